@@ -1,0 +1,1 @@
+"""The ``trainpos`` command line: thin Typer commands over dbtools and fieldlogs."""

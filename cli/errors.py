@@ -1,0 +1,54 @@
+"""Typed errors → one line on stderr and a documented exit code; never a traceback."""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+import traceback
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import typer
+
+from cli.render import err_console, print_findings
+from schemas.errors import FindingsError, TrainposError
+
+EXIT_INTERNAL = 4
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def cli_command(fn: F) -> F:
+    """Wrap a command: typed errors become a message and their exit code.
+
+    An unexpected exception (a bug) exits 4 with a one-line message; set
+    ``TRAINPOS_DEBUG=1`` to see the traceback.
+    """
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except typer.Exit:
+            raise
+        except FindingsError as exc:
+            print_findings(exc.findings, console=err_console())
+            err_console().print(f"[bold red]error:[/] {exc}", highlight=False)
+            raise typer.Exit(exc.exit_code) from None
+        except TrainposError as exc:
+            err_console().print(f"[bold red]error:[/] {exc}", highlight=False)
+            raise typer.Exit(exc.exit_code) from None
+        except KeyboardInterrupt:
+            err_console().print("interrupted")
+            raise typer.Exit(130) from None
+        except Exception as exc:  # a bug: say so plainly, keep the traceback for debugging
+            if os.environ.get("TRAINPOS_DEBUG"):
+                traceback.print_exc(file=sys.stderr)
+            err_console().print(
+                f"[bold red]internal error:[/] {type(exc).__name__}: {exc} "
+                "(this is a bug in trainpos; set TRAINPOS_DEBUG=1 for details)",
+                highlight=False,
+            )
+            raise typer.Exit(EXIT_INTERNAL) from None
+
+    return wrapper  # type: ignore[return-value]

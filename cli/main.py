@@ -1,0 +1,35 @@
+"""Root of the ``trainpos`` command: one sub-app per file."""
+
+from __future__ import annotations
+
+import typer
+
+from cli import db, schema
+from dbtools.build import tool_version
+
+app = typer.Typer(
+    name="trainpos",
+    help="Onboard train-positioning databases and field-log audits.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+app.add_typer(db.app, name="db")
+app.add_typer(schema.app, name="schema")
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"trainpos {tool_version()}")
+        raise typer.Exit()
+
+
+@app.callback()
+def root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True, help="Print the version."),
+) -> None:
+    """Onboard train-positioning databases and field-log audits.
+
+    Exit codes: 0 ok; 1 errors found; 2 input unreadable or bad usage; 3 refused
+    (would overwrite, already released); 4 internal error.
+    """

@@ -1,0 +1,1 @@
+"""Onboard DB tools: build, validate, diff, release, and the GIS grid tools."""

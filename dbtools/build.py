@@ -1,0 +1,67 @@
+"""``db build``: a source set → one onboard DB version (SQLite), atomically."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+from dbtools.database import write_db
+from dbtools.network import content_hash
+from dbtools.sources import read_source_set
+from schemas.enums import Severity
+from schemas.errors import FindingsError, RefusedError
+from schemas.findings import Finding
+from schemas.tables import SCHEMA_VERSION
+
+
+def tool_version() -> str:
+    try:
+        return version("trainpos")
+    except PackageNotFoundError:  # running from a checkout without install
+        return "0+unknown"
+
+
+@dataclass
+class BuildResult:
+    path: Path
+    db_version: str
+    content_hash: str
+    rows: dict[str, int]
+    warnings: list[Finding]
+
+
+def build_db(
+    source_dir: Path,
+    out: Path,
+    *,
+    db_version: str | None = None,
+    note: str = "",
+    force: bool = False,
+    now: datetime | None = None,
+) -> BuildResult:
+    """Read, check and write. Nothing is written when a source has an error."""
+    source_dir, out = Path(source_dir), Path(out)
+    if out.resolve().parent == source_dir.resolve() or source_dir.resolve() in out.resolve().parents:
+        raise RefusedError("the output must not be written into the source folder", path=out)
+    if out.exists() and not force:
+        raise RefusedError("output exists; use --force to replace it", path=out)
+    network, findings = read_source_set(source_dir)
+    errors = [f for f in findings if f.severity == Severity.ERROR]
+    if errors:
+        raise FindingsError(f"{len(errors)} error(s) in the source set; nothing was written", findings, path=source_dir)
+    created = (now or datetime.now(UTC)).astimezone(UTC)
+    version_str = db_version or created.strftime("%Y%m%d.%H%M%S")
+    digest = content_hash(network.tables)
+    meta = {
+        "db_version": version_str,
+        "created_at": created.isoformat(timespec="seconds").replace("+00:00", "Z"),
+        "tool_version": tool_version(),
+        "schema_version": str(SCHEMA_VERSION),
+        "content_hash": digest,
+        "note": note,
+        **network.meta,
+    }
+    write_db(out, network, meta, force=force)
+    return BuildResult(out, version_str, digest, {k: len(v) for k, v in network.tables.items()}, findings)

@@ -1,0 +1,211 @@
+"""The only module that talks to SQLite: onboard DB files written and read here.
+
+Writes are atomic (temp file in the target folder, then ``os.replace``) and never touch an
+existing file unless asked to. Reads open the file read-only so that validating or diffing
+a released DB cannot modify it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sqlite3
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import pandas as pd
+import sqlite_utils
+
+from dbtools.network import Network, canonical, content_hash
+from schemas.enums import Severity
+from schemas.errors import InputError, RefusedError
+from schemas.findings import Finding
+from schemas.model import Table
+from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, DB_TABLES, META, SCHEMA_VERSION
+
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _create_tables(db: sqlite_utils.Database, tables: tuple[Table, ...]) -> None:
+    """Schema work through sqlite-utils: columns, PK, NOT NULL, FKs, indexes."""
+    for t in tables:
+        db[t.name].create(  # type: ignore[union-attr]
+            {c.name: {"str": str, "int": int, "float": float, "bool": int}[c.dtype] for c in t.columns},
+            pk=list(t.primary_key) if len(t.primary_key) > 1 else t.primary_key[0],
+            not_null={c.name for c in t.columns if not c.nullable},
+            foreign_keys=[(fk.columns[0], fk.other_table, fk.other_columns[0]) for fk in t.foreign_keys],
+        )
+        for idx in t.indexes:
+            db[t.name].create_index(list(idx))  # type: ignore[union-attr]
+
+
+def _rows(table: Table, frame: pd.DataFrame) -> Iterator[tuple[object, ...]]:
+    """Rows as Python tuples with None for missing values (the fast executemany path)."""
+    cols = []
+    for c in table.columns:
+        s = frame[c.name]
+        if c.dtype == "float":
+            cols.append(s.to_numpy(dtype=float, na_value=float("nan")).tolist())  # NaN binds as NULL
+        else:
+            cols.append(s.astype(object).where(s.notna(), None).tolist())
+    return zip(*cols, strict=True)
+
+
+def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool = False) -> None:
+    """Write a complete onboard DB atomically. Refuses an existing ``path`` unless ``force``."""
+    path = Path(path)
+    if path.exists() and not force:
+        raise RefusedError("output exists; use --force to replace it", path=path)
+    if path.is_dir():
+        raise RefusedError("output is a folder", path=path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        tmp.unlink()
+        conn = sqlite3.connect(tmp)
+        try:
+            conn.execute("PRAGMA journal_mode=OFF")
+            conn.execute("PRAGMA synchronous=OFF")
+            conn.execute(f"PRAGMA application_id={APPLICATION_ID}")
+            conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+            conn.execute("PRAGMA foreign_keys=ON")
+            db = sqlite_utils.Database(conn)
+            _create_tables(db, ALL_DB_TABLES)
+            with conn:
+                for t in DB_TABLES:
+                    frame = canonical(t, network.tables[t.name])
+                    marks = ",".join("?" * len(t.columns))
+                    conn.executemany(
+                        f"INSERT INTO [{t.name}] ({','.join(f'[{c}]' for c in t.column_names)}) VALUES ({marks})",
+                        _rows(t, frame),
+                    )
+                conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", sorted(meta.items()))
+            conn.execute("PRAGMA synchronous=FULL")
+            conn.execute("VACUUM")
+        finally:
+            conn.close()
+        with open(tmp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        raise
+
+
+def check_sqlite_file(path: Path) -> None:
+    """Raise InputError unless ``path`` is an existing SQLite file with our application id."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError("no such file", path=path)
+    if path.is_dir():
+        raise InputError("is a folder, expected an onboard DB file (.sqlite)", path=path)
+    with open(path, "rb") as fh:
+        head = fh.read(100)
+    if not head.startswith(SQLITE_MAGIC):
+        raise InputError("not an SQLite database (bad header)", path=path)
+    if len(head) < 100:
+        raise InputError("truncated SQLite file", path=path)
+    app_id = int.from_bytes(head[68:72], "big")
+    if app_id != APPLICATION_ID:
+        raise InputError(
+            f"not a trainpos onboard DB (application_id {app_id:#x}, expected {APPLICATION_ID:#x})", path=path
+        )
+
+
+@contextlib.contextmanager
+def connect_ro(path: Path) -> Iterator[sqlite3.Connection]:
+    """Read-only connection (URI mode=ro, immutable to SQLite's locking)."""
+    check_sqlite_file(path)
+    uri = f"file:{Path(path).resolve()}?mode=ro"
+    try:
+        conn = sqlite3.connect(uri, uri=True)
+    except sqlite3.Error as exc:
+        raise InputError(f"cannot open database: {exc}", path=path) from exc
+    try:
+        yield conn
+    except sqlite3.DatabaseError as exc:
+        raise InputError(f"database is corrupt or unreadable: {exc}", path=path) from exc
+    finally:
+        conn.close()
+
+
+def read_meta(path: Path) -> dict[str, str]:
+    with connect_ro(path) as conn:
+        return dict(conn.execute("SELECT key, value FROM meta").fetchall())
+
+
+def schema_version(path: Path) -> int:
+    with connect_ro(path) as conn:
+        return int(conn.execute("PRAGMA user_version").fetchone()[0])
+
+
+def read_network(path: Path) -> Network:
+    """Load every content table of an onboard DB as canonical typed frames."""
+    path = Path(path)
+    with connect_ro(path) as conn:
+        version = int(conn.execute("PRAGMA user_version").fetchone()[0])
+        if version != SCHEMA_VERSION:
+            raise InputError(f"schema version {version} is not supported (this tool reads {SCHEMA_VERSION})", path=path)
+        existing = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        tables: dict[str, pd.DataFrame] = {}
+        for t in DB_TABLES:
+            if t.name not in existing:
+                raise InputError(f"table '{t.name}' is missing", path=path)
+            cols = ",".join(f"[{c}]" for c in t.column_names)
+            try:
+                frame = pd.read_sql_query(f"SELECT {cols} FROM [{t.name}]", conn)
+            except (sqlite3.DatabaseError, pd.errors.DatabaseError) as exc:
+                raise InputError(f"table '{t.name}' cannot be read: {exc}", path=path) from exc
+            tables[t.name] = canonical(t, frame)
+        meta = dict(conn.execute(f"SELECT key, value FROM {META.name}").fetchall()) if META.name in existing else {}
+    return Network(tables, origin=str(path), meta=meta)
+
+
+def integrity_findings(path: Path, network: Network | None = None) -> list[Finding]:
+    """SQLite-level checks: integrity_check, foreign_key_check, and the meta content hash."""
+    findings: list[Finding] = []
+    with connect_ro(path) as conn:
+        rows = [r[0] for r in conn.execute("PRAGMA integrity_check").fetchall()]
+        if rows != ["ok"]:
+            for msg in rows[:50]:
+                findings.append(
+                    Finding("db.integrity", Severity.ERROR, "sqlite", f"integrity_check: {msg}", value=msg, limit="ok")
+                )
+        for table, rowid, parent, _fk in conn.execute("PRAGMA foreign_key_check").fetchall()[:1000]:
+            findings.append(
+                Finding(
+                    "db.foreign_key",
+                    Severity.ERROR,
+                    table,
+                    f"row {rowid} references a missing row of '{parent}'",
+                    keys={"rowid": rowid},
+                    value=parent,
+                )
+            )
+    net = network if network is not None else read_network(path)
+    stored = net.meta.get("content_hash")
+    if not stored:
+        findings.append(
+            Finding("db.meta", Severity.ERROR, "meta", "meta has no content_hash", value=None, limit="sha256")
+        )
+    else:
+        actual = content_hash(net.tables)
+        if actual != stored:
+            findings.append(
+                Finding(
+                    "db.content_hash",
+                    Severity.ERROR,
+                    "meta",
+                    "content hash does not match meta: the DB was modified after it was built",
+                    value=actual[:16],
+                    limit=stored[:16],
+                )
+            )
+    for key in ("db_version", "created_at", "tool_version", "schema_version"):
+        if key not in net.meta:
+            findings.append(Finding("db.meta", Severity.ERROR, "meta", f"meta has no '{key}'", keys={"key": key}))
+    return findings

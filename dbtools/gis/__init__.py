@@ -1,0 +1,1 @@
+"""GIS tools: projection, grid geometry, grid building, verification."""

@@ -1,0 +1,94 @@
+"""The content of one onboard DB version as typed frames, however it was loaded."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from schemas.frames import PANDAS_DTYPE
+from schemas.model import Table
+from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS, KM_BREAKS, LINES
+
+
+@dataclass
+class Network:
+    """Typed, canonical frames of every content table (sorted by primary key)."""
+
+    tables: dict[str, pd.DataFrame]
+    origin: str = ""
+    """Where it came from (source folder or DB file), for messages."""
+    meta: dict[str, str] = field(default_factory=dict)
+    files: dict[str, str] = field(default_factory=dict)
+    """Table name → file it was read from (source sets only)."""
+
+    @property
+    def gis(self) -> pd.DataFrame:
+        return self.tables[GIS.name]
+
+    @property
+    def balises(self) -> pd.DataFrame:
+        return self.tables[BALISES.name]
+
+    @property
+    def feature_points(self) -> pd.DataFrame:
+        return self.tables[FEATURE_POINTS.name]
+
+    @property
+    def lines(self) -> pd.DataFrame:
+        return self.tables[LINES.name]
+
+    @property
+    def km_breaks(self) -> pd.DataFrame:
+        return self.tables[KM_BREAKS.name]
+
+
+def empty_frame(table: Table) -> pd.DataFrame:
+    return pd.DataFrame({c.name: pd.Series([], dtype=PANDAS_DTYPE[c.dtype]) for c in table.columns})
+
+
+def canonical(table: Table, frame: pd.DataFrame) -> pd.DataFrame:
+    """Declared columns in declared order, declared dtypes, sorted by primary key."""
+    out = pd.DataFrame(index=frame.index)
+    for c in table.columns:
+        s = frame[c.name] if c.name in frame.columns else pd.Series([None] * len(frame), index=frame.index)
+        if c.dtype == "str":
+            s = s.astype("string")
+        elif c.dtype == "int":
+            s = pd.to_numeric(s).astype("Int64")
+        elif c.dtype == "bool":
+            s = s.astype("boolean")
+        else:
+            s = pd.to_numeric(s).astype("float64")
+        out[c.name] = s
+    if table.primary_key and len(out):
+        out = out.sort_values(list(table.primary_key), kind="stable")
+    return out.reset_index(drop=True)
+
+
+def content_hash(tables: dict[str, pd.DataFrame]) -> str:
+    """SHA-256 over all content tables in canonical form.
+
+    Identical whether the frames come from a source set being built or from a DB read
+    back, so a hand-edited or corrupted DB no longer matches the hash in its meta table.
+    """
+    h = hashlib.sha256()
+    for table in DB_TABLES:
+        frame = canonical(table, tables.get(table.name, empty_frame(table)))
+        h.update(f"table:{table.name}:{len(frame)}\n".encode())
+        for c in table.columns:
+            h.update(f"col:{c.name}\n".encode())
+            s = frame[c.name]
+            if c.dtype == "str":
+                vals = s.astype(object).where(s.notna(), "\x00").tolist()
+                h.update("\x1f".join(vals).encode("utf-8"))
+            elif c.dtype in ("int", "bool"):
+                arr = s.astype("Float64").to_numpy(dtype=np.float64, na_value=np.nan)
+                h.update(np.ascontiguousarray(arr).tobytes())
+            else:
+                arr = s.to_numpy(dtype=np.float64, na_value=np.nan)
+                arr = np.where(np.isnan(arr), np.nan, arr)  # one NaN bit pattern
+                h.update(np.ascontiguousarray(arr).tobytes())
+    return h.hexdigest()

@@ -1,0 +1,114 @@
+"""Reading a source set (SPEC §3 "Source files") into a :class:`Network` plus findings."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dbtools.network import Network, canonical, empty_frame
+from dbtools.tabular import find_table_file, read_raw_table, sha256_file
+from schemas.enums import Severity, Track
+from schemas.errors import InputError
+from schemas.findings import Finding
+from schemas.frames import read_and_check
+from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
+
+
+def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
+    """Read every source file of a folder; returns the network and all findings.
+
+    Rows with errors stay in the frames (so later checks can still run); callers decide
+    whether errors block them.
+    """
+    folder = Path(folder)
+    if not folder.exists():
+        raise InputError("no such folder", path=folder)
+    if not folder.is_dir():
+        raise InputError("not a folder (expected a source set with gis, balises, feature_points)", path=folder)
+    findings: list[Finding] = []
+    tables: dict[str, pd.DataFrame] = {}
+    files: dict[str, str] = {}
+    hashes: dict[str, str] = {}
+    for name, table in SOURCE_TABLES.items():
+        path = find_table_file(folder, name)
+        if path is None:
+            if table.required:
+                findings.append(
+                    Finding(
+                        "source.missing_file",
+                        Severity.ERROR,
+                        name,
+                        f"required source file {name}.csv (or .xlsx) is missing",
+                        file=str(folder / f"{name}.csv"),
+                    )
+                )
+            tables[name] = empty_frame(table)
+            continue
+        raw = read_raw_table(path, sheet=name)
+        files[name] = str(path)
+        hashes[path.name] = sha256_file(path)
+        co = read_and_check(table, raw, file=str(path), allow_extra=(name == LINES.name))
+        findings.extend(co.findings)
+        frame = co.frame
+        if name == LINES.name:
+            frame = _lines_attributes(frame, table.column_names)
+        tables[name] = frame
+    tables[FEATURE_POINTS.name] = _with_seq(tables[FEATURE_POINTS.name])
+    findings.extend(_line_codes(tables, files))
+    net = Network({n: canonical(SOURCE_TABLES[n], f) for n, f in tables.items()}, origin=str(folder), files=files)
+    net.meta = {f"source_sha256:{k}": v for k, v in sorted(hashes.items())}
+    return net, findings
+
+
+def _lines_attributes(frame: pd.DataFrame, known: list[str]) -> pd.DataFrame:
+    extras = [c for c in frame.columns if c not in known]
+    if extras:
+        frame = frame.copy()
+        frame["attributes_json"] = [
+            json.dumps({k: v for k, v in zip(extras, row, strict=True) if str(v).strip()}, ensure_ascii=False)
+            for row in frame[extras].itertuples(index=False, name=None)
+        ]
+    return frame[known]
+
+
+def _with_seq(fp: pd.DataFrame) -> pd.DataFrame:
+    """Derive ``seq`` (1–6 in running order) where the source does not give it."""
+    if fp.empty or fp["seq"].notna().all():
+        return fp
+    fp = fp.copy()
+    sign = np.where(fp["track"].astype(object) == Track.UP.value, -1.0, 1.0)
+    fp["_order"] = fp["km_m"].to_numpy(dtype=float, na_value=np.nan) * sign
+    fp["_pos"] = np.arange(len(fp))
+    fp = fp.sort_values(["line_code", "track", "feature_id", "_order", "_pos"], kind="stable")
+    seq = fp.groupby(["line_code", "track", "feature_id"], dropna=False).cumcount() + 1
+    fp["seq"] = fp["seq"].fillna(seq.astype("Int64"))
+    return fp.sort_values("_pos").drop(columns=["_order", "_pos"])
+
+
+def _line_codes(tables: dict[str, pd.DataFrame], files: dict[str, str]) -> list[Finding]:
+    """Build ``lines`` from the codes in use when absent; otherwise every code must be listed."""
+    used: set[str] = set()
+    for name in ("gis", "balises", "feature_points", "km_breaks"):
+        used |= set(tables[name]["line_code"].dropna().astype(str))
+    lines = tables[LINES.name]
+    if LINES.name not in files:
+        tables[LINES.name] = pd.DataFrame(
+            {"line_code": sorted(used), "name": [None] * len(used), "attributes_json": [None] * len(used)}
+        )
+        return []
+    known = set(lines["line_code"].dropna().astype(str))
+    return [
+        Finding(
+            "source.unknown_line",
+            Severity.ERROR,
+            "lines",
+            f"line_code '{code}' is used but not listed in lines",
+            keys={"line_code": code},
+            file=files[LINES.name],
+            value=code,
+        )
+        for code in sorted(used - known)
+    ]

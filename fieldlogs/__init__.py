@@ -1,0 +1,2 @@
+"""Field logs: reading and writing runs, checks, repairs, the simulator, the positioning
+pipeline and audits."""

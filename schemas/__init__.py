@@ -1,0 +1,23 @@
+"""Schemas: every table, source file, log stream and output declared once.
+
+Also the base error class, units and enumerations. Imports nothing from the rest of the
+suite.
+"""
+
+from __future__ import annotations
+
+from schemas.logs import LOG_STREAMS
+from schemas.model import Column, Table
+from schemas.outputs import OUTPUT_TABLES
+from schemas.plans import POSSESSIONS
+from schemas.tables import ALL_DB_TABLES
+
+#: Every declaration by name, for ``trainpos schema show`` and the docs.
+ALL_SCHEMAS: dict[str, Table] = {
+    **{t.name: t for t in ALL_DB_TABLES},
+    **LOG_STREAMS,
+    **OUTPUT_TABLES,
+    POSSESSIONS.name: POSSESSIONS,
+}
+
+__all__ = ["ALL_SCHEMAS", "Column", "Table"]

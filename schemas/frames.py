@@ -1,0 +1,348 @@
+"""Typed frames from raw text cells, and declarative checks (pandera) → findings.
+
+Used for every source file, log stream and plan: read everything as text, coerce each
+column to its declared type (a cell that does not parse is a finding naming row and
+column), then let pandera check nullability, enumerations, ranges and keys lazily so that
+*every* problem is collected.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import pandera.pandas as pa
+from pandera.errors import SchemaErrors
+
+from schemas.enums import Severity
+from schemas.findings import Finding
+from schemas.model import Column, Table
+from schemas.units import parse_km_array
+
+#: Line number of the first data row in a file with one header line.
+FIRST_DATA_LINE = 2
+#: Pandas dtype each declared dtype is coerced to.
+PANDAS_DTYPE = {"str": "string", "int": "Int64", "float": "float64", "bool": "boolean"}
+
+
+@dataclass
+class Coerced:
+    frame: pd.DataFrame
+    findings: list[Finding]
+    missing: list[str]
+    """Declared columns absent from the input (added as nulls, not checked)."""
+
+
+def suggest(name: str, candidates: list[str]) -> str | None:
+    """Closest known name to a misspelled one, or None."""
+    match = difflib.get_close_matches(name, candidates, n=1, cutoff=0.6)
+    return match[0] if match else None
+
+
+def _row_keys(table: Table, frame: pd.DataFrame, idx: int) -> dict[str, object]:
+    keys = {}
+    for k in table.primary_key:
+        if k in frame.columns:
+            v = frame[k].iat[idx]
+            keys[k] = None if v is pd.NA or (isinstance(v, float) and np.isnan(v)) else v
+    return keys
+
+
+def coerce_frame(
+    table: Table,
+    raw: pd.DataFrame,
+    *,
+    file: str | None = None,
+    allow_extra: bool = False,
+    first_line: int = FIRST_DATA_LINE,
+) -> Coerced:
+    """Coerce a frame of text (or already typed) cells to the declared column types.
+
+    Missing required columns and cells that do not parse become findings; absent optional
+    columns are added as nulls; columns are returned in declared order (extras dropped
+    unless ``allow_extra``). The returned frame keeps the raw positional index so that
+    ``index + first_line`` is the file line of a row.
+    """
+    findings: list[Finding] = []
+    known = table.column_names
+    raw = raw.reset_index(drop=True)
+    raw.columns = [str(c).strip() for c in raw.columns]
+    extras = [c for c in raw.columns if c not in known]
+    for col in table.columns:
+        if col.name not in raw.columns and col.required:
+            hint = suggest(col.name, extras)
+            msg = f"required column '{col.name}' is missing"
+            if hint:
+                msg += f" (found '{hint}': misspelled?)"
+            findings.append(
+                Finding(
+                    "schema.missing_column",
+                    Severity.ERROR,
+                    table.name,
+                    msg,
+                    file=file,
+                    column=col.name,
+                    value=hint,
+                    limit=col.name,
+                )
+            )
+    if not allow_extra:
+        for c in extras:
+            hint = suggest(c, known)
+            msg = f"unknown column '{c}' ignored" + (f" (did you mean '{hint}'?)" if hint else "")
+            findings.append(
+                Finding(
+                    "schema.unknown_column", Severity.WARNING, table.name, msg, file=file, column=c, value=c, limit=hint
+                )
+            )
+    out = pd.DataFrame(index=raw.index)
+    for col in table.columns:
+        if col.name in raw.columns:
+            values, bad = _coerce_column(col, raw[col.name])
+            for i in np.flatnonzero(bad)[:1000]:
+                cell = raw[col.name].iat[i]
+                findings.append(
+                    Finding(
+                        "schema.type",
+                        Severity.ERROR,
+                        table.name,
+                        f"'{cell}' is not a valid {_type_word(col)}",
+                        file=file,
+                        row=int(i) + first_line if file else None,
+                        column=col.name,
+                        value=str(cell),
+                        limit=_type_word(col),
+                    )
+                )
+            n_bad = int(bad.sum())
+            if n_bad > 1000:
+                findings.append(
+                    Finding(
+                        "schema.type",
+                        Severity.ERROR,
+                        table.name,
+                        f"{n_bad - 1000} more cells are not a valid {_type_word(col)}",
+                        file=file,
+                        column=col.name,
+                        value=n_bad,
+                        limit=0,
+                    )
+                )
+            out[col.name] = values
+        else:
+            out[col.name] = pd.Series([None] * len(raw), index=raw.index, dtype=PANDAS_DTYPE[col.dtype])
+    if allow_extra:
+        for c in extras:
+            out[c] = raw[c]
+    missing = [c for c in known if c not in raw.columns]
+    return Coerced(out, findings, missing)
+
+
+def _type_word(col: Column) -> str:
+    if col.km_notation:
+        return "kilometrage (metres or 12k345.6)"
+    return {"str": "text", "int": "whole number", "float": "number", "bool": "0/1 flag"}[col.dtype]
+
+
+_TRUE = {"1", "true", "yes", "y", "t"}
+_FALSE = {"0", "false", "no", "n", "f"}
+
+
+def _blank(s: pd.Series) -> np.ndarray:
+    if s.dtype == object or pd.api.types.is_string_dtype(s.dtype):
+        txt = s.astype("string").str.strip()
+        return (txt.isna() | (txt == "") | txt.str.lower().isin(["nan", "na", "null"])).to_numpy(
+            dtype=bool, na_value=True
+        )
+    return s.isna().to_numpy()
+
+
+def _coerce_column(col: Column, s: pd.Series) -> tuple[pd.Series, np.ndarray]:
+    """Return (typed series, mask of cells that are not blank but do not parse)."""
+    blank = _blank(s)
+    if col.dtype == "str":
+        if pd.api.types.is_float_dtype(s.dtype):
+            # e.g. codes read from Excel as numbers: 1.0 → "1"
+            txt = s.map(lambda v: f"{v:g}" if pd.notna(v) else pd.NA).astype("string")
+        else:
+            txt = s.astype("string").str.strip()
+        txt = txt.mask(pd.Series(blank, index=s.index))
+        return txt, np.zeros(len(s), dtype=bool)
+    if col.dtype == "float":
+        if pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
+            vals = s.astype("float64")
+            bad = np.zeros(len(s), dtype=bool)
+        elif col.km_notation:
+            arr, ok = parse_km_array(s.to_numpy(dtype=object))
+            vals = pd.Series(arr, index=s.index)
+            bad = ~ok & ~blank
+        else:
+            vals = pd.to_numeric(s.astype("string").str.strip(), errors="coerce").astype("float64")
+            bad = vals.isna().to_numpy() & ~blank
+        inf = np.isinf(vals.to_numpy(dtype=float, na_value=np.nan))
+        bad |= inf
+        vals = vals.where(~inf)
+        return vals, bad
+    if col.dtype == "int":
+        num = pd.to_numeric(
+            s.astype("string").str.strip() if not pd.api.types.is_numeric_dtype(s.dtype) else s, errors="coerce"
+        )
+        arr = num.to_numpy(dtype=float, na_value=np.nan)
+        frac = ~np.isnan(arr) & (np.floor(arr) != arr)
+        bad = (np.isnan(arr) & ~blank) | frac
+        arr = np.where(frac, np.nan, arr)
+        return pd.Series(arr, index=s.index).astype("Int64"), bad
+    # bool
+    txt = s.astype("string").str.strip().str.lower()
+    vals = pd.Series(pd.NA, index=s.index, dtype="boolean")
+    vals[txt.isin(_TRUE).fillna(False).to_numpy(dtype=bool)] = True
+    vals[txt.isin(_FALSE).fillna(False).to_numpy(dtype=bool)] = False
+    bad = vals.isna().to_numpy() & ~blank
+    return vals, bad
+
+
+def pandera_schema(table: Table, *, check_keys: bool = True, present: list[str] | None = None) -> pa.DataFrameSchema:
+    """The pandera schema of a declared table (types already coerced), limited to ``present``."""
+    cols: dict[str, pa.Column] = {}
+    names = set(table.column_names if present is None else present)
+    for c in table.columns:
+        if c.name not in names:
+            continue
+        checks: list[pa.Check] = []
+        if c.enum is not None:
+            checks.append(pa.Check.isin(list(c.enum)))
+        if c.min is not None and c.max is not None:
+            checks.append(pa.Check.in_range(c.min, c.max))
+        elif c.min is not None:
+            checks.append(pa.Check.ge(c.min))
+        elif c.max is not None:
+            checks.append(pa.Check.le(c.max))
+        cols[c.name] = pa.Column(nullable=c.nullable, checks=checks, required=False, coerce=False)
+    pk_ok = table.primary_key and all(k in names for k in table.primary_key)
+    unique = list(table.primary_key) if check_keys and pk_ok else None
+    return pa.DataFrameSchema(cols, unique=unique, report_duplicates="all" if unique else "exclude_first")
+
+
+_RANGE_RE = re.compile(r"in_range\(([^,]+), ([^)]+)\)|greater_than_or_equal_to\((.+)\)|less_than_or_equal_to\((.+)\)")
+
+
+def check_frame(
+    table: Table,
+    frame: pd.DataFrame,
+    *,
+    file: str | None = None,
+    first_line: int = FIRST_DATA_LINE,
+    check_keys: bool = True,
+    max_per_check: int = 1000,
+) -> list[Finding]:
+    """Run the declared checks; every failing cell is a finding (capped per check)."""
+    schema = pandera_schema(table, check_keys=check_keys, present=list(frame.columns))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            schema.validate(frame, lazy=True)
+            return []
+        except SchemaErrors as exc:
+            cases = exc.failure_cases
+    findings: list[Finding] = []
+    dup_rows: set[int | None] = set()
+    for (column, check), group in cases.groupby(["column", "check"], sort=False, dropna=False):
+        check = str(check)
+        shown = group.head(max_per_check)
+        for _, case in shown.iterrows():
+            idx = case["index"]
+            idx = int(idx) if idx is not None and not pd.isna(idx) else None
+            if _rule_for(check) == "duplicate_key":
+                if idx in dup_rows:
+                    continue  # one finding per duplicated row, not one per key column
+                dup_rows.add(idx)
+                column = "nan"
+            findings.append(_finding_for(table, frame, str(column), check, case["failure_case"], idx, file, first_line))
+        if len(group) > max_per_check:
+            findings.append(
+                Finding(
+                    f"schema.{_rule_for(check)}",
+                    Severity.ERROR,
+                    table.name,
+                    f"{len(group) - max_per_check} more rows fail the same check ({check})",
+                    file=file,
+                    column=str(column),
+                    value=len(group),
+                    limit=0,
+                )
+            )
+    return findings
+
+
+def _rule_for(check: str) -> str:
+    if check == "not_nullable":
+        return "null"
+    if check.startswith("isin"):
+        return "enum"
+    if "range" in check or "than" in check:
+        return "range"
+    if "uniqueness" in check or check == "unique" or "duplicate" in check:
+        return "duplicate_key"
+    return "check"
+
+
+def _finding_for(
+    table: Table,
+    frame: pd.DataFrame,
+    column: str,
+    check: str,
+    value: object,
+    idx: int | None,
+    file: str | None,
+    first_line: int,
+) -> Finding:
+    rule = _rule_for(check)
+    keys = _row_keys(table, frame, idx) if idx is not None and idx < len(frame) else {}
+    row = idx + first_line if (idx is not None and file) else None
+    limit: object = None
+    if rule == "null":
+        msg = "empty value where one is required"
+    elif rule == "enum":
+        col = table.column(column)
+        limit = list(col.enum or ())
+        hint = suggest(str(value), limit) if value is not None else None
+        msg = f"'{value}' is not one of {', '.join(limit)}" + (f" (did you mean '{hint}'?)" if hint else "")
+    elif rule == "range":
+        col = table.column(column)
+        limit = [col.min, col.max]
+        lo = "−∞" if col.min is None else f"{col.min:g}"
+        hi = "+∞" if col.max is None else f"{col.max:g}"
+        msg = f"{value} {col.unit} is outside [{lo}, {hi}]".replace("  ", " ")
+    elif rule == "duplicate_key":
+        limit = list(table.primary_key)
+        msg = f"duplicate key ({', '.join(table.primary_key)}) — each must be unique"
+        column = ",".join(table.primary_key) if column in ("nan", "None") else column
+    else:
+        msg = f"fails check {check}: {value}"
+    return Finding(
+        f"schema.{rule}",
+        Severity.ERROR,
+        table.name,
+        msg,
+        keys=keys,
+        value=value,
+        limit=limit,
+        file=file,
+        row=row,
+        column=None if column in ("nan", "None") else column,
+    )
+
+
+def read_and_check(table: Table, raw: pd.DataFrame, *, file: str | None = None, allow_extra: bool = False) -> Coerced:
+    """Coerce then check: the frame plus all findings (type, null, enum, range, keys)."""
+    co = coerce_frame(table, raw, file=file, allow_extra=allow_extra)
+    bad_rows: set[int] = {f.row - FIRST_DATA_LINE for f in co.findings if f.rule == "schema.type" and f.row}
+    frame = co.frame
+    checked = frame if not bad_rows else frame.drop(index=list(bad_rows))
+    present = [c for c in table.column_names if c not in co.missing]
+    co.findings.extend(check_frame(table, checked[present], file=file))
+    return co

@@ -1,0 +1,146 @@
+"""Field-log streams (SPEC §4): one folder per run, ``run.json`` plus one table per stream,
+CSV or Parquet with the same columns. ``t`` is seconds since the start of the run.
+
+Frame (SPEC §4.1): x forward, y left, z up; specific force with gravity (az ≈ +G at rest);
+rates positive counter-clockwise seen from the axis' positive end (wz > 0 turning left,
+wy < 0 nose pitching up).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from schemas.enums import BaliseKind, CabDirection, Track, VehicleKind
+from schemas.model import Column, Table
+from schemas.tables import LAT_RANGE, LON_RANGE
+
+T = Column("t", "float", "Seconds since the start of the run", unit="s", min=0.0)
+
+#: Plausibility limits used by ``logs check`` (SPEC / issue 3).
+MAX_ABS_ACCEL_MPS2 = 30.0
+MAX_ABS_RATE_RADPS = 3.0
+
+TACHO = Table(
+    name="tacho",
+    kind="log",
+    description="Tachometer: cumulative pulse count every 100 ms cycle.",
+    columns=(T, Column("pulses", "int", "Cumulative pulse count, never decreasing", min=0)),
+    rate_hz=10.0,
+    required=False,
+)
+
+
+def _acc(name: str, what: str) -> Column:
+    return Column(name, "float", what, unit="m/s²", min=-MAX_ABS_ACCEL_MPS2, max=MAX_ABS_ACCEL_MPS2)
+
+
+def _rate(name: str, what: str) -> Column:
+    return Column(name, "float", what, unit="rad/s", min=-MAX_ABS_RATE_RADPS, max=MAX_ABS_RATE_RADPS)
+
+
+IMU = Table(
+    name="imu",
+    kind="log",
+    description="6-axis IMU, body frame x forward, y left, z up, specific force with gravity.",
+    columns=(
+        T,
+        _acc("ax", "Forward specific force"),
+        _acc("ay", "Leftward specific force"),
+        _acc("az", "Upward specific force (≈ +G at rest)"),
+        _rate("wx", "Roll rate (positive: left side up... right-handed about x)"),
+        _rate("wy", "Pitch rate (negative when the nose pitches up)"),
+        _rate("wz", "Yaw rate (positive turning left)"),
+    ),
+    rate_hz=100.0,
+    required=False,
+)
+
+BALISE = Table(
+    name="balise",
+    kind="log",
+    description="Balise telegrams received, one row per balise passed.",
+    columns=(
+        T,
+        Column("kind", "str", "I1, I2 or C", enum=tuple(k.value for k in BaliseKind)),
+        Column("line_code", "str", "Line code (I1)", nullable=True),
+        Column("station_code", "str", "Station code (I2)", nullable=True),
+        Column("track", "str", "Up/down (I2)", nullable=True, enum=tuple(t.value for t in Track)),
+        Column("signal_type", "str", "Signal type (C)", nullable=True),
+    ),
+    required=False,
+)
+
+GPS = Table(
+    name="gps",
+    kind="log",
+    description="GPS receiver output, 1 Hz.",
+    columns=(
+        T,
+        Column("lat", "float", "Latitude", unit="deg", nullable=True, min=LAT_RANGE[0], max=LAT_RANGE[1]),
+        Column("lon", "float", "Longitude", unit="deg", nullable=True, min=LON_RANGE[0], max=LON_RANGE[1]),
+        Column("fix", "int", "0 none, 1 GPS, 2 D-GPS", min=0, max=2),
+        Column("nsat", "int", "Satellites used", min=0, max=64),
+        Column("hdop", "float", "Horizontal dilution of precision", nullable=True, min=0.0, max=99.9),
+    ),
+    rate_hz=1.0,
+    required=False,
+)
+
+CAB = Table(
+    name="cab",
+    kind="log",
+    description="Cab events: running direction and road-rail PTO (on rail).",
+    columns=(
+        T,
+        Column("direction", "str", "F forward (4-wire), R reverse (5-wire)", enum=tuple(d.value for d in CabDirection)),
+        Column("pto", "int", "Road-rail PTO: 1 on rail, 0 off", required=False, nullable=True, min=0, max=1),
+    ),
+    required=False,
+)
+
+TRUTH = Table(
+    name="truth",
+    kind="log",
+    description="Ground truth (simulated or surveyed runs only).",
+    columns=(
+        T,
+        Column("line_code", "str", "Line code", nullable=True),
+        Column("track", "str", "Track", nullable=True, enum=tuple(t.value for t in Track)),
+        Column("km_m", "float", "True actual kilometrage", unit="m", nullable=True),
+        Column("speed_mps", "float", "True speed over ground (signed: + in cab forward)", unit="m/s"),
+        Column("slipping", "int", "1 while the wheel slips or slides", min=0, max=1),
+    ),
+    required=False,
+)
+
+RADAR = Table(
+    name="radar",
+    kind="log",
+    description="2-frequency CW radar ground speed [S004], about 3 Hz.",
+    columns=(T, Column("speed_mps", "float", "Ground speed", unit="m/s", min=0.0, max=150.0)),
+    rate_hz=3.0,
+    required=False,
+)
+
+#: Every stream, in the order they are listed and checked.
+LOG_STREAMS: dict[str, Table] = {t.name: t for t in (TACHO, IMU, BALISE, GPS, CAB, TRUTH, RADAR)}
+
+
+@dataclass(frozen=True)
+class RunField:
+    name: str
+    type: type
+    description: str
+    required: bool = True
+
+
+RUN_JSON: tuple[RunField, ...] = (
+    RunField("run_id", str, "Run identifier"),
+    RunField("vehicle_id", str, "Vehicle identifier"),
+    RunField("vehicle_kind", str, f"{' or '.join(v.value for v in VehicleKind)}"),
+    RunField("wheel_diameter_m", float, "Nominal wheel diameter [m] used for pulse distance"),
+    RunField("teeth", int, "Tachometer pulses per wheel revolution"),
+    RunField("start_time", str, "ISO 8601 wall-clock time of t = 0, with offset"),
+    RunField("db_version", str, "DB version the run was recorded with", required=False),
+    RunField("notes", str, "Free notes", required=False),
+)

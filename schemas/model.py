@@ -1,0 +1,77 @@
+"""Declarative column and table model: the single source of truth for every table.
+
+Readers, validators, the SQLite DDL, README tables and ``trainpos schema show`` are all
+derived from these declarations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+DType = Literal["str", "int", "float", "bool"]
+Kind = Literal["db", "source", "log", "output", "plan"]
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column: name (unit suffix in the name, e.g. ``km_m``), type, unit, limits."""
+
+    name: str
+    dtype: DType
+    description: str
+    unit: str = ""
+    required: bool = True
+    """The column must be present in a source or log file."""
+    nullable: bool = False
+    """Empty cells allowed."""
+    enum: tuple[str, ...] | None = None
+    min: float | None = None
+    max: float | None = None
+    km_notation: bool = False
+    """Accept ``12k345.6`` as well as plain metres when reading sources."""
+
+    @property
+    def sql_type(self) -> str:
+        return {"str": "TEXT", "int": "INTEGER", "float": "REAL", "bool": "INTEGER"}[self.dtype]
+
+
+@dataclass(frozen=True)
+class ForeignKey:
+    columns: tuple[str, ...]
+    other_table: str
+    other_columns: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Table:
+    """A table, a source file or a log stream."""
+
+    name: str
+    kind: Kind
+    description: str
+    columns: tuple[Column, ...]
+    primary_key: tuple[str, ...] = ()
+    """Key used for SQLite PRIMARY KEY, sorting, content hash and diff."""
+    unique: tuple[tuple[str, ...], ...] = ()
+    foreign_keys: tuple[ForeignKey, ...] = ()
+    indexes: tuple[tuple[str, ...], ...] = ()
+    required: bool = True
+    """For sources and log streams: must the file exist?"""
+    rate_hz: float | None = None
+    """Nominal sampling rate of a log stream (None for event streams)."""
+    extra: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def column_names(self) -> list[str]:
+        return [c.name for c in self.columns]
+
+    def column(self, name: str) -> Column:
+        for c in self.columns:
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+    @property
+    def required_columns(self) -> list[str]:
+        return [c.name for c in self.columns if c.required]

@@ -1,0 +1,27 @@
+"""Possession plans for road-rail works (SPEC §5.5)."""
+
+from __future__ import annotations
+
+from schemas.model import Column, Table
+from schemas.tables import LINE_CODE, TRACK
+
+POSSESSIONS = Table(
+    name="possessions",
+    kind="plan",
+    description=(
+        "Possession plan: one row per possession. started_at/released_at empty while "
+        "not started / not released. Times ISO 8601 with offset."
+    ),
+    columns=(
+        Column("work_no", "str", "Work number"),
+        LINE_CODE,
+        TRACK,
+        Column("km_from_m", "float", "Section start", unit="m", km_notation=True),
+        Column("km_to_m", "float", "Section end", unit="m", km_notation=True),
+        Column("planned_start", "str", "Planned start (ISO 8601)"),
+        Column("planned_end", "str", "Planned end (ISO 8601)"),
+        Column("started_at", "str", "Actual start (ISO 8601)", nullable=True),
+        Column("released_at", "str", "Actual release (ISO 8601)", nullable=True),
+    ),
+    primary_key=("work_no",),
+)

@@ -1,0 +1,163 @@
+"""Onboard DB tables and the source files they are built from (SPEC §3).
+
+A source set is a folder with ``gis``, ``balises``, ``feature_points`` and optionally
+``lines`` and ``km_breaks``, each as ``NAME.csv`` or ``NAME.xlsx``. The DB tables have the
+same names and columns (plus derived ones such as ``feature_points.seq``) and a ``meta``
+key/value table.
+"""
+
+from __future__ import annotations
+
+from schemas.enums import Attribute, BaliseKind, Track
+from schemas.model import Column, ForeignKey, Table
+
+#: Bumped whenever a DB table changes shape; stored as ``PRAGMA user_version``.
+SCHEMA_VERSION = 1
+#: ``PRAGMA application_id`` of every onboard DB: ASCII "TPOS".
+APPLICATION_ID = 0x54504F53
+
+#: Operating area (Japan) for lat/lon plausibility [deg].
+LAT_RANGE = (20.0, 46.0)
+LON_RANGE = (122.0, 154.0)
+
+TRACKS = tuple(t.value for t in Track)
+
+LINE_CODE = Column("line_code", "str", "Line (route) code; a string, leading zeros kept")
+TRACK = Column("track", "str", "U up (km decreasing), D down (km increasing), S single", enum=TRACKS)
+
+LINES = Table(
+    name="lines",
+    kind="db",
+    description="Lines (routes). Optional source; built from the codes used elsewhere if absent.",
+    columns=(
+        LINE_CODE,
+        Column("name", "str", "Line name", required=False, nullable=True),
+        Column(
+            "attributes_json",
+            "str",
+            "Any further descriptive columns of lines.csv, as JSON",
+            required=False,
+            nullable=True,
+        ),
+    ),
+    primary_key=("line_code",),
+    required=False,
+)
+
+GIS = Table(
+    name="gis",
+    kind="db",
+    description="20 m GIS kilometrage grid: one point every 20 m of km per line and track.",
+    columns=(
+        LINE_CODE,
+        TRACK,
+        Column("km_m", "float", "Kilometrage (multiple of 20 m)", unit="m", km_notation=True),
+        Column("lat", "float", "Latitude, JGD2011/WGS84", unit="deg", min=LAT_RANGE[0], max=LAT_RANGE[1]),
+        Column("lon", "float", "Longitude, JGD2011/WGS84", unit="deg", min=LON_RANGE[0], max=LON_RANGE[1]),
+        Column(
+            "height_m",
+            "float",
+            "Rail height above the ellipsoid",
+            unit="m",
+            required=False,
+            nullable=True,
+            min=-100.0,
+            max=4000.0,
+        ),
+    ),
+    primary_key=("line_code", "track", "km_m"),
+    foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
+)
+
+BALISES = Table(
+    name="balises",
+    kind="db",
+    description=(
+        "Balises. I1/I2: initial-position pair keyed by (line_code, station_code, track); "
+        "C: position-correction balise governed by the pair named on its row."
+    ),
+    columns=(
+        Column("balise_id", "str", "Unique balise identifier"),
+        Column("kind", "str", "I1, I2 (initial pair) or C (correction)", enum=tuple(k.value for k in BaliseKind)),
+        LINE_CODE,
+        Column("station_code", "str", "Station code of the (governing) initial pair"),
+        TRACK,
+        Column("signal_type", "str", "Signal type carried by a C balise telegram", required=False, nullable=True),
+        Column("km_actual_m", "float", "Actual kilometrage", unit="m", km_notation=True),
+        Column("km_equipment_m", "float", "Equipment kilometrage", unit="m", km_notation=True),
+        Column(
+            "dist_from_initial_m",
+            "float",
+            "C only: travel distance from the governing pair's I1",
+            unit="m",
+            required=False,
+            nullable=True,
+            min=0.0,
+        ),
+    ),
+    primary_key=("balise_id",),
+    foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
+    indexes=(("line_code", "station_code", "track"), ("kind",)),
+)
+
+FEATURE_POINTS = Table(
+    name="feature_points",
+    kind="db",
+    description=(
+        "Curve feature points, six rows per feature in running order [S000 Table 1]. "
+        "Attributes are as seen by a train in the track's normal direction "
+        "(km increasing on D and S, decreasing on U)."
+    ),
+    columns=(
+        LINE_CODE,
+        TRACK,
+        Column("feature_id", "str", "Feature (curve) identifier within the line/track"),
+        Column("seq", "int", "Row number 1–6 in running order (derived at build)", required=False, min=1, max=6),
+        Column("km_m", "float", "Kilometrage of the row", unit="m", km_notation=True),
+        Column("radius_m", "float", "Curve radius; 0 on straight/transition/none rows", unit="m", min=0.0),
+        Column("attribute", "str", "straight, transition, left, right or none", enum=tuple(a.value for a in Attribute)),
+        Column("role", "str", "Free text: what the row marks", required=False, nullable=True),
+    ),
+    primary_key=("line_code", "track", "feature_id", "seq"),
+    foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
+    indexes=(("line_code", "track", "km_m"),),
+)
+
+KM_BREAKS = Table(
+    name="km_breaks",
+    kind="db",
+    description=(
+        "Kilometrage breaks: where the GIS grid of a line/track jumps from km_from_m to "
+        "km_to_m instead of continuing in 20 m steps."
+    ),
+    columns=(
+        LINE_CODE,
+        TRACK,
+        Column("km_from_m", "float", "Last grid km before the break", unit="m", km_notation=True),
+        Column("km_to_m", "float", "First grid km after the break", unit="m", km_notation=True),
+    ),
+    primary_key=("line_code", "track", "km_from_m"),
+    foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
+    required=False,
+)
+
+META = Table(
+    name="meta",
+    kind="db",
+    description="DB version metadata: key/value pairs.",
+    columns=(
+        Column(
+            "key",
+            "str",
+            "db_version, created_at, tool_version, schema_version, content_hash, note, source_sha256:<file>",
+        ),
+        Column("value", "str", "Value", nullable=True),
+    ),
+    primary_key=("key",),
+)
+
+#: Content tables in dependency order (lines first: the others reference it).
+DB_TABLES: tuple[Table, ...] = (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS)
+ALL_DB_TABLES: tuple[Table, ...] = (*DB_TABLES, META)
+#: Tables read from a source set, by file stem.
+SOURCE_TABLES: dict[str, Table] = {t.name: t for t in DB_TABLES}
