@@ -161,3 +161,13 @@ DB_TABLES: tuple[Table, ...] = (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS)
 ALL_DB_TABLES: tuple[Table, ...] = (*DB_TABLES, META)
 #: Tables read from a source set, by file stem.
 SOURCE_TABLES: dict[str, Table] = {t.name: t for t in DB_TABLES}
+
+#: Feature-point curvature tolerance (SPEC §5.3): upper limit (1/R)(1 + 20 %), lower limit
+#: (1/R)(1 − 20 %). The table's curve-entry and curve-exit rows sit at the lower-limit crossings.
+FEATURE_TOLERANCE = 0.20
+#: Nominal spacing of the GIS grid [m].
+GIS_SPACING_M = 20.0
+#: Distance between I1 and I2 of an initial pair [m].
+PAIR_SPACING_M = 5.0
+#: Distance between the track centres of a double-track line [m] (Japanese narrow gauge).
+TRACK_SPACING_M = 3.8
