@@ -11,13 +11,14 @@ left of the centreline and the up track right of it.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from dbtools.gis.alignment import Alignment, Curve
-from dbtools.gis.geometry import Projector
+from dbtools.gis.geometry import Projector, zone_epsg
 from dbtools.network import Network, canonical, empty_frame
 from schemas.enums import Track
 from schemas.tables import (
@@ -185,7 +186,7 @@ def balises(spec: LineSpec) -> pd.DataFrame:
         for st in spec.stations:
             c_kms.append((st.km_m - sign * HOME_BEFORE_STATION_M, "home"))
         ordered = sorted(spec.stations, key=lambda s: s.km_m * sign)
-        for s0, s1 in zip(ordered[:-1], ordered[1:], strict=True):
+        for s0, s1 in itertools.pairwise(ordered):
             span = abs(s1.km_m - s0.km_m)
             n_blocks = int(span // spec.block_spacing_m)
             for j in range(1, n_blocks):
@@ -233,8 +234,6 @@ def build_network(specs: list[LineSpec], projector: Projector) -> Network:
         FEATURE_POINTS.name: pd.concat([feature_points(s) for s in specs], ignore_index=True),
         KM_BREAKS.name: empty_frame(KM_BREAKS),
     }
-    from dbtools.gis.geometry import zone_epsg  # noqa: PLC0415 (keeps the import list short)
-
     net = Network(
         {t.name: canonical(t, tables[t.name]) for t in (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS)},
         origin="synthetic",
