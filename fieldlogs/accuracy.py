@@ -1,0 +1,59 @@
+"""Pipeline output against ground truth (simulated or surveyed runs with a ``truth`` stream)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from schemas.enums import PositionState
+
+
+def compare_with_truth(positions: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
+    """Per cycle: truth km (interpolated), error = km − truth, and whether it is inside the margin.
+
+    Cycles are compared only where the pipeline claims a position (not undetermined).
+    A different line or track than the truth is flagged ``wrong_track``.
+    """
+    t = positions["t"].to_numpy(dtype=float)
+    tt = truth["t"].to_numpy(dtype=float)
+    km_true = np.interp(t, tt, truth["km_m"].to_numpy(dtype=float, na_value=np.nan))
+    idx = np.clip(np.searchsorted(tt, t, side="right") - 1, 0, len(tt) - 1)
+    line_true = truth["line_code"].astype("string").to_numpy(dtype=object)[idx]
+    track_true = truth["track"].astype("string").to_numpy(dtype=object)[idx]
+    claimed = positions["state"].to_numpy(dtype=object) != PositionState.UNDETERMINED.value
+    err = positions["km_m"].to_numpy(dtype=float) - km_true
+    margin = positions["margin_m"].to_numpy(dtype=float)
+    line = positions["line_code"].astype("string").to_numpy(dtype=object)
+    track = positions["track"].astype("string").to_numpy(dtype=object)
+    wrong = claimed & ((line != line_true) | (track != track_true))
+    return pd.DataFrame(
+        {
+            "t": t,
+            "claimed": claimed,
+            "km_true_m": km_true,
+            "error_m": np.where(claimed, err, np.nan),
+            "margin_m": margin,
+            "within_margin": ~claimed | (np.abs(err) <= margin),
+            "wrong_track": wrong,
+        }
+    )
+
+
+def truth_summary(cmp: pd.DataFrame) -> dict[str, Any]:
+    """Headline numbers of :func:`compare_with_truth`."""
+    c = cmp[cmp["claimed"]]
+    if c.empty:
+        return {"claimed_cycles": 0}
+    e = c["error_m"].abs()
+    return {
+        "claimed_cycles": len(c),
+        "first_claim_t": float(c["t"].iloc[0]),
+        "max_abs_error_m": float(e.max()),
+        "rms_error_m": float(np.sqrt((c["error_m"] ** 2).mean())),
+        "p95_abs_error_m": float(e.quantile(0.95)),
+        "within_margin_share": float(c["within_margin"].mean()),
+        "wrong_track_cycles": int(c["wrong_track"].sum()),
+        "mean_margin_m": float(c["margin_m"].mean()),
+    }

@@ -1,0 +1,208 @@
+"""The onboard positioning pipeline of SPEC §5 on a recorded run.
+
+``run_pipeline`` wires the units: cycle preprocessing (vectorised), slip/slide odometry,
+GPS analysis, the feature-point unit and the balise unit, then the solver's event loop.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dbtools.network import Network
+from fieldlogs.accuracy import compare_with_truth, truth_summary
+from fieldlogs.io import Run
+from fieldlogs.pipeline.balise import BaliseDb, BaliseUnit
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.cycles import build_cycles
+from fieldlogs.pipeline.features import FeatureUnit
+from fieldlogs.pipeline.gps import analyse_gps
+from fieldlogs.pipeline.odometry import correct_odometry
+from fieldlogs.pipeline.solver import solve
+from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry, pulse_only_odometry
+from schemas.enums import PositionState, Severity
+from schemas.errors import FindingsError
+from schemas.outputs import EVENTS
+
+__all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
+
+
+@dataclass
+class PipelineResult:
+    run_id: str
+    positions: pd.DataFrame
+    events: pd.DataFrame
+    summary: dict[str, Any]
+    odometry: Odometry
+    gps: GpsAnalysis | None = None
+    kappa: np.ndarray | None = None
+    truth: pd.DataFrame | None = field(default=None, repr=False)
+
+
+def _clean(frame: pd.DataFrame | None, name: str, events: list[Event]) -> pd.DataFrame | None:
+    """Sort by t and drop rows without t or with a repeated t (first kept), as an onboard
+    unit would see the stream; every change is reported as an ``input_repaired`` event."""
+    if frame is None or frame.empty:
+        return frame
+    n0 = len(frame)
+    frame = frame[frame["t"].notna()]
+    unsorted = bool((frame["t"].diff() < 0).any())
+    frame = frame.sort_values("t", kind="stable")
+    frame = frame[~frame["t"].duplicated(keep="first")]
+    if unsorted or len(frame) != n0:
+        events.append(
+            Event(
+                0.0,
+                "input_repaired",
+                detail={"stream": name, "rows_in": n0, "rows_used": len(frame), "sorted": unsorted},
+            )
+        )
+    return frame.reset_index(drop=True)
+
+
+def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) -> PipelineResult:
+    """Replay a run through the onboard logic; raises FindingsError when run.json is unusable."""
+    cfg = cfg or PipelineConfig()
+    if run.meta is None:
+        raise FindingsError(
+            "run.json is missing or invalid", [f for f in run.findings if f.severity == Severity.ERROR], path=run.folder
+        )
+    pre: list[Event] = []
+    streams = {n: _clean(run.stream(n), n, pre) for n in ("tacho", "imu", "balise", "gps", "cab", "truth")}
+    t_end = max((float(s["t"].iloc[-1]) for s in streams.values() if s is not None and len(s)), default=0.0)
+    cycles = build_cycles(
+        tacho=streams["tacho"],
+        imu=streams["imu"],
+        cab=streams["cab"],
+        wheel_diameter_m=run.meta.wheel_diameter_m,
+        teeth=run.meta.teeth,
+        t_end=t_end,
+        cycle_s=cfg.cycle_s,
+    )
+    odo = (
+        correct_odometry(cycles, cfg.odometry)
+        if cycles.has_imu and cycles.has_tacho
+        else pulse_only_odometry(cycles.d_pulse, cycles.v_pulse)
+    )
+    gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
+    features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
+    unit = BaliseUnit(BaliseDb.from_network(network), cfg.balise)
+    sol = solve(cycles, odo, streams["balise"], unit, cfg, gps=gps, features=features)
+
+    events = list(pre) + sol.events
+    km = sol.positions["km_m"].to_numpy()
+    for ep in odo.episodes:
+        i = min(max(ep.i_start, 0), len(km) - 1) if len(km) else 0
+        events.append(
+            Event(
+                ep.t_start,
+                ep.kind,
+                float(km[i]) if len(km) and np.isfinite(km[i]) else None,
+                detail={
+                    "t_detect": ep.t_detect,
+                    "t_end": ep.t_end,
+                    "duration_s": ep.t_end - ep.t_start,
+                    "d_pulse_m": ep.d_pulse_m,
+                    "d_corrected_m": ep.d_corrected_m,
+                    "max_error_m": ep.max_error_m,
+                    "readhered": ep.readhered,
+                    "failsafe": ep.failsafe,
+                    **ep.detail,
+                },
+            )
+        )
+    events.sort(key=lambda e: e.t)
+    ev_frame = events_frame(events)
+    truth = streams["truth"]
+    summary = summarise(run, network, cfg, sol.positions, ev_frame, odo, gps)
+    if truth is not None and len(truth):
+        summary["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
+    return PipelineResult(
+        run.run_id, sol.positions, ev_frame, summary, odo, gps, getattr(features, "kappa", None), truth
+    )
+
+
+def events_frame(events: list[Event]) -> pd.DataFrame:
+    rows = [
+        {
+            "t": e.t,
+            "type": e.type,
+            "km_m": e.km_m,
+            "correction_m": e.correction_m,
+            "correction_pct": e.correction_pct,
+            "detail": json.dumps(e.detail, ensure_ascii=False, default=_json_default, sort_keys=True),
+        }
+        for e in events
+    ]
+    frame = pd.DataFrame(rows, columns=EVENTS.column_names)
+    for c in ("t", "km_m", "correction_m", "correction_pct"):
+        frame[c] = pd.to_numeric(frame[c]).astype("float64")
+    for c in ("type", "detail"):
+        frame[c] = frame[c].astype("string")
+    return frame
+
+
+def _json_default(v: Any) -> Any:
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.floating,)):
+        return None if not np.isfinite(v) else round(float(v), 6)
+    if isinstance(v, np.bool_):
+        return bool(v)
+    return str(v)
+
+
+def summarise(
+    run: Run,
+    network: Network,
+    cfg: PipelineConfig,
+    pos: pd.DataFrame,
+    ev: pd.DataFrame,
+    odo: Odometry,
+    gps: GpsAnalysis | None,
+) -> dict[str, Any]:
+    """Headline figures of one run (what audits aggregate)."""
+    meta = run.meta
+    assert meta is not None
+    states = pos["state"].value_counts(normalize=True).to_dict()
+    corr = ev[ev["type"].isin(["balise_correction", "feature_correction"])]
+    pct = corr["correction_pct"].dropna()
+    determined = pos[pos["state"] != PositionState.UNDETERMINED.value]
+    refused = ev[ev["type"] == "feature_refused"]
+    reasons: dict[str, int] = {}
+    for d in refused["detail"]:
+        for r in json.loads(d).get("failed", []):
+            reasons[r] = reasons.get(r, 0) + 1
+    routes = determined.groupby(["line_code", "track"], dropna=True).size()
+    main_route = routes.idxmax() if len(routes) else (None, None)
+    return {
+        "run_id": run.run_id,
+        "vehicle_id": meta.vehicle_id,
+        "vehicle_kind": meta.vehicle_kind,
+        "db_version": network.meta.get("db_version"),
+        "config": cfg.to_dict(),
+        "duration_s": float(pos["t"].iloc[-1] - pos["t"].iloc[0]) if len(pos) else 0.0,
+        "distance_m": float(odo.d[-1]) if odo.d.size else 0.0,
+        "line_code": main_route[0],
+        "track": main_route[1],
+        "first_determined_t": float(determined["t"].iloc[0]) if len(determined) else None,
+        "state_share": {k: round(float(v), 6) for k, v in states.items()},
+        "n_corrections": len(corr),
+        "n_balise_corrections": int((corr["type"] == "balise_correction").sum()),
+        "n_feature_corrections": int((corr["type"] == "feature_correction").sum()),
+        "n_feature_refused": len(refused),
+        "feature_refusals": reasons,
+        "mean_correction_pct": float(pct.mean()) if len(pct) else None,
+        "max_correction_pct": float(pct.max()) if len(pct) else None,
+        "n_slips": int(ev["type"].isin(["slip", "slide"]).sum()),
+        "n_failsafe": int((ev["type"] == "failsafe").sum()),
+        "n_anomalies": int((ev["type"] == "balise_anomaly").sum()),
+        "gps_decisions": len(gps.decisions) if gps else 0,
+        "gps_trusted_share": float(gps.fixes["trusted"].mean()) if gps is not None and len(gps.fixes) else None,
+        "max_margin_m": float(pos["margin_m"].max()) if pos["margin_m"].notna().any() else None,
+        "episodes": [asdict(e) for e in odo.episodes],
+    }

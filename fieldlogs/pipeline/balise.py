@@ -1,0 +1,193 @@
+"""Balise unit: initial position from I1→I2 pairs and correction by C balises [S003 §4].
+
+* Power-up: undetermined. I1 then I2 within 10 m of travel → look up (line, station,
+  track) → actual and equipment km at I2. Reverse order (I2 first) → ignored. A code not
+  in the DB → anomaly, state kept.
+* km counts up on a D (or S) telegram, down on U; cab reversals after the pair are
+  followed through the signed travel (see :class:`~fieldlogs.pipeline.types.Fix`).
+* C balise: identified from (last initial pair, signal type) and accepted only if the
+  travel since that pair's I1 is within ±500 m of the DB's ``dist_from_initial_m``.
+  Correction amount = computed km − DB km; position-correction % = |amount| / distance
+  since the previous correction × 100.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import pandas as pd
+
+from dbtools.network import Network
+from fieldlogs.pipeline.config import BaliseConfig
+from fieldlogs.pipeline.types import Event, Fix
+from schemas.enums import BaliseKind, direction_sign
+
+PairKey = tuple[str, str, str]
+
+
+@dataclass
+class _Pending:
+    i: int
+    d: float
+    line_code: str
+
+
+@dataclass
+class BaliseDb:
+    """Look-up structures built once from the balise table."""
+
+    pairs: dict[PairKey, dict[str, dict[str, Any]]]
+    c_balises: dict[tuple[PairKey, str], list[dict[str, Any]]]
+    line_codes: set[str]
+
+    @classmethod
+    def from_network(cls, network: Network) -> BaliseDb:
+        b = network.balises
+        pairs: dict[PairKey, dict[str, dict[str, Any]]] = {}
+        c_bal: dict[tuple[PairKey, str], list[dict[str, Any]]] = {}
+        for row in b.astype(object).where(b.notna(), None).to_dict("records"):
+            key = (str(row["line_code"]), str(row["station_code"]), str(row["track"]))
+            if row["kind"] == BaliseKind.C:
+                c_bal.setdefault((key, str(row["signal_type"])), []).append(row)
+            else:
+                pairs.setdefault(key, {})[str(row["kind"])] = row
+        lines = set(network.lines["line_code"].astype(str)) | set(b["line_code"].astype(str))
+        return cls(pairs, c_bal, lines)
+
+
+@dataclass
+class BaliseUnit:
+    """Sequential telegram handling; the solver calls :meth:`on_telegram` in time order."""
+
+    db: BaliseDb
+    cfg: BaliseConfig
+    pending: _Pending | None = None
+    last_pair: tuple[PairKey, float] | None = None
+    """(pair key, travel distance at its I1)."""
+    _s: float = 0.0
+
+    def on_telegram(
+        self,
+        tel: dict[str, Any],
+        i: int,
+        t: float,
+        d: float,
+        s: float,
+        cab: int,
+        estimate: Fix | None,
+        km_now: float | None,
+    ) -> tuple[list[Event], Fix | None]:
+        """Handle one telegram at time ``t`` (cycle ``i``, travel ``d``, signed travel ``s``);
+        returns events and a new fix (or None)."""
+        self._s = s
+        kind = str(tel.get("kind") or "")
+        if kind == BaliseKind.I1:
+            return self._on_i1(tel, i, t, d)
+        if kind == BaliseKind.I2:
+            return self._on_i2(tel, i, t, d, cab, estimate, km_now)
+        if kind == BaliseKind.C:
+            return self._on_c(tel, i, t, d, estimate, km_now)
+        return [Event(t, "balise_anomaly", km_now, detail={"reason": f"unknown telegram kind {kind!r}"})], None
+
+    def _on_i1(self, tel: dict[str, Any], i: int, t: float, d: float) -> tuple[list[Event], Fix | None]:
+        line = _s(tel.get("line_code"))
+        if line is None or line not in self.db.line_codes:
+            self.pending = None
+            return [
+                Event(t, "balise_anomaly", detail={"reason": "unknown line code", "kind": "I1", "line_code": line})
+            ], None
+        self.pending = _Pending(i, d, line)
+        return [], None
+
+    def _on_i2(
+        self, tel: dict[str, Any], i: int, t: float, d: float, cab: int, estimate: Fix | None, km_now: float | None
+    ) -> tuple[list[Event], Fix | None]:
+        station, track = _s(tel.get("station_code")), _s(tel.get("track"))
+        pending, self.pending = self.pending, None
+        if pending is None or d - pending.d > self.cfg.pair_max_travel_m:
+            why = (
+                "I2 without a preceding I1 (reverse order or missed I1)"
+                if pending is None
+                else f"I2 {d - pending.d:.1f} m after I1 (limit {self.cfg.pair_max_travel_m:g} m)"
+            )
+            return [
+                Event(t, "pair_ignored", km_now, detail={"reason": why, "station_code": station, "track": track})
+            ], None
+        key = (pending.line_code, station or "", track or "")
+        pair = self.db.pairs.get(key)
+        if pair is None or "I2" not in pair or "I1" not in pair:
+            return [
+                Event(
+                    t,
+                    "balise_anomaly",
+                    km_now,
+                    detail={
+                        "reason": "initial pair not in DB",
+                        "line_code": key[0],
+                        "station_code": key[1],
+                        "track": key[2],
+                    },
+                )
+            ], None
+        i2 = pair["I2"]
+        km_db, km_eq = float(i2["km_actual_m"]), float(i2["km_equipment_m"])
+        k = direction_sign(key[2]) * (1 if cab >= 0 else -1)
+        fix = Fix(t, self._s, d, km_db, km_eq, key[0], key[2], k, "balise", self.cfg.fix_uncertainty_m)
+        self.last_pair = (key, pending.d)
+        detail = {"balise_id": i2["balise_id"], "line_code": key[0], "station_code": key[1], "track": key[2]}
+        if estimate is None or km_now is None or estimate.line_code != key[0]:
+            return [Event(t, "initial_position", km_db, detail=detail)], fix
+        return [Event(t, "balise_correction", km_db, km_now - km_db, detail={**detail, "kind": "I2"})], fix
+
+    def _on_c(
+        self, tel: dict[str, Any], i: int, t: float, d: float, estimate: Fix | None, km_now: float | None
+    ) -> tuple[list[Event], Fix | None]:
+        sig = _s(tel.get("signal_type")) or ""
+        if estimate is None or self.last_pair is None or km_now is None:
+            return [Event(t, "c_balise_ignored", detail={"reason": "no initial pair yet", "signal_type": sig})], None
+        key, d_i1 = self.last_pair
+        travelled = d - d_i1
+        cands = self.db.c_balises.get((key, sig), [])
+        hits = [c for c in cands if abs(travelled - float(c["dist_from_initial_m"])) <= self.cfg.id_window_m]
+        base = {"signal_type": sig, "pair": "/".join(key), "travelled_m": round(travelled, 2)}
+        if len(hits) != 1:
+            reason = (
+                "no C balise of this signal type within the window"
+                if not hits
+                else "ambiguous: several C balises within the window"
+            )
+            return [
+                Event(
+                    t,
+                    "balise_anomaly",
+                    km_now,
+                    detail={**base, "reason": reason, "candidates": [c["balise_id"] for c in hits]},
+                )
+            ], None
+        c = hits[0]
+        km_db, km_eq = float(c["km_actual_m"]), float(c["km_equipment_m"])
+        fix = Fix(
+            t,
+            self._s,
+            d,
+            km_db,
+            km_eq,
+            estimate.line_code,
+            estimate.track,
+            estimate.k,
+            "balise",
+            self.cfg.fix_uncertainty_m,
+        )
+        return [
+            Event(
+                t, "balise_correction", km_db, km_now - km_db, detail={**base, "balise_id": c["balise_id"], "kind": "C"}
+            )
+        ], fix
+
+
+def _s(v: Any) -> str | None:
+    if v is None or (isinstance(v, float) and v != v) or v is pd.NA:
+        return None
+    s = str(v).strip()
+    return s or None

@@ -1,0 +1,196 @@
+"""Every tuning parameter of the positioning pipeline, with SPEC defaults and units.
+
+One dataclass per concern; ``PipelineConfig.from_toml`` reads overrides from a file whose
+sections mirror the dataclasses (``[odometry]``, ``[balise]``, ``[feature]``, ``[gps]``,
+``[margin]``). Unknown keys are errors, so a misspelt parameter never silently does nothing.
+Accelerations are in the papers' km/h/s where the papers state them so.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+from schemas.errors import InputError
+from schemas.units import kmh_s_to_mps2
+
+
+@dataclass(frozen=True)
+class OdometryConfig:
+    """Slip/slide detection and inertial correction [S000 §3.1, SPEC §5.1]."""
+
+    avg_window_s: float = 3.0
+    """Moving-average window for A_p and a_x [s]."""
+    pulse_delay_cycles: int = 3
+    """Delay of the pulse stream to line it up with the IMU [cycles of 100 ms]."""
+    ta_kmh_s: float = 1.23
+    """Detection threshold Ta on |a_x − A_p| [km/h/s] (gravity component of 35 ‰), eq. 1."""
+    lookback_s: float = 2.1
+    """Look-back from the detection point before searching the start point [s]."""
+    jerk_imu_max_kmh_s: float = 0.1
+    """|Ji| limit per 0.1 s at the start point [km/h/s] (IMU resolution)."""
+    jerk_pulse_max_kmh_s: float = 0.15
+    """|Jp| limit per 0.1 s at the start point [km/h/s] (pulse resolution)."""
+    jerk_diff_max_kmh_s: float = 0.05
+    """|Ji − Jp| limit per 0.1 s at the start point [km/h/s]."""
+    hold_cycles: int = 3
+    """Consecutive cycles the jerk conditions must hold."""
+    beta_kmh_s: float = 1.64
+    """Re-adhesion: |v_inertial − v_pulse| ≤ β·t [km/h/s]."""
+    delta_a_kmh_s: float = 1.64
+    """Error budget Δa = gyro 0.31 + accel 0.1 + threshold 1.23 [km/h/s], eq. 13."""
+    max_correction_s: float = 10.0
+    """A correction still running after this is a fail-safe event [s]."""
+    min_speed_kmh: float = 3.0
+    """Below this speed no slip/slide is detected (standstill noise) [km/h]."""
+
+    @property
+    def ta_mps2(self) -> float:
+        return kmh_s_to_mps2(self.ta_kmh_s)
+
+    @property
+    def beta_mps2(self) -> float:
+        return kmh_s_to_mps2(self.beta_kmh_s)
+
+    @property
+    def delta_a_mps2(self) -> float:
+        return kmh_s_to_mps2(self.delta_a_kmh_s)
+
+
+@dataclass(frozen=True)
+class BaliseConfig:
+    """Initial pairs and correction balises [S003 §4, SPEC §5.2]."""
+
+    pair_max_travel_m: float = 10.0
+    """I2 must follow I1 within this travel distance [m]."""
+    id_window_m: float = 500.0
+    """C-balise identification window around dist_from_initial_m [m]."""
+    fix_uncertainty_m: float = 1.0
+    """Uncertainty of a balise position fix (antenna/read position) [m]."""
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Curve feature points [S000 §3.2, SPEC §5.3]."""
+
+    tolerance: float = 0.20
+    """Upper limit (1/R)(1+tol), lower limit (1/R)(1−tol)."""
+    straight_kappa_max: float = 1 / 4000
+    """|κ| below this counts as straight [1/m]."""
+    length_tolerance: float = 0.20
+    """Allowed relative deviation of the measured curve length from the DB [–]."""
+    length_tolerance_min_m: float = 10.0
+    """… but never tighter than this [m]."""
+    min_speed_kmh: float = 10.0
+    """No correction below this speed [km/h]."""
+    kappa_smoothing_s: float = 1.0
+    """Moving average applied to κ = ωz / v before the diagnostics [s]."""
+    fix_uncertainty_m: float = 10.0
+    """Uncertainty of a feature-point correction [m] (paper: within about 10 m)."""
+    search_margin_m: float = 100.0
+    """Extra distance searched around the predicted feature position [m] (grows with the margin)."""
+
+
+@dataclass(frozen=True)
+class GpsConfig:
+    """D-GPS map-matching, trust filter and up/down decision [S001 §4.2, SPEC §5.4]."""
+
+    windows_s: tuple[int, ...] = (5, 15, 30)
+    """RMS windows of the second-to-second position change [s]."""
+    rms_threshold_m: tuple[float, ...] = (1.0, 1.0, 1.0)
+    """Per window: RMS of (Δposition − expected Δposition) above this → not trusted [m]."""
+    min_fix: int = 2
+    """Minimum fix quality to use a fix (2 = D-GPS)."""
+    max_hdop: float = 3.0
+    max_offset_m: float = 15.0
+    """A fix farther than this from every candidate track is off-track (not matched) [m]."""
+    decide_min_fixes: int = 10
+    """Trusted fixes needed before deciding up/down."""
+    decide_min_share: float = 0.9
+    """Share of trusted fixes that must favour one track."""
+    decide_max_sigma_m: float = 0.6
+    """Standard error of the mean offset needed to decide [m]."""
+    crossover_rms_m: float = 1.5
+    """RMS of the offset from the base track above this (over 5 s) → crossing over [m]."""
+    initial_uncertainty_m: float = 10.0
+    """Uncertainty of a GPS-derived initial position [m]."""
+    allow_initial: bool = True
+    """GPS may set the initial position before any balise (flagged GPS-derived)."""
+
+
+@dataclass(frozen=True)
+class MarginConfig:
+    """Safety margin: |position error| ≤ margin [S000 §4.3.2]."""
+
+    distance_pct: float = 2.0
+    """Percent of the distance travelled since the last absolute correction."""
+    slip_allowance_m: float = 2.0
+    """Fixed allowance per corrected slip/slide episode, added to ½·Δa·T² (eq. 13) [m]."""
+    uncertain_growth_pct: float = 5.0
+    """Percent of distance added while the position is uncertain (fail-safe) [%]."""
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    balise: BaliseConfig = field(default_factory=BaliseConfig)
+    feature: FeatureConfig = field(default_factory=FeatureConfig)
+    gps: GpsConfig = field(default_factory=GpsConfig)
+    margin: MarginConfig = field(default_factory=MarginConfig)
+    cycle_s: float = 0.1
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_toml(cls, path: Path) -> PipelineConfig:
+        path = Path(path)
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError as exc:
+            raise InputError("no such config file", path=path) from exc
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise InputError(f"not valid TOML: {exc}", path=path) from exc
+        return cls.from_dict(data, source=str(path))
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], source: str = "config") -> PipelineConfig:
+        cfg = cls()
+        sections = {f.name: f for f in fields(cls)}
+        for key, value in data.items():
+            if key not in sections:
+                raise InputError(f"unknown section or key '{key}' (known: {', '.join(sections)})", path=source)
+            current = getattr(cfg, key)
+            if not isinstance(value, dict):
+                cfg = replace(cfg, **{key: _typed(source, key, current, value)})
+                continue
+            known = {f.name: f for f in fields(current)}
+            updates = {}
+            for k, v in value.items():
+                if k not in known:
+                    raise InputError(f"unknown key '{key}.{k}' (known: {', '.join(known)})", path=source)
+                updates[k] = _typed(source, f"{key}.{k}", getattr(current, k), v)
+            cfg = replace(cfg, **{key: replace(current, **updates)})
+        return cfg
+
+
+def _typed(source: str, key: str, default: Any, value: Any) -> Any:
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise InputError(f"'{key}' must be true or false, not {value!r}", path=source)
+        return value
+    if isinstance(default, tuple):
+        if not isinstance(value, list):
+            raise InputError(f"'{key}' must be a list, not {value!r}", path=source)
+        return tuple(_typed(source, key, default[0] if default else value[0], v) for v in value)
+    if isinstance(default, int) and not isinstance(default, bool):
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise InputError(f"'{key}' must be a whole number, not {value!r}", path=source)
+        return value
+    if isinstance(default, float):
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise InputError(f"'{key}' must be a number, not {value!r}", path=source)
+        return float(value)
+    return value

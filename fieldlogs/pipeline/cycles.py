@@ -1,0 +1,142 @@
+"""Vectorised preprocessing: the run's streams on the onboard 100 ms cycle grid.
+
+The cycle grid is the tachometer's time base (10 Hz). IMU samples (100 Hz) are averaged
+over each cycle ``(t[k−1], t[k]]``; cab direction and PTO are carried forward from their
+events. Nothing here is sequential, so it is all numpy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from schemas.enums import CabDirection
+
+FloatArray = npt.NDArray[np.float64]
+IMU_COLUMNS = ("ax", "ay", "az", "wx", "wy", "wz")
+
+
+@dataclass
+class Cycles:
+    """Per-cycle arrays (length n) of one run."""
+
+    t: FloatArray
+    pulses: FloatArray
+    """Cumulative pulse count (NaN where the tacho is absent)."""
+    d_pulse: FloatArray
+    """Travel distance by pulses since the first cycle [m] (unsigned, never decreasing)."""
+    v_pulse: FloatArray
+    """Speed by pulses, backward difference over one cycle [m/s] (unsigned)."""
+    imu: dict[str, FloatArray]
+    """Cycle means of ax, ay, az [m/s²] and wx, wy, wz [rad/s]; NaN where no sample."""
+    cab: npt.NDArray[np.int8]
+    """+1 running toward the F end (body +x), −1 reversed."""
+    pto: npt.NDArray[np.int8]
+    """1 on rail (road-rail vehicles), 0 off; 1 for trains."""
+    has_tacho: bool
+    has_imu: bool
+
+    @property
+    def n(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def dt(self) -> FloatArray:
+        return np.diff(self.t, prepend=self.t[0] - 0.1 if self.t.size else 0.0)
+
+
+def cycle_means(t_cycles: FloatArray, t_samples: FloatArray, values: FloatArray) -> FloatArray:
+    """Mean of the samples in each cycle ``(t[k−1], t[k]]`` (NaN for empty cycles)."""
+    idx = np.searchsorted(t_cycles, t_samples, side="left")
+    ok = (idx < t_cycles.size) & np.isfinite(values)
+    counts = np.bincount(idx[ok], minlength=t_cycles.size).astype(float)
+    sums = np.bincount(idx[ok], weights=values[ok], minlength=t_cycles.size)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, sums / counts, np.nan)
+
+
+def step_values(t_cycles: FloatArray, t_events: FloatArray, values: npt.ArrayLike, default: float) -> FloatArray:
+    """Value of the last event at or before each cycle (``default`` before the first)."""
+    vals = np.asarray(values, dtype=float)
+    idx = np.searchsorted(t_events, t_cycles, side="right") - 1
+    return np.where(idx >= 0, vals[np.clip(idx, 0, None)] if vals.size else default, default)
+
+
+def build_cycles(
+    *,
+    tacho: pd.DataFrame | None,
+    imu: pd.DataFrame | None,
+    cab: pd.DataFrame | None,
+    wheel_diameter_m: float,
+    teeth: int,
+    t_end: float | None = None,
+    cycle_s: float = 0.1,
+) -> Cycles:
+    """Resample a run's streams onto its cycle grid (streams must be sorted by t)."""
+    has_tacho = tacho is not None and len(tacho) > 1
+    has_imu = imu is not None and len(imu) > 0
+    if has_tacho:
+        assert tacho is not None
+        t = tacho["t"].to_numpy(dtype=float)
+        pulses = tacho["pulses"].to_numpy(dtype=float, na_value=np.nan)
+    else:
+        end = t_end if t_end is not None else (float(imu["t"].iloc[-1]) if has_imu and imu is not None else 0.0)
+        t = np.arange(0.0, end + 1e-9, cycle_s)
+        pulses = np.full(t.size, np.nan)
+    metres_per_pulse = np.pi * wheel_diameter_m / teeth
+    if has_tacho:
+        p0 = pulses[np.isfinite(pulses)][0] if np.isfinite(pulses).any() else 0.0
+        d = (pulses - p0) * metres_per_pulse
+        d = np.maximum.accumulate(np.nan_to_num(d, nan=0.0))
+        dd = np.diff(d, prepend=d[0])
+        dtt = np.diff(t, prepend=t[0] - cycle_s)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            v = np.where(dtt > 0, dd / dtt, 0.0)
+    else:
+        d = np.zeros(t.size)
+        v = np.zeros(t.size)
+    imu_means: dict[str, FloatArray] = {}
+    for c in IMU_COLUMNS:
+        if has_imu and imu is not None:
+            imu_means[c] = cycle_means(t, imu["t"].to_numpy(dtype=float), imu[c].to_numpy(dtype=float, na_value=np.nan))
+        else:
+            imu_means[c] = np.full(t.size, np.nan)
+    if cab is not None and len(cab):
+        te = cab["t"].to_numpy(dtype=float)
+        sign = np.where(cab["direction"].astype(str).to_numpy() == CabDirection.REVERSE.value, -1.0, 1.0)
+        cab_sign = step_values(t, te, sign, 1.0).astype(np.int8)
+        if "pto" in cab.columns and cab["pto"].notna().any():
+            pto_vals = cab["pto"].astype("Float64").ffill().fillna(0).to_numpy(dtype=float)
+            pto = step_values(t, te, pto_vals, 0.0).astype(np.int8)
+        else:
+            pto = np.ones(t.size, dtype=np.int8)
+    else:
+        cab_sign = np.ones(t.size, dtype=np.int8)
+        pto = np.ones(t.size, dtype=np.int8)
+    return Cycles(t, pulses, d, v, imu_means, cab_sign, pto, has_tacho, has_imu)
+
+
+def moving_average(x: FloatArray, window: int) -> FloatArray:
+    """Trailing moving average over ``window`` samples (what an onboard unit can compute
+    in real time); NaNs are ignored, the first samples average what exists."""
+    if window <= 1:
+        return x.astype(float, copy=True)
+    ok = np.isfinite(x)
+    xs = np.where(ok, x, 0.0)
+    cs = np.concatenate([[0.0], np.cumsum(xs)])
+    cn = np.concatenate([[0], np.cumsum(ok)])
+    hi = np.arange(1, x.size + 1)
+    lo = np.maximum(hi - window, 0)
+    n = cn[hi] - cn[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 0, (cs[hi] - cs[lo]) / n, np.nan)
+
+
+def delay(x: FloatArray, cycles: int) -> FloatArray:
+    """``x`` delayed by ``cycles`` (the first values repeat the first sample)."""
+    if cycles <= 0:
+        return x.copy()
+    return np.concatenate([np.full(cycles, x[0] if x.size else np.nan), x[:-cycles]])[: x.size]

@@ -1,0 +1,146 @@
+"""Data passed between the pipeline's units: odometry, fixes (anchors), events."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass
+class SlipEpisode:
+    """One slip (wheel faster, traction) or slide (wheel slower, braking) episode."""
+
+    kind: str
+    """'slip' or 'slide'."""
+    t_detect: float
+    t_start: float
+    """Correction start point (found by the look-back search) [s]."""
+    t_end: float
+    """Re-adhesion, or the fail-safe time [s]."""
+    i_start: int
+    i_end: int
+    d_pulse_m: float
+    """Distance by pulses over [t_start, t_end] [m]."""
+    d_corrected_m: float
+    """Inertially corrected distance over the same interval [m]."""
+    max_error_m: float
+    """Error budget ½·Δa·T² for the correction duration T (eq. 13) [m]."""
+    readhered: bool
+    failsafe: bool
+    detail: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Odometry:
+    """Corrected travel distance per cycle (what dead reckoning runs on)."""
+
+    d: FloatArray
+    """Corrected cumulative travel distance [m] (unsigned, never decreasing)."""
+    v: FloatArray
+    """Corrected speed [m/s] (unsigned)."""
+    slipping: npt.NDArray[np.bool_]
+    """True while a slip/slide correction is running."""
+    allowance: FloatArray
+    """Cumulative error allowance of all corrections so far [m] (for the margin)."""
+    episodes: list[SlipEpisode] = field(default_factory=list)
+
+
+@dataclass
+class Event:
+    """One row of the ``events`` output."""
+
+    t: float
+    type: str
+    km_m: float | None = None
+    correction_m: float | None = None
+    correction_pct: float | None = None
+    detail: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Fix:
+    """An absolute position fix (anchor): from ``t_effective`` on,
+    km = km_m + k·(S − s_ref), where S = Σ cab·Δd is the signed body-forward travel.
+
+    ``k`` is km per metre of body-forward travel (±1), so cab reversals after the fix are
+    followed automatically. The reference point may precede ``t_effective`` (a feature
+    point is recognised some metres after its exit crossing).
+    """
+
+    t_effective: float
+    s_ref: float
+    """Signed travel S at the reference point [m]."""
+    d_ref: float
+    """Unsigned travel d at the reference point [m] (for the margin and correction %)."""
+    km_m: float
+    km_equipment_m: float
+    line_code: str
+    track: str
+    k: int
+    source: str
+    """'balise', 'feature' or 'gps'."""
+    uncertainty_m: float
+    state: str = "determined"
+    allowance_ref_m: float = 0.0
+    """Odometry slip allowance already accumulated at the reference point [m]."""
+    uncertain_since_d: float | None = None
+    """Travel d at which the position became uncertain (fail-safe), if it is."""
+
+    def km_at(self, s: float) -> float:
+        return self.km_m + self.k * (s - self.s_ref)
+
+
+def slip_budget_m(duration_s: float, delta_a_mps2: float) -> float:
+    """Eq. 13: Δd = ½·Δa·t² (±22.8 m at t = 10 s with Δa = 1.64 km/h/s)."""
+    return 0.5 * delta_a_mps2 * duration_s * duration_s
+
+
+def pulse_only_odometry(d_pulse: FloatArray, v_pulse: FloatArray) -> Odometry:
+    """Odometry without inertial correction (no IMU in the run)."""
+    return Odometry(d_pulse.copy(), v_pulse.copy(), np.zeros(d_pulse.size, dtype=bool), np.zeros(d_pulse.size))
+
+
+@dataclass
+class FeatureOutcome:
+    """Result of evaluating one feature point (curve) against the κ trace [S000 §3.2]."""
+
+    accepted: bool
+    feature_id: str
+    line_code: str
+    track: str
+    i_ref: int | None
+    """Cycle of the exit lower-limit crossing (the correction point), if found."""
+    km_db: float | None
+    """DB km of the curve-exit row (seq 4)."""
+    failed: list[str] = field(default_factory=list)
+    """Names of the failed diagnostics (empty when accepted)."""
+    detail: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class TrackDecision:
+    """A GPS decision on line and track (up/down) from trusted fixes [S001 §4.2]."""
+
+    t: float
+    line_code: str
+    track: str
+    km_m: float
+    """Map-matched km of the last fix used."""
+    km_dir: int
+    """+1 km increasing with time, −1 decreasing, 0 unknown (standing)."""
+    evidence: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class GpsAnalysis:
+    """Vectorised GPS results over a whole run (see ``fieldlogs.pipeline.gps``)."""
+
+    fixes: Any
+    """DataFrame, one row per GPS fix: t, trusted, line_code, track, km_m, offset_m, …"""
+    decisions: list[TrackDecision] = field(default_factory=list)
+    crossovers: list[Event] = field(default_factory=list)

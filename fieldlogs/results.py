@@ -1,0 +1,55 @@
+"""Writing and reading pipeline outputs: positions and events (Parquet + CSV), summary.json."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from dbtools.atomic import atomic_folder
+from schemas.errors import InputError
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return None if not np.isfinite(v) else float(v)
+    if isinstance(v, np.bool_):
+        return bool(v)
+    return v
+
+
+def write_results(
+    out: Path, positions: pd.DataFrame, events: pd.DataFrame, summary: dict[str, Any], *, force: bool = False
+) -> Path:
+    """OUT/positions.{parquet,csv}, OUT/events.{parquet,csv}, OUT/summary.json — atomically."""
+    with atomic_folder(out, force=force) as tmp:
+        for name, frame in (("positions", positions), ("events", events)):
+            pq.write_table(
+                pa.Table.from_pandas(frame, preserve_index=False), tmp / f"{name}.parquet", compression="zstd"
+            )
+            frame.to_csv(tmp / f"{name}.csv", index=False, lineterminator="\n")
+        (tmp / "summary.json").write_text(
+            json.dumps(_jsonable(summary), indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
+        )
+    return Path(out)
+
+
+def read_summary(out: Path) -> dict[str, Any]:
+    p = Path(out) / "summary.json"
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise InputError("no summary.json (not a pipeline output folder)", path=p) from exc
+    except json.JSONDecodeError as exc:
+        raise InputError(f"summary.json is not valid JSON: {exc}", path=p) from exc
