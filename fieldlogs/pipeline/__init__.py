@@ -18,7 +18,7 @@ from fieldlogs.accuracy import compare_with_truth, truth_summary
 from fieldlogs.io import Run
 from fieldlogs.pipeline.balise import BaliseDb, BaliseUnit
 from fieldlogs.pipeline.config import PipelineConfig
-from fieldlogs.pipeline.cycles import build_cycles
+from fieldlogs.pipeline.cycles import Cycles, build_cycles
 from fieldlogs.pipeline.features import FeatureUnit
 from fieldlogs.pipeline.gps import analyse_gps
 from fieldlogs.pipeline.odometry import correct_odometry
@@ -41,6 +41,7 @@ class PipelineResult:
     gps: GpsAnalysis | None = None
     kappa: np.ndarray | None = None
     truth: pd.DataFrame | None = field(default=None, repr=False)
+    cycles: Cycles | None = field(default=None, repr=False)
 
 
 def _clean(frame: pd.DataFrame | None, name: str, events: list[Event]) -> pd.DataFrame | None:
@@ -121,9 +122,8 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
     summary = summarise(run, network, cfg, sol.positions, ev_frame, odo, gps)
     if truth is not None and len(truth):
         summary["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
-    return PipelineResult(
-        run.run_id, sol.positions, ev_frame, summary, odo, gps, getattr(features, "kappa", None), truth
-    )
+    kappa = getattr(features, "kappa", None)
+    return PipelineResult(run.run_id, sol.positions, ev_frame, summary, odo, gps, kappa, truth, cycles)
 
 
 def events_frame(events: list[Event]) -> pd.DataFrame:
