@@ -1,4 +1,16 @@
-"""``trainpos db …``: build, validate, diff and release onboard DB versions."""
+"""``trainpos db …``: build, validate, diff and release onboard DB versions.
+
+JSON shapes (``--format json``), stable:
+
+* ``db diff``: ``{"old": {origin, kind, **meta, content_hash}, "new": {…},
+  "schema_version": {"old", "new"}, "meta": {key: [old, new]},
+  "tables": {name: {"added", "removed", "changed", "rows": [{"change", "keys",
+  "changes": {col: [old, new]}}]}}, "summary": [str]}``
+* ``db releases``: ``{"registry": str, "releases": [{db_version, file, sha256,
+  content_hash, schema_version, released_at, released_by, note, source_file}]}``
+* ``db verify-release``: ``{"ok": bool, "registry": str, "checked": [{"db_version",
+  "file", "ok"}], "findings": [finding]}``
+"""
 
 from __future__ import annotations
 
@@ -6,10 +18,13 @@ from enum import StrEnum
 from pathlib import Path
 
 import typer
+from rich.table import Table as RichTable
 
 from cli.errors import cli_command
 from cli.render import console, key_value_table, print_findings, print_json
 from dbtools.build import build_db
+from dbtools.diff import DbDiff, diff_paths
+from dbtools.release import list_releases, release_db, verify_releases
 from schemas.findings import findings_report, has_errors
 
 app = typer.Typer(help="Build, validate, diff and release onboard DB versions.", no_args_is_help=True)
@@ -72,4 +87,150 @@ def validate(
     else:
         print_findings(findings, console=console(), title=f"Validation of {target}")
     if has_errors(findings, strict):
+        raise typer.Exit(1)
+
+
+@app.command("diff")
+@cli_command
+def diff(
+    old: Path = typer.Argument(..., help="Old onboard DB file (.sqlite) or source set folder."),
+    new: Path = typer.Argument(..., help="New onboard DB file (.sqlite) or source set folder."),
+    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table or json (every changed row)."),
+) -> None:
+    """Show what changed between two DB versions: rows per table and a plain-language summary.
+
+    Exit 0 whether or not anything differs (it is a report); 1 if a source set has errors;
+    2 if an input cannot be read.
+
+    Example: trainpos db diff net-2026.10.sqlite net-2026.11.sqlite
+    """
+    result = diff_paths(old, new)
+    if fmt == Fmt.json:
+        print_json(result.to_dict())
+        return
+    _print_diff(result)
+
+
+def _side_cell(side: dict[str, object], key: str) -> str:
+    v = side.get(key)
+    return "—" if v is None else str(v)
+
+
+def _print_diff(d: DbDiff) -> None:
+    out = console()
+    head = RichTable(title="db diff")
+    head.add_column("")
+    head.add_column("old", overflow="fold")
+    head.add_column("new", overflow="fold")
+    head.add_row("origin", _side_cell(d.old, "origin"), _side_cell(d.new, "origin"))
+    head.add_row("db_version", _side_cell(d.old, "db_version"), _side_cell(d.new, "db_version"))
+    head.add_row("content_hash", _side_cell(d.old, "content_hash")[:16], _side_cell(d.new, "content_hash")[:16])
+    head.add_row("schema_version", *("—" if v is None else str(v) for v in d.schema_version))
+    out.print(head)
+    counts = RichTable(title="Rows")
+    for col in ("table", "added", "removed", "changed"):
+        counts.add_column(col, justify="left" if col == "table" else "right")
+    for name, t in d.tables.items():
+        n = t.counts
+        counts.add_row(name, str(n["added"]), str(n["removed"]), str(n["changed"]))
+    out.print(counts)
+    for line in d.summary:
+        out.print(f"• {line}", markup=False)
+    if d.has_changes:
+        out.print("(--format json lists every changed row with old and new values)")
+
+
+@app.command("release")
+@cli_command
+def release(
+    file: Path = typer.Argument(..., help="Onboard DB file (.sqlite) to release; never modified."),
+    registry: Path = typer.Option(..., "--registry", help="Registry folder (created on first release)."),
+    note: str = typer.Option("", "--note", help="Release note: who and why."),
+) -> None:
+    """Validate a DB and add it to a registry as an immutable, read-only version.
+
+    Writes DIR/<db_version>.sqlite (mode 0444), DIR/<db_version>.sha256 (sha256sum format)
+    and a row in DIR/registry.sqlite. Exit 1 if validation finds an error (nothing
+    written), 2 if unreadable, 3 if the version is already released.
+
+    Example: trainpos db release net-2026.11.sqlite --registry releases/ --note "new curve table"
+    """
+    result = release_db(file, registry, note=note)
+    r = result.release
+    out = console()
+    if result.warnings:
+        print_findings(result.warnings, console=out, title="Validation warnings")
+    out.print(
+        key_value_table(
+            [
+                ("db_version", r.db_version),
+                ("file", str(result.path)),
+                ("sha256", r.sha256),
+                ("content_hash", r.content_hash),
+                ("schema_version", r.schema_version),
+                ("released_at", r.released_at),
+                ("released_by", r.released_by),
+                ("note", r.note or ""),
+            ],
+            title="Released",
+        )
+    )
+
+
+@app.command("releases")
+@cli_command
+def releases(
+    registry: Path = typer.Option(..., "--registry", help="Registry folder."),
+    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table or json."),
+) -> None:
+    """List the released DB versions of a registry, oldest first.
+
+    Example: trainpos db releases --registry releases/ --format json
+    """
+    rows = list_releases(registry)
+    if fmt == Fmt.json:
+        print_json({"registry": str(registry), "releases": [r.to_dict() for r in rows]})
+        return
+    t = RichTable(title=f"Releases in {registry}")
+    for c in ("db_version", "released_at", "by", "sha256", "schema", "note"):
+        t.add_column(c, overflow="fold", no_wrap=c in ("db_version", "released_at", "sha256"))
+    for r in rows:
+        t.add_row(r.db_version, r.released_at, r.released_by, r.sha256[:12], str(r.schema_version), r.note or "")
+    out = console()
+    out.print(t)
+    out.print(f"{len(rows)} release(s)")
+
+
+@app.command("verify-release")
+@cli_command
+def verify_release(
+    version: str | None = typer.Argument(None, help="One db_version (default: every release)."),
+    registry: Path = typer.Option(..., "--registry", help="Registry folder."),
+    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table or json."),
+) -> None:
+    """Re-hash released files against registry and manifests; check each DB's content hash.
+
+    Exit 0 all intact, 1 on any mismatch (tampered, missing or corrupt file), 2 if the
+    registry cannot be read or the version is unknown.
+
+    Example: trainpos db verify-release --registry releases/ 2026.11
+    """
+    report = verify_releases(registry, version)
+    if fmt == Fmt.json:
+        print_json(report.to_dict())
+    else:
+        out = console()
+        t = RichTable(title=f"Verification of {registry}")
+        t.add_column("db_version")
+        t.add_column("file")
+        t.add_column("status")
+        for r in report.checked:
+            bad = report.failed(r.db_version)
+            t.add_row(r.db_version, r.file, "[red]FAILED[/]" if bad else "[green]ok[/]")
+        out.print(t)
+        if report.findings:
+            print_findings(report.findings, console=out, title="Problems")
+        n_bad = sum(report.failed(r.db_version) for r in report.checked)
+        out.print(f"{len(report.checked) - n_bad} of {len(report.checked)} release(s) intact")
+    if not report.ok:
         raise typer.Exit(1)

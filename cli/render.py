@@ -22,7 +22,8 @@ def console() -> Console:
 
 
 def err_console() -> Console:
-    return Console(stderr=True, highlight=False)
+    """stderr; messages stay on one line whatever the terminal width (greppable logs)."""
+    return Console(stderr=True, highlight=False, soft_wrap=True)
 
 
 def print_json(data: Any, out: Console | None = None) -> None:

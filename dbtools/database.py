@@ -22,6 +22,7 @@ from schemas.enums import Severity
 from schemas.errors import InputError, RefusedError
 from schemas.findings import Finding
 from schemas.model import Table
+from schemas.registry import REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
 from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, DB_TABLES, META, SCHEMA_VERSION
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -69,9 +70,10 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
         try:
             conn.execute("PRAGMA journal_mode=OFF")
             conn.execute("PRAGMA synchronous=OFF")
+            conn.execute("PRAGMA cache_size=-262144")  # ≤ 256 MB: the GIS key index stays in memory
             conn.execute(f"PRAGMA application_id={APPLICATION_ID}")
             conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
-            conn.execute("PRAGMA foreign_keys=ON")
+            conn.execute("PRAGMA foreign_keys=OFF")  # checked after the load, see below
             db = sqlite_utils.Database(conn)
             _create_tables(db, ALL_DB_TABLES)
             with conn:
@@ -83,6 +85,10 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
                         _rows(t, frame),
                     )
                 conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", sorted(meta.items()))
+            # foreign keys are checked once for the whole load (enforcing them row by row
+            # costs a third of the insert time on a national network)
+            if conn.execute("PRAGMA foreign_key_check").fetchone() is not None:
+                raise sqlite3.IntegrityError("FOREIGN KEY constraint failed")
             conn.execute("PRAGMA synchronous=FULL")
             conn.execute("VACUUM")
         finally:
@@ -209,3 +215,127 @@ def integrity_findings(path: Path, network: Network | None = None) -> list[Findi
         if key not in net.meta:
             findings.append(Finding("db.meta", Severity.ERROR, "meta", f"meta has no '{key}'", keys={"key": key}))
     return findings
+
+
+# --------------------------------------------------------------------------- release registry
+
+
+def _check_registry_file(path: Path) -> None:
+    if path.is_dir():
+        raise InputError("is a folder, expected the release registry (registry.sqlite)", path=path)
+    with open(path, "rb") as fh:
+        head = fh.read(100)
+    if not head.startswith(SQLITE_MAGIC) or len(head) < 100:
+        raise InputError("release registry is not an SQLite database (corrupt?)", path=path)
+    app_id = int.from_bytes(head[68:72], "big")
+    if app_id != REGISTRY_APPLICATION_ID:
+        raise InputError(
+            f"not a trainpos release registry (application_id {app_id:#x}, expected {REGISTRY_APPLICATION_ID:#x})",
+            path=path,
+        )
+
+
+def _check_registry_schema(conn: sqlite3.Connection, path: Path) -> None:
+    names = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+    if RELEASES.name not in names:
+        raise InputError(f"release registry has no '{RELEASES.name}' table", path=path)
+    version = int(conn.execute("PRAGMA user_version").fetchone()[0])
+    if version != REGISTRY_SCHEMA_VERSION:
+        raise InputError(
+            f"release registry schema version {version} is not supported (expected {REGISTRY_SCHEMA_VERSION})",
+            path=path,
+        )
+
+
+def _create_registry(path: Path) -> None:
+    """An empty registry, written to a temp file and renamed into place."""
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        tmp.unlink()
+        conn = sqlite3.connect(tmp)
+        try:
+            conn.execute(f"PRAGMA application_id={REGISTRY_APPLICATION_ID}")
+            conn.execute(f"PRAGMA user_version={REGISTRY_SCHEMA_VERSION}")
+            _create_tables(sqlite_utils.Database(conn), (RELEASES,))
+            conn.commit()
+        finally:
+            conn.close()
+        if path.exists():  # created meanwhile by a concurrent release: use that one
+            tmp.unlink()
+        else:
+            os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        raise
+
+
+@contextlib.contextmanager
+def registry_transaction(path: Path) -> Iterator[sqlite3.Connection]:
+    """Open the release registry for writing (creating it if absent) in one IMMEDIATE
+    transaction: SQLite's write lock is held for the whole block, so two concurrent
+    releases cannot both pass a "not released yet" check. Commits when the block ends
+    normally, rolls back on any exception. Use with :func:`registry_find` and
+    :func:`registry_insert`."""
+    path = Path(path)
+    if not path.exists():
+        _create_registry(path)
+    _check_registry_file(path)
+    try:
+        conn = sqlite3.connect(path, isolation_level=None, timeout=30)
+    except sqlite3.Error as exc:
+        raise InputError(f"cannot open release registry: {exc}", path=path) from exc
+    try:
+        _check_registry_schema(conn, path)
+        conn.execute("BEGIN IMMEDIATE")
+        try:
+            yield conn
+        except BaseException:
+            conn.execute("ROLLBACK")
+            raise
+        conn.execute("COMMIT")
+    except sqlite3.DatabaseError as exc:
+        raise InputError(f"release registry is corrupt or unreadable: {exc}", path=path) from exc
+    finally:
+        conn.close()
+
+
+def registry_find(conn: sqlite3.Connection, db_version: str) -> dict[str, object] | None:
+    """The registry row of one version, or None."""
+    cur = conn.execute(f"SELECT * FROM [{RELEASES.name}] WHERE db_version = ?", (db_version,))
+    row = cur.fetchone()
+    return None if row is None else dict(zip([d[0] for d in cur.description], row, strict=True))
+
+
+def registry_insert(conn: sqlite3.Connection, row: dict[str, object]) -> None:
+    """Insert one release row (a duplicate db_version violates the primary key)."""
+    cols = RELEASES.column_names
+    conn.execute(
+        f"INSERT INTO [{RELEASES.name}] ({','.join(f'[{c}]' for c in cols)}) VALUES ({','.join('?' * len(cols))})",
+        [row.get(c) for c in cols],
+    )
+
+
+def read_registry(path: Path) -> list[dict[str, object]]:
+    """Every release row, oldest first, read-only. InputError when missing or corrupt."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError("no release registry here (nothing released yet?)", path=path)
+    _check_registry_file(path)
+    try:
+        conn = sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)
+    except sqlite3.Error as exc:
+        raise InputError(f"cannot open release registry: {exc}", path=path) from exc
+    try:
+        _check_registry_schema(conn, path)
+        cols = RELEASES.column_names
+        cur = conn.execute(
+            f"SELECT {','.join(f'[{c}]' for c in cols)} FROM [{RELEASES.name}] ORDER BY released_at, db_version"
+        )
+        return [dict(zip(cols, r, strict=True)) for r in cur.fetchall()]
+    except sqlite3.DatabaseError as exc:
+        raise InputError(f"release registry is corrupt or unreadable: {exc}", path=path) from exc
+    finally:
+        conn.close()

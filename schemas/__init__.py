@@ -6,10 +6,12 @@ suite.
 
 from __future__ import annotations
 
+from schemas.gisinput import GIS_INPUT_TABLES
 from schemas.logs import LOG_STREAMS
 from schemas.model import Column, Table
 from schemas.outputs import OUTPUT_TABLES
 from schemas.plans import POSSESSIONS
+from schemas.registry import RELEASES
 from schemas.tables import ALL_DB_TABLES
 
 #: Every declaration by name, for ``trainpos schema show`` and the docs.
@@ -18,6 +20,8 @@ ALL_SCHEMAS: dict[str, Table] = {
     **LOG_STREAMS,
     **OUTPUT_TABLES,
     POSSESSIONS.name: POSSESSIONS,
+    **GIS_INPUT_TABLES,
+    RELEASES.name: RELEASES,
 }
 
 __all__ = ["ALL_SCHEMAS", "Column", "Table"]

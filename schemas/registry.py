@@ -1,0 +1,39 @@
+"""The release registry (``db release``): one folder of immutable DB versions.
+
+Layout of a registry folder::
+
+    registry.sqlite          table ``releases`` below, one row per released version
+    <db_version>.sqlite      the released onboard DB, byte-identical to the input, mode 0444
+    <db_version>.sha256      manifest in ``sha256sum`` format: "<hex>  <db_version>.sqlite"
+"""
+
+from __future__ import annotations
+
+from schemas.model import Column, Table
+
+#: Registry database file inside a registry folder.
+REGISTRY_FILE = "registry.sqlite"
+#: ``PRAGMA application_id`` of a registry: ASCII "TPRG".
+REGISTRY_APPLICATION_ID = 0x54505247
+#: ``PRAGMA user_version`` of a registry; bumped when ``releases`` changes shape.
+REGISTRY_SCHEMA_VERSION = 1
+#: A db_version must be usable as a file name: letters, digits, ``.``, ``_``, ``-``.
+DB_VERSION_PATTERN = r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}"
+
+RELEASES = Table(
+    name="releases",
+    kind="db",
+    description="Release registry (registry.sqlite of a release folder): one row per released DB version.",
+    columns=(
+        Column("db_version", "str", "Released DB version (meta db_version of the file)"),
+        Column("file", "str", "Released file name inside the registry folder"),
+        Column("sha256", "str", "SHA-256 of the released file (hex)"),
+        Column("content_hash", "str", "Content hash from the DB's meta"),
+        Column("schema_version", "int", "PRAGMA user_version of the DB"),
+        Column("released_at", "str", "When it was released (UTC, ISO 8601 with Z)"),
+        Column("released_by", "str", "OS user who released it"),
+        Column("note", "str", "Release note", nullable=True),
+        Column("source_file", "str", "Absolute path the released file was copied from"),
+    ),
+    primary_key=("db_version",),
+)

@@ -1,0 +1,217 @@
+"""``db release`` / ``releases`` / ``verify-release``: immutable, verifiable DB versions."""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import sqlite3
+import stat
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import dbtools.release as release_mod
+from dbtools.build import build_db
+from dbtools.gis.geometry import GEOD
+from dbtools.release import Release, list_releases, release_db, verify_releases
+from dbtools.tabular import sha256_file
+from schemas.errors import FindingsError, InputError, RefusedError, UsageError
+from schemas.registry import REGISTRY_FILE, RELEASES
+
+NOW = datetime(2026, 11, 1, 9, 30, tzinfo=UTC)
+
+
+def write_sources(folder: Path, c_km: float = 600.0) -> Path:
+    """A straight double-track line 0420, km 0–1000, tracks 3.8 m apart, two initial pairs."""
+    folder.mkdir(parents=True)
+    km = np.arange(0.0, 1001.0, 20.0)
+    n = km.size
+    clon, clat, _ = GEOD.fwd(np.full(n, 139.4), np.full(n, 35.9), np.full(n, 90.0), km)
+    frames = []
+    for track, az in (("D", 0.0), ("U", 180.0)):
+        lon, lat, _ = GEOD.fwd(clon, clat, np.full(n, az), np.full(n, 1.9))
+        frames.append(pd.DataFrame({"line_code": "0420", "track": track, "km_m": km, "lat": lat, "lon": lon}))
+    pd.concat(frames).to_csv(folder / "gis.csv", index=False, float_format="%.10f")
+    (folder / "balises.csv").write_text(
+        "balise_id,kind,line_code,station_code,track,signal_type,km_actual_m,km_equipment_m,dist_from_initial_m\n"
+        "B001,I1,0420,01,D,,100,100,\nB002,I2,0420,01,D,,105,105,\n"
+        "B003,I1,0420,01,U,,905,905,\nB004,I2,0420,01,U,,900,900,\n"
+        f"B005,C,0420,01,D,H,{c_km},{c_km},{c_km - 100}\n"
+    )
+    (folder / "feature_points.csv").write_text("line_code,track,feature_id,km_m,radius_m,attribute,role\n")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def dbs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Built once: v1 (2026.10), v2 (2026.11), and v1b (also 2026.10 but other content)."""
+    root = tmp_path_factory.mktemp("release")
+    src1 = write_sources(root / "src1")
+    src2 = write_sources(root / "src2", c_km=612.0)
+    out = {"v1": root / "v1.sqlite", "v2": root / "v2.sqlite", "v1b": root / "v1b.sqlite"}
+    build_db(src1, out["v1"], db_version="2026.10", now=NOW)
+    build_db(src2, out["v2"], db_version="2026.11", now=NOW)
+    _set_version(out["v2"], out["v1b"], "2026.10")  # meta is outside the content hash: still valid
+    return out
+
+
+def _set_version(src: Path, dst: Path, version: str) -> None:
+    shutil.copyfile(src, dst)
+    with sqlite3.connect(dst) as conn:
+        conn.execute("UPDATE meta SET value = ? WHERE key = 'db_version'", (version,))
+    conn.close()
+
+
+@pytest.fixture
+def db(dbs: dict[str, Path], tmp_path: Path) -> Path:
+    """A private copy of v1 (safe to damage)."""
+    p = tmp_path / "in" / "net.sqlite"
+    p.parent.mkdir()
+    shutil.copyfile(dbs["v1"], p)
+    return p
+
+
+def _release(file: Path, reg: Path, **kw: object) -> Release:
+    return release_db(file, reg, now=NOW, user="tester", **kw).release  # type: ignore[arg-type]
+
+
+def test_release_mirrors_registry_schema() -> None:
+    assert [f.name for f in dataclasses.fields(Release)] == RELEASES.column_names
+
+
+def test_release_happy_path(db: Path, tmp_path: Path) -> None:
+    reg = tmp_path / "reg"
+    digest, mtime = sha256_file(db), db.stat().st_mtime_ns
+    r = _release(db, reg, note="first cut")
+    target = reg / "2026.10.sqlite"
+    assert r.db_version == "2026.10" and r.file == target.name and r.sha256 == digest
+    assert r.released_at == "2026-11-01T09:30:00Z" and r.released_by == "tester" and r.schema_version == 1
+    assert r.source_file == str(db.resolve()) and r.note == "first cut"
+    assert sha256_file(target) == digest  # byte-identical copy
+    assert stat.S_IMODE(target.stat().st_mode) == 0o444
+    assert (reg / "2026.10.sha256").read_text() == f"{digest}  2026.10.sqlite\n"
+    assert sha256_file(db) == digest and db.stat().st_mtime_ns == mtime  # input untouched
+    assert list_releases(reg) == [r]
+    assert sorted(p.name for p in reg.iterdir()) == ["2026.10.sha256", "2026.10.sqlite", REGISTRY_FILE]
+    report = verify_releases(reg)
+    assert report.ok and report.findings == [] and [c.db_version for c in report.checked] == ["2026.10"]
+
+
+def test_release_twice_is_refused(dbs: dict[str, Path], tmp_path: Path) -> None:
+    reg = tmp_path / "reg"
+    _release(dbs["v1"], reg)
+    with pytest.raises(RefusedError, match=r"already released .* as this same file"):
+        _release(dbs["v1"], reg)
+    with pytest.raises(RefusedError, match="as a different file"):
+        _release(dbs["v1b"], reg)
+    _release(dbs["v2"], reg)
+    assert [r.db_version for r in list_releases(reg)] == ["2026.10", "2026.11"]
+    assert sha256_file(reg / "2026.10.sqlite") == sha256_file(dbs["v1"])
+
+
+def test_unregistered_file_in_the_way_is_refused(dbs: dict[str, Path], tmp_path: Path) -> None:
+    reg = tmp_path / "reg"
+    reg.mkdir()
+    (reg / "2026.10.sqlite").write_bytes(b"debris")
+    with pytest.raises(RefusedError, match="not registered"):
+        _release(dbs["v1"], reg)
+    assert (reg / "2026.10.sqlite").read_bytes() == b"debris"
+    assert list_releases(reg) == []
+    findings = verify_releases(reg).findings
+    assert [f.rule for f in findings] == ["release.unregistered"]
+
+
+def test_failed_release_leaves_nothing(db: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def boom(*_: object) -> None:
+        raise OSError("disk full")
+
+    monkeypatch.setattr(release_mod, "registry_insert", boom)
+    reg = tmp_path / "reg"
+    with pytest.raises(OSError, match="disk full"):
+        _release(db, reg)
+    assert sorted(p.name for p in reg.iterdir()) == [REGISTRY_FILE]
+    assert list_releases(reg) == []
+
+
+def test_release_refused_when_validation_fails(db: Path, tmp_path: Path) -> None:
+    with sqlite3.connect(db) as conn:  # hand edit: the content hash in meta no longer matches
+        conn.execute("UPDATE balises SET km_actual_m = 601 WHERE balise_id = 'B005'")
+    conn.close()
+    reg = tmp_path / "reg"
+    with pytest.raises(FindingsError) as exc:
+        _release(db, reg)
+    assert any(f.rule == "db.content_hash" for f in exc.value.findings)
+    assert not reg.exists()
+
+
+def test_release_refuses_unusable_version(tmp_path: Path, dbs: dict[str, Path]) -> None:
+    bad = tmp_path / "bad.sqlite"
+    _set_version(dbs["v1"], bad, "../evil")
+    with pytest.raises(RefusedError, match="cannot name a released file"):
+        _release(bad, tmp_path / "reg")
+
+
+def test_release_of_unreadable_file(tmp_path: Path) -> None:
+    junk = tmp_path / "junk.sqlite"
+    junk.write_text("hello")
+    with pytest.raises(InputError, match="not an SQLite database"):
+        _release(junk, tmp_path / "reg")
+    with pytest.raises(InputError, match="no such file"):
+        _release(tmp_path / "missing.sqlite", tmp_path / "reg")
+
+
+def test_tampered_release_is_detected(dbs: dict[str, Path], tmp_path: Path) -> None:
+    reg = tmp_path / "reg"
+    _release(dbs["v1"], reg)
+    _release(dbs["v2"], reg)
+    target = reg / "2026.11.sqlite"
+    target.chmod(0o644)
+    with sqlite3.connect(target) as conn:
+        conn.execute("UPDATE gis SET lat = lat + 0.001 WHERE km_m = 0")
+    conn.close()
+    report = verify_releases(reg)
+    assert not report.ok
+    assert not report.failed("2026.10") and report.failed("2026.11")
+    rules = {(f.rule, str(f.severity)) for f in report.findings}
+    assert ("release.sha256", "error") in rules
+    assert ("db.content_hash", "error") in rules
+    assert ("release.writable", "warning") in rules
+    assert verify_releases(reg, "2026.10").ok
+    assert not verify_releases(reg, "2026.11").ok
+
+
+def test_missing_file_and_bad_manifest(dbs: dict[str, Path], tmp_path: Path) -> None:
+    reg = tmp_path / "reg"
+    _release(dbs["v1"], reg)
+    _release(dbs["v2"], reg)
+    (reg / "2026.10.sqlite").unlink()
+    manifest = reg / "2026.11.sha256"
+    manifest.chmod(0o644)
+    manifest.write_text(f"{'0' * 64}  2026.11.sqlite\n")
+    report = verify_releases(reg)
+    by = {(f.keys["db_version"], f.rule) for f in report.findings}
+    assert by == {("2026.10", "release.missing_file"), ("2026.11", "release.manifest")}
+
+
+def test_corrupt_or_missing_registry(dbs: dict[str, Path], tmp_path: Path) -> None:
+    reg = tmp_path / "reg"
+    _release(dbs["v1"], reg)
+    (reg / REGISTRY_FILE).write_bytes(b"garbage that is not sqlite" * 10)
+    for call in (lambda: list_releases(reg), lambda: verify_releases(reg), lambda: _release(dbs["v2"], reg)):
+        with pytest.raises(InputError, match="not an SQLite database"):
+            call()
+    with pytest.raises(InputError, match="no such registry folder"):
+        list_releases(tmp_path / "nowhere")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="nothing released yet"):
+        list_releases(tmp_path / "empty")
+
+
+def test_unknown_version(dbs: dict[str, Path], tmp_path: Path) -> None:
+    reg = tmp_path / "reg"
+    _release(dbs["v1"], reg)
+    with pytest.raises(UsageError, match="2099 is not in the registry"):
+        verify_releases(reg, "2099")
