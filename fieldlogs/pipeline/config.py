@@ -86,11 +86,19 @@ class FeatureConfig:
     min_speed_kmh: float = 10.0
     """No correction below this speed [km/h]."""
     kappa_smoothing_s: float = 1.0
-    """Moving average applied to κ = ωz / v before the diagnostics [s]."""
+    """Centred moving average (the odd number of cycles nearest this) applied to κ = ωz / v
+    before the diagnostics [s]; centred so the crossings are not delayed."""
     fix_uncertainty_m: float = 10.0
     """Uncertainty of a feature-point correction [m] (paper: within about 10 m)."""
     search_margin_m: float = 100.0
-    """Extra distance searched around the predicted feature position [m] (grows with the margin)."""
+    """Minimum extra distance searched around the predicted feature position [m]; the
+    feature is evaluated once the estimate has passed its exit-check end by this much."""
+    search_growth_pct: float = 2.0
+    """The search margin grows to fix uncertainty + this percent of the travel since the fix
+    + slip allowance since the fix, when that is larger [%] (as the safety margin does)."""
+    crossing_merge_m: float = 5.0
+    """Lower-limit runs of the same sign closer than this are one curve (noise chatter at a
+    crossing) [m]."""
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,459 @@
+"""Feature-point (curve) unit: curves as virtual balises [S000 §3.2, §4.3.2; SPEC §5.3].
+
+Curvature
+    κ = ωz / v per cycle (v = corrected speed, unsigned). The yaw rate keeps its sign when
+    the vehicle runs reversed (the body turns the same way as the path), so κ is the
+    curvature *in the travel direction*, positive turning left (SPEC §4.1). κ is smoothed
+    with a centred moving average of ``n`` cycles (the odd number nearest to
+    ``kappa_smoothing_s``). Centred, not trailing: a trailing average would delay the
+    crossings by (n − 1)/2 cycles (≈ 9 m at 20 m/s); the unit evaluates a feature only
+    ``search_margin_m`` after its exit, so it has the n/2 later samples (evaluation uses no
+    sample after the evaluation cycle). κ of cycle i stands for the middle of the cycle,
+    travel ``x_i = (d_{i−1} + d_i)/2`` (IMU cycle means and the backward-difference speed).
+
+Feature table
+    Six rows per curve [S000 Table 1], attributes as seen running in the track's normal
+    direction (D/S: km increasing, U: decreasing). In travel coordinates ``u = σ·km``
+    (σ = ±1 km per metre of travel = fix.k × cab) the rows met in travel order are 1…6
+    when σ equals the track's normal direction, else 6…1 with left/right swapped (a left
+    curve seen one way is a right curve seen the other way; the lower-limit crossings are
+    the same points, only their roles swap). Below, r1…r6 are the rows in travel order.
+
+Scheduling (``next_evaluation``)
+    Search margin w = max(``search_margin_m``, fix uncertainty + ``search_growth_pct`` % of
+    the travel since the fix + slip allowance accrued since the fix). The next feature is
+    the nearest one whose correction point r4 is not behind the fix's reference point and
+    whose exit-check end r6 is not yet passed by w; it is evaluated at the first cycle
+    where the estimate has passed r6 by w (the train has then surely left the feature if
+    the estimate is within its margin). Cab reversals are followed segment by segment.
+
+Diagnostics (``evaluate``), each named in refusal events
+    Window: cycles whose estimate lies in [r1 − w, r6 + w]. Runs of κ ≥ κ_lo or κ ≤ −κ_lo,
+    κ_lo = (1 − tol)/R, same-sign runs closer than ``crossing_merge_m`` merged (noise
+    chatter); the entry and exit crossings are interpolated linearly between samples. Of
+    the runs wholly inside the window, the one whose estimated crossings lie closest to r3
+    and r4 is the curve (either sign, so a mirrored DB attribute fails ``sign`` rather than
+    finding nothing). With x_e, x_x the entry/exit crossings (travel) and h = n·v·Δt/2 the
+    smoothing half-width:
+
+    * ``start_point``: the window is complete (the log starts before it), a curve was found,
+      the cab direction is constant and ωz present over the feature span
+      [x_e − (r3 − r1) − h, x_x + (r6 − r4) + h], and that span ends before the evaluation
+      cycle (no look-ahead);
+    * ``entry_straight``: over x ∈ [x_e − (r3 − r1), x_e − (r3 − r2)] (the DB's entry
+      straight, placed by the DB row spacing from the detected crossing) every |κ| ≤
+      ``straight_kappa_max`` + the spread the smoothing gives the transition's start,
+      min(s·q²/4h, κ_R·q/2h), q = max(0, h − distance to r2), s = κ_lo/(r3 − r2);
+    * ``sign``: the run's sign equals the expected one (+ left);
+    * ``upper_limit``: max |κ| in the run ≤ (1 + tol)/R;
+    * ``length``: |(x_x − x_e) − |r4 − r3|| ≤ max(``length_tolerance``·|r4 − r3|,
+      ``length_tolerance_min_m``);
+    * ``exit_straight``: as the entry straight over [x_x + (r5 − r4), x_x + (r6 − r4)];
+    * ``no_slip``: no cycle of the feature span has a slip/slide correction running;
+    * ``min_speed``: v ≥ ``min_speed_kmh`` on every cycle of the feature span.
+
+    The correction point is the exit crossing: ``i_ref`` = the cycle whose travel is
+    nearest x_x (quantisation ≤ v·Δt/2, reported as ``ref_offset_m``), ``km_db`` = the km
+    of r4 (DB row 4, or row 3 when running reversed); the solver's correction amount is
+    then computed km − DB km at ``i_ref``.
+
+    ``detail`` of the outcome: direction (normal/reversed), attribute (in the travel
+    direction), R_m, lower/upper_kappa, search_margin_m, db_length_m, length_m,
+    length_tol_m, max_kappa, measured_sign, measured_radius_m (1 / median |κ| over the
+    middle half of the body), entry/exit_straight_max_kappa, km_est_exit_m (estimate at the
+    exit crossing), ref_offset_m, t_exit, min_speed_kmh, and ``reason`` when
+    ``start_point`` failed. ωz and v are taken from the same cycle (no latency model).
+
+One unit per run: it remembers which features it evaluated (so one is not evaluated twice
+in the same direction without a cab reversal in between).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from dbtools.network import Network
+from fieldlogs.pipeline.config import FeatureConfig
+from fieldlogs.pipeline.cycles import Cycles, moving_average
+from fieldlogs.pipeline.types import FeatureOutcome, Fix, FloatArray, Odometry
+from schemas.enums import Attribute, Track, direction_sign
+
+#: Below this speed κ = ωz / v is not computed (NaN): the division only amplifies noise [m/s].
+KAPPA_MIN_SPEED_MPS = 0.5
+#: Diagnostic names, in the order they are reported.
+DIAGNOSTICS = (
+    "start_point",
+    "entry_straight",
+    "sign",
+    "upper_limit",
+    "length",
+    "exit_straight",
+    "no_slip",
+    "min_speed",
+)
+
+
+@dataclass(frozen=True, eq=False)
+class FeatureTable:
+    """Valid features of one line/track, rows 1…6 in the track's normal direction."""
+
+    line_code: str
+    track: str
+    feature_id: npt.NDArray[np.object_]
+    km: FloatArray
+    """(m, 6) km of rows 1…6."""
+    radius_m: FloatArray
+    left: npt.NDArray[np.bool_]
+    """Left curve as seen in the track's normal direction."""
+
+    @property
+    def normal(self) -> int:
+        return direction_sign(self.track)
+
+    def travel_rows(self, sdir: int) -> tuple[FloatArray, FloatArray, npt.NDArray[np.int_]]:
+        """(u, km, expected κ sign) with rows in travel order for km direction ``sdir``."""
+        km = self.km if sdir == self.normal else self.km[:, ::-1]
+        sign = np.where(self.left, 1, -1) * (1 if sdir == self.normal else -1)
+        return sdir * km, km, sign
+
+
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """One feature as met in one travel direction (the handle passed to ``evaluate``)."""
+
+    feature_id: str
+    line_code: str
+    track: str
+    sdir: int
+    """km per metre of travel (±1)."""
+    reversed: bool
+    """Running against the track's normal direction (rows met 6…1, left/right swapped)."""
+    u: FloatArray
+    """Rows r1…r6 in travel order as u = sdir·km (increasing)."""
+    km: FloatArray
+    """km of r1…r6 (travel order)."""
+    radius_m: float
+    sign: int
+    """Expected κ sign in the travel direction (+1 left)."""
+    margin_m: float
+    """Search margin w at scheduling time [m]."""
+    segment: int
+    """Cab-direction segment (number of cab changes before it)."""
+
+
+@dataclass(eq=False)
+class FeatureUnit:
+    """Feature-point aid for :func:`fieldlogs.pipeline.solver.solve` (module docstring)."""
+
+    cycles: Cycles = field(repr=False)
+    odo: Odometry = field(repr=False)
+    network: Network = field(repr=False)
+    cfg: FeatureConfig
+    kappa: FloatArray = field(init=False, repr=False)
+    """Smoothed κ per cycle [1/m], left positive in the travel direction (NaN: no data)."""
+    tables: dict[tuple[str, str], FeatureTable] = field(init=False, repr=False)
+    skipped: list[dict[str, Any]] = field(init=False, default_factory=list)
+    """Features left out of the table (not six rows, no curve row, …) and why."""
+
+    def __post_init__(self) -> None:
+        c, o = self.cycles, self.odo
+        n = c.n
+        self._d = np.asarray(o.d, dtype=float)
+        self._v = np.asarray(o.v, dtype=float)
+        self._x = self._d - 0.5 * np.diff(self._d, prepend=self._d[0] if n else 0.0)
+        dt = float(np.median(np.diff(c.t))) if n > 1 else 0.1
+        self._dt = dt if dt > 0 else 0.1
+        half = max(round(self.cfg.kappa_smoothing_s / self._dt / 2.0), 0)
+        self.n_smooth = 2 * half + 1
+        wz = c.imu.get("wz", np.full(n, np.nan)) if c.has_imu else np.full(n, np.nan)
+        self._wz_ok = np.isfinite(wz)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            raw = np.where((self._v >= KAPPA_MIN_SPEED_MPS) & self._wz_ok, wz / self._v, np.nan)
+        padded = np.concatenate([raw, np.full(half, np.nan)])
+        self.kappa = moving_average(padded, self.n_smooth)[half:] if n else raw
+        self._half_m = 0.5 * self.n_smooth * self._v * self._dt
+        cab = np.asarray(c.cab, dtype=np.int64)
+        self._cab = np.where(cab < 0, -1, 1)
+        self._segment = np.concatenate([[0], np.cumsum(self._cab[1:] != self._cab[:-1])]) if n else np.zeros(0, int)
+        self._changes = np.flatnonzero(self._cab[1:] != self._cab[:-1]) + 1
+        self._allow = np.asarray(o.allowance, dtype=float)
+        self.available = bool(n and c.has_imu and np.isfinite(self.kappa).any())
+        self.tables, self.skipped = _load_tables(self.network.feature_points)
+        self._done: dict[tuple[str, str, str, int], int] = {}
+
+    # -- scheduling ---------------------------------------------------------------------
+    def margin(self, fix: Fix, idx: npt.ArrayLike) -> FloatArray:
+        """Search margin w at cycles ``idx`` under ``fix`` [m]."""
+        i = np.asarray(idx)
+        grown = (
+            fix.uncertainty_m
+            + self.cfg.search_growth_pct / 100.0 * np.abs(self._d[i] - fix.d_ref)
+            + np.maximum(self._allow[i] - fix.allowance_ref_m, 0.0)
+        )
+        return np.asarray(np.maximum(grown, self.cfg.search_margin_m), dtype=float)
+
+    def next_evaluation(self, fix: Fix, after_i: int, km_est: FloatArray) -> tuple[int, Candidate] | None:
+        """Cycle and candidate of the next feature ahead (module docstring), or None."""
+        table = self.tables.get((fix.line_code, fix.track))
+        n = self._d.size
+        if not self.available or table is None or not 0 <= after_i < n:
+            return None
+        i_ref = min(int(np.searchsorted(self._d, fix.d_ref, side="left")), n - 1)
+        bounds = [after_i, *self._changes[self._changes > after_i].tolist(), n]
+        for s0, s1 in itertools.pairwise(bounds):
+            sdir = int(fix.k * self._cab[s0])
+            u_all, km_all, sign_all = table.travel_rows(sdir)
+            seg_first = int(self._changes[self._changes <= s0][-1]) if (self._changes <= s0).any() else 0
+            u_start = sdir * km_est[max(i_ref, seg_first)]
+            u_now = sdir * km_est[s0]
+            w_now = float(self.margin(fix, s0))
+            ok = (u_all[:, 3] > u_start) & (u_all[:, 5] + w_now > u_now)
+            seg = int(self._segment[s0])
+            for j in np.flatnonzero(ok)[np.argsort(u_all[ok, 5], kind="stable")]:
+                fid = str(table.feature_id[j])
+                if self._done.get((table.line_code, table.track, fid, sdir)) == seg:
+                    continue
+                u6 = u_all[j, 5]
+                u_seg = sdir * km_est[s0:s1]
+                passed = np.flatnonzero(u_seg - u6 >= self.margin(fix, np.arange(s0, s1)))
+                if passed.size == 0:
+                    break  # not reached in this segment; farther features neither
+                i_eval = s0 + int(passed[0])
+                cand = Candidate(
+                    fid,
+                    table.line_code,
+                    table.track,
+                    sdir,
+                    sdir != table.normal,
+                    u_all[j].copy(),
+                    km_all[j].copy(),
+                    float(table.radius_m[j]),
+                    int(sign_all[j]),
+                    float(self.margin(fix, i_eval)),
+                    seg,
+                )
+                return i_eval, cand
+        return None
+
+    # -- diagnostics --------------------------------------------------------------------
+    def evaluate(self, candidate: Candidate, fix: Fix, km_est: FloatArray, i_eval: int) -> FeatureOutcome:
+        """Run the diagnostics of the module docstring on the κ trace up to ``i_eval``."""
+        c, cfg = candidate, self.cfg
+        self._done[(c.line_code, c.track, c.feature_id, c.sdir)] = c.segment
+        d, x, kap = self._d, self._x, self.kappa
+        u, w, R = c.u, c.margin_m, c.radius_m
+        k_lo, k_hi = (1.0 - cfg.tolerance) / R, (1.0 + cfg.tolerance) / R
+        km_db = float(c.km[3])
+        detail: dict[str, Any] = {
+            "line_code": c.line_code,
+            "track": c.track,
+            "direction": "reversed" if c.reversed else "normal",
+            "attribute": "left" if c.sign > 0 else "right",
+            "R_m": R,
+            "lower_kappa": k_lo,
+            "upper_kappa": k_hi,
+            "search_margin_m": round(w, 2),
+            "db_length_m": round(float(u[3] - u[2]), 2),
+        }
+        failed: list[str] = []
+
+        def out(i_ref: int | None = None) -> FeatureOutcome:
+            order = [n for n in DIAGNOSTICS if n in failed]
+            return FeatureOutcome(not order, c.feature_id, c.line_code, c.track, i_ref, km_db, order, detail)
+
+        # window: estimate within [r1 − w, r6 + w], causal (samples complete before i_eval)
+        ue = c.sdir * km_est
+        m = self.n_smooth // 2
+        i_hi = i_eval - m
+        d_lo = d[i_eval] - max(ue[i_eval] - (u[0] - w), 0.0) - 20.0
+        i_lo = int(np.searchsorted(d, d_lo, side="left"))
+        before = np.flatnonzero(ue[i_lo : i_eval + 1] < u[0] - w)
+        if before.size == 0 or i_hi <= i_lo + before[-1] + 2:
+            detail["reason"] = "search window incomplete (log starts inside it or direction changed)"
+            failed.append("start_point")
+            return out()
+        i_a = i_lo + int(before[-1]) + 1
+        runs = _runs(kap[i_a : i_hi + 1], x[i_a : i_hi + 1], k_lo, cfg.crossing_merge_m)
+        best: tuple[float, float, float, int] | None = None
+        for j0, j1, sgn in runs:
+            if j0 < 1 or j1 > i_hi - i_a:
+                continue  # a crossing outside the window
+            xe = _cross(x, kap, i_a + j0 - 1, i_a + j0, k_lo, sgn)
+            xx = _cross(x, kap, i_a + j1 - 1, i_a + j1, k_lo, sgn)
+            ie = i_a + j0
+            cost = abs(ue[ie] + (xe - d[ie]) - u[2]) + abs(ue[ie] + (xx - d[ie]) - u[3])
+            if best is None or cost < best[0]:
+                best = (cost, xe, xx, sgn)
+        if best is None:
+            detail["reason"] = "no curve (pair of lower-limit crossings) in the search window"
+            failed.append("start_point")
+            span = np.arange(i_a, i_hi + 1)
+            self._slip_speed(span, failed, detail)
+            return out()
+        _, xe, xx, sgn = best
+        span_lo = xe - (u[2] - u[0])
+        span_hi = xx + (u[5] - u[3])
+        ia, ib = int(np.searchsorted(x, span_lo, side="left")), int(np.searchsorted(x, span_hi, side="right"))
+        h_max = float(np.nanmax(self._half_m[ia:ib])) if ib > ia else 0.0
+        ia = int(np.searchsorted(x, span_lo - h_max, side="left"))
+        ib = int(np.searchsorted(x, span_hi + h_max, side="right"))
+        span = np.arange(ia, ib)
+        i_x = int(np.clip(np.searchsorted(d, xx), 1, d.size - 1))
+        i_ref = i_x if abs(d[i_x] - xx) <= abs(d[i_x - 1] - xx) else i_x - 1
+        body = np.abs(kap[int(np.searchsorted(x, xe)) : int(np.searchsorted(x, xx))])
+        body = body[np.isfinite(body)]
+        max_k = float(np.max(body)) if body.size else float("nan")
+        middle = body[body.size // 4 : body.size - body.size // 4]
+        length = xx - xe
+        db_len = float(u[3] - u[2])
+        tol = max(cfg.length_tolerance * db_len, cfg.length_tolerance_min_m)
+        detail.update(
+            measured_radius_m=round(1.0 / float(np.median(middle)), 1) if middle.size else None,
+            max_kappa=max_k,
+            measured_sign=int(sgn),
+            length_m=round(length, 2),
+            length_tol_m=round(tol, 2),
+            km_est_exit_m=round(float(c.sdir * (ue[i_ref] - (d[i_ref] - xx))), 2),
+            ref_offset_m=round(float(d[i_ref] - xx), 3),
+            t_exit=float(self.cycles.t[i_ref]),
+        )
+        reasons = []
+        if ia <= 0 or ib > i_hi + 1:
+            reasons.append("feature span not inside the data available at the evaluation point")
+        elif not self._wz_ok[span].all():
+            reasons.append("yaw rate missing in the feature span")
+        if span.size and (self._cab[span] != self._cab[span[0]]).any():
+            reasons.append("cab direction changed during the feature")
+        if reasons:
+            detail["reason"] = "; ".join(reasons)
+            failed.append("start_point")
+        ent = self._straight(
+            xe - (u[2] - u[0]), xe - (u[2] - u[1]), xe - (u[2] - u[1]), k_lo / max(u[2] - u[1], 1e-9), R
+        )
+        ext = self._straight(
+            xx + (u[4] - u[3]), xx + (u[5] - u[3]), xx + (u[4] - u[3]), k_lo / max(u[4] - u[3], 1e-9), R
+        )
+        detail["entry_straight_max_kappa"], detail["exit_straight_max_kappa"] = ent[1], ext[1]
+        if not ent[0]:
+            failed.append("entry_straight")
+        if sgn != c.sign:
+            failed.append("sign")
+        if not max_k <= k_hi:
+            failed.append("upper_limit")
+        if not abs(length - db_len) <= tol:
+            failed.append("length")
+        if not ext[0]:
+            failed.append("exit_straight")
+        self._slip_speed(span, failed, detail)
+        return out(i_ref)
+
+    def _straight(self, x0: float, x1: float, x_ts: float, slope: float, radius: float) -> tuple[bool, float | None]:
+        """Is |κ| straight over travel [x0, x1]? (ok, max |κ|); the tolerance near the
+        transition start ``x_ts`` grows by the smoothing spread of the transition. A DB
+        straight of zero length passes; a missing sample fails."""
+        if x1 - x0 <= 0.0:
+            return True, None
+        lo, hi = np.searchsorted(self._x, [x0, x1])
+        k = self.kappa[lo:hi]
+        if k.size == 0 or not np.isfinite(k).all():
+            return False, None
+        h = np.maximum(self._half_m[lo:hi], 1e-9)
+        q = np.maximum(h - np.abs(self._x[lo:hi] - x_ts), 0.0)
+        spread = np.minimum(slope * q * q / (4.0 * h), q / (2.0 * h) / radius)
+        ak = np.abs(k)
+        return bool((ak <= self.cfg.straight_kappa_max + spread).all()), float(ak.max())
+
+    def _slip_speed(self, span: npt.NDArray[np.int_], failed: list[str], detail: dict[str, Any]) -> None:
+        span = span[(span >= 0) & (span < self._d.size)]
+        if span.size == 0:
+            return
+        if self.odo.slipping[span].any():
+            failed.append("no_slip")
+        v_min = float(self._v[span].min())
+        detail["min_speed_kmh"] = round(v_min * 3.6, 2)
+        if not v_min * 3.6 >= self.cfg.min_speed_kmh:
+            failed.append("min_speed")
+
+
+def _runs(k: FloatArray, x: FloatArray, level: float, merge_m: float) -> list[tuple[int, int, int]]:
+    """Runs (first index, index after the last, sign) where ±κ ≥ level; same-sign runs
+    separated by less than ``merge_m`` of travel are merged."""
+    out: list[tuple[int, int, int]] = []
+    for sgn in (1, -1):
+        above = np.nan_to_num(sgn * k, nan=-np.inf) >= level
+        edges = np.diff(np.concatenate([[0], above.astype(np.int8), [0]]))
+        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+        merged: list[list[int]] = []
+        for s, e in zip(starts.tolist(), ends.tolist(), strict=True):
+            if merged and x[s] - x[merged[-1][1] - 1] < merge_m:
+                merged[-1][1] = e
+            else:
+                merged.append([s, e])
+        out += [(s, e, sgn) for s, e in merged]
+    return out
+
+
+def _cross(x: FloatArray, k: FloatArray, i0: int, i1: int, level: float, sgn: int) -> float:
+    """Travel where sgn·κ passes ``level`` between samples i0 and i1 (linear; x[i1] if unknown)."""
+    a, b = sgn * k[i0], sgn * k[i1]
+    if not (np.isfinite(a) and np.isfinite(b)) or a == b:
+        return float(x[i1])
+    f = float(np.clip((level - a) / (b - a), 0.0, 1.0))
+    return float(x[i0] + f * (x[i1] - x[i0]))
+
+
+def _load_tables(fp: pd.DataFrame) -> tuple[dict[tuple[str, str], FeatureTable], list[dict[str, Any]]]:
+    """Group the feature-point rows per line/track (vectorised: national DBs hold ~10,000
+    features); invalid features are skipped with a reason."""
+    tables: dict[tuple[str, str], FeatureTable] = {}
+    skipped: list[dict[str, Any]] = []
+    if fp is None or fp.empty:
+        return tables, skipped
+    keys = ["line_code", "track", "feature_id"]
+    f = pd.DataFrame({k: fp[k].astype(str).to_numpy() for k in keys})
+    f["km"] = pd.to_numeric(fp["km_m"], errors="coerce").to_numpy(dtype=float)
+    f["radius"] = pd.to_numeric(fp["radius_m"], errors="coerce").to_numpy(dtype=float)
+    f["attr"] = fp["attribute"].astype(str).to_numpy()
+    normal = np.where(f["track"].to_numpy() == Track.UP, -1.0, 1.0)
+    # running order: seq where the table has it, else km in the track's normal direction
+    seq = fp["seq"] if "seq" in fp.columns else None
+    f["order"] = seq.to_numpy(dtype=float) if seq is not None and seq.notna().all() else f["km"] * normal
+    f = f.sort_values([*keys, "order"], kind="stable").reset_index(drop=True)
+    group = f.groupby(keys, sort=False).ngroup().to_numpy()
+    size = np.bincount(group)
+    first = np.searchsorted(group, np.arange(size.size))
+    head = f.iloc[first].reset_index(drop=True)
+    why = np.full(size.size, "", dtype=object)
+    why[size != 6] = [f"{k} rows (6 expected)" for k in size[size != 6]]
+    six = np.flatnonzero(size == 6)
+    rows = first[six][:, None] + np.arange(6)
+    km = f["km"].to_numpy()[rows]
+    u = km * np.where(head["track"].to_numpy()[six] == Track.UP, -1.0, 1.0)[:, None]
+    attr3 = f["attr"].to_numpy()[rows[:, 2]]
+    r3 = f["radius"].to_numpy()[rows[:, 2]]
+    bad_order = ~np.isfinite(km).all(axis=1) | (np.diff(u, axis=1) < 0).any(axis=1) | (u[:, 3] <= u[:, 2])
+    checks = [
+        (bad_order, "km not in running order"),
+        (~(r3 > 0), "row 3 radius is not > 0"),
+        (~np.isin(attr3, [Attribute.LEFT.value, Attribute.RIGHT.value]), "row 3 attribute is not left/right"),
+    ]
+    for bad, reason in checks:  # the last failing check wins; any reason is enough
+        why[six[bad]] = reason
+    for j in np.flatnonzero(why != ""):
+        skipped.append({**{k: head.at[j, k] for k in keys}, "reason": why[j]})
+    ok = why[six] == ""
+    good = six[ok]
+    km, r3, left = km[ok], r3[ok], attr3[ok] == Attribute.LEFT.value
+    lt = head.loc[good, ["line_code", "track"]].to_numpy()
+    for line, track in {(str(a), str(b)) for a, b in lt}:
+        sel = (lt[:, 0] == line) & (lt[:, 1] == track)
+        tables[(line, track)] = FeatureTable(
+            line, track, head.loc[good[sel], "feature_id"].to_numpy(dtype=object), km[sel], r3[sel], left[sel]
+        )
+    return tables, skipped
