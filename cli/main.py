@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from cli import db, schema
+from cli import db, gis, logs, schema, simulate
 from dbtools.build import tool_version
 
 app = typer.Typer(
@@ -15,7 +15,10 @@ app = typer.Typer(
     add_completion=False,
 )
 app.add_typer(db.app, name="db")
+app.add_typer(gis.app, name="gis")
 app.add_typer(schema.app, name="schema")
+app.add_typer(logs.app, name="logs")
+app.command("simulate")(simulate.simulate)
 
 
 def _version(value: bool) -> None:

@@ -4,6 +4,16 @@ A run is a folder with ``run.json`` and one file per stream (``NAME.csv`` or
 ``NAME.parquet``, same columns). Streams load lazily and are coerced to the declared
 types of ``schemas.logs``; problems become findings (file, row, column) instead of
 exceptions, so a damaged log can still be reported on and partly processed.
+
+Row numbers in findings: for CSV the 1-based line of the file (header = line 1, first data
+row = line 2). Parquet has no lines; its rows are numbered the same way, i.e. the 0-based
+row index + 2, so that a CSV and its Parquet conversion report the same row numbers.
+
+Parquet fast path: columns whose Arrow type already matches the declared type are turned
+into numpy / pandas arrays column by column (no per-cell Python); anything else (text in
+a numeric column, a missing column) goes through ``schemas.frames.coerce_frame``, which
+names every bad cell. Parquet written here carries each column's unit in the field
+metadata (``unit``); a file whose unit differs from the declared one is a finding.
 """
 
 from __future__ import annotations
@@ -16,20 +26,30 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from dbtools.tabular import read_raw_table
 from schemas.enums import Severity, VehicleKind
-from schemas.errors import InputError, RefusedError
+from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding
-from schemas.frames import PANDAS_DTYPE, coerce_frame
+from schemas.frames import PANDAS_DTYPE, coerce_frame, suggest
 from schemas.logs import LOG_STREAMS, RUN_JSON
-from schemas.model import Table
+from schemas.model import Column, Table
 
 LogFormat = Literal["csv", "parquet"]
 STREAM_SUFFIXES = (".parquet", ".csv")
+RUN_JSON_NAME = "run.json"
+#: Files a run folder may hold besides run.json and the streams.
+KNOWN_EXTRA_FILES = frozenset({"repair_log.json", "README.md", "notes.txt"})
+#: Streams a run of each vehicle kind must have (SPEC §4: no GPS on a train, no balises
+#: on a road-rail vehicle).
+REQUIRED_STREAMS: dict[str, tuple[str, ...]] = {
+    VehicleKind.TRAIN.value: ("tacho", "imu"),
+    VehicleKind.ROAD_RAIL.value: ("gps", "cab"),
+}
 
 
 @dataclass
@@ -52,15 +72,15 @@ class RunMeta:
         return {**d, **extra}
 
 
-def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
-    """Read and check ``run.json``; findings for missing or mistyped fields."""
-    findings: list[Finding] = []
+def _load_run_json(path: Path) -> tuple[Any, list[Finding]]:
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
+        return json.loads(Path(path).read_text(encoding="utf-8")), []
     except FileNotFoundError:
         return None, [
             Finding("log.missing_run_json", Severity.ERROR, "run.json", "run.json is missing", file=str(path))
         ]
+    except IsADirectoryError:
+        return None, [Finding("log.bad_run_json", Severity.ERROR, "run.json", "run.json is a folder", file=str(path))]
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         return None, [
             Finding(
@@ -72,8 +92,11 @@ def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
                 row=getattr(exc, "lineno", None),
             )
         ]
-    if not isinstance(data, dict):
-        return None, [Finding("log.bad_run_json", Severity.ERROR, "run.json", "must be a JSON object", file=str(path))]
+
+
+def _typed_fields(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], list[Finding]]:
+    """Every field of ``run.json`` that parses, plus findings for the others."""
+    findings: list[Finding] = []
     values: dict[str, Any] = {}
     for f in RUN_JSON:
         if f.name not in data or data[f.name] in (None, ""):
@@ -89,18 +112,23 @@ def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
                     )
                 )
             continue
+        raw = data[f.name]
         try:
-            v = f.type(data[f.name])
-        except (TypeError, ValueError):
+            if f.type is int and (isinstance(raw, bool) or (isinstance(raw, float) and not raw.is_integer())):
+                raise ValueError(raw)
+            v = f.type(raw)
+            if f.type is float and not np.isfinite(v):
+                raise ValueError(raw)
+        except (TypeError, ValueError, OverflowError):
             findings.append(
                 Finding(
                     "log.run_json_field",
                     Severity.ERROR,
                     "run.json",
-                    f"field '{f.name}' = {data[f.name]!r} is not a {f.type.__name__}",
+                    f"field '{f.name}' = {raw!r} is not a {f.type.__name__}",
                     file=str(path),
                     column=f.name,
-                    value=data[f.name],
+                    value=str(raw),
                 )
             )
             continue
@@ -116,8 +144,10 @@ def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
                 file=str(path),
                 column="vehicle_kind",
                 value=kind,
+                limit=[k.value for k in VehicleKind],
             )
         )
+        del values["vehicle_kind"]
     for name in ("wheel_diameter_m", "teeth"):
         v = values.get(name)
         if v is not None and not v > 0:
@@ -130,12 +160,25 @@ def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
                     file=str(path),
                     column=name,
                     value=v,
+                    limit=0,
                 )
             )
+            del values[name]
+    return values, findings
+
+
+def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
+    """Read and check ``run.json``; findings for missing or mistyped fields."""
+    data, findings = _load_run_json(path)
+    if findings:
+        return None, findings
+    if not isinstance(data, dict):
+        return None, [Finding("log.bad_run_json", Severity.ERROR, "run.json", "must be a JSON object", file=str(path))]
+    values, findings = _typed_fields(data, path)
     if any(f.severity == Severity.ERROR for f in findings):
         return None, findings
     known = {f.name for f in RUN_JSON}
-    meta = RunMeta(**values, extra={k: v for k, v in data.items() if k not in known})  # type: ignore[arg-type]
+    meta = RunMeta(**values, extra={k: v for k, v in data.items() if k not in known})
     return meta, findings
 
 
@@ -151,11 +194,15 @@ def stream_path(folder: Path, name: str) -> Path | None:
 def read_stream_raw(path: Path) -> pd.DataFrame:
     """A stream file as stored (Parquet typed, CSV as text)."""
     if path.suffix == ".parquet":
-        try:
-            return pq.read_table(path).to_pandas()
-        except (pa.ArrowInvalid, OSError) as exc:
-            raise InputError(f"not a readable Parquet file: {exc}", path=path) from exc
+        return _read_parquet_table(path).to_pandas()
     return read_raw_table(path)
+
+
+def _read_parquet_table(path: Path) -> pa.Table:
+    try:
+        return pq.read_table(path)
+    except (pa.ArrowException, OSError) as exc:
+        raise InputError(f"not a readable Parquet file: {exc}", path=path) from exc
 
 
 def coerce_stream(table: Table, raw: pd.DataFrame, file: str) -> tuple[pd.DataFrame, list[Finding]]:
@@ -164,53 +211,269 @@ def coerce_stream(table: Table, raw: pd.DataFrame, file: str) -> tuple[pd.DataFr
         str(raw[c.name].dtype) == PANDAS_DTYPE[c.dtype] or (c.dtype == "float" and raw[c.name].dtype == "float64")
         for c in table.columns
     ):
-        return raw[table.column_names], []  # already typed (Parquet written by us): fast path
+        return raw[table.column_names], []  # already typed: nothing to coerce
     co = coerce_frame(table, raw, file=file)
     return co.frame, co.findings
 
 
+def _arrow_column(col: Column, arr: pa.ChunkedArray) -> Any:
+    """A typed pandas array for a column whose Arrow type fits the declared one, else None."""
+    t = arr.type
+    if col.dtype == "float" and (pa.types.is_floating(t) or pa.types.is_integer(t)):
+        return arr.to_numpy().astype(np.float64, copy=False)  # nulls → NaN
+    if col.dtype == "int" and pa.types.is_integer(t):
+        if arr.null_count == 0:
+            values = arr.to_numpy().astype(np.int64, copy=False)
+            return pd.arrays.IntegerArray(values, np.zeros(len(values), dtype=bool))
+        mask = arr.is_null().to_numpy(zero_copy_only=False)
+        values = arr.fill_null(0).to_numpy().astype(np.int64, copy=False)
+        return pd.arrays.IntegerArray(values, mask)
+    if col.dtype == "str" and (pa.types.is_string(t) or pa.types.is_large_string(t)):
+        s = arr.to_pandas().astype("string").str.strip()
+        return s.mask(s == "").array
+    return None
+
+
+def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Finding]]:
+    """A Parquet stream, typed column by column; text or odd types go through ``coerce_frame``."""
+    pt = _read_parquet_table(path)
+    file = str(path)
+    findings: list[Finding] = []
+    for col in table.columns:
+        if col.name not in pt.column_names:
+            continue
+        meta = pt.schema.field(col.name).metadata or {}
+        unit = meta.get(b"unit")
+        if unit is not None and unit.decode("utf-8", "replace") != col.unit:
+            findings.append(
+                Finding(
+                    "log.unit",
+                    Severity.ERROR,
+                    table.name,
+                    f"column is stored in '{unit.decode('utf-8', 'replace')}', expected '{col.unit}'",
+                    file=file,
+                    column=col.name,
+                    value=unit.decode("utf-8", "replace"),
+                    limit=col.unit,
+                )
+            )
+    fast: dict[str, Any] = {}
+    if all(c.name in pt.column_names for c in table.columns):
+        for col in table.columns:
+            arr = _arrow_column(col, pt.column(col.name))
+            if arr is None:
+                break
+            fast[col.name] = arr
+    extras = [c for c in pt.column_names if c not in table.column_names]
+    if len(fast) == len(table.columns):
+        frame = pd.DataFrame(fast, copy=False)
+        for c in extras:
+            hint = suggest(c, table.column_names)
+            findings.append(
+                Finding(
+                    "schema.unknown_column",
+                    Severity.WARNING,
+                    table.name,
+                    f"unknown column '{c}' ignored" + (f" (did you mean '{hint}'?)" if hint else ""),
+                    file=file,
+                    column=c,
+                    value=c,
+                    limit=hint,
+                )
+            )
+        return frame, findings
+    co = coerce_frame(table, pt.to_pandas(), file=file)
+    return co.frame, findings + co.findings
+
+
+def read_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Finding]]:
+    """One stream file → (typed frame with a 0-based positional index, findings).
+
+    Raises InputError when the file cannot be read at all (empty, not CSV, corrupt Parquet).
+    """
+    path = Path(path)
+    if path.suffix == ".parquet":
+        return read_parquet_stream(table, path)
+    return coerce_stream(table, read_raw_table(path), str(path))
+
+
+def _run_field(data: dict[str, Any], name: str) -> Any:
+    """One field of a (possibly partly broken) run.json, typed and positive, or None."""
+    values, _ = _typed_fields({name: data.get(name)}, Path(RUN_JSON_NAME))
+    return values.get(name)
+
+
 class Run:
-    """One run folder; streams are read on first access and cached."""
+    """One run folder; streams are read on first access and cached.
+
+    ``findings`` holds the problems found so far: run.json fields and folder contents at
+    construction, then the type findings of each stream as it is loaded. ``run.json``
+    missing or not a JSON object makes the run unreadable (InputError).
+    """
 
     def __init__(self, folder: Path) -> None:
         self.folder = Path(folder)
         if not self.folder.is_dir():
             raise InputError("not a run folder (expected run.json and stream files)", path=self.folder)
-        self.meta, self.findings = parse_run_json(self.folder / "run.json")
+        json_path = self.folder / RUN_JSON_NAME
+        data, bad = _load_run_json(json_path)
+        if bad:
+            raise InputError(bad[0].message, path=json_path, row=bad[0].row)
+        if not isinstance(data, dict):
+            raise InputError("run.json must be a JSON object", path=json_path)
+        self.raw_json: dict[str, Any] = data
+        self.meta, self.findings = parse_run_json(json_path)
         self._streams: dict[str, pd.DataFrame | None] = {}
+        self._stream_findings: dict[str, list[Finding]] = {}
+        self._files: dict[str, Path] = {}
+        self._scan()
+
+    def _scan(self) -> None:
+        """Find the stream files once; warn about duplicates and unknown files."""
+        names = sorted(p.name for p in self.folder.iterdir())
+        for name in LOG_STREAMS:
+            found = [self.folder / f"{name}{s}" for s in STREAM_SUFFIXES if (self.folder / f"{name}{s}").is_file()]
+            if found:
+                self._files[name] = found[0]
+            if len(found) > 1:
+                self.findings.append(
+                    Finding(
+                        "log.duplicate_stream_file",
+                        Severity.WARNING,
+                        name,
+                        f"both {found[0].name} and {found[1].name} exist; {found[0].name} is used",
+                        file=str(found[1]),
+                    )
+                )
+        expected = {f"{n}{s}" for n in LOG_STREAMS for s in STREAM_SUFFIXES} | {RUN_JSON_NAME} | KNOWN_EXTRA_FILES
+        for name in names:
+            if name in expected or name.startswith("."):
+                continue
+            stem = name.split(".", 1)[0]
+            hint = suggest(stem, list(LOG_STREAMS))
+            msg = f"unknown file '{name}' ignored"
+            if hint:
+                msg += f" (a misnamed '{hint}' stream? expected {hint}.csv or {hint}.parquet)"
+            self.findings.append(
+                Finding("log.unknown_file", Severity.WARNING, "run", msg, file=str(self.folder / name), value=name)
+            )
 
     @property
     def run_id(self) -> str:
-        return self.meta.run_id if self.meta else self.folder.name
+        return self.meta.run_id if self.meta else str(self.raw_json.get("run_id") or self.folder.name)
+
+    def field(self, name: str) -> Any:
+        """A run.json field, typed, even when other fields are broken (None if unusable)."""
+        if self.meta is not None:
+            return getattr(self.meta, name)
+        return _run_field(self.raw_json, name)
+
+    @property
+    def vehicle_kind(self) -> str | None:
+        return self.field("vehicle_kind")
 
     def has(self, name: str) -> bool:
-        return stream_path(self.folder, name) is not None
+        return name in self._files
 
     def streams_present(self) -> list[str]:
         return [n for n in LOG_STREAMS if self.has(n)]
 
+    def stream_file(self, name: str) -> Path | None:
+        return self._files.get(name)
+
+    def stream_format(self, name: str) -> LogFormat | None:
+        p = self._files.get(name)
+        if p is None:
+            return None
+        return "parquet" if p.suffix == ".parquet" else "csv"
+
+    def stream_findings(self, name: str) -> list[Finding]:
+        """Findings from reading one stream (loads it)."""
+        self.stream(name)
+        return self._stream_findings.get(name, [])
+
     def stream(self, name: str) -> pd.DataFrame | None:
-        """The typed stream, or None when the run has no such stream."""
+        """The typed stream, or None when the run has no such stream or it cannot be read."""
         if name not in self._streams:
-            path = stream_path(self.folder, name)
-            if path is None:
-                self._streams[name] = None
-            else:
-                frame, findings = coerce_stream(LOG_STREAMS[name], read_stream_raw(path), str(path))
-                self.findings.extend(findings)
-                self._streams[name] = frame
+            path = self._files.get(name)
+            frame: pd.DataFrame | None = None
+            findings: list[Finding] = []
+            if path is not None:
+                try:
+                    frame, findings = read_stream(LOG_STREAMS[name], path)
+                except InputError as exc:
+                    findings = [
+                        Finding(
+                            "log.unreadable_stream",
+                            Severity.ERROR,
+                            name,
+                            f"cannot read the stream: {exc.message}",
+                            file=str(path),
+                            row=exc.row,
+                        )
+                    ]
+            self._streams[name] = frame
+            self._stream_findings[name] = findings
+            self.findings.extend(findings)
         return self._streams[name]
+
+    def load_all(self) -> dict[str, pd.DataFrame]:
+        """Every readable stream present."""
+        out = {}
+        for name in self.streams_present():
+            frame = self.stream(name)
+            if frame is not None:
+                out[name] = frame
+        return out
 
 
 def read_run(folder: Path) -> Run:
     return Run(folder)
 
 
+def check_output_folder(src: Path, out: Path) -> None:
+    """Refuse an output folder that is, contains or lies inside the input run."""
+    s, o = Path(src).resolve(), Path(out).resolve()
+    if s == o:
+        raise RefusedError("the output folder must differ from the input run", path=out)
+    if s in o.parents:
+        raise RefusedError("the output folder must not be inside the input run", path=out)
+    if o in s.parents:
+        raise RefusedError("the output folder must not contain the input run", path=out)
+
+
+def _arrow_table(table: Table, frame: pd.DataFrame) -> pa.Table:
+    """Declared columns with declared Arrow types and each column's unit in its metadata."""
+    arrays, fields = [], []
+    for c in table.columns:
+        if c.name not in frame.columns:
+            continue
+        s = frame[c.name]
+        if c.dtype == "float":
+            arr = pa.array(s.to_numpy(dtype=np.float64, na_value=np.nan), type=pa.float64())
+            typ = pa.float64()
+        elif c.dtype == "int":
+            vals = pd.to_numeric(s).astype("Int64")
+            mask = vals.isna().to_numpy()
+            ints = vals.to_numpy(dtype=np.int64, na_value=0)
+            arr = pa.array(ints, mask=mask if mask.any() else None, type=pa.int64())
+            typ = pa.int64()
+        elif c.dtype == "bool":
+            arr = pa.array(s.astype("boolean"), type=pa.bool_())
+            typ = pa.bool_()
+        else:
+            arr = pa.array(s.astype("string").astype(object).where(s.notna(), None), type=pa.string())
+            typ = pa.string()
+        arrays.append(arr)
+        fields.append(pa.field(c.name, typ, nullable=True, metadata={"unit": c.unit} if c.unit else None))
+    return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
+
+
 def _write_stream(path: Path, table: Table, frame: pd.DataFrame, fmt: LogFormat) -> None:
     cols = [c for c in table.column_names if c in frame.columns]
     frame = frame[cols]
     if fmt == "parquet":
-        pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, compression="zstd")
+        pq.write_table(_arrow_table(table, frame), path, compression="zstd")
     else:
         frame.to_csv(path, index=False, float_format="%.10g", lineterminator="\n")
 
@@ -222,23 +485,34 @@ def write_run(
     *,
     fmt: LogFormat = "parquet",
     force: bool = False,
+    extra_files: dict[str, str] | None = None,
 ) -> Path:
-    """Write a run folder atomically (temp folder beside it, then rename)."""
+    """Write a run folder atomically (temp folder beside it, then rename).
+
+    ``extra_files`` are written as text into the folder as well (e.g. ``repair_log.json``).
+    """
     folder = Path(folder)
     if folder.exists():
         if not force:
             raise RefusedError("output folder exists; use --force to replace it", path=folder)
+        if not folder.is_dir():
+            raise RefusedError("output exists and is not a folder", path=folder)
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
     try:
-        (tmp / "run.json").write_text(json.dumps(meta.to_json(), indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+        (tmp / RUN_JSON_NAME).write_text(
+            json.dumps(meta.to_json(), indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
+        )
         for name, frame in streams.items():
             if frame is None:
                 continue
             table = LOG_STREAMS[name]
             _write_stream(tmp / f"{name}.{fmt}", table, frame, fmt)
+        for name, text in (extra_files or {}).items():
+            (tmp / name).write_text(text, encoding="utf-8")
         if folder.exists():
             old = folder.with_name(f".{folder.name}.old")
+            shutil.rmtree(old, ignore_errors=True)
             os.replace(folder, old)
             os.replace(tmp, folder)
             shutil.rmtree(old, ignore_errors=True)
@@ -248,3 +522,38 @@ def write_run(
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return folder
+
+
+@dataclass
+class ConvertResult:
+    source: str
+    out: str
+    format: str
+    rows: dict[str, int]
+    warnings: list[Finding]
+
+
+def convert_run(src: Path | str, out: Path | str, fmt: LogFormat, *, force: bool = False) -> ConvertResult:
+    """Write ``src`` again as a new run folder in ``fmt`` (same columns, typed).
+
+    Refused (FindingsError) when run.json or a stream has errors a conversion would lose,
+    e.g. text in a numeric column; RefusedError when ``out`` exists (unless ``force``) or
+    is, contains or lies inside ``src``.
+    """
+    src, out = Path(src), Path(out)
+    check_output_folder(src, out)
+    run = Run(src)
+    if out.exists() and not force:
+        raise RefusedError("output folder exists; use --force to replace it", path=out)
+    streams = run.load_all()
+    errors = [f for f in run.findings if f.severity == Severity.ERROR]
+    if run.meta is None or errors:
+        raise FindingsError(
+            f"{len(errors)} error(s) would be lost or copied blindly by a conversion; "
+            "run 'trainpos logs check' and fix them first; nothing was written",
+            errors,
+            path=src,
+        )
+    write_run(out, run.meta, streams, fmt=fmt, force=force)
+    warnings = [f for f in run.findings if f.severity == Severity.WARNING]
+    return ConvertResult(str(src), str(out), fmt, {k: len(v) for k, v in streams.items()}, warnings)
