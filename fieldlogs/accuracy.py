@@ -20,13 +20,13 @@ def compare_with_truth(positions: pd.DataFrame, truth: pd.DataFrame) -> pd.DataF
     tt = truth["t"].to_numpy(dtype=float)
     km_true = np.interp(t, tt, truth["km_m"].to_numpy(dtype=float, na_value=np.nan))
     idx = np.clip(np.searchsorted(tt, t, side="right") - 1, 0, len(tt) - 1)
-    line_true = truth["line_code"].astype("string").to_numpy(dtype=object)[idx]
-    track_true = truth["track"].astype("string").to_numpy(dtype=object)[idx]
+    line_true = truth["line_code"].astype("string").fillna("").to_numpy(dtype=object)[idx]
+    track_true = truth["track"].astype("string").fillna("").to_numpy(dtype=object)[idx]
     claimed = positions["state"].to_numpy(dtype=object) != PositionState.UNDETERMINED.value
     err = positions["km_m"].to_numpy(dtype=float) - km_true
     margin = positions["margin_m"].to_numpy(dtype=float)
-    line = positions["line_code"].astype("string").to_numpy(dtype=object)
-    track = positions["track"].astype("string").to_numpy(dtype=object)
+    line = positions["line_code"].astype("string").fillna("").to_numpy(dtype=object)
+    track = positions["track"].astype("string").fillna("").to_numpy(dtype=object)
     wrong = claimed & ((line != line_true) | (track != track_true))
     return pd.DataFrame(
         {

@@ -49,6 +49,9 @@ def _clean(frame: pd.DataFrame | None, name: str, events: list[Event]) -> pd.Dat
     unit would see the stream; every change is reported as an ``input_repaired`` event."""
     if frame is None or frame.empty:
         return frame
+    t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
+    if t.size and np.isfinite(t).all() and (np.diff(t) > 0).all():
+        return frame  # the normal case: nothing to repair, no copy
     n0 = len(frame)
     frame = frame[frame["t"].notna()]
     unsorted = bool((frame["t"].diff() < 0).any())
@@ -91,7 +94,7 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
     )
     gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
-    unit = BaliseUnit(BaliseDb.from_network(network), cfg.balise)
+    unit = BaliseUnit(network.cached("balise_db", lambda: BaliseDb.from_network(network)), cfg.balise)
     sol = solve(cycles, odo, streams["balise"], unit, cfg, gps=gps, features=features)
 
     events = list(pre) + sol.events

@@ -48,9 +48,17 @@ class Cycles:
         return np.diff(self.t, prepend=self.t[0] - 0.1 if self.t.size else 0.0)
 
 
-def cycle_means(t_cycles: FloatArray, t_samples: FloatArray, values: FloatArray) -> FloatArray:
+def cycle_index(t_cycles: FloatArray, t_samples: FloatArray) -> npt.NDArray[np.intp]:
+    """Cycle k of each sample, the cycle ``(t[k−1], t[k]]`` it falls in (n when after the last)."""
+    return np.searchsorted(t_cycles, t_samples, side="left")
+
+
+def cycle_means(
+    t_cycles: FloatArray, t_samples: FloatArray, values: FloatArray, idx: npt.NDArray[np.intp] | None = None
+) -> FloatArray:
     """Mean of the samples in each cycle ``(t[k−1], t[k]]`` (NaN for empty cycles)."""
-    idx = np.searchsorted(t_cycles, t_samples, side="left")
+    if idx is None:
+        idx = cycle_index(t_cycles, t_samples)
     ok = (idx < t_cycles.size) & np.isfinite(values)
     counts = np.bincount(idx[ok], minlength=t_cycles.size).astype(float)
     sums = np.bincount(idx[ok], weights=values[ok], minlength=t_cycles.size)
