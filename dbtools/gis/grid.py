@@ -1,0 +1,534 @@
+"""The 20 m GIS grid from surveyed track centrelines and kilometre posts (pure).
+
+Method, per line (all metric work in the line's JGD2011 plane rectangular zone):
+
+1. Each track centreline is a polyline; ``s`` is the distance along it on the ground
+   (geodesic length of each segment, so km is not off by the zone's scale factor of
+   0.9999–1.0001); positions are interpolated in the plane.
+2. Every kilometre post of the line is projected onto each track (nearest point): the foot
+   gives the post's chainage ``s_p`` and its signed lateral offset ``o_p`` (left positive).
+   Posts more than ``max_post_offset_m`` from a track, or beyond its ends, are not used on it.
+   The posts also orient the track: a polyline drawn from high to low km is reversed.
+3. Kilometrage is measured along the line of the posts, not along each track: through a
+   curve of deflection Δθ a parallel track at lateral distance d from that line is d·Δθ
+   shorter (inside) or longer (outside). The *reference chainage* ``r`` removes this:
+   ``dr = ds − o·dθ`` with ``o`` the median post offset of the track and ``dθ`` the turn of
+   the polyline (each vertex's turn split over its two segments). ``r = s`` when the posts
+   stand on the track; exact for a track parallel to the line of the posts.
+4. ``km(r)`` is piecewise linear through the posts, with slope 1 before the first and
+   after the last post. A post with ``km_after_m`` is a kilometrage break: km counts to
+   ``km_m`` before it and restarts at ``km_after_m`` after it (a new *run*).
+5. Grid points are the multiples of 20 m of km inside each run (both ends inclusive, so a
+   break post gets a point for each of its kilometrages); km → r → s → (x, y, height) by
+   linear interpolation along the polyline, then back to lon/lat. Each break gives one
+   ``km_breaks`` row (last grid km before, first grid km after).
+
+Everything is vectorised over the vertices and grid points; transformers are cached.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from dbtools.gis.geometry import PolylineIndex, Projector, geodesic_step, turn_angle
+from dbtools.network import canonical, empty_frame
+from schemas.enums import Severity
+from schemas.findings import Finding
+from schemas.gisinput import CENTRELINE_VERTICES, KM_POSTS
+from schemas.tables import GIS, GIS_SPACING_M, KM_BREAKS
+
+FloatArray = npt.NDArray[np.float64]
+
+#: A post farther than this from a track is not used on that track [m].
+MAX_POST_OFFSET_M = 50.0
+#: A post whose foot falls more than this beyond a track's end is not used on it [m].
+BEYOND_END_TOL_M = 1.0
+#: Consecutive vertices closer than this are duplicates [m].
+DUPLICATE_VERTEX_M = 1e-3
+#: Posts closer than this along a track are the same place [m].
+SAME_PLACE_M = 0.01
+#: Warn when the km difference of two posts differs from the measured distance by more than
+#: max(SPACING_ABS_M, SPACING_REL · distance).
+SPACING_ABS_M = 1.0
+SPACING_REL = 0.01
+#: Grid kms may lie this far outside a run (float round-off at exact multiples) [m].
+KM_EPS_M = 1e-6
+
+#: Extra frame columns the readers may add: file line of the row, and a label prefix for
+#: inputs without lines (GeoJSON: "feature 3, vertex 12").
+ROW_COL = "_row"
+LABEL_COL = "_label"
+
+
+@dataclass
+class TrackSummary:
+    """What was built for one line/track."""
+
+    line_code: str
+    track: str
+    points: int
+    km_first_m: float
+    km_last_m: float
+    length_m: float
+    posts_used: int
+    post_offset_m: float
+    """Median signed offset of the posts from the track (left of increasing km positive)."""
+    reversed: bool
+    """The polyline was drawn from high to low km and has been reversed."""
+    breaks: int
+
+
+@dataclass
+class GridResult:
+    gis: pd.DataFrame
+    km_breaks: pd.DataFrame
+    findings: list[Finding] = field(default_factory=list)
+    tracks: list[TrackSummary] = field(default_factory=list)
+    zones: dict[str, int] = field(default_factory=dict)
+    """Plane rectangular zone used per line."""
+
+
+@dataclass
+class _Posts:
+    """The posts of one line, with their projected plane coordinates."""
+
+    frame_index: pd.Index
+    """Index labels of the posts in the input frame (for finding locations)."""
+    km: FloatArray
+    km_after: FloatArray
+    x: FloatArray
+    y: FloatArray
+    used: npt.NDArray[np.bool_]
+    nearest_m: FloatArray
+
+
+class _Where:
+    """Finding locations: file and line of an input row (or a label when there are no lines)."""
+
+    def __init__(self, frame: pd.DataFrame, table: str, file: str | None) -> None:
+        self.table, self.file = table, file
+        self.rows = frame[ROW_COL] if ROW_COL in frame.columns else None
+        self.labels = frame[LABEL_COL] if LABEL_COL in frame.columns else None
+
+    def finding(
+        self,
+        rule: str,
+        severity: Severity,
+        message: str,
+        idx: Any = None,
+        *,
+        keys: Mapping[str, object] | None = None,
+        value: object = None,
+        limit: object = None,
+        column: str | None = None,
+    ) -> Finding:
+        row = None
+        if idx is not None and self.rows is not None:
+            v = self.rows.loc[idx]
+            row = None if pd.isna(v) else int(v)
+        if idx is not None and self.labels is not None:
+            label = self.labels.loc[idx]
+            if isinstance(label, str) and label:
+                message = f"{label}: {message}"
+        return Finding(
+            rule,
+            severity,
+            self.table,
+            message,
+            keys=dict(keys or {}),
+            value=value,
+            limit=limit,
+            file=self.file,
+            row=row,
+            column=column,
+        )
+
+
+def build_grid(
+    centrelines: pd.DataFrame,
+    posts: pd.DataFrame,
+    *,
+    centrelines_file: str | None = None,
+    posts_file: str | None = None,
+    max_post_offset_m: float = MAX_POST_OFFSET_M,
+) -> GridResult:
+    """The GIS grid (and kilometrage breaks) of every line/track; see the module docstring.
+
+    Inputs are typed frames as declared in :mod:`schemas.gisinput` (already schema-checked).
+    Problems come back as findings; tracks with errors produce no grid points.
+    """
+    cw = _Where(centrelines, CENTRELINE_VERTICES.name, centrelines_file)
+    pw = _Where(posts, KM_POSTS.name, posts_file)
+    result = GridResult(empty_frame(GIS), empty_frame(KM_BREAKS))
+    findings = result.findings
+    post_lines = posts["line_code"].astype(object)
+    line_codes = centrelines["line_code"].astype(object)
+    gis_parts: list[pd.DataFrame] = []
+    break_rows: list[dict[str, object]] = []
+
+    # posts: breaks must go forward; lines must exist
+    km_after_all = posts["km_after_m"].to_numpy(dtype=float, na_value=np.nan)
+    km_all = posts["km_m"].to_numpy(dtype=float, na_value=np.nan)
+    for i in np.flatnonzero(~np.isnan(km_after_all) & (km_after_all <= km_all)).tolist():
+        idx = posts.index[i]
+        findings.append(
+            pw.finding(
+                "gisinput.break_backwards",
+                Severity.ERROR,
+                f"km_after_m {km_after_all[i]:g} is not larger than km_m {km_all[i]:g}: a break must "
+                "jump forward (a repeated kilometrage cannot be held by the gis table)",
+                idx,
+                keys={"line_code": post_lines.iat[i], "km_m": km_all[i]},
+                value=km_after_all[i],
+                limit=km_all[i],
+                column="km_after_m",
+            )
+        )
+    known_lines = set(line_codes.dropna())
+    for i in np.flatnonzero(~post_lines.isin(known_lines).to_numpy()).tolist():
+        findings.append(
+            pw.finding(
+                "gisinput.unknown_line",
+                Severity.ERROR,
+                f"no centreline for line_code '{post_lines.iat[i]}'",
+                posts.index[i],
+                keys={"line_code": post_lines.iat[i], "km_m": km_all[i]},
+                value=post_lines.iat[i],
+                column="line_code",
+            )
+        )
+
+    for line_code in sorted(known_lines):
+        on_line = centrelines[line_codes == line_code]
+        lon = on_line["lon"].to_numpy(dtype=float)
+        lat = on_line["lat"].to_numpy(dtype=float)
+        projector = Projector.for_points(lat, lon)
+        result.zones[line_code] = projector.zone
+        sel = np.flatnonzero((post_lines == line_code).to_numpy())
+        px, py = projector.to_xy(posts["lon"].to_numpy(dtype=float)[sel], posts["lat"].to_numpy(dtype=float)[sel])
+        line_posts = _Posts(
+            frame_index=posts.index[sel],
+            km=km_all[sel],
+            km_after=km_after_all[sel],
+            x=px,
+            y=py,
+            used=np.zeros(sel.size, dtype=bool),
+            nearest_m=np.full(sel.size, np.inf),
+        )
+        tracks = on_line["track"].astype(object)
+        for track in sorted(set(tracks.dropna())):
+            vertices = on_line[tracks == track].sort_values("seq", kind="stable")
+            built = _track_grid(str(line_code), str(track), vertices, line_posts, projector, cw, pw, max_post_offset_m)
+            findings.extend(built.findings)
+            if built.gis is not None and built.summary is not None:
+                gis_parts.append(built.gis)
+                break_rows.extend(built.breaks)
+                result.tracks.append(built.summary)
+        for j in np.flatnonzero(~line_posts.used).tolist():
+            i = int(sel[j])
+            near = line_posts.nearest_m[j]
+            where = (
+                f"is {near:.1f} m from the nearest track of line '{line_code}'"
+                if math.isfinite(near)
+                else f"lies beyond the ends of every track of line '{line_code}'"
+            )
+            findings.append(
+                pw.finding(
+                    "gisinput.post_off_track",
+                    Severity.ERROR,
+                    f"post km {km_all[i]:g} {where}; a post must lie within {max_post_offset_m:g} m of a track",
+                    posts.index[i],
+                    keys={"line_code": line_code, "km_m": km_all[i]},
+                    value=round(float(near), 3) if math.isfinite(near) else None,
+                    limit=max_post_offset_m,
+                )
+            )
+
+    if gis_parts:
+        result.gis = canonical(GIS, pd.concat(gis_parts, ignore_index=True))
+    if break_rows:
+        result.km_breaks = canonical(KM_BREAKS, pd.DataFrame(break_rows))
+    return result
+
+
+@dataclass
+class _TrackBuilt:
+    findings: list[Finding]
+    gis: pd.DataFrame | None = None
+    breaks: list[dict[str, object]] = field(default_factory=list)
+    summary: TrackSummary | None = None
+
+
+def _track_grid(
+    line_code: str,
+    track: str,
+    vertices: pd.DataFrame,
+    posts: _Posts,
+    projector: Projector,
+    cw: _Where,
+    pw: _Where,
+    max_post_offset_m: float,
+) -> _TrackBuilt:
+    out = _TrackBuilt([])
+    keys = {"line_code": line_code, "track": track}
+    first_idx = vertices.index[0]
+    lon = vertices["lon"].to_numpy(dtype=float)
+    lat = vertices["lat"].to_numpy(dtype=float)
+    x, y = projector.to_xy(lon, lat)
+    h = vertices["height_m"].to_numpy(dtype=float, na_value=np.nan)
+    step = geodesic_step(lon, lat)
+    dup = np.flatnonzero(step < DUPLICATE_VERTEX_M) + 1
+    if dup.size:
+        out.findings.append(
+            cw.finding(
+                "gisinput.duplicate_vertex",
+                Severity.WARNING,
+                f"{dup.size} vertex(es) repeat the previous one and were dropped",
+                vertices.index[dup[0]],
+                keys=keys,
+                value=int(dup.size),
+            )
+        )
+        keep = np.ones(x.size, dtype=bool)
+        keep[dup] = False
+        x, y, h, step = x[keep], y[keep], h[keep], geodesic_step(lon[keep], lat[keep])
+    if x.size < 2:
+        out.findings.append(
+            cw.finding(
+                "gisinput.short_track",
+                Severity.ERROR,
+                f"track {track} of line '{line_code}' has fewer than two distinct vertices",
+                first_idx,
+                keys=keys,
+                value=int(x.size),
+                limit=2,
+            )
+        )
+        return out
+    has_h = ~np.isnan(h)
+    if has_h.any() and not has_h.all():
+        out.findings.append(
+            cw.finding(
+                "gisinput.partial_height",
+                Severity.WARNING,
+                f"height_m is given on {int(has_h.sum())} of {h.size} vertices of the track; heights ignored",
+                first_idx,
+                keys=keys,
+                column="height_m",
+            )
+        )
+    heights = h if has_h.all() else None
+
+    # chainage on the ground (geodesic), not in the plane (scale factor 0.9999–1.0001)
+    s = np.concatenate([[0.0], np.cumsum(step)])
+    proj, usable = _project_posts(x, y, s, posts, max_post_offset_m)
+    reversed_ = False
+    if usable.sum() >= 2:
+        order = np.argsort(proj.km_m[usable], kind="stable")
+        km_used = posts.km[usable][order]
+        if km_used[-1] < km_used[0]:
+            reversed_ = True
+            x, y = x[::-1].copy(), y[::-1].copy()
+            heights = heights[::-1].copy() if heights is not None else None
+            s = s[-1] - s[::-1]
+            proj, usable = _project_posts(x, y, s, posts, max_post_offset_m)
+    posts.used |= usable
+    posts.nearest_m = np.minimum(posts.nearest_m, np.where(proj.beyond, np.inf, proj.distance_m))
+    if not usable.any():
+        out.findings.append(
+            cw.finding(
+                "gisinput.no_posts",
+                Severity.ERROR,
+                f"no kilometre post of line '{line_code}' lies within {max_post_offset_m:g} m of track {track}",
+                first_idx,
+                keys=keys,
+                limit=max_post_offset_m,
+            )
+        )
+        return out
+
+    offset = float(np.median(proj.offset_m[usable]))
+    r = _reference_chainage(x, y, s, offset)
+    if np.any(np.diff(r) <= 0):
+        out.findings.append(
+            cw.finding(
+                "gisinput.sharp_turn",
+                Severity.ERROR,
+                f"the track turns too sharply for posts {offset:.1f} m beside it (reference chainage "
+                "would run backwards); check for a spike in the centreline",
+                first_idx,
+                keys=keys,
+                value=offset,
+            )
+        )
+        return out
+
+    # posts on this track in order of reference chainage
+    pw_idx = posts.frame_index
+    sel = np.flatnonzero(usable)
+    rp = np.interp(proj.km_m[sel], s, r)
+    order = np.argsort(rp, kind="stable")
+    sel, rp = sel[order], rp[order]
+    km_before = posts.km[sel]
+    km_after = np.where(np.isnan(posts.km_after[sel]), km_before, posts.km_after[sel])
+    ok = True
+    for a in range(sel.size - 1):
+        b = a + 1
+        ib = pw_idx[sel[b]]
+        pkeys = {"line_code": line_code, "track": track, "km_m": km_before[b]}
+        if rp[b] - rp[a] < SAME_PLACE_M:
+            out.findings.append(
+                pw.finding(
+                    "gisinput.posts_same_place",
+                    Severity.ERROR,
+                    f"posts km {km_before[a]:g} and km {km_before[b]:g} project to the same place on track {track}",
+                    ib,
+                    keys=pkeys,
+                )
+            )
+            ok = False
+            continue
+        if km_before[b] <= km_after[a]:
+            out.findings.append(
+                pw.finding(
+                    "gisinput.km_order",
+                    Severity.ERROR,
+                    f"kilometrage does not increase along track {track}: post km {km_before[b]:g} comes after "
+                    f"post km {km_after[a]:g} (a post is misplaced or its km is wrong)",
+                    ib,
+                    keys=pkeys,
+                    value=km_before[b],
+                    limit=km_after[a],
+                    column="km_m",
+                )
+            )
+            ok = False
+            continue
+        dkm, dr = km_before[b] - km_after[a], rp[b] - rp[a]
+        tol = max(SPACING_ABS_M, SPACING_REL * dr)
+        if abs(dkm - dr) > tol:
+            out.findings.append(
+                pw.finding(
+                    "gisinput.post_spacing",
+                    Severity.WARNING,
+                    f"posts km {km_after[a]:g} → {km_before[b]:g} differ by {dkm:.1f} m of km but lie "
+                    f"{dr:.1f} m apart along track {track}",
+                    ib,
+                    keys=pkeys,
+                    value=round(float(dkm - dr), 3),
+                    limit=round(tol, 3),
+                )
+            )
+    if not ok:
+        return out
+
+    # runs of continuous kilometrage, split at break posts
+    runs: list[tuple[list[float], list[float]]] = []
+    rk: list[float] = [float(r[0])]
+    kk: list[float] = [float(km_before[0] - (rp[0] - r[0]))]
+    for j in range(sel.size):
+        if rp[j] > rk[-1]:
+            rk.append(float(rp[j]))
+            kk.append(float(km_before[j]))
+        if km_after[j] != km_before[j]:
+            runs.append((rk, kk))
+            rk, kk = [float(rp[j])], [float(km_after[j])]
+    if r[-1] > rk[-1]:
+        kk.append(kk[-1] + float(r[-1] - rk[-1]))
+        rk.append(float(r[-1]))
+    runs.append((rk, kk))
+
+    kms: list[FloatArray] = []
+    refs: list[FloatArray] = []
+    last_km: float | None = None
+    for n_run, (rk_, kk_) in enumerate(runs):
+        k_lo = math.ceil(kk_[0] / GIS_SPACING_M - KM_EPS_M / GIS_SPACING_M)
+        k_hi = math.floor(kk_[-1] / GIS_SPACING_M + KM_EPS_M / GIS_SPACING_M)
+        grid_km = np.arange(k_lo, k_hi + 1, dtype=float) * GIS_SPACING_M
+        if n_run > 0 and grid_km.size and last_km is not None:
+            out.breaks.append({**keys, "km_from_m": last_km, "km_to_m": float(grid_km[0])})
+        if grid_km.size:
+            last_km = float(grid_km[-1])
+            kms.append(grid_km)
+            refs.append(np.interp(grid_km, kk_, rk_) if len(rk_) > 1 else np.full(grid_km.size, rk_[0]))
+    if not kms:
+        out.findings.append(
+            cw.finding(
+                "gisinput.no_grid",
+                Severity.ERROR,
+                f"track {track} of line '{line_code}' is shorter than one grid step",
+                first_idx,
+                keys=keys,
+            )
+        )
+        return out
+    grid_km = np.concatenate(kms)
+    sg = np.interp(np.concatenate(refs), r, s)
+    gx, gy = np.interp(sg, s, x), np.interp(sg, s, y)
+    glon, glat = projector.to_lonlat(gx, gy)
+    out.gis = pd.DataFrame(
+        {
+            "line_code": line_code,
+            "track": track,
+            "km_m": grid_km,
+            "lat": np.round(glat, 9),
+            "lon": np.round(glon, 9),
+            "height_m": np.round(np.interp(sg, s, heights), 3) if heights is not None else np.nan,
+        }
+    )
+    out.summary = TrackSummary(
+        line_code,
+        track,
+        int(grid_km.size),
+        float(grid_km[0]),
+        float(grid_km[-1]),
+        float(s[-1]),
+        int(sel.size),
+        round(offset, 3),
+        reversed_,
+        len(out.breaks),
+    )
+    return out
+
+
+@dataclass
+class _PostProjection:
+    km_m: FloatArray
+    offset_m: FloatArray
+    distance_m: FloatArray
+    beyond: npt.NDArray[np.bool_]
+
+
+def _project_posts(
+    x: FloatArray, y: FloatArray, s: FloatArray, posts: _Posts, max_offset: float
+) -> tuple[_PostProjection, npt.NDArray[np.bool_]]:
+    """Chainage ``s`` of the foot, signed offset and distance of every post on one polyline
+    (plane ``x``, ``y``; ground chainage ``s`` at the vertices); which posts are usable."""
+    if posts.x.size == 0:
+        empty = np.empty(0)
+        return _PostProjection(empty, empty, empty, np.empty(0, dtype=bool)), np.empty(0, dtype=bool)
+    p = PolylineIndex(x, y, s).project(posts.x, posts.y)
+    # along-track distance of the post from each end, positive inwards (negative = beyond)
+    first = max(float(np.hypot(x[1] - x[0], y[1] - y[0])), 1e-12)
+    last = max(float(np.hypot(x[-1] - x[-2], y[-1] - y[-2])), 1e-12)
+    t0 = ((posts.x - x[0]) * (x[1] - x[0]) + (posts.y - y[0]) * (y[1] - y[0])) / first
+    t1 = ((x[-1] - posts.x) * (x[-1] - x[-2]) + (y[-1] - posts.y) * (y[-1] - y[-2])) / last
+    beyond = ((p.km_m <= 0.0) & (t0 < -BEYOND_END_TOL_M)) | ((p.km_m >= s[-1]) & (t1 < -BEYOND_END_TOL_M))
+    usable = (p.distance_m <= max_offset) & ~beyond
+    return _PostProjection(p.km_m, p.offset_m, p.distance_m, beyond), usable
+
+
+def _reference_chainage(x: FloatArray, y: FloatArray, s: FloatArray, offset_m: float) -> FloatArray:
+    """``r`` at the vertices: ``dr = ds − o·dθ``, each vertex's turn split over its two segments."""
+    if offset_m == 0.0 or x.size < 3:
+        return s.copy()
+    turn = np.nan_to_num(turn_angle(x, y))
+    seg_turn = 0.5 * (turn[:-1] + turn[1:])
+    return np.concatenate([[0.0], np.cumsum(np.diff(s) - offset_m * seg_turn)])
