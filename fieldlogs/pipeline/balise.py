@@ -87,7 +87,7 @@ class BaliseUnit:
         if kind == BaliseKind.I2:
             return self._on_i2(tel, i, t, d, cab, estimate, km_now)
         if kind == BaliseKind.C:
-            return self._on_c(tel, i, t, d, estimate, km_now)
+            return self._on_c(tel, i, t, d, cab, estimate, km_now)
         return [Event(t, "balise_anomaly", km_now, detail={"reason": f"unknown telegram kind {kind!r}"})], None
 
     def _on_i1(self, tel: dict[str, Any], i: int, t: float, d: float) -> tuple[list[Event], Fix | None]:
@@ -141,12 +141,28 @@ class BaliseUnit:
         return [Event(t, "balise_correction", km_db, km_now - km_db, detail={**detail, "kind": "I2"})], fix
 
     def _on_c(
-        self, tel: dict[str, Any], i: int, t: float, d: float, estimate: Fix | None, km_now: float | None
+        self,
+        tel: dict[str, Any],
+        i: int,
+        t: float,
+        d: float,
+        cab: int,
+        estimate: Fix | None,
+        km_now: float | None,
     ) -> tuple[list[Event], Fix | None]:
         sig = _s(tel.get("signal_type")) or ""
         if estimate is None or self.last_pair is None or km_now is None:
             return [Event(t, "c_balise_ignored", detail={"reason": "no initial pair yet", "signal_type": sig})], None
         key, d_i1 = self.last_pair
+        if estimate.k * cab != direction_sign(key[2]):
+            return [
+                Event(
+                    t,
+                    "c_balise_ignored",
+                    km_now,
+                    detail={"reason": "running against the direction of the governing pair", "signal_type": sig},
+                )
+            ], None
         travelled = d - d_i1
         cands = self.db.c_balises.get((key, sig), [])
         hits = [c for c in cands if abs(travelled - float(c["dist_from_initial_m"])) <= self.cfg.id_window_m]

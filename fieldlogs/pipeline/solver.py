@@ -25,8 +25,8 @@ from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.types import Event, FeatureOutcome, Fix, FloatArray, GpsAnalysis, Odometry
 from schemas.enums import PositionState
 
-#: Order of simultaneous events: fail-safe first, then telegrams, GPS, feature points.
-PRIO_FAILSAFE, PRIO_BALISE, PRIO_GPS, PRIO_FEATURE = 0, 1, 2, 3
+#: Order of simultaneous events: rail on/off and fail-safe first, then telegrams, GPS, features.
+PRIO_RAIL, PRIO_FAILSAFE, PRIO_BALISE, PRIO_GPS, PRIO_FEATURE = -1, 0, 1, 2, 3
 #: Sources of absolute fixes whose position is good enough to compute a correction % from.
 ABSOLUTE_SOURCES = ("balise", "feature")
 
@@ -80,6 +80,11 @@ def solve(
     for ep in odo.episodes:
         if ep.failsafe:
             push(ep.t_end, PRIO_FAILSAFE, "failsafe", ep)
+    # road-rail vehicles: a position only exists while on rail (PTO on); going off rail
+    # forgets it, going on rail again starts undetermined
+    pto_change = np.flatnonzero(np.diff(cycles.pto.astype(np.int8))) + 1
+    for i in pto_change:
+        push(float(t[i]), PRIO_RAIL, "on_rail" if cycles.pto[i] else "off_rail", None)
     if gps is not None:
         for dec in gps.decisions:
             push(dec.t, PRIO_GPS, "gps_decision", dec)
@@ -136,6 +141,17 @@ def solve(
                 break
             i, d_now, s_now = at(tt)
             km_now = fix.km_at(s_now) if fix is not None else None
+            if kind in ("on_rail", "off_rail"):
+                events.append(Event(tt, kind, km_now))
+                if kind == "off_rail" and fix is not None:
+                    fix = None
+                    fixes.append(Fix(tt, s_now, d_now, np.nan, np.nan, "", "", 1, "none", np.nan,
+                                     state=PositionState.UNDETERMINED))
+                    version += 1
+                    last_abs = None
+                continue
+            if cycles.pto[i] == 0:
+                continue  # off rail: telegrams, GPS decisions and features do not apply
             if kind == "balise":
                 evs, new = balise_unit.on_telegram(payload, i, tt, d_now, s_now, int(cycles.cab[i]), fix, km_now)
                 events.extend(evs)
@@ -307,10 +323,11 @@ def _positions(
         uncertain_extra = np.where(
             np.isfinite(unc_d), cfg.margin.uncertain_growth_pct / 100.0 * np.abs(d - np.nan_to_num(unc_d)), 0.0
         )
+        has &= np.array([f.state != PositionState.UNDETERMINED for f in fixes])[j]
         km = np.where(has, est, np.nan)
         km_eq = np.where(has, est + eq_off, np.nan)
         margin = np.where(has, mg + uncertain_extra, np.nan)
-        state = np.where(has, np.array([f.state for f in fixes], dtype=object)[j], state)
+        state = np.where(has, np.array([str(f.state) for f in fixes], dtype=object)[j], state)
         line = np.where(has, np.array([f.line_code for f in fixes], dtype=object)[j], None)
         track = np.where(has, np.array([f.track for f in fixes], dtype=object)[j], None)
         source = np.where(has, np.array([f.source for f in fixes], dtype=object)[j], "none")
