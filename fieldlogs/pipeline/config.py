@@ -103,25 +103,85 @@ class FeatureConfig:
 
 @dataclass(frozen=True)
 class GpsConfig:
-    """D-GPS map-matching, trust filter and up/down decision [S001 §4.2, SPEC §5.4]."""
+    """D-GPS map-matching, trust filter, up/down decision and crossovers [S001 §4.2, SPEC §5.4].
 
-    windows_s: tuple[int, ...] = (5, 15, 30)
-    """RMS windows of the second-to-second position change [s]."""
-    rms_threshold_m: tuple[float, ...] = (1.0, 1.0, 1.0)
-    """Per window: RMS of (Δposition − expected Δposition) above this → not trusted [m]."""
+    The statistics are stated in ``fieldlogs.pipeline.gps``. Defaults are calibrated for
+    D-GPS whose slow (time-correlated) error is ~1.5 m per axis with a correlation time of
+    one to three minutes and whose fast noise is ≤ 0.3 m per axis; change the ``noise_*``
+    model and the RMS thresholds together when a receiver behaves differently.
+    """
+
+    # --- usable fixes and map-matching
     min_fix: int = 2
     """Minimum fix quality to use a fix (2 = D-GPS)."""
     max_hdop: float = 3.0
+    """Fixes with a larger HDOP are not used (a missing HDOP does not exclude a fix)."""
     max_offset_m: float = 15.0
-    """A fix farther than this from every candidate track is off-track (not matched) [m]."""
+    """A track farther than this from a fix is not a candidate for it [m]."""
+    max_gap_s: float = 1.5
+    """A time step longer than this between usable fixes resets the RMS windows [s]."""
+    # --- trust filter [S001 §4.2.2]
+    windows_s: tuple[int, ...] = (5, 15, 30)
+    """RMS windows of the second-to-second position change [s]."""
+    rms_threshold_m: tuple[float, ...] = (2.5, 1.8, 1.5)
+    """Per window: RMS of the change of the per-second displacement about its window mean
+    (the 2-D second difference of positions, constant acceleration removed) above this →
+    not trusted [m]. Clean D-GPS gives ~1.0 m (~1.2 m with 0.3 m fast noise); a 5 m jump
+    gives ≥ 3.3 / 2.1 / 1.65 m in the 5 / 15 / 30 s windows."""
+    max_change_m: float = 3.0
+    """The fix's own change of displacement above this → not trusted [m] (catches the
+    first fix of a jump, which a causal window sees only once)."""
+    min_history_s: float = 5.0
+    """Usable fixes needed since the last reset before any fix is trusted [s]."""
+    # --- error model of trusted fixes (for the standard error of a mean offset)
+    noise_sigma_m: float = 1.5
+    """1-σ of the slow lateral D-GPS error (Gauss-Markov) [m]."""
+    noise_tau_s: float = 180.0
+    """Correlation time of that error [s]: consecutive fixes are not independent. Set it from
+    the receiver's measured error (180 s = the suite's simulator model); a value shorter
+    than the truth makes decisions overconfident."""
+    noise_white_m: float = 0.25
+    """1-σ of the independent per-fix noise [m]."""
+    # --- up/down decision (sequential likelihood-ratio test on the mean offset)
+    decide_window_s: float = 120.0
+    """Evidence window: trusted fixes of the last this many seconds [s] (field target < 120 s)."""
     decide_min_fixes: int = 10
-    """Trusted fixes needed before deciding up/down."""
+    """Trusted fixes needed in the window before deciding."""
+    decide_min_duration_s: float = 10.0
+    """Time spanned by those fixes [s]."""
     decide_min_share: float = 0.9
-    """Share of trusted fixes that must favour one track."""
-    decide_max_sigma_m: float = 0.6
-    """Standard error of the mean offset needed to decide [m]."""
-    crossover_rms_m: float = 1.5
-    """RMS of the offset from the base track above this (over 5 s) → crossing over [m]."""
+    """Share of the window's trusted fixes whose nearest track is the decided one."""
+    decide_error: float = 1e-3
+    """Accepted probability of deciding the wrong track: the log-likelihood ratio of the
+    decided track against every other candidate must reach ln(1/decide_error)."""
+    decide_fit_z: float = 3.0
+    """|mean offset| from the decided track must be within this many standard errors …"""
+    decide_max_mean_m: float = 2.5
+    """… and not exceed this [m]: a vehicle between two tracks, or on a track missing from
+    the GIS, must not be assigned to its neighbour."""
+    redecide_factor: float = 2.0
+    """Changing an existing decision without a detected crossover needs this many times the
+    log-likelihood ratio (i.e. decide_error ** factor)."""
+    km_dir_min_m: float = 10.0
+    """|km change| over the evidence window below this → km_dir = 0 (standing) [m]."""
+    # --- crossover (渡り線) detection [S001 §7]
+    crossover_window_s: float = 5.0
+    """Window of the RMS of the offset from the base (decided) track [s]."""
+    crossover_ref_s: float = 20.0
+    """Reference window for the offset's previous level [s] …"""
+    crossover_lag_s: float = 10.0
+    """… ending this long before the RMS window starts, so that a slow crossing (up to
+    about this long) is compared with the level before it began [s]."""
+    crossover_rms_m: float = 2.0
+    """RMS of the offset from the base track above this (over the window) [m] …"""
+    crossover_min_shift: float = 0.6
+    """… and the mean offset moved toward the other track by this share of the track spacing
+    (and past the midpoint between the tracks)."""
+    crossover_z: float = 3.0
+    """… and by at least this many standard deviations of the drift the slow error model
+    (``noise_*``) produces between the two windows: with noisy GPS a crossover is only
+    reported when it stands out of the noise."""
+    # --- use by the solver
     initial_uncertainty_m: float = 10.0
     """Uncertainty of a GPS-derived initial position [m]."""
     allow_initial: bool = True

@@ -1,0 +1,494 @@
+"""Map-matching of position fixes to the 20 m GIS grid [S001 §4.2.3, SPEC §5.4].
+
+For a fix and a candidate track, the fix's kilometrage is the foot of the perpendicular
+dropped onto the *nearest segment* of that track's grid polyline and its lateral offset the
+signed length of that perpendicular (positive left of increasing km). On double track the
+two nearest grid points of a fix are often on different tracks, so segments are only ever
+formed between consecutive grid points of one track: tracks are never mixed.
+
+Structure of a :class:`TrackIndex` (built once per network, reused by the GPS unit, GIS
+verification and the possession audit):
+
+* one plane projection (:class:`~dbtools.gis.geometry.Projector`) for all grid points;
+* **pieces**: per (line_code, track) the grid points in km order, cut wherever a segment
+  cannot be interpolated — a kilometrage break listed in ``km_breaks``, km not increasing,
+  a km step that disagrees with the segment's length by more than
+  ``km_tolerance_m + km_tolerance_rel·Δkm`` (an unlisted km jump), or a segment longer than
+  ``max_segment_m`` (a hole in the grid). A missing grid point (Δkm = 40 m over 40 m) is
+  *not* a cut. Segments longer than ``densify_m`` get extra vertices on the segment with
+  linearly interpolated km — the geometry and every projection stay the same, but all
+  segments are short, which keeps the search radius below small;
+* one **cKDTree over all vertices** (the candidate index) and, per piece, an exact
+  :class:`~dbtools.gis.geometry.PolylineIndex` (built on demand, for unbounded projection
+  onto one known track: :meth:`TrackIndex.project_onto`).
+
+Exactness of :meth:`TrackIndex.match_xy`. If a track has a segment within ``max_offset_m``
+of a fix, the nearer end of that segment is within ``R = max_offset_m + ½·longest
+segment``. The tree returns *all* vertices within R (a k-nearest query bounded by R whose
+k-th hit is inside R is repeated with 4k), and both segments adjacent to every returned
+vertex are evaluated exactly. Hence, per track, the nearest candidate segment is the
+nearest segment of the whole track whenever that is within ``max_offset_m`` — the same
+answer as brute force over every segment of the track. Per fix, tracks are then taken in
+order of distance by repeated argmin over the candidate matrix (no Python loop per fix).
+
+Fixes are processed in a spatially sorted order (1 km cells) so that the tree walks memory
+coherently; results come back in input order. Throughput: ``bench/bench_matching.py``.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+from numba import njit
+from scipy.spatial import cKDTree
+
+from dbtools.gis.geometry import FloatArray, PolylineIndex, Projection, Projector
+from dbtools.network import Network
+from schemas.tables import GIS_SPACING_M
+
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+
+#: Columns of :meth:`TrackIndex.match` (one row per fix and candidate track).
+MATCH_COLUMNS = ("fix", "line_code", "track", "track_id", "km_m", "offset_m", "distance_m", "best")
+#: Default search radius: a fix farther than this from a track is not matched to it [m].
+DEFAULT_MAX_OFFSET_M = 15.0
+#: Cell size of the spatial sort of the fixes [m].
+SORT_CELL_M = 1000.0
+
+
+@dataclass(frozen=True)
+class Piece:
+    """A contiguous run of one track's vertices that can be interpolated (module doc)."""
+
+    track_id: int
+    start: int
+    """First vertex (index into :attr:`TrackIndex.x` etc.)."""
+    stop: int
+    """One past the last vertex."""
+
+
+class TrackIndex:
+    """Nearest-segment map-matching onto every track of a GIS grid (see module docstring).
+
+    ``grid`` needs ``line_code``, ``track``, ``km_m``, ``lat``, ``lon`` (rows with a
+    missing value are ignored); ``km_breaks`` (optional) ``line_code``, ``track``,
+    ``km_from_m``. Attributes ``x``, ``y``, ``km``, ``vertex_track`` are the vertices in
+    (line, track, km) order, densified; ``segment_ok[i]`` says vertices i and i+1 form a
+    segment (same piece).
+    """
+
+    def __init__(
+        self,
+        grid: pd.DataFrame,
+        projector: Projector | None = None,
+        km_breaks: pd.DataFrame | None = None,
+        *,
+        km_tolerance_m: float = 1.0,
+        km_tolerance_rel: float = 0.02,
+        max_segment_m: float = 200.0,
+        densify_m: float = 1.25 * GIS_SPACING_M,
+        k: int = 8,
+    ) -> None:
+        g = grid[["line_code", "track", "km_m", "lat", "lon"]]
+        num = g[["km_m", "lat", "lon"]].to_numpy(dtype=float, na_value=np.nan)
+        g = g[np.isfinite(num).all(axis=1) & g["line_code"].notna().to_numpy() & g["track"].notna().to_numpy()]
+        g = g.assign(line_code=g["line_code"].astype(str), track=g["track"].astype(str))
+        g = g.sort_values(["line_code", "track", "km_m"], kind="stable").reset_index(drop=True)
+        lat = g["lat"].to_numpy(dtype=float)
+        lon = g["lon"].to_numpy(dtype=float)
+        if projector is None:
+            if not len(g):
+                raise ValueError("an empty GIS grid needs an explicit projector")
+            projector = Projector.for_points(lat, lon)
+        self.projector = projector
+        self.k = int(k)
+        x0, y0 = projector.to_xy(lon, lat)
+        km0 = g["km_m"].to_numpy(dtype=float)
+        groups = g.groupby(["line_code", "track"], sort=False, observed=True)
+        tid0 = groups.ngroup().to_numpy(dtype=np.int64)
+        self.keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in groups.groups]
+        self.line_categories = sorted({lc for lc, _ in self.keys})
+        self.track_categories = sorted({tr for _, tr in self.keys})
+        self._line_dtype = pd.CategoricalDtype(self.line_categories)
+        self._track_dtype = pd.CategoricalDtype(self.track_categories)
+        self._key_line = np.array([self.line_categories.index(lc) for lc, _ in self.keys], dtype=np.int64)
+        self._key_track = np.array([self.track_categories.index(tr) for _, tr in self.keys], dtype=np.int64)
+        self._key_id = {key: i for i, key in enumerate(self.keys)}
+
+        # --- cuts between original grid points
+        n = km0.size
+        if n > 1:
+            dkm = np.diff(km0)
+            seg = np.hypot(np.diff(x0), np.diff(y0))
+            cut = (tid0[1:] != tid0[:-1]) | (dkm <= 0) | (seg > max_segment_m)
+            cut |= np.abs(seg - dkm) > km_tolerance_m + km_tolerance_rel * np.abs(dkm)
+            for j in self._listed_breaks(km_breaks, tid0, km0):
+                cut[j] = True
+            parts = np.where(cut | (seg <= densify_m), 1, np.ceil(seg / GIS_SPACING_M)).astype(np.int64)
+        else:
+            cut = np.zeros(0, dtype=bool)
+            parts = np.zeros(0, dtype=np.int64)
+        piece0 = np.concatenate([[0], np.cumsum(cut)]) if n else np.zeros(0, dtype=np.int64)
+        size = np.bincount(piece0) if n else np.zeros(0, dtype=np.int64)
+        single = size[piece0] == 1 if n else np.zeros(0, dtype=bool)
+
+        # --- densified vertices: point i contributes itself and the extra vertices of the
+        # segment i → i+1 (if not cut); an isolated point is doubled (a zero-length segment)
+        counts = np.ones(n, dtype=np.int64)
+        if n > 1:
+            counts[:-1] += np.where(cut, 0, parts - 1)
+        counts += single
+        base = np.repeat(np.arange(n), counts)
+        first = np.repeat(np.cumsum(counts) - counts, counts)
+        step = np.arange(base.size) - first
+        nxt = np.minimum(base + 1, max(n - 1, 0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frac = np.where(single[base] | (step == 0), 0.0, step / np.concatenate([parts, [1]])[base] if n else 0.0)
+        self.x = np.ascontiguousarray(x0[base] + frac * (x0[nxt] - x0[base]))
+        self.y = np.ascontiguousarray(y0[base] + frac * (y0[nxt] - y0[base]))
+        self.km = np.ascontiguousarray(km0[base] + frac * (km0[nxt] - km0[base]))
+        self.vertex_track = tid0[base]
+        vpiece = piece0[base]
+        nv = self.x.size
+        self.segment_ok = np.zeros(nv, dtype=bool)  # padded: the last vertex starts no segment
+        if nv > 1:
+            self.segment_ok[:-1] = vpiece[1:] == vpiece[:-1]
+        starts = np.flatnonzero(np.concatenate([[True], vpiece[1:] != vpiece[:-1]])) if nv else np.zeros(0, int)
+        stops = np.concatenate([starts[1:], [nv]]) if nv else np.zeros(0, int)
+        self.pieces = [Piece(int(self.vertex_track[a]), int(a), int(b)) for a, b in zip(starts, stops, strict=True)]
+        self._track_pieces: dict[int, list[int]] = {}
+        for i, p in enumerate(self.pieces):
+            self._track_pieces.setdefault(p.track_id, []).append(i)
+
+        # --- per-segment constants (index = first vertex)
+        self._dx = np.zeros(nv)
+        self._dy = np.zeros(nv)
+        if nv > 1:
+            self._dx[:-1] = np.diff(self.x)
+            self._dy[:-1] = np.diff(self.y)
+        self._dx[~self.segment_ok] = 0.0
+        self._dy[~self.segment_ok] = 0.0
+        len2 = self._dx**2 + self._dy**2
+        with np.errstate(divide="ignore"):
+            self._inv_len2 = np.where(len2 > 0, 1.0 / len2, 0.0)
+        self._dkm = np.zeros(nv)
+        if nv > 1:
+            self._dkm[:-1] = np.where(self.segment_ok[:-1], np.diff(self.km), 0.0)
+        self.half_max_segment_m = 0.5 * float(np.sqrt(len2.max())) if nv else 0.0
+        self.tree = cKDTree(np.column_stack([self.x, self.y])) if nv else None
+        self._poly: dict[int, PolylineIndex] = {}
+
+    @staticmethod
+    def _key_breaks(km_breaks: pd.DataFrame | None) -> list[tuple[str, str, float]]:
+        if km_breaks is None or not len(km_breaks):
+            return []
+        kb = km_breaks
+        return [
+            (str(lc), str(tr), float(k))
+            for lc, tr, k in zip(kb["line_code"], kb["track"], kb["km_from_m"], strict=True)
+            if pd.notna(k)
+        ]
+
+    def _listed_breaks(self, km_breaks: pd.DataFrame | None, tid: IntArray, km: FloatArray) -> list[int]:
+        """Original-segment indices cut by a listed break (after the point at km_from_m)."""
+        out = []
+        for lc, tr, k_from in self._key_breaks(km_breaks):
+            t = self._key_id.get((lc, tr))
+            if t is None:
+                continue
+            lo, hi = np.searchsorted(tid, [t, t + 1])
+            j = int(lo + np.searchsorted(km[lo:hi], k_from))
+            if j < hi - 1 and abs(km[j] - k_from) < 1e-6:
+                out.append(j)
+        return out
+
+    @classmethod
+    def from_network(cls, network: Network, projector: Projector | None = None, **kwargs: float) -> TrackIndex:
+        """Index of every track of ``network`` (kilometrage breaks respected)."""
+        return cls(network.gis, projector, network.tables.get("km_breaks"), **kwargs)  # type: ignore[arg-type]
+
+    # ------------------------------------------------------------------------------ access
+    @property
+    def n_vertices(self) -> int:
+        return int(self.x.size)
+
+    def track_id(self, line_code: str, track: str) -> int | None:
+        return self._key_id.get((str(line_code), str(track)))
+
+    def pieces_of(self, track_id: int) -> list[int]:
+        """Indices into :attr:`pieces` of one track's pieces, in km order."""
+        return list(self._track_pieces.get(track_id, []))
+
+    def piece_index(self, piece: int) -> PolylineIndex:
+        """The exact projector of one piece (built on first use)."""
+        poly = self._poly.get(piece)
+        if poly is None:
+            p = self.pieces[piece]
+            sl = slice(p.start, p.stop)
+            poly = PolylineIndex(self.x[sl], self.y[sl], self.km[sl])
+            self._poly[piece] = poly
+        return poly
+
+    def to_xy(self, lat: npt.ArrayLike, lon: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
+        return self.projector.to_xy(lon, lat)
+
+    def project_onto(self, x: npt.ArrayLike, y: npt.ArrayLike, line_code: str, track: str) -> Projection:
+        """Exact projection onto one known track, however far the points are (nearest over
+        the track's pieces; ``segment`` is the vertex index in :attr:`x`). For points known
+        to be on that track: GIS verification, a vehicle's declared track."""
+        px = np.atleast_1d(np.asarray(x, dtype=float))
+        py = np.atleast_1d(np.asarray(y, dtype=float))
+        t = self.track_id(line_code, track)
+        out = Projection(
+            np.full(px.size, np.nan), np.full(px.size, np.nan), np.full(px.size, -1, np.int64), np.full(px.size, np.inf)
+        )
+        ok = np.isfinite(px) & np.isfinite(py)
+        if t is None or not ok.any():
+            return out
+        for pi in self._track_pieces[t]:
+            pr = self.piece_index(pi).project(px[ok], py[ok])
+            better = pr.distance_m < out.distance_m[ok]
+            idx = np.flatnonzero(ok)[better]
+            out.km_m[idx] = pr.km_m[better]
+            out.offset_m[idx] = pr.offset_m[better]
+            out.segment[idx] = pr.segment[better] + self.pieces[pi].start
+            out.distance_m[idx] = pr.distance_m[better]
+        out.distance_m[~np.isfinite(out.km_m)] = np.nan
+        return out
+
+    # ------------------------------------------------------------------------------ matching
+    def match(
+        self,
+        lat: npt.ArrayLike,
+        lon: npt.ArrayLike,
+        line_code: str | None = None,
+        track: str | None = None,
+        max_offset_m: float = DEFAULT_MAX_OFFSET_M,
+    ) -> pd.DataFrame:
+        """Match fixes given as latitude/longitude (see :meth:`match_xy`)."""
+        x, y = self.to_xy(lat, lon)
+        return self.match_xy(x, y, line_code, track, max_offset_m)
+
+    def match_xy(
+        self,
+        x: npt.ArrayLike,
+        y: npt.ArrayLike,
+        line_code: str | None = None,
+        track: str | None = None,
+        max_offset_m: float = DEFAULT_MAX_OFFSET_M,
+    ) -> pd.DataFrame:
+        """Every (fix, track) pair whose nearest segment is within ``max_offset_m``.
+
+        Columns: ``fix`` (position in the input arrays), ``line_code``, ``track``
+        (categoricals), ``track_id`` (index into :attr:`keys`), ``km_m`` (foot of the
+        perpendicular on the track's nearest segment), ``offset_m`` (signed, positive left
+        of increasing km), ``distance_m`` (= |offset_m|), ``best`` (the fix's nearest
+        track). Sorted by fix, then distance; fixes with no track in reach, or with NaN
+        coordinates, have no row. ``line_code`` / ``track`` restrict the candidates.
+        """
+        px = np.atleast_1d(np.asarray(x, dtype=float))
+        py = np.atleast_1d(np.asarray(y, dtype=float))
+        allowed = self._allowed(line_code, track)
+        parts = []
+        if self.tree is not None and px.size:
+            finite = np.flatnonzero(np.isfinite(px) & np.isfinite(py))
+            cx = np.floor(px[finite] / SORT_CELL_M).astype(np.int64)
+            cy = np.floor(py[finite] / SORT_CELL_M).astype(np.int64)
+            pending = finite[np.argsort(cx * 2_000_003 + cy, kind="stable")]
+            radius = float(max_offset_m) + self.half_max_segment_m
+            k = self.k
+            nv = self.n_vertices
+            while pending.size:
+                kk = min(k, nv)
+                _, v = self.tree.query(np.column_stack([px[pending], py[pending]]), k=kk, distance_upper_bound=radius)
+                v = v.reshape(pending.size, kk)
+                overflow = v[:, -1] < nv if kk < nv else np.zeros(pending.size, dtype=bool)
+                done = ~overflow
+                parts.append(self._resolve(px, py, pending[done], v[done], float(max_offset_m), allowed))
+                pending = pending[overflow]
+                k *= 4
+        return self._frame(px.size, parts)
+
+    def _allowed(self, line_code: str | None, track: str | None) -> BoolArray | None:
+        if line_code is None and track is None:
+            return None
+        return np.array(
+            [
+                (line_code is None or lc == str(line_code)) and (track is None or tr == str(track))
+                for lc, tr in self.keys
+            ],
+            dtype=bool,
+        )
+
+    def _resolve(
+        self,
+        px: FloatArray,
+        py: FloatArray,
+        fixes: IntArray,
+        v: IntArray,
+        max_offset_m: float,
+        allowed: BoolArray | None,
+    ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
+        """Per fix, every track's nearest candidate segment within reach, nearest first.
+
+        ``v``: (m, k) vertex hits (``n_vertices`` = none). Returns (fix, pass, segment, u,
+        signed offset) with pass = 0 for the nearest track, 1 for the next, …
+        """
+        ok_track = np.ones(len(self.keys), dtype=np.bool_) if allowed is None else allowed
+        return _resolve_kernel(
+            px,
+            py,
+            np.ascontiguousarray(fixes, dtype=np.int64),
+            np.ascontiguousarray(v, dtype=np.int64),
+            self.x,
+            self.y,
+            self._dx,
+            self._dy,
+            self._inv_len2,
+            self.segment_ok,
+            self.vertex_track,
+            ok_track,
+            max_offset_m * max_offset_m,
+        )
+
+    def _frame(
+        self, n_fixes: int, parts: list[tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]]
+    ) -> pd.DataFrame:
+        if parts:
+            f, p, s, u, off = (np.concatenate(a) for a in zip(*parts, strict=True))
+        else:
+            f = p = s = np.zeros(0, dtype=np.int64)
+            u = off = np.zeros(0)
+        # input order without sorting: a fix's rows are its passes 0..c−1
+        count = np.bincount(f, minlength=n_fixes)
+        pos = (np.cumsum(count) - count)[f] + p
+        order = np.empty(f.size, dtype=np.int64)
+        order[pos] = np.arange(f.size)
+        f, p, s, u, off = f[order], p[order], s[order], u[order], off[order]
+        km = self.km[s] + u * self._dkm[s]
+        tid = self.vertex_track[s]
+        return pd.DataFrame(
+            {
+                "fix": f,
+                "line_code": pd.Categorical.from_codes(self._key_line[tid], dtype=self._line_dtype),
+                "track": pd.Categorical.from_codes(self._key_track[tid], dtype=self._track_dtype),
+                "track_id": tid,
+                "km_m": km,
+                "offset_m": off,
+                "distance_m": np.abs(off),
+                "best": p == 0,
+            }
+        )
+
+
+@njit(cache=True, nogil=True)
+def _resolve_kernel(
+    px: FloatArray,
+    py: FloatArray,
+    fixes: IntArray,
+    hits: IntArray,
+    x: FloatArray,
+    y: FloatArray,
+    dx: FloatArray,
+    dy: FloatArray,
+    inv_len2: FloatArray,
+    segment_ok: BoolArray,
+    vertex_track: IntArray,
+    ok_track: BoolArray,
+    max_d2: float,
+) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
+    """For each fix: both segments adjacent to every hit vertex; per track the nearest
+    (first segment index on exact ties, like an argmin over the track); tracks emitted in
+    order of distance. The same arithmetic as :class:`PolylineIndex` / brute force."""
+    m, k = hits.shape
+    nv = x.size
+    cap = m * 2 * k
+    out_f = np.empty(cap, dtype=np.int64)
+    out_p = np.empty(cap, dtype=np.int64)
+    out_s = np.empty(cap, dtype=np.int64)
+    out_u = np.empty(cap)
+    out_o = np.empty(cap)
+    bt = np.empty(2 * k, dtype=np.int64)
+    bs = np.empty(2 * k, dtype=np.int64)
+    bd = np.empty(2 * k)
+    bu = np.empty(2 * k)
+    n_out = 0
+    for r in range(m):
+        f = fixes[r]
+        qx = px[f]
+        qy = py[f]
+        nt = 0
+        for c in range(k):
+            v = hits[r, c]
+            if v >= nv:
+                continue
+            for s in (v - 1, v):
+                if s < 0 or not segment_ok[s]:
+                    continue
+                t = vertex_track[s]
+                if not ok_track[t]:
+                    continue
+                ax = x[s]
+                ay = y[s]
+                u = ((qx - ax) * dx[s] + (qy - ay) * dy[s]) * inv_len2[s]
+                u = min(max(u, 0.0), 1.0)
+                ex = ax + u * dx[s] - qx
+                ey = ay + u * dy[s] - qy
+                d2 = ex * ex + ey * ey
+                if d2 > max_d2:
+                    continue
+                j = 0
+                while j < nt and bt[j] != t:
+                    j += 1
+                if j == nt:
+                    bt[j] = t
+                    bs[j] = s
+                    bd[j] = d2
+                    bu[j] = u
+                    nt += 1
+                elif d2 < bd[j] or (d2 == bd[j] and s < bs[j]):
+                    bs[j] = s
+                    bd[j] = d2
+                    bu[j] = u
+        # emit tracks nearest first (insertion sort of at most 2k entries)
+        for i in range(1, nt):
+            j = i
+            while j > 0 and bd[j] < bd[j - 1]:
+                bt[j], bt[j - 1] = bt[j - 1], bt[j]
+                bs[j], bs[j - 1] = bs[j - 1], bs[j]
+                bd[j], bd[j - 1] = bd[j - 1], bd[j]
+                bu[j], bu[j - 1] = bu[j - 1], bu[j]
+                j -= 1
+        for i in range(nt):
+            s = bs[i]
+            cross = dx[s] * (qy - y[s]) - dy[s] * (qx - x[s])
+            d = np.sqrt(bd[i])
+            out_f[n_out] = f
+            out_p[n_out] = i
+            out_s[n_out] = s
+            out_u[n_out] = bu[i]
+            out_o[n_out] = d if cross >= 0 else -d
+            n_out += 1
+    return out_f[:n_out], out_p[:n_out], out_s[:n_out], out_u[:n_out], out_o[:n_out]
+
+
+_INDEX_CACHE: dict[int, tuple[weakref.ref[Network], TrackIndex]] = {}
+
+
+def track_index_for(network: Network) -> TrackIndex:
+    """The :class:`TrackIndex` of ``network``, built once per Network object and reused
+    while that object lives (networks are not modified after loading)."""
+    key = id(network)
+    hit = _INDEX_CACHE.get(key)
+    if hit is not None and hit[0]() is network:
+        return hit[1]
+    index = TrackIndex.from_network(network)
+    for k in [k for k, (ref, _) in _INDEX_CACHE.items() if ref() is None]:
+        del _INDEX_CACHE[k]
+    _INDEX_CACHE[key] = (weakref.ref(network), index)
+    return index
