@@ -106,9 +106,10 @@ class GpsConfig:
     """D-GPS map-matching, trust filter, up/down decision and crossovers [S001 §4.2, SPEC §5.4].
 
     The statistics are stated in ``fieldlogs.pipeline.gps``. Defaults are calibrated for
-    D-GPS whose slow (time-correlated) error is ~1.5 m per axis with a correlation time of
-    one to three minutes and whose fast noise is ≤ 0.3 m per axis; change the ``noise_*``
-    model and the RMS thresholds together when a receiver behaves differently.
+    D-GPS whose slow (time-correlated) error is ~0.75 m per axis (2-D RMS ≈ 1.1 m, good
+    sky) with a correlation time of one to three minutes and whose fast noise is ≤ 0.3 m
+    per axis; change the ``noise_*`` model and the RMS thresholds together when a receiver
+    behaves differently.
     """
 
     # --- usable fixes and map-matching
@@ -134,8 +135,10 @@ class GpsConfig:
     min_history_s: float = 5.0
     """Usable fixes needed since the last reset before any fix is trusted [s]."""
     # --- error model of trusted fixes (for the standard error of a mean offset)
-    noise_sigma_m: float = 1.5
-    """1-σ of the slow lateral D-GPS error (Gauss-Markov) [m]."""
+    noise_sigma_m: float = 0.75
+    """1-σ of the slow lateral D-GPS error (Gauss-Markov) [m]. With 1.5 m per axis, 120 s
+    hold about two independent samples of the lateral error: the 3.8 m track spacing then
+    cannot be decided within the field target without risking wrong decisions."""
     noise_tau_s: float = 180.0
     """Correlation time of that error [s]: consecutive fixes are not independent. Set it from
     the receiver's measured error (180 s = the suite's simulator model); a value shorter

@@ -131,7 +131,7 @@ class SlipCfg:
 
 @dataclass(frozen=True)
 class GpsCfg:
-    sigma_m: float = 1.5
+    sigma_m: float = 0.75
     tau_s: float = 180.0
     multipath_per_hour: float = 6.0
     multipath_m: tuple[float, float] = (5.0, 30.0)
