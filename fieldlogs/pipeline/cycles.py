@@ -53,17 +53,30 @@ def cycle_index(t_cycles: FloatArray, t_samples: FloatArray) -> npt.NDArray[np.i
     return np.searchsorted(t_cycles, t_samples, side="left")
 
 
-def cycle_means(
-    t_cycles: FloatArray, t_samples: FloatArray, values: FloatArray, idx: npt.NDArray[np.intp] | None = None
-) -> FloatArray:
-    """Mean of the samples in each cycle ``(t[k−1], t[k]]`` (NaN for empty cycles)."""
+def cycle_means(t_cycles: FloatArray, t_samples: FloatArray, values: FloatArray,
+                idx: npt.NDArray[np.intp] | None = None) -> FloatArray:
+    """Mean of the samples in each cycle ``(t[k−1], t[k]]`` (NaN for empty cycles).
+
+    Samples must be sorted by time (they are: the pipeline sorts its streams), so each
+    cycle is a contiguous slice and ``np.add.reduceat`` sums it without scattering.
+    """
     if idx is None:
         idx = cycle_index(t_cycles, t_samples)
-    ok = (idx < t_cycles.size) & np.isfinite(values)
-    counts = np.bincount(idx[ok], minlength=t_cycles.size).astype(float)
-    sums = np.bincount(idx[ok], weights=values[ok], minlength=t_cycles.size)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(counts > 0, sums / counts, np.nan)
+    n = t_cycles.size
+    inside = idx < n
+    vals = values[inside]
+    k = idx[inside]
+    ok = np.isfinite(vals)
+    if not ok.all():
+        vals, k = vals[ok], k[ok]
+    out = np.full(n, np.nan)
+    if k.size == 0:
+        return out
+    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    sums = np.add.reduceat(vals, starts)
+    counts = np.diff(np.r_[starts, k.size])
+    out[k[starts]] = sums / counts
+    return out
 
 
 def step_values(t_cycles: FloatArray, t_events: FloatArray, values: npt.ArrayLike, default: float) -> FloatArray:
