@@ -42,9 +42,12 @@ def scenario(i: int, network: Any) -> dict[str, Any]:
     lo, hi = float(km.min()) + 200, float(km.max()) - 200
     path = [lo, hi] if track == "D" else [hi, lo]
     slips = {"slips": 0, "slides": 0, "on_grade_curve": False} if i % 5 == 4 else {"slips": 2, "slides": 2}
-    return {"name": f"accuracy-{i}", "route": {"line_code": line, "track": track, "path_km_m": path,
-                                               "start_cab": "R" if i % 4 >= 2 else "F"},
-            "slip": slips, "run": {"run_id": f"ACC-{i:03d}"}}
+    return {
+        "name": f"accuracy-{i}",
+        "route": {"line_code": line, "track": track, "path_km_m": path, "start_cab": "R" if i % 4 >= 2 else "F"},
+        "slip": slips,
+        "run": {"run_id": f"ACC-{i:03d}"},
+    }
 
 
 def one(args: tuple[int, str, str]) -> dict[str, Any]:
@@ -89,8 +92,9 @@ def metrics(res: Any, truth: pd.DataFrame, st: dict[str, Any]) -> dict[str, Any]
             if true_m > 5.0:
                 slip_errors.append(100.0 * (corr_m - true_m) / true_m)
                 pulse_errors.append(100.0 * (d.d_pulse_m - true_m) / true_m)
-    false_det = [d for d in detected
-                 if not any(d.t_end >= e["t0"] - 1.0 and d.t_start <= e["t1"] + 3.0 for e in injected)]
+    false_det = [
+        d for d in detected if not any(d.t_end >= e["t0"] - 1.0 and d.t_start <= e["t1"] + 3.0 for e in injected)
+    ]
     ev = res.events
     feat = ev[ev.type == "feature_correction"]
     feat_err = []
@@ -119,13 +123,20 @@ def metrics(res: Any, truth: pd.DataFrame, st: dict[str, Any]) -> dict[str, Any]
     trusted = res.gps.fixes[res.gps.fixes["trusted"]] if res.gps is not None and len(res.gps.fixes) else None
     first_trusted = float(trusted["t"].iloc[0]) if trusted is not None and len(trusted) else None
     return {
-        "claimed": len(claimed), "within": int(claimed.within_margin.sum()),
-        "wrong_track": int(claimed.wrong_track.sum()), "max_abs_err": float(claimed.error_m.abs().max()) if len(
-            claimed) else 0.0,
-        "injected": len(injected), "matched": matched, "false_det": len(false_det),
-        "slip_err_pct": slip_errors, "pulse_err_pct": pulse_errors, "feat_err": feat_err,
+        "claimed": len(claimed),
+        "within": int(claimed.within_margin.sum()),
+        "wrong_track": int(claimed.wrong_track.sum()),
+        "max_abs_err": float(claimed.error_m.abs().max()) if len(claimed) else 0.0,
+        "injected": len(injected),
+        "matched": matched,
+        "false_det": len(false_det),
+        "slip_err_pct": slip_errors,
+        "pulse_err_pct": pulse_errors,
+        "feat_err": feat_err,
         "n_feat_refused": int((ev.type == "feature_refused").sum()),
-        "pct_dev": pct_dev, "dec": dec_tracks, "first_trusted": first_trusted,
+        "pct_dev": pct_dev,
+        "dec": dec_tracks,
+        "first_trusted": first_trusted,
         "failsafe": int((ev.type == "failsafe").sum()),
     }
 
@@ -195,24 +206,47 @@ def main() -> None:
             ("|km error| ≤ margin", f"{100 * within / max(claimed, 1):.3f} %  (target ≥ 99.9 %)"),
             ("wrong line/track cycles", f"{sum(x['wrong_track'] for x in m)}  (target 0)"),
             ("max |km error|", f"{max(x['max_abs_err'] for x in m):.2f} m"),
-            ("slip/slide episodes detected", f"{sum(x['matched'] for x in m)}/{sum(x['injected'] for x in m)} = "
-             f"{100 * sum(x['matched'] for x in m) / max(sum(x['injected'] for x in m), 1):.1f} % (target ≥ 95 %)"),
+            (
+                "slip/slide episodes detected",
+                f"{sum(x['matched'] for x in m)}/{sum(x['injected'] for x in m)} = "
+                f"{100 * sum(x['matched'] for x in m) / max(sum(x['injected'] for x in m), 1):.1f} % (target ≥ 95 %)",
+            ),
             ("detections on slip-free runs", f"{sum(x['false_det'] for x in free)} in {len(free)} runs (target 0)"),
             ("false detections, all runs", f"{sum(x['false_det'] for x in m)}"),
-            ("distance error over corrected episodes",
-             f"mean {slip_err.mean():+.2f} %, |err| p95 {np.percentile(np.abs(slip_err), 95):.2f} %, "
-             f"max {np.abs(slip_err).max():.2f} % (n={slip_err.size}; paper ±2 %)" if slip_err.size else "n/a"),
+            (
+                "distance error over corrected episodes",
+                f"mean {slip_err.mean():+.2f} %, |err| p95 {np.percentile(np.abs(slip_err), 95):.2f} %, "
+                f"max {np.abs(slip_err).max():.2f} % (n={slip_err.size}; paper ±2 %)"
+                if slip_err.size
+                else "n/a",
+            ),
             ("  same episodes by pulses only", f"mean {pulse_err.mean():+.1f} %" if pulse_err.size else "n/a"),
-            ("feature corrections within 10 m", f"{100 * (feat <= 10).mean():.1f} % (n={feat.size}), max "
-             f"{feat.max():.2f} m, refused {sum(x['n_feat_refused'] for x in m)}" if feat.size else "n/a"),
-            ("balise correction % − wheel wear", f"|dev| mean {pct.mean():.4f}, max {pct.max():.4f} points "
-             f"(n={pct.size}; target ≤ 0.05)" if pct.size else "n/a"),
-            ("GPS up/down decided", f"{dec_ok}/{args.runs} runs correct, {dec_wrong} wrong decisions; "
-             f"time after first trusted fix: median {np.median(dec_delay):.0f} s, max {np.max(dec_delay):.0f} s"
-             if dec_delay else f"{dec_runs} runs with decisions"),
+            (
+                "feature corrections within 10 m",
+                f"{100 * (feat <= 10).mean():.1f} % (n={feat.size}), max "
+                f"{feat.max():.2f} m, refused {sum(x['n_feat_refused'] for x in m)}"
+                if feat.size
+                else "n/a",
+            ),
+            (
+                "balise correction % − wheel wear",
+                f"|dev| mean {pct.mean():.4f}, max {pct.max():.4f} points (n={pct.size}; target ≤ 0.05)"
+                if pct.size
+                else "n/a",
+            ),
+            (
+                "GPS up/down decided",
+                f"{dec_ok}/{args.runs} runs correct, {dec_wrong} wrong decisions; "
+                f"time after first trusted fix: median {np.median(dec_delay):.0f} s, max {np.max(dec_delay):.0f} s"
+                if dec_delay
+                else f"{dec_runs} runs with decisions",
+            ),
             ("fail-safe events", f"{sum(x['failsafe'] for x in m)}"),
-            ("margin 8 km after the pair", f"{no_margin:.0f} m without feature points → {with_margin:.0f} m with "
-             f"{n_feat} feature corrections (paper: 180 m → ~80 m, 5 features)"),
+            (
+                "margin 8 km after the pair",
+                f"{no_margin:.0f} m without feature points → {with_margin:.0f} m with "
+                f"{n_feat} feature corrections (paper: 180 m → ~80 m, 5 features)",
+            ),
             ("pipeline time per run", f"{np.mean([r['elapsed'] for r in results]):.3f} s"),
         ]
         w = max(len(a) for a, _ in rows)
