@@ -14,7 +14,9 @@ def compare_with_truth(positions: pd.DataFrame, truth: pd.DataFrame) -> pd.DataF
     """Per cycle: truth km (interpolated), error = km − truth, and whether it is inside the margin.
 
     Cycles are compared only where the pipeline claims a position (not undetermined).
-    A different line or track than the truth is flagged ``wrong_track``.
+    A different line or track than the truth is flagged ``wrong_track`` where the position
+    is *determined*; an *uncertain* position (fail-safe: the onboard unit tells the driver
+    not to rely on it) may carry a track in doubt.
     """
     t = positions["t"].to_numpy(dtype=float)
     tt = truth["t"].to_numpy(dtype=float)
@@ -27,7 +29,8 @@ def compare_with_truth(positions: pd.DataFrame, truth: pd.DataFrame) -> pd.DataF
     margin = positions["margin_m"].to_numpy(dtype=float)
     line = positions["line_code"].astype("string").fillna("").to_numpy(dtype=object)
     track = positions["track"].astype("string").fillna("").to_numpy(dtype=object)
-    wrong = claimed & ((line != line_true) | (track != track_true))
+    determined = positions["state"].to_numpy(dtype=object) == PositionState.DETERMINED.value
+    wrong = determined & ((line != line_true) | (track != track_true))
     return pd.DataFrame(
         {
             "t": t,

@@ -95,7 +95,7 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
     gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
     unit = BaliseUnit(network.cached("balise_db", lambda: BaliseDb.from_network(network)), cfg.balise)
-    sol = solve(cycles, odo, streams["balise"], unit, cfg, gps=gps, features=features)
+    sol = solve(cycles, odo, streams["balise"], unit, cfg, gps=gps, features=features, network=network)
 
     events = list(pre) + sol.events
     km = sol.positions["km_m"].to_numpy()

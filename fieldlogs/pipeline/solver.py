@@ -13,15 +13,18 @@ from __future__ import annotations
 
 import heapq
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
 import pandas as pd
 
+from dbtools.network import Network
 from fieldlogs.pipeline.balise import BaliseUnit
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
+from fieldlogs.pipeline.metric import IDENTITY, TrackMetric, track_metric
 from fieldlogs.pipeline.types import Event, FeatureOutcome, Fix, FloatArray, GpsAnalysis, Odometry
 from schemas.enums import PositionState
 
@@ -64,7 +67,10 @@ def solve(
     *,
     gps: GpsAnalysis | None = None,
     features: FeatureAid | None = None,
+    network: Network | None = None,
 ) -> Solution:
+    """Apply the aids in time order; with ``network``, dead reckoning runs along each
+    track's own length (see :mod:`fieldlogs.pipeline.metric`)."""
     t = cycles.t
     d = odo.d
     s_trav = signed_travel(cycles, odo)
@@ -106,8 +112,11 @@ def solve(
     def allowance_at(tt: float) -> float:
         return float(np.interp(tt, t, odo.allowance))
 
+    def metric(f: Fix) -> TrackMetric:
+        return track_metric(network, f.line_code, f.track) if network is not None and f.line_code else IDENTITY
+
     def km_estimate(f: Fix) -> FloatArray:
-        return f.km_m + f.k * (s_trav - f.s_ref)
+        return km_along(f, s_trav, metric(f))
 
     def schedule_feature(after_i: int) -> None:
         if features is None or fix is None or fix.state != PositionState.DETERMINED:
@@ -140,13 +149,26 @@ def solve(
             if tt > t[-1] + 1e-9:
                 break
             i, d_now, s_now = at(tt)
-            km_now = fix.km_at(s_now) if fix is not None else None
+            km_now = float(km_along(fix, s_now, metric(fix))) if fix is not None else None
             if kind in ("on_rail", "off_rail"):
                 events.append(Event(tt, kind, km_now))
                 if kind == "off_rail" and fix is not None:
                     fix = None
-                    fixes.append(Fix(tt, s_now, d_now, np.nan, np.nan, "", "", 1, "none", np.nan,
-                                     state=PositionState.UNDETERMINED))
+                    fixes.append(
+                        Fix(
+                            tt,
+                            s_now,
+                            d_now,
+                            np.nan,
+                            np.nan,
+                            "",
+                            "",
+                            1,
+                            "none",
+                            np.nan,
+                            state=PositionState.UNDETERMINED,
+                        )
+                    )
                     version += 1
                     last_abs = None
                 continue
@@ -183,7 +205,7 @@ def solve(
                     continue
                 if out.accepted and out.i_ref is not None and out.km_db is not None:
                     s_ref, d_ref = float(s_trav[out.i_ref]), float(d[out.i_ref])
-                    km_comp = fix.km_at(s_ref)
+                    km_comp = float(km_along(fix, s_ref, metric(fix)))
                     ev = Event(
                         tt,
                         "feature_correction",
@@ -257,12 +279,27 @@ def solve(
                         )
                 elif dec.line_code == fix.line_code and dec.track != fix.track:
                     if crossover_pending:
+                        # A balise-given track is only overruled by GPS in a fail-safe way:
+                        # the new track is shown but the position is uncertain until the
+                        # next initial pair confirms it (a false crossover must never
+                        # produce a determined wrong track).
+                        confirmed_by_gps_only = fix.source == "gps"
                         events.append(
                             Event(
-                                tt, "track_change", km_now, detail={"from": fix.track, "to": dec.track, **dec.evidence}
+                                tt,
+                                "track_change",
+                                km_now,
+                                detail={
+                                    "from": fix.track,
+                                    "to": dec.track,
+                                    "confirmed": confirmed_by_gps_only,
+                                    **dec.evidence,
+                                },
                             )
                         )
                         fix = replace(fix, t_effective=tt, track=dec.track)
+                        if not confirmed_by_gps_only:
+                            fix = replace(fix, state=PositionState.UNCERTAIN, uncertain_since_d=d_now)
                         fixes.append(fix)
                         version += 1
                         crossover_pending = False
@@ -287,13 +324,23 @@ def solve(
                     )
                     crossover_pending = False
 
-    positions = _positions(cycles, odo, s_trav, fixes, cfg)
+    positions = _positions(cycles, odo, s_trav, fixes, cfg, metric)
     events.sort(key=lambda e: e.t)
     return Solution(positions, events, fixes)
 
 
+def km_along(fix: Fix, s: FloatArray | float, m: TrackMetric) -> FloatArray:
+    """Dead reckoning from ``fix``: travel S − S_ref along the track's own length, as km."""
+    return m.km_of_c(m.c_of_km(fix.km_m) + fix.k * (np.asarray(s, dtype=float) - fix.s_ref))
+
+
 def _positions(
-    cycles: Cycles, odo: Odometry, s_trav: FloatArray, fixes: list[Fix], cfg: PipelineConfig
+    cycles: Cycles,
+    odo: Odometry,
+    s_trav: FloatArray,
+    fixes: list[Fix],
+    cfg: PipelineConfig,
+    metric: Callable[[Fix], TrackMetric],
 ) -> pd.DataFrame:
     """Per-cycle state, km and margin from the fixes in force (vectorised)."""
     t, d = cycles.t, odo.d
@@ -319,6 +366,9 @@ def _positions(
         a_ref = np.array([f.allowance_ref_m for f in fixes])[j]
         unc_d = np.array([np.nan if f.uncertain_since_d is None else f.uncertain_since_d for f in fixes])[j]
         est = km_m + k * (s_trav - s_ref)
+        for jj in np.unique(j[has]):  # the track's own length (contiguous per fix)
+            sel = has & (j == jj)
+            est[sel] = km_along(fixes[jj], s_trav[sel], metric(fixes[jj]))
         mg = unc + cfg.margin.distance_pct / 100.0 * np.abs(d - d_ref) + np.maximum(odo.allowance - a_ref, 0.0)
         uncertain_extra = np.where(
             np.isfinite(unc_d), cfg.margin.uncertain_growth_pct / 100.0 * np.abs(d - np.nan_to_num(unc_d)), 0.0

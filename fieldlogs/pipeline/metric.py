@@ -1,0 +1,66 @@
+"""Kilometrage ↔ distance along a track.
+
+Both tracks of a double-track line share one kilometrage, but the wheels roll each
+track's own length: in a curve of radius R and deflection Δθ the inner track is 1.9·Δθ m
+shorter than its km difference (3.8 m track spacing) and the outer one longer — e.g.
+0.16 % over a 600 m balise interval. Dead reckoning therefore advances along the track's
+own length, measured on the GIS grid (geodesic, so no map-projection scale error), and
+converts back to km. Beyond the grid's ends 1 m of travel is 1 m of km.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from dbtools.gis.geometry import geodesic_step
+from dbtools.network import Network
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def _interp_extrapolated(x: FloatArray | float, xp: FloatArray, fp: FloatArray) -> FloatArray:
+    """np.interp with slope-1 extension beyond both ends."""
+    xa = np.asarray(x, dtype=float)
+    out = np.interp(xa, xp, fp)
+    out = np.where(xa < xp[0], fp[0] + (xa - xp[0]), out)
+    return np.where(xa > xp[-1], fp[-1] + (xa - xp[-1]), out)
+
+
+@dataclass(frozen=True)
+class TrackMetric:
+    """Cumulative track length ``c`` at each grid km of one line/track."""
+
+    km: FloatArray
+    c: FloatArray
+
+    def c_of_km(self, km: FloatArray | float) -> FloatArray:
+        return _interp_extrapolated(km, self.km, self.c)
+
+    def km_of_c(self, c: FloatArray | float) -> FloatArray:
+        return _interp_extrapolated(c, self.c, self.km)
+
+
+IDENTITY = TrackMetric(np.array([0.0, 1.0]), np.array([0.0, 1.0]))
+
+
+def track_metric(network: Network, line_code: str, track: str) -> TrackMetric:
+    """The metric of a line/track from its GIS grid (identity when the grid is missing).
+
+    Kilometrage breaks (km jumps larger than the distance between the points) count the
+    distance actually travelled, so km jumps across them as the grid does.
+    """
+
+    def build() -> TrackMetric:
+        g = network.gis
+        g = g[(g["line_code"] == line_code) & (g["track"] == track)].sort_values("km_m")
+        if len(g) < 2:
+            return IDENTITY
+        km = g["km_m"].to_numpy(dtype=float)
+        step = geodesic_step(g["lon"].to_numpy(dtype=float), g["lat"].to_numpy(dtype=float))
+        c = np.concatenate([[0.0], np.cumsum(step)]) + km[0]
+        return TrackMetric(km, c)
+
+    return network.cached(("track_metric", line_code, track), build)
