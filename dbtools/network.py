@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 import pandas as pd
@@ -11,6 +13,8 @@ import pandas as pd
 from schemas.frames import PANDAS_DTYPE
 from schemas.model import Table
 from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS, KM_BREAKS, LINES
+
+T = TypeVar("T")
 
 
 @dataclass
@@ -23,6 +27,17 @@ class Network:
     meta: dict[str, str] = field(default_factory=dict)
     files: dict[str, str] = field(default_factory=dict)
     """Table name → file it was read from (source sets only)."""
+    source_rows: dict[str, np.ndarray] = field(default_factory=dict)
+    """Table name → file line (1-based, header = line 1) of each row of the canonical frame
+    (source sets only), so that findings on sorted frames can name the line to edit."""
+    _cache: dict[object, object] = field(default_factory=dict, repr=False, compare=False)
+
+    def cached(self, key: object, factory: Callable[[], T]) -> T:
+        """Structures derived from the tables (look-up dicts, spatial indexes) are built
+        once per loaded network and shared by every run processed with it."""
+        if key not in self._cache:
+            self._cache[key] = factory()
+        return self._cache[key]  # type: ignore[return-value]
 
     @property
     def gis(self) -> pd.DataFrame:
@@ -45,16 +60,26 @@ class Network:
         return self.tables[KM_BREAKS.name]
 
 
+_DTYPES = {name: pd.Series([], dtype=dtype).dtype for name, dtype in PANDAS_DTYPE.items()}
+
+
 def empty_frame(table: Table) -> pd.DataFrame:
     return pd.DataFrame({c.name: pd.Series([], dtype=PANDAS_DTYPE[c.dtype]) for c in table.columns})
 
 
 def canonical(table: Table, frame: pd.DataFrame) -> pd.DataFrame:
     """Declared columns in declared order, declared dtypes, sorted by primary key."""
-    out = pd.DataFrame(index=frame.index)
+    return canonical_with_index(table, frame)[0]
+
+
+def canonical_with_index(table: Table, frame: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray]:
+    """:func:`canonical` plus the index label of the input row behind each output row."""
+    cols: dict[str, pd.Series] = {}
     for c in table.columns:
         s = frame[c.name] if c.name in frame.columns else pd.Series([None] * len(frame), index=frame.index)
-        if c.dtype == "str":
+        if s.dtype == _DTYPES[c.dtype]:
+            pass  # already canonical (the common case): no copy
+        elif c.dtype == "str":
             s = s.astype("string")
         elif c.dtype == "int":
             s = pd.to_numeric(s).astype("Int64")
@@ -62,10 +87,11 @@ def canonical(table: Table, frame: pd.DataFrame) -> pd.DataFrame:
             s = s.astype("boolean")
         else:
             s = pd.to_numeric(s).astype("float64")
-        out[c.name] = s
+        cols[c.name] = s
+    out = pd.DataFrame(cols, index=frame.index)
     if table.primary_key and len(out):
         out = out.sort_values(list(table.primary_key), kind="stable")
-    return out.reset_index(drop=True)
+    return out.reset_index(drop=True), out.index.to_numpy()
 
 
 def content_hash(tables: dict[str, pd.DataFrame]) -> str:

@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from dbtools.network import Network, canonical, empty_frame
+from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.tabular import find_table_file, read_raw_table, sha256_file
 from schemas.enums import Severity, Track
 from schemas.errors import InputError
 from schemas.findings import Finding
-from schemas.frames import read_and_check
+from schemas.frames import FIRST_DATA_LINE, read_and_check
 from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
 
 
@@ -58,7 +58,12 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
         tables[name] = frame
     tables[FEATURE_POINTS.name] = _with_seq(tables[FEATURE_POINTS.name])
     findings.extend(_line_codes(tables, files))
-    net = Network({n: canonical(SOURCE_TABLES[n], f) for n, f in tables.items()}, origin=str(folder), files=files)
+    net = Network({}, origin=str(folder), files=files)
+    for name, frame in tables.items():
+        # frames still carry the positional index of their file rows: keep it as line numbers
+        net.tables[name], labels = canonical_with_index(SOURCE_TABLES[name], frame)
+        if name in files:
+            net.source_rows[name] = np.asarray(labels, dtype=np.int64) + FIRST_DATA_LINE
     net.meta = {f"source_sha256:{k}": v for k, v in sorted(hashes.items())}
     return net, findings
 
@@ -92,7 +97,7 @@ def _line_codes(tables: dict[str, pd.DataFrame], files: dict[str, str]) -> list[
     """Build ``lines`` from the codes in use when absent; otherwise every code must be listed."""
     used: set[str] = set()
     for name in ("gis", "balises", "feature_points", "km_breaks"):
-        used |= set(tables[name]["line_code"].dropna().astype(str))
+        used |= set(tables[name]["line_code"].dropna().unique().astype(str))
     lines = tables[LINES.name]
     if LINES.name not in files:
         tables[LINES.name] = pd.DataFrame(

@@ -1,4 +1,19 @@
-"""``db validate``: every consistency rule of SPEC §3 → findings (pure over a Network)."""
+"""``db validate``: every consistency rule of SPEC §3 → findings (pure over a Network).
+
+Rule families, each in its own pure module (frames in → list of findings):
+
+* schema — :func:`schemas.frames.check_frame` (types, nulls, enumerations, lat/lon inside
+  the operating area, duplicate keys) and :mod:`dbtools.rules.schema` (radius vs attribute,
+  non-finite numbers);
+* GIS grid — :mod:`dbtools.rules.gis`;
+* balises — :mod:`dbtools.rules.balises`;
+* feature points — :mod:`dbtools.rules.features`;
+* DB file — :func:`dbtools.database.integrity_findings` (SQLite integrity_check,
+  foreign_key_check, meta and content hash).
+
+All limits are in :class:`ValidationConfig`. Findings on a source set name the file and
+line of the row (``Network.source_rows``); on a DB the table and the row's domain keys.
+"""
 
 from __future__ import annotations
 
@@ -6,27 +21,47 @@ from pathlib import Path
 
 from dbtools.database import integrity_findings, read_network
 from dbtools.network import Network
+from dbtools.rules.balises import check_balises
+from dbtools.rules.common import Locator
+from dbtools.rules.config import ValidationConfig
+from dbtools.rules.features import check_features
+from dbtools.rules.gis import build_grid, check_gis
+from dbtools.rules.schema import check_values
 from dbtools.sources import read_source_set
 from schemas.findings import Finding
 from schemas.frames import check_frame
 from schemas.tables import DB_TABLES
 
+__all__ = ["ValidationConfig", "validate_network", "validate_path"]
 
-def validate_network(network: Network, *, schema_checks: bool = True) -> list[Finding]:
+
+def validate_network(
+    network: Network, *, schema_checks: bool = True, config: ValidationConfig | None = None
+) -> list[Finding]:
     """Schema checks of the loaded frames (skipped for sources: already done while reading)
     plus the domain rules."""
+    config = config or ValidationConfig()
+    loc = Locator(network.files, network.source_rows)
     findings: list[Finding] = []
     if schema_checks:
         for t in DB_TABLES:
-            findings.extend(check_frame(t, network.tables[t.name]))
+            findings.extend(check_frame(t, network.tables[t.name], max_per_check=config.max_findings_per_rule))
+    findings.extend(check_values(network.tables, config, loc))
+    grid = build_grid(network.gis, config)
+    findings.extend(check_gis(grid, network.gis, network.km_breaks, config, loc))
+    findings.extend(check_balises(network.balises, grid, config, loc))
+    findings.extend(check_features(network.feature_points, grid, config, loc))
     return findings
 
 
-def validate_path(path: Path) -> list[Finding]:
-    """Validate a DB file (with SQLite integrity and content hash) or a source set folder."""
+def validate_path(path: Path, *, config: ValidationConfig | None = None) -> list[Finding]:
+    """Validate a DB file (with SQLite integrity and content hash) or a source set folder.
+
+    Raises :class:`~schemas.errors.InputError` (exit 2) when the input cannot be read.
+    """
     path = Path(path)
     if path.is_dir():
         network, findings = read_source_set(path)
-        return findings + validate_network(network, schema_checks=False)
+        return findings + validate_network(network, schema_checks=False, config=config)
     network = read_network(path)
-    return integrity_findings(path, network) + validate_network(network)
+    return integrity_findings(path, network) + validate_network(network, config=config)

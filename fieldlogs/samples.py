@@ -6,6 +6,7 @@
   2 slips + 2 slides (one on a gradient-plus-curve section when the line has one), radar;
 * ``sim-u-tunnel`` — up track (km decreasing), a 600 m GPS outage (tunnel), slides and a slip;
 * ``sim-d-reversal`` — down track, stop, change ends, run back reversed (cab R);
+* ``sim-d-evening``, ``sim-u-evening`` — another vehicle on both tracks (for per-route statistics);
 * ``sim-road-rail`` — road-rail vehicle: on rail at a km (PTO 1), works back and forth in a
   600 m section at 15 km/h, off rail; GPS + cab + tacho, no balises.
 
@@ -75,6 +76,20 @@ def sample_scenarios(network: Any, line_code: str | None = None) -> dict[str, di
             },
             "slip": {"slips": 1, "slides": 1},
         },
+        "sim-d-evening": {
+            "name": "sample: down track, another vehicle, one slide",
+            "seed": 105,
+            "run": {"run_id": "SIM-D-EVE", "vehicle_id": "EMU-103", "start_time": "2026-01-15T18:02:00+09:00"},
+            "route": {"line_code": line, "track": down, "path_km_m": [lo, lo + length]},
+            "slip": {"slips": 0, "slides": 1},
+        },
+        "sim-u-evening": {
+            "name": "sample: up track, another vehicle, one slip",
+            "seed": 106,
+            "run": {"run_id": "SIM-U-EVE", "vehicle_id": "EMU-103", "start_time": "2026-01-15T18:40:00+09:00"},
+            "route": {"line_code": line, "track": up, "path_km_m": [hi_u, hi_u - len_u]},
+            "slip": {"slips": 1, "slides": 0},
+        },
         "sim-road-rail": {
             "name": "sample: road-rail vehicle working inside a section",
             "seed": 104,
@@ -106,3 +121,22 @@ def make_sample_runs(
         streams, meta = simulate_run(network, scenario)
         out.append(write_run(Path(out_dir) / name, meta, streams, fmt=fmt, force=force))
     return out
+
+
+def main() -> None:
+    """Regenerate the bundled sample logs: ``python -m fieldlogs.samples``."""
+    import tempfile
+
+    from dbtools.build import build_db
+    from dbtools.sample_network import sample_source_dir
+
+    target = Path(__file__).resolve().parent / "sample_logs"
+    with tempfile.TemporaryDirectory() as tmp:
+        db = Path(tmp) / "sample.sqlite"
+        build_db(sample_source_dir(), db, db_version="sample-1")
+        for path in make_sample_runs(db, target, force=True):
+            print(path)
+
+
+if __name__ == "__main__":
+    main()

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 import pandera.pandas as pa
+import pyarrow as pa_arrow
+import pyarrow.compute as pc
 from pandera.errors import SchemaErrors
 
 from schemas.enums import Severity
@@ -99,7 +101,7 @@ def coerce_frame(
                     "schema.unknown_column", Severity.WARNING, table.name, msg, file=file, column=c, value=c, limit=hint
                 )
             )
-    out = pd.DataFrame(index=raw.index)
+    out: dict[str, pd.Series] = {}
     for col in table.columns:
         if col.name in raw.columns:
             values, bad = _coerce_column(col, raw[col.name])
@@ -139,7 +141,8 @@ def coerce_frame(
         for c in extras:
             out[c] = raw[c]
     missing = [c for c in known if c not in raw.columns]
-    return Coerced(out, findings, missing)
+    # one DataFrame from all columns at once (column-by-column insertion is slow)
+    return Coerced(pd.DataFrame(out, index=raw.index), findings, missing)
 
 
 def _type_word(col: Column) -> str:
@@ -161,6 +164,22 @@ def _blank(s: pd.Series) -> np.ndarray:
     return s.isna().to_numpy()
 
 
+def _fast_float(s: pd.Series, blank: np.ndarray) -> pd.Series | None:
+    """Text → float64 through pyarrow's (correctly rounded) parser when *every* non-blank
+    cell is a plain number; None otherwise, and the caller takes the general path."""
+    if not pd.api.types.is_string_dtype(s.dtype) or s.dtype == object:
+        return None
+    try:
+        arr = pa_arrow.array(s.str.strip().mask(pd.Series(blank, index=s.index)))
+        out = pc.cast(arr, pa_arrow.float64())
+    except (pa_arrow.ArrowInvalid, pa_arrow.ArrowNotImplementedError, pa_arrow.ArrowTypeError):
+        return None
+    vals = out.to_numpy(zero_copy_only=False).astype(np.float64)
+    if (np.isnan(vals) & ~blank).any():  # e.g. "-nan": let the general path call it a bad cell
+        return None
+    return pd.Series(vals, index=s.index, dtype="float64")
+
+
 def _coerce_column(col: Column, s: pd.Series) -> tuple[pd.Series, np.ndarray]:
     """Return (typed series, mask of cells that are not blank but do not parse)."""
     blank = _blank(s)
@@ -173,7 +192,11 @@ def _coerce_column(col: Column, s: pd.Series) -> tuple[pd.Series, np.ndarray]:
         txt = txt.mask(pd.Series(blank, index=s.index))
         return txt, np.zeros(len(s), dtype=bool)
     if col.dtype == "float":
-        if pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
+        fast = _fast_float(s, blank)
+        if fast is not None:
+            vals = fast
+            bad = np.zeros(len(s), dtype=bool)
+        elif pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
             vals = s.astype("float64")
             bad = np.zeros(len(s), dtype=bool)
         elif col.km_notation:
@@ -188,8 +211,13 @@ def _coerce_column(col: Column, s: pd.Series) -> tuple[pd.Series, np.ndarray]:
         vals = vals.where(~inf)
         return vals, bad
     if col.dtype == "int":
-        num = pd.to_numeric(
-            s.astype("string").str.strip() if not pd.api.types.is_numeric_dtype(s.dtype) else s, errors="coerce"
+        fast = _fast_float(s, blank)
+        num = (
+            fast
+            if fast is not None
+            else pd.to_numeric(
+                s.astype("string").str.strip() if not pd.api.types.is_numeric_dtype(s.dtype) else s, errors="coerce"
+            )
         )
         arr = num.to_numpy(dtype=float, na_value=np.nan)
         frac = ~np.isnan(arr) & (np.floor(arr) != arr)

@@ -1,0 +1,211 @@
+"""Benchmark: ``db build`` and ``db validate`` on a national-scale synthetic network.
+
+Run on demand (never part of the test suite; prints numbers, never pass/fail)::
+
+    .venv/bin/python bench/bench_db.py                 # 1000 lines × 10 km double track
+    .venv/bin/python bench/bench_db.py --lines 100     # a quick smaller run
+    .venv/bin/python bench/bench_db.py --workdir /tmp/tp-bench --keep
+
+Targets (SPEC / brief): 1,000,000 GIS points, ~50,000 balises, ~10,000 features;
+``db build`` ≤ 10 s and ``db validate`` ≤ 15 s on one core, peak memory ≤ 4 GB.
+
+The network: ``--lines`` lines on a square grid of 15 km cells around the origin of
+JGD2011 zone 9 (each line is a :func:`~dbtools.synthetic.random_alignment` starting near its
+cell centre, so lines do not overlap), double track, a station every 1.1 km (initial pair,
+home-signal C balise per station and track), one feature per curve and track.
+
+The naive baseline is what a straightforward script would do: ``csv.DictReader``, per-row
+type and range checks in Python, one ``INSERT`` per row in autocommit mode. It runs on a
+1 % slice of every source file and is scaled ×100 to estimate the full run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import os
+import resource
+import shutil
+import sqlite3
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import TypeVar
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core, as the targets are stated
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from dbtools.build import build_db
+from dbtools.gis.geometry import Projector
+from dbtools.network import Network, canonical, empty_frame
+from dbtools.sources import write_source_set
+from dbtools.synthetic import LineSpec, Station, balises, feature_points, gis_grid, random_alignment
+from dbtools.validate import validate_path
+from schemas.enums import Severity
+from schemas.tables import BALISES, FEATURE_POINTS, GIS, KM_BREAKS, LAT_RANGE, LINES, LON_RANGE
+
+T = TypeVar("T")
+#: Side of the square cell each line is drawn in [m].
+CELL_M = 15_000.0
+#: Station spacing [m]: ~25 balises per track on a 10 km line.
+STATION_SPACING_M = 1_100.0
+
+
+def national_network(n_lines: int, length_m: float, seed: int = 2026) -> Network:
+    """``n_lines`` double-track lines of ``length_m`` each, one per grid cell (zone 9)."""
+    rng = np.random.default_rng(seed)
+    side = math.ceil(math.sqrt(n_lines))
+    projector = Projector(9)
+    gis, bal, fp, lines = [], [], [], []
+    for i in range(n_lines):
+        row, col = divmod(i, side)
+        x0 = (col - side / 2 + 0.5) * CELL_M
+        y0 = (row - side / 2 + 0.5) * CELL_M
+        heading = float(rng.uniform(-np.pi, np.pi))
+        # start half a line length behind the cell centre so the line stays in its cell
+        x0 -= 0.5 * length_m * math.cos(heading) * 0.8
+        y0 -= 0.5 * length_m * math.sin(heading) * 0.8
+        a = random_alignment(rng, length_m, km0=float(rng.integers(0, 50)) * 1000.0, x0=x0, y0=y0, heading0=heading)
+        n_st = int((length_m - 600.0) // STATION_SPACING_M) + 1
+        stations = [Station(f"{j + 1:02d}", f"S{j + 1}", a.km0 + 300.0 + j * STATION_SPACING_M) for j in range(n_st)]
+        spec = LineSpec(f"{i + 1:04d}", f"Line {i + 1}", a, stations)
+        gis.append(gis_grid(spec, projector))
+        bal.append(balises(spec))
+        fp.append(feature_points(spec))
+        lines.append((spec.line_code, spec.name))
+    tables = {
+        LINES.name: pd.DataFrame({"line_code": [c for c, _ in lines], "name": [n for _, n in lines]}),
+        GIS.name: pd.concat(gis, ignore_index=True),
+        BALISES.name: pd.concat(bal, ignore_index=True),
+        FEATURE_POINTS.name: pd.concat(fp, ignore_index=True),
+        KM_BREAKS.name: empty_frame(KM_BREAKS),
+    }
+    return Network({t.name: canonical(t, tables[t.name]) for t in (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS)})
+
+
+# ----------------------------------------------------------------------------- naive baseline
+
+_NAIVE_DDL = {
+    "gis": "CREATE TABLE gis (line_code TEXT, track TEXT, km_m REAL, lat REAL, lon REAL, height_m REAL, "
+    "PRIMARY KEY (line_code, track, km_m))",
+    "balises": "CREATE TABLE balises (balise_id TEXT PRIMARY KEY, kind TEXT, line_code TEXT, station_code TEXT, "
+    "track TEXT, signal_type TEXT, km_actual_m REAL, km_equipment_m REAL, dist_from_initial_m REAL)",
+    "feature_points": "CREATE TABLE feature_points (line_code TEXT, track TEXT, feature_id TEXT, seq INTEGER, "
+    "km_m REAL, radius_m REAL, attribute TEXT, role TEXT)",
+}
+
+
+def naive_build(src: Path, out: Path, fraction: float) -> tuple[float, int]:
+    """Row-by-row build of the first ``fraction`` of every file; returns (seconds, rows)."""
+    t0 = time.perf_counter()
+    conn = sqlite3.connect(out, isolation_level=None)  # autocommit: one transaction per INSERT
+    n_rows = 0
+    for name, ddl in _NAIVE_DDL.items():
+        conn.execute(ddl)
+        with open(src / f"{name}.csv", newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+        keep = rows[: max(1, int(len(rows) * fraction))]
+        for row in keep:
+            values = []
+            for key, cell in row.items():
+                if key in ("km_m", "lat", "lon", "height_m", "km_actual_m", "km_equipment_m", "radius_m") or (
+                    key == "dist_from_initial_m" and cell
+                ):
+                    v = float(cell)
+                    if not math.isfinite(v):
+                        raise ValueError(key)
+                    if key == "lat" and not LAT_RANGE[0] <= v <= LAT_RANGE[1]:
+                        raise ValueError(key)
+                    if key == "lon" and not LON_RANGE[0] <= v <= LON_RANGE[1]:
+                        raise ValueError(key)
+                    values.append(v)
+                else:
+                    values.append(cell or None)
+            marks = ",".join("?" * len(values))
+            conn.execute(f"INSERT INTO {name} ({','.join(row)}) VALUES ({marks})", values)
+            n_rows += 1
+    conn.close()
+    return time.perf_counter() - t0, n_rows
+
+
+def timed(fn: Callable[[], T]) -> tuple[tuple[float, float], T]:
+    """((wall s, CPU s of this process), result)."""
+    w, c = time.perf_counter(), time.process_time()
+    result = fn()
+    return (time.perf_counter() - w, time.process_time() - c), result
+
+
+def peak_rss_mb() -> float:
+    """Peak resident set size of this process [MB] (ru_maxrss is KiB on Linux)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--lines", type=int, default=1000, help="number of lines (default 1000)")
+    p.add_argument("--length-m", type=float, default=10_000.0, help="length of each line [m] (default 10000)")
+    p.add_argument("--workdir", type=Path, default=None, help="where to write sources and DBs (default: temp)")
+    p.add_argument("--keep", action="store_true", help="keep the workdir (reuses an existing source set)")
+    p.add_argument(
+        "--naive-fraction", type=float, default=0.01, help="slice for the naive baseline (default 1 %%; 0 skips it)"
+    )
+    p.add_argument("--cores", type=int, default=1, help="pin the process to this many cores (default 1)")
+    args = p.parse_args(argv)
+    os.sched_setaffinity(0, sorted(os.sched_getaffinity(0))[: args.cores])
+
+    work = args.workdir or Path(tempfile.mkdtemp(prefix="trainpos-bench-"))
+    work.mkdir(parents=True, exist_ok=True)
+    src, db = work / f"src-{args.lines}x{int(args.length_m)}", work / "bench.sqlite"
+    try:
+        if not (src / "gis.csv").exists():
+            t0 = time.perf_counter()
+            net = national_network(args.lines, args.length_m)
+            write_source_set(net, src, force=True)
+            print(f"generated in {time.perf_counter() - t0:.1f} s → {src}")
+        sizes = {n: sum(1 for _ in open(src / f"{n}.csv", encoding="utf-8")) - 1 for n in _NAIVE_DDL}
+        print("rows: " + ", ".join(f"{k} {v:,}" for k, v in sizes.items()))
+
+        db.unlink(missing_ok=True)
+        (t_build, c_build), _ = timed(lambda: build_db(src, db, db_version="bench"))
+        rss_build = peak_rss_mb()
+        (t_validate, c_validate), findings = timed(lambda: validate_path(db))
+        (t_validate_src, c_validate_src), src_findings = timed(lambda: validate_path(src))
+        n_err = sum(f.severity == Severity.ERROR for f in findings)
+
+        print(f"cores: {sorted(os.sched_getaffinity(0))}; wall and CPU time (CPU = wall on an idle core)")
+        print(f"db build            {t_build:7.2f} s wall {c_build:7.2f} s CPU  (target ≤ 10 s)")
+        print(
+            f"db validate (DB)    {t_validate:7.2f} s wall {c_validate:7.2f} s CPU  (target ≤ 15 s)"
+            f"  {len(findings)} findings, {n_err} errors"
+        )
+        print(
+            f"db validate (src)   {t_validate_src:7.2f} s wall {c_validate_src:7.2f} s CPU"
+            f"  {len(src_findings)} findings"
+        )
+        print(f"peak RSS            {peak_rss_mb():7.0f} MB (after build {rss_build:.0f} MB; target ≤ 4096 MB)")
+        if args.naive_fraction > 0:
+            naive_db = work / "naive.sqlite"
+            naive_db.unlink(missing_ok=True)
+            t_naive_slice, n_naive = naive_build(src, naive_db, args.naive_fraction)
+            t_naive = t_naive_slice / args.naive_fraction
+            print(
+                f"naive build         {t_naive:7.1f} s   (estimated: {t_naive_slice:.2f} s for {n_naive:,} rows ×"
+                f" {1 / args.naive_fraction:g}); ratio naive / build = {t_naive / t_build:.0f}× (wall)"
+            )
+        for f in findings[:10]:
+            print("  ", f)
+    finally:
+        if not args.keep and args.workdir is None:
+            shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

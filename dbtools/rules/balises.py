@@ -1,0 +1,327 @@
+"""Balise rules (SPEC §3 "uniqueness" and "cross-table", SPEC §5.2).
+
+An initial pair is keyed by (line_code, station_code, track); a C balise names its governing
+pair with the same three columns. ``sign`` below is +1 on D and S tracks (km increasing in
+the running direction) and −1 on U.
+
+* ``balise.pair_count`` (error) — a pair key does not have exactly one I1 and one I2.
+* ``balise.pair_spacing`` (error) — |km(I2) − km(I1)| differs from 5 m by more than
+  ``pair_spacing_tolerance_m``.
+* ``balise.pair_order`` (error) — I2 is not after I1 in running direction
+  (sign·(km(I2) − km(I1)) ≤ 0).
+* ``balise.c_pair`` (error) — a C balise names a pair that has no I1.
+* ``balise.c_fields`` (error) — a C balise without ``signal_type`` or ``dist_from_initial_m``.
+* ``balise.initial_fields`` (warning) — an I1/I2 row carries ``signal_type`` or
+  ``dist_from_initial_m`` (they are ignored).
+* ``balise.ambiguous`` (error) — two C balises after the same pair with the same signal type
+  whose ``dist_from_initial_m`` differ by ≤ ``id_window_m``: the onboard unit cannot tell them
+  apart.
+* ``balise.c_direction`` (warning) — a C balise lies behind its governing pair in running
+  direction, so the travel distance since the pair can never reach it.
+* ``balise.dist_from_initial`` (warning) — ``dist_from_initial_m`` differs from
+  |km(C) − km(I1)| by more than ``dist_tolerance_m``.
+* ``balise.outside_gis`` (error) — ``km_actual_m`` is outside the GIS km range of the
+  balise's line/track (or the line/track has no GIS at all).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from dbtools.rules.common import Locator, capped, column, fmt_km, py
+from dbtools.rules.config import ValidationConfig
+from dbtools.rules.gis import Grid
+from schemas.enums import BaliseKind, Severity, Track
+from schemas.findings import Finding
+from schemas.tables import BALISES
+
+T = BALISES.name
+
+
+def check_balises(balises: pd.DataFrame, grid: Grid, config: ValidationConfig, loc: Locator) -> list[Finding]:
+    """All balise rules (see module docstring)."""
+    out: list[Finding] = []
+    cap = config.max_findings_per_rule
+    file = loc.file(T)
+    if balises.empty:
+        return out
+    bid = column(balises, "balise_id")
+    kind = column(balises, "kind")
+    line, station, track = column(balises, "line_code"), column(balises, "station_code"), column(balises, "track")
+    sig, km = column(balises, "signal_type"), column(balises, "km_actual_m")
+    dist = column(balises, "dist_from_initial_m")
+    keyed = pd.notna(line) & pd.notna(station) & pd.notna(track)
+    sign = np.where(track == Track.UP.value, -1.0, 1.0)
+    is_i1, is_i2, is_c = kind == BaliseKind.I1.value, kind == BaliseKind.I2.value, kind == BaliseKind.C.value
+
+    def keys(i: int) -> dict[str, object]:
+        return {"balise_id": py(bid[i])}
+
+    def pair_keys(i: int) -> dict[str, object]:
+        return {"line_code": py(line[i]), "station_code": py(station[i]), "track": py(track[i])}
+
+    # pair key of every row → pair id (−1 when a key column is missing)
+    key_frame = pd.DataFrame({"l": line, "s": station, "t": track})
+    pid = np.full(len(balises), -1, dtype=np.int64)
+    pid[keyed] = key_frame[keyed].groupby(["l", "s", "t"], sort=False).ngroup().to_numpy()
+    n_pairs = int(pid.max()) + 1 if keyed.any() else 0
+    n1 = np.bincount(pid[is_i1 & keyed], minlength=n_pairs)
+    n2 = np.bincount(pid[is_i2 & keyed], minlength=n_pairs)
+    # first row of every pair id that has any I1/I2 row, for the finding's location
+    initial = np.flatnonzero((is_i1 | is_i2) & keyed)
+    first_row = np.full(n_pairs, -1, dtype=np.int64)
+    first_row[pid[initial][::-1]] = initial[::-1]
+
+    # balise.pair_count
+    bad = np.flatnonzero(((n1 != 1) | (n2 != 1)) & (first_row >= 0))
+    out += capped(
+        "balise.pair_count",
+        Severity.ERROR,
+        T,
+        bad,
+        lambda p: Finding(
+            "balise.pair_count",
+            Severity.ERROR,
+            T,
+            f"initial pair has {n1[p]} I1 and {n2[p]} I2 balise(s); exactly one of each is required",
+            keys=pair_keys(int(first_row[p])),
+            value=[int(n1[p]), int(n2[p])],
+            limit=[1, 1],
+            **loc.at(T, int(first_row[p])),
+        ),
+        cap,
+        file,
+    )
+
+    # km of the (single) I1 and I2 of each complete pair
+    i1_row = np.full(n_pairs, -1, dtype=np.int64)
+    i2_row = np.full(n_pairs, -1, dtype=np.int64)
+    r1 = np.flatnonzero(is_i1 & keyed)
+    r2 = np.flatnonzero(is_i2 & keyed)
+    i1_row[pid[r1]] = r1
+    i2_row[pid[r2]] = r2
+    complete = np.flatnonzero((n1 == 1) & (n2 == 1))
+    a, b = i1_row[complete], i2_row[complete]
+    with np.errstate(invalid="ignore"):
+        delta = km[b] - km[a]
+        spacing_bad = np.abs(np.abs(delta) - config.pair_spacing_m) > config.pair_spacing_tolerance_m
+        order_bad = sign[a] * delta <= 0
+
+    def pair_finding(rule: str, j: int, msg: str, value: object, limit: object) -> Finding:
+        return Finding(
+            rule, Severity.ERROR, T, msg, keys=pair_keys(int(a[j])), value=value, limit=limit, **loc.at(T, int(b[j]))
+        )
+
+    lo = config.pair_spacing_m - config.pair_spacing_tolerance_m
+    hi = config.pair_spacing_m + config.pair_spacing_tolerance_m
+    out += capped(
+        "balise.pair_spacing",
+        Severity.ERROR,
+        T,
+        np.flatnonzero(spacing_bad),
+        lambda j: pair_finding(
+            "balise.pair_spacing",
+            j,
+            f"I1 {bid[a[j]]} and I2 {bid[b[j]]} are {abs(delta[j]):.2f} m apart, expected "
+            f"{config.pair_spacing_m:g} ± {config.pair_spacing_tolerance_m:g} m",
+            round(float(abs(delta[j])), 3),
+            [lo, hi],
+        ),
+        cap,
+        file,
+    )
+    out += capped(
+        "balise.pair_order",
+        Severity.ERROR,
+        T,
+        np.flatnonzero(order_bad),
+        lambda j: pair_finding(
+            "balise.pair_order",
+            j,
+            f"I2 {bid[b[j]]} (km {fmt_km(km[b[j]])}) is not after I1 {bid[a[j]]} (km {fmt_km(km[a[j]])}) "
+            f"in the running direction of track {track[a[j]]} "
+            f"({'km decreasing' if sign[a[j]] < 0 else 'km increasing'})",
+            round(float(delta[j]), 3),
+            "> 0" if sign[a[j]] > 0 else "< 0",
+        ),
+        cap,
+        file,
+    )
+
+    # C balises
+    c_rows = np.flatnonzero(is_c)
+    gov_i1 = np.full(len(balises), -1, dtype=np.int64)
+    has_pid = c_rows[pid[c_rows] >= 0]
+    gov_i1[has_pid] = i1_row[pid[has_pid]]
+    bad = c_rows[gov_i1[c_rows] < 0]
+    out += capped(
+        "balise.c_pair",
+        Severity.ERROR,
+        T,
+        bad,
+        lambda i: Finding(
+            "balise.c_pair",
+            Severity.ERROR,
+            T,
+            f"C balise names initial pair ({line[i]}, {station[i]}, {track[i]}), which has no I1 balise",
+            keys=keys(i),
+            value=[py(line[i]), py(station[i]), py(track[i])],
+            **loc.at(T, i),
+        ),
+        cap,
+        file,
+    )
+    missing_sig = pd.isna(sig)
+    missing_dist = np.isnan(dist)
+    bad = c_rows[missing_sig[c_rows] | missing_dist[c_rows]]
+    out += capped(
+        "balise.c_fields",
+        Severity.ERROR,
+        T,
+        bad,
+        lambda i: Finding(
+            "balise.c_fields",
+            Severity.ERROR,
+            T,
+            "C balise needs "
+            + " and ".join(
+                n for n, m in (("signal_type", missing_sig[i]), ("dist_from_initial_m", missing_dist[i])) if m
+            ),
+            keys=keys(i),
+            column="signal_type" if missing_sig[i] else "dist_from_initial_m",
+            **loc.at(T, i),
+        ),
+        cap,
+        file,
+    )
+    bad = np.flatnonzero((is_i1 | is_i2) & (~missing_sig | ~missing_dist))
+    out += capped(
+        "balise.initial_fields",
+        Severity.WARNING,
+        T,
+        bad,
+        lambda i: Finding(
+            "balise.initial_fields",
+            Severity.WARNING,
+            T,
+            f"{kind[i]} balise carries signal_type/dist_from_initial_m, which only C balises use (ignored)",
+            keys=keys(i),
+            column="signal_type" if not missing_sig[i] else "dist_from_initial_m",
+            **loc.at(T, i),
+        ),
+        cap,
+        file,
+    )
+
+    # balise.ambiguous: same pair and signal type, |Δ dist| ≤ window (sorted: neighbours suffice)
+    amb = c_rows[(pid[c_rows] >= 0) & ~missing_sig[c_rows] & ~missing_dist[c_rows]]
+    if len(amb) > 1:
+        sig_code, _ = pd.factorize(pd.Series(sig[amb], dtype=object))
+        order = np.lexsort((dist[amb], sig_code, pid[amb]))
+        s = amb[order]
+        sc = sig_code[order]
+        same = (pid[s[1:]] == pid[s[:-1]]) & (sc[1:] == sc[:-1])
+        gap = dist[s[1:]] - dist[s[:-1]]
+        hit = np.flatnonzero(same & (gap <= config.id_window_m))
+        out += capped(
+            "balise.ambiguous",
+            Severity.ERROR,
+            T,
+            hit,
+            lambda j: Finding(
+                "balise.ambiguous",
+                Severity.ERROR,
+                T,
+                f"C balises {bid[s[j]]} and {bid[s[j + 1]]} both carry signal type '{sig[s[j]]}' after pair "
+                f"({line[s[j]]}, {station[s[j]]}, {track[s[j]]}) and their distances from I1 differ by only "
+                f"{gap[j]:.1f} m (identification window ±{config.id_window_m:g} m): identification is ambiguous",
+                keys={"balise_id": py(bid[s[j + 1]]), "other_balise_id": py(bid[s[j]])},
+                value=round(float(gap[j]), 3),
+                limit=config.id_window_m,
+                **loc.at(T, int(s[j + 1])),
+            ),
+            cap,
+            file,
+        )
+
+    # C vs its governing I1: direction and travel distance
+    gc = c_rows[(gov_i1[c_rows] >= 0)]
+    gi = gov_i1[gc]
+    with np.errstate(invalid="ignore"):
+        ahead = sign[gi] * (km[gc] - km[gi])
+        behind = ahead <= 0
+        dist_err = np.abs(dist[gc] - np.abs(km[gc] - km[gi]))
+        dist_bad = dist_err > config.dist_tolerance_m
+    out += capped(
+        "balise.c_direction",
+        Severity.WARNING,
+        T,
+        np.flatnonzero(behind),
+        lambda j: Finding(
+            "balise.c_direction",
+            Severity.WARNING,
+            T,
+            f"C balise at km {fmt_km(km[gc[j]])} lies behind I1 {bid[gi[j]]} (km {fmt_km(km[gi[j]])}) "
+            f"in the running direction of track {track[gc[j]]}: it can never be identified from that pair",
+            keys=keys(int(gc[j])),
+            value=round(float(ahead[j]), 3),
+            limit="> 0",
+            column="km_actual_m",
+            **loc.at(T, int(gc[j])),
+        ),
+        cap,
+        file,
+    )
+    out += capped(
+        "balise.dist_from_initial",
+        Severity.WARNING,
+        T,
+        np.flatnonzero(dist_bad),
+        lambda j: Finding(
+            "balise.dist_from_initial",
+            Severity.WARNING,
+            T,
+            f"dist_from_initial_m is {dist[gc[j]]:.2f} m but the C balise is "
+            f"{abs(km[gc[j]] - km[gi[j]]):.2f} m from I1 {bid[gi[j]]} by km_actual_m",
+            keys=keys(int(gc[j])),
+            value=round(float(dist[gc[j]]), 3),
+            limit=round(float(abs(km[gc[j]] - km[gi[j]])), 3),
+            column="dist_from_initial_m",
+            **loc.at(T, int(gc[j])),
+        ),
+        cap,
+        file,
+    )
+
+    # balise.outside_gis
+    rows = np.flatnonzero(pd.notna(line) & pd.notna(track) & np.isfinite(km))
+    gid = grid.group_of(line[rows], track[rows])
+    kmin, kmax = grid.km_range(gid)
+    with np.errstate(invalid="ignore"):
+        outside = (gid < 0) | (km[rows] < kmin - config.km_epsilon_m) | (km[rows] > kmax + config.km_epsilon_m)
+    out += capped(
+        "balise.outside_gis",
+        Severity.ERROR,
+        T,
+        np.flatnonzero(outside),
+        lambda j: Finding(
+            "balise.outside_gis",
+            Severity.ERROR,
+            T,
+            (
+                f"no GIS grid for line {line[rows[j]]} track {track[rows[j]]}"
+                if gid[j] < 0
+                else f"km {fmt_km(km[rows[j]])} is outside the GIS range {fmt_km(kmin[j])}–{fmt_km(kmax[j])} "
+                f"of line {line[rows[j]]} track {track[rows[j]]}"
+            ),
+            keys=keys(int(rows[j])),
+            value=py(km[rows[j]]),
+            limit=None if gid[j] < 0 else [py(kmin[j]), py(kmax[j])],
+            column="km_actual_m",
+            **loc.at(T, int(rows[j])),
+        ),
+        cap,
+        file,
+    )
+    return out
