@@ -166,9 +166,9 @@ def test_scenario_from_dict_errors_and_overrides() -> None:
 def test_make_sample_runs(demo_db: Path, tmp_path: Path) -> None:
     folders = make_sample_runs(demo_db, tmp_path / "samples")
     names = [p.name for p in folders]
-    assert names == ["sim-d-slips", "sim-u-tunnel", "sim-d-reversal", "sim-road-rail"]
+    assert names == ["sim-d-slips", "sim-u-tunnel", "sim-d-reversal", "sim-d-evening", "sim-u-evening", "sim-road-rail"]
     total = sum(f.stat().st_size for p in folders for f in p.iterdir())
-    assert total < 5_000_000
+    assert total < 8_000_000
     runs = {p.name: read_run(p) for p in folders}
     refs = load_db_refs(demo_db)
     for name, run in runs.items():
