@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from cli import db, gis, logs, schema, simulate
+from cli import audit, db, demo, gis, logs, possession, run, schema, simulate
 from dbtools.build import tool_version
 
 app = typer.Typer(
@@ -18,7 +18,12 @@ app.add_typer(db.app, name="db")
 app.add_typer(gis.app, name="gis")
 app.add_typer(schema.app, name="schema")
 app.add_typer(logs.app, name="logs")
+app.add_typer(possession.app, name="possession")
 app.command("simulate")(simulate.simulate)
+app.command("run")(run.run)
+app.command("audit")(audit.audit)
+app.command("report")(audit.report)
+app.command("demo")(demo.demo)
 
 
 def _version(value: bool) -> None:

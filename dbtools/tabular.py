@@ -90,10 +90,11 @@ def _read_xlsx(path: Path, sheet: str | None) -> pd.DataFrame:
         book = pd.ExcelFile(path, engine="openpyxl")
     except (zipfile.BadZipFile, ValueError, OSError, KeyError) as exc:
         raise InputError(f"not a readable .xlsx workbook: {exc}", path=path) from exc
-    name = sheet if sheet in book.sheet_names else book.sheet_names[0]
-    try:
-        frame = book.parse(name, dtype=str, keep_default_na=False)
-    except (ValueError, KeyError) as exc:
-        raise InputError(f"sheet '{name}' cannot be read: {exc}", path=path) from exc
+    with book:  # close the workbook (an open one leaks a ResourceWarning later)
+        name = sheet if sheet in book.sheet_names else book.sheet_names[0]
+        try:
+            frame = pd.read_excel(book, sheet_name=name, dtype=str, keep_default_na=False)
+        except (ValueError, KeyError) as exc:
+            raise InputError(f"sheet '{name}' cannot be read: {exc}", path=path) from exc
     frame = frame.dropna(how="all")
     return frame.fillna("")

@@ -79,6 +79,7 @@ class RoadRailCfg:
     off_rail_before_s: float = 60.0
     off_rail_after_s: float = 60.0
     road_offset_m: float = 8.0
+    transfer_s: float = 20.0
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,12 @@ class GpsCfg:
     fix1_sigma_m: float = 4.0
     nsat: int = 12
     hdop: float = 0.9
+    poor_sky_km_m: tuple[tuple[float, float], ...] = ()
+    poor_sky_white_m: float = 1.0
+    poor_sky_multipath_per_hour: float = 240.0
+    poor_sky_fix1_share: float = 0.3
+    poor_sky_fix1_spell_s: float = 8.0
+    poor_sky_nsat: int = 6
 
 
 @dataclass(frozen=True)
@@ -281,6 +288,8 @@ def _check(s: Scenario) -> None:
     else:
         if st.tzinfo is None:
             fail("run.start_time", "needs a UTC offset, e.g. 2026-01-15T10:00:00+09:00")
+    if not math.isfinite(s.road_rail.road_offset_m):
+        fail("road_rail.road_offset_m", "must be finite")
     if s.route.track not in ("", *(t.value for t in Track)):
         fail("route.track", "must be U, D, S or empty")
     if s.route.start_cab not in [d.value for d in CabDirection]:
@@ -314,6 +323,9 @@ def _check(s: Scenario) -> None:
         "running.standstill_end_s": s.running.standstill_end_s,
         "road_rail.off_rail_before_s": s.road_rail.off_rail_before_s,
         "road_rail.off_rail_after_s": s.road_rail.off_rail_after_s,
+        "road_rail.transfer_s": s.road_rail.transfer_s,
+        "gps.poor_sky_white_m": s.gps.poor_sky_white_m,
+        "gps.poor_sky_multipath_per_hour": s.gps.poor_sky_multipath_per_hour,
         "gps.sigma_m": s.gps.sigma_m,
         "gps.multipath_per_hour": s.gps.multipath_per_hour,
         "gps.reacquire_s": s.gps.reacquire_s,
@@ -344,9 +356,16 @@ def _check(s: Scenario) -> None:
     for key, ((lo, hi), vmin, vmax) in ranges.items():
         if not (vmin <= lo <= hi <= vmax):
             fail(key, f"needs [low, high] with {vmin} ≤ low ≤ high ≤ {vmax}, got [{lo}, {hi}]")
-    for i, (a, b) in enumerate(s.gps.outages_km_m):
-        if not (math.isfinite(a) and math.isfinite(b) and a < b):
-            fail(f"gps.outages_km_m[{i}]", f"needs [from, to] with from < to, got [{a}, {b}]")
+    for key, spans in (("gps.outages_km_m", s.gps.outages_km_m), ("gps.poor_sky_km_m", s.gps.poor_sky_km_m)):
+        for i, (a, b) in enumerate(spans):
+            if not (math.isfinite(a) and math.isfinite(b) and a < b):
+                fail(f"{key}[{i}]", f"needs [from, to] with from < to, got [{a}, {b}]")
+    if not 0 <= s.gps.poor_sky_fix1_share < 1:
+        fail("gps.poor_sky_fix1_share", "must be ≥ 0 and < 1")
+    if not (math.isfinite(s.gps.poor_sky_fix1_spell_s) and s.gps.poor_sky_fix1_spell_s >= 1):
+        fail("gps.poor_sky_fix1_spell_s", "must be ≥ 1 s")
+    if not 4 <= s.gps.poor_sky_nsat <= 64:
+        fail("gps.poor_sky_nsat", "must be between 4 and 64")
     for i, ep in enumerate(s.slip.episodes):
         key = f"slip.episodes[{i}]"
         if ep.kind not in ("slip", "slide"):

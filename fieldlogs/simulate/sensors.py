@@ -12,6 +12,11 @@
 * **D-GPS** (1 Hz): true track position (DB GIS geometry) + Gauss-Markov error (σ, τ) +
   multipath bursts; outages (tunnels) fix 0 with empty lat/lon; fix 1 (no differential
   correction, larger error) for a while after an outage; nsat/hdop follow the conditions.
+  Poor-sky stretches (``gps.poor_sky_*``) add white noise, frequent multipath bursts and
+  spells of fix 1 (a two-state Markov chain per second with the configured share and mean
+  spell length). A road-rail vehicle off rail stands ``road_offset_m`` beside the track at
+  its on-rail km and drives onto / off the track over ``transfer_s`` (lateral offset
+  L·(1 − cos πf)/2, f the remaining share of the transfer: no jump the trust filter would see).
 * **Radar** (~3 Hz): |v| + N(0, max(pct·v, min)); unaffected by slip; 0 below the cut-off.
 """
 
@@ -142,6 +147,70 @@ def _bursts(rng: np.random.Generator, t: FloatArray, scenario: Scenario) -> tupl
     return ex, ey, level
 
 
+def road_lateral(motion: Motion, scenario: Scenario, t: FloatArray) -> FloatArray:
+    """Lateral offset of the GPS antenna from the track at times ``t`` [m] (+ left of
+    increasing km): 0 on rail; a road-rail vehicle off rail stands ``road_offset_m`` beside
+    the track and drives over ``transfer_s`` between there and the track."""
+    rr = scenario.road_rail
+    on = np.interp(t, motion.t, motion.on_rail.astype(float)) >= 0.5
+    if not scenario.is_road_rail or not motion.on_rail.any():
+        return np.where(on, 0.0, rr.road_offset_m)
+    k_on = np.flatnonzero(motion.on_rail)
+    t_on, t_off = float(motion.t[k_on[0]]), float(motion.t[k_on[-1]]) + DT
+    away = np.where(t < t_on - 1e-9, t_on - t, np.where(t >= t_off - 1e-9, t - t_off + DT, 0.0))
+    if rr.transfer_s <= 0:
+        frac = (away > 0).astype(float)
+    else:
+        f = np.clip(away / rr.transfer_s, 0.0, 1.0)
+        frac = 0.5 * (1.0 - np.cos(np.pi * f))
+    return rr.road_offset_m * frac
+
+
+def in_spans(km: FloatArray, spans: tuple[tuple[float, float], ...]) -> npt.NDArray[np.bool_]:
+    """True where ``km`` lies in one of the [from, to] spans."""
+    out = np.zeros(km.shape, dtype=bool)
+    for a, b in spans:
+        out |= (km >= a) & (km <= b)
+    return out
+
+
+def _poor_sky(
+    rng: np.random.Generator, t: FloatArray, inside: npt.NDArray[np.bool_], scenario: Scenario
+) -> tuple[FloatArray, FloatArray, npt.NDArray[np.bool_], FloatArray]:
+    """Extra error (east, north) [m], the fix-1 spells and the burst intensity in poor sky."""
+    cfg = scenario.gps
+    n = len(t)
+    ex = np.where(inside, rng.standard_normal(n) * cfg.poor_sky_white_m, 0.0)
+    ey = np.where(inside, rng.standard_normal(n) * cfg.poor_sky_white_m, 0.0)
+    # fix-1 spells: two-state Markov chain per fix, mean spell length L, stationary share p
+    p_exit = 1.0 / cfg.poor_sky_fix1_spell_s
+    p_enter = cfg.poor_sky_fix1_share / (1.0 - cfg.poor_sky_fix1_share) * p_exit
+    u = rng.random(n)
+    spell = np.zeros(n, dtype=bool)
+    state = False
+    for i in range(n):
+        state = bool(inside[i]) and (u[i] >= p_exit if state else u[i] < p_enter)
+        spell[i] = state
+    fx = gauss_markov(rng, n, 1.0, cfg.fix1_sigma_m, 30.0)
+    fy = gauss_markov(rng, n, 1.0, cfg.fix1_sigma_m, 30.0)
+    ex += np.where(spell, fx, 0.0)
+    ey += np.where(spell, fy, 0.0)
+    # multipath: bursts placed uniformly over the time spent in poor sky
+    level = np.zeros(n)
+    idx = np.flatnonzero(inside)
+    m = int(rng.poisson(cfg.poor_sky_multipath_per_hour * idx.size / 3600.0)) if idx.size else 0
+    for _ in range(m):
+        t0 = float(t[idx[int(rng.integers(idx.size))]])
+        dur = float(rng.uniform(*cfg.multipath_s))
+        mag = float(rng.uniform(*cfg.multipath_m))
+        ang = float(rng.uniform(0.0, 2 * np.pi))
+        shape = np.where((t >= t0) & (t <= t0 + dur), np.sin(np.pi * np.clip((t - t0) / dur, 0.0, 1.0)) ** 0.5, 0.0)
+        ex += mag * np.cos(ang) * shape
+        ey += mag * np.sin(ang) * shape
+        level = np.maximum(level, shape)
+    return ex, ey, spell, level
+
+
 def gps_stream(
     motion: Motion, geom: TrackGeometry, scenario: Scenario, rng: np.random.Generator
 ) -> tuple[pd.DataFrame, list[tuple[float, float]]]:
@@ -151,7 +220,7 @@ def gps_stream(
     t = motion.t[k]
     km = motion.km[k]
     on = motion.on_rail[k]
-    lateral = np.where(on, 0.0, scenario.road_rail.road_offset_m)
+    lateral = road_lateral(motion, scenario, t)
     x, y = geom.xy(km, lateral)
     outage = np.zeros(len(k), dtype=bool)
     for a, b in cfg.outages_km_m:
@@ -168,6 +237,13 @@ def gps_stream(
         mx, my, level = _bursts(rng, t, scenario)
         x, y = x + mx, y + my
         nsat = nsat + gauss_markov(rng, len(k), 1.0, 1.0, 120.0) - 3.0 * level
+        poor = in_spans(km, cfg.poor_sky_km_m) & ~outage
+        if poor.any():
+            px, py, spell, plevel = _poor_sky(rng, t, poor, scenario)
+            x, y = x + px, y + py
+            fix = np.where(spell & (fix == 2), 1, fix)
+            nsat = np.where(poor, np.minimum(nsat, cfg.poor_sky_nsat), nsat) - 3.0 * plevel
+            level = np.maximum(level, plevel)
     else:
         level = np.zeros(len(k))
     nsat = np.where(fix1, np.minimum(nsat, 6.0), nsat)

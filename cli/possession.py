@@ -1,0 +1,151 @@
+"""``trainpos possession …``: possession (線路閉鎖) alarms for road-rail vehicles."""
+
+from __future__ import annotations
+
+import io
+import json
+from enum import StrEnum
+from pathlib import Path
+
+import pandas as pd
+import typer
+from rich.console import Console
+
+from cli.errors import cli_command
+from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
+from fieldlogs.possession import PossessionReport, check_files
+from schemas.errors import EXIT_FINDINGS, UsageError
+from schemas.units import format_km
+
+app = typer.Typer(help="Possession (線路閉鎖) alarms for road-rail vehicles.", no_args_is_help=True)
+
+
+class Fmt(StrEnum):
+    table = "table"
+    json = "json"
+    html = "html"
+
+
+ALARM_COLUMNS = ["type", "t_s", "time", "km", "track", "work_no", "evidence"]
+#: Evidence shown in the terminal table per type (JSON and HTML have all of it).
+BRIEF = {
+    "wrong_track": ("planned_track", "decided_track", "after_on_rail_s", "llr"),
+    "overrun": ("end", "beyond_m", "uncertainty_m", "until_t"),
+    "released_on_rail": ("released_at", "until_t"),
+    "not_started": ("started_at", "reason", "until_t"),
+    "approaching_end": ("end", "distance_m", "speed_mps"),
+    "track_undecided": ("decided_at_t",),
+    "crossover": ("from", "to", "rms_m"),
+    "position_uncertain": ("uncertainty_m", "until_t"),
+    "position_undetermined": ("km_known_from_t",),
+}
+
+
+def _frame(items: list[dict[str, object]]) -> pd.DataFrame:
+    rows = []
+    for a in items:
+        ev = a["evidence"] if isinstance(a["evidence"], dict) else {}
+        keys = BRIEF.get(str(a["type"]), tuple(ev))
+        km = a["km_m"]
+        rows.append(
+            {
+                "type": a["type"],
+                "t_s": f"{a['t']:.1f}",
+                "time": str(a["time"])[11:21],
+                "km": format_km(float(km)) if isinstance(km, int | float) else "",
+                "track": a["track"] or "",
+                "work_no": a["work_no"] or "",
+                "evidence": ", ".join(f"{k}={ev[k]}" for k in keys if ev.get(k) is not None),
+            }
+        )
+    return pd.DataFrame(rows, columns=ALARM_COLUMNS)
+
+
+def _decision_text(dec: dict[str, object] | None) -> str:
+    if not dec:
+        return "undecided"
+    return f"{dec['line_code']} / {dec['track']} at t = {dec['t']} s ({dec['after_on_rail_s']} s after PTO on)"
+
+
+def render_tables(report: PossessionReport, c: Console) -> None:
+    for check in report.to_json()["runs"]:
+        dec = check["track_decision"]
+        rows = [
+            ("run", check["run"]),
+            ("possessions", ", ".join(check["possessions"]) or "none"),
+            (
+                "on rail",
+                "; ".join(f"{p['time_on']} – {p['time_off']}" for p in check["on_rail"]) or "never",
+            ),
+            ("track decision", _decision_text(dec)),
+            ("alarms", len(check["alarms"])),
+            ("notices", len(check["notices"])),
+        ]
+        c.print(key_value_table(rows, title=f"Possession check: {check['run_id']}"))
+        if check["alarms"]:
+            c.print(frame_table(_frame(check["alarms"]), title="Alarms"))
+        if check["notices"]:
+            c.print(frame_table(_frame(check["notices"]), title="Notices"))
+    c.print(f"{report.n_alarms} alarm(s) in {len(report.checks)} run(s)")
+
+
+@app.command("check")
+@cli_command
+def check(
+    runs: list[Path] = typer.Argument(..., help="Road-rail run folders (run.json with start_time, gps, cab.pto)."),
+    db: Path = typer.Option(..., "--db", help="Onboard DB (.sqlite): GIS grid for km and up/down."),
+    plan: Path = typer.Option(
+        ...,
+        "--plan",
+        help="Possession plan CSV/XLSX: work_no, line_code, track, km_from_m, km_to_m, planned_start, planned_end, "
+        "started_at, released_at (ISO 8601 with offset).",
+    ),
+    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json or html."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
+    config: Path | None = typer.Option(None, "--config", help="TOML with [gps] and [possession] parameters."),
+) -> None:
+    """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.
+
+    On rail = PTO on. The up/down decision comes from trusted D-GPS (5/15/30 s RMS filter,
+    decided as soon as the evidence suffices, else undecided); km from map-matched fixes with
+    a fail-safe uncertainty band (overrun as soon as km ± u leaves the section); notices 30 m
+    before a section end. Runs are matched to possessions by wall-clock time (run.json
+    start_time + t) and line.
+
+    Exit codes: 0 no alarm; 1 alarms found, or the plan has errors (listed with file, line,
+    column); 2 the DB, plan, config or a run cannot be read (or --format html without --out).
+
+    Example: trainpos possession check runs/rr-0116 --db net.sqlite --plan possessions.csv --format html --out pz.html
+    """
+    if fmt == Fmt.html and out is None:
+        raise UsageError("--format html needs --out FILE")
+    report = check_files(runs, db, plan, config)
+    if report.plan.findings:
+        print_findings(report.plan.findings, console=err_console(), title="Plan warnings")
+    if fmt == Fmt.html:
+        from fieldlogs.possession_report import render_html
+
+        assert out is not None
+        _write(out, render_html(report.checks, plan=str(plan), db=str(db)))
+        console().print(f"HTML report written to {out} ({report.n_alarms} alarm(s))")
+    elif fmt == Fmt.json:
+        data = report.to_json()
+        if out:
+            _write(out, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+        else:
+            print_json(data)
+    elif out:
+        buf = io.StringIO()
+        render_tables(report, Console(file=buf, width=200, color_system=None))
+        _write(out, buf.getvalue())
+    else:
+        render_tables(report, console())
+    if report.n_alarms:
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+def _write(path: Path, text: str) -> None:
+    from dbtools.atomic import atomic_file
+
+    with atomic_file(path, force=True) as tmp:
+        tmp.write_text(text, encoding="utf-8")

@@ -1,0 +1,306 @@
+"""Possession plans (SPEC §5.5, [S001 §4.2.4]): reading, validation and the three states.
+
+A plan file (``possessions.csv`` or an .xlsx sheet with the same columns, declared once in
+:data:`schemas.plans.POSSESSIONS`) has one row per possession: ``work_no``, ``line_code``,
+``track``, ``km_from_m``, ``km_to_m`` (metres or ``12k345.6``), ``planned_start``,
+``planned_end``, ``started_at``, ``released_at``. It is read like every other source:
+all cells as text through :func:`schemas.frames.read_and_check` (types, empty required
+cells, track enumeration, duplicate work numbers), then the plan's own rules. Every problem
+is a finding naming file, line and column:
+
+* times are ISO 8601 **with a UTC offset** (``2026-01-16T01:00:00+09:00``, ``…Z``); a time
+  without an offset is an error (the plan and the vehicle's clock must be comparable);
+* ``km_from_m < km_to_m``; ``planned_start < planned_end``;
+* ``released_at`` only after a ``started_at``, and not before it;
+* the line and track exist in the onboard DB (GIS grid); a km range reaching beyond the
+  track's grid is a warning.
+
+States [S001 §4.2.4]: at wall-clock time T a possession is *not started* (no
+``started_at``, or T before it), *started*, or *released* (``released_at`` ≤ T).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from datetime import datetime
+from enum import StrEnum
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dbtools.network import Network
+from dbtools.tabular import read_raw_table
+from schemas.enums import Severity
+from schemas.errors import FindingsError
+from schemas.findings import Finding
+from schemas.frames import FIRST_DATA_LINE, read_and_check
+from schemas.plans import POSSESSIONS
+
+#: Time columns of a plan; the first two are required.
+TIME_COLUMNS = ("planned_start", "planned_end", "started_at", "released_at")
+TIME_EXAMPLE = "2026-01-16T01:00:00+09:00"
+
+
+class PossessionState(StrEnum):
+    """The three states of a possession [S001 §4.2.4]."""
+
+    NOT_STARTED = "not_started"
+    STARTED = "started"
+    RELEASED = "released"
+
+
+@dataclass(frozen=True)
+class Possession:
+    """One row of a plan, times timezone-aware."""
+
+    work_no: str
+    line_code: str
+    track: str
+    km_from_m: float
+    km_to_m: float
+    planned_start: datetime
+    planned_end: datetime
+    started_at: datetime | None = None
+    released_at: datetime | None = None
+    row: int | None = None
+    """File line of the row (header = line 1), for messages."""
+
+    def state_at(self, when: datetime) -> PossessionState:
+        if self.released_at is not None and when >= self.released_at:
+            return PossessionState.RELEASED
+        if self.started_at is not None and when >= self.started_at:
+            return PossessionState.STARTED
+        return PossessionState.NOT_STARTED
+
+    @property
+    def window(self) -> tuple[datetime, datetime]:
+        """Earliest to latest of the planned and actual times."""
+        times = [t for t in (self.planned_start, self.planned_end, self.started_at, self.released_at) if t]
+        return min(times), max(times)
+
+    def covers(self, km: float) -> bool:
+        return self.km_from_m <= km <= self.km_to_m
+
+
+@dataclass
+class Plan:
+    possessions: list[Possession]
+    findings: list[Finding] = field(default_factory=list)
+    path: str = ""
+
+    @property
+    def errors(self) -> list[Finding]:
+        return [f for f in self.findings if f.severity == Severity.ERROR]
+
+
+def _text(v: object) -> str | None:
+    """A cell as text, None when empty."""
+    if v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v)):
+        return None
+    return str(v)
+
+
+def parse_time(text: str) -> datetime:
+    """ISO 8601 with a UTC offset → aware datetime; ValueError otherwise."""
+    s = text.strip()
+    t = datetime.fromisoformat(s)
+    if t.tzinfo is None or t.utcoffset() is None:
+        raise ValueError("no UTC offset")
+    return t
+
+
+def read_plan(path: Path, network: Network | None = None) -> Plan:
+    """Read and check a plan file; rows with errors are left out of ``possessions``.
+
+    Raises :class:`~schemas.errors.InputError` when the file cannot be read at all.
+    """
+    path = Path(path)
+    raw = read_raw_table(path, sheet=POSSESSIONS.name)
+    file = str(path)
+    co = read_and_check(POSSESSIONS, raw, file=file)
+    findings = list(co.findings)
+    frame = co.frame
+    bad_rows = {f.row for f in findings if f.severity == Severity.ERROR and f.row is not None}
+    if any(f.rule == "schema.missing_column" for f in findings):
+        return Plan([], findings, file)
+
+    def finding(rule: str, i: int, column: str, message: str, value: object = None, limit: object = None) -> None:
+        work = frame["work_no"].iat[i]
+        findings.append(
+            Finding(
+                rule,
+                Severity.ERROR,
+                POSSESSIONS.name,
+                message,
+                keys={"work_no": _text(work)},
+                value=value,
+                limit=limit,
+                file=file,
+                row=i + FIRST_DATA_LINE,
+                column=column,
+            )
+        )
+        bad_rows.add(i + FIRST_DATA_LINE)
+
+    times: dict[str, list[datetime | None]] = {c: [None] * len(frame) for c in TIME_COLUMNS}
+    for c in TIME_COLUMNS:
+        for i, v in enumerate(frame[c].tolist()):
+            if _text(v) is None:
+                continue
+            try:
+                times[c][i] = parse_time(str(v))
+            except ValueError as exc:
+                if "offset" in str(exc):
+                    finding(
+                        "plan.time_offset",
+                        i,
+                        c,
+                        f"'{v}' has no UTC offset: write e.g. {TIME_EXAMPLE}",
+                        value=str(v),
+                        limit="ISO 8601 with offset",
+                    )
+                else:
+                    finding(
+                        "plan.time_format",
+                        i,
+                        c,
+                        f"'{v}' is not an ISO 8601 time (e.g. {TIME_EXAMPLE})",
+                        value=str(v),
+                        limit="ISO 8601 with offset",
+                    )
+    tracks = _db_tracks(network)
+    km_from = frame["km_from_m"].to_numpy(dtype=float, na_value=np.nan)
+    km_to = frame["km_to_m"].to_numpy(dtype=float, na_value=np.nan)
+    for i in range(len(frame)):
+        if np.isfinite(km_from[i]) and np.isfinite(km_to[i]) and not km_from[i] < km_to[i]:
+            finding(
+                "plan.km_order",
+                i,
+                "km_to_m",
+                f"km_to_m {km_to[i]:g} m must be greater than km_from_m {km_from[i]:g} m",
+                value=float(km_to[i]),
+                limit=float(km_from[i]),
+            )
+        ps, pe = times["planned_start"][i], times["planned_end"][i]
+        if ps is not None and pe is not None and not ps < pe:
+            finding("plan.time_order", i, "planned_end", "planned_end must be after planned_start", str(pe), str(ps))
+        st, rl = times["started_at"][i], times["released_at"][i]
+        if rl is not None and _text(frame["started_at"].iat[i]) is None:
+            finding("plan.release_without_start", i, "released_at", "released_at given but started_at is empty")
+        if st is not None and rl is not None and rl < st:
+            finding("plan.time_order", i, "released_at", "released_at is before started_at", str(rl), str(st))
+        if tracks is not None:
+            for rule, column, message, value, limit in _track_errors(frame, i, tracks):
+                finding(rule, i, column, message, value, limit)
+            warning = _outside_grid(frame, i, tracks, km_from[i], km_to[i], file)
+            if warning is not None:
+                findings.append(warning)
+    possessions = []
+    for i in range(len(frame)):
+        if i + FIRST_DATA_LINE in bad_rows:
+            continue
+        ps, pe = times["planned_start"][i], times["planned_end"][i]
+        if ps is None or pe is None:
+            continue
+        possessions.append(
+            Possession(
+                work_no=str(frame["work_no"].iat[i]),
+                line_code=str(frame["line_code"].iat[i]),
+                track=str(frame["track"].iat[i]),
+                km_from_m=float(km_from[i]),
+                km_to_m=float(km_to[i]),
+                planned_start=ps,
+                planned_end=pe,
+                started_at=times["started_at"][i],
+                released_at=times["released_at"][i],
+                row=i + FIRST_DATA_LINE,
+            )
+        )
+    return Plan(possessions, findings, file)
+
+
+def _db_tracks(network: Network | None) -> dict[tuple[str, str], tuple[float, float]] | None:
+    if network is None:
+        return None
+    g = network.gis
+    if g.empty:
+        return {}
+    ext = g.groupby([g["line_code"].astype(str), g["track"].astype(str)])["km_m"].agg(["min", "max"])
+    keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in ext.index]
+    return dict(zip(keys, zip(ext["min"].astype(float), ext["max"].astype(float), strict=True), strict=True))
+
+
+def _track_errors(
+    frame: pd.DataFrame, i: int, tracks: dict[tuple[str, str], tuple[float, float]]
+) -> list[tuple[str, str, str, object, object]]:
+    """(rule, column, message, value, limit) when the row's line or track is not in the DB."""
+    line, track = _text(frame["line_code"].iat[i]), _text(frame["track"].iat[i])
+    if line is None or track is None:
+        return []
+    lines = sorted({a for a, _ in tracks})
+    if line not in lines:
+        return [("plan.unknown_line", "line_code", f"line '{line}' is not in the onboard DB", line, lines)]
+    if (line, track) not in tracks:
+        have = sorted(b for a, b in tracks if a == line)
+        msg = f"line '{line}' has no track '{track}' in the onboard DB (tracks: {', '.join(have)})"
+        return [("plan.unknown_track", "track", msg, track, have)]
+    return []
+
+
+def _outside_grid(
+    frame: pd.DataFrame,
+    i: int,
+    tracks: dict[tuple[str, str], tuple[float, float]],
+    km_from: float,
+    km_to: float,
+    file: str,
+) -> Finding | None:
+    """A warning when the section reaches beyond the track's GIS grid."""
+    key = (str(frame["line_code"].iat[i]), str(frame["track"].iat[i]))
+    if key not in tracks or not (np.isfinite(km_from) and np.isfinite(km_to)):
+        return None
+    lo, hi = tracks[key]
+    if lo <= km_from and km_to <= hi:
+        return None
+    work = frame["work_no"].iat[i]
+    return Finding(
+        "plan.km_outside_gis",
+        Severity.WARNING,
+        POSSESSIONS.name,
+        f"section {km_from:g}–{km_to:g} m reaches beyond the GIS grid of {key[0]}/{key[1]} ({lo:g}–{hi:g} m)",
+        keys={"work_no": _text(work)},
+        value=[km_from, km_to],
+        limit=[lo, hi],
+        file=file,
+        row=i + FIRST_DATA_LINE,
+        column="km_from_m" if km_from < lo else "km_to_m",
+    )
+
+
+def load_plan(path: Path, network: Network | None = None) -> Plan:
+    """:func:`read_plan`, raising :class:`~schemas.errors.FindingsError` (exit 1) on any error."""
+    plan = read_plan(path, network)
+    if plan.errors:
+        raise FindingsError(
+            f"the possession plan has {len(plan.errors)} error(s); fix them and check again", plan.errors, path=path
+        )
+    return plan
+
+
+def plan_frame(possessions: list[Possession]) -> pd.DataFrame:
+    """Possessions as a plan table (text times), e.g. to write a CSV."""
+    rows = []
+    for p in possessions:
+        rows.append(
+            {
+                "work_no": p.work_no,
+                "line_code": p.line_code,
+                "track": p.track,
+                "km_from_m": p.km_from_m,
+                "km_to_m": p.km_to_m,
+                **{c: (getattr(p, c).isoformat() if getattr(p, c) else "") for c in TIME_COLUMNS},
+            }
+        )
+    return pd.DataFrame(rows, columns=POSSESSIONS.column_names)

@@ -1,0 +1,934 @@
+"""Possession alarms for road-rail vehicles [S001 §3, §4.2.4, §6; SPEC §5.5].
+
+A road-rail vehicle's run (``gps``, ``cab.pto``; often no tacho or IMU) is checked against a
+possession plan (:mod:`fieldlogs.plans`). Everything is evaluated as the onboard alarm
+device would have seen it, causally, on a ``step_s`` (0.1 s) grid while the PTO says the
+vehicle is on rail.
+
+**On rail** = PTO on (``cab.pto``, carried forward; off before the first event). A run
+without any PTO value counts as on rail throughout (fail-safe). Each on-rail period is
+analysed on its own (the GPS decision state starts afresh, as the vehicle may come back on
+another track); the fixes of the ``lead_s`` before PTO on (the approach on the road) feed the
+trust filter and the km estimate but are no evidence for the up/down decision.
+
+**Up/down decision** = the pipeline's GPS analysis (:mod:`fieldlogs.pipeline.gps`): a
+sequential likelihood-ratio test on the mean offset of *trusted* D-GPS fixes (5/15/30 s RMS
+filter), decided as soon as the evidence suffices, otherwise *undecided* — never guessed.
+No decision ``decision_target_s`` (120 s, the field target [S001 §3.1(e)]) after PTO on is a
+``track_undecided`` notice. Crossovers (RMS of the offset from the base track [S001 §7]) are
+notices; the decision that follows a crossover is checked like any other.
+
+**km and its uncertainty.** A 1-D constant-velocity Kalman filter along the line's
+kilometrage (state km, dkm/dt; white acceleration noise ``accel_noise_mps2``, speed kept
+within ± ``max_speed_mps``) is updated at every map-matched fix (km of the foot of the
+perpendicular on the nearest GIS segment, :mod:`dbtools.gis.matching`) within
+``max_offset_m`` of a track of the line. Each fix's error is split into a white part (the
+filter's R) and a slow part (bias) that no filter can average out:
+
+=====================================  ===========================================  ==============
+fix                                    white σ                                      bias σ
+=====================================  ===========================================  ==============
+trusted (5/15/30 s RMS filter)         ``noise_white_m`` of the GPS model (0.25 m)  ``noise_sigma_m`` (0.75 m)
+usable D-GPS, not trusted              max(``untrusted_sigma_m``, 5 s RMS)           ``noise_sigma_m``
+fix 1 or high HDOP                     the same                                     ``fix1_sigma_m`` (5 m)
+=====================================  ===========================================  ==============
+
+(no RMS history yet counts as ``fix1_sigma_m``); the white σ is at least the fix's offset
+from the nearest track beyond ``offset_free_m`` (an on-rail fix far from every track is
+probably as wrong along it — the trust filter passes such fixes when a multipath burst
+ramps up smoothly). A fix whose innovation exceeds ``gate_z`` σ is rejected (multipath);
+``restart_fixes`` consecutive rejected fixes on a straight line at a possible speed restart
+the filter from them (a burst that slipped through must not leave it lost). The estimate
+carries the bias variance bvar ← (1 − K)·bvar + K·bias² (K the km gain: the biases of the
+fixes it is made of, as if fully correlated). Between fixes the filter predicts (dead
+reckoning on the GPS velocity): this is what gives the alarm its timing with 1 Hz GPS — the
+band is evaluated every ``step_s`` (0.1 s), not only at fixes::
+
+    u(t) = gis_uncertainty_m + km_z · √(P_km(t) + bvar)      (≈ 2.9 m on trusted fixes)
+
+**Matching the run to the plan.** The period's line is the line most of its matched fixes
+lie on. Candidates: possessions of that line whose time window (earliest to latest of the
+planned and actual times) overlaps the period ± ``match_slack_s``. The *governing*
+possession is the candidate covering the km at PTO on (preferring one already started, then
+the lowest work number); after a track decision on another track the candidate of that
+track is taken if there is one — otherwise that is a wrong-track alarm.
+
+**Alarms** (each with t, wall-clock time = run.json start_time + t, km, decided track, work
+number and evidence; one per episode, episodes closer than ``rearm_s`` merged):
+
+* ``wrong_track`` — an up/down decision (line, track) that no candidate possession of that
+  line and track covering the vehicle's km allows, at the decision time;
+* ``overrun`` — fail-safe: as soon as the band km ± u is not inside [km_from, km_to]
+  (so on good fixes ~u before the true crossing; with degraded GPS earlier still); cleared
+  when the band is inside again;
+* ``released_on_rail`` — the governing possession's ``released_at`` passes while on rail
+  (or the vehicle goes on rail after it);
+* ``not_started`` — on rail while the governing possession is not started (no
+  ``started_at`` yet), or with no candidate possession at all.
+
+**Notices**: ``approaching_end`` — the leading edge of the band (km + u moving up, km − u
+moving down, speed ≥ ``min_speed_mps``) within ``notice_m`` (30 m) of that end of the
+section [S001 §6.2(b)]; ``track_undecided``; ``crossover``; ``position_uncertain`` (u above
+``uncertain_notice_m``, the paper's 30 m longitudinal target [S001 §3.2(b)]);
+``position_undetermined`` (no km at PTO on).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections import Counter
+from dataclasses import dataclass, field, fields, replace
+from datetime import datetime, timedelta
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from dbtools.gis.matching import TrackIndex, track_index_for
+from dbtools.network import Network
+from fieldlogs.io import Run
+from fieldlogs.pipeline.config import GpsConfig, PipelineConfig
+from fieldlogs.pipeline.cycles import build_cycles
+from fieldlogs.pipeline.gps import analyse_gps, trust_filter
+from fieldlogs.pipeline.types import Event, GpsAnalysis, TrackDecision
+from fieldlogs.plans import Plan, Possession, PossessionState
+from schemas.errors import InputError
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+ALARM_TYPES = ("wrong_track", "overrun", "released_on_rail", "not_started")
+NOTICE_TYPES = ("approaching_end", "track_undecided", "crossover", "position_uncertain", "position_undetermined")
+
+
+@dataclass(frozen=True)
+class PossessionConfig:
+    """Tuning of the possession alarms (``[possession]`` in a ``--config`` TOML file)."""
+
+    notice_m: float = 30.0
+    """Notice when the band's leading edge is this close to the section end [m] [S001 §6.2(b)]."""
+    km_z: float = 3.0
+    """The band is km ± (gis + km_z·σ) [–]."""
+    gis_uncertainty_m: float = 0.5
+    """Along-track error of the GIS grid and of map-matching [m]."""
+    accel_noise_mps2: float = 0.3
+    """White acceleration noise of the km filter (road-rail vehicles: ≤ 2 km/h/s) [m/s²]."""
+    speed_sigma_mps: float = 5.0
+    """Prior σ of the speed when the filter starts [m/s]."""
+    untrusted_sigma_m: float = 1.0
+    """Minimum σ (white part) of the km of a fix the trust filter did not trust; above it
+    the RMS of the shortest trust window [m]."""
+    fix1_sigma_m: float = 5.0
+    """Minimum σ of the km of a fix without D-GPS (fix 1) or with a high HDOP [m]."""
+    gate_z: float = 4.0
+    """Fixes whose innovation exceeds this many σ are rejected (multipath) [–]."""
+    restart_fixes: int = 3
+    """That many consecutive rejected fixes lying on a straight line restart the filter from
+    them (0 = never) [–]."""
+    offset_free_m: float = 1.5
+    """Lateral offset from the nearest track a good fix may have (2σ of the slow error);
+    beyond it the excess counts as along-track noise too [m]."""
+    max_speed_mps: float = 7.0
+    """The filter's speed is kept within ± this (road-rail vehicles on rail: ≤ 25 km/h) [m/s]."""
+    max_offset_m: float = 15.0
+    """Fixes farther than this from every track of the line are no km measurement [m]."""
+    lead_s: float = 60.0
+    """Fixes before PTO on used for the trust filter and the km (approach on the road) [s]."""
+    decision_target_s: float = 120.0
+    """No up/down decision this long after PTO on → ``track_undecided`` notice [s] [S001 §3.1(e)]."""
+    step_s: float = 0.1
+    """Evaluation step of the alarm rules [s]."""
+    min_speed_mps: float = 0.3
+    """The direction of travel is known above this speed (approach notice) [m/s]."""
+    uncertain_notice_m: float = 30.0
+    """``position_uncertain`` notice when u exceeds this [m] [S001 §3.2(b)]."""
+    rearm_s: float = 5.0
+    """Episodes of the same alarm or notice closer than this are one [s]."""
+    match_slack_s: float = 3600.0
+    """A possession is a candidate when its time window ± this overlaps the on-rail period [s]."""
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], source: str = "config") -> PossessionConfig:
+        cfg = cls()
+        known = {f.name: f for f in fields(cls)}
+        updates: dict[str, Any] = {}
+        for k, v in data.items():
+            if k not in known:
+                raise InputError(f"unknown key 'possession.{k}' (known: {', '.join(known)})", path=source)
+            whole = isinstance(getattr(cfg, k), int)
+            if isinstance(v, bool) or not isinstance(v, int if whole else int | float) or not math.isfinite(v):
+                kind = "a whole number" if whole else "a number"
+                raise InputError(f"'possession.{k}' must be {kind}, not {v!r}", path=source)
+            updates[k] = v if whole else float(v)
+        return replace(cfg, **updates)
+
+
+def load_config(path: Path | None) -> tuple[GpsConfig, PossessionConfig]:
+    """GPS and possession settings from a TOML file (``[gps]``, ``[possession]``; the other
+    pipeline sections are accepted and ignored); defaults without a file."""
+    if path is None:
+        return GpsConfig(), PossessionConfig()
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise InputError("no such config file", path=path) from exc
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not valid TOML: {exc}", path=path) from exc
+    section = data.pop("possession", {})
+    if not isinstance(section, dict):
+        raise InputError("'possession' must be a table", path=path)
+    return PipelineConfig.from_dict(data, source=str(path)).gps, PossessionConfig.from_dict(section, str(path))
+
+
+# ------------------------------------------------------------------------------ results
+@dataclass
+class Alarm:
+    """An alarm or a notice."""
+
+    type: str
+    t: float
+    time: str
+    km_m: float | None
+    track: str | None
+    work_no: str | None
+    evidence: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "type": self.type,
+            "t": round(self.t, 2),
+            "time": self.time,
+            "km_m": _r(self.km_m, 2),
+            "track": self.track,
+            "work_no": self.work_no,
+            "evidence": {k: _jsonable(v) for k, v in self.evidence.items()},
+        }
+
+
+@dataclass
+class Timeline:
+    """What the plot of one on-rail period needs."""
+
+    t: FloatArray
+    km: FloatArray
+    u: FloatArray
+    fix_t: FloatArray
+    fix_km: FloatArray
+    fix_trusted: BoolArray
+    sections: list[tuple[float, float, str, float, float]]
+    """(t from, t to, work_no, km_from, km_to) of the governing possession."""
+
+
+@dataclass
+class PeriodResult:
+    t_on: float
+    t_off: float
+    line_code: str | None
+    work_no: str | None
+    decisions: list[TrackDecision]
+    crossovers: list[Event]
+    timeline: Timeline
+    gps: GpsAnalysis | None = field(default=None, repr=False)
+
+    def decision_json(self, start: datetime) -> dict[str, Any] | None:
+        if not self.decisions:
+            return None
+        d = self.decisions[0]
+        return {
+            "t": round(d.t, 2),
+            "time": wall(start, d.t),
+            "line_code": d.line_code,
+            "track": d.track,
+            "after_on_rail_s": round(d.t - self.t_on, 2),
+            "evidence": {k: _jsonable(v) for k, v in d.evidence.items()},
+        }
+
+
+@dataclass
+class RunCheck:
+    """Result of checking one run against the plan."""
+
+    run: str
+    run_id: str
+    start_time: datetime
+    possessions: list[str]
+    periods: list[PeriodResult]
+    alarms: list[Alarm]
+    notices: list[Alarm]
+
+    @property
+    def track_decision(self) -> dict[str, Any] | None:
+        """The first up/down decision after going on rail (first on-rail period that has one)."""
+        for p in self.periods:
+            d = p.decision_json(self.start_time)
+            if d is not None:
+                return d
+        return None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "run": self.run,
+            "run_id": self.run_id,
+            "possessions": self.possessions,
+            "track_decision": self.track_decision,
+            "alarms": [a.to_json() for a in self.alarms],
+            "notices": [n.to_json() for n in self.notices],
+            "on_rail": [
+                {
+                    "t_on": round(p.t_on, 2),
+                    "t_off": round(p.t_off, 2),
+                    "time_on": wall(self.start_time, p.t_on),
+                    "time_off": wall(self.start_time, p.t_off),
+                    "line_code": p.line_code,
+                    "work_no": p.work_no,
+                    "track_decision": p.decision_json(self.start_time),
+                }
+                for p in self.periods
+            ],
+        }
+
+
+def checks_json(checks: list[RunCheck]) -> dict[str, Any]:
+    """The documented JSON shape ``{"runs": [...]}``."""
+    return {"runs": [c.to_json() for c in checks]}
+
+
+def wall(start: datetime, t: float) -> str:
+    """Wall-clock time of run time t (ISO 8601 with the run's offset, ms)."""
+    return (start + timedelta(seconds=float(t))).isoformat(timespec="milliseconds")
+
+
+def _r(v: float | None, nd: int) -> float | None:
+    return None if v is None or not math.isfinite(v) else round(float(v), nd)
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, float):
+        return _r(v, 3)
+    if isinstance(v, datetime):
+        return v.isoformat()
+    if isinstance(v, list | tuple):
+        return [_jsonable(x) for x in v]
+    return v
+
+
+# ------------------------------------------------------------------------------ km filter
+@dataclass
+class KmTrack:
+    """Kalman-filter states after each accepted fix (module docstring)."""
+
+    t: FloatArray
+    km: FloatArray
+    v: FloatArray
+    p00: FloatArray
+    p01: FloatArray
+    p11: FloatArray
+    bvar: FloatArray
+    """Variance of the slow (bias) GPS error carried by the estimate [m²]."""
+    trusted: BoolArray
+    q: float
+    n_rejected: int = 0
+
+    def at(self, tq: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """(km, speed, km σ, seconds since the last accepted fix) predicted at ``tq``; NaN before the first fix."""
+        tq = np.asarray(tq, dtype=float)
+        if self.t.size == 0:
+            nan = np.full(tq.shape, np.nan)
+            return nan, nan, nan, nan
+        j = np.searchsorted(self.t, tq, side="right") - 1
+        ok = j >= 0
+        jj = np.clip(j, 0, None)
+        dt = np.where(ok, tq - self.t[jj], np.nan)
+        km = self.km[jj] + self.v[jj] * dt
+        var = self.p00[jj] + 2 * dt * self.p01[jj] + dt * dt * self.p11[jj] + self.q * dt**3 / 3.0
+        sig = np.sqrt(var + self.bvar[jj])
+        return np.where(ok, km, np.nan), np.where(ok, self.v[jj], np.nan), np.where(ok, sig, np.nan), dt
+
+
+def track_km(
+    t: FloatArray, z: FloatArray, white: FloatArray, bias: FloatArray, trusted: BoolArray, cfg: PossessionConfig
+) -> KmTrack:
+    """Run the constant-velocity filter over the km measurements (sorted by t).
+
+    ``white``: σ of the independent part of each measurement (the filter's R); ``bias``: σ
+    of its slow part, which no filter can average out — the estimate carries
+    bvar ← (1 − K)·bvar + K·bias² (K the km gain of the update), i.e. the biases of the
+    fixes it is made of, weighted as the filter weights them (conservative: as if fully
+    correlated).
+    """
+    q = cfg.accel_noise_mps2**2
+    n = t.size
+    out = {k: np.empty(n) for k in ("t", "km", "v", "p00", "p01", "p11", "bvar")}
+    tr = np.zeros(n, dtype=bool)
+    m = 0
+    rejected = 0
+    run: list[int] = []  # consecutive rejected fixes
+    x0 = x1 = p00 = p01 = p11 = bv = 0.0
+    t_last = -np.inf
+    for i in range(n):
+        r = float(white[i]) ** 2
+        b2 = float(bias[i]) ** 2
+        if m == 0:
+            x0, x1 = float(z[i]), 0.0
+            p00, p01, p11, bv = r, 0.0, cfg.speed_sigma_mps**2, b2
+        else:
+            dt = float(t[i]) - t_last
+            if dt <= 0:
+                continue
+            # predict: F = [[1, dt], [0, 1]], Q = q·[[dt³/3, dt²/2], [dt²/2, dt]]
+            y0 = x0 + x1 * dt
+            c00 = p00 + 2 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
+            c01 = p01 + dt * p11 + q * dt * dt / 2.0
+            c11 = p11 + q * dt
+            innov = float(z[i]) - y0
+            s = c00 + r
+            if innov * innov > cfg.gate_z**2 * (s + bv + b2):
+                # an outlier (multipath): the state stays the prediction from the last accepted
+                # fix — unless the rejected fixes agree among themselves, i.e. the filter lost the
+                # vehicle (a burst that slipped through bent its speed): restart from them
+                rejected += 1
+                run.append(i)
+                restart = _restart(t, z, white, bias, run, cfg)
+                if restart is None:
+                    continue
+                x0, x1, p00, p01, p11, bv = restart
+                run = []
+            else:
+                run = []
+                k0, k1 = c00 / s, c01 / s
+                x0 = y0 + k0 * innov
+                x1 = min(max(x1 + k1 * innov, -cfg.max_speed_mps), cfg.max_speed_mps)
+                p00, p01, p11 = (1 - k0) * c00, (1 - k0) * c01, c11 - k1 * c01
+                bv = (1 - k0) * bv + k0 * b2
+        t_last = float(t[i])
+        out["t"][m], out["km"][m], out["v"][m] = t_last, x0, x1
+        out["p00"][m], out["p01"][m], out["p11"][m], out["bvar"][m] = p00, p01, p11, bv
+        tr[m] = bool(trusted[i])
+        m += 1
+    return KmTrack(
+        out["t"][:m],
+        out["km"][:m],
+        out["v"][:m],
+        out["p00"][:m],
+        out["p01"][:m],
+        out["p11"][:m],
+        out["bvar"][:m],
+        tr[:m],
+        q,
+        rejected,
+    )
+
+
+def _restart(
+    t: FloatArray, z: FloatArray, white: FloatArray, bias: FloatArray, run: list[int], cfg: PossessionConfig
+) -> tuple[float, float, float, float, float, float] | None:
+    """A new state from the last ``restart_fixes`` rejected fixes when a straight line fits
+    them within 1.5 × their noise at a possible speed; None otherwise."""
+    k = cfg.restart_fixes
+    if k < 2 or len(run) < k:
+        return None
+    idx = np.array(run[-k:])
+    tt = t[idx] - t[idx[-1]]
+    zz = z[idx]
+    a = np.vstack([np.ones(k), tt]).T
+    coef, *_ = np.linalg.lstsq(a, zz, rcond=None)
+    resid = float(np.sqrt(np.mean((zz - a @ coef) ** 2)))
+    noise = max(1.0, float(np.median(white[idx])))
+    if resid > 1.5 * noise or abs(coef[1]) > cfg.max_speed_mps:
+        return None
+    p00 = resid**2 + noise**2
+    p11 = max(1.0, 2.0 * p00 / max(float(np.sum(tt**2)), 1.0))
+    return float(coef[0]), float(coef[1]), p00, 0.0, p11, float(np.max(bias[idx] ** 2))
+
+
+def km_noise(fixes: pd.DataFrame, gps_cfg: GpsConfig, cfg: PossessionConfig) -> tuple[FloatArray, FloatArray]:
+    """(white σ, bias σ) of the km of each fix (module docstring)."""
+    n = len(fixes)
+    rms_cols = sorted((c for c in fixes.columns if c.startswith("rms_")), key=lambda c: float(c[4:]))
+    # the shortest window: the quality of the last seconds (no history: unknown, as fix 1)
+    rms = fixes[rms_cols[0]].to_numpy(dtype=float, na_value=np.nan) if rms_cols else np.full(n, np.nan)
+    off = np.abs(fixes["offset_m"].to_numpy(dtype=float, na_value=np.nan)) if "offset_m" in fixes else np.zeros(n)
+    trusted = _bool(fixes, "trusted")
+    usable = _bool(fixes, "usable")
+    # an on-rail fix far from the track is as wrong along the track, likely: the offset bounds σ
+    excess = np.fmax(off - cfg.offset_free_m, 0.0)
+    noisy = np.fmax(cfg.untrusted_sigma_m, np.where(np.isfinite(rms), rms, cfg.fix1_sigma_m))
+    white = np.fmax(np.where(trusted, gps_cfg.noise_white_m, noisy), excess)
+    bias = np.where(usable | trusted, gps_cfg.noise_sigma_m, cfg.fix1_sigma_m)
+    return white, bias
+
+
+def _bool(frame: pd.DataFrame, name: str) -> BoolArray:
+    if name not in frame.columns:
+        return np.zeros(len(frame), dtype=bool)
+    return frame[name].fillna(False).to_numpy(dtype=bool)
+
+
+# ------------------------------------------------------------------------------ evaluation
+@dataclass
+class RailPeriod:
+    """One on-rail period and the GPS analysis of its fixes (from ``t_on − lead_s``)."""
+
+    t_on: float
+    t_off: float
+    gps: GpsAnalysis
+
+
+def episodes(mask: BoolArray, t: FloatArray, merge_s: float) -> list[tuple[int, int]]:
+    """(first, last) index of each run of True, runs closer than ``merge_s`` merged."""
+    if not mask.any():
+        return []
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    starts = np.flatnonzero(np.diff(m) == 1)
+    ends = np.flatnonzero(np.diff(m) == -1) - 1
+    out: list[tuple[int, int]] = []
+    for s, e in zip(starts, ends, strict=True):
+        if out and t[s] - t[out[-1][1]] < merge_s:
+            out[-1] = (out[-1][0], int(e))
+        else:
+            out.append((int(s), int(e)))
+    return out
+
+
+def _rel(start: datetime, when: datetime | None) -> float:
+    return np.nan if when is None else (when - start).total_seconds()
+
+
+def _rank(p: Possession, km: float, when: datetime) -> tuple[int, float, int, str]:
+    dist = 0.0 if not math.isfinite(km) else max(p.km_from_m - km, km - p.km_to_m, 0.0)
+    started = p.state_at(when) == PossessionState.STARTED
+    return (0 if dist == 0.0 and math.isfinite(km) else 1, dist, 0 if started else 1, p.work_no)
+
+
+def _period_line(fixes: pd.DataFrame, t_on: float, max_offset: float) -> str | None:
+    ok = fixes["km_m"].notna() & (fixes["offset_m"].abs() <= max_offset) & fixes["line_code"].notna()
+    on = ok & (fixes["t"] >= t_on)
+    sel = fixes.loc[on if on.any() else ok, "line_code"]
+    if sel.empty:
+        return None
+    return str(Counter(sel.astype(str)).most_common(1)[0][0])
+
+
+def evaluate_period(
+    period: RailPeriod,
+    possessions: list[Possession],
+    start: datetime,
+    gps_cfg: GpsConfig,
+    cfg: PossessionConfig,
+) -> tuple[PeriodResult, list[Alarm], list[Alarm]]:
+    """The alarm rules of the module docstring over one on-rail period (pure: no I/O)."""
+    t_on, t_off = period.t_on, period.t_off
+    fixes = period.gps.fixes
+    line = _period_line(fixes, t_on, cfg.max_offset_m) if len(fixes) else None
+    # --- km filter over the period's measurements (approach included)
+    white, bias = km_noise(fixes, gps_cfg, cfg) if len(fixes) else (np.zeros(0), np.zeros(0))
+    ft = fixes["t"].to_numpy(dtype=float) if len(fixes) else np.zeros(0)
+    fkm = fixes["km_m"].to_numpy(dtype=float, na_value=np.nan) if len(fixes) else np.zeros(0)
+    meas = np.isfinite(fkm) & (ft <= t_off)
+    if len(fixes):
+        meas &= (fixes["offset_m"].abs() <= cfg.max_offset_m).fillna(False).to_numpy(dtype=bool)
+        if line is not None:
+            meas &= (fixes["line_code"].astype(str) == line).to_numpy(dtype=bool)
+    trusted = _bool(fixes, "trusted") if len(fixes) else np.zeros(0, dtype=bool)
+    kt = track_km(ft[meas], fkm[meas], white[meas], bias[meas], trusted[meas], cfg)
+    n = max(math.ceil((t_off - t_on) / cfg.step_s - 1e-9), 1)
+    tg: FloatArray = t_on + np.arange(n, dtype=np.float64) * cfg.step_s
+    km, v, s_km, since = kt.at(tg)
+    u = cfg.gis_uncertainty_m + cfg.km_z * s_km
+    known = np.isfinite(km)
+    wall_on = start + timedelta(seconds=t_on)
+
+    decisions = [d for d in period.gps.decisions if t_on - 1e-9 <= d.t <= t_off]
+    crossovers = [c for c in period.gps.crossovers if t_on - 1e-9 <= c.t <= t_off]
+    alarms: list[Alarm] = []
+    notices: list[Alarm] = []
+
+    def decided_at(tt: float) -> str | None:
+        cur = None
+        for d in decisions:
+            if d.t <= tt + 1e-9:
+                cur = d.track
+        return cur
+
+    def km_at(tt: float) -> float | None:
+        i = int(np.clip(np.searchsorted(tg, tt, side="right") - 1, 0, n - 1))
+        return float(km[i]) if np.isfinite(km[i]) else None
+
+    def add(kind: list[Alarm], typ: str, tt: float, work: str | None, evidence: dict[str, Any]) -> None:
+        kind.append(Alarm(typ, float(tt), wall(start, tt), km_at(tt), decided_at(tt), work, evidence))
+
+    # --- candidates and the governing possession
+    lo_t, hi_t = wall_on - timedelta(seconds=cfg.match_slack_s), start + timedelta(seconds=t_off + cfg.match_slack_s)
+    cands = [
+        p for p in possessions if (line is None or p.line_code == line) and p.window[0] <= hi_t and p.window[1] >= lo_t
+    ]
+    first = np.flatnonzero(known)
+    km_on = float(km[first[0]]) if first.size else float("nan")
+    gov = min(cands, key=lambda p: _rank(p, km_on, wall_on)) if cands else None
+    segments: list[tuple[float, Possession | None]] = [(t_on, gov)]
+    for d in decisions:
+        cur = segments[-1][1]
+        if cur is not None and (d.line_code, d.track) == (cur.line_code, cur.track):
+            continue
+        kd = km_at(d.t)
+        alt = [p for p in cands if (p.line_code, p.track) == (d.line_code, d.track) and kd is not None and p.covers(kd)]
+        if alt:
+            when = start + timedelta(seconds=d.t)
+            segments.append((d.t, min(alt, key=lambda p: _rank(p, np.nan if kd is None else kd, when))))
+        elif cur is not None:
+            add(
+                alarms,
+                "wrong_track",
+                d.t,
+                cur.work_no,
+                {
+                    "planned_line_code": cur.line_code,
+                    "planned_track": cur.track,
+                    "decided_line_code": d.line_code,
+                    "decided_track": d.track,
+                    "after_on_rail_s": round(d.t - t_on, 2),
+                    **d.evidence,
+                },
+            )
+    if not first.size or first[0] > 0:
+        notices.append(
+            Alarm(
+                "position_undetermined",
+                t_on,
+                wall(start, t_on),
+                None,
+                None,
+                gov.work_no if gov else None,
+                {"km_known_from_t": float(tg[first[0]]) if first.size else None},
+            )
+        )
+    if gov is None:
+        add(
+            alarms,
+            "not_started",
+            t_on,
+            None,
+            {"reason": f"no possession on line {line or '?'} at this time", "line_code": line},
+        )
+    # --- per-grid section and times of the governing possession
+    seg_t = np.array([s[0] for s in segments])
+    seg_p = [s[1] for s in segments]
+    k = np.clip(np.searchsorted(seg_t, tg, side="right") - 1, 0, len(seg_p) - 1)
+    has = np.array([p is not None for p in seg_p])[k]
+    kf = np.array([p.km_from_m if p else np.nan for p in seg_p])[k]
+    kt_ = np.array([p.km_to_m if p else np.nan for p in seg_p])[k]
+    st = np.array([_rel(start, p.started_at) if p else np.nan for p in seg_p])[k]
+    rl = np.array([_rel(start, p.released_at) if p else np.nan for p in seg_p])[k]
+    works = [p.work_no if p else None for p in seg_p]
+
+    def work_at(i: int) -> str | None:
+        return works[int(k[i])]
+
+    not_started = has & ~(tg >= st)
+    for a, b in episodes(not_started, tg, cfg.rearm_s):
+        p = seg_p[int(k[a])]
+        assert p is not None
+        add(
+            alarms,
+            "not_started",
+            tg[a],
+            p.work_no,
+            {
+                "state": PossessionState.NOT_STARTED.value,
+                "started_at": p.started_at,
+                "planned_start": p.planned_start,
+                "until_t": round(float(tg[b]) + cfg.step_s, 2),
+            },
+        )
+    released = has & (tg >= rl)
+    for a, b in episodes(released, tg, cfg.rearm_s):
+        p = seg_p[int(k[a])]
+        assert p is not None
+        t_alarm = max(float(rl[a]), t_on)
+        add(
+            alarms,
+            "released_on_rail",
+            t_alarm,
+            p.work_no,
+            {
+                "released_at": p.released_at,
+                "on_rail_since_t": round(t_on, 2),
+                "until_t": round(float(tg[b]) + cfg.step_s, 2),
+            },
+        )
+    lo_edge, hi_edge = km - u, km + u
+    inside = (lo_edge >= kf) & (hi_edge <= kt_)
+    over = has & known & ~inside
+    for a, b in episodes(over, tg, cfg.rearm_s):
+        up = hi_edge[a] - kt_[a] >= kf[a] - lo_edge[a]
+        beyond = np.where(up, hi_edge - kt_, kf - lo_edge)[a : b + 1]
+        add(
+            alarms,
+            "overrun",
+            tg[a],
+            work_at(a),
+            {
+                "end": "km_to_m" if up else "km_from_m",
+                "boundary_km_m": float(kt_[a] if up else kf[a]),
+                "uncertainty_m": float(u[a]),
+                "beyond_m": float(beyond[0]),
+                "max_beyond_m": float(np.nanmax(beyond)),
+                "since_fix_s": float(since[a]),
+                "until_t": round(float(tg[b]) + cfg.step_s, 2),
+            },
+        )
+    # --- notices
+    moving_up, moving_down = v >= cfg.min_speed_mps, v <= -cfg.min_speed_mps
+    for end, cond, dist in (
+        ("km_to_m", has & moving_up & (hi_edge <= kt_) & (kt_ - hi_edge <= cfg.notice_m), kt_ - km),
+        ("km_from_m", has & moving_down & (lo_edge >= kf) & (lo_edge - kf <= cfg.notice_m), km - kf),
+    ):
+        for a, _b in episodes(cond, tg, 2 * cfg.rearm_s):
+            add(
+                notices,
+                "approaching_end",
+                tg[a],
+                work_at(a),
+                {
+                    "end": end,
+                    "boundary_km_m": float(kt_[a] if end == "km_to_m" else kf[a]),
+                    "distance_m": float(dist[a]),
+                    "uncertainty_m": float(u[a]),
+                    "speed_mps": float(abs(v[a])),
+                },
+            )
+    for a, b in episodes(known & (u > cfg.uncertain_notice_m), tg, cfg.rearm_s):
+        add(
+            notices,
+            "position_uncertain",
+            tg[a],
+            work_at(a),
+            {
+                "uncertainty_m": float(u[a]),
+                "since_fix_s": float(since[a]),
+                "until_t": round(float(tg[b]) + cfg.step_s, 2),
+            },
+        )
+    t_target = t_on + cfg.decision_target_s
+    if t_off > t_target and not any(d.t <= t_target for d in decisions):
+        add(
+            notices,
+            "track_undecided",
+            t_target,
+            gov.work_no if gov else None,
+            {"after_on_rail_s": cfg.decision_target_s, "decided_at_t": decisions[0].t if decisions else None},
+        )
+    for c in crossovers:
+        add(notices, "crossover", c.t, work_at(int(np.clip(np.searchsorted(tg, c.t) - 1, 0, n - 1))), dict(c.detail))
+    seg_end = [*seg_t[1:].tolist(), t_off]
+    sections = [
+        (float(a), float(b), p.work_no, p.km_from_m, p.km_to_m)
+        for a, b, p in zip(seg_t.tolist(), seg_end, seg_p, strict=True)
+        if p is not None
+    ]
+    timeline = Timeline(tg, km, u, ft[meas], fkm[meas], trusted[meas], sections)
+    result = PeriodResult(t_on, t_off, line, gov.work_no if gov else None, decisions, crossovers, timeline, period.gps)
+    return result, alarms, notices
+
+
+def check_periods(
+    periods: list[RailPeriod],
+    possessions: list[Possession],
+    start: datetime,
+    gps_cfg: GpsConfig | None = None,
+    cfg: PossessionConfig | None = None,
+    *,
+    run: str = "",
+    run_id: str = "",
+) -> RunCheck:
+    """Alarms and notices of a run given its on-rail periods (pure: no I/O)."""
+    gps_cfg = gps_cfg or GpsConfig()
+    cfg = cfg or PossessionConfig()
+    results, alarms, notices = [], [], []
+    for p in periods:
+        r, a, n = evaluate_period(p, possessions, start, gps_cfg, cfg)
+        results.append(r)
+        alarms += a
+        notices += n
+    alarms.sort(key=lambda a: (a.t, a.type))
+    notices.sort(key=lambda a: (a.t, a.type))
+    works = sorted({s[2] for r in results for s in r.timeline.sections} | {r.work_no for r in results if r.work_no})
+    return RunCheck(run, run_id, start, works, results, alarms, notices)
+
+
+# ------------------------------------------------------------------------------ a run
+def rail_periods(cab: pd.DataFrame | None, t_end: float, t_start: float = 0.0) -> list[tuple[float, float]]:
+    """(t_on, t_off) of every PTO-on period; the whole run when there is no PTO value."""
+    if cab is None or not len(cab) or "pto" not in cab.columns or cab["pto"].isna().all():
+        return [(t_start, t_end)] if t_end > t_start else []
+    c = cab[cab["t"].notna()].sort_values("t", kind="stable")
+    t = c["t"].to_numpy(dtype=float)
+    pto = c["pto"].astype("Float64").ffill().fillna(0).to_numpy(dtype=float) > 0.5
+    out: list[tuple[float, float]] = []
+    on_since: float | None = None
+    for tt, p in zip(t, pto, strict=True):
+        if p and on_since is None:
+            on_since = float(tt)
+        elif not p and on_since is not None:
+            if tt > on_since:
+                out.append((on_since, float(tt)))
+            on_since = None
+    if on_since is not None and t_end > on_since:
+        out.append((on_since, t_end))
+    return out
+
+
+def parse_start_time(run: Run) -> datetime:
+    """run.json ``start_time`` as an aware datetime (InputError otherwise: the run cannot be
+    related to the plan)."""
+    raw = run.field("start_time")
+    path = run.folder / "run.json"
+    if not raw:
+        raise InputError("start_time is missing: the run cannot be related to the plan", path=path)
+    try:
+        start = datetime.fromisoformat(str(raw).strip())
+    except ValueError as exc:
+        raise InputError(f"start_time {raw!r} is not an ISO 8601 time", path=path) from exc
+    if start.tzinfo is None:
+        raise InputError(f"start_time {raw!r} has no UTC offset: the run cannot be related to the plan", path=path)
+    return start
+
+
+def _stream(run: Run, name: str) -> pd.DataFrame | None:
+    frame = run.stream(name)
+    if frame is None and run.has(name):
+        bad = [f for f in run.stream_findings(name) if f.rule == "log.unreadable_stream"]
+        raise InputError(bad[0].message if bad else "stream cannot be read", path=run.stream_file(name))
+    return frame
+
+
+def with_degraded_fixes(ga: GpsAnalysis, index: TrackIndex, gps_cfg: GpsConfig) -> GpsAnalysis:
+    """Map-match the fixes the GPS analysis does not use (fix 1, high HDOP) so that they can
+    serve as coarse km measurements; adds a ``degraded`` column. The up/down decision is untouched."""
+    f = ga.fixes.copy()
+    t = f["t"].to_numpy(dtype=float)
+    lat, lon = f["lat"].to_numpy(dtype=float), f["lon"].to_numpy(dtype=float)
+    usable = f["usable"].to_numpy(dtype=bool)
+    inc = np.ones(t.size, dtype=bool)
+    inc[1:] = t[1:] > t[:-1]
+    deg = np.isfinite(lat) & np.isfinite(lon) & np.isfinite(t) & (f["fix"].to_numpy() >= 1) & ~usable & inc
+    f["degraded"] = deg
+    if deg.any():
+        both = usable | deg
+        x, y = index.to_xy(np.where(both, lat, np.nan), np.where(both, lon, np.nan))
+        _, rms = trust_filter(t, x, y, both, gps_cfg)
+        for w, r in rms.items():
+            col = f"rms_{w}"
+            if col in f.columns:
+                f.loc[deg, col] = r[deg]
+        rows = np.flatnonzero(deg)
+        m = index.match_xy(x[rows], y[rows], max_offset_m=gps_cfg.max_offset_m)
+        m = m[m["best"].to_numpy()]
+        at = rows[m["fix"].to_numpy()]
+        f.loc[at, "km_m"] = m["km_m"].to_numpy()
+        f.loc[at, "offset_m"] = m["offset_m"].to_numpy()
+        f.loc[at, "line_code"] = m["line_code"].astype(str).to_numpy()
+        f.loc[at, "track"] = m["track"].astype(str).to_numpy()
+    return GpsAnalysis(f, ga.decisions, ga.crossovers)
+
+
+def check_run(
+    run: Run,
+    network: Network,
+    possessions: list[Possession],
+    gps_cfg: GpsConfig | None = None,
+    cfg: PossessionConfig | None = None,
+) -> RunCheck:
+    """Read a run's GPS and cab streams, analyse each on-rail period, apply the rules.
+
+    Raises InputError when run.json, its start_time or a needed stream cannot be read.
+    """
+    gps_cfg = gps_cfg or GpsConfig()
+    cfg = cfg or PossessionConfig()
+    if run.meta is None:
+        bad = [f for f in run.findings if f.severity == "error"]
+        raise InputError(bad[0].message if bad else "run.json is invalid", path=run.folder / "run.json")
+    start = parse_start_time(run)
+    gps = _stream(run, "gps")
+    cab = _stream(run, "cab")
+    return check_streams(gps, cab, start, network, possessions, gps_cfg, cfg, run=str(run.folder), run_id=run.run_id)
+
+
+def check_streams(
+    gps: pd.DataFrame | None,
+    cab: pd.DataFrame | None,
+    start: datetime,
+    network: Network,
+    possessions: list[Possession],
+    gps_cfg: GpsConfig | None = None,
+    cfg: PossessionConfig | None = None,
+    *,
+    run: str = "",
+    run_id: str = "",
+) -> RunCheck:
+    """:func:`check_run` on stream frames (``gps``, ``cab`` as in ``schemas.logs``)."""
+    gps_cfg = gps_cfg or GpsConfig()
+    cfg = cfg or PossessionConfig()
+    if gps is not None:
+        gps = gps[gps["t"].notna()].sort_values("t", kind="stable").reset_index(drop=True)
+    if cab is not None:
+        cab = cab[cab["t"].notna()].sort_values("t", kind="stable").reset_index(drop=True)
+    present = [s for s in (gps, cab) if s is not None and len(s)]
+    t_end = max((float(s["t"].iloc[-1]) for s in present), default=0.0)
+    t_start = min((float(s["t"].iloc[0]) for s in present), default=0.0)
+    spans = rail_periods(cab, t_end, t_start)
+    cycles = build_cycles(tacho=None, imu=None, cab=cab, wheel_diameter_m=1.0, teeth=1, t_end=t_end)
+    if cab is None or "pto" not in cab.columns or cab["pto"].isna().all():
+        cycles.pto[:] = 1
+    index = track_index_for(network)
+    periods = []
+    for t_on, t_off in spans:
+        if gps is not None and len(gps):
+            tt = gps["t"].to_numpy(dtype=float)
+            sl = gps[(tt >= t_on - cfg.lead_s) & (tt <= t_off)].reset_index(drop=True)
+        else:
+            sl = None
+        ga = analyse_gps(sl, network, gps_cfg, cycles, index=index)
+        periods.append(RailPeriod(t_on, t_off, with_degraded_fixes(ga, index, gps_cfg)))
+    return check_periods(periods, possessions, start, gps_cfg, cfg, run=run, run_id=run_id)
+
+
+@dataclass
+class PossessionReport:
+    """What ``trainpos possession check`` shows: every run's check and the plan's warnings."""
+
+    checks: list[RunCheck]
+    plan: Plan
+    db: str
+
+    @property
+    def n_alarms(self) -> int:
+        return sum(len(c.alarms) for c in self.checks)
+
+    def to_json(self) -> dict[str, Any]:
+        return checks_json(self.checks)
+
+
+def check_files(
+    run_dirs: list[Path], db_path: Path, plan_path: Path, config_path: Path | None = None
+) -> PossessionReport:
+    """Read the DB, the plan (FindingsError on plan errors) and every run, and check each run.
+
+    InputError (exit 2) when the DB, the plan, the config or a run cannot be read.
+    """
+    from dbtools.database import read_network
+    from fieldlogs.io import read_run
+    from fieldlogs.plans import load_plan
+
+    gps_cfg, cfg = load_config(config_path)
+    network = read_network(Path(db_path))
+    plan = load_plan(Path(plan_path), network)
+    runs = [read_run(Path(r)) for r in run_dirs]
+    checks = [check_run(r, network, plan.possessions, gps_cfg, cfg) for r in runs]
+    return PossessionReport(checks, plan, str(db_path))

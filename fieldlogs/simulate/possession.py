@@ -1,0 +1,242 @@
+"""Road-rail runs paired with possession plans, with deliberate mistakes (tests, bench).
+
+``make_case(network, kind, seed)`` draws a possession (line, track, 400–800 m section), a
+level crossing inside it where the vehicle goes on rail from a road position beside the
+track, work movements back and forth inside the section at 10–20 km/h, and the plan's
+times around the run; then simulates the run (``fieldlogs.simulate``) and states which
+alarms the plan and the run must give (``expected``). Kinds:
+
+* ``correct`` — everything as planned: no alarm;
+* ``wrong_track`` — the vehicle goes on rail on the other track of the line;
+* ``overrun`` — one work movement runs 10–50 m past an end of the section;
+* ``early_release`` — the plan's ``released_at`` falls while the vehicle is on rail;
+* ``not_started`` — on rail before ``started_at`` (started late, or never).
+
+``poor_sky=True`` adds a 60–200 m poor-sky stretch inside the section (multipath, fix 1,
+extra noise: ``gps.poor_sky_*``); ``tacho`` adds a tachometer stream. About half the cases
+carry decoy possessions that must not be matched (another night; the other track far away).
+Everything is drawn from ``np.random.default_rng(seed)``.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dbtools.network import Network
+from fieldlogs.io import LogFormat, RunMeta, write_run
+from fieldlogs.plans import Possession, plan_frame
+from fieldlogs.simulate import Scenario, scenario_from_dict, simulate_run
+
+KINDS = ("correct", "wrong_track", "overrun", "early_release", "not_started")
+#: Wall-clock time of the earliest run start (runs start up to 2 h later).
+BASE_TIME = "2026-01-16T00:30:00+09:00"
+#: Alarm each mistake must give.
+EXPECTED_ALARM = {
+    "wrong_track": "wrong_track",
+    "overrun": "overrun",
+    "early_release": "released_on_rail",
+    "not_started": "not_started",
+}
+
+
+@dataclass
+class PossessionCase:
+    name: str
+    kind: str
+    seed: int
+    poor_sky: bool
+    scenario: Scenario
+    streams: dict[str, pd.DataFrame]
+    meta: RunMeta
+    possessions: list[Possession]
+    work_no: str
+    line_code: str
+    plan_track: str
+    run_track: str
+    km_from_m: float
+    km_to_m: float
+    t_on: float
+    t_off: float
+    expected: list[dict[str, Any]] = field(default_factory=list)
+    """``{"type", "t_true"}`` per alarm the case must give (t_true: the true event time [s])."""
+
+    def write(self, folder: Path, fmt: LogFormat = "parquet", force: bool = False) -> tuple[Path, Path]:
+        """Write ``folder/<name>/`` (the run) and ``folder/<name>.csv`` (its plan)."""
+        folder = Path(folder)
+        run_dir = write_run(folder / self.name, self.meta, self.streams, fmt=fmt, force=force)
+        plan = folder / f"{self.name}.csv"
+        plan_frame(self.possessions).to_csv(plan, index=False, lineterminator="\n")
+        return run_dir, plan
+
+
+def _tracks(network: Network, line: str) -> dict[str, tuple[float, float]]:
+    g = network.gis[network.gis["line_code"].astype(str) == line]
+    return {str(t): (float(s["km_m"].min()), float(s["km_m"].max())) for t, s in g.groupby("track")}
+
+
+def _minute(t: datetime) -> datetime:
+    return t.replace(second=0, microsecond=0)
+
+
+def make_case(
+    network: Network,
+    kind: str,
+    seed: int,
+    *,
+    poor_sky: bool = False,
+    tacho: bool = False,
+    line_code: str | None = None,
+) -> PossessionCase:
+    """One (run, plan) pair; see the module docstring."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {', '.join(KINDS)}")
+    rng = np.random.default_rng(seed)
+    line = line_code or sorted(set(network.gis["line_code"].astype(str)))[0]
+    tracks = _tracks(network, line)
+    names = sorted(tracks)
+    plan_track = str(rng.choice(names))
+    others = [t for t in names if t != plan_track]
+    run_track = others[0] if kind == "wrong_track" and others else plan_track
+    lo = max(a for a, _ in tracks.values()) + 300.0
+    hi = min(b for _, b in tracks.values()) - 300.0
+    length = float(rng.uniform(400.0, 800.0))
+    km_from = float(np.round(rng.uniform(lo, hi - length), -1))
+    km_to = km_from + float(np.round(length, -1))
+
+    def inner() -> float:
+        return float(rng.uniform(25.0, 60.0))
+
+    km_on = float(rng.uniform(km_from + 40.0, km_to - 40.0))
+    n_turns = int(rng.integers(2, 5))
+    high = bool(rng.random() < 0.5)
+    path = [km_on]
+    for _ in range(n_turns):
+        if rng.random() < 0.75:
+            path.append(km_to - inner() if high else km_from + inner())
+            high = not high
+        else:
+            path.append(float(rng.uniform(km_from + 60.0, km_to - 60.0)))
+    path.append(float(rng.uniform(km_from + 40.0, km_to - 40.0)))
+    if kind == "overrun":
+        i = int(rng.integers(1, len(path) - 1))
+        beyond = float(rng.uniform(10.0, 50.0))
+        path[i] = km_to + beyond if path[i] > 0.5 * (km_from + km_to) else km_from - beyond
+    path = [path[0]] + [b for a, b in itertools.pairwise(path) if abs(b - a) > 5.0]
+    start = datetime.fromisoformat(BASE_TIME) + timedelta(minutes=int(rng.integers(0, 120)))
+    over: dict[str, Any] = {
+        "name": f"possession case {kind} {seed}",
+        "run": {
+            "run_id": f"PZ-{kind}-{seed}",
+            "vehicle_id": f"RR-{seed % 7 + 1:02d}",
+            "vehicle_kind": "road_rail",
+            "start_time": start.isoformat(),
+        },
+        "route": {"line_code": line, "track": run_track, "path_km_m": path, "start_cab": "F"},
+        "running": {
+            "line_speed_kmh": float(rng.uniform(10.0, 20.0)),
+            "accel_kmh_s": 1.5,
+            "brake_kmh_s": 2.0,
+            "dwell_s": float(rng.uniform(15.0, 40.0)),
+            "reversal_dwell_s": float(rng.uniform(20.0, 60.0)),
+        },
+        "road_rail": {
+            "off_rail_before_s": float(rng.uniform(60.0, 120.0)),
+            "off_rail_after_s": 60.0,
+            "road_offset_m": float(rng.choice([-1.0, 1.0]) * rng.uniform(6.0, 15.0)),
+            "transfer_s": float(rng.uniform(15.0, 30.0)),
+        },
+        "sensors": {"imu": False, "tacho": tacho, "gps": True, "balise": False, "radar": False, "truth": True},
+        "slip": {"slips": 0, "slides": 0},
+    }
+    if poor_sky:
+        a = float(rng.uniform(km_from, km_to - 60.0))
+        over["gps"] = {"poor_sky_km_m": [[a, min(a + float(rng.uniform(60.0, 200.0)), km_to)]]}
+    scenario = scenario_from_dict(over, source=f"possession case {kind} {seed}")
+    streams, meta = simulate_run(network, scenario, seed=seed)
+    cab = streams["cab"]
+    pto = cab["pto"].to_numpy(dtype=float, na_value=0.0)
+    t_on = float(cab["t"].to_numpy()[np.flatnonzero(pto > 0)[0]])
+    t_off = float(cab["t"].to_numpy()[np.flatnonzero((pto < 1) & (cab["t"].to_numpy() > t_on))[0]])
+    on_wall = start + timedelta(seconds=t_on)
+    off_wall = start + timedelta(seconds=t_off)
+    planned_start = _minute(start - timedelta(minutes=float(rng.uniform(5.0, 30.0))))
+    planned_end = _minute(off_wall + timedelta(minutes=float(rng.uniform(10.0, 40.0))))
+    started_at: datetime | None = _minute(start - timedelta(minutes=float(rng.uniform(1.0, 10.0))))
+    released_at: datetime | None = _minute(off_wall + timedelta(minutes=float(rng.uniform(2.0, 15.0))))
+    expected: list[dict[str, Any]] = []
+    if kind == "not_started":
+        if rng.random() < 0.5:
+            started_at = None
+        else:
+            started_at = (on_wall + timedelta(seconds=float(rng.uniform(30.0, 0.5 * (t_off - t_on))))).replace(
+                microsecond=0
+            )
+        expected.append({"type": "not_started", "t_true": t_on})
+    elif kind == "early_release":
+        released_at = (on_wall + timedelta(seconds=float(rng.uniform(0.3, 0.8) * (t_off - t_on)))).replace(
+            microsecond=0
+        )
+        expected.append({"type": "released_on_rail", "t_true": (released_at - start).total_seconds()})
+    elif kind == "wrong_track":
+        expected.append({"type": "wrong_track", "t_true": t_on})
+    elif kind == "overrun":
+        truth = streams["truth"]
+        km = truth["km_m"].to_numpy(dtype=float, na_value=np.nan)
+        out = np.flatnonzero((km > km_to) | (km < km_from))
+        expected.append({"type": "overrun", "t_true": float(truth["t"].to_numpy()[out[0]])})
+    work = f"W{seed:05d}"
+    possessions = [
+        Possession(work, line, plan_track, km_from, km_to, planned_start, planned_end, started_at, released_at)
+    ]
+    if rng.random() < 0.5:
+        day = timedelta(days=1)
+        possessions.append(
+            Possession(f"{work}-N", line, plan_track, km_from, km_to, planned_start + day, planned_end + day, None)
+        )
+        far = km_to + 1500.0 if km_to + 2000.0 < hi else km_from - 2000.0
+        if others and far > lo:
+            possessions.append(
+                Possession(
+                    f"{work}-A", line, others[0], far, far + 500.0, planned_start, planned_end, started_at, released_at
+                )
+            )
+    return PossessionCase(
+        name=f"pz-{kind}-{seed}{'-poor' if poor_sky else ''}",
+        kind=kind,
+        seed=seed,
+        poor_sky=poor_sky,
+        scenario=scenario,
+        streams=streams,
+        meta=meta,
+        possessions=possessions,
+        work_no=work,
+        line_code=line,
+        plan_track=plan_track,
+        run_track=run_track,
+        km_from_m=km_from,
+        km_to_m=km_to,
+        t_on=t_on,
+        t_off=t_off,
+        expected=expected,
+    )
+
+
+def make_cases(
+    network: Network, n: int, seed0: int = 1000, *, poor_sky_every: int = 3, tacho_every: int = 0
+) -> list[PossessionCase]:
+    """``n`` cases cycling through the kinds (every ``poor_sky_every``-th with poor sky,
+    every ``tacho_every``-th with a tachometer; 0 = never)."""
+    out = []
+    for i in range(n):
+        kind = KINDS[i % len(KINDS)]
+        poor = poor_sky_every > 0 and (i // len(KINDS)) % poor_sky_every == poor_sky_every - 1
+        tacho = tacho_every > 0 and i % tacho_every == 0
+        out.append(make_case(network, kind, seed0 + i, poor_sky=poor, tacho=tacho))
+    return out
