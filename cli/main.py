@@ -13,6 +13,7 @@ app = typer.Typer(
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     add_completion=False,
+    rich_markup_mode=None,  # help texts are plain: units like [m] must not vanish as markup
 )
 app.add_typer(db.app, name="db")
 app.add_typer(gis.app, name="gis")

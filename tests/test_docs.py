@@ -70,11 +70,15 @@ def test_readme_examples_name_real_commands_and_options() -> None:
                 assert token.split("=")[0] in known, f"README: `trainpos {' '.join(path)}` has no option {token}"
 
 
-def test_help_runs_for_every_command() -> None:
+def test_help_runs_for_every_command_and_keeps_units() -> None:
     runner = CliRunner()
-    for path in COMMANDS:
-        result = runner.invoke(app, [*path, "--help"])
+    for path, cmd in COMMANDS.items():
+        result = runner.invoke(app, [*path, "--help"], env={"COLUMNS": "400"})
         assert result.exit_code == 0, (path, result.output)
+        flat = " ".join(result.output.split())
+        for p in cmd.params:
+            for unit in re.findall(r"\[[^\]]+\]", getattr(p, "help", None) or ""):
+                assert unit in flat, f"`trainpos {' '.join(path)} --help` lost {unit} (rich markup?)"
 
 
 def test_exit_codes_documented() -> None:
