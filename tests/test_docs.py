@@ -84,3 +84,9 @@ def test_help_runs_for_every_command_and_keeps_units() -> None:
 def test_exit_codes_documented() -> None:
     for code in ("| 0 |", "| 1 |", "| 2 |", "| 3 |", "| 4 |"):
         assert code in README
+
+
+def test_readme_schema_tables_match_the_declarations() -> None:
+    from cli.schema_docs import with_schemas
+
+    assert with_schemas(README) == README, "README schema section is stale: run python -m cli.schema_docs"
