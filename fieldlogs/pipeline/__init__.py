@@ -76,7 +76,7 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
             "run.json is missing or invalid", [f for f in run.findings if f.severity == Severity.ERROR], path=run.folder
         )
     pre: list[Event] = []
-    streams = {n: _clean(run.stream(n), n, pre) for n in ("tacho", "imu", "balise", "gps", "cab", "truth")}
+    streams = {n: _clean(run.stream(n), n, pre) for n in ("tacho", "imu", "balise", "gps", "cab", "truth", "radar")}
     t_end = max((float(s["t"].iloc[-1]) for s in streams.values() if s is not None and len(s)), default=0.0)
     cycles = build_cycles(
         tacho=streams["tacho"],
@@ -88,7 +88,7 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
         cycle_s=cfg.cycle_s,
     )
     odo = (
-        correct_odometry(cycles, cfg.odometry)
+        correct_odometry(cycles, cfg.odometry, radar_on_cycles(streams["radar"], cycles.t))
         if cycles.has_imu and cycles.has_tacho
         else pulse_only_odometry(cycles.d_pulse, cycles.v_pulse)
     )
@@ -127,6 +127,19 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
         summary["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
     kappa = getattr(features, "kappa", None)
     return PipelineResult(run.run_id, sol.positions, ev_frame, summary, odo, gps, kappa, truth, cycles)
+
+
+def radar_on_cycles(radar: pd.DataFrame | None, t: np.ndarray, max_gap_s: float = 1.0) -> np.ndarray | None:
+    """Radar ground speed interpolated onto the cycle times; NaN farther than ``max_gap_s``
+    from a radar sample (no radar, no bridging)."""
+    if radar is None or len(radar) < 2:
+        return None
+    tr = radar["t"].to_numpy(dtype=float)
+    v = radar["speed_mps"].to_numpy(dtype=float, na_value=np.nan)
+    out = np.interp(t, tr, v)
+    j = np.clip(np.searchsorted(tr, t), 1, len(tr) - 1)
+    gap = np.minimum(np.abs(t - tr[j - 1]), np.abs(tr[j] - t))
+    return np.where(gap <= max_gap_s, out, np.nan)
 
 
 def events_frame(events: list[Event]) -> pd.DataFrame:

@@ -53,8 +53,9 @@ def cycle_index(t_cycles: FloatArray, t_samples: FloatArray) -> npt.NDArray[np.i
     return np.searchsorted(t_cycles, t_samples, side="left")
 
 
-def cycle_means(t_cycles: FloatArray, t_samples: FloatArray, values: FloatArray,
-                idx: npt.NDArray[np.intp] | None = None) -> FloatArray:
+def cycle_means(
+    t_cycles: FloatArray, t_samples: FloatArray, values: FloatArray, idx: npt.NDArray[np.intp] | None = None
+) -> FloatArray:
     """Mean of the samples in each cycle ``(t[k−1], t[k]]`` (NaN for empty cycles).
 
     Samples must be sorted by time (they are: the pipeline sorts its streams), so each

@@ -122,10 +122,20 @@ SPEED_AVG_S = 1.0
 #: How far before the look-back point the start-point search may go [s].
 SEARCH_SPAN_S = 3.0
 CYCLE_S = 0.1
+#: Error budget of a radar-bridged episode: this share of its distance plus a constant [%, m].
+RADAR_ERROR_PCT = 1.0
+RADAR_ERROR_M = 0.5
 
 
-def correct_odometry(cycles: Cycles, cfg: OdometryConfig) -> Odometry:
-    """Pulse odometry with slip/slide episodes replaced by the inertial solution (SPEC §5.1)."""
+def correct_odometry(cycles: Cycles, cfg: OdometryConfig, radar_mps: FloatArray | None = None) -> Odometry:
+    """Pulse odometry with slip/slide episodes replaced by the inertial solution (SPEC §5.1).
+
+    ``radar_mps``: an independent ground speed on the cycle grid (2-frequency CW radar
+    [S004]; NaN where there is none). Detection is unchanged, but over an episode the
+    radar covers completely its speed replaces the inertial one: it does not drift, so the
+    episode's error budget is the radar's (1 % of the distance + 0.5 m) when smaller than
+    eq. 13's.
+    """
     n = cycles.n
     d_pulse = np.nan_to_num(np.asarray(cycles.d_pulse, dtype=float), nan=0.0)
     v_pulse = np.nan_to_num(np.asarray(cycles.v_pulse, dtype=float), nan=0.0)
@@ -133,7 +143,7 @@ def correct_odometry(cycles: Cycles, cfg: OdometryConfig) -> Odometry:
         return pulse_only_odometry(d_pulse, v_pulse)
     s = _Streams(cycles, cfg, d_pulse, v_pulse)
     episodes = s.find_episodes()
-    return s.assemble(episodes)
+    return s.assemble(episodes, radar_mps)
 
 
 @dataclass
@@ -414,7 +424,7 @@ class _Streams:
         return ep, v_in
 
     # ------------------------------------------------------------------ output
-    def assemble(self, found: list[tuple[SlipEpisode, FloatArray]]) -> Odometry:
+    def assemble(self, found: list[tuple[SlipEpisode, FloatArray]], radar: FloatArray | None = None) -> Odometry:
         n, t = self.n, self.t
         d_pulse, v_pulse = self.d_pulse, self.v_pulse
         v = v_pulse.copy()
@@ -431,6 +441,11 @@ class _Streams:
                 v_in = np.concatenate([v_in, np.full(n - 1 - e, v_in[-1])])
                 e = n - 1
                 ep.i_end = e
+            use_radar = radar is not None and bool(np.isfinite(radar[s : e + 1]).all())
+            if use_radar:
+                assert radar is not None
+                v_in = radar[s : e + 1].astype(float)
+            ep.detail["speed_source"] = "radar" if use_radar else "inertial"
             d_s = d_pulse[s] + offset
             inc = np.concatenate([[0.0], v_in[1:] * self.dt[s + 1 : e + 1]])
             d_seg = d_s + np.cumsum(inc)
@@ -441,6 +456,8 @@ class _Streams:
             off_step[e + 1] += new_offset - offset
             offset = new_offset
             budget = slip_budget_m(float(t[e] - t[s]), da)
+            if use_radar:
+                budget = min(budget, RADAR_ERROR_PCT / 100.0 * float(d_seg[-1] - d_seg[0]) + RADAR_ERROR_M)
             allow_step[e + 1] += budget
             growth.append((s, e, budget))
             ep.t_start, ep.t_end = float(t[s]), float(t[e])
@@ -449,9 +466,10 @@ class _Streams:
             ep.d_corrected_m = float(d_seg[-1] - d_seg[0])
         d = d_pulse + np.cumsum(off_step)[:n]
         allowance = np.cumsum(allow_step)[:n]
-        for (s, d_seg), (_, e, _) in zip(seg_d, growth, strict=True):
+        for (s, d_seg), (_, e, budget) in zip(seg_d, growth, strict=True):
             d[s : e + 1] = d_seg
-            allowance[s + 1 : e + 1] += 0.5 * da * (t[s + 1 : e + 1] - t[s]) ** 2
+            grow = 0.5 * da * (t[s + 1 : e + 1] - t[s]) ** 2
+            allowance[s + 1 : e + 1] += np.minimum(grow, budget)
         return Odometry(d, v, slipping, allowance, [ep for ep, _ in found])
 
 
