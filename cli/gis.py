@@ -2,17 +2,33 @@
 
 from __future__ import annotations
 
+import io
+import json
+import sys
+import time
+from enum import StrEnum
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pandas as pd
 import typer
+from rich.console import Console
+from rich.progress import Progress, TaskID
 
 from cli.errors import cli_command
-from cli.render import console, frame_table, key_value_table, print_findings
+from cli.render import console, err_console, frame_table, key_value_table, print_findings, progress
 from dbtools.gis.io import grid_files
+from dbtools.gis.verify import VerifyConfig, proposed_network
+from dbtools.sources import write_source_set
+from schemas.errors import EXIT_FINDINGS, RefusedError, UsageError
 from schemas.units import format_km
 
-app = typer.Typer(help="Build the 20 m GIS kilometrage grid from surveys.", no_args_is_help=True)
+if TYPE_CHECKING:
+    from fieldlogs.gisevidence import VerifyReport
+
+app = typer.Typer(
+    help="Build the 20 m GIS kilometrage grid from surveys; verify it against GPS runs.", no_args_is_help=True
+)
 
 
 @app.command("grid")
@@ -66,3 +82,201 @@ def grid(
         ]
     )
     out_c.print(frame_table(tracks, title="Tracks"))
+
+
+class VerifyFmt(StrEnum):
+    table = "table"
+    json = "json"
+    html = "html"
+
+
+class _Bar:
+    """The library's ``progress(done, total, run)`` callback as a Rich bar with runs/s,
+    shown from the first report on (not while the DB is read or runs are searched)."""
+
+    def __init__(self, bar: Progress) -> None:
+        self.bar = bar
+        self.task: TaskID | None = None
+        self.started = time.perf_counter()
+
+    def __call__(self, done: int, total: int, _run: str) -> None:
+        if self.task is None:
+            self.bar.start()
+            self.task = self.bar.add_task("replaying runs", total=total, rate="")
+        dt = time.perf_counter() - self.started
+        self.bar.update(self.task, completed=done, total=total, rate=f"{done / dt:.2f} runs/s" if dt > 0 else "")
+
+
+def _km_range(a: float, b: float) -> str:
+    return f"{format_km(a, 0)}–{format_km(b, 0)}"
+
+
+def render_verification(report: VerifyReport, c: Console) -> None:
+    """Terminal tables of ``gis verify``: summary, coverage, defects, proposal."""
+    v = report.verification
+    ev = report.evidence
+    rows: list[tuple[str, object]] = [
+        ("DB", f"{report.db} (version {report.db_version or '—'})"),
+        ("runs", len(report.runs)),
+        ("GPS fixes", f"{ev.get('gps_fixes', 0):,} ({ev.get('trusted', 0):,} trusted)"),
+        (
+            "left out",
+            f"{ev.get('no_position', 0):,} track unknown or position undetermined, "
+            f"{ev.get('track_conflict', 0):,} GPS decision ≠ pipeline track, "
+            f"{v.counts.get('fixes_far', 0):,} beyond {v.config.max_offset_m:g} m",
+        ),
+        ("fixes used", f"{v.counts.get('fixes_matched', 0):,}"),
+        ("cells", ", ".join(f"{n} {s}" for s, n in v.cells["status"].value_counts().sort_index().items()) or "—"),
+    ]
+    r = v.km_residual
+    if r.get("n"):
+        rows.append(("along-track residual", f"median {r['median_m']:+.2f} m, sd {r['sd_m']} m (n {r['n']:,})"))
+    rows.append(("defects", len(v.defects)))
+    c.print(key_value_table(rows, title="GIS verification"))
+    cov = v.coverage
+    c.print(
+        frame_table(
+            pd.DataFrame(
+                {
+                    "line": cov["line_code"],
+                    "track": cov["track"],
+                    "km": [f"{k:.2f}" for k in cov["length_km"]],
+                    "verified": _shares(cov["verified_km"], cov["verified_share"]),
+                    "unverified": _shares(cov["unverified_km"], cov["unverified_share"]),
+                    "defect": _shares(cov["defect_km"], cov["defect_share"]),
+                    "defects": cov["defects"],
+                    "runs": cov["runs"],
+                    "fixes": cov["fixes"],
+                }
+            ),
+            title="Coverage (km, share of the track)",
+        )
+    )
+    if len(v.defects):
+        d = v.defects
+        shown = pd.DataFrame(
+            {
+                "#": d["defect_id"],
+                "line": d["line_code"],
+                "track": d["track"],
+                "km": [_km_range(a, b) for a, b in zip(d["km_from_m"], d["km_to_m"], strict=True)],
+                "shift m": [f"{x:+.2f}" for x in d["shift_m"]],
+                "spread m": [f"{x:.2f}" for x in d["spread_m"]],
+                "runs": d["runs"],
+                "fixes": d["fixes"],
+                "p": [f"{x:.0e}" for x in d["p_value"]],
+                "moved": d["points_moved"],
+            }
+        )
+        c.print(frame_table(shown, title="Defects (shift + = the track lies left of the GIS in increasing km)"))
+
+
+def _shares(km: pd.Series, share: pd.Series) -> list[str]:
+    return [f"{k:.2f} {100 * s:.0f}%" if s == s else f"{k:.2f}" for k, s in zip(km, share, strict=True)]
+
+
+@app.command("verify")
+@cli_command
+def verify(
+    db: Path = typer.Argument(..., help="Onboard DB under test (.sqlite)."),
+    runs: list[Path] = typer.Argument(..., help="Run folders, or folders to search for runs (run.json)."),
+    fmt: VerifyFmt = typer.Option(VerifyFmt.table, "--format", help="table, json or html (html needs --out)."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write the report to this file instead of stdout."),
+    propose: Path | None = typer.Option(
+        None, "--propose", help="Write a corrected source set here (defect cells' GIS points moved)."
+    ),
+    force: bool = typer.Option(False, "--force", help="Replace an existing --propose folder or --out file."),
+    config: Path | None = typer.Option(None, "--config", help="Pipeline parameters (TOML)."),
+    alpha: float = typer.Option(0.01, "--alpha", min=1e-12, max=0.5, help="Significance after BH correction."),
+    bonferroni: bool = typer.Option(False, "--bonferroni", help="Bonferroni instead of Benjamini–Hochberg."),
+    min_shift: float = typer.Option(0.5, "--min-shift", min=0.0, help="Smallest offset worth correcting [m]."),
+    min_runs: int = typer.Option(3, "--min-runs", min=2, help="Fewer runs through a cell → unverified."),
+    min_fixes: int = typer.Option(5, "--min-fixes", min=1, help="Fewer fixes in a cell → unverified."),
+    tolerance: float = typer.Option(
+        1.5, "--tolerance", min=0.01, help="Verified only if the 95 % interval is within ±this [m]."
+    ),
+    max_km_margin: float = typer.Option(
+        10.0, "--max-km-margin", min=0.0, help="Pipeline margin up to which its km is the along-track reference [m]."
+    ),
+    workers: int = typer.Option(1, "--workers", "-j", min=1, help="Processes replaying runs."),
+) -> None:
+    """Verify the 20 m GIS grid against the trusted GPS fixes of recorded runs.
+
+    Every run is replayed through the positioning pipeline on DB; trusted fixes on a track
+    known from balises or the GPS up/down decision (never guessed) are map-matched to that
+    track. Per 20 m cell the runs' mean lateral offsets are t-tested against 0 (the run is
+    the unit, the spread is at least the track's pooled one), Benjamini–Hochberg over all
+    cells; a defect needs |mean| ≥ --min-shift. Neighbouring defect cells merge into
+    defects. Cells with little evidence are unverified, never good.
+
+    JSON (--format json): {"db", "db_version", "evidence", "runs", "config", "counts",
+    "km_residual", "coverage": [per line/track], "defects": [...], "proposal": [moved
+    points], "cells": [every cell with at least one fix]}.
+
+    Exit codes: 0 no defect, 1 defects found, 2 unreadable DB/run or bad usage,
+    3 --propose/--out exists (use --force).
+
+    Example: trainpos gis verify net.sqlite logs/ --format html --out gis.html --propose src-fixed/
+    """
+    from fieldlogs.gisevidence import verify_runs
+    from fieldlogs.pipeline import PipelineConfig
+
+    if fmt == VerifyFmt.html and out is None:
+        raise UsageError("--format html needs --out FILE")
+    for target in (out, propose):
+        if target is not None and target.exists() and not force:
+            if target.is_file() or any(target.iterdir()):
+                raise RefusedError("exists; use --force to replace it", path=target)
+    cfg = VerifyConfig(
+        alpha=alpha,
+        correction="bonferroni" if bonferroni else "bh",
+        min_shift_m=min_shift,
+        min_runs=min_runs,
+        min_fixes=min_fixes,
+        tolerance_m=tolerance,
+    )
+    pipeline = PipelineConfig.from_toml(config) if config else PipelineConfig()
+    bar = _Bar(progress(err_console()))
+    try:
+        report = verify_runs(
+            db, runs, pipeline=pipeline, config=cfg, max_km_margin_m=max_km_margin, workers=workers, progress=bar
+        )
+    finally:
+        if bar.task is not None:
+            bar.bar.stop()
+    v = report.verification
+    if propose is not None:
+        write_source_set(proposed_network(report.network, v), propose, force=True)
+        moved = len(v.proposal)
+        err_console().print(
+            f"proposed source set written to {propose} ({moved} GIS point(s) moved)"
+            + ("; build it with: trainpos db build " + str(propose) + " --out NEW.sqlite" if moved else ""),
+            highlight=False,
+        )
+    if fmt == VerifyFmt.html:
+        from fieldlogs.gisplots import render_html
+
+        assert out is not None
+        _write(out, render_html(report))
+        console().print(f"HTML report written to {out}")
+    elif fmt == VerifyFmt.json:
+        text = json.dumps(report.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
+        if out:
+            _write(out, text)
+        else:
+            sys.stdout.write(text)
+    elif out:
+        buf = io.StringIO()
+        render_verification(report, Console(file=buf, width=160, color_system=None))
+        _write(out, buf.getvalue())
+    else:
+        render_verification(report, console())
+    if v.has_defects:
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+def _write(path: Path, text: str) -> None:
+    from dbtools.atomic import atomic_file
+
+    with atomic_file(path, force=True) as tmp:
+        tmp.write_text(text, encoding="utf-8")
