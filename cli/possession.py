@@ -102,7 +102,9 @@ def check(
     ),
     fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json or html."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
-    config: Path | None = typer.Option(None, "--config", help="TOML with gps and possession sections (see fieldlogs/possession.py)."),
+    config: Path | None = typer.Option(
+        None, "--config", help="TOML with gps and possession sections (see fieldlogs/possession.py)."
+    ),
 ) -> None:
     """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.
 

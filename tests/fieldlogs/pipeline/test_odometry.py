@@ -381,7 +381,7 @@ def test_radar_bridges_the_episode_with_ground_speed() -> None:
     (ep,) = odo.episodes
     assert ep.detail["speed_source"] == "radar"
     assert (ep.t_start, ep.t_end) == (plain.episodes[0].t_start, plain.episodes[0].t_end)
-    err, _, true = episode_error(odo, sc)
+    err, _, _ = episode_error(odo, sc)
     assert abs(err) < 0.005
     assert ep.max_error_m == pytest.approx(0.01 * ep.d_corrected_m + 0.5)
     assert ep.max_error_m < plain.episodes[0].max_error_m
