@@ -2,18 +2,45 @@
 
 from __future__ import annotations
 
+import io
+import json
 import time
 from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
+import pandas as pd
 import typer
+from rich.console import Console
+from rich.progress import Progress, TaskID
 
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_json, progress
 from fieldlogs.audit import audit as run_audit
 from fieldlogs.pipeline import PipelineConfig
-from fieldlogs.report import build_report, report_json
-from schemas.errors import UsageError
+from fieldlogs.report import ROUTE_KEYS, Report, build_report, report_json
+from schemas.errors import EXIT_FINDINGS, UsageError
+
+
+class ProgressBar:
+    """Adapts the library's ``progress(done, total, run)`` callback to a Rich bar with
+    runs/s (runs processed by this call, not the ones skipped up front) and ETA."""
+
+    def __init__(self, bar: Progress, description: str) -> None:
+        self.bar = bar
+        self.task: TaskID = bar.add_task(description, total=None, rate="")
+        self.first: int | None = None
+        self.started = time.perf_counter()
+
+    def __call__(self, done: int, total: int, _run: str) -> None:
+        if self.first is None:  # runs skipped without reading them: not part of the rate/ETA
+            self.first = done
+            self.started = time.perf_counter()
+            self.bar.reset(self.task, total=total, completed=done)
+            return
+        dt = time.perf_counter() - self.started
+        rate = (done - self.first) / dt if dt > 0 else 0.0
+        self.bar.update(self.task, completed=done, total=total, rate=f"{rate:.2f} runs/s")
 
 
 @cli_command
@@ -22,27 +49,30 @@ def audit(
     db: Path = typer.Option(..., "--db", help="Onboard DB (.sqlite)."),
     out: Path = typer.Option(..., "--out", "-o", help="Audit database (created, or resumed if it exists)."),
     workers: int | None = typer.Option(None, "--workers", "-j", min=1, help="Processes (default: all cores)."),
-    dask_scheduler: str | None = typer.Option(None, "--dask-scheduler", help="Run on this Dask cluster instead."),
+    dask_scheduler: str | None = typer.Option(
+        None, "--dask-scheduler", help="Run on this Dask cluster (tcp://host:8786) instead of local processes."
+    ),
     config: Path | None = typer.Option(None, "--config", help="Pipeline parameters (TOML)."),
 ) -> None:
-    """Run the pipeline on every run found and store the results as each run finishes.
+    """Run the positioning pipeline on every run found and store the results as each run finishes.
 
-    Resumes an interrupted audit; skips runs already audited with the same files, DB
-    content and config; a failing run is recorded with its error and the others go on.
+    Resumes an interrupted audit; skips runs already audited with the same file contents,
+    DB content and config; a failing run is recorded with its error and the others go on.
+    Exit 0 when every run was audited (or skipped), 1 when some run failed, 2 when the DB,
+    a log root or the audit database cannot be read.
 
     Example: trainpos audit logs/ --db net.sqlite --out audit.sqlite --workers 2
     """
     cfg = PipelineConfig.from_toml(config) if config else PipelineConfig()
-    started = time.perf_counter()
     with progress(err_console()) as bar:
-        task = bar.add_task("auditing", total=None, rate="")
-
-        def on_progress(done: int, total: int, _run: str) -> None:
-            dt = time.perf_counter() - started
-            bar.update(task, completed=done, total=total, rate=f"{done / dt:.2f} runs/s" if dt > 0 else "")
-
         stats = run_audit(
-            log_roots, db, out, config=cfg, workers=workers, scheduler=dask_scheduler, progress=on_progress
+            log_roots,
+            db,
+            out,
+            config=cfg,
+            workers=workers,
+            scheduler=dask_scheduler,
+            progress=ProgressBar(bar, "auditing"),
         )
     rows = [
         ("runs found", stats.total),
@@ -55,6 +85,10 @@ def audit(
     console().print(key_value_table(rows, title=f"Audit → {out}"))
     for path, err in stats.errors[:20]:
         err_console().print(f"[red]failed:[/] {path}: {err.splitlines()[0] if err else ''}", highlight=False)
+    if len(stats.errors) > 20:
+        err_console().print(f"… {len(stats.errors) - 20} more failed runs (see the runs table of {out})")
+    if stats.failed:
+        raise typer.Exit(EXIT_FINDINGS)
 
 
 class By(StrEnum):
@@ -70,15 +104,86 @@ class ReportFmt(StrEnum):
     html = "html"
 
 
+#: Columns of the terminal tables (CSV, JSON and HTML keep the full names) and their labels.
+PCT_COLUMNS = [
+    "n_runs",
+    "distance_km",
+    "n_corrections",
+    "mean_correction_pct",
+    "median_correction_pct",
+    "max_correction_pct",
+    "share_above_target",
+]
+OTHER_COLUMNS = [
+    "n_feature_corrections",
+    "n_feature_refused",
+    "n_slips",
+    "n_slips_readhered",
+    "max_slip_error_m",
+    "gps_decisions",
+    "gps_trusted_share",
+    "n_failsafe",
+    "n_anomalies",
+]
+LABELS = {
+    "line_code": "line",
+    "direction": "dir",
+    "run_id": "run",
+    "vehicle_id": "vehicle",
+    "n_runs": "runs",
+    "distance_km": "km",
+    "n_corrections": "balise corr.",
+    "mean_correction_pct": "mean %",
+    "median_correction_pct": "median %",
+    "max_correction_pct": "max %",
+    "share_above_target": "> target",
+    "n_feature_corrections": "feature corr.",
+    "n_feature_refused": "refused",
+    "refusal_reasons": "failed diagnostics (count)",
+    "n_slips": "slips",
+    "n_slips_readhered": "re-adhered",
+    "max_slip_error_m": "max slip err. m",
+    "gps_decisions": "GPS decisions",
+    "gps_trusted_share": "GPS trusted",
+    "n_failsafe": "fail-safe",
+    "n_anomalies": "anomalies",
+}
+KEYS = {"route": ROUTE_KEYS, "run": ["run_id", "vehicle_id", *ROUTE_KEYS], "vehicle": ["vehicle_id"]}
+
+
+def _view(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:
+    """Rounded, missing values blank, short column labels."""
+    f = frame[cols].round(3)
+    return f.astype(object).where(f.notna(), None).rename(columns=LABELS)
+
+
+def render_tables(rep: Report, c: Console) -> None:
+    keys = KEYS[rep.by]
+    g = rep.groups.assign(distance_km=(rep.groups["distance_m"] / 1000.0).round(1))
+    pct = [col for col in PCT_COLUMNS if not (rep.by == "run" and col == "n_runs")]
+    title = f"Position correction by {rep.by} (balise corrections, target {rep.target_pct:g} %)"
+    c.print(frame_table(_view(g, keys + pct), title=title))
+    c.print(frame_table(_view(g, keys + OTHER_COLUMNS), title=f"Slips, feature points, GPS and alarms by {rep.by}"))
+    refused = g[g["refusal_reasons"] != ""]
+    if len(refused):
+        c.print(frame_table(_view(refused, [*keys, "refusal_reasons"]), title="Feature points refused"))
+    if len(rep.failed_runs):
+        c.print(frame_table(rep.failed_runs, title="Runs that failed"))
+
+
 @cli_command
 def report(
     audit_db: Path = typer.Argument(..., help="Audit database written by `trainpos audit`."),
     by: By = typer.Option(By.route, "--by", help="Group by route (line, track, direction), run or vehicle."),
     fmt: ReportFmt = typer.Option(ReportFmt.table, "--format", help="table, csv, json or html."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
-    target_pct: float = typer.Option(0.5, "--target-pct", help="Position-correction target [%]."),
+    target_pct: float = typer.Option(0.5, "--target-pct", min=0.0, help="Position-correction target [%]."),
 ) -> None:
     """Position-correction percentages, slips, feature points, GPS and alarms per route/run/vehicle.
+
+    Correction statistics are over balise corrections; feature-point corrections are
+    counted separately. JSON has a stable shape (routes, runs, vehicles, failed_runs)
+    whatever --by is; csv and table follow --by; html is one self-contained file.
 
     Example: trainpos report audit.sqlite --format html --out audit.html
     """
@@ -90,22 +195,24 @@ def report(
             raise UsageError("--format html needs --out FILE")
         _write(out, render_html(rep, audit_db))
         console().print(f"HTML report written to {out}")
-        return
-    if fmt == ReportFmt.json:
-        import json
-
-        text = json.dumps(report_json(rep), indent=2, ensure_ascii=False)
-        _write(out, text + "\n") if out else print_json(report_json(rep))
-        return
-    if fmt == ReportFmt.csv:
+    elif fmt == ReportFmt.json:
+        data: Any = report_json(rep)
+        if out:
+            _write(out, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+        else:
+            print_json(data)
+    elif fmt == ReportFmt.csv:
         text = rep.groups.to_csv(index=False, lineterminator="\n")
-        _write(out, text) if out else typer.echo(text, nl=False)
-        return
-    c = console()
-    cols = [c_ for c_ in rep.groups.columns if c_ not in ("refusal_reasons",)]
-    c.print(frame_table(rep.groups[cols].round(3), title=f"Positioning audit by {by.value} (target {target_pct:g} %)"))
-    if len(rep.failed_runs):
-        c.print(frame_table(rep.failed_runs, title="Runs that failed"))
+        if out:
+            _write(out, text)
+        else:
+            typer.echo(text, nl=False)
+    elif out:
+        buf = io.StringIO()
+        render_tables(rep, Console(file=buf, width=200, color_system=None))
+        _write(out, buf.getvalue())
+    else:
+        render_tables(rep, console())
 
 
 def _write(path: Path, text: str) -> None:

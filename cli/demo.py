@@ -6,8 +6,9 @@ from pathlib import Path
 
 import typer
 
+from cli.audit import ProgressBar, render_tables
 from cli.errors import cli_command
-from cli.render import console, err_console, frame_table, print_findings, progress
+from cli.render import console, err_console, print_findings, progress
 from dbtools.build import build_db
 from dbtools.validate import validate_path
 from fieldlogs.audit import audit
@@ -16,7 +17,15 @@ from schemas.errors import InputError
 
 
 def sample_logs_dir() -> Path:
+    """The bundled sample runs (``fieldlogs/sample_logs``, made by ``fieldlogs.samples``)."""
     return Path(__file__).resolve().parent.parent / "fieldlogs" / "sample_logs"
+
+
+def sample_source_dir() -> Path:
+    """The bundled sample network's source set (``dbtools/sample_network``)."""
+    from dbtools.sample_network import sample_source_dir as bundled
+
+    return Path(bundled())
 
 
 @cli_command
@@ -27,11 +36,16 @@ def demo(
     """Build and validate the sample DB (real Kawagoe line geometry), audit the bundled
     sample logs through the positioning pipeline, print the report and write it as HTML.
 
+    Writes OUT/sample-network.sqlite, OUT/audit.sqlite and OUT/report.html (replaced on
+    every run).
+
     Example: trainpos demo --out demo-out
     """
-    from dbtools.sample_network import sample_source_dir
     from fieldlogs.report_html import render_html
 
+    logs = sample_logs_dir()
+    if not logs.is_dir():
+        raise InputError("sample logs are missing from this installation", path=logs)
     c = console()
     out.mkdir(parents=True, exist_ok=True)
     db = out / "sample-network.sqlite"
@@ -43,35 +57,16 @@ def demo(
     findings = validate_path(db)
     c.print("[bold]2.[/] validated:", end=" ")
     print_findings(findings, console=c)
-    logs = sample_logs_dir()
-    if not logs.is_dir():
-        raise InputError("sample logs are missing from this installation", path=logs)
     audit_db = out / "audit.sqlite"
-    if audit_db.exists():
-        audit_db.unlink()
+    for stale in (audit_db, audit_db.with_name(audit_db.name + "-wal"), audit_db.with_name(audit_db.name + "-shm")):
+        stale.unlink(missing_ok=True)  # a fresh audit: the DB was just rebuilt
     with progress(err_console()) as bar:
-        task = bar.add_task("auditing sample runs", total=None, rate="")
-        stats = audit(
-            [logs], db, audit_db, workers=workers, progress=lambda d, t, _r: bar.update(task, completed=d, total=t)
-        )
-    c.print(f"[bold]3.[/] audited {stats.audited} runs ({stats.failed} failed) in {stats.elapsed_s:.1f} s")
+        stats = audit([logs], db, audit_db, workers=workers, progress=ProgressBar(bar, "auditing sample runs"))
+    c.print(f"[bold]3.[/] audited {stats.audited} runs ({stats.failed} failed) in {stats.elapsed_s:.1f} s → {audit_db}")
+    for path, err in stats.errors:
+        err_console().print(f"[red]failed:[/] {path}: {err.splitlines()[0] if err else ''}", highlight=False)
     rep = build_report(audit_db)
-    cols = [
-        "line_code",
-        "track",
-        "direction",
-        "n_runs",
-        "n_corrections",
-        "distance_m",
-        "mean_correction_pct",
-        "median_correction_pct",
-        "max_correction_pct",
-        "share_above_target",
-        "n_slips",
-        "n_failsafe",
-    ]
-    c.print(frame_table(rep.routes[cols].round(3), title="Position-correction per route (target 0.5 %)"))
-    c.print(frame_table(rep.runs.round(3), title="Runs"))
+    render_tables(rep, c)
     html = out / "report.html"
     html.write_text(render_html(rep, audit_db), encoding="utf-8")
     c.print(f"[bold]4.[/] HTML report: {html}")
