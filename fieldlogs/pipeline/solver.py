@@ -25,7 +25,15 @@ from fieldlogs.pipeline.balise import BaliseUnit
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.metric import IDENTITY, TrackMetric, track_metric
-from fieldlogs.pipeline.types import Event, FeatureOutcome, Fix, FloatArray, GpsAnalysis, Odometry
+from fieldlogs.pipeline.types import (
+    Event,
+    FeatureOutcome,
+    Fix,
+    FloatArray,
+    GpsAnalysis,
+    Odometry,
+    TrackDecision,
+)
 from schemas.enums import PositionState
 
 #: Order of simultaneous events: rail on/off and fail-safe first, then telegrams, GPS, features.
@@ -277,6 +285,9 @@ def solve(
                                 detail={"line_code": dec.line_code, "track": dec.track, **dec.evidence},
                             )
                         )
+                        later = _direction_evidence(gps, dec, cfg.gps.km_dir_min_m) if cfg.gps.allow_initial else None
+                        if later is not None:  # standing at the decision: initialise once it moves
+                            push(later.t, PRIO_GPS, "gps_decision", later)
                 elif dec.line_code == fix.line_code and dec.track != fix.track:
                     if crossover_pending:
                         # A balise-given track is only overruled by GPS in a fail-safe way:
@@ -327,6 +338,30 @@ def solve(
     positions = _positions(cycles, odo, s_trav, fixes, cfg, metric)
     events.sort(key=lambda e: e.t)
     return Solution(positions, events, fixes)
+
+
+def _direction_evidence(gps: GpsAnalysis | None, dec: TrackDecision, min_km_m: float) -> TrackDecision | None:
+    """After a decision taken while standing (no km direction), the first later trusted fix
+    on the decided track whose km differs from the decision's by ``min_km_m``: the decision
+    again, at that time and km, with the direction the km moved in."""
+    if gps is None or gps.fixes is None or len(gps.fixes) == 0:
+        return None
+    f = gps.fixes
+    track_col = "decided_track" if "decided_track" in f.columns else "track"
+    ok = (f["t"].to_numpy(dtype=float) > dec.t) & f["trusted"].to_numpy(dtype=bool)
+    ok &= (f[track_col].astype("string").fillna("") == dec.track).to_numpy(dtype=bool)
+    km = f["km_m"].to_numpy(dtype=float, na_value=np.nan)
+    moved = ok & np.isfinite(km) & (np.abs(km - dec.km_m) >= min_km_m)
+    if not moved.any():
+        return None
+    j = int(np.argmax(moved))
+    return replace(
+        dec,
+        t=float(f["t"].iloc[j]),
+        km_m=float(km[j]),
+        km_dir=1 if km[j] > dec.km_m else -1,
+        evidence={**dec.evidence, "direction_from_t": dec.t},
+    )
 
 
 def km_along(fix: Fix, s: FloatArray | float, m: TrackMetric) -> FloatArray:

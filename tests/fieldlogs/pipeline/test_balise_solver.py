@@ -178,3 +178,32 @@ def test_margin_grows_2_percent_and_failsafe_makes_uncertain(net) -> None:
     assert pos.loc[40.0, "state"] == "uncertain"
     assert pos.loc[50.0, "margin_m"] > CFG.balise.fix_uncertainty_m + 0.02 * 395.0
     assert "failsafe" in [e.type for e in sol.events]
+
+
+def test_gps_decision_while_standing_initialises_once_the_km_moves(net) -> None:
+    """A decision with no km direction (vehicle standing) does not set a position; the first
+    later trusted fix on that track 10 m or more away does, with the direction it moved in."""
+    from fieldlogs.pipeline.types import GpsAnalysis, TrackDecision
+
+    c, odo = cycles_const(10.0, 60.0)
+    t = np.arange(0.0, 61.0)
+    fixes = pd.DataFrame(
+        {
+            "t": t,
+            "trusted": t >= 5,
+            "decided_track": "U",
+            "track": "U",
+            "km_m": np.where(t < 20, 5000.0, 5000.0 - 10.0 * (t - 20)),
+        }
+    )
+    dec = TrackDecision(15.0, "0900", "U", 5000.0, 0, {"n_fixes": 10})
+    sol = solve(
+        c, odo, None, BaliseUnit(BaliseDb.from_network(net), CFG.balise), CFG, gps=GpsAnalysis(fixes, [dec], [])
+    )
+    assert [e.type for e in sol.events] == ["track_decision", "initial_position_gps"]
+    init = sol.events[1]
+    assert init.t == 21.0 and init.km_m == 4990.0
+    pos = sol.positions.set_index(sol.positions.t.round(1))
+    assert pos.loc[20.9, "state"] == "undetermined"
+    assert pos.loc[31.0, "km_m"] == pytest.approx(4990.0 - 100.0)  # km decreasing, as the fixes moved
+    assert pos.loc[31.0, "last_fix_source"] == "gps"
