@@ -29,6 +29,7 @@ Tables (one writer: the coordinating process of ``fieldlogs.audit``):
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sqlite3
 from collections.abc import Iterator
@@ -198,6 +199,10 @@ def open_audit(path: Path, *, create: bool = True) -> Iterator[sqlite3.Connectio
     except sqlite3.DatabaseError as exc:
         raise InputError(f"audit database error: {exc}", path=path) from exc
     finally:
+        if create:
+            # back to a single file: readers (reports, read-only) then leave no -wal/-shm behind
+            with contextlib.suppress(sqlite3.DatabaseError):
+                conn.execute("PRAGMA journal_mode=DELETE")
         conn.close()
 
 
