@@ -28,8 +28,9 @@ from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, DB_TABLES, META, SCHEM
 SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
-def _create_tables(db: sqlite_utils.Database, tables: tuple[Table, ...]) -> None:
-    """Schema work through sqlite-utils: columns, PK, NOT NULL, FKs, indexes."""
+def _create_tables(db: sqlite_utils.Database, tables: tuple[Table, ...], *, indexes: bool = True) -> None:
+    """Schema work through sqlite-utils: columns, PK, NOT NULL, FKs and (unless a bulk load
+    follows, see :func:`_create_indexes`) the secondary indexes."""
     for t in tables:
         db[t.name].create(  # type: ignore[union-attr]
             {c.name: {"str": str, "int": int, "float": float, "bool": int}[c.dtype] for c in t.columns},
@@ -37,6 +38,13 @@ def _create_tables(db: sqlite_utils.Database, tables: tuple[Table, ...]) -> None
             not_null={c.name for c in t.columns if not c.nullable},
             foreign_keys=[(fk.columns[0], fk.other_table, fk.other_columns[0]) for fk in t.foreign_keys],
         )
+    if indexes:
+        _create_indexes(db, tables)
+
+
+def _create_indexes(db: sqlite_utils.Database, tables: tuple[Table, ...]) -> None:
+    """Secondary indexes, built once after a bulk load (cheaper than maintaining them per row)."""
+    for t in tables:
         for idx in t.indexes:
             db[t.name].create_index(list(idx))  # type: ignore[union-attr]
 
@@ -75,7 +83,7 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
             conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             conn.execute("PRAGMA foreign_keys=OFF")  # checked after the load, see below
             db = sqlite_utils.Database(conn)
-            _create_tables(db, ALL_DB_TABLES)
+            _create_tables(db, ALL_DB_TABLES, indexes=False)
             with conn:
                 for t in DB_TABLES:
                     frame = canonical(t, network.tables[t.name])
@@ -85,12 +93,12 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
                         _rows(t, frame),
                     )
                 conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", sorted(meta.items()))
+            _create_indexes(db, ALL_DB_TABLES)
             # foreign keys are checked once for the whole load (enforcing them row by row
             # costs a third of the insert time on a national network)
             if conn.execute("PRAGMA foreign_key_check").fetchone() is not None:
                 raise sqlite3.IntegrityError("FOREIGN KEY constraint failed")
-            conn.execute("PRAGMA synchronous=FULL")
-            conn.execute("VACUUM")
+            # no VACUUM: the file was written once, in key order, with no deletions
         finally:
             conn.close()
         with open(tmp, "rb+") as fh:
