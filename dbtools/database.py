@@ -17,9 +17,10 @@ from pathlib import Path
 import pandas as pd
 import sqlite_utils
 
+from dbtools.atomic import atomic_file
 from dbtools.network import Network, canonical, content_hash
 from schemas.enums import Severity
-from schemas.errors import InputError, RefusedError
+from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.model import Table
 from schemas.registry import REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
@@ -63,17 +64,8 @@ def _rows(table: Table, frame: pd.DataFrame) -> Iterator[tuple[object, ...]]:
 
 def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool = False) -> None:
     """Write a complete onboard DB atomically. Refuses an existing ``path`` unless ``force``."""
-    path = Path(path)
-    if path.exists() and not force:
-        raise RefusedError("output exists; use --force to replace it", path=path)
-    if path.is_dir():
-        raise RefusedError("output is a folder", path=path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        tmp.unlink()
+    with atomic_file(Path(path), force=force) as tmp:
+        tmp.unlink()  # SQLite creates the file itself
         conn = sqlite3.connect(tmp)
         try:
             conn.execute("PRAGMA journal_mode=OFF")
@@ -103,11 +95,6 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
             conn.close()
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-        raise
 
 
 def check_sqlite_file(path: Path) -> None:

@@ -121,28 +121,17 @@ def _line_codes(tables: dict[str, pd.DataFrame], files: dict[str, str]) -> list[
 
 def write_source_set(network: Network, folder: Path, *, force: bool = False) -> Path:
     """Write a network as CSV source files (the format ``db build`` reads back)."""
-    import os
-    import shutil
-    import tempfile
-
+    from dbtools.atomic import atomic_folder
     from schemas.errors import RefusedError
 
     folder = Path(folder)
     if folder.exists() and any(folder.iterdir()) and not force:
         raise RefusedError("output folder exists and is not empty; use --force", path=folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
+    with atomic_folder(folder, force=True) as tmp:  # an empty folder may be replaced
         for name, table in SOURCE_TABLES.items():
             frame = network.tables.get(name)
             if frame is None or (not table.required and frame.empty):
                 continue
             cols = [c for c in table.column_names if c != "attributes_json"]
             frame[cols].to_csv(tmp / f"{name}.csv", index=False, lineterminator="\n")
-        if folder.exists():
-            shutil.rmtree(folder)
-        os.replace(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return folder

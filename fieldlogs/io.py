@@ -19,9 +19,6 @@ metadata (``unit``); a file whose unit differs from the declared one is a findin
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -31,6 +28,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from dbtools.atomic import atomic_folder
 from dbtools.tabular import read_raw_table
 from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError, RefusedError
@@ -497,9 +495,7 @@ def write_run(
             raise RefusedError("output folder exists; use --force to replace it", path=folder)
         if not folder.is_dir():
             raise RefusedError("output exists and is not a folder", path=folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-    try:
+    with atomic_folder(folder, force=True) as tmp:  # refusals above, with their own messages
         (tmp / RUN_JSON_NAME).write_text(
             json.dumps(meta.to_json(), indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
         )
@@ -510,17 +506,6 @@ def write_run(
             _write_stream(tmp / f"{name}.{fmt}", table, frame, fmt)
         for name, text in (extra_files or {}).items():
             (tmp / name).write_text(text, encoding="utf-8")
-        if folder.exists():
-            old = folder.with_name(f".{folder.name}.old")
-            shutil.rmtree(old, ignore_errors=True)
-            os.replace(folder, old)
-            os.replace(tmp, folder)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return folder
 
 
