@@ -23,7 +23,7 @@ from fieldlogs.pipeline.features import FeatureUnit
 from fieldlogs.pipeline.gps import analyse_gps
 from fieldlogs.pipeline.odometry import correct_odometry
 from fieldlogs.pipeline.solver import solve
-from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry, pulse_only_odometry
+from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
 from schemas.enums import PositionState, Severity
 from schemas.errors import FindingsError
 from schemas.outputs import EVENTS
@@ -87,11 +87,8 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
         t_end=t_end,
         cycle_s=cfg.cycle_s,
     )
-    odo = (
-        correct_odometry(cycles, cfg.odometry, radar_on_cycles(streams["radar"], cycles.t))
-        if cycles.has_imu and cycles.has_tacho
-        else pulse_only_odometry(cycles.d_pulse, cycles.v_pulse)
-    )
+    # pulses only when the run has no IMU (correct_odometry falls back by itself)
+    odo = correct_odometry(cycles, cfg.odometry, radar_on_cycles(streams["radar"], cycles.t))
     gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
     unit = BaliseUnit(network.cached("balise_db", lambda: BaliseDb.from_network(network)), cfg.balise)

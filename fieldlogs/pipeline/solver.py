@@ -392,16 +392,13 @@ def _positions(
         idx = np.searchsorted(t_eff, t, side="right") - 1
         has = idx >= 0
         j = np.clip(idx, 0, None)
-        km_m = np.array([f.km_m for f in fixes])[j]
-        k = np.array([f.k for f in fixes], dtype=float)[j]
-        s_ref = np.array([f.s_ref for f in fixes])[j]
         d_ref = np.array([f.d_ref for f in fixes])[j]
         eq_off = np.array([f.km_equipment_m - f.km_m for f in fixes])[j]
         unc = np.array([f.uncertainty_m for f in fixes])[j]
         a_ref = np.array([f.allowance_ref_m for f in fixes])[j]
         unc_d = np.array([np.nan if f.uncertain_since_d is None else f.uncertain_since_d for f in fixes])[j]
-        est = km_m + k * (s_trav - s_ref)
-        for jj in np.unique(j[has]):  # the track's own length (contiguous per fix)
+        est = np.full(n, np.nan)
+        for jj in np.unique(j[has]):  # dead reckoning along the track's own length, per fix in force
             sel = has & (j == jj)
             est[sel] = km_along(fixes[jj], s_trav[sel], metric(fixes[jj]))
         mg = unc + cfg.margin.distance_pct / 100.0 * np.abs(d - d_ref) + np.maximum(odo.allowance - a_ref, 0.0)

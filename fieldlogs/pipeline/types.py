@@ -64,10 +64,11 @@ class Event:
 
 @dataclass
 class Fix:
-    """An absolute position fix (anchor): from ``t_effective`` on,
-    km = km_m + k·(S − s_ref), where S = Σ cab·Δd is the signed body-forward travel.
+    """An absolute position fix (anchor): from ``t_effective`` on, km follows from ``km_m``
+    after a travel k·(S − s_ref) along the track's own length (``solver.km_along``), where
+    S = Σ cab·Δd is the signed body-forward travel.
 
-    ``k`` is km per metre of body-forward travel (±1), so cab reversals after the fix are
+    ``k`` is the sign of km per metre of body-forward travel (±1), so cab reversals after the fix are
     followed automatically. The reference point may precede ``t_effective`` (a feature
     point is recognised some metres after its exit crossing).
     """
@@ -90,9 +91,6 @@ class Fix:
     """Odometry slip allowance already accumulated at the reference point [m]."""
     uncertain_since_d: float | None = None
     """Travel d at which the position became uncertain (fail-safe), if it is."""
-
-    def km_at(self, s: float) -> float:
-        return self.km_m + self.k * (s - self.s_ref)
 
 
 def slip_budget_m(duration_s: float, delta_a_mps2: float) -> float:
