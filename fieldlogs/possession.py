@@ -78,7 +78,7 @@ from __future__ import annotations
 import math
 import tomllib
 from collections import Counter
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
@@ -90,7 +90,7 @@ import pandas as pd
 from dbtools.gis.matching import TrackIndex, track_index_for
 from dbtools.network import Network
 from fieldlogs.io import Run
-from fieldlogs.pipeline.config import GpsConfig, PipelineConfig
+from fieldlogs.pipeline.config import GpsConfig, PipelineConfig, update_section
 from fieldlogs.pipeline.cycles import build_cycles
 from fieldlogs.pipeline.gps import analyse_gps, trust_filter
 from fieldlogs.pipeline.types import Event, GpsAnalysis, TrackDecision
@@ -152,18 +152,7 @@ class PossessionConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "config") -> PossessionConfig:
-        cfg = cls()
-        known = {f.name: f for f in fields(cls)}
-        updates: dict[str, Any] = {}
-        for k, v in data.items():
-            if k not in known:
-                raise InputError(f"unknown key 'possession.{k}' (known: {', '.join(known)})", path=source)
-            whole = isinstance(getattr(cfg, k), int)
-            if isinstance(v, bool) or not isinstance(v, int if whole else int | float) or not math.isfinite(v):
-                kind = "a whole number" if whole else "a number"
-                raise InputError(f"'possession.{k}' must be {kind}, not {v!r}", path=source)
-            updates[k] = v if whole else float(v)
-        return replace(cfg, **updates)
+        return update_section(cls(), data, "possession", source)
 
 
 def load_config(path: Path | None) -> tuple[GpsConfig, PossessionConfig]:

@@ -8,13 +8,16 @@ Accelerations are in the papers' km/h/s where the papers state them so.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from schemas.errors import InputError
 from schemas.units import kmh_s_to_mps2
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -240,14 +243,20 @@ class PipelineConfig:
             if not isinstance(value, dict):
                 cfg = replace(cfg, **{key: _typed(source, key, current, value)})
                 continue
-            known = {f.name: f for f in fields(current)}
-            updates = {}
-            for k, v in value.items():
-                if k not in known:
-                    raise InputError(f"unknown key '{key}.{k}' (known: {', '.join(known)})", path=source)
-                updates[k] = _typed(source, f"{key}.{k}", getattr(current, k), v)
-            cfg = replace(cfg, **{key: replace(current, **updates)})
+            cfg = replace(cfg, **{key: update_section(current, value, key, source)})
         return cfg
+
+
+def update_section(current: T, values: dict[str, Any], section: str, source: str) -> T:
+    """``current`` (a frozen config dataclass) with ``values`` from the TOML section
+    ``[section]``: unknown keys and values of the wrong type are errors naming the key."""
+    known = {f.name for f in fields(current)}  # type: ignore[arg-type]
+    updates = {}
+    for k, v in values.items():
+        if k not in known:
+            raise InputError(f"unknown key '{section}.{k}' (known: {', '.join(known)})", path=source)
+        updates[k] = _typed(source, f"{section}.{k}", getattr(current, k), v)
+    return replace(current, **updates)  # type: ignore[type-var]
 
 
 def _typed(source: str, key: str, default: Any, value: Any) -> Any:
@@ -264,7 +273,7 @@ def _typed(source: str, key: str, default: Any, value: Any) -> Any:
             raise InputError(f"'{key}' must be a whole number, not {value!r}", path=source)
         return value
     if isinstance(default, float):
-        if not isinstance(value, (int, float)) or isinstance(value, bool):
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
             raise InputError(f"'{key}' must be a number, not {value!r}", path=source)
         return float(value)
     return value
