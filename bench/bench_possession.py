@@ -70,7 +70,11 @@ def evaluate(case: PossessionCase, network: object) -> dict[str, object]:
         late = [a for a in alarms if a.type == typ and a is not hit]
         row["alarmed"] = hit is not None
         row["alarmed_late"] = hit is None and bool(late)
-    row["false"] = sum(1 for a in alarms if a is not hit and not (exp and a.type == EXPECTED_ALARM[case.kind]))
+    false = [a for a in alarms if a is not hit and not (exp and a.type == EXPECTED_ALARM[case.kind])]
+    row["false"] = len(false)
+    row["false_detail"] = [
+        f"{case.meta.run_id} {case.kind}: {a.type} at t {a.t:.1f} s km {a.km_m} {a.evidence}" for a in false
+    ]
     decisions = [d for p in chk.periods for d in p.decisions]
     first = decisions[0] if decisions else None
     row["wrong_decision"] = any(d.track != case.run_track for d in decisions)
@@ -98,6 +102,7 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=60)
     ap.add_argument("--seed0", type=int, default=1000)
     ap.add_argument("--poor-sky-every", type=int, default=3, help="every n-th round of kinds with poor sky (0 never)")
+    ap.add_argument("--details", action="store_true", help="print every false alarm")
     args = ap.parse_args()
     network = build_network([demo_line()], Projector(9))
     t0 = time.perf_counter()
@@ -146,6 +151,10 @@ def main() -> None:
     )
     print(f"mistakes alarmed only after the target: {len(late)}; runs undecided 120 s after PTO on: {len(undecided)}")
     print("false = runs with an alarm that is not the injected mistake; worst = max |km error| / u")
+    if args.details:
+        for r in rows:
+            for line in r["false_detail"]:  # type: ignore[attr-defined]
+                print("  false:", line)
 
 
 if __name__ == "__main__":

@@ -29,11 +29,14 @@ filter's R) and a slow part (bias) that no filter can average out:
 fix                                    white σ                                      bias σ
 =====================================  ===========================================  ==============
 trusted (5/15/30 s RMS filter)         ``noise_white_m`` of the GPS model (0.25 m)  ``noise_sigma_m`` (0.75 m)
-usable D-GPS, not trusted              max(``untrusted_sigma_m``, 5 s RMS)           ``noise_sigma_m``
+usable D-GPS, not trusted              max(``untrusted_sigma_m``, 5 s RMS / √12)     ``noise_sigma_m``
 fix 1 or high HDOP                     the same                                     ``fix1_sigma_m`` (5 m)
 =====================================  ===========================================  ==============
 
-(no RMS history yet counts as ``fix1_sigma_m``); the white σ is at least the fix's offset
+(no RMS history yet counts as ``fix1_sigma_m``; fix 1 and high-HDOP fixes keep the whole
+5 s RMS: the RMS of 2-D second differences is √12 × the per-axis white noise that makes it,
+but a multipath burst's offset is no white noise — on D-GPS the gate, not a wider R, keeps
+it out, while without D-GPS the slow error makes the gate wide); the white σ is at least the fix's offset
 from the nearest track beyond ``offset_free_m`` (an on-rail fix far from every track is
 probably as wrong along it — the trust filter passes such fixes when a multipath burst
 ramps up smoothly). A fix whose innovation exceeds ``gate_z`` σ is rejected (multipath);
@@ -447,9 +450,13 @@ def km_noise(fixes: pd.DataFrame, gps_cfg: GpsConfig, cfg: PossessionConfig) -> 
     usable = _bool(fixes, "usable")
     # an on-rail fix far from the track is as wrong along the track, likely: the offset bounds σ
     excess = np.fmax(off - cfg.offset_free_m, 0.0)
-    noisy = np.fmax(cfg.untrusted_sigma_m, np.where(np.isfinite(rms), rms, cfg.fix1_sigma_m))
-    white = np.fmax(np.where(trusted, gps_cfg.noise_white_m, noisy), excess)
     bias = np.where(usable | trusted, gps_cfg.noise_sigma_m, cfg.fix1_sigma_m)
+    # the RMS of 2-D second differences is √12 × the per-axis white noise that makes it; a
+    # D-GPS fix's burst offset is no white noise: the gate, not a wider R, must keep it out.
+    # Without D-GPS (fix 1, high HDOP) the slow error is large and the gate wide: keep R wide.
+    scale = np.where(usable | trusted, 1.0 / np.sqrt(12.0), 1.0)
+    noisy = np.fmax(cfg.untrusted_sigma_m, np.where(np.isfinite(rms), rms * scale, cfg.fix1_sigma_m))
+    white = np.fmax(np.where(trusted, gps_cfg.noise_white_m, noisy), excess)
     return white, bias
 
 

@@ -54,7 +54,18 @@ IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
 #: Columns of :meth:`TrackIndex.match` (one row per fix and candidate track).
-MATCH_COLUMNS = ("fix", "line_code", "track", "track_id", "km_m", "offset_m", "distance_m", "best")
+MATCH_COLUMNS = (
+    "fix",
+    "line_code",
+    "track",
+    "track_id",
+    "km_m",
+    "offset_m",
+    "distance_m",
+    "best",
+    "dir_e",
+    "dir_n",
+)
 #: Default search radius: a fix farther than this from a track is not matched to it [m].
 DEFAULT_MAX_OFFSET_M = 15.0
 #: Cell size of the spatial sort of the fixes [m].
@@ -176,6 +187,9 @@ class TrackIndex:
         len2 = self._dx**2 + self._dy**2
         with np.errstate(divide="ignore"):
             self._inv_len2 = np.where(len2 > 0, 1.0 / len2, 0.0)
+        # unit vector of increasing km per segment (km increases within a piece)
+        self._ux = self._dx * np.sqrt(self._inv_len2)
+        self._uy = self._dy * np.sqrt(self._inv_len2)
         self._dkm = np.zeros(nv)
         if nv > 1:
             self._dkm[:-1] = np.where(self.segment_ok[:-1], np.diff(self.km), 0.0)
@@ -288,7 +302,9 @@ class TrackIndex:
         (categoricals), ``track_id`` (index into :attr:`keys`), ``km_m`` (foot of the
         perpendicular on the track's nearest segment), ``offset_m`` (signed, positive left
         of increasing km), ``distance_m`` (= |offset_m|), ``best`` (the fix's nearest
-        track). Sorted by fix, then distance; fixes with no track in reach, or with NaN
+        track), ``dir_e`` / ``dir_n`` (unit vector of increasing km of the matched segment in the
+        plane, east/north: the track heading, which the GPS unit needs to tell a crossover from a
+        slow GPS error seen through a curve). Sorted by fix, then distance; fixes with no track in reach, or with NaN
         coordinates, have no row. ``line_code`` / ``track`` restrict the candidates.
         """
         px = np.atleast_1d(np.asarray(x, dtype=float))
@@ -382,6 +398,8 @@ class TrackIndex:
                 "offset_m": off,
                 "distance_m": np.abs(off),
                 "best": p == 0,
+                "dir_e": self._ux[s],
+                "dir_n": self._uy[s],
             }
         )
 

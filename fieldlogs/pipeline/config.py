@@ -138,6 +138,9 @@ class GpsConfig:
     max_change_m: float = 3.0
     """The fix's own change of displacement above this → not trusted [m] (catches the
     first fix of a jump, which a causal window sees only once)."""
+    jump_hold_s: float = 30.0
+    """After a fix whose own change exceeds ``max_change_m``, the fixes of this many seconds are
+    not trusted: a multipath burst ramps on and off smoothly after its first jump [s]."""
     min_history_s: float = 5.0
     """Usable fixes needed since the last reset before any fix is trusted [s]."""
     # --- error model of trusted fixes (for the standard error of a mean offset)
@@ -154,6 +157,10 @@ class GpsConfig:
     # --- up/down decision (sequential likelihood-ratio test on the mean offset)
     decide_window_s: float = 120.0
     """Evidence window: trusted fixes of the last this many seconds [s] (field target < 120 s)."""
+    decide_recent_s: float = 30.0
+    """The test is also made on the trusted fixes of only the last this many seconds, so that
+    older fixes a slow error put between the tracks do not hold back a decision the recent
+    ones support (0 = only the full window) [s]."""
     decide_min_fixes: int = 10
     """Trusted fixes needed in the window before deciding."""
     decide_min_duration_s: float = 10.0

@@ -23,7 +23,10 @@ jump of J metres puts two values ±J into every window containing it: RMS ≳ J�
 for J = 5 m, 3.3 / 2.1 / 1.65 m in the 5 / 15 / 30 s windows. A fix is **trusted** only
 if, in every window ending at it, RMS_w ≤ ``rms_threshold_m[w]`` (defaults 2.5 / 1.8 /
 1.5 m), its own |a_k| ≤ ``max_change_m`` (3 m: the first fix of a jump, seen only once by a
-causal window) and at least ``min_history_s`` of uninterrupted usable fixes precede it. A
+causal window), no fix of the last ``jump_hold_s`` (30 s) had a larger |a_k| (multipath
+bursts ramp on and off smoothly, so the fixes after the first jump of a 5–8 m burst stay
+below every window's threshold) and at least ``min_history_s`` of uninterrupted usable
+fixes precede it. A
 gap (no usable fix for more than ``max_gap_s``: outage, fix 1, high HDOP) resets all
 windows. So a burst and the 30 s after it are untrusted; an isolated fix never is.
 
@@ -45,7 +48,9 @@ decided when n ≥ ``decide_min_fixes`` over ≥ ``decide_min_duration_s``, shar
 ``decide_max_mean_m``: not between two tracks, not beside one) and LLR_jb ≥ ln(1/``decide_error``)
 against every other candidate b (as in Wald's sequential test, the chance of ever deciding
 the wrong track is then of the order of ``decide_error``). The test is re-evaluated at
-every trusted fix ("as soon as the evidence suffices"); weak evidence leaves the run
+every trusted fix ("as soon as the evidence suffices"), on the ``decide_window_s`` window and
+on the last ``decide_recent_s`` (30 s) alone — older fixes that a slow error put between the
+tracks must not hold back what the recent ones show; weak evidence leaves the run
 *undecided* rather than wrong.
 A :class:`TrackDecision` carries the km of the last fix on the decided track and
 km_dir = sign of the km change over the evidence window (0 if below ``km_dir_min_m``).
@@ -59,8 +64,16 @@ offsets from d over the last ``crossover_window_s`` ≥ ``crossover_rms_m``; the
 moved toward the other track of the line — relative to a ``crossover_ref_s`` reference
 window ending ``crossover_lag_s`` before — by ≥ ``crossover_min_shift`` × the track
 spacing and by ≥ ``crossover_z`` × the model's 1-σ drift of the slow error over that lag;
-and past the midpoint between the tracks → ``Event(t, "crossover", km, {line_code, from,
-to, rms_m, shift_m})``. The decision evidence restarts after it.
+and past the midpoint between the tracks; and not explained by the slow error turning in a
+curve: that error is nearly constant in the plane, so through a curve its along-track part
+becomes lateral (3.6 m along the track before a 46° curve is 2.6 m across it inside). A
+plane bias b (prior N(0, σ²) per axis) is fitted to the offsets r = b·N of the reference
+window and the lag (N the track's left normal at each fix) and the RMS window's mean must
+differ from b̂·N̄ by ≥ half the spacing and ≥ ``crossover_z`` × the prediction's 1-σ. On
+straight track b̂·N̄ is the earlier mean; in a curve a crossover made while such an error
+turns the other way can be missed — the redecision then finds the new track, never a
+wrong one → ``Event(t, "crossover", km, {line_code, from, to, rms_m, shift_m})``. The
+decision evidence restarts after it.
 
 If ``cycles`` are given, fixes while the PTO says off-rail (road-rail vehicles on the road)
 are matched and reported but are no evidence for decisions or crossovers.
@@ -220,7 +233,11 @@ def trust_filter(
     cx = np.concatenate([[0.0], np.cumsum(ax)])
     cy = np.concatenate([[0.0], np.cumsum(ay)])
     cq = np.concatenate([[0.0], np.cumsum(ax * ax + ay * ay)])
-    ok = (tu - tu[first] >= cfg.min_history_s - 1e-9) & valid & (np.hypot(ax, ay) <= cfg.max_change_m)
+    jump = valid & (np.hypot(ax, ay) > cfg.max_change_m)
+    last_jump = np.maximum.accumulate(np.where(jump, tu, -np.inf))
+    ok = (tu - tu[first] >= cfg.min_history_s - 1e-9) & valid & ~jump
+    # a burst may ramp on smoothly after its first jump, below every window's threshold
+    ok &= ~(tu - last_jump < cfg.jump_hold_s)
     for w, thr in zip(cfg.windows_s, cfg.rms_threshold_m, strict=True):
         lo = np.maximum(np.searchsorted(tu, tu - w, side="right"), first + 2)
         hi = pos + 1
@@ -258,6 +275,15 @@ class _Evidence:
     cs: FloatArray
     cq: FloatArray
     cnear: FloatArray
+    s_ne: FloatArray
+    """Prefix sums of the left normal (east, north components) of each candidate track at the
+    fix, and of the products the crossover's rotating-bias fit needs (see :func:`_crossing`)."""
+    s_nn: FloatArray
+    s_ee: FloatArray
+    s_en: FloatArray
+    s_nn2: FloatArray
+    s_re: FloatArray
+    s_rn: FloatArray
 
     @classmethod
     def build(cls, t: FloatArray, evidence: BoolArray, matches: pd.DataFrame, index: TrackIndex) -> _Evidence:
@@ -269,6 +295,8 @@ class _Evidence:
         r = np.full((rows.size, tracks.size), np.nan)
         km = np.full((rows.size, tracks.size), np.nan)
         near = np.zeros(rows.size, dtype=np.int64)
+        ne = np.zeros((rows.size, tracks.size))
+        nn = np.zeros((rows.size, tracks.size))
         if len(m):
             e = e_of[m["fix"].to_numpy()]
             j = np.searchsorted(tracks, m["track_id"].to_numpy())
@@ -276,9 +304,17 @@ class _Evidence:
             km[e, j] = m["km_m"].to_numpy()
             b = m["best"].to_numpy()
             near[e[b]] = j[b]
+            # left normal of increasing km = heading turned +90°: offsets are positive to the left
+            ne[e, j] = -m["dir_n"].to_numpy()
+            nn[e, j] = m["dir_e"].to_numpy()
         has = np.isfinite(r)
         zero = np.zeros((1, tracks.size))
         onehot = (near[:, None] == np.arange(tracks.size)[None, :]).astype(float)
+        r0 = np.where(has, r, 0.0)
+
+        def csum(a: FloatArray) -> FloatArray:
+            return np.concatenate([zero, np.cumsum(a, axis=0)])
+
         return cls(
             rows,
             t[rows],
@@ -290,6 +326,13 @@ class _Evidence:
             np.concatenate([zero, np.cumsum(np.where(has, r, 0.0), axis=0)]),
             np.concatenate([zero, np.cumsum(np.where(has, r * r, 0.0), axis=0)]),
             np.concatenate([zero, np.cumsum(onehot, axis=0)]),
+            csum(ne),
+            csum(nn),
+            csum(ne * ne),
+            csum(ne * nn),
+            csum(nn * nn),
+            csum(r0 * ne),
+            csum(r0 * nn),
         )
 
     @property
@@ -323,8 +366,8 @@ class _Window:
     """(rows, J) all conditions except the LLR threshold."""
 
 
-def _windows(ev: _Evidence, i: IntArray, reset_lo: int, cfg: GpsConfig) -> _Window:
-    lo = np.maximum(np.searchsorted(ev.t, ev.t[i] - cfg.decide_window_s, side="right"), reset_lo)
+def _windows(ev: _Evidence, i: IntArray, reset_lo: int, cfg: GpsConfig, length_s: float) -> _Window:
+    lo = np.maximum(np.searchsorted(ev.t, ev.t[i] - length_s, side="right"), reset_lo)
     hi = i + 1
     total = (hi - lo).astype(float)[:, None]
     n = ev.cn[hi] - ev.cn[lo]
@@ -357,6 +400,21 @@ def _windows(ev: _Evidence, i: IntArray, reset_lo: int, cfg: GpsConfig) -> _Wind
     return _Window(i, lo, n, mean, share, se2, llr, ok)
 
 
+def _merge_windows(w: _Window, wr: _Window, use_r: BoolArray) -> _Window:
+    """Per (row, track), the recent window's statistics where ``use_r``, else the full one's."""
+    row_r = use_r.any(axis=1)
+    return _Window(
+        w.i,
+        np.where(row_r, wr.lo, w.lo),
+        np.where(use_r, wr.n, w.n),
+        np.where(use_r, wr.mean, w.mean),
+        np.where(use_r, wr.share, w.share),
+        np.where(use_r, wr.se2, w.se2),
+        np.where(use_r, wr.llr, w.llr),
+        np.where(use_r, wr.ok, w.ok),
+    )
+
+
 def _crossing(ev: _Evidence, i: IntArray, reset_lo: int, d: int, o: int, cfg: GpsConfig) -> tuple[BoolArray, ...]:
     """Crossover condition from base column d toward column o at rows i (vectorised)."""
     lo = np.maximum(np.searchsorted(ev.t, ev.t[i] - cfg.crossover_window_s, side="right"), reset_lo)
@@ -379,15 +437,57 @@ def _crossing(ev: _Evidence, i: IntArray, reset_lo: int, d: int, o: int, cfg: Gp
     # what the slow error alone moves between the two window centres (model, 1-σ)
     lag = 0.5 * cfg.crossover_window_s + cfg.crossover_lag_s + 0.5 * cfg.crossover_ref_s
     drift = cfg.noise_sigma_m * np.sqrt(2.0 * (1.0 - np.exp(-lag / cfg.noise_tau_s))) if cfg.noise_tau_s > 0 else 0.0
+    # the slow error is (nearly) constant in the plane, not across the track: through a curve
+    # it turns from along-track into lateral. Fit that bias b (2-D, prior N(0, σ²)) to the
+    # offsets r = b·N of the reference window and the lag (N: the track's left normal) and ask
+    # how far the RMS window's mean lies from what b alone predicts there.
+    unexplained, sd_pred = _rotating_bias_residual(ev, d, lr, lo, hi, m5, drift, cfg)
     cross = (
         (n5 >= 3)
         & (nref >= 3)
         & (rms5 >= cfg.crossover_rms_m)
         & (shift >= np.maximum(cfg.crossover_min_shift * np.abs(spacing), cfg.crossover_z * drift))
+        & (unexplained * side >= np.maximum(0.5 * np.abs(spacing), cfg.crossover_z * sd_pred))
         & (m5 * side >= 0.5 * np.abs(spacing))
         & np.isfinite(spacing)
     )
     return cross, rms5, shift
+
+
+def _rotating_bias_residual(
+    ev: _Evidence,
+    d: int,
+    lr: IntArray,
+    lo: IntArray,
+    hi: IntArray,
+    m5: FloatArray,
+    drift: float,
+    cfg: GpsConfig,
+) -> tuple[FloatArray, FloatArray]:
+    """(m5 − b̂·N̄5, 1-σ of that prediction incl. the drift) per row (vectorised 2×2 solves).
+
+    b̂ is the MAP estimate of a constant plane bias from the offsets of rows [lr, lo) on
+    column d (per-fix σ² = white² + drift², prior σ = ``noise_sigma_m`` per axis); N̄5 is the
+    mean left normal over the RMS window [lo, hi). On straight track only b's lateral part is
+    observable and b̂·N̄5 is the reference mean; through a curve the along-track part is seen too.
+    """
+    s_w2 = cfg.noise_white_m**2 + drift**2
+    p = 1.0 / max(cfg.noise_sigma_m**2, 1e-12)
+    a11 = (ev.s_ee[lo, d] - ev.s_ee[lr, d]) / s_w2 + p
+    a12 = (ev.s_en[lo, d] - ev.s_en[lr, d]) / s_w2
+    a22 = (ev.s_nn2[lo, d] - ev.s_nn2[lr, d]) / s_w2 + p
+    r1 = (ev.s_re[lo, d] - ev.s_re[lr, d]) / s_w2
+    r2 = (ev.s_rn[lo, d] - ev.s_rn[lr, d]) / s_w2
+    det = a11 * a22 - a12 * a12
+    i11, i12, i22 = a22 / det, -a12 / det, a11 / det  # posterior covariance of b
+    be, bn = i11 * r1 + i12 * r2, i12 * r1 + i22 * r2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n5 = ev.cn[hi, d] - ev.cn[lo, d]
+        ue = (ev.s_ne[hi, d] - ev.s_ne[lo, d]) / n5
+        un = (ev.s_nn[hi, d] - ev.s_nn[lo, d]) / n5
+    pred = be * ue + bn * un
+    var = ue * ue * i11 + 2.0 * ue * un * i12 + un * un * i22
+    return m5 - pred, np.sqrt(np.maximum(var, 0.0) + drift * drift)
 
 
 def _decide(
@@ -407,9 +507,16 @@ def _decide(
     keys = index.keys
     while pos < ev.size:
         i = np.arange(pos, min(pos + _CHUNK, ev.size))
-        w = _windows(ev, i, reset_lo, cfg)
         need = thr if (current is None or pending) else thr * cfg.redecide_factor
+        w = _windows(ev, i, reset_lo, cfg, cfg.decide_window_s)
         cand = w.ok & (w.llr >= need)
+        if 0.0 < cfg.decide_recent_s < cfg.decide_window_s:
+            # the recent fixes alone may decide when older ones were ambiguous
+            wr = _windows(ev, i, reset_lo, cfg, cfg.decide_recent_s)
+            cand_r = wr.ok & (wr.llr >= need)
+            use_r = cand_r & ~cand
+            w = _merge_windows(w, wr, use_r)
+            cand = cand | cand_r
         if current is not None and not pending:
             cand[:, current] = False
         dec_rows = np.flatnonzero(cand.any(axis=1))

@@ -58,8 +58,10 @@ def fixes(
     bursts: tuple[tuple[float, float, float], ...] = (),
     outages: tuple[tuple[float, float], ...] = (),
     crossover: tuple[float, float, str] | None = None,
+    bias_along_m: float = 0.0,
 ) -> tuple[pd.DataFrame, np.ndarray, np.ndarray]:
-    """(gps frame, true km, mask of burst fixes). ``crossover`` = (t start, length m, to track)."""
+    """(gps frame, true km, mask of burst fixes). ``crossover`` = (t start, length m, to track);
+    ``bias_along_m``: a constant plane error along the track's heading at the first fix."""
     t = np.arange(seconds, dtype=float)
     km = km0 + direction * speed * t
     off = np.full(t.size, TRACK_OFFSETS[track] + lateral)
@@ -72,6 +74,8 @@ def fixes(
     h = A.heading(s)
     x = x0 - off * np.sin(h)
     y = y0 + off * np.cos(h)
+    x = x + bias_along_m * np.cos(h[0])
+    y = y + bias_along_m * np.sin(h[0])
     if sigma > 0:
         x = x + ar1(rng, t.size, sigma, tau)
         y = y + ar1(rng, t.size, sigma, tau)
@@ -324,3 +328,75 @@ def test_crossover_from_d_to_u(speed):
         assert ev.detail["from"] == "D" and ev.detail["to"] == "U" and ev.detail["rms_m"] >= cfg.crossover_rms_m
         assert ev.km_m == pytest.approx(km[int(ev.t)], abs=10.0)
         assert res.decisions[1].t > ev.t
+
+
+# ------------------------------------------------- slow error through curves, bursts, windows
+
+
+def test_constant_plane_error_turning_in_a_curve_is_no_crossover():
+    """A 3.6 m error along the track before the 46° curve at km 10.8–11.4 turns into a
+    lateral error of ~2.6 m inside it, toward U for one sign (the fixes' nearest track
+    becomes U): no crossover, no change of decision."""
+    cfg = replace(model(0.75), noise_tau_s=180.0)
+    toward_u = 0
+    for sign in (1.0, -1.0):
+        gps, _, _ = fixes(np.random.default_rng(3), sigma=0.0, km0=10300.0, seconds=70, bias_along_m=3.6 * sign)
+        res = analyse_gps(gps, NET, cfg)
+        toward_u += int((res.fixes["track"] == "U").sum() >= 5)
+        assert res.crossovers == [], sign
+        assert [d.track for d in res.decisions] == ["D"], sign
+    assert toward_u == 1  # the case the test is about did happen
+
+
+@pytest.mark.parametrize("bias", [0.0, -3.6])
+@pytest.mark.parametrize("t_cross", [30.0, 52.0])
+def test_crossover_inside_a_curve_is_still_found(bias, t_cross):
+    """The same curve with a real crossover (60 m long) just before or well inside it."""
+    cfg = replace(model(0.75), noise_tau_s=180.0)
+    gps, _, _ = fixes(
+        np.random.default_rng(3), sigma=0.0, km0=10300.0, seconds=70, bias_along_m=bias, crossover=(t_cross, 60.0, "U")
+    )
+    res = analyse_gps(gps, NET, cfg)
+    assert [c.detail["to"] for c in res.crossovers] == ["U"]
+    assert t_cross < res.crossovers[0].t <= t_cross + 8.0
+    assert [d.track for d in res.decisions] == ["D", "U"]
+
+
+def test_fixes_after_a_smoothly_ramping_burst_are_not_trusted():
+    """A 5 m burst over 8 s ramping on as sin^0.5 (the simulator's shape): after its first
+    jump (3.1 m) the second differences stay below every threshold, so only the jump hold
+    keeps the burst's fixes out."""
+    gps, _, _ = fixes(np.random.default_rng(1), sigma=0.0, white=0.1, seconds=120, km0=3000.0)
+    t = gps["t"].to_numpy()
+    x, y = P.to_xy(gps["lon"].to_numpy(), gps["lat"].to_numpy())
+    shape = np.where((t >= 60) & (t <= 68), np.sin(np.pi * np.clip((t - 60) / 8.0, 0, 1)) ** 0.5, 0.0)
+    x = x + 5.0 * shape
+    lon, lat = P.to_lonlat(x, y)
+    gps = gps.assign(lat=lat, lon=lon)
+    usable = np.ones(t.size, dtype=bool)
+    trusted, _ = trust_filter(t, x, y, usable, CFG)
+    assert trusted[50:61].all()
+    assert not trusted[61 : 61 + int(CFG.jump_hold_s)].any()
+    assert trusted[70 + int(CFG.jump_hold_s) :].all()
+    loose, _ = trust_filter(t, x, y, usable, replace(CFG, jump_hold_s=0.0))
+    assert loose[62:69].all()  # what the hold is for: fixes 3–5 m off, trusted without it
+
+
+def test_recent_fixes_decide_when_older_ones_were_between_the_tracks():
+    """50 s between the tracks (a slow error of 1.9 m toward U), then clearly on D: the 30 s
+    window decides once the ambiguous fixes have left it (~27 s later); the 120 s window alone
+    would wait ~110 s."""
+    cfg = replace(model(0.75), noise_tau_s=180.0)
+    gps, _, _ = fixes(np.random.default_rng(2), sigma=0.0, white=0.2, seconds=200, km0=3000.0)
+    t = gps["t"].to_numpy()
+    x, y = P.to_xy(gps["lon"].to_numpy(), gps["lat"].to_numpy())
+    h = A.heading(A.chainage(3000.0 + 20.0 * t))
+    lateral = np.where(t < 50, -1.9, 0.0)
+    lon, lat = P.to_lonlat(x - lateral * np.sin(h), y + lateral * np.cos(h))
+    gps = gps.assign(lat=lat, lon=lon)
+    res = analyse_gps(gps, NET, cfg)
+    assert [d.track for d in res.decisions] == ["D"]
+    assert 60.0 <= res.decisions[0].t <= 82.0
+    full_only = analyse_gps(gps, NET, replace(cfg, decide_recent_s=0.0))
+    assert all(d.track == "D" for d in full_only.decisions)
+    assert not full_only.decisions or full_only.decisions[0].t > 100.0
