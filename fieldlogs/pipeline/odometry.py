@@ -18,19 +18,74 @@ Streams and alignment
     smoothed with the trailing 3 s moving average ``MA3``. Before differentiating, the pulse
     speed is averaged over ``SPEED_AVG_S`` (1 s) and a_x gets the identical 1 s average, so
     both go through the same filter K = MA3∘MA1 (a 3.9 s trapezoid) and, while adhering,
-    ``K·a_x − K·A_p = K·(G·sinθ)`` exactly, whatever the jerk. Why the extra 1 s: at 10 Hz one
-    pulse (≈ 3 cm) is 0.3 m/s of speed and 3 m/s² of A_p; ``MA3`` alone leaves ±0.11 m/s²
-    (0.4 km/h/s, a third of Ta, false alarms on 25 ‰ lines) and steps Jp by 0.36 km/h/s per
-    0.1 s, above its 0.15 limit, so the start-point condition would almost never hold. After
+    ``K·a_x − K·A_p = K·(G·sinθ)`` whatever the jerk (to half a cycle, see "Pulse delay").
+    Why the extra 1 s: at 10 Hz one pulse (≈ 3 cm) is 0.3 m/s of speed and 3 m/s² of A_p;
+    ``MA3`` alone leaves ±0.11 m/s² (0.4 km/h/s, a third of Ta, false alarms on 25 ‰ lines)
+    and steps Jp by 0.36 km/h/s per 0.1 s, above its 0.15 limit, so the start-point
+    condition would almost never hold. After
     ``MA1`` the residue is ±0.025 m/s² and Jp steps by 0.036 km/h/s. Cost: ≈ 0.3 s more
     detection latency (0.7–0.8 s from onset for a 3.5–4.5 m/s wheel-speed step, 0.3 s of
     it the pulse delay); the look-back absorbs it.
+
+Pulse delay (``_align``)
+    The 300 ms is the SPEC's installation; a delay off by δ leaves δ·(jerk of K·a_x) in
+    K·a_x − K·A_p (0.3 s × 0.3 m/s³ ≈ 0.09 m/s² in every jerk-limited transition, θ0 errors
+    up to 9 mrad). With ``pulse_delay_search_cycles`` > 0 the run itself decides, within
+    that many cycles of the SPEC value: the grade-compensated residual u (below) and the
+    jerk of K·a_x, both high-passed by a second difference over DELAY_HP_S (removing the
+    accelerometer bias, the gyro drift and most grade changes; values beyond
+    DELAY_CLIP_MPS2 — slips — left out), are regressed on each other; the coefficient is
+    the time by which A_p lags a_x. Half a cycle of it is built in (A_p of cycle k spans
+    (t_k − 1.05, t_k − 0.05], a pulse speed being the mean over its cycle, a_x's 1 s mean
+    (t_k − 1, t_k]); the rest, rounded to cycles, moves the delay (one refinement) when it
+    exceeds DELAY_SIGMAS standard errors (K-correlated samples counted once per filter
+    length). Without jerk in the run the SPEC value stays. The simulator's IMU has no lag:
+    every run gives 0.24–0.29 s at the SPEC value and ends at d = 0; the tests' harness
+    (four transitions in 120 s) gives back its 0, 300 and 600 ms, while a one-cycle
+    difference needs more jerk than that to be significant. (The built-in half cycle
+    remains: K·a_x − K·A_p = K·G·sinθ + 0.05 s·jerk, ≤ 0.02 m/s².)
+
+Gyro pitch-rate bias (``_gyro_pitch``)
+    θ_g = ∫θ̇ dt over the whole run (eq. 12, body frame so that a change of cab does not
+    break it; roll per cycle as at a start point, eq. 11 carried with ω_x) and
+    u = K·(a_x − A_p)/G − K·θ_g. While adhering u = b_a/G − const − b·t + noise (b_a the
+    accelerometer bias, b the pitch-rate bias): the least-squares slope of u over the
+    adhering cycles of the trailing ``bias_window_s`` is −b (``_sliding_slope``, running
+    sums, O(n); no estimate, and no residual, before BIAS_MIN_S of data). An ADIS16480-class
+    gyro has a bias of 0.05 °/s ≈ 0.9 mrad/s (1σ): uncorrected, θ drifts 9 mrad in a 10 s
+    correction, the
+    acceleration error grows to 0.09 m/s² and the distance error to G·b·(t_c·T²/2 + T³/6)
+    ≈ 3 m in 8 s (t_c the 1.9 s carry to i0) — it was the main cause of corrections off by
+    2–5 % (bench/slip_study.py: 80 % → 96 % within ±2 %). b is removed from θ̇ in the carry
+    to i0 and in the integration.
 
 Detection (eq. 1)
     ``|a_x − A_p| > Ta`` on the smoothed aligned values, pulse speed ≥ ``min_speed_kmh``.
     ``a_x − A_p < −Ta``: the wheel accelerates faster than the body → *slip* (traction);
     ``> +Ta``: the wheel decelerates faster → *slide* (braking). The gravity term G·sinθ is
     at most Ta (35 ‰), so the sign decides. Only rising edges of the mask open an episode.
+
+Second criterion: grade-compensated residual (``residual_threshold_kmh_s``, 0 = off)
+    Ta must exceed the largest G·sinθ, so a slip whose K-filtered excess acceleration stays
+    below 0.34 m/s² goes unseen: shallow (10–20 %) slips at 2–8 m/s, 0.4–4 m of distance
+    each. But the change of θ is known from the gyro: with u as above (adhering: constant
+    − b·t), the residual over the horizon H = ``residual_horizon_s``
+
+        r(k) = G·[u(k) − u(k − H) + b̂·H]      (travel frame: slip < 0 < slide)
+
+    is K·(a_x − A_p) minus its value H ago minus the gyro's change of G·sinθ in between:
+    grades, vertical curves, cant and the accelerometer bias drop out and r stays near zero
+    while adhering. Its noise is the pulse quantisation of two K windows (±0.04 m/s²), the
+    gyro error over H after the bias estimate (≈ 0.3 mrad/s in sharp canted curves, from
+    the roll error × ω_z) and the IMU noise: over 300 simulated runs |r| ≤ 0.076 m/s² on
+    adhering cycles (99.9 % ≤ 0.05), against the threshold 0.45 km/h/s = 0.125 m/s² (Ta/2.7).
+    H = 4 s ≥ the filter length M = 3.9 s: the two K windows do not overlap, so a slip
+    onset shows in full. A detection needs an adhering reference: u(k − H) not in a Ta
+    detection and not within a filter length after a cycle either criterion flags (two
+    passes); a residual onset whose reference falls in the previous episode (k − H − M ≤
+    its end) is ignored; and there is no residual before the bias estimate exists. The
+    residual needs the right pulse delay (above): with the SPEC's 300 ms on lag-free data
+    it reaches 0.15 m/s² (37 false detections in 100 simulated runs).
 
 Correction start point
     From the detection cycle minus ``lookback_s`` search backwards (at most
@@ -39,6 +94,16 @@ Correction start point
     consecutive cycles (Ji, Jp: per-cycle differences of smoothed a_x, A_p). Vectorised as
     "last index ≤ k where the rolling condition holds" (``np.maximum.accumulate``). If none
     is found the look-back point itself is used (``detail['start_found'] = False``).
+    A residual detection comes earlier (0.4–1.3 s after the onset, median 0.8 s, on the
+    simulated runs), so its look-back point is instead QUIET_MARGIN_S before the last cycle
+    at which |r| was within QUIET_SHARE of the threshold (where the residual leaves its
+    noise band), but never earlier than the SPEC
+    look-back: as often before the onset as with the SPEC look-back (8 against 4 of 958
+    simulated episodes start after it), ≈ 0.5 s shorter corrections, 12 % fewer fail-safes.
+    A slip shorter than the filter shows in r as two opposite lobes that cancel while both
+    are in the window; when only the end lobe crosses the threshold, the look-back counts
+    from the first cycle of the opposite lobe within H + M before (beyond half the
+    threshold) and the kind is reversed (``criterion`` "residual-end", ``_lobe``).
 
 Attitude at the start point (i0)
     Pitch (eq. 3): θ̄ = arcsin((a_x0 − A_p0)/G) with A_p0 the least-squares acceleration of a
@@ -67,6 +132,7 @@ Attitude propagation (eqs. 4, 6, 12 in our frame)
     (k = ±1 by curve hand) has no counterpart in rigid-body kinematics: with k = sign(ω_z)
     it integrates to k·(cosψ − cosψ0), an empirical correction for their installation, and
     it is left out (it would bias exact data by up to 1 − cos ψ ≈ 0.005 rad at 100 mm cant).
+    The gyro bias b̂ at i0 is subtracted from θ̇ (see above).
     Roll: ψ(t) = ψ0 + ∫ωx dt (eq. 6); a second pass adds the exact −Ψ̇·sinθ term with
     Ψ̇·cosθ = wy·sinψ + wz·cosψ (on 25 ‰ in an R 400 m curve at 20 m/s eq. 6 alone drifts
     0.05 rad/s·0.025·10 s ≈ 0.013 rad in ψ).
@@ -77,17 +143,30 @@ Correction (eq. 2)
     to the distance. Negative speeds are clipped (the distance never decreases).
 
 Re-adhesion
-    After detection, the first cycle with ``|a_x − A_p| ≤ Ta`` and
-    ``|v_inertial − v_pulse| ≤ β·(t − t0)``. From there the distance continues on the pulses
-    with a constant offset (continuous, never decreasing). A correction still running
-    ``max_correction_s`` after i0 ends there as a *fail-safe* episode (``failsafe=True``):
-    the distance continues on the pulses and the solver makes the position uncertain.
-    Only rising edges of the detection mask open an episode, and a new start point needs
-    the look-back's room after the previous end (see ``find_episodes``): otherwise a
-    re-adhesion is re-opened (it was premature — with a 3.9 s filter this is the rule for
-    slips of about the window's length) and a detection just after a fail-safe is ignored.
-    With the SPEC parameters a correction lasts ≈ look-back 2.3 s + slip + filter tail
-    ≈ 3.5 s, so slips longer than ≈ 4 s end as fail-safe.
+    After detection, the first cycle at which the 1 s mean inertial speed and the 1 s mean
+    pulse speed ``vp1`` have agreed within ``readhesion_tol_kmh`` + β·(t − t0) for
+    ``readhesion_hold_s``. The SPEC compares the per-cycle pulse speed (±0.3 m/s of
+    quantisation) within β·t and also requires |a_x − A_p| ≤ Ta. Both fail for shallow
+    slips: |a_x − A_p| never exceeds Ta, and β·t with the former β = 0.8 km/h/s lets a
+    0.4 m/s speed excess "re-adhere" 2 s after the start while still slipping. The 1 s means
+    are quiet to ±0.03 m/s, so the tolerance can follow the inertial error instead: 0.1 m/s
+    (quantisation, and wheel wear up to 0.5 % of v0) + 0.15 km/h/s·t (with the gyro bias
+    removed the inertial speed of the simulated corrections is off by ≤ 0.17 m/s at their
+    end in 95 %, ≤ 0.26 m/s in 99 %). Holding 1 s stands in for the acceleration condition
+    (a crossing of the two speeds does not hold), without the 3.9 s filter's lag:
+    corrections end 1.2 s after the slip on average instead of 2.3 s, and none of 653
+    simulated re-adhesions comes before the slip's end (before: 7 of 90 more than 0.3 s
+    before it).
+    From there the distance continues on the pulses with a constant offset (continuous,
+    never decreasing). A correction still running ``max_correction_s`` after i0 ends there
+    as a *fail-safe* episode (``failsafe=True``): the distance continues on the pulses and
+    the solver makes the position uncertain.
+    Only rising edges of the detection masks open an episode, and a new start point needs
+    the look-back's room after the previous end (see ``find_episodes``): otherwise, if the
+    two speeds still agree since the re-adhesion, the detection is the filters' echo of the
+    slip's end and is ignored (``detail['echo_t']``); if not, the re-adhesion was premature
+    and is re-opened; a detection just after a fail-safe is ignored. A correction lasts
+    ≈ look-back 1–2 s + slip + 1.2 s, so slips longer than ≈ 7.5 s end as fail-safe.
 
 Output time base
     Episodes are found on the aligned arrays and written back shifted by the pulse delay,
@@ -122,6 +201,17 @@ SPEED_AVG_S = 1.0
 #: How far before the look-back point the start-point search may go [s].
 SEARCH_SPAN_S = 3.0
 CYCLE_S = 0.1
+#: Pulse-delay search: high-pass span (second difference over this) [s], residuals beyond
+#: this left out (slips) [m/s²], and how many standard errors the lag estimate must have.
+DELAY_HP_S = 5.0
+DELAY_CLIP_MPS2 = 0.1
+DELAY_SIGMAS = 3.0
+#: Residual detections: the look-back point is QUIET_MARGIN_S before the residual last
+#: stayed within QUIET_SHARE of its threshold.
+QUIET_SHARE = 0.25
+QUIET_MARGIN_S = 1.0
+#: Least adhering data in the bias window before the gyro bias is estimated [s].
+BIAS_MIN_S = 10.0
 #: Error budget of a radar-bridged episode: this share of its distance plus a constant [%, m].
 RADAR_ERROR_PCT = 1.0
 RADAR_ERROR_M = 0.5
@@ -168,11 +258,11 @@ class _Streams:
         self.cyc = float(np.median(dt)) if n > 1 else CYCLE_S
         self.dt = np.where(np.isfinite(dt) & (dt > 0), dt, self.cyc)
         self.uniform = bool(np.all(np.abs(self.dt - self.cyc) < 1e-6))
-        self.D = D = max(int(cfg.pulse_delay_cycles), 0)
         self.W = max(round(cfg.avg_window_s / self.cyc), 1)
         self.P = max(round(SPEED_AVG_S / self.cyc), 1)
         self.d_pulse, self.v_pulse = d_pulse, v_pulse
         self._cache: dict[int, _Integration] = {}
+        self._agree: dict[int, npt.NDArray[np.bool_]] = {}
         # filter K = MA_W ∘ MA_P as weights on lags 0..M−1, and its tail sums S_l = Σ_{m≥l} w_m
         self.kernel = np.convolve(np.full(self.P, 1.0 / self.P), np.full(self.W, 1.0 / self.W))
         self.M = self.kernel.size
@@ -184,29 +274,58 @@ class _Streams:
         # travel frame (cab −1: body turned 180° about z); IMU gaps are bridged per window
         cab = np.asarray(cycles.cab)
         self.sign = None if (cab >= 0).all() else np.where(cab < 0, -1.0, 1.0)
+        self.sgn = np.ones(n) if self.sign is None else self.sign
         self.imu = {c: np.asarray(cycles.imu[c], dtype=float) for c in ("ax", "ay", "az", "wx", "wy", "wz")}
         ax_raw = self.imu["ax"] if self.sign is None else self.imu["ax"] * self.sign
+        self.axs = self._k(ax_raw)
 
         # pulse stream delayed onto the IMU (aligned index k ↔ output index k − D); the first
         # pulse speed is 0 by construction and the delay repeats it: everything before
         # ``warm`` is excluded from detection and from the start-point windows
+        self.D = D = self._align(max(int(cfg.pulse_delay_cycles), 0))
         self.vp = delay(v_pulse, D)
         self.dp = delay(d_pulse, D)
         self.vp1 = _ma(self.vp, self.P)
         ap = np.diff(self.vp1, prepend=self.vp1[0])
         ap /= self.dt
         self.aps = _ma(ap, self.W)
-        self.axs = _ma(_ma(ax_raw, self.P), self.W)
         self.diff = self.axs - self.aps
         self.ta = cfg.ta_mps2
         self.warm = warm = min(D + self.P + self.M, n)  # first cycle whose windows hold only valid data
 
         # detection mask (eq. 1) and its rising edges
+        moving = self.vp1 >= cfg.min_speed_kmh / 3.6
         with np.errstate(invalid="ignore"):
-            mask = (np.abs(self.diff) > self.ta) & (self.vp1 >= cfg.min_speed_kmh / 3.6)
+            mask = (np.abs(self.diff) > self.ta) & moving
         mask[:warm] = False
         self.mask = mask
-        self.onsets = np.flatnonzero(mask[1:] & ~mask[:-1]) + 1
+        ta_onsets = _rising(mask)
+
+        # second criterion: the grade-compensated residual (see the module docstring)
+        self._gyro_pitch()
+        self.res = np.full(n, np.nan)
+        self.res_mask = np.zeros(n, dtype=bool)
+        hz = round(cfg.residual_horizon_s / self.cyc)
+        self.H = hz
+        if cfg.residual_threshold_kmh_s > 0 and 0 < hz < n:
+            ref, now = slice(0, n - hz), slice(hz, n)
+            u, t = self.u, self.t
+            self.res[now] = G * self.sgn[now] * (u[now] - u[ref] + self.bias[ref] * (t[now] - t[ref]))
+            with np.errstate(invalid="ignore"):
+                over = (np.abs(self.res) > kmh_s_to_mps2(cfg.residual_threshold_kmh_s)) & self.u_valid & moving
+            # the reference must be adhering: no Ta detection there, and not within a filter
+            # length after a cycle either criterion flags (its K window would hold the
+            # disturbance); two passes settle which residual detections count
+            quiet = self.u_ok & self.bias_ok
+            for _ in range(2):
+                ref_ok = np.zeros(n, dtype=bool)
+                ref_ok[now] = quiet[ref]
+                quiet = self.u_ok & self.bias_ok & ~_recent(mask | (over & ref_ok), self.M)
+            self.res[~(ref_ok & self.u_valid)] = np.nan
+            self.res_mask = over & ref_ok
+        res_onsets = _rising(self.res_mask)
+        self.onsets = np.union1d(ta_onsets, res_onsets)
+        self.is_ta_onset = np.isin(self.onsets, ta_onsets)
 
         # start-point condition: jerks per 0.1 s, held for hold_cycles → last index where it held
         per: float | FloatArray = 0.1 / self.cyc if self.uniform else 0.1 / self.dt
@@ -225,6 +344,89 @@ class _Streams:
             run[:lag] = False
         self.last_hold = np.maximum.accumulate(np.where(run, np.arange(n), -1))
 
+    def _k(self, x: FloatArray) -> FloatArray:
+        """The filter K = MA_W ∘ MA_P."""
+        return _ma(_ma(x, self.P), self.W)
+
+    def _theta_gyro(self, vp: FloatArray) -> FloatArray:
+        """Body-frame pitch integrated from the gyros (eq. 12) over the whole run, K-filtered
+        (an arbitrary constant and the gyro bias·t included); ``vp`` the aligned pulse speed
+        for the roll's centripetal term."""
+        n = self.n
+        ay, az = _bridge(self.imu["ay"]), _bridge(self.imu["az"], G)
+        wx, wy, wz = _bridge(self.imu["wx"]), _bridge(self.imu["wy"]), _bridge(self.imu["wz"])
+        # roll per cycle: eq. 11's window mean carried to the cycle with ω_x (as at i0)
+        psi = np.arctan2(self._k(ay - self.sgn * vp * wz), self._k(az))
+        psi += np.convolve(wx * self.dt, self.tail[1:])[:n]
+        theta_dot = -wy * np.cos(psi) + wz * np.sin(psi)
+        return self._k(np.cumsum(theta_dot * self.dt))
+
+    def _align(self, d0: int) -> int:
+        """Pulse delay: the SPEC value ``d0``, or the one within ±pulse_delay_search_cycles
+        that the run's data show (regression of the residual on the jerk, see the docstring)."""
+        span = max(int(self.cfg.pulse_delay_search_cycles), 0)
+        hp = round(DELAY_HP_S / self.cyc)
+        n = self.n
+        first = min(d0 + span, n) + self.P + self.M + 2 * hp
+        self.theta_k = self._theta_gyro(delay(self.v_pulse, d0))
+        if span == 0 or n <= first + 10 * hp:
+            return d0
+        vp1 = _ma(self.v_pulse, self.P)
+        aps = _ma(np.diff(vp1, prepend=vp1[0]) / self.dt, self.W)
+        body = self.sgn * self.axs / G - self.theta_k
+
+        def h2(x: FloatArray) -> FloatArray:  # second difference over DELAY_HP_S
+            return (x[2 * hp :] - 2.0 * x[hp:-hp] + x[: -2 * hp])[first - 2 * hp :]
+
+        jerk = h2(np.gradient(self.sgn * self.axs) / self.cyc)
+        moving = vp1[first:] > 1.0
+        d = d0
+        for _ in range(2):
+            e = G * h2(body - self.sgn * delay(aps, d) / G)
+            with np.errstate(invalid="ignore"):
+                m = moving & np.isfinite(e) & np.isfinite(jerk) & (np.abs(e) <= DELAY_CLIP_MPS2)
+            jj = float(np.dot(jerk[m], jerk[m]))
+            if m.sum() < 10 * hp or jj <= 0.0:
+                break
+            lead = float(np.dot(e[m], jerk[m])) / jj  # A_p behind a_x by this much [s]
+            rest = e[m] - lead * jerk[m]
+            sigma = float(np.sqrt(np.dot(rest, rest) / m.sum() / jj * self.M))  # K-correlated samples
+            lead -= 0.5 * self.cyc  # A_p of cycle k is centred half a cycle before a_x's
+            if abs(lead) < DELAY_SIGMAS * sigma:
+                break
+            nd = int(np.clip(d - round(lead / self.cyc), max(d0 - span, 0), d0 + span))
+            if nd == d:
+                break
+            d = nd
+        if d != d0:
+            self.theta_k = self._theta_gyro(delay(self.v_pulse, d))
+        return d
+
+    def _gyro_pitch(self) -> None:
+        """``u`` = K·(a_x − A_p)/G − K·θ_gyro in the body frame, and the gyro bias.
+
+        While adhering u = accelerometer bias/G − the gyro pitch's constant − b·t + noise
+        (b the pitch-rate bias of eq. 12): its trailing least-squares slope is −b. Body frame
+        (``sgn`` turns it back) so that a change of cab does not break the gyro integral;
+        K windows across a change of cab mix the frames and are left out."""
+        n = self.n
+        with np.errstate(invalid="ignore"):
+            self.u = self.sgn * self.diff / G - self.theta_k
+        valid = np.isfinite(self.u)
+        valid[: self.warm] = False
+        if self.sign is not None:
+            for c in np.flatnonzero(np.diff(self.sgn) != 0) + 1:
+                valid[c : c + self.M + self.P] = False
+        self.u_valid = valid
+        self.u_ok = valid & ~self.mask
+        self.bias = np.zeros(n)
+        self.bias_ok = np.ones(n, dtype=bool)  # without an estimate the residual drifts by G·b·H
+        lb = round(self.cfg.bias_window_s / self.cyc)
+        if lb > 0:
+            slope, count = _sliding_slope(self.t, self.u, self.u_ok, lb)
+            self.bias_ok = count >= min(BIAS_MIN_S / self.cyc, lb)
+            self.bias = np.where(self.bias_ok, -slope, 0.0)
+
     def imu_window(self, name: str, sl: slice, fill: float = 0.0) -> FloatArray:
         """Travel-frame IMU column over a window, gaps bridged linearly (edges held)."""
         x = self.imu[name][sl]
@@ -239,11 +441,14 @@ class _Streams:
         A start point needs ``lookback`` cycles of room after the previous episode's end ie
         (and after a fail-safe also a full filter window, so that θ0 and v0 are computed
         from data of after the disturbance). A detection without that room is
-        * after a re-adhesion: proof that the re-adhesion was premature (typically the
-          slip's onset has left the 3 s window before its end has entered it) — the
+        * after a re-adhesion, with the speeds agreeing ever since: the filters' echo of the
+          slip's end — ignored, listed in ``echo_t``;
+        * after a re-adhesion otherwise: proof that the re-adhesion was premature — the
           previous correction is re-opened and continues from its own start point;
         * after a fail-safe: still the same disturbance — ignored, the distance stays on
           the pulses (the position is uncertain anyway); listed in ``redetect_t``.
+        A residual onset whose reference u(k − H) lies within the previous episode (or a
+        filter length after it) is ignored: the residual then compares with slipping pulses.
         """
         cfg = self.cfg
         episodes: list[tuple[SlipEpisode, FloatArray]] = []
@@ -256,29 +461,86 @@ class _Streams:
             if j >= self.onsets.size:
                 break
             det = int(self.onsets[j])
+            ta = bool(self.is_ta_onset[j])
             prev = episodes[-1][0] if episodes else None
+            if not ta and prev is not None and det - self.H - self.M <= prev.detail["i_end_aligned"]:
+                pos = det + 1  # the residual's reference lies in the previous episode
+                continue
             if prev is not None and det - lookback < floor:
                 pd = prev.detail
+                if prev.readhered and self._agrees(pd["i_start_aligned"], pd["i_end_aligned"], det):
+                    pd["echo_t"].append(float(self.t[det]))
+                    pos = det + 1  # the filters' echo of the slip's end: the speeds still agree
+                    continue
                 pd["redetect_t"].append(float(self.t[det]))
                 if prev.failsafe:
                     pos = det + 1
                     continue
                 episodes.pop()
                 ep, v_in = self._episode(
-                    pd["i_detect_aligned"], pd["i_start_aligned"], pd["start_found"], det, pd["redetect_t"]
+                    pd["i_detect_aligned"],
+                    pd["i_start_aligned"],
+                    pd["start_found"],
+                    det,
+                    pd["redetect_t"],
+                    pd["criterion"],
                 )
             else:
-                i0, found = self._start_point(det, lookback, span, floor)
-                ep, v_in = self._episode(det, i0, found, det, [])
+                if ta:
+                    crit, back = "ta", det - lookback
+                else:
+                    crit, ref = self._lobe(det)
+                    back = self._quiet_before(ref, ref - lookback)
+                i0, found = self._start_point(det, back, span, floor)
+                ep, v_in = self._episode(det, i0, found, det, [], crit)
             episodes.append((ep, v_in))
             ie = ep.detail["i_end_aligned"]
             floor = ie + self.M if ep.failsafe else ie + 1
             pos = ie + 1
         return episodes
 
-    def _start_point(self, det: int, lookback: int, span: int, floor: int) -> tuple[int, bool]:
-        k = det - lookback
-        lo = max(floor, det - lookback - span)
+    def _lobe(self, det: int) -> tuple[str, int]:
+        """A slip shorter than the filter shows in the residual as two lobes of opposite
+        sign (onset, then end) that cancel while both are in the window; a sub-threshold
+        onset lobe followed by a detected end lobe would put the look-back inside the slip.
+        If the residual had the opposite sign (beyond half the threshold) within the
+        horizon + filter before ``det``, rising from its noise band there, the look-back
+        counts from the first cycle of that lobe and the kind is reversed."""
+        lo = max(det - self.H - self.M, 0)
+        thr = kmh_s_to_mps2(self.cfg.residual_threshold_kmh_s)
+        with np.errstate(invalid="ignore"):
+            opp = np.flatnonzero(np.sign(self.res[det]) * self.res[lo:det] < -0.5 * thr)
+        if opp.size == 0:
+            return "residual", det
+        back = opp[::-1]  # the latest opposite lobe: its run of consecutive cycles, backwards
+        brk = np.flatnonzero(np.diff(back) != -1)
+        first = int(back[brk[0]] if brk.size else back[-1])
+        with np.errstate(invalid="ignore"):  # a lobe rises from the noise band, a drift does not
+            rose = bool((np.abs(self.res[lo : lo + first]) <= QUIET_SHARE * thr).any())
+        return ("residual-end", lo + first) if rose else ("residual", det)
+
+    def _agrees(self, i0: int, ie: int, det: int) -> bool:
+        """Pulse and inertial speeds of the correction from i0 still agree from its
+        re-adhesion ie up to cycle det (False when det is past the integrated span)."""
+        agree = self._agree.get(i0)
+        if agree is None or det - i0 >= agree.size:
+            return False
+        return bool(agree[ie - i0 : det - i0 + 1].all())
+
+    def _quiet_before(self, ref: int, back: int) -> int:
+        """Look-back point of a residual detection: QUIET_MARGIN_S before the last cycle
+        before ``ref`` at which |residual| was within QUIET_SHARE of the threshold (the
+        onset is where the residual leaves its noise band), but not before ``back``."""
+        thr = QUIET_SHARE * kmh_s_to_mps2(self.cfg.residual_threshold_kmh_s)
+        lo = max(back, 0)
+        with np.errstate(invalid="ignore"):
+            q = np.flatnonzero(np.abs(self.res[lo:ref]) <= thr)
+        if q.size == 0:
+            return back
+        return max(lo + int(q[-1]) - round(QUIET_MARGIN_S / self.cyc), back)
+
+    def _start_point(self, det: int, k: int, span: int, floor: int) -> tuple[int, bool]:
+        lo = max(floor, k - span)
         if k < lo:
             return max(min(det - 1, floor), 0), False
         j = int(self.last_hold[k])
@@ -336,7 +598,8 @@ class _Streams:
         theta_bar = float(np.arcsin(np.clip(diff0 / G, -1.0, 1.0)))
         clipped = abs(theta_bar) > theta_max
         theta_bar = float(np.clip(theta_bar, -theta_max, theta_max))
-        theta0 = theta_bar + self._carry(-wy[pre] * np.cos(psi0) + wz[pre] * np.sin(psi0), hw, tail_th)
+        bias = float(self.bias[i0] * self.sgn[i0])  # gyro pitch-rate bias, travel frame
+        theta0 = theta_bar + self._carry(-wy[pre] * np.cos(psi0) + wz[pre] * np.sin(psi0) - bias, hw, tail_th)
         v0 = float(self.vp1[i0]) + self._carry(ax[pre] - G * np.sin(theta0), hw, self.tail_p)
 
         # integrate over at most max_correction_s (eqs. 4, 6, 12, 2)
@@ -345,11 +608,11 @@ class _Streams:
         h[0] = 0.0
         ax, wx, wy, wz = ax[post], wx[post], wy[post], wz[post]
         psi = psi0 + np.cumsum(wx * h)
-        theta_dot = -wy * np.cos(psi) + wz * np.sin(psi)
+        theta_dot = -wy * np.cos(psi) + wz * np.sin(psi) - bias
         theta = theta0 + np.cumsum(theta_dot * h)
         yaw_c = wy * np.sin(psi) + wz * np.cos(psi)  # Ψ̇·cosθ
         psi = psi0 + np.cumsum((wx - yaw_c * np.tan(theta)) * h)
-        theta_dot = -wy * np.cos(psi) + wz * np.sin(psi)
+        theta_dot = -wy * np.cos(psi) + wz * np.sin(psi) - bias
         theta = theta0 + np.cumsum(theta_dot * h)
         theta_mid = theta - 0.5 * theta_dot * h
         acc = ax - G * np.sin(theta_mid)
@@ -360,7 +623,7 @@ class _Streams:
         return res
 
     def _episode(
-        self, det: int, i0: int, found: bool, after: int, redetect_t: list[float]
+        self, det: int, i0: int, found: bool, after: int, redetect_t: list[float], criterion: str
     ) -> tuple[SlipEpisode, FloatArray]:
         """Episode detected at ``det`` corrected from start point i0; re-adhesion is looked
         for after cycle ``after`` (later than ``det`` when a premature one was re-opened)."""
@@ -370,10 +633,18 @@ class _Streams:
         i_lim, v_in, theta = ig.i_lim, ig.v_in, ig.theta
         sl = slice(i0, i_lim + 1)
 
-        # re-adhesion after detection, else fail-safe at the time limit, else end of data
+        # re-adhesion after detection (1 s mean speeds agree within ε + β·t for readhesion_hold_s),
+        # else fail-safe at the time limit, else end of data
         tt = t[sl] - t[i0]
+        lead = self.vp[max(i0 - self.P + 1, 0) : i0]  # the 1 s mean starts on adhering pulses
+        v1 = _ma(np.concatenate([lead, v_in]), self.P)[lead.size :]
         with np.errstate(invalid="ignore"):
-            cond = (np.abs(self.diff[sl]) <= self.ta) & (np.abs(v_in - self.vp[sl]) <= cfg.beta_mps2 * tt)
+            agree = np.abs(v1 - self.vp1[sl]) <= cfg.readhesion_tol_kmh / 3.6 + cfg.beta_mps2 * tt
+        self._agree[i0] = agree
+        cond = agree.copy()
+        for lag in range(1, max(round(cfg.readhesion_hold_s / self.cyc), 1)):
+            cond[lag:] &= agree[:-lag]
+            cond[:lag] = False
         cond[: max(after - i0 + 1, 0)] = False
         hit = np.flatnonzero(cond)
         readhered = hit.size > 0
@@ -387,7 +658,8 @@ class _Streams:
         m_end = ie - i0 + 1
         v_in, theta = v_in[:m_end], theta[:m_end]
         duration = float(t[ie] - t[i0])
-        kind = "slip" if float(self.diff[det]) < 0 else "slide"
+        sense = float(self.diff[det] if criterion == "ta" else self.res[det])
+        kind = "slip" if (sense < 0) != (criterion == "residual-end") else "slide"
         detail: dict[str, Any] = {
             "theta0_rad": ig.theta0,
             "psi0_rad": ig.psi0,
@@ -397,6 +669,9 @@ class _Streams:
             "ax_at_detect_kmh_s": mps2_to_kmh_s(float(self.axs[det])),
             "ap_at_detect_kmh_s": mps2_to_kmh_s(float(self.aps[det])),
             "v_pulse_at_detect_mps": float(self.vp1[det]),
+            "criterion": criterion,
+            "residual_at_detect_kmh_s": _finite(mps2_to_kmh_s(float(self.res[det]))),
+            "gyro_bias_rad_s": float(self.bias[i0] * self.sgn[i0]),
             "start_found": found,
             "theta_clipped": ig.clipped,
             "lookback_s": float(t[det] - t[i0]),
@@ -406,6 +681,7 @@ class _Streams:
             "i_end_aligned": ie,
             "truncated": not readhered and not failsafe,
             "redetect_t": redetect_t,
+            "echo_t": [],
         }
         ep = SlipEpisode(
             kind=kind,
@@ -521,3 +797,41 @@ def _ma(x: FloatArray, window: int) -> FloatArray:
     out[:w] = cs[1 : w + 1] / np.arange(1, w + 1)
     out[w:] = (cs[w + 1 :] - cs[1 : x.size - w + 1]) / w
     return out
+
+
+def _rising(mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:
+    """Indices where ``mask`` turns True."""
+    return np.flatnonzero(mask[1:] & ~mask[:-1]) + 1
+
+
+def _sliding_slope(
+    t: FloatArray, y: FloatArray, w: npt.NDArray[np.bool_], window: int
+) -> tuple[FloatArray, FloatArray]:
+    """Least-squares slope dy/dt over the samples with ``w`` in the trailing window of
+    ``window`` cycles ending at each cycle, and their count (running sums, O(n))."""
+    x = t - t[t.size // 2] if t.size else t
+    wf = w.astype(float)
+    yz = np.where(w, y, 0.0)
+
+    def run(a: FloatArray) -> FloatArray:
+        c = np.concatenate([[0.0], np.cumsum(a)])
+        hi = np.arange(1, a.size + 1)
+        return c[hi] - c[np.maximum(hi - window, 0)]
+
+    s0, s1, s2 = run(wf), run(wf * x), run(wf * x * x)
+    sy, sxy = run(yz), run(yz * x)
+    den = s0 * s2 - s1 * s1
+    with np.errstate(invalid="ignore", divide="ignore"):
+        slope = np.where(den > 1e-12 * np.maximum(s0, 1.0) ** 2, (s0 * sxy - s1 * sy) / den, 0.0)
+    return slope, s0
+
+
+def _recent(mask: npt.NDArray[np.bool_], window: int) -> npt.NDArray[np.bool_]:
+    """True where ``mask`` was True at this cycle or one of the ``window − 1`` before."""
+    c = np.concatenate([[0], np.cumsum(mask)])
+    hi = np.arange(1, mask.size + 1)
+    return (c[hi] - c[np.maximum(hi - window, 0)]) > 0
+
+
+def _finite(x: float) -> float | None:
+    return x if np.isfinite(x) else None

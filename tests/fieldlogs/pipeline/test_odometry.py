@@ -10,7 +10,7 @@ compensates); pulses are counts of a 90-tooth, 0.86 m wheel (≈ 3 cm quantum).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -19,9 +19,9 @@ from hypothesis import strategies as st
 
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles, cycle_means
-from fieldlogs.pipeline.odometry import correct_odometry
+from fieldlogs.pipeline.odometry import _Streams, correct_odometry
 from fieldlogs.pipeline.types import Odometry, slip_budget_m
-from schemas.units import G
+from schemas.units import G, kmh_s_to_mps2
 
 Q = np.pi * 0.86 / 90  # metres per pulse
 H = 0.01  # fine grid [s]
@@ -294,6 +294,190 @@ def test_second_slip_right_after_failsafe_is_not_corrected_from_a_slipping_start
 def test_eq13_budget_at_10_s() -> None:
     assert slip_budget_m(10.0, CFG.delta_a_mps2) == pytest.approx(22.8, abs=0.1)
     assert slip_budget_m(5.0, CFG.delta_a_mps2) == pytest.approx(22.8 / 4, abs=0.03)
+
+
+# --------------------------------------------------------------------------- second criterion
+
+
+def streams(sc: Scenario, cfg: OdometryConfig = CFG) -> _Streams:
+    return _Streams(sc.cycles, cfg, sc.cycles.d_pulse, sc.cycles.v_pulse)
+
+
+THR = kmh_s_to_mps2(CFG.residual_threshold_kmh_s)  # 0.125 m/s²
+
+
+@pytest.mark.parametrize(
+    ("accel", "v0", "factor", "kind"),
+    [(0.1, 5.0, 0.08, "slip"), (-0.1, 11.0, -0.08, "slide")],
+)
+def test_shallow_slip_below_ta_found_by_the_residual(accel: float, v0: float, factor: float, kind: str) -> None:
+    """8 m/s at the onset (t = 30 s), wheel speed ±8 % = ±0.64 m/s ramped in over 1 s and
+    out over 1 s, 3 s in all, on a level line. K = MA3∘MA1 turns the 0.64 m/s step into a
+    bump of 0.64/3 ≈ 0.21 m/s² (+ 8 % of the 0.1 m/s² acceleration): below Ta = 0.34 m/s²,
+    so eq. 1 never fires, but far above the residual's 0.125 m/s²."""
+    onset, dur = 30.0, 3.0
+    sc = scenario(50.0, const(accel), v0, slip=slip_pulse(onset, dur, factor, edge=1.0), ax_noise_kmh_s=0.1)
+    s = streams(sc)
+    assert np.nanmax(np.abs(s.diff[s.warm :])) < CFG.ta_mps2  # invisible to the SPEC criterion
+    assert 1.5 * THR < np.nanmax(np.abs(s.res)) < CFG.ta_mps2
+    assert correct_odometry(sc.cycles, replace(CFG, residual_threshold_kmh_s=0.0)).episodes == []
+    odo = correct_odometry(sc.cycles, CFG)
+    assert_odometry_sane(odo, sc)
+    (ep,) = odo.episodes
+    assert ep.kind == kind and ep.detail["criterion"] == "residual"
+    assert np.sign(ep.detail["residual_at_detect_kmh_s"]) == (-1 if kind == "slip" else 1)
+    assert 0.0 < ep.t_detect - onset < 1.8
+    assert ep.t_start < onset and ep.readhered and not ep.failsafe
+    assert onset + dur <= ep.t_end < onset + dur + 2.0  # not before the wheel re-adheres
+    err, err_pulse, _ = episode_error(odo, sc)
+    assert abs(err) < 0.01
+    assert abs(err_pulse) > 0.02
+    pulse_excess = sc.cycles.d_pulse[-1] - sc.s_true[-1]  # ≈ ±0.64 m/s × 2 s
+    assert abs(pulse_excess) > 1.0
+    assert abs(odo.d[-1] - sc.s_true[-1]) < 0.2 * abs(pulse_excess)
+
+
+def test_residual_quiet_over_a_vertical_curve_onto_25_permil() -> None:
+    """0 → 25 ‰ over 5 s at 10 m/s (a 2 km vertical curve) while accelerating and braking,
+    no slip: G·sinθ grows by 0.245 m/s², 0.2 m/s² of it within the residual's 4 s horizon —
+    K·(a_x − A_p) changes by more than the threshold, the gyro pitch takes it out."""
+
+    def accel(t: np.ndarray) -> np.ndarray:
+        return 0.4 * ramp(t, 10, 12) - 0.4 * ramp(t, 24, 26) - 0.5 * ramp(t, 40, 42)
+
+    sc = scenario(60.0, accel, 10.0, theta=lambda t: np.arctan(0.025 * ramp(t, 20, 25)), ax_noise_kmh_s=0.1)
+    s = streams(sc)
+    h = s.H
+    assert np.nanmax(np.abs(s.diff[h:] - s.diff[:-h])[s.warm :]) > 1.4 * THR  # the grade is in a_x − A_p
+    assert np.nanmax(np.abs(s.res)) < 0.4 * THR
+    assert correct_odometry(sc.cycles, CFG).episodes == []
+
+
+def test_residual_quiet_in_a_canted_curve() -> None:
+    """R = 300 m at 20 m/s (ω_z = 0.067 rad/s) entered through a 6 s transition to 100 mrad
+    of cant, on 10 ‰, no slip. The pitch gyro reads Ψ̇·cosθ·sinψ ≈ −6.7 mrad/s in the
+    curve: −wy alone would be a pitch change of 27 mrad (0.26 m/s²) within 4 s; eq. 12's
+    wz·sinψ cancels it."""
+    v0 = 20.0
+    sc = scenario(
+        60.0,
+        const(0.0),
+        v0,
+        theta=const(np.arctan(0.010)),
+        roll=lambda t: -0.1 * ramp(t, 20, 26),
+        yaw_rate=lambda t: v0 / 300.0 * ramp(t, 20, 26),
+        ax_noise_kmh_s=0.1,
+    )
+    s = streams(sc)
+    wy = sc.cycles.imu["wy"]
+    naive = G * np.abs(np.convolve(-wy * 0.1, np.ones(s.H), "valid")).max()  # ∫ −wy over 4 s
+    assert naive > 2.0 * THR
+    assert np.nanmax(np.abs(s.res)) < 0.4 * THR
+    assert correct_odometry(sc.cycles, CFG).episodes == []
+
+
+def test_short_shallow_slip_seen_only_at_its_end_starts_before_it() -> None:
+    """A 2 s slip of 10 % at 3 m/s (0.3 m/s of excess): its onset lobe in the residual stays
+    below the threshold, the end lobe (the wheel slowing back) crosses it ≈ 3 s after the
+    slip, with the opposite sign. The look-back must count from the onset lobe, not from
+    the detection (that start point would lie after the slip), and the kind is a slip."""
+    onset, dur = 20.0, 2.0
+    sc = scenario(45.0, const(0.1), 1.0, slip=slip_pulse(onset, dur, 0.1, edge=0.7), ax_noise_kmh_s=0.1)
+    s = streams(sc)
+    on = slice(round(onset / 0.1), round((onset + 2.5) / 0.1))
+    assert -THR < np.nanmin(s.res[on]) < -0.5 * THR  # the onset lobe: seen, not detected
+    odo = correct_odometry(sc.cycles, CFG)
+    assert_odometry_sane(odo, sc)
+    (ep,) = odo.episodes
+    assert ep.detail["criterion"] == "residual-end" and ep.kind == "slip"
+    assert ep.t_detect > onset + dur + 1.0
+    assert ep.t_start < onset and ep.readhered
+    err, _, _ = episode_error(odo, sc)
+    assert abs(err) < 0.02
+
+
+def test_gyro_bias_is_estimated_and_removed() -> None:
+    """A pitch-gyro bias of 2 mrad/s (0.11 °/s): uncorrected, the pitch drifts 20 mrad in a
+    10 s correction and the inertial speed by ≈ 1 m/s. The slope of u over the 40 s of
+    adhering running before the slip gives it back."""
+    onset = 40.0
+    sc = scenario(60.0, const(0.3), 3.0, slip=slip_pulse(onset, 6.0, 0.3), ax_noise_kmh_s=0.1)
+    sc.cycles.imu["wy"] = sc.cycles.imu["wy"] + 0.002
+    before = slice(0, round(onset / 0.1))
+    assert np.nanmax(np.abs(streams(sc).res[before])) < 0.4 * THR  # G·b·H = 0.08 m/s² uncorrected
+    odo = correct_odometry(sc.cycles, CFG)
+    assert_odometry_sane(odo, sc)
+    (ep,) = odo.episodes
+    assert ep.detail["gyro_bias_rad_s"] == pytest.approx(-0.002, abs=2e-4)  # θ̇ = −wy + …
+    assert ep.readhered
+    err, _, _ = episode_error(odo, sc)
+    assert abs(err) < 0.01
+    assert abs(odo.d[-1] - sc.s_true[-1]) < 1.0
+    off = correct_odometry(sc.cycles, replace(CFG, bias_window_s=0.0))
+    assert off.episodes[0].failsafe  # the drifting inertial speed never meets the pulses again
+    assert abs(off.d[-1] - sc.s_true[-1]) > 3.0
+
+
+def _jerky(t: np.ndarray) -> np.ndarray:
+    return 0.6 * ramp(t, 0, 1) - 0.6 * ramp(t, 30, 31) - 0.5 * ramp(t, 80, 82) + 0.5 * ramp(t, 115, 116)
+
+
+@pytest.mark.parametrize(("lag_s", "cycles"), [(0.0, 0), (0.3, 3), (0.6, 6)])
+def test_pulse_delay_is_found_from_the_run(lag_s: float, cycles: int) -> None:
+    """The IMU lags the pulses by ``lag_s``; four jerk-limited transitions in 120 s are enough
+    evidence. Without the search the SPEC's 3 cycles stay, and a wrong delay shows in
+    K·(a_x − A_p) as delay error × jerk (0.3 s × 0.6 m/s³ → ≈ 0.06 m/s² after K)."""
+    sc = scenario(120.0, _jerky, 0.5, imu_lag_s=lag_s, ax_noise_kmh_s=0.1, seed=3)
+    s = streams(sc)
+    assert s.D == cycles
+    spec = streams(sc, replace(CFG, pulse_delay_search_cycles=0))
+    assert spec.D == 3
+    quiet = np.nanmax(np.abs(s.diff[s.warm + 6 :]))
+    assert quiet < 0.035
+    if cycles != 3:
+        assert np.nanmax(np.abs(spec.diff[spec.warm + 6 :])) > quiet + 0.03
+
+
+def test_pulse_delay_stays_without_jerk() -> None:
+    """Constant acceleration: no jerk, no evidence about the delay — the SPEC value stays."""
+    sc = scenario(120.0, const(0.3), 5.0, imu_lag_s=0.0, ax_noise_kmh_s=0.1)
+    assert streams(sc).D == CFG.pulse_delay_cycles
+
+
+# --------------------------------------------------------------------------- re-adhesion
+
+
+def test_shallow_long_slip_does_not_readhere_while_slipping() -> None:
+    """6 s of 8 % slip at 11 m/s: 0.9 m/s of excess. With β·t = 0.8 km/h/s·t (the former
+    rule) the inertial and pulse speeds "agree" 4 s after the start point, 2 s before the
+    wheel stops slipping; with 0.1 m/s + 0.15 km/h/s·t they agree only after it."""
+    onset, dur = 30.0, 6.0
+    sc = scenario(60.0, const(0.2), 5.0, slip=slip_pulse(onset, dur, 0.08, edge=1.0), ax_noise_kmh_s=0.1)
+    odo = correct_odometry(sc.cycles, CFG)
+    assert_odometry_sane(odo, sc)
+    (ep,) = odo.episodes
+    assert ep.readhered and onset + dur <= ep.t_end < onset + dur + 1.5
+    assert abs(odo.d[-1] - sc.s_true[-1]) < 0.5
+    loose = correct_odometry(sc.cycles, replace(CFG, beta_kmh_s=0.8))
+    assert loose.episodes[0].t_end < onset + dur - 1.0
+    assert abs(loose.d[-1] - sc.s_true[-1]) > 1.0
+
+
+def test_filter_echo_after_readhesion_is_not_a_new_episode() -> None:
+    """SPEC criterion only, a 3 s slip of 10 % at 11 m/s: the speeds agree again ≈ 1 s after
+    the slip, but the end of the slip is still in the 3.9 s filter and |a_x − A_p| crosses
+    Ta once more. The speeds still agree, so it is the filter's echo: ignored, not a
+    re-opened correction."""
+    onset, dur = 30.0, 3.0
+    cfg = replace(CFG, residual_threshold_kmh_s=0.0)
+    sc = scenario(50.0, const(0.2), 5.0, slip=slip_pulse(onset, dur, 0.1, edge=1.0), ax_noise_kmh_s=0.1)
+    odo = correct_odometry(sc.cycles, cfg)
+    assert_odometry_sane(odo, sc)
+    (ep,) = odo.episodes
+    assert ep.detail["echo_t"] and not ep.detail["redetect_t"]
+    assert ep.readhered and ep.t_end < ep.detail["echo_t"][0] < onset + dur + 3.0
+    err, _, _ = episode_error(odo, sc)
+    assert abs(err) < 0.01
 
 
 # --------------------------------------------------------------------------- clean runs
