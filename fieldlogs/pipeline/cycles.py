@@ -8,6 +8,7 @@ events. Nothing here is sequential, so it is all numpy.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -141,20 +142,24 @@ def build_cycles(
     return Cycles(t, pulses, d, v, imu_means, cab_sign, pto, has_tacho, has_imu)
 
 
+def trailing_sum(x: npt.ArrayLike, window: int) -> npt.NDArray[Any]:
+    """Sum over the trailing ``window`` samples ending at each sample (fewer at the start);
+    one cumsum, so integer and boolean inputs give exact integer counts."""
+    a = np.asarray(x)
+    c = np.concatenate([np.zeros(1, dtype=np.cumsum(a[:0]).dtype), np.cumsum(a)])
+    hi = np.arange(1, a.size + 1)
+    return c[hi] - c[np.maximum(hi - window, 0)]
+
+
 def moving_average(x: FloatArray, window: int) -> FloatArray:
     """Trailing moving average over ``window`` samples (what an onboard unit can compute
     in real time); NaNs are ignored, the first samples average what exists."""
     if window <= 1:
         return x.astype(float, copy=True)
     ok = np.isfinite(x)
-    xs = np.where(ok, x, 0.0)
-    cs = np.concatenate([[0.0], np.cumsum(xs)])
-    cn = np.concatenate([[0], np.cumsum(ok)])
-    hi = np.arange(1, x.size + 1)
-    lo = np.maximum(hi - window, 0)
-    n = cn[hi] - cn[lo]
+    n = trailing_sum(ok, window)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n > 0, (cs[hi] - cs[lo]) / n, np.nan)
+        return np.where(n > 0, trailing_sum(np.where(ok, x, 0.0), window) / n, np.nan)
 
 
 def delay(x: FloatArray, cycles: int) -> FloatArray:

@@ -322,10 +322,10 @@ class _Evidence:
             r,
             km,
             near,
-            np.concatenate([zero, np.cumsum(has, axis=0)]),
-            np.concatenate([zero, np.cumsum(np.where(has, r, 0.0), axis=0)]),
-            np.concatenate([zero, np.cumsum(np.where(has, r * r, 0.0), axis=0)]),
-            np.concatenate([zero, np.cumsum(onehot, axis=0)]),
+            csum(has),
+            csum(r0),
+            csum(r0 * r0),
+            csum(onehot),
             csum(ne),
             csum(nn),
             csum(ne * ne),
@@ -441,7 +441,7 @@ def _crossing(ev: _Evidence, i: IntArray, reset_lo: int, d: int, o: int, cfg: Gp
     # it turns from along-track into lateral. Fit that bias b (2-D, prior N(0, σ²)) to the
     # offsets r = b·N of the reference window and the lag (N: the track's left normal) and ask
     # how far the RMS window's mean lies from what b alone predicts there.
-    unexplained, sd_pred = _rotating_bias_residual(ev, d, lr, lo, hi, m5, drift, cfg)
+    unexplained, sd_pred = _rotating_bias_residual(ev, d, lr, lo, hi, n5, m5, drift, cfg)
     cross = (
         (n5 >= 3)
         & (nref >= 3)
@@ -460,11 +460,13 @@ def _rotating_bias_residual(
     lr: IntArray,
     lo: IntArray,
     hi: IntArray,
+    n5: FloatArray,
     m5: FloatArray,
     drift: float,
     cfg: GpsConfig,
 ) -> tuple[FloatArray, FloatArray]:
-    """(m5 − b̂·N̄5, 1-σ of that prediction incl. the drift) per row (vectorised 2×2 solves).
+    """(m5 − b̂·N̄5, 1-σ of that prediction incl. the drift) per row (vectorised 2×2 solves);
+    n5, m5: count and mean offset of the RMS window [lo, hi).
 
     b̂ is the MAP estimate of a constant plane bias from the offsets of rows [lr, lo) on
     column d (per-fix σ² = white² + drift², prior σ = ``noise_sigma_m`` per axis); N̄5 is the
@@ -482,7 +484,6 @@ def _rotating_bias_residual(
     i11, i12, i22 = a22 / det, -a12 / det, a11 / det  # posterior covariance of b
     be, bn = i11 * r1 + i12 * r2, i12 * r1 + i22 * r2
     with np.errstate(invalid="ignore", divide="ignore"):
-        n5 = ev.cn[hi, d] - ev.cn[lo, d]
         ue = (ev.s_ne[hi, d] - ev.s_ne[lo, d]) / n5
         un = (ev.s_nn[hi, d] - ev.s_nn[lo, d]) / n5
     pred = be * ue + bn * un

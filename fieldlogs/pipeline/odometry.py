@@ -192,7 +192,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fieldlogs.pipeline.config import OdometryConfig
-from fieldlogs.pipeline.cycles import Cycles, delay, moving_average
+from fieldlogs.pipeline.cycles import Cycles, delay, moving_average, trailing_sum
 from fieldlogs.pipeline.types import FloatArray, Odometry, SlipEpisode, pulse_only_odometry, slip_budget_m
 from schemas.units import G, kmh_s_to_mps2, mps2_to_kmh_s
 
@@ -813,13 +813,8 @@ def _sliding_slope(
     wf = w.astype(float)
     yz = np.where(w, y, 0.0)
 
-    def run(a: FloatArray) -> FloatArray:
-        c = np.concatenate([[0.0], np.cumsum(a)])
-        hi = np.arange(1, a.size + 1)
-        return c[hi] - c[np.maximum(hi - window, 0)]
-
-    s0, s1, s2 = run(wf), run(wf * x), run(wf * x * x)
-    sy, sxy = run(yz), run(yz * x)
+    s0, s1, s2 = (trailing_sum(a, window) for a in (wf, wf * x, wf * x * x))
+    sy, sxy = trailing_sum(yz, window), trailing_sum(yz * x, window)
     den = s0 * s2 - s1 * s1
     with np.errstate(invalid="ignore", divide="ignore"):
         slope = np.where(den > 1e-12 * np.maximum(s0, 1.0) ** 2, (s0 * sxy - s1 * sy) / den, 0.0)
@@ -828,9 +823,7 @@ def _sliding_slope(
 
 def _recent(mask: npt.NDArray[np.bool_], window: int) -> npt.NDArray[np.bool_]:
     """True where ``mask`` was True at this cycle or one of the ``window − 1`` before."""
-    c = np.concatenate([[0], np.cumsum(mask)])
-    hi = np.arange(1, mask.size + 1)
-    return (c[hi] - c[np.maximum(hi - window, 0)]) > 0
+    return trailing_sum(mask, window) > 0
 
 
 def _finite(x: float) -> float | None:
