@@ -4,6 +4,8 @@ Run on demand (prints a table, never pass/fail)::
 
     .venv/bin/python bench/bench_possession.py                 # 60 runs, seeds 1000…
     .venv/bin/python bench/bench_possession.py --runs 100 --seed0 5000 --poor-sky-every 2
+    .venv/bin/python bench/bench_possession.py --set possession.accel_noise_mps2=0.5   # a trial setting
+    .venv/bin/python bench/bench_possession.py --runs 100 --seed0 7000 --poor-sky-every 1 --poor-sky-ends  # stress
 
 Cases come from :func:`fieldlogs.simulate.possession.make_cases` over the synthetic demo
 line (double track, 3.8 m apart): the kinds ``correct``, ``wrong_track``, ``overrun``,
@@ -25,6 +27,7 @@ compared with the simulator's truth:
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -40,19 +43,24 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dbtools.gis.geometry import Projector
 from dbtools.synthetic import build_network, demo_line
-from fieldlogs.possession import check_streams
+from fieldlogs.pipeline.config import GpsConfig, update_section
+from fieldlogs.possession import PossessionConfig, check_streams
 from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, PossessionCase, make_cases
 
 TARGET_S = {"wrong_track": 120.0, "overrun": 2.0, "released_on_rail": 2.0, "not_started": 2.0}
 
 
-def evaluate(case: PossessionCase, network: object) -> dict[str, object]:
+def evaluate(
+    case: PossessionCase, network: object, gps_cfg: GpsConfig | None = None, cfg: PossessionConfig | None = None
+) -> dict[str, object]:
     chk = check_streams(
         case.streams["gps"],
         case.streams["cab"],
         datetime.fromisoformat(case.meta.start_time),
         network,  # type: ignore[arg-type]
         case.possessions,
+        gps_cfg,
+        cfg,
         run_id=case.meta.run_id,
     )
     row: dict[str, object] = {"kind": case.kind, "poor": case.poor_sky}
@@ -102,14 +110,31 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=60)
     ap.add_argument("--seed0", type=int, default=1000)
     ap.add_argument("--poor-sky-every", type=int, default=3, help="every n-th round of kinds with poor sky (0 never)")
+    ap.add_argument(
+        "--poor-sky-ends", action="store_true", help="poor sky straddles both section ends instead of inside"
+    )
     ap.add_argument("--details", action="store_true", help="print every false alarm")
+    ap.add_argument(
+        "--set", action="append", default=[], help="trial setting, e.g. --set possession.gate_z=5 or gps.max_change_m=2"
+    )
     args = ap.parse_args()
+    over: dict[str, dict[str, object]] = {"gps": {}, "possession": {}}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        section, _, name = key.partition(".")
+        if section not in over or not name or not value:
+            ap.error(f"--set wants gps.KEY=VALUE or possession.KEY=VALUE, not {item!r}")
+        over[section][name] = json.loads(value)
+    gps_cfg = update_section(GpsConfig(), over["gps"], "gps", "--set")
+    cfg = update_section(PossessionConfig(), over["possession"], "possession", "--set")
     network = build_network([demo_line()], Projector(9))
     t0 = time.perf_counter()
-    cases = make_cases(network, args.runs, args.seed0, poor_sky_every=args.poor_sky_every)
+    cases = make_cases(
+        network, args.runs, args.seed0, poor_sky_every=args.poor_sky_every, poor_sky_ends=args.poor_sky_ends
+    )
     t_sim = time.perf_counter() - t0
     t0 = time.perf_counter()
-    rows = [evaluate(c, network) for c in cases]
+    rows = [evaluate(c, network, gps_cfg, cfg) for c in cases]
     t_check = time.perf_counter() - t0
     groups: dict[tuple[str, str], list[dict[str, object]]] = defaultdict(list)
     for r in rows:

@@ -34,6 +34,7 @@ BRIEF = {
     "released_on_rail": ("released_at", "until_t"),
     "not_started": ("started_at", "reason", "until_t"),
     "approaching_end": ("end", "distance_m", "speed_mps"),
+    "overrun_possible": ("end", "uncertainty_m", "until_t"),
     "track_undecided": ("decided_at_t",),
     "crossover": ("from", "to", "rms_m"),
     "position_uncertain": ("uncertainty_m", "until_t"),
@@ -110,7 +111,8 @@ def check(
 
     On rail = PTO on. The up/down decision comes from trusted D-GPS (5/15/30 s RMS filter,
     decided as soon as the evidence suffices, else undecided); km from map-matched fixes with
-    a fail-safe uncertainty band (overrun as soon as km ± u leaves the section); notices 30 m
+    an uncertainty band (overrun as soon as km ± u leaves the section, u taken at most 15 m;
+    a wider band leaving it is an overrun_possible notice); notices 30 m
     before a section end. Runs are matched to possessions by wall-clock time (run.json
     start_time + t) and line.
 

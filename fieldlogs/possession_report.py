@@ -128,7 +128,8 @@ def render_html(checks: list[RunCheck], *, plan: str = "", db: str = "") -> str:
         f"<span class='{'alarm' if n_alarms else 'ok'}'>{n_alarms} alarm(s)</span>; "
         f"generated {datetime.now(UTC):%Y-%m-%d %H:%M} UTC.</p>",
         "<p class='note'>Alarms: wrong_track (on rail on a track no possession covers, once decided), overrun "
-        "(km ± uncertainty not inside the section), released_on_rail, not_started. Notices: approaching_end (30 m), "
+        "(km ± uncertainty, at most 15 m, not inside the section), released_on_rail, not_started. Notices: "
+        "approaching_end (30 m), overrun_possible (the wider band leaves the section: judgement held), "
         "track_undecided (no decision 120 s after PTO on), crossover, position_uncertain, "
         "position_undetermined.</p>",
     ]

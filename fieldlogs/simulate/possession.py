@@ -13,7 +13,9 @@ alarms the plan and the run must give (``expected``). Kinds:
 * ``not_started`` — on rail before ``started_at`` (started late, or never).
 
 ``poor_sky=True`` adds a 60–200 m poor-sky stretch inside the section (multipath, fix 1,
-extra noise: ``gps.poor_sky_*``); ``tacho`` adds a tachometer stream. About half the cases
+extra noise: ``gps.poor_sky_*``); with ``poor_sky_ends=True`` the poor sky straddles both
+section ends instead (30–100 m inside to 60 m beyond: the hardest case for the overrun
+alarm and for a vehicle working close to an end); ``tacho`` adds a tachometer stream. About half the cases
 carry decoy possessions that must not be matched (another night; the other track far away).
 Everything is drawn from ``np.random.default_rng(seed)``.
 """
@@ -91,6 +93,7 @@ def make_case(
     seed: int,
     *,
     poor_sky: bool = False,
+    poor_sky_ends: bool = False,
     tacho: bool = False,
     line_code: str | None = None,
 ) -> PossessionCase:
@@ -155,7 +158,14 @@ def make_case(
         "sensors": {"imu": False, "tacho": tacho, "gps": True, "balise": False, "radar": False, "truth": True},
         "slip": {"slips": 0, "slides": 0},
     }
-    if poor_sky:
+    if poor_sky and poor_sky_ends:
+        over["gps"] = {
+            "poor_sky_km_m": [
+                [km_from - 60.0, km_from + float(rng.uniform(30.0, 100.0))],
+                [km_to - float(rng.uniform(30.0, 100.0)), km_to + 60.0],
+            ]
+        }
+    elif poor_sky:
         a = float(rng.uniform(km_from, km_to - 60.0))
         over["gps"] = {"poor_sky_km_m": [[a, min(a + float(rng.uniform(60.0, 200.0)), km_to)]]}
     scenario = scenario_from_dict(over, source=f"possession case {kind} {seed}")
@@ -229,14 +239,21 @@ def make_case(
 
 
 def make_cases(
-    network: Network, n: int, seed0: int = 1000, *, poor_sky_every: int = 3, tacho_every: int = 0
+    network: Network,
+    n: int,
+    seed0: int = 1000,
+    *,
+    poor_sky_every: int = 3,
+    poor_sky_ends: bool = False,
+    tacho_every: int = 0,
 ) -> list[PossessionCase]:
-    """``n`` cases cycling through the kinds (every ``poor_sky_every``-th with poor sky,
-    every ``tacho_every``-th with a tachometer; 0 = never)."""
+    """``n`` cases cycling through the kinds (every ``poor_sky_every``-th round of kinds with
+    poor sky, at the section ends with ``poor_sky_ends``; every ``tacho_every``-th case with a
+    tachometer; 0 = never)."""
     out = []
     for i in range(n):
         kind = KINDS[i % len(KINDS)]
         poor = poor_sky_every > 0 and (i // len(KINDS)) % poor_sky_every == poor_sky_every - 1
         tacho = tacho_every > 0 and i % tacho_every == 0
-        out.append(make_case(network, kind, seed0 + i, poor_sky=poor, tacho=tacho))
+        out.append(make_case(network, kind, seed0 + i, poor_sky=poor, poor_sky_ends=poor_sky_ends, tacho=tacho))
     return out

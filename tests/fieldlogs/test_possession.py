@@ -9,6 +9,7 @@ road-rail runs with injected mistakes against the simulator's truth.
 from __future__ import annotations
 
 import gc
+from dataclasses import replace
 from datetime import datetime, timedelta
 from pathlib import Path
 
@@ -28,6 +29,7 @@ from fieldlogs.possession import (
     check_streams,
     checks_json,
     episodes,
+    km_noise,
     load_config,
     rail_periods,
     track_km,
@@ -258,15 +260,49 @@ def test_overrun_at_the_lower_end() -> None:
     assert a.evidence["end"] == "km_from_m" and 68.0 <= a.t <= 70.0
 
 
-def test_no_fixes_near_the_end_alarms_fail_safe() -> None:
-    # moving up at 2 m/s toward 1500 with no fix after t = 60 (km 1380): the band grows
+def test_no_fixes_near_the_end_holds_judgement_then_alarms() -> None:
+    # moving up at 2 m/s toward 1500 with no fix after t = 60 (km 1280): the band grows
     km = run_line(200, (0.0, 20), (2.0, 180))
     km[61:] = np.nan
     res = check(km, [possession()])
     a = next(a for a in res.alarms if a.type == "overrun")
-    assert a.t < 20 + 300 / 2.0  # long before the vehicle (dead reckoning) would reach the end
-    assert a.evidence["since_fix_s"] > 5.0
+    # the alarm's band is km ± 15 m: dead reckoning at 2 m/s puts km at 1485 at t = 162.5 s,
+    # 7.5 s before it would reach the end
+    assert a.t == pytest.approx(60 + (1500 - 15 - 1280) / 2.0, abs=1.0)
+    assert a.evidence["since_fix_s"] > 50.0 and a.evidence["uncertainty_m"] > 15.0
+    # … before it, the full band (u grows as √(q·dt³/3)) left the section: judgement held
+    held = next(n for n in res.notices if n.type == "overrun_possible")
+    assert 60.0 < held.t < a.t - 5.0 and held.evidence["end"] == "km_to_m"
+    assert held.evidence["uncertainty_m"] > 15.0
     assert any(n.type == "position_uncertain" for n in res.notices)
+
+
+def test_braking_near_the_end_without_fixes_is_no_overrun() -> None:
+    # up at 4 m/s, stops at 1472 (28 m before the end) while the fixes are lost for 10 s:
+    # dead reckoning at 4 m/s overshoots, the full band crosses 1500 (notice), the 15 m
+    # alarm band does not (the filter meets the vehicle again at the next fixes)
+    km = run_line(260, (0.0, 20), (4.0, 68), (0.0, 172))
+    km[80:90] = np.nan
+    res = check(km, [possession()], decisions=(decided(15.0),))
+    assert [a.type for a in res.alarms] == []
+    held = [n for n in res.notices if n.type == "overrun_possible"]
+    assert held and all(80.0 < n.t < 92.0 for n in held)
+    # with the old rule (the whole band) this was an alarm
+    wide = replace(CFG, overrun_band_max_m=1e9)
+    period = RailPeriod(5.0, float(km.size - 1), analysis(km, decisions=(decided(15.0),)))
+    assert "overrun" in types(check_periods([period], [possession()], START, GPS, wide).alarms)
+
+
+def test_first_dgps_fix_after_a_gap_counts() -> None:
+    # after a 6 s gap the D-GPS fixes have no 5 s RMS yet: they weigh as untrusted D-GPS
+    # (1 m), not as fix 1 (5 m), so the filter takes the vehicle's new place at once
+    fixes = analysis(np.array([0.0, 0.0, np.nan, 10.0]), trusted=False, rms=np.nan).fixes
+    white, bias = km_noise(fixes, GPS, CFG)
+    assert white[0] == pytest.approx(CFG.untrusted_sigma_m) and bias[0] == pytest.approx(GPS.noise_sigma_m)
+    fixes.loc[1, "fix"] = 1
+    fixes.loc[1, "usable"] = False
+    white, bias = km_noise(fixes, GPS, CFG)
+    assert white[1] == pytest.approx(CFG.fix1_sigma_m) and bias[1] == pytest.approx(CFG.fix1_sigma_m)
 
 
 def test_single_multipath_outlier_is_rejected() -> None:
