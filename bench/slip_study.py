@@ -16,6 +16,8 @@ the truth stream and the true travel-frame pitch are cached in ``$TMPDIR/slip_st
 * ``θ0 err``: θ0 minus the true pitch (it legitimately contains the accelerometer bias/G);
 * ``ev0`` / ``ev1``: corrected speed minus the true cycle-mean speed at the first and last
   cycle of the correction, ``T`` its length;
+* ``δ`` / ``upd``: inertial minus pulse speed (1 s means) at re-adhesion, and the distance the
+  re-adhesion speed update moved (``--set readhesion_speed_update=false`` turns it off);
 * ``err``: the distance error over the correction exactly as ``bench/accuracy.py`` computes
   it (only episodes corrected and re-adhered in one piece).
 
@@ -147,6 +149,8 @@ def study(r: dict[str, Any], cfg: PipelineConfig, show: str) -> dict[str, Any]:
         vt = np.diff(np.interp(t_cyc, t_truth, s_true), prepend=0.0) / 0.1
         ev0, ev1 = odo.v[d.i_start + 1] - vt[d.i_start + 1], odo.v[d.i_end] - vt[d.i_end]
         info += f" ev0 {ev0:+.2f} ev1 {ev1:+.2f} m/s T {d.t_end - d.t_start:4.1f}"
+        if dt.get("end_speed_error_mps") is not None:
+            info += f" δ {dt['end_speed_error_mps']:+.2f} m/s upd {dt['speed_update_m']:+.2f} m"
         err = None
         if not (d.failsafe or not d.readhered or len(hit) > 1 or after_failsafe):
             true_m = _truth_dist(truth, d.t_start, d.t_end)

@@ -75,6 +75,15 @@ class OdometryConfig:
     wear in v0), added to β·t [km/h]."""
     readhesion_hold_s: float = 1.0
     """Re-adhesion: the speeds must agree this long (a mere crossing does not count) [s]."""
+    readhesion_speed_update: bool = True
+    """At re-adhesion the wheel measures the ground speed again: the difference of the 1 s
+    mean inertial and pulse speeds there is the inertial speed error accumulated since the
+    start point (where the speed came from adhering pulses), and it is removed from the
+    correction as a ramp growing linearly from 0 at the start point, i.e. the episode
+    distance changes by −½·δ·T (δ the difference [m/s], T the correction time [s]; |δ| is
+    at most ``readhesion_tol_kmh`` + β·T by the re-adhesion condition). Halves the error of
+    the worst low-speed corrections (odometry module docstring, "Re-adhesion speed
+    update"). False = the SPEC's open-loop correction [–]."""
 
     @property
     def ta_mps2(self) -> float:
