@@ -254,6 +254,7 @@ def main() -> None:
                 "feature corrections within 10 m",
                 f"{100 * (feat <= 10).mean():.1f} % (n={feat.size}), max "
                 f"{feat.max():.2f} m, refused {sum(x['n_feat_refused'] for x in m)}"
+                + "".join(f"; run {i} off {e:+.1f} m" for i, x in enumerate(m) for e in x["feat_err"] if abs(e) > 10.0)
                 if feat.size
                 else "n/a",
             ),
@@ -266,7 +267,8 @@ def main() -> None:
             (
                 "GPS up/down decided",
                 f"{dec_ok}/{args.runs} runs correct, {dec_wrong} wrong decisions; "
-                f"time after first trusted fix: median {np.median(dec_delay):.0f} s, max {np.max(dec_delay):.0f} s"
+                f"time after first trusted fix: median {np.median(dec_delay):.0f} s, max {np.max(dec_delay):.0f} s, "
+                f"{sum(d <= 120.0 for d in dec_delay)}/{args.runs} within 120 s"
                 if dec_delay
                 else f"{dec_runs} runs with decisions",
             ),
