@@ -43,9 +43,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dbtools.gis.geometry import Projector
 from dbtools.synthetic import build_network, demo_line
-from fieldlogs.pipeline.config import GpsConfig, update_section
-from fieldlogs.possession import PossessionConfig, check_streams
+from fieldlogs.pipeline.config import GpsConfig
+from fieldlogs.possession import PossessionConfig, check_streams, config_from_dict
 from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, PossessionCase, make_cases
+from schemas.errors import InputError
 
 TARGET_S = {"wrong_track": 120.0, "overrun": 2.0, "released_on_rail": 2.0, "not_started": 2.0}
 
@@ -125,8 +126,10 @@ def main() -> None:
         if section not in over or not name or not value:
             ap.error(f"--set wants gps.KEY=VALUE or possession.KEY=VALUE, not {item!r}")
         over[section][name] = json.loads(value)
-    gps_cfg = update_section(GpsConfig(), over["gps"], "gps", "--set")
-    cfg = update_section(PossessionConfig(), over["possession"], "possession", "--set")
+    try:
+        gps_cfg, cfg = config_from_dict(over, "--set")
+    except InputError as exc:
+        ap.error(str(exc))
     network = build_network([demo_line()], Projector(9))
     t0 = time.perf_counter()
     cases = make_cases(

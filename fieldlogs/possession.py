@@ -190,10 +190,17 @@ def load_config(path: Path | None) -> tuple[GpsConfig, PossessionConfig]:
         raise InputError("no such config file", path=path) from exc
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"not valid TOML: {exc}", path=path) from exc
+    return config_from_dict(data, str(path))
+
+
+def config_from_dict(data: dict[str, Any], source: str = "config") -> tuple[GpsConfig, PossessionConfig]:
+    """:func:`load_config` on parsed sections (``{"gps": {...}, "possession": {...}}``);
+    unknown keys and wrong types are InputErrors naming ``source``."""
+    data = dict(data)
     section = data.pop("possession", {})
     if not isinstance(section, dict):
-        raise InputError("'possession' must be a table", path=path)
-    return PipelineConfig.from_dict(data, source=str(path)).gps, PossessionConfig.from_dict(section, str(path))
+        raise InputError("'possession' must be a table", path=source)
+    return PipelineConfig.from_dict(data, source=source).gps, PossessionConfig.from_dict(section, source)
 
 
 # ------------------------------------------------------------------------------ results
@@ -463,21 +470,21 @@ def km_noise(fixes: pd.DataFrame, gps_cfg: GpsConfig, cfg: PossessionConfig) -> 
     """(white σ, bias σ) of the km of each fix (module docstring)."""
     n = len(fixes)
     rms_cols = sorted((c for c in fixes.columns if c.startswith("rms_")), key=lambda c: float(c[4:]))
-    # the shortest window: the quality of the last seconds (no history: unknown, as fix 1)
+    # the shortest window: the quality of the last seconds
     rms = fixes[rms_cols[0]].to_numpy(dtype=float, na_value=np.nan) if rms_cols else np.full(n, np.nan)
     off = np.abs(fixes["offset_m"].to_numpy(dtype=float, na_value=np.nan)) if "offset_m" in fixes else np.zeros(n)
     trusted = _bool(fixes, "trusted")
-    usable = _bool(fixes, "usable")
+    dgps = _bool(fixes, "usable") | trusted
     # an on-rail fix far from the track is as wrong along the track, likely: the offset bounds σ
     excess = np.fmax(off - cfg.offset_free_m, 0.0)
-    bias = np.where(usable | trusted, gps_cfg.noise_sigma_m, cfg.fix1_sigma_m)
+    bias = np.where(dgps, gps_cfg.noise_sigma_m, cfg.fix1_sigma_m)
     # the RMS of 2-D second differences is √12 × the per-axis white noise that makes it; a
     # D-GPS fix's burst offset is no white noise: the gate, not a wider R, must keep it out.
     # Without D-GPS (fix 1, high HDOP) the slow error is large and the gate wide: keep R wide.
-    scale = np.where(usable | trusted, 1.0 / np.sqrt(12.0), 1.0)
+    scale = np.where(dgps, 1.0 / np.sqrt(12.0), 1.0)
     # no RMS history yet (after a gap): a D-GPS fix is as good as D-GPS usually is — the gate
     # keeps out the bad ones; without D-GPS nothing is known
-    unknown = np.where(usable | trusted, cfg.untrusted_sigma_m, cfg.fix1_sigma_m)
+    unknown = np.where(dgps, cfg.untrusted_sigma_m, cfg.fix1_sigma_m)
     noisy = np.fmax(cfg.untrusted_sigma_m, np.where(np.isfinite(rms), rms * scale, unknown))
     white = np.fmax(np.where(trusted, gps_cfg.noise_white_m, noisy), excess)
     return white, bias
