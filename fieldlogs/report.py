@@ -45,6 +45,30 @@ BALISE = "balise_correction"
 FEATURE = "feature_correction"
 CORRECTION_TYPES = (BALISE, FEATURE)
 ROUTE_KEYS = ["line_code", "track", "direction"]
+#: Per-route (or per-group) statistics, in the order reports show them: position correction …
+CORRECTION_STATS = [
+    "n_runs",
+    "distance_m",
+    "n_corrections",
+    "mean_correction_pct",
+    "median_correction_pct",
+    "max_correction_pct",
+    "share_above_target",
+]
+#: … and everything else.
+OTHER_STATS = [
+    "n_feature_corrections",
+    "n_feature_refused",
+    "refusal_reasons",
+    "n_slips",
+    "n_slips_readhered",
+    "max_slip_error_m",
+    "gps_decisions",
+    "n_gps_disagrees",
+    "gps_trusted_share",
+    "n_failsafe",
+    "n_anomalies",
+]
 UNKNOWN = "—"
 """Route key of runs whose position was never determined."""
 
@@ -213,27 +237,7 @@ def _aggregate(runs: pd.DataFrame, parts: dict[str, pd.DataFrame], keys: list[st
     for c in ("n_runs", "n_failsafe", "n_anomalies", "gps_decisions"):
         out[c] = out[c].fillna(0).astype(int)
     out["refusal_reasons"] = [_count_reasons(s) for s in out["refusal_reasons"]]
-    cols = [
-        "n_runs",
-        "distance_m",
-        "n_corrections",
-        "mean_correction_pct",
-        "median_correction_pct",
-        "max_correction_pct",
-        "share_above_target",
-        "n_feature_corrections",
-        "n_feature_refused",
-        "refusal_reasons",
-        "n_slips",
-        "n_slips_readhered",
-        "max_slip_error_m",
-        "gps_decisions",
-        "n_gps_disagrees",
-        "gps_trusted_share",
-        "n_failsafe",
-        "n_anomalies",
-    ]
-    return out[cols].reset_index()
+    return out[[*CORRECTION_STATS, *OTHER_STATS]].reset_index()
 
 
 def _count_reasons(joined: Any) -> str:

@@ -23,7 +23,7 @@ import pandas as pd
 from dbtools.database import read_network
 from fieldlogs import plots
 from fieldlogs.auditdb import read_table, read_trace
-from fieldlogs.report import ROUTE_KEYS, Report
+from fieldlogs.report import CORRECTION_STATS, OTHER_STATS, ROUTE_KEYS, Report
 from schemas.errors import TrainposError
 
 CSS = """
@@ -34,30 +34,8 @@ th{background:#f0f0f0}td.l,th.l{text-align:left}
 .warn{color:#b00;font-weight:bold}.note{color:#666}figure{margin:1.5em 0}img{max-width:100%}.scroll{overflow-x:auto}
 """
 
-CORRECTION_COLUMNS = [
-    *ROUTE_KEYS,
-    "n_runs",
-    "distance_m",
-    "n_corrections",
-    "mean_correction_pct",
-    "median_correction_pct",
-    "max_correction_pct",
-    "share_above_target",
-]
-OTHER_COLUMNS = [
-    *ROUTE_KEYS,
-    "n_feature_corrections",
-    "n_feature_refused",
-    "refusal_reasons",
-    "n_slips",
-    "n_slips_readhered",
-    "max_slip_error_m",
-    "gps_decisions",
-    "n_gps_disagrees",
-    "gps_trusted_share",
-    "n_failsafe",
-    "n_anomalies",
-]
+CORRECTION_COLUMNS = [*ROUTE_KEYS, *CORRECTION_STATS]
+OTHER_COLUMNS = [*ROUTE_KEYS, *OTHER_STATS]
 
 
 def _img(png: bytes, alt: str) -> str:
