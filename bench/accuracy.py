@@ -135,6 +135,7 @@ def metrics(res: Any, truth: pd.DataFrame, st: dict[str, Any]) -> dict[str, Any]
         "claimed": len(claimed),
         "within": int(claimed.within_margin.sum()),
         "wrong_track": int(claimed.wrong_track.sum()),
+        "uncovered_t": claimed.loc[~claimed.within_margin, "t"].to_numpy().tolist(),
         "max_abs_err": float(claimed.error_m.abs().max()) if len(claimed) else 0.0,
         "injected": len(injected),
         "matched": matched,
@@ -218,6 +219,16 @@ def main() -> None:
         rows = [
             ("cycles with a claimed position", f"{claimed}"),
             ("|km error| ≤ margin", f"{100 * within / max(claimed, 1):.3f} %  (target ≥ 99.9 %)"),
+            (
+                "runs with uncovered cycles",
+                f"{sum(1 for x in m if x['uncovered_t'])}"
+                + "".join(
+                    f"; run {r['i']}: {len(x['uncovered_t'])} at t "
+                    f"{min(x['uncovered_t']):.0f}–{max(x['uncovered_t']):.0f} s"
+                    for r, x in sorted(zip(results, m, strict=True), key=lambda rx: -len(rx[1]["uncovered_t"]))[:5]
+                    if x["uncovered_t"]
+                ),
+            ),
             ("wrong line/track cycles", f"{sum(x['wrong_track'] for x in m)}  (target 0)"),
             ("max |km error|", f"{max(x['max_abs_err'] for x in m):.2f} m"),
             (

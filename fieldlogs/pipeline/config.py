@@ -52,6 +52,12 @@ class OdometryConfig:
     """Error budget Δa = gyro 0.31 + accel 0.1 + threshold 1.23 [km/h/s], eq. 13."""
     max_correction_s: float = 10.0
     """A correction still running after this is a fail-safe event [s]."""
+    failsafe_watch_s: float = 20.0
+    """After a fail-safe the inertial (or radar) speed is followed this much longer: until
+    it agrees with the pulses again (the re-adhesion test) the slip allowance grows by
+    |v_inertial − v_pulse| + Δa·t per second, t from the start point — the pulses may still
+    be slipping, and the 5 %/km growth of an uncertain position does not cover a deep slide
+    (31 m off with 8 m of margin, once in 300 simulated runs). 0 = no watch [s]."""
     min_speed_kmh: float = 3.0
     """Below this speed no slip/slide is detected (standstill noise) [km/h]."""
     pulse_delay_search_cycles: int = 3
@@ -128,7 +134,19 @@ class FeatureConfig:
     """Centred moving average (the odd number of cycles nearest this) applied to κ = ωz / v
     before the diagnostics [s]; centred so the crossings are not delayed."""
     fix_uncertainty_m: float = 10.0
-    """Uncertainty of a feature-point correction [m] (paper: within about 10 m)."""
+    """Least uncertainty of a feature-point correction [m] (paper: within about 10 m); it is
+    larger when the κ error could move the exit crossing farther (``crossing_z``)."""
+    crossing_z: float = 3.0
+    """A correction's uncertainty is at least this many σ of its exit crossing: σ_x =
+    σ_ω / (v · s), s = κ_lo / (r5 − r4) the κ slope of the DB exit transition, σ_ω the yaw
+    rate's 1σ below [–]. Why: a slow train on a long transition turns a small ωz error into
+    metres (0.6 mrad/s at 12 m/s on R 1150 m, 64 m transition: σ_x 4.6 m)."""
+    yaw_rate_sigma_rad_s: float = 0.0006
+    """1σ of the smoothed ωz once its bias is estimated at a standstill (white noise over the
+    smoothing window, vibration, residual bias) [rad/s]."""
+    yaw_bias_sigma_rad_s: float = 0.0009
+    """1σ of the yaw-gyro bias before any standstill estimate (ADIS16480 class: 0.05 °/s);
+    added in quadrature to ``yaw_rate_sigma_rad_s`` then [rad/s]."""
     search_margin_m: float = 100.0
     """Minimum extra distance searched around the predicted feature position [m]; the
     feature is evaluated once the estimate has passed its exit-check end by this much."""
@@ -138,6 +156,16 @@ class FeatureConfig:
     crossing_merge_m: float = 5.0
     """Lower-limit runs of the same sign closer than this are one curve (noise chatter at a
     crossing) [m]."""
+    yaw_bias_window_s: float = 60.0
+    """ωz is corrected by its mean over the latest this-many seconds of standstill (0 = no
+    correction) [s]. Why: a yaw-gyro bias b reads as κ error b/v — 0.05 °/s (1σ of an
+    ADIS16480-class gyro) is 8 % of 1/R at 12 m/s on R 1150 m, enough to move a lower-limit
+    crossing 25 m along a transition when a train brakes through a curve exit."""
+    yaw_bias_settle_s: float = 2.0
+    """A standstill counts for the yaw bias only after no pulse for this long (the train has
+    stopped rocking and is not creeping between pulses) [s]."""
+    yaw_bias_min_s: float = 5.0
+    """No yaw bias estimate (0) before this much standstill [s]."""
 
 
 @dataclass(frozen=True)

@@ -151,6 +151,38 @@ def trailing_sum(x: npt.ArrayLike, window: int) -> npt.NDArray[Any]:
     return c[hi] - c[np.maximum(hi - window, 0)]
 
 
+def standstill_mean(
+    t: FloatArray, v: FloatArray, x: FloatArray, settle_s: float, window_s: float, min_s: float
+) -> tuple[FloatArray, npt.NDArray[np.bool_]]:
+    """Causal mean of ``x`` over the latest standstill cycles, per cycle, and whether it
+    exists yet (the mean is 0 where not).
+
+    A cycle counts when the speed ``v`` has been exactly 0 (no pulse) for at least
+    ``settle_s`` and ``x`` is finite: at standstill a yaw gyro should read 0, so its mean
+    there is the gyro's bias (Earth rate included). The estimate at cycle i averages the
+    last ``window_s`` worth of counted cycles up to i; it is 0 until ``min_s`` of them exist.
+    """
+    n = t.size
+    if n == 0 or window_s <= 0.0:
+        return np.zeros(n), np.zeros(n, dtype=bool)
+    still = v == 0.0
+    start = np.flatnonzero(still & ~np.concatenate([[False], still[:-1]]))
+    run_start = np.full(n, np.nan)
+    run_start[start] = t[start]
+    run_start = pd.Series(run_start).ffill().to_numpy()
+    counted = still & (t - run_start >= settle_s - 1e-9) & np.isfinite(x)
+    dt = float(np.median(np.diff(t))) if n > 1 else 0.1
+    m = max(round(window_s / dt), 1)
+    pos = np.flatnonzero(counted)
+    csum = np.concatenate([[0.0], np.cumsum(x[pos])])
+    k = np.cumsum(counted)  # counted cycles up to and including i
+    lo = np.maximum(k - m, 0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = (csum[k] - csum[lo]) / (k - lo)
+    known = k * dt >= min_s - 1e-9
+    return np.where(known, mean, 0.0), known
+
+
 def moving_average(x: FloatArray, window: int) -> FloatArray:
     """Trailing moving average over ``window`` samples (what an onboard unit can compute
     in real time); NaNs are ignored, the first samples average what exists."""

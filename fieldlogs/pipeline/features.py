@@ -1,7 +1,10 @@
 """Feature-point (curve) unit: curves as virtual balises [S000 §3.2, §4.3.2; SPEC §5.3].
 
 Curvature
-    κ = ωz / v per cycle (v = corrected speed, unsigned). The yaw rate keeps its sign when
+    κ = (ωz − b) / v per cycle (v = corrected speed, unsigned; b the yaw-gyro bias, the mean
+    of ωz over the latest standstill — ``yaw_bias_*`` of the config — 0 before the first
+    standstill: uncorrected, b/v moves the lower-limit crossings of a train braking through a
+    curve by tens of metres along the transition). The yaw rate keeps its sign when
     the vehicle runs reversed (the body turns the same way as the path), so κ is the
     curvature *in the travel direction*, positive turning left (SPEC §4.1). κ is smoothed
     with a centred moving average of ``n`` cycles (the odd number nearest to
@@ -55,13 +58,15 @@ Diagnostics (``evaluate``), each named in refusal events
     The correction point is the exit crossing: ``i_ref`` = the cycle whose travel is
     nearest x_x (quantisation ≤ v·Δt/2, reported as ``ref_offset_m``), ``km_db`` = the km
     of r4 (DB row 4, or row 3 when running reversed); the solver's correction amount is
-    then computed km − DB km at ``i_ref``.
+    then computed km − DB km at ``i_ref``. The correction's uncertainty is the larger of
+    ``fix_uncertainty_m`` and ``crossing_z`` σ of the crossing, σ_x = σ_ω / (v·s) with s the
+    κ slope of the DB exit transition (a κ error δ moves the crossing by δ/s).
 
     ``detail`` of the outcome: direction (normal/reversed), attribute (in the travel
     direction), R_m, lower/upper_kappa, search_margin_m, db_length_m, length_m,
     length_tol_m, max_kappa, measured_sign, measured_radius_m (1 / median |κ| over the
     middle half of the body), entry/exit_straight_max_kappa, km_est_exit_m (estimate at the
-    exit crossing), ref_offset_m, t_exit, min_speed_kmh, and ``reason`` when
+    exit crossing), ref_offset_m, t_exit, min_speed_kmh, uncertainty_m, and ``reason`` when
     ``start_point`` failed. ωz and v are taken from the same cycle (no latency model).
 
 One unit per run: it remembers which features it evaluated (so one is not evaluated twice
@@ -80,7 +85,7 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.pipeline.config import FeatureConfig
-from fieldlogs.pipeline.cycles import Cycles, moving_average
+from fieldlogs.pipeline.cycles import Cycles, moving_average, standstill_mean
 from fieldlogs.pipeline.types import FeatureOutcome, Fix, FloatArray, Odometry
 from schemas.enums import Attribute, Track, direction_sign
 
@@ -157,6 +162,8 @@ class FeatureUnit:
     cfg: FeatureConfig
     kappa: FloatArray = field(init=False, repr=False)
     """Smoothed κ per cycle [1/m], left positive in the travel direction (NaN: no data)."""
+    yaw_bias: FloatArray = field(init=False, repr=False)
+    """Yaw-rate bias subtracted from ωz per cycle (standstill mean, causal) [rad/s]."""
     tables: dict[tuple[str, str], FeatureTable] = field(init=False, repr=False)
     skipped: list[dict[str, Any]] = field(init=False, default_factory=list)
     """Features left out of the table (not six rows, no curve row, …) and why."""
@@ -173,6 +180,11 @@ class FeatureUnit:
         self.n_smooth = 2 * half + 1
         wz = c.imu.get("wz", np.full(n, np.nan)) if c.has_imu else np.full(n, np.nan)
         self._wz_ok = np.isfinite(wz)
+        cfg = self.cfg
+        self.yaw_bias, self._bias_known = standstill_mean(
+            c.t, c.v_pulse, wz, cfg.yaw_bias_settle_s, cfg.yaw_bias_window_s, cfg.yaw_bias_min_s
+        )
+        wz = wz - self.yaw_bias
         with np.errstate(invalid="ignore", divide="ignore"):
             raw = np.where((self._v >= KAPPA_MIN_SPEED_MPS) & self._wz_ok, wz / self._v, np.nan)
         padded = np.concatenate([raw, np.full(half, np.nan)])
@@ -265,7 +277,10 @@ class FeatureUnit:
 
         def out(i_ref: int | None = None) -> FeatureOutcome:
             order = [n for n in DIAGNOSTICS if n in failed]
-            return FeatureOutcome(not order, c.feature_id, c.line_code, c.track, i_ref, km_db, order, detail)
+            unc = self._crossing_uncertainty(i_ref, c) if i_ref is not None else None
+            if unc is not None:
+                detail["uncertainty_m"] = round(unc, 2)
+            return FeatureOutcome(not order, c.feature_id, c.line_code, c.track, i_ref, km_db, order, detail, unc)
 
         # window: estimate within [r1 − w, r6 + w], causal (samples complete before i_eval)
         ue = c.sdir * km_est
@@ -352,6 +367,21 @@ class FeatureUnit:
             failed.append("exit_straight")
         self._slip_speed(span, failed, detail)
         return out(i_ref)
+
+    def _crossing_uncertainty(self, i_ref: int, c: Candidate) -> float:
+        """Uncertainty of the exit crossing as a correction [m]: max(fix_uncertainty_m,
+        crossing_z · σ_ω / (v · κ_lo / (r5 − r4))) (config docstrings); no transition in the
+        DB (r5 = r4) leaves the least value."""
+        cfg = self.cfg
+        transition = float(c.u[4] - c.u[3])
+        v = float(self._v[i_ref])
+        if transition <= 0.0 or v <= 0.0:
+            return cfg.fix_uncertainty_m
+        sigma = cfg.yaw_rate_sigma_rad_s
+        if not self._bias_known[i_ref]:  # no standstill yet: the bias is unknown
+            sigma = float(np.hypot(sigma, cfg.yaw_bias_sigma_rad_s))
+        slope = (1.0 - cfg.tolerance) / c.radius_m / transition
+        return max(cfg.fix_uncertainty_m, cfg.crossing_z * sigma / (v * slope))
 
     def _straight(self, x0: float, x1: float, x_ts: float, slope: float, radius: float) -> tuple[bool, float | None]:
         """Is |κ| straight over travel [x0, x1]? (ok, max |κ|); the tolerance near the

@@ -168,6 +168,18 @@ Re-adhesion
     and is re-opened; a detection just after a fail-safe is ignored. A correction lasts
     ≈ look-back 1–2 s + slip + 1.2 s, so slips longer than ≈ 7.5 s end as fail-safe.
 
+Fail-safe watch (``failsafe_watch_s``, ``_watch``)
+    After a fail-safe the wheel may still be slipping while the distance runs on its
+    pulses. The integration goes on (radar where it covers) for up to ``failsafe_watch_s``
+    and is compared with the pulses as in the re-adhesion test; until they agree the
+    allowance grows by |v − v_pulse| + the speed's own error bound (Δa·t from the start
+    point, eq. 13's model; radar 1 % of v) per second, and detections (and residual
+    references) inside the watch belong to the same disturbance: they are ignored
+    (``redetect_t``). Why: a 34 % slide going on 6 s past its fail-safe left 31 m of error
+    against 8 m of margin (once in 300 simulated runs); a new correction started from the
+    still-sliding pulses doubled the error. ``detail``: ``watch_end_t``,
+    ``watch_allowance_m``, ``watch_readhered``, ``watch_speed_source``.
+
 Re-adhesion speed update (``readhesion_speed_update``)
     Once re-adhered the wheel measures the ground speed again, so the difference δ of the
     1 s mean inertial and pulse speeds at ie is the inertial speed error accumulated since
@@ -238,6 +250,9 @@ DELAY_SIGMAS = 3.0
 #: stayed within QUIET_SHARE of its threshold.
 QUIET_SHARE = 0.25
 QUIET_MARGIN_S = 1.0
+#: The end lobe of a shallow slip is at most this many times its onset lobe (the same speed
+#: change; the residual's echo of the onset adds to the end lobe) [–].
+LOBE_RATIO = 4.0
 #: Least adhering data in the bias window before the gyro bias is estimated [s].
 BIAS_MIN_S = 10.0
 #: Error budget of a radar-bridged episode: this share of its distance plus a constant [%, m].
@@ -491,7 +506,7 @@ class _Streams:
             det = int(self.onsets[j])
             ta = bool(self.is_ta_onset[j])
             prev = episodes[-1][0] if episodes else None
-            if not ta and prev is not None and det - self.H - self.M <= prev.detail["i_end_aligned"]:
+            if not ta and prev is not None and det - self.H - self.M <= prev.detail["i_settled_aligned"]:
                 pos = det + 1  # the residual's reference lies in the previous episode
                 continue
             if prev is not None and det - lookback < floor:
@@ -523,7 +538,12 @@ class _Streams:
                 ep, v_in = self._episode(det, i0, found, det, [], crit)
             episodes.append((ep, v_in))
             ie = ep.detail["i_end_aligned"]
-            floor = ie + self.M if ep.failsafe else ie + 1
+            floor = ie + 1
+            ep.detail["i_settled_aligned"] = ie
+            if ep.failsafe:  # still the same disturbance while the pulses disagree
+                w = self._watch(ep.detail["i_start_aligned"], ie) if cfg.failsafe_watch_s > 0 else None
+                ep.detail["i_settled_aligned"] = max(ie, w.end if w is not None else 0)
+                floor = max(ie + self.M, ep.detail["i_settled_aligned"] + 1)
             pos = ie + 1
         return episodes
 
@@ -532,8 +552,11 @@ class _Streams:
         sign (onset, then end) that cancel while both are in the window; a sub-threshold
         onset lobe followed by a detected end lobe would put the look-back inside the slip.
         If the residual had the opposite sign (beyond half the threshold) within the
-        horizon + filter before ``det``, rising from its noise band there, the look-back
-        counts from the first cycle of that lobe and the kind is reversed."""
+        horizon + filter before ``det``, rising from its noise band there, and the detected
+        lobe's peak over the next filter length is at most LOBE_RATIO times that lobe's, the
+        look-back counts from the first cycle of that lobe and the kind is reversed (the
+        kind and start point are settled a filter length after ``det``: the correction is
+        retroactive anyway)."""
         lo = max(det - self.H - self.M, 0)
         thr = kmh_s_to_mps2(self.cfg.residual_threshold_kmh_s)
         with np.errstate(invalid="ignore"):
@@ -545,6 +568,16 @@ class _Streams:
         first = int(back[brk[0]] if brk.size else back[-1])
         with np.errstate(invalid="ignore"):  # a lobe rises from the noise band, a drift does not
             rose = bool((np.abs(self.res[lo : lo + first]) <= QUIET_SHARE * thr).any())
+        # one slip's lobes carry the same speed change: an end lobe far larger than the
+        # opposite lobe is a new, deep disturbance (a 34 % slide 5 s after a noise lobe of
+        # half the threshold was once taken for a slip's end: its correction started 8 s
+        # early and ran out of time mid-slide)
+        sgn = np.sign(self.res[det])
+        with np.errstate(invalid="ignore"):
+            peak_opp = float(np.nanmax(-sgn * self.res[lo + back[: brk[0] + 1 if brk.size else None]]))
+            peak_end = float(np.nanmax(sgn * self.res[det : det + self.M]))
+        if peak_end > LOBE_RATIO * peak_opp:
+            return "residual", det
         return ("residual-end", lo + first) if rose else ("residual", det)
 
     def _agrees(self, i0: int, ie: int, det: int) -> bool:
@@ -604,8 +637,9 @@ class _Streams:
         n, t, dt = self.n, self.t, self.dt
         t_lim = t[i0] + cfg.max_correction_s
         i_lim = min(int(np.searchsorted(t, t_lim - 1e-9)), n - 1)
+        i_far = min(int(np.searchsorted(t, t_lim + max(cfg.failsafe_watch_s, 0.0) - 1e-9)), n - 1)
         w = self._window(i0)  # filter window ending at i0
-        span = slice(w.start, i_lim + 1)  # window + integration, IMU bridged once
+        span = slice(w.start, i_far + 1)  # window + integration (+ fail-safe watch), IMU bridged once
         ax, ay, az = self.imu_window("ax", span), self.imu_window("ay", span), self.imu_window("az", span, G)
         wx, wy, wz = self.imu_window("wx", span), self.imu_window("wy", span), self.imu_window("wz", span)
         nw = i0 - w.start + 1
@@ -630,8 +664,8 @@ class _Streams:
         theta0 = theta_bar + self._carry(-wy[pre] * np.cos(psi0) + wz[pre] * np.sin(psi0) - bias, hw, tail_th)
         v0 = float(self.vp1[i0]) + self._carry(ax[pre] - G * np.sin(theta0), hw, self.tail_p)
 
-        # integrate over at most max_correction_s (eqs. 4, 6, 12, 2)
-        sl = slice(i0, i_lim + 1)
+        # integrate over max_correction_s and the fail-safe watch (eqs. 4, 6, 12, 2)
+        sl = slice(i0, i_far + 1)
         h = dt[sl].copy()
         h[0] = 0.0
         ax, wx, wy, wz = ax[post], wx[post], wy[post], wz[post]
@@ -658,7 +692,8 @@ class _Streams:
         cfg = self.cfg
         n, t = self.n, self.t
         ig = self._integrate(i0)
-        i_lim, v_in, theta = ig.i_lim, ig.v_in, ig.theta
+        i_lim = ig.i_lim
+        v_in, theta = ig.v_in[: i_lim - i0 + 1], ig.theta[: i_lim - i0 + 1]
         sl = slice(i0, i_lim + 1)
 
         # re-adhesion after detection (1 s mean speeds agree within ε + β·t for readhesion_hold_s),
@@ -669,10 +704,7 @@ class _Streams:
         with np.errstate(invalid="ignore"):
             agree = np.abs(v1 - self.vp1[sl]) <= cfg.readhesion_tol_kmh / 3.6 + cfg.beta_mps2 * tt
         self._agree[i0] = agree
-        cond = agree.copy()
-        for lag in range(1, max(round(cfg.readhesion_hold_s / self.cyc), 1)):
-            cond[lag:] &= agree[:-lag]
-            cond[:lag] = False
+        cond = _held(agree, max(round(cfg.readhesion_hold_s / self.cyc), 1))
         cond[: max(after - i0 + 1, 0)] = False
         hit = np.flatnonzero(cond)
         readhered = hit.size > 0
@@ -784,7 +816,71 @@ class _Streams:
             d[s : e + 1] = d_seg
             grow = 0.5 * da * (t[s + 1 : e + 1] - t[s]) ** 2
             allowance[s + 1 : e + 1] += np.minimum(grow, budget)
+        if self.cfg.failsafe_watch_s > 0:
+            for ep, _ in found:
+                if ep.failsafe:
+                    self._add_watch(ep, allowance, radar)
         return Odometry(d, v, slipping, allowance, [ep for ep, _ in found])
+
+    def _watch(self, i0: int, ie: int, radar: FloatArray | None = None) -> _Watch | None:
+        """Fail-safe watch (``OdometryConfig.failsafe_watch_s``) of the correction from i0
+        that failed safe at ie: from ie on, compare the 1 s mean inertial speed of its
+        integration (the radar's where it covers the watch) with the 1 s mean pulse speed
+        as the re-adhesion test does. Until they have agreed for ``readhesion_hold_s`` the
+        pulses may still be slipping: the error rate is bounded by |v − v_pulse| + the
+        speed's own error (Δa·t from the start point; radar 1 % of v)."""
+        cfg, t = self.cfg, self.t
+        ig = self._integrate(i0)
+        lead = self.vp[max(i0 - self.P + 1, 0) : i0]
+        v1 = _ma(np.concatenate([lead, ig.v_in]), self.P)[lead.size + ie - i0 :]
+        k = np.arange(ie, ie + v1.size)  # aligned cycles; output cycle = k − D
+        out = k - self.D
+        if v1.size < 2 or out[0] - self.P + 1 < 0:
+            return None
+        tt = t[k] - t[i0]
+        use_radar = radar is not None and bool(np.isfinite(radar[out[0] - self.P + 1 : out[-1] + 1]).all())
+        if use_radar:
+            assert radar is not None
+            v1 = _ma(radar[out[0] - self.P + 1 : out[-1] + 1].astype(float), self.P)[self.P - 1 :]
+            own = RADAR_ERROR_PCT / 100.0 * v1
+            tol = cfg.readhesion_tol_kmh / 3.6 + own
+        else:
+            own = cfg.delta_a_mps2 * tt
+            tol = cfg.readhesion_tol_kmh / 3.6 + cfg.beta_mps2 * tt
+        dv = np.abs(v1 - self.vp1[k])
+        held = _held(dv <= tol, max(round(cfg.readhesion_hold_s / self.cyc), 1))
+        held[0] = False
+        hit = np.flatnonzero(held)
+        j = int(hit[0]) if hit.size else v1.size - 1
+        grow = np.cumsum((dv + own)[1 : j + 1] * self.dt[out[1 : j + 1]])
+        return _Watch(ie + j, out[1 : j + 1], grow, bool(hit.size), "radar" if use_radar else "inertial")
+
+    def _add_watch(self, ep: SlipEpisode, allowance: FloatArray, radar: FloatArray | None) -> None:
+        """The fail-safe watch's growth added to the allowance; ``watch_*`` in the detail."""
+        w = self._watch(int(ep.detail["i_start_aligned"]), int(ep.detail["i_end_aligned"]), radar)
+        if w is None:
+            return
+        if w.grow.size:
+            allowance[w.cycles] += w.grow
+            allowance[w.cycles[-1] + 1 :] += w.grow[-1]
+        ep.detail.update(
+            watch_end_t=float(self.t[w.end - self.D]),
+            watch_allowance_m=float(w.grow[-1]) if w.grow.size else 0.0,
+            watch_readhered=w.readhered,
+            watch_speed_source=w.source,
+        )
+
+
+@dataclass
+class _Watch:
+    end: int
+    """Aligned cycle at which the watch ends (re-adhesion, or its time limit)."""
+    cycles: npt.NDArray[np.intp]
+    """Output cycles after the fail-safe up to the end."""
+    grow: FloatArray
+    """Cumulative allowance growth on those cycles [m]."""
+    readhered: bool
+    source: str
 
 
 def _bridge(x: npt.NDArray[np.float64], fill: float = 0.0) -> FloatArray:
@@ -835,6 +931,15 @@ def _ma(x: FloatArray, window: int) -> FloatArray:
     out[:w] = cs[1 : w + 1] / np.arange(1, w + 1)
     out[w:] = (cs[w + 1 :] - cs[1 : x.size - w + 1]) / w
     return out
+
+
+def _held(ok: npt.NDArray[np.bool_], cycles: int) -> npt.NDArray[np.bool_]:
+    """True where ``ok`` has held for the last ``cycles`` cycles (this one included)."""
+    cond = ok.copy()
+    for lag in range(1, cycles):
+        cond[lag:] &= ok[:-lag]
+        cond[:lag] = False
+    return cond
 
 
 def _rising(mask: npt.NDArray[np.bool_]) -> npt.NDArray[np.intp]:

@@ -232,7 +232,7 @@ def solve(
                         fix.track,
                         fix.k,
                         "feature",
-                        cfg.feature.fix_uncertainty_m,
+                        max(out.uncertainty_m or 0.0, cfg.feature.fix_uncertainty_m),
                     )
                     apply(new, ev)
                 else:

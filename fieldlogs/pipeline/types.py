@@ -118,6 +118,8 @@ class FeatureOutcome:
     failed: list[str] = field(default_factory=list)
     """Names of the failed diagnostics (empty when accepted)."""
     detail: dict[str, Any] = field(default_factory=dict)
+    uncertainty_m: float | None = None
+    """Uncertainty of the correction it gives [m] (None: the config's least value)."""
 
 
 @dataclass
