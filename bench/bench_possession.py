@@ -6,14 +6,16 @@ Run on demand (prints a table, never pass/fail)::
     .venv/bin/python bench/bench_possession.py --runs 100 --seed0 5000 --poor-sky-every 2
     .venv/bin/python bench/bench_possession.py --set possession.accel_noise_mps2=0.5   # a trial setting
     .venv/bin/python bench/bench_possession.py --runs 100 --seed0 7000 --poor-sky-every 1 --poor-sky-ends  # stress
+    .venv/bin/python bench/bench_possession.py --runs 300 --seed0 20000 --poor-sky-every 2 --tacho-every 1
 
 Cases come from :func:`fieldlogs.simulate.possession.make_cases` over the synthetic demo
 line (double track, 3.8 m apart): the kinds ``correct``, ``wrong_track``, ``overrun``,
 ``early_release``, ``not_started`` in turn; every ``--poor-sky-every``-th round of kinds
 with a poor-sky stretch (multipath, fix 1, extra noise) inside the section; default D-GPS
-σ 0.75 m per axis, τ 180 s, 6 multipath bursts/h. Each run is checked with
-:func:`fieldlogs.possession.check_streams` (the library path of ``possession check``) and
-compared with the simulator's truth:
+σ 0.75 m per axis, τ 180 s, 6 multipath bursts/h; every ``--tacho-every``-th case with a
+tachometer stream (0: none, the default). Each run is checked with
+:func:`fieldlogs.possession.check_streams` (the library path of ``possession check``, which
+uses the tacho when the case has one) and compared with the simulator's truth:
 
 * *alarmed*: the mistake's alarm exists — wrong track at most 120 s after PTO on; overrun at
   most 2 s after the true crossing of the section end (negative latency = before it, which
@@ -21,7 +23,8 @@ compared with the simulator's truth:
 * *false*: any other alarm (or an overrun more than 30 s before the crossing);
 * *decision*: the first up/down decision against the true track (wrong / undecided after
   120 s / its delay after PTO on);
-* *band*: share of on-rail time with the true km inside km ± u, and the largest |error|/u.
+* *band*: share of on-rail time with the true km inside km ± u, and the largest |error|/u;
+* *tacho*: runs whose check used a tacho.
 """
 
 from __future__ import annotations
@@ -63,8 +66,11 @@ def evaluate(
         gps_cfg,
         cfg,
         run_id=case.meta.run_id,
+        tacho=case.streams.get("tacho"),
+        wheel_diameter_m=case.meta.wheel_diameter_m,
+        teeth=case.meta.teeth,
     )
-    row: dict[str, object] = {"kind": case.kind, "poor": case.poor_sky}
+    row: dict[str, object] = {"kind": case.kind, "poor": case.poor_sky, "tacho": bool(chk.tacho["used"])}
     exp = case.expected[0] if case.expected else None
     alarms = list(chk.alarms)
     hit = None
@@ -114,6 +120,9 @@ def main() -> None:
     ap.add_argument(
         "--poor-sky-ends", action="store_true", help="poor sky straddles both section ends instead of inside"
     )
+    ap.add_argument(
+        "--tacho-every", type=int, default=0, help="every n-th case with a tachometer stream (0 never, 1 all)"
+    )
     ap.add_argument("--details", action="store_true", help="print every false alarm")
     ap.add_argument(
         "--set", action="append", default=[], help="trial setting, e.g. --set possession.gate_z=5 or gps.max_change_m=2"
@@ -133,7 +142,12 @@ def main() -> None:
     network = build_network([demo_line()], Projector(9))
     t0 = time.perf_counter()
     cases = make_cases(
-        network, args.runs, args.seed0, poor_sky_every=args.poor_sky_every, poor_sky_ends=args.poor_sky_ends
+        network,
+        args.runs,
+        args.seed0,
+        poor_sky_every=args.poor_sky_every,
+        poor_sky_ends=args.poor_sky_ends,
+        tacho_every=args.tacho_every,
     )
     t_sim = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -146,7 +160,7 @@ def main() -> None:
         groups[(str(r["kind"]), "all")].append(r)
         groups[("all kinds", "all")].append(r)
     head = (
-        f"{'kind':14s} {'sky':8s} {'runs':>4s} {'alarmed':>9s} {'latency s min/med/max':>22s} "
+        f"{'kind':14s} {'sky':8s} {'runs':>4s} {'tacho':>5s} {'alarmed':>9s} {'latency s min/med/max':>22s} "
         f"{'false':>6s} {'dec wrong':>9s} {'dec≤120s':>8s} {'dec s med/max':>13s} {'band cov':>8s} {'worst':>6s}"
     )
     print(head)
@@ -157,6 +171,7 @@ def main() -> None:
         if not g or (key[0] == "all kinds" and key[1] != "all"):
             continue
         n = len(g)
+        n_tacho = sum(bool(r["tacho"]) for r in g)
         expect = [r for r in g if "alarmed" in r]
         alarmed = f"{sum(bool(r['alarmed']) for r in expect)}/{len(expect)}" if expect else "—"
         lat = [float(r["latency_s"]) for r in expect if r.get("latency_s") is not None]  # type: ignore[arg-type]
@@ -168,7 +183,7 @@ def main() -> None:
         worst = max(float(r["worst"]) for r in g)  # type: ignore[arg-type]
         dec_s = f"{np.median(dec):.0f} / {max(dec):.0f}" if dec else "—"
         print(
-            f"{key[0]:14s} {key[1]:8s} {n:4d} {alarmed:>9s} {fmt_lat(lat):>22s} {false_runs:>6d} "
+            f"{key[0]:14s} {key[1]:8s} {n:4d} {n_tacho:5d} {alarmed:>9s} {fmt_lat(lat):>22s} {false_runs:>6d} "
             f"{wrong:>9d} {f'{within}/{n}':>8s} {dec_s:>13s} {100 * cov:7.2f}% {worst:6.2f}"
         )
     late = [r for r in rows if r.get("alarmed_late")]

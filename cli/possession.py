@@ -79,6 +79,7 @@ def render_tables(report: PossessionReport, c: Console) -> None:
                 "; ".join(f"{p['time_on']} – {p['time_off']}" for p in check["on_rail"]) or "never",
             ),
             ("track decision", _decision_text(dec)),
+            ("tacho", "used" if check["tacho"]["used"] else check["tacho"]["note"]),
             ("alarms", len(check["alarms"])),
             ("notices", len(check["notices"])),
         ]
@@ -93,7 +94,9 @@ def render_tables(report: PossessionReport, c: Console) -> None:
 @app.command("check")
 @cli_command
 def check(
-    runs: list[Path] = typer.Argument(..., help="Road-rail run folders (run.json with start_time, gps, cab.pto)."),
+    runs: list[Path] = typer.Argument(
+        ..., help="Road-rail run folders (run.json with start_time, gps, cab.pto; tacho used when present)."
+    ),
     db: Path = typer.Option(..., "--db", help="Onboard DB (.sqlite): GIS grid for km and up/down."),
     plan: Path = typer.Option(
         ...,
@@ -112,9 +115,10 @@ def check(
     On rail = PTO on. The up/down decision comes from trusted D-GPS (5/15/30 s RMS filter,
     decided as soon as the evidence suffices, else undecided); km from map-matched fixes with
     an uncertainty band (overrun as soon as km ± u leaves the section, u taken at most 15 m;
-    a wider band leaving it is an overrun_possible notice); notices 30 m
-    before a section end. Runs are matched to possessions by wall-clock time (run.json
-    start_time + t) and line.
+    a wider band leaving it is an overrun_possible notice); a tacho stream, when the run has
+    a usable one, holds km and band at a standstill and sharpens the speed (else GPS only,
+    and the output says why); notices 30 m before a section end. Runs are matched to
+    possessions by wall-clock time (run.json start_time + t) and line.
 
     Exit codes: 0 no alarm; 1 alarms found, or the plan has errors (listed with file, line,
     column); 2 the DB, plan, config or a run cannot be read (or --format html without --out).

@@ -1,9 +1,9 @@
 """Possession alarms for road-rail vehicles [S001 §3, §4.2.4, §6; SPEC §5.5].
 
-A road-rail vehicle's run (``gps``, ``cab.pto``; often no tacho or IMU) is checked against a
-possession plan (:mod:`fieldlogs.plans`). Everything is evaluated as the onboard alarm
-device would have seen it, causally, on a ``step_s`` (0.1 s) grid while the PTO says the
-vehicle is on rail.
+A road-rail vehicle's run (``gps``, ``cab.pto``; often no tacho or IMU — a ``tacho`` is used
+when present, see below) is checked against a possession plan (:mod:`fieldlogs.plans`).
+Everything is evaluated as the onboard alarm device would have seen it, causally, on a
+``step_s`` (0.1 s) grid while the PTO says the vehicle is on rail.
 
 **On rail** = PTO on (``cab.pto``, carried forward; off before the first event). A run
 without any PTO value counts as on rail throughout (fail-safe). Each on-rail period is
@@ -47,10 +47,43 @@ ramps up smoothly). A fix whose innovation exceeds ``gate_z`` σ is rejected (mu
 the filter from them (a burst that slipped through must not leave it lost). The estimate
 carries the bias variance bvar ← (1 − K)·bvar + K·bias² (K the km gain: the biases of the
 fixes it is made of, as if fully correlated). Between fixes the filter predicts (dead
-reckoning on the GPS velocity): this is what gives the alarm its timing with 1 Hz GPS — the
-band is evaluated every ``step_s`` (0.1 s), not only at fixes::
+reckoning on its velocity — from the fixes, and the tacho's speeds when there is one): this
+is what gives the alarm its timing with 1 Hz GPS — the band is evaluated every ``step_s``
+(0.1 s), not only at fixes::
 
     u(t) = gis_uncertainty_m + km_z · √(P_km(t) + bvar)      (≈ 2.9 m on trusted fixes)
+
+**Tachometer (optional).** GPS alone cannot tell a stopped vehicle from a slow one: braking
+to a stop ~30 m before a section end while the fixes degrade, the filter dead-reckoned on
+its GPS speed past the vehicle, a multipath burst along the track seemed to confirm it, and
+the band crossed the end (false overruns in ``bench/bench_possession.py``). A ``tacho``
+stream (with run.json ``wheel_diameter_m``, ``teeth``; pulses → metres by
+:func:`fieldlogs.pipeline.cycles.build_cycles`) is used while on rail only (on the road the
+rail wheels do not run), and only what it surely says — it is an *unsigned* speed with an
+unknown scale error of a few % (a road-rail odometer is not calibrated like a train's):
+
+* **standstill** — no pulse for ``standstill_s`` (1 s) — is certain: from then to the next
+  pulse the filter *holds*. Its start is a perfect measurement speed = 0 (km moves back along
+  its correlation with the speed), and the dynamics run on the moving time (time outside
+  standstills): no dead reckoning, no process noise, so the band cannot grow. A fix whose bias
+  variance exceeds the estimate's (fix 1 on a good estimate) is skipped there — fusing it
+  could only widen the band — and rejected fixes never restart the filter while stopped (the
+  speed is known, so it cannot have been bent; agreeing outliers are a steady multipath offset);
+* **moving** — once a second, the speed by pulses (second-order backward difference over
+  0.5 s: causal and without lag under constant braking) is a measurement of |dkm/dt| with
+  σ = ``tacho_scale_sigma`` (3 %) · v + ``tacho_speed_floor_mps`` (0.1 m/s). Its sign is that
+  of the filter's predicted speed, used only when that speed is sure (|v| ≥ ``km_z`` σ_v and
+  ≥ ``min_speed_mps``); else, e.g. just after a standstill, the fixes must give the direction
+  first. Why not the cab direction: it gives km direction only through the vehicle's facing,
+  which no log holds and would have to be learned, and a missing or stale cab event would then
+  push the km the wrong way with the tacho's precision; the filter's own sign can only sharpen
+  what the fixes already say.
+
+A tacho that fails :func:`tacho_problem` (t not increasing; pulses missing, negative or
+decreasing; no pulse at all; not ~10 Hz; an impossible speed; no wheel diameter or teeth) or
+cannot be read is not used at all — a false standstill would freeze the km of a moving
+vehicle — and the result says so (``RunCheck.tacho``, JSON ``"tacho": {"used", "note"}``).
+Without a usable tacho the filter is exactly the GPS-only one above.
 
 **Matching the run to the plan.** The period's line is the line most of its matched fixes
 lie on. Candidates: possessions of that line whose time window (earliest to latest of the
@@ -172,6 +205,20 @@ class PossessionConfig:
     """Episodes of the same alarm or notice closer than this are one [s]."""
     match_slack_s: float = 3600.0
     """A possession is a candidate when its time window ± this overlaps the on-rail period [s]."""
+    standstill_s: float = 1.0
+    """With a tacho: no pulse for this long (≈ 3 cm of wheel travel; 0.03 m/s at most) is a
+    standstill, taken as certain: the km filter holds (speed 0, no process noise) until the
+    next pulse [s]. Why: a stopped vehicle is the one thing GPS cannot tell from a slow one,
+    and dead reckoning past it while the fixes are degraded was the cause of the remaining
+    false overruns (measured in ``bench/bench_possession.py``)."""
+    tacho_scale_sigma: float = 0.03
+    """With a tacho: 1σ of its unknown scale error (a fraction of the speed) [–]. Why: a
+    road-rail vehicle's rail-wheel odometer is not calibrated like a train's — wheel wear and a
+    nominal diameter in run.json put a few % on it; the filter never learns the scale."""
+    tacho_speed_floor_mps: float = 0.1
+    """With a tacho: σ of a tacho speed is ``tacho_scale_sigma``·v + this [m/s] — one pulse
+    (≈ 3 cm) over the 0.5 s difference, and the difference's error while the braking or
+    traction force changes."""
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "config") -> PossessionConfig:
@@ -278,6 +325,8 @@ class RunCheck:
     periods: list[PeriodResult]
     alarms: list[Alarm]
     notices: list[Alarm]
+    tacho: dict[str, Any] = field(default_factory=lambda: {"used": False, "note": "no tacho stream"})
+    """Whether the km filter used a tacho, and why not (``{"used", "note"}``)."""
 
     @property
     def track_decision(self) -> dict[str, Any] | None:
@@ -296,6 +345,7 @@ class RunCheck:
             "track_decision": self.track_decision,
             "alarms": [a.to_json() for a in self.alarms],
             "notices": [n.to_json() for n in self.notices],
+            "tacho": dict(self.tacho),
             "on_rail": [
                 {
                     "t_on": round(p.t_on, 2),
@@ -337,10 +387,130 @@ def _jsonable(v: Any) -> Any:
     return v
 
 
+# ------------------------------------------------------------------------------ tacho
+TACHO_MEAS_S = 1.0
+"""A tacho speed measurement enters the km filter once a second (the GPS rate: speed changes
+slowly, and the per-event loop stays short)."""
+TACHO_DIFF_S = 0.5
+"""Speed by pulses = the second-order backward difference (3·d(t) − 4·d(t − w) + d(t − 2w)) / 2w
+over w = this: causal and exact under constant acceleration, so braking does not make it lag
+(a plain 1 s mean lags 0.5 s, 0.3 m/s at 2 km/h/s) [s]."""
+TACHO_GAP_S = 0.35
+"""Tacho rows farther apart than this are a gap: no standstill or speed across it [s]."""
+
+
+@dataclass
+class Tacho:
+    """What the km filter takes from a tachometer (module docstring): unsigned speeds at about
+    1 Hz and the standstill intervals ``[from, to)``, both only where the tacho says so."""
+
+    t: FloatArray
+    speed: FloatArray
+    """Speed by pulses [m/s], unsigned (≥ 0)."""
+    hold: FloatArray
+    """(k, 2): standstills, sorted and disjoint — from ``standstill_s`` after the last pulse to
+    the next pulse (or the last row)."""
+
+    def between(self, t0: float, t1: float) -> Tacho:
+        """Only what falls in [t0, t1] (the tacho counts rail-wheel travel: on rail only)."""
+        keep = (self.t >= t0) & (self.t <= t1)
+        h = np.clip(self.hold, t0, t1)
+        return Tacho(self.t[keep], self.speed[keep], h[h[:, 1] > h[:, 0]])
+
+    def moving_time(self, tq: npt.ArrayLike) -> FloatArray:
+        """``tq`` minus the standstill time before it: the clock the filter's dynamics run on."""
+        tq = np.asarray(tq, dtype=float)
+        a, b = self.hold[:, 0], self.hold[:, 1]
+        dur = b - a
+        before = np.concatenate([[0.0], np.cumsum(dur)])
+        k = np.searchsorted(a, tq, side="right")  # holds that started at or before tq
+        kk = np.clip(k - 1, 0, None)
+        inside = np.minimum(tq - a[kk], dur[kk]) if a.size else np.zeros(tq.shape)
+        return np.where(k > 0, tq - before[kk] - inside, tq)
+
+    def holding(self, tq: npt.ArrayLike) -> BoolArray:
+        """Whether each ``tq`` lies in a standstill."""
+        tq = np.asarray(tq, dtype=float)
+        k = np.searchsorted(self.hold[:, 0], tq, side="right") - 1
+        return (k >= 0) & (tq < self.hold[np.clip(k, 0, None), 1]) if self.hold.size else np.zeros(tq.shape, bool)
+
+
+def tacho_problem(
+    tacho: pd.DataFrame, wheel_diameter_m: float | None, teeth: int | None, cfg: PossessionConfig
+) -> str | None:
+    """Why a tacho stream cannot serve the km filter (None: it can). A wrong standstill would
+    hold the filter while the vehicle moves, so anything doubtful makes it unusable: t not
+    strictly increasing, a missing, negative or decreasing pulse count (a counter reset), no
+    pulse at all, too slow a rate, no usable wheel diameter / teeth, or a speed no road-rail
+    vehicle reaches on rail. Rows are file lines (the header is line 1)."""
+    if wheel_diameter_m is None or not math.isfinite(wheel_diameter_m) or wheel_diameter_m <= 0:
+        return f"run.json wheel_diameter_m {wheel_diameter_m!r} is not a positive number"
+    if teeth is None or teeth <= 0:
+        return f"run.json teeth {teeth!r} is not a positive number"
+    missing = [c for c in ("t", "pulses") if c not in tacho.columns]
+    if missing:
+        return f"no column {', '.join(missing)}"
+    if len(tacho) < 2:
+        return "fewer than 2 rows"
+    t = tacho["t"].to_numpy(dtype=float, na_value=np.nan)
+    p = tacho["pulses"].to_numpy(dtype=float, na_value=np.nan)
+    for bad, what in (
+        (~np.isfinite(t), "t is missing"),
+        (~np.isfinite(p), "pulses is missing"),
+        (p < 0, "pulses is negative"),
+    ):
+        if bad.any():
+            return f"{what} at row {int(np.flatnonzero(bad)[0]) + 2}"
+    dt, dp = np.diff(t), np.diff(p)
+    for bad, what in ((dt <= 0, "t does not increase"), (dp < 0, "pulses decrease (counter reset?)")):
+        if bad.any():
+            return f"{what} at row {int(np.flatnonzero(bad)[0]) + 3}"
+    if not (dp > 0).any():
+        return "no pulse at all (sensor or cable?)"
+    if float(np.median(dt)) > TACHO_GAP_S:
+        return f"rows {float(np.median(dt)):.2f} s apart, not a 10 Hz stream"
+    metres = np.pi * wheel_diameter_m / teeth
+    w = max(round(TACHO_MEAS_S / float(np.median(dt))), 1)
+    fast = float(np.max((p[w:] - p[:-w]) * metres / (t[w:] - t[:-w]))) if p.size > w else 0.0
+    if fast > 2.0 * cfg.max_speed_mps:
+        return f"{fast:.1f} m/s by pulses, over twice max_speed_mps (wheel_diameter_m or teeth wrong?)"
+    return None
+
+
+def tacho_track(tacho: pd.DataFrame, wheel_diameter_m: float, teeth: int, cfg: PossessionConfig) -> Tacho:
+    """Standstills and 1 Hz speeds of a tacho stream that :func:`tacho_problem` accepts
+    (pulses → metres by :func:`fieldlogs.pipeline.cycles.build_cycles`)."""
+    c = build_cycles(tacho=tacho, imu=None, cab=None, wheel_diameter_m=wheel_diameter_m, teeth=teeth)
+    t, d = c.t, c.d_pulse
+    n = t.size
+    # contiguous stretches of rows: nothing is known across a gap
+    seg0 = np.maximum.accumulate(np.where(np.r_[True, np.diff(t) > TACHO_GAP_S], t, -np.inf))
+    pulse = np.r_[False, np.diff(d) > 0]
+    last_pulse = np.maximum.accumulate(np.where(pulse, t, -np.inf))
+    still = t - np.maximum(last_pulse, seg0) >= cfg.standstill_s - 1e-9
+    hold = np.array([], dtype=float).reshape(0, 2)
+    if still.any():
+        m = np.r_[0, still.astype(np.int8), 0]
+        a = np.flatnonzero(np.diff(m) == 1)
+        b = np.flatnonzero(np.diff(m) == -1)  # first row after each run (n at the end)
+        dt_med = float(np.median(np.diff(t))) if n > 1 else 0.1
+        bb = np.clip(b, 0, n - 1)
+        joined = (b < n) & (t[bb] - t[np.clip(b - 1, 0, None)] <= TACHO_GAP_S)
+        end = np.where(joined, t[bb], t[b - 1] + dt_med)
+        hold = np.column_stack([t[a], end])
+    w = TACHO_DIFF_S
+    v = (3.0 * d - 4.0 * np.interp(t - w, t, d) + np.interp(t - 2 * w, t, d)) / (2.0 * w)
+    sec = np.floor(t / TACHO_MEAS_S + 1e-9)
+    first = np.r_[True, sec[1:] != sec[:-1]]
+    use = first & ~still & (t - 2 * w >= seg0 - 1e-9)
+    return Tacho(t[use], np.fmax(v[use], 0.0), hold)
+
+
 # ------------------------------------------------------------------------------ km filter
 @dataclass
 class KmTrack:
-    """Kalman-filter states after each accepted fix (module docstring)."""
+    """Kalman-filter states after each accepted fix — and, with a tacho, after each tacho
+    speed and standstill start (module docstring)."""
 
     t: FloatArray
     km: FloatArray
@@ -353,9 +523,15 @@ class KmTrack:
     trusted: BoolArray
     q: float
     n_rejected: int = 0
+    tacho: Tacho | None = None
+    tau: FloatArray | None = None
+    """With a tacho: the moving time (:meth:`Tacho.moving_time`) of each state."""
+    fix_t: FloatArray | None = None
+    """With a tacho: the time of the last accepted fix at each state."""
 
     def at(self, tq: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """(km, speed, km σ, seconds since the last accepted fix) predicted at ``tq``; NaN before the first fix."""
+        """(km, speed, km σ, seconds since the last accepted fix) predicted at ``tq``; NaN before
+        the first fix. The prediction runs on the moving time: it stands still in a standstill."""
         tq = np.asarray(tq, dtype=float)
         if self.t.size == 0:
             nan = np.full(tq.shape, np.nan)
@@ -364,14 +540,28 @@ class KmTrack:
         ok = j >= 0
         jj = np.clip(j, 0, None)
         dt = np.where(ok, tq - self.t[jj], np.nan)
+        since = dt
+        if self.tacho is not None and self.tau is not None and self.fix_t is not None:
+            dt = np.where(ok, self.tacho.moving_time(tq) - self.tau[jj], np.nan)
+            since = np.where(ok, tq - self.fix_t[jj], np.nan)
         km = self.km[jj] + self.v[jj] * dt
         var = self.p00[jj] + 2 * dt * self.p01[jj] + dt * dt * self.p11[jj] + self.q * dt**3 / 3.0
         sig = np.sqrt(var + self.bvar[jj])
-        return np.where(ok, km, np.nan), np.where(ok, self.v[jj], np.nan), np.where(ok, sig, np.nan), dt
+        return np.where(ok, km, np.nan), np.where(ok, self.v[jj], np.nan), np.where(ok, sig, np.nan), since
+
+
+FIX, SPEED, HOLD = 2, 1, 0
+"""Event kinds of the km filter; at one time a standstill starts first, then speed, then fix."""
 
 
 def track_km(
-    t: FloatArray, z: FloatArray, white: FloatArray, bias: FloatArray, trusted: BoolArray, cfg: PossessionConfig
+    t: FloatArray,
+    z: FloatArray,
+    white: FloatArray,
+    bias: FloatArray,
+    trusted: BoolArray,
+    cfg: PossessionConfig,
+    tacho: Tacho | None = None,
 ) -> KmTrack:
     """Run the constant-velocity filter over the km measurements (sorted by t).
 
@@ -380,55 +570,104 @@ def track_km(
     bvar ← (1 − K)·bvar + K·bias² (K the km gain of the update), i.e. the biases of the
     fixes it is made of, weighted as the filter weights them (conservative: as if fully
     correlated).
+
+    ``tacho`` (on-rail part only): the dynamics run on its moving time (no prediction, no
+    process noise in a standstill); a standstill's start is a perfect measurement speed = 0;
+    a fix in a standstill whose bias variance exceeds the estimate's variance is skipped (it
+    could only widen the band), and rejected fixes there never restart the filter; a tacho
+    speed is a measurement of |dkm/dt| signed by the filter's predicted speed, used only when
+    that sign is sure (module docstring).
     """
     q = cfg.accel_noise_mps2**2
     n = t.size
-    out = {k: np.empty(n) for k in ("t", "km", "v", "p00", "p01", "p11", "bvar")}
-    tr = np.zeros(n, dtype=bool)
+    if tacho is None:
+        kind = np.full(n, FIX, dtype=np.int8)
+        idx = np.arange(n)
+        et = t
+        tau = t
+        hold = np.zeros(n, dtype=bool)
+        tf = t
+    else:
+        kind = np.repeat(np.array([FIX, SPEED, HOLD], dtype=np.int8), [n, tacho.t.size, len(tacho.hold)])
+        idx = np.concatenate([np.arange(n), np.arange(tacho.t.size), np.arange(len(tacho.hold))])
+        et = np.concatenate([t, tacho.t, tacho.hold[:, 0]])
+        order = np.lexsort((kind, et))
+        kind, idx, et = kind[order], idx[order], et[order]
+        tau = tacho.moving_time(et)
+        hold = tacho.holding(et)
+        tf = tacho.moving_time(t)
+    ne = et.size
+    out = {k: np.empty(ne) for k in ("t", "km", "v", "p00", "p01", "p11", "bvar", "tau", "fix_t")}
+    tr = np.zeros(ne, dtype=bool)
     m = 0
     rejected = 0
     run: list[int] = []  # consecutive rejected fixes
     x0 = x1 = p00 = p01 = p11 = bv = 0.0
-    t_last = -np.inf
-    for i in range(n):
-        r = float(white[i]) ** 2
-        b2 = float(bias[i]) ** 2
-        if m == 0:
-            x0, x1 = float(z[i]), 0.0
-            p00, p01, p11, bv = r, 0.0, cfg.speed_sigma_mps**2, b2
-        else:
-            dt = float(t[i]) - t_last
-            if dt <= 0:
+    t_last = tau_last = t_fix = -np.inf
+    last_trusted = False
+    for e in range(ne):
+        i = int(idx[e])
+        if kind[e] != FIX:
+            if m == 0:
                 continue
-            # predict: F = [[1, dt], [0, 1]], Q = q·[[dt³/3, dt²/2], [dt²/2, dt]]
-            y0 = x0 + x1 * dt
-            c00 = p00 + 2 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0
-            c01 = p01 + dt * p11 + q * dt * dt / 2.0
-            c11 = p11 + q * dt
-            innov = float(z[i]) - y0
-            s = c00 + r
-            if innov * innov > cfg.gate_z**2 * (s + bv + b2):
-                # an outlier (multipath): the state stays the prediction from the last accepted
-                # fix — unless the rejected fixes agree among themselves, i.e. the filter lost the
-                # vehicle (a burst that slipped through bent its speed): restart from them
-                rejected += 1
-                run.append(i)
-                restart = _restart(t, z, white, bias, run, cfg)
-                if restart is None:
-                    continue
-                x0, x1, p00, p01, p11, bv = restart
-                run = []
+            y0, c00, c01, c11 = _predict(x0, x1, p00, p01, p11, float(tau[e]) - tau_last, q)
+            if kind[e] == HOLD:
+                x0, x1, p00, p01, p11 = _stop(y0, x1, c00, c01, c11)
             else:
-                run = []
-                k0, k1 = c00 / s, c01 / s
+                assert tacho is not None
+                vt = float(tacho.speed[i])
+                if vt > cfg.tacho_speed_floor_mps and abs(x1) < max(cfg.min_speed_mps, cfg.km_z * math.sqrt(c11)):
+                    continue  # moving, direction not sure yet: the fixes must tell it first
+                # H = [0, 1], z = |v| signed as the predicted speed, R = (scale·|v| + floor)²
+                s = c11 + (cfg.tacho_scale_sigma * vt + cfg.tacho_speed_floor_mps) ** 2
+                k0, k1 = c01 / s, c11 / s
+                innov = math.copysign(vt, x1) - x1
                 x0 = y0 + k0 * innov
                 x1 = min(max(x1 + k1 * innov, -cfg.max_speed_mps), cfg.max_speed_mps)
-                p00, p01, p11 = (1 - k0) * c00, (1 - k0) * c01, c11 - k1 * c01
-                bv = (1 - k0) * bv + k0 * b2
-        t_last = float(t[i])
+                p00, p01, p11 = c00 - k0 * c01, (1 - k1) * c01, (1 - k1) * c11
+        else:
+            r = float(white[i]) ** 2
+            b2 = float(bias[i]) ** 2
+            if m == 0:
+                x0, x1 = float(z[i]), 0.0
+                p00, p01, p11, bv = r, 0.0, cfg.speed_sigma_mps**2, b2
+                if hold[e]:
+                    x0, x1, p00, p01, p11 = _stop(x0, x1, p00, p01, p11)
+            else:
+                if float(t[i]) - t_fix <= 0:
+                    continue
+                y0, c00, c01, c11 = _predict(x0, x1, p00, p01, p11, float(tau[e]) - tau_last, q)
+                innov = float(z[i]) - y0
+                s = c00 + r
+                if hold[e] and b2 > c00 + bv:
+                    continue  # stopped: a fix worse than the estimate would only widen the band
+                if innov * innov > cfg.gate_z**2 * (s + bv + b2):
+                    # an outlier (multipath): the state stays the prediction from the last accepted
+                    # fix — unless the rejected fixes agree among themselves, i.e. the filter lost the
+                    # vehicle (a burst that slipped through bent its speed): restart from them
+                    rejected += 1
+                    run.append(i)
+                    # — not in a standstill: the speed is known there, so it cannot have been bent,
+                    # and rejected fixes that agree while stopped are a steady multipath offset
+                    restart = None if hold[e] else _restart(tf, z, white, bias, run, cfg)
+                    if restart is None:
+                        continue
+                    x0, x1, p00, p01, p11, bv = restart
+                    run = []
+                else:
+                    run = []
+                    k0, k1 = c00 / s, c01 / s
+                    x0 = y0 + k0 * innov
+                    x1 = min(max(x1 + k1 * innov, -cfg.max_speed_mps), cfg.max_speed_mps)
+                    p00, p01, p11 = (1 - k0) * c00, (1 - k0) * c01, c11 - k1 * c01
+                    bv = (1 - k0) * bv + k0 * b2
+            t_fix = float(t[i])
+            last_trusted = bool(trusted[i])
+        t_last, tau_last = float(et[e]), float(tau[e])
         out["t"][m], out["km"][m], out["v"][m] = t_last, x0, x1
         out["p00"][m], out["p01"][m], out["p11"][m], out["bvar"][m] = p00, p01, p11, bv
-        tr[m] = bool(trusted[i])
+        out["tau"][m], out["fix_t"][m] = tau_last, t_fix
+        tr[m] = last_trusted
         m += 1
     return KmTrack(
         out["t"][:m],
@@ -441,7 +680,31 @@ def track_km(
         tr[:m],
         q,
         rejected,
+        tacho,
+        out["tau"][:m] if tacho is not None else None,
+        out["fix_t"][:m] if tacho is not None else None,
     )
+
+
+def _predict(
+    x0: float, x1: float, p00: float, p01: float, p11: float, dt: float, q: float
+) -> tuple[float, float, float, float]:
+    """Constant-velocity prediction over dt: F = [[1, dt], [0, 1]], Q = q·[[dt³/3, dt²/2],
+    [dt²/2, dt]]; returns (km, P00, P01, P11) (the speed is unchanged)."""
+    return (
+        x0 + x1 * dt,
+        p00 + 2 * dt * p01 + dt * dt * p11 + q * dt**3 / 3.0,
+        p01 + dt * p11 + q * dt * dt / 2.0,
+        p11 + q * dt,
+    )
+
+
+def _stop(x0: float, x1: float, p00: float, p01: float, p11: float) -> tuple[float, float, float, float, float]:
+    """The update by a perfect measurement speed = 0 (a standstill): km moves back along its
+    correlation with the speed, and the speed and its variance become 0."""
+    if p11 > 0.0:
+        x0, p00 = x0 - p01 / p11 * x1, max(p00 - p01 * p01 / p11, 0.0)
+    return x0, 0.0, p00, 0.0, 0.0
 
 
 def _restart(
@@ -504,6 +767,8 @@ class RailPeriod:
     t_on: float
     t_off: float
     gps: GpsAnalysis
+    tacho: Tacho | None = None
+    """The run's usable tacho (:func:`tacho_track`), None without one; only its on-rail part is used."""
 
 
 def episodes(mask: BoolArray, t: FloatArray, merge_s: float) -> list[tuple[int, int]]:
@@ -562,7 +827,8 @@ def evaluate_period(
         if line is not None:
             meas &= (fixes["line_code"].astype(str) == line).to_numpy(dtype=bool)
     trusted = _bool(fixes, "trusted") if len(fixes) else np.zeros(0, dtype=bool)
-    kt = track_km(ft[meas], fkm[meas], white[meas], bias[meas], trusted[meas], cfg)
+    tacho = period.tacho.between(t_on, t_off) if period.tacho is not None else None
+    kt = track_km(ft[meas], fkm[meas], white[meas], bias[meas], trusted[meas], cfg, tacho)
     n = max(math.ceil((t_off - t_on) / cfg.step_s - 1e-9), 1)
     tg: FloatArray = t_on + np.arange(n, dtype=np.float64) * cfg.step_s
     km, v, s_km, since = kt.at(tg)
@@ -774,8 +1040,10 @@ def check_periods(
     *,
     run: str = "",
     run_id: str = "",
+    tacho_note: dict[str, Any] | None = None,
 ) -> RunCheck:
-    """Alarms and notices of a run given its on-rail periods (pure: no I/O)."""
+    """Alarms and notices of a run given its on-rail periods (pure: no I/O); ``tacho_note``
+    is :attr:`RunCheck.tacho` (default: used when a period carries one)."""
     gps_cfg = gps_cfg or GpsConfig()
     cfg = cfg or PossessionConfig()
     results, alarms, notices = [], [], []
@@ -787,7 +1055,10 @@ def check_periods(
     alarms.sort(key=lambda a: (a.t, a.type))
     notices.sort(key=lambda a: (a.t, a.type))
     works = sorted({s[2] for r in results for s in r.timeline.sections} | {r.work_no for r in results if r.work_no})
-    return RunCheck(run, run_id, start, works, results, alarms, notices)
+    if tacho_note is None:
+        used = any(p.tacho is not None for p in periods)
+        tacho_note = {"used": used, "note": None if used else "no tacho stream"}
+    return RunCheck(run, run_id, start, works, results, alarms, notices, tacho_note)
 
 
 # ------------------------------------------------------------------------------ a run
@@ -873,9 +1144,10 @@ def check_run(
     gps_cfg: GpsConfig | None = None,
     cfg: PossessionConfig | None = None,
 ) -> RunCheck:
-    """Read a run's GPS and cab streams, analyse each on-rail period, apply the rules.
+    """Read a run's GPS, cab and (if any) tacho streams, analyse each on-rail period, apply the rules.
 
-    Raises InputError when run.json, its start_time or a needed stream cannot be read.
+    Raises InputError when run.json, its start_time or a needed stream (gps, cab) cannot be
+    read; an unreadable tacho is only a note (the km filter then uses the GPS alone).
     """
     gps_cfg = gps_cfg or GpsConfig()
     cfg = cfg or PossessionConfig()
@@ -885,7 +1157,28 @@ def check_run(
     start = parse_start_time(run)
     gps = _stream(run, "gps")
     cab = _stream(run, "cab")
-    return check_streams(gps, cab, start, network, possessions, gps_cfg, cfg, run=str(run.folder), run_id=run.run_id)
+    tacho = run.stream("tacho")
+    unreadable = None
+    if tacho is None and run.has("tacho"):
+        bad = [f for f in run.stream_findings("tacho") if f.rule == "log.unreadable_stream"]
+        unreadable = bad[0].message if bad else "the stream cannot be read"
+    res = check_streams(
+        gps,
+        cab,
+        start,
+        network,
+        possessions,
+        gps_cfg,
+        cfg,
+        run=str(run.folder),
+        run_id=run.run_id,
+        tacho=tacho,
+        wheel_diameter_m=run.field("wheel_diameter_m"),
+        teeth=run.field("teeth"),
+    )
+    if unreadable is not None:
+        res.tacho = {"used": False, "note": f"tacho not used: {unreadable}; km from GPS only"}
+    return res
 
 
 def check_streams(
@@ -899,10 +1192,26 @@ def check_streams(
     *,
     run: str = "",
     run_id: str = "",
+    tacho: pd.DataFrame | None = None,
+    wheel_diameter_m: float | None = None,
+    teeth: int | None = None,
 ) -> RunCheck:
-    """:func:`check_run` on stream frames (``gps``, ``cab`` as in ``schemas.logs``)."""
+    """:func:`check_run` on stream frames (``gps``, ``cab``, ``tacho`` as in ``schemas.logs``;
+    ``wheel_diameter_m`` and ``teeth`` from run.json). Without a tacho, or with one
+    :func:`tacho_problem` rejects, the km comes from the GPS alone (said in ``RunCheck.tacho``)."""
     gps_cfg = gps_cfg or GpsConfig()
     cfg = cfg or PossessionConfig()
+    track: Tacho | None = None
+    if tacho is None:
+        note: dict[str, Any] = {"used": False, "note": "no tacho stream"}
+    else:
+        problem = tacho_problem(tacho, wheel_diameter_m, teeth, cfg)
+        if problem is None:
+            assert wheel_diameter_m is not None and teeth is not None
+            track = tacho_track(tacho, float(wheel_diameter_m), int(teeth), cfg)
+            note = {"used": True, "note": None}
+        else:
+            note = {"used": False, "note": f"tacho not used: {problem}; km from GPS only"}
     if gps is not None:
         gps = gps[gps["t"].notna()].sort_values("t", kind="stable").reset_index(drop=True)
     if cab is not None:
@@ -923,8 +1232,8 @@ def check_streams(
         else:
             sl = None
         ga = analyse_gps(sl, network, gps_cfg, cycles, index=index)
-        periods.append(RailPeriod(t_on, t_off, with_degraded_fixes(ga, index, gps_cfg)))
-    return check_periods(periods, possessions, start, gps_cfg, cfg, run=run, run_id=run_id)
+        periods.append(RailPeriod(t_on, t_off, with_degraded_fixes(ga, index, gps_cfg), track))
+    return check_periods(periods, possessions, start, gps_cfg, cfg, run=run, run_id=run_id, tacho_note=note)
 
 
 @dataclass

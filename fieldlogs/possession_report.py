@@ -141,6 +141,7 @@ def render_html(checks: list[RunCheck], *, plan: str = "", db: str = "") -> str:
             if dec
             else "undecided"
         )
+        tacho = "used" if c.tacho["used"] else str(c.tacho["note"])
         on = "; ".join(f"{p['time_on']} – {p['time_off']} (t {p['t_on']:.0f}–{p['t_off']:.0f} s)" for p in j["on_rail"])
         parts += [
             f"<h2>{html.escape(c.run_id)}</h2>",
@@ -148,7 +149,8 @@ def render_html(checks: list[RunCheck], *, plan: str = "", db: str = "") -> str:
             f"<tr><th>run</th><td><code>{html.escape(c.run)}</code></td></tr>"
             f"<tr><th>possessions</th><td>{html.escape(', '.join(c.possessions) or 'none')}</td></tr>"
             f"<tr><th>on rail</th><td>{html.escape(on or 'never')}</td></tr>"
-            f"<tr><th>track decision</th><td>{html.escape(dec_txt)}</td></tr></table>",
+            f"<tr><th>track decision</th><td>{html.escape(dec_txt)}</td></tr>"
+            f"<tr><th>tacho</th><td>{html.escape(tacho)}</td></tr></table>",
             "<h3>Alarms</h3>",
             _rows(j["alarms"], "alarm"),
             "<h3>Notices</h3>",

@@ -135,3 +135,35 @@ def test_help() -> None:
     res = invoke("possession", "check", "--help")
     assert res.exit_code == 0
     assert "Exit codes" in res.stdout and "--plan" in res.stdout
+
+
+def test_tacho_used_when_present_and_reported_when_bad(world: dict[str, Path], tmp_path: Path) -> None:
+    """PZ-correct-20085 stops ~30 m before the section end in poor sky: a false overrun with
+    GPS only, none with its tacho; a decreasing pulse count (a counter reset) is not used,
+    and the output says so — the check is then the GPS-only one (exit 1 again)."""
+    net = build_network([demo_line()], Projector(9))
+    run, plan = make_case(net, "correct", 20085, poor_sky=True, tacho=True).write(tmp_path, fmt="csv")
+    args = ("possession", "check", run, "--db", world["db"], "--plan", plan, "--format", "json")
+    res = invoke(*args)
+    assert res.exit_code == 0, res.output
+    (data,) = json.loads(res.stdout)["runs"]
+    assert data["tacho"] == {"used": True, "note": None} and data["alarms"] == []
+    tacho = run / "tacho.csv"
+    lines = tacho.read_text(encoding="utf-8").splitlines()
+    t, _ = lines[2001].split(",")
+    lines[2001] = f"{t},5"  # row 2002: the counter jumps back
+    tacho.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    res = invoke(*args)
+    assert res.exit_code == 1, res.output
+    (data,) = json.loads(res.stdout)["runs"]
+    assert data["tacho"]["used"] is False
+    assert "pulses decrease (counter reset?) at row 2002" in data["tacho"]["note"]
+    assert [a["type"] for a in data["alarms"]] == ["overrun"]
+    res = invoke(*args[:-2])
+    assert "tacho" in res.stdout and "GPS only" in " ".join(res.stdout.split())
+    tacho.write_text("t,pulses\nbroken", encoding="utf-8")  # unreadable: a note, not exit 2
+    res = invoke(*args)
+    assert res.exit_code == 1, res.output
+    (data,) = json.loads(res.stdout)["runs"]
+    assert data["tacho"]["used"] is False and "km from GPS only" in data["tacho"]["note"]
+    assert [a["type"] for a in data["alarms"]] == ["overrun"]

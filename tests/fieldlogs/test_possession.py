@@ -25,6 +25,7 @@ from fieldlogs.plans import Possession, PossessionState, load_plan, plan_frame, 
 from fieldlogs.possession import (
     PossessionConfig,
     RailPeriod,
+    Tacho,
     check_periods,
     check_streams,
     checks_json,
@@ -32,6 +33,8 @@ from fieldlogs.possession import (
     km_noise,
     load_config,
     rail_periods,
+    tacho_problem,
+    tacho_track,
     track_km,
 )
 from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, make_case
@@ -493,3 +496,187 @@ def test_simulator_road_approach_and_poor_sky() -> None:
         from fieldlogs.simulate import scenario_from_dict
 
         scenario_from_dict({"gps": {"poor_sky_fix1_share": 1.0}})
+
+
+# ------------------------------------------------------------------------------ tacho
+# 60 teeth on a 3/π m wheel: one pulse is exactly 0.05 m
+WHEEL_M, TEETH = 3.0 / np.pi, 60
+
+
+def pulses_for(km: np.ndarray) -> pd.DataFrame:
+    """A 10 Hz tacho stream of the 1 Hz km trajectory ``km`` (linear in between): the
+    cumulative unsigned distance in whole 0.05 m pulses."""
+    t10 = np.round(np.arange(0.0, km.size - 1 + 1e-9, 0.1), 3)
+    k10 = np.interp(t10, np.arange(km.size, dtype=float), km)
+    dist = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(k10)))])
+    return pd.DataFrame({"t": t10, "pulses": np.floor(dist / 0.05 + 1e-6).astype(np.int64)})
+
+
+def stop_near_the_end() -> tuple[np.ndarray, GpsAnalysis]:
+    """Up at 4 m/s from t = 20 s, stops at 1472 (28 m before the end, t = 88 s) while the
+    sky is poor from t = 78 to 110 s: fix 1 only (5 s RMS 3 m), and from t = 88 s a
+    multipath burst puts the fixes 10 m beyond the vehicle, toward the end."""
+    km = run_line(260, (0.0, 20), (4.0, 68), (0.0, 172))
+    ga = analysis(km.copy(), decisions=(decided(15.0),))
+    f = ga.fixes
+    poor = ((f["t"] >= 78) & (f["t"] < 110)).to_numpy()
+    f.loc[poor, ["fix", "usable", "trusted", "rms_5"]] = [1, False, False, 3.0]
+    f.loc[poor, "km_m"] = km[poor] + np.where(f["t"].to_numpy()[poor] >= 88, 10.0, 0.0)
+    return km, ga
+
+
+def grid_at(tt: float) -> int:
+    """Index of time ``tt`` on the evaluation grid of a period from t_on = 5 s."""
+    return round((tt - 5.0) / CFG.step_s)
+
+
+def test_tacho_track_standstills_and_speeds() -> None:
+    # stands 20 s, 2 m/s for 30 s, stands 10 s, 1 m/s for 20 s, stands
+    km = run_line(100, (0.0, 20), (2.0, 30), (0.0, 10), (-1.0, 20))
+    tk = tacho_track(pulses_for(km), WHEEL_M, TEETH, CFG)
+    # a standstill from standstill_s (1 s) after the last pulse to the next pulse; the last
+    # pulse before t = 50 is at 50.0 (60 m = 1200 pulses), the next at 60.1 (first 0.05 m)
+    assert tk.hold.ravel().tolist() == pytest.approx([1.0, 20.1, 51.0, 60.1, 81.0, 99.1])
+    # one speed a second, only while moving, the second-order difference exact at constant speed
+    moving = (tk.t > 21.0) & (tk.t < 50.0)
+    assert tk.t[moving].tolist() == pytest.approx(list(range(22, 50)))
+    assert tk.speed[moving] == pytest.approx(np.full(28, 2.0), abs=1e-9)
+    assert tk.speed[(tk.t > 61.0) & (tk.t < 80.0)] == pytest.approx(np.full(18, 1.0), abs=1e-9)
+    assert not tk.holding(tk.t).any()
+    # the moving time stands still in a standstill
+    assert tk.moving_time(np.array([0.5, 1.0, 10.0, 20.1, 30.0])) == pytest.approx([0.5, 1.0, 1.0, 1.0, 10.9])
+
+
+def test_stop_28_m_before_the_end_with_poor_fixes_no_overrun_with_tacho() -> None:
+    km, ga = stop_near_the_end()
+    plan = [possession()]
+    # GPS only: the filter dead-reckons at 4 m/s past the stopped vehicle (km 1480 at
+    # t = 89 s), the burst seems to confirm it, and the 15 m band crosses 1500: a false alarm
+    without = check_periods([RailPeriod(5.0, 259.0, ga)], plan, START, GPS, CFG)
+    assert types(without.alarms) == ["overrun"] and 88.0 < without.alarms[0].t < 91.0
+    assert without.tacho == {"used": False, "note": "no tacho stream"}
+    # with the tacho: speed 4 m/s to the stop, standstill from t = 89 s (no pulse after
+    # 88.0): km is held 1 m past the vehicle (the second it took to see the standstill,
+    # taken back along the km–speed correlation) and the burst's fixes are skipped
+    tk = tacho_track(pulses_for(km), WHEEL_M, TEETH, CFG)
+    res = check_periods([RailPeriod(5.0, 259.0, ga, tk)], plan, START, GPS, CFG)
+    assert res.alarms == [] and res.tacho == {"used": True, "note": None}
+    assert not any(n.type == "overrun_possible" for n in res.notices)
+    tl = res.periods[0].timeline
+    held = slice(grid_at(89.0), grid_at(110.0))
+    assert tl.km[held] == pytest.approx(np.full(tl.km[held].size, 1472.0), abs=1.5)
+    assert np.max(tl.km[held] + tl.u[held]) < 1500.0 - 15.0
+
+
+def test_band_does_not_grow_in_a_tacho_standstill() -> None:
+    km, ga = stop_near_the_end()
+    tk = tacho_track(pulses_for(km), WHEEL_M, TEETH, CFG)
+    ((a, b),) = tk.between(60.0, 259.0).hold  # the stop: t = 89 s to the end
+    assert (a, b) == pytest.approx((89.0, 259.0))
+    for fixes in (ga, analysis(np.where(np.arange(km.size) >= 85, np.nan, km))):
+        tl = check_periods([RailPeriod(5.0, 259.0, fixes, tk)], [possession()], START, GPS, CFG).periods[0].timeline
+        s = (tl.t >= a) & (tl.t < 110.0)
+        assert np.all(np.diff(tl.u[s]) <= 1e-9)  # the band never widens while stopped
+        if fixes is not ga:  # no fix at all: nothing may move km or widen the band
+            assert np.ptp(tl.km[s]) == 0.0 and np.ptp(tl.u[s]) == 0.0
+    # GPS only, the same fixes lost: the band keeps growing (dead reckoning at the GPS speed)
+    tl = check(np.where(np.arange(km.size) >= 85, np.nan, km), [possession()], t_off=259.0).periods[0].timeline
+    s = (tl.t >= a) & (tl.t < 110.0)
+    assert tl.u[s][-1] > tl.u[s][0] + 10.0
+
+
+def test_tacho_speed_needs_a_sure_direction() -> None:
+    t = np.arange(60.0)
+    ones = np.ones(60, dtype=bool)
+    white, bias = np.full(60, 0.25), np.full(60, 0.75)
+    # standing until t = 10 s, then no fix: the filter's speed is 0 and its direction
+    # unknown, so a tacho speed of 3 m/s is not used — the km stays where the fixes left it
+    tk = Tacho(t[11:], np.full(49, 3.0), np.array([[0.0, 10.0]]))
+    still = np.full(11, 1200.0)
+    kt = track_km(t[:11], still, white[:11], bias[:11], ones[:11], CFG, tk)
+    km, v, _, since = kt.at(np.array([5.0, 30.0]))
+    assert v.tolist() == [0.0, 0.0] and km == pytest.approx([1200.0, 1200.0], abs=0.2)
+    assert since[1] == pytest.approx(20.0)
+    # moving down at 3 m/s from t = 10 s on trusted fixes, the tacho reading 10 % high: the
+    # speed is signed like the filter's (down) and pulls it beyond the fixes' −3 m/s
+    z = 1200.0 - 3.0 * np.fmax(t - 10.0, 0.0)
+    gps_only = track_km(t, z, white, bias, ones, CFG).at(np.array([59.5]))[1][0]
+    kt = track_km(t, z, white, bias, ones, CFG, Tacho(t[11:], np.full(49, 3.3), np.array([[0.0, 10.0]])))
+    v_tacho = kt.at(np.array([59.5]))[1][0]
+    assert gps_only == pytest.approx(-3.0, abs=0.02) and -3.3 < v_tacho < gps_only - 0.05
+    # an empty tacho (no speed, no standstill) is the GPS-only filter exactly
+    empty = Tacho(np.zeros(0), np.zeros(0), np.zeros((0, 2)))
+    args = (t, z + np.sin(t), white, bias, ones, CFG)
+    tq = np.arange(0.0, 60.0, 0.1)
+    for x, y in zip(track_km(*args).at(tq), track_km(*args, empty).at(tq), strict=True):
+        np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (
+            lambda f: f.assign(pulses=f["pulses"].where(f.index != 2000, 5)),
+            "pulses decrease (counter reset?) at row 2002",
+        ),
+        (lambda f: f.assign(pulses=f["pulses"].astype("Float64").where(f.index != 7)), "pulses is missing at row 9"),
+        (lambda f: f.assign(pulses=0), "no pulse at all"),
+        (lambda f: f.assign(t=f["t"].where(f.index != 5, 0.3)), "t does not increase at row 7"),
+        (lambda f: f.assign(pulses=f["pulses"] * 100), "over twice max_speed_mps"),
+        (lambda f: f[["t"]], "no column pulses"),
+    ],
+)
+def test_bad_tacho_is_reported_and_gps_only(edit: object, message: str) -> None:
+    case = make_case(NET, "correct", 20085, poor_sky=True, tacho=True)
+    tacho = edit(case.streams["tacho"].copy())  # type: ignore[operator]
+    assert message in str(tacho_problem(tacho, case.meta.wheel_diameter_m, case.meta.teeth, CFG))
+
+    def run(tacho: pd.DataFrame | None, wheel: float | None = case.meta.wheel_diameter_m) -> object:
+        return check_streams(
+            case.streams["gps"],
+            case.streams["cab"],
+            datetime.fromisoformat(case.meta.start_time),
+            NET,
+            case.possessions,
+            tacho=tacho,
+            wheel_diameter_m=wheel,
+            teeth=case.meta.teeth,
+        )
+
+    bad, none = run(tacho), run(None)
+    assert bad.tacho["used"] is False and message in bad.tacho["note"] and "GPS only" in bad.tacho["note"]  # type: ignore[attr-defined]
+    assert checks_json([bad])["runs"][0]["tacho"]["note"] == bad.tacho["note"]  # type: ignore[attr-defined]
+    assert [a.to_json() for a in bad.alarms] == [a.to_json() for a in none.alarms]  # type: ignore[attr-defined]
+    np.testing.assert_array_equal(bad.periods[0].timeline.u, none.periods[0].timeline.u)  # type: ignore[attr-defined]
+    assert "wheel_diameter_m" in run(case.streams["tacho"], wheel=None).tacho["note"]  # type: ignore[attr-defined]
+
+
+def test_simulated_stop_before_the_end_in_poor_sky() -> None:
+    """PZ-correct-20085 of ``bench_possession.py --runs 300 --seed0 20000 --poor-sky-every 2``:
+    the vehicle stops ~30 m before the end in poor sky. GPS only gives a false overrun — the
+    same, to the last digit, as before the tacho existed (the numbers below are pinned from
+    that code); its tacho removes it."""
+    case = make_case(NET, "correct", 20085, poor_sky=True, tacho=True)
+    common = (case.streams["gps"], case.streams["cab"], datetime.fromisoformat(case.meta.start_time), NET)
+    gps_only = check_streams(*common, case.possessions)
+    (a,) = gps_only.alarms
+    assert (a.type, a.t, a.km_m, a.evidence["uncertainty_m"]) == (
+        "overrun",
+        140.18,
+        2495.0086170028476,
+        15.766842456411137,
+    )
+    tl = gps_only.periods[0].timeline
+    assert (float(np.nansum(tl.km)), float(np.nansum(tl.u))) == (6201216.972926079, 11859.41133395116)
+    with_tacho = check_streams(
+        *common,
+        case.possessions,
+        tacho=case.streams["tacho"],
+        wheel_diameter_m=case.meta.wheel_diameter_m,
+        teeth=case.meta.teeth,
+    )
+    assert with_tacho.alarms == [] and with_tacho.tacho["used"] is True
+    truth = case.streams["truth"]
+    tl = with_tacho.periods[0].timeline
+    tk = np.interp(tl.t, truth["t"].to_numpy(), truth["km_m"].to_numpy(dtype=float, na_value=np.nan))
+    assert np.mean(np.abs(tl.km - tk) <= tl.u) > 0.99
