@@ -204,6 +204,7 @@ def main() -> None:
         free = [x for r, x in zip(results, m, strict=True) if r["sim_truth"]["slip_episodes"] == []]
         dec_runs = dec_ok = dec_wrong = 0
         dec_delay = []
+        slow_dec: list[str] = []
         for r, x in zip(results, m, strict=True):
             if x["dec"]:
                 dec_runs += 1
@@ -212,6 +213,8 @@ def main() -> None:
                     dec_ok += 1
                     if x["first_trusted"] is not None:
                         dec_delay.append(first_t - x["first_trusted"])
+                        if dec_delay[-1] > 120.0:
+                            slow_dec.append(f"run {r['i']} {dec_delay[-1]:.0f} s")
                 dec_wrong += sum(1 for _, tr in x["dec"] if tr != r["track"])
         no_margin, with_margin, n_feat = margin_effect(db, tmp)
         radar = " with radar" if args.radar else ""
@@ -279,7 +282,7 @@ def main() -> None:
                 "GPS up/down decided",
                 f"{dec_ok}/{args.runs} runs correct, {dec_wrong} wrong decisions; "
                 f"time after first trusted fix: median {np.median(dec_delay):.0f} s, max {np.max(dec_delay):.0f} s, "
-                f"{sum(d <= 120.0 for d in dec_delay)}/{args.runs} within 120 s"
+                f"{sum(d <= 120.0 for d in dec_delay)}/{args.runs} within 120 s" + "".join(f"; {x}" for x in slow_dec)
                 if dec_delay
                 else f"{dec_runs} runs with decisions",
             ),
