@@ -1177,8 +1177,13 @@ def check_run(
         teeth=run.field("teeth"),
     )
     if unreadable is not None:
-        res.tacho = {"used": False, "note": f"tacho not used: {unreadable}; km from GPS only"}
+        res.tacho = _tacho_unused(unreadable)
     return res
+
+
+def _tacho_unused(why: str) -> dict[str, Any]:
+    """:attr:`RunCheck.tacho` of a tacho stream that could not serve."""
+    return {"used": False, "note": f"tacho not used: {why}; km from GPS only"}
 
 
 def check_streams(
@@ -1211,7 +1216,7 @@ def check_streams(
             track = tacho_track(tacho, float(wheel_diameter_m), int(teeth), cfg)
             note = {"used": True, "note": None}
         else:
-            note = {"used": False, "note": f"tacho not used: {problem}; km from GPS only"}
+            note = _tacho_unused(problem)
     if gps is not None:
         gps = gps[gps["t"].notna()].sort_values("t", kind="stable").reset_index(drop=True)
     if cab is not None:

@@ -166,10 +166,8 @@ def standstill_mean(
     if n == 0 or window_s <= 0.0:
         return np.zeros(n), np.zeros(n, dtype=bool)
     still = v == 0.0
-    start = np.flatnonzero(still & ~np.concatenate([[False], still[:-1]]))
-    run_start = np.full(n, np.nan)
-    run_start[start] = t[start]
-    run_start = pd.Series(run_start).ffill().to_numpy()
+    starts = still & ~np.concatenate([[False], still[:-1]])
+    run_start = np.maximum.accumulate(np.where(starts, t, -np.inf))  # t is increasing
     counted = still & (t - run_start >= settle_s - 1e-9) & np.isfinite(x)
     dt = float(np.median(np.diff(t))) if n > 1 else 0.1
     m = max(round(window_s / dt), 1)

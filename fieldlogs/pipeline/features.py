@@ -277,7 +277,7 @@ class FeatureUnit:
 
         def out(i_ref: int | None = None) -> FeatureOutcome:
             order = [n for n in DIAGNOSTICS if n in failed]
-            unc = self._crossing_uncertainty(i_ref, c) if i_ref is not None else None
+            unc = self._crossing_uncertainty(i_ref, c, k_lo) if i_ref is not None else None
             if unc is not None:
                 detail["uncertainty_m"] = round(unc, 2)
             return FeatureOutcome(not order, c.feature_id, c.line_code, c.track, i_ref, km_db, order, detail, unc)
@@ -368,7 +368,7 @@ class FeatureUnit:
         self._slip_speed(span, failed, detail)
         return out(i_ref)
 
-    def _crossing_uncertainty(self, i_ref: int, c: Candidate) -> float:
+    def _crossing_uncertainty(self, i_ref: int, c: Candidate, k_lo: float) -> float:
         """Uncertainty of the exit crossing as a correction [m]: max(fix_uncertainty_m,
         crossing_z · σ_ω / (v · κ_lo / (r5 − r4))) (config docstrings); no transition in the
         DB (r5 = r4) leaves the least value."""
@@ -380,7 +380,7 @@ class FeatureUnit:
         sigma = cfg.yaw_rate_sigma_rad_s
         if not self._bias_known[i_ref]:  # no standstill yet: the bias is unknown
             sigma = float(np.hypot(sigma, cfg.yaw_bias_sigma_rad_s))
-        slope = (1.0 - cfg.tolerance) / c.radius_m / transition
+        slope = k_lo / transition
         return max(cfg.fix_uncertainty_m, cfg.crossing_z * sigma / (v * slope))
 
     def _straight(self, x0: float, x1: float, x_ts: float, slope: float, radius: float) -> tuple[bool, float | None]:

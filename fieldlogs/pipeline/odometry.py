@@ -303,6 +303,8 @@ class _Streams:
         self.uniform = bool(np.all(np.abs(self.dt - self.cyc) < 1e-6))
         self.W = max(round(cfg.avg_window_s / self.cyc), 1)
         self.P = max(round(SPEED_AVG_S / self.cyc), 1)
+        self.readhesion_hold = max(round(cfg.readhesion_hold_s / self.cyc), 1)  # re-adhesion hold [cycles]
+        self.readhesion_tol0 = cfg.readhesion_tol_kmh / 3.6  # re-adhesion tolerance, constant part [m/s]
         self.d_pulse, self.v_pulse = d_pulse, v_pulse
         self._cache: dict[int, _Integration] = {}
         self._agree: dict[int, npt.NDArray[np.bool_]] = {}
@@ -563,9 +565,10 @@ class _Streams:
             opp = np.flatnonzero(np.sign(self.res[det]) * self.res[lo:det] < -0.5 * thr)
         if opp.size == 0:
             return "residual", det
-        back = opp[::-1]  # the latest opposite lobe: its run of consecutive cycles, backwards
+        back = opp[::-1]
         brk = np.flatnonzero(np.diff(back) != -1)
-        first = int(back[brk[0]] if brk.size else back[-1])
+        lobe = back[: brk[0] + 1] if brk.size else back  # the latest opposite lobe, backwards
+        first = int(lobe[-1])
         with np.errstate(invalid="ignore"):  # a lobe rises from the noise band, a drift does not
             rose = bool((np.abs(self.res[lo : lo + first]) <= QUIET_SHARE * thr).any())
         # one slip's lobes carry the same speed change: an end lobe far larger than the
@@ -574,7 +577,7 @@ class _Streams:
         # early and ran out of time mid-slide)
         sgn = np.sign(self.res[det])
         with np.errstate(invalid="ignore"):
-            peak_opp = float(np.nanmax(-sgn * self.res[lo + back[: brk[0] + 1 if brk.size else None]]))
+            peak_opp = float(np.nanmax(-sgn * self.res[lo + lobe]))
             peak_end = float(np.nanmax(sgn * self.res[det : det + self.M]))
         if peak_end > LOBE_RATIO * peak_opp:
             return "residual", det
@@ -702,9 +705,9 @@ class _Streams:
         lead = self.vp[max(i0 - self.P + 1, 0) : i0]  # the 1 s mean starts on adhering pulses
         v1 = _ma(np.concatenate([lead, v_in]), self.P)[lead.size :]
         with np.errstate(invalid="ignore"):
-            agree = np.abs(v1 - self.vp1[sl]) <= cfg.readhesion_tol_kmh / 3.6 + cfg.beta_mps2 * tt
+            agree = np.abs(v1 - self.vp1[sl]) <= self.readhesion_tol0 + cfg.beta_mps2 * tt
         self._agree[i0] = agree
-        cond = _held(agree, max(round(cfg.readhesion_hold_s / self.cyc), 1))
+        cond = _held(agree, self.readhesion_hold)
         cond[: max(after - i0 + 1, 0)] = False
         hit = np.flatnonzero(cond)
         readhered = hit.size > 0
@@ -843,12 +846,12 @@ class _Streams:
             assert radar is not None
             v1 = _ma(radar[out[0] - self.P + 1 : out[-1] + 1].astype(float), self.P)[self.P - 1 :]
             own = RADAR_ERROR_PCT / 100.0 * v1
-            tol = cfg.readhesion_tol_kmh / 3.6 + own
+            tol = self.readhesion_tol0 + own
         else:
             own = cfg.delta_a_mps2 * tt
-            tol = cfg.readhesion_tol_kmh / 3.6 + cfg.beta_mps2 * tt
+            tol = self.readhesion_tol0 + cfg.beta_mps2 * tt
         dv = np.abs(v1 - self.vp1[k])
-        held = _held(dv <= tol, max(round(cfg.readhesion_hold_s / self.cyc), 1))
+        held = _held(dv <= tol, self.readhesion_hold)
         held[0] = False
         hit = np.flatnonzero(held)
         j = int(hit[0]) if hit.size else v1.size - 1

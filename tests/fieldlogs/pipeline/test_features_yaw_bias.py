@@ -113,7 +113,8 @@ def test_crossing_uncertainty_by_hand(net) -> None:
     assert out.uncertainty_m > CFG.fix_uncertainty_m
     # fast trains keep the paper's 10 m
     fast = FeatureUnit(c, replace(odo, v=odo.v * 5.0), net, CFG)
-    assert fast._crossing_uncertainty(out.i_ref, _candidate(fast, out.feature_id)) == CFG.fix_uncertainty_m
+    cand = _candidate(fast, out.feature_id)
+    assert fast._crossing_uncertainty(out.i_ref, cand, 0.8 / cand.radius_m) == CFG.fix_uncertainty_m
 
 
 def _candidate(unit: FeatureUnit, feature_id: str):
