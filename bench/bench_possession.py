@@ -17,7 +17,8 @@ tachometer stream (0: none, the default). Each run is checked with
 :func:`fieldlogs.possession.check_streams` (the library path of ``possession check``, which
 uses the tacho when the case has one) and compared with the simulator's truth:
 
-* *alarmed*: the mistake's alarm exists — wrong track at most 120 s after PTO on; overrun at
+* *alarmed*: the mistake's alarm exists — wrong track (decided, or suspected while still
+  undecided: ``wrong_track_suspected``) at most 120 s after PTO on; overrun at
   most 2 s after the true crossing of the section end (negative latency = before it, which
   the fail-safe band does on purpose); release and not-started at most 2 s after the event;
 * *false*: any other alarm (or an overrun more than 30 s before the crossing);
@@ -48,7 +49,7 @@ from dbtools.gis.geometry import Projector
 from dbtools.synthetic import build_network, demo_line
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.possession import PossessionConfig, check_streams, config_from_dict
-from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, PossessionCase, make_cases
+from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, MISTAKE_ALARMS, PossessionCase, make_cases
 from schemas.errors import InputError
 
 TARGET_S = {"wrong_track": 120.0, "overrun": 2.0, "released_on_rail": 2.0, "not_started": 2.0}
@@ -77,15 +78,17 @@ def evaluate(
     if exp is not None:
         typ = EXPECTED_ALARM[case.kind]
         t_ref = case.t_on if typ == "wrong_track" else float(exp["t_true"])
-        cands = [a for a in alarms if a.type == typ and a.t <= t_ref + TARGET_S[typ]]
+        mine = MISTAKE_ALARMS[case.kind]
+        cands = [a for a in alarms if a.type in mine and a.t <= t_ref + TARGET_S[typ]]
         if typ == "overrun":
             cands = [a for a in cands if a.t >= t_ref - 30.0]
         hit = cands[0] if cands else None
         row["latency_s"] = None if hit is None else hit.t - t_ref
-        late = [a for a in alarms if a.type == typ and a is not hit]
+        late = [a for a in alarms if a.type in mine and a is not hit]
+        row["suspected"] = hit is not None and hit.type != typ
         row["alarmed"] = hit is not None
         row["alarmed_late"] = hit is None and bool(late)
-    false = [a for a in alarms if a is not hit and not (exp and a.type == EXPECTED_ALARM[case.kind])]
+    false = [a for a in alarms if a is not hit and not (exp and a.type in MISTAKE_ALARMS[case.kind])]
     row["false"] = len(false)
     row["false_detail"] = [
         f"{case.meta.run_id} {case.kind}: {a.type} at t {a.t:.1f} s km {a.km_m} {a.evidence}" for a in false
@@ -192,7 +195,9 @@ def main() -> None:
     print(
         f"runs: {len(rows)}; simulation {t_sim:.1f} s, checks {t_check:.1f} s ({t_check / len(rows) * 1000:.0f} ms/run)"
     )
+    suspected = sum(1 for r in rows if r.get("suspected"))
     print(f"mistakes alarmed only after the target: {len(late)}; runs undecided 120 s after PTO on: {len(undecided)}")
+    print(f"wrong tracks alarmed as suspected (undecided at 120 s, the evidence leaning their way): {suspected}")
     print("false = runs with an alarm that is not the injected mistake; worst = max |km error| / u")
     if args.details:
         for r in rows:

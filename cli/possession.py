@@ -30,6 +30,7 @@ ALARM_COLUMNS = ["type", "t_s", "time", "km", "track", "work_no", "evidence"]
 #: Evidence shown in the terminal table per type (JSON and HTML have all of it).
 BRIEF = {
     "wrong_track": ("planned_track", "decided_track", "after_on_rail_s", "llr"),
+    "wrong_track_suspected": ("planned_track", "likeliest_track", "odds", "n_fixes"),
     "overrun": ("end", "beyond_m", "uncertainty_m", "until_t"),
     "released_on_rail": ("released_at", "until_t"),
     "not_started": ("started_at", "reason", "until_t"),

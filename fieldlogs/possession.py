@@ -15,7 +15,12 @@ trust filter and the km estimate but are no evidence for the up/down decision.
 sequential likelihood-ratio test on the mean offset of *trusted* D-GPS fixes (5/15/30 s RMS
 filter), decided as soon as the evidence suffices, otherwise *undecided* — never guessed.
 No decision ``decision_target_s`` (120 s, the field target [S001 §3.1(e)]) after PTO on is a
-``track_undecided`` notice. Crossovers (RMS of the offset from the base track [S001 §7]) are
+``track_undecided`` notice; if the evidence of those seconds nonetheless leans to another
+track than the plan's (:func:`fieldlogs.pipeline.gps.track_odds`: that track is the likeliest,
+log-likelihood ratio > ``suspect_llr``), a ``wrong_track_suspected`` alarm too — fail-safe:
+the paper's device must warn before the vehicle starts work on the track, and a slow D-GPS
+error can hold the fixes near the midline longer than that (the decision itself still waits
+for its 1:1000 evidence and is never guessed). Crossovers (RMS of the offset from the base track [S001 §7]) are
 notices; the decision that follows a crossover is checked like any other.
 
 **km and its uncertainty.** A 1-D constant-velocity Kalman filter along the line's
@@ -97,6 +102,8 @@ number and evidence; one per episode, episodes closer than ``rearm_s`` merged):
 
 * ``wrong_track`` — an up/down decision (line, track) that no candidate possession of that
   line and track covering the vehicle's km allows, at the decision time;
+* ``wrong_track_suspected`` — still undecided ``decision_target_s`` after PTO on while the
+  evidence leans to another track than the plan's (above; with the odds);
 * ``overrun`` — as soon as the band km ± min(u, ``overrun_band_max_m``) is not inside
   [km_from, km_to] (so on good fixes ~u ≈ 3 m before the true crossing); cleared when it is
   inside again. With degraded GPS (u above 15 m) the wider band leaving the section is an
@@ -136,7 +143,7 @@ from dbtools.network import Network
 from fieldlogs.io import Run
 from fieldlogs.pipeline.config import GpsConfig, PipelineConfig, update_section
 from fieldlogs.pipeline.cycles import build_cycles
-from fieldlogs.pipeline.gps import analyse_gps, trust_filter
+from fieldlogs.pipeline.gps import TrackOdds, analyse_gps, track_odds, trust_filter
 from fieldlogs.pipeline.types import Event, GpsAnalysis, TrackDecision
 from fieldlogs.plans import Plan, Possession, PossessionState
 from schemas.errors import InputError
@@ -144,7 +151,7 @@ from schemas.errors import InputError
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
-ALARM_TYPES = ("wrong_track", "overrun", "released_on_rail", "not_started")
+ALARM_TYPES = ("wrong_track", "wrong_track_suspected", "overrun", "released_on_rail", "not_started")
 NOTICE_TYPES = (
     "approaching_end",
     "overrun_possible",
@@ -189,7 +196,13 @@ class PossessionConfig:
     lead_s: float = 60.0
     """Fixes before PTO on used for the trust filter and the km (approach on the road) [s]."""
     decision_target_s: float = 120.0
-    """No up/down decision this long after PTO on → ``track_undecided`` notice [s] [S001 §3.1(e)]."""
+    """No up/down decision this long after PTO on → ``track_undecided`` notice [s] [S001 §3.1(e)] …"""
+    suspect_llr: float = 0.0
+    """… and a ``wrong_track_suspected`` alarm when the evidence of those seconds leans to
+    another track than the plan's: its log-likelihood ratio against every other candidate
+    exceeds this [–]. Why: the slow D-GPS error can hold the fixes near the midline longer than
+    the field target, and a vehicle on the wrong track must not start work unwarned; the
+    alarm says which way the evidence leans and how strongly (odds), it is not a decision."""
     step_s: float = 0.1
     """Evaluation step of the alarm rules [s]."""
     min_speed_mps: float = 0.3
@@ -769,6 +782,9 @@ class RailPeriod:
     gps: GpsAnalysis
     tacho: Tacho | None = None
     """The run's usable tacho (:func:`tacho_track`), None without one; only its on-rail part is used."""
+    odds: list[TrackOdds] = field(default_factory=list)
+    """The up/down test's statistics over the first ``decision_target_s`` on rail
+    (:func:`fieldlogs.pipeline.gps.track_odds`, likeliest first): where the evidence leans."""
 
 
 def episodes(mask: BoolArray, t: FloatArray, merge_s: float) -> list[tuple[int, int]]:
@@ -1018,6 +1034,32 @@ def evaluate_period(
             gov.work_no if gov else None,
             {"after_on_rail_s": cfg.decision_target_s, "decided_at_t": decisions[0].t if decisions else None},
         )
+        lean = period.odds[0] if period.odds else None
+        if (
+            gov is not None
+            and lean is not None
+            and (lean.line_code, lean.track) != (gov.line_code, gov.track)
+            and lean.llr > cfg.suspect_llr
+        ):
+            add(
+                alarms,
+                "wrong_track_suspected",
+                t_target,
+                gov.work_no,
+                {
+                    "planned_line_code": gov.line_code,
+                    "planned_track": gov.track,
+                    "likeliest_line_code": lean.line_code,
+                    "likeliest_track": lean.track,
+                    "odds": round(math.exp(min(lean.llr, 50.0)), 2),
+                    "llr": round(lean.llr, 2),
+                    "n_fixes": lean.n_fixes,
+                    "mean_offset_m": round(lean.mean_offset_m, 3),
+                    "sigma_m": round(lean.sigma_m, 3),
+                    "after_on_rail_s": cfg.decision_target_s,
+                    "decided_at_t": decisions[0].t if decisions else None,
+                },
+            )
     for c in crossovers:
         add(notices, "crossover", c.t, work_at(int(np.clip(np.searchsorted(tg, c.t) - 1, 0, n - 1))), dict(c.detail))
     seg_end = [*seg_t[1:].tolist(), t_off]
@@ -1237,7 +1279,8 @@ def check_streams(
         else:
             sl = None
         ga = analyse_gps(sl, network, gps_cfg, cycles, index=index)
-        periods.append(RailPeriod(t_on, t_off, with_degraded_fixes(ga, index, gps_cfg), track))
+        odds = track_odds(ga.fixes, index, gps_cfg, t_on, t_on + cfg.decision_target_s)
+        periods.append(RailPeriod(t_on, t_off, with_degraded_fixes(ga, index, gps_cfg), track, odds))
     return check_periods(periods, possessions, start, gps_cfg, cfg, run=run, run_id=run_id, tacho_note=note)
 
 

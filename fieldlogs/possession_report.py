@@ -127,7 +127,8 @@ def render_html(checks: list[RunCheck], *, plan: str = "", db: str = "") -> str:
         f"<p>Plan <code>{html.escape(plan)}</code>, onboard DB <code>{html.escape(db)}</code>, {len(checks)} run(s), "
         f"<span class='{'alarm' if n_alarms else 'ok'}'>{n_alarms} alarm(s)</span>; "
         f"generated {datetime.now(UTC):%Y-%m-%d %H:%M} UTC.</p>",
-        "<p class='note'>Alarms: wrong_track (on rail on a track no possession covers, once decided), overrun "
+        "<p class='note'>Alarms: wrong_track (on rail on a track no possession covers, once decided), "
+        "wrong_track_suspected (undecided 120 s after PTO on, the evidence leaning to another track), overrun "
         "(km ± uncertainty, at most 15 m, not inside the section), released_on_rail, not_started. Notices: "
         "approaching_end (30 m), overrun_possible (the wider band leaves the section: judgement held), "
         "track_undecided (no decision 120 s after PTO on), crossover, position_uncertain, "

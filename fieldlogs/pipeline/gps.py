@@ -176,6 +176,57 @@ def analyse_gps(
     return GpsAnalysis(out, decisions, crossovers)
 
 
+@dataclass(frozen=True)
+class TrackOdds:
+    """Evidence for one candidate track over a window (see :func:`track_odds`)."""
+
+    line_code: str
+    track: str
+    n_fixes: int
+    mean_offset_m: float
+    sigma_m: float
+    llr: float
+    """min over the other candidates b of (m_b² − m_j²)/(2 SE_j²): > 0 = this track is the
+    likeliest; ≥ ln(1/``decide_error``) would decide it."""
+
+
+def track_odds(
+    fixes: pd.DataFrame, network: Network | TrackIndex, cfg: GpsConfig, t_from: float, t_to: float
+) -> list[TrackOdds]:
+    """The up/down test's statistics over the trusted fixes in (t_from, t_to] of ``fixes``
+    (an :func:`analyse_gps` table), per candidate track, likeliest first — where the
+    evidence leans when it does not (yet) decide. Empty without trusted matched fixes."""
+    if not len(fixes):
+        return []
+    t = _col(fixes, "t")
+    sel = (t > t_from) & (t <= t_to) & fixes["trusted"].fillna(False).to_numpy(dtype=bool)
+    if not sel.any():
+        return []
+    index = network if isinstance(network, TrackIndex) else track_index_for(network)
+    ts = t[sel]
+    x, y = index.to_xy(_col(fixes, "lat")[sel], _col(fixes, "lon")[sel])
+    matches = index.match_xy(x, y, max_offset_m=cfg.max_offset_m)
+    if not len(matches):
+        return []
+    ev = _Evidence.build(ts, np.isin(np.arange(ts.size), matches["fix"].to_numpy()), matches, index)
+    if ev.size == 0:
+        return []
+    w = _windows(ev, np.array([ev.size - 1]), 0, cfg, float(t_to - t_from))
+    out = [
+        TrackOdds(
+            index.keys[int(tid)][0],
+            index.keys[int(tid)][1],
+            int(w.n[0, j]),
+            float(w.mean[0, j]),
+            float(np.sqrt(w.se2[0, j])),
+            float(w.llr[0, j]),
+        )
+        for j, tid in enumerate(ev.tracks)
+        if w.n[0, j] > 0
+    ]
+    return sorted(out, key=lambda o: -o.llr)
+
+
 def _col(df: pd.DataFrame, name: str) -> FloatArray:
     if name not in df.columns:
         return np.full(len(df), np.nan)

@@ -46,6 +46,11 @@ EXPECTED_ALARM = {
     "early_release": "released_on_rail",
     "not_started": "not_started",
 }
+#: Alarm types that report each mistake (a wrong track may first be *suspected* at the
+#: decision target, before the evidence decides it).
+MISTAKE_ALARMS = {kind: (typ,) for kind, typ in EXPECTED_ALARM.items()} | {
+    "wrong_track": ("wrong_track", "wrong_track_suspected")
+}
 
 
 @dataclass
