@@ -49,7 +49,13 @@ from the nearest track beyond ``offset_free_m`` (an on-rail fix far from every t
 probably as wrong along it — the trust filter passes such fixes when a multipath burst
 ramps up smoothly). A fix whose innovation exceeds ``gate_z`` σ is rejected (multipath);
 ``restart_fixes`` consecutive rejected fixes on a straight line at a possible speed restart
-the filter from them (a burst that slipped through must not leave it lost). The estimate
+the filter from them (a burst that slipped through must not leave it lost). A trusted fix
+*anchors* the filter for ``restart_anchor_s`` (10 s): meanwhile a restart needs a line the
+vehicle could have joined from the anchored state (``restart_accel_mps2``), and a vehicle the
+anchor shows standing skips fixes whose slow error alone exceeds the estimate's (fix 1, high
+HDOP) — a multipath burst by a standing vehicle otherwise widened the gate with its
+high-HDOP fixes, bent the filter with the next one and restarted it on its plateau: a
+false overrun 28 m before the end in good sky. The estimate
 carries the bias variance bvar ← (1 − K)·bvar + K·bias² (K the km gain: the biases of the
 fixes it is made of, as if fully correlated). Between fixes the filter predicts (dead
 reckoning on its velocity — from the fixes, and the tacho's speeds when there is one): this
@@ -185,7 +191,17 @@ class PossessionConfig:
     """Fixes whose innovation exceeds this many σ are rejected (multipath) [–]."""
     restart_fixes: int = 3
     """That many consecutive rejected fixes lying on a straight line restart the filter from
-    them (0 = never) [–]."""
+    them (0 = never) [–] …"""
+    restart_accel_mps2: float = 1.5
+    """… but while the last accepted fix was trusted (less than ``restart_anchor_s`` before),
+    only if the vehicle could have joined the line from the filter's state accelerating by at
+    most this [m/s²]. Why: a multipath burst's plateau is a line too — a vehicle standing
+    28 m before the end 'jumped' 15 m in a second and was alarmed as overrunning (measured in
+    ``bench/bench_possession.py``); a filter built on trusted fixes is not the one that got lost."""
+    restart_anchor_s: float = 10.0
+    """How long a trusted fix anchors the filter (longer than a burst) [s]: restarts must be
+    reachable from it, and while it shows the vehicle standing, fixes worse than the
+    estimate (fix 1, high HDOP) are skipped (0 = no anchor)."""
     offset_free_m: float = 1.5
     """Lateral offset from the nearest track a good fix may have (2σ of the slow error);
     beyond it the excess counts as along-track noise too [m]."""
@@ -617,6 +633,7 @@ def track_km(
     run: list[int] = []  # consecutive rejected fixes
     x0 = x1 = p00 = p01 = p11 = bv = 0.0
     t_last = tau_last = t_fix = -np.inf
+    anchor: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, -np.inf)  # state at the last trusted fix
     last_trusted = False
     for e in range(ne):
         i = int(idx[e])
@@ -652,8 +669,13 @@ def track_km(
                 y0, c00, c01, c11 = _predict(x0, x1, p00, p01, p11, float(tau[e]) - tau_last, q)
                 innov = float(z[i]) - y0
                 s = c00 + r
-                if hold[e] and b2 > c00 + bv:
-                    continue  # stopped: a fix worse than the estimate would only widen the band
+                anchored = float(tau[e]) - anchor[4] < cfg.restart_anchor_s
+                still = anchored and abs(anchor[1]) < cfg.min_speed_mps
+                if (hold[e] or still) and b2 > c00 + bv:
+                    # stopped (tacho, or trusted fixes moments ago): a fix whose slow error alone
+                    # is worse than the estimate (fix 1, high HDOP) would only widen the band —
+                    # and the gate with it, for the multipath burst that made it
+                    continue
                 if innov * innov > cfg.gate_z**2 * (s + bv + b2):
                     # an outlier (multipath): the state stays the prediction from the last accepted
                     # fix — unless the rejected fixes agree among themselves, i.e. the filter lost the
@@ -662,10 +684,12 @@ def track_km(
                     run.append(i)
                     # — not in a standstill: the speed is known there, so it cannot have been bent,
                     # and rejected fixes that agree while stopped are a steady multipath offset
-                    restart = None if hold[e] else _restart(tf, z, white, bias, run, cfg)
+                    prior = anchor if anchored else None
+                    restart = None if hold[e] else _restart(tf, z, white, bias, run, cfg, prior)
                     if restart is None:
                         continue
                     x0, x1, p00, p01, p11, bv = restart
+                    anchor = (0.0, 0.0, 0.0, 0.0, -np.inf)
                     run = []
                 else:
                     run = []
@@ -674,6 +698,8 @@ def track_km(
                     x1 = min(max(x1 + k1 * innov, -cfg.max_speed_mps), cfg.max_speed_mps)
                     p00, p01, p11 = (1 - k0) * c00, (1 - k0) * c01, c11 - k1 * c01
                     bv = (1 - k0) * bv + k0 * b2
+                    if trusted[i]:
+                        anchor = (x0, x1, p00, p11, float(tau[e]))
             t_fix = float(t[i])
             last_trusted = bool(trusted[i])
         t_last, tau_last = float(et[e]), float(tau[e])
@@ -721,10 +747,18 @@ def _stop(x0: float, x1: float, p00: float, p01: float, p11: float) -> tuple[flo
 
 
 def _restart(
-    t: FloatArray, z: FloatArray, white: FloatArray, bias: FloatArray, run: list[int], cfg: PossessionConfig
+    t: FloatArray,
+    z: FloatArray,
+    white: FloatArray,
+    bias: FloatArray,
+    run: list[int],
+    cfg: PossessionConfig,
+    prior: tuple[float, float, float, float, float] | None = None,
 ) -> tuple[float, float, float, float, float, float] | None:
     """A new state from the last ``restart_fixes`` rejected fixes when a straight line fits
-    them within 1.5 × their noise at a possible speed; None otherwise."""
+    them within 1.5 × their noise at a possible speed — and, given an anchored ``prior``
+    (km, speed, P00, P11, time), one the vehicle could have joined (:func:`_reachable`);
+    None otherwise."""
     k = cfg.restart_fixes
     if k < 2 or len(run) < k:
         return None
@@ -737,9 +771,34 @@ def _restart(
     noise = max(1.0, float(np.median(white[idx])))
     if resid > 1.5 * noise or abs(coef[1]) > cfg.max_speed_mps:
         return None
+    if prior is not None and not _reachable(tt + float(t[idx[-1]]), coef, resid, prior, cfg.restart_accel_mps2):
+        return None
     p00 = resid**2 + noise**2
     p11 = max(1.0, 2.0 * p00 / max(float(np.sum(tt**2)), 1.0))
     return float(coef[0]), float(coef[1]), p00, 0.0, p11, float(np.max(bias[idx] ** 2))
+
+
+def _reachable(
+    t: FloatArray, coef: FloatArray, resid: float, prior: tuple[float, float, float, float, float], accel: float
+) -> bool:
+    """Could a vehicle in the state ``prior`` = (km, speed, P00, P11, time) have joined the
+    line ``coef`` = (km at t[-1], speed) by its first fix t[0], accelerating by at most
+    ``accel``? Speed and position each within 3σ (the prior's and the line's, the line's
+    per-fix error its RMS residual, at least 0.5 m) plus what that acceleration allows."""
+    x0, v0, p00, p11, t0 = prior
+    k = t.size
+    dt = max(float(t[0]) - t0, 0.0)
+    s2 = max(resid * resid, 0.25)
+    tc = t - t.mean()
+    sxx = max(float(np.sum(tc * tc)), 1e-9)
+    v_var = s2 / sxx
+    z_var = s2 * (1.0 / k + float(tc[0]) ** 2 / sxx)
+    v1 = float(coef[1])
+    z1 = float(coef[0]) + v1 * float(t[0] - t[-1])
+    speed_ok = abs(v1 - v0) <= accel * dt + 3.0 * math.sqrt(max(p11, 0.0) + v_var)
+    z_sd = math.sqrt(max(p00, 0.0) + 0.25 * dt * dt * (max(p11, 0.0) + v_var) + z_var)
+    place_ok = abs(z1 - (x0 + 0.5 * (v0 + v1) * dt)) <= 0.25 * accel * dt * dt + 3.0 * z_sd
+    return speed_ok and place_ok
 
 
 def km_noise(fixes: pd.DataFrame, gps_cfg: GpsConfig, cfg: PossessionConfig) -> tuple[FloatArray, FloatArray]:

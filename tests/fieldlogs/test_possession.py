@@ -654,8 +654,9 @@ def test_bad_tacho_is_reported_and_gps_only(edit: object, message: str) -> None:
 def test_simulated_stop_before_the_end_in_poor_sky() -> None:
     """PZ-correct-20085 of ``bench_possession.py --runs 300 --seed0 20000 --poor-sky-every 2``:
     the vehicle stops ~30 m before the end in poor sky. GPS only gives a false overrun — the
-    same, to the last digit, as before the tacho existed (the numbers below are pinned from
-    that code); its tacho removes it."""
+    same alarm, to the last digit, as before the tacho existed; the sums of km and u are
+    pinned from the code with the trusted-fix anchor (``restart_anchor_s``), which changed
+    them by 0.007 % and 0.7 %; its tacho removes the alarm."""
     case = make_case(NET, "correct", 20085, poor_sky=True, tacho=True)
     common = (case.streams["gps"], case.streams["cab"], datetime.fromisoformat(case.meta.start_time), NET)
     gps_only = check_streams(*common, case.possessions)
@@ -667,7 +668,7 @@ def test_simulated_stop_before_the_end_in_poor_sky() -> None:
         15.766842456411137,
     )
     tl = gps_only.periods[0].timeline
-    assert (float(np.nansum(tl.km)), float(np.nansum(tl.u))) == (6201216.972926079, 11859.41133395116)
+    assert (float(np.nansum(tl.km)), float(np.nansum(tl.u))) == (6201257.914244132, 11776.25639549805)
     with_tacho = check_streams(
         *common,
         case.possessions,
@@ -680,3 +681,52 @@ def test_simulated_stop_before_the_end_in_poor_sky() -> None:
     tl = with_tacho.periods[0].timeline
     tk = np.interp(tl.t, truth["t"].to_numpy(), truth["km_m"].to_numpy(dtype=float, na_value=np.nan))
     assert np.mean(np.abs(tl.km - tk) <= tl.u) > 0.99
+
+
+def burst_while_standing() -> GpsAnalysis:
+    """Standing at 1472 (28 m before the end) on trusted fixes; at t = 100 a multipath burst
+    along the track (+13…+20 m over 6 s, two of its fixes with a high HDOP, i.e. no D-GPS),
+    untrusted for 30 s (the numbers of simulated run PZ-wrong_track-1241)."""
+    km = run_line(200, (0.0, 20), (4.0, 68))  # 1200 → 1472 by t = 88, then standing
+    burst = [13.4, 18.1, 19.8, 18.8, 15.2, 6.6, -0.3]
+    km[100:107] += burst
+    ga = analysis(km)
+    f = ga.fixes
+    f.loc[100:130, "trusted"] = False
+    f.loc[100:106, "rms_5"] = [5.5, 7.1, 7.2, 7.3, 3.0, 3.0, 3.0]
+    f.loc[102:103, ["usable", "fix"]] = [False, 1]
+    return ga
+
+
+def test_multipath_burst_by_a_standing_vehicle_is_no_overrun() -> None:
+    ga = burst_while_standing()
+    period = RailPeriod(5.0, 199.0, ga)
+    res = check_periods([period], [possession()], START, GPS, CFG)
+    assert res.alarms == []
+    km = res.periods[0].timeline.km  # type: ignore[attr-defined]
+    # the burst's last ramp-down fix (+6.6 m, 5 s after the anchor) may pass the widened gate
+    assert np.nanmax(km[(res.periods[0].timeline.t >= 95.0)]) < 1472.0 + 8.0  # type: ignore[attr-defined]
+    # without the trusted-fix anchor the burst's high-HDOP fixes widen the gate, its next fix
+    # bends the filter and its plateau restarts it: the band crossed the end
+    loose = replace(CFG, restart_anchor_s=0.0)
+    assert "overrun" in types(check_periods([period], [possession()], START, GPS, loose).alarms)
+
+
+def test_restart_needs_a_reachable_line_while_anchored() -> None:
+    # a steady 20 m multipath offset for 5 s beside a vehicle standing on trusted fixes is a
+    # line (at speed 0) — but no vehicle moves 20 m in a second from a standstill
+    km = run_line(200, (0.0, 20), (4.0, 60))  # standing at 1440 from t = 80
+    km[100:105] += 20.0
+    trusted = np.ones(km.size, dtype=bool)
+    trusted[100:131] = False
+    period = RailPeriod(5.0, 199.0, analysis(km, trusted=trusted, rms=0.3))
+    res = check_periods([period], [possession()], START, GPS, CFG)
+    assert res.alarms == []
+    tl = res.periods[0].timeline  # type: ignore[attr-defined]
+    assert np.nanmax(tl.km[tl.t >= 95.0]) < 1440.0 + 3.0
+    # once the anchor (the last trusted fix) is older than restart_anchor_s, such a line restarts
+    km2 = km.copy()
+    km2[100:125] = 1460.0
+    period2 = RailPeriod(5.0, 199.0, analysis(km2, trusted=trusted, rms=0.3))
+    tl2 = check_periods([period2], [possession()], START, GPS, CFG).periods[0].timeline
+    assert abs(tl2.km[np.searchsorted(tl2.t, 120.0)] - 1460.0) < 3.0
