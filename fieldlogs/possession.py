@@ -633,7 +633,7 @@ def track_km(
     run: list[int] = []  # consecutive rejected fixes
     x0 = x1 = p00 = p01 = p11 = bv = 0.0
     t_last = tau_last = t_fix = -np.inf
-    anchor: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, -np.inf)  # state at the last trusted fix
+    anchor = _NO_ANCHOR  # (km, speed, P00, P11, moving time) at the last accepted trusted fix
     last_trusted = False
     for e in range(ne):
         i = int(idx[e])
@@ -689,7 +689,7 @@ def track_km(
                     if restart is None:
                         continue
                     x0, x1, p00, p01, p11, bv = restart
-                    anchor = (0.0, 0.0, 0.0, 0.0, -np.inf)
+                    anchor = _NO_ANCHOR
                     run = []
                 else:
                     run = []
@@ -723,6 +723,10 @@ def track_km(
         out["tau"][:m] if tacho is not None else None,
         out["fix_t"][:m] if tacho is not None else None,
     )
+
+
+#: The km filter's anchor before any trusted fix, and after a restart: never in force.
+_NO_ANCHOR: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, -math.inf)
 
 
 def _predict(
@@ -1086,13 +1090,8 @@ def evaluate_period(
         )
     t_target = t_on + cfg.decision_target_s
     if t_off > t_target and not any(d.t <= t_target for d in decisions):
-        add(
-            notices,
-            "track_undecided",
-            t_target,
-            gov.work_no if gov else None,
-            {"after_on_rail_s": cfg.decision_target_s, "decided_at_t": decisions[0].t if decisions else None},
-        )
+        undecided = {"after_on_rail_s": cfg.decision_target_s, "decided_at_t": decisions[0].t if decisions else None}
+        add(notices, "track_undecided", t_target, gov.work_no if gov else None, undecided)
         lean = period.odds[0] if period.odds else None
         if (
             gov is not None
@@ -1115,8 +1114,7 @@ def evaluate_period(
                     "n_fixes": lean.n_fixes,
                     "mean_offset_m": round(lean.mean_offset_m, 3),
                     "sigma_m": round(lean.sigma_m, 3),
-                    "after_on_rail_s": cfg.decision_target_s,
-                    "decided_at_t": decisions[0].t if decisions else None,
+                    **undecided,
                 },
             )
     for c in crossovers:

@@ -25,6 +25,7 @@ from fieldlogs.plans import Possession, PossessionState, load_plan, plan_frame, 
 from fieldlogs.possession import (
     PossessionConfig,
     RailPeriod,
+    RunCheck,
     Tacho,
     check_periods,
     check_streams,
@@ -37,7 +38,7 @@ from fieldlogs.possession import (
     tacho_track,
     track_km,
 )
-from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, make_case
+from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, PossessionCase, make_case
 from schemas.errors import FindingsError, InputError
 
 NET = build_network([demo_line()], Projector(9))
@@ -412,21 +413,25 @@ SEEDS = {
 POOR = {12, 22, 32}
 
 
+def check_case(case: PossessionCase) -> RunCheck:
+    """``check_streams`` on a simulated case's GPS and cab streams (GPS only, no tacho)."""
+    return check_streams(
+        case.streams["gps"],
+        case.streams["cab"],
+        datetime.fromisoformat(case.meta.start_time),
+        NET,
+        case.possessions,
+        run_id=case.meta.run_id,
+    )
+
+
 @pytest.fixture(scope="module")
 def simulated() -> list[tuple[object, object]]:
     out = []
     for kind in KINDS:
         for seed in SEEDS[kind]:
             case = make_case(NET, kind, seed, poor_sky=seed in POOR)
-            res = check_streams(
-                case.streams["gps"],
-                case.streams["cab"],
-                datetime.fromisoformat(case.meta.start_time),
-                NET,
-                case.possessions,
-                run_id=case.meta.run_id,
-            )
-            out.append((case, res))
+            out.append((case, check_case(case)))
     return out
 
 

@@ -10,7 +10,6 @@ slow D-GPS error holds the fixes near the midline past 120 s.
 from __future__ import annotations
 
 import math
-from datetime import datetime
 
 import numpy as np
 import pandas as pd
@@ -18,9 +17,21 @@ import pytest
 
 from dbtools.gis.matching import track_index_for
 from fieldlogs.pipeline.gps import TrackOdds, track_odds
-from fieldlogs.possession import RailPeriod, check_periods, check_streams
+from fieldlogs.possession import RailPeriod, check_periods
 from fieldlogs.simulate.possession import make_case
-from tests.fieldlogs.test_possession import CFG, GPS, LINE, NET, START, analysis, decided, possession, run_line, types
+from tests.fieldlogs.test_possession import (
+    CFG,
+    GPS,
+    LINE,
+    NET,
+    START,
+    analysis,
+    check_case,
+    decided,
+    possession,
+    run_line,
+    types,
+)
 
 KM0 = 3000.0
 TOWARD_U = -1.0
@@ -124,15 +135,7 @@ def test_no_suspected_alarm(odds: list[TrackOdds], decisions: tuple[object, ...]
 
 def _check(kind: str, seed: int) -> tuple[object, object]:
     case = make_case(NET, kind, seed)
-    res = check_streams(
-        case.streams["gps"],
-        case.streams["cab"],
-        datetime.fromisoformat(case.meta.start_time),
-        NET,
-        case.possessions,
-        run_id=case.meta.run_id,
-    )
-    return case, res
+    return case, check_case(case)
 
 
 def test_simulated_wrong_track_held_near_the_midline_is_suspected_at_120_s() -> None:
