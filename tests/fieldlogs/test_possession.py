@@ -12,6 +12,7 @@ import gc
 from dataclasses import replace
 from datetime import datetime, timedelta
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -413,8 +414,9 @@ SEEDS = {
 POOR = {12, 22, 32}
 
 
-def check_case(case: PossessionCase) -> RunCheck:
-    """``check_streams`` on a simulated case's GPS and cab streams (GPS only, no tacho)."""
+def check_case(case: PossessionCase, **kw: Any) -> RunCheck:
+    """``check_streams`` on a simulated case's GPS and cab streams (``kw``: a tacho and its
+    run.json fields; without, GPS only)."""
     return check_streams(
         case.streams["gps"],
         case.streams["cab"],
@@ -422,6 +424,7 @@ def check_case(case: PossessionCase) -> RunCheck:
         NET,
         case.possessions,
         run_id=case.meta.run_id,
+        **kw,
     )
 
 
@@ -637,16 +640,7 @@ def test_bad_tacho_is_reported_and_gps_only(edit: object, message: str) -> None:
     assert message in str(tacho_problem(tacho, case.meta.wheel_diameter_m, case.meta.teeth, CFG))
 
     def run(tacho: pd.DataFrame | None, wheel: float | None = case.meta.wheel_diameter_m) -> object:
-        return check_streams(
-            case.streams["gps"],
-            case.streams["cab"],
-            datetime.fromisoformat(case.meta.start_time),
-            NET,
-            case.possessions,
-            tacho=tacho,
-            wheel_diameter_m=wheel,
-            teeth=case.meta.teeth,
-        )
+        return check_case(case, tacho=tacho, wheel_diameter_m=wheel, teeth=case.meta.teeth)
 
     bad, none = run(tacho), run(None)
     assert bad.tacho["used"] is False and message in bad.tacho["note"] and "GPS only" in bad.tacho["note"]  # type: ignore[attr-defined]
