@@ -73,7 +73,7 @@ def _truth_dist(truth: pd.DataFrame, t0: float, t1: float) -> float:
 
 
 def metrics(res: Any, truth: pd.DataFrame, st: dict[str, Any]) -> dict[str, Any]:
-    from fieldlogs.accuracy import compare_with_truth
+    from fieldlogs.pipeline.truth import compare_with_truth
 
     cmp = compare_with_truth(res.positions, truth)
     claimed = cmp[cmp.claimed]

@@ -33,8 +33,8 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.sources import write_source_set
-from dbtools.synthetic import build_network, demo_line
-from fieldlogs.audit import AuditStats, audit
+from dbtools.synthetic.network import build_network, demo_line
+from fieldlogs.audit.runner import AuditStats, audit
 from fieldlogs.io import write_run
 from fieldlogs.simulate import scenario_from_dict, simulate_run
 

@@ -10,7 +10,7 @@ Targets (SPEC / brief): 1,000,000 GIS points, ~50,000 balises, ~10,000 features;
 ``db build`` ≤ 10 s and ``db validate`` ≤ 15 s on one core, peak memory ≤ 4 GB.
 
 The network: ``--lines`` lines on a square grid of 15 km cells around the origin of
-JGD2011 zone 9 (each line is a :func:`~dbtools.synthetic.random_alignment` starting near its
+JGD2011 zone 9 (each line is a :func:`~dbtools.synthetic.network.random_alignment` starting near its
 cell centre, so lines do not overlap), double track, a station every 1.1 km (initial pair,
 home-signal C balise per station and track), one feature per curve and track.
 
@@ -46,7 +46,7 @@ from dbtools.build import build_db
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical, empty_frame
 from dbtools.sources import write_source_set
-from dbtools.synthetic import LineSpec, Station, balises, feature_points, gis_grid, random_alignment
+from dbtools.synthetic.network import LineSpec, Station, balises, feature_points, gis_grid, random_alignment
 from dbtools.validate import validate_path
 from schemas.enums import Severity
 from schemas.tables import BALISES, FEATURE_POINTS, GIS, KM_BREAKS, LAT_RANGE, LINES, LON_RANGE

@@ -49,8 +49,8 @@ from dbtools.gis.geometry import Projector
 from dbtools.gis.verify import VerifyConfig, shift_grid_points, verify_fixes
 from dbtools.network import Network
 from dbtools.sources import write_source_set
-from dbtools.synthetic import LineSpec, Station, build_network, random_alignment
-from fieldlogs.gisevidence import collect_evidence
+from dbtools.synthetic.network import LineSpec, Station, build_network, random_alignment
+from fieldlogs.gisverify.evidence import collect_evidence
 from fieldlogs.io import write_run
 from fieldlogs.simulate import scenario_from_dict, simulate_run
 

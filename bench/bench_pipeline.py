@@ -27,7 +27,7 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.sources import write_source_set
-from dbtools.synthetic import build_network, demo_line
+from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.io import read_run, write_run
 from fieldlogs.pipeline import run_pipeline
 from fieldlogs.simulate import scenario_from_dict, simulate_run

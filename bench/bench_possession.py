@@ -14,7 +14,7 @@ line (double track, 3.8 m apart): the kinds ``correct``, ``wrong_track``, ``over
 with a poor-sky stretch (multipath, fix 1, extra noise) inside the section; default D-GPS
 σ 0.75 m per axis, τ 180 s, 6 multipath bursts/h; every ``--tacho-every``-th case with a
 tachometer stream (0: none, the default). Each run is checked with
-:func:`fieldlogs.possession.check_streams` (the library path of ``possession check``, which
+:func:`fieldlogs.possession.check.check_streams` (the library path of ``possession check``, which
 uses the tacho when the case has one) and compared with the simulator's truth:
 
 * *alarmed*: the mistake's alarm exists — wrong track (decided, or suspected while still
@@ -46,9 +46,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic import build_network, demo_line
+from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.pipeline.config import GpsConfig
-from fieldlogs.possession import PossessionConfig, check_streams, config_from_dict
+from fieldlogs.possession.check import PossessionConfig, check_streams, config_from_dict
 from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, MISTAKE_ALARMS, PossessionCase, make_cases
 from schemas.errors import InputError
 

@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic import build_network, demo_line
+from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.simulate import scenario_from_dict, simulate_run
 from fieldlogs.simulate.kinematics import body_kinematics
 from fieldlogs.simulate.running import Motion, cant_model, plan_motion

@@ -16,9 +16,9 @@ from rich.progress import Progress, TaskID
 
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_json, progress
-from fieldlogs.audit import audit as run_audit
+from fieldlogs.audit.runner import audit as run_audit
 from fieldlogs.pipeline import PipelineConfig
-from fieldlogs.report import ROUTE_KEYS, Report, build_report, report_json
+from fieldlogs.reports.report import ROUTE_KEYS, Report, build_report, report_json
 from schemas.errors import EXIT_FINDINGS, UsageError
 
 
@@ -187,7 +187,7 @@ def report(
 
     Example: trainpos report audit.sqlite --format html --out audit.html
     """
-    from fieldlogs.report_html import render_html
+    from fieldlogs.reports.page import render_html
 
     rep = build_report(audit_db, by=by.value, target_pct=target_pct)
     if fmt == ReportFmt.html:

@@ -11,13 +11,13 @@ from cli.errors import cli_command
 from cli.render import console, err_console, print_findings, progress
 from dbtools.build import build_db
 from dbtools.validate import validate_path
-from fieldlogs.audit import audit
-from fieldlogs.report import build_report
+from fieldlogs.audit.runner import audit
+from fieldlogs.reports.report import build_report
 from schemas.errors import InputError
 
 
 def sample_logs_dir() -> Path:
-    """The bundled sample runs (``fieldlogs/sample_logs``, made by ``fieldlogs.samples``)."""
+    """The bundled sample runs (``fieldlogs/sample_logs``, made by ``fieldlogs.simulate.samples``)."""
     return Path(__file__).resolve().parent.parent / "fieldlogs" / "sample_logs"
 
 
@@ -41,7 +41,7 @@ def demo(
 
     Example: trainpos demo --out demo-out
     """
-    from fieldlogs.report_html import render_html
+    from fieldlogs.reports.page import render_html
 
     logs = sample_logs_dir()
     if not logs.is_dir():

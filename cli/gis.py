@@ -24,7 +24,7 @@ from schemas.errors import EXIT_FINDINGS, RefusedError, UsageError
 from schemas.units import format_km
 
 if TYPE_CHECKING:
-    from fieldlogs.gisevidence import VerifyReport
+    from fieldlogs.gisverify.evidence import VerifyReport
 
 app = typer.Typer(
     help="Build the 20 m GIS kilometrage grid from surveys; verify it against GPS runs.", no_args_is_help=True
@@ -218,7 +218,7 @@ def verify(
 
     Example: trainpos gis verify net.sqlite logs/ --format html --out gis.html --propose src-fixed/
     """
-    from fieldlogs.gisevidence import verify_runs
+    from fieldlogs.gisverify.evidence import verify_runs
     from fieldlogs.pipeline import PipelineConfig
 
     if fmt == VerifyFmt.html and out is None:
@@ -254,7 +254,7 @@ def verify(
             highlight=False,
         )
     if fmt == VerifyFmt.html:
-        from fieldlogs.gisplots import render_html
+        from fieldlogs.gisverify.page import render_html
 
         assert out is not None
         _write(out, render_html(report))

@@ -11,10 +11,10 @@ import typer
 
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
-from fieldlogs.checks import check_run, load_db_refs
-from fieldlogs.info import run_info
 from fieldlogs.io import convert_run
-from fieldlogs.repair import REPAIR_LOG, repair_run
+from fieldlogs.quality.checks import check_run, load_db_refs
+from fieldlogs.quality.info import run_info
+from fieldlogs.quality.repair import REPAIR_LOG, repair_run
 from schemas.errors import EXIT_FINDINGS, EXIT_OK, EXIT_UNREADABLE, InputError
 from schemas.findings import has_errors
 

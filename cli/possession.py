@@ -13,7 +13,7 @@ from rich.console import Console
 
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
-from fieldlogs.possession import PossessionReport, check_files
+from fieldlogs.possession.check import PossessionReport, check_files
 from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.units import format_km
 
@@ -132,7 +132,7 @@ def check(
     if report.plan.findings:
         print_findings(report.plan.findings, console=err_console(), title="Plan warnings")
     if fmt == Fmt.html:
-        from fieldlogs.possession_report import render_html
+        from fieldlogs.possession.page import render_html
 
         assert out is not None
         _write(out, render_html(report.checks, plan=str(plan), db=str(db)))

@@ -11,7 +11,7 @@ from cli.render import console, key_value_table
 from dbtools.database import read_network
 from fieldlogs.io import read_run
 from fieldlogs.pipeline import PipelineConfig, run_pipeline
-from fieldlogs.results import write_results
+from fieldlogs.pipeline.outputs import write_results
 from schemas.units import format_km
 
 

@@ -22,7 +22,7 @@ def simulate(
     db: Path = typer.Option(..., "--db", help="Onboard DB file (.sqlite) whose line/track the vehicle runs on."),
     out: Path = typer.Option(..., "--out", "-o", help="Run folder to write (run.json + one file per stream)."),
     scenario: Path | None = typer.Option(
-        None, "--scenario", help="Scenario TOML; overrides the knobs of fieldlogs/scenarios/default.toml."
+        None, "--scenario", help="Scenario TOML; overrides the knobs of fieldlogs/simulate/scenarios/default.toml."
     ),
     seed: int | None = typer.Option(None, "--seed", min=0, help="Random seed (default: the scenario's 'seed')."),
     line: str | None = typer.Option(None, "--line", help="Line code (overrides route.line_code)."),

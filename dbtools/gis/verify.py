@@ -1,7 +1,7 @@
 """GIS grid verification from traversed trajectories [S001 §9(a), SPEC §6].
 
 Input: GPS fixes whose track is *known* (from balises or the GPS up/down decision, never
-guessed — :mod:`fieldlogs.gisevidence` selects them), one row per fix with the columns of
+guessed — :mod:`fieldlogs.gisverify.evidence` selects them), one row per fix with the columns of
 :data:`FIX_COLUMNS`. Everything below is vectorised over fixes (no Python loop per fix or
 per cell; one small loop per *defect*).
 

@@ -24,13 +24,13 @@ import numpy as np
 import pandas as pd
 
 from dbtools.build import build_db
-from dbtools.gis.alignment import Alignment
 from dbtools.gis.io import grid_files
-from dbtools.gis.survey import centreline_vertices, km_posts
 from dbtools.network import canonical
 from dbtools.sample_network import PACKAGE_DIR
 from dbtools.sample_network.fit import FitResult, FitSettings, fit_alignment, project_brute
-from dbtools.synthetic import LineSpec, Station, balises, feature_points
+from dbtools.synthetic.alignment import Alignment
+from dbtools.synthetic.network import LineSpec, Station, balises, feature_points
+from dbtools.synthetic.survey import centreline_vertices, km_posts
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.model import Table

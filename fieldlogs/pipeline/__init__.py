@@ -14,7 +14,6 @@ import numpy as np
 import pandas as pd
 
 from dbtools.network import Network
-from fieldlogs.accuracy import compare_with_truth, truth_summary
 from fieldlogs.io import Run
 from fieldlogs.pipeline.balise import BaliseDb, BaliseUnit
 from fieldlogs.pipeline.config import PipelineConfig
@@ -23,6 +22,7 @@ from fieldlogs.pipeline.features import FeatureUnit
 from fieldlogs.pipeline.gps import analyse_gps
 from fieldlogs.pipeline.odometry import correct_odometry
 from fieldlogs.pipeline.solver import solve
+from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
 from schemas.enums import PositionState, Severity
 from schemas.errors import FindingsError

@@ -4,7 +4,7 @@
 columns) and the ``run.json`` metadata; ``simulate_to_folder`` reads the DB and writes the
 run with ``fieldlogs.io.write_run``. The pieces, one concern per module:
 
-* ``scenario`` — knobs (TOML, documented in ``fieldlogs/scenarios/default.toml``);
+* ``scenario`` — knobs (TOML, documented in ``fieldlogs/simulate/scenarios/default.toml``);
 * ``track`` — GIS grid → C2 splines: heading, curvature, gradient, cant, arc length;
 * ``running`` — moves, stops, curve limits, jerk-limited speed profile at 100 Hz;
 * ``kinematics`` — body attitude, specific force and rates (SPEC §4.1 frame);

@@ -33,7 +33,7 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.io import LogFormat, RunMeta, write_run
-from fieldlogs.plans import Possession, plan_frame
+from fieldlogs.possession.plan import Possession, plan_frame
 from fieldlogs.simulate import Scenario, scenario_from_dict, simulate_run
 
 KINDS = ("correct", "wrong_track", "overrun", "early_release", "not_started")

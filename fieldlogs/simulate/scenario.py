@@ -1,6 +1,6 @@
 """Simulation scenarios: typed dataclasses loaded from TOML (``tomllib``).
 
-A scenario file overrides any subset of the knobs of ``fieldlogs/scenarios/default.toml``,
+A scenario file overrides any subset of the knobs of ``fieldlogs/simulate/scenarios/default.toml``,
 which documents every knob with its unit and default. Unknown keys and wrong types are
 errors that name the file and the dotted key (``slip.depth``), so a typo never silently
 falls back to a default. Integers are accepted where a float is expected; booleans are not
@@ -21,7 +21,7 @@ from schemas.enums import CabDirection, Track, VehicleKind
 from schemas.errors import UsageError
 from schemas.frames import suggest
 
-DEFAULT_SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "default.toml"
+DEFAULT_SCENARIO = Path(__file__).resolve().parent / "scenarios" / "default.toml"
 
 
 class ScenarioError(UsageError):
@@ -165,7 +165,7 @@ class BaliseCfg:
 
 @dataclass(frozen=True)
 class Scenario:
-    """Every knob of a simulated run (see ``fieldlogs/scenarios/default.toml``)."""
+    """Every knob of a simulated run (see ``fieldlogs/simulate/scenarios/default.toml``)."""
 
     name: str = "default"
     seed: int = 1

@@ -1,4 +1,4 @@
-"""``trainpos audit``, ``trainpos report`` and ``trainpos demo`` (thin CLI over fieldlogs.audit/report)."""
+"""``trainpos audit``, ``trainpos report`` and ``trainpos demo`` (thin CLI over fieldlogs.audit.runner/report)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from typer.testing import CliRunner, Result
 
 import cli.demo as demo_mod
 from cli.main import app
-from tests.fieldlogs.audit_data import RUNS, AuditData, audit_data
+from tests.fieldlogs.audit.audit_data import RUNS, AuditData, audit_data
 
 N = len(RUNS)
 

@@ -15,7 +15,7 @@ from dbtools.build import build_db
 from dbtools.tabular import sha256_file
 from tests.conftest import DATA
 from tests.fieldlogs.make_runs import make_run
-from tests.fieldlogs.test_checks import DAMAGES, clean_copy, damage_run
+from tests.fieldlogs.quality.test_checks import DAMAGES, clean_copy, damage_run
 
 
 @pytest.fixture(scope="module")

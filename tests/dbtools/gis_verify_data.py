@@ -23,7 +23,7 @@ from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.gis.verify import shift_grid_points
 from dbtools.sources import write_source_set
-from dbtools.synthetic import build_network, demo_line
+from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.io import write_run
 from fieldlogs.simulate import scenario_from_dict, simulate_run
 

@@ -11,7 +11,6 @@ import pytest
 from scipy import stats
 
 from dbtools.database import read_network
-from dbtools.gis.alignment import Alignment
 from dbtools.gis.matching import track_index_for
 from dbtools.gis.verify import (
     CELL_COLUMNS,
@@ -30,8 +29,9 @@ from dbtools.gis.verify import (
     verify_fixes,
 )
 from dbtools.network import Network
-from dbtools.synthetic import LineSpec, build_network
-from fieldlogs.gisevidence import collect_evidence
+from dbtools.synthetic.alignment import Alignment
+from dbtools.synthetic.network import LineSpec, build_network
+from fieldlogs.gisverify.evidence import collect_evidence
 from schemas.errors import InputError
 from tests.dbtools.gis_verify_data import (
     DEFECT_KM,

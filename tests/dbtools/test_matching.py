@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from dbtools.gis.geometry import Projector
 from dbtools.gis.matching import MATCH_COLUMNS, TrackIndex, track_index_for
-from dbtools.synthetic import TRACK_OFFSETS, build_network, demo_line
+from dbtools.synthetic.network import TRACK_OFFSETS, build_network, demo_line
 
 P = Projector(9)
 

@@ -10,13 +10,13 @@ import pandas as pd
 import pytest
 
 from dbtools.build import build_db
-from dbtools.gis.alignment import Alignment, Curve
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical, empty_frame
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.features import stencil_leak
 from dbtools.sources import write_source_set
-from dbtools.synthetic import LineSpec, Station, build_network, demo_line, random_alignment
+from dbtools.synthetic.alignment import Alignment, Curve
+from dbtools.synthetic.network import LineSpec, Station, build_network, demo_line, random_alignment
 from dbtools.validate import validate_network, validate_path
 from schemas.enums import Severity, Track
 from schemas.findings import Finding

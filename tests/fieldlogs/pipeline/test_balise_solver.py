@@ -1,6 +1,6 @@
 """Balise state machine (SPEC §5.2) and the solver's dead reckoning, hand-computed.
 
-A tiny network: line 0900, stations with pairs on D and U (dbtools.synthetic), a train
+A tiny network: line 0900, stations with pairs on D and U (dbtools.synthetic.network), a train
 with a known travel profile; telegrams are written by hand.
 """
 
@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic import build_network, demo_line
+from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.pipeline.balise import BaliseDb, BaliseUnit
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles

@@ -1,7 +1,7 @@
 """Feature-point unit (SPEC §5.3, [S000 §3.2]) on hand-made κ traces.
 
 A double-track line with two curves of known radius (400 m left, 800 m right, 60 m
-transitions), its feature table from ``dbtools.synthetic``; a train at constant speed
+transitions), its feature table from ``dbtools.synthetic.network``; a train at constant speed
 whose yaw rate is v·κ of the track it runs on (travel direction, left positive) plus
 0.1 deg/s of white noise per cycle (about 7× an ADIS16480's). Independent of the simulator.
 
@@ -16,10 +16,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from dbtools.gis.alignment import Alignment, Curve
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
-from dbtools.synthetic import LineSpec, Station, build_network
+from dbtools.synthetic.alignment import Alignment, Curve
+from dbtools.synthetic.network import LineSpec, Station, build_network
 from fieldlogs.pipeline.balise import BaliseDb, BaliseUnit
 from fieldlogs.pipeline.config import FeatureConfig, PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles

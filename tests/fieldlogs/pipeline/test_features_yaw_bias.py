@@ -15,7 +15,7 @@ import pytest
 
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
-from dbtools.synthetic import build_network
+from dbtools.synthetic.network import build_network
 from fieldlogs.pipeline.cycles import Cycles, standstill_mean
 from fieldlogs.pipeline.features import FeatureUnit
 from fieldlogs.pipeline.solver import signed_travel

@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic import TRACK_OFFSETS, build_network, demo_line
+from dbtools.synthetic.network import TRACK_OFFSETS, build_network, demo_line
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.gps import DECIDED_COLUMNS, FIX_COLUMNS, analyse_gps, mean_variance_factor, trust_filter

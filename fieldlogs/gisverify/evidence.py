@@ -1,0 +1,278 @@
+"""Evidence for GIS verification: the trusted GPS fixes of recorded runs on a known track
+[S001 §9(a), SPEC §6], and the ``gis verify`` driver (runs → evidence → statistics).
+
+Per run the positioning pipeline (:func:`fieldlogs.pipeline.run_pipeline`) is replayed
+against the DB under test. A fix is evidence only when
+
+* the GPS unit trusts it (the 5/15/30 s RMS filter of :mod:`fieldlogs.pipeline.gps`);
+* the pipeline's position at that moment is not *undetermined* and names a line and
+  track — known from balises, or from a GPS up/down decision the pipeline accepted;
+* the GPS decision in force, if any, does not name a different track (a disagreement
+  means one of them is wrong: the fix is dropped, never guessed).
+
+The track is therefore never inferred from the fix itself. The pipeline km at the fix time
+(``km_ref_m``, linear between the two 100 ms cycles around it) is attached only where the
+position is *determined*, its last absolute fix was a balise or a feature point (a GPS
+initial position would compare the grid with itself) and its margin is at most
+``max_km_margin_m``; elsewhere it is NaN and the fix only serves the lateral test.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dbtools.database import read_network
+from dbtools.gis.verify import FIX_COLUMNS, GisVerification, VerifyConfig, verify_fixes
+from dbtools.network import Network
+from fieldlogs.io import read_run
+from fieldlogs.pipeline import PipelineConfig, PipelineResult, run_pipeline
+from schemas.enums import PositionState
+from schemas.errors import InputError, TrainposError
+
+#: Sources of the last absolute fix whose km may serve as the along-track reference.
+KM_REF_SOURCES = ("balise", "feature")
+#: Default largest pipeline margin for the along-track reference [m].
+MAX_KM_MARGIN_M = 10.0
+
+Progress = Callable[[int, int, str], None]
+
+
+@dataclass
+class RunEvidence:
+    """The evidence fixes of one run (``FIX_COLUMNS``) and why the others were left out."""
+
+    run_id: str
+    folder: str
+    fixes: pd.DataFrame
+    counts: dict[str, int] = field(default_factory=dict)
+    """gps_fixes, trusted, no_position (undetermined or no track), track_conflict, used, with_km_ref."""
+
+
+def fixes_from_result(result: PipelineResult, run_id: str, max_km_margin_m: float = MAX_KM_MARGIN_M) -> RunEvidence:
+    """Select the evidence fixes of one pipeline result (module docstring)."""
+    gps = result.gps
+    empty = pd.DataFrame({c: pd.Series([], dtype=float) for c in FIX_COLUMNS})
+    if gps is None or not len(gps.fixes) or not len(result.positions):
+        return RunEvidence(run_id, "", empty, {"gps_fixes": 0, "trusted": 0, "used": 0})
+    f = gps.fixes
+    pos = result.positions
+    t = f["t"].to_numpy(dtype=float)
+    tc = pos["t"].to_numpy(dtype=float)
+    n_c = tc.size
+    i0 = np.clip(np.searchsorted(tc, t, side="right") - 1, 0, n_c - 1)
+    i1 = np.minimum(i0 + 1, n_c - 1)
+    state = pos["state"].to_numpy(dtype=object)
+    line, track = _text(pos["line_code"]), _text(pos["track"])
+    trusted = f["trusted"].to_numpy(dtype=bool)
+    before = t >= tc[0]
+    known = before & (state[i0] != PositionState.UNDETERMINED.value) & (line[i0] != "") & (track[i0] != "")
+    dec_line, dec_track = _text(f["decided_line_code"]), _text(f["decided_track"])
+    has_dec = (dec_line != "") & (dec_track != "")
+    conflict = known & has_dec & ((dec_line != line[i0]) | (dec_track != track[i0]))
+    use = trusted & known & ~conflict
+
+    km = pos["km_m"].to_numpy(dtype=float)
+    margin = pos["margin_m"].to_numpy(dtype=float)
+    source = _text(pos["last_fix_source"])
+    ok_c = (
+        (state == PositionState.DETERMINED.value)
+        & np.isin(source, KM_REF_SOURCES)
+        & (margin <= max_km_margin_m)
+        & np.isfinite(km)
+    )
+    dt = tc[i1] - tc[i0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(dt > 0, (t - tc[i0]) / dt, 0.0)
+    km_ref = km[i0] + w * (km[i1] - km[i0])
+    same = (line[i1] == line[i0]) & (track[i1] == track[i0]) & ok_c[i1]
+    km_ref = np.where(ok_c[i0] & same, km_ref, np.nan)
+
+    sel = np.flatnonzero(use)
+    fixes = pd.DataFrame(
+        {
+            "run_id": run_id,
+            "t": t[sel],
+            "lat": f["lat"].to_numpy(dtype=float)[sel],
+            "lon": f["lon"].to_numpy(dtype=float)[sel],
+            "line_code": line[i0[sel]].astype(str),
+            "track": track[i0[sel]].astype(str),
+            "km_ref_m": km_ref[sel],
+        }
+    )
+    counts = {
+        "gps_fixes": len(f),
+        "trusted": int(trusted.sum()),
+        "no_position": int((trusted & ~known).sum()),
+        "track_conflict": int((trusted & conflict).sum()),
+        "used": int(sel.size),
+        "with_km_ref": int(np.isfinite(km_ref[sel]).sum()),
+    }
+    return RunEvidence(run_id, "", fixes, counts)
+
+
+def _text(s: pd.Series) -> np.ndarray:
+    """Strings as an object array, "" where missing (safe to compare)."""
+    return s.astype(object).where(s.notna(), "").to_numpy(dtype=object)
+
+
+def run_evidence(
+    folder: Path, network: Network, cfg: PipelineConfig | None = None, max_km_margin_m: float = MAX_KM_MARGIN_M
+) -> RunEvidence:
+    """Replay one run folder and select its evidence fixes. Any failure is an
+    :class:`InputError` naming the folder (exit 2: a run that cannot be used is not a
+    finding about the GIS)."""
+    try:
+        run = read_run(folder)
+        result = run_pipeline(run, network, cfg or PipelineConfig())
+    except TrainposError as exc:
+        raise InputError(f"run cannot be used: {exc}", path=folder) from None
+    except Exception as exc:  # a run the pipeline cannot replay
+        raise InputError(f"run cannot be processed: {type(exc).__name__}: {exc}", path=folder) from exc
+    ev = fixes_from_result(result, run.run_id, max_km_margin_m)
+    ev.folder = str(folder)
+    return ev
+
+
+_WORKER_NETWORK: dict[str, Network] = {}
+
+
+def _worker(args: tuple[str, str, PipelineConfig, float]) -> RunEvidence | str:
+    """One run in a worker process; an error comes back as its message (exceptions with
+    keyword arguments do not survive pickling)."""
+    folder, db, cfg, max_margin = args
+    try:
+        if db not in _WORKER_NETWORK:
+            _WORKER_NETWORK.clear()
+            _WORKER_NETWORK[db] = read_network(Path(db))
+        return run_evidence(Path(folder), _WORKER_NETWORK[db], cfg, max_margin)
+    except TrainposError as exc:
+        return str(exc)
+
+
+@dataclass
+class Evidence:
+    """Evidence of every run: fixes (``FIX_COLUMNS``, run ids made unique) and per-run counts."""
+
+    fixes: pd.DataFrame
+    runs: list[RunEvidence]
+
+    def totals(self) -> dict[str, int]:
+        keys = ("gps_fixes", "trusted", "no_position", "track_conflict", "used", "with_km_ref")
+        return {k: sum(r.counts.get(k, 0) for r in self.runs) for k in keys}
+
+
+def collect_evidence(
+    run_dirs: Sequence[Path],
+    db: Path,
+    cfg: PipelineConfig | None = None,
+    *,
+    network: Network | None = None,
+    max_km_margin_m: float = MAX_KM_MARGIN_M,
+    workers: int = 1,
+    progress: Progress | None = None,
+) -> Evidence:
+    """Run the pipeline on every run folder (``workers`` processes) and gather the evidence.
+
+    A run that cannot be read or replayed raises an :class:`InputError` naming the folder:
+    a verification must not silently rest on fewer runs than it was given."""
+    cfg = cfg or PipelineConfig()
+    total = len(run_dirs)
+    results: list[RunEvidence] = []
+    if workers > 1 and total > 1:
+        args = [(str(p), str(db), cfg, max_km_margin_m) for p in run_dirs]
+        with ProcessPoolExecutor(max_workers=min(workers, total)) as pool:
+            for i, out in enumerate(pool.map(_worker, args)):
+                if isinstance(out, str):
+                    raise InputError(out)
+                results.append(out)
+                if progress:
+                    progress(i + 1, total, out.run_id)
+    else:
+        net = network if network is not None else read_network(db)
+        for i, p in enumerate(run_dirs):
+            ev = run_evidence(Path(p), net, cfg, max_km_margin_m)
+            results.append(ev)
+            if progress:
+                progress(i + 1, total, ev.run_id)
+    _unique_ids(results)
+    frames = [r.fixes.assign(run_id=r.run_id) for r in results if len(r.fixes)]
+    fixes = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=list(FIX_COLUMNS))
+    return Evidence(fixes, results)
+
+
+def _unique_ids(runs: list[RunEvidence]) -> None:
+    """Two folders with the same run_id are two runs: suffix the folder name."""
+    seen: dict[str, int] = {}
+    for r in runs:
+        seen[r.run_id] = seen.get(r.run_id, 0) + 1
+    for r in runs:
+        if seen[r.run_id] > 1:
+            r.run_id = f"{r.run_id}@{Path(r.folder).name}"
+
+
+def discover(roots: Iterable[Path]) -> list[Path]:
+    """Run folders (holding run.json) at or below the given roots."""
+    from fieldlogs.audit.runner import discover_runs
+
+    found = discover_runs(roots)
+    if not found:
+        raise InputError("no run folders (run.json) found", path=", ".join(str(r) for r in roots))
+    return found
+
+
+@dataclass
+class VerifyReport:
+    """What ``trainpos gis verify`` shows: the statistics plus where the evidence came from."""
+
+    db: str
+    db_version: str | None
+    verification: GisVerification
+    evidence: dict[str, int]
+    runs: list[dict[str, Any]]
+    network: Network
+
+    def to_dict(self) -> dict[str, Any]:
+        out = {"db": self.db, "db_version": self.db_version, "evidence": self.evidence, "runs": self.runs}
+        out.update(self.verification.to_dict())
+        return out
+
+
+def verify_runs(
+    db: Path,
+    roots: Sequence[Path],
+    *,
+    pipeline: PipelineConfig | None = None,
+    config: VerifyConfig | None = None,
+    max_km_margin_m: float = MAX_KM_MARGIN_M,
+    workers: int = 1,
+    progress: Progress | None = None,
+) -> VerifyReport:
+    """``gis verify``: discover runs, replay them, select evidence, verify the grid."""
+    network = read_network(db)
+    runs = discover(roots)
+    ev = collect_evidence(
+        runs,
+        db,
+        pipeline,
+        network=network,
+        max_km_margin_m=max_km_margin_m,
+        workers=workers or (os.cpu_count() or 1),
+        progress=progress,
+    )
+    result = verify_fixes(network, ev.fixes, config)
+    return VerifyReport(
+        str(db),
+        network.meta.get("db_version"),
+        result,
+        ev.totals(),
+        [{"run_id": r.run_id, "folder": r.folder, **r.counts} for r in ev.runs],
+        network,
+    )

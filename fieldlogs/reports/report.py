@@ -1,0 +1,289 @@
+"""Audit reports: per route, run or vehicle aggregates from an audit database (SPEC §7).
+
+Position-correction percentages (SPEC §5.2: |correction| / distance travelled since the
+previous correction × 100) are aggregated over **balise corrections only**, as the papers
+report them per balise (mean 0.29 % Tohoku line, 0.37 % Kawagoe line, target 0.5 %). A
+feature-point correction often follows a balise within a few hundred metres, which makes
+its percentage meaningless; feature-point corrections are counted separately
+(``n_feature_corrections``, ``n_feature_refused`` with the failed diagnostics).
+
+Columns of every grouping (route = line, track, direction; run; vehicle):
+
+==========================  ==========================================================
+n_runs                      runs audited without error
+distance_m                  travelled distance (corrected odometry) [m]
+n_corrections               balise corrections
+mean/median/max_correction_pct  over the balise corrections that have a % (the first
+                            one after power-up has no previous correction)
+share_above_target          share of those above the target %
+n_feature_corrections       accepted feature-point corrections
+n_feature_refused           refused ones; ``refusal_reasons``: "diagnostic count, ..."
+n_slips                     slip + slide episodes; ``n_slips_readhered`` re-adhered within
+                            the maximum correction time; ``max_slip_error_m`` largest
+                            error budget ½·Δa·t² (eq. 13)
+gps_decisions               up/down (track) decisions from trusted GPS fixes;
+                            ``n_gps_disagrees`` decisions contradicting the balise track;
+                            ``gps_trusted_share`` mean share of trusted fixes
+n_failsafe, n_anomalies     fail-safe events (slip correction too long), balise anomalies
+==========================  ==========================================================
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+
+from fieldlogs.audit.store import read_meta, read_table
+
+By = Literal["route", "run", "vehicle"]
+BALISE = "balise_correction"
+FEATURE = "feature_correction"
+CORRECTION_TYPES = (BALISE, FEATURE)
+ROUTE_KEYS = ["line_code", "track", "direction"]
+#: Per-route (or per-group) statistics, in the order reports show them: position correction …
+CORRECTION_STATS = [
+    "n_runs",
+    "distance_m",
+    "n_corrections",
+    "mean_correction_pct",
+    "median_correction_pct",
+    "max_correction_pct",
+    "share_above_target",
+]
+#: … and everything else.
+OTHER_STATS = [
+    "n_feature_corrections",
+    "n_feature_refused",
+    "refusal_reasons",
+    "n_slips",
+    "n_slips_readhered",
+    "max_slip_error_m",
+    "gps_decisions",
+    "n_gps_disagrees",
+    "gps_trusted_share",
+    "n_failsafe",
+    "n_anomalies",
+]
+UNKNOWN = "—"
+"""Route key of runs whose position was never determined."""
+
+ROUTE_JSON_KEYS = (
+    "line_code",
+    "track",
+    "direction",
+    "n_runs",
+    "n_corrections",
+    "distance_m",
+    "mean_correction_pct",
+    "median_correction_pct",
+    "max_correction_pct",
+    "share_above_target",
+)
+RUN_JSON_KEYS = (
+    "run_id",
+    "vehicle_id",
+    "line_code",
+    "track",
+    "n_corrections",
+    "mean_correction_pct",
+    "n_slips",
+    "n_failsafe",
+)
+VEHICLE_JSON_KEYS = (
+    "vehicle_id",
+    "n_runs",
+    "n_corrections",
+    "distance_m",
+    "mean_correction_pct",
+    "median_correction_pct",
+    "max_correction_pct",
+    "share_above_target",
+)
+RUN_VIEW = [
+    "run_path",
+    "run_id",
+    "vehicle_id",
+    *ROUTE_KEYS,
+    "distance_m",
+    "n_corrections",
+    "mean_correction_pct",
+    "max_correction_pct",
+    "n_feature_corrections",
+    "n_feature_refused",
+    "n_slips",
+    "n_failsafe",
+    "n_anomalies",
+    "max_margin_m",
+]
+COUNT_COLUMNS = (
+    "n_corrections",
+    "n_feature_corrections",
+    "n_feature_refused",
+    "n_slips",
+    "n_slips_readhered",
+    "n_gps_disagrees",
+)
+
+
+@dataclass
+class Report:
+    by: str
+    target_pct: float
+    groups: pd.DataFrame
+    """One row per route / run / vehicle (``by``)."""
+    routes: pd.DataFrame
+    """One row per route (line, track, direction)."""
+    runs: pd.DataFrame
+    """One row per run audited without error (columns ``RUN_VIEW``)."""
+    vehicles: pd.DataFrame
+    corrections: pd.DataFrame
+    """Every balise and feature-point correction (``type``) with its route, amount, % and
+    distance since the previous correction (``distance_since_m``)."""
+    meta: dict[str, str]
+    failed_runs: pd.DataFrame
+    """run_path, error of the runs recorded with status error."""
+
+
+def _details(frame: pd.DataFrame) -> list[dict[str, Any]]:
+    return [json.loads(d) if isinstance(d, str) and d else {} for d in frame["detail"]]
+
+
+def build_report(audit_path: Path, *, by: By = "route", target_pct: float = 0.5) -> Report:
+    """Aggregate an audit database (read-only)."""
+    runs_all = read_table(audit_path, "runs", "ORDER BY run_path")
+    events = read_table(audit_path, "events")
+    meta = read_meta(audit_path)
+    runs = runs_all[runs_all["status"] == "ok"].copy()
+    failed = runs_all.loc[runs_all["status"] == "error", ["run_path", "error"]].reset_index(drop=True)
+    for c in [*ROUTE_KEYS, "vehicle_id", "run_id"]:
+        runs[c] = runs[c].fillna(UNKNOWN).astype(str)
+    ev = events.merge(runs[["run_path", "run_id", "vehicle_id", *ROUTE_KEYS]], on="run_path", how="inner")
+    ev["correction_pct"] = pd.to_numeric(ev["correction_pct"])
+    corr = ev[ev["type"].isin(CORRECTION_TYPES)].copy()
+    corr["distance_since_m"] = pd.to_numeric(
+        pd.Series([d.get("distance_since_correction_m", np.nan) for d in _details(corr)], index=corr.index, dtype=float)
+    )
+    slips = ev[ev["type"].isin(["slip", "slide"])].copy()
+    sd = _details(slips)
+    slips["readhered"] = pd.Series([bool(d.get("readhered")) for d in sd], index=slips.index, dtype=bool)
+    slips["max_error_m"] = pd.Series([float(d.get("max_error_m") or 0.0) for d in sd], index=slips.index, dtype=float)
+    refused = ev[ev["type"] == "feature_refused"].copy()
+    refused["reasons"] = pd.Series(
+        [",".join(d.get("failed", [])) or "unknown" for d in _details(refused)], index=refused.index, dtype=object
+    )
+    parts = {"corr": corr, "slips": slips, "refused": refused, "ev": ev}
+
+    routes = _aggregate(runs, parts, ROUTE_KEYS, target_pct)
+    by_run = _aggregate(runs, parts, ["run_path"], target_pct)
+    run_cols = runs[["run_path", "run_id", "vehicle_id", *ROUTE_KEYS, "max_margin_m"]]
+    run_view = run_cols.merge(by_run, on="run_path", how="left")[RUN_VIEW]
+    vehicles = _aggregate(runs, parts, ["vehicle_id"], target_pct)
+    groups = {"route": routes, "run": run_cols.merge(by_run, on="run_path", how="left"), "vehicle": vehicles}[by]
+    return Report(
+        by,
+        target_pct,
+        groups.reset_index(drop=True),
+        routes,
+        run_view.reset_index(drop=True),
+        vehicles,
+        corr.reset_index(drop=True),
+        meta,
+        failed,
+    )
+
+
+def _aggregate(runs: pd.DataFrame, parts: dict[str, pd.DataFrame], keys: list[str], target: float) -> pd.DataFrame:
+    """One row per distinct ``keys`` of the runs; see the module docstring for the columns."""
+    base = runs.groupby(keys, sort=True).agg(
+        n_runs=("run_path", "size"),
+        distance_m=("distance_m", "sum"),
+        n_failsafe=("n_failsafe", "sum"),
+        n_anomalies=("n_anomalies", "sum"),
+        gps_decisions=("gps_decisions", "sum"),
+        gps_trusted_share=("gps_trusted_share", "mean"),
+    )
+    idx = base.index
+
+    def per(frame: pd.DataFrame, col: str, how: Any) -> pd.Series:
+        if frame.empty:
+            return pd.Series(np.nan, index=idx)
+        return frame.groupby(keys)[col].agg(how).reindex(idx)
+
+    corr = parts["corr"]
+    bal = corr[corr["type"] == BALISE]
+    pct = bal.dropna(subset=["correction_pct"]).assign(above=lambda f: (f["correction_pct"] > target).astype(float))
+    slips, refused, ev = parts["slips"], parts["refused"], parts["ev"]
+    out = base.assign(
+        n_corrections=per(bal, "type", "size"),
+        mean_correction_pct=per(pct, "correction_pct", "mean"),
+        median_correction_pct=per(pct, "correction_pct", "median"),
+        max_correction_pct=per(pct, "correction_pct", "max"),
+        share_above_target=per(pct, "above", "mean"),
+        n_feature_corrections=per(corr[corr["type"] == FEATURE], "type", "size"),
+        n_feature_refused=per(refused, "type", "size"),
+        refusal_reasons=per(refused, "reasons", ",".join),
+        n_slips=per(slips, "type", "size"),
+        n_slips_readhered=per(slips, "readhered", "sum"),
+        max_slip_error_m=per(slips, "max_error_m", "max"),
+        n_gps_disagrees=per(ev[ev["type"] == "gps_track_disagrees"], "type", "size"),
+    )
+    for c in COUNT_COLUMNS:
+        out[c] = out[c].fillna(0).astype(int)
+    for c in ("n_runs", "n_failsafe", "n_anomalies", "gps_decisions"):
+        out[c] = out[c].fillna(0).astype(int)
+    out["refusal_reasons"] = [_count_reasons(s) for s in out["refusal_reasons"]]
+    return out[[*CORRECTION_STATS, *OTHER_STATS]].reset_index()
+
+
+def _count_reasons(joined: Any) -> str:
+    """ "a,b" + "," + "a" → "a 2, b 1" (empty when nothing was refused)."""
+    if not isinstance(joined, str) or not joined:
+        return ""
+    counts: dict[str, int] = {}
+    for r in joined.split(","):
+        counts[r] = counts.get(r, 0) + 1
+    return ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+
+
+def _num(v: Any) -> Any:
+    """JSON value: numpy scalars as Python numbers, NaN and the unknown route key as null."""
+    if v is None or v is pd.NA or v == UNKNOWN:
+        return None
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v) if np.isfinite(v) else None
+    return v
+
+
+def _records(frame: pd.DataFrame, keys: tuple[str, ...]) -> list[dict[str, Any]]:
+    return [{k: _num(v) for k, v in zip(keys, row, strict=True)} for row in frame[list(keys)].itertuples(index=False)]
+
+
+def report_json(report: Report) -> dict[str, Any]:
+    """The documented, stable JSON shape (whatever ``by`` is)::
+
+        {"target_pct": 0.5,
+         "routes": [{line_code, track, direction, n_runs, n_corrections, distance_m,
+                     mean_correction_pct, median_correction_pct, max_correction_pct,
+                     share_above_target}],
+         "runs": [{run_id, vehicle_id, line_code, track, n_corrections, mean_correction_pct,
+                   n_slips, n_failsafe}],
+         "vehicles": [{vehicle_id, n_runs, n_corrections, distance_m, mean_correction_pct,
+                       median_correction_pct, max_correction_pct, share_above_target}],
+         "failed_runs": [{run_path, error}]}
+
+    Corrections and their % are balise corrections; unknown values are null.
+    """
+    return {
+        "target_pct": report.target_pct,
+        "routes": _records(report.routes, ROUTE_JSON_KEYS),
+        "runs": _records(report.runs, RUN_JSON_KEYS),
+        "vehicles": _records(report.vehicles, VEHICLE_JSON_KEYS),
+        "failed_runs": _records(report.failed_runs, ("run_path", "error")),
+    }
