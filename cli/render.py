@@ -12,6 +12,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from schemas.findings import Finding, count_by_severity
+from schemas.jsonable import jsonable
 
 #: Cap on findings printed as a table; JSON always has all of them.
 MAX_TABLE_ROWS = 200
@@ -27,7 +28,7 @@ def err_console() -> Console:
 
 
 def print_json(data: Any, out: Console | None = None) -> None:
-    text = json.dumps(data, ensure_ascii=False, indent=2, default=str)
+    text = json.dumps(jsonable(data), ensure_ascii=False, indent=2)
     if out is None:
         sys.stdout.write(text + "\n")
     else:

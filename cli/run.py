@@ -47,7 +47,8 @@ def run(
             f"{s['n_balise_corrections']} balise, {s['n_feature_corrections']} feature "
             f"({s['n_feature_refused']} refused)",
         ),
-        ("mean correction", "—" if s["mean_correction_pct"] is None else f"{s['mean_correction_pct']:.3f} %"),
+        ("mean correction % (balise)", _pct(s["mean_correction_pct"])),
+        ("mean correction % (all)", _pct(s["all_corrections"]["mean_correction_pct"])),
         ("slips/slides", s["n_slips"]),
         ("fail-safe", s["n_failsafe"]),
         ("anomalies", s["n_anomalies"]),
@@ -66,3 +67,7 @@ def run(
             ("last position", f"{format_km(float(last['km_m'].iloc[-1]))} ± {float(last['margin_m'].iloc[-1]):.1f} m")
         )
     console().print(key_value_table(rows, title=f"Positioning → {out}"))
+
+
+def _pct(v: float | None) -> str:
+    return "—" if v is None else f"{v:.3f} %"

@@ -67,3 +67,103 @@ class PositionState(StrEnum):
 def direction_sign(track: str) -> int:
     """+1 where km grows in the track's normal running direction (D, S), −1 on U."""
     return -1 if track == Track.UP else 1
+
+
+class FixSource(StrEnum):
+    """What set the position in force (``positions.last_fix_source``)."""
+
+    NONE = "none"
+    BALISE = "balise"
+    FEATURE = "feature"
+    GPS = "gps"
+
+    @property
+    def absolute(self) -> bool:
+        """A source good enough to compute a position-correction % from [S003 §5.2]."""
+        return self in (FixSource.BALISE, FixSource.FEATURE)
+
+
+class EventType(StrEnum):
+    """Types of the pipeline's ``events`` output; :data:`EVENT_MEANING` says what each is."""
+
+    INPUT_REPAIRED = "input_repaired"
+    ON_RAIL = "on_rail"
+    OFF_RAIL = "off_rail"
+    INITIAL_POSITION = "initial_position"
+    INITIAL_POSITION_GPS = "initial_position_gps"
+    BALISE_CORRECTION = "balise_correction"
+    PAIR_IGNORED = "pair_ignored"
+    C_BALISE_IGNORED = "c_balise_ignored"
+    BALISE_ANOMALY = "balise_anomaly"
+    FEATURE_CORRECTION = "feature_correction"
+    FEATURE_REFUSED = "feature_refused"
+    SLIP = "slip"
+    SLIDE = "slide"
+    FAILSAFE = "failsafe"
+    TRACK_DECISION = "track_decision"
+    CROSSOVER = "crossover"
+    TRACK_CHANGE = "track_change"
+    GPS_TRACK_DISAGREES = "gps_track_disagrees"
+
+
+EVENT_MEANING: dict[EventType, str] = {
+    EventType.INPUT_REPAIRED: "a stream was sorted or had rows without t or with a repeated t dropped",
+    EventType.ON_RAIL: "PTO on: a road-rail vehicle was put on rail (position starts undetermined)",
+    EventType.OFF_RAIL: "PTO off: the vehicle left the rail; its position is forgotten",
+    EventType.INITIAL_POSITION: "an I1→I2 initial pair set line, track and km [S003 §4.3]",
+    EventType.INITIAL_POSITION_GPS: "a GPS up/down decision set the initial position (10 m uncertainty) [S001 §4.2]",
+    EventType.BALISE_CORRECTION: "an initial pair or a C balise corrected the km; correction_pct is the position-"
+    "correction % [S003 §4.5]",
+    EventType.PAIR_IGNORED: "an I2 without its I1 within 10 m of travel (reverse order or missed I1)",
+    EventType.C_BALISE_IGNORED: "a C telegram before any initial pair, or running against the pair's direction",
+    EventType.BALISE_ANOMALY: "a telegram the DB does not know, or an ambiguous C balise; the state is kept",
+    EventType.FEATURE_CORRECTION: "a curve feature point corrected the km at its exit crossing [S000 §3.2]",
+    EventType.FEATURE_REFUSED: "a curve feature point failed a diagnostic (named in detail.failed); no correction",
+    EventType.SLIP: "wheel slip (traction) corrected inertially [S000 §3.1]",
+    EventType.SLIDE: "wheel slide (braking) corrected inertially [S000 §3.1]",
+    EventType.FAILSAFE: "a slip/slide correction exceeded the maximum correction time: position uncertain",
+    EventType.TRACK_DECISION: "trusted GPS fixes decided line and track (up/down) [S001 §4.2]",
+    EventType.CROSSOVER: "the offset from the decided track moved across to the other track [S001 §7]",
+    EventType.TRACK_CHANGE: "after a crossover GPS decided the other track (uncertain until a pair confirms it)",
+    EventType.GPS_TRACK_DISAGREES: "a GPS decision contradicts the balise-given track without a crossover",
+}
+
+#: Events that correct the km, and the one the position-correction % is defined on [S003 §5.2].
+CORRECTION_EVENTS = (EventType.BALISE_CORRECTION, EventType.FEATURE_CORRECTION)
+SLIP_EVENTS = (EventType.SLIP, EventType.SLIDE)
+
+
+class AlarmType(StrEnum):
+    """Possession alarms for road-rail vehicles [S001 §3, §6]."""
+
+    WRONG_TRACK = "wrong_track"
+    WRONG_TRACK_SUSPECTED = "wrong_track_suspected"
+    OVERRUN = "overrun"
+    RELEASED_ON_RAIL = "released_on_rail"
+    NOT_STARTED = "not_started"
+
+
+class NoticeType(StrEnum):
+    """Possession notices: the worker is told, no alarm [S001 §3, §7]."""
+
+    APPROACHING_END = "approaching_end"
+    OVERRUN_POSSIBLE = "overrun_possible"
+    TRACK_UNDECIDED = "track_undecided"
+    CROSSOVER = "crossover"
+    POSITION_UNCERTAIN = "position_uncertain"
+    POSITION_UNDETERMINED = "position_undetermined"
+
+
+ALARM_MEANING: dict[AlarmType | NoticeType, str] = {
+    AlarmType.WRONG_TRACK: "on rail on a different track than the selected work's possession",
+    AlarmType.WRONG_TRACK_SUSPECTED: "still undecided 120 s after PTO on while the fixes lean to another track",
+    AlarmType.OVERRUN: "outside the possession's km range",
+    AlarmType.RELEASED_ON_RAIL: "the possession was released while the vehicle is on rail",
+    AlarmType.NOT_STARTED: "on rail before the possession was started",
+    NoticeType.APPROACHING_END: "30 m before the end of the possession section",
+    NoticeType.OVERRUN_POSSIBLE: "the km band is too wide to judge an overrun; judgement held",
+    NoticeType.TRACK_UNDECIDED: "no up/down decision 120 s after PTO on",
+    NoticeType.CROSSOVER: "a crossover to the other track was detected",
+    NoticeType.POSITION_UNCERTAIN: "the km is uncertain (poor GPS); alarms held",
+    NoticeType.POSITION_UNDETERMINED: "no km yet on this on-rail period",
+}

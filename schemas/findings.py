@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
 from schemas.enums import Severity
+from schemas.jsonable import jsonable
+
+#: Decimals of finding values in JSON.
+FINDING_DIGITS = 6
 
 
 @dataclass
@@ -34,9 +37,9 @@ class Finding:
             "rule": self.rule,
             "severity": str(self.severity),
             "table": self.table,
-            "keys": {k: _jsonable(v) for k, v in self.keys.items()},
-            "value": _jsonable(self.value),
-            "limit": _jsonable(self.limit),
+            "keys": jsonable(self.keys, FINDING_DIGITS),
+            "value": jsonable(self.value, FINDING_DIGITS),
+            "limit": jsonable(self.limit, FINDING_DIGITS),
             "message": self.message,
         }
         for name in ("file", "row", "column"):
@@ -66,27 +69,6 @@ class Finding:
 def _short(v: Any) -> str:
     if isinstance(v, float):
         return f"{v:g}"
-    return str(v)
-
-
-def _jsonable(v: Any) -> Any:
-    if v is None:
-        return None
-    if hasattr(v, "item") and not isinstance(v, (str, bytes)):
-        try:
-            v = v.item()
-        except (ValueError, AttributeError):
-            pass
-    if isinstance(v, float):
-        if math.isnan(v):
-            return None
-        if math.isinf(v):
-            return str(v)
-        return round(v, 6)
-    if isinstance(v, (int, str, bool)):
-        return v
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
     return str(v)
 
 

@@ -57,7 +57,6 @@ _NETWORK_CACHE: dict[tuple[str, int, int], Network] = {}
 _MALLOC_TUNED = False
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc mallopt parameters (malloc.h)
 #: Events whose correction % enters the position-correction statistics (SPEC §5.2).
-BALISE_CORRECTION = "balise_correction"
 
 
 def discover_runs(roots: Iterable[Path]) -> list[Path]:
@@ -247,13 +246,6 @@ def _check_usable(run: Any) -> None:
         raise InputError(f"unusable run: {'; '.join(problems)}", path=run.folder)
 
 
-def _balise_pct(events: pd.DataFrame) -> tuple[int, float | None, float | None]:
-    """Number of balise corrections and mean/max of their correction % (SPEC §5.2)."""
-    bal = events[events["type"] == BALISE_CORRECTION]
-    pct = bal["correction_pct"].dropna()
-    return len(bal), (float(pct.mean()) if len(pct) else None), (float(pct.max()) if len(pct) else None)
-
-
 def audit_one(
     run_path: str, db_path: str, cfg_json: str, context: str, known_fingerprint: str | None = None
 ) -> dict[str, Any]:
@@ -288,7 +280,6 @@ def audit_one(
         _check_usable(run)
         result = run_pipeline(run, network, cfg)
         s = result.summary
-        n_bal, mean_pct, max_pct = _balise_pct(result.events)
         record = {
             **base,
             "status": "ok",
@@ -299,9 +290,7 @@ def audit_one(
             "line_code": s["line_code"],
             "track": s["track"],
             "direction": _direction(result.positions),
-            "n_corrections": n_bal,
-            "mean_correction_pct": mean_pct,
-            "max_correction_pct": max_pct,
+            **{k: s[k] for k in ("n_corrections", "mean_correction_pct", "max_correction_pct")},
             **{
                 k: s.get(k)
                 for k in (

@@ -17,6 +17,7 @@ from dbtools.network import Network
 from fieldlogs.io import Run
 from fieldlogs.pipeline.balise import BaliseDb, BaliseUnit
 from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.corrections import run_correction_stats
 from fieldlogs.pipeline.cycles import Cycles, build_cycles
 from fieldlogs.pipeline.features import FeatureUnit
 from fieldlogs.pipeline.gps import analyse_gps
@@ -24,11 +25,15 @@ from fieldlogs.pipeline.odometry import correct_odometry
 from fieldlogs.pipeline.solver import solve
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
-from schemas.enums import PositionState, Severity
+from schemas.enums import CORRECTION_EVENTS, EventType, PositionState, Severity
 from schemas.errors import FindingsError
+from schemas.jsonable import jsonable
 from schemas.outputs import EVENTS
 
 __all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
+
+#: Decimals kept in the events' ``detail`` JSON (µm, µs: below every sensor's resolution).
+DETAIL_DIGITS = 6
 
 
 @dataclass
@@ -147,7 +152,7 @@ def events_frame(events: list[Event]) -> pd.DataFrame:
             "km_m": e.km_m,
             "correction_m": e.correction_m,
             "correction_pct": e.correction_pct,
-            "detail": json.dumps(e.detail, ensure_ascii=False, default=_json_default, sort_keys=True),
+            "detail": json.dumps(jsonable(e.detail, DETAIL_DIGITS), ensure_ascii=False, sort_keys=True),
         }
         for e in events
     ]
@@ -157,16 +162,6 @@ def events_frame(events: list[Event]) -> pd.DataFrame:
     for c in ("type", "detail"):
         frame[c] = frame[c].astype("string")
     return frame
-
-
-def _json_default(v: Any) -> Any:
-    if isinstance(v, (np.integer,)):
-        return int(v)
-    if isinstance(v, (np.floating,)):
-        return None if not np.isfinite(v) else round(float(v), 6)
-    if isinstance(v, np.bool_):
-        return bool(v)
-    return str(v)
 
 
 def summarise(
@@ -182,8 +177,7 @@ def summarise(
     meta = run.meta
     assert meta is not None
     states = pos["state"].value_counts(normalize=True).to_dict()
-    corr = ev[ev["type"].isin(["balise_correction", "feature_correction"])]
-    pct = corr["correction_pct"].dropna()
+    corr = ev[ev["type"].isin(CORRECTION_EVENTS)]
     determined = pos[pos["state"] != PositionState.UNDETERMINED.value]
     refused = ev[ev["type"] == "feature_refused"]
     reasons: dict[str, int] = {}
@@ -204,13 +198,12 @@ def summarise(
         "track": main_route[1],
         "first_determined_t": float(determined["t"].iloc[0]) if len(determined) else None,
         "state_share": {k: round(float(v), 6) for k, v in states.items()},
-        "n_corrections": len(corr),
-        "n_balise_corrections": int((corr["type"] == "balise_correction").sum()),
-        "n_feature_corrections": int((corr["type"] == "feature_correction").sum()),
+        **run_correction_stats(ev, population="balise"),
+        "all_corrections": run_correction_stats(ev, population="all"),
+        "n_balise_corrections": int((corr["type"] == EventType.BALISE_CORRECTION).sum()),
+        "n_feature_corrections": int((corr["type"] == EventType.FEATURE_CORRECTION).sum()),
         "n_feature_refused": len(refused),
         "feature_refusals": reasons,
-        "mean_correction_pct": float(pct.mean()) if len(pct) else None,
-        "max_correction_pct": float(pct.max()) if len(pct) else None,
         "n_slips": int(ev["type"].isin(["slip", "slide"]).sum()),
         "n_failsafe": int((ev["type"] == "failsafe").sum()),
         "n_anomalies": int((ev["type"] == "balise_anomaly").sum()),

@@ -153,8 +153,11 @@ from fieldlogs.pipeline.gps import TrackOdds, analyse_gps, track_odds, trust_fil
 from fieldlogs.pipeline.types import Event, GpsAnalysis, TrackDecision
 from fieldlogs.possession.plan import Plan, Possession, PossessionState
 from schemas.errors import InputError
+from schemas.jsonable import jsonable
 
 FloatArray = npt.NDArray[np.float64]
+#: Decimals of the alarms' evidence in JSON (mm, ms).
+EVIDENCE_DIGITS = 3
 BoolArray = npt.NDArray[np.bool_]
 
 ALARM_TYPES = ("wrong_track", "wrong_track_suspected", "overrun", "released_on_rail", "not_started")
@@ -300,7 +303,7 @@ class Alarm:
             "km_m": _r(self.km_m, 2),
             "track": self.track,
             "work_no": self.work_no,
-            "evidence": {k: _jsonable(v) for k, v in self.evidence.items()},
+            "evidence": jsonable(self.evidence, EVIDENCE_DIGITS),
         }
 
 
@@ -339,7 +342,7 @@ class PeriodResult:
             "line_code": d.line_code,
             "track": d.track,
             "after_on_rail_s": round(d.t - self.t_on, 2),
-            "evidence": {k: _jsonable(v) for k, v in d.evidence.items()},
+            "evidence": jsonable(d.evidence, EVIDENCE_DIGITS),
         }
 
 
@@ -402,18 +405,6 @@ def wall(start: datetime, t: float) -> str:
 
 def _r(v: float | None, nd: int) -> float | None:
     return None if v is None or not math.isfinite(v) else round(float(v), nd)
-
-
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, float):
-        return _r(v, 3)
-    if isinstance(v, datetime):
-        return v.isoformat()
-    if isinstance(v, list | tuple):
-        return [_jsonable(x) for x in v]
-    return v
 
 
 # ------------------------------------------------------------------------------ tacho

@@ -39,22 +39,13 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.audit.store import read_meta, read_table
+from fieldlogs.pipeline.corrections import STAT_COLUMNS, correction_stats
+from schemas.enums import CORRECTION_EVENTS, SLIP_EVENTS, EventType
 
 By = Literal["route", "run", "vehicle"]
-BALISE = "balise_correction"
-FEATURE = "feature_correction"
-CORRECTION_TYPES = (BALISE, FEATURE)
 ROUTE_KEYS = ["line_code", "track", "direction"]
 #: Per-route (or per-group) statistics, in the order reports show them: position correction …
-CORRECTION_STATS = [
-    "n_runs",
-    "distance_m",
-    "n_corrections",
-    "mean_correction_pct",
-    "median_correction_pct",
-    "max_correction_pct",
-    "share_above_target",
-]
+CORRECTION_STATS = ["n_runs", "distance_m", *STAT_COLUMNS]
 #: … and everything else.
 OTHER_STATS = [
     "n_feature_corrections",
@@ -164,15 +155,15 @@ def build_report(audit_path: Path, *, by: By = "route", target_pct: float = 0.5)
         runs[c] = runs[c].fillna(UNKNOWN).astype(str)
     ev = events.merge(runs[["run_path", "run_id", "vehicle_id", *ROUTE_KEYS]], on="run_path", how="inner")
     ev["correction_pct"] = pd.to_numeric(ev["correction_pct"])
-    corr = ev[ev["type"].isin(CORRECTION_TYPES)].copy()
+    corr = ev[ev["type"].isin(CORRECTION_EVENTS)].copy()
     corr["distance_since_m"] = pd.to_numeric(
         pd.Series([d.get("distance_since_correction_m", np.nan) for d in _details(corr)], index=corr.index, dtype=float)
     )
-    slips = ev[ev["type"].isin(["slip", "slide"])].copy()
+    slips = ev[ev["type"].isin(SLIP_EVENTS)].copy()
     sd = _details(slips)
     slips["readhered"] = pd.Series([bool(d.get("readhered")) for d in sd], index=slips.index, dtype=bool)
     slips["max_error_m"] = pd.Series([float(d.get("max_error_m") or 0.0) for d in sd], index=slips.index, dtype=float)
-    refused = ev[ev["type"] == "feature_refused"].copy()
+    refused = ev[ev["type"] == EventType.FEATURE_REFUSED].copy()
     refused["reasons"] = pd.Series(
         [",".join(d.get("failed", [])) or "unknown" for d in _details(refused)], index=refused.index, dtype=object
     )
@@ -215,22 +206,17 @@ def _aggregate(runs: pd.DataFrame, parts: dict[str, pd.DataFrame], keys: list[st
         return frame.groupby(keys)[col].agg(how).reindex(idx)
 
     corr = parts["corr"]
-    bal = corr[corr["type"] == BALISE]
-    pct = bal.dropna(subset=["correction_pct"]).assign(above=lambda f: (f["correction_pct"] > target).astype(float))
     slips, refused, ev = parts["slips"], parts["refused"], parts["ev"]
+    stats = correction_stats(corr, keys, population="balise", target_pct=target, index=idx)
     out = base.assign(
-        n_corrections=per(bal, "type", "size"),
-        mean_correction_pct=per(pct, "correction_pct", "mean"),
-        median_correction_pct=per(pct, "correction_pct", "median"),
-        max_correction_pct=per(pct, "correction_pct", "max"),
-        share_above_target=per(pct, "above", "mean"),
-        n_feature_corrections=per(corr[corr["type"] == FEATURE], "type", "size"),
+        **{c: stats[c] for c in STAT_COLUMNS},
+        n_feature_corrections=per(corr[corr["type"] == EventType.FEATURE_CORRECTION], "type", "size"),
         n_feature_refused=per(refused, "type", "size"),
         refusal_reasons=per(refused, "reasons", ",".join),
         n_slips=per(slips, "type", "size"),
         n_slips_readhered=per(slips, "readhered", "sum"),
         max_slip_error_m=per(slips, "max_error_m", "max"),
-        n_gps_disagrees=per(ev[ev["type"] == "gps_track_disagrees"], "type", "size"),
+        n_gps_disagrees=per(ev[ev["type"] == EventType.GPS_TRACK_DISAGREES], "type", "size"),
     )
     for c in COUNT_COLUMNS:
         out[c] = out[c].fillna(0).astype(int)

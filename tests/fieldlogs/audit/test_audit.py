@@ -22,9 +22,11 @@ import pandas as pd
 import pytest
 
 import fieldlogs.audit.runner as audit_mod
+from dbtools.database import read_network
 from fieldlogs.audit.runner import audit, discover_runs, pack, unpack
 from fieldlogs.audit.store import open_audit, read_table, read_trace, store_run
-from fieldlogs.pipeline import PipelineConfig
+from fieldlogs.io import read_run
+from fieldlogs.pipeline import PipelineConfig, run_pipeline
 from fieldlogs.reports.page import render_html
 from fieldlogs.reports.report import RUN_JSON_KEYS, build_report, report_json
 from schemas.errors import InputError
@@ -94,6 +96,23 @@ def test_audit_stores_runs_events_traces_and_route_view(audited: Path, data: Aud
     view = read_table(audited, "route_summary")
     assert len(view) == 2 and view["n_runs"].sum() == N
     assert view["n_corrections"].sum() == n_bal.sum()
+
+
+def test_run_audit_and_report_give_the_same_correction_statistics(audited: Path, data: AuditData) -> None:
+    """One statistic (balise corrections, S003 §5.2) whether a user runs `trainpos run`,
+    reads the audit record or the report by run: the figures agree exactly."""
+    runs = read_table(audited, "runs").set_index("run_path")
+    by_run = build_report(audited, by="run").groups.set_index("run_path")
+    for path in data.runs:
+        key = str(path.resolve())
+        summary = run_pipeline(read_run(path), read_network(data.db)).summary
+        assert summary["n_corrections"] == runs.loc[key, "n_corrections"] == by_run.loc[key, "n_corrections"]
+        assert summary["mean_correction_pct"] == pytest.approx(runs.loc[key, "mean_correction_pct"])
+        assert summary["mean_correction_pct"] == pytest.approx(by_run.loc[key, "mean_correction_pct"])
+        assert summary["max_correction_pct"] == pytest.approx(by_run.loc[key, "max_correction_pct"])
+        assert (
+            summary["all_corrections"]["n_corrections"] == summary["n_corrections"] + summary["n_feature_corrections"]
+        )
 
 
 def test_reaudit_skips_unchanged_touch_is_still_skipped_config_change_reaudits(
