@@ -22,3 +22,14 @@ def tiny_sources(tmp_path: Path) -> Path:
     dst = tmp_path / "src"
     shutil.copytree(DATA / "tiny_sources", dst)
     return dst
+
+
+@pytest.fixture(scope="session")
+def sample_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The bundled sample network built once per session (read-only by convention)."""
+    from dbtools.build import build_db
+    from dbtools.sample_network import sample_source_dir
+
+    db = tmp_path_factory.mktemp("sample-db") / "sample.sqlite"
+    build_db(sample_source_dir(), db, db_version="sample-test")
+    return db

@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from schemas.enums import EventType, FixSource, PositionState
+
 FloatArray = npt.NDArray[np.float64]
 
 
@@ -55,22 +57,23 @@ class Event:
     """One row of the ``events`` output."""
 
     t: float
-    type: str
+    type: EventType
     km_m: float | None = None
     correction_m: float | None = None
     correction_pct: float | None = None
     detail: dict[str, Any] = field(default_factory=dict)
 
 
-@dataclass
+@dataclass(frozen=True)
 class Fix:
-    """An absolute position fix (anchor): from ``t_effective`` on, km follows from ``km_m``
-    after a travel k·(S − s_ref) along the track's own length (``solver.km_along``), where
-    S = Σ cab·Δd is the signed body-forward travel.
+    """An estimate anchor: from ``t_effective`` on, km follows from ``km_m`` after a travel
+    k·(S − s_ref) along the track's own length (:func:`fieldlogs.pipeline.estimate.km_along`),
+    where S = Σ cab·Δd is the signed body-forward travel.
 
-    ``k`` is the sign of km per metre of body-forward travel (±1), so cab reversals after the fix are
-    followed automatically. The reference point may precede ``t_effective`` (a feature
-    point is recognised some metres after its exit crossing).
+    ``k`` is the sign of km per metre of body-forward travel (±1), so cab reversals after the
+    fix are followed automatically. The reference point (``t_ref``, ``s_ref``, ``d_ref``)
+    may precede ``t_effective``: a feature point is recognised some metres after its exit
+    crossing.
     """
 
     t_effective: float
@@ -83,14 +86,26 @@ class Fix:
     line_code: str
     track: str
     k: int
-    source: str
-    """'balise', 'feature' or 'gps'."""
+    source: FixSource
     uncertainty_m: float
-    state: str = "determined"
+    state: PositionState = PositionState.DETERMINED
+    t_ref: float | None = None
+    """Time of the reference point (None: ``t_effective``)."""
     allowance_ref_m: float = 0.0
-    """Odometry slip allowance already accumulated at the reference point [m]."""
+    """Odometry slip allowance already accumulated at the reference point [m] (set by the
+    engine when the fix takes effect)."""
     uncertain_since_d: float | None = None
     """Travel d at which the position became uncertain (fail-safe), if it is."""
+
+    @property
+    def reference_t(self) -> float:
+        return self.t_effective if self.t_ref is None else self.t_ref
+
+    @classmethod
+    def undetermined(cls, t: float, s: float, d: float) -> Fix:
+        """No position from ``t`` on (off rail)."""
+        nan = float("nan")
+        return cls(t, s, d, nan, nan, "", "", 1, FixSource.NONE, nan, state=PositionState.UNDETERMINED)
 
 
 def slip_budget_m(duration_s: float, delta_a_mps2: float) -> float:

@@ -12,11 +12,11 @@ import pytest
 
 from dbtools.gis.geometry import Projector
 from dbtools.synthetic.network import build_network, demo_line
-from fieldlogs.pipeline.balise import BaliseDb, BaliseUnit
+from fieldlogs.pipeline.aids.balise import BaliseDb
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
-from fieldlogs.pipeline.solver import solve
 from fieldlogs.pipeline.types import Odometry, SlipEpisode
+from tests.fieldlogs.pipeline.engine_cases import solve
 
 CFG = PipelineConfig()
 
@@ -56,7 +56,7 @@ def balise_km(net, bid: str) -> float:
 
 
 def run(net, telegrams, c, odo):
-    return solve(c, odo, telegrams, BaliseUnit(BaliseDb.from_network(net), CFG.balise), CFG)
+    return solve(c, odo, telegrams, BaliseDb.from_network(net), CFG)
 
 
 def test_undetermined_until_pair_then_counts_up_on_d(net) -> None:
@@ -197,9 +197,7 @@ def test_gps_decision_while_standing_initialises_once_the_km_moves(net) -> None:
         }
     )
     dec = TrackDecision(15.0, "0900", "U", 5000.0, 0, {"n_fixes": 10})
-    sol = solve(
-        c, odo, None, BaliseUnit(BaliseDb.from_network(net), CFG.balise), CFG, gps=GpsAnalysis(fixes, [dec], [])
-    )
+    sol = solve(c, odo, None, BaliseDb.from_network(net), CFG, gps=GpsAnalysis(fixes, [dec], []))
     assert [e.type for e in sol.events] == ["track_decision", "initial_position_gps"]
     init = sol.events[1]
     assert init.t == 21.0 and init.km_m == 4990.0

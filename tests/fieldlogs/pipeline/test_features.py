@@ -20,12 +20,13 @@ from dbtools.gis.geometry import Projector
 from dbtools.network import Network
 from dbtools.synthetic.alignment import Alignment, Curve
 from dbtools.synthetic.network import LineSpec, Station, build_network
-from fieldlogs.pipeline.balise import BaliseDb, BaliseUnit
+from fieldlogs.pipeline.aids.balise import BaliseDb
+from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.config import FeatureConfig, PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
-from fieldlogs.pipeline.features import FeatureUnit
-from fieldlogs.pipeline.solver import signed_travel, solve
+from fieldlogs.pipeline.estimate import signed_travel
 from fieldlogs.pipeline.types import FeatureOutcome, Fix, FloatArray, Odometry
+from tests.fieldlogs.pipeline.engine_cases import solve
 
 LINE = "0900"
 KM0 = 10_000.0
@@ -308,7 +309,7 @@ def test_solver_applies_feature_corrections(net) -> None:
     )
     cfg = PipelineConfig()
     unit = FeatureUnit(c, odo, net, cfg.feature)
-    sol = solve(c, odo, telegrams, BaliseUnit(BaliseDb.from_network(net), cfg.balise), cfg, features=unit)
+    sol = solve(c, odo, telegrams, BaliseDb.from_network(net), cfg, features=unit)
     types = [e.type for e in sol.events]
     assert types == ["initial_position", "feature_correction", "feature_correction"]
     pos = sol.positions

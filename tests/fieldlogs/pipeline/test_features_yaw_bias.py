@@ -16,9 +16,9 @@ import pytest
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
 from dbtools.synthetic.network import build_network
+from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.cycles import Cycles, standstill_mean
-from fieldlogs.pipeline.features import FeatureUnit
-from fieldlogs.pipeline.solver import signed_travel
+from fieldlogs.pipeline.estimate import signed_travel
 from fieldlogs.pipeline.types import Odometry
 from tests.fieldlogs.pipeline.test_features import CFG, DT, KM0, NOISE_RAD_S, SPEC, fix_at_start, outcomes
 

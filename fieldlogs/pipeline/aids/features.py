@@ -76,6 +76,7 @@ in the same direction without a cab reversal in between).
 from __future__ import annotations
 
 import itertools
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -84,10 +85,11 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
+from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.config import FeatureConfig
 from fieldlogs.pipeline.cycles import Cycles, moving_average, standstill_mean
-from fieldlogs.pipeline.types import FeatureOutcome, Fix, FloatArray, Odometry
-from schemas.enums import Attribute, Track, direction_sign
+from fieldlogs.pipeline.types import Event, FeatureOutcome, Fix, FloatArray, Odometry
+from schemas.enums import Attribute, EventType, FixSource, PositionState, Track, direction_sign
 
 #: Below this speed κ = ωz / v is not computed (NaN): the division only amplifies noise [m/s].
 KAPPA_MIN_SPEED_MPS = 0.5
@@ -154,7 +156,7 @@ class Candidate:
 
 @dataclass(eq=False)
 class FeatureUnit:
-    """Feature-point aid for :func:`fieldlogs.pipeline.solver.solve` (module docstring)."""
+    """Curvature trace, feature tables, scheduling and diagnostics (module docstring)."""
 
     cycles: Cycles = field(repr=False)
     odo: Odometry = field(repr=False)
@@ -487,3 +489,60 @@ def _load_tables(fp: pd.DataFrame) -> tuple[dict[tuple[str, str], FeatureTable],
             line, track, head.loc[good[sel], "feature_id"].to_numpy(dtype=object), km[sel], r3[sel], left[sel]
         )
     return tables, skipped
+
+
+@dataclass(eq=False)
+class FeatureAid(StaticAid):
+    """Feature points as an aid of the engine: the next feature ahead is evaluated once the
+    estimate has passed it (an estimate-dependent moment); an accepted one is an absolute
+    fix at its exit crossing, a refused one an event naming the failed diagnostics."""
+
+    unit: FeatureUnit
+    name = "feature"
+    priority = Priority.FEATURE
+
+    def observations(self) -> Iterator[Observation]:
+        return iter(())
+
+    def next_observation(self, view: EngineView) -> Observation | None:
+        fix = view.estimate
+        if fix is None or fix.state != PositionState.DETERMINED:
+            return None
+        nxt = self.unit.next_evaluation(fix, view.i, view.km_estimate())
+        if nxt is None:
+            return None
+        i_eval, cand = nxt
+        return Observation(float(self.unit.cycles.t[i_eval]), cand)
+
+    def observe(self, obs: Observation, view: EngineView) -> Outcome:
+        fix = view.estimate
+        if fix is None:
+            return Outcome()
+        out = self.unit.evaluate(obs.payload, fix, view.km_estimate(), view.i)
+        if not (out.accepted and out.i_ref is not None and out.km_db is not None):
+            detail = {"feature_id": out.feature_id, "failed": out.failed, **out.detail}
+            return Outcome([Event(view.t, EventType.FEATURE_REFUSED, view.km, detail=detail)])
+        travel = view.travel
+        s_ref, d_ref = float(travel.s[out.i_ref]), float(travel.d[out.i_ref])
+        km_comp = view.km_at(s_ref)
+        ev = Event(
+            view.t,
+            EventType.FEATURE_CORRECTION,
+            out.km_db,
+            km_comp - out.km_db,
+            detail={"feature_id": out.feature_id, **out.detail},
+        )
+        new = Fix(
+            view.t,
+            s_ref,
+            d_ref,
+            out.km_db,
+            out.km_db + (fix.km_equipment_m - fix.km_m),
+            fix.line_code,
+            fix.track,
+            fix.k,
+            FixSource.FEATURE,
+            max(out.uncertainty_m or 0.0, self.unit.cfg.fix_uncertainty_m),
+            t_ref=float(travel.t[out.i_ref]),
+        )
+        return Outcome([ev], new)

@@ -4,24 +4,29 @@
   track) → actual and equipment km at I2. Reverse order (I2 first) → ignored. A code not
   in the DB → anomaly, state kept.
 * km counts up on a D (or S) telegram, down on U; cab reversals after the pair are
-  followed through the signed travel (see :class:`~fieldlogs.pipeline.types.Fix`).
+  followed through the signed travel (see :mod:`fieldlogs.pipeline.estimate`).
 * C balise: identified from (last initial pair, signal type) and accepted only if the
   travel since that pair's I1 is within ±500 m of the DB's ``dist_from_initial_m``.
-  Correction amount = computed km − DB km; position-correction % = |amount| / distance
-  since the previous correction × 100.
+  Correction amount = computed km − DB km; the engine turns it into the position-
+  correction % = |amount| / distance since the previous correction × 100.
+
+The aid's only state is the pending I1 and the last initial pair (the identification
+base of the C balises); it speaks at every telegram.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from typing import Any
 
 import pandas as pd
 
 from dbtools.network import Network
+from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.config import BaliseConfig
 from fieldlogs.pipeline.types import Event, Fix
-from schemas.enums import BaliseKind, direction_sign
+from schemas.enums import BaliseKind, EventType, FixSource, direction_sign
 
 PairKey = tuple[str, str, str]
 
@@ -57,15 +62,29 @@ class BaliseDb:
 
 
 @dataclass
-class BaliseUnit:
-    """Sequential telegram handling; the solver calls :meth:`on_telegram` in time order."""
+class BaliseAid(StaticAid):
+    """Telegrams in time order (module docstring): the balise aid of the engine."""
 
     db: BaliseDb
     cfg: BaliseConfig
+    telegrams: pd.DataFrame | None = field(default=None, repr=False)
     pending: _Pending | None = None
     last_pair: tuple[PairKey, float] | None = None
     """(pair key, travel distance at its I1)."""
     _s: float = 0.0
+    name = "balise"
+    priority = Priority.TELEGRAM
+
+    def observations(self) -> Iterator[Observation]:
+        tel = self.telegrams
+        if tel is None:
+            return
+        for row in tel.astype(object).where(tel.notna(), None).to_dict("records"):
+            yield Observation(float(row["t"]), row)
+
+    def observe(self, obs: Observation, view: EngineView) -> Outcome:
+        evs, fix = self.on_telegram(obs.payload, view.i, view.t, view.d, view.s, view.cab, view.estimate, view.km)
+        return Outcome(evs, fix if evs else None)
 
     def on_telegram(
         self,
@@ -88,14 +107,16 @@ class BaliseUnit:
             return self._on_i2(tel, i, t, d, cab, estimate, km_now)
         if kind == BaliseKind.C:
             return self._on_c(tel, i, t, d, cab, estimate, km_now)
-        return [Event(t, "balise_anomaly", km_now, detail={"reason": f"unknown telegram kind {kind!r}"})], None
+        return [Event(t, EventType.BALISE_ANOMALY, km_now, detail={"reason": f"unknown telegram kind {kind!r}"})], None
 
     def _on_i1(self, tel: dict[str, Any], i: int, t: float, d: float) -> tuple[list[Event], Fix | None]:
         line = _s(tel.get("line_code"))
         if line is None or line not in self.db.line_codes:
             self.pending = None
             return [
-                Event(t, "balise_anomaly", detail={"reason": "unknown line code", "kind": "I1", "line_code": line})
+                Event(
+                    t, EventType.BALISE_ANOMALY, detail={"reason": "unknown line code", "kind": "I1", "line_code": line}
+                )
             ], None
         self.pending = _Pending(i, d, line)
         return [], None
@@ -112,7 +133,9 @@ class BaliseUnit:
                 else f"I2 {d - pending.d:.1f} m after I1 (limit {self.cfg.pair_max_travel_m:g} m)"
             )
             return [
-                Event(t, "pair_ignored", km_now, detail={"reason": why, "station_code": station, "track": track})
+                Event(
+                    t, EventType.PAIR_IGNORED, km_now, detail={"reason": why, "station_code": station, "track": track}
+                )
             ], None
         key = (pending.line_code, station or "", track or "")
         pair = self.db.pairs.get(key)
@@ -120,7 +143,7 @@ class BaliseUnit:
             return [
                 Event(
                     t,
-                    "balise_anomaly",
+                    EventType.BALISE_ANOMALY,
                     km_now,
                     detail={
                         "reason": "initial pair not in DB",
@@ -133,12 +156,12 @@ class BaliseUnit:
         i2 = pair["I2"]
         km_db, km_eq = float(i2["km_actual_m"]), float(i2["km_equipment_m"])
         k = direction_sign(key[2]) * (1 if cab >= 0 else -1)
-        fix = Fix(t, self._s, d, km_db, km_eq, key[0], key[2], k, "balise", self.cfg.fix_uncertainty_m)
+        fix = Fix(t, self._s, d, km_db, km_eq, key[0], key[2], k, FixSource.BALISE, self.cfg.fix_uncertainty_m, t_ref=t)
         self.last_pair = (key, pending.d)
         detail = {"balise_id": i2["balise_id"], "line_code": key[0], "station_code": key[1], "track": key[2]}
         if estimate is None or km_now is None or estimate.line_code != key[0]:
-            return [Event(t, "initial_position", km_db, detail=detail)], fix
-        return [Event(t, "balise_correction", km_db, km_now - km_db, detail={**detail, "kind": "I2"})], fix
+            return [Event(t, EventType.INITIAL_POSITION, km_db, detail=detail)], fix
+        return [Event(t, EventType.BALISE_CORRECTION, km_db, km_now - km_db, detail={**detail, "kind": "I2"})], fix
 
     def _on_c(
         self,
@@ -152,13 +175,15 @@ class BaliseUnit:
     ) -> tuple[list[Event], Fix | None]:
         sig = _s(tel.get("signal_type")) or ""
         if estimate is None or self.last_pair is None or km_now is None:
-            return [Event(t, "c_balise_ignored", detail={"reason": "no initial pair yet", "signal_type": sig})], None
+            return [
+                Event(t, EventType.C_BALISE_IGNORED, detail={"reason": "no initial pair yet", "signal_type": sig})
+            ], None
         key, d_i1 = self.last_pair
         if estimate.k * cab != direction_sign(key[2]):
             return [
                 Event(
                     t,
-                    "c_balise_ignored",
+                    EventType.C_BALISE_IGNORED,
                     km_now,
                     detail={"reason": "running against the direction of the governing pair", "signal_type": sig},
                 )
@@ -176,7 +201,7 @@ class BaliseUnit:
             return [
                 Event(
                     t,
-                    "balise_anomaly",
+                    EventType.BALISE_ANOMALY,
                     km_now,
                     detail={**base, "reason": reason, "candidates": [c["balise_id"] for c in hits]},
                 )
@@ -192,12 +217,17 @@ class BaliseUnit:
             estimate.line_code,
             estimate.track,
             estimate.k,
-            "balise",
+            FixSource.BALISE,
             self.cfg.fix_uncertainty_m,
+            t_ref=t,
         )
         return [
             Event(
-                t, "balise_correction", km_db, km_now - km_db, detail={**base, "balise_id": c["balise_id"], "kind": "C"}
+                t,
+                EventType.BALISE_CORRECTION,
+                km_db,
+                km_now - km_db,
+                detail={**base, "balise_id": c["balise_id"], "kind": "C"},
             )
         ], fix
 

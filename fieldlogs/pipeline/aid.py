@@ -1,0 +1,180 @@
+"""The aid protocol: how a sensor or a correction plugs into the positioning engine.
+
+The onboard position between two absolute fixes is pure dead reckoning on the corrected
+travel (:mod:`fieldlogs.pipeline.estimate`). Everything else — a balise telegram, a curve
+recognised as a feature point, a GPS up/down decision, the fail-safe end of a slip
+correction, a road-rail vehicle put on rail — is an **aid**: a unit that says something
+about the position at certain moments. The engine (:mod:`fieldlogs.pipeline.engine`)
+visits those moments in time order and knows no sensor: it asks each aid
+
+* :meth:`Aid.observations` — the moments known before the loop (telegram times, GPS
+  decisions computed vectorised over the run, fail-safe times, PTO changes);
+* :meth:`Aid.next_observation` — after every change of the estimate, the next moment that
+  depends on it (a feature point is evaluated once the estimate has passed it, so where it
+  lies depends on the fix in force); an observation scheduled under an older estimate is
+  dropped when the estimate changes;
+* :meth:`Aid.observe` — what it says at that moment, given an :class:`EngineView` (time,
+  cycle, travel, cab direction, the estimate in force and its km): events, and optionally a
+  new estimate (an absolute fix, the same fix made *uncertain* or moved to another track) or
+  the instruction to forget the position (off rail), and follow-up observations.
+
+Every estimate carries its uncertainty (``Fix.uncertainty_m``) from which the engine's
+margin grows with travel; the engine, not the aid, turns a correction amount
+(``Event.correction_m``) into its position-correction % [S003 §5.2], because only it knows
+the previous absolute fix.
+
+Simultaneous observations are taken in the order of the aids' :class:`Priority`; an aid
+with ``needs_track`` is not heard while the vehicle is not on the track (a road-rail vehicle
+on the road: PTO off).
+
+Speed aids (a ground-speed sensor such as the 2-frequency CW radar [S004]) act one level
+lower, on the odometry, through :class:`SpeedAid`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+
+from fieldlogs.pipeline.types import Event, Fix, FloatArray
+
+if TYPE_CHECKING:
+    from fieldlogs.pipeline.cycles import Cycles
+    from fieldlogs.pipeline.estimate import Travel
+
+
+class Priority(IntEnum):
+    """Order of observations at the same time (lower first)."""
+
+    RAIL = -1
+    """On/off rail: decides whether a position exists at all."""
+    INTEGRITY = 0
+    """Fail-safe: the position became uncertain."""
+    TELEGRAM = 1
+    """Balise telegrams: absolute fixes."""
+    TRACK = 2
+    """Track (up/down) decisions and crossovers from GNSS."""
+    FEATURE = 3
+    """Feature points, evaluated on the estimate the earlier aids left."""
+
+
+@dataclass(frozen=True)
+class Observation:
+    """A moment at which an aid has something to say."""
+
+    t: float
+    payload: Any = None
+    """Whatever the aid needs back in :meth:`Aid.observe` (a telegram, a decision, …)."""
+    version: int | None = None
+    """Estimate version it was scheduled under (dynamic observations); None: always valid."""
+
+
+@dataclass
+class Outcome:
+    """What an aid says at an observation."""
+
+    events: list[Event] = field(default_factory=list)
+    estimate: Fix | None = None
+    """A new estimate in force from now (an absolute fix, or the current one changed)."""
+    forget: bool = False
+    """The position no longer exists (off rail): undetermined from now."""
+    follow_up: Sequence[Observation] = ()
+    """Further static observations of this aid (e.g. a decision to re-take once moving)."""
+
+
+class EngineView(Protocol):
+    """What an aid sees of the engine at an observation (read-only)."""
+
+    @property
+    def t(self) -> float: ...
+    @property
+    def i(self) -> int:
+        """Cycle at or after ``t``."""
+        ...
+
+    @property
+    def d(self) -> float:
+        """Unsigned travel at ``t`` [m]."""
+        ...
+
+    @property
+    def s(self) -> float:
+        """Signed travel toward the cab's F end at ``t`` [m]."""
+        ...
+
+    @property
+    def cab(self) -> int:
+        """+1 running toward the F end, −1 reversed (at cycle ``i``)."""
+        ...
+
+    @property
+    def estimate(self) -> Fix | None:
+        """The fix in force (None: never determined, or forgotten)."""
+        ...
+
+    @property
+    def km(self) -> float | None:
+        """Dead-reckoned km of the estimate at ``t`` (None without an estimate)."""
+        ...
+
+    def km_at(self, s: float) -> float:
+        """Dead-reckoned km of the estimate at signed travel ``s``."""
+        ...
+
+    def km_estimate(self) -> FloatArray:
+        """Dead-reckoned km of the estimate on every cycle of the run (computed once per
+        estimate)."""
+        ...
+
+    @property
+    def travel(self) -> Travel:
+        """The run's travel arrays (time, d, S, cab, slip budget) on the cycle grid."""
+        ...
+
+
+@runtime_checkable
+class Aid(Protocol):
+    """A position aid (see the module docstring)."""
+
+    name: str
+    priority: Priority
+    needs_track: bool
+
+    def observations(self) -> Iterable[Observation]: ...
+
+    def next_observation(self, view: EngineView) -> Observation | None: ...
+
+    def observe(self, obs: Observation, view: EngineView) -> Outcome: ...
+
+
+class StaticAid:
+    """Base of aids whose moments are all known before the loop."""
+
+    name = "aid"
+    priority = Priority.FEATURE
+    needs_track = True
+
+    def next_observation(self, view: EngineView) -> Observation | None:
+        return None
+
+
+@dataclass(frozen=True)
+class SpeedOnCycles:
+    """An independent ground speed on the cycle grid (NaN where there is none)."""
+
+    v_mps: FloatArray
+    """Speed over ground, unsigned [m/s]."""
+    sigma_mps: FloatArray
+    """Its 1σ [m/s]."""
+    source: str
+
+
+@runtime_checkable
+class SpeedAid(Protocol):
+    """A ground-speed sensor for the odometry (independent of wheel slip and slide)."""
+
+    name: str
+
+    def on_cycles(self, cycles: Cycles) -> SpeedOnCycles | None: ...

@@ -1,0 +1,81 @@
+"""The aids of the positioning engine, and the registry that builds them for a run.
+
+Each entry of :data:`POSITION_AIDS` / :data:`SPEED_AIDS` is a factory that looks at the
+run's context (streams present, vehicle, network, configuration, the vectorised products)
+and returns its aid, or None when the run cannot feed it. A new sensor is a new module
+here and one line in the registry; the engine does not change.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import pandas as pd
+
+from dbtools.network import Network
+from fieldlogs.pipeline.aid import Aid, SpeedAid
+from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
+from fieldlogs.pipeline.aids.failsafe import FailsafeAid
+from fieldlogs.pipeline.aids.features import FeatureAid, FeatureUnit
+from fieldlogs.pipeline.aids.gps import GpsAid
+from fieldlogs.pipeline.aids.radar import RadarSpeedAid
+from fieldlogs.pipeline.aids.rail import RailAid
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.cycles import Cycles
+from fieldlogs.pipeline.types import GpsAnalysis, Odometry
+
+
+@dataclass(frozen=True)
+class RunContext:
+    """What the aid factories may look at."""
+
+    network: Network
+    cfg: PipelineConfig
+    streams: dict[str, pd.DataFrame | None]
+    cycles: Cycles
+    odometry: Odometry
+    gps: GpsAnalysis | None
+    features: FeatureUnit | None
+
+
+def _rail(ctx: RunContext) -> Aid | None:
+    return RailAid(ctx.cycles.t, ctx.cycles.pto)
+
+
+def _failsafe(ctx: RunContext) -> Aid | None:
+    return FailsafeAid(ctx.odometry.episodes)
+
+
+def _balise(ctx: RunContext) -> Aid | None:
+    db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
+    return BaliseAid(db, ctx.cfg.balise, ctx.streams.get("balise"))
+
+
+def _gps(ctx: RunContext) -> Aid | None:
+    return GpsAid(ctx.gps, ctx.cfg.gps) if ctx.gps is not None else None
+
+
+def _features(ctx: RunContext) -> Aid | None:
+    return FeatureAid(ctx.features) if ctx.features is not None else None
+
+
+POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (_rail, _failsafe, _balise, _gps, _features)
+"""Position aids in registry order (simultaneous observations are ordered by priority)."""
+
+
+def position_aids(ctx: RunContext) -> list[Aid]:
+    return [a for f in POSITION_AIDS if (a := f(ctx)) is not None]
+
+
+def _radar(streams: dict[str, pd.DataFrame | None]) -> SpeedAid | None:
+    radar = streams.get("radar")
+    return RadarSpeedAid(radar) if radar is not None and len(radar) >= 2 else None
+
+
+SPEED_AIDS: tuple[Callable[[dict[str, pd.DataFrame | None]], SpeedAid | None], ...] = (_radar,)
+"""Ground-speed aids for the odometry, best first (the first one with data is used)."""
+
+
+def speed_aids(streams: dict[str, pd.DataFrame | None]) -> list[SpeedAid]:
+    return [a for f in SPEED_AIDS if (a := f(streams)) is not None]

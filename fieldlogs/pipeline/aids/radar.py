@@ -1,0 +1,43 @@
+"""A ready radar ground-speed stream (``radar``: t, speed_mps) as a speed aid [S004].
+
+The 2-frequency CW radar measures the speed over ground independently of wheel slip and
+slide; the odometry uses it over slip/slide episodes it covers (and in the fail-safe
+watch). Samples are interpolated onto the cycle grid; a cycle farther than ``max_gap_s``
+from a sample has none (NaN). Its 1σ is the radar error model of the odometry
+(``RADAR_ERROR_PCT`` of the speed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from fieldlogs.pipeline.aid import SpeedOnCycles
+from fieldlogs.pipeline.cycles import Cycles
+
+#: 1σ of the ready radar speed, share of the speed [–] (S004: resolution 0.073 km/h).
+RADAR_SIGMA_SHARE = 0.01
+
+
+@dataclass(frozen=True)
+class RadarSpeedAid:
+    """Speed aid from a ready ``radar`` stream."""
+
+    stream: pd.DataFrame
+    max_gap_s: float = 1.0
+    name = "radar"
+
+    def on_cycles(self, cycles: Cycles) -> SpeedOnCycles | None:
+        radar = self.stream
+        if radar is None or len(radar) < 2:
+            return None
+        t = cycles.t
+        tr = radar["t"].to_numpy(dtype=float)
+        v = radar["speed_mps"].to_numpy(dtype=float, na_value=np.nan)
+        out = np.interp(t, tr, v)
+        j = np.clip(np.searchsorted(tr, t), 1, len(tr) - 1)
+        gap = np.minimum(np.abs(t - tr[j - 1]), np.abs(tr[j] - t))
+        speed = np.where(gap <= self.max_gap_s, out, np.nan)
+        return SpeedOnCycles(speed, RADAR_SIGMA_SHARE * np.abs(speed), self.name)

@@ -1,0 +1,184 @@
+"""The positioning engine: aids applied in time order, knowing no sensor.
+
+Between two absolute fixes the position is dead reckoning on the corrected travel
+(:mod:`fieldlogs.pipeline.estimate`), so the loop only visits the moments when an aid has
+something to say (:mod:`fieldlogs.pipeline.aid`) — a heap of observations ordered by
+(time, aid priority, arrival). At each one the aid's :class:`~fieldlogs.pipeline.aid.Outcome`
+is applied:
+
+* a new estimate takes effect at once; its slip-allowance reference is the odometry's
+  budget at its reference point; if it is absolute (balise, feature) and an event of the
+  outcome carries a correction amount, that event gets its position-correction % =
+  |amount| / travel since the previous absolute fix on the same line × 100 [S003 §5.2];
+* ``forget`` ends the position (undetermined from now, and no previous absolute fix);
+* every change of the estimate bumps its version: observations scheduled under an older
+  version are dropped, and every aid is asked for its next estimate-dependent moment.
+
+Per-cycle positions and margins are then evaluated vectorised from the recorded fixes
+(:mod:`fieldlogs.pipeline.positions`).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import pandas as pd
+
+from fieldlogs.pipeline.aid import Aid, Observation, Outcome
+from fieldlogs.pipeline.config import MarginConfig
+from fieldlogs.pipeline.estimate import Travel
+from fieldlogs.pipeline.positions import positions_frame
+from fieldlogs.pipeline.types import Event, Fix, FloatArray
+
+#: Heap entry: (t, priority, arrival, aid index, observation).
+_Entry = tuple[float, int, int, int, Observation]
+
+
+@dataclass
+class Solution:
+    positions: pd.DataFrame
+    events: list[Event]
+    fixes: list[Fix] = field(default_factory=list)
+
+
+@dataclass
+class _View:
+    """:class:`~fieldlogs.pipeline.aid.EngineView` of one observation."""
+
+    engine: _Engine
+    t: float
+    i: int
+    d: float
+    s: float
+
+    @property
+    def cab(self) -> int:
+        return int(self.engine.travel.cab[self.i])
+
+    @property
+    def travel(self) -> Travel:
+        return self.engine.travel
+
+    @property
+    def estimate(self) -> Fix | None:
+        return self.engine.fix
+
+    @property
+    def km(self) -> float | None:
+        fix = self.engine.fix
+        return None if fix is None else float(self.engine.travel.km(fix, self.s))
+
+    def km_at(self, s: float) -> float:
+        fix = self.engine.fix
+        if fix is None:
+            raise ValueError("no estimate in force")
+        return float(self.engine.travel.km(fix, s))
+
+    def km_estimate(self) -> FloatArray:
+        return self.engine.km_estimate()
+
+
+class _Engine:
+    """State of one run through the loop (see the module docstring)."""
+
+    def __init__(self, travel: Travel, aids: Sequence[Aid]) -> None:
+        self.travel = travel
+        self.aids = list(aids)
+        self.heap: list[_Entry] = []
+        self.arrival = itertools.count()
+        self.events: list[Event] = []
+        self.fixes: list[Fix] = []
+        self.fix: Fix | None = None
+        self.version = 0
+        self.last_abs: Fix | None = None
+        self._km_cache: tuple[int, FloatArray] | None = None
+
+    def push(self, k: int, obs: Observation) -> None:
+        heapq.heappush(self.heap, (obs.t, int(self.aids[k].priority), next(self.arrival), k, obs))
+
+    def km_estimate(self) -> FloatArray:
+        if self.fix is None:
+            return np.full(self.travel.n, np.nan)
+        if self._km_cache is None or self._km_cache[0] != self.version:
+            self._km_cache = (self.version, self.travel.km(self.fix, self.travel.s))
+        return self._km_cache[1]
+
+    def run(self) -> None:
+        for k, aid in enumerate(self.aids):
+            for obs in aid.observations():
+                self.push(k, obs)
+        travel = self.travel
+        if not travel.n:
+            return
+        while self.heap:
+            t, _prio, _n, k, obs = heapq.heappop(self.heap)
+            if t > travel.t[-1] + 1e-9:
+                break
+            if obs.version is not None and obs.version != self.version:
+                continue  # scheduled under an estimate that has changed since
+            i, d, s = travel.at(t)
+            aid = self.aids[k]
+            if aid.needs_track and not travel.on_track[i]:
+                continue  # the vehicle is not on the track: no position, nothing to aid
+            before = self.version
+            view = _View(self, t, i, d, s)
+            out = aid.observe(obs, view)
+            for follow in out.follow_up:
+                self.push(k, follow)
+            self.apply(out, view)
+            if self.version != before:
+                self.ask_next(view, range(len(self.aids)))
+            elif obs.version is not None:
+                self.ask_next(view, [k])  # its estimate-dependent moment was taken: the next one
+
+    def apply(self, out: Outcome, view: _View) -> None:
+        self.events.extend(out.events)
+        if out.forget:
+            self._forget(view)
+        elif out.estimate is not None:
+            self._take(out.estimate, out.events)
+
+    def _forget(self, view: _View) -> None:
+        if self.fix is None:
+            return
+        self.fix = None
+        self.fixes.append(Fix.undetermined(view.t, view.s, view.d))
+        self.version += 1
+        self.last_abs = None
+
+    def _take(self, new: Fix, events: list[Event]) -> None:
+        # the reference point stays that of the fix that set it when an aid changes the
+        # estimate (made uncertain, moved to another track): same allowance reference
+        t_ref = new.reference_t
+        new = replace(new, t_ref=t_ref, allowance_ref_m=self.travel.allowance_at(t_ref))
+        if new.source.absolute:
+            prev = self.last_abs
+            corrections = [e for e in events if e.correction_m is not None]
+            if corrections and prev is not None and prev.line_code == new.line_code:
+                dist = new.d_ref - prev.d_ref
+                if dist > 0:
+                    ev = corrections[-1]
+                    ev.correction_pct = abs(float(ev.correction_m or 0.0)) / dist * 100.0
+                    ev.detail["distance_since_correction_m"] = round(dist, 2)
+            self.last_abs = new
+        self.fix = new
+        self.fixes.append(new)
+        self.version += 1
+
+    def ask_next(self, view: _View, which: Iterable[int]) -> None:
+        for k in which:
+            nxt = self.aids[k].next_observation(view)
+            if nxt is not None:
+                self.push(k, replace(nxt, version=self.version))
+
+
+def run_aids(travel: Travel, aids: Sequence[Aid], margin: MarginConfig) -> Solution:
+    """Apply ``aids`` in time order over ``travel``; per-cycle positions with their margins."""
+    engine = _Engine(travel, aids)
+    engine.run()
+    events = sorted(engine.events, key=lambda e: e.t)
+    return Solution(positions_frame(travel, engine.fixes, margin), events, engine.fixes)

@@ -1,0 +1,88 @@
+"""Dead reckoning between absolute fixes, and the travel it runs on.
+
+With the corrected unsigned travel d (odometry, never decreasing) and the cab direction
+(+1 toward the vehicle's F end, −1 reversed), the signed body-forward travel is
+
+    S(t) = Σ cab·Δd,
+
+and from a fix (km_m, k, s_ref) the position is
+
+    km(t) = km_of_c( c_of_km(km_m) + k·(S(t) − s_ref) ),
+
+where c is the cumulative length of the fix's track on the GIS grid
+(:mod:`fieldlogs.pipeline.metric`): the wheels roll the track's own length, which in a
+curve differs from the km difference of a double-track line's shared kilometrage. k = ±1
+is the sign of km per metre of forward travel set by the aid that made the fix, so a cab
+reversal after the fix is followed without a new fix [S003 §5.3].
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from dbtools.network import Network
+from fieldlogs.pipeline.cycles import Cycles
+from fieldlogs.pipeline.metric import IDENTITY, TrackMetric, track_metric
+from fieldlogs.pipeline.types import Fix, FloatArray, Odometry
+
+Metric = Callable[[Fix], TrackMetric]
+
+
+def signed_travel(cycles: Cycles, odo: Odometry) -> FloatArray:
+    """S = Σ cab·Δd: travel toward the vehicle's F end (+) or R end (−)."""
+    dd = np.diff(odo.d, prepend=odo.d[0] if odo.d.size else 0.0)
+    return np.cumsum(cycles.cab.astype(float) * dd)
+
+
+def km_along(fix: Fix, s: FloatArray | float, m: TrackMetric) -> FloatArray:
+    """Dead reckoning from ``fix``: travel S − S_ref along the track's own length, as km."""
+    return m.km_of_c(m.c_of_km(fix.km_m) + fix.k * (np.asarray(s, dtype=float) - fix.s_ref))
+
+
+@dataclass(frozen=True)
+class Travel:
+    """The run's travel on the cycle grid: what the engine dead-reckons on."""
+
+    t: FloatArray
+    d: FloatArray
+    """Corrected unsigned travel [m]."""
+    s: FloatArray
+    """Signed body-forward travel S [m]."""
+    v: FloatArray
+    """Corrected speed [m/s]."""
+    cab: np.ndarray
+    on_track: np.ndarray
+    """True where the vehicle is on the track (PTO on for road-rail vehicles; trains always)."""
+    allowance: FloatArray
+    """Cumulative slip-correction error budget (eq. 13) [m]."""
+    network: Network | None = None
+    """With a network, dead reckoning runs along each track's own length."""
+
+    @classmethod
+    def of(cls, cycles: Cycles, odo: Odometry, network: Network | None = None) -> Travel:
+        on_track = np.asarray(cycles.pto) != 0
+        return cls(cycles.t, odo.d, signed_travel(cycles, odo), odo.v, cycles.cab, on_track, odo.allowance, network)
+
+    @property
+    def n(self) -> int:
+        return int(self.t.size)
+
+    def metric(self, fix: Fix) -> TrackMetric:
+        if self.network is None or not fix.line_code:
+            return IDENTITY
+        return track_metric(self.network, fix.line_code, fix.track)
+
+    def km(self, fix: Fix, s: FloatArray | float) -> FloatArray:
+        """km of ``fix`` dead-reckoned to signed travel ``s``."""
+        return km_along(fix, s, self.metric(fix))
+
+    def at(self, t: float) -> tuple[int, float, float]:
+        """Cycle index at or after ``t`` and the travel d, S interpolated at ``t``."""
+        i = int(min(np.searchsorted(self.t, t, side="left"), self.t.size - 1))
+        return i, float(np.interp(t, self.t, self.d)), float(np.interp(t, self.t, self.s))
+
+    def allowance_at(self, t: float) -> float:
+        return float(np.interp(t, self.t, self.allowance))

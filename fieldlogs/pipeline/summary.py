@@ -1,0 +1,125 @@
+"""The pipeline's outputs of one run: the events frame and the headline summary.
+
+``summary.json`` holds what audits aggregate: distance, route, state shares, correction
+statistics (:mod:`fieldlogs.pipeline.corrections` — balise corrections under the plain
+names, all absolute corrections under ``all_corrections``), feature refusals by
+diagnostic, slips, fail-safes, anomalies, GPS trust, the largest margin and, for runs with
+a ``truth`` stream, the comparison with it.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dbtools.network import Network
+from fieldlogs.io import Run
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.corrections import run_correction_stats
+from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
+from schemas.enums import CORRECTION_EVENTS, SLIP_EVENTS, EventType, PositionState
+from schemas.jsonable import jsonable
+from schemas.outputs import EVENTS
+
+#: Decimals kept in the events' ``detail`` JSON (µm, µs: below every sensor's resolution).
+DETAIL_DIGITS = 6
+
+
+def episode_events(odo: Odometry, km: np.ndarray) -> list[Event]:
+    """One ``slip``/``slide`` event per odometry episode, at its correction start point."""
+    events = []
+    for ep in odo.episodes:
+        i = min(max(ep.i_start, 0), len(km) - 1) if len(km) else 0
+        events.append(
+            Event(
+                ep.t_start,
+                EventType(ep.kind),
+                float(km[i]) if len(km) and np.isfinite(km[i]) else None,
+                detail={
+                    "t_detect": ep.t_detect,
+                    "t_end": ep.t_end,
+                    "duration_s": ep.t_end - ep.t_start,
+                    "d_pulse_m": ep.d_pulse_m,
+                    "d_corrected_m": ep.d_corrected_m,
+                    "max_error_m": ep.max_error_m,
+                    "readhered": ep.readhered,
+                    "failsafe": ep.failsafe,
+                    **ep.detail,
+                },
+            )
+        )
+    return events
+
+
+def events_frame(events: list[Event]) -> pd.DataFrame:
+    rows = [
+        {
+            "t": e.t,
+            "type": str(e.type),
+            "km_m": e.km_m,
+            "correction_m": e.correction_m,
+            "correction_pct": e.correction_pct,
+            "detail": json.dumps(jsonable(e.detail, DETAIL_DIGITS), ensure_ascii=False, sort_keys=True),
+        }
+        for e in events
+    ]
+    frame = pd.DataFrame(rows, columns=EVENTS.column_names)
+    for c in ("t", "km_m", "correction_m", "correction_pct"):
+        frame[c] = pd.to_numeric(frame[c]).astype("float64")
+    for c in ("type", "detail"):
+        frame[c] = frame[c].astype("string")
+    return frame
+
+
+def summarise(
+    run: Run,
+    network: Network,
+    cfg: PipelineConfig,
+    pos: pd.DataFrame,
+    ev: pd.DataFrame,
+    odo: Odometry,
+    gps: GpsAnalysis | None,
+) -> dict[str, Any]:
+    """Headline figures of one run (what audits aggregate)."""
+    meta = run.meta
+    assert meta is not None
+    states = pos["state"].value_counts(normalize=True).to_dict()
+    corr = ev[ev["type"].isin(CORRECTION_EVENTS)]
+    determined = pos[pos["state"] != PositionState.UNDETERMINED.value]
+    refused = ev[ev["type"] == EventType.FEATURE_REFUSED]
+    reasons: dict[str, int] = {}
+    for d in refused["detail"]:
+        for r in json.loads(d).get("failed", []):
+            reasons[r] = reasons.get(r, 0) + 1
+    routes = determined.groupby(["line_code", "track"], dropna=True).size()
+    main_route = routes.idxmax() if len(routes) else (None, None)
+    return {
+        "run_id": run.run_id,
+        "vehicle_id": meta.vehicle_id,
+        "vehicle_kind": meta.vehicle_kind,
+        "db_version": network.meta.get("db_version"),
+        "config": cfg.to_dict(),
+        "duration_s": float(pos["t"].iloc[-1] - pos["t"].iloc[0]) if len(pos) else 0.0,
+        "distance_m": float(odo.d[-1]) if odo.d.size else 0.0,
+        "line_code": main_route[0],
+        "track": main_route[1],
+        "first_determined_t": float(determined["t"].iloc[0]) if len(determined) else None,
+        "state_share": {k: round(float(v), 6) for k, v in states.items()},
+        **run_correction_stats(ev, population="balise"),
+        "all_corrections": run_correction_stats(ev, population="all"),
+        "n_balise_corrections": int((corr["type"] == EventType.BALISE_CORRECTION).sum()),
+        "n_feature_corrections": int((corr["type"] == EventType.FEATURE_CORRECTION).sum()),
+        "n_feature_refused": len(refused),
+        "feature_refusals": reasons,
+        "n_slips": int(ev["type"].isin(SLIP_EVENTS).sum()),
+        "n_failsafe": int((ev["type"] == EventType.FAILSAFE).sum()),
+        "n_anomalies": int((ev["type"] == EventType.BALISE_ANOMALY).sum()),
+        "gps_decisions": len(gps.decisions) if gps else 0,
+        "gps_trusted_share": float(gps.fixes["trusted"].mean()) if gps is not None and len(gps.fixes) else None,
+        "max_margin_m": float(pos["margin_m"].max()) if pos["margin_m"].notna().any() else None,
+        "episodes": [asdict(e) for e in odo.episodes],
+    }

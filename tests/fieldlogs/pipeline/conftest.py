@@ -1,0 +1,21 @@
+"""Fixtures of the pipeline tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from dbtools.database import read_network
+from fieldlogs.io import read_run
+from fieldlogs.pipeline import PipelineConfig, prepare_run
+from fieldlogs.pipeline.aids import RunContext
+
+SAMPLE_LOGS = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"
+
+
+@pytest.fixture(scope="module")
+def sample_run_context(sample_db: Path) -> RunContext:
+    """The prepared context of the bundled run with slips, balises, GPS and radar."""
+    ctx, _ = prepare_run(read_run(SAMPLE_LOGS / "sim-d-slips"), read_network(sample_db), PipelineConfig())
+    return ctx
