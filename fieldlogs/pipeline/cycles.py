@@ -148,7 +148,8 @@ def trailing_sum(x: npt.ArrayLike, window: int) -> npt.NDArray[Any]:
     a = np.asarray(x)
     c = np.concatenate([np.zeros(1, dtype=np.cumsum(a[:0]).dtype), np.cumsum(a)])
     hi = np.arange(1, a.size + 1)
-    return c[hi] - c[np.maximum(hi - window, 0)]
+    out: npt.NDArray[Any] = c[hi] - c[np.maximum(hi - window, 0)]
+    return out
 
 
 def standstill_mean(

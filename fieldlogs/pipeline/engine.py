@@ -111,29 +111,32 @@ class _Engine:
         for k, aid in enumerate(self.aids):
             for obs in aid.observations():
                 self.push(k, obs)
-        travel = self.travel
-        if not travel.n:
-            return
+        end = self.travel.t[-1] + 1e-9 if self.travel.n else -np.inf
         while self.heap:
             t, _prio, _n, k, obs = heapq.heappop(self.heap)
-            if t > travel.t[-1] + 1e-9:
+            if t > end:
                 break
-            if obs.version is not None and obs.version != self.version:
-                continue  # scheduled under an estimate that has changed since
-            i, d, s = travel.at(t)
-            aid = self.aids[k]
-            if aid.needs_track and not travel.on_track[i]:
-                continue  # the vehicle is not on the track: no position, nothing to aid
-            before = self.version
-            view = _View(self, t, i, d, s)
-            out = aid.observe(obs, view)
-            for follow in out.follow_up:
-                self.push(k, follow)
-            self.apply(out, view)
-            if self.version != before:
-                self.ask_next(view, range(len(self.aids)))
-            elif obs.version is not None:
-                self.ask_next(view, [k])  # its estimate-dependent moment was taken: the next one
+            self.step(t, k, obs)
+
+    def step(self, t: float, k: int, obs: Observation) -> None:
+        """Hear aid ``k`` at ``t`` (unless its observation is stale or it needs the track and
+        the vehicle is not on it), apply what it says, ask for what follows."""
+        if obs.version is not None and obs.version != self.version:
+            return  # scheduled under an estimate that has changed since
+        i, d, s = self.travel.at(t)
+        aid = self.aids[k]
+        if aid.needs_track and not self.travel.on_track[i]:
+            return  # the vehicle is not on the track: no position, nothing to aid
+        before = self.version
+        view = _View(self, t, i, d, s)
+        out = aid.observe(obs, view)
+        for follow in out.follow_up:
+            self.push(k, follow)
+        self.apply(out, view)
+        if self.version != before:
+            self.ask_next(view, range(len(self.aids)))
+        elif obs.version is not None:
+            self.ask_next(view, [k])  # its estimate-dependent moment was taken: the next one
 
     def apply(self, out: Outcome, view: _View) -> None:
         self.events.extend(out.events)

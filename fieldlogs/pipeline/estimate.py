@@ -81,7 +81,7 @@ class Travel:
 
     def at(self, t: float) -> tuple[int, float, float]:
         """Cycle index at or after ``t`` and the travel d, S interpolated at ``t``."""
-        i = int(min(np.searchsorted(self.t, t, side="left"), self.t.size - 1))
+        i = min(int(np.searchsorted(self.t, t, side="left")), self.t.size - 1)
         return i, float(np.interp(t, self.t, self.d)), float(np.interp(t, self.t, self.s))
 
     def allowance_at(self, t: float) -> float:

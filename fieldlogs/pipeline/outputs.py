@@ -34,7 +34,8 @@ def write_results(
 def read_summary(out: Path) -> dict[str, Any]:
     p = Path(out) / "summary.json"
     try:
-        return json.loads(p.read_text(encoding="utf-8"))
+        data: dict[str, Any] = json.loads(p.read_text(encoding="utf-8"))
+        return data
     except FileNotFoundError as exc:
         raise InputError("no summary.json (not a pipeline output folder)", path=p) from exc
     except json.JSONDecodeError as exc:

@@ -96,7 +96,8 @@ def summarise(
         for r in json.loads(d).get("failed", []):
             reasons[r] = reasons.get(r, 0) + 1
     routes = determined.groupby(["line_code", "track"], dropna=True).size()
-    main_route = routes.idxmax() if len(routes) else (None, None)
+    best = routes.idxmax() if len(routes) else (None, None)
+    main_route: tuple[str | None, str | None] = (best[0], best[1]) if isinstance(best, tuple) else (None, None)
     return {
         "run_id": run.run_id,
         "vehicle_id": meta.vehicle_id,

@@ -11,6 +11,8 @@ import numpy.typing as npt
 from schemas.enums import EventType, FixSource, PositionState
 
 FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass

@@ -51,7 +51,8 @@ class BaliseDb:
         b = network.balises
         pairs: dict[PairKey, dict[str, dict[str, Any]]] = {}
         c_bal: dict[tuple[PairKey, str], list[dict[str, Any]]] = {}
-        for row in b.astype(object).where(b.notna(), None).to_dict("records"):
+        rows: list[dict[str, Any]] = b.astype(object).where(b.notna(), None).to_dict("records")  # type: ignore[assignment]
+        for row in rows:
             key = (str(row["line_code"]), str(row["station_code"]), str(row["track"]))
             if row["kind"] == BaliseKind.C:
                 c_bal.setdefault((key, str(row["signal_type"])), []).append(row)
