@@ -82,14 +82,14 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
+from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, load_tables
 from fieldlogs.pipeline.config import FeatureConfig
 from fieldlogs.pipeline.cycles import Cycles, moving_average, standstill_mean
 from fieldlogs.pipeline.types import Event, FeatureOutcome, Fix, FloatArray, Odometry
-from schemas.enums import Attribute, EventType, FixSource, PositionState, Track, direction_sign
+from schemas.enums import EventType, FixSource, PositionState
 
 #: Below this speed κ = ωz / v is not computed (NaN): the division only amplifies noise [m/s].
 KAPPA_MIN_SPEED_MPS = 0.5
@@ -104,54 +104,6 @@ DIAGNOSTICS = (
     "no_slip",
     "min_speed",
 )
-
-
-@dataclass(frozen=True, eq=False)
-class FeatureTable:
-    """Valid features of one line/track, rows 1…6 in the track's normal direction."""
-
-    line_code: str
-    track: str
-    feature_id: npt.NDArray[np.object_]
-    km: FloatArray
-    """(m, 6) km of rows 1…6."""
-    radius_m: FloatArray
-    left: npt.NDArray[np.bool_]
-    """Left curve as seen in the track's normal direction."""
-
-    @property
-    def normal(self) -> int:
-        return direction_sign(self.track)
-
-    def travel_rows(self, sdir: int) -> tuple[FloatArray, FloatArray, npt.NDArray[np.int_]]:
-        """(u, km, expected κ sign) with rows in travel order for km direction ``sdir``."""
-        km = self.km if sdir == self.normal else self.km[:, ::-1]
-        sign = np.where(self.left, 1, -1) * (1 if sdir == self.normal else -1)
-        return sdir * km, km, sign
-
-
-@dataclass(frozen=True, eq=False)
-class Candidate:
-    """One feature as met in one travel direction (the handle passed to ``evaluate``)."""
-
-    feature_id: str
-    line_code: str
-    track: str
-    sdir: int
-    """km per metre of travel (±1)."""
-    reversed: bool
-    """Running against the track's normal direction (rows met 6…1, left/right swapped)."""
-    u: FloatArray
-    """Rows r1…r6 in travel order as u = sdir·km (increasing)."""
-    km: FloatArray
-    """km of r1…r6 (travel order)."""
-    radius_m: float
-    sign: int
-    """Expected κ sign in the travel direction (+1 left)."""
-    margin_m: float
-    """Search margin w at scheduling time [m]."""
-    segment: int
-    """Cab-direction segment (number of cab changes before it)."""
 
 
 @dataclass(eq=False)
@@ -198,7 +150,7 @@ class FeatureUnit:
         self._changes = np.flatnonzero(self._cab[1:] != self._cab[:-1]) + 1
         self._allow = np.asarray(o.allowance, dtype=float)
         self.available = bool(n and c.has_imu and np.isfinite(self.kappa).any())
-        self.tables, self.skipped = _load_tables(self.network.feature_points)
+        self.tables, self.skipped = load_tables(self.network.feature_points)
         self._done: dict[tuple[str, str, str, int], int] = {}
 
     # -- scheduling ---------------------------------------------------------------------
@@ -260,20 +212,17 @@ class FeatureUnit:
         """Run the diagnostics of the module docstring on the κ trace up to ``i_eval``."""
         c, cfg = candidate, self.cfg
         self._done[(c.line_code, c.track, c.feature_id, c.sdir)] = c.segment
-        d, x, kap = self._d, self._x, self.kappa
-        u, w, R = c.u, c.margin_m, c.radius_m
-        k_lo, k_hi = (1.0 - cfg.tolerance) / R, (1.0 + cfg.tolerance) / R
-        km_db = float(c.km[3])
+        k_lo, k_hi = (1.0 - cfg.tolerance) / c.radius_m, (1.0 + cfg.tolerance) / c.radius_m
         detail: dict[str, Any] = {
             "line_code": c.line_code,
             "track": c.track,
             "direction": "reversed" if c.reversed else "normal",
             "attribute": "left" if c.sign > 0 else "right",
-            "R_m": R,
+            "R_m": c.radius_m,
             "lower_kappa": k_lo,
             "upper_kappa": k_hi,
-            "search_margin_m": round(w, 2),
-            "db_length_m": round(float(u[3] - u[2]), 2),
+            "search_margin_m": round(c.margin_m, 2),
+            "db_length_m": round(float(c.u[3] - c.u[2]), 2),
         }
         failed: list[str] = []
 
@@ -282,23 +231,55 @@ class FeatureUnit:
             unc = self._crossing_uncertainty(i_ref, c, k_lo) if i_ref is not None else None
             if unc is not None:
                 detail["uncertainty_m"] = round(unc, 2)
-            return FeatureOutcome(not order, c.feature_id, c.line_code, c.track, i_ref, km_db, order, detail, unc)
+            return FeatureOutcome(
+                not order, c.feature_id, c.line_code, c.track, i_ref, float(c.km[3]), order, detail, unc
+            )
 
-        # window: estimate within [r1 − w, r6 + w], causal (samples complete before i_eval)
         ue = c.sdir * km_est
-        m = self.n_smooth // 2
-        i_hi = i_eval - m
+        window = self._window(c, ue, i_eval)
+        if window is None:
+            detail["reason"] = "search window incomplete (log starts inside it or direction changed)"
+            failed.append("start_point")
+            return out()
+        i_a, i_hi = window
+        best = self._curve(c, ue, i_a, i_hi, k_lo)
+        if best is None:
+            detail["reason"] = "no curve (pair of lower-limit crossings) in the search window"
+            failed.append("start_point")
+            self._slip_speed(np.arange(i_a, i_hi + 1), failed, detail)
+            return out()
+        xe, xx, sgn = best
+        ia, ib = self._span(c, xe, xx)
+        span = np.arange(ia, ib)
+        i_ref = self._nearest_cycle(xx)
+        self._measure(c, ue, xe, xx, sgn, i_ref, detail)
+        reasons = self._span_problems(ia, ib, i_hi)
+        if reasons:
+            detail["reason"] = "; ".join(reasons)
+            failed.append("start_point")
+        failed += self._shape_failures(c, xe, xx, sgn, k_lo, k_hi, detail)
+        self._slip_speed(span, failed, detail)
+        return out(i_ref)
+
+    def _window(self, c: Candidate, ue: FloatArray, i_eval: int) -> tuple[int, int] | None:
+        """First and last cycle of the search window: estimate in [r1 − w, r6 + w], causal
+        (every smoothed sample complete before ``i_eval``); None when the window's start is
+        not in the data (log starts inside it, or the direction changed)."""
+        d, u, w = self._d, c.u, c.margin_m
+        i_hi = i_eval - self.n_smooth // 2
         d_lo = d[i_eval] - max(ue[i_eval] - (u[0] - w), 0.0) - 20.0
         i_lo = int(np.searchsorted(d, d_lo, side="left"))
         before = np.flatnonzero(ue[i_lo : i_eval + 1] < u[0] - w)
         if before.size == 0 or i_hi <= i_lo + before[-1] + 2:
-            detail["reason"] = "search window incomplete (log starts inside it or direction changed)"
-            failed.append("start_point")
-            return out()
-        i_a = i_lo + int(before[-1]) + 1
-        runs = _runs(kap[i_a : i_hi + 1], x[i_a : i_hi + 1], k_lo, cfg.crossing_merge_m)
+            return None
+        return i_lo + int(before[-1]) + 1, i_hi
+
+    def _curve(self, c: Candidate, ue: FloatArray, i_a: int, i_hi: int, k_lo: float) -> tuple[float, float, int] | None:
+        """(entry crossing, exit crossing, sign) of the lower-limit run wholly inside the
+        window whose estimated crossings lie closest to r3 and r4."""
+        d, x, kap, u = self._d, self._x, self.kappa, c.u
         best: tuple[float, float, float, int] | None = None
-        for j0, j1, sgn in runs:
+        for j0, j1, sgn in _runs(kap[i_a : i_hi + 1], x[i_a : i_hi + 1], k_lo, self.cfg.crossing_merge_m):
             if j0 < 1 or j1 > i_hi - i_a:
                 continue  # a crossing outside the window
             xe = _cross(x, kap, i_a + j0 - 1, i_a + j0, k_lo, sgn)
@@ -307,49 +288,62 @@ class FeatureUnit:
             cost = abs(ue[ie] + (xe - d[ie]) - u[2]) + abs(ue[ie] + (xx - d[ie]) - u[3])
             if best is None or cost < best[0]:
                 best = (cost, xe, xx, sgn)
-        if best is None:
-            detail["reason"] = "no curve (pair of lower-limit crossings) in the search window"
-            failed.append("start_point")
-            span = np.arange(i_a, i_hi + 1)
-            self._slip_speed(span, failed, detail)
-            return out()
-        _, xe, xx, sgn = best
-        span_lo = xe - (u[2] - u[0])
-        span_hi = xx + (u[5] - u[3])
+        return None if best is None else best[1:]
+
+    def _span(self, c: Candidate, xe: float, xx: float) -> tuple[int, int]:
+        """Cycles [ia, ib) of the feature span [x_e − (r3 − r1) − h, x_x + (r6 − r4) + h]."""
+        x, u = self._x, c.u
+        span_lo, span_hi = xe - (u[2] - u[0]), xx + (u[5] - u[3])
         ia, ib = int(np.searchsorted(x, span_lo, side="left")), int(np.searchsorted(x, span_hi, side="right"))
         h_max = float(np.nanmax(self._half_m[ia:ib])) if ib > ia else 0.0
         ia = int(np.searchsorted(x, span_lo - h_max, side="left"))
         ib = int(np.searchsorted(x, span_hi + h_max, side="right"))
-        span = np.arange(ia, ib)
+        return ia, ib
+
+    def _nearest_cycle(self, xx: float) -> int:
+        """The cycle whose travel is nearest the exit crossing (the correction point)."""
+        d = self._d
         i_x = int(np.clip(np.searchsorted(d, xx), 1, d.size - 1))
-        i_ref = i_x if abs(d[i_x] - xx) <= abs(d[i_x - 1] - xx) else i_x - 1
-        body = np.abs(kap[int(np.searchsorted(x, xe)) : int(np.searchsorted(x, xx))])
+        return i_x if abs(d[i_x] - xx) <= abs(d[i_x - 1] - xx) else i_x - 1
+
+    def _measure(
+        self, c: Candidate, ue: FloatArray, xe: float, xx: float, sgn: int, i_ref: int, detail: dict[str, Any]
+    ) -> None:
+        """What was measured of the curve (``detail``)."""
+        d, x, cfg = self._d, self._x, self.cfg
+        body = np.abs(self.kappa[int(np.searchsorted(x, xe)) : int(np.searchsorted(x, xx))])
         body = body[np.isfinite(body)]
-        max_k = float(np.max(body)) if body.size else float("nan")
         middle = body[body.size // 4 : body.size - body.size // 4]
-        length = xx - xe
-        db_len = float(u[3] - u[2])
-        tol = max(cfg.length_tolerance * db_len, cfg.length_tolerance_min_m)
+        db_len = float(c.u[3] - c.u[2])
         detail.update(
             measured_radius_m=round(1.0 / float(np.median(middle)), 1) if middle.size else None,
-            max_kappa=max_k,
+            max_kappa=float(np.max(body)) if body.size else float("nan"),
             measured_sign=int(sgn),
-            length_m=round(length, 2),
-            length_tol_m=round(tol, 2),
+            length_m=round(xx - xe, 2),
+            length_tol_m=round(max(cfg.length_tolerance * db_len, cfg.length_tolerance_min_m), 2),
             km_est_exit_m=round(float(c.sdir * (ue[i_ref] - (d[i_ref] - xx))), 2),
             ref_offset_m=round(float(d[i_ref] - xx), 3),
             t_exit=float(self.cycles.t[i_ref]),
         )
-        reasons = []
+
+    def _span_problems(self, ia: int, ib: int, i_hi: int) -> list[str]:
+        """Why the feature span [ia, ib) cannot be judged (the ``start_point`` diagnostic)."""
         if ia <= 0 or ib > i_hi + 1:
-            reasons.append("feature span not inside the data available at the evaluation point")
-        elif not self._wz_ok[span].all():
+            return ["feature span not inside the data available at the evaluation point"]
+        reasons = []
+        if not self._wz_ok[ia:ib].all():
             reasons.append("yaw rate missing in the feature span")
-        if span.size and (self._cab[span] != self._cab[span[0]]).any():
+        if ib > ia and (self._cab[ia:ib] != self._cab[ia]).any():
             reasons.append("cab direction changed during the feature")
-        if reasons:
-            detail["reason"] = "; ".join(reasons)
-            failed.append("start_point")
+        return reasons
+
+    def _shape_failures(
+        self, c: Candidate, xe: float, xx: float, sgn: int, k_lo: float, k_hi: float, detail: dict[str, Any]
+    ) -> list[str]:
+        """entry_straight, sign, upper_limit, length, exit_straight (module docstring)."""
+        u, R, cfg = c.u, c.radius_m, self.cfg
+        db_len = float(u[3] - u[2])
+        tol = max(cfg.length_tolerance * db_len, cfg.length_tolerance_min_m)
         ent = self._straight(
             xe - (u[2] - u[0]), xe - (u[2] - u[1]), xe - (u[2] - u[1]), k_lo / max(u[2] - u[1], 1e-9), R
         )
@@ -357,18 +351,14 @@ class FeatureUnit:
             xx + (u[4] - u[3]), xx + (u[5] - u[3]), xx + (u[4] - u[3]), k_lo / max(u[4] - u[3], 1e-9), R
         )
         detail["entry_straight_max_kappa"], detail["exit_straight_max_kappa"] = ent[1], ext[1]
-        if not ent[0]:
-            failed.append("entry_straight")
-        if sgn != c.sign:
-            failed.append("sign")
-        if not max_k <= k_hi:
-            failed.append("upper_limit")
-        if not abs(length - db_len) <= tol:
-            failed.append("length")
-        if not ext[0]:
-            failed.append("exit_straight")
-        self._slip_speed(span, failed, detail)
-        return out(i_ref)
+        checks = (
+            ("entry_straight", ent[0]),
+            ("sign", sgn == c.sign),
+            ("upper_limit", detail["max_kappa"] <= k_hi),
+            ("length", abs((xx - xe) - db_len) <= tol),
+            ("exit_straight", ext[0]),
+        )
+        return [name for name, ok in checks if not ok]
 
     def _crossing_uncertainty(self, i_ref: int, c: Candidate, k_lo: float) -> float:
         """Uncertainty of the exit crossing as a correction [m]: max(fix_uncertainty_m,
@@ -438,57 +428,6 @@ def _cross(x: FloatArray, k: FloatArray, i0: int, i1: int, level: float, sgn: in
         return float(x[i1])
     f = float(np.clip((level - a) / (b - a), 0.0, 1.0))
     return float(x[i0] + f * (x[i1] - x[i0]))
-
-
-def _load_tables(fp: pd.DataFrame) -> tuple[dict[tuple[str, str], FeatureTable], list[dict[str, Any]]]:
-    """Group the feature-point rows per line/track (vectorised: national DBs hold ~10,000
-    features); invalid features are skipped with a reason."""
-    tables: dict[tuple[str, str], FeatureTable] = {}
-    skipped: list[dict[str, Any]] = []
-    if fp is None or fp.empty:
-        return tables, skipped
-    keys = ["line_code", "track", "feature_id"]
-    f = pd.DataFrame({k: fp[k].astype(str).to_numpy() for k in keys})
-    f["km"] = pd.to_numeric(fp["km_m"], errors="coerce").to_numpy(dtype=float)
-    f["radius"] = pd.to_numeric(fp["radius_m"], errors="coerce").to_numpy(dtype=float)
-    f["attr"] = fp["attribute"].astype(str).to_numpy()
-    normal = np.where(f["track"].to_numpy() == Track.UP, -1.0, 1.0)
-    # running order: seq where the table has it, else km in the track's normal direction
-    seq = fp["seq"] if "seq" in fp.columns else None
-    f["order"] = seq.to_numpy(dtype=float) if seq is not None and seq.notna().all() else f["km"] * normal
-    f = f.sort_values([*keys, "order"], kind="stable").reset_index(drop=True)
-    group = f.groupby(keys, sort=False).ngroup().to_numpy()
-    size = np.bincount(group)
-    first = np.searchsorted(group, np.arange(size.size))
-    head = f.iloc[first].reset_index(drop=True)
-    why = np.full(size.size, "", dtype=object)
-    why[size != 6] = [f"{k} rows (6 expected)" for k in size[size != 6]]
-    six = np.flatnonzero(size == 6)
-    rows = first[six][:, None] + np.arange(6)
-    km = f["km"].to_numpy()[rows]
-    u = km * np.where(head["track"].to_numpy()[six] == Track.UP, -1.0, 1.0)[:, None]
-    attr3 = f["attr"].to_numpy()[rows[:, 2]]
-    r3 = f["radius"].to_numpy()[rows[:, 2]]
-    bad_order = ~np.isfinite(km).all(axis=1) | (np.diff(u, axis=1) < 0).any(axis=1) | (u[:, 3] <= u[:, 2])
-    checks = [
-        (bad_order, "km not in running order"),
-        (~(r3 > 0), "row 3 radius is not > 0"),
-        (~np.isin(attr3, [Attribute.LEFT.value, Attribute.RIGHT.value]), "row 3 attribute is not left/right"),
-    ]
-    for bad, reason in checks:  # the last failing check wins; any reason is enough
-        why[six[bad]] = reason
-    for j in np.flatnonzero(why != ""):
-        skipped.append({**{k: head.at[j, k] for k in keys}, "reason": why[j]})
-    ok = why[six] == ""
-    good = six[ok]
-    km, r3, left = km[ok], r3[ok], attr3[ok] == Attribute.LEFT.value
-    lt = head.loc[good, ["line_code", "track"]].to_numpy()
-    for line, track in {(str(a), str(b)) for a, b in lt}:
-        sel = (lt[:, 0] == line) & (lt[:, 1] == track)
-        tables[(line, track)] = FeatureTable(
-            line, track, head.loc[good[sel], "feature_id"].to_numpy(dtype=object), km[sel], r3[sel], left[sel]
-        )
-    return tables, skipped
 
 
 @dataclass(eq=False)
