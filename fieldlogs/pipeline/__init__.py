@@ -103,17 +103,7 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
                 ep.t_start,
                 ep.kind,
                 float(km[i]) if len(km) and np.isfinite(km[i]) else None,
-                detail={
-                    "t_detect": ep.t_detect,
-                    "t_end": ep.t_end,
-                    "duration_s": ep.t_end - ep.t_start,
-                    "d_pulse_m": ep.d_pulse_m,
-                    "d_corrected_m": ep.d_corrected_m,
-                    "max_error_m": ep.max_error_m,
-                    "readhered": ep.readhered,
-                    "failsafe": ep.failsafe,
-                    **ep.detail,
-                },
+                detail=ep.event_detail(),
             )
         )
     events.sort(key=lambda e: e.t)
