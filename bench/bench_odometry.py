@@ -22,7 +22,7 @@ import numpy as np
 
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles
-from fieldlogs.pipeline.odometry import SPEED_AVG_S, _Streams, correct_odometry
+from fieldlogs.pipeline.odometry import SPEED_AVG_S, align_streams, correct_odometry, detect
 from schemas.units import G
 
 Q = np.pi * 0.86 / 90
@@ -124,7 +124,7 @@ def main() -> None:
     for _ in range(100):
         np.cumsum(cyc.t, out=ref)
     pass_ms = (time.thread_time() - t0) * 10
-    same = np.array_equal(np.array(mask), _Streams(cyc, cfg, cyc.d_pulse, cyc.v_pulse).mask)
+    same = np.array_equal(np.array(mask), detect(align_streams(cyc, cfg), cfg).ta_mask)
     hit = sum(any(e.t_start <= to <= e.t_end for e in odo.episodes) for to in onsets)
     print(
         f"cycles: {cyc.n} ({args.hours:g} h), injected slips: {len(onsets)}, inside a correction: {hit}, "

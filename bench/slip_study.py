@@ -119,6 +119,8 @@ def study(r: dict[str, Any], cfg: PipelineConfig, show: str) -> dict[str, Any]:
     t_cyc = cycles.t
     injected = st["slip_episodes"]
     detected = odo.episodes
+    diag = odo.diagnostics.episodes if odo.diagnostics is not None else ()
+    internals = {id(d): x for d, x in zip(detected, diag, strict=True)}
     lines, errs, missed, matched = [], [], [], 0
     for e in injected:
         hit = [d for d in detected if d.t_end >= e["t0"] - 1.0 and d.t_start <= e["t1"] + 3.0]
@@ -137,20 +139,20 @@ def study(r: dict[str, Any], cfg: PipelineConfig, show: str) -> dict[str, Any]:
         after_failsafe = any(f.failsafe and 0.0 <= d.t_start - f.t_end <= 10.0 for f in detected)
         k0 = min(np.searchsorted(t_truth, d.t_start), len(t_truth) - 1)
         th_true = float(pitch[k0])
-        dt = d.detail
+        dg = internals[id(d)]
         info = (
-            f"  [{len(hit)} ep] det {dt.get('criterion', 'ta'):5s} {d.t_detect - e['t0']:+5.1f} s "
-            f"start {d.t_start - e['t0']:+5.1f}{'' if dt['start_found'] else '!'} "
-            f"end {d.t_end - e['t1']:+5.1f} s  θ0 err {1000 * (dt['theta0_rad'] - th_true):+5.1f} mrad "
-            f"(θ {1000 * th_true:+5.1f}) {'FS' if d.failsafe else ''}{'RE' if dt['redetect_t'] else ''}"
+            f"  [{len(hit)} ep] det {d.criterion:5s} {d.t_detect - e['t0']:+5.1f} s "
+            f"start {d.t_start - e['t0']:+5.1f}{'' if d.start_found else '!'} "
+            f"end {d.t_end - e['t1']:+5.1f} s  θ0 err {1000 * (d.theta0_rad - th_true):+5.1f} mrad "
+            f"(θ {1000 * th_true:+5.1f}) {'FS' if d.failsafe else ''}{'RE' if dg.redetect_t else ''}"
         )
         # speed error of the correction at its start and end vs the true cycle-mean speed
         s_true = np.concatenate([[0.0], np.cumsum(0.5 * (v_truth[1:] + v_truth[:-1]) * np.diff(t_truth))])
         vt = np.diff(np.interp(t_cyc, t_truth, s_true), prepend=0.0) / 0.1
         ev0, ev1 = odo.v[d.i_start + 1] - vt[d.i_start + 1], odo.v[d.i_end] - vt[d.i_end]
         info += f" ev0 {ev0:+.2f} ev1 {ev1:+.2f} m/s T {d.t_end - d.t_start:4.1f}"
-        if dt.get("end_speed_error_mps") is not None:
-            info += f" δ {dt['end_speed_error_mps']:+.2f} m/s upd {dt['speed_update_m']:+.2f} m"
+        if dg.end_speed_error_mps is not None:
+            info += f" δ {dg.end_speed_error_mps:+.2f} m/s upd {d.speed_update_m:+.2f} m"
         err = None
         if not (d.failsafe or not d.readhered or len(hit) > 1 or after_failsafe):
             true_m = _truth_dist(truth, d.t_start, d.t_end)
@@ -167,7 +169,7 @@ def study(r: dict[str, Any], cfg: PipelineConfig, show: str) -> dict[str, Any]:
         if show in ("all", "false", "bad"):
             lines.append(
                 f"run {r['i']:3d} FALSE {d.kind} t {d.t_start:.1f}–{d.t_end:.1f} det {d.t_detect:.1f} "
-                f"crit {d.detail.get('criterion', 'ta')} v {d.detail['v_pulse_at_detect_mps']:.1f}"
+                f"crit {d.criterion} v {internals[id(d)].v_pulse_at_detect_mps:.1f}"
             )
     return {
         "lines": lines,

@@ -39,17 +39,7 @@ def episode_events(odo: Odometry, km: np.ndarray) -> list[Event]:
                 ep.t_start,
                 EventType(ep.kind),
                 float(km[i]) if len(km) and np.isfinite(km[i]) else None,
-                detail={
-                    "t_detect": ep.t_detect,
-                    "t_end": ep.t_end,
-                    "duration_s": ep.t_end - ep.t_start,
-                    "d_pulse_m": ep.d_pulse_m,
-                    "d_corrected_m": ep.d_corrected_m,
-                    "max_error_m": ep.max_error_m,
-                    "readhered": ep.readhered,
-                    "failsafe": ep.failsafe,
-                    **ep.detail,
-                },
+                detail=ep.event_detail(),
             )
         )
     return events

@@ -3,40 +3,119 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from schemas.enums import EventType, FixSource, PositionState
 
+if TYPE_CHECKING:
+    from fieldlogs.pipeline.odometry.diagnostics import OdometryDiagnostics
+
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
 
-@dataclass
-class SlipEpisode:
-    """One slip (wheel faster, traction) or slide (wheel slower, braking) episode."""
+SlipKind = Literal["slip", "slide"]
+"""'slip': wheel faster than the train (traction); 'slide': slower (braking)."""
+DetectionCriterion = Literal["ta", "residual", "residual-end"]
+"""What detected an episode: eq. 1 (|a_x − A_p| > Ta), the grade-compensated residual at
+the slip's onset, or the residual at its end (a short shallow slip)."""
+SpeedSource = Literal["inertial", "radar"]
+"""Where a correction's speed came from."""
 
-    kind: str
-    """'slip' or 'slide'."""
+
+@dataclass(frozen=True)
+class FailsafeWatch:
+    """After a fail-safe: the inertial (or radar) speed followed until the pulses agree
+    again; the allowance grew meanwhile (``OdometryConfig.failsafe_watch_s``)."""
+
+    end_t: float
+    """When the watch ended (re-adhesion, or its time limit) [s]."""
+    allowance_m: float
+    """Allowance it added [m]."""
+    readhered: bool
+    """The pulses agreed again within the watch."""
+    speed_source: SpeedSource
+
+
+@dataclass(frozen=True)
+class SlipEpisode:
+    """One slip (wheel faster, traction) or slide (wheel slower, braking) episode and its
+    correction, as the events report it (``event_detail``). Algorithm internals are in
+    ``Odometry.diagnostics``."""
+
+    kind: SlipKind
     t_detect: float
+    """Detection (clock time of the detection cycle) [s]."""
     t_start: float
     """Correction start point (found by the look-back search) [s]."""
     t_end: float
     """Re-adhesion, or the fail-safe time [s]."""
     i_start: int
+    """Cycle of ``t_start`` (index into the run's cycle arrays)."""
     i_end: int
+    """Cycle of ``t_end``."""
     d_pulse_m: float
     """Distance by pulses over [t_start, t_end] [m]."""
     d_corrected_m: float
-    """Inertially corrected distance over the same interval [m]."""
+    """Corrected distance over the same interval [m]."""
     max_error_m: float
-    """Error budget ½·Δa·T² for the correction duration T (eq. 13) [m]."""
+    """Error budget: ½·Δa·T² for the correction duration T (eq. 13), or the radar's when
+    smaller [m]."""
     readhered: bool
     failsafe: bool
-    detail: dict[str, Any] = field(default_factory=dict)
+    """Still correcting after ``max_correction_s``: the position becomes uncertain."""
+    criterion: DetectionCriterion = field(kw_only=True)
+    start_found: bool = field(kw_only=True)
+    """A jerk-quiet start point was found (else the look-back point is used)."""
+    theta0_rad: float = field(kw_only=True)
+    """Pitch at the start point: the gradient climbed in the travel direction [rad]."""
+    v0_mps: float = field(kw_only=True)
+    """Speed at the start point [m/s]."""
+    truncated: bool = field(default=False, kw_only=True)
+    """The data ended before re-adhesion or fail-safe (the speed is held to the end)."""
+    speed_source: SpeedSource = field(default="inertial", kw_only=True)
+    speed_update_m: float = field(default=0.0, kw_only=True)
+    """Distance the re-adhesion speed update moved the correction (0 when not applied:
+    switched off, no re-adhesion, or the radar's speed used) [m]."""
+    watch: FailsafeWatch | None = field(default=None, kw_only=True)
+    """The fail-safe watch (fail-safe episodes, when enabled)."""
+
+    @property
+    def duration_s(self) -> float:
+        """Correction duration T [s]."""
+        return self.t_end - self.t_start
+
+    def event_detail(self) -> dict[str, Any]:
+        """The ``detail`` of the episode's slip/slide event (public fields only)."""
+        out: dict[str, Any] = {
+            "t_detect": self.t_detect,
+            "t_end": self.t_end,
+            "duration_s": self.duration_s,
+            "d_pulse_m": self.d_pulse_m,
+            "d_corrected_m": self.d_corrected_m,
+            "max_error_m": self.max_error_m,
+            "readhered": self.readhered,
+            "failsafe": self.failsafe,
+            "truncated": self.truncated,
+            "criterion": self.criterion,
+            "start_found": self.start_found,
+            "theta0_rad": self.theta0_rad,
+            "v0_mps": self.v0_mps,
+            "speed_source": self.speed_source,
+            "speed_update_m": self.speed_update_m,
+        }
+        if self.watch is not None:
+            out.update(
+                watch_end_t=self.watch.end_t,
+                watch_allowance_m=self.watch.allowance_m,
+                watch_readhered=self.watch.readhered,
+                watch_speed_source=self.watch.speed_source,
+            )
+        return out
 
 
 @dataclass
@@ -52,6 +131,9 @@ class Odometry:
     allowance: FloatArray
     """Cumulative error allowance of all corrections so far [m] (for the margin)."""
     episodes: list[SlipEpisode] = field(default_factory=list)
+    diagnostics: OdometryDiagnostics | None = field(default=None, repr=False)
+    """Algorithm internals for tests and bench scripts (None without inertial correction);
+    never part of the pipeline's outputs."""
 
 
 @dataclass

@@ -170,7 +170,9 @@ def test_c_balise_outside_window_is_an_anomaly(net) -> None:
 
 def test_margin_grows_2_percent_and_failsafe_makes_uncertain(net) -> None:
     c, odo = cycles_const(10.0, 60.0)
-    odo.episodes.append(SlipEpisode("slip", 39.0, 30.0, 40.0, 300, 400, 100.0, 100.0, 22.8, False, True))
+    ep = SlipEpisode("slip", 39.0, 30.0, 40.0, 300, 400, 100.0, 100.0, 22.8, False, True,
+                     criterion="ta", start_found=True, theta0_rad=0.0, v0_mps=10.0)  # fmt: skip
+    odo.episodes.append(ep)
     sol = run(net, tel([(10.0, "I1", "0900", None, None, None), (10.5, "I2", None, "01", "D", None)]), c, odo)
     pos = sol.positions.set_index(sol.positions.t.round(1))
     assert pos.loc[30.5, "margin_m"] == pytest.approx(CFG.balise.fix_uncertainty_m + 0.02 * 200.0)

@@ -19,8 +19,15 @@ from hypothesis import strategies as st
 
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles, cycle_means
-from fieldlogs.pipeline.odometry import _Streams, correct_odometry
-from fieldlogs.pipeline.types import Odometry, slip_budget_m
+from fieldlogs.pipeline.odometry import (
+    AlignedStreams,
+    Detections,
+    EpisodeDiagnostics,
+    align_streams,
+    correct_odometry,
+    detect,
+)
+from fieldlogs.pipeline.types import Odometry, SlipEpisode, slip_budget_m
 from schemas.units import G, kmh_s_to_mps2
 
 Q = np.pi * 0.86 / 90  # metres per pulse
@@ -123,8 +130,14 @@ def assert_odometry_sane(odo: Odometry, sc: Scenario) -> None:
         after = slice(ep.i_end, nxt + 1)
         # after the episode the distance follows the pulses with a constant offset
         off = odo.d[after] - sc.cycles.d_pulse[after]
-        if not ep.detail["truncated"]:
+        if not ep.truncated:
             np.testing.assert_allclose(off, off[0], atol=1e-9)
+
+
+def internals(odo: Odometry, ep: SlipEpisode) -> EpisodeDiagnostics:
+    """The algorithm internals of episode ``ep`` of ``odo``."""
+    assert odo.diagnostics is not None
+    return odo.diagnostics.episodes[odo.episodes.index(ep)]
 
 
 def episode_error(odo: Odometry, sc: Scenario) -> tuple[float, float, float]:
@@ -145,14 +158,14 @@ def test_slip_while_accelerating_level() -> None:
     (ep,) = odo.episodes
     assert ep.kind == "slip"
     assert 0.0 < ep.t_detect - onset < 1.0  # 0.3 s pulse delay + filter response
-    assert ep.detail["start_found"]
+    assert ep.start_found
     assert ep.t_start < onset - 0.5  # look-back lands before the onset (pulses still adhering)
     assert ep.readhered and not ep.failsafe
     assert ep.t_end > onset + 4.0
     err, err_pulse, true = episode_error(odo, sc)
     assert abs(err) < 0.02
     assert err_pulse > 0.05  # what the correction removed
-    assert abs(ep.detail["theta0_rad"]) < 0.002
+    assert abs(ep.theta0_rad) < 0.002
     # from the end on the allowance is the eq. 13 budget of the actual duration
     T = ep.t_end - ep.t_start
     assert odo.allowance[ep.i_end :] == pytest.approx(0.5 * CFG.delta_a_mps2 * T**2)
@@ -185,8 +198,8 @@ def test_slip_on_25_permil_gradient() -> None:
     assert_odometry_sane(odo, sc)
     (ep,) = odo.episodes
     assert ep.kind == "slip"
-    assert ep.detail["theta0_rad"] == pytest.approx(grade, abs=0.002)
-    assert ep.detail["theta_end_rad"] == pytest.approx(grade, abs=0.002)
+    assert ep.theta0_rad == pytest.approx(grade, abs=0.002)
+    assert internals(odo, ep).theta_end_rad == pytest.approx(grade, abs=0.002)
     err, _, true = episode_error(odo, sc)
     assert abs(err) < 0.02
     # without the gravity term (θ = 0) the error would be ½·G·sinθ·T², far outside 2 %
@@ -218,9 +231,9 @@ def test_slip_in_canted_curve_keeps_pitch() -> None:
     assert ep.readhered
     assert ep.t_start < 15.0 < ep.t_end  # the correction spans the transition into the curve
     assert sc.psi[ep.i_start] < -0.01  # ... and starts inside it
-    assert ep.detail["psi0_rad"] == pytest.approx(sc.psi[ep.i_start], abs=0.003)  # eq. 11
-    assert ep.detail["theta0_rad"] == pytest.approx(grade, abs=0.002)
-    assert ep.detail["theta_end_rad"] == pytest.approx(grade, abs=0.002)
+    assert internals(odo, ep).psi0_rad == pytest.approx(sc.psi[ep.i_start], abs=0.003)  # eq. 11
+    assert ep.theta0_rad == pytest.approx(grade, abs=0.002)
+    assert internals(odo, ep).theta_end_rad == pytest.approx(grade, abs=0.002)
     err, _, _ = episode_error(odo, sc)
     assert abs(err) < 0.01
 
@@ -235,7 +248,7 @@ def test_reversed_running_gives_the_same_result() -> None:
     assert_odometry_sane(odo_r, rev)
     (ep,) = odo_r.episodes
     assert ep.kind == "slip" and ep.readhered
-    assert ep.detail["theta0_rad"] == pytest.approx(np.arctan(0.015), abs=0.002)
+    assert ep.theta0_rad == pytest.approx(np.arctan(0.015), abs=0.002)
     np.testing.assert_allclose(odo_r.d, odo_f.d, atol=1e-9)
     err, _, _ = episode_error(odo_r, rev)
     assert abs(err) < 0.02
@@ -283,7 +296,7 @@ def test_second_slip_right_after_failsafe_is_not_corrected_from_a_slipping_start
     assert_odometry_sane(odo, sc)
     (ep,) = odo.episodes
     assert ep.failsafe
-    assert len(ep.detail["redetect_t"]) >= 2
+    assert len(internals(odo, ep).redetect_t) >= 2
     # the distance error is what the pulses slipped after the fail-safe, nothing worse
     pulse_excess_after = (sc.cycles.d_pulse[-1] - sc.cycles.d_pulse[ep.i_end]) - (sc.s_true[-1] - sc.s_true[ep.i_end])
     err_at_end = odo.d[ep.i_end] - sc.s_true[ep.i_end]
@@ -299,8 +312,12 @@ def test_eq13_budget_at_10_s() -> None:
 # --------------------------------------------------------------------------- second criterion
 
 
-def streams(sc: Scenario, cfg: OdometryConfig = CFG) -> _Streams:
-    return _Streams(sc.cycles, cfg, sc.cycles.d_pulse, sc.cycles.v_pulse)
+def streams(sc: Scenario, cfg: OdometryConfig = CFG) -> AlignedStreams:
+    return align_streams(sc.cycles, cfg)
+
+
+def detections(sc: Scenario, cfg: OdometryConfig = CFG) -> Detections:
+    return detect(align_streams(sc.cycles, cfg), cfg)
 
 
 THR = kmh_s_to_mps2(CFG.residual_threshold_kmh_s)  # 0.125 m/s²
@@ -319,13 +336,13 @@ def test_shallow_slip_below_ta_found_by_the_residual(accel: float, v0: float, fa
     sc = scenario(50.0, const(accel), v0, slip=slip_pulse(onset, dur, factor, edge=1.0), ax_noise_kmh_s=0.1)
     s = streams(sc)
     assert np.nanmax(np.abs(s.diff[s.warm :])) < CFG.ta_mps2  # invisible to the SPEC criterion
-    assert 1.5 * THR < np.nanmax(np.abs(s.res)) < CFG.ta_mps2
+    assert 1.5 * THR < np.nanmax(np.abs(detections(sc).residual)) < CFG.ta_mps2
     assert correct_odometry(sc.cycles, replace(CFG, residual_threshold_kmh_s=0.0)).episodes == []
     odo = correct_odometry(sc.cycles, CFG)
     assert_odometry_sane(odo, sc)
     (ep,) = odo.episodes
-    assert ep.kind == kind and ep.detail["criterion"] == "residual"
-    assert np.sign(ep.detail["residual_at_detect_kmh_s"]) == (-1 if kind == "slip" else 1)
+    assert ep.kind == kind and ep.criterion == "residual"
+    assert np.sign(internals(odo, ep).residual_at_detect_kmh_s) == (-1 if kind == "slip" else 1)
     assert 0.0 < ep.t_detect - onset < 1.8
     assert ep.t_start < onset and ep.readhered and not ep.failsafe
     assert onset + dur <= ep.t_end < onset + dur + 2.0  # not before the wheel re-adheres
@@ -346,10 +363,10 @@ def test_residual_quiet_over_a_vertical_curve_onto_25_permil() -> None:
         return 0.4 * ramp(t, 10, 12) - 0.4 * ramp(t, 24, 26) - 0.5 * ramp(t, 40, 42)
 
     sc = scenario(60.0, accel, 10.0, theta=lambda t: np.arctan(0.025 * ramp(t, 20, 25)), ax_noise_kmh_s=0.1)
-    s = streams(sc)
-    h = s.H
+    s, d = streams(sc), detections(sc)
+    h = d.horizon
     assert np.nanmax(np.abs(s.diff[h:] - s.diff[:-h])[s.warm :]) > 1.4 * THR  # the grade is in a_x − A_p
-    assert np.nanmax(np.abs(s.res)) < 0.4 * THR
+    assert np.nanmax(np.abs(d.residual)) < 0.4 * THR
     assert correct_odometry(sc.cycles, CFG).episodes == []
 
 
@@ -368,11 +385,11 @@ def test_residual_quiet_in_a_canted_curve() -> None:
         yaw_rate=lambda t: v0 / 300.0 * ramp(t, 20, 26),
         ax_noise_kmh_s=0.1,
     )
-    s = streams(sc)
+    d = detections(sc)
     wy = sc.cycles.imu["wy"]
-    naive = G * np.abs(np.convolve(-wy * 0.1, np.ones(s.H), "valid")).max()  # ∫ −wy over 4 s
+    naive = G * np.abs(np.convolve(-wy * 0.1, np.ones(d.horizon), "valid")).max()  # ∫ −wy over 4 s
     assert naive > 2.0 * THR
-    assert np.nanmax(np.abs(s.res)) < 0.4 * THR
+    assert np.nanmax(np.abs(d.residual)) < 0.4 * THR
     assert correct_odometry(sc.cycles, CFG).episodes == []
 
 
@@ -383,13 +400,13 @@ def test_short_shallow_slip_seen_only_at_its_end_starts_before_it() -> None:
     the detection (that start point would lie after the slip), and the kind is a slip."""
     onset, dur = 20.0, 2.0
     sc = scenario(45.0, const(0.1), 1.0, slip=slip_pulse(onset, dur, 0.1, edge=0.7), ax_noise_kmh_s=0.1)
-    s = streams(sc)
+    d = detections(sc)
     on = slice(round(onset / 0.1), round((onset + 2.5) / 0.1))
-    assert -THR < np.nanmin(s.res[on]) < -0.5 * THR  # the onset lobe: seen, not detected
+    assert -THR < np.nanmin(d.residual[on]) < -0.5 * THR  # the onset lobe: seen, not detected
     odo = correct_odometry(sc.cycles, CFG)
     assert_odometry_sane(odo, sc)
     (ep,) = odo.episodes
-    assert ep.detail["criterion"] == "residual-end" and ep.kind == "slip"
+    assert ep.criterion == "residual-end" and ep.kind == "slip"
     assert ep.t_detect > onset + dur + 1.0
     assert ep.t_start < onset and ep.readhered
     err, _, _ = episode_error(odo, sc)
@@ -404,11 +421,11 @@ def test_gyro_bias_is_estimated_and_removed() -> None:
     sc = scenario(60.0, const(0.3), 3.0, slip=slip_pulse(onset, 6.0, 0.3), ax_noise_kmh_s=0.1)
     sc.cycles.imu["wy"] = sc.cycles.imu["wy"] + 0.002
     before = slice(0, round(onset / 0.1))
-    assert np.nanmax(np.abs(streams(sc).res[before])) < 0.4 * THR  # G·b·H = 0.08 m/s² uncorrected
+    assert np.nanmax(np.abs(detections(sc).residual[before])) < 0.4 * THR  # G·b·H = 0.08 m/s² uncorrected
     odo = correct_odometry(sc.cycles, CFG)
     assert_odometry_sane(odo, sc)
     (ep,) = odo.episodes
-    assert ep.detail["gyro_bias_rad_s"] == pytest.approx(-0.002, abs=2e-4)  # θ̇ = −wy + …
+    assert internals(odo, ep).gyro_bias_rad_s == pytest.approx(-0.002, abs=2e-4)  # θ̇ = −wy + …
     assert ep.readhered
     err, _, _ = episode_error(odo, sc)
     assert abs(err) < 0.01
@@ -429,9 +446,9 @@ def test_pulse_delay_is_found_from_the_run(lag_s: float, cycles: int) -> None:
     K·(a_x − A_p) as delay error × jerk (0.3 s × 0.6 m/s³ → ≈ 0.06 m/s² after K)."""
     sc = scenario(120.0, _jerky, 0.5, imu_lag_s=lag_s, ax_noise_kmh_s=0.1, seed=3)
     s = streams(sc)
-    assert s.D == cycles
+    assert s.delay == cycles
     spec = streams(sc, replace(CFG, pulse_delay_search_cycles=0))
-    assert spec.D == 3
+    assert spec.delay == 3
     quiet = np.nanmax(np.abs(s.diff[s.warm + 6 :]))
     assert quiet < 0.035
     if cycles != 3:
@@ -441,7 +458,7 @@ def test_pulse_delay_is_found_from_the_run(lag_s: float, cycles: int) -> None:
 def test_pulse_delay_stays_without_jerk() -> None:
     """Constant acceleration: no jerk, no evidence about the delay — the SPEC value stays."""
     sc = scenario(120.0, const(0.3), 5.0, imu_lag_s=0.0, ax_noise_kmh_s=0.1)
-    assert streams(sc).D == CFG.pulse_delay_cycles
+    assert streams(sc).delay == CFG.pulse_delay_cycles
 
 
 # --------------------------------------------------------------------------- re-adhesion
@@ -474,8 +491,8 @@ def test_filter_echo_after_readhesion_is_not_a_new_episode() -> None:
     odo = correct_odometry(sc.cycles, cfg)
     assert_odometry_sane(odo, sc)
     (ep,) = odo.episodes
-    assert ep.detail["echo_t"] and not ep.detail["redetect_t"]
-    assert ep.readhered and ep.t_end < ep.detail["echo_t"][0] < onset + dur + 3.0
+    assert internals(odo, ep).echo_t and not internals(odo, ep).redetect_t
+    assert ep.readhered and ep.t_end < internals(odo, ep).echo_t[0] < onset + dur + 3.0
     err, _, _ = episode_error(odo, sc)
     assert abs(err) < 0.01
 
@@ -563,7 +580,7 @@ def test_radar_bridges_the_episode_with_ground_speed() -> None:
     plain = correct_odometry(sc.cycles, CFG)
     odo = correct_odometry(sc.cycles, CFG, radar)
     (ep,) = odo.episodes
-    assert ep.detail["speed_source"] == "radar"
+    assert ep.speed_source == "radar"
     assert (ep.t_start, ep.t_end) == (plain.episodes[0].t_start, plain.episodes[0].t_end)
     err, _, _ = episode_error(odo, sc)
     assert abs(err) < 0.005
@@ -571,4 +588,4 @@ def test_radar_bridges_the_episode_with_ground_speed() -> None:
     assert ep.max_error_m < plain.episodes[0].max_error_m
     # a radar gap inside the episode: the inertial solution is used
     radar[ep.i_start + 5] = np.nan
-    assert correct_odometry(sc.cycles, CFG, radar).episodes[0].detail["speed_source"] == "inertial"
+    assert correct_odometry(sc.cycles, CFG, radar).episodes[0].speed_source == "inertial"

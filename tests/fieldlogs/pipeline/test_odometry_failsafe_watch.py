@@ -1,4 +1,4 @@
-"""Fail-safe watch and the residual's lobe rule (odometry module docstring).
+"""Fail-safe watch and the residual's lobe rule (``odometry.watch``, ``odometry.start_point``).
 
 Scenarios from ``test_odometry`` (exact 100 Hz kinematics, 3 cm pulses). A slide longer
 than the maximum correction time fails safe with the wheel still sliding; from then on the
@@ -15,10 +15,12 @@ import pytest
 
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.odometry import LOBE_RATIO, correct_odometry
+from fieldlogs.pipeline.odometry.start_point import lobe
 from tests.fieldlogs.pipeline.test_odometry import (
     THR,
     assert_odometry_sane,
     const,
+    detections,
     ramp,
     scenario,
     slip_pulse,
@@ -39,20 +41,21 @@ def test_allowance_covers_the_pulses_sliding_on_after_the_failsafe() -> None:
     assert_odometry_sane(odo, sc)
     ep = odo.episodes[0]
     assert ep.failsafe and ep.t_end < 30.0  # the slide lasts until 30 s
-    d = ep.detail
-    assert d["watch_readhered"] and d["watch_speed_source"] == "inertial"
-    assert 30.0 < d["watch_end_t"] < 33.0  # the speeds agree again soon after the slide
+    d = ep.watch
+    assert d is not None
+    assert d.readhered and d.speed_source == "inertial"
+    assert 30.0 < d.end_t < 33.0  # the speeds agree again soon after the slide
     err = np.abs(odo.d - sc.s_true)
     after = slice(ep.i_end, None)
     assert (err[after] <= odo.allowance[after]).all()
     # the pulses lost ≈ 0.3 × 18 m/s × 5 s after the fail-safe: the watch gave at least that
     lost = (sc.s_true[-1] - sc.s_true[ep.i_end]) - (sc.cycles.d_pulse[-1] - sc.cycles.d_pulse[ep.i_end])
     assert lost > 15.0
-    assert d["watch_allowance_m"] >= lost
-    assert odo.allowance[-1] == pytest.approx(ep.max_error_m + d["watch_allowance_m"])
+    assert d.allowance_m >= lost
+    assert odo.allowance[-1] == pytest.approx(ep.max_error_m + d.allowance_m)
     # without the watch the allowance stops at eq. 13's budget and the error outgrows it
     off = correct_odometry(sc.cycles, replace(CFG, failsafe_watch_s=0.0))
-    assert "watch_end_t" not in off.episodes[0].detail
+    assert off.episodes[0].watch is None
     assert (np.abs(off.d - sc.s_true) > off.allowance).any()
 
 
@@ -63,13 +66,14 @@ def test_watch_after_a_slide_ending_with_the_failsafe_is_short() -> None:
     odo = correct_odometry(sc.cycles, CFG)
     ep = odo.episodes[0]
     assert ep.failsafe
-    d = ep.detail
-    assert d["watch_readhered"]
-    watch_s = d["watch_end_t"] - ep.t_end
+    d = ep.watch
+    assert d is not None
+    assert d.readhered
+    watch_s = d.end_t - ep.t_end
     assert 1.0 <= watch_s <= 3.0
     rate = CFG.delta_a_mps2 * CFG.max_correction_s  # 4.6 m/s at 10 s from the start point
     # plus the rest of the slide (≈ 0.3 × 12 m/s over its last ~0.6 s) and its 1 s mean
-    assert rate * watch_s <= d["watch_allowance_m"] <= rate * watch_s + 0.5 * CFG.delta_a_mps2 * watch_s**2 + 5.0
+    assert rate * watch_s <= d.allowance_m <= rate * watch_s + 0.5 * CFG.delta_a_mps2 * watch_s**2 + 5.0
 
 
 def test_radar_watch_uses_the_radar_speed() -> None:
@@ -78,10 +82,12 @@ def test_radar_watch_uses_the_radar_speed() -> None:
     radar = sc.v_true * (1.0 + 0.005 * rng.standard_normal(sc.v_true.size))
     odo = correct_odometry(sc.cycles, CFG, radar)
     ep = odo.episodes[0]
-    assert ep.failsafe and ep.detail["watch_speed_source"] == "radar"
-    plain = correct_odometry(sc.cycles, CFG).episodes[0].detail["watch_allowance_m"]
+    assert ep.failsafe and ep.watch is not None and ep.watch.speed_source == "radar"
+    plain_watch = correct_odometry(sc.cycles, CFG).episodes[0].watch
+    assert plain_watch is not None
+    plain = plain_watch.allowance_m
     # the radar does not drift: the watch adds the pulse loss and 1 %, not Δa·t
-    assert ep.detail["watch_allowance_m"] < 0.6 * plain
+    assert ep.watch.allowance_m < 0.6 * plain
     err = np.abs(odo.d - sc.s_true)
     assert (err[ep.i_end :] <= odo.allowance[ep.i_end :]).all()
 
@@ -89,16 +95,15 @@ def test_radar_watch_uses_the_radar_speed() -> None:
 # --------------------------------------------------------------------------- lobe rule
 def lobes(end_peak: float) -> str:
     """Residual: noise-free zero, an opposite (negative) lobe of −0.7·THR over 10–12 s, the
-    detected positive lobe from 15 s peaking at ``end_peak``·THR; the criterion ``_lobe``
+    detected positive lobe from 15 s peaking at ``end_peak``·THR; the criterion ``lobe``
     gives for the detection at its threshold crossing."""
     sc = scenario(30.0, const(0.0), 10.0)
-    s = streams(sc)
+    s, d = streams(sc), detections(sc)
     t = sc.cycles.t
     res = -0.7 * THR * (ramp(t, 10.0, 10.5) - ramp(t, 11.5, 12.0))
     res += end_peak * THR * (ramp(t, 15.0, 16.0) - ramp(t, 17.0, 18.0))
-    s.res = res
     det = int(np.flatnonzero(res > THR)[0])
-    crit, ref = s._lobe(det)
+    crit, ref = lobe(res, det, d.horizon, s.filters.M, THR)
     if crit == "residual-end":
         assert 10.2 <= t[ref] <= 10.45  # the look-back counts from the onset lobe beyond half THR
     return crit

@@ -1,4 +1,4 @@
-"""Re-adhesion speed update of the slip correction (odometry module docstring).
+"""Re-adhesion speed update of the slip correction (``odometry.episodes`` docstring).
 
 The scenarios are those of ``test_odometry`` (exact 100 Hz kinematics, 3 cm pulses). A known
 inertial error is injected by hand: from the slip's onset on the accelerometer reads
@@ -23,6 +23,7 @@ from tests.fieldlogs.pipeline.test_odometry import (
     Scenario,
     assert_odometry_sane,
     const,
+    internals,
     ramp,
     scenario,
     slip_pulse,
@@ -45,7 +46,8 @@ def _low_speed_slip(c: float) -> Scenario:
 
 def test_speed_update_removes_a_linear_speed_error() -> None:
     clean, sc = _low_speed_slip(0.0), _low_speed_slip(C)  # the same pulses
-    (r0,), (r1,) = correct_odometry(clean.cycles, OFF).episodes, correct_odometry(clean.cycles, ON).episodes
+    clean_off, clean_on = correct_odometry(clean.cycles, OFF), correct_odometry(clean.cycles, ON)
+    (r0,), (r1,) = clean_off.episodes, clean_on.episodes
     off, on = correct_odometry(sc.cycles, OFF), correct_odometry(sc.cycles, ON)
     assert_odometry_sane(on, sc)
     (e0,), (e1,) = off.episodes, on.episodes
@@ -61,17 +63,17 @@ def test_speed_update_removes_a_linear_speed_error() -> None:
     # open loop, C adds ½·C·τ² to the distance (hand: 0.03/2 · 6.5² = 0.63 m of ≈ 34 m) …
     assert e0.d_corrected_m - r0.d_corrected_m == pytest.approx(0.5 * C * tau**2, abs=0.02)
     # … and C·(τ − 0.45 s) to δ, the 1 s means' difference at re-adhesion
-    delta = e1.detail["end_speed_error_mps"]
-    assert delta == e0.detail["end_speed_error_mps"]
-    assert delta - r1.detail["end_speed_error_mps"] == pytest.approx(C * (tau - 0.45), abs=0.005)
-    assert e0.detail["speed_update_m"] == 0.0
+    delta = internals(on, e1).end_speed_error_mps
+    assert delta == internals(off, e0).end_speed_error_mps
+    assert delta - internals(clean_on, r1).end_speed_error_mps == pytest.approx(C * (tau - 0.45), abs=0.005)
+    assert e0.speed_update_m == 0.0
 
     # the ramp δ·(t − t0)/T: distance −δ·Σ_k k·0.01/T = −δ·0.05·(m + 1), the end speed δ lower
-    assert e1.detail["speed_update_m"] == pytest.approx(-delta * 0.05 * (m + 1), rel=1e-9)
-    assert e1.d_corrected_m - e0.d_corrected_m == pytest.approx(e1.detail["speed_update_m"], abs=1e-9)
+    assert e1.speed_update_m == pytest.approx(-delta * 0.05 * (m + 1), rel=1e-9)
+    assert e1.d_corrected_m - e0.d_corrected_m == pytest.approx(e1.speed_update_m, abs=1e-9)
     assert on.v[e] == pytest.approx(off.v[e] - delta, abs=1e-9)
     assert on.v[s + 1] == pytest.approx(off.v[s + 1] - delta * 0.1 / T, abs=1e-9)
-    assert on.d[-1] - off.d[-1] == pytest.approx(e1.detail["speed_update_m"], abs=1e-9)
+    assert on.d[-1] - off.d[-1] == pytest.approx(e1.speed_update_m, abs=1e-9)
 
     # closed: C's part left is ½·C·τ² − C·(τ − 0.45)·0.05·(m + 1) (hand: 0.63 − 0.69 m)
     left = e1.d_corrected_m - r1.d_corrected_m
@@ -81,7 +83,7 @@ def test_speed_update_removes_a_linear_speed_error() -> None:
     assert abs(e1.d_corrected_m - true) < 0.005 * true < abs(e0.d_corrected_m - true)
     # bounded by the re-adhesion tolerance, whatever the cause of δ
     bound = (ON.readhesion_tol_kmh / 3.6 + ON.beta_mps2 * T) * 0.05 * (m + 1)
-    assert abs(e1.detail["speed_update_m"]) <= bound
+    assert abs(e1.speed_update_m) <= bound
 
 
 def test_no_speed_update_without_an_adhering_end() -> None:
@@ -91,8 +93,8 @@ def test_no_speed_update_without_an_adhering_end() -> None:
     on, off = correct_odometry(sc.cycles, ON), correct_odometry(sc.cycles, OFF)
     ep = on.episodes[0]
     assert ep.failsafe and not ep.readhered
-    assert ep.detail["end_speed_error_mps"] is None
-    assert ep.detail["speed_update_m"] == 0.0
+    assert internals(on, ep).end_speed_error_mps is None
+    assert ep.speed_update_m == 0.0
     np.testing.assert_array_equal(on.d, off.d)
 
 
@@ -104,7 +106,7 @@ def test_speed_update_leaves_an_exact_correction_alone() -> None:
     (ep,) = on.episodes
     assert ep.readhered
     T = ep.t_end - ep.t_start
-    assert abs(ep.detail["end_speed_error_mps"]) <= 0.035
-    assert abs(ep.detail["speed_update_m"]) <= 0.035 * (T / 2 + 0.05)
+    assert abs(internals(on, ep).end_speed_error_mps) <= 0.035
+    assert abs(ep.speed_update_m) <= 0.035 * (T / 2 + 0.05)
     true = sc.s_true[ep.i_end] - sc.s_true[ep.i_start]
     assert abs(ep.d_corrected_m - true) < 0.005 * true

@@ -1,0 +1,123 @@
+"""Slip/slide detection and inertial correction of the pulse odometry [S000 §3.1, SPEC §5.1].
+
+``correct_odometry`` runs five pure stages on the 100 ms cycle arrays of :class:`Cycles`;
+each is a function of the previous stages' frozen results and the config:
+
+1. :func:`~.streams.align_streams` → :class:`~.streams.AlignedStreams`: travel frame,
+   pulse delay (searched), the filter K on a_x and A_p, the gyro pitch u.
+2. :func:`~.detection.detect` → :class:`~.detection.Detections`: eq. 1, the gyro bias,
+   the grade-compensated residual, onsets, the start-point condition.
+3. :func:`~.episodes.find_episodes` → :class:`~.episodes.Episode` records: start point
+   (:mod:`.start_point`), attitude at i0 and integration (:mod:`.integration`),
+   re-adhesion, speed update, re-opening and echoes.
+4. :func:`~.watch.watch_failsafes` → :class:`~.watch.Watch` per fail-safe episode.
+5. :func:`~.assembly.assemble` → :class:`Odometry` (d, v, slipping, allowance, the public
+   :class:`SlipEpisode` list, and ``diagnostics`` — the internals, for tests and bench).
+
+Detection, jerks, smoothing and the start-point search are vectorised over the whole run;
+only the (rare) episodes are visited in a Python loop, each integrated with ``np.cumsum``
+over at most ``max_correction_s`` + ``failsafe_watch_s`` of cycles.
+
+Frames
+    Travel frame: x along travel, y left, z up (SPEC §4.1), the body frame turned 180°
+    about z when the cab is reversed (``ax, ay, wx, wy`` change sign). Pitch θ nose-up in
+    the travel direction (the gradient climbed), roll ψ positive with the left side up.
+    Aligned index k holds pulse and IMU data of the same instant (pulses delayed D
+    cycles); outputs are on the cycle grid of ``cycles.t``.
+
+Equations (where they are computed)
+    * eq. 1 detection |a_x − A_p| > Ta — :mod:`.detection`;
+    * eq. 3 pitch θ0 = arcsin((a_x0 − A_p0)/G) and eq. 11 roll ψ0 =
+      arctan((a_y0 − v0·ω_z0)/a_z0) at the start point — :mod:`.integration`;
+    * eqs. 4, 5/12, 6 attitude: θ = θ0 + ∫θ̇ dt with θ̇ = −wy·cosψ + wz·sinψ (eq. 12 in this
+      frame), ψ = ψ0 + ∫ω_x dt — :mod:`.integration` (and over the whole run in
+      :mod:`.streams`);
+    * eq. 2 correction A_x = a_x − G·sinθ, integrated to speed and distance —
+      :mod:`.integration`, :mod:`.assembly`;
+    * eq. 13 error budget Δd = ½·Δa·t² — :mod:`.assembly` (``slip_budget_m``).
+
+Where the code departs from the papers (each module says why; measurements in
+bench/NOTES.md, "Odometry")
+    * eq. 12's third term −k·ω_x·sinψ is left out: it has no counterpart in rigid-body
+      kinematics (an empirical term of the papers' installation).
+    * Re-adhesion: the 1 s mean inertial and pulse speeds agreeing within ε + β·t for
+      ``readhesion_hold_s``, instead of the per-cycle pulse speed within β·t and
+      |a_x − A_p| ≤ Ta, which both fail for shallow slips.
+    * A second, grade-compensated residual criterion finds the shallow slips that Ta (which
+      must exceed the steepest gradient's G·sinθ) cannot.
+    * The pulse delay is searched in the run (the residual needs the true delay, the SPEC's
+      300 ms is only the installation value); a 1 s mean precedes the 3 s moving average
+      (pulse quantisation).
+    * The gyro pitch-rate bias is estimated while adhering and removed (the main error of
+      long corrections otherwise).
+    * The re-adhesion speed update closes each re-adhered correction on the measured speed
+      difference.
+    * The fail-safe watch keeps the margin growing while the wheel may still be slipping
+      after a fail-safe.
+    * θ0 uses a least-squares A_p0 over the filter window (pulse quantisation), residual
+      detections have their own look-back point and the lobe rule.
+
+NaN policy: missing IMU cycles are bridged by linear interpolation for the integration; the
+moving averages use what exists; no detection where a smoothed value is missing; missing
+pulse distances and speeds count as 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fieldlogs.pipeline.config import OdometryConfig
+from fieldlogs.pipeline.cycles import Cycles
+from fieldlogs.pipeline.odometry.assembly import assemble
+from fieldlogs.pipeline.odometry.detection import BIAS_MIN_S, Detections, detect
+from fieldlogs.pipeline.odometry.diagnostics import EpisodeDiagnostics, OdometryDiagnostics
+from fieldlogs.pipeline.odometry.episodes import Episode, find_episodes
+from fieldlogs.pipeline.odometry.start_point import LOBE_RATIO, QUIET_MARGIN_S, QUIET_SHARE, SEARCH_SPAN_S
+from fieldlogs.pipeline.odometry.streams import SPEED_AVG_S, AlignedStreams, align_streams
+from fieldlogs.pipeline.odometry.watch import RADAR_ERROR_M, RADAR_ERROR_PCT, Watch, watch_failsafes
+from fieldlogs.pipeline.types import FloatArray, Odometry, SlipEpisode, pulse_only_odometry
+
+__all__ = [
+    "BIAS_MIN_S",
+    "LOBE_RATIO",
+    "QUIET_MARGIN_S",
+    "QUIET_SHARE",
+    "RADAR_ERROR_M",
+    "RADAR_ERROR_PCT",
+    "SEARCH_SPAN_S",
+    "SPEED_AVG_S",
+    "AlignedStreams",
+    "Detections",
+    "Episode",
+    "EpisodeDiagnostics",
+    "Odometry",
+    "OdometryDiagnostics",
+    "SlipEpisode",
+    "Watch",
+    "align_streams",
+    "assemble",
+    "correct_odometry",
+    "detect",
+    "find_episodes",
+    "watch_failsafes",
+]
+
+
+def correct_odometry(cycles: Cycles, cfg: OdometryConfig, radar_mps: FloatArray | None = None) -> Odometry:
+    """Pulse odometry with slip/slide episodes replaced by the inertial solution (SPEC §5.1).
+
+    ``radar_mps``: an independent ground speed on the cycle grid (2-frequency CW radar
+    [S004]; NaN where there is none). Detection is unchanged, but over an episode the
+    radar covers completely its speed replaces the inertial one: it does not drift, so the
+    episode's error budget is the radar's (1 % of the distance + 0.5 m) when smaller than
+    eq. 13's. Without IMU or tacho (or with fewer than 3 cycles): the pulse odometry.
+    """
+    if not cycles.has_imu or not cycles.has_tacho or cycles.n < 3:
+        d_pulse = np.nan_to_num(np.asarray(cycles.d_pulse, dtype=float), nan=0.0)
+        v_pulse = np.nan_to_num(np.asarray(cycles.v_pulse, dtype=float), nan=0.0)
+        return pulse_only_odometry(d_pulse, v_pulse)
+    streams = align_streams(cycles, cfg)
+    detections = detect(streams, cfg)
+    episodes = find_episodes(streams, detections, cfg)
+    watches = watch_failsafes(streams, cfg, episodes, radar_mps)
+    return assemble(streams, detections, cfg, episodes, watches, radar_mps)

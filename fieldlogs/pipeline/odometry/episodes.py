@@ -1,0 +1,242 @@
+"""Stage 3: the episodes — start point, inertial correction, re-adhesion, speed update.
+
+Each detection onset (stage 2), in time order, either opens an episode corrected from its
+start point (:mod:`~fieldlogs.pipeline.odometry.start_point`, integrated by
+:mod:`~fieldlogs.pipeline.odometry.integration`), or — too close to the previous one — is
+its echo, its re-opening or part of its fail-safe. The loop is a fold: each step is a pure
+function of the episodes so far and the onset.
+
+Re-adhesion
+    Departure from the SPEC (per-cycle pulse speed within β·t of the inertial speed and
+    |a_x − A_p| ≤ Ta), which fails for shallow slips: |a_x − A_p| never exceeds Ta there,
+    and a loose β·t lets a few tenths of a m/s of speed excess "re-adhere" while still
+    slipping. Here: the first cycle after the detection at which the 1 s mean inertial
+    speed and the 1 s mean pulse speed ``vp1`` have agreed within ``readhesion_tol_kmh`` +
+    β·(t − t0) for ``readhesion_hold_s``. The 1 s means are quiet to ±0.03 m/s, so the
+    tolerance can follow the inertial error: 0.1 m/s (quantisation, and wheel wear up to
+    0.5 % of v0) + 0.15 km/h/s·t. Holding 1 s stands in for the acceleration condition (a
+    crossing of the two speeds does not hold), without the 3.9 s filter's lag
+    (measurements: bench/NOTES.md, "Odometry"). From there the distance continues on the
+    pulses with a constant offset (continuous, never decreasing). A correction still
+    running ``max_correction_s`` after i0 ends there as a *fail-safe* episode: the distance
+    continues on the pulses and the solver makes the position uncertain. A correction
+    whose data end first is *truncated*.
+
+Re-opening and echoes
+    A new start point needs ``lookback_s`` of room after the previous episode's end ie (after
+    a fail-safe also a full filter window and the fail-safe watch, so that θ0 and v0 come
+    from data of after the disturbance). A detection without that room is
+    * after a re-adhesion, with the speeds agreeing ever since: the filters' echo of the
+      slip's end — ignored (``echo_t``);
+    * after a re-adhesion otherwise: proof that the re-adhesion was premature — the
+      previous correction is re-opened and continues from its own start point;
+    * after a fail-safe: still the same disturbance — ignored, the distance stays on the
+      pulses (the position is uncertain anyway) (``redetect_t``).
+    A residual onset whose reference u(k − H) lies within the previous episode (or its
+    fail-safe watch) is ignored: the residual then compares with slipping pulses. A
+    correction lasts ≈ look-back 1–2 s + slip + 1.2 s, so slips longer than ≈ 7.5 s end as
+    fail-safe.
+
+Re-adhesion speed update (``readhesion_speed_update``)
+    Not in the papers. Once re-adhered the wheel measures the ground speed again, so the
+    difference δ of the 1 s mean inertial and pulse speeds at ie is the inertial speed
+    error accumulated since i0 (known to ±0.03 m/s: one pulse per second), and the
+    correction, retroactive anyway, is closed on it: δ·(t − t0)/T is subtracted from the
+    inertial speed (a ramp from 0 at i0, where the speed came from adhering pulses, to δ at
+    ie, T = t_ie − t0), which changes the episode distance by −½·δ·T (exactly
+    −δ·Σ_k (t_k − t0)·dt_k / T over the cycles of the correction). Why: the inertial errors
+    grow with time, the episode distance with speed, so a long correction at low speed is
+    off by a few per cent although its speed ends only 0.2–0.3 m/s off. A linear ramp is
+    the conditional mean of the distance error given δ when the error is a constant
+    acceleration error (θ0, accelerometer bias change: ½·δ·T); a residual gyro bias gives
+    ⅓·δ·T, an angle random walk ⅜·δ·T, a v0 error δ·T: the ramp sits in the middle
+    (measurements: bench/NOTES.md, "Odometry"). Bounded: by the re-adhesion condition
+    |δ| ≤ ``readhesion_tol_kmh`` + β·T, so a re-adhesion declared on a still slightly
+    slipping wheel moves the distance by at most (0.1 + 0.042·T)·T/2 m (2.6 m at 10 s,
+    against eq. 13's 22.8 m, which stays the allowance). Scale: v0 and the pulse speed at
+    ie both carry the wheel's diameter error (wear), so the update closes the correction in
+    the pulses' scale, that of the rest of the odometry (the solver's correction
+    percentage removes it); the inertial increments alone are in true scale. Fail-safe and
+    truncated episodes (no re-adhesion) and radar-bridged ones keep their speeds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from fieldlogs.pipeline.config import OdometryConfig
+from fieldlogs.pipeline.odometry.detection import Detections
+from fieldlogs.pipeline.odometry.integration import Integration, integrate
+from fieldlogs.pipeline.odometry.signals import BoolArray, held, ma, readonly
+from fieldlogs.pipeline.odometry.start_point import lookback_point, start_point
+from fieldlogs.pipeline.odometry.streams import AlignedStreams
+from fieldlogs.pipeline.odometry.watch import hold_cycles, readhesion_tolerance, watch_failsafe
+from fieldlogs.pipeline.types import DetectionCriterion, FloatArray, SlipKind
+
+
+@dataclass(frozen=True, eq=False)
+class Episode:
+    """One correction on the aligned cycles (index k ↔ output cycle k − delay)."""
+
+    kind: SlipKind
+    criterion: DetectionCriterion
+    i_detect: int
+    i_start: int
+    """Start point i0."""
+    i_end: int
+    """Re-adhesion, fail-safe or last cycle ie."""
+    i_settled: int
+    """End of the disturbance: ie, or the end of the fail-safe watch (without radar)."""
+    start_found: bool
+    readhered: bool
+    failsafe: bool
+    truncated: bool
+    """The data ended before re-adhesion or fail-safe."""
+    integration: Integration
+    agree: BoolArray
+    """The 1 s mean inertial and pulse speeds agree, cycles i0..i_lim."""
+    v_in: FloatArray
+    """Inertial speed on cycles i0..ie, after the speed update [m/s]."""
+    theta_end: float
+    """Pitch at ie [rad]."""
+    end_speed_error: float
+    """δ: 1 s mean inertial − pulse speed at re-adhesion (NaN when not re-adhered) [m/s]."""
+    speed_update_m: float
+    """Distance change by the re-adhesion speed update (0 when not applied) [m]."""
+    redetect_t: tuple[float, ...] = ()
+    """Detections inside the episode's room that re-opened it or fell in its fail-safe [s]."""
+    echo_t: tuple[float, ...] = ()
+    """Detections ignored as the filters' echo of the slip's end [s]."""
+
+
+def find_episodes(s: AlignedStreams, d: Detections, cfg: OdometryConfig) -> tuple[Episode, ...]:
+    """Stage 3: the episodes in time order."""
+    found: tuple[Episode, ...] = ()
+    pos = 0
+    while (j := int(np.searchsorted(d.onsets, pos))) < d.onsets.size:
+        found, pos = _step(s, d, cfg, found, int(d.onsets[j]), bool(d.is_ta_onset[j]))
+    return found
+
+
+def _floor(s: AlignedStreams, prev: Episode | None) -> int:
+    """Earliest start point after ``prev``: its end, after a fail-safe also a filter window
+    and the watch."""
+    if prev is None:
+        return s.warm
+    if prev.failsafe:
+        return max(prev.i_end + s.filters.M, prev.i_settled + 1)
+    return prev.i_end + 1
+
+
+def _step(
+    s: AlignedStreams, d: Detections, cfg: OdometryConfig, found: tuple[Episode, ...], det: int, ta: bool
+) -> tuple[tuple[Episode, ...], int]:
+    """The episodes after the onset at ``det``, and the cycle from which to look for the next."""
+    prev = found[-1] if found else None
+    if prev is not None and not ta and det - d.horizon - s.filters.M <= prev.i_settled:
+        return found, det + 1  # the residual's reference lies in the previous episode
+    floor = _floor(s, prev)
+    if prev is None or det - round(cfg.lookback_s / s.cyc) >= floor:
+        crit, back = lookback_point(s, d, cfg, det, ta)
+        i0, ok = start_point(s, d, det, back, floor)
+        ep = _correct(s, d, cfg, integrate(s, d, cfg, i0), det, ok, det, crit)
+        return (*found, ep), ep.i_end + 1
+    t_det = float(s.t[det])
+    if prev.readhered and _agrees(prev, det):
+        # the filters' echo of the slip's end: the speeds still agree
+        return (*found[:-1], replace(prev, echo_t=(*prev.echo_t, t_det))), det + 1
+    redetect = (*prev.redetect_t, t_det)
+    if prev.failsafe:
+        return (*found[:-1], replace(prev, redetect_t=redetect)), det + 1
+    # premature re-adhesion: re-open the correction from its own start point
+    again = _correct(s, d, cfg, prev.integration, prev.i_detect, prev.start_found, det, prev.criterion)
+    return (*found[:-1], replace(again, redetect_t=redetect)), again.i_end + 1
+
+
+def _agrees(ep: Episode, det: int) -> bool:
+    """Pulse and inertial speeds of ``ep`` still agree from its re-adhesion up to cycle
+    ``det`` (False when det is past the integrated span)."""
+    i0 = ep.i_start
+    if det - i0 >= ep.agree.size:
+        return False
+    return bool(ep.agree[ep.i_end - i0 : det - i0 + 1].all())
+
+
+def _correct(
+    s: AlignedStreams,
+    d: Detections,
+    cfg: OdometryConfig,
+    ig: Integration,
+    det: int,
+    start_found: bool,
+    after: int,
+    criterion: DetectionCriterion,
+) -> Episode:
+    """The episode detected at ``det`` corrected by ``ig``; re-adhesion is looked for after
+    cycle ``after`` (later than ``det`` when a premature one was re-opened)."""
+    i0, i_lim = ig.i0, ig.i_lim
+    m = i_lim - i0 + 1
+    sl = slice(i0, i_lim + 1)
+    tt = s.t[sl] - s.t[i0]
+    lead = s.vp[max(i0 - s.filters.P + 1, 0) : i0]  # the 1 s mean starts on adhering pulses
+    v1 = ma(np.concatenate([lead, ig.v_in[:m]]), s.filters.P)[lead.size :]
+    with np.errstate(invalid="ignore"):
+        agree = np.abs(v1 - s.vp1[sl]) <= readhesion_tolerance(cfg) + cfg.beta_mps2 * tt
+    ie, readhered, failsafe = _end(s, cfg, ig, agree, after)
+    m_end = ie - i0 + 1
+    end_err = float(v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan")
+    v_in, update_m = _speed_update(s, cfg, i0, ie, ig.v_in[:m_end], end_err if readhered else float("nan"))
+    sense = float(s.diff[det] if criterion == "ta" else d.residual[det])
+    settled = ie
+    if failsafe and cfg.failsafe_watch_s > 0:  # still the same disturbance while the pulses disagree
+        w = watch_failsafe(s, cfg, ig, ie)
+        settled = max(ie, w.end if w is not None else 0)
+    return Episode(
+        kind="slip" if (sense < 0) != (criterion == "residual-end") else "slide",
+        criterion=criterion,
+        i_detect=det,
+        i_start=i0,
+        i_end=ie,
+        i_settled=settled,
+        start_found=start_found,
+        readhered=readhered,
+        failsafe=failsafe,
+        truncated=not readhered and not failsafe,
+        integration=ig,
+        agree=readonly(agree),
+        v_in=readonly(v_in),
+        theta_end=float(ig.theta[m_end - 1]),
+        end_speed_error=end_err,
+        speed_update_m=update_m,
+    )
+
+
+def _end(
+    s: AlignedStreams, cfg: OdometryConfig, ig: Integration, agree: BoolArray, after: int
+) -> tuple[int, bool, bool]:
+    """End ie of a correction: (re-adhesion after ``after``, True, False), else (the time
+    limit, False, True) — a fail-safe —, else (the last cycle, False, False)."""
+    i0 = ig.i0
+    cond = held(agree, hold_cycles(cfg, s.cyc))
+    cond[: max(after - i0 + 1, 0)] = False
+    hit = np.flatnonzero(cond)
+    if hit.size:
+        return i0 + int(hit[0]), True, False
+    if s.t[ig.i_lim] - s.t[i0] >= cfg.max_correction_s - 1e-9:
+        return ig.i_lim, False, True
+    return s.n - 1, False, False
+
+
+def _speed_update(
+    s: AlignedStreams, cfg: OdometryConfig, i0: int, ie: int, v_in: FloatArray, end_err: float
+) -> tuple[FloatArray, float]:
+    """The inertial speed on i0..ie with the ramp δ·(t − t0)/T removed, and the distance
+    change; unchanged (and 0) when off, without re-adhesion (δ NaN) or for T = 0."""
+    duration = float(s.t[ie] - s.t[i0])
+    if not (cfg.readhesion_speed_update and duration > 0 and np.isfinite(end_err)):
+        return v_in, 0.0
+    ramp = end_err * (s.t[i0 : ie + 1] - s.t[i0]) / duration
+    update_m = -float(np.dot(ramp[1:], s.dt[i0 + 1 : ie + 1]))
+    return np.maximum(v_in - ramp, 0.0), update_m

@@ -1,0 +1,117 @@
+"""The correction start point i0 of a detection (SPEC §5.1, stage 3).
+
+SPEC rule
+    From the detection cycle minus ``lookback_s`` search backwards (at most
+    ``SEARCH_SPAN_S``, never before the previous episode's end) for the last cycle at which
+    the start-point condition (stage 2) held for ``hold_cycles``. If none is found the
+    look-back point itself is used (``start_found`` False).
+
+Residual detections
+    Departure from the SPEC, for the second criterion only: a residual detection comes
+    earlier after the onset than an eq. 1 one (0.4–1.3 s), so its look-back point is
+    instead QUIET_MARGIN_S before the last cycle at which |r| was within QUIET_SHARE of the
+    threshold (where the residual leaves its noise band), but never earlier than the SPEC
+    look-back: as often before the onset as with the SPEC look-back, with shorter
+    corrections and fewer fail-safes (bench/NOTES.md, "Odometry").
+
+Lobe rule (``criterion`` "residual-end")
+    A slip shorter than the filter shows in r as two lobes of opposite sign (onset, then
+    end) that cancel while both are in the window; when only the end lobe crosses the
+    threshold, the look-back counts from the first cycle of the opposite lobe within H + M
+    before (beyond half the threshold) and the kind is reversed — unless the detected lobe
+    is more than LOBE_RATIO times the opposite one (one slip's lobes carry the same speed
+    change; a far larger end lobe is a new, deep disturbance).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from fieldlogs.pipeline.config import OdometryConfig
+from fieldlogs.pipeline.odometry.detection import Detections
+from fieldlogs.pipeline.odometry.streams import AlignedStreams
+from fieldlogs.pipeline.types import DetectionCriterion, FloatArray
+from schemas.units import kmh_s_to_mps2
+
+#: How far before the look-back point the start-point search may go [s].
+SEARCH_SPAN_S = 3.0
+#: Residual detections: the look-back point is QUIET_MARGIN_S before the residual last
+#: stayed within QUIET_SHARE of its threshold.
+QUIET_SHARE = 0.25
+QUIET_MARGIN_S = 1.0
+#: The end lobe of a shallow slip is at most this many times its onset lobe (the same speed
+#: change; the residual's echo of the onset adds to the end lobe) [–].
+LOBE_RATIO = 4.0
+
+
+def lookback_point(
+    s: AlignedStreams, d: Detections, cfg: OdometryConfig, det: int, ta: bool
+) -> tuple[DetectionCriterion, int]:
+    """The criterion of the detection at ``det`` and its look-back point."""
+    lookback = round(cfg.lookback_s / s.cyc)
+    if ta:
+        return "ta", det - lookback
+    thr = kmh_s_to_mps2(cfg.residual_threshold_kmh_s)
+    crit, ref = lobe(d.residual, det, d.horizon, s.filters.M, thr)
+    return crit, quiet_before(d.residual, ref, ref - lookback, thr, s.cyc)
+
+
+def start_point(s: AlignedStreams, d: Detections, det: int, back: int, floor: int) -> tuple[int, bool]:
+    """Start point i0 for the detection at ``det`` with look-back point ``back``: the last
+    cycle ≤ ``back`` where the start-point condition held, within SEARCH_SPAN_S and not
+    before ``floor``; and whether one was found."""
+    lo = max(floor, back - round(SEARCH_SPAN_S / s.cyc))
+    if back < lo:
+        return max(min(det - 1, floor), 0), False
+    j = int(d.last_hold[back])
+    if j >= lo:
+        return j, True
+    return back, False
+
+
+def lobe(
+    res: FloatArray, det: int, horizon: int, m: int, thr: float
+) -> tuple[Literal["residual", "residual-end"], int]:
+    """Criterion of a residual detection at ``det`` and the cycle its look-back counts from.
+
+    If the residual had the opposite sign (beyond half the threshold ``thr``) within the
+    horizon + filter length ``m`` before ``det``, rising from its noise band there, and the
+    detected lobe's peak over the next filter length is at most LOBE_RATIO times that
+    lobe's, the look-back counts from the first cycle of that lobe and the kind is
+    reversed (the kind and start point are settled a filter length after ``det``: the
+    correction is retroactive anyway)."""
+    lo = max(det - horizon - m, 0)
+    with np.errstate(invalid="ignore"):
+        opp = np.flatnonzero(np.sign(res[det]) * res[lo:det] < -0.5 * thr)
+    if opp.size == 0:
+        return "residual", det
+    back = opp[::-1]
+    brk = np.flatnonzero(np.diff(back) != -1)
+    lobe_ = back[: brk[0] + 1] if brk.size else back  # the latest opposite lobe, backwards
+    first = int(lobe_[-1])
+    with np.errstate(invalid="ignore"):  # a lobe rises from the noise band, a drift does not
+        rose = bool((np.abs(res[lo : lo + first]) <= QUIET_SHARE * thr).any())
+    # one slip's lobes carry the same speed change: an end lobe far larger than the
+    # opposite lobe is a new, deep disturbance (bench/NOTES.md, "Odometry")
+    sgn = np.sign(res[det])
+    with np.errstate(invalid="ignore"):
+        peak_opp = float(np.nanmax(-sgn * res[lo + lobe_]))
+        peak_end = float(np.nanmax(sgn * res[det : det + m]))
+    if peak_end > LOBE_RATIO * peak_opp:
+        return "residual", det
+    return ("residual-end", lo + first) if rose else ("residual", det)
+
+
+def quiet_before(res: FloatArray, ref: int, back: int, thr: float, cyc: float) -> int:
+    """Look-back point of a residual detection: QUIET_MARGIN_S before the last cycle
+    before ``ref`` at which |r| was within QUIET_SHARE of the threshold ``thr`` (the onset
+    is where the residual leaves its noise band), but not before ``back``."""
+    quiet = QUIET_SHARE * thr
+    lo = max(back, 0)
+    with np.errstate(invalid="ignore"):
+        q = np.flatnonzero(np.abs(res[lo:ref]) <= quiet)
+    if q.size == 0:
+        return back
+    return max(lo + int(q[-1]) - round(QUIET_MARGIN_S / cyc), back)
