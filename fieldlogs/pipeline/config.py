@@ -1,95 +1,67 @@
-"""Every tuning parameter of the positioning pipeline, with SPEC defaults and units.
+"""Every tuning parameter of the positioning pipeline, with SPEC defaults, units and ranges.
 
-One dataclass per concern; ``PipelineConfig.from_toml`` reads overrides from a file whose
-sections mirror the dataclasses (``[odometry]``, ``[balise]``, ``[feature]``, ``[gps]``,
-``[margin]``). Unknown keys are errors, so a misspelt parameter never silently does nothing.
-Accelerations are in the papers' km/h/s where the papers state them so.
+One frozen section per concern — ``[odometry]``, ``[balise]``, ``[feature]``, ``[gps]``,
+``[margin]`` of a ``--config`` TOML file, plus ``cycle_s`` — each field declared with
+:func:`schemas.settings.setting` (default, one-line meaning, unit, allowed range), so that
+``trainpos config show`` prints them all and a value out of range is refused wherever it
+comes from. Accelerations are in the papers' km/h/s where the papers state them so. The
+maths behind each parameter is in the module that uses it; measurements behind the
+non-SPEC defaults are in ``bench/NOTES.md``.
 """
 
 from __future__ import annotations
 
-import math
 import tomllib
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from schemas.errors import InputError
+from schemas.settings import SettingError, check_ranges, section_from_dict, setting, typed
 from schemas.units import kmh_s_to_mps2
-
-T = TypeVar("T")
 
 
 @dataclass(frozen=True)
 class OdometryConfig:
     """Slip/slide detection and inertial correction [S000 §3.1, SPEC §5.1]."""
 
-    avg_window_s: float = 3.0
-    """Moving-average window for A_p and a_x [s]."""
-    pulse_delay_cycles: int = 3
-    """Delay of the pulse stream to line it up with the IMU [cycles of 100 ms] (SPEC value;
-    see ``pulse_delay_search_cycles``)."""
-    ta_kmh_s: float = 1.23
-    """Detection threshold Ta on |a_x − A_p| [km/h/s] (gravity component of 35 ‰), eq. 1."""
-    lookback_s: float = 2.1
-    """Look-back from the detection point before searching the start point [s]."""
-    jerk_imu_max_kmh_s: float = 0.1
-    """|Ji| limit per 0.1 s at the start point [km/h/s] (IMU resolution)."""
-    jerk_pulse_max_kmh_s: float = 0.15
-    """|Jp| limit per 0.1 s at the start point [km/h/s] (pulse resolution)."""
-    jerk_diff_max_kmh_s: float = 0.05
-    """|Ji − Jp| limit per 0.1 s at the start point [km/h/s]."""
-    hold_cycles: int = 3
-    """Consecutive cycles the jerk conditions must hold."""
-    beta_kmh_s: float = 0.15
-    """Re-adhesion: the 1 s mean inertial and pulse speeds agree within
-    ``readhesion_tol_kmh`` + β·t [km/h/s]. The paper uses its full error budget, 1.64 km/h/s,
-    on the per-cycle pulse speed; with 1.64 (or the 0.8 used before) a slip of a few tenths
-    of a m/s "re-adheres" while still slipping. With the gyro bias removed the inertial
-    speed error of an ADIS16480-class IMU stays below 0.3 m/s in 10 s (odometry module
-    docstring, "Re-adhesion")."""
-    delta_a_kmh_s: float = 1.64
-    """Error budget Δa = gyro 0.31 + accel 0.1 + threshold 1.23 [km/h/s], eq. 13."""
-    max_correction_s: float = 10.0
-    """A correction still running after this is a fail-safe event [s]."""
-    failsafe_watch_s: float = 20.0
-    """After a fail-safe the inertial (or radar) speed is followed this much longer: until
-    it agrees with the pulses again (the re-adhesion test) the slip allowance grows by
-    |v_inertial − v_pulse| + Δa·t per second, t from the start point — the pulses may still
-    be slipping, and the 5 %/km growth of an uncertain position does not cover a deep slide
-    (31 m off with 8 m of margin, once in 300 simulated runs). 0 = no watch [s]."""
-    min_speed_kmh: float = 3.0
-    """Below this speed no slip/slide is detected (standstill noise) [km/h]."""
-    pulse_delay_search_cycles: int = 3
-    """The run's own data may move the pulse delay by up to this many cycles from
-    ``pulse_delay_cycles`` (regression of the grade-compensated residual on the jerk; the
-    SPEC value stays unless the lag is significant); 0 = always the SPEC value. The
-    residual criterion needs the true delay [cycles]."""
-    bias_window_s: float = 120.0
-    """Trailing window over which the gyro pitch-rate bias is estimated (slope of the
-    accelerometer pitch minus the gyro pitch on adhering cycles) and removed from eq. 12
-    [s]; 0 = no bias estimate."""
-    residual_threshold_kmh_s: float = 0.45
-    """Second detection criterion, beside Ta: |grade-compensated residual| above this —
-    the change of K·(a_x − A_p) over ``residual_horizon_s`` minus the gyro's change of
-    G·sinθ (odometry module docstring) [km/h/s]. Adhering it stays within ±0.27 km/h/s;
-    catches the shallow slips whose |a_x − A_p| never reaches Ta. 0 = off (SPEC eq. 1 only)."""
-    residual_horizon_s: float = 4.0
-    """Horizon of the residual: the present K window against the one this long ago [s]."""
-    readhesion_tol_kmh: float = 0.36
-    """Re-adhesion: constant part of the speed tolerance (1 s mean quantisation and wheel
-    wear in v0), added to β·t [km/h]."""
-    readhesion_hold_s: float = 1.0
-    """Re-adhesion: the speeds must agree this long (a mere crossing does not count) [s]."""
-    readhesion_speed_update: bool = True
-    """At re-adhesion the wheel measures the ground speed again: the difference of the 1 s
-    mean inertial and pulse speeds there is the inertial speed error accumulated since the
-    start point (where the speed came from adhering pulses), and it is removed from the
-    correction as a ramp growing linearly from 0 at the start point, i.e. the episode
-    distance changes by −½·δ·T (δ the difference [m/s], T the correction time [s]; |δ| is
-    at most ``readhesion_tol_kmh`` + β·T by the re-adhesion condition). Halves the error of
-    the worst low-speed corrections (odometry module docstring, "Re-adhesion speed
-    update"). False = the SPEC's open-loop correction [–]."""
+    avg_window_s: float = setting(3.0, "moving-average window of A_p and a_x", "s", gt=0)
+    pulse_delay_cycles: int = setting(3, "delay of the pulse stream to line it up with the IMU (SPEC)", "cycles", ge=0)
+    ta_kmh_s: float = setting(1.23, "detection threshold Ta on |a_x − A_p|, eq. 1 (gravity of 35 ‰)", "km/h/s", gt=0)
+    lookback_s: float = setting(2.1, "look-back from the detection point before the start-point search", "s", ge=0)
+    jerk_imu_max_kmh_s: float = setting(0.1, "|Ji| limit per 0.1 s at the start point", "km/h/s", gt=0)
+    jerk_pulse_max_kmh_s: float = setting(0.15, "|Jp| limit per 0.1 s at the start point", "km/h/s", gt=0)
+    jerk_diff_max_kmh_s: float = setting(0.05, "|Ji − Jp| limit per 0.1 s at the start point", "km/h/s", gt=0)
+    hold_cycles: int = setting(3, "consecutive cycles the jerk conditions must hold", "cycles", ge=1)
+    beta_kmh_s: float = setting(
+        0.15, "re-adhesion: the 1 s mean speeds agree within readhesion_tol_kmh + β·t", "km/h/s", ge=0
+    )
+    delta_a_kmh_s: float = setting(1.64, "error budget Δa = gyro 0.31 + accel 0.1 + Ta 1.23, eq. 13", "km/h/s", gt=0)
+    max_correction_s: float = setting(10.0, "a correction still running after this is a fail-safe event", "s", gt=0)
+    failsafe_watch_s: float = setting(
+        20.0, "after a fail-safe, follow the inertial (or radar) speed this long; 0 = no watch", "s", ge=0
+    )
+    min_speed_kmh: float = setting(3.0, "no slip/slide is detected below this speed", "km/h", ge=0)
+    pulse_delay_search_cycles: int = setting(
+        3, "the run's own data may move the pulse delay by up to this; 0 = the SPEC value", "cycles", ge=0
+    )
+    bias_window_s: float = setting(
+        120.0, "window of the gyro pitch-rate bias estimate; 0 = no bias estimate", "s", ge=0
+    )
+    residual_threshold_kmh_s: float = setting(
+        0.45, "second criterion: |grade-compensated residual| above this; 0 = off (eq. 1 only)", "km/h/s", ge=0
+    )
+    residual_horizon_s: float = setting(4.0, "horizon of the residual (present K window vs this long ago)", "s", gt=0)
+    readhesion_tol_kmh: float = setting(
+        0.36, "re-adhesion: constant part of the speed tolerance (quantisation, wheel wear)", "km/h", ge=0
+    )
+    readhesion_hold_s: float = setting(1.0, "re-adhesion: the speeds must agree this long", "s", gt=0)
+    readhesion_speed_update: bool = setting(
+        True, "close a re-adhered correction on the measured speed difference (false: the SPEC's open loop)"
+    )
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "odometry")
 
     @property
     def ta_mps2(self) -> float:
@@ -108,240 +80,179 @@ class OdometryConfig:
 class BaliseConfig:
     """Initial pairs and correction balises [S003 §4, SPEC §5.2]."""
 
-    pair_max_travel_m: float = 10.0
-    """I2 must follow I1 within this travel distance [m]."""
-    id_window_m: float = 500.0
-    """C-balise identification window around dist_from_initial_m [m]."""
-    fix_uncertainty_m: float = 1.0
-    """Uncertainty of a balise position fix (antenna/read position) [m]."""
+    pair_max_travel_m: float = setting(10.0, "I2 must follow I1 within this travel", "m", gt=0)
+    id_window_m: float = setting(500.0, "C-balise identification window around dist_from_initial_m", "m", gt=0)
+    fix_uncertainty_m: float = setting(1.0, "uncertainty of a balise position fix (antenna, read position)", "m", gt=0)
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "balise")
 
 
 @dataclass(frozen=True)
 class FeatureConfig:
-    """Curve feature points [S000 §3.2, SPEC §5.3]."""
+    """Curve feature points [S000 §3.2, SPEC §5.3].
 
-    tolerance: float = 0.20
-    """Upper limit (1/R)(1+tol), lower limit (1/R)(1−tol)."""
-    straight_kappa_max: float = 1 / 4000
-    """|κ| below this counts as straight [1/m]."""
-    length_tolerance: float = 0.20
-    """Allowed relative deviation of the measured curve length from the DB [–]."""
-    length_tolerance_min_m: float = 10.0
-    """… but never tighter than this [m]."""
-    min_speed_kmh: float = 10.0
-    """No correction below this speed [km/h]."""
-    kappa_smoothing_s: float = 1.0
-    """Centred moving average (the odd number of cycles nearest this) applied to κ = ωz / v
-    before the diagnostics [s]; centred so the crossings are not delayed."""
-    fix_uncertainty_m: float = 10.0
-    """Least uncertainty of a feature-point correction [m] (paper: within about 10 m); it is
-    larger when the κ error could move the exit crossing farther (``crossing_z``)."""
-    crossing_z: float = 3.0
-    """A correction's uncertainty is at least this many σ of its exit crossing: σ_x =
-    σ_ω / (v · s), s = κ_lo / (r5 − r4) the κ slope of the DB exit transition, σ_ω the yaw
-    rate's 1σ below [–]. Why: a slow train on a long transition turns a small ωz error into
-    metres (0.6 mrad/s at 12 m/s on R 1150 m, 64 m transition: σ_x 4.6 m)."""
-    yaw_rate_sigma_rad_s: float = 0.0006
-    """1σ of the smoothed ωz once its bias is estimated at a standstill (white noise over the
-    smoothing window, vibration, residual bias) [rad/s]."""
-    yaw_bias_sigma_rad_s: float = 0.0009
-    """1σ of the yaw-gyro bias before any standstill estimate (ADIS16480 class: 0.05 °/s);
-    added in quadrature to ``yaw_rate_sigma_rad_s`` then [rad/s]."""
-    search_margin_m: float = 100.0
-    """Minimum extra distance searched around the predicted feature position [m]; the
-    feature is evaluated once the estimate has passed its exit-check end by this much."""
-    search_growth_pct: float = 2.0
-    """The search margin grows to fix uncertainty + this percent of the travel since the fix
-    + slip allowance since the fix, when that is larger [%] (as the safety margin does)."""
-    crossing_merge_m: float = 5.0
-    """Lower-limit runs of the same sign closer than this are one curve (noise chatter at a
-    crossing) [m]."""
-    yaw_bias_window_s: float = 60.0
-    """ωz is corrected by its mean over the latest this-many seconds of standstill (0 = no
-    correction) [s]. Why: a yaw-gyro bias b reads as κ error b/v — 0.05 °/s (1σ of an
-    ADIS16480-class gyro) is 8 % of 1/R at 12 m/s on R 1150 m, enough to move a lower-limit
-    crossing 25 m along a transition when a train brakes through a curve exit."""
-    yaw_bias_settle_s: float = 2.0
-    """A standstill counts for the yaw bias only after no pulse for this long (the train has
-    stopped rocking and is not creeping between pulses) [s]."""
-    yaw_bias_min_s: float = 5.0
-    """No yaw bias estimate (0) before this much standstill [s]."""
+    A correction's uncertainty is max(``fix_uncertainty_m``, ``crossing_z``·σ_x) with σ_x =
+    σ_ω / (v·s), s = κ_lo / (r5 − r4) the κ slope of the DB exit transition: a slow train on
+    a long transition turns a small ωz error into metres (0.6 mrad/s at 12 m/s on R 1150 m,
+    64 m transition: σ_x 4.6 m). ωz is corrected by its mean over standstills: a yaw-gyro
+    bias b reads as a κ error b/v.
+    """
+
+    tolerance: float = setting(0.20, "upper limit (1/R)(1 + tol), lower limit (1/R)(1 − tol)", gt=0, lt=1)
+    straight_kappa_max: float = setting(1 / 4000, "|κ| below this counts as straight", "1/m", gt=0)
+    length_tolerance: float = setting(0.20, "allowed relative deviation of the measured curve length", ge=0)
+    length_tolerance_min_m: float = setting(10.0, "… but never tighter than this", "m", ge=0)
+    min_speed_kmh: float = setting(10.0, "no correction below this speed", "km/h", ge=0)
+    kappa_smoothing_s: float = setting(1.0, "centred moving average of κ = ωz / v before the diagnostics", "s", ge=0)
+    fix_uncertainty_m: float = setting(
+        10.0, "least uncertainty of a feature-point correction (paper: ~10 m)", "m", gt=0
+    )
+    crossing_z: float = setting(3.0, "the uncertainty is at least this many σ of the exit crossing", ge=0)
+    yaw_rate_sigma_rad_s: float = setting(0.0006, "1σ of the smoothed ωz once its bias is estimated", "rad/s", ge=0)
+    yaw_bias_sigma_rad_s: float = setting(0.0009, "1σ of the yaw-gyro bias before any standstill", "rad/s", ge=0)
+    search_margin_m: float = setting(100.0, "least extra distance searched around the predicted feature", "m", gt=0)
+    search_growth_pct: float = setting(
+        2.0, "the search margin grows by this share of the travel since the fix (+ slip allowance)", "%", ge=0
+    )
+    crossing_merge_m: float = setting(5.0, "same-sign lower-limit runs closer than this are one curve", "m", ge=0)
+    yaw_bias_window_s: float = setting(60.0, "ωz corrected by its mean over the latest standstills; 0 = off", "s", ge=0)
+    yaw_bias_settle_s: float = setting(
+        2.0, "a standstill counts for the yaw bias after no pulse for this long", "s", ge=0
+    )
+    yaw_bias_min_s: float = setting(5.0, "no yaw bias estimate before this much standstill", "s", ge=0)
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "feature")
 
 
 @dataclass(frozen=True)
 class GpsConfig:
     """D-GPS map-matching, trust filter, up/down decision and crossovers [S001 §4.2, SPEC §5.4].
 
-    The statistics are stated in ``fieldlogs.pipeline.gps``. Defaults are calibrated for
-    D-GPS whose slow (time-correlated) error is ~0.75 m per axis (2-D RMS ≈ 1.1 m, good
-    sky) with a correlation time of one to three minutes and whose fast noise is ≤ 0.3 m
-    per axis; change the ``noise_*`` model and the RMS thresholds together when a receiver
-    behaves differently.
+    The statistics are stated in :mod:`fieldlogs.pipeline.gps`. Defaults are for D-GPS whose
+    slow (time-correlated) error is ~0.75 m per axis with a correlation time of one to three
+    minutes and whose fast noise is ≤ 0.3 m per axis; change the ``noise_*`` model and the
+    RMS thresholds together for another receiver (a ``noise_tau_s`` shorter than the truth
+    makes decisions overconfident).
     """
 
-    # --- usable fixes and map-matching
-    min_fix: int = 2
-    """Minimum fix quality to use a fix (2 = D-GPS)."""
-    max_hdop: float = 3.0
-    """Fixes with a larger HDOP are not used (a missing HDOP does not exclude a fix)."""
-    max_offset_m: float = 15.0
-    """A track farther than this from a fix is not a candidate for it [m]."""
-    max_gap_s: float = 1.5
-    """A time step longer than this between usable fixes resets the RMS windows [s]."""
-    # --- trust filter [S001 §4.2.2]
-    windows_s: tuple[int, ...] = (5, 15, 30)
-    """RMS windows of the second-to-second position change [s]."""
-    rms_threshold_m: tuple[float, ...] = (2.5, 1.8, 1.5)
-    """Per window: RMS of the change of the per-second displacement about its window mean
-    (the 2-D second difference of positions, constant acceleration removed) above this →
-    not trusted [m]. Clean D-GPS gives ~1.0 m (~1.2 m with 0.3 m fast noise); a 5 m jump
-    gives ≥ 3.3 / 2.1 / 1.65 m in the 5 / 15 / 30 s windows."""
-    max_change_m: float = 3.0
-    """The fix's own change of displacement above this → not trusted [m] (catches the
-    first fix of a jump, which a causal window sees only once)."""
-    jump_hold_s: float = 30.0
-    """After a fix whose own change exceeds ``max_change_m``, the fixes of this many seconds are
-    not trusted: a multipath burst ramps on and off smoothly after its first jump [s]."""
-    min_history_s: float = 5.0
-    """Usable fixes needed since the last reset before any fix is trusted [s]."""
-    # --- error model of trusted fixes (for the standard error of a mean offset)
-    noise_sigma_m: float = 0.75
-    """1-σ of the slow lateral D-GPS error (Gauss-Markov) [m]. With 1.5 m per axis, 120 s
-    hold about two independent samples of the lateral error: the 3.8 m track spacing then
-    cannot be decided within the field target without risking wrong decisions."""
-    noise_tau_s: float = 180.0
-    """Correlation time of that error [s]: consecutive fixes are not independent. Set it from
-    the receiver's measured error (180 s = the suite's simulator model); a value shorter
-    than the truth makes decisions overconfident."""
-    noise_white_m: float = 0.25
-    """1-σ of the independent per-fix noise [m]."""
-    # --- up/down decision (sequential likelihood-ratio test on the mean offset)
-    decide_window_s: float = 120.0
-    """Evidence window: trusted fixes of the last this many seconds [s] (field target < 120 s)."""
-    decide_recent_s: float = 30.0
-    """The test is also made on the trusted fixes of only the last this many seconds, so that
-    older fixes a slow error put between the tracks do not hold back a decision the recent
-    ones support (0 = only the full window) [s]."""
-    decide_min_fixes: int = 10
-    """Trusted fixes needed in the window before deciding."""
-    decide_min_duration_s: float = 10.0
-    """Time spanned by those fixes [s]."""
-    decide_min_share: float = 0.9
-    """Share of the window's trusted fixes whose nearest track is the decided one."""
-    decide_error: float = 1e-3
-    """Accepted probability of deciding the wrong track: the log-likelihood ratio of the
-    decided track against every other candidate must reach ln(1/decide_error)."""
-    decide_fit_z: float = 3.0
-    """|mean offset| from the decided track must be within this many standard errors …"""
-    decide_max_mean_m: float = 2.5
-    """… and not exceed this [m]: a vehicle between two tracks, or on a track missing from
-    the GIS, must not be assigned to its neighbour."""
-    redecide_factor: float = 2.0
-    """Changing an existing decision without a detected crossover needs this many times the
-    log-likelihood ratio (i.e. decide_error ** factor)."""
-    km_dir_min_m: float = 10.0
-    """|km change| over the evidence window below this → km_dir = 0 (standing) [m]."""
-    # --- crossover (渡り線) detection [S001 §7]
-    crossover_window_s: float = 5.0
-    """Window of the RMS of the offset from the base (decided) track [s]."""
-    crossover_ref_s: float = 20.0
-    """Reference window for the offset's previous level [s] …"""
-    crossover_lag_s: float = 10.0
-    """… ending this long before the RMS window starts, so that a slow crossing (up to
-    about this long) is compared with the level before it began [s]."""
-    crossover_rms_m: float = 2.0
-    """RMS of the offset from the base track above this (over the window) [m] …"""
-    crossover_min_shift: float = 0.6
-    """… and the mean offset moved toward the other track by this share of the track spacing
-    (and past the midpoint between the tracks)."""
-    crossover_z: float = 3.0
-    """… and by at least this many standard deviations of the drift the slow error model
-    (``noise_*``) produces between the two windows: with noisy GPS a crossover is only
-    reported when it stands out of the noise."""
-    # --- use by the solver
-    initial_uncertainty_m: float = 10.0
-    """Uncertainty of a GPS-derived initial position [m]."""
-    allow_initial: bool = True
-    """GPS may set the initial position before any balise (flagged GPS-derived)."""
+    min_fix: int = setting(2, "least fix quality used (2 = D-GPS)", ge=0)
+    max_hdop: float = setting(3.0, "fixes with a larger HDOP are not used (a missing HDOP does not exclude)", gt=0)
+    max_offset_m: float = setting(15.0, "a track farther than this from a fix is not a candidate", "m", gt=0)
+    max_gap_s: float = setting(1.5, "a longer step between usable fixes resets the RMS windows", "s", gt=0)
+    windows_s: tuple[int, ...] = setting((5, 15, 30), "RMS windows of the second-to-second position change", "s", gt=0)
+    rms_threshold_m: tuple[float, ...] = setting(
+        (2.5, 1.8, 1.5), "per window: RMS of the change of displacement above this → not trusted", "m", gt=0
+    )
+    max_change_m: float = setting(3.0, "a fix's own change of displacement above this → not trusted", "m", gt=0)
+    jump_hold_s: float = setting(30.0, "after such a jump the fixes of this long are not trusted", "s", ge=0)
+    min_history_s: float = setting(5.0, "usable fixes needed since the last reset before any is trusted", "s", ge=0)
+    noise_sigma_m: float = setting(0.75, "1σ of the slow lateral D-GPS error (Gauss-Markov)", "m", gt=0)
+    noise_tau_s: float = setting(180.0, "correlation time of that error", "s", ge=0)
+    noise_white_m: float = setting(0.25, "1σ of the independent per-fix noise", "m", ge=0)
+    decide_window_s: float = setting(120.0, "evidence window of the up/down test (field target < 120 s)", "s", gt=0)
+    decide_recent_s: float = setting(
+        30.0, "the test is also made on the last this-many seconds alone; 0 = full window only", "s", ge=0
+    )
+    decide_min_fixes: int = setting(10, "trusted fixes needed in the window before deciding", ge=1)
+    decide_min_duration_s: float = setting(10.0, "time spanned by those fixes", "s", ge=0)
+    decide_min_share: float = setting(0.9, "share of the fixes whose nearest track is the decided one", ge=0, le=1)
+    decide_error: float = setting(1e-3, "accepted probability of deciding the wrong track", gt=0, lt=1)
+    decide_fit_z: float = setting(3.0, "|mean offset| from the decided track within this many SE …", gt=0)
+    decide_max_mean_m: float = setting(2.5, "… and at most this (not between two tracks, not beside one)", "m", gt=0)
+    redecide_factor: float = setting(
+        2.0, "changing a decision without a crossover needs this many times the LLR threshold", ge=1
+    )
+    km_dir_min_m: float = setting(10.0, "|km change| over the evidence window below this → standing", "m", ge=0)
+    crossover_window_s: float = setting(5.0, "window of the RMS of the offset from the decided track", "s", gt=0)
+    crossover_ref_s: float = setting(20.0, "reference window of the offset's previous level …", "s", gt=0)
+    crossover_lag_s: float = setting(10.0, "… ending this long before the RMS window starts", "s", ge=0)
+    crossover_rms_m: float = setting(2.0, "RMS of the offset above this …", "m", gt=0)
+    crossover_min_shift: float = setting(0.6, "… and the mean moved by this share of the track spacing …", ge=0)
+    crossover_z: float = setting(3.0, "… and by this many σ of the slow error's drift", ge=0)
+    initial_uncertainty_m: float = setting(10.0, "uncertainty of a GPS-derived initial position", "m", gt=0)
+    allow_initial: bool = setting(True, "GPS may set the initial position before any balise (flagged)")
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "gps")
+        if len(self.windows_s) != len(self.rms_threshold_m) or not self.windows_s:
+            raise SettingError(
+                f"'gps.windows_s' and 'gps.rms_threshold_m' need one threshold per window "
+                f"({len(self.windows_s)} windows, {len(self.rms_threshold_m)} thresholds)"
+            )
 
 
 @dataclass(frozen=True)
 class MarginConfig:
-    """Safety margin: |position error| ≤ margin [S000 §4.3.2]."""
+    """Safety margin: |position error| ≤ margin [S000 §4.3.2] (:mod:`fieldlogs.pipeline.positions`)."""
 
-    distance_pct: float = 2.0
-    """Percent of the distance travelled since the last absolute correction."""
-    slip_allowance_m: float = 2.0
-    """Fixed allowance per corrected slip/slide episode, added to ½·Δa·T² (eq. 13) [m]."""
-    uncertain_growth_pct: float = 5.0
-    """Percent of distance added while the position is uncertain (fail-safe) [%]."""
+    distance_pct: float = setting(2.0, "share of the travel since the last absolute fix", "%", ge=0)
+    uncertain_growth_pct: float = setting(5.0, "share of the travel added while the position is uncertain", "%", ge=0)
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "margin")
 
 
 @dataclass(frozen=True)
 class PipelineConfig:
+    """The pipeline's sections of the configuration tree."""
+
     odometry: OdometryConfig = field(default_factory=OdometryConfig)
     balise: BaliseConfig = field(default_factory=BaliseConfig)
     feature: FeatureConfig = field(default_factory=FeatureConfig)
     gps: GpsConfig = field(default_factory=GpsConfig)
     margin: MarginConfig = field(default_factory=MarginConfig)
-    cycle_s: float = 0.1
+    cycle_s: float = setting(0.1, "processing cycle of the onboard unit (the tacho's rate)", "s", gt=0)
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
     def from_toml(cls, path: Path) -> PipelineConfig:
-        path = Path(path)
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError as exc:
-            raise InputError("no such config file", path=path) from exc
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise InputError(f"not valid TOML: {exc}", path=path) from exc
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(read_toml(path), source=str(path))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "config") -> PipelineConfig:
+        """Overrides from ``data`` (TOML tables per section); sections that are not the
+        pipeline's (``[possession]``, ``[gis_verify]``) are left to their applications."""
         cfg = cls()
-        sections = {f.name: f for f in fields(cls)}
+        sections = {f.name for f in fields(cls)}
         for key, value in data.items():
-            if key not in sections:
-                raise InputError(f"unknown section or key '{key}' (known: {', '.join(sections)})", path=source)
-            current = getattr(cfg, key)
-            if not isinstance(value, dict):
-                cfg = replace(cfg, **{key: _typed(source, key, current, value)})
+            if key in FOREIGN_SECTIONS:
                 continue
-            cfg = replace(cfg, **{key: update_section(current, value, key, source)})
+            if key not in sections:
+                known = ", ".join(sorted(sections | FOREIGN_SECTIONS))
+                raise InputError(f"unknown section or key '{key}' (known: {known})", path=source)
+            current = getattr(cfg, key)
+            try:
+                if isinstance(value, dict):
+                    cfg = replace(cfg, **{key: section_from_dict(current, value, key, source)})
+                else:
+                    cfg = replace(cfg, **{key: typed(source, key, current, value)})
+            except SettingError as exc:
+                raise SettingError(exc.message, path=source) from None
         return cfg
 
 
-def update_section(current: T, values: dict[str, Any], section: str, source: str) -> T:
-    """``current`` (a frozen config dataclass) with ``values`` from the TOML section
-    ``[section]``: unknown keys and values of the wrong type are errors naming the key."""
-    known = {f.name for f in fields(current)}  # type: ignore[arg-type]
-    updates = {}
-    for k, v in values.items():
-        if k not in known:
-            raise InputError(f"unknown key '{section}.{k}' (known: {', '.join(known)})", path=source)
-        updates[k] = _typed(source, f"{section}.{k}", getattr(current, k), v)
-    return replace(current, **updates)  # type: ignore[type-var]
+#: Sections of the configuration tree that belong to other applications.
+FOREIGN_SECTIONS = frozenset({"possession", "gis_verify"})
 
 
-def _typed(source: str, key: str, default: Any, value: Any) -> Any:
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise InputError(f"'{key}' must be true or false, not {value!r}", path=source)
-        return value
-    if isinstance(default, tuple):
-        if not isinstance(value, list):
-            raise InputError(f"'{key}' must be a list, not {value!r}", path=source)
-        return tuple(_typed(source, key, default[0] if default else value[0], v) for v in value)
-    if isinstance(default, int) and not isinstance(default, bool):
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise InputError(f"'{key}' must be a whole number, not {value!r}", path=source)
-        return value
-    if isinstance(default, float):
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
-            raise InputError(f"'{key}' must be a number, not {value!r}", path=source)
-        return float(value)
-    return value
+def read_toml(path: Path) -> dict[str, Any]:
+    """A TOML file as a dict (missing file or bad TOML: InputError naming the file)."""
+    path = Path(path)
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise InputError("no such config file", path=path) from exc
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not valid TOML: {exc}", path=path) from exc
+
+
+def update_section(current: Any, values: dict[str, Any], section: str, source: str) -> Any:
+    """Kept for the possession and GIS-verify sections until they move into the tree."""
+    return section_from_dict(current, values, section, source)
