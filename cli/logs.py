@@ -134,7 +134,7 @@ def convert(
 
     Example: trainpos logs convert runs/2026-01-15-V01 --to parquet --out runs/2026-01-15-V01-pq
     """
-    res = convert_run(run, out, to.value, force=force)  # type: ignore[arg-type]
+    res = convert_run(run, out, to.value, force=force)
     c = console()
     if res.warnings:
         print_findings(res.warnings, console=c, title="Warnings (not copied)")

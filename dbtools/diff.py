@@ -466,7 +466,7 @@ def _features_summary(td: TableDiff) -> list[str]:
     cols = FEATURE_POINTS.column_names
     added: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
     removed: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
-    changed: dict[tuple[str, str, str], list[tuple[dict[str, Any], dict[str, Any], dict[str, Any]]]] = {}
+    changed: dict[tuple[str, str, str], list[_Change]] = {}
     for r in _records(td.added, cols):
         added.setdefault(_feature_key(r), []).append(r)
     for r in _records(td.removed, cols):
@@ -485,27 +485,36 @@ def _features_summary(td: TableDiff) -> list[str]:
         if rem and not add and not chg and len(rem) >= 6:
             out.append(f"{label} removed ({_feature_shape(rem)})")
             continue
-        parts: list[str] = []
-        radius = [(o["radius_m"], n["radius_m"]) for o, n, m in chg if m["radius_m"]]
-        if radius:
-            parts.append(", ".join(f"radius {_val(a)} → {_val(b)} m" for a, b in dict.fromkeys(radius)))
-        km = [(o["seq"], o["km_m"], n["km_m"]) for o, n, m in chg if m["km_m"]]
-        if km:
-            deltas = {round(b - a, 3) for _, a, b in km if a is not None and b is not None}
-            seqs = _seq_list(s for s, _, _ in km)
-            if len(deltas) == 1 and len(km) > 1:
-                parts.append(f"km {next(iter(deltas)):+.1f} m ({seqs})")
-            else:
-                parts.append(", ".join(f"row {s} km {_km1(a)} → {_km1(b)}" for s, a, b in km))
-        for c in ("attribute", "role"):
-            vals = [(o["seq"], o[c], n[c]) for o, n, m in chg if m[c]]
-            parts.extend(f"row {s} {c} {_val(a)} → {_val(b)}" for s, a, b in vals)
-        if add:
-            parts.append(f"{_seq_list(r['seq'] for r in add)} added")
-        if rem:
-            parts.append(f"{_seq_list(r['seq'] for r in rem)} removed")
-        out.append(f"{label}: " + "; ".join(parts))
+        out.append(f"{label}: " + "; ".join(_feature_changes(add, rem, chg)))
     return out
+
+
+_Change = tuple[dict[str, Any], dict[str, Any], dict[str, Any]]
+
+
+def _feature_changes(add: list[dict[str, Any]], rem: list[dict[str, Any]], chg: list[_Change]) -> list[str]:
+    """What changed in one feature's rows: radius, km (one shift or row by row), attribute,
+    role, rows added and removed."""
+    parts: list[str] = []
+    radius = [(o["radius_m"], n["radius_m"]) for o, n, m in chg if m["radius_m"]]
+    if radius:
+        parts.append(", ".join(f"radius {_val(a)} → {_val(b)} m" for a, b in dict.fromkeys(radius)))
+    km = [(o["seq"], o["km_m"], n["km_m"]) for o, n, m in chg if m["km_m"]]
+    if km:
+        deltas = {round(b - a, 3) for _, a, b in km if a is not None and b is not None}
+        seqs = _seq_list(s for s, _, _ in km)
+        if len(deltas) == 1 and len(km) > 1:
+            parts.append(f"km {next(iter(deltas)):+.1f} m ({seqs})")
+        else:
+            parts.append(", ".join(f"row {s} km {_km1(a)} → {_km1(b)}" for s, a, b in km))
+    for c in ("attribute", "role"):
+        vals = [(o["seq"], o[c], n[c]) for o, n, m in chg if m[c]]
+        parts.extend(f"row {s} {c} {_val(a)} → {_val(b)}" for s, a, b in vals)
+    if add:
+        parts.append(f"{_seq_list(r['seq'] for r in add)} added")
+    if rem:
+        parts.append(f"{_seq_list(r['seq'] for r in rem)} removed")
+    return parts
 
 
 def _seq_list(seqs: Iterable[Any]) -> str:

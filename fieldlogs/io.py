@@ -192,7 +192,8 @@ def stream_path(folder: Path, name: str) -> Path | None:
 def read_stream_raw(path: Path) -> pd.DataFrame:
     """A stream file as stored (Parquet typed, CSV as text)."""
     if path.suffix == ".parquet":
-        return _read_parquet_table(path).to_pandas()
+        frame: pd.DataFrame = _read_parquet_table(path).to_pandas()
+        return frame
     return read_raw_table(path)
 
 
@@ -368,7 +369,8 @@ class Run:
 
     @property
     def vehicle_kind(self) -> str | None:
-        return self.field("vehicle_kind")
+        kind = self.field("vehicle_kind")
+        return None if kind is None else str(kind)
 
     def has(self, name: str) -> bool:
         return name in self._files

@@ -46,7 +46,7 @@ def suggest(name: str, candidates: list[str]) -> str | None:
 
 
 def _row_keys(table: Table, frame: pd.DataFrame, idx: int) -> dict[str, object]:
-    keys = {}
+    keys: dict[str, object] = {}
     for k in table.primary_key:
         if k in frame.columns:
             v = frame[k].iat[idx]
@@ -69,71 +69,18 @@ def coerce_frame(
     unless ``allow_extra``). The returned frame keeps the raw positional index so that
     ``index + first_line`` is the file line of a row.
     """
-    findings: list[Finding] = []
     known = table.column_names
     raw = raw.reset_index(drop=True)
     raw.columns = [str(c).strip() for c in raw.columns]
     extras = [c for c in raw.columns if c not in known]
-    for col in table.columns:
-        if col.name not in raw.columns and col.required:
-            hint = suggest(col.name, extras)
-            msg = f"required column '{col.name}' is missing"
-            if hint:
-                msg += f" (found '{hint}': misspelled?)"
-            findings.append(
-                Finding(
-                    "schema.missing_column",
-                    Severity.ERROR,
-                    table.name,
-                    msg,
-                    file=file,
-                    column=col.name,
-                    value=hint,
-                    limit=col.name,
-                )
-            )
+    findings = _missing_columns(table, raw, extras, file)
     if not allow_extra:
-        for c in extras:
-            hint = suggest(c, known)
-            msg = f"unknown column '{c}' ignored" + (f" (did you mean '{hint}'?)" if hint else "")
-            findings.append(
-                Finding(
-                    "schema.unknown_column", Severity.WARNING, table.name, msg, file=file, column=c, value=c, limit=hint
-                )
-            )
+        findings += _unknown_columns(table, extras, file)
     out: dict[str, pd.Series] = {}
     for col in table.columns:
         if col.name in raw.columns:
             values, bad = _coerce_column(col, raw[col.name])
-            for i in np.flatnonzero(bad)[:1000]:
-                cell = raw[col.name].iat[i]
-                findings.append(
-                    Finding(
-                        "schema.type",
-                        Severity.ERROR,
-                        table.name,
-                        f"'{cell}' is not a valid {_type_word(col)}",
-                        file=file,
-                        row=int(i) + first_line if file else None,
-                        column=col.name,
-                        value=str(cell),
-                        limit=_type_word(col),
-                    )
-                )
-            n_bad = int(bad.sum())
-            if n_bad > 1000:
-                findings.append(
-                    Finding(
-                        "schema.type",
-                        Severity.ERROR,
-                        table.name,
-                        f"{n_bad - 1000} more cells are not a valid {_type_word(col)}",
-                        file=file,
-                        column=col.name,
-                        value=n_bad,
-                        limit=0,
-                    )
-                )
+            findings += _bad_cells(table, col, raw[col.name], bad, file, first_line)
             out[col.name] = values
         else:
             out[col.name] = pd.Series([None] * len(raw), index=raw.index, dtype=PANDAS_DTYPE[col.dtype])
@@ -143,6 +90,83 @@ def coerce_frame(
     missing = [c for c in known if c not in raw.columns]
     # one DataFrame from all columns at once (column-by-column insertion is slow)
     return Coerced(pd.DataFrame(out, index=raw.index), findings, missing)
+
+
+def _missing_columns(table: Table, raw: pd.DataFrame, extras: list[str], file: str | None) -> list[Finding]:
+    findings = []
+    for col in table.columns:
+        if col.name in raw.columns or not col.required:
+            continue
+        hint = suggest(col.name, extras)
+        msg = f"required column '{col.name}' is missing"
+        if hint:
+            msg += f" (found '{hint}': misspelled?)"
+        findings.append(
+            Finding(
+                "schema.missing_column",
+                Severity.ERROR,
+                table.name,
+                msg,
+                file=file,
+                column=col.name,
+                value=hint,
+                limit=col.name,
+            )
+        )
+    return findings
+
+
+def _unknown_columns(table: Table, extras: list[str], file: str | None) -> list[Finding]:
+    findings = []
+    for c in extras:
+        hint = suggest(c, table.column_names)
+        msg = f"unknown column '{c}' ignored" + (f" (did you mean '{hint}'?)" if hint else "")
+        findings.append(
+            Finding(
+                "schema.unknown_column", Severity.WARNING, table.name, msg, file=file, column=c, value=c, limit=hint
+            )
+        )
+    return findings
+
+
+#: Cells named one by one per column; beyond, one finding counts the rest.
+MAX_CELL_FINDINGS = 1000
+
+
+def _bad_cells(
+    table: Table, col: Column, cells: pd.Series, bad: np.ndarray, file: str | None, first_line: int
+) -> list[Finding]:
+    findings = []
+    for i in np.flatnonzero(bad)[:MAX_CELL_FINDINGS]:
+        cell = cells.iat[i]
+        findings.append(
+            Finding(
+                "schema.type",
+                Severity.ERROR,
+                table.name,
+                f"'{cell}' is not a valid {_type_word(col)}",
+                file=file,
+                row=int(i) + first_line if file else None,
+                column=col.name,
+                value=str(cell),
+                limit=_type_word(col),
+            )
+        )
+    n_bad = int(bad.sum())
+    if n_bad > MAX_CELL_FINDINGS:
+        findings.append(
+            Finding(
+                "schema.type",
+                Severity.ERROR,
+                table.name,
+                f"{n_bad - MAX_CELL_FINDINGS} more cells are not a valid {_type_word(col)}",
+                file=file,
+                column=col.name,
+                value=n_bad,
+                limit=0,
+            )
+        )
+    return findings
 
 
 def _type_word(col: Column) -> str:

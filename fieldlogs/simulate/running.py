@@ -117,7 +117,7 @@ def speed_profile(vlim: FloatArray, ds: float, accel: float, brake: float) -> Fl
     vl2[0] = vl2[-1] = 0.0
     fwd = 2 * accel * q + np.minimum.accumulate(vl2 - 2 * accel * q)
     bwd = -2 * brake * q + np.minimum.accumulate((vl2 + 2 * brake * q)[::-1])[::-1]
-    return np.sqrt(np.clip(np.minimum(np.minimum(fwd, bwd), vl2), 0.0, None))
+    return np.asarray(np.sqrt(np.clip(np.minimum(np.minimum(fwd, bwd), vl2), 0.0, None)), dtype=float)
 
 
 def segment_samples(length: float, vlim_at: SpeedLimit, accel: float, brake: float) -> FloatArray:
@@ -131,14 +131,14 @@ def segment_samples(length: float, vlim_at: SpeedLimit, accel: float, brake: flo
     vs = np.interp(np.arange(m + 1) * DT, t_nodes, v, right=0.0)
     vs[0] = vs[-1] = 0.0
     trap = DT * (vs.sum() - 0.5 * (vs[0] + vs[-1]))
-    return vs * (length / trap)
+    return np.asarray(vs * (length / trap), dtype=float)
 
 
 def moving_average(x: FloatArray, w: int) -> FloatArray:
     """Centred moving average over ``w`` (odd) samples, zero outside."""
     h = w // 2
     c = np.concatenate([[0.0], np.cumsum(np.concatenate([np.zeros(h), x, np.zeros(h)]))])
-    return (c[w:] - c[:-w]) / w
+    return np.asarray((c[w:] - c[:-w]) / w, dtype=float)
 
 
 def plan_moves(geom: TrackGeometry, scenario: Scenario) -> tuple[list[Move], int]:
@@ -175,78 +175,103 @@ def plan_moves(geom: TrackGeometry, scenario: Scenario) -> tuple[list[Move], int
     return moves, facing
 
 
+@dataclass
+class _Timeline:
+    """100 Hz speed blocks of the run in the making, with its cab/PTO events and stops."""
+
+    blocks: list[FloatArray] = field(default_factory=list)
+    cab_events: list[tuple[float, str, int | None]] = field(default_factory=list)
+    stops_km: list[float] = field(default_factory=list)
+    n: int = 0
+
+    def add(self, arr: FloatArray) -> None:
+        self.blocks.append(arr)
+        self.n += len(arr)
+
+    def still(self, seconds: float) -> int:
+        k = round(seconds / DT)
+        self.add(np.zeros(k))
+        return k
+
+    @property
+    def t(self) -> float:
+        return self.n * DT
+
+
+@dataclass(frozen=True)
+class _Driving:
+    geom: TrackGeometry
+    accel: float
+    brake: float
+    v_line: float
+    cant: Cant
+    unbalanced_mps2: float
+
+    def vlim_for(self, move: Move, sigma_start: float) -> SpeedLimit:
+        def f(q: FloatArray) -> FloatArray:
+            km = self.geom.km_at(sigma_start + move.direction * q)
+            lim = curve_limit(self.geom.curvature(km), self.cant, self.unbalanced_mps2)
+            return np.asarray(np.minimum(self.v_line, lim), dtype=float)
+
+        return f
+
+
+def _drive(tl: _Timeline, drv: _Driving, mv: Move, stations_sigma: FloatArray, dwell_s: float, stop: bool) -> None:
+    """One move: segments between the station stops inside it (if ``stop``)."""
+    lo_s, hi_s = sorted((mv.sigma0, mv.sigma1))
+    inner = stations_sigma[(stations_sigma > lo_s + STOP_MARGIN_M) & (stations_sigma < hi_s - STOP_MARGIN_M)]
+    if not stop:
+        inner = np.empty(0)
+    inner = np.sort(inner) if mv.direction > 0 else np.sort(inner)[::-1]
+    points = [mv.sigma0, *inner.tolist(), mv.sigma1]
+    for j, (a0, a1) in enumerate(itertools.pairwise(points)):
+        if j > 0:
+            tl.still(dwell_s)
+            tl.stops_km.append(float(drv.geom.km_at(a0)))
+        tl.add(segment_samples(abs(a1 - a0), drv.vlim_for(mv, a0), drv.accel, drv.brake))
+
+
 def plan_motion(geom: TrackGeometry, scenario: Scenario, stations_km: list[float]) -> Motion:
     """The true motion of the whole run (see module docstring)."""
     r = scenario.running
     road_rail = scenario.is_road_rail
-    v_line = r.line_speed_kmh * KMH
     accel, brake = r.accel_kmh_s * KMH_PER_S, r.brake_kmh_s * KMH_PER_S
     w = round((accel + brake) / r.jerk_mps3 / DT) | 1  # odd window
     window_s = w * DT
     min_still = window_s + 1.0
-    cant = cant_model(scenario)
     moves, facing = plan_moves(geom, scenario)
-
-    def vlim_for(move: Move, sigma_start: float) -> SpeedLimit:
-        def f(q: FloatArray) -> FloatArray:
-            km = geom.km_at(sigma_start + move.direction * q)
-            lim = curve_limit(geom.curvature(km), cant, r.unbalanced_lateral_mps2)
-            return np.minimum(v_line, lim)
-
-        return f
-
+    drv = _Driving(geom, accel, brake, r.line_speed_kmh * KMH, cant_model(scenario), r.unbalanced_lateral_mps2)
     stations_sigma = np.sort(geom.sigma(np.asarray(stations_km, dtype=float))) if stations_km else np.empty(0)
-    blocks: list[FloatArray] = []
-    cab_events: list[tuple[float, str, int | None]] = []
-    pto: int | None = 0 if road_rail else None
-    n_total = 0
-
-    def add(arr: FloatArray) -> None:
-        nonlocal n_total
-        blocks.append(arr)
-        n_total += len(arr)
-
-    def still(seconds: float) -> int:
-        k = round(seconds / DT)
-        add(np.zeros(k))
-        return k
-
-    cab_events.append((0.0, moves[0].cab, pto))
+    tl = _Timeline()
+    tl.cab_events.append((0.0, moves[0].cab, 0 if road_rail else None))
+    t_on = 0.0
     if road_rail:
-        still(scenario.road_rail.off_rail_before_s)
-        t_on = n_total * DT
-        cab_events.append((round(t_on, 2), moves[0].cab, 1))
-    else:
-        t_on = 0.0
-    still(max(r.standstill_start_s, min_still))
-    stops_km: list[float] = []
+        tl.still(scenario.road_rail.off_rail_before_s)
+        t_on = tl.t
+        tl.cab_events.append((round(t_on, 2), moves[0].cab, 1))
+    tl.still(max(r.standstill_start_s, min_still))
     for i, mv in enumerate(moves):
-        lo_s, hi_s = sorted((mv.sigma0, mv.sigma1))
-        inner = stations_sigma[(stations_sigma > lo_s + STOP_MARGIN_M) & (stations_sigma < hi_s - STOP_MARGIN_M)]
-        if road_rail or not r.stop_at_stations:
-            inner = np.empty(0)
-        inner = np.sort(inner) if mv.direction > 0 else np.sort(inner)[::-1]
-        points = [mv.sigma0, *inner.tolist(), mv.sigma1]
-        for j, (a0, a1) in enumerate(itertools.pairwise(points)):
-            if j > 0:
-                still(max(r.dwell_s, min_still))
-                stops_km.append(float(geom.km_at(a0)))
-            add(segment_samples(abs(a1 - a0), vlim_for(mv, a0), accel, brake))
+        _drive(tl, drv, mv, stations_sigma, max(r.dwell_s, min_still), r.stop_at_stations and not road_rail)
         if i + 1 < len(moves):
             reverse = moves[i + 1].direction != mv.direction
-            dwell = max(r.reversal_dwell_s if reverse else r.dwell_s, min_still)
-            k0 = n_total
-            k = still(dwell)
-            stops_km.append(float(geom.km_at(mv.sigma1)))
+            k0 = tl.n
+            k = tl.still(max(r.reversal_dwell_s if reverse else r.dwell_s, min_still))
+            tl.stops_km.append(float(geom.km_at(mv.sigma1)))
             if moves[i + 1].cab != mv.cab:
-                cab_events.append((round((k0 + k // 2) * DT, 2), moves[i + 1].cab, 1 if road_rail else None))
-    still(max(r.standstill_end_s, min_still))
-    t_off = n_total * DT
+                tl.cab_events.append((round((k0 + k // 2) * DT, 2), moves[i + 1].cab, 1 if road_rail else None))
+    tl.still(max(r.standstill_end_s, min_still))
+    t_off = tl.t
     if road_rail:
-        cab_events.append((round(t_off, 2), moves[-1].cab, 0))
-        still(scenario.road_rail.off_rail_after_s)
+        tl.cab_events.append((round(t_off, 2), moves[-1].cab, 0))
+        tl.still(scenario.road_rail.off_rail_after_s)
+    return _motion(geom, tl, moves, facing, w, (t_on, t_off) if road_rail else None)
 
-    v_raw = np.concatenate(blocks)
+
+def _motion(
+    geom: TrackGeometry, tl: _Timeline, moves: list[Move], facing: int, w: int, on_rail: tuple[float, float] | None
+) -> Motion:
+    """Smoothed speeds → distance, along-track position, km, signed speed per 100 Hz step."""
+    v_raw = np.concatenate(tl.blocks)
     v = np.clip(moving_average(v_raw, w), 0.0, None)
     n = len(v)
     t = np.arange(n) / 100.0
@@ -260,7 +285,10 @@ def plan_motion(geom: TrackGeometry, scenario: Scenario, stations_km: list[float
     sigma = s0[idx] + d[idx] * (p - starts[idx])
     # end of the run: never beyond the last path point (float drift of ~1e-9 m)
     sigma = np.clip(sigma, geom.sigma(geom.km_min), geom.sigma(geom.km_max))
-    on_rail = (t >= t_on - 1e-9) & (t < t_off - 1e-9) if road_rail else np.ones(n, dtype=bool)
+    if on_rail is not None:
+        on = (t >= on_rail[0] - 1e-9) & (t < on_rail[1] - 1e-9)
+    else:
+        on = np.ones(n, dtype=bool)
     return Motion(
         t=t,
         v=v,
@@ -271,10 +299,10 @@ def plan_motion(geom: TrackGeometry, scenario: Scenario, stations_km: list[float
         u=d[idx] * v,
         udot=d[idx] * a,
         move=idx,
-        on_rail=on_rail,
+        on_rail=on,
         facing=facing,
         moves=moves,
-        cab_events=cab_events,
-        window_s=window_s,
-        stops_km=stops_km,
+        cab_events=tl.cab_events,
+        window_s=w * DT,
+        stops_km=tl.stops_km,
     )

@@ -210,6 +210,15 @@ def _type_name(tp: Any) -> str:
     return str(tp)
 
 
+def _scalar_ok(value: Any, tp: Any) -> bool:
+    """Whether ``value`` (from TOML) is acceptable for the scalar type ``tp``."""
+    if tp is bool or tp is str:
+        return isinstance(value, tp)
+    if tp is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, int | float) and not isinstance(value, bool)  # float
+
+
 def _convert(value: Any, tp: Any, key: str, src: str) -> Any:
     def bad() -> ScenarioError:
         return ScenarioError(f"expected {_type_name(tp)}, got {value!r}", path=src, key=key)
@@ -218,22 +227,10 @@ def _convert(value: Any, tp: Any, key: str, src: str) -> Any:
         if not isinstance(value, dict):
             raise bad()
         return _build(tp, value, key, src)  # type: ignore[arg-type]
-    if tp is bool:
-        if not isinstance(value, bool):
+    if tp in (bool, int, float, str):
+        if not _scalar_ok(value, tp):
             raise bad()
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise bad()
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise bad()
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise bad()
-        return value
+        return float(value) if tp is float else value
     if typing.get_origin(tp) is tuple:
         args = typing.get_args(tp)
         if not isinstance(value, list):
@@ -273,29 +270,39 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 
 def _check(s: Scenario) -> None:
-    src = s.source
+    """Every knob inside its range; the first problem is raised naming its key."""
+    for check in (_check_run, _check_positive, _check_non_negative, _check_bounds, _check_spans, _check_episodes):
+        problem = check(s)
+        if problem is not None:
+            raise ScenarioError(problem[1], path=s.source, key=problem[0])
 
-    def fail(key: str, msg: str) -> None:
-        raise ScenarioError(msg, path=src, key=key)
 
+Problem = tuple[str, str] | None
+"""(key, message) of the first problem a check finds, or None."""
+
+
+def _check_run(s: Scenario) -> Problem:
     kinds = [v.value for v in VehicleKind]
     if s.run.vehicle_kind not in kinds:
-        fail("run.vehicle_kind", f"must be one of {', '.join(kinds)}")
+        return "run.vehicle_kind", f"must be one of {', '.join(kinds)}"
     try:
         st = datetime.fromisoformat(s.run.start_time)
     except ValueError:
-        fail("run.start_time", f"not an ISO 8601 time: {s.run.start_time!r}")
-    else:
-        if st.tzinfo is None:
-            fail("run.start_time", "needs a UTC offset, e.g. 2026-01-15T10:00:00+09:00")
+        return "run.start_time", f"not an ISO 8601 time: {s.run.start_time!r}"
+    if st.tzinfo is None:
+        return "run.start_time", "needs a UTC offset, e.g. 2026-01-15T10:00:00+09:00"
     if not math.isfinite(s.road_rail.road_offset_m):
-        fail("road_rail.road_offset_m", "must be finite")
+        return "road_rail.road_offset_m", "must be finite"
     if s.route.track not in ("", *(t.value for t in Track)):
-        fail("route.track", "must be U, D, S or empty")
+        return "route.track", "must be U, D, S or empty"
     if s.route.start_cab not in [d.value for d in CabDirection]:
-        fail("route.start_cab", "must be F or R")
+        return "route.start_cab", "must be F or R"
     if s.seed < 0:
-        fail("seed", "must be ≥ 0")
+        return "seed", "must be ≥ 0"
+    return None
+
+
+def _check_positive(s: Scenario) -> Problem:
     positive = {
         "running.line_speed_kmh": s.running.line_speed_kmh,
         "running.accel_kmh_s": s.running.accel_kmh_s,
@@ -308,9 +315,10 @@ def _check(s: Scenario) -> None:
         "gps.tau_s": s.gps.tau_s,
         "radar.rate_hz": s.radar.rate_hz,
     }
-    for key, v in positive.items():
-        if not (math.isfinite(v) and v > 0):
-            fail(key, f"must be > 0, got {v}")
+    return next(((k, f"must be > 0, got {v}") for k, v in positive.items() if not (math.isfinite(v) and v > 0)), None)
+
+
+def _check_non_negative(s: Scenario) -> Problem:
     non_negative = {
         "route.margin_m": s.route.margin_m,
         "running.design_speed_kmh": s.running.design_speed_kmh,
@@ -337,15 +345,23 @@ def _check(s: Scenario) -> None:
         "slip.slides": s.slip.slides,
         **{f"imu.{f.name}": getattr(s.imu, f.name) for f in fields(ImuCfg)},
     }
-    for key, v in non_negative.items():
-        if not (math.isfinite(v) and v >= 0):
-            fail(key, f"must be ≥ 0, got {v}")
+    bad = ((k, f"must be ≥ 0, got {v}") for k, v in non_negative.items() if not (math.isfinite(v) and v >= 0))
+    return next(bad, None)
+
+
+def _check_bounds(s: Scenario) -> Problem:
     if s.running.cant_max_mm >= 1000 * s.running.gauge_m:
-        fail("running.cant_max_mm", "must be smaller than the gauge")
+        return "running.cant_max_mm", "must be smaller than the gauge"
     if not 0 <= s.balise.miss_probability <= 1:
-        fail("balise.miss_probability", "must be between 0 and 1")
+        return "balise.miss_probability", "must be between 0 and 1"
     if not 0 <= s.gps.nsat <= 64:
-        fail("gps.nsat", "must be between 0 and 64")
+        return "gps.nsat", "must be between 0 and 64"
+    if not 0 <= s.gps.poor_sky_fix1_share < 1:
+        return "gps.poor_sky_fix1_share", "must be ≥ 0 and < 1"
+    if not (math.isfinite(s.gps.poor_sky_fix1_spell_s) and s.gps.poor_sky_fix1_spell_s >= 1):
+        return "gps.poor_sky_fix1_spell_s", "must be ≥ 1 s"
+    if not 4 <= s.gps.poor_sky_nsat <= 64:
+        return "gps.poor_sky_nsat", "must be between 4 and 64"
     ranges = {
         "tacho.wear_pct": (s.tacho.wear_pct, -5.0, 5.0),
         "slip.depth": (s.slip.depth, 0.0, 0.9),
@@ -355,28 +371,31 @@ def _check(s: Scenario) -> None:
     }
     for key, ((lo, hi), vmin, vmax) in ranges.items():
         if not (vmin <= lo <= hi <= vmax):
-            fail(key, f"needs [low, high] with {vmin} ≤ low ≤ high ≤ {vmax}, got [{lo}, {hi}]")
+            return key, f"needs [low, high] with {vmin} ≤ low ≤ high ≤ {vmax}, got [{lo}, {hi}]"
+    return None
+
+
+def _check_spans(s: Scenario) -> Problem:
     for key, spans in (("gps.outages_km_m", s.gps.outages_km_m), ("gps.poor_sky_km_m", s.gps.poor_sky_km_m)):
         for i, (a, b) in enumerate(spans):
             if not (math.isfinite(a) and math.isfinite(b) and a < b):
-                fail(f"{key}[{i}]", f"needs [from, to] with from < to, got [{a}, {b}]")
-    if not 0 <= s.gps.poor_sky_fix1_share < 1:
-        fail("gps.poor_sky_fix1_share", "must be ≥ 0 and < 1")
-    if not (math.isfinite(s.gps.poor_sky_fix1_spell_s) and s.gps.poor_sky_fix1_spell_s >= 1):
-        fail("gps.poor_sky_fix1_spell_s", "must be ≥ 1 s")
-    if not 4 <= s.gps.poor_sky_nsat <= 64:
-        fail("gps.poor_sky_nsat", "must be between 4 and 64")
+                return f"{key}[{i}]", f"needs [from, to] with from < to, got [{a}, {b}]"
+    for key, vals in (("route.path_km_m", s.route.path_km_m), ("running.stations_km_m", s.running.stations_km_m)):
+        if not all(math.isfinite(v) for v in vals):
+            return key, "values must be finite"
+    return None
+
+
+def _check_episodes(s: Scenario) -> Problem:
     for i, ep in enumerate(s.slip.episodes):
         key = f"slip.episodes[{i}]"
         if ep.kind not in ("slip", "slide"):
-            fail(f"{key}.kind", "must be 'slip' or 'slide'")
+            return f"{key}.kind", "must be 'slip' or 'slide'"
         if not (0 < ep.depth < 1):
-            fail(f"{key}.depth", "must be between 0 and 1 (fraction of speed)")
+            return f"{key}.depth", "must be between 0 and 1 (fraction of speed)"
         if not (ep.duration_s > 0 and ep.t0_s >= 0):
-            fail(key, "needs t0_s ≥ 0 and duration_s > 0")
-    for key, vals in (("route.path_km_m", s.route.path_km_m), ("running.stations_km_m", s.running.stations_km_m)):
-        if not all(math.isfinite(v) for v in vals):
-            fail(key, "values must be finite")
+            return key, "needs t0_s ≥ 0 and duration_s > 0"
+    return None
 
 
 def scenario_from_dict(data: dict[str, Any], source: str = "<dict>", *, base: dict[str, Any] | None = None) -> Scenario:

@@ -91,7 +91,7 @@ def wheel_distance(motion: Motion, factor: FloatArray) -> FloatArray:
     """Distance rolled by the wheel circumference [m], cumulative at every step."""
     vw = motion.v * factor
     c = np.cumsum(vw)
-    return DT * (c - 0.5 * (vw[0] + vw))
+    return np.asarray(DT * (c - 0.5 * (vw[0] + vw)), dtype=float)
 
 
 def tacho_stream(rolled: FloatArray, motion: Motion, d_true: float, teeth: int) -> pd.DataFrame:

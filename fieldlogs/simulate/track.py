@@ -182,10 +182,10 @@ class TrackGeometry:
         return self.state(km).kappa
 
     def sigma(self, km: npt.ArrayLike) -> FloatArray:
-        return np.interp(np.asarray(km, dtype=float), self._kf, self._sf)
+        return np.asarray(np.interp(np.asarray(km, dtype=float), self._kf, self._sf), dtype=float)
 
     def km_at(self, sigma: npt.ArrayLike) -> FloatArray:
-        return np.interp(np.asarray(sigma, dtype=float), self._sf, self._kf)
+        return np.asarray(np.interp(np.asarray(sigma, dtype=float), self._sf, self._kf), dtype=float)
 
     def xy(self, km: npt.ArrayLike, lateral_m: float | FloatArray = 0.0) -> tuple[FloatArray, FloatArray]:
         """Plane coordinates of track positions, ``lateral_m`` to the left of increasing km."""
