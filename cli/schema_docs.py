@@ -6,8 +6,10 @@ from pathlib import Path
 
 from cli.schema import schema_markdown
 from schemas import ALL_SCHEMAS
+from schemas.enums import ALARM_MEANING, EVENT_MEANING, AlarmType
 
 BEGIN, END = "<!-- schemas:begin -->", "<!-- schemas:end -->"
+EVENTS_BEGIN, EVENTS_END = "<!-- events:begin -->", "<!-- events:end -->"
 README = Path(__file__).resolve().parent.parent / "README.md"
 
 
@@ -15,10 +17,25 @@ def schemas_markdown() -> str:
     return "\n\n".join(schema_markdown(t) for t in ALL_SCHEMAS.values())
 
 
+def events_markdown() -> str:
+    """The event types of ``events`` and the possession alarms and notices (schemas/enums.py)."""
+    rows = ["| event type | what it means |", "|---|---|"]
+    rows += [f"| `{t}` | {m} |" for t, m in EVENT_MEANING.items()]
+    rows += ["", "| possession alarm / notice | what it means |", "|---|---|"]
+    rows += [f"| `{t}` ({'alarm' if isinstance(t, AlarmType) else 'notice'}) | {m} |" for t, m in ALARM_MEANING.items()]
+    return "\n".join(rows)
+
+
+def _between(readme: str, begin: str, end: str, body: str) -> str:
+    head, rest = readme.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    return f"{head}{begin}\n{body}\n{end}{tail}"
+
+
 def with_schemas(readme: str) -> str:
-    head, rest = readme.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    return f"{head}{BEGIN}\n{schemas_markdown()}\n{END}{tail}"
+    """README with its generated sections (schemas, event types) rebuilt."""
+    readme = _between(readme, BEGIN, END, schemas_markdown())
+    return _between(readme, EVENTS_BEGIN, EVENTS_END, events_markdown())
 
 
 def main() -> None:
