@@ -16,7 +16,8 @@ from hypothesis import strategies as st
 
 from dbtools.build import build_db
 from fieldlogs.io import write_run
-from fieldlogs.quality.checks import CheckLimits, DbRefs, check_run, cumulative_again, load_db_refs, pulse_resets
+from fieldlogs.quality.checks import CheckLimits, DbRefs, check_run, load_db_refs
+from fieldlogs.quality.tacho import cumulative_again, pulse_resets
 from schemas.errors import InputError, TrainposError
 from schemas.findings import Finding
 from tests.conftest import DATA
