@@ -19,7 +19,7 @@ class Cells(HTMLParser):
         super().__init__()
         self.cells: list[tuple[str | None, str]] = []
         self.tags: list[str] = []
-        self._td: str | None | bool = False
+        self._td: str | bool | None = False
 
     def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
         self.tags.append(tag)

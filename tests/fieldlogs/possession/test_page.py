@@ -18,6 +18,6 @@ def test_page_legend_alarms_and_timeline() -> None:
     for typ in (*AlarmType, *NoticeType):
         assert f"<dt>{typ.value}</dt><dd>{html.escape(ALARM_MEANING[typ])}</dd>" in text
     assert [a.type for a in chk.alarms] == [AlarmType.OVERRUN]
-    assert "<td class=\"alarm\">overrun</td>" in text and "<span class='badge alarm'>1 alarm(s)</span>" in text
+    assert '<td class="alarm">overrun</td>' in text and "<span class='badge alarm'>1 alarm(s)</span>" in text
     assert "<code>plan &lt;1&gt;.csv</code>" in text and text.count("data:image/png;base64,") == 1
     assert "<script" not in text and "http" not in text.split("<body>")[1]

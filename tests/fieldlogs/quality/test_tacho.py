@@ -119,9 +119,7 @@ def test_speed_jump_is_a_wheel_event_not_a_defect() -> None:
 )
 def test_never_raises_and_rows_are_inside_the_frame(pulses: list[int | None], t: list[float | None]) -> None:
     n = min(len(pulses), len(t))
-    frame = pd.DataFrame(
-        {"t": pd.array(t[:n], dtype="Float64"), "pulses": pd.array(pulses[:n], dtype="Int64")}
-    )
+    frame = pd.DataFrame({"t": pd.array(t[:n], dtype="Float64"), "pulses": pd.array(pulses[:n], dtype="Int64")})
     limits = TachoLimits(max_accel_mps2=5.0, max_median_step_s=0.35, max_speed_mps=14.0)
     for f in review_tacho(frame, D, TEETH, limits):
         assert all(0 <= r < n for r in f.rows.tolist())
