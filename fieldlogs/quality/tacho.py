@@ -157,7 +157,8 @@ def _wheel(wheel_diameter_m: float | None, teeth: int | None) -> Iterator[TachoF
         msg = f"run.json wheel_diameter_m {wheel_diameter_m!r} is not a positive number"
         yield TachoFinding(TachoIssue.WHEEL_DIAMETER, msg, value=lambda _k: wheel_diameter_m, limit=0)
     if teeth is None or teeth <= 0:
-        yield TachoFinding(TachoIssue.TEETH, f"run.json teeth {teeth!r} is not a positive number", limit=0)
+        msg = f"run.json teeth {teeth!r} is not a positive number"
+        yield TachoFinding(TachoIssue.TEETH, msg, value=lambda _k: teeth, limit=0)
 
 
 def _values(t: FloatArray, p: FloatArray) -> Iterator[TachoFinding]:
