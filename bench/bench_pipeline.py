@@ -31,7 +31,7 @@ from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.io import read_run, write_run
 from fieldlogs.pipeline import run_pipeline
 from fieldlogs.simulate import scenario_from_dict, simulate_run
-from schemas.units import kmh_s_to_mps2
+from schemas.units import kmh_s_to_mps2, metres_per_pulse
 
 
 def naive(
@@ -48,6 +48,7 @@ def naive(
     2 % margin, one output row per cycle, and each GPS fix projected onto the grid
     segment by segment near its nearest point."""
     ta = kmh_s_to_mps2(1.23)
+    k_pulse = metres_per_pulse(d_wheel, teeth)
     win_ax: deque[float] = deque()
     win_ap: deque[float] = deque()
     win_k: deque[float] = deque()
@@ -65,7 +66,7 @@ def naive(
             n += 1
             j += 1
         means = [x / n if n else 0.0 for x in sums]
-        d = pulses / teeth * np.pi * d_wheel
+        d = pulses * k_pulse
         v = (d - prev_d) / 0.1
         ap = (v - prev_v) / 0.1
         prev_d, prev_v = d, v

@@ -48,11 +48,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from dbtools.gis.geometry import Projector
 from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.pipeline.config import GpsConfig
-from fieldlogs.possession.check import PossessionConfig, check_streams, config_from_dict
+from fieldlogs.possession.check import check_streams
+from fieldlogs.possession.config import PossessionConfig, config_from_dict
 from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, MISTAKE_ALARMS, PossessionCase, make_cases
+from schemas.enums import AlarmType
 from schemas.errors import InputError
 
-TARGET_S = {"wrong_track": 120.0, "overrun": 2.0, "released_on_rail": 2.0, "not_started": 2.0}
+TARGET_S = {
+    AlarmType.WRONG_TRACK: 120.0,
+    AlarmType.OVERRUN: 2.0,
+    AlarmType.RELEASED_ON_RAIL: 2.0,
+    AlarmType.NOT_STARTED: 2.0,
+}
 
 
 def evaluate(
@@ -77,10 +84,10 @@ def evaluate(
     hit = None
     if exp is not None:
         typ = EXPECTED_ALARM[case.kind]
-        t_ref = case.t_on if typ == "wrong_track" else float(exp["t_true"])
+        t_ref = case.t_on if typ == AlarmType.WRONG_TRACK else float(exp["t_true"])
         mine = MISTAKE_ALARMS[case.kind]
         cands = [a for a in alarms if a.type in mine and a.t <= t_ref + TARGET_S[typ]]
-        if typ == "overrun":
+        if typ == AlarmType.OVERRUN:
             cands = [a for a in cands if a.t >= t_ref - 30.0]
         hit = cands[0] if cands else None
         row["latency_s"] = None if hit is None else hit.t - t_ref

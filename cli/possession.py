@@ -14,6 +14,7 @@ from rich.console import Console
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
 from fieldlogs.possession.check import PossessionReport, check_files
+from schemas.enums import AlarmType, NoticeType
 from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.units import format_km
 
@@ -28,18 +29,18 @@ class Fmt(StrEnum):
 
 ALARM_COLUMNS = ["type", "t_s", "time", "km", "track", "work_no", "evidence"]
 #: Evidence shown in the terminal table per type (JSON and HTML have all of it).
-BRIEF = {
-    "wrong_track": ("planned_track", "decided_track", "after_on_rail_s", "llr"),
-    "wrong_track_suspected": ("planned_track", "likeliest_track", "odds", "n_fixes"),
-    "overrun": ("end", "beyond_m", "uncertainty_m", "until_t"),
-    "released_on_rail": ("released_at", "until_t"),
-    "not_started": ("started_at", "reason", "until_t"),
-    "approaching_end": ("end", "distance_m", "speed_mps"),
-    "overrun_possible": ("end", "uncertainty_m", "until_t"),
-    "track_undecided": ("decided_at_t",),
-    "crossover": ("from", "to", "rms_m"),
-    "position_uncertain": ("uncertainty_m", "until_t"),
-    "position_undetermined": ("km_known_from_t",),
+BRIEF: dict[str, tuple[str, ...]] = {
+    AlarmType.WRONG_TRACK: ("planned_track", "decided_track", "after_on_rail_s", "llr"),
+    AlarmType.WRONG_TRACK_SUSPECTED: ("planned_track", "likeliest_track", "odds", "n_fixes"),
+    AlarmType.OVERRUN: ("end", "beyond_m", "uncertainty_m", "until_t"),
+    AlarmType.RELEASED_ON_RAIL: ("released_at", "until_t"),
+    AlarmType.NOT_STARTED: ("started_at", "reason", "until_t"),
+    NoticeType.APPROACHING_END: ("end", "distance_m", "speed_mps"),
+    NoticeType.OVERRUN_POSSIBLE: ("end", "uncertainty_m", "until_t"),
+    NoticeType.TRACK_UNDECIDED: ("decided_at_t",),
+    NoticeType.CROSSOVER: ("from", "to", "rms_m"),
+    NoticeType.POSITION_UNCERTAIN: ("uncertainty_m", "until_t"),
+    NoticeType.POSITION_UNDETERMINED: ("km_known_from_t",),
 }
 
 
@@ -108,7 +109,7 @@ def check(
     fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json or html."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
     config: Path | None = typer.Option(
-        None, "--config", help="TOML with gps and possession sections (see fieldlogs/possession.py)."
+        None, "--config", help="TOML with gps and possession sections (see fieldlogs/possession/config.py)."
     ),
 ) -> None:
     """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.

@@ -32,6 +32,20 @@ def mps2_to_kmh_s(value: float) -> float:
     return value / KMH_PER_S
 
 
+def wheel_circumference_m(wheel_diameter_m: float) -> float:
+    """Distance one wheel revolution rolls: π·D [m] (the nominal diameter of run.json)."""
+    return math.pi * wheel_diameter_m
+
+
+def metres_per_pulse(wheel_diameter_m: float, teeth: int) -> float:
+    """Distance per tachometer pulse: k = π·D / teeth [m] (``teeth`` pulses per revolution).
+
+    The one place the tacho's scale is defined: the pipeline's cycles, ``logs check`` and
+    ``logs info``, the possession tacho and the simulator's pulse counter all use it.
+    """
+    return wheel_circumference_m(wheel_diameter_m) / teeth
+
+
 def parse_km(text: str) -> float:
     """Parse kilometrage in metres: ``"12345.6"`` or railway notation ``"12k345.6"``.
 

@@ -3,25 +3,22 @@
 One figure per line: per track, the mean lateral offset of every cell (the run-level mean,
 with its 95 % interval) along the km, coloured by status, defects shaded, the ±min-shift
 band drawn; below, the along-track residual (GPS km − pipeline km) per cell. Matplotlib
-headless (Agg), PNG bytes; the HTML embeds them as ``data:`` URIs (no external resource,
-no script: the file works offline and can be mailed).
+headless (Agg, through :func:`dbtools.pagekit.pyplot`), PNG bytes; the page
+(:mod:`dbtools.pagekit`) embeds them as ``data:`` URIs (no external resource, no script:
+the file works offline and can be mailed).
+
+The verdict is green ("No defect found.") only when no line is mostly unverified: a grid
+that could not be checked is not shown to be right (:func:`verdict`).
 """
 
 from __future__ import annotations
 
-import base64
-import html
-import io
-from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
+from dbtools import pagekit as kit
 from dbtools.gis.verify import DEFECT, UNVERIFIED, VERIFIED
 from schemas.units import format_km
 
@@ -30,26 +27,14 @@ if TYPE_CHECKING:
 
 #: At most this many lines get a figure in the HTML (lines with defects first).
 MAX_LINE_FIGURES = 20
+#: A line with more than this share of its length unverified keeps "no defect found" from
+#: showing green.
+MAX_UNVERIFIED_SHARE = 0.5
 STATUS_STYLE = {
     VERIFIED: ("tab:blue", "verified"),
     UNVERIFIED: ("0.65", "unverified"),
     DEFECT: ("tab:red", "defect"),
 }
-CSS = """
-body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;margin:2em;color:#222;max-width:1400px}
-table{border-collapse:collapse;margin:1em 0;font-size:13px}
-th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}
-th{background:#f0f0f0}td.l,th.l{text-align:left}
-.warn{color:#b00;font-weight:bold}.ok{color:#070;font-weight:bold}.note{color:#666}
-figure{margin:1.5em 0}img{max-width:100%}.scroll{overflow-x:auto}
-"""
-
-
-def _png(fig: Any) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=96, bbox_inches="tight")
-    plt.close(fig)
-    return buf.getvalue()
 
 
 def offset_along_line(cells: pd.DataFrame, defects: pd.DataFrame, line_code: str, min_shift_m: float) -> bytes:
@@ -57,7 +42,9 @@ def offset_along_line(cells: pd.DataFrame, defects: pd.DataFrame, line_code: str
     along-track residual; defects shaded."""
     c = cells[cells["line_code"].astype(str) == str(line_code)]
     tracks = sorted(c["track"].astype(str).unique()) or ["—"]
-    fig, axes = plt.subplots(len(tracks) + 1, 1, figsize=(12, 2.6 * len(tracks) + 2.2), sharex=True, squeeze=False)
+    fig, axes = kit.pyplot().subplots(
+        len(tracks) + 1, 1, figsize=(12, 2.6 * len(tracks) + 2.2), sharex=True, squeeze=False
+    )
     d_line = defects[defects["line_code"].astype(str) == str(line_code)] if len(defects) else defects
     for ax, track in zip(axes[:-1, 0], tracks, strict=True):
         ct = c[c["track"].astype(str) == track]
@@ -108,90 +95,117 @@ def offset_along_line(cells: pd.DataFrame, defects: pd.DataFrame, line_code: str
     else:
         ax.text(0.5, 0.5, "no pipeline km with a small margin", ha="center", va="center", transform=ax.transAxes)
     axes[0, 0].set_title(f"Line {line_code}: mean lateral offset per 20 m cell (95 % interval)")
-    return _png(fig)
+    return kit.png(fig)
 
 
 # ------------------------------------------------------------------------------ HTML
 
 
-def _img(png: bytes, alt: str) -> str:
-    data = base64.b64encode(png).decode()
-    return (
-        f'<figure><img alt="{html.escape(alt)}" src="data:image/png;base64,{data}">'
-        f"<figcaption>{html.escape(alt)}</figcaption></figure>"
-    )
-
-
-def _fmt(column: str, v: Any) -> str:
-    if v is None or (isinstance(v, float) and not np.isfinite(v)) or (not isinstance(v, str) and pd.isna(v)):
-        return "<td></td>"
-    if isinstance(v, str) or isinstance(v, bool):
-        return f'<td class="l">{html.escape(str(v))}</td>'
+def _cell(column: str, v: Any) -> kit.Cell:
+    """km columns in railway notation, p/q values in scientific notation, shares in %,
+    other numbers with three decimals."""
+    if kit.is_missing(v) or (isinstance(v, float | np.floating) and not np.isfinite(v)):
+        return kit.Cell("")
+    if isinstance(v, str | bool) or not isinstance(v, int | float | np.integer | np.floating):
+        return kit.Cell(str(v), "l")
     if column.startswith("km_") and column.endswith("_m") and "residual" not in column:
-        return f"<td>{format_km(float(v))}</td>"
+        return kit.Cell(format_km(float(v)))
     if isinstance(v, int | np.integer):
-        return f"<td>{int(v):,}</td>"
+        return kit.Cell(f"{int(v):,}")
     x = float(v)
     if column.startswith(("p_", "q_")):
-        return f"<td>{x:.2e}</td>"
+        return kit.Cell(f"{x:.2e}")
     if column.endswith("_share"):
-        return f"<td>{100 * x:.1f} %</td>"
-    return f"<td>{x:.3f}</td>"
+        return kit.Cell(f"{100 * x:.1f} %")
+    return kit.Cell(f"{x:.3f}")
 
 
 def table_html(frame: pd.DataFrame) -> str:
-    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
-    rows = [
-        "<tr>" + "".join(_fmt(str(c), v) for c, v in zip(frame.columns, rec, strict=True)) + "</tr>"
-        for rec in frame.itertuples(index=False, name=None)
+    return kit.frame_table(frame, _cell)
+
+
+def mostly_unverified(coverage: pd.DataFrame) -> pd.DataFrame:
+    """Lines (all tracks together) with more than :data:`MAX_UNVERIFIED_SHARE` of their
+    length unverified: ``line_code``, ``length_km``, ``unverified_km``."""
+    if coverage.empty:
+        return pd.DataFrame({"line_code": [], "length_km": [], "unverified_km": []})
+    per = coverage.groupby(coverage["line_code"].astype(str))[["length_km", "unverified_km"]].sum().reset_index()
+    return per[(per["length_km"] > 0) & (per["unverified_km"] > MAX_UNVERIFIED_SHARE * per["length_km"])]
+
+
+def verdict(coverage: pd.DataFrame, n_defects: int) -> str:
+    """Defects in red; "No defect found." in green only when no line is mostly unverified,
+    else in amber, naming those lines and how much of them is unverified."""
+    if n_defects:
+        return kit.paragraph(f"{n_defects} defect(s) found.", kit.Status.WARN)
+    if coverage.empty or not float(coverage["length_km"].sum()) > 0:
+        return kit.paragraph("No defect found, but no grid cell could be checked.", kit.Status.CAUTION)
+    thin = mostly_unverified(coverage)
+    if thin.empty:
+        return kit.paragraph("No defect found.", kit.Status.OK)
+    lines = "; ".join(
+        f"line {r.line_code}: {r.unverified_km:.1f} of {r.length_km:.1f} km unverified" for r in thin.itertuples()
+    )
+    return kit.paragraph(
+        f"No defect found where the evidence suffices, but most of the grid is unverified ({lines}): "
+        "the grid there is not shown to be right.",
+        kit.Status.CAUTION,
+    )
+
+
+def _method(report: VerifyReport) -> str:
+    cfg = report.verification.config
+    return kit.paragraph(
+        "Per 20 m cell the run is the unit: the runs' mean offsets are tested against 0 "
+        f"(t-test, spread at least the track's pooled between-run spread; {cfg.correction.upper()} correction "
+        f"over all testable cells at {cfg.alpha:g}); a defect needs |mean| ≥ {cfg.min_shift_m:g} m. "
+        f"Cells with fewer than {cfg.min_runs} runs or {cfg.min_fixes} fixes, or whose 95 % interval reaches "
+        f"beyond ±{cfg.tolerance_m:g} m, are unverified. Offsets are positive to the left of increasing km.",
+        kit.Status.NOTE,
+    )
+
+
+def _line_figures(report: VerifyReport) -> list[str]:
+    v = report.verification
+    lines = list(v.coverage["line_code"].astype(str).unique())
+    with_defects = set(v.defects["line_code"].astype(str)) if len(v.defects) else set()
+    lines.sort(key=lambda lc: (lc not in with_defects, lc))
+    out = [
+        kit.figure(offset_along_line(v.cells, v.defects, lc, v.config.min_shift_m), f"Line {lc}")
+        for lc in lines[:MAX_LINE_FIGURES]
     ]
-    return f"<div class='scroll'><table><tr>{head}</tr>{''.join(rows)}</table></div>"
+    if len(lines) > MAX_LINE_FIGURES:
+        out.append(kit.paragraph(f"{len(lines) - MAX_LINE_FIGURES} more line(s) not drawn.", kit.Status.NOTE))
+    return out
 
 
 def render_html(report: VerifyReport) -> str:
     """The whole verification as one HTML string."""
     v = report.verification
-    cfg = v.config
     n_def = len(v.defects)
-    verdict = f"<p class='warn'>{n_def} defect(s) found.</p>" if n_def else "<p class='ok'>No defect found.</p>"
     parts = [
-        "<!doctype html><html lang='en'><head><meta charset='utf-8'><title>trainpos gis verify</title>"
-        f"<style>{CSS}</style></head><body>",
-        "<h1>GIS grid verification</h1>",
-        f"<p>DB <code>{html.escape(report.db)}</code> (version <b>{html.escape(str(report.db_version))}</b>), "
-        f"{len(report.runs)} run(s), {v.counts.get('fixes_matched', 0):,} fixes used; "
-        f"generated {datetime.now(UTC):%Y-%m-%d %H:%M} UTC.</p>",
-        verdict,
-        "<p class='note'>Per 20 m cell the run is the unit: the runs' mean offsets are tested against 0 "
-        f"(t-test, spread at least the track's pooled between-run spread; {cfg.correction.upper()} correction "
-        f"over all testable cells at {cfg.alpha:g}); a defect needs |mean| ≥ {cfg.min_shift_m:g} m. "
-        f"Cells with fewer than {cfg.min_runs} runs or {cfg.min_fixes} fixes, or whose 95 % interval reaches "
-        f"beyond ±{cfg.tolerance_m:g} m, are unverified. Offsets are positive to the left of increasing km.</p>",
-        "<h2>Coverage</h2>",
-        table_html(v.coverage),
-        "<h2>Defects</h2>",
-        table_html(v.defects) if n_def else "<p>None.</p>",
+        f"<p>DB {kit.code(report.db)} (version <b>{kit.escape(report.db_version)}</b>), "
+        f"{len(report.runs)} run(s), {v.counts.get('fixes_matched', 0):,} fixes used; {kit.generated()}.</p>",
+        verdict(v.coverage, n_def),
+        _method(report),
+        kit.section("Coverage", table_html(v.coverage)),
+        kit.section("Defects", table_html(v.defects) if n_def else "<p>None.</p>"),
     ]
     if len(v.proposal):
-        parts += ["<h2>Proposed GIS points</h2>", table_html(v.proposal)]
-    parts += ["<h2>Offsets along the lines</h2>"]
-    lines = list(v.coverage["line_code"].astype(str).unique())
-    with_defects = set(v.defects["line_code"].astype(str)) if n_def else set()
-    lines.sort(key=lambda lc: (lc not in with_defects, lc))
-    for lc in lines[:MAX_LINE_FIGURES]:
-        parts.append(_img(offset_along_line(v.cells, v.defects, lc, cfg.min_shift_m), f"Line {lc}"))
-    if len(lines) > MAX_LINE_FIGURES:
-        parts.append(f"<p class='note'>{len(lines) - MAX_LINE_FIGURES} more line(s) not drawn.</p>")
+        parts.append(kit.section("Proposed GIS points", table_html(v.proposal)))
+    parts.append(kit.section("Offsets along the lines", *_line_figures(report)))
     flagged = v.cells[v.cells["status"] == DEFECT]
     if len(flagged):
-        parts += ["<h2>Defect cells</h2>", table_html(flagged)]
-    parts += [
-        "<h2>Evidence</h2>",
-        table_html(pd.DataFrame([report.evidence])),
-        table_html(pd.DataFrame(report.runs)),
-        "<p class='note'>Along-track residual over all fixes with a pipeline km of small margin: "
-        + html.escape(", ".join(f"{k} {val}" for k, val in v.km_residual.items()))
-        + "</p>",
-        "</body></html>",
-    ]
-    return "\n".join(parts)
+        parts.append(kit.section("Defect cells", table_html(flagged)))
+    residual = ", ".join(f"{k} {val}" for k, val in v.km_residual.items())
+    parts.append(
+        kit.section(
+            "Evidence",
+            table_html(pd.DataFrame([report.evidence])),
+            table_html(pd.DataFrame(report.runs)),
+            kit.paragraph(
+                f"Along-track residual over all fixes with a pipeline km of small margin: {residual}", kit.Status.NOTE
+            ),
+        )
+    )
+    return kit.page("trainpos gis verify", *parts, heading_text="GIS grid verification")

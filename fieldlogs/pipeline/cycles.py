@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from schemas import units
 from schemas.enums import CabDirection
 
 FloatArray = npt.NDArray[np.float64]
@@ -109,7 +110,7 @@ def build_cycles(
         end = t_end if t_end is not None else (float(imu["t"].iloc[-1]) if has_imu and imu is not None else 0.0)
         t = np.arange(0.0, end + 1e-9, cycle_s)
         pulses = np.full(t.size, np.nan)
-    metres_per_pulse = np.pi * wheel_diameter_m / teeth
+    metres_per_pulse = units.metres_per_pulse(wheel_diameter_m, teeth)
     if has_tacho:
         p0 = pulses[np.isfinite(pulses)][0] if np.isfinite(pulses).any() else 0.0
         d = (pulses - p0) * metres_per_pulse

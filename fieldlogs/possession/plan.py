@@ -28,6 +28,7 @@ from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
@@ -41,6 +42,7 @@ from schemas.plans import POSSESSIONS
 #: Time columns of a plan; the first two are required.
 TIME_COLUMNS = ("planned_start", "planned_end", "started_at", "released_at")
 TIME_EXAMPLE = "2026-01-16T01:00:00+09:00"
+FloatArray = npt.NDArray[np.float64]
 
 
 class PossessionState(StrEnum):
@@ -111,24 +113,17 @@ def parse_time(text: str) -> datetime:
     return t
 
 
-def read_plan(path: Path, network: Network | None = None) -> Plan:
-    """Read and check a plan file; rows with errors are left out of ``possessions``.
+class _Rows:
+    """The plan's findings, and the file lines of rows with an error (left out of the plan)."""
 
-    Raises :class:`~schemas.errors.InputError` when the file cannot be read at all.
-    """
-    path = Path(path)
-    raw = read_raw_table(path, sheet=POSSESSIONS.name)
-    file = str(path)
-    co = read_and_check(POSSESSIONS, raw, file=file)
-    findings = list(co.findings)
-    frame = co.frame
-    bad_rows = {f.row for f in findings if f.severity == Severity.ERROR and f.row is not None}
-    if any(f.rule == "schema.missing_column" for f in findings):
-        return Plan([], findings, file)
+    def __init__(self, frame: pd.DataFrame, file: str, findings: list[Finding]) -> None:
+        self.frame, self.file, self.findings = frame, file, findings
+        self.bad = {f.row for f in findings if f.severity == Severity.ERROR and f.row is not None}
 
-    def finding(rule: str, i: int, column: str, message: str, value: object = None, limit: object = None) -> None:
-        work = frame["work_no"].iat[i]
-        findings.append(
+    def error(self, rule: str, i: int, column: str, message: str, value: object = None, limit: object = None) -> None:
+        """An error of row ``i`` (0-based data row)."""
+        work = self.frame["work_no"].iat[i]
+        self.findings.append(
             Finding(
                 rule,
                 Severity.ERROR,
@@ -137,13 +132,17 @@ def read_plan(path: Path, network: Network | None = None) -> Plan:
                 keys={"work_no": _text(work)},
                 value=value,
                 limit=limit,
-                file=file,
+                file=self.file,
                 row=i + FIRST_DATA_LINE,
                 column=column,
             )
         )
-        bad_rows.add(i + FIRST_DATA_LINE)
+        self.bad.add(i + FIRST_DATA_LINE)
 
+
+def _parse_times(rows: _Rows) -> dict[str, list[datetime | None]]:
+    """Every time cell parsed (None when empty or wrong; wrong ones are findings)."""
+    frame = rows.frame
     times: dict[str, list[datetime | None]] = {c: [None] * len(frame) for c in TIME_COLUMNS}
     for c in TIME_COLUMNS:
         for i, v in enumerate(frame[c].tolist()):
@@ -153,56 +152,48 @@ def read_plan(path: Path, network: Network | None = None) -> Plan:
                 times[c][i] = parse_time(str(v))
             except ValueError as exc:
                 if "offset" in str(exc):
-                    finding(
-                        "plan.time_offset",
-                        i,
-                        c,
-                        f"'{v}' has no UTC offset: write e.g. {TIME_EXAMPLE}",
-                        value=str(v),
-                        limit="ISO 8601 with offset",
-                    )
+                    rule, message = "plan.time_offset", f"'{v}' has no UTC offset: write e.g. {TIME_EXAMPLE}"
                 else:
-                    finding(
-                        "plan.time_format",
-                        i,
-                        c,
-                        f"'{v}' is not an ISO 8601 time (e.g. {TIME_EXAMPLE})",
-                        value=str(v),
-                        limit="ISO 8601 with offset",
-                    )
-    tracks = _db_tracks(network)
-    km_from = frame["km_from_m"].to_numpy(dtype=float, na_value=np.nan)
-    km_to = frame["km_to_m"].to_numpy(dtype=float, na_value=np.nan)
-    for i in range(len(frame)):
-        if np.isfinite(km_from[i]) and np.isfinite(km_to[i]) and not km_from[i] < km_to[i]:
-            finding(
-                "plan.km_order",
-                i,
-                "km_to_m",
-                f"km_to_m {km_to[i]:g} m must be greater than km_from_m {km_from[i]:g} m",
-                value=float(km_to[i]),
-                limit=float(km_from[i]),
-            )
-        ps, pe = times["planned_start"][i], times["planned_end"][i]
-        if ps is not None and pe is not None and not ps < pe:
-            finding("plan.time_order", i, "planned_end", "planned_end must be after planned_start", str(pe), str(ps))
-        st, rl = times["started_at"][i], times["released_at"][i]
-        if rl is not None and _text(frame["started_at"].iat[i]) is None:
-            finding("plan.release_without_start", i, "released_at", "released_at given but started_at is empty")
-        if st is not None and rl is not None and rl < st:
-            finding("plan.time_order", i, "released_at", "released_at is before started_at", str(rl), str(st))
-        if tracks is not None:
-            for rule, column, message, value, limit in _track_errors(frame, i, tracks):
-                finding(rule, i, column, message, value, limit)
-            warning = _outside_grid(frame, i, tracks, km_from[i], km_to[i], file)
-            if warning is not None:
-                findings.append(warning)
+                    rule, message = "plan.time_format", f"'{v}' is not an ISO 8601 time (e.g. {TIME_EXAMPLE})"
+                rows.error(rule, i, c, message, value=str(v), limit="ISO 8601 with offset")
+    return times
+
+
+def _order_rules(rows: _Rows, i: int, times: dict[str, list[datetime | None]], km_from: float, km_to: float) -> None:
+    """km_from < km_to, planned_start < planned_end, released_at only after started_at."""
+    if np.isfinite(km_from) and np.isfinite(km_to) and not km_from < km_to:
+        message = f"km_to_m {km_to:g} m must be greater than km_from_m {km_from:g} m"
+        rows.error("plan.km_order", i, "km_to_m", message, value=float(km_to), limit=float(km_from))
+    ps, pe = times["planned_start"][i], times["planned_end"][i]
+    if ps is not None and pe is not None and not ps < pe:
+        rows.error("plan.time_order", i, "planned_end", "planned_end must be after planned_start", str(pe), str(ps))
+    st, rl = times["started_at"][i], times["released_at"][i]
+    if rl is not None and _text(rows.frame["started_at"].iat[i]) is None:
+        rows.error("plan.release_without_start", i, "released_at", "released_at given but started_at is empty")
+    if st is not None and rl is not None and rl < st:
+        rows.error("plan.time_order", i, "released_at", "released_at is before started_at", str(rl), str(st))
+
+
+def _db_rules(
+    rows: _Rows, i: int, tracks: dict[tuple[str, str], tuple[float, float]], km_from: float, km_to: float
+) -> None:
+    """The line and track exist in the onboard DB; a warning when the section leaves its grid."""
+    for rule, column, message, value, limit in _track_errors(rows.frame, i, tracks):
+        rows.error(rule, i, column, message, value, limit)
+    warning = _outside_grid(rows.frame, i, tracks, km_from, km_to, rows.file)
+    if warning is not None:
+        rows.findings.append(warning)
+
+
+def _possessions(
+    rows: _Rows, times: dict[str, list[datetime | None]], km_from: FloatArray, km_to: FloatArray
+) -> list[Possession]:
+    """The rows without an error, as possessions."""
+    frame = rows.frame
     possessions = []
     for i in range(len(frame)):
-        if i + FIRST_DATA_LINE in bad_rows:
-            continue
         ps, pe = times["planned_start"][i], times["planned_end"][i]
-        if ps is None or pe is None:
+        if i + FIRST_DATA_LINE in rows.bad or ps is None or pe is None:
             continue
         possessions.append(
             Possession(
@@ -218,7 +209,31 @@ def read_plan(path: Path, network: Network | None = None) -> Plan:
                 row=i + FIRST_DATA_LINE,
             )
         )
-    return Plan(possessions, findings, file)
+    return possessions
+
+
+def read_plan(path: Path, network: Network | None = None) -> Plan:
+    """Read and check a plan file; rows with errors are left out of ``possessions``.
+
+    Raises :class:`~schemas.errors.InputError` when the file cannot be read at all.
+    """
+    path = Path(path)
+    raw = read_raw_table(path, sheet=POSSESSIONS.name)
+    file = str(path)
+    co = read_and_check(POSSESSIONS, raw, file=file)
+    findings = list(co.findings)
+    if any(f.rule == "schema.missing_column" for f in findings):
+        return Plan([], findings, file)
+    rows = _Rows(co.frame, file, findings)
+    times = _parse_times(rows)
+    tracks = _db_tracks(network)
+    km_from = co.frame["km_from_m"].to_numpy(dtype=float, na_value=np.nan)
+    km_to = co.frame["km_to_m"].to_numpy(dtype=float, na_value=np.nan)
+    for i in range(len(co.frame)):
+        _order_rules(rows, i, times, float(km_from[i]), float(km_to[i]))
+        if tracks is not None:
+            _db_rules(rows, i, tracks, float(km_from[i]), float(km_to[i]))
+    return Plan(_possessions(rows, times, km_from, km_to), findings, file)
 
 
 def _db_tracks(network: Network | None) -> dict[tuple[str, str], tuple[float, float]] | None:

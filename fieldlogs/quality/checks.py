@@ -10,10 +10,11 @@ rule, become Python objects):
 * time: ``t`` going backwards (unsorted), duplicated ``t`` (identical rows or not), gaps
   longer than ``gap_cycles`` nominal cycles, measured sampling rate (1 / median Δt) more
   than ``rate_tolerance`` away from the declared rate;
-* tacho: pulse counter decreasing or reset (a drop to less than half the previous count
-  that does not recover at the next sample),
-  speed jumps: pulse-derived acceleration above ``max_accel_mps2`` plus the quantisation of
-  two pulses per cycle (2·k/Δt², k = π·D/teeth metres per pulse);
+* tacho (:func:`fieldlogs.quality.tacho.review_tacho`, the validator the possession check
+  uses too): pulse counter decreasing or reset (a drop to less than half the previous count
+  that does not recover at the next sample), speed jumps: pulse-derived acceleration above
+  ``max_accel_mps2`` plus the quantisation of two pulses per cycle (2·k/Δt², k = π·D/teeth
+  metres per pulse);
 * imu: median |a| far from gravity (units: logged in g?);
 * gps, with a DB: fixes outside the bounding box of the DB's GIS grid + ``area_margin_m``;
 * balise: telegrams missing their fields; with a DB, unknown I1 line codes, unknown I2
@@ -37,6 +38,7 @@ import pandas as pd
 from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.io import REQUIRED_STREAMS, Run
+from fieldlogs.quality.tacho import TACHO_RATE_HZ, TachoIssue, TachoLimits, review_tacho, time_order
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, check_frame
@@ -45,31 +47,6 @@ from schemas.model import Table
 
 G = 9.80665
 M_PER_DEG_LAT = 111_320.0
-#: A pulse count dropping below this fraction of the previous one, and staying below that
-#: previous count at the next sample, is a counter reset (the counter restarted near 0).
-#: Other drops, including a single low sample that recovers, are glitches: reported, never
-#: repaired.
-RESET_FRACTION = 0.5
-
-
-def pulse_resets(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Indices ``i`` (into ``p``, in time order, no NaN) where the count drops: (resets, other drops)."""
-    drop = np.flatnonzero(np.diff(p) < 0) + 1
-    nxt = np.minimum(drop + 1, len(p) - 1)
-    stays_low = (drop == len(p) - 1) | (p[nxt] < p[drop - 1])
-    is_reset = (p[drop] < RESET_FRACTION * p[drop - 1]) & stays_low
-    return drop[is_reset], drop[~is_reset]
-
-
-def cumulative_again(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pulses made cumulative across resets: each reset adds the count before it to all later rows.
-
-    ``p`` in time order without NaN; returns (fixed counts, reset indices).
-    """
-    resets, _ = pulse_resets(p)
-    offsets = np.zeros(len(p), dtype=p.dtype)
-    offsets[resets] = p[resets - 1]
-    return p + np.cumsum(offsets), resets
 
 
 @dataclass(frozen=True)
@@ -234,19 +211,6 @@ def _duplicates(tv: np.ndarray, *, sorted_already: bool) -> tuple[np.ndarray, np
     return dup, rep
 
 
-def time_order(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(positional rows with a usable t in time order, their t), duplicates of t dropped."""
-    pos = np.flatnonzero(~np.isnan(t))
-    tv = t[pos]
-    if len(tv) > 1 and (np.diff(tv) < 0).any():
-        order = np.argsort(tv, kind="stable")
-        pos, tv = pos[order], tv[order]
-    if len(tv) > 1:
-        keep = np.concatenate(([True], np.diff(tv) > 0))
-        pos, tv = pos[keep], tv[keep]
-    return pos, tv
-
-
 # ---------------------------------------------------------------------------------------
 # per-stream checks
 
@@ -346,65 +310,25 @@ def _check_time(out: _Out, table: Table, frame: pd.DataFrame, limits: CheckLimit
             )
 
 
+#: ``logs check`` rules of the tacho validator's findings (its other problems are the generic
+#: value, time and rate checks above, and the run.json checks).
+_TACHO_RULES = {
+    TachoIssue.PULSE_RESET: ("log.pulse_reset", Severity.ERROR, "resets"),
+    TachoIssue.PULSE_DECREASE: ("log.pulse_decrease", Severity.ERROR, "rows"),
+    TachoIssue.SPEED_JUMP: ("log.speed_jump", Severity.WARNING, "speed jumps"),
+}
+
+
 def _check_tacho(out: _Out, run: Run, frame: pd.DataFrame, limits: CheckLimits) -> None:
-    t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
-    p_all = frame["pulses"].to_numpy(dtype=float, na_value=np.nan)
-    pos, tv = time_order(np.where(np.isnan(p_all), np.nan, t))
-    if len(pos) < 2:
-        return
-    p = p_all[pos]
-    dp = np.diff(p)
-    resets, decs = pulse_resets(p)
-    if len(resets) or len(decs):
-        out.rows(
-            "log.pulse_reset",
-            Severity.ERROR,
-            pos[resets],
-            lambda k: (
-                f"pulse counter reset from {p[resets[k] - 1]:.0f} to {p[resets[k]]:.0f} "
-                "(logs repair makes it cumulative again)"
-            ),
-            column="pulses",
-            value=lambda k: int(p[resets[k]]),
-            limit=None,
-            what="resets",
-        )
-        out.rows(
-            "log.pulse_decrease",
-            Severity.ERROR,
-            pos[decs],
-            lambda k: f"pulse count decreases from {p[decs[k] - 1]:.0f} to {p[decs[k]]:.0f} (must never decrease)",
-            column="pulses",
-            value=lambda k: int(p[decs[k]]),
-            limit=None,
-        )
-    diameter, teeth = run.field("wheel_diameter_m"), run.field("teeth")
-    if diameter is None or teeth is None or len(pos) < 3:
-        return
-    m_per_pulse = np.pi * diameter / teeth
-    dt = np.diff(tv)
-    nominal = 1.0 / LOG_STREAMS["tacho"].rate_hz  # type: ignore[operator]
-    ok = (dp >= 0) & (dt <= limits.gap_cycles * nominal + 1e-9)
-    v = np.where(ok, dp * m_per_pulse / dt, np.nan)
-    mid = 0.5 * (dt[1:] + dt[:-1])
-    acc = np.diff(v) / mid
-    limit = limits.max_accel_mps2 + 2.0 * m_per_pulse / nominal**2
-    with np.errstate(invalid="ignore"):
-        jump = np.flatnonzero(np.abs(acc) > limit)
-    # acc[j] is between v[j] and v[j+1], i.e. ending at sample j+2
-    out.rows(
-        "log.speed_jump",
-        Severity.WARNING,
-        pos[jump + 2],
-        lambda k: (
-            f"pulse-derived speed jumps from {v[jump[k]]:.2f} to {v[jump[k] + 1]:.2f} m/s "
-            f"({acc[jump[k]]:+.1f} m/s², limit {limit:.1f}): wheel slip/slide or counter glitch"
-        ),
-        column="pulses",
-        value=lambda k: float(acc[jump[k]]),
-        limit=limit,
-        what="speed jumps",
-    )
+    """Counter resets, decreases and speed jumps (:func:`fieldlogs.quality.tacho.review_tacho`)."""
+    nominal = 1.0 / TACHO_RATE_HZ
+    tacho_limits = TachoLimits(max_accel_mps2=limits.max_accel_mps2, gap_s=limits.gap_cycles * nominal)
+    for f in review_tacho(frame, run.field("wheel_diameter_m"), run.field("teeth"), tacho_limits):
+        if f.issue not in _TACHO_RULES:
+            continue
+        rule, severity, what = _TACHO_RULES[f.issue]
+        detail = f.detail or _const(f.reason)
+        out.rows(rule, severity, f.rows, detail, column="pulses", value=f.value, limit=f.limit, what=what)
 
 
 def _check_imu(out: _Out, frame: pd.DataFrame, limits: CheckLimits) -> None:

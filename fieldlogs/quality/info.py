@@ -1,7 +1,8 @@
 """``logs info``: what a run holds, at a glance (never fails on a damaged stream).
 
-Distance by pulses = total pulses / teeth · π · D, with the total taken in time order and
-counter resets bridged as ``logs repair`` does (``checks.cumulative_again``). Measured
+Distance by pulses = total pulses · π·D / teeth (:func:`schemas.units.metres_per_pulse`),
+with the total taken in time order and counter resets bridged as ``logs repair`` does
+(:func:`fieldlogs.quality.tacho.cumulative_again`). Measured
 rates are 1 / median Δt over the distinct time stamps. GPS availability is the share of
 rows with ``fix ≥ 1`` (any fix) and with ``fix = 2`` (D-GPS).
 """
@@ -15,9 +16,10 @@ from typing import Any
 import numpy as np
 
 from fieldlogs.io import Run
-from fieldlogs.quality.checks import cumulative_again, time_order
+from fieldlogs.quality.tacho import cumulative_again, time_order
 from schemas.enums import GpsFix, Severity
 from schemas.logs import LOG_STREAMS
+from schemas.units import metres_per_pulse
 
 
 @dataclass
@@ -107,7 +109,7 @@ def _distance_m(run: Run) -> float | None:
     if len(pos) < 2:
         return 0.0 if len(pos) else None
     fixed, _ = cumulative_again(p[pos])
-    return float(fixed[-1] - fixed[0]) / teeth * np.pi * diameter
+    return float(fixed[-1] - fixed[0]) * metres_per_pulse(diameter, teeth)
 
 
 def _gps_info(run: Run) -> GpsInfo | None:

@@ -31,7 +31,8 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.io import LogFormat, Run, check_output_folder, write_run
-from fieldlogs.quality.checks import check_run, cumulative_again
+from fieldlogs.quality.checks import check_run
+from fieldlogs.quality.tacho import cumulative_again
 from schemas.enums import Severity
 from schemas.errors import FindingsError, RefusedError
 from schemas.findings import Finding, count_by_severity

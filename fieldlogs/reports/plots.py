@@ -1,50 +1,43 @@
-"""Report figures (matplotlib, headless Agg) returned as PNG bytes."""
+"""Report figures (matplotlib through :func:`dbtools.pagekit.pyplot`: headless Agg, imported
+on first use) returned as PNG bytes."""
 
 from __future__ import annotations
 
-import io
+from typing import TYPE_CHECKING, Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-from matplotlib.figure import Figure
 
-from schemas.enums import direction_sign
+from dbtools import pagekit as kit
+from schemas.enums import EventType, direction_sign
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 #: Speed below which the measured curvature is not drawn (κ = ωz / v is noise) [m/s].
 KAPPA_MIN_SPEED_MPS = 3.0
 
 
-def _png(fig: Figure) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=96, bbox_inches="tight")
-    plt.close(fig)
-    return buf.getvalue()
-
-
-def _empty(ax: plt.Axes, text: str) -> None:
+def _empty(ax: Axes, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
 
 
-def _legend(ax: plt.Axes, **kw: object) -> None:
+def _legend(ax: Axes, **kw: Any) -> None:
     if ax.get_legend_handles_labels()[0]:
-        ax.legend(**kw)  # type: ignore[arg-type]
+        ax.legend(**kw)
 
 
 def correction_vs_distance(corrections: pd.DataFrame, target_pct: float) -> bytes:
     """Position-correction % of balise corrections against the distance since the previous
     correction, one colour per route; feature-point corrections as grey crosses (not part of
     the statistics: their % is meaningless a few hundred metres after a balise)."""
-    fig, ax = plt.subplots(figsize=(8, 4.5))
+    fig, ax = kit.pyplot().subplots(figsize=(8, 4.5))
     c = corrections.dropna(subset=["correction_pct", "distance_since_m"])
-    bal = c[c["type"] == "balise_correction"]
+    bal = c[c["type"] == EventType.BALISE_CORRECTION]
     for key, g in bal.groupby(["line_code", "track", "direction"], dropna=False):
         label = " ".join(map(str, key))
         ax.scatter(g["distance_since_m"] / 1000.0, g["correction_pct"], s=18, alpha=0.8, label=f"{label} (balise)")
-    feat = c[c["type"] == "feature_correction"]
+    feat = c[c["type"] == EventType.FEATURE_CORRECTION]
     if len(feat):
         ax.scatter(
             feat["distance_since_m"] / 1000.0,
@@ -64,12 +57,12 @@ def correction_vs_distance(corrections: pd.DataFrame, target_pct: float) -> byte
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.3)
     _legend(ax, fontsize=8)
-    return _png(fig)
+    return kit.png(fig)
 
 
 def margin_along_run(trace: pd.DataFrame, run_id: str) -> bytes:
     """Safety margin (±) along a run, and the true error when the run has ground truth."""
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = kit.pyplot().subplots(figsize=(8, 4))
     t = trace["t"]
     ax.fill_between(t, -trace["margin_m"], trace["margin_m"], color="C0", alpha=0.15, label="± margin")
     ax.plot(t, trace["margin_m"], color="C0", lw=1)
@@ -83,14 +76,14 @@ def margin_along_run(trace: pd.DataFrame, run_id: str) -> bytes:
     ax.set_title(f"Margin along run {run_id}")
     ax.grid(alpha=0.3)
     _legend(ax, fontsize=8)
-    return _png(fig)
+    return kit.png(fig)
 
 
 def slip_episodes(trace: pd.DataFrame, episodes: list[dict[str, float]], run_id: str, max_panels: int = 4) -> bytes:
     """Wheel (pulse) speed against the corrected (inertial) speed around slip/slide episodes."""
     eps = episodes[:max_panels]
     n = max(len(eps), 1)
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n + 0.8, 3.5), squeeze=False)
+    fig, axes = kit.pyplot().subplots(1, n, figsize=(3.6 * n + 0.8, 3.5), squeeze=False)
     for ax, ep in zip(axes[0], eps, strict=False):
         w = trace[(trace["t"] >= ep["t_start"] - 5) & (trace["t"] <= ep["t_end"] + 5)]
         ax.plot(w["t"], w["v_pulse_mps"] * 3.6, label="wheel (pulses)", color="C1")
@@ -105,7 +98,7 @@ def slip_episodes(trace: pd.DataFrame, episodes: list[dict[str, float]], run_id:
     if not eps:
         _empty(axes[0][0], "no slip/slide episodes")
     fig.suptitle(f"Slip/slide episodes, run {run_id}")
-    return _png(fig)
+    return kit.png(fig)
 
 
 def curvature_vs_db(trace: pd.DataFrame, features: pd.DataFrame, track: str, run_id: str) -> bytes:
@@ -115,7 +108,7 @@ def curvature_vs_db(trace: pd.DataFrame, features: pd.DataFrame, track: str, run
     given that way; κ of the run is in its travel direction, so it is flipped where the
     run's km moved against the normal direction).
     """
-    fig, ax = plt.subplots(figsize=(9, 3.8))
+    fig, ax = kit.pyplot().subplots(figsize=(9, 3.8))
     km = trace["km_m"].to_numpy(dtype=float)
     kappa = trace["kappa"].to_numpy(dtype=float)
     moving = np.sign(np.gradient(km)) if km.size > 1 else np.zeros(km.size)
@@ -148,13 +141,13 @@ def curvature_vs_db(trace: pd.DataFrame, features: pd.DataFrame, track: str, run
     ax.set_title(f"Curvature against the feature-point DB, run {run_id} (track {track}, normal direction)")
     ax.grid(alpha=0.3)
     _legend(ax, fontsize=8)
-    return _png(fig)
+    return kit.png(fig)
 
 
 def run_map(gis: pd.DataFrame, trace: pd.DataFrame, track: str, run_id: str) -> bytes:
     """The GIS grid's tracks, the run's estimated positions (km placed on the grid of its
     track) and its GPS fixes."""
-    fig, ax = plt.subplots(figsize=(7, 6))
+    fig, ax = kit.pyplot().subplots(figsize=(7, 6))
     for (line, trk), g in gis.groupby(["line_code", "track"]):
         g = g.sort_values("km_m")
         ax.plot(g["lon"], g["lat"], lw=1, color="0.6" if trk != track else "0.3", label=f"GIS {line} {trk}")
@@ -192,4 +185,4 @@ def run_map(gis: pd.DataFrame, trace: pd.DataFrame, track: str, run_id: str) -> 
     ax.grid(alpha=0.3)
     _legend(ax, fontsize=7, loc="best")
     ax.set_title(f"Run {run_id} on the GIS grid")
-    return _png(fig)
+    return kit.png(fig)

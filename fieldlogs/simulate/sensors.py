@@ -30,7 +30,7 @@ from scipy.signal import lfilter
 from fieldlogs.simulate.running import DT, Motion
 from fieldlogs.simulate.scenario import Scenario
 from fieldlogs.simulate.track import TrackGeometry
-from schemas.units import KMH_PER_S
+from schemas.units import KMH_PER_S, wheel_circumference_m
 
 FloatArray = npt.NDArray[np.float64]
 TACHO_STEP = 10
@@ -96,7 +96,7 @@ def wheel_distance(motion: Motion, factor: FloatArray) -> FloatArray:
 
 def tacho_stream(rolled: FloatArray, motion: Motion, d_true: float, teeth: int) -> pd.DataFrame:
     k = np.arange(0, motion.n, TACHO_STEP)
-    revs = rolled[k] / (np.pi * d_true)
+    revs = rolled[k] / wheel_circumference_m(d_true)
     pulses = np.floor(revs * teeth + 1e-9).astype(np.int64)
     return pd.DataFrame({"t": motion.t[k], "pulses": np.maximum.accumulate(pulses)})
 

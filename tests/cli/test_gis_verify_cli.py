@@ -77,6 +77,16 @@ def test_table_with_too_few_runs_is_unverified(runner: CliRunner, data: VerifyDa
     assert "unverified" in r.output and "Defects" not in r.output
 
 
+def test_html_of_a_mostly_unverified_grid_is_not_green(runner: CliRunner, data: VerifyData, tmp_path: Path) -> None:
+    """Issue 15: "No defect found" never shows in green while most of the line is unverified."""
+    html = tmp_path / "gis.html"
+    r = invoke(runner, "gis", "verify", data.surveyed_db, data.runs[0], data.runs[1], "--format", "html", "--out", html)
+    assert r.exit_code == 0, r.output
+    text = html.read_text(encoding="utf-8")
+    assert "<p class='ok'>" not in text and "<p class='caution'>No defect found where the evidence suffices" in text
+    assert f"line {LINE}: " in text and "km unverified" in text
+
+
 def test_usage_errors_and_refusals(runner: CliRunner, data: VerifyData, tmp_path: Path) -> None:
     r = invoke(runner, "gis", "verify", data.truth_db, data.runs[0], "--format", "html")
     assert r.exit_code == 2 and "--format html needs --out" in r.output

@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.io import LogFormat, RunMeta, write_run
+from schemas.units import metres_per_pulse
 
 G = 9.80665
 WHEEL_D_M = 0.86
@@ -52,7 +53,7 @@ def synthetic_streams(
     n_tacho = round(seconds * 10)
     n_imu = round(seconds * 100)
     n_gps = max(round(seconds), 1)
-    k = np.pi * WHEEL_D_M / TEETH  # metres per pulse
+    k = metres_per_pulse(WHEEL_D_M, TEETH)
 
     t_tacho = np.arange(n_tacho) / 10.0
     d, _, _ = _profile(t_tacho)

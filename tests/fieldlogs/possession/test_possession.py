@@ -22,23 +22,14 @@ from dbtools.gis.geometry import Projector
 from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.types import Event, GpsAnalysis, TrackDecision
-from fieldlogs.possession.check import (
-    PossessionConfig,
-    RailPeriod,
-    RunCheck,
-    Tacho,
-    check_periods,
-    check_streams,
-    checks_json,
-    episodes,
-    km_noise,
-    load_config,
-    rail_periods,
-    tacho_problem,
-    tacho_track,
-    track_km,
-)
+from fieldlogs.possession.alarms import episodes
+from fieldlogs.possession.check import check_periods, check_streams
+from fieldlogs.possession.config import PossessionConfig, load_config
+from fieldlogs.possession.kmfilter import km_noise, track_km
+from fieldlogs.possession.periods import RailPeriod, rail_periods
 from fieldlogs.possession.plan import Possession, PossessionState, load_plan, plan_frame, read_plan
+from fieldlogs.possession.results import RunCheck, checks_json
+from fieldlogs.possession.tacho import Tacho, tacho_problem, tacho_track
 from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, PossessionCase, make_case
 from schemas.errors import FindingsError, InputError
 

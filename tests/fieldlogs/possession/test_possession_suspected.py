@@ -17,7 +17,8 @@ import pytest
 
 from dbtools.gis.matching import track_index_for
 from fieldlogs.pipeline.gps import TrackOdds, track_odds
-from fieldlogs.possession.check import RailPeriod, check_periods
+from fieldlogs.possession.check import check_periods
+from fieldlogs.possession.periods import RailPeriod
 from fieldlogs.simulate.possession import make_case
 from tests.fieldlogs.possession.test_possession import (
     CFG,

@@ -8,7 +8,6 @@ import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -16,7 +15,7 @@ from hypothesis import strategies as st
 
 from dbtools.build import build_db
 from fieldlogs.io import write_run
-from fieldlogs.quality.checks import CheckLimits, DbRefs, check_run, cumulative_again, load_db_refs, pulse_resets
+from fieldlogs.quality.checks import CheckLimits, DbRefs, check_run, load_db_refs
 from schemas.errors import InputError, TrainposError
 from schemas.findings import Finding
 from tests.conftest import DATA
@@ -255,17 +254,6 @@ def test_row_numbers_of_parquet_are_index_plus_two(tmp_path: Path) -> None:
 def test_unreadable_run_raises_only_input_error(tmp_path: Path) -> None:
     with pytest.raises(InputError):
         check_run(tmp_path / "nope")
-
-
-def test_pulse_helpers() -> None:
-    p = np.array([10, 20, 2, 5, 1, 3, 2])
-    resets, decs = pulse_resets(p)
-    assert resets.tolist() == [2, 4] and decs.tolist() == [6]
-    fixed, _ = cumulative_again(p)
-    assert fixed.tolist() == [10, 20, 22, 25, 26, 28, 27]
-    glitch = np.array([10, 20, 2, 30, 40])  # one low sample that recovers: not a reset
-    assert [x.tolist() for x in pulse_resets(glitch)] == [[], [2]]
-    assert cumulative_again(glitch)[0].tolist() == glitch.tolist()
 
 
 def test_db_refs_from_tiny_db(db: DbRefs) -> None:

@@ -1,0 +1,214 @@
+"""One kit for the suite's self-contained HTML pages (audit report, GIS verification,
+possession check; DB-review and survey pages to come).
+
+A page is one string: inline CSS, figures as PNG ``data:`` URIs, no script and no external
+resource, so the file works offline and can be mailed. Every text that reaches the page goes
+through :func:`escape`. Tables come from DataFrames (:func:`frame_table`) or key/value rows
+(:func:`key_value_table`) with one number formatting (:func:`number_text`), which a page may
+refine per column with a ``cell`` function; cells carry plain text only (a CSS class on the
+``<td>`` marks them), so a page stays easy to parse. Figures come from matplotlib
+(:func:`pyplot`: headless Agg, imported on first use, never at import time) through
+:func:`png` and :func:`figure`.
+
+The kit lives in ``dbtools`` (imports only ``schemas``-level libraries) so that ``dbtools``
+pages can use it as well as ``fieldlogs`` and ``cli``.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from enum import StrEnum
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+if TYPE_CHECKING:
+    from types import ModuleType
+
+    from matplotlib.figure import Figure
+
+CSS = """
+body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;margin:2em;color:#222;max-width:1400px}
+table{border-collapse:collapse;margin:1em 0;font-size:13px}
+th,td{border:1px solid #ccc;padding:3px 8px;text-align:right;vertical-align:top}
+th{background:#f0f0f0}td.l,th.l,table.kv td,table.kv th,table.text td,table.text th{text-align:left}
+.warn,.alarm{color:#b00;font-weight:bold}.ok{color:#070;font-weight:bold}.note{color:#666}
+.caution{color:#a60;font-weight:bold}
+.badge{display:inline-block;padding:1px 8px;border-radius:9px;font-size:12px;font-weight:bold;color:#fff}
+.badge.ok{background:#2a7d2a}.badge.warn,.badge.alarm{background:#b00}.badge.caution{background:#c77c00}
+.badge.note{background:#888}
+figure{margin:1.5em 0}img{max-width:100%}.scroll{overflow-x:auto}code{font-size:12px}
+dl.legend{font-size:13px}dl.legend dt{font-weight:bold;float:left;clear:left;margin-right:.5em}
+dl.legend dd{margin:0 0 .2em 0}
+"""
+
+
+class Status(StrEnum):
+    """Tone of a badge, a verdict or a cell (its CSS class)."""
+
+    OK = "ok"
+    """Green: checked and fine."""
+    CAUTION = "caution"
+    """Amber: nothing wrong found, but not everything could be checked."""
+    WARN = "warn"
+    """Red: a problem."""
+    ALARM = "alarm"
+    """Red: a safety alarm."""
+    NOTE = "note"
+    """Grey: information."""
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One table cell: its text (escaped by the kit) and an optional CSS class."""
+
+    text: str
+    cls: str | None = None
+
+
+def escape(value: object) -> str:
+    """Text for HTML (``&``, ``<``, ``>``, quotes escaped)."""
+    return html.escape(str(value))
+
+
+def is_missing(v: object) -> bool:
+    """None, NaN, NA or NaT."""
+    if v is None or v is pd.NA or v is pd.NaT:
+        return True
+    return isinstance(v, float | np.floating) and math.isnan(float(v))
+
+
+def number_text(v: int | float | np.integer[Any] | np.floating[Any]) -> str:
+    """The kit's number format: integers with thousands separators; other numbers with
+    thousands separators and no decimals from 100 on, else three decimals."""
+    if isinstance(v, int | np.integer):
+        return f"{int(v):,}"
+    x = float(v)
+    return f"{x:,.0f}" if abs(x) >= 100 else f"{x:.3f}"
+
+
+def default_cell(column: str, v: object) -> Cell:
+    """Empty for a missing value; numbers by :func:`number_text`; everything else as
+    left-aligned text."""
+    if is_missing(v):
+        return Cell("")
+    if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
+        return Cell(str(v), "l")
+    return Cell(number_text(v))
+
+
+def _td(cell: Cell) -> str:
+    cls = f' class="{escape(cell.cls)}"' if cell.cls else ""
+    return f"<td{cls}>{escape(cell.text)}</td>"
+
+
+def table(header: Sequence[str], rows: Iterable[Sequence[Cell]], *, cls: str | None = None, scroll: bool = True) -> str:
+    """A table of ready cells under a header row."""
+    head = "".join(f"<th>{escape(c)}</th>" for c in header)
+    body = "".join("<tr>" + "".join(_td(c) for c in row) + "</tr>" for row in rows)
+    klass = f" class='{escape(cls)}'" if cls else ""
+    out = f"<table{klass}><tr>{head}</tr>{body}</table>"
+    return f"<div class='scroll'>{out}</div>" if scroll else out
+
+
+def frame_table(frame: pd.DataFrame, cell: Callable[[str, Any], Cell] = default_cell) -> str:
+    """A DataFrame as a table, each value through ``cell(column, value)``."""
+    columns = [str(c) for c in frame.columns]
+    rows = ([cell(c, v) for c, v in zip(columns, rec, strict=True)] for rec in frame.itertuples(index=False, name=None))
+    return table(columns, rows)
+
+
+def key_value_table(rows: Sequence[tuple[str, object]], *, code: Sequence[str] = ()) -> str:
+    """A two-column table of (label, value); labels in ``code`` show their value as code."""
+    body = []
+    for label, value in rows:
+        text = escape("" if value is None else value)
+        shown = f"<code>{text}</code>" if label in code else text
+        body.append(f"<tr><th>{escape(label)}</th><td>{shown}</td></tr>")
+    return f"<table class='kv'>{''.join(body)}</table>"
+
+
+def paragraph(text: str, status: Status | None = None) -> str:
+    """A paragraph of plain text (escaped)."""
+    cls = f" class='{status.value}'" if status else ""
+    return f"<p{cls}>{escape(text)}</p>"
+
+
+def heading(text: str, level: int = 2, status: Status | None = None) -> str:
+    cls = f" class='{status.value}'" if status else ""
+    return f"<h{level}{cls}>{escape(text)}</h{level}>"
+
+
+def section(title: str, *parts: str, level: int = 2, status: Status | None = None) -> str:
+    """A heading followed by ready HTML parts."""
+    return "\n".join([heading(title, level, status), *parts])
+
+
+def code(text: object) -> str:
+    return f"<code>{escape(text)}</code>"
+
+
+def badge(text: str, status: Status) -> str:
+    """A coloured status label (e.g. ``3 alarm(s)``, ``no defect``, ``unverified``)."""
+    return f"<span class='badge {status.value}'>{escape(text)}</span>"
+
+
+def legend(items: Mapping[str, str], title: str | None = None) -> str:
+    """Term → meaning, as a definition list (e.g. every alarm type and what it means)."""
+    body = "".join(f"<dt>{escape(k)}</dt><dd>{escape(v)}</dd>" for k, v in items.items())
+    head = paragraph(title, Status.NOTE) if title else ""
+    return f"{head}<dl class='legend'>{body}</dl>"
+
+
+def generated() -> str:
+    """``generated YYYY-MM-DD HH:MM UTC`` (the time the page was made)."""
+    return f"generated {datetime.now(UTC):%Y-%m-%d %H:%M} UTC"
+
+
+def page(title: str, *parts: str, heading_text: str | None = None, description: str = "") -> str:
+    """The whole page: doctype, charset, viewport, title, the kit's CSS, an ``<h1>`` and the parts."""
+    meta = f"<meta name='description' content='{escape(description)}'>" if description else ""
+    head = (
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>"
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>"
+        f"{meta}<title>{escape(title)}</title><style>{CSS}</style></head><body>"
+    )
+    h1 = f"<h1>{escape(heading_text or title)}</h1>"
+    return "\n".join([head, h1, *parts, "</body></html>"])
+
+
+# ------------------------------------------------------------------------------ figures
+
+
+def pyplot() -> ModuleType:
+    """``matplotlib.pyplot`` on the headless Agg backend, imported on first use."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def png(fig: Figure, dpi: int = 96) -> bytes:
+    """A matplotlib figure as PNG bytes (tight bounding box); the figure is closed."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    pyplot().close(fig)
+    return buf.getvalue()
+
+
+def figure(png_bytes: bytes, alt: str, caption: str | None = None) -> str:
+    """A PNG embedded as a ``data:`` URI, with ``alt`` text and a caption (``alt`` by default)."""
+    data = base64.b64encode(png_bytes).decode()
+    return (
+        f'<figure><img alt="{escape(alt)}" src="data:image/png;base64,{data}">'
+        f"<figcaption>{escape(caption if caption is not None else alt)}</figcaption></figure>"
+    )

@@ -1,0 +1,103 @@
+"""The HTML page kit: escaping, tables from DataFrames, embedded figures, badges, legend, the
+page skeleton, and matplotlib imported only when a figure is drawn."""
+
+from __future__ import annotations
+
+import base64
+import subprocess
+import sys
+from html.parser import HTMLParser
+
+import numpy as np
+import pandas as pd
+
+from dbtools import pagekit as kit
+
+
+class Cells(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.cells: list[tuple[str | None, str]] = []
+        self.tags: list[str] = []
+        self._td: str | bool | None = False
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        self.tags.append(tag)
+        if tag == "td":
+            self._td = dict(attrs).get("class")
+            self.cells.append((self._td, ""))
+        else:
+            self._td = False
+
+    def handle_data(self, data: str) -> None:
+        if self._td is not False and self.cells:
+            cls, text = self.cells[-1]
+            self.cells[-1] = (cls, text + data)
+
+
+def parse(html: str) -> Cells:
+    p = Cells()
+    p.feed(html)
+    return p
+
+
+def test_frame_table_escapes_and_formats_numbers() -> None:
+    frame = pd.DataFrame(
+        {"name": ["<b>x</b>", None], "n": [1234567, 3], "x": [1234.5678, 0.12345], "flag": [True, False]}
+    )
+    frame["gap"] = [np.nan, 2.0]
+    html = kit.frame_table(frame)
+    assert "<b>x</b>" not in html and "&lt;b&gt;x&lt;/b&gt;" in html
+    cells = parse(html).cells
+    assert cells[:5] == [("l", "<b>x</b>"), (None, "1,234,567"), (None, "1,235"), ("l", "True"), (None, "")]
+    assert cells[5:] == [(None, ""), (None, "3"), (None, "0.123"), ("l", "False"), (None, "2.000")]
+
+
+def test_cell_function_refines_columns() -> None:
+    def cell(column: str, v: object) -> kit.Cell:
+        return kit.Cell(f"{float(v):.1f} %", "warn") if column == "share" else kit.default_cell(column, v)  # type: ignore[arg-type]
+
+    cells = parse(kit.frame_table(pd.DataFrame({"share": [12.34], "k": [2]}), cell)).cells
+    assert cells == [("warn", "12.3 %"), (None, "2")]
+
+
+def test_page_skeleton_badge_legend_and_key_values() -> None:
+    html = kit.page(
+        "t <1>",
+        kit.paragraph("a & b", kit.Status.NOTE),
+        kit.badge("3 alarm(s)", kit.Status.ALARM),
+        kit.legend({"overrun": "outside <the> section"}, "Alarms:"),
+        kit.key_value_table([("run", "runs/a"), ("n", 3)], code=("run",)),
+        kit.section("Part", "<p>x</p>", level=3),
+        heading_text="Heading",
+    )
+    assert html.startswith("<!doctype html><html lang='en'><head><meta charset='utf-8'>")
+    assert "<title>t &lt;1&gt;</title>" in html and "<h1>Heading</h1>" in html and html.endswith("</body></html>")
+    assert "<p class='note'>a &amp; b</p>" in html and "<span class='badge alarm'>3 alarm(s)</span>" in html
+    assert "<dt>overrun</dt><dd>outside &lt;the&gt; section</dd>" in html
+    assert "<tr><th>run</th><td><code>runs/a</code></td></tr><tr><th>n</th><td>3</td></tr>" in html
+    assert "<h3>Part</h3>\n<p>x</p>" in html
+    assert "<script" not in html and "http" not in html.split("<body>")[1]
+
+
+def test_figure_is_an_embedded_png() -> None:
+    plt = kit.pyplot()
+    fig, ax = plt.subplots(figsize=(2, 2))
+    ax.plot([0, 1], [0, 1])
+    data = kit.png(fig)
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    html = kit.figure(data, 'a "quoted" alt', "caption")
+    src = html.split('src="', 1)[1].split('"', 1)[0]
+    head, b64 = src.split(",", 1)
+    assert head == "data:image/png;base64" and base64.b64decode(b64) == data
+    assert 'alt="a &quot;quoted&quot; alt"' in html and "<figcaption>caption</figcaption>" in html
+    assert plt.get_fignums() == []  # the figure was closed
+
+
+def test_matplotlib_is_imported_lazily() -> None:
+    code = (
+        "import sys, dbtools.pagekit, fieldlogs.reports.page, fieldlogs.gisverify.page, fieldlogs.possession.page; "
+        "print('matplotlib' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
