@@ -17,7 +17,7 @@ from rich.progress import Progress, TaskID
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_json, progress
 from fieldlogs.audit.runner import audit as run_audit
-from fieldlogs.pipeline import PipelineConfig
+from fieldlogs.config import load_tree
 from fieldlogs.reports.report import ROUTE_KEYS, Report, build_report, report_json
 from schemas.errors import EXIT_FINDINGS, UsageError
 
@@ -52,7 +52,7 @@ def audit(
     dask_scheduler: str | None = typer.Option(
         None, "--dask-scheduler", help="Run on this Dask cluster (tcp://host:8786) instead of local processes."
     ),
-    config: Path | None = typer.Option(None, "--config", help="Pipeline parameters (TOML)."),
+    config: Path | None = typer.Option(None, "--config", help="Settings (TOML, see trainpos config show)."),
 ) -> None:
     """Run the positioning pipeline on every run found and store the results as each run finishes.
 
@@ -63,7 +63,7 @@ def audit(
 
     Example: trainpos audit logs/ --db net.sqlite --out audit.sqlite --workers 2
     """
-    cfg = PipelineConfig.from_toml(config) if config else PipelineConfig()
+    cfg = load_tree(config).pipeline
     with progress(err_console()) as bar:
         stats = run_audit(
             log_roots,

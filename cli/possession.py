@@ -109,7 +109,7 @@ def check(
     fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json or html."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
     config: Path | None = typer.Option(
-        None, "--config", help="TOML with gps and possession sections (see fieldlogs/possession/config.py)."
+        None, "--config", help="Settings (TOML; its [gps] and [possession] sections; see trainpos config show)."
     ),
 ) -> None:
     """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.

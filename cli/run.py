@@ -9,8 +9,9 @@ import typer
 from cli.errors import cli_command
 from cli.render import console, key_value_table
 from dbtools.database import read_network
+from fieldlogs.config import load_tree
 from fieldlogs.io import read_run
-from fieldlogs.pipeline import PipelineConfig, run_pipeline
+from fieldlogs.pipeline import run_pipeline
 from fieldlogs.pipeline.outputs import write_results
 from schemas.units import format_km
 
@@ -20,7 +21,7 @@ def run(
     run_dir: Path = typer.Argument(..., help="Run folder (run.json + streams)."),
     db: Path = typer.Option(..., "--db", help="Onboard DB (.sqlite)."),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder for positions, events, summary.json."),
-    config: Path | None = typer.Option(None, "--config", help="Pipeline parameters (TOML); SPEC defaults otherwise."),
+    config: Path | None = typer.Option(None, "--config", help="Settings (TOML, see trainpos config show)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
 ) -> None:
     """Replay a run cycle by cycle (100 ms) through the onboard positioning logic.
@@ -31,7 +32,7 @@ def run(
 
     Example: trainpos run logs/run-001 --db net.sqlite --out out/run-001
     """
-    cfg = PipelineConfig.from_toml(config) if config else PipelineConfig()
+    cfg = load_tree(config).pipeline
     network = read_network(db)
     result = run_pipeline(read_run(run_dir), network, cfg)
     write_results(out, result.positions, result.events, result.summary, force=force)

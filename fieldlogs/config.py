@@ -3,30 +3,80 @@
 One TOML file (``--config FILE.toml``) configures every command: ``run``, ``audit`` and
 ``gis verify`` read the pipeline's sections (``[odometry]``, ``[balise]``, ``[feature]``,
 ``[gps]``, ``[margin]``, ``cycle_s``), ``possession check`` reads ``[gps]`` and
-``[possession]``, ``gis verify`` ``[gis_verify]``; each command ignores the sections of the
-others but refuses unknown ones. ``trainpos config show`` prints the whole tree (or one
-section) with every default, unit, range and meaning as commented TOML; fed back with
-``--config`` it changes nothing.
+``[possession]``; each command refuses unknown sections and keys, wrong types and values out
+of range. ``trainpos config show`` prints the whole tree (or one section) with every
+default, unit, range and meaning as commented TOML; fed back with ``--config`` it changes
+nothing.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from fieldlogs.pipeline.config import PipelineConfig, read_toml
-from schemas.errors import UsageError
-from schemas.settings import describe, render_toml
+from fieldlogs.pipeline.config import (
+    CYCLE_S,
+    BaliseConfig,
+    FeatureConfig,
+    GpsConfig,
+    MarginConfig,
+    OdometryConfig,
+    PipelineConfig,
+    read_toml,
+)
+from fieldlogs.possession.config import PossessionConfig
+from schemas.errors import InputError, UsageError
+from schemas.settings import SettingError, check_ranges, describe, render_toml, section_from_dict, setting, typed
 
 
-def default_tree() -> PipelineConfig:
-    """The whole tree with its defaults."""
-    return PipelineConfig()
+@dataclass(frozen=True)
+class SuiteConfig:
+    """Every section of the configuration tree."""
+
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    balise: BaliseConfig = field(default_factory=BaliseConfig)
+    feature: FeatureConfig = field(default_factory=FeatureConfig)
+    gps: GpsConfig = field(default_factory=GpsConfig)
+    margin: MarginConfig = field(default_factory=MarginConfig)
+    possession: PossessionConfig = field(default_factory=PossessionConfig)
+    cycle_s: float = setting(**CYCLE_S)
+
+    def __post_init__(self) -> None:
+        check_ranges(self)
+
+    @property
+    def pipeline(self) -> PipelineConfig:
+        return PipelineConfig(self.odometry, self.balise, self.feature, self.gps, self.margin, self.cycle_s)
+
+    @classmethod
+    def from_toml(cls, path: Path) -> SuiteConfig:
+        return cls.from_dict(read_toml(path), source=str(path))
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], source: str = "config") -> SuiteConfig:
+        """Overrides from ``data`` (a TOML table per section, plain settings at the top)."""
+        tree = cls()
+        names = [f.name for f in fields(cls)]
+        for key, value in data.items():
+            if key not in names:
+                raise InputError(f"unknown section or key '{key}' (known: {', '.join(names)})", path=source)
+            current = getattr(tree, key)
+            try:
+                if isinstance(value, dict) and hasattr(current, "__dataclass_fields__"):
+                    tree = replace(tree, **{key: section_from_dict(current, value, key, source)})
+                elif hasattr(current, "__dataclass_fields__"):
+                    raise InputError(f"'{key}' must be a table ([{key}])", path=source)
+                else:
+                    tree = replace(tree, **{key: typed(source, key, current, value)})
+            except SettingError as exc:
+                raise SettingError(exc.message, path=source) from None
+        return tree
 
 
-def load_tree(path: Path | None) -> PipelineConfig:
+def load_tree(path: Path | None) -> SuiteConfig:
     """The tree with the overrides of ``path`` (defaults without a file)."""
-    return PipelineConfig.from_toml(path) if path is not None else default_tree()
+    return SuiteConfig.from_toml(path) if path is not None else SuiteConfig()
 
 
 def section_names(tree: Any) -> list[str]:
@@ -47,6 +97,3 @@ def _known(tree: Any, section: str | None) -> None:
     names = section_names(tree)
     if section is not None and section not in names:
         raise UsageError(f"no config section '{section}' (known: {', '.join(names)})")
-
-
-__all__ = ["default_tree", "load_tree", "read_toml", "section_names", "show_dict", "show_toml"]

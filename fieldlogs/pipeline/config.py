@@ -194,6 +194,15 @@ class MarginConfig:
         check_ranges(self, "margin")
 
 
+#: The one plain setting of the pipeline (declared once, also used by the suite's tree).
+CYCLE_S: dict[str, Any] = {
+    "default": 0.1,
+    "meaning": "processing cycle of the onboard unit (the tacho's rate)",
+    "unit": "s",
+    "gt": 0,
+}
+
+
 @dataclass(frozen=True)
 class PipelineConfig:
     """The pipeline's sections of the configuration tree."""
@@ -203,7 +212,7 @@ class PipelineConfig:
     feature: FeatureConfig = field(default_factory=FeatureConfig)
     gps: GpsConfig = field(default_factory=GpsConfig)
     margin: MarginConfig = field(default_factory=MarginConfig)
-    cycle_s: float = setting(0.1, "processing cycle of the onboard unit (the tacho's rate)", "s", gt=0)
+    cycle_s: float = setting(**CYCLE_S)
 
     def __post_init__(self) -> None:
         check_ranges(self)

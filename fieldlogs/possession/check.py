@@ -31,7 +31,7 @@ from dbtools.network import Network
 from fieldlogs.io import Run
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.possession.alarms import evaluate_period
-from fieldlogs.possession.config import PossessionConfig, load_config
+from fieldlogs.possession.config import PossessionConfig
 from fieldlogs.possession.periods import RailPeriod, analyse_periods
 from fieldlogs.possession.plan import Plan, Possession
 from fieldlogs.possession.results import Alarm, PeriodResult, RunCheck, checks_json
@@ -202,10 +202,12 @@ def check_files(
     InputError (exit 2) when the DB, the plan, the config or a run cannot be read.
     """
     from dbtools.database import read_network
+    from fieldlogs.config import load_tree
     from fieldlogs.io import read_run
     from fieldlogs.possession.plan import load_plan
 
-    gps_cfg, cfg = load_config(config_path)
+    tree = load_tree(config_path)
+    gps_cfg, cfg = tree.gps, tree.possession
     network = read_network(Path(db_path))
     plan = load_plan(Path(plan_path), network)
     runs = [read_run(Path(r)) for r in run_dirs]

@@ -20,11 +20,12 @@ import pytest
 
 from dbtools.gis.geometry import Projector
 from dbtools.synthetic.network import build_network, demo_line
+from fieldlogs.config import SuiteConfig
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.types import Event, GpsAnalysis, TrackDecision
 from fieldlogs.possession.alarms import episodes
 from fieldlogs.possession.check import check_periods, check_streams
-from fieldlogs.possession.config import PossessionConfig, load_config
+from fieldlogs.possession.config import PossessionConfig
 from fieldlogs.possession.kmfilter import km_noise, track_km
 from fieldlogs.possession.periods import RailPeriod, rail_periods
 from fieldlogs.possession.plan import Possession, PossessionState, load_plan, plan_frame, read_plan
@@ -387,11 +388,14 @@ def test_km_filter_tracks_and_predicts() -> None:
 def test_config_file(tmp_path: Path) -> None:
     path = tmp_path / "c.toml"
     path.write_text("[gps]\nnoise_sigma_m = 1.0\n[possession]\nnotice_m = 50\n", encoding="utf-8")
-    gps, cfg = load_config(path)
-    assert gps.noise_sigma_m == 1.0 and cfg.notice_m == 50.0
+    tree = SuiteConfig.from_toml(path)
+    assert tree.gps.noise_sigma_m == 1.0 and tree.possession.notice_m == 50.0
     path.write_text("[possession]\nnotice = 50\n", encoding="utf-8")
     with pytest.raises(InputError, match=r"possession\.notice"):
-        load_config(path)
+        SuiteConfig.from_toml(path)
+    path.write_text("[possession]\ngate_z = 0\n", encoding="utf-8")
+    with pytest.raises(InputError, match=r"'possession\.gate_z' = 0\.0 is out of range \(allowed: > 0\)"):
+        SuiteConfig.from_toml(path)
 
 
 # ------------------------------------------------------------------------------ simulated
