@@ -40,7 +40,7 @@ from fieldlogs.pipeline.odometry import correct_odometry
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
-from schemas.enums import EventType, Severity
+from schemas.enums import EventType, Severity, VehicleKind
 from schemas.errors import FindingsError
 
 __all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
@@ -98,6 +98,7 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
         teeth=run.meta.teeth,
         t_end=t_end,
         cycle_s=cfg.cycle_s,
+        uses_pto=run.meta.vehicle_kind == VehicleKind.ROAD_RAIL,
     )
     ground = next((g for a in speed_aids(streams) if (g := a.on_cycles(cycles)) is not None), None)
     # pulses only when the run has no IMU (correct_odometry falls back by itself)

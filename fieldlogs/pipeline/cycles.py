@@ -98,8 +98,13 @@ def build_cycles(
     teeth: int,
     t_end: float | None = None,
     cycle_s: float = 0.1,
+    uses_pto: bool = True,
 ) -> Cycles:
-    """Resample a run's streams onto its cycle grid (streams must be sorted by t)."""
+    """Resample a run's streams onto its cycle grid (streams must be sorted by t).
+
+    ``uses_pto`` False (a train): a ``pto`` column of the cab stream is ignored and the
+    vehicle is on rail throughout — recorders write every column for every vehicle, and a
+    train's PTO 0 must not switch it "off rail" [S001 §4.2.4: PTO is a road-rail signal]."""
     has_tacho = tacho is not None and len(tacho) > 1
     has_imu = imu is not None and len(imu) > 0
     if has_tacho:
@@ -123,16 +128,18 @@ def build_cycles(
         d = np.zeros(t.size)
         v = np.zeros(t.size)
     imu_means: dict[str, FloatArray] = {}
+    t_imu = imu["t"].to_numpy(dtype=float) if has_imu and imu is not None else None
+    idx = cycle_index(t, t_imu) if t_imu is not None else None  # once for the six columns
     for c in IMU_COLUMNS:
-        if has_imu and imu is not None:
-            imu_means[c] = cycle_means(t, imu["t"].to_numpy(dtype=float), imu[c].to_numpy(dtype=float, na_value=np.nan))
+        if idx is not None and t_imu is not None and imu is not None:
+            imu_means[c] = cycle_means(t, t_imu, imu[c].to_numpy(dtype=float, na_value=np.nan), idx)
         else:
             imu_means[c] = np.full(t.size, np.nan)
     if cab is not None and len(cab):
         te = cab["t"].to_numpy(dtype=float)
         sign = np.where(cab["direction"].astype(str).to_numpy() == CabDirection.REVERSE.value, -1.0, 1.0)
         cab_sign = step_values(t, te, sign, 1.0).astype(np.int8)
-        if "pto" in cab.columns and cab["pto"].notna().any():
+        if uses_pto and "pto" in cab.columns and cab["pto"].notna().any():
             pto_vals = cab["pto"].astype("Float64").ffill().fillna(0).to_numpy(dtype=float)
             pto = step_values(t, te, pto_vals, 0.0).astype(np.int8)
         else:

@@ -216,3 +216,27 @@ def test_a_changed_estimate_keeps_its_reference_point() -> None:
     assert pos.loc[30.0, "state"] == "uncertain"
     assert pos.loc[30.0, "margin_m"] == pytest.approx(1.0 + 0.02 * 200.0 + 0.05 * 100.0)
     assert sol.fixes[-1].t_ref == pytest.approx(10.0)
+
+
+def test_a_trains_pto_column_is_ignored(sample_db, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """Issue 15: a train's cab stream from another producer carries pto = 0 (recorders write
+    every column); the train must not be 'off rail' for the whole run."""
+    import shutil
+
+    from dbtools.database import read_network
+    from fieldlogs.io import read_run
+    from fieldlogs.pipeline import run_pipeline
+    from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(SAMPLE_LOGS / "sim-d-slips", run_dir)
+    run = read_run(run_dir)
+    cab = run.stream("cab")
+    assert cab is not None and "pto" not in cab.columns or cab["pto"].isna().all()
+    net = read_network(sample_db)
+    plain = run_pipeline(run, net)
+    cab = cab.assign(pto=0)
+    cab.to_parquet(run_dir / "cab.parquet", index=False)
+    with_pto = run_pipeline(read_run(run_dir), net)
+    assert with_pto.summary["n_corrections"] == plain.summary["n_corrections"] > 0
+    assert with_pto.positions["state"].tolist() == plain.positions["state"].tolist()
