@@ -26,9 +26,9 @@ Integrity, with redundancy (dof = rows − unknowns ≥ 1) [S002]:
   receiver can identify a faulty one (without it the three normalised residuals of a
   one-dof problem are equal). The reported s uses the satellites only.
 
-Stated uncertainty U = max(k_ff·σ_s, PL), the protection level against one undetected
-fault PL = max_r |K_sr|·σ_r/√q_r·(√χ²_thr(dof) + k_md), K = (HᵀWH)⁻¹HᵀW (RAIM slope,
-Brown & Chin 1997 form). With dof = 0 only the fault-free term is available.
+Stated uncertainty U = k_ff·σ_s (k_ff = 3.29: 10⁻³ two-sided for Gaussian errors). Beside
+it the protection level against one undetected fault PL = max_r |K_sr|·σ_r/√q_r·(√χ²_thr(dof)
++ k_md), K = (HᵀWH)⁻¹HᵀW (the RAIM slope, Brown & Chin 1997 form; 0 when dof = 0).
 Measured figures: bench/NOTES.md (GNSS).
 """
 
@@ -98,6 +98,7 @@ class ConstrainedSolution:
     sigma_s: FloatArray
     adop: FloatArray
     uncertainty_m: FloatArray
+    protection_m: FloatArray
     test: FloatArray
     dof: IntArray
     n_used: IntArray
@@ -417,7 +418,7 @@ def _exclude_faults(
 def _uncertainty(
     fit: _Fit, rows: Rows, used: BoolArray, dof: IntArray, q: FloatArray, cfg: ConstrainedConfig
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """σ_s, ADOP and U = max(k_ff σ_s, PL) (module docstring)."""
+    """σ_s, ADOP and the protection level PL (module docstring)."""
     w = np.where(used, 1.0 / np.where(used, rows.sigma_m, 1.0) ** 2, 0.0)
     sigma_s = np.sqrt(np.abs(fit.n_inv[:, 0, 0]))
     hh = np.einsum("esi,es,esj->eij", fit.h, used.astype(float), fit.h)
@@ -432,7 +433,7 @@ def _uncertainty(
     thr = chi2_thresholds(cfg.p_false_alarm)
     pbias = np.sqrt(np.where(dof >= 1, thr[np.clip(dof, 1, thr.size - 1)], 0.0)) + cfg.k_missed_detection
     pl = np.where(dof >= 1, slope.max(axis=1, initial=0.0) * pbias, 0.0)
-    return sigma_s, adop, np.maximum(cfg.k_fault_free * sigma_s, pl)
+    return sigma_s, adop, pl
 
 
 def solve_constrained(
@@ -463,7 +464,7 @@ def solve_constrained(
     if prior is not None:
         fit = gauss_newton(track, rows, ant, used, fit.s, None, cfg)
     t, _, dof, q = _statistics(fit, rows, used, None, np.zeros(e, dtype=bool))
-    sigma_s, adop, unc = _uncertainty(fit, rows, used, dof, q, cfg)
+    sigma_s, adop, pl = _uncertainty(fit, rows, used, dof, q, cfg)
     n_used = used.sum(axis=1)
     status = np.full(e, STATUS_OK, dtype=np.int64)
     status[adop > cfg.max_adop] = STATUS_GEOMETRY
@@ -478,7 +479,8 @@ def solve_constrained(
         clock_m=fit.b,
         sigma_s=sigma_s,
         adop=adop,
-        uncertainty_m=unc,
+        uncertainty_m=cfg.k_fault_free * sigma_s,
+        protection_m=pl,
         test=t,
         dof=dof,
         n_used=n_used.astype(np.int64),
