@@ -164,6 +164,25 @@ def _normal(
     return n, rhs
 
 
+def _singular(n: FloatArray) -> BoolArray:
+    """Normal matrices too close to singular to solve (relative determinant below 1e-12)."""
+    diag = np.prod(np.abs(np.diagonal(n, axis1=1, axis2=2)), axis=1)
+    return ~(np.abs(np.linalg.det(n)) > 1e-12 * np.maximum(diag, 1e-300))
+
+
+def _solve_safe(n: FloatArray, rhs: FloatArray) -> tuple[FloatArray, BoolArray]:
+    bad = _singular(n)
+    n = np.where(bad[:, None, None], np.eye(n.shape[1]), n)
+    delta = np.linalg.solve(n, rhs[..., None])[..., 0]
+    return np.where(bad[:, None], 0.0, delta), bad
+
+
+def _inv_safe(n: FloatArray) -> FloatArray:
+    bad = _singular(n)
+    inv = np.linalg.inv(np.where(bad[:, None, None], np.eye(n.shape[1]), n))
+    return np.where(bad[:, None, None], np.nan, inv)
+
+
 def gauss_newton(
     track: TrackLine,
     rows: Rows,
@@ -191,18 +210,18 @@ def gauss_newton(
         v = np.where(used, rows.pr_m - rho - np.einsum("esk,ek->es", onehot, b), 0.0)
         h = np.concatenate([g[..., None], onehot], axis=-1)
         n, rhs = _normal(h, w, v, p_w, p_s - s)
-        delta = np.linalg.solve(n, rhs[..., None])[..., 0]
+        delta, bad = _solve_safe(n, rhs)
         delta[:, 0] = np.clip(delta[:, 0], -5_000.0, 5_000.0)
         s = s + delta[:, 0]
         b = b + delta[:, 1:]
-        converged = np.max(np.abs(delta), axis=1) < cfg.tol_m
+        converged = (np.max(np.abs(delta), axis=1) < cfg.tol_m) & ~bad
         if converged.all():
             break
     rho, g = _geometry(track, rows, antennas, s)
     v = np.where(used, rows.pr_m - rho - np.einsum("esk,ek->es", onehot, b), 0.0)
     h = np.concatenate([g[..., None], onehot], axis=-1)
     n, _ = _normal(h, w, v, p_w, p_s - s)
-    return _Fit(s, b, h, v, np.linalg.inv(n), converged)
+    return _Fit(s, b, h, v, _inv_safe(n), converged & ~_singular(n))
 
 
 def coarse_start(track: TrackLine, rows: Rows, antennas: FloatArray, used: BoolArray, step_m: float) -> FloatArray:
