@@ -19,16 +19,24 @@ Integrity, with redundancy (dof = rows − unknowns ≥ 1) [S002]:
   the prior), or does not converge, is solved again without each row in turn; the row whose
   removal gives a converged on-track solution with the smallest test statistic is rejected;
 * *exclusion*: while the global test T = Σ v_r²/σ_r² exceeds the χ²(dof) quantile at
-  ``p_false_alarm``, the row with the largest normalised residual |v_r|/(σ_r√q_r)
-  (q_r = 1 − w_r h_r, h_r the hat-matrix diagonal: Baarda's w-test) is excluded;
+  ``p_false_alarm`` or a normalised residual w_r = |v_r|/(σ_r√q_r) exceeds ``k_w``
+  (q_r = 1 − h_r/σ_r², h_r the hat-matrix diagonal: Baarda's w-test, which sees a bias on a
+  low-redundancy row that the global test dilutes), the satellite row with the largest w_r
+  is excluded; with dof = 1 a failing epoch cannot be resolved and is refused;
 * an optional prior (s_prior, σ_prior) — the pipeline's own estimate, e.g. from the
   tachometer — enters the *tests* as one more observation: with it, three satellites on one
   receiver can identify a faulty one (without it the three normalised residuals of a
-  one-dof problem are equal). The reported s uses the satellites only.
+  one-dof problem are equal). The prior is never the one excluded (a fault that hides in
+  the satellites' own fit shows as a large prior residual; blaming the prior would accept
+  it): when only the prior disagrees the epoch fails. The reported s uses the satellites only.
 
-Stated uncertainty U = k_ff·σ_s (k_ff = 3.29: 10⁻³ two-sided for Gaussian errors). Beside
-it the protection level against one undetected fault PL = max_r |K_sr|·σ_r/√q_r·(√χ²_thr(dof)
-+ k_md), K = (HᵀWH)⁻¹HᵀW (the RAIM slope, Brown & Chin 1997 form; 0 when dof = 0).
+Stated uncertainty U = max(k_ff·σ_s, PL): k_ff = 3.29 is the 10⁻³ two-sided bound of
+fault-free Gaussian errors, and PL the protection level against one satellite fault the
+w-test misses, PL = max_r |K_sr|·σ_r/√q_r·(k_w + k_md) with K = (HᵀWH)⁻¹HᵀW of the
+satellites-only estimate and q_r the redundancy numbers of the detector (with the prior
+when one is given): the largest error a bias just below the detectable size on one row can
+cause (the RAIM slope of Brown & Chin 1997, in w-test form). With dof = 0 nothing is
+monitored: PL is NaN and U the fault-free term.
 Measured figures: bench/NOTES.md (GNSS).
 """
 
@@ -67,9 +75,11 @@ class ConstrainedConfig:
     tol_m: float = 1e-3
     p_false_alarm: float = 1e-3
     max_exclusions: int = 3
+    k_w: float = 3.29
+    """Critical value of the normalised residuals (Baarda's w-test, 10⁻³ two-sided per row)."""
     k_fault_free: float = 3.29
     k_missed_detection: float = 3.09
-    max_adop: float = 30.0
+    max_adop: float = 10.0
     prior_window_sigmas: float = 5.0
     coarse_step_m: float = 100.0
 
@@ -419,39 +429,34 @@ def _exclude_faults(
     fail = np.zeros(used.shape[0], dtype=bool)
     for _ in range(cfg.max_exclusions + 1):
         t, wres, dof, _ = _statistics(fit, rows, used, prior, prior_on)
-        fail = (dof >= 1) & (t > thr[np.clip(dof, 0, thr.size - 1)])
+        fail = (dof >= 1) & ((t > thr[np.clip(dof, 0, thr.size - 1)]) | (np.max(np.abs(wres), axis=1) > cfg.k_w))
         sel = np.flatnonzero(fail & (dof >= 2))
         if sel.size == 0:
             break
-        worst = np.argmax(np.abs(wres[sel]), axis=1)
-        is_prior = worst == n_s
-        prior_on[sel[is_prior]] = False
-        ex_e, ex_j = sel[~is_prior], worst[~is_prior]
-        used[ex_e, ex_j] = False
-        excluded[ex_e, ex_j] = True
-        pr = None if prior is None else (prior[0][sel], np.where(prior_on[sel], prior[1][sel], np.inf))
+        worst = np.argmax(np.abs(wres[sel, :n_s]), axis=1)  # satellites only: the prior is the reference
+        used[sel, worst] = False
+        excluded[sel, worst] = True
+        pr = None if prior is None else (prior[0][sel], prior[1][sel])
         _merge(fit, gauss_newton(track, _sub_rows(rows, sel), ant, used[sel], fit.s[sel], pr, cfg), sel)
     return excluded, fail
 
 
 def _uncertainty(
-    fit: _Fit, rows: Rows, used: BoolArray, dof: IntArray, q: FloatArray, cfg: ConstrainedConfig
+    fit: _Fit, rows: Rows, used: BoolArray, dof_det: IntArray, q_det: FloatArray, cfg: ConstrainedConfig
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """σ_s, ADOP and the protection level PL (module docstring)."""
+    """σ_s, ADOP and the protection level PL of the satellites-only estimate ``fit`` against
+    one fault missed by the detector whose redundancy numbers are ``q_det`` (module docstring)."""
     w = np.where(used, 1.0 / np.where(used, rows.sigma_m, 1.0) ** 2, 0.0)
     sigma_s = np.sqrt(np.abs(fit.n_inv[:, 0, 0]))
     hh = np.einsum("esi,es,esj->eij", fit.h, used.astype(float), fit.h)
     empty = np.einsum("esi,es->ei", fit.h[..., 1:] ** 2, used.astype(float)) <= 0
     idx = np.arange(1, hh.shape[1])
     hh[:, idx, idx] += empty
-    det_ok = np.abs(np.linalg.det(hh)) > 1e-12
-    hh[~det_ok] = np.eye(hh.shape[1])
-    adop = np.where(det_ok, np.sqrt(np.abs(np.linalg.inv(hh)[:, 0, 0])), np.inf)
+    adop = np.sqrt(np.abs(_inv_safe(hh)[:, 0, 0]))
+    adop = np.where(np.isfinite(adop), adop, np.inf)
     k_s = np.einsum("ei,esi,es->es", fit.n_inv[:, 0, :], fit.h, w)
-    slope = np.where(used, np.abs(k_s) * np.where(used, rows.sigma_m, 0.0) / np.sqrt(q), 0.0)
-    thr = chi2_thresholds(cfg.p_false_alarm)
-    pbias = np.sqrt(np.where(dof >= 1, thr[np.clip(dof, 1, thr.size - 1)], 0.0)) + cfg.k_missed_detection
-    pl = np.where(dof >= 1, slope.max(axis=1, initial=0.0) * pbias, 0.0)
+    slope = np.where(used, np.abs(k_s) * np.where(used, rows.sigma_m, 0.0) / np.sqrt(q_det), 0.0)
+    pl = np.where(dof_det >= 1, slope.max(axis=1, initial=0.0) * (cfg.k_w + cfg.k_missed_detection), np.nan)
     return sigma_s, adop, pl
 
 
@@ -480,10 +485,11 @@ def solve_constrained(
     fit = gauss_newton(track, rows, ant, used, s0, prior, cfg)
     no_track = _reject_off_track(track, rows, ant, used, fit, prior, cfg)
     excluded, fail = _exclude_faults(track, rows, ant, used, fit, prior, prior_on, cfg)
+    _, _, dof_det, q_det = _statistics(fit, rows, used, prior, prior_on)
     if prior is not None:
         fit = gauss_newton(track, rows, ant, used, fit.s, None, cfg)
-    t, _, dof, q = _statistics(fit, rows, used, None, np.zeros(e, dtype=bool))
-    sigma_s, adop, pl = _uncertainty(fit, rows, used, dof, q, cfg)
+    t, _, dof, _ = _statistics(fit, rows, used, None, np.zeros(e, dtype=bool))
+    sigma_s, adop, pl = _uncertainty(fit, rows, used, dof_det, q_det, cfg)
     n_used = used.sum(axis=1)
     status = np.full(e, STATUS_OK, dtype=np.int64)
     status[adop > cfg.max_adop] = STATUS_GEOMETRY
@@ -498,7 +504,7 @@ def solve_constrained(
         clock_m=fit.b,
         sigma_s=sigma_s,
         adop=adop,
-        uncertainty_m=cfg.k_fault_free * sigma_s,
+        uncertainty_m=np.fmax(cfg.k_fault_free * sigma_s, pl),
         protection_m=pl,
         test=t,
         dof=dof,

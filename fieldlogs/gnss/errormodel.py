@@ -16,7 +16,9 @@
   (the shape of DO-229's airborne model 0.13 + 0.53 exp(−E/10°), larger beside a railway).
 
 Where a correction (SBAS/D-GPS) applies its ``sigma_m`` replaces σ_sis, and σ_iono/σ_tropo too
-when it covers the atmosphere.
+when it covers the atmosphere. Carrier smoothing over n samples scales σ_noise and σ_mp by
+max(√(``smooth_corr_samples``/n), ``smooth_floor``): noise and fast multipath average down,
+slow multipath (correlated over tens of seconds beside a structure) does not, hence the floor.
 """
 
 from __future__ import annotations
@@ -46,6 +48,8 @@ class ErrorModel:
     mp_zenith_m: float = 0.3
     mp_low_m: float = 2.0
     mp_scale_deg: float = 15.0
+    smooth_corr_samples: float = 5.0
+    smooth_floor: float = 0.35
 
 
 def obliquity(el_rad: FloatArray) -> FloatArray:
@@ -62,6 +66,7 @@ def pseudorange_sigma_m(
     sv_acc_m: FloatArray,
     corr_sigma_m: FloatArray | None = None,
     covers_atmosphere: BoolArray | None = None,
+    smooth_n: FloatArray | None = None,
 ) -> FloatArray:
     """1σ [m] of each corrected pseudorange (module docstring)."""
     el = np.asarray(el_rad, dtype=float)
@@ -74,6 +79,10 @@ def pseudorange_sigma_m(
     cn0 = np.nan_to_num(np.asarray(cn0_dbhz, dtype=float), nan=35.0)
     noise = model.noise_45_m * 10.0 ** ((45.0 - cn0) / 20.0)
     mp = model.mp_zenith_m + model.mp_low_m * np.exp(-np.degrees(el) / model.mp_scale_deg)
+    if smooth_n is not None:
+        n = np.maximum(np.nan_to_num(np.asarray(smooth_n, dtype=float), nan=1.0), 1.0)
+        f = np.minimum(np.maximum(np.sqrt(model.smooth_corr_samples / n), model.smooth_floor), 1.0)
+        noise, mp = noise * f, mp * f
     if corr_sigma_m is not None:
         cs = np.asarray(corr_sigma_m, dtype=float)
         has = np.isfinite(cs)

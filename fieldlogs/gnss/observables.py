@@ -28,6 +28,7 @@ from fieldlogs.gnss.atmosphere import iono_delay_m, tropo_delay_m
 from fieldlogs.gnss.constants import (
     C_MPS,
     OBS_CN0,
+    OBS_LLI,
     OBS_PR,
     OBS_RECEIVER,
     OBS_SAT,
@@ -81,6 +82,45 @@ class ObservationError(ValueError):
     """An observation frame without a required column."""
 
 
+def carrier_smoothed(obs: pd.DataFrame, window_s: float = 100.0, jump_m: float = 15.0) -> pd.DataFrame:
+    """Carrier-smoothed pseudoranges (Hatch filter in its moving-window form, RTCA DO-229 J.2.4).
+
+    Per (receiver, satellite, signal) arc: ρ_s(k) = λΦ(k) + mean_{j ∈ window(k)} (ρ(j) − λΦ(j)),
+    the window being the last ``window_s`` seconds of the arc. An arc restarts at a gap longer
+    than 1.5 epochs, at a loss-of-lock flag (lli bit 0) and where the code-minus-carrier jumps
+    by more than ``jump_m`` from the previous epoch (a cycle slip). The ionosphere's code-carrier
+    divergence (2ΔI over the window, ~0.1–0.3 m for 100 s at low elevation) is left in.
+    Returns a copy with ``pseudorange_m`` replaced where a carrier exists and a column
+    ``smooth_n`` (samples averaged; 1 where unsmoothed).
+    """
+    df = obs.copy()
+    lam = C_MPS / signal_frequency_hz(system_of(df[OBS_SAT].to_numpy()), df[OBS_SIGNAL].to_numpy(str))
+    phase = df["carrier_cycles"].to_numpy(float) * lam if "carrier_cycles" in df.columns else np.full(len(df), np.nan)
+    cmc = df[OBS_PR].to_numpy(float) - phase
+    key = [OBS_RECEIVER, OBS_SAT, OBS_SIGNAL]
+    order = df.sort_values([*key, OBS_TIME], kind="stable").index
+    d = df.loc[order, key].assign(_t=df.loc[order, OBS_TIME].to_numpy(float), _cmc=cmc[order])
+    same = (d[key] == d[key].shift()).all(axis=1).to_numpy()
+    dt = np.diff(d["_t"].to_numpy(), prepend=np.nan)
+    step = float(np.nanmedian(dt[same])) if same.any() else 1.0
+    lli = df.loc[order, OBS_LLI].fillna(0).to_numpy().astype(np.int64) & 1 if OBS_LLI in df.columns else 0
+    jump = np.abs(np.diff(d["_cmc"].to_numpy(), prepend=np.nan)) > jump_m
+    new_arc = ~same | (dt > 1.5 * step) | (lli > 0) | jump | ~np.isfinite(d["_cmc"].to_numpy())
+    arc = np.cumsum(new_arc)
+    n_win = max(int(round(window_s / step)), 1)
+    vals = np.nan_to_num(d["_cmc"].to_numpy())
+    cs = pd.Series(vals).groupby(arc).cumsum().to_numpy()
+    pos = pd.Series(np.ones(arc.size)).groupby(arc).cumsum().to_numpy().astype(np.int64)
+    lag = pd.Series(cs).groupby(arc).shift(n_win).fillna(0.0).to_numpy()
+    count = np.minimum(pos, n_win)
+    mean = (cs - lag) / count
+    ok = np.isfinite(d["_cmc"].to_numpy())
+    smoothed = np.where(ok, phase[order] + mean, df.loc[order, OBS_PR].to_numpy(float))
+    df.loc[order, OBS_PR] = smoothed
+    df.loc[order, "smooth_n"] = np.where(ok, count, 1)
+    return df
+
+
 @dataclass
 class Epochs:
     """Per-epoch arrays of one or more receivers (module docstring)."""
@@ -102,6 +142,8 @@ class Epochs:
     prc_m: FloatArray
     corr_sigma_m: FloatArray
     corr_atmosphere: BoolArray
+    smooth_n: FloatArray
+    """Carrier-smoothing samples averaged per row (1: raw code)."""
     present: BoolArray
     flags: IntArray
     az: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
@@ -184,6 +226,7 @@ def build_epochs(
         "prc_m": corr.prc_m,
         "corr_sigma_m": corr.sigma_m,
         "corr_atmosphere": corr.covers_atmosphere,
+        "smooth_n": df["smooth_n"].to_numpy(float) if "smooth_n" in df.columns else np.ones(sat.size),
         "flags": flags.astype(np.int64),
     }
     return _to_epochs(df, rows)
@@ -243,7 +286,7 @@ def apply_geometry(
     iono = np.where(atm, 0.0, iono)
     tropo = np.where(atm, 0.0, tropo)
     sigma = pseudorange_sigma_m(
-        error_model or ErrorModel(), el, ep.cn0_dbhz, iono, ep.sv_acc_m, ep.corr_sigma_m, ep.corr_atmosphere
+        error_model or ErrorModel(), el, ep.cn0_dbhz, iono, ep.sv_acc_m, ep.corr_sigma_m, ep.corr_atmosphere, ep.smooth_n
     )
     pr_corr = ep.pr_m + ep.clock_m - iono - tropo + ep.prc_m
     return replace(ep, az=az, el=el, iono_m=iono, tropo_m=tropo, sigma_m=sigma, pr_corr_m=pr_corr)

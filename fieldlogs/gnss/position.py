@@ -23,7 +23,14 @@ import pandas as pd
 from fieldlogs.gnss.constrained import STATUS_NAMES, STATUS_OK, ConstrainedConfig, Rows, solve_constrained
 from fieldlogs.gnss.errormodel import ErrorModel
 from fieldlogs.gnss.lsq import solve_lsq
-from fieldlogs.gnss.observables import FLAG_SKY_MASK, Epochs, apply_geometry, apply_masks, build_epochs
+from fieldlogs.gnss.observables import (
+    FLAG_SKY_MASK,
+    Epochs,
+    apply_geometry,
+    apply_masks,
+    build_epochs,
+    carrier_smoothed,
+)
 from fieldlogs.gnss.prechecks import check_receiver_pair, compare_navigation, flag_nav_mismatch
 from fieldlogs.gnss.skymask import SkyMask
 from fieldlogs.gnss.track import Antenna, TrackLine
@@ -38,6 +45,8 @@ class PositionConfig:
     cn0_mask_dbhz: float = 30.0
     pr_difference_tol_m: float = 8.0
     max_pdop: float = 6.0
+    smoothing_s: float | None = 100.0
+    """Carrier-smoothing window (``observables.carrier_smoothed``); None: raw code."""
     error_model: ErrorModel = field(default_factory=ErrorModel)
     solver: ConstrainedConfig = field(default_factory=ConstrainedConfig)
 
@@ -50,7 +59,8 @@ class PositionResult:
     observations: Epochs
 
 
-def _rows(ep: Epochs, direction: np.ndarray) -> Rows:
+def receiver_rows(ep: Epochs, direction: np.ndarray) -> Rows:
+    """Solver rows (K = 1) of the epochs ``ep`` (one receiver's)."""
     return Rows(
         sat_pos=np.nan_to_num(ep.sat_pos, nan=0.0),
         pr_m=np.nan_to_num(ep.pr_corr_m, nan=0.0),
@@ -105,6 +115,8 @@ def position_run(
     else:
         mismatch = compare_navigation(nav)
         merged = pd.concat(list(nav.values()), ignore_index=True).drop_duplicates(["sat", "week", "Toe", "DataSrc"])
+    if cfg.smoothing_s:
+        obs = carrier_smoothed(obs, cfg.smoothing_s)
     ep = build_epochs(obs, merged, systems=cfg.systems, corrections=corrections)
     if mismatch is not None:
         flag_nav_mismatch(ep, mismatch)
@@ -168,7 +180,7 @@ def _solve_receivers(
             pr = (prior[0][sel], prior[1][sel])
         sol = solve_constrained(
             track,
-            _rows(sub, dirs[sel]),
+            receiver_rows(sub, dirs[sel]),
             [antennas[name]],
             cfg.solver,
             s_init=None if s_init is None else s_init[sel],

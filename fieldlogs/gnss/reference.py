@@ -132,15 +132,11 @@ def solve_epoch(
     fail = False
     for _ in range(cfg.max_exclusions + 1):
         t, dof, wres = stats(h, v, n_inv, s, used, pri)
-        fail = dof >= 1 and t > thr[dof]
+        fail = dof >= 1 and (t > thr[dof] or max(wres, default=0.0) > cfg.k_w)
         if not (fail and dof >= 2):
             break
-        worst = int(np.argmax(wres))
         idx = [i for i, x in enumerate(used) if x]
-        if worst == len(idx):
-            pri = None
-        else:
-            used[idx[worst]] = False
+        used[idx[int(np.argmax(wres[: len(idx)]))]] = False
         s, b, h, v, n_inv, conv = _fit(track, sats, pr, sig, we, used, ant, direction, s, pri, cfg)
     if prior is not None:
         s, b, h, v, n_inv, conv = _fit(track, sats, pr, sig, we, used, ant, direction, s, None, cfg)

@@ -23,7 +23,9 @@ test checks). For each receiver, epoch and satellite:
   functions of s; a satellite behind buildings is received by reflection (NLOS) with
   probability ``p_nlos`` per pass, with an exponential extra delay (mean ``nlos_mean_m``);
 * receiver time tag gnss_time_s = t + b_r (the receiver's clock), carrier phase and Doppler
-  consistent with the same geometry (Doppler = −(ρ̇ + c(ḃ − Δṫ_sv))/λ).
+  consistent with the same geometry (Doppler = −(ρ̇ + c(ḃ − Δṫ_sv))/λ); the carrier advances
+  the ionosphere (−I), carries 1 % of the code multipath, the NLOS extra path and 3 mm noise,
+  with one integer ambiguity per satellite.
 
 D-GPS-level corrections (``dgps_corrections``): per epoch and satellite PRC = −(ε_sis + I + T)
 plus the reference-station residual: 5 % of the atmospheric delays (decorrelation over a
@@ -241,7 +243,8 @@ def simulate(
         clock_rate = C_MPS * rx.clock_drift_sps - C_MPS * st_clock.clock_rate
         doppler = -(rate + clock_rate) / lam
         amb = np.round(rng.uniform(-1e6, 1e6, n_s))
-        carrier = (rng_m + clock_m[:, None] - C_MPS * clock_f + sis - iono + tropo + 0.01 * mp) / lam + amb
+        carrier_noise = 0.003 * rng.standard_normal(el.shape)
+        carrier = (rng_m + clock_m[:, None] - C_MPS * clock_f + sis - iono + tropo + 0.01 * mp + extra + carrier_noise) / lam + amb
         keep = visible & (idx >= 0)
         e_i, s_i = np.nonzero(keep)
         t_tag = traj.t + clock_m / C_MPS
