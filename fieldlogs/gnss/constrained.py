@@ -49,6 +49,7 @@ from typing import Final
 import numpy as np
 
 from fieldlogs.gnss.constants import C_MPS, BoolArray, FloatArray, IntArray
+from fieldlogs.gnss.linalg import inv_safe, singular, solve_safe
 from fieldlogs.gnss.track import Antenna, TrackLine
 
 STATUS_OK: Final = 0
@@ -116,8 +117,9 @@ class ConstrainedSolution:
     excluded: BoolArray
     no_track: BoolArray
     residual_m: FloatArray
+    mdb_m: FloatArray
+    """Minimal detectable bias of each used row (k_w + k_md)·σ_r/√q_r; NaN unused or unmonitored."""
     status: IntArray
-    prior_rejected: BoolArray
 
 
 @lru_cache(maxsize=8)
@@ -174,25 +176,6 @@ def _normal(
     return n, rhs
 
 
-def _singular(n: FloatArray) -> BoolArray:
-    """Normal matrices too close to singular to solve (relative determinant below 1e-12)."""
-    diag = np.prod(np.abs(np.diagonal(n, axis1=1, axis2=2)), axis=1)
-    return ~(np.abs(np.linalg.det(n)) > 1e-12 * np.maximum(diag, 1e-300))
-
-
-def _solve_safe(n: FloatArray, rhs: FloatArray) -> tuple[FloatArray, BoolArray]:
-    bad = _singular(n)
-    n = np.where(bad[:, None, None], np.eye(n.shape[1]), n)
-    delta = np.linalg.solve(n, rhs[..., None])[..., 0]
-    return np.where(bad[:, None], 0.0, delta), bad
-
-
-def _inv_safe(n: FloatArray) -> FloatArray:
-    bad = _singular(n)
-    inv = np.linalg.inv(np.where(bad[:, None, None], np.eye(n.shape[1]), n))
-    return np.where(bad[:, None, None], np.nan, inv)
-
-
 def gauss_newton(
     track: TrackLine,
     rows: Rows,
@@ -220,7 +203,7 @@ def gauss_newton(
         v = np.where(used, rows.pr_m - rho - np.einsum("esk,ek->es", onehot, b), 0.0)
         h = np.concatenate([g[..., None], onehot], axis=-1)
         n, rhs = _normal(h, w, v, p_w, p_s - s)
-        delta, bad = _solve_safe(n, rhs)
+        delta, bad = solve_safe(n, rhs)
         delta[:, 0] = np.clip(delta[:, 0], -5_000.0, 5_000.0)
         s = s + delta[:, 0]
         b = b + delta[:, 1:]
@@ -231,7 +214,7 @@ def gauss_newton(
     v = np.where(used, rows.pr_m - rho - np.einsum("esk,ek->es", onehot, b), 0.0)
     h = np.concatenate([g[..., None], onehot], axis=-1)
     n, _ = _normal(h, w, v, p_w, p_s - s)
-    return _Fit(s, b, h, v, _inv_safe(n), converged & ~_singular(n))
+    return _Fit(s, b, h, v, inv_safe(n), converged & ~singular(n))
 
 
 def coarse_start(track: TrackLine, rows: Rows, antennas: FloatArray, used: BoolArray, step_m: float) -> FloatArray:
@@ -452,7 +435,7 @@ def _uncertainty(
     empty = np.einsum("esi,es->ei", fit.h[..., 1:] ** 2, used.astype(float)) <= 0
     idx = np.arange(1, hh.shape[1])
     hh[:, idx, idx] += empty
-    adop = np.sqrt(np.abs(_inv_safe(hh)[:, 0, 0]))
+    adop = np.sqrt(np.abs(inv_safe(hh)[:, 0, 0]))
     adop = np.where(np.isfinite(adop), adop, np.inf)
     k_s = np.einsum("ei,esi,es->es", fit.n_inv[:, 0, :], fit.h, w)
     slope = np.where(used, np.abs(k_s) * np.where(used, rows.sigma_m, 0.0) / np.sqrt(q_det), 0.0)
@@ -513,6 +496,6 @@ def solve_constrained(
         excluded=excluded,
         no_track=no_track,
         residual_m=np.where(used, fit.v, np.nan),
+        mdb_m=np.where(used & (dof_det >= 1)[:, None], (cfg.k_w + cfg.k_missed_detection) * rows.sigma_m / np.sqrt(q_det), np.nan),
         status=status,
-        prior_rejected=(prior is not None) & ~prior_on,
     )

@@ -14,7 +14,9 @@ Metrics per receiver-epoch: constrained availability (status ok and the antenna-
 check passed), unconstrained availability (≥ 4 satellites, PDOP ≤ 6), along-track error
 s − s_true of available epochs and whether it exceeds the stated uncertainty; in fault cases
 the epochs after onset with the faulty satellite among ≥ 3 usable ones, whether it is excluded
-(or the epoch refused) from the 2nd epoch on, and the error against the uncertainty meanwhile.
+(or the epoch refused) from the 2nd epoch on where its bias has reached the row's minimal
+detectable bias (a 50 m step at once unless the geometry cannot see 50 m; a ramp when it has
+grown to it), and the error against the uncertainty meanwhile.
 """
 
 from __future__ import annotations
@@ -136,6 +138,10 @@ def run_case(spec: CaseSpec) -> CaseResult:
         tb["fault_excluded"] = (row & ((ep.flags & (FLAG_EXCLUDED | FLAG_NO_TRACK_SOLUTION)) > 0)).any(axis=1)
         tb["fault_epoch"] = np.round(tb["t"].to_numpy() - t_f).astype(int)
         tb["fault_bias_m"] = np.where(tb["fault_present"], 50.0 if spec.fault == "step" else 0.2 * (tb["t"] - t_f), 0.0)
+        tb["fault_mdb_m"] = np.nanmin(np.where(row, res.mdb_m, np.inf), axis=1)
+        detectable = tb["fault_present"] & ((tb["fault_bias_m"] >= tb["fault_mdb_m"]) | tb["fault_excluded"])
+        first = tb["t"].where(detectable).groupby(tb["receiver"]).transform("min")
+        tb["fault_detectable_epoch"] = np.round(tb["t"] - first)
     return CaseResult(tb, fault_sat, t_f)
 
 
@@ -156,8 +162,8 @@ def summarise(results: list[CaseResult]) -> dict[str, float]:
     }
     if "fault_present" in tb.columns:
         f = tb[tb["fault_present"].fillna(False).astype(bool) & tb["fault_usable3"].fillna(False).astype(bool)]
-        late = f[f["fault_epoch"] >= 1]
-        missed = late["ok"] & ~late["fault_excluded"].astype(bool)
+        late = f[f["fault_detectable_epoch"] >= 1]
+        missed = late["ok"] & ~late["fault_excluded"].astype(bool) & (late["fault_bias_m"] >= late["fault_mdb_m"])
         out["fault_epochs"] = float(len(f))
         out["fault_not_excluded_after_2_epochs"] = float(missed.mean()) if len(late) else np.nan
         out["fault_exceed_fraction"] = float((f["exceeds"]).sum() / max(int(f["ok"].sum()), 1))

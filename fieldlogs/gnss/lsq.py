@@ -21,6 +21,7 @@ import numpy as np
 
 from fieldlogs.gnss.constants import C_MPS, BoolArray, FloatArray, IntArray, StrArray
 from fieldlogs.gnss.geodesy import ecef_to_geodetic, enu_basis
+from fieldlogs.gnss.linalg import inv_safe, solve_safe
 
 
 @dataclass
@@ -78,10 +79,7 @@ def solve_lsq(
         n[:, 4, 4] += np.where(isb_free, 0.0, 1.0)
         n[:, :4, :4] += np.where(used.sum(axis=1) == 0, 1.0, 0.0)[:, None, None] * np.eye(4)
         rhs = np.einsum("esi,es,es->ei", h, w, v)
-        bad = np.abs(np.linalg.det(n)) < 1e-30
-        n[bad] = np.eye(5)
-        delta = np.linalg.solve(n, rhs[..., None])[..., 0]
-        delta[bad] = 0.0
+        delta, bad = solve_safe(n, rhs)
         x += delta
         converged = (np.max(np.abs(delta), axis=1) < 1e-3) & ~bad
         if converged.all():
@@ -92,7 +90,8 @@ def solve_lsq(
     n_used = used.sum(axis=1)
     enough = n_used >= 4 + isb_free
     qn[~enough] = np.eye(5)
-    q = np.linalg.inv(qn)
+    q = inv_safe(qn)
+    enough &= np.isfinite(q[:, 0, 0])
     lat, lon, _ = ecef_to_geodetic(
         np.where(np.linalg.norm(x[:, :3], axis=1, keepdims=True) > 1e6, x[:, :3], [6.4e6, 0, 0])
     )

@@ -57,6 +57,8 @@ class PositionResult:
 
     epochs: pd.DataFrame
     observations: Epochs
+    mdb_m: np.ndarray
+    """Minimal detectable bias of every row of ``observations`` (NaN: unused or unmonitored)."""
 
 
 def receiver_rows(ep: Epochs, direction: np.ndarray) -> Rows:
@@ -134,18 +136,19 @@ def position_run(
     if sky_mask is not None:
         ep.flag(sky_mask.blocked(ep.az, ep.el), FLAG_SKY_MASK)
     dirs = np.full(ep.t.size, float(direction))
-    sols = _solve_receivers(ep, track, antennas, names, dirs, pr, cfg)
+    mdb = np.full(ep.present.shape, np.nan)
+    sols = _solve_receivers(ep, track, antennas, names, dirs, pr, cfg, mdb)
     if pr is None:  # second pass: geometry at the first solution
         s1 = np.where(np.isfinite(sols["s_m"].to_numpy()), sols["s_m"].to_numpy(), s_approx)
         ep2 = _geometry(replace_flags(ep), track, s1, iono, cfg)
         if sky_mask is not None:
             ep2.flag(sky_mask.blocked(ep2.az, ep2.el), FLAG_SKY_MASK)
         ep = ep2
-        sols = _solve_receivers(ep, track, antennas, names, dirs, None, cfg, s_init=s1)
+        sols = _solve_receivers(ep, track, antennas, names, dirs, None, cfg, mdb, s_init=s1)
     table = _with_lsq(ep, sols, cfg)
     if len(names) == 2:
         table = _antenna_distance(table, track, antennas, names, direction, cfg)
-    return PositionResult(table, ep)
+    return PositionResult(table, ep, mdb)
 
 
 def replace_flags(ep: Epochs) -> Epochs:
@@ -166,6 +169,7 @@ def _solve_receivers(
     dirs: np.ndarray,
     prior: tuple[np.ndarray, np.ndarray] | None,
     cfg: PositionConfig,
+    mdb: np.ndarray,
     s_init: np.ndarray | None = None,
 ) -> pd.DataFrame:
     """Constrained solution of each receiver's epochs (K = 1 each)."""
@@ -197,6 +201,7 @@ def _solve_receivers(
         out.loc[sel, "n_used"] = sol.n_used
         out.loc[sel, "n_excluded"] = sol.excluded.sum(axis=1) + sol.no_track.sum(axis=1)
         out.loc[sel, "status_code"] = sol.status
+        mdb[sel] = sol.mdb_m
         ep.flag(_scatter(ep, sel, sol.excluded), 256)
         ep.flag(_scatter(ep, sel, sol.no_track), 128)
     out["status"] = out["status_code"].map(STATUS_NAMES)

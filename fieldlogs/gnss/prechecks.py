@@ -10,6 +10,8 @@
    the antenna separation. The common clock term c(b_a − b_b) is unknown: it is taken as the
    value inside the most intervals [d_i − D − tol, d_i + D + tol] (interval stabbing over the
    epoch's satellites); satellites whose interval misses it are dropped in both receivers.
+   Without the baseline's direction this catches for certain an error beyond 2(D + tol) and a
+   smaller one only where the other satellites leave it no room.
 3. Elevation and C/N0 masks: ``observables.apply_masks``; sky masks: ``skymask``.
 """
 
