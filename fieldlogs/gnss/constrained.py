@@ -15,9 +15,12 @@ The unknowns drop from (x, y, z, b) to (s, b_1..b_K) [S002 fig. 1], so one recei
 
 Integrity, with redundancy (dof = rows − unknowns ≥ 1) [S002]:
 
-* *no on-track solution*: an epoch whose solution leaves the track (or the window around
-  the prior), or does not converge, is solved again without each row in turn; the row whose
-  removal gives a converged on-track solution with the smallest test statistic is rejected;
+* *no on-track solution*: an epoch whose solution leaves the track (or the window
+  |s − s_prior| ≤ ``prior_window_sigmas``·√(σ_prior² + σ_s²) around the prior), or does not
+  converge, is solved again without each row in turn; the row whose removal gives a converged
+  on-track solution with the smallest test statistic is rejected. The final satellites-only
+  solution must lie in the same window (two satellites can fit a second, distant point of a
+  winding track);
 * *exclusion*: while the global test T = Σ v_r²/σ_r² exceeds the χ²(dof) quantile at
   ``p_false_alarm`` or a normalised residual w_r = |v_r|/(σ_r√q_r) exceeds ``k_w``
   (q_r = 1 − h_r/σ_r², h_r the hat-matrix diagonal: Baarda's w-test, which sees a bias on a
@@ -98,6 +101,22 @@ class Rows:
     """Receiver index k_r of each row (0..K−1)."""
     direction: FloatArray
     """+1 where the vehicle faces increasing s, −1 otherwise (E,)."""
+    clock_prior_m: FloatArray | None = None
+    """Predicted receiver clocks (E, K) for clock coasting, or None."""
+    clock_prior_sigma_m: FloatArray | None = None
+    """Their 1σ (E, K); +inf where there is no prediction."""
+
+    def take(self, sel: IntArray) -> Rows:
+        """The epochs ``sel``."""
+        kw = {f: getattr(self, f) for f in self.__dataclass_fields__}
+        return Rows(**{f: (None if v is None else v[sel]) for f, v in kw.items()})
+
+    def clock_weight(self) -> FloatArray:
+        """1/σ² of the clock predictions (E, K); 0 where none."""
+        if self.clock_prior_sigma_m is None:
+            return np.zeros((self.pr_m.shape[0], int(self.receiver.max(initial=0)) + 1))
+        sig = self.clock_prior_sigma_m
+        return np.where(np.isfinite(sig), 1.0 / np.where(np.isfinite(sig), sig, 1.0) ** 2, 0.0)
 
 
 @dataclass
@@ -106,6 +125,7 @@ class ConstrainedSolution:
 
     s: FloatArray
     clock_m: FloatArray
+    sigma_clock_m: FloatArray
     sigma_s: FloatArray
     adop: FloatArray
     uncertainty_m: FloatArray
@@ -163,14 +183,17 @@ def _geometry(track: TrackLine, rows: Rows, ant: FloatArray, s: FloatArray) -> t
 
 
 def _normal(
-    h: FloatArray, w: FloatArray, v: FloatArray, prior_w: FloatArray, prior_v: FloatArray
+    h: FloatArray, w: FloatArray, v: FloatArray, prior_w: FloatArray, prior_v: FloatArray, cw: FloatArray, cv: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     n = np.einsum("esi,es,esj->eij", h, w, h)
     rhs = np.einsum("esi,es,es->ei", h, w, v)
     n[:, 0, 0] += prior_w
     rhs[:, 0] += prior_w * prior_v
-    # receivers without rows: pin their clock (regularise the empty column)
-    empty = np.einsum("esi,es->ei", h[..., 1:] ** 2, w) <= 0
+    kk = np.arange(1, n.shape[1])
+    n[:, kk, kk] += cw
+    rhs[:, 1:] += cw * cv
+    # receivers without rows nor a clock prediction: pin their clock (regularise the empty column)
+    empty = (np.einsum("esi,es->ei", h[..., 1:] ** 2, w) <= 0) & (cw <= 0)
     idx = np.arange(1, n.shape[1])
     n[:, idx, idx] += empty
     return n, rhs
@@ -195,6 +218,9 @@ def gauss_newton(
     rho, g = _geometry(track, rows, antennas, s)
     resid0 = np.where(used, rows.pr_m - rho, 0.0)
     b = np.einsum("es,es,esk->ek", resid0, w, onehot) / np.maximum(np.einsum("es,esk->ek", w, onehot), 1e-30)
+    cw = rows.clock_weight()[:, :k] if rows.clock_prior_m is not None else np.zeros((e, k))
+    cb = np.zeros((e, k)) if rows.clock_prior_m is None else np.nan_to_num(rows.clock_prior_m[:, :k])
+    b = np.where((cw > 0) & (np.einsum("es,esk->ek", w, onehot) <= 0), cb, b)
     p_w = np.zeros(e) if prior is None else 1.0 / prior[1] ** 2
     p_s = np.zeros(e) if prior is None else prior[0]
     converged = np.zeros(e, dtype=bool)
@@ -202,7 +228,7 @@ def gauss_newton(
         rho, g = _geometry(track, rows, antennas, s)
         v = np.where(used, rows.pr_m - rho - np.einsum("esk,ek->es", onehot, b), 0.0)
         h = np.concatenate([g[..., None], onehot], axis=-1)
-        n, rhs = _normal(h, w, v, p_w, p_s - s)
+        n, rhs = _normal(h, w, v, p_w, p_s - s, cw, cb - b)
         delta, bad = solve_safe(n, rhs)
         delta[:, 0] = np.clip(delta[:, 0], -5_000.0, 5_000.0)
         s = s + delta[:, 0]
@@ -213,7 +239,7 @@ def gauss_newton(
     rho, g = _geometry(track, rows, antennas, s)
     v = np.where(used, rows.pr_m - rho - np.einsum("esk,ek->es", onehot, b), 0.0)
     h = np.concatenate([g[..., None], onehot], axis=-1)
-    n, _ = _normal(h, w, v, p_w, p_s - s)
+    n, _ = _normal(h, w, v, p_w, p_s - s, cw, cb - b)
     return _Fit(s, b, h, v, inv_safe(n), converged & ~singular(n))
 
 
@@ -228,28 +254,12 @@ def coarse_start(track: TrackLine, rows: Rows, antennas: FloatArray, used: BoolA
     for a in range(0, e, 32):
         sl = slice(a, a + 32)
         m = min(32, e - a)
-        sub = Rows(
-            *(
-                x[sl]
-                for x in (
-                    rows.sat_pos,
-                    rows.pr_m,
-                    rows.sigma_m,
-                    rows.usable,
-                    rows.omega_e,
-                    rows.receiver,
-                    rows.direction,
-                )
-            )
-        )
+        sub = rows.take(np.arange(a, a + m))
         rep = Rows(
-            np.repeat(sub.sat_pos, cand.size, axis=0),
-            np.repeat(sub.pr_m, cand.size, axis=0),
-            np.repeat(sub.sigma_m, cand.size, axis=0),
-            np.repeat(sub.usable, cand.size, axis=0),
-            np.repeat(sub.omega_e, cand.size, axis=0),
-            np.repeat(sub.receiver, cand.size, axis=0),
-            np.repeat(sub.direction, cand.size, axis=0),
+            **{
+                f: (None if getattr(sub, f) is None else np.repeat(getattr(sub, f), cand.size, axis=0))
+                for f in sub.__dataclass_fields__
+            }
         )
         rho, _ = _geometry(track, rep, antennas, np.tile(cand, m))
         ww = np.repeat(w[sl], cand.size, axis=0)
@@ -273,10 +283,14 @@ def _statistics(
     wres = np.where(used, fit.v * np.sqrt(w) / np.sqrt(q), 0.0)
     t = np.sum(w * fit.v**2, axis=1)
     k = fit.b.shape[1]
-    observed = np.zeros((used.shape[0], k), dtype=bool)
+    cw = rows.clock_weight()[:, :k] if rows.clock_prior_m is not None else np.zeros((used.shape[0], k))
+    observed = cw > 0
     for kk in range(k):
-        observed[:, kk] = np.any(used & (rows.receiver == kk), axis=1)
-    dof = used.sum(axis=1) - 1 - observed.sum(axis=1)
+        observed[:, kk] |= np.any(used & (rows.receiver == kk), axis=1)
+    dof = used.sum(axis=1) + (cw > 0).sum(axis=1) - 1 - observed.sum(axis=1)
+    if rows.clock_prior_m is not None:
+        cv = np.nan_to_num(rows.clock_prior_m[:, :k]) - fit.b
+        t = t + np.sum(cw * cv**2, axis=1)
     prior_w = np.zeros_like(t)
     if prior is not None:
         pw = np.where(prior_on, 1.0 / prior[1] ** 2, 0.0)
@@ -288,38 +302,9 @@ def _statistics(
     return t, np.concatenate([wres, prior_w[:, None]], axis=1), dof.astype(np.int64), q
 
 
-def _solve_subset(
-    track: TrackLine,
-    rows: Rows,
-    antennas: FloatArray,
-    used: BoolArray,
-    s0: FloatArray,
-    prior: tuple[FloatArray, FloatArray] | None,
-    cfg: ConstrainedConfig,
-    sel: IntArray,
-) -> _Fit:
-    sub = Rows(
-        *(
-            x[sel]
-            for x in (rows.sat_pos, rows.pr_m, rows.sigma_m, rows.usable, rows.omega_e, rows.receiver, rows.direction)
-        )
-    )
-    pr = None if prior is None else (prior[0][sel], prior[1][sel])
-    return gauss_newton(track, sub, antennas, used[sel], s0[sel], pr, cfg)
-
-
 def _merge(fit: _Fit, part: _Fit, sel: IntArray) -> None:
     for name in ("s", "b", "h", "v", "n_inv", "converged"):
         getattr(fit, name)[sel] = getattr(part, name)
-
-
-def _sub_rows(rows: Rows, sel: IntArray) -> Rows:
-    return Rows(
-        *(
-            x[sel]
-            for x in (rows.sat_pos, rows.pr_m, rows.sigma_m, rows.usable, rows.omega_e, rows.receiver, rows.direction)
-        )
-    )
 
 
 def _on_track(
@@ -333,7 +318,17 @@ def _on_track(
 
 
 def _n_unknowns(rows: Rows, used: BoolArray, k: int) -> IntArray:
-    return 1 + sum(np.any(used & (rows.receiver == kk), axis=1).astype(np.int64) for kk in range(k))
+    """1 + the receivers with rows or a clock prediction."""
+    cw = rows.clock_weight()
+    return 1 + sum(
+        (np.any(used & (rows.receiver == kk), axis=1) | (cw[:, kk] > 0 if kk < cw.shape[1] else False)).astype(np.int64)
+        for kk in range(k)
+    )
+
+
+def _n_observations(rows: Rows, used: BoolArray) -> IntArray:
+    """Satellite rows plus clock predictions."""
+    return used.sum(axis=1) + (rows.clock_weight() > 0).sum(axis=1)
 
 
 def _reject_off_track(
@@ -348,7 +343,7 @@ def _reject_off_track(
     """Leave-one-out search for epochs without an on-track solution (module docstring)."""
     k = int(ant.shape[0])
     no_track = np.zeros_like(used)
-    bad = np.flatnonzero(~_on_track(track, fit, prior, cfg) & (used.sum(axis=1) > _n_unknowns(rows, used, k)))
+    bad = np.flatnonzero(~_on_track(track, fit, prior, cfg) & (_n_observations(rows, used) > _n_unknowns(rows, used, k)))
     if bad.size == 0:
         return no_track
     best_score = np.full(bad.size, np.inf)
@@ -363,14 +358,14 @@ def _reject_off_track(
         u[:, j] = False
         part = gauss_newton(
             track,
-            _sub_rows(rows, cand),
+            rows.take(cand),
             ant,
             u,
             fit.s[cand],
             None if prior is None else (prior[0][cand], prior[1][cand]),
             cfg,
         )
-        t, _, dof, _ = _statistics(part, _sub_rows(rows, cand), u, None, np.zeros(cand.size, dtype=bool))
+        t, _, dof, _ = _statistics(part, rows.take(cand), u, None, np.zeros(cand.size, dtype=bool))
         ok = _on_track(track, part, None if prior is None else (prior[0][cand], prior[1][cand]), cfg)
         score = np.where(ok, np.where(dof >= 1, t / thr[np.clip(dof, 1, thr.size - 1)], 0.0), np.inf)
         pos = np.searchsorted(bad, cand)
@@ -420,7 +415,7 @@ def _exclude_faults(
         used[sel, worst] = False
         excluded[sel, worst] = True
         pr = None if prior is None else (prior[0][sel], prior[1][sel])
-        _merge(fit, gauss_newton(track, _sub_rows(rows, sel), ant, used[sel], fit.s[sel], pr, cfg), sel)
+        _merge(fit, gauss_newton(track, rows.take(sel), ant, used[sel], fit.s[sel], pr, cfg), sel)
     return excluded, fail
 
 
@@ -432,8 +427,12 @@ def _uncertainty(
     w = np.where(used, 1.0 / np.where(used, rows.sigma_m, 1.0) ** 2, 0.0)
     sigma_s = np.sqrt(np.abs(fit.n_inv[:, 0, 0]))
     hh = np.einsum("esi,es,esj->eij", fit.h, used.astype(float), fit.h)
-    empty = np.einsum("esi,es->ei", fit.h[..., 1:] ** 2, used.astype(float)) <= 0
     idx = np.arange(1, hh.shape[1])
+    # a clock prediction counts as one more row, weighted relative to the rms satellite σ
+    cw = rows.clock_weight()[:, : idx.size] if rows.clock_prior_m is not None else np.zeros((used.shape[0], idx.size))
+    sig2 = np.sum(np.where(used, rows.sigma_m**2, 0.0), axis=1) / np.maximum(used.sum(axis=1), 1)
+    hh[:, idx, idx] += cw * sig2[:, None]
+    empty = (np.einsum("esi,es->ei", fit.h[..., 1:] ** 2, used.astype(float)) <= 0) & (cw <= 0)
     hh[:, idx, idx] += empty
     adop = np.sqrt(np.abs(inv_safe(hh)[:, 0, 0]))
     adop = np.where(np.isfinite(adop), adop, np.inf)
@@ -477,14 +476,15 @@ def solve_constrained(
     status = np.full(e, STATUS_OK, dtype=np.int64)
     status[adop > cfg.max_adop] = STATUS_GEOMETRY
     status[fail] = STATUS_FAULT
-    status[~_on_track(track, fit, None, cfg)] = STATUS_OFF_TRACK
+    status[~_on_track(track, fit, prior, cfg)] = STATUS_OFF_TRACK
     status[~fit.converged] = STATUS_NOT_CONVERGED
-    status[n_used < _n_unknowns(rows, used, k)] = STATUS_TOO_FEW
+    status[_n_observations(rows, used) < _n_unknowns(rows, used, k)] = STATUS_TOO_FEW
     for kk in range(k):
         status[(~np.any(used & (rows.receiver == kk), axis=1)) & (k > 1) & (status == STATUS_OK)] = STATUS_TOO_FEW
     return ConstrainedSolution(
         s=fit.s,
         clock_m=fit.b,
+        sigma_clock_m=np.sqrt(np.abs(np.diagonal(fit.n_inv, axis1=1, axis2=2)[:, 1:])),
         sigma_s=sigma_s,
         adop=adop,
         uncertainty_m=np.fmax(cfg.k_fault_free * sigma_s, pl),

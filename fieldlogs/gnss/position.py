@@ -10,20 +10,29 @@ k_ff·√(σ_a² + σ_b²) + 0.5 m); epochs failing it are marked ``antenna_dist
 
 Geometry (azimuth, elevation, atmosphere, σ) is evaluated at the prior's track point when a
 prior is given, else in two passes: at the track's middle, then at the first solution.
+Epochs the satellites alone cannot carry (one satellite, poor geometry, an unresolved fault)
+are then solved again with the receiver's coasted clock (``coasting``) as one more
+observation; those that pass are marked ``clock_aided``. This goes beyond the paper's method
+(it needs the receiver clock stable over a minute, which every TCXO receiver is).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
 
+from fieldlogs.gnss.coasting import predict_clock
 from fieldlogs.gnss.constrained import STATUS_NAMES, STATUS_OK, ConstrainedConfig, Rows, solve_constrained
 from fieldlogs.gnss.errormodel import ErrorModel
 from fieldlogs.gnss.lsq import solve_lsq
 from fieldlogs.gnss.observables import (
+    FLAG_EXCLUDED,
+    FLAG_LOW_CN0,
+    FLAG_LOW_ELEVATION,
+    FLAG_NO_TRACK_SOLUTION,
     FLAG_SKY_MASK,
     Epochs,
     apply_geometry,
@@ -45,6 +54,8 @@ class PositionConfig:
     cn0_mask_dbhz: float = 30.0
     pr_difference_tol_m: float = 8.0
     max_pdop: float = 6.0
+    clock_coasting: bool = True
+    """Re-solve failed epochs with each receiver's predicted clock (``coasting``)."""
     smoothing_s: float | None = 100.0
     """Carrier-smoothing window (``observables.carrier_smoothed``); None: raw code."""
     error_model: ErrorModel = field(default_factory=ErrorModel)
@@ -85,12 +96,21 @@ def _prior_for(ep: Epochs, prior: pd.DataFrame | None) -> tuple[np.ndarray, np.n
 
 
 def _geometry(
-    ep: Epochs, track: TrackLine, s_approx: np.ndarray, iono: Mapping[str, Sequence[float]] | None, cfg: PositionConfig
+    ep: Epochs,
+    track: TrackLine,
+    s_approx: np.ndarray,
+    iono: Mapping[str, Sequence[float]] | None,
+    sky_mask: SkyMask | None,
+    cfg: PositionConfig,
 ) -> Epochs:
+    """Geometry at the track points s_approx, then the elevation, C/N0 and sky masks."""
     flags = ep.flags.copy()
-    out = apply_geometry(ep, track.point(np.clip(s_approx, 0.0, track.length_m)), iono_params=iono, error_model=cfg.error_model)
+    pts = track.point(np.clip(s_approx, 0.0, track.length_m))
+    out = apply_geometry(ep, pts, iono_params=iono, error_model=cfg.error_model)
     out.flags = flags
     apply_masks(out, elevation_mask_deg=cfg.elevation_mask_deg, cn0_mask_dbhz=cfg.cn0_mask_dbhz)
+    if sky_mask is not None:
+        out.flag(sky_mask.blocked(out.az, out.el), FLAG_SKY_MASK)
     return out
 
 
@@ -112,6 +132,36 @@ def position_run(
     ``nav`` is one frame, or one per receiver (then compared, and merged).
     """
     cfg = cfg or PositionConfig()
+    names = sorted(antennas)
+    ep = _prepare(obs, nav, antennas, names, corrections, cfg)
+    pr = _prior_for(ep, prior)
+    s_approx = pr[0] if pr is not None else np.full(ep.t.size, 0.5 * track.length_m)
+    ep = _geometry(ep, track, s_approx, iono, sky_mask, cfg)
+    dirs = np.full(ep.t.size, float(direction))
+    sol = _solve_receivers(ep, track, antennas, names, dirs, pr, cfg)
+    if pr is None:  # second pass: geometry at the first solution
+        s1 = np.where(np.isfinite(sol.table["s_m"].to_numpy()), sol.table["s_m"].to_numpy(), s_approx)
+        ep = _geometry(replace_flags(ep), track, s1, iono, sky_mask, cfg)
+        sol = _solve_receivers(ep, track, antennas, names, dirs, None, cfg, s_init=s1)
+    if cfg.clock_coasting:
+        sol = _coast(ep, track, antennas, names, dirs, pr, cfg, sol)
+    ep.flag(sol.excluded, FLAG_EXCLUDED)
+    ep.flag(sol.no_track, FLAG_NO_TRACK_SOLUTION)
+    table = _with_lsq(ep, sol.table, cfg)
+    if len(names) == 2:
+        table = _antenna_distance(table, track, antennas, names, direction, cfg)
+    return PositionResult(table, ep, sol.mdb)
+
+
+def _prepare(
+    obs: pd.DataFrame,
+    nav: pd.DataFrame | Mapping[str, pd.DataFrame],
+    antennas: Mapping[str, Antenna],
+    names: list[str],
+    corrections: pd.DataFrame | None,
+    cfg: PositionConfig,
+) -> Epochs:
+    """Epoch arrays with the navigation comparison and the antenna-separation check applied."""
     if isinstance(nav, pd.DataFrame):
         merged, mismatch = nav, None
     else:
@@ -122,7 +172,6 @@ def position_run(
     ep = build_epochs(obs, merged, systems=cfg.systems, corrections=corrections)
     if mismatch is not None:
         flag_nav_mismatch(ep, mismatch)
-    names = sorted(antennas)
     missing = sorted(set(np.unique(ep.receiver)) - set(names))
     if missing:
         raise KeyError(f"no antenna given for receiver(s) {', '.join(missing)}")
@@ -130,35 +179,27 @@ def position_run(
         a, b = (antennas[n] for n in names)
         sep = float(np.linalg.norm([a.along_m - b.along_m, a.lateral_m - b.lateral_m, a.height_m - b.height_m]))
         check_receiver_pair(ep, names[0], names[1], sep, cfg.pr_difference_tol_m)
-    pr = _prior_for(ep, prior)
-    s_approx = pr[0] if pr is not None else np.full(ep.t.size, 0.5 * track.length_m)
-    ep = _geometry(ep, track, s_approx, iono, cfg)
-    if sky_mask is not None:
-        ep.flag(sky_mask.blocked(ep.az, ep.el), FLAG_SKY_MASK)
-    dirs = np.full(ep.t.size, float(direction))
-    mdb = np.full(ep.present.shape, np.nan)
-    sols = _solve_receivers(ep, track, antennas, names, dirs, pr, cfg, mdb)
-    if pr is None:  # second pass: geometry at the first solution
-        s1 = np.where(np.isfinite(sols["s_m"].to_numpy()), sols["s_m"].to_numpy(), s_approx)
-        ep2 = _geometry(replace_flags(ep), track, s1, iono, cfg)
-        if sky_mask is not None:
-            ep2.flag(sky_mask.blocked(ep2.az, ep2.el), FLAG_SKY_MASK)
-        ep = ep2
-        sols = _solve_receivers(ep, track, antennas, names, dirs, None, cfg, mdb, s_init=s1)
-    table = _with_lsq(ep, sols, cfg)
-    if len(names) == 2:
-        table = _antenna_distance(table, track, antennas, names, direction, cfg)
-    return PositionResult(table, ep, mdb)
+    return ep
 
 
 def replace_flags(ep: Epochs) -> Epochs:
     """A copy of ``ep`` with the geometry-dependent flags (masks) cleared."""
-    from dataclasses import replace
-
-    from fieldlogs.gnss.observables import FLAG_LOW_CN0, FLAG_LOW_ELEVATION
-
     keep = ~np.int64(FLAG_LOW_ELEVATION | FLAG_LOW_CN0 | FLAG_SKY_MASK)
     return replace(ep, flags=ep.flags & keep)
+
+
+@dataclass
+class _Solved:
+    table: pd.DataFrame
+    excluded: np.ndarray
+    no_track: np.ndarray
+    mdb: np.ndarray
+
+
+_COLUMNS = (
+    "s_m", "clock_m", "sigma_clock_m", "sigma_m", "uncertainty_m", "protection_m", "adop", "test", "dof",
+    "n_used", "n_excluded", "status_code",
+)  # fmt: skip
 
 
 def _solve_receivers(
@@ -169,49 +210,71 @@ def _solve_receivers(
     dirs: np.ndarray,
     prior: tuple[np.ndarray, np.ndarray] | None,
     cfg: PositionConfig,
-    mdb: np.ndarray,
     s_init: np.ndarray | None = None,
-) -> pd.DataFrame:
-    """Constrained solution of each receiver's epochs (K = 1 each)."""
-    out = pd.DataFrame(index=np.arange(ep.t.size))
+    subset: np.ndarray | None = None,
+    clock: tuple[np.ndarray, np.ndarray] | None = None,
+) -> _Solved:
+    """Constrained solution of each receiver's epochs (K = 1 each), optionally only ``subset``
+    (boolean over E) and with clock predictions ``clock`` (value, σ over E)."""
+    n_e = ep.t.size
+    cols: dict[str, np.ndarray] = {c: np.full(n_e, np.nan) for c in _COLUMNS}
+    out = _Solved(pd.DataFrame(), np.zeros_like(ep.present), np.zeros_like(ep.present), np.full(ep.present.shape, np.nan))
     for name in names:
-        sel = np.flatnonzero(ep.receiver == name)
+        sel = np.flatnonzero((ep.receiver == name) & (True if subset is None else subset))
         if sel.size == 0:
             continue
-        sub = ep.select(sel)
-        pr = None
-        if prior is not None:
-            pr = (prior[0][sel], prior[1][sel])
+        rows = receiver_rows(ep.select(sel), dirs[sel])
+        if clock is not None:
+            rows = replace(rows, clock_prior_m=clock[0][sel, None], clock_prior_sigma_m=clock[1][sel, None])
         sol = solve_constrained(
             track,
-            receiver_rows(sub, dirs[sel]),
+            rows,
             [antennas[name]],
             cfg.solver,
             s_init=None if s_init is None else s_init[sel],
-            prior=pr,
+            prior=None if prior is None else (prior[0][sel], prior[1][sel]),
         )
-        out.loc[sel, "s_m"] = sol.s
-        out.loc[sel, "clock_m"] = sol.clock_m[:, 0]
-        out.loc[sel, "sigma_m"] = sol.sigma_s
-        out.loc[sel, "uncertainty_m"] = sol.uncertainty_m
-        out.loc[sel, "protection_m"] = sol.protection_m
-        out.loc[sel, "adop"] = sol.adop
-        out.loc[sel, "test"] = sol.test
-        out.loc[sel, "dof"] = sol.dof
-        out.loc[sel, "n_used"] = sol.n_used
-        out.loc[sel, "n_excluded"] = sol.excluded.sum(axis=1) + sol.no_track.sum(axis=1)
-        out.loc[sel, "status_code"] = sol.status
-        mdb[sel] = sol.mdb_m
-        ep.flag(_scatter(ep, sel, sol.excluded), 256)
-        ep.flag(_scatter(ep, sel, sol.no_track), 128)
-    out["status"] = out["status_code"].map(STATUS_NAMES)
+        for c, v in (
+            ("s_m", sol.s), ("clock_m", sol.clock_m[:, 0]), ("sigma_clock_m", sol.sigma_clock_m[:, 0]),
+            ("sigma_m", sol.sigma_s), ("uncertainty_m", sol.uncertainty_m), ("protection_m", sol.protection_m),
+            ("adop", sol.adop), ("test", sol.test), ("dof", sol.dof), ("n_used", sol.n_used),
+            ("n_excluded", sol.excluded.sum(axis=1) + sol.no_track.sum(axis=1)), ("status_code", sol.status),
+        ):  # fmt: skip
+            cols[c][sel] = v
+        out.excluded[sel], out.no_track[sel], out.mdb[sel] = sol.excluded, sol.no_track, sol.mdb_m
+    out.table = pd.DataFrame(cols)
+    out.table["status"] = out.table["status_code"].map(STATUS_NAMES)
+    out.table["clock_aided"] = False
     return out
 
 
-def _scatter(ep: Epochs, sel: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    full = np.zeros_like(ep.present)
-    full[sel] = rows
-    return full
+def _coast(
+    ep: Epochs,
+    track: TrackLine,
+    antennas: Mapping[str, Antenna],
+    names: list[str],
+    dirs: np.ndarray,
+    prior: tuple[np.ndarray, np.ndarray] | None,
+    cfg: PositionConfig,
+    sol: _Solved,
+) -> _Solved:
+    """Re-solve the epochs the satellites alone could not carry with a coasted clock
+    (``coasting``); keep the re-solved epochs that pass."""
+    ok = (sol.table["status_code"] == STATUS_OK).to_numpy()
+    pred, sig = predict_clock(
+        ep.receiver, ep.t_run, sol.table["clock_m"].to_numpy(), sol.table["sigma_clock_m"].to_numpy(), ok
+    )
+    redo = ~ok & np.isfinite(sig) & (ep.usable.sum(axis=1) >= 1)
+    if not redo.any():
+        return sol
+    again = _solve_receivers(ep, track, antennas, names, dirs, prior, cfg, subset=redo, clock=(pred, sig))
+    take = redo & (again.table["status_code"] == STATUS_OK).to_numpy()
+    sol.table.loc[take, list(_COLUMNS)] = again.table.loc[take, list(_COLUMNS)].to_numpy()
+    sol.table.loc[take, "status"] = "ok"
+    sol.table.loc[take, "clock_aided"] = True
+    for name in ("excluded", "no_track", "mdb"):
+        getattr(sol, name)[take] = getattr(again, name)[take]
+    return sol
 
 
 def _with_lsq(ep: Epochs, sols: pd.DataFrame, cfg: PositionConfig) -> pd.DataFrame:

@@ -147,7 +147,7 @@ def solve_epoch(
         status = STATUS_GEOMETRY
     if fail:
         status = STATUS_FAULT
-    if not on_track(s, n_inv, conv, None):
+    if not on_track(s, n_inv, conv, prior):
         status = STATUS_OFF_TRACK
     if not conv:
         status = STATUS_NOT_CONVERGED
