@@ -63,7 +63,7 @@ def klobuchar_s(
     per = np.maximum(sum(beta[n] * phi_m**n for n in range(4)), 72_000.0)
     x = 2.0 * np.pi * (t - 50_400.0) / per
     day = np.abs(x) < 1.57
-    return np.where(day, f * (5e-9 + amp * (1.0 - x**2 / 2.0 + x**4 / 24.0)), f * 5e-9)
+    return np.asarray(np.where(day, f * (5e-9 + amp * (1.0 - x**2 / 2.0 + x**4 / 24.0)), f * 5e-9), dtype=float)
 
 
 def modip_rad(lat_rad: FloatArray, lon_rad: FloatArray) -> FloatArray:
@@ -73,7 +73,7 @@ def modip_rad(lat_rad: FloatArray, lon_rad: FloatArray) -> FloatArray:
     sin_gm = np.sin(lat) * np.sin(_POLE_LAT) + np.cos(lat) * np.cos(_POLE_LAT) * np.cos(lon - _POLE_LON)
     gm = np.arcsin(np.clip(sin_gm, -1.0, 1.0))
     dip = np.arctan(2.0 * np.tan(gm))
-    return np.arctan(dip / np.sqrt(np.maximum(np.cos(lat), 1e-6)))
+    return np.asarray(np.arctan(dip / np.sqrt(np.maximum(np.cos(lat), 1e-6))), dtype=float)
 
 
 def galileo_effective_s(
@@ -100,7 +100,7 @@ def galileo_effective_s(
     f = 1.0 + 16.0 * (0.53 - e) ** 3
     amp = 0.06e-9 * level * np.abs(np.cos(np.clip(phi_m, -0.5, 0.5) * GPS_PI))
     x = 2.0 * np.pi * (t - 50_400.0) / (26.0 * 3600.0)
-    return f * (5e-9 + np.where(np.abs(x) < np.pi / 2.0, amp * np.cos(x), 0.0))
+    return np.asarray(f * (5e-9 + np.where(np.abs(x) < np.pi / 2.0, amp * np.cos(x), 0.0)), dtype=float)
 
 
 def iono_delay_m(
@@ -132,7 +132,7 @@ def iono_delay_m(
     q_a, q_b = params.get("qzss_alpha", g_a), params.get("qzss_beta", g_b)
     if q_a is not None and q_b is not None:
         out = np.where(sysl == "J", np.broadcast_to(klobuchar_s(*args, q_a, q_b), shape), out)
-    return C_MPS * out * (F_L1_HZ / np.asarray(freq_hz, dtype=float)) ** 2
+    return np.asarray(C_MPS * out * (F_L1_HZ / np.asarray(freq_hz, dtype=float)) ** 2, dtype=float)
 
 
 def saastamoinen_zenith_m(lat_rad: FloatArray, h_m: FloatArray, humidity: float = 0.5) -> tuple[FloatArray, FloatArray]:
@@ -149,10 +149,10 @@ def saastamoinen_zenith_m(lat_rad: FloatArray, h_m: FloatArray, humidity: float 
 def tropo_mapping(el_rad: FloatArray) -> FloatArray:
     """Black & Eisner mapping 1.001/√(0.002001 + sin²E) (RTCA DO-229 A.4.2.4)."""
     s = np.sin(np.asarray(el_rad, dtype=float))
-    return 1.001 / np.sqrt(0.002001 + s * s)
+    return np.asarray(1.001 / np.sqrt(0.002001 + s * s), dtype=float)
 
 
 def tropo_delay_m(lat_rad: FloatArray, h_m: FloatArray, el_rad: FloatArray) -> FloatArray:
     """Slant tropospheric delay [m]: (zhd + zwd)·m(E)."""
     zhd, zwd = saastamoinen_zenith_m(lat_rad, h_m)
-    return (zhd + zwd) * tropo_mapping(el_rad)
+    return np.asarray((zhd + zwd) * tropo_mapping(el_rad), dtype=float)

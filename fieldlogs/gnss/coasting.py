@@ -38,13 +38,22 @@ def predict_clock(
     for name in np.unique(receiver):
         idx = np.flatnonzero(receiver == name)
         idx = idx[np.argsort(t[idx], kind="stable")]
-        p, s = _predict_one(t[idx], clock_m[idx], sigma_m[idx], ok[idx], window_s, max_gap_s, min_epochs, walk_m_per_sqrt_s)
+        p, s = _predict_one(
+            t[idx], clock_m[idx], sigma_m[idx], ok[idx], window_s, max_gap_s, min_epochs, walk_m_per_sqrt_s
+        )
         pred[idx], sig[idx] = p, s
     return pred, sig
 
 
 def _predict_one(
-    t: FloatArray, b: FloatArray, sb: FloatArray, ok: BoolArray, window_s: float, max_gap_s: float, min_epochs: int, q: float
+    t: FloatArray,
+    b: FloatArray,
+    sb: FloatArray,
+    ok: BoolArray,
+    window_s: float,
+    max_gap_s: float,
+    min_epochs: int,
+    q: float,
 ) -> tuple[FloatArray, FloatArray]:
     good = ok & np.isfinite(b) & np.isfinite(sb) & (sb > 0)
     w = np.where(good, 1.0 / np.where(good, sb, 1.0) ** 2, 0.0)

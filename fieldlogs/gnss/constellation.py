@@ -13,8 +13,9 @@ orbit and the truth can be evaluated from the same records as the solver's:
 
 Layouts (nominal values as published by the operators):
 
-* GPS: 31 satellites in 6 planes (A–F, 60° apart), i ≈ 55°, A ≈ 26 560 km (√A ≈ 5153.7),
-  e 0.002–0.02, irregular slots; Toe every 2 h, fit 4 h, URA 2.4 m (SVacc);
+* GPS: 31 satellites in 6 planes (A–F, 60° apart) on the 24 baseline slots of the GPS SPS
+  Performance Standard (Table 3-1) plus 7 in the planes' largest gaps, i ≈ 55°,
+  A ≈ 26 560 km (√A ≈ 5153.7), e 0.002–0.02; Toe every 2 h, fit 4 h, URA 2.4 m (SVacc);
 * Galileo: Walker 24/3/1, i ≈ 56°, A ≈ 29 600 km (√A ≈ 5440.6), e < 0.001; I/NAV records
   (DataSrc 517) and F/NAV records (DataSrc 258) every 10 min, SISA 3.12 m;
 * QZSS: three quasi-zenith IGSO (A = 42 164 km, e ≈ 0.075, i ≈ 41°, ω = 270°, ground track
@@ -67,35 +68,61 @@ def _clock(rng: np.random.Generator) -> tuple[float, float]:
     return rng.uniform(-6e-4, 6e-4), rng.normal(0.0, 4e-12)
 
 
-def gps_orbits(rng: np.random.Generator) -> list[MeanOrbit]:
-    """31 GPS satellites in 6 planes with irregular slots."""
-    per_plane = (5, 5, 5, 5, 6, 5)
+# GPS SPS Performance Standard (2001) Table 3-1 "Reference Orbit Slot Assignments as of the
+# Defined Epoch": plane RAAN [deg] and the slots' arguments of latitude [deg] (A1..A4, B1..B4, ...).
+GPS_SLOTS: dict[str, tuple[float, tuple[float, float, float, float]]] = {
+    "A": (272.847, (268.126, 161.786, 11.676, 41.806)),
+    "B": (332.847, (80.956, 173.336, 309.976, 204.376)),
+    "C": (32.847, (111.876, 11.796, 339.666, 241.556)),
+    "D": (92.847, (135.226, 265.446, 35.156, 167.356)),
+    "E": (152.847, (197.046, 302.596, 66.066, 333.686)),
+    "F": (212.847, (238.886, 345.226, 105.206, 135.346)),
+}
+
+
+def _gps_layout() -> list[tuple[float, float]]:
+    """(RAAN, argument of latitude) [deg] of 31 satellites: the 24 baseline slots, then one more
+    per plane in its largest gap and a second in plane B (the operational constellation's
+    extra satellites sit in such expanded/fore-aft positions)."""
     out = []
-    prn = 1
+    for raan, slots in GPS_SLOTS.values():
+        out.extend((raan, u) for u in slots)
+    for plane in ("A", "B", "C", "D", "E", "F", "B"):
+        raan = GPS_SLOTS[plane][0]
+        us = np.sort([u for r, u in out if r == raan])
+        gaps = np.diff(np.concatenate([us, [us[0] + 360.0]]))
+        k = int(np.argmax(gaps))
+        out.append((raan, float((us[k] + gaps[k] / 2.0) % 360.0)))
+    return out
+
+
+def gps_orbits(rng: np.random.Generator) -> list[MeanOrbit]:
+    """31 GPS satellites on the published slot layout (``_gps_layout``); the whole constellation
+    is rotated by a seeded angle against the Earth, and e, ω, i are drawn within the SPS PS
+    tolerances (e 0–0.02, i 55° ± 1°)."""
+    out = []
     lon0 = rng.uniform(0.0, _TWO_PI)
-    for k, n in enumerate(per_plane):
-        for j in range(n):
-            m = _TWO_PI * j / n + np.radians(15.0 * k) + rng.normal(0.0, np.radians(6.0))
-            af0, af1 = _clock(rng)
-            out.append(
-                MeanOrbit(
-                    sat=f"G{prn:02d}",
-                    sqrt_a=5153.7 + rng.normal(0.0, 0.3),
-                    ecc=rng.uniform(0.002, 0.02),
-                    inc=np.radians(55.0 + rng.normal(0.0, 1.0)),
-                    omega=rng.uniform(-np.pi, np.pi),
-                    node_lon=lon0 + np.radians(60.0 * k),
-                    mean_anomaly=m,
-                    delta_n=4.5e-9 + rng.normal(0.0, 5e-10),
-                    omega_dot=-8.0e-9 + rng.normal(0.0, 3e-10),
-                    idot=rng.normal(0.0, 3e-10),
-                    harmonics=_harmonics(rng),
-                    af0=af0,
-                    af1=af1,
-                    group_delay=(rng.normal(0.0, 5e-9), 0.0),
-                )
+    for prn, (raan, u) in enumerate(_gps_layout(), start=1):
+        af0, af1 = _clock(rng)
+        omega = rng.uniform(-np.pi, np.pi)
+        out.append(
+            MeanOrbit(
+                sat=f"G{prn:02d}",
+                sqrt_a=5153.7 + rng.normal(0.0, 0.3),
+                ecc=rng.uniform(0.002, 0.02),
+                inc=np.radians(55.0 + rng.normal(0.0, 1.0)),
+                omega=omega,
+                node_lon=lon0 + np.radians(raan),
+                mean_anomaly=np.radians(u) - omega,
+                delta_n=4.5e-9 + rng.normal(0.0, 5e-10),
+                omega_dot=-8.0e-9 + rng.normal(0.0, 3e-10),
+                idot=rng.normal(0.0, 3e-10),
+                harmonics=_harmonics(rng),
+                af0=af0,
+                af1=af1,
+                group_delay=(rng.normal(0.0, 5e-9), 0.0),
             )
-            prn += 1
+        )
     return out
 
 
@@ -163,7 +190,9 @@ def qzss_orbits(rng: np.random.Generator, t_ref: float) -> list[MeanOrbit]:
         )
     af0, af1 = _clock(rng)
     out.append(
-        MeanOrbit("J03", sqrt_a, 2e-4, np.radians(0.06), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, (0.0,) * 6, af0, af1, (2e-9, 0.0))
+        MeanOrbit(
+            "J03", sqrt_a, 2e-4, np.radians(0.06), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, (0.0,) * 6, af0, af1, (2e-9, 0.0)
+        )
     )
     shifted = []
     for orb, centre in zip(out, (135.0, 135.0, 135.0, 127.0), strict=True):
@@ -232,7 +261,13 @@ def records(orbits: list[MeanOrbit], t0: float, t1: float, spacing_s: float, t_r
 def _system_fields(base: dict[str, float | str], orb: MeanOrbit, sys: str) -> list[dict[str, float | str]]:
     nan = float("nan")
     if sys == "E":
-        common = {"TGD": nan, "SVacc": 3.12, "FitIntvl": nan, "BGDe5a": orb.group_delay[0], "BGDe5b": orb.group_delay[1]}
+        common = {
+            "TGD": nan,
+            "SVacc": 3.12,
+            "FitIntvl": nan,
+            "BGDe5a": orb.group_delay[0],
+            "BGDe5b": orb.group_delay[1],
+        }
         return [{**base, **common, "DataSrc": 517.0}, {**base, **common, "DataSrc": 258.0}]
     fit = 4.0 if sys == "G" else 0.0
     extra = {"TGD": orb.group_delay[0], "SVacc": 2.4, "FitIntvl": fit, "BGDe5a": nan, "BGDe5b": nan, "DataSrc": nan}

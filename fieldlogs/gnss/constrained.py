@@ -45,6 +45,7 @@ Measured figures: bench/NOTES.md (GNSS).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Final
@@ -108,8 +109,25 @@ class Rows:
 
     def take(self, sel: IntArray) -> Rows:
         """The epochs ``sel``."""
-        kw = {f: getattr(self, f) for f in self.__dataclass_fields__}
-        return Rows(**{f: (None if v is None else v[sel]) for f, v in kw.items()})
+        return self._map(lambda v: v[sel])
+
+    def repeat(self, n: int) -> Rows:
+        """Every epoch repeated ``n`` times in place (for candidate searches)."""
+        return self._map(lambda v: np.repeat(v, n, axis=0))
+
+    def _map(self, fn: Callable[[np.ndarray], np.ndarray]) -> Rows:
+        cp, cs = self.clock_prior_m, self.clock_prior_sigma_m
+        return Rows(
+            fn(self.sat_pos),
+            fn(self.pr_m),
+            fn(self.sigma_m),
+            fn(self.usable),
+            fn(self.omega_e),
+            fn(self.receiver),
+            fn(self.direction),
+            None if cp is None else fn(cp),
+            None if cs is None else fn(cs),
+        )
 
     def clock_weight(self) -> FloatArray:
         """1/σ² of the clock predictions (E, K); 0 where none."""
@@ -183,7 +201,13 @@ def _geometry(track: TrackLine, rows: Rows, ant: FloatArray, s: FloatArray) -> t
 
 
 def _normal(
-    h: FloatArray, w: FloatArray, v: FloatArray, prior_w: FloatArray, prior_v: FloatArray, cw: FloatArray, cv: FloatArray
+    h: FloatArray,
+    w: FloatArray,
+    v: FloatArray,
+    prior_w: FloatArray,
+    prior_v: FloatArray,
+    cw: FloatArray,
+    cv: FloatArray,
 ) -> tuple[FloatArray, FloatArray]:
     n = np.einsum("esi,es,esj->eij", h, w, h)
     rhs = np.einsum("esi,es,es->ei", h, w, v)
@@ -255,12 +279,7 @@ def coarse_start(track: TrackLine, rows: Rows, antennas: FloatArray, used: BoolA
         sl = slice(a, a + 32)
         m = min(32, e - a)
         sub = rows.take(np.arange(a, a + m))
-        rep = Rows(
-            **{
-                f: (None if getattr(sub, f) is None else np.repeat(getattr(sub, f), cand.size, axis=0))
-                for f in sub.__dataclass_fields__
-            }
-        )
+        rep = sub.repeat(cand.size)
         rho, _ = _geometry(track, rep, antennas, np.tile(cand, m))
         ww = np.repeat(w[sl], cand.size, axis=0)
         res = np.where(ww > 0, rep.pr_m - rho, 0.0)
@@ -320,15 +339,16 @@ def _on_track(
 def _n_unknowns(rows: Rows, used: BoolArray, k: int) -> IntArray:
     """1 + the receivers with rows or a clock prediction."""
     cw = rows.clock_weight()
-    return 1 + sum(
-        (np.any(used & (rows.receiver == kk), axis=1) | (cw[:, kk] > 0 if kk < cw.shape[1] else False)).astype(np.int64)
-        for kk in range(k)
-    )
+    n = np.ones(used.shape[0], dtype=np.int64)
+    for kk in range(k):
+        prior_k = cw[:, kk] > 0 if kk < cw.shape[1] else np.zeros(used.shape[0], dtype=bool)
+        n += np.any(used & (rows.receiver == kk), axis=1) | prior_k
+    return n
 
 
 def _n_observations(rows: Rows, used: BoolArray) -> IntArray:
     """Satellite rows plus clock predictions."""
-    return used.sum(axis=1) + (rows.clock_weight() > 0).sum(axis=1)
+    return np.asarray(used.sum(axis=1) + (rows.clock_weight() > 0).sum(axis=1), dtype=np.int64)
 
 
 def _reject_off_track(
@@ -343,7 +363,9 @@ def _reject_off_track(
     """Leave-one-out search for epochs without an on-track solution (module docstring)."""
     k = int(ant.shape[0])
     no_track = np.zeros_like(used)
-    bad = np.flatnonzero(~_on_track(track, fit, prior, cfg) & (_n_observations(rows, used) > _n_unknowns(rows, used, k)))
+    bad = np.flatnonzero(
+        ~_on_track(track, fit, prior, cfg) & (_n_observations(rows, used) > _n_unknowns(rows, used, k))
+    )
     if bad.size == 0:
         return no_track
     best_score = np.full(bad.size, np.inf)
@@ -496,6 +518,8 @@ def solve_constrained(
         excluded=excluded,
         no_track=no_track,
         residual_m=np.where(used, fit.v, np.nan),
-        mdb_m=np.where(used & (dof_det >= 1)[:, None], (cfg.k_w + cfg.k_missed_detection) * rows.sigma_m / np.sqrt(q_det), np.nan),
+        mdb_m=np.where(
+            used & (dof_det >= 1)[:, None], (cfg.k_w + cfg.k_missed_detection) * rows.sigma_m / np.sqrt(q_det), np.nan
+        ),
         status=status,
     )

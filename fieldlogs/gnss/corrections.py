@@ -87,7 +87,15 @@ def match_corrections(
     c = c.rename(columns={"gnss_time_s": "t_of"}).sort_values("t_of")
     q = pd.DataFrame({"row": np.arange(n), "sat": np.asarray(sat, dtype=str), "t": np.asarray(t, dtype=float)})
     q = q.sort_values("t")
-    m = pd.merge_asof(q, c, left_on="t", right_on="t_of", by="sat", direction="backward", tolerance=max_age_s)
+    m = pd.merge_asof(
+        q,
+        c,
+        left_on="t",
+        right_on="t_of",
+        by="sat",
+        direction="backward",
+        tolerance=max_age_s,  # type: ignore[arg-type]
+    )  # float keys take a float tolerance (the stubs know only time-like ones)
     m = m.sort_values("row")
     present = m["t_of"].notna().to_numpy()
     dt = np.where(present, m["t"].to_numpy() - m["t_of"].to_numpy(), 0.0)

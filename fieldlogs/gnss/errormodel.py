@@ -55,7 +55,7 @@ class ErrorModel:
 def obliquity(el_rad: FloatArray) -> FloatArray:
     """Thin-shell ionospheric obliquity factor at 350 km."""
     c = _R_E * np.cos(np.asarray(el_rad, dtype=float)) / (_R_E + _H_IONO)
-    return 1.0 / np.sqrt(1.0 - c * c)
+    return np.asarray(1.0 / np.sqrt(1.0 - c * c), dtype=float)
 
 
 def pseudorange_sigma_m(
@@ -91,4 +91,4 @@ def pseudorange_sigma_m(
             atm = has & np.asarray(covers_atmosphere, dtype=bool)
             iono = np.where(atm, 0.0, iono)
             tropo = np.where(atm, 0.0, tropo)
-    return np.sqrt(sis**2 + iono**2 + tropo**2 + noise**2 + mp**2)
+    return np.asarray(np.sqrt(sis**2 + iono**2 + tropo**2 + noise**2 + mp**2), dtype=float)

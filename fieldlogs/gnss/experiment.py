@@ -51,7 +51,7 @@ class CaseSpec:
     fault: str | None = None
     """None, 'step' (50 m) or 'ramp' (0.2 m/s)."""
     prior_sigma_m: float = 5.0
-    elevation_mask_deg: float = 5.0
+    elevation_mask_deg: float = 10.0
 
 
 @dataclass
@@ -74,7 +74,9 @@ def _simulate(spec: CaseSpec) -> tuple[Simulated, np.ndarray, np.ndarray, pd.Dat
     rng = np.random.default_rng(spec.seed)
     tr = _track()
     t0 = 2300 * WEEK_S + float(np.floor(rng.uniform(0.0, WEEK_S)))
-    s = run_profile(tr.truth.length_m, spec.duration_s, 1.0, float(rng.uniform(15.0, 30.0)), float(rng.uniform(0.0, 4000.0)), 3000.0)
+    s = run_profile(
+        tr.truth.length_m, spec.duration_s, 1.0, float(rng.uniform(15.0, 30.0)), float(rng.uniform(0.0, 4000.0)), 3000.0
+    )
     traj = trajectory(tr, s, t0, 1.0)
     nav = constellation_nav(t0, t0 + spec.duration_s, seed=spec.seed)
     rx = [
@@ -89,7 +91,9 @@ def _simulate(spec: CaseSpec) -> tuple[Simulated, np.ndarray, np.ndarray, pd.Dat
     return sim, traj.t, s, corr, prior
 
 
-def _solve(sim: Simulated, obs: pd.DataFrame, spec: CaseSpec, corr: pd.DataFrame | None, prior: pd.DataFrame) -> PositionResult:
+def _solve(
+    sim: Simulated, obs: pd.DataFrame, spec: CaseSpec, corr: pd.DataFrame | None, prior: pd.DataFrame
+) -> PositionResult:
     return position_run(
         obs,
         sim.nav,
@@ -122,7 +126,13 @@ def run_case(spec: CaseSpec) -> CaseResult:
     if spec.fault is not None:
         fault_sat = _fault_sat(res, t_f)
         if fault_sat is not None:
-            obs = inject_fault(sim.obs, fault_sat, t_f, step_m=50.0 if spec.fault == "step" else 0.0, ramp_mps=0.2 if spec.fault == "ramp" else 0.0)
+            obs = inject_fault(
+                sim.obs,
+                fault_sat,
+                t_f,
+                step_m=50.0 if spec.fault == "step" else 0.0,
+                ramp_mps=0.2 if spec.fault == "ramp" else 0.0,
+            )
             res = _solve(sim, obs, spec, corr, prior)
     tb = res.epochs.copy()
     tb["s_true_m"] = np.interp(tb["t"].to_numpy(float), t, s_true)
@@ -134,7 +144,11 @@ def run_case(spec: CaseSpec) -> CaseResult:
         row = ep.sat == fault_sat
         tb["fault_present"] = (row & ep.present).any(axis=1) & (tb["t"].to_numpy() >= t_f)
         n_cand = (ep.usable | ((ep.flags & (FLAG_EXCLUDED | FLAG_NO_TRACK_SOLUTION)) > 0)).sum(axis=1)
-        tb["fault_usable3"] = tb["fault_present"] & (n_cand >= 3) & (row & (ep.usable | (ep.flags & (FLAG_EXCLUDED | FLAG_NO_TRACK_SOLUTION) > 0))).any(axis=1)
+        tb["fault_usable3"] = (
+            tb["fault_present"]
+            & (n_cand >= 3)
+            & (row & (ep.usable | (ep.flags & (FLAG_EXCLUDED | FLAG_NO_TRACK_SOLUTION) > 0))).any(axis=1)
+        )
         tb["fault_excluded"] = (row & ((ep.flags & (FLAG_EXCLUDED | FLAG_NO_TRACK_SOLUTION)) > 0)).any(axis=1)
         tb["fault_epoch"] = np.round(tb["t"].to_numpy() - t_f).astype(int)
         tb["fault_bias_m"] = np.where(tb["fault_present"], 50.0 if spec.fault == "step" else 0.2 * (tb["t"] - t_f), 0.0)
@@ -169,5 +183,7 @@ def summarise(results: list[CaseResult]) -> dict[str, float]:
         out["fault_exceed_fraction"] = float((f["exceeds"]).sum() / max(int(f["ok"].sum()), 1))
         out["fault_availability"] = float(f["ok"].mean()) if len(f) else np.nan
         ex = f[f["fault_excluded"].astype(bool)]
-        out["fault_bias_at_exclusion_m"] = float(ex.groupby("receiver")["fault_bias_m"].min().median()) if len(ex) else np.nan
+        out["fault_bias_at_exclusion_m"] = (
+            float(ex.groupby("receiver")["fault_bias_m"].min().median()) if len(ex) else np.nan
+        )
     return out

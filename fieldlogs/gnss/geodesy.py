@@ -12,11 +12,12 @@
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from fieldlogs.gnss.constants import WGS84_A_M, WGS84_E2, FloatArray
 
 
-def geodetic_to_ecef(lat_rad: FloatArray, lon_rad: FloatArray, h_m: FloatArray) -> FloatArray:
+def geodetic_to_ecef(lat_rad: npt.ArrayLike, lon_rad: npt.ArrayLike, h_m: npt.ArrayLike) -> FloatArray:
     """ECEF [m] (…, 3) of geodetic latitude/longitude [rad] and ellipsoidal height [m]."""
     lat, lon, h = (np.asarray(v, dtype=float) for v in (lat_rad, lon_rad, h_m))
     n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)

@@ -15,7 +15,7 @@ from fieldlogs.gnss.constants import BoolArray, FloatArray
 def singular(n: FloatArray) -> BoolArray:
     """Normal matrices too close to singular to solve (relative determinant below 1e-12)."""
     diag = np.prod(np.abs(np.diagonal(n, axis1=1, axis2=2)), axis=1)
-    return ~(np.abs(np.linalg.det(n)) > 1e-12 * np.maximum(diag, 1e-300))
+    return np.asarray(~(np.abs(np.linalg.det(n)) > 1e-12 * np.maximum(diag, 1e-300)), dtype=bool)
 
 
 def solve_safe(n: FloatArray, rhs: FloatArray) -> tuple[FloatArray, BoolArray]:

@@ -107,7 +107,7 @@ def carrier_smoothed(obs: pd.DataFrame, window_s: float = 100.0, jump_m: float =
     jump = np.abs(np.diff(d["_cmc"].to_numpy(), prepend=np.nan)) > jump_m
     new_arc = ~same | (dt > 1.5 * step) | (lli > 0) | jump | ~np.isfinite(d["_cmc"].to_numpy())
     arc = np.cumsum(new_arc)
-    n_win = max(int(round(window_s / step)), 1)
+    n_win = max(round(window_s / step), 1)
     vals = np.nan_to_num(d["_cmc"].to_numpy())
     cs = pd.Series(vals).groupby(arc).cumsum().to_numpy()
     pos = pd.Series(np.ones(arc.size)).groupby(arc).cumsum().to_numpy().astype(np.int64)
@@ -118,7 +118,7 @@ def carrier_smoothed(obs: pd.DataFrame, window_s: float = 100.0, jump_m: float =
     smoothed = np.where(ok, phase[order] + mean, df.loc[order, OBS_PR].to_numpy(float))
     df.loc[order, OBS_PR] = smoothed
     df.loc[order, "smooth_n"] = np.where(ok, count, 1)
-    return df
+    return pd.DataFrame(df)
 
 
 @dataclass
@@ -155,7 +155,7 @@ class Epochs:
 
     @property
     def usable(self) -> BoolArray:
-        return self.present & (self.flags == 0)
+        return np.asarray(self.present & (self.flags == 0), dtype=bool)
 
     def flag(self, mask: BoolArray, bit: int) -> None:
         """Set ``bit`` where ``mask`` (present rows only)."""
@@ -181,7 +181,7 @@ def _pick_signals(obs: pd.DataFrame, signals: Mapping[str, Sequence[str]]) -> pd
     ok = (rank < 10_000) & np.isfinite(obs[OBS_PR].to_numpy(float))
     df = obs.loc[ok].assign(_rank=rank[ok])
     df = df.sort_values([OBS_RECEIVER, OBS_TIME, OBS_SAT, "_rank"], kind="stable")
-    return df.drop_duplicates([OBS_RECEIVER, OBS_TIME, OBS_SAT], keep="first")
+    return pd.DataFrame(df.drop_duplicates([OBS_RECEIVER, OBS_TIME, OBS_SAT], keep="first"))
 
 
 def build_epochs(
@@ -286,7 +286,14 @@ def apply_geometry(
     iono = np.where(atm, 0.0, iono)
     tropo = np.where(atm, 0.0, tropo)
     sigma = pseudorange_sigma_m(
-        error_model or ErrorModel(), el, ep.cn0_dbhz, iono, ep.sv_acc_m, ep.corr_sigma_m, ep.corr_atmosphere, ep.smooth_n
+        error_model or ErrorModel(),
+        el,
+        ep.cn0_dbhz,
+        iono,
+        ep.sv_acc_m,
+        ep.corr_sigma_m,
+        ep.corr_atmosphere,
+        ep.smooth_n,
     )
     pr_corr = ep.pr_m + ep.clock_m - iono - tropo + ep.prc_m
     return replace(ep, az=az, el=el, iono_m=iono, tropo_m=tropo, sigma_m=sigma, pr_corr_m=pr_corr)

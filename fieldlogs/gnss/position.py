@@ -218,7 +218,9 @@ def _solve_receivers(
     (boolean over E) and with clock predictions ``clock`` (value, σ over E)."""
     n_e = ep.t.size
     cols: dict[str, np.ndarray] = {c: np.full(n_e, np.nan) for c in _COLUMNS}
-    out = _Solved(pd.DataFrame(), np.zeros_like(ep.present), np.zeros_like(ep.present), np.full(ep.present.shape, np.nan))
+    out = _Solved(
+        pd.DataFrame(), np.zeros_like(ep.present), np.zeros_like(ep.present), np.full(ep.present.shape, np.nan)
+    )
     for name in names:
         sel = np.flatnonzero((ep.receiver == name) & (True if subset is None else subset))
         if sel.size == 0:
@@ -299,7 +301,12 @@ def _with_lsq(ep: Epochs, sols: pd.DataFrame, cfg: PositionConfig) -> pd.DataFra
 
 
 def _antenna_distance(
-    table: pd.DataFrame, track: TrackLine, antennas: Mapping[str, Antenna], names: list[str], direction: float, cfg: PositionConfig
+    table: pd.DataFrame,
+    track: TrackLine,
+    antennas: Mapping[str, Antenna],
+    names: list[str],
+    direction: float,
+    cfg: PositionConfig,
 ) -> pd.DataFrame:
     """The paper's final check: computed vs real distance between the two antennas."""
     a, b = names
@@ -313,10 +320,21 @@ def _antenna_distance(
     rb, _ = track.antenna(mid, antennas[b], direction)
     computed = np.linalg.norm(pa - pb, axis=1)
     real = np.linalg.norm(ra - rb, axis=1)
-    tol = cfg.solver.k_fault_free * np.hypot(ta.loc[common, "sigma_m"].to_numpy(float), tb.loc[common, "sigma_m"].to_numpy(float)) + 0.5
+    tol = (
+        cfg.solver.k_fault_free
+        * np.hypot(ta.loc[common, "sigma_m"].to_numpy(float), tb.loc[common, "sigma_m"].to_numpy(float))
+        + 0.5
+    )
     ok = np.abs(computed - real) <= tol
     both = ta.loc[common, "available"].to_numpy(bool) & tb.loc[common, "available"].to_numpy(bool)
-    check = pd.DataFrame({"t_key": common, "antenna_distance_m": computed, "antenna_distance_real_m": real, "antenna_distance_ok": ok | ~both})
+    check = pd.DataFrame(
+        {
+            "t_key": common,
+            "antenna_distance_m": computed,
+            "antenna_distance_real_m": real,
+            "antenna_distance_ok": ok | ~both,
+        }
+    )
     table = table.assign(t_key=np.round(table["t"], 3)).merge(check, on="t_key", how="left").drop(columns="t_key")
     table["antenna_distance_ok"] = table["antenna_distance_ok"].fillna(True).astype(bool)
     return table

@@ -87,8 +87,11 @@ def _fit_half(sat: np.ndarray, fit_hours: FloatArray) -> FloatArray:
 
 def flag_nav_mismatch(ep: Epochs, mismatch: NavMismatch) -> None:
     """Flag rows of satellites inside a mismatch window (in place)."""
-    for row in mismatch.table.itertuples(index=False):  # a handful of windows, not rows
-        hit = (ep.sat == row.sat) & (ep.t[:, None] >= row.t_from) & (ep.t[:, None] <= row.t_to)
+    tab = mismatch.table
+    for sat, t_from, t_to in zip(  # a handful of windows, not rows
+        tab["sat"].to_numpy(str), tab["t_from"].to_numpy(float), tab["t_to"].to_numpy(float), strict=True
+    ):
+        hit = (ep.sat == sat) & (ep.t[:, None] >= t_from) & (ep.t[:, None] <= t_to)
         ep.flag(hit, FLAG_NAV_MISMATCH)
 
 
@@ -108,7 +111,7 @@ def pseudorange_difference_check(
     count = np.where(np.isfinite(cand), count, -1)
     best = cand[np.arange(d.shape[0]), np.argmax(count, axis=1)]
     fail = both & (np.abs(d - best[:, None]) > half + 1e-9)
-    return fail & (both.sum(axis=1) >= 2)[:, None]
+    return np.asarray(fail & (both.sum(axis=1) >= 2)[:, None], dtype=bool)
 
 
 def check_receiver_pair(ep: Epochs, name_a: str, name_b: str, separation_m: float, tol_m: float = 8.0) -> int:

@@ -39,14 +39,28 @@ class EpochResult:
 
 def _antenna(track: TrackLine, s: float, ant: Antenna, d: float) -> tuple[FloatArray, FloatArray]:
     sa = s + d * ant.along_m
-    j = int(min(max(np.searchsorted(track.s, sa, side="right") - 1, 0), track.s.size - 2))
-    pos = track.xyz[j] + (sa - track.s[j]) * track.tangent[j] + d * ant.lateral_m * track.left[j] + ant.height_m * track.up[j]
+    j = int(np.clip(np.searchsorted(track.s, sa, side="right") - 1, 0, track.s.size - 2))
+    pos = (
+        track.xyz[j]
+        + (sa - track.s[j]) * track.tangent[j]
+        + d * ant.lateral_m * track.left[j]
+        + ant.height_m * track.up[j]
+    )
     return pos, track.tangent[j]
 
 
 def _fit(
-    track: TrackLine, sats: FloatArray, pr: FloatArray, sig: FloatArray, we: FloatArray, used: list[bool],
-    ant: Antenna, d: float, s: float, prior: tuple[float, float] | None, cfg: ConstrainedConfig,
+    track: TrackLine,
+    sats: FloatArray,
+    pr: FloatArray,
+    sig: FloatArray,
+    we: FloatArray,
+    used: list[bool],
+    ant: Antenna,
+    d: float,
+    s: float,
+    prior: tuple[float, float] | None,
+    cfg: ConstrainedConfig,
 ) -> tuple[float, float, FloatArray, FloatArray, FloatArray, bool]:
     """Gauss–Newton of one epoch: returns s, b, H (n, 2), v (n,), N⁻¹, converged."""
     idx = [i for i, u in enumerate(used) if u]
@@ -83,74 +97,118 @@ def _range(sat: FloatArray, pos: FloatArray, we: float) -> float:
     return float(np.linalg.norm(sat - pos) + we / C_MPS * (sat[0] * pos[1] - sat[1] * pos[0]))
 
 
-def solve_epoch(
-    track: TrackLine, sats: FloatArray, pr: FloatArray, sig: FloatArray, we: FloatArray, usable: list[bool],
-    ant: Antenna, direction: float, s0: float, prior: tuple[float, float] | None, cfg: ConstrainedConfig,
-) -> EpochResult:
-    """One epoch, one receiver (module docstring)."""
-    used = list(usable)
-    thr = chi2_thresholds(cfg.p_false_alarm)
+_FitResult = tuple[float, float, FloatArray, FloatArray, FloatArray, bool]
 
-    def on_track(s: float, n_inv: FloatArray, conv: bool, pri: tuple[float, float] | None) -> bool:
-        ok = conv and 0.0 <= s <= track.length_m
-        if pri is not None:
-            ok = ok and abs(s - pri[0]) <= cfg.prior_window_sigmas * math.sqrt(pri[1] ** 2 + abs(n_inv[0, 0]))
+
+@dataclass
+class _Epoch:
+    """One epoch's inputs and the per-epoch steps of the algorithm."""
+
+    track: TrackLine
+    sats: FloatArray
+    pr: FloatArray
+    sig: FloatArray
+    we: FloatArray
+    ant: Antenna
+    direction: float
+    cfg: ConstrainedConfig
+
+    def fit(self, used: list[bool], s: float, prior: tuple[float, float] | None) -> _FitResult:
+        return _fit(
+            self.track, self.sats, self.pr, self.sig, self.we, used, self.ant, self.direction, s, prior, self.cfg
+        )
+
+    def on_track(self, f: _FitResult, prior: tuple[float, float] | None) -> bool:
+        s, n_inv, conv = f[0], f[4], f[5]
+        ok = conv and 0.0 <= s <= self.track.length_m
+        if prior is not None:
+            ok = ok and abs(s - prior[0]) <= self.cfg.prior_window_sigmas * math.sqrt(prior[1] ** 2 + abs(n_inv[0, 0]))
         return ok
 
-    def stats(h: FloatArray, v: FloatArray, n_inv: FloatArray, s: float, u: list[bool], pri: tuple[float, float] | None) -> tuple[float, int, list[float]]:
+    def stats(self, f: _FitResult, u: list[bool], prior: tuple[float, float] | None) -> tuple[float, int, list[float]]:
+        """T, dof and the normalised residuals (satellites, then the prior)."""
+        s, h, v, n_inv = f[0], f[2], f[3], f[4]
         idx = [i for i, x in enumerate(u) if x]
         t, wres = 0.0, []
         for r, i in enumerate(idx):
-            w = 1.0 / sig[i] ** 2
+            w = 1.0 / self.sig[i] ** 2
             q = min(max(1.0 - w * float(h[r] @ n_inv @ h[r]), 1e-12), 1.0)
             t += w * v[r] ** 2
             wres.append(abs(v[r]) * math.sqrt(w) / math.sqrt(q))
         dof = len(idx) - 2
-        if pri is not None and math.isfinite(pri[1]):
-            pw = 1.0 / pri[1] ** 2
+        if prior is not None:
+            pw = 1.0 / prior[1] ** 2
             pq = min(max(1.0 - pw * n_inv[0, 0], 1e-12), 1.0)
-            t += pw * (pri[0] - s) ** 2
+            t += pw * (prior[0] - s) ** 2
             dof += 1
-            wres.append(abs(pri[0] - s) * math.sqrt(pw) / math.sqrt(pq))
+            wres.append(abs(prior[0] - s) * math.sqrt(pw) / math.sqrt(pq))
         return t, dof, wres
 
-    s, b, h, v, n_inv, conv = _fit(track, sats, pr, sig, we, used, ant, direction, s0, prior, cfg)
-    if not on_track(s, n_inv, conv, prior) and sum(used) > 2:
-        best: tuple[float, int, tuple[float, float, FloatArray, FloatArray, FloatArray, bool]] | None = None
+    def reject_off_track(self, used: list[bool], f: _FitResult, prior: tuple[float, float] | None) -> _FitResult:
+        """Leave-one-out when the solution is off the track (or the prior's window)."""
+        if self.on_track(f, prior) or sum(used) <= 2:
+            return f
+        thr = chi2_thresholds(self.cfg.p_false_alarm)
+        best: tuple[float, int, _FitResult] | None = None
         for j in [i for i, x in enumerate(used) if x]:
             u = list(used)
             u[j] = False
-            f = _fit(track, sats, pr, sig, we, u, ant, direction, s, prior, cfg)
-            t, dof, _ = stats(f[2], f[3], f[4], f[0], u, None)
-            score = (t / thr[dof] if dof >= 1 else 0.0) if on_track(f[0], f[4], f[5], prior) else math.inf
+            g = self.fit(u, f[0], prior)
+            t, dof, _ = self.stats(g, u, None)
+            score = (t / thr[dof] if dof >= 1 else 0.0) if self.on_track(g, prior) else math.inf
             if score < math.inf and (best is None or score < best[0]):
-                best = (score, j, f)
-        if best is not None:
-            used[best[1]] = False
-            s, b, h, v, n_inv, conv = best[2]
-    pri = prior
-    fail = False
-    for _ in range(cfg.max_exclusions + 1):
-        t, dof, wres = stats(h, v, n_inv, s, used, pri)
-        fail = dof >= 1 and (t > thr[dof] or max(wres, default=0.0) > cfg.k_w)
-        if not (fail and dof >= 2):
-            break
-        idx = [i for i, x in enumerate(used) if x]
-        used[idx[int(np.argmax(wres[: len(idx)]))]] = False
-        s, b, h, v, n_inv, conv = _fit(track, sats, pr, sig, we, used, ant, direction, s, pri, cfg)
+                best = (score, j, g)
+        if best is None:
+            return f
+        used[best[1]] = False
+        return best[2]
+
+    def exclude(self, used: list[bool], f: _FitResult, prior: tuple[float, float] | None) -> tuple[_FitResult, bool]:
+        """χ² and w-test with exclusion of the largest normalised satellite residual."""
+        thr = chi2_thresholds(self.cfg.p_false_alarm)
+        fail = False
+        for _ in range(self.cfg.max_exclusions + 1):
+            t, dof, wres = self.stats(f, used, prior)
+            fail = dof >= 1 and (t > thr[dof] or max(wres, default=0.0) > self.cfg.k_w)
+            if not (fail and dof >= 2):
+                break
+            idx = [i for i, x in enumerate(used) if x]
+            used[idx[int(np.argmax(wres[: len(idx)]))]] = False
+            f = self.fit(used, f[0], prior)
+        return f, fail
+
+    def status(self, f: _FitResult, used: list[bool], fail: bool, prior: tuple[float, float] | None) -> int:
+        hh = f[2].T @ f[2]
+        adop = math.sqrt(abs(np.linalg.inv(hh)[0, 0])) if abs(np.linalg.det(hh)) > 1e-12 else math.inf
+        checks = (
+            (sum(used) < 2, STATUS_TOO_FEW),
+            (not f[5], STATUS_NOT_CONVERGED),
+            (not self.on_track(f, prior), STATUS_OFF_TRACK),
+            (fail, STATUS_FAULT),
+            (adop > self.cfg.max_adop, STATUS_GEOMETRY),
+        )
+        return next((code for bad, code in checks if bad), STATUS_OK)
+
+
+def solve_epoch(
+    track: TrackLine,
+    sats: FloatArray,
+    pr: FloatArray,
+    sig: FloatArray,
+    we: FloatArray,
+    usable: list[bool],
+    ant: Antenna,
+    direction: float,
+    s0: float,
+    prior: tuple[float, float] | None,
+    cfg: ConstrainedConfig,
+) -> EpochResult:
+    """One epoch, one receiver (module docstring)."""
+    ep = _Epoch(track, sats, pr, sig, we, ant, direction, cfg)
+    used = list(usable)
+    f = ep.fit(used, s0, prior)
+    f = ep.reject_off_track(used, f, prior)
+    f, fail = ep.exclude(used, f, prior)
     if prior is not None:
-        s, b, h, v, n_inv, conv = _fit(track, sats, pr, sig, we, used, ant, direction, s, None, cfg)
-    hh = h.T @ h
-    adop = math.sqrt(abs(np.linalg.inv(hh)[0, 0])) if abs(np.linalg.det(hh)) > 1e-12 else math.inf
-    status = STATUS_OK
-    if adop > cfg.max_adop:
-        status = STATUS_GEOMETRY
-    if fail:
-        status = STATUS_FAULT
-    if not on_track(s, n_inv, conv, prior):
-        status = STATUS_OFF_TRACK
-    if not conv:
-        status = STATUS_NOT_CONVERGED
-    if sum(used) < 2:
-        status = STATUS_TOO_FEW
-    return EpochResult(s, b, math.sqrt(abs(n_inv[0, 0])), status, used)
+        f = ep.fit(used, f[0], None)
+    return EpochResult(f[0], f[1], math.sqrt(abs(f[4][0, 0])), ep.status(f, used, fail, prior), used)

@@ -109,7 +109,7 @@ def run_profile(
 
 def trajectory(track: SyntheticTrack, s: FloatArray, t0: float, dt: float, direction: float = 1.0) -> Trajectory:
     """Reference-point truth along ``track.truth`` at s (facing increasing s if direction > 0)."""
-    t = t0 + dt * np.arange(s.size)
+    t = np.asarray(t0 + dt * np.arange(s.size), dtype=float)
     ref = track.truth.point(s)
     j = track.truth.segment(s)
     heading = track.heading_rad[j] + (np.pi if direction < 0 else 0.0)
@@ -122,7 +122,9 @@ def mixed_corridor(length_m: float, seed: int) -> Corridor:
     sections = []
     pos = 0.0
     while pos < length_m:
-        kind = rng.choice(["open", "left", "right", "cutting", "overpass", "tunnel"], p=[0.45, 0.15, 0.15, 0.15, 0.08, 0.02])
+        kind = rng.choice(
+            ["open", "left", "right", "cutting", "overpass", "tunnel"], p=[0.45, 0.15, 0.15, 0.15, 0.08, 0.02]
+        )
         if kind == "overpass":
             ln = rng.uniform(10.0, 30.0)
         elif kind == "tunnel":
@@ -130,7 +132,11 @@ def mixed_corridor(length_m: float, seed: int) -> Corridor:
         else:
             ln = rng.uniform(200.0, 1200.0)
         if kind != "open":
-            elev = {"left": rng.uniform(30.0, 70.0), "right": rng.uniform(30.0, 70.0), "cutting": rng.uniform(15.0, 35.0)}
+            elev = {
+                "left": rng.uniform(30.0, 70.0),
+                "right": rng.uniform(30.0, 70.0),
+                "cutting": rng.uniform(15.0, 35.0),
+            }
             sections.append(Section(pos, pos + ln, str(kind), float(elev.get(str(kind), 90.0))))
         pos += ln
     return Corridor(tuple(sections))

@@ -153,7 +153,7 @@ def antenna_positions(traj: Trajectory, rx: ReceiverSpec) -> FloatArray:
         + rx.left_m * np.stack([-np.cos(h), np.sin(h), np.zeros_like(h)], axis=-1)
         + rx.up_m * np.array([0.0, 0.0, 1.0])
     )
-    return traj.ref_ecef + np.einsum("eij,ei->ej", r, enu)
+    return np.asarray(traj.ref_ecef + np.einsum("eij,ei->ej", r, enu), dtype=float)
 
 
 def _gauss_markov(rng: np.random.Generator, n_t: int, n_s: int, dt: float, tau: float, sigma: FloatArray) -> FloatArray:
@@ -164,7 +164,7 @@ def _gauss_markov(rng: np.random.Generator, n_t: int, n_s: int, dt: float, tau: 
     drive = rng.standard_normal((n_t, n_s)) * np.sqrt(1.0 - a * a)
     for i in range(1, n_t):  # sequential by nature (a recursion in time); n_t ≤ a few thousand
         x[i] = a * x[i - 1] + drive[i]
-    return x * sigma
+    return np.asarray(x * sigma, dtype=float)
 
 
 def _light_time(
@@ -204,7 +204,9 @@ def simulate(
     idx = select_ephemeris(table, ss, tt)
     sysl = system_of(ss)
     sis = _gauss_markov(rng, n_t, n_s, dt, err.sis_tau_s, np.vectorize(lambda c: err.sis_sigma_m.get(c, 0.5))(sysl))
-    iono_scale = max(1.0 + rng.normal(0.0, err.iono_run_sigma), 0.2) * (1.0 + err.iono_sat_sigma * rng.standard_normal(n_s))
+    iono_scale = max(1.0 + rng.normal(0.0, err.iono_run_sigma), 0.2) * (
+        1.0 + err.iono_sat_sigma * rng.standard_normal(n_s)
+    )
     tropo_scale = 1.0 + rng.normal(0.0, err.tropo_run_sigma)
     nlos_pass = rng.random(n_s) < err.p_nlos
     nlos_bias = rng.exponential(err.nlos_mean_m, n_s)
@@ -223,7 +225,11 @@ def simulate(
         right_side = np.sin(az - track_heading[:, None]) > 0  # the track's right, facing increasing s
         side_mask = np.where(right_side, right_m[:, None], left_m[:, None])
         behind = np.degrees(el) < side_mask
-        visible = (np.degrees(el) >= err.min_elevation_deg) & ~blocked_all[:, None] & (~behind | (nlos_pass & buildings[:, None]))
+        visible = (
+            (np.degrees(el) >= err.min_elevation_deg)
+            & ~blocked_all[:, None]
+            & (~behind | (nlos_pass & buildings[:, None]))
+        )
         nlos = visible & behind
         mp_sigma = (err.mp_zenith_m + err.mp_low_m * np.exp(-np.degrees(el) / err.mp_scale_deg)) * np.where(
             buildings[:, None], err.mp_buildings_factor, 1.0
@@ -244,7 +250,9 @@ def simulate(
         doppler = -(rate + clock_rate) / lam
         amb = np.round(rng.uniform(-1e6, 1e6, n_s))
         carrier_noise = 0.003 * rng.standard_normal(el.shape)
-        carrier = (rng_m + clock_m[:, None] - C_MPS * clock_f + sis - iono + tropo + 0.01 * mp + extra + carrier_noise) / lam + amb
+        carrier = (
+            rng_m + clock_m[:, None] - C_MPS * clock_f + sis - iono + tropo + 0.01 * mp + extra + carrier_noise
+        ) / lam + amb
         keep = visible & (idx >= 0)
         e_i, s_i = np.nonzero(keep)
         t_tag = traj.t + clock_m / C_MPS
@@ -295,8 +303,10 @@ def simulate(
             )
         )
     obs = pd.concat(obs_frames, ignore_index=True)[list(OBS_COLUMNS)]
-    iono_params = {"gps_alpha": KLOBUCHAR_ALPHA, "gps_beta": KLOBUCHAR_BETA}
-    return Simulated(obs, nav, iono_params, pd.concat(truth_frames, ignore_index=True), pd.concat(row_frames, ignore_index=True))
+    iono_params: dict[str, tuple[float, ...]] = {"gps_alpha": KLOBUCHAR_ALPHA, "gps_beta": KLOBUCHAR_BETA}
+    return Simulated(
+        obs, nav, iono_params, pd.concat(truth_frames, ignore_index=True), pd.concat(row_frames, ignore_index=True)
+    )
 
 
 def dgps_corrections(sim: Simulated, seed: int, sigma_m: float = 0.15, decorrelation: float = 0.05) -> pd.DataFrame:
@@ -304,7 +314,11 @@ def dgps_corrections(sim: Simulated, seed: int, sigma_m: float = 0.15, decorrela
     rng = np.random.default_rng(seed)
     r = sim.rows.drop_duplicates(["t", "sat"]).reset_index(drop=True)
     atm = r["iono_m"].to_numpy() + r["tropo_m"].to_numpy()
-    prc = -(r["sis_m"].to_numpy() + atm) + decorrelation * atm * rng.standard_normal(len(r)) + rng.normal(0.0, sigma_m, len(r))
+    prc = (
+        -(r["sis_m"].to_numpy() + atm)
+        + decorrelation * atm * rng.standard_normal(len(r))
+        + rng.normal(0.0, sigma_m, len(r))
+    )
     return pd.DataFrame(
         {
             "gnss_time_s": r["t"].to_numpy() - 0.5,

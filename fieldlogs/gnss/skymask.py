@@ -33,7 +33,7 @@ class SkyMask:
     def blocked(self, az_rad: FloatArray, el_rad: FloatArray) -> BoolArray:
         az = np.mod(np.degrees(np.asarray(az_rad, dtype=float)), 360.0)
         j = np.clip(np.searchsorted(self.az_start_deg, az, side="right") - 1, 0, self.az_start_deg.size - 1)
-        return np.degrees(np.asarray(el_rad, dtype=float)) < self.min_el_deg[j]
+        return np.asarray(np.degrees(np.asarray(el_rad, dtype=float)) < self.min_el_deg[j], dtype=bool)
 
 
 def no_mask() -> SkyMask:
@@ -56,9 +56,18 @@ def mask_from_table(table: pd.DataFrame, source: str = "sky mask") -> SkyMask:
     az = pd.to_numeric(table["azimuth_deg"], errors="coerce").to_numpy(float)
     el = pd.to_numeric(table["elevation_deg"], errors="coerce").to_numpy(float)
     for col, vals, lo, hi in (("azimuth_deg", az, 0.0, 360.0), ("elevation_deg", el, 0.0, 90.0)):
-        bad = np.flatnonzero(~np.isfinite(vals) | (vals < lo) | (vals > hi) if col == "elevation_deg" else ~np.isfinite(vals) | (vals < lo) | (vals >= hi))
+        bad = np.flatnonzero(
+            ~np.isfinite(vals) | (vals < lo) | (vals > hi)
+            if col == "elevation_deg"
+            else ~np.isfinite(vals) | (vals < lo) | (vals >= hi)
+        )
         if bad.size:
-            raise InputError(f"value {table[col].iloc[bad[0]]!r} outside [{lo:g}, {hi:g}]", path=source, row=int(bad[0]) + 2, column=col)
+            raise InputError(
+                f"value {table[col].iloc[bad[0]]!r} outside [{lo:g}, {hi:g}]",
+                path=source,
+                row=int(bad[0]) + 2,
+                column=col,
+            )
     if az.size == 0 or az[0] != 0.0 or np.any(np.diff(az) <= 0):
         raise InputError("azimuths must start at 0 and increase", path=source, column="azimuth_deg")
     return SkyMask(az, np.where(el >= 90.0, _FULL, el))

@@ -38,9 +38,7 @@ def _klobuchar_scalar(lat_deg: float, lon_deg: float, az_deg: float, el_deg: flo
     [(40.0, 260.0, 210.0, 20.0, 593100.0), (35.7, 139.7, 90.0, 45.0, 3600.0 * 5), (-20.0, 10.0, 0.0, 80.0, 50400.0)],
 )
 def test_klobuchar_matches_the_icd_transcription(lat: float, lon: float, az: float, el: float, tow: float) -> None:
-    got = atm.klobuchar_s(
-        np.radians(lat), np.radians(lon), np.radians(az), np.radians(el), np.array(tow), ALPHA, BETA
-    )
+    got = atm.klobuchar_s(np.radians(lat), np.radians(lon), np.radians(az), np.radians(el), np.array(tow), ALPHA, BETA)
     assert float(got) == pytest.approx(_klobuchar_scalar(lat, lon, az, el, tow), rel=1e-12)
 
 

@@ -35,7 +35,15 @@ def sat_at(p: np.ndarray, az_deg: float, el_deg: float, r: float = 2.2e7) -> np.
 
 def rows_of(sats: np.ndarray, pr: np.ndarray, sigma: float = 1.0) -> Rows:
     n = pr.size
-    return Rows(sats[None], pr[None], np.full((1, n), sigma), np.ones((1, n), bool), np.zeros((1, n)), np.zeros((1, n), np.int64), np.ones(1))
+    return Rows(
+        sats[None],
+        pr[None],
+        np.full((1, n), sigma),
+        np.ones((1, n), bool),
+        np.zeros((1, n)),
+        np.zeros((1, n), np.int64),
+        np.ones(1),
+    )
 
 
 def test_two_satellites_ahead_and_behind_exact() -> None:
@@ -138,8 +146,18 @@ def test_two_receivers_joint_three_satellites() -> None:
     p2, _ = track.antenna(np.array([s_true]), a2)
     s_a, s_b = sat_at(p1[0], 0.0, 30.0), sat_at(p1[0], 180.0, 25.0)
     sats = np.array([s_a, s_b, s_a])
-    pr = np.array([np.linalg.norm(s_a - p1[0]) + 10.0, np.linalg.norm(s_b - p1[0]) + 10.0, np.linalg.norm(s_a - p2[0]) - 20.0])
-    rows = Rows(sats[None], pr[None], np.ones((1, 3)), np.ones((1, 3), bool), np.zeros((1, 3)), np.array([[0, 0, 1]]), np.ones(1))
+    pr = np.array(
+        [np.linalg.norm(s_a - p1[0]) + 10.0, np.linalg.norm(s_b - p1[0]) + 10.0, np.linalg.norm(s_a - p2[0]) - 20.0]
+    )
+    rows = Rows(
+        sats[None],
+        pr[None],
+        np.ones((1, 3)),
+        np.ones((1, 3), bool),
+        np.zeros((1, 3)),
+        np.array([[0, 0, 1]]),
+        np.ones(1),
+    )
     sol = solve_constrained(track, rows, [a1, a2])
     assert sol.status[0] == STATUS_OK
     assert sol.s[0] == pytest.approx(s_true, abs=1e-6)
@@ -150,7 +168,9 @@ def test_one_satellite_is_too_few() -> None:
     track = straight_north()
     p = track.point(np.array([500.0]))[0]
     sats = np.array([sat_at(p, 0.0, 30.0)])
-    sol = solve_constrained(track, rows_of(sats, np.linalg.norm(sats - p, axis=1)), [Antenna()], s_init=np.array([500.0]))
+    sol = solve_constrained(
+        track, rows_of(sats, np.linalg.norm(sats - p, axis=1)), [Antenna()], s_init=np.array([500.0])
+    )
     assert sol.status[0] == STATUS_TOO_FEW
 
 
@@ -178,7 +198,17 @@ def test_batch_equals_per_epoch_reference() -> None:
     sol = solve_constrained(track, rows, [ant], cfg, prior=(prior_s, np.full(e, 5.0)))
     for i in range(e):
         ref = solve_epoch(
-            track, sats[i], pr[i], sigma[i], rows.omega_e[i], list(usable[i]), ant, 1.0, prior_s[i], (prior_s[i], 5.0), cfg
+            track,
+            sats[i],
+            pr[i],
+            sigma[i],
+            rows.omega_e[i],
+            list(usable[i]),
+            ant,
+            1.0,
+            prior_s[i],
+            (prior_s[i], 5.0),
+            cfg,
         )
         assert ref.status == sol.status[i], i
         assert ref.used == list(sol.used[i]), i
@@ -194,10 +224,19 @@ def test_lsq_exact_and_dops() -> None:
     sats = np.array([sat_at(p, az, el) for az, el in ((0, 90), (0, 0), (120, 0), (240, 0))])
     pr = np.linalg.norm(sats - p, axis=1) + 99.0
     n = 4
-    sol = solve_lsq(sats[None], pr[None], np.ones((1, n)), np.ones((1, n), bool), np.full((1, n), "G"), np.zeros((1, n)))
+    sol = solve_lsq(
+        sats[None], pr[None], np.ones((1, n)), np.ones((1, n), bool), np.full((1, n), "G"), np.zeros((1, n))
+    )
     np.testing.assert_allclose(sol.pos[0], p, atol=1e-4)
     assert sol.clock_m[0] == pytest.approx(99.0, abs=1e-4)
-    u = np.array([[0, 0, 1], [0, 1, 0], [np.sin(np.radians(120)), np.cos(np.radians(120)), 0], [np.sin(np.radians(240)), np.cos(np.radians(240)), 0]])
+    u = np.array(
+        [
+            [0, 0, 1],
+            [0, 1, 0],
+            [np.sin(np.radians(120)), np.cos(np.radians(120)), 0],
+            [np.sin(np.radians(240)), np.cos(np.radians(240)), 0],
+        ]
+    )
     h = np.hstack([-u, np.ones((4, 1))])
     q = np.linalg.inv(h.T @ h)
     assert sol.hdop[0] == pytest.approx(np.sqrt(q[0, 0] + q[1, 1]), rel=1e-3)

@@ -66,8 +66,26 @@ def test_receiver_pair_flags_both_receivers() -> None:
     pr = np.array([2.1e7, 2.2e7, 2.3e7, 2.4e7])
     obs = pd.concat(
         [
-            pd.DataFrame({"t": T0, "gnss_time_s": T0, "receiver": "rx1", "sat": sats, "signal": "C1C", "pseudorange_m": pr + [0, 3, -2, 60]}),
-            pd.DataFrame({"t": T0, "gnss_time_s": T0 + 1e-4, "receiver": "rx2", "sat": sats[::-1], "signal": "C1C", "pseudorange_m": pr[::-1]}),
+            pd.DataFrame(
+                {
+                    "t": T0,
+                    "gnss_time_s": T0,
+                    "receiver": "rx1",
+                    "sat": sats,
+                    "signal": "C1C",
+                    "pseudorange_m": pr + np.array([0.0, 3.0, -2.0, 60.0]),
+                }
+            ),
+            pd.DataFrame(
+                {
+                    "t": T0,
+                    "gnss_time_s": T0 + 1e-4,
+                    "receiver": "rx2",
+                    "sat": sats[::-1],
+                    "signal": "C1C",
+                    "pseudorange_m": pr[::-1],
+                }
+            ),
         ]
     )
     ep = build_epochs(obs, nav)
@@ -87,7 +105,9 @@ def test_sky_masks(tmp_path: Path) -> None:
     f = tmp_path / "mask.csv"
     f.write_text("azimuth_deg,elevation_deg\n0,10\n90,40\n180,90\n270,0\n")
     m = skymask.load_mask(f)
-    np.testing.assert_array_equal(m.blocked(np.radians([45, 100, 200, 300]), np.radians([20, 20, 89, 1])), [False, True, True, False])
+    np.testing.assert_array_equal(
+        m.blocked(np.radians([45, 100, 200, 300]), np.radians([20, 20, 89, 1])), [False, True, True, False]
+    )
     f.write_text("azimuth_deg,elevation_deg\n0,10\n90,95\n")
     with pytest.raises(InputError, match=r"mask.csv:3, column 'elevation_deg'"):
         skymask.load_mask(f)
@@ -105,7 +125,9 @@ def test_corrections_latest_within_age_and_do_not_use() -> None:
             "usable": [True, True, False],
         }
     )
-    m = match_corrections(corr, np.array(["G01", "G01", "G02", "G01", "G03"]), np.array([105.0, 108.0, 101.0, 200.0, 105.0]))
+    m = match_corrections(
+        corr, np.array(["G01", "G01", "G02", "G01", "G03"]), np.array([105.0, 108.0, 101.0, 200.0, 105.0])
+    )
     np.testing.assert_allclose(m.prc_m, [1.0, 3.0, -3.0, 0.0, 0.0])
     np.testing.assert_array_equal(m.present, [True, True, True, False, False])
     np.testing.assert_array_equal(m.usable, [True, True, False, True, True])

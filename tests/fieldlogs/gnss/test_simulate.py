@@ -26,7 +26,9 @@ def test_constellation_layout() -> None:
     assert sum(s.startswith("E") for s in sats) == 24
     assert sorted(s for s in sats if s.startswith("J")) == ["J01", "J02", "J03", "J04"]
     for sys, spacing in TOE_SPACING_S.items():
-        toe = np.sort((nav.loc[nav["sat"] == f"{sys}01", "week"] * WEEK_S + nav.loc[nav["sat"] == f"{sys}01", "Toe"]).unique())
+        toe = np.sort(
+            (nav.loc[nav["sat"] == f"{sys}01", "week"] * WEEK_S + nav.loc[nav["sat"] == f"{sys}01", "Toe"]).unique()
+        )
         assert np.all(np.diff(toe) == spacing)
     table = nav_table(nav)
     t = np.full(sats.size, T0 + 1800.0)
@@ -81,7 +83,9 @@ def test_error_free_simulation_is_solved_exactly() -> None:
 
 
 def test_corridor_blocks_by_side() -> None:
-    cor = Corridor((Section(0.0, 100.0, "left", 60.0), Section(100.0, 200.0, "tunnel"), Section(200.0, 300.0, "cutting", 20.0)))
+    cor = Corridor(
+        (Section(0.0, 100.0, "left", 60.0), Section(100.0, 200.0, "tunnel"), Section(200.0, 300.0, "cutting", 20.0))
+    )
     left, right, blocked, buildings = cor.masks(np.array([50.0, 150.0, 250.0, 400.0]))
     np.testing.assert_array_equal(left, [60.0, 0.0, 20.0, 0.0])
     np.testing.assert_array_equal(right, [0.0, 0.0, 20.0, 0.0])
@@ -104,4 +108,3 @@ def test_headline_statistics_on_a_few_seeded_runs() -> None:
     assert f["fault_epochs"] > 100
     assert f["fault_not_excluded_after_2_epochs"] == 0.0
     assert f["fault_exceed_fraction"] <= 0.001
-
