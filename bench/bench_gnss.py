@@ -46,10 +46,10 @@ ROWS: tuple[tuple[str, dict[str, object]], ...] = (
 )
 
 
-def _fmt(v: float, pct: bool = False) -> str:
+def _fmt(v: float, pct: bool = False, digits: int = 1) -> str:
     if not np.isfinite(v):
         return "   -  "
-    return f"{100 * v:6.1f}%" if pct else f"{v:7.2f}"
+    return f"{100 * v:6.{digits}f}%" if pct else f"{v:7.2f}"
 
 
 def accuracy(runs: int, seed0: int) -> None:
@@ -64,7 +64,7 @@ def accuracy(runs: int, seed0: int) -> None:
         print(
             f"{label:46s} {int(s['epochs']):7d} {_fmt(s['constrained_availability'], True)} "
             f"{_fmt(s['unconstrained_availability'], True):>8s} {_fmt(s['median_abs_err_m'])} "
-            f"{_fmt(s['p99_abs_err_m'])} {_fmt(s['max_abs_err_m'])} {_fmt(s['exceed_fraction'], True)} "
+            f"{_fmt(s['p99_abs_err_m'])} {_fmt(s['max_abs_err_m'])} {_fmt(s['exceed_fraction'], True, 3)} "
             f"{_fmt(s['median_uncertainty_m'])}"
         )
         if "fault_epochs" in s:
@@ -74,7 +74,7 @@ def accuracy(runs: int, seed0: int) -> None:
     for label, s in faults:
         print(
             f"{label:40s} {int(s['fault_epochs']):7d} {_fmt(s['fault_availability'], True)} "
-            f"{_fmt(s['fault_not_excluded_after_2_epochs'], True):>9s} {_fmt(s['fault_exceed_fraction'], True)} "
+            f"{_fmt(s['fault_not_excluded_after_2_epochs'], True, 2):>9s} {_fmt(s['fault_exceed_fraction'], True, 3)} "
             f"{_fmt(s['fault_bias_at_exclusion_m']):>9s}"
         )
     print(
