@@ -34,6 +34,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from fieldlogs.gnss.constants import C_MPS, F_L1_HZ, GPS_PI, FloatArray
 
@@ -42,11 +43,11 @@ _POLE_LON = np.radians(-72.68)
 
 
 def klobuchar_s(
-    lat_rad: FloatArray,
-    lon_rad: FloatArray,
-    az_rad: FloatArray,
-    el_rad: FloatArray,
-    t_gps_s: FloatArray,
+    lat_rad: npt.ArrayLike,
+    lon_rad: npt.ArrayLike,
+    az_rad: npt.ArrayLike,
+    el_rad: npt.ArrayLike,
+    t_gps_s: npt.ArrayLike,
     alpha: Sequence[float],
     beta: Sequence[float],
 ) -> FloatArray:
@@ -66,7 +67,7 @@ def klobuchar_s(
     return np.asarray(np.where(day, f * (5e-9 + amp * (1.0 - x**2 / 2.0 + x**4 / 24.0)), f * 5e-9), dtype=float)
 
 
-def modip_rad(lat_rad: FloatArray, lon_rad: FloatArray) -> FloatArray:
+def modip_rad(lat_rad: npt.ArrayLike, lon_rad: npt.ArrayLike) -> FloatArray:
     """Modified dip latitude μ from a centred dipole (module docstring)."""
     lat = np.asarray(lat_rad, dtype=float)
     lon = np.asarray(lon_rad, dtype=float)
@@ -77,11 +78,11 @@ def modip_rad(lat_rad: FloatArray, lon_rad: FloatArray) -> FloatArray:
 
 
 def galileo_effective_s(
-    lat_rad: FloatArray,
-    lon_rad: FloatArray,
-    az_rad: FloatArray,
-    el_rad: FloatArray,
-    t_gps_s: FloatArray,
+    lat_rad: npt.ArrayLike,
+    lon_rad: npt.ArrayLike,
+    az_rad: npt.ArrayLike,
+    el_rad: npt.ArrayLike,
+    t_gps_s: npt.ArrayLike,
     ai: Sequence[float],
 ) -> FloatArray:
     """L1/E1 ionospheric delay [s] of the simplified effective-ionisation model (module docstring)."""
@@ -104,13 +105,13 @@ def galileo_effective_s(
 
 
 def iono_delay_m(
-    system: np.ndarray,
-    freq_hz: FloatArray,
-    lat_rad: FloatArray,
-    lon_rad: FloatArray,
-    az_rad: FloatArray,
-    el_rad: FloatArray,
-    t_gps_s: FloatArray,
+    system: npt.ArrayLike,
+    freq_hz: npt.ArrayLike,
+    lat_rad: npt.ArrayLike,
+    lon_rad: npt.ArrayLike,
+    az_rad: npt.ArrayLike,
+    el_rad: npt.ArrayLike,
+    t_gps_s: npt.ArrayLike,
     params: Mapping[str, Sequence[float]] | None,
 ) -> FloatArray:
     """Model ionospheric group delay [m] on each signal's frequency; 0 where no parameters.
@@ -135,7 +136,9 @@ def iono_delay_m(
     return np.asarray(C_MPS * out * (F_L1_HZ / np.asarray(freq_hz, dtype=float)) ** 2, dtype=float)
 
 
-def saastamoinen_zenith_m(lat_rad: FloatArray, h_m: FloatArray, humidity: float = 0.5) -> tuple[FloatArray, FloatArray]:
+def saastamoinen_zenith_m(
+    lat_rad: npt.ArrayLike, h_m: npt.ArrayLike, humidity: float = 0.5
+) -> tuple[FloatArray, FloatArray]:
     """Saastamoinen zenith hydrostatic and wet delays [m] in the standard atmosphere."""
     h = np.clip(np.asarray(h_m, dtype=float), -100.0, 1e4)
     pres = 1013.25 * (1.0 - 2.2557e-5 * h) ** 5.2568
@@ -146,13 +149,13 @@ def saastamoinen_zenith_m(lat_rad: FloatArray, h_m: FloatArray, humidity: float 
     return zhd, zwd
 
 
-def tropo_mapping(el_rad: FloatArray) -> FloatArray:
+def tropo_mapping(el_rad: npt.ArrayLike) -> FloatArray:
     """Black & Eisner mapping 1.001/√(0.002001 + sin²E) (RTCA DO-229 A.4.2.4)."""
     s = np.sin(np.asarray(el_rad, dtype=float))
     return np.asarray(1.001 / np.sqrt(0.002001 + s * s), dtype=float)
 
 
-def tropo_delay_m(lat_rad: FloatArray, h_m: FloatArray, el_rad: FloatArray) -> FloatArray:
+def tropo_delay_m(lat_rad: npt.ArrayLike, h_m: npt.ArrayLike, el_rad: npt.ArrayLike) -> FloatArray:
     """Slant tropospheric delay [m]: (zhd + zwd)·m(E)."""
     zhd, zwd = saastamoinen_zenith_m(lat_rad, h_m)
     return np.asarray((zhd + zwd) * tropo_mapping(el_rad), dtype=float)

@@ -84,7 +84,7 @@ def _gps_layout() -> list[tuple[float, float]]:
     """(RAAN, argument of latitude) [deg] of 31 satellites: the 24 baseline slots, then one more
     per plane in its largest gap and a second in plane B (the operational constellation's
     extra satellites sit in such expanded/fore-aft positions)."""
-    out = []
+    out: list[tuple[float, float]] = []
     for raan, slots in GPS_SLOTS.values():
         out.extend((raan, u) for u in slots)
     for plane in ("A", "B", "C", "D", "E", "F", "B"):

@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.gnss.constants import BoolArray, FloatArray, StrArray
+from schemas.errors import InputError
 
 CORR_COLUMNS: Final = (
     "gnss_time_s",
@@ -43,7 +44,7 @@ CORR_COLUMNS: Final = (
 )
 
 
-class CorrectionsError(ValueError):
+class CorrectionsError(InputError):
     """A corrections frame without a required column."""
 
 
@@ -77,7 +78,7 @@ def match_corrections(
     need = ("gnss_time_s", "sat", "prc_m")
     missing = [c for c in need if c not in corrections.columns]
     if missing:
-        raise CorrectionsError(f"corrections frame: missing column(s) {', '.join(missing)}")
+        raise CorrectionsError("missing column", path="corrections frame", column=missing[0])
     c = corrections.copy()
     for col, default in (("rrc_mps", 0.0), ("dx_m", 0.0), ("dy_m", 0.0), ("dz_m", 0.0), ("dclock_s", 0.0)):
         c[col] = c[col].fillna(default) if col in c.columns else default

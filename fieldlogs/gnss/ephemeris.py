@@ -52,13 +52,14 @@ from fieldlogs.gnss.constants import (
     StrArray,
     system_of,
 )
+from schemas.errors import InputError
 
 KIND_ANY = 0
 KIND_INAV = 1
 KIND_FNAV = 2
 
 
-class EphemerisError(ValueError):
+class EphemerisError(InputError):
     """A navigation frame that lacks a required column."""
 
 
@@ -90,7 +91,7 @@ def nav_table(nav: pd.DataFrame) -> NavTable:
     """Arrays of the supported rows of a ``gnss_nav`` frame (GLONASS/BeiDou/SBAS rows are dropped)."""
     missing = [c for c in ("sat", "toc_gps_s", "week", *NAV_KEPLER) if c not in nav.columns]
     if missing:
-        raise EphemerisError(f"gnss_nav frame: missing column(s) {', '.join(missing)}")
+        raise EphemerisError("missing column", path="gnss_nav frame", column=missing[0])
     sysl = system_of(nav["sat"].to_numpy())
     keep = np.isin(sysl, list(SYSTEMS))
     df = nav.loc[keep].reset_index(drop=True)

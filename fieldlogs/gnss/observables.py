@@ -47,6 +47,7 @@ from fieldlogs.gnss.corrections import match_corrections
 from fieldlogs.gnss.ephemeris import NavTable, nav_table, transmission_states
 from fieldlogs.gnss.errormodel import ErrorModel, pseudorange_sigma_m
 from fieldlogs.gnss.geodesy import azimuth_elevation, ecef_to_geodetic
+from schemas.errors import InputError
 
 FLAG_NO_EPHEMERIS: Final = 1
 FLAG_LOW_ELEVATION: Final = 2
@@ -78,7 +79,7 @@ DEFAULT_SIGNALS: Final[dict[str, tuple[str, ...]]] = {
 }
 
 
-class ObservationError(ValueError):
+class ObservationError(InputError):
     """An observation frame without a required column."""
 
 
@@ -195,7 +196,7 @@ def build_epochs(
     """Satellite states and clock corrections for every observation, as (E, S) arrays."""
     missing = [c for c in (OBS_TIME, OBS_RECEIVER, OBS_SAT, OBS_SIGNAL, OBS_PR) if c not in obs.columns]
     if missing:
-        raise ObservationError(f"gnss_obs frame: missing column(s) {', '.join(missing)}")
+        raise ObservationError("missing column", path="gnss_obs frame", column=missing[0])
     table = nav if isinstance(nav, NavTable) else nav_table(nav)
     df = _pick_signals(obs, signals or DEFAULT_SIGNALS)
     df = df.loc[np.isin(system_of(df[OBS_SAT].to_numpy()), list(SYSTEMS))]

@@ -43,6 +43,7 @@ from fieldlogs.gnss.observables import (
 from fieldlogs.gnss.prechecks import check_receiver_pair, compare_navigation, flag_nav_mismatch
 from fieldlogs.gnss.skymask import SkyMask
 from fieldlogs.gnss.track import Antenna, TrackLine
+from schemas.errors import UsageError
 
 
 @dataclass(frozen=True)
@@ -174,7 +175,7 @@ def _prepare(
         flag_nav_mismatch(ep, mismatch)
     missing = sorted(set(np.unique(ep.receiver)) - set(names))
     if missing:
-        raise KeyError(f"no antenna given for receiver(s) {', '.join(missing)}")
+        raise UsageError(f"no antenna given for receiver(s) {', '.join(missing)}")
     if len(names) == 2:
         a, b = (antennas[n] for n in names)
         sep = float(np.linalg.norm([a.along_m - b.along_m, a.lateral_m - b.lateral_m, a.height_m - b.height_m]))

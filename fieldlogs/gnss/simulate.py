@@ -42,7 +42,7 @@ import pandas as pd
 from fieldlogs.gnss.atmosphere import klobuchar_s, tropo_delay_m
 from fieldlogs.gnss.constants import C_MPS, F_L1_HZ, OBS_COLUMNS, FloatArray, IntArray, system_of
 from fieldlogs.gnss.ephemeris import NavTable, group_delay_s, nav_table, satellite_states, select_ephemeris
-from fieldlogs.gnss.geodesy import azimuth_elevation, ecef_to_geodetic, enu_basis
+from fieldlogs.gnss.geodesy import azimuth_elevation, ecef_to_geodetic, enu_basis, geodetic_to_ecef
 
 KLOBUCHAR_ALPHA = (1.1176e-08, 7.4506e-09, -5.9605e-08, -5.9605e-08)
 KLOBUCHAR_BETA = (90112.0, 0.0, -196608.0, -65536.0)
@@ -128,6 +128,24 @@ class Trajectory:
     heading_rad: FloatArray
     s: FloatArray
     direction: FloatArray
+
+    @classmethod
+    def from_geodetic(
+        cls,
+        t: FloatArray,
+        lat_deg: FloatArray,
+        lon_deg: FloatArray,
+        h_m: FloatArray,
+        heading_deg: FloatArray,
+        s: FloatArray,
+        direction: FloatArray | float = 1.0,
+    ) -> Trajectory:
+        """From latitude/longitude/ellipsoidal height and heading (clockwise from north) per epoch,
+        as the train simulator's truth gives them."""
+        t = np.asarray(t, dtype=float)
+        ecef = geodetic_to_ecef(np.radians(lat_deg), np.radians(lon_deg), h_m)
+        d = np.broadcast_to(np.asarray(direction, dtype=float), t.shape).copy()
+        return cls(t, ecef, np.radians(np.asarray(heading_deg, dtype=float)), np.asarray(s, dtype=float), d)
 
 
 @dataclass

@@ -20,9 +20,10 @@ import numpy as np
 
 from fieldlogs.gnss.constants import FloatArray, IntArray
 from fieldlogs.gnss.geodesy import ecef_to_geodetic, enu_basis, geodetic_to_ecef
+from schemas.errors import InputError
 
 
-class TrackGeometryError(ValueError):
+class TrackGeometryError(InputError):
     """A track polyline that cannot carry a solution (fewer than 2 distinct points)."""
 
 

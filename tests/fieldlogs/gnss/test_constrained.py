@@ -30,7 +30,7 @@ def straight_north(length: float = 2000.0) -> TrackLine:
 def sat_at(p: np.ndarray, az_deg: float, el_deg: float, r: float = 2.2e7) -> np.ndarray:
     az, el = np.radians(az_deg), np.radians(el_deg)
     d = np.cos(el) * np.sin(az) * ENU[0] + np.cos(el) * np.cos(az) * ENU[1] + np.sin(el) * ENU[2]
-    return p + r * d
+    return np.asarray(p + r * d, dtype=float)
 
 
 def rows_of(sats: np.ndarray, pr: np.ndarray, sigma: float = 1.0) -> Rows:

@@ -235,13 +235,13 @@ def test_selection_nearest_healthy_within_fit() -> None:
         recs.append({**base, "Toe": toe, "toc_gps_s": 1742 * WEEK_S + toe, "health": 1.0 if k == 1 else 0.0})
     table = _table(*recs)
     t0 = 1742 * WEEK_S
-    t = t0 + np.array([346000.0, 352900.0, 356500.0, 367100.0, 330000.0])
-    idx = eph.select_ephemeris(table, np.full(5, "G01"), t)
-    toe = np.where(idx >= 0, table.toe_s[np.maximum(idx, 0)] - t0, -1)
+    times = t0 + np.array([346000.0, 352900.0, 356500.0, 367100.0, 330000.0])
+    idx = eph.select_ephemeris(table, np.full(5, "G01"), times)
+    picked = np.where(idx >= 0, table.toe_s[np.maximum(idx, 0)] - t0, -1)
     # 352900: the nearest (352800) is unhealthy → 360000 at 7100 s is inside ±2 h; 330000 is 15600 s from
     # the first Toe: none
-    np.testing.assert_array_equal(toe, [345600.0, 360000.0, 360000.0, 360000.0, -1])
-    assert eph.select_ephemeris(table, np.array(["G02"]), t[:1])[0] == -1
+    np.testing.assert_array_equal(picked, [345600.0, 360000.0, 360000.0, 360000.0, -1])
+    assert eph.select_ephemeris(table, np.array(["G02"]), times[:1])[0] == -1
 
 
 def test_galileo_falls_back_to_the_other_message() -> None:
@@ -264,5 +264,5 @@ def test_sagnac_magnitude() -> None:
 
 
 def test_missing_column_is_a_clear_error() -> None:
-    with pytest.raises(eph.EphemerisError, match="missing column"):
+    with pytest.raises(eph.EphemerisError, match="gnss_nav frame, column 'toc_gps_s': missing column"):
         eph.nav_table(pd.DataFrame({"sat": ["G01"]}))

@@ -108,3 +108,16 @@ def test_headline_statistics_on_a_few_seeded_runs() -> None:
     assert f["fault_epochs"] > 100
     assert f["fault_not_excluded_after_2_epochs"] == 0.0
     assert f["fault_exceed_fraction"] <= 0.001
+
+
+def test_trajectory_from_geodetic_matches_ecef() -> None:
+    tr = synthetic_track()
+    s = np.array([100.0, 200.0])
+    ref = trajectory(tr, s, T0, 1.0)
+    from fieldlogs.gnss.geodesy import ecef_to_geodetic
+    from fieldlogs.gnss.simulate import Trajectory
+
+    lat, lon, h = ecef_to_geodetic(ref.ref_ecef)
+    geo = Trajectory.from_geodetic(ref.t, np.degrees(lat), np.degrees(lon), h, np.degrees(ref.heading_rad), s)
+    np.testing.assert_allclose(geo.ref_ecef, ref.ref_ecef, atol=1e-6)
+    np.testing.assert_allclose(geo.heading_rad, ref.heading_rad)
