@@ -1,7 +1,7 @@
 """Ionosphere and troposphere delay models for single-frequency pseudoranges.
 
 **Klobuchar** (IS-GPS-200N §20.3.3.5.2.5, Figure 20-4; QZSS broadcasts the same model with its
-own α/β, IS-QZSS-PNT §5.5.4.3), in semicircles (π = 3.1415926535898) with E the elevation:
+own α/β, IS-QZSS-PNT), in semicircles (π = 3.1415926535898) with E the elevation:
 ψ = 0.0137/(E + 0.11) − 0.022; φ_i = φ_u + ψ cos A clamped to ±0.416; λ_i = λ_u + ψ sin A/cos φ_i;
 φ_m = φ_i + 0.064 cos(λ_i − 1.617); t = 4.32e4·λ_i + t_GPS (mod 86 400 s);
 F = 1 + 16(0.53 − E)³; AMP = Σα_n φ_mⁿ (≥ 0); PER = Σβ_n φ_mⁿ (≥ 72 000 s);

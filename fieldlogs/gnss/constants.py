@@ -4,9 +4,9 @@ Every system is evaluated with its own interface-control document's constants:
 
 * GPS (IS-GPS-200N §20.3.3.4.3, Table 20-IV): μ = 3.986005e14 m³/s², Ω̇e = 7.2921151467e-5 rad/s,
   F = −2√μ/c² = −4.442807633e-10 s/√m (§20.3.3.3.3.1);
-* Galileo (OS SIS ICD 2.1 §5.1.1, Table 55; §5.1.4): μ = 3.986004418e14 m³/s², Ω̇e = 7.2921151467e-5 rad/s,
+* Galileo (OS SIS ICD §5.1.1 and the clock correction's F): μ = 3.986004418e14 m³/s², Ω̇e = 7.2921151467e-5 rad/s,
   F = −4.442807309e-10 s/√m;
-* QZSS (IS-QZSS-PNT-005 §5.5.3, Table 5.5.3-1, the GPS LNAV algorithm): the GPS values.
+* QZSS (IS-QZSS-PNT: the GPS LNAV algorithm and constants): the GPS values.
 
 The speed of light is c = 299 792 458 m/s for all. Times are continuous GPS seconds since
 1980-01-06T00:00:00 (no leap seconds; GST and QZSST are steered to the same scale, their

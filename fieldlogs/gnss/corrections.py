@@ -4,9 +4,9 @@ A corrections frame has one row per satellite and time of applicability:
 
 * ``gnss_time_s``, ``sat``;
 * ``prc_m`` — fast pseudorange correction, added to the measured pseudorange (RTCA DO-229
-  A.4.4.3: PR_corrected = PR + FC + RRC·(t − t_of)), with ``rrc_mps`` its range-rate correction;
+  Appendix A: PR_corrected = PR + FC + RRC·(t − t_of)), with ``rrc_mps`` its range-rate correction;
 * ``dx_m``, ``dy_m``, ``dz_m``, ``dclock_s`` — long-term correction of the broadcast satellite
-  position (ECEF) and clock (DO-229 A.4.4.4), added to the broadcast values;
+  position (ECEF) and clock (DO-229 Appendix A), added to the broadcast values;
 * ``sigma_m`` — 1σ of the corrected range (σ_flt from the UDRE, or the D-GPS residual);
 * ``usable`` — False where the augmentation says "do not use" (UDREI 15; the paper's MSAS
   screening discards such satellites);

@@ -2,8 +2,8 @@
 
 All functions take arrays of (ephemeris row, time) pairs and evaluate them at once.
 
-Orbit (IS-GPS-200N §20.3.3.4.3, Table 20-IV; Galileo OS SIS ICD §5.1.1 Table 58; IS-QZSS-PNT
-§5.5.3 uses the GPS algorithm), with each system's μ and Ω̇e (see ``constants``):
+Orbit (IS-GPS-200N §20.3.3.4.3, Table 20-IV; Galileo OS SIS ICD §5.1.1; IS-QZSS-PNT
+uses the GPS algorithm), with each system's μ and Ω̇e (see ``constants``):
 
 * A = (√A)², n = √(μ/A³) + Δn, t_k = t − Toe (continuous seconds, so no week crossover);
 * M_k = M0 + n·t_k; Kepler's equation M_k = E_k − e·sin E_k solved by Newton's iteration
@@ -311,7 +311,7 @@ class Transmission:
 def transmission_states(
     table: NavTable, sat: StrArray, t_rx: FloatArray, pseudorange_m: FloatArray, freq_hz: FloatArray, band: StrArray
 ) -> Transmission:
-    """Satellite states at transmission (IS-GPS-200N §20.3.3.3.3.1 and §20.3.3.4.3.3.1).
+    """Satellite states at transmission (IS-GPS-200N §20.3.3.3.3.1).
 
     t_sv = t_rx − ρ/c is exact in the satellite's time scale whatever the receiver clock
     (that is what a pseudorange is); t = t_sv − Δt_sv(t_sv) with Δt_sv evaluated twice
@@ -333,8 +333,9 @@ def sagnac_m(sat_pos: FloatArray, rx_pos: FloatArray, omega_e: FloatArray | floa
 
     With the satellite at its transmission position in the ECEF frame of transmission and the
     receiver in the frame of reception, the geometric range is |r_s − r_r| + this term to first
-    order in Ω̇e·τ (IS-GPS-200N §20.3.3.4.3.4 "Earth-centred, Earth-fixed" discussion; ESA GNSS
-    Data Processing Vol. I eq. 5.11). It is up to ~40 m for GPS and ~100 m for a GEO.
+    order in Ω̇e·τ (the rotation of the ECEF frame during the signal's travel that the
+    IS-GPS-200 user algorithm leaves to the user; the same form as RTKLIB's geodist). Its
+    bound Ω̇e·R_E·r_s/c is ~40 m for GPS and ~65 m for a GEO.
     """
     w = np.asarray(omega_e, dtype=float)
     return (w / C_MPS) * (sat_pos[..., 0] * rx_pos[..., 1] - sat_pos[..., 1] * rx_pos[..., 0])

@@ -7,7 +7,7 @@
   where it is missing;
 * σ_iono — residual after the model: max(``iono_frac``·model delay,
   ``iono_floor_vert_m``·F(E)), F the thin-shell obliquity 1/√(1 − (R cos E/(R + 350 km))²)
-  (Klobuchar removes ≈ 50 % rms: IS-GPS-200N §20.3.3.5.2.5; DO-229 J.2.3 bounds it more
+  (Klobuchar removes ≈ 50 % rms: IS-GPS-200N §20.3.3.5.2.5; DO-229 Appendix J bounds it more
   conservatively);
 * σ_tropo = ``tropo_vert_m``·m(E) with Black & Eisner's m (DO-229 A.4.2.4: 0.12 m);
 * σ_noise — code tracking noise by C/N0: ``noise_45_m``·10^((45 − C/N0)/20) (a DLL's σ grows

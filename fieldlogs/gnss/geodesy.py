@@ -1,7 +1,7 @@
 """WGS-84 geodesy on arrays: ECEF ↔ geodetic, local ENU frame, azimuth and elevation.
 
 * geodetic → ECEF: N = a/√(1 − e² sin²φ); x = (N + h) cos φ cos λ, y = (N + h) cos φ sin λ,
-  z = (N(1 − e²) + h) sin φ (NIMA TR8350.2 eq. 4-14);
+  z = (N(1 − e²) + h) sin φ (NIMA TR8350.2);
 * ECEF → geodetic: Bowring's iteration on φ from p = √(x² + y²) (four passes reach 1e-12 rad
   at any height a railway has);
 * ENU rows at (φ, λ): e = (−sin λ, cos λ, 0), n = (−sin φ cos λ, −sin φ sin λ, cos φ),

@@ -1,7 +1,7 @@
 """Classical unconstrained single-point positioning, batched over epochs (for comparison).
 
 Unknowns per epoch x = (x, y, z, b) plus an inter-system bias b_E for Galileo when the epoch
-has both Galileo and GPS/QZSS satellites (QZSST is steered to GPS time, IS-QZSS-PNT §3.2;
+has both Galileo and GPS/QZSS satellites (QZSST is steered to GPS time, IS-QZSS-PNT;
 GST differs by the GGTO, a few ns). Iterative weighted least squares from the Earth's centre
 (or a given start): v = ρ_c − |r_s − r| − sagnac − b − b_E·[Galileo], H = [−û, 1, [Galileo]],
 (HᵀWH)δ = HᵀWv (≤ 10 iterations, |δ| < 1 mm). An unobservable b_E is pinned to 0.

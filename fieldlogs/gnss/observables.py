@@ -84,7 +84,8 @@ class ObservationError(InputError):
 
 
 def carrier_smoothed(obs: pd.DataFrame, window_s: float = 100.0, jump_m: float = 15.0) -> pd.DataFrame:
-    """Carrier-smoothed pseudoranges (Hatch filter in its moving-window form, RTCA DO-229 J.2.4).
+    """Carrier-smoothed pseudoranges (Hatch filter in its moving-window form; DO-229's
+    airborne equipment smooths over 100 s).
 
     Per (receiver, satellite, signal) arc: ρ_s(k) = λΦ(k) + mean_{j ∈ window(k)} (ρ(j) − λΦ(j)),
     the window being the last ``window_s`` seconds of the arc. An arc restarts at a gap longer
