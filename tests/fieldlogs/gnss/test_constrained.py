@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -242,3 +244,39 @@ def test_lsq_exact_and_dops() -> None:
     assert sol.hdop[0] == pytest.approx(np.sqrt(q[0, 0] + q[1, 1]), rel=1e-3)
     assert sol.vdop[0] == pytest.approx(np.sqrt(q[2, 2]), rel=1e-3)
     assert sol.tdop[0] == pytest.approx(np.sqrt(q[3, 3]), rel=1e-3)
+
+
+def test_one_satellite_with_a_coasted_clock() -> None:
+    """With the receiver clock predicted (σ 0.3 m) one satellite fixes s: b from the prior row,
+    s from the range; σ_s = √(σ² + σ_b²)/|g|."""
+    track = straight_north()
+    s_true, b_true = 812.0, 77.0
+    p = track.point(np.array([s_true]))[0]
+    sats = np.array([sat_at(p, 0.0, 20.0)])
+    pr = np.linalg.norm(sats - p, axis=1) + b_true
+    rows = replace(rows_of(sats, pr), clock_prior_m=np.array([[b_true]]), clock_prior_sigma_m=np.array([[0.3]]))
+    sol = solve_constrained(track, rows, [Antenna()], s_init=np.array([700.0]))
+    assert sol.status[0] == STATUS_OK
+    assert sol.s[0] == pytest.approx(s_true, abs=1e-6)
+    assert sol.sigma_s[0] == pytest.approx(np.hypot(1.0, 0.3) / np.cos(np.radians(20.0)), rel=1e-3)
+
+
+def test_clock_prediction_is_causal_and_bounded() -> None:
+    from fieldlogs.gnss.coasting import predict_clock
+
+    rng = np.random.default_rng(4)
+    t = np.arange(200.0)
+    b = 30.0 + 2.5 * t + np.cumsum(rng.normal(0.0, 0.1, t.size))
+    est = b + rng.normal(0.0, 2.0, t.size)
+    ok = np.ones(t.size, bool)
+    ok[100:140] = False
+    pred, sig = predict_clock(np.full(t.size, "rx"), t, est, np.full(t.size, 2.0), ok)
+    assert np.isinf(sig[:5]).all()  # fewer than 5 solved epochs before
+    assert np.isinf(sig[131:140]).all()  # more than 30 s after the last solved epoch
+    have = np.isfinite(sig)
+    z = (pred[have] - b[have]) / sig[have]
+    assert np.mean(np.abs(z) < 3.29) > 0.99
+    changed = est.copy()
+    changed[150:] += 1000.0  # a later jump must not change earlier predictions
+    pred2, _ = predict_clock(np.full(t.size, "rx"), t, changed, np.full(t.size, 2.0), ok)
+    np.testing.assert_array_equal(pred2[:151][have[:151]], pred[:151][have[:151]])

@@ -152,3 +152,30 @@ def test_carrier_smoothing_averages_code_noise_and_restarts() -> None:
     assert np.std(err[60:120]) < 0.25
     assert sm["smooth_n"].iloc[119] == 50 and sm["smooth_n"].iloc[120] == 1 and sm["smooth_n"].iloc[130] == 11
     assert obs["pseudorange_m"].iloc[0] != sm["pseudorange_m"].iloc[5]  # input not modified, output smoothed
+
+
+def test_corrections_enter_the_corrected_pseudorange() -> None:
+    """PRC adds to the range, the long-term terms move the satellite and its clock, and a D-GPS
+    correction that covers the atmosphere switches the models off."""
+    from fieldlogs.gnss.geodesy import geodetic_to_ecef
+    from fieldlogs.gnss.observables import apply_geometry
+
+    nav = constellation_nav(T0, T0 + 600.0, seed=2, systems=("G",))
+    obs = pd.DataFrame(
+        {"t": T0, "gnss_time_s": T0, "receiver": "rx1", "sat": ["G01", "G02"], "signal": "C1C", "pseudorange_m": 2.2e7}
+    )
+    corr = pd.DataFrame(
+        {
+            "gnss_time_s": [T0 - 1.0, T0 - 1.0], "sat": ["G01", "G02"], "prc_m": [5.0, -2.0],
+            "dx_m": [1.0, 0.0], "dclock_s": [1e-9, 0.0], "covers_atmosphere": [True, False],
+        }
+    )  # fmt: skip
+    raw = build_epochs(obs, nav)
+    ep = build_epochs(obs, nav, corrections=corr)
+    np.testing.assert_allclose(ep.sat_pos[0, :, 0] - raw.sat_pos[0, :, 0], [1.0, 0.0])
+    np.testing.assert_allclose(ep.clock_m[0] - raw.clock_m[0], [0.299792458, 0.0])
+    rx = geodetic_to_ecef(np.radians(35.7), np.radians(139.7), 40.0)[None]
+    iono = {"gps_alpha": (1e-8, 0.0, 0.0, 0.0), "gps_beta": (9e4, 0.0, 0.0, 0.0)}
+    g_raw, g = apply_geometry(raw, rx, iono_params=iono), apply_geometry(ep, rx, iono_params=iono)
+    assert g.iono_m[0, 0] == 0.0 and g.tropo_m[0, 0] == 0.0 and g.iono_m[0, 1] > 0.0
+    np.testing.assert_allclose(g.pr_corr_m[0, 1] - g_raw.pr_corr_m[0, 1], -2.0)
