@@ -42,6 +42,7 @@ ROWS: tuple[tuple[str, dict[str, object]], ...] = (
     ("  + 50 m step on a used satellite", {"fault": "step"}),
     ("  + 0.2 m/s ramp on a used satellite", {"fault": "ramp"}),
     ("paper case with a 5° elevation mask", {"elevation_mask_deg": 5.0}),
+    ("paper case without a prior (search whole track)", {"use_prior": False}),
     ("GPS+Galileo+QZSS, west half + mixed corridor", {"systems": ("G", "E", "J"), "corridor": "mixed"}),
 )
 

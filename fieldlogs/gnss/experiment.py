@@ -51,6 +51,8 @@ class CaseSpec:
     fault: str | None = None
     """None, 'step' (50 m) or 'ramp' (0.2 m/s)."""
     prior_sigma_m: float = 5.0
+    use_prior: bool = True
+    """False: no prior at all (coarse search along the whole track, no prior in the tests)."""
     elevation_mask_deg: float = 10.0
 
 
@@ -102,7 +104,7 @@ def _solve(
         iono=sim.iono,
         corrections=corr,
         sky_mask=load_mask(spec.sky),
-        prior=prior,
+        prior=prior if spec.use_prior else None,
         cfg=PositionConfig(systems=spec.systems, elevation_mask_deg=spec.elevation_mask_deg),
     )
 
