@@ -146,9 +146,9 @@ def position_run(
         sol = _solve_receivers(ep, track, antennas, names, dirs, None, cfg, s_init=s1)
     if cfg.clock_coasting:
         sol = _coast(ep, track, antennas, names, dirs, pr, cfg, sol)
+    table = _with_lsq(ep, sol.table, cfg)  # the classical receiver: masks and pre-checks, no FDE
     ep.flag(sol.excluded, FLAG_EXCLUDED)
     ep.flag(sol.no_track, FLAG_NO_TRACK_SOLUTION)
-    table = _with_lsq(ep, sol.table, cfg)
     if len(names) == 2:
         table = _antenna_distance(table, track, antennas, names, direction, cfg)
     return PositionResult(table, ep, sol.mdb)
