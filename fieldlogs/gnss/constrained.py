@@ -31,7 +31,10 @@ Integrity, with redundancy (dof = rows − unknowns ≥ 1) [S002]:
   receiver can identify a faulty one (without it the three normalised residuals of a
   one-dof problem are equal). The prior is never the one excluded (a fault that hides in
   the satellites' own fit shows as a large prior residual; blaming the prior would accept
-  it): when only the prior disagrees the epoch fails. The reported s uses the satellites only.
+  it): when only the prior disagrees the epoch fails. The reported s uses the satellites only;
+* a predicted receiver clock (``Rows.clock_prior_m``, from ``coasting``) is one more
+  observation of b_k, kept in the solution and the tests and never excluded: with it one
+  satellite fixes s. In the ADOP it counts as a row of weight σ_rms²/σ_clock².
 
 Stated uncertainty U = max(k_ff·σ_s, PL): k_ff = 3.29 is the 10⁻³ two-sided bound of
 fault-free Gaussian errors, and PL the protection level against one satellite fault the
