@@ -12,8 +12,13 @@ Modules, one concern each:
 * ``lsq`` — the unconstrained (x, y, z, clock [, inter-system bias]) least squares, DOPs;
 * ``track`` — the 3-D track polyline and the antennas on the vehicle;
 * ``constrained`` — the track-constrained (s, clock per receiver) Gauss–Newton with FDE;
+  ``reference`` — the same, epoch by epoch (yardstick and check); ``linalg`` — batched solves;
+* ``coasting`` — receiver clock prediction for epochs the satellites alone cannot carry;
 * ``prechecks`` — the paper's per-epoch input checks; ``skymask`` — blocked sky;
-* ``constellation`` / ``simulate`` — GPS/Galileo/QZSS broadcast ephemerides and observations.
+* ``position`` — one run: pre-checks, geometry, constrained and unconstrained solutions;
+* ``constellation`` / ``simulate`` / ``scenario`` — GPS/Galileo/QZSS broadcast ephemerides,
+  observations, a synthetic 3-D track with runs and corridors; ``experiment`` — seeded cases
+  and their statistics for the bench and the tests.
 
 Nothing here imports the pipeline; phase 2 wires it in as an aid.
 """
