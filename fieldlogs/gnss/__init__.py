@@ -1,0 +1,24 @@
+"""GNSS core of the track-constrained positioning [S002] (SPEC §5.6).
+
+Modules, one concern each:
+
+* ``constants`` — ICD constants per system, signals, the frame columns;
+* ``ephemeris`` — broadcast ephemeris selection, satellite position/velocity/clock, Sagnac;
+* ``geodesy`` — ECEF ↔ geodetic, ENU, azimuth/elevation;
+* ``atmosphere`` — Klobuchar, the Galileo effective-ionisation model, Saastamoinen;
+* ``corrections`` — the SBAS/MSAS (or D-GPS) corrections seam;
+* ``observables`` — gnss_obs + gnss_nav frames → corrected pseudorange arrays per epoch;
+* ``errormodel`` — pseudorange σ from elevation and C/N0;
+* ``lsq`` — the unconstrained (x, y, z, clock [, inter-system bias]) least squares, DOPs;
+* ``track`` — the 3-D track polyline and the antennas on the vehicle;
+* ``constrained`` — the track-constrained (s, clock per receiver) Gauss–Newton with FDE;
+  ``reference`` — the same, epoch by epoch (yardstick and check); ``linalg`` — batched solves;
+* ``coasting`` — receiver clock prediction for epochs the satellites alone cannot carry;
+* ``prechecks`` — the paper's per-epoch input checks; ``skymask`` — blocked sky;
+* ``position`` — one run: pre-checks, geometry, constrained and unconstrained solutions;
+* ``constellation`` / ``simulate`` / ``scenario`` — GPS/Galileo/QZSS broadcast ephemerides,
+  observations, a synthetic 3-D track with runs and corridors; ``experiment`` — seeded cases
+  and their statistics for the bench and the tests.
+
+Nothing here imports the pipeline; phase 2 wires it in as an aid.
+"""
