@@ -58,8 +58,11 @@ ANTENNA: tuple[VehicleField, ...] = (
     _Y,
     _Z,
 )
-BALISE_READER: tuple[VehicleField, ...] = (_X, _Y, VehicleField("z_m", "float", "Above the rail top", "m",
-                                                                required=False, min=-1.0, max=2.0))
+BALISE_READER: tuple[VehicleField, ...] = (
+    _X,
+    _Y,
+    VehicleField("z_m", "float", "Above the rail top", "m", required=False, min=-1.0, max=2.0),
+)
 IMU: tuple[VehicleField, ...] = (
     _X,
     _Y,
@@ -71,10 +74,18 @@ IMU: tuple[VehicleField, ...] = (
 AXLE: tuple[VehicleField, ...] = (
     VehicleField("id", "str", "Axle id, unique"),
     _X,
-    VehicleField("wheel_diameter_m", "float", "Nominal wheel diameter (required on the tacho axle)", "m",
-                 required=False, min=0.2, max=1.5),
-    VehicleField("teeth", "int", "Tachometer pulses per revolution (an axle with a tacho)", required=False,
-                 min=1, max=100_000),
+    VehicleField(
+        "wheel_diameter_m",
+        "float",
+        "Nominal wheel diameter (required on the tacho axle)",
+        "m",
+        required=False,
+        min=0.2,
+        max=1.5,
+    ),
+    VehicleField(
+        "teeth", "int", "Tachometer pulses per revolution (an axle with a tacho)", required=False, min=1, max=100_000
+    ),
 )
 #: Sections of the vehicle block: (name, fields, is a list).
 VEHICLE_SECTIONS: tuple[tuple[str, tuple[VehicleField, ...], bool], ...] = (

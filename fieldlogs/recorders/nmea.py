@@ -218,8 +218,9 @@ def _dates(path: Path, rmc: pd.DataFrame, epoch: np.ndarray, key: np.ndarray, s:
     base = day0 - np.floor(key[ep] / 86400.0)
     if np.ptp(base) > 0:
         bad = int(np.flatnonzero(base != base[0])[0])
-        raise InputError("RMC date does not follow the earlier sentences' date and time", path=path,
-                         row=int(s.line[i[bad]]))
+        raise InputError(
+            "RMC date does not follow the earlier sentences' date and time", path=path, row=int(s.line[i[bad]])
+        )
     return np.full(len(key), base[0]) + np.floor(key / 86400.0)
 
 
@@ -231,8 +232,19 @@ def _put(out: pd.DataFrame, name: str, epochs: np.ndarray, values: np.ndarray) -
 
 
 def _gps_frame(tables: dict[str, pd.DataFrame], epoch: np.ndarray, n: int) -> pd.DataFrame:
-    cols = ("lat", "lon", "fix", "nsat", "hdop", "height_m", "speed_mps", "course_deg", "sigma_lat_m",
-            "sigma_lon_m", "sigma_height_m")
+    cols = (
+        "lat",
+        "lon",
+        "fix",
+        "nsat",
+        "hdop",
+        "height_m",
+        "speed_mps",
+        "course_deg",
+        "sigma_lat_m",
+        "sigma_lon_m",
+        "sigma_height_m",
+    )
     out = pd.DataFrame({c: np.full(n, np.nan) for c in cols})
     gga, rmc, gst, gsa, vtg = (tables[k] for k in ("GGA", "RMC", "GST", "GSA", "VTG"))
     if len(gga):
@@ -356,7 +368,9 @@ def write_nmea(gps: pd.DataFrame, path: Path, *, talker: str = "GN") -> int:
     Returns the number of sentences. The caller writes atomically (``dbtools.atomic``)."""
     lines: list[str] = []
     for r in gps.to_dict("records"):
-        lines += _epoch_sentences({k: float(v) if v is not None and not pd.isna(v) else np.nan
-                                   for k, v in r.items() if k != "receiver"}, talker)
+        lines += _epoch_sentences(
+            {k: float(v) if v is not None and not pd.isna(v) else np.nan for k, v in r.items() if k != "receiver"},
+            talker,
+        )
     Path(path).write_text("\r\n".join(lines) + "\r\n", encoding="ascii")
     return len(lines)

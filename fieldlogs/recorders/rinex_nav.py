@@ -29,14 +29,17 @@ from schemas.gnss import GNSS_NAV, SYSTEMS
 
 #: Broadcast-orbit lines after the epoch line, per system (RINEX 3).
 ORBIT_LINES = {"G": 7, "E": 7, "J": 7, "C": 7, "I": 7, "R": 3, "S": 3}
-KEPLER_G = ("SVclockBias SVclockDrift SVclockDriftRate IODE Crs DeltaN M0 Cuc Eccentricity Cus sqrtA Toe Cic "
-            "Omega0 Cis Io Crc omega OmegaDot IDOT CodesL2 week L2Pflag SVacc health TGD IODC TransTime "
-            "FitIntvl").split()
-KEPLER_E = ("SVclockBias SVclockDrift SVclockDriftRate IODE Crs DeltaN M0 Cuc Eccentricity Cus sqrtA Toe Cic "
-            "Omega0 Cis Io Crc omega OmegaDot IDOT DataSrc week spare0 SVacc health BGDe5a BGDe5b "
-            "TransTime").split()
-STATE_R = ("SVclockBias SVrelFreqBias MessageFrameTime X dX dX2 health Y dY dY2 FreqNum Z dZ dZ2 "
-           "AgeOpInfo").split()
+KEPLER_G = (
+    "SVclockBias SVclockDrift SVclockDriftRate IODE Crs DeltaN M0 Cuc Eccentricity Cus sqrtA Toe Cic "
+    "Omega0 Cis Io Crc omega OmegaDot IDOT CodesL2 week L2Pflag SVacc health TGD IODC TransTime "
+    "FitIntvl"
+).split()
+KEPLER_E = (
+    "SVclockBias SVclockDrift SVclockDriftRate IODE Crs DeltaN M0 Cuc Eccentricity Cus sqrtA Toe Cic "
+    "Omega0 Cis Io Crc omega OmegaDot IDOT DataSrc week spare0 SVacc health BGDe5a BGDe5b "
+    "TransTime"
+).split()
+STATE_R = ("SVclockBias SVrelFreqBias MessageFrameTime X dX dX2 health Y dY dY2 FreqNum Z dZ dZ2 AgeOpInfo").split()
 FIELDS = {"G": KEPLER_G, "J": KEPLER_G, "E": KEPLER_E, "R": STATE_R}
 KM_FIELDS = {"X", "dX", "dX2", "Y", "dY", "dY2", "Z", "dZ", "dZ2"}
 NAV_COLUMNS = GNSS_NAV.column_names
@@ -58,8 +61,14 @@ def _record(path: Path, lines: list[str], i: int, version: int) -> tuple[str, fl
         if version >= 3:
             sat = ln[:3].replace(" ", "0")
             sysl = sat[0]
-            y, mo, d, h, mi, s = (int(ln[4:8]), int(ln[9:11]), int(ln[12:14]), int(ln[15:17]), int(ln[18:20]),
-                                  float(ln[21:23]))
+            y, mo, d, h, mi, s = (
+                int(ln[4:8]),
+                int(ln[9:11]),
+                int(ln[12:14]),
+                int(ln[15:17]),
+                int(ln[18:20]),
+                float(ln[21:23]),
+            )
             first = ln[23:80]
         else:
             sat = ""
@@ -107,8 +116,13 @@ def _row(sysl: str, sat: str, t_own: float, vals: list[float]) -> dict[str, Any]
 def _header_params(header: list[str]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     corr: list[dict[str, Any]] = []
-    keys = {"GPSA": "klobuchar_alpha", "GPSB": "klobuchar_beta", "QZSA": "qzss_klobuchar_alpha",
-            "QZSB": "qzss_klobuchar_beta", "GAL": "nequick_ai"}
+    keys = {
+        "GPSA": "klobuchar_alpha",
+        "GPSB": "klobuchar_beta",
+        "QZSA": "qzss_klobuchar_alpha",
+        "QZSB": "qzss_klobuchar_beta",
+        "GAL": "nequick_ai",
+    }
     for ln in header:
         lab = label(ln)
         if lab == "IONOSPHERIC CORR":
@@ -121,11 +135,25 @@ def _header_params(header: list[str]) -> dict[str, Any]:
                 _num(ln[2 + 12 * k : 14 + 12 * k]) for k in range(4)
             ]
         elif lab == "TIME SYSTEM CORR":
-            corr.append({"type": ln[:4].strip(), "a0_s": _num(ln[5:22]), "a1_s_per_s": _num(ln[22:38]),
-                         "t_ref_s": _num(ln[38:45]), "week": _num(ln[45:50])})
+            corr.append(
+                {
+                    "type": ln[:4].strip(),
+                    "a0_s": _num(ln[5:22]),
+                    "a1_s_per_s": _num(ln[22:38]),
+                    "t_ref_s": _num(ln[38:45]),
+                    "week": _num(ln[45:50]),
+                }
+            )
         elif lab == "DELTA-UTC: A0,A1,T,W":
-            corr.append({"type": "GPUT", "a0_s": _num(ln[3:22]), "a1_s_per_s": _num(ln[22:41]),
-                         "t_ref_s": _num(ln[41:50]), "week": _num(ln[50:59])})
+            corr.append(
+                {
+                    "type": "GPUT",
+                    "a0_s": _num(ln[3:22]),
+                    "a1_s_per_s": _num(ln[22:41]),
+                    "t_ref_s": _num(ln[41:50]),
+                    "week": _num(ln[50:59]),
+                }
+            )
         elif lab == "LEAP SECONDS" and ln[:6].strip():
             out["leap_seconds"] = int(ln[:6])
     if corr:
@@ -185,16 +213,27 @@ def _header_lines(gnss: dict[str, Any]) -> list[str]:
     def h(text: str, lab: str) -> str:
         return f"{text:<60.60}{lab:<20}"
 
-    out = [h("     3.04           N: GNSS NAV DATA    M: MIXED", "RINEX VERSION / TYPE"),
-           h("trainpos            trainpos", "PGM / RUN BY / DATE")]
-    for key, tag in (("klobuchar_alpha", "GPSA"), ("klobuchar_beta", "GPSB"), ("qzss_klobuchar_alpha", "QZSA"),
-                     ("qzss_klobuchar_beta", "QZSB"), ("nequick_ai", "GAL ")):
+    out = [
+        h("     3.04           N: GNSS NAV DATA    M: MIXED", "RINEX VERSION / TYPE"),
+        h("trainpos            trainpos", "PGM / RUN BY / DATE"),
+    ]
+    for key, tag in (
+        ("klobuchar_alpha", "GPSA"),
+        ("klobuchar_beta", "GPSB"),
+        ("qzss_klobuchar_alpha", "QZSA"),
+        ("qzss_klobuchar_beta", "QZSB"),
+        ("nequick_ai", "GAL "),
+    ):
         if key in gnss:
             vals = list(gnss[key]) + [0.0] * (4 - len(gnss[key]))
             out.append(h(f"{tag:<4} " + "".join(f"{v:12.4E}" for v in vals), "IONOSPHERIC CORR"))
     for c in gnss.get("time_corrections", []):
-        out.append(h(f"{c['type']:<4} {c['a0_s']:17.10E}{c['a1_s_per_s']:16.9E} {int(c['t_ref_s']):6d} "
-                     f"{int(c['week']):4d}", "TIME SYSTEM CORR"))
+        out.append(
+            h(
+                f"{c['type']:<4} {c['a0_s']:17.10E}{c['a1_s_per_s']:16.9E} {int(c['t_ref_s']):6d} {int(c['week']):4d}",
+                "TIME SYSTEM CORR",
+            )
+        )
     if "leap_seconds" in gnss:
         out.append(h(f"{int(gnss['leap_seconds']):6d}", "LEAP SECONDS"))
     out.append(h("", "END OF HEADER"))
@@ -213,8 +252,9 @@ def write_rinex_nav(nav: pd.DataFrame, path: Path, gnss: dict[str, Any] | None =
         cal = utc_calendar(r["toc_gps_s"]) if sysl == "R" else gps_calendar(r["toc_gps_s"])
         y, mo, d, hh, mi, s = cal
         vals = [r.get(k, 0.0) * (0.001 if k in KM_FIELDS else 1.0) if k in r else 0.0 for k in FIELDS[sysl]]
-        lines.append(f"{r['sat']} {y:04d} {mo:02d} {d:02d} {hh:02d} {mi:02d} {round(s):02d}" + "".join(
-            _d(v) for v in vals[:3]))
+        lines.append(
+            f"{r['sat']} {y:04d} {mo:02d} {d:02d} {hh:02d} {mi:02d} {round(s):02d}" + "".join(_d(v) for v in vals[:3])
+        )
         rest = vals[3:]
         for k in range(0, ORBIT_LINES[sysl] * 4, 4):
             lines.append("    " + "".join(_d(v) for v in rest[k : k + 4]).rstrip() if rest[k : k + 4] else "    ")

@@ -31,8 +31,17 @@ from schemas.errors import InputError
 from schemas.gnss import SYSTEMS
 
 OBS_KINDS = {"C": "pseudorange_m", "L": "carrier_cycles", "D": "doppler_hz", "S": "cn0_dbhz"}
-OBS_COLUMNS = ["gnss_time_s", "receiver", "sat", "signal", "pseudorange_m", "carrier_cycles", "doppler_hz",
-               "cn0_dbhz", "lli"]
+OBS_COLUMNS = [
+    "gnss_time_s",
+    "receiver",
+    "sat",
+    "signal",
+    "pseudorange_m",
+    "carrier_cycles",
+    "doppler_hz",
+    "cn0_dbhz",
+    "lli",
+]
 
 
 def label(line: str) -> str:
@@ -70,14 +79,15 @@ def _obs_types(path: Path, header: list[str]) -> dict[str, list[str]]:
     return types
 
 
-def _time_system(header: list[str]) -> str:
+def time_system(header: list[str]) -> str:
+    """The TIME OF FIRST OBS time system ('' when not named)."""
     for ln in header:
         if label(ln) == "TIME OF FIRST OBS":
-            return ln[48:51].strip() or "GPS"
-    return "GPS"
+            return ln[48:51].strip()
+    return ""
 
 
-def _marker(path: Path, header: list[str]) -> str:
+def marker(path: Path, header: list[str]) -> str:
     for ln in header:
         if label(ln) == "MARKER NAME" and ln[:60].strip():
             return ln[:60].strip()
@@ -93,9 +103,21 @@ def _epochs(path: Path, body: pd.Series, first_line: int) -> tuple[np.ndarray, p
     if ep_idx[0] != 0:
         raise InputError("data before the first epoch record", path=path, row=first_line)
     e = body.iloc[ep_idx]
-    f = pd.DataFrame({k: pd.to_numeric(e.str.slice(a, b), errors="coerce").to_numpy()
-                      for k, (a, b) in {"y": (2, 6), "mo": (7, 9), "d": (10, 12), "h": (13, 15), "mi": (16, 18),
-                                        "s": (18, 29), "flag": (31, 32), "n": (32, 35)}.items()})
+    f = pd.DataFrame(
+        {
+            k: pd.to_numeric(e.str.slice(a, b), errors="coerce").to_numpy()
+            for k, (a, b) in {
+                "y": (2, 6),
+                "mo": (7, 9),
+                "d": (10, 12),
+                "h": (13, 15),
+                "mi": (16, 18),
+                "s": (18, 29),
+                "flag": (31, 32),
+                "n": (32, 35),
+            }.items()
+        }
+    )
     bad = f[["y", "mo", "d", "h", "mi", "s", "flag", "n"]].isna().any(axis=1).to_numpy()
     if bad.any():
         j = int(ep_idx[np.flatnonzero(bad)[0]])
@@ -157,7 +179,7 @@ def signal_groups(types: list[str]) -> dict[str, dict[str, int]]:
     return groups
 
 
-def _system_rows(lines: list[str], types: list[str]) -> pd.DataFrame:
+def system_rows(lines: list[str], types: list[str]) -> pd.DataFrame:
     """Long-format rows of one system's satellite records (vectorised)."""
     width = 3 + 16 * len(types)
     u = _fixed(lines, width)
@@ -180,7 +202,7 @@ def _system_rows(lines: list[str], types: list[str]) -> pd.DataFrame:
 def read_rinex_obs3(path: Path, lines: list[str], dec: Decoded) -> None:
     header, start = split_header(path, lines)
     types = _obs_types(path, header)
-    receiver = _marker(path, header)
+    receiver = marker(path, header)
     body = pd.Series(lines[start:], dtype=object)
     owner, ep = _epochs(path, body, start + 1)
     dec.records = len(ep)
@@ -197,18 +219,20 @@ def read_rinex_obs3(path: Path, lines: list[str], dec: Decoded) -> None:
     sys_letter = sats.str[0].to_numpy(dtype=object)
     unknown = np.flatnonzero(~np.isin(sys_letter, list(SYSTEMS)))
     if len(unknown):
-        raise InputError(f"unknown satellite system '{sys_letter[unknown[0]]}'", path=path,
-                         row=start + 1 + int(sat_pos[unknown[0]]))
+        raise InputError(
+            f"unknown satellite system '{sys_letter[unknown[0]]}'", path=path, row=start + 1 + int(sat_pos[unknown[0]])
+        )
     t_file = calendar_to_utc_s(ep["y"], ep["mo"], ep["d"], ep["h"] * 3600.0 + ep["mi"] * 60.0 + ep["s"])
-    t_gps = time_system_to_gps(t_file, _time_system(header))
+    t_gps = time_system_to_gps(t_file, time_system(header) or "GPS")
     out = []
     for letter in sorted(set(sys_letter)):
         if letter not in types:
             j = int(np.flatnonzero(sys_letter == letter)[0])
-            raise InputError(f"system '{letter}' has no SYS / # / OBS TYPES header line", path=path,
-                             row=start + 1 + int(sat_pos[j]))
+            raise InputError(
+                f"system '{letter}' has no SYS / # / OBS TYPES header line", path=path, row=start + 1 + int(sat_pos[j])
+            )
         sel = np.flatnonzero(sys_letter == letter)
-        rows = _system_rows(sats.iloc[sel].tolist(), types[letter])
+        rows = system_rows(sats.iloc[sel].tolist(), types[letter])
         pos = sat_pos[sel][rows["line_pos"].to_numpy(dtype=np.int64)]
         rows["gnss_time_s"] = t_gps[owner[pos]]
         rows["sat"] = body.iloc[pos].str.slice(0, 3).str.replace(" ", "0").to_numpy()
@@ -248,8 +272,9 @@ def _header(obs: pd.DataFrame, types: dict[str, list[str]], receiver: str) -> li
             lines.append(_hline(head + "".join(f" {c}" for c in ts[k : k + 13]), "SYS / # / OBS TYPES"))
     t0 = float(obs["gnss_time_s"].min())
     y, mo, d, h, mi, s = _calendar(t0)
-    lines.append(_hline(f"  {y:04d}    {mo:02d}    {d:02d}    {h:02d}    {mi:02d}   {s:10.7f}     GPS",
-                        "TIME OF FIRST OBS"))
+    lines.append(
+        _hline(f"  {y:04d}    {mo:02d}    {d:02d}    {h:02d}    {mi:02d}   {s:10.7f}     GPS", "TIME OF FIRST OBS")
+    )
     lines.append(_hline("", "END OF HEADER"))
     return lines
 

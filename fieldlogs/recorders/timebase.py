@@ -104,9 +104,9 @@ def calendar_to_utc_s(
     y = np.asarray(year, dtype=np.int64)
     m = np.asarray(month, dtype=np.int64)
     d = np.asarray(day, dtype=np.int64)
-    days = (
-        (y - 1970).astype("datetime64[Y]").astype("datetime64[M]") + (m - 1).astype("timedelta64[M]")
-    ).astype("datetime64[D]") + (d - 1).astype("timedelta64[D]")
+    days = ((y - 1970).astype("datetime64[Y]").astype("datetime64[M]") + (m - 1).astype("timedelta64[M]")).astype(
+        "datetime64[D]"
+    ) + (d - 1).astype("timedelta64[D]")
     since = (days - np.datetime64("1980-01-06", "D")).astype(np.int64).astype(np.float64) * 86400.0
     return since + np.asarray(seconds_of_day, dtype=np.float64)
 

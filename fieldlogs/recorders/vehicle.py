@@ -72,8 +72,12 @@ def _fields(sink: _Sink, fields: Sequence[VehicleField], data: Any, prefix: str)
             continue
         v, why = _typed(f, data[f.name])
         if why is not None:
-            sink.add(f"'{where}' {why}" if why.startswith("=") else f"'{where}' = {data[f.name]!r} {why}", where,
-                     data[f.name], limit=[f.min, f.max] if f.min is not None or f.max is not None else None)
+            sink.add(
+                f"'{where}' {why}" if why.startswith("=") else f"'{where}' = {data[f.name]!r} {why}",
+                where,
+                data[f.name],
+                limit=[f.min, f.max] if f.min is not None or f.max is not None else None,
+            )
             continue
         out[f.name] = v
     for k in data:
@@ -93,8 +97,11 @@ def _unique(sink: _Sink, items: list[dict[str, Any]], key: str, section: str) ->
         if v is None:
             continue
         if v in seen:
-            sink.add(f"{section}[{i}].{key} '{v}' repeats {section}[{seen[v]}]: each {key} must be unique",
-                     f"{section}[{i}].{key}", v)
+            sink.add(
+                f"{section}[{i}].{key} '{v}' repeats {section}[{seen[v]}]: each {key} must be unique",
+                f"{section}[{i}].{key}",
+                v,
+            )
         else:
             seen[v] = i
 
@@ -132,14 +139,22 @@ def _extent(sink: _Sink, v: dict[str, Any]) -> None:
     if length is None or front is None:
         return
     if front > length:
-        sink.add(f"front_x_m = {front:g} m exceeds length_m = {length:g} m: the reference point lies outside "
-                 "the vehicle", "front_x_m", front, limit=[0.0, length])
+        sink.add(
+            f"front_x_m = {front:g} m exceeds length_m = {length:g} m: the reference point lies outside the vehicle",
+            "front_x_m",
+            front,
+            limit=[0.0, length],
+        )
         return
     lo, hi = front - length - EXTENT_TOLERANCE_M, front + EXTENT_TOLERANCE_M
     for where, x in _points(v):
         if not lo <= x <= hi:
-            sink.add(f"'{where}' = {x:g} m lies outside the vehicle (x from {front - length:g} to {front:g} m)",
-                     where, x, limit=[lo, hi])
+            sink.add(
+                f"'{where}' = {x:g} m lies outside the vehicle (x from {front - length:g} to {front:g} m)",
+                where,
+                x,
+                limit=[lo, hi],
+            )
 
 
 def _tacho(sink: _Sink, v: dict[str, Any], needs_tacho: bool) -> None:
@@ -152,8 +167,12 @@ def _tacho(sink: _Sink, v: dict[str, Any], needs_tacho: bool) -> None:
     axles = {a.get("id"): (i, a) for i, a in enumerate(v.get("axles", []))}
     if axle_id not in axles:
         hint = suggest(str(axle_id), [str(k) for k in axles if k])
-        sink.add(f"tacho_axle '{axle_id}' is not an axle id" + (f" (did you mean '{hint}'?)" if hint else ""),
-                 "tacho_axle", axle_id, limit=sorted(str(k) for k in axles if k))
+        sink.add(
+            f"tacho_axle '{axle_id}' is not an axle id" + (f" (did you mean '{hint}'?)" if hint else ""),
+            "tacho_axle",
+            axle_id,
+            limit=sorted(str(k) for k in axles if k),
+        )
         return
     i, axle = axles[axle_id]
     for key in ("wheel_diameter_m", "teeth"):
@@ -175,8 +194,12 @@ def check_vehicle(
     v = _fields(sink, VEHICLE_TOP, data, "")
     kind = v.get("vehicle_kind")
     if kind is not None and kind not in {k.value for k in VehicleKind}:
-        sink.add(f"vehicle_kind '{kind}' is not train or road_rail", "vehicle_kind", kind,
-                 limit=[k.value for k in VehicleKind])
+        sink.add(
+            f"vehicle_kind '{kind}' is not train or road_rail",
+            "vehicle_kind",
+            kind,
+            limit=[k.value for k in VehicleKind],
+        )
     v.update(_sections(sink, data))
     _extent(sink, v)
     _tacho(sink, v, needs_tacho=has_tacho or kind == VehicleKind.TRAIN)
