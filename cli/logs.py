@@ -221,8 +221,8 @@ def import_(
 
     Example: trainpos logs import rx1.ubx imu.csv --mapping imu.toml --vehicle car.toml --out runs/r1
     """
-    from fieldlogs.recorders.importer import import_run
     from fieldlogs.quality.checks import check_run as _check
+    from fieldlogs.recorders.importer import import_run
 
     res = import_run(sources, out, fmt=fmt.value, mapping=mapping, vehicle=vehicle, run_id=run_id, force=force)
     c = console()

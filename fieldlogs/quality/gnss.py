@@ -17,6 +17,7 @@ block (warning when the run has no vehicle block).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -90,6 +91,16 @@ def check_gnss_obs(out: _Out, frame: pd.DataFrame) -> None:
         )
 
 
+def _missing_msg(letter: np.ndarray, miss: np.ndarray, c: str) -> Callable[[int], str]:
+    return lambda k: f"{letter[miss[k]]} ephemeris without {c}"
+
+
+def _range_msg(
+    v: np.ndarray, bad: np.ndarray, c: str, lo: float, hi: float
+) -> tuple[Callable[[int], str], Callable[[int], float]]:
+    return (lambda k: f"{c} = {v[bad[k]]:.6g} is outside [{lo:g}, {hi:g})"), (lambda k: float(v[bad[k]]))
+
+
 def check_gnss_nav(out: _Out, frame: pd.DataFrame) -> None:
     _pattern(out, frame, "sat", SAT_RE, "a satellite id like G07, E11, J02, R05")
     letter = frame["sat"].astype("string").str[:1].fillna("").to_numpy(dtype=object)
@@ -97,26 +108,13 @@ def check_gnss_nav(out: _Out, frame: pd.DataFrame) -> None:
         rows = np.isin(letter, systems)
         for c in needed:
             miss = np.flatnonzero(rows & frame[c].isna().to_numpy())
-            out.rows(
-                "log.nav_field",
-                Severity.ERROR,
-                miss,
-                lambda k, c=c: f"{letter[miss[k]]} ephemeris without {c}",
-                column=c,
-            )
+            out.rows("log.nav_field", Severity.ERROR, miss, _missing_msg(letter, miss, c), column=c)
     for c, lo, hi in (("sqrtA", *SQRT_A_RANGE), ("Eccentricity", 0.0, 0.5)):
         v = frame[c].to_numpy(dtype=float, na_value=np.nan)
         with np.errstate(invalid="ignore"):
             bad = np.flatnonzero((v < lo) | (v >= hi))
-        out.rows(
-            "log.nav_range",
-            Severity.ERROR,
-            bad,
-            lambda k, v=v, c=c, lo=lo, hi=hi: f"{c} = {v[bad[k]]:.6g} is outside [{lo:g}, {hi:g})",
-            column=c,
-            value=lambda k, v=v: float(v[bad[k]]),
-            limit=[lo, hi],
-        )
+        msg, val = _range_msg(v, bad, c, lo, hi)
+        out.rows("log.nav_range", Severity.ERROR, bad, msg, column=c, value=val, limit=[lo, hi])
     dup = np.flatnonzero(frame.duplicated(keep="first").to_numpy())
     out.rows("log.duplicate_row", Severity.WARNING, dup, lambda k: "ephemeris repeats an earlier row exactly")
 
@@ -141,8 +139,8 @@ def check_receivers(run: Run) -> list[Any]:
                 column="receiver",
             )
         ]
-    ants = vehicle.get("antennas") if isinstance(vehicle.get("antennas"), list) else []
-    known = {str(a.get("receiver")) for a in ants if isinstance(a, dict)}
+    ants = vehicle.get("antennas")
+    known = {str(a.get("receiver")) for a in (ants if isinstance(ants, list) else []) if isinstance(a, dict)}
     missing = sorted(set(obs["receiver"].dropna().astype(str)) - known)
     if not missing:
         return []

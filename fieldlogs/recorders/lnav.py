@@ -159,7 +159,7 @@ def _value(name: str, eph: dict[str, Any]) -> float:
 def encode(eph: dict[str, Any]) -> list[list[int]]:
     """Subframes 1–3 (each 10 SFRBX words) of one ephemeris (gnss_nav row of G or J)."""
     week = int(_value("week", eph))
-    tow6 = int(round((_value("TransTime", eph) + 6.0) / 6.0))
+    tow6 = round((_value("TransTime", eph) + 6.0) / 6.0)
     toc_sow = (_value("toc_gps_s", eph) - week * 604_800.0) % 604_800.0
     ints: dict[str, float] = {
         "wn": week % 1024,
@@ -177,6 +177,6 @@ def encode(eph: dict[str, Any]) -> list[list[int]]:
             x = ints[name] if name in ints else _value(name, eph)
             if semi:
                 x /= PI
-            _put(data, segs, int(round(x / scale)))
+            _put(data, segs, round(x / scale))
         out.append([(d << 6) | _parity(d) for d in data])
     return out

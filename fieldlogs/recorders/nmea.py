@@ -277,7 +277,8 @@ def _gps_frame(tables: dict[str, pd.DataFrame], epoch: np.ndarray, n: int) -> pd
             _put(out, name, e, _num(gst[k]))
     if len(gsa):
         e = epoch[gsa.index.to_numpy()]
-        used = gsa[list(range(3, 15))].notna() & gsa[list(range(3, 15))].ne("")
+        prn = gsa[list(range(3, 15))]
+        used = prn.notna() & (prn != "")
         per = pd.Series(used.sum(axis=1).to_numpy(), index=e).groupby(level=0).sum()
         _put(out, "nsat", per.index.to_numpy(), per.to_numpy(dtype=float))
         _put(out, "hdop", e, _num(gsa[16]))
@@ -367,9 +368,9 @@ def write_nmea(gps: pd.DataFrame, path: Path, *, talker: str = "GN") -> int:
     exist) per epoch; heights are written as altitude with a zero geoid separation.
     Returns the number of sentences. The caller writes atomically (``dbtools.atomic``)."""
     lines: list[str] = []
-    for r in gps.to_dict("records"):
+    for r in gps.to_dict(orient="records"):
         lines += _epoch_sentences(
-            {k: float(v) if v is not None and not pd.isna(v) else np.nan for k, v in r.items() if k != "receiver"},
+            {str(k): float(v) if v is not None and not pd.isna(v) else np.nan for k, v in r.items() if k != "receiver"},
             talker,
         )
     Path(path).write_text("\r\n".join(lines) + "\r\n", encoding="ascii")

@@ -60,7 +60,7 @@ def _record(path: Path, lines: list[str], i: int, version: int) -> tuple[str, fl
     try:
         if version >= 3:
             sat = ln[:3].replace(" ", "0")
-            sysl = sat[0]
+            sat[0]
             y, mo, d, h, mi, s = (
                 int(ln[4:8]),
                 int(ln[9:11]),

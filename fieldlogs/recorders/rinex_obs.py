@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from fieldlogs.recorders.common import Decoded, read_text
+from fieldlogs.recorders.common import Decoded
 from fieldlogs.recorders.timebase import BDT_OFFSET_S, calendar_to_utc_s, gps_to_utc, utc_to_gps
 from schemas.errors import InputError
 from schemas.gnss import SYSTEMS
@@ -312,7 +312,8 @@ def write_rinex_obs(obs: pd.DataFrame, path: Path, *, receiver: str | None = Non
             for code in types[sat[0]]:
                 r = by.get((sat, "C" + code[1:]))
                 v = np.nan if r is None else float(getattr(r, OBS_KINDS[code[0]]))
-                li = None if r is None or code[0] != "L" or pd.isna(r.lli) else int(r.lli)
+                lli = None if r is None else r.lli
+                li = None if lli is None or code[0] != "L" or pd.isna(lli) else int(lli)  # type: ignore[arg-type]
                 cells.append(_field(v, li))
             lines.append((sat + "".join(cells)).rstrip())
         n_ep += 1

@@ -40,7 +40,7 @@ from schemas.errors import FindingsError, InputError
 from schemas.findings import Finding
 from schemas.frames import suggest
 from schemas.logs import LOG_STREAMS, MAX_ABS_RATE_RADPS
-from schemas.units import G, KMH
+from schemas.units import KMH, G
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 UNIT_FACTORS = {
@@ -83,10 +83,12 @@ def _read_table(path: Path) -> pd.DataFrame:
         if path.suffix.lower() == ".parquet":
             import pyarrow.parquet as pq  # lazy: heavy
 
-            return pq.read_table(path).to_pandas()
+            frame: pd.DataFrame = pq.read_table(path).to_pandas()
+            return frame
         import pyarrow.csv as pcsv
 
-        return pcsv.read_csv(path, read_options=pcsv.ReadOptions(use_threads=False)).to_pandas()
+        table: pd.DataFrame = pcsv.read_csv(path, read_options=pcsv.ReadOptions(use_threads=False)).to_pandas()
+        return table
     except FileNotFoundError as exc:
         raise InputError("source file not found", path=path) from exc
     except (OSError, ValueError) as exc:
@@ -113,6 +115,21 @@ def _numeric(path: Path, s: pd.Series, name: str) -> np.ndarray:
     return v
 
 
+def _fitted(path: Path, raw: pd.DataFrame, tm: dict[str, Any], tau: np.ndarray, dec: Decoded) -> np.ndarray:
+    """Recorder times mapped to GPS time through the clock fitted to the logged pairs."""
+    gcol = _numeric(path, _column(path, raw, tm["gnss_column"], "GNSS time"), str(tm["gnss_column"]))
+    gb = tm.get("gnss_base", "gps")
+    if gb not in ("gps", "unix", "utc"):
+        raise InputError(f"gnss_base '{gb}' is not gps, unix or utc", path=path, column="time.gnss_base")
+    pairs = gcol if gb == "gps" else (unix_to_gps(gcol) if gb == "unix" else utc_to_gps(gcol))
+    try:
+        fit = fit_clock(tau, pairs)
+    except ValueError as exc:
+        raise InputError(f"recorder clock: {exc}", path=path, column=str(tm["gnss_column"])) from exc
+    dec.clock = {"stream": "", **fit.to_dict()}
+    return fit.apply(tau)
+
+
 def _abs_time(path: Path, raw: pd.DataFrame, tm: dict[str, Any], dec: Decoded) -> tuple[np.ndarray, bool]:
     """(GPS seconds per row — or recorder seconds when relative without start, is absolute)."""
     col = _column(path, raw, tm["column"], "t")
@@ -130,15 +147,7 @@ def _abs_time(path: Path, raw: pd.DataFrame, tm: dict[str, Any], dec: Decoded) -
         raise InputError(f"time unit '{unit}' is not one of s, ms, us", path=path, column="time.unit")
     tau = _numeric(path, col, str(tm["column"])) * TIME_UNITS[unit]
     if "gnss_column" in tm:
-        gcol = _numeric(path, _column(path, raw, tm["gnss_column"], "GNSS time"), str(tm["gnss_column"]))
-        gb = tm.get("gnss_base", "gps")
-        pairs = gcol if gb == "gps" else (unix_to_gps(gcol) if gb == "unix" else utc_to_gps(gcol))
-        try:
-            fit = fit_clock(tau, pairs)
-        except ValueError as exc:
-            raise InputError(f"recorder clock: {exc}", path=path, column=str(tm["gnss_column"])) from exc
-        dec.clock = {"stream": "", **fit.to_dict()}
-        return fit.apply(tau), True
+        return _fitted(path, raw, tm, tau, dec), True
     if base == "gps":
         return tau, True
     if base == "unix":
@@ -241,6 +250,22 @@ def _plausible(path: Path, out: dict[str, np.ndarray], stream: str, m: dict[str,
         raise FindingsError("units that cannot be right; nothing was written", findings, path=path)
 
 
+def _extract(path: Path, raw: pd.DataFrame, cols: dict[str, str], stream: str) -> dict[str, Any]:
+    """Declared columns of ``stream`` from the raw table (mapped names, else their own)."""
+    out: dict[str, Any] = {}
+    for c in LOG_STREAMS[stream].columns:
+        if c.name == "t":
+            continue
+        src = cols.get(c.name, c.name if c.name in raw.columns else None)
+        if src is None:
+            if c.required:
+                raise InputError(f"{stream} needs column '{c.name}': map it in [columns]", path=path, column=c.name)
+            continue
+        s = _column(path, raw, src, c.name)
+        out[c.name] = _numeric(path, s, str(src)) if c.dtype in ("float", "int") else s.astype("string").to_numpy()
+    return out
+
+
 def read_mapped(path: Path, mapping: dict[str, Any], mapping_file: str = "") -> Decoded:
     """One vendor table → its stream with ``gnss_time_s`` (absolute) or ``recorder_s``
     (relative time without a start: the importer aligns it to the run's start)."""
@@ -260,17 +285,7 @@ def read_mapped(path: Path, mapping: dict[str, Any], mapping_file: str = "") -> 
             path=Path(mapping_file or path),
             column=f"columns.{unknown[0]}",
         )
-    out: dict[str, Any] = {}
-    for c in table.columns:
-        if c.name == "t":
-            continue
-        src = cols.get(c.name, c.name if c.name in raw.columns else None)
-        if src is None:
-            if c.required:
-                raise InputError(f"{stream} needs column '{c.name}': map it in [columns]", path=path, column=c.name)
-            continue
-        s = _column(path, raw, src, c.name)
-        out[c.name] = _numeric(path, s, str(src)) if c.dtype in ("float", "int") else s.astype("string").to_numpy()
+    out = _extract(path, raw, cols, stream)
     _units(path, mapping, out, stream)
     if stream == "imu":
         _axes(path, mapping, out)

@@ -108,7 +108,8 @@ def calendar_to_utc_s(
         "datetime64[D]"
     ) + (d - 1).astype("timedelta64[D]")
     since = (days - np.datetime64("1980-01-06", "D")).astype(np.int64).astype(np.float64) * 86400.0
-    return since + np.asarray(seconds_of_day, dtype=np.float64)
+    out: FloatArray = since + np.asarray(seconds_of_day, dtype=np.float64)
+    return out
 
 
 @dataclass(frozen=True)

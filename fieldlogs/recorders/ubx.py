@@ -173,10 +173,8 @@ def _candidates(arr: npt.NDArray[np.uint8]) -> tuple[np.ndarray, np.ndarray, np.
     return s, end, ok
 
 
-def scan(path: Path, dec: Decoded) -> Frames:
-    """Chain the valid frames; count bad checksums and stray bytes; refuse a truncated file."""
-    arr = np.frombuffer(read_bytes(path), dtype=np.uint8)
-    s, end, ok = _candidates(arr)
+def _chain(s: np.ndarray, end: np.ndarray, ok: np.ndarray, n: int) -> tuple[list[int], int, int, int | None]:
+    """(accepted frame starts, stray bytes, bad checksums, start of a truncated last frame)."""
     starts: list[int] = []
     pos, stray, bad = 0, 0, 0
     trunc: int | None = None
@@ -187,10 +185,18 @@ def scan(path: Path, dec: Decoded) -> Frames:
             stray += a - pos
             starts.append(a)
             pos, trunc = b, None
-        elif b > len(arr):
+        elif b > n:
             trunc = a if trunc is None else trunc
         else:
             bad += 1
+    return starts, stray + (n - pos), bad, trunc
+
+
+def scan(path: Path, dec: Decoded) -> Frames:
+    """Chain the valid frames; count bad checksums and stray bytes; refuse a truncated file."""
+    arr = np.frombuffer(read_bytes(path), dtype=np.uint8)
+    s, end, ok = _candidates(arr)
+    starts, stray, bad, trunc = _chain(s, end, ok, len(arr))
     if trunc is not None:
         raise InputError(
             f"truncated UBX file: the frame at byte {trunc} declares {int(end[s == trunc][0] - trunc - 8)} payload "
@@ -198,7 +204,6 @@ def scan(path: Path, dec: Decoded) -> Frames:
             path=path,
             row=None,
         )
-    stray += len(arr) - pos
     if bad:
         dec.skipped["UBX frames with a bad checksum"] += bad
     if stray:
@@ -211,7 +216,9 @@ def scan(path: Path, dec: Decoded) -> Frames:
     length = arr[st + 4].astype(np.int64) | (arr[st + 5].astype(np.int64) << 8)
     dec.records = len(st)
     known = set(NAMES)
-    for (c, m), n in pd.Series(list(zip(cls.tolist(), mid.tolist(), strict=True))).value_counts().items():
+    pairs, counts = np.unique(cls * 256 + mid, return_counts=True)
+    for cm, n in zip(pairs.tolist(), counts.tolist(), strict=True):
+        c, m = divmod(int(cm), 256)
         if (c, m) not in known:
             dec.skipped[f"UBX message 0x{c:02X} 0x{m:02X} not imported"] += int(n)
     return Frames(arr, st, cls, mid, length)
@@ -351,13 +358,13 @@ def pvt_frames(gps: pd.DataFrame) -> Iterable[tuple[float, bytes]]:
 
     for r in gps.to_dict("records"):
         g = float(r["gnss_time_s"])
-        itow = int(round((g % 604_800.0) * 1000.0))
+        itow = round((g % 604_800.0) * 1000.0)
         utc = float(gps_to_utc(g))
         day = np.datetime64("1980-01-06") + np.timedelta64(int(utc // 86400), "D")
         y, mo, d = (int(x) for x in str(day).split("-"))
         sod = utc - (utc // 86400) * 86400
         whole = int(np.floor(sod + 1e-9))
-        nano = int(round((sod - whole) * 1e9))
+        nano = round((sod - whole) * 1e9)
         fix = int(r["fix"])
         lat = float(r["lat"]) if pd.notna(r["lat"]) else 0.0
         lon = float(r["lon"]) if pd.notna(r["lon"]) else 0.0
@@ -369,49 +376,49 @@ def pvt_frames(gps: pd.DataFrame) -> Iterable[tuple[float, bytes]]:
         sig_h = r.get("sigma_lat_m", np.nan)
         sig_v = r.get("sigma_height_m", np.nan)
         spd, crs = r.get("speed_mps", np.nan), r.get("course_deg", np.nan)
-        vals = dict(
-            iTOW=itow,
-            year=y,
-            month=mo,
-            day=d,
-            hour=whole // 3600,
-            min=(whole % 3600) // 60,
-            sec=whole % 60,
-            valid=0x7,
-            nano=nano,
-            fixType=3 if fix else 0,
-            flags=flags,
-            numSV=int(r["nsat"]),
-            lon=lon_i,
-            lat=lat_i,
-            height=h_mm,
-            hMSL=h_mm,
-            hAcc=int(round(sig_h * 1e3)) if pd.notna(sig_h) else 0,
-            vAcc=int(round(sig_v * 1e3)) if pd.notna(sig_v) else 0,
-            gSpeed=int(round(spd * 1e3)) if pd.notna(spd) else 0,
-            headMot=int(round(crs * 1e5)) if pd.notna(crs) else 0,
-        )
+        vals = {
+            "iTOW": itow,
+            "year": y,
+            "month": mo,
+            "day": d,
+            "hour": whole // 3600,
+            "min": (whole % 3600) // 60,
+            "sec": whole % 60,
+            "valid": 0x7,
+            "nano": nano,
+            "fixType": 3 if fix else 0,
+            "flags": flags,
+            "numSV": int(r["nsat"]),
+            "lon": lon_i,
+            "lat": lat_i,
+            "height": h_mm,
+            "hMSL": h_mm,
+            "hAcc": round(sig_h * 1e3) if pd.notna(sig_h) else 0,
+            "vAcc": round(sig_v * 1e3) if pd.notna(sig_v) else 0,
+            "gSpeed": round(spd * 1e3) if pd.notna(spd) else 0,
+            "headMot": round(crs * 1e5) if pd.notna(crs) else 0,
+        }
         for k, v in vals.items():
             rec[k] = v
         hp = np.zeros(1, dtype=HPPOSLLH_DTYPE)
-        for k, v in dict(
-            iTOW=itow,
-            lon=lon_i,
-            lat=lat_i,
-            height=h_mm,
-            hMSL=h_mm,
-            lonHp=int(round((lon * 1e7 - lon_i) * 100)),
-            latHp=int(round((lat * 1e7 - lat_i) * 100)),
-            heightHp=int(round((hgt * 1e3 - h_mm) * 10)),
-            hMSLHp=int(round((hgt * 1e3 - h_mm) * 10)),
-            flags=0 if fix else 1,
-        ).items():
+        for k, v in {
+            "iTOW": itow,
+            "lon": lon_i,
+            "lat": lat_i,
+            "height": h_mm,
+            "hMSL": h_mm,
+            "lonHp": round((lon * 1e7 - lon_i) * 100),
+            "latHp": round((lat * 1e7 - lat_i) * 100),
+            "heightHp": round((hgt * 1e3 - h_mm) * 10),
+            "hMSLHp": round((hgt * 1e3 - h_mm) * 10),
+            "flags": 0 if fix else 1,
+        }.items():
             hp[k] = min(v, 99) if k.endswith("Hp") else v
         out = frame(*NAV_PVT, rec.tobytes()) + frame(*NAV_HPPOSLLH, hp.tobytes())
         if pd.notna(r.get("hdop", np.nan)):
             dop = np.zeros(1, dtype=DOP_DTYPE)
             dop["iTOW"] = itow
-            dop["hDOP"] = int(round(float(r["hdop"]) * 100))
+            dop["hDOP"] = round(float(r["hdop"]) * 100)
             out += frame(*NAV_DOP, dop.tobytes())
         yield g, out
 

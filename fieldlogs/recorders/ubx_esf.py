@@ -63,8 +63,8 @@ def _samples(f: Frames) -> pd.DataFrame:
         owner = np.repeat(np.arange(len(meas)), n)
         k = np.arange(len(owner)) - np.repeat(np.cumsum(n) - n, n)
         pos = base[owner] + 8 + 4 * k
-        words = np.ascontiguousarray(f.data[pos[:, None] + np.arange(4)[None, :]]).view("<u4").ravel()
-        parts.append(pd.DataFrame({"order": f.start[meas][owner] + k, "word": words, "tag": tag[owner]}))
+        mwords = np.ascontiguousarray(f.data[pos[:, None] + np.arange(4)[None, :]]).view("<u4").ravel()
+        parts.append(pd.DataFrame({"order": f.start[meas][owner] + k, "word": mwords, "tag": tag[owner]}))
     if not parts:
         return pd.DataFrame(columns=["order", "word", "tag", "type", "value"])
     s = pd.concat(parts, ignore_index=True).sort_values("order", kind="stable").reset_index(drop=True)

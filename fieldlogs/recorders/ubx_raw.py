@@ -146,7 +146,10 @@ def read_rawx(path: Path, f: Frames, dec: Decoded, receiver: str) -> int | None:
             "doppler_hz": m["doMes"].astype(np.float64),
             "cn0_dbhz": m["cno"].astype(np.float64),
             "lli": pd.array(
-                np.where(m["locktime"] == 0, 1, 0) | np.where(((trk & 2) > 0) & ((trk & 4) == 0), 2, 0), dtype="Int64"
+                (np.where(m["locktime"] == 0, 1, 0) | np.where(((trk & 2) > 0) & ((trk & 4) == 0), 2, 0)).astype(
+                    np.int64
+                ),
+                dtype="Int64",
             ),
         }
     )[known]
@@ -249,7 +252,7 @@ def sfrbx_frames(nav: pd.DataFrame) -> list[tuple[float, bytes]]:
         sat = str(r["sat"])
         if sat[0] not in ("G", "J"):
             raise ValueError(f"the UBX writer encodes GPS/QZSS LNAV only, not {sat}")
-        subframes = lnav.encode(r)
+        subframes = lnav.encode({str(k): v for k, v in r.items()})
         t0 = float(r["week"]) * 604_800.0 + float(r["TransTime"])
         for k, words in enumerate(subframes):
             head = np.zeros(1, dtype=SFRBX_HEAD)
