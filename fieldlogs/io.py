@@ -43,7 +43,7 @@ OPTIONAL_BLOCKS = ("vehicle", "gnss", "sources")
 STREAM_SUFFIXES = (".parquet", ".csv")
 RUN_JSON_NAME = "run.json"
 #: Files a run folder may hold besides run.json and the streams.
-KNOWN_EXTRA_FILES = frozenset({"repair_log.json", "README.md", "notes.txt"})
+KNOWN_EXTRA_FILES = frozenset({"repair_log.json", "README.md", "notes.txt", "recorder"})
 #: Streams a run of each vehicle kind must have (SPEC §4: no GPS on a train, no balises
 #: on a road-rail vehicle).
 REQUIRED_STREAMS: dict[str, tuple[str, ...]] = {
@@ -295,8 +295,11 @@ def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Fi
                 )
             )
     fast: dict[str, Any] = {}
-    if all(c.name in pt.column_names for c in table.columns):
+    if all(c.name in pt.column_names for c in table.columns if c.required):
         for col in table.columns:
+            if col.name not in pt.column_names:  # an optional column absent: nulls of its type
+                fast[col.name] = pd.array([None] * pt.num_rows, dtype=PANDAS_DTYPE[col.dtype])
+                continue
             arr = _arrow_column(col, pt.column(col.name))
             if arr is None:
                 break
