@@ -207,7 +207,9 @@ def import_(
     ),
     out: Path = typer.Option(..., "--out", "-o", help="New run folder to write."),
     fmt: ImportFmt = typer.Option(ImportFmt.auto, "--format", help="auto (from the content), nmea, ubx, rinex, csv."),
-    mapping: Path | None = typer.Option(None, "--mapping", help="Mapping TOML of a CSV/Parquet source (README)."),
+    mapping: list[Path] | None = typer.Option(
+        None, "--mapping", help="Mapping TOML of a CSV/Parquet source (README); one per table source, in order."
+    ),
     vehicle: Path | None = typer.Option(None, "--vehicle", help="VEHICLE.toml: identity, antennas, axles (README)."),
     run_id: str | None = typer.Option(None, "--run-id", help="run_id (default: the first source's name)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
@@ -224,7 +226,7 @@ def import_(
     from fieldlogs.quality.checks import check_run as _check
     from fieldlogs.recorders.importer import import_run
 
-    res = import_run(sources, out, fmt=fmt.value, mapping=mapping, vehicle=vehicle, run_id=run_id, force=force)
+    res = import_run(sources, out, fmt=fmt.value, mapping=mapping or [], vehicle=vehicle, run_id=run_id, force=force)
     c = console()
     if res.warnings:
         print_findings(res.warnings, console=c, title="Warnings")

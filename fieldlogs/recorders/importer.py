@@ -48,11 +48,12 @@ class ImportResult:
     warnings: list[Finding] = field(default_factory=list)
 
 
-def detect_format(path: Path, mapping: Path | None) -> str:
+TABLE_SUFFIXES = (".csv", ".parquet", ".txt", ".tsv")
+
+
+def detect_format(path: Path) -> str:
     """nmea, ubx, rinex or csv from the file's first bytes (and name for tables)."""
-    if path.suffix.lower() in (".csv", ".parquet", ".txt", ".tsv"):
-        if mapping is None:
-            raise UsageError(f"{path}: a CSV/Parquet source needs --mapping MAP.toml")
+    if path.suffix.lower() in TABLE_SUFFIXES:
         return "csv"
     head = read_bytes(path)[:4096]
     if head[:2] == b"\xb5\x62" or (b"\xb5\x62" in head[:512] and head.count(b"\xb5\x62") > 1):
@@ -161,7 +162,7 @@ def _check_receivers(streams: dict[str, pd.DataFrame], vehicle: dict[str, Any], 
             value=missing,
             limit=sorted(known),
         )
-        raise FindingsError("a receiver without an antenna; nothing was written", [finding], path=vehicle_file)
+        raise FindingsError(f"{finding.message}; nothing was written", [finding], path=vehicle_file)
 
 
 def import_run(
@@ -169,12 +170,14 @@ def import_run(
     out: Path,
     *,
     fmt: str = "auto",
-    mapping: Path | None = None,
+    mapping: Sequence[Path] = (),
     vehicle: Path | None = None,
     run_id: str | None = None,
     force: bool = False,
 ) -> ImportResult:
-    """Decode ``sources`` and write one run folder at ``out`` (see the module docstring)."""
+    """Decode ``sources`` and write one run folder at ``out`` (see the module docstring).
+
+    ``mapping``: one mapping TOML per CSV/Parquet source, in the order of those sources."""
     out = Path(out)
     if fmt != "auto" and fmt not in FORMATS:
         raise UsageError(f"--format {fmt}: one of auto, {', '.join(FORMATS)}")
@@ -187,7 +190,15 @@ def import_run(
         raise UsageError(
             "run.json needs vehicle_id, vehicle_kind, wheel_diameter_m and teeth (SPEC §4): give --vehicle VEHICLE.toml"
         )
-    decoded = [decode(Path(s), detect_format(Path(s), mapping) if fmt == "auto" else fmt, mapping) for s in sources]
+    formats = [detect_format(Path(s)) if fmt == "auto" else fmt for s in sources]
+    n_tables = formats.count("csv")
+    if n_tables != len(mapping):
+        raise UsageError(
+            f"{n_tables} CSV/Parquet source(s) but {len(mapping)} --mapping file(s): give one mapping per "
+            "table source, in the same order"
+        )
+    maps = iter(mapping)
+    decoded = [decode(Path(s), f, next(maps) if f == "csv" else None) for s, f in zip(sources, formats, strict=True)]
     t0 = _t0(decoded)
     streams = _merge(decoded, t0)
     veh, warnings = load_vehicle(vehicle, has_tacho="tacho" in streams)

@@ -112,7 +112,7 @@ def assemble(sf1: dict[str, float], sf2: dict[str, float], sf3: dict[str, float]
     toe_week = week + (1 if sf2["Toe"] - trans < -302_400 else 0)
     toc_week = week + (1 if sf1["toc"] - trans < -302_400 else 0)
     eph: dict[str, Any] = {
-        k: v for k, v in {**sf1, **sf2, **sf3}.items() if k not in {"sf", "tow", "wn", "ura", "fit", "IODE3"}
+        k: v for k, v in {**sf1, **sf2, **sf3}.items() if k not in {"sf", "tow", "wn", "ura", "fit", "toc", "IODE3"}
     }
     eph.update(
         toc_gps_s=toc_week * 604_800.0 + sf1["toc"],

@@ -137,8 +137,8 @@ class _Sentences:
         self.talker = self.body.str[:2]
         self.type = self.body.str[2:5]
         known = self.type.isin(TYPES).to_numpy() & self.talker.isin(TALKERS).to_numpy()
-        for t, n in self.type[~known].value_counts().items():
-            dec.skipped[f"sentence type {t} not imported"] += int(n)
+        for t, n in self.body[~known].str.split(",").str[0].value_counts().items():
+            dec.skipped[f"sentence {t} not imported"] += int(n)
         self.known = known
 
     def of(self, kind: str) -> np.ndarray:

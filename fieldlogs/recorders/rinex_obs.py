@@ -216,6 +216,11 @@ def read_rinex_obs3(path: Path, lines: list[str], dec: Decoded) -> None:
         dec.skipped["epochs without satellites"] += empty
     sat_pos = np.flatnonzero((owner >= 0) & (flags[np.maximum(owner, 0)] <= 1))
     sats = body.iloc[sat_pos]
+    blank = np.flatnonzero(sats.str.strip().str.len().to_numpy() == 0)
+    if len(blank):
+        raise InputError(
+            "blank satellite record inside an epoch (blank epoch)", path=path, row=start + 1 + int(sat_pos[blank[0]])
+        )
     sys_letter = sats.str[0].to_numpy(dtype=object)
     unknown = np.flatnonzero(~np.isin(sys_letter, list(SYSTEMS)))
     if len(unknown):

@@ -247,7 +247,9 @@ def _plausible(path: Path, out: dict[str, np.ndarray], stream: str, m: dict[str,
             )
         )
     if findings:
-        raise FindingsError("units that cannot be right; nothing was written", findings, path=path)
+        raise FindingsError(
+            f"units that cannot be right: {findings[0].message}; nothing was written", findings, path=path
+        )
 
 
 def _extract(path: Path, raw: pd.DataFrame, cols: dict[str, str], stream: str) -> dict[str, Any]:

@@ -4,10 +4,10 @@
 ``schemas.gnss``). UTC → GPS: ``gps = (utc − 1980-01-06) + ΔLS(utc)`` with ΔLS = GPS − UTC
 from the leap-second table (IERS Bulletin C; 18 s since 2017-01-01).
 
-Recorder clock drift: a logger whose own clock ``τ`` runs at ``1 + b`` times GNSS time
-logs some rows with both ``τ`` and a GNSS time ``g`` (a PPS stamp, a fix time). The clock
-model ``g = a + (1 + b)·τ`` is fitted by least squares over those pairs, then every
-recorder time is mapped through it. The residual (RMS and max |g − ĝ|) is reported in the
+Recorder clock drift: a logger whose own clock ``τ`` runs at ``1 + d`` times GNSS time
+(d > 0: the recorder runs fast) logs some rows with both ``τ`` and a GNSS time ``g`` (a PPS
+stamp, a fix time). The clock model ``g = a + s·τ`` with ``s = 1 / (1 + d)`` is fitted by
+least squares over those pairs, then every recorder time is mapped through it. The residual (RMS and max |g − ĝ|) is reported in the
 run's provenance; a fit with fewer than 2 pairs, or a rate |b| above ``MAX_DRIFT``, is
 refused.
 """
@@ -114,20 +114,23 @@ def calendar_to_utc_s(
 
 @dataclass(frozen=True)
 class ClockFit:
-    """``g = offset_s + (1 + drift)·τ``; residuals of the pairs used."""
+    """``g = offset_s + slope·τ``, ``drift = 1 / slope − 1`` (recorder rate error); residuals."""
 
     offset_s: float
+    slope: float
     drift: float
     pairs: int
     residual_rms_s: float
     residual_max_s: float
 
     def apply(self, tau: npt.ArrayLike) -> FloatArray:
-        return self.offset_s + (1.0 + self.drift) * np.asarray(tau, dtype=np.float64)
+        out: FloatArray = self.offset_s + self.slope * np.asarray(tau, dtype=np.float64)
+        return out
 
     def to_dict(self) -> dict[str, float | int]:
         return {
             "offset_s": self.offset_s,
+            "slope": self.slope,
             "drift": self.drift,
             "drift_ppm": self.drift * 1e6,
             "pairs": self.pairs,
@@ -150,9 +153,9 @@ def fit_clock(tau: npt.ArrayLike, gnss: npt.ArrayLike) -> ClockFit:
         raise ValueError(f"{len(t)} usable time pair(s); at least 2 at different times are needed")
     tm, gm = t.mean(), g.mean()
     slope = float(np.dot(t - tm, g - gm) / np.dot(t - tm, t - tm))
-    drift = slope - 1.0
+    drift = 1.0 / slope - 1.0 if slope > 0 else float("inf")
     if abs(drift) > MAX_DRIFT:
         raise ValueError(f"clock rate {slope:.6f} is off GNSS time by more than {MAX_DRIFT:.0%}: wrong time unit?")
     offset = float(gm - slope * tm)
     res = g - (offset + slope * t)
-    return ClockFit(offset, drift, len(t), float(np.sqrt(np.mean(res**2))), float(np.max(np.abs(res))))
+    return ClockFit(offset, slope, drift, len(t), float(np.sqrt(np.mean(res**2))), float(np.max(np.abs(res))))

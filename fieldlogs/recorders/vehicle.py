@@ -234,5 +234,10 @@ def load_vehicle(path: Path, *, has_tacho: bool = False) -> tuple[dict[str, Any]
     vehicle, findings = check_vehicle(data, file=str(path), has_tacho=has_tacho)
     if vehicle is None:
         errors = [f for f in findings if f.severity == Severity.ERROR]
-        raise FindingsError(f"{len(errors)} error(s) in the vehicle file; nothing was written", errors, path=path)
+        raise FindingsError(
+            f"{len(errors)} error(s) in the vehicle file, first: {errors[0].column}: {errors[0].message}; "
+            "nothing was written",
+            errors,
+            path=path,
+        )
     return vehicle, findings
