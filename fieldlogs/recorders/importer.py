@@ -97,7 +97,7 @@ def _t0(decoded: Sequence[Decoded]) -> float:
 
 
 def _on_run_time(name: str, frame: pd.DataFrame, t0: float) -> pd.DataFrame:
-    f = frame.copy()
+    f = frame.copy(deep=False)
     if "recorder_s" in f.columns:
         f.insert(0, "t", f.pop("recorder_s") - float(np.nanmin(f["recorder_s"])) if len(f) else 0.0)
     elif name != "gnss_nav":
@@ -110,9 +110,12 @@ def _on_run_time(name: str, frame: pd.DataFrame, t0: float) -> pd.DataFrame:
             f[c.name] = pd.array(np.round(f[c.name].to_numpy(dtype=float, na_value=np.nan)), dtype="Float64").astype(
                 "Int64"
             )
-    keys = ["t"] if "t" in f.columns else ["sat", "toc_gps_s"]
-    if name == "gnss_obs":
-        keys = ["t", "receiver", "sat", "signal"]
+    if name not in ("gnss_obs", "gnss_nav"):
+        t = f["t"].to_numpy(dtype=float)
+        if len(t) < 2 or bool((np.diff(t) >= 0).all()):
+            return f.reset_index(drop=True)  # already in time order: no sort of millions of rows
+        return f.sort_values("t", kind="stable").reset_index(drop=True)
+    keys = ["t", "receiver", "sat", "signal"] if name == "gnss_obs" else ["sat", "toc_gps_s"]
     return f.sort_values(keys, kind="stable").reset_index(drop=True)
 
 

@@ -7,9 +7,9 @@ from the leap-second table (IERS Bulletin C; 18 s since 2017-01-01).
 Recorder clock drift: a logger whose own clock ``τ`` runs at ``1 + d`` times GNSS time
 (d > 0: the recorder runs fast) logs some rows with both ``τ`` and a GNSS time ``g`` (a PPS
 stamp, a fix time). The clock model ``g = a + s·τ`` with ``s = 1 / (1 + d)`` is fitted by
-least squares over those pairs, then every recorder time is mapped through it. The residual (RMS and max |g − ĝ|) is reported in the
-run's provenance; a fit with fewer than 2 pairs, or a rate |b| above ``MAX_DRIFT``, is
-refused.
+least squares over those pairs, then every recorder time is mapped through it. The
+residual (RMS and max |g − ĝ|) is reported in the run's provenance; a fit with fewer than
+2 pairs, or a rate error |d| above ``MAX_DRIFT``, is refused.
 """
 
 from __future__ import annotations

@@ -71,7 +71,7 @@ def obs_frame(n_epochs: int = 3, receiver: str = "rx1", t0: float = T0_GPS) -> p
 
 def nav_row(sat: str = "G07", t0: float = T0_GPS) -> dict[str, float | str]:
     """A broadcast ephemeris on exact LNAV grid values (each field a whole number of LSBs)."""
-    r: dict[str, float | str] = {c: np.nan for c in GNSS_NAV.column_names}
+    r: dict[str, float | str] = dict.fromkeys(GNSS_NAV.column_names, np.nan)
     week = t0 // 604_800
     toe = (t0 // 16 * 16) % 604_800
     pi = np.pi

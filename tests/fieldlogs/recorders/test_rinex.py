@@ -91,7 +91,7 @@ def test_obs_writer_round_trip(tmp_path: Path) -> None:
     key = ["gnss_time_s", "sat", "signal"]
     a = obs.sort_values(key).reset_index(drop=True)
     b = back.sort_values(key).reset_index(drop=True)
-    pd.testing.assert_frame_equal(a[key + ["receiver"]], b[key + ["receiver"]])
+    pd.testing.assert_frame_equal(a[[*key, "receiver"]], b[[*key, "receiver"]])
     for c in ("pseudorange_m", "carrier_cycles", "doppler_hz", "cn0_dbhz"):
         np.testing.assert_allclose(b[c], a[c], atol=5e-4, err_msg=c)  # F14.3
     assert b["lli"].tolist() == a["lli"].tolist()
@@ -117,7 +117,7 @@ def test_nav_writer_round_trip(tmp_path: Path) -> None:
             "SVacc": 3.12,
         },
     ]
-    glo: dict[str, Any] = {c: np.nan for c in GNSS_NAV.column_names}
+    glo: dict[str, Any] = dict.fromkeys(GNSS_NAV.column_names, np.nan)
     glo.update(
         sat="R05",
         toc_gps_s=T0_GPS + 900.0,
