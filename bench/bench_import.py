@@ -1,13 +1,15 @@
 """Benchmark: ``logs import`` of 10 h of 1 Hz NMEA, 10 h of 100 Hz IMU CSV and 1 h of 1 Hz
-multi-GNSS RINEX 3 (target ≤ 5 s each on one core), against the parser library alone.
+multi-GNSS RINEX 3 (target ≤ 5 s each on one core), against the parser library alone;
+also 1 h of UBX (NAV-PVT, RAWX, 100 Hz ESF-RAW; no target) against pyubx2.
 
 Run: ``OMP_NUM_THREADS=1 .venv/bin/python bench/bench_import.py``. The files are made first
 (not timed) by this project's writers. For each it prints the reader's time, the whole
 import (reader + run folder written as Parquet), the throughput, and the ratio against
 the library alone reading the same file: pynmea2 (``pynmea2.parse`` per sentence, checksum
-on), pyarrow's CSV reader (what the importer itself uses, so the ratio shows the mapping's
-cost), georinex (``georinex.load``; on a slice of ``--georinex-minutes`` of the same file,
-scaled linearly, since it takes minutes for the hour). Never fails on timing: it reports.
+on, keeping the GGA fields), pyubx2 (``UBXReader`` over every frame), pyarrow's CSV reader
+(what the importer itself uses, so the ratio shows the mapping's cost), georinex
+(``georinex.load``; on a slice of ``--georinex-minutes`` of the same file, scaled
+linearly, since it takes minutes for the hour). Never fails on timing: it reports.
 """
 
 from __future__ import annotations
@@ -87,9 +89,22 @@ z = "-z"
 def make_nmea(path: Path, hours: float) -> int:
     n = int(hours * 3600)
     k = np.arange(n, dtype=float)
-    gps = pd.DataFrame({"gnss_time_s": T0 + k, "lat": 35.9 + 1e-5 * np.sin(k / 300.0), "lon": 139.4 + 1e-6 * k,
-                        "fix": 2, "nsat": 12, "hdop": 0.8, "height_m": 40.0, "speed_mps": 15.0, "course_deg": 90.0,
-                        "sigma_lat_m": 0.4, "sigma_lon_m": 0.3, "sigma_height_m": 0.8})
+    gps = pd.DataFrame(
+        {
+            "gnss_time_s": T0 + k,
+            "lat": 35.9 + 1e-5 * np.sin(k / 300.0),
+            "lon": 139.4 + 1e-6 * k,
+            "fix": 2,
+            "nsat": 12,
+            "hdop": 0.8,
+            "height_m": 40.0,
+            "speed_mps": 15.0,
+            "course_deg": 90.0,
+            "sigma_lat_m": 0.4,
+            "sigma_lon_m": 0.3,
+            "sigma_height_m": 0.8,
+        }
+    )
     return write_nmea(gps, path)
 
 
@@ -106,18 +121,30 @@ def make_imu_csv(path: Path, hours: float) -> int:
     return n
 
 
-def make_rinex(path: Path, hours: float) -> int:
+def _obs(hours: float) -> pd.DataFrame:
     n = int(hours * 3600)
     sats = [(f"{s}{i + 1:02d}", sig) for s, (count, sig) in CONSTELLATION.items() for i in range(count)]
     per = [(sat, sig) for sat, sigs in sats for sig in sigs]
     k = np.repeat(np.arange(n, dtype=float), len(per))
     sat = np.tile([p[0] for p in per], n)
-    obs = pd.DataFrame({
-        "gnss_time_s": T0 + k, "receiver": "rx", "sat": sat, "signal": np.tile([p[1] for p in per], n),
-        "pseudorange_m": 2.2e7 + 700.0 * k + 1000.0 * np.tile(np.arange(len(per)), n),
-        "carrier_cycles": 1.15e8 + 3678.25 * k, "doppler_hz": -700.125 + 0.01 * k, "cn0_dbhz": 44.0,
-        "lli": pd.array(np.zeros(len(k), dtype=np.int64), dtype="Int64"),
-    })
+    obs = pd.DataFrame(
+        {
+            "gnss_time_s": T0 + k,
+            "receiver": "rx",
+            "sat": sat,
+            "signal": np.tile([p[1] for p in per], n),
+            "pseudorange_m": 2.2e7 + 700.0 * k + 1000.0 * np.tile(np.arange(len(per)), n),
+            "carrier_cycles": 1.15e8 + 3678.25 * k,
+            "doppler_hz": -700.125 + 0.01 * k,
+            "cn0_dbhz": 44.0,
+            "lli": pd.array(np.zeros(len(k), dtype=np.int64), dtype="Int64"),
+        }
+    )
+    return obs
+
+
+def make_rinex(path: Path, hours: float) -> int:
+    obs = _obs(hours)
     write_rinex_obs(obs, path)
     return len(obs)
 
@@ -132,14 +159,50 @@ def timed(fn: Callable[[], Any], repeat: int = 3) -> tuple[float, Any]:
 
 
 def pynmea2_alone(path: Path) -> int:
+    """pynmea2 per sentence (checksum on), keeping the GGA fields the gps stream needs."""
     import pynmea2
 
-    n = 0
+    rows = []
     with path.open(encoding="ascii") as fh:
         for line in fh:
-            pynmea2.parse(line.strip(), check=True)
+            m = pynmea2.parse(line.strip(), check=True)
+            if m.sentence_type == "GGA":
+                rows.append((m.timestamp, m.latitude, m.longitude, m.gps_qual, m.num_sats, m.horizontal_dil))
+    return len(rows)
+
+
+def pyubx2_alone(path: Path) -> int:
+    from pyubx2 import UBXReader
+
+    n = 0
+    with path.open("rb") as fh:
+        for _, _msg in UBXReader(fh, protfilter=2):
             n += 1
     return n
+
+
+def make_ubx(path: Path, hours: float) -> int:
+    """1 Hz NAV-PVT/HPPOSLLH/DOP, 1 Hz RXM-RAWX of the multi-GNSS set, 100 Hz ESF-RAW."""
+    from fieldlogs.recorders.ubx import write_ubx
+
+    n = int(hours * 3600)
+    k = np.arange(n, dtype=float)
+    gps = pd.DataFrame(
+        {
+            "gnss_time_s": T0 + k,
+            "lat": 35.9,
+            "lon": 139.4 + 1e-6 * k,
+            "fix": 2,
+            "nsat": 12,
+            "hdop": 0.8,
+            "height_m": 40.0,
+            "speed_mps": 15.0,
+            "course_deg": 90.0,
+        }
+    )
+    ti = T0 + np.arange(0.0, n, 0.01)
+    imu = pd.DataFrame({"gnss_time_s": ti, "ax": 0.1, "ay": 0.0, "az": 9.8, "wx": 0.0, "wy": 0.0, "wz": 0.01})
+    return write_ubx(path, gps=gps, obs=_obs(hours), imu=imu)
 
 
 def pyarrow_alone(path: Path) -> int:
@@ -169,9 +232,11 @@ def rinex_slice(src: Path, dst: Path, minutes: float) -> float:
 
 
 def row(name: str, size_mb: float, records: int, t_read: float, t_import: float, t_lib: float, lib: str) -> None:
-    print(f"{name:<24} {size_mb:8.1f} MB {records:>10,} rec   read {t_read:6.2f} s ({records / t_read / 1e6:5.2f} M/s, "
-          f"{size_mb / t_read:6.1f} MB/s)   import {t_import:6.2f} s {'ok' if t_import <= 5.0 else 'OVER 5 s'}   "
-          f"{lib} {t_lib:7.2f} s → ×{t_lib / t_read:.1f}")
+    print(
+        f"{name:<24} {size_mb:8.1f} MB {records:>10,} rec   read {t_read:6.2f} s ({records / t_read / 1e6:5.2f} M/s, "
+        f"{size_mb / t_read:6.1f} MB/s)   import {t_import:6.2f} s {'ok' if t_import <= 5.0 else 'OVER 5 s'}   "
+        f"{lib} {t_lib:7.2f} s → ×{t_lib / t_read:.1f}"
+    )
 
 
 def main() -> None:
@@ -180,6 +245,7 @@ def main() -> None:
     ap.add_argument("--imu-hours", type=float, default=10.0)
     ap.add_argument("--rinex-hours", type=float, default=1.0)
     ap.add_argument("--georinex-minutes", type=float, default=3.0)
+    ap.add_argument("--ubx-hours", type=float, default=1.0)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
@@ -190,6 +256,8 @@ def main() -> None:
         make_nmea(nmea, args.nmea_hours)
         make_imu_csv(csv, args.imu_hours)
         n_obs = make_rinex(rnx, args.rinex_hours)
+        ubx = tmp / "rx.ubx"
+        make_ubx(ubx, args.ubx_hours)
         print(f"files made in {time.perf_counter() - t:.1f} s (not timed below); best of 3 runs, one core")
 
         def imp(src: Path, **kw: Any) -> Callable[[], Any]:
@@ -198,22 +266,48 @@ def main() -> None:
         t_read, dec = timed(lambda: decode(nmea, "nmea", None))
         t_imp, _ = timed(imp(nmea))
         t_lib, _ = timed(lambda: pynmea2_alone(nmea), repeat=1)
-        row(f"NMEA {args.nmea_hours:g} h 1 Hz", nmea.stat().st_size / 1e6, dec.records, t_read, t_imp, t_lib,
-            "pynmea2")
+        row(f"NMEA {args.nmea_hours:g} h 1 Hz", nmea.stat().st_size / 1e6, dec.records, t_read, t_imp, t_lib, "pynmea2")
 
         t_read, dec = timed(lambda: decode(csv, "csv", tmp / "imu.toml"))
         t_imp, _ = timed(imp(csv, mapping=[tmp / "imu.toml"]))
         t_lib, _ = timed(lambda: pyarrow_alone(csv))
-        row(f"IMU CSV {args.imu_hours:g} h 100 Hz", csv.stat().st_size / 1e6, dec.records, t_read, t_imp, t_lib,
-            "pyarrow.csv")
+        row(
+            f"IMU CSV {args.imu_hours:g} h 100 Hz",
+            csv.stat().st_size / 1e6,
+            dec.records,
+            t_read,
+            t_imp,
+            t_lib,
+            "pyarrow.csv",
+        )
 
         t_read, dec = timed(lambda: decode(rnx, "rinex", None))
         t_imp, _ = timed(imp(rnx))
         part = tmp / "slice.obs"
         frac = rinex_slice(rnx, part, args.georinex_minutes)
         t_slice, _ = timed(lambda: georinex_alone(part), repeat=1)
-        row(f"RINEX 3 {args.rinex_hours:g} h ({n_obs:,} obs)", rnx.stat().st_size / 1e6, len(dec.frames["gnss_obs"]),
-            t_read, t_imp, t_slice / frac, f"georinex (×{1 / frac:.0f} of a {args.georinex_minutes:g} min slice)")
+        row(
+            f"RINEX 3 {args.rinex_hours:g} h ({n_obs:,} obs)",
+            rnx.stat().st_size / 1e6,
+            len(dec.frames["gnss_obs"]),
+            t_read,
+            t_imp,
+            t_slice / frac,
+            f"georinex (×{1 / frac:.0f} of a {args.georinex_minutes:g} min slice)",
+        )
+
+        t_read, dec = timed(lambda: decode(ubx, "ubx", None))
+        t_imp, _ = timed(imp(ubx))
+        t_lib, _ = timed(lambda: pyubx2_alone(ubx), repeat=1)
+        row(
+            f"UBX {args.ubx_hours:g} h (PVT, RAWX, ESF)",
+            ubx.stat().st_size / 1e6,
+            dec.records,
+            t_read,
+            t_imp,
+            t_lib,
+            "pyubx2 (no target)",
+        )
 
 
 if __name__ == "__main__":

@@ -89,7 +89,8 @@ def _read_table(path: Path) -> pd.DataFrame:
             return frame
         import pyarrow.csv as pcsv
 
-        table: pd.DataFrame = pcsv.read_csv(path, read_options=pcsv.ReadOptions(use_threads=False)).to_pandas()
+        arrow = pcsv.read_csv(path, read_options=pcsv.ReadOptions(use_threads=False, block_size=1 << 24))
+        table: pd.DataFrame = arrow.to_pandas(split_blocks=True, self_destruct=True)  # no 2-D block copy
         return table
     except FileNotFoundError as exc:
         raise InputError("source file not found", path=path) from exc
