@@ -1,5 +1,7 @@
 """Raw GNSS streams (SPEC §4, §5.6): observations (``gnss_obs``) and broadcast ephemerides
-(``gnss_nav``), plus the navigation header's ``gnss`` block of ``run.json``.
+(``gnss_nav``), plus the navigation header's ``gnss`` block of ``run.json`` — the inputs of
+track-constrained positioning [S002]: pseudoranges per receiver and epoch, the navigation
+messages and GNSS time.
 
 Time convention (every producer and consumer): ``gnss_time_s`` and ``toc_gps_s`` are
 continuous GPS time in seconds since 1980-01-06T00:00:00 — no leap seconds; Galileo
