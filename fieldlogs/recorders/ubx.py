@@ -13,8 +13,9 @@ truncated file: refused, naming the byte offset. Payloads of one message type ar
 gathered into one array and decoded with numpy structured dtypes.
 
 NAV-PVT: ``fix`` 2 (D-GPS) with diffSoln or an RTK carrier solution, 1 with gnssFixOK and
-a 2-D/3-D/GNSS+DR fix, else 0; epoch = GPS week (from the UTC date and the leap seconds)
-· 604800 + iTOW; frames without a valid UTC date and time are skipped and counted. hAcc
+a 2-D/3-D/GNSS+DR fix, else 0 (latitude and longitude empty when fixType is 0); epoch =
+GPS week (from the UTC date and the leap seconds) · 604800 + iTOW; frames without a valid
+UTC date and time are skipped and counted. hAcc
 and vAcc give the 1-σ sigmas (hAcc for both latitude and longitude). NAV-HPPOSLLH
 replaces latitude, longitude and height of the NAV-PVT with the same iTOW by its
 high-precision values; NAV-DOP gives the HDOP.
@@ -252,13 +253,14 @@ def _pvt(path: Path, f: Frames, dec: Decoded) -> pd.DataFrame | None:
     flags = r["flags"].astype(np.int64)
     fix_ok = (flags & 1).astype(bool) & np.isin(r["fixType"], [2, 3, 4])
     diff = ((flags & 2) > 0) | ((flags >> 6) & 3 > 0)
+    no_fix = r["fixType"] == 0  # no position at all (dead reckoning, fixType 1, keeps its estimate)
     return pd.DataFrame(
         {
             "itow": r["iTOW"].astype(np.int64),
             "offset": offset,
             "gnss_time_s": week * 604_800.0 + tow,
-            "lat": r["lat"] * 1e-7,
-            "lon": r["lon"] * 1e-7,
+            "lat": np.where(no_fix, np.nan, r["lat"] * 1e-7),
+            "lon": np.where(no_fix, np.nan, r["lon"] * 1e-7),
             "fix": np.where(fix_ok, np.where(diff, 2, 1), 0).astype(np.int64),
             "nsat": r["numSV"].astype(np.int64),
             "hdop": np.full(len(r), np.nan),
@@ -386,7 +388,7 @@ def pvt_frames(gps: pd.DataFrame) -> Iterable[tuple[float, bytes]]:
             "sec": whole % 60,
             "valid": 0x7,
             "nano": nano,
-            "fixType": 3 if fix else 0,
+            "fixType": 3 if fix else (1 if pd.notna(r["lat"]) else 0),  # a position without a fix: DR
             "flags": flags,
             "numSV": int(r["nsat"]),
             "lon": lon_i,

@@ -245,3 +245,25 @@ def test_ubx_import_with_raw_observations(imported: tuple[Path, Path, dict[str, 
     res = invoke("logs", "check", out, "--format", "json")
     rules = {f["rule"] for f in json.loads(res.output)["runs"][0]["findings"]}
     assert rules == {"log.missing_stream"}  # a train without imu and tacho: reported, not refused
+
+
+def test_simulate_writes_the_gnss_part_as_a_recorder(sim: AuditData, tmp_path: Path) -> None:
+    out = tmp_path / "sim-ubx"
+    res = invoke("simulate", "--db", sim.db, "--out", out, "--seed", "5", "--format", "ubx")
+    assert res.exit_code == 0, res.output
+    ubx = out / "recorder" / "gnss.ubx"
+    assert ubx.is_file()
+    assert "log.unknown_file" not in {f.rule for f in Run(out).findings}  # recorder/ is a known extra
+    gps = Run(out).stream("gps")
+    assert gps is not None
+    from fieldlogs.recorders.ubx import read_ubx
+
+    back = read_ubx(ubx).frames["gps"]
+    assert len(back) == len(gps)
+    np.testing.assert_allclose(back["lat"], gps["lat"], atol=1e-9)  # NaN where there is no fix, both sides
+    assert back["fix"].tolist() == gps["fix"].tolist()
+    # no raw observations in a simulated run yet: rinex is refused and nothing is left behind
+    out2 = tmp_path / "sim-rinex"
+    res = invoke("simulate", "--db", sim.db, "--out", out2, "--seed", "5", "--format", "rinex")
+    assert res.exit_code == 2 and "gnss_obs" in res.output
+    assert not out2.exists()
