@@ -63,7 +63,7 @@ def write_recorder_files(run_folder: Path, fmt: str, *, force: bool = False) -> 
             names.append("gnss.nmea")
         elif fmt == "ubx":
             gj = nav[nav["sat"].str[0].isin(["G", "J"])] if nav is not None else None
-            ubx.write_ubx(tmp / "gnss.ubx", gps=gps, obs=obs, nav=gj)
+            ubx.write_ubx(tmp / "gnss.ubx", gps=gps, obs=obs, nav=gj, gnss=run.raw_json.get("gnss") or None)
             names.append("gnss.ubx")
         else:
             if obs is None or not len(obs):

@@ -180,3 +180,74 @@ def encode(eph: dict[str, Any]) -> list[list[int]]:
             _put(data, segs, round(x / scale))
         out.append([(d << 6) | _parity(d) for d in data])
     return out
+
+
+# Subframe 4, page 18 (SV ID 56): ionosphere and UTC parameters (IS-GPS-200 §20.3.3.5.1.6–7).
+IONO_UTC: list[_F] = [
+    ("page", [(3, 3, 6)], 1.0, False, False),
+    ("a0", [(3, 9, 8)], 2.0**-30, True, False),
+    ("a1", [(3, 17, 8)], 2.0**-27, True, False),
+    ("a2", [(4, 1, 8)], 2.0**-24, True, False),
+    ("a3", [(4, 9, 8)], 2.0**-24, True, False),
+    ("b0", [(4, 17, 8)], 2.0**11, True, False),
+    ("b1", [(5, 1, 8)], 2.0**14, True, False),
+    ("b2", [(5, 9, 8)], 2.0**16, True, False),
+    ("b3", [(5, 17, 8)], 2.0**16, True, False),
+    ("A1", [(6, 1, 24)], 2.0**-50, True, False),
+    ("A0", [(7, 1, 24), (8, 1, 8)], 2.0**-30, True, False),
+    ("tot", [(8, 9, 8)], 2.0**12, False, False),
+    ("WNt", [(8, 17, 8)], 1.0, False, False),
+    ("dtLS", [(9, 1, 8)], 1.0, True, False),
+]
+IONO_UTC_PAGE = 56
+
+
+def decode_iono_utc(words: list[int], week_hint: int) -> dict[str, Any] | None:
+    """The ``gnss`` block entries of subframe 4 page 18, or None for any other page."""
+    data = [(w >> 6) & 0xFFFFFF for w in words]
+    if (data[1] >> 2) & 0x7 != 4:
+        return None
+    v: dict[str, float] = {}
+    for name, segs, scale, signed, _semi in IONO_UTC:
+        x, n = _bits(data, segs)
+        if signed and x >= 1 << (n - 1):
+            x -= 1 << n
+        v[name] = x * scale
+    if int(v["page"]) != IONO_UTC_PAGE:
+        return None
+    wnt = week_hint + ((int(v["WNt"]) - week_hint) % 256 + 128) % 256 - 128
+    return {
+        "alpha": [v["a0"], v["a1"], v["a2"], v["a3"]],
+        "beta": [v["b0"], v["b1"], v["b2"], v["b3"]],
+        "leap_seconds": int(v["dtLS"]),
+        "correction": {"a0_s": v["A0"], "a1_s_per_s": v["A1"], "t_ref_s": v["tot"], "week": float(wnt)},
+    }
+
+
+def encode_iono_utc(
+    alpha: list[float], beta: list[float], leap_seconds: int, corr: dict[str, float], tow6: int
+) -> list[int]:
+    """Subframe 4 page 18 (10 SFRBX words) from Klobuchar α/β, ΔtLS and the GPS−UTC correction."""
+    data = [0] * 10
+    data[0] = PREAMBLE << 16
+    data[1] = ((tow6 % 100_800) << 7) | (4 << 2)
+    values = {
+        "page": IONO_UTC_PAGE,
+        "a0": alpha[0],
+        "a1": alpha[1],
+        "a2": alpha[2],
+        "a3": alpha[3],
+        "b0": beta[0],
+        "b1": beta[1],
+        "b2": beta[2],
+        "b3": beta[3],
+        "A1": corr["a1_s_per_s"],
+        "A0": corr["a0_s"],
+        "tot": corr["t_ref_s"],
+        "WNt": int(corr["week"]) % 256,
+        "dtLS": leap_seconds,
+    }
+    data[2] |= 1 << 22  # data ID 01
+    for name, segs, scale, _signed, _semi in IONO_UTC:
+        _put(data, segs, round(float(values[name]) / scale))
+    return [(d << 6) | _parity(d) for d in data]

@@ -29,6 +29,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -434,15 +435,18 @@ def write_ubx(
     imu: pd.DataFrame | None = None,
     tacho: pd.DataFrame | None = None,
     esf_drift: float = 0.0,
+    gnss: dict[str, Any] | None = None,
 ) -> int:
     """One UBX file from any of the frames (each with ``gnss_time_s``; ``nav`` G/J rows).
 
     Frames are written in time order; at equal times sensor data come before the epoch's
     NAV-PVT, as the reader's clock pairing expects. ESF time tags are ms of a recorder
     clock started at the first GNSS time and running ``1 + esf_drift`` times GNSS time.
+    ``gnss`` (run.json's block: Klobuchar α/β, leap seconds, a GPUT correction) is sent as
+    GPS subframe 4 page 18 at the first epoch.
     Returns the number of frames; the caller writes atomically."""
     from fieldlogs.recorders.ubx_esf import esf_frames
-    from fieldlogs.recorders.ubx_raw import rawx_frames, sfrbx_frames
+    from fieldlogs.recorders.ubx_raw import iono_frames, rawx_frames, sfrbx_frames
 
     items: list[tuple[float, int, bytes]] = []
     starts = [float(x["gnss_time_s"].min()) for x in (gps, obs, imu, tacho) if x is not None and len(x)]
@@ -452,6 +456,8 @@ def write_ubx(
         items += [(g, 3, b) for g, b in rawx_frames(obs)]
     if nav is not None and len(nav):
         items += [(g, 4, b) for g, b in sfrbx_frames(nav)]
+    if gnss and starts:
+        items += [(g, 4, b) for g, b in iono_frames(gnss, min(starts))]
     if starts and ((imu is not None and len(imu)) or (tacho is not None and len(tacho))):
         items += [(g, 1, b) for g, b in esf_frames(imu, tacho, t_ref_gps=min(starts), drift=esf_drift)]
     items.sort(key=lambda x: (x[0], x[1]))

@@ -12,8 +12,10 @@ C/N0 is whole dB-Hz, Doppler single precision: the round-trip resolution.
 
 SFRBX: GPS and QZSS L1 C/A subframes (10 words) are assembled per satellite into an
 ephemeris when subframes 1, 2 and 3 agree on IODC/IODE (``lnav.assemble``); repeats of an
-ephemeris already decoded are dropped. Galileo I/NAV, GLONASS strings, BeiDou D1/D2 and
-subframes 4–5 are counted as skipped (not decoded).
+ephemeris already decoded are dropped. GPS (QZSS) subframe 4 page 18 gives the ``gnss``
+block: Klobuchar α/β (``qzss_klobuchar_*``), ΔtLS → ``leap_seconds`` and A0, A1, tot, WNt →
+a GPUT ``time_corrections`` entry (``lnav.decode_iono_utc``). Galileo I/NAV, GLONASS
+strings, BeiDou D1/D2 and the almanac pages are counted as skipped (not decoded).
 """
 
 from __future__ import annotations
@@ -168,6 +170,21 @@ def _skip_reason(gnss: int, words: int) -> str:
     )
 
 
+def _other_subframe(dec: Decoded, gnss: int, sf: int, words: list[int], week_hint: int | None) -> None:
+    """Subframe 4 page 18 → the ``gnss`` block (first one kept); others counted as skipped."""
+    iono = lnav.decode_iono_utc(words, week_hint) if sf == 4 and week_hint is not None else None
+    if iono is None:
+        reason = "SFRBX LNAV almanac subframes not decoded" if sf in (4, 5) else "SFRBX words without a preamble"
+        dec.skipped[reason] += 1
+        return
+    prefix = "qzss_" if gnss == 5 else ""
+    dec.gnss.setdefault(f"{prefix}klobuchar_alpha", iono["alpha"])
+    dec.gnss.setdefault(f"{prefix}klobuchar_beta", iono["beta"])
+    if gnss == 0:
+        dec.gnss.setdefault("leap_seconds", iono["leap_seconds"])
+        dec.gnss.setdefault("time_corrections", [{"type": "GPUT", **iono["correction"]}])
+
+
 def read_sfrbx(path: Path, f: Frames, dec: Decoded, week_hint: int | None) -> None:
     """SFRBX → dec.frames['gnss_nav'] (GPS, QZSS)."""
     idx = f.of((0x02, 0x13))
@@ -184,11 +201,7 @@ def read_sfrbx(path: Path, f: Frames, dec: Decoded, week_hint: int | None) -> No
         words = np.frombuffer(f.payload(i)[8 : 8 + 40], dtype="<u4").tolist()
         sf = lnav.subframe_id(words)
         if sf not in (1, 2, 3):
-            dec.skipped[
-                "SFRBX LNAV subframes 4-5 (almanac, ionosphere, UTC) not decoded"
-                if sf in (4, 5)
-                else "SFRBX LNAV words without a valid preamble"
-            ] += 1
+            _other_subframe(dec, gnss, sf, words, week_hint)
             continue
         sat = f"{GNSS_LETTER[gnss]}{sv:02d}"
         cur = last.setdefault(sat, {})
@@ -243,10 +256,38 @@ def rawx_frames(obs: pd.DataFrame) -> list[tuple[float, bytes]]:
     return out
 
 
-def sfrbx_frames(nav: pd.DataFrame) -> list[tuple[float, bytes]]:
-    """(GPS time of transmission, RXM-SFRBX frame) for subframes 1–3 of each G/J ephemeris."""
+def _sfrbx(gnss: int, sv: int, words: list[int]) -> bytes:
     from fieldlogs.recorders.ubx import frame
 
+    head = np.zeros(1, dtype=SFRBX_HEAD)
+    head["gnssId"] = gnss
+    head["svId"] = sv
+    head["numWords"] = 10
+    head["version"] = 2
+    return frame(0x02, 0x13, head.tobytes() + np.array(words, dtype="<u4").tobytes())
+
+
+def iono_frames(gnss_block: dict[str, Any], t_gps: float) -> list[tuple[float, bytes]]:
+    """Subframe 4 page 18 (GPS) from run.json's ``gnss`` block, sent at ``t_gps``."""
+    need = ("klobuchar_alpha", "klobuchar_beta", "leap_seconds", "time_corrections")
+    if not all(k in gnss_block for k in need):
+        return []
+    corr = next((c for c in gnss_block["time_corrections"] if c.get("type") == "GPUT"), None)
+    if corr is None:
+        return []
+    tow6 = round((t_gps % 604_800.0) / 6.0) + 1
+    words = lnav.encode_iono_utc(
+        list(gnss_block["klobuchar_alpha"]),
+        list(gnss_block["klobuchar_beta"]),
+        int(gnss_block["leap_seconds"]),
+        corr,
+        tow6,
+    )
+    return [(t_gps, _sfrbx(0, 1, words))]
+
+
+def sfrbx_frames(nav: pd.DataFrame) -> list[tuple[float, bytes]]:
+    """(GPS time of transmission, RXM-SFRBX frame) for subframes 1–3 of each G/J ephemeris."""
     out = []
     for r in nav.to_dict("records"):
         sat = str(r["sat"])
@@ -255,10 +296,5 @@ def sfrbx_frames(nav: pd.DataFrame) -> list[tuple[float, bytes]]:
         subframes = lnav.encode({str(k): v for k, v in r.items()})
         t0 = float(r["week"]) * 604_800.0 + float(r["TransTime"])
         for k, words in enumerate(subframes):
-            head = np.zeros(1, dtype=SFRBX_HEAD)
-            head["gnssId"] = LETTER_GNSS[sat[0]]
-            head["svId"] = int(sat[1:])
-            head["numWords"] = 10
-            head["version"] = 2
-            out.append((t0 + 6.0 * k, frame(0x02, 0x13, head.tobytes() + np.array(words, dtype="<u4").tobytes())))
+            out.append((t0 + 6.0 * k, _sfrbx(LETTER_GNSS[sat[0]], int(sat[1:]), words)))
     return out

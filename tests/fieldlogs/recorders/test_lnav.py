@@ -56,6 +56,18 @@ def test_week_rollover_resolved_near_the_hint() -> None:
     assert eph["week"] == row["week"]
 
 
+def test_iono_utc_page_round_trip() -> None:
+    alpha = [18 * 2.0**-30, 15 * 2.0**-27, -1 * 2.0**-24, -2 * 2.0**-24]
+    beta = [59 * 2.0**11, 8 * 2.0**14, -2 * 2.0**16, -3 * 2.0**16]
+    corr = {"a0_s": -5 * 2.0**-30, "a1_s_per_s": -7 * 2.0**-50, "t_ref_s": 61_440.0, "week": 2447.0}
+    words = lnav.encode_iono_utc(alpha, beta, 18, corr, tow6=1000)
+    assert lnav.subframe_id(words) == 4
+    got = lnav.decode_iono_utc(words, week_hint=2450)
+    assert got == {"alpha": alpha, "beta": beta, "leap_seconds": 18, "correction": corr}
+    other = lnav.encode(nav_row())[0]
+    assert lnav.decode_iono_utc(other, week_hint=2450) is None
+
+
 def test_preamble_checked() -> None:
     words = lnav.encode(nav_row())[0]
     assert lnav.subframe_id(words) == 1

@@ -73,6 +73,22 @@ def test_gnss_round_trip_through_pyubx2_and_the_reader(tmp_path: Path) -> None:
                 assert nv.loc[sat, c] == pytest.approx(want[c], rel=1e-15, abs=1e-25), (sat, c)
 
 
+def test_ionosphere_and_utc_from_subframe_4(tmp_path: Path) -> None:
+    gnss = {
+        "klobuchar_alpha": [18 * 2.0**-30, 15 * 2.0**-27, -(2.0**-24), -2 * 2.0**-24],
+        "klobuchar_beta": [59 * 2.0**11, 8 * 2.0**14, -2 * 2.0**16, -3 * 2.0**16],
+        "leap_seconds": 18,
+        "time_corrections": [
+            {"type": "GPUT", "a0_s": -5 * 2.0**-30, "a1_s_per_s": -7 * 2.0**-50, "t_ref_s": 61_440.0, "week": 2447.0}
+        ],
+    }
+    p = tmp_path / "rx.ubx"
+    write_ubx(p, gps=gps_frame(3), obs=obs_frame(3), gnss=gnss)
+    dec = read_ubx(p)
+    assert dec.gnss == gnss
+    assert "SFRBX LNAV almanac subframes not decoded" not in dec.skipped
+
+
 def test_esf_axes_units_and_a_drifting_clock(tmp_path: Path) -> None:
     imu, tacho = _sensors()
     gps = gps_frame(20)
