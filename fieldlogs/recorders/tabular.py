@@ -80,30 +80,60 @@ def load_mapping(path: Path) -> dict[str, Any]:
     return m
 
 
-def _read_table(path: Path) -> pd.DataFrame:
+def _wanted(mapping: dict[str, Any]) -> dict[str, bool]:
+    """Source columns the mapping reads → numeric (True) or text (False)."""
+    table = LOG_STREAMS[str(mapping["stream"])]
+    cols = mapping.get("columns", {})
+    out = {str(cols.get(c.name, c.name)): c.dtype in ("float", "int") for c in table.columns if c.name != "t"}
+    tm = mapping["time"]
+    out[str(tm["column"])] = tm.get("base", "relative") != "utc"
+    if "gnss_column" in tm:
+        out[str(tm["gnss_column"])] = True
+    return out
+
+
+def _read_table(path: Path, mapping: dict[str, Any]) -> pd.DataFrame:
+    """Only the columns the mapping reads, numeric ones parsed straight to float64 (pyarrow's
+    type inference costs more than the parse); a cell that is not a number falls back to
+    text so that ``_numeric`` names its row. ``attrs['all_columns']``: every column name."""
+    import pyarrow as pa
+
     try:
         if path.suffix.lower() == ".parquet":
             import pyarrow.parquet as pq  # lazy: heavy
 
-            frame: pd.DataFrame = pq.read_table(path).to_pandas()
-            return frame
-        import pyarrow.csv as pcsv
+            names = pq.read_schema(path).names
+            keep = [c for c in _wanted(mapping) if c in names]
+            frame: pd.DataFrame = pq.read_table(path, columns=keep).to_pandas()
+        else:
+            import pyarrow.csv as pcsv
 
-        arrow = pcsv.read_csv(path, read_options=pcsv.ReadOptions(use_threads=False, block_size=1 << 24))
-        table: pd.DataFrame = arrow.to_pandas(split_blocks=True, self_destruct=True)  # no 2-D block copy
-        return table
+            opts = pcsv.ReadOptions(use_threads=False, block_size=1 << 24)
+            names = pcsv.open_csv(path, read_options=pcsv.ReadOptions(use_threads=False)).schema.names
+            want = {c: numeric for c, numeric in _wanted(mapping).items() if c in names}
+            types = {c: pa.float64() if numeric else pa.string() for c, numeric in want.items()}
+            conv = pcsv.ConvertOptions(include_columns=list(want), column_types=types)
+            try:
+                arrow = pcsv.read_csv(path, read_options=opts, convert_options=conv)
+            except pa.ArrowInvalid:
+                text = pcsv.ConvertOptions(include_columns=list(want), column_types=dict.fromkeys(want, pa.string()))
+                arrow = pcsv.read_csv(path, read_options=opts, convert_options=text)
+            frame = arrow.to_pandas(split_blocks=True, self_destruct=True)  # no 2-D block copy
     except FileNotFoundError as exc:
         raise InputError("source file not found", path=path) from exc
     except (OSError, ValueError) as exc:
         raise InputError(f"not a readable CSV/Parquet table: {exc}", path=path) from exc
+    frame.attrs["all_columns"] = list(names)
+    return frame
 
 
 def _column(path: Path, raw: pd.DataFrame, source: str, target: str) -> pd.Series:
     if source not in raw.columns:
-        hint = suggest(str(source), [str(c) for c in raw.columns])
+        names = [str(c) for c in raw.attrs.get("all_columns", raw.columns)]
+        hint = suggest(str(source), names)
         raise InputError(
             f"the mapping names column '{source}' (for {target}), which the file does not have"
-            + (f" (did you mean '{hint}'?)" if hint else f"; columns: {', '.join(map(str, raw.columns))}"),
+            + (f" (did you mean '{hint}'?)" if hint else f"; columns: {', '.join(names)}"),
             path=path,
             column=str(source),
         )
@@ -278,7 +308,7 @@ def read_mapped(path: Path, mapping: dict[str, Any], mapping_file: str = "") -> 
     (relative time without a start: the importer aligns it to the run's start)."""
     path = Path(path)
     dec = Decoded(str(path), "csv" if path.suffix.lower() != ".parquet" else "parquet")
-    raw = _read_table(path)
+    raw = _read_table(path, mapping)
     dec.records = len(raw)
     stream = str(mapping["stream"])
     table = LOG_STREAMS[stream]

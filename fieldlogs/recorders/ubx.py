@@ -1,7 +1,9 @@
 """u-blox UBX binary → ``gps`` (NAV-PVT, NAV-HPPOSLLH, NAV-DOP), ``gnss_obs`` / ``gnss_nav``
 (RXM-RAWX, RXM-SFRBX: ``ubx_raw``), ``imu`` / ``tacho`` (ESF-RAW, ESF-MEAS: ``ubx_esf``).
 
-Framing, vectorised: every ``B5 62`` is a candidate frame (class, id, little-endian length
+Framing. The usual file is a clean chain of frames from byte 0: walked by the length
+fields, then all checksums verified at once with two ``reduceat`` sums. Any other file
+takes the general path, vectorised: every ``B5 62`` is a candidate frame (class, id, little-endian length
 L, payload, CK_A, CK_B); the 8-bit Fletcher checksum over class…payload of all candidates
 at once from two wrapping prefix sums, ``CK_A = S1[b] − S1[a]`` and
 ``CK_B = b·(S1[b] − S1[a]) − (S2[b] − S2[a])`` (mod 256, with S2 the prefix sum of j·byte_j;
@@ -194,14 +196,57 @@ def _chain(s: np.ndarray, end: np.ndarray, ok: np.ndarray, n: int) -> tuple[list
     return starts, stray + (n - pos), bad, trunc
 
 
+def _frame_checksums(arr: npt.NDArray[np.uint8], s: np.ndarray, end: np.ndarray) -> np.ndarray:
+    """Checksum ok of non-overlapping frames [s, end): two ``reduceat`` passes, mod 256.
+
+    CK_A = Σ b_j, CK_B = Σ (hi − j)·b_j = hi·CK_A − Σ (j mod 256)·b_j (mod 256) over
+    j ∈ [s + 2, end − 2)."""
+    n = len(arr)
+    lo, hi = s + 2, end - 2
+    idx = np.empty(2 * len(s), dtype=np.int64)
+    idx[0::2], idx[1::2] = lo, hi
+    idx = np.minimum(idx, n - 1)
+    weights = np.tile(np.arange(256, dtype=np.uint16), n // 256 + 1)[:n] * arr  # (j mod 256)·b_j < 2^16
+    a = np.add.reduceat(arr, idx, dtype=np.uint64)[0::2]
+    w = np.add.reduceat(weights, idx, dtype=np.uint64)[0::2]
+    empty = hi <= lo  # zero-length payload and no class/id: cannot happen (hi − lo ≥ 4)
+    a[empty], w[empty] = 0, 0
+    ck_a = a & np.uint64(0xFF)
+    with np.errstate(over="ignore"):
+        ck_b = (hi.astype(np.uint64) * a - w) & np.uint64(0xFF)
+    return (ck_a == arr[end - 2]) & (ck_b == arr[end - 1])
+
+
+def _fast_chain(arr: npt.NDArray[np.uint8]) -> list[int] | None:
+    """Frame starts when the file is a clean chain of valid frames from byte 0 (the usual
+    case), else None and the caller takes the general path."""
+    n = len(arr)
+    starts: list[int] = []
+    pos = 0
+    data = arr.tobytes()
+    while pos + 8 <= n and data[pos : pos + 2] == SYNC:
+        starts.append(pos)
+        pos += 8 + (data[pos + 4] | (data[pos + 5] << 8))
+    if pos != n or not starts:
+        return None
+    st = np.array(starts, dtype=np.int64)
+    end = np.append(st[1:], n)
+    return starts if bool(_frame_checksums(arr, st, end).all()) else None
+
+
 def scan(path: Path, dec: Decoded) -> Frames:
     """Chain the valid frames; count bad checksums and stray bytes; refuse a truncated file."""
     arr = np.frombuffer(read_bytes(path), dtype=np.uint8)
-    s, end, ok = _candidates(arr)
-    starts, stray, bad, trunc = _chain(s, end, ok, len(arr))
+    fast = _fast_chain(arr)
+    if fast is not None:
+        starts, stray, bad, trunc = fast, 0, 0, None
+    else:
+        s, end, ok = _candidates(arr)
+        starts, stray, bad, trunc = _chain(s, end, ok, len(arr))
     if trunc is not None:
+        declared = int(arr[trunc + 4]) | (int(arr[trunc + 5]) << 8)
         raise InputError(
-            f"truncated UBX file: the frame at byte {trunc} declares {int(end[s == trunc][0] - trunc - 8)} payload "
+            f"truncated UBX file: the frame at byte {trunc} declares {declared} payload "
             f"bytes, only {len(arr) - trunc - 8 if len(arr) > trunc + 8 else 0} are left",
             path=path,
             row=None,

@@ -136,3 +136,13 @@ def test_parquet_source(tmp_path: Path) -> None:
     a = read_mapped(csv, _mapping()).frames["imu"]
     b = read_mapped(pq, _mapping()).frames["imu"]
     pd.testing.assert_frame_equal(a, b)
+
+
+def test_a_cell_that_is_not_a_number_is_named_by_line(tmp_path: Path) -> None:
+    p = _imu_file(tmp_path)
+    lines = p.read_text().splitlines()
+    lines[5] = lines[5].replace("1.0", "one", 1)
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match="'one' is not a number") as exc:
+        read_mapped(p, _mapping())
+    assert (exc.value.row, exc.value.column) == (6, "az")

@@ -161,3 +161,19 @@ def test_not_ubx(tmp_path: Path) -> None:
     p.write_bytes(b"\x00" * 100)
     with pytest.raises(InputError, match="no valid UBX frame"):
         read_ubx(p)
+
+
+def test_fast_and_general_framing_agree(tmp_path: Path) -> None:
+    from fieldlogs.recorders.ubx import _candidates, _chain, _fast_chain
+
+    p = tmp_path / "rx.ubx"
+    imu, tacho = _sensors(3.0)
+    write_ubx(p, gps=gps_frame(3), obs=obs_frame(3), nav=pd.DataFrame([nav_row()]), imu=imu, tacho=tacho)
+    arr = np.frombuffer(p.read_bytes(), dtype=np.uint8)
+    fast = _fast_chain(arr)
+    s, end, ok = _candidates(arr)
+    general, stray, bad, trunc = _chain(s, end, ok, len(arr))
+    assert fast is not None and fast == general and (stray, bad, trunc) == (0, 0, None)
+    damaged = arr.copy()
+    damaged[fast[5] + 7] ^= 0x01  # one payload bit of the sixth frame
+    assert _fast_chain(damaged) is None
