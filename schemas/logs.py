@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from schemas.enums import BaliseKind, CabDirection, Track, VehicleKind
-from schemas.gnss import GNSS_NAV, GNSS_OBS
+from schemas.gnss import GNSS_BLOCK, GNSS_NAV, GNSS_OBS
 from schemas.model import Column, Table
 from schemas.tables import LAT_RANGE, LON_RANGE
 
@@ -190,6 +190,11 @@ class RunField:
     description: str
     required: bool = True
 
+
+#: run.json's ``gnss`` block (the navigation header's ionosphere and time-system parameters),
+#: declared beside the raw GNSS streams in ``schemas.gnss``; the ``vehicle`` block is
+#: ``schemas.vehicle``.
+RUN_JSON_GNSS_BLOCK = GNSS_BLOCK
 
 RUN_JSON: tuple[RunField, ...] = (
     RunField("run_id", str, "Run identifier"),

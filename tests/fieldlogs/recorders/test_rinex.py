@@ -224,3 +224,39 @@ def test_not_rinex(tmp_path: Path) -> None:
     p.write_text("hello\n")
     with pytest.raises(InputError, match="not a RINEX file"):
         read_rinex(p)
+
+
+def _d19(*values: float) -> str:
+    return "".join(f"{v:19.12E}".replace("E", "D") for v in values)
+
+
+def test_rinex_2_glonass_navigation_by_hand(tmp_path: Path) -> None:
+    head = [
+        f"{'     2.11           G: GLONASS NAV DATA':<60}RINEX VERSION / TYPE",
+        f"{'':<60}END OF HEADER",
+    ]
+    rec = [
+        " 5 26 12  1 10 15  0.0" + _d19(-1.2e-5, 1.0e-12, 172800.0),
+        "   " + _d19(12000.0, 1.2345, 0.0, 0.0),  # X [km], dX [km/s], dX2, health
+        "   " + _d19(-15000.0, -0.1, 1.0e-9, -3.0),  # Y, dY, dY2, frequency number
+        "   " + _d19(18000.0, 2.0, 0.0, 0.0),  # Z, dZ, dZ2, age
+    ]
+    p = tmp_path / "glo.26g"
+    p.write_text("\n".join(head + rec) + "\n")
+    nav = read_rinex(p).frames["gnss_nav"].iloc[0]
+    assert nav["sat"] == "R05"
+    utc = (datetime(2026, 12, 1) - datetime(1980, 1, 6)).days * 86_400.0 + 10 * 3600 + 15 * 60
+    assert nav["toc_gps_s"] == utc + 18.0  # GLONASS epochs are UTC
+    assert (nav["X"], nav["dX"], nav["Y"], nav["FreqNum"], nav["Z"]) == (1.2e7, 1234.5, -1.5e7, -3.0, 1.8e7)
+    assert (nav["SVclockBias"], nav["SVrelFreqBias"], nav["MessageFrameTime"]) == (-1.2e-5, 1.0e-12, 172800.0)
+    assert np.isnan(nav["sqrtA"])
+
+
+def test_navigation_record_of_an_unknown_system(tmp_path: Path) -> None:
+    p = tmp_path / "nav.rnx"
+    write_rinex_nav(pd.DataFrame([nav_row("G07")]), p)
+    text = p.read_text().replace("\nG07 ", "\nX07 ")
+    p.write_text(text)
+    with pytest.raises(InputError, match="unknown satellite system 'X'") as exc:
+        read_rinex(p)
+    assert exc.value.row == text.splitlines().index(next(ln for ln in text.splitlines() if ln.startswith("X07"))) + 1
