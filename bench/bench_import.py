@@ -10,6 +10,10 @@ on, keeping the GGA fields), pyubx2 (``UBXReader`` over every frame), pyarrow's 
 (what the importer itself uses, so the ratio shows the mapping's cost), georinex
 (``georinex.load``; on a slice of ``--georinex-minutes`` of the same file, scaled
 linearly, since it takes minutes for the hour). Never fails on timing: it reports.
+
+For whole-process timings from outside (noisy shared machines): ``--make DIR`` writes the
+inputs once, ``--one KIND --dir DIR`` runs a single import (nmea, csv, rinex, ubx,
+rinex-slice) or a single library read (pynmea2, pyarrow, georinex-slice, pyubx2).
 """
 
 from __future__ import annotations
@@ -239,14 +243,49 @@ def row(name: str, size_mb: float, records: int, t_read: float, t_import: float,
     )
 
 
+ONE = {
+    "nmea": lambda d: import_run([d / "rx.nmea"], d / "out", vehicle=d / "vehicle.toml", force=True),
+    "csv": lambda d: import_run(
+        [d / "imu.csv"], d / "out", mapping=[d / "imu.toml"], vehicle=d / "vehicle.toml", force=True
+    ),
+    "rinex": lambda d: import_run([d / "rx.obs"], d / "out", vehicle=d / "vehicle.toml", force=True),
+    "ubx": lambda d: import_run([d / "rx.ubx"], d / "out", vehicle=d / "vehicle.toml", force=True),
+    "pynmea2": lambda d: pynmea2_alone(d / "rx.nmea"),
+    "pyarrow": lambda d: pyarrow_alone(d / "imu.csv"),
+    "georinex-slice": lambda d: georinex_alone(d / "slice.obs"),
+    "rinex-slice": lambda d: import_run([d / "slice.obs"], d / "out", vehicle=d / "vehicle.toml", force=True),
+    "pyubx2": lambda d: pyubx2_alone(d / "rx.ubx"),
+}
+
+
+def make_all(d: Path, args: argparse.Namespace) -> None:
+    d.mkdir(parents=True, exist_ok=True)
+    (d / "vehicle.toml").write_text(VEHICLE)
+    (d / "imu.toml").write_text(IMU_MAPPING)
+    make_nmea(d / "rx.nmea", args.nmea_hours)
+    make_imu_csv(d / "imu.csv", args.imu_hours)
+    make_rinex(d / "rx.obs", args.rinex_hours)
+    rinex_slice(d / "rx.obs", d / "slice.obs", args.georinex_minutes)
+    make_ubx(d / "rx.ubx", args.ubx_hours)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--make", type=Path, help="only write the input files into this folder, then exit")
+    ap.add_argument("--one", choices=sorted(ONE), help="one import (or one library read) of the files in --dir")
+    ap.add_argument("--dir", type=Path, help="folder written by --make (with --one)")
     ap.add_argument("--nmea-hours", type=float, default=10.0)
     ap.add_argument("--imu-hours", type=float, default=10.0)
     ap.add_argument("--rinex-hours", type=float, default=1.0)
     ap.add_argument("--georinex-minutes", type=float, default=3.0)
     ap.add_argument("--ubx-hours", type=float, default=1.0)
     args = ap.parse_args()
+    if args.make:
+        make_all(args.make, args)
+        return
+    if args.one:
+        ONE[args.one](args.dir)
+        return
     with tempfile.TemporaryDirectory() as tmp_s:
         tmp = Path(tmp_s)
         (tmp / "vehicle.toml").write_text(VEHICLE)
