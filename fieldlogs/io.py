@@ -298,7 +298,7 @@ def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Fi
     if all(c.name in pt.column_names for c in table.columns if c.required):
         for col in table.columns:
             if col.name not in pt.column_names:  # an optional column absent: nulls of its type
-                fast[col.name] = pd.array([None] * pt.num_rows, dtype=PANDAS_DTYPE[col.dtype])
+                fast[col.name] = pd.Series([None] * pt.num_rows, dtype=PANDAS_DTYPE[col.dtype]).array
                 continue
             arr = _arrow_column(col, pt.column(col.name))
             if arr is None:

@@ -214,7 +214,8 @@ def _frame_checksums(arr: npt.NDArray[np.uint8], s: np.ndarray, end: np.ndarray)
     ck_a = a & np.uint64(0xFF)
     with np.errstate(over="ignore"):
         ck_b = (hi.astype(np.uint64) * a - w) & np.uint64(0xFF)
-    return (ck_a == arr[end - 2]) & (ck_b == arr[end - 1])
+    ok: np.ndarray = (ck_a == arr[end - 2]) & (ck_b == arr[end - 1])
+    return ok
 
 
 def _fast_chain(arr: npt.NDArray[np.uint8]) -> list[int] | None:
