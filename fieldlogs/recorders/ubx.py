@@ -255,7 +255,7 @@ def scan(path: Path, dec: Decoded) -> Frames:
     if bad:
         dec.skipped["UBX frames with a bad checksum"] += bad
     if stray:
-        dec.skipped["bytes outside UBX frames (e.g. NMEA)"] += stray
+        dec.skipped["bytes outside valid UBX frames (NMEA, damaged frames)"] += stray
     st = np.array(starts, dtype=np.int64)
     if not len(st):
         raise InputError("no valid UBX frame (sync B5 62 with a good checksum)", path=path)

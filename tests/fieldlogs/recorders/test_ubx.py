@@ -142,7 +142,7 @@ def test_bad_checksum_and_stray_bytes_are_counted(tmp_path: Path) -> None:
     q.write_bytes(text + bytes(blob))
     dec = read_ubx(q)
     assert dec.skipped["UBX frames with a bad checksum"] == 1
-    assert dec.skipped["bytes outside UBX frames (e.g. NMEA)"] >= len(text)
+    assert dec.skipped["bytes outside valid UBX frames (NMEA, damaged frames)"] >= len(text)
     assert len(dec.frames["gps"]) == 4
 
 
@@ -177,3 +177,32 @@ def test_fast_and_general_framing_agree(tmp_path: Path) -> None:
     damaged = arr.copy()
     damaged[fast[5] + 7] ^= 0x01  # one payload bit of the sixth frame
     assert _fast_chain(damaged) is None
+
+
+def test_hand_made_file(data: Path) -> None:
+    """tests/data/recorders/sample.ubx, packed by hand with struct (u-blox field order): two
+    NAV-PVT (the second sent twice, first with a damaged byte), an NMEA line between frames,
+    one RXM-RAWX with G07 and E11."""
+    dec = read_ubx(data / "sample.ubx")
+    gps = dec.frames["gps"]
+    assert gps["gnss_time_s"].tolist() == [T0_GPS, T0_GPS + 1.0]  # 2026-12-01 10:00:00 UTC, iTOW 208 818 s
+    assert gps["lat"].tolist() == [35.9070517, 35.9070527]
+    assert gps["lon"].tolist() == [139.4830967, 139.4831067]
+    assert gps["fix"].tolist() == [2, 1]  # diffSoln set in the first only
+    assert gps["nsat"].tolist() == [12, 11]
+    assert gps["height_m"].tolist() == [63.5, 63.6]
+    assert gps["sigma_lat_m"].tolist() == [0.45, 0.52]
+    np.testing.assert_allclose(gps[["speed_mps", "course_deg"]], [[10.0, 90.0], [10.1, 90.0]], rtol=1e-12)
+    assert gps["hdop"].isna().all()  # no NAV-DOP in the file
+    assert dict(dec.skipped) == {
+        "UBX frames with a bad checksum": 1,
+        "bytes outside valid UBX frames (NMEA, damaged frames)": len(b"$GNTXT,01,01,02,hand-made*00\r\n") + 8 + 92,
+    }
+    obs = dec.frames["gnss_obs"].set_index("sat")
+    assert obs.loc["G07", "signal"] == "C1C" and obs.loc["E11", "signal"] == "C1C"
+    assert obs.loc["G07", "pseudorange_m"] == 21000000.125 and obs.loc["E11", "doppler_hz"] == 2500.25
+    assert obs.loc["G07", "lli"] == 0  # locked 5 s, half cycle resolved
+    assert obs.loc["E11", "lli"] == 3  # lock time 0 (new lock), half cycle unresolved
+    assert (obs["receiver"] == "sample").all() and (obs["gnss_time_s"] == T0_GPS).all()
+    msgs = _pyubx2(data / "sample.ubx")
+    assert [m.identity for m in msgs] == ["NAV-PVT", "RXM-RAWX", "NAV-PVT"]  # pyubx2 drops the damaged frame too
