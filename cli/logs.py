@@ -210,7 +210,11 @@ def import_(
     mapping: list[Path] | None = typer.Option(
         None, "--mapping", help="Mapping TOML of a CSV/Parquet source (README); one per table source, in order."
     ),
-    vehicle: Path | None = typer.Option(None, "--vehicle", help="VEHICLE.toml: identity, antennas, axles (README)."),
+    vehicle: Path | None = typer.Option(
+        None,
+        "--vehicle",
+        help="VEHICLE.toml (needed: run.json's vehicle_id, kind, wheel and teeth come from it; README).",
+    ),
     run_id: str | None = typer.Option(None, "--run-id", help="run_id (default: the first source's name)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
 ) -> None:
