@@ -6,7 +6,7 @@ run's ``start_time`` where the gps stream has none). Files go to ``RUN/recorder/
 
 * ``nmea``: ``gnss.nmea`` from gps (RMC, VTG, GGA, GSA, GST);
 * ``ubx``: ``gnss.ubx`` from gps (NAV-PVT, NAV-HPPOSLLH, NAV-DOP), gnss_obs (RXM-RAWX) and the
-  GPS/QZSS rows of gnss_nav (RXM-SFRBX);
+  GPS/QZSS (LNAV) and Galileo (I/NAV) rows of gnss_nav (RXM-SFRBX);
 * ``rinex``: ``<receiver>.obs`` per receiver (RINEX 3.04) and ``nav.rnx`` — it needs
   gnss_obs, which the simulator does not produce yet (refused with a clear message).
 
@@ -62,7 +62,7 @@ def write_recorder_files(run_folder: Path, fmt: str, *, force: bool = False) -> 
             nmea.write_nmea(gps, tmp / "gnss.nmea")
             names.append("gnss.nmea")
         elif fmt == "ubx":
-            gj = nav[nav["sat"].str[0].isin(["G", "J"])] if nav is not None else None
+            gj = nav[nav["sat"].str[0].isin(["G", "J", "E"])] if nav is not None else None
             ubx.write_ubx(tmp / "gnss.ubx", gps=gps, obs=obs, nav=gj, gnss=run.raw_json.get("gnss") or None)
             names.append("gnss.ubx")
         else:

@@ -483,7 +483,7 @@ def write_ubx(
     esf_drift: float = 0.0,
     gnss: dict[str, Any] | None = None,
 ) -> int:
-    """One UBX file from any of the frames (each with ``gnss_time_s``; ``nav`` G/J rows).
+    """One UBX file from any of the frames (each with ``gnss_time_s``; ``nav`` G/J/E rows).
 
     Frames are written in time order; at equal times sensor data come before the epoch's
     NAV-PVT, as the reader's clock pairing expects. ESF time tags are ms of a recorder
@@ -501,7 +501,8 @@ def write_ubx(
     if obs is not None and len(obs):
         items += [(g, 3, b) for g, b in rawx_frames(obs)]
     if nav is not None and len(nav):
-        items += [(g, 4, b) for g, b in sfrbx_frames(nav)]
+        ai = list((gnss or {}).get("nequick_ai", [0.0, 0.0, 0.0]))
+        items += [(g, 4, b) for g, b in sfrbx_frames(nav, ai)]
     if gnss and starts:
         items += [(g, 4, b) for g, b in iono_frames(gnss, min(starts))]
     if starts and ((imu is not None and len(imu)) or (tacho is not None and len(tacho))):

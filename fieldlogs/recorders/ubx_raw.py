@@ -11,11 +11,14 @@ when the lock time is 0 (a new lock), bit 1 when the half-cycle ambiguity is unr
 C/N0 is whole dB-Hz, Doppler single precision: the round-trip resolution.
 
 SFRBX: GPS and QZSS L1 C/A subframes (10 words) are assembled per satellite into an
-ephemeris when subframes 1, 2 and 3 agree on IODC/IODE (``lnav.assemble``); repeats of an
-ephemeris already decoded are dropped. GPS (QZSS) subframe 4 page 18 gives the ``gnss``
-block: Klobuchar α/β (``qzss_klobuchar_*``), ΔtLS → ``leap_seconds`` and A0, A1, tot, WNt →
-a GPUT ``time_corrections`` entry (``lnav.decode_iono_utc``). Galileo I/NAV, GLONASS
-strings, BeiDou D1/D2 and the almanac pages are counted as skipped (not decoded).
+ephemeris when subframes 1, 2 and 3 agree on IODC/IODE (``lnav.assemble``); Galileo I/NAV
+pages (8 words) when word types 1–4 share their IODnav and word type 5 has come
+(``inav.assemble``, CRC-24Q checked); repeats of an ephemeris already decoded are dropped.
+GPS (QZSS) subframe 4 page 18 gives the ``gnss`` block: Klobuchar α/β
+(``qzss_klobuchar_*``), ΔtLS → ``leap_seconds`` and A0, A1, tot, WNt → a GPUT
+``time_corrections`` entry (``lnav.decode_iono_utc``); Galileo word type 5 its NeQuick
+ai0–ai2. GLONASS strings, BeiDou D1/D2, the almanac pages and the other Galileo word types
+are counted as skipped (not decoded).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from fieldlogs.recorders import lnav
+from fieldlogs.recorders import inav, lnav
 from fieldlogs.recorders.common import Decoded
 from fieldlogs.recorders.rinex_obs import OBS_COLUMNS
 from schemas.gnss import GNSS_NAV
@@ -162,7 +165,12 @@ def read_rawx(path: Path, f: Frames, dec: Decoded, receiver: str) -> int | None:
 
 
 def _skip_reason(gnss: int, words: int) -> str:
-    names = {2: "Galileo I/NAV pages", 6: "GLONASS strings", 3: "BeiDou D1/D2 subframes", 1: "SBAS messages"}
+    names = {
+        2: "Galileo pages of other than 8 words (F/NAV)",
+        6: "GLONASS strings",
+        3: "BeiDou D1/D2 subframes",
+        1: "SBAS messages",
+    }
     return (
         f"SFRBX {names.get(gnss, f'gnssId {gnss} messages')} not decoded"
         if gnss not in (0, 5)
@@ -185,8 +193,36 @@ def _other_subframe(dec: Decoded, gnss: int, sf: int, words: list[int], week_hin
         dec.gnss.setdefault("time_corrections", [{"type": "GPUT", **iono["correction"]}])
 
 
+def _lnav(
+    cur: dict[int, dict[str, float]], words: list[int], sf: int, sat: str, week_hint: int | None
+) -> dict[str, Any] | None:
+    """Keep subframe ``sf``; the ephemeris once subframes 1–3 agree on IODC/IODE."""
+    cur[sf] = lnav.decode_subframe(words)
+    if week_hint is None or not all(k in cur for k in (1, 2, 3)):
+        return None
+    s1, s2, s3 = cur[1], cur[2], cur[3]
+    if int(s1["IODC"]) & 0xFF == int(s2["IODE"]) == int(s3["IODE3"]):
+        return {"sat": sat, **lnav.assemble(s1, s2, s3, week_hint)}
+    return None
+
+
+def _inav(
+    dec: Decoded, cur: dict[int, dict[str, float]], words: list[int], sat: str, sig: int
+) -> dict[str, Any] | None:
+    """Keep a Galileo word; the ephemeris once word types 1–5 are there (``inav.assemble``)."""
+    got = inav.word_of_page(words)
+    if got is None or got[0] not in (1, 2, 3, 4, 5):
+        dec.skipped["SFRBX Galileo pages not decoded (alert, CRC, word types 0, 6-10)"] += 1
+        return None
+    cur[got[0]] = inav.decode_word(got[1])
+    if got[0] == 5:
+        dec.gnss.setdefault("nequick_ai", [cur[5]["ai0"], cur[5]["ai1"], cur[5]["ai2"]])
+    eph = inav.assemble(cur, e5b=sig == 5) if got[0] == 5 else None
+    return None if eph is None else {"sat": sat, **eph}
+
+
 def read_sfrbx(path: Path, f: Frames, dec: Decoded, week_hint: int | None) -> None:
-    """SFRBX → dec.frames['gnss_nav'] (GPS, QZSS)."""
+    """SFRBX → dec.frames['gnss_nav'] (GPS, QZSS LNAV; Galileo I/NAV)."""
     idx = f.of((0x02, 0x13))
     if not len(idx):
         return
@@ -194,24 +230,23 @@ def read_sfrbx(path: Path, f: Frames, dec: Decoded, week_hint: int | None) -> No
     last: dict[str, dict[int, dict[str, float]]] = {}
     rows: dict[tuple[str, float, float], dict[str, Any]] = {}
     for i, h in zip(idx.tolist(), head.tolist(), strict=True):
-        gnss, sv, nwords = int(h[0]), int(h[1]), int(h[4])
-        if gnss not in (0, 5) or nwords != 10:
+        gnss, sv, sig, nwords = int(h[0]), int(h[1]), int(h[2]), int(h[4])
+        sat = f"{GNSS_LETTER.get(gnss, '?')}{sv:02d}"
+        if gnss == 2 and nwords == 8:
+            words = np.frombuffer(f.payload(i)[8 : 8 + 32], dtype="<u4").tolist()
+            eph = _inav(dec, last.setdefault(sat, {}), words, sat, sig)
+        elif gnss in (0, 5) and nwords == 10:
+            words = np.frombuffer(f.payload(i)[8 : 8 + 40], dtype="<u4").tolist()
+            sf = lnav.subframe_id(words)
+            if sf not in (1, 2, 3):
+                _other_subframe(dec, gnss, sf, words, week_hint)
+                continue
+            eph = _lnav(last.setdefault(sat, {}), words, sf, sat, week_hint)
+        else:
             dec.skipped[_skip_reason(gnss, nwords)] += 1
             continue
-        words = np.frombuffer(f.payload(i)[8 : 8 + 40], dtype="<u4").tolist()
-        sf = lnav.subframe_id(words)
-        if sf not in (1, 2, 3):
-            _other_subframe(dec, gnss, sf, words, week_hint)
-            continue
-        sat = f"{GNSS_LETTER[gnss]}{sv:02d}"
-        cur = last.setdefault(sat, {})
-        cur[sf] = lnav.decode_subframe(words)
-        if week_hint is None or not all(k in cur for k in (1, 2, 3)):
-            continue
-        s1, s2, s3 = cur[1], cur[2], cur[3]
-        if int(s1["IODC"]) & 0xFF == int(s2["IODE"]) == int(s3["IODE3"]):
-            eph = lnav.assemble(s1, s2, s3, week_hint)
-            rows.setdefault((sat, eph["toc_gps_s"], eph["IODE"]), {"sat": sat, **eph})
+        if eph is not None:
+            rows.setdefault((sat, eph["toc_gps_s"], eph["IODE"]), eph)
     cols = GNSS_NAV.column_names
     frame = pd.DataFrame(list(rows.values()), columns=cols) if rows else pd.DataFrame(columns=cols)
     frame = frame.astype({c: "float64" for c in cols if c != "sat"})
@@ -256,13 +291,14 @@ def rawx_frames(obs: pd.DataFrame) -> list[tuple[float, bytes]]:
     return out
 
 
-def _sfrbx(gnss: int, sv: int, words: list[int]) -> bytes:
+def _sfrbx(gnss: int, sv: int, words: list[int], sig: int = 0) -> bytes:
     from fieldlogs.recorders.ubx import frame
 
     head = np.zeros(1, dtype=SFRBX_HEAD)
     head["gnssId"] = gnss
     head["svId"] = sv
-    head["numWords"] = 10
+    head["sigId"] = sig
+    head["numWords"] = len(words)
     head["version"] = 2
     return frame(0x02, 0x13, head.tobytes() + np.array(words, dtype="<u4").tobytes())
 
@@ -286,15 +322,20 @@ def iono_frames(gnss_block: dict[str, Any], t_gps: float) -> list[tuple[float, b
     return [(t_gps, _sfrbx(0, 1, words))]
 
 
-def sfrbx_frames(nav: pd.DataFrame) -> list[tuple[float, bytes]]:
-    """(GPS time of transmission, RXM-SFRBX frame) for subframes 1–3 of each G/J ephemeris."""
+def sfrbx_frames(nav: pd.DataFrame, ai: list[float] | None = None) -> list[tuple[float, bytes]]:
+    """(GPS time of transmission, RXM-SFRBX frame): subframes 1–3 of each G/J ephemeris,
+    I/NAV word types 1–5 of each E one (``ai``: NeQuick ai0–ai2 for word type 5)."""
     out = []
     for r in nav.to_dict("records"):
         sat = str(r["sat"])
-        if sat[0] not in ("G", "J"):
-            raise ValueError(f"the UBX writer encodes GPS/QZSS LNAV only, not {sat}")
-        subframes = lnav.encode({str(k): v for k, v in r.items()})
+        eph = {str(k): v for k, v in r.items()}
         t0 = float(r["week"]) * 604_800.0 + float(r["TransTime"])
-        for k, words in enumerate(subframes):
-            out.append((t0 + 6.0 * k, _sfrbx(LETTER_GNSS[sat[0]], int(sat[1:]), words)))
+        if sat[0] in ("G", "J"):  # subframe 1 starts at TransTime, 6 s each
+            pages, offsets, sig = lnav.encode(eph), [0.0, 6.0, 12.0], 0
+        elif sat[0] == "E":  # word type 5 (its TOW is TransTime) last, 2 s pages
+            pages, offsets, sig = inav.encode(eph, ai), [-8.0, -6.0, -4.0, -2.0, 0.0], 1
+        else:
+            raise ValueError(f"the UBX writer encodes GPS/QZSS LNAV and Galileo I/NAV only, not {sat}")
+        for dt, words in zip(offsets, pages, strict=True):
+            out.append((t0 + dt, _sfrbx(LETTER_GNSS[sat[0]], int(sat[1:]), words, sig)))
     return out

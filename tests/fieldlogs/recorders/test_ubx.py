@@ -206,3 +206,70 @@ def test_hand_made_file(data: Path) -> None:
     assert (obs["receiver"] == "sample").all() and (obs["gnss_time_s"] == T0_GPS).all()
     msgs = _pyubx2(data / "sample.ubx")
     assert [m.identity for m in msgs] == ["NAV-PVT", "RXM-RAWX", "NAV-PVT"]  # pyubx2 drops the damaged frame too
+
+
+def _galileo_row() -> dict[str, object]:
+    r = nav_row("E11")
+    week = T0_GPS // 604_800
+    toe = (T0_GPS // 60 * 60) % 604_800
+    r.update(
+        IODE=77.0,
+        SVclockBias=12345 * 2.0**-34,
+        SVclockDrift=-7 * 2.0**-46,
+        SVclockDriftRate=3 * 2.0**-59,
+        Toe=toe,
+        toc_gps_s=week * 604_800 + toe,
+        TGD=np.nan,
+        IODC=np.nan,
+        FitIntvl=np.nan,
+        BGDe5a=-9 * 2.0**-32,
+        BGDe5b=-11 * 2.0**-32,
+        DataSrc=513.0,
+        SVacc=3.12,
+        health=0.0,
+        TransTime=(T0_GPS // 2 * 2 - 100) % 604_800,
+        sqrtA=2_851_000_000 * 2.0**-19,
+        Eccentricity=1_000_000 * 2.0**-33,
+    )
+    return r
+
+
+def test_galileo_inav_round_trip(tmp_path: Path) -> None:
+    from fieldlogs.recorders import inav
+
+    assert inav._crc24q(int.from_bytes(b"123456789", "big"), 72) == 0xCDE703  # the CRC-24Q check value
+    assert [inav.sisa_m(i) for i in (0, 49, 50, 75, 100, 125, 255)] == [0.0, 0.49, 0.5, 1.0, 2.0, 6.0, -1.0]
+    gal = _galileo_row()
+    p = tmp_path / "rx.ubx"
+    write_ubx(
+        p,
+        gps=gps_frame(3),
+        obs=obs_frame(3),
+        nav=pd.DataFrame([gal, nav_row("G07")]),
+        gnss={"nequick_ai": [60.75, 0.25, -0.125]},
+    )
+    assert [m.gnssId for m in _pyubx2(p) if m.identity == "RXM-SFRBX"].count(2) == 5  # pyubx2: 5 Galileo pages
+    dec = read_ubx(p)
+    got = dec.frames["gnss_nav"].set_index("sat").loc["E11"]
+    for c in GNSS_NAV.column_names[1:]:
+        want = gal[c]
+        if isinstance(want, float) and np.isnan(want):
+            assert np.isnan(got[c]), c
+        else:
+            assert got[c] == pytest.approx(want, rel=1e-15, abs=1e-25), c
+    assert dec.gnss["nequick_ai"] == [60.75, 0.25, -0.125]
+
+
+def test_galileo_page_with_a_bad_crc_is_not_decoded(tmp_path: Path) -> None:
+    from fieldlogs.recorders import inav
+    from fieldlogs.recorders.ubx_raw import _sfrbx
+
+    pages = inav.encode(_galileo_row())
+    damaged = list(pages[0])
+    damaged[1] ^= 1 << 5  # a data bit of word type 1
+    p = tmp_path / "rx.ubx"
+    write_ubx(p, gps=gps_frame(2))
+    p.write_bytes(p.read_bytes() + b"".join(_sfrbx(2, 11, w, 1) for w in [damaged, *pages[1:]]))
+    dec = read_ubx(p)
+    assert "gnss_nav" not in dec.frames  # word type 1 missing: no ephemeris
+    assert dec.skipped["SFRBX Galileo pages not decoded (alert, CRC, word types 0, 6-10)"] == 1
