@@ -21,7 +21,7 @@ def _examples() -> list[list[str]]:
 
 def test_readme_import_examples_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     examples = _examples()
-    assert len(examples) == 3  # NMEA, RINEX, CSV (the UBX one needs a simulated run first)
+    assert len(examples) == 4  # NMEA, RINEX, UBX, CSV (the simulated UBX one needs a DB first)
     monkeypatch.chdir(ROOT)
     for k, argv in enumerate(examples):
         out = argv.index("--out") + 1

@@ -23,7 +23,7 @@ def vehicle(data: Path) -> dict[str, Any]:
 def test_hand_made_vehicle_file(data: Path) -> None:
     v, warnings = load_vehicle(data / "vehicle.toml")
     assert warnings == []
-    assert [a["receiver"] for a in v["antennas"]] == ["RX211", "gnss"]
+    assert [a["receiver"] for a in v["antennas"]] == ["RX211", "sample", "gnss"]
     assert tacho_wheel(v) == (0.86, 90)
     assert v["imu"]["pitch_deg"] == 0.2
 
@@ -36,7 +36,7 @@ def _messages(data: Any, **kw: Any) -> list[tuple[str, str]]:
 @pytest.mark.parametrize(
     ("edit", "column", "text"),
     [
-        (lambda v: v["antennas"].append(dict(v["antennas"][0])), "antennas[2].id", "repeats antennas[0]"),
+        (lambda v: v["antennas"].append(dict(v["antennas"][0])), "antennas[3].id", "repeats antennas[0]"),
         (lambda v: v["antennas"][1].update(receiver="RX211"), "antennas[1].receiver", "must be unique"),
         (lambda v: v["axles"][1].update(id="A1"), "axles[1].id", "must be unique"),
         (lambda v: v["antennas"][0].update(x_m=12.0), "antennas[0].x_m", "outside the vehicle"),
