@@ -189,3 +189,66 @@ def repair(
     rem = res.to_dict()["remaining"]
     c.print(f"log: {Path(res.out) / REPAIR_LOG}")
     c.print(f"still found by logs check: {rem['errors']} error(s), {rem['warnings']} warning(s)")
+
+
+class ImportFmt(StrEnum):
+    auto = "auto"
+    nmea = "nmea"
+    ubx = "ubx"
+    rinex = "rinex"
+    csv = "csv"
+
+
+@app.command("import")
+@cli_command
+def import_(
+    sources: list[Path] = typer.Argument(
+        ..., help="Recorder files: NMEA, UBX, RINEX obs/nav (.gz, .crx), CSV/Parquet."
+    ),
+    out: Path = typer.Option(..., "--out", "-o", help="New run folder to write."),
+    fmt: ImportFmt = typer.Option(ImportFmt.auto, "--format", help="auto (from the content), nmea, ubx, rinex, csv."),
+    mapping: list[Path] | None = typer.Option(
+        None, "--mapping", help="Mapping TOML of a CSV/Parquet source (README); one per table source, in order."
+    ),
+    vehicle: Path | None = typer.Option(
+        None,
+        "--vehicle",
+        help="VEHICLE.toml (needed: run.json's vehicle_id, kind, wheel and teeth come from it; README).",
+    ),
+    run_id: str | None = typer.Option(None, "--run-id", help="run_id (default: the first source's name)."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
+) -> None:
+    """Import recorder files into a new run folder on one time base (GNSS time).
+
+    Exit 0 written, 1 data or vehicle errors (units that cannot be right, a receiver
+    without an antenna), 2 unreadable or corrupt input (truncated, out of order, unknown
+    system, a mapping naming a missing column) or bad usage, 3 the output exists.
+    Nothing is written unless the exit code is 0.
+
+    Example: trainpos logs import rx1.ubx imu.csv --mapping imu.toml --vehicle car.toml --out runs/r1
+    """
+    from fieldlogs.quality.checks import check_run as _check
+    from fieldlogs.recorders.importer import import_run
+
+    res = import_run(sources, out, fmt=fmt.value, mapping=mapping or [], vehicle=vehicle, run_id=run_id, force=force)
+    c = console()
+    if res.warnings:
+        print_findings(res.warnings, console=c, title="Warnings")
+    rows: list[tuple[str, Any]] = [("run folder", res.out), ("run_id", res.run_id), ("start_time", res.start_time)]
+    rows += [(f"rows: {k}", v) for k, v in res.rows.items()]
+    for s in res.sources:
+        skipped = sum(x["count"] for x in s["skipped"])
+        rows.append((f"source {Path(s['file']).name}", f"{s['format']}, {s['records']} records, {skipped} skipped"))
+        if "clock" in s:
+            ck = s["clock"]
+            rows.append(
+                (
+                    "  recorder clock",
+                    f"drift {ck['drift_ppm']:.1f} ppm, residual RMS "
+                    f"{ck['residual_rms_s'] * 1e3:.2f} ms (max {ck['residual_max_s'] * 1e3:.2f} ms)",
+                )
+            )
+    found = _check(Path(res.out))
+    n_err = sum(f.severity == "error" for f in found)
+    rows.append(("logs check", f"{n_err} error(s), {len(found) - n_err} warning(s)"))
+    c.print(key_value_table(rows, title="Imported"))

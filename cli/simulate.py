@@ -15,6 +15,9 @@ from fieldlogs.simulate import load_scenario, simulate_to_folder
 class LogFmt(StrEnum):
     parquet = "parquet"
     csv = "csv"
+    nmea = "nmea"
+    ubx = "ubx"
+    rinex = "rinex"
 
 
 @cli_command
@@ -27,7 +30,12 @@ def simulate(
     seed: int | None = typer.Option(None, "--seed", min=0, help="Random seed (default: the scenario's 'seed')."),
     line: str | None = typer.Option(None, "--line", help="Line code (overrides route.line_code)."),
     track: str | None = typer.Option(None, "--track", help="Track U, D or S (overrides route.track)."),
-    fmt: LogFmt = typer.Option(LogFmt.parquet, "--format", help="parquet (zstd) or csv."),
+    fmt: LogFmt = typer.Option(
+        LogFmt.parquet,
+        "--format",
+        help="parquet (zstd) or csv streams; nmea, ubx or rinex: Parquet streams plus the GNSS part as a "
+        "recorder writes it, in RUN_DIR/recorder/.",
+    ),
     force: bool = typer.Option(False, "--force", help="Replace an existing run folder."),
 ) -> None:
     """Simulate a field-log run: IMU, tacho, GPS, balises, cab (+ truth, radar) from the DB's track.
@@ -43,7 +51,13 @@ def simulate(
     if line is not None or track is not None:
         overrides["route"] = {k: v for k, v in (("line_code", line), ("track", track)) if v is not None}
     sc = load_scenario(scenario, overrides or None)
-    result = simulate_to_folder(db, out, sc, seed=seed, fmt=fmt.value, force=force)
+    files: list[Path] = []
+    if fmt.value in ("nmea", "ubx", "rinex"):
+        from fieldlogs.recorders.export import simulate_with_recorder
+
+        result, files = simulate_with_recorder(db, out, fmt.value, scenario=sc, seed=seed, force=force)
+    else:
+        result = simulate_to_folder(db, out, sc, seed=seed, fmt=fmt.value, force=force)  # type: ignore[arg-type]
     slips = [e for e in result.slip_episodes if e.kind == "slip"]
     rows = [
         ("run folder", str(result.path)),
@@ -54,5 +68,6 @@ def simulate(
         ("slips / slides", f"{len(slips)} / {len(result.slip_episodes) - len(slips)}"),
         ("true wheel diameter", f"{result.wheel_diameter_true_m:.5f} m"),
         *((f"rows: {k}", v) for k, v in result.rows.items()),
+        *(("recorder file", str(f)) for f in files),
     ]
     console().print(key_value_table(rows, title="Simulated run"))

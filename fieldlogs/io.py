@@ -38,10 +38,12 @@ from schemas.logs import LOG_STREAMS, RUN_JSON
 from schemas.model import Column, Table
 
 LogFormat = Literal["csv", "parquet"]
+#: run.json blocks written only when present.
+OPTIONAL_BLOCKS = ("vehicle", "gnss", "sources")
 STREAM_SUFFIXES = (".parquet", ".csv")
 RUN_JSON_NAME = "run.json"
 #: Files a run folder may hold besides run.json and the streams.
-KNOWN_EXTRA_FILES = frozenset({"repair_log.json", "README.md", "notes.txt"})
+KNOWN_EXTRA_FILES = frozenset({"repair_log.json", "README.md", "notes.txt", "recorder"})
 #: Streams a run of each vehicle kind must have (SPEC §4: no GPS on a train, no balises
 #: on a road-rail vehicle).
 REQUIRED_STREAMS: dict[str, tuple[str, ...]] = {
@@ -62,11 +64,20 @@ class RunMeta:
     start_time: str
     db_version: str | None = None
     notes: str = ""
+    vehicle: dict[str, Any] | None = None
+    """Vehicle geometry (``schemas.vehicle``), checked by ``recorders.vehicle``."""
+    gnss: dict[str, Any] | None = None
+    """Navigation-header parameters (``schemas.gnss.GNSS_BLOCK``)."""
+    sources: list[Any] | None = None
+    """Provenance of an imported run (``logs import``)."""
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
         extra = d.pop("extra")
+        for block in OPTIONAL_BLOCKS:
+            if d[block] is None:
+                del d[block]
         return {**d, **extra}
 
 
@@ -111,6 +122,22 @@ def _typed_fields(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], lis
                 )
             continue
         raw = data[f.name]
+        if f.type in (dict, list):
+            if not isinstance(raw, f.type):
+                findings.append(
+                    Finding(
+                        "log.run_json_field",
+                        Severity.ERROR,
+                        "run.json",
+                        f"field '{f.name}' must be a JSON {'object' if f.type is dict else 'list'}",
+                        file=str(path),
+                        column=f.name,
+                        value=type(raw).__name__,
+                    )
+                )
+            else:
+                values[f.name] = raw
+            continue
         try:
             if f.type is int and (isinstance(raw, bool) or (isinstance(raw, float) and not raw.is_integer())):
                 raise ValueError(raw)
@@ -178,6 +205,18 @@ def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
     known = {f.name for f in RUN_JSON}
     meta = RunMeta(**values, extra={k: v for k, v in data.items() if k not in known})
     return meta, findings
+
+
+def _block_findings(data: dict[str, Any], path: Path, *, has_tacho: bool) -> list[Finding]:
+    """Findings of run.json's vehicle and gnss blocks (``recorders.vehicle``, ``recorders.blocks``)."""
+    from fieldlogs.recorders.blocks import check_gnss_block, check_vehicle_block
+
+    out: list[Finding] = []
+    if isinstance(data.get("vehicle"), dict):
+        out += check_vehicle_block(data, str(path), has_tacho=has_tacho)
+    if isinstance(data.get("gnss"), dict):
+        out += check_gnss_block(data["gnss"], str(path))
+    return out
 
 
 def stream_path(folder: Path, name: str) -> Path | None:
@@ -257,8 +296,11 @@ def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Fi
                 )
             )
     fast: dict[str, Any] = {}
-    if all(c.name in pt.column_names for c in table.columns):
+    if all(c.name in pt.column_names for c in table.columns if c.required):
         for col in table.columns:
+            if col.name not in pt.column_names:  # an optional column absent: nulls of its type
+                fast[col.name] = pd.Series([None] * pt.num_rows, dtype=PANDAS_DTYPE[col.dtype]).array
+                continue
             arr = _arrow_column(col, pt.column(col.name))
             if arr is None:
                 break
@@ -326,6 +368,7 @@ class Run:
         self._stream_findings: dict[str, list[Finding]] = {}
         self._files: dict[str, Path] = {}
         self._scan()
+        self.findings.extend(_block_findings(data, json_path, has_tacho=self.has("tacho")))
 
     def _scan(self) -> None:
         """Find the stream files once; warn about duplicates and unknown files."""

@@ -9,8 +9,10 @@ wy < 0 nose pitching up).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from schemas.enums import BaliseKind, CabDirection, Track, VehicleKind
+from schemas.gnss import GNSS_BLOCK, GNSS_NAV, GNSS_OBS
 from schemas.model import Column, Table
 from schemas.tables import LAT_RANGE, LON_RANGE
 
@@ -70,6 +72,60 @@ BALISE = Table(
     required=False,
 )
 
+#: Optional gps columns that receivers log (``logs import``); absent in older runs.
+GPS_RECORDER_COLUMNS = (
+    Column(
+        "gnss_time_s",
+        "float",
+        "Fix epoch, continuous GPS seconds since 1980-01-06",
+        unit="s",
+        required=False,
+        nullable=True,
+        min=0.0,
+    ),
+    Column(
+        "height_m", "float", "Ellipsoidal height", unit="m", required=False, nullable=True, min=-1000.0, max=10000.0
+    ),
+    Column("speed_mps", "float", "Speed over ground", unit="m/s", required=False, nullable=True, min=0.0, max=150.0),
+    Column(
+        "course_deg",
+        "float",
+        "Course over ground, clockwise from true north",
+        unit="deg",
+        required=False,
+        nullable=True,
+        min=0.0,
+        max=360.0,
+    ),
+    Column(
+        "sigma_lat_m",
+        "float",
+        "1-σ latitude error (NMEA GST, UBX hAcc)",
+        unit="m",
+        required=False,
+        nullable=True,
+        min=0.0,
+    ),
+    Column(
+        "sigma_lon_m",
+        "float",
+        "1-σ longitude error (NMEA GST, UBX hAcc)",
+        unit="m",
+        required=False,
+        nullable=True,
+        min=0.0,
+    ),
+    Column(
+        "sigma_height_m",
+        "float",
+        "1-σ height error (NMEA GST, UBX vAcc)",
+        unit="m",
+        required=False,
+        nullable=True,
+        min=0.0,
+    ),
+)
+
 GPS = Table(
     name="gps",
     kind="log",
@@ -81,6 +137,7 @@ GPS = Table(
         Column("fix", "int", "0 none, 1 GPS, 2 D-GPS", min=0, max=2),
         Column("nsat", "int", "Satellites used", min=0, max=64),
         Column("hdop", "float", "Horizontal dilution of precision", nullable=True, min=0.0, max=99.9),
+        *GPS_RECORDER_COLUMNS,
     ),
     rate_hz=1.0,
     required=False,
@@ -123,16 +180,21 @@ RADAR = Table(
 )
 
 #: Every stream, in the order they are listed and checked.
-LOG_STREAMS: dict[str, Table] = {t.name: t for t in (TACHO, IMU, BALISE, GPS, CAB, TRUTH, RADAR)}
+LOG_STREAMS: dict[str, Table] = {t.name: t for t in (TACHO, IMU, BALISE, GPS, CAB, TRUTH, RADAR, GNSS_OBS, GNSS_NAV)}
 
 
 @dataclass(frozen=True)
 class RunField:
     name: str
-    type: type
+    type: type[Any]
     description: str
     required: bool = True
 
+
+#: run.json's ``gnss`` block (the navigation header's ionosphere and time-system parameters),
+#: declared beside the raw GNSS streams in ``schemas.gnss``; the ``vehicle`` block is
+#: ``schemas.vehicle``.
+RUN_JSON_GNSS_BLOCK = GNSS_BLOCK
 
 RUN_JSON: tuple[RunField, ...] = (
     RunField("run_id", str, "Run identifier"),
@@ -143,4 +205,16 @@ RUN_JSON: tuple[RunField, ...] = (
     RunField("start_time", str, "ISO 8601 wall-clock time of t = 0, with offset"),
     RunField("db_version", str, "DB version the run was recorded with", required=False),
     RunField("notes", str, "Free notes", required=False),
+    RunField(
+        "vehicle", dict, "Vehicle geometry (antennas, balise reader, IMU, axles): see VEHICLE_FIELDS", required=False
+    ),
+    RunField(
+        "gnss",
+        dict,
+        "Navigation-header parameters (ionosphere, leap seconds, time corrections): GNSS_BLOCK",
+        required=False,
+    ),
+    RunField(
+        "sources", list, "Provenance of an imported run: [{file, sha256, format, counts, skipped}]", required=False
+    ),
 )

@@ -38,6 +38,7 @@ import pandas as pd
 from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.io import REQUIRED_STREAMS, Run
+from fieldlogs.quality.gnss import check_gnss_nav, check_gnss_obs, check_receivers
 from fieldlogs.quality.tacho import TACHO_RATE_HZ, TachoIssue, TachoLimits, review_tacho, time_order
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
@@ -490,6 +491,9 @@ def _check_overlap(run: Run, spans: dict[str, tuple[float, float]], limits: Chec
 # ---------------------------------------------------------------------------------------
 # the run
 
+#: Streams with their own checks instead of the time checks (``quality.gnss``).
+GNSS_CHECKS: dict[str, Callable[[_Out, pd.DataFrame], None]] = {"gnss_obs": check_gnss_obs, "gnss_nav": check_gnss_nav}
+
 
 def check_stream(run: Run, name: str, db: DbRefs | None = None, limits: CheckLimits = CheckLimits()) -> list[Finding]:
     """Read findings plus every check of one stream (empty when the stream is absent)."""
@@ -512,6 +516,9 @@ def check_stream(run: Run, name: str, db: DbRefs | None = None, limits: CheckLim
         )
         return read + out.items
     _check_values(out, table, frame, read)
+    if name in GNSS_CHECKS:
+        GNSS_CHECKS[name](out, frame)
+        return read + out.items
     _check_time(out, table, frame, limits)
     if name == "tacho":
         _check_tacho(out, run, frame, limits)
@@ -546,9 +553,10 @@ def check_run(run: Run | Path | str, db: DbRefs | None = None, limits: CheckLimi
     for name in run.streams_present():
         findings.extend(check_stream(run, name, db, limits))
         frame = run.stream(name)
-        if frame is not None and len(frame):
+        if frame is not None and len(frame) and "t" in frame.columns:
             t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
             if not np.isnan(t).all():
                 spans[name] = (float(np.nanmin(t)), float(np.nanmax(t)))
     findings.extend(_check_overlap(run, spans, limits))
+    findings.extend(check_receivers(run))
     return findings

@@ -85,7 +85,7 @@ def _stream_info(run: Run, name: str) -> StreamInfo:
         None if frame is None else len(frame),
         declared_rate_hz=table.rate_hz,
     )
-    if frame is None or not len(frame):
+    if frame is None or not len(frame) or "t" not in frame.columns:
         return info
     t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
     if np.isnan(t).all():

@@ -46,7 +46,8 @@ MAX_RANGES = 100
 @dataclass
 class RepairAction:
     action: str
-    """sort_by_t, drop_duplicate_rows, drop_duplicate_t or bridge_pulse_reset."""
+    """sort_by_t, sort_by_key, drop_duplicate_rows, drop_duplicate_t, drop_duplicate_key or
+    bridge_pulse_reset."""
     count: int
     """Rows affected (sorted: rows found out of order; resets: resets bridged)."""
     rows: list[list[int]]
@@ -119,8 +120,57 @@ def _line_list(lines: list[list[int]], total: int) -> str:
     return txt + (" …" if shown < total else "")
 
 
+#: Streams with many rows per t: sorted by their key, duplicates judged on the key.
+KEYED_STREAMS = {"gnss_obs": ["t", "receiver", "sat", "signal"], "gnss_nav": ["sat", "toc_gps_s"]}
+
+
+def _repair_keyed(name: str, frame: pd.DataFrame, file: str) -> tuple[pd.DataFrame, StreamRepair]:
+    """gnss_obs / gnss_nav: sort by the key, drop exact duplicates, then (gnss_obs) rows
+    repeating a key (receiver, t, sat, signal), keeping the first in file order."""
+    rep = StreamRepair(name, file, len(frame), len(frame))
+    key = KEYED_STREAMS[name]
+    f = frame.reset_index(drop=True)
+    order = np.lexsort(
+        [
+            f[k].astype("string").fillna("").to_numpy(dtype=object) if f[k].dtype != "float64" else f[k].to_numpy()
+            for k in reversed(key)
+        ]
+    )
+    moved = np.flatnonzero(order != np.arange(len(f)))
+    if len(moved):
+        f = f.iloc[order]
+        rows = _ranges(moved + FIRST_DATA_LINE)
+        rep.actions.append(
+            RepairAction("sort_by_key", len(moved), rows, f"sorted by ({', '.join(key)}): {len(moved)} row(s) moved")
+        )
+    for action, mask, what in (
+        ("drop_duplicate_rows", f.duplicated(keep="first"), "repeating an earlier row exactly"),
+        ("drop_duplicate_key", None, f"repeating the key ({', '.join(key)}) of an earlier row"),
+    ):
+        if mask is None:
+            if name != "gnss_obs":
+                continue
+            mask = f.duplicated(subset=key, keep="first")
+        dropped = f.index[mask.to_numpy()].to_numpy()
+        if len(dropped):
+            f = f[~mask.to_numpy()]
+            rows = _ranges(dropped + FIRST_DATA_LINE)
+            rep.actions.append(
+                RepairAction(
+                    action,
+                    len(dropped),
+                    rows,
+                    f"dropped {len(dropped)} row(s) {what} (lines {_line_list(rows, len(dropped))})",
+                )
+            )
+    rep.rows_out = len(f)
+    return f.reset_index(drop=True), rep
+
+
 def repair_stream(name: str, frame: pd.DataFrame, file: str) -> tuple[pd.DataFrame, StreamRepair]:
     """The repaired frame (fresh 0-based index) and what was done. ``frame`` is not modified."""
+    if name in KEYED_STREAMS:
+        return _repair_keyed(name, frame, file)
     rep = StreamRepair(name, file, len(frame), len(frame))
     f = frame.reset_index(drop=True)  # label = input row index; input line = label + 2
     t = f["t"].to_numpy(dtype=float, na_value=np.nan)
@@ -213,7 +263,7 @@ def _refusals(run: Run) -> list[Finding]:
     frames = {n: run.stream(n) for n in run.streams_present()}
     bad = [f for f in run.findings if f.severity == Severity.ERROR and f.rule != "schema.unknown_column"]
     for name, frame in frames.items():
-        if frame is not None and frame["t"].isna().any():
+        if frame is not None and "t" in frame.columns and frame["t"].isna().any():
             rows = np.flatnonzero(frame["t"].isna().to_numpy())
             bad.append(
                 Finding(

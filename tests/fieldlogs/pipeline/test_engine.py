@@ -232,7 +232,7 @@ def test_a_trains_pto_column_is_ignored(sample_db, tmp_path) -> None:  # type: i
     shutil.copytree(SAMPLE_LOGS / "sim-d-slips", run_dir)
     run = read_run(run_dir)
     cab = run.stream("cab")
-    assert cab is not None and "pto" not in cab.columns or cab["pto"].isna().all()
+    assert (cab is not None and "pto" not in cab.columns) or cab["pto"].isna().all()
     net = read_network(sample_db)
     plain = run_pipeline(run, net)
     cab = cab.assign(pto=0)

@@ -1,0 +1,95 @@
+"""What every recorder reader returns, and the helpers they share.
+
+A reader turns one source file into frames on absolute GNSS time: every frame has a
+``gnss_time_s`` column (continuous GPS seconds, ``schemas.gnss``) except ``gnss_nav``,
+which carries ``toc_gps_s``. The importer (``fieldlogs.recorders.importer``) puts all
+sources on one time base and turns ``gnss_time_s`` into the run's ``t``.
+"""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from schemas.errors import InputError
+
+#: Formats ``logs import`` reads.
+FORMATS = ("nmea", "ubx", "rinex", "csv")
+
+
+@dataclass
+class Decoded:
+    """One source file decoded: frames by stream name plus what was skipped and why."""
+
+    file: str
+    format: str
+    frames: dict[str, pd.DataFrame] = field(default_factory=dict)
+    records: int = 0
+    """Records (sentences, frames, epochs, rows) read."""
+    skipped: Counter[str] = field(default_factory=Counter)
+    """Reason → number of records skipped (never imported)."""
+    gnss: dict[str, Any] = field(default_factory=dict)
+    """Navigation-header parameters (run.json ``gnss`` block)."""
+    clock: dict[str, Any] | None = None
+    """Recorder clock fit (``timebase.ClockFit.to_dict``) when the source had its own clock."""
+    notes: list[str] = field(default_factory=list)
+
+    def provenance(self, sha256: str) -> dict[str, Any]:
+        d: dict[str, Any] = {
+            "file": self.file,
+            "sha256": sha256,
+            "format": self.format,
+            "records": self.records,
+            "counts": {k: len(v) for k, v in self.frames.items()},
+            "skipped": [{"reason": r, "count": n} for r, n in sorted(self.skipped.items())],
+        }
+        if self.clock is not None:
+            d["clock"] = self.clock
+        if self.notes:
+            d["notes"] = list(self.notes)
+        return d
+
+
+def sha256_of(path: Path) -> str:
+    h = hashlib.sha256()
+    with Path(path).open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def read_bytes(path: Path) -> bytes:
+    """File content, gunzipped when it is gzip (by magic number, not by name)."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError as exc:
+        raise InputError("source file not found", path=path) from exc
+    except IsADirectoryError as exc:
+        raise InputError("is a folder, not a source file", path=path) from exc
+    if raw[:2] == b"\x1f\x8b":
+        try:
+            return gzip.decompress(raw)
+        except (OSError, EOFError) as exc:
+            raise InputError(f"truncated or corrupt gzip file: {exc}", path=path) from exc
+    return raw
+
+
+def read_text(path: Path) -> str:
+    """Text of a source (gzip and Hatanaka-compressed RINEX decompressed)."""
+    raw = read_bytes(path)
+    head = raw[:80]
+    if b"COMPACT RINEX FORMAT" in head or b"CRINEX VERS" in head:
+        import hatanaka  # lazy: only for Hatanaka-compressed RINEX
+
+        try:
+            raw = hatanaka.decompress(raw)
+        except (ValueError, RuntimeError, OSError) as exc:
+            raise InputError(f"Hatanaka decompression failed: {exc}", path=path) from exc
+    return raw.decode("ascii", errors="replace")
