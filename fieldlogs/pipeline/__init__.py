@@ -35,6 +35,7 @@ from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles, build_cycles
 from fieldlogs.pipeline.engine import run_aids
 from fieldlogs.pipeline.estimate import Travel
+from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.gps import analyse_gps
 from fieldlogs.pipeline.odometry import correct_odometry
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
@@ -105,7 +106,8 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
     odo = correct_odometry(cycles, cfg.odometry, ground.v_mps if ground is not None else None)
     gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
-    return RunContext(network, cfg, streams, cycles, odo, gps, features), pre
+    geometry = VehicleGeometry.of(run.meta.vehicle)
+    return RunContext(network, cfg, streams, cycles, odo, gps, features, geometry), pre
 
 
 def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) -> PipelineResult:
@@ -113,7 +115,7 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
     cfg = cfg or PipelineConfig()
     ctx, pre = prepare_run(run, network, cfg)
     odo = ctx.odometry
-    sol = run_aids(Travel.of(ctx.cycles, odo, network), position_aids(ctx), cfg.margin)
+    sol = run_aids(Travel.of(ctx.cycles, odo, network), position_aids(ctx), cfg.margin, ctx.geometry)
     events = pre + sol.events + episode_events(odo, sol.positions["km_m"].to_numpy())
     events.sort(key=lambda e: e.t)
     ev_frame = events_frame(events)

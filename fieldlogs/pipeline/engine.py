@@ -31,6 +31,7 @@ import pandas as pd
 from fieldlogs.pipeline.aid import Aid, Observation, Outcome
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
+from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.positions import positions_frame
 from fieldlogs.pipeline.types import Event, Fix, FloatArray
 
@@ -179,9 +180,12 @@ class _Engine:
                 self.push(k, replace(nxt, version=self.version))
 
 
-def run_aids(travel: Travel, aids: Sequence[Aid], margin: MarginConfig) -> Solution:
-    """Apply ``aids`` in time order over ``travel``; per-cycle positions with their margins."""
+def run_aids(
+    travel: Travel, aids: Sequence[Aid], margin: MarginConfig, geometry: VehicleGeometry | None = None
+) -> Solution:
+    """Apply ``aids`` in time order over ``travel``; per-cycle positions with their margins
+    (and the vehicle's head and tail km when ``geometry`` knows its extent)."""
     engine = _Engine(travel, aids)
     engine.run()
     events = sorted(engine.events, key=lambda e: e.t)
-    return Solution(positions_frame(travel, engine.fixes, margin), events, engine.fixes)
+    return Solution(positions_frame(travel, engine.fixes, margin, geometry), events, engine.fixes)

@@ -24,6 +24,7 @@ import pandas as pd
 
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
+from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.types import Fix, FloatArray
 from schemas.enums import FixSource, PositionState
 
@@ -38,8 +39,12 @@ def margin_m(fix: Fix, d: FloatArray | float, allowance: FloatArray | float, cfg
     return np.asarray(m, dtype=float)
 
 
-def positions_frame(travel: Travel, fixes: list[Fix], cfg: MarginConfig) -> pd.DataFrame:
-    """Per-cycle state, km, equipment km, margin and source from the fixes in force."""
+def positions_frame(
+    travel: Travel, fixes: list[Fix], cfg: MarginConfig, geometry: VehicleGeometry | None = None
+) -> pd.DataFrame:
+    """Per-cycle state, km, equipment km, margin and source from the fixes in force, and the
+    vehicle's head and tail km (:mod:`fieldlogs.pipeline.geometry`; NaN without its extent)."""
+    geometry = geometry or VehicleGeometry()
     t, d = travel.t, travel.d
     n = t.size
     state = np.full(n, PositionState.UNDETERMINED.value, dtype=object)
@@ -49,6 +54,7 @@ def positions_frame(travel: Travel, fixes: list[Fix], cfg: MarginConfig) -> pd.D
     km = np.full(n, np.nan)
     km_eq = np.full(n, np.nan)
     margin = np.full(n, np.nan)
+    k_sign = np.full(n, np.nan)
     if fixes:
         t_eff = np.array([f.t_effective for f in fixes])
         idx = np.searchsorted(t_eff, t, side="right") - 1
@@ -63,10 +69,12 @@ def positions_frame(travel: Travel, fixes: list[Fix], cfg: MarginConfig) -> pd.D
             km[sel] = est
             km_eq[sel] = est + (f.km_equipment_m - f.km_m)
             margin[sel] = margin_m(f, d[sel], travel.allowance[sel], cfg)
+            k_sign[sel] = f.k
             state[sel] = str(f.state)
             line[sel] = f.line_code
             track[sel] = f.track
             source[sel] = str(f.source)
+    head, tail = geometry.ends(km, k_sign, np.asarray(travel.cab, dtype=float))
     return pd.DataFrame(
         {
             "t": t,
@@ -78,5 +86,7 @@ def positions_frame(travel: Travel, fixes: list[Fix], cfg: MarginConfig) -> pd.D
             "speed_mps": travel.v,
             "margin_m": margin,
             "last_fix_source": pd.array(source, dtype="string"),
+            "km_head_m": head,
+            "km_tail_m": tail,
         }
     )

@@ -9,7 +9,7 @@ here and one line in the registry; the engine does not change.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import pandas as pd
 
@@ -23,6 +23,7 @@ from fieldlogs.pipeline.aids.radar import RadarSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
+from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.types import GpsAnalysis, Odometry
 
 
@@ -37,6 +38,7 @@ class RunContext:
     odometry: Odometry
     gps: GpsAnalysis | None
     features: FeatureUnit | None
+    geometry: VehicleGeometry = field(default_factory=VehicleGeometry)
 
 
 def _rail(ctx: RunContext) -> Aid | None:
@@ -49,11 +51,11 @@ def _failsafe(ctx: RunContext) -> Aid | None:
 
 def _balise(ctx: RunContext) -> Aid | None:
     db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
-    return BaliseAid(db, ctx.cfg.balise, ctx.streams.get("balise"))
+    return BaliseAid(db, ctx.cfg.balise, ctx.streams.get("balise"), ctx.geometry.reader_x_m)
 
 
 def _gps(ctx: RunContext) -> Aid | None:
-    return GpsAid(ctx.gps, ctx.cfg.gps) if ctx.gps is not None else None
+    return GpsAid(ctx.gps, ctx.cfg.gps, ctx.geometry.gps_antenna_x_m) if ctx.gps is not None else None
 
 
 def _features(ctx: RunContext) -> Aid | None:

@@ -69,6 +69,8 @@ class BaliseAid(StaticAid):
     db: BaliseDb
     cfg: BaliseConfig
     telegrams: pd.DataFrame | None = field(default=None, repr=False)
+    reader_x_m: float = 0.0
+    """The balise reader's position forward of the vehicle's reference point [m]."""
     pending: _Pending | None = None
     last_pair: tuple[PairKey, float] | None = None
     """(pair key, travel distance at its I1)."""
@@ -157,12 +159,26 @@ class BaliseAid(StaticAid):
         i2 = pair["I2"]
         km_db, km_eq = float(i2["km_actual_m"]), float(i2["km_equipment_m"])
         k = direction_sign(key[2]) * (1 if cab >= 0 else -1)
-        fix = Fix(t, self._s, d, km_db, km_eq, key[0], key[2], k, FixSource.BALISE, self.cfg.fix_uncertainty_m, t_ref=t)
+        at_ref = -k * self.reader_x_m  # the reader is x_r ahead of the reference point (geometry.py)
+        fix = Fix(
+            t,
+            self._s,
+            d,
+            km_db + at_ref,
+            km_eq + at_ref,
+            key[0],
+            key[2],
+            k,
+            FixSource.BALISE,
+            self.cfg.fix_uncertainty_m,
+            t_ref=t,
+        )
         self.last_pair = (key, pending.d)
         detail = {"balise_id": i2["balise_id"], "line_code": key[0], "station_code": key[1], "track": key[2]}
         if estimate is None or km_now is None or estimate.line_code != key[0]:
             return [Event(t, EventType.INITIAL_POSITION, km_db, detail=detail)], fix
-        return [Event(t, EventType.BALISE_CORRECTION, km_db, km_now - km_db, detail={**detail, "kind": "I2"})], fix
+        amount = km_now - at_ref - km_db  # computed km at the reader − DB km
+        return [Event(t, EventType.BALISE_CORRECTION, km_db, amount, detail={**detail, "kind": "I2"})], fix
 
     def _on_c(
         self,
@@ -209,12 +225,13 @@ class BaliseAid(StaticAid):
             ], None
         c = hits[0]
         km_db, km_eq = float(c["km_actual_m"]), float(c["km_equipment_m"])
+        at_ref = -estimate.k * self.reader_x_m
         fix = Fix(
             t,
             self._s,
             d,
-            km_db,
-            km_eq,
+            km_db + at_ref,
+            km_eq + at_ref,
             estimate.line_code,
             estimate.track,
             estimate.k,
@@ -227,7 +244,7 @@ class BaliseAid(StaticAid):
                 t,
                 EventType.BALISE_CORRECTION,
                 km_db,
-                km_now - km_db,
+                km_now - at_ref - km_db,
                 detail={**base, "balise_id": c["balise_id"], "kind": "C"},
             )
         ], fix

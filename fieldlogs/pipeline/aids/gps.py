@@ -35,6 +35,8 @@ class GpsAid(StaticAid):
 
     gps: GpsAnalysis
     cfg: GpsConfig
+    antenna_x_m: float = 0.0
+    """The GPS antenna's position forward of the vehicle's reference point [m]."""
     crossover_pending: bool = False
     name = "gps"
     priority = Priority.TRACK
@@ -64,12 +66,13 @@ class GpsAid(StaticAid):
         if self.cfg.allow_initial and dec.km_dir != 0:
             ev = Event(view.t, EventType.INITIAL_POSITION_GPS, dec.km_m, detail=detail)
             k = dec.km_dir * view.cab
+            km = dec.km_m - k * self.antenna_x_m  # the fix is at the antenna (geometry.py)
             new = Fix(
                 view.t,
                 view.s,
                 view.d,
-                dec.km_m,
-                dec.km_m,
+                km,
+                km,
                 dec.line_code,
                 dec.track,
                 k,
