@@ -1,6 +1,7 @@
 """The 20 m GIS grid from surveyed track centrelines and kilometre posts (pure).
 
-Method, per line (all metric work in the line's JGD2011 plane rectangular zone):
+Method, per line (all metric work in the survey's one plane projection, chosen by the policy
+of :mod:`dbtools.gis.index` from all centreline vertices):
 
 1. Each track centreline is a polyline; ``s`` is the distance along it on the ground
    (geodesic length of each segment, so km is not off by the zone's scale factor of
@@ -38,6 +39,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.geometry import PolylineIndex, Projector, geodesic_step, turn_angle
+from dbtools.gis.index import projection_for
 from dbtools.network import canonical, empty_frame
 from schemas.enums import Severity
 from schemas.findings import Finding
@@ -205,11 +207,14 @@ def build_grid(
             )
         )
 
+    # one plane for the whole survey, by the grid index's policy (dbtools.gis.index)
+    projector = projection_for(
+        centrelines["lat"].to_numpy(dtype=float, na_value=np.nan),
+        centrelines["lon"].to_numpy(dtype=float, na_value=np.nan),
+    )
     for line_code in sorted(known_lines):
+        assert projector is not None  # a known line has vertices
         on_line = centrelines[line_codes == line_code]
-        lon = on_line["lon"].to_numpy(dtype=float)
-        lat = on_line["lat"].to_numpy(dtype=float)
-        projector = Projector.for_points(lat, lon)
         result.zones[line_code] = projector.zone
         sel = np.flatnonzero((post_lines == line_code).to_numpy())
         px, py = projector.to_xy(posts["lon"].to_numpy(dtype=float)[sel], posts["lat"].to_numpy(dtype=float)[sel])
@@ -266,6 +271,31 @@ class _TrackBuilt:
     summary: TrackSummary | None = None
 
 
+@dataclass
+class _Polyline:
+    """One track's cleaned centreline: plane vertices, heights (or None), ground chainage."""
+
+    x: FloatArray
+    y: FloatArray
+    heights: FloatArray | None
+    s: FloatArray
+
+
+@dataclass(frozen=True)
+class _TrackCtx:
+    """Who a track is, for findings."""
+
+    line_code: str
+    track: str
+    first_idx: Any
+    cw: _Where
+    pw: _Where
+
+    @property
+    def keys(self) -> dict[str, object]:
+        return {"line_code": self.line_code, "track": self.track}
+
+
 def _track_grid(
     line_code: str,
     track: str,
@@ -276,69 +306,13 @@ def _track_grid(
     pw: _Where,
     max_post_offset_m: float,
 ) -> _TrackBuilt:
+    """Steps 1–5 of the module docstring for one track."""
     out = _TrackBuilt([])
-    keys = {"line_code": line_code, "track": track}
-    first_idx = vertices.index[0]
-    lon = vertices["lon"].to_numpy(dtype=float)
-    lat = vertices["lat"].to_numpy(dtype=float)
-    x, y = projector.to_xy(lon, lat)
-    h = vertices["height_m"].to_numpy(dtype=float, na_value=np.nan)
-    step = geodesic_step(lon, lat)
-    dup = np.flatnonzero(step < DUPLICATE_VERTEX_M) + 1
-    if dup.size:
-        out.findings.append(
-            cw.finding(
-                "gisinput.duplicate_vertex",
-                Severity.WARNING,
-                f"{dup.size} vertex(es) repeat the previous one and were dropped",
-                vertices.index[dup[0]],
-                keys=keys,
-                value=int(dup.size),
-            )
-        )
-        keep = np.ones(x.size, dtype=bool)
-        keep[dup] = False
-        x, y, h, step = x[keep], y[keep], h[keep], geodesic_step(lon[keep], lat[keep])
-    if x.size < 2:
-        out.findings.append(
-            cw.finding(
-                "gisinput.short_track",
-                Severity.ERROR,
-                f"track {track} of line '{line_code}' has fewer than two distinct vertices",
-                first_idx,
-                keys=keys,
-                value=int(x.size),
-                limit=2,
-            )
-        )
+    ctx = _TrackCtx(line_code, track, vertices.index[0], cw, pw)
+    poly = _polyline(vertices, projector, ctx, out.findings)
+    if poly is None:
         return out
-    has_h = ~np.isnan(h)
-    if has_h.any() and not has_h.all():
-        out.findings.append(
-            cw.finding(
-                "gisinput.partial_height",
-                Severity.WARNING,
-                f"height_m is given on {int(has_h.sum())} of {h.size} vertices of the track; heights ignored",
-                first_idx,
-                keys=keys,
-                column="height_m",
-            )
-        )
-    heights = h if has_h.all() else None
-
-    # chainage on the ground (geodesic), not in the plane (scale factor 0.9999–1.0001)
-    s = np.concatenate([[0.0], np.cumsum(step)])
-    proj, usable = _project_posts(x, y, s, posts, max_post_offset_m)
-    reversed_ = False
-    if usable.sum() >= 2:
-        order = np.argsort(proj.km_m[usable], kind="stable")
-        km_used = posts.km[usable][order]
-        if km_used[-1] < km_used[0]:
-            reversed_ = True
-            x, y = x[::-1].copy(), y[::-1].copy()
-            heights = heights[::-1].copy() if heights is not None else None
-            s = s[-1] - s[::-1]
-            proj, usable = _project_posts(x, y, s, posts, max_post_offset_m)
+    proj, usable, reversed_ = _orient(poly, posts, max_post_offset_m)
     posts.used |= usable
     posts.nearest_m = np.minimum(posts.nearest_m, np.where(proj.beyond, np.inf, proj.distance_m))
     if not usable.any():
@@ -347,15 +321,14 @@ def _track_grid(
                 "gisinput.no_posts",
                 Severity.ERROR,
                 f"no kilometre post of line '{line_code}' lies within {max_post_offset_m:g} m of track {track}",
-                first_idx,
-                keys=keys,
+                ctx.first_idx,
+                keys=ctx.keys,
                 limit=max_post_offset_m,
             )
         )
         return out
-
     offset = float(np.median(proj.offset_m[usable]))
-    r = _reference_chainage(x, y, s, offset)
+    r = _reference_chainage(poly.x, poly.y, poly.s, offset)
     if np.any(np.diff(r) <= 0):
         out.findings.append(
             cw.finding(
@@ -363,77 +336,168 @@ def _track_grid(
                 Severity.ERROR,
                 f"the track turns too sharply for posts {offset:.1f} m beside it (reference chainage "
                 "would run backwards); check for a spike in the centreline",
-                first_idx,
-                keys=keys,
+                ctx.first_idx,
+                keys=ctx.keys,
                 value=offset,
             )
         )
         return out
-
     # posts on this track in order of reference chainage
-    pw_idx = posts.frame_index
     sel = np.flatnonzero(usable)
-    rp = np.interp(proj.km_m[sel], s, r)
+    rp = np.interp(proj.km_m[sel], poly.s, r)
     order = np.argsort(rp, kind="stable")
     sel, rp = sel[order], rp[order]
     km_before = posts.km[sel]
     km_after = np.where(np.isnan(posts.km_after[sel]), km_before, posts.km_after[sel])
-    ok = True
-    for a in range(sel.size - 1):
-        b = a + 1
-        ib = pw_idx[sel[b]]
-        pkeys = {"line_code": line_code, "track": track, "km_m": km_before[b]}
-        if rp[b] - rp[a] < SAME_PLACE_M:
-            out.findings.append(
-                pw.finding(
-                    "gisinput.posts_same_place",
-                    Severity.ERROR,
-                    f"posts km {km_before[a]:g} and km {km_before[b]:g} project to the same place on track {track}",
-                    ib,
-                    keys=pkeys,
-                )
-            )
-            ok = False
-            continue
-        if km_before[b] <= km_after[a]:
-            out.findings.append(
-                pw.finding(
-                    "gisinput.km_order",
-                    Severity.ERROR,
-                    f"kilometrage does not increase along track {track}: post km {km_before[b]:g} comes after "
-                    f"post km {km_after[a]:g} (a post is misplaced or its km is wrong)",
-                    ib,
-                    keys=pkeys,
-                    value=km_before[b],
-                    limit=km_after[a],
-                    column="km_m",
-                )
-            )
-            ok = False
-            continue
-        dkm, dr = km_before[b] - km_after[a], rp[b] - rp[a]
-        tol = max(SPACING_ABS_M, SPACING_REL * dr)
-        if abs(dkm - dr) > tol:
-            out.findings.append(
-                pw.finding(
-                    "gisinput.post_spacing",
-                    Severity.WARNING,
-                    f"posts km {km_after[a]:g} → {km_before[b]:g} differ by {dkm:.1f} m of km but lie "
-                    f"{dr:.1f} m apart along track {track}",
-                    ib,
-                    keys=pkeys,
-                    value=round(float(dkm - dr), 3),
-                    limit=round(tol, 3),
-                )
-            )
-    if not ok:
+    if not _check_post_order(ctx, posts.frame_index[sel], rp, km_before, km_after, out.findings):
         return out
+    runs = _km_runs(r, rp, km_before, km_after)
+    return _grid_points(ctx, out, poly, r, runs, projector, (int(sel.size), offset, reversed_))
 
-    # runs of continuous kilometrage, split at break posts
+
+def _polyline(
+    vertices: pd.DataFrame, projector: Projector, ctx: _TrackCtx, findings: list[Finding]
+) -> _Polyline | None:
+    """Step 1: plane vertices without repeats, heights if given on every vertex, chainage
+    on the ground (geodesic, not in the plane: scale factor 0.9999–1.0001); None (and a
+    finding) when fewer than two distinct vertices remain."""
+    lon = vertices["lon"].to_numpy(dtype=float)
+    lat = vertices["lat"].to_numpy(dtype=float)
+    x, y = projector.to_xy(lon, lat)
+    h = vertices["height_m"].to_numpy(dtype=float, na_value=np.nan)
+    step = geodesic_step(lon, lat)
+    dup = np.flatnonzero(step < DUPLICATE_VERTEX_M) + 1
+    if dup.size:
+        findings.append(
+            ctx.cw.finding(
+                "gisinput.duplicate_vertex",
+                Severity.WARNING,
+                f"{dup.size} vertex(es) repeat the previous one and were dropped",
+                vertices.index[dup[0]],
+                keys=ctx.keys,
+                value=int(dup.size),
+            )
+        )
+        keep = np.ones(x.size, dtype=bool)
+        keep[dup] = False
+        x, y, h, step = x[keep], y[keep], h[keep], geodesic_step(lon[keep], lat[keep])
+    if x.size < 2:
+        findings.append(
+            ctx.cw.finding(
+                "gisinput.short_track",
+                Severity.ERROR,
+                f"track {ctx.track} of line '{ctx.line_code}' has fewer than two distinct vertices",
+                ctx.first_idx,
+                keys=ctx.keys,
+                value=int(x.size),
+                limit=2,
+            )
+        )
+        return None
+    has_h = ~np.isnan(h)
+    if has_h.any() and not has_h.all():
+        findings.append(
+            ctx.cw.finding(
+                "gisinput.partial_height",
+                Severity.WARNING,
+                f"height_m is given on {int(has_h.sum())} of {h.size} vertices of the track; heights ignored",
+                ctx.first_idx,
+                keys=ctx.keys,
+                column="height_m",
+            )
+        )
+    return _Polyline(x, y, h if has_h.all() else None, np.concatenate([[0.0], np.cumsum(step)]))
+
+
+def _orient(
+    poly: _Polyline, posts: _Posts, max_post_offset_m: float
+) -> tuple[_PostProjection, npt.NDArray[np.bool_], bool]:
+    """Step 2: the posts projected onto the track; a polyline drawn from high to low km is
+    reversed in place. Returns (projection, usable posts, reversed)."""
+    proj, usable = _project_posts(poly.x, poly.y, poly.s, posts, max_post_offset_m)
+    if usable.sum() < 2:
+        return proj, usable, False
+    order = np.argsort(proj.km_m[usable], kind="stable")
+    km_used = posts.km[usable][order]
+    if km_used[-1] >= km_used[0]:
+        return proj, usable, False
+    poly.x, poly.y = poly.x[::-1].copy(), poly.y[::-1].copy()
+    poly.heights = poly.heights[::-1].copy() if poly.heights is not None else None
+    poly.s = poly.s[-1] - poly.s[::-1]
+    proj, usable = _project_posts(poly.x, poly.y, poly.s, posts, max_post_offset_m)
+    return proj, usable, True
+
+
+def _check_post_order(
+    ctx: _TrackCtx,
+    index: pd.Index,
+    rp: FloatArray,
+    km_before: FloatArray,
+    km_after: FloatArray,
+    findings: list[Finding],
+) -> bool:
+    """Consecutive posts along the track (reference chainage ``rp``): distinct places, km
+    increasing (errors: False), km difference close to their distance (warning)."""
+    ok = True
+    for a in range(rp.size - 1):
+        b = a + 1
+        f = _post_pair(ctx, index[b], (rp[a], rp[b]), (km_after[a], km_before[a], km_before[b]))
+        if f is not None:
+            findings.append(f)
+            ok = ok and f.severity != Severity.ERROR
+    return ok
+
+
+def _post_pair(ctx: _TrackCtx, idx: Any, rp: tuple[float, float], km: tuple[float, float, float]) -> Finding | None:
+    """The finding (if any) for post b after post a: ``rp`` their reference chainages,
+    ``km`` = (km after a, km before a, km before b)."""
+    after_a, before_a, before_b = km
+    pkeys = {**ctx.keys, "km_m": before_b}
+    t = ctx.track
+    if rp[1] - rp[0] < SAME_PLACE_M:
+        return ctx.pw.finding(
+            "gisinput.posts_same_place",
+            Severity.ERROR,
+            f"posts km {before_a:g} and km {before_b:g} project to the same place on track {t}",
+            idx,
+            keys=pkeys,
+        )
+    if before_b <= after_a:
+        return ctx.pw.finding(
+            "gisinput.km_order",
+            Severity.ERROR,
+            f"kilometrage does not increase along track {t}: post km {before_b:g} comes after "
+            f"post km {after_a:g} (a post is misplaced or its km is wrong)",
+            idx,
+            keys=pkeys,
+            value=before_b,
+            limit=after_a,
+            column="km_m",
+        )
+    dkm, dr = before_b - after_a, rp[1] - rp[0]
+    tol = max(SPACING_ABS_M, SPACING_REL * dr)
+    if abs(dkm - dr) <= tol:
+        return None
+    return ctx.pw.finding(
+        "gisinput.post_spacing",
+        Severity.WARNING,
+        f"posts km {after_a:g} → {before_b:g} differ by {dkm:.1f} m of km but lie {dr:.1f} m apart along track {t}",
+        idx,
+        keys=pkeys,
+        value=round(float(dkm - dr), 3),
+        limit=round(tol, 3),
+    )
+
+
+def _km_runs(
+    r: FloatArray, rp: FloatArray, km_before: FloatArray, km_after: FloatArray
+) -> list[tuple[list[float], list[float]]]:
+    """Step 4: runs of continuous kilometrage, (reference chainage, km) knots of each, split
+    at break posts; slope 1 before the first and after the last post."""
     runs: list[tuple[list[float], list[float]]] = []
     rk: list[float] = [float(r[0])]
     kk: list[float] = [float(km_before[0] - (rp[0] - r[0]))]
-    for j in range(sel.size):
+    for j in range(rp.size):
         if rp[j] > rk[-1]:
             rk.append(float(rp[j]))
             kk.append(float(km_before[j]))
@@ -444,53 +508,78 @@ def _track_grid(
         kk.append(kk[-1] + float(r[-1] - rk[-1]))
         rk.append(float(r[-1]))
     runs.append((rk, kk))
+    return runs
 
+
+def _grid_kms(
+    runs: list[tuple[list[float], list[float]]], keys: dict[str, object]
+) -> tuple[list[FloatArray], list[FloatArray], list[dict[str, object]]]:
+    """Step 5: the multiples of 20 m of km inside each run, their reference chainage and
+    one ``km_breaks`` row per break (last grid km before, first after)."""
     kms: list[FloatArray] = []
     refs: list[FloatArray] = []
+    breaks: list[dict[str, object]] = []
     last_km: float | None = None
     for n_run, (rk_, kk_) in enumerate(runs):
         k_lo = math.ceil(kk_[0] / GIS_SPACING_M - KM_EPS_M / GIS_SPACING_M)
         k_hi = math.floor(kk_[-1] / GIS_SPACING_M + KM_EPS_M / GIS_SPACING_M)
         grid_km = np.arange(k_lo, k_hi + 1, dtype=float) * GIS_SPACING_M
-        if n_run > 0 and grid_km.size and last_km is not None:
-            out.breaks.append({**keys, "km_from_m": last_km, "km_to_m": float(grid_km[0])})
-        if grid_km.size:
-            last_km = float(grid_km[-1])
-            kms.append(grid_km)
-            refs.append(np.interp(grid_km, kk_, rk_) if len(rk_) > 1 else np.full(grid_km.size, rk_[0]))
+        if not grid_km.size:
+            continue
+        if n_run > 0 and last_km is not None:
+            breaks.append({**keys, "km_from_m": last_km, "km_to_m": float(grid_km[0])})
+        last_km = float(grid_km[-1])
+        kms.append(grid_km)
+        refs.append(np.interp(grid_km, kk_, rk_) if len(rk_) > 1 else np.full(grid_km.size, rk_[0]))
+    return kms, refs, breaks
+
+
+def _grid_points(
+    ctx: _TrackCtx,
+    out: _TrackBuilt,
+    poly: _Polyline,
+    r: FloatArray,
+    runs: list[tuple[list[float], list[float]]],
+    projector: Projector,
+    posts: tuple[int, float, bool],
+) -> _TrackBuilt:
+    """Step 5: km → r → s → (x, y, height) by linear interpolation, back to lon/lat;
+    ``posts`` = (posts used, their median offset, reversed) for the summary."""
+    kms, refs, out.breaks = _grid_kms(runs, ctx.keys)
     if not kms:
         out.findings.append(
-            cw.finding(
+            ctx.cw.finding(
                 "gisinput.no_grid",
                 Severity.ERROR,
-                f"track {track} of line '{line_code}' is shorter than one grid step",
-                first_idx,
-                keys=keys,
+                f"track {ctx.track} of line '{ctx.line_code}' is shorter than one grid step",
+                ctx.first_idx,
+                keys=ctx.keys,
             )
         )
         return out
     grid_km = np.concatenate(kms)
+    s = poly.s
     sg = np.interp(np.concatenate(refs), r, s)
-    gx, gy = np.interp(sg, s, x), np.interp(sg, s, y)
-    glon, glat = projector.to_lonlat(gx, gy)
+    glon, glat = projector.to_lonlat(np.interp(sg, s, poly.x), np.interp(sg, s, poly.y))
     out.gis = pd.DataFrame(
         {
-            "line_code": line_code,
-            "track": track,
+            "line_code": ctx.line_code,
+            "track": ctx.track,
             "km_m": grid_km,
             "lat": np.round(glat, 9),
             "lon": np.round(glon, 9),
-            "height_m": np.round(np.interp(sg, s, heights), 3) if heights is not None else np.nan,
+            "height_m": np.round(np.interp(sg, s, poly.heights), 3) if poly.heights is not None else np.nan,
         }
     )
+    n_posts, offset, reversed_ = posts
     out.summary = TrackSummary(
-        line_code,
-        track,
+        ctx.line_code,
+        ctx.track,
         int(grid_km.size),
         float(grid_km[0]),
         float(grid_km[-1]),
         float(s[-1]),
-        int(sel.size),
+        n_posts,
         round(offset, 3),
         reversed_,
         len(out.breaks),

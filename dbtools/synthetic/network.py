@@ -158,58 +158,10 @@ def balises(spec: LineSpec) -> pd.DataFrame:
     Each C balise is governed by the last pair passed before it in running direction and
     carries the travel distance from that pair's I1.
     """
-    a = spec.alignment
     rows: list[dict[str, object]] = []
     for track in spec.tracks:
-        sign = running_sign(track)
-        pairs = []  # (I1 km, station code)
-        for st in spec.stations:
-            i1 = st.km_m - sign * PAIR_BEFORE_STATION_M
-            i2 = i1 + sign * PAIR_SPACING_M
-            if not (a.km0 <= min(i1, i2) and max(i1, i2) <= a.km_end):
-                continue
-            pairs.append((i1, st.code))
-            for kind, km in (("I1", i1), ("I2", i2)):
-                rows.append(
-                    {
-                        "balise_id": f"{spec.line_code}-{st.code}-{track}-{kind}",
-                        "kind": kind,
-                        "line_code": spec.line_code,
-                        "station_code": st.code,
-                        "track": str(track),
-                        "signal_type": None,
-                        "km_actual_m": km,
-                        "dist_from_initial_m": None,
-                    }
-                )
-        c_kms: list[tuple[float, str]] = []
-        for st in spec.stations:
-            c_kms.append((st.km_m - sign * HOME_BEFORE_STATION_M, "home"))
-        ordered = sorted(spec.stations, key=lambda s: s.km_m * sign)
-        for s0, s1 in itertools.pairwise(ordered):
-            span = abs(s1.km_m - s0.km_m)
-            n_blocks = int(span // spec.block_spacing_m)
-            for j in range(1, n_blocks):
-                c_kms.append((s0.km_m + sign * j * span / n_blocks, "block"))
-        n = 0
-        for km, sig in sorted(c_kms, key=lambda t: t[0] * sign):
-            governing = [(i1, code) for i1, code in pairs if (km - i1) * sign > PAIR_SPACING_M]
-            if not governing or not (a.km0 <= km <= a.km_end):
-                continue
-            i1, code = max(governing, key=lambda p: p[0] * sign)
-            n += 1
-            rows.append(
-                {
-                    "balise_id": f"{spec.line_code}-{track}-C{n:03d}",
-                    "kind": "C",
-                    "line_code": spec.line_code,
-                    "station_code": code,
-                    "track": str(track),
-                    "signal_type": sig,
-                    "km_actual_m": km,
-                    "dist_from_initial_m": abs(km - i1),
-                }
-            )
+        pair_rows, pairs = _pair_rows(spec, track)
+        rows += pair_rows + _c_rows(spec, track, pairs)
     frame = pd.DataFrame(rows)
     if frame.empty:
         return empty_frame(BALISES)
@@ -217,6 +169,71 @@ def balises(spec: LineSpec) -> pd.DataFrame:
     frame["km_equipment_m"] = spec.equipment_km(frame["km_actual_m"].to_numpy()).round(2)
     frame["dist_from_initial_m"] = frame["dist_from_initial_m"].astype(float).round(2)
     return frame
+
+
+def _pair_rows(spec: LineSpec, track: str) -> tuple[list[dict[str, object]], list[tuple[float, str]]]:
+    """I1/I2 rows of every station's initial pair on one track, and the pairs (I1 km, station)."""
+    a = spec.alignment
+    sign = running_sign(track)
+    rows: list[dict[str, object]] = []
+    pairs: list[tuple[float, str]] = []
+    for st in spec.stations:
+        i1 = st.km_m - sign * PAIR_BEFORE_STATION_M
+        i2 = i1 + sign * PAIR_SPACING_M
+        if not (a.km0 <= min(i1, i2) and max(i1, i2) <= a.km_end):
+            continue
+        pairs.append((i1, st.code))
+        for kind, km in (("I1", i1), ("I2", i2)):
+            rows.append(
+                {
+                    "balise_id": f"{spec.line_code}-{st.code}-{track}-{kind}",
+                    "kind": kind,
+                    "line_code": spec.line_code,
+                    "station_code": st.code,
+                    "track": str(track),
+                    "signal_type": None,
+                    "km_actual_m": km,
+                    "dist_from_initial_m": None,
+                }
+            )
+    return rows, pairs
+
+
+def _signal_kms(spec: LineSpec, sign: int) -> list[tuple[float, str]]:
+    """(km, signal type) of the home signal of every station and the block signals between."""
+    c_kms: list[tuple[float, str]] = [(st.km_m - sign * HOME_BEFORE_STATION_M, "home") for st in spec.stations]
+    ordered = sorted(spec.stations, key=lambda s: s.km_m * sign)
+    for s0, s1 in itertools.pairwise(ordered):
+        span = abs(s1.km_m - s0.km_m)
+        n_blocks = int(span // spec.block_spacing_m)
+        for j in range(1, n_blocks):
+            c_kms.append((s0.km_m + sign * j * span / n_blocks, "block"))
+    return c_kms
+
+
+def _c_rows(spec: LineSpec, track: str, pairs: list[tuple[float, str]]) -> list[dict[str, object]]:
+    """C balises at the signals of one track, each governed by the last pair before it."""
+    a = spec.alignment
+    sign = running_sign(track)
+    rows: list[dict[str, object]] = []
+    for km, sig in sorted(_signal_kms(spec, sign), key=lambda t: t[0] * sign):
+        governing = [(i1, code) for i1, code in pairs if (km - i1) * sign > PAIR_SPACING_M]
+        if not governing or not (a.km0 <= km <= a.km_end):
+            continue
+        i1, code = max(governing, key=lambda p: p[0] * sign)
+        rows.append(
+            {
+                "balise_id": f"{spec.line_code}-{track}-C{len(rows) + 1:03d}",
+                "kind": "C",
+                "line_code": spec.line_code,
+                "station_code": code,
+                "track": str(track),
+                "signal_type": sig,
+                "km_actual_m": km,
+                "dist_from_initial_m": abs(km - i1),
+            }
+        )
+    return rows
 
 
 def build_network(specs: list[LineSpec], projector: Projector) -> Network:
