@@ -22,6 +22,7 @@ from pathlib import Path
 from dbtools.database import integrity_findings, read_network
 from dbtools.gis.index import grid_index
 from dbtools.network import Network
+from dbtools.rules.area import check_area
 from dbtools.rules.balises import check_balises
 from dbtools.rules.common import Locator
 from dbtools.rules.config import ValidationConfig
@@ -47,6 +48,7 @@ def validate_network(
     if schema_checks:
         for t in DB_TABLES:
             findings.extend(check_frame(t, network.tables[t.name], max_per_check=config.max_findings_per_rule))
+        findings.extend(check_area(network, loc, config.max_findings_per_rule))  # sources: done on reading
     findings.extend(check_values(network.tables, config, loc))
     grid = grid_index(network)
     findings.extend(check_gis(grid, network.km_breaks, config, loc))

@@ -38,20 +38,19 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from dbtools.gis.geometry import PolylineIndex, Projector, geodesic_step, turn_angle
+from dbtools.gis.geometry import Projector, geodesic_step
 from dbtools.gis.index import projection_for
+from dbtools.gis.posts import PostProjection, Posts, grid_kms, km_runs, project_posts, reference_chainage
 from dbtools.network import canonical, empty_frame
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.gisinput import CENTRELINE_VERTICES, KM_POSTS
-from schemas.tables import GIS, GIS_SPACING_M, KM_BREAKS
+from schemas.tables import GIS, KM_BREAKS
 
 FloatArray = npt.NDArray[np.float64]
 
 #: A post farther than this from a track is not used on that track [m].
 MAX_POST_OFFSET_M = 50.0
-#: A post whose foot falls more than this beyond a track's end is not used on it [m].
-BEYOND_END_TOL_M = 1.0
 #: Consecutive vertices closer than this are duplicates [m].
 DUPLICATE_VERTEX_M = 1e-3
 #: Posts closer than this along a track are the same place [m].
@@ -60,8 +59,6 @@ SAME_PLACE_M = 0.01
 #: max(SPACING_ABS_M, SPACING_REL · distance).
 SPACING_ABS_M = 1.0
 SPACING_REL = 0.01
-#: Grid kms may lie this far outside a run (float round-off at exact multiples) [m].
-KM_EPS_M = 1e-6
 
 #: Extra frame columns the readers may add: file line of the row, and a label prefix for
 #: inputs without lines (GeoJSON: "feature 3, vertex 12").
@@ -94,21 +91,9 @@ class GridResult:
     findings: list[Finding] = field(default_factory=list)
     tracks: list[TrackSummary] = field(default_factory=list)
     zones: dict[str, int] = field(default_factory=dict)
-    """Plane rectangular zone used per line."""
-
-
-@dataclass
-class _Posts:
-    """The posts of one line, with their projected plane coordinates."""
-
-    frame_index: pd.Index
-    """Index labels of the posts in the input frame (for finding locations)."""
-    km: FloatArray
-    km_after: FloatArray
-    x: FloatArray
-    y: FloatArray
-    used: npt.NDArray[np.bool_]
-    nearest_m: FloatArray
+    """JGD2011 plane rectangular zone used per line (0: another projection, see ``epsg``)."""
+    epsg: int = 0
+    """EPSG code of the one plane projection of the survey."""
 
 
 class _Where:
@@ -215,10 +200,10 @@ def build_grid(
     for line_code in sorted(known_lines):
         assert projector is not None  # a known line has vertices
         on_line = centrelines[line_codes == line_code]
-        result.zones[line_code] = projector.zone
+        result.zones[line_code], result.epsg = projector.zone, projector.epsg
         sel = np.flatnonzero((post_lines == line_code).to_numpy())
         px, py = projector.to_xy(posts["lon"].to_numpy(dtype=float)[sel], posts["lat"].to_numpy(dtype=float)[sel])
-        line_posts = _Posts(
+        line_posts = Posts(
             frame_index=posts.index[sel],
             km=km_all[sel],
             km_after=km_after_all[sel],
@@ -300,7 +285,7 @@ def _track_grid(
     line_code: str,
     track: str,
     vertices: pd.DataFrame,
-    posts: _Posts,
+    posts: Posts,
     projector: Projector,
     cw: _Where,
     pw: _Where,
@@ -328,7 +313,7 @@ def _track_grid(
         )
         return out
     offset = float(np.median(proj.offset_m[usable]))
-    r = _reference_chainage(poly.x, poly.y, poly.s, offset)
+    r = reference_chainage(poly.x, poly.y, poly.s, offset)
     if np.any(np.diff(r) <= 0):
         out.findings.append(
             cw.finding(
@@ -351,7 +336,7 @@ def _track_grid(
     km_after = np.where(np.isnan(posts.km_after[sel]), km_before, posts.km_after[sel])
     if not _check_post_order(ctx, posts.frame_index[sel], rp, km_before, km_after, out.findings):
         return out
-    runs = _km_runs(r, rp, km_before, km_after)
+    runs = km_runs(r, rp, km_before, km_after)
     return _grid_points(ctx, out, poly, r, runs, projector, (int(sel.size), offset, reversed_))
 
 
@@ -410,11 +395,11 @@ def _polyline(
 
 
 def _orient(
-    poly: _Polyline, posts: _Posts, max_post_offset_m: float
-) -> tuple[_PostProjection, npt.NDArray[np.bool_], bool]:
+    poly: _Polyline, posts: Posts, max_post_offset_m: float
+) -> tuple[PostProjection, npt.NDArray[np.bool_], bool]:
     """Step 2: the posts projected onto the track; a polyline drawn from high to low km is
     reversed in place. Returns (projection, usable posts, reversed)."""
-    proj, usable = _project_posts(poly.x, poly.y, poly.s, posts, max_post_offset_m)
+    proj, usable = project_posts(poly.x, poly.y, poly.s, posts, max_post_offset_m)
     if usable.sum() < 2:
         return proj, usable, False
     order = np.argsort(proj.km_m[usable], kind="stable")
@@ -424,7 +409,7 @@ def _orient(
     poly.x, poly.y = poly.x[::-1].copy(), poly.y[::-1].copy()
     poly.heights = poly.heights[::-1].copy() if poly.heights is not None else None
     poly.s = poly.s[-1] - poly.s[::-1]
-    proj, usable = _project_posts(poly.x, poly.y, poly.s, posts, max_post_offset_m)
+    proj, usable = project_posts(poly.x, poly.y, poly.s, posts, max_post_offset_m)
     return proj, usable, True
 
 
@@ -489,51 +474,6 @@ def _post_pair(ctx: _TrackCtx, idx: Any, rp: tuple[float, float], km: tuple[floa
     )
 
 
-def _km_runs(
-    r: FloatArray, rp: FloatArray, km_before: FloatArray, km_after: FloatArray
-) -> list[tuple[list[float], list[float]]]:
-    """Step 4: runs of continuous kilometrage, (reference chainage, km) knots of each, split
-    at break posts; slope 1 before the first and after the last post."""
-    runs: list[tuple[list[float], list[float]]] = []
-    rk: list[float] = [float(r[0])]
-    kk: list[float] = [float(km_before[0] - (rp[0] - r[0]))]
-    for j in range(rp.size):
-        if rp[j] > rk[-1]:
-            rk.append(float(rp[j]))
-            kk.append(float(km_before[j]))
-        if km_after[j] != km_before[j]:
-            runs.append((rk, kk))
-            rk, kk = [float(rp[j])], [float(km_after[j])]
-    if r[-1] > rk[-1]:
-        kk.append(kk[-1] + float(r[-1] - rk[-1]))
-        rk.append(float(r[-1]))
-    runs.append((rk, kk))
-    return runs
-
-
-def _grid_kms(
-    runs: list[tuple[list[float], list[float]]], keys: dict[str, object]
-) -> tuple[list[FloatArray], list[FloatArray], list[dict[str, object]]]:
-    """Step 5: the multiples of 20 m of km inside each run, their reference chainage and
-    one ``km_breaks`` row per break (last grid km before, first after)."""
-    kms: list[FloatArray] = []
-    refs: list[FloatArray] = []
-    breaks: list[dict[str, object]] = []
-    last_km: float | None = None
-    for n_run, (rk_, kk_) in enumerate(runs):
-        k_lo = math.ceil(kk_[0] / GIS_SPACING_M - KM_EPS_M / GIS_SPACING_M)
-        k_hi = math.floor(kk_[-1] / GIS_SPACING_M + KM_EPS_M / GIS_SPACING_M)
-        grid_km = np.arange(k_lo, k_hi + 1, dtype=float) * GIS_SPACING_M
-        if not grid_km.size:
-            continue
-        if n_run > 0 and last_km is not None:
-            breaks.append({**keys, "km_from_m": last_km, "km_to_m": float(grid_km[0])})
-        last_km = float(grid_km[-1])
-        kms.append(grid_km)
-        refs.append(np.interp(grid_km, kk_, rk_) if len(rk_) > 1 else np.full(grid_km.size, rk_[0]))
-    return kms, refs, breaks
-
-
 def _grid_points(
     ctx: _TrackCtx,
     out: _TrackBuilt,
@@ -545,7 +485,7 @@ def _grid_points(
 ) -> _TrackBuilt:
     """Step 5: km → r → s → (x, y, height) by linear interpolation, back to lon/lat;
     ``posts`` = (posts used, their median offset, reversed) for the summary."""
-    kms, refs, out.breaks = _grid_kms(runs, ctx.keys)
+    kms, refs, out.breaks = grid_kms(runs, ctx.keys)
     if not kms:
         out.findings.append(
             ctx.cw.finding(
@@ -585,39 +525,3 @@ def _grid_points(
         len(out.breaks),
     )
     return out
-
-
-@dataclass
-class _PostProjection:
-    km_m: FloatArray
-    offset_m: FloatArray
-    distance_m: FloatArray
-    beyond: npt.NDArray[np.bool_]
-
-
-def _project_posts(
-    x: FloatArray, y: FloatArray, s: FloatArray, posts: _Posts, max_offset: float
-) -> tuple[_PostProjection, npt.NDArray[np.bool_]]:
-    """Chainage ``s`` of the foot, signed offset and distance of every post on one polyline
-    (plane ``x``, ``y``; ground chainage ``s`` at the vertices); which posts are usable."""
-    if posts.x.size == 0:
-        empty = np.empty(0)
-        return _PostProjection(empty, empty, empty, np.empty(0, dtype=bool)), np.empty(0, dtype=bool)
-    p = PolylineIndex(x, y, s).project(posts.x, posts.y)
-    # along-track distance of the post from each end, positive inwards (negative = beyond)
-    first = max(float(np.hypot(x[1] - x[0], y[1] - y[0])), 1e-12)
-    last = max(float(np.hypot(x[-1] - x[-2], y[-1] - y[-2])), 1e-12)
-    t0 = ((posts.x - x[0]) * (x[1] - x[0]) + (posts.y - y[0]) * (y[1] - y[0])) / first
-    t1 = ((x[-1] - posts.x) * (x[-1] - x[-2]) + (y[-1] - posts.y) * (y[-1] - y[-2])) / last
-    beyond = ((p.km_m <= 0.0) & (t0 < -BEYOND_END_TOL_M)) | ((p.km_m >= s[-1]) & (t1 < -BEYOND_END_TOL_M))
-    usable = (p.distance_m <= max_offset) & ~beyond
-    return _PostProjection(p.km_m, p.offset_m, p.distance_m, beyond), usable
-
-
-def _reference_chainage(x: FloatArray, y: FloatArray, s: FloatArray, offset_m: float) -> FloatArray:
-    """``r`` at the vertices: ``dr = ds − o·dθ``, each vertex's turn split over its two segments."""
-    if offset_m == 0.0 or x.size < 3:
-        return s.copy()
-    turn = np.nan_to_num(turn_angle(x, y))
-    seg_turn = 0.5 * (turn[:-1] + turn[1:])
-    return np.concatenate([[0.0], np.cumsum(np.diff(s) - offset_m * seg_turn)])

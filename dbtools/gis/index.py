@@ -4,18 +4,21 @@ rules (:mod:`dbtools.rules`), map-matching (:mod:`dbtools.gis.matching`), GIS ve
 Built once per loaded network (:func:`grid_index`, through ``Network.cached``).
 
 **Points.** The *valid* GIS points — ``line_code``, ``track``, ``km_m``, ``lat``, ``lon``
-all present and finite, lat/lon inside the operating area — sorted by (line_code, track,
+all present and finite, lat/lon not *far* outside the network's operating area
+(:mod:`dbtools.gis.georef`: more than 2 km outside is an error) — sorted by (line_code, track,
 km_m) (stable: a duplicate key keeps its file order). Each (line_code, track) is one
 *track*, with track ids 0, 1, … in that order; its points are ``start[t]:end[t]``. Rows
 left out are reported by the schema rules, never silently used.
 
 **Projection policy** (every module, one plane per network): all plane work — headings,
 curvature, track spacing, nearest segments, lateral offsets, lateral shifts — is done in
-ONE conformal plane projection, :attr:`GridIndex.projector`, chosen by :func:`projection_for`
-from the median (lat, lon) of the valid points: the JGD2011 plane rectangular zone whose
-origin is nearest to it (zones 1–19, EPSG 6669–6687). Lengths along the track are never
-taken from the plane: steps are geodesic (GRS80), so km and track length carry no scale
-factor of the zone (0.9999–1.0001 inside it).
+ONE conformal plane projection, :attr:`GridIndex.projector`: the network's metric CRS
+(:func:`network_georef`), as declared in the DB meta or the source set's ``network.toml``,
+else derived from the median (lat, lon) of the points — the JGD2011 plane rectangular
+zone whose origin is nearest inside Japan, the UTM zone elsewhere
+(:func:`dbtools.gis.georef.derive`). Lengths along the track are never taken from the
+plane: steps are geodesic (GRS80), so km and track length carry no scale factor of the
+projection (0.9999–1.0001 inside a JGD2011 zone, 0.9996–1.001 inside a UTM zone).
 
 **Per step** (i → i + 1, arrays of length n − 1): ``dkm`` the km step within a track (NaN
 across tracks), ``dist`` the geodesic distance, ``seg`` the plane distance.
@@ -54,6 +57,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.geometry import Projector, geodesic_step, signed_curvature
+from dbtools.gis.georef import AREA_TOLERANCE_M, Georef, derive, georef_of
 from dbtools.network import Network
 from schemas.tables import LAT_RANGE, LON_RANGE
 
@@ -94,11 +98,10 @@ class GridShape:
 
 
 def projection_for(lat: F64, lon: F64) -> Projector | None:
-    """The one plane projection of a set of points (module doc, "Projection policy");
-    None when there are no points."""
-    if lat.size == 0:
-        return None
-    return Projector.for_points(lat, lon)
+    """The one plane projection of a set of points with nothing declared (module doc,
+    "Projection policy"); None when there are no points."""
+    g = derive(lat, lon)
+    return None if g is None else Projector.from_epsg(g.crs_epsg)
 
 
 def _column(frame: pd.DataFrame, name: str, numeric: bool) -> npt.NDArray[Any]:
@@ -124,12 +127,17 @@ class GridIndex:
     """
 
     def __init__(
-        self, gis: pd.DataFrame, km_breaks: pd.DataFrame | None = None, projector: Projector | None = None
+        self,
+        gis: pd.DataFrame,
+        km_breaks: pd.DataFrame | None = None,
+        projector: Projector | None = None,
+        georef: Georef | None = None,
     ) -> None:
         self.gis = gis
         self.km_breaks = km_breaks
         line, track = _column(gis, "line_code", False), _column(gis, "track", False)
         km, lat, lon = (_column(gis, c, True) for c in ("km_m", "lat", "lon"))
+        self.georef = georef if georef is not None else derive(lat, lon)
         with np.errstate(invalid="ignore"):
             ok = pd.notna(line) & pd.notna(track) & np.isfinite(km) & self._inside(lat, lon)
         pos = np.flatnonzero(ok)
@@ -152,7 +160,9 @@ class GridIndex:
         self.tracks: ObjArray = np.asarray(tuniq, dtype=object)[tcode[self.start]]
         self.keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in zip(self.lines, self.tracks, strict=True)]
         self._key_id = {key: i for i, key in enumerate(self.keys)}
-        self.projector = projector if projector is not None else projection_for(self.lat, self.lon)
+        if projector is None and self.georef is not None:
+            projector = Projector.from_epsg(self.georef.crs_epsg)
+        self.projector = projector
         if self.projector is not None and n:
             self.x, self.y = self.projector.to_xy(self.lon, self.lat)
         else:
@@ -165,12 +175,14 @@ class GridIndex:
         self._cuts: dict[PieceRule, BoolArray] = {}
         self._breaks: dict[float, tuple[BoolArray, I64]] = {}
 
-    @staticmethod
-    def _inside(lat: F64, lon: F64) -> BoolArray:
-        """Inside the operating area (which also means finite)."""
-        return np.asarray(
-            (lat >= LAT_RANGE[0]) & (lat <= LAT_RANGE[1]) & (lon >= LON_RANGE[0]) & (lon <= LON_RANGE[1]), dtype=bool
-        )
+    def _inside(self, lat: F64, lon: F64) -> BoolArray:
+        """Finite, on the globe and not far outside the operating area."""
+        with np.errstate(invalid="ignore"):
+            ok = (np.abs(lat) <= LAT_RANGE[1]) & (np.abs(lon) <= LON_RANGE[1])
+        if self.georef is None or not ok.any():
+            return np.asarray(ok, dtype=bool)
+        ok[ok] = self.georef.area.distance_m(lat[ok], lon[ok]) <= AREA_TOLERANCE_M
+        return np.asarray(ok, dtype=bool)
 
     @cached_property
     def dist(self) -> F64:
@@ -319,9 +331,22 @@ class GridIndex:
         return self._cuts[rule]
 
 
+def network_georef(network: Network) -> Georef | None:
+    """Area, metric CRS and height datum of ``network``: its meta (declared, or stored by
+    ``db build``), the rest derived from its GIS points; None without any point."""
+    gis = network.gis
+
+    def build() -> tuple[pd.DataFrame, Georef | None]:
+        lat, lon = _column(gis, "lat", True), _column(gis, "lon", True)
+        return gis, georef_of(network.meta, lat, lon, network.origin)
+
+    return network.cached(("georef", id(gis)), build)[1]
+
+
 def grid_index(network: Network) -> GridIndex:
     """The :class:`GridIndex` of ``network``, built once per loaded network. The key holds
     the identity of the frames it was built from (and the index keeps them alive), so a
     table replaced after loading gets a new index."""
     gis, kb = network.gis, network.tables.get("km_breaks")
-    return network.cached(("grid_index", id(gis), id(kb)), lambda: GridIndex(gis, kb))
+    georef = network_georef(network)
+    return network.cached(("grid_index", id(gis), id(kb)), lambda: GridIndex(gis, kb, georef=georef))

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from dbtools.gis.geometry import Projector, zone_epsg
+from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical, empty_frame
 from dbtools.synthetic.alignment import Alignment, Curve
 from schemas.enums import Track
@@ -237,7 +237,9 @@ def _c_rows(spec: LineSpec, track: str, pairs: list[tuple[float, str]]) -> list[
 
 
 def build_network(specs: list[LineSpec], projector: Projector) -> Network:
-    """A complete network (all content tables, canonical) from line specs."""
+    """A complete network (all content tables, canonical) from line specs, drawn in the
+    plane of ``projector`` (any projected CRS: :meth:`Projector.from_epsg`), which the
+    network declares as its metric CRS (meta ``metric_crs``)."""
     tables = {
         LINES.name: pd.DataFrame(
             {
@@ -255,7 +257,7 @@ def build_network(specs: list[LineSpec], projector: Projector) -> Network:
         {t.name: canonical(t, tables[t.name]) for t in (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS)},
         origin="synthetic",
     )
-    net.meta = {"crs": f"EPSG:{zone_epsg(projector.zone)}"}
+    net.meta = {"metric_crs": f"EPSG:{projector.epsg}", "metric_crs_source": "declared"}
     return net
 
 
@@ -305,10 +307,14 @@ def random_alignment(
     )
 
 
-def demo_line(line_code: str = "0900", seed: int = 7, length_m: float = 12_000.0) -> LineSpec:
-    """A small double-track test line with stations every ~3 km (for tests and benchmarks)."""
+def demo_line(
+    line_code: str = "0900", seed: int = 7, length_m: float = 12_000.0, *, x0: float = 0.0, y0: float = 0.0
+) -> LineSpec:
+    """A small double-track test line with stations every ~3 km (for tests and benchmarks),
+    starting at plane (x0, y0) of whatever projection it is built in: the origin of a
+    JGD2011 zone by default; e.g. ``x0=500_000, y0=5_000_000`` on a UTM central meridian."""
     rng = np.random.default_rng(seed)
-    a = random_alignment(rng, length_m, km0=1000.0)
+    a = random_alignment(rng, length_m, km0=1000.0, x0=x0, y0=y0)
     stations = [
         Station(f"{i + 1:02d}", f"Station {i + 1}", a.km0 + 500.0 + i * 3000.0)
         for i in range(int((length_m - 1000.0) // 3000.0) + 1)
