@@ -281,3 +281,24 @@ def test_sample_network_figures_unchanged(tmp_path: Path) -> None:
     meta = read_network(tmp_path / "net.sqlite").meta
     assert meta["metric_crs"] == "EPSG:6677" and meta["metric_crs_source"] == "derived"
     assert json.loads(meta["area"]) == {"lat_min": 20.0, "lat_max": 46.0, "lon_min": 122.0, "lon_max": 154.0}
+
+
+def test_declared_polygon_area(tmp_path: Path) -> None:
+    """A polygon area: a point inside its bounding box but ~1.4 km beyond its slanted edge
+    is a warning, the same point 25 km out an error; the polygon survives db build and a
+    rewrite of the source set."""
+    poly = "[[8.9, 45.1], [9.1, 45.1], [9.1, 45.3], [8.9, 45.3], [8.9, 45.2]]"
+    src = _europe_source(tmp_path, f"[area]\npolygon = {poly}\n")
+    assert validate_path(src) == []
+    gis = pd.read_csv(src / "gis.csv", dtype={"line_code": str})
+    gis.loc[3, ["lat", "lon"]] = [45.2, 8.9 - 0.018]  # 1.4 km west of the western edge
+    gis.loc[4, ["lat", "lon"]] = [45.2, 8.9 - 0.32]  # 25 km west
+    gis.to_csv(src / "gis.csv", index=False)
+    found = {(f.rule, f.row) for f in validate_path(src) if f.rule in ("schema.range", "gis.outside_area")}
+    assert found == {("gis.outside_area", 5), ("schema.range", 6)}
+    gis.drop(index=[3, 4]).to_csv(src / "gis.csv", index=False)
+    build_db(src, tmp_path / "net.sqlite")
+    db = read_network(tmp_path / "net.sqlite")
+    assert json.loads(db.meta["area"])["polygon"][0] == [8.9, 45.1] and db.meta["area_source"] == "declared"
+    again = write_source_set(db, tmp_path / "again")
+    assert read_source_set(again)[0].meta["area"] == db.meta["area"]
