@@ -18,7 +18,8 @@ from rich.progress import Progress, TaskID
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, progress
 from dbtools.gis.io import grid_files
-from dbtools.gis.verify import VerifyConfig, proposed_network
+from dbtools.gis.verify.config import VerifyConfig
+from dbtools.gis.verify.proposal import proposed_network
 from dbtools.sources import write_source_set
 from schemas.errors import EXIT_FINDINGS, RefusedError, UsageError
 from schemas.units import format_km
@@ -221,12 +222,7 @@ def verify(
     from fieldlogs.gisverify.evidence import verify_runs
     from fieldlogs.pipeline import PipelineConfig
 
-    if fmt == VerifyFmt.html and out is None:
-        raise UsageError("--format html needs --out FILE")
-    for target in (out, propose):
-        if target is not None and target.exists() and not force:
-            if target.is_file() or any(target.iterdir()):
-                raise RefusedError("exists; use --force to replace it", path=target)
+    _check_targets(fmt, out, propose, force)
     cfg = VerifyConfig(
         alpha=alpha,
         correction="bonferroni" if bonferroni else "bh",
@@ -244,15 +240,36 @@ def verify(
     finally:
         if bar.task is not None:
             bar.bar.stop()
-    v = report.verification
     if propose is not None:
-        write_source_set(proposed_network(report.network, v), propose, force=True)
-        moved = len(v.proposal)
-        err_console().print(
-            f"proposed source set written to {propose} ({moved} GIS point(s) moved)"
-            + ("; build it with: trainpos db build " + str(propose) + " --out NEW.sqlite" if moved else ""),
-            highlight=False,
-        )
+        _write_proposal(report, propose)
+    _emit_report(report, fmt, out)
+    if report.verification.has_defects:
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+def _check_targets(fmt: VerifyFmt, out: Path | None, propose: Path | None, force: bool) -> None:
+    """Usage and overwrite checks of ``gis verify`` before any run is replayed."""
+    if fmt == VerifyFmt.html and out is None:
+        raise UsageError("--format html needs --out FILE")
+    for target in (out, propose):
+        if target is not None and target.exists() and not force:
+            if target.is_file() or any(target.iterdir()):
+                raise RefusedError("exists; use --force to replace it", path=target)
+
+
+def _write_proposal(report: VerifyReport, propose: Path) -> None:
+    v = report.verification
+    write_source_set(proposed_network(report.network, v), propose, force=True)
+    moved = len(v.proposal)
+    err_console().print(
+        f"proposed source set written to {propose} ({moved} GIS point(s) moved)"
+        + ("; build it with: trainpos db build " + str(propose) + " --out NEW.sqlite" if moved else ""),
+        highlight=False,
+    )
+
+
+def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None) -> None:
+    """The report as HTML (to ``out``), JSON or a table (to ``out`` or stdout)."""
     if fmt == VerifyFmt.html:
         from fieldlogs.gisverify.page import render_html
 
@@ -271,8 +288,6 @@ def verify(
         _write(out, buf.getvalue())
     else:
         render_verification(report, console())
-    if v.has_defects:
-        raise typer.Exit(EXIT_FINDINGS)
 
 
 def _write(path: Path, text: str) -> None:

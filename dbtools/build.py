@@ -1,4 +1,6 @@
-"""``db build``: a source set → one onboard DB version (SQLite), atomically."""
+"""``db build``: a source set → one onboard DB version (SQLite), atomically. The meta gets
+the network's operating area, metric CRS and height datum, declared or derived
+(:mod:`dbtools.gis.georef`)."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from dbtools.database import write_db
+from dbtools.gis.index import network_georef
 from dbtools.network import content_hash
 from dbtools.sources import read_source_set
 from schemas.enums import Severity
@@ -54,6 +57,7 @@ def build_db(
     created = (now or datetime.now(UTC)).astimezone(UTC)
     version_str = db_version or created.strftime("%Y%m%d.%H%M%S")
     digest = content_hash(network.tables)
+    georef = network_georef(network)
     meta = {
         "db_version": version_str,
         "created_at": created.isoformat(timespec="seconds").replace("+00:00", "Z"),
@@ -62,6 +66,7 @@ def build_db(
         "content_hash": digest,
         "note": note,
         **network.meta,
+        **(georef.to_meta() if georef is not None else {}),
     }
     write_db(out, network, meta, force=force)
     return BuildResult(out, version_str, digest, {k: len(v) for k, v in network.tables.items()}, findings)

@@ -27,6 +27,7 @@ import pandas as pd
 
 from dbtools.database import read_network, schema_version
 from dbtools.gis.geometry import GEOD
+from dbtools.gis.index import network_georef
 from dbtools.network import Network, content_hash
 from dbtools.sources import read_source_set
 from schemas.enums import Severity
@@ -281,6 +282,22 @@ def _side(net: Network, actual_hash: str) -> dict[str, Any]:
 # --------------------------------------------------------------------------- summaries
 
 
+def _georef_summary(old: Network, new: Network) -> list[str]:
+    """Changes of operating area, metric CRS and height datum (stated in meta, or derived
+    from the points for a DB built without them)."""
+    a, b = network_georef(old), network_georef(new)
+    if a is None or b is None:
+        return []
+    out = []
+    if a.crs_epsg != b.crs_epsg:
+        out.append(f"metric CRS EPSG:{a.crs_epsg} ({a.crs_source}) → EPSG:{b.crs_epsg} ({b.crs_source})")
+    if a.area != b.area:
+        out.append(f"operating area {a.area.describe()} ({a.area_source}) → {b.area.describe()} ({b.area_source})")
+    if a.heights != b.heights:
+        out.append(f"height datum {a.heights} → {b.heights}")
+    return out
+
+
 def summarize(d: DbDiff, old: Network, new: Network) -> list[str]:
     """Plain-language lines, meta first, then one block per table in dependency order."""
     lines: list[str] = []
@@ -290,6 +307,7 @@ def summarize(d: DbDiff, old: Network, new: Network) -> list[str]:
     v_old, v_new = old.meta.get("db_version"), new.meta.get("db_version")
     if v_old != v_new and v_old and v_new:
         lines.append(f"db_version {v_old} → {v_new}")
+    lines.extend(_georef_summary(old, new))
     h_old, h_new = d.old["content_hash"], d.new["content_hash"]
     if h_old != h_new:
         lines.append(f"content_hash {h_old[:12]}… → {h_new[:12]}…")

@@ -1,4 +1,7 @@
-"""Reading a source set (SPEC §3 "Source files") into a :class:`Network` plus findings."""
+"""Reading a source set (SPEC §3 "Source files") into a :class:`Network` plus findings.
+
+An optional ``network.toml`` declares the operating area, metric CRS and height datum
+(:func:`dbtools.gis.georef.read_declaration`); its entries go to ``Network.meta``."""
 
 from __future__ import annotations
 
@@ -8,7 +11,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from dbtools.gis.georef import NETWORK_FILE, read_declaration, write_declaration
 from dbtools.network import Network, canonical_with_index, empty_frame
+from dbtools.rules.area import check_area
+from dbtools.rules.common import Locator
 from dbtools.tabular import find_table_file, read_raw_table, sha256_file
 from schemas.enums import Severity, Track
 from schemas.errors import InputError
@@ -64,8 +70,20 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
         net.tables[name], labels = canonical_with_index(SOURCE_TABLES[name], frame)
         if name in files:
             net.source_rows[name] = np.asarray(labels, dtype=np.int64) + FIRST_DATA_LINE
-    net.meta = {f"source_sha256:{k}": v for k, v in sorted(hashes.items())}
+    net.meta = _declared_meta(folder, hashes)
+    findings.extend(check_area(net, Locator(files, net.source_rows)))
     return net, findings
+
+
+def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:
+    """Source hashes (``network.toml`` included) and what ``network.toml`` declares."""
+    declared = folder / NETWORK_FILE
+    if declared.is_file():
+        hashes[declared.name] = sha256_file(declared)
+    meta = {f"source_sha256:{k}": v for k, v in sorted(hashes.items())}
+    if declared.is_file():
+        meta.update(read_declaration(declared))
+    return meta
 
 
 def _lines_attributes(frame: pd.DataFrame, known: list[str]) -> pd.DataFrame:
@@ -134,4 +152,5 @@ def write_source_set(network: Network, folder: Path, *, force: bool = False) -> 
                 continue
             cols = [c for c in table.column_names if c != "attributes_json"]
             frame[cols].to_csv(tmp / f"{name}.csv", index=False, lineterminator="\n")
+        write_declaration(network.meta, tmp / NETWORK_FILE)
     return folder

@@ -20,12 +20,14 @@ from __future__ import annotations
 from pathlib import Path
 
 from dbtools.database import integrity_findings, read_network
+from dbtools.gis.index import grid_index
 from dbtools.network import Network
+from dbtools.rules.area import check_area
 from dbtools.rules.balises import check_balises
 from dbtools.rules.common import Locator
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.features import check_features
-from dbtools.rules.gis import build_grid, check_gis
+from dbtools.rules.gis import check_gis
 from dbtools.rules.schema import check_values
 from dbtools.sources import read_source_set
 from schemas.findings import Finding
@@ -46,9 +48,10 @@ def validate_network(
     if schema_checks:
         for t in DB_TABLES:
             findings.extend(check_frame(t, network.tables[t.name], max_per_check=config.max_findings_per_rule))
+        findings.extend(check_area(network, loc, config.max_findings_per_rule))  # sources: done on reading
     findings.extend(check_values(network.tables, config, loc))
-    grid = build_grid(network.gis, config)
-    findings.extend(check_gis(grid, network.gis, network.km_breaks, config, loc))
+    grid = grid_index(network)
+    findings.extend(check_gis(grid, network.km_breaks, config, loc))
     findings.extend(check_balises(network.balises, grid, config, loc))
     findings.extend(check_features(network.feature_points, grid, config, loc))
     return findings

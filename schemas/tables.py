@@ -16,9 +16,14 @@ SCHEMA_VERSION = 1
 #: ``PRAGMA application_id`` of every onboard DB: ASCII "TPOS".
 APPLICATION_ID = 0x54504F53
 
-#: Operating area (Japan) for lat/lon plausibility [deg].
-LAT_RANGE = (20.0, 46.0)
-LON_RANGE = (122.0, 154.0)
+#: Latitude and longitude on the globe [deg]; where a network operates is its own
+#: declaration or derivation (``dbtools.gis.georef``, DB meta ``area``).
+LAT_RANGE = (-90.0, 90.0)
+LON_RANGE = (-180.0, 180.0)
+#: The JGD2011 box (lat_min, lat_max, lon_min, lon_max) [deg]: the area of the 19 plane
+#: rectangular zones, and the operating area derived for a network whose median point is
+#: inside it (the only area accepted before areas could be declared).
+JAPAN_AREA = (20.0, 46.0, 122.0, 154.0)
 
 TRACKS = tuple(t.value for t in Track)
 
@@ -52,12 +57,19 @@ GIS = Table(
         LINE_CODE,
         TRACK,
         Column("km_m", "float", "Kilometrage (multiple of 20 m)", unit="m", km_notation=True),
-        Column("lat", "float", "Latitude, JGD2011/WGS84", unit="deg", min=LAT_RANGE[0], max=LAT_RANGE[1]),
-        Column("lon", "float", "Longitude, JGD2011/WGS84", unit="deg", min=LON_RANGE[0], max=LON_RANGE[1]),
+        Column(
+            "lat",
+            "float",
+            "Latitude in the geodetic datum of the metric CRS (JGD2011, WGS 84, …)",
+            unit="deg",
+            min=LAT_RANGE[0],
+            max=LAT_RANGE[1],
+        ),
+        Column("lon", "float", "Longitude, same datum", unit="deg", min=LON_RANGE[0], max=LON_RANGE[1]),
         Column(
             "height_m",
             "float",
-            "Rail height above the ellipsoid",
+            "Rail height: above the ellipsoid, or above the geoid named in meta (height_datum)",
             unit="m",
             required=False,
             nullable=True,
@@ -149,7 +161,8 @@ META = Table(
         Column(
             "key",
             "str",
-            "db_version, created_at, tool_version, schema_version, content_hash, note, source_sha256:<file>",
+            "db_version, created_at, tool_version, schema_version, content_hash, note, source_sha256:<file>, "
+            "area, area_source, metric_crs, metric_crs_source, height_datum, geoid_model",
         ),
         Column("value", "str", "Value", nullable=True),
     ),

@@ -1,4 +1,5 @@
-"""Vectorised geometry on the 20 m grid: projection to JGD2011 plane rectangular zones,
+"""Vectorised geometry on the 20 m grid: projection to a plane (a JGD2011 plane rectangular
+zone, a UTM zone or any projected CRS; which one: :mod:`dbtools.gis.georef`),
 signed curvature, geodesic distance and exact nearest-segment projection of points onto
 a track polyline (kilometrage and signed lateral offset).
 
@@ -67,31 +68,58 @@ def _transformer(src: int, dst: int) -> Transformer:
     return Transformer.from_crs(src, dst, always_xy=True)
 
 
+@lru_cache(maxsize=32)
+def _geodetic_of(epsg: int) -> Transformer:
+    """Geographic lon/lat of the projected CRS's own geodetic datum → the projected CRS
+    (no datum transformation), cached."""
+    from pyproj import CRS
+
+    crs = CRS.from_epsg(epsg)
+    return Transformer.from_crs(crs.geodetic_crs, crs, always_xy=True)
+
+
 @dataclass(frozen=True)
 class Projector:
-    """lon/lat ↔ plane x (east), y (north) in one JGD2011 zone."""
+    """lon/lat ↔ plane x (east), y (north) in one projected CRS: a JGD2011 plane
+    rectangular zone (``zone`` 1–19, lon/lat in JGD2011), or any other projected CRS in
+    metres (``epsg_code``, lon/lat in that CRS's own geodetic datum: WGS 84 for UTM).
+    :meth:`from_epsg` gives the same Projector for EPSG 6669–6687 as the zone number."""
 
-    zone: int
+    zone: int = 0
+    epsg_code: int = 0
+
+    @classmethod
+    def from_epsg(cls, code: int) -> Projector:
+        if zone_epsg(1) <= code <= zone_epsg(len(ZONE_ORIGINS)):
+            return cls(code - EPSG_JGD2011_GEOGRAPHIC)
+        return cls(0, int(code))
 
     @classmethod
     def for_points(cls, lat: npt.ArrayLike, lon: npt.ArrayLike) -> Projector:
-        lat_a, lon_a = np.asarray(lat, dtype=float), np.asarray(lon, dtype=float)
-        return cls(zone_for(float(np.nanmedian(lat_a)), float(np.nanmedian(lon_a))))
+        """The projection of a set of points by the one policy of
+        :func:`dbtools.gis.georef.derive` (a JGD2011 zone in Japan, UTM elsewhere)."""
+        from dbtools.gis.georef import derive
+
+        g = derive(lat, lon)
+        if g is None:
+            raise ValueError("no finite point to choose a projection for")
+        return cls.from_epsg(g.crs_epsg)
 
     @property
     def epsg(self) -> int:
-        return zone_epsg(self.zone)
+        return zone_epsg(self.zone) if self.zone else self.epsg_code
 
     def to_xy(self, lon: npt.ArrayLike, lat: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
-        x, y = _transformer(EPSG_JGD2011_GEOGRAPHIC, self.epsg).transform(
-            np.asarray(lon, dtype=float), np.asarray(lat, dtype=float)
-        )
+        t = _transformer(EPSG_JGD2011_GEOGRAPHIC, self.epsg) if self.zone else _geodetic_of(self.epsg)
+        x, y = t.transform(np.asarray(lon, dtype=float), np.asarray(lat, dtype=float))
         return np.asarray(x, dtype=float), np.asarray(y, dtype=float)
 
     def to_lonlat(self, x: npt.ArrayLike, y: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
-        lon, lat = _transformer(self.epsg, EPSG_JGD2011_GEOGRAPHIC).transform(
-            np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-        )
+        xa, ya = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        if self.zone:
+            lon, lat = _transformer(self.epsg, EPSG_JGD2011_GEOGRAPHIC).transform(xa, ya)
+        else:
+            lon, lat = _geodetic_of(self.epsg).transform(xa, ya, direction="INVERSE")
         return np.asarray(lon, dtype=float), np.asarray(lat, dtype=float)
 
 

@@ -1,6 +1,7 @@
 """The 20 m GIS grid from surveyed track centrelines and kilometre posts (pure).
 
-Method, per line (all metric work in the line's JGD2011 plane rectangular zone):
+Method, per line (all metric work in the survey's one plane projection, chosen by the policy
+of :mod:`dbtools.gis.index` from all centreline vertices):
 
 1. Each track centreline is a polyline; ``s`` is the distance along it on the ground
    (geodesic length of each segment, so km is not off by the zone's scale factor of
@@ -37,19 +38,19 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from dbtools.gis.geometry import PolylineIndex, Projector, geodesic_step, turn_angle
+from dbtools.gis.geometry import Projector, geodesic_step
+from dbtools.gis.index import projection_for
+from dbtools.gis.posts import PostProjection, Posts, grid_kms, km_runs, project_posts, reference_chainage
 from dbtools.network import canonical, empty_frame
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.gisinput import CENTRELINE_VERTICES, KM_POSTS
-from schemas.tables import GIS, GIS_SPACING_M, KM_BREAKS
+from schemas.tables import GIS, KM_BREAKS
 
 FloatArray = npt.NDArray[np.float64]
 
 #: A post farther than this from a track is not used on that track [m].
 MAX_POST_OFFSET_M = 50.0
-#: A post whose foot falls more than this beyond a track's end is not used on it [m].
-BEYOND_END_TOL_M = 1.0
 #: Consecutive vertices closer than this are duplicates [m].
 DUPLICATE_VERTEX_M = 1e-3
 #: Posts closer than this along a track are the same place [m].
@@ -58,8 +59,6 @@ SAME_PLACE_M = 0.01
 #: max(SPACING_ABS_M, SPACING_REL · distance).
 SPACING_ABS_M = 1.0
 SPACING_REL = 0.01
-#: Grid kms may lie this far outside a run (float round-off at exact multiples) [m].
-KM_EPS_M = 1e-6
 
 #: Extra frame columns the readers may add: file line of the row, and a label prefix for
 #: inputs without lines (GeoJSON: "feature 3, vertex 12").
@@ -92,21 +91,9 @@ class GridResult:
     findings: list[Finding] = field(default_factory=list)
     tracks: list[TrackSummary] = field(default_factory=list)
     zones: dict[str, int] = field(default_factory=dict)
-    """Plane rectangular zone used per line."""
-
-
-@dataclass
-class _Posts:
-    """The posts of one line, with their projected plane coordinates."""
-
-    frame_index: pd.Index
-    """Index labels of the posts in the input frame (for finding locations)."""
-    km: FloatArray
-    km_after: FloatArray
-    x: FloatArray
-    y: FloatArray
-    used: npt.NDArray[np.bool_]
-    nearest_m: FloatArray
+    """JGD2011 plane rectangular zone used per line (0: another projection, see ``epsg``)."""
+    epsg: int = 0
+    """EPSG code of the one plane projection of the survey."""
 
 
 class _Where:
@@ -205,15 +192,18 @@ def build_grid(
             )
         )
 
+    # one plane for the whole survey, by the grid index's policy (dbtools.gis.index)
+    projector = projection_for(
+        centrelines["lat"].to_numpy(dtype=float, na_value=np.nan),
+        centrelines["lon"].to_numpy(dtype=float, na_value=np.nan),
+    )
     for line_code in sorted(known_lines):
+        assert projector is not None  # a known line has vertices
         on_line = centrelines[line_codes == line_code]
-        lon = on_line["lon"].to_numpy(dtype=float)
-        lat = on_line["lat"].to_numpy(dtype=float)
-        projector = Projector.for_points(lat, lon)
-        result.zones[line_code] = projector.zone
+        result.zones[line_code], result.epsg = projector.zone, projector.epsg
         sel = np.flatnonzero((post_lines == line_code).to_numpy())
         px, py = projector.to_xy(posts["lon"].to_numpy(dtype=float)[sel], posts["lat"].to_numpy(dtype=float)[sel])
-        line_posts = _Posts(
+        line_posts = Posts(
             frame_index=posts.index[sel],
             km=km_all[sel],
             km_after=km_after_all[sel],
@@ -266,79 +256,48 @@ class _TrackBuilt:
     summary: TrackSummary | None = None
 
 
+@dataclass
+class _Polyline:
+    """One track's cleaned centreline: plane vertices, heights (or None), ground chainage."""
+
+    x: FloatArray
+    y: FloatArray
+    heights: FloatArray | None
+    s: FloatArray
+
+
+@dataclass(frozen=True)
+class _TrackCtx:
+    """Who a track is, for findings."""
+
+    line_code: str
+    track: str
+    first_idx: Any
+    cw: _Where
+    pw: _Where
+
+    @property
+    def keys(self) -> dict[str, object]:
+        return {"line_code": self.line_code, "track": self.track}
+
+
 def _track_grid(
     line_code: str,
     track: str,
     vertices: pd.DataFrame,
-    posts: _Posts,
+    posts: Posts,
     projector: Projector,
     cw: _Where,
     pw: _Where,
     max_post_offset_m: float,
 ) -> _TrackBuilt:
+    """Steps 1–5 of the module docstring for one track."""
     out = _TrackBuilt([])
-    keys = {"line_code": line_code, "track": track}
-    first_idx = vertices.index[0]
-    lon = vertices["lon"].to_numpy(dtype=float)
-    lat = vertices["lat"].to_numpy(dtype=float)
-    x, y = projector.to_xy(lon, lat)
-    h = vertices["height_m"].to_numpy(dtype=float, na_value=np.nan)
-    step = geodesic_step(lon, lat)
-    dup = np.flatnonzero(step < DUPLICATE_VERTEX_M) + 1
-    if dup.size:
-        out.findings.append(
-            cw.finding(
-                "gisinput.duplicate_vertex",
-                Severity.WARNING,
-                f"{dup.size} vertex(es) repeat the previous one and were dropped",
-                vertices.index[dup[0]],
-                keys=keys,
-                value=int(dup.size),
-            )
-        )
-        keep = np.ones(x.size, dtype=bool)
-        keep[dup] = False
-        x, y, h, step = x[keep], y[keep], h[keep], geodesic_step(lon[keep], lat[keep])
-    if x.size < 2:
-        out.findings.append(
-            cw.finding(
-                "gisinput.short_track",
-                Severity.ERROR,
-                f"track {track} of line '{line_code}' has fewer than two distinct vertices",
-                first_idx,
-                keys=keys,
-                value=int(x.size),
-                limit=2,
-            )
-        )
+    ctx = _TrackCtx(line_code, track, vertices.index[0], cw, pw)
+    poly = _polyline(vertices, projector, ctx, out.findings)
+    if poly is None:
         return out
-    has_h = ~np.isnan(h)
-    if has_h.any() and not has_h.all():
-        out.findings.append(
-            cw.finding(
-                "gisinput.partial_height",
-                Severity.WARNING,
-                f"height_m is given on {int(has_h.sum())} of {h.size} vertices of the track; heights ignored",
-                first_idx,
-                keys=keys,
-                column="height_m",
-            )
-        )
-    heights = h if has_h.all() else None
-
-    # chainage on the ground (geodesic), not in the plane (scale factor 0.9999–1.0001)
-    s = np.concatenate([[0.0], np.cumsum(step)])
-    proj, usable = _project_posts(x, y, s, posts, max_post_offset_m)
-    reversed_ = False
-    if usable.sum() >= 2:
-        order = np.argsort(proj.km_m[usable], kind="stable")
-        km_used = posts.km[usable][order]
-        if km_used[-1] < km_used[0]:
-            reversed_ = True
-            x, y = x[::-1].copy(), y[::-1].copy()
-            heights = heights[::-1].copy() if heights is not None else None
-            s = s[-1] - s[::-1]
-            proj, usable = _project_posts(x, y, s, posts, max_post_offset_m)
+    proj, usable, reversed_ = _orient(poly, posts, max_post_offset_m)
     posts.used |= usable
     posts.nearest_m = np.minimum(posts.nearest_m, np.where(proj.beyond, np.inf, proj.distance_m))
     if not usable.any():
@@ -347,15 +306,14 @@ def _track_grid(
                 "gisinput.no_posts",
                 Severity.ERROR,
                 f"no kilometre post of line '{line_code}' lies within {max_post_offset_m:g} m of track {track}",
-                first_idx,
-                keys=keys,
+                ctx.first_idx,
+                keys=ctx.keys,
                 limit=max_post_offset_m,
             )
         )
         return out
-
     offset = float(np.median(proj.offset_m[usable]))
-    r = _reference_chainage(x, y, s, offset)
+    r = reference_chainage(poly.x, poly.y, poly.s, offset)
     if np.any(np.diff(r) <= 0):
         out.findings.append(
             cw.finding(
@@ -363,172 +321,207 @@ def _track_grid(
                 Severity.ERROR,
                 f"the track turns too sharply for posts {offset:.1f} m beside it (reference chainage "
                 "would run backwards); check for a spike in the centreline",
-                first_idx,
-                keys=keys,
+                ctx.first_idx,
+                keys=ctx.keys,
                 value=offset,
             )
         )
         return out
-
     # posts on this track in order of reference chainage
-    pw_idx = posts.frame_index
     sel = np.flatnonzero(usable)
-    rp = np.interp(proj.km_m[sel], s, r)
+    rp = np.interp(proj.km_m[sel], poly.s, r)
     order = np.argsort(rp, kind="stable")
     sel, rp = sel[order], rp[order]
     km_before = posts.km[sel]
     km_after = np.where(np.isnan(posts.km_after[sel]), km_before, posts.km_after[sel])
-    ok = True
-    for a in range(sel.size - 1):
-        b = a + 1
-        ib = pw_idx[sel[b]]
-        pkeys = {"line_code": line_code, "track": track, "km_m": km_before[b]}
-        if rp[b] - rp[a] < SAME_PLACE_M:
-            out.findings.append(
-                pw.finding(
-                    "gisinput.posts_same_place",
-                    Severity.ERROR,
-                    f"posts km {km_before[a]:g} and km {km_before[b]:g} project to the same place on track {track}",
-                    ib,
-                    keys=pkeys,
-                )
-            )
-            ok = False
-            continue
-        if km_before[b] <= km_after[a]:
-            out.findings.append(
-                pw.finding(
-                    "gisinput.km_order",
-                    Severity.ERROR,
-                    f"kilometrage does not increase along track {track}: post km {km_before[b]:g} comes after "
-                    f"post km {km_after[a]:g} (a post is misplaced or its km is wrong)",
-                    ib,
-                    keys=pkeys,
-                    value=km_before[b],
-                    limit=km_after[a],
-                    column="km_m",
-                )
-            )
-            ok = False
-            continue
-        dkm, dr = km_before[b] - km_after[a], rp[b] - rp[a]
-        tol = max(SPACING_ABS_M, SPACING_REL * dr)
-        if abs(dkm - dr) > tol:
-            out.findings.append(
-                pw.finding(
-                    "gisinput.post_spacing",
-                    Severity.WARNING,
-                    f"posts km {km_after[a]:g} → {km_before[b]:g} differ by {dkm:.1f} m of km but lie "
-                    f"{dr:.1f} m apart along track {track}",
-                    ib,
-                    keys=pkeys,
-                    value=round(float(dkm - dr), 3),
-                    limit=round(tol, 3),
-                )
-            )
-    if not ok:
+    if not _check_post_order(ctx, posts.frame_index[sel], rp, km_before, km_after, out.findings):
         return out
+    runs = km_runs(r, rp, km_before, km_after)
+    return _grid_points(ctx, out, poly, r, runs, projector, (int(sel.size), offset, reversed_))
 
-    # runs of continuous kilometrage, split at break posts
-    runs: list[tuple[list[float], list[float]]] = []
-    rk: list[float] = [float(r[0])]
-    kk: list[float] = [float(km_before[0] - (rp[0] - r[0]))]
-    for j in range(sel.size):
-        if rp[j] > rk[-1]:
-            rk.append(float(rp[j]))
-            kk.append(float(km_before[j]))
-        if km_after[j] != km_before[j]:
-            runs.append((rk, kk))
-            rk, kk = [float(rp[j])], [float(km_after[j])]
-    if r[-1] > rk[-1]:
-        kk.append(kk[-1] + float(r[-1] - rk[-1]))
-        rk.append(float(r[-1]))
-    runs.append((rk, kk))
 
-    kms: list[FloatArray] = []
-    refs: list[FloatArray] = []
-    last_km: float | None = None
-    for n_run, (rk_, kk_) in enumerate(runs):
-        k_lo = math.ceil(kk_[0] / GIS_SPACING_M - KM_EPS_M / GIS_SPACING_M)
-        k_hi = math.floor(kk_[-1] / GIS_SPACING_M + KM_EPS_M / GIS_SPACING_M)
-        grid_km = np.arange(k_lo, k_hi + 1, dtype=float) * GIS_SPACING_M
-        if n_run > 0 and grid_km.size and last_km is not None:
-            out.breaks.append({**keys, "km_from_m": last_km, "km_to_m": float(grid_km[0])})
-        if grid_km.size:
-            last_km = float(grid_km[-1])
-            kms.append(grid_km)
-            refs.append(np.interp(grid_km, kk_, rk_) if len(rk_) > 1 else np.full(grid_km.size, rk_[0]))
+def _polyline(
+    vertices: pd.DataFrame, projector: Projector, ctx: _TrackCtx, findings: list[Finding]
+) -> _Polyline | None:
+    """Step 1: plane vertices without repeats, heights if given on every vertex, chainage
+    on the ground (geodesic, not in the plane: scale factor 0.9999–1.0001); None (and a
+    finding) when fewer than two distinct vertices remain."""
+    lon = vertices["lon"].to_numpy(dtype=float)
+    lat = vertices["lat"].to_numpy(dtype=float)
+    x, y = projector.to_xy(lon, lat)
+    h = vertices["height_m"].to_numpy(dtype=float, na_value=np.nan)
+    step = geodesic_step(lon, lat)
+    dup = np.flatnonzero(step < DUPLICATE_VERTEX_M) + 1
+    if dup.size:
+        findings.append(
+            ctx.cw.finding(
+                "gisinput.duplicate_vertex",
+                Severity.WARNING,
+                f"{dup.size} vertex(es) repeat the previous one and were dropped",
+                vertices.index[dup[0]],
+                keys=ctx.keys,
+                value=int(dup.size),
+            )
+        )
+        keep = np.ones(x.size, dtype=bool)
+        keep[dup] = False
+        x, y, h, step = x[keep], y[keep], h[keep], geodesic_step(lon[keep], lat[keep])
+    if x.size < 2:
+        findings.append(
+            ctx.cw.finding(
+                "gisinput.short_track",
+                Severity.ERROR,
+                f"track {ctx.track} of line '{ctx.line_code}' has fewer than two distinct vertices",
+                ctx.first_idx,
+                keys=ctx.keys,
+                value=int(x.size),
+                limit=2,
+            )
+        )
+        return None
+    has_h = ~np.isnan(h)
+    if has_h.any() and not has_h.all():
+        findings.append(
+            ctx.cw.finding(
+                "gisinput.partial_height",
+                Severity.WARNING,
+                f"height_m is given on {int(has_h.sum())} of {h.size} vertices of the track; heights ignored",
+                ctx.first_idx,
+                keys=ctx.keys,
+                column="height_m",
+            )
+        )
+    return _Polyline(x, y, h if has_h.all() else None, np.concatenate([[0.0], np.cumsum(step)]))
+
+
+def _orient(
+    poly: _Polyline, posts: Posts, max_post_offset_m: float
+) -> tuple[PostProjection, npt.NDArray[np.bool_], bool]:
+    """Step 2: the posts projected onto the track; a polyline drawn from high to low km is
+    reversed in place. Returns (projection, usable posts, reversed)."""
+    proj, usable = project_posts(poly.x, poly.y, poly.s, posts, max_post_offset_m)
+    if usable.sum() < 2:
+        return proj, usable, False
+    order = np.argsort(proj.km_m[usable], kind="stable")
+    km_used = posts.km[usable][order]
+    if km_used[-1] >= km_used[0]:
+        return proj, usable, False
+    poly.x, poly.y = poly.x[::-1].copy(), poly.y[::-1].copy()
+    poly.heights = poly.heights[::-1].copy() if poly.heights is not None else None
+    poly.s = poly.s[-1] - poly.s[::-1]
+    proj, usable = project_posts(poly.x, poly.y, poly.s, posts, max_post_offset_m)
+    return proj, usable, True
+
+
+def _check_post_order(
+    ctx: _TrackCtx,
+    index: pd.Index,
+    rp: FloatArray,
+    km_before: FloatArray,
+    km_after: FloatArray,
+    findings: list[Finding],
+) -> bool:
+    """Consecutive posts along the track (reference chainage ``rp``): distinct places, km
+    increasing (errors: False), km difference close to their distance (warning)."""
+    ok = True
+    for a in range(rp.size - 1):
+        b = a + 1
+        f = _post_pair(ctx, index[b], (rp[a], rp[b]), (km_after[a], km_before[a], km_before[b]))
+        if f is not None:
+            findings.append(f)
+            ok = ok and f.severity != Severity.ERROR
+    return ok
+
+
+def _post_pair(ctx: _TrackCtx, idx: Any, rp: tuple[float, float], km: tuple[float, float, float]) -> Finding | None:
+    """The finding (if any) for post b after post a: ``rp`` their reference chainages,
+    ``km`` = (km after a, km before a, km before b)."""
+    after_a, before_a, before_b = km
+    pkeys = {**ctx.keys, "km_m": before_b}
+    t = ctx.track
+    if rp[1] - rp[0] < SAME_PLACE_M:
+        return ctx.pw.finding(
+            "gisinput.posts_same_place",
+            Severity.ERROR,
+            f"posts km {before_a:g} and km {before_b:g} project to the same place on track {t}",
+            idx,
+            keys=pkeys,
+        )
+    if before_b <= after_a:
+        return ctx.pw.finding(
+            "gisinput.km_order",
+            Severity.ERROR,
+            f"kilometrage does not increase along track {t}: post km {before_b:g} comes after "
+            f"post km {after_a:g} (a post is misplaced or its km is wrong)",
+            idx,
+            keys=pkeys,
+            value=before_b,
+            limit=after_a,
+            column="km_m",
+        )
+    dkm, dr = before_b - after_a, rp[1] - rp[0]
+    tol = max(SPACING_ABS_M, SPACING_REL * dr)
+    if abs(dkm - dr) <= tol:
+        return None
+    return ctx.pw.finding(
+        "gisinput.post_spacing",
+        Severity.WARNING,
+        f"posts km {after_a:g} → {before_b:g} differ by {dkm:.1f} m of km but lie {dr:.1f} m apart along track {t}",
+        idx,
+        keys=pkeys,
+        value=round(float(dkm - dr), 3),
+        limit=round(tol, 3),
+    )
+
+
+def _grid_points(
+    ctx: _TrackCtx,
+    out: _TrackBuilt,
+    poly: _Polyline,
+    r: FloatArray,
+    runs: list[tuple[list[float], list[float]]],
+    projector: Projector,
+    posts: tuple[int, float, bool],
+) -> _TrackBuilt:
+    """Step 5: km → r → s → (x, y, height) by linear interpolation, back to lon/lat;
+    ``posts`` = (posts used, their median offset, reversed) for the summary."""
+    kms, refs, out.breaks = grid_kms(runs, ctx.keys)
     if not kms:
         out.findings.append(
-            cw.finding(
+            ctx.cw.finding(
                 "gisinput.no_grid",
                 Severity.ERROR,
-                f"track {track} of line '{line_code}' is shorter than one grid step",
-                first_idx,
-                keys=keys,
+                f"track {ctx.track} of line '{ctx.line_code}' is shorter than one grid step",
+                ctx.first_idx,
+                keys=ctx.keys,
             )
         )
         return out
     grid_km = np.concatenate(kms)
+    s = poly.s
     sg = np.interp(np.concatenate(refs), r, s)
-    gx, gy = np.interp(sg, s, x), np.interp(sg, s, y)
-    glon, glat = projector.to_lonlat(gx, gy)
+    glon, glat = projector.to_lonlat(np.interp(sg, s, poly.x), np.interp(sg, s, poly.y))
     out.gis = pd.DataFrame(
         {
-            "line_code": line_code,
-            "track": track,
+            "line_code": ctx.line_code,
+            "track": ctx.track,
             "km_m": grid_km,
             "lat": np.round(glat, 9),
             "lon": np.round(glon, 9),
-            "height_m": np.round(np.interp(sg, s, heights), 3) if heights is not None else np.nan,
+            "height_m": np.round(np.interp(sg, s, poly.heights), 3) if poly.heights is not None else np.nan,
         }
     )
+    n_posts, offset, reversed_ = posts
     out.summary = TrackSummary(
-        line_code,
-        track,
+        ctx.line_code,
+        ctx.track,
         int(grid_km.size),
         float(grid_km[0]),
         float(grid_km[-1]),
         float(s[-1]),
-        int(sel.size),
+        n_posts,
         round(offset, 3),
         reversed_,
         len(out.breaks),
     )
     return out
-
-
-@dataclass
-class _PostProjection:
-    km_m: FloatArray
-    offset_m: FloatArray
-    distance_m: FloatArray
-    beyond: npt.NDArray[np.bool_]
-
-
-def _project_posts(
-    x: FloatArray, y: FloatArray, s: FloatArray, posts: _Posts, max_offset: float
-) -> tuple[_PostProjection, npt.NDArray[np.bool_]]:
-    """Chainage ``s`` of the foot, signed offset and distance of every post on one polyline
-    (plane ``x``, ``y``; ground chainage ``s`` at the vertices); which posts are usable."""
-    if posts.x.size == 0:
-        empty = np.empty(0)
-        return _PostProjection(empty, empty, empty, np.empty(0, dtype=bool)), np.empty(0, dtype=bool)
-    p = PolylineIndex(x, y, s).project(posts.x, posts.y)
-    # along-track distance of the post from each end, positive inwards (negative = beyond)
-    first = max(float(np.hypot(x[1] - x[0], y[1] - y[0])), 1e-12)
-    last = max(float(np.hypot(x[-1] - x[-2], y[-1] - y[-2])), 1e-12)
-    t0 = ((posts.x - x[0]) * (x[1] - x[0]) + (posts.y - y[0]) * (y[1] - y[0])) / first
-    t1 = ((x[-1] - posts.x) * (x[-1] - x[-2]) + (y[-1] - posts.y) * (y[-1] - y[-2])) / last
-    beyond = ((p.km_m <= 0.0) & (t0 < -BEYOND_END_TOL_M)) | ((p.km_m >= s[-1]) & (t1 < -BEYOND_END_TOL_M))
-    usable = (p.distance_m <= max_offset) & ~beyond
-    return _PostProjection(p.km_m, p.offset_m, p.distance_m, beyond), usable
-
-
-def _reference_chainage(x: FloatArray, y: FloatArray, s: FloatArray, offset_m: float) -> FloatArray:
-    """``r`` at the vertices: ``dr = ds − o·dθ``, each vertex's turn split over its two segments."""
-    if offset_m == 0.0 or x.size < 3:
-        return s.copy()
-    turn = np.nan_to_num(turn_angle(x, y))
-    seg_turn = 0.5 * (turn[:-1] + turn[1:])
-    return np.concatenate([[0.0], np.cumsum(np.diff(s) - offset_m * seg_turn)])

@@ -149,16 +149,7 @@ def grid_files(
     has kilometrage breaks, ``km_breaks.csv`` beside it. Nothing is written on an error."""
     centrelines, posts, out = Path(centrelines), Path(posts), Path(out)
     breaks_path = out.parent / KM_BREAKS_FILE
-    for src in (centrelines, posts):
-        if src.exists() and out.exists() and src.resolve() == out.resolve():
-            raise RefusedError("the output would overwrite an input", path=out)
-    if breaks_path.resolve() in (centrelines.resolve(), posts.resolve()):
-        raise RefusedError(f"{KM_BREAKS_FILE} beside the output would overwrite an input", path=breaks_path)
-    if out.exists() and not force:
-        raise RefusedError("output exists; use --force to replace it", path=out)
-    if out.is_dir():
-        raise RefusedError("output is a folder; give a file name such as gis.csv", path=out)
-
+    _refuse_overwrite(centrelines, posts, out, breaks_path, force)
     cl = read_centrelines(centrelines)
     kp = read_km_posts(posts)
     findings = cl.findings + kp.findings
@@ -187,22 +178,7 @@ def grid_files(
     if has_breaks:
         files[breaks_path] = result.km_breaks[KM_BREAKS.column_names]
     _write_atomically(files)
-    removed = None
-    if not has_breaks and breaks_path.exists():
-        if force:
-            breaks_path.unlink()
-            removed = breaks_path
-        else:
-            findings.append(
-                Finding(
-                    "gisinput.stale_km_breaks",
-                    Severity.WARNING,
-                    KM_BREAKS.name,
-                    f"the new grid has no kilometrage breaks but {KM_BREAKS_FILE} exists beside it "
-                    "(kept; remove it or rerun with --force)",
-                    file=str(breaks_path),
-                )
-            )
+    removed = None if has_breaks else _stale_breaks(breaks_path, force, findings)
     return GridFiles(
         out,
         breaks_path if has_breaks else None,
@@ -210,6 +186,41 @@ def grid_files(
         removed_stale=removed,
         warnings=[f for f in findings if f.severity != Severity.ERROR],
     )
+
+
+def _refuse_overwrite(centrelines: Path, posts: Path, out: Path, breaks_path: Path, force: bool) -> None:
+    """RefusedError when the output (or km_breaks.csv beside it) would overwrite an input,
+    exists without ``force``, or is a folder."""
+    for src in (centrelines, posts):
+        if src.exists() and out.exists() and src.resolve() == out.resolve():
+            raise RefusedError("the output would overwrite an input", path=out)
+    if breaks_path.resolve() in (centrelines.resolve(), posts.resolve()):
+        raise RefusedError(f"{KM_BREAKS_FILE} beside the output would overwrite an input", path=breaks_path)
+    if out.exists() and not force:
+        raise RefusedError("output exists; use --force to replace it", path=out)
+    if out.is_dir():
+        raise RefusedError("output is a folder; give a file name such as gis.csv", path=out)
+
+
+def _stale_breaks(breaks_path: Path, force: bool, findings: list[Finding]) -> Path | None:
+    """A km_breaks.csv left from an earlier grid that has breaks, beside a new one without:
+    removed with ``force`` (returned), else kept with a warning."""
+    if not breaks_path.exists():
+        return None
+    if force:
+        breaks_path.unlink()
+        return breaks_path
+    findings.append(
+        Finding(
+            "gisinput.stale_km_breaks",
+            Severity.WARNING,
+            KM_BREAKS.name,
+            f"the new grid has no kilometrage breaks but {KM_BREAKS_FILE} exists beside it "
+            "(kept; remove it or rerun with --force)",
+            file=str(breaks_path),
+        )
+    )
+    return None
 
 
 def _write_atomically(files: dict[Path, pd.DataFrame]) -> None:

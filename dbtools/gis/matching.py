@@ -6,18 +6,17 @@ signed length of that perpendicular (positive left of increasing km). On double 
 two nearest grid points of a fix are often on different tracks, so segments are only ever
 formed between consecutive grid points of one track: tracks are never mixed.
 
-Structure of a :class:`TrackIndex` (built once per network, reused by the GPS unit, GIS
-verification and the possession audit):
+Structure of a :class:`TrackIndex` (built once per network on its
+:class:`~dbtools.gis.index.GridIndex`, reused by the GPS unit, GIS verification and the
+possession audit):
 
-* one plane projection (:class:`~dbtools.gis.geometry.Projector`) for all grid points;
-* **pieces**: per (line_code, track) the grid points in km order, cut wherever a segment
-  cannot be interpolated — a kilometrage break listed in ``km_breaks``, km not increasing,
-  a km step that disagrees with the segment's length by more than
-  ``km_tolerance_m + km_tolerance_rel·Δkm`` (an unlisted km jump), or a segment longer than
-  ``max_segment_m`` (a hole in the grid). A missing grid point (Δkm = 40 m over 40 m) is
-  *not* a cut. Segments longer than ``densify_m`` get extra vertices on the segment with
-  linearly interpolated km — the geometry and every projection stay the same, but all
-  segments are short, which keeps the search radius below small;
+* the grid index's points, track ids, plane projection (its one projection policy) and
+  **pieces**: per (line_code, track) the grid points in km order, cut wherever a segment
+  cannot be interpolated (:meth:`~dbtools.gis.index.GridIndex.cuts`: a listed kilometrage
+  break, km not increasing, an unlisted km jump, a hole longer than ``max_segment_m``).
+  Segments longer than ``densify_m`` get extra vertices on the segment with linearly
+  interpolated km — the geometry and every projection stay the same, but all segments are
+  short, which keeps the search radius below small;
 * one **cKDTree over all vertices** (the candidate index) and, per piece, an exact
   :class:`~dbtools.gis.geometry.PolylineIndex` (built on demand, for unbounded projection
   onto one known track: :meth:`TrackIndex.project_onto`).
@@ -37,7 +36,6 @@ coherently; results come back in input order. Throughput: ``bench/bench_matching
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,6 +45,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 
 from dbtools.gis.geometry import FloatArray, PolylineIndex, Projection, Projector
+from dbtools.gis.index import GridIndex, PieceRule, grid_index
 from dbtools.network import Network
 from schemas.tables import GIS_SPACING_M
 
@@ -95,7 +94,7 @@ class TrackIndex:
 
     def __init__(
         self,
-        grid: pd.DataFrame,
+        grid: pd.DataFrame | GridIndex,
         projector: Projector | None = None,
         km_breaks: pd.DataFrame | None = None,
         *,
@@ -105,51 +104,34 @@ class TrackIndex:
         densify_m: float = 1.25 * GIS_SPACING_M,
         k: int = 8,
     ) -> None:
-        g = grid[["line_code", "track", "km_m", "lat", "lon"]]
-        num = g[["km_m", "lat", "lon"]].to_numpy(dtype=float, na_value=np.nan)
-        g = g[np.isfinite(num).all(axis=1) & g["line_code"].notna().to_numpy() & g["track"].notna().to_numpy()]
-        g = g.assign(line_code=g["line_code"].astype(str), track=g["track"].astype(str))
-        g = g.sort_values(["line_code", "track", "km_m"], kind="stable").reset_index(drop=True)
-        lat = g["lat"].to_numpy(dtype=float)
-        lon = g["lon"].to_numpy(dtype=float)
-        if projector is None:
-            if not len(g):
-                raise ValueError("an empty GIS grid needs an explicit projector")
-            projector = Projector.for_points(lat, lon)
-        self.projector = projector
+        gi = grid if isinstance(grid, GridIndex) else GridIndex(grid, km_breaks, projector)
+        if gi.projector is None:
+            raise ValueError("an empty GIS grid needs an explicit projector")
+        self.grid = gi
+        self.projector: Projector = gi.projector
         self.k = int(k)
-        x0, y0 = projector.to_xy(lon, lat)
-        km0 = g["km_m"].to_numpy(dtype=float)
-        groups = g.groupby(["line_code", "track"], sort=False, observed=True)
-        tid0 = groups.ngroup().to_numpy(dtype=np.int64)
-        self.keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in groups.groups]
+        self.keys: list[tuple[str, str]] = list(gi.keys)
         self.line_categories = sorted({lc for lc, _ in self.keys})
         self.track_categories = sorted({tr for _, tr in self.keys})
         self._line_dtype = pd.CategoricalDtype(self.line_categories)
         self._track_dtype = pd.CategoricalDtype(self.track_categories)
         self._key_line = np.array([self.line_categories.index(lc) for lc, _ in self.keys], dtype=np.int64)
         self._key_track = np.array([self.track_categories.index(tr) for _, tr in self.keys], dtype=np.int64)
-        self._key_id = {key: i for i, key in enumerate(self.keys)}
+        cut = gi.cuts(PieceRule(km_tolerance_m, km_tolerance_rel, max_segment_m))
+        self._densify(gi, cut, densify_m)
+        self._segment_constants()
+        self._poly: dict[int, PolylineIndex] = {}
 
-        # --- cuts between original grid points
+    def _densify(self, gi: GridIndex, cut: BoolArray, densify_m: float) -> None:
+        """Vertices: point i contributes itself and, unless the step i → i+1 is cut, the
+        extra vertices of that segment (longer than ``densify_m``: split into ~20 m parts
+        with linearly interpolated km); an isolated point is doubled (a zero-length segment)."""
+        x0, y0, km0, tid0 = gi.x, gi.y, gi.km, gi.tid
         n = km0.size
-        if n > 1:
-            dkm = np.diff(km0)
-            seg = np.hypot(np.diff(x0), np.diff(y0))
-            cut = (tid0[1:] != tid0[:-1]) | (dkm <= 0) | (seg > max_segment_m)
-            cut |= np.abs(seg - dkm) > km_tolerance_m + km_tolerance_rel * np.abs(dkm)
-            for j in self._listed_breaks(km_breaks, tid0, km0):
-                cut[j] = True
-            parts = np.where(cut | (seg <= densify_m), 1, np.ceil(seg / GIS_SPACING_M)).astype(np.int64)
-        else:
-            cut = np.zeros(0, dtype=bool)
-            parts = np.zeros(0, dtype=np.int64)
+        parts = np.where(cut | (gi.seg <= densify_m), 1, np.ceil(gi.seg / GIS_SPACING_M)).astype(np.int64)
         piece0 = np.concatenate([[0], np.cumsum(cut)]) if n else np.zeros(0, dtype=np.int64)
         size = np.bincount(piece0) if n else np.zeros(0, dtype=np.int64)
         single = size[piece0] == 1 if n else np.zeros(0, dtype=bool)
-
-        # --- densified vertices: point i contributes itself and the extra vertices of the
-        # segment i → i+1 (if not cut); an isolated point is doubled (a zero-length segment)
         counts = np.ones(n, dtype=np.int64)
         if n > 1:
             counts[:-1] += np.where(cut, 0, parts - 1)
@@ -176,7 +158,9 @@ class TrackIndex:
         for i, p in enumerate(self.pieces):
             self._track_pieces.setdefault(p.track_id, []).append(i)
 
-        # --- per-segment constants (index = first vertex)
+    def _segment_constants(self) -> None:
+        """Per segment (index = first vertex): direction, 1/length², unit vector, Δkm."""
+        nv = self.x.size
         self._dx = np.zeros(nv)
         self._dy = np.zeros(nv)
         if nv > 1:
@@ -195,35 +179,13 @@ class TrackIndex:
             self._dkm[:-1] = np.where(self.segment_ok[:-1], np.diff(self.km), 0.0)
         self.half_max_segment_m = 0.5 * float(np.sqrt(len2.max())) if nv else 0.0
         self.tree = cKDTree(np.column_stack([self.x, self.y])) if nv else None
-        self._poly: dict[int, PolylineIndex] = {}
-
-    @staticmethod
-    def _key_breaks(km_breaks: pd.DataFrame | None) -> list[tuple[str, str, float]]:
-        if km_breaks is None or not len(km_breaks):
-            return []
-        kb = km_breaks
-        return [
-            (str(lc), str(tr), float(k))
-            for lc, tr, k in zip(kb["line_code"], kb["track"], kb["km_from_m"], strict=True)
-            if pd.notna(k)
-        ]
-
-    def _listed_breaks(self, km_breaks: pd.DataFrame | None, tid: IntArray, km: FloatArray) -> list[int]:
-        """Original-segment indices cut by a listed break (after the point at km_from_m)."""
-        out = []
-        for lc, tr, k_from in self._key_breaks(km_breaks):
-            t = self._key_id.get((lc, tr))
-            if t is None:
-                continue
-            lo, hi = np.searchsorted(tid, [t, t + 1])
-            j = int(lo + np.searchsorted(km[lo:hi], k_from))
-            if j < hi - 1 and abs(km[j] - k_from) < 1e-6:
-                out.append(j)
-        return out
 
     @classmethod
     def from_network(cls, network: Network, projector: Projector | None = None, **kwargs: float) -> TrackIndex:
-        """Index of every track of ``network`` (kilometrage breaks respected)."""
+        """Index of every track of ``network`` (kilometrage breaks respected), on the
+        network's grid index unless another ``projector`` is asked for."""
+        if projector is None:
+            return cls(grid_index(network), **kwargs)  # type: ignore[arg-type]
         return cls(network.gis, projector, network.tables.get("km_breaks"), **kwargs)  # type: ignore[arg-type]
 
     # ------------------------------------------------------------------------------ access
@@ -232,7 +194,7 @@ class TrackIndex:
         return int(self.x.size)
 
     def track_id(self, line_code: str, track: str) -> int | None:
-        return self._key_id.get((str(line_code), str(track)))
+        return self.grid.track_id(line_code, track)
 
     def pieces_of(self, track_id: int) -> list[int]:
         """Indices into :attr:`pieces` of one track's pieces, in km order."""
@@ -356,7 +318,7 @@ class TrackIndex:
         signed offset) with pass = 0 for the nearest track, 1 for the next, …
         """
         ok_track = np.ones(len(self.keys), dtype=np.bool_) if allowed is None else allowed
-        return _resolve_kernel(
+        f, p, s, u, d2 = _resolve_kernel(
             px,
             py,
             np.ascontiguousarray(fixes, dtype=np.int64),
@@ -371,6 +333,9 @@ class TrackIndex:
             ok_track,
             max_offset_m * max_offset_m,
         )
+        cross = self._dx[s] * (py[f] - self.y[s]) - self._dy[s] * (px[f] - self.x[s])
+        d = np.sqrt(d2)
+        return f, p, s, u, np.where(cross >= 0, d, -d)
 
     def _frame(
         self, n_fixes: int, parts: list[tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]]
@@ -405,6 +370,20 @@ class TrackIndex:
 
 
 @njit(cache=True, nogil=True)
+def _sort_nearest_first(nt: int, bt: IntArray, bs: IntArray, bd: FloatArray, bu: FloatArray) -> None:
+    """Insertion sort of the first ``nt`` entries by distance (at most 2k entries; stable,
+    so tracks at equal distance keep the order in which they were met)."""
+    for i in range(1, nt):
+        j = i
+        while j > 0 and bd[j] < bd[j - 1]:
+            bt[j], bt[j - 1] = bt[j - 1], bt[j]
+            bs[j], bs[j - 1] = bs[j - 1], bs[j]
+            bd[j], bd[j - 1] = bd[j - 1], bd[j]
+            bu[j], bu[j - 1] = bu[j - 1], bu[j]
+            j -= 1
+
+
+@njit(cache=True, nogil=True)
 def _resolve_kernel(
     px: FloatArray,
     py: FloatArray,
@@ -422,7 +401,9 @@ def _resolve_kernel(
 ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
     """For each fix: both segments adjacent to every hit vertex; per track the nearest
     (first segment index on exact ties, like an argmin over the track); tracks emitted in
-    order of distance. The same arithmetic as :class:`PolylineIndex` / brute force."""
+    order of distance. Returns (fix, pass, segment, u, squared distance): the same
+    arithmetic as :class:`PolylineIndex` / brute force (the signed offset is taken from
+    them by :meth:`TrackIndex._resolve`)."""
     m, k = hits.shape
     nv = x.size
     cap = m * 2 * k
@@ -430,7 +411,7 @@ def _resolve_kernel(
     out_p = np.empty(cap, dtype=np.int64)
     out_s = np.empty(cap, dtype=np.int64)
     out_u = np.empty(cap)
-    out_o = np.empty(cap)
+    out_d2 = np.empty(cap)
     bt = np.empty(2 * k, dtype=np.int64)
     bs = np.empty(2 * k, dtype=np.int64)
     bd = np.empty(2 * k)
@@ -443,18 +424,13 @@ def _resolve_kernel(
         nt = 0
         for c in range(k):
             v = hits[r, c]
-            if v >= nv:
-                continue
             for s in (v - 1, v):
-                if s < 0 or not segment_ok[s]:
+                if v >= nv or s < 0 or not segment_ok[s] or not ok_track[vertex_track[s]]:
                     continue
                 t = vertex_track[s]
-                if not ok_track[t]:
-                    continue
                 ax = x[s]
                 ay = y[s]
-                u = ((qx - ax) * dx[s] + (qy - ay) * dy[s]) * inv_len2[s]
-                u = min(max(u, 0.0), 1.0)
+                u = min(max(((qx - ax) * dx[s] + (qy - ay) * dy[s]) * inv_len2[s], 0.0), 1.0)
                 ex = ax + u * dx[s] - qx
                 ey = ay + u * dy[s] - qy
                 d2 = ex * ex + ey * ey
@@ -465,48 +441,24 @@ def _resolve_kernel(
                     j += 1
                 if j == nt:
                     bt[j] = t
-                    bs[j] = s
-                    bd[j] = d2
-                    bu[j] = u
                     nt += 1
-                elif d2 < bd[j] or (d2 == bd[j] and s < bs[j]):
-                    bs[j] = s
-                    bd[j] = d2
-                    bu[j] = u
-        # emit tracks nearest first (insertion sort of at most 2k entries)
-        for i in range(1, nt):
-            j = i
-            while j > 0 and bd[j] < bd[j - 1]:
-                bt[j], bt[j - 1] = bt[j - 1], bt[j]
-                bs[j], bs[j - 1] = bs[j - 1], bs[j]
-                bd[j], bd[j - 1] = bd[j - 1], bd[j]
-                bu[j], bu[j - 1] = bu[j - 1], bu[j]
-                j -= 1
-        for i in range(nt):
-            s = bs[i]
-            cross = dx[s] * (qy - y[s]) - dy[s] * (qx - x[s])
-            d = np.sqrt(bd[i])
-            out_f[n_out] = f
-            out_p[n_out] = i
-            out_s[n_out] = s
-            out_u[n_out] = bu[i]
-            out_o[n_out] = d if cross >= 0 else -d
-            n_out += 1
-    return out_f[:n_out], out_p[:n_out], out_s[:n_out], out_u[:n_out], out_o[:n_out]
-
-
-_INDEX_CACHE: dict[int, tuple[weakref.ref[Network], TrackIndex]] = {}
+                elif not (d2 < bd[j] or (d2 == bd[j] and s < bs[j])):
+                    continue
+                bs[j] = s
+                bd[j] = d2
+                bu[j] = u
+        _sort_nearest_first(nt, bt, bs, bd, bu)
+        out_f[n_out : n_out + nt] = f
+        out_p[n_out : n_out + nt] = np.arange(nt)
+        out_s[n_out : n_out + nt] = bs[:nt]
+        out_u[n_out : n_out + nt] = bu[:nt]
+        out_d2[n_out : n_out + nt] = bd[:nt]
+        n_out += nt
+    return out_f[:n_out], out_p[:n_out], out_s[:n_out], out_u[:n_out], out_d2[:n_out]
 
 
 def track_index_for(network: Network) -> TrackIndex:
-    """The :class:`TrackIndex` of ``network``, built once per Network object and reused
-    while that object lives (networks are not modified after loading)."""
-    key = id(network)
-    hit = _INDEX_CACHE.get(key)
-    if hit is not None and hit[0]() is network:
-        return hit[1]
-    index = TrackIndex.from_network(network)
-    for k in [k for k, (ref, _) in _INDEX_CACHE.items() if ref() is None]:
-        del _INDEX_CACHE[k]
-    _INDEX_CACHE[key] = (weakref.ref(network), index)
-    return index
+    """The :class:`TrackIndex` of ``network``, built once per loaded network on its
+    :func:`~dbtools.gis.index.grid_index` (networks are not modified after loading)."""
+    gi = grid_index(network)
+    return network.cached(("track_index", id(gi)), lambda: TrackIndex(gi))

@@ -29,9 +29,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from dbtools.gis.index import GridIndex
 from dbtools.rules.common import Locator, capped, column, fmt_km, py
 from dbtools.rules.config import ValidationConfig
-from dbtools.rules.gis import Grid
 from schemas.enums import BaliseKind, Severity, Track
 from schemas.findings import Finding
 from schemas.tables import BALISES
@@ -39,7 +39,7 @@ from schemas.tables import BALISES
 T = BALISES.name
 
 
-def check_balises(balises: pd.DataFrame, grid: Grid, config: ValidationConfig, loc: Locator) -> list[Finding]:
+def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConfig, loc: Locator) -> list[Finding]:
     """All balise rules (see module docstring)."""
     out: list[Finding] = []
     cap = config.max_findings_per_rule
@@ -296,7 +296,7 @@ def check_balises(balises: pd.DataFrame, grid: Grid, config: ValidationConfig, l
 
     # balise.outside_gis
     rows = np.flatnonzero(pd.notna(line) & pd.notna(track) & np.isfinite(km))
-    gid = grid.group_of(line[rows], track[rows])
+    gid = grid.track_ids(line[rows], track[rows])
     kmin, kmax = grid.km_range(gid)
     with np.errstate(invalid="ignore"):
         outside = (gid < 0) | (km[rows] < kmin - config.km_epsilon_m) | (km[rows] > kmax + config.km_epsilon_m)

@@ -28,13 +28,17 @@ Against the GIS grid (curvature κ at grid vertices, positive left of increasing
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.gis.index import GridIndex
 from dbtools.rules.common import Locator, capped, column, fmt_km, py
 from dbtools.rules.config import ValidationConfig
-from dbtools.rules.gis import Grid
 from schemas.enums import Attribute, Severity, Track
 from schemas.findings import Finding
 from schemas.tables import FEATURE_POINTS
@@ -67,7 +71,7 @@ def stencil_leak(kappa: F64, transition_m: F64, spacing_m: float) -> F64:
         y_clothoid = h**3 / (6.0 * lt)
     y_arc = lt**2 / 6.0 + lt * (h - lt) / 2.0 + (h - lt) ** 2 / 2.0
     y = np.where(lt >= h, y_clothoid, y_arc)
-    return np.abs(kappa) * y / h**2
+    return np.asarray(np.abs(kappa) * y / h**2, dtype=np.float64)
 
 
 def _range_stat(values: F64, lo: npt.NDArray[np.int64], hi: npt.NDArray[np.int64]) -> tuple[F64, F64, F64]:
@@ -89,205 +93,250 @@ def _range_stat(values: F64, lo: npt.NDArray[np.int64], hi: npt.NDArray[np.int64
     return mean, mx, count
 
 
-def check_features(fp: pd.DataFrame, grid: Grid, config: ValidationConfig, loc: Locator) -> list[Finding]:
+@dataclass(frozen=True)
+class _Rows:
+    """The feature-point columns as arrays, and how findings name a row."""
+
+    line: npt.NDArray[Any]
+    track: npt.NDArray[Any]
+    fid: npt.NDArray[Any]
+    seq: F64
+    km: F64
+    radius: F64
+    attr: npt.NDArray[Any]
+    config: ValidationConfig
+    loc: Locator
+
+    @classmethod
+    def of(cls, fp: pd.DataFrame, config: ValidationConfig, loc: Locator) -> _Rows:
+        line, track, fid = column(fp, "line_code"), column(fp, "track"), column(fp, "feature_id")
+        seq, km, radius, attr = column(fp, "seq"), column(fp, "km_m"), column(fp, "radius_m"), column(fp, "attribute")
+        return cls(line, track, fid, seq, km, radius, attr, config, loc)
+
+    def row_keys(self, i: int) -> dict[str, object]:
+        return {**self.feat_keys(i), "seq": py(self.seq[i])}
+
+    def feat_keys(self, i: int) -> dict[str, object]:
+        return {"line_code": py(self.line[i]), "track": py(self.track[i]), "feature_id": py(self.fid[i])}
+
+    def capped(self, rule: str, items: npt.NDArray[np.int64], build: Callable[[int], Finding]) -> list[Finding]:
+        return capped(rule, Severity.ERROR, T, items, build, self.config.max_findings_per_rule, self.loc.file(T))
+
+    def finding(self, rule: str, message: str, at: int, **kw: Any) -> Finding:
+        return Finding(rule, Severity.ERROR, T, message, **kw, **self.loc.at(T, at))
+
+
+@dataclass(frozen=True)
+class _Blocks:
+    """Well-formed features: (k, 6) frame rows in seq order, with their km and running sign."""
+
+    block: npt.NDArray[np.int64]
+    k6: F64
+    sign: F64
+    step: F64
+    """sign · Δkm between consecutive rows (k, 5)."""
+
+
+def check_features(fp: pd.DataFrame, grid: GridIndex, config: ValidationConfig, loc: Locator) -> list[Finding]:
     """All feature-point rules (see module docstring)."""
-    out: list[Finding] = []
     if fp.empty:
+        return []
+    r = _Rows.of(fp, config, loc)
+    out, in_gis = _outside_gis(r, grid)
+    found, block = _six_rows(r)
+    out += found
+    if len(block) == 0:
         return out
-    cap = config.max_findings_per_rule
-    file = loc.file(T)
-    line, track, fid = column(fp, "line_code"), column(fp, "track"), column(fp, "feature_id")
-    seq, km, radius, attr = column(fp, "seq"), column(fp, "km_m"), column(fp, "radius_m"), column(fp, "attribute")
+    out += _pattern(r, block)
+    k6 = r.km[block]
+    sign = np.where(r.track[block[:, 0]] == Track.UP.value, -1.0, 1.0)
+    b = _Blocks(block, k6, sign, sign[:, None] * np.diff(k6, axis=1))
+    with np.errstate(invalid="ignore"):
+        order_bad = ~np.all(b.step >= 0, axis=1) | ~(b.step[:, 2] > 0)
+    out += _order(r, b, order_bad)
+    out += _straight_length(r, b, ~order_bad)
+    # against the GIS curvature: only well-formed features wholly inside the grid
+    fi = np.flatnonzero(~order_bad & np.all(in_gis[block], axis=1))
+    if len(fi) == 0 or grid.n < 3:
+        return out
+    g = _Blocks(block[fi], k6[fi], sign[fi], b.step[fi])
+    kappa = grid.shape(config.gis_spacing_m, config.km_epsilon_m).kappa
+    gid = grid.track_ids(r.line[g.block[:, 0]], r.track[g.block[:, 0]])
+    out += _body(r, g, grid, gid, kappa)
+    out += _straights(r, g, grid, gid, kappa)
+    return out
 
-    def row_keys(i: int) -> dict[str, object]:
-        return {"line_code": py(line[i]), "track": py(track[i]), "feature_id": py(fid[i]), "seq": py(seq[i])}
 
-    def feat_keys(i: int) -> dict[str, object]:
-        return {"line_code": py(line[i]), "track": py(track[i]), "feature_id": py(fid[i])}
-
-    # feature.outside_gis (every row, whatever its feature looks like)
+def _outside_gis(r: _Rows, grid: GridIndex) -> tuple[list[Finding], npt.NDArray[np.bool_]]:
+    """``feature.outside_gis`` (every row, whatever its feature looks like); rows in the grid."""
+    line, track, km, eps = r.line, r.track, r.km, r.config.km_epsilon_m
     rows = np.flatnonzero(pd.notna(line) & pd.notna(track) & np.isfinite(km))
-    rgid = grid.group_of(line[rows], track[rows])
+    rgid = grid.track_ids(line[rows], track[rows])
     kmin, kmax = grid.km_range(rgid)
     with np.errstate(invalid="ignore"):
-        outside = (rgid < 0) | (km[rows] < kmin - config.km_epsilon_m) | (km[rows] > kmax + config.km_epsilon_m)
-    out += capped(
-        "feature.outside_gis",
-        Severity.ERROR,
-        T,
-        np.flatnonzero(outside),
-        lambda j: Finding(
-            "feature.outside_gis",
-            Severity.ERROR,
-            T,
-            (
-                f"no GIS grid for line {line[rows[j]]} track {track[rows[j]]}"
-                if rgid[j] < 0
-                else f"km {fmt_km(km[rows[j]])} is outside the GIS range {fmt_km(kmin[j])}–{fmt_km(kmax[j])}"
-            ),
-            keys=row_keys(int(rows[j])),
-            value=py(km[rows[j]]),
-            limit=None if rgid[j] < 0 else [py(kmin[j]), py(kmax[j])],
-            column="km_m",
-            **loc.at(T, int(rows[j])),
-        ),
-        cap,
-        file,
-    )
-    in_gis = np.zeros(len(fp), dtype=bool)
-    in_gis[rows[~outside]] = True
+        outside = (rgid < 0) | (km[rows] < kmin - eps) | (km[rows] > kmax + eps)
 
-    # group rows into features, ordered by seq
-    keyed = np.flatnonzero(pd.notna(line) & pd.notna(track) & pd.notna(fid))
+    def build(j: int) -> Finding:
+        i = int(rows[j])
+        known = rgid[j] >= 0
+        return r.finding(
+            "feature.outside_gis",
+            f"km {fmt_km(km[i])} is outside the GIS range {fmt_km(kmin[j])}–{fmt_km(kmax[j])}"
+            if known
+            else f"no GIS grid for line {line[i]} track {track[i]}",
+            i,
+            keys=r.row_keys(i),
+            value=py(km[i]),
+            limit=[py(kmin[j]), py(kmax[j])] if known else None,
+            column="km_m",
+        )
+
+    in_gis = np.zeros(len(km), dtype=bool)
+    in_gis[rows[~outside]] = True
+    return r.capped("feature.outside_gis", np.flatnonzero(outside), build), in_gis
+
+
+def _six_rows(r: _Rows) -> tuple[list[Finding], npt.NDArray[np.int64]]:
+    """``feature.rows``; the (k, 6) frame rows of the features with seq 1…6."""
+    keyed = np.flatnonzero(pd.notna(r.line) & pd.notna(r.track) & pd.notna(r.fid))
     if len(keyed) == 0:
-        return out
+        return [], np.zeros((0, 6), dtype=np.int64)
     fgid = (
-        pd.DataFrame({"l": line[keyed], "t": track[keyed], "f": fid[keyed]})
+        pd.DataFrame({"l": r.line[keyed], "t": r.track[keyed], "f": r.fid[keyed]})
         .groupby(["l", "t", "f"], sort=False)
         .ngroup()
         .to_numpy()
     )
-    order = np.lexsort((np.nan_to_num(seq[keyed], nan=np.inf), fgid))
-    r = keyed[order]
-    g = fgid[order]
+    order = np.lexsort((np.nan_to_num(r.seq[keyed], nan=np.inf), fgid))
+    rows, g = keyed[order], fgid[order]
     n_feat = int(g.max()) + 1
     counts = np.bincount(g, minlength=n_feat)
     first = np.searchsorted(g, np.arange(n_feat))
     six = np.flatnonzero(counts == 6)
-    block = r[first[six][:, None] + np.arange(6)]  # (k, 6) frame rows
-    ok_seq = np.all(seq[block] == np.arange(1, 7), axis=1)
-    bad_feat = np.concatenate([np.flatnonzero(counts != 6), six[~ok_seq]])
-    bad_feat.sort()
+    block = rows[first[six][:, None] + np.arange(6)]
+    ok_seq = np.all(r.seq[block] == np.arange(1, 7), axis=1)
+    bad_feat = np.sort(np.concatenate([np.flatnonzero(counts != 6), six[~ok_seq]]))
 
-    def rows_finding(f: int) -> Finding:
-        i = int(r[first[f]])
-        seqs = [py(seq[j]) for j in r[first[f] : first[f] + counts[f]]]
-        return Finding(
+    def build(f: int) -> Finding:
+        i = int(rows[first[f]])
+        seqs = [py(r.seq[j]) for j in rows[first[f] : first[f] + counts[f]]]
+        return r.finding(
             "feature.rows",
-            Severity.ERROR,
-            T,
             f"feature has {counts[f]} row(s) with seq {seqs}; it needs exactly six, seq 1 to 6",
-            keys=feat_keys(i),
+            i,
+            keys=r.feat_keys(i),
             value=[None if s is None else int(s) for s in seqs],
             limit=[1, 2, 3, 4, 5, 6],
             column="seq",
-            **loc.at(T, i),
         )
 
-    out += capped("feature.rows", Severity.ERROR, T, bad_feat, rows_finding, cap, file)
-    block = block[ok_seq]
-    if len(block) == 0:
-        return out
+    return r.capped("feature.rows", bad_feat, build), np.asarray(block[ok_seq], dtype=np.int64)
 
-    # feature.pattern
-    a6 = attr[block]
+
+def _pattern(r: _Rows, block: npt.NDArray[np.int64]) -> list[Finding]:
+    """``feature.pattern``: each row's attribute against [S000 Table 1]."""
+    a6 = r.attr[block]
     pat_bad = np.zeros(a6.shape, dtype=bool)
     for k, allowed in enumerate(PATTERN):
         pat_bad[:, k] = ~np.isin(a6[:, k], allowed)
     pr, pc = np.nonzero(pat_bad)
-    out += capped(
-        "feature.pattern",
-        Severity.ERROR,
-        T,
-        np.arange(len(pr)),
-        lambda j: Finding(
+
+    def build(j: int) -> Finding:
+        i = int(block[pr[j], pc[j]])
+        return r.finding(
             "feature.pattern",
-            Severity.ERROR,
-            T,
             f"row {pc[j] + 1} of the feature is '{a6[pr[j], pc[j]]}', expected {' or '.join(PATTERN[pc[j]])} "
             "(Table 1: straight, transition, left|right, transition, straight, none)",
-            keys=row_keys(int(block[pr[j], pc[j]])),
+            i,
+            keys=r.row_keys(i),
             value=py(a6[pr[j], pc[j]]),
             limit=list(PATTERN[pc[j]]),
             column="attribute",
-            **loc.at(T, int(block[pr[j], pc[j]])),
-        ),
-        cap,
-        file,
-    )
+        )
 
-    # feature.order
-    k6 = km[block]
-    sign = np.where(track[block[:, 0]] == Track.UP.value, -1.0, 1.0)
-    step = sign[:, None] * np.diff(k6, axis=1)
-    with np.errstate(invalid="ignore"):
-        order_bad = ~np.all(step >= 0, axis=1) | ~(step[:, 2] > 0)
-    out += capped(
-        "feature.order",
-        Severity.ERROR,
-        T,
-        np.flatnonzero(order_bad),
-        lambda j: Finding(
+    return r.capped("feature.pattern", np.arange(len(pr)), build)
+
+
+def _order(r: _Rows, b: _Blocks, order_bad: npt.NDArray[np.bool_]) -> list[Finding]:
+    """``feature.order``: km monotonic in running direction, a curve body of non-zero length."""
+
+    def build(j: int) -> Finding:
+        i = int(b.block[j, 0])
+        word = "decreasing" if b.sign[j] < 0 else "increasing"
+        return r.finding(
             "feature.order",
-            Severity.ERROR,
-            T,
-            f"km of rows 1–6 ({', '.join(f'{v:g}' for v in k6[j])}) are not "
-            f"{'decreasing' if sign[j] < 0 else 'increasing'} in the running direction of track "
-            f"{track[block[j, 0]]}",
-            keys=feat_keys(int(block[j, 0])),
-            value=[py(v) for v in k6[j]],
-            limit="decreasing" if sign[j] < 0 else "increasing",
+            f"km of rows 1–6 ({', '.join(f'{v:g}' for v in b.k6[j])}) are not "
+            f"{word} in the running direction of track {r.track[i]}",
+            i,
+            keys=r.feat_keys(i),
+            value=[py(v) for v in b.k6[j]],
+            limit=word,
             column="km_m",
-            **loc.at(T, int(block[j, 0])),
-        ),
-        cap,
-        file,
-    )
-    good = ~order_bad
-    # feature.straight_length
-    for name, a, b in (("entry", 0, 1), ("exit", 4, 5)):
-        length = step[:, a]
-        bad = np.flatnonzero(good & (length < config.min_straight_m - config.km_epsilon_m))
+        )
 
-        def short(j: int, name: str = name, a: int = a, b: int = b) -> Finding:
-            return Finding(
+    return r.capped("feature.order", np.flatnonzero(order_bad), build)
+
+
+def _straight_length(r: _Rows, b: _Blocks, good: npt.NDArray[np.bool_]) -> list[Finding]:
+    """``feature.straight_length``: entry (rows 1–2) and exit (rows 5–6) long enough."""
+    out: list[Finding] = []
+    min_m = r.config.min_straight_m
+    for name, a, c in (("entry", 0, 1), ("exit", 4, 5)):
+        bad = np.flatnonzero(good & (b.step[:, a] < min_m - r.config.km_epsilon_m))
+
+        def short(j: int, name: str = name, a: int = a, c: int = c) -> Finding:
+            return r.finding(
                 "feature.straight_length",
-                Severity.ERROR,
-                T,
-                f"{name} straight (rows {a + 1}–{b + 1}) is {step[j, a]:.1f} m long; "
-                f"at least {config.min_straight_m:g} m is required",
-                keys=feat_keys(int(block[j, 0])),
-                value=round(float(step[j, a]), 3),
-                limit=config.min_straight_m,
+                f"{name} straight (rows {a + 1}–{c + 1}) is {b.step[j, a]:.1f} m long; "
+                f"at least {min_m:g} m is required",
+                int(b.block[j, a]),
+                keys=r.feat_keys(int(b.block[j, 0])),
+                value=round(float(b.step[j, a]), 3),
+                limit=min_m,
                 column="km_m",
-                **loc.at(T, int(block[j, a])),
             )
 
-        out += capped("feature.straight_length", Severity.ERROR, T, bad, short, cap, file)
+        out += r.capped("feature.straight_length", bad, short)
+    return out
 
-    # against the GIS curvature: only well-formed features wholly inside the grid
-    fi = np.flatnonzero(good & np.all(in_gis[block], axis=1))
-    if len(fi) == 0 or grid.n < 3:
-        return out
-    blk, k6f, sg = block[fi], k6[fi], sign[fi]
-    gid = grid.group_of(line[blk[:, 0]], track[blk[:, 0]])
-    R = radius[blk[:, 2]]
-    att = attr[blk[:, 2]]
 
-    def span(c0: int, c1: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-        lo_km = np.minimum(k6f[:, c0], k6f[:, c1])
-        hi_km = np.maximum(k6f[:, c0], k6f[:, c1])
-        lo = grid.searchsorted(gid, lo_km - config.km_epsilon_m, "left")
-        hi = grid.searchsorted(gid, hi_km + config.km_epsilon_m, "right")
-        return lo, hi
+def _span(
+    r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], c0: int, c1: int
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Grid points between rows c0 and c1 of each feature (ε-inclusive)."""
+    eps = r.config.km_epsilon_m
+    lo_km = np.minimum(b.k6[:, c0], b.k6[:, c1])
+    hi_km = np.maximum(b.k6[:, c0], b.k6[:, c1])
+    return grid.searchsorted(gid, lo_km - eps, "left"), grid.searchsorted(gid, hi_km + eps, "right")
 
-    lo, hi = span(2, 3)
-    mean, _, count = _range_stat(grid.kappa, lo, hi)
-    # body shorter than the grid spacing: the vertex nearest its middle
+
+def _body_curvature(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> F64:
+    """Mean GIS κ over the body (rows 3–4); a body shorter than the grid spacing takes the
+    vertex nearest its middle."""
+    lo, hi = _span(r, b, grid, gid, 2, 3)
+    mean, _, count = _range_stat(kappa, lo, hi)
     empty = np.flatnonzero(count == 0)
     if len(empty):
-        mid = 0.5 * (k6f[empty, 2] + k6f[empty, 3])
+        mid = 0.5 * (b.k6[empty, 2] + b.k6[empty, 3])
         j = grid.searchsorted(gid[empty], mid)
         j = np.clip(j, grid.start[gid[empty]], grid.end[gid[empty]] - 1)
         jm = np.maximum(j - 1, grid.start[gid[empty]])
         pick = np.where(np.abs(grid.km[jm] - mid) < np.abs(grid.km[j] - mid), jm, j)
-        mean[empty] = grid.kappa[pick]
-    tol = config.feature_tolerance
+        mean[empty] = kappa[pick]
+    return mean
+
+
+def _body(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> list[Finding]:
+    """``feature.direction`` and ``feature.radius`` from the mean κ over the body."""
+    blk, sg, tol = b.block, b.sign, r.config.feature_tolerance
+    R = r.radius[blk[:, 2]]
+    att = r.attr[blk[:, 2]]
+    mean = _body_curvature(r, b, grid, gid, kappa)
     curve = np.isfinite(mean) & np.isfinite(R) & (R > 0) & np.isin(att, PATTERN[2])
     expected = np.where(att == Attribute.LEFT.value, 1.0, -1.0) * sg
     with np.errstate(invalid="ignore", divide="ignore"):
         kap = np.abs(mean)
-        dir_bad = curve & (mean * expected < 0) & (kap >= config.straight_kappa_max)
+        dir_bad = curve & (mean * expected < 0) & (kap >= r.config.straight_kappa_max)
         rad_bad = curve & ((kap < (1 - tol) / R) | (kap > (1 + tol) / R))
         r_gis = 1.0 / kap
 
@@ -295,69 +344,63 @@ def check_features(fp: pd.DataFrame, grid: Grid, config: ValidationConfig, loc: 
         left_in_km = mean[j] > 0
         return "left" if (left_in_km if sg[j] > 0 else not left_in_km) else "right"
 
-    out += capped(
-        "feature.direction",
-        Severity.ERROR,
-        T,
-        np.flatnonzero(dir_bad),
-        lambda j: Finding(
+    def direction(j: int) -> Finding:
+        i = int(blk[j, 2])
+        return r.finding(
             "feature.direction",
-            Severity.ERROR,
-            T,
             f"the feature says {att[j]} but the GIS grid curves {gis_side(j)} between rows 3 and 4 "
-            f"in the running direction of track {track[blk[j, 2]]}",
-            keys=row_keys(int(blk[j, 2])),
+            f"in the running direction of track {r.track[i]}",
+            i,
+            keys=r.row_keys(i),
             value=gis_side(j),
             limit=py(att[j]),
             column="attribute",
-            **loc.at(T, int(blk[j, 2])),
-        ),
-        cap,
-        file,
-    )
-    out += capped(
-        "feature.radius",
-        Severity.ERROR,
-        T,
-        np.flatnonzero(rad_bad),
-        lambda j: Finding(
+        )
+
+    def radius(j: int) -> Finding:
+        i = int(blk[j, 2])
+        return r.finding(
             "feature.radius",
-            Severity.ERROR,
-            T,
             f"radius {R[j]:g} m but the GIS grid gives {r_gis[j]:.0f} m between rows 3 and 4 "
             f"(allowed ±{tol:.0%} in curvature: {R[j] / (1 + tol):.0f}–{R[j] / (1 - tol):.0f} m)",
-            keys=row_keys(int(blk[j, 2])),
+            i,
+            keys=r.row_keys(i),
             value=round(float(r_gis[j]), 1) if np.isfinite(r_gis[j]) else None,
             limit=[round(float(R[j] / (1 + tol)), 1), round(float(R[j] / (1 - tol)), 1)],
             column="radius_m",
-            **loc.at(T, int(blk[j, 2])),
-        ),
-        cap,
-        file,
+        )
+
+    return r.capped("feature.direction", np.flatnonzero(dir_bad), direction) + r.capped(
+        "feature.radius", np.flatnonzero(rad_bad), radius
     )
 
-    # feature.straight: entry (rows 1–2, transition rows 2–3) and exit (rows 5–6, transition 4–5)
+
+def _straights(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> list[Finding]:
+    """``feature.straight``: entry (rows 1–2, transition rows 2–3) and exit (rows 5–6,
+    transition 4–5) straight on the grid, allowing the stencil leak of the transition."""
+    out: list[Finding] = []
+    R = r.radius[b.block[:, 2]]
+    tol = r.config.feature_tolerance
     with np.errstate(invalid="ignore"):
         kappa_r = np.where(np.isfinite(R) & (R > 0), 1.0 / np.where(R > 0, R, 1.0), 0.0)
     for name, c0, c1, t0, t1 in (("entry", 0, 1, 1, 2), ("exit", 4, 5, 3, 4)):
-        lo, hi = span(c0, c1)
-        _, mx, count = _range_stat(grid.kappa, lo, hi)
-        lt = np.abs(k6f[:, t1] - k6f[:, t0]) / (1 - tol)
-        limit = config.straight_kappa_max + stencil_leak(kappa_r, lt, config.gis_spacing_m)
+        lo, hi = _span(r, b, grid, gid, c0, c1)
+        _, mx, count = _range_stat(kappa, lo, hi)
+        lt = np.abs(b.k6[:, t1] - b.k6[:, t0]) / (1 - tol)
+        limit = r.config.straight_kappa_max + stencil_leak(kappa_r, lt, r.config.gis_spacing_m)
         bad = np.flatnonzero((count > 0) & (mx > limit))
 
         def curved(j: int, name: str = name, c0: int = c0, c1: int = c1, limit: F64 = limit, mx: F64 = mx) -> Finding:
-            return Finding(
+            i = int(b.block[j, c0])
+            return r.finding(
                 "feature.straight",
-                Severity.ERROR,
-                T,
                 f"the {name} straight (rows {c0 + 1}–{c1 + 1}) is not straight on the GIS grid: radius "
                 f"≈ {1 / mx[j]:.0f} m, a straight here needs ≥ {1 / limit[j]:.0f} m",
-                keys=row_keys(int(blk[j, c0])),
+                i,
+                keys=r.row_keys(i),
                 value=round(float(1 / mx[j]), 1),
                 limit=round(float(1 / limit[j]), 1),
-                **loc.at(T, int(blk[j, c0])),
             )
 
-        out += capped("feature.straight", Severity.ERROR, T, bad, curved, cap, file)
+        out += r.capped("feature.straight", bad, curved)
     return out

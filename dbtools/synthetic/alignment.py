@@ -114,7 +114,7 @@ class Alignment:
     # -- horizontal ---------------------------------------------------------------------
     def curvature(self, s: npt.ArrayLike) -> FloatArray:
         """Centreline curvature [1/m], positive left in increasing km."""
-        return np.interp(np.asarray(s, dtype=float), self._ks, self._kv)
+        return np.asarray(np.interp(np.asarray(s, dtype=float), self._ks, self._kv), dtype=np.float64)
 
     def heading(self, s: npt.ArrayLike) -> FloatArray:
         """Heading [rad] in increasing km, counter-clockwise from plane east."""
@@ -139,7 +139,7 @@ class Alignment:
     # -- vertical -----------------------------------------------------------------------
     def grade(self, s: npt.ArrayLike) -> FloatArray:
         """Gradient (rise per metre) in increasing km."""
-        return np.interp(np.asarray(s, dtype=float), self._gs, self._gv)
+        return np.asarray(np.interp(np.asarray(s, dtype=float), self._gs, self._gv), dtype=np.float64)
 
     def height(self, s: npt.ArrayLike) -> FloatArray:
         return self.height0 + _interp_integral(self._gs, self._gv, np.asarray(s, dtype=float))

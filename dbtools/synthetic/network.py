@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from dbtools.gis.geometry import Projector, zone_epsg
+from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical, empty_frame
 from dbtools.synthetic.alignment import Alignment, Curve
 from schemas.enums import Track
@@ -158,58 +158,10 @@ def balises(spec: LineSpec) -> pd.DataFrame:
     Each C balise is governed by the last pair passed before it in running direction and
     carries the travel distance from that pair's I1.
     """
-    a = spec.alignment
     rows: list[dict[str, object]] = []
     for track in spec.tracks:
-        sign = running_sign(track)
-        pairs = []  # (I1 km, station code)
-        for st in spec.stations:
-            i1 = st.km_m - sign * PAIR_BEFORE_STATION_M
-            i2 = i1 + sign * PAIR_SPACING_M
-            if not (a.km0 <= min(i1, i2) and max(i1, i2) <= a.km_end):
-                continue
-            pairs.append((i1, st.code))
-            for kind, km in (("I1", i1), ("I2", i2)):
-                rows.append(
-                    {
-                        "balise_id": f"{spec.line_code}-{st.code}-{track}-{kind}",
-                        "kind": kind,
-                        "line_code": spec.line_code,
-                        "station_code": st.code,
-                        "track": str(track),
-                        "signal_type": None,
-                        "km_actual_m": km,
-                        "dist_from_initial_m": None,
-                    }
-                )
-        c_kms: list[tuple[float, str]] = []
-        for st in spec.stations:
-            c_kms.append((st.km_m - sign * HOME_BEFORE_STATION_M, "home"))
-        ordered = sorted(spec.stations, key=lambda s: s.km_m * sign)
-        for s0, s1 in itertools.pairwise(ordered):
-            span = abs(s1.km_m - s0.km_m)
-            n_blocks = int(span // spec.block_spacing_m)
-            for j in range(1, n_blocks):
-                c_kms.append((s0.km_m + sign * j * span / n_blocks, "block"))
-        n = 0
-        for km, sig in sorted(c_kms, key=lambda t: t[0] * sign):
-            governing = [(i1, code) for i1, code in pairs if (km - i1) * sign > PAIR_SPACING_M]
-            if not governing or not (a.km0 <= km <= a.km_end):
-                continue
-            i1, code = max(governing, key=lambda p: p[0] * sign)
-            n += 1
-            rows.append(
-                {
-                    "balise_id": f"{spec.line_code}-{track}-C{n:03d}",
-                    "kind": "C",
-                    "line_code": spec.line_code,
-                    "station_code": code,
-                    "track": str(track),
-                    "signal_type": sig,
-                    "km_actual_m": km,
-                    "dist_from_initial_m": abs(km - i1),
-                }
-            )
+        pair_rows, pairs = _pair_rows(spec, track)
+        rows += pair_rows + _c_rows(spec, track, pairs)
     frame = pd.DataFrame(rows)
     if frame.empty:
         return empty_frame(BALISES)
@@ -219,8 +171,75 @@ def balises(spec: LineSpec) -> pd.DataFrame:
     return frame
 
 
+def _pair_rows(spec: LineSpec, track: str) -> tuple[list[dict[str, object]], list[tuple[float, str]]]:
+    """I1/I2 rows of every station's initial pair on one track, and the pairs (I1 km, station)."""
+    a = spec.alignment
+    sign = running_sign(track)
+    rows: list[dict[str, object]] = []
+    pairs: list[tuple[float, str]] = []
+    for st in spec.stations:
+        i1 = st.km_m - sign * PAIR_BEFORE_STATION_M
+        i2 = i1 + sign * PAIR_SPACING_M
+        if not (a.km0 <= min(i1, i2) and max(i1, i2) <= a.km_end):
+            continue
+        pairs.append((i1, st.code))
+        for kind, km in (("I1", i1), ("I2", i2)):
+            rows.append(
+                {
+                    "balise_id": f"{spec.line_code}-{st.code}-{track}-{kind}",
+                    "kind": kind,
+                    "line_code": spec.line_code,
+                    "station_code": st.code,
+                    "track": str(track),
+                    "signal_type": None,
+                    "km_actual_m": km,
+                    "dist_from_initial_m": None,
+                }
+            )
+    return rows, pairs
+
+
+def _signal_kms(spec: LineSpec, sign: int) -> list[tuple[float, str]]:
+    """(km, signal type) of the home signal of every station and the block signals between."""
+    c_kms: list[tuple[float, str]] = [(st.km_m - sign * HOME_BEFORE_STATION_M, "home") for st in spec.stations]
+    ordered = sorted(spec.stations, key=lambda s: s.km_m * sign)
+    for s0, s1 in itertools.pairwise(ordered):
+        span = abs(s1.km_m - s0.km_m)
+        n_blocks = int(span // spec.block_spacing_m)
+        for j in range(1, n_blocks):
+            c_kms.append((s0.km_m + sign * j * span / n_blocks, "block"))
+    return c_kms
+
+
+def _c_rows(spec: LineSpec, track: str, pairs: list[tuple[float, str]]) -> list[dict[str, object]]:
+    """C balises at the signals of one track, each governed by the last pair before it."""
+    a = spec.alignment
+    sign = running_sign(track)
+    rows: list[dict[str, object]] = []
+    for km, sig in sorted(_signal_kms(spec, sign), key=lambda t: t[0] * sign):
+        governing = [(i1, code) for i1, code in pairs if (km - i1) * sign > PAIR_SPACING_M]
+        if not governing or not (a.km0 <= km <= a.km_end):
+            continue
+        i1, code = max(governing, key=lambda p: p[0] * sign)
+        rows.append(
+            {
+                "balise_id": f"{spec.line_code}-{track}-C{len(rows) + 1:03d}",
+                "kind": "C",
+                "line_code": spec.line_code,
+                "station_code": code,
+                "track": str(track),
+                "signal_type": sig,
+                "km_actual_m": km,
+                "dist_from_initial_m": abs(km - i1),
+            }
+        )
+    return rows
+
+
 def build_network(specs: list[LineSpec], projector: Projector) -> Network:
-    """A complete network (all content tables, canonical) from line specs."""
+    """A complete network (all content tables, canonical) from line specs, drawn in the
+    plane of ``projector`` (any projected CRS: :meth:`Projector.from_epsg`), which the
+    network declares as its metric CRS (meta ``metric_crs``)."""
     tables = {
         LINES.name: pd.DataFrame(
             {
@@ -238,7 +257,7 @@ def build_network(specs: list[LineSpec], projector: Projector) -> Network:
         {t.name: canonical(t, tables[t.name]) for t in (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS)},
         origin="synthetic",
     )
-    net.meta = {"crs": f"EPSG:{zone_epsg(projector.zone)}"}
+    net.meta = {"metric_crs": f"EPSG:{projector.epsg}", "metric_crs_source": "declared"}
     return net
 
 
@@ -288,10 +307,14 @@ def random_alignment(
     )
 
 
-def demo_line(line_code: str = "0900", seed: int = 7, length_m: float = 12_000.0) -> LineSpec:
-    """A small double-track test line with stations every ~3 km (for tests and benchmarks)."""
+def demo_line(
+    line_code: str = "0900", seed: int = 7, length_m: float = 12_000.0, *, x0: float = 0.0, y0: float = 0.0
+) -> LineSpec:
+    """A small double-track test line with stations every ~3 km (for tests and benchmarks),
+    starting at plane (x0, y0) of whatever projection it is built in: the origin of a
+    JGD2011 zone by default; e.g. ``x0=500_000, y0=5_000_000`` on a UTM central meridian."""
     rng = np.random.default_rng(seed)
-    a = random_alignment(rng, length_m, km0=1000.0)
+    a = random_alignment(rng, length_m, km0=1000.0, x0=x0, y0=y0)
     stations = [
         Station(f"{i + 1:02d}", f"Station {i + 1}", a.km0 + 500.0 + i * 3000.0)
         for i in range(int((length_m - 1000.0) // 3000.0) + 1)

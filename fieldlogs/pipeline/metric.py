@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from dbtools.gis.geometry import geodesic_step
+from dbtools.gis.index import grid_index
 from dbtools.network import Network
 
 FloatArray = npt.NDArray[np.float64]
@@ -26,7 +26,7 @@ def _interp_extrapolated(x: FloatArray | float, xp: FloatArray, fp: FloatArray) 
     xa = np.asarray(x, dtype=float)
     out = np.interp(xa, xp, fp)
     out = np.where(xa < xp[0], fp[0] + (xa - xp[0]), out)
-    return np.where(xa > xp[-1], fp[-1] + (xa - xp[-1]), out)
+    return np.asarray(np.where(xa > xp[-1], fp[-1] + (xa - xp[-1]), out), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -47,20 +47,20 @@ IDENTITY = TrackMetric(np.array([0.0, 1.0]), np.array([0.0, 1.0]))
 
 
 def track_metric(network: Network, line_code: str, track: str) -> TrackMetric:
-    """The metric of a line/track from its GIS grid (identity when the grid is missing).
+    """The metric of a line/track: km and cumulative geodesic track length ``c`` of its
+    points in the network's grid index (:attr:`~dbtools.gis.index.GridIndex.c`); the
+    identity when the track has fewer than two grid points.
 
     Kilometrage breaks (km jumps larger than the distance between the points) count the
     distance actually travelled, so km jumps across them as the grid does.
     """
 
     def build() -> TrackMetric:
-        g = network.gis
-        g = g[(g["line_code"] == line_code) & (g["track"] == track)].sort_values("km_m")
-        if len(g) < 2:
+        grid = grid_index(network)
+        t = grid.track_id(line_code, track)
+        if t is None or grid.end[t] - grid.start[t] < 2:
             return IDENTITY
-        km = g["km_m"].to_numpy(dtype=float)
-        step = geodesic_step(g["lon"].to_numpy(dtype=float), g["lat"].to_numpy(dtype=float))
-        c = np.concatenate([[0.0], np.cumsum(step)]) + km[0]
-        return TrackMetric(km, c)
+        sl = slice(int(grid.start[t]), int(grid.end[t]))
+        return TrackMetric(grid.km[sl], grid.c[sl])
 
     return network.cached(("track_metric", line_code, track), build)

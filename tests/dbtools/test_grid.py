@@ -313,13 +313,18 @@ def test_geojson_problems_are_located_by_feature(tmp_path: Path) -> None:
 # -- round trip ------------------------------------------------------------------------------
 
 
-def test_round_trip_synthetic_alignment() -> None:
-    """Dense survey (5 m vertices, posts every km on the line centre) → grid ≈ gis_grid."""
-    spec, projector = demo_line(), Projector(9)
+@pytest.mark.parametrize(
+    ("epsg", "x0", "y0"), [(6677, 0.0, 0.0), (32632, 500_000.0, 5_000_000.0), (32756, 330_000.0, 6_250_000.0)]
+)
+def test_round_trip_synthetic_alignment(epsg: int, x0: float, y0: float) -> None:
+    """Dense survey (5 m vertices, posts every km on the line centre) → grid ≈ gis_grid, in
+    Japan and (the survey's derived UTM zone) in Italy and Australia."""
+    spec, projector = demo_line(x0=x0, y0=y0), Projector.from_epsg(epsg)
     a = spec.alignment
     kms = np.unique(np.r_[a.km0, np.arange(np.ceil(a.km0 / 1000.0) * 1000.0, a.km_end, 1000.0), a.km_end])
     r = build_grid(centreline_vertices(spec, projector, 5.0), km_posts(spec, projector, kms))
     assert r.findings == []
+    assert set(r.zones.values()) == ({9} if epsg == 6677 else {0}) and r.epsg == epsg
     want = gis_grid(spec, projector)
     got = want.merge(r.gis, on=["line_code", "track", "km_m"], how="outer", suffixes=("", "_grid"), indicator=True)
     assert (got["_merge"] == "both").all()  # the same kms on both tracks

@@ -1,0 +1,352 @@
+"""The grid index: the one structure over a network's GIS points, shared by the validation
+rules (:mod:`dbtools.rules`), map-matching (:mod:`dbtools.gis.matching`), GIS verification
+(:mod:`dbtools.gis.verify`) and the dead-reckoning metric (:mod:`fieldlogs.pipeline.metric`).
+Built once per loaded network (:func:`grid_index`, through ``Network.cached``).
+
+**Points.** The *valid* GIS points — ``line_code``, ``track``, ``km_m``, ``lat``, ``lon``
+all present and finite, lat/lon not *far* outside the network's operating area
+(:mod:`dbtools.gis.georef`: more than 2 km outside is an error) — sorted by (line_code, track,
+km_m) (stable: a duplicate key keeps its file order). Each (line_code, track) is one
+*track*, with track ids 0, 1, … in that order; its points are ``start[t]:end[t]``. Rows
+left out are reported by the schema rules, never silently used.
+
+**Projection policy** (every module, one plane per network): all plane work — headings,
+curvature, track spacing, nearest segments, lateral offsets, lateral shifts — is done in
+ONE conformal plane projection, :attr:`GridIndex.projector`: the network's metric CRS
+(:func:`network_georef`), as declared in the DB meta or the source set's ``network.toml``,
+else derived from the median (lat, lon) of the points — the JGD2011 plane rectangular
+zone whose origin is nearest inside Japan, the UTM zone elsewhere
+(:func:`dbtools.gis.georef.derive`). Lengths along the track are never taken from the
+plane: steps are geodesic (GRS80), so km and track length carry no scale factor of the
+projection (0.9999–1.0001 inside a JGD2011 zone, 0.9996–1.001 inside a UTM zone).
+
+**Per step** (i → i + 1, arrays of length n − 1): ``dkm`` the km step within a track (NaN
+across tracks), ``dist`` the geodesic distance, ``seg`` the plane distance.
+
+**Track length** (the dead-reckoning metric): ``c[start] = km[start]``,
+``c[i+1] = c[i] + dist[i]`` within each track — the length the wheels roll on that track,
+which differs from its km on the inner/outer track of a curve.
+
+**km search.** One sorted key ``km + shift[t]`` for all tracks (``shift`` puts the tracks
+1 km apart, in track-id order): :meth:`GridIndex.searchsorted` finds a km on a track with
+one ``np.searchsorted`` for any number of queries.
+
+**Shape** (:meth:`GridIndex.shape`, for spacing h and tolerance ε): a step is *regular*
+when it is one spacing within a track (|Δkm − h| ≤ ε); at a vertex whose two steps are
+regular, the turn angle between the segments, the Menger curvature
+κ = 2·((b − a) × (c − b)) / (|b − a|·|c − b|·|c − a|) (positive turning left in increasing
+km) and the heading of increasing km (chord of the neighbours; at a vertex with one regular
+step, that step's direction).
+
+**Pieces** (:meth:`GridIndex.cuts`): a step is *cut* — the two points are not joined by
+an interpolable segment — across tracks, at a kilometrage break listed in ``km_breaks``
+(km_from_m and km_to_m both matching consecutive points within ε), where km does not
+increase, where the plane step is longer than ``max_segment_m`` (a hole) or differs from Δkm
+by more than ``km_tolerance_m + km_tolerance_rel·Δkm`` (an unlisted km jump). A missing grid
+point (Δkm = 40 m over 40 m) is not a cut.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from dbtools.gis.geometry import Projector, geodesic_step, signed_curvature
+from dbtools.gis.georef import AREA_TOLERANCE_M, Georef, derive, georef_of
+from dbtools.network import Network
+from schemas.tables import LAT_RANGE, LON_RANGE
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+ObjArray = npt.NDArray[np.object_]
+
+#: Gap between consecutive tracks in the sorted km key [m].
+KEY_GAP_M = 1000.0
+#: A listed kilometrage break matches consecutive points whose km agree within this [m].
+BREAK_EPSILON_M = 1e-3
+
+
+@dataclass(frozen=True)
+class PieceRule:
+    """When consecutive points of a track are not one interpolable segment (module doc)."""
+
+    km_tolerance_m: float = 1.0
+    km_tolerance_rel: float = 0.02
+    max_segment_m: float = 200.0
+
+
+@dataclass(frozen=True)
+class GridShape:
+    """Spacing-dependent geometry of the points (module doc, "Shape")."""
+
+    regular: BoolArray
+    """The step to the next point is one grid spacing within the same track (length n − 1)."""
+    turn: F64
+    """Signed angle between the segments before and after a vertex [rad] (NaN unless both
+    steps are regular)."""
+    kappa: F64
+    """Signed Menger curvature at a vertex [1/m], positive left of increasing km (NaN unless
+    both steps are regular)."""
+    heading: F64
+    """Direction of increasing km at a vertex [rad] (chord of the neighbouring points)."""
+
+
+def projection_for(lat: F64, lon: F64) -> Projector | None:
+    """The one plane projection of a set of points with nothing declared (module doc,
+    "Projection policy"); None when there are no points."""
+    g = derive(lat, lon)
+    return None if g is None else Projector.from_epsg(g.crs_epsg)
+
+
+def _column(frame: pd.DataFrame, name: str, numeric: bool) -> npt.NDArray[Any]:
+    if name not in frame.columns:
+        return np.full(len(frame), np.nan if numeric else None, dtype=float if numeric else object)
+    s = frame[name]
+    if numeric:
+        return np.asarray(pd.to_numeric(s, errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan))
+    return np.asarray(s.astype(object).where(s.notna(), None).to_numpy(dtype=object))
+
+
+def _wrap(a: F64) -> F64:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+class GridIndex:
+    """The grid index of one GIS frame (see module docstring).
+
+    Attributes (length n = valid points, in (line, track, km) order): ``pos`` (row in the
+    frame), ``tid`` (track id), ``km``, ``lat``, ``lon``, ``x``, ``y`` (plane, east/north),
+    ``c`` (track length); per step: ``dkm``, ``dist``, ``seg``; per track id: ``start``,
+    ``end``, ``lines``, ``tracks`` (object arrays), ``keys`` ((line, track) strings).
+    """
+
+    def __init__(
+        self,
+        gis: pd.DataFrame,
+        km_breaks: pd.DataFrame | None = None,
+        projector: Projector | None = None,
+        georef: Georef | None = None,
+    ) -> None:
+        self.gis = gis
+        self.km_breaks = km_breaks
+        line, track = _column(gis, "line_code", False), _column(gis, "track", False)
+        km, lat, lon = (_column(gis, c, True) for c in ("km_m", "lat", "lon"))
+        self.georef = georef if georef is not None else derive(lat, lon)
+        with np.errstate(invalid="ignore"):
+            ok = pd.notna(line) & pd.notna(track) & np.isfinite(km) & self._inside(lat, lon)
+        pos = np.flatnonzero(ok)
+        lcode, luniq = pd.factorize(pd.Series(line[pos], dtype=object), sort=True)
+        tcode, tuniq = pd.factorize(pd.Series(track[pos], dtype=object), sort=True)
+        order = np.lexsort((km[pos], tcode, lcode))
+        self.pos: I64 = pos[order].astype(np.int64)
+        lcode, tcode = lcode[order], tcode[order]
+        self.km: F64 = km[self.pos]
+        self.lat: F64 = lat[self.pos]
+        self.lon: F64 = lon[self.pos]
+        n = self.pos.size
+        pair = lcode.astype(np.int64) * max(len(tuniq), 1) + tcode
+        new = np.ones(n, dtype=bool)
+        new[1:] = pair[1:] != pair[:-1]
+        self.tid: I64 = (np.cumsum(new) - 1).astype(np.int64)
+        self.start: I64 = np.flatnonzero(new).astype(np.int64)
+        self.end: I64 = np.append(self.start[1:], n)[: self.start.size].astype(np.int64)
+        self.lines: ObjArray = np.asarray(luniq, dtype=object)[lcode[self.start]]
+        self.tracks: ObjArray = np.asarray(tuniq, dtype=object)[tcode[self.start]]
+        self.keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in zip(self.lines, self.tracks, strict=True)]
+        self._key_id = {key: i for i, key in enumerate(self.keys)}
+        if projector is None and self.georef is not None:
+            projector = Projector.from_epsg(self.georef.crs_epsg)
+        self.projector = projector
+        if self.projector is not None and n:
+            self.x, self.y = self.projector.to_xy(self.lon, self.lat)
+        else:
+            self.x, self.y = np.zeros(n), np.zeros(n)
+        same = self.tid[1:] == self.tid[:-1]
+        self.dkm: F64 = np.where(same, np.diff(self.km), np.nan)
+        self.seg: F64 = np.hypot(np.diff(self.x), np.diff(self.y))
+        self._build_key()
+        self._shapes: dict[tuple[float, float], GridShape] = {}
+        self._cuts: dict[PieceRule, BoolArray] = {}
+        self._breaks: dict[float, tuple[BoolArray, I64]] = {}
+
+    def _inside(self, lat: F64, lon: F64) -> BoolArray:
+        """Finite, on the globe and not far outside the operating area."""
+        with np.errstate(invalid="ignore"):
+            ok = (np.abs(lat) <= LAT_RANGE[1]) & (np.abs(lon) <= LON_RANGE[1])
+        if self.georef is None or not ok.any():
+            return np.asarray(ok, dtype=bool)
+        ok[ok] = self.georef.area.distance_m(lat[ok], lon[ok]) <= AREA_TOLERANCE_M
+        return np.asarray(ok, dtype=bool)
+
+    @cached_property
+    def dist(self) -> F64:
+        """Geodesic distance to the next point [m] (length n − 1; computed on first use)."""
+        return geodesic_step(self.lon, self.lat) if self.n > 1 else np.zeros(0)
+
+    @cached_property
+    def c(self) -> F64:
+        """Cumulative geodesic track length at each point (module doc; on first use)."""
+        c = np.empty(self.n)
+        for s, e in zip(self.start, self.end, strict=True):
+            c[s:e] = np.concatenate([[0.0], np.cumsum(self.dist[s : e - 1])]) + self.km[s]
+        return c
+
+    def _build_key(self) -> None:
+        n_t = len(self.keys)
+        if n_t:
+            lo, hi = self.km[self.start], self.km[self.end - 1]
+            span = hi - lo + KEY_GAP_M
+            self.shift: F64 = np.concatenate([[0.0], np.cumsum(span)[:-1]]) - lo
+        else:
+            self.shift = np.zeros(0)
+        self.key: F64 = self.km + self.shift[self.tid] if self.n else np.zeros(0)
+
+    # ------------------------------------------------------------------------------ access
+    @property
+    def n(self) -> int:
+        return int(self.km.size)
+
+    @property
+    def n_tracks(self) -> int:
+        return len(self.keys)
+
+    def track_id(self, line_code: object, track: object) -> int | None:
+        """Track id of (line_code, track); None when the grid has no such track."""
+        return self._key_id.get((str(line_code), str(track)))
+
+    def track_ids(self, lines: npt.ArrayLike, tracks: npt.ArrayLike) -> I64:
+        """Track id of each (line, track) pair (−1: missing, or not a track of the grid);
+        strings are factorized once and the few distinct pairs looked up."""
+        lc_codes, lc_uniq = pd.factorize(pd.Series(np.asarray(lines, dtype=object)), use_na_sentinel=True)
+        tr_codes, tr_uniq = pd.factorize(pd.Series(np.asarray(tracks, dtype=object)), use_na_sentinel=True)
+        table = np.full((len(lc_uniq) + 1, len(tr_uniq) + 1), -1, dtype=np.int64)
+        for i, lc in enumerate(lc_uniq):
+            for j, tr in enumerate(tr_uniq):
+                table[i, j] = self._key_id.get((str(lc), str(tr)), -1)
+        return np.asarray(table[lc_codes, tr_codes], dtype=np.int64)  # sentinel −1: last row/col
+
+    def km_range(self, tid: I64) -> tuple[F64, F64]:
+        """(first km, last km) of each track id (NaN for −1)."""
+        ok = tid >= 0
+        lo = np.full(len(tid), np.nan)
+        hi = np.full(len(tid), np.nan)
+        lo[ok] = self.km[self.start[tid[ok]]]
+        hi[ok] = self.km[self.end[tid[ok]] - 1]
+        return lo, hi
+
+    def searchsorted(self, tid: npt.ArrayLike, km: npt.ArrayLike, side: str = "left") -> I64:
+        """Index of the first point of track ``tid`` with km ≥ ``km`` ('left') or > ('right').
+
+        Queries before (after) a track's range get its first index (one past its last)."""
+        t = np.asarray(tid, dtype=np.int64)
+        k = np.asarray(km, dtype=float)
+        lo_km, hi_km = self.km[self.start[t]], self.km[self.end[t] - 1]
+        inside = (k >= lo_km) & (k <= hi_km)
+        out = np.where(k < lo_km, self.start[t], self.end[t]).astype(np.int64)
+        q = np.flatnonzero(inside)
+        if len(q):
+            out[q] = np.searchsorted(self.key, k[q] + self.shift[t[q]], side=side)  # type: ignore[call-overload]
+        return out
+
+    # ------------------------------------------------------------------------------ derived
+    def shape(self, spacing_m: float, epsilon_m: float) -> GridShape:
+        """Regular steps, turn, curvature and heading for grid spacing ``spacing_m`` (cached)."""
+        key = (float(spacing_m), float(epsilon_m))
+        if key not in self._shapes:
+            self._shapes[key] = self._shape(*key)
+        return self._shapes[key]
+
+    def _shape(self, spacing_m: float, epsilon_m: float) -> GridShape:
+        n, x, y = self.n, self.x, self.y
+        regular = (self.tid[1:] == self.tid[:-1]) & (np.abs(self.dkm - spacing_m) <= epsilon_m)
+        both = np.zeros(n, dtype=bool)
+        both[1:-1] = regular[:-1] & regular[1:]
+        seg_h = np.arctan2(np.diff(y), np.diff(x)) if n > 1 else np.zeros(0)
+        turn = np.full(n, np.nan)
+        turn[1:-1] = _wrap(seg_h[1:] - seg_h[:-1])
+        turn[~both] = np.nan
+        kappa = signed_curvature(x, y)
+        kappa[~both] = np.nan
+        # heading at a vertex: chord of its neighbours, else the one regular step it has
+        heading = np.full(n, np.nan)
+        if n > 1:
+            heading[1:-1] = np.arctan2(y[2:] - y[:-2], x[2:] - x[:-2])
+            heading[~both] = np.nan
+            fwd = np.zeros(n, dtype=bool)
+            fwd[:-1] = regular
+            back = np.zeros(n, dtype=bool)
+            back[1:] = regular
+            use_fwd = ~both & fwd
+            use_back = ~both & ~fwd & back
+            heading[use_fwd] = seg_h[np.flatnonzero(use_fwd)]
+            heading[use_back] = seg_h[np.flatnonzero(use_back) - 1]
+        return GridShape(regular, turn, kappa, heading)
+
+    def break_steps(self, epsilon_m: float = BREAK_EPSILON_M) -> tuple[BoolArray, I64]:
+        """(steps listed as km breaks, rows of ``km_breaks`` that match no step), cached."""
+        if epsilon_m not in self._breaks:
+            self._breaks[epsilon_m] = self._break_steps(epsilon_m)
+        return self._breaks[epsilon_m]
+
+    def _break_steps(self, eps: float) -> tuple[BoolArray, I64]:
+        kb = self.km_breaks
+        is_break = np.zeros(max(self.n - 1, 0), dtype=bool)
+        if kb is None or kb.empty:
+            return is_break, np.zeros(0, dtype=np.int64)
+        if self.n < 2:
+            return is_break, np.arange(len(kb), dtype=np.int64)
+        lines, tracks = _column(kb, "line_code", False), _column(kb, "track", False)
+        k_from, k_to = _column(kb, "km_from_m", True), _column(kb, "km_to_m", True)
+        ok = pd.notna(lines) & pd.notna(tracks) & np.isfinite(k_from) & np.isfinite(k_to)
+        tid = np.full(len(kb), -1, dtype=np.int64)
+        tid[ok] = self.track_ids(lines[ok], tracks[ok])
+        rows = np.flatnonzero(tid >= 0)
+        i = np.minimum(self.searchsorted(tid[rows], k_from[rows] - eps), self.n - 2)
+        hit = (
+            (self.tid[i] == tid[rows])
+            & (self.tid[i + 1] == tid[rows])
+            & (np.abs(self.km[i] - k_from[rows]) <= eps)
+            & (np.abs(self.km[i + 1] - k_to[rows]) <= eps)
+        )
+        is_break[i[hit]] = True
+        used = np.zeros(len(kb), dtype=bool)
+        used[rows[hit]] = True
+        return is_break, np.flatnonzero(~used).astype(np.int64)
+
+    def cuts(self, rule: PieceRule = PieceRule()) -> BoolArray:
+        """Steps that do not form an interpolable segment (module doc, "Pieces"), cached."""
+        if rule not in self._cuts:
+            dkm = np.diff(self.km)
+            seg = self.seg
+            cut = (self.tid[1:] != self.tid[:-1]) | (dkm <= 0) | (seg > rule.max_segment_m)
+            cut |= np.abs(seg - dkm) > rule.km_tolerance_m + rule.km_tolerance_rel * np.abs(dkm)
+            cut |= self.break_steps()[0]
+            self._cuts[rule] = cut
+        return self._cuts[rule]
+
+
+def network_georef(network: Network) -> Georef | None:
+    """Area, metric CRS and height datum of ``network``: its meta (declared, or stored by
+    ``db build``), the rest derived from its GIS points; None without any point."""
+    gis = network.gis
+
+    def build() -> tuple[pd.DataFrame, Georef | None]:
+        lat, lon = _column(gis, "lat", True), _column(gis, "lon", True)
+        return gis, georef_of(network.meta, lat, lon, network.origin)
+
+    return network.cached(("georef", id(gis)), build)[1]
+
+
+def grid_index(network: Network) -> GridIndex:
+    """The :class:`GridIndex` of ``network``, built once per loaded network. The key holds
+    the identity of the frames it was built from (and the index keeps them alive), so a
+    table replaced after loading gets a new index."""
+    gis, kb = network.gis, network.tables.get("km_breaks")
+    georef = network_georef(network)
+    return network.cached(("grid_index", id(gis), id(kb)), lambda: GridIndex(gis, kb, georef=georef))
