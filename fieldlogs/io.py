@@ -34,7 +34,7 @@ from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding
 from schemas.frames import PANDAS_DTYPE, coerce_frame, suggest
-from schemas.logs import LOG_STREAMS, RUN_JSON
+from schemas.logs import LOG_STREAMS, RADAR_LOOKS_TOWARD, RUN_JSON, RUN_JSON_RADAR, RadarParams
 from schemas.model import Column, Table
 
 LogFormat = Literal["csv", "parquet"]
@@ -180,6 +180,103 @@ def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
     return meta, findings
 
 
+def _radar_finding(path: Path, column: str, message: str, **kw: Any) -> Finding:
+    return Finding("log.run_json_radar", Severity.ERROR, "run.json", message, file=str(path), column=column, **kw)
+
+
+def _radar_number(block: dict[str, Any], f: Any, path: Path) -> tuple[float | None, Finding | None]:
+    col = f"radar.{f.name}"
+    raw = block.get(f.name)
+    if raw is None:
+        return None, _radar_finding(path, col, f"field '{col}' [{f.unit}] is missing ({f.description})")
+    if isinstance(raw, bool) or not isinstance(raw, int | float) or not np.isfinite(raw):
+        return None, _radar_finding(path, col, f"field '{col}' = {raw!r} is not a number [{f.unit}]", value=str(raw))
+    if not f.min <= raw <= f.max:
+        return None, _radar_finding(
+            path, col, f"{col} = {raw:g} {f.unit} is outside {f.min:g}–{f.max:g}", value=raw, limit=[f.min, f.max]
+        )
+    return float(raw), None
+
+
+def parse_radar_block(data: dict[str, Any], path: Path) -> tuple[RadarParams | None, list[Finding]]:
+    """The optional ``radar`` block of run.json (``schemas.logs.RUN_JSON_RADAR``), checked.
+
+    Absent → (None, []). Every field must be a number inside its range; the beam must stay
+    between the horizontal and the vertical, and its footprint inside the unambiguous range
+    c/(2·Δf). Any error → (None, findings).
+    """
+    if data.get("radar") is None:
+        return None, []
+    block = data["radar"]
+    if not isinstance(block, dict):
+        return None, [_radar_finding(path, "radar", "'radar' must be a JSON object of radar parameters")]
+    findings: list[Finding] = []
+    values: dict[str, Any] = {}
+    for f in RUN_JSON_RADAR:
+        v, bad = _radar_number(block, f, path)
+        if bad is not None:
+            findings.append(bad)
+        values[f.name] = v
+    looks = block.get("looks_toward", "F")
+    if looks not in RADAR_LOOKS_TOWARD:
+        findings.append(_radar_finding(path, "radar.looks_toward", f"radar.looks_toward = {looks!r} is not F or R"))
+    known = {f.name for f in RUN_JSON_RADAR} | {"looks_toward"}
+    for k in sorted(set(block) - known):
+        hint = suggest(k, sorted(known))
+        findings.append(
+            Finding(
+                "log.run_json_radar",
+                Severity.WARNING,
+                "run.json",
+                f"unknown field 'radar.{k}' ignored" + (f" (did you mean '{hint}'?)" if hint else ""),
+                file=str(path),
+                column=f"radar.{k}",
+            )
+        )
+    if any(f.severity == Severity.ERROR for f in findings):
+        return None, findings
+    params = RadarParams(**values, looks_toward=looks)
+    geometry = _radar_geometry(params, path)
+    return (None, findings + geometry) if geometry else (params, findings)
+
+
+def _radar_geometry(p: RadarParams, path: Path) -> list[Finding]:
+    """Cross-field checks: beam between horizontal and vertical, footprint range < c/(2·Δf), frames of ≥ 16 samples."""
+    lo, hi = p.depression_deg - p.beam_elev_deg, p.depression_deg + p.beam_elev_deg
+    if not (0.0 < lo and hi < 90.0):
+        return [
+            _radar_finding(
+                path,
+                "radar.depression_deg",
+                f"beam {lo:g}°–{hi:g}° below the horizontal (depression ± beam_elev) must lie between 0° and 90°",
+                value=[lo, hi],
+                limit=[0, 90],
+            )
+        ]
+    far = p.height_m / np.sin(np.radians(lo))
+    if far >= p.r_max_m:
+        return [
+            _radar_finding(
+                path,
+                "radar.delta_f_hz",
+                f"the beam's far edge is {far:.2f} m away, beyond the unambiguous range c/(2·Δf) = {p.r_max_m:.2f} m",
+                value=far,
+                limit=p.r_max_m,
+            )
+        ]
+    if p.samples_per_frame < 16:
+        return [
+            _radar_finding(
+                path,
+                "radar.t_epi_s",
+                f"T_epi holds only {p.samples_per_frame} samples of each frequency (at least 16)",
+                value=p.samples_per_frame,
+                limit=16,
+            )
+        ]
+    return []
+
+
 def stream_path(folder: Path, name: str) -> Path | None:
     """The file of a stream (``.parquet`` preferred), None if absent."""
     for suffix in STREAM_SUFFIXES:
@@ -218,7 +315,7 @@ def _arrow_column(col: Column, arr: pa.ChunkedArray) -> Any:
     """A typed pandas array for a column whose Arrow type fits the declared one, else None."""
     t = arr.type
     if col.dtype == "float" and (pa.types.is_floating(t) or pa.types.is_integer(t)):
-        return arr.to_numpy().astype(np.float64, copy=False)  # nulls → NaN
+        return arr.to_numpy().astype(np.float32 if col.float32 else np.float64, copy=False)  # nulls → NaN
     if col.dtype == "int" and pa.types.is_integer(t):
         if arr.null_count == 0:
             values = arr.to_numpy().astype(np.int64, copy=False)
@@ -321,6 +418,9 @@ class Run:
             raise InputError("run.json must be a JSON object", path=json_path)
         self.raw_json: dict[str, Any] = data
         self.meta, self.findings = parse_run_json(json_path)
+        self.radar, radar_findings = parse_radar_block(data, json_path)
+        """The run.json ``radar`` block (None when absent or unusable)."""
+        self.findings.extend(radar_findings)
         self._streams: dict[str, pd.DataFrame | None] = {}
         self._stream_findings: dict[str, list[Finding]] = {}
         self._files: dict[str, Path] = {}
@@ -375,6 +475,12 @@ class Run:
 
     def streams_present(self) -> list[str]:
         return [n for n in LOG_STREAMS if self.has(n)]
+
+    def stream_rate_hz(self, name: str) -> float | None:
+        """Nominal rate of a stream: the declared one, for ``radar_if`` 1/(2·T_pri) of run.json."""
+        if name == "radar_if" and self.radar is not None:
+            return self.radar.sample_rate_hz
+        return LOG_STREAMS[name].rate_hz
 
     def stream_file(self, name: str) -> Path | None:
         return self._files.get(name)
@@ -448,8 +554,8 @@ def _arrow_table(table: Table, frame: pd.DataFrame) -> pa.Table:
             continue
         s = frame[c.name]
         if c.dtype == "float":
-            arr = pa.array(s.to_numpy(dtype=np.float64, na_value=np.nan), type=pa.float64())
-            typ = pa.float64()
+            typ = pa.float32() if c.float32 else pa.float64()
+            arr = pa.array(s.to_numpy(dtype=typ.to_pandas_dtype(), na_value=np.nan), type=typ)
         elif c.dtype == "int":
             vals = pd.to_numeric(s).astype("Int64")
             mask = vals.isna().to_numpy()

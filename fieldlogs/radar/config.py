@@ -1,0 +1,45 @@
+"""Tunable limits of the radar processing (units in the names)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class RadarConfig:
+    """Thresholds of ``fieldlogs.radar`` (the radar itself is run.json's ``radar`` block)."""
+
+    pfa: float = 1e-6
+    """False-alarm probability per bin of the noise-floor threshold (CFAR): a line needs
+    power > −ln(pfa) × the mean noise power of a bin (1e-6: 13.8×, +11.4 dB)."""
+    dc_guard_bins: int = 2
+    """Bins either side of 0 Hz never taken as a Doppler line (the Hann main lobe of a
+    static echo); sets the lowest measurable speed."""
+    gate_beamwidths: float = 2.0
+    """A line is a ground reflection when its range lies where the ground is seen at the
+    beam axis ± this many elevation half-widths: h/sin(θ0 + k·β) ≤ R ≤ h/sin(θ0 − k·β)."""
+    gate_sigmas: float = 3.0
+    """Refinement: lines whose range is more than this many σ_R from the one eq. 1
+    predicts for their Doppler are left out (symmetric, so the gate adds no bias)."""
+    range_floor_m: float = 0.01
+    """Smallest σ_R of one line [m] (speckle: reflections of one bin spread in range)."""
+    iterations: int = 6
+    """Gauss–Newton steps of the range-space refinement of eq. 2."""
+    min_lines: int = 1
+    """Fewer used ground lines → low_quality. One line suffices for eq. 1 (its own range
+    corrects its own Doppler): at walking pace a frame resolves only a few lines."""
+    min_direction: float = 0.6
+    """|Σ snr·sign(f_d)| / Σ snr of the ground lines below this → low_quality (no clear
+    direction of motion, e.g. vibration sidebands on both sides of 0 Hz)."""
+    alias_share: float = 0.1
+    """Aliased when the lines at a ground range only if shifted by c/(4·Δf) are at least
+    this share of all ground-range lines (and at least ``min_alias_lines``)."""
+    min_alias_lines: int = 3
+    min_valid: float = 0.9
+    """Frames with a smaller share of their samples present → low_quality."""
+    max_sigma_mps: float = 0.5
+    """A speed whose 1σ exceeds this [m/s] … """
+    max_rel_sigma: float = 0.02
+    """… and this share of the speed → low_quality."""
+    block_frames: int = 256
+    """Frames per vectorised block (bounds memory; the result does not depend on it)."""
