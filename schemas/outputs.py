@@ -38,7 +38,6 @@ EVENTS = Table(
 )
 
 
-
 def _opt(name: str, what: str, unit: str = "") -> Column:
     return Column(name, "float", what, unit=unit, nullable=True)
 

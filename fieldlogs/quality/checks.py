@@ -596,7 +596,6 @@ def check_stream(run: Run, name: str, db: DbRefs | None = None, limits: CheckLim
             "raw radar samples need the radar's parameters: run.json has no 'radar' block "
             "(f0_hz, delta_f_hz, t_pri_s, t_epi_s, height_m, depression_deg, beam_elev_deg, beam_az_deg); "
             "the rate is checked against Table 1's 1/(2·50 µs)",
-            file=str(run.folder / "run.json"),
             column="radar",
         )
     if name == "tacho":

@@ -18,11 +18,21 @@ class RadarConfig:
     gate_beamwidths: float = 2.0
     """A line is a ground reflection when its range lies where the ground is seen at the
     beam axis ± this many elevation half-widths: h/sin(θ0 + k·β) ≤ R ≤ h/sin(θ0 − k·β)."""
+    core_beamwidths: float = 1.5
+    """Refinement: only lines whose Doppler puts them within the beam axis ± this many
+    elevation half-widths (cos θ_m = V_m/V_G) — toward the beam edges the spectrum's
+    resolution smears the strong centre into the weak edge bins and pulls their ranges
+    toward the centre's."""
     gate_sigmas: float = 3.0
     """Refinement: lines whose range is more than this many σ_R from the one eq. 1
     predicts for their Doppler are left out (symmetric, so the gate adds no bias)."""
     range_floor_m: float = 0.01
     """Smallest σ_R of one line [m] (speckle: reflections of one bin spread in range)."""
+    sigma_scale: float = 1.45
+    """The Gauss–Newton 1σ times this: the lines of one frame share errors their scatter
+    does not show (speckle of the same ground, acceleration during T_epi). Set so that
+    simulated errors are within 1σ about 68 % of the time (bench/NOTES.md); re-tune on
+    field runs against a reference speed."""
     iterations: int = 6
     """Gauss–Newton steps of the range-space refinement of eq. 2."""
     min_lines: int = 1

@@ -90,7 +90,7 @@ def frame_samples(
         empty = np.zeros((0, n_per), dtype=np.complex64)
         return Frames(empty, empty.copy(), None, 0.0, rate)
     t_first = float(t[ok].min())
-    slot = np.rint((t - t_first) * rate).astype(np.int64)
+    slot = np.rint(np.where(ok, t - t_first, -1.0) * rate).astype(np.int64)
     n_frames = (int(slot[ok].max()) + 1) // n_per
     total = n_frames * n_per
     if ok.all() and len(t) >= total and np.array_equal(slot[:total], np.arange(total)):

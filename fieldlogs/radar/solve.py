@@ -20,9 +20,11 @@ s_m upward. So (a) eq. 2 is solved with weights SNR_m/s_m³ (∝ 1/var s_m) for 
 (b) V_G is refined by Gauss–Newton on the same model eq. 1 with the residual taken in
 range, where the noise is additive and symmetric: minimise Σ_m (R_m − h/√(1 − u_m·w))²/σ_m²,
 σ_m = max(σ_floor, c/(4π·Δf)/√SNR_m), leaving out lines more than ``gate_sigmas``·σ_m
-(× the frame's residual scale) from the prediction — a symmetric gate that adds no bias.
+(× the frame's robust residual scale, 1.4826·median |r/σ|) from the prediction — a
+symmetric gate that adds no bias.
 The 1σ of V_G follows from the Gauss–Newton normal equation, var(w) = χ²_ν / Σ J_m²/σ_m²
-with χ²_ν ≥ 1 the reduced chi-square (J = ∂R_pred/∂w), and σ_V = ½·V_G³·σ_w.
+with χ²_ν ≥ 1 the reduced chi-square (J = ∂R_pred/∂w), and σ_V = ½·V_G³·σ_w, times
+``sigma_scale`` for the errors the lines of a frame share.
 
 **Which lines.** Ground lines have a range inside the beam's footprint (axis ± ``gate_
 beamwidths`` elevation half-widths); a line whose range is there only after a shift of
@@ -149,12 +151,16 @@ class _Fit:
     cand: BoolArray
     h: float
     n: int
+    core: tuple[float, float]
+    """cos² of the beam core's highest and lowest depression."""
 
     def step(self, w: FloatArray, gate: FloatArray | None) -> tuple[FloatArray, BoolArray, FloatArray, FloatArray]:
         """One Gauss–Newton step in w per frame: (new w, kept lines, residuals, J)."""
         wl = w[self.fi]
         q = 1.0 - self.u * wl
         ok = self.cand & np.isfinite(q) & (q > 1e-6)
+        if gate is not None:  # beam core: cos²θ = u·w within [cos² hi, cos² lo]
+            ok &= (self.u * wl >= self.core[0]) & (self.u * wl <= self.core[1])
         qs = np.where(ok, q, 1.0)
         res = self.r - self.h / np.sqrt(qs)
         jac = self.h * self.u / (2.0 * qs**1.5)
@@ -178,18 +184,20 @@ def _direction(fi: IntArray, ground: BoolArray, lines: Lines, n: int) -> tuple[I
     return np.sign(dsum).astype(np.int64), consistency
 
 
+def _gate(fit: _Fit, keep: BoolArray, res: FloatArray, cfg: RadarConfig) -> FloatArray:
+    """Per frame ``gate_sigmas`` × max(1, 1.4826·median |r/σ|): a robust scale, so that one
+    far outlier cannot widen the gate that should leave it out."""
+    scale = 1.4826 * _median_per_frame(fit.fi[keep], np.abs(res[keep] / fit.sig[keep]), fit.n)
+    return np.asarray(cfg.gate_sigmas * np.maximum(np.nan_to_num(scale, nan=1.0), 1.0))
+
+
 def _refine(fit: _Fit, w0: FloatArray, cfg: RadarConfig) -> tuple[FloatArray, BoolArray, FloatArray, FloatArray]:
-    """Gauss–Newton in range space from w0; the first step ungated, then gated at
-    ``gate_sigmas``·σ × max(1, √χ²_ν)."""
+    """Gauss–Newton in range space from w0; the first step ungated, then gated (``_gate``)."""
     w, keep, res, jac = fit.step(w0, None)
     for _ in range(max(cfg.iterations - 1, 0)):
-        chi2, _k = fit.chi2(keep, res)
-        gate = cfg.gate_sigmas * np.sqrt(np.maximum(np.nan_to_num(chi2, nan=1.0), 1.0))
-        w, keep, res, jac = fit.step(w, gate)
+        w, keep, res, jac = fit.step(w, _gate(fit, keep, res, cfg))
     # residuals and kept lines at the final w
-    chi2, _k = fit.chi2(keep, res)
-    gate = cfg.gate_sigmas * np.sqrt(np.maximum(np.nan_to_num(chi2, nan=1.0), 1.0))
-    _w_next, keep, res, jac = fit.step(w, gate)
+    _w_next, keep, res, jac = fit.step(w, _gate(fit, keep, res, cfg))
     return w, keep, res, jac
 
 
@@ -207,14 +215,15 @@ def fit_frames(lines: Lines, n_frames: int, params: RadarParams, cfg: RadarConfi
     w0 = eq2_closed_form(fi, u, s, c0, n)
     w0 = np.where(w0 > 0, w0, np.nan)
     sig = np.maximum(cfg.range_floor_m, params.r_max_m / (2 * np.pi) / np.sqrt(np.maximum(lines.snr, 1e-12)))
-    fit = _Fit(fi, u, lines.range_m, sig, cand, h, n)
+    lo, hi = params.depression_range_rad(cfg.core_beamwidths)
+    fit = _Fit(fi, u, lines.range_m, sig, cand, h, n, (math.cos(hi) ** 2, math.cos(lo) ** 2))
     w, keep, res, jac = _refine(fit, w0, cfg)
     chi2, k = fit.chi2(keep, res)
     c = np.where(keep, 1.0 / sig**2, 0.0)
     var_w = _ratio(np.maximum(np.nan_to_num(chi2, nan=1.0), 1.0), _sum(fi, c * jac * jac, n))
     with np.errstate(invalid="ignore", divide="ignore"):
         v = np.where((w > 0) & (k >= 1), 1.0 / np.sqrt(w), np.nan)
-        sigma = 0.5 * v**3 * np.sqrt(var_w)
+        sigma = cfg.sigma_scale * 0.5 * v**3 * np.sqrt(var_w)
         e1 = np.where(keep, s + u * w[fi] - 1.0, 0.0)
         eq1_rms = np.sqrt(_ratio(_sum(fi, e1 * e1, n), k))
         residual = np.sqrt(_ratio(_sum(fi, c * res * res, n), _sum(fi, c, n)))
