@@ -52,4 +52,5 @@ class RadarConfig:
     max_rel_sigma: float = 0.02
     """… and this share of the speed → low_quality."""
     block_frames: int = 256
-    """Frames per vectorised block (bounds memory; the result does not depend on it)."""
+    """Frames per vectorised block (bounds memory; the result does not depend on it beyond
+    the last bit of the float32 FFTs)."""

@@ -170,7 +170,8 @@ def analyse_block(frames: Frames, params: RadarParams, cfg: RadarConfig) -> tupl
 
 
 def process_frames(frames: Frames, params: RadarParams, cfg: RadarConfig = RadarConfig()) -> RadarSpeed:
-    """Every frame, in blocks of ``cfg.block_frames`` (results do not depend on the block size)."""
+    """Every frame, in blocks of ``cfg.block_frames`` (the block size changes at most the
+    last bit of the float32 FFTs)."""
     parts: list[dict[str, npt.NDArray[Any]]] = []
     step = max(cfg.block_frames, 1)
     for start in range(0, frames.n_frames, step):

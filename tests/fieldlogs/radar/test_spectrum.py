@@ -14,32 +14,7 @@ from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.framing import frame_samples
 from fieldlogs.radar.spectrum import Lines, detect_lines, fft_length, hann, interpolate, spectra
 from schemas.logs import RadarParams
-
-C = 299_792_458.0
-TABLE1 = RadarParams(24.06e9, 12.75e6, 50e-6, 0.307, 0.8, 45.0, 7.5, 3.0)
-
-
-def reflector_if(
-    p: RadarParams,
-    fd_hz: float,
-    range_m: float,
-    frames: int = 2,
-    amp: float = 0.1,
-    noise: float = 1e-4,
-    seed: int = 0,
-) -> dict[str, np.ndarray]:
-    """One point reflector at constant range and Doppler: f_k's echo A·exp(j(2π·f_d·t − 4π·f_k·R/c)),
-    f1 sampled at t_n = n·2·T_pri, f2 at t_n + T_pri; plus white noise (written out by hand,
-    not with the simulator)."""
-    rng = np.random.default_rng(seed)
-    n = frames * p.samples_per_frame
-    t = np.arange(n) * 2 * p.t_pri_s
-    out: dict[str, np.ndarray] = {"t": t}
-    for k, (f, dt) in enumerate(((p.f0_hz, 0.0), (p.f0_hz + p.delta_f_hz, p.t_pri_s)), start=1):
-        z = amp * np.exp(1j * (2 * np.pi * fd_hz * (t + dt) - 4 * np.pi * f * range_m / C))
-        z += noise * (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / np.sqrt(2)
-        out[f"i{k}"], out[f"q{k}"] = z.real.astype(np.float32), z.imag.astype(np.float32)
-    return out
+from tests.fieldlogs.radar.signals import TABLE1, C, reflector_if
 
 
 def lines_of(d: dict[str, np.ndarray], p: RadarParams = TABLE1, cfg: RadarConfig = RadarConfig()) -> Lines:
