@@ -34,8 +34,9 @@ from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding
 from schemas.frames import PANDAS_DTYPE, coerce_frame, suggest
-from schemas.logs import LOG_STREAMS, RADAR_LOOKS_TOWARD, RUN_JSON, RUN_JSON_RADAR, RadarParams
+from schemas.logs import LOG_STREAMS, RUN_JSON
 from schemas.model import Column, Table
+from schemas.radar import parse_radar_block
 
 LogFormat = Literal["csv", "parquet"]
 STREAM_SUFFIXES = (".parquet", ".csv")
@@ -178,103 +179,6 @@ def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
     known = {f.name for f in RUN_JSON}
     meta = RunMeta(**values, extra={k: v for k, v in data.items() if k not in known})
     return meta, findings
-
-
-def _radar_finding(path: Path, column: str, message: str, **kw: Any) -> Finding:
-    return Finding("log.run_json_radar", Severity.ERROR, "run.json", message, file=str(path), column=column, **kw)
-
-
-def _radar_number(block: dict[str, Any], f: Any, path: Path) -> tuple[float | None, Finding | None]:
-    col = f"radar.{f.name}"
-    raw = block.get(f.name)
-    if raw is None:
-        return None, _radar_finding(path, col, f"field '{col}' [{f.unit}] is missing ({f.description})")
-    if isinstance(raw, bool) or not isinstance(raw, int | float) or not np.isfinite(raw):
-        return None, _radar_finding(path, col, f"field '{col}' = {raw!r} is not a number [{f.unit}]", value=str(raw))
-    if not f.min <= raw <= f.max:
-        return None, _radar_finding(
-            path, col, f"{col} = {raw:g} {f.unit} is outside {f.min:g}–{f.max:g}", value=raw, limit=[f.min, f.max]
-        )
-    return float(raw), None
-
-
-def parse_radar_block(data: dict[str, Any], path: Path) -> tuple[RadarParams | None, list[Finding]]:
-    """The optional ``radar`` block of run.json (``schemas.logs.RUN_JSON_RADAR``), checked.
-
-    Absent → (None, []). Every field must be a number inside its range; the beam must stay
-    between the horizontal and the vertical, and its footprint inside the unambiguous range
-    c/(2·Δf). Any error → (None, findings).
-    """
-    if data.get("radar") is None:
-        return None, []
-    block = data["radar"]
-    if not isinstance(block, dict):
-        return None, [_radar_finding(path, "radar", "'radar' must be a JSON object of radar parameters")]
-    findings: list[Finding] = []
-    values: dict[str, Any] = {}
-    for f in RUN_JSON_RADAR:
-        v, bad = _radar_number(block, f, path)
-        if bad is not None:
-            findings.append(bad)
-        values[f.name] = v
-    looks = block.get("looks_toward", "F")
-    if looks not in RADAR_LOOKS_TOWARD:
-        findings.append(_radar_finding(path, "radar.looks_toward", f"radar.looks_toward = {looks!r} is not F or R"))
-    known = {f.name for f in RUN_JSON_RADAR} | {"looks_toward"}
-    for k in sorted(set(block) - known):
-        hint = suggest(k, sorted(known))
-        findings.append(
-            Finding(
-                "log.run_json_radar",
-                Severity.WARNING,
-                "run.json",
-                f"unknown field 'radar.{k}' ignored" + (f" (did you mean '{hint}'?)" if hint else ""),
-                file=str(path),
-                column=f"radar.{k}",
-            )
-        )
-    if any(f.severity == Severity.ERROR for f in findings):
-        return None, findings
-    params = RadarParams(**values, looks_toward=looks)
-    geometry = _radar_geometry(params, path)
-    return (None, findings + geometry) if geometry else (params, findings)
-
-
-def _radar_geometry(p: RadarParams, path: Path) -> list[Finding]:
-    """Cross-field checks: beam between horizontal and vertical, footprint range < c/(2·Δf), frames of ≥ 16 samples."""
-    lo, hi = p.depression_deg - p.beam_elev_deg, p.depression_deg + p.beam_elev_deg
-    if not (0.0 < lo and hi < 90.0):
-        return [
-            _radar_finding(
-                path,
-                "radar.depression_deg",
-                f"beam {lo:g}°–{hi:g}° below the horizontal (depression ± beam_elev) must lie between 0° and 90°",
-                value=[lo, hi],
-                limit=[0, 90],
-            )
-        ]
-    far = p.height_m / np.sin(np.radians(lo))
-    if far >= p.r_max_m:
-        return [
-            _radar_finding(
-                path,
-                "radar.delta_f_hz",
-                f"the beam's far edge is {far:.2f} m away, beyond the unambiguous range c/(2·Δf) = {p.r_max_m:.2f} m",
-                value=far,
-                limit=p.r_max_m,
-            )
-        ]
-    if p.samples_per_frame < 16:
-        return [
-            _radar_finding(
-                path,
-                "radar.t_epi_s",
-                f"T_epi holds only {p.samples_per_frame} samples of each frequency (at least 16)",
-                value=p.samples_per_frame,
-                limit=16,
-            )
-        ]
-    return []
 
 
 def stream_path(folder: Path, name: str) -> Path | None:

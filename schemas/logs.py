@@ -8,13 +8,11 @@ wy < 0 nose pitching up).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from schemas.enums import BaliseKind, CabDirection, Track, VehicleKind
 from schemas.model import Column, Table
 from schemas.tables import LAT_RANGE, LON_RANGE
-from schemas.units import SPEED_OF_LIGHT_MPS
 
 T = Column("t", "float", "Seconds since the start of the run", unit="s", min=0.0)
 
@@ -173,89 +171,3 @@ RUN_JSON: tuple[RunField, ...] = (
     RunField("db_version", str, "DB version the run was recorded with", required=False),
     RunField("notes", str, "Free notes", required=False),
 )
-
-
-@dataclass(frozen=True)
-class RadarField:
-    """One number of the optional ``run.json`` block ``radar`` and its plausible range."""
-
-    name: str
-    unit: str
-    description: str
-    min: float
-    max: float
-
-
-#: The ``radar`` block of ``run.json`` (needed to process ``radar_if``); S004 Table 1 values
-#: in the descriptions. ``looks_toward`` (optional, ``F`` default) is the vehicle end the beam
-#: points to.
-RUN_JSON_RADAR: tuple[RadarField, ...] = (
-    RadarField("f0_hz", "Hz", "Carrier frequency f0 (Table 1: 24.06 GHz)", 1e9, 300e9),
-    RadarField("delta_f_hz", "Hz", "Frequency difference Δf = f2 − f1 (Table 1: 12.75 MHz)", 1e5, 1e9),
-    RadarField("t_pri_s", "s", "Switching interval f1 → f2, T_pri (Table 1: 50 µs)", 1e-7, 1e-2),
-    RadarField("t_epi_s", "s", "Observation time of one FFT frame, T_epi (Table 1: 307 ms)", 1e-3, 10.0),
-    RadarField("height_m", "m", "Antenna height h above the ground (track bed) surface", 0.05, 5.0),
-    RadarField("depression_deg", "deg", "Beam axis below the horizontal, toward looks_toward", 5.0, 85.0),
-    RadarField("beam_elev_deg", "deg", "Half-power half-width in elevation (Table 1: ±7.5°)", 0.5, 30.0),
-    RadarField("beam_az_deg", "deg", "Half-power half-width in azimuth (Table 1: ±3.0°)", 0.5, 30.0),
-)
-RADAR_LOOKS_TOWARD = (CabDirection.FORWARD.value, CabDirection.REVERSE.value)
-
-
-@dataclass(frozen=True)
-class RadarParams:
-    """The run's radar [S004 Table 1] and the figures that follow from it."""
-
-    f0_hz: float
-    delta_f_hz: float
-    t_pri_s: float
-    t_epi_s: float
-    height_m: float
-    depression_deg: float
-    beam_elev_deg: float
-    beam_az_deg: float
-    looks_toward: str = "F"
-
-    @property
-    def wavelength_m(self) -> float:
-        """λ = c / f0 (24.06 GHz: 12.46 mm)."""
-        return SPEED_OF_LIGHT_MPS / self.f0_hz
-
-    @property
-    def sample_rate_hz(self) -> float:
-        """Samples per second of each frequency: 1 / (2·T_pri) (10 kHz)."""
-        return 1.0 / (2.0 * self.t_pri_s)
-
-    @property
-    def samples_per_frame(self) -> int:
-        """N = round(T_epi · rate) samples of each frequency per FFT frame (3070)."""
-        return max(round(self.t_epi_s * self.sample_rate_hz), 1)
-
-    @property
-    def speed_resolution_mps(self) -> float:
-        """ΔV = λ / (2·T_epi): one Doppler bin as radial speed (0.073 km/h)."""
-        return self.wavelength_m / (2.0 * self.t_epi_s)
-
-    @property
-    def v_max_mps(self) -> float:
-        """Radial speed at the Doppler Nyquist frequency rate/2: λ·rate/4 (112.14 km/h)."""
-        return self.wavelength_m * self.sample_rate_hz / 4.0
-
-    @property
-    def r_max_m(self) -> float:
-        """Unambiguous range c / (2·Δf) of the phase difference (11.76 m)."""
-        return SPEED_OF_LIGHT_MPS / (2.0 * self.delta_f_hz)
-
-    @property
-    def look_sign(self) -> int:
-        """+1 when the beam looks toward the F end (body +x), −1 toward the R end."""
-        return 1 if self.looks_toward == CabDirection.FORWARD.value else -1
-
-    def depression_range_rad(self, beamwidths: float) -> tuple[float, float]:
-        """Depression angles of the beam axis ± ``beamwidths`` half-widths, kept in (0.5°, 89.5°)."""
-        lo = self.depression_deg - beamwidths * self.beam_elev_deg
-        hi = self.depression_deg + beamwidths * self.beam_elev_deg
-        return math.radians(max(lo, 0.5)), math.radians(min(hi, 89.5))
-
-    def to_json(self) -> dict[str, float | str]:
-        return {f.name: getattr(self, f.name) for f in RUN_JSON_RADAR} | {"looks_toward": self.looks_toward}

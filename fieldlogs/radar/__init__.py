@@ -12,7 +12,7 @@ eq. 2 turns the lines of a frame into the ground speed V_G despite the beam spre
 * ``speed`` — the whole run in blocks, frame status, CSV/JSON output;
 * ``plots`` — radar vs wheel vs truth speed along a run, one frame's Doppler–range scatter.
 
-The run.json ``radar`` block (``schemas.logs.RadarParams``) describes the radar; the
+The run.json ``radar`` block (``schemas.radar.RadarParams``) describes the radar; the
 output columns are ``schemas.outputs.RADAR_SPEED``. Pure functions of their inputs; no
 Python loop per frame.
 """

@@ -5,7 +5,7 @@ One PNG, two panels:
 * **Speed along the run** [km/h, magnitude]: the radar's V_G of every ``ok`` frame (its
   ±2σ band), ``standstill`` frames at 0, frames without a speed marked by status; the wheel
   (tachometer pulses × π·D/teeth over 1 s), the GNSS speed (distance between consecutive
-  fixes with fix ≥ 1; missing under an overpass or in a tunnel) and the simulator's truth
+  fixes with fix ≥ 1; missing, shaded, under an overpass or in a tunnel) and the simulator's truth
   where the run has them; the naive strongest-line speed, faint.
 * **One frame as a person checks the radar**: every paired line as (Doppler speed V_m,
   range R_m), coloured by SNR when used in eq. 2, grey when at a ground range but left
@@ -67,6 +67,20 @@ def gnss_speed(run: Run) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float6
     return 0.5 * (t[1:] + t[:-1]), np.hypot(dx, dy) / np.diff(t)
 
 
+def _gnss_lost(ax: Any, run: Run) -> None:
+    """Shade the spans without a GNSS fix (tunnels, overpasses)."""
+    gps = run.stream("gps")
+    if gps is None or len(gps) < 2:
+        return
+    t = gps["t"].to_numpy(dtype=float, na_value=np.nan)
+    lost = gps["fix"].to_numpy(dtype=float, na_value=0.0) < GpsFix.GPS
+    edges = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
+    for k, (a, b) in enumerate(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True)):
+        ax.axvspan(
+            t[a] - 0.5, t[b - 1] + 0.5, color="tab:olive", alpha=0.15, lw=0, label="no GNSS fix" if k == 0 else None
+        )
+
+
 def _speed_panel(ax: Any, run: Run, result: RadarSpeed) -> None:
     c = result.columns
     t, v, sig, status = c["t"], np.abs(c["speed_mps"]) * KMH, c["sigma_mps"] * KMH, c["status"]
@@ -79,6 +93,7 @@ def _speed_panel(ax: Any, run: Run, result: RadarSpeed) -> None:
     ):
         if series is not None:
             ax.plot(series[0], series[1] * KMH, color=style, lw=1.0, label=label)
+    _gnss_lost(ax, run)
     ax.plot(t, np.abs(c["v_naive_mps"]) * KMH, ".", color="tab:gray", ms=2, alpha=0.5, label="naive single peak")
     ax.fill_between(t, v - 2 * sig, v + 2 * sig, color="tab:blue", alpha=0.25, lw=0)
     ax.plot(t, v, ".-", color="tab:blue", ms=3, lw=0.8, label="radar V_G (eq. 2) ±2σ")

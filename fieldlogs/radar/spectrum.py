@@ -38,7 +38,7 @@ import numpy.typing as npt
 
 from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.framing import Frames
-from schemas.logs import RadarParams
+from schemas.radar import RadarParams
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

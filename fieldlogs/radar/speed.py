@@ -42,8 +42,8 @@ from fieldlogs.radar.solve import FrameFit, LineClass, fit_frames
 from fieldlogs.radar.spectrum import Lines, detect_lines, spectra
 from schemas.enums import RadarStatus
 from schemas.errors import InputError, UsageError
-from schemas.logs import RadarParams
 from schemas.outputs import RADAR_SPEED
+from schemas.radar import RadarParams
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

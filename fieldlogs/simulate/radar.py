@@ -45,7 +45,7 @@ from fieldlogs.simulate.running import DT, Motion
 from fieldlogs.simulate.scenario import RadarIfCfg, Scenario
 from fieldlogs.simulate.sensors import in_spans
 from fieldlogs.simulate.track import TrackGeometry
-from schemas.logs import RadarParams
+from schemas.radar import RadarParams
 from schemas.units import SPEED_OF_LIGHT_MPS
 
 FloatArray = npt.NDArray[np.float64]

@@ -20,7 +20,7 @@ from typing import Any
 from schemas.enums import CabDirection, Track, VehicleKind
 from schemas.errors import UsageError
 from schemas.frames import suggest
-from schemas.logs import RUN_JSON_RADAR
+from schemas.radar import RUN_JSON_RADAR
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parent / "scenarios" / "default.toml"
 
@@ -409,7 +409,7 @@ def _check(s: Scenario) -> None:
 
 
 def _check_radar_if(r: RadarIfCfg, fail: typing.Callable[[str, str], None]) -> None:
-    """The IF simulator's radar inside run.json's plausible ranges (``schemas.logs.RUN_JSON_RADAR``)."""
+    """The IF simulator's radar inside run.json's plausible ranges (``schemas.radar.RUN_JSON_RADAR``)."""
     for f in RUN_JSON_RADAR:
         v = getattr(r, f.name)
         if not (math.isfinite(v) and f.min <= v <= f.max):

@@ -16,7 +16,7 @@ import pandas as pd
 from dbtools.network import Network
 from fieldlogs.io import RunMeta
 from fieldlogs.simulate import scenario_from_dict, simulate_run
-from schemas.logs import RadarParams
+from schemas.radar import RadarParams
 
 KINDS = ("accelerate", "overpass", "slab", "reverse")
 ACCEL_KMH_S, BRAKE_KMH_S = 2.5, 3.0
@@ -81,7 +81,7 @@ def radar_of(meta: RunMeta) -> RadarParams:
 
 def truth_at(truth: pd.DataFrame, t: np.ndarray) -> np.ndarray:
     """True signed speed (+ toward F) at times ``t``, linear between the 10 Hz samples."""
-    return np.interp(t, truth["t"].to_numpy(dtype=float), truth["speed_mps"].to_numpy(dtype=float))
+    return np.asarray(np.interp(t, truth["t"].to_numpy(dtype=float), truth["speed_mps"].to_numpy(dtype=float)))
 
 
 def onset_time(truth: pd.DataFrame, kmh: float = 0.5) -> float:

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from schemas.logs import RadarParams
+from schemas.radar import RadarParams
 
 C = 299_792_458.0
 TABLE1 = RadarParams(24.06e9, 12.75e6, 50e-6, 0.307, 0.8, 45.0, 7.5, 3.0)

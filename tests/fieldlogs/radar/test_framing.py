@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fieldlogs.radar.framing import frame_samples
-from schemas.logs import RadarParams
+from schemas.radar import RadarParams
 
 # small frames: 1 kHz pairs (T_pri 0.5 ms), T_epi 10 ms → 10 pairs per frame
 P = RadarParams(24.06e9, 12.75e6, 0.5e-3, 0.010, 0.8, 45.0, 7.5, 3.0)
@@ -44,7 +44,8 @@ def test_unsorted_repeated_and_missing_rows() -> None:
 def test_a_gap_leaves_empty_slots() -> None:
     d = rows(40)
     keep = (np.arange(40) < 12) | (np.arange(40) >= 18)
-    fr = frame_samples(*(d[k][keep] for k in ("t", "i1", "q1", "i2", "q2")), P)
+    t, i1, q1, i2, q2 = (d[k][keep] for k in ("t", "i1", "q1", "i2", "q2"))
+    fr = frame_samples(t, i1, q1, i2, q2, P)
     assert fr.z1.shape == (4, 10)
     assert fr.valid_share.tolist() == [1.0, 0.4, 1.0, 1.0]
 

@@ -12,14 +12,14 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from fieldlogs.io import Run, parse_radar_block, write_run
+from fieldlogs.io import Run, write_run
 from fieldlogs.quality.checks import check_run
 from fieldlogs.quality.info import run_info
 from schemas.enums import Severity
-from schemas.logs import RadarParams
+from schemas.radar import RadarParams, parse_radar_block
 from tests.fieldlogs.make_runs import make_meta, synthetic_streams
 
-BLOCK = {
+BLOCK: dict[str, Any] = {
     "f0_hz": 24.06e9,
     "delta_f_hz": 12.75e6,
     "t_pri_s": 50e-6,

@@ -49,7 +49,7 @@ def test_off_axis_scatterer_follows_the_two_way_pattern() -> None:
 def test_doppler_sign_of_forward_and_backward_motion(speed: float, look: int, sign: int) -> None:
     # the antenna moves at `speed` along σ; the scatterer 0.8 m in front of the beam
     t = np.arange(200) * 1e-4
-    pos = speed * t
+    pos = np.asarray(speed * t, dtype=np.float64)
     g = one(look * 0.8)
     z = echo(g, pos, np.full(len(t), 0.8), look, CFG.f0_hz, CFG, view(CFG))
     f = np.angle(z[1:] * np.conj(z[:-1])) / (2 * math.pi * 1e-4)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.solve import classify, eq2_closed_form, fit_frames, range_gate
 from fieldlogs.radar.spectrum import Lines
-from schemas.logs import RadarParams
+from schemas.radar import RadarParams
 
 P = RadarParams(24.06e9, 12.75e6, 50e-6, 0.307, 0.8, 45.0, 7.5, 3.0)
 

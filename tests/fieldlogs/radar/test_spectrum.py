@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.framing import frame_samples
 from fieldlogs.radar.spectrum import Lines, detect_lines, fft_length, hann, interpolate, spectra
-from schemas.logs import RadarParams
+from schemas.radar import RadarParams
 from tests.fieldlogs.radar.signals import TABLE1, C, reflector_if
 
 
