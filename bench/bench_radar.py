@@ -13,7 +13,8 @@ error is inside 2σ; the delay from motion onset (true speed > 0.5 km/h) to the 
 ``ok`` frame (target ≤ 1 frame); false speeds at rest; a run at 150 km/h (aliasing: no
 ``ok`` frame may be wrong by more than 1 km/h).
 
-``throughput`` builds one hour of IF samples (a simulated minute at ~60 km/h, repeated),
+``throughput`` builds one hour of IF samples (the ~10 s cruise of a simulated run at
+60 km/h, repeated in whole frames),
 times ``process_if`` on it (target ≤ 36 s: 100× real time) and a per-frame Python loop with
 numpy FFTs on ``--loop-minutes`` (scaled). ``process`` runs one implementation on saved
 samples (``throughput --save FILE.npz``), for timing whole processes from outside.
@@ -137,7 +138,7 @@ def accuracy(args: argparse.Namespace) -> None:
 
 
 def hour_of_samples(hours: float) -> tuple[dict[str, np.ndarray], RadarParams]:
-    """A simulated minute at ~60 km/h (cruise part of run 0), repeated to ``hours``."""
+    """The cruise (> 55 km/h) of run 0 at 60 km/h, cut to whole frames, repeated to ``hours``."""
     with tempfile.TemporaryDirectory() as tmp:
         net = read_network(sample_db(Path(tmp)))
         streams, meta = simulate_radar_run(0, net, top_kmh=60.0)

@@ -38,9 +38,13 @@ class RadarConfig:
     min_lines: int = 1
     """Fewer used ground lines → low_quality. One line suffices for eq. 1 (its own range
     corrects its own Doppler): at walking pace a frame resolves only a few lines."""
-    min_direction: float = 0.6
-    """|Σ snr·sign(f_d)| / Σ snr of the ground lines below this → low_quality (no clear
-    direction of motion, e.g. vibration sidebands on both sides of 0 Hz)."""
+    min_direction: float = 0.8
+    """|Σ sign(f_d)·(snr − snr_mirror)| / Σ (snr + snr_mirror) of the ground lines below
+    this → no clear direction of motion (vibration sidebands on both sides of 0 Hz):
+    standstill when slow (``vibration_max_mps``), else low_quality."""
+    vibration_max_mps: float = 0.3
+    """A frame with a static ground echo whose lines have no clear direction and are all
+    slower than this [m/s] is standstill: the sidebands of the antenna's vibration."""
     alias_share: float = 0.1
     """Aliased when the lines at a ground range only if shifted by c/(4·Δf) are at least
     this share of all ground-range lines (and at least ``min_alias_lines``)."""

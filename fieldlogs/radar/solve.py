@@ -30,7 +30,9 @@ with χ²_ν ≥ 1 the reduced chi-square (J = ∂R_pred/∂w), and σ_V = ½·V
 beamwidths`` elevation half-widths); a line whose range is there only after a shift of
 c/(4·Δf) is aliased (see ``spectrum``). The direction of motion is the SNR-weighted sign of
 the ground lines' Doppler (+: approaching, the vehicle moves toward where the radar
-looks); lines of the other sign are not ground moving past and are left out.
+looks), each line counted against the power at its mirror bin, since ground moving past
+is one-sided in Doppler and vibration sidebands are not; lines of the other sign are not
+ground moving past and are left out.
 **Naive**: the strongest line alone, v = f_d·λ/(2·cos θ0) — what a single-frequency
 Doppler speedometer reports; its bias from the beam spread is what eq. 2 removes.
 """
@@ -72,7 +74,10 @@ class FrameFit:
     direction: IntArray
     """+1 approaching (moving toward where the radar looks), −1 receding, 0 none."""
     consistency: FloatArray
-    """|Σ snr·sign f_d| / Σ snr over the ground lines (1: every line agrees)."""
+    """|Σ sign f_d·(snr − snr_mirror)| / Σ (snr + snr_mirror) over the ground lines
+    (1: every line one-sided and of one sign; 0: symmetric about 0 Hz)."""
+    max_vm: FloatArray
+    """Largest |V_m| of the frame's ground lines [m/s] (0 when none)."""
     v_eq2: FloatArray
     """The paper's unweighted eq. 2 [m/s]."""
     v: FloatArray
@@ -130,6 +135,12 @@ def _median_per_frame(fi: IntArray, x: FloatArray, n: int) -> FloatArray:
     return out
 
 
+def _max_per_frame(fi: IntArray, x: FloatArray, n: int) -> FloatArray:
+    out = np.zeros(n)
+    np.maximum.at(out, fi, x)
+    return out
+
+
 def _naive(lines: Lines, params: RadarParams, n: int) -> FloatArray:
     out = np.full(n, np.nan)
     if len(lines) == 0:
@@ -177,9 +188,11 @@ class _Fit:
 
 
 def _direction(fi: IntArray, ground: BoolArray, lines: Lines, n: int) -> tuple[IntArray, FloatArray]:
+    """Sign and consistency Σ sign(f_d)·(snr − snr_mirror) / Σ (snr + snr_mirror) of the
+    ground lines: 1 when every line is one-sided, 0 for sidebands on both sides of 0 Hz."""
     sgn = np.sign(lines.fd_hz)
-    wsum = _sum(fi, np.where(ground, lines.snr, 0.0), n)
-    dsum = _sum(fi, np.where(ground, lines.snr * sgn, 0.0), n)
+    wsum = _sum(fi, np.where(ground, lines.snr + lines.snr_mirror, 0.0), n)
+    dsum = _sum(fi, np.where(ground, (lines.snr - lines.snr_mirror) * sgn, 0.0), n)
     consistency = np.abs(_ratio(dsum, wsum))
     return np.sign(dsum).astype(np.int64), consistency
 
@@ -236,6 +249,7 @@ def fit_frames(lines: Lines, n_frames: int, params: RadarParams, cfg: RadarConfi
         n_used=k.astype(np.int64),
         direction=direction,
         consistency=consistency,
+        max_vm=_max_per_frame(fi[ground], np.abs(lines.v_m[ground]), n),
         v_eq2=v_eq2,
         v=v,
         sigma=sigma,

@@ -16,7 +16,9 @@ For every frame (all frames of a block at once, as 2-D arrays):
    the whole spectrum, valid because ground clutter fills far less than half the band.
    A bin is a peak when it is a local maximum of its spectrum above −ln(P_fa) × that floor.
 4. **Pairing.** A line is an f1 peak with an f2 peak in the same or an adjacent bin,
-   outside ± ``dc_guard_bins`` of 0 Hz; its SNR = (P1 + P2)/(floor1 + floor2).
+   outside ± ``dc_guard_bins`` of 0 Hz; its SNR = (P1 + P2)/(floor1 + floor2), and the
+   same ratio at the mirror bin −k is kept (ground moving past is one-sided in Doppler,
+   vibration of the antenna is not).
 5. **Sub-bin frequency.** With A the magnitude √(P1 + P2) at bins k−1, k, k+1, the Hann
    window's exact three-bin interpolation δ = 2(A₊ − A₋)/(A₋ + 2A₀ + A₊) gives
    f_d = (k + δ)·rate/N_fft and V_m = f_d·λ/2 (a bin is ΔV = λ/(2·T_epi), Table 1: 0.073 km/h).
@@ -76,6 +78,8 @@ class Lines:
     range_m: FloatArray
     snr: FloatArray
     """(P1 + P2)/(floor1 + floor2), linear."""
+    snr_mirror: FloatArray
+    """The same at the mirror bin −k: a translation is one-sided, vibration is not."""
 
     def __len__(self) -> int:
         return len(self.frame)
@@ -170,7 +174,10 @@ def detect_lines(sp: Spectra, params: RadarParams, cfg: RadarConfig) -> Lines:
         cross += sp.s1[fi, j].astype(np.complex128) * np.conj(sp.s2[fi, j])
     cross *= np.exp(2j * np.pi * fd * params.t_pri_s)
     dphi = np.mod(np.angle(cross), 2.0 * np.pi)
-    snr = (sp.p1[fi, k].astype(np.float64) + sp.p2[fi, k]) / (sp.floor1[fi] + sp.floor2[fi])
+    floors = sp.floor1[fi] + sp.floor2[fi]
+    snr = (sp.p1[fi, k].astype(np.float64) + sp.p2[fi, k]) / floors
+    mirror = (-k) % n_fft
+    snr_mirror = (sp.p1[fi, mirror].astype(np.float64) + sp.p2[fi, mirror]) / floors
     return Lines(
         frame=fi,
         bin=signed.astype(np.int64),
@@ -178,4 +185,5 @@ def detect_lines(sp: Spectra, params: RadarParams, cfg: RadarConfig) -> Lines:
         v_m=fd * params.wavelength_m / 2.0,
         range_m=params.r_max_m * dphi / (2.0 * np.pi),
         snr=snr,
+        snr_mirror=snr_mirror,
     )

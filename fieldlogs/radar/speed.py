@@ -8,10 +8,12 @@ each frame a status (``schemas.enums.RadarStatus``), first match wins:
 2. ``aliased`` — at least ``alias_share`` of the ground-range lines (and ``min_lines``)
    are aliased (and ``min_alias_lines``), or the speed puts the beam's half-power edge θ0 − β_e past the Nyquist
    frequency: V_G·cos(θ0 − β_e) ≥ Vmax (Table 1: 112.14 km/h radial) — no speed;
-3. ``standstill`` — no Doppler line but the static ground echo above the threshold:
-   speed 0, σ = the lowest measurable speed (the first bin past the DC guard at the beam
-   edge); ``no_reflections`` — no line and no static echo, or lines but none at a ground
-   range — no speed;
+3. ``standstill`` — no Doppler line but the static ground echo above the threshold, or
+   only slow lines without a direction (vibration sidebands on both sides of 0 Hz, below
+   ``vibration_max_mps``): speed 0, σ = the lowest measurable speed (the first bin past
+   the DC guard at the beam edge), or the fastest such line when faster;
+   ``no_reflections`` — no line and no static echo, or lines but none at a ground range —
+   no speed;
 4. ``low_quality`` — fewer than ``min_lines`` used lines, no clear direction
    (``min_direction``), a failed fit, or σ above both ``max_sigma_mps`` and
    ``max_rel_sigma``·V — no speed;
@@ -106,11 +108,13 @@ def _status(
         bad_sigma = ~(fit.sigma <= np.maximum(cfg.max_sigma_mps, cfg.max_rel_sigma * fit.v))
     no_lines = fit.n_lines == 0
     static = dc_snr > -math.log(cfg.pfa)
-    weak = (fit.n_used < cfg.min_lines) | ~(fit.consistency >= cfg.min_direction) | ~np.isfinite(fit.v) | bad_sigma
+    undirected = ~(fit.consistency >= cfg.min_direction)
+    vibration = static & undirected & (fit.n_ground > 0) & (fit.max_vm <= cfg.vibration_max_mps)
+    weak = (fit.n_used < cfg.min_lines) | undirected | ~np.isfinite(fit.v) | bad_sigma
     conds = [
         valid < cfg.min_valid,
         alias_lines | beyond,
-        no_lines & static,
+        (no_lines & static) | vibration,
         no_lines | (fit.n_ground == 0),
         weak,
     ]
@@ -133,7 +137,8 @@ def _columns(
     ok = status == RadarStatus.OK.value
     still = status == RadarStatus.STANDSTILL.value
     speed = np.where(ok, look * fit.direction * fit.v, np.where(still, 0.0, np.nan))
-    sigma = np.where(ok, fit.sigma, np.where(still, lowest_speed_mps(params, cfg), np.nan))
+    rest_sigma = np.maximum(lowest_speed_mps(params, cfg), fit.max_vm)
+    sigma = np.where(ok, fit.sigma, np.where(still, rest_sigma, np.nan))
     return {
         "t": frames.t_centre,
         "speed_mps": speed + 0.0,

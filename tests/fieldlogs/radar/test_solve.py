@@ -30,6 +30,7 @@ def lines_from(v_g: float, deg: list[float], p: RadarParams = P, snr: float = 1e
         v_m=v_m,
         range_m=p.height_m / np.sin(th),
         snr=np.full(n, snr),
+        snr_mirror=np.zeros(n),
     )
 
 

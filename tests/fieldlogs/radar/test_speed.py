@@ -80,19 +80,40 @@ def test_missing_samples_make_low_quality_frames() -> None:
     assert res.columns["valid_share"][1] == pytest.approx(1 - 600 / 3070)
 
 
-def test_symmetric_vibration_sidebands_are_not_a_speed() -> None:
+def test_vibration_sidebands_at_rest_are_standstill_not_a_speed() -> None:
     # a static echo whose range vibrates 1 mm at 9 Hz: lines at ±9 Hz, ±18 Hz … on both sides
     p = TABLE1
     n = 2 * p.samples_per_frame
     t = np.arange(n) * 2 * p.t_pri_s
     d = {"t": t}
+    rng = np.random.default_rng(2)
     for k, (f, dt) in enumerate(((p.f0_hz, 0.0), (p.f0_hz + p.delta_f_hz, p.t_pri_s)), start=1):
         r = 1.1 + 0.001 * np.sin(2 * np.pi * 9.0 * (t + dt))
-        z = 0.05 * np.exp(-4j * np.pi * f * r / C) + 1e-4 * np.exp(1j * t)
+        noise = 1.6e-3 * (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / np.sqrt(2)  # 30 dB below
+        z = 0.05 * np.exp(-4j * np.pi * f * r / C) + noise
         d[f"i{k}"], d[f"q{k}"] = z.real.astype(np.float32), z.imag.astype(np.float32)
     c = run(d).columns
-    assert not (c["status"] == RadarStatus.OK.value).any()
-    assert np.isnan(c["speed_mps"]).all()
+    assert list(c["status"]) == [RadarStatus.STANDSTILL.value] * 2
+    assert c["speed_mps"].tolist() == [0.0, 0.0] and (c["n_lines"] >= 2).all()
+
+
+def test_one_sided_weak_sideband_is_checked_against_its_mirror_bin() -> None:
+    # +18 Hz at SNR 40 (16 dB), its mirror −18 Hz 7 dB weaker, below the 11.4 dB threshold:
+    # one line only, but no translation (consistency (40 − 8)/(40 + 8) = 0.67 < 0.8)
+    p = TABLE1
+    floor_amp = 3e-4  # noise per sample; a bin's noise power ≈ σ²·Σw² = σ²·3N/8
+    bin_noise = floor_amp**2 * 3 * p.samples_per_frame / 8
+    tone = math.sqrt(40 * bin_noise) / (p.samples_per_frame / 2)  # Hann peak gain N/2
+    h = p.height_m / math.sin(math.radians(45))
+    d = reflectors_if(p, [18.0, -18.0], [h, h], amp=[tone, 0.45 * tone], noise=floor_amp, static=0.05, frames=3)
+    c = run(d).columns
+    assert (c["n_lines"] == 1).any()
+    assert list(c["status"]) == [RadarStatus.STANDSTILL.value] * 3
+
+
+def test_slow_motion_is_not_taken_for_vibration() -> None:
+    c = run(ground_if(TABLE1, 0.25, [40.0, 45.0, 50.0], static=0.05, noise=1e-3)).columns
+    assert list(c["status"]) == ["ok", "ok"] and c["speed_mps"] == pytest.approx([0.25, 0.25], abs=0.01)
 
 
 def test_blocks_do_not_change_the_result() -> None:
