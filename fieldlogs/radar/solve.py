@@ -205,12 +205,16 @@ def _gate(fit: _Fit, keep: BoolArray, res: FloatArray, cfg: RadarConfig) -> Floa
 
 
 def _refine(fit: _Fit, w0: FloatArray, cfg: RadarConfig) -> tuple[FloatArray, BoolArray, FloatArray, FloatArray]:
-    """Gauss–Newton in range space from w0; the first step ungated, then gated (``_gate``)."""
+    """Gauss–Newton in range space from w0; the first step ungated, then gated (``_gate``,
+    its scale taken after the first two steps and then held: the outliers are gone by then)."""
     w, keep, res, jac = fit.step(w0, None)
-    for _ in range(max(cfg.iterations - 1, 0)):
-        w, keep, res, jac = fit.step(w, _gate(fit, keep, res, cfg))
+    gate = _gate(fit, keep, res, cfg)
+    for i in range(max(cfg.iterations - 1, 0)):
+        w, keep, res, jac = fit.step(w, gate)
+        if i == 0:
+            gate = _gate(fit, keep, res, cfg)
     # residuals and kept lines at the final w
-    _w_next, keep, res, jac = fit.step(w, _gate(fit, keep, res, cfg))
+    _w_next, keep, res, jac = fit.step(w, gate)
     return w, keep, res, jac
 
 

@@ -11,7 +11,7 @@ For every frame (all frames of a block at once, as 2-D arrays):
    closing at radial speed V_m gives a line at f_d = 2·V_m/λ, positive for an approaching
    reflector (I + jQ keeps the sign).
 3. **Noise floor (CFAR).** Per frame and frequency the median bin power over the whole
-   spectrum, divided by ln 2, estimates the mean noise power per bin (noise power in a bin
+   spectrum (every 4th bin), divided by ln 2, estimates the mean noise power per bin (noise power in a bin
    is exponential, median = ln2·mean) — an order-statistic CFAR whose reference cells are
    the whole spectrum, valid because ground clutter fills far less than half the band.
    A bin is a peak when it is a local maximum of its spectrum above −ln(P_fa) × that floor.
@@ -44,6 +44,11 @@ from schemas.radar import RadarParams
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
+
+
+#: The noise floor is the median of every 4th bin (768 of 3072: its standard error ≈ 3.6 %,
+#: ±0.15 dB on the threshold) — the median is the costliest step of the spectra.
+FLOOR_STRIDE = 4
 
 
 @dataclass(frozen=True)
@@ -122,7 +127,7 @@ def spectra(frames: Frames, cfg: RadarConfig) -> Spectra:
         zd, m = _demean(z, frames.present)
         s = scipy.fft.fft(zd * w, n=n_fft, axis=1, workers=1).astype(np.complex64, copy=False)
         p = (s.real * s.real + s.imag * s.imag).astype(np.float32, copy=False)
-        floor = np.median(p, axis=1).astype(np.float64) / math.log(2.0)
+        floor = np.median(p[:, ::FLOOR_STRIDE], axis=1).astype(np.float64) / math.log(2.0)
         sigma2 = np.maximum(floor / w2, 1e-30)  # noise variance of one sample
         dc = np.maximum(dc, n * np.abs(m) ** 2 / sigma2)
         out += [s, p, floor]
