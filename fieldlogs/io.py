@@ -36,6 +36,7 @@ from schemas.findings import Finding
 from schemas.frames import PANDAS_DTYPE, coerce_frame, suggest
 from schemas.logs import LOG_STREAMS, RUN_JSON
 from schemas.model import Column, Table
+from schemas.radar import parse_radar_block
 
 LogFormat = Literal["csv", "parquet"]
 #: run.json blocks written only when present.
@@ -258,7 +259,7 @@ def _arrow_column(col: Column, arr: pa.ChunkedArray) -> Any:
     """A typed pandas array for a column whose Arrow type fits the declared one, else None."""
     t = arr.type
     if col.dtype == "float" and (pa.types.is_floating(t) or pa.types.is_integer(t)):
-        return arr.to_numpy().astype(np.float64, copy=False)  # nulls → NaN
+        return arr.to_numpy().astype(np.float32 if col.float32 else np.float64, copy=False)  # nulls → NaN
     if col.dtype == "int" and pa.types.is_integer(t):
         if arr.null_count == 0:
             values = arr.to_numpy().astype(np.int64, copy=False)
@@ -364,6 +365,9 @@ class Run:
             raise InputError("run.json must be a JSON object", path=json_path)
         self.raw_json: dict[str, Any] = data
         self.meta, self.findings = parse_run_json(json_path)
+        self.radar, radar_findings = parse_radar_block(data, json_path)
+        """The run.json ``radar`` block (None when absent or unusable)."""
+        self.findings.extend(radar_findings)
         self._streams: dict[str, pd.DataFrame | None] = {}
         self._stream_findings: dict[str, list[Finding]] = {}
         self._files: dict[str, Path] = {}
@@ -420,6 +424,12 @@ class Run:
 
     def streams_present(self) -> list[str]:
         return [n for n in LOG_STREAMS if self.has(n)]
+
+    def stream_rate_hz(self, name: str) -> float | None:
+        """Nominal rate of a stream: the declared one, for ``radar_if`` 1/(2·T_pri) of run.json."""
+        if name == "radar_if" and self.radar is not None:
+            return self.radar.sample_rate_hz
+        return LOG_STREAMS[name].rate_hz
 
     def stream_file(self, name: str) -> Path | None:
         return self._files.get(name)
@@ -493,8 +503,8 @@ def _arrow_table(table: Table, frame: pd.DataFrame) -> pa.Table:
             continue
         s = frame[c.name]
         if c.dtype == "float":
-            arr = pa.array(s.to_numpy(dtype=np.float64, na_value=np.nan), type=pa.float64())
-            typ = pa.float64()
+            typ = pa.float32() if c.float32 else pa.float64()
+            arr = pa.array(s.to_numpy(dtype=typ.to_pandas_dtype(), na_value=np.nan), type=typ)
         elif c.dtype == "int":
             vals = pd.to_numeric(s).astype("Int64")
             mask = vals.isna().to_numpy()

@@ -64,6 +64,20 @@ class PositionState(StrEnum):
     UNCERTAIN = "uncertain"
 
 
+class RadarStatus(StrEnum):
+    """Status of one radar frame [S004]: only ``ok`` and ``standstill`` carry a speed."""
+
+    OK = "ok"
+    STANDSTILL = "standstill"
+    """No Doppler line but the ground echo is there: speed 0 (± the lowest measurable speed)."""
+    ALIASED = "aliased"
+    """Doppler beyond the Nyquist frequency (speed above the radar's range): no speed."""
+    NO_REFLECTIONS = "no_reflections"
+    """No ground echo at all (no line at a ground range, no static echo): no speed."""
+    LOW_QUALITY = "low_quality"
+    """Too few lines, missing samples, no clear direction or too large an uncertainty: no speed."""
+
+
 def direction_sign(track: str) -> int:
     """+1 where km grows in the track's normal running direction (D, S), −1 on U."""
     return -1 if track == Track.UP else 1

@@ -179,8 +179,37 @@ RADAR = Table(
     required=False,
 )
 
+
+def _if(name: str, what: str) -> Column:
+    return Column(name, "float", what, unit="FS", min=-1.0, max=1.0, float32=True)
+
+
+#: S004 Table 1: f1 and f2 alternate every T_pri = 50 µs, one (f1, f2) pair per 100 µs.
+RADAR_IF_NOMINAL_RATE_HZ = 1.0 / (2 * 50e-6)
+
+RADAR_IF = Table(
+    name="radar_if",
+    kind="log",
+    description=(
+        "Raw IF samples of the 2-frequency CW radar [S004], one row per (f1, f2) pair: f1 sampled "
+        "at t, f2 T_pri later; I + jQ normalised to the ADC full scale (FS); rate 1/(2·T_pri) "
+        "of the run.json 'radar' block."
+    ),
+    columns=(
+        T,
+        _if("i1", "In-phase sample of f1"),
+        _if("q1", "Quadrature sample of f1"),
+        _if("i2", "In-phase sample of f2 (T_pri after f1)"),
+        _if("q2", "Quadrature sample of f2"),
+    ),
+    rate_hz=RADAR_IF_NOMINAL_RATE_HZ,
+    required=False,
+)
+
 #: Every stream, in the order they are listed and checked.
-LOG_STREAMS: dict[str, Table] = {t.name: t for t in (TACHO, IMU, BALISE, GPS, CAB, TRUTH, RADAR, GNSS_OBS, GNSS_NAV)}
+LOG_STREAMS: dict[str, Table] = {
+    t.name: t for t in (TACHO, IMU, BALISE, GPS, CAB, TRUTH, RADAR, RADAR_IF, GNSS_OBS, GNSS_NAV)
+}
 
 
 @dataclass(frozen=True)

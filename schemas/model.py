@@ -30,6 +30,9 @@ class Column:
     max: float | None = None
     km_notation: bool = False
     """Accept ``12k345.6`` as well as plain metres when reading sources."""
+    float32: bool = False
+    """Stored as 32-bit float in Parquet and read back as float32 (raw radar samples, where
+    4 bytes per value halve a 10 kHz stream); ``t`` and every derived value stay 64-bit."""
 
     @property
     def sql_type(self) -> str:

@@ -1,8 +1,9 @@
-"""Pipeline outputs (``trainpos run``): positions per cycle and events."""
+"""Outputs: the pipeline's (``trainpos run``) positions per cycle and events; the radar's
+(``trainpos radar speed``) ground speed per frame."""
 
 from __future__ import annotations
 
-from schemas.enums import PositionState, Track
+from schemas.enums import PositionState, RadarStatus, Track
 from schemas.model import Column, Table
 
 POSITIONS = Table(
@@ -40,4 +41,30 @@ EVENTS = Table(
     ),
 )
 
-OUTPUT_TABLES: dict[str, Table] = {t.name: t for t in (POSITIONS, EVENTS)}
+
+def _opt(name: str, what: str, unit: str = "") -> Column:
+    return Column(name, "float", what, unit=unit, nullable=True)
+
+
+RADAR_SPEED = Table(
+    name="radar_speed",
+    kind="output",
+    description="2-frequency CW radar ground speed [S004], one row per T_epi frame of radar_if.",
+    columns=(
+        Column("t", "float", "Frame centre", unit="s"),
+        _opt("speed_mps", "Ground speed V_G, + toward the F end (ok, standstill; else empty)", "m/s"),
+        _opt("sigma_mps", "1σ uncertainty of speed_mps", "m/s"),
+        Column("status", "str", "Frame status", enum=tuple(s.value for s in RadarStatus)),
+        Column("n_lines", "int", "Paired f1/f2 Doppler lines above the noise threshold", min=0),
+        Column("n_used", "int", "Lines at a ground range used for V_G (eq. 2)", min=0),
+        Column("n_alias", "int", "Lines at a ground range only if aliased (range shifted c/(4·Δf))", min=0),
+        _opt("residual_m", "Weighted RMS of measured − predicted range of the used lines", "m"),
+        _opt("eq1_rms", "RMS of eq. 1's residual (h/R)² + (V_m/V_G)² − 1 of the used lines"),
+        _opt("snr_db", "Median signal-to-noise ratio of the used lines", "dB"),
+        _opt("v_eq2_mps", "The paper's eq. 2 in closed form, unweighted (signed)", "m/s"),
+        _opt("v_naive_mps", "Strongest line only: f_d·λ/(2·cos depression) (signed)", "m/s"),
+        Column("valid_share", "float", "Share of the frame's samples present", min=0.0, max=1.0),
+    ),
+)
+
+OUTPUT_TABLES: dict[str, Table] = {t.name: t for t in (POSITIONS, EVENTS, RADAR_SPEED)}

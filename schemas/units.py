@@ -18,6 +18,8 @@ G = 9.80665
 KMH_PER_S = 1000.0 / 3600.0
 #: 1 km/h in m/s.
 KMH = 1000.0 / 3600.0
+#: Speed of light in vacuum [m/s] (radar wavelength λ = c/f0 and range c·Δφ/(4π·Δf)).
+SPEED_OF_LIGHT_MPS = 299_792_458.0
 
 _KM_RE = re.compile(r"^\s*(-?)(\d+)[kK](\d{1,3}(?:\.\d*)?)\s*$")
 

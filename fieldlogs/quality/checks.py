@@ -226,7 +226,7 @@ def _check_values(out: _Out, table: Table, frame: pd.DataFrame, read: Sequence[F
         out.items.extend(check_frame(table, frame[mask], file=out.file, check_keys=False, max_per_check=out.cap))
 
 
-def _check_time(out: _Out, table: Table, frame: pd.DataFrame, limits: CheckLimits) -> None:
+def _check_time(out: _Out, table: Table, frame: pd.DataFrame, limits: CheckLimits, rate_hz: float | None) -> None:
     t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
     pos = np.flatnonzero(~np.isnan(t))
     tv = t[pos]
@@ -274,13 +274,13 @@ def _check_time(out: _Out, table: Table, frame: pd.DataFrame, limits: CheckLimit
             column="t",
             value=lambda k: float(t[other[k]]),
         )
-    if table.rate_hz is None:
+    if rate_hz is None:
         return
     opos, ot = time_order(t)
     if len(ot) < 2:
         return
     dts = np.diff(ot)
-    nominal = 1.0 / table.rate_hz
+    nominal = 1.0 / rate_hz
     max_gap = limits.gap_cycles * nominal
     gaps = np.flatnonzero(dts > max_gap + 1e-9)
     out.rows(
@@ -299,15 +299,15 @@ def _check_time(out: _Out, table: Table, frame: pd.DataFrame, limits: CheckLimit
     if len(dts) >= 3:
         med = float(np.median(dts))
         measured = 1.0 / med
-        if abs(measured - table.rate_hz) > limits.rate_tolerance * table.rate_hz:
+        if abs(measured - rate_hz) > limits.rate_tolerance * rate_hz:
             out.add(
                 "log.rate",
                 Severity.ERROR,
                 f"measured rate {_f(measured)} Hz (median Δt {_f(med)} s) differs from the declared "
-                f"{table.rate_hz:g} Hz by more than {limits.rate_tolerance:.0%}",
+                f"{rate_hz:g} Hz by more than {limits.rate_tolerance:.0%}",
                 column="t",
                 value=measured,
-                limit=table.rate_hz,
+                limit=rate_hz,
             )
 
 
@@ -519,7 +519,16 @@ def check_stream(run: Run, name: str, db: DbRefs | None = None, limits: CheckLim
     if name in GNSS_CHECKS:
         GNSS_CHECKS[name](out, frame)
         return read + out.items
-    _check_time(out, table, frame, limits)
+    _check_time(out, table, frame, limits, run.stream_rate_hz(name))
+    if name == "radar_if" and run.raw_json.get("radar") is None:
+        out.add(
+            "log.radar_params",
+            Severity.ERROR,
+            "raw radar samples need the radar's parameters: run.json has no 'radar' block "
+            "(f0_hz, delta_f_hz, t_pri_s, t_epi_s, height_m, depression_deg, beam_elev_deg, beam_az_deg); "
+            "the rate is checked against Table 1's 1/(2·50 µs)",
+            column="radar",
+        )
     if name == "tacho":
         _check_tacho(out, run, frame, limits)
     elif name == "imu":

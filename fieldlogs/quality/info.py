@@ -18,7 +18,6 @@ import numpy as np
 from fieldlogs.io import Run
 from fieldlogs.quality.tacho import cumulative_again, time_order
 from schemas.enums import GpsFix, Severity
-from schemas.logs import LOG_STREAMS
 from schemas.units import metres_per_pulse
 
 
@@ -77,13 +76,12 @@ class RunInfo:
 
 def _stream_info(run: Run, name: str) -> StreamInfo:
     frame = run.stream(name)
-    table = LOG_STREAMS[name]
     info = StreamInfo(
         name,
         str(run.stream_file(name)),
         run.stream_format(name) or "",
         None if frame is None else len(frame),
-        declared_rate_hz=table.rate_hz,
+        declared_rate_hz=run.stream_rate_hz(name),
     )
     if frame is None or not len(frame) or "t" not in frame.columns:
         return info
@@ -92,7 +90,7 @@ def _stream_info(run: Run, name: str) -> StreamInfo:
         return info
     info.t_start_s, info.t_end_s = float(np.nanmin(t)), float(np.nanmax(t))
     _, ts = time_order(t)
-    if table.rate_hz is not None and len(ts) >= 2:
+    if info.declared_rate_hz is not None and len(ts) >= 2:
         med = float(np.median(np.diff(ts)))
         info.measured_rate_hz = 1.0 / med if med > 0 else None
     return info

@@ -9,6 +9,7 @@ run with ``fieldlogs.io.write_run``. The pieces, one concern per module:
 * ``running`` — moves, stops, curve limits, jerk-limited speed profile at 100 Hz;
 * ``kinematics`` — body attitude, specific force and rates (SPEC §4.1 frame);
 * ``slip`` — slip/slide episodes; ``sensors`` — IMU, tacho, GPS, radar, truth;
+* ``radar`` — raw IF samples of the 2-frequency CW radar (``sensors.radar_if``);
 * ``events`` — balise telegrams and cab events.
 
 Everything random comes from ``np.random.default_rng(seed)`` (one child generator per
@@ -113,9 +114,9 @@ def _wheel(scenario: Scenario, rng: np.random.Generator) -> tuple[float, float]:
 def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) -> SimulatedRun:
     """Simulate one run over ``network`` (see module docstring); ``seed`` overrides the scenario's."""
     seed = scenario.seed if seed is None else seed
-    rngs = dict(
-        zip(("wheel", "slip", "imu", "gps", "radar", "balise"), np.random.default_rng(seed).spawn(6), strict=True)
-    )
+    # a 7th child for the radar IF samples: the first six are the same as with spawn(6)
+    names = ("wheel", "slip", "imu", "gps", "radar", "balise", "radar_if")
+    rngs = dict(zip(names, np.random.default_rng(seed).spawn(len(names)), strict=True))
     line, track = _pick_route(network, scenario)
     path = scenario.route.path_km_m
     try:
@@ -147,6 +148,10 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
     if sensors.radar:
         streams["radar"] = radar_stream(motion, scenario, rngs["radar"])
     meta = _meta(network, scenario, seed, line, track, geom, motion, d_true, wear, episodes, outages, rolled)
+    if sensors.radar_if:
+        from fieldlogs.simulate.radar import radar_if_stream  # numba: only when asked for
+
+        streams["radar_if"], meta.extra["radar"] = radar_if_stream(motion, geom, scenario, rngs["radar_if"])
     return SimulatedRun(streams, meta)
 
 

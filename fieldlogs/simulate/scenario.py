@@ -20,6 +20,7 @@ from typing import Any
 from schemas.enums import CabDirection, Track, VehicleKind
 from schemas.errors import UsageError
 from schemas.frames import suggest
+from schemas.radar import RUN_JSON_RADAR
 
 DEFAULT_SCENARIO = Path(__file__).resolve().parent / "scenarios" / "default.toml"
 
@@ -89,6 +90,7 @@ class SensorsCfg:
     gps: bool = True
     balise: bool = True
     radar: bool = False
+    radar_if: bool = False
     truth: bool = True
 
 
@@ -159,6 +161,31 @@ class RadarCfg:
 
 
 @dataclass(frozen=True)
+class RadarIfCfg:
+    f0_hz: float = 24.06e9
+    delta_f_hz: float = 12.75e6
+    t_pri_s: float = 50e-6
+    t_epi_s: float = 0.307
+    height_m: float = 0.8
+    depression_deg: float = 45.0
+    beam_elev_deg: float = 7.5
+    beam_az_deg: float = 3.0
+    looks_toward: str = "F"
+    track_bed: str = "ballast"
+    slab_km_m: tuple[tuple[float, float], ...] = ()
+    scatterers_per_m2: float = 400.0
+    ballast_roughness_m: float = 0.02
+    slab_reflectivity: float = 0.3
+    strong_per_m: float = 1.0
+    strong_gain: float = 4.0
+    snr_db: float = 30.0
+    dc_leak: float = 0.5
+    adc_bits: int = 12
+    vibration_mm: float = 0.0
+    vibration_hz: float = 8.0
+
+
+@dataclass(frozen=True)
 class BaliseCfg:
     miss_probability: float = 0.0
 
@@ -180,6 +207,7 @@ class Scenario:
     slip: SlipCfg = field(default_factory=SlipCfg)
     gps: GpsCfg = field(default_factory=GpsCfg)
     radar: RadarCfg = field(default_factory=RadarCfg)
+    radar_if: RadarIfCfg = field(default_factory=RadarIfCfg)
     balise: BaliseCfg = field(default_factory=BaliseCfg)
     source: str = field(default="<default scenario>", compare=False)
     """Where it was loaded from (for messages); not a knob."""
@@ -271,7 +299,16 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 def _check(s: Scenario) -> None:
     """Every knob inside its range; the first problem is raised naming its key."""
-    for check in (_check_run, _check_positive, _check_non_negative, _check_bounds, _check_spans, _check_episodes):
+    checks = (
+        _check_run,
+        _check_positive,
+        _check_non_negative,
+        _check_bounds,
+        _check_spans,
+        _check_episodes,
+        _check_radar,
+    )
+    for check in checks:
         problem = check(s)
         if problem is not None:
             raise ScenarioError(problem[1], path=s.source, key=problem[0])
@@ -396,6 +433,55 @@ def _check_episodes(s: Scenario) -> Problem:
         if not (ep.duration_s > 0 and ep.t0_s >= 0):
             return key, "needs t0_s ≥ 0 and duration_s > 0"
     return None
+
+
+def _check_radar(s: Scenario) -> Problem:
+    """The IF simulator's radar (raises at the first problem, like the other checks)."""
+
+    def fail(key: str, msg: str) -> None:
+        raise ScenarioError(msg, path=s.source, key=key)
+
+    _check_radar_if(s.radar_if, fail)
+    return None
+
+
+def _check_radar_if(r: RadarIfCfg, fail: typing.Callable[[str, str], None]) -> None:
+    """The IF simulator's radar inside run.json's plausible ranges (``schemas.radar.RUN_JSON_RADAR``)."""
+    for f in RUN_JSON_RADAR:
+        v = getattr(r, f.name)
+        if not (math.isfinite(v) and f.min <= v <= f.max):
+            fail(f"radar_if.{f.name}", f"must be between {f.min:g} and {f.max:g} {f.unit}, got {v}")
+    if not 0 < r.depression_deg - r.beam_elev_deg < r.depression_deg + r.beam_elev_deg < 90:
+        fail("radar_if.depression_deg", "depression ± beam_elev_deg must stay between 0 and 90 degrees")
+    if r.looks_toward not in ("F", "R"):
+        fail("radar_if.looks_toward", "must be F or R")
+    _check_radar_scene(r, fail)
+
+
+def _check_radar_scene(r: RadarIfCfg, fail: typing.Callable[[str, str], None]) -> None:
+    """The simulated track bed, receiver and vibration knobs."""
+    if r.track_bed not in ("ballast", "slab"):
+        fail("radar_if.track_bed", "must be 'ballast' or 'slab'")
+    for key in (
+        "scatterers_per_m2",
+        "ballast_roughness_m",
+        "slab_reflectivity",
+        "strong_per_m",
+        "strong_gain",
+        "dc_leak",
+        "vibration_mm",
+        "vibration_hz",
+    ):
+        v = getattr(r, key)
+        if not (math.isfinite(v) and v >= 0):
+            fail(f"radar_if.{key}", f"must be ≥ 0, got {v}")
+    if not math.isfinite(r.snr_db) or not -20 <= r.snr_db <= 80:
+        fail("radar_if.snr_db", f"must be between -20 and 80 dB, got {r.snr_db}")
+    if not (r.adc_bits == 0 or 4 <= r.adc_bits <= 24):
+        fail("radar_if.adc_bits", "must be 0 (no quantisation) or between 4 and 24")
+    for i, (a, b) in enumerate(r.slab_km_m):
+        if not (math.isfinite(a) and math.isfinite(b) and a < b):
+            fail(f"radar_if.slab_km_m[{i}]", f"needs [from, to] with from < to, got [{a}, {b}]")
 
 
 def scenario_from_dict(data: dict[str, Any], source: str = "<dict>", *, base: dict[str, Any] | None = None) -> Scenario:

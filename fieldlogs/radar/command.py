@@ -1,0 +1,43 @@
+"""``trainpos radar speed`` as one library call: read, process, write, plot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from dbtools.atomic import refuse_existing
+from fieldlogs.io import Run
+from fieldlogs.radar.config import RadarConfig
+from fieldlogs.radar.speed import OutFormat, RadarSpeed, process_frames, run_frames, write_speed
+from schemas.errors import UsageError
+
+
+def radar_speed_command(
+    run_dir: Path,
+    *,
+    fmt: str = "table",
+    out: Path | None = None,
+    plot: Path | None = None,
+    plot_t: float | None = None,
+    force: bool = False,
+    cfg: RadarConfig = RadarConfig(),
+) -> RadarSpeed:
+    """Ground speed of every frame of ``run_dir``'s radar_if; with ``out`` written as CSV or
+    JSON, with ``plot`` a PNG (``plots.plot_run``). Existing outputs are refused before any
+    work unless ``force``; both are written atomically."""
+    if out is not None and fmt not in ("csv", "json"):
+        raise UsageError("--out writes csv or json: add --format csv or --format json")
+    for p in (out, plot):
+        if p is not None:
+            refuse_existing(p, force)
+    run = Run(Path(run_dir))
+    frames, params = run_frames(run)
+    result = process_frames(frames, params, cfg)
+    result.run_id = run.run_id
+    if out is not None:
+        fmt_out: OutFormat = "csv" if fmt == "csv" else "json"
+        write_speed(result, out, fmt_out, force=force)
+    if plot is not None:
+        from fieldlogs.radar.plots import plot_run
+
+        plot_run(run, frames, result, plot, frame_t=plot_t, force=force)
+    return result
