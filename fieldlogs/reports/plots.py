@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from schemas.enums import direction_sign
@@ -25,13 +26,13 @@ def _png(fig: Figure) -> bytes:
     return buf.getvalue()
 
 
-def _empty(ax: plt.Axes, text: str) -> None:
+def _empty(ax: Axes, text: str) -> None:
     ax.text(0.5, 0.5, text, ha="center", va="center", transform=ax.transAxes, color="0.4")
 
 
-def _legend(ax: plt.Axes, **kw: object) -> None:
+def _legend(ax: Axes, **kw: object) -> None:
     if ax.get_legend_handles_labels()[0]:
-        ax.legend(**kw)  # type: ignore[arg-type]
+        ax.legend(**kw)  # type: ignore[arg-type,unused-ignore]
 
 
 def correction_vs_distance(corrections: pd.DataFrame, target_pct: float) -> bytes:
