@@ -570,6 +570,6 @@ def open_audit_db(path: Path, *, create: bool = True) -> Iterator[AuditDB]:
         raise InputError(f"audit database error: {exc}", path=path) from exc
     finally:
         if create:
-            with contextlib.suppress(sqlite3.DatabaseError):
+            with contextlib.suppress(sqlite3.DatabaseError):  # a reader still open keeps the WAL
                 conn.execute("PRAGMA journal_mode=DELETE")
         conn.close()

@@ -33,7 +33,8 @@ import threading
 import traceback
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from types import TracebackType
 from typing import Any, Generic, TypeVar
@@ -199,7 +200,13 @@ def worker_init() -> None:
 
 
 class LocalPool:
-    """A fork-server process pool for one replay, stopped with everything it started."""
+    """A fork-server process pool for one replay, stopped with everything it started.
+
+    At most ``2 n`` runs are in the pool at a time (enough to keep every worker busy while
+    this process stores results), so that a worker process that dies takes few runs with
+    it: the pool is restarted, those runs are retried one at a time and only a run that
+    breaks the pool again is an error (:class:`_Schedule`).
+    """
 
     def __init__(self, n: int, preload: list[str]) -> None:
         self.n = n
@@ -217,7 +224,7 @@ class LocalPool:
         forkserver.ensure_running()
         self.own_tracker = _pid(resource_tracker, "_resource_tracker") != tracker
         self.own_server = _pid(forkserver, "_forkserver") != server
-        self.pool = ProcessPoolExecutor(max_workers=self.n, mp_context=ctx, initializer=worker_init)
+        self.restart()
         return self
 
     def __exit__(
@@ -225,11 +232,18 @@ class LocalPool:
     ) -> None:
         self.close(cancel=exc_type is not None)
 
-    def close(self, *, cancel: bool) -> None:
-        """Shut the pool down (``cancel``: terminate running workers, drop the queue), then
-        stop the fork server and the resource tracker if this pool started them."""
-        from multiprocessing import forkserver, resource_tracker
+    def restart(self) -> ProcessPoolExecutor:
+        """A new pool (the first one, or after a worker process died and broke the last)."""
+        from multiprocessing import get_context
 
+        if self.pool is not None:
+            self._shutdown(cancel=True)
+        self.pool = ProcessPoolExecutor(
+            max_workers=self.n, mp_context=get_context("forkserver"), initializer=worker_init
+        )
+        return self.pool
+
+    def _shutdown(self, *, cancel: bool) -> None:
         pool, self.pool = self.pool, None
         if pool is None:
             return
@@ -241,7 +255,13 @@ class LocalPool:
             for p in procs:
                 p.join(10)
         pool.shutdown(wait=True, cancel_futures=True)
-        del pool
+
+    def close(self, *, cancel: bool) -> None:
+        """Shut the pool down (``cancel``: terminate running workers, drop the queue), then
+        stop the fork server and the resource tracker if this pool started them."""
+        from multiprocessing import forkserver, resource_tracker
+
+        self._shutdown(cancel=cancel)
         gc.collect()  # release the pool's semaphores before their tracker stops
         if self.own_server:
             _stop(forkserver, "_forkserver")
@@ -249,66 +269,103 @@ class LocalPool:
             _stop(resource_tracker, "_resource_tracker")
 
     def outcomes(self, worker: Callable[..., R], tasks: list[Task]) -> Iterator[Outcome[R]]:
-        """Outcomes in completion order; this process replays runs from the back of the
-        queue while a thread submits the front to the starting pool (module docstring)."""
-        assert self.pool is not None
-        pool = self.pool
-        items = deque(enumerate(tasks))
-        lock = threading.Lock()
-        submitted: dict[Future[Outcome[R]], tuple[int, str]] = {}
+        """Outcomes in completion order (see :class:`_Schedule`)."""
+        return _Schedule(self, worker, tasks).outcomes()
 
-        def feed() -> None:
-            while True:
-                with lock:
-                    if not items:
-                        return
-                    i, (run, args) = items.popleft()
-                try:
-                    fut = pool.submit(run_task, worker, i, run, args)
-                except BaseException:  # pool shut down (interrupted) or broken: the rest is done here
-                    with lock:
-                        items.appendleft((i, (run, args)))
-                    return
-                with lock:
-                    submitted[fut] = (i, run)
 
-        feeder = threading.Thread(target=feed, name="replay-submit", daemon=True)
+class _Schedule(Generic[R]):
+    """Which run goes where, and when.
+
+    Start-up: the fork server imports the worker's modules for seconds and ``submit``
+    blocks meanwhile, so a thread submits the first runs while this process replays runs
+    from the back of the queue itself until the pool's first result arrives: a small replay
+    is never slower than one worker and a large one loses no time to the start-up. Then:
+    at most ``2 n`` runs in the pool, the next submitted as one completes.
+    """
+
+    def __init__(self, owner: LocalPool, worker: Callable[..., R], tasks: list[Task]) -> None:
+        self.owner, self.worker = owner, worker
+        assert owner.pool is not None
+        self.pool = owner.pool
+        self.limit = 2 * owner.n
+        self.queue: deque[tuple[int, Task]] = deque(enumerate(tasks))
+        self.inflight: dict[Future[Outcome[R]], tuple[int, Task]] = {}
+        self.strikes: dict[int, int] = {}
+        self.restarts = 0
+        self.lock = threading.Lock()
+
+    def outcomes(self) -> Iterator[Outcome[R]]:
+        feeder = threading.Thread(target=self._fill, name="replay-submit", daemon=True)
         feeder.start()
         try:
-            yield from self._meanwhile(worker, items, lock, submitted)
+            while True:  # until the pool's first result
+                with self.lock:
+                    busy = any(f.done() for f in self.inflight)
+                    item = self.queue.pop() if self.queue and not busy else None
+                if item is None:
+                    break
+                yield run_task(self.worker, item[0], *item[1])
             feeder.join()
-            for fut in as_completed(list(submitted)):
-                yield _collect(fut, *submitted[fut])
-            while items:  # the pool broke before taking them all
-                i, (run, args) = items.pop()
-                yield run_task(worker, i, run, args)
+            while self.inflight or self.queue:
+                self._fill()
+                yield from self._completed()
         finally:
-            with lock:
-                items.clear()  # interrupted: submit nothing more
+            with self.lock:
+                self.queue.clear()  # interrupted: submit nothing more
             feeder.join()
 
-    @staticmethod
-    def _meanwhile(
-        worker: Callable[..., R],
-        items: deque[tuple[int, Task]],
-        lock: threading.Lock,
-        submitted: dict[Future[Outcome[R]], tuple[int, str]],
-    ) -> Iterator[Outcome[R]]:
-        """Runs replayed here until the pool's first result (or until nothing is left)."""
+    def _fill(self) -> None:
+        """Submit runs up to the limit; a run that was in the pool when a worker died goes
+        alone (nothing else in the pool) so that a second break names it."""
         while True:
-            with lock:
-                item = items.pop() if items and not any(f.done() for f in submitted) else None
-            if item is None:
+            with self.lock:
+                if not self.queue or len(self.inflight) >= self.limit or self._solo():
+                    return
+                i, task = self.queue.popleft()
+                if self.strikes.get(i) and self.inflight:
+                    self.queue.appendleft((i, task))
+                    return
+            try:
+                fut = self.pool.submit(run_task, self.worker, i, task[0], task[1])
+            except BaseException:  # shut down (interrupted) or broken: handled by the caller
+                with self.lock:
+                    self.queue.appendleft((i, task))
                 return
-            i, (run, args) = item
-            yield run_task(worker, i, run, args)
+            with self.lock:
+                self.inflight[fut] = (i, task)
 
+    def _solo(self) -> bool:
+        return any(self.strikes.get(i) for i, _ in self.inflight.values())
 
-def _collect(fut: Future[Outcome[R]], index: int, run: str) -> Outcome[R]:
-    try:
-        return fut.result()
-    except Exception as exc:
-        return failed(index, run, exc)
+    def _completed(self) -> Iterator[Outcome[R]]:
+        """Outcomes of the runs that completed next; restarts a broken pool."""
+        if not self.inflight:  # the pool refused new work: it is broken
+            self.restarts += 1
+            if self.restarts > 2:  # and cannot be restarted: the remaining runs fail
+                while self.queue:
+                    i, task = self.queue.popleft()
+                    yield failed(i, task[0], RuntimeError("the process pool cannot be restarted"))
+                return
+            self.pool = self.owner.restart()
+            return
+        done, _ = wait(list(self.inflight), return_when=FIRST_COMPLETED)
+        self.restarts = 0
+        broken = False
+        for fut in done:
+            i, task = self.inflight.pop(fut)
+            try:
+                yield fut.result()
+            except BrokenProcessPool as exc:  # a worker died: this run or another in the pool
+                broken = True
+                self.strikes[i] = self.strikes.get(i, 0) + 1
+                if self.strikes[i] >= 2:  # it was alone in the pool: it broke it
+                    yield failed(i, task[0], exc)
+                else:
+                    self.queue.appendleft((i, task))
+            except Exception as exc:
+                yield failed(i, task[0], exc)
+        if broken and not self.inflight:
+            self.pool = self.owner.restart()
 
 
 def _pid(module: Any, singleton: str) -> int | None:

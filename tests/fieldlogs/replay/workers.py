@@ -27,7 +27,9 @@ def balise_count(run: str, db: DbRef) -> tuple[str, int, int]:
     return Path(run).name, len(net.balises), id(net)
 
 
-def crash(run: str) -> None:
-    """A worker process dying mid-run (as when killed or out of memory)."""
-    if Path(run).name.endswith("1"):
+def crash(run: str, coordinator_pid: int) -> None:
+    """A worker process dying on ``*-1`` runs (as when killed or out of memory); the
+    coordinating process, which replays runs too while the pool starts, is spared."""
+    time.sleep(0.2)
+    if Path(run).name.endswith("1") and os.getpid() != coordinator_pid:
         os._exit(3)
