@@ -146,7 +146,7 @@ def main() -> None:
             from distributed import LocalCluster
 
             with LocalCluster(
-                n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None
+                n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=":0"
             ) as cluster:
                 rd, _ = timed(
                     f"LocalCluster {args.workers}×1", db, logs, root / "ad.sqlite", scheduler=cluster.scheduler_address

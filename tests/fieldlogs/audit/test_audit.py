@@ -22,12 +22,12 @@ import pandas as pd
 import pytest
 
 import fieldlogs.audit.runner as audit_mod
-from dbtools.database import read_network
+from dbtools.database import AuditDB, read_network
 from fieldlogs.audit.runner import audit, pack, unpack
 from fieldlogs.audit.store import open_audit, read_table, read_trace, store_run
 from fieldlogs.io import read_run
-from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.pipeline import PipelineConfig, run_pipeline
+from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.reports.page import render_html
 from fieldlogs.reports.report import RUN_JSON_KEYS, build_report, report_json
 from schemas.errors import InputError
@@ -164,7 +164,7 @@ def test_interrupted_audit_resumes_without_losing_finished_runs(
     real_store = audit_mod.store_run
     stored: list[str] = []
 
-    def interrupting_store(conn: sqlite3.Connection, record: dict[str, Any], *rest: Any) -> None:
+    def interrupting_store(conn: AuditDB, record: dict[str, Any], *rest: Any) -> None:
         if len(stored) == 2:
             raise KeyboardInterrupt  # Ctrl-C in the coordinating loop, at the 3rd finished run
         real_store(conn, record, *rest)
@@ -259,7 +259,7 @@ def test_pack_round_trip() -> None:
 def cluster() -> Iterator[Any]:
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=50
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50
     ) as c:
         yield c
 

@@ -152,7 +152,7 @@ def test_replay_closed_by_garbage_collection_stops_its_pool(runs: list[Path]) ->
 def cluster() -> Iterator[Any]:
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=50
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50
     ) as c:
         yield c
 
