@@ -93,8 +93,8 @@ def _tune_malloc() -> None:
 
     Dask's nanny starts every worker with ``MALLOC_TRIM_THRESHOLD_=65536``, which also
     freezes glibc's mmap threshold at 128 kB: every array of a run (MBs each) is then
-    mapped, page-faulted, zeroed and unmapped afresh, and a run costs 2.5× the CPU it costs
-    in a plain process. Arrays up to 32 MiB go back to the heap and memory is trimmed above
+    mapped, page-faulted, zeroed and unmapped afresh (the cost is in bench/NOTES.md,
+    "Replayer"). Arrays up to 32 MiB go back to the heap and memory is trimmed above
     256 MiB instead.
     """
     if _MALLOC_TUNED:
