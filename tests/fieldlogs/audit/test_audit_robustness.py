@@ -214,3 +214,25 @@ def test_schema_show_lists_the_audit_tables() -> None:
     assert names["audit_runs"]["kind"] == "audit" and names["audit_runs"]["primary_key"] == ["run_path"]
     res = CliRunner().invoke(app, ["schema", "show", "audit_traces"])
     assert res.exit_code == 0 and "bytes" in res.stdout
+
+
+def test_audit_db_whose_identity_is_still_in_the_wal_is_recognised(tmp_path: Path) -> None:
+    """What schema 1 left after a kill -9: application id written in WAL mode, never
+    checkpointed, so the file header still says 0. The probe asks SQLite, not the header."""
+    src = tmp_path / "live.sqlite"
+    conn = sqlite3.connect(src)
+    try:
+        conn.execute("PRAGMA journal_mode=WAL")
+        conn.execute(f"PRAGMA application_id={AUDIT_APPLICATION_ID}")
+        conn.execute("PRAGMA user_version=1")
+        conn.execute("CREATE TABLE runs (run_path TEXT PRIMARY KEY)")
+        conn.commit()
+        dst = tmp_path / "killed.sqlite"
+        for suffix in ("", "-wal"):  # the files as a killed process leaves them
+            shutil.copy(f"{src}{suffix}", f"{dst}{suffix}")
+    finally:
+        conn.close()
+    assert dst.read_bytes()[68:72] == b"\0\0\0\0"
+    with pytest.raises(InputError, match="schema 1 is older") as err:
+        build_report(dst)
+    assert "not a trainpos audit database" not in str(err.value)
