@@ -1,5 +1,7 @@
 """Benchmark: fleet-audit throughput — 1 worker, 2 local worker processes, 2-worker Dask LocalCluster.
 
+All three modes go through the one replayer (``fieldlogs.replay``) via ``audit()``.
+
 Run: ``.venv/bin/python bench/bench_audit.py [--runs 200] [--workers 2]``.
 
 Simulates ONE one-hour run per track of a synthetic 62 km double-track line (stations every
@@ -21,7 +23,6 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
-import sqlite3
 import sys
 import tempfile
 import time
@@ -35,6 +36,7 @@ from dbtools.gis.geometry import Projector
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.audit.runner import AuditStats, audit
+from fieldlogs.audit.store import read_table
 from fieldlogs.io import write_run
 from fieldlogs.simulate import scenario_from_dict, simulate_run
 
@@ -113,8 +115,8 @@ def timed(label: str, db: Path, logs: Path, out: Path, **kw: object) -> tuple[fl
     coordinator_cpu = time.process_time() - c0
     load1 = os.getloadavg()
     rate = 60.0 * stats.audited / wall
-    with sqlite3.connect(out) as conn:
-        run_wall, run_cpu = conn.execute("SELECT AVG(elapsed_s), AVG(cpu_s) FROM runs").fetchone()
+    runs = read_table(out, "audit_runs")
+    run_wall, run_cpu = float(runs["elapsed_s"].mean()), float(runs["cpu_s"].mean())
     print(
         f"{label:<22} {stats.audited:4d} runs  {wall:7.1f} s  {rate:7.1f} runs/min  "
         f"first result {first[0] if first else float('nan'):5.1f} s  "
@@ -144,7 +146,7 @@ def main() -> None:
             from distributed import LocalCluster
 
             with LocalCluster(
-                n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None
+                n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=":0"
             ) as cluster:
                 rd, _ = timed(
                     f"LocalCluster {args.workers}×1", db, logs, root / "ad.sqlite", scheduler=cluster.scheduler_address

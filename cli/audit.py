@@ -20,6 +20,7 @@ from fieldlogs.audit.runner import audit as run_audit
 from fieldlogs.config import load_tree
 from fieldlogs.reports.report import ROUTE_KEYS, Report, build_report, report_json
 from schemas.errors import EXIT_FINDINGS, UsageError
+from schemas.jsonable import jsonable
 
 
 class ProgressBar:
@@ -83,6 +84,8 @@ def audit(
         ("throughput", f"{stats.runs_per_min:.1f} runs/min"),
     ]
     console().print(key_value_table(rows, title=f"Audit → {out}"))
+    for warning in stats.warnings:
+        err_console().print(f"[yellow]warning:[/] {warning}", highlight=False)
     for path, err in stats.errors[:20]:
         err_console().print(f"[red]failed:[/] {path}: {err.splitlines()[0] if err else ''}", highlight=False)
     if len(stats.errors) > 20:
@@ -198,7 +201,7 @@ def report(
     elif fmt == ReportFmt.json:
         data: Any = report_json(rep)
         if out:
-            _write(out, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+            _write(out, json.dumps(jsonable(data), indent=2, ensure_ascii=False) + "\n")
         else:
             print_json(data)
     elif fmt == ReportFmt.csv:

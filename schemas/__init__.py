@@ -6,6 +6,7 @@ suite.
 
 from __future__ import annotations
 
+from schemas.audit import AUDIT_TABLES, AUDIT_VIEWS
 from schemas.gisinput import GIS_INPUT_TABLES
 from schemas.logs import LOG_STREAMS
 from schemas.model import Column, Table
@@ -22,6 +23,7 @@ ALL_SCHEMAS: dict[str, Table] = {
     POSSESSIONS.name: POSSESSIONS,
     **GIS_INPUT_TABLES,
     RELEASES.name: RELEASES,
+    **{t.name: t for t in (*AUDIT_TABLES, *AUDIT_VIEWS)},
 }
 
 __all__ = ["ALL_SCHEMAS", "Column", "Table"]

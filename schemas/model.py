@@ -9,8 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-DType = Literal["str", "int", "float", "bool"]
-Kind = Literal["db", "source", "log", "output", "plan"]
+DType = Literal["str", "int", "float", "bool", "bytes"]
+Kind = Literal["db", "source", "log", "output", "plan", "audit"]
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,7 @@ class Column:
 
     @property
     def sql_type(self) -> str:
-        return {"str": "TEXT", "int": "INTEGER", "float": "REAL", "bool": "INTEGER"}[self.dtype]
+        return {"str": "TEXT", "int": "INTEGER", "float": "REAL", "bool": "INTEGER", "bytes": "BLOB"}[self.dtype]
 
 
 @dataclass(frozen=True)

@@ -1,19 +1,19 @@
 """Fleet audits: the pipeline over many runs, in parallel, stored as each run finishes.
 
-Runs go to a process pool on this machine by default, or to an existing Dask cluster
-(``dask.distributed``) when a scheduler address is given — both call the same worker
-function :func:`audit_one`, so the cluster path is the local path. Results are written
-by the coordinating process only (one SQLite writer). The local pool uses a fork server
-that imports the pipeline once (and ignores Ctrl-C: the coordinator handles it); while it
-starts, the coordinating process audits runs itself.
+Runs are replayed by :mod:`fieldlogs.replay` — in this process, a local process pool or an
+existing Dask cluster (``dask.distributed``) when a scheduler address is given — all
+through the same worker function :func:`audit_one`, so the cluster path is the local path.
+Results are written by the coordinating process only (one SQLite writer, through
+:mod:`fieldlogs.audit.store`). Ctrl-C stops the workers and keeps every run finished so far.
 
 Skip and resume: a run is identified by its folder (absolute path); its fingerprint is the
-SHA-256 of its files' contents plus the *context* (the onboard DB's content hash and the
-pipeline config). A quick key (file names, sizes, mtimes) plus an unchanged context skips a
-run without reading it; when only the quick key differs (a file touched, copied back) the
-worker hashes the content and an unchanged fingerprint is still skipped. Runs recorded
-with status ``error`` are retried. The context is kept per run, so resuming an audit
-interrupted under another config or DB never skips a run audited with the old one.
+SHA-256 of its files' contents plus the *context*: the onboard DB's content hash — of the
+tables as read, not the hash in its meta table, so a hand-edited DB is a new context — and
+the pipeline config. A quick key (file names, sizes, mtimes) plus an unchanged context
+skips a run without reading it; when only the quick key differs (a file touched, copied
+back) the worker hashes the content and an unchanged fingerprint is still skipped. Runs
+recorded with status ``error`` are retried. The context is kept per run, so resuming an
+audit interrupted under another config or DB never skips a run audited with the old one.
 
 A run fails (status ``error``, message stored) when run.json is unusable, a stream its
 vehicle kind needs (tacho and IMU for a train, GPS and cab for a road-rail vehicle) is
@@ -27,54 +27,45 @@ bottleneck of a parallel audit.
 
 from __future__ import annotations
 
-import ctypes
 import hashlib
 import json
-import os
-import sys
-import threading
 import time
-import traceback
-from collections import deque
-from collections.abc import Callable, Generator, Iterable, Iterator
-from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Iterable
 from contextlib import closing
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from multiprocessing import get_context
 from pathlib import Path
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from dbtools.database import read_meta, read_network
-from dbtools.network import Network
+from dbtools.database import AuditDB
 from fieldlogs.audit.store import encode_trace, fingerprints, open_audit, set_meta, store_run, touch_run
-from schemas.errors import FindingsError, InputError, TrainposError
+from fieldlogs.replay.discovery import discover_runs
+from fieldlogs.replay.network import DbRef, load_network, open_db
+from fieldlogs.replay.pool import Outcome, error_message, replay
+from schemas.errors import FindingsError, InputError
+from schemas.jsonable import jsonable
 
-_NETWORK_CACHE: dict[tuple[str, int, int], Network] = {}
-_MALLOC_TUNED = False
-M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc mallopt parameters (malloc.h)
-#: Events whose correction % enters the position-correction statistics (SPEC §5.2).
+__all__ = ["AuditStats", "audit", "audit_one", "discover_runs", "pack", "unpack"]
 
-
-def discover_runs(roots: Iterable[Path]) -> list[Path]:
-    """Every folder holding a ``run.json`` below the given roots (a root may be a run)."""
-    found: set[Path] = set()
-    for root in roots:
-        root = Path(root)
-        if not root.is_dir():
-            raise InputError("no such folder", path=root)
-        if (root / "run.json").is_file():
-            found.add(root.resolve())
-            continue
-        for p in root.rglob("run.json"):
-            rel = p.parent.relative_to(root).parts
-            if any(part.startswith(".") for part in rel):
-                continue  # temporary folders of an atomic write (.name.xxxx), hidden folders
-            found.add(p.parent.resolve())
-    return sorted(found)
+#: Modules the replay's fork server imports once, besides this one.
+PRELOAD = ("fieldlogs.pipeline", "fieldlogs.io")
+#: Figures of the pipeline summary copied into a run's record.
+SUMMARY_FIELDS = (
+    "duration_s",
+    "distance_m",
+    "n_feature_corrections",
+    "n_feature_refused",
+    "n_slips",
+    "n_failsafe",
+    "n_anomalies",
+    "gps_decisions",
+    "gps_trusted_share",
+    "max_margin_m",
+    "first_determined_t",
+)
 
 
 def quick_key(run: Path) -> str:
@@ -104,36 +95,8 @@ def content_fingerprint(run: Path, context: str) -> str:
     return h.hexdigest()
 
 
-def _tune_malloc() -> None:
-    """Undo a small ``MALLOC_TRIM_THRESHOLD_`` for this process (once; glibc only).
-
-    Dask's nanny starts every worker with ``MALLOC_TRIM_THRESHOLD_=65536``, which also
-    freezes glibc's mmap threshold at 128 kB: every array of a run (MBs each) is then mapped,
-    page-faulted, zeroed and unmapped afresh, and a run costs 2.5× the CPU it costs in a
-    plain process. Arrays up to 32 MiB go back to the heap and memory is trimmed above
-    256 MiB instead.
-    """
-    global _MALLOC_TUNED
-    if _MALLOC_TUNED:
-        return
-    _MALLOC_TUNED = True
-    if not sys.platform.startswith("linux") or "MALLOC_TRIM_THRESHOLD_" not in os.environ:
-        return
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        libc.mallopt(M_MMAP_THRESHOLD, 32 << 20)
-        libc.mallopt(M_TRIM_THRESHOLD, 256 << 20)
-    except (OSError, AttributeError):  # not glibc
-        pass
-
-
-def _network(db_path: str) -> Network:
-    st = os.stat(db_path)
-    key = (db_path, st.st_mtime_ns, st.st_size)
-    if key not in _NETWORK_CACHE:
-        _NETWORK_CACHE.clear()
-        _NETWORK_CACHE[key] = read_network(Path(db_path))
-    return _NETWORK_CACHE[key]
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def _direction(pos: pd.DataFrame) -> str | None:
@@ -247,7 +210,7 @@ def _check_usable(run: Any) -> None:
 
 
 def audit_one(
-    run_path: str, db_path: str, cfg_json: str, context: str, known_fingerprint: str | None = None
+    run_path: str, db: DbRef, cfg_json: str, context: str, known_fingerprint: str | None = None
 ) -> dict[str, Any]:
     """Worker: run the pipeline on one run. Never raises: errors become a record.
 
@@ -258,15 +221,13 @@ def audit_one(
     from fieldlogs.io import read_run
     from fieldlogs.pipeline import PipelineConfig, run_pipeline
 
-    _tune_malloc()
     t0, c0 = time.perf_counter(), time.process_time()
-    now = datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
     base: dict[str, Any] = {
         "run_path": run_path,
         "quick_key": None,
         "context": context,
         "fingerprint": "",
-        "audited_at": now,
+        "audited_at": _now(),
     }
     try:
         base["quick_key"] = quick_key(Path(run_path))
@@ -274,56 +235,31 @@ def audit_one(
         base["fingerprint"] = fp
         if known_fingerprint == fp:
             return {"record": base, "unchanged": True}
-        network = _network(db_path)
+        network = load_network(db)
         cfg = PipelineConfig.from_dict(json.loads(cfg_json))
         run = read_run(Path(run_path))
         _check_usable(run)
         result = run_pipeline(run, network, cfg)
-        s = result.summary
-        record = {
-            **base,
-            "status": "ok",
-            "run_id": s["run_id"],
-            "vehicle_id": s["vehicle_id"],
-            "vehicle_kind": s["vehicle_kind"],
-            "db_version": s["db_version"],
-            "line_code": s["line_code"],
-            "track": s["track"],
-            "direction": _direction(result.positions),
-            **{k: s[k] for k in ("n_corrections", "mean_correction_pct", "max_correction_pct")},
-            **{
-                k: s.get(k)
-                for k in (
-                    "duration_s",
-                    "distance_m",
-                    "n_feature_corrections",
-                    "n_feature_refused",
-                    "n_slips",
-                    "n_failsafe",
-                    "n_anomalies",
-                    "gps_decisions",
-                    "gps_trusted_share",
-                    "max_margin_m",
-                    "first_determined_t",
-                )
-            },
-            "summary_json": json.dumps({k: v for k, v in s.items() if k != "config"}, default=str),
-            "elapsed_s": time.perf_counter() - t0,  # wall time in the worker
-            "cpu_s": time.process_time() - c0,  # its CPU time (wall / CPU > 1: a busy machine)
-        }
+        record = {**base, **_record(result), "elapsed_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
         return {"record": record, "events": pack(result.events), "trace": encode_trace(_trace(result))}
-    except FindingsError as exc:
-        msg = str(exc)
-        if exc.findings and "(" not in exc.message:
-            msg += ": " + "; ".join(f.message for f in exc.findings[:3])
-    except TrainposError as exc:
-        msg = str(exc)
-    except OSError as exc:  # the folder vanished or is unreadable
-        msg = f"cannot read the run: {exc}"
-    except Exception as exc:  # a bug on one run must not stop a fleet audit
-        msg = f"internal error {type(exc).__name__}: {exc} | {traceback.format_exc(limit=3)}"
+    except Exception as exc:  # a bad run or a bug on one run must not stop a fleet audit
+        msg = error_message(exc)
     end = {"elapsed_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
     return {"record": {**base, "status": "error", "error": msg, **end}}
+
+
+def _record(result: Any) -> dict[str, Any]:
+    """The record fields of a run the pipeline went through (``elapsed_s``: wall time in
+    the worker, ``cpu_s`` its CPU time; wall / CPU > 1: a busy machine)."""
+    s = result.summary
+    return {
+        "status": "ok",
+        **{k: s[k] for k in ("run_id", "vehicle_id", "vehicle_kind", "db_version", "line_code", "track")},
+        "direction": _direction(result.positions),
+        **{k: s[k] for k in ("n_corrections", "mean_correction_pct", "max_correction_pct")},
+        **{k: s.get(k) for k in SUMMARY_FIELDS},
+        "summary_json": json.dumps(jsonable({k: v for k, v in s.items() if k != "config"})),
+    }
 
 
 @dataclass
@@ -339,10 +275,17 @@ class AuditStats:
     elapsed_s: float = 0.0
     errors: list[tuple[str, str]] = field(default_factory=list)
     """(run path, error message) of the failed runs."""
+    warnings: list[str] = field(default_factory=list)
+    """Things the user should know (e.g. a DB modified after it was built)."""
 
     @property
     def runs_per_min(self) -> float:
         return 60.0 * (self.audited + self.failed) / self.elapsed_s if self.elapsed_s > 0 else 0.0
+
+    @property
+    def done(self) -> int:
+        """Runs skipped, audited or failed so far."""
+        return self.skipped + self.audited + self.failed
 
 
 ProgressFn = Callable[[int, int, str], None]
@@ -369,189 +312,80 @@ def audit(
     from fieldlogs.pipeline import PipelineConfig
 
     cfg = config or PipelineConfig()
-    cfg_json = json.dumps(cfg.to_dict(), sort_keys=True)
-    db_path = Path(db_path).resolve()
-    db_meta = read_meta(db_path)  # fails early (exit 2) on an unreadable DB
-    context = context_key(db_meta.get("content_hash", ""), cfg_json)
+    cfg_json = json.dumps(jsonable(cfg.to_dict()), sort_keys=True)
+    db, net = open_db(Path(db_path))  # fails early (exit 2) on an unreadable DB
+    context = context_key(db.content_hash, cfg_json)
     runs = discover_runs(roots)
     stats = AuditStats(total=len(runs))
+    if net.meta.get("content_hash") != db.content_hash:
+        stats.warnings.append(
+            f"{db.path}: content hash does not match its meta table: the DB was modified after it was built"
+        )
     t0 = time.perf_counter()
     with open_audit(audit_path) as conn:
         set_meta(
             conn,
             {
-                "db_path": str(db_path),
-                "db_version": db_meta.get("db_version", ""),
-                "db_content_hash": db_meta.get("content_hash", ""),
+                "db_path": db.path,
+                "db_version": net.meta.get("db_version", ""),
+                "db_content_hash": db.content_hash,
                 "config": cfg_json,
             },
         )
-        known = fingerprints(conn)
-        todo: list[tuple[str, str | None]] = []
-        for r in runs:
-            prev = known.get(str(r))
-            ok = prev is not None and prev[2] == "ok" and bool(prev[0])
-            if ok and prev is not None and prev[3] == context and prev[1] == quick_key(r):
-                stats.skipped += 1  # unchanged files, same DB content, same config
-                continue
-            # the worker hashes the content; an unchanged fingerprint is still skipped
-            todo.append((str(r), prev[0] if ok and prev is not None else None))
-        done = stats.skipped
+        todo = _plan(conn, runs, context, stats)
         if progress:
-            progress(done, stats.total, "")
-        results = _execute(todo, str(db_path), cfg_json, context, workers, scheduler)
+            progress(stats.done, stats.total, "")
+        tasks = [(p, (db, cfg_json, context, k)) for p, k in todo]
+        results = replay(audit_one, tasks, workers=workers, scheduler=scheduler, preload=PRELOAD)
         with closing(results):  # interrupted: stop the pool / cluster work at once
-            for res in results:
-                rec = res["record"]
-                if res.get("unchanged"):
-                    touch_run(conn, rec["run_path"], rec["quick_key"])
-                    stats.skipped += 1
-                else:
-                    store_run(conn, rec, unpack(res.get("events")), res.get("trace"))
-                    if rec.get("status") == "error":
-                        stats.failed += 1
-                        stats.errors.append((rec["run_path"], rec.get("error") or ""))
-                    else:
-                        stats.audited += 1
-                done += 1
+            for out in results:
+                _store(conn, out, context, stats)
                 if progress:
-                    progress(done, stats.total, rec["run_path"])
+                    progress(stats.done, stats.total, out.run)
         set_meta(conn, {"last_audit_at": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")})
     stats.elapsed_s = time.perf_counter() - t0
     return stats
 
 
-def _execute(
-    todo: list[tuple[str, str | None]],
-    db_path: str,
-    cfg_json: str,
-    context: str,
-    workers: int | None,
-    scheduler: str | None,
-) -> Generator[dict[str, Any], None, None]:
-    """Results of ``audit_one`` over ``todo`` in completion order. Closing the generator
-    early (an interrupted audit) cancels the runs not started yet."""
-    if not todo:
-        return
-    if scheduler:
-        yield from _execute_dask(todo, db_path, cfg_json, context, scheduler)
-        return
-    n = workers or os.cpu_count() or 1
-    if n <= 1 or len(todo) == 1:
-        for p, k in todo:
-            yield audit_one(p, db_path, cfg_json, context, k)
-        return
-    # forkserver, not fork: the caller may run threads (progress bar, Dask client, BLAS). The
-    # server imports the pipeline once; workers fork from it ready to run.
-    ctx = get_context("forkserver")
-    ctx.set_forkserver_preload(
-        ["fieldlogs.audit._ignore_sigint", "fieldlogs.audit.runner", "fieldlogs.pipeline", "fieldlogs.io"]
-    )
-    pool = ProcessPoolExecutor(max_workers=min(n, len(todo)), mp_context=ctx)
-    try:
-        yield from _pool_results(pool, todo, db_path, cfg_json, context)
-    finally:
-        # normal end: nothing left; interrupted: drop the queue, let running runs finish
-        pool.shutdown(wait=True, cancel_futures=True)
+def _plan(conn: AuditDB, runs: list[Path], context: str, stats: AuditStats) -> list[tuple[str, str | None]]:
+    """(run path, fingerprint it was audited with) of the runs to replay; counts the runs
+    skipped without reading them (unchanged files, same DB content, same config)."""
+    known = fingerprints(conn)
+    todo: list[tuple[str, str | None]] = []
+    for r in runs:
+        prev = known.get(str(r))
+        ok = prev is not None and prev[2] == "ok" and bool(prev[0])
+        if ok and prev is not None and prev[3] == context and prev[1] == quick_key(r):
+            stats.skipped += 1
+            continue
+        # the worker hashes the content; an unchanged fingerprint is still skipped
+        todo.append((str(r), prev[0] if ok and prev is not None else None))
+    return todo
 
 
-def _pool_results(
-    pool: ProcessPoolExecutor, todo: list[tuple[str, str | None]], db_path: str, cfg_json: str, context: str
-) -> Iterator[dict[str, Any]]:
-    """Results from the pool in completion order.
-
-    Starting the pool takes seconds (the fork server imports the pipeline) and ``submit``
-    blocks meanwhile, so a thread submits the runs from the front of the queue while this
-    process audits runs from its back itself until the pool's first result arrives: a small
-    audit is never slower than one worker, and a large one loses no time to the start-up.
-    """
-    items = deque(todo)
-    lock = threading.Lock()
-    submitted: dict[Future[dict[str, Any]], str] = {}
-
-    def feed() -> None:
-        while True:
-            with lock:
-                if not items:
-                    return
-                p, k = items.popleft()
-            try:
-                fut = pool.submit(audit_one, p, db_path, cfg_json, context, k)
-            except BaseException:  # pool shut down (interrupted) or broken: the rest is done here
-                with lock:
-                    items.appendleft((p, k))
-                return
-            with lock:
-                submitted[fut] = p
-
-    feeder = threading.Thread(target=feed, name="audit-submit", daemon=True)
-    feeder.start()
-    try:
-        while True:
-            with lock:
-                item = items.pop() if items and not any(f.done() for f in submitted) else None
-            if item is None:
-                break
-            yield audit_one(item[0], db_path, cfg_json, context, item[1])
-        feeder.join()
-        for fut in as_completed(list(submitted)):
-            yield _result(fut, submitted[fut], context)
-        while items:  # the pool broke before taking them all
-            p, k = items.pop()
-            yield audit_one(p, db_path, cfg_json, context, k)
-    finally:
-        with lock:
-            items.clear()  # interrupted: submit nothing more
-        feeder.join()
-
-
-def _result(fut: Any, run_path: str, context: str) -> dict[str, Any]:
-    """A finished future's result; a worker that died (killed, out of memory, lost) becomes
-    an error record of its run (retried by the next audit)."""
-    try:
-        return cast(dict[str, Any], fut.result())
-    except Exception as exc:
-        now = datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
-        msg = f"worker failed: {type(exc).__name__}: {exc}"
-        return {
+def _store(conn: AuditDB, out: Outcome[dict[str, Any]], context: str, stats: AuditStats) -> None:
+    """Record one run's outcome; a worker that died becomes an error record of its run
+    (retried by the next audit)."""
+    res = out.value
+    if res is None:
+        res = {
             "record": {
-                "run_path": run_path,
+                "run_path": out.run,
                 "fingerprint": "",
                 "context": context,
                 "status": "error",
-                "error": msg,
-                "audited_at": now,
+                "error": out.error,
+                "audited_at": _now(),
             }
         }
-
-
-def _execute_dask(
-    todo: list[tuple[str, str | None]], db_path: str, cfg_json: str, context: str, scheduler: str
-) -> Iterator[dict[str, Any]]:
-    from distributed import Client
-    from distributed import as_completed as dask_completed
-
-    try:
-        client = Client(scheduler, timeout="10s")
-    except (OSError, TimeoutError) as exc:
-        raise InputError(f"cannot reach the Dask scheduler: {exc}", path=scheduler) from exc
-    futures: list[Any] = []
-    try:
-        n = len(todo)
-        futures = client.map(
-            audit_one,
-            [p for p, _ in todo],
-            [db_path] * n,
-            [cfg_json] * n,
-            [context] * n,
-            [k for _, k in todo],
-            pure=False,
-        )
-        paths = {fut.key: p for fut, (p, _) in zip(futures, todo, strict=True)}
-        for fut in dask_completed(futures):
-            yield _result(fut, paths[fut.key], context)
-            fut.release()
-    finally:
-        if futures:
-            client.cancel(futures)
-        client.close()
+    rec = res["record"]
+    if res.get("unchanged"):
+        touch_run(conn, rec["run_path"], rec["quick_key"])
+        stats.skipped += 1
+        return
+    store_run(conn, rec, unpack(res.get("events")), res.get("trace"))
+    if rec.get("status") == "error":
+        stats.failed += 1
+        stats.errors.append((rec["run_path"], rec.get("error") or ""))
+    else:
+        stats.audited += 1

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,6 +34,9 @@ from dbtools.gis.verify import FIX_COLUMNS, GisVerification, VerifyConfig, verif
 from dbtools.network import Network
 from fieldlogs.io import read_run
 from fieldlogs.pipeline import PipelineConfig, PipelineResult, run_pipeline
+from fieldlogs.replay.discovery import discover_runs
+from fieldlogs.replay.network import DbRef, load_network, open_db
+from fieldlogs.replay.pool import replay
 from schemas.enums import PositionState
 from schemas.errors import InputError, TrainposError
 
@@ -141,20 +144,9 @@ def run_evidence(
     return ev
 
 
-_WORKER_NETWORK: dict[str, Network] = {}
-
-
-def _worker(args: tuple[str, str, PipelineConfig, float]) -> RunEvidence | str:
-    """One run in a worker process; an error comes back as its message (exceptions with
-    keyword arguments do not survive pickling)."""
-    folder, db, cfg, max_margin = args
-    try:
-        if db not in _WORKER_NETWORK:
-            _WORKER_NETWORK.clear()
-            _WORKER_NETWORK[db] = read_network(Path(db))
-        return run_evidence(Path(folder), _WORKER_NETWORK[db], cfg, max_margin)
-    except TrainposError as exc:
-        return str(exc)
+def evidence_one(folder: str, db: DbRef, cfg: PipelineConfig, max_km_margin_m: float) -> RunEvidence:
+    """Replayer worker: one run against the DB of ``db`` (loaded once per worker process)."""
+    return run_evidence(Path(folder), load_network(db), cfg, max_km_margin_m)
 
 
 @dataclass
@@ -185,23 +177,18 @@ def collect_evidence(
     a verification must not silently rest on fewer runs than it was given."""
     cfg = cfg or PipelineConfig()
     total = len(run_dirs)
+    ref, _ = open_db(db, network)  # this process replays runs too: it keeps the network
     results: list[RunEvidence] = []
-    if workers > 1 and total > 1:
-        args = [(str(p), str(db), cfg, max_km_margin_m) for p in run_dirs]
-        with ProcessPoolExecutor(max_workers=min(workers, total)) as pool:
-            for i, out in enumerate(pool.map(_worker, args)):
-                if isinstance(out, str):
-                    raise InputError(out)
-                results.append(out)
-                if progress:
-                    progress(i + 1, total, out.run_id)
-    else:
-        net = network if network is not None else read_network(db)
-        for i, p in enumerate(run_dirs):
-            ev = run_evidence(Path(p), net, cfg, max_km_margin_m)
-            results.append(ev)
+    tasks = [(str(p), (ref, cfg, max_km_margin_m)) for p in run_dirs]
+    outcomes = replay(evidence_one, tasks, workers=workers, ordered=True, preload=("fieldlogs.pipeline",))
+    with closing(outcomes):  # the first run that cannot be used stops the replay
+        for out in outcomes:
+            if out.value is None:  # its message names the folder, unless its worker died
+                msg = out.error or "run cannot be used"
+                raise InputError(msg, path=None if out.run in msg else out.run)
+            results.append(out.value)
             if progress:
-                progress(i + 1, total, ev.run_id)
+                progress(len(results), total, out.value.run_id)
     _unique_ids(results)
     frames = [r.fixes.assign(run_id=r.run_id) for r in results if len(r.fixes)]
     fixes = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=list(FIX_COLUMNS))
@@ -220,8 +207,6 @@ def _unique_ids(runs: list[RunEvidence]) -> None:
 
 def discover(roots: Iterable[Path]) -> list[Path]:
     """Run folders (holding run.json) at or below the given roots."""
-    from fieldlogs.audit.runner import discover_runs
-
     found = discover_runs(roots)
     if not found:
         raise InputError("no run folders (run.json) found", path=", ".join(str(r) for r in roots))

@@ -24,6 +24,7 @@ from dbtools.database import read_network
 from fieldlogs.audit.store import read_table, read_trace
 from fieldlogs.reports import plots
 from fieldlogs.reports.report import CORRECTION_STATS, OTHER_STATS, ROUTE_KEYS, Report
+from schemas.audit import AUDIT_RUNS
 from schemas.errors import TrainposError
 
 CORRECTION_COLUMNS = [*ROUTE_KEYS, *CORRECTION_STATS]
@@ -83,7 +84,7 @@ def render_html(report: Report, audit_path: Path) -> str:
 
 def _run_plots(report: Report, audit_path: Path) -> list[str]:
     """Plots of one representative run: most slip/slide episodes, then the longest."""
-    runs = read_table(audit_path, "runs", "WHERE status = 'ok'")
+    runs = read_table(audit_path, AUDIT_RUNS.name, where={"status": "ok"})
     if runs.empty:
         return [kit.paragraph("No run was audited without error: no run plots.", kit.Status.NOTE)]
     row = runs.sort_values(["n_slips", "distance_m", "run_path"], ascending=[False, False, True]).iloc[0]

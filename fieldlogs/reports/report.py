@@ -40,7 +40,9 @@ import pandas as pd
 
 from fieldlogs.audit.store import read_meta, read_table
 from fieldlogs.pipeline.corrections import STAT_COLUMNS, correction_stats
+from schemas.audit import AUDIT_EVENTS, AUDIT_RUNS
 from schemas.enums import CORRECTION_EVENTS, SLIP_EVENTS, EventType
+from schemas.jsonable import jsonable
 
 By = Literal["route", "run", "vehicle"]
 ROUTE_KEYS = ["line_code", "track", "direction"]
@@ -146,8 +148,8 @@ def _details(frame: pd.DataFrame) -> list[dict[str, Any]]:
 
 def build_report(audit_path: Path, *, by: By = "route", target_pct: float = 0.5) -> Report:
     """Aggregate an audit database (read-only)."""
-    runs_all = read_table(audit_path, "runs", "ORDER BY run_path")
-    events = read_table(audit_path, "events")
+    runs_all = read_table(audit_path, AUDIT_RUNS.name, order_by=("run_path",))
+    events = read_table(audit_path, AUDIT_EVENTS.name)
     meta = read_meta(audit_path)
     runs = runs_all[runs_all["status"] == "ok"].copy()
     failed = runs_all.loc[runs_all["status"] == "error", ["run_path", "error"]].reset_index(drop=True)
@@ -203,7 +205,8 @@ def _aggregate(runs: pd.DataFrame, parts: dict[str, pd.DataFrame], keys: list[st
     def per(frame: pd.DataFrame, col: str, how: Any) -> pd.Series:
         if frame.empty:
             return pd.Series(np.nan, index=idx)
-        return frame.groupby(keys)[col].agg(how).reindex(idx)
+        out: pd.Series = frame.groupby(keys)[col].agg(how).reindex(idx)
+        return out
 
     corr = parts["corr"]
     slips, refused, ev = parts["slips"], parts["refused"], parts["ev"]
@@ -237,14 +240,8 @@ def _count_reasons(joined: Any) -> str:
 
 
 def _num(v: Any) -> Any:
-    """JSON value: numpy scalars as Python numbers, NaN and the unknown route key as null."""
-    if v is None or v is pd.NA or v == UNKNOWN:
-        return None
-    if isinstance(v, (np.integer,)):
-        return int(v)
-    if isinstance(v, (float, np.floating)):
-        return float(v) if np.isfinite(v) else None
-    return v
+    """JSON value (:func:`schemas.jsonable.jsonable`), the unknown route key as null."""
+    return None if isinstance(v, str) and v == UNKNOWN else jsonable(v)
 
 
 def _records(frame: pd.DataFrame, keys: tuple[str, ...]) -> list[dict[str, Any]]:

@@ -22,11 +22,12 @@ import pandas as pd
 import pytest
 
 import fieldlogs.audit.runner as audit_mod
-from dbtools.database import read_network
-from fieldlogs.audit.runner import audit, discover_runs, pack, unpack
+from dbtools.database import AuditDB, read_network
+from fieldlogs.audit.runner import audit, pack, unpack
 from fieldlogs.audit.store import open_audit, read_table, read_trace, store_run
 from fieldlogs.io import read_run
 from fieldlogs.pipeline import PipelineConfig, run_pipeline
+from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.reports.page import render_html
 from fieldlogs.reports.report import RUN_JSON_KEYS, build_report, report_json
 from schemas.errors import InputError
@@ -53,7 +54,7 @@ def dump(path: Path) -> dict[str, list[tuple[Any, ...]]]:
     with sqlite3.connect(path) as conn:
         return {
             t: conn.execute(f"SELECT * FROM {t} ORDER BY 1, 2").fetchall()
-            for t in ("runs", "events", "traces", "audit_meta")
+            for t in ("audit_runs", "audit_events", "audit_traces", "audit_meta")
         }
 
 
@@ -77,7 +78,7 @@ class Counter:
 
 # -- audit: storage, skip, resume, errors ---------------------------------------------------
 def test_audit_stores_runs_events_traces_and_route_view(audited: Path, data: AuditData) -> None:
-    runs = read_table(audited, "runs").set_index("run_id")
+    runs = read_table(audited, "audit_runs").set_index("run_id")
     assert set(runs.index) == {f"RUN-{name}" for name, *_ in RUNS}
     assert (runs["status"] == "ok").all()
     assert set(runs["direction"]) == {"down", "up"}
@@ -85,7 +86,7 @@ def test_audit_stores_runs_events_traces_and_route_view(audited: Path, data: Aud
     assert runs.loc["RUN-u-east", ["track", "direction"]].tolist() == ["U", "up"]
     assert (runs["distance_m"].between(2800, 3300)).all()
     assert (runs["n_slips"] >= 1).all()
-    events = read_table(audited, "events")
+    events = read_table(audited, "audit_events")
     # n_corrections of a run = its balise corrections (the population of the % statistics)
     n_bal = events[events["type"] == "balise_correction"].groupby("run_path").size()
     assert runs.set_index("run_path")["n_corrections"].sort_index().tolist() == n_bal.sort_index().tolist()
@@ -101,7 +102,7 @@ def test_audit_stores_runs_events_traces_and_route_view(audited: Path, data: Aud
 def test_run_audit_and_report_give_the_same_correction_statistics(audited: Path, data: AuditData) -> None:
     """One statistic (balise corrections, S003 §5.2) whether a user runs `trainpos run`,
     reads the audit record or the report by run: the figures agree exactly."""
-    runs = read_table(audited, "runs").set_index("run_path")
+    runs = read_table(audited, "audit_runs").set_index("run_path")
     by_run = build_report(audited, by="run").groups.set_index("run_path")
     for path in data.runs:
         key = str(path.resolve())
@@ -138,7 +139,7 @@ def test_reaudit_skips_unchanged_touch_is_still_skipped_config_change_reaudits(
     touched = audit([logs], data.db, out, workers=1)
     assert (touched.audited, touched.skipped) == (0, N)
     assert count.calls == [str((logs / RUNS[0][0]).resolve())] and count.piped == []
-    assert dump(out)["events"] == before["events"]
+    assert dump(out)["audit_events"] == before["audit_events"]
     count.calls.clear()
     audit([logs], data.db, out, workers=1)
     assert count.calls == []  # the new quick key was stored
@@ -163,7 +164,7 @@ def test_interrupted_audit_resumes_without_losing_finished_runs(
     real_store = audit_mod.store_run
     stored: list[str] = []
 
-    def interrupting_store(conn: sqlite3.Connection, record: dict[str, Any], *rest: Any) -> None:
+    def interrupting_store(conn: AuditDB, record: dict[str, Any], *rest: Any) -> None:
         if len(stored) == 2:
             raise KeyboardInterrupt  # Ctrl-C in the coordinating loop, at the 3rd finished run
         real_store(conn, record, *rest)
@@ -173,16 +174,16 @@ def test_interrupted_audit_resumes_without_losing_finished_runs(
     with pytest.raises(KeyboardInterrupt):
         audit([data.logs], data.db, out, workers=2)  # the pool is shut down, the queue dropped
     monkeypatch.setattr(audit_mod, "store_run", real_store)
-    kept = read_table(out, "runs")
+    kept = read_table(out, "audit_runs")
     assert sorted(kept["run_path"]) == sorted(stored) and len(stored) == 2
     assert (kept["status"] == "ok").all()
-    assert len(read_table(out, "traces")["run_path"].unique()) == 2
+    assert len(read_table(out, "audit_traces")["run_path"].unique()) == 2
 
     count = Counter(monkeypatch)
     resumed = audit([data.logs], data.db, out, workers=1)
     assert (resumed.skipped, resumed.audited) == (2, N - 2)
     assert not set(count.calls) & set(stored)  # the finished runs are not audited again
-    after = read_table(out, "runs").set_index("run_path")
+    after = read_table(out, "audit_runs").set_index("run_path")
     assert after.loc[stored, "audited_at"].tolist() == kept.set_index("run_path").loc[stored, "audited_at"].tolist()
     assert len(after) == N
 
@@ -199,7 +200,7 @@ def test_failing_runs_are_recorded_and_the_others_go_on(data: AuditData, tmp_pat
     out = tmp_path / "audit.sqlite"
     stats = audit([logs], data.db, out, workers=2)
     assert (stats.total, stats.audited, stats.failed) == (N + 2, N, 2)
-    runs = read_table(out, "runs").set_index("run_path")
+    runs = read_table(out, "audit_runs").set_index("run_path")
     err = runs.loc[str(bad_json.resolve())]
     assert err["status"] == "error" and "run.json" in err["error"] and "JSON" in err["error"]
     err = runs.loc[str(garbage.resolve())]
@@ -258,7 +259,7 @@ def test_pack_round_trip() -> None:
 def cluster() -> Iterator[Any]:
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=50
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=50
     ) as c:
         yield c
 
@@ -268,10 +269,10 @@ def test_dask_cluster_audit_equals_local_pool(cluster: Any, data: AuditData, aud
     stats = audit([data.logs], data.db, out, scheduler=cluster.scheduler_address)
     assert (stats.total, stats.audited, stats.failed) == (N, N, 0), stats.errors
     cols = ["run_path", "line_code", "track", "direction", "n_corrections", "mean_correction_pct", "n_slips"]
-    local = read_table(audited, "runs")[cols].sort_values("run_path").reset_index(drop=True)
-    remote = read_table(out, "runs")[cols].sort_values("run_path").reset_index(drop=True)
+    local = read_table(audited, "audit_runs")[cols].sort_values("run_path").reset_index(drop=True)
+    remote = read_table(out, "audit_runs")[cols].sort_values("run_path").reset_index(drop=True)
     pd.testing.assert_frame_equal(local, remote)
-    assert len(read_table(out, "events")) == len(read_table(audited, "events"))
+    assert len(read_table(out, "audit_events")) == len(read_table(audited, "audit_events"))
     assert audit([data.logs], data.db, out, scheduler=cluster.scheduler_address).skipped == N
 
 

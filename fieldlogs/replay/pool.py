@@ -1,0 +1,382 @@
+"""The replayer: a per-run worker over many runs, in this process, a local pool or Dask.
+
+``replay(worker, tasks)`` calls ``worker(run_path, *args)`` for every task ``(run_path,
+args)`` and yields one :class:`Outcome` per run, as the runs complete or (``ordered``) in
+task order. The worker must be a module-level function and its arguments picklable; it
+may raise: the exception becomes the outcome's one-line ``error`` (:func:`error_message`),
+as does a worker process that dies, and the other runs go on.
+
+Where the runs go (one call path, :func:`run_task`, for all three):
+
+* ``workers=1`` (or a single run): in this process;
+* ``workers=N``: a pool of N processes forked from a fork server that imports the
+  worker's module once (not ``fork``: the caller may run threads — a progress bar, a Dask
+  client, BLAS). Starting the server takes seconds, so meanwhile this process replays runs
+  from the back of the queue itself until the pool's first result arrives: a small replay
+  is never slower than one worker and a large one loses no time to the start-up;
+* ``scheduler="tcp://host:8786"``: an existing Dask cluster (:mod:`fieldlogs.replay.cluster`),
+  whose workers must see the runs and the DB under the same paths.
+
+Cancellation: closing the iterator (``with closing(replay(...))``, or an exception such as
+KeyboardInterrupt while it runs) drops the queued runs, terminates the running workers and
+stops the fork server and the resource tracker this replay started, so no process is left
+behind; results already yielded are the caller's.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import gc
+import os
+import sys
+import threading
+import traceback
+from collections import deque
+from collections.abc import Callable, Generator, Iterable, Iterator, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from types import TracebackType
+from typing import Any, Generic, TypeVar
+
+from schemas.errors import FindingsError, TrainposError
+
+R = TypeVar("R")
+Task = tuple[str, tuple[Any, ...]]
+"""(run folder, further arguments of the worker)."""
+Progress = Callable[[int, int, str], None]
+"""``progress(done, total, run_path)``, called after every run."""
+
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3  # glibc mallopt parameters (malloc.h)
+_MALLOC_TUNED: list[bool] = []
+
+
+@dataclass(frozen=True)
+class Outcome(Generic[R]):
+    """What one run gave: ``value`` (the worker's return value) or ``error``."""
+
+    index: int
+    """Position of the run in the tasks."""
+    run: str
+    value: R | None = None
+    error: str | None = None
+    """One-line message when the worker raised or its process died."""
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+Outcomes = Generator[Outcome[R], None, None]
+"""What :func:`replay` returns: close it to cancel the runs not finished yet."""
+
+
+def error_message(exc: BaseException) -> str:
+    """The message an error record of a run carries: the suite's own errors as they read
+    (with the first findings of a FindingsError), an unreadable folder, or an internal
+    error with its type and the last frames of its traceback."""
+    if isinstance(exc, FindingsError):
+        msg = str(exc)
+        if exc.findings and "(" not in exc.message:
+            msg += ": " + "; ".join(str(getattr(f, "message", f)) for f in exc.findings[:3])
+        return msg
+    if isinstance(exc, TrainposError):
+        return str(exc)
+    if isinstance(exc, OSError):  # the folder vanished or is unreadable
+        return f"cannot read the run: {exc}"
+    tb = "".join(traceback.format_exception(exc, limit=3))
+    return f"internal error {type(exc).__name__}: {exc} | {tb}"
+
+
+def _tune_malloc() -> None:
+    """Undo a small ``MALLOC_TRIM_THRESHOLD_`` for this process (once; glibc only).
+
+    Dask's nanny starts every worker with ``MALLOC_TRIM_THRESHOLD_=65536``, which also
+    freezes glibc's mmap threshold at 128 kB: every array of a run (MBs each) is then
+    mapped, page-faulted, zeroed and unmapped afresh (the cost is in bench/NOTES.md,
+    "Replayer"). Arrays up to 32 MiB go back to the heap and memory is trimmed above
+    256 MiB instead.
+    """
+    if _MALLOC_TUNED:
+        return
+    _MALLOC_TUNED.append(True)
+    if not sys.platform.startswith("linux") or "MALLOC_TRIM_THRESHOLD_" not in os.environ:
+        return
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(M_MMAP_THRESHOLD, 32 << 20)
+        libc.mallopt(M_TRIM_THRESHOLD, 256 << 20)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
+def run_task(worker: Callable[..., R], index: int, run: str, args: tuple[Any, ...]) -> Outcome[R]:
+    """One run, wherever it is executed: the worker's value, or its error as a message."""
+    _tune_malloc()
+    try:
+        return Outcome(index, run, worker(run, *args))
+    except Exception as exc:  # one bad run must not stop the fleet
+        return Outcome(index, run, error=error_message(exc))
+
+
+def failed(index: int, run: str, exc: BaseException) -> Outcome[Any]:
+    """The outcome of a run whose worker process died (killed, out of memory, lost)."""
+    return Outcome(index, run, error=f"worker failed: {type(exc).__name__}: {exc}")
+
+
+def replay(
+    worker: Callable[..., R],
+    tasks: Iterable[Task],
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    ordered: bool = False,
+    progress: Progress | None = None,
+    preload: Sequence[str] = (),
+) -> Outcomes[R]:
+    """Outcomes of ``worker`` over ``tasks`` (module docstring).
+
+    ``workers``: processes of the local pool (default: all cores; 1 = in this process).
+    ``scheduler``: a Dask scheduler address instead of the local pool. ``preload``: more
+    modules for the fork server to import (the worker's own module always is).
+    """
+    todo = list(tasks)
+    source: Outcomes[R]
+    if scheduler:
+        from fieldlogs.replay.cluster import cluster_outcomes
+
+        source = cluster_outcomes(worker, todo, scheduler)
+    else:
+        modules = [getattr(worker, "__module__", None) or "", *preload]
+        source = _local(worker, todo, workers or os.cpu_count() or 1, [m for m in modules if m])
+    if ordered:
+        source = _in_order(source)
+    return _reporting(source, len(todo), progress)
+
+
+def _reporting(source: Outcomes[R], total: int, progress: Progress | None) -> Outcomes[R]:
+    done = 0
+    try:
+        for out in source:
+            done += 1
+            if progress:
+                progress(done, total, out.run)
+            yield out
+    finally:
+        source.close()  # stops the pool or the cluster work at once
+
+
+def _in_order(source: Outcomes[R]) -> Outcomes[R]:
+    """Outcomes in task order (later ones wait in memory for the earlier ones)."""
+    waiting: dict[int, Outcome[R]] = {}
+    nxt = 0
+    try:
+        for out in source:
+            waiting[out.index] = out
+            while nxt in waiting:
+                yield waiting.pop(nxt)
+                nxt += 1
+    finally:
+        source.close()
+
+
+def _local(worker: Callable[..., R], tasks: list[Task], n: int, preload: list[str]) -> Outcomes[R]:
+    if n <= 1 or len(tasks) <= 1:
+        for i, (run, args) in enumerate(tasks):
+            yield run_task(worker, i, run, args)
+        return
+    with LocalPool(min(n, len(tasks)), preload) as pool:
+        yield from pool.outcomes(worker, tasks)
+
+
+def worker_init() -> None:
+    """Start of every pool worker: die with the fork server; exit at once when it is
+    already gone (nothing would ever stop this process otherwise)."""
+    from fieldlogs.replay import _server
+
+    _server.die_with_parent()
+    if _server.SERVER_PID != os.getpid() and os.getppid() != _server.SERVER_PID:
+        os._exit(0)
+
+
+class LocalPool:
+    """A fork-server process pool for one replay, stopped with everything it started.
+
+    At most ``2 n`` runs are in the pool at a time (enough to keep every worker busy while
+    this process stores results), so that a worker process that dies takes few runs with
+    it: the pool is restarted, those runs are retried one at a time and only a run that
+    breaks the pool again is an error (:class:`_Schedule`).
+    """
+
+    def __init__(self, n: int, preload: list[str]) -> None:
+        self.n = n
+        self.preload = ["fieldlogs.replay._server", *dict.fromkeys(preload)]
+        self.pool: ProcessPoolExecutor | None = None
+        self.own_server = self.own_tracker = False
+
+    def __enter__(self) -> LocalPool:
+        from multiprocessing import forkserver, get_context, resource_tracker
+
+        ctx = get_context("forkserver")
+        ctx.set_forkserver_preload(self.preload)  # for a server started now (a running one keeps its own)
+        tracker, server = _pid(resource_tracker, "_resource_tracker"), _pid(forkserver, "_forkserver")
+        # started from this thread: PR_SET_PDEATHSIG ties the server to it (not to a feeder thread)
+        forkserver.ensure_running()
+        self.own_tracker = _pid(resource_tracker, "_resource_tracker") != tracker
+        self.own_server = _pid(forkserver, "_forkserver") != server
+        self.restart()
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close(cancel=exc_type is not None)
+
+    def restart(self) -> ProcessPoolExecutor:
+        """A new pool (the first one, or after a worker process died and broke the last)."""
+        from multiprocessing import get_context
+
+        if self.pool is not None:
+            self._shutdown(cancel=True)
+        self.pool = ProcessPoolExecutor(
+            max_workers=self.n, mp_context=get_context("forkserver"), initializer=worker_init
+        )
+        return self.pool
+
+    def _shutdown(self, *, cancel: bool) -> None:
+        pool, self.pool = self.pool, None
+        if pool is None:
+            return
+        if cancel:
+            # no public way to stop a running worker before Python 3.14 (terminate_workers)
+            procs = list((getattr(pool, "_processes", None) or {}).values())
+            for p in procs:
+                p.terminate()
+            for p in procs:
+                p.join(10)
+        pool.shutdown(wait=True, cancel_futures=True)
+
+    def close(self, *, cancel: bool) -> None:
+        """Shut the pool down (``cancel``: terminate running workers, drop the queue), then
+        stop the fork server and the resource tracker if this pool started them."""
+        from multiprocessing import forkserver, resource_tracker
+
+        self._shutdown(cancel=cancel)
+        gc.collect()  # release the pool's semaphores before their tracker stops
+        if self.own_server:
+            _stop(forkserver, "_forkserver")
+        if self.own_tracker:
+            _stop(resource_tracker, "_resource_tracker")
+
+    def outcomes(self, worker: Callable[..., R], tasks: list[Task]) -> Iterator[Outcome[R]]:
+        """Outcomes in completion order (see :class:`_Schedule`)."""
+        return _Schedule(self, worker, tasks).outcomes()
+
+
+class _Schedule(Generic[R]):
+    """Which run goes where, and when.
+
+    Start-up: the fork server imports the worker's modules for seconds and ``submit``
+    blocks meanwhile, so a thread submits the first runs while this process replays runs
+    from the back of the queue itself until the pool's first result arrives: a small replay
+    is never slower than one worker and a large one loses no time to the start-up. Then:
+    at most ``2 n`` runs in the pool, the next submitted as one completes.
+    """
+
+    def __init__(self, owner: LocalPool, worker: Callable[..., R], tasks: list[Task]) -> None:
+        self.owner, self.worker = owner, worker
+        assert owner.pool is not None
+        self.pool = owner.pool
+        self.limit = 2 * owner.n
+        self.queue: deque[tuple[int, Task]] = deque(enumerate(tasks))
+        self.inflight: dict[Future[Outcome[R]], tuple[int, Task]] = {}
+        self.strikes: dict[int, int] = {}
+        self.restarts = 0
+        self.lock = threading.Lock()
+
+    def outcomes(self) -> Iterator[Outcome[R]]:
+        feeder = threading.Thread(target=self._fill, name="replay-submit", daemon=True)
+        feeder.start()
+        try:
+            while True:  # until the pool's first result
+                with self.lock:
+                    busy = any(f.done() for f in self.inflight)
+                    item = self.queue.pop() if self.queue and not busy else None
+                if item is None:
+                    break
+                yield run_task(self.worker, item[0], *item[1])
+            feeder.join()
+            while self.inflight or self.queue:
+                self._fill()
+                yield from self._completed()
+        finally:
+            with self.lock:
+                self.queue.clear()  # interrupted: submit nothing more
+            feeder.join()
+
+    def _fill(self) -> None:
+        """Submit runs up to the limit; a run that was in the pool when a worker died goes
+        alone (nothing else in the pool) so that a second break names it."""
+        while True:
+            with self.lock:
+                if not self.queue or len(self.inflight) >= self.limit or self._solo():
+                    return
+                i, task = self.queue.popleft()
+                if self.strikes.get(i) and self.inflight:
+                    self.queue.appendleft((i, task))
+                    return
+            try:
+                fut = self.pool.submit(run_task, self.worker, i, task[0], task[1])
+            except BaseException:  # shut down (interrupted) or broken: handled by the caller
+                with self.lock:
+                    self.queue.appendleft((i, task))
+                return
+            with self.lock:
+                self.inflight[fut] = (i, task)
+
+    def _solo(self) -> bool:
+        return any(self.strikes.get(i) for i, _ in self.inflight.values())
+
+    def _completed(self) -> Iterator[Outcome[R]]:
+        """Outcomes of the runs that completed next; restarts a broken pool."""
+        if not self.inflight:  # the pool refused new work: it is broken
+            self.restarts += 1
+            if self.restarts > 2:  # and cannot be restarted: the remaining runs fail
+                while self.queue:
+                    i, task = self.queue.popleft()
+                    yield failed(i, task[0], RuntimeError("the process pool cannot be restarted"))
+                return
+            self.pool = self.owner.restart()
+            return
+        done, _ = wait(list(self.inflight), return_when=FIRST_COMPLETED)
+        self.restarts = 0
+        broken = False
+        for fut in done:
+            i, task = self.inflight.pop(fut)
+            try:
+                yield fut.result()
+            except BrokenProcessPool as exc:  # a worker died: this run or another in the pool
+                broken = True
+                self.strikes[i] = self.strikes.get(i, 0) + 1
+                if self.strikes[i] >= 2:  # it was alone in the pool: it broke it
+                    yield failed(i, task[0], exc)
+                else:
+                    self.queue.appendleft((i, task))
+            except Exception as exc:
+                yield failed(i, task[0], exc)
+        if broken and not self.inflight:
+            self.pool = self.owner.restart()
+
+
+def _pid(module: Any, singleton: str) -> int | None:
+    """The pid of a multiprocessing helper process (fork server, resource tracker), if started."""
+    obj = getattr(module, singleton, None)
+    pid = getattr(obj, "_forkserver_pid", None) if singleton == "_forkserver" else getattr(obj, "_pid", None)
+    return None if pid is None else int(pid)
+
+
+def _stop(module: Any, singleton: str) -> None:
+    """Stop a multiprocessing helper process (``_stop``: the stdlib's own, used by its tests)."""
+    stop = getattr(getattr(module, singleton, None), "_stop", None)
+    if stop is not None:
+        stop()

@@ -1,0 +1,130 @@
+"""The audit database (``trainpos audit``): runs, their events and traces, per-route view.
+
+One file per audit, written by the coordinating process of a fleet audit only (one
+SQLite writer), one transaction per finished run. Tables are created from these
+declarations (:mod:`dbtools.database`); the ``route_summary`` view is declared here with its
+columns and defined in SQL there.
+"""
+
+from __future__ import annotations
+
+from schemas.model import Column, DType, ForeignKey, Table
+from schemas.outputs import EVENTS
+
+#: ``PRAGMA application_id`` of an audit DB: ASCII "TPAU".
+AUDIT_APPLICATION_ID = 0x54504155
+#: ``PRAGMA user_version`` of an audit DB. 2: tables declared in ``schemas/`` and renamed
+#: ``audit_*``; the run context hashes the DB's actual content (1 used its meta hash).
+AUDIT_SCHEMA_VERSION = 2
+
+RUN_PATH = Column("run_path", "str", "Run folder (absolute path): the run's identity in the audit")
+
+
+def _n(name: str, description: str, dtype: DType = "int", unit: str = "") -> Column:
+    """A nullable figure of an audited run (missing on a run that failed)."""
+    return Column(name, dtype, description, unit=unit, nullable=True)
+
+
+AUDIT_RUNS = Table(
+    name="audit_runs",
+    kind="audit",
+    description=(
+        "One row per audited run folder: status, route, headline figures. Correction counts "
+        "and % are balise corrections only (SPEC §5.2)."
+    ),
+    columns=(
+        RUN_PATH,
+        _n("run_id", "Run id (run.json)", "str"),
+        _n("vehicle_id", "Vehicle id (run.json)", "str"),
+        _n("vehicle_kind", "train or road_rail", "str"),
+        Column("fingerprint", "str", "SHA-256 of the run's files and the context ('' when unreadable)"),
+        _n("quick_key", "SHA-256 of the run's file names, sizes and mtimes (skip without reading)", "str"),
+        _n("context", "SHA-256 of the onboard DB's content hash and the pipeline config", "str"),
+        Column("status", "str", "ok, or error (message in error)", enum=("ok", "error")),
+        _n("error", "Why the run failed", "str"),
+        _n("db_version", "Onboard DB version the run was audited with", "str"),
+        _n("line_code", "Line of the run (where the position was first determined)", "str"),
+        _n("track", "Track of the run", "str"),
+        _n("direction", "down when the km increased over the run, up otherwise", "str"),
+        _n("duration_s", "Run duration", "float", "s"),
+        _n("distance_m", "Travelled distance (corrected odometry)", "float", "m"),
+        _n("n_corrections", "Balise position corrections"),
+        _n("n_feature_corrections", "Accepted feature-point corrections"),
+        _n("n_feature_refused", "Refused feature-point corrections"),
+        _n("mean_correction_pct", "Mean balise position-correction %", "float", "%"),
+        _n("max_correction_pct", "Largest balise position-correction %", "float", "%"),
+        _n("n_slips", "Slip and slide episodes"),
+        _n("n_failsafe", "Fail-safe events"),
+        _n("n_anomalies", "Balise anomalies"),
+        _n("gps_decisions", "Up/down decisions from trusted GPS fixes"),
+        _n("gps_trusted_share", "Share of trusted GPS fixes", "float"),
+        _n("max_margin_m", "Largest safety margin", "float", "m"),
+        _n("first_determined_t", "Time the position was first determined", "float", "s"),
+        _n("summary_json", "The pipeline's run summary (JSON)", "str"),
+        Column("audited_at", "str", "When the run was audited (UTC, ISO 8601 with Z)"),
+        _n("elapsed_s", "Wall time of the run in its worker", "float", "s"),
+        _n("cpu_s", "CPU time of the run in its worker", "float", "s"),
+    ),
+    primary_key=("run_path",),
+)
+
+AUDIT_EVENTS = Table(
+    name="audit_events",
+    kind="audit",
+    description="The pipeline's events of every audited run (columns of the run's events output).",
+    columns=(RUN_PATH, *(Column(c.name, c.dtype, c.description, unit=c.unit, nullable=True) for c in EVENTS.columns)),
+    foreign_keys=(ForeignKey(("run_path",), AUDIT_RUNS.name, ("run_path",)),),
+    indexes=(("run_path",), ("type",)),
+)
+
+AUDIT_TRACES = Table(
+    name="audit_traces",
+    kind="audit",
+    description=(
+        "One row per run: its 1 Hz trace (full rate around slip/slide episodes) for the "
+        "report's plots, one Parquet blob."
+    ),
+    columns=(
+        RUN_PATH,
+        Column("n_rows", "int", "Rows of the trace"),
+        Column("format", "str", "Encoding of data", enum=("parquet",)),
+        Column("data", "bytes", "The trace (columns t, km_m, margin_m, speed_mps, v_pulse_mps, kappa, lat, lon, …)"),
+    ),
+    primary_key=("run_path",),
+    foreign_keys=(ForeignKey(("run_path",), AUDIT_RUNS.name, ("run_path",)),),
+)
+
+AUDIT_META = Table(
+    name="audit_meta",
+    kind="audit",
+    description="Audit metadata: onboard DB path, version and content hash, config (JSON), last audit.",
+    columns=(Column("key", "str", "Key"), Column("value", "str", "Value", nullable=True)),
+    primary_key=("key",),
+)
+
+ROUTE_SUMMARY = Table(
+    name="route_summary",
+    kind="audit",
+    description="View: per route (line, track, direction) over the runs with status ok.",
+    columns=(
+        _n("line_code", "Line", "str"),
+        _n("track", "Track", "str"),
+        _n("direction", "down or up", "str"),
+        Column("n_runs", "int", "Runs audited without error"),
+        _n("distance_m", "Travelled distance", "float", "m"),
+        _n("n_corrections", "Balise corrections"),
+        _n("mean_correction_pct", "Mean balise position-correction %", "float", "%"),
+        _n("max_correction_pct", "Largest balise position-correction %", "float", "%"),
+        _n("n_feature_corrections", "Accepted feature-point corrections"),
+        _n("n_feature_refused", "Refused feature-point corrections"),
+        _n("n_slips", "Slip and slide episodes"),
+        _n("n_failsafe", "Fail-safe events"),
+        _n("n_anomalies", "Balise anomalies"),
+    ),
+    extra={"view": "yes"},
+)
+
+#: Tables of an audit DB in dependency order (runs first: the others reference it).
+AUDIT_TABLES: tuple[Table, ...] = (AUDIT_RUNS, AUDIT_EVENTS, AUDIT_TRACES, AUDIT_META)
+#: Views of an audit DB.
+AUDIT_VIEWS: tuple[Table, ...] = (ROUTE_SUMMARY,)
