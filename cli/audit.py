@@ -15,9 +15,10 @@ from rich.console import Console
 from rich.progress import Progress, TaskID
 
 from cli.errors import cli_command
-from cli.render import console, err_console, frame_table, key_value_table, print_json, progress
+from cli.render import console, err_console, frame_table, key_value_table, print_json, progress, write_out
 from fieldlogs.audit.runner import audit as run_audit
 from fieldlogs.config import load_tree
+from fieldlogs.pipeline.corrections import TARGET_PCT
 from fieldlogs.reports.report import ROUTE_KEYS, Report, build_report, report_json
 from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.jsonable import jsonable
@@ -180,7 +181,8 @@ def report(
     by: By = typer.Option(By.route, "--by", help="Group by route (line, track, direction), run or vehicle."),
     fmt: ReportFmt = typer.Option(ReportFmt.table, "--format", help="table, csv, json or html."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
-    target_pct: float = typer.Option(0.5, "--target-pct", min=0.0, help="Position-correction target [%]."),
+    target_pct: float = typer.Option(TARGET_PCT, "--target-pct", min=0.0, help="Position-correction target [%]."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
 ) -> None:
     """Position-correction percentages, slips, feature points, GPS and alarms per route/run/vehicle.
 
@@ -196,30 +198,28 @@ def report(
     if fmt == ReportFmt.html:
         if out is None:
             raise UsageError("--format html needs --out FILE")
-        _write(out, render_html(rep, audit_db))
+        write_out(out, force=force, inputs=[audit_db], text=render_html(rep, audit_db))
         console().print(f"HTML report written to {out}")
     elif fmt == ReportFmt.json:
         data: Any = report_json(rep)
         if out:
-            _write(out, json.dumps(jsonable(data), indent=2, ensure_ascii=False) + "\n")
+            write_out(
+                out,
+                force=force,
+                inputs=[audit_db],
+                text=json.dumps(jsonable(data), indent=2, ensure_ascii=False) + "\n",
+            )
         else:
             print_json(data)
     elif fmt == ReportFmt.csv:
         text = rep.groups.to_csv(index=False, lineterminator="\n")
         if out:
-            _write(out, text)
+            write_out(out, force=force, inputs=[audit_db], text=text)
         else:
             typer.echo(text, nl=False)
     elif out:
         buf = io.StringIO()
         render_tables(rep, Console(file=buf, width=200, color_system=None))
-        _write(out, buf.getvalue())
+        write_out(out, force=force, inputs=[audit_db], text=buf.getvalue())
     else:
         render_tables(rep, console())
-
-
-def _write(path: Path, text: str) -> None:
-    from dbtools.atomic import atomic_file
-
-    with atomic_file(path, force=True) as tmp:
-        tmp.write_text(text, encoding="utf-8")

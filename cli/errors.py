@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import functools
 import os
 import sys
@@ -12,7 +13,7 @@ from typing import Any, TypeVar
 import typer
 
 from cli.render import err_console, print_findings
-from schemas.errors import FindingsError, TrainposError
+from schemas.errors import EXIT_UNREADABLE, FindingsError, TrainposError
 
 EXIT_INTERNAL = 4
 F = TypeVar("F", bound=Callable[..., Any])
@@ -41,6 +42,9 @@ def cli_command(fn: F) -> F:
         except KeyboardInterrupt:
             err_console().print("interrupted")
             raise typer.Exit(130) from None
+        except OSError as exc:  # the environment, not a bug: permission denied, disk full, …
+            err_console().print(f"[bold red]error:[/] {environment_message(exc)}", highlight=False)
+            raise typer.Exit(EXIT_UNREADABLE) from None
         except Exception as exc:  # a bug: say so plainly, keep the traceback for debugging
             if os.environ.get("TRAINPOS_DEBUG"):
                 traceback.print_exc(file=sys.stderr)
@@ -52,3 +56,14 @@ def cli_command(fn: F) -> F:
             raise typer.Exit(EXIT_INTERNAL) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def environment_message(exc: OSError) -> str:
+    """One line for an error of the machine (a file system, a disk): what, where, why."""
+    where = exc.filename if exc.filename is not None else ""
+    why = exc.strerror or type(exc).__name__
+    if exc.errno == errno.ENOSPC:
+        why += " (free some space and run the command again: nothing was half-written)"
+    elif exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        why += " (check the folder's permissions)"
+    return f"{where}: {why}" if where else why

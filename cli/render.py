@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import Any
 
 from rich.console import Console
@@ -96,3 +97,11 @@ def progress(out: Console | None = None) -> Progress:
         console=out or err_console(),
         transient=False,
     )
+
+
+def write_out(path: Path, text: str, *, force: bool, inputs: Sequence[Path] = ()) -> None:
+    """A command's text output, under the suite's one output rule (``dbtools.atomic``):
+    refused when it exists without --force, never over a registry, an input or a folder."""
+    from dbtools.atomic import write_text
+
+    write_text(path, text, force=force, inputs=inputs)

@@ -140,12 +140,10 @@ def _line_codes(tables: dict[str, pd.DataFrame], files: dict[str, str]) -> list[
 def write_source_set(network: Network, folder: Path, *, force: bool = False) -> Path:
     """Write a network as CSV source files (the format ``db build`` reads back)."""
     from dbtools.atomic import atomic_folder
-    from schemas.errors import RefusedError
 
     folder = Path(folder)
-    if folder.exists() and any(folder.iterdir()) and not force:
-        raise RefusedError("output folder exists and is not empty; use --force", path=folder)
-    with atomic_folder(folder, force=True) as tmp:  # an empty folder may be replaced
+    empty = folder.is_dir() and not any(folder.iterdir())
+    with atomic_folder(folder, force=force or empty) as tmp:  # an empty folder may be replaced
         for name, table in SOURCE_TABLES.items():
             frame = network.tables.get(name)
             if frame is None or (not table.required and frame.empty):

@@ -19,6 +19,7 @@ metadata (``unit``); a file whose unit differs from the declared one is a findin
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -539,18 +540,15 @@ def write_run(
     fmt: LogFormat = "parquet",
     force: bool = False,
     extra_files: dict[str, str] | None = None,
+    inputs: Iterable[Path | str] = (),
 ) -> Path:
-    """Write a run folder atomically (temp folder beside it, then rename).
+    """Write a run folder atomically (temp folder beside it, then rename) under the output
+    rule of :mod:`dbtools.atomic` (``inputs``: the command's input runs, never replaced).
 
     ``extra_files`` are written as text into the folder as well (e.g. ``repair_log.json``).
     """
     folder = Path(folder)
-    if folder.exists():
-        if not force:
-            raise RefusedError("output folder exists; use --force to replace it", path=folder)
-        if not folder.is_dir():
-            raise RefusedError("output exists and is not a folder", path=folder)
-    with atomic_folder(folder, force=True) as tmp:  # refusals above, with their own messages
+    with atomic_folder(folder, force=force, inputs=inputs) as tmp:
         (tmp / RUN_JSON_NAME).write_text(
             json.dumps(meta.to_json(), indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
         )
@@ -594,6 +592,6 @@ def convert_run(src: Path | str, out: Path | str, fmt: LogFormat, *, force: bool
             errors,
             path=src,
         )
-    write_run(out, run.meta, streams, fmt=fmt, force=force)
+    write_run(out, run.meta, streams, fmt=fmt, force=force, inputs=[src])
     warnings = [f for f in run.findings if f.severity == Severity.WARNING]
     return ConvertResult(str(src), str(out), fmt, {k: len(v) for k, v in streams.items()}, warnings)

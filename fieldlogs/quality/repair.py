@@ -310,7 +310,7 @@ def repair_run(src: Path | str, out: Path | str, *, force: bool = False, fmt: Lo
         reports.append(rep)
     result = RepairResult(str(src), str(out), out_fmt, reports)
     text = json.dumps(result.to_dict(), indent=2, ensure_ascii=False) + "\n"
-    write_run(out, run.meta, streams, fmt=out_fmt, force=force, extra_files={REPAIR_LOG: text})
+    write_run(out, run.meta, streams, fmt=out_fmt, force=force, extra_files={REPAIR_LOG: text}, inputs=[src])
     result.remaining = check_run(out)
     _write_text_atomic(out / REPAIR_LOG, json.dumps(result.to_dict(), indent=2, ensure_ascii=False) + "\n")
     return result

@@ -10,6 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from dbtools.atomic import MARKER
 from dbtools.build import build_db
 from dbtools.gis.geometry import PolylineIndex, Projector
 from dbtools.sources import write_source_set
@@ -44,7 +45,7 @@ def test_cli_writes_a_readable_run(demo_db: Path, tmp_path: Path) -> None:
     assert run.meta.start_time.endswith("+09:00")
     assert run.meta.vehicle_kind == "train" and run.meta.wheel_diameter_m == 0.86 and run.meta.teeth == 90
     assert set(run.streams_present()) == {"tacho", "imu", "balise", "gps", "cab", "truth"}
-    assert all(p.suffix == ".parquet" for p in out.iterdir() if p.name != "run.json")
+    assert all(p.suffix == ".parquet" for p in out.iterdir() if p.name not in ("run.json", MARKER))
     streams = run.load_all()
     assert run.findings == []
     st = run.raw_json["sim_truth"]
