@@ -104,12 +104,18 @@ def check(
         ...,
         "--plan",
         help="Possession plan CSV/XLSX: work_no, line_code, track, km_from_m, km_to_m, planned_start, planned_end, "
-        "started_at, released_at (ISO 8601 with offset).",
+        "started_at, released_at (ISO 8601 with offset); optional vehicle_id and purpose (work/protection).",
     ),
     fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json or html."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
     config: Path | None = typer.Option(
         None, "--config", help="Settings (TOML; its [gps] and [possession] sections; see trainpos config show)."
+    ),
+    work: str | None = typer.Option(
+        None,
+        "--work",
+        help="The work the worker selected on the device (work_no): only its possession allows being on rail. "
+        "Without it, the plan rows for the run's vehicle_id (or for any vehicle).",
     ),
 ) -> None:
     """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.
@@ -129,7 +135,7 @@ def check(
     """
     if fmt == Fmt.html and out is None:
         raise UsageError("--format html needs --out FILE")
-    report = check_files(runs, db, plan, config)
+    report = check_files(runs, db, plan, config, work=work)
     if report.plan.findings:
         print_findings(report.plan.findings, console=err_console(), title="Plan warnings")
     if fmt == Fmt.html:

@@ -22,6 +22,16 @@ POSSESSIONS = Table(
         Column("planned_end", "str", "Planned end (ISO 8601)"),
         Column("started_at", "str", "Actual start (ISO 8601)", nullable=True),
         Column("released_at", "str", "Actual release (ISO 8601)", nullable=True),
+        Column("vehicle_id", "str", "Vehicle the work is for (empty: any vehicle)", nullable=True, required=False),
+        Column(
+            "purpose",
+            "str",
+            "work, or protection: an adjacent-line protection possession [S001 §3.1(e)] that never "
+            "allows running on its track (empty: work)",
+            nullable=True,
+            required=False,
+            enum=("work", "protection"),
+        ),
     ),
     primary_key=("work_no",),
 )

@@ -33,7 +33,7 @@ from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.possession.alarms import evaluate_period
 from fieldlogs.possession.config import PossessionConfig
 from fieldlogs.possession.periods import RailPeriod, analyse_periods
-from fieldlogs.possession.plan import Plan, Possession
+from fieldlogs.possession.plan import Plan, Possession, possessions_for
 from fieldlogs.possession.results import Alarm, PeriodResult, RunCheck, checks_json
 from fieldlogs.possession.tacho import Tacho, tacho_problem, tacho_track, tacho_unused
 from schemas.errors import InputError
@@ -101,8 +101,11 @@ def check_run(
     possessions: list[Possession],
     gps_cfg: GpsConfig | None = None,
     cfg: PossessionConfig | None = None,
+    *,
+    work: str | None = None,
 ) -> RunCheck:
-    """Read a run's GPS, cab and (if any) tacho streams, analyse each on-rail period, apply the rules.
+    """Read a run's GPS, cab and (if any) tacho streams, analyse each on-rail period, apply the
+    rules (``work``: the work selected on the device; else the plan rows for this vehicle).
 
     Raises InputError when run.json, its start_time or a needed stream (gps, cab) cannot be
     read; an unreadable tacho is only a note (the km filter then uses the GPS alone).
@@ -133,6 +136,8 @@ def check_run(
         tacho=tacho,
         wheel_diameter_m=run.field("wheel_diameter_m"),
         teeth=run.field("teeth"),
+        vehicle_id=run.meta.vehicle_id,
+        work=work,
     )
     if unreadable is not None:
         res.tacho = tacho_unused(unreadable)
@@ -166,16 +171,21 @@ def check_streams(
     tacho: pd.DataFrame | None = None,
     wheel_diameter_m: float | None = None,
     teeth: int | None = None,
+    vehicle_id: str | None = None,
+    work: str | None = None,
 ) -> RunCheck:
     """:func:`check_run` on stream frames (``gps``, ``cab``, ``tacho`` as in ``schemas.logs``;
     ``wheel_diameter_m`` and ``teeth`` from run.json). Without a tacho, or with one
     :func:`~fieldlogs.possession.tacho.tacho_problem` rejects, the km comes from the GPS alone
-    (said in ``RunCheck.tacho``)."""
+    (said in ``RunCheck.tacho``). Only the possessions that may allow this vehicle on rail
+    count (:func:`~fieldlogs.possession.plan.possessions_for`: never a protection possession;
+    the selected ``work`` or the ``vehicle_id``'s own)."""
     gps_cfg = gps_cfg or GpsConfig()
     cfg = cfg or PossessionConfig()
+    own = possessions_for(possessions, vehicle_id=vehicle_id, work=work)
     track, note = _usable_tacho(tacho, wheel_diameter_m, teeth, cfg)
     periods = analyse_periods(gps, cab, network, gps_cfg, cfg, track)
-    return check_periods(periods, possessions, start, gps_cfg, cfg, run=run, run_id=run_id, tacho_note=note)
+    return check_periods(periods, own, start, gps_cfg, cfg, run=run, run_id=run_id, tacho_note=note)
 
 
 @dataclass
@@ -195,7 +205,7 @@ class PossessionReport:
 
 
 def check_files(
-    run_dirs: list[Path], db_path: Path, plan_path: Path, config_path: Path | None = None
+    run_dirs: list[Path], db_path: Path, plan_path: Path, config_path: Path | None = None, work: str | None = None
 ) -> PossessionReport:
     """Read the DB, the plan (FindingsError on plan errors) and every run, and check each run.
 
@@ -211,5 +221,5 @@ def check_files(
     network = read_network(Path(db_path))
     plan = load_plan(Path(plan_path), network)
     runs = [read_run(Path(r)) for r in run_dirs]
-    checks = [check_run(r, network, plan.possessions, gps_cfg, cfg) for r in runs]
+    checks = [check_run(r, network, plan.possessions, gps_cfg, cfg, work=work) for r in runs]
     return PossessionReport(checks, plan, str(db_path))

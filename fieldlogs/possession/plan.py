@@ -34,7 +34,7 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.tabular import read_raw_table
 from schemas.enums import Severity
-from schemas.errors import FindingsError
+from schemas.errors import FindingsError, UsageError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
 from schemas.plans import POSSESSIONS
@@ -66,6 +66,10 @@ class Possession:
     planned_end: datetime
     started_at: datetime | None = None
     released_at: datetime | None = None
+    vehicle_id: str | None = None
+    """The vehicle the work is for (None: any)."""
+    purpose: str = "work"
+    """``work`` or ``protection`` (adjacent-line protection: never legitimises running on it)."""
     row: int | None = None
     """File line of the row (header = line 1), for messages."""
 
@@ -206,6 +210,8 @@ def _possessions(
                 planned_end=pe,
                 started_at=times["started_at"][i],
                 released_at=times["released_at"][i],
+                vehicle_id=_text(frame["vehicle_id"].iat[i]) if "vehicle_id" in frame.columns else None,
+                purpose=_text(frame["purpose"].iat[i]) or "work" if "purpose" in frame.columns else "work",
                 row=i + FIRST_DATA_LINE,
             )
         )
@@ -319,3 +325,23 @@ def plan_frame(possessions: list[Possession]) -> pd.DataFrame:
             }
         )
     return pd.DataFrame(rows, columns=POSSESSIONS.column_names)
+
+
+def possessions_for(
+    possessions: list[Possession], *, vehicle_id: str | None = None, work: str | None = None
+) -> list[Possession]:
+    """The possessions that may allow this vehicle to be on rail [S001 §6.1(a), §3.1(e)].
+
+    The worker selects the vehicle's own planned work on the device before putting it on
+    rail, and an adjacent-line protection possession protects the neighbouring track — it
+    never makes running on that track right. So: never a ``protection`` possession; with
+    ``work`` (the selected work) only that work's rows; otherwise the rows for this vehicle
+    or for any vehicle. UsageError when ``work`` is not a work of the plan."""
+    own = [p for p in possessions if p.purpose != "protection"]
+    if work is not None:
+        chosen = [p for p in own if p.work_no == work]
+        if not chosen:
+            known = ", ".join(sorted({p.work_no for p in own})) or "none"
+            raise UsageError(f"work '{work}' is not a work possession of the plan (works: {known})")
+        return chosen
+    return [p for p in own if p.vehicle_id is None or vehicle_id is None or p.vehicle_id == vehicle_id]

@@ -28,11 +28,11 @@ from fieldlogs.possession.check import check_periods, check_streams
 from fieldlogs.possession.config import PossessionConfig
 from fieldlogs.possession.kmfilter import km_noise, track_km
 from fieldlogs.possession.periods import RailPeriod, rail_periods
-from fieldlogs.possession.plan import Possession, PossessionState, load_plan, plan_frame, read_plan
+from fieldlogs.possession.plan import Possession, PossessionState, load_plan, plan_frame, possessions_for, read_plan
 from fieldlogs.possession.results import RunCheck, checks_json
 from fieldlogs.possession.tacho import Tacho, tacho_problem, tacho_track
 from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, PossessionCase, make_case
-from schemas.errors import FindingsError, InputError
+from schemas.errors import FindingsError, InputError, UsageError
 
 NET = build_network([demo_line()], Projector(9))
 START = datetime.fromisoformat("2026-01-16T01:00:00+09:00")
@@ -724,3 +724,53 @@ def test_restart_needs_a_reachable_line_while_anchored() -> None:
     period2 = RailPeriod(5.0, 199.0, analysis(km2, trusted=trusted, rms=0.3))
     tl2 = check_periods([period2], [possession()], START, GPS, CFG).periods[0].timeline
     assert abs(tl2.km[np.searchsorted(tl2.t, 120.0)] - 1460.0) < 3.0
+
+
+# ------------------------------------------------------------------------------ own work (issue 15)
+def test_a_protection_possession_never_allows_running_on_its_track() -> None:
+    """S001 §3.1(e): work W1 on D, an adjacent-line protection possession P1 on U. A vehicle
+    decided on U is on the wrong track — P1 protects U, it does not make running on it right."""
+    km = run_line(200)
+    protection = replace(possession("P1", track="U"), purpose="protection")
+    plan = [possession("W1", track="D"), protection]
+    res = check(km, possessions_for(plan), decisions=(decided(42.0, "U"),))
+    assert types(res.alarms) == ["wrong_track"]
+    assert res.alarms[0].work_no == "W1" and res.alarms[0].evidence["decided_track"] == "U"
+    # the same plan without the filter (the old behaviour) let P1 govern: no alarm
+    assert check(km, plan, decisions=(decided(42.0, "U"),)).alarms == []
+
+
+def test_only_the_vehicles_own_or_the_selected_work_counts() -> None:
+    km = run_line(200)
+    other_vehicle = replace(possession("W2", track="U"), vehicle_id="RR-2")
+    plan = [possession("W1", track="D"), other_vehicle]
+    mine = possessions_for(plan, vehicle_id="RR-1")
+    assert [p.work_no for p in mine] == ["W1"]
+    assert types(check(km, mine, decisions=(decided(42.0, "U"),)).alarms) == ["wrong_track"]
+    assert [p.work_no for p in possessions_for(plan, vehicle_id="RR-2")] == ["W1", "W2"]
+    anyone = [possession("W1", track="D"), possession("W2", track="U")]
+    assert [p.work_no for p in possessions_for(anyone, work="W1")] == ["W1"]
+    with pytest.raises(UsageError, match="work 'W9' is not a work possession of the plan"):
+        possessions_for(anyone, work="W9")
+
+
+def test_plan_columns_vehicle_and_purpose(tmp_path: Path) -> None:
+    path = tmp_path / "possessions.csv"
+    path.write_text(
+        HEADER.rstrip("\n") + ",vehicle_id,purpose\n"
+        "W1,0900,D,2000,2600,2026-01-16T01:00:00+09:00,2026-01-16T04:00:00+09:00,,,RR-1,work\n"
+        "P1,0900,U,2000,2600,2026-01-16T01:00:00+09:00,2026-01-16T04:00:00+09:00,,,,protection\n"
+        "W3,0900,U,2000,2600,2026-01-16T01:00:00+09:00,2026-01-16T04:00:00+09:00,,,,\n",
+        encoding="utf-8",
+    )
+    plan = read_plan(path)
+    by = {p.work_no: p for p in plan.possessions}
+    assert (by["W1"].vehicle_id, by["W1"].purpose) == ("RR-1", "work")
+    assert by["P1"].purpose == "protection" and by["W3"].purpose == "work" and by["W3"].vehicle_id is None
+    path.write_text(
+        HEADER.rstrip("\n") + ",purpose\n"
+        "W1,0900,D,2000,2600,2026-01-16T01:00:00+09:00,2026-01-16T04:00:00+09:00,,,guard\n",
+        encoding="utf-8",
+    )
+    bad = read_plan(path)
+    assert any(f.column == "purpose" for f in bad.errors)
