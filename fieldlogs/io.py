@@ -61,8 +61,9 @@ class RunMeta:
     run_id: str
     vehicle_id: str
     vehicle_kind: str
-    wheel_diameter_m: float
-    teeth: int
+    wheel_diameter_m: float | None
+    """Needed for a train and wherever the run has a tacho stream (``Run`` says so); None otherwise."""
+    teeth: int | None
     start_time: str
     db_version: str | None = None
     notes: str = ""
@@ -175,6 +176,8 @@ def _typed_fields(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], lis
             )
         )
         del values["vehicle_kind"]
+    if values.get("vehicle_kind") == VehicleKind.TRAIN.value:
+        findings += _wheel_needed(values, path, "a train's pulses are its odometry")
     for name in ("wheel_diameter_m", "teeth"):
         v = values.get(name)
         if v is not None and not v > 0:
@@ -194,6 +197,22 @@ def _typed_fields(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], lis
     return values, findings
 
 
+def _wheel_needed(values: dict[str, Any], path: Path, why: str) -> list[Finding]:
+    """A finding for each wheel field (wheel_diameter_m, teeth) that ``values`` lacks."""
+    return [
+        Finding(
+            "log.run_json_field",
+            Severity.ERROR,
+            "run.json",
+            f"field '{name}' is missing ({why})",
+            file=str(path),
+            column=name,
+        )
+        for name in ("wheel_diameter_m", "teeth")
+        if values.get(name) is None and name in {f.name for f in RUN_JSON}
+    ]
+
+
 def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
     """Read and check ``run.json``; findings for missing or mistyped fields."""
     data, findings = _load_run_json(path)
@@ -205,6 +224,8 @@ def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
     if any(f.severity == Severity.ERROR for f in findings):
         return None, findings
     known = {f.name for f in RUN_JSON}
+    values.setdefault("wheel_diameter_m", None)
+    values.setdefault("teeth", None)
     meta = RunMeta(**values, extra={k: v for k, v in data.items() if k not in known})
     return meta, findings
 
@@ -374,6 +395,11 @@ class Run:
         self._files: dict[str, Path] = {}
         self._scan()
         self.findings.extend(_block_findings(data, json_path, has_tacho=self.has("tacho")))
+        if self.meta is not None and self.has("tacho"):
+            missing = _wheel_needed(asdict(self.meta), json_path, "the run has a tacho stream")
+            if missing:  # the pulses cannot be turned into metres: run.json is unusable
+                self.findings.extend(missing)
+                self.meta = None
 
     def _scan(self) -> None:
         """Find the stream files once; warn about duplicates and unknown files."""

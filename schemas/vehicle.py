@@ -35,6 +35,12 @@ class VehicleField:
     max: float | None = None
 
 
+#: Plausible wheel diameters [m] per vehicle kind (a road-rail vehicle's rail wheels are
+#: small), the range any rail wheel lies in, and the teeth of a tachometer per revolution.
+WHEEL_DIAMETER_M: dict[str, tuple[float, float]] = {"train": (0.5, 1.3), "road_rail": (0.2, 1.3)}
+ANY_WHEEL_DIAMETER_M = (0.2, 1.3)
+TEETH_RANGE = (1, 1000)
+
 #: Largest |x| or |y| of a point on a vehicle [m] (a 25 m car plus margins).
 MAX_X_M = 100.0
 MAX_Y_M = 3.0
@@ -80,11 +86,16 @@ AXLE: tuple[VehicleField, ...] = (
         "Nominal wheel diameter (required on the tacho axle)",
         "m",
         required=False,
-        min=0.2,
-        max=1.5,
+        min=ANY_WHEEL_DIAMETER_M[0],
+        max=ANY_WHEEL_DIAMETER_M[1],
     ),
     VehicleField(
-        "teeth", "int", "Tachometer pulses per revolution (an axle with a tacho)", required=False, min=1, max=100_000
+        "teeth",
+        "int",
+        "Tachometer pulses per revolution (an axle with a tacho)",
+        required=False,
+        min=TEETH_RANGE[0],
+        max=TEETH_RANGE[1],
     ),
 )
 #: Sections of the vehicle block: (name, fields, is a list).

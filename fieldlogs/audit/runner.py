@@ -42,10 +42,10 @@ import pandas as pd
 
 from dbtools.database import AuditDB
 from fieldlogs.audit.store import encode_trace, fingerprints, open_audit, set_meta, store_run, touch_run
+from fieldlogs.quality.usability import Purpose, require_usable
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, load_network, open_db
 from fieldlogs.replay.pool import Outcome, error_message, replay
-from schemas.errors import FindingsError, InputError
 from schemas.jsonable import jsonable
 
 __all__ = ["AuditStats", "audit", "audit_one", "discover_runs", "pack", "unpack"]
@@ -181,34 +181,6 @@ def _trace(result: Any) -> pd.DataFrame:
     return out
 
 
-def _check_usable(run: Any) -> None:
-    """InputError when run.json is unusable or a stream the vehicle kind needs is missing or
-    has no usable row (fewer than 2 rows with every required column valid)."""
-    from fieldlogs.io import REQUIRED_STREAMS
-    from schemas.enums import Severity
-    from schemas.logs import LOG_STREAMS
-
-    if run.meta is None:
-        errors = [f for f in run.findings if f.severity == Severity.ERROR]
-        detail = "; ".join(f"{f.column or f.table}: {f.message}" for f in errors[:3])
-        raise FindingsError(f"run.json is unusable ({detail})", errors, path=run.folder / "run.json")
-    problems = []
-    for name in REQUIRED_STREAMS.get(run.meta.vehicle_kind, ()):
-        if not run.has(name):
-            problems.append(f"{name}: missing")
-            continue
-        frame = run.stream(name)
-        cols = [c.name for c in LOG_STREAMS[name].columns if c.required and not c.nullable]
-        usable = 0
-        if frame is not None and all(c in frame.columns for c in cols):
-            usable = int(frame[cols].notna().all(axis=1).sum())
-        if usable < 2:
-            first = next((f for f in run.stream_findings(name) if f.severity == Severity.ERROR), None)
-            problems.append(f"{name}: no usable rows" + (f" ({first.message})" if first else ""))
-    if problems:
-        raise InputError(f"unusable run: {'; '.join(problems)}", path=run.folder)
-
-
 def audit_one(
     run_path: str, db: DbRef, cfg_json: str, context: str, known_fingerprint: str | None = None
 ) -> dict[str, Any]:
@@ -238,7 +210,7 @@ def audit_one(
         network = load_network(db)
         cfg = PipelineConfig.from_dict(json.loads(cfg_json))
         run = read_run(Path(run_path))
-        _check_usable(run)
+        require_usable(run, Purpose.POSITIONING)
         result = run_pipeline(run, network, cfg)
         record = {**base, **_record(result), "elapsed_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
         return {"record": record, "events": pack(result.events), "trace": encode_trace(_trace(result))}

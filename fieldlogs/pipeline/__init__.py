@@ -41,8 +41,10 @@ from fieldlogs.pipeline.odometry import correct_odometry
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
-from schemas.enums import EventType, Severity, VehicleKind
-from schemas.errors import FindingsError
+from fieldlogs.quality.tacho import cumulative_again
+from fieldlogs.quality.usability import Purpose, require_usable
+from schemas.enums import EventType, VehicleKind
+from schemas.frames import FIRST_DATA_LINE
 
 __all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
 
@@ -82,14 +84,38 @@ def clean_stream(frame: pd.DataFrame | None, name: str, events: list[Event]) -> 
     return frame.reset_index(drop=True)
 
 
+def counter_resets_bridged(tacho: pd.DataFrame | None, events: list[Event]) -> pd.DataFrame | None:
+    """A pulse counter that was reset (it drops below half its count and stays low) counts on
+    from where it was: each reset adds the count before it to every later row, as an onboard
+    unit keeps its distance through a counter reset (``logs repair`` does the same to the
+    file). Without this the dead reckoning would stand still until the count caught up and the
+    next balise would read as a correction of kilometres. Each bridge is an ``input_repaired``
+    event naming the rows."""
+    if tacho is None or len(tacho) < 2:
+        return tacho
+    p = tacho["pulses"].to_numpy(dtype=float, na_value=np.nan)
+    ok = np.flatnonzero(np.isfinite(p))
+    fixed, resets = cumulative_again(p[ok])
+    if resets.size == 0:
+        return tacho
+    out = tacho.copy()
+    full = p.copy()
+    full[ok] = fixed
+    out["pulses"] = pd.array(np.round(full), dtype="Int64")
+    rows = (ok[resets] + FIRST_DATA_LINE).tolist()
+    detail = {"stream": "tacho", "counter_resets": len(rows), "rows": rows[:20], "bridged": True}
+    events.append(Event(0.0, EventType.INPUT_REPAIRED, detail=detail))
+    return out
+
+
 def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunContext, list[Event]]:
     """Stages 1–4 of the module docstring: the context the aids are built from, and the
     ``input_repaired`` events of the cleaning; raises FindingsError when run.json is unusable."""
-    if run.meta is None:
-        errors = [f for f in run.findings if f.severity == Severity.ERROR]
-        raise FindingsError("run.json is missing or invalid", errors, path=run.folder)
+    require_usable(run, Purpose.POSITIONING)  # never a "determined" km the run cannot support
+    assert run.meta is not None
     pre: list[Event] = []
     streams = {n: clean_stream(run.stream(n), n, pre) for n in STREAMS}
+    streams["tacho"] = counter_resets_bridged(streams["tacho"], pre)
     t_end = max((float(s["t"].iloc[-1]) for s in streams.values() if s is not None and len(s)), default=0.0)
     cycles = build_cycles(
         tacho=streams["tacho"],

@@ -94,8 +94,8 @@ def build_cycles(
     tacho: pd.DataFrame | None,
     imu: pd.DataFrame | None,
     cab: pd.DataFrame | None,
-    wheel_diameter_m: float,
-    teeth: int,
+    wheel_diameter_m: float | None,
+    teeth: int | None,
     t_end: float | None = None,
     cycle_s: float = 0.1,
     uses_pto: bool = True,
@@ -115,10 +115,12 @@ def build_cycles(
         end = t_end if t_end is not None else (float(imu["t"].iloc[-1]) if has_imu and imu is not None else 0.0)
         t = np.arange(0.0, end + 1e-9, cycle_s)
         pulses = np.full(t.size, np.nan)
-    metres_per_pulse = units.metres_per_pulse(wheel_diameter_m, teeth)
+    if has_tacho and (wheel_diameter_m is None or teeth is None):
+        raise ValueError("a tacho stream needs wheel_diameter_m and teeth")
     if has_tacho:
         p0 = pulses[np.isfinite(pulses)][0] if np.isfinite(pulses).any() else 0.0
-        d = (pulses - p0) * metres_per_pulse
+        assert wheel_diameter_m is not None and teeth is not None
+        d = (pulses - p0) * units.metres_per_pulse(wheel_diameter_m, teeth)
         d = np.maximum.accumulate(np.nan_to_num(d, nan=0.0))
         dd = np.diff(d, prepend=d[0])
         dtt = np.diff(t, prepend=t[0] - cycle_s)

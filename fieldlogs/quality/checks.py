@@ -28,7 +28,7 @@ Rows are file lines (header = line 1); for Parquet the 0-based row index + 2 (se
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -568,4 +568,18 @@ def check_run(run: Run | Path | str, db: DbRefs | None = None, limits: CheckLimi
                 spans[name] = (float(np.nanmin(t)), float(np.nanmax(t)))
     findings.extend(_check_overlap(run, spans, limits))
     findings.extend(check_receivers(run))
+    findings.extend(_usability(run))
     return findings
+
+
+def _usability(run: Run) -> list[Finding]:
+    """The usability rule's problems the stream checks do not state (``fieldlogs.quality.usability``):
+    a time base not in seconds, an implausible wheel — for a train's positioning or a road-rail
+    vehicle's possession check."""
+    from fieldlogs.quality.usability import Purpose, usability_findings
+
+    if run.meta is None:
+        return []
+    purpose = Purpose.POSSESSION if run.meta.vehicle_kind == "road_rail" else Purpose.POSITIONING
+    extra = [f for f in usability_findings(run, purpose) if f.column in ("t", "wheel_diameter_m", "teeth")]
+    return [replace(f, file=str(run.folder)) for f in extra]

@@ -41,6 +41,7 @@ import pandas as pd
 from schemas.frames import FIRST_DATA_LINE
 from schemas.logs import LOG_STREAMS
 from schemas.units import metres_per_pulse
+from schemas.vehicle import ANY_WHEEL_DIAMETER_M, TEETH_RANGE
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -153,12 +154,20 @@ def _line(row: int | np.integer[Any]) -> int:
 
 
 def _wheel(wheel_diameter_m: float | None, teeth: int | None) -> Iterator[TachoFinding]:
+    lo, hi = ANY_WHEEL_DIAMETER_M
     if wheel_diameter_m is None or not math.isfinite(wheel_diameter_m) or wheel_diameter_m <= 0:
         msg = f"run.json wheel_diameter_m {wheel_diameter_m!r} is not a positive number"
         yield TachoFinding(TachoIssue.WHEEL_DIAMETER, msg, value=lambda _k: wheel_diameter_m, limit=0)
+    elif not lo <= wheel_diameter_m <= hi:
+        msg = f"run.json wheel_diameter_m {wheel_diameter_m:.6g} m is not a rail wheel's ({lo:g}–{hi:g} m)"
+        yield TachoFinding(TachoIssue.WHEEL_DIAMETER, msg, value=lambda _k: wheel_diameter_m, limit=[lo, hi])
+    t_lo, t_hi = TEETH_RANGE
     if teeth is None or teeth <= 0:
         msg = f"run.json teeth {teeth!r} is not a positive number"
         yield TachoFinding(TachoIssue.TEETH, msg, value=lambda _k: teeth, limit=0)
+    elif not t_lo <= teeth <= t_hi:
+        msg = f"run.json teeth {teeth} is not {t_lo}–{t_hi} pulses per revolution"
+        yield TachoFinding(TachoIssue.TEETH, msg, value=lambda _k: teeth, limit=[t_lo, t_hi])
 
 
 def _values(t: FloatArray, p: FloatArray) -> Iterator[TachoFinding]:
