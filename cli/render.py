@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import re
 import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -11,6 +13,7 @@ from typing import Any
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
+from rich.text import Text
 
 from schemas.findings import Finding, count_by_severity
 from schemas.jsonable import jsonable
@@ -36,14 +39,51 @@ def print_json(data: Any, out: Console | None = None) -> None:
         out.print(text, markup=False, highlight=False, soft_wrap=True)
 
 
+#: Widest cell kept on one line whatever the terminal: numbers and codes are never split.
+MAX_UNSPLIT = 24
+
+
+def _unsplit_width(cells: Iterable[str]) -> int:
+    """Width that keeps every short cell (a number, a code) on one line."""
+    return min(max((len(c) for c in cells), default=1), MAX_UNSPLIT)
+
+
 def findings_table(findings: Sequence[Finding], title: str = "Findings") -> Table:
-    t = Table(title=title, show_lines=False)
-    for col in ("severity", "rule", "where", "value", "limit", "message"):
-        t.add_column(col, overflow="fold")
-    for f in findings[:MAX_TABLE_ROWS]:
+    """Findings as a table: severity, rule, value and limit never wrap (a number is never split
+    across lines, at 80 columns or piped); the location and the message wrap at spaces."""
+    shown = findings[:MAX_TABLE_ROWS]
+    base = _common_folder([f.file for f in shown if f.file])
+    rows = [(str(f.severity), f.rule, _where(f, base), _cell(f.value), _cell(f.limit), f.message) for f in shown]
+    t = Table(title=f"{title} (in {base})" if base and base not in title else title, show_lines=False)
+    for k, col in enumerate(("severity", "rule", "where", "value", "limit", "message")):
+        if col == "where":  # "file:row," stays whole; the column name may go to the next line
+            first = [r[k].split(" ", 1)[0] for r in rows]
+            t.add_column(col, overflow="fold", ratio=1, min_width=min(max(map(len, first), default=1), 2 * MAX_UNSPLIT))
+        elif col == "message":
+            t.add_column(col, overflow="fold", ratio=2)
+        else:
+            t.add_column(col, no_wrap=True, min_width=_unsplit_width(r[k] for r in rows))
+    for f, r in zip(shown, rows, strict=True):
         style = "red" if f.severity == "error" else "yellow"
-        t.add_row(f"[{style}]{f.severity}[/]", f.rule, f.where, _cell(f.value), _cell(f.limit), f.message)
+        t.add_row(f"[{style}]{r[0]}[/]", *r[1:])
     return t
+
+
+def _common_folder(files: Sequence[str]) -> str | None:
+    """The folder every finding's file lies in (its paths are then shown relative to it)."""
+    if len(files) < 1:
+        return None
+    try:
+        common = os.path.commonpath([os.path.dirname(os.path.abspath(f)) or "." for f in files])
+    except ValueError:  # paths on different drives
+        return None
+    return common if common not in ("", os.sep, ".") else None
+
+
+def _where(f: Finding, base: str | None) -> str:
+    if base and f.file and os.path.abspath(f.file).startswith(base + os.sep):
+        return f.where.replace(f.file, os.path.relpath(os.path.abspath(f.file), base), 1)
+    return f.where
 
 
 def _cell(v: Any) -> str:
@@ -57,13 +97,42 @@ def _cell(v: Any) -> str:
 
 
 def print_findings(findings: Sequence[Finding], console: Console | None = None, title: str = "Findings") -> None:
+    """Findings as a table when it fits the terminal, else one block per finding (a number
+    is never split across lines either way)."""
     out = console or globals()["console"]()
     if findings:
-        out.print(findings_table(findings, title))
+        table = findings_table(findings, title)
+        if _table_min_width(table) <= out.width:
+            out.print(table)
+        else:
+            for block in findings_blocks(findings[:MAX_TABLE_ROWS], title):
+                out.print(block, soft_wrap=False, overflow="fold")
         if len(findings) > MAX_TABLE_ROWS:
             out.print(f"… {len(findings) - MAX_TABLE_ROWS} more (use --format json for all)")
     counts = count_by_severity(findings)
     out.print(f"{counts['error']} error(s), {counts['warning']} warning(s)")
+
+
+#: Narrowest message column worth a table (below it the blocks read better).
+MIN_MESSAGE_WIDTH = 20
+
+
+def _table_min_width(table: Table) -> int:
+    """Width the table needs so that no unsplittable cell is cut: the columns' minimum widths
+    (the message at least MIN_MESSAGE_WIDTH), cell padding and the borders."""
+    widths = [max(c.min_width or 1, MIN_MESSAGE_WIDTH if c.header == "message" else 1) for c in table.columns]
+    return sum(widths) + 3 * len(widths) + 1
+
+
+def findings_blocks(findings: Sequence[Finding], title: str = "Findings") -> list[Text]:
+    """One block per finding for narrow terminals: a head line, then the message."""
+    base = _common_folder([f.file for f in findings if f.file])
+    blocks = [Text(f"{title} (in {base})" if base and base not in title else title, style="bold")]
+    for f in findings:
+        head = f"{f.severity} {f.rule} {_where(f, base)}"
+        extra = ", ".join(f"{k} {_cell(v)}" for k, v in (("value", f.value), ("limit", f.limit)) if v is not None)
+        blocks.append(Text(f"{head}{' — ' + extra if extra else ''}\n  {f.message}"))
+    return blocks
 
 
 def key_value_table(rows: Iterable[tuple[str, Any]], title: str | None = None) -> Table:
@@ -76,13 +145,22 @@ def key_value_table(rows: Iterable[tuple[str, Any]], title: str | None = None) -
 
 
 def frame_table(frame: Any, title: str | None = None, max_rows: int = 200) -> Table:
-    """A pandas DataFrame as a Rich table."""
+    """A pandas DataFrame as a Rich table; number columns never wrap (no number is split
+    across lines), text columns wrap at spaces."""
+    rows = [[_cell(v) for v in row] for row in frame.head(max_rows).itertuples(index=False, name=None)]
     t = Table(title=title)
-    for c in frame.columns:
-        t.add_column(str(c), overflow="fold")
-    for row in frame.head(max_rows).itertuples(index=False, name=None):
-        t.add_row(*[_cell(v) for v in row])
+    for k, c in enumerate(frame.columns):
+        cells = [r[k] for r in rows]
+        if all(_NUMBER.fullmatch(x) for x in cells if x):
+            t.add_column(str(c), no_wrap=True, min_width=_unsplit_width(cells), justify="right")
+        else:
+            t.add_column(str(c), overflow="fold")
+    for r in rows:
+        t.add_row(*r)
     return t
+
+
+_NUMBER = re.compile(r"[-+]?(\d[\d,]*(\.\d*)?|\.\d+)([eE][-+]?\d+)?( ?%| ?[a-zA-Z/²]{1,5})?|—|nan|inf|-inf")
 
 
 def progress(out: Console | None = None) -> Progress:

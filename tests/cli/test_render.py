@@ -1,0 +1,82 @@
+"""Terminal tables never split a number across lines (issue 15), at 80 columns and piped."""
+
+from __future__ import annotations
+
+import io
+import re
+
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from rich.console import Console
+
+from cli.render import frame_table, print_findings
+from schemas.enums import Severity
+from schemas.findings import Finding
+
+
+def _render(table: object, width: int) -> str:
+    buf = io.StringIO()
+    Console(file=buf, width=width, color_system=None).print(table)
+    return buf.getvalue()
+
+
+numbers = st.one_of(
+    st.integers(-(10**9), 10**9),
+    st.floats(-1e9, 1e9, allow_nan=False, allow_infinity=False),
+)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(st.tuples(numbers, numbers, st.integers(2, 999_999)), min_size=1, max_size=8),
+    st.sampled_from([60, 80, 100]),
+)
+def test_findings_numbers_stay_whole(rows: list[tuple[float, float, int]], width: int) -> None:
+    findings = [
+        Finding(
+            "log.gap",
+            Severity.WARNING,
+            "tacho",
+            f"gap of {v} s from t = {lim} to {row} s (more than 3 cycles of 0.1 s)",
+            file="/data/runs/2026-12-01/vehicle-0042/tacho.parquet",
+            row=row,
+            column="t",
+            value=v,
+            limit=lim,
+        )
+        for v, lim, row in rows
+    ]
+    buf = io.StringIO()
+    print_findings(findings, Console(file=buf, width=width, color_system=None))
+    text = buf.getvalue()
+    assert max(len(line) for line in text.splitlines()) <= width
+    for f in findings:
+        for cell in (_fmt(f.value), _fmt(f.limit), f"tacho.parquet:{f.row}"):
+            assert cell in text, (cell, text)
+
+
+def _fmt(v: object) -> str:
+    from cli.render import _cell
+
+    return _cell(v)
+
+
+@pytest.mark.parametrize("width", [80, 100])
+def test_frame_number_columns_never_wrap(width: int) -> None:
+    frame = pd.DataFrame(
+        {
+            "line_code": ["0420", "0420"],
+            "track": ["D", "U"],
+            "direction": ["down", "up"],
+            "n_corrections": [123456, 7],
+            "mean_correction_pct": [0.123456, 12.5],
+            "max_correction_pct": [1.98765, 0.5],
+            "distance_m": [1234567.25, 98765.5],
+            "refusal_reasons": ["entry_straight 2, min_speed 2, no_slip 2, upper_limit 1", ""],
+        }
+    )
+    text = _render(frame_table(frame), width)
+    for token in ("123456", "0.1235", "1.988", "1.235e+06", "9.877e+04"):
+        assert re.search(rf"(?<![\d.]){re.escape(token)}(?![\d])", text), (token, text)
