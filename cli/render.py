@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import re
 import sys
 from collections.abc import Iterable, Sequence
@@ -52,13 +51,12 @@ def findings_table(findings: Sequence[Finding], title: str = "Findings") -> Tabl
     """Findings as a table: severity, rule, value and limit never wrap (a number is never split
     across lines, at 80 columns or piped); the location and the message wrap at spaces."""
     shown = findings[:MAX_TABLE_ROWS]
-    base = _common_folder([f.file for f in shown if f.file])
-    rows = [(str(f.severity), f.rule, _where(f, base), _cell(f.value), _cell(f.limit), f.message) for f in shown]
-    t = Table(title=f"{title} (in {base})" if base and base not in title else title, show_lines=False)
+    rows = [(str(f.severity), f.rule, f.where, _cell(f.value), _cell(f.limit), f.message) for f in shown]
+    t = Table(title=title, show_lines=False)
     for k, col in enumerate(("severity", "rule", "where", "value", "limit", "message")):
-        if col == "where":  # "file:row," stays whole; the column name may go to the next line
+        if col == "where":  # "file:row," stays whole (a table that cannot hold it is printed as blocks)
             first = [r[k].split(" ", 1)[0] for r in rows]
-            t.add_column(col, overflow="fold", ratio=1, min_width=min(max(map(len, first), default=1), 2 * MAX_UNSPLIT))
+            t.add_column(col, overflow="fold", ratio=1, min_width=max(map(len, first), default=1))
         elif col == "message":
             t.add_column(col, overflow="fold", ratio=2)
         else:
@@ -67,23 +65,6 @@ def findings_table(findings: Sequence[Finding], title: str = "Findings") -> Tabl
         style = "red" if f.severity == "error" else "yellow"
         t.add_row(f"[{style}]{r[0]}[/]", *r[1:])
     return t
-
-
-def _common_folder(files: Sequence[str]) -> str | None:
-    """The folder every finding's file lies in (its paths are then shown relative to it)."""
-    if len(files) < 1:
-        return None
-    try:
-        common = os.path.commonpath([os.path.dirname(os.path.abspath(f)) or "." for f in files])
-    except ValueError:  # paths on different drives
-        return None
-    return common if common not in ("", os.sep, ".") else None
-
-
-def _where(f: Finding, base: str | None) -> str:
-    if base and f.file and os.path.abspath(f.file).startswith(base + os.sep):
-        return f.where.replace(f.file, os.path.relpath(os.path.abspath(f.file), base), 1)
-    return f.where
 
 
 def _cell(v: Any) -> str:
@@ -106,7 +87,7 @@ def print_findings(findings: Sequence[Finding], console: Console | None = None, 
             out.print(table)
         else:
             for block in findings_blocks(findings[:MAX_TABLE_ROWS], title):
-                out.print(block, soft_wrap=False, overflow="fold")
+                out.print(block, soft_wrap=True)  # long lines are the terminal's to wrap: no split
         if len(findings) > MAX_TABLE_ROWS:
             out.print(f"… {len(findings) - MAX_TABLE_ROWS} more (use --format json for all)")
     counts = count_by_severity(findings)
@@ -126,10 +107,9 @@ def _table_min_width(table: Table) -> int:
 
 def findings_blocks(findings: Sequence[Finding], title: str = "Findings") -> list[Text]:
     """One block per finding for narrow terminals: a head line, then the message."""
-    base = _common_folder([f.file for f in findings if f.file])
-    blocks = [Text(f"{title} (in {base})" if base and base not in title else title, style="bold")]
+    blocks = [Text(title, style="bold")]
     for f in findings:
-        head = f"{f.severity} {f.rule} {_where(f, base)}"
+        head = f"{f.severity} {f.rule} {f.where}"
         extra = ", ".join(f"{k} {_cell(v)}" for k, v in (("value", f.value), ("limit", f.limit)) if v is not None)
         blocks.append(Text(f"{head}{' — ' + extra if extra else ''}\n  {f.message}"))
     return blocks
