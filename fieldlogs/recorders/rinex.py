@@ -96,14 +96,15 @@ def _walk2(path: Path, body: list[str], first: int, n_lines: int) -> tuple[list[
         if not ln.strip():
             raise InputError("blank line where an epoch record was expected (blank epoch)", path=path, row=first + i)
         try:
+            flag, n = int(ln[28]), int(ln[29:32])
+            if 2 <= flag <= 5:  # n special (header) records follow; the epoch fields may be blank
+                skipped += n
+                i += 1 + n
+                continue
             yy, mo, d, h, mi = (int(ln[k : k + 3]) for k in (0, 3, 6, 9, 12))
-            s, flag, n = float(ln[15:26]), int(ln[28]), int(ln[29:32])
+            s = float(ln[15:26])
         except ValueError as exc:
             raise InputError("blank or malformed epoch record", path=path, row=first + i) from exc
-        if 2 <= flag <= 5:  # n special (header) records follow
-            skipped += n
-            i += 1 + n
-            continue
         sat_text = ln[32:68]
         extra = (n - 1) // 12 if n else 0
         for k in range(extra):

@@ -118,6 +118,10 @@ def _epochs(path: Path, body: pd.Series, first_line: int) -> tuple[np.ndarray, p
             }.items()
         }
     )
+    event = f["flag"].between(2, 5).to_numpy()  # special events: the epoch fields may be blank
+    f.loc[event, ["y", "mo", "d", "h", "mi", "s"]] = f.loc[event, ["y", "mo", "d", "h", "mi", "s"]].fillna(
+        {"y": 1980, "mo": 1, "d": 6, "h": 0, "mi": 0, "s": 0.0}
+    )
     bad = f[["y", "mo", "d", "h", "mi", "s", "flag", "n"]].isna().any(axis=1).to_numpy()
     if bad.any():
         j = int(ep_idx[np.flatnonzero(bad)[0]])

@@ -164,6 +164,16 @@ class BaliseCfg:
 
 
 @dataclass(frozen=True)
+class GnssRawCfg:
+    enabled: bool = False
+    systems: tuple[str, ...] = ("G", "E", "J")
+    interval_s: float = 1.0
+    antennas_x_m: tuple[float, ...] = (8.0, -8.0)
+    antenna_z_m: float = 3.8
+    corridor: str = "open"
+
+
+@dataclass(frozen=True)
 class Scenario:
     """Every knob of a simulated run (see ``fieldlogs/simulate/scenarios/default.toml``)."""
 
@@ -181,6 +191,7 @@ class Scenario:
     gps: GpsCfg = field(default_factory=GpsCfg)
     radar: RadarCfg = field(default_factory=RadarCfg)
     balise: BaliseCfg = field(default_factory=BaliseCfg)
+    gnss_raw: GnssRawCfg = field(default_factory=GnssRawCfg)
     source: str = field(default="<default scenario>", compare=False)
     """Where it was loaded from (for messages); not a knob."""
 
@@ -271,7 +282,9 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 def _check(s: Scenario) -> None:
     """Every knob inside its range; the first problem is raised naming its key."""
-    for check in (_check_run, _check_positive, _check_non_negative, _check_bounds, _check_spans, _check_episodes):
+    for check in (
+        _check_run, _check_positive, _check_non_negative, _check_bounds, _check_spans, _check_episodes, _check_gnss_raw,
+    ):  # fmt: skip
         problem = check(s)
         if problem is not None:
             raise ScenarioError(problem[1], path=s.source, key=problem[0])
@@ -395,6 +408,22 @@ def _check_episodes(s: Scenario) -> Problem:
             return f"{key}.depth", "must be between 0 and 1 (fraction of speed)"
         if not (ep.duration_s > 0 and ep.t0_s >= 0):
             return key, "needs t0_s ≥ 0 and duration_s > 0"
+    return None
+
+
+def _check_gnss_raw(s: Scenario) -> Problem:
+    g = s.gnss_raw
+    if not g.systems or any(x not in ("G", "E", "J") for x in g.systems):
+        return "gnss_raw.systems", "each must be G, E or J (at least one)"
+    steps = g.interval_s / 0.01
+    if not (math.isfinite(g.interval_s) and 0.1 <= g.interval_s <= 60 and abs(steps - round(steps)) < 1e-6):
+        return "gnss_raw.interval_s", "must be a multiple of 0.01 s between 0.1 and 60"
+    if not 1 <= len(g.antennas_x_m) <= 4 or any(not (math.isfinite(x) and -10 <= x <= 10) for x in g.antennas_x_m):
+        return "gnss_raw.antennas_x_m", "one to four antennas, each within ±10 m of the car centre"
+    if not (math.isfinite(g.antenna_z_m) and 0 <= g.antenna_z_m <= 8):
+        return "gnss_raw.antenna_z_m", "must be between 0 and 8 m above the rail"
+    if g.corridor not in ("open", "mixed"):
+        return "gnss_raw.corridor", "must be 'open' or 'mixed'"
     return None
 
 
