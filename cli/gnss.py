@@ -51,7 +51,7 @@ def _systems(text: str | None) -> tuple[str, ...] | None:
 
 
 def _km(v: object) -> str:
-    return format_km(float(v)) if isinstance(v, int | float) and v == v else ""  # noqa: PLR0124 (NaN)
+    return format_km(float(v)) if isinstance(v, int | float) and v == v else ""
 
 
 def _table_frame(report: GnssPositionReport) -> pd.DataFrame:

@@ -94,7 +94,8 @@ def _sat_lists(ep: Epochs) -> tuple[list[list[str]], list[list[str]], list[dict[
 def _lsq_columns(tb: pd.DataFrame, track: GisTrack) -> pd.DataFrame:
     pos = tb[["lsq_x_m", "lsq_y_m", "lsq_z_m"]].to_numpy(dtype=float)
     ok = tb["lsq_available"].to_numpy(bool) & np.all(np.isfinite(pos), axis=1)
-    out = pd.DataFrame(index=tb.index, columns=["lsq_lat", "lsq_lon", "lsq_h_m", "lsq_km_m", "lsq_offset_m"], dtype=float)
+    cols = ["lsq_lat", "lsq_lon", "lsq_h_m", "lsq_km_m", "lsq_offset_m"]
+    out = pd.DataFrame(np.nan, index=tb.index, columns=cols)
     if ok.any():
         lat, lon, h = ecef_to_geodetic(pos[ok])
         s = track.line.project(pos[ok])
@@ -108,7 +109,7 @@ def _availability(tb: pd.DataFrame) -> dict[str, Any]:
     per_epoch = tb.groupby("epoch")[["ok", "lsq_available"]].any()
     by_rx = tb.groupby("receiver")[["ok", "lsq_available"]].mean()
     return {
-        "epochs": int(len(per_epoch)),
+        "epochs": len(per_epoch),
         "constrained": float(per_epoch["ok"].mean()) if len(per_epoch) else 0.0,
         "unconstrained": float(per_epoch["lsq_available"].mean()) if len(per_epoch) else 0.0,
         "by_receiver": {
@@ -147,7 +148,8 @@ def position_report(
     tb = sols.table.copy()
     tb["ok"] = tb["ok"].astype(bool)
     used, excluded, other = _sat_lists(sols.result.observations)
-    tb["used"], tb["excluded"], tb["not_used"] = used, excluded, other
+    tb["used"], tb["excluded"] = used, excluded
+    tb["not_used"] = pd.Series(other, index=tb.index, dtype=object)
     tb["available"] = tb["ok"]
     tb = pd.concat([tb, _lsq_columns(tb, track)], axis=1)
     if "antenna_distance_ok" not in tb:

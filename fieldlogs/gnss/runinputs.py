@@ -114,13 +114,14 @@ def run_gnss(run: Run) -> RunGnss | None:
         )
     meta = run.meta
     antennas = antennas_of(meta.vehicle if meta is not None else None)
-    missing = sorted(set(obs["receiver"].astype(str)) - set(antennas))
+    observed = {str(r) for r in pd.unique(obs["receiver"].to_numpy(dtype=object))}
+    missing = sorted(observed - set(antennas))
     if missing:
         raise GnssInputError(
             f"run.json vehicle block has no antenna for receiver(s) {', '.join(missing)}",
             reason="no_antenna",
             path=str(run.folder / "run.json"),
         )
-    antennas = {r: a for r, a in antennas.items() if r in set(obs["receiver"].astype(str))}
+    antennas = {r: a for r, a in antennas.items() if r in observed}
     t = np.unique(obs["t"].to_numpy(dtype=float))
     return RunGnss(obs, nav, iono_params(meta.gnss if meta is not None else None), antennas, t, epoch_keys(t))

@@ -2,8 +2,9 @@
 decompressed by ``common.read_text``) and the RINEX 2.11 observation reader.
 
 RINEX 2.11 observations: epoch records (``yy mm dd hh mm ss.sssssss  flag n`` + up to 12
-satellites per line, continued on following lines) are walked in Python (one step per
-epoch); each satellite's lines are padded to 80 columns and joined, then all fields are
+satellites per line, continued on following lines; event records, flags 2–5, are skipped with
+their n header records and may leave the epoch fields blank) are walked in Python (one step
+per epoch); each satellite's lines are padded to 80 columns and joined, then all fields are
 converted in one vectorised pass as for RINEX 3. Observation types map onto RINEX 3 codes
 (RINEX 3.04 §5.1 table): GPS/QZSS C1→C1C, P1→C1W, C2→C2L, P2→C2W, C5→C5X, band-1 phase,
 Doppler, C/N0 with C1 (attribute C, else W), band 2 with P2 (W, else L); GLONASS C1/P1 →

@@ -7,7 +7,8 @@ georinex parses line by line in Python, about 40× slower (``bench/bench_import.
 is the independent reader in the round-trip tests.
 
 An epoch with flag 0/1 is followed by exactly its number of satellite records; flags 2–5
-by that many header records (skipped, counted); flag 6 (cycle slips) is skipped. An epoch
+by that many header records (skipped, counted; their epoch fields may be blank, as receivers
+write them for "start of kinematic data"); flag 6 (cycle slips) is skipped. An epoch
 whose records are missing or blank, a satellite of an unknown system, or a system without
 ``SYS / # / OBS TYPES`` is refused with its line. Epoch times are converted to GPS time
 from the file's time system (GPS, GAL, QZS: same scale; BDS: +14 s; GLO/UTC: leap seconds).

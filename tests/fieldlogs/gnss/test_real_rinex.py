@@ -83,3 +83,18 @@ def test_real_files_import_and_position(case: str, tmp_path: Path) -> None:
         err = np.abs(ok["km_m"].to_numpy() - 2000.0)
         assert err.max() < 6.0 and (err <= ok["uncertainty_m"].to_numpy()).all()
         assert (ok["n_used"] >= 5).all() and rep.availability["constrained"] == 1.0
+
+
+def test_a_rinex3_event_record_with_blank_epoch_fields_is_skipped(tmp_path: Path) -> None:
+    from fieldlogs.recorders.rinex import read_rinex
+
+    src = DATA / CASES["netr9-rinex304"][0]
+    lines = src.read_text().splitlines()
+    end = next(i for i, ln in enumerate(lines) if "END OF HEADER" in ln)
+    event = [">                              3  1", f"{'new site occupation (test)':<60}COMMENT"]
+    edited = tmp_path / "event.rnx"
+    edited.write_text("\n".join(lines[: end + 1] + event + lines[end + 1 :]) + "\n")
+    a, b = read_rinex(src), read_rinex(edited)
+    assert b.skipped["event records (epoch flags 2-5)"] == 1
+    keep = [c for c in a.frames["gnss_obs"].columns if c != "receiver"]  # named after the file: no MARKER NAME
+    assert b.frames["gnss_obs"][keep].equals(a.frames["gnss_obs"][keep])
