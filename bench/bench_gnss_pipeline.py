@@ -8,9 +8,9 @@ D-GPS corrections); every third run through the seeded mixed corridor (buildings
 overpasses, a short tunnel). Each run goes through the pipeline with the GNSS aid off and on.
 Printed: cycles with a claimed position, |km error| ≤ margin, wrong-track cycles, the largest
 |km error|, the margin's percentiles over the claimed cycles with and without the aid, the
-aid's events, the pipeline time per run (wall and cpu: the machine is shared); ``--png`` writes the margin against the distance
-travelled of the first run, with and without the aid. Figures: bench/NOTES.md ("GNSS in the
-pipeline").
+aid's events, the pipeline time per run (wall and cpu: the machine is shared); ``--png``
+writes the margin against the distance travelled of the first run, with and without the aid.
+Figures: bench/NOTES.md ("GNSS in the pipeline").
 """
 
 from __future__ import annotations
