@@ -18,7 +18,7 @@ POSITIONS = Table(
         Column("km_equipment_m", "float", "Equipment kilometrage", unit="m", nullable=True),
         Column("speed_mps", "float", "Speed estimate", unit="m/s"),
         Column("margin_m", "float", "Safety margin: |km error| ≤ margin", unit="m", nullable=True),
-        Column("last_fix_source", "str", "balise, feature, gps or none", nullable=True),
+        Column("last_fix_source", "str", "balise, feature, gps, gnss or none", nullable=True),
     ),
 )
 
