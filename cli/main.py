@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from cli import audit, config, db, demo, gis, logs, possession, radar, run, schema, simulate
+from cli import audit, config, db, demo, gis, gnss, logs, possession, radar, run, schema, simulate
 from dbtools.build import tool_version
 
 app = typer.Typer(
@@ -22,6 +22,7 @@ app.add_typer(logs.app, name="logs")
 app.add_typer(possession.app, name="possession")
 app.add_typer(config.app, name="config")
 app.add_typer(radar.app, name="radar")
+app.add_typer(gnss.app, name="gnss")
 app.command("simulate")(simulate.simulate)
 app.command("run")(run.run)
 app.command("audit")(audit.audit)

@@ -34,14 +34,16 @@ def simulate(
         LogFmt.parquet,
         "--format",
         help="parquet (zstd) or csv streams; nmea, ubx or rinex: Parquet streams plus the GNSS part as a "
-        "recorder writes it, in RUN_DIR/recorder/.",
+        "recorder writes it, in RUN_DIR/recorder/ (rinex switches the scenario's [gnss_raw] on: raw observations "
+        "of two receivers; ubx includes them when the scenario has them).",
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing run folder."),
 ) -> None:
     """Simulate a field-log run: IMU, tacho, GPS, balises, cab (+ truth, radar) from the DB's track.
 
     Speed profile with curve limits and station stops, 3-D attitude from the GIS geometry,
-    slips/slides, wheel wear, GPS outages; everything seeded. Exit 2 on a bad scenario
+    slips/slides, wheel wear, GPS outages; everything seeded; raw GNSS observations (gnss_obs,
+    gnss_nav) of a GPS/Galileo/QZSS constellation with [gnss_raw] enabled = true. Exit 2 on a bad scenario
     (the message names the file and the key) or a line/track not in the DB, 3 when the
     output exists without --force.
 

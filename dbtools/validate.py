@@ -5,7 +5,7 @@ Rule families, each in its own pure module (frames in → list of findings):
 * schema — :func:`schemas.frames.check_frame` (types, nulls, enumerations, lat/lon inside
   the operating area, duplicate keys) and :mod:`dbtools.rules.schema` (radius vs attribute,
   non-finite numbers);
-* GIS grid — :mod:`dbtools.rules.gis`;
+* GIS grid — :mod:`dbtools.rules.gis`; its heights — :mod:`dbtools.rules.heights`;
 * balises — :mod:`dbtools.rules.balises`;
 * feature points — :mod:`dbtools.rules.features`;
 * DB file — :func:`dbtools.database.integrity_findings` (SQLite integrity_check,
@@ -28,6 +28,7 @@ from dbtools.rules.common import Locator
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.features import check_features
 from dbtools.rules.gis import check_gis
+from dbtools.rules.heights import check_heights
 from dbtools.rules.schema import check_values
 from dbtools.sources import read_source_set
 from schemas.findings import Finding
@@ -52,6 +53,7 @@ def validate_network(
     findings.extend(check_values(network.tables, config, loc))
     grid = grid_index(network)
     findings.extend(check_gis(grid, network.km_breaks, config, loc))
+    findings.extend(check_heights(network.gis, network.meta, config, loc))
     findings.extend(check_balises(network.balises, grid, config, loc))
     findings.extend(check_features(network.feature_points, grid, config, loc))
     return findings

@@ -2,7 +2,7 @@
 
 One TOML file (``--config FILE.toml``) configures every command: ``run``, ``audit`` and
 ``gis verify`` read the pipeline's sections (``[odometry]``, ``[balise]``, ``[feature]``,
-``[gps]``, ``[margin]``, ``cycle_s``), ``possession check`` reads ``[gps]`` and
+``[gps]``, ``[margin]``, ``[gnss]``, ``cycle_s``), ``possession check`` reads ``[gps]`` and
 ``[possession]``; each command refuses unknown sections and keys, wrong types and values out
 of range. ``trainpos config show`` prints the whole tree (or one section) with every
 default, unit, range and meaning as commented TOML; fed back with ``--config`` it changes
@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from fieldlogs.gnss.config import GnssConfig
 from fieldlogs.pipeline.config import (
     CYCLE_S,
     BaliseConfig,
@@ -39,6 +40,7 @@ class SuiteConfig:
     feature: FeatureConfig = field(default_factory=FeatureConfig)
     gps: GpsConfig = field(default_factory=GpsConfig)
     margin: MarginConfig = field(default_factory=MarginConfig)
+    gnss: GnssConfig = field(default_factory=GnssConfig)
     possession: PossessionConfig = field(default_factory=PossessionConfig)
     cycle_s: float = setting(**CYCLE_S)
 
@@ -47,7 +49,9 @@ class SuiteConfig:
 
     @property
     def pipeline(self) -> PipelineConfig:
-        return PipelineConfig(self.odometry, self.balise, self.feature, self.gps, self.margin, self.cycle_s)
+        return PipelineConfig(
+            self.odometry, self.balise, self.feature, self.gps, self.margin, self.cycle_s, gnss=self.gnss
+        )
 
     @classmethod
     def from_toml(cls, path: Path) -> SuiteConfig:

@@ -90,6 +90,9 @@ class FixSource(StrEnum):
     BALISE = "balise"
     FEATURE = "feature"
     GPS = "gps"
+    GNSS = "gnss"
+    """A track-constrained GNSS epoch from raw pseudoranges [S002]: corrects the km, but is no
+    absolute fix for the position-correction % (that measures the wheel between balises)."""
 
     @property
     def absolute(self) -> bool:
@@ -118,6 +121,10 @@ class EventType(StrEnum):
     CROSSOVER = "crossover"
     TRACK_CHANGE = "track_change"
     GPS_TRACK_DISAGREES = "gps_track_disagrees"
+    INITIAL_POSITION_GNSS = "initial_position_gnss"
+    GNSS_CORRECTION = "gnss_correction"
+    GNSS_REFUSED = "gnss_refused"
+    GNSS_TRACK_DISAGREES = "gnss_track_disagrees"
 
 
 EVENT_MEANING: dict[EventType, str] = {
@@ -140,6 +147,14 @@ EVENT_MEANING: dict[EventType, str] = {
     EventType.CROSSOVER: "the offset from the decided track moved across to the other track [S001 §7]",
     EventType.TRACK_CHANGE: "after a crossover GPS decided the other track (uncertain until a pair confirms it)",
     EventType.GPS_TRACK_DISAGREES: "a GPS decision contradicts the balise-given track without a crossover",
+    EventType.INITIAL_POSITION_GNSS: "a track-constrained GNSS epoch set the initial position on the GPS-decided "
+    "track (its own uncertainty) [S002]",
+    EventType.GNSS_CORRECTION: "a track-constrained GNSS epoch whose uncertainty is below the margin corrected "
+    "the km [S002]",
+    EventType.GNSS_REFUSED: "notice: the GNSS aid cannot run on this track (no heights, …) or an epoch "
+    "contradicts the estimate; no correction",
+    EventType.GNSS_TRACK_DISAGREES: "constrained fits on another track of the line are far better: evidence "
+    "against the track in force (kept) [S002]",
 }
 
 #: Events that correct the km, and the one the position-correction % is defined on [S003 §5.2].

@@ -19,7 +19,7 @@ POSITIONS = Table(
         Column("km_equipment_m", "float", "Equipment kilometrage", unit="m", nullable=True),
         Column("speed_mps", "float", "Speed estimate", unit="m/s"),
         Column("margin_m", "float", "Safety margin: |km error| ≤ margin", unit="m", nullable=True),
-        Column("last_fix_source", "str", "balise, feature, gps or none", nullable=True),
+        Column("last_fix_source", "str", "balise, feature, gps, gnss or none", nullable=True),
         Column("km_head_m", "float", "km of the vehicle's leading end (needs its geometry)", unit="m", nullable=True),
         Column(
             "km_tail_m", "float", "km of its trailing end: the vehicle occupies [tail, head]", unit="m", nullable=True

@@ -65,6 +65,18 @@ class ValidationConfig:
     min_straight_m: float = 20.0
     """Minimum length of the entry (rows 1–2) and exit (rows 5–6) straights [m] (SPEC §5.3)."""
 
+    # -- GIS heights (dbtools.rules.heights) -----------------------------------------------
+    height_grade_warning_permille: float = 40.0
+    """|grade| between two grid points above this: warning (``gis.height_grade``) [‰]; main
+    adhesion lines stay below ~35 ‰."""
+    height_grade_error_permille: float = 100.0
+    """… above this: error — no adhesion railway is this steep (mountain lines reach 80 ‰) [‰]."""
+    height_radius_warning_m: float = 1000.0
+    """Vertical-curve radius below this: warning (``gis.height_curvature``) [m]; railways use
+    2,000–4,000 m and more, survey noise of a few cm on a 20 m grid stays above ~5,000 m."""
+    height_radius_error_m: float = 250.0
+    """… below this: error — a spike of ~0.8 m on one point [m]."""
+
     # -- reporting -------------------------------------------------------------------------
     max_findings_per_rule: int = 1000
     """Findings listed per rule; the rest are summed up in one extra finding."""

@@ -18,7 +18,14 @@ Modules, one concern each:
 * ``position`` — one run: pre-checks, geometry, constrained and unconstrained solutions;
 * ``constellation`` / ``simulate`` / ``scenario`` — GPS/Galileo/QZSS broadcast ephemerides,
   observations, a synthetic 3-D track with runs and corridors; ``experiment`` — seeded cases
-  and their statistics for the bench and the tests.
+  and their statistics for the bench and the tests; ``trainsim`` — the same driven by the
+  train simulator's truth (``[gnss_raw]``);
+* ``gis`` — the DB's GIS grid of a line/track as the 3-D polyline (heights required,
+  ellipsoidal) with km; ``runinputs`` — a run's observations, ephemerides, ionosphere
+  parameters and antennas; ``ontrack`` — a run solved on a track, the best receiver per epoch,
+  the evidence between two tracks; ``report`` — ``trainpos gnss position``; ``config`` — the
+  ``[gnss]`` section.
 
-Nothing here imports the pipeline; phase 2 wires it in as an aid.
+Nothing here imports the pipeline: its GNSS aid (``fieldlogs.pipeline.aids.gnss``) uses
+``ontrack``.
 """

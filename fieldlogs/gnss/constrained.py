@@ -8,7 +8,8 @@ The unknowns drop from (x, y, z, b) to (s, b_1..b_K) [S002 fig. 1], so one recei
 * residual v_r = ρ_c,r − |r_s − A(s)| − sagnac − b_k; Jacobian H_r = [g_r, e_k] with the
   along-track geometry g_r = ∂ρ/∂s = −û_r·t (û receiver→satellite, t the tangent);
 * weighted normal equations (HᵀWH)δ = HᵀWv, W = diag(1/σ_r²) from ``errormodel``;
-  iterate from the prior s (or a coarse search along the whole track) to |δ| < 1 mm;
+  iterate from a given start, the prior s, or a coarse search along the whole track (every
+  ``coarse_step_m``, the best fit of the clocks eliminated) to |δ| < 1 mm;
 * 1σ along the track σ_s = √[(HᵀWH)⁻¹]_ss and the along-track DOP ADOP = √[(HᵀH)⁻¹]_ss.
   Two satellites ahead of and behind the train at low elevation give g ≈ ±cos E and
   σ_s ≈ σ/(√2 cos E) — the paper's best case.
@@ -483,7 +484,10 @@ def solve_constrained(
     e = rows.pr_m.shape[0]
     used = rows.usable & np.isfinite(rows.pr_m) & np.isfinite(rows.sigma_m) & np.all(np.isfinite(rows.sat_pos), axis=-1)
     if s_init is not None:
-        s0 = np.asarray(s_init, dtype=float)
+        s0 = np.asarray(s_init, dtype=float).copy()
+        miss = np.flatnonzero(~np.isfinite(s0))
+        if miss.size:  # no start given: the coarse search for those epochs
+            s0[miss] = coarse_start(track, rows.take(miss), ant, used[miss], cfg.coarse_step_m)
     elif prior is not None:
         s0 = np.asarray(prior[0], dtype=float)
     else:

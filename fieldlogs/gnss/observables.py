@@ -301,6 +301,18 @@ def apply_geometry(
     return replace(ep, az=az, el=el, iono_m=iono, tropo_m=tropo, sigma_m=sigma, pr_corr_m=pr_corr)
 
 
+def epoch_keys(t: FloatArray, tol_s: float = 0.02) -> IntArray:
+    """One common index per epoch across receivers: receivers tag their epochs in their own
+    clock (an unsteered clock is off by up to a millisecond), so run times closer than
+    ``tol_s`` are one epoch (times sorted, a new epoch where the step exceeds ``tol_s``)."""
+    ta = np.asarray(t, dtype=float)
+    order = np.argsort(ta, kind="stable")
+    new = np.concatenate([[True], np.diff(ta[order]) > tol_s]) if ta.size else np.zeros(0, dtype=bool)
+    keys = np.empty(ta.size, dtype=np.int64)
+    keys[order] = np.cumsum(new) - 1
+    return keys
+
+
 def apply_masks(ep: Epochs, *, elevation_mask_deg: float = 10.0, cn0_mask_dbhz: float = 30.0) -> None:
     """The paper's elevation and C/N0 masks [S002]: flag rows below either (in place)."""
     ep.flag(ep.el < np.radians(elevation_mask_deg), FLAG_LOW_ELEVATION)

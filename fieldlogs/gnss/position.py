@@ -9,7 +9,11 @@ fault detection and exclusion → the computed distance between the two antennas
 k_ff·√(σ_a² + σ_b²) + 0.5 m); epochs failing it are marked ``antenna_distance``.
 
 Geometry (azimuth, elevation, atmosphere, σ) is evaluated at the prior's track point when a
-prior is given, else in two passes: at the track's middle, then at the first solution.
+prior is given, else in two passes: at the track's middle, then at the first solution. Without
+a prior the Gauss–Newton starts from the projection onto the track of the unconstrained
+solution where that one is available and within 100 m of the track, else from the coarse
+search along the whole track. Receivers' epochs are paired by ``observables.epoch_keys``
+(their own clocks tag them up to a millisecond apart).
 Epochs the satellites alone cannot carry (one satellite, poor geometry, an unresolved fault)
 are then solved again with the receiver's coasted clock (``coasting``) as one more
 observation; those that pass are marked ``clock_aided``. This goes beyond the paper's method
@@ -39,6 +43,7 @@ from fieldlogs.gnss.observables import (
     apply_masks,
     build_epochs,
     carrier_smoothed,
+    epoch_keys,
 )
 from fieldlogs.gnss.prechecks import check_receiver_pair, compare_navigation, flag_nav_mismatch
 from fieldlogs.gnss.skymask import SkyMask
@@ -139,7 +144,8 @@ def position_run(
     s_approx = pr[0] if pr is not None else np.full(ep.t.size, 0.5 * track.length_m)
     ep = _geometry(ep, track, s_approx, iono, sky_mask, cfg)
     dirs = np.full(ep.t.size, float(direction))
-    sol = _solve_receivers(ep, track, antennas, names, dirs, pr, cfg)
+    seed = _lsq_seed(ep, track, antennas, dirs, cfg) if pr is None else None
+    sol = _solve_receivers(ep, track, antennas, names, dirs, pr, cfg, s_init=seed)
     if pr is None:  # second pass: geometry at the first solution
         s1 = np.where(np.isfinite(sol.table["s_m"].to_numpy()), sol.table["s_m"].to_numpy(), s_approx)
         ep = _geometry(replace_flags(ep), track, s1, iono, sky_mask, cfg)
@@ -152,6 +158,35 @@ def position_run(
     if len(names) == 2:
         table = _antenna_distance(table, track, antennas, names, direction, cfg)
     return PositionResult(table, ep, sol.mdb)
+
+
+def _lsq_seed(
+    ep: Epochs, track: TrackLine, antennas: Mapping[str, Antenna], dirs: np.ndarray, cfg: PositionConfig
+) -> np.ndarray:
+    """Start s of the epochs whose unconstrained solution is available and within
+    ``SEED_MAX_OFFSET_M`` of the track: its projection, less the antenna's along-track offset;
+    NaN elsewhere (those epochs get the coarse search along the whole track)."""
+    lsq = solve_lsq(
+        np.nan_to_num(ep.sat_pos, nan=0.0),
+        np.nan_to_num(ep.pr_corr_m, nan=0.0),
+        np.nan_to_num(ep.sigma_m, nan=1.0),
+        ep.usable & np.isfinite(ep.pr_corr_m),
+        ep.system,
+        np.nan_to_num(ep.omega_e, nan=0.0),
+        max_pdop=cfg.max_pdop,
+    )
+    seed = np.full(ep.t.size, np.nan)
+    ok = np.flatnonzero(lsq.available)
+    if ok.size:
+        s_ant = track.project(lsq.pos[ok])
+        near = np.linalg.norm(lsq.pos[ok] - track.point(s_ant), axis=1) <= SEED_MAX_OFFSET_M
+        along = np.array([antennas[r].along_m if r in antennas else 0.0 for r in ep.receiver[ok]])
+        seed[ok[near]] = (s_ant - dirs[ok] * along)[near]
+    return seed
+
+
+#: An unconstrained solution farther than this from the track seeds no constrained one [m].
+SEED_MAX_OFFSET_M = 100.0
 
 
 def _prepare(
@@ -199,7 +234,7 @@ class _Solved:
 
 _COLUMNS = (
     "s_m", "clock_m", "sigma_clock_m", "sigma_m", "uncertainty_m", "protection_m", "adop", "test", "dof",
-    "n_used", "n_excluded", "status_code",
+    "n_used", "n_excluded", "residual_rms_m", "status_code",
 )  # fmt: skip
 
 
@@ -241,7 +276,8 @@ def _solve_receivers(
             ("s_m", sol.s), ("clock_m", sol.clock_m[:, 0]), ("sigma_clock_m", sol.sigma_clock_m[:, 0]),
             ("sigma_m", sol.sigma_s), ("uncertainty_m", sol.uncertainty_m), ("protection_m", sol.protection_m),
             ("adop", sol.adop), ("test", sol.test), ("dof", sol.dof), ("n_used", sol.n_used),
-            ("n_excluded", sol.excluded.sum(axis=1) + sol.no_track.sum(axis=1)), ("status_code", sol.status),
+            ("n_excluded", sol.excluded.sum(axis=1) + sol.no_track.sum(axis=1)),
+            ("residual_rms_m", _rms(sol.residual_m)), ("status_code", sol.status),
         ):  # fmt: skip
             cols[c][sel] = v
         out.excluded[sel], out.no_track[sel], out.mdb[sel] = sol.excluded, sol.no_track, sol.mdb_m
@@ -249,6 +285,13 @@ def _solve_receivers(
     out.table["status"] = out.table["status_code"].map(STATUS_NAMES)
     out.table["clock_aided"] = False
     return out
+
+
+def _rms(residual_m: np.ndarray) -> np.ndarray:
+    """RMS of the used rows' residuals per epoch (NaN without any)."""
+    n = np.isfinite(residual_m).sum(axis=1)
+    ss = np.nansum(np.where(np.isfinite(residual_m), residual_m, 0.0) ** 2, axis=1)
+    return np.where(n > 0, np.sqrt(ss / np.maximum(n, 1)), np.nan)
 
 
 def _coast(
@@ -311,8 +354,9 @@ def _antenna_distance(
 ) -> pd.DataFrame:
     """The paper's final check: computed vs real distance between the two antennas."""
     a, b = names
-    ta = table[table["receiver"] == a].set_index(np.round(table.loc[table["receiver"] == a, "t"], 3))
-    tb = table[table["receiver"] == b].set_index(np.round(table.loc[table["receiver"] == b, "t"], 3))
+    table = table.assign(t_key=epoch_keys(table["t"].to_numpy(float)))
+    ta = table[table["receiver"] == a].drop_duplicates("t_key").set_index("t_key")
+    tb = table[table["receiver"] == b].drop_duplicates("t_key").set_index("t_key")
     common = ta.index.intersection(tb.index)
     pa, _ = track.antenna(ta.loc[common, "s_m"].to_numpy(float), antennas[a], direction)
     pb, _ = track.antenna(tb.loc[common, "s_m"].to_numpy(float), antennas[b], direction)
@@ -336,6 +380,6 @@ def _antenna_distance(
             "antenna_distance_ok": ok | ~both,
         }
     )
-    table = table.assign(t_key=np.round(table["t"], 3)).merge(check, on="t_key", how="left").drop(columns="t_key")
+    table = table.merge(check, on="t_key", how="left").drop(columns="t_key")
     table["antenna_distance_ok"] = table["antenna_distance_ok"].fillna(True).astype(bool)
     return table

@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.gnss.constants import NAV_KEPLER, SYSTEMS, WEEK_S, BoolArray, FloatArray
-from fieldlogs.gnss.observables import FLAG_NAV_MISMATCH, FLAG_PR_DIFFERENCE, Epochs
+from fieldlogs.gnss.observables import FLAG_NAV_MISMATCH, FLAG_PR_DIFFERENCE, Epochs, epoch_keys
 
 _COMPARED = tuple(c for c in NAV_KEPLER if c not in ("TransTime", "SVacc", "FitIntvl"))
 
@@ -116,11 +116,14 @@ def pseudorange_difference_check(
 
 def check_receiver_pair(ep: Epochs, name_a: str, name_b: str, separation_m: float, tol_m: float = 8.0) -> int:
     """Apply ``pseudorange_difference_check`` to two receivers of ``ep`` (epochs matched on the
-    run clock t_run, satellites by id); flags both receivers' rows in place, returns the count."""
+    run clock t_run by ``observables.epoch_keys``, satellites by id); flags both receivers' rows
+    in place, returns the count."""
+    keys = epoch_keys(ep.t_run)
     ia = np.flatnonzero(ep.receiver == name_a)
     ib = np.flatnonzero(ep.receiver == name_b)
-    ta = pd.Series(ia, index=np.round(ep.t_run[ia], 3))
-    tb = pd.Series(ib, index=np.round(ep.t_run[ib], 3))
+    ta = pd.Series(ia, index=keys[ia])
+    tb = pd.Series(ib, index=keys[ib])
+    ta, tb = ta[~ta.index.duplicated()], tb[~tb.index.duplicated()]
     common = ta.index.intersection(tb.index)
     ea, eb = ta.loc[common].to_numpy(), tb.loc[common].to_numpy()
     if ea.size == 0:

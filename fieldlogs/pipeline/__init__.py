@@ -11,7 +11,8 @@ loop over the few moments an aid speaks):
    cycle grid, then :func:`~fieldlogs.pipeline.odometry.correct_odometry`: pulse odometry
    with slip/slide episodes corrected inertially [S000 §3.1];
 4. products the aids share: the GPS analysis (trust, map-matching, up/down decisions,
-   crossovers [S001 §4.2]) and the curvature trace with the feature tables [S000 §3.2];
+   crossovers [S001 §4.2]), the curvature trace with the feature tables [S000 §3.2] and the
+   run's raw GNSS inputs (``gnss_obs``/``gnss_nav``, solved on a track when an aid asks [S002]);
 5. position aids built by the registry (:mod:`fieldlogs.pipeline.aids`) and applied in time
    order by the engine (:mod:`fieldlogs.pipeline.engine`), which records the fixes;
 6. per-cycle positions with their margins (:mod:`fieldlogs.pipeline.positions`), the events
@@ -31,6 +32,7 @@ from dbtools.network import Network
 from fieldlogs.io import Run
 from fieldlogs.pipeline.aids import RunContext, position_aids, speed_aids
 from fieldlogs.pipeline.aids.features import FeatureUnit
+from fieldlogs.pipeline.aids.gnss import GnssUnit
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles, build_cycles
 from fieldlogs.pipeline.engine import run_aids
@@ -133,7 +135,9 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
     gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
     geometry = VehicleGeometry.of(run.meta.vehicle)
-    return RunContext(network, cfg, streams, cycles, odo, gps, features, geometry), pre
+    gnss = GnssUnit.for_run(run, network, cfg.gnss)
+    ctx = RunContext(network, cfg, streams, cycles, odo, gps, features, geometry=geometry, gnss=gnss)
+    return ctx, pre
 
 
 def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) -> PipelineResult:

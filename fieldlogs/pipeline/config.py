@@ -1,7 +1,8 @@
 """Every tuning parameter of the positioning pipeline, with SPEC defaults, units and ranges.
 
 One frozen section per concern — ``[odometry]``, ``[balise]``, ``[feature]``, ``[gps]``,
-``[margin]`` of a ``--config`` TOML file, plus ``cycle_s`` — each field declared with
+``[margin]`` of a ``--config`` TOML file, plus ``cycle_s``, and ``[gnss]`` (declared in
+:mod:`fieldlogs.gnss.config`) — each field declared with
 :func:`schemas.settings.setting` (default, one-line meaning, unit, allowed range), so that
 ``trainpos config show`` prints them all and a value out of range is refused wherever it
 comes from. Accelerations are in the papers' km/h/s where the papers state them so. The
@@ -16,6 +17,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from fieldlogs.gnss.config import GnssConfig
 from schemas.errors import InputError
 from schemas.settings import SettingError, check_ranges, section_from_dict, setting, typed
 from schemas.units import kmh_s_to_mps2
@@ -213,6 +215,7 @@ class PipelineConfig:
     gps: GpsConfig = field(default_factory=GpsConfig)
     margin: MarginConfig = field(default_factory=MarginConfig)
     cycle_s: float = setting(**CYCLE_S)
+    gnss: GnssConfig = field(default_factory=GnssConfig)
 
     def __post_init__(self) -> None:
         check_ranges(self)

@@ -5,10 +5,15 @@ The seam for the constellation simulator: every writer takes whatever ``gps``,
 run's ``start_time`` where the gps stream has none). Files go to ``RUN/recorder/``:
 
 * ``nmea``: ``gnss.nmea`` from gps (RMC, VTG, GGA, GSA, GST);
-* ``ubx``: ``gnss.ubx`` from gps (NAV-PVT, NAV-HPPOSLLH, NAV-DOP), gnss_obs (RXM-RAWX) and the
-  GPS/QZSS (LNAV) and Galileo (I/NAV) rows of gnss_nav (RXM-SFRBX);
+* ``ubx``: ``gnss.ubx`` from gps (NAV-PVT, NAV-HPPOSLLH, NAV-DOP) — with the run's gnss_obs
+  (RXM-RAWX) and the GPS/QZSS (LNAV) and Galileo (I/NAV) rows of gnss_nav (RXM-SFRBX) when it
+  has one receiver; with several receivers each gets its own ``<receiver>.ubx`` (RXM-RAWX,
+  RXM-SFRBX and the ionosphere page), as each receiver writes its own file;
 * ``rinex``: ``<receiver>.obs`` per receiver (RINEX 3.04) and ``nav.rnx`` — it needs
-  gnss_obs, which the simulator does not produce yet (refused with a clear message).
+  gnss_obs (``trainpos simulate`` switches ``[gnss_raw]`` on for it).
+
+With a run.json ``vehicle`` block, ``vehicle.toml`` (the ``logs import --vehicle`` file) is
+written beside them, so that the recorder files import back into a run.
 
 The folder is written atomically and replaced only with ``force``.
 """
@@ -47,7 +52,7 @@ def _gps(run: Run) -> pd.DataFrame | None:
 
 def write_recorder_files(run_folder: Path, fmt: str, *, force: bool = False) -> list[Path]:
     """Write the run's GNSS part in ``fmt`` into ``RUN/recorder/``; the files written."""
-    from fieldlogs.recorders import nmea, rinex_nav, rinex_obs, ubx
+    from fieldlogs.recorders import nmea, rinex_nav, rinex_obs
 
     if fmt not in EXPORT_FORMATS:
         raise UsageError(f"recorder format '{fmt}' is not one of {', '.join(EXPORT_FORMATS)}")
@@ -62,14 +67,12 @@ def write_recorder_files(run_folder: Path, fmt: str, *, force: bool = False) -> 
             nmea.write_nmea(gps, tmp / "gnss.nmea")
             names.append("gnss.nmea")
         elif fmt == "ubx":
-            gj = nav[nav["sat"].str[0].isin(["G", "J", "E"])] if nav is not None else None
-            ubx.write_ubx(tmp / "gnss.ubx", gps=gps, obs=obs, nav=gj, gnss=run.raw_json.get("gnss") or None)
-            names.append("gnss.ubx")
+            names += _write_ubx(run, tmp, gps, obs, nav)
         else:
             if obs is None or not len(obs):
                 raise UsageError(
-                    "--format rinex needs raw observations (gnss_obs); the simulator does not produce them yet "
-                    "(the constellation simulator will): use --format nmea or ubx"
+                    "--format rinex needs raw observations (gnss_obs): simulate with [gnss_raw] enabled = true "
+                    "(trainpos simulate --format rinex does), or use --format nmea or ubx"
                 )
             for rec, g in obs.groupby("receiver"):
                 rinex_obs.write_rinex_obs(g, tmp / f"{rec}.obs")
@@ -77,7 +80,55 @@ def write_recorder_files(run_folder: Path, fmt: str, *, force: bool = False) -> 
             if nav is not None and len(nav):
                 rinex_nav.write_rinex_nav(nav, tmp / "nav.rnx", run.raw_json.get("gnss") or {})
                 names.append("nav.rnx")
+        vehicle = run.raw_json.get("vehicle")
+        if isinstance(vehicle, dict):
+            (tmp / "vehicle.toml").write_text(vehicle_toml(vehicle), encoding="utf-8")
+            names.append("vehicle.toml")
     return [target / n for n in names]
+
+
+def _write_ubx(
+    run: Run, tmp: Path, gps: pd.DataFrame | None, obs: pd.DataFrame | None, nav: pd.DataFrame | None
+) -> list[str]:
+    """``gnss.ubx`` (and one ``<receiver>.ubx`` per receiver of a multi-receiver run)."""
+    from fieldlogs.recorders import ubx
+
+    gj = nav[nav["sat"].str[0].isin(["G", "J", "E"])] if nav is not None else None
+    block = run.raw_json.get("gnss") or None
+    receivers = sorted(obs["receiver"].astype(str).unique()) if obs is not None and len(obs) else []
+    if len(receivers) <= 1:
+        ubx.write_ubx(tmp / "gnss.ubx", gps=gps, obs=obs, nav=gj, gnss=block)
+        return ["gnss.ubx"]
+    assert obs is not None
+    names = []
+    if gps is not None:
+        ubx.write_ubx(tmp / "gnss.ubx", gps=gps)
+        names.append("gnss.ubx")
+    for rec in receivers:
+        ubx.write_ubx(tmp / f"{rec}.ubx", obs=obs[obs["receiver"] == rec], nav=gj, gnss=block)
+        names.append(f"{rec}.ubx")
+    return names
+
+
+def _toml_value(v: object) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int | float):
+        return repr(v)
+    return '"' + str(v).replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def vehicle_toml(vehicle: dict[str, object]) -> str:
+    """A run.json ``vehicle`` block as the ``logs import --vehicle`` TOML (``schemas.vehicle``)."""
+    lines = [f"{k} = {_toml_value(v)}" for k, v in vehicle.items() if not isinstance(v, dict | list)]
+    for k, v in vehicle.items():
+        if isinstance(v, dict):
+            lines += ["", f"[{k}]", *(f"{kk} = {_toml_value(vv)}" for kk, vv in v.items())]
+        elif isinstance(v, list):
+            for item in v:
+                if isinstance(item, dict):
+                    lines += ["", f"[[{k}]]", *(f"{kk} = {_toml_value(vv)}" for kk, vv in item.items())]
+    return "\n".join(lines) + "\n"
 
 
 def simulate_with_recorder(
@@ -90,11 +141,17 @@ def simulate_with_recorder(
     force: bool = False,
 ) -> tuple[SimulationSummary, list[Path]]:
     """``simulate`` into a temporary folder, add the recorder files, then rename into ``out``:
-    nothing is left behind when the recorder format cannot be written."""
-    from fieldlogs.simulate import simulate_to_folder
+    nothing is left behind when the recorder format cannot be written. ``rinex`` switches the
+    scenario's raw GNSS (``[gnss_raw]``) on: RINEX observations are what it writes."""
+    from dataclasses import replace
+
+    from fieldlogs.simulate import load_scenario, simulate_to_folder
 
     if fmt not in EXPORT_FORMATS:
         raise UsageError(f"recorder format '{fmt}' is not one of {', '.join(EXPORT_FORMATS)}")
+    if fmt == "rinex":
+        scenario = scenario if scenario is not None else load_scenario()
+        scenario = replace(scenario, gnss_raw=replace(scenario.gnss_raw, enabled=True))
     with atomic_folder(Path(out), force=force) as tmp:
         summary = simulate_to_folder(db_path, tmp, scenario, seed=seed, fmt="parquet", force=True)
         files = write_recorder_files(tmp, fmt)

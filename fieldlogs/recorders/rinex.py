@@ -2,8 +2,9 @@
 decompressed by ``common.read_text``) and the RINEX 2.11 observation reader.
 
 RINEX 2.11 observations: epoch records (``yy mm dd hh mm ss.sssssss  flag n`` + up to 12
-satellites per line, continued on following lines) are walked in Python (one step per
-epoch); each satellite's lines are padded to 80 columns and joined, then all fields are
+satellites per line, continued on following lines; event records, flags 2–5, are skipped with
+their n header records and may leave the epoch fields blank) are walked in Python (one step
+per epoch); each satellite's lines are padded to 80 columns and joined, then all fields are
 converted in one vectorised pass as for RINEX 3. Observation types map onto RINEX 3 codes
 (RINEX 3.04 §5.1 table): GPS/QZSS C1→C1C, P1→C1W, C2→C2L, P2→C2W, C5→C5X, band-1 phase,
 Doppler, C/N0 with C1 (attribute C, else W), band 2 with P2 (W, else L); GLONASS C1/P1 →
@@ -96,14 +97,15 @@ def _walk2(path: Path, body: list[str], first: int, n_lines: int) -> tuple[list[
         if not ln.strip():
             raise InputError("blank line where an epoch record was expected (blank epoch)", path=path, row=first + i)
         try:
+            flag, n = int(ln[28]), int(ln[29:32])
+            if 2 <= flag <= 5:  # n special (header) records follow; the epoch fields may be blank
+                skipped += n
+                i += 1 + n
+                continue
             yy, mo, d, h, mi = (int(ln[k : k + 3]) for k in (0, 3, 6, 9, 12))
-            s, flag, n = float(ln[15:26]), int(ln[28]), int(ln[29:32])
+            s = float(ln[15:26])
         except ValueError as exc:
             raise InputError("blank or malformed epoch record", path=path, row=first + i) from exc
-        if 2 <= flag <= 5:  # n special (header) records follow
-            skipped += n
-            i += 1 + n
-            continue
         sat_text = ln[32:68]
         extra = (n - 1) // 12 if n else 0
         for k in range(extra):

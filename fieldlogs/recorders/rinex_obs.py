@@ -7,7 +7,8 @@ georinex parses line by line in Python, about 40× slower (``bench/bench_import.
 is the independent reader in the round-trip tests.
 
 An epoch with flag 0/1 is followed by exactly its number of satellite records; flags 2–5
-by that many header records (skipped, counted); flag 6 (cycle slips) is skipped. An epoch
+by that many header records (skipped, counted; their epoch fields may be blank, as receivers
+write them for "start of kinematic data"); flag 6 (cycle slips) is skipped. An epoch
 whose records are missing or blank, a satellite of an unknown system, or a system without
 ``SYS / # / OBS TYPES`` is refused with its line. Epoch times are converted to GPS time
 from the file's time system (GPS, GAL, QZS: same scale; BDS: +14 s; GLO/UTC: leap seconds).
@@ -117,6 +118,10 @@ def _epochs(path: Path, body: pd.Series, first_line: int) -> tuple[np.ndarray, p
                 "n": (32, 35),
             }.items()
         }
+    )
+    event = f["flag"].between(2, 5).to_numpy()  # special events: the epoch fields may be blank
+    f.loc[event, ["y", "mo", "d", "h", "mi", "s"]] = f.loc[event, ["y", "mo", "d", "h", "mi", "s"]].fillna(
+        {"y": 1980, "mo": 1, "d": 6, "h": 0, "mi": 0, "s": 0.0}
     )
     bad = f[["y", "mo", "d", "h", "mi", "s", "flag", "n"]].isna().any(axis=1).to_numpy()
     if bad.any():

@@ -10,7 +10,8 @@ run with ``fieldlogs.io.write_run``. The pieces, one concern per module:
 * ``kinematics`` — body attitude, specific force and rates (SPEC §4.1 frame);
 * ``slip`` — slip/slide episodes; ``sensors`` — IMU, tacho, GPS, radar, truth;
 * ``radar`` — raw IF samples of the 2-frequency CW radar (``sensors.radar_if``);
-* ``events`` — balise telegrams and cab events.
+* ``events`` — balise telegrams and cab events;
+* raw GNSS (``[gnss_raw]``, off by default) — :mod:`fieldlogs.gnss.trainsim`.
 
 Everything random comes from ``np.random.default_rng(seed)`` (one child generator per
 concern, so switching a sensor off does not change the others).
@@ -114,8 +115,8 @@ def _wheel(scenario: Scenario, rng: np.random.Generator) -> tuple[float, float]:
 def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) -> SimulatedRun:
     """Simulate one run over ``network`` (see module docstring); ``seed`` overrides the scenario's."""
     seed = scenario.seed if seed is None else seed
-    # a 7th child for the radar IF samples: the first six are the same as with spawn(6)
-    names = ("wheel", "slip", "imu", "gps", "radar", "balise", "radar_if")
+    # one child per concern; new concerns are appended so the earlier children stay the same
+    names = ("wheel", "slip", "imu", "gps", "radar", "balise", "radar_if", "gnss_raw")
     rngs = dict(zip(names, np.random.default_rng(seed).spawn(len(names)), strict=True))
     line, track = _pick_route(network, scenario)
     path = scenario.route.path_km_m
@@ -152,7 +153,47 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
         from fieldlogs.simulate.radar import radar_if_stream  # numba: only when asked for
 
         streams["radar_if"], meta.extra["radar"] = radar_if_stream(motion, geom, scenario, rngs["radar_if"])
+    if scenario.gnss_raw.enabled:
+        _add_raw_gnss(streams, meta, scenario, motion, geom, rngs["gnss_raw"])
     return SimulatedRun(streams, meta)
+
+
+def _add_raw_gnss(
+    streams: dict[str, pd.DataFrame],
+    meta: RunMeta,
+    scenario: Scenario,
+    motion: Motion,
+    geom: TrackGeometry,
+    rng: np.random.Generator,
+) -> None:
+    """gnss_obs, gnss_nav and the run.json vehicle and gnss blocks (``fieldlogs.gnss.trainsim``)."""
+    from fieldlogs.gnss.trainsim import RawGnssSpec, raw_gnss, vehicle_block
+    from fieldlogs.recorders.timebase import iso_to_gps
+
+    g = scenario.gnss_raw
+    spec = RawGnssSpec(
+        g.systems, g.interval_s, g.antennas_x_m, g.antenna_z_m, g.corridor, scenario.noise,
+        iso_to_gps(scenario.run.start_time), scenario.gps.outages_km_m,
+    )  # fmt: skip
+    raw = raw_gnss(motion, geom, spec, rng)
+    streams["gnss_obs"], streams["gnss_nav"] = raw.obs, raw.nav
+    meta.vehicle = vehicle_block(
+        meta.vehicle_id, meta.vehicle_kind, raw.receivers, scenario.tacho.wheel_diameter_m, scenario.tacho.teeth
+    )
+    meta.gnss = raw.gnss_block
+    meta.extra["sim_truth"]["gnss_raw"] = {
+        "receivers": [
+            {
+                "receiver": r.name,
+                "x_m": r.forward_m,
+                "clock_bias_s": r.clock_bias_s,
+                "clock_drift_sps": r.clock_drift_sps,
+            }
+            for r in raw.receivers
+        ],
+        "corridor": g.corridor,
+        "systems": list(g.systems),
+    }
 
 
 def _meta(

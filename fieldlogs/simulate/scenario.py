@@ -191,6 +191,16 @@ class BaliseCfg:
 
 
 @dataclass(frozen=True)
+class GnssRawCfg:
+    enabled: bool = False
+    systems: tuple[str, ...] = ("G", "E", "J")
+    interval_s: float = 1.0
+    antennas_x_m: tuple[float, ...] = (8.0, -8.0)
+    antenna_z_m: float = 3.8
+    corridor: str = "open"
+
+
+@dataclass(frozen=True)
 class Scenario:
     """Every knob of a simulated run (see ``fieldlogs/simulate/scenarios/default.toml``)."""
 
@@ -209,6 +219,7 @@ class Scenario:
     radar: RadarCfg = field(default_factory=RadarCfg)
     radar_if: RadarIfCfg = field(default_factory=RadarIfCfg)
     balise: BaliseCfg = field(default_factory=BaliseCfg)
+    gnss_raw: GnssRawCfg = field(default_factory=GnssRawCfg)
     source: str = field(default="<default scenario>", compare=False)
     """Where it was loaded from (for messages); not a knob."""
 
@@ -307,6 +318,7 @@ def _check(s: Scenario) -> None:
         _check_spans,
         _check_episodes,
         _check_radar,
+        _check_gnss_raw,
     )
     for check in checks:
         problem = check(s)
@@ -482,6 +494,22 @@ def _check_radar_scene(r: RadarIfCfg, fail: typing.Callable[[str, str], None]) -
     for i, (a, b) in enumerate(r.slab_km_m):
         if not (math.isfinite(a) and math.isfinite(b) and a < b):
             fail(f"radar_if.slab_km_m[{i}]", f"needs [from, to] with from < to, got [{a}, {b}]")
+
+
+def _check_gnss_raw(s: Scenario) -> Problem:
+    g = s.gnss_raw
+    if not g.systems or any(x not in ("G", "E", "J") for x in g.systems):
+        return "gnss_raw.systems", "each must be G, E or J (at least one)"
+    steps = g.interval_s / 0.01
+    if not (math.isfinite(g.interval_s) and 0.1 <= g.interval_s <= 60 and abs(steps - round(steps)) < 1e-6):
+        return "gnss_raw.interval_s", "must be a multiple of 0.01 s between 0.1 and 60"
+    if not 1 <= len(g.antennas_x_m) <= 4 or any(not (math.isfinite(x) and -10 <= x <= 10) for x in g.antennas_x_m):
+        return "gnss_raw.antennas_x_m", "one to four antennas, each within ±10 m of the car centre"
+    if not (math.isfinite(g.antenna_z_m) and 0 <= g.antenna_z_m <= 8):
+        return "gnss_raw.antenna_z_m", "must be between 0 and 8 m above the rail"
+    if g.corridor not in ("open", "mixed"):
+        return "gnss_raw.corridor", "must be 'open' or 'mixed'"
+    return None
 
 
 def scenario_from_dict(data: dict[str, Any], source: str = "<dict>", *, base: dict[str, Any] | None = None) -> Scenario:

@@ -199,3 +199,7 @@ class TrackGeometry:
 
     def lonlat(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
         return self.projector.to_lonlat(x, y)
+
+    def height(self, km: npt.ArrayLike) -> FloatArray:
+        """Rail height h(km) of the grid's spline (the grid's datum: ellipsoidal) [m]."""
+        return np.asarray(self._sh(np.asarray(km, dtype=float)), dtype=float)

@@ -18,6 +18,7 @@ from fieldlogs.pipeline.aid import Aid, SpeedAid
 from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
 from fieldlogs.pipeline.aids.failsafe import FailsafeAid
 from fieldlogs.pipeline.aids.features import FeatureAid, FeatureUnit
+from fieldlogs.pipeline.aids.gnss import GnssAid, GnssUnit
 from fieldlogs.pipeline.aids.gps import GpsAid
 from fieldlogs.pipeline.aids.radar import RadarSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
@@ -39,6 +40,7 @@ class RunContext:
     gps: GpsAnalysis | None
     features: FeatureUnit | None
     geometry: VehicleGeometry = field(default_factory=VehicleGeometry)
+    gnss: GnssUnit | None = None
 
 
 def _rail(ctx: RunContext) -> Aid | None:
@@ -62,7 +64,11 @@ def _features(ctx: RunContext) -> Aid | None:
     return FeatureAid(ctx.features) if ctx.features is not None else None
 
 
-POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (_rail, _failsafe, _balise, _gps, _features)
+def _gnss(ctx: RunContext) -> Aid | None:
+    return GnssAid(ctx.gnss, ctx.cfg.margin, ctx.gps) if ctx.gnss is not None else None
+
+
+POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (_rail, _failsafe, _balise, _gps, _features, _gnss)
 """Position aids in registry order (simultaneous observations are ordered by priority)."""
 
 

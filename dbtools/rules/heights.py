@@ -1,0 +1,188 @@
+"""GIS height rules (SPEC §3; needed by track-constrained GNSS [S002], SPEC §5.6).
+
+The rail height ``height_m`` of the 20 m grid is optional, but where a line/track has it, it
+is the vertical part of the 3-D track the GNSS solver constrains the antennas to, so it must
+be complete and smooth. Per line/track, points sorted by km, over *regular* steps only (km
+difference equal to the grid spacing; a kilometrage break is no step of the track):
+
+* grade g_j = (h_{j+1} − h_j) / Δkm_j [‰] — the steepest adhesion main lines are ~35 ‰
+  (SPEC §5.1: Ta is its gravity component), a few mountain lines reach 60–80 ‰;
+* vertical curvature κ_j = (g_j − g_{j−1}) / ((Δkm_{j−1} + Δkm_j)/2) [1/m] between two
+  consecutive regular steps, i.e. 1/R of the vertical curve — railways use R ≥ 2,000–4,000 m
+  (conventional lines; more on high-speed lines); a single point 0.5 m off gives R ≈ 400 m.
+
+Rules:
+
+* ``gis.height_partial`` (error) — ``height_m`` is given on some but not all points of a
+  line/track (the GNSS aid refuses such a track); reported once per line/track with the first
+  empty row;
+* ``gis.height_grade`` (warning / error) — |g| above ``height_grade_warning_permille`` (an
+  unusual gradient: check the survey) / ``height_grade_error_permille`` (no railway);
+* ``gis.height_curvature`` (warning / error) — |κ| above 1/``height_radius_warning_m`` /
+  1/``height_radius_error_m`` (a spike or a step in the heights);
+* ``gis.height_datum`` (warning) — heights present but the DB meta declares them orthometric
+  (``height_datum``; ``geoid_model``): the GNSS aid needs ellipsoidal heights and no geoid model
+  is shipped. A DB whose meta does not state the datum is taken as ellipsoidal, which is what the
+  ``gis.height_m`` column declares; no finding.
+
+Consecutive offending steps of one line/track are reported as one finding per stretch (the
+first point, the stretch's extreme value and its length in points).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from dbtools.rules.common import Locator, capped, fmt_km, py
+from dbtools.rules.config import ValidationConfig
+from schemas.enums import Severity
+from schemas.findings import Finding
+from schemas.tables import GIS
+
+F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+
+def check_heights(gis: pd.DataFrame, meta: Mapping[str, str], config: ValidationConfig, loc: Locator) -> list[Finding]:
+    """All height rules (module docstring)."""
+    if "height_m" not in gis.columns or not gis["height_m"].notna().any():
+        return []
+    g = gis.reset_index(drop=True)
+    g = g.assign(_pos=np.arange(len(g))).sort_values(["line_code", "track", "km_m"], kind="stable")
+    out = _datum(meta, loc)
+    out += _partial(g, config, loc)
+    steps = _steps(g, config)
+    for rule, values, warn, err, what in (
+        ("gis.height_grade", steps["grade"], config.height_grade_warning_permille, config.height_grade_error_permille,
+         "grade"),
+        ("gis.height_curvature", steps["curv_radius"], config.height_radius_warning_m, config.height_radius_error_m,
+         "vertical curve radius"),
+    ):  # fmt: skip
+        out += _limits(rule, what, steps, values, warn, err, config, loc)
+    return out
+
+
+def _datum(meta: Mapping[str, str], loc: Locator) -> list[Finding]:
+    datum = str(meta.get("height_datum") or "ellipsoidal")
+    if datum == "ellipsoidal":
+        return []
+    geoid = str(meta.get("geoid_model") or "")
+    return [
+        Finding(
+            "gis.height_datum",
+            Severity.WARNING,
+            GIS.name,
+            f"heights are {datum}{f' ({geoid})' if geoid else ''}: track-constrained GNSS needs ellipsoidal "
+            "heights and refuses this DB",
+            value=datum,
+            limit="ellipsoidal",
+            column="height_m",
+            file=loc.file(GIS.name),
+        )
+    ]
+
+
+def _partial(g: pd.DataFrame, config: ValidationConfig, loc: Locator) -> list[Finding]:
+    has = g["height_m"].notna()
+    out: list[Finding] = []
+    for (line, track), grp in has.groupby([g["line_code"], g["track"]], sort=True):
+        n_has = int(grp.sum())
+        if 0 < n_has < len(grp):
+            first = int(g.loc[grp.index[~grp.to_numpy()][0], "_pos"])
+            km = float(g.loc[grp.index[~grp.to_numpy()][0], "km_m"])
+            out.append(
+                Finding(
+                    "gis.height_partial",
+                    Severity.ERROR,
+                    GIS.name,
+                    f"height_m is given on {n_has} of {len(grp)} points of {line}/{track}; the first empty one is "
+                    f"km {fmt_km(km)}",
+                    keys={"line_code": py(line), "track": py(track), "km_m": km},
+                    value=n_has,
+                    limit=len(grp),
+                    column="height_m",
+                    **loc.at(GIS.name, first),
+                )
+            )
+    return out[: config.max_findings_per_rule]
+
+
+def _steps(g: pd.DataFrame, config: ValidationConfig) -> dict[str, Any]:
+    """Per step j (point j → j+1 of one line/track): grade [‰] and, at point j+1, the radius of
+    the vertical curve between steps j and j+1 [m] (NaN where not both regular)."""
+    km = g["km_m"].to_numpy(dtype=float)
+    h = g["height_m"].to_numpy(dtype=float, na_value=np.nan)
+    key = (g["line_code"].astype(str) + "\x1f" + g["track"].astype(str)).to_numpy()
+    same = key[1:] == key[:-1]
+    dkm = np.diff(km)
+    regular = same & (np.abs(dkm - config.gis_spacing_m) <= config.km_epsilon_m)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        grade = np.where(regular, np.diff(h) / dkm, np.nan)
+        both = regular[1:] & regular[:-1]
+        curv = np.where(both, np.diff(grade) / (0.5 * (dkm[1:] + dkm[:-1])), np.nan)
+        radius = np.concatenate([[np.nan], np.abs(1.0 / curv)])
+    return {
+        "grade": 1000.0 * np.abs(grade),
+        "curv_radius": radius,
+        "pos": g["_pos"].to_numpy(dtype=np.int64),
+        "km": km,
+        "key": key,
+        "line": g["line_code"].to_numpy(dtype=object),
+        "track": g["track"].to_numpy(dtype=object),
+    }
+
+
+def _stretches(bad: npt.NDArray[np.bool_], key: npt.NDArray[Any]) -> list[tuple[int, int]]:
+    """(first, last) step index of each run of consecutive offending steps of one line/track."""
+    idx = np.flatnonzero(bad)
+    if not idx.size:
+        return []
+    new = np.concatenate([[True], (np.diff(idx) > 1) | (key[idx[1:]] != key[idx[:-1]])])
+    starts = np.flatnonzero(new)
+    ends = np.concatenate([starts[1:], [idx.size]]) - 1
+    return [(int(idx[a]), int(idx[b])) for a, b in zip(starts, ends, strict=True)]
+
+
+def _limits(
+    rule: str,
+    what: str,
+    st: dict[str, Any],
+    values: F64,
+    warn: float,
+    err: float,
+    config: ValidationConfig,
+    loc: Locator,
+) -> list[Finding]:
+    radius = what.startswith("vertical")
+    with np.errstate(invalid="ignore"):
+        bad = (values < warn) if radius else (values > warn)
+    runs = _stretches(np.nan_to_num(bad, nan=False).astype(bool), st["key"])
+    unit = "m" if radius else "‰"
+
+    def build(r: int) -> Finding:
+        a, b = runs[r]
+        seg = values[a : b + 1]
+        worst = float(np.nanmin(seg) if radius else np.nanmax(seg))
+        severe = worst < err if radius else worst > err
+        p = a if radius else a + 1  # the curvature lives at a point, the grade between two
+        limit = err if severe else warn
+        return Finding(
+            rule,
+            Severity.ERROR if severe else Severity.WARNING,
+            GIS.name,
+            f"{what} {worst:.1f} {unit} at km {fmt_km(st['km'][p])} of {st['line'][p]}/{st['track'][p]} "
+            f"({b - a + 1} point(s)); {'at least' if radius else 'at most'} {limit:g} {unit} expected",
+            keys={"line_code": py(st["line"][p]), "track": py(st["track"][p]), "km_m": py(st["km"][p])},
+            value=round(worst, 3),
+            limit=limit,
+            column="height_m",
+            **loc.at(GIS.name, int(st["pos"][p])),
+        )
+
+    return capped(rule, Severity.WARNING, GIS.name, np.arange(len(runs)), build, config.max_findings_per_rule,
+                  loc.file(GIS.name))  # fmt: skip

@@ -1,0 +1,169 @@
+"""``trainpos gnss position``: every epoch of a run on one line/track, constrained and not [S002].
+
+The solutions are those of the pipeline's GNSS aid (:func:`fieldlogs.gnss.ontrack.solve_on_track`,
+no prior), optionally under a sky mask — the paper's experiment of blocking the west half of the
+sky on any run. One row per receiver-epoch:
+
+* the constrained solution: ``status`` (``ok`` or why not: too few satellites, poor geometry,
+  no on-track solution, a fault that could not be excluded, not converged), ``available``
+  (ok and the antenna-distance check passed), ``km_m`` of the vehicle's reference point,
+  ``uncertainty_m`` (the stated bound U), ``sigma_m`` (1σ along the track), ``residual_rms_m``
+  of the used pseudoranges, ``clock_aided``;
+* the satellites: ``used``, ``excluded`` (by fault detection and exclusion, or without an
+  on-track solution) and ``not_used`` with the reason of each (elevation, C/N0 or sky mask,
+  pre-checks, no ephemeris, system not selected);
+* the unconstrained (x, y, z, clock) least squares beside it: ``lsq_available`` (≥ 4
+  satellites, PDOP ≤ ``gnss.max_pdop``), ``lsq_n_used``, ``lsq_pdop``, its geodetic position
+  and its distance from the track.
+
+Availability: the share of epochs (receivers' epochs within 20 ms are one epoch) with an
+available constrained solution from at least one receiver, against the share with an
+available unconstrained one, and the same per receiver.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from fieldlogs.gnss.config import GnssConfig, position_config
+from fieldlogs.gnss.geodesy import ecef_to_geodetic
+from fieldlogs.gnss.gis import GisTrack
+from fieldlogs.gnss.observables import FLAG_NAMES, Epochs
+from fieldlogs.gnss.ontrack import solve_on_track
+from fieldlogs.gnss.runinputs import RunGnss
+from fieldlogs.gnss.skymask import SkyMask
+
+#: Flags of an FDE decision (reported as ``excluded``, the others as ``not_used``).
+_FDE = ("fde_excluded", "no_track_solution")
+
+
+@dataclass
+class GnssPositionReport:
+    """The command's result (module docstring); ``to_json`` is its JSON."""
+
+    run_id: str
+    line_code: str
+    track: str
+    track_source: str
+    direction: int
+    facing_source: str
+    sky_mask: str
+    systems: tuple[str, ...]
+    epochs: pd.DataFrame = field(repr=False)
+    availability: dict[str, Any] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        rows = self.epochs.astype(object).where(self.epochs.notna(), None).to_dict("records")
+        return {
+            "run": self.run_id,
+            "line_code": self.line_code,
+            "track": self.track,
+            "track_source": self.track_source,
+            "facing": "increasing_km" if self.direction > 0 else "decreasing_km",
+            "facing_source": self.facing_source,
+            "sky_mask": self.sky_mask,
+            "systems": list(self.systems),
+            "availability": self.availability,
+            "epochs": rows,
+        }
+
+
+def _sat_lists(ep: Epochs) -> tuple[list[list[str]], list[list[str]], list[dict[str, str]]]:
+    """Per epoch row: satellites used, excluded by FDE, and the others with their reasons."""
+    used, excluded, other = [], [], []
+    for e in range(ep.t.size):  # per output row: formatting, not arithmetic
+        sats, flags, present = ep.sat[e], ep.flags[e], ep.present[e]
+        used.append(sorted(str(s) for s in sats[present & (flags == 0)]))
+        ex: list[str] = []
+        why: dict[str, str] = {}
+        for s, f in zip(sats[present & (flags != 0)], flags[present & (flags != 0)], strict=True):
+            names = [n for bit, n in FLAG_NAMES.items() if int(f) & bit]
+            if any(n in _FDE for n in names):
+                ex.append(str(s))
+            else:
+                why[str(s)] = "+".join(names)
+        excluded.append(sorted(ex))
+        other.append(dict(sorted(why.items())))
+    return used, excluded, other
+
+
+def _lsq_columns(tb: pd.DataFrame, track: GisTrack) -> pd.DataFrame:
+    pos = tb[["lsq_x_m", "lsq_y_m", "lsq_z_m"]].to_numpy(dtype=float)
+    ok = tb["lsq_available"].to_numpy(bool) & np.all(np.isfinite(pos), axis=1)
+    cols = ["lsq_lat", "lsq_lon", "lsq_h_m", "lsq_km_m", "lsq_offset_m"]
+    out = pd.DataFrame(np.nan, index=tb.index, columns=cols)
+    if ok.any():
+        lat, lon, h = ecef_to_geodetic(pos[ok])
+        s = track.line.project(pos[ok])
+        out.loc[ok, "lsq_lat"], out.loc[ok, "lsq_lon"], out.loc[ok, "lsq_h_m"] = np.degrees(lat), np.degrees(lon), h
+        out.loc[ok, "lsq_km_m"] = track.km_of_s(s)
+        out.loc[ok, "lsq_offset_m"] = np.linalg.norm(pos[ok] - track.line.point(s), axis=1)
+    return out
+
+
+def _availability(tb: pd.DataFrame) -> dict[str, Any]:
+    per_epoch = tb.groupby("epoch")[["ok", "lsq_available"]].any()
+    by_rx = tb.groupby("receiver")[["ok", "lsq_available"]].mean()
+    return {
+        "epochs": len(per_epoch),
+        "constrained": float(per_epoch["ok"].mean()) if len(per_epoch) else 0.0,
+        "unconstrained": float(per_epoch["lsq_available"].mean()) if len(per_epoch) else 0.0,
+        "by_receiver": {
+            str(r): {"epochs": int((tb["receiver"] == r).sum()), "constrained": float(v.ok),
+                     "unconstrained": float(v.lsq_available)}
+            for r, v in by_rx.iterrows()
+        },
+    }  # fmt: skip
+
+
+#: Columns of ``GnssPositionReport.epochs``, in order.
+COLUMNS = (
+    "t", "gnss_time_s", "receiver", "status", "available", "km_m", "uncertainty_m", "sigma_m", "residual_rms_m",
+    "n_used", "used", "excluded", "not_used", "clock_aided", "antenna_distance_ok", "lsq_available", "lsq_n_used",
+    "lsq_pdop", "lsq_lat", "lsq_lon", "lsq_h_m", "lsq_km_m", "lsq_offset_m",
+)  # fmt: skip
+
+
+def position_report(
+    run_id: str,
+    g: RunGnss,
+    track: GisTrack,
+    direction: int,
+    *,
+    cfg: GnssConfig | None = None,
+    systems: tuple[str, ...] | None = None,
+    sky_mask: SkyMask | None = None,
+    sky_mask_name: str = "none",
+    track_source: str = "given",
+    facing_source: str = "given",
+) -> GnssPositionReport:
+    """Every epoch of the run on ``track`` (module docstring)."""
+    cfg = cfg or GnssConfig()
+    pc = position_config(cfg, systems)
+    sols = solve_on_track(g, track, direction, pc, sky_mask=sky_mask)
+    tb = sols.table.copy()
+    tb["ok"] = tb["ok"].astype(bool)
+    used, excluded, other = _sat_lists(sols.result.observations)
+    tb["used"], tb["excluded"] = used, excluded
+    tb["not_used"] = pd.Series(other, index=tb.index, dtype=object)
+    tb["available"] = tb["ok"]
+    tb = pd.concat([tb, _lsq_columns(tb, track)], axis=1)
+    if "antenna_distance_ok" not in tb:
+        tb["antenna_distance_ok"] = True
+    tb = tb.sort_values(["t", "receiver"], kind="stable").reset_index(drop=True)
+    return GnssPositionReport(
+        run_id,
+        track.line_code,
+        track.track,
+        track_source,
+        direction,
+        facing_source,
+        sky_mask_name,
+        pc.systems,
+        tb[list(COLUMNS)],
+        _availability(tb),
+    )

@@ -1,0 +1,127 @@
+"""A run's inputs of GNSS positioning: ``gnss_obs``, ``gnss_nav``, the navigation header
+(run.json ``gnss``) and the antennas on the vehicle (run.json ``vehicle``).
+
+* Ionosphere parameters: ``klobuchar_alpha``/``klobuchar_beta`` (GPS, and QZSS and Galileo
+  without their own), ``qzss_klobuchar_*`` (QZSS), ``nequick_ai`` (Galileo's effective
+  ionisation, :mod:`fieldlogs.gnss.atmosphere`); without any the ionosphere is not modelled
+  (import the navigation file with the observations to get them).
+* Antennas: every ``vehicle.antennas[]`` entry gives the receiver of its ``gnss_obs`` rows
+  and its place on the vehicle: x forward toward the F end (``along``), y left (``lateral``),
+  z above the rail top (``height``), all from the vehicle's reference point — the point whose
+  km the pipeline reports. Which way along the track x points depends on which end of the
+  vehicle faces increasing km (the solver's ``direction``, the sign of km per metre of travel
+  toward the F end).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from fieldlogs.gnss.observables import epoch_keys
+from fieldlogs.gnss.track import Antenna
+from fieldlogs.io import Run
+from schemas.errors import EXIT_FINDINGS, TrainposError
+
+#: run.json ``gnss`` keys → the ionosphere parameter names of the GNSS core.
+IONO_KEYS = {
+    "klobuchar_alpha": "gps_alpha",
+    "klobuchar_beta": "gps_beta",
+    "qzss_klobuchar_alpha": "qzss_alpha",
+    "qzss_klobuchar_beta": "qzss_beta",
+    "nequick_ai": "gal_ai",
+}
+
+
+class GnssInputError(TrainposError):
+    """A run whose GNSS part cannot be positioned (no navigation data, a receiver without antenna)."""
+
+    exit_code = EXIT_FINDINGS
+
+    def __init__(self, message: str, *, reason: str, path: str | None = None) -> None:
+        super().__init__(message, path=path)
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class RunGnss:
+    """The inputs of one run (module docstring)."""
+
+    obs: pd.DataFrame
+    nav: pd.DataFrame
+    iono: dict[str, tuple[float, ...]]
+    antennas: dict[str, Antenna]
+    """Receiver → antenna, for the receivers that have observations."""
+    times: np.ndarray
+    """Distinct run times t of the receivers' epochs (ascending)."""
+    keys: np.ndarray
+    """Common epoch of each of ``times`` (``observables.epoch_keys``: receivers' epochs within
+    20 ms are one epoch)."""
+
+    @property
+    def epoch_times(self) -> np.ndarray:
+        """Run time of every common epoch (its earliest receiver epoch), ascending."""
+        _, first = np.unique(self.keys, return_index=True)
+        return np.asarray(self.times[first], dtype=float)
+
+    def epoch_of(self, t: np.ndarray) -> np.ndarray:
+        """Common epoch of run times ``t`` that are receiver epochs of this run."""
+        i = np.clip(np.searchsorted(self.times, np.asarray(t, dtype=float)), 0, self.times.size - 1)
+        return np.asarray(self.keys[i], dtype=np.int64)
+
+
+def iono_params(block: Mapping[str, Any] | None) -> dict[str, tuple[float, ...]]:
+    """Ionosphere parameters of the core from a run.json ``gnss`` block (module docstring)."""
+    out: dict[str, tuple[float, ...]] = {}
+    for key, name in IONO_KEYS.items():
+        v = (block or {}).get(key)
+        if isinstance(v, list | tuple) and v and all(isinstance(x, int | float) for x in v):
+            out[name] = tuple(float(x) for x in v)
+    return out
+
+
+def antennas_of(vehicle: Mapping[str, Any] | None) -> dict[str, Antenna]:
+    """Receiver → antenna of a vehicle block (entries without a receiver or coordinates skipped:
+    ``logs check`` reports them)."""
+    out: dict[str, Antenna] = {}
+    for a in (vehicle or {}).get("antennas") or []:
+        if not isinstance(a, dict) or not isinstance(a.get("receiver"), str):
+            continue
+        try:
+            out[a["receiver"]] = Antenna(float(a["x_m"]), float(a["y_m"]), float(a["z_m"]))
+        except (KeyError, TypeError, ValueError):
+            continue
+    return out
+
+
+def run_gnss(run: Run) -> RunGnss | None:
+    """The run's GNSS inputs, or None when it has no ``gnss_obs`` rows.
+
+    Raises :class:`GnssInputError` when observations exist but cannot be positioned: no
+    ``gnss_nav``, or a receiver without an antenna in the vehicle block.
+    """
+    obs = run.stream("gnss_obs")
+    if obs is None or not len(obs):
+        return None
+    nav = run.stream("gnss_nav")
+    if nav is None or not len(nav):
+        raise GnssInputError(
+            "the run has gnss_obs but no gnss_nav (ephemerides)", reason="no_nav", path=str(run.folder)
+        )
+    meta = run.meta
+    antennas = antennas_of(meta.vehicle if meta is not None else None)
+    observed = {str(r) for r in pd.unique(obs["receiver"].to_numpy(dtype=object))}
+    missing = sorted(observed - set(antennas))
+    if missing:
+        raise GnssInputError(
+            f"run.json vehicle block has no antenna for receiver(s) {', '.join(missing)}",
+            reason="no_antenna",
+            path=str(run.folder / "run.json"),
+        )
+    antennas = {r: a for r, a in antennas.items() if r in observed}
+    t = np.unique(obs["t"].to_numpy(dtype=float))
+    return RunGnss(obs, nav, iono_params(meta.gnss if meta is not None else None), antennas, t, epoch_keys(t))
