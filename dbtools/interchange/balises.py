@@ -119,6 +119,7 @@ def _signal_type(doc: RailmlDoc, g: _Group, first: RBalise) -> str | None:
     if group is not None:
         sig = doc.signals.get(group.signal_ref or "")
         func = sig.function if sig is not None else group.function
+        func = None if func is not None and func.startswith("other:") else func  # not a signal function
     else:
         ahead = [
             s

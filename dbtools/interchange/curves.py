@@ -163,7 +163,7 @@ def _arc(doc: RailmlDoc, pieces: list[RCurve], i: int, target: Target, findings:
     l1 = (t1.km_to - t1.km_from) if t1 else 0.0
     l2 = (t2.km_to - t2.km_from) if t2 else 0.0
     doc.use(arc.el, *(p.el for p in (t1, t2, s1, s2) if p is not None))
-    return rows_for(ts, l1, st, l2, arc.radius, target, arc.id or f"arc@{arc.km_from:.0f}")
+    return rows_for(ts, l1, st, l2, arc.radius, target, arc.name or arc.id or f"arc@{arc.km_from:.0f}")
 
 
 def curves_of_feature(rows: Sequence[dict[str, Any]], track: str) -> list[tuple[str, float, float, float]] | None:

@@ -135,6 +135,7 @@ class RCurve:
     curve_type: str
     radius: float
     ext: dict[str, str] = field(default_factory=dict)
+    name: str | None = None
 
 
 @dataclass

@@ -369,4 +369,4 @@ def _curve(r: _Reader, el: Element) -> None:
     radius = r.num(el, "radius") or 0.0
     kind = (xt.attr(el, "curveType") or "").strip() or "straight"
     r.doc.use(*xt.children(el, "name"))  # the curve itself: used or reported by the curve mapping
-    r.doc.curves.append(RCurve(xt.attr(el, "id") or "", el, track.id, k0, k1, kind, radius if rising else -radius, _ext(el)))
+    r.doc.curves.append(RCurve(xt.attr(el, "id") or "", el, track.id, k0, k1, kind, radius if rising else -radius, _ext(el), _name(el)))
