@@ -18,7 +18,8 @@ positions, not our telegram roles, so the import maps:
   the first signal ahead in running direction within :data:`SIGNAL_AHEAD_M` read in the
   same direction), ``blocking``/``intermediate`` → ``block``, ``entry`` → ``home``;
   its governing pair is the last initial pair before it in running direction on the same
-  line and track, and ``dist_from_initial_m`` the km difference from that pair's I1.
+  line and track, and ``dist_from_initial_m`` the travel distance from that pair's I1: the
+  km difference less the jumps of the mileage changes between them (on one railML track).
 
 Reported and not written (honest findings, never invented codes): a C candidate with no
 initial pair before it, the further balises of a group (only a group's first balise is
@@ -182,6 +183,9 @@ def _c_row(doc: RailmlDoc, g: _Group, first: RBalise, pairs: list[tuple[float, s
             f"balise {first.id} ({g.target.line_code} {g.target.track} km {first.km:.1f}) has no initial pair before it "
             "in running direction: a C balise needs one (name pairs in the map's [initial_pairs])",
         )
-    skm, station, i1 = max(before, key=lambda p: p[0])
-    dist = first.km * g.sign - skm
+    _, station, i1 = max(before, key=lambda p: p[0])
+    # travel distance: the km difference less the mileage changes between them on their track
+    mileage = doc.tracks[i1.track_id].mileage if first.track_id == i1.track_id else None
+    jumps = mileage.jumps(i1.pos, first.pos) if mileage is not None else 0.0
+    dist = abs(first.km - i1.km - jumps)
     return _row(first, g.target, BaliseKind.C, station, _signal_type(doc, g, first), round(dist, 6))

@@ -101,9 +101,12 @@ def survey_frames(tracks: Sequence[tuple[RTrack, str, str]]) -> tuple[pd.DataFra
                 {"line_code": line, "track": track, "seq": seq, "lon": p.lon, "lat": p.lat, "height_m": p.height}
             )
             if not p.vertex_only:
-                posts.setdefault((line, round(p.km, 3)), {"line_code": line, "km_m": p.km, "lon": p.lon, "lat": p.lat})
+                posts.setdefault(
+                    (line, round(p.km, 3)),
+                    {"line_code": line, "km_m": p.km, "lon": p.lon, "lat": p.lat, "km_after_m": p.km_after},
+                )
     cl = pd.DataFrame(vertices, columns=["line_code", "track", "seq", "lon", "lat", "height_m"])
-    kp = pd.DataFrame(list(posts.values()), columns=["line_code", "km_m", "lon", "lat"])
+    kp = pd.DataFrame(list(posts.values()), columns=["line_code", "km_m", "lon", "lat", "km_after_m"])
     return cl, kp.sort_values(["line_code", "km_m"]).reset_index(drop=True)
 
 
@@ -115,5 +118,5 @@ def grid_from_survey(cl: pd.DataFrame, kp: pd.DataFrame) -> Any:
     from schemas.gisinput import CENTRELINE_VERTICES, KM_POSTS
 
     cl_t = read_and_check(CENTRELINE_VERTICES, cl.astype(str).replace({"None": "", "nan": ""}), file="railml").frame
-    kp_t = read_and_check(KM_POSTS, kp.astype(str), file="railml").frame
+    kp_t = read_and_check(KM_POSTS, kp.astype(str).replace({"None": "", "nan": ""}), file="railml").frame
     return build_grid(cl_t, kp_t, centrelines_file="railml centrelines", posts_file="railml km posts")

@@ -43,6 +43,14 @@ class Mileage:
             slope = (m1 - m0) / (p1 - p0)
         return m0 + slope * (pos - p0)
 
+    def jumps(self, pos_a: float, pos_b: float) -> float:
+        """Sum of the km jumps (outgoing − incoming) of the mileage changes between two
+        positions, signed in the direction from ``pos_a`` to ``pos_b``."""
+        lo, hi = sorted((pos_a, pos_b))
+        k = self.knots
+        total = sum(k[i + 1][1] - k[i][1] for i in range(len(k) - 1) if k[i][0] == k[i + 1][0] and lo < k[i][0] <= hi)
+        return total if pos_b >= pos_a else -total
+
     def _slope(self, i: int) -> float:
         for j in range(i, 0, -1):
             (pa, ma), (pb, mb) = self.knots[j - 1], self.knots[j]
@@ -62,6 +70,8 @@ class GeoPoint:
     height: float | None = None
     vertex_only: bool = False
     """A shape vertex with no stated km (gml LineString): not a kilometre post."""
+    km_after: float | None = None
+    """At a mileage change: the outgoing km (``km`` is then the incoming one)."""
 
 
 @dataclass

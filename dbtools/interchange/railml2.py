@@ -166,7 +166,12 @@ def _geo(doc: RailmlDoc, track: RTrack, el: Element, geo: Element) -> None:
         _err(doc, geo, "railml.geocoord", f"geoCoord/@coord '{' '.join(coord)}': {exc}", column="coord")
         return
     doc.use(geo)
-    if where is not None:
+    if where is None:
+        return
+    if xt.local(el) == "mileageChange":  # a kilometre post with a break: in → out
+        k_in = _num(doc, el, "absPosIn")
+        track.geo.append(GeoPoint(where[0], k_in if k_in is not None else where[1], lon, lat, h, km_after=where[1]))
+    else:
         track.geo.append(GeoPoint(where[0], where[1], lon, lat, h))
 
 
