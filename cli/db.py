@@ -259,7 +259,9 @@ def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: 
     from dbtools.interchange.ci import junit, sarif_text
 
     if fmt == ValidateFmt.sarif:
-        sys.stdout.write(sarif_text(findings, target=None if target.is_dir() else str(target), tool_version=tool_version()))
+        sys.stdout.write(
+            sarif_text(findings, target=None if target.is_dir() else str(target), tool_version=tool_version())
+        )
     else:
         sys.stdout.write(junit(findings, target=str(target), strict=strict))
 
@@ -271,7 +273,9 @@ def import_(
     fmt: ImportFmt = typer.Option(..., "--format", help="railml."),
     out: Path = typer.Option(..., "--out", "-o", help="Output source set folder (then: db build SOURCE_DIR)."),
     line_code: Path | None = typer.Option(
-        None, "--line-code", help="Map (TOML): railML lines/tracks → line_code and track, initial pairs → station codes."
+        None,
+        "--line-code",
+        help="Map (TOML): railML lines/tracks → line_code and track, initial pairs → station codes.",
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
 ) -> None:
@@ -294,7 +298,12 @@ def import_(
     rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
     out_c.print(
         key_value_table(
-            [("folder", str(result.out)), ("railML version", result.version), ("balises in the file", result.balises_seen), *rows],
+            [
+                ("folder", str(result.out)),
+                ("railML version", result.version),
+                ("balises in the file", result.balises_seen),
+                *rows,
+            ],
             title="Imported",
         )
     )

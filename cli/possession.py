@@ -107,7 +107,9 @@ def check(
         help="Possession plan CSV/XLSX: work_no, line_code, track, km_from_m, km_to_m, planned_start, planned_end, "
         "started_at, released_at (ISO 8601 with offset).",
     ),
-    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json, html or geojson (alarms and sections, for QGIS)."),
+    fmt: Fmt = typer.Option(
+        Fmt.table, "--format", help="table, json, html or geojson (alarms and sections, for QGIS)."
+    ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html and geojson)."),
     config: Path | None = typer.Option(
         None, "--config", help="Settings (TOML; its [gps] and [possession] sections; see trainpos config show)."

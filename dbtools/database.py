@@ -111,7 +111,10 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
 
 
 def write_sqlite(
-    path: Path, script: Sequence[tuple[str, Iterable[Sequence[object]] | None]], *, pragmas: Sequence[str] = (),
+    path: Path,
+    script: Sequence[tuple[str, Iterable[Sequence[object]] | None]],
+    *,
+    pragmas: Sequence[str] = (),
     force: bool = False,
 ) -> None:
     """Write any other SQLite file (a GeoPackage …) atomically: ``pragmas`` first, then each

@@ -59,7 +59,9 @@ def _sign(track: str) -> int:
     return -1 if track == Track.UP.value else 1
 
 
-def _row(b: RBalise, t: Target, kind: str, station: str | None, signal: str | None, dist: float | None) -> dict[str, Any]:
+def _row(
+    b: RBalise, t: Target, kind: str, station: str | None, signal: str | None, dist: float | None
+) -> dict[str, Any]:
     return {
         "balise_id": b.id,
         "kind": kind,
@@ -81,7 +83,7 @@ def _own_row(b: RBalise, t: Target) -> dict[str, Any]:
 
 
 def _float(text: str | None) -> float | None:
-    return None if text in (None, "") else float(text)  # type: ignore[arg-type]
+    return None if text is None or text == "" else float(text)
 
 
 def _groups(balises: Sequence[RBalise], targets: dict[str, Target]) -> list[_Group]:
@@ -125,7 +127,8 @@ def _signal_type(doc: RailmlDoc, g: _Group, first: RBalise) -> str | None:
         ahead = [
             s
             for s in doc.signals.values()
-            if s.track_id == first.track_id and 0 <= (s.km - first.km) * g.sign <= SIGNAL_AHEAD_M
+            if s.track_id == first.track_id
+            and 0 <= (s.km - first.km) * g.sign <= SIGNAL_AHEAD_M
             and (s.direction == first.direction or 0 in (s.direction, first.direction))
         ]
         nearest: RSignal | None = min(ahead, key=lambda s: abs(s.km - first.km), default=None)
@@ -152,20 +155,36 @@ def map_balises(
     pairs: dict[tuple[str, str], list[tuple[float, str, RBalise]]] = {}
     candidates: list[tuple[_Group, RBalise]] = []
     for g in _groups(placed, targets):
-        station = next((lmap.initial_pairs[k] for k in [g.key, *(b.id for b in g.members)] if k in lmap.initial_pairs), None)
+        station = next(
+            (lmap.initial_pairs[k] for k in [g.key, *(b.id for b in g.members)] if k in lmap.initial_pairs), None
+        )
         if station is not None and len(g.members) == 2:
             i1, i2 = g.members
-            rows += [_row(i1, g.target, BaliseKind.I1, station, None, None), _row(i2, g.target, BaliseKind.I2, station, None, None)]
+            rows += [
+                _row(i1, g.target, BaliseKind.I1, station, None, None),
+                _row(i2, g.target, BaliseKind.I2, station, None, None),
+            ]
             pairs.setdefault((g.target.line_code, g.target.track), []).append((i1.km * g.sign, station, i1))
             continue
         if station is not None:
             findings.append(
-                _warn(doc, g.members[0], "railml.pair", f"group {g.key} is named an initial pair but has {len(g.members)} balise(s), not 2")
+                _warn(
+                    doc,
+                    g.members[0],
+                    "railml.pair",
+                    f"group {g.key} is named an initial pair but has {len(g.members)} balise(s), not 2",
+                )
             )
         candidates.append((g, g.members[0]))
         for b in g.members[1:]:
             findings.append(
-                _warn(doc, b, "railml.unmapped", f"balise {b.id} is not the first of group {g.key}: only a group's first balise is a position-correction balise [S003 §4.5]")
+                _warn(
+                    doc,
+                    b,
+                    "railml.unmapped",
+                    f"balise {b.id} is not the first of group {g.key}: only a group's first balise is "
+                    "a position-correction balise [S003 §4.5]",
+                )
             )
     for g, first in candidates:
         rows_or_finding = _c_row(doc, g, first, pairs.get((g.target.line_code, g.target.track), []))
@@ -173,14 +192,17 @@ def map_balises(
     return rows, findings
 
 
-def _c_row(doc: RailmlDoc, g: _Group, first: RBalise, pairs: list[tuple[float, str, RBalise]]) -> dict[str, Any] | Finding:
+def _c_row(
+    doc: RailmlDoc, g: _Group, first: RBalise, pairs: list[tuple[float, str, RBalise]]
+) -> dict[str, Any] | Finding:
     before = [p for p in pairs if p[0] < first.km * g.sign]
     if not before:
         return _warn(
             doc,
             first,
             "railml.no_pair",
-            f"balise {first.id} ({g.target.line_code} {g.target.track} km {first.km:.1f}) has no initial pair before it "
+            f"balise {first.id} ({g.target.line_code} {g.target.track} km {first.km:.1f}) has no "
+            "initial pair before it "
             "in running direction: a C balise needs one (name pairs in the map's [initial_pairs])",
         )
     _, station, i1 = max(before, key=lambda p: p[0])

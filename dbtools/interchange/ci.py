@@ -117,7 +117,9 @@ def sarif(findings: Sequence[Finding], *, target: str | None = None, tool_versio
                 "level": "error" if f.severity == Severity.ERROR else "warning",
                 "message": {"text": f"{f.where}: {f.message}"},
                 "locations": [_location(f, target, cache)],
-                "properties": jsonable({"table": f.table, "keys": f.keys, "value": f.value, "limit": f.limit, "column": f.column}, 6),
+                "properties": jsonable(
+                    {"table": f.table, "keys": f.keys, "value": f.value, "limit": f.limit, "column": f.column}, 6
+                ),
             }
         )
     driver = {"name": "trainpos", "version": tool_version, "semanticVersion": tool_version, "rules": descriptors}
@@ -143,11 +145,16 @@ def junit(findings: Sequence[Finding], *, target: str, strict: bool = False) -> 
             else f"<system-out>{escape(str(f))}</system-out>"
         )
         cases.append(f"    <testcase classname={cls} name={name} file={quoteattr(f.file or target)}>{body}</testcase>")
-    verdict = "" if not failed else f"<failure type=\"trainpos.db.validate\" message=\"{failed} finding(s) fail\"/>"
-    cases.append(f"    <testcase classname=\"trainpos.db.validate\" name={quoteattr('consistency ' + target)}>{verdict}</testcase>")
+    verdict = "" if not failed else f'<failure type="trainpos.db.validate" message="{failed} finding(s) fail"/>'
+    cases.append(
+        f'    <testcase classname="trainpos.db.validate" name={quoteattr("consistency " + target)}>{verdict}</testcase>'
+    )
     buf = io.StringIO()
     buf.write('<?xml version="1.0" encoding="UTF-8"?>\n')
-    buf.write(f"<testsuites name=\"trainpos db validate\" tests=\"{len(cases)}\" failures=\"{failed + bool(failed)}\">\n")
-    buf.write(f"  <testsuite name={quoteattr('db validate ' + target)} tests=\"{len(cases)}\" failures=\"{failed + bool(failed)}\" errors=\"0\" skipped=\"0\">\n")
+    buf.write(f'<testsuites name="trainpos db validate" tests="{len(cases)}" failures="{failed + bool(failed)}">\n')
+    buf.write(
+        f'  <testsuite name={quoteattr("db validate " + target)} tests="{len(cases)}" '
+        f'failures="{failed + bool(failed)}" errors="0" skipped="0">\n'
+    )
     buf.write("\n".join(cases) + "\n  </testsuite>\n</testsuites>\n")
     return buf.getvalue()

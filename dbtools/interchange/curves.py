@@ -49,7 +49,9 @@ ROLES = (
 TRANSITIONS = ("clothoide", "clothoid", "transition")
 
 
-def rows_for(ts: float, l1: float, st: float, l2: float, radius: float, target: Target, fid: str) -> list[dict[str, Any]]:
+def rows_for(
+    ts: float, l1: float, st: float, l2: float, radius: float, target: Target, fid: str
+) -> list[dict[str, Any]]:
     """The six rows of one curve (module doc); ``radius`` signed, negative left in increasing km."""
     left = radius < 0
     if target.track == Track.UP.value:

@@ -11,6 +11,8 @@ from dbtools.atomic import atomic_file, refuse_existing
 from dbtools.diff import load_network
 from dbtools.gis.index import network_georef
 from dbtools.interchange.geojson import network_features, network_geojson, write_geojson
+from dbtools.interchange.geometry import WGS84
+from dbtools.interchange.geometry import geodetic_epsg as lonlat_epsg
 from dbtools.network import Network
 
 
@@ -23,13 +25,8 @@ class ExportFormat(StrEnum):
 
 def geodetic_epsg(network: Network) -> int:
     """EPSG code of the lat/lon datum of the network (the geodetic CRS of its metric CRS)."""
-    from pyproj import CRS
-
     g = network_georef(network)
-    if g is None:
-        return 4326
-    code = CRS.from_epsg(g.crs_epsg).geodetic_crs.to_epsg()
-    return int(code) if code else 4326
+    return WGS84 if g is None else lonlat_epsg(g.crs_epsg)
 
 
 def export_network(source: Path, out: Path, fmt: ExportFormat, *, force: bool = False) -> dict[str, int]:

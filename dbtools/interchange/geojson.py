@@ -130,10 +130,11 @@ def network_features(network: Network) -> list[dict[str, Any]]:
     out: list[dict[str, Any]] = []
     for rec in network.balises.to_dict("records"):
         geom = loc.point_at(rec["line_code"], rec["track"], rec["km_actual_m"])
-        out.append(feature(geom, {"layer": "balises", **{k: _clean(v) for k, v in rec.items()}}, str(rec["balise_id"])))
+        props = {"layer": "balises", **{str(k): _clean(v) for k, v in rec.items()}}
+        out.append(feature(geom, props, str(rec["balise_id"])))
     for rec in network.feature_points.to_dict("records"):
         geom = loc.point_at(rec["line_code"], rec["track"], rec["km_m"])
-        out.append(feature(geom, {"layer": "feature_points", **{k: _clean(v) for k, v in rec.items()}}))
+        out.append(feature(geom, {"layer": "feature_points", **{str(k): _clean(v) for k, v in rec.items()}}))
     out += frame_points(network.gis, "gis_points", height="height_m")
     for (line, track), (km, lon, lat) in loc.tracks.items():
         props = {"layer": "gis_lines", "line_code": line, "track": track, "km_from_m": km[0], "km_to_m": km[-1]}
@@ -150,7 +151,7 @@ def _km_features(loc: GridLocator, frame: pd.DataFrame, layer: str) -> list[dict
     out = []
     for rec in frame.to_dict("records"):
         coords = loc.between(rec["line_code"], rec["track"], rec["km_from_m"], rec["km_to_m"])
-        out.append(feature(line_string(coords), {"layer": layer, **{k: _clean(v) for k, v in rec.items()}}))
+        out.append(feature(line_string(coords), {"layer": layer, **{str(k): _clean(v) for k, v in rec.items()}}))
     return out
 
 
@@ -161,7 +162,7 @@ def verification_geojson(network: Network, verification: Any) -> dict[str, Any]:
     loc = GridLocator(network)
     feats = _km_features(loc, verification.defects, "defects") + _km_features(loc, verification.cells, "cells")
     for rec in verification.proposal.to_dict("records"):
-        props = {"layer": "proposal", **{k: _clean(v) for k, v in rec.items()}}
+        props = {"layer": "proposal", **{str(k): _clean(v) for k, v in rec.items()}}
         feats.append(feature(point(_num(rec["lon"]), _num(rec["lat"])), props))
         move = line_string([(_num(rec["lon"]), _num(rec["lat"])), (_num(rec["lon_new"]), _num(rec["lat_new"]))])
         feats.append(feature(move, {**props, "layer": "proposal_moves"}))
@@ -175,8 +176,14 @@ def possession_geojson(network: Network, report: Mapping[str, Any], possessions:
     lines = {str(p.work_no): str(p.line_code) for p in possessions}
     feats = []
     for p in possessions:
-        props = {"layer": "possessions", "work_no": p.work_no, "line_code": p.line_code, "track": p.track,
-                 "km_from_m": p.km_from_m, "km_to_m": p.km_to_m}
+        props = {
+            "layer": "possessions",
+            "work_no": p.work_no,
+            "line_code": p.line_code,
+            "track": p.track,
+            "km_from_m": p.km_from_m,
+            "km_to_m": p.km_to_m,
+        }
         feats.append(feature(line_string(loc.between(p.line_code, p.track, p.km_from_m, p.km_to_m)), props))
     for run in report.get("runs", []):
         for layer in ("alarms", "notices"):

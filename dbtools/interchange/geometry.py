@@ -60,6 +60,14 @@ def _to_geographic(epsg: int) -> Any:
     return Transformer.from_crs(crs, crs.geodetic_crs, always_xy=True)
 
 
+def geodetic_epsg(metric_epsg: int) -> int:
+    """EPSG code of the geodetic CRS (the lat/lon datum) of a projected CRS; WGS 84 when PROJ
+    has no code for it."""
+    geo = _crs(metric_epsg).geodetic_crs
+    code = geo.to_epsg() if geo is not None else None
+    return int(code) if code else WGS84
+
+
 def to_lonlat(values: Sequence[float], crs: str | None, *, xy: bool = False) -> tuple[float, float, float | None]:
     """(lon, lat, height) of one coordinate tuple in ``crs`` (module doc for the order);
     ``xy``: (x = lon, y = lat) for a geographic CRS. Lat/lon stay in the CRS's own datum

@@ -27,7 +27,9 @@ def _column(values: list[Any]) -> list[Any]:
     return values
 
 
-def write_geoparquet(path: Path, features: Sequence[dict[str, Any]], *, srs_epsg: int = 4326, force: bool = False) -> int:
+def write_geoparquet(
+    path: Path, features: Sequence[dict[str, Any]], *, srs_epsg: int = 4326, force: bool = False
+) -> int:
     import pyarrow as pa
     import pyarrow.parquet as pq
     from pyproj import CRS
@@ -45,9 +47,26 @@ def write_geoparquet(path: Path, features: Sequence[dict[str, Any]], *, srs_epsg
         "columns": {
             "geometry": {
                 "encoding": "WKB",
-                "geometry_types": sorted({g["type"] + (" Z" if g["type"] == "Point" and len(g["coordinates"]) == 3 else "") for g in geoms if g}),
+                "geometry_types": sorted(
+                    {
+                        g["type"] + (" Z" if g["type"] == "Point" and len(g["coordinates"]) == 3 else "")
+                        for g in geoms
+                        if g
+                    }
+                ),
                 "crs": json.loads(CRS.from_epsg(srs_epsg).to_json()),
-                **({"bbox": [min(b[0] for b in boxes), min(b[2] for b in boxes), max(b[1] for b in boxes), max(b[3] for b in boxes)]} if boxes else {}),
+                **(
+                    {
+                        "bbox": [
+                            min(b[0] for b in boxes),
+                            min(b[2] for b in boxes),
+                            max(b[1] for b in boxes),
+                            max(b[3] for b in boxes),
+                        ]
+                    }
+                    if boxes
+                    else {}
+                ),
             }
         },
     }

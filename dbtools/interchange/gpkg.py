@@ -54,18 +54,39 @@ def _layer(name: str, features: list[dict[str, Any]], srs_id: int, now: str) -> 
     types = {c: _sql_type(f["properties"].get(c) for f in features) for c in cols}
     ddl = ", ".join(f'"{c}" {types[c]}' for c in cols)
     boxes = [envelope(f["geometry"]) for f in features if f["geometry"] is not None]
-    bbox = (min(b[0] for b in boxes), min(b[2] for b in boxes), max(b[1] for b in boxes), max(b[3] for b in boxes)) if boxes else (None,) * 4
-    has_z = int(any(f["geometry"] and len(f["geometry"]["coordinates"]) == 3 for f in features if f["geometry"] and f["geometry"]["type"] == "Point"))
+    bbox = (
+        (min(b[0] for b in boxes), min(b[2] for b in boxes), max(b[1] for b in boxes), max(b[3] for b in boxes))
+        if boxes
+        else (None,) * 4
+    )
+    has_z = int(
+        any(
+            f["geometry"] and len(f["geometry"]["coordinates"]) == 3
+            for f in features
+            if f["geometry"] and f["geometry"]["type"] == "Point"
+        )
+    )
     marks = ", ".join("?" * (len(cols) + 1))
     rows = [
-        (gpkg_geometry(f["geometry"], srs_id), *(_value(f["properties"].get(c), types[c]) for c in cols)) for f in features
+        (gpkg_geometry(f["geometry"], srs_id), *(_value(f["properties"].get(c), types[c]) for c in cols))
+        for f in features
     ]
     names = ", ".join(["geom", *(f'"{c}"' for c in cols)])
     return [
-        (f'CREATE TABLE "{name}" (fid INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, geom BLOB' + (f", {ddl})" if ddl else ")"), None),
+        (
+            f'CREATE TABLE "{name}" (fid INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, geom BLOB'
+            + (f", {ddl})" if ddl else ")"),
+            None,
+        ),
         (f'INSERT INTO "{name}" ({names}) VALUES ({marks})', rows),
-        ("INSERT INTO gpkg_contents VALUES (?, 'features', ?, '', ?, ?, ?, ?, ?, ?)", [(name, name, now, *bbox, srs_id)]),
-        ("INSERT INTO gpkg_geometry_columns VALUES (?, 'geom', ?, ?, ?, 0)", [(name, _geometry_type(features), srs_id, has_z)]),
+        (
+            "INSERT INTO gpkg_contents VALUES (?, 'features', ?, '', ?, ?, ?, ?, ?, ?)",
+            [(name, name, now, *bbox, srs_id)],
+        ),
+        (
+            "INSERT INTO gpkg_geometry_columns VALUES (?, 'geom', ?, ?, ?, 0)",
+            [(name, _geometry_type(features), srs_id, has_z)],
+        ),
     ]
 
 
@@ -75,29 +96,57 @@ def _value(v: Any, sql_type: str) -> Any:
     return str(v)
 
 
-def write_gpkg(path: Path, features: Sequence[dict[str, Any]], *, srs_epsg: int = 4326, force: bool = False) -> dict[str, int]:
+def write_gpkg(
+    path: Path, features: Sequence[dict[str, Any]], *, srs_epsg: int = 4326, force: bool = False
+) -> dict[str, int]:
     """One GeoPackage with a table per ``layer`` property; returns rows per layer."""
     layers: dict[str, list[dict[str, Any]]] = {}
     for f in features:
         layers.setdefault(str(f["properties"].get("layer", "features")), []).append(f)
     now = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%S.000Z")
-    srs = [("WGS 84 geodetic", 4326, "EPSG", 4326, _wkt(4326), "longitude/latitude coordinates in decimal degrees on the WGS 84 spheroid"), *_SRS]
+    srs = [
+        (
+            "WGS 84 geodetic",
+            4326,
+            "EPSG",
+            4326,
+            _wkt(4326),
+            "longitude/latitude coordinates in decimal degrees on the WGS 84 spheroid",
+        ),
+        *_SRS,
+    ]
     if srs_epsg != 4326:
         srs.append((f"EPSG:{srs_epsg}", srs_epsg, "EPSG", srs_epsg, _wkt(srs_epsg), "lat/lon datum of the network"))
     script: list[tuple[str, Any]] = [
-        ("CREATE TABLE gpkg_spatial_ref_sys (srs_name TEXT NOT NULL, srs_id INTEGER PRIMARY KEY, organization TEXT NOT NULL, "
-         "organization_coordsys_id INTEGER NOT NULL, definition TEXT NOT NULL, description TEXT)", None),
+        (
+            "CREATE TABLE gpkg_spatial_ref_sys (srs_name TEXT NOT NULL, srs_id INTEGER PRIMARY KEY, "
+            "organization TEXT NOT NULL, "
+            "organization_coordsys_id INTEGER NOT NULL, definition TEXT NOT NULL, description TEXT)",
+            None,
+        ),
         ("INSERT INTO gpkg_spatial_ref_sys VALUES (?, ?, ?, ?, ?, ?)", srs),
-        ("CREATE TABLE gpkg_contents (table_name TEXT NOT NULL PRIMARY KEY, data_type TEXT NOT NULL, identifier TEXT UNIQUE, "
-         "description TEXT DEFAULT '', last_change DATETIME NOT NULL DEFAULT (strftime('%Y-%m-%dT%H:%M:%fZ','now')), "
-         "min_x DOUBLE, min_y DOUBLE, max_x DOUBLE, max_y DOUBLE, srs_id INTEGER, "
-         "CONSTRAINT fk_gc_r_srs_id FOREIGN KEY (srs_id) REFERENCES gpkg_spatial_ref_sys(srs_id))", None),
-        ("CREATE TABLE gpkg_geometry_columns (table_name TEXT NOT NULL, column_name TEXT NOT NULL, geometry_type_name TEXT NOT NULL, "
-         "srs_id INTEGER NOT NULL, z TINYINT NOT NULL, m TINYINT NOT NULL, CONSTRAINT pk_geom_cols PRIMARY KEY (table_name, column_name), "
-         "CONSTRAINT fk_gc_tn FOREIGN KEY (table_name) REFERENCES gpkg_contents(table_name), "
-         "CONSTRAINT fk_gc_srs FOREIGN KEY (srs_id) REFERENCES gpkg_spatial_ref_sys (srs_id))", None),
+        (
+            "CREATE TABLE gpkg_contents (table_name TEXT NOT NULL PRIMARY KEY, data_type TEXT NOT "
+            "NULL, identifier TEXT UNIQUE, "
+            "description TEXT DEFAULT '', last_change DATETIME NOT NULL DEFAULT "
+            "(strftime('%Y-%m-%dT%H:%M:%fZ','now')), "
+            "min_x DOUBLE, min_y DOUBLE, max_x DOUBLE, max_y DOUBLE, srs_id INTEGER, "
+            "CONSTRAINT fk_gc_r_srs_id FOREIGN KEY (srs_id) REFERENCES gpkg_spatial_ref_sys(srs_id))",
+            None,
+        ),
+        (
+            "CREATE TABLE gpkg_geometry_columns (table_name TEXT NOT NULL, column_name TEXT NOT "
+            "NULL, geometry_type_name TEXT NOT NULL, "
+            "srs_id INTEGER NOT NULL, z TINYINT NOT NULL, m TINYINT NOT NULL, CONSTRAINT "
+            "pk_geom_cols PRIMARY KEY (table_name, column_name), "
+            "CONSTRAINT fk_gc_tn FOREIGN KEY (table_name) REFERENCES gpkg_contents(table_name), "
+            "CONSTRAINT fk_gc_srs FOREIGN KEY (srs_id) REFERENCES gpkg_spatial_ref_sys (srs_id))",
+            None,
+        ),
     ]
     for name, feats in layers.items():
         script += _layer(name, feats, srs_epsg, now)
-    write_sqlite(path, script, pragmas=(f"application_id={APPLICATION_ID}", f"user_version={USER_VERSION}"), force=force)
+    write_sqlite(
+        path, script, pragmas=(f"application_id={APPLICATION_ID}", f"user_version={USER_VERSION}"), force=force
+    )
     return {k: len(v) for k, v in layers.items()}

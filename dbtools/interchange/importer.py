@@ -53,12 +53,14 @@ WHY = {
     "switchIS": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
     "crossing": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
     "connection": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
-    "netRelation": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
+    "netRelation": "track topology (switches, connections) has no counterpart: tracks are chained by "
+    "line, track and km",
     "speedChange": "speed data are not part of the onboard positioning DB",
     "infraAttributes": "infrastructure attributes (speed profiles, …) are not part of the onboard positioning DB",
     "visualization": "schematic screen coordinates, not geographic ones: not used for the GIS",
     "ocp": "operational points have no counterpart (station codes of initial pairs come from the --line-code map)",
-    "operationalPoint": "operational points have no counterpart (station codes of initial pairs come from the --line-code map)",
+    "operationalPoint": "operational points have no counterpart (station codes of initial pairs come "
+    "from the --line-code map)",
 }
 
 
@@ -98,7 +100,13 @@ def _duplicates(doc: RailmlDoc, root: Any) -> None:
         if ident in seen:
             first = xt.line_of(seen[ident])
             doc.findings.append(
-                xt.finding(el, "railml.duplicate_id", f"id '{ident}' is used again (first at line {first})", file=doc.file, column="id")
+                xt.finding(
+                    el,
+                    "railml.duplicate_id",
+                    f"id '{ident}' is used again (first at line {first})",
+                    file=doc.file,
+                    column="id",
+                )
             )
         else:
             seen[ident] = el
@@ -130,16 +138,22 @@ def _unmapped(doc: RailmlDoc, root: Any) -> list[Finding]:
         n = sum(1 for _ in el.iter()) - 1
         more = f" (with {n} element(s) inside)" if n else ""
         out.append(
-            xt.finding(el, "railml.unmapped", f"{name} not imported{more}: {why}", file=doc.file, severity=Severity.WARNING)
+            xt.finding(
+                el, "railml.unmapped", f"{name} not imported{more}: {why}", file=doc.file, severity=Severity.WARNING
+            )
         )
         reported.add(id(el))
         alive.append(el)
     return out
 
 
-def _gis(doc: RailmlDoc, targets: dict[str, Target]) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, pd.DataFrame, list[Finding]]:
+def _gis(
+    doc: RailmlDoc, targets: dict[str, Target]
+) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, pd.DataFrame, list[Finding]]:
     """(gis, km_breaks, centrelines, km posts, findings)."""
-    mapped = [(t, targets[tid].line_code, targets[tid].track) for tid, t in doc.tracks.items() if tid in targets and t.geo]
+    mapped = [
+        (t, targets[tid].line_code, targets[tid].track) for tid, t in doc.tracks.items() if tid in targets and t.geo
+    ]
     cl, kp = survey_frames(mapped)
     findings: list[Finding] = []
     breaks = pd.DataFrame(doc.km_breaks, columns=KM_BREAKS.column_names)
@@ -153,14 +167,26 @@ def _gis(doc: RailmlDoc, targets: dict[str, Target]) -> tuple[pd.DataFrame, pd.D
     root = doc_root_el(doc)
     if cl.empty:
         findings.append(
-            xt.finding(root, "railml.geometry", "no coordinates on any mapped track: gis.csv is empty (build a grid with gis grid)",
-                       file=doc.file, table="gis", severity=Severity.WARNING)
+            xt.finding(
+                root,
+                "railml.geometry",
+                "no coordinates on any mapped track: gis.csv is empty (build a grid with gis grid)",
+                file=doc.file,
+                table="gis",
+                severity=Severity.WARNING,
+            )
         )
         return empty_frame(GIS), breaks, cl, kp, findings
     if (kp.groupby("line_code").size() < 2).any() or kp.empty:
         findings.append(
-            xt.finding(root, "railml.geometry", "fewer than two points with a km on a line: survey/ written, no grid",
-                       file=doc.file, table="gis", severity=Severity.WARNING)
+            xt.finding(
+                root,
+                "railml.geometry",
+                "fewer than two points with a km on a line: survey/ written, no grid",
+                file=doc.file,
+                table="gis",
+                severity=Severity.WARNING,
+            )
         )
         return empty_frame(GIS), breaks, cl, kp, findings
     grid = grid_from_survey(cl, kp)
@@ -174,7 +200,9 @@ def doc_root_el(doc: RailmlDoc) -> Any:
     return doc._alive[0]
 
 
-def _frames(doc: RailmlDoc, lmap: LineMap, targets: dict[str, Target]) -> tuple[dict[str, pd.DataFrame], dict[str, Any], list[Finding]]:
+def _frames(
+    doc: RailmlDoc, lmap: LineMap, targets: dict[str, Target]
+) -> tuple[dict[str, pd.DataFrame], dict[str, Any], list[Finding]]:
     balise_rows, f_bal = map_balises(doc, targets, lmap)
     feature_rows, f_cur = map_curves(doc, targets)
     gis, breaks, cl, kp, f_geo = _gis(doc, targets)
@@ -237,8 +265,13 @@ def import_railml(source: Path, out: Path, *, line_map: Path | None = None, forc
 
 
 def _write(
-    out: Path, tables: dict[str, pd.DataFrame], extra: dict[str, Any], meta: dict[str, str], findings: list[Finding],
-    doc: RailmlDoc, force: bool,
+    out: Path,
+    tables: dict[str, pd.DataFrame],
+    extra: dict[str, Any],
+    meta: dict[str, str],
+    findings: list[Finding],
+    doc: RailmlDoc,
+    force: bool,
 ) -> None:
     with atomic_folder(out, force=True if force or out.exists() else False) as tmp:
         for name, table in SOURCE_TABLES.items():
@@ -265,7 +298,12 @@ def _write(
 def _declared(meta: dict[str, str]) -> dict[str, str]:
     """Our export's tpos root attributes (metricCrs …) or the map → network.toml entries."""
     out = {k: v for k, v in meta.items() if k in ("metric_crs", "metric_crs_source")}
-    for src, dst in (("metricCrs", "metric_crs"), ("area", "area"), ("heightDatum", "height_datum"), ("geoidModel", "geoid_model")):
+    for src, dst in (
+        ("metricCrs", "metric_crs"),
+        ("area", "area"),
+        ("heightDatum", "height_datum"),
+        ("geoidModel", "geoid_model"),
+    ):
         if src in meta:
             out[dst] = meta[src]
     for src, dst in (("metricCrsSource", "metric_crs_source"), ("areaSource", "area_source")):

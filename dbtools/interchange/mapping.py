@@ -59,13 +59,13 @@ def _table(data: dict[str, Any], key: str, path: Path) -> dict[str, dict[str, st
     out: dict[str, dict[str, str]] = {}
     for ident, spec in raw.items():
         if not isinstance(spec, dict) or "line_code" not in spec:
-            raise InputError(f"[{key}.\"{ident}\"] needs line_code", path=path)
+            raise InputError(f'[{key}."{ident}"] needs line_code', path=path)
         track = str(spec.get("track", Track.SINGLE.value))
         if track not in TRACKS:
             raise InputError(f"[{key}.\"{ident}\"] track '{track}' is not one of {', '.join(TRACKS)}", path=path)
         unknown = set(spec) - {"line_code", "track", "name"}
         if unknown:
-            raise InputError(f"[{key}.\"{ident}\"] unknown key(s) {', '.join(sorted(unknown))}", path=path)
+            raise InputError(f'[{key}."{ident}"] unknown key(s) {", ".join(sorted(unknown))}', path=path)
         out[str(ident)] = {k: str(v) for k, v in spec.items()} | {"track": track}
     return out
 
@@ -83,7 +83,9 @@ def read_map(path: Path | None) -> LineMap:
         raise InputError(f"not a valid TOML map: {exc}", path=path) from exc
     unknown = set(data) - {"lines", "tracks", "initial_pairs", "metric_crs"}
     if unknown:
-        raise InputError(f"unknown key(s) {', '.join(sorted(unknown))} (lines, tracks, initial_pairs, metric_crs)", path=path)
+        raise InputError(
+            f"unknown key(s) {', '.join(sorted(unknown))} (lines, tracks, initial_pairs, metric_crs)", path=path
+        )
     pairs = data.get("initial_pairs", {})
     if not isinstance(pairs, dict):
         raise InputError("[initial_pairs] must be a table of group id = station code", path=path)

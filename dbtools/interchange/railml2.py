@@ -131,8 +131,14 @@ def _position(doc: RailmlDoc, track: RTrack, el: Element) -> tuple[float, float]
             _err(doc, el, "railml.position", f"{where} and has no @absPos", column="pos")
             return None
         doc.findings.append(  # the stated mileage still places it on the line
-            xt.finding(el, "railml.position", f"{where}; placed by its @absPos {stated:g} on the same line and track",
-                       file=doc.file, severity=Severity.WARNING, column="pos")
+            xt.finding(
+                el,
+                "railml.position",
+                f"{where}; placed by its @absPos {stated:g} on the same line and track",
+                file=doc.file,
+                severity=Severity.WARNING,
+                column="pos",
+            )
         )
         return pos, stated
     derived = track.mileage.km(pos) if track.mileage is not None else None
@@ -246,8 +252,14 @@ def _line(doc: RailmlDoc, el: Element) -> None:
             target = xt.attr(ref, "id")
             doc.quirks.add(id(ref))
             doc.findings.append(
-                xt.finding(ref, "railml.quirk", f"trackRef has @id '{target}' instead of @ref: read as the reference",
-                           file=doc.file, severity=Severity.WARNING, column="ref")
+                xt.finding(
+                    ref,
+                    "railml.quirk",
+                    f"trackRef has @id '{target}' instead of @ref: read as the reference",
+                    file=doc.file,
+                    severity=Severity.WARNING,
+                    column="ref",
+                )
             )
         if target not in doc.tracks:
             _err(doc, ref, "railml.undefined_track", f"trackRef names track '{target}', which is not defined")

@@ -137,7 +137,11 @@ class _Reader:
         self.doc.use(lin)
         ref = xt.attr(lin, "positioningSystemRef")
         if ref is not None and ref not in self.lps:
-            self.err(lin, "railml.undefined_ref", f"positioningSystemRef '{ref}' is not a linear positioning system in metres")
+            self.err(
+                lin,
+                "railml.undefined_ref",
+                f"positioningSystemRef '{ref}' is not a linear positioning system in metres",
+            )
             return None
         return self.num(lin, "measure")
 
@@ -166,7 +170,9 @@ class _Reader:
         ref = xt.attr(loc, "netElementRef")
         track = self.doc.tracks.get(ref or "")
         if track is None:
-            self.err(loc, "railml.undefined_track", f"netElementRef '{ref}' names no netElement", column="netElementRef")
+            self.err(
+                loc, "railml.undefined_track", f"netElementRef '{ref}' names no netElement", column="netElementRef"
+            )
             return None
         t = self.num(loc, "intrinsicCoord")
         lin = xt.child(loc, "linearCoordinate")
@@ -336,7 +342,9 @@ def _group(r: _Reader, el: Element) -> None:
         return
     conn = xt.child(el, "connectedWithInfrastructureElement")
     func = xt.child(el, "functionalType")
-    r.doc.use(el, conn, func, *xt.children(el, "name"), *xt.children(el, "applicationType"), *xt.children(el, "spotLocation"))
+    r.doc.use(
+        el, conn, func, *xt.children(el, "name"), *xt.children(el, "applicationType"), *xt.children(el, "spotLocation")
+    )
     for s in xt.children(el, "spotLocation"):
         r.doc.use(*xt.children(s))
     function = (xt.attr(func, "value") or (func.text or "").strip() or None) if func is not None else None
@@ -369,4 +377,6 @@ def _curve(r: _Reader, el: Element) -> None:
     radius = r.num(el, "radius") or 0.0
     kind = (xt.attr(el, "curveType") or "").strip() or "straight"
     r.doc.use(*xt.children(el, "name"))  # the curve itself: used or reported by the curve mapping
-    r.doc.curves.append(RCurve(xt.attr(el, "id") or "", el, track.id, k0, k1, kind, radius if rising else -radius, _ext(el), _name(el)))
+    r.doc.curves.append(
+        RCurve(xt.attr(el, "id") or "", el, track.id, k0, k1, kind, radius if rising else -radius, _ext(el), _name(el))
+    )

@@ -30,7 +30,6 @@ shortest round-trip form, so export → import → build gives the same content 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -39,6 +38,7 @@ import pandas as pd
 from dbtools.gis.geometry import geodesic_step
 from dbtools.gis.index import network_georef
 from dbtools.interchange.curves import curves_of_feature
+from dbtools.interchange.geometry import WGS84, geodetic_epsg
 from dbtools.interchange.xmltree import GML_NS, TPOS_NS
 from dbtools.network import Network
 from schemas.enums import BaliseKind, Track
@@ -109,9 +109,16 @@ def _root(network: Network, geo_epsg: int) -> Any:
     )
     root.set(_T("gisGrid"), "true")
     meta = network.meta
-    for src, dst in (("metric_crs", "metricCrs"), ("metric_crs_source", "metricCrsSource"), ("area", "area"),
-                     ("area_source", "areaSource"), ("height_datum", "heightDatum"), ("geoid_model", "geoidModel"),
-                     ("db_version", "dbVersion"), ("content_hash", "contentHash")):
+    for src, dst in (
+        ("metric_crs", "metricCrs"),
+        ("metric_crs_source", "metricCrsSource"),
+        ("area", "area"),
+        ("area_source", "areaSource"),
+        ("height_datum", "heightDatum"),
+        ("geoid_model", "geoidModel"),
+        ("db_version", "dbVersion"),
+        ("content_hash", "contentHash"),
+    ):
         if meta.get(src):
             root.set(_T(dst), meta[src])
     md = _sub(root, "metadata")
@@ -126,7 +133,7 @@ def network_railml(network: Network) -> bytes:
     from lxml import etree
 
     georef = network_georef(network)
-    geo_epsg = _geodetic_epsg(georef.crs_epsg) if georef is not None else 4326
+    geo_epsg = geodetic_epsg(georef.crs_epsg) if georef is not None else WGS84
     root = _root(network, geo_epsg)
     pos = _sub(_sub(root, "common", id="co"), "positioning")
     lpss, gpss = _sub(pos, "linearPositioningSystems"), _sub(pos, "geometricPositioningSystems")
@@ -146,13 +153,6 @@ def network_railml(network: Network) -> bytes:
     return bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True))
 
 
-def _geodetic_epsg(epsg: int) -> int:
-    from pyproj import CRS
-
-    code = CRS.from_epsg(epsg).geodetic_crs.to_epsg()
-    return int(code) if code else 4326
-
-
 def _pairs(network: Network) -> list[tuple[str, str]]:
     keys = set()
     for t in ("gis", "balises", "feature_points", "km_breaks"):
@@ -168,86 +168,184 @@ def _net_elements(network: Network, nes: Any, level: Any, tracks_el: Any) -> dic
         ne_id = _nid("ne", line, track)
         tr = _Track(gis[(gis["line_code"].astype(str) == line) & (gis["track"].astype(str) == track)])
         out[(line, track)] = tr
-        ne = _sub(nes, "netElement", id=ne_id, length=tr.length if tr.length > 0 else None, tpos_lineCode=line, tpos_track=track)
+        ne = _sub(
+            nes,
+            "netElement",
+            id=ne_id,
+            length=tr.length if tr.length > 0 else None,
+            tpos_lineCode=line,
+            tpos_track=track,
+        )
         aps = _sub(ne, "associatedPositioningSystem", id=_nid("aps", line, track))
-        for i, (km, lat, lon, h) in enumerate(tr.frame[["km_m", "lat", "lon", "height_m"]].itertuples(index=False, name=None)):
-            ic = _sub(aps, "intrinsicCoordinate", id=_nid("ic", line, track, i),
-                      intrinsicCoord=tr.s[i] / tr.length if tr.length > 0 else 0.0)
+        for i, (km, lat, lon, h) in enumerate(
+            tr.frame[["km_m", "lat", "lon", "height_m"]].itertuples(index=False, name=None)
+        ):
+            ic = _sub(
+                aps,
+                "intrinsicCoordinate",
+                id=_nid("ic", line, track, i),
+                intrinsicCoord=tr.s[i] / tr.length if tr.length > 0 else 0.0,
+            )
             _sub(ic, "linearCoordinate", positioningSystemRef=_nid("lps", line), measure=km)
-            _sub(ic, "geometricCoordinate", positioningSystemRef="gps_geo", x=lon, y=lat,
-                 z=None if pd.isna(h) else float(h))
+            _sub(
+                ic,
+                "geometricCoordinate",
+                positioningSystemRef="gps_geo",
+                x=lon,
+                y=lat,
+                z=None if pd.isna(h) else float(h),
+            )
         _sub(level, "networkResource", ref=ne_id)
         t_el = _sub(tracks_el, "track", id=_nid("tr", line, track))
         _sub(t_el, "name", name=f"{line} {track}", language="en")
-        _sub(_sub(t_el, "linearLocation", id=_nid("tr", line, track, "loc")), "associatedNetElement", netElementRef=ne_id,
-             intrinsicCoordBegin=0.0, intrinsicCoordEnd=1.0)
+        _sub(
+            _sub(t_el, "linearLocation", id=_nid("tr", line, track, "loc")),
+            "associatedNetElement",
+            netElementRef=ne_id,
+            intrinsicCoordBegin=0.0,
+            intrinsicCoordEnd=1.0,
+        )
         if len(tr.frame) >= 2:
             ls = _sub(_sub(t_el, "gmlLocations"), "LineString", GML_NS, srsName="urn:ogc:def:crs:EPSG::4326")
             ls.set(f"{{{GML_NS}}}id", _nid("gml", line, track))
-            _sub(ls, "posList", GML_NS).text = " ".join(f"{la!r} {lo!r}" for la, lo in zip(tr.frame["lat"], tr.frame["lon"], strict=True))
+            _sub(ls, "posList", GML_NS).text = " ".join(
+                f"{la!r} {lo!r}" for la, lo in zip(tr.frame["lat"], tr.frame["lon"], strict=True)
+            )
     return out
 
 
 def _lines(network: Network, lpss: Any, lines_el: Any, tracks: dict[tuple[str, str], _Track]) -> None:
     breaks = network.km_breaks
-    for rec in network.lines.itertuples(index=False):
-        line = str(rec.line_code)
+    for rec in _records(network.lines):
+        line = str(rec["line_code"])
         kms = np.concatenate([t.km for (ln, _), t in tracks.items() if ln == line] or [np.zeros(0)])
-        lps = _sub(lpss, "linearPositioningSystem", id=_nid("lps", line), units="m", linearReferencingMethod="absolute",
-                   startMeasure=float(kms.min()) if kms.size else None, endMeasure=float(kms.max()) if kms.size else None,
-                   tpos_lineCode=line)
+        lps = _sub(
+            lpss,
+            "linearPositioningSystem",
+            id=_nid("lps", line),
+            units="m",
+            linearReferencingMethod="absolute",
+            startMeasure=float(kms.min()) if kms.size else None,
+            endMeasure=float(kms.max()) if kms.size else None,
+            tpos_lineCode=line,
+        )
         _sub(lps, "name", name=line, language="en")
-        for j, b in enumerate(breaks[breaks["line_code"].astype(str) == line].itertuples(index=False)):
-            _sub(lps, "anchor", id=_nid("anc", line, j), measure=float(b.km_from_m), tpos_track=str(b.track), tpos_kmTo=float(b.km_to_m))
-        el = _sub(lines_el, "line", id=_nid("ln", line), tpos_lineCode=line,
-                  tpos_attributes=None if pd.isna(rec.attributes_json) else str(rec.attributes_json))
-        if not pd.isna(rec.name):
-            _sub(el, "name", name=str(rec.name), language="en")
+        for j, b in enumerate(_records(breaks[breaks["line_code"].astype(str) == line])):
+            _sub(
+                lps,
+                "anchor",
+                id=_nid("anc", line, j),
+                measure=float(b["km_from_m"]),
+                tpos_track=str(b["track"]),
+                tpos_kmTo=float(b["km_to_m"]),
+            )
+        el = _sub(
+            lines_el,
+            "line",
+            id=_nid("ln", line),
+            tpos_lineCode=line,
+            tpos_attributes=_s(rec["attributes_json"]),
+        )
+        if _s(rec["name"]) is not None:
+            _sub(el, "name", name=str(rec["name"]), language="en")
         loc = _sub(el, "linearLocation", id=_nid("ln", line, "loc"))
         for ln, track in tracks:
             if ln == line:
-                _sub(loc, "associatedNetElement", netElementRef=_nid("ne", line, track), intrinsicCoordBegin=0.0, intrinsicCoordEnd=1.0)
+                _sub(
+                    loc,
+                    "associatedNetElement",
+                    netElementRef=_nid("ne", line, track),
+                    intrinsicCoordBegin=0.0,
+                    intrinsicCoordEnd=1.0,
+                )
 
 
 def _features(network: Network, curves_el: Any, tracks: dict[tuple[str, str], _Track]) -> None:
     fp = network.feature_points.sort_values(["line_code", "track", "feature_id", "seq"])
     for (line, track, fid), g in fp.groupby(["line_code", "track", "feature_id"], sort=True):
-        rows = g.to_dict("records")
-        payload = json.dumps([[int(r["seq"]), float(r["km_m"]), float(r["radius_m"]), str(r["attribute"]),
-                               None if pd.isna(r["role"]) else str(r["role"])] for r in rows])
-        pieces = curves_of_feature(rows, str(track)) or [("arc", min(g["km_m"]), max(g["km_m"]), float(g["radius_m"].max()))]
+        rows = _records(g)
+        payload = json.dumps(
+            [
+                [
+                    int(r["seq"]),
+                    float(r["km_m"]),
+                    float(r["radius_m"]),
+                    str(r["attribute"]),
+                    None if pd.isna(r["role"]) else str(r["role"]),
+                ]
+                for r in rows
+            ]
+        )
+        pieces = curves_of_feature(rows, str(track)) or [
+            ("arc", min(g["km_m"]), max(g["km_m"]), float(g["radius_m"].max()))
+        ]
         ne, lps, tr = _nid("ne", line, track), _nid("lps", line), tracks.get((str(line), str(track)))
         for n, (kind, k0, k1, radius) in enumerate(pieces):
             is_arc = kind == "arc"
-            el = _sub(curves_el, "horizontalCurve", id=_nid("hc", line, track, fid, n + 1), curveType=kind,
-                      radius=radius, length=k1 - k0, tpos_featureId=str(fid),
-                      tpos_featureRows=payload if is_arc else None)
+            el = _sub(
+                curves_el,
+                "horizontalCurve",
+                id=_nid("hc", line, track, fid, n + 1),
+                curveType=kind,
+                radius=radius,
+                length=k1 - k0,
+                tpos_featureId=str(fid),
+                tpos_featureRows=payload if is_arc else None,
+            )
             _sub(el, "name", name=str(fid), language="en")
             loc = _sub(el, "linearLocation", id=_nid("hc", line, track, fid, n + 1, "loc"))
-            a = _sub(loc, "associatedNetElement", netElementRef=ne,
-                     intrinsicCoordBegin=tr.intrinsic(k0) if tr else None, intrinsicCoordEnd=tr.intrinsic(k1) if tr else None)
+            a = _sub(
+                loc,
+                "associatedNetElement",
+                netElementRef=ne,
+                intrinsicCoordBegin=tr.intrinsic(k0) if tr else None,
+                intrinsicCoordEnd=tr.intrinsic(k1) if tr else None,
+            )
             _sub(a, "linearCoordinateBegin", positioningSystemRef=lps, measure=k0)
             _sub(a, "linearCoordinateEnd", positioningSystemRef=lps, measure=k1)
 
 
 def _balises(network: Network, bal: Any, grp: Any, tracks: dict[tuple[str, str], _Track]) -> None:
     made: set[str] = set()
-    for rec in network.balises.to_dict("records"):
+    for rec in _records(network.balises):
         line, track, kind = str(rec["line_code"]), str(rec["track"]), str(rec["kind"])
         group = _nid("bg", line, rec["station_code"], track) if kind != BaliseKind.C else _nid("bg", rec["balise_id"])
         if group not in made:
             made.add(group)
-            g = _sub(grp, "baliseGroup", id=group, numberOfBalisesInGroup="1" if kind == BaliseKind.C else "2",
-                     mileageDirection="reverse" if track == Track.UP.value else "nominal")
+            g = _sub(
+                grp,
+                "baliseGroup",
+                id=group,
+                numberOfBalisesInGroup="1" if kind == BaliseKind.C else "2",
+                mileageDirection="reverse" if track == Track.UP.value else "nominal",
+            )
             _sub(g, "applicationType", value="other:trainpos")
             _sub(g, "functionalType", value="other:positionCorrection" if kind == BaliseKind.C else "other:initialPair")
-        el = _sub(bal, "balise", id=str(rec["balise_id"]), tpos_kind=kind, tpos_stationCode=_s(rec["station_code"]),
-                  tpos_signalType=_s(rec["signal_type"]), tpos_kmEquipment=_n(rec["km_equipment_m"]),
-                  tpos_distFromInitial=_n(rec["dist_from_initial_m"]))
+        el = _sub(
+            bal,
+            "balise",
+            id=str(rec["balise_id"]),
+            tpos_kind=kind,
+            tpos_stationCode=_s(rec["station_code"]),
+            tpos_signalType=_s(rec["signal_type"]),
+            tpos_kmEquipment=_n(rec["km_equipment_m"]),
+            tpos_distFromInitial=_n(rec["dist_from_initial_m"]),
+        )
         direction = "reverse" if track == Track.UP.value else "normal"
-        _spot(el, _nid("sl", rec["balise_id"]), _nid("ne", line, track), _nid("lps", line), tracks.get((line, track)),
-              float(rec["km_actual_m"]), direction)
+        _spot(
+            el,
+            _nid("sl", rec["balise_id"]),
+            _nid("ne", line, track),
+            _nid("lps", line),
+            tracks.get((line, track)),
+            float(rec["km_actual_m"]),
+            direction,
+        )
         _sub(el, "belongsToParent", ref=group)
+
+
+def _records(frame: pd.DataFrame) -> list[dict[str, Any]]:
+    return [{str(k): v for k, v in r.items()} for r in frame.to_dict("records")]
 
 
 def _s(v: Any) -> str | None:

@@ -37,7 +37,11 @@ def _findings_table(findings: list[Finding]) -> str:
         ]
         for f in findings[:MAX_ROWS]
     ]
-    more = pk.paragraph(f"… {len(findings) - MAX_ROWS} more (db validate --format json)", pk.Status.NOTE) if len(findings) > MAX_ROWS else ""
+    more = (
+        pk.paragraph(f"… {len(findings) - MAX_ROWS} more (db validate --format json)", pk.Status.NOTE)
+        if len(findings) > MAX_ROWS
+        else ""
+    )
     return pk.table(["severity", "rule", "where", "message"], rows, cls="text") + more
 
 
@@ -45,7 +49,9 @@ def _changes_table(rows: list[dict[str, Any]]) -> str:
     out = []
     for r in rows[:MAX_ROWS]:
         keys = ", ".join(f"{k}={v}" for k, v in r["keys"].items())
-        changes = "; ".join(f"{c}: {a if a is not None else '—'} → {b if b is not None else '—'}" for c, (a, b) in r["changes"].items())
+        changes = "; ".join(
+            f"{c}: {a if a is not None else '—'} → {b if b is not None else '—'}" for c, (a, b) in r["changes"].items()
+        )
         out.append([pk.Cell(r["change"], "l"), pk.Cell(keys, "l"), pk.Cell(changes, "l")])
     return pk.table(["change", "keys", "values (old → new)"], out, cls="text")
 
@@ -63,32 +69,58 @@ def render_review(old: Path, new: Path) -> tuple[str, list[Finding]]:
     findings = validate_path(new)
     counts = count_by_severity(findings)
     ok = counts["error"] == 0
-    verdict = pk.badge(f"{counts['error']} error(s), {counts['warning']} warning(s) in NEW", pk.Status.OK if ok else pk.Status.WARN)
+    verdict = pk.badge(
+        f"{counts['error']} error(s), {counts['warning']} warning(s) in NEW", pk.Status.OK if ok else pk.Status.WARN
+    )
     changed = pk.badge("changes" if d.has_changes else "no content change", pk.Status.NOTE)
     head = pk.key_value_table(
-        [("old", str(old)), ("new", str(new)), ("old db_version", d.old.get("db_version")), ("new db_version", d.new.get("db_version")),
-         ("old content_hash", d.old.get("content_hash")), ("new content_hash", d.new.get("content_hash"))],
+        [
+            ("old", str(old)),
+            ("new", str(new)),
+            ("old db_version", d.old.get("db_version")),
+            ("new db_version", d.new.get("db_version")),
+            ("old content_hash", d.old.get("content_hash")),
+            ("new content_hash", d.new.get("content_hash")),
+        ],
         code=("old content_hash", "new content_hash"),
     )
     counts_frame = pd.DataFrame([{"table": n, **t.counts} for n, t in d.tables.items()])
     proj = _projector(new_net) or _projector(old_net)
-    svg = render_svg(map_data(old_net, new_net, d), proj) if proj is not None else pk.paragraph("No GIS points: no map.", pk.Status.NOTE)
+    svg = (
+        render_svg(map_data(old_net, new_net, d), proj)
+        if proj is not None
+        else pk.paragraph("No GIS points: no map.", pk.Status.NOTE)
+    )
     parts = [
         f"<p id='verdict'>{verdict} {changed}</p>",
         head,
         pk.section("Validation of NEW", _findings_table(findings)),
-        pk.section("What changed", "<ul id='summary'>" + "".join(f"<li>{pk.escape(s)}</li>" for s in d.summary) + "</ul>",
-                   pk.frame_table(counts_frame)),
-        pk.section("Map of the changes", f"<figure id='map'>{svg}<figcaption>{pk.escape('Drawn offline in the metric CRS of NEW')}"
-                   f"{pk.escape(f' (EPSG:{proj.epsg})' if proj else '')}</figcaption></figure>"),
+        pk.section(
+            "What changed",
+            "<ul id='summary'>" + "".join(f"<li>{pk.escape(s)}</li>" for s in d.summary) + "</ul>",
+            pk.frame_table(counts_frame),
+        ),
+        pk.section(
+            "Map of the changes",
+            f"<figure id='map'>{svg}<figcaption>{pk.escape('Drawn offline in the metric CRS of NEW')}"
+            f"{pk.escape(f' (EPSG:{proj.epsg})' if proj else '')}</figcaption></figure>",
+        ),
     ]
     for name, t in d.tables.items():
         if t.n_changes:
-            parts.append(pk.section(f"{name}: {t.counts['added']} added, {t.counts['removed']} removed, {t.counts['changed']} changed",
-                                    _changes_table(t.rows()), level=3))
+            parts.append(
+                pk.section(
+                    f"{name}: {t.counts['added']} added, {t.counts['removed']} removed, {t.counts['changed']} changed",
+                    _changes_table(t.rows()),
+                    level=3,
+                )
+            )
     parts.append(pk.paragraph(pk.generated(), pk.Status.NOTE))
-    page = pk.page(f"DB review {d.old.get('db_version', old)} → {d.new.get('db_version', new)}", *parts,
-                   description="trainpos db review: validation, diff and map of a DB change")
+    page = pk.page(
+        f"DB review {d.old.get('db_version', old)} → {d.new.get('db_version', new)}",
+        *parts,
+        description="trainpos db review: validation, diff and map of a DB change",
+    )
     return page, findings
 
 

@@ -83,11 +83,20 @@ def _marker(c: Change, fr: _Frame) -> str:
     (x, y), colour = fr.px([where])[0], COLOURS[c.kind]
     title = f"<title>{escape(c.what)} {escape(c.label)} {escape(c.kind)}</title>"
     if c.what == "GIS point":
-        return f"<rect class='chg {c.kind}' x='{x - 3:.1f}' y='{y - 3:.1f}' width='6' height='6' fill='{colour}'>{title}</rect>"
+        return (
+            f"<rect class='chg {c.kind}' x='{x - 3:.1f}' y='{y - 3:.1f}' width='6' height='6' "
+            f"fill='{colour}'>{title}</rect>"
+        )
     shape = "circle" if c.what == "balise" else "rect"
     if shape == "circle":
-        return f"<circle class='chg {c.kind}' cx='{x:.1f}' cy='{y:.1f}' r='5' fill='{colour}' stroke='#fff'>{title}</circle>"
-    return f"<polygon class='chg {c.kind}' points='{x:.1f},{y - 6:.1f} {x + 6:.1f},{y + 5:.1f} {x - 6:.1f},{y + 5:.1f}' fill='{colour}'>{title}</polygon>"
+        return (
+            f"<circle class='chg {c.kind}' cx='{x:.1f}' cy='{y:.1f}' r='5' fill='{colour}' "
+            f"stroke='#fff'>{title}</circle>"
+        )
+    return (
+        f"<polygon class='chg {c.kind}' points='{x:.1f},{y - 6:.1f} {x + 6:.1f},{y + 5:.1f} "
+        f"{x - 6:.1f},{y + 5:.1f}' fill='{colour}'>{title}</polygon>"
+    )
 
 
 def _arrow(c: Change, fr: _Frame, factor: float) -> str:
@@ -117,13 +126,19 @@ def _legend(factor: float, counts: dict[str, int], metres_per_px: float) -> str:
         ("removed", "circle", f"removed ({counts['removed']})"),
         ("moved", "line", f"moved ({counts['moved']}), arrows ×{factor:,.0f}"),
     ]
-    out = ["<g class='legend' font-size='12' font-family='sans-serif'>",
-           f"<rect x='10' y='10' width='300' height='{28 + 18 * (len(items) + 2)}' fill='#fff' fill-opacity='0.9' stroke='#ccc'/>",
-           "<text x='20' y='28' font-weight='bold'>Legend</text>"]
+    out = [
+        "<g class='legend' font-size='12' font-family='sans-serif'>",
+        f"<rect x='10' y='10' width='300' height='{28 + 18 * (len(items) + 2)}' fill='#fff' "
+        "fill-opacity='0.9' stroke='#ccc'/>",
+        "<text x='20' y='28' font-weight='bold'>Legend</text>",
+    ]
     y = 46
     for kind, shape, text in items:
         if shape == "line":
-            out.append(f"<line x1='20' y1='{y - 4}' x2='40' y2='{y - 4}' stroke='{COLOURS[kind]}' stroke-width='2' marker-end='url(#arrow)'/>")
+            out.append(
+                f"<line x1='20' y1='{y - 4}' x2='40' y2='{y - 4}' stroke='{COLOURS[kind]}' "
+                "stroke-width='2' marker-end='url(#arrow)'/>"
+            )
         else:
             out.append(f"<circle cx='30' cy='{y - 4}' r='5' fill='{COLOURS[kind]}'/>")
         out.append(f"<text x='50' y='{y}'>{escape(text)}</text>")
@@ -146,12 +161,17 @@ def render_svg(data: MapData, projector: Projector) -> str:
     counts = {k: sum(c.kind == k for c in data.changes) for k in ("added", "removed", "moved")}
     parts = [
         f"<svg xmlns='http://www.w3.org/2000/svg' id='review-map' role='img' aria-label='map of the changes' "
-        f"viewBox='0 0 {WIDTH} {HEIGHT}' width='{WIDTH}' height='{HEIGHT}' style='background:#fafafa;border:1px solid #ddd'>",
+        f"viewBox='0 0 {WIDTH} {HEIGHT}' width='{WIDTH}' height='{HEIGHT}' "
+        "style='background:#fafafa;border:1px solid #ddd'>",
         "<defs><marker id='arrow' viewBox='0 0 10 10' refX='9' refY='5' markerWidth='6' markerHeight='6' orient='auto'>"
         f"<path d='M0,0 L10,5 L0,10 z' fill='{COLOURS['moved']}'/></marker></defs>",
     ]
     parts += [_poly(fr.px(ln), f"stroke='{COLOURS['line']}' stroke-width='2'") for ln in data.lines if len(ln) > 1]
-    parts += [_poly(fr.px(ln), f"stroke='{COLOURS['removed']}' stroke-width='1.5' stroke-dasharray='6,4'") for ln in data.removed_lines if len(ln) > 1]
+    parts += [
+        _poly(fr.px(ln), f"stroke='{COLOURS['removed']}' stroke-width='1.5' stroke-dasharray='6,4'")
+        for ln in data.removed_lines
+        if len(ln) > 1
+    ]
     parts += [_marker(c, fr) for c in data.changes if c.kind != "moved" and (c.new or c.old)]
     parts += [_arrow(c, fr, factor) for c in moves]
     parts.append(_legend(factor, counts, 1.0 / fr.scale))

@@ -141,9 +141,7 @@ def finding(
     ident = attr(el, "id")
     if ident:
         keys["id"] = ident
-    return Finding(
-        rule, severity, table, message, keys=keys, value=value, file=file, row=line_of(el), column=column
-    )
+    return Finding(rule, severity, table, message, keys=keys, value=value, file=file, row=line_of(el), column=column)
 
 
 def number(el: Element, name: str) -> float | None:

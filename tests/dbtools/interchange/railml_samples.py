@@ -5,7 +5,8 @@
 straight line due east at 60° N (1 m = 1/(111 319.49·cos 60°) deg of longitude, close
 enough for the test's 1 m tolerance). Radius changes: straight from pos 0 (a radiusChange
 holds until the next one; before the first one nothing is known), a left curve — clothoid
-pos 400–460, arc R 600 m 460–700, clothoid 700–760 — and straight to the end. Balises: an initial pair at pos 1100/1105, a C balise at 1800
+pos 400–460, arc R 600 m 460–700, clothoid 700–760 — and straight to the end. Balises: an
+initial pair at pos 1100/1105, a C balise at 1800
 with a home signal 50 m ahead, a lone balise at 2900.
 """
 
@@ -99,13 +100,19 @@ RAILML3_HEAD = """<?xml version="1.0" encoding="UTF-8"?>
     <topology><netElements>
       <netElement id="ne1" length="1000">
         <associatedPositioningSystem id="aps1">
-          <intrinsicCoordinate id="ic0" intrinsicCoord="0"><linearCoordinate positioningSystemRef="lps1" measure="0"/></intrinsicCoordinate>
-          <intrinsicCoordinate id="ic1" intrinsicCoord="1"><linearCoordinate positioningSystemRef="lps1" measure="1000"/></intrinsicCoordinate>
+          <intrinsicCoordinate id="ic0" intrinsicCoord="0">
+            <linearCoordinate positioningSystemRef="lps1" measure="0"/>
+          </intrinsicCoordinate>
+          <intrinsicCoordinate id="ic1" intrinsicCoord="1">
+            <linearCoordinate positioningSystemRef="lps1" measure="1000"/>
+          </intrinsicCoordinate>
         </associatedPositioningSystem>
       </netElement>
     </netElements></topology>
     <functionalInfrastructure>
-      <lines><line id="ln1"><linearLocation id="ll1"><associatedNetElement netElementRef="ne1"/></linearLocation></line></lines>
+      <lines><line id="ln1">
+        <linearLocation id="ll1"><associatedNetElement netElementRef="ne1"/></linearLocation>
+      </line></lines>
       <balises>
 {balises}
       </balises>

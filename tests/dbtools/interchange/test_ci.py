@@ -16,7 +16,9 @@ from typer.testing import CliRunner
 from cli.main import app
 from dbtools.sample_network import sample_source_dir
 
-SCHEMA = json.loads((Path(__file__).resolve().parents[2] / "data" / "sarif" / "sarif-schema-2.1.0.json").read_text(encoding="utf-8"))
+SCHEMA = json.loads(
+    (Path(__file__).resolve().parents[2] / "data" / "sarif" / "sarif-schema-2.1.0.json").read_text(encoding="utf-8")
+)
 
 
 def _run(*args: object) -> tuple[int, str]:

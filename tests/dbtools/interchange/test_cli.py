@@ -48,9 +48,15 @@ def test_export_exit_codes(sample_db: Path, tmp_path: Path) -> None:
     r = invoke("db", "export", sample_db, "--format", "kml", "--out", tmp_path / "x.kml")
     assert r.exit_code == 2 and "railml, geojson, gpkg, geoparquet" in r.output
     r = invoke("db", "export", sample_db, "--format", "geojson", "--out", tmp_path / "n.geojson")
-    assert r.exit_code == 0 and json.loads((tmp_path / "n.geojson").read_text(encoding="utf-8"))["type"] == "FeatureCollection"
+    assert (
+        r.exit_code == 0
+        and json.loads((tmp_path / "n.geojson").read_text(encoding="utf-8"))["type"] == "FeatureCollection"
+    )
     assert invoke("db", "export", sample_db, "--format", "geojson", "--out", tmp_path / "n.geojson").exit_code == 3
-    assert invoke("db", "export", tmp_path / "missing.sqlite", "--format", "gpkg", "--out", tmp_path / "m.gpkg").exit_code == 2
+    assert (
+        invoke("db", "export", tmp_path / "missing.sqlite", "--format", "gpkg", "--out", tmp_path / "m.gpkg").exit_code
+        == 2
+    )
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +73,9 @@ def test_gis_verify_geojson(data: VerifyData, tmp_path: Path) -> None:
     assert {"defects", "cells", "proposal", "proposal_moves"} <= layers
     (defect,) = [f for f in gj["features"] if f["properties"]["layer"] == "defects"]
     assert defect["geometry"]["type"] == "LineString" and defect["properties"]["track"] == DEFECT_TRACK
-    assert DEFECT_KM[0] - 40 <= defect["properties"]["km_from_m"] <= defect["properties"]["km_to_m"] <= DEFECT_KM[1] + 40
+    assert (
+        DEFECT_KM[0] - 40 <= defect["properties"]["km_from_m"] <= defect["properties"]["km_to_m"] <= DEFECT_KM[1] + 40
+    )
     assert all("offset_mean_m" in f["properties"] for f in gj["features"] if f["properties"]["layer"] == "cells")
     assert invoke("gis", "verify", data.surveyed_db, data.logs, "--format", "geojson").exit_code == 2  # needs --out
 
@@ -84,7 +92,9 @@ def test_possession_geojson(tmp_path: Path) -> None:
     build_db(tmp_path / "src", tmp_path / "net.sqlite", db_version="t")
     run, plan = make_case(net, "overrun", 31).write(tmp_path, fmt="csv")
     out = tmp_path / "pz.geojson"
-    r = invoke("possession", "check", run, "--db", tmp_path / "net.sqlite", "--plan", plan, "--format", "geojson", "--out", out)
+    r = invoke(
+        "possession", "check", run, "--db", tmp_path / "net.sqlite", "--plan", plan, "--format", "geojson", "--out", out
+    )
     assert r.exit_code == 1, r.output
     gj = json.loads(out.read_text(encoding="utf-8"))
     alarms = [f for f in gj["features"] if f["properties"]["layer"] == "alarms"]

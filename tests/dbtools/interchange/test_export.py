@@ -66,7 +66,9 @@ def test_railml_structure(exported: dict[str, Path], sample_db: Path) -> None:
     ics = root.findall(f".//{R}intrinsicCoordinate")
     assert len(ics) == len(net.gis)
     assert all(0.0 <= float(ic.get("intrinsicCoord")) <= 1.0 for ic in ics)
-    assert all(ic.find(f"{R}linearCoordinate") is not None and ic.find(f"{R}geometricCoordinate") is not None for ic in ics)
+    assert all(
+        ic.find(f"{R}linearCoordinate") is not None and ic.find(f"{R}geometricCoordinate") is not None for ic in ics
+    )
     balises = infra.findall(f"{R}functionalInfrastructure/{R}balises/{R}balise")
     assert len(balises) == len(net.balises)
     for b in balises:
@@ -93,7 +95,12 @@ def test_geojson_is_rfc7946(exported: dict[str, Path], sample_db: Path) -> None:
         for p in pts:  # lon, lat order: the sample lies near 139.5° E, 35.9° N
             assert 139.3 < p[0] < 139.6 and 35.8 < p[1] < 36.0
     net = read_network(sample_db)
-    assert layers == {"balises": 31, "feature_points": len(net.feature_points), "gis_points": len(net.gis), "gis_lines": 2}
+    assert layers == {
+        "balises": 31,
+        "feature_points": len(net.feature_points),
+        "gis_points": len(net.gis),
+        "gis_lines": 2,
+    }
 
 
 def test_geopackage_tables_and_binary_geometry(exported: dict[str, Path]) -> None:
@@ -102,12 +109,21 @@ def test_geopackage_tables_and_binary_geometry(exported: dict[str, Path]) -> Non
         assert con.execute("PRAGMA application_id").fetchone()[0] == 0x47504B47
         assert con.execute("PRAGMA user_version").fetchone()[0] == 10400
         assert {r[0] for r in con.execute("SELECT srs_id FROM gpkg_spatial_ref_sys")} == {4326, 6668, -1, 0}
-        contents = {r[0]: r[1:] for r in con.execute("SELECT table_name, data_type, srs_id, min_x, max_x FROM gpkg_contents")}
+        contents = {
+            r[0]: r[1:] for r in con.execute("SELECT table_name, data_type, srs_id, min_x, max_x FROM gpkg_contents")
+        }
         assert set(contents) == {"balises", "feature_points", "gis_points", "gis_lines"}
         assert all(v[0] == "features" and v[1] == 6668 and 139 < v[2] < v[3] < 140 for v in contents.values())
         types = dict(con.execute("SELECT table_name, geometry_type_name FROM gpkg_geometry_columns"))
-        assert types == {"balises": "POINT", "feature_points": "POINT", "gis_points": "POINT", "gis_lines": "LINESTRING"}
-        blob, bid, km = con.execute("SELECT geom, balise_id, km_actual_m FROM balises ORDER BY balise_id LIMIT 1").fetchone()
+        assert types == {
+            "balises": "POINT",
+            "feature_points": "POINT",
+            "gis_points": "POINT",
+            "gis_lines": "LINESTRING",
+        }
+        blob, bid, km = con.execute(
+            "SELECT geom, balise_id, km_actual_m FROM balises ORDER BY balise_id LIMIT 1"
+        ).fetchone()
         assert blob[:2] == b"GP" and blob[2] == 0 and blob[3] & 1 == 1
         assert struct.unpack("<i", blob[4:8])[0] == 6668
         minx, maxx, miny, maxy = struct.unpack("<4d", blob[8:40])

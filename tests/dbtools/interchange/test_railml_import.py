@@ -38,7 +38,9 @@ def test_finnish_file_accounts_for_every_balise(tmp_path: Path) -> None:
     assert sum(f.rule == "railml.no_pair" for f in r.findings) == 45
     assert sum("not the first of group" in f.message for f in r.findings) == 31
     signals = [f for f in r.findings if f.rule == "railml.unmapped" and f.message.startswith("signal ")]
-    assert len(signals) == 34 and all(f.row and f.keys["element"].startswith("/railml/infrastructure/tracks") for f in signals)
+    assert len(signals) == 34 and all(
+        f.row and f.keys["element"].startswith("/railml/infrastructure/tracks") for f in signals
+    )
     # the generator's quirks are reported, not fatal
     assert sum(f.rule == "railml.quirk" for f in r.findings) == 19
     assert any(f.rule == "railml.position" and "placed by its @absPos 41097" in f.message for f in r.findings)
@@ -68,7 +70,7 @@ def test_finnish_file_with_a_map_gives_c_balises(tmp_path: Path) -> None:
     assert (c["km_actual_m"].astype(float) > 34315).all()  # S runs km-increasing: after the pair
     first = c.sort_values("km_actual_m", key=lambda s: s.astype(float)).iloc[0]
     assert float(first["dist_from_initial_m"]) == pytest.approx(float(first["km_actual_m"]) - 34315, abs=1e-6)
-    assert "metric_crs = \"EPSG:3067\"" in (out / "network.toml").read_text(encoding="utf-8")
+    assert 'metric_crs = "EPSG:3067"' in (out / "network.toml").read_text(encoding="utf-8")
     assert r.rows["balises"] == len(b)
 
 
@@ -131,7 +133,9 @@ def test_railml3_without_our_extensions_derives_features_and_grid(sample_db: Pat
     assert a.index.equals(b.index)
     assert (a["km_m"] - b["km_m"]).abs().max() < 1e-6 and (a["radius_m"] == b["radius_m"]).all()
     assert (a["attribute"] == b["attribute"]).all()
-    ga = pd.read_csv(sample_source_dir() / "gis.csv", dtype={"line_code": str}).set_index(["line_code", "track", "km_m"])
+    ga = pd.read_csv(sample_source_dir() / "gis.csv", dtype={"line_code": str}).set_index(
+        ["line_code", "track", "km_m"]
+    )
     gb = pd.read_csv(out / "gis.csv", dtype={"line_code": str}).set_index(["line_code", "track", "km_m"])
     j = ga.join(gb, how="inner", suffixes=("", "_n"))
     assert len(j) == len(ga) == len(gb)
@@ -141,7 +145,10 @@ def test_railml3_without_our_extensions_derives_features_and_grid(sample_db: Pat
     assert ba.index.sort_values().equals(bb.index.sort_values())
     assert (ba["kind"] == bb.loc[ba.index, "kind"]).all()
     assert (ba["station_code"] == bb.loc[ba.index, "station_code"]).all()
-    assert (ba["dist_from_initial_m"].astype(float).fillna(-1) - bb.loc[ba.index, "dist_from_initial_m"].astype(float).fillna(-1)).abs().max() < 1e-6
+    assert (
+        ba["dist_from_initial_m"].astype(float).fillna(-1)
+        - bb.loc[ba.index, "dist_from_initial_m"].astype(float).fillna(-1)
+    ).abs().max() < 1e-6
 
 
 # ---------------------------------------------------------------------------- bad input
@@ -165,7 +172,8 @@ def test_malformed_xml_names_the_line(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     "doc",
     [
-        '<!DOCTYPE r [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;">]><railML version="3.2">&b;</railML>',
+        '<!DOCTYPE r [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;">]><railML '
+        'version="3.2">&b;</railML>',
         '<!DOCTYPE r [<!ENTITY x SYSTEM "file:///etc/passwd">]><railML version="3.2"><x>&x;</x></railML>',
         '<!DOCTYPE railML SYSTEM "http://example.invalid/railml.dtd"><railML version="3.2"/>',
     ],

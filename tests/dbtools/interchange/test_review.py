@@ -74,9 +74,19 @@ def _chromium() -> str | None:
 def _browser(exe: str, page: Path, *args: str) -> subprocess.CompletedProcess[bytes]:
     with tempfile.TemporaryDirectory() as profile:
         return subprocess.run(
-            [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-             "--disable-component-update", "--disable-sync", "--no-first-run", f"--user-data-dir={profile}",
-             *args, page.as_uri()],
+            [
+                exe,
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-background-networking",
+                "--disable-component-update",
+                "--disable-sync",
+                "--no-first-run",
+                f"--user-data-dir={profile}",
+                *args,
+                page.as_uri(),
+            ],
             capture_output=True,
             timeout=90,
             check=False,
@@ -90,7 +100,7 @@ def test_page_renders_in_headless_chromium(change: dict[str, Path]) -> None:
     exe = _chromium()
     assert exe is not None
     dom = _browser(exe, change["page"], "--dump-dom").stdout.decode("utf-8", "replace")
-    assert "id=\"review-map\"" in dom and "Legend" in dom and "Validation of NEW" in dom
+    assert 'id="review-map"' in dom and "Legend" in dom and "Validation of NEW" in dom
     png = change["root"] / "review.png"
     _browser(exe, change["page"], f"--screenshot={png}", "--window-size=1200,1800")
     assert png.is_file(), "chromium wrote no screenshot"
