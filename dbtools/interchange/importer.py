@@ -164,7 +164,7 @@ def _gis(
             for p in t.geo
         ]
         return pd.DataFrame(rows, columns=GIS.column_names), breaks, cl, kp, findings
-    root = doc_root_el(doc)
+    root = doc.root
     if cl.empty:
         findings.append(
             xt.finding(
@@ -194,10 +194,6 @@ def _gis(
         f.severity = Severity.WARNING if f.severity == Severity.ERROR else f.severity
         f.message = f"grid from the railML coordinates: {f.message}"
     return grid.gis, grid.km_breaks, cl, kp, grid.findings
-
-
-def doc_root_el(doc: RailmlDoc) -> Any:
-    return doc._alive[0]
 
 
 def _frames(
@@ -252,7 +248,7 @@ def import_railml(source: Path, out: Path, *, line_map: Path | None = None, forc
     lmap = read_map(line_map)
     doc, targets = read_railml(source, lmap)
     tables, extra, findings = _frames(doc, lmap, targets)
-    findings = _dedupe(doc.findings + findings + _unmapped(doc, doc_root_el(doc)))
+    findings = _dedupe(doc.findings + findings + _unmapped(doc, doc.root))
     errors = [f for f in findings if f.severity == Severity.ERROR]
     if errors:
         raise FindingsError(f"{len(errors)} error(s) in {source.name}; nothing was written", findings, path=source)
@@ -273,7 +269,7 @@ def _write(
     doc: RailmlDoc,
     force: bool,
 ) -> None:
-    with atomic_folder(out, force=True if force or out.exists() else False) as tmp:
+    with atomic_folder(out, force=force or out.exists()) as tmp:  # an empty folder may be replaced
         for name, table in SOURCE_TABLES.items():
             frame = canonical(table, tables[name])
             if not table.required and frame.empty:

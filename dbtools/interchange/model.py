@@ -171,6 +171,11 @@ class RailmlDoc:
     quirks: set[int] = field(default_factory=set)
     """``id()`` of elements whose ``@id`` is a reference (2.x trackRef written with @id)."""
 
+    @property
+    def root(self) -> Element:
+        """The document element (the readers use it first)."""
+        return self._alive[0]
+
     def use(self, *els: Element) -> None:
         for el in els:
             if el is not None:
