@@ -187,8 +187,11 @@ def map_balises(
                 )
             )
     for g, first in candidates:
-        rows_or_finding = _c_row(doc, g, first, pairs.get((g.target.line_code, g.target.track), []))
-        (rows if isinstance(rows_or_finding, dict) else findings).append(rows_or_finding)  # type: ignore[arg-type]
+        result = _c_row(doc, g, first, pairs.get((g.target.line_code, g.target.track), []))
+        if isinstance(result, Finding):
+            findings.append(result)
+        else:
+            rows.append(result)
     return rows, findings
 
 
