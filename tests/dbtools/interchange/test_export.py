@@ -136,6 +136,21 @@ def test_geopackage_tables_and_binary_geometry(exported: dict[str, Path]) -> Non
         con.close()
 
 
+def test_gdal_reads_the_geopackage_and_geojson_as_qgis_would(exported: dict[str, Path]) -> None:
+    import pyogrio
+    from pyogrio.raw import read
+
+    layers = {str(name): str(kind) for name, kind in pyogrio.list_layers(exported["gpkg"])}
+    assert layers == {"balises": "Point", "feature_points": "Point", "gis_points": "Point Z", "gis_lines": "LineString"}
+    info = pyogrio.read_info(exported["gpkg"], layer="balises")
+    assert info["crs"] == "EPSG:6668" and info["features"] == 31 and "station_code" in list(info["fields"])
+    _, _, geoms, fields = read(exported["gpkg"], layer="feature_points", columns=["feature_id", "km_m"])
+    assert len(geoms) == 108 and all(shapely.from_wkb(g).geom_type == "Point" for g in geoms)
+    assert sorted(set(fields[0].tolist()))[:2] == ["F001", "F002"] and float(fields[1].max()) > 29_000
+    gj = pyogrio.read_info(exported["geojson"])
+    assert gj["features"] == 31 + 108 + 1500 + 2 and gj["crs"] == "EPSG:4326"
+
+
 def test_geoparquet_metadata_and_wkb(exported: dict[str, Path]) -> None:
     import pyarrow.parquet as pq
 
