@@ -97,7 +97,7 @@ def survey_frames(tracks: Sequence[tuple[RTrack, str, str]]) -> tuple[pd.DataFra
     for rt, line, track in tracks:
         chains.setdefault((line, track), []).extend(rt.geo)
     for (line, track), pts in sorted(chains.items()):
-        pts = sorted(pts, key=lambda p: (p.km, p.pos))
+        pts = sorted(pts, key=lambda p: (p.km if p.km == p.km else float("inf"), p.pos))
         seq = 0
         last: tuple[float, float] | None = None
         for p in pts:

@@ -12,7 +12,8 @@ curves, mileage changes and gml locations.
   given, else the mileage at its intrinsic coordinate.
 * Coordinates: ``intrinsicCoordinate/geometricCoordinate`` (x = lon, y = lat in a geographic
   CRS, or easting/northing) in the ``@crsDefinition`` of its geometric positioning system;
-  failing those, the ``gml:LineString``/``gml:Point`` of a track's ``gmlLocations`` (vertices only).
+  failing those, the ``gml:LineString`` of a track's ``gmlLocations``, each vertex placed by
+  its geodesic chainage scaled to the netElement's length.
 * ``horizontalCurve``: ``@curveType`` (straight, arc, clothoide, …), ``@radius`` (negative
   left as seen from the curve's begin), ``@length``, located by a ``linearLocation``.
 """
@@ -310,6 +311,12 @@ def _track(r: _Reader, el: Element) -> None:
 
 
 def _gml_vertices(r: _Reader, track: RTrack, gml: Element) -> None:
+    """The vertices of a track's gml LineString; each gets its chainage (geodesic distance
+    along the line, scaled to the netElement's length) and, through the netElement's
+    mileage, a km — so they are kilometre posts too."""
+    import numpy as np
+
+    from dbtools.gis.geometry import geodesic_step
     from dbtools.interchange.geometry import to_lonlat
 
     for ls in xt.iter_named(gml, "LineString"):
@@ -317,13 +324,18 @@ def _gml_vertices(r: _Reader, track: RTrack, gml: Element) -> None:
         dim = int(ls.get("srsDimension") or 2)
         pos_list = next(xt.iter_named(ls, "posList"), None)
         values = [float(v) for v in (pos_list.text or "").split()] if pos_list is not None else []
-        for i in range(0, len(values) - dim + 1, dim):
-            try:
-                lon, lat, h = to_lonlat(values[i : i + dim], crs)
-            except ValueError as exc:
-                r.err(ls, "railml.geocoord", f"gml posList: {exc}")
-                return
-            track.geo.append(GeoPoint(float(i), float("nan"), lon, lat, h, vertex_only=True))
+        try:
+            pts = [to_lonlat(values[i : i + dim], crs) for i in range(0, len(values) - dim + 1, dim)]
+        except ValueError as exc:
+            r.err(ls, "railml.geocoord", f"gml posList: {exc}")
+            return
+        if len(pts) < 2:
+            continue
+        s = np.concatenate([[0.0], np.cumsum(geodesic_step([p[0] for p in pts], [p[1] for p in pts]))])
+        scale = track.length / s[-1] if track.length and s[-1] > 0 else 1.0
+        for (lon, lat, h), si in zip(pts, s.tolist(), strict=True):
+            km = track.mileage.km(si * scale) if track.mileage is not None else float("nan")
+            track.geo.append(GeoPoint(si * scale, km, lon, lat, h, vertex_only=track.mileage is None))
 
 
 def _signal(r: _Reader, el: Element) -> None:

@@ -146,7 +146,7 @@ def network_railml(network: Network) -> bytes:
     curves = _sub(_sub(infra, "geometry"), "horizontalCurves")
     fi = _sub(infra, "functionalInfrastructure")
     bal, grp, lines_el, tracks_el = (_sub(fi, n) for n in ("balises", "baliseGroups", "lines", "tracks"))
-    tracks = _net_elements(network, nes, level, tracks_el)
+    tracks = _net_elements(network, nes, level, tracks_el, geo_epsg)
     _lines(network, lpss, lines_el, tracks)
     _features(network, curves, tracks)
     _balises(network, bal, grp, tracks)
@@ -161,7 +161,9 @@ def _pairs(network: Network) -> list[tuple[str, str]]:
     return sorted(keys)
 
 
-def _net_elements(network: Network, nes: Any, level: Any, tracks_el: Any) -> dict[tuple[str, str], _Track]:
+def _net_elements(
+    network: Network, nes: Any, level: Any, tracks_el: Any, geo_epsg: int
+) -> dict[tuple[str, str], _Track]:
     out: dict[tuple[str, str], _Track] = {}
     gis = network.gis
     for line, track in _pairs(network):
@@ -206,7 +208,7 @@ def _net_elements(network: Network, nes: Any, level: Any, tracks_el: Any) -> dic
             intrinsicCoordEnd=1.0,
         )
         if len(tr.frame) >= 2:
-            ls = _sub(_sub(t_el, "gmlLocations"), "LineString", GML_NS, srsName="urn:ogc:def:crs:EPSG::4326")
+            ls = _sub(_sub(t_el, "gmlLocations"), "LineString", GML_NS, srsName=f"urn:ogc:def:crs:EPSG::{geo_epsg}")
             ls.set(f"{{{GML_NS}}}id", _nid("gml", line, track))
             _sub(ls, "posList", GML_NS).text = " ".join(
                 f"{la!r} {lo!r}" for la, lo in zip(tr.frame["lat"], tr.frame["lon"], strict=True)

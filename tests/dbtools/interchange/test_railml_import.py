@@ -151,6 +151,32 @@ def test_railml3_without_our_extensions_derives_features_and_grid(sample_db: Pat
     ).abs().max() < 1e-6
 
 
+def test_railml3_gml_line_only_gives_a_grid(sample_db: Path, tmp_path: Path) -> None:
+    """Without geometric coordinates the tracks' gml LineStrings are the centrelines; their
+    vertices get km from the netElement's mileage, and the grid follows the same line."""
+    from lxml import etree
+
+    from dbtools.interchange.export import ExportFormat, export_network
+
+    export_network(sample_db, tmp_path / "net.railml", ExportFormat.railml)
+    tree = etree.parse(str(tmp_path / "net.railml"))
+    for el in list(tree.getroot().iter("{*}geometricCoordinate")):
+        el.getparent().remove(el)
+    tree.getroot().attrib.pop("{urn:x-trainpos:railml:1}gisGrid")
+    tree.write(str(tmp_path / "gml.railml"))
+    out = tmp_path / "src"
+    import_railml(tmp_path / "gml.railml", out)
+    from dbtools.sample_network import sample_source_dir
+
+    ga = pd.read_csv(sample_source_dir() / "gis.csv", dtype={"line_code": str}).set_index(
+        ["line_code", "track", "km_m"]
+    )
+    gb = pd.read_csv(out / "gis.csv", dtype={"line_code": str}).set_index(["line_code", "track", "km_m"])
+    j = ga.join(gb, how="inner", suffixes=("", "_n"))
+    assert len(j) == len(ga) == len(gb)
+    assert ((j["lat"] - j["lat_n"]).abs().max() * 111_000) < 0.5  # rebuilt through gis grid
+
+
 # ---------------------------------------------------------------------------- bad input
 
 
