@@ -25,7 +25,7 @@ from cli.render import console, key_value_table, print_findings, print_json
 from dbtools.build import build_db
 from dbtools.diff import DbDiff, diff_paths
 from dbtools.release import list_releases, release_db, verify_releases
-from schemas.findings import findings_report, has_errors
+from schemas.findings import Finding, findings_report, has_errors
 
 app = typer.Typer(help="Build, validate, diff and release onboard DB versions.", no_args_is_help=True)
 
@@ -33,6 +33,17 @@ app = typer.Typer(help="Build, validate, diff and release onboard DB versions.",
 class Fmt(StrEnum):
     table = "table"
     json = "json"
+
+
+class ValidateFmt(StrEnum):
+    table = "table"
+    json = "json"
+    sarif = "sarif"
+    junit = "junit"
+
+
+class ImportFmt(StrEnum):
+    railml = "railml"
 
 
 @app.command("build")
@@ -70,7 +81,9 @@ def build(
 @cli_command
 def validate(
     target: Path = typer.Argument(..., help="Onboard DB file (.sqlite) or source set folder."),
-    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table or json."),
+    fmt: ValidateFmt = typer.Option(
+        ValidateFmt.table, "--format", help="table, json, sarif (SARIF 2.1.0) or junit (JUnit XML) for CI."
+    ),
     strict: bool = typer.Option(False, "--strict", help="Warnings also fail (exit 1)."),
 ) -> None:
     """Check every consistency rule; exit 0 clean, 1 errors (or warnings with --strict), 2 unreadable.
@@ -80,7 +93,9 @@ def validate(
     from dbtools.validate import validate_path
 
     findings = validate_path(target)
-    if fmt == Fmt.json:
+    if fmt in (ValidateFmt.sarif, ValidateFmt.junit):
+        _ci_report(findings, target, fmt, strict)
+    elif fmt == ValidateFmt.json:
         report = findings_report(findings)
         report["ok"] = not has_errors(findings, strict)
         print_json(report)
@@ -233,4 +248,111 @@ def verify_release(
         n_bad = sum(report.failed(r.db_version) for r in report.checked)
         out.print(f"{len(report.checked) - n_bad} of {len(report.checked)} release(s) intact")
     if not report.ok:
+        raise typer.Exit(1)
+
+
+def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: bool) -> None:
+    """SARIF or JUnit on stdout (dbtools.interchange.ci)."""
+    import sys
+
+    from dbtools.build import tool_version
+    from dbtools.interchange.ci import junit, sarif_text
+
+    if fmt == ValidateFmt.sarif:
+        sys.stdout.write(
+            sarif_text(findings, target=None if target.is_dir() else str(target), tool_version=tool_version())
+        )
+    else:
+        sys.stdout.write(junit(findings, target=str(target), strict=strict))
+
+
+@app.command("import")
+@cli_command
+def import_(
+    source: Path = typer.Argument(..., help="railML file (2.0–2.5 or 3.1–3.3)."),
+    fmt: ImportFmt = typer.Option(..., "--format", help="railml."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output source set folder (then: db build SOURCE_DIR)."),
+    line_code: Path | None = typer.Option(
+        None,
+        "--line-code",
+        help="Map (TOML): railML lines/tracks → line_code and track, initial pairs → station codes.",
+    ),
+    force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
+) -> None:
+    """Import a railML file as a source set; every element that cannot be mapped is reported.
+
+    Writes the source tables, network.toml (when declared), survey/ (centrelines and km
+    posts for gis grid, when the file has coordinates) and import_report.json. Exit 0
+    written (unmapped elements are warnings), 1 errors such as duplicate or missing ids,
+    positions on undefined tracks, lengths not in metres or an unknown railML version
+    (nothing written), 2 unreadable (malformed XML, entity declarations, bad map), 3 output exists.
+
+    Example: trainpos db import line.railml --format railml --out src/ --line-code map.toml
+    """
+    from dbtools.interchange.importer import import_railml
+
+    result = import_railml(source, out, line_map=line_code, force=force)
+    out_c = console()
+    if result.findings:
+        print_findings(result.findings, console=out_c, title="Not imported / warnings")
+    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
+    out_c.print(
+        key_value_table(
+            [
+                ("folder", str(result.out)),
+                ("railML version", result.version),
+                ("balises in the file", result.balises_seen),
+                *rows,
+            ],
+            title="Imported",
+        )
+    )
+
+
+@app.command("export")
+@cli_command
+def export(
+    db: Path = typer.Argument(..., help="Onboard DB file (.sqlite) or source set folder."),
+    fmt: str = typer.Option(..., "--format", help="railml (3.2), geojson, gpkg (GeoPackage) or geoparquet."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output file."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
+) -> None:
+    """Export a DB as railML 3.2 or as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet).
+
+    Layers: balises, feature_points, gis_points, gis_lines. Exit 0 written, 1 source set
+    errors, 2 unreadable input or unknown format, 3 output exists.
+
+    Example: trainpos db export net.sqlite --format gpkg --out net.gpkg
+    """
+    from dbtools.interchange.export import ExportFormat, export_network
+    from schemas.errors import UsageError
+
+    try:
+        kind = ExportFormat(fmt)
+    except ValueError:
+        raise UsageError(f"--format '{fmt}': use one of {', '.join(f.value for f in ExportFormat)}") from None
+    counts = export_network(db, out, kind, force=force)
+    console().print(key_value_table([("file", str(out)), ("format", kind.value), *counts.items()], title="Exported"))
+
+
+@app.command("review")
+@cli_command
+def review(
+    old: Path = typer.Argument(..., help="Old onboard DB file (.sqlite) or source set folder."),
+    new: Path = typer.Argument(..., help="New onboard DB file (.sqlite) or source set folder."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output page (.html), self-contained."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
+) -> None:
+    """One page for the reviewer of a DB change: validation of NEW, the diff, a map of what moved.
+
+    The map is inline SVG drawn in NEW's metric CRS (no tiles, no scripts). Exit 0 written
+    and NEW has no error, 1 written but NEW has errors, 2 unreadable, 3 output exists.
+
+    Example: trainpos db review net-2026.10.sqlite net-2026.11.sqlite --out review.html
+    """
+    from dbtools.interchange.review import write_review
+
+    findings = write_review(old, new, out, force=force)
+    console().print(f"review page written to {out}")
+    if has_errors(findings):
         raise typer.Exit(1)

@@ -89,6 +89,7 @@ class VerifyFmt(StrEnum):
     table = "table"
     json = "json"
     html = "html"
+    geojson = "geojson"
 
 
 class _Bar:
@@ -181,7 +182,9 @@ def _shares(km: pd.Series, share: pd.Series) -> list[str]:
 def verify(
     db: Path = typer.Argument(..., help="Onboard DB under test (.sqlite)."),
     runs: list[Path] = typer.Argument(..., help="Run folders, or folders to search for runs (run.json)."),
-    fmt: VerifyFmt = typer.Option(VerifyFmt.table, "--format", help="table, json or html (html needs --out)."),
+    fmt: VerifyFmt = typer.Option(
+        VerifyFmt.table, "--format", help="table, json, html or geojson (html and geojson need --out)."
+    ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the report to this file instead of stdout."),
     propose: Path | None = typer.Option(
         None, "--propose", help="Write a corrected source set here (defect cells' GIS points moved)."
@@ -249,8 +252,8 @@ def verify(
 
 def _check_targets(fmt: VerifyFmt, out: Path | None, propose: Path | None, force: bool) -> None:
     """Usage and overwrite checks of ``gis verify`` before any run is replayed."""
-    if fmt == VerifyFmt.html and out is None:
-        raise UsageError("--format html needs --out FILE")
+    if fmt in (VerifyFmt.html, VerifyFmt.geojson) and out is None:
+        raise UsageError(f"--format {fmt.value} needs --out FILE")
     for target in (out, propose):
         if target is not None and target.exists() and not force:
             if target.is_file() or any(target.iterdir()):
@@ -276,6 +279,12 @@ def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None) -> None
         assert out is not None
         _write(out, render_html(report))
         console().print(f"HTML report written to {out}")
+    elif fmt == VerifyFmt.geojson:  # defects, cells (residuals) and proposed moves for QGIS
+        from dbtools.interchange.geojson import verification_geojson, write_geojson
+
+        assert out is not None
+        write_geojson(out, verification_geojson(report.network, report.verification), force=True)
+        console().print(f"GeoJSON written to {out}")
     elif fmt == VerifyFmt.json:
         text = json.dumps(report.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
         if out:

@@ -25,6 +25,7 @@ class Fmt(StrEnum):
     table = "table"
     json = "json"
     html = "html"
+    geojson = "geojson"
 
 
 ALARM_COLUMNS = ["type", "t_s", "time", "km", "track", "work_no", "evidence"]
@@ -106,8 +107,10 @@ def check(
         help="Possession plan CSV/XLSX: work_no, line_code, track, km_from_m, km_to_m, planned_start, planned_end, "
         "started_at, released_at (ISO 8601 with offset); optional vehicle_id and purpose (work/protection).",
     ),
-    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json or html."),
-    out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
+    fmt: Fmt = typer.Option(
+        Fmt.table, "--format", help="table, json, html or geojson (alarms and sections, for QGIS)."
+    ),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html and geojson)."),
     config: Path | None = typer.Option(
         None, "--config", help="Settings (TOML; its [gps] and [possession] sections; see trainpos config show)."
     ),
@@ -133,8 +136,8 @@ def check(
 
     Example: trainpos possession check runs/rr-0116 --db net.sqlite --plan possessions.csv --format html --out pz.html
     """
-    if fmt == Fmt.html and out is None:
-        raise UsageError("--format html needs --out FILE")
+    if fmt in (Fmt.html, Fmt.geojson) and out is None:
+        raise UsageError(f"--format {fmt.value} needs --out FILE")
     report = check_files(runs, db, plan, config, work=work)
     if report.plan.findings:
         print_findings(report.plan.findings, console=err_console(), title="Plan warnings")
@@ -144,6 +147,13 @@ def check(
         assert out is not None
         _write(out, render_html(report.checks, plan=str(plan), db=str(db)))
         console().print(f"HTML report written to {out} ({report.n_alarms} alarm(s))")
+    elif fmt == Fmt.geojson:
+        from dbtools.database import read_network
+        from dbtools.interchange.geojson import possession_geojson, write_geojson
+
+        assert out is not None
+        write_geojson(out, possession_geojson(read_network(db), report.to_json(), report.plan.possessions), force=True)
+        console().print(f"GeoJSON written to {out} ({report.n_alarms} alarm(s))")
     elif fmt == Fmt.json:
         data = report.to_json()
         if out:

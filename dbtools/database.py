@@ -110,6 +110,28 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
             os.fsync(fh.fileno())
 
 
+def write_sqlite(
+    path: Path,
+    script: Sequence[tuple[str, Iterable[Sequence[object]] | None]],
+    *,
+    pragmas: Sequence[str] = (),
+    force: bool = False,
+) -> None:
+    """Write any other SQLite file (a GeoPackage …) atomically: ``pragmas`` first, then each
+    ``(sql, rows)`` of ``script`` (``executemany`` with rows, else ``execute``) in one transaction."""
+    with atomic_file(Path(path), force=force) as tmp:
+        tmp.unlink()
+        conn = sqlite3.connect(tmp)
+        try:
+            for p in pragmas:
+                conn.execute(f"PRAGMA {p}")
+            with conn:
+                for sql, rows in script:
+                    conn.executemany(sql, rows) if rows is not None else conn.execute(sql)
+        finally:
+            conn.close()
+
+
 def check_sqlite_file(path: Path) -> None:
     """Raise InputError unless ``path`` is an existing SQLite file with our application id."""
     path = Path(path)

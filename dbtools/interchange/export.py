@@ -1,0 +1,65 @@
+"""``db export DB --format railml|geojson|gpkg|geoparquet --out FILE``: one network (a DB
+file or a source set) in another format; the output is written atomically and an existing
+one is refused without ``force`` (checked before any work)."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from pathlib import Path
+
+from dbtools.atomic import atomic_file, refuse_existing
+from dbtools.diff import load_network
+from dbtools.gis.index import network_georef
+from dbtools.interchange.geojson import network_features, network_geojson, write_geojson
+from dbtools.interchange.geometry import WGS84
+from dbtools.interchange.geometry import geodetic_epsg as lonlat_epsg
+from dbtools.network import Network
+
+
+class ExportFormat(StrEnum):
+    railml = "railml"
+    geojson = "geojson"
+    gpkg = "gpkg"
+    geoparquet = "geoparquet"
+
+
+def geodetic_epsg(network: Network) -> int:
+    """EPSG code of the lat/lon datum of the network (the geodetic CRS of its metric CRS)."""
+    g = network_georef(network)
+    return WGS84 if g is None else lonlat_epsg(g.crs_epsg)
+
+
+def export_network(source: Path, out: Path, fmt: ExportFormat, *, force: bool = False) -> dict[str, int]:
+    """Write ``source`` as ``fmt`` to ``out``; returns rows per table or layer."""
+    out = Path(out)
+    refuse_existing(out, force)
+    network, _ = load_network(Path(source))
+    counts = {name: len(frame) for name, frame in network.tables.items()}
+    if fmt == ExportFormat.railml:
+        from dbtools.interchange.railml_out import network_railml
+
+        data = network_railml(network)
+        with atomic_file(out, force=force) as tmp:
+            tmp.write_bytes(data)
+        return counts
+    if fmt == ExportFormat.geojson:
+        gj = network_geojson(network)
+        write_geojson(out, gj, force=force)
+        return _layers(gj["features"])
+    features = network_features(network)
+    if fmt == ExportFormat.gpkg:
+        from dbtools.interchange.gpkg import write_gpkg
+
+        return write_gpkg(out, features, srs_epsg=geodetic_epsg(network), force=force)
+    from dbtools.interchange.geoparquet import write_geoparquet
+
+    write_geoparquet(out, features, srs_epsg=geodetic_epsg(network), force=force)
+    return _layers(features)
+
+
+def _layers(features: list[dict[str, object]]) -> dict[str, int]:
+    out: dict[str, int] = {}
+    for f in features:
+        layer = str(f["properties"].get("layer"))  # type: ignore[attr-defined]
+        out[layer] = out.get(layer, 0) + 1
+    return out

@@ -1,0 +1,197 @@
+"""GeoJSON (RFC 7946) for QGIS: the network, GIS-verification results and possession alarms.
+
+RFC 7946: a ``FeatureCollection``; coordinates ``[lon, lat]`` (height as a third value
+where known) in WGS 84 — our lat/lon are in the geodetic datum of the network's metric CRS
+(JGD2011, ETRS89, WGS 84), which differ from WGS 84 by at most a metre or two; no datum
+shift is applied, as everywhere in the suite. Every feature has a ``layer`` property
+(``balises``, ``feature_points``, ``gis_points``, ``gis_lines``, ``defects``, ``cells``,
+``proposal``, ``alarms``, ``possessions`` …) so one file can be split by layer in QGIS.
+
+Things placed by kilometrage (balises, feature points, defects, alarms) get their position
+from the GIS grid of their line and track by linear interpolation between the 20 m points
+(:class:`GridLocator`); outside the grid their geometry is ``null`` (RFC 7946 §3.2 allows it).
+
+The writer (:func:`write_geojson`) and the builders (:func:`feature`, :func:`point`,
+:func:`line_string`, :func:`frame_points`) are meant for any command that lays results
+over the GIS (``gis verify``, ``possession check``, the survey).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dbtools.atomic import atomic_file
+from dbtools.network import Network
+from schemas.jsonable import jsonable
+
+Geometry = dict[str, Any] | None
+
+
+def point(lon: float, lat: float, height: float | None = None) -> Geometry:
+    if not (math.isfinite(lon) and math.isfinite(lat)):
+        return None
+    coords = [float(lon), float(lat)] + ([float(height)] if height is not None and math.isfinite(height) else [])
+    return {"type": "Point", "coordinates": coords}
+
+
+def line_string(coords: Sequence[Sequence[float]]) -> Geometry:
+    pts = [[float(c[0]), float(c[1])] for c in coords if math.isfinite(c[0]) and math.isfinite(c[1])]
+    return {"type": "LineString", "coordinates": pts} if len(pts) >= 2 else None
+
+
+def feature(geometry: Geometry, properties: Mapping[str, Any], ident: str | None = None) -> dict[str, Any]:
+    out: dict[str, Any] = {"type": "Feature", "geometry": geometry, "properties": jsonable(dict(properties), 9)}
+    if ident is not None:
+        out["id"] = ident
+    return out
+
+
+def collection(features: Iterable[dict[str, Any]], name: str | None = None) -> dict[str, Any]:
+    out: dict[str, Any] = {"type": "FeatureCollection", "features": list(features)}
+    if name:
+        out["name"] = name
+    return out
+
+
+def write_geojson(path: Path, data: Mapping[str, Any], *, force: bool = False) -> Path:
+    """Write a FeatureCollection atomically (RefusedError for an existing file without force)."""
+    with atomic_file(Path(path), force=force) as tmp:
+        tmp.write_text(json.dumps(data, ensure_ascii=False, allow_nan=False) + "\n", encoding="utf-8")
+    return Path(path)
+
+
+def frame_points(
+    frame: pd.DataFrame, layer: str, *, lon: str = "lon", lat: str = "lat", height: str | None = None
+) -> list[dict[str, Any]]:
+    """One Point feature per row (lon/lat columns), every other column a property."""
+    props = [c for c in frame.columns if c not in (lon, lat)]
+    out = []
+    for rec in frame.to_dict("records"):
+        h = rec.get(height) if height else None
+        geom = point(_num(rec[lon]), _num(rec[lat]), None if h is None or pd.isna(h) else float(h))
+        out.append(feature(geom, {"layer": layer, **{c: _clean(rec[c]) for c in props}}))
+    return out
+
+
+def _num(v: Any) -> float:
+    return float("nan") if v is None or pd.isna(v) else float(v)
+
+
+def _clean(v: Any) -> Any:
+    if v is None or (not isinstance(v, str | bytes | list | dict) and pd.isna(v)):
+        return None
+    return v.item() if isinstance(v, np.generic) else v
+
+
+class GridLocator:
+    """lon/lat (and the grid polyline) of (line, track, km) from a network's GIS grid."""
+
+    def __init__(self, network: Network) -> None:
+        self.tracks: dict[tuple[str, str], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        gis = network.gis.sort_values(["line_code", "track", "km_m"])
+        for (line, track), g in gis.groupby(["line_code", "track"], sort=True):
+            self.tracks[(str(line), str(track))] = (
+                g["km_m"].to_numpy(dtype=float),
+                g["lon"].to_numpy(dtype=float),
+                g["lat"].to_numpy(dtype=float),
+            )
+
+    def at(self, line: Any, track: Any, km: Any) -> tuple[float, float] | None:
+        t = self.tracks.get((str(line), str(track)))
+        if t is None or km is None or pd.isna(km) or not t[0][0] <= float(km) <= t[0][-1]:
+            return None
+        return float(np.interp(km, t[0], t[1])), float(np.interp(km, t[0], t[2]))
+
+    def between(self, line: Any, track: Any, km0: float, km1: float) -> list[tuple[float, float]]:
+        t = self.tracks.get((str(line), str(track)))
+        if t is None:
+            return []
+        lo, hi = sorted((float(km0), float(km1)))
+        inside = (t[0] > lo) & (t[0] < hi)
+        ends = [self.at(line, track, k) for k in (lo, hi)]
+        mid = list(zip(t[1][inside].tolist(), t[2][inside].tolist(), strict=True))
+        return [p for p in [ends[0], *mid, ends[1]] if p is not None]
+
+    def point_at(self, line: Any, track: Any, km: Any) -> Geometry:
+        p = self.at(line, track, km)
+        return None if p is None else point(*p)
+
+
+def network_features(network: Network) -> list[dict[str, Any]]:
+    """Balises, feature points, GIS points and one GIS line per line/track."""
+    loc = GridLocator(network)
+    out: list[dict[str, Any]] = []
+    for rec in network.balises.to_dict("records"):
+        geom = loc.point_at(rec["line_code"], rec["track"], rec["km_actual_m"])
+        props = {"layer": "balises", **{str(k): _clean(v) for k, v in rec.items()}}
+        out.append(feature(geom, props, str(rec["balise_id"])))
+    for rec in network.feature_points.to_dict("records"):
+        geom = loc.point_at(rec["line_code"], rec["track"], rec["km_m"])
+        out.append(feature(geom, {"layer": "feature_points", **{str(k): _clean(v) for k, v in rec.items()}}))
+    out += frame_points(network.gis, "gis_points", height="height_m")
+    for (line, track), (km, lon, lat) in loc.tracks.items():
+        props = {"layer": "gis_lines", "line_code": line, "track": track, "km_from_m": km[0], "km_to_m": km[-1]}
+        out.append(feature(line_string(list(zip(lon, lat, strict=True))), props))
+    return out
+
+
+def network_geojson(network: Network) -> dict[str, Any]:
+    return collection(network_features(network), name=f"trainpos {network.meta.get('db_version', '')}".strip())
+
+
+def _km_features(loc: GridLocator, frame: pd.DataFrame, layer: str) -> list[dict[str, Any]]:
+    """A LineString along the grid from km_from_m to km_to_m for every row."""
+    out = []
+    for rec in frame.to_dict("records"):
+        coords = loc.between(rec["line_code"], rec["track"], rec["km_from_m"], rec["km_to_m"])
+        out.append(feature(line_string(coords), {"layer": layer, **{str(k): _clean(v) for k, v in rec.items()}}))
+    return out
+
+
+def verification_geojson(network: Network, verification: Any) -> dict[str, Any]:
+    """``gis verify`` results: defects and cells (with their mean offset, the residual) as
+    lines along the grid, proposed moves as points at the old position with the new one as a
+    property and a short line from old to new."""
+    loc = GridLocator(network)
+    feats = _km_features(loc, verification.defects, "defects") + _km_features(loc, verification.cells, "cells")
+    for rec in verification.proposal.to_dict("records"):
+        props = {"layer": "proposal", **{str(k): _clean(v) for k, v in rec.items()}}
+        feats.append(feature(point(_num(rec["lon"]), _num(rec["lat"])), props))
+        move = line_string([(_num(rec["lon"]), _num(rec["lat"])), (_num(rec["lon_new"]), _num(rec["lat_new"]))])
+        feats.append(feature(move, {**props, "layer": "proposal_moves"}))
+    return collection(feats, name="gis verify")
+
+
+def possession_geojson(network: Network, report: Mapping[str, Any], possessions: Sequence[Any]) -> dict[str, Any]:
+    """``possession check`` results (its JSON shape) and the plan's sections: alarms and
+    notices as points at their km on the possession's line and track, sections as lines."""
+    loc = GridLocator(network)
+    lines = {str(p.work_no): str(p.line_code) for p in possessions}
+    feats = []
+    for p in possessions:
+        props = {
+            "layer": "possessions",
+            "work_no": p.work_no,
+            "line_code": p.line_code,
+            "track": p.track,
+            "km_from_m": p.km_from_m,
+            "km_to_m": p.km_to_m,
+        }
+        feats.append(feature(line_string(loc.between(p.line_code, p.track, p.km_from_m, p.km_to_m)), props))
+    for run in report.get("runs", []):
+        for layer in ("alarms", "notices"):
+            for a in run.get(layer, []):
+                line = lines.get(str(a.get("work_no")))
+                geom = loc.point_at(line, a.get("track"), a.get("km_m")) if line is not None else None
+                props = {"layer": layer, "run": run.get("run"), "run_id": run.get("run_id"), "line_code": line}
+                props.update({k: v for k, v in a.items() if k != "evidence"})
+                props["evidence"] = json.dumps(a.get("evidence", {}), ensure_ascii=False)
+                feats.append(feature(geom, props))
+    return collection(feats, name="possession check")

@@ -1,0 +1,186 @@
+"""The version-independent picture of a railML file, as the readers build it.
+
+Positions along a railML track are ``pos`` [m] from its begin (railML 2.x ``pos``; railML 3
+``intrinsicCoord`` × netElement length). Our kilometrage is the railML mileage (2.x
+``absPos``, 3.x ``linearCoordinate/@measure``), obtained through :class:`Mileage`: piecewise
+linear in ``pos`` through knots, with a jump wherever two knots share a ``pos`` (a mileage
+change: the first knot is the incoming km, the second the outgoing one).
+"""
+
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass, field
+from typing import Any
+
+from schemas.findings import Finding
+
+Element = Any
+
+
+@dataclass
+class Mileage:
+    """``km(pos)`` through ``knots`` [(pos, km)] sorted by pos; equal pos = a jump."""
+
+    knots: list[tuple[float, float]]
+
+    def km(self, pos: float) -> float:
+        """km at ``pos``; at a jump the outgoing km; beyond the ends the end slope continues
+        (slope ±1 with a single knot, from the knot's direction)."""
+        k = self.knots
+        if len(k) == 1:
+            return k[0][1] + pos - k[0][0]
+        ps = [p for p, _ in k]
+        i = bisect.bisect_right(ps, pos) - 1
+        i = min(max(i, 0), len(k) - 2)
+        while i + 1 < len(k) - 1 and k[i + 1][0] <= pos and k[i + 1][0] == k[i + 2][0]:
+            i += 1
+        (p0, m0), (p1, m1) = k[i], k[i + 1]
+        if p1 == p0:  # the last knots are a jump: continue after it with the previous slope
+            p0, m0 = p1, m1
+            slope = self._slope(i)
+        else:
+            slope = (m1 - m0) / (p1 - p0)
+        return m0 + slope * (pos - p0)
+
+    def jumps(self, pos_a: float, pos_b: float) -> float:
+        """Sum of the km jumps (outgoing − incoming) of the mileage changes between two
+        positions, signed in the direction from ``pos_a`` to ``pos_b``."""
+        lo, hi = sorted((pos_a, pos_b))
+        k = self.knots
+        total = sum(k[i + 1][1] - k[i][1] for i in range(len(k) - 1) if k[i][0] == k[i + 1][0] and lo < k[i][0] <= hi)
+        return total if pos_b >= pos_a else -total
+
+    def _slope(self, i: int) -> float:
+        for j in range(i, 0, -1):
+            (pa, ma), (pb, mb) = self.knots[j - 1], self.knots[j]
+            if pb > pa:
+                return (mb - ma) / (pb - pa)
+        return 1.0
+
+
+@dataclass
+class GeoPoint:
+    """A georeferenced point on a track: pos, km, lon/lat [deg], height [m]."""
+
+    pos: float
+    km: float
+    lon: float
+    lat: float
+    height: float | None = None
+    vertex_only: bool = False
+    """A shape vertex with no stated km (gml LineString): not a kilometre post."""
+    km_after: float | None = None
+    """At a mileage change: the outgoing km (``km`` is then the incoming one)."""
+
+
+@dataclass
+class RTrack:
+    """A railML 2.x track or 3.x netElement."""
+
+    id: str
+    el: Element
+    name: str | None = None
+    length: float | None = None
+    mileage: Mileage | None = None
+    line_id: str | None = None
+    geo: list[GeoPoint] = field(default_factory=list)
+    ext: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class RLine:
+    id: str
+    el: Element
+    code: str | None = None
+    name: str | None = None
+    track_ids: list[str] = field(default_factory=list)
+    ext: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class RBalise:
+    id: str
+    el: Element
+    track_id: str
+    pos: float
+    km: float
+    name: str | None = None
+    direction: int = 0
+    """+1 read in increasing pos, −1 decreasing, 0 both / unknown."""
+    group: str | None = None
+    ext: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class RGroup:
+    """A railML 3 baliseGroup: its balises and the signal it belongs to."""
+
+    id: str
+    el: Element
+    signal_ref: str | None = None
+    function: str | None = None
+
+
+@dataclass
+class RSignal:
+    id: str
+    el: Element
+    track_id: str
+    km: float
+    direction: int = 0
+    function: str | None = None
+
+
+@dataclass
+class RCurve:
+    """One piece of horizontal alignment on a track, ``km_from`` < ``km_to`` along the track's
+    increasing km; ``radius`` signed: negative turning left in increasing km, 0 straight."""
+
+    id: str
+    el: Element
+    track_id: str
+    km_from: float
+    km_to: float
+    curve_type: str
+    radius: float
+    ext: dict[str, str] = field(default_factory=dict)
+    name: str | None = None
+
+
+@dataclass
+class RailmlDoc:
+    """Everything a reader found, plus its findings and the elements it consumed."""
+
+    file: str
+    version: str
+    lines: dict[str, RLine] = field(default_factory=dict)
+    tracks: dict[str, RTrack] = field(default_factory=dict)
+    balises: list[RBalise] = field(default_factory=list)
+    groups: dict[str, RGroup] = field(default_factory=dict)
+    signals: dict[str, RSignal] = field(default_factory=dict)
+    curves: list[RCurve] = field(default_factory=list)
+    km_breaks: list[dict[str, Any]] = field(default_factory=list)
+    meta: dict[str, str] = field(default_factory=dict)
+    """Declarations carried by our own export (metric CRS, area, height datum)."""
+    findings: list[Finding] = field(default_factory=list)
+    used: set[int] = field(default_factory=set)
+    """``id()`` of every element the mapping consumed (the rest is reported); the elements
+    are kept in ``_alive`` so that lxml hands out the same proxy object (and id) later."""
+    _alive: list[Element] = field(default_factory=list, repr=False)
+    quirks: set[int] = field(default_factory=set)
+    """``id()`` of elements whose ``@id`` is a reference (2.x trackRef written with @id)."""
+
+    @property
+    def root(self) -> Element:
+        """The document element (the readers use it first)."""
+        return self._alive[0]
+
+    def use(self, *els: Element) -> None:
+        for el in els:
+            if el is not None:
+                self.used.add(id(el))
+                self._alive.append(el)
+
+    def is_used(self, el: Element) -> bool:
+        return id(el) in self.used

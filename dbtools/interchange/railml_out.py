@@ -1,0 +1,358 @@
+"""``db export --format railml``: an onboard DB as railML 3.2.
+
+What goes where (checked structurally by the tests; the railML XSDs are not shipped with the
+suite, so no XML Schema validation runs here):
+
+* ``common/positioning``: one ``linearPositioningSystem`` per line (``@units="m"``, the
+  line's km range; each kilometrage break an ``anchor`` at ``km_from`` with ``tpos:kmTo``),
+  one ``geometricPositioningSystem`` in the geodetic CRS of the network's metric CRS (the
+  lat/lon datum of the GIS table).
+* ``infrastructure/topology``: one ``netElement`` per line and track, its length the geodesic
+  length of the GIS points, each GIS point an ``intrinsicCoordinate`` (intrinsic coordinate
+  = distance along / length, ``linearCoordinate`` = km, ``geometricCoordinate`` x = lon,
+  y = lat, z = height); one micro ``network`` level holding them.
+* ``infrastructure/geometry/horizontalCurves``: per feature point the straight – clothoid –
+  arc – clothoid – straight pieces its six rows imply (:func:`curves.curves_of_feature`),
+  radius negative to the left in increasing km.
+* ``functionalInfrastructure``: ``balises`` (a ``spotLocation`` with the km as
+  ``linearCoordinate``; ``applicationDirection`` normal on D/S, reverse on U), one
+  ``baliseGroup`` per initial pair and per C balise, ``lines``, ``tracks`` (with a
+  ``gml:LineString`` of the GIS points, EPSG axis order lat lon).
+
+Whatever railML has no attribute for is written in this suite's namespace
+(:data:`~dbtools.interchange.xmltree.TPOS_NS`, railML's ``anyAttribute`` extension point):
+balise kind, station code, signal type, equipment km, distance from the pair's I1; each
+feature's six rows (``tpos:featureRows``, JSON) on its arc; line code and track on each
+netElement; the network's declarations on the root. Floats are written in Python's
+shortest round-trip form, so export → import → build gives the same content hash.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dbtools.gis.geometry import geodesic_step
+from dbtools.gis.index import network_georef
+from dbtools.interchange.curves import curves_of_feature
+from dbtools.interchange.geometry import WGS84, geodetic_epsg
+from dbtools.interchange.xmltree import GML_NS, TPOS_NS
+from dbtools.network import Network
+from schemas.enums import BaliseKind, Track
+
+NS = "https://www.railml.org/schemas/3.2"
+DC_NS = "http://purl.org/dc/elements/1.1/"
+XSI_NS = "http://www.w3.org/2001/XMLSchema-instance"
+
+
+def _f(x: Any) -> str:
+    return repr(float(x))
+
+
+def _T(name: str) -> str:
+    return f"{{{TPOS_NS}}}{name}"
+
+
+def _sub(parent: Any, tag: str, ns: str = NS, /, **attrs: Any) -> Any:
+    from lxml import etree
+
+    el = etree.SubElement(parent, f"{{{ns}}}{tag}")
+    for k, v in attrs.items():
+        if v is not None and not (isinstance(v, float) and np.isnan(v)):
+            el.set(k if not k.startswith("tpos_") else _T(k[5:]), v if isinstance(v, str) else _f(v))
+    return el
+
+
+def _nid(*parts: object) -> str:
+    return "_".join(str(p).replace(" ", "-") for p in parts)
+
+
+class _Track:
+    """km ↔ intrinsic coordinate of one netElement (through the GIS points)."""
+
+    def __init__(self, gis: pd.DataFrame) -> None:
+        g = gis.sort_values("km_m")
+        self.km = g["km_m"].to_numpy(dtype=float)
+        lon, lat = g["lon"].to_numpy(dtype=float), g["lat"].to_numpy(dtype=float)
+        self.s = np.concatenate([[0.0], np.cumsum(geodesic_step(lon, lat))]) if len(g) else np.zeros(0)
+        self.length = float(self.s[-1]) if len(self.s) else 0.0
+        self.frame = g
+
+    def intrinsic(self, km: float) -> float | None:
+        if self.length <= 0 or len(self.km) < 2:
+            return None
+        return float(np.clip(np.interp(km, self.km, self.s) / self.length, 0.0, 1.0))
+
+
+def _spot(parent: Any, ident: str, ne: str, lps: str, tr: _Track | None, km: float, direction: str | None) -> None:
+    loc = _sub(
+        parent,
+        "spotLocation",
+        id=ident,
+        netElementRef=ne,
+        intrinsicCoord=tr.intrinsic(km) if tr is not None else None,
+        applicationDirection=direction,
+    )
+    _sub(loc, "linearCoordinate", positioningSystemRef=lps, measure=km)
+
+
+def _root(network: Network, geo_epsg: int) -> Any:
+    from lxml import etree
+
+    root = etree.Element(
+        f"{{{NS}}}railML",
+        nsmap={None: NS, "gml": GML_NS, "dc": DC_NS, "tpos": TPOS_NS, "xsi": XSI_NS},
+        version="3.2",
+    )
+    root.set(_T("gisGrid"), "true")
+    meta = network.meta
+    for src, dst in (
+        ("metric_crs", "metricCrs"),
+        ("metric_crs_source", "metricCrsSource"),
+        ("area", "area"),
+        ("area_source", "areaSource"),
+        ("height_datum", "heightDatum"),
+        ("geoid_model", "geoidModel"),
+        ("db_version", "dbVersion"),
+        ("content_hash", "contentHash"),
+    ):
+        if meta.get(src):
+            root.set(_T(dst), meta[src])
+    md = _sub(root, "metadata")
+    _sub(md, "title", DC_NS).text = f"trainpos onboard DB {meta.get('db_version', '')}".strip()
+    _sub(md, "source", DC_NS).text = network.origin
+    _sub(md, "description", DC_NS).text = f"lat/lon in EPSG:{geo_epsg}; km in metres"
+    return root
+
+
+def network_railml(network: Network) -> bytes:
+    """The railML 3.2 document of a network (module doc)."""
+    from lxml import etree
+
+    georef = network_georef(network)
+    geo_epsg = geodetic_epsg(georef.crs_epsg) if georef is not None else WGS84
+    root = _root(network, geo_epsg)
+    pos = _sub(_sub(root, "common", id="co"), "positioning")
+    lpss, gpss = _sub(pos, "linearPositioningSystems"), _sub(pos, "geometricPositioningSystems")
+    _sub(gpss, "geometricPositioningSystem", id="gps_geo", crsDefinition=f"EPSG:{geo_epsg}")
+    infra = _sub(root, "infrastructure", id="is")
+    topo = _sub(infra, "topology")
+    nes = _sub(topo, "netElements")
+    _sub(topo, "netRelations")
+    level = _sub(_sub(_sub(topo, "networks"), "network", id="nw"), "level", id="lv0", descriptionLevel="Micro")
+    curves = _sub(_sub(infra, "geometry"), "horizontalCurves")
+    fi = _sub(infra, "functionalInfrastructure")
+    bal, grp, lines_el, tracks_el = (_sub(fi, n) for n in ("balises", "baliseGroups", "lines", "tracks"))
+    tracks = _net_elements(network, nes, level, tracks_el, geo_epsg)
+    _lines(network, lpss, lines_el, tracks)
+    _features(network, curves, tracks)
+    _balises(network, bal, grp, tracks)
+    return bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True))
+
+
+def _pairs(network: Network) -> list[tuple[str, str]]:
+    keys = set()
+    for t in ("gis", "balises", "feature_points", "km_breaks"):
+        f = network.tables[t]
+        keys |= set(zip(f["line_code"].astype(str), f["track"].astype(str), strict=True))
+    return sorted(keys)
+
+
+def _net_elements(
+    network: Network, nes: Any, level: Any, tracks_el: Any, geo_epsg: int
+) -> dict[tuple[str, str], _Track]:
+    out: dict[tuple[str, str], _Track] = {}
+    gis = network.gis
+    for line, track in _pairs(network):
+        ne_id = _nid("ne", line, track)
+        tr = _Track(gis[(gis["line_code"].astype(str) == line) & (gis["track"].astype(str) == track)])
+        out[(line, track)] = tr
+        ne = _sub(
+            nes,
+            "netElement",
+            id=ne_id,
+            length=tr.length if tr.length > 0 else None,
+            tpos_lineCode=line,
+            tpos_track=track,
+        )
+        aps = _sub(ne, "associatedPositioningSystem", id=_nid("aps", line, track))
+        for i, (km, lat, lon, h) in enumerate(
+            tr.frame[["km_m", "lat", "lon", "height_m"]].itertuples(index=False, name=None)
+        ):
+            ic = _sub(
+                aps,
+                "intrinsicCoordinate",
+                id=_nid("ic", line, track, i),
+                intrinsicCoord=tr.s[i] / tr.length if tr.length > 0 else 0.0,
+            )
+            _sub(ic, "linearCoordinate", positioningSystemRef=_nid("lps", line), measure=km)
+            _sub(
+                ic,
+                "geometricCoordinate",
+                positioningSystemRef="gps_geo",
+                x=lon,
+                y=lat,
+                z=None if pd.isna(h) else float(h),
+            )
+        _sub(level, "networkResource", ref=ne_id)
+        t_el = _sub(tracks_el, "track", id=_nid("tr", line, track))
+        _sub(t_el, "name", name=f"{line} {track}", language="en")
+        _sub(
+            _sub(t_el, "linearLocation", id=_nid("tr", line, track, "loc")),
+            "associatedNetElement",
+            netElementRef=ne_id,
+            intrinsicCoordBegin=0.0,
+            intrinsicCoordEnd=1.0,
+        )
+        if len(tr.frame) >= 2:
+            ls = _sub(_sub(t_el, "gmlLocations"), "LineString", GML_NS, srsName=f"urn:ogc:def:crs:EPSG::{geo_epsg}")
+            ls.set(f"{{{GML_NS}}}id", _nid("gml", line, track))
+            _sub(ls, "posList", GML_NS).text = " ".join(
+                f"{la!r} {lo!r}" for la, lo in zip(tr.frame["lat"], tr.frame["lon"], strict=True)
+            )
+    return out
+
+
+def _lines(network: Network, lpss: Any, lines_el: Any, tracks: dict[tuple[str, str], _Track]) -> None:
+    breaks = network.km_breaks
+    for rec in _records(network.lines):
+        line = str(rec["line_code"])
+        kms = np.concatenate([t.km for (ln, _), t in tracks.items() if ln == line] or [np.zeros(0)])
+        lps = _sub(
+            lpss,
+            "linearPositioningSystem",
+            id=_nid("lps", line),
+            units="m",
+            linearReferencingMethod="absolute",
+            startMeasure=float(kms.min()) if kms.size else None,
+            endMeasure=float(kms.max()) if kms.size else None,
+            tpos_lineCode=line,
+        )
+        _sub(lps, "name", name=line, language="en")
+        for j, b in enumerate(_records(breaks[breaks["line_code"].astype(str) == line])):
+            _sub(
+                lps,
+                "anchor",
+                id=_nid("anc", line, j),
+                measure=float(b["km_from_m"]),
+                tpos_track=str(b["track"]),
+                tpos_kmTo=float(b["km_to_m"]),
+            )
+        el = _sub(
+            lines_el,
+            "line",
+            id=_nid("ln", line),
+            tpos_lineCode=line,
+            tpos_attributes=_s(rec["attributes_json"]),
+        )
+        if _s(rec["name"]) is not None:
+            _sub(el, "name", name=str(rec["name"]), language="en")
+        loc = _sub(el, "linearLocation", id=_nid("ln", line, "loc"))
+        for ln, track in tracks:
+            if ln == line:
+                _sub(
+                    loc,
+                    "associatedNetElement",
+                    netElementRef=_nid("ne", line, track),
+                    intrinsicCoordBegin=0.0,
+                    intrinsicCoordEnd=1.0,
+                )
+
+
+def _features(network: Network, curves_el: Any, tracks: dict[tuple[str, str], _Track]) -> None:
+    fp = network.feature_points.sort_values(["line_code", "track", "feature_id", "seq"])
+    for (line, track, fid), g in fp.groupby(["line_code", "track", "feature_id"], sort=True):
+        rows = _records(g)
+        payload = json.dumps(
+            [
+                [
+                    int(r["seq"]),
+                    float(r["km_m"]),
+                    float(r["radius_m"]),
+                    str(r["attribute"]),
+                    None if pd.isna(r["role"]) else str(r["role"]),
+                ]
+                for r in rows
+            ]
+        )
+        pieces = curves_of_feature(rows, str(track)) or [
+            ("arc", min(g["km_m"]), max(g["km_m"]), float(g["radius_m"].max()))
+        ]
+        ne, lps, tr = _nid("ne", line, track), _nid("lps", line), tracks.get((str(line), str(track)))
+        for n, (kind, k0, k1, radius) in enumerate(pieces):
+            is_arc = kind == "arc"
+            el = _sub(
+                curves_el,
+                "horizontalCurve",
+                id=_nid("hc", line, track, fid, n + 1),
+                curveType=kind,
+                radius=radius,
+                length=k1 - k0,
+                tpos_featureId=str(fid),
+                tpos_featureRows=payload if is_arc else None,
+            )
+            _sub(el, "name", name=str(fid), language="en")
+            loc = _sub(el, "linearLocation", id=_nid("hc", line, track, fid, n + 1, "loc"))
+            a = _sub(
+                loc,
+                "associatedNetElement",
+                netElementRef=ne,
+                intrinsicCoordBegin=tr.intrinsic(k0) if tr else None,
+                intrinsicCoordEnd=tr.intrinsic(k1) if tr else None,
+            )
+            _sub(a, "linearCoordinateBegin", positioningSystemRef=lps, measure=k0)
+            _sub(a, "linearCoordinateEnd", positioningSystemRef=lps, measure=k1)
+
+
+def _balises(network: Network, bal: Any, grp: Any, tracks: dict[tuple[str, str], _Track]) -> None:
+    made: set[str] = set()
+    for rec in _records(network.balises):
+        line, track, kind = str(rec["line_code"]), str(rec["track"]), str(rec["kind"])
+        group = _nid("bg", line, rec["station_code"], track) if kind != BaliseKind.C else _nid("bg", rec["balise_id"])
+        if group not in made:
+            made.add(group)
+            g = _sub(
+                grp,
+                "baliseGroup",
+                id=group,
+                numberOfBalisesInGroup="1" if kind == BaliseKind.C else "2",
+                mileageDirection="reverse" if track == Track.UP.value else "nominal",
+            )
+            _sub(g, "applicationType", value="other:trainpos")
+            _sub(g, "functionalType", value="other:positionCorrection" if kind == BaliseKind.C else "other:initialPair")
+        el = _sub(
+            bal,
+            "balise",
+            id=str(rec["balise_id"]),
+            tpos_kind=kind,
+            tpos_stationCode=_s(rec["station_code"]),
+            tpos_signalType=_s(rec["signal_type"]),
+            tpos_kmEquipment=_n(rec["km_equipment_m"]),
+            tpos_distFromInitial=_n(rec["dist_from_initial_m"]),
+        )
+        direction = "reverse" if track == Track.UP.value else "normal"
+        _spot(
+            el,
+            _nid("sl", rec["balise_id"]),
+            _nid("ne", line, track),
+            _nid("lps", line),
+            tracks.get((line, track)),
+            float(rec["km_actual_m"]),
+            direction,
+        )
+        _sub(el, "belongsToParent", ref=group)
+
+
+def _records(frame: pd.DataFrame) -> list[dict[str, Any]]:
+    return [{str(k): v for k, v in r.items()} for r in frame.to_dict("records")]
+
+
+def _s(v: Any) -> str | None:
+    return None if v is None or pd.isna(v) else str(v)
+
+
+def _n(v: Any) -> str | None:
+    return None if v is None or pd.isna(v) else repr(float(v))

@@ -1,0 +1,136 @@
+"""``db review OLD NEW``: one self-contained page for the reviewer of a DB change (page kit).
+
+Sections: a verdict (errors in NEW, and whether anything changed), the validation of NEW
+(every finding), the ``db diff`` summary lines and the row counts per table, the map of
+what moved (:mod:`~dbtools.interchange.svgmap`, inline SVG), and the changed rows per
+table (capped at :data:`MAX_ROWS` each; ``db diff --format json`` has them all).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from dbtools import pagekit as pk
+from dbtools.diff import diff_networks, load_network
+from dbtools.gis.geometry import Projector
+from dbtools.gis.index import network_georef
+from dbtools.interchange.svgmap import map_data, render_svg
+from dbtools.validate import validate_path
+from schemas.enums import Severity
+from schemas.findings import Finding, count_by_severity
+
+MAX_ROWS = 200
+
+
+def _findings_table(findings: list[Finding]) -> str:
+    if not findings:
+        return pk.paragraph("No finding: every rule passes.", pk.Status.OK)
+    rows = [
+        [
+            pk.Cell(str(f.severity), "warn" if f.severity == Severity.ERROR else "caution"),
+            pk.Cell(f.rule, "l"),
+            pk.Cell(f.where, "l"),
+            pk.Cell(f.message, "l"),
+        ]
+        for f in findings[:MAX_ROWS]
+    ]
+    more = (
+        pk.paragraph(f"… {len(findings) - MAX_ROWS} more (db validate --format json)", pk.Status.NOTE)
+        if len(findings) > MAX_ROWS
+        else ""
+    )
+    return pk.table(["severity", "rule", "where", "message"], rows, cls="text") + more
+
+
+def _changes_table(rows: list[dict[str, Any]]) -> str:
+    out = []
+    for r in rows[:MAX_ROWS]:
+        keys = ", ".join(f"{k}={v}" for k, v in r["keys"].items())
+        changes = "; ".join(
+            f"{c}: {a if a is not None else '—'} → {b if b is not None else '—'}" for c, (a, b) in r["changes"].items()
+        )
+        out.append([pk.Cell(r["change"], "l"), pk.Cell(keys, "l"), pk.Cell(changes, "l")])
+    return pk.table(["change", "keys", "values (old → new)"], out, cls="text")
+
+
+def _projector(net: Any) -> Projector | None:
+    g = network_georef(net)
+    return None if g is None else Projector.from_epsg(g.crs_epsg)
+
+
+def render_review(old: Path, new: Path) -> tuple[str, list[Finding]]:
+    """The review page of OLD → NEW (DB files or source sets) and NEW's findings."""
+    old_net, old_sv = load_network(old)
+    new_net, new_sv = load_network(new)
+    d = diff_networks(old_net, new_net, schema_versions=(old_sv, new_sv))
+    findings = validate_path(new)
+    counts = count_by_severity(findings)
+    ok = counts["error"] == 0
+    verdict = pk.badge(
+        f"{counts['error']} error(s), {counts['warning']} warning(s) in NEW", pk.Status.OK if ok else pk.Status.WARN
+    )
+    changed = pk.badge("changes" if d.has_changes else "no content change", pk.Status.NOTE)
+    head = pk.key_value_table(
+        [
+            ("old", str(old)),
+            ("new", str(new)),
+            ("old db_version", d.old.get("db_version")),
+            ("new db_version", d.new.get("db_version")),
+            ("old content_hash", d.old.get("content_hash")),
+            ("new content_hash", d.new.get("content_hash")),
+        ],
+        code=("old content_hash", "new content_hash"),
+    )
+    counts_frame = pd.DataFrame([{"table": n, **t.counts} for n, t in d.tables.items()])
+    proj = _projector(new_net) or _projector(old_net)
+    svg = (
+        render_svg(map_data(old_net, new_net, d), proj)
+        if proj is not None
+        else pk.paragraph("No GIS points: no map.", pk.Status.NOTE)
+    )
+    parts = [
+        f"<p id='verdict'>{verdict} {changed}</p>",
+        head,
+        pk.section("Validation of NEW", _findings_table(findings)),
+        pk.section(
+            "What changed",
+            "<ul id='summary'>" + "".join(f"<li>{pk.escape(s)}</li>" for s in d.summary) + "</ul>",
+            pk.frame_table(counts_frame),
+        ),
+        pk.section(
+            "Map of the changes",
+            f"<figure id='map'>{svg}<figcaption>{pk.escape('Drawn offline in the metric CRS of NEW')}"
+            f"{pk.escape(f' (EPSG:{proj.epsg})' if proj else '')}</figcaption></figure>",
+        ),
+    ]
+    for name, t in d.tables.items():
+        if t.n_changes:
+            parts.append(
+                pk.section(
+                    f"{name}: {t.counts['added']} added, {t.counts['removed']} removed, {t.counts['changed']} changed",
+                    _changes_table(t.rows()),
+                    level=3,
+                )
+            )
+    parts.append(pk.paragraph(pk.generated(), pk.Status.NOTE))
+    page = pk.page(
+        f"DB review {d.old.get('db_version', old)} → {d.new.get('db_version', new)}",
+        *parts,
+        description="trainpos db review: validation, diff and map of a DB change",
+    )
+    return page, findings
+
+
+def write_review(old: Path, new: Path, out: Path, *, force: bool = False) -> list[Finding]:
+    """Write the page atomically (refused when ``out`` exists without ``force``, before any
+    work); returns NEW's findings."""
+    from dbtools.atomic import atomic_file, refuse_existing
+
+    refuse_existing(Path(out), force)
+    text, findings = render_review(old, new)
+    with atomic_file(Path(out), force=force) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return findings

@@ -1,0 +1,128 @@
+"""Random damage to run folders (issue 15, property tests): never a traceback or an internal
+error, never a modified input, and a "determined" position is never outside truth ± margin.
+
+Each example copies a simulated run (with its truth), damages it by a few random operations
+of the kinds users meet in the field — streams missing, truncated, shuffled, duplicated rows,
+NaNs, a counter reset, t in milliseconds, run.json fields missing/mistyped/absurd, a corrupt
+file, stray files — and runs ``trainpos logs check`` and ``trainpos run`` on it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from cli.main import app
+from fieldlogs.pipeline.truth import compare_with_truth
+
+SAMPLE = Path(__file__).resolve().parents[1] / "fieldlogs" / "sample_logs" / "sim-d-slips"
+STREAMS = ("tacho", "imu", "balise", "gps", "cab", "radar")
+
+
+def _digest(folder: Path) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir()) if p.is_file()}
+
+
+def _damage(run: Path, op: str, stream: str, frac: float, rng: np.random.Generator) -> None:
+    path = run / f"{stream}.parquet"
+    if op == "json":
+        data = json.loads((run / "run.json").read_text())
+        key = ["wheel_diameter_m", "teeth", "start_time", "vehicle_kind", "run_id"][int(frac * 5) % 5]
+        choice = int(frac * 997) % 4
+        if choice == 0:
+            data.pop(key, None)
+        elif choice == 1:
+            data[key] = "oops"
+        elif choice == 2:
+            data[key] = 1e308
+        else:
+            data[key] = None
+        (run / "run.json").write_text(json.dumps(data))
+        return
+    if op == "stray":
+        (run / "balises.csv").write_text("t,kind\n1,I1\n")
+        return
+    if not path.exists():
+        return
+    if op == "delete":
+        path.unlink()
+        return
+    if op == "corrupt":
+        raw = path.read_bytes()
+        path.write_bytes(raw[: int(len(raw) * frac)])
+        return
+    frame = pd.read_parquet(path)
+    n = len(frame)
+    if n == 0:
+        return
+    if op == "truncate":
+        frame = frame.iloc[: int(n * frac)]
+    elif op == "shuffle":
+        frame = frame.sample(frac=1.0, random_state=int(rng.integers(1 << 30)))
+    elif op == "duplicate":
+        frame = pd.concat([frame, frame.iloc[: max(int(n * frac), 1)]])
+    elif op == "nan":
+        cols = [c for c in frame.columns if c != "t" and pd.api.types.is_float_dtype(frame[c])] or ["t"]
+        col = cols[int(frac * len(cols)) % len(cols)]
+        idx = rng.choice(n, size=max(int(n * frac * 0.2), 1), replace=False)
+        frame.loc[frame.index[idx], col] = np.nan
+    elif op == "milliseconds":
+        frame["t"] = frame["t"] * 1000.0
+    elif op == "reset" and stream == "tacho":
+        i = max(int(n * frac), 1)
+        frame.loc[frame.index[i:], "pulses"] = frame["pulses"].iloc[i:] - frame["pulses"].iloc[i - 1]
+    frame.to_parquet(path, index=False)
+
+
+OPS = ("delete", "truncate", "shuffle", "duplicate", "nan", "milliseconds", "reset", "json", "corrupt", "stray")
+damage = st.lists(
+    st.tuples(st.sampled_from(OPS), st.sampled_from(STREAMS), st.floats(0.05, 0.95)), min_size=1, max_size=3
+)
+
+
+@pytest.mark.slow
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(ops=damage, seed=st.integers(0, 2**31 - 1))
+def test_damaged_runs_fail_safe(ops: list[tuple[str, str, float]], seed: int, sample_db: Path, tmp_path: Path) -> None:
+    work = tmp_path / f"case-{seed}"
+    if work.exists():
+        shutil.rmtree(work)
+    run = work / "run"
+    shutil.copytree(SAMPLE, run)
+    truth = pd.read_parquet(SAMPLE / "truth.parquet")
+    rng = np.random.default_rng(seed)
+    for op, stream, frac in ops:
+        _damage(run, op, stream, frac, rng)
+    before = _digest(run)
+    runner = CliRunner()
+    check = runner.invoke(app, ["logs", "check", str(run), "--db", str(sample_db), "--format", "json"])
+    assert check.exit_code in (0, 1, 2), check.output
+    out = work / "out"
+    res = runner.invoke(app, ["run", str(run), "--db", str(sample_db), "--out", str(out)])
+    for r in (check, res):
+        assert "internal error" not in r.output and "Traceback" not in r.output, (ops, r.output)
+        assert r.exception is None or isinstance(r.exception, SystemExit), (ops, repr(r.exception))
+    assert res.exit_code in (0, 1, 2), (ops, res.output)
+    assert _digest(run) == before, "an input was modified"
+    if res.exit_code == 0:
+        _positions_hold(pd.read_parquet(out / "positions.parquet"), truth, ops)
+
+
+def _positions_hold(pos: pd.DataFrame, truth: pd.DataFrame, ops: Any) -> None:
+    """Where the run claims a determined position, it holds against the undamaged truth."""
+    cmp = compare_with_truth(pos, truth)
+    det = cmp[cmp["claimed"] & (pos["state"] == "determined").to_numpy()]
+    if len(det) == 0:
+        return
+    assert int(det["wrong_track"].sum()) == 0, ops
+    assert det["within_margin"].mean() >= 0.999, (ops, float(det["within_margin"].mean()))
