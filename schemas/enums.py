@@ -117,6 +117,8 @@ class EventType(StrEnum):
     SLIP = "slip"
     SLIDE = "slide"
     FAILSAFE = "failsafe"
+    IMU_LOST = "imu_lost"
+    IMU_BACK = "imu_back"
     TRACK_DECISION = "track_decision"
     CROSSOVER = "crossover"
     TRACK_CHANGE = "track_change"
@@ -143,6 +145,8 @@ EVENT_MEANING: dict[EventType, str] = {
     EventType.SLIP: "wheel slip (traction) corrected inertially [S000 §3.1]",
     EventType.SLIDE: "wheel slide (braking) corrected inertially [S000 §3.1]",
     EventType.FAILSAFE: "a slip/slide correction exceeded the maximum correction time: position uncertain",
+    EventType.IMU_LOST: "the IMU fell silent while moving: slips cannot be detected; position uncertain, margin grows",
+    EventType.IMU_BACK: "the IMU samples are back (the position stays uncertain until the next absolute fix)",
     EventType.TRACK_DECISION: "trusted GPS fixes decided line and track (up/down) [S001 §4.2]",
     EventType.CROSSOVER: "the offset from the decided track moved across to the other track [S001 §7]",
     EventType.TRACK_CHANGE: "after a crossover GPS decided the other track (uncertain until a pair confirms it)",

@@ -61,7 +61,10 @@ def _damage(run: Path, op: str, stream: str, frac: float, rng: np.random.Generat
         raw = path.read_bytes()
         path.write_bytes(raw[: int(len(raw) * frac)])
         return
-    frame = pd.read_parquet(path)
+    try:
+        frame = pd.read_parquet(path)
+    except (OSError, ValueError):  # already corrupted by an earlier operation
+        return
     n = len(frame)
     if n == 0:
         return

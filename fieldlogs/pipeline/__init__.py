@@ -39,6 +39,7 @@ from fieldlogs.pipeline.engine import run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.gps import analyse_gps
+from fieldlogs.pipeline.imugap import imu_gaps, with_gap_allowance
 from fieldlogs.pipeline.odometry import correct_odometry
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
@@ -132,11 +133,15 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
     ground = next((g for a in speed_aids(streams) if (g := a.on_cycles(cycles)) is not None), None)
     # pulses only when the run has no IMU (correct_odometry falls back by itself)
     odo = correct_odometry(cycles, cfg.odometry, ground.v_mps if ground is not None else None)
+    gaps = imu_gaps(cycles, cfg.margin.imu_gap_s, cfg.odometry.min_speed_kmh / 3.6)
+    odo = with_gap_allowance(odo, gaps, cfg.margin.imu_gap_share)
     gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
     geometry = VehicleGeometry.of(run.meta.vehicle)
     gnss = GnssUnit.for_run(run, network, cfg.gnss)
-    ctx = RunContext(network, cfg, streams, cycles, odo, gps, features, geometry=geometry, gnss=gnss)
+    ctx = RunContext(
+        network, cfg, streams, cycles, odo, gps, features, geometry=geometry, gnss=gnss, imu_gaps=tuple(gaps)
+    )
     return ctx, pre
 
 

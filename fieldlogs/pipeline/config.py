@@ -191,6 +191,10 @@ class MarginConfig:
 
     distance_pct: float = setting(2.0, "share of the travel since the last absolute fix", "%", ge=0)
     uncertain_growth_pct: float = setting(5.0, "share of the travel added while the position is uncertain", "%", ge=0)
+    imu_gap_s: float = setting(3.0, "an IMU silent this long while moving makes the position uncertain", "s", gt=0)
+    imu_gap_share: float = setting(
+        0.5, "share of the travel added to the margin while the IMU is silent (undetectable slip)", ge=0, le=1
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "margin")

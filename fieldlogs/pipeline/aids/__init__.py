@@ -25,6 +25,7 @@ from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.geometry import VehicleGeometry
+from fieldlogs.pipeline.imugap import ImuGap, ImuGapAid
 from fieldlogs.pipeline.types import GpsAnalysis, Odometry
 
 
@@ -41,6 +42,7 @@ class RunContext:
     features: FeatureUnit | None
     geometry: VehicleGeometry = field(default_factory=VehicleGeometry)
     gnss: GnssUnit | None = None
+    imu_gaps: tuple[ImuGap, ...] = ()
 
 
 def _rail(ctx: RunContext) -> Aid | None:
@@ -49,6 +51,10 @@ def _rail(ctx: RunContext) -> Aid | None:
 
 def _failsafe(ctx: RunContext) -> Aid | None:
     return FailsafeAid(ctx.odometry.episodes)
+
+
+def _imu_gap(ctx: RunContext) -> Aid | None:
+    return ImuGapAid(list(ctx.imu_gaps), ctx.cfg.margin.imu_gap_share) if ctx.imu_gaps else None
 
 
 def _balise(ctx: RunContext) -> Aid | None:
@@ -65,10 +71,21 @@ def _features(ctx: RunContext) -> Aid | None:
 
 
 def _gnss(ctx: RunContext) -> Aid | None:
-    return GnssAid(ctx.gnss, ctx.cfg.margin, ctx.gps) if ctx.gnss is not None else None
+    g = ctx.gnss
+    if g is None or (g.inputs is None and g.problem is None):
+        return None  # no raw GNSS in the run (or the aid switched off)
+    return GnssAid(g, ctx.cfg.margin, ctx.gps)
 
 
-POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (_rail, _failsafe, _balise, _gps, _features, _gnss)
+POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
+    _rail,
+    _failsafe,
+    _imu_gap,
+    _balise,
+    _gps,
+    _features,
+    _gnss,
+)
 """Position aids in registry order (simultaneous observations are ordered by priority)."""
 
 
