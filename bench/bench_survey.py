@@ -84,7 +84,9 @@ def build(net: Network, root: Path, name: str) -> Path:
 def _telegram_balise(streams: dict[str, pd.DataFrame], balises: pd.DataFrame, line: str, track: str) -> np.ndarray:
     """The DB balise id of every telegram (truth km at its time, same kind, within 0.5 m)."""
     tel, truth = streams["balise"], streams["truth"]
-    km = np.interp(tel["t"].to_numpy(dtype=float), truth["t"].to_numpy(dtype=float), truth["km_m"].to_numpy(dtype=float))
+    km = np.interp(
+        tel["t"].to_numpy(dtype=float), truth["t"].to_numpy(dtype=float), truth["km_m"].to_numpy(dtype=float)
+    )
     on = balises[(balises["line_code"] == line) & (balises["track"] == track)]
     out = np.full(len(tel), "", dtype=object)
     for j, (k, kind) in enumerate(zip(km, tel["kind"].astype(str), strict=True)):
@@ -137,7 +139,7 @@ def inject(truth: Network, rng: np.random.Generator, unpowered_per_line: int) ->
         fsel = rng.choice(feats, size=2, replace=False)
         removed_f.append((str(line), str(track), str(fsel[0])))
         moved_f.append((str(line), str(track), str(fsel[1])))
-    for line, g in b.groupby("line_code"):
+    for _line, g in b.groupby("line_code"):
         free = g[~g["balise_id"].isin([*moved, *removed_b])]["balise_id"].to_numpy()
         unpowered += [str(x) for x in rng.choice(free, size=min(unpowered_per_line, free.size), replace=False)]
     for bid, dx in moved.items():
@@ -159,14 +161,18 @@ def inject(truth: Network, rng: np.random.Generator, unpowered_per_line: int) ->
     return net, what
 
 
-def simulate_runs(db: Path, net: Network, runs: int, root: Path, workers: int, seed: int, unpowered: list[str]) -> list[Path]:
+def simulate_runs(
+    db: Path, net: Network, runs: int, root: Path, workers: int, seed: int, unpowered: list[str]
+) -> list[Path]:
     jobs = []
     k = 0
     for li, line in enumerate(sorted(set(net.gis["line_code"]))):
         for ti, track in enumerate(("D", "U")):
             for r in range(runs):
                 s = seed * 100_000 + li * 1000 + ti * 500 + r
-                jobs.append((str(db), str(line), track, s, k, str(root / "logs" / f"{line}-{track}-{r:03d}"), unpowered))
+                jobs.append(
+                    (str(db), str(line), track, s, k, str(root / "logs" / f"{line}-{track}-{r:03d}"), unpowered)
+                )
                 k += 1
     with ProcessPoolExecutor(workers) as pool:
         return [Path(p) for p in pool.map(_simulate, jobs)]
@@ -204,7 +210,12 @@ def evaluate(rep: SurveyReport, truth: Network, what: dict[str, Any]) -> dict[st
             prop_err.append((np.inf, np.inf))
             continue
         j = int(np.argmin(np.abs(on["exit_km_m"].to_numpy(dtype=float) - t["exit_km_m"])))
-        prop_err.append((abs(float(on["exit_km_m"].iloc[j]) - t["exit_km_m"]), abs(float(on["radius_m"].iloc[j]) / t["radius_m"] - 1)))
+        prop_err.append(
+            (
+                abs(float(on["exit_km_m"].iloc[j]) - t["exit_km_m"]),
+                abs(float(on["radius_m"].iloc[j]) / t["radius_m"] - 1),
+            )
+        )
     pe = np.array(prop_err).reshape(-1, 2)
     mf = {tuple(k) for k in what["moved_f"]}
     f_db = f[f["feature_id"].notna()]
@@ -259,13 +270,25 @@ def report(e: dict[str, Any], clean: dict[str, Any], km: float) -> None:
     _row("false 'missed' (surveyed DB / truth DB)", f"{e['false_missed']} / {clean['false_missed']}", "0")
     _row("balises removed from the DB found as confirmed candidates", f"{e['cand_found']}/{e['cand_total']}")
     _row("removed curves proposed within ±10 m and ±10 % radius", f"{e['new_within']}/{e['new_total']}", "all")
-    _row("   … largest exit-crossing error [m] / radius error", f"{e['new_err_max']:.1f} / {100 * e['new_r_err_max']:.1f} %", "≤ 10 m / 10 %")
+    _row(
+        "   … largest exit-crossing error [m] / radius error",
+        f"{e['new_err_max']:.1f} / {100 * e['new_r_err_max']:.1f} %",
+        "≤ 10 m / 10 %",
+    )
     _row("curves moved 30 m in the DB found moved", f"{e['moved_f_found']}/{e['moved_f_total']}")
     _row("wheel diameter per vehicle, largest error", f"{e['wheel_veh_max_pct']:.4f} %", "≤ 0.1 %")
     _row("   … per run, largest error", f"{e['wheel_run_max_pct']:.4f} %")
     _row("   … vehicles / fewest runs with an estimate", f"{e['vehicles']} / {e['veh_runs_min']}", "≥ 3 runs")
-    _row("false 'moved' balises / features, clean items of the surveyed DB", f"{e['false_moved']} / {e['false_moved_f']}", "0")
-    _row(f"false 'moved' balises / features, truth DB ({km:.0f} track-km)", f"{clean['false_moved']} / {clean['false_moved_f']}", "0 in 100 track-km")
+    _row(
+        "false 'moved' balises / features, clean items of the surveyed DB",
+        f"{e['false_moved']} / {e['false_moved_f']}",
+        "0",
+    )
+    _row(
+        f"false 'moved' balises / features, truth DB ({km:.0f} track-km)",
+        f"{clean['false_moved']} / {clean['false_moved_f']}",
+        "0 in 100 track-km",
+    )
     _row("clean balises ok (truth DB)", f"{clean['clean_ok']}/{clean['clean_balises']}")
 
 
@@ -289,15 +312,18 @@ def main() -> None:
         sv_db = build(surveyed, root, "surveyed")
         t0 = time.perf_counter()
         runs = simulate_runs(truth_db, truth, args.runs, root, args.workers, args.seed, what["unpowered"])
-        print(f"simulated {len(runs)} runs ({args.lines} lines × 2 tracks × {args.runs}) in {time.perf_counter() - t0:.0f} s")
+        print(
+            f"simulated {len(runs)} runs ({args.lines} lines × 2 tracks × {args.runs}) "
+            f"in {time.perf_counter() - t0:.0f} s"
+        )
         load0 = os.getloadavg()[0]
         rep, t_survey, cpu_survey = timed(lambda: survey([root / "logs"], sv_db, workers=args.workers))
         rep_truth, t_truth, _ = timed(lambda: survey([root / "logs"], truth_db, workers=args.workers))
         _, t_gis, cpu_gis = timed(lambda: verify_runs(sv_db, [root / "logs"], workers=args.workers))
         load1 = os.getloadavg()[0]
-    e = evaluate(rep, truth, what)
-    clean_what = {"moved": {}, "unpowered": what["unpowered"], "removed_b": [], "removed_f": [], "moved_f": []}
-    ct = evaluate(rep_truth, truth, clean_what)
+        e = evaluate(rep, truth, what)
+        clean_what = {"moved": {}, "unpowered": what["unpowered"], "removed_b": [], "removed_f": [], "moved_f": []}
+        ct = evaluate(rep_truth, truth, clean_what)
     hours = rep.summary()["run_hours"]
     print(f"\n{'metric':62s} {'value':>18s}  target")
     report(e, ct, track_km(truth))

@@ -31,11 +31,11 @@ class Fmt(StrEnum):
 
 
 def _km(v: object) -> str:
-    return format_km(float(v), 1) if isinstance(v, int | float) and v == v else ""  # type: ignore[arg-type]
+    return format_km(float(v), 1) if isinstance(v, int | float) and v == v else ""
 
 
 def _num(v: object, fmt: str) -> str:
-    return format(float(v), fmt) if isinstance(v, int | float) and v == v else ""  # type: ignore[arg-type]
+    return format(float(v), fmt) if isinstance(v, int | float) and v == v else ""
 
 
 def _balise_table(rep: SurveyReport) -> pd.DataFrame:
@@ -65,12 +65,15 @@ def _feature_table(rep: SurveyReport) -> pd.DataFrame:
             "line": f["line_code"],
             "track": f["track"],
             "status": f["status"],
-            "runs": f["runs"],
+            "passes": f["passes"],
             "exit km (DB)": [_km(v) for v in f["exit_km_db_m"]],
             "exit km (runs)": [_km(v) for v in f["exit_km_m"]],
             "R (DB)": [_num(v, ".0f") for v in f["radius_db_m"]],
             "R (runs)": [_num(v, ".0f") for v in f["radius_m"]],
-            "dir": [f"{a}/{b}" if isinstance(b, str) else str(a) for a, b in zip(f["attribute_db"], f["attribute"], strict=True)],
+            "dir": [
+                f"{a}/{b}" if isinstance(b, str) else str(a)
+                for a, b in zip(f["attribute_db"], f["attribute"], strict=True)
+            ],
             "reason": f["reason"],
         }
     )
@@ -92,11 +95,9 @@ def _wheel_table(rep: SurveyReport) -> pd.DataFrame:
     )
 
 
-def render_survey(rep: SurveyReport, c: Console) -> None:
-    """Terminal tables: summary (unverified items counted by reason), moved and missed
-    balises, missed passes, candidates, features moved/new/not seen, wheels, GIS, changes
-    (every row of every table is in --format json)."""
+def _summary_rows(rep: SurveyReport) -> list[tuple[str, object]]:
     s = rep.summary()
+    applied = int(rep.changes["applied"].sum()) if len(rep.changes) else 0
     rows: list[tuple[str, object]] = [
         ("DB", f"{rep.db} (version {rep.db_version or '—'})"),
         ("runs", f"{s['runs']} ({s['run_hours']:.1f} run-hours), {s['failed_runs']} failed"),
@@ -105,31 +106,45 @@ def render_survey(rep: SurveyReport, c: Console) -> None:
         ("feature points", ", ".join(f"{v} {k}" for k, v in s["features"].items()) or "—"),
         ("wheels", ", ".join(f"{v} {k}" for k, v in s["wheels"].items()) or "—"),
         ("GIS defects", s["gis_defects"] if s["gis_defects"] is not None else f"— ({rep.gis_note})"),
-        ("proposed changes", f"{int(rep.changes['applied'].sum()) if len(rep.changes) else 0} of {s['changes']}"),
+        ("proposed changes", f"{applied} of {s['changes']}"),
     ]
     for what, frame in (("balises", rep.balises), ("feature points", rep.features)):
         why = frame.loc[frame["status"] == "unverified", "reason"] if len(frame) else pd.Series(dtype=str)
         if len(why):
             counts = why.str.split(" (", regex=False).str[0].value_counts()
             rows.append((f"unverified {what}", "; ".join(f"{v}× {k}" for k, v in counts.items())))
-    c.print(key_value_table(rows, title="Survey"))
-    if rep.balises["status"].isin(["moved", "missed"]).any():
-        c.print(frame_table(_balise_table(rep), title="Balises moved or missed (residual = DB km − runs' km)"))
-    if len(rep.missed):
-        c.print(frame_table(rep.missed, title="Inspection: passes over missed balises"))
-    if len(rep.candidates):
-        c.print(frame_table(rep.candidates.round(2), title="Telegrams the DB does not know"))
-    if len(rep.features) and (~rep.features["status"].isin(["ok", "unverified"])).any():
-        c.print(frame_table(_feature_table(rep), title="Feature points moved, new or not seen"))
-    if len(rep.wheels):
-        c.print(frame_table(_wheel_table(rep), title="Wheel diameters"))
+    return rows
+
+
+def render_survey(rep: SurveyReport, c: Console) -> None:
+    """Terminal tables: summary (unverified items counted by reason), moved and missed
+    balises, missed passes, candidates, features moved/new/not seen, wheels, GIS, changes
+    (every row of every table is in --format json)."""
+    c.print(key_value_table(_summary_rows(rep), title="Survey"))
+    tables: list[tuple[bool, pd.DataFrame, str]] = [
+        (
+            bool(rep.balises["status"].isin(["moved", "missed"]).any()),
+            _balise_table(rep),
+            "Balises moved or missed (residual = DB km − runs' km)",
+        ),
+        (len(rep.missed) > 0, rep.missed, "Inspection: passes over missed balises"),
+        (len(rep.candidates) > 0, rep.candidates.round(2), "Telegrams the DB does not know"),
+        (
+            bool(len(rep.features) and (~rep.features["status"].isin(["ok", "unverified"])).any()),
+            _feature_table(rep),
+            "Feature points moved, new or not seen",
+        ),
+        (len(rep.wheels) > 0, _wheel_table(rep), "Wheel diameters"),
+        (len(rep.changes) > 0, rep.changes.drop(columns=["line_code", "track"]), "Changes --propose writes"),
+    ]
     if rep.gis is not None and len(rep.gis.defects):
-        d = rep.gis.defects
-        c.print(frame_table(d[["defect_id", "line_code", "track", "km_from_m", "km_to_m", "shift_m", "runs"]].round(2), title="GIS defects"))
-    if len(rep.changes):
-        c.print(frame_table(rep.changes.drop(columns=["line_code", "track"]), title="Changes --propose writes"))
+        cols = ["defect_id", "line_code", "track", "km_from_m", "km_to_m", "shift_m", "runs"]
+        tables.insert(-1, (True, rep.gis.defects[cols].round(2), "GIS defects"))
+    for show, frame, title in tables:
+        if show:
+            c.print(frame_table(frame, title=title))
     for run, err in rep.failed_runs.itertuples(index=False, name=None):
-        err_console().print(f"[red]failed:[/] {run}: {err.splitlines()[0] if err else ''}", highlight=False)
+        err_console().print(f"[red]failed:[/] {run}: {str(err).splitlines()[0] if err else ''}", highlight=False)
 
 
 def _check_targets(fmt: Fmt, out: Path | None, propose: Path | None, force: bool) -> None:
@@ -178,7 +193,9 @@ def survey(
     propose: Path | None = typer.Option(
         None, "--propose", help="Write a corrected source set here (flagged items only) with survey_changes.json/.csv."
     ),
-    workers: int | None = typer.Option(None, "--workers", "-j", min=1, help="Processes replaying runs (default: all cores)."),
+    workers: int | None = typer.Option(
+        None, "--workers", "-j", min=1, help="Processes replaying runs (default: all cores)."
+    ),
     dask_scheduler: str | None = typer.Option(
         None, "--dask-scheduler", help="Replay on this Dask cluster (tcp://host:8786) instead of local processes."
     ),
@@ -216,7 +233,13 @@ def survey(
     bar = _Bar(progress(err_console()))
     try:
         rep = run_survey(
-            runs, db, pipeline=tree.pipeline, config=tree.survey, workers=workers, scheduler=dask_scheduler, progress=bar
+            runs,
+            db,
+            pipeline=tree.pipeline,
+            config=tree.survey,
+            workers=workers,
+            scheduler=dask_scheduler,
+            progress=bar,
         )
     finally:
         if bar.task is not None:

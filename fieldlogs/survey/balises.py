@@ -26,9 +26,10 @@ interval is δ̄ ± t₀.₉₇₅,ₙ₋₁·se.
 is) by up to e/2. The survey therefore iterates: the balises that qualify as moved and
 whose culprit score (:func:`culprit_score`: both sides must see the balise off by the
 same amount; a neighbour of a displaced balise is off from one side only) is the largest
-among the qualifying balises of the neighbouring clusters are *flagged*, their anchor position is replaced by the surveyed one (c_DB − δ̄/(dkm/dc)), the
-wheel scales and every residual are estimated again; flags that no longer qualify are
-dropped; until the flags and anchors no longer change (``max_iterations``).
+among the qualifying balises of the neighbouring clusters are *flagged*, their anchor
+position is replaced by the surveyed one (c_DB − δ̄/(dkm/dc)), the wheel scales and every
+residual are estimated again; flags that no longer qualify are dropped; until the flags
+and anchors no longer change (``max_iterations``).
 
 **Wheel scale.** λ_r of a run is the weighted least-squares slope through the origin of
 σ·Δc on Δd over its clean intervals between reads of different clusters (weights
@@ -115,7 +116,7 @@ def wheel_scales(
     sxy = np.bincount(run, w * dc * dd, n_runs)
     sxx = np.bincount(run, w * dd * dd, n_runs)
     cnt = np.bincount(run, None, n_runs)
-    used = np.bincount(run, dd, n_runs)
+    used = np.asarray(np.bincount(run, dd, n_runs), dtype=float)
     ok = (used >= cfg.wheel_min_distance_m) & (sxx > 0)
     lam[ok] = sxy[ok] / sxx[ok]
     resid = dc - np.where(ok[run], lam[run], np.nan) * dd
@@ -199,7 +200,7 @@ def balise_statistics(est: PassEstimates, reads: Reads, table: BaliseTable) -> p
         pooled = np.sqrt(vhat * mvar)
         spread = np.fmax(np.where(n > 1, sd, np.nan), pooled)
         se = spread / np.sqrt(n)
-        half = t_quantile(n - 1) * se
+        half = t_quantile((n - 1).astype(float)) * se
         z = mean / se
     forward = _side_mean(b, est.forward_m, nb_rows)
     backward = _side_mean(b, est.backward_m, nb_rows)

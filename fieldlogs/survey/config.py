@@ -59,11 +59,15 @@ class SurveyConfig:
     )
     feature_radius_tolerance: float = setting(0.20, "… and its radius within this share", gt=0, lt=1)
     max_radius_m: float = setting(3000.0, "curves of a larger radius are not surveyed as feature points", "m", gt=0)
-    min_curve_m: float = setting(20.0, "curve bodies (between the lower-limit crossings) shorter than this are ignored", "m", gt=0)
+    min_curve_m: float = setting(
+        20.0, "curve bodies (between the lower-limit crossings) shorter than this are ignored", "m", gt=0
+    )
     min_speed_kmh: float = setting(
         30.0, "curvature samples slower than this are not used (κ = ωz/v amplifies the gyro's noise)", "km/h", ge=0
     )
-    max_gap_m: float = setting(10.0, "a lower-limit crossing needs curvature samples this close on both sides", "m", gt=0)
+    max_gap_m: float = setting(
+        10.0, "a lower-limit crossing needs curvature samples this close on both sides", "m", gt=0
+    )
     profile_bin_m: float = setting(2.0, "bin of the mean curvature profile along a track", "m", gt=0)
     curve_pad_m: float = setting(
         150.0, "curvature kept around every curve and DB feature (enough for its transitions)", "m", gt=0

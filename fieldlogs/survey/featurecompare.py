@@ -19,7 +19,7 @@ FEATURE_COLUMNS = (
     "curve_id",
     "status",
     "reason",
-    "runs",
+    "passes",
     "attribute_db",
     "attribute",
     "radius_db_m",
@@ -55,11 +55,11 @@ def _judge(db: pd.Series, c: pd.Series, cfg: SurveyConfig) -> tuple[str, str, di
     return (MOVED if reasons else OK), "; ".join(reasons), nums
 
 
-def _row(db: pd.Series | None, c: pd.Series | None, status: str, reason: str, runs: int) -> dict[str, object]:
+def _row(db: pd.Series | None, c: pd.Series | None, status: str, reason: str, passes: int) -> dict[str, object]:
     out: dict[str, object] = dict.fromkeys(FEATURE_COLUMNS, np.nan)
     src = db if db is not None else c
     assert src is not None
-    out.update(line_code=src["line_code"], track=src["track"], status=status, reason=reason, runs=runs)
+    out.update(line_code=src["line_code"], track=src["track"], status=status, reason=reason, passes=passes)
     if db is not None:
         out.update(
             feature_id=db["feature_id"],
@@ -102,13 +102,17 @@ def compare(
         if best is not None:
             matched.add(str(best["curve_id"]))
             status, reason, nums = _judge(db, best, cfg)
-            row = _row(db, best, status, reason, int(best["runs"]))
+            row = _row(db, best, status, reason, int(best["passes"]))
             row.update(nums)
         else:
             cov = coverage.get(key)
-            n = len(cov.runs_covering(float(db["lo"]), float(db["hi"]))) if cov is not None else 0
+            n = len(cov.passes_covering(float(db["lo"]), float(db["hi"]))) if cov is not None else 0
             seen = n >= cfg.min_passes
-            why = f"no curve in the runs' curvature ({n} runs)" if seen else f"too few runs covering it ({n} of {cfg.min_passes})"
+            why = (
+                f"no curve in the runs' curvature ({n} passes)"
+                if seen
+                else f"too few passes covering it ({n} of {cfg.min_passes})"
+            )
             row = _row(db, None, NOT_SEEN if seen else UNVERIFIED, why, n)
         rows.append(row)
     for tc in surveyed.values():
@@ -116,5 +120,5 @@ def compare(
             if str(c["curve_id"]) in matched:
                 continue
             why = "" if c["straights_ok"] else "no 20 m straight on both sides: not a feature point"
-            rows.append(_row(None, c, NEW, why, int(c["runs"])))
+            rows.append(_row(None, c, NEW, why, int(c["passes"])))
     return pd.DataFrame(rows, columns=list(FEATURE_COLUMNS))

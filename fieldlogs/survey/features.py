@@ -9,11 +9,13 @@ found by the pipeline's own rule, iterated to a fixed point: the body is where
 ``measured_radius_m``). A body shorter than ``min_curve_m`` or a radius above
 ``max_radius_m`` is not a feature.
 
-**Location.** On every run whose samples cover the curve, its own lower-limit crossings
-(the same rule as the pipeline: the same-sign run of |κ_n| ≥ κ_lo nearest the profile's,
-runs closer than ``crossing_merge_m`` merged, crossings interpolated linearly between
-samples) give its entry and exit km in the running direction; the curve's crossings are
-the mean over runs, with a 95 % interval from the runs' spread. The exit crossing is the
+**Location.** On every pass (:mod:`fieldlogs.survey.curvature`) whose samples cover the
+curve, its own lower-limit crossings — the same rule as the pipeline: the same-sign run
+of |κ_n| ≥ κ_lo nearest the profile's, runs closer than ``crossing_merge_m`` merged,
+crossings interpolated linearly between samples no more than ``max_gap_m`` apart — give
+its entry and exit km in the running direction; passes whose crossings lie beyond
+max(3 robust σ, 5 m) of the passes' median are left out, and the curve's crossings are the
+mean over the others, with a 95 % interval from their spread. The exit crossing is the
 pipeline's correction point.
 
 **Comparison** with the DB's six-row features of the track (rows 3 and 4 are the entry
@@ -37,6 +39,7 @@ is reported, not proposed.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,7 +50,7 @@ import pandas as pd
 from fieldlogs.pipeline.config import FeatureConfig
 from fieldlogs.survey.balises import t_quantile
 from fieldlogs.survey.config import SurveyConfig
-from fieldlogs.survey.curvature import Coverage, TrackKey, TrackSamples, mean_profile
+from fieldlogs.survey.curvature import TrackKey, TrackSamples, mean_profile
 from schemas.enums import direction_sign
 
 FloatArray = npt.NDArray[np.float64]
@@ -68,7 +71,7 @@ CURVE_COLUMNS = (
     "radius_m",
     "entry_km_m",
     "exit_km_m",
-    "runs",
+    "passes",
     "entry_ci95_m",
     "exit_ci95_m",
     "radius_spread",
@@ -145,7 +148,7 @@ def _body(km: FloatArray, kap: FloatArray, i0: int, i1: int, sgn: int, level: fl
 
 def detect(profile: pd.DataFrame, rule: Rule) -> list[dict[str, Any]]:
     """Curves of a track's mean profile (module docstring, "Detection")."""
-    prof = profile[profile["runs"] >= rule.cfg.min_passes]
+    prof = profile[profile["passes"] >= rule.cfg.min_passes]
     km, kap = prof["km_m"].to_numpy(dtype=float), prof["kappa"].to_numpy(dtype=float)
     detect_level = (1.0 - rule.tol) / rule.cfg.max_radius_m
     out = []
@@ -177,15 +180,18 @@ def _fixed_point(km: FloatArray, kap: FloatArray, i0: int, i1: int, sgn: int, ru
 
 
 def run_crossings(s: TrackSamples, curve: dict[str, Any], rule: Rule) -> pd.DataFrame:
-    """Per run covering the curve: its lower-limit crossings lo, hi (km ascending)."""
+    """Per pass covering the curve: its lower-limit crossings lo, hi (km ascending)."""
     level = (1.0 - rule.tol) / curve["radius_m"]
     lo, hi, sgn = curve["lo"], curve["hi"], curve["sign"]
-    near = (s.km >= lo - rule.cfg.curve_pad_m) & (s.km <= hi + rule.cfg.curve_pad_m)
+    win = s.window(lo - rule.cfg.curve_pad_m, hi + rule.cfg.curve_pad_m)
+    run_w, km_w, kap_w = s.pass_id[win], s.km[win], s.kappa[win]
+    order = np.argsort(run_w, kind="stable")  # by pass, km order kept within a pass
+    run_w, km_w, kap_w = run_w[order], km_w[order], kap_w[order]
+    bounds = np.flatnonzero(np.r_[True, run_w[1:] != run_w[:-1], True])
     rows = []
-    for r in np.unique(s.run[near]):
-        sel = near & (s.run == r)
-        order = np.argsort(s.km[sel], kind="stable")
-        km, kap = s.km[sel][order], s.kappa[sel][order]
+    for a0, a1 in itertools.pairwise(bounds):
+        r = run_w[a0]
+        km, kap = km_w[a0:a1], kap_w[a0:a1]
         if km.size < 3 or km[0] > lo - COVER_M or km[-1] < hi + COVER_M:
             continue
         best = None
@@ -201,8 +207,8 @@ def run_crossings(s: TrackSamples, curve: dict[str, Any], rule: Rule) -> pd.Data
         if a < 1 or b > km.size - 2 or km[a] - km[a - 1] > rule.cfg.max_gap_m or km[b + 1] - km[b] > rule.cfg.max_gap_m:
             continue  # a crossing falls in a gap of the run's samples (a stop, a slow stretch)
         x_lo, x_hi = crossing(km, kap, a - 1, a, level, sgn), crossing(km, kap, b + 1, b, level, sgn)
-        rows.append({"run": int(r), "lo": x_lo, "hi": x_hi, "radius_m": _radius(km, kap, x_lo, x_hi)})
-    return _robust(pd.DataFrame(rows, columns=["run", "lo", "hi", "radius_m"]))
+        rows.append({"pass": int(r), "lo": x_lo, "hi": x_hi, "radius_m": _radius(km, kap, x_lo, x_hi)})
+    return _robust(pd.DataFrame(rows, columns=["pass", "lo", "hi", "radius_m"]))
 
 
 def _robust(pr: pd.DataFrame) -> pd.DataFrame:
@@ -282,7 +288,7 @@ def survey_track(key: TrackKey, s: TrackSamples, rule: Rule) -> TrackCurves:
                 "radius_m": radius,
                 "entry_km_m": entry,
                 "exit_km_m": exit_,
-                "runs": n,
+                "passes": n,
                 "entry_ci95_m": float(half * pr["lo" if sign_n > 0 else "hi"].std(ddof=1)),
                 "exit_ci95_m": float(half * pr["hi" if sign_n > 0 else "lo"].std(ddof=1)),
                 "radius_spread": float(pr["radius_m"].std(ddof=1) / radius),
@@ -302,14 +308,16 @@ def db_features(fp: pd.DataFrame) -> pd.DataFrame:
         return pd.DataFrame(
             columns=["line_code", "track", "feature_id", "entry_km_m", "exit_km_m", "radius_m", "attribute", "lo", "hi"]
         )
-    f = fp.assign(line_code=fp["line_code"].astype(str), track=fp["track"].astype(str), feature_id=fp["feature_id"].astype(str))
+    f = fp.assign(
+        line_code=fp["line_code"].astype(str), track=fp["track"].astype(str), feature_id=fp["feature_id"].astype(str)
+    )
     keys = ["line_code", "track", "feature_id"]
     span = f.groupby(keys)["km_m"].agg(lo="min", hi="max")
     r3 = f[f["seq"] == 3].set_index(keys)
     r4 = f[f["seq"] == 4].set_index(keys)
     out = span.join(r3[["km_m", "radius_m", "attribute"]].rename(columns={"km_m": "entry_km_m"}))
     out = out.join(r4[["km_m"]].rename(columns={"km_m": "exit_km_m"}))
-    return out.reset_index()
+    return pd.DataFrame(out.reset_index())
 
 
 def proposed_rows(curve: pd.Series, feature_id: str) -> list[dict[str, Any]]:
@@ -326,7 +334,11 @@ def proposed_rows(curve: pd.Series, feature_id: str) -> list[dict[str, Any]]:
     roles = [
         ("straight", 0.0, "entry straight check starts"),
         ("transition", 0.0, "entry straight check ends"),
-        (str(curve["attribute"]), round(float(curve["radius_m"]), 1), "curvature exceeds the lower limit (curve entry)"),
+        (
+            str(curve["attribute"]),
+            round(float(curve["radius_m"]), 1),
+            "curvature exceeds the lower limit (curve entry)",
+        ),
         ("transition", 0.0, "curvature falls below the lower limit (curve exit)"),
         ("straight", 0.0, "exit straight check starts"),
         ("none", 0.0, "exit straight check ends"),

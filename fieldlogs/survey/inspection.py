@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from datetime import datetime, timedelta
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -78,7 +79,9 @@ def pass_table(runs: Sequence[RunSurvey]) -> pd.DataFrame:
         if len(rs.passes)
     ]
     if not frames:
-        return pd.DataFrame(columns=["balise_id", "seg", "t_pass", "km_pass_m", "read", "run", "run_id", "vehicle_id", "start_time"])
+        return pd.DataFrame(
+            columns=["balise_id", "seg", "t_pass", "km_pass_m", "read", "run", "run_id", "vehicle_id", "start_time"]
+        )
     return pd.concat(frames, ignore_index=True)
 
 
@@ -95,13 +98,17 @@ def _reason(status: str, passes: int, reads: int, n_est: int, cfg: SurveyConfig)
     return f"inconclusive (the 95 % interval reaches beyond ±{cfg.ok_tolerance_m:g} m)"
 
 
-def balise_status(table: BaliseTable, adj: Adjustment, passes: pd.DataFrame, reads_per_balise: pd.Series, cfg: SurveyConfig) -> pd.DataFrame:
+def balise_status(
+    table: BaliseTable, adj: Adjustment, passes: pd.DataFrame, reads_per_balise: pd.Series, cfg: SurveyConfig
+) -> pd.DataFrame:
     """One row per DB balise (:data:`BALISE_COLUMNS`)."""
     f = table.frame
     st = adj.stats
     by = passes.groupby("balise_id")["read"] if len(passes) else None
     n_pass = (by.size() if by is not None else pd.Series(dtype=int)).reindex(f["balise_id"], fill_value=0).to_numpy()
-    n_read_pass = (by.sum() if by is not None else pd.Series(dtype=int)).reindex(f["balise_id"], fill_value=0).to_numpy()
+    n_read_pass = (
+        (by.sum() if by is not None else pd.Series(dtype=int)).reindex(f["balise_id"], fill_value=0).to_numpy()
+    )
     reads = reads_per_balise.reindex(f["balise_id"], fill_value=0).to_numpy(dtype=np.int64)
     mean = st["residual_m"].to_numpy(dtype=float)
     half = st["ci95_m"].to_numpy(dtype=float)
@@ -197,6 +204,7 @@ def candidates(
     f = table.frame
     rows = []
     for k, g in u.groupby("group", sort=True):
+        group = cast(int, k)
         km = g["km_m"].to_numpy(dtype=float)
         n_runs = int(g["run"].nunique())
         on = f[(f["line_code"] == g["line_code"].iloc[0]) & (f["track"] == g["track"].iloc[0])]
@@ -205,7 +213,7 @@ def candidates(
         rows.append(
             {
                 **{c: g[c].iloc[0] for c in keys},
-                "candidate_id": f"K{int(k):03d}",
+                "candidate_id": f"K{group:03d}",
                 "km_m": float(km.mean()),
                 "ci95_m": float(1.96 * km.std(ddof=1) / np.sqrt(km.size)) if km.size > 1 else np.nan,
                 "runs": n_runs,

@@ -18,6 +18,7 @@ import pandas as pd
 
 from dbtools import pagekit as kit
 from fieldlogs.survey.features import db_features
+from fieldlogs.survey.frames import rows as frame_rows
 from schemas.units import format_km
 
 if TYPE_CHECKING:
@@ -60,7 +61,7 @@ def balise_residuals(balises: pd.DataFrame, line: str, moved_min_m: float) -> by
 def _feature_bands(ax: Any, rows: pd.DataFrame, colour: str, label: str) -> None:
     """±1/R between the lower-limit crossings of each feature (sign: its direction)."""
     first = True
-    for r in rows.itertuples():
+    for r in frame_rows(rows):
         if not (np.isfinite(r.entry) and np.isfinite(r.exit) and r.radius > 0):
             continue
         k = (1.0 if r.attribute == "left" else -1.0) / float(r.radius)
@@ -78,10 +79,20 @@ def curvature_overlay(rep: SurveyReport, key: tuple[str, str]) -> bytes:
         ax.plot(p["km_m"] / 1000.0, p["kappa"], ".", ms=1.5, color="0.3", label="runs' mean κ")
     dbf = db_features(rep.network.feature_points)
     dbf = dbf[(dbf["line_code"] == key[0]) & (dbf["track"] == key[1])]
-    _feature_bands(ax, dbf.rename(columns={"entry_km_m": "entry", "exit_km_m": "exit", "radius_m": "radius"}), "tab:blue", "DB feature")
+    _feature_bands(
+        ax,
+        dbf.rename(columns={"entry_km_m": "entry", "exit_km_m": "exit", "radius_m": "radius"}),
+        "tab:blue",
+        "DB feature",
+    )
     f = rep.features
     prop = f[(f["line_code"] == key[0]) & (f["track"] == key[1]) & f["status"].isin(["new", "moved"])]
-    _feature_bands(ax, prop.rename(columns={"entry_km_m": "entry", "exit_km_m": "exit", "radius_m": "radius"}), "tab:red", "proposed")
+    _feature_bands(
+        ax,
+        prop.rename(columns={"entry_km_m": "entry", "exit_km_m": "exit", "radius_m": "radius"}),
+        "tab:red",
+        "proposed",
+    )
     ax.axhline(0.0, color="0.5", lw=0.6)
     ax.set_xlabel("km")
     ax.set_ylabel("κ [1/m] (+ left)")
@@ -101,10 +112,18 @@ def wheel_trend(wheel_runs: pd.DataFrame) -> bytes:
         ok = np.isfinite(g["diameter_m"].to_numpy(dtype=float)) & g["time"].notna().to_numpy()
         if ok.any():
             ax.errorbar(
-                g["time"][ok], 1000 * g["diameter_m"][ok], yerr=1000 * np.nan_to_num(g["ci95_m"][ok].to_numpy(dtype=float)),
-                fmt="o-", ms=3, lw=0.8, color="tab:blue", label="estimated",
+                g["time"][ok],
+                1000 * g["diameter_m"][ok],
+                yerr=1000 * np.nan_to_num(g["ci95_m"][ok].to_numpy(dtype=float)),
+                fmt="o-",
+                ms=3,
+                lw=0.8,
+                color="tab:blue",
+                label="estimated",
             )
-            ax.step(g["time"][ok], 1000 * g["configured_m"][ok], where="post", color="tab:orange", lw=1.0, label="run.json")
+            ax.step(
+                g["time"][ok], 1000 * g["configured_m"][ok], where="post", color="tab:orange", lw=1.0, label="run.json"
+            )
             ax.legend(loc="upper right", fontsize=7)
         else:
             ax.text(0.5, 0.5, "no estimate", ha="center", va="center", transform=ax.transAxes, color="0.4")
@@ -149,7 +168,8 @@ def _verdict(rep: SurveyReport) -> str:
     n = max(sum(s["balises"].values()), 1)
     if s["balises"].get("unverified", 0) > n / 2:
         return kit.paragraph(
-            f"Nothing flagged, but {s['balises']['unverified']} of {n} balises are unverified: the DB is not shown to be right.",
+            f"Nothing flagged, but {s['balises']['unverified']} of {n} balises are unverified: "
+            "the DB is not shown to be right.",
             kit.Status.CAUTION,
         )
     return kit.paragraph("Nothing flagged.", kit.Status.OK)
@@ -160,7 +180,9 @@ def _figures(rep: SurveyReport) -> list[str]:
     lines = sorted(rep.balises["line_code"].unique())
     for line in lines[:MAX_FIGURES]:
         out.append(kit.figure(balise_residuals(rep.balises, line, rep.config.moved_min_m), f"Balises, line {line}"))
-    keys = sorted(set(rep.curves) | {(str(a), str(b)) for a, b in rep.features[["line_code", "track"]].itertuples(index=False)})
+    keys = sorted(
+        set(rep.curves) | {(str(a), str(b)) for a, b in rep.features[["line_code", "track"]].itertuples(index=False)}
+    )
     for key in keys[:MAX_FIGURES]:
         out.append(kit.figure(curvature_overlay(rep, key), f"Curvature, line {key[0]} track {key[1]}"))
     if len(keys) > MAX_FIGURES or len(lines) > MAX_FIGURES:
@@ -171,15 +193,25 @@ def _figures(rep: SurveyReport) -> list[str]:
 def render_html(rep: SurveyReport) -> str:
     """The whole survey as one HTML string."""
     s = rep.summary()
-    rows = [("DB", f"{rep.db} (version {rep.db_version or '—'})"), ("runs", f"{s['runs']} ({s['run_hours']} run-hours)")]
-    rows += [(f"{k}", ", ".join(f"{n} {st}" for st, n in s[k].items()) or "—") for k in ("balises", "features", "wheels")]
+    rows = [
+        ("DB", f"{rep.db} (version {rep.db_version or '—'})"),
+        ("runs", f"{s['runs']} ({s['run_hours']} run-hours)"),
+    ]
+    rows += [
+        (f"{k}", ", ".join(f"{n} {st}" for st, n in s[k].items()) or "—") for k in ("balises", "features", "wheels")
+    ]
     rows += [("GIS defects", s["gis_defects"] if s["gis_defects"] is not None else rep.gis_note)]
     parts = [
         f"<p>{kit.generated()}.</p>",
         _verdict(rep),
         kit.key_value_table(rows),
         kit.section("Along the lines", *_figures(rep)),
-        kit.section("Wheels", kit.figure(wheel_trend(rep.wheel_runs), "Wheel diameter per vehicle"), _table(rep.wheels), _table(rep.wheel_runs)),
+        kit.section(
+            "Wheels",
+            kit.figure(wheel_trend(rep.wheel_runs), "Wheel diameter per vehicle"),
+            _table(rep.wheels),
+            _table(rep.wheel_runs),
+        ),
         kit.section("Balises", _table(rep.balises)),
         kit.section("Inspection: passes over missed balises", _table(rep.missed)),
         kit.section("Telegrams the DB does not know", _table(rep.candidates)),
@@ -188,7 +220,9 @@ def render_html(rep: SurveyReport) -> str:
     if rep.gis is not None:
         parts.append(kit.section("GIS grid (gis verify)", _table(rep.gis.coverage), _table(rep.gis.defects)))
     else:
-        parts.append(kit.section("GIS grid (gis verify)", kit.paragraph(rep.gis_note or "not verified", kit.Status.NOTE)))
+        parts.append(
+            kit.section("GIS grid (gis verify)", kit.paragraph(rep.gis_note or "not verified", kit.Status.NOTE))
+        )
     parts.append(kit.section("Changes --propose writes", _table(rep.changes)))
     parts.append(kit.section("Runs", _table(rep.runs), _table(rep.failed_runs)))
     return kit.page("trainpos survey", *parts, heading_text="Survey of balises, feature points and wheels")

@@ -36,10 +36,23 @@ from dbtools.validate import validate_network
 from fieldlogs.survey.balises import MOVED
 from fieldlogs.survey.features import MOVED as F_MOVED
 from fieldlogs.survey.features import NEW, proposed_rows
+from fieldlogs.survey.frames import rows
 from schemas.enums import BaliseKind, Severity, direction_sign
 from schemas.tables import BALISES, FEATURE_POINTS, PAIR_SPACING_M
 
-CHANGE_COLUMNS = ("change_id", "table", "action", "key", "line_code", "track", "old", "new", "evidence", "applied", "note")
+CHANGE_COLUMNS = (
+    "change_id",
+    "table",
+    "action",
+    "key",
+    "line_code",
+    "track",
+    "old",
+    "new",
+    "evidence",
+    "applied",
+    "note",
+)
 SIDECAR = "survey_changes"
 #: Note on the equipment km of an added balise.
 EQUIPMENT_NOTE = "km_equipment_m from the nearest balise's offset: check near realignments"
@@ -68,7 +81,7 @@ class Change:
 
 def _balise_moves(balises: pd.DataFrame) -> list[Change]:
     out = []
-    for r in balises[balises["status"] == MOVED].itertuples():
+    for r in rows(balises[balises["status"] == MOVED]):
         delta = round(-float(r.residual_m), 2)
         out.append(
             Change(
@@ -155,7 +168,7 @@ def _candidate_changes(cands: pd.DataFrame, b: pd.DataFrame) -> list[Change]:
     if not len(cands):
         return []
     used = set(b["balise_id"].astype(str))
-    return [_candidate_change(c, b, used) for c in cands[cands["confirmed"].astype(bool)].itertuples()]
+    return [_candidate_change(c, b, used) for c in rows(cands[cands["confirmed"].astype(bool)])]
 
 
 def _next_id(used: set[str]) -> str:
@@ -170,11 +183,11 @@ def _feature_changes(features: pd.DataFrame, curves: dict[tuple[str, str], Any],
     """New and moved features as six surveyed rows each (module docstring)."""
     out: list[Change] = []
     used = {(str(k[0]), str(k[1])): set(g["feature_id"].astype(str)) for k, g in fp.groupby(["line_code", "track"])}
-    for f in features[features["status"].isin([NEW, F_MOVED])].itertuples():
+    for f in rows(features[features["status"].isin([NEW, F_MOVED])]):
         key = (str(f.line_code), str(f.track))
         curve = curves[key].curves.set_index("curve_id").loc[str(f.curve_id)].copy()
         curve["line_code"], curve["track"] = key
-        ev = f"{f.runs} runs: exit {f.exit_km_m:.1f} ± {f.exit_ci95_m:.1f} m, R {f.radius_m:.0f} m, {f.attribute}"
+        ev = f"{f.passes} passes: exit {f.exit_km_m:.1f} ± {f.exit_ci95_m:.1f} m, R {f.radius_m:.0f} m, {f.attribute}"
         action = "add" if f.status == NEW else "replace"
         if not bool(curve["straights_ok"]):
             note = "no 20 m straight on both sides"
@@ -184,8 +197,8 @@ def _feature_changes(features: pd.DataFrame, curves: dict[tuple[str, str], Any],
         old = "" if f.status == NEW else f"exit {f.exit_km_db_m:.1f}, R {f.radius_db_m:.0f} {f.attribute_db}"
         new = f"exit {f.exit_km_m:.1f}, R {float(f.radius_m):.0f} {f.attribute}"
         scope = {"line_code": key[0], "track": key[1], "feature_id": fid}
-        rows = proposed_rows(curve, fid)
-        out.append(Change(FEATURE_POINTS.name, action, fid, *key, old, new, ev, scope, rows, str(f.reason or "")))
+        six = proposed_rows(curve, fid)
+        out.append(Change(FEATURE_POINTS.name, action, fid, *key, old, new, ev, scope, six, str(f.reason or "")))
     return out
 
 
@@ -267,11 +280,11 @@ def build_proposal(report: Any) -> Proposal:
         + _feature_changes(report.features, report.curves, network.feature_points)
     )
     proposed = _guard(network, changes) if changes else network
-    rows = [
+    table = [
         {c: getattr(ch, c) for c in CHANGE_COLUMNS if c != "change_id"} | {"change_id": i + 1}
         for i, ch in enumerate(changes)
     ]
-    return Proposal(proposed, pd.DataFrame(rows, columns=list(CHANGE_COLUMNS)))
+    return Proposal(proposed, pd.DataFrame(table, columns=list(CHANGE_COLUMNS)))
 
 
 def write_proposal(proposal: Proposal, folder: Path, *, force: bool = False) -> Path:

@@ -110,7 +110,19 @@ def _run_frame(runs: Sequence[RunSurvey]) -> pd.DataFrame:
             }
             for r in runs
         ],
-        columns=["run_id", "folder", "vehicle_id", "start_time", "duration_s", "distance_m", "telegrams", "identified", "unknown", "unlocated", "wrong_direction"],
+        columns=[
+            "run_id",
+            "folder",
+            "vehicle_id",
+            "start_time",
+            "duration_s",
+            "distance_m",
+            "telegrams",
+            "identified",
+            "unknown",
+            "unlocated",
+            "wrong_direction",
+        ],
     )
 
 
@@ -180,5 +192,7 @@ def survey(
         folders, Path(db), network, pipeline, cfg, workers=workers, scheduler=scheduler, progress=progress
     )
     if not runs:
-        raise InputError(f"no run could be used ({failed[0][1] if failed else 'none'})", path=failed[0][0] if failed else None)
+        raise InputError(
+            f"no run could be used ({failed[0][1] if failed else 'none'})", path=failed[0][0] if failed else None
+        )
     return aggregate(network, runs, failed, pipeline, cfg, str(db))

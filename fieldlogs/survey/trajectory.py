@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import numpy.typing as npt
@@ -67,7 +68,8 @@ def balise_table(network: Network, cluster_m: float) -> BaliseTable:
     slope = np.ones(len(b))
     cluster = np.zeros(len(b), dtype=np.int64)
     next_cluster = 0
-    for (line, track), idx in b.groupby(["line_code", "track"]).indices.items():
+    for key, idx in b.groupby(["line_code", "track"]).indices.items():
+        line, track = cast(tuple[str, str], key)
         m = track_metric(network, str(line), str(track))
         c[idx] = m.c_of_km(km[idx])
         slope[idx] = 2.0 / np.maximum(m.c_of_km(km[idx] + 1.0) - m.c_of_km(km[idx] - 1.0), 1e-9)
@@ -128,7 +130,7 @@ def chained_reads(runs: Sequence[RunSurvey], table: BaliseTable) -> Reads:
         return Reads(z, z, z, z, np.zeros(0), np.zeros(0), z, np.zeros(0))
     f = pd.concat(parts, ignore_index=True).sort_values(["run", "seg", "t"], kind="stable", ignore_index=True)
     f = _drop_out_of_order(f, table)
-    chain = f.groupby(["run", "seg"], sort=False).ngroup().to_numpy(dtype=np.int64)
+    chain = np.asarray(f.groupby(["run", "seg"], sort=False).ngroup().to_numpy(), dtype=np.int64)
     return Reads(
         f["run"].to_numpy(dtype=np.int64),
         chain,
@@ -147,7 +149,9 @@ def _drop_out_of_order(f: pd.DataFrame, table: BaliseTable) -> pd.DataFrame:
     km = table.frame["km_actual_m"].to_numpy(dtype=float)
     while len(f) > 1:
         u = f["motion"].to_numpy() * km[f["balise"].to_numpy()]
-        same = (f["run"].to_numpy()[1:] == f["run"].to_numpy()[:-1]) & (f["seg"].to_numpy()[1:] == f["seg"].to_numpy()[:-1])
+        same = (f["run"].to_numpy()[1:] == f["run"].to_numpy()[:-1]) & (
+            f["seg"].to_numpy()[1:] == f["seg"].to_numpy()[:-1]
+        )
         bad = np.flatnonzero(same & (np.diff(u) <= 0.0)) + 1
         if bad.size == 0:
             break
@@ -177,7 +181,9 @@ class Trajectory:
         return np.asarray(np.where(far, np.nan, out), dtype=float)
 
 
-def trajectories(reads: Reads, c_anchor: FloatArray, scale: FloatArray, reach_m: float) -> dict[tuple[int, int], Trajectory]:
+def trajectories(
+    reads: Reads, c_anchor: FloatArray, scale: FloatArray, reach_m: float
+) -> dict[tuple[int, int], Trajectory]:
     """(run, segment) → its chain's :class:`Trajectory` with the balises at ``c_anchor``
     and the runs' wheel scales ``scale`` (NaN: 1)."""
     out: dict[tuple[int, int], Trajectory] = {}
@@ -190,5 +196,7 @@ def trajectories(reads: Reads, c_anchor: FloatArray, scale: FloatArray, reach_m:
         lam = float(scale[r]) if np.isfinite(scale[r]) else 1.0
         d = reads.d[a:b]
         keep = np.r_[True, np.diff(d) > 0]  # a standstill between two reads cannot happen; guard
-        out[(r, int(reads.seg[a]))] = Trajectory(d[keep], c_anchor[reads.balise[a:b]][keep], int(reads.motion[a]), lam, reach_m)
+        out[(r, int(reads.seg[a]))] = Trajectory(
+            d[keep], c_anchor[reads.balise[a:b]][keep], int(reads.motion[a]), lam, reach_m
+        )
     return out
