@@ -296,7 +296,7 @@ def adjust(reads: Reads, table: BaliseTable, n_runs: int, cfg: SurveyConfig) -> 
         new = (flagged & cand) | local_maxima(cand, culprit_score(stats), table)
         shift = np.where(new, np.nan_to_num(stats["residual_m"].to_numpy(dtype=float)) / table.slope, 0.0)
         c_new = c_db - shift
-        stable = bool((new == flagged).all() and np.allclose(c_new, c_anchor, atol=1e-3, equal_nan=True))
+        stable = bool((new == flagged).all() and np.allclose(c_new, c_anchor, rtol=0.0, atol=1e-4, equal_nan=True))
         flagged, c_anchor = new, c_new
         if stable or it >= cfg.max_iterations:
             return Adjustment(stats, flagged, c_anchor, lam, lam_se, used, est, it)

@@ -109,8 +109,8 @@ def chained_reads(runs: Sequence[RunSurvey], table: BaliseTable) -> Reads:
         if not len(rd):
             continue
         rd = rd[(rd["status"] == IDENTIFIED) & rd["balise_id"].isin(table.row.keys())]
-        seg_lt = rs.segments.set_index("seg")[["line_code", "track"]]
-        on = rd.join(seg_lt, on="seg", rsuffix="_seg")
+        seg_lt = rs.segments.set_index("seg")[["line_code", "track"]].add_suffix("_seg")
+        on = rd.join(seg_lt, on="seg")
         on = on[(on["line_code"] == on["line_code_seg"]) & (on["track"] == on["track_seg"])]
         parts.append(
             pd.DataFrame(
