@@ -28,7 +28,9 @@ against the track's direction is not used.
 direction is *passed* when the segment's km covers it with ``pass_margin_m`` plus the
 position's margin to spare on both sides [S003 §6 ③: an unpowered balise shows as a pass
 without a read]; the pass time is when the km first reaches it. It is *read* when a read of
-that balise lies in the same segment.
+that balise lies in the same segment. Only segments in which the run identified at least
+one balise have passes: a run without a balise stream, or whose reader was dead, says
+nothing about the balises.
 
 **Curvature.** κ samples (at the cycle's mid travel, SPEC §5.3) with a speed of at least
 ``min_speed_kmh`` (and the pipeline's feature ``min_speed_kmh``) are kept where a curve may be: within
@@ -283,9 +285,10 @@ def pass_frame(
     """Every pass over a DB balise (module docstring, "Passes")."""
     frames = []
     read_keys = set(zip(reads["balise_id"], reads["seg"], strict=True)) if len(reads) else set()
+    reading = set(reads.loc[reads["status"] == IDENTIFIED, "seg"]) if len(reads) else set()
     for k, g in enumerate(segs):
-        if g.motion == 0:
-            continue
+        if g.motion == 0 or k not in reading:
+            continue  # no direction, or the reader identified nothing there (absent or dead)
         b = index.on_track(g.line_code, g.track, g.motion)
         if b is None:
             continue

@@ -4,11 +4,12 @@ each change with its evidence in a sidecar (``survey_changes.json`` / ``.csv``).
 * a *moved* balise: ``km_actual_m`` ← DB km − residual (rounded to 1 cm), ``km_equipment_m``
   moved by the same amount, and ``dist_from_initial_m`` of every C balise whose own km or
   whose governing pair's I1 moved, by s·(Δkm_C − Δkm_I1) (s = +1 on D/S, −1 on U);
-* a *confirmed* candidate: a new row — a C balise governed by the last initial pair before
-  it in running direction (its ``dist_from_initial_m`` the km difference to that pair's I1),
-  or an I1/I2 pair when both its telegrams were confirmed within 10 m; ``km_equipment_m`` is
-  its actual km plus the equipment − actual offset of the nearest DB balise on its track
-  (to be checked where a realignment begins: the sidecar says so);
+* a *confirmed* candidate C balise: a new row governed by the last initial pair before it in
+  running direction (its ``dist_from_initial_m`` the km difference to that pair's I1);
+  ``km_equipment_m`` is its actual km plus the equipment − actual offset of the nearest DB
+  balise on its track (to be checked where a realignment begins: the sidecar says so).
+  Unknown I1/I2 telegrams are listed for inspection, not proposed: an initial pair needs
+  its station and both balises checked on site;
 * a *new* curve with straights on both sides: six rows (``S001``, … not used on its track);
   a *moved* feature: its six rows replaced by the surveyed ones, same ``feature_id``.
 
