@@ -4,7 +4,8 @@ One TOML file (``--config FILE.toml``) configures every command: ``run``, ``audi
 ``gis verify`` read the pipeline's sections (``[odometry]``, ``[balise]``, ``[feature]``,
 ``[gps]``, ``[margin]``, ``cycle_s``), ``possession check`` reads ``[gps]`` and
 ``[possession]``, ``survey`` the pipeline's sections and ``[survey]``; each command
-refuses unknown sections and keys, wrong types and values out of range. ``trainpos config show`` prints the whole tree (or one section) with every
+refuses unknown sections and keys, wrong types and values out of range.
+``trainpos config show`` prints the whole tree (or one section) with every
 default, unit, range and meaning as commented TOML; fed back with ``--config`` it changes
 nothing.
 """

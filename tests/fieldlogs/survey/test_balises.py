@@ -45,7 +45,7 @@ def reads(true_km: list[float], scales: list[float], motion: int = 1, slip: dict
     """One chain per run over every balise: travel d = |true km − first| / λ (a wheel of
     scale λ reads λ times too little), optional slip allowance steps after read i."""
     runs, chains, bal, d, allow, mot, t = [], [], [], [], [], [], []
-    order = np.argsort(true_km)[:: motion]
+    order = np.argsort(true_km)[::motion]
     x = np.asarray(true_km, dtype=float)[order]
     for r, lam in enumerate(scales):
         a = np.zeros(len(x))

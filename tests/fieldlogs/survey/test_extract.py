@@ -99,7 +99,8 @@ def test_a_cab_reversal_or_a_track_change_starts_a_new_segment() -> None:
 
 
 def test_a_segment_moving_less_than_50_m_has_no_direction() -> None:
-    segs = find_segments(_positions(["determined"] * 3, [1000.0, 1010.0, 1020.0]), np.array([0.0, 10, 20]), np.ones(3), 0.0)
+    pos = _positions(["determined"] * 3, [1000.0, 1010.0, 1020.0])
+    segs = find_segments(pos, np.array([0.0, 10, 20]), np.ones(3), 0.0)
     assert segs[0].motion == 0
 
 

@@ -4,6 +4,7 @@ break a ``db validate`` rule is not applied; the output is written atomically.""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pandas as pd
@@ -13,7 +14,14 @@ from dbtools.database import read_network
 from dbtools.sources import read_source_set
 from fieldlogs.config import SuiteConfig
 from fieldlogs.survey.config import SurveyConfig
-from fieldlogs.survey.propose import CHANGE_COLUMNS, Proposal, _guard, apply_balise_moves, build_proposal, write_proposal
+from fieldlogs.survey.propose import (
+    CHANGE_COLUMNS,
+    Proposal,
+    _guard,
+    apply_balise_moves,
+    build_proposal,
+    write_proposal,
+)
 from fieldlogs.survey.propose import Change as _Change
 from schemas.errors import RefusedError
 from schemas.settings import SettingError
@@ -89,7 +97,7 @@ def test_nothing_flagged_proposes_nothing(sample_db: Path) -> None:
         balises = pd.DataFrame({"status": pd.Series([], dtype=str)})
         candidates = pd.DataFrame()
         features = pd.DataFrame({"status": pd.Series([], dtype=str)})
-        curves: dict[tuple[str, str], object] = {}
+        curves: ClassVar[dict[tuple[str, str], object]] = {}
 
     p = build_proposal(Empty())
     assert p.changes.empty and p.network is Empty.network
@@ -99,5 +107,5 @@ def test_survey_settings_are_in_the_tree_and_range_checked() -> None:
     assert SuiteConfig().survey == SurveyConfig()
     tree = SuiteConfig.from_dict({"survey": {"moved_min_m": 2.0}})
     assert tree.survey.moved_min_m == 2.0
-    with pytest.raises(SettingError, match="survey.wheel_alert_share"):
+    with pytest.raises(SettingError, match=r"survey\.wheel_alert_share"):
         SuiteConfig.from_dict({"survey": {"wheel_alert_share": 1.5}})

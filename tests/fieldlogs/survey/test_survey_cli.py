@@ -53,7 +53,8 @@ def test_the_maintenance_loop(data: SurveyData, tmp_path: Path, runner: CliRunne
     assert diff["tables"]["balises"]["added"] == 1
     assert diff["tables"]["feature_points"]["added"] == 6  # one new curve, six rows
     assert diff["tables"]["gis"]["changed"] == 0
-    res = runner.invoke(app, ["db", "release", str(new_db), "--registry", str(tmp_path / "releases"), "--note", "survey"])
+    registry = str(tmp_path / "releases")
+    res = runner.invoke(app, ["db", "release", str(new_db), "--registry", registry, "--note", "survey"])
     assert res.exit_code == 0, res.output
 
 
@@ -94,7 +95,8 @@ def test_the_table_names_what_to_act_on(data: SurveyData, runner: CliRunner) -> 
 def test_settings_come_from_the_config_file(data: SurveyData, tmp_path: Path, runner: CliRunner) -> None:
     cfg = tmp_path / "survey.toml"
     cfg.write_text("[survey]\nmoved_min_m = 5.0\nwheel_alert_share = 0.01\n")
-    res = runner.invoke(app, ["survey", str(data.logs), "--db", str(data.db), "-j", "1", "--format", "json", "--config", str(cfg)])
+    args = ["survey", str(data.logs), "--db", str(data.db), "-j", "1", "--format", "json"]
+    res = runner.invoke(app, [*args, "--config", str(cfg)])
     out = json.loads(res.stdout)
     b = {r["balise_id"]: r for r in out["balises"]}
     assert b["0420-D-C002"]["status"] == "unverified"  # 3 m is below the 5 m asked for
