@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import typer
 
-from cli import audit, config, db, demo, gis, gnss, logs, possession, radar, run, schema, simulate
+from cli import audit, config, db, demo, gis, gnss, logs, possession, radar, run, schema, simulate, survey
 from dbtools.build import tool_version
 
 app = typer.Typer(
@@ -27,6 +27,7 @@ app.command("simulate")(simulate.simulate)
 app.command("run")(run.run)
 app.command("audit")(audit.audit)
 app.command("report")(audit.report)
+app.command("survey")(survey.survey)
 app.command("demo")(demo.demo)
 
 

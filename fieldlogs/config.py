@@ -3,8 +3,9 @@
 One TOML file (``--config FILE.toml``) configures every command: ``run``, ``audit`` and
 ``gis verify`` read the pipeline's sections (``[odometry]``, ``[balise]``, ``[feature]``,
 ``[gps]``, ``[margin]``, ``[gnss]``, ``cycle_s``), ``possession check`` reads ``[gps]`` and
-``[possession]``; each command refuses unknown sections and keys, wrong types and values out
-of range. ``trainpos config show`` prints the whole tree (or one section) with every
+``[possession]``, ``survey`` the pipeline's sections and ``[survey]``; each command
+refuses unknown sections and keys, wrong types and values out of range.
+``trainpos config show`` prints the whole tree (or one section) with every
 default, unit, range and meaning as commented TOML; fed back with ``--config`` it changes
 nothing.
 """
@@ -27,6 +28,7 @@ from fieldlogs.pipeline.config import (
     read_toml,
 )
 from fieldlogs.possession.config import PossessionConfig
+from fieldlogs.survey.config import SurveyConfig
 from schemas.errors import InputError, UsageError
 from schemas.settings import SettingError, check_ranges, describe, render_toml, section_from_dict, setting, typed
 
@@ -42,6 +44,7 @@ class SuiteConfig:
     margin: MarginConfig = field(default_factory=MarginConfig)
     gnss: GnssConfig = field(default_factory=GnssConfig)
     possession: PossessionConfig = field(default_factory=PossessionConfig)
+    survey: SurveyConfig = field(default_factory=SurveyConfig)
     cycle_s: float = setting(**CYCLE_S)
 
     def __post_init__(self) -> None:

@@ -255,7 +255,7 @@ class PipelineConfig:
 
 
 #: Sections of the configuration tree that belong to other applications.
-FOREIGN_SECTIONS = frozenset({"possession", "gis_verify"})
+FOREIGN_SECTIONS = frozenset({"possession", "gis_verify", "survey"})
 
 
 def read_toml(path: Path) -> dict[str, Any]:

@@ -1,0 +1,302 @@
+"""Balise positions from the runs' dead reckoning [S003 §4.5, §5.5]; wheel scales per run.
+
+**One pass, one estimate.** For a read j of balise b in a chain (:mod:`fieldlogs.survey.trajectory`)
+the nearest reads outside b's cluster before (a) and after (c) it are its anchors, at
+their current positions c_a, c_c (the DB's, or the surveyed one of a balise found moved).
+Dead reckoning from each side gives
+
+    forward  ĉ_f = c_a + σ·λ·(d_j − d_a),        backward ĉ_b = c_c − σ·λ·(d_c − d_j),
+
+each with variance s₀² + (q·L)² (L the travel from its anchor, s₀ = ``interval_sigma_m``,
+q = ``interval_sigma_pct``); a side whose slip-correction budget grew by more than
+``max_slip_allowance_m`` is not used (a slip correction is good to a few per cent of
+itself, too coarse here). Their inverse-variance mean ĉ_j gives the pass's residual
+δ = (c_DB − ĉ_j)·dkm/dc, DB km minus where the runs put it. The pipeline's correction
+amount at a balise [S003 §4.5] is −δ from the forward side alone with λ = 1: the survey
+adds the other side and the wheel's scale, and leaves out the balise's own cluster (the
+I1 of a pair would otherwise vouch for its I2 five metres away).
+
+**Across passes.** The passes are independent (each run its own odometry): per balise the
+mean δ̄ of its n pass residuals, its spread s, and the standard error
+se = max(s, s_pool)/√n with s_pool² = v̂·mean(var) from the track's pooled variance factor
+v̂ = Σ(δ − δ̄)²/var ÷ Σ(n − 1) (with few passes s alone is often small by chance); the 95 %
+interval is δ̄ ± t₀.₉₇₅,ₙ₋₁·se.
+
+**Adjustment.** A balise off by e drags the residuals of its neighbours (whose anchor it
+is) by up to e/2. The survey therefore iterates: the balises that qualify as moved and
+whose culprit score (:func:`culprit_score`: both sides must see the balise off by the
+same amount; a neighbour of a displaced balise is off from one side only) is the largest
+among the qualifying balises of the neighbouring clusters are *flagged*, their anchor
+position is replaced by the surveyed one (c_DB − δ̄/(dkm/dc)), the wheel scales and every
+residual are estimated again; flags that no longer qualify are dropped; until the flags
+and anchors no longer change (``max_iterations``).
+
+**Wheel scale.** λ_r of a run is the weighted least-squares slope through the origin of
+σ·Δc on Δd over its clean intervals between reads of different clusters (weights
+1/(s₀² + (q·Δd)²)), with the anchors as above; with less than ``wheel_min_distance_m``
+of such travel it is unknown and the run's passes give no residual.
+
+Status: *missed* (never read on ≥ ``min_missed_passes`` passes), *moved* (|δ̄| ≥
+``moved_min_m`` and the interval excludes 0), *ok* (the interval within
+±``ok_tolerance_m``), otherwise *unverified* (not passed, too few passes, or inconclusive).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from fieldlogs.survey.config import CONFIDENCE, SurveyConfig
+from fieldlogs.survey.trajectory import BaliseTable, Reads
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
+OK, MOVED, MISSED, UNVERIFIED = "ok", "moved", "missed", "unverified"
+
+
+def t_quantile(df: FloatArray | float) -> FloatArray:
+    """Two-sided 95 % Student-t quantile (NaN for df < 1)."""
+    from scipy import stats
+
+    dfa = np.asarray(df, dtype=float)
+    with np.errstate(invalid="ignore"):
+        q = stats.t.ppf(0.5 + CONFIDENCE / 2.0, np.where(dfa >= 1, dfa, np.nan))
+    return np.asarray(q, dtype=float)
+
+
+@dataclass(frozen=True)
+class Neighbours:
+    """For every read: its anchor read on each side (−1: none) and the travel to it."""
+
+    prev: IntArray
+    next: IntArray
+
+    @classmethod
+    def of(cls, reads: Reads, cluster: IntArray) -> Neighbours:
+        n = reads.n
+        if n == 0:
+            z = np.zeros(0, dtype=np.int64)
+            return cls(z, z)
+        cl = cluster[reads.balise]
+        new = np.r_[True, (reads.chain[1:] != reads.chain[:-1]) | (cl[1:] != cl[:-1])]
+        grp = np.cumsum(new) - 1
+        first = np.flatnonzero(new)
+        last = np.r_[first[1:], n] - 1
+        prev = first[grp] - 1
+        nxt = last[grp] + 1
+        prev = np.where((prev >= 0) & (reads.chain[np.maximum(prev, 0)] == reads.chain), prev, -1)
+        nxt = np.where((nxt < n) & (reads.chain[np.minimum(nxt, n - 1)] == reads.chain), nxt, -1)
+        return cls(prev.astype(np.int64), nxt.astype(np.int64))
+
+
+def _variance(length: FloatArray, cfg: SurveyConfig) -> FloatArray:
+    return np.asarray(cfg.interval_sigma_m**2 + (cfg.interval_sigma_pct / 100.0 * length) ** 2, dtype=float)
+
+
+def wheel_scales(
+    reads: Reads, nb: Neighbours, c_anchor: FloatArray, n_runs: int, cfg: SurveyConfig
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per run: λ (NaN when unknown), its standard error and the clean travel used [m]."""
+    lam, se, used = np.full(n_runs, np.nan), np.full(n_runs, np.nan), np.zeros(n_runs)
+    # first read of each cluster group: the interval from the previous group's last read
+    j = np.flatnonzero((nb.prev >= 0) & (nb.prev == np.arange(reads.n) - 1))
+    if j.size == 0:
+        return lam, se, used
+    a = nb.prev[j]
+    dd = reads.d[j] - reads.d[a]
+    clean = (reads.allowance[j] - reads.allowance[a] <= cfg.max_slip_allowance_m) & (dd > 0)
+    j, a, dd = j[clean], a[clean], dd[clean]
+    dc = reads.motion[j] * (c_anchor[reads.balise[j]] - c_anchor[reads.balise[a]])
+    w = 1.0 / _variance(dd, cfg)
+    run = reads.run[j]
+    sxy = np.bincount(run, w * dc * dd, n_runs)
+    sxx = np.bincount(run, w * dd * dd, n_runs)
+    cnt = np.bincount(run, None, n_runs)
+    used = np.asarray(np.bincount(run, dd, n_runs), dtype=float)
+    ok = (used >= cfg.wheel_min_distance_m) & (sxx > 0)
+    lam[ok] = sxy[ok] / sxx[ok]
+    resid = dc - np.where(ok[run], lam[run], np.nan) * dd
+    ssr = np.bincount(run, np.nan_to_num(w * resid * resid), n_runs)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        emp = np.sqrt(ssr / np.maximum(cnt - 1, 1) / sxx)
+        model = np.sqrt(1.0 / sxx)
+    se[ok] = np.maximum(np.where(cnt > 1, emp, 0.0), model)[ok]
+    return lam, se, used
+
+
+@dataclass(frozen=True)
+class PassEstimates:
+    """One residual per read that has at least one usable side."""
+
+    read: IntArray
+    residual_m: FloatArray
+    """DB km − surveyed km [m]."""
+    var_m2: FloatArray
+    forward_m: FloatArray
+    """Residual from the forward side alone (NaN: side not used)."""
+    backward_m: FloatArray
+
+
+def _side(
+    reads: Reads, j: IntArray, anchor: IntArray, c_anchor: FloatArray, lam: FloatArray, cfg: SurveyConfig
+) -> tuple[FloatArray, FloatArray]:
+    """(ĉ, variance) from the anchors ``anchor`` of reads ``j`` (NaN where unusable)."""
+    ok = anchor >= 0
+    a = np.where(ok, anchor, 0)
+    length = np.abs(reads.d[j] - reads.d[a])
+    allow = np.abs(reads.allowance[j] - reads.allowance[a])
+    ok &= allow <= cfg.max_slip_allowance_m
+    est = c_anchor[reads.balise[a]] + reads.motion[j] * lam[reads.run[j]] * (reads.d[j] - reads.d[a])
+    ok &= np.isfinite(est)
+    return np.where(ok, est, np.nan), np.where(ok, _variance(length, cfg), np.nan)
+
+
+def pass_estimates(
+    reads: Reads, nb: Neighbours, table: BaliseTable, c_anchor: FloatArray, lam: FloatArray, cfg: SurveyConfig
+) -> PassEstimates:
+    """Each pass's residual (module docstring, "One pass, one estimate")."""
+    j = np.arange(reads.n)
+    cf, vf = _side(reads, j, nb.prev, c_anchor, lam, cfg)
+    cb, vb = _side(reads, j, nb.next, c_anchor, lam, cfg)
+    wf = np.where(np.isfinite(cf), 1.0 / vf, 0.0)
+    wb = np.where(np.isfinite(cb), 1.0 / vb, 0.0)
+    wsum = wf + wb
+    use = wsum > 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c_hat = (np.nan_to_num(cf) * wf + np.nan_to_num(cb) * wb) / wsum
+    b = reads.balise
+    c_db, slope = table.c[b], table.slope[b]
+    return PassEstimates(
+        j[use],
+        ((c_db - c_hat) * slope)[use],
+        (1.0 / wsum[use]) * slope[use] ** 2,
+        ((c_db - cf) * slope)[use],
+        ((c_db - cb) * slope)[use],
+    )
+
+
+def balise_statistics(est: PassEstimates, reads: Reads, table: BaliseTable) -> pd.DataFrame:
+    """Per balise (every row of ``table``): n, mean, spread, se, 95 % half-width, z."""
+    nb_rows = len(table.frame)
+    b = reads.balise[est.read]
+    n = np.bincount(b, None, nb_rows)
+    s1 = np.bincount(b, est.residual_m, nb_rows)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = s1 / n
+        dev = est.residual_m - mean[b]
+        ss = np.bincount(b, dev * dev, nb_rows)
+        sd = np.sqrt(ss / (n - 1))
+        std = np.bincount(b, dev * dev / est.var_m2, nb_rows)
+        mvar = np.bincount(b, est.var_m2, nb_rows) / n
+    track = table.frame["line_code"] + "/" + table.frame["track"]
+    dof = pd.Series(np.maximum(n - 1, 0)).groupby(track.to_numpy()).transform("sum").to_numpy(dtype=float)
+    vhat = pd.Series(std).groupby(track.to_numpy()).transform("sum").to_numpy(dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        vhat = np.where(dof > 0, vhat / dof, np.nan)
+        pooled = np.sqrt(vhat * mvar)
+        spread = np.fmax(np.where(n > 1, sd, np.nan), pooled)
+        se = spread / np.sqrt(n)
+        half = t_quantile((n - 1).astype(float)) * se
+        z = mean / se
+    forward = _side_mean(b, est.forward_m, nb_rows)
+    backward = _side_mean(b, est.backward_m, nb_rows)
+    return pd.DataFrame(
+        {
+            "n_estimates": n,
+            "residual_m": mean,
+            "spread_m": sd,
+            "se_m": se,
+            "ci95_m": half,
+            "z": z,
+            "forward_m": forward,
+            "backward_m": backward,
+        }
+    )
+
+
+def _side_mean(b: IntArray, side: FloatArray, n_rows: int) -> FloatArray:
+    ok = np.isfinite(side)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.asarray(np.bincount(b[ok], side[ok], n_rows) / np.bincount(b[ok], None, n_rows), dtype=float)
+
+
+def culprit_score(stats: pd.DataFrame) -> FloatArray:
+    """How surely a balise, rather than the anchor of one of its sides, is off: a displaced
+    balise is seen off by the same amount from both sides, the neighbour of one only from
+    the side that balise anchors. min(|f̄|, |b̄|) when the side means f̄, b̄ agree in sign,
+    0 when they disagree, half the one side's |mean| at the end of a chain (one side can
+    not tell the balise from its anchor)."""
+    f = stats["forward_m"].to_numpy(dtype=float)
+    b = stats["backward_m"].to_numpy(dtype=float)
+    both = np.isfinite(f) & np.isfinite(b)
+    two = np.where(np.sign(f) == np.sign(b), np.fmin(np.abs(f), np.abs(b)), 0.0)
+    one = 0.5 * np.abs(np.where(np.isfinite(f), f, b))
+    return np.asarray(np.nan_to_num(np.where(both, two, one)), dtype=float)
+
+
+def qualifies(stats: pd.DataFrame, cfg: SurveyConfig) -> BoolArray:
+    """Moved by the status rule of the module docstring."""
+    mean = stats["residual_m"].to_numpy(dtype=float)
+    half = stats["ci95_m"].to_numpy(dtype=float)
+    n = stats["n_estimates"].to_numpy(dtype=float)
+    with np.errstate(invalid="ignore"):
+        return np.asarray((n >= cfg.min_passes) & (np.abs(mean) >= cfg.moved_min_m) & (np.abs(mean) > half))
+
+
+def local_maxima(cand: BoolArray, score_in: FloatArray, table: BaliseTable) -> BoolArray:
+    """Candidates whose score (:func:`culprit_score`) is at least that of every candidate
+    in the neighbouring clusters of their track (km order)."""
+    f = table.frame
+    score = np.where(cand, score_in, -1.0)
+    best = pd.Series(score).groupby(f["cluster"].to_numpy()).max()
+    order = f[["line_code", "track", "cluster", "km_actual_m"]].assign(score=score)
+    cl = order.groupby("cluster").agg(line=("line_code", "first"), track=("track", "first"), km=("km_actual_m", "min"))
+    cl = cl.assign(best=best).sort_values(["line", "track", "km"])
+    same_prev = (cl["line"] == cl["line"].shift(1)) & (cl["track"] == cl["track"].shift(1))
+    same_next = (cl["line"] == cl["line"].shift(-1)) & (cl["track"] == cl["track"].shift(-1))
+    around = np.fmax(
+        np.where(same_prev, cl["best"].shift(1).to_numpy(dtype=float), -1.0),
+        np.where(same_next, cl["best"].shift(-1).to_numpy(dtype=float), -1.0),
+    )
+    rival = pd.Series(around, index=cl.index).reindex(f["cluster"].to_numpy()).to_numpy(dtype=float)
+    return np.asarray(cand & (score >= rival))
+
+
+@dataclass
+class Adjustment:
+    """Result of the iteration of the module docstring."""
+
+    stats: pd.DataFrame
+    flagged: BoolArray
+    c_anchor: FloatArray
+    scale: FloatArray
+    scale_se: FloatArray
+    scale_distance_m: FloatArray
+    estimates: PassEstimates
+    iterations: int
+
+
+def adjust(reads: Reads, table: BaliseTable, n_runs: int, cfg: SurveyConfig) -> Adjustment:
+    """Flag, correct and re-estimate until stable (module docstring, "Adjustment")."""
+    nb = Neighbours.of(reads, table.frame["cluster"].to_numpy(dtype=np.int64))
+    c_db = table.c
+    c_anchor = c_db.copy()
+    flagged = np.zeros(len(table.frame), dtype=bool)
+    it = 0
+    while True:
+        it += 1
+        lam, lam_se, used = wheel_scales(reads, nb, c_anchor, n_runs, cfg)
+        est = pass_estimates(reads, nb, table, c_anchor, lam, cfg)
+        stats = balise_statistics(est, reads, table)
+        cand = qualifies(stats, cfg)
+        new = (flagged & cand) | local_maxima(cand, culprit_score(stats), table)
+        shift = np.where(new, np.nan_to_num(stats["residual_m"].to_numpy(dtype=float)) / table.slope, 0.0)
+        c_new = c_db - shift
+        stable = bool((new == flagged).all() and np.allclose(c_new, c_anchor, rtol=0.0, atol=1e-4, equal_nan=True))
+        flagged, c_anchor = new, c_new
+        if stable or it >= cfg.max_iterations:
+            return Adjustment(stats, flagged, c_anchor, lam, lam_se, used, est, it)

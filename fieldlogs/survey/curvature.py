@@ -1,0 +1,145 @@
+"""Curvature traces on the km of the surveyed balises: samples, coverage, mean profiles.
+
+Each κ sample of a run (:mod:`fieldlogs.survey.extract`) is placed through its chain's
+trajectory (:mod:`fieldlogs.survey.trajectory`) at
+
+    km = km(c(x)) − σ·cab·x_r
+
+(the reader's km moved back to the vehicle's reference point, which the feature rows refer
+to: :mod:`fieldlogs.pipeline.geometry`) and turned into the curvature in the track's normal
+running direction, corrected for the wheel's scale:
+
+    κ_n = κ·σ·s_track / λ
+
+(κ = ωz/v is left-positive in the travel direction; s_track = +1 on D/S, −1 on U; v from
+the configured wheel is 1/λ times the true speed, so κ is λ times the true curvature).
+A *pass* is one run's chain over the track (one segment: a run that comes back over a
+track after a reversal passes it twice). Per track the samples are averaged per
+``profile_bin_m`` bin, first within a pass, then over passes: the mean profile κ̄(km) and
+the number of passes per bin.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from dbtools.network import Network
+from fieldlogs.pipeline.metric import track_metric
+from fieldlogs.survey.extract import RunSurvey
+from fieldlogs.survey.frames import rows as frame_rows
+from fieldlogs.survey.trajectory import Trajectory
+from schemas.enums import direction_sign
+
+FloatArray = npt.NDArray[np.float64]
+TrackKey = tuple[str, str]
+#: Pass id = run index × this + segment.
+PASS_BASE = 100_000
+
+
+@dataclass(frozen=True)
+class TrackSamples:
+    """κ samples of one line/track from every pass, sorted by km."""
+
+    pass_id: npt.NDArray[np.int64]
+    """run index × :data:`PASS_BASE` + segment."""
+    km: FloatArray
+    kappa: FloatArray
+    """κ_n [1/m] (module docstring)."""
+
+    def window(self, lo: float, hi: float) -> slice:
+        """Samples with lo ≤ km ≤ hi (``km`` is sorted)."""
+        return slice(int(np.searchsorted(self.km, lo, "left")), int(np.searchsorted(self.km, hi, "right")))
+
+
+@dataclass(frozen=True)
+class Coverage:
+    """km intervals with a usable κ, per pass (one line/track)."""
+
+    pass_id: npt.NDArray[np.int64]
+    lo: FloatArray
+    hi: FloatArray
+
+    def passes_covering(self, lo: float, hi: float) -> set[int]:
+        """Passes whose usable κ covers [lo, hi] entirely."""
+        ok = (self.lo <= lo) & (self.hi >= hi)
+        return {int(r) for r in self.pass_id[ok]}
+
+
+Parts = dict[TrackKey, list[tuple[int, FloatArray, FloatArray]]]
+
+
+def place_samples(
+    runs: Sequence[RunSurvey], traj: dict[tuple[int, int], Trajectory], scale: FloatArray, network: Network
+) -> tuple[dict[TrackKey, TrackSamples], dict[TrackKey, Coverage]]:
+    """Every run's κ samples and coverage on the km of its chains (module docstring)."""
+    parts: Parts = {}
+    cov: Parts = {}
+    for r, rs in enumerate(runs):
+        lam = float(scale[r]) if np.isfinite(scale[r]) else 1.0
+        info = {int(g.seg): g for g in frame_rows(rs.segments)}
+        k_seg = rs.kappa["seg"].to_numpy(dtype=np.int64)
+        c_seg = rs.coverage["seg"].to_numpy(dtype=np.int64)
+        for seg, g in info.items():
+            tj = traj.get((r, seg))
+            if tj is None:
+                continue
+            key = (str(g.line_code), str(g.track))
+            to_km = _to_km(network, key, tj, int(g.cab), rs.reader_x_m)
+            sel = k_seg == seg
+            km = to_km(rs.kappa["x_m"].to_numpy(dtype=float)[sel])
+            kn = rs.kappa["kappa"].to_numpy(dtype=float)[sel] * tj.motion * direction_sign(key[1]) / lam
+            ok = np.isfinite(km)
+            parts.setdefault(key, []).append((r * PASS_BASE + seg, km[ok], kn[ok]))
+            sel = c_seg == seg
+            reach_lo, reach_hi = tj.d[0] - tj.reach_m, tj.d[-1] + tj.reach_m
+            a = to_km(np.clip(rs.coverage["x0_m"].to_numpy(dtype=float)[sel], reach_lo, reach_hi))
+            b = to_km(np.clip(rs.coverage["x1_m"].to_numpy(dtype=float)[sel], reach_lo, reach_hi))
+            cov.setdefault(key, []).append((r * PASS_BASE + seg, np.fmin(a, b), np.fmax(a, b)))
+    return {k: _samples(v) for k, v in parts.items()}, {k: _coverage(v) for k, v in cov.items()}
+
+
+def _to_km(
+    network: Network, key: TrackKey, tj: Trajectory, cab: int, reader_x_m: float
+) -> Callable[[FloatArray], FloatArray]:
+    """Travel → the reference point's km on one chain (module docstring)."""
+    metric = track_metric(network, key[0], key[1])
+    shift = tj.motion * cab * reader_x_m
+
+    def to_km(x: FloatArray) -> FloatArray:
+        return np.asarray(metric.km_of_c(tj.c_at(x)) - shift, dtype=float)
+
+    return to_km
+
+
+def _samples(parts: list[tuple[int, FloatArray, FloatArray]]) -> TrackSamples:
+    """The parts as one :class:`TrackSamples`, sorted by km (then pass)."""
+    pid = np.concatenate([np.full(p[1].size, p[0], dtype=np.int64) for p in parts])
+    km = np.concatenate([p[1] for p in parts])
+    order = np.lexsort((pid, km))
+    return TrackSamples(pid[order], km[order], np.concatenate([p[2] for p in parts])[order])
+
+
+def _coverage(parts: list[tuple[int, FloatArray, FloatArray]]) -> Coverage:
+    pid = np.concatenate([np.full(p[1].size, p[0], dtype=np.int64) for p in parts])
+    return Coverage(pid, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]))
+
+
+def mean_profile(s: TrackSamples, bin_m: float) -> pd.DataFrame:
+    """km (bin centre), kappa (mean over passes of the passes' bin means), passes — sorted by km."""
+    b = np.floor(s.km / bin_m).astype(np.int64)
+    per_pass = (
+        pd.DataFrame({"bin": b, "pass": s.pass_id, "k": s.kappa}).groupby(["bin", "pass"], sort=False)["k"].mean()
+    )
+    prof = per_pass.groupby(level="bin").agg(["mean", "size"]).sort_index()
+    return pd.DataFrame(
+        {
+            "km_m": (prof.index.to_numpy(dtype=float) + 0.5) * bin_m,
+            "kappa": prof["mean"].to_numpy(dtype=float),
+            "passes": prof["size"].to_numpy(dtype=np.int64),
+        }
+    )

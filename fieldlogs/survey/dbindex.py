@@ -1,0 +1,127 @@
+"""The DB's balises arranged for identifying telegrams by content and place (built once per
+loaded network, :meth:`~dbtools.network.Network.cached`).
+
+A telegram carries [S003 §4]: I1 the line code, I2 the station code and the track, C the
+signal type. Candidates of a telegram are the DB balises of its kind with those codes (I1:
+on its line, any track; I2: on the segment's line with its station and track; C: on the
+segment's line/track) whose track's running direction (:func:`schemas.enums.direction_sign`)
+is the direction of motion; the nearest in km within the match window is the one read.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from dbtools.network import Network
+from schemas.enums import BaliseKind, direction_sign
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Group:
+    """Balises sharing a look-up key, as arrays."""
+
+    ids: npt.NDArray[np.object_]
+    km: FloatArray
+    line_code: npt.NDArray[np.object_]
+    track: npt.NDArray[np.object_]
+    direction: npt.NDArray[np.int64]
+
+    def nearest(self, km: float, motion: int, window: float) -> tuple[str, str, str, float] | None:
+        ok = self.direction == motion
+        if not ok.any():
+            return None
+        dist = np.where(ok, np.abs(self.km - km), np.inf)
+        j = int(np.argmin(dist))
+        if not dist[j] <= window:
+            return None
+        return str(self.ids[j]), str(self.line_code[j]), str(self.track[j]), float(dist[j])
+
+    def against(self, km: float, motion: int, window: float) -> bool:
+        return bool(((self.direction != motion) & (np.abs(self.km - km) <= window)).any())
+
+
+def _group(frame: pd.DataFrame) -> Group:
+    tracks = frame["track"].astype(str).to_numpy(dtype=object)
+    return Group(
+        frame["balise_id"].astype(str).to_numpy(dtype=object),
+        frame["km_actual_m"].to_numpy(dtype=float),
+        frame["line_code"].astype(str).to_numpy(dtype=object),
+        tracks,
+        np.array([direction_sign(t) for t in tracks], dtype=np.int64),
+    )
+
+
+@dataclass(frozen=True)
+class BaliseIndex:
+    """Look-ups of the module docstring."""
+
+    i1: dict[str, Group]
+    """line code → I1 balises."""
+    i2: dict[tuple[str, str, str], Group]
+    """(line, station, track) → the I2 of that pair."""
+    c: dict[tuple[str, str, str], Group]
+    """(line, track, signal type) → C balises."""
+    tracks: dict[tuple[str, str], Group]
+    """(line, track) → every balise on it."""
+    CODES = ("kind", "line_code", "station_code", "track", "signal_type")
+
+    def _group_for(self, tel: dict[str, Any], line: str, track: str) -> Group | None:
+        kind = tel["kind"]
+        if kind == BaliseKind.I1:
+            return self.i1.get(tel["tel_line_code"])
+        if kind == BaliseKind.I2:
+            return self.i2.get((line, tel["tel_station_code"], tel["tel_track"]))
+        if kind == BaliseKind.C:
+            return self.c.get((line, track, tel["tel_signal_type"]))
+        return None
+
+    def identify(
+        self, tel: dict[str, Any], line: str, track: str, motion: int, window: float
+    ) -> tuple[str, str, str, float] | None:
+        """(balise id, line, track, |Δkm|) of the balise read, or None."""
+        group = self._group_for(tel, line, track)
+        return None if group is None else group.nearest(float(tel["km_est_m"]), motion, window)
+
+    def against(self, tel: dict[str, Any], line: str, motion: int, window: float = 50.0) -> bool:
+        """A balise with this content lies here but on a track running the other way."""
+        group = self._group_for(tel, line, str(tel.get("track") or ""))
+        return group is not None and group.against(float(tel["km_est_m"]), motion, window)
+
+    def on_track(self, line: str, track: str, motion: int) -> Group | None:
+        """Balises of a line/track, when its running direction is ``motion``."""
+        group = self.tracks.get((line, track))
+        if group is None or direction_sign(track) != motion:
+            return None
+        return group
+
+
+def balise_index(network: Network) -> BaliseIndex:
+    """Build the look-ups from the DB's balise table."""
+    b = network.balises
+    if not len(b):
+        return BaliseIndex({}, {}, {}, {})
+    b = b.assign(
+        line_code=b["line_code"].astype(str),
+        track=b["track"].astype(str),
+        station_code=b["station_code"].astype(str),
+        signal_type=b["signal_type"].astype(object).where(b["signal_type"].notna(), "").astype(str),
+        kind=b["kind"].astype(str),
+    )
+    i1 = {str(k): _group(g) for k, g in b[b["kind"] == BaliseKind.I1].groupby("line_code")}
+    i2 = {
+        (str(k[0]), str(k[1]), str(k[2])): _group(g)
+        for k, g in b[b["kind"] == BaliseKind.I2].groupby(["line_code", "station_code", "track"])
+    }
+    c = {
+        (str(k[0]), str(k[1]), str(k[2])): _group(g)
+        for k, g in b[b["kind"] == BaliseKind.C].groupby(["line_code", "track", "signal_type"])
+    }
+    tracks = {(str(k[0]), str(k[1])): _group(g) for k, g in b.groupby(["line_code", "track"])}
+    return BaliseIndex(i1, i2, c, tracks)

@@ -1,0 +1,124 @@
+"""Surveyed curves against the DB's feature points: ok / moved / new / not seen / unverified
+(the rules are in :mod:`fieldlogs.survey.features`, "Comparison")."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import pandas as pd
+
+from fieldlogs.survey.config import SurveyConfig
+from fieldlogs.survey.curvature import Coverage, TrackKey
+from fieldlogs.survey.features import MOVED, NEW, NOT_SEEN, OK, UNVERIFIED, TrackCurves, db_features
+
+FEATURE_COLUMNS = (
+    "line_code",
+    "track",
+    "feature_id",
+    "curve_id",
+    "status",
+    "reason",
+    "passes",
+    "attribute_db",
+    "attribute",
+    "radius_db_m",
+    "radius_m",
+    "radius_diff_share",
+    "entry_km_db_m",
+    "entry_km_m",
+    "entry_diff_m",
+    "exit_km_db_m",
+    "exit_km_m",
+    "exit_diff_m",
+    "exit_ci95_m",
+)
+
+
+def _overlap(a0: float, a1: float, b0: float, b1: float) -> float:
+    return min(max(a0, a1), max(b0, b1)) - max(min(a0, a1), min(b0, b1))
+
+
+def _judge(db: pd.Series, c: pd.Series, cfg: SurveyConfig) -> tuple[str, str, dict[str, float]]:
+    d_entry = float(c["entry_km_m"] - db["entry_km_m"])
+    d_exit = float(c["exit_km_m"] - db["exit_km_m"])
+    r_db = float(db["radius_m"])
+    d_r = float(c["radius_m"] / r_db - 1.0) if r_db > 0 else float("nan")
+    reasons = []
+    if max(abs(d_entry), abs(d_exit)) > cfg.feature_km_tolerance_m:
+        reasons.append(f"km (entry {d_entry:+.1f} m, exit {d_exit:+.1f} m)")
+    if not abs(d_r) <= cfg.feature_radius_tolerance:
+        reasons.append(f"radius ({100 * d_r:+.0f} %)")
+    if str(c["attribute"]) != str(db["attribute"]):
+        reasons.append(f"direction ({c['attribute']} in the runs)")
+    nums = {"entry_diff_m": d_entry, "exit_diff_m": d_exit, "radius_diff_share": d_r}
+    return (MOVED if reasons else OK), "; ".join(reasons), nums
+
+
+def _row(db: pd.Series | None, c: pd.Series | None, status: str, reason: str, passes: int) -> dict[str, object]:
+    out: dict[str, object] = dict.fromkeys(FEATURE_COLUMNS, np.nan)
+    src = db if db is not None else c
+    assert src is not None
+    out.update(line_code=src["line_code"], track=src["track"], status=status, reason=reason, passes=passes)
+    if db is not None:
+        out.update(
+            feature_id=db["feature_id"],
+            attribute_db=db["attribute"],
+            radius_db_m=db["radius_m"],
+            entry_km_db_m=db["entry_km_m"],
+            exit_km_db_m=db["exit_km_m"],
+        )
+    if c is not None:
+        out.update(
+            curve_id=c["curve_id"],
+            attribute=c["attribute"],
+            radius_m=c["radius_m"],
+            entry_km_m=c["entry_km_m"],
+            exit_km_m=c["exit_km_m"],
+            exit_ci95_m=c["exit_ci95_m"],
+        )
+    return out
+
+
+def compare(
+    feature_points: pd.DataFrame,
+    surveyed: Mapping[TrackKey, TrackCurves],
+    coverage: Mapping[TrackKey, Coverage],
+    cfg: SurveyConfig,
+) -> pd.DataFrame:
+    """One row per DB feature and per new curve (:data:`FEATURE_COLUMNS`)."""
+    dbf = db_features(feature_points)
+    rows: list[dict[str, object]] = []
+    matched: set[str] = set()
+    for _, db in dbf.iterrows():
+        key = (str(db["line_code"]), str(db["track"]))
+        tc = surveyed.get(key)
+        best, best_ov = None, 0.0
+        if tc is not None:
+            for _, c in tc.curves.iterrows():
+                ov = _overlap(db["entry_km_m"], db["exit_km_m"], c["entry_km_m"], c["exit_km_m"])
+                if ov > best_ov and str(c["curve_id"]) not in matched:
+                    best, best_ov = c, ov
+        if best is not None:
+            matched.add(str(best["curve_id"]))
+            status, reason, nums = _judge(db, best, cfg)
+            row = _row(db, best, status, reason, int(best["passes"]))
+            row.update(nums)
+        else:
+            cov = coverage.get(key)
+            n = len(cov.passes_covering(float(db["lo"]), float(db["hi"]))) if cov is not None else 0
+            seen = n >= cfg.min_passes
+            why = (
+                f"no curve in the runs' curvature ({n} passes)"
+                if seen
+                else f"too few passes covering it ({n} of {cfg.min_passes})"
+            )
+            row = _row(db, None, NOT_SEEN if seen else UNVERIFIED, why, n)
+        rows.append(row)
+    for tc in surveyed.values():
+        for _, c in tc.curves.iterrows():
+            if str(c["curve_id"]) in matched:
+                continue
+            why = "" if c["straights_ok"] else "no 20 m straight on both sides: not a feature point"
+            rows.append(_row(None, c, NEW, why, int(c["passes"])))
+    return pd.DataFrame(rows, columns=list(FEATURE_COLUMNS))

@@ -1,0 +1,198 @@
+"""``trainpos survey``: discover the runs, replay them, aggregate the survey.
+
+Every run is replayed once (:func:`fieldlogs.survey.extract.survey_one`, through the one
+replayer of ``audit`` and ``gis verify``: this process, a local pool or a Dask cluster);
+its result feeds the balise, curve and wheel surveys and, unchanged, the GIS verification
+(:func:`fieldlogs.gisverify.evidence.fixes_from_result` → :func:`dbtools.gis.verify.verify_fixes`,
+whose statistics are reused as they are). A run that cannot be replayed is listed with its
+error and the others go on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from contextlib import closing
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dbtools.database import read_network
+from dbtools.gis.verify import VerifyConfig, verify_fixes
+from dbtools.network import Network
+from fieldlogs.pipeline import PipelineConfig
+from fieldlogs.replay.discovery import discover_runs
+from fieldlogs.replay.network import open_db
+from fieldlogs.replay.pool import replay
+from fieldlogs.survey.balises import adjust
+from fieldlogs.survey.config import SurveyConfig
+from fieldlogs.survey.curvature import place_samples
+from fieldlogs.survey.extract import IDENTIFIED, RunSurvey, survey_one
+from fieldlogs.survey.featurecompare import compare
+from fieldlogs.survey.features import Rule, survey_track
+from fieldlogs.survey.inspection import balise_status, candidates, missed_passes, pass_table
+from fieldlogs.survey.propose import build_proposal
+from fieldlogs.survey.result import SurveyReport
+from fieldlogs.survey.trajectory import balise_table, chained_reads, trajectories
+from fieldlogs.survey.wheels import run_wheels, vehicle_wheels
+from schemas.errors import InputError
+
+Progress = Callable[[int, int, str], None]
+#: Modules the replay's fork server imports once.
+PRELOAD = ("fieldlogs.pipeline", "fieldlogs.survey.extract")
+
+
+def _unique_ids(runs: list[RunSurvey]) -> None:
+    """Two folders with the same run_id are two runs: suffix the folder name."""
+    seen: dict[str, int] = {}
+    for r in runs:
+        seen[r.run_id] = seen.get(r.run_id, 0) + 1
+    for r in runs:
+        if seen[r.run_id] > 1:
+            r.run_id = f"{r.run_id}@{Path(r.folder).name}"
+            if r.gis is not None:
+                r.gis.run_id = r.run_id
+
+
+def replay_runs(
+    folders: Sequence[Path],
+    db: Path,
+    network: Network,
+    pipeline: PipelineConfig,
+    cfg: SurveyConfig,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: Progress | None = None,
+) -> tuple[list[RunSurvey], list[tuple[str, str]]]:
+    """Every run's :class:`RunSurvey` (task order) and the runs that failed (folder, error)."""
+    ref, _ = open_db(db, network)  # this process replays runs too: it keeps the network
+    tasks = [(str(p), (ref, pipeline, cfg)) for p in folders]
+    done: list[RunSurvey] = []
+    failed: list[tuple[str, str]] = []
+    outcomes = replay(survey_one, tasks, workers=workers, scheduler=scheduler, ordered=True, preload=PRELOAD)
+    with closing(outcomes):
+        for k, out in enumerate(outcomes, start=1):
+            if out.value is None:
+                failed.append((out.run, out.error or "run cannot be used"))
+            else:
+                done.append(out.value)
+            if progress:
+                progress(k, len(tasks), out.run)
+    _unique_ids(done)
+    return done, failed
+
+
+def _gis(network: Network, runs: Sequence[RunSurvey]) -> tuple[object | None, str]:
+    """The ``gis verify`` result on the runs' evidence (or why there is none)."""
+    frames = [r.gis.fixes.assign(run_id=r.run_id) for r in runs if r.gis is not None and len(r.gis.fixes)]
+    if not frames:
+        return None, "no trusted GPS fix on a known track"
+    if not len(network.gis):
+        return None, "the DB has no GIS grid"
+    try:
+        return verify_fixes(network, pd.concat(frames, ignore_index=True), VerifyConfig()), ""
+    except InputError as exc:
+        return None, exc.message
+
+
+def _run_frame(runs: Sequence[RunSurvey]) -> pd.DataFrame:
+    return pd.DataFrame(
+        [
+            {
+                "run_id": r.run_id,
+                "folder": r.folder,
+                "vehicle_id": r.vehicle_id,
+                "start_time": r.start_time,
+                "duration_s": r.duration_s,
+                "distance_m": r.distance_m,
+                **r.counts,
+            }
+            for r in runs
+        ],
+        columns=[
+            "run_id",
+            "folder",
+            "vehicle_id",
+            "start_time",
+            "duration_s",
+            "distance_m",
+            "telegrams",
+            "identified",
+            "unknown",
+            "unlocated",
+            "wrong_direction",
+        ],
+    )
+
+
+def aggregate(
+    network: Network,
+    runs: list[RunSurvey],
+    failed: list[tuple[str, str]],
+    pipeline: PipelineConfig,
+    cfg: SurveyConfig,
+    db: str = "",
+) -> SurveyReport:
+    """The survey of ``runs`` against ``network`` (every module of the package)."""
+    table = balise_table(network, cfg.cluster_m)
+    reads = chained_reads(runs, table)
+    adj = adjust(reads, table, len(runs), cfg)
+    traj = trajectories(reads, adj.c_anchor, adj.scale, cfg.extrapolate_m)
+    passes = pass_table(runs)
+    all_reads = [r.reads.loc[r.reads["status"] == IDENTIFIED, "balise_id"] for r in runs if len(r.reads)]
+    per_balise = pd.concat(all_reads).value_counts() if all_reads else pd.Series(dtype=np.int64)
+    balises = balise_status(table, adj, passes, per_balise, cfg)
+    samples, coverage = place_samples(runs, traj, adj.scale, network)
+    rule = Rule.of(pipeline.feature, cfg)
+    curves = {k: survey_track(k, s, rule) for k, s in sorted(samples.items())}
+    wheel_runs = run_wheels(runs, adj.scale, adj.scale_se, adj.scale_distance_m)
+    gis, note = _gis(network, runs)
+    report = SurveyReport(
+        db=db,
+        db_version=network.meta.get("db_version"),
+        network=network,
+        config=cfg,
+        runs=_run_frame(runs),
+        failed_runs=pd.DataFrame(failed, columns=["run", "error"]),
+        balises=balises,
+        missed=missed_passes(balises, passes),
+        candidates=candidates(runs, traj, network, table, cfg),
+        features=compare(network.feature_points, curves, coverage, cfg),
+        curves=curves,
+        wheel_runs=wheel_runs,
+        wheels=vehicle_wheels(wheel_runs, cfg),
+        gis=gis,  # type: ignore[arg-type]
+        gis_note=note,
+        iterations=adj.iterations,
+    )
+    proposal = build_proposal(report)
+    report.changes, report.proposed = proposal.changes, proposal.network
+    return report
+
+
+def survey(
+    roots: Sequence[Path],
+    db: Path,
+    *,
+    pipeline: PipelineConfig | None = None,
+    config: SurveyConfig | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    progress: Progress | None = None,
+) -> SurveyReport:
+    """``trainpos survey``: discover, replay, aggregate (module docstring)."""
+    pipeline = pipeline or PipelineConfig()
+    cfg = config or SurveyConfig()
+    network = read_network(Path(db))
+    folders = discover_runs(roots)
+    if not folders:
+        raise InputError("no run folders (run.json) found", path=", ".join(str(r) for r in roots))
+    runs, failed = replay_runs(
+        folders, Path(db), network, pipeline, cfg, workers=workers, scheduler=scheduler, progress=progress
+    )
+    if not runs:
+        raise InputError(
+            f"no run could be used ({failed[0][1] if failed else 'none'})", path=failed[0][0] if failed else None
+        )
+    return aggregate(network, runs, failed, pipeline, cfg, str(db))

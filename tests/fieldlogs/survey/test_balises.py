@@ -1,0 +1,162 @@
+"""The balise adjustment on hand-made chains: exact residuals, wheel scales, culprits."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fieldlogs.survey.balises import Neighbours, adjust, culprit_score, pass_estimates, wheel_scales
+from fieldlogs.survey.config import SurveyConfig
+from fieldlogs.survey.trajectory import BaliseTable, Reads
+
+CFG = SurveyConfig()
+
+
+def table(km: list[float], kinds: list[str] | None = None, track: str = "D", cluster_m: float = 30.0) -> BaliseTable:
+    """A straight track where km = track length (c = km, dkm/dc = 1)."""
+    kinds = kinds or ["C"] * len(km)
+    order = np.argsort(km)
+    cluster = np.zeros(len(km), dtype=np.int64)
+    cluster[order] = np.concatenate([[0], np.cumsum(np.diff(np.asarray(km)[order]) >= cluster_m)])
+    f = pd.DataFrame(
+        {
+            "balise_id": [f"B{i:02d}" for i in range(len(km))],
+            "kind": kinds,
+            "line_code": "0001",
+            "station_code": "01",
+            "track": track,
+            "signal_type": "home",
+            "km_actual_m": km,
+            "km_equipment_m": km,
+            "dist_from_initial_m": np.nan,
+            "c_m": km,
+            "slope": 1.0,
+            "direction": 1 if track != "U" else -1,
+            "cluster": cluster,
+        }
+    )
+    return BaliseTable(f, {b: i for i, b in enumerate(f["balise_id"])})
+
+
+def reads(true_km: list[float], scales: list[float], motion: int = 1, slip: dict[int, float] | None = None) -> Reads:
+    """One chain per run over every balise: travel d = |true km − first| / λ (a wheel of
+    scale λ reads λ times too little), optional slip allowance steps after read i."""
+    runs, chains, bal, d, allow, mot, t = [], [], [], [], [], [], []
+    order = np.argsort(true_km)[::motion]
+    x = np.asarray(true_km, dtype=float)[order]
+    for r, lam in enumerate(scales):
+        a = np.zeros(len(x))
+        for i, step in (slip or {}).items():
+            a[i:] += step
+        runs += [r] * len(x)
+        chains += [r] * len(x)
+        bal += order.tolist()
+        d += (np.abs(x - x[0]) / lam + 100.0).tolist()
+        allow += a.tolist()
+        mot += [motion] * len(x)
+        t += list(range(len(x)))
+    i64 = np.int64
+    return Reads(
+        np.array(runs, dtype=i64),
+        np.array(chains, dtype=i64),
+        np.zeros(len(runs), dtype=i64),
+        np.array(bal, dtype=i64),
+        np.array(d, dtype=float),
+        np.array(allow, dtype=float),
+        np.array(mot, dtype=i64),
+        np.array(t, dtype=float),
+    )
+
+
+TRUE = [0.0, 1000.0, 2200.0, 3100.0, 4500.0, 5600.0, 7000.0]
+
+
+def test_a_displaced_balise_is_flagged_with_its_exact_residual_and_its_neighbours_stay_clean() -> None:
+    db = list(TRUE)
+    db[3] += 2.5  # DB km 2.5 m beyond where the balise is
+    tab, rd = table(db), reads(TRUE, [0.998, 1.0, 1.003, 0.9995])
+    adj = adjust(rd, tab, 4, CFG)
+    assert adj.flagged.tolist() == [False, False, False, True, False, False, False]
+    res = adj.stats["residual_m"].to_numpy()
+    # exact up to the adjustment's convergence tolerance (anchors stable to 0.1 mm)
+    assert res[3] == pytest.approx(2.5, abs=1e-3)
+    assert np.abs(np.delete(res, 3)).max() < 1e-3
+    assert adj.scale == pytest.approx([0.998, 1.0, 1.003, 0.9995], abs=1e-7)
+
+
+def test_the_wheel_scale_is_the_ratio_of_track_length_to_travel() -> None:
+    tab, rd = table(TRUE), reads(TRUE, [0.996])
+    nb = Neighbours.of(rd, tab.frame["cluster"].to_numpy())
+    lam, se, used = wheel_scales(rd, nb, tab.c, 1, CFG)
+    assert lam[0] == pytest.approx(0.996, abs=1e-12)
+    assert used[0] == pytest.approx(7000.0 / 0.996)
+    assert se[0] > 0
+
+
+def test_a_short_run_has_no_wheel_scale_and_gives_no_residual() -> None:
+    cfg = SurveyConfig(wheel_min_distance_m=10_000.0)
+    tab, rd = table(TRUE), reads(TRUE, [1.0])
+    adj = adjust(rd, tab, 1, cfg)
+    assert np.isnan(adj.scale[0])
+    assert (adj.stats["n_estimates"] == 0).all()
+
+
+def test_the_two_balises_of_a_pair_are_not_each_others_anchor() -> None:
+    true = [0.0, 2000.0, 2005.0, 4000.0]
+    db = list(true)
+    db[2] += 3.0  # the I2 is off, its I1 five metres before it is right
+    tab = table(db, ["C", "I1", "I2", "C"])
+    rd = reads(true, [1.0, 1.0, 1.0])
+    nb = Neighbours.of(rd, tab.frame["cluster"].to_numpy())
+    assert nb.prev[:4].tolist() == [-1, 0, 0, 2]  # the I2 looks back past its I1
+    assert nb.next[:4].tolist() == [1, 3, 3, -1]
+    adj = adjust(rd, tab, 3, CFG)
+    assert adj.flagged.tolist() == [False, False, True, False]
+    assert adj.stats["residual_m"].to_numpy()[1] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_side_with_a_slip_correction_is_not_used() -> None:
+    tab = table(TRUE)
+    rd = reads(TRUE, [1.0], slip={3: 5.0})  # the budget grows by 5 m between reads 2 and 3
+    nb = Neighbours.of(rd, tab.frame["cluster"].to_numpy())
+    est = pass_estimates(rd, nb, tab, tab.c, np.array([1.0]), CFG)
+    by_read = dict(zip(est.read.tolist(), est.forward_m.tolist(), strict=True))
+    assert np.isnan(by_read[3])  # its forward side crosses the slip
+    assert np.isfinite(est.backward_m[est.read == 3][0])
+
+
+def test_the_culprit_is_the_balise_both_sides_see_off() -> None:
+    stats = pd.DataFrame({"forward_m": [0.0, 2.0, -2.0, 1.9, np.nan], "backward_m": [-2.0, 2.1, 2.0, np.nan, 1.0]})
+    assert culprit_score(stats).tolist() == pytest.approx([0.0, 2.0, 0.0, 0.95, 0.5])
+
+
+def test_on_an_up_track_the_same_holds() -> None:
+    db = list(TRUE)
+    db[5] -= 3.0
+    tab, rd = table(db, track="U"), reads(TRUE, [1.002, 0.999, 1.0], motion=-1)
+    adj = adjust(rd, tab, 3, CFG)
+    assert np.flatnonzero(adj.flagged).tolist() == [5]
+    assert adj.stats["residual_m"].to_numpy()[5] == pytest.approx(-3.0, abs=1e-3)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    which=st.integers(1, len(TRUE) - 2),
+    shift=st.floats(2.0, 8.0).map(lambda x: x * (1 if x > 5 else -1)),
+    scales=st.lists(st.floats(0.99, 1.01), min_size=3, max_size=6),
+    seed=st.integers(0, 10_000),
+)
+def test_one_displaced_interior_balise_is_found_among_noisy_runs(
+    which: int, shift: float, scales: list[float], seed: int
+) -> None:
+    db = list(TRUE)
+    db[which] += shift
+    rd = reads(TRUE, scales)
+    noise = np.random.default_rng(seed).normal(0.0, 0.05, rd.n)  # 5 cm read-position noise
+    rd = Reads(rd.run, rd.chain, rd.seg, rd.balise, rd.d + noise, rd.allowance, rd.motion, rd.t)
+    adj = adjust(rd, table(db), len(scales), CFG)
+    assert np.flatnonzero(adj.flagged).tolist() == [which]
+    assert adj.stats["residual_m"].to_numpy()[which] == pytest.approx(shift, abs=0.2)
