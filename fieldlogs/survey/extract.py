@@ -436,7 +436,7 @@ def extract(
         folder=folder,
         vehicle_id=str(meta.vehicle_id),
         start_time=str(meta.start_time),
-        wheel_diameter_m=float(meta.wheel_diameter_m),
+        wheel_diameter_m=float(meta.wheel_diameter_m) if meta.wheel_diameter_m is not None else float("nan"),
         reader_x_m=VehicleGeometry.of(meta.vehicle).reader_x_m,
         duration_s=float(tr.t[-1] - tr.t[0]) if tr.t.size else 0.0,
         distance_m=float(tr.d[-1]) if tr.d.size else 0.0,
