@@ -35,7 +35,7 @@ from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding
 from schemas.frames import PANDAS_DTYPE, coerce_frame, suggest
-from schemas.logs import LOG_STREAMS, RUN_JSON
+from schemas.logs import LOG_STREAMS, RUN_JSON, RunField
 from schemas.model import Column, Table
 from schemas.radar import parse_radar_block
 
@@ -106,6 +106,30 @@ def _load_run_json(path: Path) -> tuple[Any, list[Finding]]:
         ]
 
 
+def _field_finding(path: Path, name: str, message: str, value: object = None, limit: object = None) -> Finding:
+    return Finding(
+        "log.run_json_field", Severity.ERROR, "run.json", message, file=str(path), column=name, value=value, limit=limit
+    )
+
+
+def _typed_value(f: RunField, raw: Any, path: Path) -> tuple[Any, Finding | None]:
+    """One present field of ``run.json`` as its declared type, or the finding why not."""
+    if f.type in (dict, list):
+        if isinstance(raw, f.type):
+            return raw, None
+        kind = "object" if f.type is dict else "list"
+        return None, _field_finding(path, f.name, f"field '{f.name}' must be a JSON {kind}", type(raw).__name__)
+    try:
+        if f.type is int and (isinstance(raw, bool) or (isinstance(raw, float) and not raw.is_integer())):
+            raise ValueError(raw)
+        v = f.type(raw)
+        if f.type is float and not np.isfinite(v):
+            raise ValueError(raw)
+    except (TypeError, ValueError, OverflowError):
+        return None, _field_finding(path, f.name, f"field '{f.name}' = {raw!r} is not a {f.type.__name__}", str(raw))
+    return v, None
+
+
 def _typed_fields(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], list[Finding]]:
     """Every field of ``run.json`` that parses, plus findings for the others."""
     findings: list[Finding] = []
@@ -113,67 +137,18 @@ def _typed_fields(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], lis
     for f in RUN_JSON:
         if f.name not in data or data[f.name] in (None, ""):
             if f.required:
-                findings.append(
-                    Finding(
-                        "log.run_json_field",
-                        Severity.ERROR,
-                        "run.json",
-                        f"field '{f.name}' is missing",
-                        file=str(path),
-                        column=f.name,
-                    )
-                )
+                findings.append(_field_finding(path, f.name, f"field '{f.name}' is missing"))
             continue
-        raw = data[f.name]
-        if f.type in (dict, list):
-            if not isinstance(raw, f.type):
-                findings.append(
-                    Finding(
-                        "log.run_json_field",
-                        Severity.ERROR,
-                        "run.json",
-                        f"field '{f.name}' must be a JSON {'object' if f.type is dict else 'list'}",
-                        file=str(path),
-                        column=f.name,
-                        value=type(raw).__name__,
-                    )
-                )
-            else:
-                values[f.name] = raw
-            continue
-        try:
-            if f.type is int and (isinstance(raw, bool) or (isinstance(raw, float) and not raw.is_integer())):
-                raise ValueError(raw)
-            v = f.type(raw)
-            if f.type is float and not np.isfinite(v):
-                raise ValueError(raw)
-        except (TypeError, ValueError, OverflowError):
-            findings.append(
-                Finding(
-                    "log.run_json_field",
-                    Severity.ERROR,
-                    "run.json",
-                    f"field '{f.name}' = {raw!r} is not a {f.type.__name__}",
-                    file=str(path),
-                    column=f.name,
-                    value=str(raw),
-                )
-            )
-            continue
-        values[f.name] = v
+        v, problem = _typed_value(f, data[f.name], path)
+        if problem is not None:
+            findings.append(problem)
+        else:
+            values[f.name] = v
+    kinds = [k.value for k in VehicleKind]
     kind = values.get("vehicle_kind")
-    if kind is not None and kind not in {k.value for k in VehicleKind}:
+    if kind is not None and kind not in kinds:
         findings.append(
-            Finding(
-                "log.run_json_field",
-                Severity.ERROR,
-                "run.json",
-                f"vehicle_kind '{kind}' is not train or road_rail",
-                file=str(path),
-                column="vehicle_kind",
-                value=kind,
-                limit=[k.value for k in VehicleKind],
-            )
+            _field_finding(path, "vehicle_kind", f"vehicle_kind '{kind}' is not train or road_rail", kind, kinds)
         )
         del values["vehicle_kind"]
     if values.get("vehicle_kind") == VehicleKind.TRAIN.value:
@@ -181,18 +156,7 @@ def _typed_fields(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], lis
     for name in ("wheel_diameter_m", "teeth"):
         v = values.get(name)
         if v is not None and not v > 0:
-            findings.append(
-                Finding(
-                    "log.run_json_field",
-                    Severity.ERROR,
-                    "run.json",
-                    f"{name} must be > 0",
-                    file=str(path),
-                    column=name,
-                    value=v,
-                    limit=0,
-                )
-            )
+            findings.append(_field_finding(path, name, f"{name} must be > 0", v, 0))
             del values[name]
     return values, findings
 
@@ -200,16 +164,9 @@ def _typed_fields(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], lis
 def _wheel_needed(values: dict[str, Any], path: Path, why: str) -> list[Finding]:
     """A finding for each wheel field (wheel_diameter_m, teeth) that ``values`` lacks."""
     return [
-        Finding(
-            "log.run_json_field",
-            Severity.ERROR,
-            "run.json",
-            f"field '{name}' is missing ({why})",
-            file=str(path),
-            column=name,
-        )
+        _field_finding(path, name, f"field '{name}' is missing ({why})")
         for name in ("wheel_diameter_m", "teeth")
-        if values.get(name) is None and name in {f.name for f in RUN_JSON}
+        if values.get(name) is None
     ]
 
 
