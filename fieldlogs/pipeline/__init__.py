@@ -7,9 +7,10 @@ loop over the few moments an aid speaks):
    each repair an ``input_repaired`` event);
 2. :func:`~fieldlogs.pipeline.cycles.build_cycles`: tacho, IMU (cycle means), cab and PTO on
    the 100 ms cycle grid;
-3. speed aids (:data:`~fieldlogs.pipeline.aids.SPEED_AIDS`, e.g. the radar [S004]) on the
-   cycle grid, then :func:`~fieldlogs.pipeline.odometry.correct_odometry`: pulse odometry
-   with slip/slide episodes corrected inertially [S000 §3.1];
+3. speed aids (:data:`~fieldlogs.pipeline.aids.SPEED_AIDS`, e.g. the radar [S004] from its
+   IF samples) on the cycle grid, then :func:`~fieldlogs.pipeline.odometry.correct_odometry`:
+   pulse odometry with slip/slide episodes detected and corrected inertially [S000 §3.1]
+   and, with a ground speed, by it;
 4. products the aids share: the GPS analysis (trust, map-matching, up/down decisions,
    crossovers [S001 §4.2]) and the curvature trace with the feature tables [S000 §3.2];
 5. position aids built by the registry (:mod:`fieldlogs.pipeline.aids`) and applied in time
@@ -47,7 +48,7 @@ from schemas.errors import FindingsError
 __all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
 
 #: Streams the pipeline reads.
-STREAMS = ("tacho", "imu", "balise", "gps", "cab", "truth", "radar")
+STREAMS = ("tacho", "imu", "balise", "gps", "cab", "truth", "radar", "radar_if")
 
 
 @dataclass
@@ -101,9 +102,9 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
         cycle_s=cfg.cycle_s,
         uses_pto=run.meta.vehicle_kind == VehicleKind.ROAD_RAIL,
     )
-    ground = next((g for a in speed_aids(streams) if (g := a.on_cycles(cycles)) is not None), None)
+    ground = next((g for a in speed_aids(streams, run.radar) if (g := a.on_cycles(cycles)) is not None), None)
     # pulses only when the run has no IMU (correct_odometry falls back by itself)
-    odo = correct_odometry(cycles, cfg.odometry, ground.v_mps if ground is not None else None)
+    odo = correct_odometry(cycles, cfg.odometry, ground)
     gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
     geometry = VehicleGeometry.of(run.meta.vehicle)

@@ -66,34 +66,41 @@ from __future__ import annotations
 
 import numpy as np
 
+from fieldlogs.pipeline.aid import SpeedOnCycles
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.odometry.assembly import assemble
 from fieldlogs.pipeline.odometry.detection import BIAS_MIN_S, Detections, detect
 from fieldlogs.pipeline.odometry.diagnostics import EpisodeDiagnostics, OdometryDiagnostics
 from fieldlogs.pipeline.odometry.episodes import Episode, find_episodes
+from fieldlogs.pipeline.odometry.fusion import Fusion
+from fieldlogs.pipeline.odometry.ground import GroundSpeed, align_ground, metres_per_pulse
+from fieldlogs.pipeline.odometry.ground_products import GroundReport, WheelCalibration, ground_products
 from fieldlogs.pipeline.odometry.start_point import LOBE_RATIO, QUIET_MARGIN_S, QUIET_SHARE, SEARCH_SPAN_S
 from fieldlogs.pipeline.odometry.streams import SPEED_AVG_S, AlignedStreams, align_streams
-from fieldlogs.pipeline.odometry.watch import RADAR_ERROR_M, RADAR_ERROR_PCT, Watch, watch_failsafes
-from fieldlogs.pipeline.types import FloatArray, Odometry, SlipEpisode, pulse_only_odometry
+from fieldlogs.pipeline.odometry.watch import Watch, watch_failsafes
+from fieldlogs.pipeline.types import Odometry, SlipEpisode, pulse_only_odometry
 
 __all__ = [
     "BIAS_MIN_S",
     "LOBE_RATIO",
     "QUIET_MARGIN_S",
     "QUIET_SHARE",
-    "RADAR_ERROR_M",
-    "RADAR_ERROR_PCT",
     "SEARCH_SPAN_S",
     "SPEED_AVG_S",
     "AlignedStreams",
     "Detections",
     "Episode",
     "EpisodeDiagnostics",
+    "Fusion",
+    "GroundReport",
+    "GroundSpeed",
     "Odometry",
     "OdometryDiagnostics",
     "SlipEpisode",
     "Watch",
+    "WheelCalibration",
+    "align_ground",
     "align_streams",
     "assemble",
     "correct_odometry",
@@ -103,21 +110,28 @@ __all__ = [
 ]
 
 
-def correct_odometry(cycles: Cycles, cfg: OdometryConfig, radar_mps: FloatArray | None = None) -> Odometry:
+def correct_odometry(cycles: Cycles, cfg: OdometryConfig, ground: SpeedOnCycles | None = None) -> Odometry:
     """Pulse odometry with slip/slide episodes replaced by the inertial solution (SPEC §5.1).
 
-    ``radar_mps``: an independent ground speed on the cycle grid (2-frequency CW radar
-    [S004]; NaN where there is none). Detection is unchanged, but over an episode the
-    radar covers completely its speed replaces the inertial one: it does not drift, so the
-    episode's error budget is the radar's (1 % of the distance + 0.5 m) when smaller than
-    eq. 13's. Without IMU or tacho (or with fewer than 3 cycles): the pulse odometry.
+    ``ground``: an independent ground speed on the cycle grid (the 2-frequency CW radar
+    [S004]; NaN where there is none): stage 1b aligns it, stage 2 detects with it, stage 3
+    fuses it with the inertial solution and tests re-adhesion on it, stage 4 watches on it
+    and stage 6 adds the low-speed speed and the wheel calibration. Without IMU or tacho
+    (or with fewer than 3 cycles): the pulse odometry.
     """
     if not cycles.has_imu or not cycles.has_tacho or cycles.n < 3:
         d_pulse = np.nan_to_num(np.asarray(cycles.d_pulse, dtype=float), nan=0.0)
         v_pulse = np.nan_to_num(np.asarray(cycles.v_pulse, dtype=float), nan=0.0)
         return pulse_only_odometry(d_pulse, v_pulse)
     streams = align_streams(cycles, cfg)
-    detections = detect(streams, cfg)
-    episodes = find_episodes(streams, detections, cfg)
-    watches = watch_failsafes(streams, cfg, episodes, radar_mps)
-    return assemble(streams, detections, cfg, episodes, watches, radar_mps)
+    g = None
+    if ground is not None:
+        pulses = np.asarray(cycles.pulses, dtype=float)
+        g = align_ground(streams, ground, metres_per_pulse(pulses, np.asarray(cycles.d_pulse, dtype=float)))
+    detections = detect(streams, cfg, g)
+    episodes = find_episodes(streams, detections, cfg, g)
+    watches = watch_failsafes(streams, cfg, episodes)
+    odo = assemble(streams, detections, cfg, episodes, watches)
+    if g is None:
+        return odo
+    return ground_products(streams, g, cfg, odo, [ep.i_settled - streams.delay for ep in episodes])
