@@ -48,9 +48,11 @@ either end. A correction fails safe when B reaches
 eq. 13's budget at ``max_correction_s`` (22.8 m; without a ground speed that is the SPEC's
 time limit) or at ``ground_max_correction_s``.
 
-Re-adhesion and the fail-safe watch compare the 1 s means of the filtered speed (forward:
-what is known at the cycle) and of the pulses within ``ground.tolerance`` with z = AGREE_Z
-and sd the filtered speed's 1σ.
+Re-adhesion and the fail-safe watch compare the 1 s mean pulse speed with the radar's own
+1 s mean where its window is whole (the ground-speed criterion's quantity, stage 2), else
+with that of the filtered speed (forward: what is known at the cycle), within
+``ground.tolerance`` with z = AGREE_Z (< the criterion's ``ground_detect_z``: a hysteresis)
+and sd the 1σ of that mean.
 """
 
 from __future__ import annotations
@@ -94,6 +96,9 @@ class Fusion:
     reseated: int
     inertial_dev: FloatArray
     """1 s mean of (inertial − ground speed) where both exist (NaN elsewhere) [m/s]."""
+    ground_v1: FloatArray
+    """The ground speed's own 1 s mean over the span (``GroundSpeed.v1``) [m/s]."""
+    ground_sigma1: FloatArray
 
     @property
     def size(self) -> int:
@@ -191,6 +196,8 @@ def fuse(s: AlignedStreams, g: GroundSpeed, cfg: OdometryConfig, ig: Integration
         refused=k.refused,
         reseated=k.reseated,
         inertial_dev=readonly(ma(ig.v_in - z, s.filters.P)),
+        ground_v1=g.v1[span],
+        ground_sigma1=g.sigma1[span],
     )
 
 
@@ -221,12 +228,16 @@ def budget_path(s: AlignedStreams, g: GroundSpeed, cfg: OdometryConfig, f: Fusio
 def agreement(
     s: AlignedStreams, cfg: OdometryConfig, f: Fusion, lead: FloatArray
 ) -> tuple[FloatArray, FloatArray, BoolArray]:
-    """1 s mean filtered speed on i0 … (``lead``: the adhering pulse speeds before i0), its
-    1σ, and where it agrees with the 1 s mean pulse speed (the re-adhesion test on the
-    radar)."""
+    """The 1 s mean speed the pulses are compared with on i0 … — the radar's own where its
+    whole window has values, else the filtered one (``lead``: the adhering pulse speeds
+    before i0) —, its 1σ, and where the 1 s mean pulse speed agrees with it (the
+    re-adhesion test on the radar)."""
     p = s.filters.P
     v1 = ma(np.concatenate([lead, f.v]), p)[lead.size :]
     sd1 = ma(np.concatenate([np.zeros(lead.size), np.sqrt(f.p)]), p)[lead.size :]
+    own = np.isfinite(f.ground_v1)
+    v1 = np.where(own, f.ground_v1, v1)
+    sd1 = np.where(own, f.ground_sigma1, sd1)
     vp1 = s.vp1[f.i0 : f.i0 + f.size]
     with np.errstate(invalid="ignore"):
         agree = np.abs(v1 - vp1) <= tolerance(cfg, vp1, sd1, AGREE_Z)
