@@ -110,12 +110,13 @@ def _true_cycle_speed(truth: pd.DataFrame, t_cyc: np.ndarray) -> np.ndarray:
     tt = truth["t"].to_numpy(dtype=float)
     v = np.abs(truth["speed_mps"].to_numpy(dtype=float))
     s = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(tt))])
-    return np.diff(np.interp(t_cyc, tt, s), prepend=np.nan) / np.diff(t_cyc, prepend=np.nan)
+    out: np.ndarray = np.diff(np.interp(t_cyc, tt, s), prepend=np.nan) / np.diff(t_cyc, prepend=np.nan)
+    return out
 
 
 def evaluate(folder: Path, db: str, cfg: Any) -> dict[str, Any]:
     """One replay of a run folder: the figures of the table."""
-    from accuracy import metrics  # type: ignore[import-not-found]
+    from accuracy import metrics
 
     from fieldlogs.pipeline import run_pipeline
 
