@@ -307,9 +307,9 @@ def _correct_ground(
     i0 = ig.i0
     f = fuse(s, g, cfg, ig)
     lead = s.vp[max(i0 - s.filters.P + 1, 0) : i0]
-    v1, _sd1, agree = agreement(s, cfg, f, lead)
+    a = agreement(s, cfg, f, lead)
     budget = budget_path(s, g, cfg, f, g.pulse_m)
-    ie, readhered, failsafe = _end_ground(s, cfg, f, agree, budget, after)
+    ie, readhered, failsafe = _end_ground(s, cfg, f, a.agree, budget, after)
     m_end = ie - i0 + 1
     settled = ie
     if failsafe and cfg.failsafe_watch_s > 0:
@@ -327,10 +327,10 @@ def _correct_ground(
         failsafe=failsafe,
         truncated=not readhered and not failsafe,
         integration=ig,
-        agree=readonly(agree),
+        agree=a.agree,
         v_in=readonly(smooth(f, m_end)),
         theta_end=float(ig.theta[m_end - 1]),
-        end_speed_error=float(v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan"),
+        end_speed_error=float(a.v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan"),
         speed_update_m=0.0,
         fusion=f,
         budget=readonly(budget[:m_end]),

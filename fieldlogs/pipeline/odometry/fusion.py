@@ -48,11 +48,13 @@ either end. A correction fails safe when B reaches
 eq. 13's budget at ``max_correction_s`` (22.8 m; without a ground speed that is the SPEC's
 time limit) or at ``ground_max_correction_s``.
 
-Re-adhesion and the fail-safe watch compare the 1 s mean pulse speed with the radar's own
-1 s mean where its window is whole (the ground-speed criterion's quantity, stage 2), else
-with that of the filtered speed (forward: what is known at the cycle), within
-``ground.tolerance`` with z = AGREE_Z (< the criterion's ``ground_detect_z``: a hysteresis)
-and sd the 1σ of that mean.
+Re-adhesion and the fail-safe watch (:func:`agreement`) compare the 1 s mean pulse speed
+with the radar's own 1 s mean where its window is whole (the ground-speed criterion's
+quantity, stage 2) within ``ground.tolerance`` with z = AGREE_Z (< the criterion's
+``ground_detect_z``: a hysteresis) and its σ; in the radar's gaps with the filtered speed's
+1 s mean (forward: what is known at the cycle), which coasts on the inertial increments
+from the last radar mean, so the tolerance grows from there by β·t and the error bound by
+Δa·t as in the S000 path — a correction without any radar value is tested as there.
 """
 
 from __future__ import annotations
@@ -212,36 +214,64 @@ def budget_path(s: AlignedStreams, g: GroundSpeed, cfg: OdometryConfig, f: Fusio
     h = s.dt[span].copy()
     h[0] = 0.0
     t = s.t[span] - s.t[f.i0]
-    var = np.where(f.used, g.n_corr * np.nan_to_num(g.sigma[span]) ** 2 * h * h, 0.0)
-    t_cov = np.cumsum(np.where(f.used, h, 0.0))
-    idx = np.arange(f.size)
-    last = np.maximum.accumulate(np.where(f.used, idx, -1))
-    sd_last = np.where(last >= 0, np.sqrt(f.p[np.maximum(last, 0)]), 0.0)
-    gap = t - np.where(last >= 0, t[np.maximum(last, 0)], 0.0)
-    gap_inc = np.where(f.used, 0.0, (cfg.delta_a_mps2 * gap + BUDGET_Z * sd_last) * h)
-    scale = RADAR_SCALE_SHARE * np.cumsum(f.v * h)
+    used = f.used
+    var = np.where(used, g.n_corr * np.nan_to_num(g.sigma[span]) ** 2 * h * h, 0.0)
+    t_cov = np.cumsum(np.where(used, h, 0.0))
+    sd_last, gap = _since_last(t, used, np.sqrt(f.p))
+    mid_gap = np.maximum(gap - 0.5 * h, 0.0)  # mid-cycle: a gap of g adds exactly ½·Δa·g²
+    gap_inc = np.where(used, 0.0, (cfg.delta_a_mps2 * mid_gap + BUDGET_Z * sd_last) * h)
+    scale = RADAR_SCALE_SHARE * np.cumsum(np.where(used, f.v * h, 0.0))
     own = BUDGET_Z * (np.sqrt(np.cumsum(var)) + GROUND_BIAS_MPS * t_cov)
-    out: FloatArray = own + np.cumsum(gap_inc) + scale + 2.0 * pulse_m
+    anchors = np.where(t_cov > 0, 2.0 * pulse_m, 0.0)
+    out: FloatArray = own + np.cumsum(gap_inc) + scale + anchors
     return out
 
 
-def agreement(
-    s: AlignedStreams, cfg: OdometryConfig, f: Fusion, lead: FloatArray
-) -> tuple[FloatArray, FloatArray, BoolArray]:
-    """The 1 s mean speed the pulses are compared with on i0 … — the radar's own where its
-    whole window has values, else the filtered one (``lead``: the adhering pulse speeds
-    before i0) —, its 1σ, and where the 1 s mean pulse speed agrees with it (the
-    re-adhesion test on the radar)."""
+def _since_last(t: FloatArray, has: BoolArray, sd: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Per cycle: ``sd`` at the last cycle ≤ it where ``has`` (0 before any) and the time
+    since that cycle (since the first cycle before any)."""
+    idx = np.arange(t.size)
+    last = np.maximum.accumulate(np.where(has, idx, -1))
+    j = np.maximum(last, 0)
+    sd_last = np.where(last >= 0, sd[j], 0.0)
+    gap = t - np.where(last >= 0, t[j], t[0] if t.size else 0.0)
+    return sd_last, gap
+
+
+@dataclass(frozen=True, eq=False)
+class Agreement:
+    """What the pulses are compared with over a correction's cycles (re-adhesion, watch)."""
+
+    v1: FloatArray
+    """The radar's own 1 s mean where its window is whole, else the filtered speed's [m/s]."""
+    tol: FloatArray
+    """Allowed |v̄_p − v1| [m/s]."""
+    own: FloatArray
+    """The error bound of v1 [m/s]."""
+    agree: BoolArray
+    """|v̄_p − v1| ≤ tol."""
+
+
+def agreement(s: AlignedStreams, cfg: OdometryConfig, f: Fusion, lead: FloatArray) -> Agreement:
+    """The re-adhesion test on the radar over i0 … (``lead``: the adhering pulse speeds
+    before i0): against the radar's own 1 s mean within ``tolerance`` (z = AGREE_Z, its σ);
+    where it has none, against the filtered speed's 1 s mean, which coasts on the inertial
+    increments from the last radar mean — there the tolerance and the error bound grow as
+    in the S000 path from it, by β·t and Δa·t (t since that mean, or since i0)."""
     p = s.filters.P
-    v1 = ma(np.concatenate([lead, f.v]), p)[lead.size :]
-    sd1 = ma(np.concatenate([np.zeros(lead.size), np.sqrt(f.p)]), p)[lead.size :]
-    own = np.isfinite(f.ground_v1)
-    v1 = np.where(own, f.ground_v1, v1)
-    sd1 = np.where(own, f.ground_sigma1, sd1)
+    fused = ma(np.concatenate([lead, f.v]), p)[lead.size :]
+    has = np.isfinite(f.ground_v1)
+    t = s.t[f.i0 : f.i0 + f.size]
+    sd_anchor, gap = _since_last(t, has, np.nan_to_num(f.ground_sigma1))
+    sd1 = np.where(has, f.ground_sigma1, sd_anchor)
+    v1 = np.where(has, f.ground_v1, fused)
     vp1 = s.vp1[f.i0 : f.i0 + f.size]
+    coast = np.where(has, 0.0, gap)
+    tol = tolerance(cfg, vp1, sd1, AGREE_Z) + cfg.beta_mps2 * coast
+    own = AGREE_Z * sd1 + cfg.delta_a_mps2 * coast
     with np.errstate(invalid="ignore"):
-        agree = np.abs(v1 - vp1) <= tolerance(cfg, vp1, sd1, AGREE_Z)
-    return v1, sd1, agree
+        agree = np.abs(v1 - vp1) <= tol
+    return Agreement(readonly(v1), readonly(tol), readonly(own), readonly(agree))
 
 
 def ground_share(f: Fusion, m_end: int) -> float:
@@ -255,6 +285,7 @@ __all__ = [
     "GATE_Z",
     "RADAR_SCALE_SHARE",
     "WEAR_SHARE",
+    "Agreement",
     "Filtered",
     "Fusion",
     "agreement",

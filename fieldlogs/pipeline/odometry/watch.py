@@ -10,10 +10,11 @@ same disturbance (stage 3 ignores them). Why: a deep slide going on past its fai
 otherwise leaves an error far beyond the margin, and a new correction started from the
 still-sliding pulses doubles it (bench/NOTES.md, "Odometry").
 
-With a ground speed (the radar [S004]) the watch follows the correction's filtered speed
-(:mod:`.fusion`: the radar, its gaps bridged inertially) instead, with the tolerance of
-``ground.tolerance`` and the own error bound AGREE_Z·σ of the filtered speed: the radar does
-not drift, so the allowance grows by the pulses' loss, not by Δa·t.
+With a ground speed (the radar [S004]) the watch compares with the radar's 1 s mean
+instead (:func:`.fusion.agreement`: its gaps bridged by the filtered speed), within its
+tolerance and with its own error bound AGREE_Z·σ: the radar does not drift, so the
+allowance grows by the pulses' loss, not by Δa·t (which comes back only over the radar's
+gaps).
 """
 
 from __future__ import annotations
@@ -25,8 +26,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fieldlogs.pipeline.config import OdometryConfig
-from fieldlogs.pipeline.odometry.fusion import AGREE_Z, Fusion, agreement
-from fieldlogs.pipeline.odometry.ground import tolerance
+from fieldlogs.pipeline.odometry.fusion import Fusion, agreement
 from fieldlogs.pipeline.odometry.integration import Integration
 from fieldlogs.pipeline.odometry.signals import IntArray, held, ma, readonly
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
@@ -81,17 +81,15 @@ def watch_fused(s: AlignedStreams, cfg: OdometryConfig, f: Fusion, ie: int) -> W
     """Watch of a correction fused with a ground speed that failed safe at aligned cycle
     ``ie``: its filtered speed (1 s means) against the pulses for ``failsafe_watch_s``."""
     p, i0 = s.filters.P, f.i0
-    lead = s.vp[max(i0 - p + 1, 0) : i0]
-    v1, sd1, _ = agreement(s, cfg, f, lead)
+    a = agreement(s, cfg, f, s.vp[max(i0 - p + 1, 0) : i0])
     m0 = ie - i0
     m1 = min(f.size, m0 + round(cfg.failsafe_watch_s / s.cyc) + 1)
     k = np.arange(ie, i0 + m1)
     out = k - s.delay
     if k.size < 2 or out[0] - p + 1 < 0:
         return None
-    vp1 = s.vp1[k]
-    tol = tolerance(cfg, vp1, sd1[m0:m1], AGREE_Z)
-    w = _watch(s, cfg, ie, out, np.abs(v1[m0:m1] - vp1), tol, AGREE_Z * sd1[m0:m1], "inertial")
+    dv = np.abs(a.v1[m0:m1] - s.vp1[k])
+    w = _watch(s, cfg, ie, out, dv, a.tol[m0:m1], a.own[m0:m1], "inertial")
     if f.used[m0 : m0 + w.cycles.size + 1].any():
         return Watch(w.end, w.cycles, w.grow, w.readhered, "radar")
     return w

@@ -20,6 +20,7 @@ from fieldlogs.pipeline.odometry import align_ground, align_streams, correct_odo
 from fieldlogs.pipeline.odometry.fusion import GATE_Z, kalman_speed, rts
 from fieldlogs.pipeline.odometry.ground import GROUND_BIAS_MPS, WEAR_SHARE
 from fieldlogs.pipeline.odometry.ground_products import CAL_MIN_M
+from fieldlogs.pipeline.types import slip_budget_m
 from tests.fieldlogs.pipeline.test_odometry import (
     Scenario,
     assert_odometry_sane,
@@ -206,6 +207,25 @@ def test_failsafe_when_the_radar_is_lost_for_the_whole_correction() -> None:
     assert ep.failsafe and ep.speed_source == "inertial"
     assert ep.t_end - ep.t_start == pytest.approx(CFG.max_correction_s, abs=0.15)
     assert ep.max_error_m == pytest.approx(22.8, abs=0.2)
+
+
+def test_an_episode_without_radar_values_is_tested_as_without_radar() -> None:
+    """The radar has no frame from 15 to 35 s: the slip is found by the same criterion at
+    the same cycle, re-adheres within a few cycles of the S000 path (its tolerance, β·t from
+    i0) and carries eq. 13's budget."""
+    sc = scenario(40.0, const(0.5), 5.0, slip=slip_pulse(20.0, 4.0, 0.3), ax_noise_kmh_s=0.1)
+    g = radar(sc)
+    v = g.v_mps.copy()
+    v[(sc.cycles.t > 15.0) & (sc.cycles.t < 35.0)] = np.nan
+    odo = correct_odometry(sc.cycles, CFG, replace(g, v_mps=v))
+    (ep,) = odo.episodes
+    (pe,) = correct_odometry(sc.cycles, CFG).episodes
+    assert ep.speed_source == "inertial" and ep.readhered
+    assert (ep.criterion, ep.t_detect, ep.t_start) == (pe.criterion, pe.t_detect, pe.t_start)
+    assert abs(ep.t_end - pe.t_end) <= 0.3
+    assert ep.max_error_m == pytest.approx(slip_budget_m(ep.duration_s, CFG.delta_a_mps2), abs=1e-6)
+    err, _, _ = episode_error(odo, sc)
+    assert abs(err) < 0.02
 
 
 def test_locked_wheel_at_walking_pace_is_found_only_with_the_radar() -> None:
