@@ -66,8 +66,8 @@ class SlipEpisode:
     d_corrected_m: float
     """Corrected distance over the same interval [m]."""
     max_error_m: float
-    """Error budget: ½·Δa·T² for the correction duration T (eq. 13), or the radar's when
-    smaller [m]."""
+    """Error budget: ½·Δa·T² for the correction duration T (eq. 13); with a radar the
+    fused correction's, from the radar's σ (``odometry.fusion``) [m]."""
     readhered: bool
     failsafe: bool
     """Still correcting after ``max_correction_s``: the position becomes uncertain."""

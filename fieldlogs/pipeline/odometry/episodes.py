@@ -85,7 +85,7 @@ from fieldlogs.pipeline.odometry.integration import Integration, integrate
 from fieldlogs.pipeline.odometry.signals import BoolArray, held, ma, readonly
 from fieldlogs.pipeline.odometry.start_point import lookback_point, start_point
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
-from fieldlogs.pipeline.odometry.watch import hold_cycles, readhesion_tolerance, watch_failsafe, watch_fused
+from fieldlogs.pipeline.odometry.watch import Watch, hold_cycles, readhesion_tolerance, watch_failsafe, watch_fused
 from fieldlogs.pipeline.types import DetectionCriterion, FloatArray, SlipKind, slip_budget_m
 
 
@@ -101,7 +101,7 @@ class Episode:
     i_end: int
     """Re-adhesion, fail-safe or last cycle ie."""
     i_settled: int
-    """End of the disturbance: ie, or the end of the fail-safe watch (without radar)."""
+    """End of the disturbance: ie, or the end of the fail-safe watch."""
     start_found: bool
     readhered: bool
     failsafe: bool
@@ -223,22 +223,42 @@ def _correct(
     v1 = ma(np.concatenate([lead, ig.v_in[:m]]), s.filters.P)[lead.size :]
     with np.errstate(invalid="ignore"):
         agree = np.abs(v1 - s.vp1[sl]) <= readhesion_tolerance(cfg) + cfg.beta_mps2 * tt
-    ie, readhered, failsafe = _end(s, cfg, ig, agree, after)
+    end = _end(s, cfg, ig, agree, after)
+    ie, readhered, failsafe = end
     m_end = ie - i0 + 1
     end_err = float(v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan")
     v_in, update_m = _speed_update(s, cfg, i0, ie, ig.v_in[:m_end], end_err if readhered else float("nan"))
-    sense = _sense(s, d, det, criterion)
-    settled = ie
-    if failsafe and cfg.failsafe_watch_s > 0:  # still the same disturbance while the pulses disagree
-        w = watch_failsafe(s, cfg, ig, ie)
-        settled = max(ie, w.end if w is not None else 0)
+    w = watch_failsafe(s, cfg, ig, ie) if failsafe and cfg.failsafe_watch_s > 0 else None
+    return _episode(s, d, ig, det, criterion, start_found, end, w, agree, v_in, end_err, update_m)
+
+
+def _episode(
+    s: AlignedStreams,
+    d: Detections,
+    ig: Integration,
+    det: int,
+    criterion: DetectionCriterion,
+    start_found: bool,
+    end: tuple[int, bool, bool],
+    watch: Watch | None,
+    agree: BoolArray,
+    v_in: FloatArray,
+    end_err: float,
+    update_m: float,
+    fusion: Fusion | None = None,
+    budget: FloatArray | None = None,
+) -> Episode:
+    """The episode record; after a fail-safe it lasts (``i_settled``) while its watch
+    finds the pulses still disagreeing."""
+    ie, readhered, failsafe = end
+    m_end = ie - ig.i0 + 1
     return Episode(
-        kind="slip" if (sense < 0) != (criterion == "residual-end") else "slide",
+        kind="slip" if (_sense(s, d, det, criterion) < 0) != (criterion == "residual-end") else "slide",
         criterion=criterion,
         i_detect=det,
-        i_start=i0,
+        i_start=ig.i0,
         i_end=ie,
-        i_settled=settled,
+        i_settled=ie if watch is None else max(ie, watch.end),
         start_found=start_found,
         readhered=readhered,
         failsafe=failsafe,
@@ -249,6 +269,9 @@ def _correct(
         theta_end=float(ig.theta[m_end - 1]),
         end_speed_error=end_err,
         speed_update_m=update_m,
+        fusion=fusion,
+        budget=None if budget is None else readonly(budget[:m_end]),
+        ground_share=0.0 if fusion is None else ground_share(fusion, m_end),
     )
 
 
@@ -309,33 +332,12 @@ def _correct_ground(
     lead = s.vp[max(i0 - s.filters.P + 1, 0) : i0]
     a = agreement(s, cfg, f, lead)
     budget = budget_path(s, g, cfg, f, g.pulse_m)
-    ie, readhered, failsafe = _end_ground(s, cfg, f, a.agree, budget, after)
+    end = _end_ground(s, cfg, f, a.agree, budget, after)
+    ie, readhered, failsafe = end
     m_end = ie - i0 + 1
-    settled = ie
-    if failsafe and cfg.failsafe_watch_s > 0:
-        w = watch_fused(s, cfg, f, ie)
-        settled = max(ie, w.end if w is not None else 0)
-    return Episode(
-        kind="slip" if (_sense(s, d, det, criterion) < 0) != (criterion == "residual-end") else "slide",
-        criterion=criterion,
-        i_detect=det,
-        i_start=i0,
-        i_end=ie,
-        i_settled=settled,
-        start_found=start_found,
-        readhered=readhered,
-        failsafe=failsafe,
-        truncated=not readhered and not failsafe,
-        integration=ig,
-        agree=a.agree,
-        v_in=readonly(smooth(f, m_end)),
-        theta_end=float(ig.theta[m_end - 1]),
-        end_speed_error=float(a.v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan"),
-        speed_update_m=0.0,
-        fusion=f,
-        budget=readonly(budget[:m_end]),
-        ground_share=ground_share(f, m_end),
-    )
+    end_err = float(a.v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan")
+    w = watch_fused(s, cfg, f, ie) if failsafe and cfg.failsafe_watch_s > 0 else None
+    return _episode(s, d, ig, det, criterion, start_found, end, w, a.agree, smooth(f, m_end), end_err, 0.0, f, budget)
 
 
 def _end_ground(
