@@ -17,7 +17,7 @@ from fieldlogs.pipeline.aid import SpeedOnCycles
 from fieldlogs.pipeline.aids.radar_if import frames_on_cycles
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.odometry import align_ground, align_streams, correct_odometry, detect
-from fieldlogs.pipeline.odometry.fusion import GATE_Z, kalman_speed, rts
+from fieldlogs.pipeline.odometry.fusion import GATE_Z, Filtered, kalman_speed, rts
 from fieldlogs.pipeline.odometry.ground import GROUND_BIAS_MPS, WEAR_SHARE
 from fieldlogs.pipeline.odometry.ground_products import CAL_MIN_M
 from fieldlogs.pipeline.types import slip_budget_m
@@ -44,6 +44,10 @@ def radar(sc: Scenario, sigma: float = 0.03, seed: int = 3, signed: bool = False
     return SpeedOnCycles(np.abs(v), sd, "radar_if", signed_mps=v if signed else None, frame_s=FRAME_S)
 
 
+def smoothed(k: Filtered, m_end: int) -> np.ndarray:
+    return rts(np.array(k.v), np.array(k.p), np.array(k.v_prior), np.array(k.p_prior), m_end)
+
+
 # --------------------------------------------------------------------------- hand-computed
 def test_kalman_update_and_smoother_by_hand() -> None:
     """v0 = 10 ± 1, a ground value 12 ± 1 at the first cycle, none at the second: K = ½,
@@ -53,14 +57,13 @@ def test_kalman_update_and_smoother_by_hand() -> None:
     k = kalman_speed(10.0, 1.0, np.zeros(2), np.zeros(2), np.array([12.0, nan]), np.array([1.0, nan]), 3)
     assert k.v == [11.0, 11.0] and k.p == [0.5, 0.5] and k.used == [True, False]
     assert k.v_prior == [10.0, 11.0] and k.p_prior == [1.0, 0.5]
-    np.testing.assert_allclose(rts(*(np.array(x) for x in (k.v, k.p, k.v_prior, k.p_prior)), 2), [11.0, 11.0])
+    np.testing.assert_allclose(smoothed(k, 2), np.array([11.0, 11.0]))
     # a process noise q and an inertial increment: v⁻ = 11 + 0.5, P⁻ = 0.5 + 0.5; the
     # update with 13 ± 1: K = ½ → 12.25; the smoother moves cycle 0 by C = 0.5 / 1 of
     # (12.25 − 11.5)
     k = kalman_speed(10.0, 1.0, np.array([0.0, 0.5]), np.array([0.0, 0.5]), np.array([12.0, 13.0]), np.ones(2), 3)
     assert k.v == [11.0, 12.25] and k.p == [0.5, 0.5]
-    s = rts(*(np.array(x) for x in (k.v, k.p, k.v_prior, k.p_prior)), 2)
-    np.testing.assert_allclose(s, [11.0 + 0.5 * 0.75, 12.25])
+    np.testing.assert_allclose(smoothed(k, 2), np.array([11.0 + 0.5 * 0.75, 12.25]))
 
 
 def test_kalman_gate_refuses_an_outlier_and_reseats_on_a_lasting_one() -> None:
@@ -84,7 +87,7 @@ def test_frames_on_cycles_by_hand() -> None:
     """Frames [0, 0.3) and [0.3, 0.6) (centres 0.15, 0.45): each cycle (t − 0.1, t] takes
     the frame holding its midpoint; a frame without a speed, and time after the last
     frame, give none."""
-    t = np.arange(1, 8) * 0.1
+    t = np.arange(1, 8, dtype=np.float64) * 0.1
     v, sd = frames_on_cycles(
         np.array([0.15, 0.45]), np.array([-2.0, 3.0]), np.array([0.1, 0.2]), 0.3, t, np.full(7, 0.1)
     )
