@@ -7,9 +7,10 @@ loop over the few moments an aid speaks):
    each repair an ``input_repaired`` event);
 2. :func:`~fieldlogs.pipeline.cycles.build_cycles`: tacho, IMU (cycle means), cab and PTO on
    the 100 ms cycle grid;
-3. speed aids (:data:`~fieldlogs.pipeline.aids.SPEED_AIDS`, e.g. the radar [S004]) on the
-   cycle grid, then :func:`~fieldlogs.pipeline.odometry.correct_odometry`: pulse odometry
-   with slip/slide episodes corrected inertially [S000 §3.1];
+3. speed aids (:data:`~fieldlogs.pipeline.aids.SPEED_AIDS`, e.g. the radar [S004] from its
+   IF samples) on the cycle grid, then :func:`~fieldlogs.pipeline.odometry.correct_odometry`:
+   pulse odometry with slip/slide episodes detected and corrected inertially [S000 §3.1]
+   and, with a ground speed, by it;
 4. products the aids share: the GPS analysis (trust, map-matching, up/down decisions,
    crossovers [S001 §4.2]), the curvature trace with the feature tables [S000 §3.2] and the
    run's raw GNSS inputs (``gnss_obs``/``gnss_nav``, solved on a track when an aid asks [S002]);
@@ -52,7 +53,7 @@ from schemas.frames import FIRST_DATA_LINE
 __all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
 
 #: Streams the pipeline reads.
-STREAMS = ("tacho", "imu", "balise", "gps", "cab", "truth", "radar")
+STREAMS = ("tacho", "imu", "balise", "gps", "cab", "truth", "radar", "radar_if")
 
 
 @dataclass
@@ -130,9 +131,9 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
         cycle_s=cfg.cycle_s,
         uses_pto=run.meta.vehicle_kind == VehicleKind.ROAD_RAIL,
     )
-    ground = next((g for a in speed_aids(streams) if (g := a.on_cycles(cycles)) is not None), None)
+    ground = next((g for a in speed_aids(streams, run.radar) if (g := a.on_cycles(cycles)) is not None), None)
     # pulses only when the run has no IMU (correct_odometry falls back by itself)
-    odo = correct_odometry(cycles, cfg.odometry, ground.v_mps if ground is not None else None)
+    odo = correct_odometry(cycles, cfg.odometry, ground)
     gaps = imu_gaps(cycles, cfg.margin.imu_gap_s, cfg.odometry.min_speed_kmh / 3.6)
     odo = with_gap_allowance(odo, gaps, cfg.margin.imu_gap_share)
     gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)

@@ -169,6 +169,12 @@ class SpeedOnCycles:
     sigma_mps: FloatArray
     """Its 1σ [m/s]."""
     source: str
+    signed_mps: FloatArray | None = None
+    """The speed along the body x axis, + toward the F end (None: the sensor gives no
+    direction) [m/s]; the odometry checks it against the cab's direction."""
+    frame_s: float = 0.0
+    """Time over which consecutive cycles share one measurement and its error (a radar
+    frame; 0: every cycle is its own) [s]."""
 
 
 @runtime_checkable

@@ -61,6 +61,20 @@ class OdometryConfig:
     readhesion_speed_update: bool = setting(
         True, "close a re-adhered correction on the measured speed difference (false: the SPEC's open loop)"
     )
+    ground_detect_z: float = setting(
+        4.0,
+        "ground-speed criterion (radar): |1 s pulse − ground speed| beyond this many σ + tolerances; 0 = off",
+        ge=0,
+    )
+    ground_max_correction_s: float = setting(
+        60.0, "with a ground speed carrying it, a correction may run this long before a fail-safe", "s", gt=0
+    )
+    ground_low_speed_kmh: float = setting(
+        20.0, "below this the speed is the ground speed's, not the coarse pulses'; 0 = never", "km/h", ge=0
+    )
+    wheel_calibration: bool = setting(
+        False, "scale the pulses by the radar's wheel calibration once it is known (summary: wheel_calibration)"
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "odometry")

@@ -4,7 +4,8 @@
 statistics (:mod:`fieldlogs.pipeline.corrections` — balise corrections under the plain
 names, all absolute corrections under ``all_corrections``), feature refusals by
 diagnostic, slips, fail-safes, anomalies, GPS trust, the largest margin and, for runs with
-a ``truth`` stream, the comparison with it.
+a ``truth`` stream, the comparison with it; with a radar, what it gave the odometry and the
+wheel calibration.
 """
 
 from __future__ import annotations
@@ -113,4 +114,15 @@ def summarise(
         "gps_trusted_share": float(gps.fixes["trusted"].mean()) if gps is not None and len(gps.fixes) else None,
         "max_margin_m": float(pos["margin_m"].max()) if pos["margin_m"].notna().any() else None,
         "episodes": [asdict(e) for e in odo.episodes],
+        **_ground(odo, meta.wheel_diameter_m),
     }
+
+
+def _ground(odo: Odometry, wheel_diameter_m: float | None) -> dict[str, Any]:
+    """With a ground-speed sensor (the radar): what it gave the odometry (``radar``) and the
+    wheel calibration (``wheel_calibration``: true/nominal diameter with its 95 % interval);
+    nothing without one."""
+    if odo.ground is None or wheel_diameter_m is None:
+        return {}
+    report = odo.ground.to_json(wheel_diameter_m)
+    return {"radar": report, "wheel_calibration": report.pop("wheel_calibration")}

@@ -12,6 +12,7 @@ from schemas.enums import EventType, FixSource, PositionState
 
 if TYPE_CHECKING:
     from fieldlogs.pipeline.odometry.diagnostics import OdometryDiagnostics
+    from fieldlogs.pipeline.odometry.ground_products import GroundReport
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -20,11 +21,13 @@ BoolArray = npt.NDArray[np.bool_]
 
 SlipKind = Literal["slip", "slide"]
 """'slip': wheel faster than the train (traction); 'slide': slower (braking)."""
-DetectionCriterion = Literal["ta", "residual", "residual-end"]
+DetectionCriterion = Literal["ta", "residual", "residual-end", "radar"]
 """What detected an episode: eq. 1 (|a_x − A_p| > Ta), the grade-compensated residual at
-the slip's onset, or the residual at its end (a short shallow slip)."""
+the slip's onset, the residual at its end (a short shallow slip), or the pulses leaving the
+radar's ground speed."""
 SpeedSource = Literal["inertial", "radar"]
-"""Where a correction's speed came from."""
+"""Where a correction's speed came from ("radar": the radar's ground speed, fused with the
+inertial one by their variances and bridging the radar's gaps)."""
 
 
 @dataclass(frozen=True)
@@ -63,8 +66,8 @@ class SlipEpisode:
     d_corrected_m: float
     """Corrected distance over the same interval [m]."""
     max_error_m: float
-    """Error budget: ½·Δa·T² for the correction duration T (eq. 13), or the radar's when
-    smaller [m]."""
+    """Error budget: ½·Δa·T² for the correction duration T (eq. 13); with a radar the
+    fused correction's, from the radar's σ (``odometry.fusion``) [m]."""
     readhered: bool
     failsafe: bool
     """Still correcting after ``max_correction_s``: the position becomes uncertain."""
@@ -134,6 +137,9 @@ class Odometry:
     diagnostics: OdometryDiagnostics | None = field(default=None, repr=False)
     """Algorithm internals for tests and bench scripts (None without inertial correction);
     never part of the pipeline's outputs."""
+    ground: GroundReport | None = None
+    """What a ground-speed sensor (the radar) gave the odometry, with the wheel calibration
+    (None without one)."""
 
 
 @dataclass

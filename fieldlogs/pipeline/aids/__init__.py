@@ -21,12 +21,14 @@ from fieldlogs.pipeline.aids.features import FeatureAid, FeatureUnit
 from fieldlogs.pipeline.aids.gnss import GnssAid, GnssUnit
 from fieldlogs.pipeline.aids.gps import GpsAid
 from fieldlogs.pipeline.aids.radar import RadarSpeedAid
+from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.imugap import ImuGap, ImuGapAid
 from fieldlogs.pipeline.types import GpsAnalysis, Odometry
+from schemas.radar import RadarParams
 
 
 @dataclass(frozen=True)
@@ -93,14 +95,23 @@ def position_aids(ctx: RunContext) -> list[Aid]:
     return [a for f in POSITION_AIDS if (a := f(ctx)) is not None]
 
 
-def _radar(streams: dict[str, pd.DataFrame | None]) -> SpeedAid | None:
-    radar = streams.get("radar")
-    return RadarSpeedAid(radar) if radar is not None and len(radar) >= 2 else None
+Streams = dict[str, pd.DataFrame | None]
 
 
-SPEED_AIDS: tuple[Callable[[dict[str, pd.DataFrame | None]], SpeedAid | None], ...] = (_radar,)
-"""Ground-speed aids for the odometry, best first (the first one with data is used)."""
+def _radar_if(streams: Streams, radar: RadarParams | None) -> SpeedAid | None:
+    frame = streams.get("radar_if")
+    return RadarIfSpeedAid(frame, radar) if frame is not None and len(frame) and radar is not None else None
 
 
-def speed_aids(streams: dict[str, pd.DataFrame | None]) -> list[SpeedAid]:
-    return [a for f in SPEED_AIDS if (a := f(streams)) is not None]
+def _radar(streams: Streams, radar: RadarParams | None) -> SpeedAid | None:
+    frame = streams.get("radar")
+    return RadarSpeedAid(frame) if frame is not None and len(frame) >= 2 else None
+
+
+SPEED_AIDS: tuple[Callable[[Streams, RadarParams | None], SpeedAid | None], ...] = (_radar_if, _radar)
+"""Ground-speed aids for the odometry, best first (the first one with data is used); each
+factory sees the run's streams and its run.json ``radar`` block."""
+
+
+def speed_aids(streams: Streams, radar: RadarParams | None = None) -> list[SpeedAid]:
+    return [a for f in SPEED_AIDS if (a := f(streams, radar)) is not None]

@@ -1,22 +1,30 @@
 """Slip/slide detection and inertial correction of the pulse odometry [S000 §3.1, SPEC §5.1].
 
-``correct_odometry`` runs five pure stages on the 100 ms cycle arrays of :class:`Cycles`;
-each is a function of the previous stages' frozen results and the config:
+``correct_odometry`` runs pure stages on the 100 ms cycle arrays of :class:`Cycles`; each
+is a function of the previous stages' frozen results and the config:
 
 1. :func:`~.streams.align_streams` → :class:`~.streams.AlignedStreams`: travel frame,
    pulse delay (searched), the filter K on a_x and A_p, the gyro pitch u.
+1b. With a ground speed (the radar [S004]): :func:`~.ground.align_ground` →
+   :class:`~.ground.GroundSpeed`: the direction check, delayed onto the IMU, 1 s means.
 2. :func:`~.detection.detect` → :class:`~.detection.Detections`: eq. 1, the gyro bias,
-   the grade-compensated residual, onsets, the start-point condition.
+   the grade-compensated residual, the ground-speed criterion, onsets, the start-point
+   condition.
 3. :func:`~.episodes.find_episodes` → :class:`~.episodes.Episode` records: start point
-   (:mod:`.start_point`), attitude at i0 and integration (:mod:`.integration`),
-   re-adhesion, speed update, re-opening and echoes.
+   (:mod:`.start_point`), attitude at i0 and integration (:mod:`.integration`), with a
+   ground speed the fused speed and its budget (:mod:`.fusion`), re-adhesion, speed
+   update, re-opening and echoes.
 4. :func:`~.watch.watch_failsafes` → :class:`~.watch.Watch` per fail-safe episode.
 5. :func:`~.assembly.assemble` → :class:`Odometry` (d, v, slipping, allowance, the public
    :class:`SlipEpisode` list, and ``diagnostics`` — the internals, for tests and bench).
+6. With a ground speed: :func:`~.ground_products.ground_products`: the speed at low speed
+   and standstill, the wheel calibration (and the scale, if set), ``Odometry.ground``.
 
 Detection, jerks, smoothing and the start-point search are vectorised over the whole run;
 only the (rare) episodes are visited in a Python loop, each integrated with ``np.cumsum``
-over at most ``max_correction_s`` + ``failsafe_watch_s`` of cycles.
+over at most ``max_correction_s`` + ``failsafe_watch_s`` of cycles (with a ground speed
+``ground_max_correction_s`` + the watch, and its Kalman filter a loop over those cycles).
+Without a ground speed stages 1b and 6 do not run and the others take their S000 path.
 
 Frames
     Travel frame: x along travel, y left, z up (SPEC §4.1), the body frame turned 180°
@@ -34,7 +42,8 @@ Equations (where they are computed)
       :mod:`.streams`);
     * eq. 2 correction A_x = a_x − G·sinθ, integrated to speed and distance —
       :mod:`.integration`, :mod:`.assembly`;
-    * eq. 13 error budget Δd = ½·Δa·t² — :mod:`.assembly` (``slip_budget_m``).
+    * eq. 13 error budget Δd = ½·Δa·t² — :mod:`.assembly` (``slip_budget_m``); with a
+      ground speed the budget of :mod:`.fusion`.
 
 Where the code departs from the papers (each module says why; measurements in
 bench/NOTES.md, "Odometry")
@@ -56,6 +65,12 @@ bench/NOTES.md, "Odometry")
       after a fail-safe.
     * θ0 uses a least-squares A_p0 over the filter window (pulse quantisation), residual
       detections have their own look-back point and the lobe rule.
+    * With a ground speed (the radar [S004]; S000 has none): a third detection criterion,
+      corrections fused with it by their variances (Kalman filter and smoother) instead of
+      inertial bridging alone, re-adhesion and the fail-safe watch tested on it, an error
+      budget from its σ instead of eq. 13 (the fail-safe when that budget reaches eq. 13's
+      at ``max_correction_s``), the speed at low speed and standstill from it, and a wheel
+      calibration (:mod:`.ground`, :mod:`.fusion`, :mod:`.ground_products`).
 
 NaN policy: missing IMU cycles are bridged by linear interpolation for the integration; the
 moving averages use what exists; no detection where a smoothed value is missing; missing
@@ -66,34 +81,41 @@ from __future__ import annotations
 
 import numpy as np
 
+from fieldlogs.pipeline.aid import SpeedOnCycles
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.odometry.assembly import assemble
 from fieldlogs.pipeline.odometry.detection import BIAS_MIN_S, Detections, detect
 from fieldlogs.pipeline.odometry.diagnostics import EpisodeDiagnostics, OdometryDiagnostics
 from fieldlogs.pipeline.odometry.episodes import Episode, find_episodes
+from fieldlogs.pipeline.odometry.fusion import Fusion
+from fieldlogs.pipeline.odometry.ground import GroundSpeed, align_ground, metres_per_pulse
+from fieldlogs.pipeline.odometry.ground_products import GroundReport, WheelCalibration, ground_products
 from fieldlogs.pipeline.odometry.start_point import LOBE_RATIO, QUIET_MARGIN_S, QUIET_SHARE, SEARCH_SPAN_S
 from fieldlogs.pipeline.odometry.streams import SPEED_AVG_S, AlignedStreams, align_streams
-from fieldlogs.pipeline.odometry.watch import RADAR_ERROR_M, RADAR_ERROR_PCT, Watch, watch_failsafes
-from fieldlogs.pipeline.types import FloatArray, Odometry, SlipEpisode, pulse_only_odometry
+from fieldlogs.pipeline.odometry.watch import Watch, watch_failsafes
+from fieldlogs.pipeline.types import Odometry, SlipEpisode, pulse_only_odometry
 
 __all__ = [
     "BIAS_MIN_S",
     "LOBE_RATIO",
     "QUIET_MARGIN_S",
     "QUIET_SHARE",
-    "RADAR_ERROR_M",
-    "RADAR_ERROR_PCT",
     "SEARCH_SPAN_S",
     "SPEED_AVG_S",
     "AlignedStreams",
     "Detections",
     "Episode",
     "EpisodeDiagnostics",
+    "Fusion",
+    "GroundReport",
+    "GroundSpeed",
     "Odometry",
     "OdometryDiagnostics",
     "SlipEpisode",
     "Watch",
+    "WheelCalibration",
+    "align_ground",
     "align_streams",
     "assemble",
     "correct_odometry",
@@ -103,21 +125,28 @@ __all__ = [
 ]
 
 
-def correct_odometry(cycles: Cycles, cfg: OdometryConfig, radar_mps: FloatArray | None = None) -> Odometry:
+def correct_odometry(cycles: Cycles, cfg: OdometryConfig, ground: SpeedOnCycles | None = None) -> Odometry:
     """Pulse odometry with slip/slide episodes replaced by the inertial solution (SPEC §5.1).
 
-    ``radar_mps``: an independent ground speed on the cycle grid (2-frequency CW radar
-    [S004]; NaN where there is none). Detection is unchanged, but over an episode the
-    radar covers completely its speed replaces the inertial one: it does not drift, so the
-    episode's error budget is the radar's (1 % of the distance + 0.5 m) when smaller than
-    eq. 13's. Without IMU or tacho (or with fewer than 3 cycles): the pulse odometry.
+    ``ground``: an independent ground speed on the cycle grid (the 2-frequency CW radar
+    [S004]; NaN where there is none): stage 1b aligns it, stage 2 detects with it, stage 3
+    fuses it with the inertial solution and tests re-adhesion on it, stage 4 watches on it
+    and stage 6 adds the low-speed speed and the wheel calibration. Without IMU or tacho
+    (or with fewer than 3 cycles): the pulse odometry.
     """
     if not cycles.has_imu or not cycles.has_tacho or cycles.n < 3:
         d_pulse = np.nan_to_num(np.asarray(cycles.d_pulse, dtype=float), nan=0.0)
         v_pulse = np.nan_to_num(np.asarray(cycles.v_pulse, dtype=float), nan=0.0)
         return pulse_only_odometry(d_pulse, v_pulse)
     streams = align_streams(cycles, cfg)
-    detections = detect(streams, cfg)
-    episodes = find_episodes(streams, detections, cfg)
-    watches = watch_failsafes(streams, cfg, episodes, radar_mps)
-    return assemble(streams, detections, cfg, episodes, watches, radar_mps)
+    g = None
+    if ground is not None:
+        pulses = np.asarray(cycles.pulses, dtype=float)
+        g = align_ground(streams, ground, metres_per_pulse(pulses, np.asarray(cycles.d_pulse, dtype=float)))
+    detections = detect(streams, cfg, g)
+    episodes = find_episodes(streams, detections, cfg, g)
+    watches = watch_failsafes(streams, cfg, episodes)
+    odo = assemble(streams, detections, cfg, episodes, watches)
+    if g is None:
+        return odo
+    return ground_products(streams, g, cfg, odo, [ep.i_settled - streams.delay for ep in episodes])

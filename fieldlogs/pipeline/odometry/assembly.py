@@ -9,22 +9,23 @@ Output time base
 Distance
     Over an episode the distance is the pulse distance at its start (plus the offsets of
     earlier episodes) + ∫ v dt of its corrected speed; after it the pulses continue with a
-    constant offset, so ``d`` is continuous and never decreases. Over an episode the radar
-    (``radar_mps``, [S004]) covers completely, its speed replaces the inertial one. A
-    truncated episode (the data end first) holds its last speed to the end.
+    constant offset, so ``d`` is continuous and never decreases. With a ground speed (the
+    radar [S004]) an episode's speed is the fused one of :mod:`.fusion`. A truncated episode
+    (the data end first) holds its last speed to the end.
 
 Allowance (eq. 13)
-    ``allowance[k]`` = Σ over finished episodes of ½·Δa·T² (T = their correction time; a
-    radar-bridged episode 1 % of its distance + 0.5 m when smaller) plus, inside a running
-    episode, ½·Δa·(t − t_start)² (at most its budget), plus the fail-safe watches' growth
-    (stage 4). It is continuous, never decreases, and equals the full eq. 13 budget from
-    each episode's end on (22.8 m for T = 10 s).
+    ``allowance[k]`` = Σ over finished episodes of ½·Δa·T² (T = their correction time) plus,
+    inside a running episode, ½·Δa·(t − t_start)² (at most its budget), plus the fail-safe
+    watches' growth (stage 4). It is continuous, never decreases, and equals the full eq. 13
+    budget from each episode's end on (22.8 m for T = 10 s). Departure with a ground speed:
+    an episode's budget is the fused distance's B of :mod:`.fusion` (from the radar's σ,
+    eq. 13 only over the radar's gaps), inside the episode B up to the cycle.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -34,7 +35,7 @@ from fieldlogs.pipeline.odometry.diagnostics import EpisodeDiagnostics, Odometry
 from fieldlogs.pipeline.odometry.episodes import Episode
 from fieldlogs.pipeline.odometry.signals import finite_or_none
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
-from fieldlogs.pipeline.odometry.watch import RADAR_ERROR_M, RADAR_ERROR_PCT, Watch
+from fieldlogs.pipeline.odometry.watch import Watch
 from fieldlogs.pipeline.types import (
     FailsafeWatch,
     FloatArray,
@@ -63,6 +64,8 @@ class _Segment:
     budget: float
     """Error budget [m]."""
     source: SpeedSource
+    grow: FloatArray | None = None
+    """Budget from s to each cycle up to e (a ground-speed episode; None: eq. 13's)."""
 
 
 def assemble(
@@ -71,12 +74,11 @@ def assemble(
     cfg: OdometryConfig,
     episodes: Sequence[Episode],
     watches: Sequence[Watch | None],
-    radar: FloatArray | None = None,
 ) -> Odometry:
     """Stage 5: distance, speed, slipping flags and allowance with the episodes applied;
     the public episodes and the diagnostics."""
     n = s.n
-    segs = _segments(s, cfg, episodes, radar)
+    segs = _segments(s, cfg, episodes)
     v = s.v_pulse.copy()
     slipping = np.zeros(n, dtype=bool)
     off_step = np.zeros(n + 1)
@@ -91,7 +93,10 @@ def assemble(
     da = cfg.delta_a_mps2
     for g in segs:
         dist[g.s : g.e + 1] = g.d
-        grow = 0.5 * da * (s.t[g.s + 1 : g.e + 1] - s.t[g.s]) ** 2
+        if g.grow is None:
+            grow = 0.5 * da * (s.t[g.s + 1 : g.e + 1] - s.t[g.s]) ** 2
+        else:
+            grow = g.grow[1:]
         allowance[g.s + 1 : g.e + 1] += np.minimum(grow, g.budget)
     for w in watches:
         if w is not None and w.grow.size:
@@ -102,38 +107,36 @@ def assemble(
     return Odometry(dist, v, slipping, allowance, public, diag)
 
 
-def _segments(
-    s: AlignedStreams, cfg: OdometryConfig, episodes: Sequence[Episode], radar: FloatArray | None
-) -> tuple[_Segment, ...]:
+def _segments(s: AlignedStreams, cfg: OdometryConfig, episodes: Sequence[Episode]) -> tuple[_Segment, ...]:
     """The episodes on the output grid, each continuing the distance of the one before."""
     out: list[_Segment] = []
     offset = 0.0
     for ep in episodes:
-        g = _segment(s, cfg, ep, radar, offset)
+        g = _segment(s, cfg, ep, offset)
         out.append(g)
         offset = g.offset_after
     return tuple(out)
 
 
-def _segment(s: AlignedStreams, cfg: OdometryConfig, ep: Episode, radar: FloatArray | None, offset: float) -> _Segment:
+def _segment(s: AlignedStreams, cfg: OdometryConfig, ep: Episode, offset: float) -> _Segment:
     """One episode on the output grid, its distance starting ``offset`` above the pulses."""
     n = s.n
     i, e = ep.i_start - s.delay, ep.i_end - s.delay
     v_in = ep.v_in
+    path = ep.budget
     if ep.truncated and e < n - 1:  # data ended mid-correction: hold the speed
         v_in = np.concatenate([v_in, np.full(n - 1 - e, v_in[-1])])
+        if path is not None:
+            path = np.concatenate([path, np.full(n - 1 - e, path[-1])])
         e = n - 1
-    use_radar = radar is not None and bool(np.isfinite(radar[i : e + 1]).all())
-    if use_radar:
-        assert radar is not None
-        v_in = radar[i : e + 1].astype(float)
     inc = np.concatenate([[0.0], v_in[1:] * s.dt[i + 1 : e + 1]])
     d_seg = (s.d_pulse[i] + offset) + np.cumsum(inc)
-    budget = slip_budget_m(float(s.t[e] - s.t[i]), cfg.delta_a_mps2)
-    if use_radar:
-        budget = min(budget, RADAR_ERROR_PCT / 100.0 * float(d_seg[-1] - d_seg[0]) + RADAR_ERROR_M)
     after = float(d_seg[-1] - s.d_pulse[e])
-    return _Segment(i, e, v_in, d_seg, offset, after, budget, "radar" if use_radar else "inertial")
+    if path is not None:  # fused with a ground speed: its budget B
+        source: SpeedSource = "radar" if ep.ground_share > 0 else "inertial"
+        return _Segment(i, e, v_in, d_seg, offset, after, float(path[-1]), source, path)
+    budget = slip_budget_m(float(s.t[e] - s.t[i]), cfg.delta_a_mps2)
+    return _Segment(i, e, v_in, d_seg, offset, after, budget, "inertial")
 
 
 def _public(s: AlignedStreams, ep: Episode, g: _Segment, w: Watch | None) -> SlipEpisode:
@@ -172,7 +175,7 @@ def _public(s: AlignedStreams, ep: Episode, g: _Segment, w: Watch | None) -> Sli
 
 def _diagnostics(s: AlignedStreams, d: Detections, ep: Episode) -> EpisodeDiagnostics:
     k, start = ep.i_detect, ep.integration.start
-    return EpisodeDiagnostics(
+    diag = EpisodeDiagnostics(
         i_detect_aligned=k,
         i_start_aligned=ep.i_start,
         i_end_aligned=ep.i_end,
@@ -190,4 +193,15 @@ def _diagnostics(s: AlignedStreams, d: Detections, ep: Episode) -> EpisodeDiagno
         gyro_bias_rad_s=start.bias,
         theta_clipped=start.clipped,
         end_speed_error_mps=finite_or_none(ep.end_speed_error),
+    )
+    f = ep.fusion
+    if f is None:
+        return diag
+    return replace(  # the fused correction's cross-check figures
+        diag,
+        ground_e_at_detect_mps=finite_or_none(float(d.ground_e[k])) if d.ground_e is not None else None,
+        ground_refused=f.refused,
+        ground_reseated=f.reseated,
+        ground_share=ep.ground_share,
+        inertial_dev_mps=f.inertial_dev_mps(ep.i_end - ep.i_start + 1),
     )

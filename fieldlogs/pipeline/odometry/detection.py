@@ -38,6 +38,21 @@ Second criterion: grade-compensated residual (``residual_threshold_kmh_s``, 0 = 
     a residual onset whose reference falls in the previous episode). The residual needs the
     right pulse delay (stage 1).
 
+Ground-speed criterion (``ground_detect_z``, 0 = off; only with a ground speed)
+    Not in S000, which has no independent speed. With the radar [S004] (stage 1b):
+
+        e(k) = v̄_p(k) − v̄_g(k),   |e| > tol0 + WEAR_SHARE·v̄_g + z·σ̄_g      (> 0: slip)
+
+    with v̄ the 1 s means (pulses: ``vp1``; ground: only where its whole window has
+    values), tol0 = ``readhesion_tol_kmh`` (the pulses' quantisation), σ̄_g the 1σ of the
+    ground 1 s mean and z = ``ground_detect_z``. It sits beside eq. 1 and the residual (the
+    onsets of all three open episodes) and sees what they cannot: a slip whose excess
+    acceleration stays below every threshold, a slip at low speed (no ``min_speed_kmh``
+    gate: the radar measures from standstill, and a wheel spinning at rest or locked while
+    sliding shows as |e| ≈ v), within ≈ 1 s of its onset instead of the 3.9 s filter.
+    Its flagged cycles are left out of the gyro-bias estimate and count as disturbed for
+    the residual's reference.
+
 Start-point condition
     |Ji| ≤ ``jerk_imu_max_kmh_s``, |Jp| ≤ ``jerk_pulse_max_kmh_s`` and |Ji − Jp| <
     ``jerk_diff_max_kmh_s`` per 0.1 s (Ji, Jp: per-cycle differences of K·a_x, K·A_p) held
@@ -52,6 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fieldlogs.pipeline.config import OdometryConfig
+from fieldlogs.pipeline.odometry.ground import GroundSpeed, tolerance
 from fieldlogs.pipeline.odometry.signals import (
     BoolArray,
     IntArray,
@@ -92,20 +108,36 @@ class Detections:
     """Per onset: it is a rising edge of ``ta_mask``."""
     last_hold: IntArray
     """Last cycle ≤ k at which the start-point condition held (−1: none yet)."""
+    ground_e: FloatArray | None = None
+    """e = 1 s mean pulse − ground speed [m/s] (None without the ground-speed criterion)."""
+    ground_thr: FloatArray | None = None
+    """Its threshold [m/s]."""
+    ground_mask: BoolArray | None = None
+    """|e| above its threshold."""
+    is_ground_onset: BoolArray | None = None
+    """Per onset: it is a rising edge of ``ground_mask`` (this criterion then names it)."""
 
 
-def detect(s: AlignedStreams, cfg: OdometryConfig) -> Detections:
-    """Stage 2: eq. 1, the gyro bias, the residual criterion and the start-point condition."""
+def detect(s: AlignedStreams, cfg: OdometryConfig, ground: GroundSpeed | None = None) -> Detections:
+    """Stage 2: eq. 1, the gyro bias, the residual criterion, the ground-speed criterion
+    (with ``ground``) and the start-point condition."""
     moving = s.vp1 >= cfg.min_speed_kmh / 3.6
     with np.errstate(invalid="ignore"):
         mask = (np.abs(s.diff) > cfg.ta_mps2) & moving
     mask[: s.warm] = False
-    u_ok = s.u_valid & ~mask
+    ge, gthr, gmask = _ground_criterion(s, cfg, ground)
+    flagged = mask if gmask is None else mask | gmask
+    u_ok = s.u_valid & ~flagged
     bias, bias_ok = _gyro_bias(s, cfg, u_ok)
     horizon = round(cfg.residual_horizon_s / s.cyc)
-    res, res_mask = _residual(s, cfg, horizon, mask, moving, u_ok & bias_ok, bias)
+    res, res_mask = _residual(s, cfg, horizon, flagged, moving, u_ok & bias_ok, bias)
     ta_onsets = rising(mask)
     onsets = np.union1d(ta_onsets, rising(res_mask))
+    g_onset = None
+    if gmask is not None:
+        g_onsets = rising(gmask)
+        onsets = np.union1d(onsets, g_onsets)
+        g_onset = readonly(np.isin(onsets, g_onsets))
     return Detections(
         ta_mask=readonly(mask),
         bias=readonly(bias),
@@ -116,7 +148,26 @@ def detect(s: AlignedStreams, cfg: OdometryConfig) -> Detections:
         onsets=readonly(onsets),
         is_ta_onset=readonly(np.isin(onsets, ta_onsets)),
         last_hold=readonly(_last_hold(s, cfg)),
+        ground_e=None if ge is None else readonly(ge),
+        ground_thr=None if gthr is None else readonly(gthr),
+        ground_mask=None if gmask is None else readonly(gmask),
+        is_ground_onset=g_onset,
     )
+
+
+def _ground_criterion(
+    s: AlignedStreams, cfg: OdometryConfig, g: GroundSpeed | None
+) -> tuple[FloatArray | None, FloatArray | None, BoolArray | None]:
+    """e = v̄_p − v̄_g, its threshold and mask (all None without a ground speed or with
+    ``ground_detect_z`` 0)."""
+    if g is None or cfg.ground_detect_z <= 0:
+        return None, None, None
+    e = s.vp1 - g.v1
+    thr = tolerance(cfg, g.v1, g.sigma1, cfg.ground_detect_z)
+    with np.errstate(invalid="ignore"):
+        over = np.abs(e) > thr
+    over[: s.warm] = False
+    return e, thr, over
 
 
 def _gyro_bias(s: AlignedStreams, cfg: OdometryConfig, u_ok: BoolArray) -> tuple[FloatArray, BoolArray]:

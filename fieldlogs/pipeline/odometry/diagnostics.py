@@ -43,7 +43,18 @@ class EpisodeDiagnostics:
     theta_clipped: bool
     """|θ̄| at the start point exceeded arcsin(Ta/G) (the start point was not adhering)."""
     end_speed_error_mps: float | None
-    """δ: 1 s mean inertial − pulse speed at re-adhesion (None without re-adhesion) [m/s]."""
+    """δ: 1 s mean inertial − pulse speed at re-adhesion (None without re-adhesion) [m/s];
+    with a ground speed the filtered speed's."""
+    ground_e_at_detect_mps: float | None = None
+    """With a ground speed: 1 s mean pulse − ground speed at detection [m/s]."""
+    ground_refused: int = 0
+    """Ground values the cross-check refused (``fusion``)."""
+    ground_reseated: int = 0
+    """Times the filter re-seated on the ground speed (the inertial solution had left it)."""
+    ground_share: float = 0.0
+    """Share of the correction's cycles carried by a ground value."""
+    inertial_dev_mps: float | None = None
+    """Largest |1 s mean (inertial − ground speed)| over the correction [m/s]."""
 
 
 @dataclass(frozen=True)

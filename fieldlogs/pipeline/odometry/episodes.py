@@ -57,7 +57,18 @@ Re-adhesion speed update (``readhesion_speed_update``)
     ie both carry the wheel's diameter error (wear), so the update closes the correction in
     the pulses' scale, that of the rest of the odometry (the solver's correction
     percentage removes it); the inertial increments alone are in true scale. Fail-safe and
-    truncated episodes (no re-adhesion) and radar-bridged ones keep their speeds.
+    truncated episodes (no re-adhesion) keep their speeds.
+
+With a ground speed (the radar [S004], stage 1b)
+    Departure from S000 (inertial bridging only): the correction's speed is the inertial
+    solution fused with the ground speed by their variances (:mod:`.fusion`); the
+    re-adhesion test compares the pulses with that speed (1 s means within
+    ``ground.tolerance``, held ``readhesion_hold_s``) instead of with the drifting inertial
+    one; and the correction fails safe only when its error budget (:mod:`.fusion`) reaches
+    eq. 13's at ``max_correction_s``, or at ``ground_max_correction_s``: a radar-carried
+    correction does not drift, so a slip far longer than 7.5 s re-adheres. The speed update
+    is not used (the speed is measured, not integrated). Ground-speed onsets (stage 2) open
+    episodes like eq. 1 onsets.
 """
 
 from __future__ import annotations
@@ -68,12 +79,14 @@ import numpy as np
 
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.odometry.detection import Detections
+from fieldlogs.pipeline.odometry.fusion import Fusion, agreement, budget_path, fuse, ground_share, smooth
+from fieldlogs.pipeline.odometry.ground import GroundSpeed
 from fieldlogs.pipeline.odometry.integration import Integration, integrate
 from fieldlogs.pipeline.odometry.signals import BoolArray, held, ma, readonly
 from fieldlogs.pipeline.odometry.start_point import lookback_point, start_point
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
-from fieldlogs.pipeline.odometry.watch import hold_cycles, readhesion_tolerance, watch_failsafe
-from fieldlogs.pipeline.types import DetectionCriterion, FloatArray, SlipKind
+from fieldlogs.pipeline.odometry.watch import Watch, hold_cycles, readhesion_tolerance, watch_failsafe, watch_fused
+from fieldlogs.pipeline.types import DetectionCriterion, FloatArray, SlipKind, slip_budget_m
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,7 +101,7 @@ class Episode:
     i_end: int
     """Re-adhesion, fail-safe or last cycle ie."""
     i_settled: int
-    """End of the disturbance: ie, or the end of the fail-safe watch (without radar)."""
+    """End of the disturbance: ie, or the end of the fail-safe watch."""
     start_found: bool
     readhered: bool
     failsafe: bool
@@ -109,15 +122,30 @@ class Episode:
     """Detections inside the episode's room that re-opened it or fell in its fail-safe [s]."""
     echo_t: tuple[float, ...] = ()
     """Detections ignored as the filters' echo of the slip's end [s]."""
+    fusion: Fusion | None = None
+    """With a ground speed: the filtered speed over the integration (else None)."""
+    budget: FloatArray | None = None
+    """With a ground speed: the error budget B from i0 to each cycle up to ie [m]."""
+    ground_share: float = 0.0
+    """Share of the correction's cycles carried by a ground value."""
 
 
-def find_episodes(s: AlignedStreams, d: Detections, cfg: OdometryConfig) -> tuple[Episode, ...]:
-    """Stage 3: the episodes in time order."""
+def find_episodes(
+    s: AlignedStreams, d: Detections, cfg: OdometryConfig, ground: GroundSpeed | None = None
+) -> tuple[Episode, ...]:
+    """Stage 3: the episodes in time order (``ground``: corrections fused with it)."""
     found: tuple[Episode, ...] = ()
     pos = 0
     while (j := int(np.searchsorted(d.onsets, pos))) < d.onsets.size:
-        found, pos = _step(s, d, cfg, found, int(d.onsets[j]), bool(d.is_ta_onset[j]))
+        found, pos = _step(s, d, cfg, ground, found, int(d.onsets[j]), _kind(d, j))
     return found
+
+
+def _kind(d: Detections, j: int) -> DetectionCriterion:
+    """Which criterion's onset the j-th onset is (the ground speed's first, then eq. 1)."""
+    if d.is_ground_onset is not None and d.is_ground_onset[j]:
+        return "radar"
+    return "ta" if d.is_ta_onset[j] else "residual"
 
 
 def _floor(s: AlignedStreams, prev: Episode | None) -> int:
@@ -131,17 +159,24 @@ def _floor(s: AlignedStreams, prev: Episode | None) -> int:
 
 
 def _step(
-    s: AlignedStreams, d: Detections, cfg: OdometryConfig, found: tuple[Episode, ...], det: int, ta: bool
+    s: AlignedStreams,
+    d: Detections,
+    cfg: OdometryConfig,
+    g: GroundSpeed | None,
+    found: tuple[Episode, ...],
+    det: int,
+    kind: DetectionCriterion,
 ) -> tuple[tuple[Episode, ...], int]:
     """The episodes after the onset at ``det``, and the cycle from which to look for the next."""
     prev = found[-1] if found else None
-    if prev is not None and not ta and det - d.horizon - s.filters.M <= prev.i_settled:
+    if prev is not None and kind == "residual" and det - d.horizon - s.filters.M <= prev.i_settled:
         return found, det + 1  # the residual's reference lies in the previous episode
     floor = _floor(s, prev)
     if prev is None or det - round(cfg.lookback_s / s.cyc) >= floor:
-        crit, back = lookback_point(s, d, cfg, det, ta)
+        crit, back = lookback_point(s, d, cfg, det, kind)
         i0, ok = start_point(s, d, det, back, floor)
-        ep = _correct(s, d, cfg, integrate(s, d, cfg, i0), det, ok, det, crit)
+        extend = 0.0 if g is None else cfg.ground_max_correction_s - cfg.max_correction_s + cfg.failsafe_watch_s
+        ep = _correct(s, d, cfg, g, integrate(s, d, cfg, i0, extend), det, ok, det, crit)
         return (*found, ep), ep.i_end + 1
     t_det = float(s.t[det])
     if prev.readhered and _agrees(prev, det):
@@ -151,7 +186,7 @@ def _step(
     if prev.failsafe:
         return (*found[:-1], replace(prev, redetect_t=redetect)), det + 1
     # premature re-adhesion: re-open the correction from its own start point
-    again = _correct(s, d, cfg, prev.integration, prev.i_detect, prev.start_found, det, prev.criterion)
+    again = _correct(s, d, cfg, g, prev.integration, prev.i_detect, prev.start_found, det, prev.criterion)
     return (*found[:-1], replace(again, redetect_t=redetect)), again.i_end + 1
 
 
@@ -168,14 +203,18 @@ def _correct(
     s: AlignedStreams,
     d: Detections,
     cfg: OdometryConfig,
+    g: GroundSpeed | None,
     ig: Integration,
     det: int,
     start_found: bool,
     after: int,
     criterion: DetectionCriterion,
 ) -> Episode:
-    """The episode detected at ``det`` corrected by ``ig``; re-adhesion is looked for after
-    cycle ``after`` (later than ``det`` when a premature one was re-opened)."""
+    """The episode detected at ``det`` corrected by ``ig`` (fused with ``g`` when given);
+    re-adhesion is looked for after cycle ``after`` (later than ``det`` when a premature
+    one was re-opened)."""
+    if g is not None:
+        return _correct_ground(s, d, cfg, g, ig, det, start_found, after, criterion)
     i0, i_lim = ig.i0, ig.i_lim
     m = i_lim - i0 + 1
     sl = slice(i0, i_lim + 1)
@@ -184,22 +223,42 @@ def _correct(
     v1 = ma(np.concatenate([lead, ig.v_in[:m]]), s.filters.P)[lead.size :]
     with np.errstate(invalid="ignore"):
         agree = np.abs(v1 - s.vp1[sl]) <= readhesion_tolerance(cfg) + cfg.beta_mps2 * tt
-    ie, readhered, failsafe = _end(s, cfg, ig, agree, after)
+    end = _end(s, cfg, ig, agree, after)
+    ie, readhered, failsafe = end
     m_end = ie - i0 + 1
     end_err = float(v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan")
     v_in, update_m = _speed_update(s, cfg, i0, ie, ig.v_in[:m_end], end_err if readhered else float("nan"))
-    sense = float(s.diff[det] if criterion == "ta" else d.residual[det])
-    settled = ie
-    if failsafe and cfg.failsafe_watch_s > 0:  # still the same disturbance while the pulses disagree
-        w = watch_failsafe(s, cfg, ig, ie)
-        settled = max(ie, w.end if w is not None else 0)
+    w = watch_failsafe(s, cfg, ig, ie) if failsafe and cfg.failsafe_watch_s > 0 else None
+    return _episode(s, d, ig, det, criterion, start_found, end, w, agree, v_in, end_err, update_m)
+
+
+def _episode(
+    s: AlignedStreams,
+    d: Detections,
+    ig: Integration,
+    det: int,
+    criterion: DetectionCriterion,
+    start_found: bool,
+    end: tuple[int, bool, bool],
+    watch: Watch | None,
+    agree: BoolArray,
+    v_in: FloatArray,
+    end_err: float,
+    update_m: float,
+    fusion: Fusion | None = None,
+    budget: FloatArray | None = None,
+) -> Episode:
+    """The episode record; after a fail-safe it lasts (``i_settled``) while its watch
+    finds the pulses still disagreeing."""
+    ie, readhered, failsafe = end
+    m_end = ie - ig.i0 + 1
     return Episode(
-        kind="slip" if (sense < 0) != (criterion == "residual-end") else "slide",
+        kind="slip" if (_sense(s, d, det, criterion) < 0) != (criterion == "residual-end") else "slide",
         criterion=criterion,
         i_detect=det,
-        i_start=i0,
+        i_start=ig.i0,
         i_end=ie,
-        i_settled=settled,
+        i_settled=ie if watch is None else max(ie, watch.end),
         start_found=start_found,
         readhered=readhered,
         failsafe=failsafe,
@@ -210,6 +269,9 @@ def _correct(
         theta_end=float(ig.theta[m_end - 1]),
         end_speed_error=end_err,
         speed_update_m=update_m,
+        fusion=fusion,
+        budget=None if budget is None else readonly(budget[:m_end]),
+        ground_share=0.0 if fusion is None else ground_share(fusion, m_end),
     )
 
 
@@ -240,3 +302,61 @@ def _speed_update(
     ramp = end_err * (s.t[i0 : ie + 1] - s.t[i0]) / duration
     update_m = -float(np.dot(ramp[1:], s.dt[i0 + 1 : ie + 1]))
     return np.maximum(v_in - ramp, 0.0), update_m
+
+
+def _sense(s: AlignedStreams, d: Detections, det: int, criterion: DetectionCriterion) -> float:
+    """Signed disturbance at detection, < 0 for a slip (travel frame; the ground speed's
+    e = pulse − ground is > 0 for a slip)."""
+    if criterion == "ta":
+        return float(s.diff[det])
+    if criterion == "radar" and d.ground_e is not None:
+        return -float(d.ground_e[det])
+    return float(d.residual[det])
+
+
+def _correct_ground(
+    s: AlignedStreams,
+    d: Detections,
+    cfg: OdometryConfig,
+    g: GroundSpeed,
+    ig: Integration,
+    det: int,
+    start_found: bool,
+    after: int,
+    criterion: DetectionCriterion,
+) -> Episode:
+    """``_correct`` with a ground speed: the fused speed, the re-adhesion test on it and the
+    fail-safe on the error budget (:mod:`.fusion`)."""
+    i0 = ig.i0
+    f = fuse(s, g, cfg, ig)
+    lead = s.vp[max(i0 - s.filters.P + 1, 0) : i0]
+    a = agreement(s, cfg, f, lead)
+    budget = budget_path(s, g, cfg, f, g.pulse_m)
+    end = _end_ground(s, cfg, f, a.agree, budget, after)
+    ie, readhered, failsafe = end
+    m_end = ie - i0 + 1
+    end_err = float(a.v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan")
+    w = watch_fused(s, cfg, f, ie) if failsafe and cfg.failsafe_watch_s > 0 else None
+    return _episode(s, d, ig, det, criterion, start_found, end, w, a.agree, smooth(f, m_end), end_err, 0.0, f, budget)
+
+
+def _end_ground(
+    s: AlignedStreams, cfg: OdometryConfig, f: Fusion, agree: BoolArray, budget: FloatArray, after: int
+) -> tuple[int, bool, bool]:
+    """``_end`` with a ground speed: the limit is where the budget reaches eq. 13's at
+    ``max_correction_s`` or the time ``ground_max_correction_s``."""
+    i0 = f.i0
+    t = s.t[i0 : i0 + f.size] - s.t[i0]
+    b_max = slip_budget_m(cfg.max_correction_s, cfg.delta_a_mps2)
+    over = np.flatnonzero((budget >= b_max - 1e-9) | (t >= cfg.ground_max_correction_s - 1e-9))
+    lim = int(over[0]) if over.size else None
+    cond = held(agree, hold_cycles(cfg, s.cyc))
+    cond[: max(after - i0 + 1, 0)] = False
+    if lim is not None:
+        cond[lim + 1 :] = False
+    hit = np.flatnonzero(cond)
+    if hit.size:
+        return i0 + int(hit[0]), True, False
+    if lim is not None:
+        return i0 + lim, False, True
+    return s.n - 1, False, False

@@ -88,13 +88,14 @@ class Integration:
     """Pitch on the same cycles [rad]."""
 
 
-def integrate(s: AlignedStreams, d: Detections, cfg: OdometryConfig, i0: int) -> Integration:
+def integrate(s: AlignedStreams, d: Detections, cfg: OdometryConfig, i0: int, extend_s: float = 0.0) -> Integration:
     """Attitude at start point i0 and the inertial solution for ``max_correction_s`` and
-    the fail-safe watch (eqs. 3, 11, then 4, 6, 12, 2)."""
+    the fail-safe watch (eqs. 3, 11, then 4, 6, 12, 2); ``extend_s``: for longer than the
+    watch beyond ``max_correction_s`` (a correction a ground speed carries)."""
     n, t = s.n, s.t
     t_lim = t[i0] + cfg.max_correction_s
     i_lim = min(int(np.searchsorted(t, t_lim - 1e-9)), n - 1)
-    i_far = min(int(np.searchsorted(t, t_lim + max(cfg.failsafe_watch_s, 0.0) - 1e-9)), n - 1)
+    i_far = min(int(np.searchsorted(t, t_lim + max(cfg.failsafe_watch_s, extend_s, 0.0) - 1e-9)), n - 1)
     w = _window(s, i0)
     span = slice(w.start, i_far + 1)  # window + integration (+ fail-safe watch), IMU bridged once
     imu = Imu(*(s.imu_window(c, span, G if c == "az" else 0.0) for c in IMU_COLUMNS))  # travel frame, bridged

@@ -14,6 +14,12 @@ Residual detections
     look-back: as often before the onset as with the SPEC look-back, with shorter
     corrections and fewer fail-safes (bench/NOTES.md, "Odometry").
 
+Ground-speed detections (criterion "radar")
+    As residual detections, on e/thr of the ground-speed criterion (stage 2): QUIET_MARGIN_S
+    before e last stayed within QUIET_SHARE of its threshold, never before the SPEC
+    look-back. Starting early costs nothing there: the ground speed carries the
+    correction, and before the onset it agrees with the adhering pulses.
+
 Lobe rule (``criterion`` "residual-end")
     A slip shorter than the filter shows in r as two lobes of opposite sign (onset, then
     end) that cancel while both are in the window; when only the end lobe crosses the
@@ -47,12 +53,17 @@ LOBE_RATIO = 4.0
 
 
 def lookback_point(
-    s: AlignedStreams, d: Detections, cfg: OdometryConfig, det: int, ta: bool
+    s: AlignedStreams, d: Detections, cfg: OdometryConfig, det: int, kind: DetectionCriterion
 ) -> tuple[DetectionCriterion, int]:
-    """The criterion of the detection at ``det`` and its look-back point."""
+    """The criterion of the detection at ``det`` (an onset of ``kind``: "ta", "residual" or
+    "radar") and its look-back point."""
     lookback = round(cfg.lookback_s / s.cyc)
-    if ta:
+    if kind == "ta":
         return "ta", det - lookback
+    if kind == "radar" and d.ground_e is not None and d.ground_thr is not None:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = d.ground_e / d.ground_thr
+        return "radar", quiet_before(ratio, det, det - lookback, 1.0, s.cyc)
     thr = kmh_s_to_mps2(cfg.residual_threshold_kmh_s)
     crit, ref = lobe(d.residual, det, d.horizon, s.filters.M, thr)
     return crit, quiet_before(d.residual, ref, ref - lookback, thr, s.cyc)

@@ -568,24 +568,3 @@ def test_missing_imu_cycles() -> None:
     assert len(odo.episodes) == 1
     err, _, _ = episode_error(odo, sc)
     assert abs(err) < 0.02
-
-
-def test_radar_bridges_the_episode_with_ground_speed() -> None:
-    """With a radar (true speed + 0.5 % noise) the episode distance comes from it: the
-    error is the radar's, the budget 1 % + 0.5 m instead of eq. 13; detection unchanged."""
-    onset = 20.0
-    sc = scenario(40.0, const(0.5), 5.0, slip=slip_pulse(onset, 4.0, 0.3), ax_noise_kmh_s=0.1)
-    rng = np.random.default_rng(3)
-    radar = sc.v_true * (1.0 + 0.005 * rng.standard_normal(sc.v_true.size))
-    plain = correct_odometry(sc.cycles, CFG)
-    odo = correct_odometry(sc.cycles, CFG, radar)
-    (ep,) = odo.episodes
-    assert ep.speed_source == "radar"
-    assert (ep.t_start, ep.t_end) == (plain.episodes[0].t_start, plain.episodes[0].t_end)
-    err, _, _ = episode_error(odo, sc)
-    assert abs(err) < 0.005
-    assert ep.max_error_m == pytest.approx(0.01 * ep.d_corrected_m + 0.5)
-    assert ep.max_error_m < plain.episodes[0].max_error_m
-    # a radar gap inside the episode: the inertial solution is used
-    radar[ep.i_start + 5] = np.nan
-    assert correct_odometry(sc.cycles, CFG, radar).episodes[0].speed_source == "inertial"

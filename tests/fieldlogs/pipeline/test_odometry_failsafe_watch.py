@@ -76,22 +76,6 @@ def test_watch_after_a_slide_ending_with_the_failsafe_is_short() -> None:
     assert rate * watch_s <= d.allowance_m <= rate * watch_s + 0.5 * CFG.delta_a_mps2 * watch_s**2 + 5.0
 
 
-def test_radar_watch_uses_the_radar_speed() -> None:
-    sc = long_slide()
-    rng = np.random.default_rng(5)
-    radar = sc.v_true * (1.0 + 0.005 * rng.standard_normal(sc.v_true.size))
-    odo = correct_odometry(sc.cycles, CFG, radar)
-    ep = odo.episodes[0]
-    assert ep.failsafe and ep.watch is not None and ep.watch.speed_source == "radar"
-    plain_watch = correct_odometry(sc.cycles, CFG).episodes[0].watch
-    assert plain_watch is not None
-    plain = plain_watch.allowance_m
-    # the radar does not drift: the watch adds the pulse loss and 1 %, not Δa·t
-    assert ep.watch.allowance_m < 0.6 * plain
-    err = np.abs(odo.d - sc.s_true)
-    assert (err[ep.i_end :] <= odo.allowance[ep.i_end :]).all()
-
-
 # --------------------------------------------------------------------------- lobe rule
 def lobes(end_peak: float) -> str:
     """Residual: noise-free zero, an opposite (negative) lobe of −0.7·THR over 10–12 s, the

@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import json
+import shutil
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
@@ -24,11 +25,13 @@ from hypothesis import strategies as st
 from dbtools.database import read_network
 from fieldlogs.io import read_run
 from fieldlogs.pipeline import PipelineResult, run_pipeline
+from fieldlogs.pipeline.aid import SpeedOnCycles
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.odometry import (
     EpisodeDiagnostics,
     OdometryDiagnostics,
+    align_ground,
     align_streams,
     assemble,
     correct_odometry,
@@ -36,6 +39,8 @@ from fieldlogs.pipeline.odometry import (
     find_episodes,
     watch_failsafes,
 )
+from fieldlogs.pipeline.odometry.ground import metres_per_pulse
+from fieldlogs.pipeline.odometry.ground_products import ground_products
 from fieldlogs.pipeline.summary import DETAIL_DIGITS
 from fieldlogs.pipeline.types import FailsafeWatch, SlipEpisode
 from schemas.jsonable import jsonable
@@ -103,17 +108,21 @@ def arrays(x: Any) -> list[np.ndarray]:
     return []
 
 
-def run_stages(cycles: Cycles, cfg: OdometryConfig, radar: np.ndarray | None) -> tuple[Any, ...]:
+def run_stages(cycles: Cycles, cfg: OdometryConfig, radar: SpeedOnCycles | None) -> tuple[Any, ...]:
     s = align_streams(cycles, cfg)
-    d = detect(s, cfg)
-    eps = find_episodes(s, d, cfg)
-    watches = watch_failsafes(s, cfg, eps, radar)
-    return s, d, eps, watches, assemble(s, d, cfg, eps, watches, radar)
+    g = None if radar is None else align_ground(s, radar, metres_per_pulse(cycles.pulses, cycles.d_pulse))
+    d = detect(s, cfg, g)
+    eps = find_episodes(s, d, cfg, g)
+    watches = watch_failsafes(s, cfg, eps)
+    odo = assemble(s, d, cfg, eps, watches)
+    if g is not None:
+        odo = ground_products(s, g, cfg, odo, [ep.i_settled - s.delay for ep in eps])
+    return s, g, d, eps, watches, odo
 
 
 def random_run(
     data: st.DataObject,
-) -> tuple[Scenario, OdometryConfig, np.ndarray | None]:
+) -> tuple[Scenario, OdometryConfig, SpeedOnCycles | None]:
     onset = data.draw(st.floats(12.0, 18.0), label="onset")
     dur = data.draw(st.floats(1.0, 14.0), label="duration")
     factor = data.draw(st.sampled_from([-1.0, 1.0]), label="sign") * data.draw(st.floats(0.05, 0.4), label="depth")
@@ -140,7 +149,11 @@ def random_run(
     )
     radar = None
     if data.draw(st.booleans(), label="radar"):
-        radar = sc.v_true * (1.0 + 0.005 * np.random.default_rng(2).standard_normal(sc.v_true.size))
+        v = sc.v_true * (1.0 + 0.005 * np.random.default_rng(2).standard_normal(sc.v_true.size))
+        if data.draw(st.booleans(), label="radar gap"):
+            v[(sc.cycles.t > onset) & (sc.cycles.t < onset + 1.5)] = np.nan
+        radar = SpeedOnCycles(v, np.maximum(0.005 * np.abs(v), 0.02), "radar", signed_mps=v * sc.cycles.cab)
+        cfg = replace(cfg, wheel_calibration=data.draw(st.booleans(), label="calibration"))
     return sc, cfg, radar
 
 
@@ -149,23 +162,25 @@ def random_run(
 def test_stages_are_pure(data: st.DataObject) -> None:
     sc, cfg, radar = random_run(data)
     cycles_before = copy.deepcopy(sc.cycles)
-    radar_before = None if radar is None else radar.copy()
+    radar_before = copy.deepcopy(radar)
     first = run_stages(sc.cycles, cfg, radar)
-    s, d, eps, watches, odo = first
-    kept = copy.deepcopy((s, d, eps, watches))
+    s, g, d, eps, watches, odo = first
+    kept = copy.deepcopy((s, g, d, eps, watches))
     # the same inputs again, and each later stage run again on the first run's results
     assert_same(run_stages(sc.cycles, cfg, radar), first)
-    eps_again = find_episodes(s, d, cfg)
+    eps_again = find_episodes(s, d, cfg, g)
     assert_same(eps_again, eps)
-    assert_same(assemble(s, d, cfg, eps_again, watch_failsafes(s, cfg, eps_again, radar), radar), odo)
+    again = assemble(s, d, cfg, eps_again, watch_failsafes(s, cfg, eps_again))
+    if g is not None:
+        again = ground_products(s, g, cfg, again, [ep.i_settled - s.delay for ep in eps_again])
+    assert_same(again, odo)
     assert_same(correct_odometry(sc.cycles, cfg, radar), odo)
     # nothing was changed: inputs, earlier results
     assert_same(sc.cycles, cycles_before)
-    if radar is not None:
-        assert_same(radar, radar_before)
-    assert_same((s, d, eps, watches), kept)
+    assert_same(radar, radar_before)
+    assert_same((s, g, d, eps, watches), kept)
     # frozen results with read-only arrays (the output Odometry itself stays writable)
-    for part in (s, d, *eps, *(w for w in watches if w is not None)):
+    for part in (s, d, *eps, *(w for w in watches if w is not None), *([] if g is None else [g])):
         with pytest.raises(dataclasses.FrozenInstanceError):
             setattr(part, dataclasses.fields(part)[0].name, None)
         assert not any(a.flags.writeable for a in arrays(part))
@@ -204,15 +219,39 @@ def test_episode_event_detail_is_its_public_fields() -> None:
 
 # --------------------------------------------------------------------------- pipeline events
 @pytest.fixture(scope="module")
-def slips_run(sample_db: Path) -> PipelineResult:
+def slips_run(sample_db: Path, tmp_path_factory: pytest.TempPathFactory) -> PipelineResult:
+    """The sample run with slips, without its radar: two of its episodes fail safe."""
+    folder = tmp_path_factory.mktemp("slips") / "sim-d-slips"
+    shutil.copytree(SAMPLE_LOGS / "sim-d-slips", folder, ignore=shutil.ignore_patterns("radar*"))
+    return run_pipeline(read_run(folder), read_network(sample_db))
+
+
+@pytest.fixture(scope="module")
+def slips_radar_run(sample_db: Path) -> PipelineResult:
+    """The sample run with slips and its radar stream."""
     return run_pipeline(read_run(SAMPLE_LOGS / "sim-d-slips"), read_network(sample_db))
 
 
+def test_no_internal_key_in_the_slip_events_with_radar(slips_radar_run: PipelineResult) -> None:
+    """With the radar the same holds; its two 9–9.4 s slips re-adhere (no fail-safe)."""
+    odo = slips_radar_run.odometry
+    assert all(e.speed_source == "radar" and not e.failsafe for e in odo.episodes)
+    assert slips_radar_run.summary["n_failsafe"] == 0
+    assert slips_radar_run.summary["radar"]["source"] == "radar"
+    assert_public_events(slips_radar_run)
+
+
 def test_no_internal_key_in_the_slip_events(slips_run: PipelineResult) -> None:
-    odo = slips_run.odometry
-    ev = slips_run.events[slips_run.events["type"].isin(["slip", "slide"])]
+    assert "radar" not in slips_run.summary and "wheel_calibration" not in slips_run.summary
+    assert_public_events(slips_run)
+    assert any(e.failsafe for e in slips_run.odometry.episodes)
+
+
+def assert_public_events(run: PipelineResult) -> None:
+    odo = run.odometry
+    ev = run.events[run.events["type"].isin(["slip", "slide"])]
     assert len(ev) == len(odo.episodes) >= 2
-    assert any(e.failsafe for e in odo.episodes) and any(e.readhered for e in odo.episodes)
+    assert any(e.readhered for e in odo.episodes)
     internal = LEGACY_INTERNAL | {f.name for f in dataclasses.fields(EpisodeDiagnostics)}
     internal |= {f.name for f in dataclasses.fields(OdometryDiagnostics)}
     by_t = {e.t_start: e for e in odo.episodes}
@@ -220,5 +259,5 @@ def test_no_internal_key_in_the_slip_events(slips_run: PipelineResult) -> None:
         detail = json.loads(text)
         assert not internal & set(detail), sorted(internal & set(detail))
         assert detail == jsonable(by_t[float(t)].event_detail(), DETAIL_DIGITS)
-    for summary_ep in slips_run.summary["episodes"]:
+    for summary_ep in run.summary["episodes"]:
         assert not internal & set(summary_ep)
