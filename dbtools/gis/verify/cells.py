@@ -17,6 +17,7 @@ from dbtools.gis.verify.config import (
     CELL_COLUMNS,
     COVERAGE_COLUMNS,
     DEFECT,
+    KM_EPOCH_COLUMN,
     MAX_CELL_M,
     UNVERIFIED,
     VERIFIED,
@@ -105,6 +106,11 @@ def match_fixes(
     u = (km - grid.km[cell]) / (grid.km[cell + 1] - grid.km[cell])
     run_code, runs = pd.factorize(fixes["run_id"].astype(str), sort=True)
     km_ref = fixes["km_ref_m"].to_numpy(dtype=float, na_value=np.nan)[f]
+    epoch = (
+        fixes[KM_EPOCH_COLUMN].to_numpy(dtype=float, na_value=0.0)[f]
+        if KM_EPOCH_COLUMN in fixes.columns
+        else np.zeros(f.size)
+    )
     out = pd.DataFrame(
         {
             "run": run_code[f].astype(np.int64),
@@ -113,6 +119,7 @@ def match_fixes(
             "offset_m": off,
             "u": u,
             "km_residual_m": km - km_ref,
+            "epoch": epoch.astype(np.int64),
         }
     )
     counts = {
