@@ -217,11 +217,15 @@ def _scans(rc: pd.DataFrame, matched: pd.DataFrame, grid: Cells, cfg: VerifyConf
     cell means of the km residual (step 8; nothing tested when ``cfg.scan`` is off)."""
     widths = sorted({max(1, round(w / GIS_SPACING_M)) for w in cfg.scan_windows_m}) if cfg.scan else []
     flank = max(1, round(cfg.background_m / GIS_SPACING_M))
-    lateral_values = pd.DataFrame({"cell": rc["cell"], "unit": rc["run"], "v": rc["off"]})
+    lateral_values = pd.DataFrame({"cell": rc["cell"], "unit": rc["run"], "v": rc["off"], "t": rc["t"]})
     km = matched[np.isfinite(matched["km_residual_m"].to_numpy())]
     n_epochs = int(km["epoch"].max()) + 1 if len(km) else 1
     km = km.assign(unit=km["run"].to_numpy() * n_epochs + km["epoch"].to_numpy())
-    km_values = km.groupby(["cell", "unit"], sort=True)["km_residual_m"].mean().rename("v").reset_index()
+    km_values = (
+        km.groupby(["cell", "unit"], sort=True)
+        .agg(v=("km_residual_m", "mean"), t=("t", "mean"))
+        .reset_index()
+    )
     out = []
     for values, min_shift in ((lateral_values, cfg.min_shift_m), (km_values, cfg.min_km_shift_m)):
         out.append(

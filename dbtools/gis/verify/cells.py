@@ -120,6 +120,7 @@ def match_fixes(
             "u": u,
             "km_residual_m": km - km_ref,
             "epoch": epoch.astype(np.int64),
+            "t": fixes["t"].to_numpy(dtype=float, na_value=np.nan)[f],
         }
     )
     counts = {
@@ -137,7 +138,8 @@ def match_fixes(
 
 
 def run_cell_means(matched: pd.DataFrame) -> pd.DataFrame:
-    """One row per (cell, run), sorted: fixes, mean offset, km-residual mean and its count."""
+    """One row per (cell, run), sorted: fixes, mean offset, km-residual mean and its count,
+    mean fix time."""
     if not len(matched):
         return pd.DataFrame({c: pd.Series([], dtype=t) for c, t in _RC_DTYPES.items()})
     cell = matched["cell"].to_numpy()
@@ -149,6 +151,7 @@ def run_cell_means(matched: pd.DataFrame) -> pd.DataFrame:
         off=("offset_m", "mean"),
         res=("km_residual_m", "mean"),
         n_res=("km_residual_m", "count"),
+        t=("t", "mean"),
     )
     key = out.index.to_numpy()
     out.insert(0, "run", key % n_runs)
@@ -156,7 +159,7 @@ def run_cell_means(matched: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index(drop=True)
 
 
-_RC_DTYPES = {"cell": np.int64, "run": np.int64, "n": np.int64, "off": float, "res": float, "n_res": np.int64}
+_RC_DTYPES = {"cell": np.int64, "run": np.int64, "n": np.int64, "off": float, "res": float, "n_res": np.int64, "t": float}
 
 
 def cell_statistics(rc: pd.DataFrame, matched: pd.DataFrame) -> pd.DataFrame:

@@ -69,7 +69,7 @@ KM_DEFECT_COLUMNS = (
     "length_m",
     "run_epochs",
     "residual_m",
-    "spread_m",
+    "se_m",
     "t_stat",
     "p_value",
     "q_value",
@@ -136,7 +136,7 @@ class VerifyConfig:
     )
     scan: bool = setting(True, "pool neighbouring cells: test windows of scan_windows_m along each track")
     scan_windows_m: tuple[float, ...] = setting(
-        (100.0, 200.0, 300.0, 400.0, 500.0), "window lengths of the scan (multiples of the 20 m cell)", "m", gt=0
+        (100.0, 140.0, 200.0, 300.0, 400.0, 500.0), "window lengths of the scan (multiples of the 20 m cell)", "m", gt=0
     )
     scan_correction: str = setting(
         "bonferroni", "multiple-testing correction over every window of every track: bonferroni or bh"

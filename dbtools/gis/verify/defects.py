@@ -206,7 +206,7 @@ def km_defect_table(selected: pd.DataFrame, grid: Cells) -> pd.DataFrame:
             "length_m": grid.km[b] - grid.km[a],
             "run_epochs": selected["units"].to_numpy(dtype=np.int64),
             "residual_m": selected["mean_m"].to_numpy(dtype=float),
-            "spread_m": np.sqrt(selected["var_m2"].to_numpy(dtype=float)),
+            "se_m": selected["se_m"].to_numpy(dtype=float),
             "t_stat": selected["t_stat"].to_numpy(dtype=float),
             "p_value": selected["p_value"].to_numpy(dtype=float),
             "q_value": selected["q_value"].to_numpy(dtype=float),

@@ -70,7 +70,23 @@ BLOCK_ENTRIES = 4_000_000
 #: Prior degrees of freedom above this count as infinite (the pooled z-test).
 D0_MAX = 1e6
 #: Columns of the tested windows (:func:`scan`).
-WINDOW_COLUMNS = ("tid", "first", "cells", "units", "mean_m", "var_m2", "s_mod_m", "df", "t_stat", "p_value", "q_value")
+WINDOW_COLUMNS = (
+    "tid",
+    "first",
+    "cells",
+    "units",
+    "weight",
+    "mean_m",
+    "var_m2",
+    "se_m",
+    "df",
+    "t_stat",
+    "p_value",
+    "q_value",
+)
+#: Smallest time factor h of a contrast [s]: the averaging and interpolation noise a
+#: contrast keeps when window and flanks are passed within a second or two.
+H_FLOOR_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -123,23 +139,26 @@ def fit_prior(var: FloatArray, df: FloatArray) -> Prior:
 
 
 def moderated_t(
-    mean: FloatArray, var: FloatArray, k: FloatArray, prior: Prior
+    mean: FloatArray, var: FloatArray, k: FloatArray, weight: FloatArray, prior: Prior
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """(s̃, df, t, two-sided p) of windows with contrast ``mean``, ``var`` over ``k`` units (module docstring)."""
+    """(se, df, t, two-sided p) of windows with weighted contrast ``mean``, unit variance
+    ``var`` over ``k`` units of total weight ``weight`` (module docstring): the moderated
+    variance, or the window's own where that is larger."""
     from scipy import stats
 
     d = k - 1.0
+    own = np.where(np.isfinite(var), var, 0.0)
     if prior.d0 > 0 and np.isfinite(prior.s0_sq):
-        s2 = (prior.d0 * prior.s0_sq + d * np.where(np.isfinite(var), var, 0.0)) / (prior.d0 + d)
+        s2 = np.maximum((prior.d0 * prior.s0_sq + d * own) / (prior.d0 + d), own)
         df = prior.d0 + d
     else:
         s2, df = var, d
     with np.errstate(invalid="ignore", divide="ignore"):
-        s = np.sqrt(s2)
-        t = mean / (s / np.sqrt(k))
+        se = np.sqrt(s2 / weight)
+        t = mean / se
     p = 2.0 * stats.t.sf(np.abs(t), np.maximum(df, 1.0))
     bad = (k < 2) | ~np.isfinite(t)
-    return s, df, np.where(bad, np.nan, t), np.where(bad, np.nan, p)
+    return se, df, np.where(bad, np.nan, t), np.where(bad, np.nan, p)
 
 
 # ------------------------------------------------------------------------------ contrasts
@@ -170,12 +189,19 @@ class _Track:
         return cls(lo, n, holes, seg_lo.astype(np.int64), seg_hi.astype(np.int64))
 
 
+def _side(p: FloatArray, lo: IntArray, hi: IntArray, n: FloatArray) -> FloatArray:
+    """Per unit and window, the mean of a prefix-summed quantity over cells lo..hi−1."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.asarray((p[:, hi] - p[:, lo]) / n, dtype=np.float64)
+
+
 def _window_sums(
-    ps: FloatArray, pc: FloatArray, trk: _Track, w: int, gap: int, flank: int
+    ps: FloatArray, pt: FloatArray, pc: FloatArray, trk: _Track, w: int, gap: int, flank: int
 ) -> tuple[IntArray, FloatArray, FloatArray]:
     """The starts a of the windows of w cells that hold cells only, and per unit (rows) and
-    window (columns) the contrast c and whether it exists (1.0 / 0.0). ``ps``/``pc``: prefix sums of the
-    units' cell means and of their cell counts (units × (n + 1))."""
+    window (columns) the contrast c and its weight 1/h (0 where the unit has no contrast).
+    ``ps``, ``pt``, ``pc``: prefix sums of the units' cell means, cell mean times and cell
+    counts (units × (n + 1))."""
     a = np.arange(0, trk.n - w + 1)
     a = a[(trk.holes[a + w] - trk.holes[a]) == 0]
     b = a + w
@@ -184,55 +210,67 @@ def _window_sums(
     end = trk.seg_hi[np.maximum(b - 1, 0)]
     r_lo = np.minimum(b + gap, end)
     r_hi = np.minimum(b + gap + flank, end)
-    n_core = pc[:, b] - pc[:, a]
-    n_l = pc[:, l_hi] - pc[:, np.minimum(l_lo, l_hi)]
-    n_r = pc[:, r_hi] - pc[:, r_lo]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        core = (ps[:, b] - ps[:, a]) / n_core
-        left = (ps[:, l_hi] - ps[:, np.minimum(l_lo, l_hi)]) / n_l
-        right = (ps[:, r_hi] - ps[:, r_lo]) / n_r
-    flank_mean = np.where(n_l > 0, np.where(n_r > 0, 0.5 * (left + right), left), right)
-    ok = (n_core > 0) & ((n_l > 0) | (n_r > 0))
+    n_core, n_l, n_r = pc[:, b] - pc[:, a], pc[:, l_hi] - pc[:, l_lo], pc[:, r_hi] - pc[:, r_lo]
+    core, left, right = _side(ps, a, b, n_core), _side(ps, l_lo, l_hi, n_l), _side(ps, r_lo, r_hi, n_r)
+    t_c, t_l, t_r = _side(pt, a, b, n_core), _side(pt, l_lo, l_hi, n_l), _side(pt, r_lo, r_hi, n_r)
+    has_l, has_r = n_l > 0, n_r > 0
+    both = has_l & has_r
+    flank_mean = np.where(has_l, np.where(has_r, 0.5 * (left + right), left), right)
+    # Brownian increments of the slow error: var ∝ (|Δt_l| + |Δt_r|)/4 for both flanks, |Δt| for one
+    h = np.where(
+        both,
+        0.25 * (np.abs(t_c - t_l) + np.abs(t_r - t_c)),
+        np.where(has_l, np.abs(t_c - t_l), np.abs(t_r - t_c)),
+    )
+    ok = (n_core > 0) & (has_l | has_r) & np.isfinite(h)
+    weight = np.where(ok, 1.0 / np.maximum(np.where(ok, h, 0.0), H_FLOOR_S), 0.0)
     c = np.where(ok, core - flank_mean, 0.0)
-    return a, c, ok.astype(float)
+    return a, c, weight
 
 
 def _track_windows(
     values: pd.DataFrame, trk: _Track, widths: Sequence[int], gap: int, flank: int
 ) -> list[pd.DataFrame]:
-    """Tested windows of one track: per width, units k and the contrasts' mean and variance
-    (accumulated over blocks of units so that memory stays bounded)."""
+    """Tested windows of one track: per width, units k, Σw, and the weighted contrasts' mean
+    and variance (accumulated over blocks of units so that memory stays bounded)."""
     unit_code, _ = pd.factorize(values["unit"], sort=True)
     n_units = int(unit_code.max()) + 1 if unit_code.size else 0
     local = values["cell"].to_numpy(dtype=np.int64) - trk.lo
     v = values["v"].to_numpy(dtype=float)
+    tv = values["t"].to_numpy(dtype=float)
     block = max(1, BLOCK_ENTRIES // max(trk.n, 1))
     acc: dict[int, list[FloatArray]] = {}
     starts: dict[int, IntArray] = {}
     for u0 in range(0, n_units, block):
         rows = (unit_code >= u0) & (unit_code < u0 + block)
         m = min(block, n_units - u0)
-        dense = np.zeros((m, trk.n))
-        has = np.zeros((m, trk.n))
-        dense[unit_code[rows] - u0, local[rows]] = v[rows]
-        has[unit_code[rows] - u0, local[rows]] = 1.0
-        ps = np.concatenate([np.zeros((m, 1)), np.cumsum(dense, axis=1)], axis=1)
-        pc = np.concatenate([np.zeros((m, 1)), np.cumsum(has, axis=1)], axis=1)
+        prefix = []
+        for col in (v, tv, np.ones_like(v)):
+            dense = np.zeros((m, trk.n))
+            dense[unit_code[rows] - u0, local[rows]] = col[rows]
+            prefix.append(np.concatenate([np.zeros((m, 1)), np.cumsum(dense, axis=1)], axis=1))
         for w in widths:
             if w > trk.n:
                 continue
-            a, c, ok = _window_sums(ps, pc, trk, w, gap, flank)
-            sums = [ok.sum(axis=0), c.sum(axis=0), (c * c).sum(axis=0)]
+            a, c, wt = _window_sums(prefix[0], prefix[1], prefix[2], trk, w, gap, flank)
+            sums = [(wt > 0).sum(axis=0).astype(float), wt.sum(axis=0), (wt * c).sum(axis=0), (wt * c * c).sum(axis=0)]
             starts[w] = a
             acc[w] = sums if w not in acc else [x + y for x, y in zip(acc[w], sums, strict=True)]
     out = []
-    for w, (k, s1, s2) in acc.items():
+    for w, (k, sw, s1, s2) in acc.items():
         with np.errstate(invalid="ignore", divide="ignore"):
-            mean = s1 / k
-            var = np.where(k > 1, (s2 - k * mean * mean) / (k - 1), np.nan)
+            mean = s1 / sw
+            var = np.where(k > 1, (s2 - s1 * mean) / (k - 1), np.nan)
         out.append(
             pd.DataFrame(
-                {"first": starts[w] + trk.lo, "cells": w, "units": k, "mean_m": mean, "var_m2": np.maximum(var, 0.0)}
+                {
+                    "first": starts[w] + trk.lo,
+                    "cells": w,
+                    "units": k,
+                    "weight": sw,
+                    "mean_m": mean,
+                    "var_m2": np.maximum(var, 0.0),
+                }
             )
         )
     return out
@@ -251,8 +289,8 @@ def contrasts(values: pd.DataFrame, grid: Cells, widths: Sequence[int], gap: int
             frames += [f.assign(tid=int(t)) for f in _track_windows(sub, trk, widths, gap, flank)]
     frames = [f[f["units"] > 0] for f in frames]
     if not frames:
-        return pd.DataFrame({c: pd.Series([], dtype=float) for c in WINDOW_COLUMNS[:6]})
-    return pd.concat(frames, ignore_index=True)[list(WINDOW_COLUMNS[:6])]
+        return pd.DataFrame({c: pd.Series([], dtype=float) for c in WINDOW_COLUMNS[:7]})
+    return pd.concat(frames, ignore_index=True)[list(WINDOW_COLUMNS[:7])]
 
 
 # ------------------------------------------------------------------------------ tests
@@ -264,7 +302,7 @@ def window_tests(windows: pd.DataFrame, min_units: int, correction: str) -> tupl
     ``first ≡ 0 mod cells`` of each track)."""
     w = windows[windows["units"] >= min_units].reset_index(drop=True)
     priors: dict[int, Prior] = {}
-    cols = {c: np.full(len(w), np.nan) for c in ("s_mod_m", "df", "t_stat", "p_value")}
+    cols = {c: np.full(len(w), np.nan) for c in ("se_m", "df", "t_stat", "p_value")}
     for cells, idx in w.groupby("cells").indices.items():
         sub = w.iloc[idx]
         disjoint = (sub["first"].to_numpy() % int(cells)) == 0
@@ -272,8 +310,9 @@ def window_tests(windows: pd.DataFrame, min_units: int, correction: str) -> tupl
         var = sub["var_m2"].to_numpy(dtype=float)
         prior = fit_prior(var[disjoint], k[disjoint] - 1.0)
         priors[int(cells)] = prior
-        s, df, t, p = moderated_t(sub["mean_m"].to_numpy(dtype=float), var, k, prior)
-        for name, val in zip(("s_mod_m", "df", "t_stat", "p_value"), (s, df, t, p), strict=True):
+        weight = sub["weight"].to_numpy(dtype=float)
+        se, df, t, p = moderated_t(sub["mean_m"].to_numpy(dtype=float), var, k, weight, prior)
+        for name, val in zip(("se_m", "df", "t_stat", "p_value"), (se, df, t, p), strict=True):
             cols[name][idx] = val
     for name, val in cols.items():
         w[name] = val
@@ -281,21 +320,30 @@ def window_tests(windows: pd.DataFrame, min_units: int, correction: str) -> tupl
     return w[list(WINDOW_COLUMNS)], priors
 
 
-def select_windows(tested: pd.DataFrame, alpha: float, min_shift_m: float, reach: int, n_points: int) -> pd.DataFrame:
-    """The significant windows taken greedily by |t|: a window is dropped when its core or
-    its flanks (``reach`` cells either side) touch a window already taken."""
+def select_windows(tested: pd.DataFrame, alpha: float, min_shift_m: float, reach: int) -> pd.DataFrame:
+    """The displaced stretches among the significant windows (module docstring): the most
+    significant window left (largest |t|) marks one; of the significant windows of the same
+    sign that overlap it, the one with the largest |mean| is the stretch (a window inside a
+    displaced stretch has part of it in a flank, a window around it dilutes it: the one that
+    fits has the largest contrast). Every window whose core or flanks (``reach`` cells either
+    side) touch a stretch taken is dropped."""
     sig = tested[(tested["q_value"] <= alpha) & (tested["mean_m"].abs() >= min_shift_m)]
     if sig.empty:
         return sig.assign(last=pd.Series([], dtype=np.int64))
     sig = sig.assign(order=-sig["t_stat"].abs()).sort_values(["order", "p_value"], kind="stable")
-    taken = np.zeros(n_points + 1, dtype=bool)
+    tid = sig["tid"].to_numpy()
+    lo = sig["first"].to_numpy(dtype=np.int64)
+    hi = lo + sig["cells"].to_numpy(dtype=np.int64)
+    sign = np.sign(sig["mean_m"].to_numpy(dtype=float))
+    size = np.abs(sig["mean_m"].to_numpy(dtype=float))
+    alive = np.ones(len(sig), dtype=bool)
     keep = []
-    for i, first, cells in zip(sig.index, sig["first"].to_numpy(), sig["cells"].to_numpy(), strict=True):
-        a, b = int(first), int(first + cells)
-        if taken[max(a - reach, 0) : b + reach].any():
-            continue
-        taken[a:b] = True
-        keep.append(i)
+    while alive.any():
+        top = int(np.argmax(alive))  # sorted by |t|: the first one alive
+        near = alive & (tid == tid[top]) & (sign == sign[top]) & (lo < hi[top]) & (hi > lo[top])
+        best = int(np.flatnonzero(near)[np.argmax(size[near])])
+        keep.append(sig.index[best])
+        alive &= ~((tid == tid[best]) & (lo - reach < hi[best]) & (hi + reach > lo[best]))
     out = sig.loc[keep].drop(columns="order").sort_values(["tid", "first"]).reset_index(drop=True)
     out["last"] = (out["first"] + out["cells"] - 1).astype(np.int64)
     return out
@@ -324,10 +372,10 @@ def scan(
 ) -> ScanResult:
     """Contrasts, moderated tests, correction and greedy selection (module docstring)."""
     if not widths:
-        return ScanResult(select_windows(pd.DataFrame(columns=list(WINDOW_COLUMNS)), alpha, 0.0, 0, 0), 0, {})
+        return ScanResult(select_windows(pd.DataFrame(columns=list(WINDOW_COLUMNS)), alpha, 0.0, 0), 0, {})
     windows = contrasts(values, grid, widths, SCAN_GAP_CELLS, flank)
     tested, priors = window_tests(windows, min_units, correction)
-    selected = select_windows(tested, alpha, min_shift_m, SCAN_GAP_CELLS + flank, grid.km.size)
+    selected = select_windows(tested, alpha, min_shift_m, SCAN_GAP_CELLS + flank)
     return ScanResult(selected, len(tested), priors)
 
 
