@@ -2,9 +2,9 @@
 
 One TOML file (``--config FILE.toml``) configures every command: ``run``, ``audit`` and
 ``gis verify`` read the pipeline's sections (``[odometry]``, ``[balise]``, ``[feature]``,
-``[gps]``, ``[margin]``, ``cycle_s``), ``possession check`` reads ``[gps]`` and
-``[possession]``; each command refuses unknown sections and keys, wrong types and values out
-of range. ``trainpos config show`` prints the whole tree (or one section) with every
+``[gps]``, ``[margin]``, ``cycle_s``), ``gis verify`` also ``[gis_verify]``, ``possession
+check`` reads ``[gps]`` and ``[possession]``; each command refuses unknown sections and
+keys, wrong types and values out of range. ``trainpos config show`` prints the whole tree (or one section) with every
 default, unit, range and meaning as commented TOML; fed back with ``--config`` it changes
 nothing.
 """
@@ -25,6 +25,7 @@ from fieldlogs.pipeline.config import (
     PipelineConfig,
     read_toml,
 )
+from dbtools.gis.verify.config import VerifyConfig
 from fieldlogs.possession.config import PossessionConfig
 from schemas.errors import InputError, UsageError
 from schemas.settings import SettingError, check_ranges, describe, render_toml, section_from_dict, setting, typed
@@ -40,6 +41,7 @@ class SuiteConfig:
     gps: GpsConfig = field(default_factory=GpsConfig)
     margin: MarginConfig = field(default_factory=MarginConfig)
     possession: PossessionConfig = field(default_factory=PossessionConfig)
+    gis_verify: VerifyConfig = field(default_factory=VerifyConfig)
     cycle_s: float = setting(**CYCLE_S)
 
     def __post_init__(self) -> None:
