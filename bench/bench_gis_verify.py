@@ -193,6 +193,7 @@ def evaluate(result: Any, defects: list[dict[str, Any]], truth: Network, surveye
             keys = pd.MultiIndex.from_arrays([[d["line_code"]] * km.size, [d["track"]] * km.size, km])
             truth_p = t_xy.loc[keys]
             now = s_xy.loc[keys].copy()
+            moved = moved[~moved.index.duplicated(keep="first")]
             hitp = moved.index.intersection(keys)
             now.loc[hitp, ["x", "y"]] = moved.loc[hitp, ["x", "y"]].to_numpy()
             err = np.hypot(now["x"].to_numpy() - truth_p["x"].to_numpy(), now["y"].to_numpy() - truth_p["y"].to_numpy())

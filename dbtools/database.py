@@ -26,7 +26,7 @@ from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.model import Table
-from schemas.registry import REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
+from schemas.registry import IMPACTS, REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
 from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, DB_TABLES, META, SCHEMA_VERSION
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -317,13 +317,30 @@ def registry_find(conn: sqlite3.Connection, db_version: str) -> dict[str, object
     return None if row is None else dict(zip([d[0] for d in cur.description], row, strict=True))
 
 
-def registry_insert(conn: sqlite3.Connection, row: dict[str, object]) -> None:
-    """Insert one release row (a duplicate db_version violates the primary key)."""
-    cols = RELEASES.column_names
+def registry_insert(conn: sqlite3.Connection, row: dict[str, object], table: Table = RELEASES) -> None:
+    """Insert one release row (a duplicate db_version violates the primary key), or with
+    ``table`` = ``IMPACTS`` a release's impact report — creating that table in a registry
+    that has none yet (older registries stay readable: ``releases`` is unchanged)."""
+    if table is IMPACTS:
+        _create_tables(sqlite_utils.Database(conn), (IMPACTS,), if_not_exists=True)
+    cols = table.column_names
     conn.execute(
-        f"INSERT INTO [{RELEASES.name}] ({','.join(f'[{c}]' for c in cols)}) VALUES ({','.join('?' * len(cols))})",
+        f"INSERT INTO [{table.name}] ({','.join(f'[{c}]' for c in cols)}) VALUES ({','.join('?' * len(cols))})",
         [row.get(c) for c in cols],
     )
+
+
+def read_impacts(path: Path) -> dict[str, dict[str, object]]:
+    """The impact-report rows of a registry by db_version (empty without a registry or a
+    ``release_impacts`` table), read-only."""
+    if not Path(path).exists():
+        return {}
+    with _registry_ro(Path(path)) as conn:
+        if not conn.execute("SELECT 1 FROM sqlite_master WHERE name = ?", (IMPACTS.name,)).fetchone():
+            return {}
+        cols = IMPACTS.column_names
+        cur = conn.execute(f"SELECT {','.join(f'[{c}]' for c in cols)} FROM [{IMPACTS.name}]")
+        return {str(r[0]): dict(zip(cols, r, strict=True)) for r in cur.fetchall()}
 
 
 def read_registry(path: Path) -> list[dict[str, object]]:
@@ -331,6 +348,17 @@ def read_registry(path: Path) -> list[dict[str, object]]:
     path = Path(path)
     if not path.exists():
         raise InputError("no release registry here (nothing released yet?)", path=path)
+    with _registry_ro(path) as conn:
+        cols = RELEASES.column_names
+        cur = conn.execute(
+            f"SELECT {','.join(f'[{c}]' for c in cols)} FROM [{RELEASES.name}] ORDER BY released_at, db_version"
+        )
+        return [dict(zip(cols, r, strict=True)) for r in cur.fetchall()]
+
+
+@contextlib.contextmanager
+def _registry_ro(path: Path) -> Iterator[sqlite3.Connection]:
+    """A read-only connection to a checked registry; InputError when it cannot be read."""
     _check_registry_file(path)
     try:
         conn = sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)
@@ -338,11 +366,7 @@ def read_registry(path: Path) -> list[dict[str, object]]:
         raise InputError(f"cannot open release registry: {exc}", path=path) from exc
     try:
         _check_registry_schema(conn, path)
-        cols = RELEASES.column_names
-        cur = conn.execute(
-            f"SELECT {','.join(f'[{c}]' for c in cols)} FROM [{RELEASES.name}] ORDER BY released_at, db_version"
-        )
-        return [dict(zip(cols, r, strict=True)) for r in cur.fetchall()]
+        yield conn
     except sqlite3.DatabaseError as exc:
         raise InputError(f"release registry is corrupt or unreadable: {exc}", path=path) from exc
     finally:
