@@ -291,7 +291,7 @@ def subset_table(
     for n in sizes:
         for name, cfg in configs.items():
             rng = np.random.default_rng(1000 + n)
-            agg: dict[str, Any] = {k: 0 for k in ("found", "total", "hard", "hard_found", "false", "clean", "kmf")}
+            agg: dict[str, Any] = dict.fromkeys(("found", "total", "hard", "hard_found", "false", "clean", "kmf"), 0)
             agg.update(evid=0.0, evid_sv=0.0, corr=[], loc=[])
             for _ in range(seeds):
                 folders = pick_runs(runs, n, rng)
@@ -315,7 +315,9 @@ def subset_table(
             be = f"{agg['false']} = {100 * agg['false'] / max(agg['evid_sv'], 1e-9):5.2f}"
             cr = f"{np.sqrt(np.mean(corr**2)):5.2f}/{np.percentile(corr, 95):5.2f}" if corr.size else "—"
             lc = f"{np.median(loc):5.0f}/{loc.max():5.0f}" if loc.size else "—"
-            print(f"{n:>10d} {name:>7s} {rec:>13s} {hard:>11s} {fa:>13s} {be:>14s} {agg['kmf']:>9d} {cr:>17s} {lc:>16s}")
+            print(
+                f"{n:>10d} {name:>7s} {rec:>13s} {hard:>11s} {fa:>13s} {be:>14s} {agg['kmf']:>9d} {cr:>17s} {lc:>16s}"
+            )
     print(
         "targets (after, 5 runs/track): recall ≥ 95 % of 1.5–3 m over 100–300 m; ≤ 1 false defect per 100 "
         "track-km; corrections within 0.5 m. 'km false': along-track defects on the truth DB."

@@ -275,7 +275,9 @@ def impact(
         None, "--plan", help="Possession plan (CSV/XLSX): road-rail runs are checked against it on both versions."
     ),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="Processes replaying runs."),
-    config: Path | None = typer.Option(None, "--config", help="Settings (TOML): the pipeline's sections, [possession]."),
+    config: Path | None = typer.Option(
+        None, "--config", help="Settings (TOML): the pipeline's sections, [possession]."
+    ),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
 ) -> None:
     """Replay runs against two DB versions and show what the new one changes, before `db release`.
@@ -311,7 +313,9 @@ def impact(
     _emit_impact(report, fmt, out)
 
 
-def _impact_report(old: Path, new: Path, runs: list[Path], plan: Path | None, tree: object, workers: int) -> ImpactReport:
+def _impact_report(
+    old: Path, new: Path, runs: list[Path], plan: Path | None, tree: object, workers: int
+) -> ImpactReport:
     """The impact report, with a progress bar on stderr while the runs are replayed."""
     from cli.gis import _Bar
     from cli.render import err_console, progress

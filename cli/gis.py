@@ -9,7 +9,7 @@ import time
 from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 import typer
@@ -253,7 +253,7 @@ def verify(
 
     _check_targets(fmt, out, propose, force)
     tree = load_tree(config)
-    overrides = {
+    overrides: dict[str, Any] = {
         "alpha": alpha,
         "correction": "bonferroni" if bonferroni else None,
         "min_shift_m": min_shift,

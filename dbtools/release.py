@@ -230,7 +230,7 @@ def release_db(
 def _store_impact(conn: Any, impact: ImpactAttachment, path: Path, version: str, created: list[Path]) -> None:
     """The report file (read-only, atomically) and its registry row."""
     _atomic_write(path, impact.report_json, created)
-    row = {
+    row: dict[str, object] = {
         "db_version": version,
         "file": path.name,
         "sha256": hashlib.sha256(impact.report_json).hexdigest(),
@@ -474,7 +474,9 @@ def _verify_impact(registry: Path, r: Release, row: dict[str, object]) -> list[F
     return []
 
 
-def _unregistered(registry: Path, releases: list[Release], with_impact: AbstractSet[str] = frozenset()) -> list[Finding]:
+def _unregistered(
+    registry: Path, releases: list[Release], with_impact: AbstractSet[str] = frozenset()
+) -> list[Finding]:
     """Released-looking files that no registry row names (debris or smuggled in)."""
     known = {r.file for r in releases} | {f"{r.db_version}.sha256" for r in releases} | {REGISTRY_FILE}
     known |= {impact_file_name(v) for v in with_impact}

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from dbtools.gis.verify.config import VerifyConfig
 from fieldlogs.pipeline.config import (
     CYCLE_S,
     BaliseConfig,
@@ -25,7 +26,6 @@ from fieldlogs.pipeline.config import (
     PipelineConfig,
     read_toml,
 )
-from dbtools.gis.verify.config import VerifyConfig
 from fieldlogs.possession.config import PossessionConfig
 from schemas.errors import InputError, UsageError
 from schemas.settings import SettingError, check_ranges, describe, render_toml, section_from_dict, setting, typed

@@ -103,13 +103,16 @@ def render_html(report: ImpactReport) -> str:
         kit.paragraph(f"{kit.generated()}."),
         _verdict(d),
         kit.key_value_table(sides),
-        kit.section("Per route", kit.frame_table(figure_frame(d["routes"], ("line_code", "track", "direction", "runs")), _cell)),
+        kit.section(
+            "Per route", kit.frame_table(figure_frame(d["routes"], ("line_code", "track", "direction", "runs")), _cell)
+        ),
     ]
     if d["runs"]:
         parts.append(kit.section("Balise-correction % per run", kit.figure(pct_figure(d["runs"]), "old vs new")))
         parts.append(
             kit.section(
-                "Per run", kit.frame_table(figure_frame(d["runs"], ("run_id", "vehicle_id", "line_code", "track")), _cell)
+                "Per run",
+                kit.frame_table(figure_frame(d["runs"], ("run_id", "vehicle_id", "line_code", "track")), _cell),
             )
         )
     changed = _changed_runs(d["runs"])

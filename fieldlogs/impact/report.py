@@ -92,7 +92,7 @@ def changed_corrections(old: RunFigures, new: RunFigures) -> list[dict[str, Any]
             {
                 "type": r.type,
                 "row": r.row,
-                "t": float(r.t),
+                "t": float(r.t),  # type: ignore[arg-type]
                 "old_m": old_m,
                 "new_m": new_m,
                 "delta_m": None if old_m is None or new_m is None else round(new_m - old_m, 6),

@@ -4,6 +4,8 @@ correction over windows by hand, and recall / false defects on seeded hand-made 
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -13,7 +15,7 @@ from scipy import special, stats
 
 from dbtools.gis.geometry import Projector
 from dbtools.gis.index import grid_index
-from dbtools.gis.verify import FIX_COLUMNS, DEFECT, VerifyConfig, verify_fixes
+from dbtools.gis.verify import DEFECT, FIX_COLUMNS, VerifyConfig, verify_fixes
 from dbtools.gis.verify.cells import Cells
 from dbtools.gis.verify.scan import (
     Prior,
@@ -116,9 +118,7 @@ def test_moderated_t_by_hand() -> None:
 def test_contrast_by_hand() -> None:
     """Two runs on a 12-cell track, windows of 2 cells, flanks of 2 cells one cell away:
     contrast = mean(core) − ½(mean(left) + mean(right)), weight 1/h with h from the times."""
-    net = build_network(
-        [LineSpec("0100", "s", Alignment(260.0, [], x0=0.0, y0=0.0, heading0=0.0, km0=0.0))], PROJECTOR
-    )
+    net = build_network([LineSpec("0100", "s", Alignment(260.0, [], x0=0.0, y0=0.0, heading0=0.0, km0=0.0))], PROJECTOR)
     grid = Cells.build(grid_index(net))
     d_cells = np.flatnonzero(grid.tid == grid.tid[0])[:12]
     v = np.array([0, 0, 0, 0, 0, 2, 2, 0, 0, 0, 0, 0], dtype=float)
@@ -259,9 +259,9 @@ def test_unverified_cells_stay_unverified_under_the_scan(line: Network) -> None:
 
 
 def test_config_is_checked() -> None:
-    with pytest.raises(InputError, match="'gis_verify.scan_correction' = 'max' is not one of"):
+    with pytest.raises(InputError, match=re.escape("'gis_verify.scan_correction' = 'max' is not one of")):
         VerifyConfig(scan_correction="max")
-    with pytest.raises(InputError, match=r"'gis_verify.scan_windows_m' = \(100.0, -20.0\) m is out of range"):
+    with pytest.raises(InputError, match=re.escape("'gis_verify.scan_windows_m' = (100.0, -20.0) m is out of range")):
         VerifyConfig(scan_windows_m=(100.0, -20.0))
-    with pytest.raises(InputError, match="'gis_verify.alpha' = 0.7 is out of range"):
+    with pytest.raises(InputError, match=re.escape("'gis_verify.alpha' = 0.7 is out of range")):
         VerifyConfig(alpha=0.7)

@@ -221,11 +221,7 @@ def _scans(rc: pd.DataFrame, matched: pd.DataFrame, grid: Cells, cfg: VerifyConf
     km = matched[np.isfinite(matched["km_residual_m"].to_numpy())]
     n_epochs = int(km["epoch"].max()) + 1 if len(km) else 1
     km = km.assign(unit=km["run"].to_numpy() * n_epochs + km["epoch"].to_numpy())
-    km_values = (
-        km.groupby(["cell", "unit"], sort=True)
-        .agg(v=("km_residual_m", "mean"), t=("t", "mean"))
-        .reset_index()
-    )
+    km_values = km.groupby(["cell", "unit"], sort=True).agg(v=("km_residual_m", "mean"), t=("t", "mean")).reset_index()
     out = []
     for values, min_shift in ((lateral_values, cfg.min_shift_m), (km_values, cfg.min_km_shift_m)):
         out.append(

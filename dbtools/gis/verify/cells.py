@@ -159,7 +159,15 @@ def run_cell_means(matched: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index(drop=True)
 
 
-_RC_DTYPES = {"cell": np.int64, "run": np.int64, "n": np.int64, "off": float, "res": float, "n_res": np.int64, "t": float}
+_RC_DTYPES = {
+    "cell": np.int64,
+    "run": np.int64,
+    "n": np.int64,
+    "off": float,
+    "res": float,
+    "n_res": np.int64,
+    "t": float,
+}
 
 
 def cell_statistics(rc: pd.DataFrame, matched: pd.DataFrame) -> pd.DataFrame:

@@ -123,7 +123,9 @@ class VerifyConfig:
     min_shift_m: float = setting(0.5, "smallest mean lateral offset worth correcting", "m", ge=0)
     min_runs: int = setting(3, "fewer runs through a cell or window → unverified (the run is the unit)", ge=2)
     min_fixes: int = setting(5, "fewer fixes in a cell → unverified", ge=1)
-    tolerance_m: float = setting(1.5, "a cell is verified only if its 95 % CI of the mean offset is within ±this", "m", gt=0)
+    tolerance_m: float = setting(
+        1.5, "a cell is verified only if its 95 % CI of the mean offset is within ±this", "m", gt=0
+    )
     max_offset_m: float = setting(10.0, "fixes farther than this from their known track are not evidence", "m", gt=0)
     merge_gap_cells: int = setting(1, "defect cells with at most this many cells between them form one defect", ge=0)
     background_m: float = setting(

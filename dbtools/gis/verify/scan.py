@@ -104,7 +104,7 @@ def trigamma_inverse(x: float) -> float:
     from scipy.special import polygamma
 
     if x > 1e7:
-        return 1.0 / np.sqrt(x)
+        return float(1.0 / np.sqrt(x))
     if x < 1e-6:
         return 1.0 / x
     y = 0.5 + 1.0 / x
@@ -303,13 +303,14 @@ def window_tests(windows: pd.DataFrame, min_units: int, correction: str) -> tupl
     w = windows[windows["units"] >= min_units].reset_index(drop=True)
     priors: dict[int, Prior] = {}
     cols = {c: np.full(len(w), np.nan) for c in ("se_m", "df", "t_stat", "p_value")}
-    for cells, idx in w.groupby("cells").indices.items():
+    for key, idx in w.groupby("cells").indices.items():
+        cells = int(key)  # type: ignore[call-overload]
         sub = w.iloc[idx]
-        disjoint = (sub["first"].to_numpy() % int(cells)) == 0
+        disjoint = (sub["first"].to_numpy() % cells) == 0
         k = sub["units"].to_numpy(dtype=float)
         var = sub["var_m2"].to_numpy(dtype=float)
         prior = fit_prior(var[disjoint], k[disjoint] - 1.0)
-        priors[int(cells)] = prior
+        priors[cells] = prior
         weight = sub["weight"].to_numpy(dtype=float)
         se, df, t, p = moderated_t(sub["mean_m"].to_numpy(dtype=float), var, k, weight, prior)
         for name, val in zip(("se_m", "df", "t_stat", "p_value"), (se, df, t, p), strict=True):

@@ -18,8 +18,8 @@ from dbtools.build import build_db
 from dbtools.release import impact_file_name, list_impacts, verify_releases
 from dbtools.sample_network import sample_source_dir
 from fieldlogs.impact import FIGURES, impact_runs
-from fieldlogs.impact.report import changed_corrections
 from fieldlogs.impact.replay import RunFigures
+from fieldlogs.impact.report import changed_corrections
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"
 MOVED = "0420-D-C001"
@@ -90,7 +90,9 @@ def test_same_content_changes_nothing(sample_db: Path, tmp_path: Path) -> None:
 def test_changed_corrections_by_hand() -> None:
     def figs(*rows: tuple[str, str, float, float | None]) -> RunFigures:
         cols = ("type", "row", "t", "correction_m")
-        return RunFigures(True, corrections=[{**dict(zip(cols, r)), "km_m": 0.0, "correction_pct": 0.1} for r in rows])
+        return RunFigures(
+            True, corrections=[{**dict(zip(cols, r, strict=True)), "km_m": 0.0, "correction_pct": 0.1} for r in rows]
+        )
 
     old = figs(("balise_correction", "B1", 10.0, 0.4), ("balise_correction", "B2", 50.0, 0.2))
     new = figs(("balise_correction", "B1", 10.0, 0.405), ("feature_correction", "F1", 30.0, 1.0))
@@ -106,7 +108,9 @@ def test_cli_json_html_and_refusals(runner: CliRunner, sample_db: Path, moved_db
     data = json.loads(res.stdout[res.stdout.index("{") :])
     assert data["totals"]["corrections_changed"] >= 1
     page = tmp_path / "impact.html"
-    res = runner.invoke(app, ["db", "impact", str(sample_db), str(moved_db), run, "--format", "html", "--out", str(page)])
+    res = runner.invoke(
+        app, ["db", "impact", str(sample_db), str(moved_db), run, "--format", "html", "--out", str(page)]
+    )
     assert res.exit_code == 0, res.output
     html = page.read_text(encoding="utf-8")
     assert "Impact of a new DB version" in html and MOVED in html and "data:image/png;base64" in html
