@@ -265,3 +265,25 @@ def test_config_is_checked() -> None:
         VerifyConfig(scan_windows_m=(100.0, -20.0))
     with pytest.raises(InputError, match=re.escape("'gis_verify.alpha' = 0.7 is out of range")):
         VerifyConfig(alpha=0.7)
+
+
+def test_along_track_residual_stretch_is_found_and_a_drift_is_not(line: Network) -> None:
+    """Pipeline km = true km + the run's drift (0.3 % of the travel since its last balise,
+    every 1.5 km, the same for every run: one vehicle's wheel error) + 0.3 m noise; on D
+    km 4000–4200 the GIS km is 2 m short of the truth (grid points placed 2 m too early)."""
+    rng = np.random.default_rng(11)
+    f = fleet(rng, 5, [])
+    km_true, _ = PROJECTOR.to_xy(f["lon"].to_numpy(), f["lat"].to_numpy())  # the line runs east from x = km = 0
+    since = np.mod(km_true, 1500.0)
+    gis_err = np.where((f["track"] == "D").to_numpy() & (km_true >= 4000) & (km_true < 4200), 2.0, 0.0)
+    f["km_ref_m"] = km_true + 0.003 * since + rng.normal(0.0, 0.3, len(f)) + gis_err
+    f["km_ref_epoch"] = (km_true // 1500.0).astype(int)
+    res = verify_fixes(line, f)
+    k = res.km_defects
+    assert len(k) == 1, k
+    row = k.iloc[0]
+    assert row["track"] == "D" and abs(row["km_from_m"] - 4000) <= 40 and abs(row["km_to_m"] - 4200) <= 40
+    assert row["residual_m"] == pytest.approx(-2.0, abs=0.4)  # GIS km − pipeline km
+    assert res.has_defects and res.defects.empty
+    clean = verify_fixes(line, f.assign(km_ref_m=f["km_ref_m"] - gis_err))
+    assert clean.km_defects.empty  # the drift alone is no defect

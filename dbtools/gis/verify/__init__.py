@@ -223,7 +223,7 @@ def _scans(rc: pd.DataFrame, matched: pd.DataFrame, grid: Cells, cfg: VerifyConf
     km = km.assign(unit=km["run"].to_numpy() * n_epochs + km["epoch"].to_numpy())
     km_values = km.groupby(["cell", "unit"], sort=True).agg(v=("km_residual_m", "mean"), t=("t", "mean")).reset_index()
     out = []
-    for values, min_shift in ((lateral_values, cfg.min_shift_m), (km_values, cfg.min_km_shift_m)):
+    for values, min_shift, both in ((lateral_values, cfg.min_shift_m, False), (km_values, cfg.min_km_shift_m, True)):
         out.append(
             scan(
                 values,
@@ -234,6 +234,7 @@ def _scans(rc: pd.DataFrame, matched: pd.DataFrame, grid: Cells, cfg: VerifyConf
                 alpha=cfg.alpha,
                 correction=cfg.scan_correction,
                 min_shift_m=min_shift,
+                both_sides=both,
             )
         )
     return out[0], out[1]

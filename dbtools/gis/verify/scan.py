@@ -47,7 +47,9 @@ displaced stretch longer than the longest window is reported as that window's le
 **Along-track residual.** The same scan on r = GIS km − pipeline km of the fixes with a
 reference (:mod:`fieldlogs.gisverify.evidence`). The pipeline's km error is reset by every
 absolute fix, so the unit is the run-epoch (run × the pipeline's absolute-fix count at the fix:
-``km_ref_epoch``), and a contrast never mixes two epochs.
+``km_ref_epoch``), and a contrast never mixes two epochs. Within an epoch the pipeline's km
+error drifts linearly with the travel (a wheel-diameter error, the same for a vehicle's
+runs), which a one-sided flank would take for a GIS error: here a unit needs both flanks.
 """
 
 from __future__ import annotations
@@ -196,12 +198,12 @@ def _side(p: FloatArray, lo: IntArray, hi: IntArray, n: FloatArray) -> FloatArra
 
 
 def _window_sums(
-    ps: FloatArray, pt: FloatArray, pc: FloatArray, trk: _Track, w: int, gap: int, flank: int
+    ps: FloatArray, pt: FloatArray, pc: FloatArray, trk: _Track, w: int, gap: int, flank: int, both_sides: bool
 ) -> tuple[IntArray, FloatArray, FloatArray]:
     """The starts a of the windows of w cells that hold cells only, and per unit (rows) and
     window (columns) the contrast c and its weight 1/h (0 where the unit has no contrast).
     ``ps``, ``pt``, ``pc``: prefix sums of the units' cell means, cell mean times and cell
-    counts (units × (n + 1))."""
+    counts (units × (n + 1)). ``both_sides``: a unit needs both flanks (a trend cancels)."""
     a = np.arange(0, trk.n - w + 1)
     a = a[(trk.holes[a + w] - trk.holes[a]) == 0]
     b = a + w
@@ -222,14 +224,14 @@ def _window_sums(
         0.25 * (np.abs(t_c - t_l) + np.abs(t_r - t_c)),
         np.where(has_l, np.abs(t_c - t_l), np.abs(t_r - t_c)),
     )
-    ok = (n_core > 0) & (has_l | has_r) & np.isfinite(h)
+    ok = (n_core > 0) & (both if both_sides else has_l | has_r) & np.isfinite(h)
     weight = np.where(ok, 1.0 / np.maximum(np.where(ok, h, 0.0), H_FLOOR_S), 0.0)
     c = np.where(ok, core - flank_mean, 0.0)
     return a, c, weight
 
 
 def _track_windows(
-    values: pd.DataFrame, trk: _Track, widths: Sequence[int], gap: int, flank: int
+    values: pd.DataFrame, trk: _Track, widths: Sequence[int], gap: int, flank: int, both_sides: bool
 ) -> list[pd.DataFrame]:
     """Tested windows of one track: per width, units k, Σw, and the weighted contrasts' mean
     and variance (accumulated over blocks of units so that memory stays bounded)."""
@@ -252,7 +254,7 @@ def _track_windows(
         for w in widths:
             if w > trk.n:
                 continue
-            a, c, wt = _window_sums(prefix[0], prefix[1], prefix[2], trk, w, gap, flank)
+            a, c, wt = _window_sums(prefix[0], prefix[1], prefix[2], trk, w, gap, flank, both_sides)
             sums = [(wt > 0).sum(axis=0).astype(float), wt.sum(axis=0), (wt * c).sum(axis=0), (wt * c * c).sum(axis=0)]
             starts[w] = a
             acc[w] = sums if w not in acc else [x + y for x, y in zip(acc[w], sums, strict=True)]
@@ -276,17 +278,20 @@ def _track_windows(
     return out
 
 
-def contrasts(values: pd.DataFrame, grid: Cells, widths: Sequence[int], gap: int, flank: int) -> pd.DataFrame:
+def contrasts(
+    values: pd.DataFrame, grid: Cells, widths: Sequence[int], gap: int, flank: int, *, both_sides: bool = False
+) -> pd.DataFrame:
     """Every window of every track with at least one unit: ``tid``, ``first`` (grid id),
-    ``cells``, ``units``, ``mean_m``, ``var_m2``. ``values``: one row per (cell, unit) with the
-    unit's mean value ``v`` in that cell."""
+    ``cells``, ``units``, ``weight``, ``mean_m``, ``var_m2``. ``values``: one row per (cell,
+    unit) with the unit's mean value ``v`` and mean time ``t`` in that cell. ``both_sides``:
+    only units with values in both flanks (module docstring, along-track)."""
     frames = []
     if len(values):
         tid = grid.tid[values["cell"].to_numpy(dtype=np.int64)]
         for t, sub in values.groupby(tid, sort=True):
             pts = np.flatnonzero(grid.tid == int(t))
             trk = _Track.of(grid, int(pts[0]), int(pts[-1]))
-            frames += [f.assign(tid=int(t)) for f in _track_windows(sub, trk, widths, gap, flank)]
+            frames += [f.assign(tid=int(t)) for f in _track_windows(sub, trk, widths, gap, flank, both_sides)]
     frames = [f[f["units"] > 0] for f in frames]
     if not frames:
         return pd.DataFrame({c: pd.Series([], dtype=float) for c in WINDOW_COLUMNS[:7]})
@@ -370,11 +375,12 @@ def scan(
     alpha: float,
     correction: str,
     min_shift_m: float,
+    both_sides: bool = False,
 ) -> ScanResult:
     """Contrasts, moderated tests, correction and greedy selection (module docstring)."""
     if not widths:
         return ScanResult(select_windows(pd.DataFrame(columns=list(WINDOW_COLUMNS)), alpha, 0.0, 0), 0, {})
-    windows = contrasts(values, grid, widths, SCAN_GAP_CELLS, flank)
+    windows = contrasts(values, grid, widths, SCAN_GAP_CELLS, flank, both_sides=both_sides)
     tested, priors = window_tests(windows, min_units, correction)
     selected = select_windows(tested, alpha, min_shift_m, SCAN_GAP_CELLS + flank)
     return ScanResult(selected, len(tested), priors)
