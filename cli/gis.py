@@ -134,6 +134,16 @@ def render_verification(report: VerifyReport, c: Console) -> None:
     if r.get("n"):
         rows.append(("along-track residual", f"median {r['median_m']:+.2f} m, sd {r['sd_m']} m (n {r['n']:,})"))
     rows.append(("defects", len(v.defects)))
+    for name, sc in v.scan.items():
+        if sc.get("windows_tested"):
+            rows.append(
+                (
+                    f"scan ({name.replace('_', '-')})",
+                    f"{sc['windows_tested']:,} windows tested, {sc['windows_selected']} selected",
+                )
+            )
+    if len(v.km_defects):
+        rows.append(("along-track defects", len(v.km_defects)))
     c.print(key_value_table(rows, title="GIS verification"))
     cov = v.coverage
     c.print(
@@ -171,6 +181,20 @@ def render_verification(report: VerifyReport, c: Console) -> None:
             }
         )
         c.print(frame_table(shown, title="Defects (shift + = the track lies left of the GIS in increasing km)"))
+    if len(v.km_defects):
+        k = v.km_defects
+        km_shown = pd.DataFrame(
+            {
+                "line": k["line_code"],
+                "track": k["track"],
+                "km": [_km_range(a, b) for a, b in zip(k["km_from_m"], k["km_to_m"], strict=True)],
+                "residual m": [f"{x:+.2f}" for x in k["residual_m"]],
+                "se m": [f"{x:.2f}" for x in k["se_m"]],
+                "run-epochs": k["run_epochs"],
+                "q": [f"{x:.0e}" for x in k["q_value"]],
+            }
+        )
+        c.print(frame_table(km_shown, title="Along-track defects (residual = GIS km − pipeline km)"))
 
 
 def _shares(km: pd.Series, share: pd.Series) -> list[str]:

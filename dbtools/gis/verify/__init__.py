@@ -69,14 +69,29 @@ zone of :class:`Projector`), to the left for a positive shift — where the fixe
 track really is.
 
 **7. Along-track residual.** Per cell the run-level mean and spread of ``r_i`` are
-reported (not tested: the pipeline km carries its own error, up to its margin, correlated
-within a run — only cycles with a small margin should provide ``km_ref_m``).
+reported (per cell not tested: the pipeline km carries its own error, up to its margin,
+correlated within a run — only cycles with a small margin provide ``km_ref_m``; the scan of
+8 tests it over windows).
+
+**8. The scan** (:mod:`~dbtools.gis.verify.scan`, ``scan`` on). With one 1 Hz fix per pass
+per cell a handful of runs cannot test a cell; neighbouring cells are pooled into windows
+of ``scan_windows_m`` (100–500 m): per run its mean offset in the window minus its own mean
+offset over ``background_m`` either side (the slow GPS error removed, as in 5), weighted by
+how little that error can drift in between; the runs' contrasts are t-tested with the
+variance moderated per window length [Smyth 2004], Bonferroni (``scan_correction``) over
+every window of every track. The windows it selects make their cells defect cells (merged
+with those of 3 as in 5, so the shift, the proposal of 6 and the status follow the pooled
+defect); cells it does not select keep the status of 4 — a window that tested clean never
+makes an unverified cell verified. The same scan on the along-track residual of 7, with the
+run-epoch as the unit, gives the ``km_defects`` (reported, not proposed).
 
 Modules: :mod:`~dbtools.gis.verify.config` (thresholds, column sets),
 :mod:`~dbtools.gis.verify.cells` (steps 1–4, 7 and the coverage),
-:mod:`~dbtools.gis.verify.defects` (step 5), :mod:`~dbtools.gis.verify.proposal` (step 6),
+:mod:`~dbtools.gis.verify.defects` (step 5 and the scan's defects),
+:mod:`~dbtools.gis.verify.proposal` (step 6), :mod:`~dbtools.gis.verify.scan` (step 8),
 :mod:`~dbtools.gis.verify.result` (the result and its JSON shape); :func:`verify_fixes`
 runs them. All plane work is in the network's one projection (:mod:`dbtools.gis.index`).
+Measured recall and false-defect rates are in ``bench/NOTES.md`` ("GIS verification").
 """
 
 from __future__ import annotations
