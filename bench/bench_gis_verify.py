@@ -4,6 +4,7 @@ Run on demand (prints a table, never pass/fail)::
 
     .venv/bin/python bench/bench_gis_verify.py                     # 5 lines, 20 runs/track, 2 variants
     .venv/bin/python bench/bench_gis_verify.py --lines 2 --runs 20 --variants 1 --workers 2
+    .venv/bin/python bench/bench_gis_verify.py --lines 3 --runs 12 --seeds 3 --sizes 5,8   # small fleets
 
 How a GIS error is simulated. The simulator drives on the DB's geometry, so two DBs are
 built from one synthetic network (``--lines`` double-track lines of ``--length-km``, 30 km
@@ -24,7 +25,15 @@ Reported:
 * false defects per 100 track-km — defects overlapping no true stretch (surveyed DBs) and
   all defects on the truth DB, per 100 km of track that had evidence;
 * throughput of the verify step alone (map-matching + statistics + proposal, pipeline
-  excluded), on the collected fixes and on the fixes replicated to ≥ 1 M.
+  excluded), on the collected fixes and on the fixes replicated to ≥ 1 M;
+* small fleets (issue 19): the same at ``--sizes`` runs per track (default 5 and 8), on
+  ``--seeds`` random subsets of the simulated runs each, *before* (the per-cell test
+  alone, ``scan = false``) and *after* (with the pooled scan): recall (all, and the hardest
+  class), false defects per 100 track-km on the truth DB and beside true ones, along-track
+  defects on the truth DB, correction error RMS / P95 and location error of the ends.
+
+The first table is the one printed before the scan existed (all ``--runs`` runs, the
+default configuration — now with the scan).
 """
 
 from __future__ import annotations
