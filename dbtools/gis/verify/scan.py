@@ -168,53 +168,56 @@ def moderated_t(
 
 @dataclass
 class _Track:
-    """One track's cells (local 0..n−1 = grid ids lo..lo+n−1) and their segments."""
+    """One track's cells (local 0..n−1 = grid ids lo..lo+n−1) laid out for the window
+    sums: ``pad`` empty columns at both ends and after every grid point without a cell (a
+    track end, a kilometrage break or a hole), so that a flank never reaches across one."""
 
     lo: int
     n: int
-    holes: IntArray
-    """Prefix count of grid points without a cell (length n + 1)."""
-    seg_lo: IntArray
-    seg_hi: IntArray
-    """Per local cell, the first cell and one past the last of its run of cells."""
+    pad: int
+    column: IntArray
+    """Expanded column of each local cell."""
+    cell_at: IntArray
+    """Local cell of each expanded column (−1: padding or a point without a cell)."""
 
     @classmethod
-    def of(cls, grid: Cells, lo: int, hi: int) -> _Track:
+    def of(cls, grid: Cells, lo: int, hi: int, pad: int) -> _Track:
         has = grid.has_next[lo : hi + 1]
         n = has.size
-        holes = np.concatenate([[0], np.cumsum(~has)]).astype(np.int64)
-        idx = np.arange(n)
-        start = np.where(np.concatenate([[True], ~has[:-1]]), idx, 0)
-        seg_lo = np.maximum.accumulate(start)
-        end = np.where(~has, idx, n)  # a point without a cell ends its run
-        seg_hi = np.minimum.accumulate(end[::-1])[::-1]
-        return cls(lo, n, holes, seg_lo.astype(np.int64), seg_hi.astype(np.int64))
+        holes_before = np.concatenate([[0], np.cumsum(~has)[:-1]]).astype(np.int64)
+        column = pad + np.arange(n) + pad * holes_before
+        width = int(column[-1]) + 1 + pad if n else 2 * pad
+        cell_at = np.full(width, -1, dtype=np.int64)
+        cell_at[column[has]] = np.flatnonzero(has)
+        return cls(lo, n, pad, column.astype(np.int64), cell_at)
 
-
-def _side(p: FloatArray, lo: IntArray, hi: IntArray, n: FloatArray) -> FloatArray:
-    """Per unit and window, the mean of a prefix-summed quantity over cells lo..hi−1."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.asarray((p[:, hi] - p[:, lo]) / n, dtype=np.float64)
+    @property
+    def width(self) -> int:
+        return int(self.cell_at.size)
 
 
 def _window_sums(
     ps: FloatArray, pt: FloatArray, pc: FloatArray, trk: _Track, w: int, gap: int, flank: int, both_sides: bool
 ) -> tuple[IntArray, FloatArray, FloatArray]:
-    """The starts a of the windows of w cells that hold cells only, and per unit (rows) and
-    window (columns) the contrast c and its weight 1/h (0 where the unit has no contrast).
-    ``ps``, ``pt``, ``pc``: prefix sums of the units' cell means, cell mean times and cell
-    counts (units × (n + 1)). ``both_sides``: a unit needs both flanks (a trend cancels)."""
-    a = np.arange(0, trk.n - w + 1)
-    a = a[(trk.holes[a + w] - trk.holes[a]) == 0]
-    b = a + w
-    l_hi = np.maximum(a - gap, trk.seg_lo[a])
-    l_lo = np.maximum(a - gap - flank, trk.seg_lo[a])
-    end = trk.seg_hi[np.maximum(b - 1, 0)]
-    r_lo = np.minimum(b + gap, end)
-    r_hi = np.minimum(b + gap + flank, end)
-    n_core, n_l, n_r = pc[:, b] - pc[:, a], pc[:, l_hi] - pc[:, l_lo], pc[:, r_hi] - pc[:, r_lo]
-    core, left, right = _side(ps, a, b, n_core), _side(ps, l_lo, l_hi, n_l), _side(ps, r_lo, r_hi, n_r)
-    t_c, t_l, t_r = _side(pt, a, b, n_core), _side(pt, l_lo, l_hi, n_l), _side(pt, r_lo, r_hi, n_r)
+    """The local starts of the windows of w cells that hold cells only, and per unit (rows)
+    and window (columns) the contrast c and its weight 1/h (0 where the unit has no
+    contrast). ``ps``, ``pt``, ``pc``: prefix sums over the expanded columns of the units'
+    cell means, cell mean times and cell counts (units × (width + 1)); every sum is a slice
+    difference. ``both_sides``: a unit needs both flanks (a trend cancels)."""
+    e0, e1 = trk.pad, trk.width - trk.pad - w  # window starts (expanded), flanks stay inside
+    if e1 < e0:
+        return np.zeros(0, np.int64), np.zeros((ps.shape[0], 0)), np.zeros((ps.shape[0], 0))
+    m = e1 - e0 + 1
+
+    def span(p: FloatArray, lo: int, hi: int) -> FloatArray:
+        """Sum over expanded columns e+lo .. e+hi−1 for every window start e."""
+        return np.asarray(p[:, e0 + hi : e0 + hi + m] - p[:, e0 + lo : e0 + lo + m], dtype=np.float64)
+
+    sides = ((0, w), (-gap - flank, -gap), (w + gap, w + gap + flank))
+    n_core, n_l, n_r = (span(pc, lo, hi) for lo, hi in sides)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        core, left, right = (span(ps, lo, hi) / n for (lo, hi), n in zip(sides, (n_core, n_l, n_r), strict=True))
+        t_c, t_l, t_r = (span(pt, lo, hi) / n for (lo, hi), n in zip(sides, (n_core, n_l, n_r), strict=True))
     has_l, has_r = n_l > 0, n_r > 0
     both = has_l & has_r
     flank_mean = np.where(has_l, np.where(has_r, 0.5 * (left + right), left), right)
@@ -227,7 +230,11 @@ def _window_sums(
     ok = (n_core > 0) & (both if both_sides else has_l | has_r) & np.isfinite(h)
     weight = np.where(ok, 1.0 / np.maximum(np.where(ok, h, 0.0), H_FLOOR_S), 0.0)
     c = np.where(ok, core - flank_mean, 0.0)
-    return a, c, weight
+    # windows made of real cells only: w consecutive columns that are cells of the track
+    real = np.concatenate([[0], np.cumsum(trk.cell_at >= 0)])
+    starts = np.arange(e0, e1 + 1)
+    valid = (real[starts + w] - real[starts]) == w
+    return trk.cell_at[starts[valid]], c[:, valid], weight[:, valid]
 
 
 def _track_windows(
@@ -237,24 +244,24 @@ def _track_windows(
     and variance (accumulated over blocks of units so that memory stays bounded)."""
     unit_code, _ = pd.factorize(values["unit"], sort=True)
     n_units = int(unit_code.max()) + 1 if unit_code.size else 0
-    local = values["cell"].to_numpy(dtype=np.int64) - trk.lo
+    col = trk.column[values["cell"].to_numpy(dtype=np.int64) - trk.lo]
     v = values["v"].to_numpy(dtype=float)
     tv = values["t"].to_numpy(dtype=float)
-    block = max(1, BLOCK_ENTRIES // max(trk.n, 1))
+    block = max(1, BLOCK_ENTRIES // max(trk.width, 1))
     acc: dict[int, list[FloatArray]] = {}
     starts: dict[int, IntArray] = {}
     for u0 in range(0, n_units, block):
         rows = (unit_code >= u0) & (unit_code < u0 + block)
         m = min(block, n_units - u0)
         prefix = []
-        for col in (v, tv, np.ones_like(v)):
-            dense = np.zeros((m, trk.n))
-            dense[unit_code[rows] - u0, local[rows]] = col[rows]
+        for quantity in (v, tv, np.ones_like(v)):
+            dense = np.zeros((m, trk.width))
+            dense[unit_code[rows] - u0, col[rows]] = quantity[rows]
             prefix.append(np.concatenate([np.zeros((m, 1)), np.cumsum(dense, axis=1)], axis=1))
         for w in widths:
-            if w > trk.n:
-                continue
             a, c, wt = _window_sums(prefix[0], prefix[1], prefix[2], trk, w, gap, flank, both_sides)
+            if not a.size:
+                continue
             sums = [(wt > 0).sum(axis=0).astype(float), wt.sum(axis=0), (wt * c).sum(axis=0), (wt * c * c).sum(axis=0)]
             starts[w] = a
             acc[w] = sums if w not in acc else [x + y for x, y in zip(acc[w], sums, strict=True)]
@@ -290,7 +297,7 @@ def contrasts(
         tid = grid.tid[values["cell"].to_numpy(dtype=np.int64)]
         for t, sub in values.groupby(tid, sort=True):
             pts = np.flatnonzero(grid.tid == int(t))
-            trk = _Track.of(grid, int(pts[0]), int(pts[-1]))
+            trk = _Track.of(grid, int(pts[0]), int(pts[-1]), gap + flank)
             frames += [f.assign(tid=int(t)) for f in _track_windows(sub, trk, widths, gap, flank, both_sides)]
     frames = [f[f["units"] > 0] for f in frames]
     if not frames:
