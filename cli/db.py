@@ -292,7 +292,7 @@ def impact(
     JSON (--format json): {"old": {path, db_version, content_hash}, "new": {…}, "plan",
     "same_content", "totals": {runs, runs_changed, runs_failed: {old, new},
     corrections_changed}, "routes": [{line_code, track, direction, runs, replayed, old,
-    new, delta}], "runs": [{run, run_id, vehicle_id, vehicle_kind, line_code, track,
+    new, delta, refusals: {old, new}}], "runs": [{run, run_id, vehicle_id, vehicle_kind, line_code, track,
     direction, old, new, delta, refusals, alarms, errors, changed_corrections}]}; the
     figures of old/new/delta: n_balise, balise_mean_pct, balise_max_pct, n_feature,
     feature_mean_pct, feature_max_pct, n_refused, n_anomalies, n_failsafe, n_alarms,
@@ -373,6 +373,10 @@ def _route_table(r: dict[str, Any]) -> RichTable:
         change = r["delta"].get(k)
         shown = "" if change in (None, 0, 0.0) else ("+" if float(change) > 0 else "") + _num_text(change)
         t.add_row(label, _num_text(r["old"].get(k)), _num_text(r["new"].get(k)), shown)
+    refused = r["refusals"]
+    for diag in sorted(set(refused["old"]) | set(refused["new"])):
+        a, b = refused["old"].get(diag, 0), refused["new"].get(diag, 0)
+        t.add_row(f"  refused: {diag}", str(a), str(b), "" if a == b else f"{b - a:+d}")
     return t
 
 

@@ -61,6 +61,25 @@ def pct_figure(runs: list[dict[str, Any]]) -> bytes:
     return kit.png(fig)
 
 
+def refusal_frame(routes: list[dict[str, Any]]) -> pd.DataFrame:
+    """Feature refusals by failed diagnostic per route, old and new."""
+    rows = []
+    for r in routes:
+        diags = sorted(set(r["refusals"]["old"]) | set(r["refusals"]["new"]))
+        for diag in diags:
+            rows.append(
+                {
+                    "line_code": r["line_code"],
+                    "track": r["track"],
+                    "direction": r["direction"],
+                    "diagnostic": diag,
+                    "old": r["refusals"]["old"].get(diag, 0),
+                    "new": r["refusals"]["new"].get(diag, 0),
+                }
+            )
+    return pd.DataFrame(rows)
+
+
 def _verdict(d: dict[str, Any]) -> str:
     t = d["totals"]
     if t["runs_failed"]["new"] > t["runs_failed"]["old"]:
@@ -107,6 +126,9 @@ def render_html(report: ImpactReport) -> str:
             "Per route", kit.frame_table(figure_frame(d["routes"], ("line_code", "track", "direction", "runs")), _cell)
         ),
     ]
+    refusals = refusal_frame(d["routes"])
+    if len(refusals):
+        parts.append(kit.section("Feature refusals by diagnostic", kit.frame_table(refusals)))
     if d["runs"]:
         parts.append(kit.section("Balise-correction % per run", kit.figure(pct_figure(d["runs"]), "old vs new")))
         parts.append(

@@ -169,11 +169,25 @@ def _route_stats(runs: list[RunImpact], side: str) -> pd.DataFrame:
     return out
 
 
+def _route_refusals(runs: list[RunImpact]) -> dict[tuple[str, ...], dict[str, dict[str, int]]]:
+    """Per route, feature refusals by failed diagnostic, summed over its runs, per version."""
+    out: dict[tuple[str, ...], dict[str, dict[str, int]]] = {}
+    for r in runs:
+        key = tuple(str(r.ident.get(k) or "—") for k in ROUTE_KEYS)
+        sides = out.setdefault(key, {"old": {}, "new": {}})
+        for side in ("old", "new"):
+            for diag, n in _refusals(getattr(r, side)).items():
+                sides[side][diag] = sides[side].get(diag, 0) + int(n)
+    return out
+
+
 def route_table(runs: list[RunImpact]) -> list[dict[str, Any]]:
-    """Per route: ``{line_code, track, direction, runs, old: {figures}, new: {…}, delta: {…}}``."""
+    """Per route: ``{line_code, track, direction, runs, replayed, old: {figures}, new: {…},
+    delta: {…}, refusals: {old, new: {diagnostic: count}}}``."""
     if not runs:
         return []
     old, new = _route_stats(runs, "old"), _route_stats(runs, "new")
+    refusals = _route_refusals(runs)
     out = []
     for key in old.index:
         o = {k: _plain(old.loc[key, k]) for k in FIGURES}
@@ -186,6 +200,7 @@ def route_table(runs: list[RunImpact]) -> list[dict[str, Any]]:
                 "old": o,
                 "new": n,
                 "delta": delta(o, n),
+                "refusals": refusals.get(tuple(str(k) for k in key), {"old": {}, "new": {}}),
             }
         )
     return out

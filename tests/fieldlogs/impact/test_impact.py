@@ -76,6 +76,13 @@ def test_route_figures_are_over_the_route_corrections(report: dict) -> None:
     d = routes[("0420", "D", "down")]
     assert set(d["old"]) == set(FIGURES)
     assert d["new"]["n_balise"] == d["old"]["n_balise"] and d["delta"]["balise_max_pct"] > 5
+    # refusals by diagnostic: the route's runs summed, per version
+    summed: dict[str, int] = {}
+    for r in report["runs"]:
+        if (r["line_code"], r["track"], r["direction"]) == ("0420", "D", "down"):
+            for diag, n in r["refusals"]["old"].items():
+                summed[diag] = summed.get(diag, 0) + n
+    assert d["refusals"]["old"] == summed and sum(summed.values()) >= d["old"]["n_refused"] > 0
     rr = next(r for r in report["runs"] if r["vehicle_kind"] == "road_rail")
     assert rr["alarms"]["old"] is not None and rr["new"]["n_alarms"] == rr["old"]["n_alarms"]
 
