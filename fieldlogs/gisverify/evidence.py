@@ -23,7 +23,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import closing
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -248,12 +248,16 @@ def verify_runs(
     *,
     pipeline: PipelineConfig | None = None,
     config: VerifyConfig | None = None,
+    max_km_margin_m: float | None = None,
     workers: int = 1,
     progress: Progress | None = None,
 ) -> VerifyReport:
     """``gis verify``: discover runs, replay them, select evidence (pipeline km as the
-    along-track reference up to ``config.max_km_margin_m``), verify the grid."""
+    along-track reference up to ``config.max_km_margin_m``; ``max_km_margin_m`` overrides
+    it), verify the grid."""
     config = config or VerifyConfig()
+    if max_km_margin_m is not None:
+        config = replace(config, max_km_margin_m=max_km_margin_m)
     network = read_network(db)
     runs = discover(roots)
     ev = collect_evidence(
