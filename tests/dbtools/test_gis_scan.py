@@ -287,3 +287,17 @@ def test_along_track_residual_stretch_is_found_and_a_drift_is_not(line: Network)
     assert res.has_defects and res.defects.empty
     clean = verify_fixes(line, f.assign(km_ref_m=f["km_ref_m"] - gis_err))
     assert clean.km_defects.empty  # the drift alone is no defect
+
+
+def test_blocks_of_units_give_the_same_windows(line: Network, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Units summed in blocks (bounded memory) give the windows of one block."""
+    import importlib
+
+    scan_mod = importlib.import_module("dbtools.gis.verify.scan")  # the package exports a function `scan`
+    rng = np.random.default_rng(12)
+    f = fleet(rng, 4, [("U", 2000.0, 2200.0, 2.0)])
+    one = verify_fixes(line, f)
+    monkeypatch.setattr(scan_mod, "BLOCK_ENTRIES", 1)  # one unit per block
+    many = verify_fixes(line, f)
+    assert one.scan == many.scan
+    pd.testing.assert_frame_equal(one.defects, many.defects)

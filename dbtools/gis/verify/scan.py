@@ -67,8 +67,9 @@ from dbtools.gis.verify.cells import Cells, adjust_pvalues
 IntArray = npt.NDArray[np.int64]
 #: Cells skipped between a window and its flanks (the half-displaced cell at each end of a stretch).
 SCAN_GAP_CELLS = 1
-#: Largest (units × cells) block held at once per track [entries].
-BLOCK_ENTRIES = 4_000_000
+#: Largest (units × columns) block of a track held at once [entries]; about 25 arrays of
+#: that size live while its windows are summed (≈ 100 MB).
+BLOCK_ENTRIES = 500_000
 #: Prior degrees of freedom above this count as infinite (the pooled z-test).
 D0_MAX = 1e6
 #: Columns of the tested windows (:func:`scan`).
