@@ -111,7 +111,7 @@ CORRECTIONS = ("bh", "bonferroni")
 
 @dataclass(frozen=True)
 class VerifyConfig:
-    """GIS verification from traversed trajectories [S001 §9(a)] (dbtools.gis.verify; ``[gis_verify]``).
+    """GIS verification from traversed trajectories [S001 §9(a)], section [gis_verify] (dbtools.gis.verify).
 
     Steps 3–8 of :mod:`dbtools.gis.verify` use these; the scan (step 8) pools the cells of
     windows of ``scan_windows_m`` along each track. Measurements behind the defaults are in
@@ -138,7 +138,7 @@ class VerifyConfig:
     )
     scan: bool = setting(True, "pool neighbouring cells: test windows of scan_windows_m along each track")
     scan_windows_m: tuple[float, ...] = setting(
-        (100.0, 140.0, 200.0, 300.0, 400.0, 500.0), "window lengths of the scan (multiples of the 20 m cell)", "m", gt=0
+        (100.0, 140.0, 200.0, 300.0, 400.0, 500.0), "window lengths of the scan (rounded to whole 20 m cells)", "m", gt=0
     )
     scan_correction: str = setting(
         "bonferroni", "multiple-testing correction over every window of every track: bonferroni or bh"
