@@ -119,6 +119,59 @@ def surveyed_network(truth: Network, defects: list[dict[str, Any]]) -> Network:
     return Network(tables, origin="surveyed", meta=dict(truth.meta))
 
 
+def along_network(truth: Network, per_track: int, rng: np.random.Generator) -> tuple[Network, list[dict[str, Any]]]:
+    """A surveyed DB whose GIS points of up to ``per_track`` stretches per track (200–300 m)
+    sit 2–4 m further along the track than their km (random sign): a fix there matches a km
+    2–4 m short of (or beyond) where the balises put it. The pipeline km is a reference only
+    within a few hundred metres after an absolute fix (margin ≤ ``max_km_margin_m``), so each
+    stretch starts 60 m past a balise in the running direction (D: km up, U: km down)."""
+    gis = truth.gis.copy()
+    x, y = PROJECTOR.to_xy(gis["lon"].to_numpy(dtype=float), gis["lat"].to_numpy(dtype=float))
+    bal = truth.tables["balises"]
+    out = []
+    for (line, track), g in gis.groupby(["line_code", "track"]):
+        order = g.sort_values("km_m").index.to_numpy()
+        km = gis.loc[order, "km_m"].to_numpy(dtype=float)
+        pos = gis.index.get_indexer(order)
+        tx, ty = np.gradient(x[pos], km), np.gradient(y[pos], km)
+        norm = np.hypot(tx, ty)
+        b = bal[(bal["line_code"] == line) & (bal["track"] == track) & bal["kind"].isin(["I2", "C"])]
+        sites = np.sort(b["km_actual_m"].to_numpy(dtype=float))
+        sites = sites[(sites > km[0] + 1000.0) & (sites < km[-1] - 1000.0)]
+        for site in rng.choice(sites, size=min(per_track, sites.size), replace=False) if sites.size else []:
+            length = float(rng.choice([200.0, 300.0]))
+            start = (
+                float(np.ceil((site + 60.0) / 20.0) * 20.0)
+                if track != "U"
+                else float(np.floor((site - 60.0 - length) / 20.0) * 20.0)
+            )
+            delta = float(rng.uniform(2.0, 4.0)) * float(rng.choice([-1.0, 1.0]))
+            sel = (km >= start) & (km <= start + length)
+            x[pos[sel]] += delta * tx[sel] / norm[sel]
+            y[pos[sel]] += delta * ty[sel] / norm[sel]
+            out.append(
+                {"line_code": str(line), "track": str(track), "km_from": start, "km_to": start + length, "delta": delta}
+            )
+    lon, lat = PROJECTOR.to_lonlat(x, y)
+    gis["lon"], gis["lat"] = np.round(lon, 9), np.round(lat, 9)
+    return Network({**truth.tables, "gis": gis}, origin="along", meta=dict(truth.meta)), out
+
+
+def along_table(result: Any, stretches: list[dict[str, Any]]) -> tuple[int, int, int, list[float]]:
+    """(found, total, false, |residual + delta| of the found) of the along-track scan."""
+    k = result.km_defects
+    used = np.zeros(len(k), dtype=bool)
+    found, err = 0, []
+    for d in stretches:
+        ov = (k["line_code"].astype(str) == d["line_code"]) & (k["track"].astype(str) == d["track"])
+        ov &= (k["km_from_m"] < d["km_to"]) & (k["km_to_m"] > d["km_from"])
+        if ov.any():
+            found += 1
+            used |= ov.to_numpy()
+            err.append(abs(float(k.loc[ov, "residual_m"].iloc[0]) + d["delta"]))
+    return found, len(stretches), int((~used).sum()), err
+
+
 def build(net: Network, root: Path, name: str) -> Path:
     src = write_source_set(net, root / f"src-{name}", force=True)
     db = root / f"{name}.sqlite"
@@ -345,6 +398,7 @@ def main() -> None:
     ap.add_argument("--keep", type=Path, default=None, help="work folder to keep (default: a temp folder)")
     ap.add_argument("--sizes", default="5,8", help="runs per track of the small-fleet table (comma-separated)")
     ap.add_argument("--seeds", type=int, default=3, help="random run subsets per size")
+    ap.add_argument("--along", type=int, default=0, help="along-track stretches per track (one more surveyed DB)")
     args = ap.parse_args()
     cfg = VerifyConfig()
     with tempfile.TemporaryDirectory() as tmp:
@@ -382,6 +436,12 @@ def main() -> None:
             results.append(evaluate(res, defects, truth, sv))
             variants.append((sv, evs, defects))
         sizes = [int(x) for x in args.sizes.split(",") if x.strip() and int(x) <= args.runs]
+        along = None
+        if args.along:
+            al, stretches = along_network(truth, args.along, rng)
+            al_db = build(al, root, "along")
+            res_al = verify_fixes(read_network(al_db), collect_evidence(runs, al_db, workers=args.workers).fixes, cfg)
+            along = along_table(res_al, stretches)
 
     found = sum(r["found"] for r in results)
     total = sum(r["defects"] for r in results)
@@ -440,6 +500,12 @@ def main() -> None:
     if len(missed):
         print("\nmissed stretches:")
         print(missed[["line_code", "track", "km_from", "km_to", "shift_m"]].to_string(index=False))
+    if along is not None:
+        f, n, false, err = along
+        e = f"median |error| {np.median(err):.2f} m, max {max(err):.2f} m" if err else "—"
+        print(
+            f"\nalong-track: GIS points 2–4 m along the track over 200–300 m after a balise: {f}/{n} found ({e}), {false} false"
+        )
     if sizes:
         subset_table(truth, ev, variants, runs, sizes, args.seeds)
 
