@@ -504,7 +504,8 @@ def main() -> None:
         f, n, false, err = along
         e = f"median |error| {np.median(err):.2f} m, max {max(err):.2f} m" if err else "—"
         print(
-            f"\nalong-track: GIS points 2–4 m along the track over 200–300 m after a balise: {f}/{n} found ({e}), {false} false"
+            "\nalong-track: GIS points 2–4 m along the track over 200–300 m after a balise: "
+            f"{f}/{n} found ({e}), {false} false"
         )
     if sizes:
         subset_table(truth, ev, variants, runs, sizes, args.seeds)

@@ -138,7 +138,10 @@ class VerifyConfig:
     )
     scan: bool = setting(True, "pool neighbouring cells: test windows of scan_windows_m along each track")
     scan_windows_m: tuple[float, ...] = setting(
-        (100.0, 140.0, 200.0, 300.0, 400.0, 500.0), "window lengths of the scan (rounded to whole 20 m cells)", "m", gt=0
+        (100.0, 140.0, 200.0, 300.0, 400.0, 500.0),
+        "window lengths of the scan (rounded to whole 20 m cells)",
+        "m",
+        gt=0,
     )
     scan_correction: str = setting(
         "bonferroni", "multiple-testing correction over every window of every track: bonferroni or bh"
