@@ -6,9 +6,10 @@ import io
 import json
 import sys
 import time
+from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 import typer
@@ -134,6 +135,16 @@ def render_verification(report: VerifyReport, c: Console) -> None:
     if r.get("n"):
         rows.append(("along-track residual", f"median {r['median_m']:+.2f} m, sd {r['sd_m']} m (n {r['n']:,})"))
     rows.append(("defects", len(v.defects)))
+    for name, sc in v.scan.items():
+        if sc.get("windows_tested"):
+            rows.append(
+                (
+                    f"scan ({name.replace('_', '-')})",
+                    f"{sc['windows_tested']:,} windows tested, {sc['windows_selected']} selected",
+                )
+            )
+    if len(v.km_defects):
+        rows.append(("along-track defects", len(v.km_defects)))
     c.print(key_value_table(rows, title="GIS verification"))
     cov = v.coverage
     c.print(
@@ -171,10 +182,28 @@ def render_verification(report: VerifyReport, c: Console) -> None:
             }
         )
         c.print(frame_table(shown, title="Defects (shift + = the track lies left of the GIS in increasing km)"))
+    if len(v.km_defects):
+        k = v.km_defects
+        km_shown = pd.DataFrame(
+            {
+                "line": k["line_code"],
+                "track": k["track"],
+                "km": [_km_range(a, b) for a, b in zip(k["km_from_m"], k["km_to_m"], strict=True)],
+                "residual m": [f"{x:+.2f}" for x in k["residual_m"]],
+                "se m": [f"{x:.2f}" for x in k["se_m"]],
+                "run-epochs": k["run_epochs"],
+                "q": [f"{x:.0e}" for x in k["q_value"]],
+            }
+        )
+        c.print(frame_table(km_shown, title="Along-track defects (residual = GIS km − pipeline km)"))
 
 
 def _shares(km: pd.Series, share: pd.Series) -> list[str]:
     return [f"{k:.2f} {100 * s:.0f}%" if s == s else f"{k:.2f}" for k, s in zip(km, share, strict=True)]
+
+
+_VERIFY = VerifyConfig()
+"""The defaults of the options below ([gis_verify] of the configuration tree)."""
 
 
 @app.command("verify")
@@ -190,17 +219,35 @@ def verify(
         None, "--propose", help="Write a corrected source set here (defect cells' GIS points moved)."
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing --propose folder or --out file."),
-    config: Path | None = typer.Option(None, "--config", help="Pipeline parameters (TOML)."),
-    alpha: float = typer.Option(0.01, "--alpha", min=1e-12, max=0.5, help="Significance after BH correction."),
-    bonferroni: bool = typer.Option(False, "--bonferroni", help="Bonferroni instead of Benjamini–Hochberg."),
-    min_shift: float = typer.Option(0.5, "--min-shift", min=0.0, help="Smallest offset worth correcting [m]."),
-    min_runs: int = typer.Option(3, "--min-runs", min=2, help="Fewer runs through a cell → unverified."),
-    min_fixes: int = typer.Option(5, "--min-fixes", min=1, help="Fewer fixes in a cell → unverified."),
-    tolerance: float = typer.Option(
-        1.5, "--tolerance", min=0.01, help="Verified only if the 95 % interval is within ±this [m]."
+    config: Path | None = typer.Option(
+        None, "--config", help="Settings (TOML): the pipeline's sections and [gis_verify] (options below override it)."
     ),
-    max_km_margin: float = typer.Option(
-        10.0, "--max-km-margin", min=0.0, help="Pipeline margin up to which its km is the along-track reference [m]."
+    alpha: float | None = typer.Option(
+        None, "--alpha", help=f"Significance after the multiple-testing correction (default {_VERIFY.alpha:g})."
+    ),
+    bonferroni: bool = typer.Option(False, "--bonferroni", help="Bonferroni instead of Benjamini–Hochberg over cells."),
+    min_shift: float | None = typer.Option(
+        None, "--min-shift", help=f"Smallest offset worth correcting [m] (default {_VERIFY.min_shift_m:g})."
+    ),
+    min_runs: int | None = typer.Option(
+        None, "--min-runs", help=f"Fewer runs through a cell or window → unverified (default {_VERIFY.min_runs})."
+    ),
+    min_fixes: int | None = typer.Option(
+        None, "--min-fixes", help=f"Fewer fixes in a cell → unverified (default {_VERIFY.min_fixes})."
+    ),
+    tolerance: float | None = typer.Option(
+        None,
+        "--tolerance",
+        help=f"Verified only if the 95 % interval is within ±this [m] (default {_VERIFY.tolerance_m:g}).",
+    ),
+    scan: bool | None = typer.Option(
+        None, "--scan/--no-scan", help="Pool neighbouring cells into 100–500 m windows (default: on)."
+    ),
+    max_km_margin: float | None = typer.Option(
+        None,
+        "--max-km-margin",
+        help="Pipeline margin up to which its km is the along-track reference [m] "
+        f"(default {_VERIFY.max_km_margin_m:g}).",
     ),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="Processes replaying runs."),
 ) -> None:
@@ -210,36 +257,43 @@ def verify(
     known from balises or the GPS up/down decision (never guessed) are map-matched to that
     track. Per 20 m cell the runs' mean lateral offsets are t-tested against 0 (the run is
     the unit, the spread is at least the track's pooled one), Benjamini–Hochberg over all
-    cells; a defect needs |mean| ≥ --min-shift. Neighbouring defect cells merge into
-    defects. Cells with little evidence are unverified, never good.
+    cells. The scan pools neighbouring cells: over windows of 100–500 m each run's offset
+    is compared with its own offset either side (removing its slow GPS error), the runs'
+    contrasts are t-tested (variance moderated per window length), Bonferroni over every
+    window of every track; the same scan runs on the along-track residual (GIS km −
+    pipeline km). A defect needs |shift| ≥ --min-shift. Cells with little evidence are
+    unverified, never good. Defaults of the options come from [gis_verify] (trainpos
+    config show --section gis_verify); --config sets them, an option overrides.
 
     JSON (--format json): {"db", "db_version", "evidence", "runs", "config", "counts",
     "km_residual", "coverage": [per line/track], "defects": [...], "proposal": [moved
-    points], "cells": [every cell with at least one fix]}.
+    points], "km_defects": [along-track stretches], "scan": {"lateral", "along_track"},
+    "cells": [every cell with at least one fix]}.
 
     Exit codes: 0 no defect, 1 defects found, 2 unreadable DB/run or bad usage,
     3 --propose/--out exists (use --force).
 
     Example: trainpos gis verify net.sqlite logs/ --format html --out gis.html --propose src-fixed/
     """
+    from fieldlogs.config import load_tree
     from fieldlogs.gisverify.evidence import verify_runs
-    from fieldlogs.pipeline import PipelineConfig
 
     _check_targets(fmt, out, propose, force)
-    cfg = VerifyConfig(
-        alpha=alpha,
-        correction="bonferroni" if bonferroni else "bh",
-        min_shift_m=min_shift,
-        min_runs=min_runs,
-        min_fixes=min_fixes,
-        tolerance_m=tolerance,
-    )
-    pipeline = PipelineConfig.from_toml(config) if config else PipelineConfig()
+    tree = load_tree(config)
+    overrides: dict[str, Any] = {
+        "alpha": alpha,
+        "correction": "bonferroni" if bonferroni else None,
+        "min_shift_m": min_shift,
+        "min_runs": min_runs,
+        "min_fixes": min_fixes,
+        "tolerance_m": tolerance,
+        "scan": scan,
+        "max_km_margin_m": max_km_margin,
+    }
+    cfg = replace(tree.gis_verify, **{k: v for k, v in overrides.items() if v is not None})
     bar = _Bar(progress(err_console()))
     try:
-        report = verify_runs(
-            db, runs, pipeline=pipeline, config=cfg, max_km_margin_m=max_km_margin, workers=workers, progress=bar
-        )
+        report = verify_runs(db, runs, pipeline=tree.pipeline, config=cfg, workers=workers, progress=bar)
     finally:
         if bar.task is not None:
             bar.bar.stop()

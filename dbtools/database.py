@@ -1,9 +1,10 @@
-"""The only module that talks to SQLite: onboard DBs, the release registry and audit DBs.
+"""The SQLite layer: onboard DBs and the release registry (audit DBs: :mod:`dbtools.audit_db`;
+together the only modules that talk to SQLite).
 
 Onboard DB writes are atomic (temp file in the target folder, then ``os.replace``) and
 never touch an existing file unless asked to. Reads open the file read-only so that
 validating or diffing a released DB cannot modify it. Every table is created from its
-declaration in ``schemas/`` (:func:`_create_tables`), audit DBs included (last section).
+declaration in ``schemas/`` (:func:`create_tables`).
 """
 
 from __future__ import annotations
@@ -12,21 +13,19 @@ import contextlib
 import os
 import sqlite3
 import tempfile
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 import sqlite_utils
 
 from dbtools.atomic import atomic_file
 from dbtools.network import Network, canonical, content_hash
-from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION, AUDIT_TABLES, AUDIT_VIEWS, ROUTE_SUMMARY
 from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.model import Table
-from schemas.registry import REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
+from schemas.registry import IMPACTS, REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
 from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, DB_TABLES, META, SCHEMA_VERSION
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -35,7 +34,7 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 _PY_TYPES: dict[str, type] = {"str": str, "int": int, "float": float, "bool": int, "bytes": bytes}
 
 
-def _create_tables(
+def create_tables(
     db: sqlite_utils.Database, tables: tuple[Table, ...], *, indexes: bool = True, if_not_exists: bool = False
 ) -> None:
     """Schema work through sqlite-utils: columns, PK, NOT NULL, FKs and (unless a bulk load
@@ -63,7 +62,7 @@ def _create_indexes(db: sqlite_utils.Database, tables: tuple[Table, ...], *, if_
             db[t.name].create_index(list(idx), if_not_exists=if_not_exists)  # type: ignore[union-attr]
 
 
-def _rows(table: Table, frame: pd.DataFrame) -> Iterator[tuple[object, ...]]:
+def table_rows(table: Table, frame: pd.DataFrame) -> Iterator[tuple[object, ...]]:
     """Rows as Python tuples with None for missing values (the fast executemany path)."""
     cols = []
     for c in table.columns:
@@ -88,14 +87,14 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
             conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             conn.execute("PRAGMA foreign_keys=OFF")  # checked after the load, see below
             db = sqlite_utils.Database(conn)
-            _create_tables(db, ALL_DB_TABLES, indexes=False)
+            create_tables(db, ALL_DB_TABLES, indexes=False)
             with conn:
                 for t in DB_TABLES:
                     frame = canonical(t, network.tables[t.name])
                     marks = ",".join("?" * len(t.columns))
                     conn.executemany(
                         f"INSERT INTO [{t.name}] ({','.join(f'[{c}]' for c in t.column_names)}) VALUES ({marks})",
-                        _rows(t, frame),
+                        table_rows(t, frame),
                     )
                 conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", sorted(meta.items()))
             _create_indexes(db, ALL_DB_TABLES)
@@ -288,7 +287,7 @@ def _create_registry(path: Path) -> None:
         try:
             conn.execute(f"PRAGMA application_id={REGISTRY_APPLICATION_ID}")
             conn.execute(f"PRAGMA user_version={REGISTRY_SCHEMA_VERSION}")
-            _create_tables(sqlite_utils.Database(conn), (RELEASES,))
+            create_tables(sqlite_utils.Database(conn), (RELEASES,))
             conn.commit()
         finally:
             conn.close()
@@ -339,13 +338,30 @@ def registry_find(conn: sqlite3.Connection, db_version: str) -> dict[str, object
     return None if row is None else dict(zip([d[0] for d in cur.description], row, strict=True))
 
 
-def registry_insert(conn: sqlite3.Connection, row: dict[str, object]) -> None:
-    """Insert one release row (a duplicate db_version violates the primary key)."""
-    cols = RELEASES.column_names
+def registry_insert(conn: sqlite3.Connection, row: dict[str, object], table: Table = RELEASES) -> None:
+    """Insert one release row (a duplicate db_version violates the primary key), or with
+    ``table`` = ``IMPACTS`` a release's impact report — creating that table in a registry
+    that has none yet (older registries stay readable: ``releases`` is unchanged)."""
+    if table is IMPACTS:
+        create_tables(sqlite_utils.Database(conn), (IMPACTS,), if_not_exists=True)
+    cols = table.column_names
     conn.execute(
-        f"INSERT INTO [{RELEASES.name}] ({','.join(f'[{c}]' for c in cols)}) VALUES ({','.join('?' * len(cols))})",
+        f"INSERT INTO [{table.name}] ({','.join(f'[{c}]' for c in cols)}) VALUES ({','.join('?' * len(cols))})",
         [row.get(c) for c in cols],
     )
+
+
+def read_impacts(path: Path) -> dict[str, dict[str, object]]:
+    """The impact-report rows of a registry by db_version (empty without a registry or a
+    ``release_impacts`` table), read-only."""
+    if not Path(path).exists():
+        return {}
+    with _registry_ro(Path(path)) as conn:
+        if not conn.execute("SELECT 1 FROM sqlite_master WHERE name = ?", (IMPACTS.name,)).fetchone():
+            return {}
+        cols = IMPACTS.column_names
+        cur = conn.execute(f"SELECT {','.join(f'[{c}]' for c in cols)} FROM [{IMPACTS.name}]")
+        return {str(r[0]): dict(zip(cols, r, strict=True)) for r in cur.fetchall()}
 
 
 def read_registry(path: Path) -> list[dict[str, object]]:
@@ -353,6 +369,17 @@ def read_registry(path: Path) -> list[dict[str, object]]:
     path = Path(path)
     if not path.exists():
         raise InputError("no release registry here (nothing released yet?)", path=path)
+    with _registry_ro(path) as conn:
+        cols = RELEASES.column_names
+        cur = conn.execute(
+            f"SELECT {','.join(f'[{c}]' for c in cols)} FROM [{RELEASES.name}] ORDER BY released_at, db_version"
+        )
+        return [dict(zip(cols, r, strict=True)) for r in cur.fetchall()]
+
+
+@contextlib.contextmanager
+def _registry_ro(path: Path) -> Iterator[sqlite3.Connection]:
+    """A read-only connection to a checked registry; InputError when it cannot be read."""
     _check_registry_file(path)
     try:
         conn = sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)
@@ -360,238 +387,8 @@ def read_registry(path: Path) -> list[dict[str, object]]:
         raise InputError(f"cannot open release registry: {exc}", path=path) from exc
     try:
         _check_registry_schema(conn, path)
-        cols = RELEASES.column_names
-        cur = conn.execute(
-            f"SELECT {','.join(f'[{c}]' for c in cols)} FROM [{RELEASES.name}] ORDER BY released_at, db_version"
-        )
-        return [dict(zip(cols, r, strict=True)) for r in cur.fetchall()]
+        yield conn
     except sqlite3.DatabaseError as exc:
         raise InputError(f"release registry is corrupt or unreadable: {exc}", path=path) from exc
     finally:
-        conn.close()
-
-
-# --------------------------------------------------------------------------- audit databases
-
-AUDIT_NAMES: dict[str, Table] = {t.name: t for t in (*AUDIT_TABLES, *AUDIT_VIEWS)}
-_RUNS, _EVENTS, _TRACES, _META = (t.name for t in AUDIT_TABLES)
-
-#: ``route_summary`` (columns: :data:`schemas.audit.ROUTE_SUMMARY`): per (line, track,
-#: direction) over the runs with status ok; mean/max % over their balise corrections.
-ROUTE_SUMMARY_SQL = f"""
-SELECT r.line_code, r.track, r.direction,
-       COUNT(*) AS n_runs,
-       SUM(r.distance_m) AS distance_m,
-       SUM(r.n_corrections) AS n_corrections,
-       (SELECT AVG(e.correction_pct) FROM {_EVENTS} e JOIN {_RUNS} r2 USING (run_path)
-         WHERE e.type = 'balise_correction' AND r2.status = 'ok' AND r2.line_code IS r.line_code
-           AND r2.track IS r.track AND r2.direction IS r.direction) AS mean_correction_pct,
-       (SELECT MAX(e.correction_pct) FROM {_EVENTS} e JOIN {_RUNS} r2 USING (run_path)
-         WHERE e.type = 'balise_correction' AND r2.status = 'ok' AND r2.line_code IS r.line_code
-           AND r2.track IS r.track AND r2.direction IS r.direction) AS max_correction_pct,
-       SUM(r.n_feature_corrections) AS n_feature_corrections,
-       SUM(r.n_feature_refused) AS n_feature_refused,
-       SUM(r.n_slips) AS n_slips,
-       SUM(r.n_failsafe) AS n_failsafe,
-       SUM(r.n_anomalies) AS n_anomalies
-FROM {_RUNS} r WHERE r.status = 'ok'
-GROUP BY r.line_code, r.track, r.direction
-"""
-
-
-def _enum_checks(conn: sqlite3.Connection, tables: tuple[Table, ...]) -> None:
-    """A trigger per enumerated column that refuses any other value (sqlite-utils has no
-    CHECK constraints)."""
-    for t in tables:
-        for c in t.columns:
-            if not c.enum:
-                continue
-            allowed = ", ".join("'" + v.replace("'", "''") + "'" for v in c.enum)
-            for op, when in (("insert", "INSERT"), ("update", f"UPDATE OF [{c.name}]")):
-                conn.execute(
-                    f"CREATE TRIGGER IF NOT EXISTS [{t.name}_{c.name}_{op}] BEFORE {when} ON [{t.name}] "
-                    f"WHEN NEW.[{c.name}] IS NOT NULL AND NEW.[{c.name}] NOT IN ({allowed}) "
-                    f"BEGIN SELECT RAISE(ABORT, '{t.name}.{c.name} must be one of {', '.join(c.enum)}'); END"
-                )
-
-
-def _audit_probe(path: Path) -> tuple[int, int]:
-    """(application_id, number of schema objects) as SQLite sees them, write-ahead log included."""
-    try:
-        with contextlib.closing(sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)) as conn:
-            app_id = int(conn.execute("PRAGMA application_id").fetchone()[0])
-            return app_id, int(conn.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()[0])
-    except sqlite3.DatabaseError as exc:
-        raise InputError(f"audit database is unreadable: {exc}", path=path) from exc
-
-
-def _is_audit_file(path: Path) -> bool:
-    """True when ``path`` is an audit DB, False when it is an empty file (or an empty SQLite
-    DB) that may become one; InputError for anything else."""
-    if path.is_dir():
-        raise InputError("is a folder, expected an audit database file (.sqlite)", path=path)
-    with open(path, "rb") as fh:
-        head = fh.read(100)
-    if not head:
-        return False
-    if not head.startswith(SQLITE_MAGIC):
-        raise InputError("not an SQLite database", path=path)
-    if len(head) >= 72 and int.from_bytes(head[68:72], "big") == AUDIT_APPLICATION_ID:
-        return True
-    # the file header lags the write-ahead log until a checkpoint (an audit DB of schema 1
-    # killed before its first one): ask SQLite
-    app_id, n = _audit_probe(path)
-    if app_id == AUDIT_APPLICATION_ID:
-        return True
-    if n:
-        raise InputError(f"not a trainpos audit database (application_id {app_id:#x})", path=path)
-    return False
-
-
-def _check_audit_version(conn: sqlite3.Connection, path: Path, is_audit: bool) -> None:
-    version = int(conn.execute("PRAGMA user_version").fetchone()[0])
-    if version > AUDIT_SCHEMA_VERSION:
-        raise InputError(
-            f"audit database schema {version} is newer than this tool's ({AUDIT_SCHEMA_VERSION})", path=path
-        )
-    if is_audit and version < AUDIT_SCHEMA_VERSION:
-        raise InputError(
-            f"audit database schema {version} is older than this tool's ({AUDIT_SCHEMA_VERSION}): "
-            "audit the runs again into a new audit database",
-            path=path,
-        )
-
-
-def _create_audit_schema(conn: sqlite3.Connection) -> None:
-    """Identity and tables of an audit DB, committed to the main file (rollback journal)
-    *before* it switches to WAL: its header names it an audit DB from the first moment,
-    whatever happens later (a kill -9 before the first checkpoint). Idempotent: completes a
-    schema whose creation was cut short."""
-    conn.execute("PRAGMA journal_mode=DELETE")
-    conn.execute(f"PRAGMA application_id={AUDIT_APPLICATION_ID}")
-    conn.execute(f"PRAGMA user_version={AUDIT_SCHEMA_VERSION}")
-    db = sqlite_utils.Database(conn)
-    _create_tables(db, AUDIT_TABLES, if_not_exists=True)
-    _enum_checks(conn, AUDIT_TABLES)
-    db.create_view(ROUTE_SUMMARY.name, ROUTE_SUMMARY_SQL, ignore=True)
-    conn.commit()
-
-
-def _connect_audit(path: Path, *, create: bool, is_audit: bool) -> sqlite3.Connection:
-    if create:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        conn = sqlite3.connect(path) if create else sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)
-    except sqlite3.Error as exc:
-        raise InputError(f"cannot open audit database: {exc}", path=path) from exc
-    try:
-        _check_audit_version(conn, path, is_audit)
-        conn.execute("PRAGMA foreign_keys=ON")
-        if create:
-            _create_audit_schema(conn)
-            conn.execute("PRAGMA journal_mode=WAL")
-            # one commit per run: WAL + NORMAL survives a crash of the process (not of the OS)
-            conn.execute("PRAGMA synchronous=NORMAL")
-    except BaseException as exc:
-        conn.close()
-        if isinstance(exc, sqlite3.DatabaseError):
-            raise InputError(f"audit database is unreadable: {exc}", path=path) from exc
-        raise
-    return conn
-
-
-class AuditDB:
-    """An open audit DB (:func:`open_audit_db`): the runs, events, traces and meta tables of
-    :mod:`schemas.audit`, one transaction per write."""
-
-    def __init__(self, conn: sqlite3.Connection, path: Path) -> None:
-        self.conn = conn
-        self.path = path
-
-    def fingerprints(self) -> dict[str, tuple[str, str, str, str]]:
-        """run_path → (fingerprint, quick_key, status, context) of every recorded run."""
-        rows = self.conn.execute(f"SELECT run_path, fingerprint, quick_key, status, context FROM {_RUNS}")
-        return {r[0]: (r[1], r[2], r[3], r[4]) for r in rows}
-
-    def touch_run(self, run_path: str, quick_key: str) -> None:
-        """Record a new quick key for a run whose content was found unchanged."""
-        with self.conn:
-            self.conn.execute(f"UPDATE {_RUNS} SET quick_key = ? WHERE run_path = ?", (quick_key, run_path))
-
-    def store_run(
-        self, record: Mapping[str, Any], events: Iterable[Sequence[Any]], trace: bytes | None, trace_rows: int = 0
-    ) -> None:
-        """Replace one run's rows in a single transaction: its record (columns of
-        ``audit_runs``), events (rows in ``audit_events`` column order after run_path) and
-        trace blob."""
-        runs, ev_cols = AUDIT_NAMES[_RUNS].column_names, AUDIT_NAMES[_EVENTS].column_names
-        path = record["run_path"]
-        with self.conn:
-            for table in (_EVENTS, _TRACES, _RUNS):
-                self.conn.execute(f"DELETE FROM {table} WHERE run_path = ?", (path,))
-            self.conn.execute(
-                f"INSERT INTO {_RUNS} ({','.join(runs)}) VALUES ({','.join('?' * len(runs))})",
-                [record.get(c) for c in runs],
-            )
-            self.conn.executemany(
-                f"INSERT INTO {_EVENTS} ({','.join(ev_cols)}) VALUES ({','.join('?' * len(ev_cols))})",
-                ((path, *r) for r in events),
-            )
-            if trace:
-                self.conn.execute(
-                    f"INSERT INTO {_TRACES} (run_path, n_rows, format, data) VALUES (?, ?, 'parquet', ?)",
-                    (path, trace_rows, trace),
-                )
-
-    def set_meta(self, values: Mapping[str, str]) -> None:
-        with self.conn:
-            self.conn.executemany(f"INSERT OR REPLACE INTO {_META} (key, value) VALUES (?, ?)", values.items())
-
-    def meta(self) -> dict[str, str]:
-        return dict(self.conn.execute(f"SELECT key, value FROM {_META}").fetchall())
-
-    def read(
-        self, name: str, *, where: Mapping[str, str | float] | None = None, order_by: Sequence[str] = ()
-    ) -> pd.DataFrame:
-        """Rows of one audit table or view; ``where``: column = value filters."""
-        table = AUDIT_NAMES.get(name)
-        if table is None:
-            raise KeyError(f"not an audit table or view: {name}")
-        where = where or {}
-        for c in [*where, *order_by]:
-            table.column(c)  # KeyError for an undeclared column
-        sql = f"SELECT * FROM [{name}]"
-        if where:
-            sql += " WHERE " + " AND ".join(f"[{c}] = ?" for c in where)
-        if order_by:
-            sql += " ORDER BY " + ", ".join(f"[{c}]" for c in order_by)
-        return pd.read_sql_query(sql, self.conn, params=tuple(where.values()))
-
-    def trace(self, run_path: str) -> bytes | None:
-        """One run's trace blob (None when it has none)."""
-        row = self.conn.execute(f"SELECT data FROM {_TRACES} WHERE run_path = ?", (run_path,)).fetchone()
-        return None if row is None else bytes(row[0])
-
-
-@contextlib.contextmanager
-def open_audit_db(path: Path, *, create: bool = True) -> Iterator[AuditDB]:
-    """Open an audit DB: created or resumed (``create=True``, read-write) or read-only.
-
-    Refuses SQLite files that are not audit DBs (an onboard DB passed by mistake is never
-    modified) and audit DBs of another schema version. A writer leaves one file behind
-    (journal back to DELETE: readers then leave no -wal/-shm either).
-    """
-    path = Path(path)
-    is_audit = path.exists() and _is_audit_file(path)
-    if not create and not is_audit:
-        raise InputError("no such audit database" if not path.exists() else "empty audit database", path=path)
-    conn = _connect_audit(path, create=create, is_audit=is_audit)
-    try:
-        yield AuditDB(conn, path)
-    except sqlite3.DatabaseError as exc:
-        raise InputError(f"audit database error: {exc}", path=path) from exc
-    finally:
-        if create:
-            with contextlib.suppress(sqlite3.DatabaseError):  # a reader still open keeps the WAL
-                conn.execute("PRAGMA journal_mode=DELETE")
         conn.close()

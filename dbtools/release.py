@@ -5,6 +5,7 @@ A registry is a folder (layout in :mod:`schemas.registry`)::
     DIR/registry.sqlite        one row per release
     DIR/<db_version>.sqlite    the released DB, byte-identical to the validated input, mode 0444
     DIR/<db_version>.sha256    manifest in sha256sum format: "<hex>  <db_version>.sqlite"
+    DIR/<db_version>.impact.json  (``--impact``) the ``db impact`` report of the release, mode 0444
 
 so ``cd DIR && sha256sum -c *.sha256`` checks the files without trainpos.
 
@@ -24,6 +25,7 @@ import hashlib
 import os
 import re
 import tempfile
+from collections.abc import Set as AbstractSet
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -32,6 +34,7 @@ from typing import Any
 from dbtools.database import (
     check_sqlite_file,
     integrity_findings,
+    read_impacts,
     read_meta,
     read_registry,
     registry_find,
@@ -44,7 +47,7 @@ from dbtools.validate import validate_path
 from schemas.enums import Severity
 from schemas.errors import FindingsError, InputError, RefusedError, UsageError
 from schemas.findings import Finding, has_errors
-from schemas.registry import DB_VERSION_PATTERN, REGISTRY_FILE, RELEASES
+from schemas.registry import DB_VERSION_PATTERN, IMPACTS, REGISTRY_FILE, RELEASES
 
 #: Mode of released files and manifests: read-only for everyone.
 READ_ONLY = 0o444
@@ -85,6 +88,18 @@ class Release:
         )
 
 
+@dataclass(frozen=True)
+class ImpactAttachment:
+    """An impact report (``db impact`` as JSON) to store with a release (``db release --impact``)."""
+
+    report_json: bytes
+    against_version: str | None
+    """db_version of the DB the release was compared with."""
+    against_content_hash: str
+    runs: int
+    runs_changed: int
+
+
 @dataclass
 class ReleaseResult:
     release: Release
@@ -92,6 +107,13 @@ class ReleaseResult:
     """The released file."""
     warnings: list[Finding]
     """Validation warnings (errors refuse the release)."""
+    impact_path: Path | None = None
+    """The stored impact report (``<db_version>.impact.json``), if one was given."""
+
+
+def impact_file_name(db_version: str) -> str:
+    """File name of a release's impact report in its registry folder."""
+    return f"{db_version}.impact.json"
 
 
 @dataclass
@@ -130,8 +152,11 @@ def release_db(
     note: str = "",
     now: datetime | None = None,
     user: str | None = None,
+    impact: ImpactAttachment | None = None,
 ) -> ReleaseResult:
-    """Validate ``file`` and add it to ``registry`` as an immutable version.
+    """Validate ``file`` and add it to ``registry`` as an immutable version; with
+    ``impact``, store that report read-only as ``<db_version>.impact.json`` beside it and
+    record it (table ``release_impacts``) in the same transaction.
 
     Raises FindingsError (validation errors; nothing written), RefusedError (version
     already released, or its file already in the folder), InputError (unreadable input or
@@ -154,6 +179,7 @@ def release_db(
         )
     target = registry / f"{version}.sqlite"
     manifest = registry / f"{version}.sha256"
+    impact_path = registry / impact_file_name(version) if impact is not None else None
     released_at = (now or datetime.now(UTC)).astimezone(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
     release = Release(
         db_version=version,
@@ -181,8 +207,8 @@ def release_db(
                 raise RefusedError(
                     f"db_version {version} was already released on {existing['released_at']} as {what}", path=file
                 )
-            for p in (target, manifest):
-                if p.exists():
+            for p in (target, manifest, impact_path):
+                if p is not None and p.exists():
                     raise RefusedError(
                         f"{p.name} already exists in the registry folder but is not registered; "
                         "remove it by hand if it is debris of an interrupted release",
@@ -191,12 +217,34 @@ def release_db(
             _atomic_copy(file, target, digest, created)
             _atomic_write(manifest, f"{digest}  {target.name}\n".encode(), created)
             registry_insert(conn, release.to_dict())
+            if impact is not None and impact_path is not None:
+                _store_impact(conn, impact, impact_path, version, created)
     except BaseException:
         for p in created:
             with contextlib.suppress(OSError):
                 p.unlink()
         raise
-    return ReleaseResult(release, target, findings)
+    return ReleaseResult(release, target, findings, impact_path)
+
+
+def _store_impact(conn: Any, impact: ImpactAttachment, path: Path, version: str, created: list[Path]) -> None:
+    """The report file (read-only, atomically) and its registry row."""
+    _atomic_write(path, impact.report_json, created)
+    row: dict[str, object] = {
+        "db_version": version,
+        "file": path.name,
+        "sha256": hashlib.sha256(impact.report_json).hexdigest(),
+        "against_version": impact.against_version,
+        "against_content_hash": impact.against_content_hash,
+        "runs": impact.runs,
+        "runs_changed": impact.runs_changed,
+    }
+    registry_insert(conn, row, IMPACTS)
+
+
+def list_impacts(registry: Path) -> dict[str, dict[str, object]]:
+    """The impact-report rows of a registry folder by db_version (releases made with ``--impact``)."""
+    return read_impacts(Path(registry) / REGISTRY_FILE)
 
 
 def _current_user() -> str:
@@ -277,10 +325,13 @@ def verify_releases(registry: Path, db_version: str | None = None) -> VerifyRepo
         if not releases:
             raise UsageError(f"db_version {db_version} is not in the registry", path=registry / REGISTRY_FILE)
     findings: list[Finding] = []
+    impacts = list_impacts(registry)
     for r in releases:
         findings.extend(_verify_one(registry, r))
+        if r.db_version in impacts:
+            findings.extend(_verify_impact(registry, r, impacts[r.db_version]))
     if db_version is None:
-        findings.extend(_unregistered(registry, releases))
+        findings.extend(_unregistered(registry, releases, set(impacts)))
     return VerifyReport(str(registry), releases, findings)
 
 
@@ -403,12 +454,35 @@ def _check_manifest(manifest: Path, r: Release) -> list[Finding]:
     return out
 
 
-def _unregistered(registry: Path, releases: list[Release]) -> list[Finding]:
+def _verify_impact(registry: Path, r: Release, row: dict[str, object]) -> list[Finding]:
+    """A release's stored impact report: present and unchanged since the release."""
+    path = registry / str(row["file"])
+    if Path(str(row["file"])).name != row["file"] or not path.is_file():
+        return [_finding("release.impact", r, "impact report is missing", path)]
+    actual = sha256_file(path)
+    if actual != row["sha256"]:
+        return [
+            _finding(
+                "release.impact",
+                r,
+                "impact report does not match its registered SHA-256: it was modified after release",
+                path,
+                value=actual[:16],
+                limit=str(row["sha256"])[:16],
+            )
+        ]
+    return []
+
+
+def _unregistered(
+    registry: Path, releases: list[Release], with_impact: AbstractSet[str] = frozenset()
+) -> list[Finding]:
     """Released-looking files that no registry row names (debris or smuggled in)."""
     known = {r.file for r in releases} | {f"{r.db_version}.sha256" for r in releases} | {REGISTRY_FILE}
+    known |= {impact_file_name(v) for v in with_impact}
     out = []
     for p in sorted(registry.iterdir()):
-        if p.suffix in (".sqlite", ".sha256") and p.name not in known and not p.name.startswith("."):
+        if p.suffix in (".sqlite", ".sha256", ".json") and p.name not in known and not p.name.startswith("."):
             out.append(
                 Finding(
                     "release.unregistered",

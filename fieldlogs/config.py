@@ -2,10 +2,10 @@
 
 One TOML file (``--config FILE.toml``) configures every command: ``run``, ``audit`` and
 ``gis verify`` read the pipeline's sections (``[odometry]``, ``[balise]``, ``[feature]``,
-``[gps]``, ``[margin]``, ``[gnss]``, ``cycle_s``), ``possession check`` reads ``[gps]`` and
-``[possession]``, ``survey`` the pipeline's sections and ``[survey]``; each command
-refuses unknown sections and keys, wrong types and values out of range.
-``trainpos config show`` prints the whole tree (or one section) with every
+``[gps]``, ``[margin]``, ``[gnss]``, ``cycle_s``), ``gis verify`` also ``[gis_verify]``,
+``possession check`` reads ``[gps]`` and ``[possession]``, ``survey`` the pipeline's sections
+and ``[survey]``; each command refuses unknown sections and keys, wrong types and values out
+of range. ``trainpos config show`` prints the whole tree (or one section) with every
 default, unit, range and meaning as commented TOML; fed back with ``--config`` it changes
 nothing.
 """
@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from dbtools.gis.verify.config import VerifyConfig
 from fieldlogs.gnss.config import GnssConfig
 from fieldlogs.pipeline.config import (
     CYCLE_S,
@@ -45,6 +46,7 @@ class SuiteConfig:
     gnss: GnssConfig = field(default_factory=GnssConfig)
     possession: PossessionConfig = field(default_factory=PossessionConfig)
     survey: SurveyConfig = field(default_factory=SurveyConfig)
+    gis_verify: VerifyConfig = field(default_factory=VerifyConfig)
     cycle_s: float = setting(**CYCLE_S)
 
     def __post_init__(self) -> None:

@@ -12,7 +12,7 @@ from schemas.logs import LOG_STREAMS
 from schemas.model import Column, Table
 from schemas.outputs import OUTPUT_TABLES
 from schemas.plans import POSSESSIONS
-from schemas.registry import RELEASES
+from schemas.registry import IMPACTS, RELEASES
 from schemas.tables import ALL_DB_TABLES
 
 #: Every declaration by name, for ``trainpos schema show`` and the docs.
@@ -23,6 +23,7 @@ ALL_SCHEMAS: dict[str, Table] = {
     POSSESSIONS.name: POSSESSIONS,
     **GIS_INPUT_TABLES,
     RELEASES.name: RELEASES,
+    IMPACTS.name: IMPACTS,
     **{t.name: t for t in (*AUDIT_TABLES, *AUDIT_VIEWS)},
 }
 

@@ -37,3 +37,23 @@ RELEASES = Table(
     ),
     primary_key=("db_version",),
 )
+
+#: Impact reports stored with a release (``db release --impact``): one row per release
+#: that has one, the JSON file ``<db_version>.impact.json`` beside the released DB. The
+#: table is created by the first such release, so registries without it stay readable and
+#: ``releases`` keeps its shape (no schema-version bump).
+IMPACTS = Table(
+    name="release_impacts",
+    kind="db",
+    description="Impact reports of releases (registry.sqlite): what the release changed on recorded runs.",
+    columns=(
+        Column("db_version", "str", "Released DB version the report belongs to"),
+        Column("file", "str", "Report file name inside the registry folder (<db_version>.impact.json)"),
+        Column("sha256", "str", "SHA-256 of the report file (hex)"),
+        Column("against_version", "str", "db_version of the DB it was compared with", nullable=True),
+        Column("against_content_hash", "str", "Content hash of the DB it was compared with"),
+        Column("runs", "int", "Runs replayed"),
+        Column("runs_changed", "int", "Runs whose figures changed"),
+    ),
+    primary_key=("db_version",),
+)

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dbtools.database import AuditDB
+from dbtools.audit_db import AuditDB
 from fieldlogs.audit.store import encode_trace, fingerprints, open_audit, set_meta, store_run, touch_run
 from fieldlogs.quality.usability import Purpose, require_usable
 from fieldlogs.replay.discovery import discover_runs

@@ -38,7 +38,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from dbtools.database import AuditDB, open_audit_db
+from dbtools.audit_db import AuditDB, open_audit_db
 from schemas.audit import AUDIT_EVENTS, AUDIT_RUNS
 from schemas.jsonable import jsonable
 
@@ -51,7 +51,7 @@ TRACE_FLOAT64 = frozenset({"t", "km_m", "lat", "lon"})
 
 def open_audit(path: Path, *, create: bool = True) -> AbstractContextManager[AuditDB]:
     """An audit DB created or resumed (``create=True``) or opened read-only
-    (:func:`dbtools.database.open_audit_db`)."""
+    (:func:`dbtools.audit_db.open_audit_db`)."""
     return open_audit_db(Path(path), create=create)
 
 

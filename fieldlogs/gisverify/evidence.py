@@ -14,7 +14,8 @@ The track is therefore never inferred from the fix itself. The pipeline km at th
 (``km_ref_m``, linear between the two 100 ms cycles around it) is attached only where the
 position is *determined*, its last absolute fix was a balise or a feature point (a GPS
 initial position would compare the grid with itself) and its margin is at most
-``max_km_margin_m``; elsewhere it is NaN and the fix only serves the lateral test.
+``max_km_margin_m``; elsewhere it is NaN and the fix only serves the lateral test. Each
+fix also carries the pipeline's absolute-fix count (``km_ref_epoch``, :func:`fix_epochs`).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import closing
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools.database import read_network
-from dbtools.gis.verify import FIX_COLUMNS, GisVerification, VerifyConfig, verify_fixes
+from dbtools.gis.verify import FIX_COLUMNS, KM_EPOCH_COLUMN, GisVerification, VerifyConfig, verify_fixes
 from dbtools.network import Network
 from fieldlogs.io import read_run
 from fieldlogs.pipeline import PipelineConfig, PipelineResult, run_pipeline
@@ -42,8 +43,8 @@ from schemas.errors import InputError, TrainposError
 
 #: Sources of the last absolute fix whose km may serve as the along-track reference.
 KM_REF_SOURCES = ("balise", "feature")
-#: Default largest pipeline margin for the along-track reference [m].
-MAX_KM_MARGIN_M = 10.0
+#: Default largest pipeline margin for the along-track reference [m] (``[gis_verify]``).
+MAX_KM_MARGIN_M: float = VerifyConfig().max_km_margin_m
 
 Progress = Callable[[int, int, str], None]
 
@@ -95,7 +96,8 @@ def fixes_from_result(result: PipelineResult, run_id: str, max_km_margin_m: floa
     with np.errstate(invalid="ignore", divide="ignore"):
         w = np.where(dt > 0, (t - tc[i0]) / dt, 0.0)
     km_ref = km[i0] + w * (km[i1] - km[i0])
-    same = (line[i1] == line[i0]) & (track[i1] == track[i0]) & ok_c[i1]
+    epoch = fix_epochs(margin)
+    same = (line[i1] == line[i0]) & (track[i1] == track[i0]) & ok_c[i1] & (epoch[i1] == epoch[i0])
     km_ref = np.where(ok_c[i0] & same, km_ref, np.nan)
 
     sel = np.flatnonzero(use)
@@ -108,6 +110,7 @@ def fixes_from_result(result: PipelineResult, run_id: str, max_km_margin_m: floa
             "line_code": line[i0[sel]].astype(str),
             "track": track[i0[sel]].astype(str),
             "km_ref_m": km_ref[sel],
+            KM_EPOCH_COLUMN: epoch[i0[sel]],
         }
     )
     counts = {
@@ -119,6 +122,15 @@ def fixes_from_result(result: PipelineResult, run_id: str, max_km_margin_m: floa
         "with_km_ref": int(np.isfinite(km_ref[sel]).sum()),
     }
     return RunEvidence(run_id, "", fixes, counts)
+
+
+def fix_epochs(margin: np.ndarray) -> np.ndarray:
+    """Per cycle, how many absolute fixes the pipeline had taken: its margin only ever
+    drops at one (it grows with the travel otherwise). The pipeline's km error is reset
+    there, so along-track residuals are compared within one epoch."""
+    m = np.where(np.isfinite(margin), margin, np.inf)
+    drops = np.concatenate([[0], (m[1:] < m[:-1] - 1e-9).astype(np.int64)])
+    return np.cumsum(drops)
 
 
 def _text(s: pd.Series) -> np.ndarray:
@@ -236,11 +248,16 @@ def verify_runs(
     *,
     pipeline: PipelineConfig | None = None,
     config: VerifyConfig | None = None,
-    max_km_margin_m: float = MAX_KM_MARGIN_M,
+    max_km_margin_m: float | None = None,
     workers: int = 1,
     progress: Progress | None = None,
 ) -> VerifyReport:
-    """``gis verify``: discover runs, replay them, select evidence, verify the grid."""
+    """``gis verify``: discover runs, replay them, select evidence (pipeline km as the
+    along-track reference up to ``config.max_km_margin_m``; ``max_km_margin_m`` overrides
+    it), verify the grid."""
+    config = config or VerifyConfig()
+    if max_km_margin_m is not None:
+        config = replace(config, max_km_margin_m=max_km_margin_m)
     network = read_network(db)
     runs = discover(roots)
     ev = collect_evidence(
@@ -248,7 +265,7 @@ def verify_runs(
         db,
         pipeline,
         network=network,
-        max_km_margin_m=max_km_margin_m,
+        max_km_margin_m=config.max_km_margin_m,
         workers=workers or (os.cpu_count() or 1),
         progress=progress,
     )

@@ -133,11 +133,12 @@ def mostly_unverified(coverage: pd.DataFrame) -> pd.DataFrame:
     return per[(per["length_km"] > 0) & (per["unverified_km"] > MAX_UNVERIFIED_SHARE * per["length_km"])]
 
 
-def verdict(coverage: pd.DataFrame, n_defects: int) -> str:
+def verdict(coverage: pd.DataFrame, n_defects: int, n_km_defects: int = 0) -> str:
     """Defects in red; "No defect found." in green only when no line is mostly unverified,
     else in amber, naming those lines and how much of them is unverified."""
-    if n_defects:
-        return kit.paragraph(f"{n_defects} defect(s) found.", kit.Status.WARN)
+    if n_defects or n_km_defects:
+        km = f" and {n_km_defects} along-track (km) defect(s)" if n_km_defects else ""
+        return kit.paragraph(f"{n_defects} defect(s){km} found.", kit.Status.WARN)
     if coverage.empty or not float(coverage["length_km"].sum()) > 0:
         return kit.paragraph("No defect found, but no grid cell could be checked.", kit.Status.CAUTION)
     thin = mostly_unverified(coverage)
@@ -155,10 +156,18 @@ def verdict(coverage: pd.DataFrame, n_defects: int) -> str:
 
 def _method(report: VerifyReport) -> str:
     cfg = report.verification.config
+    scan = (
+        f"Neighbouring cells are pooled into windows of {', '.join(f'{w:g}' for w in cfg.scan_windows_m)} m: "
+        f"each run's offset there minus its own offset over {cfg.background_m:g} m either side, the runs' "
+        f"contrasts t-tested (variance moderated per window length), {cfg.scan_correction.upper()} over every "
+        "window of every track; the same on the along-track residual (GIS km − pipeline km). "
+        if cfg.scan
+        else "The pooled scan is off. "
+    )
     return kit.paragraph(
         "Per 20 m cell the run is the unit: the runs' mean offsets are tested against 0 "
         f"(t-test, spread at least the track's pooled between-run spread; {cfg.correction.upper()} correction "
-        f"over all testable cells at {cfg.alpha:g}); a defect needs |mean| ≥ {cfg.min_shift_m:g} m. "
+        f"over all testable cells at {cfg.alpha:g}). {scan}A defect needs |shift| ≥ {cfg.min_shift_m:g} m. "
         f"Cells with fewer than {cfg.min_runs} runs or {cfg.min_fixes} fixes, or whose 95 % interval reaches "
         f"beyond ±{cfg.tolerance_m:g} m, are unverified. Offsets are positive to the left of increasing km.",
         kit.Status.NOTE,
@@ -186,13 +195,15 @@ def render_html(report: VerifyReport) -> str:
     parts = [
         f"<p>DB {kit.code(report.db)} (version <b>{kit.escape(report.db_version)}</b>), "
         f"{len(report.runs)} run(s), {v.counts.get('fixes_matched', 0):,} fixes used; {kit.generated()}.</p>",
-        verdict(v.coverage, n_def),
+        verdict(v.coverage, n_def, len(v.km_defects)),
         _method(report),
         kit.section("Coverage", table_html(v.coverage)),
         kit.section("Defects", table_html(v.defects) if n_def else "<p>None.</p>"),
     ]
     if len(v.proposal):
         parts.append(kit.section("Proposed GIS points", table_html(v.proposal)))
+    if len(v.km_defects):
+        parts.append(kit.section("Along-track (km) defects", table_html(v.km_defects)))
     parts.append(kit.section("Offsets along the lines", *_line_figures(report)))
     flagged = v.cells[v.cells["status"] == DEFECT]
     if len(flagged):

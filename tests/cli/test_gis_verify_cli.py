@@ -113,3 +113,23 @@ def test_help_documents_exit_codes_and_json() -> None:
     r = CliRunner().invoke(app, ["gis", "verify", "--help"], env={"COLUMNS": "200"})
     assert r.exit_code == 0
     assert "Exit codes" in r.output and "coverage" in r.output and "Example" in r.output
+
+
+def test_options_default_to_the_config_and_override_it(runner: CliRunner, data: VerifyData, tmp_path: Path) -> None:
+    """[gis_verify] of --config sets the thresholds; an option on the command line wins."""
+    runs = data.runs[:2] + data.runs[-2:]
+    cfg = tmp_path / "suite.toml"
+    cfg.write_text("[gis_verify]\nmin_runs = 40\nscan = false\n[odometry]\nta_kmh_s = 1.23\n", encoding="utf-8")
+    r = invoke(runner, "gis", "verify", data.truth_db, *runs, "--format", "json", "--config", cfg)
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    assert out["config"]["min_runs"] == 40 and out["config"]["scan"] is False
+    assert {c["reason"] for c in out["cells"]} == {"fewer than 40 runs"}
+    r = invoke(runner, "gis", "verify", data.truth_db, *runs, "--format", "json", "--config", cfg, "--min-runs", "2")
+    assert json.loads(r.stdout)["config"]["min_runs"] == 2
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[gis_verify]\nscan_correction = 'max'\n", encoding="utf-8")
+    r = invoke(runner, "gis", "verify", data.truth_db, *runs, "--config", bad)
+    assert r.exit_code == 2 and "'gis_verify.scan_correction' = 'max' is not one of" in r.output
+    r = invoke(runner, "config", "show", "--section", "gis_verify")
+    assert r.exit_code == 0 and "scan_windows_m = [100.0, 140.0, 200.0, 300.0, 400.0, 500.0]" in r.output

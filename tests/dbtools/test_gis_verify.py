@@ -219,7 +219,17 @@ def test_json_shape(straight: Network) -> None:
     rng = np.random.default_rng(7)
     res = verify_fixes(straight, fixes(runs_over("D", 5, {900.0: 3.0, 920.0: 3.0}, rng, per_cell=2)))
     data = json.loads(json.dumps(res.to_dict()))
-    assert set(data) == {"config", "counts", "km_residual", "coverage", "defects", "proposal", "cells"}
+    assert set(data) == {
+        "config",
+        "counts",
+        "km_residual",
+        "coverage",
+        "defects",
+        "proposal",
+        "km_defects",
+        "scan",
+        "cells",
+    }
     assert set(data["cells"][0]) == set(CELL_COLUMNS)
     assert data["config"]["alpha"] == 0.01
 

@@ -17,6 +17,7 @@ from dbtools.gis.verify.config import (
     CELL_COLUMNS,
     COVERAGE_COLUMNS,
     DEFECT,
+    KM_EPOCH_COLUMN,
     MAX_CELL_M,
     UNVERIFIED,
     VERIFIED,
@@ -105,6 +106,11 @@ def match_fixes(
     u = (km - grid.km[cell]) / (grid.km[cell + 1] - grid.km[cell])
     run_code, runs = pd.factorize(fixes["run_id"].astype(str), sort=True)
     km_ref = fixes["km_ref_m"].to_numpy(dtype=float, na_value=np.nan)[f]
+    epoch = (
+        fixes[KM_EPOCH_COLUMN].to_numpy(dtype=float, na_value=0.0)[f]
+        if KM_EPOCH_COLUMN in fixes.columns
+        else np.zeros(f.size)
+    )
     out = pd.DataFrame(
         {
             "run": run_code[f].astype(np.int64),
@@ -113,6 +119,8 @@ def match_fixes(
             "offset_m": off,
             "u": u,
             "km_residual_m": km - km_ref,
+            "epoch": epoch.astype(np.int64),
+            "t": fixes["t"].to_numpy(dtype=float, na_value=np.nan)[f],
         }
     )
     counts = {
@@ -130,7 +138,8 @@ def match_fixes(
 
 
 def run_cell_means(matched: pd.DataFrame) -> pd.DataFrame:
-    """One row per (cell, run), sorted: fixes, mean offset, km-residual mean and its count."""
+    """One row per (cell, run), sorted: fixes, mean offset, km-residual mean and its count,
+    mean fix time."""
     if not len(matched):
         return pd.DataFrame({c: pd.Series([], dtype=t) for c, t in _RC_DTYPES.items()})
     cell = matched["cell"].to_numpy()
@@ -142,6 +151,7 @@ def run_cell_means(matched: pd.DataFrame) -> pd.DataFrame:
         off=("offset_m", "mean"),
         res=("km_residual_m", "mean"),
         n_res=("km_residual_m", "count"),
+        t=("t", "mean"),
     )
     key = out.index.to_numpy()
     out.insert(0, "run", key % n_runs)
@@ -149,7 +159,15 @@ def run_cell_means(matched: pd.DataFrame) -> pd.DataFrame:
     return out.reset_index(drop=True)
 
 
-_RC_DTYPES = {"cell": np.int64, "run": np.int64, "n": np.int64, "off": float, "res": float, "n_res": np.int64}
+_RC_DTYPES = {
+    "cell": np.int64,
+    "run": np.int64,
+    "n": np.int64,
+    "off": float,
+    "res": float,
+    "n_res": np.int64,
+    "t": float,
+}
 
 
 def cell_statistics(rc: pd.DataFrame, matched: pd.DataFrame) -> pd.DataFrame:

@@ -4,10 +4,15 @@ input fixes and of the result frames (method: :mod:`dbtools.gis.verify`)."""
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any, Literal
+from typing import Any
+
+from schemas.settings import SettingError, check_ranges, setting
 
 #: Columns of the fixes given to :func:`verify_fixes` (``km_ref_m`` may be NaN).
 FIX_COLUMNS = ("run_id", "t", "lat", "lon", "line_code", "track", "km_ref_m")
+#: Optional fix column: the pipeline's count of absolute fixes (balise, feature) at the fix.
+#: Its km error is reset by each, so along-track residuals are compared within one epoch.
+KM_EPOCH_COLUMN = "km_ref_epoch"
 #: Cell status values.
 VERIFIED, UNVERIFIED, DEFECT = "verified", "unverified", "defect"
 #: Columns of :attr:`GisVerification.cells` (one row per cell with at least one fix).
@@ -50,6 +55,24 @@ DEFECT_COLUMNS = (
     "km_residual_mean_m",
     "points_moved",
     "max_move_m",
+    "window_m",
+    "scan_t",
+    "scan_q",
+)
+#: Columns of :attr:`GisVerification.km_defects` (the along-track scan's windows).
+KM_DEFECT_COLUMNS = (
+    "km_defect_id",
+    "line_code",
+    "track",
+    "km_from_m",
+    "km_to_m",
+    "length_m",
+    "run_epochs",
+    "residual_m",
+    "se_m",
+    "t_stat",
+    "p_value",
+    "q_value",
 )
 #: Columns of :attr:`GisVerification.coverage` (one row per line/track of the DB).
 COVERAGE_COLUMNS = (
@@ -82,47 +105,62 @@ TV_SEGMENT_TOL_M = 0.02
 MAX_CELL_M = 200.0
 
 
+#: Multiple-testing corrections: Benjamini–Hochberg (false-discovery rate) or Bonferroni (family-wise).
+CORRECTIONS = ("bh", "bonferroni")
+
+
 @dataclass(frozen=True)
 class VerifyConfig:
-    """Thresholds of the verification (module docstring, steps 3–6)."""
+    """GIS verification from traversed trajectories [S001 §9(a)], section [gis_verify] (dbtools.gis.verify).
 
-    alpha: float = 0.01
-    """Significance level after the multiple-testing correction (FDR for BH)."""
-    correction: Literal["bh", "bonferroni"] = "bh"
-    """Multiple-testing correction over all testable cells."""
-    min_shift_m: float = 0.5
-    """Smallest mean lateral offset worth correcting [m]."""
-    min_runs: int = 3
-    """Fewer runs through a cell → unverified (the run is the independent unit)."""
-    min_fixes: int = 5
-    """Fewer fixes in a cell → unverified."""
-    tolerance_m: float = 1.5
-    """A cell is verified only if its 95 % CI of the mean offset lies within ±this [m]."""
-    max_offset_m: float = 10.0
-    """Fixes farther than this from their known track are not evidence [m]."""
-    merge_gap_cells: int = 1
-    """Defect cells with at most this many cells between them form one defect."""
-    background_m: float = 200.0
-    """Each run's own offset within this distance either side of a defect is its local
-    GPS error, subtracted when estimating the shift (0 = off) [m]."""
-    min_move_m: float = 0.25
-    """Proposed point shifts smaller than this are not applied [m]."""
-    ridge: float = 1e-3
-    """Ridge of the least-squares point shifts, relative to the mean data weight per point."""
-    smooth: float = 1.0
-    """Total-variation penalty on neighbouring point shifts [m × mean data weight per
-    point]: flattens noise inside a displaced stretch but keeps its ends sharp (the levels
-    are then refitted without the penalty)."""
+    Steps 3–8 of :mod:`dbtools.gis.verify` use these; the scan (step 8) pools the cells of
+    windows of ``scan_windows_m`` along each track. Measurements behind the defaults are in
+    ``bench/NOTES.md`` ("GIS verification").
+    """
+
+    alpha: float = setting(0.01, "significance level after the multiple-testing correction", gt=0, le=0.5)
+    correction: str = setting("bh", "multiple-testing correction over the cells: bh or bonferroni")
+    min_shift_m: float = setting(0.5, "smallest mean lateral offset worth correcting", "m", ge=0)
+    min_runs: int = setting(3, "fewer runs through a cell or window → unverified (the run is the unit)", ge=2)
+    min_fixes: int = setting(5, "fewer fixes in a cell → unverified", ge=1)
+    tolerance_m: float = setting(
+        1.5, "a cell is verified only if its 95 % CI of the mean offset is within ±this", "m", gt=0
+    )
+    max_offset_m: float = setting(10.0, "fixes farther than this from their known track are not evidence", "m", gt=0)
+    merge_gap_cells: int = setting(1, "defect cells with at most this many cells between them form one defect", ge=0)
+    background_m: float = setting(
+        200.0, "each run's own offset this far either side of a window or defect is its local GPS error", "m", ge=0
+    )
+    min_move_m: float = setting(0.25, "proposed point shifts smaller than this are not applied", "m", ge=0)
+    ridge: float = setting(1e-3, "ridge of the least-squares point shifts (× mean data weight per point)", ge=0)
+    smooth: float = setting(
+        1.0, "total-variation penalty on neighbouring point shifts (× mean data weight per point)", ge=0
+    )
+    scan: bool = setting(True, "pool neighbouring cells: test windows of scan_windows_m along each track")
+    scan_windows_m: tuple[float, ...] = setting(
+        (100.0, 140.0, 200.0, 300.0, 400.0, 500.0),
+        "window lengths of the scan (rounded to whole 20 m cells)",
+        "m",
+        gt=0,
+    )
+    scan_correction: str = setting(
+        "bonferroni", "multiple-testing correction over every window of every track: bonferroni or bh"
+    )
+    min_km_shift_m: float = setting(
+        1.0, "smallest mean along-track (km) residual over a window worth reporting", "m", ge=0
+    )
+    max_km_margin_m: float = setting(
+        10.0, "pipeline margin up to which its km is the along-track reference of a fix", "m", ge=0
+    )
 
     def __post_init__(self) -> None:
-        if not 0 < self.alpha < 1:
-            raise ValueError("alpha must be in (0, 1)")
-        if self.correction not in ("bh", "bonferroni"):
-            raise ValueError("correction must be 'bh' or 'bonferroni'")
-        if self.min_runs < 2:
-            raise ValueError("min_runs must be at least 2 (a spread needs two runs)")
-        if min(self.tolerance_m, self.max_offset_m) <= 0 or self.min_shift_m < 0 or self.min_fixes < 1:
-            raise ValueError("thresholds must be positive")
+        check_ranges(self, "gis_verify")
+        for key in ("correction", "scan_correction"):
+            value = getattr(self, key)
+            if value not in CORRECTIONS:
+                raise SettingError(f"'gis_verify.{key}' = {value!r} is not one of {', '.join(CORRECTIONS)}")
+        if not self.scan_windows_m and self.scan:
+            raise SettingError("'gis_verify.scan_windows_m' is empty while 'gis_verify.scan' is true")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -1,5 +1,6 @@
 """GIS verification, step 5 (:mod:`dbtools.gis.verify`): defect cells merged into defects,
-each run's background offset beside a defect, and the defect table (shift, t-test)."""
+each run's background offset beside a defect, the defect table (shift, t-test), and the
+scan's windows (step 8) as defect cells, defect columns and along-track defects."""
 
 from __future__ import annotations
 
@@ -8,22 +9,25 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.verify.cells import Cells, effective_spread, t_test
-from dbtools.gis.verify.config import DEFECT, DEFECT_COLUMNS, EDGE_CELLS
+from dbtools.gis.verify.config import DEFECT, DEFECT_COLUMNS, EDGE_CELLS, KM_DEFECT_COLUMNS
 
 IntArray = npt.NDArray[np.int64]
+#: Column of the cells frame with the sign a scan window gave its cells (merging only).
+SIGN_COLUMN = "shift_sign"
 
 
 def merge_defects(
     cells: pd.DataFrame, grid_tid: IntArray, max_gap_cells: int, has_next: npt.NDArray[np.bool_] | None = None
 ) -> pd.Series:
     """Defect number (0, 1, …) per defect cell (index = grid point id, same order); cells of
-    one track with the same sign and ≤ ``max_gap_cells`` cells between them share one —
+    one track with the same sign (of ``shift_sign`` where given: the scan's window, else of the
+    cell's mean) and ≤ ``max_gap_cells`` cells between them share one —
     never across a kilometrage break or hole (``has_next`` false: no cell there)."""
     d = cells[cells["status"] == DEFECT]
     if d.empty:
         return pd.Series([], dtype=np.int64)
     j = d.index.to_numpy(dtype=np.int64)
-    sign = np.sign(d["offset_mean_m"].to_numpy())
+    sign = np.sign(d[SIGN_COLUMN if SIGN_COLUMN in d.columns else "offset_mean_m"].to_numpy(dtype=float))
     tid = grid_tid[j]
     new = np.ones(j.size, dtype=bool)
     new[1:] = (tid[1:] != tid[:-1]) | (sign[1:] != sign[:-1]) | (np.diff(j) - 1 > max_gap_cells)
@@ -144,3 +148,68 @@ def defect_table(
         }
     )
     return table, first, last
+
+
+# ------------------------------------------------------------------------------ the scan's windows
+
+
+def mark_scan_defects(cells: pd.DataFrame, selected: pd.DataFrame, grid: Cells) -> pd.DataFrame:
+    """Cells (with fixes) of the scan's selected windows become defect cells, reason naming
+    the window; ``shift_sign`` carries the window's sign for :func:`merge_defects` (a cell's
+    own mean, with few runs, still holds their GPS errors)."""
+    out = cells.assign(**{SIGN_COLUMN: np.sign(cells["offset_mean_m"].to_numpy(dtype=float))})
+    for first, last, mean in zip(selected["first"], selected["last"], selected["mean_m"], strict=True):
+        inside = out.index[(out.index >= first) & (out.index <= last)]
+        length = float(grid.km[int(last) + 1] - grid.km[int(first)])
+        out.loc[inside, "status"] = DEFECT
+        out.loc[inside, "reason"] = f"offset over a {length:g} m window"
+        out.loc[inside, SIGN_COLUMN] = float(np.sign(mean))
+    return out
+
+
+def attach_scan(defects: pd.DataFrame, first: IntArray, last: IntArray, selected: pd.DataFrame, grid: Cells) -> None:
+    """Per defect, the scan window overlapping it with the largest |t| (``window_m``,
+    ``scan_t``, ``scan_q``; NaN when only the cell test found it). In place."""
+    cols = {"window_m": np.full(len(defects), np.nan), "scan_t": np.full(len(defects), np.nan)}
+    cols["scan_q"] = np.full(len(defects), np.nan)
+    if len(selected):
+        s_first = selected["first"].to_numpy(dtype=np.int64)
+        s_last = selected["last"].to_numpy(dtype=np.int64)
+        for i, (a, b) in enumerate(zip(first, last, strict=True)):
+            ov = np.flatnonzero((s_first <= b) & (s_last >= a) & (grid.tid[s_first] == grid.tid[a]))
+            if not ov.size:
+                continue
+            j = ov[np.argmax(selected["t_stat"].abs().to_numpy()[ov])]
+            cols["window_m"][i] = grid.km[s_last[j] + 1] - grid.km[s_first[j]]
+            cols["scan_t"][i] = selected["t_stat"].to_numpy()[j]
+            cols["scan_q"][i] = selected["q_value"].to_numpy()[j]
+    for name, val in cols.items():
+        defects[name] = val
+
+
+def km_defect_table(selected: pd.DataFrame, grid: Cells) -> pd.DataFrame:
+    """The along-track scan's selected windows as rows of ``KM_DEFECT_COLUMNS``: the mean
+    residual GIS km − pipeline km over the window relative to its flanks (+: the GIS puts
+    the fixes further along the km than the pipeline does)."""
+    if selected.empty:
+        return pd.DataFrame({c: pd.Series([], dtype=float) for c in KM_DEFECT_COLUMNS})
+    a = selected["first"].to_numpy(dtype=np.int64)
+    b = selected["last"].to_numpy(dtype=np.int64) + 1
+    g = grid.frame
+    out = pd.DataFrame(
+        {
+            "km_defect_id": np.arange(1, len(selected) + 1),
+            "line_code": g["line_code"].to_numpy()[a],
+            "track": g["track"].to_numpy()[a],
+            "km_from_m": grid.km[a],
+            "km_to_m": grid.km[b],
+            "length_m": grid.km[b] - grid.km[a],
+            "run_epochs": selected["units"].to_numpy(dtype=np.int64),
+            "residual_m": selected["mean_m"].to_numpy(dtype=float),
+            "se_m": selected["se_m"].to_numpy(dtype=float),
+            "t_stat": selected["t_stat"].to_numpy(dtype=float),
+            "p_value": selected["p_value"].to_numpy(dtype=float),
+            "q_value": selected["q_value"].to_numpy(dtype=float),
+        }
+    )
+    return out[list(KM_DEFECT_COLUMNS)]

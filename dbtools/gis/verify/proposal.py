@@ -239,7 +239,11 @@ def build_proposal(
         )
     if not rows:
         return pd.DataFrame({c: pd.Series([], dtype=float) for c in PROPOSAL_COLUMNS})
-    return pd.concat(rows, ignore_index=True)[list(PROPOSAL_COLUMNS)]
+    out = pd.concat(rows, ignore_index=True)[list(PROPOSAL_COLUMNS)]
+    # two defects close together may both move a point between them: the larger move stands
+    order = out.assign(size=-out["shift_m"].abs()).sort_values("size", kind="stable").index
+    keep = ~out.loc[order].duplicated(["line_code", "track", "km_m"]).reindex(out.index).to_numpy()
+    return out[keep].reset_index(drop=True)
 
 
 def proposed_network(network: Network, result: GisVerification) -> Network:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dbtools.gis.verify.config import VerifyConfig
+from dbtools.gis.verify.config import KM_DEFECT_COLUMNS, VerifyConfig
 
 
 @dataclass
@@ -26,20 +26,28 @@ class GisVerification:
     km_residual: dict[str, float | int | None] = field(default_factory=dict)
     """Spread of the along-track residual over all eligible fixes (the pipeline km's own
     error plus GPS along-track error): n, median, mean, sd, p95_abs [m]."""
+    km_defects: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=list(KM_DEFECT_COLUMNS)))
+    """Stretches whose along-track residual (GIS km − pipeline km) stands out of its
+    surroundings (the along-track scan, ``KM_DEFECT_COLUMNS``)."""
+    scan: dict[str, Any] = field(default_factory=dict)
+    """Per scan (``lateral``, ``along_track``): windows tested and selected, and the fitted
+    prior of each window length."""
 
     @property
     def has_defects(self) -> bool:
-        return len(self.defects) > 0
+        return len(self.defects) > 0 or len(self.km_defects) > 0
 
     def to_dict(self) -> dict[str, Any]:
         """The documented JSON shape (see ``trainpos gis verify --help``)."""
         return {
-            "config": self.config.to_dict(),
+            "config": {k: list(v) if isinstance(v, tuple) else v for k, v in self.config.to_dict().items()},
             "counts": dict(self.counts),
             "km_residual": dict(self.km_residual),
             "coverage": _records(self.coverage),
             "defects": _records(self.defects),
             "proposal": _records(self.proposal),
+            "km_defects": _records(self.km_defects),
+            "scan": self.scan,
             "cells": _records(self.cells),
         }
 

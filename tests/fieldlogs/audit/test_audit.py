@@ -22,7 +22,8 @@ import pandas as pd
 import pytest
 
 import fieldlogs.audit.runner as audit_mod
-from dbtools.database import AuditDB, read_network
+from dbtools.audit_db import AuditDB
+from dbtools.database import read_network
 from fieldlogs.audit.runner import audit, pack, unpack
 from fieldlogs.audit.store import open_audit, read_table, read_trace, store_run
 from fieldlogs.io import read_run

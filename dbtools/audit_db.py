@@ -1,0 +1,244 @@
+"""Audit databases (``trainpos audit``): tables declared in ``schemas/audit.py``, created and
+written here through the same declarations as every other table (:func:`dbtools.database.create_tables`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sqlite3
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import sqlite_utils
+
+from dbtools.database import SQLITE_MAGIC, create_tables
+from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION, AUDIT_TABLES, AUDIT_VIEWS, ROUTE_SUMMARY
+from schemas.errors import InputError
+from schemas.model import Table
+
+# --------------------------------------------------------------------------- audit databases
+
+AUDIT_NAMES: dict[str, Table] = {t.name: t for t in (*AUDIT_TABLES, *AUDIT_VIEWS)}
+_RUNS, _EVENTS, _TRACES, _META = (t.name for t in AUDIT_TABLES)
+
+#: ``route_summary`` (columns: :data:`schemas.audit.ROUTE_SUMMARY`): per (line, track,
+#: direction) over the runs with status ok; mean/max % over their balise corrections.
+ROUTE_SUMMARY_SQL = f"""
+SELECT r.line_code, r.track, r.direction,
+       COUNT(*) AS n_runs,
+       SUM(r.distance_m) AS distance_m,
+       SUM(r.n_corrections) AS n_corrections,
+       (SELECT AVG(e.correction_pct) FROM {_EVENTS} e JOIN {_RUNS} r2 USING (run_path)
+         WHERE e.type = 'balise_correction' AND r2.status = 'ok' AND r2.line_code IS r.line_code
+           AND r2.track IS r.track AND r2.direction IS r.direction) AS mean_correction_pct,
+       (SELECT MAX(e.correction_pct) FROM {_EVENTS} e JOIN {_RUNS} r2 USING (run_path)
+         WHERE e.type = 'balise_correction' AND r2.status = 'ok' AND r2.line_code IS r.line_code
+           AND r2.track IS r.track AND r2.direction IS r.direction) AS max_correction_pct,
+       SUM(r.n_feature_corrections) AS n_feature_corrections,
+       SUM(r.n_feature_refused) AS n_feature_refused,
+       SUM(r.n_slips) AS n_slips,
+       SUM(r.n_failsafe) AS n_failsafe,
+       SUM(r.n_anomalies) AS n_anomalies
+FROM {_RUNS} r WHERE r.status = 'ok'
+GROUP BY r.line_code, r.track, r.direction
+"""
+
+
+def _enum_checks(conn: sqlite3.Connection, tables: tuple[Table, ...]) -> None:
+    """A trigger per enumerated column that refuses any other value (sqlite-utils has no
+    CHECK constraints)."""
+    for t in tables:
+        for c in t.columns:
+            if not c.enum:
+                continue
+            allowed = ", ".join("'" + v.replace("'", "''") + "'" for v in c.enum)
+            for op, when in (("insert", "INSERT"), ("update", f"UPDATE OF [{c.name}]")):
+                conn.execute(
+                    f"CREATE TRIGGER IF NOT EXISTS [{t.name}_{c.name}_{op}] BEFORE {when} ON [{t.name}] "
+                    f"WHEN NEW.[{c.name}] IS NOT NULL AND NEW.[{c.name}] NOT IN ({allowed}) "
+                    f"BEGIN SELECT RAISE(ABORT, '{t.name}.{c.name} must be one of {', '.join(c.enum)}'); END"
+                )
+
+
+def _audit_probe(path: Path) -> tuple[int, int]:
+    """(application_id, number of schema objects) as SQLite sees them, write-ahead log included."""
+    try:
+        with contextlib.closing(sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)) as conn:
+            app_id = int(conn.execute("PRAGMA application_id").fetchone()[0])
+            return app_id, int(conn.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()[0])
+    except sqlite3.DatabaseError as exc:
+        raise InputError(f"audit database is unreadable: {exc}", path=path) from exc
+
+
+def _is_audit_file(path: Path) -> bool:
+    """True when ``path`` is an audit DB, False when it is an empty file (or an empty SQLite
+    DB) that may become one; InputError for anything else."""
+    if path.is_dir():
+        raise InputError("is a folder, expected an audit database file (.sqlite)", path=path)
+    with open(path, "rb") as fh:
+        head = fh.read(100)
+    if not head:
+        return False
+    if not head.startswith(SQLITE_MAGIC):
+        raise InputError("not an SQLite database", path=path)
+    if len(head) >= 72 and int.from_bytes(head[68:72], "big") == AUDIT_APPLICATION_ID:
+        return True
+    # the file header lags the write-ahead log until a checkpoint (an audit DB of schema 1
+    # killed before its first one): ask SQLite
+    app_id, n = _audit_probe(path)
+    if app_id == AUDIT_APPLICATION_ID:
+        return True
+    if n:
+        raise InputError(f"not a trainpos audit database (application_id {app_id:#x})", path=path)
+    return False
+
+
+def _check_audit_version(conn: sqlite3.Connection, path: Path, is_audit: bool) -> None:
+    version = int(conn.execute("PRAGMA user_version").fetchone()[0])
+    if version > AUDIT_SCHEMA_VERSION:
+        raise InputError(
+            f"audit database schema {version} is newer than this tool's ({AUDIT_SCHEMA_VERSION})", path=path
+        )
+    if is_audit and version < AUDIT_SCHEMA_VERSION:
+        raise InputError(
+            f"audit database schema {version} is older than this tool's ({AUDIT_SCHEMA_VERSION}): "
+            "audit the runs again into a new audit database",
+            path=path,
+        )
+
+
+def _create_audit_schema(conn: sqlite3.Connection) -> None:
+    """Identity and tables of an audit DB, committed to the main file (rollback journal)
+    *before* it switches to WAL: its header names it an audit DB from the first moment,
+    whatever happens later (a kill -9 before the first checkpoint). Idempotent: completes a
+    schema whose creation was cut short."""
+    conn.execute("PRAGMA journal_mode=DELETE")
+    conn.execute(f"PRAGMA application_id={AUDIT_APPLICATION_ID}")
+    conn.execute(f"PRAGMA user_version={AUDIT_SCHEMA_VERSION}")
+    db = sqlite_utils.Database(conn)
+    create_tables(db, AUDIT_TABLES, if_not_exists=True)
+    _enum_checks(conn, AUDIT_TABLES)
+    db.create_view(ROUTE_SUMMARY.name, ROUTE_SUMMARY_SQL, ignore=True)
+    conn.commit()
+
+
+def _connect_audit(path: Path, *, create: bool, is_audit: bool) -> sqlite3.Connection:
+    if create:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        conn = sqlite3.connect(path) if create else sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)
+    except sqlite3.Error as exc:
+        raise InputError(f"cannot open audit database: {exc}", path=path) from exc
+    try:
+        _check_audit_version(conn, path, is_audit)
+        conn.execute("PRAGMA foreign_keys=ON")
+        if create:
+            _create_audit_schema(conn)
+            conn.execute("PRAGMA journal_mode=WAL")
+            # one commit per run: WAL + NORMAL survives a crash of the process (not of the OS)
+            conn.execute("PRAGMA synchronous=NORMAL")
+    except BaseException as exc:
+        conn.close()
+        if isinstance(exc, sqlite3.DatabaseError):
+            raise InputError(f"audit database is unreadable: {exc}", path=path) from exc
+        raise
+    return conn
+
+
+class AuditDB:
+    """An open audit DB (:func:`open_audit_db`): the runs, events, traces and meta tables of
+    :mod:`schemas.audit`, one transaction per write."""
+
+    def __init__(self, conn: sqlite3.Connection, path: Path) -> None:
+        self.conn = conn
+        self.path = path
+
+    def fingerprints(self) -> dict[str, tuple[str, str, str, str]]:
+        """run_path → (fingerprint, quick_key, status, context) of every recorded run."""
+        rows = self.conn.execute(f"SELECT run_path, fingerprint, quick_key, status, context FROM {_RUNS}")
+        return {r[0]: (r[1], r[2], r[3], r[4]) for r in rows}
+
+    def touch_run(self, run_path: str, quick_key: str) -> None:
+        """Record a new quick key for a run whose content was found unchanged."""
+        with self.conn:
+            self.conn.execute(f"UPDATE {_RUNS} SET quick_key = ? WHERE run_path = ?", (quick_key, run_path))
+
+    def store_run(
+        self, record: Mapping[str, Any], events: Iterable[Sequence[Any]], trace: bytes | None, trace_rows: int = 0
+    ) -> None:
+        """Replace one run's rows in a single transaction: its record (columns of
+        ``audit_runs``), events (rows in ``audit_events`` column order after run_path) and
+        trace blob."""
+        runs, ev_cols = AUDIT_NAMES[_RUNS].column_names, AUDIT_NAMES[_EVENTS].column_names
+        path = record["run_path"]
+        with self.conn:
+            for table in (_EVENTS, _TRACES, _RUNS):
+                self.conn.execute(f"DELETE FROM {table} WHERE run_path = ?", (path,))
+            self.conn.execute(
+                f"INSERT INTO {_RUNS} ({','.join(runs)}) VALUES ({','.join('?' * len(runs))})",
+                [record.get(c) for c in runs],
+            )
+            self.conn.executemany(
+                f"INSERT INTO {_EVENTS} ({','.join(ev_cols)}) VALUES ({','.join('?' * len(ev_cols))})",
+                ((path, *r) for r in events),
+            )
+            if trace:
+                self.conn.execute(
+                    f"INSERT INTO {_TRACES} (run_path, n_rows, format, data) VALUES (?, ?, 'parquet', ?)",
+                    (path, trace_rows, trace),
+                )
+
+    def set_meta(self, values: Mapping[str, str]) -> None:
+        with self.conn:
+            self.conn.executemany(f"INSERT OR REPLACE INTO {_META} (key, value) VALUES (?, ?)", values.items())
+
+    def meta(self) -> dict[str, str]:
+        return dict(self.conn.execute(f"SELECT key, value FROM {_META}").fetchall())
+
+    def read(
+        self, name: str, *, where: Mapping[str, str | float] | None = None, order_by: Sequence[str] = ()
+    ) -> pd.DataFrame:
+        """Rows of one audit table or view; ``where``: column = value filters."""
+        table = AUDIT_NAMES.get(name)
+        if table is None:
+            raise KeyError(f"not an audit table or view: {name}")
+        where = where or {}
+        for c in [*where, *order_by]:
+            table.column(c)  # KeyError for an undeclared column
+        sql = f"SELECT * FROM [{name}]"
+        if where:
+            sql += " WHERE " + " AND ".join(f"[{c}] = ?" for c in where)
+        if order_by:
+            sql += " ORDER BY " + ", ".join(f"[{c}]" for c in order_by)
+        return pd.read_sql_query(sql, self.conn, params=tuple(where.values()))
+
+    def trace(self, run_path: str) -> bytes | None:
+        """One run's trace blob (None when it has none)."""
+        row = self.conn.execute(f"SELECT data FROM {_TRACES} WHERE run_path = ?", (run_path,)).fetchone()
+        return None if row is None else bytes(row[0])
+
+
+@contextlib.contextmanager
+def open_audit_db(path: Path, *, create: bool = True) -> Iterator[AuditDB]:
+    """Open an audit DB: created or resumed (``create=True``, read-write) or read-only.
+
+    Refuses SQLite files that are not audit DBs (an onboard DB passed by mistake is never
+    modified) and audit DBs of another schema version. A writer leaves one file behind
+    (journal back to DELETE: readers then leave no -wal/-shm either).
+    """
+    path = Path(path)
+    is_audit = path.exists() and _is_audit_file(path)
+    if not create and not is_audit:
+        raise InputError("no such audit database" if not path.exists() else "empty audit database", path=path)
+    conn = _connect_audit(path, create=create, is_audit=is_audit)
+    try:
+        yield AuditDB(conn, path)
+    except sqlite3.DatabaseError as exc:
+        raise InputError(f"audit database error: {exc}", path=path) from exc
+    finally:
+        if create:
+            with contextlib.suppress(sqlite3.DatabaseError):  # a reader still open keeps the WAL
+                conn.execute("PRAGMA journal_mode=DELETE")
+        conn.close()
