@@ -240,3 +240,28 @@ def test_a_trains_pto_column_is_ignored(sample_db, tmp_path) -> None:  # type: i
     with_pto = run_pipeline(read_run(run_dir), net)
     assert with_pto.summary["n_corrections"] == plain.summary["n_corrections"] > 0
     assert with_pto.positions["state"].tolist() == plain.positions["state"].tolist()
+
+
+def test_windowed_estimate_is_the_whole_run_estimate_sliced() -> None:
+    tr = travel(30.0)
+    seen: list[tuple[bool, bool]] = []
+
+    @dataclass(eq=False)
+    class Probe(StaticAid):
+        name = "probe"
+        priority = Priority.FEATURE
+
+        def observations(self) -> Iterator[Observation]:
+            return iter([Observation(1.0), Observation(20.0)])
+
+        def observe(self, obs: Observation, view: EngineView) -> Outcome:
+            windows = ((0, 5), (-3, 4), (100, 180), (tr.n - 2, tr.n + 9), (7, 7))
+            parts = [view.km_between(i0, i1) for i0, i1 in windows]  # before the whole run is cached
+            whole = view.km_estimate()
+            for (i0, i1), part in zip(windows, parts, strict=True):
+                ref = whole[max(i0, 0) : i1]
+                seen.append((part.shape == ref.shape, bool(np.array_equal(part, ref, equal_nan=True))))
+            return Outcome()
+
+    run_aids(tr, [Beacon((10.0,)), Probe()], MarginConfig())
+    assert len(seen) == 10 and all(a and b for a, b in seen)
