@@ -265,3 +265,14 @@ def test_windowed_estimate_is_the_whole_run_estimate_sliced() -> None:
 
     run_aids(tr, [Beacon((10.0,)), Probe()], MarginConfig())
     assert len(seen) == 10 and all(a and b for a, b in seen)
+
+
+def test_travel_interpolation_at_one_time_is_np_interp() -> None:
+    from fieldlogs.pipeline.estimate import interp_at
+
+    rng = np.random.default_rng(5)
+    xp = np.cumsum(rng.random(200))
+    xp[50:53] = xp[52]  # repeated times
+    fp = np.cumsum(rng.standard_normal(200))
+    xs = np.concatenate([rng.uniform(xp[0] - 1.0, xp[-1] + 1.0, 2000), xp, [xp[0] - 3.0, xp[-1] + 3.0]])
+    assert all(interp_at(float(x), xp, fp) == float(np.interp(x, xp, fp)) for x in xs)
