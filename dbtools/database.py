@@ -4,6 +4,7 @@ Onboard DB writes are atomic (temp file in the target folder, then ``os.replace`
 never touch an existing file unless asked to. Reads open the file read-only so that
 validating or diffing a released DB cannot modify it. Every table is created from its
 declaration in ``schemas/`` (:func:`_create_tables`), audit DBs included (last section).
+Whole content tables are read as Arrow columns by :mod:`dbtools.sqlite_columns`.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import sqlite_utils
 
 from dbtools.atomic import atomic_file
 from dbtools.network import Network, canonical, content_hash
+from dbtools.sqlite_columns import read_table_columns
 from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION, AUDIT_TABLES, AUDIT_VIEWS, ROUTE_SUMMARY
 from schemas.enums import Severity
 from schemas.errors import InputError
@@ -165,10 +167,13 @@ def read_network(path: Path) -> Network:
         if version != SCHEMA_VERSION:
             raise InputError(f"schema version {version} is not supported (this tool reads {SCHEMA_VERSION})", path=path)
         existing = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        tables: dict[str, pd.DataFrame] = {}
+        missing = [t.name for t in DB_TABLES if t.name not in existing]
+        if missing:
+            raise InputError(f"table '{missing[0]}' is missing", path=path)
+        tables = read_table_columns(path, DB_TABLES)  # as Arrow columns; the others as below
         for t in DB_TABLES:
-            if t.name not in existing:
-                raise InputError(f"table '{t.name}' is missing", path=path)
+            if t.name in tables:
+                continue
             cols = ",".join(f"[{c}]" for c in t.column_names)
             try:
                 frame = pd.read_sql_query(f"SELECT {cols} FROM [{t.name}]", conn)
