@@ -22,7 +22,7 @@ import sqlite_utils
 
 from dbtools.atomic import atomic_file
 from dbtools.network import Network, canonical, content_hash
-from dbtools.sqlite_columns import read_table_columns
+from dbtools.sqlite_columns import insert_tables, read_table_columns
 from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION, AUDIT_TABLES, AUDIT_VIEWS, ROUTE_SUMMARY
 from schemas.enums import Severity
 from schemas.errors import InputError
@@ -91,9 +91,11 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
             conn.execute("PRAGMA foreign_keys=OFF")  # checked after the load, see below
             db = sqlite_utils.Database(conn)
             _create_tables(db, ALL_DB_TABLES, indexes=False)
+            conn.commit()
+            frames = [(t, canonical(t, network.tables[t.name])) for t in DB_TABLES]
+            bulk = insert_tables(tmp, frames)  # Arrow batches; False: no driver, rows below
             with conn:
-                for t in DB_TABLES:
-                    frame = canonical(t, network.tables[t.name])
+                for t, frame in frames if not bulk else ():
                     marks = ",".join("?" * len(t.columns))
                     conn.executemany(
                         f"INSERT INTO [{t.name}] ({','.join(f'[{c}]' for c in t.column_names)}) VALUES ({marks})",

@@ -1,4 +1,4 @@
-"""Reading whole SQLite tables as typed columns, at the speed of the file's bytes.
+"""Reading and writing whole SQLite tables as typed columns, at the speed of the file's bytes.
 
 ``sqlite3`` hands every value to Python as an object (a tuple per row), which for the
 national network's million GIS rows costs more than decoding the file; the ADBC SQLite
@@ -15,11 +15,13 @@ vouch for: the driver is not installed or fails (a corrupt file), a column's
 values are not of its declared type (ADBC infers a column's type from its values), a
 boolean column holds something other than 0/1, or a key column may be null. Files under
 ``MIN_FILE_BYTES`` are read by ``sqlite3`` alone.
-Measurements: bench/bench_db.py (read_network against the readers it was chosen from).
+:func:`insert_tables` is the same driver's bulk insert of Arrow batches, for ``write_db``.
+Measurements: bench/bench_db.py (read_network and db build against the alternatives).
 """
 
 from __future__ import annotations
 
+import sqlite3
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -102,3 +104,30 @@ def read_table_columns(
     except Exception:  # opening or closing failed: the sqlite3 path reports it
         return {}
     return out
+
+
+def insert_tables(path: Path, frames: Sequence[tuple[Table, pd.DataFrame]]) -> bool:
+    """Append each canonical frame to its (existing, empty) table of the SQLite file ``path``
+    as Arrow batches through the ADBC driver, one transaction per table; False when the
+    driver is not installed (the caller inserts through ``sqlite3``). The values stored
+    are those of ``sqlite3``'s ``executemany`` of the same rows: text, integers (booleans
+    as 0/1), reals, and NULL for every missing value (NaN included). A failed insert
+    (a constraint) raises ``sqlite3.IntegrityError`` as ``executemany`` would."""
+    try:
+        import adbc_driver_manager
+        import adbc_driver_sqlite.dbapi as adbc
+    except ImportError:
+        return False
+    with adbc.connect(str(path), autocommit=True) as conn, conn.cursor() as cur:
+        cur.execute("PRAGMA journal_mode=OFF")
+        cur.execute("PRAGMA synchronous=OFF")
+        cur.execute("PRAGMA cache_size=-262144")  # ≤ 256 MB, as write_db's own connection
+        for table, frame in frames:
+            if not len(frame):
+                continue
+            data = pa.Table.from_pandas(frame[table.column_names], preserve_index=False)
+            try:
+                cur.adbc_ingest(table.name, data, mode="append")
+            except adbc_driver_manager.Error as exc:
+                raise sqlite3.IntegrityError(f"{table.name}: {exc}") from exc
+    return True

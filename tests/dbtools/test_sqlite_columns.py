@@ -70,3 +70,28 @@ def test_a_corrupt_file_reads_nothing(tmp_path: Path) -> None:
     bad = tmp_path / "bad.sqlite"
     bad.write_bytes(b"SQLite format 3\x00" + b"\xff" * 8192)
     assert read_table_columns(bad, DB_TABLES, min_bytes=0) == {}
+
+
+def stored_rows(db: Path) -> dict[str, list[tuple[object, ...]]]:
+    with sqlite3.connect(db) as conn:
+        return {
+            t.name: conn.execute(
+                f"SELECT {','.join(f'{c}, typeof({c})' for c in t.column_names)} FROM [{t.name}] ORDER BY rowid"
+            ).fetchall()
+            for t in DB_TABLES
+        }
+
+
+def test_bulk_insert_stores_what_executemany_stores(
+    sample_db: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from dbtools.database import read_meta, write_db
+
+    net, meta = read_network(sample_db), read_meta(sample_db)
+    write_db(tmp_path / "bulk.sqlite", net, meta)
+    monkeypatch.setitem(sys.modules, "adbc_driver_sqlite.dbapi", None)  # no driver: executemany
+    write_db(tmp_path / "rows.sqlite", net, meta)
+    bulk, rows = stored_rows(tmp_path / "bulk.sqlite"), stored_rows(tmp_path / "rows.sqlite")
+    assert bulk == rows
+    assert bulk == stored_rows(sample_db)
+    assert any(r for r in bulk["gis"])
