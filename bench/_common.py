@@ -10,7 +10,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
@@ -67,7 +67,9 @@ def shuttle_path(hours: float) -> list[float]:
     return path
 
 
-def simulated_run(folder: Path, hours: float, *, seed: int = 3, fmt: str = "parquet") -> tuple[Path, Path]:
+def simulated_run(
+    folder: Path, hours: float, *, seed: int = 3, fmt: Literal["csv", "parquet"] = "parquet"
+) -> tuple[Path, Path]:
     """(run folder, DB) of a simulated run of about ``hours`` on the benchmark line, 10 slips
     and 10 slides, written once under ``folder`` (reused when it is already there)."""
     from dbtools.database import read_network
