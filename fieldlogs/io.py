@@ -30,7 +30,7 @@ import pyarrow.parquet as pq
 
 from dbtools.atomic import atomic_folder
 from dbtools.tabular import read_raw_table
-from fieldlogs.csvlog import read_csv_typed
+from dbtools.typed_csv import read_csv_typed
 from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding

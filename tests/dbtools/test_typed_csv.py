@@ -1,4 +1,4 @@
-"""The typed CSV reader gives the text path's frame and findings, or declines (fieldlogs/csvlog.py)."""
+"""The typed CSV reader gives the text path's frame and findings, or declines (dbtools/typed_csv.py)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dbtools.tabular import read_raw_table
-from fieldlogs.csvlog import read_csv_typed
+from dbtools.typed_csv import read_csv_typed
 from fieldlogs.io import coerce_stream, read_stream
 from schemas.logs import LOG_STREAMS
 
@@ -48,7 +48,7 @@ def same_as_text_path(name: str, path: Path) -> None:
     ref_frame, ref_findings = text_path(name, path)
     frame, findings = read_stream(LOG_STREAMS[name], path)
     pd.testing.assert_frame_equal(frame, ref_frame, check_exact=True)
-    assert [f.__dict__ for f in findings] == [f.__dict__ for f in ref_findings]
+    assert [repr(f.__dict__) for f in findings] == [repr(f.__dict__) for f in ref_findings]  # NaN-safe
 
 
 @settings(max_examples=50, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -93,3 +93,22 @@ def test_what_the_text_path_must_judge_declines(tmp_path: Path, body: str) -> No
     path = tmp_path / "tacho.csv"
     path.write_text(body, encoding="utf-8")
     assert read_csv_typed(LOG_STREAMS["tacho"], path) is None
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(NUMBER_CELLS, NUMBER_CELLS, TEXT_CELLS), min_size=1, max_size=8))
+def test_a_source_file_reads_and_checks_as_text(tmp_path: Path, rows) -> None:  # type: ignore[no-untyped-def]
+    from schemas.frames import read_and_check
+    from schemas.tables import GIS
+
+    lines = [",".join(GIS.column_names)]
+    for a, b, text in rows:
+        cells = {"line_code": text, "track": text, "km_m": a, "lat": b, "lon": a, "height_m": b}
+        lines.append(",".join(csv_cell(cells[c]) for c in GIS.column_names))
+    path = tmp_path / "gis.csv"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    typed = read_csv_typed(GIS, path)
+    ours = read_and_check(GIS, typed if typed is not None else read_raw_table(path), file=str(path))
+    ref = read_and_check(GIS, read_raw_table(path), file=str(path))
+    pd.testing.assert_frame_equal(ours.frame, ref.frame, check_exact=True)
+    assert [repr(f.__dict__) for f in ours.findings] == [repr(f.__dict__) for f in ref.findings]  # NaN-safe

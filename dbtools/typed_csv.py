@@ -1,9 +1,10 @@
-"""Typed reading of a CSV stream file: numbers parsed while the file is read.
+"""Typed reading of a CSV file of a declared table (a log stream, a source file): numbers
+parsed while the file is read.
 
 The general path (:func:`dbtools.tabular.read_raw_table`, then
 :func:`schemas.frames.coerce_frame`) reads every cell as text and parses it afterwards,
-which for an IMU stream (seven numbers per row at 100 Hz) builds tens of millions of
-strings. Here Arrow's CSV reader parses the declared number columns straight into
+which for an IMU stream (seven numbers per row at 100 Hz) or a national GIS grid builds
+tens of millions of strings. Here Arrow's CSV reader parses the declared number columns straight into
 float64 — the same parser that coerce_frame's fast path applies to the text — and the
 frame handed to ``coerce_frame`` holds numbers where it would have held their text.
 
@@ -17,7 +18,8 @@ not a declared one or repeated, or a text field starts with a blank (the C parse
 columns are read as text and coerced exactly as before. A whole number column is parsed
 as float64 and checked by ``coerce_frame`` (integral values only: a fractional one declines,
 for the text path to name it).
-Measurements: bench/bench_logs.py (against pyarrow.csv, polars and typed pandas).
+Measurements: bench/bench_logs.py (against pyarrow.csv, polars and typed pandas) and
+bench/bench_db.py (db build).
 """
 
 from __future__ import annotations
@@ -67,8 +69,8 @@ def _numbers(data: pa.Table, table: Table) -> dict[str, np.ndarray] | None:
 
 
 def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
-    """The raw frame of a CSV stream with its number columns already parsed (float64), or
-    None when the caller must read the file as text (module docstring)."""
+    """The raw frame of a CSV file of ``table`` with its number columns already parsed
+    (float64), or None when the caller must read the file as text (module docstring)."""
     import pyarrow.csv as pcsv
 
     numeric = {c.name for c in table.columns if c.dtype in ("float", "int")}
