@@ -78,10 +78,10 @@ BENCHES = (
     Bench("gnss", "S002 GNSS epochs/s", ("--runs", "5", "--throughput-runs", "2"), ()),
     Bench("radar", "S004 radar frames/s", ("throughput", "--hours", "0.25", "--loop-minutes", "1"), ("throughput",)),
     Bench("possession", "possession alarms", ("--runs", "12"), ()),
-    Bench("gis_verify", "GIS verification", ("--lines", "2", "--runs", "4"), ()),
+    Bench("gis_verify", "GIS verification", (), ()),
     Bench("simulate", "simulator", ("--km", "30"), ()),
     Bench("survey", "survey (slot: bench_survey.py from the survey work)", (), ()),
-    Bench("audit", "fleet audit scaling, 1 → 2 workers, Dask", ("--runs", "24"), ("--runs", "200")),
+    Bench("audit", "fleet audit scaling, 1 → 2 workers, Dask", ("--runs", "100"), ("--runs", "200")),
 )
 
 
