@@ -28,7 +28,10 @@ Scheduling (``next_evaluation``)
     the nearest one whose correction point r4 is not behind the fix's reference point and
     whose exit-check end r6 is not yet passed by w; it is evaluated at the first cycle
     where the estimate has passed r6 by w (the train has then surely left the feature if
-    the estimate is within its margin). Cab reversals are followed segment by segment.
+    the estimate is within its margin). Cab reversals are followed segment by segment. The
+    estimate is read through the engine's windowed view (``km_between``), forward in chunks
+    of doubling length, and evaluation reads only its search window: a feature costs the
+    distance to it, not the length of the run.
 
 Diagnostics (``evaluate``), each named in refusal events
     Window: cycles whose estimate lies in [r1 − w, r6 + w]. Runs of κ ≥ κ_lo or κ ≤ −κ_lo,
