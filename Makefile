@@ -32,9 +32,10 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
+# every benchmark at a quick size → bench/RESULTS.md (bench/run_all.py --full: target sizes)
 bench: $(STAMP)
-	$(BIN)/python bench/bench_pipeline.py
-	$(BIN)/python bench/accuracy.py --runs 50
+	OMP_NUM_THREADS=1 $(BIN)/python bench/run_all.py
+	OMP_NUM_THREADS=1 $(BIN)/python bench/accuracy.py --runs 50
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .hypothesis

@@ -135,6 +135,79 @@ def naive_build(src: Path, out: Path, fraction: float) -> tuple[float, int]:
     return time.perf_counter() - t0, n_rows
 
 
+def read_alternatives(db: Path) -> dict[str, Callable[[], object]]:
+    """Readers of every content table of ``db``: the ones read_network was chosen from."""
+    from schemas.tables import DB_TABLES
+
+    def query(t: object) -> str:
+        return f"SELECT {','.join(t.column_names)} FROM [{t.name}]"  # type: ignore[attr-defined]
+
+    def pandas_sql() -> object:
+        with sqlite3.connect(db) as conn:
+            return [pd.read_sql_query(query(t), conn) for t in DB_TABLES]
+
+    def sqlite3_numpy() -> object:
+        with sqlite3.connect(db) as conn:
+            return [[np.asarray(c) for c in zip(*conn.execute(query(t)).fetchall(), strict=True)] for t in DB_TABLES]
+
+    out: dict[str, Callable[[], object]] = {"pd.read_sql_query": pandas_sql, "sqlite3 fetchall + numpy": sqlite3_numpy}
+    try:
+        import adbc_driver_sqlite.dbapi as adbc
+
+        def adbc_arrow() -> object:
+            with adbc.connect(str(db)) as conn, conn.cursor() as cur:
+                tables = []
+                for t in DB_TABLES:
+                    cur.execute(query(t))
+                    tables.append(cur.fetch_arrow_table())
+                return tables
+
+        out["ADBC → Arrow (no types checked)"] = adbc_arrow
+    except ImportError:
+        pass
+    return out
+
+
+def build_floor(src: Path, out: Path) -> None:
+    """A lower bound for db build: Arrow's CSV reader and the ADBC bulk insert of the three
+    big tables, no checks, no canonical order, no content hash."""
+    import adbc_driver_sqlite.dbapi as adbc
+    import pyarrow.csv as pcsv
+
+    out.unlink(missing_ok=True)
+    with adbc.connect(str(out), autocommit=True) as conn, conn.cursor() as cur:
+        cur.execute("PRAGMA journal_mode=OFF")
+        cur.execute("PRAGMA synchronous=OFF")
+        for name, ddl in _NAIVE_DDL.items():
+            cur.execute(ddl)
+            cur.adbc_ingest(name, pcsv.read_csv(src / f"{name}.csv"), mode="append")
+
+
+def compare_read_build(src: Path, db: Path, work: Path, t_build: float) -> None:
+    """read_network and db build against the alternatives, side by side (CPU s, best of 3)."""
+    from dbtools.database import read_network
+
+    def cpu(fn: Callable[[], object]) -> float:
+        return min(timed(fn)[0][1] for _ in range(3))
+
+    ours = cpu(lambda: read_network(db))
+    alts = {name: cpu(fn) for name, fn in read_alternatives(db).items()}
+    best = min(alts, key=lambda k: alts[k])
+    print(
+        f"read_network        {ours:7.2f} s CPU; "
+        + "; ".join(f"{k} {v:.2f} s" for k, v in alts.items())
+        + f"; ours / fastest ({best}) = {ours / alts[best]:.2f}×  [load {os.getloadavg()[0]:.2f}]"
+    )
+    try:
+        floor = cpu(lambda: build_floor(src, work / "floor.sqlite"))
+    except ImportError:
+        return
+    print(
+        f"db build floor      {floor:7.2f} s CPU (Arrow CSV read + ADBC insert, no checks); db build / floor = "
+        f"{t_build / floor:.2f}×  [load {os.getloadavg()[0]:.2f}]"
+    )
+
+
 def timed(fn: Callable[[], T]) -> tuple[tuple[float, float], T]:
     """((wall s, CPU s of this process), result)."""
     w, c = time.perf_counter(), time.process_time()
@@ -190,6 +263,7 @@ def main(argv: list[str] | None = None) -> int:
             f"  {len(src_findings)} findings"
         )
         print(f"peak RSS            {peak_rss_mb():7.0f} MB (after build {rss_build:.0f} MB; target ≤ 4096 MB)")
+        compare_read_build(src, db, work, c_build)
         if args.naive_fraction > 0:
             naive_db = work / "naive.sqlite"
             naive_db.unlink(missing_ok=True)

@@ -1,9 +1,15 @@
-"""Benchmark: read and ``logs check`` a 10-hour run (3.6 M IMU rows) from Parquet.
+"""Benchmark: read and ``logs check`` a 10-hour run (3.6 M IMU rows) from Parquet and CSV.
 
 Run: ``.venv/bin/python bench/bench_logs.py [--hours 10]``. Prints timings, throughput and
 the ratio against a naive baseline (csv.reader + per-row Python checks on a 10-minute CSV
 slice, scaled linearly to the full run). Targets: read ≤ 1 s, check ≤ 3 s. Never fails on
 timing: it reports.
+
+Then the same run written as CSV and as Parquet is read by ``Run.load_all`` and, side by
+side, by the library readers of the same files with the declared column types:
+``pyarrow.csv.read_csv``, ``pandas.read_csv`` (C engine, typed), polars (when installed)
+and ``pyarrow.parquet.read_table``; each line gives our time over the fastest of them
+(target ≤ 1.3× for CSV).
 """
 
 from __future__ import annotations
@@ -11,9 +17,11 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -78,6 +86,66 @@ def damage(streams: dict[str, pd.DataFrame], seed: int = 0) -> dict[str, pd.Data
     return out
 
 
+def library_readers(folder: Path, fmt: str) -> dict[str, Callable[[], object]]:
+    """Readers of every stream file of ``folder`` with the declared column types."""
+    files = {name: folder / f"{name}.{fmt}" for name in LOG_STREAMS if (folder / f"{name}.{fmt}").exists()}
+
+    def typed(name: str) -> dict[str, str]:
+        return {c.name: ("float64" if c.dtype in ("float", "int") else "string") for c in LOG_STREAMS[name].columns}
+
+    if fmt == "parquet":
+        import pyarrow.parquet as pq
+
+        return {"pyarrow.parquet.read_table": lambda: [pq.read_table(p) for p in files.values()]}
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    def arrow() -> object:
+        return [
+            pcsv.read_csv(
+                p,
+                convert_options=pcsv.ConvertOptions(
+                    column_types={
+                        k: pa.type_for_alias("double" if v == "float64" else "string") for k, v in typed(n).items()
+                    }
+                ),
+            )
+            for n, p in files.items()
+        ]
+
+    out: dict[str, Callable[[], object]] = {
+        "pyarrow.csv.read_csv": arrow,
+        "pandas.read_csv (C, typed)": lambda: [pd.read_csv(p, dtype=typed(n)) for n, p in files.items()],  # type: ignore[arg-type]
+    }
+    try:
+        import polars as pl
+
+        out["polars.read_csv"] = lambda: [
+            pl.read_csv(
+                p, schema_overrides={k: (pl.Float64 if v == "float64" else pl.Utf8) for k, v in typed(n).items()}
+            )
+            for n, p in files.items()
+        ]
+    except ImportError:
+        pass
+    return out
+
+
+def compare_readers(tmp: Path, streams: dict[str, pd.DataFrame], repeat: int) -> None:
+    """``Run.load_all`` against the library readers of the same files, CSV and Parquet."""
+    for fmt in ("csv", "parquet"):
+        folder = write_run(tmp / f"run-{fmt}", make_meta("BENCH"), streams, fmt=fmt)  # type: ignore[arg-type]
+        size = sum(p.stat().st_size for p in folder.iterdir()) / 1e6
+        ours, _ = best_of(repeat, lambda folder=folder: Run(folder).load_all())
+        lib = {name: best_of(repeat, fn)[0] for name, fn in library_readers(folder, fmt).items()}
+        best = min(lib, key=lambda k: lib[k])
+        others = ", ".join(f"{k} {v:.2f} s" for k, v in lib.items())
+        print(
+            f"read {fmt:7s} ({size:.0f} MB): Run.load_all {ours:.2f} s = {size / ours:.0f} MB/s; {others}; "
+            f"ours / fastest ({best}) = {ours / lib[best]:.2f}×  [load {os.getloadavg()[0]:.2f}]"
+        )
+
+
 def best_of(n: int, fn):  # type: ignore[no-untyped-def]
     best, out = math.inf, None
     for _ in range(n):
@@ -127,6 +195,7 @@ def main() -> None:
         )
         print(f"logs check on the same 10-min CSV slice: {t_ours_csv:.2f} s ({t_naive / t_ours_csv:.1f}x faster)")
         print(f"ratio naive (scaled) / logs check on Parquet: {scaled / t_check:.1f}x")
+        compare_readers(Path(tmp), streams, args.repeat)
 
 
 if __name__ == "__main__":

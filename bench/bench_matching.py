@@ -5,7 +5,8 @@ Run on demand (never part of the test suite; prints numbers, never pass/fail)::
     .venv/bin/python bench/bench_matching.py                  # 100 lines × 2 tracks × 5000 points
     .venv/bin/python bench/bench_matching.py --lines 20 --fixes 100000
 
-Target (brief): ≥ 300,000 fixes/s on one core against a 1,000,000-point grid.
+Target (brief): ≥ 300,000 fixes/s on one core against a 1,000,000-point grid; issue 21:
+≥ 1,000,000 fixes/s per core (CPU time, which a busy machine inflates less than wall).
 
 The grid: ``--lines`` double-track lines of ``--points`` grid points per track (100 km at
 20 m), one per 120 km cell of a square layout in JGD2011 zone 9, drawn by
@@ -91,13 +92,31 @@ def main() -> None:
 
     # (c) ours
     times = []
+    cpu_times = []
     for _ in range(args.repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         m = index.match(lat, lon)
         times.append(time.perf_counter() - t0)
+        cpu_times.append(time.process_time() - c0)
     ours = n / min(times)
+    ours_cpu = n / min(cpu_times)
     best = m[m["best"]]
-    print(f"(c) TrackIndex.match:        {ours:12,.0f} fixes/s  ({len(m):,} rows, {len(best):,} fixes matched)")
+    print(
+        f"(c) TrackIndex.match:        {ours:12,.0f} fixes/s wall, {ours_cpu:,.0f} fixes/s CPU  "
+        f"({len(m):,} rows, {len(best):,} fixes matched)  [load {os.getloadavg()[0]:.2f}]"
+    )
+    sx, sy = index.to_xy(lat, lon)
+    order = np.argsort(np.floor(sx / 1000.0) * 2_000_003 + np.floor(sy / 1000.0), kind="stable")
+    pts = np.column_stack([sx[order], sy[order]])
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(np.column_stack([index.x, index.y]))
+    c0 = time.process_time()
+    tree.query(pts, k=1)
+    print(
+        f"    reference: one spatially sorted cKDTree k=1 query over the vertices (nearest vertex only, "
+        f"projection excluded) {n / (time.process_time() - c0):,.0f} fixes/s CPU"
+    )
 
     # shapely: one 2-point LineString per grid segment
     seg_a = starts
@@ -150,7 +169,8 @@ def main() -> None:
     )
     print(
         f"ratios: ours / loop = {ours / loop:,.0f}×, ours / query_nearest = {ours / vec:.1f}×  "
-        f"(target ≥ 300,000 fixes/s: {'met' if ours >= 300_000 else 'NOT met'})"
+        f"(targets: ≥ 300,000 fixes/s: {'met' if ours >= 300_000 else 'NOT met'} (wall); issue 21 "
+        f"≥ 1,000,000 fixes/s/core: {'met' if ours_cpu >= 1_000_000 else 'NOT met'} (CPU))"
     )
 
 

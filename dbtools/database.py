@@ -4,7 +4,8 @@ together the only modules that talk to SQLite).
 Onboard DB writes are atomic (temp file in the target folder, then ``os.replace``) and
 never touch an existing file unless asked to. Reads open the file read-only so that
 validating or diffing a released DB cannot modify it. Every table is created from its
-declaration in ``schemas/`` (:func:`create_tables`).
+declaration in ``schemas/`` (:func:`create_tables`). Whole content tables are read as Arrow
+columns by :mod:`dbtools.sqlite_columns`.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import sqlite_utils
 
 from dbtools.atomic import atomic_file
 from dbtools.network import Network, canonical, content_hash
+from dbtools.sqlite_columns import insert_tables, read_table_columns
 from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
@@ -88,9 +90,11 @@ def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool 
             conn.execute("PRAGMA foreign_keys=OFF")  # checked after the load, see below
             db = sqlite_utils.Database(conn)
             create_tables(db, ALL_DB_TABLES, indexes=False)
+            conn.commit()
+            frames = [(t, canonical(t, network.tables[t.name])) for t in DB_TABLES]
+            bulk = insert_tables(tmp, frames)  # Arrow batches; False: no driver, rows below
             with conn:
-                for t in DB_TABLES:
-                    frame = canonical(t, network.tables[t.name])
+                for t, frame in frames if not bulk else ():
                     marks = ",".join("?" * len(t.columns))
                     conn.executemany(
                         f"INSERT INTO [{t.name}] ({','.join(f'[{c}]' for c in t.column_names)}) VALUES ({marks})",
@@ -186,10 +190,13 @@ def read_network(path: Path) -> Network:
         if version != SCHEMA_VERSION:
             raise InputError(f"schema version {version} is not supported (this tool reads {SCHEMA_VERSION})", path=path)
         existing = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        tables: dict[str, pd.DataFrame] = {}
+        missing = [t.name for t in DB_TABLES if t.name not in existing]
+        if missing:
+            raise InputError(f"table '{missing[0]}' is missing", path=path)
+        tables = read_table_columns(path, DB_TABLES)  # as Arrow columns; the others as below
         for t in DB_TABLES:
-            if t.name not in existing:
-                raise InputError(f"table '{t.name}' is missing", path=path)
+            if t.name in tables:
+                continue
             cols = ",".join(f"[{c}]" for c in t.column_names)
             try:
                 frame = pd.read_sql_query(f"SELECT {cols} FROM [{t.name}]", conn)

@@ -9,6 +9,8 @@ from typing import TypeVar
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from schemas.frames import PANDAS_DTYPE
 from schemas.model import Table
@@ -94,6 +96,22 @@ def canonical_with_index(table: Table, frame: pd.DataFrame) -> tuple[pd.DataFram
     return out.reset_index(drop=True), out.index.to_numpy()
 
 
+def joined_text(s: pd.Series) -> bytes:
+    """The UTF-8 bytes of a text column's values joined by 0x1f, a missing value as the
+    empty string — the bytes every stored ``content_hash`` was made of (the former
+    ``s.astype(object).where(s.notna(), "\\x00")``, whose NUL fill value pandas turns into
+    ""). Built from the column's bytes in Arrow, no Python string per value."""
+    arr = pa.array(s.array if isinstance(s.dtype, pd.StringDtype) else s.astype(object), from_pandas=True)
+    arr = pc.fill_null(arr.cast(pa.large_string()), "")
+    if isinstance(arr, pa.ChunkedArray):
+        arr = arr.combine_chunks()
+    if len(arr) == 0:
+        return b""
+    offsets = np.frombuffer(arr.buffers()[1], dtype=np.int64)[arr.offset : arr.offset + len(arr) + 1]
+    data = np.frombuffer(arr.buffers()[2], dtype=np.uint8)[offsets[0] : offsets[-1]]
+    return np.insert(data, offsets[1:-1] - offsets[0], 0x1F).tobytes()
+
+
 def content_hash(tables: dict[str, pd.DataFrame]) -> str:
     """SHA-256 over all content tables in canonical form.
 
@@ -108,8 +126,7 @@ def content_hash(tables: dict[str, pd.DataFrame]) -> str:
             h.update(f"col:{c.name}\n".encode())
             s = frame[c.name]
             if c.dtype == "str":
-                vals = s.astype(object).where(s.notna(), "\x00").tolist()
-                h.update("\x1f".join(vals).encode("utf-8"))
+                h.update(joined_text(s))
             elif c.dtype in ("int", "bool"):
                 arr = s.astype("Float64").to_numpy(dtype=np.float64, na_value=np.nan)
                 h.update(np.ascontiguousarray(arr).tobytes())

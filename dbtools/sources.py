@@ -16,6 +16,7 @@ from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.rules.area import check_area
 from dbtools.rules.common import Locator
 from dbtools.tabular import find_table_file, read_raw_table, sha256_file
+from dbtools.typed_csv import read_csv_typed
 from schemas.enums import Severity, Track
 from schemas.errors import InputError
 from schemas.findings import Finding
@@ -53,7 +54,8 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
                 )
             tables[name] = empty_frame(table)
             continue
-        raw = read_raw_table(path, sheet=name)
+        typed = read_csv_typed(table, path) if path.suffix.lower() == ".csv" else None  # None: as text
+        raw = typed if typed is not None else read_raw_table(path, sheet=name)
         files[name] = str(path)
         hashes[path.name] = sha256_file(path)
         co = read_and_check(table, raw, file=str(path), allow_extra=(name == LINES.name))

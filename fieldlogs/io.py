@@ -31,6 +31,7 @@ import pyarrow.parquet as pq
 
 from dbtools.atomic import atomic_folder
 from dbtools.tabular import read_raw_table
+from dbtools.typed_csv import read_csv_typed
 from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding
@@ -308,14 +309,13 @@ def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Fi
 
 
 def read_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Finding]]:
-    """One stream file → (typed frame with a 0-based positional index, findings).
-
-    Raises InputError when the file cannot be read at all (empty, not CSV, corrupt Parquet).
-    """
+    """One stream file → (typed frame with a 0-based positional index, findings). Raises
+    InputError when the file cannot be read at all (empty, not CSV, corrupt Parquet)."""
     path = Path(path)
     if path.suffix == ".parquet":
         return read_parquet_stream(table, path)
-    return coerce_stream(table, read_raw_table(path), str(path))
+    typed = read_csv_typed(table, path)  # numbers parsed while reading; None: read as text
+    return coerce_stream(table, typed if typed is not None else read_raw_table(path), str(path))
 
 
 def _run_field(data: dict[str, Any], name: str) -> Any:

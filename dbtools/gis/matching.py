@@ -17,21 +17,25 @@ possession audit):
   Segments longer than ``densify_m`` get extra vertices on the segment with linearly
   interpolated km — the geometry and every projection stay the same, but all segments are
   short, which keeps the search radius below small;
-* one **cKDTree over all vertices** (the candidate index) and, per piece, an exact
+* the vertices **bucketed in square cells** of side R (the candidate index, built once per
+  search radius R, see below) and, per piece, an exact
   :class:`~dbtools.gis.geometry.PolylineIndex` (built on demand, for unbounded projection
   onto one known track: :meth:`TrackIndex.project_onto`).
 
 Exactness of :meth:`TrackIndex.match_xy`. If a track has a segment within ``max_offset_m``
 of a fix, the nearer end of that segment is within ``R = max_offset_m + ½·longest
-segment``. The tree returns *all* vertices within R (a k-nearest query bounded by R whose
-k-th hit is inside R is repeated with 4k), and both segments adjacent to every returned
-vertex are evaluated exactly. Hence, per track, the nearest candidate segment is the
-nearest segment of the whole track whenever that is within ``max_offset_m`` — the same
-answer as brute force over every segment of the track. Per fix, tracks are then taken in
-order of distance by repeated argmin over the candidate matrix (no Python loop per fix).
+segment``. Every vertex within R of a fix lies in the 3 × 3 cells of side R around the
+fix's cell; all their vertices are taken (a superset), and both segments adjacent to each
+are evaluated exactly. Hence, per track, the nearest candidate segment is the nearest
+segment of the whole track whenever that is within ``max_offset_m`` — the same answer as
+brute force over every segment of the track (segment index breaking exact ties, as an
+argmin over the track would). Per fix, tracks are then taken in order of distance (exact
+ties: lower segment index first), in one compiled loop over the fixes.
 
-Fixes are processed in a spatially sorted order (1 km cells) so that the tree walks memory
-coherently; results come back in input order. Throughput: ``bench/bench_matching.py``.
+Fixes are processed in a spatially sorted order (1 km cells) so that the cells are read
+from memory coherently; results come back in input order. Throughput:
+``bench/bench_matching.py``; why cells rather than the k-d tree this used before:
+bench/NOTES.md (Performance).
 """
 
 from __future__ import annotations
@@ -42,7 +46,6 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 from numba import njit
-from scipy.spatial import cKDTree
 
 from dbtools.gis.geometry import FloatArray, PolylineIndex, Projection, Projector
 from dbtools.gis.index import GridIndex, PieceRule, grid_index
@@ -102,14 +105,12 @@ class TrackIndex:
         km_tolerance_rel: float = 0.02,
         max_segment_m: float = 200.0,
         densify_m: float = 1.25 * GIS_SPACING_M,
-        k: int = 8,
     ) -> None:
         gi = grid if isinstance(grid, GridIndex) else GridIndex(grid, km_breaks, projector)
         if gi.projector is None:
             raise ValueError("an empty GIS grid needs an explicit projector")
         self.grid = gi
         self.projector: Projector = gi.projector
-        self.k = int(k)
         self.keys: list[tuple[str, str]] = list(gi.keys)
         self.line_categories = sorted({lc for lc, _ in self.keys})
         self.track_categories = sorted({tr for _, tr in self.keys})
@@ -178,7 +179,7 @@ class TrackIndex:
         if nv > 1:
             self._dkm[:-1] = np.where(self.segment_ok[:-1], np.diff(self.km), 0.0)
         self.half_max_segment_m = 0.5 * float(np.sqrt(len2.max())) if nv else 0.0
-        self.tree = cKDTree(np.column_stack([self.x, self.y])) if nv else None
+        self._cell_cache: dict[float, tuple[float, IntArray, IntArray, IntArray]] = {}
 
     @classmethod
     def from_network(cls, network: Network, projector: Projector | None = None, **kwargs: float) -> TrackIndex:
@@ -186,7 +187,7 @@ class TrackIndex:
         network's grid index unless another ``projector`` is asked for."""
         if projector is None:
             return cls(grid_index(network), **kwargs)  # type: ignore[arg-type]
-        return cls(network.gis, projector, network.tables.get("km_breaks"), **kwargs)  # type: ignore[arg-type]
+        return cls(network.gis, projector, network.tables.get("km_breaks"), **kwargs)
 
     # ------------------------------------------------------------------------------ access
     @property
@@ -273,24 +274,38 @@ class TrackIndex:
         py = np.atleast_1d(np.asarray(y, dtype=float))
         allowed = self._allowed(line_code, track)
         parts = []
-        if self.tree is not None and px.size:
+        if self.n_vertices and px.size:
             finite = np.flatnonzero(np.isfinite(px) & np.isfinite(py))
             cx = np.floor(px[finite] / SORT_CELL_M).astype(np.int64)
             cy = np.floor(py[finite] / SORT_CELL_M).astype(np.int64)
             pending = finite[np.argsort(cx * 2_000_003 + cy, kind="stable")]
-            radius = float(max_offset_m) + self.half_max_segment_m
-            k = self.k
-            nv = self.n_vertices
-            while pending.size:
-                kk = min(k, nv)
-                _, v = self.tree.query(np.column_stack([px[pending], py[pending]]), k=kk, distance_upper_bound=radius)
-                v = v.reshape(pending.size, kk)
-                overflow = v[:, -1] < nv if kk < nv else np.zeros(pending.size, dtype=bool)
-                done = ~overflow
-                parts.append(self._resolve(px, py, pending[done], v[done], float(max_offset_m), allowed))
-                pending = pending[overflow]
-                k *= 4
+            cells = self._cells(float(max_offset_m) + self.half_max_segment_m)
+            ok_track = np.ones(len(self.keys), dtype=np.bool_) if allowed is None else allowed
+            done = 0
+            while done < pending.size:  # a full output buffer returns early: go on from there
+                f, p, sg, u, d2, done = _match_kernel(
+                    px, py, pending, done, *cells, self.x, self.y, self._dx, self._dy, self._inv_len2,
+                    self.segment_ok, self.vertex_track, ok_track, float(max_offset_m) ** 2,
+                )  # fmt: skip
+                cross = self._dx[sg] * (py[f] - self.y[sg]) - self._dy[sg] * (px[f] - self.x[sg])
+                d = np.sqrt(d2)
+                parts.append((f, p, sg, u, np.where(cross >= 0, d, -d)))
         return self._frame(px.size, parts)
+
+    def _cells(self, radius: float) -> tuple[float, IntArray, IntArray, IntArray]:
+        """The vertices bucketed in square cells of side ``radius`` (built once per radius):
+        (cell side, sorted cell keys, first position of each key's vertices in the order,
+        vertex order by cell). A disk of radius ``radius`` lies in the 3 × 3 cells around
+        its centre's cell."""
+        cached = self._cell_cache.get(radius)
+        if cached is None:
+            cx, cy = _cell_xy(self.x, self.y, radius)
+            key = cx * _CELL_STRIDE + cy
+            order = np.argsort(key, kind="stable")
+            keys, start = np.unique(key[order], return_index=True)
+            cached = (radius, keys, np.append(start, order.size).astype(np.int64), order.astype(np.int64))
+            self._cell_cache[radius] = cached
+        return cached
 
     def _allowed(self, line_code: str | None, track: str | None) -> BoolArray | None:
         if line_code is None and track is None:
@@ -302,40 +317,6 @@ class TrackIndex:
             ],
             dtype=bool,
         )
-
-    def _resolve(
-        self,
-        px: FloatArray,
-        py: FloatArray,
-        fixes: IntArray,
-        v: IntArray,
-        max_offset_m: float,
-        allowed: BoolArray | None,
-    ) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
-        """Per fix, every track's nearest candidate segment within reach, nearest first.
-
-        ``v``: (m, k) vertex hits (``n_vertices`` = none). Returns (fix, pass, segment, u,
-        signed offset) with pass = 0 for the nearest track, 1 for the next, …
-        """
-        ok_track = np.ones(len(self.keys), dtype=np.bool_) if allowed is None else allowed
-        f, p, s, u, d2 = _resolve_kernel(
-            px,
-            py,
-            np.ascontiguousarray(fixes, dtype=np.int64),
-            np.ascontiguousarray(v, dtype=np.int64),
-            self.x,
-            self.y,
-            self._dx,
-            self._dy,
-            self._inv_len2,
-            self.segment_ok,
-            self.vertex_track,
-            ok_track,
-            max_offset_m * max_offset_m,
-        )
-        cross = self._dx[s] * (py[f] - self.y[s]) - self._dy[s] * (px[f] - self.x[s])
-        d = np.sqrt(d2)
-        return f, p, s, u, np.where(cross >= 0, d, -d)
 
     def _frame(
         self, n_fixes: int, parts: list[tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]]
@@ -369,13 +350,63 @@ class TrackIndex:
         )
 
 
+#: Cell coordinates are offset by this and keyed as ``cx · stride + cy`` (int64, no overlap).
+_CELL_OFFSET = 1 << 24
+_CELL_STRIDE = 1 << 26
+
+
+def _cell_xy(x: FloatArray, y: FloatArray, side: float) -> tuple[IntArray, IntArray]:
+    """Cell coordinates (offset, clipped into the key range: a point beyond it shares a
+    border cell, and distances decide) of points in cells of ``side`` metres."""
+    hi = _CELL_STRIDE - 2
+
+    def cell(v: FloatArray) -> IntArray:
+        return np.clip(np.floor(v / side), -_CELL_OFFSET + 1, hi - _CELL_OFFSET).astype(np.int64) + _CELL_OFFSET
+
+    return cell(x), cell(y)
+
+
+@njit(cache=True, nogil=True)
+def _consider(
+    v: int, qx: float, qy: float, x: FloatArray, y: FloatArray, dx: FloatArray, dy: FloatArray,
+    inv_len2: FloatArray, segment_ok: BoolArray, vertex_track: IntArray, ok_track: BoolArray, max_d2: float,
+    nt: int, bt: IntArray, bs: IntArray, bd: FloatArray, bu: FloatArray,
+) -> int:  # fmt: skip
+    """Both segments adjacent to vertex ``v``: keep per track the nearest (first segment
+    index on exact ties, like an argmin over the track). Returns the number of tracks."""
+    for s in (v - 1, v):
+        if s < 0 or not segment_ok[s] or not ok_track[vertex_track[s]]:
+            continue
+        t = vertex_track[s]
+        ax = x[s]
+        ay = y[s]
+        u = min(max(((qx - ax) * dx[s] + (qy - ay) * dy[s]) * inv_len2[s], 0.0), 1.0)
+        ex = ax + u * dx[s] - qx
+        ey = ay + u * dy[s] - qy
+        d2 = ex * ex + ey * ey
+        if d2 > max_d2:
+            continue
+        j = 0
+        while j < nt and bt[j] != t:
+            j += 1
+        if j == nt:
+            bt[j] = t
+            nt += 1
+        elif not (d2 < bd[j] or (d2 == bd[j] and s < bs[j])):
+            continue
+        bs[j] = s
+        bd[j] = d2
+        bu[j] = u
+    return nt
+
+
 @njit(cache=True, nogil=True)
 def _sort_nearest_first(nt: int, bt: IntArray, bs: IntArray, bd: FloatArray, bu: FloatArray) -> None:
-    """Insertion sort of the first ``nt`` entries by distance (at most 2k entries; stable,
-    so tracks at equal distance keep the order in which they were met)."""
+    """Insertion sort of the first ``nt`` entries by distance, then segment index (a
+    deterministic order for tracks at exactly the same distance)."""
     for i in range(1, nt):
         j = i
-        while j > 0 and bd[j] < bd[j - 1]:
+        while j > 0 and (bd[j] < bd[j - 1] or (bd[j] == bd[j - 1] and bs[j] < bs[j - 1])):
             bt[j], bt[j - 1] = bt[j - 1], bt[j]
             bs[j], bs[j - 1] = bs[j - 1], bs[j]
             bd[j], bd[j - 1] = bd[j - 1], bd[j]
@@ -384,77 +415,62 @@ def _sort_nearest_first(nt: int, bt: IntArray, bs: IntArray, bd: FloatArray, bu:
 
 
 @njit(cache=True, nogil=True)
-def _resolve_kernel(
-    px: FloatArray,
-    py: FloatArray,
-    fixes: IntArray,
-    hits: IntArray,
-    x: FloatArray,
-    y: FloatArray,
-    dx: FloatArray,
-    dy: FloatArray,
-    inv_len2: FloatArray,
-    segment_ok: BoolArray,
-    vertex_track: IntArray,
-    ok_track: BoolArray,
-    max_d2: float,
-) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]:
-    """For each fix: both segments adjacent to every hit vertex; per track the nearest
-    (first segment index on exact ties, like an argmin over the track); tracks emitted in
-    order of distance. Returns (fix, pass, segment, u, squared distance): the same
-    arithmetic as :class:`PolylineIndex` / brute force (the signed offset is taken from
-    them by :meth:`TrackIndex._resolve`)."""
-    m, k = hits.shape
-    nv = x.size
-    cap = m * 2 * k
+def _match_kernel(
+    px: FloatArray, py: FloatArray, fixes: IntArray, first: int, side: float, keys: IntArray, start: IntArray,
+    order: IntArray, x: FloatArray, y: FloatArray, dx: FloatArray, dy: FloatArray, inv_len2: FloatArray,
+    segment_ok: BoolArray, vertex_track: IntArray, ok_track: BoolArray, max_d2: float,
+) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray, int]:  # fmt: skip
+    """For fixes ``fixes[first:]``: every vertex of the 3 × 3 cells around the fix (all the
+    vertices within the cell side, and more), both segments adjacent to each, per track the
+    nearest; tracks emitted nearest first. Returns (fix, pass, segment, u, squared
+    distance, index of the first fix not done): the same arithmetic as
+    :class:`PolylineIndex` / brute force (the signed offset is taken from them by
+    :meth:`TrackIndex.match_xy`). Stops early when the output buffer is full."""
+    m = fixes.size
+    n_tracks = ok_track.size
+    cap = max(4 * (m - first), n_tracks) + n_tracks
     out_f = np.empty(cap, dtype=np.int64)
     out_p = np.empty(cap, dtype=np.int64)
     out_s = np.empty(cap, dtype=np.int64)
     out_u = np.empty(cap)
     out_d2 = np.empty(cap)
-    bt = np.empty(2 * k, dtype=np.int64)
-    bs = np.empty(2 * k, dtype=np.int64)
-    bd = np.empty(2 * k)
-    bu = np.empty(2 * k)
+    bt = np.empty(n_tracks, dtype=np.int64)
+    bs = np.empty(n_tracks, dtype=np.int64)
+    bd = np.empty(n_tracks)
+    bu = np.empty(n_tracks)
+    lo_cell = 1
+    hi_cell = _CELL_STRIDE - 2
     n_out = 0
-    for r in range(m):
+    r = first
+    while r < m and n_out + n_tracks <= cap:
         f = fixes[r]
         qx = px[f]
         qy = py[f]
+        cx = min(max(np.floor(qx / side), -_CELL_OFFSET + 1), hi_cell - _CELL_OFFSET) + _CELL_OFFSET
+        cy = min(max(np.floor(qy / side), -_CELL_OFFSET + 1), hi_cell - _CELL_OFFSET) + _CELL_OFFSET
         nt = 0
-        for c in range(k):
-            v = hits[r, c]
-            for s in (v - 1, v):
-                if v >= nv or s < 0 or not segment_ok[s] or not ok_track[vertex_track[s]]:
-                    continue
-                t = vertex_track[s]
-                ax = x[s]
-                ay = y[s]
-                u = min(max(((qx - ax) * dx[s] + (qy - ay) * dy[s]) * inv_len2[s], 0.0), 1.0)
-                ex = ax + u * dx[s] - qx
-                ey = ay + u * dy[s] - qy
-                d2 = ex * ex + ey * ey
-                if d2 > max_d2:
-                    continue
-                j = 0
-                while j < nt and bt[j] != t:
-                    j += 1
-                if j == nt:
-                    bt[j] = t
-                    nt += 1
-                elif not (d2 < bd[j] or (d2 == bd[j] and s < bs[j])):
-                    continue
-                bs[j] = s
-                bd[j] = d2
-                bu[j] = u
+        for gx in range(max(int(cx) - 1, lo_cell), min(int(cx) + 1, hi_cell) + 1):
+            # cells (gx, cy − 1 … cy + 1) have consecutive keys: one search, then a walk
+            lo_key = gx * _CELL_STRIDE + max(int(cy) - 1, lo_cell)
+            hi_key = gx * _CELL_STRIDE + min(int(cy) + 1, hi_cell)
+            c = np.searchsorted(keys, lo_key)
+            while c < keys.size and keys[c] <= hi_key:
+                for i in range(start[c], start[c + 1]):
+                    nt = _consider(
+                        order[i], qx, qy, x, y, dx, dy, inv_len2, segment_ok, vertex_track, ok_track, max_d2,
+                        nt, bt, bs, bd, bu,
+                    )  # fmt: skip
+                c += 1
         _sort_nearest_first(nt, bt, bs, bd, bu)
-        out_f[n_out : n_out + nt] = f
-        out_p[n_out : n_out + nt] = np.arange(nt)
-        out_s[n_out : n_out + nt] = bs[:nt]
-        out_u[n_out : n_out + nt] = bu[:nt]
-        out_d2[n_out : n_out + nt] = bd[:nt]
+        for j in range(nt):
+            out_f[n_out + j] = f
+            out_p[n_out + j] = j
+            out_s[n_out + j] = bs[j]
+            out_u[n_out + j] = bu[j]
+            out_d2[n_out + j] = bd[j]
         n_out += nt
-    return out_f[:n_out], out_p[:n_out], out_s[:n_out], out_u[:n_out], out_d2[:n_out]
+        r += 1
+    return out_f[:n_out], out_p[:n_out], out_s[:n_out], out_u[:n_out], out_d2[:n_out], r
 
 
 def track_index_for(network: Network) -> TrackIndex:

@@ -125,7 +125,12 @@ class EngineView(Protocol):
 
     def km_estimate(self) -> FloatArray:
         """Dead-reckoned km of the estimate on every cycle of the run (computed once per
-        estimate)."""
+        estimate); costs O(run length): aids that scan ahead use :meth:`km_between`."""
+        ...
+
+    def km_between(self, i0: int, i1: int) -> FloatArray:
+        """Dead-reckoned km of the estimate on cycles ``i0 ≤ i < i1`` (clipped to the run):
+        ``km_estimate()[i0:i1]``, computed for the window only."""
         ...
 
     @property

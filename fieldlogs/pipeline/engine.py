@@ -82,6 +82,9 @@ class _View:
     def km_estimate(self) -> FloatArray:
         return self.engine.km_estimate()
 
+    def km_between(self, i0: int, i1: int) -> FloatArray:
+        return self.engine.km_between(i0, i1)
+
 
 class _Engine:
     """State of one run through the loop (see the module docstring)."""
@@ -107,6 +110,17 @@ class _Engine:
         if self._km_cache is None or self._km_cache[0] != self.version:
             self._km_cache = (self.version, self.travel.km(self.fix, self.travel.s))
         return self._km_cache[1]
+
+    def km_between(self, i0: int, i1: int) -> FloatArray:
+        """The estimate on cycles ``i0 ≤ i < i1`` only (clipped to the run): the same numbers
+        as ``km_estimate()[i0:i1]`` (dead reckoning is elementwise), at a cost in the window's
+        length, not the run's."""
+        i0, i1 = max(i0, 0), min(i1, self.travel.n)
+        if self.fix is None:
+            return np.full(max(i1 - i0, 0), np.nan)
+        if self._km_cache is not None and self._km_cache[0] == self.version:
+            return self._km_cache[1][i0:i1]
+        return self.travel.km(self.fix, self.travel.s[i0:i1])
 
     def run(self) -> None:
         for k, aid in enumerate(self.aids):

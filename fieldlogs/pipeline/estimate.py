@@ -82,7 +82,22 @@ class Travel:
     def at(self, t: float) -> tuple[int, float, float]:
         """Cycle index at or after ``t`` and the travel d, S interpolated at ``t``."""
         i = min(int(np.searchsorted(self.t, t, side="left")), self.t.size - 1)
-        return i, float(np.interp(t, self.t, self.d)), float(np.interp(t, self.t, self.s))
+        return i, interp_at(t, self.t, self.d), interp_at(t, self.t, self.s)
 
     def allowance_at(self, t: float) -> float:
-        return float(np.interp(t, self.t, self.allowance))
+        return interp_at(t, self.t, self.allowance)
+
+
+def interp_at(x: float, xp: FloatArray, fp: FloatArray) -> float:
+    """``np.interp(x, xp, fp)`` for one ``x``, from the two samples around it only: the same
+    number (np.interp also interpolates between the last ``xp ≤ x`` and the next one), in
+    O(log n) instead of O(n) per call."""
+    n = xp.size
+    j = int(np.searchsorted(xp, x, side="right")) - 1
+    if not np.isfinite(x) or n < 2:
+        return float(np.interp(x, xp, fp))
+    if j < 0:
+        return float(fp[0])
+    if j >= n - 1:
+        return float(fp[-1])
+    return float(np.interp(x, xp[j : j + 2], fp[j : j + 2]))

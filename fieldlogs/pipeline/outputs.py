@@ -1,4 +1,8 @@
-"""Writing and reading pipeline outputs: positions and events (Parquet + CSV), summary.json."""
+"""Writing and reading pipeline outputs: positions and events (Parquet + CSV), summary.json.
+
+The CSV files are pandas' ``to_csv(index=False, lineterminator="\\n")`` bytes, written by the
+columnar writer :mod:`dbtools.csvwrite`.
+"""
 
 from __future__ import annotations
 
@@ -7,10 +11,9 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from dbtools.atomic import atomic_folder
+from dbtools.csvwrite import write_csv
 from schemas.errors import InputError
 from schemas.jsonable import jsonable
 
@@ -19,12 +22,15 @@ def write_results(
     out: Path, positions: pd.DataFrame, events: pd.DataFrame, summary: dict[str, Any], *, force: bool = False
 ) -> Path:
     """OUT/positions.{parquet,csv}, OUT/events.{parquet,csv}, OUT/summary.json — atomically."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
     with atomic_folder(out, force=force) as tmp:
         for name, frame in (("positions", positions), ("events", events)):
             pq.write_table(
                 pa.Table.from_pandas(frame, preserve_index=False), tmp / f"{name}.parquet", compression="zstd"
             )
-            frame.to_csv(tmp / f"{name}.csv", index=False, lineterminator="\n")
+            write_csv(frame, tmp / f"{name}.csv")
         (tmp / "summary.json").write_text(
             json.dumps(jsonable(summary), indent=2, ensure_ascii=False) + "\n", encoding="utf-8"
         )

@@ -59,10 +59,12 @@ def positions_frame(
         t_eff = np.array([f.t_effective for f in fixes])
         idx = np.searchsorted(t_eff, t, side="right") - 1
         has = idx >= 0
-        j = np.clip(idx, 0, None)
-        for jj in np.unique(j[has]):  # per fix in force: dead reckoning and margin
-            f = fixes[jj]
-            sel = np.flatnonzero(has & (j == jj))
+        cyc = np.flatnonzero(has)
+        j = idx[cyc]
+        order = np.argsort(j, kind="stable")  # cycles grouped by fix in force, ascending
+        groups, first = np.unique(j[order], return_index=True)
+        for jj, sel in zip(groups.tolist(), np.split(cyc[order], first[1:]), strict=True):
+            f = fixes[jj]  # the fix in force on cycles ``sel``: dead reckoning and margin
             if f.state == PositionState.UNDETERMINED:
                 continue
             est = travel.km(f, travel.s[sel])

@@ -28,7 +28,10 @@ Scheduling (``next_evaluation``)
     the nearest one whose correction point r4 is not behind the fix's reference point and
     whose exit-check end r6 is not yet passed by w; it is evaluated at the first cycle
     where the estimate has passed r6 by w (the train has then surely left the feature if
-    the estimate is within its margin). Cab reversals are followed segment by segment.
+    the estimate is within its margin). Cab reversals are followed segment by segment. The
+    estimate is read through the engine's windowed view (``km_between``), forward in chunks
+    of doubling length, and evaluation reads only its search window: a feature costs the
+    distance to it, not the length of the run.
 
 Diagnostics (``evaluate``), each named in refusal events
     Window: cycles whose estimate lies in [r1 − w, r6 + w]. Runs of κ ≥ κ_lo or κ ≤ −κ_lo,
@@ -76,7 +79,7 @@ in the same direction without a cab reversal in between).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -93,6 +96,10 @@ from schemas.enums import EventType, FixSource, PositionState
 
 #: Below this speed κ = ωz / v is not computed (NaN): the division only amplifies noise [m/s].
 KAPPA_MIN_SPEED_MPS = 0.5
+#: Cycles read in the first chunk of the scheduling scan (then doubling): ~4 min at 10 Hz.
+SCAN_CHUNK = 2048
+#: ``km_between(i0, i1)``: the estimate in force on cycles [i0, i1) (the engine's view).
+KmBetween = Callable[[int, int], FloatArray]
 #: Diagnostic names, in the order they are reported.
 DIAGNOSTICS = (
     "start_point",
@@ -164,8 +171,10 @@ class FeatureUnit:
         )
         return np.asarray(np.maximum(grown, self.cfg.search_margin_m), dtype=float)
 
-    def next_evaluation(self, fix: Fix, after_i: int, km_est: FloatArray) -> tuple[int, Candidate] | None:
-        """Cycle and candidate of the next feature ahead (module docstring), or None."""
+    def next_evaluation(self, fix: Fix, after_i: int, km_between: KmBetween) -> tuple[int, Candidate] | None:
+        """Cycle and candidate of the next feature ahead (module docstring), or None.
+        ``km_between(i0, i1)`` is the estimate on cycles [i0, i1): the scan reads only as far
+        ahead as the feature lies (:meth:`_first_passed`)."""
         table = self.tables.get((fix.line_code, fix.track))
         n = self._d.size
         if not self.available or table is None or not 0 <= after_i < n:
@@ -176,8 +185,9 @@ class FeatureUnit:
             sdir = int(fix.k * self._cab[s0])
             u_all, km_all, sign_all = table.travel_rows(sdir)
             seg_first = int(self._changes[self._changes <= s0][-1]) if (self._changes <= s0).any() else 0
-            u_start = sdir * km_est[max(i_ref, seg_first)]
-            u_now = sdir * km_est[s0]
+            i_start = max(i_ref, seg_first)
+            u_start = sdir * km_between(i_start, i_start + 1)[0]
+            u_now = sdir * km_between(s0, s0 + 1)[0]
             w_now = float(self.margin(fix, s0))
             ok = (u_all[:, 3] > u_start) & (u_all[:, 5] + w_now > u_now)
             seg = int(self._segment[s0])
@@ -185,12 +195,9 @@ class FeatureUnit:
                 fid = str(table.feature_id[j])
                 if self._done.get((table.line_code, table.track, fid, sdir)) == seg:
                     continue
-                u6 = u_all[j, 5]
-                u_seg = sdir * km_est[s0:s1]
-                passed = np.flatnonzero(u_seg - u6 >= self.margin(fix, np.arange(s0, s1)))
-                if passed.size == 0:
+                i_eval = self._first_passed(fix, sdir, float(u_all[j, 5]), s0, s1, km_between)
+                if i_eval is None:
                     break  # not reached in this segment; farther features neither
-                i_eval = s0 + int(passed[0])
                 cand = Candidate(
                     fid,
                     table.line_code,
@@ -207,9 +214,25 @@ class FeatureUnit:
                 return i_eval, cand
         return None
 
+    def _first_passed(self, fix: Fix, sdir: int, u6: float, s0: int, s1: int, km_between: KmBetween) -> int | None:
+        """First cycle of [s0, s1) where the estimate u = sdir·km has passed ``u6`` by the
+        search margin, or None. Read in chunks of doubling length from ``s0``, so the cost is
+        in the distance to that cycle, not in the run's length."""
+        a, step = s0, SCAN_CHUNK
+        while a < s1:
+            b = min(a + step, s1)
+            u = sdir * km_between(a, b)
+            passed = np.flatnonzero(u - u6 >= self.margin(fix, np.arange(a, b)))
+            if passed.size:
+                return a + int(passed[0])
+            a, step = b, 2 * step
+        return None
+
     # -- diagnostics --------------------------------------------------------------------
-    def evaluate(self, candidate: Candidate, fix: Fix, km_est: FloatArray, i_eval: int) -> FeatureOutcome:
-        """Run the diagnostics of the module docstring on the κ trace up to ``i_eval``."""
+    def evaluate(self, candidate: Candidate, fix: Fix, km_between: KmBetween, i_eval: int) -> FeatureOutcome:
+        """Run the diagnostics of the module docstring on the κ trace up to ``i_eval``; the
+        estimate is read over the search window only (``km_between`` as in
+        :meth:`next_evaluation`)."""
         c, cfg = candidate, self.cfg
         self._done[(c.line_code, c.track, c.feature_id, c.sdir)] = c.segment
         k_lo, k_hi = (1.0 - cfg.tolerance) / c.radius_m, (1.0 + cfg.tolerance) / c.radius_m
@@ -235,14 +258,13 @@ class FeatureUnit:
                 not order, c.feature_id, c.line_code, c.track, i_ref, float(c.km[3]), order, detail, unc
             )
 
-        ue = c.sdir * km_est
-        window = self._window(c, ue, i_eval)
+        window = self._window(c, km_between, i_eval)
         if window is None:
             detail["reason"] = "search window incomplete (log starts inside it or direction changed)"
             failed.append("start_point")
             return out()
-        i_a, i_hi = window
-        best = self._curve(c, ue, i_a, i_hi, k_lo)
+        i_lo, i_a, i_hi, ue = window
+        best = self._curve(c, ue, i_lo, i_a, i_hi, k_lo)
         if best is None:
             detail["reason"] = "no curve (pair of lower-limit crossings) in the search window"
             failed.append("start_point")
@@ -252,7 +274,8 @@ class FeatureUnit:
         ia, ib = self._span(c, xe, xx)
         span = np.arange(ia, ib)
         i_ref = self._nearest_cycle(xx)
-        self._measure(c, ue, xe, xx, sgn, i_ref, detail)
+        ue_ref = float(c.sdir * km_between(i_ref, i_ref + 1)[0])
+        self._measure(c, ue_ref, xe, xx, sgn, i_ref, detail)
         reasons = self._span_problems(ia, ib, i_hi)
         if reasons:
             detail["reason"] = "; ".join(reasons)
@@ -261,22 +284,27 @@ class FeatureUnit:
         self._slip_speed(span, failed, detail)
         return out(i_ref)
 
-    def _window(self, c: Candidate, ue: FloatArray, i_eval: int) -> tuple[int, int] | None:
+    def _window(self, c: Candidate, km_between: KmBetween, i_eval: int) -> tuple[int, int, int, FloatArray] | None:
         """First and last cycle of the search window: estimate in [r1 − w, r6 + w], causal
         (every smoothed sample complete before ``i_eval``); None when the window's start is
-        not in the data (log starts inside it, or the direction changed)."""
+        not in the data (log starts inside it, or the direction changed). Returned with the
+        first cycle read, ``i_lo``, and u = sdir·km on cycles [i_lo, i_eval]."""
         d, u, w = self._d, c.u, c.margin_m
         i_hi = i_eval - self.n_smooth // 2
-        d_lo = d[i_eval] - max(ue[i_eval] - (u[0] - w), 0.0) - 20.0
+        d_lo = d[i_eval] - max(c.sdir * km_between(i_eval, i_eval + 1)[0] - (u[0] - w), 0.0) - 20.0
         i_lo = int(np.searchsorted(d, d_lo, side="left"))
-        before = np.flatnonzero(ue[i_lo : i_eval + 1] < u[0] - w)
+        ue = c.sdir * km_between(i_lo, i_eval + 1)
+        before = np.flatnonzero(ue < u[0] - w)
         if before.size == 0 or i_hi <= i_lo + before[-1] + 2:
             return None
-        return i_lo + int(before[-1]) + 1, i_hi
+        return i_lo, i_lo + int(before[-1]) + 1, i_hi, ue
 
-    def _curve(self, c: Candidate, ue: FloatArray, i_a: int, i_hi: int, k_lo: float) -> tuple[float, float, int] | None:
+    def _curve(
+        self, c: Candidate, ue: FloatArray, i_lo: int, i_a: int, i_hi: int, k_lo: float
+    ) -> tuple[float, float, int] | None:
         """(entry crossing, exit crossing, sign) of the lower-limit run wholly inside the
-        window whose estimated crossings lie closest to r3 and r4."""
+        window whose estimated crossings lie closest to r3 and r4 (``ue[i − i_lo]`` is u at
+        cycle i)."""
         d, x, kap, u = self._d, self._x, self.kappa, c.u
         best: tuple[float, float, float, int] | None = None
         for j0, j1, sgn in _runs(kap[i_a : i_hi + 1], x[i_a : i_hi + 1], k_lo, self.cfg.crossing_merge_m):
@@ -285,7 +313,8 @@ class FeatureUnit:
             xe = _cross(x, kap, i_a + j0 - 1, i_a + j0, k_lo, sgn)
             xx = _cross(x, kap, i_a + j1 - 1, i_a + j1, k_lo, sgn)
             ie = i_a + j0
-            cost = abs(ue[ie] + (xe - d[ie]) - u[2]) + abs(ue[ie] + (xx - d[ie]) - u[3])
+            ui = ue[ie - i_lo]
+            cost = abs(ui + (xe - d[ie]) - u[2]) + abs(ui + (xx - d[ie]) - u[3])
             if best is None or cost < best[0]:
                 best = (cost, xe, xx, sgn)
         return None if best is None else best[1:]
@@ -307,9 +336,9 @@ class FeatureUnit:
         return i_x if abs(d[i_x] - xx) <= abs(d[i_x - 1] - xx) else i_x - 1
 
     def _measure(
-        self, c: Candidate, ue: FloatArray, xe: float, xx: float, sgn: int, i_ref: int, detail: dict[str, Any]
+        self, c: Candidate, ue_ref: float, xe: float, xx: float, sgn: int, i_ref: int, detail: dict[str, Any]
     ) -> None:
-        """What was measured of the curve (``detail``)."""
+        """What was measured of the curve (``detail``; ``ue_ref`` = u at ``i_ref``)."""
         d, x, cfg = self._d, self._x, self.cfg
         body = np.abs(self.kappa[int(np.searchsorted(x, xe)) : int(np.searchsorted(x, xx))])
         body = body[np.isfinite(body)]
@@ -321,7 +350,7 @@ class FeatureUnit:
             measured_sign=int(sgn),
             length_m=round(xx - xe, 2),
             length_tol_m=round(max(cfg.length_tolerance * db_len, cfg.length_tolerance_min_m), 2),
-            km_est_exit_m=round(float(c.sdir * (ue[i_ref] - (d[i_ref] - xx))), 2),
+            km_est_exit_m=round(float(c.sdir * (ue_ref - (d[i_ref] - xx))), 2),
             ref_offset_m=round(float(d[i_ref] - xx), 3),
             t_exit=float(self.cycles.t[i_ref]),
         )
@@ -447,7 +476,7 @@ class FeatureAid(StaticAid):
         fix = view.estimate
         if fix is None or fix.state != PositionState.DETERMINED:
             return None
-        nxt = self.unit.next_evaluation(fix, view.i, view.km_estimate())
+        nxt = self.unit.next_evaluation(fix, view.i, view.km_between)
         if nxt is None:
             return None
         i_eval, cand = nxt
@@ -457,7 +486,7 @@ class FeatureAid(StaticAid):
         fix = view.estimate
         if fix is None:
             return Outcome()
-        out = self.unit.evaluate(obs.payload, fix, view.km_estimate(), view.i)
+        out = self.unit.evaluate(obs.payload, fix, view.km_between, view.i)
         if not (out.accepted and out.i_ref is not None and out.km_db is not None):
             detail = {"feature_id": out.feature_id, "failed": out.failed, **out.detail}
             return Outcome([Event(view.t, EventType.FEATURE_REFUSED, view.km, detail=detail)])

@@ -266,3 +266,39 @@ def test_an_imu_gap_makes_the_position_uncertain_and_the_margin_hold(sample_db, 
     after = res.positions[res.positions["t"] > t_lost + 1.0]
     assert (after["state"] != "determined").all()
     assert res.summary["truth"]["within_margin_share"] >= 0.999
+
+
+def test_windowed_estimate_is_the_whole_run_estimate_sliced() -> None:
+    tr = travel(30.0)
+    seen: list[tuple[bool, bool]] = []
+
+    @dataclass(eq=False)
+    class Probe(StaticAid):
+        name = "probe"
+        priority = Priority.FEATURE
+
+        def observations(self) -> Iterator[Observation]:
+            return iter([Observation(1.0), Observation(20.0)])
+
+        def observe(self, obs: Observation, view: EngineView) -> Outcome:
+            windows = ((0, 5), (-3, 4), (100, 180), (tr.n - 2, tr.n + 9), (7, 7))
+            parts = [view.km_between(i0, i1) for i0, i1 in windows]  # before the whole run is cached
+            whole = view.km_estimate()
+            for (i0, i1), part in zip(windows, parts, strict=True):
+                ref = whole[max(i0, 0) : i1]
+                seen.append((part.shape == ref.shape, bool(np.array_equal(part, ref, equal_nan=True))))
+            return Outcome()
+
+    run_aids(tr, [Beacon((10.0,)), Probe()], MarginConfig())
+    assert len(seen) == 10 and all(a and b for a, b in seen)
+
+
+def test_travel_interpolation_at_one_time_is_np_interp() -> None:
+    from fieldlogs.pipeline.estimate import interp_at
+
+    rng = np.random.default_rng(5)
+    xp = np.cumsum(rng.random(200))
+    xp[50:53] = xp[52]  # repeated times
+    fp = np.cumsum(rng.standard_normal(200))
+    xs = np.concatenate([rng.uniform(xp[0] - 1.0, xp[-1] + 1.0, 2000), xp, [xp[0] - 3.0, xp[-1] + 3.0]])
+    assert all(interp_at(float(x), xp, fp) == float(np.interp(x, xp, fp)) for x in xs)

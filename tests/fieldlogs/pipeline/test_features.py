@@ -16,12 +16,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import fieldlogs.pipeline.aids.features as features_mod
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
 from dbtools.synthetic.alignment import Alignment, Curve
 from dbtools.synthetic.network import LineSpec, Station, build_network
 from fieldlogs.pipeline.aids.balise import BaliseDb
-from fieldlogs.pipeline.aids.features import FeatureUnit
+from fieldlogs.pipeline.aids.features import FeatureUnit, KmBetween
 from fieldlogs.pipeline.config import FeatureConfig, PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.estimate import signed_travel
@@ -96,12 +97,17 @@ def fix_at_start(track: str, k: int, km_true0: float, error_m: float) -> Fix:
     return Fix(0.0, 0.0, 0.0, km, km, LINE, track, k, "balise", 1.0)
 
 
+def between(km_est: FloatArray) -> KmBetween:
+    """The engine's windowed estimate over a whole-run array: cycles [i0, i1)."""
+    return lambda i0, i1: km_est[max(i0, 0) : max(i1, 0)]
+
+
 def outcomes(unit: FeatureUnit, fix: Fix, km_est: FloatArray) -> list[tuple[int, FeatureOutcome]]:
     """Evaluate every feature in turn under one fix (no re-anchoring)."""
     out, after = [], 0
-    while (nxt := unit.next_evaluation(fix, after, km_est)) is not None:
+    while (nxt := unit.next_evaluation(fix, after, between(km_est))) is not None:
         i_eval, cand = nxt
-        out.append((i_eval, unit.evaluate(cand, fix, km_est, i_eval)))
+        out.append((i_eval, unit.evaluate(cand, fix, between(km_est), i_eval)))
         after = i_eval
     return out
 
@@ -163,12 +169,12 @@ def test_accepts_and_recovers_the_injected_error(net, track, k, cab, direction, 
 def test_evaluation_point_is_exit_check_end_plus_margin(net) -> None:
     c, odo, _, fix, km_est = setup(net)
     unit = FeatureUnit(c, odo, net, CFG)
-    i_eval, cand = unit.next_evaluation(fix, 0, km_est)
+    i_eval, cand = unit.next_evaluation(fix, 0, between(km_est))
     assert cand.feature_id == "F001" and cand.margin_m == CFG.search_margin_m
     end = cand.km[5] + CFG.search_margin_m
     assert km_est[i_eval] >= end > km_est[i_eval - 1]
     # a later start on the same fix: already past F001's exit check end + margin → F002 next
-    i2, cand2 = unit.next_evaluation(fix, i_eval, km_est)
+    i2, cand2 = unit.next_evaluation(fix, i_eval, between(km_est))
     assert cand2.feature_id == "F002" and i2 > i_eval
     # the margin grows with the distance since the fix (2 %) once above the minimum
     far = fix_at_start("D", 1, KM0 - 10_000.0, 0.0)  # pretend the fix was 10 km back
@@ -179,12 +185,12 @@ def test_evaluation_point_is_exit_check_end_plus_margin(net) -> None:
 def test_no_feature_ahead_or_no_imu(net) -> None:
     c, odo, _, fix, km_est = setup(net)
     unit = FeatureUnit(c, odo, net, CFG)
-    assert unit.next_evaluation(fix, c.n - 1, km_est) is None
+    assert unit.next_evaluation(fix, c.n - 1, between(km_est)) is None
     other_line = Fix(0.0, 0.0, 0.0, fix.km_m, fix.km_m, "0999", "D", 1, "balise", 1.0)
-    assert unit.next_evaluation(other_line, 0, km_est) is None
+    assert unit.next_evaluation(other_line, 0, between(km_est)) is None
     c.imu["wz"][:] = np.nan
     c.has_imu = False
-    assert FeatureUnit(c, odo, net, CFG).next_evaluation(fix, 0, km_est) is None
+    assert FeatureUnit(c, odo, net, CFG).next_evaluation(fix, 0, between(km_est)) is None
 
 
 def test_cab_reversal_evaluates_the_curve_again_the_other_way(net) -> None:
@@ -216,8 +222,8 @@ def test_cab_reversal_evaluates_the_curve_again_the_other_way(net) -> None:
 
 # -- refusals ---------------------------------------------------------------------------
 def first(unit: FeatureUnit, fix: Fix, km_est: FloatArray) -> FeatureOutcome:
-    i_eval, cand = unit.next_evaluation(fix, 0, km_est)
-    return unit.evaluate(cand, fix, km_est, i_eval)
+    i_eval, cand = unit.next_evaluation(fix, 0, between(km_est))
+    return unit.evaluate(cand, fix, between(km_est), i_eval)
 
 
 def test_slip_during_the_feature_refuses(net) -> None:
@@ -323,3 +329,32 @@ def test_solver_applies_feature_corrections(net) -> None:
         assert np.abs(err[after]).max() <= 10.0
         prev_km = ev.km_m
     assert sol.fixes[-1].source == "feature"
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 64])
+def test_scheduling_scan_in_chunks_finds_the_same_cycles(net, monkeypatch, chunk) -> None:
+    # the scan reads the estimate ahead in doubling chunks; where the chunks end must not
+    # change which cycle a feature is evaluated at, nor what its diagnostics find
+    c, odo, _, fix, km_est = setup(net)
+    whole = outcomes(FeatureUnit(c, odo, net, CFG), fix, km_est)
+    assert whole
+    monkeypatch.setattr(features_mod, "SCAN_CHUNK", chunk)
+    chunked = outcomes(FeatureUnit(c, odo, net, CFG), fix, km_est)
+    assert [(i, o.feature_id, o.accepted, o.i_ref, o.failed) for i, o in chunked] == [
+        (i, o.feature_id, o.accepted, o.i_ref, o.failed) for i, o in whole
+    ]
+    assert [o.detail for _, o in chunked] == [o.detail for _, o in whole]
+
+
+def test_scheduling_reads_the_estimate_only_near_the_feature(net) -> None:
+    # the windows asked of km_between cover the distance to the features, not the run
+    c, odo, _, fix, km_est = setup(net)
+    asked: list[int] = []
+
+    def counting(i0: int, i1: int) -> FloatArray:
+        asked.append(min(i1, c.n) - max(i0, 0))
+        return km_est[max(i0, 0) : max(i1, 0)]
+
+    unit = FeatureUnit(c, odo, net, CFG)
+    i_eval, _ = unit.next_evaluation(fix, 0, counting)
+    assert sum(asked) <= 2 * i_eval + features_mod.SCAN_CHUNK + 2

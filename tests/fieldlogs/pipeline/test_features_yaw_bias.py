@@ -20,7 +20,7 @@ from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.cycles import Cycles, standstill_mean
 from fieldlogs.pipeline.estimate import signed_travel
 from fieldlogs.pipeline.types import Odometry
-from tests.fieldlogs.pipeline.test_features import CFG, DT, KM0, NOISE_RAD_S, SPEC, fix_at_start, outcomes
+from tests.fieldlogs.pipeline.test_features import CFG, DT, KM0, NOISE_RAD_S, SPEC, between, fix_at_start, outcomes
 
 BIAS = 0.002  # rad/s (0.11 °/s, ~2σ of an ADIS16480)
 V = 10.0  # m/s
@@ -121,9 +121,9 @@ def _candidate(unit: FeatureUnit, feature_id: str):
     fix = fix_at_start("D", 1, KM0 + 1500.0, 0.0)
     km_est = fix.km_m + unit._d
     after = 0
-    while (nxt := unit.next_evaluation(fix, after, km_est)) is not None:
+    while (nxt := unit.next_evaluation(fix, after, between(km_est))) is not None:
         after, cand = nxt
         if cand.feature_id == feature_id:
             return cand
-        unit.evaluate(cand, fix, km_est, after)
+        unit.evaluate(cand, fix, between(km_est), after)
     raise AssertionError(feature_id)

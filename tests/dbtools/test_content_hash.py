@@ -1,0 +1,26 @@
+"""The content hash's text bytes, built in Arrow, are those every stored hash was made of."""
+
+from __future__ import annotations
+
+import pandas as pd
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from dbtools.network import joined_text
+
+
+def former(s: pd.Series) -> bytes:
+    """How content_hash joined a text column before (the reference of the stored hashes)."""
+    return "\x1f".join(s.astype(object).where(s.notna(), "\x00").tolist()).encode("utf-8")
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.one_of(st.none(), st.text(max_size=5)), max_size=12), st.sampled_from(["string", "str", "object"]))
+def test_joined_text_is_the_former_join(values: list[str | None], dtype: str) -> None:
+    s = pd.Series(values, dtype=dtype)
+    assert joined_text(s) == former(s)
+    assert joined_text(s.iloc[1:]) == former(s.iloc[1:])  # a sliced (offset) column
+
+
+def test_a_missing_value_is_the_empty_string() -> None:
+    assert joined_text(pd.Series(["a", None, "é"], dtype="string")) == "a\x1f\x1fé".encode()
