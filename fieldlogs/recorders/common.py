@@ -15,12 +15,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from schemas.errors import InputError
 
 #: Formats ``logs import`` reads.
 FORMATS = ("nmea", "ubx", "rinex", "csv")
+
+#: The largest DOP the ``gps`` stream holds (schemas/logs.py); receivers write 99.99 for
+#: "no DOP" (u-blox NMEA GGA/GSA without a fix, NAV-DOP 9999 · 0.01).
+DOP_MAX = 99.9
+
+
+def known_dop(dop: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """A receiver's DOP values with its "unknown" markers (above ``DOP_MAX``) as NaN."""
+    d = np.asarray(dop, dtype=np.float64)
+    return np.where(d > DOP_MAX, np.nan, d)
 
 
 @dataclass

@@ -10,7 +10,8 @@
 3. ``gnss_obs`` of several receivers and ``gnss_nav`` of several files are concatenated
    (exact duplicate ephemerides dropped); any other stream from two sources is refused.
 4. The vehicle file is checked (``recorders.vehicle``); run.json gets vehicle_id,
-   vehicle_kind, wheel_diameter_m and teeth from it, the ``vehicle`` and ``gnss`` blocks
+   vehicle_kind, wheel_diameter_m and teeth (its tacho axle's; none for a road-rail vehicle
+   or a station without one) from it, the ``vehicle`` and ``gnss`` blocks
    and ``sources`` (file, sha256, format, counts, skipped records with reasons, clock fit).
    Every receiver of ``gnss_obs`` must have an antenna.
 5. Written atomically (``fieldlogs.io.write_run``); nothing is written on any error.
@@ -206,12 +207,9 @@ def import_run(
     streams = _merge(decoded, t0)
     veh, warnings = load_vehicle(vehicle, has_tacho="tacho" in streams)
     _check_receivers(streams, veh, Path(vehicle))
-    wheel = tacho_wheel(veh)
-    if wheel is None:
-        raise UsageError(
-            f"{vehicle}: run.json needs wheel_diameter_m and teeth: name the tacho axle (tacho_axle) "
-            "and give its wheel_diameter_m and teeth"
-        )
+    # load_vehicle refused a train, or a run with a tacho stream, without its tacho axle: a
+    # wheel is missing only where run.json may go without one (a road-rail vehicle, a station)
+    wheel: tuple[float | None, int | None] = tacho_wheel(veh) or (None, None)
     provenance = [d.provenance(sha256_of(Path(d.file))) for d in decoded]
     gnss = _gnss_block(decoded)
     meta = RunMeta(

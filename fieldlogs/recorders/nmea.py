@@ -15,7 +15,8 @@ are refused (two receivers in one file?). UTC → GPS time with the leap seconds
 ``fix`` (SPEC §4): GGA quality 1 and 3 → 1 (GPS); 2 (DGPS), 4 (RTK fixed), 5 (RTK float)
 → 2; 0, 6 (dead reckoning), 7 (manual), 8 (simulator) → 0. Without GGA: RMC status A → 1,
 with mode D/R/F → 2. ``nsat`` and ``hdop`` from GGA, else from the epoch's GSA sentences
-(satellites used, summed over the systems; HDOP). GST's 1-σ latitude, longitude and height
+(satellites used, summed over the systems; HDOP, empty where the receiver writes 99.99
+for "unknown"). GST's 1-σ latitude, longitude and height
 errors are kept (``sigma_*_m``), as are the GGA ellipsoidal height (altitude + geoid
 separation), RMC/VTG speed and course.
 
@@ -31,7 +32,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from fieldlogs.recorders.common import Decoded, read_bytes
+from fieldlogs.recorders.common import Decoded, known_dop, read_bytes
 from fieldlogs.recorders.timebase import calendar_to_utc_s, gps_to_utc, utc_to_gps
 from schemas.errors import InputError
 
@@ -255,7 +256,7 @@ def _gps_frame(tables: dict[str, pd.DataFrame], epoch: np.ndarray, n: int) -> pd
         qi = np.where(np.isfinite(q) & (q >= 0) & (q < len(_GGA_FIX)), q, 0).astype(np.int64)
         _put(out, "fix", e, _GGA_FIX[qi])
         _put(out, "nsat", e, _num(gga[7]))
-        _put(out, "hdop", e, _num(gga[8]))
+        _put(out, "hdop", e, known_dop(_num(gga[8])))
         _put(out, "height_m", e, _num(gga[9]) + np.nan_to_num(_num(gga[11])))
     if len(rmc):
         e = epoch[rmc.index.to_numpy()]
@@ -281,7 +282,7 @@ def _gps_frame(tables: dict[str, pd.DataFrame], epoch: np.ndarray, n: int) -> pd
         used = prn.notna() & (prn != "")
         per = pd.Series(used.sum(axis=1).to_numpy(), index=e).groupby(level=0).sum()
         _put(out, "nsat", per.index.to_numpy(), per.to_numpy(dtype=float))
-        _put(out, "hdop", e, _num(gsa[16]))
+        _put(out, "hdop", e, known_dop(_num(gsa[16])))
         fix3 = _num(gsa[2])
         _put(out, "fix", e, np.where(fix3 >= 2, 1.0, 0.0))
     out["fix"] = np.nan_to_num(out["fix"].to_numpy(), nan=0.0)

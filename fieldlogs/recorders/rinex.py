@@ -9,6 +9,10 @@ converted in one vectorised pass as for RINEX 3. Observation types map onto RINE
 (RINEX 3.04 §5.1 table): GPS/QZSS C1→C1C, P1→C1W, C2→C2L, P2→C2W, C5→C5X, band-1 phase,
 Doppler, C/N0 with C1 (attribute C, else W), band 2 with P2 (W, else L); GLONASS C1/P1 →
 C1C/C1P, C2/P2 → C2C/C2P, band-2 phase with P2; Galileo and SBAS attribute X (SBAS C).
+Refused with the line of the epoch record: a blank or malformed epoch record (fields out of
+range), fewer satellites listed than announced, an epoch record read as satellite data (its
+predecessor announced more satellites than it has records), the file ending inside an epoch,
+a satellite of an unknown system.
 """
 
 from __future__ import annotations
@@ -85,55 +89,109 @@ def _types2(path: Path, header: list[str]) -> list[str]:
     return types
 
 
-def _walk2(path: Path, body: list[str], first: int, n_lines: int) -> tuple[list[float], list[int], list[str], int]:
-    """Epoch times (file scale), per satellite record its epoch and joined 80-column lines."""
+#: A RINEX 2.11 epoch record with its fields filled: `` yy mm dd hh mm ss.sssssss  f`` (a
+#: satellite data line, F14.3 fields, has its decimal points at columns 10, 26, …, never at 18).
+EPOCH2 = r"^ [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d [ \d]\d\.\d{7}  [0-6]"
+
+
+def _epoch_fields2(path: Path, ln: str, row: int) -> tuple[int, int]:
+    """(flag, number of satellites or special records) of an epoch record line."""
+    try:
+        flag, n = int(ln[28]), int(ln[29:32])
+    except (ValueError, IndexError) as exc:
+        raise InputError("blank or malformed epoch record (no epoch flag and count)", path=path, row=row) from exc
+    if not 0 <= flag <= 6 or n < 0:
+        raise InputError(f"malformed epoch record: epoch flag {flag} (0-6 expected)", path=path, row=row)
+    return flag, n
+
+
+def _epoch_time2(path: Path, ln: str, row: int) -> float:
+    """The epoch time of a flag 0/1/6 record, in seconds of the file's time scale."""
+    try:
+        yy, mo, d, h, mi = (int(ln[k : k + 3]) for k in (0, 3, 6, 9, 12))
+        s = float(ln[15:26])
+    except ValueError as exc:
+        raise InputError("blank or malformed epoch record", path=path, row=row) from exc
+    if not (1 <= mo <= 12 and 1 <= d <= 31 and 0 <= h <= 23 and 0 <= mi <= 59 and 0 <= s < 61):
+        raise InputError("malformed epoch record: date or time out of range", path=path, row=row)
+    y = yy + (1900 if yy >= 80 else 2000)
+    return float(calendar_to_utc_s(y, mo, d, h * 3600.0 + mi * 60.0 + s))
+
+
+def _data_block2(path: Path, shaped: np.ndarray, first: int, i: int, end: int, n: int, row: int) -> None:
+    """Refuse an epoch's satellite data lines ``body[i:end]`` (body line 0 is file line
+    ``first``) that run past the end of the file or hold a line shaped like an epoch record
+    (the epoch announced more satellites than it has records)."""
+    if end > len(shaped):
+        raise InputError(f"epoch record announces {n} satellites but the file ends", path=path, row=row)
+    lost = np.flatnonzero(shaped[i:end])
+    if len(lost):
+        raise InputError(
+            f"epoch record announces {n} satellites but has fewer records: the epoch record on line "
+            f"{first + i + int(lost[0])} would be read as satellite data",
+            path=path,
+            row=row,
+        )
+
+
+def _sat_list2(path: Path, body: list[str], i: int, n: int, row: int) -> tuple[list[str], int]:
+    """The n satellite ids of the epoch record at body[i] (continued on following lines, 12 per
+    line) and the number of continuation lines."""
+    text = body[i][32:68]
+    extra = (n - 1) // 12 if n else 0
+    for k in range(extra):
+        text += body[i + 1 + k][32:68] if i + 1 + k < len(body) else ""
+    if len(text.rstrip()) < 3 * n:
+        raise InputError(
+            f"epoch record announces {n} satellites but lists {len(text.rstrip()) // 3}", path=path, row=row
+        )
+    sats = [text[3 * k : 3 * k + 3].replace(" ", "0") for k in range(n)]
+    return [("G" + s[1:]) if s[0] == "0" else s for s in sats], extra
+
+
+def _walk2(
+    path: Path, body: list[str], first: int, n_lines: int
+) -> tuple[list[float], list[int], list[str], list[int], int]:
+    """Epoch times (file scale), per satellite record its epoch, joined 80-column lines and
+    the file line of its epoch record; and the number of skipped special records."""
+    shaped = pd.Series(body, dtype=object).str.match(EPOCH2).to_numpy(dtype=bool)
     times: list[float] = []
     owner: list[int] = []
     joined: list[str] = []
+    rows: list[int] = []
     skipped = 0
     i = 0
     while i < len(body):
-        ln = body[i]
-        if not ln.strip():
-            raise InputError("blank line where an epoch record was expected (blank epoch)", path=path, row=first + i)
-        try:
-            flag, n = int(ln[28]), int(ln[29:32])
-            if 2 <= flag <= 5:  # n special (header) records follow; the epoch fields may be blank
-                skipped += n
-                i += 1 + n
-                continue
-            yy, mo, d, h, mi = (int(ln[k : k + 3]) for k in (0, 3, 6, 9, 12))
-            s = float(ln[15:26])
-        except ValueError as exc:
-            raise InputError("blank or malformed epoch record", path=path, row=first + i) from exc
-        sat_text = ln[32:68]
-        extra = (n - 1) // 12 if n else 0
-        for k in range(extra):
-            sat_text += body[i + 1 + k][32:68] if i + 1 + k < len(body) else ""
+        row = first + i
+        if not body[i].strip():
+            raise InputError("blank line where an epoch record was expected (blank epoch)", path=path, row=row)
+        flag, n = _epoch_fields2(path, body[i], row)
+        if 2 <= flag <= 5:  # n special (header) records follow; the epoch fields may be blank
+            skipped += n
+            i += 1 + n
+            continue
+        t = _epoch_time2(path, body[i], row)
+        sats, extra = _sat_list2(path, body, i, n, row)
         i += 1 + extra
+        _data_block2(path, shaped, first, i, i + n * n_lines, n, row)
         if flag == 6:  # cycle-slip records
             skipped += n
             i += n * n_lines
             continue
-        y = yy + (1900 if yy >= 80 else 2000)
-        times.append(float(calendar_to_utc_s(y, mo, d, h * 3600.0 + mi * 60.0 + s)))
-        for k in range(n):
-            sat = sat_text[3 * k : 3 * k + 3].replace(" ", "0")
-            sat = ("G" + sat[1:]) if sat[0] == "0" else sat
-            block = body[i : i + n_lines]
-            if len(block) < n_lines:
-                raise InputError(f"epoch record announces {n} satellites but the file ends", path=path, row=first + i)
-            joined.append(sat + "".join(x[:80].ljust(80) for x in block))
-            owner.append(len(times) - 1)
+        times.append(t)
+        for sat in sats:
+            joined.append(sat + "".join(x[:80].ljust(80) for x in body[i : i + n_lines]))
             i += n_lines
-    return times, owner, joined, skipped
+        owner += [len(times) - 1] * n
+        rows += [row] * n
+    return times, owner, joined, rows, skipped
 
 
 def read_rinex_obs2(path: Path, lines: list[str], dec: Decoded) -> None:
     header, start = r3.split_header(path, lines)
     types = _types2(path, header)
     n_lines = (len(types) + 4) // 5
-    times, owner, joined, skipped = _walk2(path, lines[start:], start + 1, n_lines)
+    times, owner, joined, rec_rows, skipped = _walk2(path, lines[start:], start + 1, n_lines)
     dec.records = len(times)
     if skipped:
         dec.skipped["event records (epoch flags 2-6)"] += skipped
@@ -141,7 +199,7 @@ def read_rinex_obs2(path: Path, lines: list[str], dec: Decoded) -> None:
     letters = np.array([s[0] for s in sats], dtype=object)
     bad = np.flatnonzero(~np.isin(letters, list(SYSTEMS)))
     if len(bad):
-        raise InputError(f"unknown satellite system '{letters[bad[0]]}'", path=path)
+        raise InputError(f"unknown satellite system '{letters[bad[0]]}'", path=path, row=rec_rows[int(bad[0])])
     default = "GLO" if header[0][40] == "R" else "GPS"
     named = r3.time_system(header)
     t_gps = r3.time_system_to_gps(np.array(times), named or default)

@@ -20,7 +20,7 @@ GPS week (from the UTC date and the leap seconds) · 604800 + iTOW; frames witho
 UTC date and time are skipped and counted. hAcc
 and vAcc give the 1-σ sigmas (hAcc for both latitude and longitude). NAV-HPPOSLLH
 replaces latitude, longitude and height of the NAV-PVT with the same iTOW by its
-high-precision values; NAV-DOP gives the HDOP.
+high-precision values; NAV-DOP gives the HDOP (empty where it is 99.99, "unknown").
 
 pyubx2 parses frame by frame in Python; it is the independent reader of the round-trip
 tests (``tests/fieldlogs/recorders``).
@@ -37,7 +37,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from fieldlogs.recorders.common import Decoded, read_bytes
+from fieldlogs.recorders.common import Decoded, known_dop, read_bytes
 from fieldlogs.recorders.timebase import calendar_to_utc_s, utc_to_gps
 from schemas.errors import InputError
 
@@ -344,7 +344,7 @@ def _refine(path: Path, f: Frames, gps: pd.DataFrame) -> pd.DataFrame:
         d = f.fixed(_check_length(path, f, idx, DOP_DTYPE.itemsize, "NAV-DOP"), DOP_DTYPE)
         dop = pd.DataFrame({"itow": d["iTOW"].astype(np.int64), "h": d["hDOP"] * 0.01}).drop_duplicates("itow")
         m = gps[["itow"]].merge(dop, on="itow", how="left")
-        gps["hdop"] = m["h"].to_numpy()
+        gps["hdop"] = known_dop(m["h"].to_numpy())
     return gps
 
 

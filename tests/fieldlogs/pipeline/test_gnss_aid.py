@@ -129,3 +129,42 @@ def test_a_receiver_without_an_antenna_is_refused_once(gnss_run: Path, network: 
     res = _run(folder, network)
     assert [r["reason"] for r in _refusals(res)] == ["no_antenna"]
     assert not (_types(res) == EventType.GNSS_CORRECTION).any()
+
+
+def _tracks_swapped(network: Network) -> Network:
+    """The sample network with the GIS geometry of tracks U and D exchanged (balises and km
+    unchanged): the balises put the train on D, whose grid now runs where U really is."""
+    g = network.tables["gis"]
+    key = ["line_code", "km_m"]
+    u, d = g[g["track"] == "U"].set_index(key), g[g["track"] == "D"].set_index(key)
+    swapped = g.copy()
+    for mask, other in ((g["track"] == "D", u), (g["track"] == "U", d)):
+        idx = pd.MultiIndex.from_frame(g.loc[mask, key])
+        for c in ("lat", "lon", "height_m"):
+            swapped.loc[mask, c] = other[c].reindex(idx).to_numpy()
+    return Network({**network.tables, "gis": swapped}, meta=network.meta, origin="tracks swapped")
+
+
+def test_fits_far_better_on_the_other_track_are_reported_and_stop_the_corrections(
+    gnss_run: Path, network: Network
+) -> None:
+    """Issue 17 (must have 4): the constrained solution never chooses the track, but fits far
+    better on the other track are evidence: ``gnss_track_disagrees`` once, and no GNSS
+    correction while it lasts. With the default threshold (standalone σ) the 3.8 m between the
+    tracks leaves it undecided (bench/NOTES.md); with 4 it decides within the first 2 minutes."""
+    bad = _tracks_swapped(network)
+    cfg = PipelineConfig(gnss=GnssConfig(track_chi2=4.0))
+    res = _run(gnss_run, bad, cfg)
+    ev, types = res.events, _types(res)
+    dis = ev[types == EventType.GNSS_TRACK_DISAGREES]
+    assert len(dis) == 1
+    assert json.loads(dis["detail"].iloc[0]) == {"track": "D", "gnss_track": "U", "window_s": 60.0}
+    t_dis = float(dis["t"].iloc[0])
+    assert t_dis < 150.0
+    corr_t = ev.loc[types == EventType.GNSS_CORRECTION, "t"].to_numpy(dtype=float)
+    assert len(corr_t) > 0 and (corr_t < t_dis).all()  # none after the evidence: it lasts to the end
+    # the same threshold on the true network: no disagreement, corrections to the end
+    res = _run(gnss_run, network, cfg)
+    assert not (_types(res) == EventType.GNSS_TRACK_DISAGREES).any()
+    late = res.events.loc[_types(res) == EventType.GNSS_CORRECTION, "t"].to_numpy(dtype=float)
+    assert (late > t_dis).any()

@@ -269,3 +269,28 @@ def test_simulate_writes_the_gnss_part_as_a_recorder(sim: AuditData, tmp_path: P
     with pytest.raises(UsageError, match="gnss_obs"):
         write_recorder_files(out, "rinex", force=True)
     assert (out / "recorder" / "gnss.ubx").is_file() and not (out / "recorder" / "nav.rnx").exists()
+
+
+def test_a_road_rail_vehicle_without_a_tachometer(tmp_path: Path) -> None:
+    """A vehicle without tacho axle (optional for a road-rail vehicle without a tacho stream,
+    README) is imported without a wheel; a train without one is refused (exit 1)."""
+    from tests.fieldlogs.recorders.conftest import DATA
+
+    veh = tmp_path / "rr.toml"
+    veh.write_text(
+        'vehicle_id = "RR1"\nvehicle_kind = "road_rail"\nlength_m = 8.0\nreference = "centre"\nfront_x_m = 4.0\n'
+        '[[antennas]]\nid = "roof"\nreceiver = "RX211"\nx_m = 0.0\ny_m = 0.0\nz_m = 3.0\n'
+    )
+    out = tmp_path / "run"
+    res = invoke("logs", "import", DATA / "sample_v211.obs", DATA / "sample_v2.nav", "--vehicle", veh, "--out", out)
+    assert res.exit_code == 0, res.output
+    meta = json.loads((out / "run.json").read_text())
+    assert meta["vehicle_kind"] == "road_rail" and meta.get("wheel_diameter_m") is None and meta.get("teeth") is None
+    assert Run(out).stream("gnss_obs") is not None
+    veh.write_text(veh.read_text().replace('"road_rail"', '"train"'))
+    _refused(
+        invoke("logs", "import", DATA / "sample_v211.obs", "--vehicle", veh, "--out", tmp_path / "t"),
+        1,
+        tmp_path / "t",
+        "'tacho_axle' is missing",
+    )

@@ -30,7 +30,8 @@ def test_hand_made_file(data: Path) -> None:
     assert gps["lon"].iloc[0] == pytest.approx(139 + 28.98580 / 60, abs=1e-12)
     assert gps["fix"].tolist() == [2, 1, 0]  # GGA 2 (DGPS), 1, 0 (GGA takes precedence over RMC)
     assert gps["nsat"].tolist() == [12, 8, 0]
-    assert gps["hdop"].tolist() == [0.8, 1.1, 99.99]
+    assert gps["hdop"].tolist()[:2] == [0.8, 1.1]
+    assert np.isnan(gps["hdop"].iloc[2])  # GGA's 99.99 without a fix: "unknown", not a DOP
     assert gps["height_m"].iloc[0] == pytest.approx(25.0 + 38.5)  # altitude + geoid separation
     assert gps["speed_mps"].iloc[0] == pytest.approx(10.0 * 1852 / 3600)
     assert gps[["sigma_lat_m", "sigma_lon_m", "sigma_height_m"]].iloc[0].tolist() == [0.45, 0.35, 0.90]
@@ -137,3 +138,37 @@ def test_crlf_and_gzip(tmp_path: Path, data: Path) -> None:
     gz.write_bytes(gzip.compress(raw))
     a, b = read_nmea(data / "sample.nmea").frames["gps"], read_nmea(gz).frames["gps"]
     pd.testing.assert_frame_equal(a, b)
+
+
+def test_unknown_dop_is_empty_and_the_import_passes_check(data: Path, tmp_path: Path) -> None:
+    """Receivers write HDOP 99.99 for "unknown" (u-blox without a fix); the gps stream's HDOP
+    is at most 99.9 (schemas/logs.py), so the reader leaves it empty and `logs check` of the
+    imported file reports nothing about the gps stream."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    p = tmp_path / "a.nmea"
+    p.write_text(
+        "\n".join(
+            [
+                sentence("GNRMC,101010.00,V,,,,,,,011226,,,N"),
+                sentence("GNGGA,101010.00,,,,,0,00,99.99,,,,,,"),
+                sentence("GNGSA,A,1,,,,,,,,,,,,,99.99,99.99,99.99,1"),
+                sentence("GNGGA,101011.00,3554.00000,N,13924.00000,E,1,07,99.90,25.0,M,38.5,M,,"),
+            ]
+        )
+        + "\n"
+    )
+    gps = read_nmea(p).frames["gps"]
+    assert np.isnan(gps["hdop"].iloc[0]) and gps["hdop"].iloc[1] == 99.9
+    out = tmp_path / "run"
+    res = CliRunner().invoke(
+        app, ["logs", "import", str(p), "--vehicle", str(data / "vehicle.toml"), "--out", str(out)]
+    )
+    assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(app, ["logs", "check", str(out), "--format", "json"])
+    findings = json.loads(res.output)["runs"][0]["findings"]
+    assert {f["rule"] for f in findings} == {"log.missing_stream"}  # imu and tacho; nothing on gps

@@ -260,3 +260,31 @@ def test_navigation_record_of_an_unknown_system(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="unknown satellite system 'X'") as exc:
         read_rinex(p)
     assert exc.value.row == text.splitlines().index(next(ln for ln in text.splitlines() if ln.startswith("X07"))) + 1
+
+
+def _v211(data: Path, tmp_path: Path, edit: Any) -> Path:
+    """The hand-made RINEX 2.11 file, edited (header: lines 1-7; epoch records on 8, 15 (an event), 17)."""
+    p = tmp_path / "rx.obs"
+    p.write_text("\n".join(edit((data / "sample_v211.obs").read_text().split("\n"))))
+    return p
+
+
+@pytest.mark.parametrize(
+    ("edit", "message", "row"),
+    [
+        # the first epoch's G07 record (2 lines) is missing: the event record then on line 13 would be data
+        (lambda ls: ls[:8] + ls[10:], "announces 3 satellites but has fewer records: the epoch record on line 13", 8),
+        (lambda ls: [ln.replace("3G07G12R05", "3G07G12X05") for ln in ls], "unknown satellite system 'X'", 8),
+        (lambda ls: [ln.replace("3G07G12R05", "3G07G12   ") for ln in ls], "announces 3 satellites but lists 2", 8),
+        (lambda ls: [ln.replace(" 26 12  1  0  0  0.0", " 26 13  1  0  0  0.0") for ln in ls], "out of range", 8),
+        (lambda ls: [ln.replace(" 26 12  1  0  0  0.0", "                    ") for ln in ls], "malformed epoch", 8),
+        (lambda ls: [*ls[:14], "", *ls[14:]], "blank line where an epoch record was expected", 15),
+        (lambda ls: ls[:-3], "announces 2 satellites but the file ends", 17),
+        (lambda ls: [*ls[:7], "  21000000.125", *ls[7:]], "no epoch flag and count", 8),
+    ],
+)
+def test_bad_rinex_211_observation_files(data: Path, tmp_path: Path, edit: Any, message: str, row: int) -> None:
+    p = _v211(data, tmp_path, edit)
+    with pytest.raises(InputError, match=message) as exc:
+        read_rinex(p)
+    assert (exc.value.path, exc.value.row) == (str(p), row)

@@ -273,3 +273,14 @@ def test_galileo_page_with_a_bad_crc_is_not_decoded(tmp_path: Path) -> None:
     dec = read_ubx(p)
     assert "gnss_nav" not in dec.frames  # word type 1 missing: no ephemeris
     assert dec.skipped["SFRBX Galileo pages not decoded (alert, CRC, word types 0, 6-10)"] == 1
+
+
+def test_nav_dop_99_99_is_unknown(tmp_path: Path) -> None:
+    """NAV-DOP hDOP 9999 (·0.01 = 99.99, what a u-blox receiver sends without a fix) → empty HDOP."""
+    gps = gps_frame(3)
+    gps["hdop"] = [0.9, 99.99, 99.9]
+    p = tmp_path / "rx.ubx"
+    write_ubx(p, gps=gps)
+    assert [m.hDOP for m in _pyubx2(p) if m.identity == "NAV-DOP"] == pytest.approx([0.9, 99.99, 99.9])
+    back = read_ubx(p).frames["gps"]["hdop"]
+    assert back.iloc[0] == pytest.approx(0.9) and np.isnan(back.iloc[1]) and back.iloc[2] == pytest.approx(99.9)
