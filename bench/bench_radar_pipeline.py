@@ -118,7 +118,7 @@ def evaluate(folder: Path, db: str, cfg: Any) -> dict[str, Any]:
     """One replay of a run folder: the figures of the table."""
     from accuracy import metrics
 
-    from fieldlogs.pipeline import run_pipeline
+    from fieldlogs.pipeline.run import run_pipeline
 
     net = read_network(Path(db))
     run = read_run(folder)
@@ -157,7 +157,7 @@ def evaluate(folder: Path, db: str, cfg: Any) -> dict[str, Any]:
 
 
 def one(args: tuple[int, str, str, dict[str, Any]]) -> tuple[int, dict[str, Any], dict[str, Any]]:
-    from fieldlogs.pipeline import PipelineConfig
+    from fieldlogs.pipeline.config import PipelineConfig
 
     i, db, root, over = args
     cfg = PipelineConfig.from_dict({"odometry": over}) if over else PipelineConfig()

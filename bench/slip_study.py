@@ -47,7 +47,7 @@ from accuracy import _truth_dist, scenario  # type: ignore[import-not-found]
 from dbtools.build import build_db
 from dbtools.database import read_network
 from fieldlogs.io import read_run, write_run
-from fieldlogs.pipeline import PipelineConfig
+from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import build_cycles
 from fieldlogs.pipeline.odometry import correct_odometry
 from fieldlogs.simulate import scenario_from_dict, simulate_run

@@ -23,7 +23,8 @@ import pytest
 
 from dbtools.database import read_network
 from fieldlogs.io import read_run, write_run
-from fieldlogs.pipeline import PipelineConfig, run_pipeline
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.simulate import scenario_from_dict, simulate_run
 

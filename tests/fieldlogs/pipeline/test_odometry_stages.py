@@ -24,7 +24,6 @@ from hypothesis import strategies as st
 
 from dbtools.database import read_network
 from fieldlogs.io import read_run
-from fieldlogs.pipeline import PipelineResult, run_pipeline
 from fieldlogs.pipeline.aid import SpeedOnCycles
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles
@@ -41,6 +40,7 @@ from fieldlogs.pipeline.odometry import (
 )
 from fieldlogs.pipeline.odometry.ground import metres_per_pulse
 from fieldlogs.pipeline.odometry.ground_products import ground_products
+from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.pipeline.summary import DETAIL_DIGITS
 from fieldlogs.pipeline.types import FailsafeWatch, SlipEpisode
 from schemas.jsonable import jsonable

@@ -19,9 +19,9 @@ import pytest
 
 from dbtools.database import read_network
 from fieldlogs.io import read_run, write_run
-from fieldlogs.pipeline import PipelineResult, run_pipeline
 from fieldlogs.pipeline.aids import speed_aids
 from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
+from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.simulate import scenario_from_dict, simulate_run
 
