@@ -31,7 +31,8 @@ from dbtools.database import read_network
 from fieldlogs.io import read_run, write_run
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import run_pipeline
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 
 def scenario(i: int, network: Any, radar: bool = False) -> dict[str, Any]:

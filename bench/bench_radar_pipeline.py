@@ -37,7 +37,8 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.io import read_run, write_run
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 #: Injected slips/slides shorter than this must not end in a fail-safe with the radar [s].
 SHORT_S = 20.0

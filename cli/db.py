@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
     from dbtools.diff import DbDiff
     from dbtools.release import ImpactAttachment
-    from fieldlogs.impact import ImpactReport
+    from fieldlogs.impact.report import ImpactReport
 
 app = typer.Typer(help="Build, validate, diff and release onboard DB versions.", no_args_is_help=True)
 
@@ -451,7 +451,7 @@ def _impact_report(
     """The impact report, with a progress bar on stderr while the runs are replayed."""
     from cli.gis import _Bar
     from cli.render import err_console, progress
-    from fieldlogs.impact import impact_runs
+    from fieldlogs.impact.runner import impact_runs
 
     bar = _Bar(progress(err_console()))
     try:
@@ -496,7 +496,7 @@ def _num_text(v: object) -> str:
 
 def _route_table(r: dict[str, Any]) -> RichTable:
     """One route: every figure old, new and the change."""
-    from fieldlogs.impact import FIGURES
+    from fieldlogs.impact.report import FIGURES
 
     t = rich_table(title=f"{r['line_code']} {r['track']} {r['direction']}: {r['runs']} run(s)")
     for c in ("figure", "old", "new", "change"):
@@ -514,7 +514,7 @@ def _route_table(r: dict[str, Any]) -> RichTable:
 
 def _runs_table(runs: list[dict[str, Any]]) -> RichTable:
     """The runs that change: the change of each figure (new − old)."""
-    from fieldlogs.impact import FIGURES
+    from fieldlogs.impact.report import FIGURES
 
     t = rich_table(title="Runs that change (new − old)")
     t.add_column("run")

@@ -9,7 +9,6 @@ import typer
 
 from cli.errors import cli_command
 from cli.render import console, print_json, rich_table
-from schemas import ALL_SCHEMAS
 from schemas.errors import UsageError
 
 if TYPE_CHECKING:
@@ -84,6 +83,8 @@ def show(
 
     Example: trainpos schema show gis
     """
+    from schemas.catalog import ALL_SCHEMAS
+
     if name is not None and name not in ALL_SCHEMAS:
         from schemas.frames import suggest  # pandas and pandera: only for a misspelled name
 

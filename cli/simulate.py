@@ -48,7 +48,8 @@ def simulate(
 
     Example: trainpos simulate --db net-2026.11.sqlite --out runs/sim-001 --seed 7
     """
-    from fieldlogs.simulate import load_scenario, simulate_to_folder
+    from fieldlogs.simulate.scenario import load_scenario
+    from fieldlogs.simulate.simulator import simulate_to_folder
 
     overrides: dict[str, dict[str, str]] = {}
     if line is not None or track is not None:

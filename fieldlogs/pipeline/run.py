@@ -7,8 +7,8 @@ loop over the few moments an aid speaks):
    each repair an ``input_repaired`` event);
 2. :func:`~fieldlogs.pipeline.cycles.build_cycles`: tacho, IMU (cycle means), cab and PTO on
    the 100 ms cycle grid;
-3. speed aids (:data:`~fieldlogs.pipeline.aids.SPEED_AIDS`, e.g. the radar [S004] from its
-   IF samples) on the cycle grid, then :func:`~fieldlogs.pipeline.odometry.correct_odometry`:
+3. speed aids (:data:`~fieldlogs.pipeline.aids.registry.SPEED_AIDS`, e.g. the radar [S004] from its
+   IF samples) on the cycle grid, then :func:`~fieldlogs.pipeline.odometry.correct.correct_odometry`:
    pulse odometry with slip/slide episodes detected and corrected inertially [S000 §3.1]
    and, with a ground speed, by it;
 4. products the aids share: the GPS analysis (trust, map-matching, up/down decisions,
@@ -31,17 +31,17 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.io import Run
-from fieldlogs.pipeline.aids import RunContext, position_aids, speed_aids
 from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.aids.gnss import GnssUnit
+from fieldlogs.pipeline.aids.registry import RunContext, position_aids, speed_aids
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles, build_cycles
 from fieldlogs.pipeline.engine import run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
-from fieldlogs.pipeline.gps import analyse_gps
+from fieldlogs.pipeline.gps.analysis import analyse_gps
 from fieldlogs.pipeline.imugap import imu_gaps, with_gap_allowance
-from fieldlogs.pipeline.odometry import correct_odometry
+from fieldlogs.pipeline.odometry.correct import correct_odometry
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry

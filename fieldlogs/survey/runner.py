@@ -3,7 +3,7 @@
 Every run is replayed once (:func:`fieldlogs.survey.extract.survey_one`, through the one
 replayer of ``audit`` and ``gis verify``: this process, a local pool or a Dask cluster);
 its result feeds the balise, curve and wheel surveys and, unchanged, the GIS verification
-(:func:`fieldlogs.gisverify.evidence.fixes_from_result` → :func:`dbtools.gis.verify.verify_fixes`,
+(:func:`fieldlogs.gisverify.evidence.fixes_from_result` → :func:`dbtools.gis.verify.run.verify_fixes`,
 whose statistics are reused as they are). A run that cannot be replayed is listed with its
 error and the others go on.
 """

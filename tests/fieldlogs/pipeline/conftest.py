@@ -8,7 +8,7 @@ import pytest
 
 from dbtools.database import read_network
 from fieldlogs.io import read_run
-from fieldlogs.pipeline.aids import RunContext
+from fieldlogs.pipeline.aids.registry import RunContext
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import prepare_run
 

@@ -14,7 +14,7 @@ import pytest
 
 import fieldlogs.pipeline.engine as engine_mod
 from fieldlogs.pipeline.aid import Aid, EngineView, Observation, Outcome, Priority, StaticAid
-from fieldlogs.pipeline.aids import POSITION_AIDS, SPEED_AIDS
+from fieldlogs.pipeline.aids.registry import POSITION_AIDS, SPEED_AIDS
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.engine import run_aids
 from fieldlogs.pipeline.estimate import Travel
