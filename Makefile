@@ -11,6 +11,9 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	# the numba kernels compiled ahead into their disk cache: no command (nor every worker of an
+	# audit at once) compiles them on first use
+	$(BIN)/python -c "from dbtools.gis import match_kernel; from fieldlogs.simulate import radar; match_kernel.warm(); radar.warm()"
 	touch $(STAMP)
 
 demo: $(STAMP)

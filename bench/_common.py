@@ -74,7 +74,8 @@ def simulated_run(
     and 10 slides, written once under ``folder`` (reused when it is already there)."""
     from dbtools.database import read_network
     from fieldlogs.io import write_run
-    from fieldlogs.simulate import scenario_from_dict, simulate_run
+    from fieldlogs.simulate.scenario import scenario_from_dict
+    from fieldlogs.simulate.simulator import simulate_run
 
     db = network_db(folder)
     run = folder / f"run-{hours:g}h-{seed}-{fmt}"

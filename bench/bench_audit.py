@@ -38,7 +38,8 @@ from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.audit.runner import AuditStats, audit
 from fieldlogs.audit.store import read_table
 from fieldlogs.io import write_run
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 LINE_M = 62_000.0  # about one hour at 95 km/h line speed with a stop every 3 km
 

@@ -55,13 +55,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
-from dbtools.gis.verify import VerifyConfig, shift_grid_points, verify_fixes
+from dbtools.gis.verify.config import VerifyConfig
+from dbtools.gis.verify.proposal import shift_grid_points
+from dbtools.gis.verify.run import verify_fixes
 from dbtools.network import Network
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import LineSpec, Station, build_network, random_alignment
 from fieldlogs.gisverify.evidence import collect_evidence
 from fieldlogs.io import write_run
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 PROJECTOR = Projector(9)
 KM0 = 1000.0

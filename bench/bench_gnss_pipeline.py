@@ -34,9 +34,11 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from fieldlogs.gnss.config import GnssConfig
 from fieldlogs.io import read_run, write_run
-from fieldlogs.pipeline import PipelineConfig, run_pipeline
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 PCTS = (50, 90, 99, 100)
 

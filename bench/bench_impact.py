@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from dbtools.build import build_db
 from dbtools.sample_network import sample_source_dir
 from fieldlogs.audit.runner import audit
-from fieldlogs.impact import impact_runs
+from fieldlogs.impact.runner import impact_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_LOGS = ROOT / "fieldlogs" / "sample_logs"

@@ -22,7 +22,9 @@ import numpy as np
 
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles
-from fieldlogs.pipeline.odometry import SPEED_AVG_S, align_streams, correct_odometry, detect
+from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.pipeline.odometry.detection import detect
+from fieldlogs.pipeline.odometry.streams import SPEED_AVG_S, align_streams
 from schemas.units import G
 
 Q = np.pi * 0.86 / 90

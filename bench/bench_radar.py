@@ -39,8 +39,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dbtools.build import build_db
 from dbtools.database import read_network
-from fieldlogs.radar import RadarConfig, process_frames, process_if
+from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.framing import frame_samples
+from fieldlogs.radar.speed import process_frames, process_if
 from schemas.enums import RadarStatus
 from schemas.radar import RadarParams
 from tests.fieldlogs.radar.runs import onset_time, radar_of, simulate_radar_run, truth_at

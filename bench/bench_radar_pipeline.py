@@ -37,7 +37,8 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.io import read_run, write_run
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 #: Injected slips/slides shorter than this must not end in a fail-safe with the radar [s].
 SHORT_S = 20.0
@@ -118,7 +119,7 @@ def evaluate(folder: Path, db: str, cfg: Any) -> dict[str, Any]:
     """One replay of a run folder: the figures of the table."""
     from accuracy import metrics
 
-    from fieldlogs.pipeline import run_pipeline
+    from fieldlogs.pipeline.run import run_pipeline
 
     net = read_network(Path(db))
     run = read_run(folder)
@@ -157,7 +158,7 @@ def evaluate(folder: Path, db: str, cfg: Any) -> dict[str, Any]:
 
 
 def one(args: tuple[int, str, str, dict[str, Any]]) -> tuple[int, dict[str, Any], dict[str, Any]]:
-    from fieldlogs.pipeline import PipelineConfig
+    from fieldlogs.pipeline.config import PipelineConfig
 
     i, db, root, over = args
     cfg = PipelineConfig.from_dict({"odometry": over}) if over else PipelineConfig()

@@ -34,7 +34,7 @@ def one(run_dir: Path, db: Path) -> dict[str, float]:
     """Time the pipeline on one simulated run (in this process)."""
     from dbtools.database import read_network
     from fieldlogs.io import read_run
-    from fieldlogs.pipeline import run_pipeline
+    from fieldlogs.pipeline.run import run_pipeline
 
     net = read_network(db)
     run = read_run(run_dir)

@@ -19,9 +19,10 @@ import numpy as np
 
 from dbtools.gis.geometry import Projector
 from dbtools.synthetic.network import build_network, demo_line
-from fieldlogs.simulate import scenario_from_dict, simulate_run
 from fieldlogs.simulate.kinematics import body_kinematics
 from fieldlogs.simulate.running import Motion, cant_model, plan_motion
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 from fieldlogs.simulate.track import Cant, TrackGeometry
 from schemas.units import G
 

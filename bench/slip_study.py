@@ -47,10 +47,11 @@ from accuracy import _truth_dist, scenario  # type: ignore[import-not-found]
 from dbtools.build import build_db
 from dbtools.database import read_network
 from fieldlogs.io import read_run, write_run
-from fieldlogs.pipeline import PipelineConfig
+from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import build_cycles
-from fieldlogs.pipeline.odometry import correct_odometry
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 from fieldlogs.simulate.track import TrackGeometry
 
 CACHE = Path(tempfile.gettempdir()) / "slip_study_cache"

@@ -7,21 +7,22 @@ import json
 import time
 from enum import StrEnum
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 import typer
-from rich.console import Console
-from rich.progress import Progress, TaskID
 
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_json, progress, write_out
-from fieldlogs.audit.runner import audit as run_audit
-from fieldlogs.config import load_tree
-from fieldlogs.pipeline.corrections import TARGET_PCT
-from fieldlogs.reports.report import ROUTE_KEYS, Report, build_report, report_json
+from fieldlogs.pipeline.config import TARGET_PCT
 from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.jsonable import jsonable
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from rich.console import Console
+    from rich.progress import Progress, TaskID
+
+    from fieldlogs.reports.report import Report
 
 
 class ProgressBar:
@@ -65,6 +66,9 @@ def audit(
 
     Example: trainpos audit logs/ --db net.sqlite --out audit.sqlite --workers 2
     """
+    from fieldlogs.audit.runner import audit as run_audit
+    from fieldlogs.config import load_tree
+
     cfg = load_tree(config).pipeline
     with progress(err_console()) as bar:
         stats = run_audit(
@@ -152,7 +156,6 @@ LABELS = {
     "n_failsafe": "fail-safe",
     "n_anomalies": "anomalies",
 }
-KEYS = {"route": ROUTE_KEYS, "run": ["run_id", "vehicle_id", *ROUTE_KEYS], "vehicle": ["vehicle_id"]}
 
 
 def _view(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:
@@ -162,7 +165,9 @@ def _view(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:
 
 
 def render_tables(rep: Report, c: Console) -> None:
-    keys = KEYS[rep.by]
+    from fieldlogs.reports.report import ROUTE_KEYS
+
+    keys = {"route": ROUTE_KEYS, "run": ["run_id", "vehicle_id", *ROUTE_KEYS], "vehicle": ["vehicle_id"]}[rep.by]
     g = rep.groups.assign(distance_km=(rep.groups["distance_m"] / 1000.0).round(1))
     pct = [col for col in PCT_COLUMNS if not (rep.by == "run" and col == "n_runs")]
     title = f"Position correction by {rep.by} (balise corrections, target {rep.target_pct:g} %)"
@@ -192,7 +197,10 @@ def report(
 
     Example: trainpos report audit.sqlite --format html --out audit.html
     """
+    from rich.console import Console
+
     from fieldlogs.reports.page import render_html
+    from fieldlogs.reports.report import build_report, report_json
 
     rep = build_report(audit_db, by=by.value, target_pct=target_pct)
     if fmt == ReportFmt.html:

@@ -10,7 +10,6 @@ import typer
 
 from cli.errors import cli_command
 from cli.render import print_json
-from fieldlogs.config import load_tree, show_dict, show_toml
 
 app = typer.Typer(help="Show the configuration tree (every setting, its unit and meaning).", no_args_is_help=True)
 
@@ -34,6 +33,8 @@ def show(
 
     Example: trainpos config show --section odometry > my.toml
     """
+    from fieldlogs.config import load_tree, show_dict, show_toml
+
     tree = load_tree(config)
     if fmt == Fmt.json:
         print_json(show_dict(tree, section))

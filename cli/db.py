@@ -19,20 +19,20 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import typer
-from rich.console import Console
-from rich.table import Table as RichTable
 
 from cli.errors import cli_command
-from cli.render import console, key_value_table, print_findings, print_json
-from dbtools.build import build_db
-from dbtools.diff import DbDiff, diff_paths
-from dbtools.release import ImpactAttachment, list_releases, release_db, verify_releases
+from cli.render import console, key_value_table, print_findings, print_json, rich_table
 from schemas.errors import RefusedError, UsageError
 from schemas.findings import Finding, findings_report, has_errors
 from schemas.registry import REGISTRY_FILE
 
 if TYPE_CHECKING:
-    from fieldlogs.impact import ImpactReport
+    from rich.console import Console
+    from rich.table import Table as RichTable
+
+    from dbtools.diff import DbDiff
+    from dbtools.release import ImpactAttachment
+    from fieldlogs.impact.report import ImpactReport
 
 app = typer.Typer(help="Build, validate, diff and release onboard DB versions.", no_args_is_help=True)
 
@@ -66,6 +66,8 @@ def build(
 
     Example: trainpos db build network/ --out net-2026.11.sqlite --version 2026.11 --note "new curve table"
     """
+    from dbtools.build import build_db
+
     result = build_db(source_dir, out, db_version=version, note=note, force=force)
     out_c = console()
     if result.warnings:
@@ -126,6 +128,8 @@ def diff(
 
     Example: trainpos db diff net-2026.10.sqlite net-2026.11.sqlite
     """
+    from dbtools.diff import diff_paths
+
     result = diff_paths(old, new)
     if fmt == Fmt.json:
         print_json(result.to_dict())
@@ -140,7 +144,7 @@ def _side_cell(side: dict[str, object], key: str) -> str:
 
 def _print_diff(d: DbDiff) -> None:
     out = console()
-    head = RichTable(title="db diff")
+    head = rich_table(title="db diff")
     head.add_column("")
     head.add_column("old", overflow="fold")
     head.add_column("new", overflow="fold")
@@ -149,7 +153,7 @@ def _print_diff(d: DbDiff) -> None:
     head.add_row("content_hash", _side_cell(d.old, "content_hash")[:16], _side_cell(d.new, "content_hash")[:16])
     head.add_row("schema_version", *("—" if v is None else str(v) for v in d.schema_version))
     out.print(head)
-    counts = RichTable(title="Rows")
+    counts = rich_table(title="Rows")
     for col in ("table", "added", "removed", "changed"):
         counts.add_column(col, justify="left" if col == "table" else "right")
     for name, t in d.tables.items():
@@ -189,6 +193,8 @@ def release(
 
     Example: trainpos db release net-2026.11.sqlite --registry releases/ --note "new curve table" --impact logs/
     """
+    from dbtools.release import release_db
+
     attachment = _impact_attachment(file, registry, impact_runs, impact_against, plan, config, workers)
     result = release_db(file, registry, note=note, impact=attachment)
     r = result.release
@@ -220,11 +226,13 @@ def releases(
 
     Example: trainpos db releases --registry releases/ --format json
     """
+    from dbtools.release import list_releases
+
     rows = list_releases(registry)
     if fmt == Fmt.json:
         print_json({"registry": str(registry), "releases": [r.to_dict() for r in rows]})
         return
-    t = RichTable(title=f"Releases in {registry}")
+    t = rich_table(title=f"Releases in {registry}")
     for c in ("db_version", "released_at", "by", "sha256", "schema", "note"):
         t.add_column(c, overflow="fold", no_wrap=c in ("db_version", "released_at", "sha256"))
     for r in rows:
@@ -248,12 +256,14 @@ def verify_release(
 
     Example: trainpos db verify-release --registry releases/ 2026.11
     """
+    from dbtools.release import verify_releases
+
     report = verify_releases(registry, version)
     if fmt == Fmt.json:
         print_json(report.to_dict())
     else:
         out = console()
-        t = RichTable(title=f"Verification of {registry}")
+        t = rich_table(title=f"Verification of {registry}")
         t.add_column("db_version")
         t.add_column("file")
         t.add_column("status")
@@ -441,7 +451,7 @@ def _impact_report(
     """The impact report, with a progress bar on stderr while the runs are replayed."""
     from cli.gis import _Bar
     from cli.render import err_console, progress
-    from fieldlogs.impact import impact_runs
+    from fieldlogs.impact.runner import impact_runs
 
     bar = _Bar(progress(err_console()))
     try:
@@ -486,9 +496,9 @@ def _num_text(v: object) -> str:
 
 def _route_table(r: dict[str, Any]) -> RichTable:
     """One route: every figure old, new and the change."""
-    from fieldlogs.impact import FIGURES
+    from fieldlogs.impact.report import FIGURES
 
-    t = RichTable(title=f"{r['line_code']} {r['track']} {r['direction']}: {r['runs']} run(s)")
+    t = rich_table(title=f"{r['line_code']} {r['track']} {r['direction']}: {r['runs']} run(s)")
     for c in ("figure", "old", "new", "change"):
         t.add_column(c, justify="left" if c == "figure" else "right")
     for k, label in FIGURES.items():
@@ -504,9 +514,9 @@ def _route_table(r: dict[str, Any]) -> RichTable:
 
 def _runs_table(runs: list[dict[str, Any]]) -> RichTable:
     """The runs that change: the change of each figure (new − old)."""
-    from fieldlogs.impact import FIGURES
+    from fieldlogs.impact.report import FIGURES
 
-    t = RichTable(title="Runs that change (new − old)")
+    t = rich_table(title="Runs that change (new − old)")
     t.add_column("run")
     for label in FIGURES.values():
         t.add_column(label, justify="right", overflow="fold")
@@ -564,6 +574,7 @@ def _impact_attachment(
     registry's latest release, as the attachment :func:`release_db` stores."""
     import json
 
+    from dbtools.release import ImpactAttachment, list_releases
     from fieldlogs.config import load_tree
 
     if not runs:

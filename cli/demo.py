@@ -9,10 +9,6 @@ import typer
 from cli.audit import ProgressBar, render_tables
 from cli.errors import cli_command
 from cli.render import console, err_console, print_findings, progress
-from dbtools.build import build_db
-from dbtools.validate import validate_path
-from fieldlogs.audit.runner import audit
-from fieldlogs.reports.report import build_report
 from schemas.errors import InputError
 
 
@@ -41,7 +37,11 @@ def demo(
 
     Example: trainpos demo --out demo-out
     """
+    from dbtools.build import build_db
+    from dbtools.validate import validate_path
+    from fieldlogs.audit.runner import audit
     from fieldlogs.reports.page import render_html
+    from fieldlogs.reports.report import build_report
 
     logs = sample_logs_dir()
     if not logs.is_dir():

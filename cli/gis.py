@@ -11,21 +11,19 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import pandas as pd
 import typer
-from rich.console import Console
-from rich.progress import Progress, TaskID
 
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, progress
-from dbtools.gis.io import grid_files
 from dbtools.gis.verify.config import VerifyConfig
-from dbtools.gis.verify.proposal import proposed_network
-from dbtools.sources import write_source_set
 from schemas.errors import EXIT_FINDINGS, RefusedError, UsageError
 from schemas.units import format_km
 
 if TYPE_CHECKING:
+    import pandas as pd
+    from rich.console import Console
+    from rich.progress import Progress, TaskID
+
     from fieldlogs.gisverify.evidence import VerifyReport
 
 app = typer.Typer(
@@ -55,6 +53,10 @@ def grid(
 
     Example: trainpos gis grid survey/centrelines.csv --posts survey/kmposts.csv --out src/gis.csv
     """
+    import pandas as pd
+
+    from dbtools.gis.io import grid_files
+
     written = grid_files(centrelines, posts, out, force=force)
     out_c = console()
     if written.warnings:
@@ -116,6 +118,8 @@ def _km_range(a: float, b: float) -> str:
 
 def render_verification(report: VerifyReport, c: Console) -> None:
     """Terminal tables of ``gis verify``: summary, coverage, defects, proposal."""
+    import pandas as pd
+
     v = report.verification
     ev = report.evidence
     rows: list[tuple[str, object]] = [
@@ -315,6 +319,9 @@ def _check_targets(fmt: VerifyFmt, out: Path | None, propose: Path | None, force
 
 
 def _write_proposal(report: VerifyReport, propose: Path) -> None:
+    from dbtools.gis.verify.proposal import proposed_network
+    from dbtools.sources import write_source_set
+
     v = report.verification
     write_source_set(proposed_network(report.network, v), propose, force=True)
     moved = len(v.proposal)
@@ -327,6 +334,8 @@ def _write_proposal(report: VerifyReport, propose: Path) -> None:
 
 def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None) -> None:
     """The report as HTML (to ``out``), JSON or a table (to ``out`` or stdout)."""
+    from rich.console import Console
+
     if fmt == VerifyFmt.html:
         from fieldlogs.gisverify.page import render_html
 

@@ -6,25 +6,21 @@ import io
 import json
 from enum import StrEnum
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pandas as pd
 import typer
-from rich.console import Console
 
 from cli.errors import cli_command
 from cli.render import console, frame_table, key_value_table
-from dbtools.atomic import atomic_file
-from dbtools.database import read_network
-from fieldlogs.config import load_tree
-from fieldlogs.gnss.gis import gis_track
-from fieldlogs.gnss.report import GnssPositionReport, position_report
-from fieldlogs.gnss.runinputs import run_gnss
-from fieldlogs.gnss.skymask import load_mask
-from fieldlogs.io import read_run
-from fieldlogs.pipeline.aids.gnss import decided_route
 from schemas.errors import UsageError
 from schemas.jsonable import jsonable
 from schemas.units import format_km
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from rich.console import Console
+
+    from fieldlogs.gnss.report import GnssPositionReport
 
 app = typer.Typer(help="Track-constrained GNSS positioning from raw pseudoranges [S002].", no_args_is_help=True)
 
@@ -55,6 +51,8 @@ def _km(v: object) -> str:
 
 
 def _table_frame(report: GnssPositionReport) -> pd.DataFrame:
+    import pandas as pd
+
     e = report.epochs
     return pd.DataFrame(
         {
@@ -91,6 +89,8 @@ def render_table(report: GnssPositionReport, c: Console) -> None:
 
 
 def _write(path: Path, text: str, force: bool) -> None:
+    from dbtools.atomic import atomic_file
+
     with atomic_file(path, force=force) as tmp:
         tmp.write_text(text, encoding="utf-8")
 
@@ -132,6 +132,17 @@ def position(
 
     Example: trainpos gnss position runs/sim-rinex --db net.sqlite --sky-mask west-half --systems G
     """
+    from rich.console import Console
+
+    from dbtools.database import read_network
+    from fieldlogs.config import load_tree
+    from fieldlogs.gnss.gis import gis_track
+    from fieldlogs.gnss.report import position_report
+    from fieldlogs.gnss.runinputs import run_gnss
+    from fieldlogs.gnss.skymask import load_mask
+    from fieldlogs.io import read_run
+    from fieldlogs.pipeline.aids.gnss import decided_route
+
     if (line is None) != (track is None):
         raise UsageError("give --line and --track together (or neither: the pipeline decides the track)")
     if out is not None and out.exists() and not force:

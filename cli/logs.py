@@ -6,15 +6,10 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-import pandas as pd
 import typer
 
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
-from fieldlogs.io import convert_run
-from fieldlogs.quality.checks import check_run, load_db_refs
-from fieldlogs.quality.info import run_info
-from fieldlogs.quality.repair import REPAIR_LOG, repair_run
 from schemas.errors import EXIT_FINDINGS, EXIT_OK, EXIT_UNREADABLE, InputError
 from schemas.findings import has_errors
 
@@ -45,6 +40,8 @@ def check(
 
     Example: trainpos logs check runs/2026-01-15-V01 --db net-2026.11.sqlite --format json
     """
+    from fieldlogs.quality.checks import check_run, load_db_refs
+
     refs = load_db_refs(db) if db is not None else None
     reports: list[dict[str, Any]] = []
     code = EXIT_OK
@@ -80,6 +77,10 @@ def info(
 
     Example: trainpos logs info runs/2026-01-15-V01
     """
+    import pandas as pd
+
+    from fieldlogs.quality.info import run_info
+
     infos = [run_info(r) for r in runs]
     if fmt == Fmt.json:
         print_json({"runs": [i.to_dict() for i in infos]})
@@ -134,6 +135,8 @@ def convert(
 
     Example: trainpos logs convert runs/2026-01-15-V01 --to parquet --out runs/2026-01-15-V01-pq
     """
+    from fieldlogs.io import convert_run
+
     res = convert_run(run, out, to.value, force=force)
     c = console()
     if res.warnings:
@@ -162,6 +165,10 @@ def repair(
 
     Example: trainpos logs repair runs/2026-01-15-V01 --out runs/2026-01-15-V01-repaired
     """
+    import pandas as pd
+
+    from fieldlogs.quality.repair import REPAIR_LOG, repair_run
+
     res = repair_run(run, out, force=force)
     if fmt == Fmt.json:
         print_json(res.to_dict())

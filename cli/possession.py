@@ -6,17 +6,21 @@ import io
 import json
 from enum import StrEnum
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pandas as pd
 import typer
-from rich.console import Console
 
 from cli.errors import cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
-from fieldlogs.possession.check import PossessionReport, check_files
 from schemas.enums import AlarmType, NoticeType
 from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.units import format_km
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from rich.console import Console
+
+    from fieldlogs.possession.check import PossessionReport
 
 app = typer.Typer(help="Possession (線路閉鎖) alarms for road-rail vehicles.", no_args_is_help=True)
 
@@ -46,6 +50,8 @@ BRIEF: dict[str, tuple[str, ...]] = {
 
 
 def _frame(items: list[dict[str, object]]) -> pd.DataFrame:
+    import pandas as pd
+
     rows = []
     for a in items:
         ev = a["evidence"] if isinstance(a["evidence"], dict) else {}
@@ -136,6 +142,10 @@ def check(
 
     Example: trainpos possession check runs/rr-0116 --db net.sqlite --plan possessions.csv --format html --out pz.html
     """
+    from rich.console import Console
+
+    from fieldlogs.possession.check import check_files
+
     if fmt in (Fmt.html, Fmt.geojson) and out is None:
         raise UsageError(f"--format {fmt.value} needs --out FILE")
     report = check_files(runs, db, plan, config, work=work)

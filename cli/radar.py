@@ -5,12 +5,15 @@ from __future__ import annotations
 import sys
 from enum import StrEnum
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pandas as pd
 import typer
 
 from cli.errors import cli_command
 from cli.render import console, frame_table, key_value_table, print_json
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Frames printed as a table; csv and json always have all of them.
 MAX_ROWS = 400
@@ -25,6 +28,8 @@ class Fmt(StrEnum):
 
 
 def _table(frame: pd.DataFrame) -> pd.DataFrame:
+    import pandas as pd
+
     return pd.DataFrame(
         {
             "t [s]": frame["t"].map("{:.3f}".format),

@@ -1,4 +1,7 @@
-"""All terminal rendering: Rich tables, JSON, progress bars. Library code returns data."""
+"""All terminal rendering: Rich tables, JSON, progress bars. Library code returns data.
+
+Rich is imported by the functions that draw (not at import: ``trainpos --help`` needs none of it).
+"""
 
 from __future__ import annotations
 
@@ -7,26 +10,33 @@ import re
 import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-from rich.table import Table
-from rich.text import Text
-
-from schemas.findings import Finding, count_by_severity
+from schemas.findings import count_by_severity
 from schemas.jsonable import jsonable
+
+if TYPE_CHECKING:
+    from rich.console import Console
+    from rich.progress import Progress
+    from rich.table import Table
+    from rich.text import Text
+
+    from schemas.findings import Finding
 
 #: Cap on findings printed as a table; JSON always has all of them.
 MAX_TABLE_ROWS = 200
 
 
 def console() -> Console:
+    from rich.console import Console
+
     return Console(highlight=False, soft_wrap=False)
 
 
 def err_console() -> Console:
     """stderr; messages stay on one line whatever the terminal width (greppable logs)."""
+    from rich.console import Console
+
     return Console(stderr=True, highlight=False, soft_wrap=True)
 
 
@@ -50,6 +60,8 @@ def _unsplit_width(cells: Iterable[str]) -> int:
 def findings_table(findings: Sequence[Finding], title: str = "Findings") -> Table:
     """Findings as a table: severity, rule, value and limit never wrap (a number is never split
     across lines, at 80 columns or piped); the location and the message wrap at spaces."""
+    from rich.table import Table
+
     shown = findings[:MAX_TABLE_ROWS]
     rows = [(str(f.severity), f.rule, f.where, _cell(f.value), _cell(f.limit), f.message) for f in shown]
     t = Table(title=title, show_lines=False)
@@ -107,6 +119,8 @@ def _table_min_width(table: Table) -> int:
 
 def findings_blocks(findings: Sequence[Finding], title: str = "Findings") -> list[Text]:
     """One block per finding for narrow terminals: a head line, then the message."""
+    from rich.text import Text
+
     blocks = [Text(title, style="bold")]
     for f in findings:
         head = f"{f.severity} {f.rule} {f.where}"
@@ -115,7 +129,16 @@ def findings_blocks(findings: Sequence[Finding], title: str = "Findings") -> lis
     return blocks
 
 
+def rich_table(title: str | None = None, **kwargs: Any) -> Table:
+    """A Rich table (``rich.table.Table``; for the commands that build their own)."""
+    from rich.table import Table
+
+    return Table(title=title, **kwargs)
+
+
 def key_value_table(rows: Iterable[tuple[str, Any]], title: str | None = None) -> Table:
+    from rich.table import Table
+
     t = Table(title=title, show_header=False)
     t.add_column("key", style="bold")
     t.add_column("value", overflow="fold")
@@ -127,6 +150,8 @@ def key_value_table(rows: Iterable[tuple[str, Any]], title: str | None = None) -
 def frame_table(frame: Any, title: str | None = None, max_rows: int = 200) -> Table:
     """A pandas DataFrame as a Rich table; number columns never wrap (no number is split
     across lines), text columns wrap at spaces."""
+    from rich.table import Table
+
     rows = [[_cell(v) for v in row] for row in frame.head(max_rows).itertuples(index=False, name=None)]
     t = Table(title=title)
     for k, c in enumerate(frame.columns):
@@ -145,6 +170,15 @@ _NUMBER = re.compile(r"[-+]?(\d[\d,]*(\.\d*)?|\.\d+)([eE][-+]?\d+)?( ?%| ?[a-zA-
 
 def progress(out: Console | None = None) -> Progress:
     """Progress bar for long jobs: count, rate and ETA."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
     return Progress(
         TextColumn("[bold]{task.description}"),
         BarColumn(),

@@ -8,11 +8,6 @@ import typer
 
 from cli.errors import cli_command
 from cli.render import console, key_value_table
-from dbtools.database import read_network
-from fieldlogs.config import load_tree
-from fieldlogs.io import read_run
-from fieldlogs.pipeline import run_pipeline
-from fieldlogs.pipeline.outputs import write_results
 from schemas.units import format_km
 
 
@@ -32,6 +27,12 @@ def run(
 
     Example: trainpos run logs/run-001 --db net.sqlite --out out/run-001
     """
+    from dbtools.database import read_network
+    from fieldlogs.config import load_tree
+    from fieldlogs.io import read_run
+    from fieldlogs.pipeline.outputs import write_results
+    from fieldlogs.pipeline.run import run_pipeline
+
     cfg = load_tree(config).pipeline
     network = read_network(db)
     result = run_pipeline(read_run(run_dir), network, cfg)

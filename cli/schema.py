@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 from enum import StrEnum
+from typing import TYPE_CHECKING
 
 import typer
-from rich.table import Table as RichTable
 
 from cli.errors import cli_command
-from cli.render import console, print_json
-from schemas import ALL_SCHEMAS
+from cli.render import console, print_json, rich_table
 from schemas.errors import UsageError
-from schemas.frames import suggest
-from schemas.model import Table
+
+if TYPE_CHECKING:
+    from schemas.model import Table
 
 app = typer.Typer(help="Show table, source-file and log-stream schemas.", no_args_is_help=True)
 
@@ -83,7 +83,11 @@ def show(
 
     Example: trainpos schema show gis
     """
+    from schemas.catalog import ALL_SCHEMAS
+
     if name is not None and name not in ALL_SCHEMAS:
+        from schemas.frames import suggest  # pandas and pandera: only for a misspelled name
+
         hint = suggest(name, list(ALL_SCHEMAS))
         raise UsageError(
             f"unknown schema '{name}'"
@@ -99,7 +103,7 @@ def show(
         return
     out = console()
     for t in chosen:
-        rt = RichTable(title=f"{t.name} ({t.kind})", caption=t.description, caption_justify="left")
+        rt = rich_table(title=f"{t.name} ({t.kind})", caption=t.description, caption_justify="left")
         for h in ("column", "type", "unit", "required", "null ok", "allowed", "description"):
             rt.add_column(h, overflow="fold")
         for c in t.columns:

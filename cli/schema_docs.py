@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from cli.schema import schema_markdown
-from schemas import ALL_SCHEMAS
+from schemas.catalog import ALL_SCHEMAS
 from schemas.enums import ALARM_MEANING, EVENT_MEANING, AlarmType
 
 BEGIN, END = "<!-- schemas:begin -->", "<!-- schemas:end -->"

@@ -9,7 +9,6 @@ import typer
 
 from cli.errors import cli_command
 from cli.render import console, key_value_table
-from fieldlogs.simulate import load_scenario, simulate_to_folder
 
 
 class LogFmt(StrEnum):
@@ -49,6 +48,9 @@ def simulate(
 
     Example: trainpos simulate --db net-2026.11.sqlite --out runs/sim-001 --seed 7
     """
+    from fieldlogs.simulate.scenario import load_scenario
+    from fieldlogs.simulate.simulator import simulate_to_folder
+
     overrides: dict[str, dict[str, str]] = {}
     if line is not None or track is not None:
         overrides["route"] = {k: v for k, v in (("line_code", line), ("track", track)) if v is not None}

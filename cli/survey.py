@@ -9,18 +9,18 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import pandas as pd
 import typer
-from rich.console import Console
 
 from cli.errors import cli_command
 from cli.gis import _Bar
 from cli.render import console, err_console, frame_table, key_value_table, progress
-from fieldlogs.config import load_tree
 from schemas.errors import EXIT_FINDINGS, RefusedError, UsageError
 from schemas.units import format_km
 
 if TYPE_CHECKING:
+    import pandas as pd
+    from rich.console import Console
+
     from fieldlogs.survey.result import SurveyReport
 
 
@@ -39,6 +39,8 @@ def _num(v: object, fmt: str) -> str:
 
 
 def _balise_table(rep: SurveyReport) -> pd.DataFrame:
+    import pandas as pd
+
     b = rep.balises[rep.balises["status"].isin(["moved", "missed"])]
     return pd.DataFrame(
         {
@@ -58,6 +60,8 @@ def _balise_table(rep: SurveyReport) -> pd.DataFrame:
 
 
 def _feature_table(rep: SurveyReport) -> pd.DataFrame:
+    import pandas as pd
+
     f = rep.features[~rep.features["status"].isin(["ok", "unverified"])]
     return pd.DataFrame(
         {
@@ -80,6 +84,8 @@ def _feature_table(rep: SurveyReport) -> pd.DataFrame:
 
 
 def _wheel_table(rep: SurveyReport) -> pd.DataFrame:
+    import pandas as pd
+
     w = rep.wheels
     return pd.DataFrame(
         {
@@ -96,6 +102,8 @@ def _wheel_table(rep: SurveyReport) -> pd.DataFrame:
 
 
 def _summary_rows(rep: SurveyReport) -> list[tuple[str, object]]:
+    import pandas as pd
+
     s = rep.summary()
     applied = int(rep.changes["applied"].sum()) if len(rep.changes) else 0
     rows: list[tuple[str, object]] = [
@@ -164,6 +172,8 @@ def _write(path: Path, text: str) -> None:
 
 
 def _emit(rep: SurveyReport, fmt: Fmt, out: Path | None) -> None:
+    from rich.console import Console
+
     if fmt == Fmt.html:
         from fieldlogs.survey.page import render_html
 
@@ -225,6 +235,7 @@ def survey(
 
     Example: trainpos survey logs/ --db net.sqlite --format html --out survey.html --propose src-next/
     """
+    from fieldlogs.config import load_tree
     from fieldlogs.survey.propose import Proposal, write_proposal
     from fieldlogs.survey.runner import survey as run_survey
 

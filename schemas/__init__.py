@@ -1,30 +1,6 @@
 """Schemas: every table, source file, log stream and output declared once.
 
 Also the base error class, units and enumerations. Imports nothing from the rest of the
-suite.
+suite; this package file imports nothing at all (every declaration by name:
+:data:`schemas.catalog.ALL_SCHEMAS`).
 """
-
-from __future__ import annotations
-
-from schemas.audit import AUDIT_TABLES, AUDIT_VIEWS
-from schemas.gisinput import GIS_INPUT_TABLES
-from schemas.logs import LOG_STREAMS
-from schemas.model import Column, Table
-from schemas.outputs import OUTPUT_TABLES
-from schemas.plans import POSSESSIONS
-from schemas.registry import IMPACTS, RELEASES
-from schemas.tables import ALL_DB_TABLES
-
-#: Every declaration by name, for ``trainpos schema show`` and the docs.
-ALL_SCHEMAS: dict[str, Table] = {
-    **{t.name: t for t in ALL_DB_TABLES},
-    **LOG_STREAMS,
-    **OUTPUT_TABLES,
-    POSSESSIONS.name: POSSESSIONS,
-    **GIS_INPUT_TABLES,
-    RELEASES.name: RELEASES,
-    IMPACTS.name: IMPACTS,
-    **{t.name: t for t in (*AUDIT_TABLES, *AUDIT_VIEWS)},
-}
-
-__all__ = ["ALL_SCHEMAS", "Column", "Table"]

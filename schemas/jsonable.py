@@ -16,13 +16,12 @@ the same everywhere:
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Mapping
 from datetime import date, datetime, time, timedelta
 from enum import Enum
 from pathlib import PurePath
 from typing import Any
-
-import numpy as np
 
 
 def jsonable(value: Any, digits: int | None = None) -> Any:
@@ -35,11 +34,14 @@ def jsonable(value: Any, digits: int | None = None) -> Any:
         return int(value)
     if isinstance(value, float):
         return _float(value, digits)
-    if isinstance(value, np.generic):
+    # numpy is never imported here (schemas stays light): a value can only be a numpy one
+    # when numpy was imported by whoever made it
+    np = sys.modules.get("numpy")
+    if np is not None and isinstance(value, np.generic):
         return jsonable(value.item(), digits)
     if isinstance(value, Mapping):
         return {str(k): jsonable(v, digits) for k, v in value.items()}
-    if isinstance(value, list | tuple | np.ndarray):
+    if isinstance(value, list | tuple) or (np is not None and isinstance(value, np.ndarray)):
         return [jsonable(v, digits) for v in value]
     if isinstance(value, set | frozenset):
         return [jsonable(v, digits) for v in sorted(value, key=str)]

@@ -8,9 +8,11 @@ from __future__ import annotations
 
 import math
 import re
+from typing import TYPE_CHECKING
 
-import numpy as np
-import numpy.typing as npt
+if TYPE_CHECKING:
+    import numpy as np
+    import numpy.typing as npt
 
 #: Standard gravity [m/s²].
 G = 9.80665
@@ -69,10 +71,12 @@ def parse_km(text: str) -> float:
 
 def parse_km_array(values: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
     """Vectorised :func:`parse_km` over strings; returns (metres, ok). Empty → NaN, ok."""
+    import numpy as np  # local: units stays importable without numpy and pandas (CLI start-up)
+    import pandas as pd
+
     arr = np.asarray(values, dtype=object)
     out = np.full(arr.shape, np.nan)
     ok = np.ones(arr.shape, dtype=bool)
-    import pandas as pd  # local: units stays importable without pandas at module import
 
     s = pd.Series(arr, dtype="object").astype("string").str.strip()
     num = pd.to_numeric(s, errors="coerce")

@@ -23,9 +23,11 @@ import pytest
 
 from dbtools.database import read_network
 from fieldlogs.io import read_run, write_run
-from fieldlogs.pipeline import PipelineConfig, run_pipeline
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 RUNS = 24
 SEED0 = 7300

@@ -51,7 +51,7 @@ from schemas.jsonable import jsonable
 __all__ = ["AuditStats", "audit", "audit_one", "discover_runs", "pack", "unpack"]
 
 #: Modules the replay's fork server imports once, besides this one.
-PRELOAD = ("fieldlogs.pipeline", "fieldlogs.io")
+PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.io")
 #: Figures of the pipeline summary copied into a run's record.
 SUMMARY_FIELDS = (
     "duration_s",
@@ -191,7 +191,8 @@ def audit_one(
     ``known_fingerprint``.
     """
     from fieldlogs.io import read_run
-    from fieldlogs.pipeline import PipelineConfig, run_pipeline
+    from fieldlogs.pipeline.config import PipelineConfig
+    from fieldlogs.pipeline.run import run_pipeline
 
     t0, c0 = time.perf_counter(), time.process_time()
     base: dict[str, Any] = {
@@ -281,7 +282,7 @@ def audit(
     ``scheduler``: address of a Dask scheduler (``tcp://host:8786``); its workers must see
     the run folders and the DB under the same paths.
     """
-    from fieldlogs.pipeline import PipelineConfig
+    from fieldlogs.pipeline.config import PipelineConfig
 
     cfg = config or PipelineConfig()
     cfg_json = json.dumps(jsonable(cfg.to_dict()), sort_keys=True)

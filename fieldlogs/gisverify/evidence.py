@@ -1,7 +1,7 @@
 """Evidence for GIS verification: the trusted GPS fixes of recorded runs on a known track
 [S001 §9(a), SPEC §6], and the ``gis verify`` driver (runs → evidence → statistics).
 
-Per run the positioning pipeline (:func:`fieldlogs.pipeline.run_pipeline`) is replayed
+Per run the positioning pipeline (:func:`fieldlogs.pipeline.run.run_pipeline`) is replayed
 against the DB under test. A fix is evidence only when
 
 * the GPS unit trusts it (the 5/15/30 s RMS filter of :mod:`fieldlogs.pipeline.gps`);
@@ -31,10 +31,13 @@ import numpy as np
 import pandas as pd
 
 from dbtools.database import read_network
-from dbtools.gis.verify import FIX_COLUMNS, KM_EPOCH_COLUMN, GisVerification, VerifyConfig, verify_fixes
+from dbtools.gis.verify.config import FIX_COLUMNS, KM_EPOCH_COLUMN, VerifyConfig
+from dbtools.gis.verify.result import GisVerification
+from dbtools.gis.verify.run import verify_fixes
 from dbtools.network import Network
 from fieldlogs.io import read_run
-from fieldlogs.pipeline import PipelineConfig, PipelineResult, run_pipeline
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, load_network, open_db
 from fieldlogs.replay.pool import replay
@@ -192,7 +195,7 @@ def collect_evidence(
     ref, _ = open_db(db, network)  # this process replays runs too: it keeps the network
     results: list[RunEvidence] = []
     tasks = [(str(p), (ref, cfg, max_km_margin_m)) for p in run_dirs]
-    outcomes = replay(evidence_one, tasks, workers=workers, ordered=True, preload=("fieldlogs.pipeline",))
+    outcomes = replay(evidence_one, tasks, workers=workers, ordered=True, preload=("fieldlogs.pipeline.run",))
     with closing(outcomes):  # the first run that cannot be used stops the replay
         for out in outcomes:
             if out.value is None:  # its message names the folder, unless its worker died

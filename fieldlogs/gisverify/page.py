@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools import pagekit as kit
-from dbtools.gis.verify import DEFECT, UNVERIFIED, VERIFIED
+from dbtools.gis.verify.config import DEFECT, UNVERIFIED, VERIFIED
 from schemas.units import format_km
 
 if TYPE_CHECKING:

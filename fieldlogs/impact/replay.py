@@ -1,7 +1,7 @@
 """``db impact``, the per-run part: one run replayed against two DB versions.
 
 The worker (:func:`impact_one`) reads a run once and runs the positioning pipeline
-(:func:`fieldlogs.pipeline.run_pipeline`) against the old and the new DB — and, for a
+(:func:`fieldlogs.pipeline.run.run_pipeline`) against the old and the new DB — and, for a
 road-rail run when a possession plan is given, the possession check against each — and
 returns per version only what the report needs (:class:`RunFigures`, plain data, small to
 pickle). Both DBs stay loaded in each worker process (:func:`load_pair`): the replayer's
@@ -188,7 +188,7 @@ def _alarms(run: Any, network: Network, plan_path: str | None, ref: DbRef, tree:
 
 def _one_version(run: Any, network: Network, ref: DbRef, plan_path: str | None, tree: Any) -> RunFigures:
     """Pipeline (and possession check) of one run on one DB version; an error becomes the figures' message."""
-    from fieldlogs.pipeline import run_pipeline  # refuses a run it cannot position honestly
+    from fieldlogs.pipeline.run import run_pipeline  # refuses a run it cannot position honestly
     from fieldlogs.replay.pool import error_message
 
     try:

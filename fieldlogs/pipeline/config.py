@@ -214,6 +214,10 @@ class MarginConfig:
         check_ranges(self, "margin")
 
 
+#: Default target of the position-correction % [S003 §5.2] (:mod:`fieldlogs.pipeline.corrections`;
+#: declared here, with the settings, so that ``trainpos report --help`` needs no numpy).
+TARGET_PCT = 0.5
+
 #: The one plain setting of the pipeline (declared once, also used by the suite's tree).
 CYCLE_S: dict[str, Any] = {
     "default": 0.1,

@@ -22,10 +22,9 @@ from typing import Literal
 import numpy as np
 import pandas as pd
 
+from fieldlogs.pipeline.config import TARGET_PCT
 from schemas.enums import CORRECTION_EVENTS, EventType
 
-#: Default target of the position-correction % [S003 §5.2].
-TARGET_PCT = 0.5
 #: Which corrections a statistic covers: ``balise`` (the papers' statistic) or ``all``.
 Population = Literal["balise", "all"]
 POPULATIONS: dict[Population, tuple[EventType, ...]] = {

@@ -53,7 +53,7 @@ import numpy as np
 import numpy.typing as npt
 
 from fieldlogs.pipeline.config import GpsConfig
-from fieldlogs.pipeline.gps import TrackOdds
+from fieldlogs.pipeline.gps.analysis import TrackOdds
 from fieldlogs.pipeline.types import TrackDecision
 from fieldlogs.possession.config import PossessionConfig
 from fieldlogs.possession.kmfilter import bool_column, km_noise, track_km

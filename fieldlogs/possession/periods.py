@@ -10,7 +10,7 @@ trust filter and the km estimate but are no evidence for the up/down decision.
 sequential likelihood-ratio test on the mean offset of *trusted* D-GPS fixes (5/15/30 s RMS
 filter), decided as soon as the evidence suffices, otherwise *undecided* — never guessed
 [S001 §4.2]. Beside it, the test's statistics over the first ``decision_target_s`` on rail
-(:func:`fieldlogs.pipeline.gps.track_odds`) say where the evidence leans. Fixes the analysis
+(:func:`fieldlogs.pipeline.gps.analysis.track_odds`) say where the evidence leans. Fixes the analysis
 does not use (fix 1, high HDOP) are map-matched too (:func:`with_degraded_fixes`): they serve
 the km filter as coarse measurements, never the decision.
 """
@@ -27,7 +27,8 @@ from dbtools.gis.matching import TrackIndex, track_index_for
 from dbtools.network import Network
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.cycles import build_cycles
-from fieldlogs.pipeline.gps import TrackOdds, analyse_gps, track_odds, trust_filter
+from fieldlogs.pipeline.gps.analysis import TrackOdds, analyse_gps, track_odds
+from fieldlogs.pipeline.gps.trust import trust_filter
 from fieldlogs.pipeline.types import GpsAnalysis
 from fieldlogs.possession.config import PossessionConfig
 from fieldlogs.possession.tacho import Tacho
@@ -45,7 +46,7 @@ class RailPeriod:
     one; only its on-rail part is used."""
     odds: list[TrackOdds] = field(default_factory=list)
     """The up/down test's statistics over the first ``decision_target_s`` on rail
-    (:func:`fieldlogs.pipeline.gps.track_odds`, likeliest first): where the evidence leans."""
+    (:func:`fieldlogs.pipeline.gps.analysis.track_odds`, likeliest first): where the evidence leans."""
 
 
 def rail_periods(cab: pd.DataFrame | None, t_end: float, t_start: float = 0.0) -> list[tuple[float, float]]:

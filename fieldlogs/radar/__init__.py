@@ -16,27 +16,3 @@ The run.json ``radar`` block (``schemas.radar.RadarParams``) describes the radar
 output columns are ``schemas.outputs.RADAR_SPEED``. Pure functions of their inputs; no
 Python loop per frame.
 """
-
-from __future__ import annotations
-
-from fieldlogs.radar.config import RadarConfig
-from fieldlogs.radar.speed import (
-    RadarSpeed,
-    frame_detail,
-    process_frames,
-    process_if,
-    radar_speed,
-    run_frames,
-    write_speed,
-)
-
-__all__ = [
-    "RadarConfig",
-    "RadarSpeed",
-    "frame_detail",
-    "process_frames",
-    "process_if",
-    "radar_speed",
-    "run_frames",
-    "write_speed",
-]

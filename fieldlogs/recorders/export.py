@@ -31,7 +31,8 @@ from fieldlogs.recorders.timebase import iso_to_gps
 from schemas.errors import InputError, UsageError
 
 if TYPE_CHECKING:
-    from fieldlogs.simulate import Scenario, SimulationSummary
+    from fieldlogs.simulate.scenario import Scenario
+    from fieldlogs.simulate.simulator import SimulationSummary
 
 RECORDER_FOLDER = "recorder"
 EXPORT_FORMATS = ("nmea", "ubx", "rinex")
@@ -145,7 +146,8 @@ def simulate_with_recorder(
     scenario's raw GNSS (``[gnss_raw]``) on: RINEX observations are what it writes."""
     from dataclasses import replace
 
-    from fieldlogs.simulate import load_scenario, simulate_to_folder
+    from fieldlogs.simulate.scenario import load_scenario
+    from fieldlogs.simulate.simulator import simulate_to_folder
 
     if fmt not in EXPORT_FORMATS:
         raise UsageError(f"recorder format '{fmt}' is not one of {', '.join(EXPORT_FORMATS)}")

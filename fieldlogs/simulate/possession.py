@@ -34,7 +34,8 @@ import pandas as pd
 from dbtools.network import Network
 from fieldlogs.io import LogFormat, RunMeta, write_run
 from fieldlogs.possession.plan import Possession, plan_frame
-from fieldlogs.simulate import Scenario, scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import Scenario, scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 from schemas.enums import AlarmType
 
 KINDS = ("correct", "wrong_track", "overrun", "early_release", "not_started")

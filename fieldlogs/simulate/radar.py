@@ -243,6 +243,14 @@ def echo(
     return out_re + 1j * out_im
 
 
+def warm() -> None:
+    """Compile the echo kernel (or load it from the disk cache) for the argument types
+    :func:`echo` passes, on one sample: done ahead by ``make`` (the install step)."""
+    f = np.zeros(1)
+    i = np.zeros(1, dtype=np.int64)
+    _echo_kernel(f, f, i, i, f, f, f, f, f, 1.0, 1.0, 1.0, 0.0, 1.0, 1.0, np.zeros(3), np.empty(1), np.empty(1))
+
+
 def pattern(cfg: RadarIfCfg, sin_eps: FloatArray, sin_phi: FloatArray) -> FloatArray:
     """Two-way amplitude g = exp(−ln2·((sin ε / sin β_e)² + (sin φ / sin β_a)²))."""
     ln2 = math.log(2.0)

@@ -20,7 +20,8 @@ from typing import Any
 
 from dbtools.database import read_network
 from fieldlogs.io import LogFormat, write_run
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 from schemas.enums import Track
 from schemas.errors import InputError
 

@@ -1,6 +1,6 @@
 """What one run tells the survey: its balise reads, its passes and its curvature trace.
 
-The run is replayed through the positioning pipeline (:func:`fieldlogs.pipeline.run_pipeline`)
+The run is replayed through the positioning pipeline (:func:`fieldlogs.pipeline.run.run_pipeline`)
 against the DB under test; everything below is read from its result (positions, odometry,
 the feature unit's curvature trace ``κ = (ωz − b)/v`` with the yaw bias ``b`` removed,
 cycles) — nothing in the pipeline is changed.
@@ -52,8 +52,9 @@ import pandas as pd
 from dbtools.network import Network
 from fieldlogs.gisverify.evidence import RunEvidence, fixes_from_result
 from fieldlogs.io import Run, read_run
-from fieldlogs.pipeline import PipelineConfig, PipelineResult, clean_stream, run_pipeline
+from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.geometry import VehicleGeometry
+from fieldlogs.pipeline.run import PipelineResult, clean_stream, run_pipeline
 from fieldlogs.replay.network import DbRef, load_network
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.dbindex import BaliseIndex, balise_index

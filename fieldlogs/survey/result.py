@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dbtools.gis.verify import GisVerification
+from dbtools.gis.verify.result import GisVerification
 from dbtools.network import Network
 from fieldlogs.survey.balises import MISSED, MOVED
 from fieldlogs.survey.config import SurveyConfig

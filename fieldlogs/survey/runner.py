@@ -3,7 +3,7 @@
 Every run is replayed once (:func:`fieldlogs.survey.extract.survey_one`, through the one
 replayer of ``audit`` and ``gis verify``: this process, a local pool or a Dask cluster);
 its result feeds the balise, curve and wheel surveys and, unchanged, the GIS verification
-(:func:`fieldlogs.gisverify.evidence.fixes_from_result` → :func:`dbtools.gis.verify.verify_fixes`,
+(:func:`fieldlogs.gisverify.evidence.fixes_from_result` → :func:`dbtools.gis.verify.run.verify_fixes`,
 whose statistics are reused as they are). A run that cannot be replayed is listed with its
 error and the others go on.
 """
@@ -18,9 +18,10 @@ import numpy as np
 import pandas as pd
 
 from dbtools.database import read_network
-from dbtools.gis.verify import VerifyConfig, verify_fixes
+from dbtools.gis.verify.config import VerifyConfig
+from dbtools.gis.verify.run import verify_fixes
 from dbtools.network import Network
-from fieldlogs.pipeline import PipelineConfig
+from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import open_db
 from fieldlogs.replay.pool import replay
@@ -39,7 +40,7 @@ from schemas.errors import InputError
 
 Progress = Callable[[int, int, str], None]
 #: Modules the replay's fork server imports once.
-PRELOAD = ("fieldlogs.pipeline", "fieldlogs.survey.extract")
+PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.survey.extract")
 
 
 def _unique_ids(runs: list[RunSurvey]) -> None:

@@ -15,8 +15,9 @@ from scipy import special, stats
 
 from dbtools.gis.geometry import Projector
 from dbtools.gis.index import grid_index
-from dbtools.gis.verify import DEFECT, FIX_COLUMNS, VerifyConfig, verify_fixes
 from dbtools.gis.verify.cells import Cells
+from dbtools.gis.verify.config import DEFECT, FIX_COLUMNS, VerifyConfig
+from dbtools.gis.verify.run import verify_fixes
 from dbtools.gis.verify.scan import (
     Prior,
     contrasts,

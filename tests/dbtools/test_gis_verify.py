@@ -12,7 +12,8 @@ from scipy import stats
 
 from dbtools.database import read_network
 from dbtools.gis.matching import track_index_for
-from dbtools.gis.verify import (
+from dbtools.gis.verify.cells import adjust_pvalues, t_test
+from dbtools.gis.verify.config import (
     CELL_COLUMNS,
     COVERAGE_COLUMNS,
     DEFECT,
@@ -21,13 +22,10 @@ from dbtools.gis.verify import (
     UNVERIFIED,
     VERIFIED,
     VerifyConfig,
-    adjust_pvalues,
-    merge_defects,
-    proposed_network,
-    shift_grid_points,
-    t_test,
-    verify_fixes,
 )
+from dbtools.gis.verify.defects import merge_defects
+from dbtools.gis.verify.proposal import proposed_network, shift_grid_points
+from dbtools.gis.verify.run import verify_fixes
 from dbtools.network import Network
 from dbtools.synthetic.alignment import Alignment
 from dbtools.synthetic.network import LineSpec, build_network

@@ -279,8 +279,8 @@ def decided_route(run: Run, network: Network, cfg: Any) -> tuple[str, str, int] 
     most of its determined cycles (set by a balise pair or the GPS up/down decision) and the sign
     of km per metre of travel toward the F end on them; None when it decides none (a run
     without tacho, balises or GPS). ``cfg`` is a :class:`~fieldlogs.pipeline.config.PipelineConfig`."""
-    from fieldlogs.pipeline import run_pipeline  # the whole pipeline, only when asked
     from fieldlogs.pipeline.estimate import signed_travel
+    from fieldlogs.pipeline.run import run_pipeline  # the whole pipeline, only when asked
 
     res = run_pipeline(run, network, replace(cfg, gnss=replace(cfg.gnss, enabled=False)))
     line, track = res.summary.get("line_code"), res.summary.get("track")

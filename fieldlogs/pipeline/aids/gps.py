@@ -1,7 +1,7 @@
 """GPS track decisions and crossovers as an aid [S001 §4.2, §7; SPEC §5.4].
 
 The decisions and crossovers are computed vectorised over the whole run
-(:func:`fieldlogs.pipeline.gps.analyse_gps`); this aid applies them to the estimate in
+(:func:`fieldlogs.pipeline.gps.analysis.analyse_gps`); this aid applies them to the estimate in
 time order:
 
 * **no estimate**: a decision with a known km direction sets a GPS-derived initial

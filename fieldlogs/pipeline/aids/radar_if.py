@@ -1,6 +1,6 @@
 """The radar's raw IF samples (``radar_if`` + the run.json ``radar`` block) as a speed aid [S004].
 
-``fieldlogs.radar.process_if`` turns the samples into one ground speed V_G per T_epi frame,
+``fieldlogs.radar.speed.process_if`` turns the samples into one ground speed V_G per T_epi frame,
 with its 1σ and a status; this aid puts the frames on the cycle grid:
 
 * a cycle gets the frame covering it — the frame [c_j − T/2, c_j + T/2) (centre c_j, length
@@ -68,7 +68,7 @@ class RadarIfSpeedAid:
     name = "radar_if"
 
     def frames(self) -> RadarSpeed:
-        """The ground speed of every frame (``fieldlogs.radar.process_if``)."""
+        """The ground speed of every frame (``fieldlogs.radar.speed.process_if``)."""
         f = self.stream
         t = f["t"].to_numpy(dtype=np.float64, na_value=np.nan)
         i1, q1, i2, q2 = (f[c].to_numpy(dtype=np.float32, na_value=np.nan) for c in ("i1", "q1", "i2", "q2"))

@@ -8,19 +8,3 @@ the decision state changes are visited one by one.
 * :mod:`.decision` — the decision state machine;
 * :mod:`.crossover` — crossover detection.
 """
-
-from __future__ import annotations
-
-from fieldlogs.pipeline.gps.analysis import DECIDED_COLUMNS, FIX_COLUMNS, TrackOdds, analyse_gps, track_odds
-from fieldlogs.pipeline.gps.evidence import mean_variance_factor
-from fieldlogs.pipeline.gps.trust import trust_filter
-
-__all__ = [
-    "DECIDED_COLUMNS",
-    "FIX_COLUMNS",
-    "TrackOdds",
-    "analyse_gps",
-    "mean_variance_factor",
-    "track_odds",
-    "trust_filter",
-]

@@ -1,6 +1,6 @@
 """Slip/slide detection and inertial correction of the pulse odometry [S000 §3.1, SPEC §5.1].
 
-``correct_odometry`` runs pure stages on the 100 ms cycle arrays of :class:`Cycles`; each
+:func:`~.correct.correct_odometry` runs pure stages on the 100 ms cycle arrays of :class:`Cycles`; each
 is a function of the previous stages' frozen results and the config:
 
 1. :func:`~.streams.align_streams` → :class:`~.streams.AlignedStreams`: travel frame,
@@ -76,77 +76,3 @@ NaN policy: missing IMU cycles are bridged by linear interpolation for the integ
 moving averages use what exists; no detection where a smoothed value is missing; missing
 pulse distances and speeds count as 0.
 """
-
-from __future__ import annotations
-
-import numpy as np
-
-from fieldlogs.pipeline.aid import SpeedOnCycles
-from fieldlogs.pipeline.config import OdometryConfig
-from fieldlogs.pipeline.cycles import Cycles
-from fieldlogs.pipeline.odometry.assembly import assemble
-from fieldlogs.pipeline.odometry.detection import BIAS_MIN_S, Detections, detect
-from fieldlogs.pipeline.odometry.diagnostics import EpisodeDiagnostics, OdometryDiagnostics
-from fieldlogs.pipeline.odometry.episodes import Episode, find_episodes
-from fieldlogs.pipeline.odometry.fusion import Fusion
-from fieldlogs.pipeline.odometry.ground import GroundSpeed, align_ground, metres_per_pulse
-from fieldlogs.pipeline.odometry.ground_products import GroundReport, WheelCalibration, ground_products
-from fieldlogs.pipeline.odometry.start_point import LOBE_RATIO, QUIET_MARGIN_S, QUIET_SHARE, SEARCH_SPAN_S
-from fieldlogs.pipeline.odometry.streams import SPEED_AVG_S, AlignedStreams, align_streams
-from fieldlogs.pipeline.odometry.watch import Watch, watch_failsafes
-from fieldlogs.pipeline.types import Odometry, SlipEpisode, pulse_only_odometry
-
-__all__ = [
-    "BIAS_MIN_S",
-    "LOBE_RATIO",
-    "QUIET_MARGIN_S",
-    "QUIET_SHARE",
-    "SEARCH_SPAN_S",
-    "SPEED_AVG_S",
-    "AlignedStreams",
-    "Detections",
-    "Episode",
-    "EpisodeDiagnostics",
-    "Fusion",
-    "GroundReport",
-    "GroundSpeed",
-    "Odometry",
-    "OdometryDiagnostics",
-    "SlipEpisode",
-    "Watch",
-    "WheelCalibration",
-    "align_ground",
-    "align_streams",
-    "assemble",
-    "correct_odometry",
-    "detect",
-    "find_episodes",
-    "watch_failsafes",
-]
-
-
-def correct_odometry(cycles: Cycles, cfg: OdometryConfig, ground: SpeedOnCycles | None = None) -> Odometry:
-    """Pulse odometry with slip/slide episodes replaced by the inertial solution (SPEC §5.1).
-
-    ``ground``: an independent ground speed on the cycle grid (the 2-frequency CW radar
-    [S004]; NaN where there is none): stage 1b aligns it, stage 2 detects with it, stage 3
-    fuses it with the inertial solution and tests re-adhesion on it, stage 4 watches on it
-    and stage 6 adds the low-speed speed and the wheel calibration. Without IMU or tacho
-    (or with fewer than 3 cycles): the pulse odometry.
-    """
-    if not cycles.has_imu or not cycles.has_tacho or cycles.n < 3:
-        d_pulse = np.nan_to_num(np.asarray(cycles.d_pulse, dtype=float), nan=0.0)
-        v_pulse = np.nan_to_num(np.asarray(cycles.v_pulse, dtype=float), nan=0.0)
-        return pulse_only_odometry(d_pulse, v_pulse)
-    streams = align_streams(cycles, cfg)
-    g = None
-    if ground is not None:
-        pulses = np.asarray(cycles.pulses, dtype=float)
-        g = align_ground(streams, ground, metres_per_pulse(pulses, np.asarray(cycles.d_pulse, dtype=float)))
-    detections = detect(streams, cfg, g)
-    episodes = find_episodes(streams, detections, cfg, g)
-    watches = watch_failsafes(streams, cfg, episodes)
-    odo = assemble(streams, detections, cfg, episodes, watches)
-    if g is None:
-        return odo
-    return ground_products(streams, g, cfg, odo, [ep.i_settled - streams.delay for ep in episodes])

@@ -20,7 +20,8 @@ from dbtools.gis.geometry import Projector
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.io import write_run
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 #: (run folder, track, path km, vehicle, seed)
 RUNS = (

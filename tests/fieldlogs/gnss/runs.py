@@ -7,7 +7,8 @@ from typing import Any
 
 from dbtools.network import Network
 from fieldlogs.io import write_run
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 
 def gnss_scenario(network: Network, track: str = "D", length_m: float = 4000.0, **over: Any) -> dict[str, Any]:

@@ -17,9 +17,9 @@ from cli.main import app
 from dbtools.build import build_db
 from dbtools.release import impact_file_name, list_impacts, verify_releases
 from dbtools.sample_network import sample_source_dir
-from fieldlogs.impact import FIGURES, impact_runs
 from fieldlogs.impact.replay import RunFigures
-from fieldlogs.impact.report import changed_corrections
+from fieldlogs.impact.report import FIGURES, changed_corrections
+from fieldlogs.impact.runner import impact_runs
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"
 MOVED = "0420-D-C001"

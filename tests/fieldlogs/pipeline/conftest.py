@@ -8,8 +8,9 @@ import pytest
 
 from dbtools.database import read_network
 from fieldlogs.io import read_run
-from fieldlogs.pipeline import PipelineConfig, prepare_run
-from fieldlogs.pipeline.aids import RunContext
+from fieldlogs.pipeline.aids.registry import RunContext
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.run import prepare_run
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"
 

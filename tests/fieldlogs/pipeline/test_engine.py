@@ -14,7 +14,7 @@ import pytest
 
 import fieldlogs.pipeline.engine as engine_mod
 from fieldlogs.pipeline.aid import Aid, EngineView, Observation, Outcome, Priority, StaticAid
-from fieldlogs.pipeline.aids import POSITION_AIDS, SPEED_AIDS
+from fieldlogs.pipeline.aids.registry import POSITION_AIDS, SPEED_AIDS
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.engine import run_aids
 from fieldlogs.pipeline.estimate import Travel
@@ -226,7 +226,7 @@ def test_a_trains_pto_column_is_ignored(sample_db, tmp_path) -> None:  # type: i
 
     from dbtools.database import read_network
     from fieldlogs.io import read_run
-    from fieldlogs.pipeline import run_pipeline
+    from fieldlogs.pipeline.run import run_pipeline
     from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
 
     run_dir = tmp_path / "run"
@@ -252,7 +252,7 @@ def test_an_imu_gap_makes_the_position_uncertain_and_the_margin_hold(sample_db, 
 
     from dbtools.database import read_network
     from fieldlogs.io import read_run
-    from fieldlogs.pipeline import run_pipeline
+    from fieldlogs.pipeline.run import run_pipeline
     from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
 
     run_dir = tmp_path / "run"

@@ -16,8 +16,8 @@ from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.gnss.config import GnssConfig
 from fieldlogs.io import read_run
-from fieldlogs.pipeline import PipelineConfig, PipelineResult, run_pipeline
-from fieldlogs.pipeline.config import GpsConfig
+from fieldlogs.pipeline.config import GpsConfig, PipelineConfig
+from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
 from schemas.enums import EventType
 from tests.fieldlogs.gnss.runs import simulate_gnss_run

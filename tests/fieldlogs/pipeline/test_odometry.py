@@ -19,14 +19,10 @@ from hypothesis import strategies as st
 
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles, cycle_means
-from fieldlogs.pipeline.odometry import (
-    AlignedStreams,
-    Detections,
-    EpisodeDiagnostics,
-    align_streams,
-    correct_odometry,
-    detect,
-)
+from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.pipeline.odometry.detection import Detections, detect
+from fieldlogs.pipeline.odometry.diagnostics import EpisodeDiagnostics
+from fieldlogs.pipeline.odometry.streams import AlignedStreams, align_streams
 from fieldlogs.pipeline.types import Odometry, SlipEpisode, slip_budget_m
 from schemas.units import G, kmh_s_to_mps2
 

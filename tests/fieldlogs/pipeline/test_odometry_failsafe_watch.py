@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from fieldlogs.pipeline.config import OdometryConfig
-from fieldlogs.pipeline.odometry import LOBE_RATIO, correct_odometry
-from fieldlogs.pipeline.odometry.start_point import lobe
+from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.pipeline.odometry.start_point import LOBE_RATIO, lobe
 from tests.fieldlogs.pipeline.test_odometry import (
     THR,
     assert_odometry_sane,

@@ -16,10 +16,12 @@ import pytest
 from fieldlogs.pipeline.aid import SpeedOnCycles
 from fieldlogs.pipeline.aids.radar_if import frames_on_cycles
 from fieldlogs.pipeline.config import OdometryConfig
-from fieldlogs.pipeline.odometry import align_ground, align_streams, correct_odometry, detect
+from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.pipeline.odometry.detection import detect
 from fieldlogs.pipeline.odometry.fusion import GATE_Z, Filtered, kalman_speed, rts
-from fieldlogs.pipeline.odometry.ground import GROUND_BIAS_MPS, WEAR_SHARE
+from fieldlogs.pipeline.odometry.ground import GROUND_BIAS_MPS, WEAR_SHARE, align_ground
 from fieldlogs.pipeline.odometry.ground_products import CAL_MIN_M
+from fieldlogs.pipeline.odometry.streams import align_streams
 from fieldlogs.pipeline.types import slip_budget_m
 from tests.fieldlogs.pipeline.test_odometry import (
     Scenario,

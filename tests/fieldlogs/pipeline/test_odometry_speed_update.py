@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from fieldlogs.pipeline.config import OdometryConfig
-from fieldlogs.pipeline.odometry import correct_odometry
+from fieldlogs.pipeline.odometry.correct import correct_odometry
 from tests.fieldlogs.pipeline.test_odometry import (
     Scenario,
     assert_odometry_sane,

@@ -19,11 +19,12 @@ import pytest
 
 from dbtools.database import read_network
 from fieldlogs.io import read_run, write_run
-from fieldlogs.pipeline import PipelineResult, run_pipeline
-from fieldlogs.pipeline.aids import speed_aids
 from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
+from fieldlogs.pipeline.aids.registry import speed_aids
+from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 
 def scenario(track: str, cab: str, look: str) -> dict[str, Any]:

@@ -496,7 +496,7 @@ def test_simulator_road_approach_and_poor_sky() -> None:
     assert (gps["fix"].to_numpy()[inside] == 1).any() and (gps["fix"].to_numpy()[on & ~inside] == 2).all()
     assert (gps["nsat"].to_numpy()[inside] <= case.scenario.gps.poor_sky_nsat).all()
     with pytest.raises(Exception, match="poor_sky_fix1_share"):
-        from fieldlogs.simulate import scenario_from_dict
+        from fieldlogs.simulate.scenario import scenario_from_dict
 
         scenario_from_dict({"gps": {"poor_sky_fix1_share": 1.0}})
 

@@ -16,7 +16,7 @@ import pandas as pd
 import pytest
 
 from dbtools.gis.matching import track_index_for
-from fieldlogs.pipeline.gps import TrackOdds, track_odds
+from fieldlogs.pipeline.gps.analysis import TrackOdds, track_odds
 from fieldlogs.possession.check import check_periods
 from fieldlogs.possession.periods import RailPeriod
 from fieldlogs.simulate.possession import make_case

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from cli.main import app
 from dbtools.database import read_network
 from fieldlogs.io import read_run
-from fieldlogs.pipeline import run_pipeline
+from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.quality.checks import check_run
 from fieldlogs.quality.usability import Purpose, time_unit_problem, usability_findings
 from schemas.errors import FindingsError

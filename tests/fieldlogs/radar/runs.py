@@ -15,7 +15,8 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.io import RunMeta
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 from schemas.radar import RadarParams
 
 KINDS = ("accelerate", "overpass", "slab", "reverse")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dbtools.network import Network
-from fieldlogs.radar import process_if
+from fieldlogs.radar.speed import process_if
 from schemas.enums import RadarStatus
 from tests.fieldlogs.radar.runs import onset_time, radar_of, simulate_radar_run, truth_at
 

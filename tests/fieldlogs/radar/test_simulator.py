@@ -12,8 +12,9 @@ import pytest
 
 from dbtools.network import Network
 from fieldlogs.io import read_run
-from fieldlogs.simulate import load_scenario, scenario_from_dict, simulate_run
 from fieldlogs.simulate.radar import Ground, echo, ground, reference_power, view
+from fieldlogs.simulate.scenario import load_scenario, scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 from schemas.logs import RADAR_IF
 
 C = 299_792_458.0

@@ -8,8 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fieldlogs.radar import RadarConfig, process_if
-from fieldlogs.radar.speed import RadarSpeed, lowest_speed_mps
+from fieldlogs.radar.config import RadarConfig
+from fieldlogs.radar.speed import RadarSpeed, lowest_speed_mps, process_if
 from schemas.enums import RadarStatus
 from tests.fieldlogs.radar.signals import TABLE1, C, ground_if, reflectors_if
 

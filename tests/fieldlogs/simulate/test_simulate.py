@@ -17,9 +17,8 @@ from dbtools.sources import write_source_set
 from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.io import read_run
 from fieldlogs.quality.checks import check_run, load_db_refs
-from fieldlogs.simulate import Scenario, ScenarioError, load_scenario, scenario_from_dict
 from fieldlogs.simulate.samples import make_sample_runs
-from fieldlogs.simulate.scenario import DEFAULT_SCENARIO
+from fieldlogs.simulate.scenario import DEFAULT_SCENARIO, Scenario, ScenarioError, load_scenario, scenario_from_dict
 
 
 @pytest.fixture(scope="module")

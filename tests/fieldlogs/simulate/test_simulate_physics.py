@@ -23,7 +23,8 @@ from dbtools.network import Network
 from dbtools.sources import write_source_set
 from dbtools.synthetic.alignment import Alignment, Curve
 from dbtools.synthetic.network import LineSpec, Station, build_network, demo_line
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 from schemas.units import KMH_PER_S, G
 
 D_NOM = 0.86

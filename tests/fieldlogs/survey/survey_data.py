@@ -25,7 +25,8 @@ from dbtools.network import Network
 from dbtools.sample_network import sample_source_dir
 from dbtools.sources import write_source_set
 from fieldlogs.io import write_run
-from fieldlogs.simulate import scenario_from_dict, simulate_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 
 MOVED = {"0420-D-C002": 3.0}
 REMOVED_BALISE = "0420-U-C002"

@@ -1,0 +1,112 @@
+"""The registry of the positioning engine's aids (:data:`POSITION_AIDS`, :data:`SPEED_AIDS`) and
+the run context their factories look at (:mod:`fieldlogs.pipeline.aids`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import pandas as pd
+
+from dbtools.network import Network
+from fieldlogs.pipeline.aid import Aid, SpeedAid
+from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
+from fieldlogs.pipeline.aids.failsafe import FailsafeAid
+from fieldlogs.pipeline.aids.features import FeatureAid, FeatureUnit
+from fieldlogs.pipeline.aids.gnss import GnssAid, GnssUnit
+from fieldlogs.pipeline.aids.gps import GpsAid
+from fieldlogs.pipeline.aids.radar import RadarSpeedAid
+from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
+from fieldlogs.pipeline.aids.rail import RailAid
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.cycles import Cycles
+from fieldlogs.pipeline.geometry import VehicleGeometry
+from fieldlogs.pipeline.imugap import ImuGap, ImuGapAid
+from fieldlogs.pipeline.types import GpsAnalysis, Odometry
+from schemas.radar import RadarParams
+
+
+@dataclass(frozen=True)
+class RunContext:
+    """What the aid factories may look at."""
+
+    network: Network
+    cfg: PipelineConfig
+    streams: dict[str, pd.DataFrame | None]
+    cycles: Cycles
+    odometry: Odometry
+    gps: GpsAnalysis | None
+    features: FeatureUnit | None
+    geometry: VehicleGeometry = field(default_factory=VehicleGeometry)
+    gnss: GnssUnit | None = None
+    imu_gaps: tuple[ImuGap, ...] = ()
+
+
+def _rail(ctx: RunContext) -> Aid | None:
+    return RailAid(ctx.cycles.t, ctx.cycles.pto)
+
+
+def _failsafe(ctx: RunContext) -> Aid | None:
+    return FailsafeAid(ctx.odometry.episodes)
+
+
+def _imu_gap(ctx: RunContext) -> Aid | None:
+    return ImuGapAid(list(ctx.imu_gaps), ctx.cfg.margin.imu_gap_share) if ctx.imu_gaps else None
+
+
+def _balise(ctx: RunContext) -> Aid | None:
+    db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
+    return BaliseAid(db, ctx.cfg.balise, ctx.streams.get("balise"), ctx.geometry.reader_x_m)
+
+
+def _gps(ctx: RunContext) -> Aid | None:
+    return GpsAid(ctx.gps, ctx.cfg.gps, ctx.geometry.gps_antenna_x_m) if ctx.gps is not None else None
+
+
+def _features(ctx: RunContext) -> Aid | None:
+    return FeatureAid(ctx.features) if ctx.features is not None else None
+
+
+def _gnss(ctx: RunContext) -> Aid | None:
+    g = ctx.gnss
+    if g is None or (g.inputs is None and g.problem is None):
+        return None  # no raw GNSS in the run (or the aid switched off)
+    return GnssAid(g, ctx.cfg.margin, ctx.gps)
+
+
+POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
+    _rail,
+    _failsafe,
+    _imu_gap,
+    _balise,
+    _gps,
+    _features,
+    _gnss,
+)
+"""Position aids in registry order (simultaneous observations are ordered by priority)."""
+
+
+def position_aids(ctx: RunContext) -> list[Aid]:
+    return [a for f in POSITION_AIDS if (a := f(ctx)) is not None]
+
+
+Streams = dict[str, pd.DataFrame | None]
+
+
+def _radar_if(streams: Streams, radar: RadarParams | None) -> SpeedAid | None:
+    frame = streams.get("radar_if")
+    return RadarIfSpeedAid(frame, radar) if frame is not None and len(frame) and radar is not None else None
+
+
+def _radar(streams: Streams, radar: RadarParams | None) -> SpeedAid | None:
+    frame = streams.get("radar")
+    return RadarSpeedAid(frame) if frame is not None and len(frame) >= 2 else None
+
+
+SPEED_AIDS: tuple[Callable[[Streams, RadarParams | None], SpeedAid | None], ...] = (_radar_if, _radar)
+"""Ground-speed aids for the odometry, best first (the first one with data is used); each
+factory sees the run's streams and its run.json ``radar`` block."""
+
+
+def speed_aids(streams: Streams, radar: RadarParams | None = None) -> list[SpeedAid]:
+    return [a for f in SPEED_AIDS if (a := f(streams, radar)) is not None]

@@ -1,0 +1,163 @@
+"""The onboard positioning pipeline of SPEC §5 on a recorded run: :func:`run_pipeline`.
+
+Data flow of :func:`run_pipeline` (each stage vectorised over the run, except the engine's
+loop over the few moments an aid speaks):
+
+1. streams cleaned as the onboard unit would see them (sorted, no missing or repeated t;
+   each repair an ``input_repaired`` event);
+2. :func:`~fieldlogs.pipeline.cycles.build_cycles`: tacho, IMU (cycle means), cab and PTO on
+   the 100 ms cycle grid;
+3. speed aids (:data:`~fieldlogs.pipeline.aids.registry.SPEED_AIDS`, e.g. the radar [S004] from its
+   IF samples) on the cycle grid, then :func:`~fieldlogs.pipeline.odometry.correct.correct_odometry`:
+   pulse odometry with slip/slide episodes detected and corrected inertially [S000 §3.1]
+   and, with a ground speed, by it;
+4. products the aids share: the GPS analysis (trust, map-matching, up/down decisions,
+   crossovers [S001 §4.2]), the curvature trace with the feature tables [S000 §3.2] and the
+   run's raw GNSS inputs (``gnss_obs``/``gnss_nav``, solved on a track when an aid asks [S002]);
+5. position aids built by the registry (:mod:`fieldlogs.pipeline.aids`) and applied in time
+   order by the engine (:mod:`fieldlogs.pipeline.engine`), which records the fixes;
+6. per-cycle positions with their margins (:mod:`fieldlogs.pipeline.positions`), the events
+   frame and the summary (:mod:`fieldlogs.pipeline.summary`), and the truth comparison when
+   the run has a ``truth`` stream.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from dbtools.network import Network
+from fieldlogs.io import Run
+from fieldlogs.pipeline.aids.features import FeatureUnit
+from fieldlogs.pipeline.aids.gnss import GnssUnit
+from fieldlogs.pipeline.aids.registry import RunContext, position_aids, speed_aids
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.cycles import Cycles, build_cycles
+from fieldlogs.pipeline.engine import run_aids
+from fieldlogs.pipeline.estimate import Travel
+from fieldlogs.pipeline.geometry import VehicleGeometry
+from fieldlogs.pipeline.gps.analysis import analyse_gps
+from fieldlogs.pipeline.imugap import imu_gaps, with_gap_allowance
+from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
+from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
+from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
+from fieldlogs.quality.tacho import cumulative_again
+from fieldlogs.quality.usability import Purpose, require_usable
+from schemas.enums import EventType, VehicleKind
+from schemas.frames import FIRST_DATA_LINE
+
+__all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
+
+#: Streams the pipeline reads.
+STREAMS = ("tacho", "imu", "balise", "gps", "cab", "truth", "radar", "radar_if")
+
+
+@dataclass
+class PipelineResult:
+    run_id: str
+    positions: pd.DataFrame
+    events: pd.DataFrame
+    summary: dict[str, Any]
+    odometry: Odometry
+    gps: GpsAnalysis | None = None
+    kappa: np.ndarray | None = None
+    truth: pd.DataFrame | None = field(default=None, repr=False)
+    cycles: Cycles | None = field(default=None, repr=False)
+
+
+def clean_stream(frame: pd.DataFrame | None, name: str, events: list[Event]) -> pd.DataFrame | None:
+    """Sort by t and drop rows without t or with a repeated t (first kept), as an onboard
+    unit would see the stream; every change is reported as an ``input_repaired`` event."""
+    if frame is None or frame.empty:
+        return frame
+    t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
+    if t.size and np.isfinite(t).all() and (np.diff(t) > 0).all():
+        return frame  # the normal case: nothing to repair, no copy
+    n0 = len(frame)
+    frame = frame[frame["t"].notna()]
+    unsorted = bool((frame["t"].diff() < 0).any())
+    frame = frame.sort_values("t", kind="stable")
+    frame = frame[~frame["t"].duplicated(keep="first")]
+    if unsorted or len(frame) != n0:
+        detail = {"stream": name, "rows_in": n0, "rows_used": len(frame), "sorted": unsorted}
+        events.append(Event(0.0, EventType.INPUT_REPAIRED, detail=detail))
+    return frame.reset_index(drop=True)
+
+
+def counter_resets_bridged(tacho: pd.DataFrame | None, events: list[Event]) -> pd.DataFrame | None:
+    """A pulse counter that was reset (it drops below half its count and stays low) counts on
+    from where it was: each reset adds the count before it to every later row, as an onboard
+    unit keeps its distance through a counter reset (``logs repair`` does the same to the
+    file). Without this the dead reckoning would stand still until the count caught up and the
+    next balise would read as a correction of kilometres. Each bridge is an ``input_repaired``
+    event naming the rows."""
+    if tacho is None or len(tacho) < 2:
+        return tacho
+    p = tacho["pulses"].to_numpy(dtype=float, na_value=np.nan)
+    ok = np.flatnonzero(np.isfinite(p))
+    fixed, resets = cumulative_again(p[ok])
+    if resets.size == 0:
+        return tacho
+    out = tacho.copy()
+    full = p.copy()
+    full[ok] = fixed
+    out["pulses"] = pd.array(np.round(full), dtype="Int64")
+    rows = (ok[resets] + FIRST_DATA_LINE).tolist()
+    detail = {"stream": "tacho", "counter_resets": len(rows), "rows": rows[:20], "bridged": True}
+    events.append(Event(0.0, EventType.INPUT_REPAIRED, detail=detail))
+    return out
+
+
+def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunContext, list[Event]]:
+    """Stages 1–4 of the module docstring: the context the aids are built from, and the
+    ``input_repaired`` events of the cleaning; raises FindingsError when run.json is unusable."""
+    require_usable(run, Purpose.POSITIONING)  # never a "determined" km the run cannot support
+    assert run.meta is not None
+    pre: list[Event] = []
+    streams = {n: clean_stream(run.stream(n), n, pre) for n in STREAMS}
+    streams["tacho"] = counter_resets_bridged(streams["tacho"], pre)
+    t_end = max((float(s["t"].iloc[-1]) for s in streams.values() if s is not None and len(s)), default=0.0)
+    cycles = build_cycles(
+        tacho=streams["tacho"],
+        imu=streams["imu"],
+        cab=streams["cab"],
+        wheel_diameter_m=run.meta.wheel_diameter_m,
+        teeth=run.meta.teeth,
+        t_end=t_end,
+        cycle_s=cfg.cycle_s,
+        uses_pto=run.meta.vehicle_kind == VehicleKind.ROAD_RAIL,
+    )
+    ground = next((g for a in speed_aids(streams, run.radar) if (g := a.on_cycles(cycles)) is not None), None)
+    # pulses only when the run has no IMU (correct_odometry falls back by itself)
+    odo = correct_odometry(cycles, cfg.odometry, ground)
+    gaps = imu_gaps(cycles, cfg.margin.imu_gap_s, cfg.odometry.min_speed_kmh / 3.6)
+    odo = with_gap_allowance(odo, gaps, cfg.margin.imu_gap_share)
+    gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
+    features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
+    geometry = VehicleGeometry.of(run.meta.vehicle)
+    gnss = GnssUnit.for_run(run, network, cfg.gnss)
+    ctx = RunContext(
+        network, cfg, streams, cycles, odo, gps, features, geometry=geometry, gnss=gnss, imu_gaps=tuple(gaps)
+    )
+    return ctx, pre
+
+
+def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) -> PipelineResult:
+    """Replay a run through the onboard logic; raises FindingsError when run.json is unusable."""
+    cfg = cfg or PipelineConfig()
+    ctx, pre = prepare_run(run, network, cfg)
+    odo = ctx.odometry
+    sol = run_aids(Travel.of(ctx.cycles, odo, network), position_aids(ctx), cfg.margin, ctx.geometry)
+    events = pre + sol.events + episode_events(odo, sol.positions["km_m"].to_numpy())
+    events.sort(key=lambda e: e.t)
+    ev_frame = events_frame(events)
+    truth = ctx.streams["truth"]
+    summary = summarise(run, network, cfg, sol.positions, ev_frame, odo, ctx.gps)
+    if truth is not None and len(truth):
+        summary["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
+    kappa = ctx.features.kappa if ctx.features is not None else None
+    return PipelineResult(run.run_id, sol.positions, ev_frame, summary, odo, ctx.gps, kappa, truth, ctx.cycles)
