@@ -12,8 +12,8 @@ import numpy as np
 import pandas as pd
 
 from dbtools.database import read_network
-from fieldlogs.simulate import load_scenario, simulate_run
-from fieldlogs.simulate.scenario import Scenario
+from fieldlogs.simulate.scenario import Scenario, load_scenario
+from fieldlogs.simulate.simulator import simulate_run
 
 SCENARIOS = Path(__file__).resolve().parents[3] / "fieldlogs" / "simulate" / "scenarios"
 
