@@ -306,20 +306,24 @@ def import_(
         help="Map (TOML): railML lines/tracks → line_code and track, initial pairs → station codes.",
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
+    xsd: Path | None = typer.Option(
+        None, "--xsd", help="Validate the file against this XML Schema first (e.g. railML's railml3.xsd)."
+    ),
 ) -> None:
     """Import a railML file as a source set; every element that cannot be mapped is reported.
 
     Writes the source tables, network.toml (when declared), survey/ (centrelines and km
     posts for gis grid, when the file has coordinates) and import_report.json. Exit 0
     written (unmapped elements are warnings), 1 errors such as duplicate or missing ids,
-    positions on undefined tracks, lengths not in metres or an unknown railML version
-    (nothing written), 2 unreadable (malformed XML, entity declarations, bad map), 3 output exists.
+    positions on undefined tracks, lengths not in metres, an unknown railML version or
+    (with --xsd) a schema error (nothing written), 2 unreadable (malformed XML, entity
+    declarations, bad map, unreadable XSD), 3 output exists.
 
     Example: trainpos db import line.railml --format railml --out src/ --line-code map.toml
     """
     from dbtools.interchange.importer import import_railml
 
-    result = import_railml(source, out, line_map=line_code, force=force)
+    result = import_railml(source, out, line_map=line_code, force=force, xsd=xsd)
     out_c = console()
     if result.findings:
         print_findings(result.findings, console=out_c, title="Not imported / warnings")
@@ -344,11 +348,15 @@ def export(
     fmt: str = typer.Option(..., "--format", help="railml (3.2), geojson, gpkg (GeoPackage) or geoparquet."),
     out: Path = typer.Option(..., "--out", "-o", help="Output file."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
+    xsd: Path | None = typer.Option(
+        None, "--xsd", help="railML: validate the export against this XML Schema before writing it (railml3.xsd)."
+    ),
 ) -> None:
     """Export a DB as railML 3.2 or as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet).
 
     Layers: balises, feature_points, gis_points, gis_lines. Exit 0 written, 1 source set
-    errors, 2 unreadable input or unknown format, 3 output exists.
+    errors or (with --xsd) the export is not valid against the schema (nothing written),
+    2 unreadable input or XSD, unknown format, 3 output exists.
 
     Example: trainpos db export net.sqlite --format gpkg --out net.gpkg
     """
@@ -359,7 +367,7 @@ def export(
         kind = ExportFormat(fmt)
     except ValueError:
         raise UsageError(f"--format '{fmt}': use one of {', '.join(f.value for f in ExportFormat)}") from None
-    counts = export_network(db, out, kind, force=force)
+    counts = export_network(db, out, kind, force=force, xsd=xsd)
     console().print(key_value_table([("file", str(out)), ("format", kind.value), *counts.items()], title="Exported"))
 
 

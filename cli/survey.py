@@ -28,6 +28,7 @@ class Fmt(StrEnum):
     table = "table"
     json = "json"
     html = "html"
+    geojson = "geojson"
 
 
 def _km(v: object) -> str:
@@ -156,8 +157,8 @@ def render_survey(rep: SurveyReport, c: Console) -> None:
 
 
 def _check_targets(fmt: Fmt, out: Path | None, propose: Path | None, force: bool) -> None:
-    if fmt == Fmt.html and out is None:
-        raise UsageError("--format html needs --out FILE")
+    if fmt in (Fmt.html, Fmt.geojson) and out is None:
+        raise UsageError(f"--format {fmt.value} needs --out FILE")
     for target in (out, propose):
         if target is not None and target.exists() and not force:
             if target.is_file() or any(target.iterdir()):
@@ -180,6 +181,12 @@ def _emit(rep: SurveyReport, fmt: Fmt, out: Path | None) -> None:
         assert out is not None
         _write(out, render_html(rep))
         console().print(f"HTML report written to {out}")
+    elif fmt == Fmt.geojson:  # balises, curves and GIS defects over the grid, for QGIS
+        from dbtools.interchange.geojson import survey_geojson, write_geojson
+
+        assert out is not None
+        write_geojson(out, survey_geojson(rep.network, rep), force=True)
+        console().print(f"GeoJSON written to {out}")
     elif fmt == Fmt.json:
         text = json.dumps(rep.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
         if out:
@@ -198,7 +205,7 @@ def _emit(rep: SurveyReport, fmt: Fmt, out: Path | None) -> None:
 def survey(
     runs: list[Path] = typer.Argument(..., help="Run folders, or folders to search for runs (run.json)."),
     db: Path = typer.Option(..., "--db", help="Onboard DB under survey (.sqlite)."),
-    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json or html (html needs --out)."),
+    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json, html or geojson (html and geojson need --out)."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write the report to this file instead of stdout."),
     propose: Path | None = typer.Option(
         None, "--propose", help="Write a corrected source set here (flagged items only) with survey_changes.json/.csv."

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
 from dbtools.atomic import atomic_file, refuse_existing
 from dbtools.diff import load_network
@@ -14,6 +15,7 @@ from dbtools.interchange.geojson import network_features, network_geojson, write
 from dbtools.interchange.geometry import WGS84
 from dbtools.interchange.geometry import geodetic_epsg as lonlat_epsg
 from dbtools.network import Network
+from schemas.errors import UsageError
 
 
 class ExportFormat(StrEnum):
@@ -29,18 +31,25 @@ def geodetic_epsg(network: Network) -> int:
     return WGS84 if g is None else lonlat_epsg(g.crs_epsg)
 
 
-def export_network(source: Path, out: Path, fmt: ExportFormat, *, force: bool = False) -> dict[str, int]:
-    """Write ``source`` as ``fmt`` to ``out``; returns rows per table or layer."""
+def export_network(
+    source: Path, out: Path, fmt: ExportFormat, *, force: bool = False, xsd: Path | None = None
+) -> dict[str, int]:
+    """Write ``source`` as ``fmt`` to ``out``; returns rows per table or layer. With ``xsd``
+    (railML only) the document is validated against that XML Schema before anything is
+    written (:mod:`~dbtools.interchange.xsd`: FindingsError when it is not valid)."""
     out = Path(out)
+    if xsd is not None and fmt != ExportFormat.railml:
+        raise UsageError(f"--xsd validates railML only, not --format {fmt.value}")
     refuse_existing(out, force)
+    schema = None
+    if xsd is not None:
+        from dbtools.interchange.xsd import load_schema
+
+        schema = load_schema(xsd)
     network, _ = load_network(Path(source))
     counts = {name: len(frame) for name, frame in network.tables.items()}
     if fmt == ExportFormat.railml:
-        from dbtools.interchange.railml_out import network_railml
-
-        data = network_railml(network)
-        with atomic_file(out, force=force) as tmp:
-            tmp.write_bytes(data)
+        _write_railml(network, out, force, schema, xsd)
         return counts
     if fmt == ExportFormat.geojson:
         gj = network_geojson(network)
@@ -55,6 +64,20 @@ def export_network(source: Path, out: Path, fmt: ExportFormat, *, force: bool = 
 
     write_geoparquet(out, features, srs_epsg=geodetic_epsg(network), force=force)
     return _layers(features)
+
+
+def _write_railml(network: Network, out: Path, force: bool, schema: Any, xsd: Path | None) -> None:
+    from dbtools.interchange.railml_out import network_railml
+
+    data = network_railml(network)
+    if schema is not None and xsd is not None:
+        from lxml import etree
+
+        from dbtools.interchange.xsd import check_valid
+
+        check_valid(schema, etree.fromstring(data).getroottree(), file=str(out), xsd=xsd, what="the railML export")
+    with atomic_file(out, force=force) as tmp:
+        tmp.write_bytes(data)
 
 
 def _layers(features: list[dict[str, object]]) -> dict[str, int]:

@@ -5,7 +5,7 @@ where known) in WGS 84 — our lat/lon are in the geodetic datum of the network'
 (JGD2011, ETRS89, WGS 84), which differ from WGS 84 by at most a metre or two; no datum
 shift is applied, as everywhere in the suite. Every feature has a ``layer`` property
 (``balises``, ``feature_points``, ``gis_points``, ``gis_lines``, ``defects``, ``cells``,
-``proposal``, ``alarms``, ``possessions`` …) so one file can be split by layer in QGIS.
+``proposal``, ``alarms``, ``possessions``, ``balise_moves``, ``features`` …) so one file can be split by layer in QGIS.
 
 Things placed by kilometrage (balises, feature points, defects, alarms) get their position
 from the GIS grid of their line and track by linear interpolation between the 20 m points
@@ -13,7 +13,7 @@ from the GIS grid of their line and track by linear interpolation between the 20
 
 The writer (:func:`write_geojson`) and the builders (:func:`feature`, :func:`point`,
 :func:`line_string`, :func:`frame_points`) are meant for any command that lays results
-over the GIS (``gis verify``, ``possession check``, the survey).
+over the GIS (``gis verify``, ``possession check``, the survey: :func:`survey_geojson`).
 """
 
 from __future__ import annotations
@@ -155,18 +155,22 @@ def _km_features(loc: GridLocator, frame: pd.DataFrame, layer: str) -> list[dict
     return out
 
 
-def verification_geojson(network: Network, verification: Any) -> dict[str, Any]:
-    """``gis verify`` results: defects and cells (with their mean offset, the residual) as
-    lines along the grid, proposed moves as points at the old position with the new one as a
-    property and a short line from old to new."""
-    loc = GridLocator(network)
+def _verification_features(loc: GridLocator, verification: Any) -> list[dict[str, Any]]:
     feats = _km_features(loc, verification.defects, "defects") + _km_features(loc, verification.cells, "cells")
+    feats += _km_features(loc, verification.km_defects, "km_defects")
     for rec in verification.proposal.to_dict("records"):
         props = {"layer": "proposal", **{str(k): _clean(v) for k, v in rec.items()}}
         feats.append(feature(point(_num(rec["lon"]), _num(rec["lat"])), props))
         move = line_string([(_num(rec["lon"]), _num(rec["lat"])), (_num(rec["lon_new"]), _num(rec["lat_new"]))])
         feats.append(feature(move, {**props, "layer": "proposal_moves"}))
-    return collection(feats, name="gis verify")
+    return feats
+
+
+def verification_geojson(network: Network, verification: Any) -> dict[str, Any]:
+    """``gis verify`` results: defects, along-track defects (``km_defects``) and cells (with
+    their mean offset, the residual) as lines along the grid, proposed moves as points at the
+    old position with the new one as a property and a short line from old to new."""
+    return collection(_verification_features(GridLocator(network), verification), name="gis verify")
 
 
 def possession_geojson(network: Network, report: Mapping[str, Any], possessions: Sequence[Any]) -> dict[str, Any]:
@@ -195,3 +199,86 @@ def possession_geojson(network: Network, report: Mapping[str, Any], possessions:
                 props["evidence"] = json.dumps(a.get("evidence", {}), ensure_ascii=False)
                 feats.append(feature(geom, props))
     return collection(feats, name="possession check")
+
+
+def _records(frame: pd.DataFrame) -> list[dict[str, Any]]:
+    return [{str(k): _clean(v) for k, v in rec.items()} for rec in frame.to_dict("records")]
+
+
+def _balise_features(loc: GridLocator, balises: pd.DataFrame) -> list[dict[str, Any]]:
+    """A Point at the DB km per balise; the runs' place (km_surveyed_m = km_db_m − residual_m,
+    the residual being DB km − runs' km) as lon/lat properties, and for a moved balise a
+    ``balise_moves`` line along the grid from the DB km to the runs' km."""
+    out = []
+    for rec in _records(balises):
+        there = loc.at(rec["line_code"], rec["track"], rec["km_surveyed_m"])
+        lon_s, lat_s = there if there is not None else (None, None)
+        props = {"layer": "balises", **rec, "lon_surveyed": lon_s, "lat_surveyed": lat_s}
+        out.append(feature(loc.point_at(rec["line_code"], rec["track"], rec["km_db_m"]), props, str(rec["balise_id"])))
+        if rec["status"] == "moved" and there is not None:
+            move = line_string(loc.between(rec["line_code"], rec["track"], rec["km_db_m"], rec["km_surveyed_m"]))
+            out.append(feature(move, {**props, "layer": "balise_moves"}))
+    return out
+
+
+def _candidate_features(loc: GridLocator, candidates: pd.DataFrame) -> list[dict[str, Any]]:
+    """Telegrams the DB does not know: Points at the runs' km, status ``candidate``."""
+    out = []
+    for rec in _records(candidates):
+        props = {"layer": "balises", "balise_id": rec["candidate_id"], "status": "candidate", **rec}
+        out.append(feature(loc.point_at(rec["line_code"], rec["track"], rec["km_m"]), props))
+    return out
+
+
+def _span(loc: GridLocator, rec: Mapping[str, Any], suffix: str) -> Geometry:
+    """The curve from its entry to its exit km (``entry_km{suffix}``, ``exit_km{suffix}``)."""
+    a, b = rec.get(f"entry_km{suffix}"), rec.get(f"exit_km{suffix}")
+    if a is None or b is None:
+        return None
+    return line_string(loc.between(rec["line_code"], rec["track"], float(a), float(b)))
+
+
+def _curve_features(loc: GridLocator, features: pd.DataFrame) -> list[dict[str, Any]]:
+    """Curves (a DB feature point's entry to exit, or a new curve's as the runs place it) as
+    lines along the grid, layer ``features`` with its status; moved and new ones also as the
+    runs place them (layer ``feature_proposals``, the position ``--propose`` writes)."""
+    out = []
+    for rec in _records(features):
+        props = {"layer": "features", **rec}
+        geom = _span(loc, rec, "_db_m") if rec.get("feature_id") is not None else _span(loc, rec, "_m")
+        out.append(feature(geom, props))
+        if rec["status"] in ("moved", "new"):
+            out.append(feature(_span(loc, rec, "_m"), {**props, "layer": "feature_proposals"}))
+    return out
+
+
+def survey_geojson(network: Network, report: Any) -> dict[str, Any]:
+    """``trainpos survey`` results (a :class:`fieldlogs.survey.result.SurveyReport`) over
+    the DB's GIS grid: balises at their DB km with status (ok / moved / missed / unverified)
+    and residual ± 95 % interval, candidates (status ``candidate``) at the runs' km, moved
+    balises' DB → runs line, curves with their status and the runs' positions, and the GIS
+    statistics like ``gis verify``'s. The wheel diameters are no place on the map: they are
+    members of the FeatureCollection (``wheels``: ``vehicles``, ``runs``), beside ``db``,
+    ``db_version``, ``summary``, ``gis_note`` and ``failed_runs`` (RFC 7946 §6.1 foreign
+    members)."""
+    loc = GridLocator(network)
+    feats = _balise_features(loc, report.balises) + _candidate_features(loc, report.candidates)
+    if len(report.features):
+        feats += _curve_features(loc, report.features)
+    if report.gis is not None:
+        feats += _verification_features(loc, report.gis)
+    out = collection(feats, name="survey")
+    out.update(
+        jsonable(
+            {
+                "db": report.db,
+                "db_version": report.db_version,
+                "summary": report.summary(),
+                "wheels": {"vehicles": _records(report.wheels), "runs": _records(report.wheel_runs)},
+                "gis_note": report.gis_note,
+                "failed_runs": _records(report.failed_runs),
+            },
+            9,
+        )
+    )
+    return out

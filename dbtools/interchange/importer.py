@@ -1,6 +1,7 @@
 """``db import SOURCE --format railml --out SOURCE_DIR``: a railML file → a source set.
 
-Steps: safe parse (:mod:`~dbtools.interchange.xmltree`); version from ``@version`` (else the
+Steps: safe parse (:mod:`~dbtools.interchange.xmltree`); with ``--xsd`` validation against
+that XML Schema (:mod:`~dbtools.interchange.xsd`); version from ``@version`` (else the
 namespace): railML 2.0–2.5 (:mod:`~dbtools.interchange.railml2`) or 3.1–3.3
 (:mod:`~dbtools.interchange.railml3`); the ``--line-code`` map
 (:mod:`~dbtools.interchange.mapping`); balises (:mod:`~dbtools.interchange.balises`),
@@ -229,10 +230,17 @@ def _dedupe(findings: list[Finding]) -> list[Finding]:
     return out
 
 
-def read_railml(source: Path, lmap: LineMap) -> tuple[RailmlDoc, dict[str, Target]]:
-    """Parse and read a railML file (errors raise): the document and its track targets."""
+def read_railml(
+    source: Path, lmap: LineMap, *, schema: Any = None, xsd: Path | None = None
+) -> tuple[RailmlDoc, dict[str, Target]]:
+    """Parse and read a railML file (errors raise): the document and its track targets.
+    With ``schema`` (the XML Schema loaded from ``xsd``) the file is validated first."""
     file = str(source)
     tree = xt.parse(source)
+    if schema is not None and xsd is not None:
+        from dbtools.interchange.xsd import check_valid
+
+        check_valid(schema, tree, file=file, xsd=xsd, what=Path(source).name)
     version = detect_version(tree, file)
     reader = railml2.read if version.startswith("2") else railml3.read
     doc = reader(tree, file, version)
@@ -240,13 +248,21 @@ def read_railml(source: Path, lmap: LineMap) -> tuple[RailmlDoc, dict[str, Targe
     return doc, resolve(doc, lmap)
 
 
-def import_railml(source: Path, out: Path, *, line_map: Path | None = None, force: bool = False) -> ImportResult:
-    """Read, map and write (module doc). FindingsError (nothing written) on errors."""
+def import_railml(
+    source: Path, out: Path, *, line_map: Path | None = None, force: bool = False, xsd: Path | None = None
+) -> ImportResult:
+    """Read, map and write (module doc). FindingsError (nothing written) on errors. With
+    ``xsd`` the file is first validated against that XML Schema (:mod:`~dbtools.interchange.xsd`)."""
     source, out = Path(source), Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())) and not force:
         raise RefusedError("output folder exists and is not empty; use --force", path=out)
     lmap = read_map(line_map)
-    doc, targets = read_railml(source, lmap)
+    schema = None
+    if xsd is not None:
+        from dbtools.interchange.xsd import load_schema
+
+        schema = load_schema(xsd)
+    doc, targets = read_railml(source, lmap, schema=schema, xsd=xsd)
     tables, extra, findings = _frames(doc, lmap, targets)
     findings = _dedupe(doc.findings + findings + _unmapped(doc, doc.root))
     errors = [f for f in findings if f.severity == Severity.ERROR]

@@ -1,7 +1,8 @@
 """``db export --format railml``: an onboard DB as railML 3.2.
 
 What goes where (checked structurally by the tests; the railML XSDs are not shipped with the
-suite, so no XML Schema validation runs here):
+suite, so XML Schema validation runs only against one the user gives, ``db export --xsd``:
+:mod:`~dbtools.interchange.xsd`):
 
 * ``common/positioning``: one ``linearPositioningSystem`` per line (``@units="m"``, the
   line's km range; each kilometrage break an ``anchor`` at ``km_from`` with ``tpos:kmTo``),
