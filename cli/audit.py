@@ -14,7 +14,7 @@ import typer
 from rich.console import Console
 from rich.progress import Progress, TaskID
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_json, progress, write_out
 from fieldlogs.audit.runner import audit as run_audit
 from fieldlogs.config import load_tree
@@ -55,6 +55,7 @@ def audit(
         None, "--dask-scheduler", help="Run on this Dask cluster (tcp://host:8786) instead of local processes."
     ),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML, see trainpos config show)."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Run the positioning pipeline on every run found and store the results as each run finishes.
 
@@ -183,6 +184,7 @@ def report(
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
     target_pct: float = typer.Option(TARGET_PCT, "--target-pct", min=0.0, help="Position-correction target [%]."),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Position-correction percentages, slips, feature points, GPS and alarms per route/run/vehicle.
 

@@ -2,7 +2,8 @@
 
 JSON shapes (``--format json``), stable:
 
-* ``db diff``: ``{"old": {origin, kind, **meta, content_hash}, "new": {…},
+* ``db diff``: ``{"old": {origin, kind, **meta, content_hash, actual_content_hash,
+  content_verified}, "new": {…},
   "schema_version": {"old", "new"}, "meta": {key: [old, new]},
   "tables": {name: {"added", "removed", "changed", "rows": [{"change", "keys",
   "changes": {col: [old, new]}}]}}, "summary": [str]}``
@@ -22,7 +23,7 @@ import typer
 from rich.console import Console
 from rich.table import Table as RichTable
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, key_value_table, print_findings, print_json
 from dbtools.build import build_db
 from dbtools.diff import DbDiff, diff_paths
@@ -138,6 +139,14 @@ def _side_cell(side: dict[str, object], key: str) -> str:
     return "—" if v is None else str(v)
 
 
+def _content_check(side: dict[str, object]) -> str:
+    """Whether a side's content is the one its stored content_hash was made of."""
+    ok = side.get("content_verified")
+    if ok is None:
+        return "— (source set)"
+    return "[green]matches[/]" if ok else f"[red]MODIFIED[/] (actual {str(side.get('actual_content_hash'))[:16]})"
+
+
 def _print_diff(d: DbDiff) -> None:
     out = console()
     head = RichTable(title="db diff")
@@ -147,6 +156,7 @@ def _print_diff(d: DbDiff) -> None:
     head.add_row("origin", _side_cell(d.old, "origin"), _side_cell(d.new, "origin"))
     head.add_row("db_version", _side_cell(d.old, "db_version"), _side_cell(d.new, "db_version"))
     head.add_row("content_hash", _side_cell(d.old, "content_hash")[:16], _side_cell(d.new, "content_hash")[:16])
+    head.add_row("content check", _content_check(d.old), _content_check(d.new))
     head.add_row("schema_version", *("—" if v is None else str(v) for v in d.schema_version))
     out.print(head)
     counts = RichTable(title="Rows")
@@ -334,6 +344,7 @@ def export(
     fmt: str = typer.Option(..., "--format", help="railml (3.2), geojson, gpkg (GeoPackage) or geoparquet."),
     out: Path = typer.Option(..., "--out", "-o", help="Output file."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Export a DB as railML 3.2 or as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet).
 
@@ -401,6 +412,7 @@ def impact(
         None, "--config", help="Settings (TOML): the pipeline's sections, [possession]."
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Replay runs against two DB versions and show what the new one changes, before `db release`.
 

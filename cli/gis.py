@@ -16,7 +16,7 @@ import typer
 from rich.console import Console
 from rich.progress import Progress, TaskID
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, progress
 from dbtools.gis.io import grid_files
 from dbtools.gis.verify.config import VerifyConfig
@@ -250,6 +250,7 @@ def verify(
         f"(default {_VERIFY.max_km_margin_m:g}).",
     ),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="Processes replaying runs."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Verify the 20 m GIS grid against the trusted GPS fixes of recorded runs.
 

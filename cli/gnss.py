@@ -11,7 +11,7 @@ import pandas as pd
 import typer
 from rich.console import Console
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, frame_table, key_value_table
 from dbtools.atomic import atomic_file
 from dbtools.database import read_network
@@ -113,6 +113,7 @@ def position(
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file instead of the terminal."),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML; its [gnss] section)."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Position every epoch of a run on its track from the raw pseudoranges, beside the classical 4-satellite fix.
 

@@ -9,7 +9,7 @@ from typing import Any
 import pandas as pd
 import typer
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
 from fieldlogs.io import convert_run
 from fieldlogs.quality.checks import check_run, load_db_refs
@@ -38,6 +38,7 @@ def check(
     db: Path | None = typer.Option(None, "--db", help="Onboard DB: check GPS area and balise codes against it."),
     fmt: Fmt = typer.Option(Fmt.table, "--format", help="table or json."),
     strict: bool = typer.Option(False, "--strict", help="Warnings also fail (exit 1)."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Report every problem of each run: file, row (CSV line; Parquet row index + 2), column.
 

@@ -11,7 +11,7 @@ import pandas as pd
 import typer
 from rich.console import Console
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
 from fieldlogs.possession.check import PossessionReport, check_files
 from schemas.enums import AlarmType, NoticeType
@@ -120,6 +120,7 @@ def check(
         help="The work the worker selected on the device (work_no): only its possession allows being on rail. "
         "Without it, the plan rows for the run's vehicle_id (or for any vehicle).",
     ),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, key_value_table
 from dbtools.database import read_network
 from fieldlogs.config import load_tree
@@ -23,6 +23,7 @@ def run(
     out: Path = typer.Option(..., "--out", "-o", help="Output folder for positions, events, summary.json."),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML, see trainpos config show)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Replay a run cycle by cycle (100 ms) through the onboard positioning logic.
 

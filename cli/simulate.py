@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, key_value_table
 from fieldlogs.simulate import load_scenario, simulate_to_folder
 
@@ -38,6 +38,7 @@ def simulate(
         "of two receivers; ubx includes them when the scenario has them).",
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing run folder."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Simulate a field-log run: IMU, tacho, GPS, balises, cab (+ truth, radar) from the DB's track.
 

@@ -13,7 +13,7 @@ import pandas as pd
 import typer
 from rich.console import Console
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.gis import _Bar
 from cli.render import console, err_console, frame_table, key_value_table, progress
 from fieldlogs.config import load_tree
@@ -201,6 +201,7 @@ def survey(
     ),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML: [survey] and the pipeline's sections)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file or --propose folder."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Survey the DB's balises, feature points and the vehicles' wheels from recorded runs.
 
