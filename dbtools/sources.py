@@ -15,12 +15,14 @@ from dbtools.gis.georef import NETWORK_FILE, read_declaration, write_declaration
 from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.rules.area import check_area
 from dbtools.rules.common import Locator
-from dbtools.tabular import find_table_file, read_raw_table, sha256_file
+from dbtools.rules.schema import check_empty_tables
+from dbtools.tabular import find_table_file, read_table_file, sha256_file
 from dbtools.typed_csv import read_csv_typed
 from schemas.enums import Severity, Track
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
+from schemas.model import Table
 from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
 
 
@@ -54,8 +56,11 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
                 )
             tables[name] = empty_frame(table)
             continue
-        typed = read_csv_typed(table, path) if path.suffix.lower() == ".csv" else None  # None: as text
-        raw = typed if typed is not None else read_raw_table(path, sheet=name)
+        raw = read_csv_typed(table, path) if path.suffix.lower() == ".csv" else None  # None: as text
+        if raw is None:
+            tf = read_table_file(path, table=name, sheet=name, code_columns=code_columns(table))
+            raw = tf.frame
+            findings.extend(tf.findings)
         files[name] = str(path)
         hashes[path.name] = sha256_file(path)
         co = read_and_check(table, raw, file=str(path), allow_extra=(name == LINES.name))
@@ -73,8 +78,20 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
         if name in files:
             net.source_rows[name] = np.asarray(labels, dtype=np.int64) + FIRST_DATA_LINE
     net.meta = _declared_meta(folder, hashes)
-    findings.extend(check_area(net, Locator(files, net.source_rows)))
+    loc = Locator(files, net.source_rows)
+    findings.extend(check_empty_tables(net.tables, loc, tables_read=set(files)))
+    findings.extend(check_area(net, loc))
     return net, findings
+
+
+def code_columns(table: Table) -> list[str]:
+    """Text columns holding codes (keys, ``*_code``, ``*_id``): a number there has lost its
+    leading zeros in a workbook (:mod:`dbtools.tabular`)."""
+    return [
+        c.name
+        for c in table.columns
+        if c.dtype == "str" and (c.name in table.primary_key or c.name.endswith(("_code", "_id")))
+    ]
 
 
 def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:
