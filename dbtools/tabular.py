@@ -210,7 +210,7 @@ def _column_at_quote(path: Path, line: int, sep: str) -> str | None:
     pos = row.rfind('"')  # the quotes before it (if any) pair up
     if pos < 0:
         return None
-    idx = max(len(next(csv.reader([row[:pos]], delimiter=sep), [])) - 1, 0)  # the cell the quote opens
+    idx = max(len(_header_names(row[:pos], sep)) - 1, 0)  # the cell the quote opens
     names = _header_names(lines[0], sep)
     return names[idx] if 0 <= idx < len(names) else None
 
@@ -263,7 +263,11 @@ def _decode_other(path: Path, table: str) -> tuple[str, Finding]:
 
 
 def _header_names(header: str, sep: str) -> list[str]:
-    return [c.strip() for c in next(csv.reader([header.rstrip("\r\n")], delimiter=sep), [])]
+    """The names of a header line as the csv module splits it (none if it cannot)."""
+    try:
+        return [c.strip() for c in next(csv.reader([header.rstrip("\r\n")], delimiter=sep), [])]
+    except csv.Error:  # e.g. a lone carriage return: the parser's own findings follow
+        return []
 
 
 def _drop_duplicates(
