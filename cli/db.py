@@ -59,7 +59,12 @@ class ImportFmt(StrEnum):
 def build(
     source_dir: Path = typer.Argument(..., help="Source set folder: gis, balises, feature_points (.csv/.xlsx)."),
     out: Path = typer.Option(..., "--out", "-o", help="Output onboard DB file (.sqlite)."),
-    version: str | None = typer.Option(None, "--version", help="DB version (default: UTC date-time)."),
+    version: str | None = typer.Option(
+        None,
+        "--version",
+        help="DB version: letters and digits with single '.', '_' or '-' between them, e.g. 2026.11, "
+        "2026.11.1, v3 (default: UTC date-time, 20261201.093000).",
+    ),
     note: str = typer.Option("", "--note", help="Release note: who and why."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
 ) -> None:
