@@ -197,10 +197,12 @@ def report(
     from fieldlogs.reports.page import render_html
 
     rep = build_report(audit_db, by=by.value, target_pct=target_pct)
+    onboard = rep.meta.get("db_path")  # read for the html page's plots: an input too
+    inputs = [audit_db, *([Path(str(onboard))] if onboard else [])]
     if fmt == ReportFmt.html:
         if out is None:
             raise UsageError("--format html needs --out FILE")
-        write_out(out, force=force, inputs=[audit_db], text=render_html(rep, audit_db))
+        write_out(out, force=force, inputs=inputs, text=render_html(rep, audit_db))
         console().print(f"HTML report written to {out}")
     elif fmt == ReportFmt.json:
         data: Any = report_json(rep)
@@ -208,7 +210,7 @@ def report(
             write_out(
                 out,
                 force=force,
-                inputs=[audit_db],
+                inputs=inputs,
                 text=json.dumps(jsonable(data), indent=2, ensure_ascii=False) + "\n",
             )
         else:
@@ -216,12 +218,12 @@ def report(
     elif fmt == ReportFmt.csv:
         text = rep.groups.to_csv(index=False, lineterminator="\n")
         if out:
-            write_out(out, force=force, inputs=[audit_db], text=text)
+            write_out(out, force=force, inputs=inputs, text=text)
         else:
             typer.echo(text, nl=False)
     elif out:
         buf = io.StringIO()
         render_tables(rep, Console(file=buf, width=200, color_system=None))
-        write_out(out, force=force, inputs=[audit_db], text=buf.getvalue())
+        write_out(out, force=force, inputs=inputs, text=buf.getvalue())
     else:
         render_tables(rep, console())

@@ -28,7 +28,7 @@ from cli.render import console, key_value_table, print_findings, print_json
 from dbtools.build import build_db
 from dbtools.diff import DbDiff, diff_paths
 from dbtools.release import ImpactAttachment, list_releases, release_db, verify_releases
-from schemas.errors import RefusedError, UsageError
+from schemas.errors import UsageError
 from schemas.findings import Finding, findings_report, has_errors
 from schemas.registry import REGISTRY_FILE
 
@@ -438,18 +438,19 @@ def impact(
     max_margin_m.
 
     Exit 0 (a report, whatever changes); 2 if a DB, the plan or the runs cannot be read;
-    3 if --out exists (use --force).
+    3 if --out exists (use --force) or would replace an input.
 
     Example: trainpos db impact net-2026.10.sqlite net-2026.11.sqlite logs/ --format html --out impact.html
     """
+    from cli.render import check_outputs, inputs_of
     from fieldlogs.config import load_tree
 
     if fmt == ImpactFmt.html and out is None:
         raise UsageError("--format html needs --out FILE")
-    if out is not None and out.exists() and not force:
-        raise RefusedError("exists; use --force to replace it", path=out)
+    inputs = inputs_of(old, new, runs, plan, config)
+    check_outputs(files=[out], force=force, inputs=inputs)
     report = _impact_report(old, new, runs, plan, load_tree(config), workers)
-    _emit_impact(report, fmt, out)
+    _emit_impact(report, fmt, out, force, inputs)
 
 
 def _impact_report(
@@ -468,14 +469,14 @@ def _impact_report(
             bar.bar.stop()
 
 
-def _emit_impact(report: ImpactReport, fmt: ImpactFmt, out: Path | None) -> None:
+def _emit_impact(report: ImpactReport, fmt: ImpactFmt, out: Path | None, force: bool, inputs: list[Path]) -> None:
     import io
     import json
     import sys
 
     from rich.console import Console
 
-    from dbtools.atomic import atomic_file
+    from cli.render import write_out
 
     if fmt == ImpactFmt.html:
         from fieldlogs.impact.page import render_html
@@ -490,8 +491,7 @@ def _emit_impact(report: ImpactReport, fmt: ImpactFmt, out: Path | None) -> None
     if out is None:
         sys.stdout.write(text)
         return
-    with atomic_file(out, force=True) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+    write_out(out, text, force=force, inputs=inputs)
     console().print(f"impact report written to {out}")
 
 

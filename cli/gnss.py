@@ -12,8 +12,7 @@ import typer
 from rich.console import Console
 
 from cli.errors import NO_VERIFY_HASH, cli_command
-from cli.render import console, frame_table, key_value_table
-from dbtools.atomic import atomic_file
+from cli.render import check_outputs, console, frame_table, inputs_of, key_value_table, write_out
 from dbtools.database import read_network
 from fieldlogs.config import load_tree
 from fieldlogs.gnss.gis import gis_track
@@ -90,11 +89,6 @@ def render_table(report: GnssPositionReport, c: Console) -> None:
     c.print(frame_table(_table_frame(report), max_rows=len(report.epochs)))
 
 
-def _write(path: Path, text: str, force: bool) -> None:
-    with atomic_file(path, force=force) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-
-
 @app.command("position")
 @cli_command
 def position(
@@ -135,10 +129,9 @@ def position(
     """
     if (line is None) != (track is None):
         raise UsageError("give --line and --track together (or neither: the pipeline decides the track)")
-    if out is not None and out.exists() and not force:
-        from schemas.errors import RefusedError
-
-        raise RefusedError("output exists; use --force to replace it", path=out)
+    sky_file = None if sky_mask in ("none", "west-half", "east-half") else Path(sky_mask)  # a table
+    inputs = inputs_of(run_dir, db, sky_file, config)
+    check_outputs(files=[out], force=force, inputs=inputs)
     tree = load_tree(config)
     network = read_network(db)
     run = read_run(run_dir)
@@ -171,5 +164,5 @@ def position(
     if out is None:
         console().file.write(text)
     else:
-        _write(out, text, force)
+        write_out(out, text, force=force, inputs=inputs)
         console().print(f"{len(report.epochs)} receiver-epochs written to {out}")

@@ -36,7 +36,8 @@ def run(
     cfg = load_tree(config).pipeline
     network = read_network(db)
     result = run_pipeline(read_run(run_dir), network, cfg)
-    write_results(out, result.positions, result.events, result.summary, force=force)
+    inputs = [p for p in (run_dir, db, config) if p is not None]  # never replaced by --out
+    write_results(out, result.positions, result.events, result.summary, force=force, inputs=inputs)
     s = result.summary
     rows = [
         ("run", s["run_id"]),

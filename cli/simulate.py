@@ -54,13 +54,14 @@ def simulate(
     if line is not None or track is not None:
         overrides["route"] = {k: v for k, v in (("line_code", line), ("track", track)) if v is not None}
     sc = load_scenario(scenario, overrides or None)
+    inputs = [p for p in (db, scenario) if p is not None]  # never replaced by --out
     files: list[Path] = []
     if fmt.value in ("nmea", "ubx", "rinex"):
         from fieldlogs.recorders.export import simulate_with_recorder
 
-        result, files = simulate_with_recorder(db, out, fmt.value, scenario=sc, seed=seed, force=force)
+        result, files = simulate_with_recorder(db, out, fmt.value, scenario=sc, seed=seed, force=force, inputs=inputs)
     else:
-        result = simulate_to_folder(db, out, sc, seed=seed, fmt=fmt.value, force=force)  # type: ignore[arg-type]
+        result = simulate_to_folder(db, out, sc, seed=seed, fmt=fmt.value, force=force, inputs=inputs)  # type: ignore[arg-type]
     slips = [e for e in result.slip_episodes if e.kind == "slip"]
     rows = [
         ("run folder", str(result.path)),

@@ -74,5 +74,5 @@ def build_db(
         **network.meta,
         **(georef.to_meta() if georef is not None else {}),
     }
-    write_db(out, network, meta, force=force)
+    write_db(out, network, meta, force=force, inputs=[source_dir])
     return BuildResult(out, version_str, digest, {k: len(v) for k, v in network.tables.items()}, findings)

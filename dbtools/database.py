@@ -77,9 +77,12 @@ def table_rows(table: Table, frame: pd.DataFrame) -> Iterator[tuple[object, ...]
     return zip(*cols, strict=True)
 
 
-def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool = False) -> None:
-    """Write a complete onboard DB atomically. Refuses an existing ``path`` unless ``force``."""
-    with atomic_file(Path(path), force=force) as tmp:
+def write_db(
+    path: Path, network: Network, meta: dict[str, str], *, force: bool = False, inputs: Iterable[Path | str] = ()
+) -> None:
+    """Write a complete onboard DB atomically under the output rule of :mod:`dbtools.atomic`
+    (an existing ``path`` only with ``force``; never over a registry or one of ``inputs``)."""
+    with atomic_file(Path(path), force=force, inputs=inputs) as tmp:
         tmp.unlink()  # SQLite creates the file itself
         conn = sqlite3.connect(tmp)
         try:
@@ -120,10 +123,11 @@ def write_sqlite(
     *,
     pragmas: Sequence[str] = (),
     force: bool = False,
+    inputs: Iterable[Path | str] = (),
 ) -> None:
     """Write any other SQLite file (a GeoPackage …) atomically: ``pragmas`` first, then each
     ``(sql, rows)`` of ``script`` (``executemany`` with rows, else ``execute``) in one transaction."""
-    with atomic_file(Path(path), force=force) as tmp:
+    with atomic_file(Path(path), force=force, inputs=inputs) as tmp:
         tmp.unlink()
         conn = sqlite3.connect(tmp)
         try:

@@ -6,6 +6,7 @@ An optional ``network.toml`` declares the operating area, metric CRS and height 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -156,13 +157,14 @@ def _line_codes(tables: dict[str, pd.DataFrame], files: dict[str, str]) -> list[
     ]
 
 
-def write_source_set(network: Network, folder: Path, *, force: bool = False) -> Path:
-    """Write a network as CSV source files (the format ``db build`` reads back)."""
+def write_source_set(network: Network, folder: Path, *, force: bool = False, inputs: Iterable[Path | str] = ()) -> Path:
+    """Write a network as CSV source files (the format ``db build`` reads back), under the
+    output rule of :mod:`dbtools.atomic` (``inputs``: never replaced)."""
     from dbtools.atomic import atomic_folder
 
     folder = Path(folder)
     empty = folder.is_dir() and not any(folder.iterdir())
-    with atomic_folder(folder, force=force or empty) as tmp:  # an empty folder may be replaced
+    with atomic_folder(folder, force=force or empty, inputs=inputs) as tmp:  # an empty folder may be replaced
         for name, table in SOURCE_TABLES.items():
             frame = network.tables.get(name)
             if frame is None or (not table.required and frame.empty):
