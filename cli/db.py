@@ -30,7 +30,7 @@ from dbtools.diff import DbDiff, diff_paths
 from dbtools.release import ImpactAttachment, list_releases, release_db, verify_releases
 from schemas.errors import UsageError
 from schemas.findings import Finding, findings_report, has_errors
-from schemas.registry import REGISTRY_FILE
+from schemas.registry import DB_VERSION_RULE, REGISTRY_FILE
 
 if TYPE_CHECKING:
     from fieldlogs.impact import ImpactReport
@@ -59,12 +59,7 @@ class ImportFmt(StrEnum):
 def build(
     source_dir: Path = typer.Argument(..., help="Source set folder: gis, balises, feature_points (.csv/.xlsx)."),
     out: Path = typer.Option(..., "--out", "-o", help="Output onboard DB file (.sqlite)."),
-    version: str | None = typer.Option(
-        None,
-        "--version",
-        help="DB version: letters and digits with single '.', '_' or '-' between them, e.g. 2026.11, "
-        "2026.11.1, v3 (default: UTC date-time, 20261201.093000).",
-    ),
+    version: str | None = typer.Option(None, "--version", help=f"DB version: {DB_VERSION_RULE} (default: UTC time)."),
     note: str = typer.Option("", "--note", help="Release note: who and why."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
 ) -> None:
@@ -146,10 +141,8 @@ def _side_cell(side: dict[str, object], key: str) -> str:
 
 def _content_check(side: dict[str, object]) -> str:
     """Whether a side's content is the one its stored content_hash was made of."""
-    ok = side.get("content_verified")
-    if ok is None:
-        return "— (source set)"
-    return "[green]matches[/]" if ok else f"[red]MODIFIED[/] (actual {str(side.get('actual_content_hash'))[:16]})"
+    ok, actual = side.get("content_verified"), str(side.get("actual_content_hash"))[:16]
+    return "— (source set)" if ok is None else "[green]matches[/]" if ok else f"[red]MODIFIED[/] (actual {actual})"
 
 
 def _print_diff(d: DbDiff) -> None:
