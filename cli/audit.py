@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_json, progress, write_out
 from fieldlogs.pipeline.config import TARGET_PCT
 from schemas.errors import EXIT_FINDINGS, UsageError
@@ -56,6 +56,7 @@ def audit(
         None, "--dask-scheduler", help="Run on this Dask cluster (tcp://host:8786) instead of local processes."
     ),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML, see trainpos config show)."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Run the positioning pipeline on every run found and store the results as each run finishes.
 
@@ -188,6 +189,7 @@ def report(
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
     target_pct: float = typer.Option(TARGET_PCT, "--target-pct", min=0.0, help="Position-correction target [%]."),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Position-correction percentages, slips, feature points, GPS and alarms per route/run/vehicle.
 
@@ -203,10 +205,12 @@ def report(
     from fieldlogs.reports.report import build_report, report_json
 
     rep = build_report(audit_db, by=by.value, target_pct=target_pct)
+    onboard = rep.meta.get("db_path")  # read for the html page's plots: an input too
+    inputs = [audit_db, *([Path(str(onboard))] if onboard else [])]
     if fmt == ReportFmt.html:
         if out is None:
             raise UsageError("--format html needs --out FILE")
-        write_out(out, force=force, inputs=[audit_db], text=render_html(rep, audit_db))
+        write_out(out, force=force, inputs=inputs, text=render_html(rep, audit_db))
         console().print(f"HTML report written to {out}")
     elif fmt == ReportFmt.json:
         data: Any = report_json(rep)
@@ -214,7 +218,7 @@ def report(
             write_out(
                 out,
                 force=force,
-                inputs=[audit_db],
+                inputs=inputs,
                 text=json.dumps(jsonable(data), indent=2, ensure_ascii=False) + "\n",
             )
         else:
@@ -222,12 +226,12 @@ def report(
     elif fmt == ReportFmt.csv:
         text = rep.groups.to_csv(index=False, lineterminator="\n")
         if out:
-            write_out(out, force=force, inputs=[audit_db], text=text)
+            write_out(out, force=force, inputs=inputs, text=text)
         else:
             typer.echo(text, nl=False)
     elif out:
         buf = io.StringIO()
         render_tables(rep, Console(file=buf, width=200, color_system=None))
-        write_out(out, force=force, inputs=[audit_db], text=buf.getvalue())
+        write_out(out, force=force, inputs=inputs, text=buf.getvalue())
     else:
         render_tables(rep, console())

@@ -13,10 +13,21 @@ from typing import Any, TypeVar
 import typer
 
 from cli.render import err_console, print_findings
+from dbtools.integrity import HashPolicy, hash_policy
 from schemas.errors import EXIT_UNREADABLE, FindingsError, TrainposError
 
 EXIT_INTERNAL = 4
 F = TypeVar("F", bound=Callable[..., Any])
+
+#: ``--no-verify-hash``, the one opt-out of the content-hash check (``dbtools.integrity``)
+#: for every command that loads an onboard DB: declare a parameter ``no_verify_hash`` with
+#: this default; :func:`cli_command` reads it, the command body need not.
+NO_VERIFY_HASH = typer.Option(
+    False,
+    "--no-verify-hash",
+    help="Use an onboard DB whose content no longer matches the content hash stored when it was built "
+    "(edited or corrupted); it is refused (exit 2) without this. The DB used is named in a warning.",
+)
 
 
 def cli_command(fn: F) -> F:
@@ -29,7 +40,11 @@ def cli_command(fn: F) -> F:
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
-            return fn(*args, **kwargs)
+            with hash_policy(verify=not kwargs.get("no_verify_hash", False)) as policy:
+                try:
+                    return fn(*args, **kwargs)
+                finally:
+                    _warn_unverified(policy)
         except typer.Exit:
             raise
         except FindingsError as exc:
@@ -56,6 +71,11 @@ def cli_command(fn: F) -> F:
             raise typer.Exit(EXIT_INTERNAL) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def _warn_unverified(policy: HashPolicy) -> None:
+    for line in dict.fromkeys(policy.used_unverified):  # once per DB, in order
+        err_console().print(f"[bold yellow]warning:[/] {line}; used anyway (--no-verify-hash)", highlight=False)
 
 
 def environment_message(exc: OSError) -> str:

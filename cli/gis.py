@@ -13,10 +13,20 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from cli.errors import cli_command
-from cli.render import console, err_console, frame_table, key_value_table, print_findings, progress
+from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.render import (
+    check_outputs,
+    console,
+    err_console,
+    frame_table,
+    inputs_of,
+    key_value_table,
+    print_findings,
+    progress,
+    write_out,
+)
 from dbtools.gis.verify.config import VerifyConfig
-from schemas.errors import EXIT_FINDINGS, RefusedError, UsageError
+from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.units import format_km
 
 if TYPE_CHECKING:
@@ -254,6 +264,7 @@ def verify(
         f"(default {_VERIFY.max_km_margin_m:g}).",
     ),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="Processes replaying runs."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Verify the 20 m GIS grid against the trusted GPS fixes of recorded runs.
 
@@ -282,7 +293,8 @@ def verify(
     from fieldlogs.config import load_tree
     from fieldlogs.gisverify.evidence import verify_runs
 
-    _check_targets(fmt, out, propose, force)
+    inputs = inputs_of(db, runs, config)
+    _check_targets(fmt, out, propose, force, inputs)
     tree = load_tree(config)
     overrides: dict[str, Any] = {
         "alpha": alpha,
@@ -302,28 +314,25 @@ def verify(
         if bar.task is not None:
             bar.bar.stop()
     if propose is not None:
-        _write_proposal(report, propose)
-    _emit_report(report, fmt, out)
+        _write_proposal(report, propose, force, inputs)
+    _emit_report(report, fmt, out, force, inputs)
     if report.verification.has_defects:
         raise typer.Exit(EXIT_FINDINGS)
 
 
-def _check_targets(fmt: VerifyFmt, out: Path | None, propose: Path | None, force: bool) -> None:
-    """Usage and overwrite checks of ``gis verify`` before any run is replayed."""
+def _check_targets(fmt: VerifyFmt, out: Path | None, propose: Path | None, force: bool, inputs: list[Path]) -> None:
+    """Usage and output-rule checks of ``gis verify`` before any run is replayed."""
     if fmt in (VerifyFmt.html, VerifyFmt.geojson) and out is None:
         raise UsageError(f"--format {fmt.value} needs --out FILE")
-    for target in (out, propose):
-        if target is not None and target.exists() and not force:
-            if target.is_file() or any(target.iterdir()):
-                raise RefusedError("exists; use --force to replace it", path=target)
+    check_outputs(files=[out], folders=[propose], force=force, inputs=inputs)
 
 
-def _write_proposal(report: VerifyReport, propose: Path) -> None:
+def _write_proposal(report: VerifyReport, propose: Path, force: bool, inputs: list[Path]) -> None:
     from dbtools.gis.verify.proposal import proposed_network
     from dbtools.sources import write_source_set
 
     v = report.verification
-    write_source_set(proposed_network(report.network, v), propose, force=True)
+    write_source_set(proposed_network(report.network, v), propose, force=force, inputs=inputs)
     moved = len(v.proposal)
     err_console().print(
         f"proposed source set written to {propose} ({moved} GIS point(s) moved)"
@@ -332,7 +341,7 @@ def _write_proposal(report: VerifyReport, propose: Path) -> None:
     )
 
 
-def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None) -> None:
+def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None, force: bool, inputs: list[Path]) -> None:
     """The report as HTML (to ``out``), JSON or a table (to ``out`` or stdout)."""
     from rich.console import Console
 
@@ -340,30 +349,23 @@ def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None) -> None
         from fieldlogs.gisverify.page import render_html
 
         assert out is not None
-        _write(out, render_html(report))
+        write_out(out, render_html(report), force=force, inputs=inputs)
         console().print(f"HTML report written to {out}")
     elif fmt == VerifyFmt.geojson:  # defects, cells (residuals) and proposed moves for QGIS
         from dbtools.interchange.geojson import verification_geojson, write_geojson
 
         assert out is not None
-        write_geojson(out, verification_geojson(report.network, report.verification), force=True)
+        write_geojson(out, verification_geojson(report.network, report.verification), force=force, inputs=inputs)
         console().print(f"GeoJSON written to {out}")
     elif fmt == VerifyFmt.json:
         text = json.dumps(report.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
         if out:
-            _write(out, text)
+            write_out(out, text, force=force, inputs=inputs)
         else:
             sys.stdout.write(text)
     elif out:
         buf = io.StringIO()
         render_verification(report, Console(file=buf, width=160, color_system=None))
-        _write(out, buf.getvalue())
+        write_out(out, buf.getvalue(), force=force, inputs=inputs)
     else:
         render_verification(report, console())
-
-
-def _write(path: Path, text: str) -> None:
-    from dbtools.atomic import atomic_file
-
-    with atomic_file(path, force=True) as tmp:
-        tmp.write_text(text, encoding="utf-8")

@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from cli.errors import cli_command
-from cli.render import console, frame_table, key_value_table
+from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.render import check_outputs, console, frame_table, inputs_of, key_value_table, write_out
 from schemas.errors import UsageError
 from schemas.jsonable import jsonable
 from schemas.units import format_km
@@ -88,13 +88,6 @@ def render_table(report: GnssPositionReport, c: Console) -> None:
     c.print(frame_table(_table_frame(report), max_rows=len(report.epochs)))
 
 
-def _write(path: Path, text: str, force: bool) -> None:
-    from dbtools.atomic import atomic_file
-
-    with atomic_file(path, force=force) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-
-
 @app.command("position")
 @cli_command
 def position(
@@ -113,6 +106,7 @@ def position(
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file instead of the terminal."),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML; its [gnss] section)."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Position every epoch of a run on its track from the raw pseudoranges, beside the classical 4-satellite fix.
 
@@ -145,10 +139,9 @@ def position(
 
     if (line is None) != (track is None):
         raise UsageError("give --line and --track together (or neither: the pipeline decides the track)")
-    if out is not None and out.exists() and not force:
-        from schemas.errors import RefusedError
-
-        raise RefusedError("output exists; use --force to replace it", path=out)
+    sky_file = None if sky_mask in ("none", "west-half", "east-half") else Path(sky_mask)  # a table
+    inputs = inputs_of(run_dir, db, sky_file, config)
+    check_outputs(files=[out], force=force, inputs=inputs)
     tree = load_tree(config)
     network = read_network(db)
     run = read_run(run_dir)
@@ -181,5 +174,5 @@ def position(
     if out is None:
         console().file.write(text)
     else:
-        _write(out, text, force)
+        write_out(out, text, force=force, inputs=inputs)
         console().print(f"{len(report.epochs)} receiver-epochs written to {out}")

@@ -8,7 +8,7 @@ from typing import Any
 
 import typer
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
 from schemas.errors import EXIT_FINDINGS, EXIT_OK, EXIT_UNREADABLE, InputError
 from schemas.findings import has_errors
@@ -33,6 +33,7 @@ def check(
     db: Path | None = typer.Option(None, "--db", help="Onboard DB: check GPS area and balise codes against it."),
     fmt: Fmt = typer.Option(Fmt.table, "--format", help="table or json."),
     strict: bool = typer.Option(False, "--strict", help="Warnings also fail (exit 1)."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Report every problem of each run: file, row (CSV line; Parquet row index + 2), column.
 
@@ -157,11 +158,15 @@ def repair(
     out: Path = typer.Option(..., "--out", "-o", help="New run folder for the repaired run."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
     fmt: Fmt = typer.Option(Fmt.table, "--format", help="table or json."),
+    strict: bool = typer.Option(False, "--strict", help="Warnings left after the repair also fail (exit 1)."),
 ) -> None:
     """Safe repairs into a new folder: sort by t, drop exact duplicate rows, drop rows with a
     repeated t (keeping the first), bridge pulse-counter resets. Writes repair_log.json.
 
-    Exit 0 written, 1 problems that need a person (nothing written), 2 unreadable, 3 refused.
+    The repaired run is checked as `logs check` checks it before it is written. Exit 0
+    written (warnings that remain are listed), 1 problems that need a person — found before
+    the repair, or still found by logs check after it (listed with file, row, column; with
+    --strict warnings too) — and nothing is written, 2 unreadable, 3 refused.
 
     Example: trainpos logs repair runs/2026-01-15-V01 --out runs/2026-01-15-V01-repaired
     """
@@ -169,7 +174,7 @@ def repair(
 
     from fieldlogs.quality.repair import REPAIR_LOG, repair_run
 
-    res = repair_run(run, out, force=force)
+    res = repair_run(run, out, force=force, strict=strict)
     if fmt == Fmt.json:
         print_json(res.to_dict())
         return
@@ -194,6 +199,8 @@ def repair(
     else:
         c.print(f"Nothing to repair; copy written to {res.out}")
     rem = res.to_dict()["remaining"]
+    if res.remaining:
+        print_findings(res.remaining, console=c, title="Still found by logs check")
     c.print(f"log: {Path(res.out) / REPAIR_LOG}")
     c.print(f"still found by logs check: {rem['errors']} error(s), {rem['warnings']} warning(s)")
 

@@ -10,8 +10,18 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from cli.errors import cli_command
-from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
+from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.render import (
+    check_outputs,
+    console,
+    err_console,
+    frame_table,
+    inputs_of,
+    key_value_table,
+    print_findings,
+    print_json,
+    write_out,
+)
 from schemas.enums import AlarmType, NoticeType
 from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.units import format_km
@@ -126,6 +136,8 @@ def check(
         help="The work the worker selected on the device (work_no): only its possession allows being on rail. "
         "Without it, the plan rows for the run's vehicle_id (or for any vehicle).",
     ),
+    force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.
 
@@ -138,7 +150,8 @@ def check(
     possessions by wall-clock time (run.json start_time + t) and line.
 
     Exit codes: 0 no alarm; 1 alarms found, or the plan has errors (listed with file, line,
-    column); 2 the DB, plan, config or a run cannot be read (or --format html without --out).
+    column); 2 the DB, plan, config or a run cannot be read (or --format html without --out);
+    3 --out exists (use --force) or would replace an input.
 
     Example: trainpos possession check runs/rr-0116 --db net.sqlite --plan possessions.csv --format html --out pz.html
     """
@@ -148,6 +161,8 @@ def check(
 
     if fmt in (Fmt.html, Fmt.geojson) and out is None:
         raise UsageError(f"--format {fmt.value} needs --out FILE")
+    inputs = inputs_of(runs, db, plan, config)
+    check_outputs(files=[out], force=force, inputs=inputs)
     report = check_files(runs, db, plan, config, work=work)
     if report.plan.findings:
         print_findings(report.plan.findings, console=err_console(), title="Plan warnings")
@@ -155,33 +170,27 @@ def check(
         from fieldlogs.possession.page import render_html
 
         assert out is not None
-        _write(out, render_html(report.checks, plan=str(plan), db=str(db)))
+        write_out(out, render_html(report.checks, plan=str(plan), db=str(db)), force=force, inputs=inputs)
         console().print(f"HTML report written to {out} ({report.n_alarms} alarm(s))")
     elif fmt == Fmt.geojson:
         from dbtools.database import read_network
         from dbtools.interchange.geojson import possession_geojson, write_geojson
 
         assert out is not None
-        write_geojson(out, possession_geojson(read_network(db), report.to_json(), report.plan.possessions), force=True)
+        data = possession_geojson(read_network(db), report.to_json(), report.plan.possessions)
+        write_geojson(out, data, force=force, inputs=inputs)
         console().print(f"GeoJSON written to {out} ({report.n_alarms} alarm(s))")
     elif fmt == Fmt.json:
         data = report.to_json()
         if out:
-            _write(out, json.dumps(data, indent=2, ensure_ascii=False) + "\n")
+            write_out(out, json.dumps(data, indent=2, ensure_ascii=False) + "\n", force=force, inputs=inputs)
         else:
             print_json(data)
     elif out:
         buf = io.StringIO()
         render_tables(report, Console(file=buf, width=200, color_system=None))
-        _write(out, buf.getvalue())
+        write_out(out, buf.getvalue(), force=force, inputs=inputs)
     else:
         render_tables(report, console())
     if report.n_alarms:
         raise typer.Exit(EXIT_FINDINGS)
-
-
-def _write(path: Path, text: str) -> None:
-    from dbtools.atomic import atomic_file
-
-    with atomic_file(path, force=True) as tmp:
-        tmp.write_text(text, encoding="utf-8")

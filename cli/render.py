@@ -197,3 +197,31 @@ def write_out(path: Path, text: str, *, force: bool, inputs: Sequence[Path] = ()
     from dbtools.atomic import write_text
 
     write_text(path, text, force=force, inputs=inputs)
+
+
+def inputs_of(*items: Path | Sequence[Path] | None) -> list[Path]:
+    """A command's input paths (files, folders, lists of them; None left out), for the
+    output rule: no output may replace one of them."""
+    out: list[Path] = []
+    for item in items:
+        if item is None:
+            continue
+        out.extend([Path(item)] if isinstance(item, str | Path) else [Path(p) for p in item])
+    return out
+
+
+def check_outputs(
+    *, files: Sequence[Path | None] = (), folders: Sequence[Path | None] = (), force: bool, inputs: Sequence[Path]
+) -> None:
+    """The output rule for a command's outputs, checked before its work (the writes check
+    it again): exit 3 rather than an hour of replay and then a refusal. An existing empty
+    folder may be replaced."""
+    from dbtools.atomic import check_target
+
+    for f in files:
+        if f is not None:
+            check_target(f, force=force, kind="file", inputs=inputs)
+    for d in folders:
+        if d is not None:
+            empty = d.is_dir() and not any(d.iterdir())
+            check_target(d, force=force or empty, kind="folder", inputs=inputs)

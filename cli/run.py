@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, key_value_table
 from schemas.units import format_km
 
@@ -18,6 +18,7 @@ def run(
     out: Path = typer.Option(..., "--out", "-o", help="Output folder for positions, events, summary.json."),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML, see trainpos config show)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Replay a run cycle by cycle (100 ms) through the onboard positioning logic.
 
@@ -36,7 +37,8 @@ def run(
     cfg = load_tree(config).pipeline
     network = read_network(db)
     result = run_pipeline(read_run(run_dir), network, cfg)
-    write_results(out, result.positions, result.events, result.summary, force=force)
+    inputs = [p for p in (run_dir, db, config) if p is not None]  # never replaced by --out
+    write_results(out, result.positions, result.events, result.summary, force=force, inputs=inputs)
     s = result.summary
     rows = [
         ("run", s["run_id"]),

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import console, key_value_table
 
 
@@ -37,6 +37,7 @@ def simulate(
         "of two receivers; ubx includes them when the scenario has them).",
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing run folder."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Simulate a field-log run: IMU, tacho, GPS, balises, cab (+ truth, radar) from the DB's track.
 
@@ -55,13 +56,14 @@ def simulate(
     if line is not None or track is not None:
         overrides["route"] = {k: v for k, v in (("line_code", line), ("track", track)) if v is not None}
     sc = load_scenario(scenario, overrides or None)
+    inputs = [p for p in (db, scenario) if p is not None]  # never replaced by --out
     files: list[Path] = []
     if fmt.value in ("nmea", "ubx", "rinex"):
         from fieldlogs.recorders.export import simulate_with_recorder
 
-        result, files = simulate_with_recorder(db, out, fmt.value, scenario=sc, seed=seed, force=force)
+        result, files = simulate_with_recorder(db, out, fmt.value, scenario=sc, seed=seed, force=force, inputs=inputs)
     else:
-        result = simulate_to_folder(db, out, sc, seed=seed, fmt=fmt.value, force=force)  # type: ignore[arg-type]
+        result = simulate_to_folder(db, out, sc, seed=seed, fmt=fmt.value, force=force, inputs=inputs)  # type: ignore[arg-type]
     slips = [e for e in result.slip_episodes if e.kind == "slip"]
     rows = [
         ("run folder", str(result.path)),

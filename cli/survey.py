@@ -11,10 +11,10 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from cli.errors import cli_command
+from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.gis import _Bar
-from cli.render import console, err_console, frame_table, key_value_table, progress
-from schemas.errors import EXIT_FINDINGS, RefusedError, UsageError
+from cli.render import check_outputs, console, err_console, frame_table, inputs_of, key_value_table, progress, write_out
+from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.units import format_km
 
 if TYPE_CHECKING:
@@ -156,47 +156,37 @@ def render_survey(rep: SurveyReport, c: Console) -> None:
         err_console().print(f"[red]failed:[/] {run}: {str(err).splitlines()[0] if err else ''}", highlight=False)
 
 
-def _check_targets(fmt: Fmt, out: Path | None, propose: Path | None, force: bool) -> None:
+def _check_targets(fmt: Fmt, out: Path | None, propose: Path | None, force: bool, inputs: list[Path]) -> None:
     if fmt in (Fmt.html, Fmt.geojson) and out is None:
         raise UsageError(f"--format {fmt.value} needs --out FILE")
-    for target in (out, propose):
-        if target is not None and target.exists() and not force:
-            if target.is_file() or any(target.iterdir()):
-                raise RefusedError("exists; use --force to replace it", path=target)
+    check_outputs(files=[out], folders=[propose], force=force, inputs=inputs)
 
 
-def _write(path: Path, text: str) -> None:
-    from dbtools.atomic import atomic_file
-
-    with atomic_file(path, force=True) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-
-
-def _emit(rep: SurveyReport, fmt: Fmt, out: Path | None) -> None:
+def _emit(rep: SurveyReport, fmt: Fmt, out: Path | None, force: bool, inputs: list[Path]) -> None:
     from rich.console import Console
 
     if fmt == Fmt.html:
         from fieldlogs.survey.page import render_html
 
         assert out is not None
-        _write(out, render_html(rep))
+        write_out(out, render_html(rep), force=force, inputs=inputs)
         console().print(f"HTML report written to {out}")
     elif fmt == Fmt.geojson:  # balises, curves and GIS defects over the grid, for QGIS
         from dbtools.interchange.geojson import survey_geojson, write_geojson
 
         assert out is not None
-        write_geojson(out, survey_geojson(rep.network, rep), force=True)
+        write_geojson(out, survey_geojson(rep.network, rep), force=force, inputs=inputs)
         console().print(f"GeoJSON written to {out}")
     elif fmt == Fmt.json:
         text = json.dumps(rep.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
         if out:
-            _write(out, text)
+            write_out(out, text, force=force, inputs=inputs)
         else:
             sys.stdout.write(text)
     elif out:
         buf = io.StringIO()
         render_survey(rep, Console(file=buf, width=200, color_system=None))
-        _write(out, buf.getvalue())
+        write_out(out, buf.getvalue(), force=force, inputs=inputs)
     else:
         render_survey(rep, console())
 
@@ -218,6 +208,7 @@ def survey(
     ),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML: [survey] and the pipeline's sections)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file or --propose folder."),
+    no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Survey the DB's balises, feature points and the vehicles' wheels from recorded runs.
 
@@ -246,7 +237,8 @@ def survey(
     from fieldlogs.survey.propose import Proposal, write_proposal
     from fieldlogs.survey.runner import survey as run_survey
 
-    _check_targets(fmt, out, propose, force)
+    inputs = inputs_of(runs, db, config)
+    _check_targets(fmt, out, propose, force, inputs)
     tree = load_tree(config)
     bar = _Bar(progress(err_console()))
     try:
@@ -264,13 +256,18 @@ def survey(
             bar.bar.stop()
     if propose is not None:
         assert rep.proposed is not None
-        write_proposal(Proposal(rep.proposed, rep.changes), propose, force=True)
+        write_proposal(Proposal(rep.proposed, rep.changes), propose, force=force or _empty(propose), inputs=inputs)
         applied = int(rep.changes["applied"].sum()) if len(rep.changes) else 0
         err_console().print(
             f"proposed source set written to {propose} ({applied} change(s), evidence in survey_changes.json)"
             + (f"; build it with: trainpos db build {propose} --out NEW.sqlite" if applied else ""),
             highlight=False,
         )
-    _emit(rep, fmt, out)
+    _emit(rep, fmt, out, force, inputs)
     if rep.flagged:
         raise typer.Exit(EXIT_FINDINGS)
+
+
+def _empty(folder: Path) -> bool:
+    """An existing empty folder may be replaced without --force."""
+    return folder.is_dir() and not any(folder.iterdir())

@@ -14,8 +14,9 @@ from dbtools.gis.index import network_georef
 from dbtools.network import content_hash
 from dbtools.sources import read_source_set
 from schemas.enums import Severity
-from schemas.errors import FindingsError, RefusedError
+from schemas.errors import FindingsError, RefusedError, UsageError
 from schemas.findings import Finding
+from schemas.registry import DB_VERSION_RULE, db_version_problem
 from schemas.tables import SCHEMA_VERSION
 
 
@@ -44,7 +45,12 @@ def build_db(
     force: bool = False,
     now: datetime | None = None,
 ) -> BuildResult:
-    """Read, check and write. Nothing is written when a source has an error."""
+    """Read, check and write. Nothing is written when a source has an error or
+    ``db_version`` is no valid DB version (:data:`schemas.registry.DB_VERSION_PATTERN`:
+    UsageError)."""
+    problem = db_version_problem(db_version) if db_version is not None else None
+    if problem is not None:
+        raise UsageError(f"version '{db_version}' {problem}: a DB version is {DB_VERSION_RULE}")
     source_dir, out = Path(source_dir), Path(out)
     if out.resolve().parent == source_dir.resolve() or source_dir.resolve() in out.resolve().parents:
         raise RefusedError("the output must not be written into the source folder", path=out)
@@ -68,5 +74,5 @@ def build_db(
         **network.meta,
         **(georef.to_meta() if georef is not None else {}),
     }
-    write_db(out, network, meta, force=force)
+    write_db(out, network, meta, force=force, inputs=[source_dir])
     return BuildResult(out, version_str, digest, {k: len(v) for k, v in network.tables.items()}, findings)

@@ -21,7 +21,8 @@ import pandas as pd
 import sqlite_utils
 
 from dbtools.atomic import atomic_file
-from dbtools.network import Network, canonical, content_hash
+from dbtools.integrity import check_content_hash
+from dbtools.network import Network, canonical, network_content_hash
 from dbtools.sqlite_columns import insert_tables, read_table_columns
 from schemas.enums import Severity
 from schemas.errors import InputError
@@ -76,9 +77,12 @@ def table_rows(table: Table, frame: pd.DataFrame) -> Iterator[tuple[object, ...]
     return zip(*cols, strict=True)
 
 
-def write_db(path: Path, network: Network, meta: dict[str, str], *, force: bool = False) -> None:
-    """Write a complete onboard DB atomically. Refuses an existing ``path`` unless ``force``."""
-    with atomic_file(Path(path), force=force) as tmp:
+def write_db(
+    path: Path, network: Network, meta: dict[str, str], *, force: bool = False, inputs: Iterable[Path | str] = ()
+) -> None:
+    """Write a complete onboard DB atomically under the output rule of :mod:`dbtools.atomic`
+    (an existing ``path`` only with ``force``; never over a registry or one of ``inputs``)."""
+    with atomic_file(Path(path), force=force, inputs=inputs) as tmp:
         tmp.unlink()  # SQLite creates the file itself
         conn = sqlite3.connect(tmp)
         try:
@@ -119,10 +123,11 @@ def write_sqlite(
     *,
     pragmas: Sequence[str] = (),
     force: bool = False,
+    inputs: Iterable[Path | str] = (),
 ) -> None:
     """Write any other SQLite file (a GeoPackage …) atomically: ``pragmas`` first, then each
     ``(sql, rows)`` of ``script`` (``executemany`` with rows, else ``execute``) in one transaction."""
-    with atomic_file(Path(path), force=force) as tmp:
+    with atomic_file(Path(path), force=force, inputs=inputs) as tmp:
         tmp.unlink()
         conn = sqlite3.connect(tmp)
         try:
@@ -182,8 +187,14 @@ def schema_version(path: Path) -> int:
         return int(conn.execute("PRAGMA user_version").fetchone()[0])
 
 
-def read_network(path: Path) -> Network:
-    """Load every content table of an onboard DB as canonical typed frames."""
+def read_network(path: Path, *, verify: bool = True) -> Network:
+    """Load every content table of an onboard DB as canonical typed frames.
+
+    ``verify``: check the content against the hash stored at build
+    (:func:`dbtools.integrity.check_content_hash`: a mismatch raises ContentHashError unless
+    the caller runs under ``hash_policy(verify=False)``). False only for code that reports
+    the mismatch itself (validate, diff, verify-release) or that checks the content against
+    a hash of its own (replay workers)."""
     path = Path(path)
     with connect_ro(path) as conn:
         version = int(conn.execute("PRAGMA user_version").fetchone()[0])
@@ -204,7 +215,10 @@ def read_network(path: Path) -> Network:
                 raise InputError(f"table '{t.name}' cannot be read: {exc}", path=path) from exc
             tables[t.name] = canonical(t, frame)
         meta = dict(conn.execute(f"SELECT key, value FROM {META.name}").fetchall()) if META.name in existing else {}
-    return Network(tables, origin=str(path), meta=meta)
+    net = Network(tables, origin=str(path), meta=meta)
+    if verify:
+        check_content_hash(meta.get("content_hash"), network_content_hash(net), path)
+    return net
 
 
 def integrity_findings(path: Path, network: Network | None = None) -> list[Finding]:
@@ -228,14 +242,14 @@ def integrity_findings(path: Path, network: Network | None = None) -> list[Findi
                     value=parent,
                 )
             )
-    net = network if network is not None else read_network(path)
+    net = network if network is not None else read_network(path, verify=False)
     stored = net.meta.get("content_hash")
     if not stored:
         findings.append(
             Finding("db.meta", Severity.ERROR, "meta", "meta has no content_hash", value=None, limit="sha256")
         )
     else:
-        actual = content_hash(net.tables)
+        actual = network_content_hash(net)
         if actual != stored:
             findings.append(
                 Finding(

@@ -137,11 +137,12 @@ class DbDiff:
 # --------------------------------------------------------------------------- loading
 
 
-def load_network(path: Path) -> tuple[Network, int | None]:
+def load_network(path: Path, *, verify: bool = True) -> tuple[Network, int | None]:
     """A DB file or a source-set folder → (network, schema version; None for sources).
 
     Source sets with errors raise :class:`FindingsError`; unreadable input raises
-    :class:`InputError`.
+    :class:`InputError`. ``verify``: a DB file's content hash is checked
+    (:mod:`dbtools.integrity`); False for reports that state a mismatch themselves.
     """
     path = Path(path)
     if path.is_dir():
@@ -150,14 +151,15 @@ def load_network(path: Path) -> tuple[Network, int | None]:
         if errors:
             raise FindingsError(f"{len(errors)} error(s) in the source set; cannot diff it", findings, path=path)
         return network, None
-    network = read_network(path)
+    network = read_network(path, verify=verify)
     return network, schema_version(path)
 
 
 def diff_paths(old: Path, new: Path) -> DbDiff:
-    """Load both sides (DB files or source sets) and diff them."""
-    old_net, old_sv = load_network(old)
-    new_net, new_sv = load_network(new)
+    """Load both sides (DB files or source sets) and diff them. A DB whose content does not
+    match its stored content hash is diffed as it is, and the summary says so first."""
+    old_net, old_sv = load_network(old, verify=False)
+    new_net, new_sv = load_network(new, verify=False)
     return diff_networks(old_net, new_net, schema_versions=(old_sv, new_sv))
 
 
@@ -174,15 +176,16 @@ def diff_networks(
     tables = {t.name: diff_table(t, old.tables[t.name], new.tables[t.name]) for t in DB_TABLES}
     old_hash, new_hash = content_hash(old.tables), content_hash(new.tables)
     old_side, new_side = _side(old, old_hash), _side(new, new_hash)
-    keys = sorted((set(old_side) | set(new_side)) - {"origin", "kind"})
+    keys = sorted((set(old_side) | set(new_side)) - {"origin", "kind", "actual_content_hash", "content_verified"})
     meta = {k: (old_side.get(k), new_side.get(k)) for k in keys if old_side.get(k) != new_side.get(k)}
     d = DbDiff(old_side, new_side, schema_versions, meta, tables)
     d.summary = summarize(d, old, new)
-    for label, net, actual in (("OLD", old, old_hash), ("NEW", new, new_hash)):
-        stored = net.meta.get("content_hash")
-        if stored and stored != actual:
+    for label, side in (("NEW", new_side), ("OLD", old_side)):
+        if side["content_verified"] is False:
             d.summary.insert(
-                0, f"{label} ({net.origin}): content does not match its stored content_hash (edited after build)"
+                0,
+                f"{label} ({side['origin']}): content does not match its stored content_hash (edited after build, "
+                f"or a bit flip): stored {str(side['content_hash'])[:12]}…, actual {side['actual_content_hash'][:12]}…",
             )
     return d
 
@@ -272,10 +275,14 @@ def _side(net: Network, actual_hash: str) -> dict[str, Any]:
     """What the report says about one side: origin, kind and its meta.
 
     A source set has no stored content hash: the one a build would store is given instead.
+    ``actual_content_hash`` is the hash of the content as read; ``content_verified`` says
+    whether it is the stored one (None for a source set).
     """
     kind = "sources" if net.files else "db"
     side: dict[str, Any] = {"origin": net.origin, "kind": kind, **net.meta}
     side.setdefault("content_hash", actual_hash)
+    side["actual_content_hash"] = actual_hash
+    side["content_verified"] = None if kind == "sources" else side["content_hash"] == actual_hash
     return side
 
 
@@ -324,7 +331,13 @@ def summarize(d: DbDiff, old: Network, new: Network) -> list[str]:
             lines.extend(_capped(builders[t.name](td), t.name))
     if not d.has_changes:
         n = sum(len(new.tables[t.name]) for t in DB_TABLES)
-        lines.append(f"no content differences ({n} rows compared)")
+        same = d.old["actual_content_hash"] == d.new["actual_content_hash"]
+        lines.append(
+            f"no content differences ({n} rows compared)"
+            if same
+            else f"no content differences above the comparison tolerance ({n} rows compared), but the content "
+            f"hashes differ: values differ below {FLOAT_ATOL:g}"
+        )
     return lines
 
 

@@ -91,9 +91,39 @@ def canonical_with_index(table: Table, frame: pd.DataFrame) -> tuple[pd.DataFram
             s = pd.to_numeric(s).astype("float64")
         cols[c.name] = s
     out = pd.DataFrame(cols, index=frame.index)
-    if table.primary_key and len(out):
+    if table.primary_key and len(out) and not sorted_by(out, table.primary_key):
         out = out.sort_values(list(table.primary_key), kind="stable")
     return out.reset_index(drop=True), out.index.to_numpy()
+
+
+def sorted_by(frame: pd.DataFrame, keys: tuple[str, ...]) -> bool:
+    """True when the rows are already in the order a stable sort on ``keys`` gives (each
+    row's key tuple ≤ the next one's), so the sort can be skipped: frames read back from a
+    DB are (tables are read in key order). False whenever a key has a missing value (the
+    sort puts those last) or is not text or a number; the caller then sorts."""
+    n = len(frame)
+    if n < 2:
+        return True
+    undecided = np.ones(n - 1, dtype=bool)  # pairs equal on every key so far
+    for k in keys:
+        s = frame[k]
+        if s.isna().any():
+            return False
+        if isinstance(s.dtype, pd.StringDtype):
+            arr = pa.array(s.array, from_pandas=True)
+            lt = pc.less(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False)
+            eq = pc.equal(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False)
+        elif pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
+            v = s.to_numpy(dtype=np.float64)
+            lt, eq = v[:-1] < v[1:], v[:-1] == v[1:]
+        else:
+            return False
+        if (undecided & ~lt & ~eq).any():
+            return False  # a pair out of order
+        undecided &= eq
+        if not undecided.any():
+            return True
+    return True
 
 
 def joined_text(s: pd.Series) -> bytes:
@@ -135,3 +165,9 @@ def content_hash(tables: dict[str, pd.DataFrame]) -> str:
                 arr = np.where(np.isnan(arr), np.nan, arr)  # one NaN bit pattern
                 h.update(np.ascontiguousarray(arr).tobytes())
     return h.hexdigest()
+
+
+def network_content_hash(network: Network) -> str:
+    """:func:`content_hash` of a loaded network's tables, computed once per network (the
+    load that verifies it and the replay reference that follows share it)."""
+    return network.cached(("content_hash",), lambda: content_hash(network.tables))

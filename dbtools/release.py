@@ -47,7 +47,7 @@ from dbtools.validate import validate_path
 from schemas.enums import Severity
 from schemas.errors import FindingsError, InputError, RefusedError, UsageError
 from schemas.findings import Finding, has_errors
-from schemas.registry import DB_VERSION_PATTERN, IMPACTS, REGISTRY_FILE, RELEASES
+from schemas.registry import DB_VERSION_RULE, IMPACTS, REGISTRY_FILE, RELEASES, db_version_problem
 
 #: Mode of released files and manifests: read-only for everyone.
 READ_ONLY = 0o444
@@ -173,9 +173,12 @@ def release_db(
         raise FindingsError(f"{len(errors)} validation error(s); not released", findings, path=file)
     meta = read_meta(file)
     version = meta.get("db_version") or ""
-    if not re.fullmatch(DB_VERSION_PATTERN, version):
+    problem = db_version_problem(version)
+    if problem is not None:
         raise RefusedError(
-            f"db_version '{version}' cannot name a released file (letters, digits, '.', '_', '-' only)", path=file
+            f"db_version '{version}' {problem}: it cannot name a released file; a DB version is {DB_VERSION_RULE} "
+            "(rebuild it with db build --version)",
+            path=file,
         )
     target = registry / f"{version}.sqlite"
     manifest = registry / f"{version}.sha256"

@@ -6,6 +6,7 @@ An optional ``network.toml`` declares the operating area, metric CRS and height 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -15,12 +16,14 @@ from dbtools.gis.georef import NETWORK_FILE, read_declaration, write_declaration
 from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.rules.area import check_area
 from dbtools.rules.common import Locator
-from dbtools.tabular import find_table_file, read_raw_table, sha256_file
+from dbtools.rules.schema import check_empty_tables
+from dbtools.tabular import find_table_file, read_table_file, sha256_file
 from dbtools.typed_csv import read_csv_typed
 from schemas.enums import Severity, Track
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
+from schemas.model import Table
 from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
 
 
@@ -54,8 +57,11 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
                 )
             tables[name] = empty_frame(table)
             continue
-        typed = read_csv_typed(table, path) if path.suffix.lower() == ".csv" else None  # None: as text
-        raw = typed if typed is not None else read_raw_table(path, sheet=name)
+        raw = read_csv_typed(table, path) if path.suffix.lower() == ".csv" else None  # None: as text
+        if raw is None:
+            tf = read_table_file(path, table=name, sheet=name, code_columns=code_columns(table))
+            raw = tf.frame
+            findings.extend(tf.findings)
         files[name] = str(path)
         hashes[path.name] = sha256_file(path)
         co = read_and_check(table, raw, file=str(path), allow_extra=(name == LINES.name))
@@ -73,8 +79,20 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
         if name in files:
             net.source_rows[name] = np.asarray(labels, dtype=np.int64) + FIRST_DATA_LINE
     net.meta = _declared_meta(folder, hashes)
-    findings.extend(check_area(net, Locator(files, net.source_rows)))
+    loc = Locator(files, net.source_rows)
+    findings.extend(check_empty_tables(net.tables, loc, tables_read=set(files)))
+    findings.extend(check_area(net, loc))
     return net, findings
+
+
+def code_columns(table: Table) -> list[str]:
+    """Text columns holding codes (keys, ``*_code``, ``*_id``): a number there has lost its
+    leading zeros in a workbook (:mod:`dbtools.tabular`)."""
+    return [
+        c.name
+        for c in table.columns
+        if c.dtype == "str" and (c.name in table.primary_key or c.name.endswith(("_code", "_id")))
+    ]
 
 
 def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:
@@ -139,13 +157,14 @@ def _line_codes(tables: dict[str, pd.DataFrame], files: dict[str, str]) -> list[
     ]
 
 
-def write_source_set(network: Network, folder: Path, *, force: bool = False) -> Path:
-    """Write a network as CSV source files (the format ``db build`` reads back)."""
+def write_source_set(network: Network, folder: Path, *, force: bool = False, inputs: Iterable[Path | str] = ()) -> Path:
+    """Write a network as CSV source files (the format ``db build`` reads back), under the
+    output rule of :mod:`dbtools.atomic` (``inputs``: never replaced)."""
     from dbtools.atomic import atomic_folder
 
     folder = Path(folder)
     empty = folder.is_dir() and not any(folder.iterdir())
-    with atomic_folder(folder, force=force or empty) as tmp:  # an empty folder may be replaced
+    with atomic_folder(folder, force=force or empty, inputs=inputs) as tmp:  # an empty folder may be replaced
         for name, table in SOURCE_TABLES.items():
             frame = network.tables.get(name)
             if frame is None or (not table.required and frame.empty):

@@ -2,20 +2,52 @@
 
 Every reader in the suite that takes a spreadsheet-like file goes through here, so a
 malformed file gives the same kind of message everywhere: file, line and what is wrong.
+What spreadsheet tools commonly get wrong, and what happens to it here:
+
+* **encoding** — UTF-8, with or without a byte-order mark, is read as it is. A file that
+  is not UTF-8 but decodes as Shift-JIS (CP932: what Japanese Excel writes as "CSV") or
+  starts with a UTF-16 byte-order mark (Excel's "Unicode text") is read in that encoding,
+  with a warning (``source.encoding``) naming it and the first line that is not UTF-8;
+  anything else is refused (InputError) naming that line.
+* **delimiter** — a header without a comma that splits on ``;``, tab or ``|`` is read with
+  that delimiter, so that the other findings name the right cells, and is an error
+  (``source.delimiter``): the source format is comma-separated.
+* **quotes** — an opening quote that is never closed, and a quoted cell that spans lines
+  (a stray quote that swallowed the rows up to the next quote), are refused (InputError)
+  naming the line and the column: no cell of a table holds a line break.
+* **duplicated header names** — an error (``source.duplicate_column``) naming the column
+  and its positions; only the first of them is read.
+* **codes in .xlsx** — a number in a code column has lost its leading zeros in the
+  workbook (01 → 1): an error (``source.numeric_code``) naming the cell, unless the cell's
+  number format displays the zeros (``00``), in which case the cell is read as displayed.
+
+:func:`read_table_file` returns the frame with these findings; :func:`read_raw_table`
+(log streams, plans, survey files) raises the first error as an InputError instead.
 """
 
 from __future__ import annotations
 
+import csv
 import hashlib
+import io
 import re
 import zipfile
+from collections.abc import Collection
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
+from schemas.enums import Severity
 from schemas.errors import InputError
+from schemas.findings import Finding
 
 TABULAR_SUFFIXES = (".csv", ".xlsx")
+#: Delimiters recognised in a header without commas, with their names for messages.
+OTHER_DELIMITERS = {";": "semicolons", "\t": "tabs", "|": "vertical bars"}
+#: Cells named one by one per column for numeric codes; beyond, one finding counts the rest.
+MAX_CELLS_NAMED = 10
 
 
 def sha256_file(path: Path) -> str:
@@ -34,43 +66,277 @@ def find_table_file(folder: Path, stem: str) -> Path | None:
     return found[0] if found else None
 
 
-_LINE_RE = re.compile(r"line (\d+)")
+@dataclass
+class TableFile:
+    """The raw text cells of a file and what was found while reading it."""
+
+    frame: pd.DataFrame
+    findings: list[Finding] = field(default_factory=list)
 
 
-def read_raw_table(path: Path, sheet: str | None = None) -> pd.DataFrame:
-    """All cells as text (leading zeros kept, empty cells as empty strings)."""
+def read_table_file(
+    path: Path, *, table: str = "", sheet: str | None = None, code_columns: Collection[str] = ()
+) -> TableFile:
+    """All cells as text (leading zeros kept, empty cells as empty strings), plus findings
+    (module docstring) for ``table``. ``code_columns``: the columns whose numeric .xlsx
+    cells are reported. InputError when the file cannot be read at all."""
     path = Path(path)
     if not path.exists():
         raise InputError("no such file", path=path)
-    if path.suffix.lower() == ".xlsx":
-        return _read_xlsx(path, sheet)
-    fast = _read_csv_fast(path)
-    try:
-        frame = (
-            fast
-            if fast is not None
-            else pd.read_csv(path, dtype=str, keep_default_na=False, encoding="utf-8-sig", skipinitialspace=True)
+    tf = _read_xlsx(path, sheet, table, code_columns) if path.suffix.lower() == ".xlsx" else _read_csv(path, table)
+    empty = [i + 1 for i, c in enumerate(tf.frame.columns) if str(c).startswith("Unnamed:") or not str(c).strip()]
+    if empty:
+        raise InputError(f"header has empty column name(s) at position {empty}", path=path, row=1)
+    return tf
+
+
+def read_raw_table(path: Path, sheet: str | None = None) -> pd.DataFrame:
+    """:func:`read_table_file`'s frame; its first error finding raised as an InputError."""
+    tf = read_table_file(path, sheet=sheet)
+    for f in tf.findings:
+        if f.severity == Severity.ERROR:
+            raise InputError(f.message, path=path, row=f.row, column=f.column)
+    return tf.frame
+
+
+# ------------------------------------------------------------------------------------ CSV
+
+
+def _read_csv(path: Path, table: str) -> TableFile:
+    findings: list[Finding] = []
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    if not head.strip():
+        raise InputError("file is empty (no header line)", path=path)
+    sep = _delimiter(head)
+    if sep != ",":
+        findings.append(
+            Finding(
+                "source.delimiter",
+                Severity.ERROR,
+                table,
+                f"fields are separated by {OTHER_DELIMITERS[sep]} ({sep!r}), not commas: "
+                "save the file as CSV (comma delimited)",
+                file=str(path),
+                row=1,
+                value=sep,
+                limit=",",
+            )
         )
+    fast = _read_csv_fast(path) if sep == "," else None  # checked for line breaks already
+    utf8 = None if head.startswith((b"\xff\xfe", b"\xfe\xff")) else fast if fast is not None else _utf8(path, sep)
+    if utf8 is None:  # not UTF-8: the whole file decoded in the encoding it has
+        decoded, note = _decode_other(path, table)
+        findings.append(note)
+        frame = _parse_text(path, decoded, sep)
+        header = decoded.lstrip("\ufeff").split("\n", 1)[0]
+    else:
+        frame = utf8
+        header = head.decode("utf-8", errors="replace").lstrip("\ufeff").split("\n", 1)[0]
+    if fast is None:
+        _refuse_multiline(frame, path)
+    frame, dups = _drop_duplicates(frame, _header_names(header, sep), path, table)
+    return TableFile(frame, findings + dups)
+
+
+def _delimiter(head: bytes) -> str:
+    """``,`` unless the header line has no comma and splits on another delimiter."""
+    first = head.split(b"\n", 1)[0].replace(b"\x00", b"")  # (UTF-16: the ASCII bytes)
+    if b"," in first:
+        return ","
+    for sep in OTHER_DELIMITERS:
+        if first.count(sep.encode()) >= 1:
+            return sep
+    return ","
+
+
+def _utf8(path: Path, sep: str) -> pd.DataFrame | None:
+    """The frame of a UTF-8 file (BOM or not) by the C parser; None when it is not UTF-8."""
+    try:
+        return _parse(path, sep, lambda: pd.read_csv(path, **_csv_options(sep), encoding="utf-8-sig"))
+    except UnicodeDecodeError:
+        return None
+
+
+def _csv_options(sep: str) -> dict[str, Any]:
+    return {"dtype": str, "keep_default_na": False, "skipinitialspace": True, "sep": sep}
+
+
+def _parse(path: Path, sep: str, read: Any) -> pd.DataFrame:
+    """``read()`` with the parser's errors as InputErrors naming the line."""
+    try:
+        frame: pd.DataFrame = read()
     except pd.errors.EmptyDataError as exc:
         raise InputError("file is empty (no header line)", path=path) from exc
     except pd.errors.ParserError as exc:
-        m = _LINE_RE.search(str(exc))
-        raise InputError(f"malformed CSV: {str(exc).strip()}", path=path, row=int(m.group(1)) if m else None) from exc
-    except UnicodeDecodeError as exc:
-        raise InputError(f"not UTF-8 text (byte {exc.start}): save the file as UTF-8 CSV", path=path) from exc
-    if any(str(c).startswith("Unnamed:") for c in frame.columns):
-        bad = [i + 1 for i, c in enumerate(frame.columns) if str(c).startswith("Unnamed:")]
-        raise InputError(f"header has empty column name(s) at position {bad}", path=path, row=1)
+        raise _parser_error(path, str(exc), sep) from exc
     return frame
+
+
+def _parse_text(path: Path, text: str, sep: str) -> pd.DataFrame:
+    return _parse(path, sep, lambda: pd.read_csv(io.StringIO(text.lstrip("\ufeff")), **_csv_options(sep)))
+
+
+_EOF_RE = re.compile(r"EOF inside string starting at row (\d+)")
+_FIELDS_RE = re.compile(r"Expected (\d+) fields in line (\d+), saw (\d+)")
+
+
+def _parser_error(path: Path, msg: str, sep: str) -> InputError:
+    m = _EOF_RE.search(msg)
+    if m:  # the parser's row is the 0-based line the quoted cell starts on
+        line = int(m.group(1)) + 1
+        return InputError(
+            'a quote (") opens a cell here and is never closed: the rest of the file would be one cell',
+            path=path,
+            row=line,
+            column=_column_at_quote(path, line, sep),
+        )
+    m = _FIELDS_RE.search(msg)
+    if m:
+        return InputError(
+            f"{m.group(3)} fields where the header has {m.group(1)}: a cell holding "
+            f"{'a comma' if sep == ',' else repr(sep)} needs quotes",
+            path=path,
+            row=int(m.group(2)),
+        )
+    return InputError(f"malformed CSV: {msg.strip()}", path=path)
+
+
+def _column_at_quote(path: Path, line: int, sep: str) -> str | None:
+    """The header name of the column whose cell opens the unclosed quote on ``line``."""
+    with open(path, encoding="utf-8-sig", errors="replace") as fh:
+        lines = [next(fh, "") for _ in range(line)]
+    row = lines[-1]
+    pos = row.rfind('"')  # the quotes before it (if any) pair up
+    if pos < 0:
+        return None
+    idx = max(len(_header_names(row[:pos], sep)) - 1, 0)  # the cell the quote opens
+    names = _header_names(lines[0], sep)
+    return names[idx] if 0 <= idx < len(names) else None
+
+
+#: What CP932 decodes its unassigned bytes (0x80, 0xA0, 0xFD–0xFF) and user-defined
+#: characters to: control and private-use code points, never in a maintenance file.
+_CP932_UNUSED = re.compile("[\x80-\x9f\ue000-\uf8ff]")
+
+
+def _decode_other(path: Path, table: str) -> tuple[str, Finding]:
+    """A non-UTF-8 file's text and the warning naming its encoding; InputError when it is
+    neither UTF-16 (with BOM) nor Shift-JIS (CP932)."""
+    raw = path.read_bytes()
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        encoding, line = "UTF-16", 1
+        try:
+            text = raw.decode("utf-16")
+        except UnicodeDecodeError as exc:
+            raise InputError("starts with a UTF-16 byte-order mark but is not UTF-16 text", path=path) from exc
+    else:
+        try:
+            raw.decode("utf-8")
+            raise InputError("not readable as text", path=path)  # pragma: no cover - UTF-8 was refused
+        except UnicodeDecodeError as exc:
+            line = raw[: exc.start].count(b"\n") + 1
+        encoding = "Shift-JIS (CP932)"
+        try:
+            text = raw.decode("cp932")
+        except UnicodeDecodeError:
+            text = ""
+        if not text or _CP932_UNUSED.search(text):  # bytes no Japanese text has: another encoding
+            raise InputError(
+                f"not UTF-8 text (line {line} is the first that is not), nor Shift-JIS (CP932): "
+                "save the file as UTF-8 CSV",
+                path=path,
+                row=line,
+            )
+    note = Finding(
+        "source.encoding",
+        Severity.WARNING,
+        table,
+        f"not UTF-8 (line {line} is the first that is not): read as {encoding}; "
+        "check the text in the output, and save the file as UTF-8 to be sure",
+        file=str(path),
+        row=line,
+        value=encoding,
+        limit="UTF-8",
+    )
+    return text.replace("\r\n", "\n"), note
+
+
+def _header_names(header: str, sep: str) -> list[str]:
+    """The names of a header line as the csv module splits it (none if it cannot)."""
+    try:
+        return [c.strip() for c in next(csv.reader([header.rstrip("\r\n")], delimiter=sep), [])]
+    except csv.Error:  # e.g. a lone carriage return: the parser's own findings follow
+        return []
+
+
+def _drop_duplicates(
+    frame: pd.DataFrame, names: list[str], path: Path, table: str
+) -> tuple[pd.DataFrame, list[Finding]]:
+    """The frame without the later copies of a repeated header name, and one finding per name."""
+    seen: dict[str, list[int]] = {}
+    for i, n in enumerate(names):
+        seen.setdefault(n, []).append(i)
+    repeated = {n: pos for n, pos in seen.items() if len(pos) > 1 and n}
+    if not repeated or len(names) != frame.shape[1]:
+        return frame, []
+    findings = [
+        Finding(
+            "source.duplicate_column",
+            Severity.ERROR,
+            table,
+            f"column '{n}' appears {len(pos)} times in the header (columns {', '.join(str(p + 1) for p in pos)}); "
+            "only the first is read: rename or delete the others",
+            file=str(path),
+            row=1,
+            column=n,
+            value=len(pos),
+            limit=1,
+        )
+        for n, pos in repeated.items()
+    ]
+    drop = {p for pos in repeated.values() for p in pos[1:]}
+    keep = [i for i in range(frame.shape[1]) if i not in drop]
+    out = frame.iloc[:, keep]
+    out.columns = [names[i] for i in keep]
+    return out, findings
+
+
+def _refuse_multiline(frame: pd.DataFrame, path: Path) -> None:
+    """InputError naming line and column of the first cell that holds a line break."""
+    first: tuple[int, str] | None = None
+    for c in frame.columns:
+        s = frame[c]
+        if s.dtype != object and not pd.api.types.is_string_dtype(s.dtype):
+            continue
+        hit = s.astype("string").str.contains(r"[\r\n]", regex=True, na=False).to_numpy(dtype=bool)
+        if hit.any():
+            r = int(hit.argmax())
+            if first is None or r < first[0]:
+                first = (r, str(c))
+    if first is None:
+        return
+    r, col = first
+    breaks = sum(int(frame[c].iloc[:r].astype("string").str.count("\n").fillna(0).sum()) for c in frame.columns)
+    line = r + 2 + breaks  # header line 1, first data line 2, plus the line breaks inside earlier cells
+    span = int(str(frame[col].iat[r]).count("\n"))
+    raise InputError(
+        f'a quoted cell spans lines {line}–{line + span}: a quote (") is not closed where it should be, so those '
+        "lines were read as one cell (no cell may hold a line break): remove the stray quote",
+        path=path,
+        row=line,
+        column=col,
+    )
 
 
 def _read_csv_fast(path: Path) -> pd.DataFrame | None:
     """The same frame as the C parser gives, ~10× faster (pyarrow's CSV reader), or None.
 
     None whenever the fast reader fails or its result could differ from the C parser's
-    (a field or header with leading blanks, which ``skipinitialspace`` would strip): the
-    caller then reads with the C parser, which also produces the established error
-    messages for malformed files.
+    (a field or header with leading blanks, which ``skipinitialspace`` would strip; a cell
+    holding a line break, which pyarrow reads silently — an unclosed quote swallows the
+    rest of the file): the caller then reads with the C parser, which also produces the
+    established error messages for malformed files.
     """
     try:
         frame = pd.read_csv(path, dtype=str, keep_default_na=False, engine="pyarrow")
@@ -80,21 +346,110 @@ def _read_csv_fast(path: Path) -> pd.DataFrame | None:
         if str(c)[:1].isspace():
             return None
         col = frame[c]
-        if len(col) and col.str.match(r"[ \t]").any():
+        if len(col) and (col.str.match(r"[ \t]").any() or col.str.contains(r"[\r\n]", regex=True).any()):
             return None
     return frame
 
 
-def _read_xlsx(path: Path, sheet: str | None) -> pd.DataFrame:
+# ----------------------------------------------------------------------------------- XLSX
+
+
+def _read_xlsx(path: Path, sheet: str | None, table: str, code_columns: Collection[str]) -> TableFile:
+    import openpyxl
+    from openpyxl.utils.exceptions import InvalidFileException
+
     try:
-        book = pd.ExcelFile(path, engine="openpyxl")
-    except (zipfile.BadZipFile, ValueError, OSError, KeyError) as exc:
+        book = openpyxl.load_workbook(path, read_only=True, data_only=True, keep_links=False)
+    except (zipfile.BadZipFile, InvalidFileException, ValueError, OSError, KeyError) as exc:
         raise InputError(f"not a readable .xlsx workbook: {exc}", path=path) from exc
-    with book:  # close the workbook (an open one leaks a ResourceWarning later)
-        name = sheet if sheet in book.sheet_names else book.sheet_names[0]
+    try:
+        name = sheet if sheet in book.sheetnames else book.sheetnames[0]
         try:
-            frame = pd.read_excel(book, sheet_name=name, dtype=str, keep_default_na=False)
-        except (ValueError, KeyError) as exc:
+            return _sheet(book[name], path, table, code_columns)
+        except (ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile) as exc:
             raise InputError(f"sheet '{name}' cannot be read: {exc}", path=path) from exc
-    frame = frame.dropna(how="all")
-    return frame.fillna("")
+    finally:
+        book.close()  # an open workbook leaks a ResourceWarning later
+
+
+def _cell_text(v: object) -> str:
+    """A cell's value as pandas' ``read_excel(dtype=str)`` gives it (whole floats as ints)."""
+    if v is None:
+        return ""
+    if isinstance(v, float) and v.is_integer():
+        return str(int(v))
+    return str(v)
+
+
+_ZEROS = re.compile(r"0+")
+
+
+def _sheet(ws: Any, path: Path, table: str, code_columns: Collection[str]) -> TableFile:
+    rows = ws.iter_rows()
+    header = next(rows, None)
+    if header is None:
+        raise InputError("sheet is empty (no header row)", path=path)
+    names = [_cell_text(c.value).strip() for c in header]
+    while names and not names[-1]:
+        names.pop()
+    codes = {i for i, n in enumerate(names) if n in code_columns}
+    data: list[list[str]] = []
+    numeric: dict[str, list[tuple[int, str, str]]] = {}
+    for r, cells in enumerate(rows, start=2):
+        vals = [_cell_text(c.value) for c in cells]
+        if not any(v.strip() for v in vals):
+            continue  # an empty row (as pandas skips it)
+        if any(v.strip() for v in vals[len(names) :]):
+            names += [""] * (len(vals) - len(names))  # data beyond the header: an empty header name
+        for i in codes:
+            if i < len(cells) and cells[i].data_type == "n" and cells[i].value is not None:
+                vals[i] = _numeric_code(cells[i], vals[i], names[i], r, numeric)
+        data.append((vals + [""] * len(names))[: len(names)])
+    names = [n if n else f"Unnamed: {i}" for i, n in enumerate(names)]  # refused by the caller
+    frame, findings = _drop_duplicates(pd.DataFrame(data, columns=names, dtype=object), names, path, table)
+    return TableFile(frame, findings + _numeric_findings(numeric, path, table))
+
+
+def _numeric_code(cell: Any, text: str, name: str, row: int, numeric: dict[str, list[tuple[int, str, str]]]) -> str:
+    """A numeric cell of a code column: as displayed when its format shows the zeros
+    (``00`` → 01), else recorded for a finding and read as its digits."""
+    fmt = str(cell.number_format or "")
+    value = float(cell.value)
+    if _ZEROS.fullmatch(fmt) and value.is_integer() and value >= 0:
+        return str(int(value)).zfill(len(fmt))
+    numeric.setdefault(name, []).append((row, f"{cell.column_letter}{row}", text))
+    return text
+
+
+def _numeric_findings(numeric: dict[str, list[tuple[int, str, str]]], path: Path, table: str) -> list[Finding]:
+    out: list[Finding] = []
+    for name, cells in numeric.items():
+        for row, ref, text in cells[:MAX_CELLS_NAMED]:
+            out.append(
+                Finding(
+                    "source.numeric_code",
+                    Severity.ERROR,
+                    table,
+                    f"cell {ref} holds the number {text}, not text: a code stored as a number has lost its "
+                    "leading zeros (01 → 1); format the column as Text and type the codes again",
+                    file=str(path),
+                    row=row,
+                    column=name,
+                    value=text,
+                    limit="text",
+                )
+            )
+        if len(cells) > MAX_CELLS_NAMED:
+            out.append(
+                Finding(
+                    "source.numeric_code",
+                    Severity.ERROR,
+                    table,
+                    f"{len(cells) - MAX_CELLS_NAMED} more cells of '{name}' hold numbers, not text",
+                    file=str(path),
+                    column=name,
+                    value=len(cells),
+                    limit=0,
+                )
+            )
+    return out

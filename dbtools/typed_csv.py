@@ -12,10 +12,14 @@ It gives the same typed frame and the same findings as the general path, so it d
 (returns None, and the caller reads as text) whenever that could differ: the file does not
 parse with the declared number types (a bad cell: the text path names it), a parsed
 value is infinite or NaN (the text path names the cell as written), a column name is
-not a declared one or repeated, or a text field starts with a blank (the C parser's
-``skipinitialspace`` would strip it). Cells the text path treats as blank — empty, or
-``nan``/``na``/``null`` in any letter case, padded or not — are nulls here too. Text
-columns are read as text and coerced exactly as before. A whole number column is parsed
+not a declared one or repeated, a text field starts with a blank (the C parser's
+``skipinitialspace`` would strip it), or a text field holds a line break (Arrow reads an
+unclosed quote silently, swallowing the rest of the file into one cell; the text path
+refuses it naming the line). A header-only file, a file in another encoding or with
+another delimiter declines too: the text path reports those (:mod:`dbtools.tabular`).
+Cells the text path treats as blank — empty, or ``nan``/``na``/``null`` in any letter
+case, padded or not — are nulls here too. Text columns are read as text and coerced
+exactly as before. A whole number column is parsed
 as float64 and checked by ``coerce_frame`` (integral values only: a fractional one declines,
 for the text path to name it).
 Measurements: bench/bench_logs.py (against pyarrow.csv, polars and typed pandas) and
@@ -55,8 +59,8 @@ def _numbers(data: pa.Table, table: Table) -> dict[str, np.ndarray] | None:
     for name in names:
         col, arr = declared[name], data.column(name)
         if col.dtype not in ("float", "int"):
-            if pc.any(pc.match_substring_regex(arr, r"^[ \t]")).as_py():
-                return None
+            if pc.any(pc.match_substring_regex(arr, r"^[ \t]|[\r\n]")).as_py():
+                return None  # a padded cell, or one holding a line break (an unclosed quote)
             continue
         values = np.asarray(arr.to_numpy(zero_copy_only=False), dtype=np.float64)
         nan = np.isnan(values)

@@ -9,7 +9,8 @@ Rule families, each in its own pure module (frames in → list of findings):
 * balises — :mod:`dbtools.rules.balises`;
 * feature points — :mod:`dbtools.rules.features`;
 * DB file — :func:`dbtools.database.integrity_findings` (SQLite integrity_check,
-  foreign_key_check, meta and content hash).
+  foreign_key_check, meta and content hash) and tables without rows
+  (:func:`dbtools.rules.schema.check_empty_tables`; a source set's are found on reading).
 
 All limits are in :class:`ValidationConfig`. Findings on a source set name the file and
 line of the row (``Network.source_rows``); on a DB the table and the row's domain keys.
@@ -29,7 +30,7 @@ from dbtools.rules.config import ValidationConfig
 from dbtools.rules.features import check_features
 from dbtools.rules.gis import check_gis
 from dbtools.rules.heights import check_heights
-from dbtools.rules.schema import check_values
+from dbtools.rules.schema import check_empty_tables, check_values
 from dbtools.sources import read_source_set
 from schemas.findings import Finding
 from schemas.frames import check_frame
@@ -68,5 +69,6 @@ def validate_path(path: Path, *, config: ValidationConfig | None = None) -> list
     if path.is_dir():
         network, findings = read_source_set(path)
         return findings + validate_network(network, schema_checks=False, config=config)
-    network = read_network(path)
-    return integrity_findings(path, network) + validate_network(network, config=config)
+    network = read_network(path, verify=False)  # the hash is a finding here (integrity_findings)
+    empty = check_empty_tables(network.tables, Locator())  # sources: checked on reading
+    return integrity_findings(path, network) + empty + validate_network(network, config=config)

@@ -19,7 +19,7 @@ metadata (``unit``); a file whose unit differs from the declared one is a findin
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -524,11 +524,14 @@ def write_run(
     force: bool = False,
     extra_files: dict[str, str] | None = None,
     inputs: Iterable[Path | str] = (),
+    before_publish: Callable[[Path], None] | None = None,
 ) -> Path:
     """Write a run folder atomically (temp folder beside it, then rename) under the output
     rule of :mod:`dbtools.atomic` (``inputs``: the command's input runs, never replaced).
 
     ``extra_files`` are written as text into the folder as well (e.g. ``repair_log.json``).
+    ``before_publish(tmp)`` is called on the complete temporary folder before it is renamed
+    into place: it may add files, and an exception it raises leaves nothing written.
     """
     folder = Path(folder)
     with atomic_folder(folder, force=force, inputs=inputs) as tmp:
@@ -542,6 +545,8 @@ def write_run(
             _write_stream(tmp / f"{name}.{fmt}", table, frame, fmt)
         for name, text in (extra_files or {}).items():
             (tmp / name).write_text(text, encoding="utf-8")
+        if before_publish is not None:
+            before_publish(tmp)
     return folder
 
 

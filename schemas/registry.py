@@ -9,6 +9,8 @@ Layout of a registry folder::
 
 from __future__ import annotations
 
+import re
+
 from schemas.model import Column, Table
 
 #: Registry database file inside a registry folder.
@@ -17,8 +19,31 @@ REGISTRY_FILE = "registry.sqlite"
 REGISTRY_APPLICATION_ID = 0x54505247
 #: ``PRAGMA user_version`` of a registry; bumped when ``releases`` changes shape.
 REGISTRY_SCHEMA_VERSION = 1
-#: A db_version must be usable as a file name: letters, digits, ``.``, ``_``, ``-``.
-DB_VERSION_PATTERN = r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}"
+#: A db_version names the released file ``<db_version>.sqlite``: runs of ASCII letters and
+#: digits joined by single ``.``, ``_`` or ``-`` (``2026.11``, ``2026.11.1``, ``v3``,
+#: ``sample-1``, ``20261201.093000``), at most :data:`DB_VERSION_MAX_LENGTH` characters.
+DB_VERSION_PATTERN = r"[A-Za-z0-9]+(?:[._-][A-Za-z0-9]+)*"
+DB_VERSION_MAX_LENGTH = 100
+#: The rule in words, for messages and help texts.
+DB_VERSION_RULE = (
+    "letters and digits with single '.', '_' or '-' between them, e.g. 2026.11, 2026.11.1, v3, sample-1 "
+    f"(at most {DB_VERSION_MAX_LENGTH} characters)"
+)
+
+
+def db_version_problem(version: str) -> str | None:
+    """What makes ``version`` no valid DB version (:data:`DB_VERSION_PATTERN`), or None."""
+    if not version:
+        return "is empty"
+    if len(version) > DB_VERSION_MAX_LENGTH:
+        return f"is {len(version)} characters long"
+    if re.fullmatch(DB_VERSION_PATTERN, version):
+        return None
+    bad = sorted({c for c in version if not (c.isascii() and (c.isalnum() or c in "._-"))})
+    if bad:
+        return "has " + ", ".join("a space" if c == " " else repr(c) for c in bad)
+    return "has a '.', '_' or '-' at its start or end, or two of them in a row"
+
 
 RELEASES = Table(
     name="releases",

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from dbtools.atomic import check_target
 from dbtools.gis.grid import LABEL_COL, MAX_POST_OFFSET_M, ROW_COL, GridResult, build_grid
 from dbtools.tabular import read_raw_table
 from schemas.enums import Severity
@@ -191,13 +192,9 @@ def grid_files(
 def _refuse_overwrite(centrelines: Path, posts: Path, out: Path, breaks_path: Path, force: bool) -> None:
     """RefusedError when the output (or km_breaks.csv beside it) would overwrite an input,
     exists without ``force``, or is a folder."""
-    for src in (centrelines, posts):
-        if src.exists() and out.exists() and src.resolve() == out.resolve():
-            raise RefusedError("the output would overwrite an input", path=out)
+    check_target(out, force=force, kind="file", inputs=(centrelines, posts))  # the rule of dbtools.atomic
     if breaks_path.resolve() in (centrelines.resolve(), posts.resolve()):
         raise RefusedError(f"{KM_BREAKS_FILE} beside the output would overwrite an input", path=breaks_path)
-    if out.exists() and not force:
-        raise RefusedError("output exists; use --force to replace it", path=out)
     if out.is_dir():
         raise RefusedError("output is a folder; give a file name such as gis.csv", path=out)
 

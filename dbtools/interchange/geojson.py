@@ -60,9 +60,11 @@ def collection(features: Iterable[dict[str, Any]], name: str | None = None) -> d
     return out
 
 
-def write_geojson(path: Path, data: Mapping[str, Any], *, force: bool = False) -> Path:
+def write_geojson(
+    path: Path, data: Mapping[str, Any], *, force: bool = False, inputs: Iterable[Path | str] = ()
+) -> Path:
     """Write a FeatureCollection atomically (RefusedError for an existing file without force)."""
-    with atomic_file(Path(path), force=force) as tmp:
+    with atomic_file(Path(path), force=force, inputs=inputs) as tmp:  # the output rule (dbtools.atomic)
         tmp.write_text(json.dumps(data, ensure_ascii=False, allow_nan=False) + "\n", encoding="utf-8")
     return Path(path)
 

@@ -28,7 +28,12 @@ def _column(values: list[Any]) -> list[Any]:
 
 
 def write_geoparquet(
-    path: Path, features: Sequence[dict[str, Any]], *, srs_epsg: int = 4326, force: bool = False
+    path: Path,
+    features: Sequence[dict[str, Any]],
+    *,
+    srs_epsg: int = 4326,
+    force: bool = False,
+    inputs: Sequence[Path | str] = (),
 ) -> int:
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -73,6 +78,6 @@ def write_geoparquet(
     meta = dict(table.schema.metadata or {})
     meta[b"geo"] = json.dumps(geo).encode()
     table = table.replace_schema_metadata(meta)
-    with atomic_file(Path(path), force=force) as tmp:
+    with atomic_file(Path(path), force=force, inputs=inputs) as tmp:
         pq.write_table(table, tmp)
     return len(features)

@@ -97,7 +97,12 @@ def _value(v: Any, sql_type: str) -> Any:
 
 
 def write_gpkg(
-    path: Path, features: Sequence[dict[str, Any]], *, srs_epsg: int = 4326, force: bool = False
+    path: Path,
+    features: Sequence[dict[str, Any]],
+    *,
+    srs_epsg: int = 4326,
+    force: bool = False,
+    inputs: Sequence[Path | str] = (),
 ) -> dict[str, int]:
     """One GeoPackage with a table per ``layer`` property; returns rows per layer."""
     layers: dict[str, list[dict[str, Any]]] = {}
@@ -147,6 +152,10 @@ def write_gpkg(
     for name, feats in layers.items():
         script += _layer(name, feats, srs_epsg, now)
     write_sqlite(
-        path, script, pragmas=(f"application_id={APPLICATION_ID}", f"user_version={USER_VERSION}"), force=force
+        path,
+        script,
+        pragmas=(f"application_id={APPLICATION_ID}", f"user_version={USER_VERSION}"),
+        force=force,
+        inputs=inputs,
     )
     return {k: len(v) for k, v in layers.items()}

@@ -271,7 +271,7 @@ def import_railml(
     meta = dict(doc.meta)
     if lmap.metric_crs:
         meta.update(metric_crs=lmap.metric_crs, metric_crs_source="declared")
-    _write(out, tables, extra, meta, findings, doc, force)
+    _write(out, tables, extra, meta, findings, doc, force, [p for p in (Path(source), line_map) if p is not None])
     rows = {k: len(v) for k, v in tables.items()}
     return ImportResult(out, doc.version, rows, findings, len(doc.balises))
 
@@ -284,8 +284,10 @@ def _write(
     findings: list[Finding],
     doc: RailmlDoc,
     force: bool,
+    inputs: list[Path],
 ) -> None:
-    with atomic_folder(out, force=force or out.exists()) as tmp:  # an empty folder may be replaced
+    empty = out.is_dir() and not any(out.iterdir())
+    with atomic_folder(out, force=force or empty, inputs=inputs) as tmp:  # an empty folder may be replaced
         for name, table in SOURCE_TABLES.items():
             frame = canonical(table, tables[name])
             if not table.required and frame.empty:

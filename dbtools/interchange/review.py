@@ -127,10 +127,11 @@ def render_review(old: Path, new: Path) -> tuple[str, list[Finding]]:
 def write_review(old: Path, new: Path, out: Path, *, force: bool = False) -> list[Finding]:
     """Write the page atomically (refused when ``out`` exists without ``force``, before any
     work); returns NEW's findings."""
-    from dbtools.atomic import atomic_file, refuse_existing
+    from dbtools.atomic import atomic_file, check_target
 
-    refuse_existing(Path(out), force)
+    inputs = [Path(old), Path(new)]
+    check_target(Path(out), force=force, kind="file", inputs=inputs)  # before the work
     text, findings = render_review(old, new)
-    with atomic_file(Path(out), force=force) as tmp:
+    with atomic_file(Path(out), force=force, inputs=inputs) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return findings

@@ -8,6 +8,9 @@ Here:
   other row radius_m = 0.
 * ``schema.not_finite`` (error) — ±inf in a numeric column (a DB can store it; source
   readers already reject it as ``schema.type``).
+* ``schema.empty_table`` (error) — ``gis`` or ``balises`` without rows (a header-only
+  source file): nothing can be positioned with such a DB. An empty ``feature_points`` is
+  no finding: a network without curves is possible (there is no curve correction then).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from dbtools.rules.config import ValidationConfig
 from schemas.enums import Attribute, Severity
 from schemas.findings import Finding
 from schemas.model import Table
-from schemas.tables import DB_TABLES, FEATURE_POINTS
+from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS
 
 F64 = npt.NDArray[np.float64]
 
@@ -78,4 +81,38 @@ def check_values(tables: dict[str, pd.DataFrame], config: ValidationConfig, loc:
                 )
 
             out += capped("schema.not_finite", Severity.ERROR, table.name, bad, inf, cap, loc.file(table.name))
+    return out
+
+
+#: Tables that must not be empty: severity and what an empty one means on board.
+EMPTY_TABLES = {
+    GIS.name: (Severity.ERROR, "no GIS grid: no km can be placed on the map, matched to GPS or checked"),
+    BALISES.name: (Severity.ERROR, "no balises: the onboard unit never gets an initial position [S003 §4]"),
+}
+
+
+def check_empty_tables(
+    tables: dict[str, pd.DataFrame], loc: Locator, *, tables_read: set[str] | None = None
+) -> list[Finding]:
+    """``schema.empty_table`` for each table of :data:`EMPTY_TABLES` without rows
+    (``tables_read``: only these — in a source set, a missing file is its own finding)."""
+    out = []
+    for name, (severity, meaning) in EMPTY_TABLES.items():
+        frame = tables.get(name)
+        if (tables_read is not None and name not in tables_read) or (frame is not None and len(frame)):
+            continue
+        file = loc.file(name)
+        where = f"{file} has a header but no rows" if file else f"table '{name}' has no rows"
+        out.append(
+            Finding(
+                "schema.empty_table",
+                severity,
+                name,
+                f"{where}: {meaning}",
+                file=file,
+                row=2 if file else None,
+                value=0,
+                limit="≥ 1 row",
+            )
+        )
     return out

@@ -7,6 +7,7 @@ columnar writer :mod:`dbtools.csvwrite`.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -19,13 +20,19 @@ from schemas.jsonable import jsonable
 
 
 def write_results(
-    out: Path, positions: pd.DataFrame, events: pd.DataFrame, summary: dict[str, Any], *, force: bool = False
+    out: Path,
+    positions: pd.DataFrame,
+    events: pd.DataFrame,
+    summary: dict[str, Any],
+    *,
+    force: bool = False,
+    inputs: Iterable[Path | str] = (),
 ) -> Path:
     """OUT/positions.{parquet,csv}, OUT/events.{parquet,csv}, OUT/summary.json — atomically."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    with atomic_folder(out, force=force) as tmp:
+    with atomic_folder(out, force=force, inputs=inputs) as tmp:
         for name, frame in (("positions", positions), ("events", events)):
             pq.write_table(
                 pa.Table.from_pandas(frame, preserve_index=False), tmp / f"{name}.parquet", compression="zstd"

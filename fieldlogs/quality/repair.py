@@ -12,17 +12,20 @@ Per stream, in this order:
    glitches: reported by ``logs check``, never changed.
 
 Nothing else is changed: a run with unreadable cells, unreadable streams, empty ``t`` or a
-broken run.json is refused (fix those by hand). The input folder is only read; the output
-is written atomically and must not exist (unless ``force``), differ from the input and not
-contain it or lie inside it. ``repair_log.json`` in the output says what was done per
-stream, with counts and row ranges in the input's numbering (file lines, header = line 1;
-Parquet: row index + 2), and how many findings ``logs check`` still reports.
+broken run.json is refused (fix those by hand). The repaired run is then checked as
+``logs check`` would check it, before it is published: when errors remain (a small pulse
+drop, a plausibility error of run.json …: problems only a person can judge), or warnings
+with ``strict``, the repair is refused too, naming them, and nothing is written. The input
+folder is only read; the output is written atomically and must not exist (unless
+``force``), differ from the input and not contain it or lie inside it. ``repair_log.json``
+in the output says what was done per stream, with counts and row ranges in the input's
+numbering (file lines, header = line 1; Parquet: row index + 2), and how many findings
+``logs check`` still reports (warnings only, or none).
 """
 
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -280,11 +283,15 @@ def _refusals(run: Run) -> list[Finding]:
     return bad
 
 
-def repair_run(src: Path | str, out: Path | str, *, force: bool = False, fmt: LogFormat | None = None) -> RepairResult:
+def repair_run(
+    src: Path | str, out: Path | str, *, force: bool = False, fmt: LogFormat | None = None, strict: bool = False
+) -> RepairResult:
     """Repair ``src`` into the new folder ``out``; the input is never written to.
 
     Raises RefusedError (output exists, is the input, inside it or containing it),
-    FindingsError (the run has problems only a person can fix), InputError (unreadable).
+    FindingsError (the run has problems only a person can fix, before or after the safe
+    repairs — after: the findings of ``logs check`` on the repaired run, warnings too with
+    ``strict``; nothing written), InputError (unreadable).
     """
     src, out = Path(src), Path(out)
     check_output_folder(src, out)
@@ -309,14 +316,27 @@ def repair_run(src: Path | str, out: Path | str, *, force: bool = False, fmt: Lo
         streams[name] = fixed
         reports.append(rep)
     result = RepairResult(str(src), str(out), out_fmt, reports)
-    text = json.dumps(result.to_dict(), indent=2, ensure_ascii=False) + "\n"
-    write_run(out, run.meta, streams, fmt=out_fmt, force=force, extra_files={REPAIR_LOG: text}, inputs=[src])
-    result.remaining = check_run(out)
-    _write_text_atomic(out / REPAIR_LOG, json.dumps(result.to_dict(), indent=2, ensure_ascii=False) + "\n")
+
+    def check_repaired(tmp: Path) -> None:
+        """``logs check`` of the repaired run, in its temporary folder: refused when
+        problems remain, else the log with what is still found."""
+        result.remaining = [_relocated(f, tmp, out) for f in check_run(tmp)]
+        left = [f for f in result.remaining if f.severity == Severity.ERROR or strict]
+        if left:
+            raise FindingsError(
+                f"{len(left)} problem(s) remain after the safe repairs (logs check of the repaired run); "
+                "they need a person: nothing was written",
+                left,
+                path=src,
+            )
+        (tmp / REPAIR_LOG).write_text(json.dumps(result.to_dict(), indent=2, ensure_ascii=False) + "\n", "utf-8")
+
+    write_run(out, run.meta, streams, fmt=out_fmt, force=force, inputs=[src], before_publish=check_repaired)
     return result
 
 
-def _write_text_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+def _relocated(f: Finding, tmp: Path, out: Path) -> Finding:
+    """A finding on the temporary folder as one on the output folder it was to become."""
+    if f.file and Path(f.file).is_relative_to(tmp):
+        f.file = str(out / Path(f.file).relative_to(tmp))
+    return f

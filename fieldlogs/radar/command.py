@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dbtools.atomic import refuse_existing
+from dbtools.atomic import check_target
 from fieldlogs.io import Run
 from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.speed import OutFormat, RadarSpeed, process_frames, run_frames, write_speed
@@ -26,18 +26,19 @@ def radar_speed_command(
     work unless ``force``; both are written atomically."""
     if out is not None and fmt not in ("csv", "json"):
         raise UsageError("--out writes csv or json: add --format csv or --format json")
+    inputs = [Path(run_dir)]
     for p in (out, plot):
         if p is not None:
-            refuse_existing(p, force)
+            check_target(p, force=force, kind="file", inputs=inputs)  # before the work
     run = Run(Path(run_dir))
     frames, params = run_frames(run)
     result = process_frames(frames, params, cfg)
     result.run_id = run.run_id
     if out is not None:
         fmt_out: OutFormat = "csv" if fmt == "csv" else "json"
-        write_speed(result, out, fmt_out, force=force)
+        write_speed(result, out, fmt_out, force=force, inputs=inputs)
     if plot is not None:
         from fieldlogs.radar.plots import plot_run
 
-        plot_run(run, frames, result, plot, frame_t=plot_t, force=force)
+        plot_run(run, frames, result, plot, frame_t=plot_t, force=force, inputs=inputs)
     return result

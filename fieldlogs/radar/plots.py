@@ -15,6 +15,7 @@ One PNG, two panels:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -153,8 +154,9 @@ def plot_run(
     *,
     frame_t: float | None = None,
     force: bool = False,
+    inputs: Sequence[Path] = (),
 ) -> Path:
-    """Write the two-panel PNG (atomically; refused if ``path`` exists unless ``force``)."""
+    """Write the two-panel PNG (atomically, under the output rule of :mod:`dbtools.atomic`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -167,7 +169,7 @@ def plot_run(
         top.axvline(detail.t, color="tab:blue", ls=":", lw=0.8)
         _scatter_panel(bottom, detail, result, result.cfg)
         fig.tight_layout()
-        with atomic_file(Path(path), force=force) as tmp:
+        with atomic_file(Path(path), force=force, inputs=inputs) as tmp:
             fig.savefig(tmp, format="png", dpi=100)
     finally:
         plt.close(fig)

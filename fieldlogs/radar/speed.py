@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -247,9 +248,11 @@ def speed_json(result: RadarSpeed) -> dict[str, Any]:
     return {"run_id": result.run_id, "radar": result.params.to_json(), "summary": result.summary(), "frames": records}
 
 
-def write_speed(result: RadarSpeed, path: Path, fmt: OutFormat, *, force: bool = False) -> Path:
+def write_speed(
+    result: RadarSpeed, path: Path, fmt: OutFormat, *, force: bool = False, inputs: Sequence[Path] = ()
+) -> Path:
     """Write the frames as CSV or JSON atomically (refused if ``path`` exists, unless ``force``)."""
-    with atomic_file(Path(path), force=force) as tmp:
+    with atomic_file(Path(path), force=force, inputs=inputs) as tmp:
         if fmt == "csv":
             result.to_frame().to_csv(tmp, index=False, float_format="%.6g", lineterminator="\n")
         else:

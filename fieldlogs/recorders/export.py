@@ -20,6 +20,7 @@ The folder is written atomically and replaced only with ``force``.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -140,6 +141,7 @@ def simulate_with_recorder(
     scenario: Scenario | None = None,
     seed: int | None = None,
     force: bool = False,
+    inputs: Iterable[Path | str] = (),
 ) -> tuple[SimulationSummary, list[Path]]:
     """``simulate`` into a temporary folder, add the recorder files, then rename into ``out``:
     nothing is left behind when the recorder format cannot be written. ``rinex`` switches the
@@ -154,7 +156,7 @@ def simulate_with_recorder(
     if fmt == "rinex":
         scenario = scenario if scenario is not None else load_scenario()
         scenario = replace(scenario, gnss_raw=replace(scenario.gnss_raw, enabled=True))
-    with atomic_folder(Path(out), force=force) as tmp:
+    with atomic_folder(Path(out), force=force, inputs=[Path(db_path), *inputs]) as tmp:
         summary = simulate_to_folder(db_path, tmp, scenario, seed=seed, fmt="parquet", force=True)
         files = write_recorder_files(tmp, fmt)
     summary.path = Path(out)

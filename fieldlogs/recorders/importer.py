@@ -224,7 +224,8 @@ def import_run(
         gnss=gnss or None,
         sources=provenance,
     )
-    write_run(out, meta, streams, fmt="parquet", force=force)
+    inputs = [*sources, *mapping, *([vehicle] if vehicle is not None else [])]
+    write_run(out, meta, streams, fmt="parquet", force=force, inputs=inputs)
     return ImportResult(
         str(out), meta.run_id, meta.start_time, {k: len(v) for k, v in streams.items()}, provenance, warnings
     )

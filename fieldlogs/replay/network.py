@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dbtools.database import read_network
-from dbtools.network import Network, content_hash
+from dbtools.network import Network, content_hash, network_content_hash
 from schemas.errors import InputError
 
 _CACHE: dict[tuple[str, str], Network] = {}
@@ -37,8 +37,8 @@ def open_db(path: Path, network: Network | None = None) -> tuple[DbRef, Network]
     """Read the DB (or take ``network``, already read from it), hash its content and keep
     it in this process's cache, so that runs replayed here do not read it again."""
     path = Path(path).resolve()
-    net = network if network is not None else read_network(path)
-    ref = DbRef(str(path), content_hash(net.tables))
+    net = network if network is not None else read_network(path)  # verified (dbtools.integrity)
+    ref = DbRef(str(path), network_content_hash(net))
     _CACHE.clear()
     _CACHE[ref.key] = net
     return ref, net
@@ -49,7 +49,7 @@ def load_network(ref: DbRef) -> Network:
     the one the replay started with (the file was replaced or edited meanwhile)."""
     net = _CACHE.get(ref.key)
     if net is None:
-        net = read_network(Path(ref.path))
+        net = read_network(Path(ref.path), verify=False)  # checked against the reference instead
         actual = content_hash(net.tables)
         if actual != ref.content_hash:
             raise InputError(

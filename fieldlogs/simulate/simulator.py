@@ -3,6 +3,7 @@ and their seeding: :mod:`fieldlogs.simulate`)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
@@ -226,12 +227,14 @@ def simulate_to_folder(
     seed: int | None = None,
     fmt: LogFormat = "parquet",
     force: bool = False,
+    inputs: Iterable[Path | str] = (),
 ) -> SimulationSummary:
-    """Read the onboard DB, simulate and write the run folder atomically."""
+    """Read the onboard DB, simulate and write the run folder atomically (the output rule of
+    :mod:`dbtools.atomic`: never over the DB or another of ``inputs``)."""
     scenario = scenario if scenario is not None else load_scenario()
     network = read_network(Path(db_path))
     streams, meta = simulate_run(network, scenario, seed)
-    write_run(Path(out), meta, streams, fmt=fmt, force=force)
+    write_run(Path(out), meta, streams, fmt=fmt, force=force, inputs=[Path(db_path), *inputs])
     st = meta.extra["sim_truth"]
     return SimulationSummary(
         path=Path(out),

@@ -23,6 +23,7 @@ always builds and releases.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -288,11 +289,11 @@ def build_proposal(report: Any) -> Proposal:
     return Proposal(proposed, pd.DataFrame(table, columns=list(CHANGE_COLUMNS)))
 
 
-def write_proposal(proposal: Proposal, folder: Path, *, force: bool = False) -> Path:
+def write_proposal(proposal: Proposal, folder: Path, *, force: bool = False, inputs: Iterable[Path | str] = ()) -> Path:
     """The source set and its sidecar, written atomically into ``folder``."""
     from fieldlogs.survey.result import records
 
-    with atomic_folder(Path(folder), force=force) as tmp:
+    with atomic_folder(Path(folder), force=force, inputs=inputs) as tmp:
         write_source_set(proposal.network, tmp, force=True)
         text = json.dumps({"changes": records(proposal.changes)}, ensure_ascii=False, indent=2)
         (tmp / f"{SIDECAR}.json").write_text(text + "\n", encoding="utf-8")

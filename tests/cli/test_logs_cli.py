@@ -125,6 +125,23 @@ def test_repair(runner: CliRunner, tmp_path: Path) -> None:
     assert invoke(runner, "logs", "repair", tmp_path / "missing", "--out", tmp_path / "x")[0] == 2
 
 
+def test_repair_exits_1_and_writes_nothing_when_problems_remain(runner: CliRunner, tmp_path: Path) -> None:
+    from tests.fieldlogs.quality.test_repair import _with_a_small_pulse_drop
+
+    run = make_run(tmp_path / "r", 10)
+    line = _with_a_small_pulse_drop(run)
+    code, out, err = invoke(runner, "logs", "repair", run, "--out", tmp_path / "fixed")
+    flat = " ".join(err.split())
+    assert code == 1 and not (tmp_path / "fixed").exists(), out + err
+    assert "log.pulse_decrease" in flat and f"tacho.csv:{line}" in flat and "nothing was written" in flat
+    assert "Traceback" not in err
+    code, out, _ = invoke(runner, "logs", "repair", run, "--out", tmp_path / "fixed", "--format", "json")
+    assert code == 1 and out == ""
+    clean = make_run(tmp_path / "c", 3)
+    code, out, _ = invoke(runner, "logs", "repair", clean, "--out", tmp_path / "copy", "--strict")
+    assert code == 0 and "0 error(s), 0 warning(s)" in out
+
+
 def test_every_command_has_help(runner: CliRunner) -> None:
     for cmd in ("check", "info", "convert", "repair"):
         code, out, _ = invoke(runner, "logs", cmd, "--help")

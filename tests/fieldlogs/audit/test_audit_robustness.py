@@ -30,6 +30,7 @@ from typer.testing import CliRunner
 from cli.main import app
 from dbtools.database import read_meta as read_db_meta
 from dbtools.database import read_network
+from dbtools.integrity import ContentHashError, hash_policy
 from dbtools.network import content_hash
 from fieldlogs.audit.runner import audit
 from fieldlogs.audit.store import open_audit, read_table
@@ -157,7 +158,7 @@ def test_audit_interrupted_with_ctrl_c_exits_130_keeps_runs_and_leaves_no_proces
     assert audit([many_logs], data.db, out, workers=1).skipped == kept
 
 
-def test_hand_edited_db_is_audited_again_with_a_warning(data: AuditData, tmp_path: Path) -> None:
+def test_hand_edited_db_is_refused_or_audited_again_with_a_warning(data: AuditData, tmp_path: Path) -> None:
     db = tmp_path / "net.sqlite"
     shutil.copy(data.db, db)
     out = tmp_path / "audit.sqlite"
@@ -169,13 +170,22 @@ def test_hand_edited_db_is_audited_again_with_a_warning(data: AuditData, tmp_pat
         bid = conn.execute("SELECT balise_id FROM balises WHERE kind = 'C' ORDER BY balise_id").fetchone()[0]
         conn.execute("UPDATE balises SET km_actual_m = km_actual_m + 30 WHERE balise_id = ?", (bid,))
     assert read_db_meta(db)["content_hash"] == meta_before["content_hash"]
-    edited = audit([data.logs], db, out, workers=1)
+    with pytest.raises(ContentHashError, match="modified afterwards"):  # refused on loading
+        audit([data.logs], db, out, workers=1)
+    res = CliRunner().invoke(app, ["audit", str(data.logs), "--db", str(db), "--out", str(out), "-j", "1"])
+    assert res.exit_code == 2 and "does not match the one stored" in res.stderr and "Traceback" not in res.stderr
+    with hash_policy(verify=False) as policy:  # the user's explicit opt-out: used, with a warning
+        edited = audit([data.logs], db, out, workers=1)
+    assert len(policy.used_unverified) == 1 and str(db) in policy.used_unverified[0]
     assert (edited.audited, edited.skipped) == (N, 0)
     assert len(edited.warnings) == 1 and "modified after it was built" in edited.warnings[0]
     meta = read_table(out, "audit_meta").set_index("key")["value"]
-    assert meta["db_content_hash"] == content_hash(read_network(db).tables) != meta_before["content_hash"]
-    res = CliRunner().invoke(app, ["audit", str(data.logs), "--db", str(db), "--out", str(out), "-j", "1"])
+    assert meta["db_content_hash"] == content_hash(read_network(db, verify=False).tables) != meta_before["content_hash"]
+    res = CliRunner().invoke(
+        app, ["audit", str(data.logs), "--db", str(db), "--out", str(out), "-j", "1", "--no-verify-hash"]
+    )
     assert res.exit_code == 0 and "modified after it was built" in res.stderr
+    assert "used anyway (--no-verify-hash)" in res.stderr
 
 
 def old_audit_db(path: Path) -> Path:

@@ -121,3 +121,44 @@ def test_reset_with_missing_pulses() -> None:
     assert fixed["pulses"].tolist() == [100, 110, pd.NA, 115, 122]
     assert rep.actions[0].rows == [[5, 5]]
     assert frame["pulses"].tolist() == [100, 110, pd.NA, 5, 12]  # input frame untouched
+
+
+def _with_a_small_pulse_drop(src: Path) -> int:
+    """A tacho glitch (the counter dips by 5 and recovers) besides a repairable swap: the
+    swap is safe to repair, the glitch is not. Returns the glitch's line in the repaired run."""
+    lines = (src / "tacho.csv").read_text(encoding="utf-8").splitlines()
+    t, p = lines[40].split(",")
+    lines[40] = f"{t},{int(p) - 5 - (int(p) - int(lines[39].split(',')[1]))}"
+    lines[5], lines[6] = lines[6], lines[5]
+    (src / "tacho.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return 41
+
+
+def test_problems_left_after_the_repair_refuse_it_naming_them(tmp_path: Path) -> None:
+    src = make_run(tmp_path / "run", 10)
+    line = _with_a_small_pulse_drop(src)
+    assert {"log.unsorted", "log.pulse_decrease"} <= {f.rule for f in check_run(src)}
+    before = hashes(src)
+    with pytest.raises(FindingsError) as exc:
+        repair_run(src, tmp_path / "out")
+    assert "remain after the safe repairs" in exc.value.message and "nothing was written" in exc.value.message
+    left = [(f.rule, f.file, f.row) for f in exc.value.findings]
+    assert left == [("log.pulse_decrease", str(tmp_path / "out" / "tacho.csv"), line)]  # in the repaired run
+    assert not (tmp_path / "out").exists() and hashes(src) == before
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".out")]  # no temporary left behind
+
+
+def test_warnings_left_are_logged_or_refused_with_strict(tmp_path: Path) -> None:
+    src = make_run(tmp_path / "run", 3)
+    lines = (src / "imu.csv").read_text(encoding="utf-8").splitlines()
+    del lines[20:120]  # a 1 s gap: a warning of logs check, nothing a repair may fill
+    (src / "imu.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    warned = check_run(src)
+    assert warned and all(f.severity == "warning" for f in warned)
+    res = repair_run(src, tmp_path / "out")
+    assert [f.rule for f in res.remaining] == [f.rule for f in warned]
+    log = json.loads((tmp_path / "out" / REPAIR_LOG).read_text(encoding="utf-8"))
+    assert log["remaining"]["errors"] == 0 and log["remaining"]["warnings"] == len(warned)
+    with pytest.raises(FindingsError):
+        repair_run(src, tmp_path / "strict", strict=True)
+    assert not (tmp_path / "strict").exists()

@@ -12,10 +12,15 @@ from fieldlogs.io import Run, RunMeta, convert_run, write_run
 from fieldlogs.quality.checks import check_run
 from fieldlogs.quality.info import run_info
 from fieldlogs.quality.repair import repair_run
+from tests.fieldlogs.make_runs import synthetic_streams
 from tests.fieldlogs.recorders.conftest import nav_row, obs_frame
 
 
-def _run(tmp_path: Path, obs: pd.DataFrame, nav: pd.DataFrame, receiver: str = "rx1") -> Path:
+def _run(
+    tmp_path: Path, obs: pd.DataFrame, nav: pd.DataFrame, receiver: str = "rx1", *, complete: bool = False
+) -> Path:
+    """A road-rail run with these GNSS streams; ``complete``: with the gps and cab streams
+    a road-rail run needs (else logs check finds them missing)."""
     vehicle = {
         "vehicle_id": "V",
         "vehicle_kind": "road_rail",
@@ -28,7 +33,11 @@ def _run(tmp_path: Path, obs: pd.DataFrame, nav: pd.DataFrame, receiver: str = "
     obs = obs.copy()
     if "t" not in obs.columns:
         obs.insert(0, "t", obs["gnss_time_s"] - obs["gnss_time_s"].min())
-    return write_run(tmp_path / "r", meta, {"gnss_obs": obs, "gnss_nav": nav})
+    streams = {"gnss_obs": obs, "gnss_nav": nav}
+    if complete:
+        rest = synthetic_streams(3, vehicle_kind="road_rail")
+        streams |= {k: rest[k] for k in ("gps", "cab")}
+    return write_run(tmp_path / "r", meta, streams)
 
 
 def _rules(path: Path) -> dict[str, int]:
@@ -72,7 +81,7 @@ def test_repair_sorts_and_drops_and_convert_round_trips(tmp_path: Path) -> None:
     obs = obs_frame(3)
     shuffled = pd.concat([obs.iloc[::-1], obs.iloc[[2]]], ignore_index=True)
     nav = pd.DataFrame([nav_row("J02"), nav_row("G07"), nav_row("G07")])
-    p = _run(tmp_path, shuffled, nav)
+    p = _run(tmp_path, shuffled, nav, complete=True)  # repair refuses a run with problems it cannot fix
     assert _rules(p).get("log.unsorted", 0) > 0
     res = repair_run(p, tmp_path / "fixed")
     actions = {(s.stream, a.action): a.count for s in res.streams for a in s.actions}
