@@ -25,6 +25,7 @@ behind; results already yielded are the caller's.
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import gc
 import os
@@ -221,7 +222,8 @@ class LocalPool:
         ctx.set_forkserver_preload(self.preload)  # for a server started now (a running one keeps its own)
         tracker, server = _pid(resource_tracker, "_resource_tracker"), _pid(forkserver, "_forkserver")
         # started from this thread: PR_SET_PDEATHSIG ties the server to it (not to a feeder thread)
-        forkserver.ensure_running()
+        with _safe_path():
+            forkserver.ensure_running()
         self.own_tracker = _pid(resource_tracker, "_resource_tracker") != tracker
         self.own_server = _pid(forkserver, "_forkserver") != server
         self.restart()
@@ -366,6 +368,24 @@ class _Schedule(Generic[R]):
                 yield failed(i, task[0], exc)
         if broken and not self.inflight:
             self.pool = self.owner.restart()
+
+
+@contextlib.contextmanager
+def _safe_path() -> Iterator[None]:
+    """The fork server runs as ``python -c``, which puts the working folder first on its
+    ``sys.path``: a folder there named like one of the suite's packages (``fieldlogs/`` of
+    someone's logs) would then shadow an editable install as a namespace package in the
+    server and every worker it forks. ``PYTHONSAFEPATH`` (Python ≥ 3.11) keeps it off; the
+    workers get this process's own ``sys.path`` anyway (``multiprocessing.spawn.prepare``)."""
+    old = os.environ.get("PYTHONSAFEPATH")
+    os.environ["PYTHONSAFEPATH"] = "1"
+    try:
+        yield
+    finally:
+        if old is None:
+            del os.environ["PYTHONSAFEPATH"]
+        else:
+            os.environ["PYTHONSAFEPATH"] = old
 
 
 def _pid(module: Any, singleton: str) -> int | None:

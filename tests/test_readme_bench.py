@@ -1,0 +1,32 @@
+"""README's performance section points at the benchmark results `make bench` writes, and
+names every benchmark script."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _section() -> str:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    m = re.search(r"^## Performance\b[^\n]*\n(.*?)(?=^## )", text, re.S | re.M)
+    assert m is not None, "README has no '## Performance …' section"
+    return m.group(1)
+
+
+def test_readme_links_the_results_that_make_bench_writes() -> None:
+    assert "[bench/RESULTS.md](bench/RESULTS.md)" in _section()
+    makefile = (ROOT / "Makefile").read_text(encoding="utf-8")
+    bench_target = re.search(r"^bench:.*?\n((?:\t.*\n)+)", makefile, re.M)
+    assert bench_target is not None and "bench/run_all.py" in bench_target.group(1)
+    run_all = (ROOT / "bench" / "run_all.py").read_text(encoding="utf-8")
+    assert 'default=BENCH / "RESULTS.md"' in run_all, "bench/run_all.py no longer writes bench/RESULTS.md"
+
+
+def test_every_benchmark_script_is_in_the_table() -> None:
+    section = _section()
+    scripts = [*sorted(p.name for p in (ROOT / "bench").glob("bench_*.py")), "accuracy.py"]
+    missing = [s for s in scripts if f"bench/{s}" not in section]
+    assert not missing, f"README's performance table lacks {missing}"
