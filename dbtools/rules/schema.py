@@ -8,9 +8,11 @@ Here:
   other row radius_m = 0.
 * ``schema.not_finite`` (error) — ±inf in a numeric column (a DB can store it; source
   readers already reject it as ``schema.type``).
-* ``schema.empty_table`` (error) — ``gis`` or ``balises`` without rows (a header-only
-  source file): nothing can be positioned with such a DB. An empty ``feature_points`` is
-  no finding: a network without curves is possible (there is no curve correction then).
+* ``schema.empty_table`` — a header-only source file (or a DB table without rows): an error
+  for ``gis`` (no km can be placed, matched or checked without the grid), a warning for
+  ``balises`` (a train never gets an initial position [S003 §4]; only what needs no balise
+  works, e.g. the GPS-based possession check of road-rail vehicles [S001 §6]). An empty
+  ``feature_points`` is no finding: a network without curves is possible.
 """
 
 from __future__ import annotations
@@ -87,7 +89,10 @@ def check_values(tables: dict[str, pd.DataFrame], config: ValidationConfig, loc:
 #: Tables that must not be empty: severity and what an empty one means on board.
 EMPTY_TABLES = {
     GIS.name: (Severity.ERROR, "no GIS grid: no km can be placed on the map, matched to GPS or checked"),
-    BALISES.name: (Severity.ERROR, "no balises: the onboard unit never gets an initial position [S003 §4]"),
+    BALISES.name: (
+        Severity.WARNING,
+        "no balises: a train never gets an initial position [S003 §4] (only GPS-based checks can use this DB)",
+    ),
 }
 
 
