@@ -27,7 +27,7 @@ from typing import Any
 
 from dbtools.interchange import xmltree as xt
 from dbtools.interchange.model import GeoPoint, Mileage, RailmlDoc, RBalise, RCurve, RGroup, RLine, RSignal, RTrack
-from dbtools.interchange.railml_ids import designator
+from dbtools.interchange.railml_ids import REGISTER, designator
 from dbtools.interchange.xmltree import Element
 
 DIRECTIONS = {"normal": 1, "reverse": -1, "both": 0}
@@ -49,6 +49,7 @@ class _Reader:
         self.doc = RailmlDoc(file=file, version=version, meta=_ext(self.root))
         self.lps: dict[str, Element] = {}
         self.crs: dict[str, str | None] = {}
+        self.balise_ids: dict[str, Element] = {}
 
     def err(self, el: Element, rule: str, msg: str, column: str | None = None) -> None:
         self.doc.findings.append(xt.finding(el, rule, msg, file=self.doc.file, column=column))
@@ -368,11 +369,32 @@ def _group(r: _Reader, el: Element) -> None:
     r.doc.groups[ident] = RGroup(ident, el, xt.attr(conn, "ref") if conn is not None else None, function)
 
 
-def _balise(r: _Reader, el: Element) -> None:
-    """A balise; its id is the DB id of our designator register when it has one, else @id."""
-    ident = designator(el) or xt.attr(el, "id")
+def _balise_id(r: _Reader, el: Element) -> str | None:
+    """The DB id of a balise: the entry of its designator of our register, else its @id; a
+    designator entry that another balise already has is a duplicate id (``@id`` duplicates
+    are found document-wide by the importer)."""
+    entry = designator(el)
+    ident = entry or xt.attr(el, "id")
     if ident is None:
         r.err(el, "railml.missing_id", "balise has no @id", column="id")
+        return None
+    first = r.balise_ids.get(ident)
+    if first is not None and (entry is not None or designator(first) is not None):
+        r.err(
+            el,
+            "railml.duplicate_id",
+            f"balise id '{ident}' (designator of register {REGISTER}) is used again"
+            f" (first at line {xt.line_of(first)})",
+            column="designator",
+        )
+        return None
+    r.balise_ids[ident] = el
+    return ident
+
+
+def _balise(r: _Reader, el: Element) -> None:
+    ident = _balise_id(r, el)
+    if ident is None:
         return
     where = r.spot(el)
     if where is None:
