@@ -106,7 +106,7 @@ def _own_rows(doc: RailmlDoc, c: RCurve, target: Target) -> list[dict[str, Any]]
         {
             "line_code": target.line_code,
             "track": target.track,
-            "feature_id": c.ext.get("featureId", c.id),
+            "feature_id": c.ext.get("featureId") or c.name or c.id,
             "seq": int(r[0]),
             "km_m": float(r[1]),
             "radius_m": float(r[2]),

@@ -16,6 +16,9 @@ curves, mileage changes and gml locations.
   its geodesic chainage scaled to the netElement's length.
 * ``horizontalCurve``: ``@curveType`` (straight, arc, clothoide, …), ``@radius`` (negative
   left as seen from the curve's begin), ``@length``, located by a ``linearLocation``.
+* Ids: a balise's id, a line's code and a curve's feature id are the ``entry`` of its
+  ``designator`` of our register (:mod:`~dbtools.interchange.railml_ids`, what our export
+  writes) when it has one, else its ``@id`` (line: ``@code``; curve: its ``name``).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from typing import Any
 
 from dbtools.interchange import xmltree as xt
 from dbtools.interchange.model import GeoPoint, Mileage, RailmlDoc, RBalise, RCurve, RGroup, RLine, RSignal, RTrack
+from dbtools.interchange.railml_ids import REGISTER, designator
 from dbtools.interchange.xmltree import Element
 
 DIRECTIONS = {"normal": 1, "reverse": -1, "both": 0}
@@ -45,6 +49,7 @@ class _Reader:
         self.doc = RailmlDoc(file=file, version=version, meta=_ext(self.root))
         self.lps: dict[str, Element] = {}
         self.crs: dict[str, str | None] = {}
+        self.balise_ids: dict[str, Element] = {}
 
     def err(self, el: Element, rule: str, msg: str, column: str | None = None) -> None:
         self.doc.findings.append(xt.finding(el, rule, msg, file=self.doc.file, column=column))
@@ -289,8 +294,9 @@ def _line(r: _Reader, el: Element) -> None:
         r.err(el, "railml.missing_id", "line has no @id", column="id")
         return
     ext = _ext(el)
-    line = RLine(ident, el, code=ext.get("lineCode") or xt.attr(el, "code"), name=_name(el), ext=ext)
-    r.doc.use(el, *xt.children(el, "name"))
+    code = ext.get("lineCode") or designator(el) or xt.attr(el, "code")
+    line = RLine(ident, el, code=code, name=_name(el), ext=ext)
+    r.doc.use(el, *xt.children(el, "name"), *xt.children(el, "designator"))
     for ref in _associated(r, el):
         line.track_ids.append(ref)
         r.doc.tracks[ref].line_id = ident
@@ -363,10 +369,32 @@ def _group(r: _Reader, el: Element) -> None:
     r.doc.groups[ident] = RGroup(ident, el, xt.attr(conn, "ref") if conn is not None else None, function)
 
 
-def _balise(r: _Reader, el: Element) -> None:
-    ident = xt.attr(el, "id")
+def _balise_id(r: _Reader, el: Element) -> str | None:
+    """The DB id of a balise: the entry of its designator of our register, else its @id; a
+    designator entry that another balise already has is a duplicate id (``@id`` duplicates
+    are found document-wide by the importer)."""
+    entry = designator(el)
+    ident = entry or xt.attr(el, "id")
     if ident is None:
         r.err(el, "railml.missing_id", "balise has no @id", column="id")
+        return None
+    first = r.balise_ids.get(ident)
+    if first is not None and (entry is not None or designator(first) is not None):
+        r.err(
+            el,
+            "railml.duplicate_id",
+            f"balise id '{ident}' (designator of register {REGISTER}) is used again"
+            f" (first at line {xt.line_of(first)})",
+            column="designator",
+        )
+        return None
+    r.balise_ids[ident] = el
+    return ident
+
+
+def _balise(r: _Reader, el: Element) -> None:
+    ident = _balise_id(r, el)
+    if ident is None:
         return
     where = r.spot(el)
     if where is None:
@@ -376,7 +404,7 @@ def _balise(r: _Reader, el: Element) -> None:
     if group is not None and group not in r.doc.groups:
         r.err(parent, "railml.undefined_ref", f"belongsToParent names balise group '{group}', which is not defined")
         return
-    r.doc.use(el, parent, *xt.children(el, "name"))
+    r.doc.use(el, parent, *xt.children(el, "name"), *xt.children(el, "designator"))
     track, pos, km, direction = where
     r.doc.balises.append(RBalise(ident, el, track.id, pos, km, _name(el), direction, group, _ext(el)))
 
@@ -388,7 +416,8 @@ def _curve(r: _Reader, el: Element) -> None:
     track, k0, k1, rising = where
     radius = r.num(el, "radius") or 0.0
     kind = (xt.attr(el, "curveType") or "").strip() or "straight"
-    r.doc.use(*xt.children(el, "name"))  # the curve itself: used or reported by the curve mapping
+    r.doc.use(*xt.children(el, "name"), *xt.children(el, "designator"))  # the curve: used or reported by the mapping
+    fid = designator(el) or _name(el)  # the feature id: our register's designator, else the railML name
     r.doc.curves.append(
-        RCurve(xt.attr(el, "id") or "", el, track.id, k0, k1, kind, radius if rising else -radius, _ext(el), _name(el))
+        RCurve(xt.attr(el, "id") or "", el, track.id, k0, k1, kind, radius if rising else -radius, _ext(el), fid)
     )

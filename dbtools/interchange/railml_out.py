@@ -20,6 +20,12 @@ suite, so XML Schema validation runs only against one the user gives, ``db expor
   ``baliseGroup`` per initial pair and per C balise, ``lines``, ``tracks`` (with a
   ``gml:LineString`` of the GIS points, EPSG axis order lat lon).
 
+Every ``@id`` is an XML NCName made by :func:`~dbtools.interchange.railml_ids.xml_id` (a
+kind prefix such as ``bal_``/``ne_``/``hc_`` and the escaped DB key: injective, unique in the
+document), and every reference is built by the same function; the DB ids themselves (balise
+id, line code, feature id) are standard railML ``designator`` elements of the register
+:data:`~dbtools.interchange.railml_ids.REGISTER`, so a plain railML consumer sees them too.
+
 Whatever railML has no attribute for is written in this suite's namespace
 (:data:`~dbtools.interchange.xmltree.TPOS_NS`, railML's ``anyAttribute`` extension point):
 balise kind, station code, signal type, equipment km, distance from the pair's I1; each
@@ -40,6 +46,7 @@ from dbtools.gis.geometry import geodesic_step
 from dbtools.gis.index import network_georef
 from dbtools.interchange.curves import curves_of_feature
 from dbtools.interchange.geometry import WGS84, geodetic_epsg
+from dbtools.interchange.railml_ids import REGISTER, xml_id
 from dbtools.interchange.xmltree import GML_NS, TPOS_NS
 from dbtools.network import Network
 from schemas.enums import BaliseKind, Track
@@ -67,8 +74,14 @@ def _sub(parent: Any, tag: str, ns: str = NS, /, **attrs: Any) -> Any:
     return el
 
 
-def _nid(*parts: object) -> str:
-    return "_".join(str(p).replace(" ", "-") for p in parts)
+def _designate(el: Any, entry: object) -> None:
+    """``<designator register="_trainpos" entry="DB id"/>`` after the element's names (railML 3
+    puts ``designator`` after ``name`` and before the locations)."""
+    from lxml import etree
+
+    d = etree.Element(f"{{{NS}}}designator", register=REGISTER, entry=str(entry))
+    names = [i for i, c in enumerate(el) if c.tag == f"{{{NS}}}name"]
+    el.insert(names[-1] + 1 if names else 0, d)
 
 
 class _Track:
@@ -168,7 +181,7 @@ def _net_elements(
     out: dict[tuple[str, str], _Track] = {}
     gis = network.gis
     for line, track in _pairs(network):
-        ne_id = _nid("ne", line, track)
+        ne_id = xml_id("ne", line, track)
         tr = _Track(gis[(gis["line_code"].astype(str) == line) & (gis["track"].astype(str) == track)])
         out[(line, track)] = tr
         ne = _sub(
@@ -179,17 +192,17 @@ def _net_elements(
             tpos_lineCode=line,
             tpos_track=track,
         )
-        aps = _sub(ne, "associatedPositioningSystem", id=_nid("aps", line, track))
+        aps = _sub(ne, "associatedPositioningSystem", id=xml_id("aps", line, track))
         for i, (km, lat, lon, h) in enumerate(
             tr.frame[["km_m", "lat", "lon", "height_m"]].itertuples(index=False, name=None)
         ):
             ic = _sub(
                 aps,
                 "intrinsicCoordinate",
-                id=_nid("ic", line, track, i),
+                id=xml_id("ic", line, track, i),
                 intrinsicCoord=tr.s[i] / tr.length if tr.length > 0 else 0.0,
             )
-            _sub(ic, "linearCoordinate", positioningSystemRef=_nid("lps", line), measure=km)
+            _sub(ic, "linearCoordinate", positioningSystemRef=xml_id("lps", line), measure=km)
             _sub(
                 ic,
                 "geometricCoordinate",
@@ -199,10 +212,10 @@ def _net_elements(
                 z=None if pd.isna(h) else float(h),
             )
         _sub(level, "networkResource", ref=ne_id)
-        t_el = _sub(tracks_el, "track", id=_nid("tr", line, track))
+        t_el = _sub(tracks_el, "track", id=xml_id("tr", line, track))
         _sub(t_el, "name", name=f"{line} {track}", language="en")
         _sub(
-            _sub(t_el, "linearLocation", id=_nid("tr", line, track, "loc")),
+            _sub(t_el, "linearLocation", id=xml_id("tr", line, track, "loc")),
             "associatedNetElement",
             netElementRef=ne_id,
             intrinsicCoordBegin=0.0,
@@ -210,7 +223,7 @@ def _net_elements(
         )
         if len(tr.frame) >= 2:
             ls = _sub(_sub(t_el, "gmlLocations"), "LineString", GML_NS, srsName=f"urn:ogc:def:crs:EPSG::{geo_epsg}")
-            ls.set(f"{{{GML_NS}}}id", _nid("gml", line, track))
+            ls.set(f"{{{GML_NS}}}id", xml_id("gml", line, track))
             _sub(ls, "posList", GML_NS).text = " ".join(
                 f"{la!r} {lo!r}" for la, lo in zip(tr.frame["lat"], tr.frame["lon"], strict=True)
             )
@@ -225,7 +238,7 @@ def _lines(network: Network, lpss: Any, lines_el: Any, tracks: dict[tuple[str, s
         lps = _sub(
             lpss,
             "linearPositioningSystem",
-            id=_nid("lps", line),
+            id=xml_id("lps", line),
             units="m",
             linearReferencingMethod="absolute",
             startMeasure=float(kms.min()) if kms.size else None,
@@ -237,7 +250,7 @@ def _lines(network: Network, lpss: Any, lines_el: Any, tracks: dict[tuple[str, s
             _sub(
                 lps,
                 "anchor",
-                id=_nid("anc", line, j),
+                id=xml_id("anc", line, j),
                 measure=float(b["km_from_m"]),
                 tpos_track=str(b["track"]),
                 tpos_kmTo=float(b["km_to_m"]),
@@ -245,19 +258,20 @@ def _lines(network: Network, lpss: Any, lines_el: Any, tracks: dict[tuple[str, s
         el = _sub(
             lines_el,
             "line",
-            id=_nid("ln", line),
+            id=xml_id("ln", line),
             tpos_lineCode=line,
             tpos_attributes=_s(rec["attributes_json"]),
         )
         if _s(rec["name"]) is not None:
             _sub(el, "name", name=str(rec["name"]), language="en")
-        loc = _sub(el, "linearLocation", id=_nid("ln", line, "loc"))
+        _designate(el, line)
+        loc = _sub(el, "linearLocation", id=xml_id("ln", line, "loc"))
         for ln, track in tracks:
             if ln == line:
                 _sub(
                     loc,
                     "associatedNetElement",
-                    netElementRef=_nid("ne", line, track),
+                    netElementRef=xml_id("ne", line, track),
                     intrinsicCoordBegin=0.0,
                     intrinsicCoordEnd=1.0,
                 )
@@ -282,13 +296,13 @@ def _features(network: Network, curves_el: Any, tracks: dict[tuple[str, str], _T
         pieces = curves_of_feature(rows, str(track)) or [
             ("arc", min(g["km_m"]), max(g["km_m"]), float(g["radius_m"].max()))
         ]
-        ne, lps, tr = _nid("ne", line, track), _nid("lps", line), tracks.get((str(line), str(track)))
+        ne, lps, tr = xml_id("ne", line, track), xml_id("lps", line), tracks.get((str(line), str(track)))
         for n, (kind, k0, k1, radius) in enumerate(pieces):
             is_arc = kind == "arc"
             el = _sub(
                 curves_el,
                 "horizontalCurve",
-                id=_nid("hc", line, track, fid, n + 1),
+                id=xml_id("hc", line, track, fid, n + 1),
                 curveType=kind,
                 radius=radius,
                 length=k1 - k0,
@@ -296,7 +310,9 @@ def _features(network: Network, curves_el: Any, tracks: dict[tuple[str, str], _T
                 tpos_featureRows=payload if is_arc else None,
             )
             _sub(el, "name", name=str(fid), language="en")
-            loc = _sub(el, "linearLocation", id=_nid("hc", line, track, fid, n + 1, "loc"))
+            if is_arc:
+                _designate(el, fid)
+            loc = _sub(el, "linearLocation", id=xml_id("hc", line, track, fid, n + 1, "loc"))
             a = _sub(
                 loc,
                 "associatedNetElement",
@@ -312,7 +328,9 @@ def _balises(network: Network, bal: Any, grp: Any, tracks: dict[tuple[str, str],
     made: set[str] = set()
     for rec in _records(network.balises):
         line, track, kind = str(rec["line_code"]), str(rec["track"]), str(rec["kind"])
-        group = _nid("bg", line, rec["station_code"], track) if kind != BaliseKind.C else _nid("bg", rec["balise_id"])
+        group = (
+            xml_id("bg", line, rec["station_code"], track) if kind != BaliseKind.C else xml_id("bg", rec["balise_id"])
+        )
         if group not in made:
             made.add(group)
             g = _sub(
@@ -327,19 +345,20 @@ def _balises(network: Network, bal: Any, grp: Any, tracks: dict[tuple[str, str],
         el = _sub(
             bal,
             "balise",
-            id=str(rec["balise_id"]),
+            id=xml_id("bal", rec["balise_id"]),
             tpos_kind=kind,
             tpos_stationCode=_s(rec["station_code"]),
             tpos_signalType=_s(rec["signal_type"]),
             tpos_kmEquipment=_n(rec["km_equipment_m"]),
             tpos_distFromInitial=_n(rec["dist_from_initial_m"]),
         )
+        _designate(el, rec["balise_id"])
         direction = "reverse" if track == Track.UP.value else "normal"
         _spot(
             el,
-            _nid("sl", rec["balise_id"]),
-            _nid("ne", line, track),
-            _nid("lps", line),
+            xml_id("sl", rec["balise_id"]),
+            xml_id("ne", line, track),
+            xml_id("lps", line),
             tracks.get((line, track)),
             float(rec["km_actual_m"]),
             direction,
