@@ -37,6 +37,10 @@ nothing about the balises.
 ``curve_pad_m`` of a sample with |κ| ≥ (1 − tol)/``max_radius_m`` or of a DB feature span;
 the travel intervals with a usable κ are kept too (coverage). Their km is only computed
 by the aggregation (:mod:`fieldlogs.survey.trajectory`), from the balises as surveyed.
+
+**Wheels.** The run's wheel scale from its radar calibration and from its GNSS (or D-GPS)
+along-track positions on the segments (:mod:`fieldlogs.survey.wheelaids`); the balise
+intervals' scale needs every run and is the aggregation's.
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.replay.network import DbRef, load_network
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.dbindex import BaliseIndex, balise_index
+from fieldlogs.survey.wheelaids import AidScale, SegmentSpan, radar_scale, run_gnss_scale
 from schemas.enums import PositionState
 from schemas.errors import InputError, TrainposError
 
@@ -112,6 +117,10 @@ class RunSurvey:
     """seg, x0_m, x1_m: travel intervals with a usable κ."""
     gis: RunEvidence | None = None
     counts: dict[str, int] = field(default_factory=dict)
+    radar: AidScale | None = None
+    """The wheel scale from the radar's calibration (:mod:`fieldlogs.survey.wheelaids`)."""
+    gnss: AidScale | None = None
+    """The wheel scale from GNSS or D-GPS along-track positions."""
 
 
 @dataclass
@@ -431,6 +440,7 @@ def extract(
     kappa, coverage = kappa_frames(result, segs, tr, network, pipeline, cfg)
     gis = fixes_from_result(result, run.run_id)
     gis.folder = folder
+    spans = [SegmentSpan(float(tr.t[g.ia]), float(tr.t[g.ib - 1]), g.line_code, g.track, g.motion, g.cab) for g in segs]
     return RunSurvey(
         run_id=run.run_id,
         folder=folder,
@@ -447,6 +457,8 @@ def extract(
         coverage=coverage,
         gis=gis,
         counts=counts,
+        radar=radar_scale(result.odometry, cfg),
+        gnss=run_gnss_scale(result, network, spans, cfg),
     )
 
 
