@@ -137,7 +137,27 @@ class _Seg:
 
 
 def _text(s: pd.Series) -> npt.NDArray[np.object_]:
-    return s.astype(object).where(s.notna(), "").to_numpy(dtype=object)
+    """Strings as an object array, "" where missing."""
+    return np.asarray(s.to_numpy(dtype=object, na_value=""), dtype=object)
+
+
+def _codes(s: pd.Series) -> tuple[IntArray, npt.NDArray[np.object_]]:
+    """Integer codes of a text column (−1: missing or empty) and the texts they stand for."""
+    codes, uniques = pd.factorize(s, use_na_sentinel=True)
+    texts = np.asarray([str(u) for u in uniques], dtype=object)
+    codes = np.asarray(codes, dtype=np.int64)
+    empty = np.flatnonzero(texts == "")
+    if empty.size:
+        codes = np.where(np.isin(codes, empty), -1, codes)
+    return codes, texts
+
+
+def _stretch_start(known: npt.NDArray[np.bool_], cab_i: IntArray) -> IntArray:
+    """For every cycle, the first cycle of the stretch of equal ``known`` and cab it is in."""
+    n = known.size
+    change = np.ones(n, dtype=bool)
+    change[1:] = (known[1:] != known[:-1]) | (cab_i[1:] != cab_i[:-1])
+    return np.asarray(np.maximum.accumulate(np.where(change, np.arange(n), 0)), dtype=np.int64)
 
 
 def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extrapolate_m: float) -> list[_Seg]:
@@ -145,15 +165,16 @@ def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extra
     n = len(pos)
     if n == 0:
         return []
-    line, track = _text(pos["line_code"]), _text(pos["track"])
-    known = (pos["state"].to_numpy(dtype=object) != PositionState.UNDETERMINED.value) & (line != "") & (track != "")
-    key = pd.Series(line + "/" + track).where(known, "").to_numpy(dtype=object)
+    (lc, lines), (tc, tracks) = _codes(pos["line_code"]), _codes(pos["track"])
+    known = (_text(pos["state"]) != PositionState.UNDETERMINED.value) & (lc >= 0) & (tc >= 0)
+    key = np.where(known, lc * (tracks.size + 1) + tc, -1)
     cab_i = np.where(np.asarray(cab) < 0, -1, 1)
     change = np.ones(n, dtype=bool)
     change[1:] = (key[1:] != key[:-1]) | (cab_i[1:] != cab_i[:-1])
     starts = np.flatnonzero(change)
     ends = np.append(starts[1:], n)
     km = pos["km_m"].to_numpy(dtype=float)
+    first = _stretch_start(known, cab_i)
     out: list[_Seg] = []
     for ia, ib in zip(starts.tolist(), ends.tolist(), strict=True):
         if not known[ia]:
@@ -162,11 +183,9 @@ def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extra
         motion = int(np.sign(dk)) if abs(dk) >= MIN_MOTION_M else 0
         ie = ia
         if ia > 0 and not known[ia - 1] and cab_i[ia - 1] == cab_i[ia]:
-            j = ia - 1  # the undetermined stretch before, with the same cab
-            while j > 0 and not known[j - 1] and cab_i[j - 1] == cab_i[ia]:
-                j -= 1
+            j = int(first[ia - 1])  # the undetermined stretch before, with the same cab
             ie = max(j, int(np.searchsorted(d, d[ia] - extrapolate_m, side="left")))
-        out.append(_Seg(ia, ib, ie, str(line[ia]), str(track[ia]), motion, int(cab_i[ia])))
+        out.append(_Seg(ia, ib, ie, str(lines[lc[ia]]), str(tracks[tc[ia]]), motion, int(cab_i[ia])))
     return out
 
 
