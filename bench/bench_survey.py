@@ -4,6 +4,9 @@ Run on demand (prints a table, never pass/fail)::
 
     .venv/bin/python bench/bench_survey.py                         # 2 lines × 25 km, 8 runs per track
     .venv/bin/python bench/bench_survey.py --lines 1 --length-km 12 --runs 4
+    .venv/bin/python bench/bench_survey.py --sensors radar --wheels-only --keep DIR   # runs with a radar
+    .venv/bin/python bench/bench_survey.py --sensors gnss --lines 1 --runs 6 --wheels-only --keep DIR
+    .venv/bin/python bench/bench_survey.py --wheels-only --keep DIR --replicate 8    # + throughput of 8 copies
 
 How the errors are made. A synthetic network (``--lines`` double-track lines of
 ``--length-km``, stations every 3 km with initial pairs and home/block C balises,
@@ -16,14 +19,22 @@ curve's six rows removed (a new curve to propose) and one curve moved by 30 m; a
 line ``--unpowered`` balises (I1, I2 and C) are kept in the DB but their telegrams taken
 out of every run (unpowered balises). Every other balise and curve is clean.
 
+``--sensors`` adds a ready ``radar`` stream or raw GNSS (``gnss_obs``/``gnss_nav``) to every
+run (the D-GPS stays); ``--keep DIR`` keeps the simulated runs and reuses them.
+
 Reported against the issue's targets: moved balises flagged and their residual within
 ±0.5 m; missed balises found, and false "missed"; removed curves proposed within ±10 m
 (exit lower-limit crossing) and ±10 % radius; wheel diameters per vehicle within ±0.1 %
-of the runs' mean true diameter (and per run); false "moved" balises and features on the
-clean items of the surveyed DB, and everywhere when the truth DB itself is surveyed (per
-100 track-km). Throughput: the survey (replay + aggregation) in run-hours per minute with
-``--workers`` processes, extrapolated to 1,000 run-hours, beside ``gis verify`` alone on
-the same runs (the replay they share).
+of the runs' mean true diameter (and per run), per source (balise, radar, GNSS) and
+combined, from all of a vehicle's runs and from its first three, with how often each
+run's 95 % interval holds the truth and how many runs and vehicles the consistency check
+flags; false "moved" balises and features on the clean items of the surveyed DB, and
+everywhere when the truth DB itself is surveyed (per 100 track-km). Throughput: the survey
+(replay + aggregation) in run-hours per minute with ``--workers`` processes, extrapolated
+to 1,000 run-hours, beside ``gis verify`` alone on the same runs (the replay they share);
+``--replicate K`` times a survey of the runs hard-linked K times (with the machine's
+2-process ceiling of ``bench_audit.py``), where the fixed costs (start-up, fork server,
+aggregation imports) weigh less.
 """
 
 from __future__ import annotations
@@ -365,6 +376,12 @@ def _args() -> argparse.Namespace:
     ap.add_argument("--sensors", choices=sorted(SENSORS), default="dgps", help="what the runs carry beside balises")
     ap.add_argument("--wheels-only", action="store_true", help="survey the surveyed DB only: the wheel table, timing")
     ap.add_argument(
+        "--replicate",
+        type=int,
+        default=0,
+        help="then time a survey of the runs hard-linked this many times (throughput only)",
+    )
+    ap.add_argument(
         "--keep", type=Path, default=None, help="work folder to keep, its simulated runs reused (default: temporary)"
     )
     return ap.parse_args()
@@ -374,6 +391,46 @@ def print_wheels(ws: pd.DataFrame) -> None:
     print("\nwheel diameter per source (errors against the simulated truth, %; target ±0.1 % from ≥ 3 runs):")
     print(ws.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
     print(f"   {ws.attrs['note']}")
+
+
+def replicate(logs: Path, k: int) -> Path:
+    """The runs of ``logs`` hard-linked ``k`` times (``logs-xK/cI/RUN``; kept if complete)."""
+    runs = sorted(p for p in logs.iterdir() if (p / "run.json").is_file())
+    out = logs.parent / f"{logs.name}-x{k}"
+    if out.is_dir() and len(list(out.glob("c*/*/run.json"))) == k * len(runs):
+        return out
+    tmp = logs.parent / f".{out.name}"
+    for i in range(k):
+        for run in runs:
+            dst = tmp / f"c{i:03d}" / run.name
+            dst.mkdir(parents=True, exist_ok=True)
+            for f in run.iterdir():
+                if not (dst / f.name).exists():
+                    os.link(f, dst / f.name)
+    tmp.rename(out)
+    return out
+
+
+def time_replicas(logs: Path, db: Path, k: int, workers: int) -> None:
+    """Throughput of a survey of ``k`` copies of the runs: wall and CPU with ``workers``
+    processes, the machine's 2-process ceiling now (bench_audit's calibration) and the load."""
+    from bench_audit import calibrate
+
+    root = replicate(logs, k)
+    ceiling = calibrate(workers) if workers > 1 else 1.0
+    load0 = os.getloadavg()[0]
+    rep, wall, cpu = timed(lambda: survey([root], db, workers=workers))
+    load1 = os.getloadavg()[0]
+    hours = rep.summary()["run_hours"]
+    print(
+        f"\nreplicated ×{k}: {len(rep.runs)} runs, {hours:.1f} run-hours; {workers} workers, load {load0:.1f} → "
+        f"{load1:.1f}, {workers}-process ceiling {ceiling:.2f}×"
+    )
+    print(
+        f"   wall {wall:.1f} s = {hours / wall * 60:.1f} run-hours/min → 1,000 run-hours in "
+        f"{1000 / hours * wall / 60:.1f} min; CPU {cpu:.1f} s = {cpu / hours * 1000 / 60:.1f} CPU-min per 1,000 "
+        f"run-hours → {cpu / hours * 1000 / 60 / workers:.1f} min on {workers} idle cores"
+    )
 
 
 def print_throughput(hours: float, t: dict[str, float], workers: int, load: tuple[float, float]) -> None:
@@ -426,7 +483,9 @@ def main() -> None:
             print(f"\n{'metric':62s} {'value':>18s}  target")
             report(e, evaluate(rep_truth, truth, clean_what), track_km(truth))
         print_wheels(wheel_sources(rep))
-    print_throughput(rep.summary()["run_hours"], t, args.workers, (load0, load1))
+        print_throughput(rep.summary()["run_hours"], t, args.workers, (load0, load1))
+        if args.replicate:
+            time_replicas(logs, sv_db, args.replicate, args.workers)
 
 
 def _cpu() -> float:
