@@ -23,17 +23,22 @@ never enters). Per stretch s and point i
 
     y_i = a_s + λ·d_i + e_i,
 
-d the corrected odometry travel, a_s the stretch's offset (antenna, the error at its start).
+d the corrected odometry travel, a_s the stretch's offset (the odometry's distance error so far).
 GNSS errors are correlated over minutes (multipath, atmosphere, a D-GPS correction's age), so
 e is modelled as a Gauss–Markov process of correlation time τ = ``gnss_error_tau_s``
-scaled by the point's σ_i: the generalised least-squares estimate whitens each stretch
-(z_i = (u_i − ρ_i·u_{i−1}) / √(1 − ρ_i²), u = ·/σ_i, ρ_i = exp(−Δt_i/τ); z_0 = u_0), takes
-the offsets out per stretch and regresses through the origin: λ̂ = Σ d̃·ỹ / Σ d̃², se =
-s/√Σ d̃² with s² the whitened residuals' variance (n − stretches − 1 degrees of freedom).
+scaled by the point's σ_i, running on across a stretch's end (only the odometry's offset
+changes there) and restarted at a segment's start. The generalised least-squares estimate
+whitens each segment (z_i = (u_i − ρ_i·u_{i−1}) / √(1 − ρ_i²), u = ·/σ_i, ρ_i =
+exp(−Δt_i/τ); z_0 = u_0) — the offsets' columns then reach one point into the next stretch,
+so their normal equations are tridiagonal — eliminates the offsets through them and
+regresses the whitened y on the whitened travel: λ̂ = (d̃ᵀỹ − cᵀA⁻¹c_y)/(d̃ᵀd̃ − cᵀA⁻¹c),
+se² = s²/(d̃ᵀd̃ − cᵀA⁻¹c), s² the whitened residuals' variance (n − stretches − 1 degrees of
+freedom) — the dense GLS with the full covariance, without forming it.
 Points whose whitened residual (a jump's edges) or plain residual y − â_s − λ̂·d (its
 plateau) lies beyond ``gnss_outlier_z`` robust σ (1.4826·MAD) of its kind are dropped and
 the fit repeated (a multipath jump the trust filter let through). Estimated only with at least
-``wheel_min_distance_m`` of travel in stretches of three or more points.
+``wheel_min_distance_m`` of travel in stretches of three or more points. How the model was
+checked (coverage of the interval, the dense GLS) is in ``bench/NOTES.md`` ("Wheels").
 """
 
 from __future__ import annotations
