@@ -4,6 +4,9 @@ Run on demand (prints a table, never pass/fail)::
 
     .venv/bin/python bench/bench_survey.py                         # 2 lines × 25 km, 8 runs per track
     .venv/bin/python bench/bench_survey.py --lines 1 --length-km 12 --runs 4
+    .venv/bin/python bench/bench_survey.py --sensors radar --wheels-only --keep DIR   # runs with a radar
+    .venv/bin/python bench/bench_survey.py --sensors gnss --lines 1 --runs 6 --wheels-only --keep DIR
+    .venv/bin/python bench/bench_survey.py --wheels-only --keep DIR --replicate 8    # + throughput of 8 copies
 
 How the errors are made. A synthetic network (``--lines`` double-track lines of
 ``--length-km``, stations every 3 km with initial pairs and home/block C balises,
@@ -16,14 +19,22 @@ curve's six rows removed (a new curve to propose) and one curve moved by 30 m; a
 line ``--unpowered`` balises (I1, I2 and C) are kept in the DB but their telegrams taken
 out of every run (unpowered balises). Every other balise and curve is clean.
 
+``--sensors`` adds a ready ``radar`` stream or raw GNSS (``gnss_obs``/``gnss_nav``) to every
+run (the D-GPS stays); ``--keep DIR`` keeps the simulated runs and reuses them.
+
 Reported against the issue's targets: moved balises flagged and their residual within
 ±0.5 m; missed balises found, and false "missed"; removed curves proposed within ±10 m
 (exit lower-limit crossing) and ±10 % radius; wheel diameters per vehicle within ±0.1 %
-of the runs' mean true diameter (and per run); false "moved" balises and features on the
-clean items of the surveyed DB, and everywhere when the truth DB itself is surveyed (per
-100 track-km). Throughput: the survey (replay + aggregation) in run-hours per minute with
-``--workers`` processes, extrapolated to 1,000 run-hours, beside ``gis verify`` alone on
-the same runs (the replay they share).
+of the runs' mean true diameter (and per run), per source (balise, radar, GNSS) and
+combined, from all of a vehicle's runs and from its first three, with how often each
+run's 95 % interval holds the truth and how many runs and vehicles the consistency check
+flags; false "moved" balises and features on the clean items of the surveyed DB, and
+everywhere when the truth DB itself is surveyed (per 100 track-km). Throughput: the survey
+(replay + aggregation) in run-hours per minute with ``--workers`` processes, extrapolated
+to 1,000 run-hours, beside ``gis verify`` alone on the same runs (the replay they share);
+``--replicate K`` times a survey of the runs hard-linked K times (with the machine's
+2-process ceiling of ``bench_audit.py``), where the fixed costs (start-up, fork server,
+aggregation imports) weigh less.
 """
 
 from __future__ import annotations
@@ -56,6 +67,7 @@ from fieldlogs.simulate.simulator import simulate_run
 from fieldlogs.survey.features import db_features
 from fieldlogs.survey.result import SurveyReport
 from fieldlogs.survey.runner import survey
+from fieldlogs.survey.wheels import SOURCES, vehicle_wheels
 
 PROJECTOR = Projector(9)
 KM0 = 1000.0
@@ -98,8 +110,16 @@ def _telegram_balise(streams: dict[str, pd.DataFrame], balises: pd.DataFrame, li
     return out
 
 
-def _simulate(job: tuple[str, str, str, int, int, str, list[str]]) -> str:
-    db, line, track, seed, k, folder, unpowered = job
+#: Scenario overrides per ``--sensors`` case (the default scenario has D-GPS).
+SENSORS: dict[str, dict[str, Any]] = {
+    "dgps": {},
+    "radar": {"sensors": {"radar": True}},
+    "gnss": {"gnss_raw": {"enabled": True}},
+}
+
+
+def _simulate(job: tuple[str, str, str, int, int, str, list[str], str]) -> str:
+    db, line, track, seed, k, folder, unpowered, sensors = job
     net = read_network(Path(db))
     vid = k % VEHICLES
     nth = k // VEHICLES
@@ -111,6 +131,7 @@ def _simulate(job: tuple[str, str, str, int, int, str, list[str]]) -> str:
             "run": {"run_id": f"S{line}{track}{seed}", "vehicle_id": f"EMU-{vid + 1}", "start_time": day.isoformat()},
             "running": {"standstill_start_s": 20.0 + float(np.random.default_rng(seed).uniform(0.0, 1.0))},
             "tacho": {"wear_pct": [wear, wear]},
+            **SENSORS[sensors],
         }
     )
     sim = simulate_run(net, sc, seed=seed)
@@ -163,18 +184,20 @@ def inject(truth: Network, rng: np.random.Generator, unpowered_per_line: int) ->
 
 
 def simulate_runs(
-    db: Path, net: Network, runs: int, root: Path, workers: int, seed: int, unpowered: list[str]
+    db: Path, net: Network, runs: int, logs: Path, workers: int, seed: int, unpowered: list[str], sensors: str
 ) -> list[Path]:
+    """The runs of the module docstring in ``logs`` (kept when ``logs`` already holds them all)."""
     jobs = []
     k = 0
     for li, line in enumerate(sorted(set(net.gis["line_code"]))):
         for ti, track in enumerate(("D", "U")):
             for r in range(runs):
                 s = seed * 100_000 + li * 1000 + ti * 500 + r
-                jobs.append(
-                    (str(db), str(line), track, s, k, str(root / "logs" / f"{line}-{track}-{r:03d}"), unpowered)
-                )
+                folder = str(logs / f"{line}-{track}-{r:03d}")
+                jobs.append((str(db), str(line), track, s, k, folder, unpowered, sensors))
                 k += 1
+    if all((Path(j[5]) / "run.json").is_file() for j in jobs) and len(list(logs.iterdir())) == len(jobs):
+        return [Path(j[5]) for j in jobs]
     with ProcessPoolExecutor(workers) as pool:
         return [Path(p) for p in pool.map(_simulate, jobs)]
 
@@ -187,6 +210,56 @@ def _wheel_truth(rep: SurveyReport) -> pd.DataFrame:
         st = json.loads((Path(r.folder) / "run.json").read_text())["sim_truth"]
         rows.append({"run_id": r.run_id, "vehicle_id": r.vehicle_id, "true_m": st["wheel_diameter_true_m"]})
     return pd.DataFrame(rows)
+
+
+def _errors(d: pd.Series, true: pd.Series) -> float:
+    """Largest |d / true − 1| [%] (NaN without an estimate)."""
+    e = (d / true - 1).abs()
+    return 100 * float(e.max()) if e.notna().any() else float("nan")
+
+
+def wheel_sources(rep: SurveyReport, first_runs: int = 3) -> pd.DataFrame:
+    """Per source (and combined): runs with an estimate, the largest per-run error, the share
+    of runs whose 95 % interval holds the truth, and the largest per-vehicle error from all
+    of a vehicle's runs and from its first ``first_runs`` runs (each against the mean true
+    diameter of the runs used)."""
+    wt = _wheel_truth(rep)
+    wr = rep.wheel_runs.merge(wt, on=["run_id", "vehicle_id"])
+    first = wr.sort_values("start_time", kind="stable").groupby("vehicle_id").head(first_runs)
+    few = vehicle_wheels(first.drop(columns="true_m"), rep.config)
+    rows = []
+    for name, col, ci in [("combined", "diameter_m", "ci95_m")] + [
+        (s, f"diameter_{s}_m", f"ci95_{s}_m") for s in SOURCES
+    ]:
+        has = wr[col].notna()
+        covered = ((wr[col] - wr["true_m"]).abs() <= wr[ci])[has]
+        per_veh = []
+        for frame, runs_used in ((rep.wheels, wr), (few, first)):
+            ok = runs_used[runs_used[col].notna()]
+            true = ok.groupby("vehicle_id")["true_m"].mean().rename("true_m")
+            v = frame.merge(true, on="vehicle_id")
+            per_veh.append((_errors(v[col], v["true_m"]), int(v[col].notna().sum())))
+        rows.append(
+            {
+                "source": name,
+                "runs": int(has.sum()),
+                "run_max_pct": _errors(wr[col], wr["true_m"]),
+                "covered": f"{int(covered.sum())}/{int(has.sum())}",
+                "vehicle_max_pct": per_veh[0][0],
+                "vehicles": per_veh[0][1],
+                f"vehicle_{first_runs}_runs_max_pct": per_veh[1][0],
+                f"vehicles_{first_runs}_runs": per_veh[1][1],
+            }
+        )
+    out = pd.DataFrame(rows)
+    src = sorted({str(x) for x in wr["gnss_source"].dropna()} | {str(x) for x in wr["radar_source"].dropna()})
+    out.attrs["note"] = (
+        f"sources in the runs: {', '.join(src) or 'balises only'}; runs whose sources disagree: "
+        f"{int((wr['consistent'] == False).sum())} of {int(wr['consistent'].notna().sum())}; "  # noqa: E712
+        f"vehicles: {int((rep.wheels['consistent'] == False).sum())} of {len(rep.wheels)}; with {first_runs} "  # noqa: E712
+        f"runs: {int((few['consistent'] == False).sum())}"  # noqa: E712
+    )
+    return out
 
 
 def evaluate(rep: SurveyReport, truth: Network, what: dict[str, Any]) -> dict[str, Any]:
@@ -293,7 +366,7 @@ def report(e: dict[str, Any], clean: dict[str, Any], km: float) -> None:
     _row("clean balises ok (truth DB)", f"{clean['clean_ok']}/{clean['clean_balises']}")
 
 
-def main() -> None:
+def _args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--lines", type=int, default=2)
     ap.add_argument("--length-km", type=float, default=25.0)
@@ -301,8 +374,88 @@ def main() -> None:
     ap.add_argument("--unpowered", type=int, default=8, help="unpowered balises per line")
     ap.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--keep", type=Path, default=None, help="work folder to keep (default: a temp folder)")
-    args = ap.parse_args()
+    ap.add_argument("--sensors", choices=sorted(SENSORS), default="dgps", help="what the runs carry beside balises")
+    ap.add_argument("--wheels-only", action="store_true", help="survey the surveyed DB only: the wheel table, timing")
+    ap.add_argument(
+        "--replicate",
+        type=int,
+        default=0,
+        help="then time a survey of the runs hard-linked this many times (throughput only)",
+    )
+    ap.add_argument(
+        "--keep", type=Path, default=None, help="work folder to keep, its simulated runs reused (default: temporary)"
+    )
+    return ap.parse_args()
+
+
+def print_wheels(ws: pd.DataFrame) -> None:
+    print("\nwheel diameter per source (errors against the simulated truth, %; target ±0.1 % from ≥ 3 runs):")
+    print(ws.to_string(index=False, float_format=lambda v: f"{v:.4f}"))
+    print(f"   {ws.attrs['note']}")
+
+
+def replicate(logs: Path, k: int) -> Path:
+    """The runs of ``logs`` hard-linked ``k`` times (``logs-xK/cI/RUN``; kept if complete)."""
+    runs = sorted(p for p in logs.iterdir() if (p / "run.json").is_file())
+    out = logs.parent / f"{logs.name}-x{k}"
+    if out.is_dir() and len(list(out.glob("c*/*/run.json"))) == k * len(runs):
+        return out
+    tmp = logs.parent / f".{out.name}"
+    for i in range(k):
+        for run in runs:
+            dst = tmp / f"c{i:03d}" / run.name
+            dst.mkdir(parents=True, exist_ok=True)
+            for f in run.iterdir():
+                if not (dst / f.name).exists():
+                    os.link(f, dst / f.name)
+    tmp.rename(out)
+    return out
+
+
+def time_replicas(logs: Path, db: Path, k: int, workers: int) -> None:
+    """Throughput of a survey of ``k`` copies of the runs: wall and CPU with ``workers``
+    processes, the machine's 2-process ceiling now (bench_audit's calibration) and the load."""
+    from bench_audit import calibrate
+
+    root = replicate(logs, k)
+    ceiling = calibrate(workers) if workers > 1 else 1.0
+    load0 = os.getloadavg()[0]
+    rep, wall, cpu = timed(lambda: survey([root], db, workers=workers))
+    load1 = os.getloadavg()[0]
+    hours = rep.summary()["run_hours"]
+    print(
+        f"\nreplicated ×{k}: {len(rep.runs)} runs, {hours:.1f} run-hours; {workers} workers, load {load0:.1f} → "
+        f"{load1:.1f}, {workers}-process ceiling {ceiling:.2f}×"
+    )
+    print(
+        f"   wall {wall:.1f} s = {hours / wall * 60:.1f} run-hours/min → 1,000 run-hours in "
+        f"{1000 / hours * wall / 60:.1f} min; CPU {cpu:.1f} s = {cpu / hours * 1000 / 60:.1f} CPU-min per 1,000 "
+        f"run-hours → {cpu / hours * 1000 / 60 / workers:.1f} min on {workers} idle cores"
+    )
+
+
+def print_throughput(hours: float, t: dict[str, float], workers: int, load: tuple[float, float]) -> None:
+    rate = hours / (t["survey"] / 60.0)
+    cpu_rate = hours / (t["survey_cpu"] / workers / 60.0)
+    print(
+        f"\nthroughput ({workers} workers, load {load[0]:.1f} → {load[1]:.1f}): {hours:.1f} run-hours surveyed in "
+        f"{t['survey']:.1f} s wall = {rate:.1f} run-hours/min → 1,000 run-hours in {1000.0 / rate:.1f} min "
+        "(target ≤ 10 min)"
+    )
+    print(
+        f"   CPU time {t['survey_cpu']:.1f} s (this process and its workers) = {cpu_rate:.1f} run-hours/min on "
+        f"{workers} idle cores → 1,000 run-hours in {1000.0 / cpu_rate:.1f} min"
+    )
+    if "gis" in t:
+        print(
+            f"survey of the truth DB {t['truth']:.1f} s wall; gis verify alone on the same runs: {t['gis']:.1f} s "
+            f"wall, {t['gis_cpu']:.1f} s CPU (survey / gis verify: wall {t['survey'] / t['gis']:.2f}, CPU "
+            f"{t['survey_cpu'] / t['gis_cpu']:.2f})"
+        )
+
+
+def main() -> None:
+    args = _args()
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
         root.mkdir(parents=True, exist_ok=True)
@@ -312,37 +465,28 @@ def main() -> None:
         surveyed, what = inject(truth, np.random.default_rng(args.seed + 7), args.unpowered)
         sv_db = build(surveyed, root, "surveyed")
         t0 = time.perf_counter()
-        runs = simulate_runs(truth_db, truth, args.runs, root, args.workers, args.seed, what["unpowered"])
+        logs = root / f"logs-{args.sensors}-{args.lines}x{args.runs}"
+        runs = simulate_runs(truth_db, truth, args.runs, logs, args.workers, args.seed, what["unpowered"], args.sensors)
         print(
-            f"simulated {len(runs)} runs ({args.lines} lines × 2 tracks × {args.runs}) "
+            f"simulated {len(runs)} runs ({args.lines} lines × 2 tracks × {args.runs}, {args.sensors}) "
             f"in {time.perf_counter() - t0:.0f} s"
         )
         load0 = os.getloadavg()[0]
-        rep, t_survey, cpu_survey = timed(lambda: survey([root / "logs"], sv_db, workers=args.workers))
-        rep_truth, t_truth, _ = timed(lambda: survey([root / "logs"], truth_db, workers=args.workers))
-        _, t_gis, cpu_gis = timed(lambda: verify_runs(sv_db, [root / "logs"], workers=args.workers))
+        t: dict[str, float] = {}
+        rep, t["survey"], t["survey_cpu"] = timed(lambda: survey([logs], sv_db, workers=args.workers))
+        if not args.wheels_only:
+            rep_truth, t["truth"], _ = timed(lambda: survey([logs], truth_db, workers=args.workers))
+            _, t["gis"], t["gis_cpu"] = timed(lambda: verify_runs(sv_db, [logs], workers=args.workers))
         load1 = os.getloadavg()[0]
-        e = evaluate(rep, truth, what)
-        clean_what = {"moved": {}, "unpowered": what["unpowered"], "removed_b": [], "removed_f": [], "moved_f": []}
-        ct = evaluate(rep_truth, truth, clean_what)
-    hours = rep.summary()["run_hours"]
-    print(f"\n{'metric':62s} {'value':>18s}  target")
-    report(e, ct, track_km(truth))
-    rate = hours / (t_survey / 60.0)
-    cpu_rate = hours / (cpu_survey / args.workers / 60.0)
-    print(
-        f"\nthroughput ({args.workers} workers, load {load0:.1f} → {load1:.1f}): {hours:.1f} run-hours surveyed in "
-        f"{t_survey:.1f} s wall (truth DB {t_truth:.1f} s) = {rate:.1f} run-hours/min → 1,000 run-hours in "
-        f"{1000.0 / rate:.1f} min (target ≤ 10 min)"
-    )
-    print(
-        f"   CPU time {cpu_survey:.1f} s (this process and its workers) = {cpu_rate:.1f} run-hours/min on "
-        f"{args.workers} idle cores → 1,000 run-hours in {1000.0 / cpu_rate:.1f} min"
-    )
-    print(
-        f"gis verify alone on the same runs: {t_gis:.1f} s wall, {cpu_gis:.1f} s CPU "
-        f"(survey / gis verify: wall {t_survey / t_gis:.2f}, CPU {cpu_survey / cpu_gis:.2f})"
-    )
+        if not args.wheels_only:
+            e = evaluate(rep, truth, what)
+            clean_what = {"moved": {}, "unpowered": what["unpowered"], "removed_b": [], "removed_f": [], "moved_f": []}
+            print(f"\n{'metric':62s} {'value':>18s}  target")
+            report(e, evaluate(rep_truth, truth, clean_what), track_km(truth))
+        print_wheels(wheel_sources(rep))
+        print_throughput(rep.summary()["run_hours"], t, args.workers, (load0, load1))
+        if args.replicate:
+            time_replicas(logs, sv_db, args.replicate, args.workers)
 
 
 def _cpu() -> float:

@@ -23,7 +23,7 @@ from cli.render import (
     write_out,
 )
 from schemas.enums import AlarmType, NoticeType
-from schemas.errors import EXIT_FINDINGS, UsageError
+from schemas.errors import EXIT_FINDINGS, EXIT_UNREADABLE, UsageError
 from schemas.units import format_km
 
 if TYPE_CHECKING:
@@ -107,14 +107,17 @@ def render_tables(report: PossessionReport, c: Console) -> None:
             c.print(frame_table(_frame(check["alarms"]), title="Alarms"))
         if check["notices"]:
             c.print(frame_table(_frame(check["notices"]), title="Notices"))
-    c.print(f"{report.n_alarms} alarm(s) in {len(report.checks)} run(s)")
+    failed = f", {len(report.failed)} run(s) could not be checked" if report.failed else ""
+    c.print(f"{report.n_alarms} alarm(s) in {len(report.checks)} run(s){failed}")
 
 
 @app.command("check")
 @cli_command
 def check(
     runs: list[Path] = typer.Argument(
-        ..., help="Road-rail run folders (run.json with start_time, gps, cab.pto; tacho used when present)."
+        ...,
+        help="Road-rail run folders (run.json with start_time, gps, cab.pto; tacho used when present), or folders "
+        "to search for runs.",
     ),
     db: Path = typer.Option(..., "--db", help="Onboard DB (.sqlite): GIS grid for km and up/down."),
     plan: Path = typer.Option(
@@ -138,6 +141,9 @@ def check(
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
     no_verify_hash: bool = NO_VERIFY_HASH,
+    workers: int | None = typer.Option(
+        None, "--workers", "-j", min=1, help="Processes checking runs (default: all cores)."
+    ),
 ) -> None:
     """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.
 
@@ -147,15 +153,17 @@ def check(
     a wider band leaving it is an overrun_possible notice); a tacho stream, when the run has
     a usable one, holds km and band at a standstill and sharpens the speed (else GPS only,
     and the output says why); notices 30 m before a section end. Runs are matched to
-    possessions by wall-clock time (run.json start_time + t) and line.
+    possessions by wall-clock time (run.json start_time + t) and line. Runs are checked by
+    the replayer of audit and survey (--workers processes, a progress bar); a run that
+    cannot be read or checked is listed with its error and the others go on.
 
     Exit codes: 0 no alarm; 1 alarms found, or the plan has errors (listed with file, line,
-    column); 2 the DB, plan, config or a run cannot be read (or --format html without --out);
-    3 --out exists (use --force) or would replace an input.
+    column); 2 the DB, plan or config cannot be read, a run could not be checked (the other
+    runs are still reported), or --format html without --out; 3 --out exists (use --force)
+    or would replace an input.
 
     Example: trainpos possession check runs/rr-0116 --db net.sqlite --plan possessions.csv --format html --out pz.html
     """
-    from rich.console import Console
 
     from fieldlogs.possession.check import check_files
 
@@ -163,14 +171,40 @@ def check(
         raise UsageError(f"--format {fmt.value} needs --out FILE")
     inputs = inputs_of(runs, db, plan, config)
     check_outputs(files=[out], force=force, inputs=inputs)
-    report = check_files(runs, db, plan, config, work=work)
+    from cli.gis import _Bar
+    from cli.render import progress
+
+    bar = _Bar(progress(err_console()))
+    try:
+        report = check_files(runs, db, plan, config, work=work, workers=workers, progress=bar)
+    finally:
+        if bar.task is not None:
+            bar.bar.stop()
     if report.plan.findings:
         print_findings(report.plan.findings, console=err_console(), title="Plan warnings")
+    _emit(report, fmt, out, plan=plan, db=db, force=force, inputs=inputs)
+    for run, err in report.failed:
+        err_console().print(f"[red]failed:[/] {run}: {err.splitlines()[0] if err else ''}", highlight=False)
+    if report.failed:
+        raise typer.Exit(EXIT_UNREADABLE)
+    if report.n_alarms:
+        raise typer.Exit(EXIT_FINDINGS)
+
+
+def _emit(
+    report: PossessionReport, fmt: Fmt, out: Path | None, *, plan: Path, db: Path, force: bool, inputs: list[Path]
+) -> None:
+    """The report in ``fmt``, to ``out`` or the terminal."""
     if fmt == Fmt.html:
         from fieldlogs.possession.page import render_html
 
         assert out is not None
-        write_out(out, render_html(report.checks, plan=str(plan), db=str(db)), force=force, inputs=inputs)
+        write_out(
+            out,
+            render_html(report.checks, plan=str(plan), db=str(db), failed=report.failed),
+            force=force,
+            inputs=inputs,
+        )
         console().print(f"HTML report written to {out} ({report.n_alarms} alarm(s))")
     elif fmt == Fmt.geojson:
         from dbtools.database import read_network
@@ -192,5 +226,3 @@ def check(
         write_out(out, buf.getvalue(), force=force, inputs=inputs)
     else:
         render_tables(report, console())
-    if report.n_alarms:
-        raise typer.Exit(EXIT_FINDINGS)

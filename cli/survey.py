@@ -84,22 +84,30 @@ def _feature_table(rep: SurveyReport) -> pd.DataFrame:
     )
 
 
+def _source(d: object, h: object) -> str:
+    """A source's diameter ± its 95 % half-width in mm."""
+    ok = all(isinstance(v, int | float) and v == v for v in (d, h))
+    return f"{float(d):.5f} ±{1000 * float(h):.2f}" if ok else ""  # type: ignore[arg-type]
+
+
 def _wheel_table(rep: SurveyReport) -> pd.DataFrame:
     import pandas as pd
 
     w = rep.wheels
-    return pd.DataFrame(
-        {
-            "vehicle": w["vehicle_id"],
-            "runs": [f"{a}/{b}" for a, b in zip(w["runs_estimated"], w["runs"], strict=True)],
-            "run.json m": [_num(v, ".4f") for v in w["configured_m"]],
-            "estimated m": [_num(v, ".5f") for v in w["diameter_m"]],
-            "± 95 % mm": [_num(1000 * v, ".2f") if v == v else "" for v in w["ci95_m"]],
-            "diff %": [_num(100 * v, "+.3f") if v == v else "" for v in w["diff_share"]],
-            "trend mm/30 d": [_num(v, "+.2f") for v in w["trend_mm_per_30d"]],
-            "status": w["status"],
-        }
-    )
+    out = {
+        "vehicle": w["vehicle_id"],
+        "runs": [f"{a}/{b}" for a, b in zip(w["runs_estimated"], w["runs"], strict=True)],
+        "run.json m": [_num(v, ".4f") for v in w["configured_m"]],
+        "estimated m": [_num(v, ".5f") for v in w["diameter_m"]],
+        "± 95 % mm": [_num(1000 * v, ".2f") if v == v else "" for v in w["ci95_m"]],
+        "diff %": [_num(100 * v, "+.3f") if v == v else "" for v in w["diff_share"]],
+    }
+    for name, label in (("balise", "balises m"), ("radar", "radar m"), ("gnss", "GNSS m")):
+        out[label] = [_source(d, h) for d, h in zip(w[f"diameter_{name}_m"], w[f"ci95_{name}_m"], strict=True)]
+    out["agree"] = ["" if a is None or a != a else ("yes" if a else "NO") for a in w["consistent"]]
+    out["trend mm/30 d"] = [_num(v, "+.2f") for v in w["trend_mm_per_30d"]]
+    out["status"] = w["status"]
+    return pd.DataFrame(out)
 
 
 def _summary_rows(rep: SurveyReport) -> list[tuple[str, object]]:
@@ -114,6 +122,7 @@ def _summary_rows(rep: SurveyReport) -> list[tuple[str, object]]:
         ("candidate balises", s["candidates_confirmed"]),
         ("feature points", ", ".join(f"{v} {k}" for k, v in s["features"].items()) or "—"),
         ("wheels", ", ".join(f"{v} {k}" for k, v in s["wheels"].items()) or "—"),
+        ("wheel sources disagree", s["wheels_inconsistent"]),
         ("GIS defects", s["gis_defects"] if s["gis_defects"] is not None else f"— ({rep.gis_note})"),
         ("proposed changes", f"{applied} of {s['changes']}"),
     ]
@@ -219,8 +228,10 @@ def survey(
     telegrams read by several runs are candidates. Feature points: curves located by their
     lower-limit crossings (the pipeline's 20 % rule) on the runs' curvature κ = ωz/v,
     averaged over runs, against the DB: ok, moved, new (six rows proposed) or not seen.
-    Wheels: diameter per run and vehicle from the balise intervals, alert beyond
-    [survey] wheel_alert_share. GIS: the gis verify statistics on the same runs. Thresholds
+    Wheels: diameter per run and vehicle from the balise intervals, the radar's wheel
+    calibration and GNSS (track-constrained, else D-GPS) along-track positions, each with its
+    95 % interval, combined by inverse variance; sources that disagree beyond their intervals
+    are flagged; alert beyond [survey] wheel_alert_share. GIS: the gis verify statistics on the same runs. Thresholds
     are in [survey] (trainpos config show --section survey).
 
     JSON (--format json): {"db", "db_version", "config", "summary", "runs", "failed_runs",
@@ -228,7 +239,8 @@ def survey(
     "gis", "gis_note", "changes"}.
 
     Exit codes: 0 nothing to act on, 1 something flagged (moved or missed balise, confirmed
-    candidate, moved/new/not seen feature, wheel alert, GIS defect, a run that failed),
+    candidate, moved/new/not seen feature, wheel alert or disagreeing wheel sources, GIS
+    defect, a run that failed),
     2 unreadable DB/run/config or bad usage, 3 --out/--propose exists (use --force).
 
     Example: trainpos survey logs/ --db net.sqlite --format html --out survey.html --propose src-next/

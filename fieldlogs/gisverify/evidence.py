@@ -76,32 +76,33 @@ def fixes_from_result(result: PipelineResult, run_id: str, max_km_margin_m: floa
     n_c = tc.size
     i0 = np.clip(np.searchsorted(tc, t, side="right") - 1, 0, n_c - 1)
     i1 = np.minimum(i0 + 1, n_c - 1)
-    state = pos["state"].to_numpy(dtype=object)
-    line, track = _text(pos["line_code"]), _text(pos["track"])
+    state0, state1 = _text_at(pos["state"], i0), _text_at(pos["state"], i1)
+    line, track = _text_at(pos["line_code"], i0), _text_at(pos["track"], i0)
+    line1, track1 = _text_at(pos["line_code"], i1), _text_at(pos["track"], i1)
     trusted = f["trusted"].to_numpy(dtype=bool)
     before = t >= tc[0]
-    known = before & (state[i0] != PositionState.UNDETERMINED.value) & (line[i0] != "") & (track[i0] != "")
+    known = before & (state0 != PositionState.UNDETERMINED.value) & (line != "") & (track != "")
     dec_line, dec_track = _text(f["decided_line_code"]), _text(f["decided_track"])
     has_dec = (dec_line != "") & (dec_track != "")
-    conflict = known & has_dec & ((dec_line != line[i0]) | (dec_track != track[i0]))
+    conflict = known & has_dec & ((dec_line != line) | (dec_track != track))
     use = trusted & known & ~conflict
 
     km = pos["km_m"].to_numpy(dtype=float)
     margin = pos["margin_m"].to_numpy(dtype=float)
-    source = _text(pos["last_fix_source"])
-    ok_c = (
-        (state == PositionState.DETERMINED.value)
-        & np.isin(source, KM_REF_SOURCES)
-        & (margin <= max_km_margin_m)
-        & np.isfinite(km)
-    )
+
+    def km_ok(ix: np.ndarray, state: np.ndarray) -> np.ndarray:
+        """The cycle's km may serve as the along-track reference (module docstring)."""
+        source = _text_at(pos["last_fix_source"], ix)
+        ok = (state == PositionState.DETERMINED.value) & np.isin(source, KM_REF_SOURCES)
+        return np.asarray(ok & (margin[ix] <= max_km_margin_m) & np.isfinite(km[ix]), dtype=bool)
+
     dt = tc[i1] - tc[i0]
     with np.errstate(invalid="ignore", divide="ignore"):
         w = np.where(dt > 0, (t - tc[i0]) / dt, 0.0)
     km_ref = km[i0] + w * (km[i1] - km[i0])
     epoch = fix_epochs(margin)
-    same = (line[i1] == line[i0]) & (track[i1] == track[i0]) & ok_c[i1] & (epoch[i1] == epoch[i0])
-    km_ref = np.where(ok_c[i0] & same, km_ref, np.nan)
+    same = (line1 == line) & (track1 == track) & km_ok(i1, state1) & (epoch[i1] == epoch[i0])
+    km_ref = np.where(km_ok(i0, state0) & same, km_ref, np.nan)
 
     sel = np.flatnonzero(use)
     fixes = pd.DataFrame(
@@ -110,8 +111,8 @@ def fixes_from_result(result: PipelineResult, run_id: str, max_km_margin_m: floa
             "t": t[sel],
             "lat": f["lat"].to_numpy(dtype=float)[sel],
             "lon": f["lon"].to_numpy(dtype=float)[sel],
-            "line_code": line[i0[sel]].astype(str),
-            "track": track[i0[sel]].astype(str),
+            "line_code": line[sel].astype(str),
+            "track": track[sel].astype(str),
             "km_ref_m": km_ref[sel],
             KM_EPOCH_COLUMN: epoch[i0[sel]],
         }
@@ -138,7 +139,12 @@ def fix_epochs(margin: np.ndarray) -> np.ndarray:
 
 def _text(s: pd.Series) -> np.ndarray:
     """Strings as an object array, "" where missing (safe to compare)."""
-    return s.astype(object).where(s.notna(), "").to_numpy(dtype=object)
+    return np.asarray(s.to_numpy(dtype=object, na_value=""), dtype=object)
+
+
+def _text_at(s: pd.Series, ix: np.ndarray) -> np.ndarray:
+    """:func:`_text` of the rows ``ix`` only."""
+    return _text(s.iloc[ix])
 
 
 def run_evidence(

@@ -67,6 +67,8 @@ class PipelineResult:
     kappa: np.ndarray | None = None
     truth: pd.DataFrame | None = field(default=None, repr=False)
     cycles: Cycles | None = field(default=None, repr=False)
+    gnss: GnssUnit | None = field(default=None, repr=False)
+    """The run's raw GNSS inputs and the track solutions the aid computed (None without)."""
 
 
 def clean_stream(frame: pd.DataFrame | None, name: str, events: list[Event]) -> pd.DataFrame | None:
@@ -160,4 +162,6 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
     if truth is not None and len(truth):
         summary["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
     kappa = ctx.features.kappa if ctx.features is not None else None
-    return PipelineResult(run.run_id, sol.positions, ev_frame, summary, odo, ctx.gps, kappa, truth, ctx.cycles)
+    return PipelineResult(
+        run.run_id, sol.positions, ev_frame, summary, odo, ctx.gps, kappa, truth, ctx.cycles, ctx.gnss
+    )

@@ -13,17 +13,18 @@ package is a small positioning application of its own:
   Kalman filter with gates, restarts and a trusted-fix anchor);
 * :mod:`~fieldlogs.possession.alarms` — the alarm and notice rules over one period;
 * :mod:`~fieldlogs.possession.results` — alarms, timelines and the JSON shape;
-* this module — the run-level entry points (:func:`check_files`, :func:`check_run`,
-  :func:`check_streams`, :func:`check_periods`); :mod:`~fieldlogs.possession.page` draws
-  the HTML report.
+* this module — the run-level entry points (:func:`check_files` over many runs through the
+  one replayer of ``audit`` and ``survey``, :func:`check_run`, :func:`check_streams`,
+  :func:`check_periods`); :mod:`~fieldlogs.possession.page` draws the HTML report.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
@@ -36,7 +37,15 @@ from fieldlogs.possession.periods import RailPeriod, analyse_periods
 from fieldlogs.possession.plan import Plan, Possession, possessions_for
 from fieldlogs.possession.results import Alarm, PeriodResult, RunCheck, checks_json
 from fieldlogs.possession.tacho import Tacho, tacho_problem, tacho_track, tacho_unused
+from fieldlogs.replay.discovery import discover_runs
 from schemas.errors import InputError
+
+if TYPE_CHECKING:
+    from fieldlogs.replay.network import DbRef
+
+Progress = Callable[[int, int, str], None]
+#: Modules the replay's fork server imports once.
+PRELOAD = ("fieldlogs.possession.check",)
 
 
 def check_periods(
@@ -190,36 +199,92 @@ def check_streams(
 
 @dataclass
 class PossessionReport:
-    """What ``trainpos possession check`` shows: every run's check and the plan's warnings."""
+    """What ``trainpos possession check`` shows: every run's check, the runs that could not
+    be checked (folder, one-line error) and the plan's warnings."""
 
     checks: list[RunCheck]
     plan: Plan
     db: str
+    failed: list[tuple[str, str]] = field(default_factory=list)
 
     @property
     def n_alarms(self) -> int:
         return sum(len(c.alarms) for c in self.checks)
 
     def to_json(self) -> dict[str, Any]:
-        return checks_json(self.checks)
+        """``{"runs": [...], "failed_runs": [{"run", "error"}]}``."""
+        return {**checks_json(self.checks), "failed_runs": [{"run": r, "error": e} for r, e in self.failed]}
+
+
+def check_one(
+    folder: str, db: DbRef, possessions: list[Possession], gps_cfg: GpsConfig, cfg: PossessionConfig, work: str | None
+) -> RunCheck:
+    """Replayer worker: :func:`check_run` of one run folder against the DB of ``db`` (loaded
+    once per worker process)."""
+    from fieldlogs.io import read_run
+    from fieldlogs.replay.network import load_network
+
+    return check_run(read_run(Path(folder)), load_network(db), possessions, gps_cfg, cfg, work=work)
+
+
+def run_folders(roots: Sequence[Path]) -> list[Path]:
+    """The run folders to check, in the order given: a root holding ``run.json`` is a run
+    (kept as written), any other root is searched for runs (:func:`discover_runs`); each run
+    once. InputError when there is none, or for a root that is not a folder."""
+    out: list[Path] = []
+    seen: set[Path] = set()
+    for root in roots:
+        found = [Path(root)] if (Path(root) / "run.json").is_file() else discover_runs([Path(root)])
+        for p in found:
+            if p.resolve() not in seen:
+                seen.add(p.resolve())
+                out.append(p)
+    if not out:
+        raise InputError("no run folders (run.json) found", path=", ".join(str(r) for r in roots))
+    return out
 
 
 def check_files(
-    run_dirs: list[Path], db_path: Path, plan_path: Path, config_path: Path | None = None, work: str | None = None
+    run_dirs: Sequence[Path],
+    db_path: Path,
+    plan_path: Path,
+    config_path: Path | None = None,
+    work: str | None = None,
+    *,
+    workers: int | None = None,
+    progress: Progress | None = None,
 ) -> PossessionReport:
-    """Read the DB, the plan (FindingsError on plan errors) and every run, and check each run.
-
-    InputError (exit 2) when the DB, the plan, the config or a run cannot be read.
+    """Read the DB and the plan (FindingsError on plan errors), then check every run through
+    the replayer (:func:`fieldlogs.replay.pool.replay`: this process or ``workers`` local
+    processes; ``progress(done, total, run)`` after each run). A run that cannot be read or
+    checked is listed in :attr:`PossessionReport.failed` with its error and the others go
+    on; InputError (exit 2) when the DB, the plan or the config cannot be read, or when no
+    run could be checked.
     """
-    from dbtools.database import read_network
+    from contextlib import closing
+
     from fieldlogs.config import load_tree
-    from fieldlogs.io import read_run
     from fieldlogs.possession.plan import load_plan
+    from fieldlogs.replay.network import open_db
+    from fieldlogs.replay.pool import replay
 
     tree = load_tree(config_path)
-    gps_cfg, cfg = tree.gps, tree.possession
-    network = read_network(Path(db_path))
+    ref, network = open_db(Path(db_path))
     plan = load_plan(Path(plan_path), network)
-    runs = [read_run(Path(r)) for r in run_dirs]
-    checks = [check_run(r, network, plan.possessions, gps_cfg, cfg, work=work) for r in runs]
-    return PossessionReport(checks, plan, str(db_path))
+    folders = run_folders(run_dirs)
+    tasks = [(str(p), (ref, plan.possessions, tree.gps, tree.possession, work)) for p in folders]
+    checks: list[RunCheck] = []
+    failed: list[tuple[str, str]] = []
+    outcomes = replay(check_one, tasks, workers=workers, ordered=True, preload=PRELOAD)
+    with closing(outcomes):
+        for k, out in enumerate(outcomes, start=1):
+            if out.value is None:
+                failed.append((out.run, out.error or "run cannot be checked"))
+            else:
+                checks.append(out.value)
+            if progress:
+                progress(k, len(tasks), out.run)
+    if not checks:
+        run, err = failed[0]
+        raise InputError(err, path=None if run in err else run)
+    return PossessionReport(checks, plan, str(db_path), failed)

@@ -157,8 +157,11 @@ def _run_parts(c: RunCheck) -> list[str]:
     ]
 
 
-def render_html(checks: list[RunCheck], *, plan: str = "", db: str = "") -> str:
-    """Every run's summary, alarms, notices and timeline as one HTML string."""
+def render_html(
+    checks: list[RunCheck], *, plan: str = "", db: str = "", failed: list[tuple[str, str]] | None = None
+) -> str:
+    """Every run's summary, alarms, notices and timeline as one HTML string (and the runs
+    that could not be checked, with their errors)."""
     n_alarms = sum(len(c.alarms) for c in checks)
     status = kit.Status.ALARM if n_alarms else kit.Status.OK
     parts = [
@@ -166,6 +169,9 @@ def render_html(checks: list[RunCheck], *, plan: str = "", db: str = "") -> str:
         f"{kit.badge(f'{n_alarms} alarm(s)', status)}; {kit.generated()}.</p>",
         _legend(),
     ]
+    if failed:
+        items = "".join(f"<li>{kit.code(run)}: {kit.escape(err)}</li>" for run, err in failed)
+        parts.append(kit.section("Runs that could not be checked", f"<ul>{items}</ul>"))
     for c in checks:
         parts += _run_parts(c)
     return kit.page("trainpos possession check", *parts, heading_text="Possession check")

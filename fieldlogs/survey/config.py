@@ -76,6 +76,12 @@ class SurveyConfig:
     wheel_min_distance_m: float = setting(
         2000.0, "a run's wheel diameter needs this much clean balise-to-balise travel", "m", gt=0
     )
+    gnss_error_tau_s: float = setting(
+        180.0, "correlation time of the GNSS along-track error (Gauss–Markov) in the GNSS wheel scale", "s", gt=0
+    )
+    gnss_outlier_z: float = setting(
+        5.0, "GNSS points whose whitened residual is beyond this many robust σ are dropped", gt=0
+    )
     wheel_alert_share: float = setting(
         0.003, "maintenance alert when the estimated diameter differs from run.json's by more", gt=0, lt=1
     )

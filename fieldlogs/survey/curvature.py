@@ -31,7 +31,6 @@ import pandas as pd
 from dbtools.network import Network
 from fieldlogs.pipeline.metric import track_metric
 from fieldlogs.survey.extract import RunSurvey
-from fieldlogs.survey.frames import rows as frame_rows
 from fieldlogs.survey.trajectory import Trajectory
 from schemas.enums import direction_sign
 
@@ -81,24 +80,28 @@ def place_samples(
     cov: Parts = {}
     for r, rs in enumerate(runs):
         lam = float(scale[r]) if np.isfinite(scale[r]) else 1.0
-        info = {int(g.seg): g for g in frame_rows(rs.segments)}
+        sg = rs.segments
         k_seg = rs.kappa["seg"].to_numpy(dtype=np.int64)
+        k_x, k_v = rs.kappa["x_m"].to_numpy(dtype=float), rs.kappa["kappa"].to_numpy(dtype=float)
         c_seg = rs.coverage["seg"].to_numpy(dtype=np.int64)
-        for seg, g in info.items():
-            tj = traj.get((r, seg))
+        c_x0, c_x1 = rs.coverage["x0_m"].to_numpy(dtype=float), rs.coverage["x1_m"].to_numpy(dtype=float)
+        for seg, line, track, cab in zip(
+            sg["seg"].tolist(), sg["line_code"].tolist(), sg["track"].tolist(), sg["cab"].tolist(), strict=True
+        ):
+            tj = traj.get((r, int(seg)))
             if tj is None:
                 continue
-            key = (str(g.line_code), str(g.track))
-            to_km = _to_km(network, key, tj, int(g.cab), rs.reader_x_m)
+            key = (str(line), str(track))
+            to_km = _to_km(network, key, tj, int(cab), rs.reader_x_m)
             sel = k_seg == seg
-            km = to_km(rs.kappa["x_m"].to_numpy(dtype=float)[sel])
-            kn = rs.kappa["kappa"].to_numpy(dtype=float)[sel] * tj.motion * direction_sign(key[1]) / lam
+            km = to_km(k_x[sel])
+            kn = k_v[sel] * tj.motion * direction_sign(key[1]) / lam
             ok = np.isfinite(km)
             parts.setdefault(key, []).append((r * PASS_BASE + seg, km[ok], kn[ok]))
             sel = c_seg == seg
             reach_lo, reach_hi = tj.d[0] - tj.reach_m, tj.d[-1] + tj.reach_m
-            a = to_km(np.clip(rs.coverage["x0_m"].to_numpy(dtype=float)[sel], reach_lo, reach_hi))
-            b = to_km(np.clip(rs.coverage["x1_m"].to_numpy(dtype=float)[sel], reach_lo, reach_hi))
+            a = to_km(np.clip(c_x0[sel], reach_lo, reach_hi))
+            b = to_km(np.clip(c_x1[sel], reach_lo, reach_hi))
             cov.setdefault(key, []).append((r * PASS_BASE + seg, np.fmin(a, b), np.fmax(a, b)))
     return {k: _samples(v) for k, v in parts.items()}, {k: _coverage(v) for k, v in cov.items()}
 

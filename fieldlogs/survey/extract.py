@@ -37,6 +37,10 @@ nothing about the balises.
 ``curve_pad_m`` of a sample with |κ| ≥ (1 − tol)/``max_radius_m`` or of a DB feature span;
 the travel intervals with a usable κ are kept too (coverage). Their km is only computed
 by the aggregation (:mod:`fieldlogs.survey.trajectory`), from the balises as surveyed.
+
+**Wheels.** The run's wheel scale from its radar calibration and from its GNSS (or D-GPS)
+along-track positions on the segments (:mod:`fieldlogs.survey.wheelaids`); the balise
+intervals' scale needs every run and is the aggregation's.
 """
 
 from __future__ import annotations
@@ -58,6 +62,7 @@ from fieldlogs.pipeline.run import PipelineResult, clean_stream, run_pipeline
 from fieldlogs.replay.network import DbRef, load_network
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.dbindex import BaliseIndex, balise_index
+from fieldlogs.survey.wheelaids import AidScale, SegmentSpan, radar_scale, run_gnss_scale
 from schemas.enums import PositionState
 from schemas.errors import InputError, TrainposError
 
@@ -113,6 +118,10 @@ class RunSurvey:
     """seg, x0_m, x1_m: travel intervals with a usable κ."""
     gis: RunEvidence | None = None
     counts: dict[str, int] = field(default_factory=dict)
+    radar: AidScale | None = None
+    """The wheel scale from the radar's calibration (:mod:`fieldlogs.survey.wheelaids`)."""
+    gnss: AidScale | None = None
+    """The wheel scale from GNSS or D-GPS along-track positions."""
 
 
 @dataclass
@@ -129,7 +138,27 @@ class _Seg:
 
 
 def _text(s: pd.Series) -> npt.NDArray[np.object_]:
-    return s.astype(object).where(s.notna(), "").to_numpy(dtype=object)
+    """Strings as an object array, "" where missing."""
+    return np.asarray(s.to_numpy(dtype=object, na_value=""), dtype=object)
+
+
+def _codes(s: pd.Series) -> tuple[IntArray, npt.NDArray[np.object_]]:
+    """Integer codes of a text column (−1: missing or empty) and the texts they stand for."""
+    codes, uniques = pd.factorize(s, use_na_sentinel=True)
+    texts = np.asarray([str(u) for u in uniques], dtype=object)
+    codes = np.asarray(codes, dtype=np.int64)
+    empty = np.flatnonzero(texts == "")
+    if empty.size:
+        codes = np.where(np.isin(codes, empty), -1, codes)
+    return codes, texts
+
+
+def _stretch_start(known: npt.NDArray[np.bool_], cab_i: IntArray) -> IntArray:
+    """For every cycle, the first cycle of the stretch of equal ``known`` and cab it is in."""
+    n = known.size
+    change = np.ones(n, dtype=bool)
+    change[1:] = (known[1:] != known[:-1]) | (cab_i[1:] != cab_i[:-1])
+    return np.asarray(np.maximum.accumulate(np.where(change, np.arange(n), 0)), dtype=np.int64)
 
 
 def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extrapolate_m: float) -> list[_Seg]:
@@ -137,15 +166,16 @@ def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extra
     n = len(pos)
     if n == 0:
         return []
-    line, track = _text(pos["line_code"]), _text(pos["track"])
-    known = (pos["state"].to_numpy(dtype=object) != PositionState.UNDETERMINED.value) & (line != "") & (track != "")
-    key = pd.Series(line + "/" + track).where(known, "").to_numpy(dtype=object)
+    (lc, lines), (tc, tracks) = _codes(pos["line_code"]), _codes(pos["track"])
+    known = (_text(pos["state"]) != PositionState.UNDETERMINED.value) & (lc >= 0) & (tc >= 0)
+    key = np.where(known, lc * (tracks.size + 1) + tc, -1)
     cab_i = np.where(np.asarray(cab) < 0, -1, 1)
     change = np.ones(n, dtype=bool)
     change[1:] = (key[1:] != key[:-1]) | (cab_i[1:] != cab_i[:-1])
     starts = np.flatnonzero(change)
     ends = np.append(starts[1:], n)
     km = pos["km_m"].to_numpy(dtype=float)
+    first = _stretch_start(known, cab_i)
     out: list[_Seg] = []
     for ia, ib in zip(starts.tolist(), ends.tolist(), strict=True):
         if not known[ia]:
@@ -154,11 +184,9 @@ def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extra
         motion = int(np.sign(dk)) if abs(dk) >= MIN_MOTION_M else 0
         ie = ia
         if ia > 0 and not known[ia - 1] and cab_i[ia - 1] == cab_i[ia]:
-            j = ia - 1  # the undetermined stretch before, with the same cab
-            while j > 0 and not known[j - 1] and cab_i[j - 1] == cab_i[ia]:
-                j -= 1
+            j = int(first[ia - 1])  # the undetermined stretch before, with the same cab
             ie = max(j, int(np.searchsorted(d, d[ia] - extrapolate_m, side="left")))
-        out.append(_Seg(ia, ib, ie, str(line[ia]), str(track[ia]), motion, int(cab_i[ia])))
+        out.append(_Seg(ia, ib, ie, str(lines[lc[ia]]), str(tracks[tc[ia]]), motion, int(cab_i[ia])))
     return out
 
 
@@ -432,6 +460,7 @@ def extract(
     kappa, coverage = kappa_frames(result, segs, tr, network, pipeline, cfg)
     gis = fixes_from_result(result, run.run_id)
     gis.folder = folder
+    spans = [SegmentSpan(float(tr.t[g.ia]), float(tr.t[g.ib - 1]), g.line_code, g.track, g.motion, g.cab) for g in segs]
     return RunSurvey(
         run_id=run.run_id,
         folder=folder,
@@ -448,6 +477,8 @@ def extract(
         coverage=coverage,
         gis=gis,
         counts=counts,
+        radar=radar_scale(result.odometry, cfg),
+        gnss=run_gnss_scale(result, network, spans, cfg),
     )
 
 

@@ -73,16 +73,17 @@ CANDIDATE_COLUMNS = (
 
 def pass_table(runs: Sequence[RunSurvey]) -> pd.DataFrame:
     """Every run's passes with the run's index, id, vehicle and start time."""
-    frames = [
-        rs.passes.assign(run=r, run_id=rs.run_id, vehicle_id=rs.vehicle_id, start_time=rs.start_time)
-        for r, rs in enumerate(runs)
-        if len(rs.passes)
-    ]
-    if not frames:
+    have = [(r, rs) for r, rs in enumerate(runs) if len(rs.passes)]
+    if not have:
         return pd.DataFrame(
             columns=["balise_id", "seg", "t_pass", "km_pass_m", "read", "run", "run_id", "vehicle_id", "start_time"]
         )
-    return pd.concat(frames, ignore_index=True)
+    out = pd.concat([rs.passes for _, rs in have], ignore_index=True)
+    n = [len(rs.passes) for _, rs in have]
+    out["run"] = np.repeat([r for r, _ in have], n)
+    for col in ("run_id", "vehicle_id", "start_time"):
+        out[col] = pd.Series(np.repeat([str(getattr(rs, col)) for _, rs in have], n), dtype="str")
+    return out
 
 
 def _reason(status: str, passes: int, reads: int, n_est: int, cfg: SurveyConfig) -> str:
@@ -168,21 +169,37 @@ def missed_passes(status: pd.DataFrame, passes: pd.DataFrame) -> pd.DataFrame:
 def _locate_unknown(
     runs: Sequence[RunSurvey], traj: dict[tuple[int, int], Trajectory], network: Network
 ) -> pd.DataFrame:
-    rows = []
+    """Every unknown telegram (its read's columns) with its run and its km on the surveyed
+    chain of its segment (unknown telegrams off every chain's reach are left out)."""
+    parts: list[tuple[int, pd.DataFrame, FloatArray]] = []
     for r, rs in enumerate(runs):
         rd = rs.reads
         if not len(rd):
             continue
-        for _, row in rd[rd["status"] == UNKNOWN].iterrows():
-            tj = traj.get((r, int(row["seg"])))
+        u = rd[rd["status"].to_numpy(dtype=object) == UNKNOWN]
+        if not len(u):
+            continue
+        seg, d = u["seg"].to_numpy(dtype=np.int64), u["d_m"].to_numpy(dtype=float)
+        line, track = u["line_code"].to_numpy(dtype=object), u["track"].to_numpy(dtype=object)
+        km = np.full(len(u), np.nan)
+        for k in np.unique(seg).tolist():
+            tj = traj.get((r, int(k)))
             if tj is None:
                 continue
-            c = float(tj.c_at(np.array([row["d_m"]]))[0])
-            if not np.isfinite(c):
-                continue
-            km = float(track_metric(network, str(row["line_code"]), str(row["track"])).km_of_c(c))
-            rows.append({**row.to_dict(), "run": r, "km_m": km})
-    return pd.DataFrame(rows)
+            at = np.flatnonzero(seg == k)
+            c = tj.c_at(d[at])
+            for j, cj in zip(at.tolist(), c.tolist(), strict=True):
+                if np.isfinite(cj):
+                    km[j] = float(track_metric(network, str(line[j]), str(track[j])).km_of_c(cj))
+        ok = np.isfinite(km)
+        if ok.any():
+            parts.append((r, u[ok], km[ok]))
+    if not parts:
+        return pd.DataFrame()
+    out = pd.concat([p[1] for p in parts], ignore_index=True)
+    out["run"] = np.repeat([p[0] for p in parts], [len(p[1]) for p in parts])
+    out["km_m"] = np.concatenate([p[2] for p in parts])
+    return out
 
 
 def candidates(

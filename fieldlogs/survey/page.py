@@ -4,7 +4,8 @@ Figures (matplotlib, headless, embedded as PNG): per line, the balise residuals 
 km with their 95 % intervals, coloured by status (missed balises marked on the axis), the
 ±``moved_min_m`` band drawn; per line/track, the runs' mean curvature κ̄ with the DB's
 feature points (±1/R between their lower-limit crossings) and the proposed ones; per
-vehicle, the wheel diameter of every run against its start time with the configured one.
+vehicle, the wheel diameter of every run (combined, and per source) against its start time
+with the configured one.
 Tables of every status follow. The verdict is green only when nothing is flagged and most
 balises could be checked.
 """
@@ -102,8 +103,13 @@ def curvature_overlay(rep: SurveyReport, key: tuple[str, str]) -> bytes:
     return kit.png(fig)
 
 
+#: How each source's per-run diameter is drawn beside the combined one.
+SOURCE_MARKERS = (("balise", "s"), ("radar", "^"), ("gnss", "v"))
+
+
 def wheel_trend(wheel_runs: pd.DataFrame) -> bytes:
-    """Per vehicle: each run's estimated diameter (95 % interval) against its start time."""
+    """Per vehicle: each run's combined diameter (95 % interval) and each source's against
+    its start time."""
     w = wheel_runs.assign(time=pd.to_datetime(wheel_runs["start_time"], utc=True, errors="coerce", format="ISO8601"))
     vehicles = sorted(w["vehicle_id"].unique())[:MAX_FIGURES] or ["—"]
     fig, axes = kit.pyplot().subplots(len(vehicles), 1, figsize=(12, 2.2 * len(vehicles) + 0.6), squeeze=False)
@@ -119,8 +125,13 @@ def wheel_trend(wheel_runs: pd.DataFrame) -> bytes:
                 ms=3,
                 lw=0.8,
                 color="tab:blue",
-                label="estimated",
+                label="combined",
             )
+            for name, marker in SOURCE_MARKERS:
+                col = g[f"diameter_{name}_m"].to_numpy(dtype=float)
+                has = np.isfinite(col) & g["time"].notna().to_numpy()
+                if has.any():
+                    ax.plot(g["time"][has], 1000 * col[has], marker, ms=4, mfc="none", color="0.35", label=name)
             ax.step(
                 g["time"][ok], 1000 * g["configured_m"][ok], where="post", color="tab:orange", lw=1.0, label="run.json"
             )
@@ -147,8 +158,16 @@ def _cell(column: str, v: Any) -> kit.Cell:
     return kit.Cell(f"{float(v):.3f}")
 
 
-def _table(frame: pd.DataFrame) -> str:
-    return kit.frame_table(frame, _cell) if len(frame) else "<p>None.</p>"
+def _wheel_cell(column: str, v: Any) -> kit.Cell:
+    """Diameters and their intervals to 0.01 mm (a wheel wears a few tenths of a mm a month)."""
+    if column == "configured_m" or column.startswith(("diameter", "ci95")):
+        if isinstance(v, float | np.floating) and np.isfinite(v):
+            return kit.Cell(f"{float(v):.5f}")
+    return _cell(column, v)
+
+
+def _table(frame: pd.DataFrame, cell: Any = _cell) -> str:
+    return kit.frame_table(frame, cell) if len(frame) else "<p>None.</p>"
 
 
 def _verdict(rep: SurveyReport) -> str:
@@ -160,6 +179,8 @@ def _verdict(rep: SurveyReport) -> str:
             parts.append(f"{s['candidates_confirmed']} unknown balise(s)")
         if s["wheels"].get("alert"):
             parts.append(f"{s['wheels']['alert']} wheel alert(s)")
+        if s["wheels_inconsistent"]:
+            parts.append(f"{s['wheels_inconsistent']} vehicle(s) whose wheel sources disagree")
         if s["gis_defects"]:
             parts.append(f"{s['gis_defects']} GIS defect(s)")
         if s["failed_runs"]:
@@ -209,8 +230,8 @@ def render_html(rep: SurveyReport) -> str:
         kit.section(
             "Wheels",
             kit.figure(wheel_trend(rep.wheel_runs), "Wheel diameter per vehicle"),
-            _table(rep.wheels),
-            _table(rep.wheel_runs),
+            _table(rep.wheels, _wheel_cell),
+            _table(rep.wheel_runs, _wheel_cell),
         ),
         kit.section("Balises", _table(rep.balises)),
         kit.section("Inspection: passes over missed balises", _table(rep.missed)),

@@ -75,6 +75,7 @@ class SurveyReport:
             "candidates_confirmed": cand,
             "features": {str(k): int(v) for k, v in sorted(f.items())},
             "wheels": {str(k): int(v) for k, v in sorted(w.items())},
+            "wheels_inconsistent": int((self.wheels["consistent"] == False).sum()) if len(self.wheels) else 0,  # noqa: E712
             "gis_defects": len(self.gis.defects) if self.gis is not None else None,
             "changes": len(self.changes),
         }
@@ -82,8 +83,8 @@ class SurveyReport:
     @property
     def flagged(self) -> bool:
         """Anything a maintainer must act on (exit 1): moved or missed balises, confirmed
-        candidates, moved / new / not seen feature points, wheel alerts, GIS defects, or
-        runs that could not be used."""
+        candidates, moved / new / not seen feature points, wheel alerts, vehicles whose wheel
+        sources disagree, GIS defects, or runs that could not be used."""
         s = self.summary()
         return bool(
             s["balises"].get(MOVED, 0)
@@ -91,6 +92,7 @@ class SurveyReport:
             or s["candidates_confirmed"]
             or sum(s["features"].get(k, 0) for k in (F_MOVED, NEW, NOT_SEEN))
             or s["wheels"].get(ALERT, 0)
+            or s["wheels_inconsistent"]
             or s["gis_defects"]
             or s["failed_runs"]
         )

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from contextlib import closing
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -66,7 +67,13 @@ def replay_runs(
     scheduler: str | None = None,
     progress: Progress | None = None,
 ) -> tuple[list[RunSurvey], list[tuple[str, str]]]:
-    """Every run's :class:`RunSurvey` (task order) and the runs that failed (folder, error)."""
+    """Every run's :class:`RunSurvey` (task order) and the runs that failed (folder, error).
+
+    The runs are replayed with the odometry's ``wheel_calibration`` scale off: the survey
+    measures the wheel against the configured diameter from every source (its radar
+    calibration is still computed and used, :mod:`fieldlogs.survey.wheelaids`)."""
+    if pipeline.odometry.wheel_calibration:
+        pipeline = replace(pipeline, odometry=replace(pipeline.odometry, wheel_calibration=False))
     ref, _ = open_db(db, network)  # this process replays runs too: it keeps the network
     tasks = [(str(p), (ref, pipeline, cfg)) for p in folders]
     done: list[RunSurvey] = []

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -101,34 +101,48 @@ class Reads:
         return int(self.run.size)
 
 
+def _run_reads(r: int, rs: RunSurvey) -> dict[str, npt.NDArray[Any]] | None:
+    """The identified reads of one run on its segment's own line/track, as arrays."""
+    rd = rs.reads
+    if not len(rd):
+        return None
+    seg = rd["seg"].to_numpy(dtype=np.int64)
+    ok = (rd["status"].to_numpy(dtype=object) == IDENTIFIED) & (seg >= 0)
+    if not ok.any():
+        return None
+    sg = rs.segments
+    order = np.argsort(sg["seg"].to_numpy(dtype=np.int64), kind="stable")
+    seg_ids = sg["seg"].to_numpy(dtype=np.int64)[order]
+    at = np.clip(np.searchsorted(seg_ids, seg), 0, max(len(seg_ids) - 1, 0))
+    ok &= (seg_ids[at] == seg) if len(seg_ids) else np.zeros(seg.size, dtype=bool)
+    seg_line = sg["line_code"].to_numpy(dtype=object)[order][at]
+    seg_track = sg["track"].to_numpy(dtype=object)[order][at]
+    ok &= (rd["line_code"].to_numpy(dtype=object) == seg_line) & (rd["track"].to_numpy(dtype=object) == seg_track)
+    if not ok.any():
+        return None
+    return {
+        "run": np.full(int(ok.sum()), r, dtype=np.int64),
+        "seg": seg[ok],
+        "balise_id": rd["balise_id"].to_numpy(dtype=object)[ok],
+        "d": rd["d_m"].to_numpy(dtype=float)[ok],
+        "allowance": rd["allowance_m"].to_numpy(dtype=float)[ok],
+        "motion": rd["motion"].to_numpy(dtype=np.int64)[ok],
+        "t": rd["t"].to_numpy(dtype=float)[ok],
+    }
+
+
 def chained_reads(runs: Sequence[RunSurvey], table: BaliseTable) -> Reads:
     """Every run's identified reads as chains (module docstring)."""
-    parts = []
-    for r, rs in enumerate(runs):
-        rd = rs.reads
-        if not len(rd):
-            continue
-        rd = rd[(rd["status"] == IDENTIFIED) & rd["balise_id"].isin(table.row.keys())]
-        seg_lt = rs.segments.set_index("seg")[["line_code", "track"]].add_suffix("_seg")
-        on = rd.join(seg_lt, on="seg")
-        on = on[(on["line_code"] == on["line_code_seg"]) & (on["track"] == on["track_seg"])]
-        parts.append(
-            pd.DataFrame(
-                {
-                    "run": r,
-                    "seg": on["seg"].to_numpy(dtype=np.int64),
-                    "balise": on["balise_id"].map(table.row).to_numpy(dtype=np.int64),
-                    "d": on["d_m"].to_numpy(dtype=float),
-                    "allowance": on["allowance_m"].to_numpy(dtype=float),
-                    "motion": on["motion"].to_numpy(dtype=np.int64),
-                    "t": on["t"].to_numpy(dtype=float),
-                }
-            )
-        )
+    parts = [p for r, rs in enumerate(runs) if (p := _run_reads(r, rs)) is not None]
     if not parts:
         z = np.zeros(0, dtype=np.int64)
         return Reads(z, z, z, z, np.zeros(0), np.zeros(0), z, np.zeros(0))
-    f = pd.concat(parts, ignore_index=True).sort_values(["run", "seg", "t"], kind="stable", ignore_index=True)
+    cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    pos = pd.Index(list(table.row)).get_indexer(pd.Index(cols.pop("balise_id")))
+    row = np.where(pos >= 0, np.fromiter(table.row.values(), dtype=np.int64, count=len(table.row))[pos], -1)
+    known = row >= 0
+    f = pd.DataFrame({k: v[known] for k, v in cols.items()}).assign(balise=row[known].astype(np.int64))
+    f = f.sort_values(["run", "seg", "t"], kind="stable", ignore_index=True)
     f = _drop_out_of_order(f, table)
     chain = np.asarray(f.groupby(["run", "seg"], sort=False).ngroup().to_numpy(), dtype=np.int64)
     return Reads(

@@ -167,3 +167,65 @@ def test_tacho_used_when_present_and_reported_when_bad(world: dict[str, Path], t
     (data,) = json.loads(res.stdout)["runs"]
     assert data["tacho"]["used"] is False and "km from GPS only" in data["tacho"]["note"]
     assert [a["type"] for a in data["alarms"]] == ["overrun"]
+
+
+def _fleet(world: dict[str, Path], tmp_path: Path) -> Path:
+    """A folder of three runs (copies of the cases) and one whose run.json is broken."""
+    import shutil
+
+    root = tmp_path / "fleet"
+    for kind in ("correct", "overrun", "wrong_track"):
+        shutil.copytree(world[kind], root / "depot" / kind)
+    bad = root / "depot" / "zz-broken"
+    shutil.copytree(world["correct"], bad)
+    (bad / "run.json").write_text("{not json", encoding="utf-8")
+    return root
+
+
+def test_many_runs_go_through_the_replayer_and_a_bad_one_does_not_stop_them(
+    world: dict[str, Path], tmp_path: Path
+) -> None:
+    """A folder is searched for runs; the broken run is listed with its error, the three
+    others are checked (both alarms found) and the exit code says a run could not be checked."""
+    root = _fleet(world, tmp_path)
+    res = invoke(
+        "possession", "check", root, "--db", world["db"], "--plan", world["overrun_plan"], "--format", "json", "-j", 1
+    )
+    assert res.exit_code == 2, res.output
+    data = json.loads(res.stdout)
+    assert [r["run_id"] for r in data["runs"]] == ["PZ-correct-11", "PZ-overrun-31", "PZ-wrong_track-21"]
+    (failed,) = data["failed_runs"]
+    assert failed["run"].endswith("zz-broken") and "run.json" in failed["error"]
+    assert "failed:" in res.stderr and "zz-broken" in res.stderr
+    table = invoke("possession", "check", root, "--db", world["db"], "--plan", world["overrun_plan"])
+    assert table.exit_code == 2 and "1 run(s) could not be checked" in " ".join(table.stdout.split())
+
+
+def test_two_workers_give_the_same_report_as_one(world: dict[str, Path], tmp_path: Path) -> None:
+    root = _fleet(world, tmp_path)
+    args = ("possession", "check", root, "--db", world["db"], "--plan", world["overrun_plan"], "--format", "json")
+    one, two = invoke(*args, "--workers", 1), invoke(*args, "--workers", 2)
+    assert one.exit_code == two.exit_code == 2
+    assert json.loads(one.stdout) == json.loads(two.stdout)
+
+
+def test_check_files_reports_progress_per_run(world: dict[str, Path]) -> None:
+    from fieldlogs.possession.check import check_files
+
+    seen: list[tuple[int, int]] = []
+    rep = check_files(
+        [world["overrun"], world["correct"], world["overrun"]],
+        world["db"],
+        world["overrun_plan"],
+        workers=1,
+        progress=lambda done, total, _run: seen.append((done, total)),
+    )
+    assert seen == [(1, 2), (2, 2)]  # the repeated folder is checked once
+    assert [c.run for c in rep.checks] == [str(world["overrun"]), str(world["correct"])]  # as given, in order
+    assert rep.failed == [] and [a.type for a in rep.checks[0].alarms] == ["overrun"]
+
+
+def test_a_folder_without_runs_exits_2(world: dict[str, Path], tmp_path: Path) -> None:
+    (tmp_path / "empty").mkdir()
+    res = invoke("possession", "check", tmp_path / "empty", "--db", world["db"], "--plan", world["correct_plan"])
+    assert res.exit_code == 2 and "no run folders" in res.stderr
