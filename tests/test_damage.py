@@ -97,6 +97,20 @@ damage = st.lists(
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(ops=damage, seed=st.integers(0, 2**31 - 1))
 def test_damaged_runs_fail_safe(ops: list[tuple[str, str, float]], seed: int, sample_db: Path, tmp_path: Path) -> None:
+    _run_damaged(ops, seed, sample_db, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="known fail-safe hole, open in issue 15: tacho rows half shuffled and then a counter reset "
+    "leave 43 % of the determined cycles outside their margin (found by the property test above)",
+)
+def test_shuffled_tacho_with_a_reset_stays_inside_its_margin(sample_db: Path, tmp_path: Path) -> None:
+    _run_damaged([("shuffle", "tacho", 0.5), ("reset", "tacho", 0.5)], 0, sample_db, tmp_path)
+
+
+def _run_damaged(ops: list[tuple[str, str, float]], seed: int, sample_db: Path, tmp_path: Path) -> None:
     work = tmp_path / f"case-{seed}"
     if work.exists():
         shutil.rmtree(work)
