@@ -94,7 +94,13 @@ damage = st.lists(
 
 
 @pytest.mark.slow
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=25,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
 @given(ops=damage, seed=st.integers(0, 2**31 - 1))
 def test_damaged_runs_fail_safe(ops: list[tuple[str, str, float]], seed: int, sample_db: Path, tmp_path: Path) -> None:
     _run_damaged(ops, seed, sample_db, tmp_path)
