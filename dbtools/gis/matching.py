@@ -478,3 +478,12 @@ def track_index_for(network: Network) -> TrackIndex:
     :func:`~dbtools.gis.index.grid_index` (networks are not modified after loading)."""
     gi = grid_index(network)
     return network.cached(("track_index", id(gi)), lambda: TrackIndex(gi))
+
+
+def load_kernels() -> None:
+    """Load the compiled matching kernel (numba's on-disk cache, a few tenths of a second per
+    process) by matching one fix to a one-segment track: a process that forks workers calls
+    it once so that no worker loads it again. Same argument types as :meth:`TrackIndex.match_xy`."""
+    f8, i8 = np.zeros(2), np.zeros(2, dtype=np.int64)
+    ok, one = np.ones(2, dtype=np.bool_), np.zeros(1, dtype=np.int64)
+    _match_kernel(f8, f8, one, 0, 1.0, i8[:1], np.array([0, 2]), i8, f8, f8, f8, f8, f8, ok, i8, ok[:1], 1.0)

@@ -30,7 +30,7 @@ from schemas.errors import InputError
 __all__ = ["FIGURES", "ImpactReport", "RunImpact", "impact_runs"]
 
 #: Modules the replay's fork server imports once, besides the worker's.
-PRELOAD = ("fieldlogs.pipeline", "fieldlogs.io")
+PRELOAD = ("fieldlogs.pipeline", "fieldlogs.io", "fieldlogs.pipeline.warm")
 
 Progress = Callable[[int, int, str], None]
 
