@@ -1,14 +1,22 @@
 """Cycle means of a sampled stream (``fieldlogs.pipeline.cycles``): the shared-segment path
 gives bit for bit what a direct per-column computation gives (hypothesis), with samples
-beyond the last cycle, empty cycles and non-finite values; a hand-computed case."""
+beyond the last cycle, empty cycles and non-finite values; a hand-computed case; the
+pipeline releasing the IMU stream it read."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+import pandas as pd
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from dbtools.database import read_network
+from fieldlogs.io import read_run
+from fieldlogs.pipeline import run_pipeline
 from fieldlogs.pipeline.cycles import cycle_index, cycle_means, segments
+from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
 
 
 def reference_means(t_cycles: np.ndarray, t_samples: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -55,3 +63,19 @@ def test_shared_segments_equal_the_per_column_means(
         expected = reference_means(t, ts, v)
         assert np.array_equal(cycle_means(t, ts, v, seg=seg), expected, equal_nan=True)
         assert np.array_equal(cycle_means(t, ts, v), expected, equal_nan=True)
+
+
+def test_pipeline_releases_the_imu_it_read_and_keeps_one_the_caller_loaded(sample_db: Path) -> None:
+    """The 100 Hz stream is dropped once its cycle means exist (memory of a long run), unless
+    the caller had loaded it; the results are the same either way."""
+    net = read_network(sample_db)
+    fresh = read_run(SAMPLE_LOGS / "sim-d-slips")
+    a = run_pipeline(fresh, net)
+    assert not fresh.loaded("imu") and fresh.loaded("tacho")
+    preloaded = read_run(SAMPLE_LOGS / "sim-d-slips")
+    preloaded.load_all()
+    b = run_pipeline(preloaded, net)
+    assert preloaded.loaded("imu")
+    pd.testing.assert_frame_equal(a.positions, b.positions, check_exact=True)
+    pd.testing.assert_frame_equal(a.events, b.events, check_exact=True)
+    assert fresh.findings == preloaded.findings
