@@ -34,10 +34,13 @@ def read_parquet_table(path: Path, columns: list[str] | None = None) -> pa.Table
         raise InputError(f"not a readable Parquet file: {exc}", path=path) from exc
 
 
-def parquet_schema(path: Path) -> pa.Schema:
+def open_parquet(path: Path) -> pq.ParquetFile:
+    """The file's reader; an unreadable file raises the InputError :func:`read_parquet_table`
+    raises (the same message, whichever way the file is opened)."""
     try:
-        return pq.read_schema(path)
+        return pq.ParquetFile(path)
     except (pa.ArrowException, OSError) as exc:
+        read_parquet_table(path)  # raises with the reader's own message
         raise InputError(f"not a readable Parquet file: {exc}", path=path) from exc
 
 
@@ -73,7 +76,8 @@ def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Fi
 
     Columns are read and converted one at a time, so that a long stream is held about once
     (its arrays), not twice (the row-group chunks of the whole table beside them)."""
-    schema = parquet_schema(path)
+    pf = open_parquet(path)
+    schema = pf.schema_arrow
     file = str(path)
     findings: list[Finding] = []
     for col in table.columns:
@@ -95,7 +99,7 @@ def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Fi
                 )
             )
     extras = [c for c in schema.names if c not in table.column_names]
-    fast = _fast_columns(table, path, schema)
+    fast = _fast_columns(table, path, pf)
     if fast is not None:
         frame = pd.DataFrame(fast, copy=False)
         for c in extras:
@@ -117,25 +121,33 @@ def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Fi
     return co.frame, findings + co.findings
 
 
-def _fast_columns(table: Table, path: Path, schema: pa.Schema) -> dict[str, Any] | None:
-    """The declared columns typed by :func:`_arrow_column`, each read on its own, or None
-    when one cannot be (then the whole table goes through ``coerce_frame``)."""
+def _fast_columns(table: Table, path: Path, pf: pq.ParquetFile) -> dict[str, Any] | None:
+    """The declared columns typed by :func:`_arrow_column`, or None when one cannot be
+    (then the whole table goes through ``coerce_frame``). A file of one row group is read
+    at once (its columns are single chunks: no copy); a longer one a column at a time."""
+    schema = pf.schema_arrow
     names = set(schema.names)
     if not all(c.name in names for c in table.columns if c.required):
         return None
     if any(c.name in names and not _arrow_fits(c, schema.field(c.name).type) for c in table.columns):
         return None
+    present = [c for c in table.columns if c.name in names]
+    whole = _read(pf, path, [c.name for c in present]) if pf.metadata.num_row_groups <= 1 else None
     fast: dict[str, Any] = {}
-    n_rows = -1
-    for col in table.columns:
-        if col.name in names:
-            part = read_parquet_table(path, [col.name])
-            n_rows = part.num_rows
-            fast[col.name] = _arrow_column(col, part.column(0))
-            del part
-    if n_rows < 0:
-        n_rows = read_parquet_table(path, []).num_rows
+    for col in present:
+        part = whole if whole is not None else _read(pf, path, [col.name])
+        fast[col.name] = _arrow_column(col, part.column(col.name))
+        del part
+    n_rows = pf.metadata.num_rows
     for col in table.columns:  # an optional column absent: nulls of its type
         if col.name not in fast:
             fast[col.name] = pd.Series([None] * n_rows, dtype=PANDAS_DTYPE[col.dtype]).array
     return {c.name: fast[c.name] for c in table.columns}
+
+
+def _read(pf: pq.ParquetFile, path: Path, columns: list[str]) -> pa.Table:
+    """Columns of an open file; a failure raises what :func:`read_parquet_table` raises."""
+    try:
+        return pf.read(columns=columns)
+    except (pa.ArrowException, OSError):
+        return read_parquet_table(path, columns)
