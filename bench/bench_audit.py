@@ -2,20 +2,28 @@
 
 All three modes go through the one replayer (``fieldlogs.replay``) via ``audit()``.
 
-Run: ``.venv/bin/python bench/bench_audit.py [--runs 200] [--workers 2]``.
+Run: ``.venv/bin/python bench/bench_audit.py [--runs 200] [--workers 2] [--rounds 2]``.
 
 Simulates ONE one-hour run per track of a synthetic 62 km double-track line (stations every
 3 km, 6 slips + 6 slides each) and hard-links it ``--runs`` times under different folder
 names in a temp dir (audits key runs by folder, so every copy is audited). Then audits all
 of them into a fresh audit DB per mode and prints runs/min, the speed-up over one worker,
 the time to the first finished run (pool start-up), the mean wall and CPU time of a run in
-its worker (wall > CPU: the run waited for a core), the coordinating process's CPU time and
-the load average (``os.getloadavg``) before and after each mode. The machine may be
-shared: a calibration first measures how much faster 2 processes of a pure CPU loop are
-than one at that moment — no mode can beat it — so read the ratios with it. The local
-pool is timed from the ``audit()`` call (its start-up is part of the cost); the Dask
-cluster is started before timing (``--dask-scheduler`` connects to an existing cluster).
-Target: ≥ 1.8× the single-worker throughput with 2 workers on a 2-core machine. Never fails on timing: it reports.
+its worker (wall > CPU: the run waited for a core), the CPU of every process of the mode
+per run and outside the runs (imports, fork server, warm-up, storing), the cores the mode
+obtained (CPU / wall) and the load average (``os.getloadavg``) before and after each mode.
+
+The machine may be shared, and Linux shares CPU between sessions (autogroups) before it
+shares it between processes: a second worker gets a core only when the other sessions
+leave one. So each round measures, around its 1-worker and pool modes, how much faster 2
+processes of a pure CPU loop are than one at that moment (the calibration: no mode can
+beat it), and each speed-up is split into the cores obtained (the machine's share) times
+the CPU per run of one worker over that of the mode (the code's own cost). ``--rounds``
+repeats calibration, 1 worker and pool. The local pool is timed from the ``audit()`` call
+(its start-up is part of the cost); the Dask cluster is started before timing. Finally
+the time of a 1,000 run-hour audit is extrapolated from the slowest 2-worker rate.
+Target: ≥ 1.8× the single-worker throughput with 2 workers on a quiet 2-core machine,
+1,000 run-hours ≤ 10 min. Never fails on timing: it reports.
 """
 
 from __future__ import annotations

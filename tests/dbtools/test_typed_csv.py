@@ -9,8 +9,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from dbtools.tabular import read_raw_table
 from dbtools import typed_csv
+from dbtools.tabular import read_raw_table
 from dbtools.typed_csv import read_csv_typed
 from fieldlogs.io import coerce_stream, read_stream
 from schemas.logs import LOG_STREAMS
