@@ -13,12 +13,11 @@ a finding.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from schemas.enums import Severity
 from schemas.errors import InputError
@@ -26,8 +25,13 @@ from schemas.findings import Finding
 from schemas.frames import PANDAS_DTYPE, coerce_frame, suggest
 from schemas.model import Column, Table
 
+if TYPE_CHECKING:
+    import pyarrow.parquet as pq
+
 
 def read_parquet_table(path: Path, columns: list[str] | None = None) -> pa.Table:
+    import pyarrow.parquet as pq  # lazy: heavy
+
     try:
         return pq.read_table(path, columns=columns)
     except (pa.ArrowException, OSError) as exc:
@@ -37,6 +41,8 @@ def read_parquet_table(path: Path, columns: list[str] | None = None) -> pa.Table
 def open_parquet(path: Path) -> pq.ParquetFile:
     """The file's reader; an unreadable file raises the InputError :func:`read_parquet_table`
     raises (the same message, whichever way the file is opened)."""
+    import pyarrow.parquet as pq  # lazy: heavy
+
     try:
         return pq.ParquetFile(path)
     except (pa.ArrowException, OSError) as exc:
