@@ -4,14 +4,22 @@ Run: ``.venv/bin/python bench/bench_scaling.py [--hours 0.25 1 4 8 24] [--dir DI
 
 For each length a run of about that many hours is simulated (a train shuttling end to end
 on a 110 km double-track line, a cab reversal at each end, 10 slips and 10 slides; kept
-in ``--dir`` and reused), then a fresh process loads it and times ``run_pipeline`` (file
-reading excluded), best of 3, and reports its CPU and wall time and its peak resident
-memory (``ru_maxrss``: streams, pipeline and outputs in memory). The slope of a
-least-squares fit of log(CPU time) on log(run hours) is printed: 1 is linear, above 1
-superlinear (target ≤ 1.05; the fixed cost of a run makes short runs cost more per hour,
-so slopes below 1 are expected over small sizes). The naive baseline is linear
-extrapolation of the shortest-but-one run: the ratio per size says how far above it each
-run costs. Never fails on timing.
+in ``--dir`` and reused), then
+
+* a fresh process loads it and times ``run_pipeline`` (file reading excluded), best of 3,
+  and reports its CPU and wall time. The slope of a least-squares fit of log(CPU time) on
+  log(run hours) is printed: 1 is linear, above 1 superlinear (target ≤ 1.05; the fixed
+  cost of a run makes short runs cost more per hour, so slopes below 1 are expected over
+  small sizes). The naive baseline is linear extrapolation of the shortest-but-one run:
+  the ratio per size says how far above it each run costs;
+* another fresh process does what an audit worker or ``trainpos run`` does with it —
+  ``read_run`` then ``run_pipeline``, reading included, the ``truth`` stream removed (a
+  field log has none) — and reports its peak resident memory (``VmHWM`` of
+  ``/proc/self/status``; not ``ru_maxrss``, which a child started by fork + exec inherits
+  from a parent larger than itself). A fit of peak RSS = a + b · hours gives the memory
+  bound per worker, printed for 24 h.
+
+Never fails on timing.
 """
 
 from __future__ import annotations
@@ -30,6 +38,14 @@ import numpy as np
 from _common import load, simulated_run
 
 
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process image [MB] (``VmHWM``)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # not Linux
+
+
 def one(run_dir: Path, db: Path) -> dict[str, float]:
     """Time the pipeline on one simulated run (in this process)."""
     from dbtools.database import read_network
@@ -43,14 +59,43 @@ def one(run_dir: Path, db: Path) -> dict[str, float]:
     best_w, best_c, duration = float("inf"), float("inf"), 0.0
     res = None
     for _ in range(3):
-        res = None  # one result in memory at a time: the peak is one run's
+        res = None  # one result in memory at a time
         w0, c0 = time.perf_counter(), time.process_time()
         res = run_pipeline(run, net)
         best_w, best_c = min(best_w, time.perf_counter() - w0), min(best_c, time.process_time() - c0)
         duration = float(res.summary["duration_s"])
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     cycles = float(len(res.positions)) if res is not None else 0.0
-    return {"hours": duration / 3600.0, "cpu": best_c, "wall": best_w, "rss_mb": rss, "cycles": cycles}
+    return {"hours": duration / 3600.0, "cpu": best_c, "wall": best_w, "cycles": cycles}
+
+
+def worker(run_dir: Path, db: Path) -> dict[str, float]:
+    """Peak memory of one run processed as a worker does it (reading included)."""
+    from dbtools.database import read_network
+    from fieldlogs.io import read_run
+    from fieldlogs.pipeline.run import run_pipeline
+
+    base = peak_rss_mb()
+    net = read_network(db)
+    with tempfile.TemporaryDirectory() as tmp:  # the run without its truth stream
+        field = Path(tmp) / "run"
+        field.mkdir()
+        for f in run_dir.iterdir():
+            if f.is_file() and f.name != "truth.parquet":
+                os.link(f, field / f.name)
+        res = run_pipeline(read_run(field), net)
+    return {"rss_mb": peak_rss_mb(), "start_mb": base, "rows": float(len(res.positions))}
+
+
+def _child(flag: str, run_dir: Path, db: Path) -> dict[str, float]:
+    proc = subprocess.run(
+        [sys.executable, __file__, flag, str(run_dir), str(db)],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )
+    out: dict[str, float] = json.loads(proc.stdout.strip().splitlines()[-1])
+    return out
 
 
 def main() -> None:
@@ -58,9 +103,10 @@ def main() -> None:
     ap.add_argument("--hours", type=float, nargs="+", default=[0.25, 1.0, 4.0])
     ap.add_argument("--dir", type=Path, default=None, help="keep the simulated runs here (reused)")
     ap.add_argument("--one", nargs=2, type=Path, metavar=("RUN", "DB"), help=argparse.SUPPRESS)
+    ap.add_argument("--worker", nargs=2, type=Path, metavar=("RUN", "DB"), help=argparse.SUPPRESS)
     args = ap.parse_args()
-    if args.one:
-        print(json.dumps(one(*args.one)))
+    if args.one or args.worker:
+        print(json.dumps(one(*args.one) if args.one else worker(*args.worker)))
         return
     with tempfile.TemporaryDirectory() as tmpd:
         folder = args.dir or Path(tmpd)
@@ -68,20 +114,13 @@ def main() -> None:
         rows = []
         for h in args.hours:
             run_dir, db = simulated_run(folder, h)
-            proc = subprocess.run(
-                [sys.executable, __file__, "--one", str(run_dir), str(db)],
-                capture_output=True,
-                text=True,
-                check=True,
-                env={**os.environ, "OMP_NUM_THREADS": "1"},
-            )
-            r = json.loads(proc.stdout.strip().splitlines()[-1])
+            r = {**_child("--one", run_dir, db), **_child("--worker", run_dir, db)}
             rows.append(r)
             print(
                 f"{r['hours']:6.2f} h ({r['cycles']:,.0f} cycles): CPU {r['cpu']:.3f} s = "
                 f"{r['cpu'] / r['hours']:.3f} s per hour ({3600 * r['hours'] / r['cpu']:,.0f}× real time), "
-                f"wall {r['wall']:.3f} s, "
-                f"peak RSS {r['rss_mb']:.0f} MB  [{load()}]",
+                f"wall {r['wall']:.3f} s; worker peak RSS {r['rss_mb']:.0f} MB (imports {r['start_mb']:.0f} MB)  "
+                f"[{load()}]",
                 flush=True,
             )
     hours = np.array([r["hours"] for r in rows])
@@ -95,8 +134,11 @@ def main() -> None:
         ratios = ", ".join(f"{h:.2f} h {c / (per_h * h):.2f}×" for h, c in zip(hours, cpu, strict=True))
         print(f"log-log slope of CPU time on run length: {slope:.3f} (wall {slope_w:.3f}); target ≤ 1.05")
         print(f"CPU against linear extrapolation of the {hours[ref]:.2f} h run: {ratios}")
-        mem = np.polyfit(hours, [r["rss_mb"] for r in rows], 1)
-        print(f"peak RSS ≈ {mem[1]:.0f} MB + {mem[0]:.0f} MB per hour of log (whole run in memory)  [{load()}]")
+        b, a = np.polyfit(hours, [r["rss_mb"] for r in rows], 1)
+        print(
+            f"worker peak RSS ≈ {a:.0f} MB + {b:.1f} MB per hour of log → {a + 24 * b:.0f} MB for a 24 h run "
+            f"(the 100 Hz IMU while its cycle means are built; reading included, no truth stream)  [{load()}]"
+        )
 
 
 if __name__ == "__main__":

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import itertools
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -37,6 +38,12 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from schemas.model import Table
+
+if TYPE_CHECKING:
+    import pyarrow.csv as pcsv
+
+#: Bytes Arrow's CSV reader parses per block (its default).
+BLOCK_BYTES = 1 << 20
 
 
 def _case_variants(word: str) -> list[str]:
@@ -48,33 +55,81 @@ def _case_variants(word: str) -> list[str]:
 BLANK_CELLS = ["", *_case_variants("nan"), *_case_variants("na"), *_case_variants("null")]
 
 
-def _numbers(data: pa.Table, table: Table) -> dict[str, np.ndarray] | None:
-    """The number columns of ``data`` as float64 arrays (NaN for blank cells), or None when
-    the typed frame could differ from the text path's (module docstring)."""
-    names = data.column_names
+def _names_fit(names: list[str], table: Table) -> bool:
+    """Every column name a declared one, none repeated (else coerce_frame's findings and
+    names are needed: the caller reads as text)."""
+    declared = set(table.column_names)
+    return len(set(names)) == len(names) and all(n in declared for n in names)
+
+
+class _Growing:
+    """A float64 column filled batch by batch (over-allocated once from the first batch's
+    density, grown in place if the file's rows turn out shorter, trimmed at the end)."""
+
+    def __init__(self) -> None:
+        self.values = np.empty(0)
+        self.n = 0
+        self.nulls = 0
+
+    def add(self, arr: pa.Array, capacity: int) -> None:
+        m = len(arr)
+        if self.n + m > self.values.size:
+            self.values.resize(max(capacity, int(1.25 * (self.n + m)) + 1024), refcheck=False)
+        self.values[self.n : self.n + m] = arr.to_numpy(zero_copy_only=False)
+        self.nulls += arr.null_count
+        self.n += m
+
+    def done(self) -> np.ndarray:
+        self.values.resize(self.n, refcheck=False)
+        return self.values
+
+
+def _read_batches(
+    reader: pcsv.CSVStreamingReader, table: Table, size: int
+) -> tuple[dict[str, _Growing], dict[str, list[pa.Array]]]:
+    """Number columns as growing float64 arrays, text columns as their Arrow chunks: the
+    file is held once (its arrays), never as a table beside them."""
+    names = reader.schema.names
+    numeric = {c.name for c in table.columns if c.dtype in ("float", "int")}
+    numbers = {n: _Growing() for n in names if n in numeric}
+    text: dict[str, list[pa.Array]] = {n: [] for n in names if n not in numeric}
+    capacity = 0
+    for batch in reader:
+        if not capacity and batch.num_rows:  # rows the whole file holds at the first block's density
+            capacity = int(1.1 * size * batch.num_rows / min(size, BLOCK_BYTES)) + 1024
+        for i, name in enumerate(names):
+            if name in numbers:
+                numbers[name].add(batch.column(i), capacity)
+            else:
+                text[name].append(batch.column(i))
+    return numbers, text
+
+
+def _checked(numbers: dict[str, _Growing], table: Table) -> dict[str, np.ndarray] | None:
+    """The number columns, or None when the typed frame could differ from the text path's:
+    a NaN or infinite parse (the text path names the cell as written), a fractional whole
+    number (likewise)."""
     declared = {c.name: c for c in table.columns}
-    if len(set(names)) != len(names) or any(n not in declared for n in names):
-        return None  # repeated, padded or unknown names: coerce_frame's findings and names
     out: dict[str, np.ndarray] = {}
-    for name in names:
-        col, arr = declared[name], data.column(name)
-        if col.dtype not in ("float", "int"):
-            if pc.any(pc.match_substring_regex(arr, r"^[ \t]|[\r\n]")).as_py():
-                return None  # a padded cell, or one holding a line break (an unclosed quote)
-            continue
-        values = np.asarray(arr.to_numpy(zero_copy_only=False), dtype=np.float64)
+    for name, col in numbers.items():
+        values = col.done()
         nan = np.isnan(values)
-        if np.count_nonzero(nan) != arr.null_count or np.isinf(values).any():
-            return None  # a NaN or infinite parse: the text path names the cell as written
-        if col.dtype == "int" and (values[~nan] % 1.0 != 0.0).any():
-            return None  # a fractional whole number: likewise
+        if np.count_nonzero(nan) != col.nulls or np.isinf(values).any():
+            return None
+        if declared[name].dtype == "int" and (values[~nan] % 1.0 != 0.0).any():
+            return None
         out[name] = values
     return out
 
 
 def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
     """The raw frame of a CSV file of ``table`` with its number columns already parsed
-    (float64), or None when the caller must read the file as text (module docstring)."""
+    (float64), or None when the caller must read the file as text (module docstring).
+
+    Arrow's streaming reader parses the file block by block (the same parser and options
+    as ``pyarrow.csv.read_csv``) and each block's numbers are copied into the final
+    arrays, so the file is held once: a whole table beside its concatenated columns cost a
+    second copy of every number and, with it, most of the time (bench/NOTES.md)."""
     import pyarrow.csv as pcsv
 
     numeric = {c.name for c in table.columns if c.dtype in ("float", "int")}
@@ -83,11 +138,20 @@ def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
         column_types=types, null_values=BLANK_CELLS, strings_can_be_null=False, quoted_strings_can_be_null=False
     )
     try:
-        data = pcsv.read_csv(path, convert_options=convert)
+        reader = pcsv.open_csv(path, read_options=pcsv.ReadOptions(block_size=BLOCK_BYTES), convert_options=convert)
+        if not _names_fit(reader.schema.names, table):
+            return None
+        batches, chunks = _read_batches(reader, table, Path(path).stat().st_size)
     except (pa.ArrowException, OSError, UnicodeDecodeError):
         return None
-    numbers = _numbers(data, table) if data.num_rows else None
+    n_rows = next(iter(batches.values())).n if batches else sum(len(a) for a in next(iter(chunks.values()), []))
+    if n_rows == 0:
+        return None
+    text = {n: pa.chunked_array(a, type=pa.string()) for n, a in chunks.items()}
+    if any(pc.any(pc.match_substring_regex(arr, r"^[ \t]|[\r\n]")).as_py() for arr in text.values()):
+        return None  # a padded cell (skipinitialspace would strip it), or a line break (an unclosed quote)
+    numbers = _checked(batches, table)
     if numbers is None:
         return None
-    text = {n: data.column(n).to_pandas() for n in data.column_names if n not in numbers}  # as the text path has it
-    return pd.DataFrame({n: numbers[n] if n in numbers else text[n] for n in data.column_names}, copy=False)
+    columns = {n: numbers[n] if n in numbers else text[n].to_pandas() for n in reader.schema.names}
+    return pd.DataFrame(columns, copy=False)

@@ -9,11 +9,10 @@ Row numbers in findings: for CSV the 1-based line of the file (header = line 1, 
 row = line 2). Parquet has no lines; its rows are numbered the same way, i.e. the 0-based
 row index + 2, so that a CSV and its Parquet conversion report the same row numbers.
 
-Parquet fast path: columns whose Arrow type already matches the declared type are turned
-into numpy / pandas arrays column by column (no per-cell Python); anything else (text in
-a numeric column, a missing column) goes through ``schemas.frames.coerce_frame``, which
-names every bad cell. Parquet written here carries each column's unit in the field
-metadata (``unit``); a file whose unit differs from the declared one is a finding.
+Parquet streams are read by :mod:`fieldlogs.parquet_streams` (typed column by column, a
+column at a time; anything else through ``schemas.frames.coerce_frame``, which names every
+bad cell; a column stored in another unit than the declared one is a finding), CSV
+streams by :mod:`dbtools.typed_csv` or as text.
 """
 
 from __future__ import annotations
@@ -32,12 +31,13 @@ import pyarrow.parquet as pq
 from dbtools.atomic import atomic_folder
 from dbtools.tabular import read_raw_table
 from dbtools.typed_csv import read_csv_typed
+from fieldlogs.parquet_streams import read_parquet_stream, read_parquet_table
 from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding
 from schemas.frames import PANDAS_DTYPE, coerce_frame, suggest
 from schemas.logs import LOG_STREAMS, RUN_JSON, RunField
-from schemas.model import Column, Table
+from schemas.model import Table
 from schemas.radar import parse_radar_block
 
 LogFormat = Literal["csv", "parquet"]
@@ -212,16 +212,9 @@ def stream_path(folder: Path, name: str) -> Path | None:
 def read_stream_raw(path: Path) -> pd.DataFrame:
     """A stream file as stored (Parquet typed, CSV as text)."""
     if path.suffix == ".parquet":
-        frame: pd.DataFrame = _read_parquet_table(path).to_pandas()
+        frame: pd.DataFrame = read_parquet_table(path).to_pandas()
         return frame
     return read_raw_table(path)
-
-
-def _read_parquet_table(path: Path) -> pa.Table:
-    try:
-        return pq.read_table(path)
-    except (pa.ArrowException, OSError) as exc:
-        raise InputError(f"not a readable Parquet file: {exc}", path=path) from exc
 
 
 def coerce_stream(table: Table, raw: pd.DataFrame, file: str) -> tuple[pd.DataFrame, list[Finding]]:
@@ -231,81 +224,34 @@ def coerce_stream(table: Table, raw: pd.DataFrame, file: str) -> tuple[pd.DataFr
         for c in table.columns
     ):
         return raw[table.column_names], []  # already typed: nothing to coerce
+    numbers = _parsed_numbers(table, raw)
+    if numbers is not None:
+        return numbers, []
     co = coerce_frame(table, raw, file=file)
     return co.frame, co.findings
 
 
-def _arrow_column(col: Column, arr: pa.ChunkedArray) -> Any:
-    """A typed pandas array for a column whose Arrow type fits the declared one, else None."""
-    t = arr.type
-    if col.dtype == "float" and (pa.types.is_floating(t) or pa.types.is_integer(t)):
-        return arr.to_numpy().astype(np.float32 if col.float32 else np.float64, copy=False)  # nulls → NaN
-    if col.dtype == "int" and pa.types.is_integer(t):
-        if arr.null_count == 0:
-            values = arr.to_numpy().astype(np.int64, copy=False)
-            return pd.arrays.IntegerArray(values, np.zeros(len(values), dtype=bool))
-        mask = arr.is_null().to_numpy(zero_copy_only=False)
-        values = arr.fill_null(0).to_numpy().astype(np.int64, copy=False)
-        return pd.arrays.IntegerArray(values, mask)
-    if col.dtype == "str" and (pa.types.is_string(t) or pa.types.is_large_string(t)):
-        s = arr.to_pandas().astype("string").str.strip()
-        return s.mask(s == "").array
-    return None
-
-
-def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Finding]]:
-    """A Parquet stream, typed column by column; text or odd types go through ``coerce_frame``."""
-    pt = _read_parquet_table(path)
-    file = str(path)
-    findings: list[Finding] = []
-    for col in table.columns:
-        if col.name not in pt.column_names:
-            continue
-        meta = pt.schema.field(col.name).metadata or {}
-        unit = meta.get(b"unit")
-        if unit is not None and unit.decode("utf-8", "replace") != col.unit:
-            findings.append(
-                Finding(
-                    "log.unit",
-                    Severity.ERROR,
-                    table.name,
-                    f"column is stored in '{unit.decode('utf-8', 'replace')}', expected '{col.unit}'",
-                    file=file,
-                    column=col.name,
-                    value=unit.decode("utf-8", "replace"),
-                    limit=col.unit,
-                )
-            )
-    fast: dict[str, Any] = {}
-    if all(c.name in pt.column_names for c in table.columns if c.required):
-        for col in table.columns:
-            if col.name not in pt.column_names:  # an optional column absent: nulls of its type
-                fast[col.name] = pd.Series([None] * pt.num_rows, dtype=PANDAS_DTYPE[col.dtype]).array
-                continue
-            arr = _arrow_column(col, pt.column(col.name))
-            if arr is None:
-                break
-            fast[col.name] = arr
-    extras = [c for c in pt.column_names if c not in table.column_names]
-    if len(fast) == len(table.columns):
-        frame = pd.DataFrame(fast, copy=False)
-        for c in extras:
-            hint = suggest(c, table.column_names)
-            findings.append(
-                Finding(
-                    "schema.unknown_column",
-                    Severity.WARNING,
-                    table.name,
-                    f"unknown column '{c}' ignored" + (f" (did you mean '{hint}'?)" if hint else ""),
-                    file=file,
-                    column=c,
-                    value=c,
-                    limit=hint,
-                )
-            )
-        return frame, findings
-    co = coerce_frame(table, pt.to_pandas(), file=file)
-    return co.frame, findings + co.findings
+def _parsed_numbers(table: Table, raw: pd.DataFrame) -> pd.DataFrame | None:
+    """A stream of number columns only, as :mod:`dbtools.typed_csv` parsed it (float64,
+    every whole number integral, no infinity): typed as ``coerce_frame`` would type it
+    (whole numbers to Int64), without its per-column text machinery; None for anything
+    else (missing or extra columns, text, other dtypes)."""
+    if list(raw.columns) != table.column_names or any(c.dtype not in ("float", "int") for c in table.columns):
+        return None
+    if any(raw[c].dtype != np.float64 for c in table.column_names):
+        return None
+    cols = {}
+    for c in table.columns:
+        values = raw[c.name].to_numpy()
+        if np.isinf(values).any():
+            return None  # coerce_frame names the cell
+        if c.dtype == "int":
+            if (np.floor(values) != values)[~np.isnan(values)].any():
+                return None
+            cols[c.name] = pd.Series(values, index=raw.index).astype("Int64")
+        else:
+            cols[c.name] = pd.Series(values, index=raw.index, dtype="float64")
+    return pd.DataFrame(cols, index=raw.index)
 
 
 def read_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Finding]]:
@@ -450,9 +396,22 @@ class Run:
                         )
                     ]
             self._streams[name] = frame
-            self._stream_findings[name] = findings
-            self.findings.extend(findings)
+            if name not in self._stream_findings:  # read again after release(): said once
+                self._stream_findings[name] = findings
+                self.findings.extend(findings)
         return self._streams[name]
+
+    def loaded(self, name: str) -> bool:
+        """Whether the stream is in memory (read and not released)."""
+        return name in self._streams
+
+    def release(self, name: str) -> None:
+        """Drop a loaded stream's frame, keeping its findings: a consumer that has taken
+        what it needs (the pipeline, the IMU's cycle means) need not keep a long run's
+        100 Hz stream in memory. A later :meth:`stream` reads the file again. Arrow's pool
+        (which holds a Parquet stream's arrays) returns the freed memory at once."""
+        if self._streams.pop(name, None) is not None:
+            pa.default_memory_pool().release_unused()
 
     def load_all(self) -> dict[str, pd.DataFrame]:
         """Every readable stream present."""

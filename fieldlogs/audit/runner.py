@@ -41,7 +41,16 @@ import numpy as np
 import pandas as pd
 
 from dbtools.audit_db import AuditDB
-from fieldlogs.audit.store import encode_trace, fingerprints, open_audit, set_meta, store_run, touch_run
+from fieldlogs.audit.store import (
+    encode_trace,
+    fingerprints,
+    open_audit,
+    pack,
+    set_meta,
+    store_run,
+    touch_run,
+    unpack,
+)
 from fieldlogs.quality.usability import Purpose, require_usable
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, load_network, open_db
@@ -51,7 +60,7 @@ from schemas.jsonable import jsonable
 __all__ = ["AuditStats", "audit", "audit_one", "discover_runs", "pack", "unpack"]
 
 #: Modules the replay's fork server imports once, besides this one.
-PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.io")
+PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.io", "fieldlogs.pipeline.warm")
 #: Figures of the pipeline summary copied into a run's record.
 SUMMARY_FIELDS = (
     "duration_s",
@@ -105,36 +114,6 @@ def _direction(pos: pd.DataFrame) -> str | None:
     if len(km) < 2:
         return None
     return "down" if float(km.iloc[-1]) >= float(km.iloc[0]) else "up"
-
-
-Packed = dict[str, Any]
-
-
-def pack(frame: pd.DataFrame) -> Packed:
-    """A frame as plain arrays (text columns as int32 codes + categories): small to pickle."""
-    out: Packed = {}
-    for c in frame.columns:
-        s = frame[c]
-        if pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
-            out[c] = s.to_numpy(dtype=float, na_value=np.nan)
-        else:
-            codes, cats = pd.factorize(s.astype(object), use_na_sentinel=True)
-            out[c] = (codes.astype(np.int32), [str(x) for x in cats])
-    return out
-
-
-def unpack(packed: Packed | None) -> pd.DataFrame | None:
-    if packed is None:
-        return None
-    cols: dict[str, Any] = {}
-    for c, v in packed.items():
-        if isinstance(v, tuple):
-            codes, cats = v
-            text = np.array([*cats, None], dtype=object)
-            cols[c] = text[np.where(codes < 0, len(cats), codes)]
-        else:
-            cols[c] = v
-    return pd.DataFrame(cols)
 
 
 def _trace(result: Any) -> pd.DataFrame:
@@ -356,7 +335,7 @@ def _store(conn: AuditDB, out: Outcome[dict[str, Any]], context: str, stats: Aud
         touch_run(conn, rec["run_path"], rec["quick_key"])
         stats.skipped += 1
         return
-    store_run(conn, rec, unpack(res.get("events")), res.get("trace"))
+    store_run(conn, rec, res.get("events"), res.get("trace"))
     if rec.get("status") == "error":
         stats.failed += 1
         stats.errors.append((rec["run_path"], rec.get("error") or ""))

@@ -34,6 +34,8 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -83,22 +85,83 @@ def decode_trace(data: bytes | None) -> pd.DataFrame:
     return frame.astype({c: "float64" for c in TRACE_COLUMNS if c != "state"})
 
 
-def _rows(frame: pd.DataFrame, cols: tuple[str, ...]) -> Iterator[tuple[Any, ...]]:
-    """Rows as Python values, missing values as None (NaN floats are stored as NULL)."""
-    f = frame.reindex(columns=list(cols))
-    lists = [f[c].astype(object).where(f[c].notna(), None).tolist() for c in cols]
+Packed = dict[str, Any]
+"""A frame as :func:`pack` sends it from a worker: column → float64 array, or (int32 codes,
+categories) for a text column."""
+
+
+def pack(frame: pd.DataFrame) -> Packed:
+    """A frame as plain arrays (text columns as int32 codes + categories): small to pickle."""
+    out: Packed = {}
+    for c in frame.columns:
+        s = frame[c]
+        if pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
+            out[c] = s.to_numpy(dtype=float, na_value=np.nan)
+        else:
+            codes, cats = pd.factorize(s.astype(object), use_na_sentinel=True)
+            out[c] = (codes.astype(np.int32), [str(x) for x in cats])
+    return out
+
+
+def unpack(packed: Packed | None) -> pd.DataFrame | None:
+    if packed is None:
+        return None
+    cols: dict[str, Any] = {}
+    for c, v in packed.items():
+        if isinstance(v, tuple):
+            codes, cats = v
+            cols[c] = _text(codes, cats)
+        else:
+            cols[c] = v
+    return pd.DataFrame(cols)
+
+
+def _text(codes: npt.NDArray[np.int32], cats: Sequence[str]) -> npt.NDArray[np.object_]:
+    table = np.array([*cats, None], dtype=object)
+    out: npt.NDArray[np.object_] = table[np.where(codes < 0, len(cats), codes)]
+    return out
+
+
+def _values(v: Any) -> list[Any]:
+    """One packed column as Python values, NaN and missing text as None."""
+    if isinstance(v, tuple):
+        text: list[Any] = _text(*v).tolist()
+        return text
+    arr = np.asarray(v, dtype=float)
+    out: list[Any] = arr.tolist()
+    for i in np.flatnonzero(np.isnan(arr)).tolist():
+        out[i] = None
+    return out
+
+
+def _rows(events: pd.DataFrame | Packed, cols: tuple[str, ...]) -> Iterator[tuple[Any, ...]]:
+    """Rows as Python values, missing values as None (NaN floats are stored as NULL); a
+    packed frame is read without building a DataFrame (the coordinator's cost per run)."""
+    if isinstance(events, pd.DataFrame):
+        f = events.reindex(columns=list(cols))
+        lists = [f[c].astype(object).where(f[c].notna(), None).tolist() for c in cols]
+        return zip(*lists, strict=True)
+    n = _length(events)
+    lists = [_values(events[c]) if c in events else [None] * n for c in cols]
     return zip(*lists, strict=True)
+
+
+def _length(packed: Packed) -> int:
+    for v in packed.values():
+        return len(v[0]) if isinstance(v, tuple) else len(v)
+    return 0
 
 
 def store_run(
     conn: AuditDB,
     record: Mapping[str, Any],
-    events: pd.DataFrame | None,
+    events: pd.DataFrame | Packed | None,
     trace: pd.DataFrame | bytes | None,
 ) -> None:
-    """Replace one run's rows in a single transaction (``trace`` as a frame or as the
-    bytes of :func:`encode_trace`)."""
-    rows = _rows(events, EVENT_COLUMNS) if events is not None and not events.empty else iter(())
+    """Replace one run's rows in a single transaction (``events`` as a frame or as
+    :func:`pack` made it, ``trace`` as a frame or as the bytes of :func:`encode_trace`)."""
+    empty = events is None or (events.empty if isinstance(events, pd.DataFrame) else not _length(events))
+    rows = iter(()) if events is None or empty else _rows(events, EVENT_COLUMNS)
     if isinstance(trace, pd.DataFrame):
         trace = encode_trace(trace) if not trace.empty else None
     n = pq.read_metadata(pa.BufferReader(trace)).num_rows if trace else 0

@@ -201,7 +201,8 @@ def collect_evidence(
     ref, _ = open_db(db, network)  # this process replays runs too: it keeps the network
     results: list[RunEvidence] = []
     tasks = [(str(p), (ref, cfg, max_km_margin_m)) for p in run_dirs]
-    outcomes = replay(evidence_one, tasks, workers=workers, ordered=True, preload=("fieldlogs.pipeline.run",))
+    preload = ("fieldlogs.pipeline.run", "fieldlogs.pipeline.warm")
+    outcomes = replay(evidence_one, tasks, workers=workers, ordered=True, preload=preload)
     with closing(outcomes):  # the first run that cannot be used stops the replay
         for out in outcomes:
             if out.value is None:  # its message names the folder, unless its worker died

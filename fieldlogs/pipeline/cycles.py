@@ -55,30 +55,69 @@ def cycle_index(t_cycles: FloatArray, t_samples: FloatArray) -> npt.NDArray[np.i
     return np.searchsorted(t_cycles, t_samples, side="left")
 
 
+@dataclass(frozen=True)
+class Segments:
+    """Samples grouped by cycle (sorted samples: each cycle's are one contiguous run)."""
+
+    inside: npt.NDArray[np.bool_] | None
+    """Samples on the grid (before the last cycle's end); None: all of them."""
+    cycle: npt.NDArray[np.intp]
+    """Cycle of each run of samples."""
+    starts: npt.NDArray[np.intp]
+    """First sample of each run, among the samples inside."""
+    counts: npt.NDArray[np.intp]
+    """Samples in each run."""
+
+    @property
+    def sample_cycles(self) -> npt.NDArray[np.intp]:
+        """Cycle of every sample inside (``cycle_index`` of those samples)."""
+        out: npt.NDArray[np.intp] = np.repeat(self.cycle, self.counts)
+        return out
+
+
+def segments(idx: npt.NDArray[np.intp], n: int) -> Segments:
+    """The :class:`Segments` of samples whose cycles are ``idx`` on a grid of ``n`` cycles."""
+    inside = idx < n
+    every = bool(inside.all())
+    k = idx if every else idx[inside]
+    if k.size == 0:
+        empty = np.zeros(0, dtype=np.intp)
+        return Segments(None if every else inside, empty, empty, empty)
+    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    counts = np.diff(np.r_[starts, k.size])
+    return Segments(None if every else inside, k[starts], starts, counts)
+
+
 def cycle_means(
-    t_cycles: FloatArray, t_samples: FloatArray, values: FloatArray, idx: npt.NDArray[np.intp] | None = None
+    t_cycles: FloatArray,
+    t_samples: FloatArray,
+    values: FloatArray,
+    idx: npt.NDArray[np.intp] | None = None,
+    seg: Segments | None = None,
 ) -> FloatArray:
     """Mean of the samples in each cycle ``(t[k−1], t[k]]`` (NaN for empty cycles).
 
     Samples must be sorted by time (they are: the pipeline sorts its streams), so each
     cycle is a contiguous slice and ``np.add.reduceat`` sums it without scattering.
+    ``seg`` (:func:`segments`, shared by the columns of one stream) saves recomputing the
+    slices; non-finite values are left out of their cycle's mean.
     """
-    if idx is None:
-        idx = cycle_index(t_cycles, t_samples)
     n = t_cycles.size
-    inside = idx < n
-    vals = values[inside]
-    k = idx[inside]
-    ok = np.isfinite(vals)
-    if not ok.all():
-        vals, k = vals[ok], k[ok]
+    if seg is None:
+        seg = segments(cycle_index(t_cycles, t_samples) if idx is None else idx, n)
+    vals = values if seg.inside is None else values[seg.inside]
     out = np.full(n, np.nan)
-    if k.size == 0:
+    ok = np.isfinite(vals)
+    if not ok.all():  # drop the bad samples: the runs change
+        k = seg.sample_cycles[ok]
+        vals = vals[ok]
+        if k.size == 0:
+            return out
+        starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+        out[k[starts]] = np.add.reduceat(vals, starts) / np.diff(np.r_[starts, k.size])
         return out
-    starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
-    sums = np.add.reduceat(vals, starts)
-    counts = np.diff(np.r_[starts, k.size])
-    out[k[starts]] = sums / counts
+    if seg.starts.size:
+        out[seg.cycle] = np.add.reduceat(vals, seg.starts) / seg.counts
     return out
 
 
@@ -131,10 +170,10 @@ def build_cycles(
         v = np.zeros(t.size)
     imu_means: dict[str, FloatArray] = {}
     t_imu = imu["t"].to_numpy(dtype=float) if has_imu and imu is not None else None
-    idx = cycle_index(t, t_imu) if t_imu is not None else None  # once for the six columns
+    seg = segments(cycle_index(t, t_imu), t.size) if t_imu is not None else None  # once for the six columns
     for c in IMU_COLUMNS:
-        if idx is not None and t_imu is not None and imu is not None:
-            imu_means[c] = cycle_means(t, t_imu, imu[c].to_numpy(dtype=float, na_value=np.nan), idx)
+        if seg is not None and t_imu is not None and imu is not None:
+            imu_means[c] = cycle_means(t, t_imu, imu[c].to_numpy(dtype=float, na_value=np.nan), seg=seg)
         else:
             imu_means[c] = np.full(t.size, np.nan)
     if cab is not None and len(cab):

@@ -116,7 +116,10 @@ def counter_resets_bridged(tacho: pd.DataFrame | None, events: list[Event]) -> p
 
 def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunContext, list[Event]]:
     """Stages 1–4 of the module docstring: the context the aids are built from, and the
-    ``input_repaired`` events of the cleaning; raises FindingsError when run.json is unusable."""
+    ``input_repaired`` events of the cleaning; raises FindingsError when run.json is unusable.
+    The IMU stream is released once its cycle means are built, unless the caller had loaded
+    it (:meth:`Run.release`: the memory of a long run is then its cycles, not its samples)."""
+    keep_imu = run.loaded("imu")
     require_usable(run, Purpose.POSITIONING)  # never a "determined" km the run cannot support
     assert run.meta is not None
     pre: list[Event] = []
@@ -133,6 +136,9 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
         cycle_s=cfg.cycle_s,
         uses_pto=run.meta.vehicle_kind == VehicleKind.ROAD_RAIL,
     )
+    if not keep_imu:
+        streams["imu"] = None  # read only through the cycles from here on
+        run.release("imu")
     ground = next((g for a in speed_aids(streams, run.radar) if (g := a.on_cycles(cycles)) is not None), None)
     # pulses only when the run has no IMU (correct_odometry falls back by itself)
     odo = correct_odometry(cycles, cfg.odometry, ground)

@@ -24,6 +24,7 @@ from __future__ import annotations
 from enum import StrEnum
 
 import numpy as np
+import pandas as pd
 
 from fieldlogs.io import REQUIRED_STREAMS, Run
 from schemas.enums import Severity, VehicleKind
@@ -87,9 +88,7 @@ def _stream_problems(run: Run, name: str, purpose: Purpose) -> list[Finding]:
     frame = run.stream(name)
     table = LOG_STREAMS[name]
     cols = [c.name for c in table.columns if c.required and not c.nullable]
-    usable = 0
-    if frame is not None and all(c in frame.columns for c in cols):
-        usable = int(frame[cols].notna().all(axis=1).sum())
+    usable = _usable_rows(frame, cols) if frame is not None and all(c in frame.columns for c in cols) else 0
     if usable < 2:
         first = next((f for f in run.stream_findings(name) if f.severity == Severity.ERROR), None)
         return [_finding(name, "no usable rows" + (f" ({first.message})" if first else ""))]
@@ -98,12 +97,25 @@ def _stream_problems(run: Run, name: str, purpose: Purpose) -> list[Finding]:
     return [_finding(name, unit, column="t")] if unit else []
 
 
+def _usable_rows(frame: pd.DataFrame, cols: list[str]) -> int:
+    """Rows with every column of ``cols`` valid (column by column: no copy of the frame)."""
+    ok = np.ones(len(frame), dtype=bool)
+    for c in cols:
+        ok &= frame[c].notna().to_numpy()
+    return int(np.count_nonzero(ok))
+
+
 def time_unit_problem(t: np.ndarray, rate_hz: float | None) -> str | None:
     """The message when a stream's median step says its ``t`` is not in seconds."""
-    t = t[np.isfinite(t)]
+    finite = np.isfinite(t)
+    if not finite.all():
+        t = t[finite]
+    del finite
     if rate_hz is None or t.size < 3:
         return None
-    step = float(np.median(np.diff(np.sort(t))))
+    if not bool((t[1:] >= t[:-1]).all()):  # sorted already (the usual case): no sorted copy
+        t = np.sort(t)
+    step = float(np.median(np.diff(t), overwrite_input=True))
     nominal = 1.0 / rate_hz
     for unit, factor in WRONG_TIME_UNITS:
         if 0.3 * factor * nominal <= step <= 3.0 * factor * nominal:

@@ -41,7 +41,7 @@ from schemas.errors import InputError
 
 Progress = Callable[[int, int, str], None]
 #: Modules the replay's fork server imports once.
-PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.survey.extract")
+PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.survey.extract", "fieldlogs.pipeline.warm")
 
 
 def _unique_ids(runs: list[RunSurvey]) -> None:

@@ -3,6 +3,9 @@ brute force (hypothesis), km/offset truth on the synthetic demo line, breaks, re
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -230,3 +233,21 @@ def test_index_is_cached_per_network(demo):
     assert track_index_for(net) is index
     other = build_network([demo_line()], P)
     assert track_index_for(other) is not index
+
+
+def test_warm_up_loads_the_kernel_a_run_uses() -> None:
+    """The fork-server warm-up (fieldlogs.pipeline.warm) loads the very overload a match
+    uses: after it, matching the demo line adds no compiled signature."""
+    code = (
+        "import fieldlogs.pipeline.warm\n"
+        "from dbtools.gis import match_kernel as k, matching as m\n"
+        "from dbtools.gis.geometry import Projector\n"
+        "from dbtools.synthetic.network import build_network, demo_line\n"
+        "before = list(k.match_kernel.signatures)\n"
+        "idx = m.track_index_for(build_network([demo_line()], Projector(9)))\n"
+        "x, y = idx.x[:50] + 3.0, idx.y[:50] - 2.0\n"
+        "assert len(idx.match_xy(x, y)) > 0\n"
+        "print(len(before), list(k.match_kernel.signatures) == before)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
+    assert out.stdout.split() == ["1", "True"]

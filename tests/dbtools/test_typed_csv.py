@@ -9,6 +9,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from dbtools import typed_csv
 from dbtools.tabular import read_raw_table
 from dbtools.typed_csv import read_csv_typed
 from fieldlogs.io import coerce_stream, read_stream
@@ -112,3 +113,27 @@ def test_a_source_file_reads_and_checks_as_text(tmp_path: Path, rows) -> None:  
     ref = read_and_check(GIS, read_raw_table(path), file=str(path))
     pd.testing.assert_frame_equal(ours.frame, ref.frame, check_exact=True)
     assert [repr(f.__dict__) for f in ours.findings] == [repr(f.__dict__) for f in ref.findings]  # NaN-safe
+
+
+@pytest.mark.parametrize("name", ["imu", "cab"])
+def test_many_blocks_and_rows_shorter_than_the_first_block_read_as_the_text_path(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, name: str
+) -> None:
+    """A file of many parse blocks whose later rows are much shorter than the first ones
+    (the arrays are sized from the first block, then grown): the text path's frame, every
+    value in place; a bad cell deep in the file still declines."""
+    monkeypatch.setattr(typed_csv, "BLOCK_BYTES", 4096)
+    cols = LOG_STREAMS[name].column_names
+    kinds = {c.name: c.dtype for c in LOG_STREAMS[name].columns}
+    wide = {"float": "{k}.11111111111111", "int": "{k:014d}", "str": "F"}
+    long = [",".join(wide[kinds[c]].format(k=k) for c in cols) for k in range(100)]
+    short = [",".join(str(k % 7) if c != "direction" else ("R" if k % 3 else "") for c in cols) for k in range(6000)]
+    path = tmp_path / f"{name}.csv"
+    path.write_text("\n".join([",".join(cols), *long, *short]) + "\n", encoding="utf-8")
+    typed = read_csv_typed(LOG_STREAMS[name], path)
+    assert typed is not None and len(typed) == 6100
+    assert typed["t"].iloc[99] == float(f"99.{'1' * 14}") and typed["t"].iloc[-1] == 5999 % 7
+    same_as_text_path(name, path)
+    path.write_text(path.read_text(encoding="utf-8").replace("\n3,", "\n3x,", 1), encoding="utf-8")
+    assert read_csv_typed(LOG_STREAMS[name], path) is None
+    same_as_text_path(name, path)

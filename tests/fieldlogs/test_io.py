@@ -11,9 +11,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from fieldlogs import io
+from fieldlogs import io, parquet_streams
 from fieldlogs.io import Run, check_output_folder, convert_run, read_run, write_run
+from fieldlogs.parquet_streams import read_parquet_stream
 from schemas.errors import FindingsError, InputError, RefusedError
+from schemas.logs import LOG_STREAMS
 from tests.fieldlogs.make_runs import make_meta, make_run, synthetic_streams
 
 
@@ -185,4 +187,46 @@ def test_parquet_fast_path_has_no_per_cell_python(tmp_path: Path, monkeypatch: p
         raise AssertionError("coerce_frame called on typed Parquet")
 
     monkeypatch.setattr(io, "coerce_frame", boom)
+    monkeypatch.setattr(parquet_streams, "coerce_frame", boom)
     assert len(Run(folder).load_all()) == 5
+
+
+def test_parquet_read_a_column_at_a_time_equals_the_whole_table(tmp_path: Path) -> None:
+    """Many row groups, nulls in an int column, an optional column absent, an unknown
+    column: the same frame and findings as one row group read whole."""
+    gps = synthetic_streams(60)["gps"].drop(columns=["speed_mps"], errors="ignore")
+    gps["nsat"] = gps["nsat"].astype("Int64")
+    gps.loc[3, "nsat"] = None
+    gps["extra"] = 1.0
+    table = pa.Table.from_pandas(gps, preserve_index=False)
+    pq.write_table(table, tmp_path / "one.parquet")
+    pq.write_table(table, tmp_path / "many.parquet", row_group_size=7)
+    assert pq.ParquetFile(tmp_path / "many.parquet").metadata.num_row_groups > 3
+    whole, f_whole = read_parquet_stream(LOG_STREAMS["gps"], tmp_path / "one.parquet")
+    parts, f_parts = read_parquet_stream(LOG_STREAMS["gps"], tmp_path / "many.parquet")
+    pd.testing.assert_frame_equal(whole, parts, check_exact=True)
+    assert list(whole.columns) == LOG_STREAMS["gps"].column_names and whole["nsat"].isna().sum() == 1
+    assert (
+        [(f.rule, f.column) for f in f_parts]
+        == [(f.rule, f.column) for f in f_whole]
+        == [("schema.unknown_column", "extra")]
+    )
+
+
+def test_released_stream_is_read_again_and_its_findings_are_kept_once(tmp_path: Path) -> None:
+    folder = make_run(tmp_path / "r", 1, fmt="parquet")
+    table = pq.read_table(folder / "imu.parquet")
+    i = table.schema.get_field_index("ax")
+    table = table.set_column(i, table.schema.field("ax").with_metadata({"unit": "g"}), table.column("ax"))
+    pq.write_table(table, folder / "imu.parquet")
+    run = Run(folder)
+    first = run.stream("imu")
+    assert first is not None and run.loaded("imu") and len(run.findings) == 1
+    run.release("imu")
+    assert not run.loaded("imu") and len(run.findings) == 1 and len(run.stream_findings("imu")) == 1
+    again = run.stream("imu")
+    assert again is not None and again is not first
+    pd.testing.assert_frame_equal(first, again, check_exact=True)
+    assert len(run.findings) == 1  # not reported twice
+    run.release("radar")  # not loaded, not present: nothing to do
+    assert not run.loaded("radar")

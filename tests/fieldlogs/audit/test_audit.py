@@ -20,8 +20,11 @@ from typing import Any
 
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import fieldlogs.audit.runner as audit_mod
+import fieldlogs.audit.store as store_mod
 from dbtools.audit_db import AuditDB
 from dbtools.database import read_network
 from fieldlogs.audit.runner import audit, pack, unpack
@@ -254,6 +257,34 @@ def test_pack_round_trip() -> None:
     assert back["type"].iloc[0] == back["type"].iloc[2] == "slip" and pd.isna(back["type"].iloc[1])
     assert back["s"].tolist() == ["a", "b", "a"]
     assert back["n"].tolist() == [1.0, 2.0, 3.0]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-(2**40), 2**40)),
+            st.one_of(st.none(), st.sampled_from(["slip", "balise", "", "x y"])),
+            st.booleans(),
+        ),
+        max_size=30,
+    )
+)
+def test_rows_from_packed_events_equal_rows_of_the_unpacked_frame(rows: list[tuple[Any, Any, bool]]) -> None:
+    """The coordinator stores a worker's packed events without building a frame: the same
+    values (NaN and missing text as NULL, absent columns as NULL) as the frame path."""
+    frame = pd.DataFrame(
+        {
+            "t": pd.Series([r[0] for r in rows], dtype=float),
+            "type": pd.Series([r[1] for r in rows], dtype=object),
+            "detail": pd.Series([r[2] for r in rows], dtype=bool),
+        }
+    )
+    packed = pack(frame)
+    via_frame = list(store_mod._rows(unpack(packed), store_mod.EVENT_COLUMNS))  # type: ignore[arg-type]
+    direct = list(store_mod._rows(packed, store_mod.EVENT_COLUMNS))
+    assert len(direct) == len(rows)
+    assert repr(direct) == repr(via_frame)  # None vs nan and float vs str kept apart
 
 
 # -- Dask ----------------------------------------------------------------------------------
