@@ -261,29 +261,19 @@ def check_files(
     on; InputError (exit 2) when the DB, the plan or the config cannot be read, or when no
     run could be checked.
     """
-    from contextlib import closing
-
     from fieldlogs.config import load_tree
     from fieldlogs.possession.plan import load_plan
     from fieldlogs.replay.network import open_db
-    from fieldlogs.replay.pool import replay
+    from fieldlogs.replay.pool import replay_values
 
     tree = load_tree(config_path)
     ref, network = open_db(Path(db_path))
     plan = load_plan(Path(plan_path), network)
     folders = run_folders(run_dirs)
     tasks = [(str(p), (ref, plan.possessions, tree.gps, tree.possession, work)) for p in folders]
-    checks: list[RunCheck] = []
-    failed: list[tuple[str, str]] = []
-    outcomes = replay(check_one, tasks, workers=workers, ordered=True, preload=PRELOAD)
-    with closing(outcomes):
-        for k, out in enumerate(outcomes, start=1):
-            if out.value is None:
-                failed.append((out.run, out.error or "run cannot be checked"))
-            else:
-                checks.append(out.value)
-            if progress:
-                progress(k, len(tasks), out.run)
+    checks, failed = replay_values(
+        check_one, tasks, failure="run cannot be checked", workers=workers, preload=PRELOAD, progress=progress
+    )
     if not checks:
         run, err = failed[0]
         raise InputError(err, path=None if run in err else run)

@@ -155,6 +155,23 @@ def replay(
     return _reporting(source, len(todo), progress)
 
 
+def replay_values(
+    worker: Callable[..., R], tasks: Iterable[Task], *, failure: str, **options: Any
+) -> tuple[list[R], list[tuple[str, str]]]:
+    """Every run's value in task order and the runs that failed as (run folder, message;
+    ``failure`` when the worker gave none), for callers that report a failed run and go on
+    with the others. ``options``: those of :func:`replay` (``ordered`` is implied)."""
+    values: list[R] = []
+    failed_runs: list[tuple[str, str]] = []
+    with contextlib.closing(replay(worker, tasks, ordered=True, **options)) as outcomes:
+        for out in outcomes:
+            if out.value is None:
+                failed_runs.append((out.run, out.error or failure))
+            else:
+                values.append(out.value)
+    return values, failed_runs
+
+
 def _reporting(source: Outcomes[R], total: int, progress: Progress | None) -> Outcomes[R]:
     done = 0
     try:

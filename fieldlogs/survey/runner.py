@@ -11,7 +11,6 @@ error and the others go on.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from contextlib import closing
 from dataclasses import replace
 from pathlib import Path
 
@@ -25,7 +24,7 @@ from dbtools.network import Network
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import open_db
-from fieldlogs.replay.pool import replay
+from fieldlogs.replay.pool import replay_values
 from fieldlogs.survey.balises import adjust
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.curvature import place_samples
@@ -76,17 +75,15 @@ def replay_runs(
         pipeline = replace(pipeline, odometry=replace(pipeline.odometry, wheel_calibration=False))
     ref, _ = open_db(db, network)  # this process replays runs too: it keeps the network
     tasks = [(str(p), (ref, pipeline, cfg)) for p in folders]
-    done: list[RunSurvey] = []
-    failed: list[tuple[str, str]] = []
-    outcomes = replay(survey_one, tasks, workers=workers, scheduler=scheduler, ordered=True, preload=PRELOAD)
-    with closing(outcomes):
-        for k, out in enumerate(outcomes, start=1):
-            if out.value is None:
-                failed.append((out.run, out.error or "run cannot be used"))
-            else:
-                done.append(out.value)
-            if progress:
-                progress(k, len(tasks), out.run)
+    done, failed = replay_values(
+        survey_one,
+        tasks,
+        failure="run cannot be used",
+        workers=workers,
+        scheduler=scheduler,
+        preload=PRELOAD,
+        progress=progress,
+    )
     _unique_ids(done)
     return done, failed
 
