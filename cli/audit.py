@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import json
 import time
 from enum import StrEnum
@@ -12,7 +11,17 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from cli.errors import NO_VERIFY_HASH, cli_command
-from cli.render import console, err_console, frame_table, key_value_table, print_json, progress, write_out
+from cli.render import (
+    console,
+    emit_rendered,
+    emit_text,
+    err_console,
+    frame_table,
+    key_value_table,
+    print_json,
+    progress,
+    write_out,
+)
 from fieldlogs.pipeline.config import TARGET_PCT
 from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.jsonable import jsonable
@@ -199,7 +208,6 @@ def report(
 
     Example: trainpos report audit.sqlite --format html --out audit.html
     """
-    from rich.console import Console
 
     from fieldlogs.reports.page import render_html
     from fieldlogs.reports.report import build_report, report_json
@@ -224,14 +232,6 @@ def report(
         else:
             print_json(data)
     elif fmt == ReportFmt.csv:
-        text = rep.groups.to_csv(index=False, lineterminator="\n")
-        if out:
-            write_out(out, force=force, inputs=inputs, text=text)
-        else:
-            typer.echo(text, nl=False)
-    elif out:
-        buf = io.StringIO()
-        render_tables(rep, Console(file=buf, width=200, color_system=None))
-        write_out(out, force=force, inputs=inputs, text=buf.getvalue())
+        emit_text(out, rep.groups.to_csv(index=False, lineterminator="\n"), force=force, inputs=inputs)
     else:
-        render_tables(rep, console())
+        emit_rendered(out, lambda c: render_tables(rep, c), force=force, inputs=inputs)

@@ -100,29 +100,21 @@ def _impact_report(
 
 
 def _emit_impact(report: ImpactReport, fmt: ImpactFmt, out: Path | None, force: bool, inputs: list[Path]) -> None:
-    import io
     import json
-    import sys
 
-    from rich.console import Console
-
-    from cli.render import write_out
+    from cli.render import emit_rendered, emit_text
 
     if fmt == ImpactFmt.html:
         from fieldlogs.impact.page import render_html
 
-        text = render_html(report)
+        emit_text(out, render_html(report), force=force, inputs=inputs)
     elif fmt == ImpactFmt.json:
         text = json.dumps(report.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
+        emit_text(out, text, force=force, inputs=inputs)
     else:
-        buf = io.StringIO()
-        _print_impact(report, Console(file=buf, width=200, color_system=None) if out else console())
-        text = buf.getvalue()
-    if out is None:
-        sys.stdout.write(text)
-        return
-    write_out(out, text, force=force, inputs=inputs)
-    console().print(f"impact report written to {out}")
+        emit_rendered(out, lambda c: _print_impact(report, c), force=force, inputs=inputs)
+    if out is not None:
+        console().print(f"impact report written to {out}")
 
 
 def _num_text(v: object) -> str:

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import io
 import json
-import sys
 import time
 from dataclasses import replace
 from enum import StrEnum
@@ -17,6 +15,8 @@ from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import (
     check_outputs,
     console,
+    emit_rendered,
+    emit_text,
     err_console,
     frame_table,
     inputs_of,
@@ -343,7 +343,6 @@ def _write_proposal(report: VerifyReport, propose: Path, force: bool, inputs: li
 
 def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None, force: bool, inputs: list[Path]) -> None:
     """The report as HTML (to ``out``), JSON or a table (to ``out`` or stdout)."""
-    from rich.console import Console
 
     if fmt == VerifyFmt.html:
         from fieldlogs.gisverify.page import render_html
@@ -359,13 +358,6 @@ def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None, force: 
         console().print(f"GeoJSON written to {out}")
     elif fmt == VerifyFmt.json:
         text = json.dumps(report.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
-        if out:
-            write_out(out, text, force=force, inputs=inputs)
-        else:
-            sys.stdout.write(text)
-    elif out:
-        buf = io.StringIO()
-        render_verification(report, Console(file=buf, width=160, color_system=None))
-        write_out(out, buf.getvalue(), force=force, inputs=inputs)
+        emit_text(out, text, force=force, inputs=inputs)
     else:
-        render_verification(report, console())
+        emit_rendered(out, lambda c: render_verification(report, c), force=force, inputs=inputs, width=160)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import json
 from enum import StrEnum
 from pathlib import Path
@@ -14,6 +13,7 @@ from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.render import (
     check_outputs,
     console,
+    emit_rendered,
     err_console,
     frame_table,
     inputs_of,
@@ -220,9 +220,5 @@ def _emit(
             write_out(out, json.dumps(data, indent=2, ensure_ascii=False) + "\n", force=force, inputs=inputs)
         else:
             print_json(data)
-    elif out:
-        buf = io.StringIO()
-        render_tables(report, Console(file=buf, width=200, color_system=None))
-        write_out(out, buf.getvalue(), force=force, inputs=inputs)
     else:
-        render_tables(report, console())
+        emit_rendered(out, lambda c: render_tables(report, c), force=force, inputs=inputs)

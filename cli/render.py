@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import re
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -197,6 +197,37 @@ def write_out(path: Path, text: str, *, force: bool, inputs: Sequence[Path] = ()
     from dbtools.atomic import write_text
 
     write_text(path, text, force=force, inputs=inputs)
+
+
+def emit_text(out: Path | None, text: str, *, force: bool, inputs: Sequence[Path] = ()) -> None:
+    """A command's text result (JSON, CSV, a rendered table) to ``--out`` under the output
+    rule (:func:`write_out`), or to stdout when no file is given."""
+    if out is None:
+        sys.stdout.write(text)
+    else:
+        write_out(out, text, force=force, inputs=inputs)
+
+
+def emit_rendered(
+    out: Path | None,
+    render: Callable[[Console], None],
+    *,
+    force: bool,
+    inputs: Sequence[Path] = (),
+    width: int = 200,
+) -> None:
+    """Rich tables: drawn on the terminal, or into ``--out`` as plain text ``width``
+    columns wide (no colour codes), under the output rule."""
+    if out is None:
+        render(console())
+        return
+    import io
+
+    from rich.console import Console
+
+    buf = io.StringIO()
+    render(Console(file=buf, width=width, color_system=None))
+    write_out(out, buf.getvalue(), force=force, inputs=inputs)
 
 
 def inputs_of(*items: Path | Sequence[Path] | None) -> list[Path]:

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import io
 import json
-import sys
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -13,7 +11,18 @@ import typer
 
 from cli.errors import NO_VERIFY_HASH, cli_command
 from cli.gis import _Bar
-from cli.render import check_outputs, console, err_console, frame_table, inputs_of, key_value_table, progress, write_out
+from cli.render import (
+    check_outputs,
+    console,
+    emit_rendered,
+    emit_text,
+    err_console,
+    frame_table,
+    inputs_of,
+    key_value_table,
+    progress,
+    write_out,
+)
 from schemas.errors import EXIT_FINDINGS, UsageError
 from schemas.units import format_km
 
@@ -172,7 +181,6 @@ def _check_targets(fmt: Fmt, out: Path | None, propose: Path | None, force: bool
 
 
 def _emit(rep: SurveyReport, fmt: Fmt, out: Path | None, force: bool, inputs: list[Path]) -> None:
-    from rich.console import Console
 
     if fmt == Fmt.html:
         from fieldlogs.survey.page import render_html
@@ -188,16 +196,9 @@ def _emit(rep: SurveyReport, fmt: Fmt, out: Path | None, force: bool, inputs: li
         console().print(f"GeoJSON written to {out}")
     elif fmt == Fmt.json:
         text = json.dumps(rep.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
-        if out:
-            write_out(out, text, force=force, inputs=inputs)
-        else:
-            sys.stdout.write(text)
-    elif out:
-        buf = io.StringIO()
-        render_survey(rep, Console(file=buf, width=200, color_system=None))
-        write_out(out, buf.getvalue(), force=force, inputs=inputs)
+        emit_text(out, text, force=force, inputs=inputs)
     else:
-        render_survey(rep, console())
+        emit_rendered(out, lambda c: render_survey(rep, c), force=force, inputs=inputs)
 
 
 @cli_command
