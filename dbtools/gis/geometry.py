@@ -14,7 +14,7 @@ from functools import lru_cache
 
 import numpy as np
 import numpy.typing as npt
-from pyproj import Geod, Transformer
+from pyproj import CRS, Geod, Transformer
 from scipy.spatial import cKDTree
 
 FloatArray = npt.NDArray[np.float64]
@@ -69,12 +69,22 @@ def _transformer(src: int, dst: int) -> Transformer:
 
 
 @lru_cache(maxsize=32)
-def _geodetic_of(epsg: int) -> Transformer:
-    """Geographic lon/lat of the projected CRS's own geodetic datum → the projected CRS
-    (no datum transformation), cached."""
-    from pyproj import CRS
+def crs_of(epsg: int) -> CRS:
+    """The CRS of an EPSG code, built once per process (ValueError when PROJ does not know it)."""
+    from pyproj.exceptions import CRSError
 
-    crs = CRS.from_epsg(epsg)
+    try:
+        return CRS.from_epsg(epsg)
+    except CRSError as exc:
+        raise ValueError(f"EPSG:{epsg} is not known to PROJ") from exc
+
+
+@lru_cache(maxsize=32)
+def geodetic_transformer(epsg: int) -> Transformer:
+    """Geographic lon/lat of the projected CRS's own geodetic datum → the projected CRS
+    (no datum transformation; ``direction="INVERSE"`` the other way), cached: the suite's
+    one cache of transformers with :func:`_transformer`."""
+    crs = crs_of(epsg)
     return Transformer.from_crs(crs.geodetic_crs, crs, always_xy=True)
 
 
@@ -110,7 +120,7 @@ class Projector:
         return zone_epsg(self.zone) if self.zone else self.epsg_code
 
     def to_xy(self, lon: npt.ArrayLike, lat: npt.ArrayLike) -> tuple[FloatArray, FloatArray]:
-        t = _transformer(EPSG_JGD2011_GEOGRAPHIC, self.epsg) if self.zone else _geodetic_of(self.epsg)
+        t = _transformer(EPSG_JGD2011_GEOGRAPHIC, self.epsg) if self.zone else geodetic_transformer(self.epsg)
         x, y = t.transform(np.asarray(lon, dtype=float), np.asarray(lat, dtype=float))
         return np.asarray(x, dtype=float), np.asarray(y, dtype=float)
 
@@ -119,7 +129,7 @@ class Projector:
         if self.zone:
             lon, lat = _transformer(self.epsg, EPSG_JGD2011_GEOGRAPHIC).transform(xa, ya)
         else:
-            lon, lat = _geodetic_of(self.epsg).transform(xa, ya, direction="INVERSE")
+            lon, lat = geodetic_transformer(self.epsg).transform(xa, ya, direction="INVERSE")
         return np.asarray(lon, dtype=float), np.asarray(lat, dtype=float)
 
 

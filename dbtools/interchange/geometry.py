@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
-from functools import lru_cache
 from typing import Any
 
 import pandas as pd
@@ -41,23 +40,10 @@ def epsg_of(text: str | None) -> int:
     return int(m.group(1))
 
 
-@lru_cache(maxsize=16)
 def _crs(epsg: int) -> Any:
-    from pyproj import CRS
-    from pyproj.exceptions import CRSError
+    from dbtools.gis.geometry import crs_of  # pyproj: only once a coordinate is converted
 
-    try:
-        return CRS.from_epsg(epsg)
-    except CRSError as exc:
-        raise ValueError(f"EPSG:{epsg} is not known to PROJ") from exc
-
-
-@lru_cache(maxsize=16)
-def _to_geographic(epsg: int) -> Any:
-    from pyproj import Transformer
-
-    crs = _crs(epsg)
-    return Transformer.from_crs(crs, crs.geodetic_crs, always_xy=True)
+    return crs_of(epsg)
 
 
 def geodetic_epsg(metric_epsg: int) -> int:
@@ -80,7 +66,9 @@ def to_lonlat(values: Sequence[float], crs: str | None, *, xy: bool = False) -> 
     if c.is_geographic:
         lat, lon = (values[1], values[0]) if xy else (values[0], values[1])
     elif c.is_projected:
-        lon, lat = _to_geographic(epsg).transform(values[0], values[1])
+        from dbtools.gis.geometry import geodetic_transformer
+
+        lon, lat = geodetic_transformer(epsg).transform(values[0], values[1], direction="INVERSE")
     else:
         raise ValueError(f"EPSG:{epsg} is neither geographic nor projected")
     if not (-90 <= lat <= 90 and -180 <= lon <= 180):
