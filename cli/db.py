@@ -183,7 +183,9 @@ def release(
         None, "--impact-against", help="DB to compare with for --impact (default: the registry's latest release)."
     ),
     plan: Path | None = typer.Option(None, "--plan", help="Possession plan for --impact (road-rail runs)."),
-    workers: int = typer.Option(1, "--workers", "-j", min=1, help="Processes replaying the --impact runs."),
+    workers: int | None = typer.Option(
+        None, "--workers", "-j", min=1, help="Processes replaying the --impact runs (default: all cores)."
+    ),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML) for the --impact replay."),
 ) -> None:
     """Validate a DB and add it to a registry as an immutable, read-only version.

@@ -42,7 +42,9 @@ def impact(
     plan: Path | None = typer.Option(
         None, "--plan", help="Possession plan (CSV/XLSX): road-rail runs are checked against it on both versions."
     ),
-    workers: int = typer.Option(1, "--workers", "-j", min=1, help="Processes replaying runs."),
+    workers: int | None = typer.Option(
+        None, "--workers", "-j", min=1, help="Processes replaying runs (default: all cores)."
+    ),
     config: Path | None = typer.Option(
         None, "--config", help="Settings (TOML): the pipeline's sections, [possession]."
     ),
@@ -84,7 +86,7 @@ def impact(
 
 
 def _impact_report(
-    old: Path, new: Path, runs: list[Path], plan: Path | None, tree: object, workers: int
+    old: Path, new: Path, runs: list[Path], plan: Path | None, tree: object, workers: int | None
 ) -> ImpactReport:
     """The impact report, with a progress bar on stderr while the runs are replayed."""
     from cli.gis import _Bar
@@ -197,7 +199,7 @@ def _impact_attachment(
     against: Path | None,
     plan: Path | None,
     config: Path | None,
-    workers: int,
+    workers: int | None,
 ) -> ImpactAttachment | None:
     """``db release --impact``: the impact report of ``file`` against ``against`` or the
     registry's latest release, as the attachment :func:`release_db` stores."""

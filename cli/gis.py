@@ -263,7 +263,9 @@ def verify(
         help="Pipeline margin up to which its km is the along-track reference [m] "
         f"(default {_VERIFY.max_km_margin_m:g}).",
     ),
-    workers: int = typer.Option(1, "--workers", "-j", min=1, help="Processes replaying runs."),
+    workers: int | None = typer.Option(
+        None, "--workers", "-j", min=1, help="Processes replaying runs (default: all cores)."
+    ),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Verify the 20 m GIS grid against the trusted GPS fixes of recorded runs.

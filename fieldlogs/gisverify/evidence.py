@@ -20,7 +20,6 @@ fix also carries the pipeline's absolute-fix count (``km_ref_epoch``, :func:`fix
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Iterable, Sequence
 from contextlib import closing
 from dataclasses import dataclass, field, replace
@@ -189,7 +188,7 @@ def collect_evidence(
     *,
     network: Network | None = None,
     max_km_margin_m: float = MAX_KM_MARGIN_M,
-    workers: int = 1,
+    workers: int | None = None,
     progress: Progress | None = None,
 ) -> Evidence:
     """Run the pipeline on every run folder (``workers`` processes) and gather the evidence.
@@ -259,7 +258,7 @@ def verify_runs(
     pipeline: PipelineConfig | None = None,
     config: VerifyConfig | None = None,
     max_km_margin_m: float | None = None,
-    workers: int = 1,
+    workers: int | None = None,
     progress: Progress | None = None,
 ) -> VerifyReport:
     """``gis verify``: discover runs, replay them, select evidence (pipeline km as the
@@ -276,7 +275,7 @@ def verify_runs(
         pipeline,
         network=network,
         max_km_margin_m=config.max_km_margin_m,
-        workers=workers or (os.cpu_count() or 1),
+        workers=workers,
         progress=progress,
     )
     result = verify_fixes(network, ev.fixes, config)

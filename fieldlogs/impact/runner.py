@@ -29,7 +29,7 @@ def impact_runs(
     *,
     plan: Path | None = None,
     tree: Any = None,
-    workers: int = 1,
+    workers: int | None = None,
     progress: Progress | None = None,
 ) -> ImpactReport:
     """Replay every run below ``roots`` against ``old`` and ``new`` (``tree``: the

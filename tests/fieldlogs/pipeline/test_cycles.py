@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 
 from dbtools.database import read_network
 from fieldlogs.io import read_run
-from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.cycles import cycle_index, cycle_means, segments
+from fieldlogs.pipeline.run import run_pipeline
 from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
 
 
