@@ -17,13 +17,12 @@ from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.rules.area import check_area
 from dbtools.rules.common import Locator
 from dbtools.rules.schema import check_empty_tables
-from dbtools.tabular import find_table_file, read_table_file, sha256_file
+from dbtools.tabular import code_columns, find_table_file, read_table_file, sha256_file
 from dbtools.typed_csv import read_csv_typed
 from schemas.enums import Severity, Track
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
-from schemas.model import Table
 from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
 
 
@@ -83,16 +82,6 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
     findings.extend(check_empty_tables(net.tables, loc, tables_read=set(files)))
     findings.extend(check_area(net, loc))
     return net, findings
-
-
-def code_columns(table: Table) -> list[str]:
-    """Text columns holding codes (keys, ``*_code``, ``*_id``): a number there has lost its
-    leading zeros in a workbook (:mod:`dbtools.tabular`)."""
-    return [
-        c.name
-        for c in table.columns
-        if c.dtype == "str" and (c.name in table.primary_key or c.name.endswith(("_code", "_id")))
-    ]
 
 
 def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:

@@ -35,13 +35,16 @@ import zipfile
 from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
 from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
+
+if TYPE_CHECKING:
+    from schemas.model import Table
 
 TABULAR_SUFFIXES = (".csv", ".xlsx")
 #: Delimiters recognised in a header without commas, with their names for messages.
@@ -90,13 +93,25 @@ def read_table_file(
     return tf
 
 
-def read_raw_table(path: Path, sheet: str | None = None) -> pd.DataFrame:
-    """:func:`read_table_file`'s frame; its first error finding raised as an InputError."""
-    tf = read_table_file(path, sheet=sheet)
+def read_raw_table(path: Path, sheet: str | None = None, declared: Table | None = None) -> pd.DataFrame:
+    """:func:`read_table_file`'s frame; its first error finding raised as an InputError.
+    ``declared``: the file's table, whose :func:`code_columns` are checked in a workbook."""
+    codes = code_columns(declared) if declared is not None else ()
+    tf = read_table_file(path, table=declared.name if declared is not None else "", sheet=sheet, code_columns=codes)
     for f in tf.findings:
         if f.severity == Severity.ERROR:
             raise InputError(f.message, path=path, row=f.row, column=f.column)
     return tf.frame
+
+
+def code_columns(table: Table) -> list[str]:
+    """Text columns holding codes (keys, ``*_code``, ``*_id``): a number there has lost its
+    leading zeros in a workbook (:mod:`dbtools.tabular`)."""
+    return [
+        c.name
+        for c in table.columns
+        if c.dtype == "str" and (c.name in table.primary_key or c.name.endswith(("_code", "_id")))
+    ]
 
 
 # ------------------------------------------------------------------------------------ CSV

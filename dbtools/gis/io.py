@@ -62,7 +62,7 @@ def read_km_posts(path: Path) -> InputFrame:
 
 def _read_tabular(name: str, path: Path) -> InputFrame:
     table = CENTRELINE_VERTICES if name == CENTRELINE_VERTICES.name else KM_POSTS
-    raw = read_raw_table(path, sheet=name)
+    raw = read_raw_table(path, sheet=name, declared=table)
     co = read_and_check(table, raw, file=str(path))
     frame = co.frame
     frame[ROW_COL] = pd.array(frame.index.to_numpy() + FIRST_DATA_LINE, dtype="Int64")

@@ -224,7 +224,7 @@ def read_plan(path: Path, network: Network | None = None) -> Plan:
     Raises :class:`~schemas.errors.InputError` when the file cannot be read at all.
     """
     path = Path(path)
-    raw = read_raw_table(path, sheet=POSSESSIONS.name)
+    raw = read_raw_table(path, sheet=POSSESSIONS.name, declared=POSSESSIONS)
     file = str(path)
     co = read_and_check(POSSESSIONS, raw, file=file)
     findings = list(co.findings)

@@ -774,3 +774,29 @@ def test_plan_columns_vehicle_and_purpose(tmp_path: Path) -> None:
     )
     bad = read_plan(path)
     assert any(f.column == "purpose" for f in bad.errors)
+
+
+@pytest.mark.filterwarnings("ignore::ResourceWarning")
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_plan_xlsx_with_a_line_code_typed_as_a_number_is_refused_naming_the_cell(tmp_path: Path) -> None:
+    """A workbook cell 0900 typed as a number reads 900: a line the plan would never match
+    (every alarm of that work lost). Refused naming the cell, as for DB sources."""
+    from openpyxl import Workbook
+
+    csv = tmp_path / "p.csv"
+    csv.write_text(HEADER + GOOD, encoding="utf-8")
+    frame = plan_frame(load_plan(csv).possessions)
+    book = Workbook()
+    sheet = book.active
+    assert sheet is not None
+    sheet.title = "possessions"
+    sheet.append(list(frame.columns))
+    for row in frame.itertuples(index=False):
+        sheet.append([int(v) if name == "line_code" else v for name, v in zip(frame.columns, row, strict=True)])
+    xlsx = tmp_path / "p.xlsx"
+    book.save(xlsx)
+    with pytest.raises(InputError, match="leading zeros") as err:
+        load_plan(xlsx, NET)
+    assert err.value.column == "line_code"
+    assert err.value.row == 2
+    gc.collect()
