@@ -149,7 +149,9 @@ def _details(frame: pd.DataFrame) -> list[dict[str, Any]]:
 def build_report(audit_path: Path, *, by: By = "route", target_pct: float = 0.5) -> Report:
     """Aggregate an audit database (read-only)."""
     runs_all = read_table(audit_path, AUDIT_RUNS.name, order_by=("run_path",))
-    events = read_table(audit_path, AUDIT_EVENTS.name)
+    # runs in run_path order whatever order the workers finished them in (each run's events
+    # in their own order): the same audit gives the same report and the same plots
+    events = read_table(audit_path, AUDIT_EVENTS.name).sort_values("run_path", kind="stable", ignore_index=True)
     meta = read_meta(audit_path)
     runs = runs_all[runs_all["status"] == "ok"].copy()
     failed = runs_all.loc[runs_all["status"] == "error", ["run_path", "error"]].reset_index(drop=True)

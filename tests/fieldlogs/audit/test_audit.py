@@ -9,6 +9,7 @@ from __future__ import annotations
 import base64
 import json
 import os
+import re
 import shutil
 import sqlite3
 import subprocess
@@ -553,3 +554,27 @@ def _screenshot(html_file: Path) -> None:
 def test_html_report_without_the_onboard_db_says_so(hand_made: Path) -> None:
     text = render_html(build_report(hand_made), hand_made)
     assert "not readable" in text and text.count("<img") == 3
+
+
+def test_report_does_not_depend_on_the_order_the_workers_finished_in(audited: Path, tmp_path: Path) -> None:
+    """The same audit with its runs' events stored in the opposite order (as another worker
+    schedule stores them) gives the same report, plots included."""
+    from fieldlogs.reports.page import render_html
+
+    other = tmp_path / "reordered.sqlite"
+    with sqlite3.connect(audited) as src, sqlite3.connect(other) as dst:
+        src.backup(dst)
+    first = "SELECT run_path FROM audit_events ORDER BY rowid LIMIT 1"
+    with sqlite3.connect(other) as conn:
+        (was,) = conn.execute(first).fetchone()
+        conn.execute(  # the run stored first now stored last, the others in reverse
+            "CREATE TEMP TABLE ev AS SELECT * FROM audit_events ORDER BY run_path = ?, run_path DESC, rowid", (was,)
+        )
+        conn.execute("DELETE FROM audit_events")
+        conn.execute("INSERT INTO audit_events SELECT * FROM ev")
+        assert conn.execute(first).fetchone() != (was,)
+    assert report_json(build_report(other)) == report_json(build_report(audited))
+    images = [
+        re.findall(r"data:image/png;base64,[A-Za-z0-9+/=]+", render_html(build_report(p), p)) for p in (other, audited)
+    ]
+    assert images[0] and images[0] == images[1]
