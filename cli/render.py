@@ -147,22 +147,71 @@ def key_value_table(rows: Iterable[tuple[str, Any]], title: str | None = None) -
     return t
 
 
-def frame_table(frame: Any, title: str | None = None, max_rows: int = 200) -> Table:
-    """A pandas DataFrame as a Rich table; number columns never wrap (no number is split
-    across lines), text columns wrap at spaces."""
-    from rich.table import Table
+#: Narrowest text column worth a table (below it a text column would shrink to nothing).
+MIN_TEXT_WIDTH = 8
 
-    rows = [[_cell(v) for v in row] for row in frame.head(max_rows).itertuples(index=False, name=None)]
-    t = Table(title=title)
-    for k, c in enumerate(frame.columns):
-        cells = [r[k] for r in rows]
-        if all(_NUMBER.fullmatch(x) for x in cells if x):
-            t.add_column(str(c), no_wrap=True, min_width=_unsplit_width(cells), justify="right")
+
+class FrameView:
+    """A pandas DataFrame for the terminal: a table when it fits the console's width (no
+    number split across lines, text wraps at spaces), else one block per row (``column=value``
+    pairs, wrapped between pairs) so that no column is squeezed out of sight at 80
+    columns. Rendered by Rich (``console.print(view)``) at the width it is printed at."""
+
+    def __init__(self, frame: Any, title: str | None, max_rows: int) -> None:
+        self.title = title
+        self.names = [str(c) for c in frame.columns]
+        self.rows = [[_cell(v) for v in row] for row in frame.head(max_rows).itertuples(index=False, name=None)]
+        self.numeric = [all(_NUMBER.fullmatch(r[k]) for r in self.rows if r[k]) for k in range(len(self.names))]
+
+    def table(self) -> Table:
+        from rich.table import Table
+        from rich.text import Text
+
+        t = Table(title=self.title)
+        for name, numeric, width in zip(self.names, self.numeric, self._widths(), strict=True):
+            # rich never narrows a column below its min_width: a number column holds its widest number
+            t.add_column(Text(name), overflow="fold", min_width=width, justify="right" if numeric else "left")
+        for r in self.rows:
+            t.add_row(*(Text(c) for c in r))  # as written: "[s]" in a header is a unit, not markup
+        return t
+
+    def blocks(self) -> list[Text]:
+        from rich.text import Text
+
+        out = [Text(self.title, style="bold")] if self.title else []
+        for r in self.rows:
+            pairs = [f"{n}={v}" for n, v in zip(self.names, r, strict=True) if v]
+            out.append(Text("  ".join(pairs) or "(empty row)"))
+        return out
+
+    def _widths(self) -> list[int]:
+        """Narrowest width of each column: a number column its widest cell (numbers are never
+        split; its header wraps at spaces), a text column MIN_TEXT_WIDTH or its longest cell."""
+        widths = []
+        for k, name in enumerate(self.names):
+            cells = [r[k] for r in self.rows]
+            if self.numeric[k]:
+                widths.append(max(_unsplit_width(cells), *(len(w) for w in name.split()), 1))
+            else:
+                widths.append(min(max((len(c) for c in [name, *cells]), default=1), MIN_TEXT_WIDTH))
+        return widths
+
+    def min_width(self) -> int:
+        """Width the table needs: the columns' narrowest widths, cell padding and borders."""
+        widths = self._widths()
+        return sum(widths) + 3 * len(widths) + 1
+
+    def __rich_console__(self, console: Console, options: Any) -> Iterable[Table | Text]:
+        if self.min_width() <= options.max_width:
+            yield self.table()
         else:
-            t.add_column(str(c), overflow="fold")
-    for r in rows:
-        t.add_row(*r)
-    return t
+            yield from self.blocks()
+
+
+def frame_table(frame: Any, title: str | None = None, max_rows: int = 200) -> FrameView:
+    """A pandas DataFrame as a Rich renderable (:class:`FrameView`): a table, or one block
+    per row when the table cannot fit the terminal."""
+    return FrameView(frame, title, max_rows)
 
 
 _NUMBER = re.compile(r"[-+]?(\d[\d,]*(\.\d*)?|\.\d+)([eE][-+]?\d+)?( ?%| ?[a-zA-Z/²]{1,5})?|—|nan|inf|-inf")

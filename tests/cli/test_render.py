@@ -81,3 +81,30 @@ def test_frame_number_columns_never_wrap(width: int) -> None:
     text = _render(frame_table(frame), width)
     for token in ("123456", "0.1235", "1.988", "1.235e+06", "9.877e+04"):
         assert re.search(rf"(?<![\d.]){re.escape(token)}(?![\d])", text), (token, text)
+
+
+def test_a_frame_too_wide_for_80_columns_is_printed_as_row_blocks_with_every_column() -> None:
+    """Eleven number columns and two text columns cannot share 80 columns: rather than the
+    text columns shrinking out of sight, every row is printed as column=value pairs."""
+    frame = pd.DataFrame(
+        {
+            "run_id": ["RUN-2026-12-01-vehicle-0042", "RUN-2026-12-01-vehicle-0043"],
+            **{f"figure_{k}": [123456.25 + k, 7.5] for k in range(11)},
+            "refusal_reasons": ["entry_straight 2, min_speed 2", "upper_limit 1"],
+        }
+    )
+    wide = _render(frame_table(frame, title="Runs"), 400)
+    assert "┃" in wide and "RUN-2026-12-01-vehicle-0042" in wide  # a table where it fits
+    narrow = _render(frame_table(frame, title="Runs"), 80)
+    assert "┃" not in narrow
+    assert all(len(line) <= 80 for line in narrow.splitlines())
+    flat = " ".join(narrow.split())
+    for token in ("run_id=RUN-2026-12-01-vehicle-0042", "figure_10=1.235e+05", "refusal_reasons=upper_limit 1"):
+        assert token in flat, (token, narrow)
+
+
+def test_frame_headers_and_cells_are_printed_as_written_not_as_markup() -> None:
+    """ "[s]" is a unit (rich would read it as the strike-through tag and drop it)."""
+    frame = pd.DataFrame({"stream": ["tacho [x]"], "t from [s]": [0.0], "declared [Hz]": [10]})
+    text = _render(frame_table(frame), 80)
+    assert "[s]" in text and "[Hz]" in text and "tacho [x]" in text
