@@ -118,7 +118,9 @@ def _ltc_half(bits: Bits, start: int) -> tuple[dict[str, np.ndarray], np.ndarray
     (the second column empty for velocity code 1) and the IODP."""
     vel = getbitu(bits, start, 1) == 1
     n = bits.shape[0]
-    out = {c: np.zeros((n, 2)) for c in ("dx_m", "dy_m", "dz_m", "daf0_s", "ddx_mps", "ddy_mps", "ddz_mps", "daf1_sps")}
+    out: dict[str, np.ndarray] = {
+        c: np.zeros((n, 2)) for c in ("dx_m", "dy_m", "dz_m", "daf0_s", "ddx_mps", "ddy_mps", "ddz_mps", "daf1_sps")
+    }
     out["t0_sod_s"] = np.full((n, 2), np.nan)
     slot, iode = np.zeros((n, 2), dtype=np.int64), np.zeros((n, 2), dtype=np.int64)
     # velocity code 0: two satellites of 51 bits each, IODP at +103
@@ -144,7 +146,7 @@ def _ltc_half(bits: Bits, start: int) -> tuple[dict[str, np.ndarray], np.ndarray
     iode[:, 0] = np.where(vel, getbitu(bits, p + 6, 8), iode[:, 0])
     slot[:, 1] = np.where(vel, 0, slot[:, 1])
     iodp = np.where(vel, getbitu(bits, p + 103, 2), iodp)
-    out["slot"], out["iode"] = slot.astype(float), iode.astype(float)
+    out["slot"], out["iode"] = slot, iode
     out["velocity"] = np.repeat(vel[:, None], 2, axis=1)
     return out, iodp
 
