@@ -161,7 +161,15 @@ GNSS_SBAS = Table(
             min=0.0,
         ),
         Column("prn", "int", "SBAS PRN of the GEO (120–158; MSAS 129, 137)", min=120, max=158),
-        Column("msg_type", "int", "Message type (0–63) as the receiver reported it", nullable=True, min=0, max=63),
+        Column(
+            "msg_type",
+            "int",
+            "Message type (0–63) as the receiver reported it",
+            required=False,
+            nullable=True,
+            min=0,
+            max=63,
+        ),
         Column("message_hex", "str", "The 250 bits as 63 or 64 hex digits, MSB first (trailing pad bits ignored)"),
         Column(
             "valid",

@@ -68,6 +68,8 @@ class PositionConfig:
     """Re-solve failed epochs with each receiver's predicted clock (``coasting``)."""
     smoothing_s: float | None = 100.0
     """Carrier-smoothing window (``observables.carrier_smoothed``); None: raw code."""
+    use_sbas: bool = True
+    """Apply a run's SBAS/MSAS messages where it has them (``ontrack``)."""
     error_model: ErrorModel = field(default_factory=ErrorModel)
     solver: ConstrainedConfig = field(default_factory=ConstrainedConfig)
 
