@@ -39,6 +39,7 @@ from fieldlogs.gnss.simulate import (
     dgps_corrections,
     inject_fault,
     simulate,
+    with_sat_errors,
 )
 from fieldlogs.gnss.skymask import load_mask
 from fieldlogs.gnss.track import Antenna
@@ -63,14 +64,10 @@ class CaseSpec:
     """False: no prior at all (coarse search along the whole track, no prior in the tests)."""
     elevation_mask_deg: float = 10.0
     sat_errors: bool = False
-    """Broadcast orbit and clock errors in the truth (``SAT_ERRORS``), as an SBAS run has them."""
+    """Broadcast orbit and clock errors in the truth (``simulate.with_sat_errors``), as an SBAS run has them."""
     sbas: bool = False
     """Write an SBAS stream for the run (``fieldlogs.gnss.sbas.simulate``, with ``sat_errors``)
     and position with it."""
-
-
-#: Orbit (per axis) and clock errors of the broadcast ephemerides where ``sat_errors``.
-SAT_ERRORS = ErrorSpec(orbit_sigma_m=1.0, orbit_rate_sigma_mps=5e-4, clock_sigma_m=1.0, clock_rate_sigma_mps=2e-4)
 
 
 @dataclass
@@ -104,7 +101,7 @@ def _simulate(spec: CaseSpec) -> tuple[Simulated, np.ndarray, np.ndarray, pd.Dat
         ReceiverSpec("rx2", -8.0, 0.0, 3.8, float(rng.uniform(-5e-4, 5e-4)), float(rng.normal(0, 2e-8))),
     ]
     corridor = mixed_corridor(tr.truth.length_m, spec.seed) if spec.corridor == "mixed" else Corridor()
-    errors = SAT_ERRORS if (spec.sat_errors or spec.sbas) else None
+    errors = with_sat_errors(ErrorSpec()) if (spec.sat_errors or spec.sbas) else None
     sim = simulate(traj, nav, rx, corridor, seed=spec.seed + 1_000_003, errors=errors, systems=spec.systems)
     corr = dgps_corrections(sim, seed=spec.seed + 7) if spec.dgps else None
     if spec.sbas:

@@ -34,7 +34,7 @@ few km) and white N(0, 0.15 m) — residual errors at the decimetre level.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -126,6 +126,12 @@ class ErrorSpec:
     clock_sigma_m: float = 0.0
     """Broadcast clock error (c·δΔt, constant + drift per satellite), 0: none."""
     clock_rate_sigma_mps: float = 0.0
+
+
+def with_sat_errors(err: ErrorSpec) -> ErrorSpec:
+    """``err`` plus broadcast orbit (1 m per axis, 0.5 mm/s) and clock (1 m, 0.2 mm/s) errors per
+    satellite, as a run written with an SBAS stream has them."""
+    return replace(err, orbit_sigma_m=1.0, orbit_rate_sigma_mps=5e-4, clock_sigma_m=1.0, clock_rate_sigma_mps=2e-4)
 
 
 @dataclass
