@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fieldlogs.gnss.corrections import no_corrections
 from fieldlogs.gnss.sbas import SbasCorrections
 from fieldlogs.gnss.sbas import encode as enc
 from fieldlogs.gnss.sbas.bits import crc24q_bytes, parity_ok
@@ -82,7 +81,10 @@ def test_long_term_both_velocity_codes_and_mt24() -> None:
     a = enc.LongTerm(3, 77, 1.25, -2.5, 0.375, 20 * 2.0**-31, 3 * 2.0**-11, -5 * 2.0**-11, 0.0, 2 * 2.0**-39, 4000.0)
     b = enc.LongTerm(4, 12, -1.0, 0.5, 31.875, -7 * 2.0**-31)
     c = enc.LongTerm(5, 13, 0.125, 0.0, -32.0, 0.0)
-    msgs = [(T0, enc.mt25((True, [a]), (False, [b, c]), 1)), (T0 + 1, enc.mt24(1, 2, 1, [0.5] * 6, [4] * 6, (False, [b])))]
+    msgs = [
+        (T0, enc.mt25((True, [a]), (False, [b, c]), 1)),
+        (T0 + 1, enc.mt24(1, 2, 1, [0.5] * 6, [4] * 6, (False, [b]))),
+    ]
     m = read_messages(stream(msgs))
     lt = m.long_term.set_index(["t_rx", "slot"])
     va = lt.loc[(T0 + 1.125, 3)]
@@ -111,7 +113,9 @@ def test_masks_degradation_mt10_igp_mask_and_grid_decode() -> None:
     assert list(m.masks["prn"]) == [1, 5, 32, 120] and list(m.masks["slot"]) == [1, 2, 3, 4]
     assert list(m.degradation["ai"].iloc[:4]) == [0, 4, 9, 15] and m.degradation["t_lat_s"].iloc[0] == 3.0
     r = m.mt10.iloc[0]
-    assert (r["b_rrc"], r["c_ltc_v0"], r["i_ltc_v0"], r["c_er"], r["rss_udre"]) == pytest.approx((0.01, 0.004, 120, 1.5, 1))
+    assert (r["b_rrc"], r["c_ltc_v0"], r["i_ltc_v0"], r["c_er"], r["rss_udre"]) == pytest.approx(
+        (0.01, 0.004, 120, 1.5, 1)
+    )
     assert list(m.igp_mask["igp"]) == [21, 22, 46, 47] and list(m.igp_mask["order"]) == [0, 1, 2, 3]
     assert list(m.iono["delay_code"].iloc[:4]) == [16, 32, 24, 511] and list(m.iono["givei"].iloc[:4]) == [1, 2, 3, 4]
     assert list(m.integrity["iodf"].iloc[[0, 13, 26, 39]]) == [0, 1, 2, 3]
@@ -149,7 +153,11 @@ def test_bad_rows_are_dropped_and_counted() -> None:
 
 def _setup(mt10: bool = True, udrei2: int = 15) -> list[tuple[float, bytes]]:
     lt = enc.LongTerm(1, 7, 1.0, -2.0, 0.5, 10 * 2.0**-31)
-    msgs = [(T0, enc.mt1([1, 2], 1)), (T0 + 1, enc.mt7(0, 1, [0, 0])), (T0 + 2, enc.mt25((False, [lt]), (False, []), 1))]
+    msgs = [
+        (T0, enc.mt1([1, 2], 1)),
+        (T0 + 1, enc.mt7(0, 1, [0, 0])),
+        (T0 + 2, enc.mt25((False, [lt]), (False, []), 1)),
+    ]
     if mt10:
         msgs.append((T0 + 3, enc.mt10(enc.Mt10())))
     msgs.append((T0 + 4, enc.mt_fast(2, 1, 1, [1.5, 3.0], [0, udrei2])))
@@ -190,8 +198,8 @@ def test_no_valid_message_is_the_standalone_case() -> None:
     bad["message_hex"] = bad["message_hex"].str[:-8] + "00000000"
     sb = SbasCorrections.from_stream(bad)
     assert sb.empty and sb.messages.dropped["bad_crc"] == len(bad)
-    ref = no_corrections(1)
-    assert ref.present.sum() == 0
+    out = sb.rows(np.array(["G01"]), np.array([T0 + 6.0]), np.array([7.0]))
+    assert not out.present.any() and out.usable.all() and np.isnan(out.sigma_m).all()
 
 
 # --- ionospheric grid ------------------------------------------------------------------
@@ -211,7 +219,9 @@ def test_pierce_point_and_obliquity_by_hand() -> None:
     assert f30[0] == pytest.approx(1.751421, rel=1e-6)
     # due north at E = 30°: ψ = 90° − 30° − asin(0.8209745) = 60° − 55.18246° = 4.81754° of latitude
     lat30, lon30, _ = pierce_point(np.radians([36.0]), np.radians([141.0]), np.radians([0.0]), np.radians([30.0]))
-    assert np.degrees(lat30[0]) == pytest.approx(36.0 + 4.81754, abs=1e-4) and np.degrees(lon30[0]) == pytest.approx(141.0)
+    assert np.degrees(lat30[0]) == pytest.approx(36.0 + 4.81754, abs=1e-4) and np.degrees(lon30[0]) == pytest.approx(
+        141.0
+    )
 
 
 def _grid(delays: dict[int, float | None]) -> SbasCorrections:
@@ -224,7 +234,14 @@ def _grid(delays: dict[int, float | None]) -> SbasCorrections:
 
 def test_bilinear_and_triangle_interpolation_worked_by_hand() -> None:
     # user at 36N 141E, satellite at the zenith: pierce point = user, x = y = 0.2 in the 5° cell
-    args = (np.radians([36.0]), np.radians([141.0]), np.zeros(1), np.radians([90.0]), np.array([T0 + 10.0]), np.array([1.57542e9]))
+    args = (
+        np.radians([36.0]),
+        np.radians([141.0]),
+        np.zeros(1),
+        np.radians([90.0]),
+        np.array([T0 + 10.0]),
+        np.array([1.57542e9]),
+    )
     sb = _grid({21: 2.0, 46: 3.0, 47: 9.0, 22: 4.0})  # SW 2, SE 3, NE 9, NW 4
     cov, d, s = sb.iono(*args)
     # 0.8·0.8·2 + 0.2·0.8·3 + 0.2·0.2·9 + 0.8·0.2·4 = 1.28 + 0.48 + 0.36 + 0.64
