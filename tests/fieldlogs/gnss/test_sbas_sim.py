@@ -45,7 +45,7 @@ def test_simulated_stream_is_clean_and_complete(case: Case) -> None:
 
 
 def test_sbas_corrected_epochs_are_more_accurate_than_standalone() -> None:
-    seeds = (1, 2, 3)
+    seeds = (1, 2)
     alone = ex.summarise([ex.run_case(ex.CaseSpec(seed=s, sat_errors=True)) for s in seeds])
     sbas = ex.summarise([ex.run_case(ex.CaseSpec(seed=s, sbas=True)) for s in seeds])
     assert sbas["median_abs_err_m"] < 0.6 * alone["median_abs_err_m"]
