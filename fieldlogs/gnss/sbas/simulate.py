@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.gnss.constants import C_MPS, GPS_PI, FloatArray
-from fieldlogs.gnss.ephemeris import nav_table, select_ephemeris
+from fieldlogs.gnss.ephemeris import NavTable, nav_table, select_ephemeris
 from fieldlogs.gnss.geodesy import ecef_to_geodetic
 from fieldlogs.gnss.sbas import encode as enc
 from fieldlogs.gnss.sbas.tables import SIGMA2_GIVE_M2, band_igps
@@ -152,7 +152,7 @@ def sbas_stream(
             if not slots:
                 continue
             iodf[block] = (iodf[block] + 1) % 3
-            prc = _fast(truth, table, gps, e.sats, slots, float(t_of)) + gm[i, slots]
+            prc = _fast(truth, gps, slots, float(t_of)) + gm[i, slots]
             msg = enc.mt_fast(2 + block, iodf[block], IODP, prc.tolist(), [UDREI_SIM] * len(slots), pre)
         else:
             item = queue[q_pos % len(queue)]
@@ -173,16 +173,14 @@ def sbas_stream(
     )
 
 
-def _iode(table: object, sats: np.ndarray, ks: list[int], t: float) -> list[int]:
-    from fieldlogs.gnss.ephemeris import NavTable
-
-    assert isinstance(table, NavTable)
+def _iode(table: NavTable, sats: np.ndarray, ks: list[int], t: float) -> list[int]:
+    """IODE of the ephemeris a user selects at t for satellites ``ks`` (−1: none)."""
     idx = select_ephemeris(table, np.asarray(sats)[ks], np.full(len(ks), t))
     iode = np.where(idx >= 0, table.field["IODE"][np.maximum(idx, 0)], -1)
     return [int(v) for v in iode]
 
 
-def _fast(truth: _Truth, table: object, gps: list[int], sats: np.ndarray, slots: list[int], t: float) -> FloatArray:
+def _fast(truth: _Truth, gps: list[int], slots: list[int], t: float) -> FloatArray:
     """PRC of mask slots (0-based) at t (module docstring; without the network error)."""
     sis, _, clock = truth.at(t)
     ks = [gps[s] for s in slots]
@@ -209,7 +207,7 @@ def _slow_queue(layout: list[tuple[int, list[int], np.ndarray, np.ndarray]], n_g
 def _slow(
     item: tuple[str, int],
     truth: _Truth,
-    table: object,
+    table: NavTable,
     gps: list[int],
     sats: np.ndarray,
     prns: list[int],
