@@ -3,7 +3,9 @@
 (a) The paper's experiment on simulated runs (``fieldlogs.gnss.experiment``): GPS only, the
     west half of the sky blocked, the synthetic 3-D track, two receivers; standalone and with
     D-GPS-level corrections; then a faulty satellite (50 m step, 0.2 m/s ramp) from mid-run;
-    and a multi-GNSS run through a mixed corridor (buildings, cuttings, overpasses, tunnels).
+    and a multi-GNSS run through a mixed corridor (buildings, cuttings, overpasses, tunnels);
+    and the paper case with broadcast orbit/clock errors in the truth, standalone and with the
+    simulated MSAS stream (``fieldlogs.gnss.sbas``: fast, long-term and grid corrections).
     Printed: constrained availability (status ok + antenna-distance check) against the
     unconstrained one (≥ 4 satellites, PDOP ≤ 6), along-track error of the constrained epochs,
     the share of epochs outside the stated uncertainty, and the fault statistics.
@@ -12,6 +14,7 @@
     same prepared rows, with the agreement of the two.
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/bench_gnss.py --runs 50
+    OMP_NUM_THREADS=1 .venv/bin/python bench/bench_gnss.py --runs 50 --only orbit/clock --skip-throughput
     OMP_NUM_THREADS=1 .venv/bin/python bench/bench_gnss.py --solve-only batched --cache /tmp/rows.pkl
 
 ``--solve-only`` times one solver alone on rows cached by a previous run (whole-process timing
@@ -44,6 +47,8 @@ ROWS: tuple[tuple[str, dict[str, object]], ...] = (
     ("paper case with a 5° elevation mask", {"elevation_mask_deg": 5.0}),
     ("paper case without a prior (search whole track)", {"use_prior": False}),
     ("GPS+Galileo+QZSS, west half + mixed corridor", {"systems": ("G", "E", "J"), "corridor": "mixed"}),
+    ("paper + orbit/clock errors, standalone", {"sat_errors": True}),
+    ("  same runs + MSAS stream (SBAS, orbit/clock)", {"sbas": True}),
 )
 
 
@@ -53,13 +58,15 @@ def _fmt(v: float, pct: bool = False, digits: int = 1) -> str:
     return f"{100 * v:6.{digits}f}%" if pct else f"{v:7.2f}"
 
 
-def accuracy(runs: int, seed0: int) -> None:
+def accuracy(runs: int, seed0: int, only: str | None = None) -> None:
     print(f"(a) simulated runs: {runs} seeds from {seed0}, 600 s at 1 Hz, 2 receivers (antennas ±8 m, 3.8 m high)")
     cols: tuple[tuple[str, int], ...] = (("epochs", 7), ("constr", 7), ("unconstr", 8), ("med|e|", 7))
     cols += (("p99|e|", 7), ("max|e|", 7), (">U", 7), ("U med", 7))
     print(f"{'case':46s} " + " ".join(f"{c:>{w}s}" for c, w in cols))
     faults = []
     for label, kw in ROWS:
+        if only is not None and only not in label:
+            continue
         res = [run_case(CaseSpec(seed0 + i, **kw)) for i in range(runs)]  # type: ignore[arg-type]
         s = summarise(res)
         print(
@@ -164,6 +171,8 @@ def main() -> None:
     ap.add_argument("--seed0", type=int, default=1000)
     ap.add_argument("--throughput-runs", type=int, default=5)
     ap.add_argument("--skip-accuracy", action="store_true")
+    ap.add_argument("--skip-throughput", action="store_true")
+    ap.add_argument("--only", default=None, help="accuracy rows whose label contains this text (e.g. 'orbit/clock')")
     ap.add_argument("--cache", type=Path, default=None, help="write (or, with --solve-only, read) the prepared rows")
     ap.add_argument("--solve-only", choices=("batched", "reference"), default=None)
     args = ap.parse_args()
@@ -171,9 +180,10 @@ def main() -> None:
         solve_only(args.solve_only, args.cache)
         return
     if not args.skip_accuracy:
-        accuracy(args.runs, args.seed0)
+        accuracy(args.runs, args.seed0, args.only)
         print()
-    throughput(args.throughput_runs, args.seed0, args.cache)
+    if not args.skip_throughput:
+        throughput(args.throughput_runs, args.seed0, args.cache)
 
 
 if __name__ == "__main__":

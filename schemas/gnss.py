@@ -1,7 +1,7 @@
 """Raw GNSS streams (SPEC §4, §5.6): observations (``gnss_obs``) and broadcast ephemerides
 (``gnss_nav``), plus the navigation header's ``gnss`` block of ``run.json`` — the inputs of
 track-constrained positioning [S002]: pseudoranges per receiver and epoch, the navigation
-messages and GNSS time.
+messages and GNSS time — and the SBAS/MSAS L1 messages (``gnss_sbas``) a receiver logged.
 
 Time convention (every producer and consumer): ``gnss_time_s`` and ``toc_gps_s`` are
 continuous GPS time in seconds since 1980-01-06T00:00:00 — no leap seconds; Galileo
@@ -135,6 +135,53 @@ GNSS_NAV = Table(
         Column("toc_gps_s", "float", "Time of clock, continuous GPS seconds since 1980-01-06", unit="s", min=0.0),
         *(_nav(n, what, unit) for n, what, unit in KEPLER_FIELDS + GLONASS_FIELDS),
     ),
+    required=False,
+)
+
+#: SBAS PRNs (RTCA DO-229 Table A-1 / ICAO Annex 10; MSAS broadcasts on 129 and 137).
+SBAS_PRN_RANGE = (120, 158)
+#: Hex digits of one logged SBAS L1 message: the 250 bits left-aligned in 32 bytes (u-blox
+#: RXM-SFRBX's eight 32-bit words) or 63 digits (252 bits); the bits past 250 are ignored.
+SBAS_HEX_DIGITS = (63, 64)
+
+GNSS_SBAS = Table(
+    name="gnss_sbas",
+    kind="log",
+    description=(
+        "SBAS/MSAS L1 messages (RTCA DO-229): one row per 250-bit message received from a GEO "
+        "(8-bit preamble, 6-bit type, 212 data bits, 24-bit CRC-24Q), hex, MSB first."
+    ),
+    columns=(
+        T,
+        Column(
+            "gnss_time_s",
+            "float",
+            "Reception of the message's last bit, continuous GPS seconds since 1980-01-06",
+            unit="s",
+            min=0.0,
+        ),
+        Column("prn", "int", "SBAS PRN of the GEO (120–158; MSAS 129, 137)", min=120, max=158),
+        Column(
+            "msg_type",
+            "int",
+            "Message type (0–63) as the receiver reported it",
+            required=False,
+            nullable=True,
+            min=0,
+            max=63,
+        ),
+        Column("message_hex", "str", "The 250 bits as 63 or 64 hex digits, MSB first (trailing pad bits ignored)"),
+        Column(
+            "valid",
+            "int",
+            "1 when the receiver found the CRC good (0: logged but failed); the decoder re-checks the CRC",
+            required=False,
+            nullable=True,
+            min=0,
+            max=1,
+        ),
+    ),
+    primary_key=("prn", "gnss_time_s"),
     required=False,
 )
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from schemas.enums import BaliseKind, CabDirection, Track, VehicleKind
-from schemas.gnss import GNSS_BLOCK, GNSS_NAV, GNSS_OBS
+from schemas.gnss import GNSS_BLOCK, GNSS_NAV, GNSS_OBS, GNSS_SBAS
 from schemas.model import Column, Table
 from schemas.tables import LAT_RANGE, LON_RANGE
 
@@ -208,7 +208,7 @@ RADAR_IF = Table(
 
 #: Every stream, in the order they are listed and checked.
 LOG_STREAMS: dict[str, Table] = {
-    t.name: t for t in (TACHO, IMU, BALISE, GPS, CAB, TRUTH, RADAR, RADAR_IF, GNSS_OBS, GNSS_NAV)
+    t.name: t for t in (TACHO, IMU, BALISE, GPS, CAB, TRUTH, RADAR, RADAR_IF, GNSS_OBS, GNSS_NAV, GNSS_SBAS)
 }
 
 

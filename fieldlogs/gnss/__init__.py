@@ -6,7 +6,9 @@ Modules, one concern each:
 * ``ephemeris`` — broadcast ephemeris selection, satellite position/velocity/clock, Sagnac;
 * ``geodesy`` — ECEF ↔ geodetic, ENU, azimuth/elevation;
 * ``atmosphere`` — Klobuchar, the Galileo effective-ionisation model, Saastamoinen;
-* ``corrections`` — the SBAS/MSAS (or D-GPS) corrections seam;
+* ``corrections`` — the D-GPS corrections seam and the per-row corrections form;
+* ``sbas`` — SBAS/MSAS L1 messages (RTCA DO-229): stream screening, decoding, fast/long-term
+  corrections with σ_flt, the ionospheric grid, the simulator's stream;
 * ``observables`` — gnss_obs + gnss_nav frames → corrected pseudorange arrays per epoch;
 * ``errormodel`` — pseudorange σ from elevation and C/N0;
 * ``lsq`` — the unconstrained (x, y, z, clock [, inter-system bias]) least squares, DOPs;

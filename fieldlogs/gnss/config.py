@@ -32,6 +32,7 @@ class GnssConfig:
     cn0_mask_dbhz: float = setting(30.0, "observations with a lower C/N0 are not used", "dB-Hz", ge=0)
     smoothing_s: float = setting(100.0, "carrier-smoothing window of the code (Hatch); 0 = raw code", "s", ge=0)
     clock_coasting: bool = setting(True, "re-solve epochs the satellites alone cannot carry with a predicted clock")
+    sbas: bool = setting(True, "apply the run's SBAS/MSAS messages (gnss_sbas) where it has them")
     pr_difference_tol_m: float = setting(
         8.0, "tolerance of the pseudorange differences between two antennas (pre-check)", "m", gt=0
     )
@@ -74,4 +75,5 @@ def position_config(cfg: GnssConfig, systems: tuple[str, ...] | None = None) -> 
         max_pdop=cfg.max_pdop,
         clock_coasting=cfg.clock_coasting,
         smoothing_s=cfg.smoothing_s or None,
+        use_sbas=cfg.sbas,
     )

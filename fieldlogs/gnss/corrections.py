@@ -1,4 +1,4 @@
-"""The corrections seam: SBAS/MSAS fast and long-term corrections, or D-GPS range corrections.
+"""The corrections seam: D-GPS range corrections, and the per-row form SBAS/MSAS corrections take.
 
 A corrections frame has one row per satellite and time of applicability:
 
@@ -12,10 +12,11 @@ A corrections frame has one row per satellite and time of applicability:
   screening discards such satellites);
 * ``covers_atmosphere`` — True for D-GPS corrections, whose PRC also removes the ionospheric
   and tropospheric delays at the reference station: the models are then not applied. SBAS
-  corrections leave the ionosphere to the (not yet decoded) grid, so Klobuchar stays.
+  corrections leave the ionosphere to their grid (``fieldlogs.gnss.sbas.grid``).
 
 A correction applies to observations at t with t_of ≤ t ≤ t_of + ``max_age_s`` (the
-latest such row). Decoding SBAS messages into this frame is not part of the core.
+latest such row). SBAS messages are decoded and matched by :mod:`fieldlogs.gnss.sbas` (its own
+time-outs, IODE matching and σ_flt), which returns the same :class:`RowCorrections`.
 """
 
 from __future__ import annotations

@@ -19,6 +19,7 @@ Where a correction (SBAS/D-GPS) applies its ``sigma_m`` replaces σ_sis, and σ_
 when it covers the atmosphere. Carrier smoothing over n samples scales σ_noise and σ_mp by
 max(√(``smooth_corr_samples``/n), ``smooth_floor``): noise and fast multipath average down,
 slow multipath (correlated over tens of seconds beside a structure) does not, hence the floor.
+Where the SBAS ionospheric grid gives the delay its σ_UIRE (``iono_sigma_m``) replaces σ_iono.
 """
 
 from __future__ import annotations
@@ -67,6 +68,7 @@ def pseudorange_sigma_m(
     corr_sigma_m: FloatArray | None = None,
     covers_atmosphere: BoolArray | None = None,
     smooth_n: FloatArray | None = None,
+    iono_sigma_m: FloatArray | None = None,
 ) -> FloatArray:
     """1σ [m] of each corrected pseudorange (module docstring)."""
     el = np.asarray(el_rad, dtype=float)
@@ -75,6 +77,9 @@ def pseudorange_sigma_m(
     iono = np.maximum(
         model.iono_frac * np.abs(np.asarray(iono_m, dtype=float)), model.iono_floor_vert_m * obliquity(el)
     )
+    if iono_sigma_m is not None:
+        grid = np.asarray(iono_sigma_m, dtype=float)
+        iono = np.where(np.isfinite(grid), grid, iono)
     tropo = model.tropo_vert_m * tropo_mapping(el)
     cn0 = np.nan_to_num(np.asarray(cn0_dbhz, dtype=float), nan=35.0)
     noise = model.noise_45_m * 10.0 ** ((45.0 - cn0) / 20.0)

@@ -31,7 +31,16 @@ from fieldlogs.gnss.constellation import constellation_nav
 from fieldlogs.gnss.observables import FLAG_EXCLUDED, FLAG_NO_TRACK_SOLUTION
 from fieldlogs.gnss.position import PositionConfig, PositionResult, position_run
 from fieldlogs.gnss.scenario import SyntheticTrack, mixed_corridor, run_profile, synthetic_track, trajectory
-from fieldlogs.gnss.simulate import Corridor, ReceiverSpec, Simulated, dgps_corrections, inject_fault, simulate
+from fieldlogs.gnss.simulate import (
+    Corridor,
+    ErrorSpec,
+    ReceiverSpec,
+    Simulated,
+    dgps_corrections,
+    inject_fault,
+    simulate,
+    with_sat_errors,
+)
 from fieldlogs.gnss.skymask import load_mask
 from fieldlogs.gnss.track import Antenna
 
@@ -54,6 +63,11 @@ class CaseSpec:
     use_prior: bool = True
     """False: no prior at all (coarse search along the whole track, no prior in the tests)."""
     elevation_mask_deg: float = 10.0
+    sat_errors: bool = False
+    """Broadcast orbit and clock errors in the truth (``simulate.with_sat_errors``), as an SBAS run has them."""
+    sbas: bool = False
+    """Write an SBAS stream for the run (``fieldlogs.gnss.sbas.simulate``, with ``sat_errors``)
+    and position with it."""
 
 
 @dataclass
@@ -73,6 +87,7 @@ def _track() -> SyntheticTrack:
 
 
 def _simulate(spec: CaseSpec) -> tuple[Simulated, np.ndarray, np.ndarray, pd.DataFrame | None, pd.DataFrame]:
+    """The run, its truth times and s, the D-GPS corrections or SBAS stream, the prior."""
     rng = np.random.default_rng(spec.seed)
     tr = _track()
     t0 = 2300 * WEEK_S + float(np.floor(rng.uniform(0.0, WEEK_S)))
@@ -86,8 +101,13 @@ def _simulate(spec: CaseSpec) -> tuple[Simulated, np.ndarray, np.ndarray, pd.Dat
         ReceiverSpec("rx2", -8.0, 0.0, 3.8, float(rng.uniform(-5e-4, 5e-4)), float(rng.normal(0, 2e-8))),
     ]
     corridor = mixed_corridor(tr.truth.length_m, spec.seed) if spec.corridor == "mixed" else Corridor()
-    sim = simulate(traj, nav, rx, corridor, seed=spec.seed + 1_000_003, systems=spec.systems)
+    errors = with_sat_errors(ErrorSpec()) if (spec.sat_errors or spec.sbas) else None
+    sim = simulate(traj, nav, rx, corridor, seed=spec.seed + 1_000_003, errors=errors, systems=spec.systems)
     corr = dgps_corrections(sim, seed=spec.seed + 7) if spec.dgps else None
+    if spec.sbas:
+        from fieldlogs.gnss.sbas.simulate import sbas_stream
+
+        corr = sbas_stream(sim, seed=spec.seed + 11, lead_s=120.0)
     walk = np.cumsum(rng.normal(0.0, 0.05, s.size))
     prior = pd.DataFrame({"t": traj.t, "s_m": s + rng.normal(0.0, 1.5) + walk, "sigma_m": spec.prior_sigma_m})
     return sim, traj.t, s, corr, prior
@@ -96,6 +116,11 @@ def _simulate(spec: CaseSpec) -> tuple[Simulated, np.ndarray, np.ndarray, pd.Dat
 def _solve(
     sim: Simulated, obs: pd.DataFrame, spec: CaseSpec, corr: pd.DataFrame | None, prior: pd.DataFrame
 ) -> PositionResult:
+    sbas = None
+    if spec.sbas:
+        from fieldlogs.gnss.sbas import SbasCorrections
+
+        sbas, corr = SbasCorrections.from_stream(corr), None
     return position_run(
         obs,
         sim.nav,
@@ -106,6 +131,7 @@ def _solve(
         sky_mask=load_mask(spec.sky),
         prior=prior if spec.use_prior else None,
         cfg=PositionConfig(systems=spec.systems, elevation_mask_deg=spec.elevation_mask_deg),
+        sbas=sbas,
     )
 
 

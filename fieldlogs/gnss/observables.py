@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 import pandas as pd
@@ -48,6 +48,9 @@ from fieldlogs.gnss.ephemeris import NavTable, nav_table, transmission_states
 from fieldlogs.gnss.errormodel import ErrorModel, pseudorange_sigma_m
 from fieldlogs.gnss.geodesy import azimuth_elevation, ecef_to_geodetic
 from schemas.errors import InputError
+
+if TYPE_CHECKING:
+    from fieldlogs.gnss.sbas import SbasCorrections
 
 FLAG_NO_EPHEMERIS: Final = 1
 FLAG_LOW_ELEVATION: Final = 2
@@ -193,8 +196,13 @@ def build_epochs(
     systems: Sequence[str] = ("G", "E", "J"),
     signals: Mapping[str, Sequence[str]] | None = None,
     corrections: pd.DataFrame | None = None,
+    sbas: SbasCorrections | None = None,
 ) -> Epochs:
-    """Satellite states and clock corrections for every observation, as (E, S) arrays."""
+    """Satellite states and clock corrections for every observation, as (E, S) arrays.
+
+    With ``sbas`` (a decoded stream with valid messages) its fast and long-term corrections
+    apply instead of ``corrections`` (:mod:`fieldlogs.gnss.sbas.clock_orbit`, matched on the
+    IODE of the ephemeris in use)."""
     missing = [c for c in (OBS_TIME, OBS_RECEIVER, OBS_SAT, OBS_SIGNAL, OBS_PR) if c not in obs.columns]
     if missing:
         raise ObservationError("missing column", path="gnss_obs frame", column=missing[0])
@@ -209,8 +217,12 @@ def build_epochs(
     freq = signal_frequency_hz(sysl, sig)
     band = np.ascontiguousarray(sig.astype("U2")).view("U1").reshape(-1, 2)[:, 1] if sig.size else sig
     tx = transmission_states(table, sat, t, pr, freq, band)
-    corr = match_corrections(corrections, sat, t)
     j = np.where(tx.idx < 0, 0, tx.idx)
+    if sbas is not None and not sbas.empty:
+        iode = np.where(tx.idx < 0, np.nan, table.field["IODE"][j]) if table.size else np.full(sat.size, np.nan)
+        corr = sbas.rows(sat, t, iode)
+    else:
+        corr = match_corrections(corrections, sat, t)
     acc = table.field["SVacc"][j] if table.size else np.full(sat.size, np.nan)
     flags = np.where(tx.idx < 0, FLAG_NO_EPHEMERIS, 0) | np.where(corr.usable, 0, FLAG_AUGMENTATION)
     flags = flags | np.where(np.isin(sysl, list(systems)), 0, FLAG_SYSTEM_OFF)
@@ -271,9 +283,14 @@ def apply_geometry(
     iono_params: Mapping[str, Sequence[float]] | None = None,
     error_model: ErrorModel | None = None,
     apply_troposphere: bool = True,
+    sbas: SbasCorrections | None = None,
 ) -> Epochs:
     """Azimuth, elevation, ionosphere, troposphere, σ and the corrected pseudorange at
-    approximate receiver positions ``approx_ecef`` (E, 3). Returns a new ``Epochs``."""
+    approximate receiver positions ``approx_ecef`` (E, 3). Returns a new ``Epochs``.
+
+    With ``sbas`` its ionospheric grid replaces the broadcast model, and σ_UIRE the model's
+    σ_iono, wherever the grid covers a row's pierce point (:mod:`fieldlogs.gnss.sbas.grid`; the
+    delay is the ionosphere's, so every system's L1/E1 rows take it)."""
     rx = np.asarray(approx_ecef, dtype=float)[:, None, :]
     pos = np.where(ep.present[..., None], ep.sat_pos, rx + np.array([0.0, 0.0, 2.0e7]))
     pos = np.where(np.isfinite(pos), pos, rx + np.array([0.0, 0.0, 2.0e7]))
@@ -283,6 +300,12 @@ def apply_geometry(
     t_b = ep.t[:, None]
     freq = np.where(np.isfinite(ep.freq_hz), ep.freq_hz, 1.57542e9)
     iono = iono_delay_m(ep.system, freq, lat_b, lon_b, az, el, t_b, iono_params)
+    iono_sigma = None
+    if sbas is not None and not sbas.empty:
+        cov, grid_m, grid_sigma = sbas.iono(lat_b, lon_b, az, el, t_b, freq)
+        cov = cov & ep.present & ~ep.corr_atmosphere
+        iono = np.where(cov, grid_m, iono)
+        iono_sigma = np.where(cov, grid_sigma, np.nan)
     tropo = tropo_delay_m(lat_b, h_b, np.maximum(el, np.radians(1.0))) if apply_troposphere else np.zeros_like(el)
     atm = ep.corr_atmosphere
     iono = np.where(atm, 0.0, iono)
@@ -296,6 +319,7 @@ def apply_geometry(
         ep.corr_sigma_m,
         ep.corr_atmosphere,
         ep.smooth_n,
+        iono_sigma,
     )
     pr_corr = ep.pr_m + ep.clock_m - iono - tropo + ep.prc_m
     return replace(ep, az=az, el=el, iono_m=iono, tropo_m=tropo, sigma_m=sigma, pr_corr_m=pr_corr)

@@ -3,7 +3,8 @@
 :func:`solve_on_track` runs :func:`fieldlogs.gnss.position.position_run` (pre-checks,
 constrained solution with FDE, clock coasting, antenna-distance check, the unconstrained
 solution beside it) on the track's polyline without a prior, so the solutions do not depend
-on the pipeline's estimate and are the same for the aid and for ``trainpos gnss position``.
+on the pipeline's estimate and are the same for the aid and for ``trainpos gnss position``;
+the run's SBAS/MSAS messages apply when it has them (``gnss.sbas``).
 
 * ``table``: one row per receiver-epoch (the core's columns, see ``position_run``) plus the
   common ``epoch`` (receivers' epochs within 20 ms), ``km_m`` (the reference point's km,
@@ -68,7 +69,15 @@ def solve_on_track(
 ) -> TrackSolutions:
     """Every epoch of the run on ``track`` (module docstring)."""
     res = position_run(
-        g.obs, g.nav, track.line, g.antennas, iono=g.iono, sky_mask=sky_mask, direction=float(direction), cfg=cfg
+        g.obs,
+        g.nav,
+        track.line,
+        g.antennas,
+        iono=g.iono,
+        sky_mask=sky_mask,
+        direction=float(direction),
+        cfg=cfg,
+        sbas=g.sbas if cfg.use_sbas else None,
     )
     tb = res.epochs.copy()
     tb["epoch"] = g.epoch_of(tb["t"].to_numpy(dtype=float))

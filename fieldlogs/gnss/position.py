@@ -3,7 +3,7 @@ the antenna-distance check, and the unconstrained solution beside it [S002].
 
 Chain per epoch (the paper's fig. 2): navigation data compared between receivers →
 pseudorange differences against the antenna separation → elevation, C/N0 and sky masks →
-(SBAS/D-GPS corrections in ``observables``) → track-constrained solution per receiver with
+(SBAS/MSAS or D-GPS corrections in ``observables``, ``sbas``) → track-constrained solution per receiver with
 fault detection and exclusion → the computed distance between the two antennas
 |A_a(s_a) − A_b(s_b)| compared with the real one |A_a(s) − A_b(s)| (tolerance
 k_ff·√(σ_a² + σ_b²) + 0.5 m); epochs failing it are marked ``antenna_distance``.
@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -50,6 +51,9 @@ from fieldlogs.gnss.skymask import SkyMask
 from fieldlogs.gnss.track import Antenna, TrackLine
 from schemas.errors import UsageError
 
+if TYPE_CHECKING:
+    from fieldlogs.gnss.sbas import SbasCorrections
+
 
 @dataclass(frozen=True)
 class PositionConfig:
@@ -64,6 +68,8 @@ class PositionConfig:
     """Re-solve failed epochs with each receiver's predicted clock (``coasting``)."""
     smoothing_s: float | None = 100.0
     """Carrier-smoothing window (``observables.carrier_smoothed``); None: raw code."""
+    use_sbas: bool = True
+    """Apply a run's SBAS/MSAS messages where it has them (``ontrack``)."""
     error_model: ErrorModel = field(default_factory=ErrorModel)
     solver: ConstrainedConfig = field(default_factory=ConstrainedConfig)
 
@@ -108,11 +114,12 @@ def _geometry(
     iono: Mapping[str, Sequence[float]] | None,
     sky_mask: SkyMask | None,
     cfg: PositionConfig,
+    sbas: SbasCorrections | None = None,
 ) -> Epochs:
     """Geometry at the track points s_approx, then the elevation, C/N0 and sky masks."""
     flags = ep.flags.copy()
     pts = track.point(np.clip(s_approx, 0.0, track.length_m))
-    out = apply_geometry(ep, pts, iono_params=iono, error_model=cfg.error_model)
+    out = apply_geometry(ep, pts, iono_params=iono, error_model=cfg.error_model, sbas=sbas)
     out.flags = flags
     apply_masks(out, elevation_mask_deg=cfg.elevation_mask_deg, cn0_mask_dbhz=cfg.cn0_mask_dbhz)
     if sky_mask is not None:
@@ -132,23 +139,28 @@ def position_run(
     prior: pd.DataFrame | None = None,
     direction: float = 1.0,
     cfg: PositionConfig | None = None,
+    sbas: SbasCorrections | None = None,
 ) -> PositionResult:
     """Position every receiver-epoch of ``obs`` on ``track`` (module docstring).
 
-    ``nav`` is one frame, or one per receiver (then compared, and merged).
+    ``nav`` is one frame, or one per receiver (then compared, and merged). ``sbas``: decoded
+    SBAS/MSAS messages (:class:`fieldlogs.gnss.sbas.SbasCorrections`), applied instead of
+    ``corrections`` (giving both is refused).
     """
     cfg = cfg or PositionConfig()
+    if sbas is not None and corrections is not None:
+        raise UsageError("give either SBAS messages or a corrections frame, not both")
     names = sorted(antennas)
-    ep = _prepare(obs, nav, antennas, names, corrections, cfg)
+    ep = _prepare(obs, nav, antennas, names, corrections, cfg, sbas)
     pr = _prior_for(ep, prior)
     s_approx = pr[0] if pr is not None else np.full(ep.t.size, 0.5 * track.length_m)
-    ep = _geometry(ep, track, s_approx, iono, sky_mask, cfg)
+    ep = _geometry(ep, track, s_approx, iono, sky_mask, cfg, sbas)
     dirs = np.full(ep.t.size, float(direction))
     seed = _lsq_seed(ep, track, antennas, dirs, cfg) if pr is None else None
     sol = _solve_receivers(ep, track, antennas, names, dirs, pr, cfg, s_init=seed)
     if pr is None:  # second pass: geometry at the first solution
         s1 = np.where(np.isfinite(sol.table["s_m"].to_numpy()), sol.table["s_m"].to_numpy(), s_approx)
-        ep = _geometry(replace_flags(ep), track, s1, iono, sky_mask, cfg)
+        ep = _geometry(replace_flags(ep), track, s1, iono, sky_mask, cfg, sbas)
         sol = _solve_receivers(ep, track, antennas, names, dirs, None, cfg, s_init=s1)
     if cfg.clock_coasting:
         sol = _coast(ep, track, antennas, names, dirs, pr, cfg, sol)
@@ -196,6 +208,7 @@ def _prepare(
     names: list[str],
     corrections: pd.DataFrame | None,
     cfg: PositionConfig,
+    sbas: SbasCorrections | None = None,
 ) -> Epochs:
     """Epoch arrays with the navigation comparison and the antenna-separation check applied."""
     if isinstance(nav, pd.DataFrame):
@@ -205,7 +218,7 @@ def _prepare(
         merged = pd.concat(list(nav.values()), ignore_index=True).drop_duplicates(["sat", "week", "Toe", "DataSrc"])
     if cfg.smoothing_s:
         obs = carrier_smoothed(obs, cfg.smoothing_s)
-    ep = build_epochs(obs, merged, systems=cfg.systems, corrections=corrections)
+    ep = build_epochs(obs, merged, systems=cfg.systems, corrections=corrections, sbas=sbas)
     if mismatch is not None:
         flag_nav_mismatch(ep, mismatch)
     missing = sorted(set(np.unique(ep.receiver)) - set(names))

@@ -16,6 +16,9 @@ sky on any run. One row per receiver-epoch:
   satellites, PDOP ≤ ``gnss.max_pdop``), ``lsq_n_used``, ``lsq_pdop``, its geodetic position
   and its distance from the track.
 
+With SBAS/MSAS messages in the run (``gnss_sbas``) the report says which GEO, how many
+messages were used or dropped and how many observation rows were corrected (``sbas``).
+
 Availability: the share of epochs (receivers' epochs within 20 ms are one epoch) with an
 available constrained solution from at least one receiver, against the share with an
 available unconstrained one, and the same per receiver.
@@ -24,7 +27,7 @@ available unconstrained one, and the same per receiver.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -36,6 +39,9 @@ from fieldlogs.gnss.observables import FLAG_NAMES, Epochs
 from fieldlogs.gnss.ontrack import solve_on_track
 from fieldlogs.gnss.runinputs import RunGnss
 from fieldlogs.gnss.skymask import SkyMask
+
+if TYPE_CHECKING:
+    from fieldlogs.gnss.sbas import SbasCorrections
 
 #: Flags of an FDE decision (reported as ``excluded``, the others as ``not_used``).
 _FDE = ("fde_excluded", "no_track_solution")
@@ -55,6 +61,8 @@ class GnssPositionReport:
     systems: tuple[str, ...]
     epochs: pd.DataFrame = field(repr=False)
     availability: dict[str, Any] = field(default_factory=dict)
+    sbas: dict[str, Any] | None = None
+    """SBAS/MSAS use (``sbas_summary``), None when the run has no valid message or it is off."""
 
     def to_json(self) -> dict[str, Any]:
         rows = self.epochs.astype(object).where(self.epochs.notna(), None).to_dict("records")
@@ -68,6 +76,7 @@ class GnssPositionReport:
             "sky_mask": self.sky_mask,
             "systems": list(self.systems),
             "availability": self.availability,
+            "sbas": self.sbas,
             "epochs": rows,
         }
 
@@ -155,6 +164,7 @@ def position_report(
     if "antenna_distance_ok" not in tb:
         tb["antenna_distance_ok"] = True
     tb = tb.sort_values(["t", "receiver"], kind="stable").reset_index(drop=True)
+    sb = g.sbas if pc.use_sbas else None
     return GnssPositionReport(
         run_id,
         track.line_code,
@@ -166,4 +176,18 @@ def position_report(
         pc.systems,
         tb[list(COLUMNS)],
         _availability(tb),
+        None if sb is None else sbas_summary(sb),
     )
+
+
+def sbas_summary(sb: SbasCorrections) -> dict[str, Any]:
+    """The GEO used, its valid messages, the rows dropped by reason, the types not decoded and
+    the observation rows by outcome of the last solution (``sbas.clock_orbit``)."""
+    m = sb.messages
+    return {
+        "prn": m.geo,
+        "messages": m.n_valid,
+        "dropped": dict(m.dropped),
+        "not_decoded": {str(k): v for k, v in m.not_decoded.items()},
+        "rows": dict(sb.counts),
+    }

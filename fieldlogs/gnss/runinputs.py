@@ -11,13 +11,15 @@
   km the pipeline reports. Which way along the track x points depends on which end of the
   vehicle faces increasing km (the solver's ``direction``, the sign of km per metre of travel
   toward the F end).
+* SBAS/MSAS: the run's ``gnss_sbas`` messages (``fieldlogs.gnss.sbas``), decoded once.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -26,6 +28,9 @@ from fieldlogs.gnss.observables import epoch_keys
 from fieldlogs.gnss.track import Antenna
 from fieldlogs.io import Run
 from schemas.errors import EXIT_FINDINGS, TrainposError
+
+if TYPE_CHECKING:
+    from fieldlogs.gnss.sbas import SbasCorrections
 
 #: run.json ``gnss`` keys → the ionosphere parameter names of the GNSS core.
 IONO_KEYS = {
@@ -61,6 +66,18 @@ class RunGnss:
     keys: np.ndarray
     """Common epoch of each of ``times`` (``observables.epoch_keys``: receivers' epochs within
     20 ms are one epoch)."""
+    sbas_frame: pd.DataFrame | None = None
+    """The run's ``gnss_sbas`` rows (None: no stream)."""
+
+    @cached_property
+    def sbas(self) -> SbasCorrections | None:
+        """The decoded SBAS messages (None without a stream or without a valid message)."""
+        if self.sbas_frame is None or not len(self.sbas_frame):
+            return None
+        from fieldlogs.gnss.sbas import SbasCorrections  # the decoder, only for runs with a stream
+
+        dec = SbasCorrections.from_stream(self.sbas_frame)
+        return None if dec.empty else dec
 
     @property
     def epoch_times(self) -> np.ndarray:
@@ -124,4 +141,5 @@ def run_gnss(run: Run) -> RunGnss | None:
         )
     antennas = {r: a for r, a in antennas.items() if r in observed}
     t = np.unique(obs["t"].to_numpy(dtype=float))
-    return RunGnss(obs, nav, iono_params(meta.gnss if meta is not None else None), antennas, t, epoch_keys(t))
+    iono = iono_params(meta.gnss if meta is not None else None)
+    return RunGnss(obs, nav, iono, antennas, t, epoch_keys(t), run.stream("gnss_sbas"))

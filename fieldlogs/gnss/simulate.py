@@ -34,7 +34,7 @@ few km) and white N(0, 0.15 m) — residual errors at the decimetre level.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -117,6 +117,21 @@ class ErrorSpec:
     p_nlos: float = 0.1
     nlos_mean_m: float = 20.0
     min_elevation_deg: float = 5.0
+    orbit_sigma_m: float = 0.0
+    """Broadcast orbit error per ECEF axis (constant + drift per satellite), 0: none. Only a
+    run written with an SBAS stream sets it (``fieldlogs.gnss.sbas.simulate``): the long-term
+    corrections then have something to remove; drawn from its own generator, so the other
+    error components of a seed stay the same."""
+    orbit_rate_sigma_mps: float = 0.0
+    clock_sigma_m: float = 0.0
+    """Broadcast clock error (c·δΔt, constant + drift per satellite), 0: none."""
+    clock_rate_sigma_mps: float = 0.0
+
+
+def with_sat_errors(err: ErrorSpec) -> ErrorSpec:
+    """``err`` plus broadcast orbit (1 m per axis, 0.5 mm/s) and clock (1 m, 0.2 mm/s) errors per
+    satellite, as a run written with an SBAS stream has them."""
+    return replace(err, orbit_sigma_m=1.0, orbit_rate_sigma_mps=5e-4, clock_sigma_m=1.0, clock_rate_sigma_mps=2e-4)
 
 
 @dataclass
@@ -159,6 +174,22 @@ class Simulated:
     """Per receiver × epoch: antenna ECEF, clock bias [m], s."""
     rows: pd.DataFrame
     """Per observation: the error components (sis, iono, tropo, multipath, noise, nlos) [m]."""
+    truth_errors: SatErrors | None = None
+    """Per epoch and satellite, the errors an augmentation could know (SBAS simulator)."""
+
+
+@dataclass(frozen=True)
+class SatErrors:
+    """Satellite-side truth of a simulated run on the epoch grid ``t`` × ``sats``: the SIS range
+    error [m], the broadcast orbit error δr (t, s, 3) [m] and clock error c·δΔt [m] (the true
+    satellite is at r_brdc + δr, its clock Δt_brdc + δΔt), the ionosphere's run scale."""
+
+    t: FloatArray
+    sats: np.ndarray
+    sis_m: FloatArray
+    orbit_m: FloatArray
+    clock_m: FloatArray
+    iono_run_scale: float
 
 
 def antenna_positions(traj: Trajectory, rx: ReceiverSpec) -> FloatArray:
@@ -222,9 +253,9 @@ def simulate(
     idx = select_ephemeris(table, ss, tt)
     sysl = system_of(ss)
     sis = _gauss_markov(rng, n_t, n_s, dt, err.sis_tau_s, np.vectorize(lambda c: err.sis_sigma_m.get(c, 0.5))(sysl))
-    iono_scale = max(1.0 + rng.normal(0.0, err.iono_run_sigma), 0.2) * (
-        1.0 + err.iono_sat_sigma * rng.standard_normal(n_s)
-    )
+    iono_run = max(1.0 + rng.normal(0.0, err.iono_run_sigma), 0.2)
+    iono_scale = iono_run * (1.0 + err.iono_sat_sigma * rng.standard_normal(n_s))
+    orbit, clock_err = _orbit_clock_errors(err, seed, traj.t, n_s)
     tropo_scale = 1.0 + rng.normal(0.0, err.tropo_run_sigma)
     nlos_pass = rng.random(n_s) < err.p_nlos
     nlos_bias = rng.exponential(err.nlos_mean_m, n_s)
@@ -262,6 +293,10 @@ def simulate(
         pr = rng_m + clock_m[:, None] - C_MPS * clock_f + sis + iono + tropo + mp + noise + extra
         lam = C_MPS / F_L1_HZ
         u = (rot - ant[:, None, :]) / rng_m[..., None]
+        sat_side = 0.0
+        if orbit is not None and clock_err is not None:
+            sat_side = np.sum(u * orbit, axis=-1) - clock_err
+            pr = pr + sat_side
         v_ant = np.gradient(ant, traj.t, axis=0) if n_t > 1 else np.zeros_like(ant)
         rate = np.sum(u * (vel - v_ant[:, None, :]), axis=-1)
         clock_rate = C_MPS * rx.clock_drift_sps - C_MPS * st_clock.clock_rate
@@ -271,6 +306,8 @@ def simulate(
         carrier = (
             rng_m + clock_m[:, None] - C_MPS * clock_f + sis - iono + tropo + 0.01 * mp + extra + carrier_noise
         ) / lam + amb
+        if orbit is not None:
+            carrier = carrier + sat_side / lam
         keep = visible & (idx >= 0)
         e_i, s_i = np.nonzero(keep)
         t_tag = traj.t + clock_m / C_MPS
@@ -322,9 +359,39 @@ def simulate(
         )
     obs = pd.concat(obs_frames, ignore_index=True)[list(OBS_COLUMNS)]
     iono_params: dict[str, tuple[float, ...]] = {"gps_alpha": KLOBUCHAR_ALPHA, "gps_beta": KLOBUCHAR_BETA}
-    return Simulated(
-        obs, nav, iono_params, pd.concat(truth_frames, ignore_index=True), pd.concat(row_frames, ignore_index=True)
+    truth_err = SatErrors(
+        traj.t,
+        sats,
+        sis,
+        orbit if orbit is not None else np.zeros((n_t, n_s, 3)),
+        clock_err if clock_err is not None else np.zeros((n_t, n_s)),
+        float(iono_run),
     )
+    return Simulated(
+        obs,
+        nav,
+        iono_params,
+        pd.concat(truth_frames, ignore_index=True),
+        pd.concat(row_frames, ignore_index=True),
+        truth_err,
+    )
+
+
+def _orbit_clock_errors(
+    err: ErrorSpec, seed: int, t: FloatArray, n_s: int
+) -> tuple[FloatArray | None, FloatArray | None]:
+    """Broadcast orbit (t, s, 3) and clock (t, s) errors [m]: per satellite a constant plus a
+    drift about the run's middle; None when switched off (``ErrorSpec.orbit_sigma_m``)."""
+    if err.orbit_sigma_m <= 0.0 and err.clock_sigma_m <= 0.0:
+        return None, None
+    rng = np.random.default_rng([seed, 0x5BA5])
+    dt = (t - 0.5 * (t[0] + t[-1]))[:, None]
+    r0 = rng.normal(0.0, err.orbit_sigma_m, (n_s, 3))
+    v = rng.normal(0.0, err.orbit_rate_sigma_mps, (n_s, 3))
+    c0 = rng.normal(0.0, err.clock_sigma_m, n_s)
+    cv = rng.normal(0.0, err.clock_rate_sigma_mps, n_s)
+    orbit = r0[None, :, :] + v[None, :, :] * dt[..., None]
+    return np.asarray(orbit, dtype=float), np.asarray(c0[None, :] + cv[None, :] * dt, dtype=float)
 
 
 def dgps_corrections(sim: Simulated, seed: int, sigma_m: float = 0.15, decorrelation: float = 0.05) -> pd.DataFrame:

@@ -14,7 +14,8 @@ noise by C/N0, NLOS beside buildings).
 Sky: the run's tunnels (``gps.outages_km_m``) block every satellite; ``corridor = "mixed"`` adds
 the seeded buildings, cuttings, overpasses and short tunnel of
 :func:`fieldlogs.gnss.scenario.mixed_corridor` along the route. ``noise = false`` switches the
-random error components off (the receivers' clocks stay).
+random error components off (the receivers' clocks stay). ``sbas = true`` adds broadcast
+orbit/clock errors to the truth and a ``gnss_sbas`` stream (MSAS PRN 137) that corrects them.
 
 Times: ``gnss_time_s`` on the GPS scale from the run's ``start_time`` (the simulator's truth
 time is GPS time here), ``t`` the run clock of the epoch. The vehicle block (a 20 m car with its
@@ -43,6 +44,7 @@ from fieldlogs.gnss.simulate import (
     Section,
     Trajectory,
     simulate,
+    with_sat_errors,
 )
 from fieldlogs.recorders.timebase import gps_to_utc, leap_seconds_utc
 
@@ -65,6 +67,10 @@ class RawGnssSpec:
     noise: bool
     start_gps_s: float
     tunnels_km_m: tuple[tuple[float, float], ...] = ()
+    sbas: bool = False
+    """Broadcast orbit/clock errors in the truth and an MSAS ``gnss_sbas`` stream correcting them
+    (:mod:`fieldlogs.gnss.sbas.simulate`; it starts with the run, so its first minute is not yet
+    corrected)."""
 
 
 @dataclass
@@ -73,6 +79,7 @@ class RawGnss:
     nav: pd.DataFrame
     gnss_block: dict[str, Any]
     receivers: list[ReceiverSpec]
+    sbas: pd.DataFrame | None = None
 
 
 def _headings(geom: Any, km: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -99,9 +106,9 @@ def _corridor(spec: RawGnssSpec, km_lo: float, km_hi: float, seed: int) -> Corri
     return Corridor(tuple(sections))
 
 
-def _errors(noise: bool) -> ErrorSpec:
+def _errors(noise: bool, sbas: bool = False) -> ErrorSpec:
     if noise:
-        return ErrorSpec()
+        return with_sat_errors(ErrorSpec()) if sbas else ErrorSpec()
     return ErrorSpec(
         sis_sigma_m={"G": 0.0, "E": 0.0, "J": 0.0},
         iono_run_sigma=0.0,
@@ -140,13 +147,19 @@ def raw_gnss(motion: Any, geom: Any, spec: RawGnssSpec, rng: np.random.Generator
         for i, x in enumerate(spec.antennas_x_m)
     ]
     corridor = _corridor(spec, float(np.min(motion.km)), float(np.max(motion.km)), int(seeds[1]))
-    sim = simulate(traj, nav, receivers, corridor, seed=int(seeds[2]), errors=_errors(spec.noise), systems=spec.systems)
+    errors = _errors(spec.noise, spec.sbas)
+    sim = simulate(traj, nav, receivers, corridor, seed=int(seeds[2]), errors=errors, systems=spec.systems)
     obs = sim.obs.copy()
     obs["t"] = obs["t"].to_numpy(dtype=float) - spec.start_gps_s  # run clock of the epoch
     obs = obs.sort_values(["t", "receiver", "sat", "signal"], kind="stable").reset_index(drop=True)
     leap = int(leap_seconds_utc(gps_to_utc(spec.start_gps_s)))
     block = {"klobuchar_alpha": list(KLOBUCHAR_ALPHA), "klobuchar_beta": list(KLOBUCHAR_BETA), "leap_seconds": leap}
-    return RawGnss(obs[list(OBS_COLUMNS)], sim.nav, block, receivers)
+    sbas = None
+    if spec.sbas:
+        from fieldlogs.gnss.sbas.simulate import sbas_stream
+
+        sbas = sbas_stream(sim, seed=int(seeds[2]), t0_gps=spec.start_gps_s)
+    return RawGnss(obs[list(OBS_COLUMNS)], sim.nav, block, receivers, sbas)
 
 
 def vehicle_block(

@@ -1,4 +1,5 @@
-"""UBX RXM-RAWX ↔ ``gnss_obs`` and RXM-SFRBX ↔ ``gnss_nav`` (GPS and QZSS LNAV, ``lnav``).
+"""UBX RXM-RAWX ↔ ``gnss_obs``, RXM-SFRBX ↔ ``gnss_nav`` (GPS and QZSS LNAV, ``lnav``) and SBAS
+SFRBX (gnssId 1) → ``gnss_sbas``.
 
 RAWX, vectorised: the 16-byte headers and the 32-byte measurement blocks of all frames
 are gathered into two structured arrays. Epoch = week · 604800 + rcvTow (receiver time,
@@ -229,12 +230,16 @@ def read_sfrbx(path: Path, f: Frames, dec: Decoded, week_hint: int | None) -> No
     head = f.fixed(idx, SFRBX_HEAD)
     last: dict[str, dict[int, dict[str, float]]] = {}
     rows: dict[tuple[str, float, float], dict[str, Any]] = {}
+    sbas: list[tuple[int, int, list[int]]] = []
     for i, h in zip(idx.tolist(), head.tolist(), strict=True):
         gnss, sv, sig, nwords = int(h[0]), int(h[1]), int(h[2]), int(h[4])
         sat = f"{GNSS_LETTER.get(gnss, '?')}{sv:02d}"
         if gnss == 2 and nwords == 8:
             words = np.frombuffer(f.payload(i)[8 : 8 + 32], dtype="<u4").tolist()
             eph = _inav(dec, last.setdefault(sat, {}), words, sat, sig)
+        elif gnss == 1 and nwords == 8:
+            sbas.append((i, sv, np.frombuffer(f.payload(i)[8 : 8 + 32], dtype="<u4").tolist()))
+            continue
         elif gnss in (0, 5) and nwords == 10:
             words = np.frombuffer(f.payload(i)[8 : 8 + 40], dtype="<u4").tolist()
             sf = lnav.subframe_id(words)
@@ -247,11 +252,36 @@ def read_sfrbx(path: Path, f: Frames, dec: Decoded, week_hint: int | None) -> No
             continue
         if eph is not None:
             rows.setdefault((sat, eph["toc_gps_s"], eph["IODE"]), eph)
+    if sbas:
+        _sbas_frame(f, sbas, dec)
     cols = GNSS_NAV.column_names
     frame = pd.DataFrame(list(rows.values()), columns=cols) if rows else pd.DataFrame(columns=cols)
     frame = frame.astype({c: "float64" for c in cols if c != "sat"})
     if len(frame):
         dec.frames["gnss_nav"] = frame.sort_values(["sat", "toc_gps_s"], kind="stable").reset_index(drop=True)
+
+
+def _sbas_frame(f: Frames, found: list[tuple[int, int, list[int]]], dec: Decoded) -> None:
+    """SBAS SFRBX (gnssId 1, eight words: the 250 bits MSB first) → dec.frames['gnss_sbas'],
+    timed by the RAWX epoch before each frame (the receiver sends a message once received;
+    SFRBX carries no time). Screening and decoding are ``fieldlogs.gnss.sbas``'s."""
+    rawx = f.of((0x02, 0x15))
+    if not len(rawx):
+        dec.skipped["SFRBX SBAS messages without an RXM-RAWX epoch to time them"] += len(found)
+        return
+    head = f.fixed(rawx, RAWX_HEAD)
+    t_ep = head["week"].astype(np.float64) * 604_800.0 + head["rcvTow"]
+    at = np.maximum(np.searchsorted(rawx, [i for i, _, _ in found], side="right") - 1, 0)
+    hexes = [np.array(w, dtype=">u4").tobytes().hex().upper() for _, _, w in found]
+    dec.frames["gnss_sbas"] = pd.DataFrame(
+        {
+            "gnss_time_s": t_ep[at],
+            "prn": np.array([sv for _, sv, _ in found], dtype=np.int64),
+            "msg_type": np.array([(w[0] >> 18) & 0x3F for _, _, w in found], dtype=np.int64),
+            "message_hex": hexes,
+            "valid": pd.array([None] * len(found), dtype="Int64"),
+        }
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -301,6 +331,15 @@ def _sfrbx(gnss: int, sv: int, words: list[int], sig: int = 0) -> bytes:
     head["numWords"] = len(words)
     head["version"] = 2
     return frame(0x02, 0x13, head.tobytes() + np.array(words, dtype="<u4").tobytes())
+
+
+def sbas_sfrbx_frames(sbas: pd.DataFrame) -> list[tuple[float, bytes]]:
+    """(GPS time, RXM-SFRBX frame) of each ``gnss_sbas`` row: the 64 hex digits as eight words."""
+    out = []
+    for t, prn, hx in zip(sbas["gnss_time_s"], sbas["prn"], sbas["message_hex"], strict=True):
+        words = np.frombuffer(bytes.fromhex(str(hx).ljust(64, "0")), dtype=">u4").astype(np.int64).tolist()
+        out.append((float(t), _sfrbx(1, int(prn), words)))
+    return out
 
 
 def iono_frames(gnss_block: dict[str, Any], t_gps: float) -> list[tuple[float, bytes]]:

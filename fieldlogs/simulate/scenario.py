@@ -198,6 +198,7 @@ class GnssRawCfg:
     antennas_x_m: tuple[float, ...] = (8.0, -8.0)
     antenna_z_m: float = 3.8
     corridor: str = "open"
+    sbas: bool = False
 
 
 @dataclass(frozen=True)

@@ -147,10 +147,12 @@ def _add_raw_gnss(
     g = scenario.gnss_raw
     spec = RawGnssSpec(
         g.systems, g.interval_s, g.antennas_x_m, g.antenna_z_m, g.corridor, scenario.noise,
-        iso_to_gps(scenario.run.start_time), scenario.gps.outages_km_m,
+        iso_to_gps(scenario.run.start_time), scenario.gps.outages_km_m, g.sbas,
     )  # fmt: skip
     raw = raw_gnss(motion, geom, spec, rng)
     streams["gnss_obs"], streams["gnss_nav"] = raw.obs, raw.nav
+    if raw.sbas is not None:
+        streams["gnss_sbas"] = raw.sbas
     meta.vehicle = vehicle_block(
         meta.vehicle_id, meta.vehicle_kind, raw.receivers, scenario.tacho.wheel_diameter_m, scenario.tacho.teeth
     )
