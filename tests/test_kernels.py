@@ -174,7 +174,6 @@ def test_match_xy_takes_numpy_for_few_fixes_and_the_kernel_for_many() -> None:
     are equal, exactly (the choice only changes the time)."""
     code = (
         "import sys\nimport numpy as np\n"
-        "from dbtools.gis import match_numpy\n"
         "from dbtools.gis.geometry import Projector\n"
         "from dbtools.gis.matching import track_index_for\n"
         "from dbtools.synthetic.network import build_network, demo_line\n"
@@ -184,9 +183,8 @@ def test_match_xy_takes_numpy_for_few_fixes_and_the_kernel_for_many() -> None:
         "x, y = idx.x[sel] + rng.normal(0, 8, 3000), idx.y[sel] + rng.normal(0, 8, 3000)\n"
         "a = idx.match_xy(x, y)\n"
         "light = 'numba' not in sys.modules\n"
-        "match_numpy.NUMPY_MAX_FIXES = 0\n"
         "import dbtools.gis.matching as m\n"
-        "m.NUMPY_MAX_FIXES = 0\n"
+        "m.NUMPY_MAX_FIXES = 0  # every match above it: the compiled kernel\n"
         "b = idx.match_xy(x, y)\n"
         "print(light, 'numba' in sys.modules, len(a) > 3000, a.equals(b))\n"
     )
