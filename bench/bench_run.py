@@ -9,7 +9,8 @@ the CLI (``python -c "import cli.main"``: what every command pays before it pars
 issue's ``trainpos --help`` costs more, rich rendering the help) and so without start-up.
 Prints the real-time factor of each (target issue 21: ≥ 2,000× with start-up). The naive
 baseline is the per-sample Python of ``bench/bench_pipeline.py`` (≈ 50× real time).
-Never fails on timing.
+``--breakdown`` adds, per format, where the time of one such process goes (phases and the
+imports made in each: ``bench/run_breakdown.py``). Never fails on timing.
 """
 
 from __future__ import annotations
@@ -56,6 +57,7 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=1.0)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--dir", type=Path, default=None, help="keep the simulated runs here (reused)")
+    ap.add_argument("--breakdown", action="store_true", help="also print where one process's time goes")
     args = ap.parse_args()
     trainpos = str(Path(sys.executable).parent / "trainpos")
     with tempfile.TemporaryDirectory() as tmpd:
@@ -80,6 +82,10 @@ def main() -> None:
                 f"cli.main {start:.2f} s wall, {start_cpu:.2f} s CPU  [{load()}]",
                 flush=True,
             )
+            if args.breakdown:
+                script = str(Path(__file__).resolve().parent / "run_breakdown.py")
+                proc = subprocess.run([sys.executable, script, *cmd[2:]], capture_output=True, text=True, check=False)
+                print(f"  where one {fmt} run's time goes  [{load()}]\n{proc.stderr}", flush=True)
             shutil.rmtree(out, ignore_errors=True)
 
 

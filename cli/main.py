@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import typer
-from typer.core import TyperGroup
+from typer._coercion import RuntimeParam
+from typer._param_types import coerce_cli_path
+from typer.core import TyperCommand, TyperGroup, _TyperParameter
 
 from cli import audit, config, db, demo, gis, gnss, logs, possession, radar, run, schema, simulate, survey
 
@@ -20,10 +24,49 @@ class Group(TyperGroup):
     """
 
     def get_help_option(self, ctx: Any) -> Any:
-        option = super().get_help_option(ctx)
-        if option is not None and option.default is None:
-            option.default = False
-        return option
+        return _help_default_false(super().get_help_option(ctx))
+
+
+def _help_default_false(option: Any) -> Any:
+    if option is not None and option.default is None:
+        option.default = False
+    return option
+
+
+@dataclass(frozen=True)
+class _PlainPath(RuntimeParam):
+    """typer's coercion of a plain ``Path`` parameter without pydantic: typer turns the text
+    into a Path through a pydantic ``TypeAdapter(Path)`` (``Path(text)``) and then calls
+    ``coerce_cli_path``; this calls it with ``Path(text)`` itself."""
+
+    def _coerce_value(self, value: Any, param: Any, ctx: Any) -> Any:
+        return coerce_cli_path(
+            Path(value) if isinstance(value, str) else value, self.parameter_info, path_type=Path, param=param, ctx=ctx
+        )
+
+
+class PathCommand(TyperCommand):
+    """typer's command, its plain ``Path`` parameters coerced without importing pydantic
+    (0.1–0.2 s of a ``trainpos run``, issue 21) and its ``--help`` flag defaulting to False
+    (as :class:`Group`'s). Plain: annotated ``Path`` (or ``Path |
+    None``), none of typer's path checks (exists, resolve_path, allow_dash, path_type),
+    which keep typer's own coercion; every other parameter too."""
+
+    def get_help_option(self, ctx: Any) -> Any:
+        return _help_default_false(super().get_help_option(ctx))
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:
+        for p in self.params:
+            if isinstance(p, _TyperParameter) and p._runtime_param is None and _plain_path(p):
+                p._runtime_param = _PlainPath(p.type_descriptor.parameter_info, Path)
+        return super().parse_args(ctx, args)
+
+
+def _plain_path(p: _TyperParameter) -> bool:
+    d = p.type_descriptor
+    info = d.parameter_info
+    checks = (info.exists, info.resolve_path, info.allow_dash, info.path_type, info.parser, d.file_annotation)
+    return d.annotation is Path and not any(c for c in checks) and not (p.multiple or p.nargs != 1)
 
 
 app = typer.Typer(
@@ -44,7 +87,7 @@ app.add_typer(config.app, name="config", cls=Group)
 app.add_typer(radar.app, name="radar", cls=Group)
 app.add_typer(gnss.app, name="gnss", cls=Group)
 app.command("simulate")(simulate.simulate)
-app.command("run")(run.run)
+app.command("run", cls=PathCommand)(run.run)
 app.command("audit")(audit.audit)
 app.command("report")(audit.report)
 app.command("survey")(survey.survey)

@@ -16,9 +16,9 @@ import sqlite3
 import tempfile
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pandas as pd
-import sqlite_utils
 
 from dbtools.atomic import atomic_file
 from dbtools.integrity import check_content_hash
@@ -30,6 +30,9 @@ from schemas.findings import Finding
 from schemas.model import Table
 from schemas.registry import IMPACTS, REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
 from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, DB_TABLES, META, SCHEMA_VERSION
+
+if TYPE_CHECKING:
+    import sqlite_utils
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 
@@ -92,6 +95,8 @@ def write_db(
             conn.execute(f"PRAGMA application_id={APPLICATION_ID}")
             conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             conn.execute("PRAGMA foreign_keys=OFF")  # checked after the load, see below
+            import sqlite_utils  # writing only: reading a DB does not import it
+
             db = sqlite_utils.Database(conn)
             create_tables(db, ALL_DB_TABLES, indexes=False)
             conn.commit()
@@ -308,6 +313,8 @@ def _create_registry(path: Path) -> None:
         try:
             conn.execute(f"PRAGMA application_id={REGISTRY_APPLICATION_ID}")
             conn.execute(f"PRAGMA user_version={REGISTRY_SCHEMA_VERSION}")
+            import sqlite_utils
+
             create_tables(sqlite_utils.Database(conn), (RELEASES,))
             conn.commit()
         finally:
@@ -364,6 +371,8 @@ def registry_insert(conn: sqlite3.Connection, row: dict[str, object], table: Tab
     ``table`` = ``IMPACTS`` a release's impact report — creating that table in a registry
     that has none yet (older registries stay readable: ``releases`` is unchanged)."""
     if table is IMPACTS:
+        import sqlite_utils
+
         create_tables(sqlite_utils.Database(conn), (IMPACTS,), if_not_exists=True)
     cols = table.column_names
     conn.execute(

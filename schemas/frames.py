@@ -12,18 +12,20 @@ import difflib
 import re
 import warnings
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-import pandera.pandas as pa
 import pyarrow as pa_arrow
 import pyarrow.compute as pc
-from pandera.errors import SchemaErrors
 
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.model import Column, Table
 from schemas.units import parse_km_array
+
+if TYPE_CHECKING:
+    import pandera.pandas as pa
 
 #: Line number of the first data row in a file with one header line.
 FIRST_DATA_LINE = 2
@@ -258,7 +260,10 @@ def _coerce_column(col: Column, s: pd.Series) -> tuple[pd.Series, np.ndarray]:
 
 
 def pandera_schema(table: Table, *, check_keys: bool = True, present: list[str] | None = None) -> pa.DataFrameSchema:
-    """The pandera schema of a declared table (types already coerced), limited to ``present``."""
+    """The pandera schema of a declared table (types already coerced), limited to ``present``
+    (pandera imported here: reading typed frames does not need it)."""
+    import pandera.pandas as pa
+
     cols: dict[str, pa.Column] = {}
     names = set(table.column_names if present is None else present)
     for c in table.columns:
@@ -292,6 +297,8 @@ def check_frame(
     max_per_check: int = 1000,
 ) -> list[Finding]:
     """Run the declared checks; every failing cell is a finding (capped per check)."""
+    from pandera.errors import SchemaErrors
+
     schema = pandera_schema(table, check_keys=check_keys, present=list(frame.columns))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -125,3 +125,71 @@ def test_errors_still_map_to_exit_codes(tmp_path: Path) -> None:
         assert proc.stderr.startswith("error: ") and "Traceback" not in proc.stderr, proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert exists.read_bytes() == b""  # never touched
+
+
+#: Not imported by ``trainpos run`` of a recorded run (a few thousand GPS fixes): the map
+#: matching takes its numpy path, the DB is read without pandera or sqlite_utils, typer
+#: coerces the command's paths without pydantic (bench/NOTES.md, issue 21 third pass).
+NOT_FOR_A_RUN = ("numba", "llvmlite", "scipy", "pandera", "pydantic", "sqlite_utils", "dask", "matplotlib")
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "csv"])
+def test_run_of_a_recorded_run_imports_neither_numba_nor_the_checkers(
+    fmt: str, sample_db: Path, tmp_path: Path
+) -> None:
+    """The real entry point's ``run`` command on a sample run (Parquet as shipped, and the
+    same run written as CSV), in a fresh interpreter: positions written, none of
+    :data:`NOT_FOR_A_RUN` imported."""
+    run_dir = ROOT / "fieldlogs" / "sample_logs" / "sim-d-evening"
+    if fmt == "csv":
+        from fieldlogs.io import read_run, write_run
+
+        run = read_run(run_dir)
+        streams = {p.stem: run.stream(p.stem) for p in run_dir.glob("*.parquet")}
+        run_dir = write_run(tmp_path / "csv-run", run.meta, streams, fmt="csv")
+    code = (
+        "import json, sys\nfrom cli.main import app\n"
+        "try:\n    app(sys.argv[1:])\nexcept SystemExit as exc:\n    assert not exc.code, exc.code\n"
+        "print(json.dumps(sorted({m.split('.')[0] for m in sys.modules})))\n"
+    )
+    out = tmp_path / "out"
+    args = ["run", str(run_dir), "--db", str(sample_db), "--out", str(out)]
+    proc = subprocess.run(
+        [sys.executable, "-c", code, *args], cwd=ROOT, capture_output=True, text=True, check=False, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert (out / "positions.csv").stat().st_size > 1000
+    imported = set(json.loads(proc.stdout.strip().splitlines()[-1]))
+    assert {"pandas", "pyarrow", "rich"} <= imported  # the probe sees the run's real imports
+    assert sorted(imported & set(NOT_FOR_A_RUN)) == []
+
+
+def test_run_command_parses_paths_as_typer_does() -> None:
+    """cli.main.PathCommand (plain Path parameters coerced without pydantic) gives the same
+    parameters as typer's own command, and the same usage error for a missing option."""
+    import typer
+    from typer.core import TyperCommand
+
+    import cli.main
+    from cli.run import run as run_fn
+
+    ours = typer.main.get_command(cli.main.app).commands["run"]
+    assert isinstance(ours, cli.main.PathCommand)
+    plain = typer.Typer()
+    plain.command("run", cls=TyperCommand)(run_fn)
+    plain.command("other", cls=TyperCommand)(run_fn)  # two commands: a group, as the real app
+    theirs = typer.main.get_command(plain).commands["run"]
+    for args in (
+        ["logs/r1", "--db", "net.sqlite", "--out", "o"],
+        ["logs/r1", "--db", "./a b/ü.sqlite", "-o", "/tmp/x/", "--config", "c.toml", "--force", "--no-verify-hash"],
+        ["-", "--db", "-", "--out", "~/x"],
+    ):
+        a = ours.make_context("run", list(args)).params
+        b = theirs.make_context("run", list(args)).params
+        assert a == b and all(type(a[k]) is type(b[k]) for k in a), (args, a, b)
+        assert isinstance(a["run_dir"], Path)
+    with pytest.raises(typer._click.exceptions.MissingParameter) as mine:
+        ours.make_context("run", ["logs/r1", "--out", "o"])
+    with pytest.raises(typer._click.exceptions.MissingParameter) as typers:
+        theirs.make_context("run", ["logs/r1", "--out", "o"])
+    assert str(mine.value) == str(typers.value)

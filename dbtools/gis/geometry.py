@@ -15,7 +15,6 @@ from functools import lru_cache
 import numpy as np
 import numpy.typing as npt
 from pyproj import CRS, Geod, Transformer
-from scipy.spatial import cKDTree
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -199,6 +198,8 @@ class PolylineIndex:
         self.km = np.ascontiguousarray(km, dtype=float)
         if self.x.size < 2:
             raise ValueError("a polyline needs at least two points")
+        from scipy.spatial import cKDTree  # scipy only once a polyline is indexed
+
         self.tree = cKDTree(np.column_stack([self.x, self.y]))
         self.half_max_seg = 0.5 * float(np.max(np.hypot(np.diff(self.x), np.diff(self.y))))
         self.k = min(k, self.x.size)

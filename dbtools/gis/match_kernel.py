@@ -1,8 +1,10 @@
-"""The compiled loop of :meth:`dbtools.gis.matching.TrackIndex.match_xy` (numba) and the cell
-keys of its candidate index (the method: :mod:`dbtools.gis.matching`).
+"""The compiled loop of :meth:`dbtools.gis.matching.TrackIndex.match_xy` (numba) for many
+fixes (the method: :mod:`dbtools.gis.matching`; its numpy twin and the cell keys:
+:mod:`dbtools.gis.match_numpy`).
 
-A module of its own so that numba is imported only when fixes are matched, not by every
-command that reads a DB. The kernels are cached on disk (``cache=True``): numba compiles
+A module of its own so that numba is imported only when many fixes are matched (or the
+kernel was loaded ahead, :mod:`fieldlogs.pipeline.warm`), not by every command that reads a
+DB nor by a run's few thousand fixes. The kernels are cached on disk (``cache=True``): numba compiles
 them once per installation, later processes load the machine code.
 """
 
@@ -13,25 +15,14 @@ import numpy.typing as npt
 from numba import njit
 
 from dbtools.gis.geometry import FloatArray
+from dbtools.gis.match_numpy import CELL_OFFSET as _CELL_OFFSET
+from dbtools.gis.match_numpy import CELL_STRIDE as _CELL_STRIDE
+from dbtools.gis.match_numpy import cell_keys
 
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 
-#: Cell coordinates are offset by this and keyed as ``cx · stride + cy`` (int64, no overlap).
-_CELL_OFFSET = 1 << 24
-_CELL_STRIDE = 1 << 26
-
-
-def cell_keys(x: FloatArray, y: FloatArray, side: float) -> IntArray:
-    """Cell key ``cx · stride + cy`` of points in cells of ``side`` metres; the cell
-    coordinates are offset and clipped into the key range (a point beyond it shares a
-    border cell, and distances decide)."""
-    hi = _CELL_STRIDE - 2
-
-    def cell(v: FloatArray) -> IntArray:
-        return np.clip(np.floor(v / side), -_CELL_OFFSET + 1, hi - _CELL_OFFSET).astype(np.int64) + _CELL_OFFSET
-
-    return cell(x) * _CELL_STRIDE + cell(y)
+__all__ = ["cell_keys", "match_kernel", "warm"]
 
 
 @njit(cache=True, nogil=True)

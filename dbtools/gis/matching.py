@@ -31,7 +31,8 @@ segment of the whole track whenever that is within ``max_offset_m`` — the same
 brute force over every segment of the track (segment index breaking exact ties, as an
 argmin over the track would). Per fix, tracks are then taken in order of distance (exact
 ties: lower segment index first), in one compiled loop over the fixes
-(:mod:`dbtools.gis.match_kernel`).
+(:mod:`dbtools.gis.match_kernel`) or, for the few thousand fixes of a run, the same
+arithmetic in numpy (:mod:`dbtools.gis.match_numpy`), which spares the process numba.
 
 Fixes are processed in a spatially sorted order (1 km cells) so that the cells are read
 from memory coherently; results come back in input order. Throughput:
@@ -41,6 +42,7 @@ bench/NOTES.md (Performance).
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +51,7 @@ import pandas as pd
 
 from dbtools.gis.geometry import FloatArray, PolylineIndex, Projection, Projector
 from dbtools.gis.index import GridIndex, PieceRule, grid_index
+from dbtools.gis.match_numpy import NUMPY_MAX_FIXES, cell_keys, match_numpy
 from dbtools.network import Network
 from schemas.tables import GIS_SPACING_M
 
@@ -281,18 +284,47 @@ class TrackIndex:
             pending = finite[np.argsort(cx * 2_000_003 + cy, kind="stable")]
             cells = self._cells(float(max_offset_m) + self.half_max_segment_m)
             ok_track = np.ones(len(self.keys), dtype=np.bool_) if allowed is None else allowed
-            from dbtools.gis.match_kernel import match_kernel  # numba: only once fixes are matched
-
-            done = 0
-            while done < pending.size:  # a full output buffer returns early: go on from there
-                f, p, sg, u, d2, done = match_kernel(
-                    px, py, pending, done, *cells, self.x, self.y, self._dx, self._dy, self._inv_len2,
-                    self.segment_ok, self.vertex_track, ok_track, float(max_offset_m) ** 2,
-                )  # fmt: skip
+            for f, p, sg, u, d2 in self._candidate_matches(px, py, pending, cells, ok_track, float(max_offset_m) ** 2):
                 cross = self._dx[sg] * (py[f] - self.y[sg]) - self._dy[sg] * (px[f] - self.x[sg])
                 d = np.sqrt(d2)
                 parts.append((f, p, sg, u, np.where(cross >= 0, d, -d)))
         return self._frame(px.size, parts)
+
+    def _candidate_matches(
+        self,
+        px: FloatArray,
+        py: FloatArray,
+        pending: IntArray,
+        cells: tuple[float, IntArray, IntArray, IntArray],
+        ok_track: BoolArray,
+        max_d2: float,
+    ) -> list[tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray]]:
+        """(fix, pass, segment, u, squared distance) blocks: numpy for a few fixes (no numba
+        import, no kernel load), the compiled kernel for many or once it is loaded — the same
+        numbers either way (:mod:`dbtools.gis.match_numpy`)."""
+        x, y, dx, dy, il2, seg_ok, vt = (
+            self.x,
+            self.y,
+            self._dx,
+            self._dy,
+            self._inv_len2,
+            self.segment_ok,
+            self.vertex_track,
+        )
+        side, keys, start, order = cells
+        if pending.size <= NUMPY_MAX_FIXES and "dbtools.gis.match_kernel" not in sys.modules:
+            return [
+                match_numpy(px, py, pending, side, keys, start, order, x, y, dx, dy, il2, seg_ok, vt, ok_track, max_d2)
+            ]
+        from dbtools.gis.match_kernel import match_kernel  # numba: only for many fixes
+
+        out, done = [], 0
+        while done < pending.size:  # a full output buffer returns early: go on from there
+            f, p, sg, u, d2, done = match_kernel(
+                px, py, pending, done, side, keys, start, order, x, y, dx, dy, il2, seg_ok, vt, ok_track, max_d2
+            )
+            out.append((f, p, sg, u, d2))
+        return out
 
     def _cells(self, radius: float) -> tuple[float, IntArray, IntArray, IntArray]:
         """The vertices bucketed in square cells of side ``radius`` (built once per radius):
@@ -301,8 +333,6 @@ class TrackIndex:
         its centre's cell."""
         cached = self._cell_cache.get(radius)
         if cached is None:
-            from dbtools.gis.match_kernel import cell_keys
-
             key = cell_keys(self.x, self.y, radius)
             order = np.argsort(key, kind="stable")
             keys, start = np.unique(key[order], return_index=True)
