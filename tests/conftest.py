@@ -6,9 +6,15 @@ import shutil
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 from typer.testing import CliRunner
 
 DATA = Path(__file__).parent / "data"
+
+# Property tests check results, never time: no per-example deadline and no "too slow" health
+# check, so a loaded CI machine cannot fail a correct test (timing lives in bench/).
+settings.register_profile("trainpos", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("trainpos")
 
 
 @pytest.fixture
