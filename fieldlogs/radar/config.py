@@ -23,6 +23,13 @@ class RadarConfig:
     elevation half-widths (cos θ_m = V_m/V_G) — toward the beam edges the spectrum's
     resolution smears the strong centre into the weak edge bins and pulls their ranges
     toward the centre's."""
+    core_speed_mps: float = 9.0
+    """Below this ground speed the beam core narrows in proportion to the speed, to
+    ``core_beamwidths``·V/``core_speed_mps``: one Doppler bin spans the angle
+    ΔV/(V·sin θ0), which grows as 1/V, and with it the beam pattern's pull on the edge
+    lines' ranges (at walking pace −4.5 cm at 33°: bench/NOTES.md)."""
+    core_min_beamwidths: float = 0.5
+    """The narrowest beam core (at the slowest speeds) [elevation half-widths]."""
     gate_sigmas: float = 3.0
     """Refinement: lines whose range is more than this many σ_R from the one eq. 1
     predicts for their Doppler are left out (symmetric, so the gate adds no bias)."""

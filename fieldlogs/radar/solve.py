@@ -24,9 +24,11 @@ range, where the noise is additive and symmetric: minimise Σ_m (R_m − h/√(1
 σ_m = max(σ_floor, c/(4π·Δf)/√SNR_m), leaving out lines more than ``gate_sigmas``·σ_m
 (× the frame's robust residual scale, 1.4826·median |r/σ|) from the prediction — a
 symmetric gate that adds no bias — and only over lines whose Doppler puts them in the
-beam core (cos θ_m = V_m/V_G within θ0 ± ``core_beamwidths``·β_e): further out the
-spectrum's finite resolution smears the strong centre into the weak edge bins and pulls
-their ranges toward the centre's (bench/NOTES.md).
+beam core (cos θ_m = V_m/V_G within θ0 ± ε_c): further out the spectrum's finite
+resolution smears the strong centre into the weak edge bins and pulls their ranges toward
+the centre's (bench/NOTES.md). One bin spans the angle δθ = ΔV/(V_G·sin θ0), so the pull
+grows as the speed falls; the core is ε_c = β_e·max(``core_min_beamwidths``,
+``core_beamwidths``·min(1, V_G/``core_speed_mps``)), taken at each step's V_G.
 The 1σ of V_G follows from the Gauss–Newton normal equation, var(w) = χ²_ν / Σ J_m²/σ_m²
 with χ²_ν ≥ 1 the reduced chi-square (J = ∂R_pred/∂w), and σ_V = ½·V_G³·σ_w, times
 ``sigma_scale`` for the errors the lines of a frame share.
@@ -167,16 +169,43 @@ class _Fit:
     cand: BoolArray
     h: float
     n: int
-    core: tuple[float, float]
-    """cos² of the beam core's highest and lowest depression."""
+    core: tuple[float, float, float, float, float]
+    """The beam core: θ0, β_e [rad], ``core_beamwidths``, ``core_min_beamwidths`` and
+    ``core_speed_mps``."""
+
+    def in_core(self, w: FloatArray, wl: FloatArray, ok: BoolArray) -> BoolArray:
+        """Lines in the beam core, cos²θ = u·w within [cos² hi, cos² lo]: the core of the
+        frame's speed, or the widest core in a frame with no line in the narrowed one."""
+        c_hi, c_lo = self.core_bounds(w)
+        x = self.u * wl
+        narrow = (x >= c_hi[self.fi]) & (x <= c_lo[self.fi])
+        c_hi, c_lo = self.core_bounds(w, wide=True)
+        wide = (x >= c_hi[self.fi]) & (x <= c_lo[self.fi])
+        empty = _sum(self.fi, ok & narrow, self.n) == 0
+        out: BoolArray = np.where(empty[self.fi], wide, narrow)
+        return out
+
+    def core_bounds(self, w: FloatArray, wide: bool = False) -> tuple[FloatArray, FloatArray]:
+        """cos² of the core's highest and lowest depression at V_G = w^(−1/2) per entry of w
+        (``wide``: of the widest core, ``core_beamwidths``)."""
+        theta0, beta, full, narrowest, v_full = self.core
+        with np.errstate(invalid="ignore", divide="ignore"):
+            v = np.where(w > 0, 1.0 / np.sqrt(np.where(w > 0, w, 1.0)), 0.0)
+        if wide or v_full <= 0:
+            k = np.full(w.shape, full)
+        else:
+            k = np.maximum(narrowest, full * np.minimum(1.0, v / v_full))
+        lo = np.clip(theta0 - k * beta, math.radians(0.5), math.radians(89.5))
+        hi = np.clip(theta0 + k * beta, math.radians(0.5), math.radians(89.5))
+        return np.cos(hi) ** 2, np.cos(lo) ** 2
 
     def step(self, w: FloatArray, gate: FloatArray | None) -> tuple[FloatArray, BoolArray, FloatArray, FloatArray]:
         """One Gauss–Newton step in w per frame: (new w, kept lines, residuals, J)."""
         wl = w[self.fi]
         q = 1.0 - self.u * wl
         ok = self.cand & np.isfinite(q) & (q > 1e-6)
-        if gate is not None:  # beam core: cos²θ = u·w within [cos² hi, cos² lo]
-            ok &= (self.u * wl >= self.core[0]) & (self.u * wl <= self.core[1])
+        if gate is not None:
+            ok &= self.in_core(w, wl, ok)
         qs = np.where(ok, q, 1.0)
         res = self.r - self.h / np.sqrt(qs)
         jac = self.h * self.u / (2.0 * qs**1.5)
@@ -237,8 +266,14 @@ def fit_frames(lines: Lines, n_frames: int, params: RadarParams, cfg: RadarConfi
     w0 = eq2_closed_form(fi, u, s, c0, n)
     w0 = np.where(w0 > 0, w0, np.nan)
     sig = np.maximum(cfg.range_floor_m, params.r_max_m / (2 * np.pi) / np.sqrt(np.maximum(lines.snr, 1e-12)))
-    lo, hi = params.depression_range_rad(cfg.core_beamwidths)
-    fit = _Fit(fi, u, lines.range_m, sig, cand, h, n, (math.cos(hi) ** 2, math.cos(lo) ** 2))
+    core = (
+        math.radians(params.depression_deg),
+        math.radians(params.beam_elev_deg),
+        cfg.core_beamwidths,
+        min(cfg.core_min_beamwidths, cfg.core_beamwidths),
+        cfg.core_speed_mps,
+    )
+    fit = _Fit(fi, u, lines.range_m, sig, cand, h, n, core)
     w, keep, res, jac = _refine(fit, w0, cfg)
     chi2, k = fit.chi2(keep, res)
     c = np.where(keep, 1.0 / sig**2, 0.0)

@@ -118,3 +118,43 @@ def test_exact_lines_give_the_exact_speed(v: float, h: float, dep: float, offset
     fit = fit_frames(lines_from(v, [dep + o for o in offsets], p), 1, p, RadarConfig())
     assert fit.v[0] == pytest.approx(v, rel=1e-7)
     assert fit.v_eq2[0] == pytest.approx(v, rel=1e-7)
+
+
+def test_beam_core_narrows_below_core_speed_by_hand() -> None:
+    # θ0 = 45°, β_e = 7.5°, core 1.5 half-widths at and above core_speed_mps = 9 m/s,
+    # 1.5·V/9 below, never under 0.5: 20 m/s → ±11.25°; 4.5 m/s → ±5.625°; 1 m/s → ±3.75°
+    cfg = RadarConfig()
+    assert (cfg.core_beamwidths, cfg.core_speed_mps, cfg.core_min_beamwidths) == (1.5, 9.0, 0.5)
+    # at 4.5 m/s a line at 39.5° is inside the core, one at 39.2° outside (edge 39.375°)
+    inside = lines_from(4.5, [39.5, 45.0])
+    inside.range_m[0] += 0.05  # an off line in the core pulls the fit
+    assert fit_frames(inside, 1, P, cfg).v[0] != pytest.approx(4.5, rel=1e-4)
+    outside = lines_from(4.5, [39.2, 45.0])
+    outside.range_m[0] += 0.05  # outside the core: left out, the fit is exact
+    fit = fit_frames(outside, 1, P, cfg)
+    assert fit.v[0] == pytest.approx(4.5, rel=1e-9) and fit.n_used[0] == 1
+    # at 20 m/s the same 39.2° line is inside (edge 33.75°)
+    fast = lines_from(20.0, [39.2, 45.0])
+    fast.range_m[0] += 0.05
+    assert fit_frames(fast, 1, P, cfg).n_used[0] == 2
+
+
+def test_walking_pace_edge_lines_pulled_toward_the_centre_are_left_out() -> None:
+    # 1.5 m/s: core ±3.75°. Edge lines with ranges pulled toward the beam centre as the
+    # spectrum's 1.1° bins make them (shallow lines short, steep lines long: bench/NOTES.md)
+    # would read the speed high; in the narrowed core only the exact central lines count.
+    v = 1.5
+    core = lines_from(v, [42.0, 43.5, 45.0, 46.5, 48.0])
+    edge = lines_from(v, [34.0, 35.5, 37.0, 55.0])
+    edge.range_m[:] += np.array([-0.045, -0.03, -0.018, 0.008])
+    lines = cat(core, edge)
+    fit = fit_frames(lines, 1, P, RadarConfig())
+    assert fit.v[0] == pytest.approx(v, rel=1e-9) and fit.n_used[0] == 5
+    wide = fit_frames(lines, 1, P, RadarConfig(core_speed_mps=0.0))  # the fixed ±1.5 half-width core
+    assert wide.n_used[0] == 9 and wide.v[0] > v * 1.002
+
+
+def test_frame_without_a_line_in_the_narrowed_core_uses_the_widest() -> None:
+    # 1.5 m/s, lines only at 38° and 52° (outside ±3.75°, inside ±11.25°): still a speed
+    fit = fit_frames(lines_from(1.5, [38.0, 52.0]), 1, P, RadarConfig())
+    assert fit.v[0] == pytest.approx(1.5, rel=1e-9) and fit.n_used[0] == 2

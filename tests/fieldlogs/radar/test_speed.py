@@ -131,3 +131,15 @@ def test_empty_input_gives_no_frame() -> None:
     res = process_if(empty, empty, empty, empty, empty, TABLE1)
     assert len(res) == 0 and list(res.to_frame().columns)[:3] == ["t", "speed_mps", "sigma_mps"]
     assert res.summary()["frames"] == 0
+
+
+def test_single_scatterer_at_walking_pace_by_hand() -> None:
+    # 1.5 m/s toward where the radar looks, one reflector at the beam axis 45°, h = 0.8 m:
+    # λ = c/f0 = 299792458/24.06e9 = 0.0124602 m, f_d = 2·1.5·cos 45°/λ = 170.25 Hz
+    # (52.3 bins of 3.2552 Hz), R = 0.8/sin 45° = 1.13137 m → V_G = 1.5 m/s by eq. 1
+    fd, r = 2 * 1.5 * math.cos(math.radians(45.0)) / (C / 24.06e9), 0.8 / math.sin(math.radians(45.0))
+    assert fd == pytest.approx(170.25, abs=0.01) and r == pytest.approx(1.13137, abs=1e-5)
+    c = run(reflectors_if(TABLE1, [fd], [r], noise=3e-3)).columns
+    assert list(c["status"]) == ["ok", "ok"] and c["n_used"].tolist() == [1, 1]
+    assert c["speed_mps"] == pytest.approx([1.5, 1.5], abs=0.002)
+    assert np.all(np.abs(c["speed_mps"] - 1.5) <= 3 * c["sigma_mps"])
