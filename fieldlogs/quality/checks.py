@@ -574,12 +574,12 @@ def check_run(run: Run | Path | str, db: DbRefs | None = None, limits: CheckLimi
 
 def _usability(run: Run) -> list[Finding]:
     """The usability rule's problems the stream checks do not state (``fieldlogs.quality.usability``):
-    a time base not in seconds, an implausible wheel — for a train's positioning or a road-rail
-    vehicle's possession check."""
+    a time base not in seconds, a tacho that is not one counter, an implausible wheel — for a
+    train's positioning or a road-rail vehicle's possession check."""
     from fieldlogs.quality.usability import Purpose, usability_findings
 
     if run.meta is None:
         return []
     purpose = Purpose.POSSESSION if run.meta.vehicle_kind == "road_rail" else Purpose.POSITIONING
-    extra = [f for f in usability_findings(run, purpose) if f.column in ("t", "wheel_diameter_m", "teeth")]
-    return [replace(f, file=str(run.folder)) for f in extra]
+    extra = [f for f in usability_findings(run, purpose) if f.column in ("t", "pulses", "wheel_diameter_m", "teeth")]
+    return [replace(f, file=f.file or str(run.folder)) for f in extra]
