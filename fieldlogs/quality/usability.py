@@ -14,12 +14,15 @@ What a run needs depends on what it is for and on the vehicle:
 Every needed stream must have at least two usable rows (every required column valid), and a
 time base in seconds: a stream whose median step is ~10³ (10⁶, 10⁹) times its declared
 interval was logged in milliseconds (microseconds, nanoseconds) — said so, not guessed at —
-and one more than 30 times off it either way is no stream of that rate. For positioning, the
+and one more than 30 times off it either way is no stream of that rate (the tacho, whose rows
+are the pipeline's 100 ms cycles, within a factor of 2 for positioning). For positioning, the
 streams the cycle grid is built from (tacho, IMU) must also cover their time span (part of
 ``t`` in milliseconds stretches it), and the tacho must be one wheel's count as the pipeline
 uses it — sorted by t, resets bridged (:func:`fieldlogs.quality.tacho.counter_problem`): never
 negative, not below an earlier count at more than a few rows, no impossible speed; otherwise
-the bridging would turn rows shuffled before a reset into kilometres of phantom distance.
+the bridging would turn rows shuffled before a reset into kilometres of phantom distance. A
+train's IMU must be in m/s² and rad/s (:func:`imu_unit_problems`: gravity's median, the
+gyro's 99th percentile), else slips would be detected and corrected on a wrong scale.
 
 A run that fails is refused (FindingsError, exit 1, each problem a finding naming the stream
 and column); it is never positioned at a "determined" km it cannot support.
@@ -52,6 +55,14 @@ STEP_FACTOR = 30.0
 #: cover their span — span / (rows − 1) at most this many median steps.
 SPAN_FACTOR = 10.0
 CYCLE_STREAMS = ("tacho", "imu")
+#: The tacho's rows are the pipeline's cycles (the onboard unit's 100 ms): for positioning its
+#: median step must be within this factor of the declared interval.
+TACHO_STEP_FACTOR = 2.0
+#: The median |a| of an IMU lies in this band [m/s²]: it always measures gravity.
+GRAVITY_BAND_MPS2 = (7.0, 13.0)
+#: A train body turns, rolls and pitches far slower: 99 % of max(|ωx|, |ωy|, |ωz|) above this
+#: is no rad/s [rad/s] (the sample runs: 0.05; the same in deg/s: 2.8).
+MAX_GYRO_P99_RADPS = 1.0
 
 
 class Purpose(StrEnum):
@@ -120,16 +131,46 @@ def _stream_problems(run: Run, name: str, purpose: Purpose) -> list[Finding]:
         return [_finding(name, "no usable rows" + (f" ({first.message})" if first else ""))]
     assert frame is not None
     t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
-    unit = time_unit_problem(t, table.rate_hz)
+    cycle_grid = name == "tacho" and purpose == Purpose.POSITIONING
+    unit = time_unit_problem(t, table.rate_hz, TACHO_STEP_FACTOR if cycle_grid else STEP_FACTOR)
     if unit is None and purpose == Purpose.POSITIONING and name in CYCLE_STREAMS:
         unit = time_span_problem(t, table.rate_hz)
     path = run.stream_file(name)
     if unit:
         return [_finding(name, unit, "t", file=path)]
-    if name == "tacho" and purpose == Purpose.POSITIONING:
+    if purpose != Purpose.POSITIONING:
+        return []
+    if name == "tacho":
         counter = counter_problem(t, frame["pulses"].to_numpy(dtype=float, na_value=np.nan), _metres(run))
         return [_finding(name, counter, "pulses", file=path)] if counter else []
+    if name == "imu":
+        return [_finding(name, msg, col, file=path) for col, msg in imu_unit_problems(frame)]
     return []
+
+
+def imu_unit_problems(frame: pd.DataFrame) -> list[tuple[str, str]]:
+    """(column, message) when the IMU is not in m/s² and rad/s: the median |a| (gravity is
+    always measured, ≈ 9.81 m/s²) outside :data:`GRAVITY_BAND_MPS2` (≈ 1: in g), or the 99th
+    percentile of max(|ωx|, |ωy|, |ωz|) above :data:`MAX_GYRO_P99_RADPS` (≈ 57× a train's
+    rates: deg/s)."""
+    out: list[tuple[str, str]] = []
+    a = frame[["ax", "ay", "az"]].to_numpy(dtype=float, na_value=np.nan)
+    mag = np.sqrt((a * a).sum(axis=1))
+    mag = mag[np.isfinite(mag)]
+    lo, hi = GRAVITY_BAND_MPS2
+    if mag.size >= 10 and not lo <= (med := float(np.median(mag))) <= hi:
+        hint = "looks like g: multiply by 9.80665" if 0.7 <= med <= 1.3 else "not m/s²"
+        out.append(("az", f"median |a| {med:.3g}, gravity is about 9.81 m/s² ({hint})"))
+    w_max = np.fmax.reduce(np.abs(frame[["wx", "wy", "wz"]].to_numpy(dtype=float, na_value=np.nan)), axis=1)
+    w_max = w_max[np.isfinite(w_max)]
+    if w_max.size >= 10 and (p99 := float(np.percentile(w_max, 99))) > MAX_GYRO_P99_RADPS:
+        out.append(
+            (
+                "wz",
+                f"99 % of the angular rates below {p99:.3g}, over {MAX_GYRO_P99_RADPS:g} rad/s (deg/s? divide by 57.3)",
+            )
+        )
+    return out
 
 
 def _metres(run: Run) -> float | None:
@@ -160,10 +201,10 @@ def _steps(t: np.ndarray) -> np.ndarray:
     return step[step > 0]
 
 
-def time_unit_problem(t: np.ndarray, rate_hz: float | None) -> str | None:
+def time_unit_problem(t: np.ndarray, rate_hz: float | None, factor_off: float = STEP_FACTOR) -> str | None:
     """The message when a stream's median step Δ̃ (distinct t) says its ``t`` is not in
     seconds: Δ̃ within ×0.3–3 of the declared interval 1/rate times 10³, 10⁶ or 10⁹ (named),
-    or otherwise more than :data:`STEP_FACTOR` times off it either way."""
+    or otherwise more than ``factor_off`` times off it either way."""
     if rate_hz is None:
         return None
     steps = _steps(t)
@@ -177,10 +218,10 @@ def time_unit_problem(t: np.ndarray, rate_hz: float | None) -> str | None:
                 f"t looks like {unit}: rows {step:g} apart for a {rate_hz:g} Hz stream "
                 f"(t must be seconds since the run's start; divide by {factor:g})"
             )
-    if not nominal / STEP_FACTOR <= step <= STEP_FACTOR * nominal:
+    if not nominal / factor_off <= step <= factor_off * nominal:
         return (
             f"rows {step:.6g} s apart, not a {rate_hz:g} Hz stream "
-            "(t must be seconds since the run's start, at the stream's declared rate)"
+            f"({nominal / factor_off:g}–{factor_off * nominal:g} s; t must be seconds since the run's start)"
         )
     return None
 

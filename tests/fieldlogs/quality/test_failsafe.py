@@ -37,6 +37,8 @@ def _tacho(tmp_path: Path, edit: str) -> Path:
     elif edit == "shuffled_reset":  # the property test's shuffle then reset at half the file
         f = f.sample(frac=1.0, random_state=1).reset_index(drop=True)
         f.loc[n // 2 :, "pulses"] = f["pulses"].iloc[n // 2 :] - f["pulses"].iloc[n // 2 - 1]
+    elif edit == "sparse":  # the property test's shuffle, then 11 % of the rows kept: 0.6 s apart
+        f = f.sample(frac=0.111, random_state=2).sort_values("t")
     elif edit == "reset_then_back":  # a reset, later the count steps back 500 and stays back
         p = f["pulses"].to_numpy(dtype=np.int64).copy()
         p[n // 2 :] -= p[n // 2 - 1]
@@ -46,15 +48,29 @@ def _tacho(tmp_path: Path, edit: str) -> Path:
     return run
 
 
-def _refused(run: Path, db: Path, tmp_path: Path, column: str, words: str) -> None:
+def _imu(tmp_path: Path, edit: str) -> Path:
+    run = tmp_path / "run"
+    shutil.copytree(LOGS / "sim-d-slips", run)
+    f = pd.read_parquet(run / "imu.parquet")
+    cols = ["ax", "ay", "az"] if edit == "g" else ["wx", "wy", "wz"]
+    f[cols] = f[cols] / 9.80665 if edit == "g" else np.degrees(f[cols])
+    f.to_parquet(run / "imu.parquet", index=False)
+    return run
+
+
+def _refused(run: Path, db: Path, tmp_path: Path, column: str, words: str, stream: str = "tacho") -> None:
     problems = usability_findings(read_run(run), Purpose.POSITIONING)
-    assert [(p.table, p.column) for p in problems] == [("tacho", column)], problems
+    assert [(p.table, p.column) for p in problems] == [(stream, column)], problems
     assert words in problems[0].message, problems[0].message
     res = CliRunner().invoke(app, ["run", str(run), "--db", str(db), "--out", str(tmp_path / "out")])
     assert res.exit_code == 1, res.output
-    assert f"tacho.parquet column {column}" in res.output and words in res.output, res.output
+    assert f"{stream}.parquet column {column}" in res.output and words in res.output, res.output
     assert "internal error" not in res.output and not (tmp_path / "out").exists()
-    assert any(f.rule == "run.unusable" and words in f.message for f in check_run(run))  # logs check says it too
+    # logs check fails it too: the same message, or (values out of range) its range findings on that column
+    found = check_run(run)
+    assert any(f.rule == "run.unusable" and words in f.message for f in found) or any(
+        f.rule == "schema.range" and (f.table, f.column) == (stream, column) for f in found
+    ), found[:5]
 
 
 @pytest.mark.parametrize(
@@ -64,12 +80,33 @@ def _refused(run: Path, db: Path, tmp_path: Path, column: str, words: str) -> No
         ("partly_ms", "t", "part of t not in seconds"),
         ("shuffled_reset", "pulses", "pulses is negative at"),
         ("reset_then_back", "pulses", "step back below an earlier count and stay back"),
+        ("sparse", "t", "apart, not a 10 Hz stream (0.05–0.2 s;"),
     ],
 )
 def test_a_tacho_the_pipeline_cannot_trust_is_refused(
     edit: str, column: str, words: str, sample_db: Path, tmp_path: Path
 ) -> None:
     _refused(_tacho(tmp_path, edit), sample_db, tmp_path, column, words)
+
+
+@pytest.mark.parametrize(
+    ("edit", "column", "words"),
+    [
+        ("g", "az", "median |a| 1.01, gravity is about 9.81 m/s² (looks like g: multiply by 9.80665)"),
+        ("deg", "wz", "99 % of the angular rates below 2.86, over 1 rad/s (deg/s? divide by 57.3)"),
+    ],
+)
+def test_an_imu_in_other_units_is_refused(edit: str, column: str, words: str, sample_db: Path, tmp_path: Path) -> None:
+    """Gyro in deg/s: once 95 % of the determined cycles within margin, exit 0."""
+    run = _imu(tmp_path, edit)
+    if edit == "g":  # logs check states it as log.unit_suspect already (not twice)
+        problems = usability_findings(read_run(run), Purpose.POSITIONING)
+        assert [(p.table, p.column, words in p.message) for p in problems] == [("imu", column, True)]
+        res = CliRunner().invoke(app, ["run", str(run), "--db", str(sample_db), "--out", str(tmp_path / "out")])
+        assert res.exit_code == 1 and words in res.output and not (tmp_path / "out").exists(), res.output
+        assert any(f.rule == "log.unit_suspect" for f in check_run(run))
+    else:
+        _refused(run, sample_db, tmp_path, column, words, stream="imu")
 
 
 def test_a_counter_by_hand() -> None:
