@@ -84,9 +84,14 @@ def _damage(run: Path, op: str, stream: str, frac: float, rng: np.random.Generat
     elif op == "reset" and stream == "tacho":
         i = max(int(n * frac), 1)
         frame.loc[frame.index[i:], "pulses"] = frame["pulses"].iloc[i:] - frame["pulses"].iloc[i - 1]
+    elif op == "scale" and stream == "tacho":  # a wheel turned to a smaller diameter, run.json not updated
+        frame["pulses"] = (frame["pulses"] * (1.0 + frac)).round().astype("int64")
+    elif op == "late":  # the stream's clock runs ``frac`` × 10 s late
+        frame["t"] = frame["t"] + 10.0 * frac
     frame.to_parquet(path, index=False)
 
 
+#: The operations the property test draws from ("scale" and "late" only in the named cases below).
 OPS = ("delete", "truncate", "shuffle", "duplicate", "nan", "milliseconds", "reset", "json", "corrupt", "stray")
 damage = st.lists(
     st.tuples(st.sampled_from(OPS), st.sampled_from(STREAMS), st.floats(0.05, 0.95)), min_size=1, max_size=3
@@ -107,13 +112,54 @@ def test_damaged_runs_fail_safe(ops: list[tuple[str, str, float]], seed: int, sa
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="known fail-safe hole, open in issue 15: tacho rows half shuffled and then a counter reset "
-    "leave 43 % of the determined cycles outside their margin (found by the property test above)",
-)
 def test_shuffled_tacho_with_a_reset_stays_inside_its_margin(sample_db: Path, tmp_path: Path) -> None:
+    """Once 43 % of the determined cycles outside their margin: the reset subtracted from half
+    the shuffled rows made 771 "resets" in time order, bridged into 390× the run's distance.
+    Now refused: 1,459 negative counts (the usability rule's tacho counter check)."""
     _run_damaged([("shuffle", "tacho", 0.5), ("reset", "tacho", 0.5)], 0, sample_db, tmp_path)
+
+
+@pytest.mark.slow
+def test_tacho_in_nanoseconds_is_refused_not_an_internal_error(sample_db: Path, tmp_path: Path) -> None:
+    """Tacho t ×10⁹ (three times 'milliseconds'): once exit 4 in the pulse-delay search (a
+    cycle of 10⁸ s, no high-pass window), and with that guarded alone 0.4 % within margin."""
+    _run_damaged([("milliseconds", "tacho", 0.5)] * 3, 0, sample_db, tmp_path)
+
+
+@pytest.mark.slow
+def test_a_sparse_shuffled_tacho_is_refused(sample_db: Path, tmp_path: Path) -> None:
+    """Found by hand-run random damage: the tacho shuffled and truncated to 11 % of its rows
+    (0.6 s apart, irregular) left 0.3 % of the determined cycles outside their margin. Now
+    refused: the tacho's rows are the 100 ms cycles (median step within 2× of 0.1 s)."""
+    _run_damaged(
+        [("shuffle", "tacho", 0.249), ("truncate", "tacho", 0.111), ("duplicate", "gps", 0.38)],
+        1753136836,
+        sample_db,
+        tmp_path,
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("ops", "reason"),
+    [
+        (
+            [("scale", "tacho", 0.05)],
+            "pulses 5 % over the declared wheel: 39 % of determined cycles outside the 2 % margin",
+        ),
+        ([("late", "balise", 0.2)], "balise clock 2 s late: 74 % of determined cycles outside their margin"),
+        ([("late", "imu", 0.2)], "IMU clock 2 s late: 7 % of determined cycles outside their margin"),
+        ([("late", "gps", 0.5)], "GPS clock 5 s late: 7 % of determined cycles outside their margin"),
+    ],
+    ids=["wheel+5%", "balise-2s-late", "imu-2s-late", "gps-5s-late"],
+)
+def test_calibration_and_clock_faults_stay_inside_their_margin(
+    ops: list[tuple[str, str, float]], reason: str, sample_db: Path, tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
+    """Open fail-safe holes (issue 15, found by hand-run damage; the fix is in the margin and
+    the aids, not in the usability rule): each pinned as a strict xfail with its measurement."""
+    request.applymarker(pytest.mark.xfail(strict=True, reason=f"open in issue 15: {reason}"))
+    _run_damaged(ops, 0, sample_db, tmp_path)
 
 
 def _run_damaged(ops: list[tuple[str, str, float]], seed: int, sample_db: Path, tmp_path: Path) -> None:

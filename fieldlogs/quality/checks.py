@@ -568,18 +568,24 @@ def check_run(run: Run | Path | str, db: DbRefs | None = None, limits: CheckLimi
                 spans[name] = (float(np.nanmin(t)), float(np.nanmax(t)))
     findings.extend(_check_overlap(run, spans, limits))
     findings.extend(check_receivers(run))
-    findings.extend(_usability(run))
+    findings.extend(_usability(run, findings))
     return findings
 
 
-def _usability(run: Run) -> list[Finding]:
+def _usability(run: Run, found: list[Finding]) -> list[Finding]:
     """The usability rule's problems the stream checks do not state (``fieldlogs.quality.usability``):
-    a time base not in seconds, an implausible wheel — for a train's positioning or a road-rail
-    vehicle's possession check."""
+    a time base not in seconds, a tacho that is not one counter, a gyro in deg/s, an implausible
+    wheel — for a train's positioning or a road-rail vehicle's possession check (an IMU in g is
+    ``log.unit_suspect`` already; a column with values out of range is stated by those)."""
     from fieldlogs.quality.usability import Purpose, usability_findings
 
     if run.meta is None:
         return []
     purpose = Purpose.POSSESSION if run.meta.vehicle_kind == "road_rail" else Purpose.POSITIONING
-    extra = [f for f in usability_findings(run, purpose) if f.column in ("t", "wheel_diameter_m", "teeth")]
-    return [replace(f, file=str(run.folder)) for f in extra]
+    out_of_range = {(f.table, f.column) for f in found if f.rule == "schema.range"}
+    extra = [
+        f
+        for f in usability_findings(run, purpose)
+        if f.column in ("t", "pulses", "wz", "wheel_diameter_m", "teeth") and (f.table, f.column) not in out_of_range
+    ]
+    return [replace(f, file=f.file or str(run.folder)) for f in extra]

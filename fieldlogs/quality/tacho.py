@@ -88,6 +88,85 @@ def cumulative_again(p: npt.NDArray[Any]) -> tuple[npt.NDArray[Any], IntArray]:
     return p + np.cumsum(offsets), resets
 
 
+#: The count, in time order with its resets bridged, may stay below an earlier count at this
+#: many rows at most (single glitches that recover): more, and the dead reckoning would stand
+#: still for that long, or the stream is not one counter (rows shuffled before a reset).
+MAX_ROWS_BELOW = 10
+#: A count that steps back and stays back (two rows or more below an earlier count) freezes
+#: the dead reckoning until it catches up, losing the step: more than this in all [m] is
+#: refused (a single low row that recovers loses nothing).
+MAX_LOST_M = 1.0
+#: No rail vehicle runs faster than this by pulses over about 1 s [m/s]; faster after the
+#: resets are bridged means a drop was bridged that was no reset (phantom distance).
+MAX_COUNTER_SPEED_MPS = 120.0
+
+
+def counter_problem(t: npt.NDArray[Any], p: npt.NDArray[Any], metres: float | None) -> str | None:
+    """Why a tacho stream, as the pipeline uses it — sorted by ``t`` (repeated t dropped, first
+    kept), resets bridged by :func:`cumulative_again` — is not the count of one wheel; None when
+    it is. ``t``, ``p`` in file order; ``metres`` per pulse (None: the speed is not checked).
+
+    1. a negative count (a counter counts up from 0);
+    2. the bridged count below its running maximum c_max(i) = max_{j≤i} c(j) at more than
+       :data:`MAX_ROWS_BELOW` rows;
+    3. with ``metres`` = k: the steps back that last two rows or more, Σ (c_max(i) − c(i) +
+       c(i+1) − c(i))·k at their first rows i (the depth of the step, which the dead
+       reckoning d = k·c_max loses) above :data:`MAX_LOST_M`;
+    4. with k: (c(i+w) − c(i))·k / (t(i+w) − t(i)) over w ≈ 1 s above
+       :data:`MAX_COUNTER_SPEED_MPS`.
+    """
+    pos, tv = time_order(np.asarray(t, dtype=float))
+    pv = np.asarray(p, dtype=float)[pos]
+    ok = np.isfinite(pv)
+    pos, tv, pv = pos[ok], tv[ok], pv[ok]
+    if pv.size < 2:
+        return None
+    neg = np.flatnonzero(pv < 0)
+    if neg.size:
+        return f"pulses is negative at {neg.size} rows (first row {_line(pos[neg].min())}): a counter counts up from 0"
+    c, resets = cumulative_again(pv)
+    c_max = np.maximum.accumulate(c)
+    below = np.flatnonzero(c < c_max)
+    bridged = f" with {resets.size} counter reset(s) bridged" if resets.size else ""
+    if below.size > MAX_ROWS_BELOW:
+        return (
+            f"pulses, in time order{bridged}, stay below an earlier count "
+            f"at {below.size} rows (first row {_line(pos[below[0]])}): not one cumulative counter"
+        )
+    if metres is None or tv.size < 3:
+        return None
+    lost = _lost_steps(c, c_max, below) * metres
+    if lost > MAX_LOST_M:
+        return (
+            f"pulses, in time order{bridged}, step back below an earlier count and stay back "
+            f"(first row {_line(pos[below[0]])}): the dead reckoning would lose {lost:.3g} m"
+        )
+    w = max(round(1.0 / float(np.median(np.diff(tv)))), 1)
+    if c.size <= w:
+        return None
+    speed = (c[w:] - c[:-w]) * metres / (tv[w:] - tv[:-w])
+    k = int(np.argmax(speed))
+    if speed[k] <= MAX_COUNTER_SPEED_MPS:
+        return None
+    after = f" after bridging {resets.size} counter reset(s)" if resets.size else ""
+    return (
+        f"{speed[k]:.4g} m/s by pulses{after} at row {_line(pos[k + w])}, over {MAX_COUNTER_SPEED_MPS:g} m/s: "
+        "a drop that was no reset, or a count that jumps"
+    )
+
+
+def _lost_steps(c: FloatArray, c_max: FloatArray, below: IntArray) -> float:
+    """Σ (c_max − c + the next row's count) at the first row of each run of two or more rows
+    below ``c_max`` [pulses]."""
+    if below.size < 2:
+        return 0.0
+    first = np.concatenate(([True], np.diff(below) > 1))
+    last = np.concatenate((np.diff(below) > 1, [True]))
+    starts = below[first & ~last]  # runs of one row (a glitch that recovers) lose nothing
+    # the depth of the step, plus the row's own count that the step hid (the next row's)
+    return float((c_max[starts] - c[starts] + np.maximum(c[starts + 1] - c[starts], 0.0)).sum())
+
+
 class TachoIssue(StrEnum):
     """What :func:`review_tacho` can find (module docstring, in its order)."""
 

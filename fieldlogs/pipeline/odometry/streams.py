@@ -280,14 +280,18 @@ def _pulse_delay(
     v_pulse: FloatArray,
 ) -> tuple[int, FloatArray]:
     """Pulse delay and the gyro pitch θ_gyro for it: the SPEC value, or the one within
-    ±pulse_delay_search_cycles that the run's data show (regression of u on the jerk)."""
+    ±pulse_delay_search_cycles that the run's data show (regression of u on the jerk).
+
+    The SPEC value is kept when the run is too short for the search or its cycle is longer
+    than the high-pass window ``DELAY_HP_S`` (no second difference to take: whatever the
+    input, this never fails)."""
     d0 = max(int(cfg.pulse_delay_cycles), 0)
     span = max(int(cfg.pulse_delay_search_cycles), 0)
-    hp = round(DELAY_HP_S / f.cyc)
+    hp = round(DELAY_HP_S / f.cyc) if np.isfinite(f.cyc) and f.cyc > 0 else 0
     n = dt.size
     first = min(d0 + span, n) + f.P + f.M + 2 * hp
     theta_k = _theta_gyro(f, dt, sgn, imu, delay(v_pulse, d0))
-    if span == 0 or n <= first + 10 * hp:
+    if span == 0 or hp < 1 or n <= first + 10 * hp:
         return d0, theta_k
     vp1 = ma(v_pulse, f.P)
     aps = ma(np.diff(vp1, prepend=vp1[0]) / dt, f.W)
