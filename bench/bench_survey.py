@@ -27,8 +27,9 @@ Reported against the issue's targets: moved balises flagged and their residual w
 (exit lower-limit crossing) and ±10 % radius; wheel diameters per vehicle within ±0.1 %
 of the runs' mean true diameter (and per run), per source (balise, radar, GNSS) and
 combined, from all of a vehicle's runs and from its first three, with how often each
-run's 95 % interval holds the truth and how many runs and vehicles the consistency check
-flags; false "moved" balises and features on the clean items of the surveyed DB, and
+run's 95 % interval holds the truth, the runs' median 95 % half-width, how often each
+vehicle's pooled interval holds its runs' mean truth, and how many runs and vehicles the
+consistency check flags; false "moved" balises and features on the clean items of the surveyed DB, and
 everywhere when the truth DB itself is surveyed (per 100 track-km). Throughput: the survey
 (replay + aggregation) in run-hours per minute with ``--workers`` processes, extrapolated
 to 1,000 run-hours, beside ``gis verify`` alone on the same runs (the replay they share);
