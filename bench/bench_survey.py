@@ -27,8 +27,9 @@ Reported against the issue's targets: moved balises flagged and their residual w
 (exit lower-limit crossing) and ±10 % radius; wheel diameters per vehicle within ±0.1 %
 of the runs' mean true diameter (and per run), per source (balise, radar, GNSS) and
 combined, from all of a vehicle's runs and from its first three, with how often each
-run's 95 % interval holds the truth and how many runs and vehicles the consistency check
-flags; false "moved" balises and features on the clean items of the surveyed DB, and
+run's 95 % interval holds the truth, the runs' median 95 % half-width, how often each
+vehicle's pooled interval holds its runs' mean truth, and how many runs and vehicles the
+consistency check flags; false "moved" balises and features on the clean items of the surveyed DB, and
 everywhere when the truth DB itself is surveyed (per 100 track-km). Throughput: the survey
 (replay + aggregation) in run-hours per minute with ``--workers`` processes, extrapolated
 to 1,000 run-hours, beside ``gis verify`` alone on the same runs (the replay they share);
@@ -218,6 +219,14 @@ def _errors(d: pd.Series, true: pd.Series) -> float:
     return 100 * float(e.max()) if e.notna().any() else float("nan")
 
 
+def _vehicle_coverage(wheels: pd.DataFrame, wr: pd.DataFrame, col: str, ci: str) -> str:
+    """Vehicles whose pooled interval holds the mean true diameter of the runs used."""
+    true = wr[wr[col].notna()].groupby("vehicle_id")["true_m"].mean().rename("true_m")
+    v = wheels.merge(true, on="vehicle_id")
+    v = v[v[col].notna()]
+    return f"{int(((v[col] - v['true_m']).abs() <= v[ci]).sum())}/{len(v)}"
+
+
 def wheel_sources(rep: SurveyReport, first_runs: int = 3) -> pd.DataFrame:
     """Per source (and combined): runs with an estimate, the largest per-run error, the share
     of runs whose 95 % interval holds the truth, and the largest per-vehicle error from all
@@ -239,12 +248,15 @@ def wheel_sources(rep: SurveyReport, first_runs: int = 3) -> pd.DataFrame:
             true = ok.groupby("vehicle_id")["true_m"].mean().rename("true_m")
             v = frame.merge(true, on="vehicle_id")
             per_veh.append((_errors(v[col], v["true_m"]), int(v[col].notna().sum())))
+        vcov = _vehicle_coverage(rep.wheels, wr, col, ci)
         rows.append(
             {
                 "source": name,
                 "runs": int(has.sum()),
                 "run_max_pct": _errors(wr[col], wr["true_m"]),
                 "covered": f"{int(covered.sum())}/{int(has.sum())}",
+                "half_med_pct": 100 * float((wr[ci] / wr[col])[has].median()) if has.any() else float("nan"),
+                "veh_covered": vcov,
                 "vehicle_max_pct": per_veh[0][0],
                 "vehicles": per_veh[0][1],
                 f"vehicle_{first_runs}_runs_max_pct": per_veh[1][0],

@@ -4,8 +4,10 @@ Both tracks of a double-track line share one kilometrage, but the wheels roll ea
 track's own length: in a curve of radius R and deflection Δθ the inner track is 1.9·Δθ m
 shorter than its km difference (3.8 m track spacing) and the outer one longer — e.g.
 0.16 % over a 600 m balise interval. Dead reckoning therefore advances along the track's
-own length, measured on the GIS grid (geodesic, so no map-projection scale error), and
-converts back to km. Beyond the grid's ends 1 m of travel is 1 m of km.
+own length — the 3-D rail's, measured on the GIS grid (geodesic, so no map-projection scale
+error; with the gradient, the curves' arc over their chords and the rail height:
+:attr:`dbtools.gis.index.GridIndex.c`) — and converts back to km. Beyond the grid's ends
+1 m of travel is 1 m of km.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ IDENTITY = TrackMetric(np.array([0.0, 1.0]), np.array([0.0, 1.0]))
 
 
 def track_metric(network: Network, line_code: str, track: str) -> TrackMetric:
-    """The metric of a line/track: km and cumulative geodesic track length ``c`` of its
+    """The metric of a line/track: km and cumulative rail length ``c`` of its
     points in the network's grid index (:attr:`~dbtools.gis.index.GridIndex.c`); the
     identity when the track has fewer than two grid points.
 

@@ -9,9 +9,12 @@ J_h = √(x'² + y'²), everything the motion needs follows analytically:
   dΨ/dkm = (x'y'' − y'x'')/J_h²; horizontal curvature κ = (x'y'' − y'x'')/J_h³ (> 0 left
   in increasing km) and dκ/dkm;
 * nose-up pitch of a body facing increasing km θ = atan(h'/J_h) and dθ/dkm;
-* arc length along the 3-D track σ(km) = ∫ √(J_h² + h'²) dkm — the distance the wheels
-  roll. It differs from the km difference on the offset tracks of a double-track line in
-  curves (radius R ∓ 1.9 m) and on gradients, as on a real line;
+* arc length along the 3-D rail on the ground σ(km) = ∫ √((G·J_h)² + h'²) dkm — the
+  distance the wheels roll. G = (1 + h/R_E)/k turns plane length into ground length: k the
+  projection's point scale (0.9999–1.0001 in a JGD2011 zone; G·J_h dkm is the geodesic
+  length of the plane step, taken numerically per 1 m) and h/R_E the rail's height above
+  the ellipsoid (R_E = 6 371 km). It differs from the km difference on the offset tracks
+  of a double-track line in curves (radius R ∓ 1.9 m) and on gradients, as on a real line;
 * cant from the curvature, so it ramps along the transitions by itself:
   cant = min(cant_max, c·V²·|κ|) [mm] (|κ| < 1/50 km counts as straight), roll of a body facing increasing km
   ψ = −sign(κ)·asin(cant/gauge) (left curve: outer right rail higher, left side down, ψ < 0).
@@ -25,12 +28,14 @@ import numpy as np
 import numpy.typing as npt
 from scipy.interpolate import CubicSpline
 
-from dbtools.gis.geometry import Projector
+from dbtools.gis.geometry import Projector, geodesic_step
 from dbtools.network import Network
 from schemas.enums import Track
 from schemas.tables import GIS_SPACING_M
 
 FloatArray = npt.NDArray[np.float64]
+#: Mean Earth radius for the rail height's length factor 1 + h/R_E [m].
+EARTH_RADIUS_M = 6_371_000.0
 
 
 class TrackLookupError(LookupError):
@@ -49,7 +54,7 @@ class TrackState:
     kappa: FloatArray
     dkappa_dkm: FloatArray
     j: FloatArray
-    """dσ/dkm (3-D arc length per metre of km)."""
+    """dσ/dkm (3-D ground arc length per metre of km)."""
 
 
 @dataclass
@@ -98,8 +103,22 @@ class TrackGeometry:
         # σ(km) on a fine grid (≤ 1 m), trapezoid of J
         n = max(int(np.ceil((km[-1] - km[0]) / 1.0)) + 1, 2)
         self._kf = np.linspace(km[0], km[-1], n)
+        self._ground = self._ground_factor(self._kf)
         j = self.state(self._kf).j
         self._sf = np.concatenate([[0.0], np.cumsum(0.5 * (j[1:] + j[:-1]) * np.diff(self._kf))])
+
+    def _ground_factor(self, kf: FloatArray) -> FloatArray:
+        """G at ``kf`` (module docstring): geodesic over plane length of each fine step,
+        times 1 + h/R_E, at the steps' midpoints (held at both ends)."""
+        x, y = self._sx(kf) + self._x0, self._sy(kf) + self._y0
+        lon, lat = self.projector.to_lonlat(x, y)
+        plane = np.hypot(np.diff(x), np.diff(y))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = np.where(plane > 0, geodesic_step(lon, lat) / plane, np.nan)
+        ok = np.isfinite(ratio)
+        mid = 0.5 * (kf[1:] + kf[:-1])
+        inv_k = np.interp(kf, mid[ok], ratio[ok]) if ok.any() else np.ones_like(kf)
+        return np.asarray(inv_k * (1.0 + self._sh(kf) / EARTH_RADIUS_M), dtype=float)
 
     @classmethod
     def from_network(
@@ -159,6 +178,7 @@ class TrackGeometry:
         h1, h2 = self._sh(k, 1), self._sh(k, 2)
         jh2 = x1 * x1 + y1 * y1
         jh = np.sqrt(jh2)
+        ground = np.interp(k, self._kf, self._ground)
         cross = x1 * y2 - y1 * x2
         djh = (x1 * x2 + y1 * y2) / jh
         kappa = cross / (jh2 * jh)
@@ -171,7 +191,7 @@ class TrackGeometry:
             dtheta_dkm=(h2 * jh - h1 * djh) / (jh2 + h1 * h1),
             kappa=kappa,
             dkappa_dkm=dkappa,
-            j=np.sqrt(jh2 + h1 * h1),
+            j=np.sqrt(jh2 * ground * ground + h1 * h1),
         )
 
     def grade(self, km: npt.ArrayLike) -> FloatArray:

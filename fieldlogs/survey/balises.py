@@ -34,7 +34,11 @@ and anchors no longer change (``max_iterations``).
 **Wheel scale.** λ_r of a run is the weighted least-squares slope through the origin of
 σ·Δc on Δd over its clean intervals between reads of different clusters (weights
 1/(s₀² + (q·Δd)²)), with the anchors as above; with less than ``wheel_min_distance_m``
-of such travel it is unknown and the run's passes give no residual.
+of such travel it is unknown and the run's passes give no residual. Clean here means no
+slip or slide correction at all (the allowance did not grow): a correction's distance is
+the radar's or the integrated acceleration's, already in the ground's scale, so an interval
+holding one would pull λ towards 1 by its share of the interval (0.45 % worn, 100 m of
+correction in 1 km: 0.045 %) whatever its small allowance.
 
 Status: *missed* (never read on ≥ ``min_missed_passes`` passes), *moved* (|δ̄| ≥
 ``moved_min_m`` and the interval excludes 0), *ok* (the interval within
@@ -56,6 +60,8 @@ FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 OK, MOVED, MISSED, UNVERIFIED = "ok", "moved", "missed", "unverified"
+#: A wheel-scale interval is clean only if the correction allowance did not grow in it [m].
+ALLOWANCE_EPS_M = 1e-9
 
 
 def t_quantile(df: FloatArray | float) -> FloatArray:
@@ -108,7 +114,7 @@ def wheel_scales(
         return lam, se, used
     a = nb.prev[j]
     dd = reads.d[j] - reads.d[a]
-    clean = (reads.allowance[j] - reads.allowance[a] <= cfg.max_slip_allowance_m) & (dd > 0)
+    clean = (reads.allowance[j] - reads.allowance[a] <= ALLOWANCE_EPS_M) & (dd > 0)
     j, a, dd = j[clean], a[clean], dd[clean]
     dc = reads.motion[j] * (c_anchor[reads.balise[j]] - c_anchor[reads.balise[a]])
     w = 1.0 / _variance(dd, cfg)

@@ -82,6 +82,12 @@ class SurveyConfig:
     gnss_outlier_z: float = setting(
         5.0, "GNSS points whose whitened residual is beyond this many robust σ are dropped", gt=0
     )
+    track_length_sigma_pct: float = setting(
+        0.001,
+        "1σ systematic error of the GIS grid's track length, shared by the balise and GNSS wheel scales",
+        "%",
+        ge=0,
+    )
     wheel_alert_share: float = setting(
         0.003, "maintenance alert when the estimated diameter differs from run.json's by more", gt=0, lt=1
     )

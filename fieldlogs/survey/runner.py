@@ -151,7 +151,7 @@ def aggregate(
     samples, coverage = place_samples(runs, traj, adj.scale, network)
     rule = Rule.of(pipeline.feature, cfg)
     curves = {k: survey_track(k, s, rule) for k, s in sorted(samples.items())}
-    wheel_runs = run_wheels(runs, adj.scale, adj.scale_se, adj.scale_distance_m)
+    wheel_runs = run_wheels(runs, adj.scale, adj.scale_se, adj.scale_distance_m, cfg)
     gis, note = _gis(network, runs)
     report = SurveyReport(
         db=db,

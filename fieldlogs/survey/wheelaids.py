@@ -2,7 +2,9 @@
 
 Both are the run's wheel scale λ = D_true / D (D the configured diameter, run.json
 ``wheel_diameter_m``), the quantity :mod:`fieldlogs.survey.balises` estimates from balise
-intervals, each with its standard error; :mod:`fieldlogs.survey.wheels` combines them.
+intervals, each with its own standard error; :mod:`fieldlogs.survey.wheels` adds the error
+the GNSS and balise scales share (the GIS grid's track length, against which both are
+measured) and combines them.
 
 **Radar** [S004]. The odometry's own wheel calibration (:mod:`fieldlogs.pipeline.odometry.
 ground_products`, summary ``wheel_calibration``) is taken as it is: r = Σ v_g·Δt / Σ Δd_p

@@ -273,9 +273,17 @@ def test_sample_network_figures_unchanged(tmp_path: Path) -> None:
     shape = gi.shape(20.0, 1e-3)
     assert float(np.nansum(np.abs(shape.kappa))) == pytest.approx(0.46259015412703386, rel=1e-12)
     assert float(np.nanmax(np.abs(shape.turn))) == pytest.approx(0.067821680924117, rel=1e-12)
-    for track, length in (("D", 14975.569486778033), ("U", 14986.565007804697)):
+    for track, length, rail in (
+        ("D", 14975.569486778033, 14975.978533971516),
+        ("U", 14986.565007804697, 14986.97567912706),
+    ):
+        t = gi.track_id("0420", track)
+        assert t is not None
+        assert float(gi.dist[gi.start[t] : gi.end[t] - 1].sum()) == pytest.approx(length, rel=1e-12)  # geodesic
         tm = track_metric(net, "0420", track)
-        assert float(tm.c[-1] - tm.c[0]) == pytest.approx(length, rel=1e-12)
+        # the 3-D rail (issue 19): + rail height 55–95 m 0.169 m, + arcs over chords 0.156 m,
+        # + gradients ≤ 5.3 ‰ 0.084 m
+        assert float(tm.c[-1] - tm.c[0]) == pytest.approx(rail, rel=1e-12)
     shutil.copytree(SAMPLE, tmp_path / "src")
     build_db(tmp_path / "src", tmp_path / "net.sqlite")
     meta = read_network(tmp_path / "net.sqlite").meta

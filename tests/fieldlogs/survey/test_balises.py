@@ -160,3 +160,19 @@ def test_one_displaced_interior_balise_is_found_among_noisy_runs(
     adj = adjust(rd, table(db), len(scales), CFG)
     assert np.flatnonzero(adj.flagged).tolist() == [which]
     assert adj.stats["residual_m"].to_numpy()[which] == pytest.approx(shift, abs=0.2)
+
+
+def test_an_interval_with_a_radar_carried_correction_is_not_in_the_wheel_scale() -> None:
+    """A 300 m slip corrected by the radar in the interval 2200 → 3100: its distance is the
+    radar's (ground scale), so that interval's travel is 300·(1 − 1/λ) m longer than the
+    pulses' model, and its allowance grew by only 0.2 m (≤ max_slip_allowance_m). Left out,
+    the scale is exact; kept, it would be pulled towards 1."""
+    lam = 0.995
+    tab, rd = table(TRUE), reads(TRUE, [lam], slip={3: 0.2})
+    d = rd.d.copy()
+    d[3:] += 300.0 * (1.0 - 1.0 / lam)  # 300 m measured as 300 m, not 300/λ
+    rd = Reads(rd.run, rd.chain, rd.seg, rd.balise, d, rd.allowance, rd.motion, rd.t)
+    nb = Neighbours.of(rd, tab.frame["cluster"].to_numpy())
+    est, _, used = wheel_scales(rd, nb, tab.c, 1, CFG)
+    assert est[0] == pytest.approx(lam, abs=1e-12)
+    assert used[0] == pytest.approx((7000.0 - 900.0) / lam)  # the 900 m interval left out
