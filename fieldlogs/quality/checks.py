@@ -38,7 +38,7 @@ import pandas as pd
 from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.io import REQUIRED_STREAMS, Run
-from fieldlogs.quality.gnss import check_gnss_nav, check_gnss_obs, check_receivers
+from fieldlogs.quality.gnss import check_gnss_nav, check_gnss_obs, check_gnss_sbas, check_receivers
 from fieldlogs.quality.tacho import TACHO_RATE_HZ, TachoIssue, TachoLimits, review_tacho, time_order
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
@@ -492,7 +492,11 @@ def _check_overlap(run: Run, spans: dict[str, tuple[float, float]], limits: Chec
 # the run
 
 #: Streams with their own checks instead of the time checks (``quality.gnss``).
-GNSS_CHECKS: dict[str, Callable[[_Out, pd.DataFrame], None]] = {"gnss_obs": check_gnss_obs, "gnss_nav": check_gnss_nav}
+GNSS_CHECKS: dict[str, Callable[[_Out, pd.DataFrame], None]] = {
+    "gnss_obs": check_gnss_obs,
+    "gnss_nav": check_gnss_nav,
+    "gnss_sbas": check_gnss_sbas,
+}
 
 
 def check_stream(run: Run, name: str, db: DbRefs | None = None, limits: CheckLimits = CheckLimits()) -> list[Finding]:

@@ -11,6 +11,11 @@ gnss_nav: satellite ids; ``toc_gps_s`` present; the orbit fields each system nee
 (GPS/Galileo/QZSS: sqrtA, Eccentricity, M0, Toe, week; GLONASS: X, Y, Z) present,
 sqrtA in [1000, 10000] m^½ and the eccentricity in [0, 0.5); exact duplicate rows.
 
+gnss_sbas (one row per received message, every GEO in one stream): per GEO (``prn``), ``t``
+never going back in file order; the key (prn, t) unique — two GEOs may log in the same
+second, one GEO sends one message a second (an exact repeat is a warning, another message
+under the same key an error).
+
 Vehicle against streams: every gnss_obs receiver has an antenna in run.json's vehicle
 block (warning when the run has no vehicle block).
 """
@@ -55,14 +60,10 @@ def check_gnss_obs(out: _Out, frame: pd.DataFrame) -> None:
     _pattern(out, frame, "signal", SIGNAL_RE, "a RINEX 3 pseudorange code like C1C or C5Q")
     t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
     rec = frame["receiver"].astype("string").fillna("").to_numpy(dtype=object)
-    order = np.argsort(rec, kind="stable")
-    same = rec[order][1:] == rec[order][:-1]
-    back = np.flatnonzero(same & (np.diff(t[order]) < 0)) + 1
-    pos = order[back]
     out.rows(
         "log.unsorted",
         Severity.ERROR,
-        np.sort(pos),
+        _per_group_back(rec, t),
         lambda k: "epoch earlier than the receiver's row before (logs repair sorts them)",
         column="t",
     )
@@ -156,3 +157,34 @@ def check_receivers(run: Run) -> list[Any]:
             limit=sorted(known),
         )
     ]
+
+
+def _per_group_back(group: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Rows whose ``t`` is earlier than the row before them of the same group (file order)."""
+    order = np.argsort(group, kind="stable")
+    same = group[order][1:] == group[order][:-1]
+    return np.sort(order[np.flatnonzero(same & (np.diff(t[order]) < 0)) + 1])
+
+
+def check_gnss_sbas(out: _Out, frame: pd.DataFrame) -> None:
+    t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
+    prn = frame["prn"].astype("string").fillna("").to_numpy(dtype=object)
+    back = _per_group_back(prn, t)
+    out.rows(
+        "log.unsorted",
+        Severity.ERROR,
+        back,
+        lambda k: "message earlier than the GEO's row before (logs repair sorts them)",
+        column="t",
+    )
+    exact = frame.duplicated(keep="first").to_numpy()
+    key = frame.duplicated(subset=["prn", "t"], keep="first").to_numpy()
+    same, other = np.flatnonzero(exact), np.flatnonzero(key & ~exact)
+    out.rows("log.duplicate_row", Severity.WARNING, same, lambda k: "message repeats an earlier row exactly")
+    out.rows(
+        "log.duplicate_key",
+        Severity.ERROR,
+        other,
+        lambda k: "(prn, t) repeats an earlier row with another message: a GEO sends one message a second",
+        column="t",
+    )

@@ -124,11 +124,15 @@ def _line_list(lines: list[list[int]], total: int) -> str:
 
 
 #: Streams with many rows per t: sorted by their key, duplicates judged on the key.
-KEYED_STREAMS = {"gnss_obs": ["t", "receiver", "sat", "signal"], "gnss_nav": ["sat", "toc_gps_s"]}
+KEYED_STREAMS = {
+    "gnss_obs": ["t", "receiver", "sat", "signal"],
+    "gnss_nav": ["sat", "toc_gps_s"],
+    "gnss_sbas": ["t", "prn"],
+}
 
 
 def _repair_keyed(name: str, frame: pd.DataFrame, file: str) -> tuple[pd.DataFrame, StreamRepair]:
-    """gnss_obs / gnss_nav: sort by the key, drop exact duplicates, then (gnss_obs) rows
+    """gnss_obs / gnss_nav / gnss_sbas: sort by the key, drop exact duplicates, then (gnss_obs) rows
     repeating a key (receiver, t, sat, signal), keeping the first in file order."""
     rep = StreamRepair(name, file, len(frame), len(frame))
     key = KEYED_STREAMS[name]

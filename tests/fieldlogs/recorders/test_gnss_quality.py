@@ -111,3 +111,37 @@ def test_gnss_streams_read_in_both_formats(tmp_path: Path, fmt: str) -> None:
     assert got is not None
     assert got["lli"].tolist() == obs["lli"].tolist()
     np.testing.assert_allclose(got["pseudorange_m"], obs["pseudorange_m"], rtol=1e-9)
+
+
+def _with_sbas(tmp_path: Path, rows: list[dict[str, object]]) -> Path:
+    from fieldlogs.io import read_run
+
+    run = read_run(_run(tmp_path, obs_frame(3), pd.DataFrame([nav_row("G07"), nav_row("E11")])))
+    streams = {n: run.stream(n) for n in ("gnss_obs", "gnss_nav")}
+    streams["gnss_sbas"] = pd.DataFrame(rows)
+    assert run.meta is not None
+    return write_run(tmp_path / "with-sbas", run.meta, streams)
+
+
+def _sbas_row(t: float, prn: int, seq: int) -> dict[str, object]:
+    from fieldlogs.gnss.sbas.encode import mt1
+
+    return {"t": t, "gnss_time_s": 1e9 + t, "prn": prn, "msg_type": 1, "message_hex": mt1([7, 11], 0, seq).hex()}
+
+
+def test_two_geos_logging_in_the_same_second_are_a_clean_sbas_stream(tmp_path: Path) -> None:
+    """MSAS PRN 129 and 137 both received every second: one row per (prn, t), no finding."""
+    p = _with_sbas(tmp_path, [_sbas_row(float(k), prn, k) for k in range(3) for prn in (129, 137)])
+    assert _rules(p) == {"log.missing_stream": 2}
+
+
+def test_a_damaged_sbas_stream_is_reported(tmp_path: Path) -> None:
+    rows = [_sbas_row(float(k), prn, k) for k in range(3) for prn in (129, 137)]
+    rows.append(rows[0])  # an exact repeat: a warning
+    rows.append({**_sbas_row(0.0, 137, 2)})  # another message under an existing key: an error
+    rows.insert(3, _sbas_row(0.5, 129, 1))  # PRN 129 goes back from t 1 to 0.5
+    rules = _rules(_with_sbas(tmp_path, rows))
+    assert rules["log.duplicate_row"] == 1
+    assert rules["log.duplicate_key"] == 1
+    assert rules["log.unsorted"] == 3  # the 0.5 s row, and the two appended rows back at t 0
+    assert "log.duplicate_t" not in rules
