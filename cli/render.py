@@ -196,14 +196,10 @@ class FrameView:
                 widths.append(min(max((len(c) for c in [name, *cells]), default=1), MIN_TEXT_WIDTH))
         return widths
 
-    def min_width(self) -> int:
-        """Width the table needs: the columns' narrowest widths, cell padding and borders."""
-        widths = self._widths()
-        return sum(widths) + 3 * len(widths) + 1
-
     def __rich_console__(self, console: Console, options: Any) -> Iterable[Table | Text]:
-        if self.min_width() <= options.max_width:
-            yield self.table()
+        table = self.table()
+        if _table_min_width(table) <= options.max_width:
+            yield table
         else:
             yield from self.blocks()
 
