@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
+from cli.options import DASK_SCHEDULER, NO_VERIFY_HASH, workers_option
 from cli.render import (
     console,
     emit_rendered,
@@ -60,10 +61,8 @@ def audit(
     log_roots: list[Path] = typer.Argument(..., help="Run folders or folders to search for runs (run.json)."),
     db: Path = typer.Option(..., "--db", help="Onboard DB (.sqlite)."),
     out: Path = typer.Option(..., "--out", "-o", help="Audit database (created, or resumed if it exists)."),
-    workers: int | None = typer.Option(None, "--workers", "-j", min=1, help="Processes (default: all cores)."),
-    dask_scheduler: str | None = typer.Option(
-        None, "--dask-scheduler", help="Run on this Dask cluster (tcp://host:8786) instead of local processes."
-    ),
+    workers: int | None = workers_option("running the pipeline"),
+    dask_scheduler: str | None = DASK_SCHEDULER,
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML, see trainpos config show)."),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:

@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING
 import typer
 
 from cli.db_impact import _impact_attachment, impact
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
+from cli.options import NO_VERIFY_HASH, workers_option
 from cli.render import console, key_value_table, print_findings, print_json, rich_table
 from schemas.errors import UsageError
 from schemas.findings import Finding, findings_report, has_errors
@@ -183,9 +184,7 @@ def release(
         None, "--impact-against", help="DB to compare with for --impact (default: the registry's latest release)."
     ),
     plan: Path | None = typer.Option(None, "--plan", help="Possession plan for --impact (road-rail runs)."),
-    workers: int | None = typer.Option(
-        None, "--workers", "-j", min=1, help="Processes replaying the --impact runs (default: all cores)."
-    ),
+    workers: int | None = workers_option("replaying the --impact runs"),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML) for the --impact replay."),
 ) -> None:
     """Validate a DB and add it to a registry as an immutable, read-only version.

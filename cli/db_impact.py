@@ -13,7 +13,8 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
+from cli.options import NO_VERIFY_HASH, workers_option
 from cli.render import console, key_value_table, rich_table
 from schemas.errors import UsageError
 from schemas.registry import REGISTRY_FILE
@@ -42,9 +43,7 @@ def impact(
     plan: Path | None = typer.Option(
         None, "--plan", help="Possession plan (CSV/XLSX): road-rail runs are checked against it on both versions."
     ),
-    workers: int | None = typer.Option(
-        None, "--workers", "-j", min=1, help="Processes replaying runs (default: all cores)."
-    ),
+    workers: int | None = workers_option(),
     config: Path | None = typer.Option(
         None, "--config", help="Settings (TOML): the pipeline's sections, [possession]."
     ),

@@ -8,6 +8,7 @@ import typer
 
 from cli.audit import ProgressBar, render_tables
 from cli.errors import cli_command
+from cli.options import workers_option
 from cli.render import console, err_console, print_findings, progress
 from schemas.errors import InputError
 
@@ -27,7 +28,7 @@ def sample_source_dir() -> Path:
 @cli_command
 def demo(
     out: Path = typer.Option(Path("demo-out"), "--out", "-o", help="Folder for the DB, audit and report."),
-    workers: int | None = typer.Option(None, "--workers", "-j", min=1, help="Processes (default: all cores)."),
+    workers: int | None = workers_option("running the pipeline"),
 ) -> None:
     """Build and validate the sample DB (real Kawagoe line geometry), audit the bundled
     sample logs through the positioning pipeline, print the report and write it as HTML.

@@ -19,16 +19,6 @@ from schemas.errors import EXIT_UNREADABLE, FindingsError, TrainposError
 EXIT_INTERNAL = 4
 F = TypeVar("F", bound=Callable[..., Any])
 
-#: ``--no-verify-hash``, the one opt-out of the content-hash check (``dbtools.integrity``)
-#: for every command that loads an onboard DB: declare a parameter ``no_verify_hash`` with
-#: this default; :func:`cli_command` reads it, the command body need not.
-NO_VERIFY_HASH = typer.Option(
-    False,
-    "--no-verify-hash",
-    help="Use an onboard DB whose content no longer matches the content hash stored when it was built "
-    "(edited or corrupted); it is refused (exit 2) without this. The DB used is named in a warning.",
-)
-
 
 def cli_command(fn: F) -> F:
     """Wrap a command: typed errors become a message and their exit code.

@@ -11,7 +11,8 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
+from cli.options import NO_VERIFY_HASH, workers_option
 from cli.render import (
     check_outputs,
     console,
@@ -263,9 +264,7 @@ def verify(
         help="Pipeline margin up to which its km is the along-track reference [m] "
         f"(default {_VERIFY.max_km_margin_m:g}).",
     ),
-    workers: int | None = typer.Option(
-        None, "--workers", "-j", min=1, help="Processes replaying runs (default: all cores)."
-    ),
+    workers: int | None = workers_option(),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Verify the 20 m GIS grid against the trusted GPS fixes of recorded runs.

@@ -10,7 +10,8 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
+from cli.options import NO_VERIFY_HASH
 from cli.render import check_outputs, console, frame_table, inputs_of, key_value_table, write_out
 from schemas.errors import UsageError
 from schemas.jsonable import jsonable

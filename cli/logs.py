@@ -8,7 +8,8 @@ from typing import Any
 
 import typer
 
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
+from cli.options import NO_VERIFY_HASH
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
 from schemas.errors import EXIT_FINDINGS, EXIT_OK, EXIT_UNREADABLE, InputError
 from schemas.findings import has_errors

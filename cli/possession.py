@@ -9,7 +9,8 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
+from cli.options import NO_VERIFY_HASH, workers_option
 from cli.render import (
     check_outputs,
     console,
@@ -141,9 +142,7 @@ def check(
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
     no_verify_hash: bool = NO_VERIFY_HASH,
-    workers: int | None = typer.Option(
-        None, "--workers", "-j", min=1, help="Processes checking runs (default: all cores)."
-    ),
+    workers: int | None = workers_option("checking runs"),
 ) -> None:
     """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.
 

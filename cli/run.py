@@ -6,7 +6,8 @@ from pathlib import Path
 
 import typer
 
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
+from cli.options import NO_VERIFY_HASH
 from cli.render import console, key_value_table
 from schemas.units import format_km
 

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import typer
 
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
+from cli.options import NO_VERIFY_HASH
 from cli.render import console, key_value_table
 
 

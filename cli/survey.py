@@ -9,8 +9,9 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from cli.errors import NO_VERIFY_HASH, cli_command
+from cli.errors import cli_command
 from cli.gis import _Bar
+from cli.options import DASK_SCHEDULER, NO_VERIFY_HASH, workers_option
 from cli.render import (
     check_outputs,
     console,
@@ -210,12 +211,8 @@ def survey(
     propose: Path | None = typer.Option(
         None, "--propose", help="Write a corrected source set here (flagged items only) with survey_changes.json/.csv."
     ),
-    workers: int | None = typer.Option(
-        None, "--workers", "-j", min=1, help="Processes replaying runs (default: all cores)."
-    ),
-    dask_scheduler: str | None = typer.Option(
-        None, "--dask-scheduler", help="Replay on this Dask cluster (tcp://host:8786) instead of local processes."
-    ),
+    workers: int | None = workers_option(),
+    dask_scheduler: str | None = DASK_SCHEDULER,
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML: [survey] and the pipeline's sections)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file or --propose folder."),
     no_verify_hash: bool = NO_VERIFY_HASH,
