@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import ast
 import math
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -23,6 +21,7 @@ from dbtools.gis.matching import TrackIndex, track_index_for
 from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.simulate import radar
 from fieldlogs.simulate.scenario import RadarIfCfg
+from tests.fresh import fresh_python
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -188,9 +187,7 @@ def test_match_xy_takes_numpy_for_few_fixes_and_the_kernel_for_many() -> None:
         "b = idx.match_xy(x, y)\n"
         "print(light, 'numba' in sys.modules, len(a) > 3000, a.equals(b))\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.split() == ["True", "True", "True", "True"]
+    assert fresh_python(code).split() == ["True", "True", "True", "True"]
 
 
 def test_numpy_matching_keeps_the_kernels_signed_zero() -> None:

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.fresh import fresh_python
+
 ROOT = Path(__file__).resolve().parents[1]
 #: Never imported by ``import cli.main`` nor by any ``--help``: everything that costs start-up
 #: time (numpy and pandas too: ``--help`` needs neither), and rich and pydantic for ``--help``.
@@ -65,11 +67,7 @@ def _top(modules: list[str], names: tuple[str, ...]) -> list[str]:
 
 @pytest.fixture(scope="module")
 def probe() -> dict[str, object]:
-    proc = subprocess.run(
-        [sys.executable, "-c", PROBE], cwd=ROOT, capture_output=True, text=True, check=False, timeout=300
-    )
-    assert proc.returncode == 0, proc.stderr
-    data: dict[str, object] = json.loads(proc.stdout)
+    data: dict[str, object] = json.loads(fresh_python(PROBE))
     return data
 
 
@@ -104,9 +102,7 @@ def test_a_command_still_imports_what_it_needs() -> None:
         "assert r.exit_code == 2 and \"did you mean 'gps'\" in r.output, r.output\n"
         "print(light, 'pandas' in sys.modules)\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.split() == ["True", "True"]
+    assert fresh_python(code).split() == ["True", "True"]
 
 
 def test_errors_still_map_to_exit_codes(tmp_path: Path) -> None:
@@ -154,12 +150,9 @@ def test_run_of_a_recorded_run_imports_neither_numba_nor_the_checkers(
     )
     out = tmp_path / "out"
     args = ["run", str(run_dir), "--db", str(sample_db), "--out", str(out)]
-    proc = subprocess.run(
-        [sys.executable, "-c", code, *args], cwd=ROOT, capture_output=True, text=True, check=False, timeout=300
-    )
-    assert proc.returncode == 0, proc.stderr
+    stdout = fresh_python(code, *args)
     assert (out / "positions.csv").stat().st_size > 1000
-    imported = set(json.loads(proc.stdout.strip().splitlines()[-1]))
+    imported = set(json.loads(stdout.strip().splitlines()[-1]))
     assert {"pandas", "pyarrow", "rich"} <= imported  # the probe sees the run's real imports
     assert sorted(imported & set(NOT_FOR_A_RUN)) == []
 

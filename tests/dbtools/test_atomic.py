@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 from cli.main import app
 from dbtools.atomic import MARKER, REGISTRY_FILE, atomic_file, atomic_folder, write_text
 from schemas.errors import RefusedError
+from tests.fresh import fresh_python
 
 
 def test_existing_output_needs_force(tmp_path: Path) -> None:
@@ -89,7 +90,7 @@ def test_outputs_honour_the_umask(tmp_path: Path) -> None:
         f"cm = atomic_folder(Path({str(tmp_path / 'dir')!r})); t = cm.__enter__(); (t / 'a').write_text('y'); "
         "cm.__exit__(None, None, None)"
     )
-    subprocess.run([sys.executable, "-c", code], check=True, cwd=Path(__file__).resolve().parents[2])
+    fresh_python(code)
     assert stat.S_IMODE((tmp_path / "f.txt").stat().st_mode) == 0o644
     assert stat.S_IMODE((tmp_path / "dir").stat().st_mode) == 0o755
     assert stat.S_IMODE((tmp_path / "dir" / "a").stat().st_mode) == 0o644

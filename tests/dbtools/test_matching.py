@@ -3,9 +3,6 @@ brute force (hypothesis), km/offset truth on the synthetic demo line, breaks, re
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pandas as pd
 import pytest
@@ -15,6 +12,7 @@ from hypothesis import strategies as st
 from dbtools.gis.geometry import Projector
 from dbtools.gis.matching import MATCH_COLUMNS, TrackIndex, track_index_for
 from dbtools.synthetic.network import TRACK_OFFSETS, build_network, demo_line
+from tests.fresh import fresh_python
 
 P = Projector(9)
 
@@ -249,5 +247,4 @@ def test_warm_up_loads_the_kernel_a_run_uses() -> None:
         "assert len(idx.match_xy(x, y)) > 0\n"
         "print(len(before), list(k.match_kernel.signatures) == before)\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=300)
-    assert out.stdout.split() == ["1", "True"]
+    assert fresh_python(code).split() == ["1", "True"]

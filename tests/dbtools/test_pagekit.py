@@ -4,14 +4,13 @@ page skeleton, and matplotlib imported only when a figure is drawn."""
 from __future__ import annotations
 
 import base64
-import subprocess
-import sys
 from html.parser import HTMLParser
 
 import numpy as np
 import pandas as pd
 
 from dbtools import pagekit as kit
+from tests.fresh import fresh_python
 
 
 class Cells(HTMLParser):
@@ -99,5 +98,4 @@ def test_matplotlib_is_imported_lazily() -> None:
         "import sys, dbtools.pagekit, fieldlogs.reports.page, fieldlogs.gisverify.page, fieldlogs.possession.page; "
         "print('matplotlib' in sys.modules)"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False"
+    assert fresh_python(code).strip() == "False"
