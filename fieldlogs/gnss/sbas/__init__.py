@@ -2,10 +2,11 @@
 
 * ``bits`` — bit fields and the CRC-24Q; ``tables`` — DO-229's look-up tables and IGP bands;
 * ``encode`` — an encoder written from the standard's tables (simulator and tests);
-* ``decode`` — MT 0, 1, 2–5, 6, 7, 10, 18, 24, 25, 26 → frames, vectorised per type;
+* ``decode`` — MT 0, 1, 2–7, 9, 10, 12, 17, 18, 24–28 → frames, vectorised per type;
 * ``messages`` — a ``gnss_sbas`` stream screened (length, PRN, preamble, CRC) and decoded;
 * ``clock_orbit`` — fast + long-term corrections and σ_flt per observation row;
 * ``grid`` — the ionospheric grid at the pierce point and σ_UIRE;
+* ``delta_udre`` — δUDRE of MT 27 (service regions) or MT 28 (covariance) in σ_flt;
 * ``geo_select`` — which GEO's complete set applies when several are logged;
 * ``simulate`` — a ``gnss_sbas`` stream consistent with a simulated run's errors.
 
@@ -26,6 +27,7 @@ import pandas as pd
 from fieldlogs.gnss.constants import BoolArray, FloatArray, StrArray
 from fieldlogs.gnss.corrections import RowCorrections, no_corrections
 from fieldlogs.gnss.sbas.clock_orbit import ClockOrbitTables
+from fieldlogs.gnss.sbas.delta_udre import DeltaUdre
 from fieldlogs.gnss.sbas.geo_select import NO_GEO, GeoInputs, GeoTimeline
 from fieldlogs.gnss.sbas.grid import IonoGrid
 from fieldlogs.gnss.sbas.messages import SbasMessages, read_geos, read_messages
@@ -38,10 +40,11 @@ class GeoSet:
     messages: SbasMessages
     clock_orbit: ClockOrbitTables
     grid: IonoGrid
+    delta_udre: DeltaUdre
 
     @classmethod
     def of(cls, msg: SbasMessages) -> GeoSet:
-        return cls(msg, ClockOrbitTables.build(msg), IonoGrid.build(msg))
+        return cls(msg, ClockOrbitTables.build(msg), IonoGrid.build(msg), DeltaUdre.build(msg))
 
 
 @dataclass
@@ -106,6 +109,10 @@ class SbasCorrections:
         tt = np.asarray(t, dtype=float)
         n = tt.size
         out = no_corrections(n)
+        out = RowCorrections(
+            out.present, out.prc_m, out.dpos_m, out.dclock_s, out.sigma_m, out.usable, out.covers_atmosphere,
+            np.full(n, np.nan), np.zeros(n, dtype=bool),
+        )  # fmt: skip
         geo = self.active(tt)
         counts: dict[str, int] = {"no_usable_geo": int((geo == NO_GEO).sum())}
         self.used = {}
@@ -115,7 +122,8 @@ class SbasCorrections:
             if not sel.size:
                 continue
             part, c = gs.clock_orbit.rows(s[sel], tt[sel], io[sel])
-            for name in ("present", "prc_m", "dpos_m", "dclock_s", "sigma_m", "usable", "covers_atmosphere"):
+            for name in ("present", "prc_m", "dpos_m", "dclock_s", "sigma_m", "usable", "covers_atmosphere",
+                         "udre_sigma_m", "udre_rss"):  # fmt: skip
                 getattr(out, name)[sel] = getattr(part, name)
             for k, v in c.items():
                 counts[k] = counts.get(k, 0) + v
@@ -125,6 +133,33 @@ class SbasCorrections:
         counts.setdefault("udrei_timed_out", 0)
         self.counts = counts
         return out
+
+    def flt_sigma(
+        self,
+        sigma_m: FloatArray,
+        udre_sigma_m: FloatArray,
+        rss: BoolArray,
+        sat: StrArray,
+        t: FloatArray,
+        lat_rad: FloatArray,
+        lon_rad: FloatArray,
+        los: FloatArray,
+    ) -> FloatArray:
+        """σ_flt of rows (flat) with δUDRE of the GEO in use (``delta_udre``): from σ_flt at
+        δUDRE = 1, σ_flt + σ_UDRE(δUDRE − 1), or √(σ²_flt + σ²_UDRE(δUDRE² − 1)) with RSS_UDRE."""
+        tt = np.asarray(t, dtype=float)
+        delta = np.ones(tt.size)
+        geo = self.active(tt)
+        lat, lon = np.degrees(np.asarray(lat_rad, dtype=float)), np.degrees(np.asarray(lon_rad, dtype=float))
+        s = np.asarray(sat, dtype=str)
+        for g, gs in self.geos.items():
+            sel = np.flatnonzero((geo == g) & np.isfinite(udre_sigma_m))
+            if sel.size and not gs.delta_udre.empty:
+                delta[sel] = gs.delta_udre.factor(s[sel], tt[sel], lat[sel], lon[sel], los[sel])
+        su = np.nan_to_num(np.asarray(udre_sigma_m, dtype=float), nan=0.0)
+        lin = sigma_m + su * (delta - 1.0)
+        root = np.sqrt(np.maximum(sigma_m**2 + su**2 * (delta**2 - 1.0), 0.0))
+        return np.asarray(np.where(rss, root, lin), dtype=float)
 
     def iono(
         self,

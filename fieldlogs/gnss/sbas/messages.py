@@ -34,7 +34,7 @@ from schemas.gnss import GNSS_SBAS, SBAS_PRN_RANGE
 
 #: Delay from a message's first symbol at the GEO to its last bit at the receiver, less a margin.
 RECEPTION_DELAY_S = 1.1
-DECODED_TYPES = (0, 1, 2, 3, 4, 5, 6, 7, 10, 18, 24, 25, 26)
+DECODED_TYPES = (0, 1, 2, 3, 4, 5, 6, 7, 9, 10, 12, 17, 18, 24, 25, 26, 27, 28)
 
 
 class SbasStreamError(InputError):
@@ -59,6 +59,11 @@ class SbasMessages:
     igp_mask: pd.DataFrame = field(default_factory=_empty)
     iono: pd.DataFrame = field(default_factory=_empty)
     mt0: pd.DataFrame = field(default_factory=_empty)
+    geo_nav: pd.DataFrame = field(default_factory=_empty)
+    network_time: pd.DataFrame = field(default_factory=_empty)
+    almanacs: pd.DataFrame = field(default_factory=_empty)
+    service: pd.DataFrame = field(default_factory=_empty)
+    covariance: pd.DataFrame = field(default_factory=_empty)
     dropped: Counter[str] = field(default_factory=Counter)
     """Rows dropped by reason (module docstring)."""
     not_decoded: Counter[int] = field(default_factory=Counter)
@@ -171,3 +176,10 @@ def _decode_all(out: SbasMessages, b: np.ndarray, t: np.ndarray, geo: np.ndarray
     bb, tt, gg, _ = part((26,))
     out.iono = d.decode_mt26(bb, tt, gg)
     out.mt0 = pd.DataFrame({"t_rx": t[mt == 0], "geo": geo[mt == 0]})
+    for name, k, fn in (
+        ("geo_nav", 9, d.decode_mt9), ("network_time", 12, d.decode_mt12), ("almanacs", 17, d.decode_mt17),
+        ("service", 27, d.decode_mt27), ("covariance", 28, d.decode_mt28),
+    ):  # fmt: skip
+        if (mt == k).any():
+            bb, tt, gg, _ = part((k,))
+            setattr(out, name, fn(bb, tt, gg))

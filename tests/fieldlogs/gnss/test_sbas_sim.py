@@ -138,3 +138,23 @@ def test_gnss_position_on_a_simulated_run_with_an_msas_stream(sample_db: Path, t
     s = errs["sbas"][1]
     assert s["prn"] == 137 and s["dropped"] == {} and s["rows"]["corrected"] > 0
     assert errs["sbas"][0] < errs["alone"][0]
+
+
+def test_an_mt27_delta_udre_widens_the_corrected_rows_sigma_only(case: Case) -> None:
+    from fieldlogs.gnss.sbas import encode as enc
+
+    spec, sim, corr, prior = case
+    t_rx = float(corr["gnss_time_s"].iloc[0]) - 0.5
+    mt27 = enc.mt27(0, 1, 1, 0, 4, 4, [])  # δUDRE 2 inside and outside: everywhere
+    extra = pd.DataFrame(
+        {"t": [float(corr["t"].iloc[0]) - 0.5], "gnss_time_s": [t_rx], "prn": [137], "msg_type": [27],
+         "message_hex": [mt27.hex().upper()], "valid": [1]}
+    )  # fmt: skip
+    with27 = pd.concat([extra, corr], ignore_index=True)
+    a = ex._solve(sim, sim.obs, spec, corr, prior).observations
+    b = ex._solve(sim, sim.obs, spec, with27, prior).observations
+    corrected = a.present & np.isfinite(a.corr_udre_m)
+    assert corrected.sum() > 1000
+    assert (b.sigma_m[corrected] > a.sigma_m[corrected] + 0.1).all()
+    other = a.present & ~corrected
+    np.testing.assert_array_equal(b.sigma_m[other], a.sigma_m[other])
