@@ -6,7 +6,10 @@
   of fast corrections [s] for en-route through non-precision approach (Table A-8, the column a
   train's use corresponds to);
 * message time-outs for en-route through non-precision approach (Table A-25);
-* the PRN mask's slot numbers (Table A-3: 1–37 GPS, 38–61 GLONASS slots, 120–158 SBAS);
+* the PRN mask's slot numbers (Table A-3: 1–37 GPS, 38–61 GLONASS slots, 120–158 SBAS; the
+  rest spare in DO-229, of which the QZSS interface specification for its L1 SBAS-type signals
+  (IS-QZSS L1-SAIF / L1S) assigns 193–202 to the QZSS satellites of PRN 193–202 (J01–J10) and
+  183–192 to their L1S signals as SBAS ranging sources, not used here);
 * the ionospheric grid points of bands 0–8 (Table A-14): 40° of longitude each, columns every
   5°; a column at an odd multiple of 5° holds the 23 latitudes −55…55 every 5°; the others add
   ±65, ±75, and 85° N where the longitude is a multiple of 90° (180° W, 90° W, 0°, 90° E) or
@@ -68,7 +71,8 @@ GRID_MAX_LAT_DEG: Final = 55.0
 
 def mask_slot_sat(slot_prn: IntArray) -> list[str]:
     """Satellite ids of PRN-mask bit numbers (1–210): G01–G37, R01–R24 (slots 38–61), S20–S58
-    for 120–158 (RINEX's SBAS numbering PRN − 100); others '' (not used)."""
+    for 120–158 (RINEX's SBAS numbering PRN − 100), J01–J10 for 193–202 (QZSS PRN − 192);
+    others '' (not used)."""
     out = []
     for p in np.asarray(slot_prn, dtype=np.int64).tolist():
         if 1 <= p <= 37:
@@ -77,6 +81,8 @@ def mask_slot_sat(slot_prn: IntArray) -> list[str]:
             out.append(f"R{p - 37:02d}")
         elif 120 <= p <= 158:
             out.append(f"S{p - 100:02d}")
+        elif 193 <= p <= 202:
+            out.append(f"J{p - 192:02d}")
         else:
             out.append("")
     return out

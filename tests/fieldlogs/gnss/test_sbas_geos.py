@@ -100,3 +100,26 @@ def test_a_pinned_prn_uses_that_geo_only() -> None:
     sb = SbasCorrections.from_stream(frame, prn=129)
     assert list(sb.geos) == [129]
     np.testing.assert_allclose(_rows(sb, T0 + np.array([20.0, 100.0])), [2.0, 2.0])
+
+
+def test_qzss_slots_of_the_mask_are_corrected_and_galileo_never() -> None:
+    from fieldlogs.gnss.sbas.tables import mask_slot_sat
+
+    assert mask_slot_sat(np.array([1, 37, 38, 61, 62, 120, 158, 183, 192, 193, 202, 203])) == [
+        "G01", "G37", "R01", "R24", "", "S20", "S58", "", "", "J01", "J10", ""]  # fmt: skip
+    lt = [enc.LongTerm(1, 7, 0.5, 0.0, 0.0, 0.0), enc.LongTerm(2, 40, -1.0, 0.0, 0.0, 0.0)]
+    msgs = [
+        (T0, enc.mt1([3, 193], 1)),  # slot 1 = G03, slot 2 = J01 (QZSS PRN 193)
+        (T0 + 1, enc.mt7(0, 1, [0, 0])),
+        (T0 + 2, enc.mt25((False, lt), (False, []), 1)),
+        (T0 + 3, enc.mt_fast(2, 1, 1, [1.5, -2.25], [0, 1])),
+    ]
+    frame = pd.DataFrame(
+        {"t": [t - T0 for t, _ in msgs], "gnss_time_s": [t + LAG for t, _ in msgs], "prn": 137,
+         "message_hex": [m.hex().upper() for _, m in msgs]}
+    )  # fmt: skip
+    sb = SbasCorrections.from_stream(frame)
+    out = sb.rows(np.array(["G03", "J01", "E05", "J02"]), np.full(4, T0 + 6.0), np.array([7.0, 40.0, 40.0, 40.0]))
+    assert out.present.tolist() == [True, True, False, False]
+    assert out.prc_m[1] == -2.25 and out.dpos_m[1].tolist() == [-1.0, 0.0, 0.0]
+    assert out.sigma_m[1] == pytest.approx(np.sqrt(0.0924) + 8.0)  # UDREI 1, no MT 10
