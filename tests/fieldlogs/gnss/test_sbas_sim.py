@@ -158,3 +158,33 @@ def test_an_mt27_delta_udre_widens_the_corrected_rows_sigma_only(case: Case) -> 
     assert (b.sigma_m[corrected] > a.sigma_m[corrected] + 0.1).all()
     other = a.present & ~corrected
     np.testing.assert_array_equal(b.sigma_m[other], a.sigma_m[other])
+
+
+def test_two_geos_switch_on_time_out_and_mt0_each_epoch_as_its_geo_alone(monkeypatch: pytest.MonkeyPatch) -> None:
+    spec = ex.CaseSpec(seed=5, sbas=True, two_geos=True)
+    _, _, _, corr, _ = ex._simulate(spec)
+    assert corr is not None and set(corr["prn"]) == {129, 137}
+    sb = SbasCorrections.from_stream(corr)
+    t_first = float(corr["gnss_time_s"].iloc[0]) - float(corr["t"].iloc[0])  # gnss time of run t = 0
+    at = sb.active(t_first + np.array([100.0, 210.0, 300.0, 420.0, 460.0, 550.0]))
+    assert at.tolist() == [137, 137, 129, 129, 137, 137] and sb.timeline.switches() == 2
+    two = ex.run_case(spec).epochs
+    real = ex._simulate
+    alone = {}
+    for prn in (137, 129):  # each GEO's own messages of the same stream, alone
+
+        def one_geo(sp: ex.CaseSpec, prn: int = prn) -> tuple:  # type: ignore[type-arg]
+            sim, t, s, both, prior = real(sp)
+            assert both is not None
+            return sim, t, s, both[both["prn"] == prn], prior
+
+        monkeypatch.setattr(ex, "_simulate", one_geo)
+        alone[prn] = ex.run_case(spec).epochs
+    t = two["t"].to_numpy() - two["t"].min()
+    # the clock-aided epochs coast the receiver clock over the epochs before, across a switch too
+    own = ~two["clock_aided"].to_numpy()
+    for prn, sel in ((137, (t < 200.0) | (t >= 450.0 + 1.125)), (129, (t >= 200.0 + 1.125 + 18.0) & (t < 450.0))):
+        sel = sel & own & ~alone[prn]["clock_aided"].to_numpy()
+        assert sel.sum() > 300
+        np.testing.assert_allclose(two["s_m"].to_numpy()[sel], alone[prn]["s_m"].to_numpy()[sel], atol=1e-6)
+    assert (two["available"] == alone[137]["available"]).all()
