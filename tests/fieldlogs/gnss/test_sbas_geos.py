@@ -123,3 +123,18 @@ def test_qzss_slots_of_the_mask_are_corrected_and_galileo_never() -> None:
     assert out.present.tolist() == [True, True, False, False]
     assert out.prc_m[1] == -2.25 and out.dpos_m[1].tolist() == [-1.0, 0.0, 0.0]
     assert out.sigma_m[1] == pytest.approx(np.sqrt(0.0924) + 8.0)  # UDREI 1, no MT 10
+
+
+def test_the_receiver_clock_is_not_coasted_across_a_geo_switch() -> None:
+    from types import SimpleNamespace
+    from typing import cast
+
+    from fieldlogs.gnss.observables import Epochs
+    from fieldlogs.gnss.position import clock_segments
+
+    frame = pd.concat([_geo(137, 1.0, 0, 60), _geo(137, 1.0, 80, 200), _geo(129, 2.0, 3, 200, mt0_at=130)])
+    sb = SbasCorrections.from_stream(frame)
+    ep = cast(Epochs, SimpleNamespace(receiver=np.array(["rx1", "rx2"] * 3), t=T0 + np.repeat([10.0, 100.0, 150.0], 2)))
+    seg = clock_segments(ep, sb)  # 137, then 129 (from 79 s), then 137 (from 131 s): three stretches
+    assert seg[0] != seg[1] and seg[0].startswith("rx1") and len({seg[0], seg[2], seg[4]}) == 3
+    assert clock_segments(ep, None).tolist() == ["rx1", "rx2"] * 3
