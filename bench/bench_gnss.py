@@ -5,7 +5,8 @@
     D-GPS-level corrections; then a faulty satellite (50 m step, 0.2 m/s ramp) from mid-run;
     and a multi-GNSS run through a mixed corridor (buildings, cuttings, overpasses, tunnels);
     and the paper case with broadcast orbit/clock errors in the truth, standalone and with the
-    simulated MSAS stream (``fieldlogs.gnss.sbas``: fast, long-term and grid corrections).
+    simulated MSAS stream (``fieldlogs.gnss.sbas``: fast, long-term and grid corrections), and
+    with two GEOs (PRN 137 silent 200–400 s, PRN 129's MT 0 at 450 s: ``experiment.two_geo_stream``).
     Printed: constrained availability (status ok + antenna-distance check) against the
     unconstrained one (≥ 4 satellites, PDOP ≤ 6), along-track error of the constrained epochs,
     the share of epochs outside the stated uncertainty, and the fault statistics.
@@ -49,6 +50,7 @@ ROWS: tuple[tuple[str, dict[str, object]], ...] = (
     ("GPS+Galileo+QZSS, west half + mixed corridor", {"systems": ("G", "E", "J"), "corridor": "mixed"}),
     ("paper + orbit/clock errors, standalone", {"sat_errors": True}),
     ("  same runs + MSAS stream (SBAS, orbit/clock)", {"sbas": True}),
+    ("  2 GEOs 137/129 switching (orbit/clock)", {"sbas": True, "two_geos": True}),
 )
 
 

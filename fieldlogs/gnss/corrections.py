@@ -60,6 +60,10 @@ class RowCorrections:
     sigma_m: FloatArray
     usable: BoolArray
     covers_atmosphere: BoolArray
+    udre_sigma_m: FloatArray | None = None
+    """SBAS: σ_UDRE of each corrected row (NaN elsewhere), for δUDRE (``sbas.delta_udre``)."""
+    udre_rss: BoolArray | None = None
+    """SBAS: σ_flt of the row is a root sum of squares (MT 10 RSS_UDRE = 1)."""
 
 
 def no_corrections(n: int) -> RowCorrections:

@@ -68,6 +68,8 @@ class CaseSpec:
     sbas: bool = False
     """Write an SBAS stream for the run (``fieldlogs.gnss.sbas.simulate``, with ``sat_errors``)
     and position with it."""
+    two_geos: bool = False
+    """With ``sbas``: two GEOs (``two_geo_stream``) instead of PRN 137 alone."""
 
 
 @dataclass
@@ -108,9 +110,36 @@ def _simulate(spec: CaseSpec) -> tuple[Simulated, np.ndarray, np.ndarray, pd.Dat
         from fieldlogs.gnss.sbas.simulate import sbas_stream
 
         corr = sbas_stream(sim, seed=spec.seed + 11, lead_s=120.0)
+        if spec.two_geos:
+            corr = two_geo_stream(corr, sbas_stream(sim, seed=spec.seed + 13, geo=129, lead_s=60.0))
     walk = np.cumsum(rng.normal(0.0, 0.05, s.size))
     prior = pd.DataFrame({"t": traj.t, "s_m": s + rng.normal(0.0, 1.5) + walk, "sigma_m": spec.prior_sigma_m})
     return sim, traj.t, s, corr, prior
+
+
+#: ``two_geo_stream``: PRN 137 silent over these run seconds, PRN 129's MT 0 at this one.
+SILENT_137_S = (200.0, 400.0)
+MT0_129_S = 450.0
+
+
+def two_geo_stream(s137: pd.DataFrame, s129: pd.DataFrame) -> pd.DataFrame:
+    """Both GEOs' streams (each with its own network error; 129's heard from 60 s before the
+    run, 137's from 120 s, so 137 is complete first and taken), PRN 137 silent over
+    ``SILENT_137_S`` and PRN 129's message at ``MT0_129_S`` replaced by an MT 0, in time order:
+    137 until it times out (18 s into the silence), then 129 (kept when 137 is back), then 137
+    again from 129's MT 0 (``sbas.geo_select``)."""
+    from fieldlogs.gnss.sbas import encode as enc
+
+    t = s137["t"].to_numpy(dtype=float)
+    a = s137[(t < SILENT_137_S[0]) | (t >= SILENT_137_S[1])]
+    b = s129.copy()
+    k = int(np.argmin(np.abs(b["t"].to_numpy(dtype=float) - MT0_129_S)))
+    pre = {0x53: 0, 0x9A: 1, 0xC6: 2}[bytes.fromhex(str(b["message_hex"].iloc[k]))[0]]
+    mt0 = enc.mt0(pre)  # the preamble of the message it replaces
+    b["msg_type"] = np.where(np.arange(len(b)) == k, 0, b["msg_type"].to_numpy())
+    b["message_hex"] = np.where(np.arange(len(b)) == k, mt0.hex().upper(), b["message_hex"].to_numpy(dtype=object))
+    out = pd.concat([a, b], ignore_index=True)
+    return out.sort_values(["gnss_time_s", "prn"], kind="stable").reset_index(drop=True)
 
 
 def _solve(

@@ -151,6 +151,9 @@ class Epochs:
     """Carrier-smoothing samples averaged per row (1: raw code)."""
     present: BoolArray
     flags: IntArray
+    corr_udre_m: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    """SBAS σ_UDRE of corrected rows (NaN elsewhere; empty without SBAS): δUDRE scales it."""
+    corr_udre_rss: BoolArray = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
     az: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     el: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     iono_m: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
@@ -243,10 +246,13 @@ def build_epochs(
         "smooth_n": df["smooth_n"].to_numpy(float) if "smooth_n" in df.columns else np.ones(sat.size),
         "flags": flags.astype(np.int64),
     }
+    if corr.udre_sigma_m is not None and corr.udre_rss is not None:
+        rows["corr_udre_m"] = corr.udre_sigma_m
+        rows["corr_udre_rss"] = corr.udre_rss
     return _to_epochs(df, rows)
 
 
-_FILL = {"sat": "", "system": "", "corr_atmosphere": False, "flags": 0}
+_FILL = {"sat": "", "system": "", "corr_atmosphere": False, "corr_udre_rss": False, "flags": 0}
 
 
 def _to_epochs(df: pd.DataFrame, rows: dict[str, np.ndarray]) -> Epochs:
@@ -306,6 +312,18 @@ def apply_geometry(
         cov = cov & ep.present & ~ep.corr_atmosphere
         iono = np.where(cov, grid_m, iono)
         iono_sigma = np.where(cov, grid_sigma, np.nan)
+    corr_sigma = ep.corr_sigma_m
+    if sbas is not None and not sbas.empty and ep.corr_udre_m.shape == ep.present.shape:
+        has = ep.present & np.isfinite(ep.corr_udre_m)
+        if has.any():
+            i, j = np.nonzero(has)
+            los = pos[i, j] - rx[i, 0]
+            los = los / np.linalg.norm(los, axis=1)[:, None]
+            corr_sigma = corr_sigma.copy()
+            corr_sigma[i, j] = sbas.flt_sigma(
+                ep.corr_sigma_m[i, j], ep.corr_udre_m[i, j], ep.corr_udre_rss[i, j], ep.sat[i, j], ep.t[i],
+                lat[i], lon[i], los,
+            )  # fmt: skip
     tropo = tropo_delay_m(lat_b, h_b, np.maximum(el, np.radians(1.0))) if apply_troposphere else np.zeros_like(el)
     atm = ep.corr_atmosphere
     iono = np.where(atm, 0.0, iono)
@@ -316,7 +334,7 @@ def apply_geometry(
         ep.cn0_dbhz,
         iono,
         ep.sv_acc_m,
-        ep.corr_sigma_m,
+        corr_sigma,
         ep.corr_atmosphere,
         ep.smooth_n,
         iono_sigma,

@@ -163,7 +163,7 @@ def position_run(
         ep = _geometry(replace_flags(ep), track, s1, iono, sky_mask, cfg, sbas)
         sol = _solve_receivers(ep, track, antennas, names, dirs, None, cfg, s_init=s1)
     if cfg.clock_coasting:
-        sol = _coast(ep, track, antennas, names, dirs, pr, cfg, sol)
+        sol = _coast(ep, track, antennas, names, dirs, pr, cfg, sol, sbas)
     table = _with_lsq(ep, sol.table, cfg)  # the classical receiver: masks and pre-checks, no FDE
     ep.flag(sol.excluded, FLAG_EXCLUDED)
     ep.flag(sol.no_track, FLAG_NO_TRACK_SOLUTION)
@@ -307,6 +307,23 @@ def _rms(residual_m: np.ndarray) -> np.ndarray:
     return np.where(n > 0, np.sqrt(ss / np.maximum(n, 1)), np.nan)
 
 
+def clock_segments(ep: Epochs, sbas: SbasCorrections | None) -> np.ndarray:
+    """The receiver of each epoch, made distinct per stretch of one GEO in use (or none): the
+    receiver clock solved with one GEO's corrections is not carried to epochs corrected by
+    another or by none, since each refers the satellite clocks to its own time
+    (``sbas.geo_select``)."""
+    rx = np.asarray(ep.receiver, dtype=str)
+    if sbas is None or sbas.empty:
+        return rx
+    from fieldlogs.gnss.sbas.geo_select import NO_GEO
+
+    tl = sbas.timeline
+    prev = np.concatenate([[NO_GEO], tl.prn[:-1]])
+    change = tl.t[tl.prn != prev]
+    seg = np.searchsorted(change, np.asarray(ep.t, dtype=float), side="right")
+    return np.char.add(np.char.add(rx, "#"), seg.astype(str))
+
+
 def _coast(
     ep: Epochs,
     track: TrackLine,
@@ -316,12 +333,14 @@ def _coast(
     prior: tuple[np.ndarray, np.ndarray] | None,
     cfg: PositionConfig,
     sol: _Solved,
+    sbas: SbasCorrections | None = None,
 ) -> _Solved:
     """Re-solve the epochs the satellites alone could not carry with a coasted clock
-    (``coasting``); keep the re-solved epochs that pass."""
+    (``coasting``); keep the re-solved epochs that pass. With SBAS the clock is coasted within
+    one stretch of the GEO in use only (``clock_segments``)."""
     ok = (sol.table["status_code"] == STATUS_OK).to_numpy()
     pred, sig = predict_clock(
-        ep.receiver, ep.t_run, sol.table["clock_m"].to_numpy(), sol.table["sigma_clock_m"].to_numpy(), ok
+        clock_segments(ep, sbas), ep.t_run, sol.table["clock_m"].to_numpy(), sol.table["sigma_clock_m"].to_numpy(), ok
     )
     redo = ~ok & np.isfinite(sig) & (ep.usable.sum(axis=1) >= 1)
     if not redo.any():

@@ -181,8 +181,10 @@ def position_report(
 
 
 def sbas_summary(sb: SbasCorrections) -> dict[str, Any]:
-    """The GEO used, its valid messages, the rows dropped by reason, the types not decoded and
-    the observation rows by outcome of the last solution (``sbas.clock_orbit``)."""
+    """The GEO used longest and its valid messages, the rows dropped by reason, the types not
+    decoded, the observation rows by outcome of the last solution (``sbas.clock_orbit``), and
+    per GEO its valid messages and the rows it corrected, with the switches between GEOs
+    (``sbas.geo_select``)."""
     m = sb.messages
     return {
         "prn": m.geo,
@@ -190,4 +192,8 @@ def sbas_summary(sb: SbasCorrections) -> dict[str, Any]:
         "dropped": dict(m.dropped),
         "not_decoded": {str(k): v for k, v in m.not_decoded.items()},
         "rows": dict(sb.counts),
+        "geos": {
+            str(g): {"messages": gs.messages.n_valid, "rows": sb.used.get(g, 0)} for g, gs in sorted(sb.geos.items())
+        },
+        "switches": sb.timeline.switches(),
     }

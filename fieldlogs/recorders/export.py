@@ -8,7 +8,10 @@ run's ``start_time`` where the gps stream has none). Files go to ``RUN/recorder/
 * ``ubx``: ``gnss.ubx`` from gps (NAV-PVT, NAV-HPPOSLLH, NAV-DOP) — with the run's gnss_obs
   (RXM-RAWX) and the GPS/QZSS (LNAV) and Galileo (I/NAV) rows of gnss_nav (RXM-SFRBX) when it
   has one receiver; with several receivers each gets its own ``<receiver>.ubx`` (RXM-RAWX,
-  RXM-SFRBX and the ionosphere page), as each receiver writes its own file;
+  RXM-SFRBX and the ionosphere page), as each receiver writes its own file; the run's
+  ``gnss_sbas`` messages go as RXM-SFRBX frames of gnssId 1 into the file with the
+  observations (the first receiver's of several: one import source per stream), since the
+  reader times an SBAS frame by the RXM-RAWX epoch after it;
 * ``rinex``: ``<receiver>.obs`` per receiver (RINEX 3.04) and ``nav.rnx`` — it needs
   gnss_obs (``trainpos simulate`` switches ``[gnss_raw]`` on for it).
 
@@ -98,16 +101,18 @@ def _write_ubx(
     gj = nav[nav["sat"].str[0].isin(["G", "J", "E"])] if nav is not None else None
     block = run.raw_json.get("gnss") or None
     receivers = sorted(obs["receiver"].astype(str).unique()) if obs is not None and len(obs) else []
+    sbas = run.stream("gnss_sbas") if receivers else None
     if len(receivers) <= 1:
-        ubx.write_ubx(tmp / "gnss.ubx", gps=gps, obs=obs, nav=gj, gnss=block)
+        ubx.write_ubx(tmp / "gnss.ubx", gps=gps, obs=obs, nav=gj, gnss=block, sbas=sbas)
         return ["gnss.ubx"]
     assert obs is not None
     names = []
     if gps is not None:
         ubx.write_ubx(tmp / "gnss.ubx", gps=gps)
         names.append("gnss.ubx")
-    for rec in receivers:
-        ubx.write_ubx(tmp / f"{rec}.ubx", obs=obs[obs["receiver"] == rec], nav=gj, gnss=block)
+    for k, rec in enumerate(receivers):
+        sb = sbas if k == 0 else None
+        ubx.write_ubx(tmp / f"{rec}.ubx", obs=obs[obs["receiver"] == rec], nav=gj, gnss=block, sbas=sb)
         names.append(f"{rec}.ubx")
     return names
 

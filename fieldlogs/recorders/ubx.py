@@ -482,6 +482,7 @@ def write_ubx(
     tacho: pd.DataFrame | None = None,
     esf_drift: float = 0.0,
     gnss: dict[str, Any] | None = None,
+    sbas: pd.DataFrame | None = None,
 ) -> int:
     """One UBX file from any of the frames (each with ``gnss_time_s``; ``nav`` G/J/E rows).
 
@@ -489,10 +490,12 @@ def write_ubx(
     NAV-PVT, as the reader's clock pairing expects. ESF time tags are ms of a recorder
     clock started at the first GNSS time and running ``1 + esf_drift`` times GNSS time.
     ``gnss`` (run.json's block: Klobuchar α/β, leap seconds, a GPUT correction) is sent as
-    GPS subframe 4 page 18 at the first epoch.
+    GPS subframe 4 page 18 at the first epoch. ``sbas`` (``gnss_sbas`` rows) become RXM-SFRBX
+    frames of gnssId 1, each before the epochs of its time (the reader times an SBAS frame by
+    the next RXM-RAWX epoch: ``ubx_raw._sbas_frame``).
     Returns the number of frames; the caller writes atomically."""
     from fieldlogs.recorders.ubx_esf import esf_frames
-    from fieldlogs.recorders.ubx_raw import iono_frames, rawx_frames, sfrbx_frames
+    from fieldlogs.recorders.ubx_raw import iono_frames, rawx_frames, sbas_sfrbx_frames, sfrbx_frames
 
     items: list[tuple[float, int, bytes]] = []
     starts = [float(x["gnss_time_s"].min()) for x in (gps, obs, imu, tacho) if x is not None and len(x)]
@@ -505,6 +508,8 @@ def write_ubx(
         items += [(g, 4, b) for g, b in sfrbx_frames(nav, ai)]
     if gnss and starts:
         items += [(g, 4, b) for g, b in iono_frames(gnss, min(starts))]
+    if sbas is not None and len(sbas):
+        items += [(g, 0, b) for g, b in sbas_sfrbx_frames(sbas)]
     if starts and ((imu is not None and len(imu)) or (tacho is not None and len(tacho))):
         items += [(g, 1, b) for g, b in esf_frames(imu, tacho, t_ref_gps=min(starts), drift=esf_drift)]
     items.sort(key=lambda x: (x[0], x[1]))

@@ -262,24 +262,36 @@ def read_sfrbx(path: Path, f: Frames, dec: Decoded, week_hint: int | None) -> No
 
 
 def _sbas_frame(f: Frames, found: list[tuple[int, int, list[int]]], dec: Decoded) -> None:
-    """SBAS SFRBX (gnssId 1, eight words: the 250 bits MSB first) → dec.frames['gnss_sbas'],
-    timed by the RAWX epoch before each frame (the receiver sends a message once received;
-    SFRBX carries no time). Screening and decoding are ``fieldlogs.gnss.sbas``'s."""
+    """SBAS SFRBX (gnssId 1, eight words: the 250 bits MSB first) → dec.frames['gnss_sbas'].
+
+    SFRBX carries no time: a frame is timed by the first RXM-RAWX epoch after it in the file.
+    The receiver sends a message once it has received it, before the epoch that follows, so
+    that epoch's time is an upper bound of the reception (a correction is never used before it
+    was received). With 1 Hz epochs on whole seconds a message of time of applicability T,
+    received at T + 1.12…1.14 s, gets the epoch T + 2 s and ``messages``' t_of = ⌊t − 1.1⌋ = T
+    (the epoch before, T + 1 s, would give T − 1). Frames after the last epoch are skipped and
+    counted. Screening and decoding are ``fieldlogs.gnss.sbas``'s."""
     rawx = f.of((0x02, 0x15))
     if not len(rawx):
         dec.skipped["SFRBX SBAS messages without an RXM-RAWX epoch to time them"] += len(found)
         return
     head = f.fixed(rawx, RAWX_HEAD)
     t_ep = head["week"].astype(np.float64) * 604_800.0 + head["rcvTow"]
-    at = np.maximum(np.searchsorted(rawx, [i for i, _, _ in found], side="right") - 1, 0)
-    hexes = [np.array(w, dtype=">u4").tobytes().hex().upper() for _, _, w in found]
+    at = np.searchsorted(rawx, [i for i, _, _ in found], side="right")
+    late = at >= len(rawx)
+    if late.any():
+        dec.skipped["SFRBX SBAS messages after the last RXM-RAWX epoch (no epoch to time them)"] += int(late.sum())
+    keep = [x for x, bad in zip(found, late.tolist(), strict=True) if not bad]
+    if not keep:
+        return
+    hexes = [np.array(w, dtype=">u4").tobytes().hex().upper() for _, _, w in keep]
     dec.frames["gnss_sbas"] = pd.DataFrame(
         {
-            "gnss_time_s": t_ep[at],
-            "prn": np.array([sv for _, sv, _ in found], dtype=np.int64),
-            "msg_type": np.array([(w[0] >> 18) & 0x3F for _, _, w in found], dtype=np.int64),
+            "gnss_time_s": t_ep[at[~late]],
+            "prn": np.array([sv for _, sv, _ in keep], dtype=np.int64),
+            "msg_type": np.array([(w[0] >> 18) & 0x3F for _, _, w in keep], dtype=np.int64),
             "message_hex": hexes,
-            "valid": pd.array([None] * len(found), dtype="Int64"),
+            "valid": pd.array([None] * len(keep), dtype="Int64"),
         }
     )
 
@@ -334,7 +346,9 @@ def _sfrbx(gnss: int, sv: int, words: list[int], sig: int = 0) -> bytes:
 
 
 def sbas_sfrbx_frames(sbas: pd.DataFrame) -> list[tuple[float, bytes]]:
-    """(GPS time, RXM-SFRBX frame) of each ``gnss_sbas`` row: the 64 hex digits as eight words."""
+    """(GPS time of reception, RXM-SFRBX frame) of each ``gnss_sbas`` row: gnssId 1, svId the
+    SBAS PRN, the 64 hex digits as eight words (bits 250–255 zero). Written before any RXM-RAWX
+    epoch of the same or a later time, the reader times it by that epoch (``_sbas_frame``)."""
     out = []
     for t, prn, hx in zip(sbas["gnss_time_s"], sbas["prn"], sbas["message_hex"], strict=True):
         words = np.frombuffer(bytes.fromhex(str(hx).ljust(64, "0")), dtype=">u4").astype(np.int64).tolist()

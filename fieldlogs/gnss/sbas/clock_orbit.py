@@ -20,7 +20,9 @@ resolves through the MT 1 mask of their IODP, received before them):
 * MT 0 voids everything the GEO sent before it.
 
 Error model (§A.4.5.1): σ²_flt = (σ_UDRE·δUDRE + ε_fc + ε_rrc + ε_ltc + ε_er)² (or the sum of
-squares when MT 10's RSS_UDRE = 1), δUDRE = 1 (MT 27/28 not decoded), ε_fc = a(t − t_u +
+squares when MT 10's RSS_UDRE = 1), δUDRE = 1 here — the location-specific δUDRE of MT 27/28
+needs the user's position and line of sight, so ``delta_udre`` scales σ_UDRE once the geometry
+is known (``observables.apply_geometry``) —, ε_fc = a(t − t_u +
 t_lat)²/2 with t_u the time of applicability of the UDREI, ε_rrc = (a·I_fc/4 + B_rrc/Δt)(t − t_of)
 for successive IODFs and (a·|Δt − I_fc/2|/2 + B_rrc/Δt)(t − t_of) where either is 3 (0 with
 a = 0 or no RRC), ε_ltc = C_ltc_v0·⌊(t − t_ltc)/I_ltc_v0⌋ (code 0) or 0 inside [t₀, t₀ + I_ltc_v1]
@@ -249,6 +251,8 @@ def _combine(
         sigma_m=np.where(present, sigma, np.nan),
         usable=~refused,
         covers_atmosphere=np.zeros(n, dtype=bool),
+        udre_sigma_m=np.where(present, sig_udre, np.nan),
+        udre_rss=np.asarray(present & has10 & rss, dtype=bool),
     )
     counts = {
         "corrected": int(present.sum()),

@@ -19,12 +19,13 @@ slot (mask slot, IGP position) in SI units:
 * MT 18 → ``igp_mask`` (t_rx, geo, iodi, band, n_bands, igp 1…201, order 0…: position among
   the band's set bits);
 * MT 26 → ``iono`` (t_rx, geo, iodi, band, order = 15·block + position, delay_code, givei);
-* MT 0 → ``mt0`` (t_rx, geo): "do not use this SBAS".
+* MT 0 → ``mt0`` (t_rx, geo): "do not use this SBAS";
+* MT 9 → ``geo_nav``, MT 12 → ``network_time``, MT 17 → ``almanacs``, MT 27 → ``service``
+  (δUDRE regions), MT 28 → ``covariance`` (each decoder's docstring; the layouts are
+  ``encode``'s).
 
-Not decoded (counted as such by the stream reader): MT 9 (GEO navigation: the GEO is not
-used for ranging), MT 12 (SBAS network time/UTC), MT 17 (GEO almanacs), MT 27/28 (δUDRE
-regions and the clock-ephemeris covariance: δUDRE = 1, as DO-229 §A.4.5.1 prescribes
-without them), MT 62/63 (internal test, null).
+Not decoded (counted as such by the stream reader): MT 62/63 (internal test, null) and the
+types DO-229 leaves spare.
 """
 
 from __future__ import annotations
@@ -188,3 +189,95 @@ def decode_mt26(bits: Bits, t_rx: FloatArray, geo: IntArray) -> pd.DataFrame:
     order = block[:, None] * 15 + np.arange(15)[None, :]
     base = {"t_rx": t_rx, "geo": geo, "band": band, "iodi": getbitu(bits, 217, 2)}
     return _long(base, {"order": order, "delay_code": delay, "givei": givei})
+
+
+#: MT 9 fields after the 8 reserved bits: (name, bits, LSB, signed).
+MT9_FIELDS = (
+    ("t0_sod_s", 13, 16.0, False), ("ura", 4, 1.0, False), ("x_m", 30, 0.08, True), ("y_m", 30, 0.08, True),
+    ("z_m", 25, 0.4, True), ("vx_mps", 17, 0.000625, True), ("vy_mps", 17, 0.000625, True),
+    ("vz_mps", 18, 0.004, True), ("ax_mps2", 10, 0.0000125, True), ("ay_mps2", 10, 0.0000125, True),
+    ("az_mps2", 10, 0.0000625, True), ("af0_s", 12, 2.0**-31, True), ("af1_sps", 8, 2.0**-40, True),
+)  # fmt: skip
+#: MT 12 fields: (name, bits, LSB, signed).
+MT12_FIELDS = (
+    ("a1_sps", 24, 2.0**-50, True), ("a0_s", 32, 2.0**-30, True), ("t0t_s", 8, 4096.0, False),
+    ("wn_t", 8, 1.0, False), ("dt_ls", 8, 1.0, True), ("wn_lsf", 8, 1.0, False), ("dn", 8, 1.0, False),
+    ("dt_lsf", 8, 1.0, True), ("utc_id", 3, 1.0, False), ("gps_tow_s", 20, 1.0, False),
+    ("gps_week", 10, 1.0, False), ("glonass", 1, 1.0, False), ("glonass_da_s", 24, 2.0**-31, True),
+)  # fmt: skip
+
+
+def _fields(bits: Bits, start: int, spec: tuple[tuple[str, int, float, bool], ...]) -> dict[str, np.ndarray]:
+    out: dict[str, np.ndarray] = {}
+    pos = start
+    for name, n, lsb, signed in spec:
+        out[name] = (getbits if signed else getbitu)(bits, pos, n) * lsb
+        pos += n
+    return out
+
+
+def decode_mt9(bits: Bits, t_rx: FloatArray, geo: IntArray) -> pd.DataFrame:
+    """MT 9 → ``geo_nav`` (t_rx, geo and the fields of ``encode.GeoNav``)."""
+    return pd.DataFrame({"t_rx": t_rx, "geo": geo, **_fields(bits, 22, MT9_FIELDS)})
+
+
+def decode_mt12(bits: Bits, t_rx: FloatArray, geo: IntArray) -> pd.DataFrame:
+    """MT 12 → ``network_time`` (t_rx, geo and the fields of ``encode.NetworkTime``)."""
+    return pd.DataFrame({"t_rx": t_rx, "geo": geo, **_fields(bits, 14, MT12_FIELDS)})
+
+
+def decode_mt17(bits: Bits, t_rx: FloatArray, geo: IntArray) -> pd.DataFrame:
+    """MT 17 → ``almanacs``: one row per almanac with a PRN (t_rx, geo, t0_sod_s, data_id, prn,
+    health, x_m … vz_mps)."""
+    names = ("data_id", "prn", "health", "x_m", "y_m", "z_m", "vx_mps", "vy_mps", "vz_mps")
+    per: dict[str, np.ndarray] = {c: np.zeros((bits.shape[0], 3)) for c in names}
+    spec = (("data_id", 2, 1.0, False), ("prn", 8, 1.0, False), ("health", 8, 1.0, False), ("x_m", 15, 2600.0, True),
+            ("y_m", 15, 2600.0, True), ("z_m", 9, 26000.0, True), ("vx_mps", 3, 10.0, True), ("vy_mps", 3, 10.0, True),
+            ("vz_mps", 4, 60.0, True))  # fmt: skip
+    for k in range(3):
+        for c, v in _fields(bits, 14 + 67 * k, spec).items():
+            per[c][:, k] = v
+    base = {"t_rx": t_rx, "geo": geo, "t0_sod_s": getbitu(bits, 215, 11) * 64.0}
+    return _long(base, per, keep=per["prn"] > 0)
+
+
+def decode_mt27(bits: Bits, t_rx: FloatArray, geo: IntArray) -> pd.DataFrame:
+    """MT 27 → ``service``: one row per message and region (t_rx, geo, iods, n_messages, number,
+    n_regions, priority, inside, outside — the δUDRE indicators — region 0…, lat1, lon1, lat2,
+    lon2 [deg], square); a message without a region gives one row with region −1."""
+    head = {
+        "t_rx": t_rx, "geo": geo, "iods": getbitu(bits, 14, 3), "n_messages": getbitu(bits, 17, 3) + 1,
+        "number": getbitu(bits, 20, 3) + 1, "n_regions": getbitu(bits, 23, 3), "priority": getbitu(bits, 26, 2),
+        "inside": getbitu(bits, 28, 4), "outside": getbitu(bits, 32, 4),
+    }  # fmt: skip
+    n = bits.shape[0]
+    per: dict[str, np.ndarray] = {
+        c: np.zeros((n, 5), dtype=np.int64) for c in ("lat1", "lon1", "lat2", "lon2", "square")
+    }
+    for k in range(5):
+        p = 36 + 35 * k
+        per["lat1"][:, k], per["lon1"][:, k] = getbits(bits, p, 8), getbits(bits, p + 8, 9)
+        per["lat2"][:, k], per["lon2"][:, k] = getbits(bits, p + 17, 8), getbits(bits, p + 25, 9)
+        per["square"][:, k] = getbitu(bits, p + 34, 1)
+    region = np.broadcast_to(np.arange(5), (n, 5))
+    keep = region < head["n_regions"][:, None]
+    per["region"] = np.where(keep, region, -1)
+    keep = keep | ((head["n_regions"] == 0)[:, None] & (region == 0))
+    out = _long(head, per, keep=keep)
+    return out.assign(square=out["square"].astype(bool))
+
+
+def decode_mt28(bits: Bits, t_rx: FloatArray, geo: IntArray) -> pd.DataFrame:
+    """MT 28 → ``covariance``: one row per satellite with a mask slot (t_rx, geo, iodp, slot,
+    scale_exponent, e11 … e34 as integers)."""
+    n = bits.shape[0]
+    names = ("e11", "e22", "e33", "e44", "e12", "e13", "e14", "e23", "e24", "e34")
+    per: dict[str, np.ndarray] = {c: np.zeros((n, 2), dtype=np.int64) for c in ("slot", "scale_exponent", *names)}
+    for k in range(2):
+        p = 16 + 105 * k
+        per["slot"][:, k], per["scale_exponent"][:, k] = getbitu(bits, p, 6), getbitu(bits, p + 6, 3)
+        for j, c in enumerate(names[:4]):
+            per[c][:, k] = getbitu(bits, p + 9 + 9 * j, 9)
+        for j, c in enumerate(names[4:]):
+            per[c][:, k] = getbits(bits, p + 45 + 10 * j, 10)
+    return _long({"t_rx": t_rx, "geo": geo, "iodp": getbitu(bits, 14, 2)}, per, keep=per["slot"] > 0)

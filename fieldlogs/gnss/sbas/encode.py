@@ -24,7 +24,10 @@ Field layouts, MSB first after the 8-bit preamble and 6-bit message type (212 da
   δẋ δẏ δż 8 each (2⁻¹¹ m/s), δaf1 8 (2⁻³⁹ s/s), t₀ 13 (16 s, seconds of the GPS day), IODP 2;
 * MT 26 (Table A-16): band 4, block ID 4, 15 × {IGP vertical delay 9 (0.125 m), GIVEI 4},
   IODI 2, spare 7;
-* MT 0: 212 zero bits ("do not use this SBAS", test mode).
+* MT 0: 212 zero bits ("do not use this SBAS", test mode);
+* MT 9 (GEO navigation), MT 12 (network time/UTC), MT 17 (GEO almanacs), MT 27 (δUDRE service
+  regions) and MT 28 (clock-ephemeris covariance): the layouts in the docstrings of ``mt9``,
+  ``mt12``, ``mt17``, ``mt27`` and ``mt28`` (212 bits each, spares zero).
 """
 
 from __future__ import annotations
@@ -206,3 +209,164 @@ def mt24(
 
 def mt0(preamble: int = 0) -> bytes:
     return pack(0, [], preamble)
+
+
+@dataclass(frozen=True)
+class GeoNav:
+    """MT 9 GEO navigation message in SI units (ECEF WGS-84)."""
+
+    t0_sod_s: float
+    """Time of applicability, seconds of the GPS day (multiple of 16)."""
+    ura: int
+    x_m: float
+    y_m: float
+    z_m: float
+    vx_mps: float
+    vy_mps: float
+    vz_mps: float
+    ax_mps2: float
+    ay_mps2: float
+    az_mps2: float
+    af0_s: float
+    af1_sps: float
+
+
+def mt9(p: GeoNav, preamble: int = 0) -> bytes:
+    """MT 9: reserved 8, t₀ 13 (16 s), URA 4, X Y 30 (0.08 m), Z 25 (0.4 m), Ẋ Ẏ 17 (0.000625 m/s),
+    Ż 18 (0.004 m/s), Ẍ Ÿ 10 (0.0000125 m/s²), Z̈ 10 (0.0000625 m/s²), a_Gf0 12 (2⁻³¹ s),
+    a_Gf1 8 (2⁻⁴⁰ s/s)."""
+    fields = [
+        (0, 8), (q(p.t0_sod_s, 16.0), 13), (p.ura, 4), (q(p.x_m, 0.08), 30), (q(p.y_m, 0.08), 30),
+        (q(p.z_m, 0.4), 25), (q(p.vx_mps, 0.000625), 17), (q(p.vy_mps, 0.000625), 17), (q(p.vz_mps, 0.004), 18),
+        (q(p.ax_mps2, 0.0000125), 10), (q(p.ay_mps2, 0.0000125), 10), (q(p.az_mps2, 0.0000625), 10),
+        (q(p.af0_s, 2.0**-31), 12), (q(p.af1_sps, 2.0**-40), 8),
+    ]  # fmt: skip
+    return pack(9, fields, preamble)
+
+
+@dataclass(frozen=True)
+class NetworkTime:
+    """MT 12 SBAS network time / UTC parameters."""
+
+    a1_sps: float
+    a0_s: float
+    t0t_s: int
+    wn_t: int
+    dt_ls: int
+    wn_lsf: int
+    dn: int
+    dt_lsf: int
+    utc_id: int
+    gps_tow_s: int
+    gps_week: int
+    glonass: int = 0
+    glonass_da_s: float = 0.0
+
+
+def mt12(p: NetworkTime, preamble: int = 0) -> bytes:
+    """MT 12: A1 24 (2⁻⁵⁰ s/s), A0 32 (2⁻³⁰ s), t₀t 8 (2¹² s), WN_t 8, Δt_LS 8, WN_LSF 8, DN 8,
+    Δt_LSF 8, UTC standard identifier 3, GPS TOW 20 (1 s), GPS week 10, GLONASS indicator 1,
+    δa_i,GLONASS 24 (2⁻³¹ s), spare 50."""
+    fields = [
+        (q(p.a1_sps, 2.0**-50), 24), (q(p.a0_s, 2.0**-30), 32), (p.t0t_s // 4096, 8), (p.wn_t, 8), (p.dt_ls, 8),
+        (p.wn_lsf, 8), (p.dn, 8), (p.dt_lsf, 8), (p.utc_id, 3), (p.gps_tow_s, 20), (p.gps_week, 10),
+        (p.glonass, 1), (q(p.glonass_da_s, 2.0**-31), 24),
+    ]  # fmt: skip
+    return pack(12, fields, preamble)
+
+
+@dataclass(frozen=True)
+class GeoAlmanac:
+    """One GEO almanac of MT 17."""
+
+    prn: int
+    health: int
+    x_m: float
+    y_m: float
+    z_m: float
+    vx_mps: float
+    vy_mps: float
+    vz_mps: float
+    data_id: int = 0
+
+
+def mt17(almanacs: Sequence[GeoAlmanac], t0_sod_s: float, preamble: int = 0) -> bytes:
+    """MT 17: three almanacs {data ID 2, PRN 8, health and status 8, X Y 15 (2600 m), Z 9
+    (26000 m), Ẋ Ẏ 3 (10 m/s), Ż 4 (60 m/s)} (an unused one all zero), t₀ 11 (64 s)."""
+    fields: list[tuple[int, int]] = []
+    for k in range(3):
+        if k < len(almanacs):
+            a = almanacs[k]
+            fields += [
+                (a.data_id, 2), (a.prn, 8), (a.health, 8), (q(a.x_m, 2600.0), 15), (q(a.y_m, 2600.0), 15),
+                (q(a.z_m, 26000.0), 9), (q(a.vx_mps, 10.0), 3), (q(a.vy_mps, 10.0), 3), (q(a.vz_mps, 60.0), 4),
+            ]  # fmt: skip
+        else:
+            fields += [(0, 2), (0, 8), (0, 8), (0, 15), (0, 15), (0, 9), (0, 3), (0, 3), (0, 4)]
+    return pack(17, [*fields, (q(t0_sod_s, 64.0), 11)], preamble)
+
+
+@dataclass(frozen=True)
+class Region:
+    """An MT 27 service region: corners 1 (lat1, lon1) and 2 (lat2, lon2) [deg]; corner 3 is
+    (lat1, lon2), corner 4 (square only) (lat2, lon1)."""
+
+    lat1: int
+    lon1: int
+    lat2: int
+    lon2: int
+    square: bool
+
+
+def mt27(
+    iods: int,
+    n_messages: int,
+    number: int,
+    priority: int,
+    inside: int,
+    outside: int,
+    regions: Sequence[Region],
+    preamble: int = 0,
+) -> bytes:
+    """MT 27: IODS 3, number of service messages 3 (count − 1), service message number 3
+    (number − 1), number of regions 3, priority code 2, δUDRE indicator inside 4 and outside 4,
+    five regions {lat1 8, lon1 9, lat2 8, lon2 9 (1°, signed), shape 1 (1 square)}, spare 15."""
+    fields = [(iods, 3), (n_messages - 1, 3), (number - 1, 3), (len(regions), 3), (priority, 2), (inside, 4),
+              (outside, 4)]  # fmt: skip
+    for k in range(5):
+        r = regions[k] if k < len(regions) else Region(0, 0, 0, 0, False)
+        fields += [(r.lat1, 8), (r.lon1, 9), (r.lat2, 8), (r.lon2, 9), (1 if r.square else 0, 1)]
+    return pack(27, fields, preamble)
+
+
+@dataclass(frozen=True)
+class Covariance:
+    """One satellite of MT 28: the upper-triangular Cholesky factor R of its clock-ephemeris
+    covariance C = RᵀR, elements E_ij (integers) scaled by 2^(scale_exponent − 5) [m]."""
+
+    slot: int
+    scale_exponent: int
+    e11: int
+    e22: int
+    e33: int
+    e44: int
+    e12: int
+    e13: int
+    e14: int
+    e23: int
+    e24: int
+    e34: int
+
+
+def mt28(iodp: int, sats: Sequence[Covariance], preamble: int = 0) -> bytes:
+    """MT 28: IODP 2, two satellites {PRN-mask number 6, scale exponent 3, E11 E22 E33 E44 9
+    each (unsigned), E12 E13 E14 E23 E24 E34 10 each (signed)} (an unused one all zero)."""
+    fields = [(iodp, 2)]
+    for k in range(2):
+        if k < len(sats):
+            c = sats[k]
+            fields += [(c.slot, 6), (c.scale_exponent, 3), (c.e11, 9), (c.e22, 9), (c.e33, 9), (c.e44, 9),
+                       (c.e12, 10), (c.e13, 10), (c.e14, 10), (c.e23, 10), (c.e24, 10), (c.e34, 10)]  # fmt: skip
+        else:
+            fields += [(0, 6), (0, 3), *[(0, 9)] * 4, *[(0, 10)] * 6]
+    return pack(28, fields, preamble)

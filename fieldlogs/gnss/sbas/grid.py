@@ -8,20 +8,25 @@ is at most 600 s old (Table A-25), not "do not use" and its GIVEI not 15 (not mo
 Pierce point (§A.4.4.10.1), R_e = 6378.1363 km, h_I = 350 km, user at (φ_u, λ_u), satellite at
 azimuth A and elevation E:
 ψ_pp = π/2 − E − asin(R_e cos E/(R_e + h_I)); φ_pp = asin(sin φ_u cos ψ_pp + cos φ_u sin ψ_pp cos A);
-λ_pp = λ_u + asin(sin ψ_pp sin A/cos φ_pp) (the polar branch for |φ_u| > 70° is not needed
-below 55°). Obliquity F_pp = [1 − (R_e cos E/(R_e + h_I))²]^(−1/2).
+λ_pp = λ_u + asin(sin ψ_pp sin A/cos φ_pp), or λ_u + π − asin(…) when the pierce point lies
+beyond the pole (φ_u > 70° and tan ψ_pp cos A > tan(π/2 − φ_u), or φ_u < −70° and
+−tan ψ_pp cos A > tan(π/2 + φ_u)). Obliquity F_pp = [1 − (R_e cos E/(R_e + h_I))²]^(−1/2).
 
-Interpolation (§A.4.4.10.2–3): the 5° × 5° cell around the pierce point if its four IGPs are
-available — x = (λ_pp − λ₁)/5°, y = (φ_pp − φ₁)/5° from its south-west corner, weights
+Interpolation (§A.4.4.10.2–3): up to 60° of latitude, the 5° × 5° cell around the pierce point
+if its four IGPs are available — x = (λ_pp − λ₁)/5°, y = (φ_pp − φ₁)/5° from its south-west corner, weights
 (1 − x)(1 − y), x(1 − y), xy, (1 − x)y; with exactly three available and the pierce point inside
 their triangle, the three-point form W = 1 − x' − y' at the right-angle corner and x', y' at its
 neighbours along longitude and latitude (x', y' measured from that corner); else the same on
-the 10° × 10° cell; else no SBAS ionosphere (the broadcast model stays). Delay
+the 10° × 10° cell; between 60° and 75° (N or S) the same on the 5° (latitude) × 10°
+(longitude) cell, x = (λ_pp − λ₁)/10°, y = (φ_pp − φ₁)/5° (the IGPs there are 10° apart in
+longitude but for the 60° row of bands 9–10); else no SBAS ionosphere (the broadcast model
+stays). Above 75° (the polar interpolation between the 85° IGPs 90° apart of §A.4.4.10.3) the
+grid is not used: the broadcast model and its σ stay there. Delay
 τ_pp = Σ Wₙ τ_v,n; slant delay on L1 F_pp·τ_pp, on another frequency × (f_L1/f)².
 σ²_UIVE = Σ Wₙ σ²_ionogrid,n, σ²_ionogrid = (σ_GIVE + ε_iono)² (MT 10 RSS_iono = 0) or
 σ²_GIVE + ε²_iono (1), ε_iono = C_iono_step⌊(t − t_iono)/I_iono⌋ + C_iono_ramp(t − t_iono), t_iono the
 MT 26's time of applicability; ε_iono = 0 without MT 10. σ_UIRE = F_pp·σ_UIVE.
-Only |φ_pp| ≤ 55° is used (``tables`` docstring: bands 9–10 are not located).
+Only |φ_pp| ≤ 75° is used (``tables.GRID_MAX_LAT_DEG``).
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ from fieldlogs.gnss.sbas.messages import RECEPTION_DELAY_S, SbasMessages
 from fieldlogs.gnss.sbas.tables import (
     GIVEI_NOT_MONITORED,
     GRID_MAX_LAT_DEG,
+    GRID_WIDE_CELL_LAT_DEG,
     IGP_DO_NOT_USE,
     SIGMA2_GIVE_M2,
     TIMEOUT_S,
@@ -58,7 +64,11 @@ def pierce_point(
     c = R_E_M * np.cos(el) / (R_E_M + H_I_M)
     psi = np.pi / 2.0 - el - np.arcsin(c)
     lat_pp = np.arcsin(np.sin(lat) * np.cos(psi) + np.cos(lat) * np.sin(psi) * np.cos(az))
-    lon_pp = np.asarray(lon_rad, dtype=float) + np.arcsin(np.sin(psi) * np.sin(az) / np.cos(lat_pp))
+    arc = np.arcsin(np.sin(psi) * np.sin(az) / np.cos(lat_pp))
+    over = ((lat > np.radians(70.0)) & (np.tan(psi) * np.cos(az) > np.tan(np.pi / 2.0 - lat))) | (
+        (lat < -np.radians(70.0)) & (-np.tan(psi) * np.cos(az) > np.tan(np.pi / 2.0 + lat))
+    )  # the pierce point is beyond the pole
+    lon_pp = np.asarray(lon_rad, dtype=float) + np.where(over, np.pi - arc, arc)
     return lat_pp, lon_pp, 1.0 / np.sqrt(1.0 - c * c)
 
 
@@ -136,16 +146,18 @@ class IonoGrid:
         return np.where(fresh, eps, 0.0), bool(np.any(fresh & (cols["rss_iono"] == 1.0)))
 
     def _cell(
-        self, lat: FloatArray, lon: FloatArray, t: FloatArray, step: float
+        self, lat: FloatArray, lon: FloatArray, t: FloatArray, step: float, step_lon: float | None = None
     ) -> tuple[BoolArray, FloatArray, FloatArray]:
-        """Interpolation on the step° cell around each pierce point [deg] (module docstring)."""
-        la0, lo0 = np.floor(lat / step) * step, np.floor(lon / step) * step
-        x, y = (lon - lo0) / step, (lat - la0) / step
+        """Interpolation on the step° (latitude) × step_lon° (longitude, default step) cell around
+        each pierce point [deg] (module docstring)."""
+        d_lon = step if step_lon is None else step_lon
+        la0, lo0 = np.floor(lat / step) * step, np.floor(lon / d_lon) * d_lon
+        x, y = (lon - lo0) / d_lon, (lat - la0) / step
         corners = ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0))  # SW, SE, NE, NW as (dx, dy)
         ok = np.zeros((lat.size, 4), dtype=bool)
         tau, s2 = np.zeros((lat.size, 4)), np.zeros((lat.size, 4))
         for k, (dx, dy) in enumerate(corners):
-            key = igp_key(np.round(la0 + dy * step).astype(np.int64), np.round(lo0 + dx * step).astype(np.int64))
+            key = igp_key(np.round(la0 + dy * step).astype(np.int64), np.round(lo0 + dx * d_lon).astype(np.int64))
             a, d, v, ti = self._lookup(key, t)
             eps, rss = self._eps(t, ti)
             sg = np.sqrt(np.nan_to_num(v, nan=0.0))
@@ -187,11 +199,15 @@ class IonoGrid:
         lat_d = np.degrees(lat_pp)
         lon_d = np.mod(np.degrees(lon_pp) + 180.0, 360.0) - 180.0
         inside = np.abs(lat_d) <= GRID_MAX_LAT_DEG
+        wide = np.abs(lat_d) > GRID_WIDE_CELL_LAT_DEG
         cov5, tau5, s5 = self._cell(lat_d, lon_d, b[4], 5.0)
         cov10, tau10, s10 = self._cell(lat_d, lon_d, b[4], 10.0)
-        cov = inside & (cov5 | cov10)
-        tau = np.where(cov5, tau5, tau10)
-        s2 = np.where(cov5, s5, s10)
+        cov_w, tau_w, s_w = self._cell(lat_d, lon_d, b[4], 5.0, 10.0)
+        cov5, cov10 = cov5 & ~wide, cov10 & ~wide
+        cov_w = cov_w & wide
+        cov = inside & (cov5 | cov10 | cov_w)
+        tau = np.where(cov5, tau5, np.where(cov10, tau10, tau_w))
+        s2 = np.where(cov5, s5, np.where(cov10, s10, s_w))
         scale = (F_L1_HZ / np.broadcast_to(np.asarray(freq_hz, dtype=float), shape).ravel()) ** 2
         delay = np.where(cov, f_pp * tau * scale, np.nan)
         sigma = np.where(cov, f_pp * np.sqrt(s2) * scale, np.nan)

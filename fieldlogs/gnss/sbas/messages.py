@@ -14,8 +14,9 @@ second in which its first symbol left the GEO. The stream logs the reception of 
 one second (the message block) plus the GEO's path delay (0.12–0.14 s) later, so
 t_of = ⌊gnss_time_s − 1.1⌋ here.
 
-Several GEOs: the corrections of one GEO are used (DO-229 §2.1.1.4.5: a user applies one
-provider's set consistently) — ``prn`` or the one with the most valid messages.
+Several GEOs: each GEO's messages are decoded apart (``read_geos``); which GEO's set applies
+when is ``geo_select``'s (DO-229 §2.1.1.4.5: one GEO's set, consistently). ``read_messages``
+gives one GEO's: ``prn`` or the one with the most valid messages.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from schemas.gnss import GNSS_SBAS, SBAS_PRN_RANGE
 
 #: Delay from a message's first symbol at the GEO to its last bit at the receiver, less a margin.
 RECEPTION_DELAY_S = 1.1
-DECODED_TYPES = (0, 1, 2, 3, 4, 5, 6, 7, 10, 18, 24, 25, 26)
+DECODED_TYPES = (0, 1, 2, 3, 4, 5, 6, 7, 9, 10, 12, 17, 18, 24, 25, 26, 27, 28)
 
 
 class SbasStreamError(InputError):
@@ -58,6 +59,11 @@ class SbasMessages:
     igp_mask: pd.DataFrame = field(default_factory=_empty)
     iono: pd.DataFrame = field(default_factory=_empty)
     mt0: pd.DataFrame = field(default_factory=_empty)
+    geo_nav: pd.DataFrame = field(default_factory=_empty)
+    network_time: pd.DataFrame = field(default_factory=_empty)
+    almanacs: pd.DataFrame = field(default_factory=_empty)
+    service: pd.DataFrame = field(default_factory=_empty)
+    covariance: pd.DataFrame = field(default_factory=_empty)
     dropped: Counter[str] = field(default_factory=Counter)
     """Rows dropped by reason (module docstring)."""
     not_decoded: Counter[int] = field(default_factory=Counter)
@@ -100,30 +106,44 @@ def _screen(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, Counter[str]]:
     return bits, ok, counts
 
 
-def read_messages(frame: pd.DataFrame | None, prn: int | None = None) -> SbasMessages:
-    """Screen and decode a ``gnss_sbas`` frame (module docstring)."""
+def read_geos(frame: pd.DataFrame | None) -> dict[int, SbasMessages]:
+    """Screen a ``gnss_sbas`` frame once and decode each GEO's valid messages apart (module
+    docstring); every GEO's ``dropped`` holds the counts of the whole stream. Empty without a
+    valid message."""
     if frame is None or not len(frame):
-        return SbasMessages(None)
+        return {}
     missing = [c for c in GNSS_SBAS.required_columns if c not in frame.columns and c != "t"]
     if missing:
         raise SbasStreamError("missing column", path="gnss_sbas frame", column=missing[0])
     bits, ok, dropped = _screen(frame)
     geo_all = pd.to_numeric(frame["prn"], errors="coerce").fillna(-1).to_numpy(dtype=np.int64)
-    if prn is None:
-        ids, counts = np.unique(geo_all[ok], return_counts=True)
-        prn = int(ids[np.argmax(counts)]) if ids.size else None
-    sel = ok & (geo_all == (prn if prn is not None else -2))
-    out = SbasMessages(prn, dropped=dropped, n_valid=int(sel.sum()))
-    if not sel.any():
-        return out
-    b = bits[sel]
-    t = frame["gnss_time_s"].to_numpy(dtype=float)[sel]
-    geo = geo_all[sel]
-    mt = message_type(b)
-    for k, n in zip(*np.unique(mt[~np.isin(mt, DECODED_TYPES)], return_counts=True), strict=True):
-        out.not_decoded[int(k)] = int(n)
-    _decode_all(out, b, t, geo, mt)
+    t_all = pd.to_numeric(frame["gnss_time_s"], errors="coerce").to_numpy(dtype=float)
+    out: dict[int, SbasMessages] = {}
+    for prn in np.unique(geo_all[ok]).tolist():
+        sel = ok & (geo_all == prn)
+        one = SbasMessages(int(prn), dropped=Counter(dropped), n_valid=int(sel.sum()))
+        b, t, geo = bits[sel], t_all[sel], geo_all[sel]
+        mt = message_type(b)
+        for k, n in zip(*np.unique(mt[~np.isin(mt, DECODED_TYPES)], return_counts=True), strict=True):
+            one.not_decoded[int(k)] = int(n)
+        _decode_all(one, b, t, geo, mt)
+        out[int(prn)] = one
     return out
+
+
+def read_messages(frame: pd.DataFrame | None, prn: int | None = None) -> SbasMessages:
+    """One GEO's decoded messages (``prn``, else the one with the most valid messages)."""
+    geos = read_geos(frame)
+    if not geos:
+        if frame is not None and len(frame):
+            _, _, dropped = _screen(frame)
+            return SbasMessages(prn, dropped=dropped)
+        return SbasMessages(None)
+    if prn is None:
+        prn = max(geos, key=lambda g: (geos[g].n_valid, -g))
+    if prn not in geos:
+        return SbasMessages(prn, dropped=Counter(next(iter(geos.values())).dropped))
+    return geos[prn]
 
 
 def _decode_all(out: SbasMessages, b: np.ndarray, t: np.ndarray, geo: np.ndarray, mt: np.ndarray) -> None:
@@ -156,3 +176,10 @@ def _decode_all(out: SbasMessages, b: np.ndarray, t: np.ndarray, geo: np.ndarray
     bb, tt, gg, _ = part((26,))
     out.iono = d.decode_mt26(bb, tt, gg)
     out.mt0 = pd.DataFrame({"t_rx": t[mt == 0], "geo": geo[mt == 0]})
+    for name, k, fn in (
+        ("geo_nav", 9, d.decode_mt9), ("network_time", 12, d.decode_mt12), ("almanacs", 17, d.decode_mt17),
+        ("service", 27, d.decode_mt27), ("covariance", 28, d.decode_mt28),
+    ):  # fmt: skip
+        if (mt == k).any():
+            bb, tt, gg, _ = part((k,))
+            setattr(out, name, fn(bb, tt, gg))

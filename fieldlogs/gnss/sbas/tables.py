@@ -6,14 +6,18 @@
   of fast corrections [s] for en-route through non-precision approach (Table A-8, the column a
   train's use corresponds to);
 * message time-outs for en-route through non-precision approach (Table A-25);
-* the PRN mask's slot numbers (Table A-3: 1–37 GPS, 38–61 GLONASS slots, 120–158 SBAS);
+* the PRN mask's slot numbers (Table A-3: 1–37 GPS, 38–61 GLONASS slots, 120–158 SBAS; the
+  rest spare in DO-229, of which the QZSS interface specification for its L1 SBAS-type signals
+  (IS-QZSS L1-SAIF / L1S) assigns 193–202 to the QZSS satellites of PRN 193–202 (J01–J10) and
+  183–192 to their L1S signals as SBAS ranging sources, not used here);
 * the ionospheric grid points of bands 0–8 (Table A-14): 40° of longitude each, columns every
   5°; a column at an odd multiple of 5° holds the 23 latitudes −55…55 every 5°; the others add
   ±65, ±75, and 85° N where the longitude is a multiple of 90° (180° W, 90° W, 0°, 90° E) or
-  85° S at 140° W, 50° W, 40° E, 130° E — 201 IGPs per band, 200 in band 8. Bands 9 and 10
-  (the polar caps) are not modelled: their IGP masks are decoded but their IGPs never
-  located, so the grid is used between 55° S and 55° N only (the user algorithm of §A.4.4.10
-  above 55° needs them).
+  85° S at 140° W, 50° W, 40° E, 130° E — 201 IGPs per band, 200 in band 8;
+* bands 9 (north) and 10 (south), row by row from the equator's side, each row eastward from
+  180° W: 60° every 5° of longitude (IGPs 1–72), 65°, 70°, 75° every 10° (73–108, 109–144,
+  145–180), 85° every 30° (181–192) from 180° W in band 9 and from 170° W in band 10 (the
+  65°/75° IGPs coincide with bands 0–8's and are the same points).
 """
 
 from __future__ import annotations
@@ -62,13 +66,16 @@ TIMEOUT_S: Final = {
 NO_MT10_DEGRADATION_M: Final = 8.0
 #: IGP vertical delay code 511 (63.875 m): "do not use" (§A.4.4.10).
 IGP_DO_NOT_USE: Final = 511
-#: The grid is used where |φ_pp| ≤ this (module docstring) [deg].
-GRID_MAX_LAT_DEG: Final = 55.0
+#: The grid is used where |φ_pp| ≤ this (``grid`` docstring) [deg].
+GRID_MAX_LAT_DEG: Final = 75.0
+#: Above this |φ_pp| [deg] the cells are 5° of latitude by 10° of longitude (``grid``).
+GRID_WIDE_CELL_LAT_DEG: Final = 60.0
 
 
 def mask_slot_sat(slot_prn: IntArray) -> list[str]:
     """Satellite ids of PRN-mask bit numbers (1–210): G01–G37, R01–R24 (slots 38–61), S20–S58
-    for 120–158 (RINEX's SBAS numbering PRN − 100); others '' (not used)."""
+    for 120–158 (RINEX's SBAS numbering PRN − 100), J01–J10 for 193–202 (QZSS PRN − 192);
+    others '' (not used)."""
     out = []
     for p in np.asarray(slot_prn, dtype=np.int64).tolist():
         if 1 <= p <= 37:
@@ -77,6 +84,8 @@ def mask_slot_sat(slot_prn: IntArray) -> list[str]:
             out.append(f"R{p - 37:02d}")
         elif 120 <= p <= 158:
             out.append(f"S{p - 100:02d}")
+        elif 193 <= p <= 202:
+            out.append(f"J{p - 192:02d}")
         else:
             out.append("")
     return out
@@ -97,9 +106,22 @@ def _column_lats(lon: int) -> list[int]:
     return _LAT_EVEN
 
 
+def _polar_band(band: int) -> tuple[IntArray, IntArray]:
+    """Band 9 or 10 (module docstring)."""
+    sign = 1 if band == 9 else -1
+    rows = [(60, range(-180, 180, 5)), (65, range(-180, 180, 10)), (70, range(-180, 180, 10)),
+            (75, range(-180, 180, 10)), (85, range(-180 if band == 9 else -170, 180, 30))]  # fmt: skip
+    lats = [sign * la for la, lons in rows for _ in lons]
+    lons = [lo for _, row in rows for lo in row]
+    return np.array(lats, dtype=np.int64), np.array(lons, dtype=np.int64)
+
+
 def band_igps(band: int) -> tuple[IntArray, IntArray]:
-    """(latitude, longitude) [deg] of IGP numbers 1… of band 0–8, in mask-bit order (Table A-14):
-    column by column eastward from 180° W + 40°·band, each south to north."""
+    """(latitude, longitude) [deg] of IGP numbers 1… of band 0–10, in mask-bit order (Table A-14):
+    bands 0–8 column by column eastward from 180° W + 40°·band, each south to north; bands 9–10
+    row by row (module docstring)."""
+    if band in (9, 10):
+        return _polar_band(band)
     if not 0 <= band <= 8:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     lats: list[int] = []

@@ -73,3 +73,40 @@ def test_ubx_round_trip_one_file_per_receiver(run_dir: Path, network: Network, t
     assert ok.mean() > 0.95
     diff = (a.loc[common, "km_m"] - b.loc[common, "km_m"])[ok].abs()
     assert diff.median() < 2.0 and (diff <= a.loc[common, "uncertainty_m"][ok]).all()
+
+
+def test_ubx_export_writes_gnss_sbas_as_sfrbx_read_back_identically(network: Network, tmp_path: Path) -> None:
+    from pyubx2 import UBXReader
+
+    from fieldlogs.gnss.sbas import SbasCorrections
+    from fieldlogs.recorders.ubx import read_ubx
+
+    run_dir = simulate_gnss_run(network, tmp_path / "run", seed=8, length_m=1500.0, gnss_raw={"sbas": True})
+    sb = read_run(run_dir).stream("gnss_sbas")
+    assert sb is not None and len(sb) > 100
+    files = write_recorder_files(run_dir, "ubx", force=True)
+    first = next(f for f in files if f.name == "rx1.ubx")
+    with first.open("rb") as fh:
+        sfrbx = [m for _, m in UBXReader(fh, protfilter=2) if m.identity == "RXM-SFRBX" and m.gnssId == 1]
+    words = ["".join(f"{getattr(m, f'dwrd_{k:02d}'):08X}" for k in range(1, 9)) for m in sfrbx]
+    dec = read_ubx(first)
+    back = dec.frames["gnss_sbas"]
+    late = sum(v for k, v in dec.skipped.items() if "after the last RXM-RAWX" in k)
+    n = len(back)
+    assert n + late == len(sb) and late <= 2  # at most the messages after the run's last epoch
+    assert [m.svId for m in sfrbx] == sb["prn"].tolist()
+    assert words == sb["message_hex"].tolist()  # pyubx2 reads the 250 bits we wrote
+    assert back["message_hex"].tolist() == sb["message_hex"].iloc[:n].tolist()
+    assert back["prn"].tolist() == sb["prn"].iloc[:n].tolist()
+    assert back["msg_type"].tolist() == sb["msg_type"].iloc[:n].tolist()
+    lag = back["gnss_time_s"].to_numpy() - sb["gnss_time_s"].to_numpy()[:n]
+    assert (lag >= -1e-6).all() and (lag <= 1.0 + 1e-6).all()  # the next epoch: reception bounded above
+    a, b = SbasCorrections.from_stream(sb.iloc[:n]).messages, SbasCorrections.from_stream(back).messages
+    for name in ("fast", "integrity"):
+        np.testing.assert_array_equal(getattr(a, name)["t_of"], getattr(b, name)["t_of"])
+    assert not any(f.name == "rx2.ubx" and "gnss_sbas" in read_ubx(f).frames for f in files)
+    out = tmp_path / "imported"
+    vehicle = next(f for f in files if f.name == "vehicle.toml")
+    import_run([f for f in files if f.name.startswith("rx")], out, vehicle=vehicle)
+    imported = read_run(out).stream("gnss_sbas")
+    assert imported is not None and imported["message_hex"].tolist() == back["message_hex"].tolist()

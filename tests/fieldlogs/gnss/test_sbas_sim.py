@@ -108,9 +108,11 @@ def test_the_stream_through_ubx_sfrbx(case: Case, tmp_path: Path) -> None:
     assert back["message_hex"].tolist() == sb["message_hex"].tolist()
     assert back["prn"].tolist() == sb["prn"].tolist() and back["msg_type"].tolist() == sb["msg_type"].tolist()
     epochs = np.unique(obs["gnss_time_s"].to_numpy())
-    before = epochs[np.maximum(np.searchsorted(epochs, sb["gnss_time_s"].to_numpy(), side="right") - 1, 0)]
-    np.testing.assert_allclose(back["gnss_time_s"], before, atol=1e-6)
-    assert SbasCorrections.from_stream(back).messages.dropped == {}
+    after = epochs[np.searchsorted(epochs, sb["gnss_time_s"].to_numpy(), side="left")]
+    np.testing.assert_allclose(back["gnss_time_s"], after, atol=1e-6)  # the next epoch: an upper bound
+    a, b = SbasCorrections.from_stream(sb).messages, SbasCorrections.from_stream(back).messages
+    assert b.dropped == {}
+    np.testing.assert_array_equal(a.fast["t_of"], b.fast["t_of"])  # the same time of applicability
 
 
 def test_gnss_position_on_a_simulated_run_with_an_msas_stream(sample_db: Path, tmp_path: Path) -> None:
@@ -136,3 +138,53 @@ def test_gnss_position_on_a_simulated_run_with_an_msas_stream(sample_db: Path, t
     s = errs["sbas"][1]
     assert s["prn"] == 137 and s["dropped"] == {} and s["rows"]["corrected"] > 0
     assert errs["sbas"][0] < errs["alone"][0]
+
+
+def test_an_mt27_delta_udre_widens_the_corrected_rows_sigma_only(case: Case) -> None:
+    from fieldlogs.gnss.sbas import encode as enc
+
+    spec, sim, corr, prior = case
+    t_rx = float(corr["gnss_time_s"].iloc[0]) - 0.5
+    mt27 = enc.mt27(0, 1, 1, 0, 4, 4, [])  # δUDRE 2 inside and outside: everywhere
+    extra = pd.DataFrame(
+        {"t": [float(corr["t"].iloc[0]) - 0.5], "gnss_time_s": [t_rx], "prn": [137], "msg_type": [27],
+         "message_hex": [mt27.hex().upper()], "valid": [1]}
+    )  # fmt: skip
+    with27 = pd.concat([extra, corr], ignore_index=True)
+    a = ex._solve(sim, sim.obs, spec, corr, prior).observations
+    b = ex._solve(sim, sim.obs, spec, with27, prior).observations
+    corrected = a.present & np.isfinite(a.corr_udre_m)
+    assert corrected.sum() > 1000
+    assert (b.sigma_m[corrected] > a.sigma_m[corrected] + 0.1).all()
+    other = a.present & ~corrected
+    np.testing.assert_array_equal(b.sigma_m[other], a.sigma_m[other])
+
+
+def test_two_geos_switch_on_time_out_and_mt0_each_epoch_as_its_geo_alone(monkeypatch: pytest.MonkeyPatch) -> None:
+    spec = ex.CaseSpec(seed=5, sbas=True, two_geos=True)
+    _, _, _, corr, _ = ex._simulate(spec)
+    assert corr is not None and set(corr["prn"]) == {129, 137}
+    sb = SbasCorrections.from_stream(corr)
+    t_first = float(corr["gnss_time_s"].iloc[0]) - float(corr["t"].iloc[0])  # gnss time of run t = 0
+    at = sb.active(t_first + np.array([100.0, 210.0, 300.0, 420.0, 460.0, 550.0]))
+    assert at.tolist() == [137, 137, 129, 129, 137, 137] and sb.timeline.switches() == 2
+    two = ex.run_case(spec).epochs
+    real = ex._simulate
+    alone = {}
+    for prn in (137, 129):  # each GEO's own messages of the same stream, alone
+
+        def one_geo(sp: ex.CaseSpec, prn: int = prn) -> tuple:  # type: ignore[type-arg]
+            sim, t, s, both, prior = real(sp)
+            assert both is not None
+            return sim, t, s, both[both["prn"] == prn], prior
+
+        monkeypatch.setattr(ex, "_simulate", one_geo)
+        alone[prn] = ex.run_case(spec).epochs
+    t = two["t"].to_numpy() - two["t"].min()
+    # the clock-aided epochs coast the receiver clock over the epochs before, across a switch too
+    own = ~two["clock_aided"].to_numpy()
+    for prn, sel in ((137, (t < 200.0) | (t >= 450.0 + 1.125)), (129, (t >= 200.0 + 1.125 + 18.0) & (t < 450.0))):
+        sel = sel & own & ~alone[prn]["clock_aided"].to_numpy()
+        assert sel.sum() > 300
+        np.testing.assert_allclose(two["s_m"].to_numpy()[sel], alone[prn]["s_m"].to_numpy()[sel], atol=1e-6)
+    assert (two["available"] == alone[137]["available"]).all()
