@@ -74,11 +74,7 @@ class _Growing:
     def add(self, arr: pa.Array, capacity: int) -> None:
         m = len(arr)
         if self.n + m > self.values.size:
-            size = max(capacity, int(1.25 * (self.n + m)) + 1024)
-            if self.n:
-                self.values.resize(size, refcheck=False)
-            else:  # not resize(): it would zero-fill memory about to be written
-                self.values = np.empty(size)
+            self.values.resize(max(capacity, int(1.25 * (self.n + m)) + 1024), refcheck=False)
         self.values[self.n : self.n + m] = arr.to_numpy(zero_copy_only=False)
         self.nulls += arr.null_count
         self.n += m
