@@ -224,34 +224,8 @@ def coerce_stream(table: Table, raw: pd.DataFrame, file: str) -> tuple[pd.DataFr
         for c in table.columns
     ):
         return raw[table.column_names], []  # already typed: nothing to coerce
-    numbers = _parsed_numbers(table, raw)
-    if numbers is not None:
-        return numbers, []
     co = coerce_frame(table, raw, file=file)
     return co.frame, co.findings
-
-
-def _parsed_numbers(table: Table, raw: pd.DataFrame) -> pd.DataFrame | None:
-    """A stream of number columns only, as :mod:`dbtools.typed_csv` parsed it (float64,
-    every whole number integral, no infinity): typed as ``coerce_frame`` would type it
-    (whole numbers to Int64), without its per-column text machinery; None for anything
-    else (missing or extra columns, text, other dtypes)."""
-    if list(raw.columns) != table.column_names or any(c.dtype not in ("float", "int") for c in table.columns):
-        return None
-    if any(raw[c].dtype != np.float64 for c in table.column_names):
-        return None
-    cols = {}
-    for c in table.columns:
-        values = raw[c.name].to_numpy()
-        if np.isinf(values).any():
-            return None  # coerce_frame names the cell
-        if c.dtype == "int":
-            if (np.floor(values) != values)[~np.isnan(values)].any():
-                return None
-            cols[c.name] = pd.Series(values, index=raw.index).astype("Int64")
-        else:
-            cols[c.name] = pd.Series(values, index=raw.index, dtype="float64")
-    return pd.DataFrame(cols, index=raw.index)
 
 
 def read_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Finding]]:

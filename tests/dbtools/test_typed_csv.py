@@ -72,6 +72,61 @@ def test_typed_reading_is_the_text_path(tmp_path: Path, name: str, rows, extra_c
     same_as_text_path(name, path)
 
 
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    st.sampled_from(["gps", "balise", "cab"]),
+    st.data(),
+    st.lists(st.tuples(NUMBER_CELLS, NUMBER_CELLS, TEXT_CELLS, TEXT_CELLS), min_size=1, max_size=8),
+)
+def test_columns_in_any_order_absent_optional_ones_and_text_read_as_the_text_path(  # type: ignore[no-untyped-def]
+    tmp_path: Path, name: str, data, rows
+) -> None:
+    """A stream with its columns shuffled, optional ones left out (or a required one), and
+    text columns (padding, blanks, NA spellings, full-width letters): the typed path's
+    frame, column order and findings are the text path's."""
+    table = LOG_STREAMS[name]
+    kinds = {c.name: c.dtype for c in table.columns}
+    optional = [c.name for c in table.columns if not c.required]
+    cols = [c.name for c in table.columns if c.required]
+    cols += data.draw(st.lists(st.sampled_from(optional), unique=True)) if optional else []
+    if data.draw(st.booleans()) and len(cols) > 1:  # a required column missing: the text path's finding
+        cols.remove(data.draw(st.sampled_from([c for c in cols if c != "t"])))
+    cols = data.draw(st.permutations(cols))
+    lines = [",".join(cols)]
+    for a, b, text, text2 in rows:
+        cells = [
+            (whole_cell(a if i % 2 else b) if kinds[c] == "int" else (a if i % 2 else b))
+            if kinds[c] in ("float", "int")
+            else (text if i % 2 else text2)
+            for i, c in enumerate(cols)
+        ]
+        lines.append(",".join(csv_cell(cell) for cell in cells))
+    path = tmp_path / f"{name}.csv"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    same_as_text_path(name, path)
+
+
+def test_a_stream_with_absent_optional_columns_and_text_is_read_typed(tmp_path: Path) -> None:
+    """The shortcut is taken (no general coercion) and gives the text path's frame."""
+    from schemas import frames
+
+    path = tmp_path / "gps.csv"
+    path.write_text("lon,t,lat,fix,nsat,hdop\n139.4,0,35.9,1,9,0.9\n139.5,1,,2,NA,1\n", encoding="utf-8")
+    typed = read_csv_typed(LOG_STREAMS["gps"], path)
+    assert typed is not None and frames._already_typed(LOG_STREAMS["gps"], typed) is not None
+    same_as_text_path("gps", path)
+    path = tmp_path / "balise.csv"
+    path.write_text(
+        "t,kind,line_code,station_code,track,signal_type\n1,I1,0420,,,\n1.5,I2 ,NULL,01,D,nAn\n", encoding="utf-8"
+    )
+    typed = read_csv_typed(LOG_STREAMS["balise"], path)
+    assert typed is not None and frames._already_typed(LOG_STREAMS["balise"], typed) is not None
+    frame, _ = read_stream(LOG_STREAMS["balise"], path)
+    assert frame["kind"].tolist() == ["I1", "I2"] and frame["line_code"].isna().tolist() == [False, True]
+    assert frame["signal_type"].isna().all() and frame["line_code"].iloc[0] == "0420"
+    same_as_text_path("balise", path)
+
+
 def test_a_clean_file_is_read_typed(tmp_path: Path) -> None:
     path = tmp_path / "imu.csv"
     path.write_text("t,ax,ay,az,wx,wy,wz\n0.0,1,2,3,4,5,6\n0.01,,NA,nan,0.5,-1e-3,7\n", encoding="utf-8")
