@@ -14,7 +14,8 @@ Metrics per receiver-epoch: constrained availability (status ok and the antenna-
 check passed), unconstrained availability (≥ 4 satellites, PDOP ≤ 6), along-track error
 s − s_true of available epochs and whether it exceeds the stated uncertainty; in fault cases
 the epochs after onset with the faulty satellite among ≥ 3 usable ones, whether it is excluded
-(or the epoch refused) from the 2nd epoch on where its bias has reached the row's minimal
+(by the w/χ² tests, for no on-track solution or by the code-carrier divergence monitor; or the
+epoch refused) from the 2nd epoch on where its bias has reached the row's minimal
 detectable bias (a 50 m step at once unless the geometry cannot see 50 m; a ramp when it has
 grown to it), and the error against the uncertainty meanwhile.
 """
@@ -28,7 +29,7 @@ import pandas as pd
 
 from fieldlogs.gnss.constants import WEEK_S
 from fieldlogs.gnss.constellation import constellation_nav
-from fieldlogs.gnss.observables import FLAG_EXCLUDED, FLAG_NO_TRACK_SOLUTION
+from fieldlogs.gnss.observables import FLAG_CODE_CARRIER, FLAG_EXCLUDED, FLAG_NO_TRACK_SOLUTION
 from fieldlogs.gnss.position import PositionConfig, PositionResult, position_run
 from fieldlogs.gnss.scenario import SyntheticTrack, mixed_corridor, run_profile, synthetic_track, trajectory
 from fieldlogs.gnss.simulate import (
@@ -196,17 +197,18 @@ def run_case(spec: CaseSpec) -> CaseResult:
     tb["err_m"] = tb["s_m"] - tb["s_true_m"]
     tb["ok"] = tb["available"] & tb["antenna_distance_ok"]
     tb["exceeds"] = tb["ok"] & (tb["err_m"].abs() > tb["uncertainty_m"])
+    tb["n_divergence"] = ((res.observations.flags & FLAG_CODE_CARRIER) > 0).sum(axis=1)
     if fault_sat is not None:
         ep = res.observations
         row = ep.sat == fault_sat
         tb["fault_present"] = (row & ep.present).any(axis=1) & (tb["t"].to_numpy() >= t_f)
-        n_cand = (ep.usable | ((ep.flags & (FLAG_EXCLUDED | FLAG_NO_TRACK_SOLUTION)) > 0)).sum(axis=1)
-        tb["fault_usable3"] = (
-            tb["fault_present"]
-            & (n_cand >= 3)
-            & (row & (ep.usable | (ep.flags & (FLAG_EXCLUDED | FLAG_NO_TRACK_SOLUTION) > 0))).any(axis=1)
-        )
-        tb["fault_excluded"] = (row & ((ep.flags & (FLAG_EXCLUDED | FLAG_NO_TRACK_SOLUTION)) > 0)).any(axis=1)
+        # integrity rejections: FDE exclusion, no on-track solution, code-carrier divergence (a
+        # rejected row would have been usable but for the rejection: its other flags are clear)
+        rej = FLAG_EXCLUDED | FLAG_NO_TRACK_SOLUTION | FLAG_CODE_CARRIER
+        rejected = ep.present & ((ep.flags & rej) > 0) & ((ep.flags & ~rej) == 0)
+        n_cand = (ep.usable | rejected).sum(axis=1)
+        tb["fault_usable3"] = tb["fault_present"] & (n_cand >= 3) & (row & (ep.usable | rejected)).any(axis=1)
+        tb["fault_excluded"] = (row & rejected).any(axis=1)
         tb["fault_epoch"] = np.round(tb["t"].to_numpy() - t_f).astype(int)
         tb["fault_bias_m"] = np.where(tb["fault_present"], 50.0 if spec.fault == "step" else 0.2 * (tb["t"] - t_f), 0.0)
         tb["fault_mdb_m"] = np.nanmin(np.where(row, res.mdb_m, np.inf), axis=1)

@@ -3,8 +3,10 @@ the antenna-distance check, and the unconstrained solution beside it [S002].
 
 Chain per epoch (the paper's fig. 2): navigation data compared between receivers →
 pseudorange differences against the antenna separation → elevation, C/N0 and sky masks →
-(SBAS/MSAS or D-GPS corrections in ``observables``, ``sbas``) → track-constrained solution per receiver with
-fault detection and exclusion → the computed distance between the two antennas
+code-carrier divergence of the smoothed arcs (``observables.carrier_smoothed``: a satellite
+whose code drifts from its carrier faster than ``max_divergence_mps`` is dropped) →
+(SBAS/MSAS or D-GPS corrections in ``observables``, ``sbas``) → track-constrained solution per
+receiver with fault detection and exclusion → the computed distance between the two antennas
 |A_a(s_a) − A_b(s_b)| compared with the real one |A_a(s) − A_b(s)| (tolerance
 k_ff·√(σ_a² + σ_b²) + 0.5 m); epochs failing it are marked ``antenna_distance``.
 
@@ -68,6 +70,9 @@ class PositionConfig:
     """Re-solve failed epochs with each receiver's predicted clock (``coasting``)."""
     smoothing_s: float | None = 100.0
     """Carrier-smoothing window (``observables.carrier_smoothed``); None: raw code."""
+    max_divergence_mps: float | None = 0.1
+    """Code-carrier divergence limit of the smoothed arcs (``observables.carrier_smoothed``,
+    100 s fit): a satellite drifting faster is flagged ``code_carrier_divergence``; None: off."""
     use_sbas: bool = True
     """Apply a run's SBAS/MSAS messages where it has them (``ontrack``)."""
     error_model: ErrorModel = field(default_factory=ErrorModel)
@@ -218,7 +223,9 @@ def _prepare(
         merged = pd.concat(list(nav.values()), ignore_index=True).drop_duplicates(["sat", "week", "Toe", "DataSrc"])
     if cfg.smoothing_s:
         obs = carrier_smoothed(obs, cfg.smoothing_s)
-    ep = build_epochs(obs, merged, systems=cfg.systems, corrections=corrections, sbas=sbas)
+    ep = build_epochs(
+        obs, merged, systems=cfg.systems, corrections=corrections, sbas=sbas, max_divergence_mps=cfg.max_divergence_mps
+    )
     if mismatch is not None:
         flag_nav_mismatch(ep, mismatch)
     missing = sorted(set(np.unique(ep.receiver)) - set(names))
