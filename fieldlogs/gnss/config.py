@@ -31,6 +31,9 @@ class GnssConfig:
     elevation_mask_deg: float = setting(10.0, "satellites below this elevation are not used", "deg", ge=0, lt=90)
     cn0_mask_dbhz: float = setting(30.0, "observations with a lower C/N0 are not used", "dB-Hz", ge=0)
     smoothing_s: float = setting(100.0, "carrier-smoothing window of the code (Hatch); 0 = raw code", "s", ge=0)
+    max_divergence_mps: float = setting(
+        0.1, "a satellite whose code drifts from its carrier faster than this is dropped; 0 = off", "m/s", ge=0
+    )
     clock_coasting: bool = setting(True, "re-solve epochs the satellites alone cannot carry with a predicted clock")
     sbas: bool = setting(True, "apply the run's SBAS/MSAS messages (gnss_sbas) where it has them")
     pr_difference_tol_m: float = setting(
@@ -75,5 +78,6 @@ def position_config(cfg: GnssConfig, systems: tuple[str, ...] | None = None) -> 
         max_pdop=cfg.max_pdop,
         clock_coasting=cfg.clock_coasting,
         smoothing_s=cfg.smoothing_s or None,
+        max_divergence_mps=cfg.max_divergence_mps or None,
         use_sbas=cfg.sbas,
     )

@@ -117,3 +117,10 @@ def test_raw_gnss_changes_no_other_stream(network: Network) -> None:
         pd.testing.assert_frame_equal(frame, on.streams[name])
     assert off.meta.vehicle is None and off.meta.gnss is None
     assert "gnss_raw" not in off.meta.extra["sim_truth"]
+
+
+def test_the_divergence_monitor_is_a_gnss_setting() -> None:
+    """``[gnss] max_divergence_mps`` reaches the solver; 0 turns the monitor off."""
+    assert position_config(GnssConfig()).max_divergence_mps == 0.1
+    assert position_config(GnssConfig(max_divergence_mps=0.25)).max_divergence_mps == 0.25
+    assert position_config(GnssConfig(max_divergence_mps=0.0)).max_divergence_mps is None
