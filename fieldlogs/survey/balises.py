@@ -31,14 +31,31 @@ position is replaced by the surveyed one (c_DB − δ̄/(dkm/dc)), the wheel sca
 residual are estimated again; flags that no longer qualify are dropped; until the flags
 and anchors no longer change (``max_iterations``).
 
-**Wheel scale.** λ_r of a run is the weighted least-squares slope through the origin of
-σ·Δc on Δd over its clean intervals between reads of different clusters (weights
-1/(s₀² + (q·Δd)²)), with the anchors as above; with less than ``wheel_min_distance_m``
-of such travel it is unknown and the run's passes give no residual. Clean here means no
-slip or slide correction at all (the allowance did not grow): a correction's distance is
-the radar's or the integrated acceleration's, already in the ground's scale, so an interval
-holding one would pull λ towards 1 by its share of the interval (0.45 % worn, 100 m of
-correction in 1 km: 0.045 %) whatever its small allowance.
+**Wheel scale.** Within one chain a read i of balise b measures y_i = σ·c_b = a_p + λ·d_i + ε_i:
+the reader's true place is the balise's track length, the travel d_i counts it in the
+wheel's scale, a_p is the odometry's offset on the *stretch* p (the chain split wherever the
+correction allowance grew between two reads: a slip or slide correction's distance is the
+radar's or the integrated acceleration's, already in the ground's scale, so a corrected
+stretch would pull λ towards 1 by its share — 0.45 % worn, 100 m of correction in 1 km:
+0.045 % — whatever its small allowance; split there, the correction's own error enters no
+stretch). The errors of a wheel scale are then those of its reads' *places*, not of the
+intervals' lengths: ε_i = the DB position's error of b (its survey tolerance) + where along
+the track the telegram was taken (the antenna's reception window, the telegram's time
+stamp × speed) + the pulse quantisation of d_i, independent between reads — an interval's
+constant part s₀ = ``interval_sigma_m`` is two of them, so var ε = s₀²/2, plus the
+variance of a surveyed anchor (a balise found moved, (se/(dkm/dc))²). Between two reads
+every one of them telescopes: the interval of i−1, i and that of i, i+1 share ε_i with
+opposite signs, so the intervals' errors are not independent and do not grow with their
+length (the share ``interval_sigma_pct`` of a balise residual, which also holds the error
+of λ itself, is not one of them). λ̂ is therefore the weighted least-squares slope of y on
+d with one offset per stretch (weights 1/var ε; only stretches of two or more reads), over
+at least ``wheel_min_distance_m`` of stretch travel. The scale of var ε is measured: with
+χ²_r = Σ wᵢrᵢ² over the run's n_r reads in P_r stretches, ν_r = n_r − P_r − 1, the factor
+f_r = max(χ²_r/ν_r, Σχ²/Σν) (the run's own Birge ratio, at least the one pooled over every
+run of the survey — with a dozen degrees of freedom a run's own is often small by chance),
+and se(λ̂) = √(f_r/Σ wᵢ(dᵢ − d̄_p)²) · t₀.₉₇₅,ν_r/1.96 (the interval ±1.96·se of
+:mod:`fieldlogs.survey.wheels` then a Student-t one). The GIS grid's length error, which
+every balise and GNSS scale on that grid shares, is added there, not here.
 
 Status: *missed* (never read on ≥ ``min_missed_passes`` passes), *moved* (|δ̄| ≥
 ``moved_min_m`` and the interval excludes 0), *ok* (the interval within
@@ -62,6 +79,8 @@ BoolArray = npt.NDArray[np.bool_]
 OK, MOVED, MISSED, UNVERIFIED = "ok", "moved", "missed", "unverified"
 #: A wheel-scale interval is clean only if the correction allowance did not grow in it [m].
 ALLOWANCE_EPS_M = 1e-9
+#: Two-sided 95 % normal quantile (the wheel intervals are ±Z95·se, :mod:`fieldlogs.survey.wheels`).
+Z95 = 1.96
 
 
 def t_quantile(df: FloatArray | float) -> FloatArray:
@@ -103,34 +122,59 @@ def _variance(length: FloatArray, cfg: SurveyConfig) -> FloatArray:
     return np.asarray(cfg.interval_sigma_m**2 + (cfg.interval_sigma_pct / 100.0 * length) ** 2, dtype=float)
 
 
+def read_variance(cfg: SurveyConfig) -> float:
+    """Prior variance of one read's σ·c − λ·d about its stretch's line [m²] (module
+    docstring, "Wheel scale"): half the constant part of an interval, s₀²/2."""
+    return float(cfg.interval_sigma_m**2 / 2.0)
+
+
 def wheel_scales(
-    reads: Reads, nb: Neighbours, c_anchor: FloatArray, n_runs: int, cfg: SurveyConfig
+    reads: Reads, c_anchor: FloatArray, n_runs: int, cfg: SurveyConfig, anchor_var: FloatArray | None = None
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Per run: λ (NaN when unknown), its standard error and the clean travel used [m]."""
+    """Per run: λ (NaN when unknown), its standard error and the clean travel used [m]
+    (module docstring, "Wheel scale"); ``anchor_var`` the variance of each balise's anchor
+    position [m²] (a surveyed one; None: 0)."""
     lam, se, used = np.full(n_runs, np.nan), np.full(n_runs, np.nan), np.zeros(n_runs)
-    # first read of each cluster group: the interval from the previous group's last read
-    j = np.flatnonzero((nb.prev >= 0) & (nb.prev == np.arange(reads.n) - 1))
-    if j.size == 0:
+    n = reads.n
+    if n == 0:
         return lam, se, used
-    a = nb.prev[j]
-    dd = reads.d[j] - reads.d[a]
-    clean = (reads.allowance[j] - reads.allowance[a] <= ALLOWANCE_EPS_M) & (dd > 0)
-    j, a, dd = j[clean], a[clean], dd[clean]
-    dc = reads.motion[j] * (c_anchor[reads.balise[j]] - c_anchor[reads.balise[a]])
-    w = 1.0 / _variance(dd, cfg)
-    run = reads.run[j]
-    sxy = np.bincount(run, w * dc * dd, n_runs)
-    sxx = np.bincount(run, w * dd * dd, n_runs)
-    cnt = np.bincount(run, None, n_runs)
-    used = np.asarray(np.bincount(run, dd, n_runs), dtype=float)
+    step = np.r_[False, reads.chain[1:] == reads.chain[:-1]]
+    step[1:] &= (np.diff(reads.allowance) <= ALLOWANCE_EPS_M) & (np.diff(reads.d) > 0)
+    piece = np.cumsum(~step) - 1
+    n_p = int(piece[-1]) + 1
+    y = reads.motion * c_anchor[reads.balise]
+    v = read_variance(cfg) + (np.zeros(n) if anchor_var is None else anchor_var[reads.balise])
+    ok_pt = np.isfinite(y) & np.isfinite(reads.d) & (v > 0)
+    w = np.where(ok_pt, 1.0 / np.where(v > 0, v, 1.0), 0.0)
+    y, x = np.where(ok_pt, y, 0.0), reads.d
+    wp = np.bincount(piece, w, n_p)
+    cnt = np.bincount(piece, ok_pt.astype(float), n_p)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        xbar = np.bincount(piece, w * x, n_p) / wp
+        ybar = np.bincount(piece, w * y, n_p) / wp
+    lo = np.full(n_p, np.inf)
+    hi = np.full(n_p, -np.inf)
+    np.minimum.at(lo, piece[ok_pt], x[ok_pt])
+    np.maximum.at(hi, piece[ok_pt], x[ok_pt])
+    run_p = np.zeros(n_p, dtype=np.int64)
+    run_p[piece] = reads.run
+    real = cnt >= 2
+    used = np.asarray(np.bincount(run_p[real], (hi - lo)[real], n_runs), dtype=float)
+    dx = np.where(ok_pt & real[piece], x - np.nan_to_num(xbar[piece]), 0.0)
+    dy = np.where(ok_pt & real[piece], y - np.nan_to_num(ybar[piece]), 0.0)
+    sxx = np.bincount(reads.run, w * dx * dx, n_runs)
+    sxy = np.bincount(reads.run, w * dx * dy, n_runs)
     ok = (used >= cfg.wheel_min_distance_m) & (sxx > 0)
     lam[ok] = sxy[ok] / sxx[ok]
-    resid = dc - np.where(ok[run], lam[run], np.nan) * dd
-    ssr = np.bincount(run, np.nan_to_num(w * resid * resid), n_runs)
+    r = dy - np.nan_to_num(lam[reads.run]) * dx
+    chi2 = np.bincount(reads.run, w * r * r, n_runs)
+    dof = np.bincount(run_p[real], cnt[real] - 1.0, n_runs) - 1.0
+    fit = ok & (dof >= 1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        emp = np.sqrt(ssr / np.maximum(cnt - 1, 1) / sxx)
-        model = np.sqrt(1.0 / sxx)
-    se[ok] = np.maximum(np.where(cnt > 1, emp, 0.0), model)[ok]
+        pooled = float(chi2[fit].sum() / dof[fit].sum()) if fit.any() else 1.0
+        factor = np.fmax(np.where(fit, chi2 / np.maximum(dof, 1.0), pooled), pooled)
+        widen = np.where(dof >= 1, t_quantile(np.maximum(dof, 1.0)) / Z95, 1.0)
+        se[ok] = (np.sqrt(factor / sxx) * widen)[ok]
     return lam, se, used
 
 
@@ -292,16 +336,18 @@ def adjust(reads: Reads, table: BaliseTable, n_runs: int, cfg: SurveyConfig) -> 
     c_db = table.c
     c_anchor = c_db.copy()
     flagged = np.zeros(len(table.frame), dtype=bool)
+    anchor_var = np.zeros(len(table.frame))
     it = 0
     while True:
         it += 1
-        lam, lam_se, used = wheel_scales(reads, nb, c_anchor, n_runs, cfg)
+        lam, lam_se, used = wheel_scales(reads, c_anchor, n_runs, cfg, anchor_var)
         est = pass_estimates(reads, nb, table, c_anchor, lam, cfg)
         stats = balise_statistics(est, reads, table)
         cand = qualifies(stats, cfg)
         new = (flagged & cand) | local_maxima(cand, culprit_score(stats), table)
         shift = np.where(new, np.nan_to_num(stats["residual_m"].to_numpy(dtype=float)) / table.slope, 0.0)
         c_new = c_db - shift
+        anchor_var = np.where(new, np.nan_to_num(stats["se_m"].to_numpy(dtype=float) / table.slope) ** 2, 0.0)
         stable = bool((new == flagged).all() and np.allclose(c_new, c_anchor, rtol=0.0, atol=1e-4, equal_nan=True))
         flagged, c_anchor = new, c_new
         if stable or it >= cfg.max_iterations:

@@ -40,7 +40,9 @@ class SurveyConfig:
     interval_sigma_m: float = setting(
         0.15, "1σ of a balise-to-balise travel: constant part (read position, pulse quantisation)", "m", gt=0
     )
-    interval_sigma_pct: float = setting(0.01, "… plus this share of the interval's length", "%", ge=0)
+    interval_sigma_pct: float = setting(
+        0.01, "… plus this share of the interval's length (balise residuals; not the wheel scale)", "%", ge=0
+    )
     min_passes: int = setting(3, "fewer usable passes (runs for curves and wheels) → unverified", ge=2)
     moved_min_m: float = setting(1.0, "smallest balise residual reported as moved (and proposed)", "m", gt=0)
     ok_tolerance_m: float = setting(1.0, "a balise is ok only if its 95 % interval lies within ± this", "m", gt=0)

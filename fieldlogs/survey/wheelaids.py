@@ -36,6 +36,17 @@ so their normal equations are tridiagonal — eliminates the offsets through the
 regresses the whitened y on the whitened travel: λ̂ = (d̃ᵀỹ − cᵀA⁻¹c_y)/(d̃ᵀd̃ − cᵀA⁻¹c),
 se² = s²/(d̃ᵀd̃ − cᵀA⁻¹c), s² the whitened residuals' variance (n − stretches − 1 degrees of
 freedom) — the dense GLS with the full covariance, without forming it.
+
+**Interval.** s²/sxx is λ̂'s variance only if the error is that Gauss–Markov process; the
+real one is a sum (multipath of seconds, satellite orbit/clock and ionosphere of tens of
+minutes, geometry changes), whose mix differs from run to run. λ̂ = hᵀy is linear in the
+points (h = Wᵀg/sxx, g the whitened travel with the offsets projected out, W the whitening),
+so Var(λ̂) = hᵀCh for the true covariance C, estimated from the fit's plain residuals u
+(Newey–West): Σ_ℓ k_ℓ·γ̂(ℓ)·S(ℓ) over lags ℓ on the points' time grid within a segment,
+γ̂(ℓ) the residuals' autocovariance, S(ℓ) = Σ hᵢhᵢ₊ℓ, Bartlett weights over a bandwidth of
+``HAC_BANDWIDTH_TAUS``·τ (:func:`hac_variance`). The standard error is the larger of the two
+(the residuals of one run see little of an error slower than the run: the model's stays the
+floor).
 Points whose whitened residual (a jump's edges) or plain residual y − â_s − λ̂·d (its
 plateau) lies beyond ``gnss_outlier_z`` robust σ (1.4826·MAD) of its kind are dropped and
 the fit repeated (a multipath jump the trust filter let through). Estimated only with at least
@@ -66,6 +77,9 @@ GNSS, DGPS = "gnss", "dgps"
 MAX_ROUNDS = 5
 #: Fewest points a stretch needs to be used.
 MIN_STRETCH_POINTS = 3
+#: Bandwidth of the residuals' autocovariance in the sandwich variance, in τ (there the
+#: model's correlation has fallen to e⁻³ = 5 %).
+HAC_BANDWIDTH_TAUS = 3.0
 
 
 @dataclass(frozen=True)
@@ -249,6 +263,9 @@ class Fit:
     """Whitened residual per point."""
     plain: FloatArray
     """y − â_s − λ̂·d per point."""
+    se_hac: float = 0.0
+    """Sandwich standard error of λ̂ from the plain residuals' own autocovariance
+    (:func:`hac_variance`)."""
 
 
 def _normal(w: _Whitened, n_s: int, v: FloatArray) -> FloatArray:
@@ -282,7 +299,53 @@ def gls_scale(p: AlongTrack, tau_s: float) -> Fit | None:
     off = sol[:, 1] - lam * sol[:, 0]
     r = w.y - lam * w.d - w.a * off[w.sid] - w.b * off[w.prev]
     plain = (p.y - p.y.mean()) - lam * (p.d - p.d.mean()) - off[w.sid]
-    return Fit(lam, float(np.sqrt(float(r @ r) / dof / sxx)), r, plain)
+    h = estimator_weights(p, w, np.asarray(sol[:, 0], dtype=float), tau_s) / sxx
+    hac = hac_variance(p.t, p.segment, h, plain, HAC_BANDWIDTH_TAUS * tau_s)
+    return Fit(lam, float(np.sqrt(float(r @ r) / dof / sxx)), r, plain, float(np.sqrt(hac)))
+
+
+def estimator_weights(p: AlongTrack, w: _Whitened, off_d: FloatArray, tau_s: float) -> FloatArray:
+    """h·sxx with λ̂ = hᵀy: the whitened travel with the offsets projected out, g = d̃ − Xₒ·A⁻¹cd,
+    mapped back through the whitening, h = Wᵀg/sxx: (Wᵀg)ᵢ = gᵢ/(qᵢσᵢ) − ρᵢ₊₁gᵢ₊₁/(qᵢ₊₁σᵢ)."""
+    g = w.d - w.a * off_d[w.sid] - w.b * off_d[w.prev]
+    first = np.concatenate([[True], p.segment[1:] != p.segment[:-1]])
+    dt = np.diff(p.t, prepend=p.t[:1])
+    rho = np.where(first, 0.0, np.exp(-np.maximum(dt, 0.0) / tau_s))
+    gq = g / np.sqrt(1.0 - rho * rho)
+    nxt = np.concatenate([rho[1:] * gq[1:], [0.0]])
+    return np.asarray((gq - nxt) / p.sigma, dtype=float)
+
+
+def hac_variance(t: FloatArray, segment: IntArray, h: FloatArray, u: FloatArray, bandwidth_s: float) -> float:
+    """Var(hᵀe) with e's autocovariance estimated from the residuals u (module docstring,
+    "Interval"): per segment on the points' time grid (step: the median spacing), γ̂(ℓ) =
+    Σ uᵢuᵢ₊ℓ / #pairs at lag ℓ steps, S(ℓ) = Σ hᵢhᵢ₊ℓ, and Σ_ℓ k_ℓ·γ̂(ℓ)·S(ℓ) with the Bartlett
+    weights k₀ = 1, k_ℓ = 2·(1 − ℓ/L) for 0 < ℓ < L = bandwidth / step (0 beyond); at least 0."""
+    total = 0.0
+    for k in np.unique(segment):
+        m = segment == k
+        tk = t[m]
+        if tk.size < 2:
+            total += float(np.sum(h[m] ** 2 * u[m] ** 2))
+            continue
+        step = float(np.median(np.diff(tk)))
+        if not step > 0:
+            step = 1.0
+        idx = np.rint((tk - tk[0]) / step).astype(np.int64)
+        n = int(idx[-1]) + 1
+        hu = np.zeros((3, n))
+        np.add.at(hu[0], idx, h[m])
+        np.add.at(hu[1], idx, u[m])
+        np.add.at(hu[2], idx, 1.0)
+        lags = max(1, min(n, int(np.floor(bandwidth_s / step))))
+        gam = np.correlate(hu[1], hu[1], "full")[n - 1 : n - 1 + lags]
+        cnt = np.correlate(hu[2], hu[2], "full")[n - 1 : n - 1 + lags]
+        sh = np.correlate(hu[0], hu[0], "full")[n - 1 : n - 1 + lags]
+        kern = 2.0 * (1.0 - np.arange(lags) / lags)
+        kern[0] = 1.0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            total += float(np.sum(np.where(cnt > 0, kern * gam / np.maximum(cnt, 1.0) * sh, 0.0)))
+    return max(total, 0.0)
 
 
 def _usable(a: AlongTrack) -> tuple[AlongTrack, float]:
@@ -318,7 +381,7 @@ def gnss_scale(a: AlongTrack | None, source: str, cfg: SurveyConfig) -> AidScale
             return None
         bad = _outlying(fit.residual, cfg.gnss_outlier_z) | _outlying(fit.plain, cfg.gnss_outlier_z)
         if not bad.any() or k == MAX_ROUNDS - 1:
-            return AidScale(source, fit.scale, fit.se, used, a.n)
+            return AidScale(source, fit.scale, max(fit.se, fit.se_hac), used, a.n)
         a = a.subset(~bad)
     return None
 

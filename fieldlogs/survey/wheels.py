@@ -12,9 +12,10 @@ D_true = λ·D with the 95 % interval ±1.96·se(λ)·D:
 * **gnss** — track-constrained GNSS [S002] or D-GPS km [S001 §4.2] against the travel
   (:mod:`fieldlogs.survey.wheelaids`; ``gnss_source`` says which).
 
-**Errors.** A source's own standard error sᵢ (the fit's: balise intervals, radar frames, the
-GNSS Gauss–Markov GLS) is independent between sources and runs. The balise and GNSS scales
-are both measured against the GIS grid's track length c (:mod:`fieldlogs.pipeline.metric`),
+**Errors.** A source's own standard error sᵢ (the fit's: the balise reads' stretches
+(:mod:`fieldlogs.survey.balises`), radar frames, the GNSS Gauss–Markov GLS or its
+sandwich) is independent between sources and runs. The balise and GNSS scales are both
+measured against the GIS grid's track length c (:mod:`fieldlogs.pipeline.metric`),
 so a relative error ε of that length (1σ g = ``track_length_sigma_pct``: the GIS survey's
 scale, the height datum — an orthometric height 40 m off the ellipsoid is 0.0006 % —, the
 noise of the grid points lengthening the chord sum by ≈ σ_p²/s², 0.0006 % for σ_p = 5 cm

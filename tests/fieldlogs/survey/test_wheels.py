@@ -13,7 +13,16 @@ from hypothesis import strategies as st
 from fieldlogs.pipeline.odometry.ground_products import GroundReport, WheelCalibration
 from fieldlogs.pipeline.types import Odometry
 from fieldlogs.survey.config import SurveyConfig
-from fieldlogs.survey.wheelaids import AlongTrack, _stretches, gls_scale, gnss_scale, radar_scale
+from fieldlogs.survey.wheelaids import (
+    AlongTrack,
+    _stretches,
+    _whiten,
+    estimator_weights,
+    gls_scale,
+    gnss_scale,
+    hac_variance,
+    radar_scale,
+)
 from fieldlogs.survey.wheels import combine, pool, vehicle_wheels
 
 CFG = SurveyConfig()
@@ -59,6 +68,54 @@ def test_the_fit_is_the_dense_generalised_least_squares(n: int, tau: float, seed
     lam, se = dense_gls(a, tau)
     assert fit.scale == pytest.approx(lam, rel=1e-9, abs=1e-9)
     assert fit.se == pytest.approx(se, rel=1e-6)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(min_value=12, max_value=40), st.floats(min_value=5.0, max_value=400.0), st.integers(0, 2**31 - 1))
+def test_the_estimator_weights_reproduce_the_fit_and_its_model_variance(n: int, tau: float, seed: int) -> None:
+    """λ̂ = hᵀy, and hᵀCh = s²/sxx·… with C the model's covariance: Var(λ̂) = 1/sxx (s = 1)."""
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(0.5, 3.0, n))
+    d = np.cumsum(rng.uniform(0.0, 40.0, n))
+    segment = (np.arange(n) >= n // 2).astype(np.int64)
+    stretch = (np.arange(n) >= n // 4).astype(np.int64) + 10 * segment
+    y = 0.995 * d + rng.normal(0.0, 2.0, n) + 7.0 * stretch
+    a = AlongTrack(t, d, y, rng.uniform(0.5, 2.0, n), segment, stretch)
+    fit = gls_scale(a, tau)
+    assert fit is not None
+    w = _whiten(a, tau)
+    ids = np.unique(a.stretch)
+    x = np.column_stack([(a.stretch == s).astype(float) for s in ids])
+    same = a.segment[:, None] == a.segment[None, :]
+    cov = np.where(same, np.exp(-np.abs(t[:, None] - t[None, :]) / tau), 0.0) * np.outer(a.sigma, a.sigma)
+    ci = np.linalg.inv(cov)
+    # the offsets' part of the whitened travel, from the dense normal equations
+    off_d = np.linalg.solve(x.T @ ci @ x, x.T @ ci @ (d - d.mean()))
+    h = estimator_weights(a, w, off_d, tau)
+    xd = np.column_stack([x, d])
+    var_dense = np.linalg.inv(xd.T @ ci @ xd)[-1, -1]
+    sxx = 1.0 / var_dense
+    assert float(h @ y) / sxx == pytest.approx(fit.scale, rel=1e-9)
+    assert float(h @ cov @ h) / sxx**2 == pytest.approx(var_dense, rel=1e-6)
+
+
+def test_the_sandwich_variance_by_hand() -> None:
+    # t = 0, 1, 2 s; h = (1, −1, 1), u = (1, 2, 1); bandwidth 2 steps: k₀ = 1, k₁ = 2·(1 − ½) = 1
+    # γ̂(0) = 6/3 = 2, γ̂(1) = (2 + 2)/2 = 2; S(0) = 3, S(1) = −2 → 2·3 + 1·2·(−2) = 2
+    t, seg = np.array([0.0, 1.0, 2.0]), np.zeros(3, dtype=np.int64)
+    h, u = np.array([1.0, -1.0, 1.0]), np.array([1.0, 2.0, 1.0])
+    assert hac_variance(t, seg, h, u, 2.0) == pytest.approx(2.0)
+    # bandwidth of one step: only lag 0, Σhᵢ²·γ̂(0) = 3·2
+    assert hac_variance(t, seg, h, u, 1.0) == pytest.approx(6.0)
+    # two segments never pair: each its own lag-0 term (a one-point segment h²u²)
+    two = np.array([0, 0, 1], dtype=np.int64)
+    # segment 0: γ̂(0) = 5/2, γ̂(1) = 2; S(0) = 2, S(1) = −1: 5 + 1·2·(−1) = 3; segment 1: 1·1 = 1
+    assert hac_variance(t, two, h, u, 2.0) == pytest.approx(4.0)
+    # a gap: the points sit on the grid of the median step, the missing epoch pairs with none
+    tg = np.array([0.0, 1.0, 3.0, 4.0])
+    hg, ug = np.array([1.0, 1.0, 1.0, 1.0]), np.array([1.0, 1.0, 1.0, 1.0])
+    # step 1 s; lags 0 (4 pairs, γ̂ 1, S 4) and 1 (pairs (0,1), (3,4): γ̂ 1, S 2, k 2·(1 − 1/2) = 1)
+    assert hac_variance(tg, np.zeros(4, dtype=np.int64), hg, ug, 2.0) == pytest.approx(4.0 + 2.0)
 
 
 def test_noise_free_points_give_the_scale_whatever_the_offsets() -> None:
