@@ -22,7 +22,8 @@ between the balises, e alone (L = 0). The pipeline
 (:mod:`fieldlogs.pipeline.run`) then
 
 * moves the telegrams' t back by L̂ when |L̂| > ``clock.balise_tolerance_s`` and σ_L is at most half
-  of it (``balise_clock`` event), and replays the aids;
+  of it or a tenth of |L̂| (``balise_clock`` event), replays the aids and fits again (the speeds
+  are read at the stamped times, so a large offset is found in steps; ``BALISE_PASSES``);
 * refuses the balises when |L̂| − 2σ_L > ``clock.balise_tolerance_s`` but L̂ is not determined
   (``balise_clock`` event; the run stays undetermined rather than wrongly determined);
 * judges the clock only on a wheel that measures right (|ê| ≤ ``margin.scale_check_pct``);
@@ -56,6 +57,8 @@ MIN_INTERVALS = 4
 MIN_SCALE_INTERVALS = 2
 #: Replays with the telegrams' t moved back (the fit is repeated on each replay).
 BALISE_PASSES = 3
+#: A large offset known to this share is moved back too (the replay's fit then refines it).
+RELATIVE_SIGMA = 0.1
 #: Intervals shorter than this carry no scale evidence worth the fix noise [m].
 MIN_INTERVAL_M = 100.0
 
@@ -192,14 +195,15 @@ def _balise_clock_checked(ctx: RunContext, travel: Travel, cfg: PipelineConfig) 
     tol = cfg.clock.balise_tolerance_s
     shifted = 0.0
     detail: dict[str, Any] | None = None
-    for _ in range(BALISE_PASSES):
+    for k in range(BALISE_PASSES + 1):  # the last pass only judges what the shifts left
         ev = balise_evidence(sol.fixes, travel)
         tel = ctx.streams.get("balise")
         if ev is None or tel is None or cfg.clock.max_lag_s <= 0 or abs(ev.lag_s) <= tol:
             break
         if 100.0 * abs(ev.scale) > cfg.margin.scale_check_pct:
             break  # a clock is judged on a wheel that measures right: the scale check speaks
-        if ev.lag_sigma_s <= 0.5 * tol and abs(shifted + ev.lag_s) <= cfg.clock.max_lag_s:
+        precise = ev.lag_sigma_s <= max(0.5 * tol, RELATIVE_SIGMA * abs(ev.lag_s))
+        if k < BALISE_PASSES and precise and abs(shifted + ev.lag_s) <= cfg.clock.max_lag_s:
             shifted += ev.lag_s
             ctx = replace(ctx, streams={**ctx.streams, "balise": tel.assign(t=tel["t"] - ev.lag_s)})
             action = "telegrams' t moved back by the offset"
