@@ -229,18 +229,30 @@ def block_lag(
 
 
 def _rho(rr: FloatArray, xx: FloatArray, use: npt.NDArray[np.bool_], m: int) -> FloatArray:
-    """ρ(ℓ) for ℓ = (j − m)·step, j = 0 … 2m: x at g + ℓ is ``xx[j : j + n]``."""
+    """ρ(ℓ) for ℓ = (j − m)·step, j = 0 … 2m, with x at g + ℓ being ``xx[j : j + n]``, over
+    the points where ``use`` and both signals are finite: the six sums of the correlation
+    coefficient (count, Σr, Σx, Σr², Σx², Σrx over each lag's common points) as valid-mode
+    cross-correlations by FFT — O(n log n) for all lags at once."""
     n = rr.size
-    rho = np.full(2 * m + 1, np.nan)
-    for j in range(2 * m + 1):
-        xs = xx[j : j + n]
-        sel = use & np.isfinite(xs)
-        if sel.sum() < 10:
-            continue
-        a, b = rr[sel] - rr[sel].mean(), xs[sel] - xs[sel].mean()
-        den = float(np.sqrt(np.dot(a, a) * np.dot(b, b)))
-        rho[j] = float(np.dot(a, b)) / den if den > 0 else np.nan
-    return rho
+    u = use & np.isfinite(rr)
+    v = np.isfinite(xx)
+    r0, x0 = np.where(u, rr, 0.0), np.where(v, xx, 0.0)
+    size = 1 << int(np.ceil(np.log2(n + xx.size)))
+    fx = [np.fft.rfft(c, size) for c in (v.astype(float), x0, x0 * x0)]
+    fr = [np.fft.rfft(c[::-1], size) for c in (u.astype(float), r0, r0 * r0)]
+
+    def corr(i: int, j: int) -> FloatArray:  # Σ_i a[i + lag]·b[i], lag = 0 … 2m
+        out: FloatArray = np.fft.irfft(fx[i] * fr[j], size)[n - 1 : n + 2 * m]
+        return out
+
+    cnt = np.round(corr(0, 0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sr, sx = corr(0, 1) / cnt, corr(1, 0) / cnt
+        var_r, var_x = corr(0, 2) / cnt - sr * sr, corr(2, 0) / cnt - sx * sx
+        cov = corr(1, 1) / cnt - sr * sx
+        rho = cov / np.sqrt(var_r * var_x)
+    ok = (cnt >= 10) & (var_r > 0) & (var_x > 0)
+    return np.where(ok, rho, np.nan)
 
 
 def _tacho_speed(tacho: pd.DataFrame, metres: float) -> tuple[FloatArray, FloatArray]:
