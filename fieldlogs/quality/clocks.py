@@ -6,9 +6,9 @@ are the onboard 100 ms cycles). A recorder whose clock runs ``L`` seconds **late
 offset is seen by cross-correlating a quantity both the stream and the tacho measure:
 
 * **IMU**: a_x turned to the travel frame by the cab direction, against the pulse
-  acceleration A_p = dv/dt of the tacho's speed. The IMU's own response lags the pulses by the
-  pulse delay the odometry applies (``odometry.pulse_delay_cycles`` × cycle, SPEC: 300 ms), so
-  the clock offset is the measured lag minus that delay (``expected_s``);
+  acceleration A_p = dv/dt of the tacho's speed (centred differences: the two respond together,
+  lag 0 in the simulator; the SPEC's 300 ms pulse delay belongs to the odometry's trailing
+  filters and lies inside the tolerance), so the clock offset is the measured lag;
 * **GPS**: the speed over ground (``speed_mps`` where logged, else the distance between
   consecutive fixes over their time step, placed at the step's midpoint) against the tacho's
   speed. GPS positions then would be matched ``L·v`` behind the train.
@@ -19,15 +19,18 @@ the mean speed carry no timing). With r(t) the reference (tacho) and x(t) the st
 
     ρ(ℓ) = corr(r(t), x(t + ℓ)),  ℓ = j·step_s, |ℓ| ≤ max_lag_s,
 
-over the grid points where both exist; the lag L̂ is the best ℓ refined by the parabola
-through ρ at the best grid value and its two neighbours (x(t + L) = r(t) for a stream L
-late). The estimate is *determined* when ρ(L̂) ≥ ``min_corr``, at least ``min_span_s`` of
-motion went into it and the peak lies inside the range (not at ±max_lag_s). A determined
-offset beyond ``tolerance_s`` is reported (``log.clock_offset``, the same finding
-``logs check`` and ``run`` give); the pipeline then moves the stream's t back by L̂ (the
-odometry's pulse-delay search takes up the last ±0.3 s of the IMU, and a GPS fix is worth 10 m:
-0.1 s of residual at 30 m/s is 3 m). An offset within the tolerance is not corrected; the
-aids' margins hold it (bench/NOTES.md).
+over the grid points where both exist (all lags at once by FFT); the lag is the best ℓ refined
+by the parabola through ρ at the best grid value and its two neighbours (x(t + L) = r(t) for a
+stream L late), after robust passes that leave out what does not fit at the lag found (slips,
+GPS multipath). The run is cut into 120 s blocks; its L̂ is the median of the blocks' lags and
+σ = 1.4826·MAD/√n their spread. The estimate is *determined* when ρ ≥ ``min_corr``, at least
+``min_span_s`` of motion went into it, the peak lies inside the range (not at ±max_lag_s) and
+σ is at most half the tolerance. A determined offset beyond ``tolerance_s`` is reported
+(``log.clock_offset``, the same finding ``logs check`` and ``run`` give); the pipeline then
+moves the stream's t back by L̂ (the odometry's pulse-delay search takes up the last ±0.3 s of
+the IMU; a GPS fix is worth 10 m: 0.1 s of residual at 30 m/s is 3 m). An offset within the
+tolerance is not corrected; on a run with many slips an IMU offset near it may not be
+determined (bench/NOTES.md: open).
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from fieldlogs.io import Run
 from fieldlogs.pipeline.config import ClockConfig
 from schemas.enums import CabDirection, Severity
 from schemas.findings import Finding
@@ -366,12 +370,9 @@ def _offset(stream: str, lag: Lag | None, expected_s: float, cfg: ClockConfig) -
     ]
 
 
-def clock_findings(run: object, cfg: ClockConfig | None = None) -> list[Finding]:
+def clock_findings(run: Run, cfg: ClockConfig | None = None) -> list[Finding]:
     """``log.clock_offset`` warnings of ``logs check``: the offsets :func:`clock_offsets`
     finds beyond the tolerance (the pipeline corrects the same ones)."""
-    from fieldlogs.io import Run
-
-    assert isinstance(run, Run)
     cfg = cfg or ClockConfig()
     meta = run.meta
     if meta is None or not run.has("tacho"):

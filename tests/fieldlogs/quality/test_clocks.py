@@ -6,6 +6,9 @@ sit at t = t_true + L, i.e. x(t) = s(t − L) and x(t + L) = s(t) — the estima
 
 from __future__ import annotations
 
+import shutil
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -104,3 +107,20 @@ def test_no_check_without_tacho_or_when_switched_off() -> None:
     streams = _streams(2.0, 5.0)
     assert clock_offsets({**streams, "tacho": None}, 0.86, 90, ClockConfig()) == []
     assert clock_offsets(streams, 0.86, 90, ClockConfig(max_lag_s=0.0)) == []
+
+
+SAMPLE = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs" / "sim-d-slips"
+
+
+def test_logs_check_names_a_late_imu_and_leaves_the_clean_run_alone(tmp_path: Path) -> None:
+    from fieldlogs.quality.checks import check_run
+
+    assert not [f for f in check_run(SAMPLE) if f.rule == "log.clock_offset"]
+    run = tmp_path / "run"
+    shutil.copytree(SAMPLE, run)
+    imu = pd.read_parquet(run / "imu.parquet")
+    imu.assign(t=imu["t"] + 2.0).to_parquet(run / "imu.parquet", index=False)
+    found = [f for f in check_run(run) if f.rule == "log.clock_offset"]
+    assert len(found) == 1 and found[0].table == "imu" and found[0].column == "t"
+    assert found[0].value == pytest.approx(2.0, abs=0.25)
+    assert "imu clock" in found[0].message and "late" in found[0].message
