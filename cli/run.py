@@ -58,6 +58,7 @@ def run(
         ("fail-safe", s["n_failsafe"]),
         ("anomalies", s["n_anomalies"]),
         ("max margin", "—" if s["max_margin_m"] is None else f"{s['max_margin_m']:.1f} m"),
+        *(("warning", w) for w in s["warnings"]),
     ]
     if "truth" in s and s["truth"].get("claimed_cycles"):
         tr = s["truth"]

@@ -21,6 +21,7 @@ from fieldlogs.gnss.config import GnssConfig
 from fieldlogs.pipeline.config import (
     CYCLE_S,
     BaliseConfig,
+    ClockConfig,
     FeatureConfig,
     GpsConfig,
     MarginConfig,
@@ -44,6 +45,7 @@ class SuiteConfig:
     gps: GpsConfig = field(default_factory=GpsConfig)
     margin: MarginConfig = field(default_factory=MarginConfig)
     gnss: GnssConfig = field(default_factory=GnssConfig)
+    clock: ClockConfig = field(default_factory=ClockConfig)
     possession: PossessionConfig = field(default_factory=PossessionConfig)
     survey: SurveyConfig = field(default_factory=SurveyConfig)
     gis_verify: VerifyConfig = field(default_factory=VerifyConfig)
@@ -55,7 +57,14 @@ class SuiteConfig:
     @property
     def pipeline(self) -> PipelineConfig:
         return PipelineConfig(
-            self.odometry, self.balise, self.feature, self.gps, self.margin, self.cycle_s, gnss=self.gnss
+            self.odometry,
+            self.balise,
+            self.feature,
+            self.gps,
+            self.margin,
+            self.cycle_s,
+            gnss=self.gnss,
+            clock=self.clock,
         )
 
     @classmethod

@@ -127,6 +127,9 @@ class EventType(StrEnum):
     GNSS_CORRECTION = "gnss_correction"
     GNSS_REFUSED = "gnss_refused"
     GNSS_TRACK_DISAGREES = "gnss_track_disagrees"
+    CLOCK_OFFSET = "clock_offset"
+    WHEEL_SCALE = "wheel_scale"
+    BALISE_CLOCK = "balise_clock"
 
 
 EVENT_MEANING: dict[EventType, str] = {
@@ -159,6 +162,12 @@ EVENT_MEANING: dict[EventType, str] = {
     "contradicts the estimate; no correction",
     EventType.GNSS_TRACK_DISAGREES: "constrained fits on another track of the line are far better: evidence "
     "against the track in force (kept) [S002]",
+    EventType.CLOCK_OFFSET: "warning: the IMU's or GPS' clock is offset from the tacho's beyond the tolerance "
+    "(cross-correlation); the stream's t was moved back by the offset",
+    EventType.WHEEL_SCALE: "warning: the balise intervals show a wheel scale error beyond the margin's share; the "
+    "margin's distance share was widened to cover it",
+    EventType.BALISE_CLOCK: "warning: the balise corrections follow the speed at the telegrams (a late or early "
+    "balise clock); the telegrams' t was moved back by the offset, or the balises refused",
 }
 
 #: Events that correct the km, and the one the position-correction % is defined on [S003 §5.2].

@@ -99,6 +99,9 @@ class BaliseConfig:
     pair_max_travel_m: float = setting(10.0, "I2 must follow I1 within this travel", "m", gt=0)
     id_window_m: float = setting(500.0, "C-balise identification window around dist_from_initial_m", "m", gt=0)
     fix_uncertainty_m: float = setting(1.0, "uncertainty of a balise position fix (antenna, read position)", "m", gt=0)
+    latency_budget_s: float = setting(
+        0.1, "undetected telegram time-stamp error held by each fix: its uncertainty grows by this × speed", "s", ge=0
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "balise")
@@ -209,9 +212,37 @@ class MarginConfig:
     imu_gap_share: float = setting(
         0.5, "share of the travel added to the margin while the IMU is silent (undetectable slip)", ge=0, le=1
     )
+    scale_check_pct: float = setting(
+        1.0, "a balise interval showing a wheel scale error above this widens distance_pct by that error", "%", gt=0
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "margin")
+
+
+@dataclass(frozen=True)
+class ClockConfig:
+    """Clock offsets of the IMU and GPS against the tacho, and of the balises against the DB
+    (:mod:`fieldlogs.quality.clocks`, :mod:`fieldlogs.pipeline.consistency`)."""
+
+    max_lag_s: float = setting(10.0, "offsets searched up to this either way; 0 = no clock check", "s", ge=0)
+    tolerance_s: float = setting(
+        0.5, "a determined offset beyond this is reported and the stream's t moved back", "s", gt=0
+    )
+    min_corr: float = setting(
+        0.6, "an offset is determined when the correlation at its peak is at least this", gt=0, le=1
+    )
+    min_span_s: float = setting(60.0, "… and at least this much motion went into it", "s", ge=0)
+    highpass_s: float = setting(30.0, "both signals minus their centred mean over this before correlating", "s", gt=0)
+    balise_tolerance_s: float = setting(
+        0.1,
+        "a determined balise clock offset beyond this moves the telegrams' t back (keep ≤ balise.latency_budget_s)",
+        "s",
+        gt=0,
+    )
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "clock")
 
 
 #: Default target of the position-correction % [S003 §5.2] (:mod:`fieldlogs.pipeline.corrections`;
@@ -238,6 +269,7 @@ class PipelineConfig:
     margin: MarginConfig = field(default_factory=MarginConfig)
     cycle_s: float = setting(**CYCLE_S)
     gnss: GnssConfig = field(default_factory=GnssConfig)
+    clock: ClockConfig = field(default_factory=ClockConfig)
 
     def __post_init__(self) -> None:
         check_ranges(self)

@@ -33,10 +33,10 @@ from dbtools.network import Network
 from fieldlogs.io import Run
 from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.aids.gnss import GnssUnit
-from fieldlogs.pipeline.aids.registry import RunContext, position_aids, speed_aids
+from fieldlogs.pipeline.aids.registry import RunContext, speed_aids
 from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.consistency import checked_solution
 from fieldlogs.pipeline.cycles import Cycles, build_cycles
-from fieldlogs.pipeline.engine import run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.gps.analysis import analyse_gps
@@ -45,6 +45,7 @@ from fieldlogs.pipeline.odometry.correct import correct_odometry
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
+from fieldlogs.quality.clocks import clock_offsets
 from fieldlogs.quality.tacho import cumulative_again
 from fieldlogs.quality.usability import Purpose, require_usable
 from schemas.enums import EventType, VehicleKind
@@ -114,6 +115,34 @@ def counter_resets_bridged(tacho: pd.DataFrame | None, events: list[Event]) -> p
     return out
 
 
+def clocks_aligned(
+    streams: dict[str, pd.DataFrame | None],
+    wheel_diameter_m: float | None,
+    teeth: int | None,
+    cfg: PipelineConfig,
+    events: list[Event],
+) -> dict[str, pd.DataFrame | None]:
+    """The IMU and GPS on the tacho's clock: a determined offset beyond ``clock.tolerance_s``
+    (:func:`fieldlogs.quality.clocks.clock_offsets`, the check ``logs check`` reports as
+    ``log.clock_offset``) moves the stream's t back by it, each a ``clock_offset`` event."""
+    out = dict(streams)
+    for o in clock_offsets(streams, wheel_diameter_m, teeth, cfg.clock, cfg.cycle_s):
+        frame = out.get(o.stream)
+        if not o.beyond_tolerance or frame is None:
+            continue
+        out[o.stream] = frame.assign(t=frame["t"] - o.offset_s)
+        detail = {
+            "stream": o.stream,
+            "offset_s": round(o.offset_s, 3),
+            "sigma_s": round(o.sigma_s, 3),
+            "corr": round(o.corr, 3),
+            "action": "t moved back by the offset",
+            "message": o.message,
+        }
+        events.append(Event(0.0, EventType.CLOCK_OFFSET, detail=detail))
+    return out
+
+
 def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunContext, list[Event]]:
     """Stages 1–4 of the module docstring: the context the aids are built from, and the
     ``input_repaired`` events of the cleaning; raises FindingsError when run.json is unusable.
@@ -125,6 +154,7 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
     pre: list[Event] = []
     streams = {n: clean_stream(run.stream(n), n, pre) for n in STREAMS}
     streams["tacho"] = counter_resets_bridged(streams["tacho"], pre)
+    streams = clocks_aligned(streams, run.meta.wheel_diameter_m, run.meta.teeth, cfg, pre)
     t_end = max((float(s["t"].iloc[-1]) for s in streams.values() if s is not None and len(s)), default=0.0)
     cycles = build_cycles(
         tacho=streams["tacho"],
@@ -159,8 +189,8 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
     cfg = cfg or PipelineConfig()
     ctx, pre = prepare_run(run, network, cfg)
     odo = ctx.odometry
-    sol = run_aids(Travel.of(ctx.cycles, odo, network), position_aids(ctx), cfg.margin, ctx.geometry)
-    events = pre + sol.events + episode_events(odo, sol.positions["km_m"].to_numpy())
+    sol, checks = checked_solution(ctx, Travel.of(ctx.cycles, odo, network), cfg)
+    events = pre + checks + sol.events + episode_events(odo, sol.positions["km_m"].to_numpy())
     events.sort(key=lambda e: e.t)
     ev_frame = events_frame(events)
     truth = ctx.streams["truth"]

@@ -46,6 +46,10 @@ def episode_events(odo: Odometry, km: np.ndarray) -> list[Event]:
     return events
 
 
+#: Events that are warnings about the input (their detail's message goes to summary ``warnings``).
+WARNING_EVENTS = (EventType.CLOCK_OFFSET, EventType.BALISE_CLOCK, EventType.WHEEL_SCALE)
+
+
 def events_frame(events: list[Event]) -> pd.DataFrame:
     rows = [
         {
@@ -82,6 +86,7 @@ def summarise(
     corr = ev[ev["type"].isin(CORRECTION_EVENTS)]
     determined = pos[pos["state"] != PositionState.UNDETERMINED.value]
     refused = ev[ev["type"] == EventType.FEATURE_REFUSED]
+    warned = ev[ev["type"].isin([str(t) for t in WARNING_EVENTS])]
     reasons: dict[str, int] = {}
     for d in refused["detail"]:
         for r in json.loads(d).get("failed", []):
@@ -113,6 +118,9 @@ def summarise(
         "gps_decisions": len(gps.decisions) if gps else 0,
         "gps_trusted_share": float(gps.fixes["trusted"].mean()) if gps is not None and len(gps.fixes) else None,
         "max_margin_m": float(pos["margin_m"].max()) if pos["margin_m"].notna().any() else None,
+        "warnings": [
+            str(json.loads(d).get("message", t)) for t, d in zip(warned["type"], warned["detail"], strict=True)
+        ],
         "episodes": [asdict(e) for e in odo.episodes],
         **_ground(odo, meta.wheel_diameter_m),
     }

@@ -38,6 +38,7 @@ import pandas as pd
 from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.io import REQUIRED_STREAMS, Run
+from fieldlogs.quality.clocks import clock_findings
 from fieldlogs.quality.gnss import check_gnss_nav, check_gnss_obs, check_gnss_sbas, check_receivers
 from fieldlogs.quality.tacho import TACHO_RATE_HZ, TachoIssue, TachoLimits, review_tacho, time_order
 from schemas.enums import BaliseKind, Severity
@@ -573,6 +574,7 @@ def check_run(run: Run | Path | str, db: DbRefs | None = None, limits: CheckLimi
     findings.extend(_check_overlap(run, spans, limits))
     findings.extend(check_receivers(run))
     findings.extend(_usability(run, findings))
+    findings.extend(clock_findings(run))  # the offsets the pipeline moves back (fieldlogs.quality.clocks)
     return findings
 
 

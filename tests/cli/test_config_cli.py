@@ -50,7 +50,7 @@ def test_one_section_as_toml_and_json(runner: CliRunner) -> None:
     res = runner.invoke(app, ["config", "show", "--section", "balise"])
     assert res.exit_code == 0
     assert tomllib.loads(res.output) == {
-        "balise": {"pair_max_travel_m": 10.0, "id_window_m": 500.0, "fix_uncertainty_m": 1.0}
+        "balise": {"pair_max_travel_m": 10.0, "id_window_m": 500.0, "fix_uncertainty_m": 1.0, "latency_budget_s": 0.1}
     }
     assert "# C-balise identification window around dist_from_initial_m ([m], > 0)" in res.output
     res = runner.invoke(app, ["config", "show", "--section", "odometry", "--format", "json"])

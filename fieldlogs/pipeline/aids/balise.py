@@ -10,6 +10,10 @@
   Correction amount = computed km − DB km; the engine turns it into the position-
   correction % = |amount| / distance since the previous correction × 100.
 
+Each fix's uncertainty is ``fix_uncertainty_m`` + ``latency_budget_s`` × the speed at the
+telegram: a time stamp off by τ puts the fix v·τ from the balise, which the balise clock check
+(:mod:`fieldlogs.pipeline.consistency`) cannot see below its tolerance.
+
 The aid's only state is the pending I1 and the last initial pair (the identification
 base of the C balises); it speaks at every telegram.
 """
@@ -75,6 +79,8 @@ class BaliseAid(StaticAid):
     last_pair: tuple[PairKey, float] | None = None
     """(pair key, travel distance at its I1)."""
     _s: float = 0.0
+    _u: float | None = None
+    """Uncertainty of the fix of the telegram being handled (fix + latency budget × speed)."""
     name = "balise"
     priority = Priority.TELEGRAM
 
@@ -86,6 +92,7 @@ class BaliseAid(StaticAid):
             yield Observation(float(row["t"]), row)
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
+        self._u = self.cfg.fix_uncertainty_m + self.cfg.latency_budget_s * float(view.travel.v[view.i])
         evs, fix = self.on_telegram(obs.payload, view.i, view.t, view.d, view.s, view.cab, view.estimate, view.km)
         return Outcome(evs, fix if evs else None)
 
@@ -170,7 +177,7 @@ class BaliseAid(StaticAid):
             key[2],
             k,
             FixSource.BALISE,
-            self.cfg.fix_uncertainty_m,
+            self.cfg.fix_uncertainty_m if self._u is None else self._u,
             t_ref=t,
         )
         self.last_pair = (key, pending.d)
@@ -236,7 +243,7 @@ class BaliseAid(StaticAid):
             estimate.track,
             estimate.k,
             FixSource.BALISE,
-            self.cfg.fix_uncertainty_m,
+            self.cfg.fix_uncertainty_m if self._u is None else self._u,
             t_ref=t,
         )
         return [

@@ -175,10 +175,12 @@ def test_margin_grows_2_percent_and_failsafe_makes_uncertain(net) -> None:
     odo.episodes.append(ep)
     sol = run(net, tel([(10.0, "I1", "0900", None, None, None), (10.5, "I2", None, "01", "D", None)]), c, odo)
     pos = sol.positions.set_index(sol.positions.t.round(1))
-    assert pos.loc[30.5, "margin_m"] == pytest.approx(CFG.balise.fix_uncertainty_m + 0.02 * 200.0)
+    # the fix holds its latency budget at the telegram's 10 m/s: 1 m + 0.1 s × 10 m/s = 2 m
+    u_fix = CFG.balise.fix_uncertainty_m + CFG.balise.latency_budget_s * 10.0
+    assert pos.loc[30.5, "margin_m"] == pytest.approx(u_fix + 0.02 * 200.0)
     assert pos.loc[39.9, "state"] == "determined"
     assert pos.loc[40.0, "state"] == "uncertain"
-    assert pos.loc[50.0, "margin_m"] > CFG.balise.fix_uncertainty_m + 0.02 * 395.0
+    assert pos.loc[50.0, "margin_m"] > u_fix + 0.02 * 395.0
     assert "failsafe" in [e.type for e in sol.events]
 
 

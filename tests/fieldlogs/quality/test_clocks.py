@@ -1,0 +1,126 @@
+"""Clock-offset estimator (fieldlogs.quality.clocks): signs and sizes by hand.
+
+A stream whose clock is LATE by L writes t = t_true + L: its samples of a signal s(t_true)
+sit at t = t_true + L, i.e. x(t) = s(t − L) and x(t + L) = s(t) — the estimator returns +L.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fieldlogs.pipeline.config import ClockConfig
+from fieldlogs.quality.clocks import ClockOffset, block_lag, clock_offsets, estimate_lag, gps_speed
+
+T = np.arange(0.0, 600.0, 0.1)
+
+
+def _speed(t: np.ndarray) -> np.ndarray:
+    """A train's speed: 0 → 20 m/s and back over 60 s periods (accelerations up to ~1 m/s²)."""
+    return 10.0 + 10.0 * np.sin(2 * np.pi * t / 60.0) + 2.0 * np.sin(2 * np.pi * t / 17.0)
+
+
+@pytest.mark.parametrize("late_s", [2.0, -1.5, 0.7, 0.0])
+def test_a_late_stream_has_a_positive_lag(late_s: float) -> None:
+    # the stream samples the same speed on its own clock: at its t it shows s(t − late)
+    t_x = np.arange(0.0, 600.0, 1.0)
+    x = _speed(t_x - late_s)
+    lag = estimate_lag(T, _speed(T), t_x, x, max_lag_s=10.0)
+    assert lag is not None
+    assert lag.lag_s == pytest.approx(late_s, abs=0.03)
+    assert lag.corr > 0.99 and not lag.at_edge
+    assert lag.blocks == 4  # (600 − 2·10) s cut into 120 s blocks: 4 of 145 s
+    assert lag.sigma_s < 0.03
+
+
+def test_one_block_with_a_different_lag_does_not_move_the_median() -> None:
+    """Five blocks, one of them (multipath, say) shifted 3 s: the median keeps 1 s."""
+    t_x = np.arange(0.0, 760.0, 1.0)
+    t = np.arange(0.0, 760.0, 0.1)
+    x = _speed(t_x - 1.0)
+    bad = (t_x > 200) & (t_x < 330)
+    x[bad] = _speed(t_x[bad] - 4.0)
+    lag = estimate_lag(t, _speed(t), t_x, x, max_lag_s=10.0)
+    assert lag is not None and lag.blocks == 6
+    assert lag.lag_s == pytest.approx(1.0, abs=0.05)
+
+
+def test_block_lag_leaves_out_a_slip() -> None:
+    """The reference (the wheel) reads 30 % high for 10 s: the robust passes leave it out."""
+    t_x = np.arange(0.0, 200.0, 0.01)
+    x = np.gradient(_speed(t_x - 0.5), t_x)
+    r = np.gradient(_speed(T[T < 200]), T[T < 200])
+    r[(T[T < 200] > 80) & (T[T < 200] < 90)] *= 1.3
+    lag = block_lag(T[T < 200], r, t_x, x, max_lag_s=5.0)
+    assert lag is not None and lag.lag_s == pytest.approx(0.5, abs=0.05)
+
+
+def test_no_overlap_longer_than_the_range_gives_none() -> None:
+    assert estimate_lag(T[:100], _speed(T[:100]), T[:100], _speed(T[:100]), max_lag_s=10.0) is None
+
+
+def test_gps_speed_from_fixes_by_hand() -> None:
+    # 20 m north per second at latitude 0: 20 m/s at the steps' midpoints
+    dlat = np.degrees(20.0 / 6_371_000.0)
+    gps = pd.DataFrame({"t": [0.0, 1.0, 2.0, 3.0], "lat": np.arange(4) * dlat, "lon": 0.0, "fix": 2})
+    t, v = gps_speed(gps)
+    assert t.tolist() == [0.5, 1.5, 2.5]
+    assert v == pytest.approx([20.0, 20.0, 20.0])
+
+
+def _streams(imu_late: float, gps_late: float) -> dict[str, pd.DataFrame | None]:
+    """Tacho (0.86 m wheel, 90 teeth), IMU a_x and GPS fixes of the same motion, each on its clock."""
+    t = np.arange(0.0, 600.0, 0.1)
+    d = np.cumsum(_speed(t)) * 0.1
+    m_per_pulse = np.pi * 0.86 / 90
+    tacho = pd.DataFrame({"t": t, "pulses": np.floor(d / m_per_pulse).astype("int64")})
+    ti = np.arange(0.0, 600.0, 0.01)
+    imu = pd.DataFrame({"t": ti + imu_late, "ax": np.gradient(_speed(ti), ti)})
+    tg = np.arange(0.0, 600.0, 1.0)
+    north = np.interp(tg, t, d)
+    gps = pd.DataFrame({"t": tg + gps_late, "lat": np.degrees(north / 6_371_000.0), "lon": 0.0, "fix": 2})
+    return {"tacho": tacho, "imu": imu, "gps": gps, "cab": None}
+
+
+@pytest.mark.parametrize(("imu_late", "gps_late"), [(2.0, 5.0), (-1.0, -0.8), (0.2, 0.0)])
+def test_clock_offsets_of_imu_and_gps(imu_late: float, gps_late: float) -> None:
+    got = {o.stream: o for o in clock_offsets(_streams(imu_late, gps_late), 0.86, 90, ClockConfig())}
+    assert got["imu"].offset_s == pytest.approx(imu_late, abs=0.1)
+    assert got["gps"].offset_s == pytest.approx(gps_late, abs=0.1)
+    assert got["imu"].determined and got["gps"].determined
+    assert got["imu"].beyond_tolerance == (abs(imu_late) > 0.5)
+    assert got["gps"].beyond_tolerance == (abs(gps_late) > 0.5)
+
+
+def test_the_message_names_stream_offset_and_direction() -> None:
+    late = ClockOffset("imu", 2.0, 0.05, 0.9, True, True)
+    early = ClockOffset("gps", -1.25, 0.05, 0.99, True, True)
+    assert late.message.startswith("imu clock 2.00 s late against the tacho")
+    assert early.message.startswith("gps clock 1.25 s early against the tacho")
+
+
+def test_no_check_without_tacho_or_when_switched_off() -> None:
+    streams = _streams(2.0, 5.0)
+    assert clock_offsets({**streams, "tacho": None}, 0.86, 90, ClockConfig()) == []
+    assert clock_offsets(streams, 0.86, 90, ClockConfig(max_lag_s=0.0)) == []
+
+
+SAMPLE = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs" / "sim-d-slips"
+
+
+def test_logs_check_names_a_late_imu_and_leaves_the_clean_run_alone(tmp_path: Path) -> None:
+    from fieldlogs.quality.checks import check_run
+
+    assert not [f for f in check_run(SAMPLE) if f.rule == "log.clock_offset"]
+    run = tmp_path / "run"
+    shutil.copytree(SAMPLE, run)
+    imu = pd.read_parquet(run / "imu.parquet")
+    imu.assign(t=imu["t"] + 2.0).to_parquet(run / "imu.parquet", index=False)
+    found = [f for f in check_run(run) if f.rule == "log.clock_offset"]
+    assert len(found) == 1 and found[0].table == "imu" and found[0].column == "t"
+    assert found[0].value == pytest.approx(2.0, abs=0.25)
+    assert "imu clock" in found[0].message and "late" in found[0].message
