@@ -23,13 +23,17 @@ v̂ = Σ(δ − δ̄)²/var ÷ Σ(n − 1) (with few passes s alone is often sma
 interval is δ̄ ± t₀.₉₇₅,ₙ₋₁·se.
 
 **Adjustment.** A balise off by e drags the residuals of its neighbours (whose anchor it
-is) by up to e/2. The survey therefore iterates: the balises that qualify as moved and
-whose culprit score (:func:`culprit_score`: both sides must see the balise off by the
-same amount; a neighbour of a displaced balise is off from one side only) is the largest
-among the qualifying balises of the neighbouring clusters are *flagged*, their anchor
-position is replaced by the surveyed one (c_DB − δ̄/(dkm/dc)), the wheel scales and every
-residual are estimated again; flags that no longer qualify are dropped; until the flags
-and anchors no longer change (``max_iterations``).
+is) by e times the weight of that side (about e/2, nearly e where the other side is long
+or missing). The survey therefore iterates: the balises that qualify as moved and whose
+culprit score (:func:`culprit_score`: both sides must see the balise off by the same
+amount; a neighbour of a displaced balise is off from one side only) is the largest among
+the qualifying balises of the clusters they anchor or are anchored by in some chain
+(:func:`anchor_pairs`; not the neighbouring clusters in the DB: a balise that is never
+read, unpowered or gone, anchors nobody, and the balises on either side of it are each
+other's anchors) are *flagged*, their anchor position is replaced by the surveyed one
+(c_DB − δ̄/(dkm/dc)), the wheel scales and every residual are estimated again; flags that
+no longer qualify are dropped; until the flags and anchors no longer change
+(``max_iterations``).
 
 **Wheel scale.** Within one chain a read i of balise b measures y_i = σ·c_b = a_p + λ·d_i + ε_i:
 the reader's true place is the balise's track length, the travel d_i counts it in the
@@ -297,23 +301,26 @@ def qualifies(stats: pd.DataFrame, cfg: SurveyConfig) -> BoolArray:
         return np.asarray((n >= cfg.min_passes) & (np.abs(mean) >= cfg.moved_min_m) & (np.abs(mean) > half))
 
 
-def local_maxima(cand: BoolArray, score_in: FloatArray, table: BaliseTable) -> BoolArray:
+def anchor_pairs(reads: Reads, nb: Neighbours, cluster: IntArray) -> IntArray:
+    """Every (cluster, anchor cluster) pair of the reads, both ways round, once each: the
+    clusters whose errors enter each other's residuals (module docstring, "Adjustment")."""
+    j = np.arange(reads.n)
+    parts = [np.c_[cluster[reads.balise[j[a >= 0]]], cluster[reads.balise[a[a >= 0]]]] for a in (nb.prev, nb.next)]
+    pairs = np.concatenate([*parts, *(p[:, ::-1] for p in parts)]).astype(np.int64).reshape(-1, 2)
+    return np.unique(pairs, axis=0) if len(pairs) else pairs
+
+
+def local_maxima(cand: BoolArray, score_in: FloatArray, cluster: IntArray, pairs: IntArray) -> BoolArray:
     """Candidates whose score (:func:`culprit_score`) is at least that of every candidate
-    in the neighbouring clusters of their track (km order)."""
-    f = table.frame
+    in the clusters they anchor or are anchored by (``pairs``, :func:`anchor_pairs`)."""
+    n_cl = int(cluster.max()) + 1 if cluster.size else 0
     score = np.where(cand, score_in, -1.0)
-    best = pd.Series(score).groupby(f["cluster"].to_numpy()).max()
-    order = f[["line_code", "track", "cluster", "km_actual_m"]].assign(score=score)
-    cl = order.groupby("cluster").agg(line=("line_code", "first"), track=("track", "first"), km=("km_actual_m", "min"))
-    cl = cl.assign(best=best).sort_values(["line", "track", "km"])
-    same_prev = (cl["line"] == cl["line"].shift(1)) & (cl["track"] == cl["track"].shift(1))
-    same_next = (cl["line"] == cl["line"].shift(-1)) & (cl["track"] == cl["track"].shift(-1))
-    around = np.fmax(
-        np.where(same_prev, cl["best"].shift(1).to_numpy(dtype=float), -1.0),
-        np.where(same_next, cl["best"].shift(-1).to_numpy(dtype=float), -1.0),
-    )
-    rival = pd.Series(around, index=cl.index).reindex(f["cluster"].to_numpy()).to_numpy(dtype=float)
-    return np.asarray(cand & (score >= rival))
+    best = np.full(n_cl, -1.0)
+    np.maximum.at(best, cluster, score)
+    rival = np.full(n_cl, -1.0)
+    if len(pairs):
+        np.maximum.at(rival, pairs[:, 0], best[pairs[:, 1]])
+    return np.asarray(cand & (score >= rival[cluster]))
 
 
 @dataclass
@@ -332,7 +339,9 @@ class Adjustment:
 
 def adjust(reads: Reads, table: BaliseTable, n_runs: int, cfg: SurveyConfig) -> Adjustment:
     """Flag, correct and re-estimate until stable (module docstring, "Adjustment")."""
-    nb = Neighbours.of(reads, table.frame["cluster"].to_numpy(dtype=np.int64))
+    cluster = table.frame["cluster"].to_numpy(dtype=np.int64)
+    nb = Neighbours.of(reads, cluster)
+    pairs = anchor_pairs(reads, nb, cluster)
     c_db = table.c
     c_anchor = c_db.copy()
     flagged = np.zeros(len(table.frame), dtype=bool)
@@ -344,7 +353,7 @@ def adjust(reads: Reads, table: BaliseTable, n_runs: int, cfg: SurveyConfig) -> 
         est = pass_estimates(reads, nb, table, c_anchor, lam, cfg)
         stats = balise_statistics(est, reads, table)
         cand = qualifies(stats, cfg)
-        new = (flagged & cand) | local_maxima(cand, culprit_score(stats), table)
+        new = (flagged & cand) | local_maxima(cand, culprit_score(stats), cluster, pairs)
         shift = np.where(new, np.nan_to_num(stats["residual_m"].to_numpy(dtype=float)) / table.slope, 0.0)
         c_new = c_db - shift
         anchor_var = np.where(new, np.nan_to_num(stats["se_m"].to_numpy(dtype=float) / table.slope) ** 2, 0.0)

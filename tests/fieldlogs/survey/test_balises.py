@@ -253,3 +253,31 @@ def test_the_wheel_scale_interval_holds_on_seeded_runs_whatever_the_read_scatter
     err = lam - lam_true
     assert np.mean(np.abs(err) <= 1.96 * se) >= 0.93
     assert np.median(1.96 * se) <= 1.5 * 1.96 * float(np.std(err))
+
+
+def _without(rd: Reads, rows: list[int]) -> Reads:
+    """``rd`` without the reads of the balise rows ``rows`` (an unpowered balise)."""
+    k = ~np.isin(rd.balise, rows)
+    return Reads(rd.run[k], rd.chain[k], rd.seg[k], rd.balise[k], rd.d[k], rd.allowance[k], rd.motion[k], rd.t[k])
+
+
+def test_a_moved_balise_whose_neighbour_is_never_read_is_still_the_culprit() -> None:
+    """The DB balise B03 between the moved B02 and B04 is never read (unpowered, or gone
+    and its telegram unknown), so B02 is B04's forward anchor although their clusters are
+    not neighbours in the DB. Iteration 1: B02 (+2.5 from both sides, score 2.5) and B04
+    (−2.49 from its forward side, ≈ 0 from its 20 km backward one: residual ≈ −2.47,
+    score 0) both qualify; B04 must lose to B02, whose error it only echoes. Were B04
+    flagged too, its anchor would carry B02's error back: B02's backward side would read
+    ≈ 0, its long forward side weighs 3 %, B02 would drop out, and the two would swap
+    forever (a 2-cycle that ``max_iterations`` cuts in either phase)."""
+    true = [0.0, 8000.0, 18000.0, 18600.0, 19000.0, 39000.0]
+    db = list(true)
+    db[2] += 2.5
+    rd = _without(reads(true, [0.998, 1.0, 1.003, 0.9995]), [3])
+    adj = adjust(rd, table(db), 4, CFG)
+    assert adj.flagged.tolist() == [False, False, True, False, False, False]
+    assert adj.iterations < CFG.max_iterations
+    res = adj.stats["residual_m"].to_numpy()
+    assert res[2] == pytest.approx(2.5, abs=1e-3)
+    assert np.abs(np.delete(res, [2, 3])).max() < 1e-3
+    assert np.isnan(res[3])  # never read: no residual
