@@ -33,7 +33,8 @@ read, unpowered or gone, anchors nobody, and the balises on either side of it ar
 other's anchors) are *flagged*, their anchor position is replaced by the surveyed one
 (c_DB − δ̄/(dkm/dc)), the wheel scales and every residual are estimated again; flags that
 no longer qualify are dropped; until the flags and anchors no longer change
-(``max_iterations``).
+(``max_iterations``). A balise whose flag or anchor still changed in the last round did
+not settle: it is reported *unverified*, never *ok* or *moved* on one phase of a cycle.
 
 **Wheel scale.** Within one chain a read i of balise b measures y_i = σ·c_b = a_p + λ·d_i + ε_i:
 the reader's true place is the balise's track length, the travel d_i counts it in the
@@ -335,6 +336,10 @@ class Adjustment:
     scale_distance_m: FloatArray
     estimates: PassEstimates
     iterations: int
+    unsettled: BoolArray
+    """Balises whose flag or anchor still changed in the last round: the iteration stopped at
+    ``max_iterations`` without settling (a cycle of flags), so their residual is one phase of
+    it, not an estimate — :mod:`fieldlogs.survey.inspection` calls them *unverified*."""
 
 
 def adjust(reads: Reads, table: BaliseTable, n_runs: int, cfg: SurveyConfig) -> Adjustment:
@@ -357,7 +362,8 @@ def adjust(reads: Reads, table: BaliseTable, n_runs: int, cfg: SurveyConfig) -> 
         shift = np.where(new, np.nan_to_num(stats["residual_m"].to_numpy(dtype=float)) / table.slope, 0.0)
         c_new = c_db - shift
         anchor_var = np.where(new, np.nan_to_num(stats["se_m"].to_numpy(dtype=float) / table.slope) ** 2, 0.0)
-        stable = bool((new == flagged).all() and np.allclose(c_new, c_anchor, rtol=0.0, atol=1e-4, equal_nan=True))
+        changed = (new != flagged) | ~np.isclose(c_new, c_anchor, rtol=0.0, atol=1e-4, equal_nan=True)
+        stable = not bool(changed.any())
         flagged, c_anchor = new, c_new
         if stable or it >= cfg.max_iterations:
-            return Adjustment(stats, flagged, c_anchor, lam, lam_se, used, est, it)
+            return Adjustment(stats, flagged, c_anchor, lam, lam_se, used, est, it, changed)

@@ -86,12 +86,14 @@ def pass_table(runs: Sequence[RunSurvey]) -> pd.DataFrame:
     return out
 
 
-def _reason(status: str, passes: int, reads: int, n_est: int, cfg: SurveyConfig) -> str:
+def _reason(status: str, passes: int, reads: int, n_est: int, cfg: SurveyConfig, unsettled: bool = False) -> str:
     """Why a balise has its status; the text before " (" is the category."""
     if status == MISSED:
         return f"never read (on {passes} passes)"
     if status != UNVERIFIED:
         return ""
+    if unsettled:
+        return f"adjustment not settled (its flag or anchor still changed after {cfg.max_iterations} rounds)"
     if passes == 0 and reads == 0:
         return "no run passed it"
     if n_est < cfg.min_passes:
@@ -118,7 +120,8 @@ def balise_status(
     with np.errstate(invalid="ignore"):
         ok = (n_est >= cfg.min_passes) & (np.abs(mean) + half <= cfg.ok_tolerance_m)
     missed = (reads == 0) & (n_pass >= cfg.min_missed_passes)
-    status = np.where(missed, MISSED, np.where(moved, MOVED, np.where(ok, OK, UNVERIFIED)))
+    settled = ~adj.unsettled
+    status = np.where(missed, MISSED, np.where(moved & settled, MOVED, np.where(ok & settled, OK, UNVERIFIED)))
     km_db = f["km_actual_m"].to_numpy(dtype=float)
     out = pd.DataFrame(
         {
@@ -141,8 +144,10 @@ def balise_status(
         }
     )
     out["reason"] = [
-        _reason(s, int(p), int(r), int(n), cfg)
-        for s, p, r, n in zip(out["status"], out["passes"], out["reads"], out["n_estimates"], strict=True)
+        _reason(s, int(p), int(r), int(n), cfg, bool(u))
+        for s, p, r, n, u in zip(
+            out["status"], out["passes"], out["reads"], out["n_estimates"], adj.unsettled, strict=True
+        )
     ]
     return out[list(BALISE_COLUMNS)]
 

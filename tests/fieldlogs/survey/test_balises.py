@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -10,6 +12,7 @@ from hypothesis import strategies as st
 
 from fieldlogs.survey.balises import Neighbours, adjust, culprit_score, pass_estimates, wheel_scales
 from fieldlogs.survey.config import SurveyConfig
+from fieldlogs.survey.inspection import UNVERIFIED, balise_status
 from fieldlogs.survey.trajectory import BaliseTable, Reads
 
 CFG = SurveyConfig()
@@ -281,3 +284,22 @@ def test_a_moved_balise_whose_neighbour_is_never_read_is_still_the_culprit() -> 
     assert res[2] == pytest.approx(2.5, abs=1e-3)
     assert np.abs(np.delete(res, [2, 3])).max() < 1e-3
     assert np.isnan(res[3])  # never read: no residual
+
+
+def test_an_adjustment_that_has_not_settled_leaves_its_balises_unverified() -> None:
+    """The case above needs three rounds; cut after one, the flag of the moved B02 was still
+    changing (set in that round), so B02 is neither moved nor ok but *unverified*, with the
+    reason — never a status read off one phase of an unfinished iteration."""
+    true = [0.0, 8000.0, 18000.0, 18600.0, 19000.0, 39000.0]
+    db = list(true)
+    db[2] += 2.5
+    rd = _without(reads(true, [0.998, 1.0, 1.003, 0.9995]), [3])
+    cut = replace(CFG, max_iterations=1)
+    adj = adjust(rd, table(db), 4, cut)
+    assert adj.iterations == 1
+    assert adj.unsettled[2]
+    settled = adjust(rd, table(db), 4, CFG)
+    assert not settled.unsettled.any()
+    status = balise_status(table(db), adj, pd.DataFrame(), pd.Series(dtype=int), cut)
+    assert status["status"].iloc[2] == UNVERIFIED
+    assert status["reason"].iloc[2].startswith("adjustment not settled")
