@@ -76,6 +76,7 @@ BENCHES = (
     Bench("outputs", "writing outputs (share of trainpos run)", (), ()),
     Bench("odometry", "slip/slide odometry", ("--repeat", "5"), ()),
     Bench("gnss", "S002 GNSS epochs/s", ("--runs", "5", "--throughput-runs", "2"), ()),
+    Bench("gnss_fde", "S002 fault detection and exclusion (step, ramp)", ("--runs", "5"), ("--runs", "50")),
     Bench("radar", "S004 radar frames/s", ("throughput", "--hours", "0.25", "--loop-minutes", "1"), ("throughput",)),
     Bench("possession", "possession alarms", ("--runs", "12"), ()),
     Bench("gis_verify", "GIS verification", (), ()),
