@@ -128,6 +128,13 @@ def step_values(t_cycles: FloatArray, t_events: FloatArray, values: npt.ArrayLik
     return np.where(idx >= 0, vals[np.clip(idx, 0, None)] if vals.size else default, default)
 
 
+def cab_signs(t: FloatArray, t_cab: FloatArray, directions: npt.ArrayLike) -> FloatArray:
+    """The driving cab at each ``t``: +1 forward, −1 reverse, from the last cab event at or
+    before it (``t_cab`` sorted; +1 before the first)."""
+    reverse = np.asarray(directions).astype(str) == CabDirection.REVERSE.value
+    return step_values(t, t_cab, np.where(reverse, -1.0, 1.0), 1.0)
+
+
 def build_cycles(
     *,
     tacho: pd.DataFrame | None,
@@ -178,8 +185,7 @@ def build_cycles(
             imu_means[c] = np.full(t.size, np.nan)
     if cab is not None and len(cab):
         te = cab["t"].to_numpy(dtype=float)
-        sign = np.where(cab["direction"].astype(str).to_numpy() == CabDirection.REVERSE.value, -1.0, 1.0)
-        cab_sign = step_values(t, te, sign, 1.0).astype(np.int8)
+        cab_sign = cab_signs(t, te, cab["direction"].astype(str).to_numpy()).astype(np.int8)
         if uses_pto and "pto" in cab.columns and cab["pto"].notna().any():
             pto_vals = cab["pto"].astype("Float64").ffill().fillna(0).to_numpy(dtype=float)
             pto = step_values(t, te, pto_vals, 0.0).astype(np.int8)

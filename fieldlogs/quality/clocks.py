@@ -44,7 +44,8 @@ import pandas as pd
 
 from fieldlogs.io import Run
 from fieldlogs.pipeline.config import ClockConfig
-from schemas.enums import CabDirection, Severity
+from fieldlogs.pipeline.cycles import cab_signs
+from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.units import metres_per_pulse
 from schemas.vehicle import ANY_WHEEL_DIAMETER_M
@@ -286,10 +287,8 @@ def _cab_sign(cab: pd.DataFrame | None, t: FloatArray) -> FloatArray:
     if cab is None or not len(cab):
         return np.ones(t.size)
     te = cab["t"].to_numpy(dtype=float, na_value=np.nan)
-    sign = np.where(cab["direction"].astype(str).to_numpy() == CabDirection.REVERSE.value, -1.0, 1.0)
     order = np.argsort(te, kind="stable")
-    idx = np.searchsorted(te[order], t, side="right") - 1
-    return np.where(idx >= 0, sign[order][np.clip(idx, 0, None)], 1.0)
+    return cab_signs(t, te[order], cab["direction"].astype(str).to_numpy()[order])
 
 
 def gps_speed(gps: pd.DataFrame) -> tuple[FloatArray, FloatArray]:
