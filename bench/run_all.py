@@ -10,8 +10,8 @@ the best library alternative measured side by side in the same run. The table ha
 per benchmark: the command that reproduces it, what it printed, its wall time and the
 1-minute load average (``os.getloadavg``) before and after it, since the machine may be
 shared. A benchmark that fails is a row saying so (exit code and last line): the table is
-written all the same. The survey benchmark is a slot: listed, and run once
-``bench/bench_survey.py`` exists. Never fails on timing: it reports.
+written all the same. Every ``bench/bench_*.py`` is a row (a test checks it). Never fails on
+timing: it reports.
 """
 
 from __future__ import annotations
@@ -77,11 +77,19 @@ BENCHES = (
     Bench("odometry", "slip/slide odometry", ("--repeat", "5"), ()),
     Bench("gnss", "S002 GNSS epochs/s", ("--runs", "5", "--throughput-runs", "2"), ()),
     Bench("gnss_fde", "S002 fault detection and exclusion (step, ramp)", ("--runs", "5"), ("--runs", "50")),
+    Bench("gnss_pipeline", "S002 GNSS aid in the pipeline (aid off vs on)", ("--runs", "3"), ("--runs", "24")),
     Bench("radar", "S004 radar frames/s", ("throughput", "--hours", "0.25", "--loop-minutes", "1"), ("throughput",)),
+    Bench("radar_pipeline", "S004 radar in the pipeline (pulses + IMU vs + radar)", ("--runs", "3"), ("--runs", "30")),
     Bench("possession", "possession alarms", ("--runs", "12"), ()),
     Bench("gis_verify", "GIS verification", (), ()),
     Bench("simulate", "simulator", ("--km", "30"), ()),
-    Bench("survey", "survey (slot: bench_survey.py from the survey work)", (), ()),
+    Bench(
+        "survey",
+        "survey: moved/missed balises, curves, wheels; run-hours/min",
+        ("--lines", "1", "--length-km", "12", "--runs", "4"),
+        (),
+    ),
+    Bench("impact", "db impact vs two audits of the same runs", ("--copies", "2", "--pairs", "1"), ()),
     Bench("audit", "fleet audit scaling, 1 → 2 workers, Dask", ("--runs", "100"), ("--runs", "200")),
 )
 
