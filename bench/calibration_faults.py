@@ -1,7 +1,7 @@
 """Wheel scale and clock faults on the sample run (issue 15): how much of the run stays inside
 its margin.
 
-    .venv/bin/python bench/bench_calibration_faults.py [CASE ...]
+    .venv/bin/python bench/calibration_faults.py [CASE ...]
 
 Each case copies ``fieldlogs/sample_logs/sim-d-slips``, damages it as ``tests/test_damage.py``
 does (``("scale", "tacho", 0.05)``: pulses 5 % over the declared wheel; ``("late", "balise",
