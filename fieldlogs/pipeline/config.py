@@ -215,6 +215,9 @@ class MarginConfig:
     scale_check_pct: float = setting(
         1.0, "a balise interval showing a wheel scale error above this widens distance_pct by that error", "%", gt=0
     )
+    wheel_rescale: bool = setting(
+        True, "a fitted wheel scale error above scale_check_pct divides the pulse distance by 1 + it (replayed)"
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "margin")

@@ -26,7 +26,9 @@ between the balises, e alone (L = 0). The pipeline
   are read at the stamped times, so a large offset is found in steps; ``BALISE_PASSES``);
 * refuses the balises when |L̂| − 2σ_L > ``clock.balise_tolerance_s`` but L̂ is not determined
   (``balise_clock`` event; the run stays undetermined rather than wrongly determined);
-* judges the clock only on a wheel that measures right (|ê| ≤ ``margin.scale_check_pct``);
+* judges the clock only on a wheel that measures right (|ê| ≤ ``margin.scale_check_pct``;
+  a larger scale is first divided out of the pulses and the run replayed,
+  :mod:`fieldlogs.pipeline.wheelscale`);
 * widens the margin's distance share when an interval shows a scale error r_j =
   (|a_j| − 2·u_fix − ΔA_j)/D_j (beyond its fixes' noise and its slip budget) above
   ``margin.scale_check_pct`` (or the fitted |ê| is): p = distance_pct + 100·max(max_j r_j,

@@ -15,7 +15,9 @@ loop over the few moments an aid speaks):
    crossovers [S001 §4.2]), the curvature trace with the feature tables [S000 §3.2] and the
    run's raw GNSS inputs (``gnss_obs``/``gnss_nav``, solved on a track when an aid asks [S002]);
 5. position aids built by the registry (:mod:`fieldlogs.pipeline.aids`) and applied in time
-   order by the engine (:mod:`fieldlogs.pipeline.engine`), which records the fixes;
+   order by the engine (:mod:`fieldlogs.pipeline.engine`), which records the fixes, and the
+   balise checks (:mod:`fieldlogs.pipeline.consistency`); a wheel scale they find is divided
+   out of the pulses and stages 3–5 replayed (:mod:`fieldlogs.pipeline.wheelscale`);
 6. per-cycle positions with their margins (:mod:`fieldlogs.pipeline.positions`), the events
    frame and the summary (:mod:`fieldlogs.pipeline.summary`), and the truth comparison when
    the run has a ``truth`` stream.
@@ -35,9 +37,7 @@ from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.aids.gnss import GnssUnit
 from fieldlogs.pipeline.aids.registry import RunContext, speed_aids
 from fieldlogs.pipeline.config import PipelineConfig
-from fieldlogs.pipeline.consistency import checked_solution
 from fieldlogs.pipeline.cycles import Cycles, build_cycles
-from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.gps.analysis import analyse_gps
 from fieldlogs.pipeline.imugap import imu_gaps, with_gap_allowance
@@ -45,6 +45,7 @@ from fieldlogs.pipeline.odometry.correct import correct_odometry
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
+from fieldlogs.pipeline.wheelscale import scaled_cycles, wheel_corrected
 from fieldlogs.quality.clocks import clock_offsets
 from fieldlogs.quality.tacho import cumulative_again
 from fieldlogs.quality.usability import Purpose, require_usable
@@ -169,6 +170,22 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
     if not keep_imu:
         streams["imu"] = None  # read only through the cycles from here on
         run.release("imu")
+    gnss = GnssUnit.for_run(run, network, cfg.gnss)
+    return context_on(cycles, run, network, cfg, streams, gnss), pre
+
+
+def context_on(
+    cycles: Cycles,
+    run: Run,
+    network: Network,
+    cfg: PipelineConfig,
+    streams: dict[str, pd.DataFrame | None],
+    gnss: GnssUnit | None,
+) -> RunContext:
+    """Stages 3–4 of the module docstring on ``cycles``: what :func:`prepare_run` builds after
+    the cycles, and again on the cycles with the wheel scale divided out
+    (:mod:`fieldlogs.pipeline.wheelscale`)."""
+    assert run.meta is not None
     ground = next((g for a in speed_aids(streams, run.radar) if (g := a.on_cycles(cycles)) is not None), None)
     # pulses only when the run has no IMU (correct_odometry falls back by itself)
     odo = correct_odometry(cycles, cfg.odometry, ground)
@@ -177,24 +194,27 @@ def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunCon
     gps = analyse_gps(streams["gps"], network, cfg.gps, cycles)
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
     geometry = VehicleGeometry.of(run.meta.vehicle)
-    gnss = GnssUnit.for_run(run, network, cfg.gnss)
-    ctx = RunContext(
+    return RunContext(
         network, cfg, streams, cycles, odo, gps, features, geometry=geometry, gnss=gnss, imu_gaps=tuple(gaps)
     )
-    return ctx, pre
 
 
 def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) -> PipelineResult:
     """Replay a run through the onboard logic; raises FindingsError when run.json is unusable."""
     cfg = cfg or PipelineConfig()
     ctx, pre = prepare_run(run, network, cfg)
+    first = ctx
+
+    def rescaled(scale: float) -> RunContext:
+        return context_on(scaled_cycles(first.cycles, scale), run, network, cfg, first.streams, first.gnss)
+
+    ctx, scale, sol, checks = wheel_corrected(ctx, rescaled, cfg)
     odo = ctx.odometry
-    sol, checks = checked_solution(ctx, Travel.of(ctx.cycles, odo, network), cfg)
     events = pre + checks + sol.events + episode_events(odo, sol.positions["km_m"].to_numpy())
     events.sort(key=lambda e: e.t)
     ev_frame = events_frame(events)
     truth = ctx.streams["truth"]
-    summary = summarise(run, network, cfg, sol.positions, ev_frame, odo, ctx.gps)
+    summary = summarise(run, network, cfg, sol.positions, ev_frame, odo, ctx.gps, wheel_scale=scale)
     if truth is not None and len(truth):
         summary["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
     kappa = ctx.features.kappa if ctx.features is not None else None

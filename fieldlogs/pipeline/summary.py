@@ -11,7 +11,7 @@ wheel calibration.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
@@ -78,8 +78,12 @@ def summarise(
     ev: pd.DataFrame,
     odo: Odometry,
     gps: GpsAnalysis | None,
+    *,
+    wheel_scale: float = 1.0,
 ) -> dict[str, Any]:
-    """Headline figures of one run (what audits aggregate)."""
+    """Headline figures of one run (what audits aggregate); ``wheel_scale``: the scale the
+    pulse distance was divided by (:mod:`fieldlogs.pipeline.wheelscale`), so the radar's wheel
+    calibration is stated against run.json's diameter."""
     meta = run.meta
     assert meta is not None
     states = pos["state"].value_counts(normalize=True).to_dict()
@@ -122,15 +126,21 @@ def summarise(
             str(json.loads(d).get("message", t)) for t, d in zip(warned["type"], warned["detail"], strict=True)
         ],
         "episodes": [asdict(e) for e in odo.episodes],
-        **_ground(odo, meta.wheel_diameter_m),
+        **_ground(odo, meta.wheel_diameter_m, wheel_scale),
     }
 
 
-def _ground(odo: Odometry, wheel_diameter_m: float | None) -> dict[str, Any]:
+def _ground(odo: Odometry, wheel_diameter_m: float | None, wheel_scale: float = 1.0) -> dict[str, Any]:
     """With a ground-speed sensor (the radar): what it gave the odometry (``radar``) and the
     wheel calibration (``wheel_calibration``: true/nominal diameter with its 95 % interval);
-    nothing without one."""
+    nothing without one. Measured on pulses divided by ``wheel_scale`` (ratio r·s), it is
+    stated against the nominal wheel: ratio and half-width divided by s."""
     if odo.ground is None or wheel_diameter_m is None:
         return {}
-    report = odo.ground.to_json(wheel_diameter_m)
+    ground = odo.ground
+    if wheel_scale != 1.0 and ground.calibration is not None:
+        cal = ground.calibration
+        cal = replace(cal, ratio=cal.ratio / wheel_scale, half_width=cal.half_width / wheel_scale)
+        ground = replace(ground, calibration=cal)
+    report = ground.to_json(wheel_diameter_m)
     return {"radar": report, "wheel_calibration": report.pop("wheel_calibration")}

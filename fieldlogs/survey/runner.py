@@ -68,11 +68,14 @@ def replay_runs(
 ) -> tuple[list[RunSurvey], list[tuple[str, str]]]:
     """Every run's :class:`RunSurvey` (task order) and the runs that failed (folder, error).
 
-    The runs are replayed with the odometry's ``wheel_calibration`` scale off: the survey
-    measures the wheel against the configured diameter from every source (its radar
-    calibration is still computed and used, :mod:`fieldlogs.survey.wheelaids`)."""
+    The runs are replayed with the odometry's ``wheel_calibration`` scale and the balise
+    check's ``margin.wheel_rescale`` off: the survey measures the wheel against the configured
+    diameter from every source (its radar calibration is still computed and used,
+    :mod:`fieldlogs.survey.wheelaids`)."""
     if pipeline.odometry.wheel_calibration:
         pipeline = replace(pipeline, odometry=replace(pipeline.odometry, wheel_calibration=False))
+    if pipeline.margin.wheel_rescale:
+        pipeline = replace(pipeline, margin=replace(pipeline.margin, wheel_rescale=False))
     ref, _ = open_db(db, network)  # this process replays runs too: it keeps the network
     tasks = [(str(p), (ref, pipeline, cfg)) for p in folders]
     done, failed = replay_values(

@@ -16,7 +16,9 @@ from dbtools.database import read_network
 from fieldlogs.io import read_run
 from fieldlogs.pipeline.config import ClockConfig, MarginConfig, PipelineConfig
 from fieldlogs.pipeline.consistency import Interval, fit_evidence, scale_rate
+from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.pipeline.wheelscale import scaled_cycles
 
 SAMPLE = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs" / "sim-d-slips"
 
@@ -76,11 +78,12 @@ def _turned_wheel(tmp_path: Path, factor: float) -> Path:
 
 
 def test_a_turned_wheel_widens_the_margin_never_below_the_configured_share(sample_db: Path, tmp_path: Path) -> None:
+    """Without the rescaling (``margin.wheel_rescale`` off) the wheel's scale widens the margin."""
     network = read_network(sample_db)
     run = _turned_wheel(tmp_path, 1.05)
     off = replace(PipelineConfig(), clock=ClockConfig(max_lag_s=0.0), margin=MarginConfig(scale_check_pct=1000.0))
     before = run_pipeline(read_run(run), network, off)
-    after = run_pipeline(read_run(run), network)
+    after = run_pipeline(read_run(run), network, replace(PipelineConfig(), margin=MarginConfig(wheel_rescale=False)))
     ev = after.events[after.events["type"] == "wheel_scale"]
     assert len(ev) == 1
     detail = json.loads(ev["detail"].iloc[0])
@@ -99,3 +102,68 @@ def test_a_clean_run_gets_no_warning(sample_db: Path) -> None:
     res = run_pipeline(read_run(SAMPLE), read_network(sample_db))
     assert res.summary["warnings"] == []
     assert not res.events["type"].isin(["wheel_scale", "balise_clock", "clock_offset"]).any()
+
+
+def test_scaled_cycles_divide_the_pulse_distance_and_speed_by_hand() -> None:
+    """Pulses 5 % over the declared wheel: 105 m by pulses are 100 m, 21 m/s are 20 m/s; the
+    counts (and everything else) stay."""
+    one = np.ones(2)
+    cyc = Cycles(
+        t=np.array([0.0, 0.1]),
+        pulses=np.array([0.0, 100.0]),
+        d_pulse=np.array([0.0, 105.0]),
+        v_pulse=np.array([0.0, 21.0]),
+        imu={"ax": one},
+        cab=np.ones(2, dtype=np.int8),
+        pto=np.ones(2, dtype=np.int8),
+        has_tacho=True,
+        has_imu=True,
+    )
+    out = scaled_cycles(cyc, 1.05)
+    assert out.d_pulse == pytest.approx([0.0, 100.0]) and out.v_pulse == pytest.approx([0.0, 20.0])
+    assert out.pulses is cyc.pulses and out.imu is cyc.imu and cyc.d_pulse[1] == 105.0
+
+
+@pytest.mark.parametrize("factor", [1.05, 1.02, 0.95])
+def test_a_turned_wheel_is_divided_out_and_keeps_the_clean_runs_margins(
+    factor: float, sample_db: Path, tmp_path: Path
+) -> None:
+    """The balise intervals' scale is divided out of the pulses and the run replayed (module
+    :mod:`fieldlogs.pipeline.wheelscale`): one ``wheel_scale`` event with the scale found
+    (+5 %: 2.49 % then 2.10 % → 4.64 %; the slip corrections run part of the long intervals
+    on the radar, so one fit sees only part of it), no widening left, the margins and the
+    determined cycles of the clean run, and the radar's wheel calibration still stated against
+    run.json's diameter. Before: the margin widened to 5.9 / 4.2 / 6.2 % of the distance
+    (mean margin 34.5 / 33.5 / 33.5 m, clean 18.8 m) and 1,484 cycles fewer determined at ±5 %."""
+    network = read_network(sample_db)
+    clean = run_pipeline(read_run(SAMPLE), network)
+    res = run_pipeline(read_run(_turned_wheel(tmp_path, factor)), network)
+    ev = res.events[res.events["type"] == "wheel_scale"]
+    assert len(ev) == 1
+    detail = json.loads(ev["detail"].iloc[0])
+    assert detail["scale_pct"] == pytest.approx(100.0 * (factor - 1.0), abs=0.5)
+    assert "distance_pct" not in detail and "wheel scale" in res.summary["warnings"][0]
+    det0 = (clean.positions["state"] == "determined").to_numpy()
+    det1 = (res.positions["state"] == "determined").to_numpy()
+    assert det1.sum() >= det0.sum() - 5
+    m0 = float(clean.positions["margin_m"][det0].mean())
+    assert float(res.positions["margin_m"][det1].mean()) < m0 + 1.0
+    assert res.summary["truth"]["within_margin_share"] >= 0.999
+    cal0, cal1 = clean.summary["wheel_calibration"], res.summary["wheel_calibration"]
+    assert cal1["ratio"] == pytest.approx(cal0["ratio"] / factor, rel=2e-3)
+
+
+def test_a_clock_is_judged_on_the_corrected_wheel(sample_db: Path, tmp_path: Path) -> None:
+    """Wheel +5 % and the balise clock 1 s late: before, the clock was never judged (|ê| 2.5 %
+    beyond the scale check; 74.8 % of the determined cycles within margin); now the scale is
+    divided out first and the clock found on the corrected replay (0.98 s late)."""
+    network = read_network(sample_db)
+    run = _turned_wheel(tmp_path, 1.05)
+    tel = pd.read_parquet(run / "balise.parquet")
+    tel.assign(t=tel["t"] + 1.0).to_parquet(run / "balise.parquet", index=False)
+    res = run_pipeline(read_run(run), network)
+    kinds = list(res.events["type"][res.events["type"].isin(["wheel_scale", "balise_clock"])])
+    assert sorted(kinds) == ["balise_clock", "wheel_scale"]
+    clock = json.loads(res.events["detail"][res.events["type"] == "balise_clock"].iloc[0])
+    assert clock["offset_s"] == pytest.approx(1.0, abs=0.1)
+    assert res.summary["truth"]["within_margin_share"] >= 0.999

@@ -5,6 +5,7 @@ mounting reads 0.3 % high found inconsistent."""
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -21,6 +22,8 @@ from fieldlogs.simulate.simulator import simulate_run
 from fieldlogs.survey.result import SurveyReport
 from fieldlogs.survey.runner import survey
 from tests.fieldlogs.gnss.runs import simulate_gnss_run
+
+SAMPLE = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs" / "sim-d-slips"
 
 WEAR = 0.4
 SEEDS = (51, 52, 53)
@@ -105,3 +108,18 @@ def test_a_raw_gnss_run_uses_the_track_constrained_solutions(fleet: tuple[Path, 
     assert abs(r["diameter_m"] / true - 1) < 0.001
     run = rep.to_dict()["wheels"]["runs"][0]
     assert run["gnss_source"] == "gnss" and run["consistent"] is True
+
+
+def test_the_survey_measures_a_turned_wheel_against_run_json(sample_db: Path, tmp_path: Path) -> None:
+    """Pulses 5 % over run.json's 0.86 m wheel: the pipeline divides the balise intervals' scale
+    out of the pulses (``margin.wheel_rescale``), which the survey turns off, so the wheel is
+    measured against run.json's diameter — 0.86 / 1.05 = 0.819 m (true 0.8591 m, 0.1 % worn:
+    0.8182 m). With the rescaling on the survey read 0.8563 m (−0.4 %), hiding the 5 %."""
+    run = tmp_path / "logs" / "r1"
+    shutil.copytree(SAMPLE, run)
+    tacho = pd.read_parquet(run / "tacho.parquet")
+    tacho.assign(pulses=(tacho["pulses"] * 1.05).round().astype("int64")).to_parquet(run / "tacho.parquet")
+    rep = survey([tmp_path / "logs"], sample_db, workers=1)
+    r = rep.wheel_runs.iloc[0]
+    assert r["diameter_m"] == pytest.approx(0.859118 / 1.05, rel=0.002)
+    assert r["diff_share"] < -0.04
