@@ -1,13 +1,14 @@
 """Pipeline accuracy against simulator truth over many seeded runs (issue 4).
 
-    .venv/bin/python bench/accuracy.py [--runs 50] [--workers 2]
+    .venv/bin/python bench/accuracy.py [--runs 50] [--workers 2] [--imu-shift 0.0]
 
 Simulates runs on the bundled sample network (Kawagoe line geometry, both tracks, slips
 and slides, GPS noise/multipath), replays them through ``run_pipeline`` and prints:
 margin coverage, wrong-track cycles, slip/slide detection recall and false detections,
 distance error over corrected episodes, feature-point correction error, position-
 correction % vs the simulated wheel wear, GPS up/down decisions, and the paper's margin
-effect (margin over 8 km with and without feature points).
+effect (margin over 8 km with and without feature points). ``--imu-shift S`` moves every run's
+IMU t by S seconds (late > 0) before the replay: the fail-safe check of an IMU clock offset.
 """
 
 from __future__ import annotations
@@ -56,10 +57,12 @@ def scenario(i: int, network: Any, radar: bool = False) -> dict[str, Any]:
     }
 
 
-def one(args: tuple[int, str, str, bool]) -> dict[str, Any]:
-    i, db, tmp, radar = args
+def one(args: tuple[int, str, str, bool, float]) -> dict[str, Any]:
+    i, db, tmp, radar, imu_shift = args
     net = read_network(Path(db))
     streams, meta = simulate_run(net, scenario_from_dict(scenario(i, net, radar)), seed=1000 + i)
+    if imu_shift and streams.get("imu") is not None:
+        streams["imu"] = streams["imu"].assign(t=streams["imu"]["t"] + imu_shift)
     folder = Path(tmp) / f"run{i:03d}"
     write_run(folder, meta, streams, force=True)
     t0 = time.perf_counter()
@@ -189,6 +192,7 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=50)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--radar", action="store_true", help="runs carry a radar ground-speed stream")
+    ap.add_argument("--imu-shift", type=float, default=0.0, help="IMU clock late by this [s] (early < 0)")
     args = ap.parse_args()
     from dbtools.sample_network import sample_source_dir
 
@@ -198,7 +202,7 @@ def main() -> None:
         build_db(sample_source_dir(), db)
         t0 = time.perf_counter()
         with ProcessPoolExecutor(args.workers) as pool:
-            results = list(pool.map(one, [(i, str(db), tmpd, args.radar) for i in range(args.runs)]))
+            results = list(pool.map(one, [(i, str(db), tmpd, args.radar, args.imu_shift) for i in range(args.runs)]))
         wall = time.perf_counter() - t0
         m = [r["metrics"] for r in results]
         claimed = sum(x["claimed"] for x in m)

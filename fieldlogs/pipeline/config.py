@@ -128,6 +128,13 @@ class FeatureConfig:
         10.0, "least uncertainty of a feature-point correction (paper: ~10 m)", "m", gt=0
     )
     crossing_z: float = setting(3.0, "the uncertainty is at least this many σ of the exit crossing", ge=0)
+    clock_budget_s: float = setting(
+        0.5,
+        "undetected IMU clock offset held by each correction: its uncertainty grows by this × speed"
+        " (keep ≥ clock.tolerance_s)",
+        "s",
+        ge=0,
+    )
     yaw_rate_sigma_rad_s: float = setting(0.0006, "1σ of the smoothed ωz once its bias is estimated", "rad/s", ge=0)
     yaw_bias_sigma_rad_s: float = setting(0.0009, "1σ of the yaw-gyro bias before any standstill", "rad/s", ge=0)
     search_margin_m: float = setting(100.0, "least extra distance searched around the predicted feature", "m", gt=0)

@@ -13,9 +13,11 @@ offset is seen by cross-correlating a quantity both the stream and the tacho mea
   consecutive fixes over their time step, placed at the step's midpoint) against the tacho's
   speed. GPS positions then would be matched ``L·v`` behind the train.
 
-Both signals are resampled onto a common grid of ``step_s`` (linear interpolation), averaged
-over ``SMOOTH_S`` and high-passed (minus their centred ``highpass_s`` mean: grade, biases and
-the mean speed carry no timing). With r(t) the reference (tacho) and x(t) the stream,
+Both signals are resampled onto a common grid of ``step_s`` — the tacho's by linear
+interpolation, the stream's by its mean over each step (:func:`step_means`: the IMU's 100 Hz
+samples averaged, not one in ten picked) — averaged over ``SMOOTH_S`` and high-passed (minus
+their centred ``highpass_s`` mean: grade, biases and the mean speed carry no timing). With
+r(t) the reference (tacho) and x(t) the stream,
 
     ρ(ℓ) = corr(r(t), x(t + ℓ)),  ℓ = j·step_s, |ℓ| ≤ max_lag_s,
 
@@ -29,8 +31,8 @@ GPS multipath). The run is cut into 120 s blocks; its L̂ is the median of the b
 (``log.clock_offset``, the same finding ``logs check`` and ``run`` give); the pipeline then
 moves the stream's t back by L̂ (the odometry's pulse-delay search takes up the last ±0.3 s of
 the IMU; a GPS fix is worth 10 m: 0.1 s of residual at 30 m/s is 3 m). An offset within the
-tolerance is not corrected; on a run with many slips an IMU offset near it may not be
-determined (bench/NOTES.md: open).
+tolerance is not corrected: the feature-point corrections, the one aid that places the train
+by IMU timing (the curve seen on the gyro), hold ``feature.clock_budget_s`` × speed for it.
 """
 
 from __future__ import annotations
@@ -201,7 +203,7 @@ def block_lag(
         return None
     gx = np.arange(g[0] - m * step_s, g[-1] + (m + 0.5) * step_s, step_s)[: g.size + 2 * m]
     rr = _smooth_hp(np.interp(g, t_ref, r), step_s, highpass_s)
-    xx = _smooth_hp(np.interp(gx, t_x, x, left=np.nan, right=np.nan), step_s, highpass_s)
+    xx = _smooth_hp(step_means(t_x, x, gx, step_s), step_s, highpass_s)
     use = np.isfinite(rr)
     if weight is not None:
         use &= np.interp(g, t_ref, weight) > 0.5
@@ -231,6 +233,21 @@ def block_lag(
         c = rho[k - 1] - 2.0 * rho[k] + rho[k + 1]
         frac = 0.5 * (rho[k - 1] - rho[k + 1]) / c if c < 0 else 0.0
     return Lag((k - m + frac) * step_s, float(rho[k]), moving_s, k in (0, 2 * m))
+
+
+def step_means(t: FloatArray, x: FloatArray, g: FloatArray, step_s: float) -> FloatArray:
+    """Means of ``x`` (linear between its samples at ``t``) over [g − step/2, g + step/2]:
+    the difference of its running trapezoid integral at the two ends over ``step_s``; NaN
+    where the window reaches beyond ``t``. A stream sampled faster than the grid (the IMU's
+    100 Hz) is averaged, not point-sampled: its noise then enters the grid by 1/√(samples
+    per step), not whole."""
+    if t.size < 2:
+        return np.full(g.size, np.nan)
+    area = np.concatenate(([0.0], np.cumsum(0.5 * (x[1:] + x[:-1]) * np.diff(t))))
+    h = 0.5 * step_s
+    lo, hi = g - h, g + h
+    out = (np.interp(hi, t, area) - np.interp(lo, t, area)) / step_s
+    return np.where((lo >= t[0]) & (hi <= t[-1]), out, np.nan)
 
 
 def _rho(rr: FloatArray, xx: FloatArray, use: npt.NDArray[np.bool_], m: int) -> FloatArray:

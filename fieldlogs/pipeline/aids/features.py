@@ -63,7 +63,9 @@ Diagnostics (``evaluate``), each named in refusal events
     of r4 (DB row 4, or row 3 when running reversed); the solver's correction amount is
     then computed km − DB km at ``i_ref``. The correction's uncertainty is the larger of
     ``fix_uncertainty_m`` and ``crossing_z`` σ of the crossing, σ_x = σ_ω / (v·s) with s the
-    κ slope of the DB exit transition (a κ error δ moves the crossing by δ/s).
+    κ slope of the DB exit transition (a κ error δ moves the crossing by δ/s), plus
+    ``clock_budget_s``·v (an IMU clock offset L within the clock tolerance, not corrected,
+    moves the crossing by L·v).
 
     ``detail`` of the outcome: direction (normal/reversed), attribute (in the travel
     direction), R_m, lower/upper_kappa, search_margin_m, db_length_m, length_m,
@@ -391,18 +393,20 @@ class FeatureUnit:
 
     def _crossing_uncertainty(self, i_ref: int, c: Candidate, k_lo: float) -> float:
         """Uncertainty of the exit crossing as a correction [m]: max(fix_uncertainty_m,
-        crossing_z · σ_ω / (v · κ_lo / (r5 − r4))) (config docstrings); no transition in the
-        DB (r5 = r4) leaves the least value."""
+        crossing_z · σ_ω / (v · κ_lo / (r5 − r4))) + clock_budget_s · v (config docstrings:
+        an IMU clock offset within the clock tolerance moves the crossing by up to that); no
+        transition in the DB (r5 = r4) leaves the least value (+ the clock budget)."""
         cfg = self.cfg
         transition = float(c.u[4] - c.u[3])
         v = float(self._v[i_ref])
+        clock_m = cfg.clock_budget_s * max(v, 0.0)
         if transition <= 0.0 or v <= 0.0:
-            return cfg.fix_uncertainty_m
+            return cfg.fix_uncertainty_m + clock_m
         sigma = cfg.yaw_rate_sigma_rad_s
         if not self._bias_known[i_ref]:  # no standstill yet: the bias is unknown
             sigma = float(np.hypot(sigma, cfg.yaw_bias_sigma_rad_s))
         slope = k_lo / transition
-        return max(cfg.fix_uncertainty_m, cfg.crossing_z * sigma / (v * slope))
+        return max(cfg.fix_uncertainty_m, cfg.crossing_z * sigma / (v * slope)) + clock_m
 
     def _straight(self, x0: float, x1: float, x_ts: float, slope: float, radius: float) -> tuple[bool, float | None]:
         """Is |κ| straight over travel [x0, x1]? (ok, max |κ|); the tolerance near the

@@ -103,18 +103,24 @@ def test_crossing_uncertainty_by_hand(net) -> None:
     c, odo, km_true = standing_then_running(30.0, BIAS)
     _, out = f002(net, c, odo, km_true)
     sigma_x = CFG.yaw_rate_sigma_rad_s / (V * slope)
-    assert out.uncertainty_m == pytest.approx(max(CFG.fix_uncertainty_m, 3.0 * sigma_x))
+    clock_m = CFG.clock_budget_s * V  # 0.5 s of IMU clock at 10 m/s: 5 m
+    assert clock_m == pytest.approx(5.0)
+    assert out.uncertainty_m == pytest.approx(max(CFG.fix_uncertainty_m, 3.0 * sigma_x) + clock_m)
     assert out.detail["uncertainty_m"] == pytest.approx(out.uncertainty_m, abs=0.01)
     # no standstill before the curve: the bias is unknown and adds in quadrature
     c, odo, km_true = standing_then_running(0.0, 0.0)
     _, out = f002(net, c, odo, km_true)
     sigma = np.hypot(CFG.yaw_rate_sigma_rad_s, CFG.yaw_bias_sigma_rad_s)
-    assert out.uncertainty_m == pytest.approx(3.0 * sigma / (V * slope))
-    assert out.uncertainty_m > CFG.fix_uncertainty_m
-    # fast trains keep the paper's 10 m
+    assert out.uncertainty_m == pytest.approx(3.0 * sigma / (V * slope) + clock_m)
+    assert out.uncertainty_m > CFG.fix_uncertainty_m + clock_m
+    # fast trains keep the paper's 10 m, and the clock budget at their speed (50 m/s: 25 m)
     fast = FeatureUnit(c, replace(odo, v=odo.v * 5.0), net, CFG)
     cand = _candidate(fast, out.feature_id)
-    assert fast._crossing_uncertainty(out.i_ref, cand, 0.8 / cand.radius_m) == CFG.fix_uncertainty_m
+    at = fast._crossing_uncertainty(out.i_ref, cand, 0.8 / cand.radius_m)
+    assert at == pytest.approx(CFG.fix_uncertainty_m + 25.0)
+    # without the budget (clock_budget_s = 0) the crossing's own uncertainty alone
+    bare = FeatureUnit(c, replace(odo, v=odo.v * 5.0), net, replace(CFG, clock_budget_s=0.0))
+    assert bare._crossing_uncertainty(out.i_ref, cand, 0.8 / cand.radius_m) == CFG.fix_uncertainty_m
 
 
 def _candidate(unit: FeatureUnit, feature_id: str):
