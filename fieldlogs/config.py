@@ -27,6 +27,7 @@ from fieldlogs.pipeline.config import (
     MarginConfig,
     OdometryConfig,
     PipelineConfig,
+    check_budgets,
     read_toml,
 )
 from fieldlogs.possession.config import PossessionConfig
@@ -89,6 +90,7 @@ class SuiteConfig:
                     tree = replace(tree, **{key: typed(source, key, current, value)})
             except SettingError as exc:
                 raise SettingError(exc.message, path=source) from None
+        check_budgets(tree.balise, tree.feature, tree.clock, source)
         return tree
 
 

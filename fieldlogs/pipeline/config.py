@@ -311,7 +311,26 @@ class PipelineConfig:
                     cfg = replace(cfg, **{key: typed(source, key, current, value)})
             except SettingError as exc:
                 raise SettingError(exc.message, path=source) from None
+        check_budgets(cfg.balise, cfg.feature, cfg.clock, source)
         return cfg
+
+
+def check_budgets(balise: BaliseConfig, feature: FeatureConfig, clock: ClockConfig, source: str) -> None:
+    """The fail-safe pairs of keys: an offset a check leaves uncorrected (at most its
+    tolerance) must be held by the budget the fixes carry for it, or a position could be
+    claimed outside its margin. Checked once the whole file is read (either key may be set
+    first); :class:`SettingError` names both keys."""
+    pairs = (
+        ("clock.balise_tolerance_s", clock.balise_tolerance_s, "balise.latency_budget_s", balise.latency_budget_s),
+        ("clock.tolerance_s", clock.tolerance_s, "feature.clock_budget_s", feature.clock_budget_s),
+    )
+    for tol_key, tol, budget_key, budget in pairs:
+        if tol > budget:
+            raise SettingError(
+                f"'{tol_key}' = {tol:g} s is above '{budget_key}' = {budget:g} s: an offset the check leaves "
+                f"uncorrected would not be held by the margin (raise '{budget_key}' to at least {tol:g} s)",
+                path=source,
+            )
 
 
 #: Sections of the configuration tree that belong to other applications.

@@ -49,3 +49,32 @@ def test_bad_values_name_the_key(data: dict, message: str) -> None:
 def test_ranges_hold_in_code_too() -> None:
     with pytest.raises(InputError, match=re.escape("'odometry.max_correction_s' = 0.0 s is out of range")):
         OdometryConfig(max_correction_s=0.0)
+
+
+@pytest.mark.parametrize(
+    ("data", "keys"),
+    [
+        ({"clock": {"tolerance_s": 1.0}}, ("clock.tolerance_s", "feature.clock_budget_s")),
+        ({"clock": {"balise_tolerance_s": 0.3}}, ("clock.balise_tolerance_s", "balise.latency_budget_s")),
+        ({"balise": {"latency_budget_s": 0.05}}, ("clock.balise_tolerance_s", "balise.latency_budget_s")),
+    ],
+)
+def test_a_tolerance_above_its_budget_is_refused(data: dict, keys: tuple[str, str]) -> None:
+    """An offset a check leaves uncorrected must be held by the fixes' budget (issue 15)."""
+    from fieldlogs.config import SuiteConfig
+
+    for load in (PipelineConfig.from_dict, SuiteConfig.from_dict):
+        with pytest.raises(InputError) as exc:
+            load(data, source="c.toml")
+        assert all(k in exc.value.message for k in keys) and exc.value.path == "c.toml"
+
+
+def test_a_tolerance_raised_with_its_budget_is_accepted_in_either_order() -> None:
+    from fieldlogs.config import SuiteConfig
+
+    for data in (
+        {"clock": {"tolerance_s": 1.0}, "feature": {"clock_budget_s": 1.0}},
+        {"feature": {"clock_budget_s": 1.0}, "clock": {"tolerance_s": 1.0}},
+    ):
+        assert PipelineConfig.from_dict(data).clock.tolerance_s == 1.0
+        assert SuiteConfig.from_dict(data).feature.clock_budget_s == 1.0
