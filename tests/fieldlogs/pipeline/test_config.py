@@ -59,7 +59,7 @@ def test_ranges_hold_in_code_too() -> None:
         ({"balise": {"latency_budget_s": 0.05}}, ("clock.balise_tolerance_s", "balise.latency_budget_s")),
     ],
 )
-def test_a_tolerance_above_its_budget_is_refused(data: dict, keys: tuple[str, str]) -> None:
+def test_a_tolerance_above_its_budget_is_refused(data: dict[str, object], keys: tuple[str, str]) -> None:
     """An offset a check leaves uncorrected must be held by the fixes' budget (issue 15)."""
     from fieldlogs.config import SuiteConfig
 
