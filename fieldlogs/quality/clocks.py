@@ -147,7 +147,10 @@ def estimate_lag(
     marks the reference samples that count (e.g. moving); None when the two do not overlap by
     more than the searched range."""
     ok_r, ok_x = np.isfinite(t_ref) & np.isfinite(r), np.isfinite(t_x) & np.isfinite(x)
-    t_ref, r, t_x, x = t_ref[ok_r], r[ok_r], t_x[ok_x], x[ok_x]
+    t_ref, r = t_ref[ok_r], r[ok_r]
+    if not ok_x.all():  # a long stream all finite (the usual case) is not copied
+        t_x, x = t_x[ok_x], x[ok_x]
+    del ok_x
     w_ref = np.ones(t_ref.size) if weight is None else np.asarray(weight, dtype=float)[ok_r]
     if t_ref.size < 10 or t_x.size < 10:
         return None
@@ -274,11 +277,14 @@ def _tacho_speed(tacho: pd.DataFrame, metres: float) -> tuple[FloatArray, FloatA
 
 
 def _sorted(frame: pd.DataFrame, cols: list[str]) -> dict[str, FloatArray]:
+    """t and ``cols`` sorted by t (stable), rows with a NaN or repeated t left out; a stream
+    already increasing (the usual case) is returned as its arrays, not copies of them."""
     t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
+    out = {"t": t, **{c: frame[c].to_numpy(dtype=float, na_value=np.nan) for c in cols}}
+    if t.size and bool(np.isfinite(t[[0, -1]]).all()) and bool((t[1:] > t[:-1]).all()):  # increasing: all finite
+        return out
     order = np.argsort(t, kind="stable")
-    out = {"t": t[order]}
-    for c in cols:
-        out[c] = frame[c].to_numpy(dtype=float, na_value=np.nan)[order]
+    out = {k: v[order] for k, v in out.items()}
     keep = (np.diff(out["t"], prepend=-np.inf) > 0) & np.isfinite(out["t"])
     return {k: v[keep] for k, v in out.items()}
 
