@@ -43,6 +43,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from fieldlogs.io import Run
+from fieldlogs.pipeline.block_means import BLOCK_ROWS
 from fieldlogs.pipeline.config import ClockConfig
 from fieldlogs.pipeline.cycles import cab_signs
 from schemas.enums import Severity
@@ -289,12 +290,19 @@ def _sorted(frame: pd.DataFrame, cols: list[str]) -> dict[str, FloatArray]:
     return {k: v[keep] for k, v in out.items()}
 
 
-def _cab_sign(cab: pd.DataFrame | None, t: FloatArray) -> FloatArray:
+def _in_travel_frame(cab: pd.DataFrame | None, t: FloatArray, ax: FloatArray, rows: int = BLOCK_ROWS) -> FloatArray:
+    """``ax`` turned to the travel frame: times the cab sign (+1 forward, −1 reverse) at each
+    ``t``, ``rows`` samples at a time (the sign's lookup index and values for a block, not for
+    a long run's whole 100 Hz stream; each product is the same)."""
     if cab is None or not len(cab):
-        return np.ones(t.size)
+        return ax.copy()
     te = cab["t"].to_numpy(dtype=float, na_value=np.nan)
     order = np.argsort(te, kind="stable")
-    return cab_signs(t, te[order], cab["direction"].astype(str).to_numpy()[order])
+    te, directions = te[order], cab["direction"].astype(str).to_numpy()[order]
+    out = np.empty(t.size)
+    for a in range(0, t.size, max(rows, 1)):
+        out[a : a + rows] = ax[a : a + rows] * cab_signs(t[a : a + rows], te, directions)
+    return out
 
 
 def gps_speed(gps: pd.DataFrame) -> tuple[FloatArray, FloatArray]:
@@ -336,7 +344,7 @@ def clock_offsets(
     imu = streams.get("imu")
     if imu is not None and len(imu) >= 10 and "ax" in imu.columns:
         s = _sorted(imu, ["ax"])
-        ax = s["ax"] * _cab_sign(streams.get("cab"), s["t"])
+        ax = _in_travel_frame(streams.get("cab"), s["t"], s["ax"])
         a_p = np.gradient(v_p, t_p) if t_p.size > 1 else v_p
         lag = estimate_lag(
             t_p, a_p, s["t"], ax, max_lag_s=cfg.max_lag_s, step_s=cycle_s, highpass_s=cfg.highpass_s, weight=moving

@@ -1,6 +1,8 @@
-"""``clocks._sorted`` (the streams the clock check correlates): returning an increasing
-stream's own arrays gives what sorting and filtering them gave, bit for bit — and
-anything else (unsorted, repeated, NaN or infinite t) still goes through the sort."""
+"""The inputs of the IMU clock check without full-length copies: ``clocks._sorted`` returns
+an increasing stream's own arrays — what sorting and filtering them gave, bit for bit;
+anything else (unsorted, repeated, NaN or infinite t) still goes through the sort — and
+``clocks._in_travel_frame`` turns a_x by the cab sign block by block, bit for bit the
+whole-array product."""
 
 from __future__ import annotations
 
@@ -9,7 +11,8 @@ import pandas as pd
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fieldlogs.quality.clocks import _sorted
+from fieldlogs.pipeline.cycles import cab_signs
+from fieldlogs.quality.clocks import _in_travel_frame, _sorted
 
 
 def sorted_before(frame: pd.DataFrame, cols: list[str]) -> dict[str, np.ndarray]:
@@ -46,3 +49,29 @@ def test_an_increasing_stream_is_not_copied() -> None:
     assert np.shares_memory(got["t"], frame["t"].to_numpy()) and np.shares_memory(got["ax"], frame["ax"].to_numpy())
     last_inf = frame.assign(t=[0.0, 0.01, 0.02, np.inf])
     assert np.array_equal(_sorted(last_inf, ["ax"])["t"], [0.0, 0.01, 0.02])
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    n=st.integers(0, 200),
+    events=st.lists(st.tuples(st.floats(-1.0, 3.0), st.sampled_from(["F", "R"])), max_size=6),
+    rows=st.integers(1, 50),
+)
+def test_travel_frame_by_blocks_equals_the_whole_product(n: int, events: list[tuple[float, str]], rows: int) -> None:
+    t = np.linspace(0.0, 2.0, n)
+    ax = np.sin(7.0 * t) - 0.3
+    cab = pd.DataFrame({"t": [e[0] for e in events], "direction": [e[1] for e in events]}) if events else None
+    if cab is None:
+        want = ax * np.ones(n)
+    else:
+        te = cab["t"].to_numpy(dtype=float)
+        order = np.argsort(te, kind="stable")
+        want = ax * cab_signs(t, te[order], cab["direction"].astype(str).to_numpy()[order])
+    got = _in_travel_frame(cab, t, ax, rows)
+    assert np.array_equal(got, want) and not np.shares_memory(got, ax)
+
+
+def test_travel_frame_by_hand() -> None:
+    cab = pd.DataFrame({"t": [1.0, 0.0], "direction": ["R", "F"]})  # unsorted events
+    t = np.array([-0.5, 0.5, 1.0, 2.0])
+    assert np.array_equal(_in_travel_frame(cab, t, np.full(4, 2.0), rows=3), [2.0, 2.0, -2.0, -2.0])
