@@ -105,20 +105,28 @@ def cycle_means(
     n = t_cycles.size
     if seg is None:
         seg = segments(cycle_index(t_cycles, t_samples) if idx is None else idx, n)
-    vals = values if seg.inside is None else values[seg.inside]
     out = np.full(n, np.nan)
+    means_into(out, seg, values)
+    return out
+
+
+def means_into(out: FloatArray, seg: Segments, values: FloatArray) -> None:
+    """Write into ``out`` the mean of each run of ``seg`` over ``values`` (the samples of
+    ``seg``, inside or not), non-finite values left out; cycles without a finite sample are
+    left as they are. The arithmetic of :func:`cycle_means` (one ``np.add.reduceat`` per
+    run of samples, divided by its count)."""
+    vals = values if seg.inside is None else values[seg.inside]
     ok = np.isfinite(vals)
     if not ok.all():  # drop the bad samples: the runs change
         k = seg.sample_cycles[ok]
         vals = vals[ok]
         if k.size == 0:
-            return out
+            return
         starts = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
         out[k[starts]] = np.add.reduceat(vals, starts) / np.diff(np.r_[starts, k.size])
-        return out
+        return
     if seg.starts.size:
         out[seg.cycle] = np.add.reduceat(vals, seg.starts) / seg.counts
-    return out
 
 
 def step_values(t_cycles: FloatArray, t_events: FloatArray, values: npt.ArrayLike, default: float) -> FloatArray:
@@ -175,14 +183,9 @@ def build_cycles(
     else:
         d = np.zeros(t.size)
         v = np.zeros(t.size)
-    imu_means: dict[str, FloatArray] = {}
-    t_imu = imu["t"].to_numpy(dtype=float) if has_imu and imu is not None else None
-    seg = segments(cycle_index(t, t_imu), t.size) if t_imu is not None else None  # once for the six columns
+    imu_means = imu_cycle_means(t, imu) if has_imu and imu is not None else {}
     for c in IMU_COLUMNS:
-        if seg is not None and t_imu is not None and imu is not None:
-            imu_means[c] = cycle_means(t, t_imu, imu[c].to_numpy(dtype=float, na_value=np.nan), seg=seg)
-        else:
-            imu_means[c] = np.full(t.size, np.nan)
+        imu_means.setdefault(c, np.full(t.size, np.nan))
     if cab is not None and len(cab):
         te = cab["t"].to_numpy(dtype=float)
         cab_sign = cab_signs(t, te, cab["direction"].astype(str).to_numpy()).astype(np.int8)
@@ -195,6 +198,28 @@ def build_cycles(
         cab_sign = np.ones(t.size, dtype=np.int8)
         pto = np.ones(t.size, dtype=np.int8)
     return Cycles(t, pulses, d, v, imu_means, cab_sign, pto, has_tacho, has_imu)
+
+
+def imu_cycle_means(t_cycles: FloatArray, imu: pd.DataFrame) -> dict[str, FloatArray]:
+    """Cycle means of the IMU's six columns, consumed block by block
+    (:mod:`fieldlogs.pipeline.block_means`: bit-identical to :func:`cycle_means`, without
+    the whole stream's per-sample index and masks); samples not in time order go through
+    :func:`cycle_means` over the whole stream, whose result they define."""
+    from fieldlogs.pipeline.block_means import means_by_blocks
+
+    def block(start: int, stop: int) -> tuple[FloatArray, dict[str, FloatArray]]:
+        part = imu.iloc[start:stop]
+        cols = {c: part[c].to_numpy(dtype=float, na_value=np.nan) for c in IMU_COLUMNS}
+        return part["t"].to_numpy(dtype=float, na_value=np.nan), cols
+
+    means = means_by_blocks(t_cycles, len(imu), block, IMU_COLUMNS)
+    if means is not None:
+        return means
+    t_imu = imu["t"].to_numpy(dtype=float)
+    seg = segments(cycle_index(t_cycles, t_imu), t_cycles.size)  # once for the six columns
+    return {
+        c: cycle_means(t_cycles, t_imu, imu[c].to_numpy(dtype=float, na_value=np.nan), seg=seg) for c in IMU_COLUMNS
+    }
 
 
 def trailing_sum(x: npt.ArrayLike, window: int) -> npt.NDArray[Any]:

@@ -45,6 +45,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from fieldlogs.io import Run
+from fieldlogs.pipeline.block_means import BLOCK_ROWS
 from fieldlogs.pipeline.config import ClockConfig
 from fieldlogs.pipeline.cycles import cab_signs
 from schemas.enums import Severity
@@ -149,7 +150,10 @@ def estimate_lag(
     marks the reference samples that count (e.g. moving); None when the two do not overlap by
     more than the searched range."""
     ok_r, ok_x = np.isfinite(t_ref) & np.isfinite(r), np.isfinite(t_x) & np.isfinite(x)
-    t_ref, r, t_x, x = t_ref[ok_r], r[ok_r], t_x[ok_x], x[ok_x]
+    t_ref, r = t_ref[ok_r], r[ok_r]
+    if not ok_x.all():  # a long stream all finite (the usual case) is not copied
+        t_x, x = t_x[ok_x], x[ok_x]
+    del ok_x
     w_ref = np.ones(t_ref.size) if weight is None else np.asarray(weight, dtype=float)[ok_r]
     if t_ref.size < 10 or t_x.size < 10:
         return None
@@ -291,21 +295,31 @@ def _tacho_speed(tacho: pd.DataFrame, metres: float) -> tuple[FloatArray, FloatA
 
 
 def _sorted(frame: pd.DataFrame, cols: list[str]) -> dict[str, FloatArray]:
+    """t and ``cols`` sorted by t (stable), rows with a NaN or repeated t left out; a stream
+    already increasing (the usual case) is returned as its arrays, not copies of them."""
     t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
+    out = {"t": t, **{c: frame[c].to_numpy(dtype=float, na_value=np.nan) for c in cols}}
+    if t.size and bool(np.isfinite(t[[0, -1]]).all()) and bool((t[1:] > t[:-1]).all()):  # increasing: all finite
+        return out
     order = np.argsort(t, kind="stable")
-    out = {"t": t[order]}
-    for c in cols:
-        out[c] = frame[c].to_numpy(dtype=float, na_value=np.nan)[order]
+    out = {k: v[order] for k, v in out.items()}
     keep = (np.diff(out["t"], prepend=-np.inf) > 0) & np.isfinite(out["t"])
     return {k: v[keep] for k, v in out.items()}
 
 
-def _cab_sign(cab: pd.DataFrame | None, t: FloatArray) -> FloatArray:
+def _in_travel_frame(cab: pd.DataFrame | None, t: FloatArray, ax: FloatArray, rows: int = BLOCK_ROWS) -> FloatArray:
+    """``ax`` turned to the travel frame: times the cab sign (+1 forward, −1 reverse) at each
+    ``t``, ``rows`` samples at a time (the sign's lookup index and values for a block, not for
+    a long run's whole 100 Hz stream; each product is the same)."""
     if cab is None or not len(cab):
-        return np.ones(t.size)
+        return ax.copy()
     te = cab["t"].to_numpy(dtype=float, na_value=np.nan)
     order = np.argsort(te, kind="stable")
-    return cab_signs(t, te[order], cab["direction"].astype(str).to_numpy()[order])
+    te, directions = te[order], cab["direction"].astype(str).to_numpy()[order]
+    out = np.empty(t.size)
+    for a in range(0, t.size, max(rows, 1)):
+        out[a : a + rows] = ax[a : a + rows] * cab_signs(t[a : a + rows], te, directions)
+    return out
 
 
 def gps_speed(gps: pd.DataFrame) -> tuple[FloatArray, FloatArray]:
@@ -347,7 +361,7 @@ def clock_offsets(
     imu = streams.get("imu")
     if imu is not None and len(imu) >= 10 and "ax" in imu.columns:
         s = _sorted(imu, ["ax"])
-        ax = s["ax"] * _cab_sign(streams.get("cab"), s["t"])
+        ax = _in_travel_frame(streams.get("cab"), s["t"], s["ax"])
         a_p = np.gradient(v_p, t_p) if t_p.size > 1 else v_p
         lag = estimate_lag(
             t_p, a_p, s["t"], ax, max_lag_s=cfg.max_lag_s, step_s=cycle_s, highpass_s=cfg.highpass_s, weight=moving

@@ -30,6 +30,7 @@ and column); it is never positioned at a "determined" km it cannot support.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from enum import StrEnum
 from pathlib import Path
 
@@ -37,6 +38,7 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.io import REQUIRED_STREAMS, Run
+from fieldlogs.pipeline.block_means import BLOCK_ROWS
 from fieldlogs.quality.tacho import counter_problem
 from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError
@@ -148,22 +150,21 @@ def _stream_problems(run: Run, name: str, purpose: Purpose) -> list[Finding]:
     return []
 
 
-def imu_unit_problems(frame: pd.DataFrame) -> list[tuple[str, str]]:
+def imu_unit_problems(frame: pd.DataFrame, rows: int = BLOCK_ROWS) -> list[tuple[str, str]]:
     """(column, message) when the IMU is not in m/s² and rad/s: the median |a| (gravity is
     always measured, ≈ 9.81 m/s²) outside :data:`GRAVITY_BAND_MPS2` (≈ 1: in g), or the 99th
     percentile of max(|ωx|, |ωy|, |ωz|) above :data:`MAX_GYRO_P99_RADPS` (≈ 57× a train's
-    rates: deg/s)."""
+    rates: deg/s). |a| and the rate maxima are computed ``rows`` samples at a time into one
+    array of the finite values (no n×3 copies of a long run's 100 Hz stream)."""
     out: list[tuple[str, str]] = []
-    a = frame[["ax", "ay", "az"]].to_numpy(dtype=float, na_value=np.nan)
-    mag = np.sqrt((a * a).sum(axis=1))
-    mag = mag[np.isfinite(mag)]
+    mag = _row_values(frame, ["ax", "ay", "az"], lambda a: np.sqrt((a * a).sum(axis=1)), rows)
     lo, hi = GRAVITY_BAND_MPS2
-    if mag.size >= 10 and not lo <= (med := float(np.median(mag))) <= hi:
+    if mag.size >= 10 and not lo <= (med := float(np.median(mag, overwrite_input=True))) <= hi:
         hint = "looks like g: multiply by 9.80665" if 0.7 <= med <= 1.3 else "not m/s²"
         out.append(("az", f"median |a| {med:.3g}, gravity is about 9.81 m/s² ({hint})"))
-    w_max = np.fmax.reduce(np.abs(frame[["wx", "wy", "wz"]].to_numpy(dtype=float, na_value=np.nan)), axis=1)
-    w_max = w_max[np.isfinite(w_max)]
-    if w_max.size >= 10 and (p99 := float(np.percentile(w_max, 99))) > MAX_GYRO_P99_RADPS:
+    del mag
+    w_max = _row_values(frame, ["wx", "wy", "wz"], lambda w: np.fmax.reduce(np.abs(w), axis=1), rows)
+    if w_max.size >= 10 and (p99 := float(np.percentile(w_max, 99, overwrite_input=True))) > MAX_GYRO_P99_RADPS:
         out.append(
             (
                 "wz",
@@ -171,6 +172,22 @@ def imu_unit_problems(frame: pd.DataFrame) -> list[tuple[str, str]]:
             )
         )
     return out
+
+
+def _row_values(
+    frame: pd.DataFrame, cols: list[str], per_row: Callable[[np.ndarray], np.ndarray], rows: int
+) -> np.ndarray:
+    """The finite values of ``per_row`` (one per row of the n×k array of ``cols``), in row
+    order, computed a block of ``rows`` rows at a time (the same row arithmetic as on the
+    whole frame: each value depends on its row only)."""
+    out = np.empty(len(frame))
+    m = 0
+    for start in range(0, len(frame), max(rows, 1)):
+        v = per_row(frame.iloc[start : start + rows][cols].to_numpy(dtype=float, na_value=np.nan))
+        v = v[np.isfinite(v)]
+        out[m : m + v.size] = v
+        m += v.size
+    return out[:m]
 
 
 def _metres(run: Run) -> float | None:
