@@ -64,9 +64,12 @@ def _names_fit(names: list[str], table: Table) -> bool:
 
 class _Growing:
     """A float64 column filled batch by batch (over-allocated once from the first batch's
-    density, grown in place if the file's rows turn out shorter, trimmed at the end)."""
+    density, grown if the file's rows turn out shorter, trimmed at the end). Its memory is
+    an Arrow buffer: Arrow's pool keeps pages it has freed for the next read, where a
+    fresh numpy allocation of this size is faulted in anew on every read (bench/NOTES.md)."""
 
     def __init__(self) -> None:
+        self.buffer = pa.allocate_buffer(0, resizable=True)
         self.values = np.empty(0)
         self.n = 0
         self.nulls = 0
@@ -74,14 +77,17 @@ class _Growing:
     def add(self, arr: pa.Array, capacity: int) -> None:
         m = len(arr)
         if self.n + m > self.values.size:
-            self.values.resize(max(capacity, int(1.25 * (self.n + m)) + 1024), refcheck=False)
+            self.values = np.empty(0)  # no view of the buffer across its reallocation
+            self.buffer.resize(8 * max(capacity, int(1.25 * (self.n + m)) + 1024))
+            self.values = np.frombuffer(self.buffer, dtype=np.float64)
         self.values[self.n : self.n + m] = arr.to_numpy(zero_copy_only=False)
         self.nulls += arr.null_count
         self.n += m
 
     def done(self) -> np.ndarray:
-        self.values.resize(self.n, refcheck=False)
-        return self.values
+        self.values = np.empty(0)
+        self.buffer.resize(8 * self.n, shrink_to_fit=True)
+        return np.frombuffer(self.buffer, dtype=np.float64)
 
 
 def _read_batches(
@@ -108,15 +114,15 @@ def _read_batches(
 def _checked(numbers: dict[str, _Growing], table: Table) -> dict[str, np.ndarray] | None:
     """The number columns, or None when the typed frame could differ from the text path's:
     a NaN or infinite parse (the text path names the cell as written), a fractional whole
-    number (likewise)."""
+    number (likewise). Nulls are NaN in the arrays, so "no NaN but the nulls and no
+    infinity" is "as many non-finite values as nulls": one pass over each column."""
     declared = {c.name: c for c in table.columns}
     out: dict[str, np.ndarray] = {}
     for name, col in numbers.items():
         values = col.done()
-        nan = np.isnan(values)
-        if np.count_nonzero(nan) != col.nulls or np.isinf(values).any():
+        if values.size - np.count_nonzero(np.isfinite(values)) != col.nulls:
             return None
-        if declared[name].dtype == "int" and (values[~nan] % 1.0 != 0.0).any():
+        if declared[name].dtype == "int" and (values[~np.isnan(values)] % 1.0 != 0.0).any():
             return None
         out[name] = values
     return out
@@ -138,7 +144,12 @@ def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
         column_types=types, null_values=BLANK_CELLS, strings_can_be_null=False, quoted_strings_can_be_null=False
     )
     try:
-        reader = pcsv.open_csv(path, read_options=pcsv.ReadOptions(block_size=BLOCK_BYTES), convert_options=convert)
+        reader = pcsv.open_csv(
+            path,
+            read_options=pcsv.ReadOptions(block_size=BLOCK_BYTES, use_threads=False),
+            parse_options=pcsv.ParseOptions(quote_char=False),
+            convert_options=convert,
+        )
         if not _names_fit(reader.schema.names, table):
             return None
         batches, chunks = _read_batches(reader, table, Path(path).stat().st_size)
@@ -148,8 +159,8 @@ def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
     if n_rows == 0:
         return None
     text = {n: pa.chunked_array(a, type=pa.string()) for n, a in chunks.items()}
-    if any(pc.any(pc.match_substring_regex(arr, r"^[ \t]|[\r\n]")).as_py() for arr in text.values()):
-        return None  # a padded cell (skipinitialspace would strip it), or a line break (an unclosed quote)
+    if any(pc.any(pc.match_substring_regex(arr, r'^[ \t]|[\r\n"]')).as_py() for arr in text.values()):
+        return None  # a padded cell (skipinitialspace would strip it), a quote (read as text here), a line break
     numbers = _checked(batches, table)
     if numbers is None:
         return None
