@@ -64,12 +64,9 @@ def _names_fit(names: list[str], table: Table) -> bool:
 
 class _Growing:
     """A float64 column filled batch by batch (over-allocated once from the first batch's
-    density, grown if the file's rows turn out shorter, trimmed at the end). Its memory is
-    an Arrow buffer: Arrow's pool keeps pages it has freed for the next read, where a
-    fresh numpy allocation of this size is faulted in anew on every read (bench/NOTES.md)."""
+    density, grown in place if the file's rows turn out shorter, trimmed at the end)."""
 
     def __init__(self) -> None:
-        self.buffer = pa.allocate_buffer(0, resizable=True)
         self.values = np.empty(0)
         self.n = 0
         self.nulls = 0
@@ -77,17 +74,14 @@ class _Growing:
     def add(self, arr: pa.Array, capacity: int) -> None:
         m = len(arr)
         if self.n + m > self.values.size:
-            self.values = np.empty(0)  # no view of the buffer across its reallocation
-            self.buffer.resize(8 * max(capacity, int(1.25 * (self.n + m)) + 1024))
-            self.values = np.frombuffer(self.buffer, dtype=np.float64)
+            self.values.resize(max(capacity, int(1.25 * (self.n + m)) + 1024), refcheck=False)
         self.values[self.n : self.n + m] = arr.to_numpy(zero_copy_only=False)
         self.nulls += arr.null_count
         self.n += m
 
     def done(self) -> np.ndarray:
-        self.values = np.empty(0)
-        self.buffer.resize(8 * self.n, shrink_to_fit=True)
-        return np.frombuffer(self.buffer, dtype=np.float64)
+        self.values.resize(self.n, refcheck=False)
+        return self.values
 
 
 def _read_batches(
