@@ -13,9 +13,9 @@ It gives the same typed frame and the same findings as the general path, so it d
 parse with the declared number types (a bad cell: the text path names it), a parsed
 value is infinite or NaN (the text path names the cell as written), a column name is
 not a declared one or repeated, a text field starts with a blank (the C parser's
-``skipinitialspace`` would strip it), or a text field holds a line break (Arrow reads an
-unclosed quote silently, swallowing the rest of the file into one cell; the text path
-refuses it naming the line). A header-only file, a file in another encoding or with
+``skipinitialspace`` would strip it), or any cell holds a quote (Arrow parses here without
+quote handling, which is faster; the text path reads quoted cells and names an unclosed
+quote's line). A header-only file, a file in another encoding or with
 another delimiter declines too: the text path reports those (:mod:`dbtools.tabular`).
 Cells the text path treats as blank — empty, or ``nan``/``na``/``null`` in any letter
 case, padded or not — are nulls here too. Text columns are read as text and coerced
