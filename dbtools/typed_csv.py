@@ -13,9 +13,9 @@ It gives the same typed frame and the same findings as the general path, so it d
 parse with the declared number types (a bad cell: the text path names it), a parsed
 value is infinite or NaN (the text path names the cell as written), a column name is
 not a declared one or repeated, a text field starts with a blank (the C parser's
-``skipinitialspace`` would strip it), or a text field holds a line break (Arrow reads an
-unclosed quote silently, swallowing the rest of the file into one cell; the text path
-refuses it naming the line). A header-only file, a file in another encoding or with
+``skipinitialspace`` would strip it), or any cell holds a quote (Arrow parses here without
+quote handling, which is faster; the text path reads quoted cells and names an unclosed
+quote's line). A header-only file, a file in another encoding or with
 another delimiter declines too: the text path reports those (:mod:`dbtools.tabular`).
 Cells the text path treats as blank — empty, or ``nan``/``na``/``null`` in any letter
 case, padded or not — are nulls here too. Text columns are read as text and coerced
@@ -108,15 +108,15 @@ def _read_batches(
 def _checked(numbers: dict[str, _Growing], table: Table) -> dict[str, np.ndarray] | None:
     """The number columns, or None when the typed frame could differ from the text path's:
     a NaN or infinite parse (the text path names the cell as written), a fractional whole
-    number (likewise)."""
+    number (likewise). Nulls are NaN in the arrays, so "no NaN but the nulls and no
+    infinity" is "as many non-finite values as nulls": one pass over each column."""
     declared = {c.name: c for c in table.columns}
     out: dict[str, np.ndarray] = {}
     for name, col in numbers.items():
         values = col.done()
-        nan = np.isnan(values)
-        if np.count_nonzero(nan) != col.nulls or np.isinf(values).any():
+        if values.size - np.count_nonzero(np.isfinite(values)) != col.nulls:
             return None
-        if declared[name].dtype == "int" and (values[~nan] % 1.0 != 0.0).any():
+        if declared[name].dtype == "int" and (values[~np.isnan(values)] % 1.0 != 0.0).any():
             return None
         out[name] = values
     return out
@@ -138,7 +138,12 @@ def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
         column_types=types, null_values=BLANK_CELLS, strings_can_be_null=False, quoted_strings_can_be_null=False
     )
     try:
-        reader = pcsv.open_csv(path, read_options=pcsv.ReadOptions(block_size=BLOCK_BYTES), convert_options=convert)
+        reader = pcsv.open_csv(
+            path,
+            read_options=pcsv.ReadOptions(block_size=BLOCK_BYTES, use_threads=False),
+            parse_options=pcsv.ParseOptions(quote_char=False),
+            convert_options=convert,
+        )
         if not _names_fit(reader.schema.names, table):
             return None
         batches, chunks = _read_batches(reader, table, Path(path).stat().st_size)
@@ -148,8 +153,8 @@ def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
     if n_rows == 0:
         return None
     text = {n: pa.chunked_array(a, type=pa.string()) for n, a in chunks.items()}
-    if any(pc.any(pc.match_substring_regex(arr, r"^[ \t]|[\r\n]")).as_py() for arr in text.values()):
-        return None  # a padded cell (skipinitialspace would strip it), or a line break (an unclosed quote)
+    if any(pc.any(pc.match_substring_regex(arr, r'^[ \t]|[\r\n"]')).as_py() for arr in text.values()):
+        return None  # a padded cell (skipinitialspace would strip it), a quote (read as text here), a line break
     numbers = _checked(batches, table)
     if numbers is None:
         return None

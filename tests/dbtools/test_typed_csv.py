@@ -192,3 +192,24 @@ def test_many_blocks_and_rows_shorter_than_the_first_block_read_as_the_text_path
     path.write_text(path.read_text(encoding="utf-8").replace("\n3,", "\n3x,", 1), encoding="utf-8")
     assert read_csv_typed(LOG_STREAMS[name], path) is None
     same_as_text_path(name, path)
+
+
+@pytest.mark.parametrize(
+    ("name", "body"),
+    [
+        ("cab", 't,direction\n0,"F"\n1,R\n'),  # a quoted text cell: the text path drops the quotes
+        ("cab", 't,direction\n0,""\n1,R\n'),  # a quoted empty cell
+        ("cab", 't,direction\n0,"F,R"\n1,R\n'),  # a quoted delimiter
+        ("cab", 't,direction\n0,F"x\n1,R\n'),  # a quote inside a cell
+        ("cab", '"t","direction"\n0,F\n1,R\n'),  # a quoted header
+        ("imu", 't,ax,ay,az,wx,wy,wz\n0,"1.5",2,3,4,5,6\n'),  # a quoted number
+        ("balise", 't,kind,line_code,station_code,track,signal_type\n1,"I1",0420,,"D",\n'),
+    ],
+)
+def test_a_quoted_cell_is_read_as_the_text_path(tmp_path: Path, name: str, body: str) -> None:
+    """Arrow parses without quote handling here (faster): any quote makes the file decline,
+    for the text path to read it (bench/NOTES.md)."""
+    path = tmp_path / f"{name}.csv"
+    path.write_text(body, encoding="utf-8")
+    assert read_csv_typed(LOG_STREAMS[name], path) is None
+    same_as_text_path(name, path)
