@@ -245,11 +245,19 @@ def step_means(t: FloatArray, x: FloatArray, g: FloatArray, step_s: float) -> Fl
     where the window reaches beyond ``t``. A stream sampled faster than the grid (the IMU's
     100 Hz) is averaged, not point-sampled: its noise then enters the grid by 1/√(samples
     per step), not whole."""
+    if t.size < 2 or g.size == 0:
+        return np.full(g.size, np.nan)
+    h = 0.5 * step_s
+    lo, hi = g - h, g + h
+    # only the samples that bracket the grid's windows (a block's, not the whole run's: the
+    # integral over the whole stream per block made the clock check quadratic in run length);
+    # the kept end samples bracket the first and last window as before, so the NaN rule holds
+    i0 = max(int(np.searchsorted(t, lo.min(), side="right")) - 1, 0)
+    i1 = min(int(np.searchsorted(t, hi.max(), side="left")) + 1, t.size)
+    t, x = t[i0:i1], x[i0:i1]
     if t.size < 2:
         return np.full(g.size, np.nan)
     area = np.concatenate(([0.0], np.cumsum(0.5 * (x[1:] + x[:-1]) * np.diff(t))))
-    h = 0.5 * step_s
-    lo, hi = g - h, g + h
     out = (np.interp(hi, t, area) - np.interp(lo, t, area)) / step_s
     return np.where((lo >= t[0]) & (hi <= t[-1]), out, np.nan)
 

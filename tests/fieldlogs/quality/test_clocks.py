@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fieldlogs.pipeline.config import ClockConfig
 from fieldlogs.quality.clocks import ClockOffset, block_lag, clock_offsets, estimate_lag, gps_speed, step_means
@@ -154,3 +156,27 @@ def test_logs_check_names_a_late_imu_and_leaves_the_clean_run_alone(tmp_path: Pa
     assert len(found) == 1 and found[0].table == "imu" and found[0].column == "t"
     assert found[0].value == pytest.approx(2.0, abs=0.25)
     assert "imu clock" in found[0].message and "late" in found[0].message
+
+
+@settings(max_examples=200, deadline=None, derandomize=True, database=None)
+@given(
+    n=st.integers(2, 400),
+    seed=st.integers(0, 2**32 - 1),
+    g0=st.floats(-5.0, 60.0),
+    ng=st.integers(0, 80),
+    step=st.sampled_from([0.1, 0.25, 1.0]),
+)
+def test_step_means_reads_only_the_samples_around_its_grid(n: int, seed: int, g0: float, ng: int, step: float) -> None:
+    """step_means integrates the samples that bracket its grid's windows only (a block's, not
+    the whole run's: once the clock check's cost grew with the square of the run's length);
+    the means and the NaN beyond the stream's ends equal the whole-stream integral's."""
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(0.005, 0.6, n))
+    x = rng.standard_normal(n)
+    g = g0 + step * np.arange(ng)
+    area = np.concatenate(([0.0], np.cumsum(0.5 * (x[1:] + x[:-1]) * np.diff(t))))
+    lo, hi = g - step / 2, g + step / 2
+    whole = np.where((lo >= t[0]) & (hi <= t[-1]), (np.interp(hi, t, area) - np.interp(lo, t, area)) / step, np.nan)
+    got = step_means(t, x, g, step)
+    assert np.array_equal(np.isnan(got), np.isnan(whole))
+    np.testing.assert_allclose(got[~np.isnan(got)], whole[~np.isnan(whole)], rtol=1e-9, atol=1e-9)
