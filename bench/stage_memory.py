@@ -32,7 +32,7 @@ STAGES = (
     "imu_gaps",
     "analyse_gps",
     "FeatureUnit",
-    "checked_solution",
+    "wheel_corrected",  # the balise checks (checked_solution), with the wheel-scale replays
     "episode_events",
     "events_frame",
     "summarise",
