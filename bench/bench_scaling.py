@@ -12,9 +12,10 @@ in ``--dir`` and reused), then
   cost of a run makes short runs cost more per hour, so slopes below 1 are expected over
   small sizes). The naive baseline is linear extrapolation of the shortest-but-one run:
   the ratio per size says how far above it each run costs;
-* another fresh process does what an audit worker or ``trainpos run`` does with it —
-  ``read_run`` then ``run_pipeline``, reading included, the ``truth`` stream removed (a
-  field log has none) — and reports its peak resident memory (``VmHWM`` of
+* another fresh process does what ``trainpos run`` does with it — ``read_run``, then
+  ``replay_bounded`` (a run longer than 1.5 × ``[window] length_h`` replayed in windows,
+  :mod:`fieldlogs.pipeline.windows`) writing the positions as they come, reading included,
+  the ``truth`` stream removed (a field log has none) — and reports its peak resident memory (``VmHWM`` of
   ``/proc/self/status``; not ``ru_maxrss``, which a child started by fork + exec inherits
   from a parent larger than itself). A fit of peak RSS = a + b · hours gives the memory
   bound per worker, printed for 24 h.
@@ -69,10 +70,13 @@ def one(run_dir: Path, db: Path) -> dict[str, float]:
 
 
 def worker(run_dir: Path, db: Path) -> dict[str, float]:
-    """Peak memory of one run processed as a worker does it (reading included)."""
+    """Peak memory of one run processed as ``trainpos run`` does it: reading included, a long
+    run replayed in windows, the positions written to the output files as they come."""
     from dbtools.database import read_network
     from fieldlogs.io import read_run
-    from fieldlogs.pipeline.run import run_pipeline
+    from fieldlogs.pipeline.config import PipelineConfig
+    from fieldlogs.pipeline.outputs import streamed_results
+    from fieldlogs.pipeline.windows import replay_bounded
 
     base = peak_rss_mb()
     net = read_network(db)
@@ -82,8 +86,10 @@ def worker(run_dir: Path, db: Path) -> dict[str, float]:
         for f in run_dir.iterdir():
             if f.is_file() and f.name != "truth.parquet":
                 os.link(f, field / f.name)
-        res = run_pipeline(read_run(field), net)
-    return {"rss_mb": peak_rss_mb(), "start_mb": base, "rows": float(len(res.positions))}
+        with streamed_results(Path(tmp) / "out") as sink:
+            res = replay_bounded(read_run(field), net, PipelineConfig(), lambda p: sink.add_positions(p.positions))
+            sink.finish(res.events, res.summary)
+    return {"rss_mb": peak_rss_mb(), "start_mb": base, "rows": float(res.cycles), "windows": float(res.windows)}
 
 
 def _child(flag: str, run_dir: Path, db: Path) -> dict[str, float]:
@@ -119,7 +125,8 @@ def main() -> None:
             print(
                 f"{r['hours']:6.2f} h ({r['cycles']:,.0f} cycles): CPU {r['cpu']:.3f} s = "
                 f"{r['cpu'] / r['hours']:.3f} s per hour ({3600 * r['hours'] / r['cpu']:,.0f}× real time), "
-                f"wall {r['wall']:.3f} s; worker peak RSS {r['rss_mb']:.0f} MB (imports {r['start_mb']:.0f} MB)  "
+                f"wall {r['wall']:.3f} s; worker peak RSS {r['rss_mb']:.0f} MB (imports {r['start_mb']:.0f} MB, "
+                f"{r['windows']:.0f} windows)  "
                 f"[{load()}]",
                 flush=True,
             )
@@ -137,8 +144,15 @@ def main() -> None:
         b, a = np.polyfit(hours, [r["rss_mb"] for r in rows], 1)
         print(
             f"worker peak RSS ≈ {a:.0f} MB + {b:.1f} MB per hour of log → {a + 24 * b:.0f} MB for a 24 h run "
-            f"(the 100 Hz IMU while its cycle means are built; reading included, no truth stream)  [{load()}]"
+            f"(reading included, no truth stream)  [{load()}]"
         )
+        long = [r for r in rows if r["hours"] > 3.0]  # replayed in windows ([window] length_h 2 h)
+        if len(long) >= 2:
+            b, a = np.polyfit([r["hours"] for r in long], [r["rss_mb"] for r in long], 1)
+            print(
+                f"runs over 3 h (replayed in 2 h windows): peak RSS ≈ {a:.0f} MB + {b:.1f} MB per hour "
+                f"(the kept result: positions, odometry) → {a + 24 * b:.0f} MB at 24 h  [{load()}]"
+            )
 
 
 if __name__ == "__main__":

@@ -25,21 +25,23 @@ def run(
 
     Writes positions (t, state, line, track, km, equipment km, speed, margin, last fix
     source) and events (corrections, refusals, slips, anomalies, fail-safe) as Parquet and
-    CSV, and summary.json.
+    CSV, and summary.json. A Parquet run longer than 1.5 × [window] length_h (2 h) is replayed
+    in windows of that length, so its memory is a window's (see trainpos config show window).
 
     Example: trainpos run logs/run-001 --db net.sqlite --out out/run-001
     """
     from dbtools.database import read_network
     from fieldlogs.config import load_tree
     from fieldlogs.io import read_run
-    from fieldlogs.pipeline.outputs import write_results
-    from fieldlogs.pipeline.run import run_pipeline
+    from fieldlogs.pipeline.outputs import streamed_results
+    from fieldlogs.pipeline.windows import replay_bounded
 
     cfg = load_tree(config).pipeline
     network = read_network(db)
-    result = run_pipeline(read_run(run_dir), network, cfg)
     inputs = [p for p in (run_dir, db, config) if p is not None]  # never replaced by --out
-    write_results(out, result.positions, result.events, result.summary, force=force, inputs=inputs)
+    with streamed_results(out, force=force, inputs=inputs) as sink:  # a long Parquet run: by windows
+        result = replay_bounded(read_run(run_dir), network, cfg, lambda part: sink.add_positions(part.positions))
+        sink.finish(result.events, result.summary)
     s = result.summary
     rows = [
         ("run", s["run_id"]),
@@ -67,11 +69,11 @@ def run(
             ("truth: within margin", f"{100 * tr['within_margin_share']:.2f} %"),
             ("truth: wrong track", tr["wrong_track_cycles"]),
         ]
-    last = result.positions.dropna(subset=["km_m"])
-    if len(last):
-        rows.append(
-            ("last position", f"{format_km(float(last['km_m'].iloc[-1]))} ± {float(last['margin_m'].iloc[-1]):.1f} m")
-        )
+    if result.last_position is not None:
+        km, margin = result.last_position
+        rows.append(("last position", f"{format_km(km)} ± {margin:.1f} m"))
+    if result.windows:
+        rows.append(("replayed", f"in {result.windows} windows of {cfg.window.length_h:g} h"))
     console().print(key_value_table(rows, title=f"Positioning → {out}"))
 
 

@@ -2,7 +2,7 @@
 
 One TOML file (``--config FILE.toml``) configures every command: ``run``, ``audit`` and
 ``gis verify`` read the pipeline's sections (``[odometry]``, ``[balise]``, ``[feature]``,
-``[gps]``, ``[margin]``, ``[gnss]``, ``cycle_s``), ``gis verify`` also ``[gis_verify]``,
+``[gps]``, ``[margin]``, ``[gnss]``, ``[clock]``, ``[window]``, ``cycle_s``), ``gis verify`` also ``[gis_verify]``,
 ``possession check`` reads ``[gps]`` and ``[possession]``, ``survey`` the pipeline's sections
 and ``[survey]``; each command refuses unknown sections and keys, wrong types and values out
 of range. ``trainpos config show`` prints the whole tree (or one section) with every
@@ -27,6 +27,7 @@ from fieldlogs.pipeline.config import (
     MarginConfig,
     OdometryConfig,
     PipelineConfig,
+    WindowConfig,
     check_budgets,
     read_toml,
 )
@@ -47,6 +48,7 @@ class SuiteConfig:
     margin: MarginConfig = field(default_factory=MarginConfig)
     gnss: GnssConfig = field(default_factory=GnssConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
+    window: WindowConfig = field(default_factory=WindowConfig)
     possession: PossessionConfig = field(default_factory=PossessionConfig)
     survey: SurveyConfig = field(default_factory=SurveyConfig)
     gis_verify: VerifyConfig = field(default_factory=VerifyConfig)
@@ -66,6 +68,7 @@ class SuiteConfig:
             self.cycle_s,
             gnss=self.gnss,
             clock=self.clock,
+            window=self.window,
         )
 
     @classmethod

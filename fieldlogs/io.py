@@ -17,7 +17,9 @@ streams by :mod:`dbtools.typed_csv` or as text.
 
 from __future__ import annotations
 
+import copy
 import json
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -31,7 +33,12 @@ import pyarrow.parquet as pq
 from dbtools.atomic import atomic_folder
 from dbtools.tabular import read_raw_table
 from dbtools.typed_csv import read_csv_typed
-from fieldlogs.parquet_streams import read_parquet_stream, read_parquet_table
+from fieldlogs.parquet_streams import (
+    parquet_windowable,
+    read_parquet_stream,
+    read_parquet_stream_between,
+    read_parquet_table,
+)
 from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding
@@ -270,6 +277,8 @@ class Run:
         self._streams: dict[str, pd.DataFrame | None] = {}
         self._stream_findings: dict[str, list[Finding]] = {}
         self._files: dict[str, Path] = {}
+        self.span: tuple[float, float] | None = None
+        """Set on a :meth:`window` view: only the rows with span[0] ≤ t < span[1] are read."""
         self._scan()
         self.findings.extend(_block_findings(data, json_path, has_tacho=self.has("tacho")))
         if self.meta is not None and self.has("tacho"):
@@ -355,7 +364,10 @@ class Run:
             path = self._files.get(name)
             frame: pd.DataFrame | None = None
             findings: list[Finding] = []
-            if path is not None:
+            if path is not None and self.span is not None:
+                read = self._window_of(name)  # read by window before: readable by window
+                frame = read[0] if read is not None else None
+            elif path is not None:
                 try:
                     frame, findings = read_stream(LOG_STREAMS[name], path)
                 except InputError as exc:
@@ -374,6 +386,50 @@ class Run:
                 self._stream_findings[name] = findings
                 self.findings.extend(findings)
         return self._streams[name]
+
+    def window(self, t0: float, t1: float) -> Run | None:
+        """A view of this run holding only the rows with t0 ≤ t < t1 of every stream (run.json,
+        files and findings so far shared), each stream read by time window
+        (:func:`fieldlogs.parquet_streams.read_parquet_stream_between`): the memory of a long
+        run's replay is its window, not the whole recording. Every stream is read here, so a
+        run that cannot be read by windows — a CSV stream, a Parquet column that must be
+        coerced — gives None (the caller reads it whole, where the findings are made).
+        :meth:`release` then :meth:`stream` reads the window again."""
+        view = copy.copy(self)
+        view.span = (t0, t1)
+        view.findings = list(self.findings)
+        view._streams = {}
+        view._stream_findings = {}
+        for name in self.streams_present():
+            read = view._window_of(name)
+            if read is None:
+                return None
+            view._streams[name], view._stream_findings[name] = read
+            view.findings.extend(read[1])
+        return view
+
+    def windowable(self) -> bool:
+        """Whether every stream can be read by time window (:meth:`window`): Parquet whose
+        columns are typed as stored (from the files' schemas; no rows read)."""
+        for name in self.streams_present():
+            path, table = self._files[name], LOG_STREAMS[name]
+            if path.suffix != ".parquet" or ("t" in table.column_names and not parquet_windowable(table, path)):
+                return False
+        return True
+
+    def _window_of(self, name: str) -> tuple[pd.DataFrame, list[Finding]] | None:
+        """A stream's rows in the window: a held stream (:attr:`Table.held`) also every row
+        before it; a table without time (the GNSS ephemerides) whole."""
+        path, table = self._files[name], LOG_STREAMS[name]
+        if self.span is None or path.suffix != ".parquet":
+            return None
+        if "t" not in table.column_names:
+            try:
+                return read_stream(table, path)
+            except InputError:
+                return None
+        t0, t1 = self.span
+        return read_parquet_stream_between(table, path, -math.inf if table.held else t0, t1)
 
     def loaded(self, name: str) -> bool:
         """Whether the stream is in memory (read and not released)."""

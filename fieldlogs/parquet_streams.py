@@ -12,6 +12,7 @@ a finding.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -104,27 +105,31 @@ def read_parquet_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Fi
                     limit=col.unit,
                 )
             )
-    extras = [c for c in schema.names if c not in table.column_names]
     fast = _fast_columns(table, path, pf)
     if fast is not None:
-        frame = pd.DataFrame(fast, copy=False)
-        for c in extras:
-            hint = suggest(c, table.column_names)
-            findings.append(
-                Finding(
-                    "schema.unknown_column",
-                    Severity.WARNING,
-                    table.name,
-                    f"unknown column '{c}' ignored" + (f" (did you mean '{hint}'?)" if hint else ""),
-                    file=file,
-                    column=c,
-                    value=c,
-                    limit=hint,
-                )
-            )
-        return frame, findings
+        return pd.DataFrame(fast, copy=False), findings + _unknown_columns(table, schema, file)
     co = coerce_frame(table, read_parquet_table(path).to_pandas(), file=file)
     return co.frame, findings + co.findings
+
+
+def _unknown_columns(table: Table, schema: pa.Schema, file: str) -> list[Finding]:
+    """A warning for each column the table does not declare (ignored)."""
+    out = []
+    for c in (c for c in schema.names if c not in table.column_names):
+        hint = suggest(c, table.column_names)
+        out.append(
+            Finding(
+                "schema.unknown_column",
+                Severity.WARNING,
+                table.name,
+                f"unknown column '{c}' ignored" + (f" (did you mean '{hint}'?)" if hint else ""),
+                file=file,
+                column=c,
+                value=c,
+                limit=hint,
+            )
+        )
+    return out
 
 
 def _fast_columns(table: Table, path: Path, pf: pq.ParquetFile) -> dict[str, Any] | None:
@@ -157,3 +162,119 @@ def _read(pf: pq.ParquetFile, path: Path, columns: list[str]) -> pa.Table:
         return pf.read(columns=columns)
     except (pa.ArrowException, OSError):
         return read_parquet_table(path, columns)
+
+
+def _row_groups_between(pf: pq.ParquetFile, t0: float, t1: float) -> list[int]:
+    """The row groups whose ``t`` statistics reach into [t0, t1); a group without statistics
+    is always read (its rows are then filtered one by one)."""
+    col = pf.schema_arrow.get_field_index("t")
+    out = []
+    for i in range(pf.metadata.num_row_groups):
+        stats = pf.metadata.row_group(i).column(col).statistics
+        if stats is None or not stats.has_min_max or stats.max is None or stats.min is None:
+            out.append(i)
+        elif float(stats.max) >= t0 and float(stats.min) < t1:
+            out.append(i)
+    return out
+
+
+def _window_columns(table: Table, schema: pa.Schema) -> list[Column] | None:
+    """The declared columns present, when each can be typed as stored (Arrow type fits,
+    unit as declared) and ``t`` and the required columns are there; else None."""
+    names = set(schema.names)
+    if "t" not in names or not all(c.name in names for c in table.columns if c.required):
+        return None
+    present = [c for c in table.columns if c.name in names]
+    for col in present:
+        unit = (schema.field(col.name).metadata or {}).get(b"unit")
+        if not _arrow_fits(col, schema.field(col.name).type) or (
+            unit is not None and unit.decode("utf-8", "replace") != col.unit
+        ):
+            return None
+    return present
+
+
+def parquet_windowable(table: Table, path: Path) -> bool:
+    """Whether :func:`read_parquet_stream_between` can read the file (its schema alone)."""
+    try:
+        return _window_columns(table, open_parquet(path).schema_arrow) is not None
+    except InputError:
+        return False
+
+
+def read_parquet_stream_between(
+    table: Table, path: Path, t0: float, t1: float
+) -> tuple[pd.DataFrame, list[Finding]] | None:
+    """The rows of a Parquet stream with t0 ≤ t < t1, typed as :func:`read_parquet_stream`
+    types them, reading only the row groups whose ``t`` statistics reach the window, one
+    column of one group at a time (memory: the window's rows and one column of a row group,
+    not the file's).
+
+    None when the file cannot be read this way — no ``t`` column, a column whose Arrow type
+    does not fit the declared one (``coerce_frame`` must name its cells), a declared unit
+    that differs, an unreadable file: the caller then reads the stream whole, where the
+    findings are made. Rows are kept in file order (selection by value, not by position),
+    so :func:`fieldlogs.pipeline.run.clean_stream` sees every row of the window. The findings
+    are those of the whole read that do not depend on the rows (unknown columns)."""
+    try:
+        pf = open_parquet(path)
+    except InputError:
+        return None
+    schema = pf.schema_arrow
+    present = _window_columns(table, schema)
+    if present is None:
+        return None
+    import pyarrow.compute as pc
+
+    fast: dict[str, Any] = {}
+    try:
+        groups = _row_groups_between(pf, t0, t1)
+        masks = []
+        for g in groups:  # the window's rows of each group, from its t alone
+            t = pf.read_row_group(g, columns=["t"]).column(0)
+            masks.append(pc.and_(pc.greater_equal(t, t0), pc.less(t, t1)))
+        n_rows = sum(int(pc.sum(m).as_py() or 0) for m in masks)
+        for col in present:  # a column of a group at a time: the window is held about once
+            parts = [
+                chunk
+                for g, m in zip(groups, masks, strict=True)
+                for chunk in pf.read_row_group(g, columns=[col.name]).column(0).filter(m).chunks
+            ]
+            fast[col.name] = _arrow_column(col, pa.chunked_array(parts, type=schema.field(col.name).type))
+            del parts
+    except (pa.ArrowException, OSError):
+        return None
+    finally:
+        pa.default_memory_pool().release_unused()
+    for col in table.columns:  # an optional column absent: nulls of its type
+        if col.name not in fast:
+            fast[col.name] = pd.Series([None] * n_rows, dtype=PANDAS_DTYPE[col.dtype]).array
+    frame = pd.DataFrame({c.name: fast[c.name] for c in table.columns}, copy=False)
+    return frame, _unknown_columns(table, schema, str(path))
+
+
+def stream_t_range(path: Path) -> tuple[float, float] | None:
+    """(first, last) t of a Parquet stream from its row groups' statistics (no rows read),
+    or None when a group has none or the file cannot be opened."""
+    try:
+        pf = open_parquet(path)
+    except InputError:
+        return None
+    if "t" not in pf.schema_arrow.names or pf.metadata.num_row_groups == 0:
+        return None
+    col = pf.schema_arrow.get_field_index("t")
+    lo, hi = math.inf, -math.inf
+    for i in range(pf.metadata.num_row_groups):
+        stats = pf.metadata.row_group(i).column(col).statistics
+        if stats is None or not stats.has_min_max or stats.min is None or stats.max is None:
+            return None
+        lo, hi = min(lo, float(stats.min)), max(hi, float(stats.max))
+    return (lo, hi) if lo <= hi else None
+
+
+def parquet_rows(path: Path) -> int | None:
+    """Rows of a Parquet file from its metadata (None when it cannot be opened)."""
+    try:
+        return int(open_parquet(path).metadata.num_rows)
+    except InputError:
+        return None

@@ -153,6 +153,7 @@ CAB = Table(
         Column("pto", "int", "Road-rail PTO: 1 on rail, 0 off", required=False, nullable=True, min=0, max=1),
     ),
     required=False,
+    held=True,
 )
 
 TRUTH = Table(

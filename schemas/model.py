@@ -63,6 +63,9 @@ class Table:
     """For sources and log streams: must the file exist?"""
     rate_hz: float | None = None
     """Nominal sampling rate of a log stream (None for event streams)."""
+    held: bool = False
+    """Log streams: each row holds until a later one (a state, e.g. the cab's direction), so a
+    time window of the stream also takes every row before it (:meth:`fieldlogs.io.Run.window`)."""
     extra: dict[str, str] = field(default_factory=dict)
 
     @property

@@ -51,7 +51,6 @@ from fieldlogs.audit.store import (
     touch_run,
     unpack,
 )
-from fieldlogs.quality.usability import Purpose, require_usable
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, load_network, open_db
 from fieldlogs.replay.pool import Outcome, error_message, replay
@@ -108,23 +107,17 @@ def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
-def _direction(pos: pd.DataFrame) -> str | None:
-    """``down`` when the km grew over the run, ``up`` when it fell (None if never determined)."""
-    km = pos["km_m"].dropna()
-    if len(km) < 2:
-        return None
-    return "down" if float(km.iloc[-1]) >= float(km.iloc[0]) else "up"
-
-
-def _trace(result: Any) -> pd.DataFrame:
-    """1 Hz trace of a run for plots: km, margin, speeds, κ, GPS position, truth error."""
+def _trace(result: Any, earlier: list[Any] | None = None) -> pd.DataFrame:
+    """1 Hz trace of a run for plots: km, margin, speeds, κ, GPS position, truth error;
+    full rate around the slip/slide episodes (``earlier``: those of a long run's earlier
+    windows, one of which may reach into this window's part)."""
     pos = result.positions
     dt = float(np.median(np.diff(pos["t"]))) if len(pos) > 1 else 0.1
     step = max(round(1.0 / max(dt, 1e-3)), 1)
     keep = np.zeros(len(pos), dtype=bool)
     keep[::step] = True
     t = pos["t"].to_numpy()
-    for ep in result.odometry.episodes:  # full rate around slip/slide episodes
+    for ep in [*(earlier or []), *result.odometry.episodes]:  # full rate around slip/slide episodes
         keep |= (t >= ep.t_start - 5.0) & (t <= ep.t_end + 5.0)
     sel = pos[keep]
     idx = np.flatnonzero(keep)
@@ -171,7 +164,7 @@ def audit_one(
     """
     from fieldlogs.io import read_run
     from fieldlogs.pipeline.config import PipelineConfig
-    from fieldlogs.pipeline.run import run_pipeline
+    from fieldlogs.pipeline.windows import replay_bounded
 
     t0, c0 = time.perf_counter(), time.process_time()
     base: dict[str, Any] = {
@@ -190,24 +183,58 @@ def audit_one(
         network = load_network(db)
         cfg = PipelineConfig.from_dict(json.loads(cfg_json))
         run = read_run(Path(run_path))
-        require_usable(run, Purpose.POSITIONING)
-        result = run_pipeline(run, network, cfg)
-        record = {**base, **_record(result), "elapsed_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
-        return {"record": record, "events": pack(result.events), "trace": encode_trace(_trace(result))}
+        seen = _Seen()
+        result = replay_bounded(run, network, cfg, seen.add)  # refuses an unusable run; a long one by windows
+        record = {
+            **base,
+            **_record(result.summary, seen.direction()),
+            "elapsed_s": time.perf_counter() - t0,
+            "cpu_s": time.process_time() - c0,
+        }
+        return {"record": record, "events": pack(result.events), "trace": encode_trace(seen.trace())}
     except Exception as exc:  # a bad run or a bug on one run must not stop a fleet audit
         msg = error_message(exc)
     end = {"elapsed_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
     return {"record": {**base, "status": "error", "error": msg, **end}}
 
 
-def _record(result: Any) -> dict[str, Any]:
+class _Seen:
+    """What the audit keeps of a run's results as they come (the whole run's, or each
+    window's of a long one): its 1 Hz trace and its first and last km."""
+
+    def __init__(self) -> None:
+        self.traces: list[pd.DataFrame] = []
+        self.episodes: list[Any] = []
+        self.first_km: float | None = None
+        self.last_km: float | None = None
+        self.kms = 0
+
+    def add(self, result: Any) -> None:
+        self.traces.append(_trace(result, self.episodes))
+        self.episodes += result.odometry.episodes
+        km = result.positions["km_m"].dropna()
+        if len(km):
+            self.first_km = float(km.iloc[0]) if self.first_km is None else self.first_km
+            self.last_km = float(km.iloc[-1])
+            self.kms += len(km)
+
+    def direction(self) -> str | None:
+        """``down`` when the km grew over the run, ``up`` when it fell (None if never determined)."""
+        if self.kms < 2 or self.first_km is None or self.last_km is None:
+            return None
+        return "down" if self.last_km >= self.first_km else "up"
+
+    def trace(self) -> pd.DataFrame:
+        return self.traces[0] if len(self.traces) == 1 else pd.concat(self.traces, ignore_index=True)
+
+
+def _record(s: dict[str, Any], direction: str | None) -> dict[str, Any]:
     """The record fields of a run the pipeline went through (``elapsed_s``: wall time in
     the worker, ``cpu_s`` its CPU time; wall / CPU > 1: a busy machine)."""
-    s = result.summary
     return {
         "status": "ok",
         **{k: s[k] for k in ("run_id", "vehicle_id", "vehicle_kind", "db_version", "line_code", "track")},
-        "direction": _direction(result.positions),
+        "direction": direction,
         **{k: s[k] for k in ("n_corrections", "mean_correction_pct", "max_correction_pct")},
         **{k: s.get(k) for k in SUMMARY_FIELDS},
         "summary_json": json.dumps(jsonable({k: v for k, v in s.items() if k != "config"})),

@@ -1,7 +1,7 @@
 """Every tuning parameter of the positioning pipeline, with SPEC defaults, units and ranges.
 
 One frozen section per concern — ``[odometry]``, ``[balise]``, ``[feature]``, ``[gps]``,
-``[margin]`` of a ``--config`` TOML file, plus ``cycle_s``, and ``[gnss]`` (declared in
+``[margin]``, ``[clock]``, ``[window]`` of a ``--config`` TOML file, plus ``cycle_s``, and ``[gnss]`` (declared in
 :mod:`fieldlogs.gnss.config`) — each field declared with
 :func:`schemas.settings.setting` (default, one-line meaning, unit, allowed range), so that
 ``trainpos config show`` prints them all and a value out of range is refused wherever it
@@ -255,6 +255,25 @@ class ClockConfig:
         check_ranges(self, "clock")
 
 
+@dataclass(frozen=True)
+class WindowConfig:
+    """Replay of a long run in time windows, memory bounded by the window
+    (:mod:`fieldlogs.pipeline.windows`; ``trainpos run`` and ``trainpos audit``)."""
+
+    length_h: float = setting(
+        2.0, "a Parquet run longer than 1.5 × this is replayed in windows of this length; 0 = always whole", "h", ge=0
+    )
+    overlap_min: float = setting(
+        30.0, "each window is replayed from this long before its part (the position settles)", "min", ge=0
+    )
+    lookahead_min: float = setting(
+        5.0, "… and to this long after it (what is decided after the fact: curve exits, the smoother)", "min", ge=0
+    )
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "window")
+
+
 #: Default target of the position-correction % [S003 §5.2] (:mod:`fieldlogs.pipeline.corrections`;
 #: declared here, with the settings, so that ``trainpos report --help`` needs no numpy).
 TARGET_PCT = 0.5
@@ -280,6 +299,7 @@ class PipelineConfig:
     cycle_s: float = setting(**CYCLE_S)
     gnss: GnssConfig = field(default_factory=GnssConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
+    window: WindowConfig = field(default_factory=WindowConfig)
 
     def __post_init__(self) -> None:
         check_ranges(self)

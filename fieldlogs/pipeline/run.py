@@ -46,7 +46,7 @@ from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
 from fieldlogs.pipeline.wheelscale import scaled_cycles, wheel_corrected
-from fieldlogs.quality.clocks import clock_offsets
+from fieldlogs.quality.clocks import ClockOffset, clock_offsets
 from fieldlogs.quality.tacho import cumulative_again
 from fieldlogs.quality.usability import Purpose, require_usable
 from schemas.enums import EventType, VehicleKind
@@ -71,6 +71,8 @@ class PipelineResult:
     cycles: Cycles | None = field(default=None, repr=False)
     gnss: GnssUnit | None = field(default=None, repr=False)
     """The run's raw GNSS inputs and the track solutions the aid computed (None without)."""
+    wheel_scale: float = 1.0
+    """The scale the pulse distance was divided by (:mod:`fieldlogs.pipeline.wheelscale`)."""
 
 
 def clean_stream(frame: pd.DataFrame | None, name: str, events: list[Event]) -> pd.DataFrame | None:
@@ -122,12 +124,17 @@ def clocks_aligned(
     teeth: int | None,
     cfg: PipelineConfig,
     events: list[Event],
+    offsets: list[ClockOffset] | None = None,
 ) -> dict[str, pd.DataFrame | None]:
     """The IMU and GPS on the tacho's clock: a determined offset beyond ``clock.tolerance_s``
     (:func:`fieldlogs.quality.clocks.clock_offsets`, the check ``logs check`` reports as
-    ``log.clock_offset``) moves the stream's t back by it, each a ``clock_offset`` event."""
+    ``log.clock_offset``, or ``offsets`` when given: a window of a long run borrows what it
+    could not determine, :mod:`fieldlogs.pipeline.windows`) moves the stream's t back by it,
+    each a ``clock_offset`` event."""
     out = dict(streams)
-    for o in clock_offsets(streams, wheel_diameter_m, teeth, cfg.clock, cfg.cycle_s):
+    if offsets is None:
+        offsets = clock_offsets(streams, wheel_diameter_m, teeth, cfg.clock, cfg.cycle_s)
+    for o in offsets:
         frame = out.get(o.stream)
         if not o.beyond_tolerance or frame is None:
             continue
@@ -140,22 +147,41 @@ def clocks_aligned(
             "action": "t moved back by the offset",
             "message": o.message,
         }
+        if o.from_t is not None:
+            detail["determined_from_t"] = o.from_t
         events.append(Event(0.0, EventType.CLOCK_OFFSET, detail=detail))
     return out
 
 
-def prepare_run(run: Run, network: Network, cfg: PipelineConfig) -> tuple[RunContext, list[Event]]:
+def clean_streams(run: Run, events: list[Event]) -> dict[str, pd.DataFrame | None]:
+    """Stage 1 of the module docstring: the streams as the onboard unit sees them (sorted, no
+    missing or repeated t, pulse counter resets bridged), each repair an event."""
+    streams = {n: clean_stream(run.stream(n), n, events) for n in STREAMS}
+    streams["tacho"] = counter_resets_bridged(streams["tacho"], events)
+    return streams
+
+
+def run_clock_offsets(run: Run, cfg: PipelineConfig) -> list[ClockOffset]:
+    """The clock offsets :func:`prepare_run` would find on ``run`` (its cleaned streams)."""
+    assert run.meta is not None
+    streams = clean_streams(run, [])
+    return clock_offsets(streams, run.meta.wheel_diameter_m, run.meta.teeth, cfg.clock, cfg.cycle_s)
+
+
+def prepare_run(
+    run: Run, network: Network, cfg: PipelineConfig, offsets: list[ClockOffset] | None = None
+) -> tuple[RunContext, list[Event]]:
     """Stages 1–4 of the module docstring: the context the aids are built from, and the
     ``input_repaired`` events of the cleaning; raises FindingsError when run.json is unusable.
+    ``offsets``: the clock offsets to apply instead of those the run's own check finds.
     The IMU stream is released once its cycle means are built, unless the caller had loaded
     it (:meth:`Run.release`: the memory of a long run is then its cycles, not its samples)."""
     keep_imu = run.loaded("imu")
     require_usable(run, Purpose.POSITIONING)  # never a "determined" km the run cannot support
     assert run.meta is not None
     pre: list[Event] = []
-    streams = {n: clean_stream(run.stream(n), n, pre) for n in STREAMS}
-    streams["tacho"] = counter_resets_bridged(streams["tacho"], pre)
-    streams = clocks_aligned(streams, run.meta.wheel_diameter_m, run.meta.teeth, cfg, pre)
+    streams = clean_streams(run, pre)
+    streams = clocks_aligned(streams, run.meta.wheel_diameter_m, run.meta.teeth, cfg, pre, offsets)
     t_end = max((float(s["t"].iloc[-1]) for s in streams.values() if s is not None and len(s)), default=0.0)
     cycles = build_cycles(
         tacho=streams["tacho"],
@@ -199,10 +225,13 @@ def context_on(
     )
 
 
-def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) -> PipelineResult:
-    """Replay a run through the onboard logic; raises FindingsError when run.json is unusable."""
+def run_pipeline(
+    run: Run, network: Network, cfg: PipelineConfig | None = None, *, clock_offsets: list[ClockOffset] | None = None
+) -> PipelineResult:
+    """Replay a run through the onboard logic; raises FindingsError when run.json is unusable.
+    ``clock_offsets``: applied instead of those the run's own clock check finds."""
     cfg = cfg or PipelineConfig()
-    ctx, pre = prepare_run(run, network, cfg)
+    ctx, pre = prepare_run(run, network, cfg, clock_offsets)
     first = ctx
 
     def rescaled(scale: float) -> RunContext:
@@ -219,5 +248,5 @@ def run_pipeline(run: Run, network: Network, cfg: PipelineConfig | None = None) 
         summary["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
     kappa = ctx.features.kappa if ctx.features is not None else None
     return PipelineResult(
-        run.run_id, sol.positions, ev_frame, summary, odo, ctx.gps, kappa, truth, ctx.cycles, ctx.gnss
+        run.run_id, sol.positions, ev_frame, summary, odo, ctx.gps, kappa, truth, ctx.cycles, ctx.gnss, scale
     )

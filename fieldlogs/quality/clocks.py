@@ -100,13 +100,17 @@ class ClockOffset:
     corr: float
     determined: bool
     beyond_tolerance: bool
+    from_t: float | None = None
+    """Set when a window of a long run could not determine its own offset and took this one,
+    determined on the window starting at this t (:mod:`fieldlogs.pipeline.windows`)."""
 
     @property
     def message(self) -> str:
         way = "late" if self.offset_s > 0 else "early"
+        where = "" if self.from_t is None else f", determined on the part from t = {self.from_t:.0f} s"
         return (
             f"{self.stream} clock {abs(self.offset_s):.2f} s {way} against the tacho "
-            f"(cross-correlation ρ {self.corr:.2f}; t of this stream is offset — the pipeline moves it back)"
+            f"(cross-correlation ρ {self.corr:.2f}{where}; t of this stream is offset — the pipeline moves it back)"
         )
 
 
