@@ -80,6 +80,7 @@ def worker(run_dir: Path, db: Path) -> dict[str, float]:
 
     base = peak_rss_mb()
     net = read_network(db)
+    c0 = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:  # the run without its truth stream
         field = Path(tmp) / "run"
         field.mkdir()
@@ -89,7 +90,14 @@ def worker(run_dir: Path, db: Path) -> dict[str, float]:
         with streamed_results(Path(tmp) / "out") as sink:
             res = replay_bounded(read_run(field), net, PipelineConfig(), lambda p: sink.add_positions(p.positions))
             sink.finish(res.events, res.summary)
-    return {"rss_mb": peak_rss_mb(), "start_mb": base, "rows": float(res.cycles), "windows": float(res.windows)}
+    cpu = time.process_time() - c0
+    return {
+        "rss_mb": peak_rss_mb(),
+        "start_mb": base,
+        "rows": float(res.cycles),
+        "windows": float(res.windows),
+        "worker_cpu": cpu,
+    }
 
 
 def _child(flag: str, run_dir: Path, db: Path) -> dict[str, float]:
@@ -126,7 +134,8 @@ def main() -> None:
                 f"{r['hours']:6.2f} h ({r['cycles']:,.0f} cycles): CPU {r['cpu']:.3f} s = "
                 f"{r['cpu'] / r['hours']:.3f} s per hour ({3600 * r['hours'] / r['cpu']:,.0f}× real time), "
                 f"wall {r['wall']:.3f} s; worker peak RSS {r['rss_mb']:.0f} MB (imports {r['start_mb']:.0f} MB, "
-                f"{r['windows']:.0f} windows)  "
+                f"{r['windows']:.0f} windows; its CPU {r['worker_cpu']:.2f} s = "
+                f"{r['worker_cpu'] / r['hours']:.2f} s per hour, reading and writing included)  "
                 f"[{load()}]",
                 flush=True,
             )
@@ -141,11 +150,11 @@ def main() -> None:
         ratios = ", ".join(f"{h:.2f} h {c / (per_h * h):.2f}×" for h, c in zip(hours, cpu, strict=True))
         print(f"log-log slope of CPU time on run length: {slope:.3f} (wall {slope_w:.3f}); target ≤ 1.05")
         print(f"CPU against linear extrapolation of the {hours[ref]:.2f} h run: {ratios}")
-        b, a = np.polyfit(hours, [r["rss_mb"] for r in rows], 1)
-        print(
-            f"worker peak RSS ≈ {a:.0f} MB + {b:.1f} MB per hour of log → {a + 24 * b:.0f} MB for a 24 h run "
-            f"(reading included, no truth stream)  [{load()}]"
-        )
+        wcpu = np.array([r["worker_cpu"] for r in rows])
+        slope_worker = float(np.polyfit(np.log(hours), np.log(wcpu), 1)[0])
+        print(f"log-log slope of the worker's CPU (windows over 3 h, reading and writing): {slope_worker:.3f}")
+        peaks = ", ".join(f"{r['hours']:.2f} h {r['rss_mb']:.0f} MB" for r in rows)
+        print(f"worker peak RSS: {peaks} (reading included, no truth stream)  [{load()}]")
         long = [r for r in rows if r["hours"] > 3.0]  # replayed in windows ([window] length_h 2 h)
         if len(long) >= 2:
             b, a = np.polyfit([r["hours"] for r in long], [r["rss_mb"] for r in long], 1)
