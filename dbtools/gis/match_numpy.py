@@ -24,8 +24,12 @@ BoolArray = npt.NDArray[np.bool_]
 #: Cell coordinates are offset by this and keyed as ``cx · stride + cy`` (int64, no overlap).
 CELL_OFFSET = 1 << 24
 CELL_STRIDE = 1 << 26
-#: Up to this many fixes a match is done here unless the compiled kernel is already loaded.
-NUMPY_MAX_FIXES = 50_000
+#: Up to this many fixes a match is done here unless the compiled kernel is already loaded: a
+#: day of GPS at 1 Hz (86,400 fixes), so a 24 h run's one match needs no numba. At 100,000 fixes
+#: this path takes ≈ 0.3 s and ≈ 60 MB of peak (blocks of BLOCK_FIXES), where importing numba
+#: and loading the kernel takes ≈ 0.5 s and ≈ 190 MB of RSS before it matches them in 0.03 s
+#: (bench/NOTES.md, "Day-long runs without numba"); beyond ≈ 180,000 fixes the kernel is faster.
+NUMPY_MAX_FIXES = 100_000
 #: Fixes per block of materialised candidate pairs (bounds the memory: ~ 20–60 pairs a fix).
 BLOCK_FIXES = 8192
 

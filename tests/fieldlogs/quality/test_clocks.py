@@ -6,8 +6,12 @@ sit at t = t_true + L, i.e. x(t) = s(t − L) and x(t + L) = s(t) — the estima
 
 from __future__ import annotations
 
+import itertools
 import shutil
+from collections.abc import Iterator
+from dataclasses import astuple
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -15,8 +19,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import fieldlogs.quality.clocks as clocks
 from fieldlogs.pipeline.config import ClockConfig
-from fieldlogs.quality.clocks import ClockOffset, block_lag, clock_offsets, estimate_lag, gps_speed, step_means
+from fieldlogs.quality.clocks import (
+    ClockOffset,
+    block_lag,
+    block_rows,
+    clock_offsets,
+    estimate_lag,
+    gps_speed,
+    step_means,
+)
 
 T = np.arange(0.0, 600.0, 0.1)
 
@@ -180,3 +193,93 @@ def test_step_means_reads_only_the_samples_around_its_grid(n: int, seed: int, g0
     got = step_means(t, x, g, step)
     assert np.array_equal(np.isnan(got), np.isnan(whole))
     np.testing.assert_allclose(got[~np.isnan(got)], whole[~np.isnan(whole)], rtol=1e-9, atol=1e-9)
+
+
+def _mask_rows(t: np.ndarray, edges: np.ndarray) -> Iterator[np.ndarray]:
+    """The block selection estimate_lag made before block_rows: the mask over the whole ``t``."""
+    for a, b in itertools.pairwise(edges):
+        yield (t >= a) & (t <= b)
+
+
+@st.composite
+def _sorted_times(draw: st.DrawFn) -> tuple[np.ndarray, np.ndarray]:
+    """(sorted t with repeats, block edges), some edges exactly on samples, some off them,
+    some beyond the ends."""
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    n = draw(st.integers(1, 300))
+    t = np.cumsum(rng.choice([0.0, 0.05, 0.1, 0.37], n)) + draw(st.floats(-50.0, 50.0))
+    on = t[rng.integers(0, n, draw(st.integers(0, 6)))]
+    off = rng.uniform(t[0] - 3.0, t[-1] + 3.0, draw(st.integers(0, 6)))
+    edges = np.sort(np.concatenate([on, off, [t[0], t[-1]]]))
+    return t, edges
+
+
+@settings(max_examples=300, deadline=None, derandomize=True, database=None)
+@given(case=_sorted_times(), shuffle=st.booleans())
+def test_block_rows_are_the_masks_rows(case: tuple[np.ndarray, np.ndarray], shuffle: bool) -> None:
+    """Each block's rows are those of the mask (t >= a) & (t <= b), both ends included, on
+    sorted times (slices: edges on samples, repeated samples, edges beyond the ends) and on
+    unsorted ones (the mask itself)."""
+    t, edges = case
+    if shuffle:
+        t = np.random.default_rng(t.size).permutation(t)
+    got = [np.arange(t.size)[sel] for sel in block_rows(t, edges)]
+    want = [np.flatnonzero(m) for m in _mask_rows(t, edges)]
+    assert len(got) == len(want) == edges.size - 1
+    for g, w in zip(got, want, strict=True):
+        assert np.array_equal(g, w)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    late=st.floats(-3.0, 3.0),
+    block=st.sampled_from([40.0, 57.5, 120.0]),  # longer than the 30 s high-pass
+    on_edges=st.booleans(),
+)
+def test_estimate_lag_by_slices_is_the_mask_computation(seed: int, late: float, block: float, on_edges: bool) -> None:
+    """estimate_lag on a sorted reference (steps of 0–0.2 s, repeats; with ``on_edges`` a
+    sample exactly on every block edge) gives the Lag of the whole-reference masks, exactly."""
+    rng = np.random.default_rng(seed)
+    t_ref = np.cumsum(rng.choice([0.0, 0.05, 0.1, 0.2], 3000))
+    t_x = np.sort(rng.uniform(0.0, t_ref[-1], 1500))
+    max_lag = 5.0
+    if on_edges:  # the edges estimate_lag computes (t0, t1 unchanged by samples inside)
+        t0, t1 = max(t_ref[0], t_x[0] - max_lag), min(t_ref[-1], t_x[-1] - max_lag)
+        edges = np.linspace(t0, t1, max(int((t1 - t0) // block), 1) + 1)
+        t_ref = np.sort(np.concatenate([t_ref, edges]))
+    r, x = _speed(t_ref), _speed(t_x - late) + 0.3 * rng.standard_normal(t_x.size)
+    weight = (rng.uniform(size=t_ref.size) > 0.1).astype(float)
+    kw = {"max_lag_s": max_lag, "block_s": block, "weight": weight}
+    got = estimate_lag(t_ref, r, t_x, x, **kw)  # type: ignore[arg-type]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(clocks, "block_rows", _mask_rows)
+        want = estimate_lag(t_ref, r, t_x, x, **kw)  # type: ignore[arg-type]
+    assert (got is None) == (want is None)
+    if got is not None and want is not None:
+        assert np.array_equal(np.array(astuple(got), float), np.array(astuple(want), float), equal_nan=True)
+
+
+class _Counted(np.ndarray):
+    """An array that counts the elements its >= and <= comparisons read (on itself and on
+    the arrays indexed from it)."""
+
+    compared = 0
+
+    def __array_ufunc__(self, ufunc: Any, method: str, *inputs: Any, **kwargs: Any) -> Any:
+        if ufunc in (np.greater_equal, np.less_equal):
+            _Counted.compared += max(np.size(i) for i in inputs)
+        args = [np.asarray(i) if isinstance(i, _Counted) else i for i in inputs]
+        return getattr(ufunc, method)(*args, **kwargs)
+
+
+def test_the_clock_check_compares_a_sorted_reference_once_not_once_per_block() -> None:
+    """On a sorted reference the blocks are found by binary search: the >= / <= comparisons
+    read the reference once (its sortedness), not twice per 120 s block — which made the
+    clock check grow with the square of the run's length."""
+    t = np.arange(0.0, 3600.0, 0.1)  # an hour of tacho: 29 blocks
+    t_x = np.arange(0.0, 3600.0, 1.0)
+    _Counted.compared = 0
+    lag = estimate_lag(t.view(_Counted), _speed(t), t_x, _speed(t_x - 1.0), max_lag_s=10.0)
+    assert lag is not None and lag.blocks == 29 and lag.lag_s == pytest.approx(1.0, abs=0.03)
+    assert _Counted.compared <= t.size
