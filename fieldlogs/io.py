@@ -279,6 +279,8 @@ class Run:
         self._files: dict[str, Path] = {}
         self.span: tuple[float, float] | None = None
         """Set on a :meth:`window` view: only the rows with span[0] ≤ t < span[1] are read."""
+        self.spooled: dict[str, Path] = {}
+        """CSV streams also written as Parquet (:mod:`fieldlogs.csv_spool`), which windows read."""
         self._scan()
         self.findings.extend(_block_findings(data, json_path, has_tacho=self.has("tacho")))
         if self.meta is not None and self.has("tacho"):
@@ -389,7 +391,7 @@ class Run:
 
     def window(self, t0: float, t1: float) -> Run | None:
         """A view of this run holding only the rows with t0 ≤ t < t1 of every stream (run.json,
-        files and findings so far shared), each stream read by time window
+        files and findings so far shared), each stream (or its spooled copy) read by time window
         (:func:`fieldlogs.parquet_streams.read_parquet_stream_between`): the memory of a long
         run's replay is its window, not the whole recording. Every stream is read here, so a
         run that cannot be read by windows — a CSV stream, a Parquet column that must be
@@ -412,7 +414,7 @@ class Run:
         """Whether every stream can be read by time window (:meth:`window`): Parquet whose
         columns are typed as stored (from the files' schemas; no rows read)."""
         for name in self.streams_present():
-            path, table = self._files[name], LOG_STREAMS[name]
+            path, table = self.spooled.get(name, self._files[name]), LOG_STREAMS[name]
             if path.suffix != ".parquet" or ("t" in table.column_names and not parquet_windowable(table, path)):
                 return False
         return True
@@ -420,7 +422,7 @@ class Run:
     def _window_of(self, name: str) -> tuple[pd.DataFrame, list[Finding]] | None:
         """A stream's rows in the window: a held stream (:attr:`Table.held`) also every row
         before it; a table without time (the GNSS ephemerides) whole."""
-        path, table = self._files[name], LOG_STREAMS[name]
+        path, table = self.spooled.get(name, self._files[name]), LOG_STREAMS[name]
         if self.span is None or path.suffix != ".parquet":
             return None
         if "t" not in table.column_names:
@@ -468,7 +470,7 @@ def check_output_folder(src: Path, out: Path) -> None:
         raise RefusedError("the output folder must not contain the input run", path=out)
 
 
-def _arrow_table(table: Table, frame: pd.DataFrame) -> pa.Table:
+def arrow_stream_table(table: Table, frame: pd.DataFrame) -> pa.Table:
     """Declared columns with declared Arrow types and each column's unit in its metadata."""
     arrays, fields = [], []
     for c in table.columns:
@@ -499,7 +501,7 @@ def _write_stream(path: Path, table: Table, frame: pd.DataFrame, fmt: LogFormat)
     cols = [c for c in table.column_names if c in frame.columns]
     frame = frame[cols]
     if fmt == "parquet":
-        pq.write_table(_arrow_table(table, frame), path, compression="zstd")
+        pq.write_table(arrow_stream_table(table, frame), path, compression="zstd")
     else:
         frame.to_csv(path, index=False, float_format="%.10g", lineterminator="\n")
 

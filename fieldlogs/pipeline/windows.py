@@ -30,22 +30,26 @@ offsets, repairs: t = 0 of its replay) are kept at its ``keep_from`` with the wi
 ``detail``. :func:`run_bounded` joins the parts into one result (tests, bench, callers that
 want the whole table).
 
-A run that cannot be read by window (a CSV stream, a Parquet column that must be coerced,
-no tacho stream to define the cycles) is replayed whole.
+A long CSV run is first spooled to Parquet block by block (:mod:`fieldlogs.csv_spool`). A run
+that cannot be read by window (a CSV stream the block parser declines, a Parquet column that
+must be coerced, no tacho stream to define the cycles) is replayed whole.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import tempfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from dbtools.network import Network
+from fieldlogs.csv_spool import csv_t_span, spool_csv_streams
 from fieldlogs.io import Run
 from fieldlogs.parquet_streams import parquet_rows, stream_t_range
 from fieldlogs.pipeline.config import PipelineConfig, WindowConfig
@@ -111,7 +115,7 @@ SPAN_PER_ROWS = 10.0
 def plan_run(run: Run, cfg: WindowConfig) -> list[Window]:
     """The windows of ``run`` (none: replay it whole): its tacho's span from the Parquet
     statistics, every stream readable by window (:meth:`Run.windowable`)."""
-    tacho = run.stream_file("tacho")
+    tacho = run.spooled.get("tacho") or run.stream_file("tacho")
     if tacho is None or tacho.suffix != ".parquet" or not run.windowable():
         return []
     span = stream_t_range(tacho)
@@ -227,7 +231,24 @@ def replay_bounded(
 ) -> Replayed:
     """The run through the pipeline, whole or (:func:`plan_run`) window by window, each
     result — the whole run's, or each window's kept part — handed to ``consume`` as it is
-    made and then dropped; returns the summary and the events."""
+    made and then dropped; returns the summary and the events. A long CSV run is spooled
+    to Parquet first (:mod:`fieldlogs.csv_spool`, in a temporary folder removed after)."""
+    with tempfile.TemporaryDirectory(prefix="trainpos-spool-") as tmp:
+        if _long_csv(run, cfg.window):
+            spool_csv_streams(run, Path(tmp))
+        return _replay(run, network, cfg, consume)
+
+
+def _long_csv(run: Run, cfg: WindowConfig) -> bool:
+    """A CSV tacho whose first and last t are more than 1.5 window lengths apart."""
+    tacho = run.stream_file("tacho")
+    if tacho is None or tacho.suffix == ".parquet" or cfg.length_h <= 0:
+        return False
+    span = csv_t_span(tacho)
+    return span is not None and span[1] - span[0] > 1.5 * cfg.length_h * 3600.0
+
+
+def _replay(run: Run, network: Network, cfg: PipelineConfig, consume: Callable[[PipelineResult], None]) -> Replayed:
     windows = plan_run(run, cfg.window)
     if not windows:
         result = run_pipeline(run, network, cfg)

@@ -371,3 +371,41 @@ def test_a_tacho_time_base_its_rows_do_not_cover_is_not_windowed(tmp_path: Path,
     assert run.windowable()
     assert plan_run(run, WindowConfig(length_h=2.0)) == []
     assert plan_run(read_run(parquet_runs / "sim-d-slips"), WindowConfig(length_h=0.05))
+
+
+@pytest.mark.slow
+def test_a_long_csv_run_is_spooled_and_replayed_as_its_parquet_twin(
+    tmp_path: Path, parquet_runs: Path, sample_db: Path
+) -> None:
+    """The CSV conversion of a run, windowed: its streams spooled to Parquet block by block,
+    the positions those of the Parquet run's windowed replay; nothing left of the spool."""
+    convert_run(parquet_runs / "sim-d-slips", tmp_path / "csv", "csv")
+    net = read_network(sample_db)
+    cfg = _small_windows()
+    pq_res = run_bounded(read_run(parquet_runs / "sim-d-slips"), net, cfg)
+    before = {f.name: f.read_bytes() for f in (tmp_path / "csv").iterdir()}
+    run = read_run(tmp_path / "csv")
+    csv_res = run_bounded(run, net, cfg)
+    assert csv_res.summary["windows"] == pq_res.summary["windows"]
+    assert set(run.spooled) == set(run.streams_present())
+    assert not any(p.exists() for p in run.spooled.values())  # the spool folder is removed
+    pd.testing.assert_frame_equal(csv_res.positions, pq_res.positions)
+    assert {f.name: f.read_bytes() for f in (tmp_path / "csv").iterdir()} == before  # the input untouched
+
+
+def test_a_csv_stream_the_block_parser_declines_keeps_the_run_whole(tmp_path: Path, parquet_runs: Path) -> None:
+    """A quoted cell in the IMU: that stream needs the text path, the run is not spooled."""
+    from fieldlogs.csv_spool import csv_t_span, spool_csv_streams
+
+    convert_run(parquet_runs / "sim-d-slips", tmp_path / "csv", "csv")
+    imu = tmp_path / "csv" / "imu.csv"
+    lines = imu.read_text(encoding="utf-8").splitlines(keepends=True)
+    first = lines[5].split(",")
+    lines[5] = ",".join([first[0], f'"{first[1]}"', *first[2:]])
+    imu.write_text("".join(lines), encoding="utf-8")
+    run = read_run(tmp_path / "csv")
+    span = csv_t_span(run.stream_file("tacho"))  # type: ignore[arg-type]
+    assert span is not None and span[1] - span[0] > 600.0
+    (tmp_path / "spool").mkdir()
+    assert not spool_csv_streams(run, tmp_path / "spool")
+    assert "imu" not in run.spooled and not run.windowable()
