@@ -98,7 +98,8 @@ class _Block:
     rows: int
     nbytes: int
     finite: bool = False
-    """The number columns are known to hold finite numbers only (the C parser's blocks)."""
+    """The number columns are known to hold finite numbers and the nulls only (the C
+    parser's blocks: checked as they were parsed)."""
 
 
 class _Growing:
@@ -225,22 +226,31 @@ def _piece_ends(fh: BinaryIO, start: int, size: int, piece_bytes: int) -> list[i
     return ends
 
 
-def _c_numbers(fh: BinaryIO, header: bytes, names: list[str], start: int, end: int) -> dict[str, np.ndarray] | None:
+def _c_numbers(
+    fh: BinaryIO, header: bytes, names: list[str], start: int, end: int
+) -> tuple[dict[str, np.ndarray], dict[str, int]] | None:
     """pandas's C parser on one piece of a file of number columns only (correctly rounded
-    since pandas 3.1: fast_float, the parser Arrow uses), or None when the piece holds
-    anything but finite numbers — a blank (a null), ``nan``, an infinity, a short row, a
-    row of spaces (``skip_blank_lines=False``: no line is dropped unseen), a quote
-    (``QUOTE_NONE``: a number with a quote does not parse) — for Arrow's path to read
-    that piece. Where it accepts a cell Arrow does not (a vertical tab or form feed around
-    a number: pandas's whitespace rule is C's), the text path reads the same number, which
-    the hypothesis tests check."""
+    since pandas 3.1: fast_float, the parser Arrow uses): its number columns and their
+    null counts, or None for Arrow's path to read the piece.
+
+    The blank cells are the same nulls as Arrow's (``na_values``: the same list, matched on
+    the cell as written), and pandas's converter never makes a NaN of a cell (``-nan`` or
+    `` nan`` do not parse), so every NaN is a null, or a field missing from a short row:
+    those fill the row's last columns, so a NaN in the last column declines the piece (a
+    blank last cell too: Arrow tells them apart). Declined as well: a cell that does not
+    parse (the parser's error: a quote too, with ``QUOTE_NONE``), an infinity, a row of
+    spaces or an empty line (``skip_blank_lines=False``: no line is dropped unseen), a row
+    longer than the header. Where it accepts a cell Arrow does not (a vertical tab or form
+    feed around a number: pandas's whitespace rule is C's), the text path reads the same
+    number, which the hypothesis tests check."""
     try:
         frame = pd.read_csv(
             _Range(fh, header, start, end),
             dtype="float64",
             engine="c",
             quoting=csv.QUOTE_NONE,
-            na_filter=False,
+            na_values=BLANK_CELLS,
+            keep_default_na=False,
             skip_blank_lines=False,
             encoding="utf-8",
         )
@@ -249,12 +259,14 @@ def _c_numbers(fh: BinaryIO, header: bytes, names: list[str], start: int, end: i
     if list(frame.columns) != names or not isinstance(frame.index, pd.RangeIndex):
         return None
     numbers = {n: frame[n].to_numpy() for n in names}
-    with np.errstate(
-        over="ignore", invalid="ignore"
-    ):  # a NaN or an infinity makes the sum non-finite, as does a sum beyond float64
-        if any(v.dtype != np.float64 or not np.isfinite(v.sum()) for v in numbers.values()):
-            return None
-    return numbers
+    if any(v.dtype != np.float64 for v in numbers.values()):
+        return None
+    with np.errstate(over="ignore", invalid="ignore"):  # a sum is finite when its terms are (and not beyond float64)
+        if all(np.isfinite(v.sum()) for v in numbers.values()):
+            return numbers, dict.fromkeys(names, 0)
+    if np.isnan(numbers[names[-1]]).any() or any(np.isinf(v).any() for v in numbers.values()):
+        return None
+    return numbers, {n: int(np.count_nonzero(np.isnan(v))) for n, v in numbers.items()}
 
 
 def _c_blocks(path: Path, table: Table, piece_bytes: int) -> Iterator[_Block] | None:
@@ -267,23 +279,32 @@ def _c_blocks(path: Path, table: Table, piece_bytes: int) -> Iterator[_Block] | 
         return None
     header, names = head
     numeric = _numeric(table)
-    if not C_PARSER_EXACT or not _names_fit(names, table) or not all(n in numeric for n in names):
+    if (
+        not C_PARSER_EXACT
+        or not hasattr(os, "preadv")
+        or not _names_fit(names, table)
+        or not all(n in numeric for n in names)
+    ):
         return None
     return _c_pieces(path, table, header, names, piece_bytes)
 
 
 def _c_pieces(path: Path, table: Table, header: bytes, names: list[str], piece_bytes: int) -> Iterator[_Block]:
+    """The pieces of a number file, one block each from the C parser, or Arrow's blocks of
+    a piece it declines (the file itself when it is one piece; else the piece read in
+    place, never a copy of it in memory)."""
     with open(path, "rb") as fh:
         size = os.fstat(fh.fileno()).st_size
         start = len(header)
         for end in _piece_ends(fh, start, size, piece_bytes):
-            numbers = _c_numbers(fh, header, names, start, end)
-            if numbers is not None:
-                yield _Block(names, numbers, dict.fromkeys(names, 0), {}, len(numbers[names[0]]), end - start, True)
+            parsed = _c_numbers(fh, header, names, start, end)
+            if parsed is not None:
+                numbers, nulls = parsed
+                yield _Block(names, numbers, nulls, {}, len(numbers[names[0]]), end - start, True)
             else:
-                fh.seek(start)
-                piece = header + fh.read(end - start)
-                for block in _arrow_blocks(pa.BufferReader(piece), table, BLOCK_BYTES, len(piece)):
+                whole = start == len(header) and end == size
+                source = path if whole else pa.PythonFile(_Range(fh, header, start, end), mode="r")
+                for block in _arrow_blocks(source, table, BLOCK_BYTES, end - start):
                     if block.names != names:
                         raise TextPathNeeded
                     yield block
@@ -291,7 +312,7 @@ def _c_pieces(path: Path, table: Table, header: bytes, names: list[str], piece_b
 
 
 def _blocks(table: Table, path: Path, piece_bytes: int) -> Iterator[_Block] | None:
-    """The file's blocks, checked one by one (:func:`_checked`), or None when it is known
+    """The file's blocks, checked one by one (:func:`_fits`), or None when it is known
     from its header that the text path must read it; the iterator raises
     :class:`TextPathNeeded` when that is found later."""
     try:
@@ -337,7 +358,7 @@ def _fits(block: _Block, table: Table) -> bool:
     parse (the text path names the cell as written), a fractional whole number (likewise),
     a text cell the text path reads otherwise. Nulls are NaN in the arrays, so "no NaN but
     the nulls and no infinity" is "as many non-finite values as nulls": one pass over each
-    column (the C parser's blocks have neither: checked as they were parsed)."""
+    column (the C parser's blocks are checked as they are parsed)."""
     declared = {c.name: c for c in table.columns}
     for name, values in block.numbers.items():
         nulls = block.nulls[name]
