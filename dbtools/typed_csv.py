@@ -37,6 +37,7 @@ import csv
 import io
 import itertools
 import os
+import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,7 +61,7 @@ PIECE_BYTES = 1 << 30
 #: pandas's C parser is correctly rounded from 3.1 on (fast_float for every
 #: ``float_precision``, pandas-dev/pandas#64432); before, its "high" converter was not
 #: (1 ulp off on some cells), so Arrow's parser reads every file.
-C_PARSER_EXACT = tuple(int(p) for p in pd.__version__.split(".")[:2]) >= (3, 1)
+C_PARSER_EXACT = tuple(int(p) for p in re.findall(r"\d+", pd.__version__)[:2]) >= (3, 1)
 
 
 def _case_variants(word: str) -> list[str]:
