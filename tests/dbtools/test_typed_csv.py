@@ -5,14 +5,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
+import pyarrow as pa
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dbtools import typed_csv
 from dbtools.tabular import read_raw_table
-from dbtools.typed_csv import read_csv_typed
+from dbtools.typed_csv import TextPathNeeded, iter_csv_typed, read_csv_typed
 from fieldlogs.io import coerce_stream, read_stream
+from schemas.errors import InputError
 from schemas.logs import LOG_STREAMS
 
 NUMBER_CELLS = st.one_of(
@@ -20,6 +22,10 @@ NUMBER_CELLS = st.one_of(
     st.integers(-(10**6), 10**6).map(str),
     st.sampled_from(["", "nan", "NaN", "NA", "null", "NULL", "nAn", "inf", "-inf", "1e999", "x", "1,5", " 2", "3 "]),
     st.sampled_from(["1.50", "2.0", "-0", "+4", "1e3", "0x10", "-nan", " nan", "1_000"]),
+    # whitespace the C parser skips around a number (C's isspace) and Arrow does not
+    st.sampled_from(["\x0b1", "2\x0c", "\t", " ", "\x0b", "1e5\t", "\xa03"]),
+    # NaN spellings: only the blank ones are nulls (pandas's own NA list is not used)
+    st.sampled_from(["+nan", "nan ", "-NaN", "+NaN", "NULL ", "N/A", "#N/A", "None", "<NA>", "nan(1)", "1.#QNAN"]),
 )
 
 
@@ -213,3 +219,164 @@ def test_a_quoted_cell_is_read_as_the_text_path(tmp_path: Path, name: str, body:
     path.write_text(body, encoding="utf-8")
     assert read_csv_typed(LOG_STREAMS[name], path) is None
     same_as_text_path(name, path)
+
+
+DIGITS = st.text("0123456789", min_size=1, max_size=25)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(DIGITS, DIGITS, st.integers(-340, 320), st.booleans()), min_size=1, max_size=40))
+def test_the_c_parser_rounds_every_number_correctly(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, cells) -> None:  # type: ignore[no-untyped-def]
+    """A file of number columns only is parsed by pandas's C parser (Arrow's path is not
+    taken), and every value is the correctly rounded one (Python's float): up to 25
+    significant digits, exponents near both ends of float64 (subnormals, underflow to 0)."""
+    if not typed_csv.C_PARSER_EXACT:
+        pytest.skip("pandas < 3.1: Arrow's parser reads every file")
+    texts = [f"{'-' if neg else ''}{a}.{b}e{e}" for a, b, e, neg in cells]
+    texts = [x for x in texts if abs(float(x)) < 1.7e308]
+    if not texts:
+        return
+    path = tmp_path / "imu.csv"
+    path.write_text("t,ax,ay,az,wx,wy,wz\n" + "".join(f"0,{x},1,2,3,4,5\n" for x in texts), encoding="utf-8")
+
+    def no_arrow(*args: object) -> None:
+        raise AssertionError("Arrow's path taken")
+
+    monkeypatch.setattr(typed_csv, "_arrow_blocks", no_arrow)
+    frame = read_csv_typed(LOG_STREAMS["imu"], path)
+    assert frame is not None
+    assert [v.hex() for v in frame["ax"].tolist()] == [float(x).hex() for x in texts]
+
+
+@pytest.mark.parametrize(
+    ("name", "body"),
+    [
+        ("tacho", "t,pulses\n0,1\n\n1,2\n"),  # an empty line (Arrow skips it)
+        ("tacho", "t,pulses\n0,1\n1,2\n\n\n"),
+        ("tacho", "t,pulses\n0,1\n  \n1,2\n"),  # a line of spaces (pandas would skip it)
+        ("tacho", "t,pulses\n0,1\n\t\n1,2\n"),
+        ("tacho", "t,pulses\r\n0,1\r\n1,2\r\n"),
+        ("tacho", "\ufefft,pulses\n0,1\n1,2\n"),
+        ("tacho", "t,pulses\n0,1\n1\n"),  # a short row
+        ("tacho", "t,pulses\n0,1\n1,2,3\n"),  # a long row
+        ("tacho", "t,pulses\n0,1,5\n1,2,6\n"),  # every row long (pandas: an index column)
+        ("tacho", "t,pulses\n0,1,\n1,2,\n"),
+        ("tacho", "t,pulses,\n0,1,\n1,2,\n"),
+        ("tacho", "t,pulses\n0,1\n1,2"),  # no final line end
+        ("tacho", "t,pulses\r0,1\r1,2\r"),  # carriage returns only
+        ("tacho", "t,pulses\n0,1\n1,\x0b2\n"),  # a vertical tab: C's whitespace
+        ("tacho", "t,pulses\n0,1\n#1,2\n"),
+        ("tacho", "t,pulses\n0,1\n1,2\x00\n"),
+        ("tacho", "t,pulses\n1e999,1\n"),
+        ("tacho", "t,pulses\n0,2.5\n"),
+        ("imu", "t,ax,ay,az,wx,wy,wz\n0,1,2,3,4,5,6\n,,,,,,\n"),
+        ("imu", "t,ax,ay,az,wx,wy,wz\n0,1,2,3,4,5,inf\n"),
+        ("imu", "t,ax,ay,az,wx,wy,wz\n0,1,2,3,4,5,1e308\n0,1,2,3,4,5,1e308\n"),  # a sum beyond float64
+    ],
+)
+def test_line_shapes_of_a_number_file_read_as_the_text_path(tmp_path: Path, name: str, body: str) -> None:
+    """Where pandas's C parser and Arrow's differ on a file's lines (pandas skips lines of
+    spaces, fills short rows, takes a long first column for an index, skips C's whitespace
+    around a number), the typed frame is still the text path's."""
+    path = tmp_path / f"{name}.csv"
+    path.write_bytes(body.encode("utf-8"))
+    try:
+        text_path(name, path)
+    except InputError as exc:  # the text path refuses the file: so does read_stream, the same way
+        with pytest.raises(InputError) as got:
+            read_stream(LOG_STREAMS[name], path)
+        assert str(got.value) == str(exc)
+        return
+    same_as_text_path(name, path)
+
+
+def _spread_file(tmp_path: Path, name: str, rows: int, blanks: list[int], bad: int | None, column: int = -1) -> Path:
+    cols = LOG_STREAMS[name].column_names
+    kinds = {c.name: c.dtype for c in LOG_STREAMS[name].columns}
+    lines = [",".join(cols)]
+    for k in range(rows):
+        cells = [
+            ("F" if k % 3 else "R") if kinds[c] == "str" else str(k if kinds[c] == "int" else k * 0.01 + i / 7)
+            for i, c in enumerate(cols)
+        ]
+        if k in blanks:
+            cells[column] = ""
+        if k == bad:
+            cells[0] = "x"
+        lines.append(",".join(cells))
+    path = tmp_path / f"{name}.csv"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    st.sampled_from(["imu", "tacho", "gps", "cab"]),
+    st.integers(0, 3000),
+    st.integers(1, 1500),
+    st.lists(st.integers(0, 2999), max_size=3),
+    st.one_of(st.none(), st.integers(0, 2999)),
+    st.integers(-1, 1),
+)
+def test_blocks_concatenate_to_the_whole_frame(  # type: ignore[no-untyped-def]
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, name: str, n: int, rows: int, blanks, bad, column: int
+) -> None:
+    """iter_csv_typed on files of many pieces and Arrow blocks (a piece with a blank read by
+    Arrow, a bad cell deep in the file): frames of at most ``rows`` rows, parsed a piece
+    of about ``rows`` rows at a time, whose concatenation is read_csv_typed's frame (index,
+    dtypes, every value); None or TextPathNeeded exactly when read_csv_typed declines."""
+    monkeypatch.setattr(typed_csv, "BLOCK_BYTES", 2048)
+    monkeypatch.setattr(typed_csv, "PIECE_BYTES", 8192)
+    path = _spread_file(tmp_path, name, n, blanks, bad, column)
+    whole = read_csv_typed(LOG_STREAMS[name], path)
+    pieces: list[int] = []
+    c_numbers = typed_csv._c_numbers
+
+    def counted(fh, header, names, start, end):  # type: ignore[no-untyped-def]
+        pieces.append(end - start)
+        return c_numbers(fh, header, names, start, end)
+
+    monkeypatch.setattr(typed_csv, "_c_numbers", counted)
+    frames = iter_csv_typed(LOG_STREAMS[name], path, rows)
+    if frames is None:
+        assert whole is None
+        return
+    try:
+        got = list(frames)
+    except TextPathNeeded:
+        assert whole is None
+        return
+    assert whole is not None
+    assert all(0 < len(f) <= rows for f in got)
+    line = max(len(x) for x in path.read_bytes().splitlines()) + 1
+    assert all(p <= max(1 << 16, rows * line) + line for p in pieces)  # a piece of about ``rows`` rows
+    pd.testing.assert_frame_equal(pd.concat(got), whole, check_exact=True)
+
+
+def test_a_number_file_of_many_pieces_reads_as_the_text_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Pieces of a number file: the C parser's where it accepts them, Arrow's for the one
+    with a blank (a null), the frame the text path's; a bad cell in the last piece declines."""
+    monkeypatch.setattr(typed_csv, "PIECE_BYTES", 4096)
+    path = _spread_file(tmp_path, "imu", 2000, [1500], None)
+    arrow = typed_csv._arrow_blocks
+    calls: list[object] = []
+
+    def counted(*args):  # type: ignore[no-untyped-def]
+        calls.append(args[0])
+        return arrow(*args)
+
+    monkeypatch.setattr(typed_csv, "_arrow_blocks", counted)
+    frame = read_csv_typed(LOG_STREAMS["imu"], path)
+    assert frame is not None and frame["wz"].isna().sum() == 1 and len(frame) == 2000
+    # Arrow reads the one piece with the blank (C parser), or the whole file (pandas < 3.1)
+    assert len(calls) == 1 and isinstance(calls[0], pa.NativeFile) == typed_csv.C_PARSER_EXACT
+    same_as_text_path("imu", path)
+    path = _spread_file(tmp_path, "imu", 2000, [1500], 1999)
+    assert read_csv_typed(LOG_STREAMS["imu"], path) is None
+    same_as_text_path("imu", path)
+    calls.clear()  # blanks in another column than the last: nulls of the C parser's pieces
+    path = _spread_file(tmp_path, "imu", 2000, [3, 1500, 1501], None, column=2)
+    frame = read_csv_typed(LOG_STREAMS["imu"], path)
+    assert frame is not None and frame["ay"].isna().sum() == 3 and len(frame) == 2000
+    assert calls == [] or not typed_csv.C_PARSER_EXACT
+    same_as_text_path("imu", path)
