@@ -4,7 +4,7 @@ Between two consecutive balise fixes i → j on one line (no other absolute fix 
 dead reckoning runs D_ij metres; the correction at j, turned along the travel
 (a_j = (computed − DB km)·k·cab: + the estimate was ahead), is
 
-    a_j = e·D_ij + L·(v_j − v_i) + ε_j,
+    a_j = e·N_ij + L·(v_j − c_i·c_j·v_i) + ε_j,
 
 e the wheel's scale error (pulses e over the declared wheel: a turned wheel, run.json not
 updated) and L the balise clock's offset (+ late: a telegram stamped L after the reader
@@ -14,6 +14,16 @@ invisible in a_j (it cancels); the speed changes between balises — stations, s
 show it, and what they cannot show is held by the balise latency budget in the fix's
 uncertainty (``balise.latency_budget_s`` × speed). ε holds the fix uncertainties, the slip
 corrections' residuals and the wear noise.
+
+N_ij = (S_j − S_i)·c_j is the signed travel from i to j along the travel at j (c the cab, S
+the signed travel the estimate reckons on): D_ij, unless the train turned back between the
+two fixes. A shuttle out to a terminus and back past its last balise runs D_ij but moves
+only N_ij along the line, and the scale's error is e·N_ij: 1.6 km out to the far end, 109.7 km
+back and 0.1 km out again between two up-direction balises 1.8 h apart (no balise fix on the
+way back), N = −108.0 km against D = 111.7 km, a = −293 m
+on a wheel 0.27 % over; fitted on D, six such intervals among 762 read e = −0.23 % and a
+balise clock 0.61 ± 0.04 s late on a clean 24 h run (issue 21). Likewise fix i's v_i·L lies
+along the travel at i, so it cancels against fix j's only when the cabs c_i and c_j agree.
 
 :func:`balise_evidence` fits (e, L) by weighted least squares over the run's intervals (at
 least ``MIN_INTERVALS``; weights 1/(1 m² + ΔA²), ΔA the slip budget the interval accrued), with
@@ -75,9 +85,18 @@ class Interval:
     along_m: float
     """Correction at its end along the travel (+ the estimate was ahead) [m]."""
     dv_mps: float
-    """Speed at its end − speed at its start [m/s]."""
+    """Speed at its end − speed at its start turned along the end's travel, v_j − c_i·c_j·v_i
+    (module docstring) [m/s]."""
     allowance_m: float = 0.0
     """Slip-correction error budget accrued over it (eq. 13, the margin's own term) [m]."""
+    net_m: float | None = None
+    """Signed travel from its start to its end along the end's travel, (S_j − S_i)·c_j: what
+    the wheel's scale error accrues on (module docstring) [m]; None: ``dist_m`` (no turn back)."""
+
+    @property
+    def scale_base_m(self) -> float:
+        """The metres the scale error e accrues on: ``net_m``, or ``dist_m`` without it."""
+        return self.dist_m if self.net_m is None else self.net_m
 
 
 @dataclass(frozen=True)
@@ -109,10 +128,12 @@ def balise_intervals(fixes: list[Fix], travel: Travel) -> list[Interval]:
         if prev is not None and prev.line_code == f.line_code and f.d_ref - prev.d_ref >= MIN_INTERVAL_M:
             i0, i1 = _cycle(travel, prev.reference_t), _cycle(travel, f.reference_t)
             amount = float(travel.km(prev, f.s_ref)) - f.km_m
-            along = amount * prev.k * float(travel.cab[i1])
-            dv = float(travel.v[i1] - travel.v[i0])
+            c0, c1 = float(travel.cab[i0]), float(travel.cab[i1])
+            along = amount * prev.k * c1
+            dv = float(travel.v[i1]) - c0 * c1 * float(travel.v[i0])
             budget = travel.allowance_at(f.reference_t) - travel.allowance_at(prev.reference_t)
-            out.append(Interval(prev.reference_t, f.reference_t, f.d_ref - prev.d_ref, along, dv, budget))
+            net = (f.s_ref - prev.s_ref) * c1
+            out.append(Interval(prev.reference_t, f.reference_t, f.d_ref - prev.d_ref, along, dv, budget, net))
         prev = f
     return out
 
@@ -122,11 +143,11 @@ def _cycle(travel: Travel, t: float) -> int:
 
 
 def fit_evidence(intervals: list[Interval]) -> BaliseEvidence | None:
-    """Least squares a = e·D + L·Δv over ``intervals`` (None below MIN_INTERVALS)."""
+    """Least squares a = e·N + L·Δv over ``intervals`` (None below MIN_INTERVALS)."""
     if len(intervals) < MIN_SCALE_INTERVALS:
         return None
     w = np.sqrt([1.0 / (1.0 + iv.allowance_m**2) for iv in intervals])  # 1 m fix noise ⊕ slip budget
-    x = np.array([[iv.dist_m, iv.dv_mps] for iv in intervals]) * w[:, None]
+    x = np.array([[iv.scale_base_m, iv.dv_mps] for iv in intervals]) * w[:, None]
     y = np.array([iv.along_m for iv in intervals]) * w
     xtx = x.T @ x
     if len(y) < MIN_INTERVALS or abs(float(np.linalg.det(xtx))) < 1e-6 * float(np.trace(xtx)) ** 2:
@@ -157,7 +178,9 @@ def balise_evidence(fixes: list[Fix], travel: Travel) -> BaliseEvidence | None:
 
 def scale_rate(intervals: list[Interval], fix_uncertainty_m: float, lag_s: float = 0.0) -> float:
     """The largest wheel scale error an interval shows beyond its fixes' noise and its slip
-    budget: max_j (|a_j − L·Δv_j| − 2·u_fix − ΔA_j) / D_j (0 without intervals; never negative)."""
+    budget: max_j (|a_j − L·Δv_j| − 2·u_fix − ΔA_j) / D_j (0 without intervals; never negative).
+    Per metre of D_j, not of N_j: the margin's distance share it widens grows with the unsigned
+    travel, which is what has to hold |a_j| on a stretch that turned back."""
     rates = [
         (abs(iv.along_m - lag_s * iv.dv_mps) - 2.0 * fix_uncertainty_m - iv.allowance_m) / iv.dist_m for iv in intervals
     ]

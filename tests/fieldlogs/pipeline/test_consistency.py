@@ -15,10 +15,13 @@ import pytest
 from dbtools.database import read_network
 from fieldlogs.io import read_run
 from fieldlogs.pipeline.config import ClockConfig, MarginConfig, PipelineConfig
-from fieldlogs.pipeline.consistency import Interval, fit_evidence, scale_rate
+from fieldlogs.pipeline.consistency import Interval, balise_intervals, fit_evidence, scale_rate
 from fieldlogs.pipeline.cycles import Cycles
+from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.pipeline.types import Fix
 from fieldlogs.pipeline.wheelscale import scaled_cycles
+from schemas.enums import FixSource
 
 SAMPLE = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs" / "sim-d-slips"
 
@@ -41,6 +44,72 @@ def test_fit_recovers_scale_and_a_late_or_early_balise_clock(e: float, lag: floa
     assert ev.lag_sigma_s < 1e-6
     if lag == 2.0:
         assert _intervals(e, lag)[0].along_m == pytest.approx(10.0)
+
+
+def _shuttle(e: float) -> Travel:
+    """By hand: up km 0 → 2000 at 20 m/s (cab F), back to km 0 at 25 m/s (cab R), up again to
+    km 1000 at 10 m/s (cab F); the pulses read e too many metres (d, v and S over by 1 + e)."""
+    legs = [(0.0, 2000.0, 20.0, 1), (2000.0, 0.0, 25.0, -1), (0.0, 1000.0, 10.0, 1)]
+    km, cab = [np.array([0.0])], [np.array([1])]
+    for a, b, v, c in legs:
+        n = round(abs(b - a) / v / 0.1)
+        km.append(a + (b - a) * np.arange(1, n + 1) / n)
+        cab.append(np.full(n, c))
+    x, c = np.concatenate(km), np.concatenate(cab)
+    d = (1.0 + e) * np.concatenate([[0.0], np.cumsum(np.abs(np.diff(x)))])
+    t = 0.1 * np.arange(x.size)
+    v = np.abs(np.gradient(d, t))
+    return Travel(t, d, (1.0 + e) * x, v, c.astype(np.int8), np.ones(x.size, bool), np.zeros(x.size))
+
+
+def _balise(travel: Travel, t: float, km: float) -> Fix:
+    s = float(np.interp(t, travel.t, travel.s))
+    d = float(np.interp(t, travel.t, travel.d))
+    return Fix(t, s, d, km, km, "", "", 1, FixSource.BALISE, 1.0)
+
+
+@pytest.mark.parametrize(("t_end", "km_end", "turns"), [(230.0, 500.0, 2), (120.0, 1500.0, 1)])
+def test_an_interval_that_turns_back_accrues_the_scale_on_its_net_travel(
+    t_end: float, km_end: float, turns: int
+) -> None:
+    """A balise at km 1000 on the way up (t 50 s, 20 m/s), the next at km 500 after turning
+    back twice (t 230 s, 10 m/s) or at km 1500 after one turn (t 120 s, 25 m/s, the other cab);
+    the telegrams stamped L = 0.5 s late, the pulses 0.3 % over. The correction is
+    a = e·N + L·(v_j − c_i·c_j·v_i) (to O(e²)): the scale accrues on the net travel along the end's
+    travel N = −500 / −500 m, not on D = 3500 / 1500 m (e·D: +10.5 / +4.5 m), and after one turn
+    fix i's v_i·L adds to fix j's (Δv 45 m/s) instead of cancelling (−5 m/s). Before: a = e·D +
+    L·(v_j − v_i) was fitted, and a clean 24 h shuttle's six such intervals read a balise clock
+    0.61 s late (moved back: 75 % of its claimed cycles within margin)."""
+    e, lag = 0.003, 0.5
+    travel = _shuttle(e)
+    fixes = [_balise(travel, 50.0 + lag, 1000.0), _balise(travel, t_end + lag, km_end)]
+    (iv,) = balise_intervals(fixes, travel)
+    assert iv.net_m == pytest.approx(-500.0, abs=25.0) and iv.dist_m == pytest.approx(
+        3500.0 if turns == 2 else 1500.0, abs=25.0
+    )
+    assert iv.dv_mps == pytest.approx(-10.0 if turns == 2 else 45.0, rel=0.01)
+    # to O(e²) and O(e·L·Δv): 0.07 m here
+    assert iv.along_m == pytest.approx(e * iv.scale_base_m + lag * iv.dv_mps, abs=0.1)
+    assert abs(iv.along_m - e * iv.dist_m) > 4.0
+
+
+def test_a_shuttle_fits_its_wheel_and_no_clock() -> None:
+    """600 intervals as on the 24 h shuttle of bench/bench_scaling.py — 205 m ending 6 m/s
+    slower, 1050 m, 1750 / 2660 m ending 6.3 m/s faster — on a wheel 0.27 % over, and one back
+    from a terminus (D 111.7 km, N −108 km, 8.1 m/s slower at its end). On N the fit says
+    e 0.27 %, L 0; on D (before) that one interval read e −0.22 % and a clock 1.1 ± 0.05 s late."""
+    rng = np.random.default_rng(1)
+    ends = {205.0: -6.0, 1050.0: -0.6, 1750.0: 6.3, 2660.0: 6.3}
+    ivs = []
+    for j in range(600):
+        dist = float(rng.choice(list(ends)))
+        dist, net, dv = (111_700.0, -108_000.0, -8.1) if j == 300 else (dist, dist, ends[dist] + rng.normal(0.0, 0.3))
+        ivs.append(Interval(0.0, 1.0, dist, 0.0027 * net + float(rng.normal(0.0, 0.02)), float(dv), 0.0, net))
+    ev = fit_evidence(ivs)
+    assert ev is not None and ev.n == 600
+    assert ev.scale == pytest.approx(0.0027, abs=1e-5) and abs(ev.lag_s) < 0.01 and ev.rms_m < 0.05
+    old = fit_evidence([replace(iv, net_m=None) for iv in ivs])
+    assert old is not None and old.scale < 0.0 and old.lag_s > 0.5 and old.lag_sigma_s < 0.1
 
 
 def test_few_intervals_fit_the_scale_alone() -> None:
@@ -167,3 +236,30 @@ def test_a_clock_is_judged_on_the_corrected_wheel(sample_db: Path, tmp_path: Pat
     clock = json.loads(res.events["detail"][res.events["type"] == "balise_clock"].iloc[0])
     assert clock["offset_s"] == pytest.approx(1.0, abs=0.1)
     assert res.summary["truth"]["within_margin_share"] >= 0.999
+
+
+def test_a_clean_shuttle_between_termini_gets_no_balise_clock(sample_db: Path, tmp_path: Path) -> None:
+    """Issue 21: a simulated shuttle (up the sample line's down track, back, up again and
+    back, no slips, its wheel 0.27 % worn) reads the down track's balises only on the way up,
+    so the interval from the last balise before the far end to the first one after the near
+    end turns back twice: D 17.2 km, N −12.0 km, a −32.6 m. Before, its scale was fitted on D
+    (e·D would be +46.6 m): e −0.14 %, L 0.67 ± 0.24 s, "balise clock 0.67 s late … balises
+    refused (offset not determined)" on a clean run (on N: e 0.271 %, L −0.002 s); the 24 h
+    shuttle of bench/bench_scaling.py had its telegrams moved back by 0.61 s instead, and 25 %
+    of its claimed cycles outside their margin."""
+    from fieldlogs.io import write_run
+    from fieldlogs.simulate.scenario import scenario_from_dict
+    from fieldlogs.simulate.simulator import simulate_run
+
+    network = read_network(sample_db)
+    km = network.gis.loc[(network.gis["line_code"] == "0420") & (network.gis["track"] == "D"), "km_m"]
+    lo, hi = float(km.min()) + 200.0, float(km.max()) - 200.0
+    route = {"line_code": "0420", "track": "D", "path_km_m": [lo, hi, lo, hi, lo + 2800.0]}
+    streams, meta = simulate_run(
+        network, scenario_from_dict({"route": route, "slip": {"slips": 0, "slides": 0}}), seed=3
+    )
+    write_run(tmp_path / "run", meta, streams, fmt="parquet")
+    res = run_pipeline(read_run(tmp_path / "run"), network)
+    assert not res.events["type"].isin(["balise_clock", "wheel_scale"]).any()
+    assert res.summary["warnings"] == []
+    assert res.summary["truth"]["within_margin_share"] == 1.0
