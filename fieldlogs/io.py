@@ -392,20 +392,22 @@ class Run:
                 self.findings.extend(findings)
         return self._streams[name]
 
-    def window(self, t0: float, t1: float) -> Run | None:
+    def window(self, t0: float, t1: float, streams: Iterable[str] | None = None) -> Run | None:
         """A view of this run holding only the rows with t0 ≤ t < t1 of every stream (run.json,
         files and findings so far shared), each stream (or its spooled copy) read by time window
         (:func:`fieldlogs.parquet_streams.read_parquet_stream_between`): the memory of a long
         run's replay is its window, not the whole recording. Every stream is read here, so a
         run that cannot be read by windows — a CSV stream, a Parquet column that must be
         coerced — gives None (the caller reads it whole, where the findings are made).
-        :meth:`release` then :meth:`stream` reads the window again."""
+        :meth:`release` then :meth:`stream` reads the window again. ``streams``: only these
+        are read now (the others on first access)."""
+        wanted = set(self.streams_present() if streams is None else streams)
         view = copy.copy(self)
         view.span = (t0, t1)
         view.findings = list(self.findings)
         view._streams = {}
         view._stream_findings = {}
-        for name in self.streams_present():
+        for name in (n for n in self.streams_present() if n in wanted):
             read = view._window_of(name)
             if read is None:
                 return None

@@ -56,6 +56,8 @@ __all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
 
 #: Streams the pipeline reads.
 STREAMS = ("tacho", "imu", "balise", "gps", "cab", "truth", "radar", "radar_if")
+#: Streams the clock check reads (:func:`fieldlogs.quality.clocks.clock_offsets`).
+CLOCK_STREAMS = ("tacho", "imu", "gps", "cab")
 
 
 @dataclass
@@ -153,10 +155,10 @@ def clocks_aligned(
     return out
 
 
-def clean_streams(run: Run, events: list[Event]) -> dict[str, pd.DataFrame | None]:
+def clean_streams(run: Run, events: list[Event], names: tuple[str, ...] = STREAMS) -> dict[str, pd.DataFrame | None]:
     """Stage 1 of the module docstring: the streams as the onboard unit sees them (sorted, no
     missing or repeated t, pulse counter resets bridged), each repair an event."""
-    streams = {n: clean_stream(run.stream(n), n, events) for n in STREAMS}
+    streams = {n: clean_stream(run.stream(n), n, events) for n in names}
     streams["tacho"] = counter_resets_bridged(streams["tacho"], events)
     return streams
 
@@ -164,7 +166,7 @@ def clean_streams(run: Run, events: list[Event]) -> dict[str, pd.DataFrame | Non
 def run_clock_offsets(run: Run, cfg: PipelineConfig) -> list[ClockOffset]:
     """The clock offsets :func:`prepare_run` would find on ``run`` (its cleaned streams)."""
     assert run.meta is not None
-    streams = clean_streams(run, [])
+    streams = clean_streams(run, [], CLOCK_STREAMS)
     return clock_offsets(streams, run.meta.wheel_diameter_m, run.meta.teeth, cfg.clock, cfg.cycle_s)
 
 

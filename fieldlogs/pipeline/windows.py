@@ -54,7 +54,7 @@ from fieldlogs.io import Run
 from fieldlogs.parquet_streams import parquet_rows, stream_t_range
 from fieldlogs.pipeline.config import PipelineConfig, WindowConfig
 from fieldlogs.pipeline.cycles import Cycles
-from fieldlogs.pipeline.run import PipelineResult, run_clock_offsets, run_pipeline
+from fieldlogs.pipeline.run import CLOCK_STREAMS, PipelineResult, run_clock_offsets, run_pipeline
 from fieldlogs.pipeline.summary import RunParts, summarise_parts
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import GpsAnalysis, Odometry
@@ -154,8 +154,8 @@ def replay_windows(run: Run, network: Network, cfg: PipelineConfig, windows: lis
         yield kept
 
 
-def _view(run: Run, w: Window) -> Run:
-    view = run.window(w.read_from, w.read_to)
+def _view(run: Run, w: Window, streams: tuple[str, ...] | None = None) -> Run:
+    view = run.window(w.read_from, w.read_to, streams)
     if view is None:
         raise InputError("a stream could not be read by time window", path=run.folder)
     return view
@@ -177,7 +177,7 @@ def window_offsets(run: Run, cfg: PipelineConfig, windows: list[Window]) -> list
     it put 5 % of their cycles outside the margin). A first pass: the IMU is read twice."""
     found = []
     for w in windows:
-        view = _view(run, w)
+        view = _view(run, w, CLOCK_STREAMS)
         found.append(run_clock_offsets(view, cfg))
         del view
         _give_back_memory()
