@@ -15,12 +15,14 @@ replayed whole, where the findings are made.
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
 
 from fieldlogs.io import Run, arrow_stream_table, coerce_stream
 from schemas.logs import LOG_STREAMS
+from schemas.model import Table
 
 #: Rows per spooled block (and row group).
 SPOOL_ROWS = 1 << 17
@@ -68,7 +70,7 @@ def spool_csv_streams(run: Run, folder: Path, rows: int = SPOOL_ROWS) -> bool:
             return False
         out = Path(folder) / f"{name}.parquet"
         try:
-            if not _write(frames, table.name, path, out):
+            if not _write(frames, table, path, out):
                 return False
         except TextPathNeeded:
             with contextlib.suppress(FileNotFoundError):
@@ -78,14 +80,14 @@ def spool_csv_streams(run: Run, folder: Path, rows: int = SPOOL_ROWS) -> bool:
     return True
 
 
-def _write(frames: object, name: str, path: Path, out: Path) -> bool:
+def _write(frames: Iterator[pd.DataFrame], table: Table, path: Path, out: Path) -> bool:
+    """The frames of ``path`` as the row groups of ``out``; False (nothing usable written) when
+    a frame has type findings or there is none."""
     import pyarrow.parquet as pq
 
-    table = LOG_STREAMS[name]
     writer = None
     try:
-        for raw in frames:  # type: ignore[attr-defined]
-            assert isinstance(raw, pd.DataFrame)
+        for raw in frames:
             typed, findings = coerce_stream(table, raw, str(path))
             if findings:
                 return False

@@ -12,7 +12,6 @@ a finding.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -132,17 +131,23 @@ def _unknown_columns(table: Table, schema: pa.Schema, file: str) -> list[Finding
     return out
 
 
+def _typed_columns(table: Table, schema: pa.Schema) -> list[Column] | None:
+    """The declared columns present, when every required one is there and each can be typed
+    as stored (:func:`_arrow_fits`); else None."""
+    names = set(schema.names)
+    if not all(c.name in names for c in table.columns if c.required):
+        return None
+    present = [c for c in table.columns if c.name in names]
+    return present if all(_arrow_fits(c, schema.field(c.name).type) for c in present) else None
+
+
 def _fast_columns(table: Table, path: Path, pf: pq.ParquetFile) -> dict[str, Any] | None:
     """The declared columns typed by :func:`_arrow_column`, or None when one cannot be
     (then the whole table goes through ``coerce_frame``). A file of one row group is read
     at once (its columns are single chunks: no copy); a longer one a column at a time."""
-    schema = pf.schema_arrow
-    names = set(schema.names)
-    if not all(c.name in names for c in table.columns if c.required):
+    present = _typed_columns(table, pf.schema_arrow)
+    if present is None:
         return None
-    if any(c.name in names and not _arrow_fits(c, schema.field(c.name).type) for c in table.columns):
-        return None
-    present = [c for c in table.columns if c.name in names]
     whole = _read(pf, path, [c.name for c in present]) if pf.metadata.num_row_groups <= 1 else None
     fast: dict[str, Any] = {}
     for col in present:
@@ -164,32 +169,30 @@ def _read(pf: pq.ParquetFile, path: Path, columns: list[str]) -> pa.Table:
         return read_parquet_table(path, columns)
 
 
+def _t_ranges(pf: pq.ParquetFile) -> list[tuple[float, float] | None]:
+    """Each row group's (min, max) ``t`` from its statistics (None: the group has none)."""
+    col = pf.schema_arrow.get_field_index("t")
+    out: list[tuple[float, float] | None] = []
+    for i in range(pf.metadata.num_row_groups):
+        stats = pf.metadata.row_group(i).column(col).statistics
+        ok = stats is not None and stats.has_min_max and stats.min is not None and stats.max is not None
+        out.append((float(stats.min), float(stats.max)) if ok else None)
+    return out
+
+
 def _row_groups_between(pf: pq.ParquetFile, t0: float, t1: float) -> list[int]:
     """The row groups whose ``t`` statistics reach into [t0, t1); a group without statistics
     is always read (its rows are then filtered one by one)."""
-    col = pf.schema_arrow.get_field_index("t")
-    out = []
-    for i in range(pf.metadata.num_row_groups):
-        stats = pf.metadata.row_group(i).column(col).statistics
-        if stats is None or not stats.has_min_max or stats.max is None or stats.min is None:
-            out.append(i)
-        elif float(stats.max) >= t0 and float(stats.min) < t1:
-            out.append(i)
-    return out
+    return [i for i, r in enumerate(_t_ranges(pf)) if r is None or (r[1] >= t0 and r[0] < t1)]
 
 
 def _window_columns(table: Table, schema: pa.Schema) -> list[Column] | None:
     """The declared columns present, when each can be typed as stored (Arrow type fits,
     unit as declared) and ``t`` and the required columns are there; else None."""
-    names = set(schema.names)
-    if "t" not in names or not all(c.name in names for c in table.columns if c.required):
-        return None
-    present = [c for c in table.columns if c.name in names]
-    for col in present:
+    present = _typed_columns(table, schema) if "t" in schema.names else None
+    for col in present or []:
         unit = (schema.field(col.name).metadata or {}).get(b"unit")
-        if not _arrow_fits(col, schema.field(col.name).type) or (
-            unit is not None and unit.decode("utf-8", "replace") != col.unit
-        ):
+        if unit is not None and unit.decode("utf-8", "replace") != col.unit:
             return None
     return present
 
@@ -262,13 +265,11 @@ def stream_t_range(path: Path) -> tuple[float, float] | None:
         return None
     if "t" not in pf.schema_arrow.names or pf.metadata.num_row_groups == 0:
         return None
-    col = pf.schema_arrow.get_field_index("t")
-    lo, hi = math.inf, -math.inf
-    for i in range(pf.metadata.num_row_groups):
-        stats = pf.metadata.row_group(i).column(col).statistics
-        if stats is None or not stats.has_min_max or stats.min is None or stats.max is None:
-            return None
-        lo, hi = min(lo, float(stats.min)), max(hi, float(stats.max))
+    ranges = _t_ranges(pf)
+    if any(r is None for r in ranges):
+        return None
+    lo = min(r[0] for r in ranges if r is not None)
+    hi = max(r[1] for r in ranges if r is not None)
     return (lo, hi) if lo <= hi else None
 
 

@@ -91,6 +91,15 @@ class Window:
         """Which of the times ``t`` this window reports."""
         return np.asarray((t >= self.keep_from) & (t < self.keep_to))
 
+    def holds(self, t: float) -> bool:
+        """Whether this window reports time ``t``."""
+        return self.keep_from <= t < self.keep_to
+
+
+def long_enough(span_s: float, cfg: WindowConfig) -> bool:
+    """Whether a run spanning ``span_s`` is replayed in windows: more than 1.5 lengths."""
+    return cfg.length_h > 0 and math.isfinite(span_s) and span_s > 1.5 * cfg.length_h * 3600.0
+
 
 def plan_windows(t_first: float, t_last: float, cfg: WindowConfig) -> list[Window]:
     """Windows of ``cfg.length_h`` covering [t_first, t_last], the last one between 0.5 and
@@ -99,7 +108,7 @@ def plan_windows(t_first: float, t_last: float, cfg: WindowConfig) -> list[Windo
     everything after its start, so no row of the run falls outside every window."""
     length = cfg.length_h * 3600.0
     span = t_last - t_first
-    if length <= 0 or not math.isfinite(span) or span <= 1.5 * length:
+    if not long_enough(span, cfg):
         return []
     n = max(round(span / length), 2)
     edges = [-math.inf, *(t_first + k * length for k in range(1, n)), math.inf]
@@ -242,10 +251,10 @@ def replay_bounded(
 def _long_csv(run: Run, cfg: WindowConfig) -> bool:
     """A CSV tacho whose first and last t are more than 1.5 window lengths apart."""
     tacho = run.stream_file("tacho")
-    if tacho is None or tacho.suffix == ".parquet" or cfg.length_h <= 0:
+    if tacho is None or tacho.suffix == ".parquet":
         return False
     span = csv_t_span(tacho)
-    return span is not None and span[1] - span[0] > 1.5 * cfg.length_h * 3600.0
+    return span is not None and long_enough(span[1] - span[0], cfg)
 
 
 def _replay(run: Run, network: Network, cfg: PipelineConfig, consume: Callable[[PipelineResult], None]) -> Replayed:
@@ -349,20 +358,6 @@ def _give_back_memory() -> None:
         pass
 
 
-def _interned(frame: pd.DataFrame) -> pd.DataFrame:
-    """A copy of ``frame`` whose text (object) columns reference one str per distinct value
-    (≈ 8 B per cell, not a str object per cycle); values and dtypes unchanged (a missing
-    value stays None). Also: the copy holds no view of the window's whole frame."""
-    out = frame.copy()
-    for name in out.columns:
-        col = out[name]
-        if col.dtype == object:
-            codes, uniques = pd.factorize(col, use_na_sentinel=True)
-            values = np.array([*uniques, None], dtype=object)
-            out[name] = values[codes]  # code −1 (missing) → the trailing None
-    return out
-
-
 def _kept(w: Window, part: PipelineResult, wheel_diameter_m: float | None) -> Kept:
     """The part of a window's result it reports: its kept cycles, events, episodes, GPS
     fixes and decisions, truth rows, and the summary's parts of the kept span."""
@@ -378,7 +373,7 @@ def _kept(w: Window, part: PipelineResult, wheel_diameter_m: float | None) -> Ke
         odo.v[rows].copy(),
         odo.slipping[rows].copy(),
         odo.allowance[rows].copy(),
-        [e for e in odo.episodes if w.keep_from <= e.t_start < w.keep_to],
+        [e for e in odo.episodes if w.holds(e.t_start)],
         ground=odo.ground,
     )
     gps = part.gps
@@ -388,13 +383,13 @@ def _kept(w: Window, part: PipelineResult, wheel_diameter_m: float | None) -> Ke
             fixes = fixes[w.keeps(fixes["t"].to_numpy(dtype=float))].copy()
         gps = GpsAnalysis(
             fixes,
-            [x for x in gps.decisions if w.keep_from <= x.t < w.keep_to],
-            [e for e in gps.crossovers if w.keep_from <= e.t < w.keep_to],
+            [x for x in gps.decisions if w.holds(x.t)],
+            [e for e in gps.crossovers if w.holds(e.t)],
         )
     truth = part.truth
     if truth is not None and len(truth):
-        truth = _interned(truth[w.keeps(truth["t"].to_numpy(dtype=float))])
-    kept_pos = _interned(pos.iloc[rows])
+        truth = truth[w.keeps(truth["t"].to_numpy(dtype=float))].copy()
+    kept_pos = pos.iloc[rows].copy()  # not a view holding the window's whole frame
     travel = float(d[-1] - d[0]) + lead if d.size else 0.0
     parts = RunParts.of(kept_pos, odometry, gps, wheel_diameter_m, wheel_scale=part.wheel_scale, distance_m=travel)
     kappa = part.kappa[rows].copy() if part.kappa is not None and len(part.kappa) == len(pos) else None
@@ -437,7 +432,7 @@ def _kept_events(ev: pd.DataFrame, w: Window) -> pd.DataFrame:
     notes = ev["type"].isin(RUN_NOTES).to_numpy() & (t == 0.0)
     if not math.isfinite(w.keep_from):
         notes[:] = False
-    take = (w.keeps(t) & ~notes) | notes
+    take = w.keeps(t) | notes
     out = ev[take].copy()
     if notes.any():
         sel = notes[take]
