@@ -56,13 +56,12 @@ class ResultsWriter:
         import pyarrow.parquet as pq
 
         table = pa.Table.from_pandas(frame, preserve_index=False)
+        data = csv_bytes(frame)
         if self._parquet is None:
             self._schema = _declared_where_null(table.schema, POSITIONS)
             self._parquet = pq.ParquetWriter(self.folder / "positions.parquet", self._schema, compression="zstd")
             self._csv = (self.folder / "positions.csv").open("wb")
-            data = csv_bytes(frame)
         else:
-            data = csv_bytes(frame)
             data = data[data.index(b"\n") + 1 :]  # the header once
         self._parquet.write_table(table if table.schema == self._schema else table.cast(self._schema))
         self._csv.write(data)
