@@ -22,14 +22,22 @@ import pandas as pd
 
 from dbtools.atomic import atomic_file
 from dbtools.integrity import check_content_hash
-from dbtools.network import Network, canonical, network_content_hash
+from dbtools.network import Network, canonical, empty_frame, network_content_hash
 from dbtools.sqlite_columns import insert_tables, read_table_columns
 from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.model import Table
 from schemas.registry import IMPACTS, REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
-from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, DB_TABLES, META, SCHEMA_VERSION
+from schemas.tables import (
+    ALL_DB_TABLES,
+    APPLICATION_ID,
+    DB_TABLES,
+    META,
+    READABLE_SCHEMA_VERSIONS,
+    SCHEMA_VERSION,
+    TABLES_SINCE_V2,
+)
 
 if TYPE_CHECKING:
     import sqlite_utils
@@ -100,7 +108,7 @@ def write_db(
             db = sqlite_utils.Database(conn)
             create_tables(db, ALL_DB_TABLES, indexes=False)
             conn.commit()
-            frames = [(t, canonical(t, network.tables[t.name])) for t in DB_TABLES]
+            frames = [(t, canonical(t, network.tables.get(t.name, empty_frame(t)))) for t in DB_TABLES]
             bulk = insert_tables(tmp, frames)  # Arrow batches; False: no driver, rows below
             with conn:
                 for t, frame in frames if not bulk else ():
@@ -203,27 +211,39 @@ def read_network(path: Path, *, verify: bool = True) -> Network:
     path = Path(path)
     with connect_ro(path) as conn:
         version = int(conn.execute("PRAGMA user_version").fetchone()[0])
-        if version != SCHEMA_VERSION:
-            raise InputError(f"schema version {version} is not supported (this tool reads {SCHEMA_VERSION})", path=path)
+        if version not in READABLE_SCHEMA_VERSIONS:
+            readable = ", ".join(map(str, READABLE_SCHEMA_VERSIONS))
+            raise InputError(f"schema version {version} is not supported (this tool reads {readable})", path=path)
         existing = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        missing = [t.name for t in DB_TABLES if t.name not in existing]
+        since = TABLES_SINCE_V2 if version < 2 else ()
+        missing = [t.name for t in DB_TABLES if t.name not in existing and t not in since]
         if missing:
             raise InputError(f"table '{missing[0]}' is missing", path=path)
-        tables = read_table_columns(path, DB_TABLES)  # as Arrow columns; the others as below
+        wanted = tuple(t for t in DB_TABLES if t.name in existing)
+        tables = read_table_columns(path, wanted) if version == SCHEMA_VERSION else {}
         for t in DB_TABLES:
-            if t.name in tables:
-                continue
-            cols = ",".join(f"[{c}]" for c in t.column_names)
-            try:
-                frame = pd.read_sql_query(f"SELECT {cols} FROM [{t.name}]", conn)
-            except (sqlite3.DatabaseError, pd.errors.DatabaseError) as exc:
-                raise InputError(f"table '{t.name}' cannot be read: {exc}", path=path) from exc
-            tables[t.name] = canonical(t, frame)
+            if t.name not in tables:
+                tables[t.name] = _read_sqlite3(conn, t, path) if t.name in existing else empty_frame(t)
         meta = dict(conn.execute(f"SELECT key, value FROM {META.name}").fetchall()) if META.name in existing else {}
     net = Network(tables, origin=str(path), meta=meta)
     if verify:
         check_content_hash(meta.get("content_hash"), network_content_hash(net), path)
     return net
+
+
+def _read_sqlite3(conn: sqlite3.Connection, t: Table, path: Path) -> pd.DataFrame:
+    """One table through ``sqlite3``; a nullable column the DB lacks (an older schema
+    version) is read as missing values."""
+    present = {r[1] for r in conn.execute(f"PRAGMA table_info([{t.name}])")}
+    absent = [c.name for c in t.columns if c.name not in present]
+    if any(not t.column(n).nullable for n in absent):
+        raise InputError(f"table '{t.name}' has no column '{absent[0]}'", path=path)
+    cols = ",".join(f"[{c}]" for c in t.column_names if c in present)
+    try:
+        frame = pd.read_sql_query(f"SELECT {cols} FROM [{t.name}]", conn)
+    except (sqlite3.DatabaseError, pd.errors.DatabaseError) as exc:
+        raise InputError(f"table '{t.name}' cannot be read: {exc}", path=path) from exc
+    return canonical(t, frame)
 
 
 def integrity_findings(path: Path, network: Network | None = None) -> list[Finding]:

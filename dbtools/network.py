@@ -14,7 +14,8 @@ import pyarrow.compute as pc
 
 from schemas.frames import PANDAS_DTYPE
 from schemas.model import Table
-from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS, KM_BREAKS, LINES
+from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES, TRACK_POINTS
+from schemas.tables import BALISE_GROUP_COLUMNS, BALISES, DB_TABLES, FEATURE_POINTS, GIS, KM_BREAKS, LINES, TABLES_SINCE_V2
 
 T = TypeVar("T")
 
@@ -60,6 +61,23 @@ class Network:
     @property
     def km_breaks(self) -> pd.DataFrame:
         return self.tables[KM_BREAKS.name]
+
+    @property
+    def tracks(self) -> pd.DataFrame:
+        """The declared tracks (empty for a line-only network: see :mod:`dbtools.topology`)."""
+        return self.tables.get(NETWORK_TRACKS.name, empty_frame(NETWORK_TRACKS))
+
+    @property
+    def connections(self) -> pd.DataFrame:
+        return self.tables.get(CONNECTIONS.name, empty_frame(CONNECTIONS))
+
+    @property
+    def switches(self) -> pd.DataFrame:
+        return self.tables.get(SWITCHES.name, empty_frame(SWITCHES))
+
+    @property
+    def track_points(self) -> pd.DataFrame:
+        return self.tables.get(TRACK_POINTS.name, empty_frame(TRACK_POINTS))
 
 
 _DTYPES = {name: pd.Series([], dtype=dtype).dtype for name, dtype in PANDAS_DTYPE.items()}
@@ -147,12 +165,18 @@ def content_hash(tables: dict[str, pd.DataFrame]) -> str:
 
     Identical whether the frames come from a source set being built or from a DB read
     back, so a hand-edited or corrupted DB no longer matches the hash in its meta table.
+    What schema version 2 added (the network tables, the balise-group columns) enters only
+    when it holds something: a line-only network hashes as it did under version 1.
     """
     h = hashlib.sha256()
     for table in DB_TABLES:
         frame = canonical(table, tables.get(table.name, empty_frame(table)))
+        if table in TABLES_SINCE_V2 and frame.empty:
+            continue
         h.update(f"table:{table.name}:{len(frame)}\n".encode())
         for c in table.columns:
+            if c in BALISE_GROUP_COLUMNS and table is BALISES and not frame[c.name].notna().any():
+                continue
             h.update(f"col:{c.name}\n".encode())
             s = frame[c.name]
             if c.dtype == "str":

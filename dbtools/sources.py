@@ -123,7 +123,7 @@ def _with_seq(fp: pd.DataFrame) -> pd.DataFrame:
 def _line_codes(tables: dict[str, pd.DataFrame], files: dict[str, str]) -> list[Finding]:
     """Build ``lines`` from the codes in use when absent; otherwise every code must be listed."""
     used: set[str] = set()
-    for name in ("gis", "balises", "feature_points", "km_breaks"):
+    for name in ("gis", "balises", "feature_points", "km_breaks", "tracks", "switches"):
         used |= set(tables[name]["line_code"].dropna().unique().astype(str))
     lines = tables[LINES.name]
     if LINES.name not in files:

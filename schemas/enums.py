@@ -14,11 +14,68 @@ class Track(StrEnum):
 
 
 class BaliseKind(StrEnum):
-    """I1/I2: initial-position pair (5 m apart); C: position-correction balise."""
+    """I1/I2: initial-position pair (5 m apart); C: position-correction balise [S003];
+    G: a balise of a European (ETCS) balise group, identified by NID_C/NID_BG and its
+    position N_PIG in the group (SUBSET-026 §3.4, §7.5)."""
 
     I1 = "I1"
     I2 = "I2"
     C = "C"
+    G = "G"
+
+
+class TrackKind(StrEnum):
+    """What a track (netElement, track section) of the network is used for."""
+
+    MAIN = "main"
+    """a running track of a line (U/D/S of the papers)"""
+    STATION = "station"
+    """a platform or loop track of a station (``1``, ``2``, ``3``…)"""
+    SIDING = "siding"
+    CROSSOVER = "crossover"
+    """joins two parallel tracks of one line through two switches"""
+    CONNECTING = "connecting"
+    """a connecting curve between lines (its own length, no line km)"""
+    YARD = "yard"
+
+
+class TrackEnd(StrEnum):
+    """An end of a track: where its distance from the begin is 0, or its length
+    (RailTopoModel ``positionOn`` 0 and 1; railML 2 ``trackBegin``/``trackEnd``)."""
+
+    BEGIN = "begin"
+    END = "end"
+
+
+class Navigability(StrEnum):
+    """May a train pass a connection from track A to track B, the other way, both or neither
+    (RailTopoModel ``navigability``; ``none`` joins the two branches of a switch)."""
+
+    BOTH = "both"
+    A_TO_B = "AB"
+    B_TO_A = "BA"
+    NONE = "none"
+
+
+class SwitchType(StrEnum):
+    """Kinds of track node with moving or crossing parts (OSRD's switch types, railML 3
+    ``switchIS/@type``, OSM ``railway:switch``)."""
+
+    POINT = "point"
+    """a turnout: toe (port A) and two branches (B1 left, B2 right seen from the toe)"""
+    CROSSING = "crossing"
+    """a diamond crossing: A1–B1 and A2–B2 cross, no change of track"""
+    SINGLE_SLIP = "single_slip"
+    """a diamond crossing with one slip route (A1–B2)"""
+    DOUBLE_SLIP = "double_slip"
+    """a diamond crossing with both slip routes (A1–B2, A2–B1)"""
+
+
+class Side(StrEnum):
+    """The side of the diverging branch of a turnout, seen from its toe."""
+
+    LEFT = "left"
+    RIGHT = "right"
 
 
 class Attribute(StrEnum):

@@ -10,9 +10,14 @@ from __future__ import annotations
 
 from schemas.enums import Attribute, BaliseKind, Track
 from schemas.model import Column, ForeignKey, Table
+from schemas.network import NETWORK_TABLES
 
 #: Bumped whenever a DB table changes shape; stored as ``PRAGMA user_version``.
-SCHEMA_VERSION = 1
+#: 2: the network tables (tracks, connections, switches, track_points) and the balise-group
+#: columns of ``balises``. A version-1 DB is still read: it is a network without them.
+SCHEMA_VERSION = 2
+#: The versions this tool reads.
+READABLE_SCHEMA_VERSIONS = (1, 2)
 #: ``PRAGMA application_id`` of every onboard DB: ASCII "TPOS".
 APPLICATION_ID = 0x54504F53
 
@@ -81,19 +86,60 @@ GIS = Table(
     foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
 )
 
+#: Columns a table gained after schema version 1: they enter the content hash only when they
+#: hold a value, so a DB of version 1 and the same content built today hash alike.
+BALISE_GROUP_COLUMNS = (
+    Column(
+        "track_id",
+        "str",
+        "Track (netElement) of the balise, where the DB has a network (tracks)",
+        required=False,
+        nullable=True,
+    ),
+    Column("nid_c", "int", "G only: country/region code NID_C of the group", required=False, nullable=True, min=0, max=1023),
+    Column("nid_bg", "int", "G only: identity NID_BG of the group", required=False, nullable=True, min=0, max=16383),
+    Column(
+        "n_pig",
+        "int",
+        "G only: position of the balise in its group N_PIG (0 = first in the nominal direction)",
+        required=False,
+        nullable=True,
+        min=0,
+        max=7,
+    ),
+    Column("n_total", "int", "G only: number of balises in the group N_TOTAL + 1", required=False, nullable=True, min=1, max=8),
+    Column(
+        "link_group",
+        "str",
+        "G only: the next group announced by linking in the nominal direction, as NID_C:NID_BG",
+        required=False,
+        nullable=True,
+    ),
+    Column(
+        "link_distance_m",
+        "float",
+        "G only: distance to that next group",
+        unit="m",
+        required=False,
+        nullable=True,
+        min=0.0,
+    ),
+)
+
 BALISES = Table(
     name="balises",
     kind="db",
     description=(
         "Balises. I1/I2: initial-position pair keyed by (line_code, station_code, track); "
-        "C: position-correction balise governed by the pair named on its row."
+        "C: position-correction balise governed by the pair named on its row; "
+        "G: a balise of a European balise group (NID_C, NID_BG, N_PIG of N_TOTAL)."
     ),
     columns=(
         Column("balise_id", "str", "Unique balise identifier"),
-        Column("kind", "str", "I1, I2 (initial pair) or C (correction)", enum=tuple(k.value for k in BaliseKind)),
-        LINE_CODE,
-        Column("station_code", "str", "Station code of the (governing) initial pair"),
-        TRACK,
+        Column("kind", "str", "I1, I2 (initial pair), C (correction) or G (balise group)", enum=tuple(k.value for k in BaliseKind)),
+        Column("line_code", "str", "Line (route) code; I1/I2/C always, G where its track lies along a line", nullable=True),
+        Column("station_code", "str", "I1/I2/C: station code of the (governing) initial pair", required=False, nullable=True),
+        Column("track", "str", "Local track name: U, D or S for I1/I2/C", nullable=True),
         Column("signal_type", "str", "Signal type carried by a C balise telegram", required=False, nullable=True),
         Column("km_actual_m", "float", "Actual kilometrage", unit="m", km_notation=True),
         Column("km_equipment_m", "float", "Equipment kilometrage", unit="m", km_notation=True),
@@ -106,6 +152,7 @@ BALISES = Table(
             nullable=True,
             min=0.0,
         ),
+        *BALISE_GROUP_COLUMNS,
     ),
     primary_key=("balise_id",),
     foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
@@ -170,7 +217,9 @@ META = Table(
 )
 
 #: Content tables in dependency order (lines first: the others reference it).
-DB_TABLES: tuple[Table, ...] = (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS)
+DB_TABLES: tuple[Table, ...] = (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS, *NETWORK_TABLES)
+#: Tables a DB of schema version 1 does not have; read as empty, hashed only when not empty.
+TABLES_SINCE_V2: tuple[Table, ...] = NETWORK_TABLES
 ALL_DB_TABLES: tuple[Table, ...] = (*DB_TABLES, META)
 #: Tables read from a source set, by file stem.
 SOURCE_TABLES: dict[str, Table] = {t.name: t for t in DB_TABLES}

@@ -289,7 +289,7 @@ def _write(
     empty = out.is_dir() and not any(out.iterdir())
     with atomic_folder(out, force=force or empty, inputs=inputs) as tmp:  # an empty folder may be replaced
         for name, table in SOURCE_TABLES.items():
-            frame = canonical(table, tables[name])
+            frame = canonical(table, tables.get(name, empty_frame(table)))
             if not table.required and frame.empty:
                 continue
             cols = [c for c in table.column_names if c != "attributes_json"]

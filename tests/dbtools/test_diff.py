@@ -16,7 +16,7 @@ from dbtools.diff import DbDiff, diff_networks, diff_paths
 from dbtools.gis.geometry import GEOD
 from dbtools.network import Network, canonical, content_hash
 from schemas.errors import FindingsError, InputError
-from schemas.tables import FEATURE_POINTS, KM_BREAKS, LINES
+from schemas.tables import FEATURE_POINTS, KM_BREAKS, LINES, SCHEMA_VERSION
 
 BALISES_CSV = (
     "balise_id,kind,line_code,station_code,track,signal_type,km_actual_m,km_equipment_m,dist_from_initial_m\n"
@@ -88,7 +88,7 @@ def test_identical_dbs_have_no_changes(base: tuple[Path, Path], tmp_path: Path) 
     assert all(t.counts == {"added": 0, "removed": 0, "changed": 0} for t in d.tables.values())
     assert d.meta == {}
     assert d.summary == ["no content differences (108 rows compared)"]
-    assert d.schema_version == (1, 1)
+    assert d.schema_version == (SCHEMA_VERSION, SCHEMA_VERSION)
 
 
 def test_source_folder_against_its_build_has_no_changes(base: tuple[Path, Path]) -> None:
