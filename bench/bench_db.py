@@ -57,9 +57,11 @@ from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical, content_hash, empty_frame
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import LineSpec, Station, balises, feature_points, gis_grid, random_alignment
+from dbtools.synthetic.topology import station_network
 from dbtools.validate import validate_path
 from schemas.enums import Severity
-from schemas.tables import BALISES, FEATURE_POINTS, GIS, KM_BREAKS, LAT_RANGE, LINES, LON_RANGE
+from schemas.network import NETWORK_TABLES
+from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS, KM_BREAKS, LAT_RANGE, LINES, LON_RANGE
 
 T = TypeVar("T")
 #: Side of the square cell each line is drawn in [m].
@@ -68,12 +70,15 @@ CELL_M = 15_000.0
 STATION_SPACING_M = 1_100.0
 
 
-def national_network(n_lines: int, length_m: float, seed: int = 2026) -> Network:
-    """``n_lines`` double-track lines of ``length_m`` each, one per grid cell (zone 9)."""
+def national_network(n_lines: int, length_m: float, seed: int = 2026, *, topology: bool = False) -> Network:
+    """``n_lines`` double-track lines of ``length_m`` each, one per grid cell (zone 9);
+    ``topology``: with a loop pair and a crossover at every station, the main tracks split at
+    their switches (:mod:`dbtools.synthetic.topology`: ≈ 9 tracks and 6 switches a station)."""
     rng = np.random.default_rng(seed)
     side = math.ceil(math.sqrt(n_lines))
     projector = Projector(9)
     gis, bal, fp, lines = [], [], [], []
+    net_parts: dict[str, list[pd.DataFrame]] = {t.name: [] for t in NETWORK_TABLES}
     for i in range(n_lines):
         row, col = divmod(i, side)
         x0 = (col - side / 2 + 0.5) * CELL_M
@@ -90,14 +95,20 @@ def national_network(n_lines: int, length_m: float, seed: int = 2026) -> Network
         bal.append(balises(spec))
         fp.append(feature_points(spec))
         lines.append((spec.line_code, spec.name))
+        if topology:
+            parts = station_network(spec, projector)
+            bal.append(parts.pop("balises"))
+            for name, frame in parts.items():
+                net_parts[name].append(frame)
     tables = {
         LINES.name: pd.DataFrame({"line_code": [c for c, _ in lines], "name": [n for _, n in lines]}),
         GIS.name: pd.concat(gis, ignore_index=True),
         BALISES.name: pd.concat(bal, ignore_index=True),
         FEATURE_POINTS.name: pd.concat(fp, ignore_index=True),
         KM_BREAKS.name: empty_frame(KM_BREAKS),
+        **{name: pd.concat(frames, ignore_index=True) for name, frames in net_parts.items() if frames},
     }
-    return Network({t.name: canonical(t, tables[t.name]) for t in (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS)})
+    return Network({t.name: canonical(t, tables[t.name]) for t in DB_TABLES if t.name in tables})
 
 
 # ----------------------------------------------------------------------------- naive baseline
@@ -147,7 +158,6 @@ def naive_build(src: Path, out: Path, fraction: float) -> tuple[float, int]:
 
 def read_alternatives(db: Path) -> dict[str, Callable[[], object]]:
     """Readers of every content table of ``db``: the ones read_network was chosen from."""
-    from schemas.tables import DB_TABLES
 
     def query(t: object) -> str:
         return f"SELECT {','.join(t.column_names)} FROM [{t.name}]"  # type: ignore[attr-defined]
@@ -451,8 +461,16 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--rounds", type=int, default=3, help="interleaved rounds of the checked-build comparison")
     p.add_argument("--cores", type=int, default=1, help="pin the process to this many cores (default 1)")
+    p.add_argument(
+        "--topology",
+        action="store_true",
+        help="compare build and validate per grid point: the lines with station layouts (tracks, switches, "
+        "connections, balise groups) against the same lines alone",
+    )
     args = p.parse_args(argv)
     os.sched_setaffinity(0, sorted(os.sched_getaffinity(0))[: args.cores])
+    if args.topology:
+        return compare_topology(args.lines, args.length_m, args.rounds)
 
     work = args.workdir or Path(tempfile.mkdtemp(prefix="trainpos-bench-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -499,6 +517,53 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if not args.keep and args.workdir is None:
             shutil.rmtree(work, ignore_errors=True)
+    return 0
+
+
+def _grid_points(src: Path) -> int:
+    return sum(
+        sum(1 for _ in open(src / f"{n}.csv", encoding="utf-8")) - 1
+        for n in ("gis", "track_points")
+        if (src / f"{n}.csv").exists()
+    )
+
+
+def compare_topology(n_lines: int, length_m: float, rounds: int) -> int:
+    """``db build`` and ``db validate`` CPU per grid point (gis + track_points rows) of the
+    network with station layouts against the same lines without them (target ≤ 1.3×);
+    rounds interleaved, medians printed."""
+    work = Path(tempfile.mkdtemp(prefix="trainpos-bench-topo-"))
+    try:
+        srcs = {}
+        for topo in (False, True):
+            net = national_network(n_lines, length_m, topology=topo)
+            srcs[topo] = write_source_set(net, work / f"src-{int(topo)}", force=True)
+        counts = {k: (_grid_points(v), len(pd.read_csv(v / "tracks.csv")) if k else 0) for k, v in srcs.items()}
+        print(
+            f"line-only: {counts[False][0]:,} grid points; with stations: {counts[True][0]:,} grid points, "
+            f"{counts[True][1]:,} tracks"
+        )
+        per: dict[tuple[bool, str], list[float]] = {}
+        for r in range(rounds + 1):  # round 0 warms the imports and caches up, not counted
+            for topo, src in srcs.items():
+                db = work / f"db-{int(topo)}.sqlite"
+                db.unlink(missing_ok=True)
+                (_, c_build), _ = timed(lambda src=src, db=db: build_db(src, db, db_version="bench"))
+                (_, c_val), findings = timed(lambda db=db: validate_path(db))
+                n = counts[topo][0]
+                if r == 0:
+                    continue
+                per.setdefault((topo, "build"), []).append(c_build / n * 1e6)
+                per.setdefault((topo, "validate"), []).append(c_val / n * 1e6)
+                errors = [f for f in findings if f.severity == Severity.ERROR]
+                if errors:
+                    print(f"  {len(errors)} validation errors, first: {errors[0]}")
+        print(f"{'':12}{'line-only':>14}{'with stations':>16}{'ratio':>8}   (CPU µs per grid point, median)")
+        for step in ("build", "validate"):
+            a, b = (float(np.median(per[(t, step)])) for t in (False, True))
+            print(f"db {step:9}{a:14.2f}{b:16.2f}{b / a:8.2f}×  (target ≤ 1.3×)")
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
     return 0
 
 

@@ -12,10 +12,20 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from schemas.enums import S003_KINDS
 from schemas.frames import PANDAS_DTYPE
 from schemas.model import Table
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES, TRACK_POINTS
-from schemas.tables import BALISE_GROUP_COLUMNS, BALISES, DB_TABLES, FEATURE_POINTS, GIS, KM_BREAKS, LINES, TABLES_SINCE_V2
+from schemas.tables import (
+    BALISE_GROUP_COLUMNS,
+    BALISES,
+    DB_TABLES,
+    FEATURE_POINTS,
+    GIS,
+    KM_BREAKS,
+    LINES,
+    TABLES_SINCE_V2,
+)
 
 T = TypeVar("T")
 
@@ -35,6 +45,12 @@ class Network:
     (source sets only), so that findings on sorted frames can name the line to edit."""
     _cache: dict[object, object] = field(default_factory=dict, repr=False, compare=False)
 
+    def __post_init__(self) -> None:
+        # a network always holds the network tables (empty for a line-only one)
+        for t in TABLES_SINCE_V2:
+            if t.name not in self.tables:
+                self.tables[t.name] = empty_frame(t)
+
     def cached(self, key: object, factory: Callable[[], T]) -> T:
         """Structures derived from the tables (look-up dicts, spatial indexes) are built
         once per loaded network and shared by every run processed with it."""
@@ -49,6 +65,19 @@ class Network:
     @property
     def balises(self) -> pd.DataFrame:
         return self.tables[BALISES.name]
+
+    @property
+    def s003_balises(self) -> pd.DataFrame:
+        """The I1/I2/C balises (the papers' system, keyed by line, station and track): what
+        line-based consumers (the pipeline's balise aid, survey, the simulator) work with. The
+        G balises of European groups are the network's (:mod:`dbtools.topology`)."""
+
+        def build() -> pd.DataFrame:
+            b = self.balises
+            s003 = b["kind"].isin([k.value for k in S003_KINDS]).to_numpy(dtype=bool)
+            return b if s003.all() else b[s003].reset_index(drop=True)
+
+        return self.cached(("s003_balises",), build)
 
     @property
     def feature_points(self) -> pd.DataFrame:

@@ -51,7 +51,9 @@ def all_tracks(net: Network) -> pd.DataFrame:
         ext = ext[np.asarray(keep, dtype=bool)] if len(ext) else ext
         implied = pd.DataFrame(
             {
-                "track_id": [implied_track_id(str(a), str(b)) for a, b in zip(ext["line_code"], ext["track"], strict=True)],
+                "track_id": [
+                    implied_track_id(str(a), str(b)) for a, b in zip(ext["line_code"], ext["track"], strict=True)
+                ],
                 "line_code": ext["line_code"].astype(object),
                 "track": ext["track"].astype(object),
                 "kind": TrackKind.MAIN.value,
@@ -106,9 +108,10 @@ class Topology:
 
 
 def _seen_from_b(nav: str) -> str:
-    return {Navigability.A_TO_B.value: Navigability.B_TO_A.value, Navigability.B_TO_A.value: Navigability.A_TO_B.value}.get(
-        nav, nav
-    )
+    return {
+        Navigability.A_TO_B.value: Navigability.B_TO_A.value,
+        Navigability.B_TO_A.value: Navigability.A_TO_B.value,
+    }.get(nav, nav)
 
 
 def topology(net: Network) -> Topology:

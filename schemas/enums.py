@@ -24,6 +24,10 @@ class BaliseKind(StrEnum):
     G = "G"
 
 
+#: The kinds of the papers' Japanese balise system [S003]: keyed by line, station and track.
+S003_KINDS = (BaliseKind.I1, BaliseKind.I2, BaliseKind.C)
+
+
 class TrackKind(StrEnum):
     """What a track (netElement, track section) of the network is used for."""
 

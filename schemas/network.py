@@ -36,7 +36,9 @@ LINE_CODE_OPTIONAL = Column(
 def _port(name: str, what: str, *, required: bool) -> tuple[Column, Column]:
     """The track and end columns of one switch port."""
     return (
-        Column(f"{name}_track", "str", f"Track at port {name.upper()}: {what}", required=required, nullable=not required),
+        Column(
+            f"{name}_track", "str", f"Track at port {name.upper()}: {what}", required=required, nullable=not required
+        ),
         Column(
             f"{name}_end",
             "str",
@@ -66,7 +68,12 @@ NETWORK_TRACKS = Table(
             required=False,
             nullable=True,
         ),
-        Column("kind", "str", "main, station, siding, crossover, connecting or yard", enum=tuple(k.value for k in TrackKind)),
+        Column(
+            "kind",
+            "str",
+            "main, station, siding, crossover, connecting or yard",
+            enum=tuple(k.value for k in TrackKind),
+        ),
         Column(
             "km_begin_m",
             "float",
@@ -180,9 +187,13 @@ SWITCHES = Table(
             max=400.0,
         ),
         LINE_CODE_OPTIONAL,
-        Column("km_m", "float", "Line km of the switch's toe", unit="m", required=False, nullable=True, km_notation=True),
+        Column(
+            "km_m", "float", "Line km of the switch's toe", unit="m", required=False, nullable=True, km_notation=True
+        ),
         Column("lat", "float", "Latitude of the toe", unit="deg", required=False, nullable=True, min=-90.0, max=90.0),
-        Column("lon", "float", "Longitude of the toe", unit="deg", required=False, nullable=True, min=-180.0, max=180.0),
+        Column(
+            "lon", "float", "Longitude of the toe", unit="deg", required=False, nullable=True, min=-180.0, max=180.0
+        ),
         Column("name", "str", "Name or local number", required=False, nullable=True),
     ),
     primary_key=("switch_id",),

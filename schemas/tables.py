@@ -96,7 +96,9 @@ BALISE_GROUP_COLUMNS = (
         required=False,
         nullable=True,
     ),
-    Column("nid_c", "int", "G only: country/region code NID_C of the group", required=False, nullable=True, min=0, max=1023),
+    Column(
+        "nid_c", "int", "G only: country/region code NID_C of the group", required=False, nullable=True, min=0, max=1023
+    ),
     Column("nid_bg", "int", "G only: identity NID_BG of the group", required=False, nullable=True, min=0, max=16383),
     Column(
         "n_pig",
@@ -107,7 +109,15 @@ BALISE_GROUP_COLUMNS = (
         min=0,
         max=7,
     ),
-    Column("n_total", "int", "G only: number of balises in the group N_TOTAL + 1", required=False, nullable=True, min=1, max=8),
+    Column(
+        "n_total",
+        "int",
+        "G only: number of balises in the group N_TOTAL + 1",
+        required=False,
+        nullable=True,
+        min=1,
+        max=8,
+    ),
     Column(
         "link_group",
         "str",
@@ -136,9 +146,22 @@ BALISES = Table(
     ),
     columns=(
         Column("balise_id", "str", "Unique balise identifier"),
-        Column("kind", "str", "I1, I2 (initial pair), C (correction) or G (balise group)", enum=tuple(k.value for k in BaliseKind)),
-        Column("line_code", "str", "Line (route) code; I1/I2/C always, G where its track lies along a line", nullable=True),
-        Column("station_code", "str", "I1/I2/C: station code of the (governing) initial pair", required=False, nullable=True),
+        Column(
+            "kind",
+            "str",
+            "I1, I2 (initial pair), C (correction) or G (balise group)",
+            enum=tuple(k.value for k in BaliseKind),
+        ),
+        Column(
+            "line_code", "str", "Line (route) code; I1/I2/C always, G where its track lies along a line", nullable=True
+        ),
+        Column(
+            "station_code",
+            "str",
+            "I1/I2/C: station code of the (governing) initial pair",
+            required=False,
+            nullable=True,
+        ),
         Column("track", "str", "Local track name: U, D or S for I1/I2/C", nullable=True),
         Column("signal_type", "str", "Signal type carried by a C balise telegram", required=False, nullable=True),
         Column("km_actual_m", "float", "Actual kilometrage", unit="m", km_notation=True),

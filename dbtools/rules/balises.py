@@ -22,6 +22,9 @@ the running direction) and −1 on U.
   |km(C) − km(I1)| by more than ``dist_tolerance_m``.
 * ``balise.outside_gis`` (error) — ``km_actual_m`` is outside the GIS km range of the
   balise's line/track (or the line/track has no GIS at all).
+* ``balise.s003_key`` (error) — an I1, I2 or C balise without line_code or station_code, or
+  on a track other than U, D or S: S003 pairs and C balises are keyed by them (a G balise of
+  a European group may leave them empty: it is identified by NID_C/NID_BG).
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ import pandas as pd
 from dbtools.gis.index import GridIndex
 from dbtools.rules.common import Locator, capped, column, fmt_km, py
 from dbtools.rules.config import ValidationConfig
-from schemas.enums import BaliseKind, Severity, Track
+from schemas.enums import S003_KINDS, BaliseKind, Severity, Track
 from schemas.findings import Finding
 from schemas.tables import BALISES
 
@@ -46,6 +49,7 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
     file = loc.file(T)
     if balises.empty:
         return out
+    out += _s003_keys(balises, loc, cap)
     bid = column(balises, "balise_id")
     kind = column(balises, "kind")
     line, station, track = column(balises, "line_code"), column(balises, "station_code"), column(balises, "track")
@@ -294,9 +298,12 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
         file,
     )
 
-    # balise.outside_gis
+    # balise.outside_gis (a G balise only where its line and track have a grid: a group on a
+    # track along no line's km is checked against its track by dbtools.rules.topology)
     rows = np.flatnonzero(pd.notna(line) & pd.notna(track) & np.isfinite(km))
     gid = grid.track_ids(line[rows], track[rows])
+    keep = (kind[rows] != BaliseKind.G.value) | (gid >= 0)
+    rows, gid = rows[keep], gid[keep]
     kmin, kmax = grid.km_range(gid)
     with np.errstate(invalid="ignore"):
         outside = (gid < 0) | (km[rows] < kmin - config.km_epsilon_m) | (km[rows] > kmax + config.km_epsilon_m)
@@ -325,3 +332,35 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
         file,
     )
     return out
+
+
+def _s003_keys(balises: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
+    """``balise.s003_key`` (module docstring)."""
+    kind, line = column(balises, "kind"), column(balises, "line_code")
+    station, track = column(balises, "station_code"), column(balises, "track")
+    s003 = np.isin(kind, [k.value for k in S003_KINDS])
+    tracks = [t.value for t in Track]
+    bad_track = ~np.isin(np.where(pd.isna(track), "", track).astype(str), tracks)
+    missing = pd.isna(line) | pd.isna(station)
+    bid = column(balises, "balise_id")
+
+    def finding(i: int) -> Finding:
+        if bad_track[i]:
+            what, col, value = f"is on track '{py(track[i]) or ''}', not U, D or S", "track", py(track[i])
+        else:
+            col = "line_code" if pd.isna(line[i]) else "station_code"
+            what, value = f"has no {col}", None
+        return Finding(
+            "balise.s003_key",
+            Severity.ERROR,
+            T,
+            f"{kind[i]} balise {bid[i]} {what}: initial pairs and C balises are keyed by line, station and track",
+            keys={"balise_id": py(bid[i])},
+            column=col,
+            value=value,
+            **loc.at(T, i),
+        )
+
+    return capped(
+        "balise.s003_key", Severity.ERROR, T, np.flatnonzero(s003 & (bad_track | missing)), finding, cap, loc.file(T)
+    )

@@ -98,7 +98,7 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
         geom = TrackGeometry.from_network(network, line, track, (min(path), max(path)) if path else None)
     except TrackLookupError as exc:
         raise ScenarioError(str(exc), path=scenario.source, key="route.path_km_m") from None
-    balises = track_balises(network.balises, line, track)
+    balises = track_balises(network.s003_balises, line, track)
     motion = plan_motion(geom, scenario, [] if scenario.is_road_rail else _stations(balises, geom, scenario))
     d_true, wear = _wheel(scenario, rngs["wheel"])
     episodes = place_episodes(scenario, motion, geom, rngs["slip"])

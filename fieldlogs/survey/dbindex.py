@@ -104,7 +104,7 @@ class BaliseIndex:
 
 def balise_index(network: Network) -> BaliseIndex:
     """Build the look-ups from the DB's balise table."""
-    b = network.balises
+    b = network.s003_balises
     if not len(b):
         return BaliseIndex({}, {}, {}, {})
     b = b.assign(

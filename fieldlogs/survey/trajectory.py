@@ -60,7 +60,7 @@ class BaliseTable:
 
 def balise_table(network: Network, cluster_m: float) -> BaliseTable:
     """:class:`BaliseTable` of the network's balises."""
-    b = network.balises.reset_index(drop=True).copy()
+    b = network.s003_balises.reset_index(drop=True).copy()
     for col in ("balise_id", "kind", "line_code", "station_code", "track"):
         b[col] = b[col].astype(str)
     km = b["km_actual_m"].to_numpy(dtype=float)

@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from cli.main import app
 from dbtools.build import build_db
 from schemas.registry import REGISTRY_FILE
+from schemas.tables import SCHEMA_VERSION
 from tests.dbtools.release_sources import write_sources
 
 
@@ -54,7 +55,7 @@ def test_diff_table_and_json(runner: CliRunner, dbs: dict[str, Path]) -> None:
     assert result.exit_code == 0
     out = json.loads(result.stdout)
     assert out["tables"]["balises"]["changed"] == 1
-    assert out["schema_version"] == {"old": 1, "new": 1}
+    assert out["schema_version"] == {"old": SCHEMA_VERSION, "new": SCHEMA_VERSION}
 
 
 def test_diff_without_differences_exits_0(runner: CliRunner, dbs: dict[str, Path]) -> None:

@@ -16,7 +16,7 @@ from dbtools.diff import DbDiff, diff_networks, diff_paths
 from dbtools.gis.geometry import GEOD
 from dbtools.network import Network, canonical, content_hash
 from schemas.errors import FindingsError, InputError
-from schemas.tables import FEATURE_POINTS, KM_BREAKS, LINES, SCHEMA_VERSION
+from schemas.tables import DB_TABLES, FEATURE_POINTS, KM_BREAKS, LINES, SCHEMA_VERSION
 
 BALISES_CSV = (
     "balise_id,kind,line_code,station_code,track,signal_type,km_actual_m,km_equipment_m,dist_from_initial_m\n"
@@ -97,7 +97,7 @@ def test_source_folder_against_its_build_has_no_changes(base: tuple[Path, Path])
     assert d.old["kind"] == "sources" and d.new["kind"] == "db"
     assert d.old["content_hash"] == d.new["content_hash"]  # what a build would store
     assert "content_hash" not in d.meta
-    assert d.schema_version == (None, 1)
+    assert d.schema_version == (None, SCHEMA_VERSION)
 
 
 def test_moved_gis_points_grouped_into_km_runs(net: Network) -> None:
@@ -218,10 +218,10 @@ def test_json_shape_is_stable_and_plain(net: Network) -> None:
     text = json.dumps(out)  # plain Python values only: no numpy scalars, no NaN
     assert "NaN" not in text
     assert set(out) == {"old", "new", "schema_version", "meta", "tables", "summary"}
-    assert out["schema_version"] == {"old": 1, "new": 1}
+    assert out["schema_version"] == {"old": SCHEMA_VERSION, "new": SCHEMA_VERSION}
     assert out["meta"]["db_version"] == ["2026.10", "2026.11"]
     assert out["old"]["origin"].endswith("old.sqlite") and out["new"]["db_version"] == "2026.11"
-    assert list(out["tables"]) == ["lines", "gis", "balises", "feature_points", "km_breaks"]
+    assert list(out["tables"]) == [t.name for t in DB_TABLES]
     for t in out["tables"].values():
         assert set(t) == {"added", "removed", "changed", "rows"}
         assert len(t["rows"]) == t["added"] + t["removed"] + t["changed"]

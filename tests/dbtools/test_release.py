@@ -17,6 +17,7 @@ from dbtools.release import Release, list_releases, release_db, verify_releases
 from dbtools.tabular import sha256_file
 from schemas.errors import FindingsError, InputError, RefusedError, UsageError
 from schemas.registry import REGISTRY_FILE, RELEASES
+from schemas.tables import SCHEMA_VERSION
 from tests.dbtools.release_sources import write_sources
 
 NOW = datetime(2026, 11, 1, 9, 30, tzinfo=UTC)
@@ -65,7 +66,7 @@ def test_release_happy_path(db: Path, tmp_path: Path) -> None:
     r = _release(db, reg, note="first cut")
     target = reg / "2026.10.sqlite"
     assert r.db_version == "2026.10" and r.file == target.name and r.sha256 == digest
-    assert r.released_at == "2026-11-01T09:30:00Z" and r.released_by == "tester" and r.schema_version == 1
+    assert r.released_at == "2026-11-01T09:30:00Z" and r.released_by == "tester" and r.schema_version == SCHEMA_VERSION
     assert r.source_file == str(db.resolve()) and r.note == "first cut"
     assert sha256_file(target) == digest  # byte-identical copy
     assert stat.S_IMODE(target.stat().st_mode) == 0o444

@@ -52,7 +52,7 @@ class BaliseDb:
 
     @classmethod
     def from_network(cls, network: Network) -> BaliseDb:
-        b = network.balises
+        b = network.s003_balises
         pairs: dict[PairKey, dict[str, dict[str, Any]]] = {}
         c_bal: dict[tuple[PairKey, str], list[dict[str, Any]]] = {}
         rows: list[dict[str, Any]] = b.astype(object).where(b.notna(), None).to_dict("records")  # type: ignore[assignment]
