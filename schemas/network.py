@@ -42,7 +42,7 @@ def _port(name: str, what: str, *, required: bool) -> tuple[Column, Column]:
         Column(
             f"{name}_end",
             "str",
-            f"End of that track at the switch (begin/end)",
+            "End of that track at the switch (begin/end)",
             enum=ENDS,
             required=required,
             nullable=not required,

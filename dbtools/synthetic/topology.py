@@ -18,6 +18,9 @@ piece's centreline is its line grid between its end km.
 
 from __future__ import annotations
 
+import itertools
+from typing import Any, cast
+
 import numpy as np
 import pandas as pd
 
@@ -157,7 +160,7 @@ def _split_mains(lay: _Layout) -> dict[tuple[str, float, str], tuple[str, str]]:
     lo_km, hi_km = _grid(np.ceil(a.km0 / GIS_SPACING_M) * GIS_SPACING_M), _grid(a.km_end - GIS_SPACING_M / 2)
     for main, splits in lay.splits.items():
         cuts = [lo_km, *sorted(set(splits)), hi_km]
-        for i, (k0, k1) in enumerate(zip(cuts[:-1], cuts[1:], strict=True)):
+        for i, (k0, k1) in enumerate(itertools.pairwise(cuts)):
             tid = lay.main_id(main, i)
             lay.tracks.append(
                 {
@@ -179,8 +182,8 @@ def _resolve(lay: _Layout, ends: dict[tuple[str, float, str], tuple[str, str]]) 
     """Ports from placeholders to track ends; the switch's connections."""
     for s in lay.switches:
         for port in ("a1", "b1", "b2"):
-            ref = s.pop(port)
-            track, end = ends[ref] if len(ref) == 3 else ref
+            ref = cast(tuple[Any, ...], s.pop(port))
+            track, end = ends[cast(tuple[str, float, str], ref)] if len(ref) == 3 else ref
             s[f"{port}_track"], s[f"{port}_end"] = track, end
         toe = (s["a1_track"], s["a1_end"])
         for (ta, ea), (tb, eb), nav in (
