@@ -88,11 +88,32 @@ def _damage(run: Path, op: str, stream: str, frac: float, rng: np.random.Generat
         frame["pulses"] = (frame["pulses"] * (1.0 + frac)).round().astype("int64")
     elif op == "late":  # the stream's clock runs ``frac`` × 10 s late
         frame["t"] = frame["t"] + 10.0 * frac
+    elif op == "outlier":  # a burst of values no working sensor reports (issue 32 item 5)
+        cols = [c for c in frame.columns if c != "t" and pd.api.types.is_float_dtype(frame[c])]
+        if cols:
+            col = cols[int(frac * 7919) % len(cols)]
+            value = OUTLIERS[int(frac * 104729) % len(OUTLIERS)]
+            i = int(n * frac)
+            frame.loc[frame.index[i : i + 20], col] = value
     frame.to_parquet(path, index=False)
 
 
 #: The operations the property test draws from ("scale" and "late" only in the named cases below).
-OPS = ("delete", "truncate", "shuffle", "duplicate", "nan", "milliseconds", "reset", "json", "corrupt", "stray")
+OPS = (
+    "delete",
+    "truncate",
+    "shuffle",
+    "duplicate",
+    "nan",
+    "milliseconds",
+    "reset",
+    "json",
+    "corrupt",
+    "stray",
+    "outlier",
+)
+#: Values of the "outlier" operation: beyond every stream's declared range, both signs, huge and infinite.
+OUTLIERS = (45.0, -45.0, 300.0, 1e308, -1e308, float("inf"), 500.0)
 damage = st.lists(
     st.tuples(st.sampled_from(OPS), st.sampled_from(STREAMS), st.floats(0.05, 0.95)), min_size=1, max_size=3
 )
@@ -202,6 +223,44 @@ def test_calibration_and_clock_faults_stay_inside_their_margin(
     feature corrections, placed by the gyro's timing, missed by 0.5 s × 28 m/s ≈ 14 m against
     their 10 m uncertainty; they now hold the budget × speed."""
     _run_damaged(ops, 0, sample_db, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("stream", "column", "value", "rows"),
+    [
+        ("imu", "ax", 45.0, 20),
+        ("imu", "ax", 300.0, 20),
+        ("imu", "ax", 1e308, 1),
+        ("imu", "wz", -50.0, 40),
+        ("gps", "lat", 1e308, 5),
+        ("radar", "speed_mps", 500.0, 10),
+    ],
+    ids=["ax-45x20", "ax-300x20", "ax-1e308", "wz-50x40", "gps-lat-1e308", "radar-500"],
+)
+def test_values_outside_the_sensor_range_are_masked_not_used(
+    stream: str, column: str, value: float, rows: int, sample_db: Path, tmp_path: Path
+) -> None:
+    """Issue 32 item 5: 20 rows of ``ax = 45 m/s²`` gave exit 0 with 80 determined cycles
+    outside their margin (worst 81 m), ``ax = 300`` 525 m, one ``ax = 1e308`` a km of 5e304.
+    Out-of-range samples are now masked before the pipeline (an ``input_repaired`` event
+    names them) and every determined cycle holds."""
+    run = tmp_path / "run"
+    shutil.copytree(SAMPLE, run)
+    path = run / f"{stream}.parquet"
+    frame = pd.read_parquet(path)
+    # inside a braking or traction episode, where the slide correction integrates ax
+    i = int(np.argmax(np.abs(np.gradient(frame[column].to_numpy(dtype=float))))) if stream == "imu" else len(frame) // 2
+    frame.loc[frame.index[i : i + rows], column] = value
+    frame.to_parquet(path, index=False)
+    out = tmp_path / "out"
+    res = CliRunner().invoke(app, ["run", str(run), "--db", str(sample_db), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    events = pd.read_parquet(out / "events.parquet")
+    repaired = [json.loads(d) for d in events.loc[events["type"] == "input_repaired", "detail"]]
+    masked = [d for d in repaired if d.get("stream") == stream and "out_of_range" in d]
+    assert masked and masked[0]["out_of_range"] == {column: rows}, repaired
+    _positions_hold(pd.read_parquet(out / "positions.parquet"), pd.read_parquet(SAMPLE / "truth.parquet"), column)
 
 
 def _run_damaged(ops: list[tuple[str, str, float]], seed: int, sample_db: Path, tmp_path: Path) -> None:

@@ -47,6 +47,7 @@ from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
 from fieldlogs.pipeline.wheelscale import scaled_cycles, wheel_corrected
 from fieldlogs.quality.clocks import ClockOffset, clock_offsets
+from fieldlogs.quality.limits import masked
 from fieldlogs.quality.tacho import cumulative_again
 from fieldlogs.quality.usability import Purpose, require_usable
 from schemas.enums import EventType, VehicleKind
@@ -78,10 +79,12 @@ class PipelineResult:
 
 
 def clean_stream(frame: pd.DataFrame | None, name: str, events: list[Event]) -> pd.DataFrame | None:
-    """Sort by t and drop rows without t or with a repeated t (first kept), as an onboard
-    unit would see the stream; every change is reported as an ``input_repaired`` event."""
+    """Mask the samples outside the sensor's declared range (:mod:`fieldlogs.quality.limits`),
+    sort by t and drop rows without t or with a repeated t (first kept), as an onboard unit
+    would see the stream; every change is reported as an ``input_repaired`` event."""
     if frame is None or frame.empty:
         return frame
+    frame = within_limits(frame, name, events)
     t = frame["t"].to_numpy(dtype=float, na_value=np.nan)
     if t.size and np.isfinite(t).all() and (np.diff(t) > 0).all():
         return frame  # the normal case: nothing to repair, no copy
@@ -94,6 +97,27 @@ def clean_stream(frame: pd.DataFrame | None, name: str, events: list[Event]) -> 
         detail = {"stream": name, "rows_in": n0, "rows_used": len(frame), "sorted": unsorted}
         events.append(Event(0.0, EventType.INPUT_REPAIRED, detail=detail))
     return frame.reset_index(drop=True)
+
+
+def within_limits(frame: pd.DataFrame, name: str, events: list[Event]) -> pd.DataFrame:
+    """``frame`` without its rows outside the declared physical limits, each stream's masking
+    an ``input_repaired`` event naming the columns, counts, worst values and file lines."""
+    frame_in = frame
+    frame, bad = masked(name, frame)
+    if bad is None:
+        return frame
+    lines = (bad.rows[:20] + FIRST_DATA_LINE).tolist()
+    detail = {
+        "stream": name,
+        "rows_in": len(frame_in),
+        "rows_used": len(frame),
+        "out_of_range": bad.columns,
+        "worst": {k: f"{v:.6g}" for k, v in bad.worst.items()},
+        "lines": lines,
+        "action": "rows outside the sensor's declared range masked (not used)",
+    }
+    events.append(Event(0.0, EventType.INPUT_REPAIRED, detail=detail))
+    return frame
 
 
 def counter_resets_bridged(tacho: pd.DataFrame | None, events: list[Event]) -> pd.DataFrame | None:

@@ -49,6 +49,7 @@ from fieldlogs.io import Run
 from fieldlogs.pipeline.block_means import BLOCK_ROWS
 from fieldlogs.pipeline.config import ClockConfig
 from fieldlogs.pipeline.cycles import cab_signs
+from fieldlogs.quality.limits import masked
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.units import metres_per_pulse
@@ -428,6 +429,10 @@ def _offset(stream: str, lag: Lag | None, expected_s: float, cfg: ClockConfig) -
     ]
 
 
+def _masked(name: str, frame: pd.DataFrame | None) -> pd.DataFrame | None:
+    return None if frame is None else masked(name, frame)[0]
+
+
 def clock_findings(run: Run, cfg: ClockConfig | None = None) -> list[Finding]:
     """``log.clock_offset`` warnings of ``logs check``: the offsets :func:`clock_offsets`
     finds beyond the tolerance (the pipeline corrects the same ones)."""
@@ -435,7 +440,8 @@ def clock_findings(run: Run, cfg: ClockConfig | None = None) -> list[Finding]:
     meta = run.meta
     if meta is None or not run.has("tacho"):
         return []
-    streams = {n: run.stream(n) for n in ("tacho", "imu", "gps", "cab") if run.has(n)}
+    # the streams as the pipeline reads them: samples outside the sensors' limits masked
+    streams = {n: _masked(n, run.stream(n)) for n in ("tacho", "imu", "gps", "cab") if run.has(n)}
     offsets = clock_offsets(streams, meta.wheel_diameter_m, meta.teeth, cfg)
     return [
         Finding(

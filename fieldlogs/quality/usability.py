@@ -157,7 +157,8 @@ def imu_unit_problems(frame: pd.DataFrame, rows: int = BLOCK_ROWS) -> list[tuple
     rates: deg/s). |a| and the rate maxima are computed ``rows`` samples at a time into one
     array of the finite values (no n×3 copies of a long run's 100 Hz stream)."""
     out: list[tuple[str, str]] = []
-    mag = _row_values(frame, ["ax", "ay", "az"], lambda a: np.sqrt((a * a).sum(axis=1)), rows)
+    # |a| as a hypotenuse: a value near the float limit (a broken sample) is inf, not an overflow
+    mag = _row_values(frame, ["ax", "ay", "az"], lambda a: np.hypot(np.hypot(a[:, 0], a[:, 1]), a[:, 2]), rows)
     lo, hi = GRAVITY_BAND_MPS2
     if mag.size >= 10 and not lo <= (med := float(np.median(mag, overwrite_input=True))) <= hi:
         hint = "looks like g: multiply by 9.80665" if 0.7 <= med <= 1.3 else "not m/s²"
