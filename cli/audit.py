@@ -21,6 +21,7 @@ from cli.render import (
     key_value_table,
     print_json,
     progress,
+    safe,
     write_out,
 )
 from fieldlogs.pipeline.config import TARGET_PCT
@@ -99,11 +100,13 @@ def audit(
     ]
     console().print(key_value_table(rows, title=f"Audit → {out}"))
     for warning in stats.warnings:
-        err_console().print(f"[yellow]warning:[/] {warning}", highlight=False)
+        err_console().print(f"[yellow]warning:[/] {safe(warning)}", highlight=False)
     for path, err in stats.errors[:20]:
-        err_console().print(f"[red]failed:[/] {path}: {err.splitlines()[0] if err else ''}", highlight=False)
+        err_console().print(
+            f"[red]failed:[/] {safe(path)}: {safe(err.splitlines()[0] if err else '')}", highlight=False
+        )
     if len(stats.errors) > 20:
-        err_console().print(f"… {len(stats.errors) - 20} more failed runs (see the runs table of {out})")
+        err_console().print(f"… {len(stats.errors) - 20} more failed runs (see the runs table of {safe(out)})")
     if stats.failed:
         raise typer.Exit(EXIT_FINDINGS)
 
@@ -218,7 +221,7 @@ def report(
         if out is None:
             raise UsageError("--format html needs --out FILE")
         write_out(out, force=force, inputs=inputs, text=render_html(rep, audit_db))
-        console().print(f"HTML report written to {out}")
+        console().print(f"HTML report written to {safe(out)}")
     elif fmt == ReportFmt.json:
         data: Any = report_json(rep)
         if out:

@@ -24,7 +24,7 @@ import typer
 from cli.db_impact import _impact_attachment, impact
 from cli.errors import cli_command
 from cli.options import NO_VERIFY_HASH, workers_option
-from cli.render import console, key_value_table, print_findings, print_json, rich_table
+from cli.render import console, key_value_table, print_findings, print_json, rich_table, safe
 from schemas.errors import UsageError
 from schemas.findings import Finding, findings_report, has_errors
 from schemas.registry import DB_VERSION_RULE
@@ -267,6 +267,8 @@ def verify_release(
     if fmt == Fmt.json:
         print_json(report.to_dict())
     else:
+        from rich.text import Text
+
         out = console()
         t = rich_table(title=f"Verification of {registry}")
         t.add_column("db_version")
@@ -274,7 +276,7 @@ def verify_release(
         t.add_column("status")
         for r in report.checked:
             bad = report.failed(r.db_version)
-            t.add_row(r.db_version, r.file, "[red]FAILED[/]" if bad else "[green]ok[/]")
+            t.add_row(r.db_version, r.file, Text("FAILED", style="red") if bad else Text("ok", style="green"))
         out.print(t)
         if report.findings:
             print_findings(report.findings, console=out, title="Problems")
@@ -394,7 +396,7 @@ def review(
     from dbtools.interchange.review import write_review
 
     findings = write_review(old, new, out, force=force)
-    console().print(f"review page written to {out}")
+    console().print(f"review page written to {safe(out)}")
     if has_errors(findings):
         raise typer.Exit(1)
 

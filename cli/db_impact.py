@@ -15,7 +15,7 @@ import typer
 
 from cli.errors import cli_command
 from cli.options import NO_VERIFY_HASH, workers_option
-from cli.render import console, key_value_table, rich_table
+from cli.render import console, key_value_table, rich_table, safe
 from schemas.errors import UsageError
 from schemas.registry import REGISTRY_FILE
 
@@ -115,7 +115,7 @@ def _emit_impact(report: ImpactReport, fmt: ImpactFmt, out: Path | None, force: 
     else:
         emit_rendered(out, lambda c: _print_impact(report, c), force=force, inputs=inputs)
     if out is not None:
-        console().print(f"impact report written to {out}")
+        console().print(f"impact report written to {safe(out)}")
 
 
 def _num_text(v: object) -> str:

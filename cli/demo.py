@@ -9,7 +9,7 @@ import typer
 from cli.audit import ProgressBar, render_tables
 from cli.errors import cli_command
 from cli.options import workers_option
-from cli.render import console, err_console, print_findings, progress
+from cli.render import console, err_console, print_findings, progress, safe
 from schemas.errors import InputError
 
 
@@ -52,7 +52,7 @@ def demo(
     db = out / "sample-network.sqlite"
     res = build_db(sample_source_dir(), db, db_version="sample-1", note="bundled sample network", force=True)
     c.print(
-        f"[bold]1.[/] built {db} (version {res.db_version}, "
+        f"[bold]1.[/] built {safe(db)} (version {safe(res.db_version)}, "
         f"{res.rows['gis']} GIS points, {res.rows['balises']} balises, {res.rows['feature_points']} feature rows)"
     )
     findings = validate_path(db)
@@ -63,11 +63,16 @@ def demo(
         stale.unlink(missing_ok=True)  # a fresh audit: the DB was just rebuilt
     with progress(err_console()) as bar:
         stats = audit([logs], db, audit_db, workers=workers, progress=ProgressBar(bar, "auditing sample runs"))
-    c.print(f"[bold]3.[/] audited {stats.audited} runs ({stats.failed} failed) in {stats.elapsed_s:.1f} s → {audit_db}")
+    c.print(
+        f"[bold]3.[/] audited {stats.audited} runs ({stats.failed} failed) in {stats.elapsed_s:.1f} s "
+        f"→ {safe(audit_db)}"
+    )
     for path, err in stats.errors:
-        err_console().print(f"[red]failed:[/] {path}: {err.splitlines()[0] if err else ''}", highlight=False)
+        err_console().print(
+            f"[red]failed:[/] {safe(path)}: {safe(err.splitlines()[0] if err else '')}", highlight=False
+        )
     rep = build_report(audit_db)
     render_tables(rep, c)
     html = out / "report.html"
     html.write_text(render_html(rep, audit_db), encoding="utf-8")
-    c.print(f"[bold]4.[/] HTML report: {html}")
+    c.print(f"[bold]4.[/] HTML report: {safe(html)}")

@@ -12,7 +12,7 @@ from typing import Any, TypeVar
 
 import typer
 
-from cli.render import err_console, print_findings
+from cli.render import err_console, print_findings, safe
 from dbtools.integrity import HashPolicy, hash_policy
 from schemas.errors import EXIT_UNREADABLE, FindingsError, TrainposError
 
@@ -39,22 +39,22 @@ def cli_command(fn: F) -> F:
             raise
         except FindingsError as exc:
             print_findings(exc.findings, console=err_console())
-            err_console().print(f"[bold red]error:[/] {exc}", highlight=False)
+            err_console().print(f"[bold red]error:[/] {safe(exc)}", highlight=False)
             raise typer.Exit(exc.exit_code) from None
         except TrainposError as exc:
-            err_console().print(f"[bold red]error:[/] {exc}", highlight=False)
+            err_console().print(f"[bold red]error:[/] {safe(exc)}", highlight=False)
             raise typer.Exit(exc.exit_code) from None
         except KeyboardInterrupt:
             err_console().print("interrupted")
             raise typer.Exit(130) from None
         except OSError as exc:  # the environment, not a bug: permission denied, disk full, …
-            err_console().print(f"[bold red]error:[/] {environment_message(exc)}", highlight=False)
+            err_console().print(f"[bold red]error:[/] {safe(environment_message(exc))}", highlight=False)
             raise typer.Exit(EXIT_UNREADABLE) from None
         except Exception as exc:  # a bug: say so plainly, keep the traceback for debugging
             if os.environ.get("TRAINPOS_DEBUG"):
                 traceback.print_exc(file=sys.stderr)
             err_console().print(
-                f"[bold red]internal error:[/] {type(exc).__name__}: {exc} "
+                f"[bold red]internal error:[/] {safe(type(exc).__name__)}: {safe(exc)} "
                 "(this is a bug in trainpos; set TRAINPOS_DEBUG=1 for details)",
                 highlight=False,
             )
@@ -65,7 +65,7 @@ def cli_command(fn: F) -> F:
 
 def _warn_unverified(policy: HashPolicy) -> None:
     for line in dict.fromkeys(policy.used_unverified):  # once per DB, in order
-        err_console().print(f"[bold yellow]warning:[/] {line}; used anyway (--no-verify-hash)", highlight=False)
+        err_console().print(f"[bold yellow]warning:[/] {safe(line)}; used anyway (--no-verify-hash)", highlight=False)
 
 
 def environment_message(exc: OSError) -> str:

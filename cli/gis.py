@@ -24,6 +24,7 @@ from cli.render import (
     key_value_table,
     print_findings,
     progress,
+    safe,
     write_out,
 )
 from dbtools.gis.verify.config import VerifyConfig
@@ -350,13 +351,13 @@ def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None, force: 
 
         assert out is not None
         write_out(out, render_html(report), force=force, inputs=inputs)
-        console().print(f"HTML report written to {out}")
+        console().print(f"HTML report written to {safe(out)}")
     elif fmt == VerifyFmt.geojson:  # defects, cells (residuals) and proposed moves for QGIS
         from dbtools.interchange.geojson import verification_geojson, write_geojson
 
         assert out is not None
         write_geojson(out, verification_geojson(report.network, report.verification), force=force, inputs=inputs)
-        console().print(f"GeoJSON written to {out}")
+        console().print(f"GeoJSON written to {safe(out)}")
     elif fmt == VerifyFmt.json:
         text = json.dumps(report.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
         emit_text(out, text, force=force, inputs=inputs)

@@ -12,7 +12,7 @@ import typer
 
 from cli.errors import cli_command
 from cli.options import NO_VERIFY_HASH
-from cli.render import check_outputs, console, frame_table, inputs_of, key_value_table, write_out
+from cli.render import check_outputs, console, frame_table, inputs_of, key_value_table, safe, write_out
 from schemas.errors import UsageError
 from schemas.jsonable import jsonable
 from schemas.units import format_km
@@ -176,4 +176,4 @@ def position(
         console().file.write(text)
     else:
         write_out(out, text, force=force, inputs=inputs)
-        console().print(f"{len(report.epochs)} receiver-epochs written to {out}")
+        console().print(f"{len(report.epochs)} receiver-epochs written to {safe(out)}")

@@ -10,7 +10,7 @@ import typer
 
 from cli.errors import cli_command
 from cli.options import NO_VERIFY_HASH
-from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
+from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json, safe
 from schemas.errors import EXIT_FINDINGS, EXIT_OK, EXIT_UNREADABLE, InputError
 from schemas.findings import has_errors
 
@@ -55,7 +55,7 @@ def check(
             code = max(code, EXIT_UNREADABLE)
             reports.append({"run": str(run), "ok": False, "error": str(exc), "findings": []})
             if fmt == Fmt.table:
-                err_console().print(f"[bold red]error:[/] {exc}", highlight=False)
+                err_console().print(f"[bold red]error:[/] {safe(exc)}", highlight=False)
             continue
         failed = has_errors(findings, strict)
         if failed:
@@ -198,11 +198,11 @@ def repair(
     if len(frame):
         c.print(frame_table(frame, title=f"Repairs written to {res.out}"))
     else:
-        c.print(f"Nothing to repair; copy written to {res.out}")
+        c.print(f"Nothing to repair; copy written to {safe(res.out)}")
     rem = res.to_dict()["remaining"]
     if res.remaining:
         print_findings(res.remaining, console=c, title="Still found by logs check")
-    c.print(f"log: {Path(res.out) / REPAIR_LOG}")
+    c.print(f"log: {safe(Path(res.out) / REPAIR_LOG)}")
     c.print(f"still found by logs check: {rem['errors']} error(s), {rem['warnings']} warning(s)")
 
 

@@ -21,6 +21,7 @@ from cli.render import (
     key_value_table,
     print_findings,
     print_json,
+    safe,
     write_out,
 )
 from schemas.enums import AlarmType, NoticeType
@@ -109,7 +110,7 @@ def render_tables(report: PossessionReport, c: Console) -> None:
         if check["notices"]:
             c.print(frame_table(_frame(check["notices"]), title="Notices"))
     failed = f", {len(report.failed)} run(s) could not be checked" if report.failed else ""
-    c.print(f"{report.n_alarms} alarm(s) in {len(report.checks)} run(s){failed}")
+    c.print(f"{report.n_alarms} alarm(s) in {len(report.checks)} run(s){safe(failed)}")
 
 
 @app.command("check")
@@ -183,7 +184,7 @@ def check(
         print_findings(report.plan.findings, console=err_console(), title="Plan warnings")
     _emit(report, fmt, out, plan=plan, db=db, force=force, inputs=inputs)
     for run, err in report.failed:
-        err_console().print(f"[red]failed:[/] {run}: {err.splitlines()[0] if err else ''}", highlight=False)
+        err_console().print(f"[red]failed:[/] {safe(run)}: {safe(err.splitlines()[0] if err else '')}", highlight=False)
     if report.failed:
         raise typer.Exit(EXIT_UNREADABLE)
     if report.n_alarms:
@@ -204,7 +205,7 @@ def _emit(
             force=force,
             inputs=inputs,
         )
-        console().print(f"HTML report written to {out} ({report.n_alarms} alarm(s))")
+        console().print(f"HTML report written to {safe(out)} ({report.n_alarms} alarm(s))")
     elif fmt == Fmt.geojson:
         from dbtools.database import read_network
         from dbtools.interchange.geojson import possession_geojson, write_geojson
@@ -212,7 +213,7 @@ def _emit(
         assert out is not None
         data = possession_geojson(read_network(db), report.to_json(), report.plan.possessions)
         write_geojson(out, data, force=force, inputs=inputs)
-        console().print(f"GeoJSON written to {out} ({report.n_alarms} alarm(s))")
+        console().print(f"GeoJSON written to {safe(out)} ({report.n_alarms} alarm(s))")
     elif fmt == Fmt.json:
         data = report.to_json()
         if out:

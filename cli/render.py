@@ -5,6 +5,7 @@ Rich is imported by the functions that draw (not at import: ``trainpos --help`` 
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 import sys
@@ -30,14 +31,14 @@ MAX_TABLE_ROWS = 200
 def console() -> Console:
     from rich.console import Console
 
-    return Console(highlight=False, soft_wrap=False)
+    return Console(highlight=False, soft_wrap=False, emoji=False)  # ":x:" in a path stays text
 
 
 def err_console() -> Console:
     """stderr; messages stay on one line whatever the terminal width (greppable logs)."""
     from rich.console import Console
 
-    return Console(stderr=True, highlight=False, soft_wrap=True)
+    return Console(stderr=True, highlight=False, soft_wrap=True, emoji=False)
 
 
 def print_json(data: Any, out: Console | None = None) -> None:
@@ -60,11 +61,11 @@ def _unsplit_width(cells: Iterable[str]) -> int:
 def findings_table(findings: Sequence[Finding], title: str = "Findings") -> Table:
     """Findings as a table: severity, rule, value and limit never wrap (a number is never split
     across lines, at 80 columns or piped); the location and the message wrap at spaces."""
-    from rich.table import Table
+    from rich.text import Text
 
     shown = findings[:MAX_TABLE_ROWS]
     rows = [(str(f.severity), f.rule, f.where, _cell(f.value), _cell(f.limit), f.message) for f in shown]
-    t = Table(title=title, show_lines=False)
+    t = rich_table(title=title, show_lines=False)
     for k, col in enumerate(("severity", "rule", "where", "value", "limit", "message")):
         if col == "where":  # "file:row," stays whole (a table that cannot hold it is printed as blocks)
             first = [r[k].split(" ", 1)[0] for r in rows]
@@ -75,8 +76,28 @@ def findings_table(findings: Sequence[Finding], title: str = "Findings") -> Tabl
             t.add_column(col, no_wrap=True, min_width=_unsplit_width(r[k] for r in rows))
     for f, r in zip(shown, rows, strict=True):
         style = "red" if f.severity == "error" else "yellow"
-        t.add_row(f"[{style}]{r[0]}[/]", *r[1:])
+        t.add_row(Text(r[0], style=style), *r[1:])
     return t
+
+
+#: C0 control characters but tab and newline, DEL and the C1 block: a run id or path carrying
+#: ESC would otherwise reach the terminal as an escape sequence.
+_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+def visible(text: object) -> str:
+    """``text`` with every control character shown as ``\\xNN`` (nothing a user supplied
+    reaches the terminal as a control sequence)."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", str(text))
+
+
+def safe(text: object) -> str:
+    """User-supplied text (a path, an id, an exception's message) for a Rich markup string:
+    :func:`visible`, and ``[`` escaped so that ``[/x]`` or ``[bold]`` in a path is printed as
+    written, never read as markup. Every message that mixes markup with such text uses it."""
+    from rich.markup import escape
+
+    return escape(visible(text))
 
 
 def _cell(v: Any) -> str:
@@ -86,7 +107,7 @@ def _cell(v: Any) -> str:
         return f"{v:.4g}"
     if isinstance(v, (list, tuple)):
         return ", ".join(_cell(x) for x in v)
-    return str(v)
+    return visible(v)
 
 
 def print_findings(findings: Sequence[Finding], console: Console | None = None, title: str = "Findings") -> None:
@@ -103,7 +124,7 @@ def print_findings(findings: Sequence[Finding], console: Console | None = None, 
         if len(findings) > MAX_TABLE_ROWS:
             out.print(f"… {len(findings) - MAX_TABLE_ROWS} more (use --format json for all)")
     counts = count_by_severity(findings)
-    out.print(f"{counts['error']} error(s), {counts['warning']} warning(s)")
+    out.print(f"{safe(counts['error'])} error(s), {safe(counts['warning'])} warning(s)")
 
 
 #: Narrowest message column worth a table (below it the blocks read better).
@@ -129,17 +150,29 @@ def findings_blocks(findings: Sequence[Finding], title: str = "Findings") -> lis
     return blocks
 
 
-def rich_table(title: str | None = None, **kwargs: Any) -> Table:
-    """A Rich table (``rich.table.Table``; for the commands that build their own)."""
+@functools.cache
+def _plain_table() -> type[Table]:
+    """``rich.table.Table`` whose title and ``str`` cells are plain text (:func:`visible`),
+    never markup: a path, run id or note is printed as written. Styled cells are ``Text``."""
     from rich.table import Table
+    from rich.text import Text
 
-    return Table(title=title, **kwargs)
+    class PlainTable(Table):
+        def add_row(self, *renderables: Any, **kwargs: Any) -> None:
+            super().add_row(*(Text(visible(c)) if isinstance(c, str) else c for c in renderables), **kwargs)
+
+    return PlainTable
+
+
+def rich_table(title: str | None = None, **kwargs: Any) -> Table:
+    """The table every command draws with (:func:`_plain_table`): title and cells plain text."""
+    from rich.text import Text
+
+    return _plain_table()(title=Text(visible(title)) if isinstance(title, str) else title, **kwargs)
 
 
 def key_value_table(rows: Iterable[tuple[str, Any]], title: str | None = None) -> Table:
-    from rich.table import Table
-
-    t = Table(title=title, show_header=False)
+    t = rich_table(title=title, show_header=False)
     t.add_column("key", style="bold")
     t.add_column("value", overflow="fold")
     for k, v in rows:
@@ -164,10 +197,9 @@ class FrameView:
         self.numeric = [all(_NUMBER.fullmatch(r[k]) for r in self.rows if r[k]) for k in range(len(self.names))]
 
     def table(self) -> Table:
-        from rich.table import Table
         from rich.text import Text
 
-        t = Table(title=self.title)
+        t = rich_table(title=self.title)
         for name, numeric, width in zip(self.names, self.numeric, self._widths(), strict=True):
             # rich never narrows a column below its min_width: a number column holds its widest number
             t.add_column(Text(name), overflow="fold", min_width=width, justify="right" if numeric else "left")

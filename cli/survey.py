@@ -22,6 +22,7 @@ from cli.render import (
     inputs_of,
     key_value_table,
     progress,
+    safe,
     write_out,
 )
 from schemas.errors import EXIT_FINDINGS, UsageError
@@ -172,7 +173,9 @@ def render_survey(rep: SurveyReport, c: Console) -> None:
         if show:
             c.print(frame_table(frame, title=title))
     for run, err in rep.failed_runs.itertuples(index=False, name=None):
-        err_console().print(f"[red]failed:[/] {run}: {str(err).splitlines()[0] if err else ''}", highlight=False)
+        err_console().print(
+            f"[red]failed:[/] {safe(run)}: {safe(str(err).splitlines()[0] if err else '')}", highlight=False
+        )
 
 
 def _check_targets(fmt: Fmt, out: Path | None, propose: Path | None, force: bool, inputs: list[Path]) -> None:
@@ -188,13 +191,13 @@ def _emit(rep: SurveyReport, fmt: Fmt, out: Path | None, force: bool, inputs: li
 
         assert out is not None
         write_out(out, render_html(rep), force=force, inputs=inputs)
-        console().print(f"HTML report written to {out}")
+        console().print(f"HTML report written to {safe(out)}")
     elif fmt == Fmt.geojson:  # balises, curves and GIS defects over the grid, for QGIS
         from dbtools.interchange.geojson import survey_geojson, write_geojson
 
         assert out is not None
         write_geojson(out, survey_geojson(rep.network, rep), force=force, inputs=inputs)
-        console().print(f"GeoJSON written to {out}")
+        console().print(f"GeoJSON written to {safe(out)}")
     elif fmt == Fmt.json:
         text = json.dumps(rep.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"
         emit_text(out, text, force=force, inputs=inputs)
