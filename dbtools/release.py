@@ -15,15 +15,15 @@ rollback-journal mode: readers of a release create no -wal/-shm). The snapshot i
 (any error refuses) and hashed, and that same file is renamed into place. The input is only
 ever read — never checkpointed or modified.
 
-**Publication is recoverable.** Holding the registry's write lock, a release refuses a version
-that is already registered, then records its intent (table ``release_pending``: each file's
-name and SHA-256, its process) and commits; it then publishes its files (read-only, each
-renamed into place) and, in a second transaction, registers the release and deletes the
-intent. A failure removes the files written so far and the intent. A release killed in
-between (``kill -9``, power loss) leaves an intent whose process is gone: the next release
-removes the files it names — only those whose SHA-256 is still the recorded one — and the
-intent; ``verify-release`` reports them as debris of an interrupted release. A file the
-registry knows nothing about is never removed (refused, exit 3).
+**Publication is recoverable.** Under the registry's write lock a release refuses a version
+already registered, records its intent (table ``release_pending``: each file's name and
+SHA-256, its process) and commits; it then publishes its files (read-only, renamed into
+place) and, in a second transaction, registers the release and deletes the intent. A failure
+removes its files and intent. After a ``kill -9`` in between, the intent's process is gone:
+the next release removes the files it names that still have the recorded SHA-256, and the
+intent (``verify-release`` names them as such debris). Unregistered files holding exactly
+the bytes a release writes (debris of an older trainpos) are written again; any other file
+the registry knows nothing about is never removed (refused, exit 3).
 """
 
 from __future__ import annotations
@@ -245,7 +245,8 @@ def _publish(registry: Path, snap: Path, release: Release, impact: ImpactAttachm
     with registry_transaction(registry / REGISTRY_FILE) as conn:
         _refuse_released(conn, release)
         _clear_interrupted(conn, registry, version)
-        for name in files:
+        for name, sha in files.items():
+            _remove_if_ours(registry, name, sha)  # the very bytes this release writes (older debris): no loss
             _refuse_unregistered(registry / name)
         registry_insert(conn, _intent(version, files), PENDING)
     created: list[Path] = []
@@ -339,7 +340,7 @@ def _intent_files(row: dict[str, object]) -> dict[str, str]:
 
 def _remove_if_ours(registry: Path, name: str, sha256: str) -> None:
     """Remove ``registry/name`` if it is the file an interrupted release wrote (same
-    SHA-256); anything else standing there is kept."""
+    SHA-256: the same bytes); anything else standing there is kept."""
     p = registry / name
     if name and Path(name).name == name and p.is_file() and not p.is_symlink() and sha256_file(p) == sha256:
         p.unlink()

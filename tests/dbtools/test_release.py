@@ -363,3 +363,19 @@ def test_a_release_in_progress_is_not_taken_for_debris(dbs: dict[str, Path], tmp
         _release(dbs["v1"], reg)
     _release(dbs["v2"], reg)  # another version is not held up
     assert [r.db_version for r in list_releases(reg)] == ["2026.11"]
+
+
+def test_identical_debris_without_an_intent_is_written_again(dbs: dict[str, Path], tmp_path: Path) -> None:
+    """Files an older trainpos left (no intent recorded) that hold exactly the bytes this
+    release writes are no obstacle; a different file still is."""
+    reg = tmp_path / "reg"
+    reg.mkdir()
+    digest = sha256_file(dbs["v1"])
+    shutil.copyfile(dbs["v1"], reg / "2026.10.sqlite")
+    (reg / "2026.10.sha256").write_text(f"{digest}  2026.10.sqlite\n")
+    r = _release(dbs["v1"], reg)
+    assert r.sha256 == digest and verify_releases(reg).findings == []
+    (reg / "2026.11.sqlite").write_bytes(b"someone else's")
+    with pytest.raises(RefusedError, match="not registered"):
+        _release(dbs["v2"], reg)
+    assert (reg / "2026.11.sqlite").read_bytes() == b"someone else's"
