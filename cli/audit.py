@@ -72,7 +72,8 @@ def audit(
     Resumes an interrupted audit; skips runs already audited with the same file contents,
     DB content and config; a failing run is recorded with its error and the others go on.
     Exit 0 when every run was audited (or skipped), 1 when some run failed, 2 when the DB,
-    a log root or the audit database cannot be read.
+    a log root or the audit database cannot be read, 3 when --out is inside a release
+    registry (nothing is ever written there).
 
     Example: trainpos audit logs/ --db net.sqlite --out audit.sqlite --workers 2
     """

@@ -189,12 +189,15 @@ def release(
 ) -> None:
     """Validate a DB and add it to a registry as an immutable, read-only version.
 
-    Writes DIR/<db_version>.sqlite (mode 0444), DIR/<db_version>.sha256 (sha256sum format)
-    and a row in DIR/registry.sqlite. With --impact RUNS the runs are first replayed
-    against the registry's latest release (or --impact-against) and this DB, and the
-    `db impact` JSON report is stored read-only as DIR/<db_version>.impact.json and
-    recorded in the registry (verify-release checks it). Exit 1 if validation finds an
-    error (nothing written), 2 if unreadable, 3 if the version is already released.
+    Snapshots the DB as SQLite reads it (a WAL-mode DB with its -wal; the DB is only read),
+    validates and hashes the snapshot and publishes that same file as DIR/<db_version>.sqlite
+    (mode 0444, rollback journal), with DIR/<db_version>.sha256 (sha256sum format) and a row
+    in DIR/registry.sqlite; files a killed release left are removed by the next one. With
+    --impact RUNS the runs are first replayed against the registry's latest release (or
+    --impact-against) and this DB, and the `db impact` JSON report is stored read-only as
+    DIR/<db_version>.impact.json and recorded in the registry (verify-release checks it). Exit 1 if validation finds an
+    error (nothing written), 2 if unreadable, 3 if the version is already released or being
+    released, or an unregistered file is in its way.
 
     Example: trainpos db release net-2026.11.sqlite --registry releases/ --note "new curve table" --impact logs/
     """

@@ -38,12 +38,14 @@ def demo(
 
     Example: trainpos demo --out demo-out
     """
+    from dbtools.atomic import refuse_registry
     from dbtools.build import build_db
     from dbtools.validate import validate_path
     from fieldlogs.audit.runner import audit
     from fieldlogs.reports.page import render_html
     from fieldlogs.reports.report import build_report
 
+    refuse_registry(out)  # every file it writes lies inside OUT
     logs = sample_logs_dir()
     if not logs.is_dir():
         raise InputError("sample logs are missing from this installation", path=logs)

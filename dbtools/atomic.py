@@ -2,10 +2,12 @@
 
 **The rule** (:func:`check_target`), the same for every command:
 
+* nothing is written inside a release registry (a folder holding ``registry.sqlite``: the
+  released DBs, their manifests, the registry itself), with or without ``--force`` — the one
+  check :func:`refuse_registry`, which every output path passes (outputs that are not
+  replaced but resumed, like an audit DB, call it directly); exit 3;
 * an existing output is refused without ``--force`` (exit 3);
 * ``--force`` never replaces — whatever the command —
-  * a release registry or anything inside one (a folder holding ``registry.sqlite``: the
-    released DBs, their manifests, the registry itself),
   * an input of the same command (the output is an input, inside one, or holds one),
   * a folder trainpos did not create: every output folder carries the marker file
     ``.trainpos-output``; an existing folder without it is replaced only when empty,
@@ -13,10 +15,14 @@
 * outputs honour the umask (the temporary files Python makes are private; the final file or
   folder gets the permissions a plain ``open`` would give).
 
-**Atomic writes**: the output is written into a temporary sibling (``.NAME.PID.….tmp``) and
-renamed into place, so an interrupted command never leaves a half-written output under the
-requested name; temporary siblings left by a process that was killed are removed by the next
-write to the same target.
+**Atomic writes**: the output is written into a temporary sibling and renamed into place, so
+an interrupted command never leaves a half-written output under the requested name. A
+temporary sibling carries an unmistakable signature, ``.NAME.trainpos-tmp.PID.TOKEN`` (TOKEN:
+16 random hex digits; :func:`temp_sibling`). A folder replaced with ``--force`` is first
+renamed aside as ``.NAME.trainpos-old.PID.TOKEN`` and removed only once the new one is in
+place. The next check of the same target (:func:`sweep_stale`) removes temporary siblings
+whose process is gone, and renames an orphaned old copy back when the target is missing (a
+kill between the two renames); it touches no other file, whatever its name looks like.
 """
 
 from __future__ import annotations
@@ -24,9 +30,9 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import secrets
 import shutil
 import stat
-import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Literal
@@ -37,6 +43,15 @@ from schemas.errors import RefusedError
 MARKER = ".trainpos-output"
 #: The file that makes a folder a release registry (``dbtools/release.py``).
 REGISTRY_FILE = "registry.sqlite"
+#: Tags of the temporary-sibling signature: a new output being written, and the previous
+#: copy of a folder during a ``--force`` replace.
+TEMP_TAG = "trainpos-tmp"
+OLD_TAG = "trainpos-old"
+#: The signature: ``.NAME.TAG.PID.TOKEN`` (TOKEN: 16 random hex digits), plus the journal
+#: files SQLite may leave beside a temporary DB. Nothing else is ever swept.
+TEMP_RE = re.compile(
+    rf"^\.(?P<name>.+)\.(?P<tag>{TEMP_TAG}|{OLD_TAG})\.(?P<pid>[0-9]{{1,10}})\.[0-9a-f]{{16}}(?:-journal|-wal|-shm)?$"
+)
 
 
 def _umask() -> int:
@@ -49,12 +64,28 @@ _UMASK = _umask()
 
 
 def in_registry(path: Path) -> Path | None:
-    """The release registry ``path`` is, or lies inside, if any."""
-    p = Path(path).absolute()
-    for folder in (p, *p.parents):
-        if (folder / REGISTRY_FILE).is_file():
-            return folder
+    """The release registry ``path`` is, or lies inside, if any: a folder holding
+    :data:`REGISTRY_FILE`, found along the path as given and along its resolved path (a
+    symlink into a registry is inside it)."""
+    given = Path(path).absolute()
+    for p in (given, Path(os.path.realpath(given))):
+        for folder in (p, *p.parents):
+            if (folder / REGISTRY_FILE).is_file():
+                return folder
     return None
+
+
+def refuse_registry(path: Path) -> None:
+    """The check every output path passes, whatever writes it (``--out``, ``--propose``,
+    ``--plot``, an audit DB resumed in place): nothing is ever written inside a release
+    registry or over one — RefusedError, exit 3. Only ``db release`` adds to a registry."""
+    registry = in_registry(path)
+    if registry is not None:
+        raise RefusedError(
+            f"a release registry ({registry}) is never written into or replaced: no output goes inside one "
+            "(only db release adds a version); choose a path outside it",
+            path=path,
+        )
 
 
 def _overlaps(a: Path, b: Path) -> bool:
@@ -67,9 +98,8 @@ def check_target(
 ) -> None:
     """Refuse (RefusedError, exit 3) what the module docstring's rule forbids."""
     path = Path(path)
-    registry = in_registry(path)
-    if registry is not None:
-        raise RefusedError(f"a release registry ({registry}) is never written into or replaced", path=path)
+    refuse_registry(path)
+    sweep_stale(path)  # an old copy a killed replace left aside is back under its name first
     for src in inputs:
         if _overlaps(path, Path(src)):
             raise RefusedError(f"the output would replace an input of this command ({src})", path=path)
@@ -93,34 +123,78 @@ def refuse_existing(path: Path, force: bool) -> None:
         raise RefusedError("output exists; use --force to replace it", path=path)
 
 
-def _sweep_stale(path: Path) -> None:
-    """Remove temporary siblings of ``path`` left by processes that no longer run."""
-    pattern = re.compile(rf"^\.{re.escape(path.name)}\.(?:old\.)?(\d+)\.")
+def temp_sibling(target: Path, *, folder: bool = False, tag: str = TEMP_TAG) -> Path:
+    """Create (exclusively, private) a fresh temporary file or folder beside ``target``,
+    named with the signature :data:`TEMP_RE` that :func:`sweep_stale` recognises."""
+    while True:
+        tmp = _signed_name(Path(target), tag)
+        try:
+            if folder:
+                os.mkdir(tmp, 0o700)
+            else:
+                os.close(os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+        except FileExistsError:  # 64 random bits taken: draw again
+            continue
+        return tmp
+
+
+def _signed_name(target: Path, tag: str) -> Path:
+    """A fresh name with the signature: ``.NAME.TAG.PID.TOKEN`` beside ``target``."""
+    return target.with_name(f".{target.name}.{tag}.{os.getpid()}.{secrets.token_hex(8)}")
+
+
+def _own_temps(path: Path) -> list[tuple[Path, str]]:
+    """(sibling, tag) of every temporary sibling of ``path`` whose owning process is gone,
+    newest first; only names with the full signature count (a user's ``.NAME.2026.bak``
+    never does)."""
+    found: list[tuple[float, Path, str]] = []
     with contextlib.suppress(OSError):
         for sib in path.parent.iterdir():
-            m = pattern.match(sib.name)
-            if m is None or _alive(int(m.group(1))):
+            m = TEMP_RE.match(sib.name)
+            if m is None or m.group("name") != path.name or process_alive(int(m.group("pid"))):
                 continue
-            if sib.is_dir():
-                shutil.rmtree(sib, ignore_errors=True)
-            else:
-                with contextlib.suppress(OSError):
-                    sib.unlink()
+            with contextlib.suppress(OSError):
+                found.append((sib.lstat().st_mtime, sib, m.group("tag")))
+    return [(sib, tag) for _, sib, tag in sorted(found, key=lambda f: f[0], reverse=True)]
 
 
-def _alive(pid: int) -> bool:
+def sweep_stale(path: Path) -> None:
+    """Clean up after processes killed while writing ``path``: their temporary siblings are
+    removed, except that the previous copy of a folder being replaced (killed between its
+    two renames) is renamed back to ``path`` when ``path`` is missing — never deleted."""
+    path = Path(path)
+    for sib, tag in _own_temps(path):
+        if tag != OLD_TAG:
+            _remove(sib)
+        elif not path.exists() and not path.is_symlink():
+            with contextlib.suppress(OSError):  # left in place if it cannot be renamed back
+                os.replace(sib, path)
+        else:  # the replace finished: the new copy is in place
+            _remove(sib)
+
+
+def _remove(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            p.unlink()
+
+
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs on this machine (this process counts; unknown: alive)."""
     if pid == os.getpid():
         return True
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:
+    except (PermissionError, OverflowError):
         return True
     return True
 
 
-def _publish_mode(p: Path) -> None:
+def publish_mode(p: Path) -> None:
     """The permissions a plain open/mkdir would have given (umask honoured)."""
     if p.is_dir():
         for sub in [p, *p.rglob("*")]:
@@ -138,22 +212,32 @@ def atomic_folder(path: Path, *, force: bool = False, inputs: Iterable[Path | st
     path = Path(path)
     check_target(path, force=force, kind="folder", inputs=inputs)
     path.parent.mkdir(parents=True, exist_ok=True)
-    _sweep_stale(path)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent))
+    tmp = temp_sibling(path, folder=True)
     try:
         yield tmp
         (tmp / MARKER).write_text("written by trainpos; --force may replace this folder\n", encoding="utf-8")
-        _publish_mode(tmp)
+        publish_mode(tmp)
         if path.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.{os.getpid()}.", suffix=".tmp", dir=path.parent))
-            os.replace(path, old / "x")
-            os.replace(tmp, path)
-            shutil.rmtree(old, ignore_errors=True)
+            _replace_folder(tmp, path)
         else:
             os.replace(tmp, path)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _replace_folder(new: Path, path: Path) -> None:
+    """Two renames: ``path`` aside under the signature (``.NAME.trainpos-old.PID.TOKEN``),
+    ``new`` into place; the old copy is removed only then. Killed between the renames, the
+    old copy stays recoverable: the next write to ``path`` renames it back (:func:`sweep_stale`)."""
+    old = _signed_name(path, OLD_TAG)  # 64 random bits: no other file has this name
+    os.rename(path, old)
+    try:
+        os.replace(new, path)
+    except BaseException:  # failed (not killed): the old copy goes straight back
+        os.rename(old, path)
+        raise
+    shutil.rmtree(old, ignore_errors=True)
 
 
 @contextlib.contextmanager
@@ -162,13 +246,10 @@ def atomic_file(path: Path, *, force: bool = False, inputs: Iterable[Path | str]
     path = Path(path)
     check_target(path, force=force, kind="file", inputs=inputs)
     path.parent.mkdir(parents=True, exist_ok=True)
-    _sweep_stale(path)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(name)
+    tmp = temp_sibling(path)
     try:
         yield tmp
-        _publish_mode(tmp)
+        publish_mode(tmp)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):

@@ -13,6 +13,7 @@ from typing import Any
 import pandas as pd
 import sqlite_utils
 
+from dbtools.atomic import refuse_registry
 from dbtools.database import SQLITE_MAGIC, create_tables
 from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION, AUDIT_TABLES, AUDIT_VIEWS, ROUTE_SUMMARY
 from schemas.errors import InputError
@@ -224,11 +225,14 @@ class AuditDB:
 def open_audit_db(path: Path, *, create: bool = True) -> Iterator[AuditDB]:
     """Open an audit DB: created or resumed (``create=True``, read-write) or read-only.
 
-    Refuses SQLite files that are not audit DBs (an onboard DB passed by mistake is never
+    Refuses a path inside a release registry (:func:`dbtools.atomic.refuse_registry`),
+    SQLite files that are not audit DBs (an onboard DB passed by mistake is never
     modified) and audit DBs of another schema version. A writer leaves one file behind
     (journal back to DELETE: readers then leave no -wal/-shm either).
     """
     path = Path(path)
+    if create:
+        refuse_registry(path)  # the output rule's registry check (exit 3): written in place, never in a registry
     is_audit = path.exists() and _is_audit_file(path)
     if not create and not is_audit:
         raise InputError("no such audit database" if not path.exists() else "empty audit database", path=path)

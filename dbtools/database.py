@@ -12,15 +12,15 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import sqlite3
-import tempfile
 from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pandas as pd
 
-from dbtools.atomic import atomic_file
+from dbtools.atomic import atomic_file, sweep_stale, temp_sibling
 from dbtools.integrity import check_content_hash
 from dbtools.network import Network, canonical, empty_frame, network_content_hash
 from dbtools.sqlite_columns import insert_tables, read_table_columns
@@ -28,7 +28,7 @@ from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.model import Table
-from schemas.registry import IMPACTS, REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
+from schemas.registry import REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
 from schemas.tables import (
     ALL_DB_TABLES,
     APPLICATION_ID,
@@ -190,6 +190,40 @@ def connect_ro(path: Path) -> Iterator[sqlite3.Connection]:
         conn.close()
 
 
+def snapshot_db(src: Path, dst: Path) -> None:
+    """Copy an onboard DB as SQLite reads it — its write-ahead log included — into the new
+    file ``dst``, in a rollback-journal mode (a reader of the copy needs no -wal/-shm and
+    works on a read-only mount). ``src`` is only read: opened read-only, never checkpointed.
+
+    Under one read transaction (writers of a rollback-journal DB wait; a WAL DB's readers see
+    one fixed state): a DB in a rollback-journal mode is the file itself and is copied byte
+    for byte; a WAL-mode DB is copied through SQLite's backup API and the copy set to
+    ``journal_mode=DELETE``."""
+    src, dst = Path(src), Path(dst)
+    with connect_ro(src) as conn:
+        wal = str(conn.execute("PRAGMA journal_mode").fetchone()[0]).lower() == "wal"
+        conn.execute("BEGIN")
+        conn.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()  # takes the read lock / WAL snapshot
+        if wal:
+            _backup_to(conn, dst)
+        else:  # (closing this second descriptor drops SQLite's POSIX lock, but only once the copy is done)
+            with open(src, "rb") as fin, open(dst, "wb") as fout:
+                shutil.copyfileobj(fin, fout, 1 << 20)
+        conn.execute("COMMIT")
+    with open(dst, "rb+") as fh:
+        os.fsync(fh.fileno())
+
+
+def _backup_to(conn: sqlite3.Connection, dst: Path) -> None:
+    """Every page of ``conn``'s main DB into ``dst``, then rollback journal (DELETE)."""
+    out = sqlite3.connect(dst)
+    try:
+        conn.backup(out)
+        out.execute("PRAGMA journal_mode=DELETE")
+    finally:
+        out.close()
+
+
 def read_meta(path: Path) -> dict[str, str]:
     with connect_ro(path) as conn:
         return dict(conn.execute("SELECT key, value FROM meta").fetchall())
@@ -324,9 +358,8 @@ def _check_registry_schema(conn: sqlite3.Connection, path: Path) -> None:
 
 def _create_registry(path: Path) -> None:
     """An empty registry, written to a temp file and renamed into place."""
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
+    sweep_stale(path)  # a temp file of a release killed while creating it
+    tmp = temp_sibling(path)
     try:
         tmp.unlink()
         conn = sqlite3.connect(tmp)
@@ -387,13 +420,14 @@ def registry_find(conn: sqlite3.Connection, db_version: str) -> dict[str, object
 
 
 def registry_insert(conn: sqlite3.Connection, row: dict[str, object], table: Table = RELEASES) -> None:
-    """Insert one release row (a duplicate db_version violates the primary key), or with
-    ``table`` = ``IMPACTS`` a release's impact report — creating that table in a registry
-    that has none yet (older registries stay readable: ``releases`` is unchanged)."""
-    if table is IMPACTS:
+    """Insert one release row (a duplicate db_version violates the primary key), or a row of
+    another registry table (``IMPACTS``: a release's impact report; ``PENDING``: a release in
+    progress) — creating that table in a registry that has none yet (older registries stay
+    readable: ``releases`` is unchanged)."""
+    if table is not RELEASES:
         import sqlite_utils
 
-        create_tables(sqlite_utils.Database(conn), (IMPACTS,), if_not_exists=True)
+        create_tables(sqlite_utils.Database(conn), (table,), if_not_exists=True)
     cols = table.column_names
     conn.execute(
         f"INSERT INTO [{table.name}] ({','.join(f'[{c}]' for c in cols)}) VALUES ({','.join('?' * len(cols))})",
@@ -401,17 +435,33 @@ def registry_insert(conn: sqlite3.Connection, row: dict[str, object], table: Tab
     )
 
 
-def read_impacts(path: Path) -> dict[str, dict[str, object]]:
-    """The impact-report rows of a registry by db_version (empty without a registry or a
-    ``release_impacts`` table), read-only."""
+def registry_delete(conn: sqlite3.Connection, table: Table, db_version: str) -> None:
+    """Delete the row of ``db_version`` from an optional registry table (``PENDING``), if the
+    table exists."""
+    if _has_table(conn, table):
+        conn.execute(f"DELETE FROM [{table.name}] WHERE db_version = ?", (db_version,))
+
+
+def registry_rows(conn: sqlite3.Connection, table: Table) -> dict[str, dict[str, object]]:
+    """The rows of an optional registry table (``IMPACTS``, ``PENDING``) by db_version; empty
+    when the registry has no such table yet."""
+    if not _has_table(conn, table):
+        return {}
+    cols = table.column_names
+    cur = conn.execute(f"SELECT {','.join(f'[{c}]' for c in cols)} FROM [{table.name}]")
+    return {str(r[0]): dict(zip(cols, r, strict=True)) for r in cur.fetchall()}
+
+
+def _has_table(conn: sqlite3.Connection, table: Table) -> bool:
+    return conn.execute("SELECT 1 FROM sqlite_master WHERE name = ?", (table.name,)).fetchone() is not None
+
+
+def read_registry_table(path: Path, table: Table) -> dict[str, dict[str, object]]:
+    """:func:`registry_rows` of a registry file, read-only (empty without a registry)."""
     if not Path(path).exists():
         return {}
     with _registry_ro(Path(path)) as conn:
-        if not conn.execute("SELECT 1 FROM sqlite_master WHERE name = ?", (IMPACTS.name,)).fetchone():
-            return {}
-        cols = IMPACTS.column_names
-        cur = conn.execute(f"SELECT {','.join(f'[{c}]' for c in cols)} FROM [{IMPACTS.name}]")
-        return {str(r[0]): dict(zip(cols, r, strict=True)) for r in cur.fetchall()}
+        return registry_rows(conn, table)
 
 
 def read_registry(path: Path) -> list[dict[str, object]]:

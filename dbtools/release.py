@@ -3,18 +3,27 @@
 A registry is a folder (layout in :mod:`schemas.registry`)::
 
     DIR/registry.sqlite        one row per release
-    DIR/<db_version>.sqlite    the released DB, byte-identical to the validated input, mode 0444
+    DIR/<db_version>.sqlite    the released DB: exactly the bytes that were validated and hashed, mode 0444
     DIR/<db_version>.sha256    manifest in sha256sum format: "<hex>  <db_version>.sqlite"
     DIR/<db_version>.impact.json  (``--impact``) the ``db impact`` report of the release, mode 0444
 
 so ``cd DIR && sha256sum -c *.sha256`` checks the files without trainpos.
 
-Releasing validates the file first (any error refuses), then, holding the registry's write
-lock, refuses a version that is already registered (or whose file is already in the
-folder), copies the file to a temp file in ``DIR``, checks the copy's SHA-256 against the
-validated input, makes it read-only and renames it into place, writes the manifest the same
-way and records the row. If anything fails, the files written so far are removed and the
-registry is left unchanged. The input file is only ever read.
+**What is released is what was validated.** The input is copied as SQLite reads it into a
+private snapshot in ``DIR`` (:func:`dbtools.database.snapshot_db`: WAL included, in a
+rollback-journal mode: readers of a release create no -wal/-shm). The snapshot is validated
+(any error refuses) and hashed, and that same file is renamed into place. The input is only
+ever read — never checkpointed or modified.
+
+**Publication is recoverable.** Under the registry's write lock a release refuses a version
+already registered, records its intent (table ``release_pending``: each file's name and
+SHA-256, its process) and commits; it then publishes its files (read-only, renamed into
+place) and, in a second transaction, registers the release and deletes the intent. A failure
+removes its files and intent. After a ``kill -9`` in between, the intent's process is gone:
+the next release removes the files it names that still have the recorded SHA-256, and the
+intent (``verify-release`` names them as such debris). Unregistered files holding exactly
+the bytes a release writes (debris of an older trainpos) are written again; any other file
+the registry knows nothing about is never removed (refused, exit 3).
 """
 
 from __future__ import annotations
@@ -22,37 +31,43 @@ from __future__ import annotations
 import contextlib
 import getpass
 import hashlib
+import json
 import os
 import re
-import tempfile
+import socket
 from collections.abc import Set as AbstractSet
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from dbtools.atomic import process_alive, sweep_stale, temp_sibling
 from dbtools.database import (
     check_sqlite_file,
     integrity_findings,
-    read_impacts,
     read_meta,
     read_registry,
+    read_registry_table,
+    registry_delete,
     registry_find,
     registry_insert,
+    registry_rows,
     registry_transaction,
     schema_version,
+    snapshot_db,
 )
 from dbtools.tabular import sha256_file
 from dbtools.validate import validate_path
 from schemas.enums import Severity
 from schemas.errors import FindingsError, InputError, RefusedError, UsageError
 from schemas.findings import Finding, has_errors
-from schemas.registry import DB_VERSION_RULE, IMPACTS, REGISTRY_FILE, RELEASES, db_version_problem
+from schemas.registry import DB_VERSION_RULE, IMPACTS, PENDING, REGISTRY_FILE, RELEASES, db_version_problem
 
 #: Mode of released files and manifests: read-only for everyone.
 READ_ONLY = 0o444
 _MANIFEST_RE = re.compile(r"^([0-9a-fA-F]{64}) [ *](.+)$")
-_CHUNK = 1 << 20
+#: Name the private snapshot of a release is a temporary sibling of (``dbtools.atomic``).
+_SNAPSHOT = "snapshot.sqlite"
 
 
 @dataclass(frozen=True)
@@ -154,24 +169,49 @@ def release_db(
     user: str | None = None,
     impact: ImpactAttachment | None = None,
 ) -> ReleaseResult:
-    """Validate ``file`` and add it to ``registry`` as an immutable version; with
-    ``impact``, store that report read-only as ``<db_version>.impact.json`` beside it and
-    record it (table ``release_impacts``) in the same transaction.
+    """Snapshot ``file``, validate the snapshot and add it to ``registry`` as an immutable
+    version (see the module docstring); with ``impact``, store that report read-only as
+    ``<db_version>.impact.json`` beside it and record it (table ``release_impacts``) in the
+    same transaction.
 
     Raises FindingsError (validation errors; nothing written), RefusedError (version
-    already released, or its file already in the folder), InputError (unreadable input or
-    registry; the input changed while being released).
+    already released or being released, or its file already in the folder unregistered),
+    InputError (unreadable input or registry).
     """
     file, registry = Path(file), Path(registry)
     check_sqlite_file(file)
     if registry.exists() and not registry.is_dir():
         raise InputError("release registry must be a folder", path=registry)
-    digest = sha256_file(file)
-    findings = validate_path(file)
+    new_folder = not registry.exists()
+    registry.mkdir(parents=True, exist_ok=True)
+    sweep_stale(registry / _SNAPSHOT)  # snapshots of killed releases
+    snap = temp_sibling(registry / _SNAPSHOT)
+    try:
+        release, findings = _snapshot_and_validate(file, snap, note=note, now=now, user=user)
+        impact_path = _publish(registry, snap, release, impact)
+        return ReleaseResult(release, registry / release.file, findings, impact_path)
+    except BaseException:
+        if new_folder:  # nothing was released: leave no empty registry folder behind
+            with contextlib.suppress(OSError):
+                snap.unlink(missing_ok=True)
+                registry.rmdir()
+        raise
+    finally:
+        snap.unlink(missing_ok=True)
+
+
+def _snapshot_and_validate(
+    file: Path, snap: Path, *, note: str, now: datetime | None, user: str | None
+) -> tuple[Release, list[Finding]]:
+    """The snapshot of ``file`` in ``snap``, validated and hashed: its registry row and the
+    validation warnings. FindingsError on errors, RefusedError on an unusable version."""
+    snapshot_db(file, snap)
+    digest = sha256_file(snap)
+    findings = validate_path(snap)
     errors = [f for f in findings if f.severity == Severity.ERROR]
     if errors:
         raise FindingsError(f"{len(errors)} validation error(s); not released", findings, path=file)
-    meta = read_meta(file)
+    meta = read_meta(snap)
     version = meta.get("db_version") or ""
     problem = db_version_problem(version)
     if problem is not None:
@@ -180,60 +220,135 @@ def release_db(
             "(rebuild it with db build --version)",
             path=file,
         )
-    target = registry / f"{version}.sqlite"
-    manifest = registry / f"{version}.sha256"
-    impact_path = registry / impact_file_name(version) if impact is not None else None
     released_at = (now or datetime.now(UTC)).astimezone(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
     release = Release(
         db_version=version,
-        file=target.name,
+        file=f"{version}.sqlite",
         sha256=digest,
         content_hash=meta.get("content_hash", ""),
-        schema_version=schema_version(file),
+        schema_version=schema_version(snap),
         released_at=released_at,
         released_by=user or _current_user(),
         note=note or None,
         source_file=str(file.resolve()),
     )
-    registry.mkdir(parents=True, exist_ok=True)
+    return release, findings
+
+
+def _publish(registry: Path, snap: Path, release: Release, impact: ImpactAttachment | None) -> Path | None:
+    """Intent, files, registration (the module docstring); the impact report's path."""
+    version = release.db_version
+    report = (registry / impact_file_name(version), impact.report_json) if impact is not None else None
+    extras = [(registry / f"{version}.sha256", f"{release.sha256}  {release.file}\n".encode())]
+    extras += [report] if report is not None else []
+    files = {release.file: release.sha256} | {p.name: hashlib.sha256(data).hexdigest() for p, data in extras}
+    with registry_transaction(registry / REGISTRY_FILE) as conn:
+        _refuse_released(conn, release)
+        _clear_interrupted(conn, registry, version)
+        for name, sha in files.items():
+            _remove_if_ours(registry, name, sha)  # the very bytes this release writes (older debris): no loss
+            _refuse_unregistered(registry / name)
+        registry_insert(conn, _intent(version, files), PENDING)
     created: list[Path] = []
     try:
+        _finish(snap, registry / release.file, created)
+        for p, data in extras:
+            _atomic_write(p, data, created)
         with registry_transaction(registry / REGISTRY_FILE) as conn:
-            existing = registry_find(conn, version)
-            if existing is not None:
-                what = (
-                    "this same file; nothing to do"
-                    if existing["sha256"] == digest
-                    else f"a different file (sha256 {existing['sha256']}); a released version is immutable: "
-                    "build the change under a new version"
-                )
-                raise RefusedError(
-                    f"db_version {version} was already released on {existing['released_at']} as {what}", path=file
-                )
-            for p in (target, manifest, impact_path):
-                if p is not None and p.exists():
-                    raise RefusedError(
-                        f"{p.name} already exists in the registry folder but is not registered; "
-                        "remove it by hand if it is debris of an interrupted release",
-                        path=p,
-                    )
-            _atomic_copy(file, target, digest, created)
-            _atomic_write(manifest, f"{digest}  {target.name}\n".encode(), created)
             registry_insert(conn, release.to_dict())
-            if impact is not None and impact_path is not None:
-                _store_impact(conn, impact, impact_path, version, created)
+            if impact is not None and report is not None:
+                registry_insert(conn, _impact_row(impact, report[0], version), IMPACTS)
+            registry_delete(conn, PENDING, version)
     except BaseException:
         for p in created:
             with contextlib.suppress(OSError):
                 p.unlink()
+        with contextlib.suppress(Exception), registry_transaction(registry / REGISTRY_FILE) as conn:
+            registry_delete(conn, PENDING, version)
         raise
-    return ReleaseResult(release, target, findings, impact_path)
+    return report[0] if report is not None else None
 
 
-def _store_impact(conn: Any, impact: ImpactAttachment, path: Path, version: str, created: list[Path]) -> None:
-    """The report file (read-only, atomically) and its registry row."""
-    _atomic_write(path, impact.report_json, created)
-    row: dict[str, object] = {
+def _intent(version: str, files: dict[str, str]) -> dict[str, object]:
+    """The ``release_pending`` row of this process releasing ``version``."""
+    return {
+        "db_version": version,
+        "files": json.dumps(files, sort_keys=True),
+        "pid": os.getpid(),
+        "host": socket.gethostname(),
+        "started_at": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z"),
+    }
+
+
+def _refuse_released(conn: Any, release: Release) -> None:
+    existing = registry_find(conn, release.db_version)
+    if existing is None:
+        return
+    what = (
+        "this same file; nothing to do"
+        if existing["sha256"] == release.sha256
+        else f"a different file (sha256 {existing['sha256']}); a released version is immutable: "
+        "build the change under a new version"
+    )
+    raise RefusedError(
+        f"db_version {release.db_version} was already released on {existing['released_at']} as {what}",
+        path=Path(release.source_file),
+    )
+
+
+def _refuse_unregistered(p: Path) -> None:
+    sweep_stale(p)  # temporary siblings of a killed release
+    if p.exists() or p.is_symlink():
+        raise RefusedError(
+            f"{p.name} already exists in the registry folder but is not registered (nor is it, unchanged, "
+            "what an interrupted release left): it is left as it is; look at it and remove it by hand if it "
+            "is not needed",
+            path=p,
+        )
+
+
+def _owner_gone(row: dict[str, object]) -> bool:
+    """Whether the process of an intent is gone (only known on the machine it ran on)."""
+    return row.get("host") == socket.gethostname() and not process_alive(int(str(row["pid"])))
+
+
+def _clear_interrupted(conn: Any, registry: Path, version: str) -> None:
+    """Remove what killed releases left (their intents and the files those name, still with
+    the recorded SHA-256); refuse ``version`` while another live process releases it."""
+    for v, row in registry_rows(conn, PENDING).items():
+        if not _owner_gone(row):
+            if v == version:
+                raise RefusedError(
+                    f"db_version {version} is being released by process {row['pid']} on {row['host']} "
+                    f"since {row['started_at']} (a release killed on another machine is cleaned up by the next "
+                    "release there)",
+                    path=registry,
+                )
+            continue
+        for name, sha in _intent_files(row).items():
+            _remove_if_ours(registry, name, sha)
+        registry_delete(conn, PENDING, v)  # a file still there is not its own any more (changed since)
+
+
+def _intent_files(row: dict[str, object]) -> dict[str, str]:
+    try:
+        files = json.loads(str(row["files"]))
+    except ValueError:
+        return {}
+    return {str(k): str(v) for k, v in files.items()} if isinstance(files, dict) else {}
+
+
+def _remove_if_ours(registry: Path, name: str, sha256: str) -> None:
+    """Remove ``registry/name`` if it is the file an interrupted release wrote (same
+    SHA-256: the same bytes); anything else standing there is kept."""
+    p = registry / name
+    if name and Path(name).name == name and p.is_file() and not p.is_symlink() and sha256_file(p) == sha256:
+        p.unlink()
+
+
+def _impact_row(impact: ImpactAttachment, path: Path, version: str) -> dict[str, object]:
+    """The ``release_impacts`` row of a stored report."""
+    return {
         "db_version": version,
         "file": path.name,
         "sha256": hashlib.sha256(impact.report_json).hexdigest(),
@@ -242,12 +357,11 @@ def _store_impact(conn: Any, impact: ImpactAttachment, path: Path, version: str,
         "runs": impact.runs,
         "runs_changed": impact.runs_changed,
     }
-    registry_insert(conn, row, IMPACTS)
 
 
 def list_impacts(registry: Path) -> dict[str, dict[str, object]]:
     """The impact-report rows of a registry folder by db_version (releases made with ``--impact``)."""
-    return read_impacts(Path(registry) / REGISTRY_FILE)
+    return read_registry_table(Path(registry) / REGISTRY_FILE, IMPACTS)
 
 
 def _current_user() -> str:
@@ -255,12 +369,6 @@ def _current_user() -> str:
         return getpass.getuser()
     except (OSError, KeyError, ImportError):  # no login name in some containers
         return "unknown"
-
-
-def _temp_in(folder: Path, name: str) -> Path:
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
-    os.close(fd)
-    return Path(tmp)
 
 
 def _finish(tmp: Path, dst: Path, created: list[Path]) -> None:
@@ -272,27 +380,9 @@ def _finish(tmp: Path, dst: Path, created: list[Path]) -> None:
     created.append(dst)
 
 
-def _atomic_copy(src: Path, dst: Path, expected_sha256: str, created: list[Path]) -> None:
-    """Copy through a temp file in the target folder, checking the copy's SHA-256."""
-    tmp = _temp_in(dst.parent, dst.name)
-    try:
-        h = hashlib.sha256()
-        with open(src, "rb") as fin, open(tmp, "wb") as fout:
-            for chunk in iter(lambda: fin.read(_CHUNK), b""):
-                h.update(chunk)
-                fout.write(chunk)
-            fout.flush()
-            os.fsync(fout.fileno())
-        if h.hexdigest() != expected_sha256:
-            raise InputError("the file changed while it was being released; nothing was released", path=src)
-        _finish(tmp, dst, created)
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
-
-
 def _atomic_write(dst: Path, data: bytes, created: list[Path]) -> None:
-    tmp = _temp_in(dst.parent, dst.name)
+    """``data`` into a temporary sibling (fsynced), then :func:`_finish`."""
+    tmp = temp_sibling(dst)
     try:
         with open(tmp, "wb") as fh:
             fh.write(data)
@@ -334,7 +424,8 @@ def verify_releases(registry: Path, db_version: str | None = None) -> VerifyRepo
         if r.db_version in impacts:
             findings.extend(_verify_impact(registry, r, impacts[r.db_version]))
     if db_version is None:
-        findings.extend(_unregistered(registry, releases, set(impacts)))
+        pending = read_registry_table(registry / REGISTRY_FILE, PENDING)
+        findings.extend(_unregistered(registry, releases, set(impacts), pending))
     return VerifyReport(str(registry), releases, findings)
 
 
@@ -478,22 +569,32 @@ def _verify_impact(registry: Path, r: Release, row: dict[str, object]) -> list[F
 
 
 def _unregistered(
-    registry: Path, releases: list[Release], with_impact: AbstractSet[str] = frozenset()
+    registry: Path,
+    releases: list[Release],
+    with_impact: AbstractSet[str] = frozenset(),
+    pending: dict[str, dict[str, object]] | None = None,
 ) -> list[Finding]:
-    """Released-looking files that no registry row names (debris or smuggled in)."""
+    """Released-looking files that no registry row names: debris of an interrupted release
+    (an intent names them; the next ``db release`` removes them) or unknown (smuggled in, or
+    left by a trainpos that recorded no intents)."""
     known = {r.file for r in releases} | {f"{r.db_version}.sha256" for r in releases} | {REGISTRY_FILE}
     known |= {impact_file_name(v) for v in with_impact}
+    owners = {name: row for row in (pending or {}).values() for name in _intent_files(row)}
     out = []
     for p in sorted(registry.iterdir()):
         if p.suffix in (".sqlite", ".sha256", ".json") and p.name not in known and not p.name.startswith("."):
-            out.append(
-                Finding(
-                    "release.unregistered",
-                    Severity.WARNING,
-                    RELEASES.name,
-                    "file in the registry folder is not registered",
-                    file=str(p),
-                    value=p.name,
-                )
-            )
+            out.append(_unregistered_finding(p, owners.get(p.name)))
     return out
+
+
+def _unregistered_finding(p: Path, intent: dict[str, object] | None) -> Finding:
+    if intent is None:
+        message = "file in the registry folder is not registered"
+    elif _owner_gone(intent):
+        message = (
+            f"left by a release of {intent['db_version']} interrupted after {intent['started_at']} "
+            f"(process {intent['pid']} is gone); the next db release removes it"
+        )
+    else:
+        message = f"being written by a release of {intent['db_version']} in progress (process {intent['pid']})"
+    return Finding("release.unregistered", Severity.WARNING, RELEASES.name, message, file=str(p), value=p.name)

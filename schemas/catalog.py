@@ -9,7 +9,7 @@ from schemas.logs import LOG_STREAMS
 from schemas.model import Table
 from schemas.outputs import OUTPUT_TABLES
 from schemas.plans import POSSESSIONS
-from schemas.registry import IMPACTS, RELEASES
+from schemas.registry import IMPACTS, PENDING, RELEASES
 from schemas.tables import ALL_DB_TABLES
 
 #: Every declaration by name, for ``trainpos schema show`` and the docs.
@@ -21,5 +21,6 @@ ALL_SCHEMAS: dict[str, Table] = {
     **GIS_INPUT_TABLES,
     RELEASES.name: RELEASES,
     IMPACTS.name: IMPACTS,
+    PENDING.name: PENDING,
     **{t.name: t for t in (*AUDIT_TABLES, *AUDIT_VIEWS)},
 }

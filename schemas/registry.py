@@ -3,7 +3,7 @@
 Layout of a registry folder::
 
     registry.sqlite          table ``releases`` below, one row per released version
-    <db_version>.sqlite      the released onboard DB, byte-identical to the input, mode 0444
+    <db_version>.sqlite      the released onboard DB: the snapshot that was validated and hashed, mode 0444
     <db_version>.sha256      manifest in ``sha256sum`` format: "<hex>  <db_version>.sqlite"
 """
 
@@ -79,6 +79,24 @@ IMPACTS = Table(
         Column("against_content_hash", "str", "Content hash of the DB it was compared with"),
         Column("runs", "int", "Runs replayed"),
         Column("runs_changed", "int", "Runs whose figures changed"),
+    ),
+    primary_key=("db_version",),
+)
+
+#: Releases in progress: a row is committed before a release publishes any file and deleted
+#: in the transaction that registers it, so files a killed release left behind are known as
+#: its own (name and SHA-256 of each) and the next ``db release`` removes them. Created by the
+#: first release that needs it (older registries stay readable; no schema-version bump).
+PENDING = Table(
+    name="release_pending",
+    kind="db",
+    description="Releases in progress (registry.sqlite): the files each will publish, until it is registered.",
+    columns=(
+        Column("db_version", "str", "DB version being released"),
+        Column("files", "str", "JSON object: file name in the registry folder → SHA-256 (hex) of what is written"),
+        Column("pid", "int", "Process id of the release"),
+        Column("host", "str", "Host name of the machine running it"),
+        Column("started_at", "str", "When it started (UTC, ISO 8601 with Z)"),
     ),
     primary_key=("db_version",),
 )

@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import json
 import os
-import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
 
-from dbtools.atomic import check_target
+from dbtools.atomic import check_target, publish_mode, temp_sibling
 from dbtools.gis.grid import LABEL_COL, MAX_POST_OFFSET_M, ROW_COL, GridResult, build_grid
 from dbtools.tabular import read_raw_table
 from schemas.enums import Severity
@@ -225,11 +224,11 @@ def _write_atomically(files: dict[Path, pd.DataFrame]) -> None:
     temps: dict[Path, Path] = {}
     try:
         for target, frame in files.items():
-            # a fresh name beside the target, created with the usual permissions (umask)
-            tmp = target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp")
-            with open(tmp, "x", encoding="utf-8", newline="") as fh:
-                temps[target] = tmp
+            # a fresh temporary sibling (the signature of dbtools.atomic), published with the umask's permissions
+            temps[target] = tmp = temp_sibling(target)
+            with open(tmp, "w", encoding="utf-8", newline="") as fh:
                 frame.to_csv(fh, index=False, lineterminator="\n")
+            publish_mode(tmp)
         for target, tmp in temps.items():
             os.replace(tmp, target)
     finally:

@@ -14,9 +14,9 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
-from dbtools.atomic import MARKER, REGISTRY_FILE, atomic_file, atomic_folder, write_text
+from dbtools.atomic import MARKER, OLD_TAG, REGISTRY_FILE, TEMP_RE, TEMP_TAG, atomic_file, atomic_folder, write_text
 from schemas.errors import RefusedError
-from tests.fresh import fresh_python
+from tests.fresh import ROOT, fresh_python
 
 
 def test_existing_output_needs_force(tmp_path: Path) -> None:
@@ -96,15 +96,137 @@ def test_outputs_honour_the_umask(tmp_path: Path) -> None:
     assert stat.S_IMODE((tmp_path / "dir" / "a").stat().st_mode) == 0o644
 
 
-def test_temporary_files_of_a_killed_process_are_swept(tmp_path: Path) -> None:
+def _dead_pid() -> int:
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
-    pid = int(dead.stdout)
-    stale = tmp_path / f".net.sqlite.{pid}.abcd.tmp"
+    return int(dead.stdout)
+
+
+def test_temporary_files_of_a_killed_process_are_swept(tmp_path: Path) -> None:
+    pid = _dead_pid()
+    stale = tmp_path / f".net.sqlite.{TEMP_TAG}.{pid}.0123456789abcdef"
     stale.write_bytes(b"half a DB")
-    live = tmp_path / f".net.sqlite.{os.getppid()}.efgh.tmp"  # a live process's: kept
+    journal = tmp_path / f".net.sqlite.{TEMP_TAG}.{pid}.fedcba9876543210-journal"  # SQLite's, beside a temp DB
+    journal.write_bytes(b"journal")
+    live = tmp_path / f".net.sqlite.{TEMP_TAG}.{os.getppid()}.0123456789abcdef"  # a live process's: kept
     live.write_bytes(b"in progress")
     write_text(tmp_path / "net.sqlite", "x")
-    assert not stale.exists() and live.exists()
+    assert not stale.exists() and not journal.exists() and live.exists()
+
+
+def test_temporaries_carry_the_signature(tmp_path: Path) -> None:
+    seen: list[str] = []
+    with atomic_file(tmp_path / "net.sqlite") as tmp:
+        seen.append(tmp.name)
+    with atomic_folder(tmp_path / "out") as tmp:
+        seen.append(tmp.name)
+    assert [TEMP_RE.match(n) is not None for n in seen] == [True, True]
+    assert [m.group("name") for m in map(TEMP_RE.match, seen) if m] == ["net.sqlite", "out"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["net.sqlite", "out"]
+
+
+def test_the_sweep_keeps_user_files_that_look_like_temporaries(tiny_sources: Path, tmp_path: Path) -> None:
+    """Issue 32.2: a hidden backup beside the DB, a notes folder beside the output folder —
+    named like the old temporaries (``.NAME.<number>.…``) — survive ``--force`` writes."""
+    runner = CliRunner()
+    db = tmp_path / "net.sqlite"
+    backups = [tmp_path / ".net.sqlite.20261205.bak", tmp_path / f".net.sqlite.{_dead_pid()}.x.tmp"]
+    for b in backups:
+        b.write_text("my backup")
+    for _ in range(2):
+        res = runner.invoke(app, ["db", "build", str(tiny_sources), "--out", str(db), "--force"])
+        assert res.exit_code == 0, res.output
+    assert all(b.read_text() == "my backup" for b in backups)
+    out = tmp_path / "out-sim"
+    notes = [tmp_path / ".out-sim.2026.notes", tmp_path / ".out-sim.20261205.notes"]
+    for n in notes:
+        n.mkdir()
+        (n / "todo.txt").write_text("notes")
+    for _ in range(2):
+        with atomic_folder(out, force=True) as tmp:
+            (tmp / "summary.json").write_text("{}")
+    assert all((n / "todo.txt").read_text() == "notes" for n in notes)
+
+
+def test_run_out_force_keeps_a_notes_folder_beside_the_output(sample_db: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out-sim"
+    notes = tmp_path / ".out-sim.20261205.notes"
+    notes.mkdir()
+    (notes / "todo.txt").write_text("notes")
+    args = ["run", "fieldlogs/sample_logs/sim-d-slips", "--db", str(sample_db), "--out", str(out), "--force"]
+    for _ in range(2):
+        res = CliRunner().invoke(app, args)
+        assert res.exit_code == 0, res.output
+    assert (notes / "todo.txt").read_text() == "notes"
+
+
+_KILLED_REPLACE = """
+import os, sys
+from pathlib import Path
+import dbtools.atomic as atomic
+
+target = Path(sys.argv[1])
+real = os.replace
+
+def replace(src, dst):
+    if Path(dst) == target:  # the old copy is aside, the new one not yet in place: killed
+        os._exit(9)
+    real(src, dst)
+
+atomic.os.replace = replace
+with atomic.atomic_folder(target, force=True) as tmp:
+    (tmp / "result.txt").write_text("new")
+"""
+
+
+def test_a_folder_replace_killed_between_its_renames_keeps_the_old_copy(tmp_path: Path) -> None:
+    """Issue 32.2: killed between the two renames of a --force replace, the output is
+    missing; the old copy is kept aside and the next write to it puts it back."""
+    out = tmp_path / "out"
+    with atomic_folder(out) as tmp:
+        (tmp / "result.txt").write_text("old")
+    proc = subprocess.run([sys.executable, "-c", _KILLED_REPLACE, str(out)], cwd=ROOT, capture_output=True, text=True)
+    assert proc.returncode == 9, proc.stderr
+    assert not out.exists()
+    aside = [p for p in tmp_path.iterdir() if (p / "result.txt").is_file() and (p / "result.txt").read_text() == "old"]
+    assert len(aside) == 1  # recoverable by hand meanwhile
+    with pytest.raises(RefusedError, match="output exists; use --force"), atomic_folder(out) as tmp:
+        (tmp / "result.txt").write_text("newer")
+    assert (out / "result.txt").read_text() == "old" and (out / MARKER).is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # the killed write's new copy is swept
+    with atomic_folder(out, force=True) as tmp:
+        (tmp / "result.txt").write_text("newer")
+    assert (out / "result.txt").read_text() == "newer"
+
+
+def test_a_failed_second_rename_puts_the_old_copy_back(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import dbtools.atomic as atomic
+
+    out = tmp_path / "out"
+    with atomic_folder(out) as tmp:
+        (tmp / "result.txt").write_text("old")
+    real = os.replace
+
+    def replace(src: object, dst: object) -> None:
+        if Path(str(dst)) == out:
+            raise OSError(5, "Input/output error")
+        real(src, dst)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(atomic.os, "replace", replace)
+    with pytest.raises(OSError, match="Input/output"), atomic_folder(out, force=True) as tmp:
+        (tmp / "result.txt").write_text("new")
+    assert (out / "result.txt").read_text() == "old" and sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_an_old_copy_left_after_a_finished_replace_is_swept(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    with atomic_folder(out) as tmp:
+        (tmp / "result.txt").write_text("new")
+    old = tmp_path / f".out.{OLD_TAG}.{_dead_pid()}.0123456789abcdef"
+    old.mkdir()
+    (old / "result.txt").write_text("old")
+    with atomic_folder(out, force=True) as tmp:
+        (tmp / "result.txt").write_text("newer")
+    assert not old.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
 # ------------------------------------------------------------------------------ commands
@@ -178,3 +300,50 @@ def test_environment_errors_exit_2_with_a_clear_line(exc: OSError, expected: str
     res = CliRunner().invoke(mini, [])
     assert res.exit_code == 2
     assert expected in res.output and "internal error" not in res.output
+
+
+def _registry(folder: Path) -> Path:
+    """A release registry folder with one released file (what makes it one: its registry file)."""
+    folder.mkdir()
+    (folder / REGISTRY_FILE).write_bytes(b"")
+    (folder / "2026.11.sqlite").write_bytes(b"released")
+    return folder
+
+
+def test_audit_never_writes_into_a_registry(sample_db: Path, tmp_path: Path) -> None:
+    """Issue 32.4: ``audit --out`` (an output resumed in place, not replaced) passes the same
+    registry check as every other output: exit 3, nothing written, before any run is read."""
+    reg = _registry(tmp_path / "releases")
+    link = tmp_path / "link"
+    link.symlink_to(reg)
+    runner = CliRunner()
+    for out in (reg / "audit.sqlite", reg / "sub" / "audit.sqlite", link / "audit.sqlite", reg):
+        args = ["audit", "fieldlogs/sample_logs/sim-d-slips", "--db", str(sample_db), "--out", str(out)]
+        res = runner.invoke(app, args)
+        assert res.exit_code == 3, res.output
+        assert "release registry" in res.output and "never written into" in res.output
+    assert sorted(p.name for p in reg.iterdir()) == ["2026.11.sqlite", REGISTRY_FILE]
+
+
+def test_other_outputs_never_go_into_a_registry(sample_db: Path, tmp_path: Path) -> None:
+    """Issue 32.4: the same refusal (exit 3) for the other commands' --out: a report, the demo
+    folder, a run's output folder, a grid."""
+    from fieldlogs.audit.store import open_audit
+
+    reg = _registry(tmp_path / "releases")
+    audit_db = tmp_path / "audit.sqlite"
+    with open_audit(audit_db):
+        pass
+    runner = CliRunner()
+    commands = [
+        ["report", str(audit_db), "--format", "html", "--out", str(reg / "report.html")],
+        ["demo", "--out", str(reg / "demo")],
+        ["demo", "--out", str(reg)],
+        ["run", "fieldlogs/sample_logs/sim-d-slips", "--db", str(sample_db), "--out", str(reg / "run")],
+        ["db", "export", str(sample_db), "--format", "geojson", "--out", str(reg / "net.geojson")],
+    ]
+    for args in commands:
+        res = runner.invoke(app, args)
+        assert res.exit_code == 3, (args, res.output)
+        assert "release registry" in res.output, res.output
+    assert sorted(p.name for p in reg.iterdir()) == ["2026.11.sqlite", REGISTRY_FILE]
