@@ -47,6 +47,7 @@ from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
 from fieldlogs.pipeline.wheelscale import scaled_cycles, wheel_corrected
 from fieldlogs.quality.clocks import ClockOffset, clock_offsets
+from fieldlogs.quality.dbfit import require_db_fit
 from fieldlogs.quality.limits import masked
 from fieldlogs.quality.tacho import cumulative_again
 from fieldlogs.quality.usability import Purpose, require_usable
@@ -204,6 +205,7 @@ def prepare_run(
     it (:meth:`Run.release`: the memory of a long run is then its cycles, not its samples)."""
     keep_imu = run.loaded("imu")
     require_usable(run, Purpose.POSITIONING)  # never a "determined" km the run cannot support
+    require_db_fit(run, network)  # nor one on another network's DB
     assert run.meta is not None
     pre: list[Event] = []
     streams = clean_streams(run, pre)

@@ -107,6 +107,17 @@ class DbRefs:
         )
 
 
+def area_box(db: DbRefs, margin_m: float) -> list[float] | None:
+    """The DB's GIS bounding box widened by ``margin_m``: [lat_min, lat_max, lon_min, lon_max]
+    (None for a DB without GIS)."""
+    if db.bbox is None:
+        return None
+    lat0, lat1, lon0, lon1 = db.bbox
+    dlat = margin_m / M_PER_DEG_LAT
+    dlon = margin_m / (M_PER_DEG_LAT * max(np.cos(np.radians(0.5 * (lat0 + lat1))), 0.1))
+    return [lat0 - dlat, lat1 + dlat, lon0 - dlon, lon1 + dlon]
+
+
 def load_db_refs(path: Path) -> DbRefs:
     """Read an onboard DB (InputError when it is not one)."""
     return DbRefs.from_network(read_network(Path(path)))
@@ -354,12 +365,9 @@ def _check_imu(out: _Out, frame: pd.DataFrame, limits: CheckLimits) -> None:
 
 
 def _check_gps(out: _Out, frame: pd.DataFrame, db: DbRefs, limits: CheckLimits) -> None:
-    if db.bbox is None:
+    box = area_box(db, limits.area_margin_m)
+    if box is None:
         return
-    lat0, lat1, lon0, lon1 = db.bbox
-    dlat = limits.area_margin_m / M_PER_DEG_LAT
-    dlon = limits.area_margin_m / (M_PER_DEG_LAT * max(np.cos(np.radians(0.5 * (lat0 + lat1))), 0.1))
-    box = [lat0 - dlat, lat1 + dlat, lon0 - dlon, lon1 + dlon]
     lat = frame["lat"].to_numpy(dtype=float, na_value=np.nan)
     lon = frame["lon"].to_numpy(dtype=float, na_value=np.nan)
     fix = frame["fix"].to_numpy(dtype=float, na_value=0.0)
