@@ -26,7 +26,7 @@ from cli.errors import cli_command
 from cli.options import NO_VERIFY_HASH, workers_option
 from cli.render import console, key_value_table, print_findings, print_json, rich_table, safe
 from schemas.errors import UsageError
-from schemas.findings import Finding, findings_report, has_errors
+from schemas.findings import Finding, count_by_severity, findings_report, has_errors
 from schemas.registry import DB_VERSION_RULE
 
 if TYPE_CHECKING:
@@ -59,14 +59,27 @@ def build(
     version: str | None = typer.Option(None, "--version", help=f"DB version: {DB_VERSION_RULE} (default: UTC time)."),
     note: str = typer.Option("", "--note", help="Release note: who and why."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
+    strict: bool = typer.Option(
+        False, "--strict", help="Refuse to write a DB that fails the validation rules (exit 1, nothing written)."
+    ),
+    no_validate: bool = typer.Option(
+        False, "--no-validate", help="Skip the validation rules (only the sources' own checks run)."
+    ),
 ) -> None:
-    """Build an onboard DB version from a source set.
+    """Build an onboard DB version from a source set, and validate it.
+
+    Errors in the source files stop the build (exit 1). Then the rules of `db validate` run on the
+    content: their summary is printed; the DB is written anyway (exit 0) unless --strict.
 
     Example: trainpos db build network/ --out net-2026.11.sqlite --version 2026.11 --note "new curve table"
     """
     from dbtools.build import build_db
 
-    result = build_db(source_dir, out, db_version=version, note=note, force=force)
+    if strict and no_validate:
+        raise UsageError("--strict needs the validation rules: drop --no-validate")
+    result = build_db(
+        source_dir, out, db_version=version, note=note, force=force, validate=not no_validate, strict=strict
+    )
     out_c = console()
     if result.warnings:
         print_findings(result.warnings, console=out_c, title="Source warnings")
@@ -82,6 +95,11 @@ def build(
             title="Built",
         )
     )
+    if result.validation is not None:
+        counts = count_by_severity(result.validation)
+        verdict = "valid" if not result.validation else f"{counts['error']} error(s), {counts['warning']} warning(s)"
+        hint = f" — see them with: trainpos db validate {safe(result.path)}" if result.validation else ""
+        out_c.print(f"validation: {verdict}{hint}")
 
 
 @app.command("validate")

@@ -13,6 +13,7 @@ from dbtools.database import write_db
 from dbtools.gis.index import network_georef
 from dbtools.network import content_hash
 from dbtools.sources import read_source_set
+from dbtools.validate import validate_network
 from schemas.enums import Severity
 from schemas.errors import FindingsError, RefusedError, UsageError
 from schemas.findings import Finding
@@ -34,6 +35,9 @@ class BuildResult:
     content_hash: str
     rows: dict[str, int]
     warnings: list[Finding]
+    """What reading the source set found (no error: those stop the build)."""
+    validation: list[Finding] | None = None
+    """The domain rules of ``db validate`` on the content written (None: not run)."""
 
 
 def build_db(
@@ -44,10 +48,14 @@ def build_db(
     note: str = "",
     force: bool = False,
     now: datetime | None = None,
+    validate: bool = False,
+    strict: bool = False,
 ) -> BuildResult:
     """Read, check and write. Nothing is written when a source has an error or
     ``db_version`` is no valid DB version (:data:`schemas.registry.DB_VERSION_PATTERN`:
-    UsageError)."""
+    UsageError). ``validate``: also run the domain rules of ``db validate`` (the DB would
+    fail them: the result carries them); ``strict``: their errors stop the build too
+    (FindingsError, nothing written)."""
     problem = db_version_problem(db_version) if db_version is not None else None
     if problem is not None:
         raise UsageError(f"version '{db_version}' {problem}: a DB version is {DB_VERSION_RULE}")
@@ -60,6 +68,10 @@ def build_db(
     errors = [f for f in findings if f.severity == Severity.ERROR]
     if errors:
         raise FindingsError(f"{len(errors)} error(s) in the source set; nothing was written", findings, path=source_dir)
+    validation = validate_network(network, schema_checks=False) if validate or strict else None
+    if strict and validation and any(f.severity == Severity.ERROR for f in validation):
+        n = sum(f.severity == Severity.ERROR for f in validation)
+        raise FindingsError(f"{n} validation error(s) (--strict); nothing was written", validation, path=source_dir)
     created = (now or datetime.now(UTC)).astimezone(UTC)
     version_str = db_version or created.strftime("%Y%m%d.%H%M%S")
     digest = content_hash(network.tables)
@@ -75,4 +87,4 @@ def build_db(
         **(georef.to_meta() if georef is not None else {}),
     }
     write_db(out, network, meta, force=force, inputs=[source_dir])
-    return BuildResult(out, version_str, digest, {k: len(v) for k, v in network.tables.items()}, findings)
+    return BuildResult(out, version_str, digest, {k: len(v) for k, v in network.tables.items()}, findings, validation)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import sqlite3
 from pathlib import Path
 
@@ -163,3 +164,22 @@ def test_diff_source_set_with_errors_exits_1(runner: CliRunner, dbs: dict[str, P
     result = _run(runner, ["db", "diff", str(src), str(dbs["v1"])])
     assert result.exit_code == 1
     assert result.stderr.splitlines()[-1] == f"error: {src}: 1 error(s) in the source set; cannot diff it"
+
+
+def test_build_says_when_the_db_would_fail_validation(tmp_path: Path) -> None:
+    """Issue 32 item 14: `db build` wrote a DB that fails `db validate` without a word. It now
+    prints the validation summary (exit 0, DB written), and --strict refuses (exit 1, nothing)."""
+    src = tmp_path / "src"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "data" / "tiny_sources", src)
+    text = (src / "balises.csv").read_text().replace("B002,I2,0420,01,D,,10,10,", "B002,I2,0420,01,D,,13,13,")
+    (src / "balises.csv").write_text(text)  # I1–I2 8 m apart: balise.pair_spacing
+    runner = CliRunner()
+    r = _run(runner, ["db", "build", str(src), "--out", str(tmp_path / "a.sqlite")])
+    assert r.exit_code == 0, r.output
+    assert "validation: 1 error(s)" in r.stdout and "trainpos db validate" in r.stdout
+    assert (tmp_path / "a.sqlite").exists()
+    r = _run(runner, ["db", "build", str(src), "--out", str(tmp_path / "b.sqlite"), "--strict"])
+    assert r.exit_code == 1 and "balise.pair_spacing" in r.output
+    assert not (tmp_path / "b.sqlite").exists()
+    r = _run(runner, ["db", "build", str(src), "--out", str(tmp_path / "c.sqlite"), "--no-validate"])
+    assert r.exit_code == 0 and "validation:" not in r.stdout
