@@ -103,17 +103,6 @@ class Projector:
             return cls(code - EPSG_JGD2011_GEOGRAPHIC)
         return cls(0, int(code))
 
-    @classmethod
-    def for_points(cls, lat: npt.ArrayLike, lon: npt.ArrayLike) -> Projector:
-        """The projection of a set of points by the one policy of
-        :func:`dbtools.gis.georef.derive` (a JGD2011 zone in Japan, UTM elsewhere)."""
-        from dbtools.gis.georef import derive
-
-        g = derive(lat, lon)
-        if g is None:
-            raise ValueError("no finite point to choose a projection for")
-        return cls.from_epsg(g.crs_epsg)
-
     @property
     def epsg(self) -> int:
         return zone_epsg(self.zone) if self.zone else self.epsg_code

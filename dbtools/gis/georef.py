@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from dbtools.gis.geometry import GEOD, zone_epsg, zone_for
+from dbtools.gis.geometry import GEOD, Projector, zone_epsg, zone_for
 from schemas.errors import InputError
 from schemas.tables import JAPAN_AREA
 
@@ -203,6 +203,15 @@ def derive(lat: npt.ArrayLike, lon: npt.ArrayLike) -> Georef | None:
     near = np.asarray(dist) <= DERIVED_RADIUS_M
     area = Area.box(la[ok][near].min(), la[ok][near].max(), lo[ok][near].min(), lo[ok][near].max())
     return Georef(area, utm_epsg(*mid))
+
+
+def projector_for_points(lat: npt.ArrayLike, lon: npt.ArrayLike) -> Projector:
+    """The projection of a set of points by the one policy of :func:`derive` (a JGD2011
+    zone in Japan, UTM elsewhere); ValueError without a finite point."""
+    g = derive(lat, lon)
+    if g is None:
+        raise ValueError("no finite point to choose a projection for")
+    return Projector.from_epsg(g.crs_epsg)
 
 
 def _crs_of(value: object, where: str, path: Path | None) -> int:

@@ -37,6 +37,7 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import least_squares
 
 from dbtools.gis.geometry import Projector
+from dbtools.gis.georef import projector_for_points
 from dbtools.synthetic.alignment import Alignment, Curve
 
 FloatArray = npt.NDArray[np.float64]
@@ -215,7 +216,7 @@ def fit_alignment(lon: npt.ArrayLike, lat: npt.ArrayLike, settings: FitSettings 
     """Fit an alignment to a polyline given as lon/lat vertices (see the module docstring)."""
     settings = settings or FitSettings()
     lon_a, lat_a = np.asarray(lon, dtype=float), np.asarray(lat, dtype=float)
-    projector = Projector.for_points(lat_a, lon_a)
+    projector = projector_for_points(lat_a, lon_a)
     x, y = projector.to_xy(lon_a, lat_a)
     s, hs, kappa = smoothed_heading(x, y, settings)
     candidates = find_curves(s, hs, kappa, settings)

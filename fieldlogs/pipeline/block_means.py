@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from fieldlogs.pipeline.cycles import FloatArray, cycle_index, means_into, segments
+from fieldlogs.pipeline.cycle_grid import FloatArray, cycle_index, means_into, segments
 
 IntArray = npt.NDArray[np.intp]
 #: Samples per block when a stream in memory is consumed block by block (≈ 11 min at 100 Hz:

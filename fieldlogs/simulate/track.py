@@ -28,7 +28,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.interpolate import CubicSpline
 
-from dbtools.gis.geometry import Projector, geodesic_step
+from dbtools.gis.geometry import geodesic_step
+from dbtools.gis.georef import projector_for_points
 from dbtools.network import Network
 from schemas.enums import Track
 from schemas.tables import GIS_SPACING_M
@@ -92,7 +93,7 @@ class TrackGeometry:
     ) -> None:
         self.line_code, self.track = line_code, track
         self.km = km
-        self.projector = Projector.for_points(lat, lon)
+        self.projector = projector_for_points(lat, lon)
         x, y = self.projector.to_xy(lon, lat)
         self._x0, self._y0 = float(x[0]), float(y[0])  # local origin keeps the splines well scaled
         self._sx = CubicSpline(km, x - self._x0)

@@ -13,6 +13,7 @@ from cli.main import app
 from dbtools.atomic import MARKER
 from dbtools.build import build_db
 from dbtools.gis.geometry import PolylineIndex, Projector
+from dbtools.gis.georef import projector_for_points
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.io import read_run
@@ -199,7 +200,7 @@ def test_make_sample_runs(demo_db: Path, tmp_path: Path) -> None:
     gps = rr.stream("gps")
     g = build_network([demo_line()], Projector(9)).gis
     g = g[g["track"] == "D"]
-    proj = Projector.for_points(g["lat"], g["lon"])
+    proj = projector_for_points(g["lat"], g["lon"])
     index = PolylineIndex(*proj.to_xy(g["lon"], g["lat"]), g["km_m"])
     off = index.project(*proj.to_xy(gps["lon"].iloc[:50], gps["lat"].iloc[:50])).offset_m
     assert np.abs(np.median(off)) == pytest.approx(8.0, abs=4.0)

@@ -19,6 +19,7 @@ import pytest
 from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.geometry import PolylineIndex, Projector
+from dbtools.gis.georef import projector_for_points
 from dbtools.network import Network
 from dbtools.sources import write_source_set
 from dbtools.synthetic.alignment import Alignment, Curve
@@ -334,7 +335,7 @@ def test_gps_on_the_gis_track_and_outage(straight: Network) -> None:
     assert meta["sim_truth"]["gps_outages_s"][0][0] == pytest.approx(gps.loc[inside, "t"].min())
     # noise off: every fix lies on the DB's GIS polyline of track D at the true km
     g = straight.gis[straight.gis["track"] == "D"].sort_values("km_m")
-    proj = Projector.for_points(g["lat"], g["lon"])
+    proj = projector_for_points(g["lat"], g["lon"])
     idx = PolylineIndex(*proj.to_xy(g["lon"], g["lat"]), g["km_m"])
     ok = gps["fix"] > 0
     x, y = proj.to_xy(gps.loc[ok, "lon"], gps.loc[ok, "lat"])
