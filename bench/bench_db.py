@@ -8,7 +8,9 @@ Run on demand (never part of the test suite; prints numbers, never pass/fail)::
     .venv/bin/python bench/bench_db.py --workdir /tmp/tp-bench --keep --naive-fraction 0 --rounds 5
 
 Targets (SPEC / brief): 1,000,000 GIS points, ~50,000 balises, ~10,000 features;
-``db build`` ≤ 10 s and ``db validate`` ≤ 15 s on one core, peak memory ≤ 4 GB.
+``db build`` ≤ 10 s and ``db validate`` ≤ 15 s on one core, peak memory ≤ 4 GB. Also
+``db info`` (with and without the content check) and ``db show gis --limit 10`` (issue 33:
+``COUNT(*)`` and ``LIMIT``ed reads only, fast whatever the size).
 
 The network: ``--lines`` lines on a square grid of 15 km cells around the origin of
 JGD2011 zone 9 (each line is a :func:`~dbtools.synthetic.network.random_alignment` starting near its
@@ -52,7 +54,9 @@ import pyarrow as pa
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from dbtools.browse import select_rows
 from dbtools.build import build_db
+from dbtools.db_info import db_info
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical, content_hash, empty_frame
 from dbtools.sources import write_source_set
@@ -500,6 +504,13 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"db validate (src)   {t_validate_src:7.2f} s wall {c_validate_src:7.2f} s CPU"
             f"  {len(src_findings)} findings"
+        )
+        (t_info, c_info), _ = timed(lambda: db_info(db))
+        (_, c_quick), _ = timed(lambda: db_info(db, verify=False))
+        (_, c_show), _ = timed(lambda: select_rows(db, "gis", None, 10))
+        print(
+            f"db info             {t_info:7.2f} s wall {c_info:7.2f} s CPU  (--quick {c_quick:.3f} s CPU;"
+            f" db show gis --limit 10 {c_show:.3f} s CPU; in process, no start-up)"
         )
         print(f"peak RSS            {peak_rss_mb():7.0f} MB (after build {rss_build:.0f} MB; target ≤ 4096 MB)")
         compare_read_build(src, db, work, c_build, args.rounds)

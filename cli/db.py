@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from cli.db_impact import _impact_attachment, impact
+from cli.db_inspect import info, show
 from cli.errors import cli_command
 from cli.options import NO_VERIFY_HASH, workers_option
 from cli.render import console, key_value_table, print_findings, print_json, rich_table, safe
@@ -422,4 +423,6 @@ def review(
         raise typer.Exit(1)
 
 
+app.command("info")(info)
+app.command("show")(show)
 app.command("impact")(impact)  # last in the group's help, as before

@@ -188,12 +188,13 @@ class FrameView:
     """A pandas DataFrame for the terminal: a table when it fits the console's width (no
     number split across lines, text wraps at spaces), else one block per row (``column=value``
     pairs, wrapped between pairs) so that no column is squeezed out of sight at 80
-    columns. Rendered by Rich (``console.print(view)``) at the width it is printed at."""
+    columns. Rendered by Rich (``console.print(view)``) at the width it is printed at.
+    Built by :func:`frame_table` (a DataFrame) or :func:`rows_table` (rows of text)."""
 
-    def __init__(self, frame: Any, title: str | None, max_rows: int) -> None:
+    def __init__(self, names: Sequence[str], rows: Sequence[Sequence[str]], title: str | None) -> None:
         self.title = title
-        self.names = [str(c) for c in frame.columns]
-        self.rows = [[_cell(v) for v in row] for row in frame.head(max_rows).itertuples(index=False, name=None)]
+        self.names = list(names)
+        self.rows = [list(r) for r in rows]
         self.numeric = [all(_NUMBER.fullmatch(r[k]) for r in self.rows if r[k]) for k in range(len(self.names))]
 
     def table(self) -> Table:
@@ -239,7 +240,13 @@ class FrameView:
 def frame_table(frame: Any, title: str | None = None, max_rows: int = 200) -> FrameView:
     """A pandas DataFrame as a Rich renderable (:class:`FrameView`): a table, or one block
     per row when the table cannot fit the terminal."""
-    return FrameView(frame, title, max_rows)
+    rows = [[_cell(v) for v in row] for row in frame.head(max_rows).itertuples(index=False, name=None)]
+    return FrameView([str(c) for c in frame.columns], rows, title)
+
+
+def rows_table(names: Sequence[str], rows: Sequence[Sequence[str]], title: str | None = None) -> FrameView:
+    """Rows of text cells (as they are to be shown) as a :class:`FrameView`, no pandas needed."""
+    return FrameView(names, rows, title)
 
 
 _NUMBER = re.compile(r"[-+]?(\d[\d,]*(\.\d*)?|\.\d+)([eE][-+]?\d+)?( ?%| ?[a-zA-Z/²]{1,5})?|—|nan|inf|-inf")

@@ -15,6 +15,7 @@ import sqlite_utils
 
 from dbtools.atomic import refuse_registry
 from dbtools.database import SQLITE_MAGIC, create_tables
+from dbtools.sqlite_file import ro_uri
 from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION, AUDIT_TABLES, AUDIT_VIEWS, ROUTE_SUMMARY
 from schemas.errors import InputError
 from schemas.model import Table
@@ -66,7 +67,7 @@ def _enum_checks(conn: sqlite3.Connection, tables: tuple[Table, ...]) -> None:
 def _audit_probe(path: Path) -> tuple[int, int]:
     """(application_id, number of schema objects) as SQLite sees them, write-ahead log included."""
     try:
-        with contextlib.closing(sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)) as conn:
+        with contextlib.closing(sqlite3.connect(ro_uri(path), uri=True)) as conn:
             app_id = int(conn.execute("PRAGMA application_id").fetchone()[0])
             return app_id, int(conn.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()[0])
     except sqlite3.DatabaseError as exc:
@@ -129,7 +130,7 @@ def _connect_audit(path: Path, *, create: bool, is_audit: bool) -> sqlite3.Conne
     if create:
         path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        conn = sqlite3.connect(path) if create else sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)
+        conn = sqlite3.connect(path) if create else sqlite3.connect(ro_uri(path), uri=True)
     except sqlite3.Error as exc:
         raise InputError(f"cannot open audit database: {exc}", path=path) from exc
     try:

@@ -3,7 +3,8 @@ together the only modules that talk to SQLite).
 
 Onboard DB writes are atomic (temp file in the target folder, then ``os.replace``) and
 never touch an existing file unless asked to. Reads open the file read-only so that
-validating or diffing a released DB cannot modify it. Every table is created from its
+validating or diffing a released DB cannot modify it (:mod:`dbtools.sqlite_file`, light: the
+read-only connection of ``db info`` and ``db show`` too). Every table is created from its
 declaration in ``schemas/`` (:func:`create_tables`). Whole content tables are read as Arrow
 columns by :mod:`dbtools.sqlite_columns`.
 """
@@ -24,6 +25,9 @@ from dbtools.atomic import atomic_file, sweep_stale, temp_sibling
 from dbtools.integrity import check_content_hash
 from dbtools.network import Network, canonical, empty_frame, network_content_hash
 from dbtools.sqlite_columns import insert_tables, read_table_columns
+from dbtools.sqlite_file import SQLITE_MAGIC as SQLITE_MAGIC
+from dbtools.sqlite_file import check_sqlite_file as check_sqlite_file
+from dbtools.sqlite_file import connect_ro, ro_uri
 from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
@@ -41,9 +45,6 @@ from schemas.tables import (
 
 if TYPE_CHECKING:
     import sqlite_utils
-
-SQLITE_MAGIC = b"SQLite format 3\x00"
-
 
 _PY_TYPES: dict[str, type] = {"str": str, "int": int, "float": float, "bool": int, "bytes": bytes}
 
@@ -151,43 +152,6 @@ def write_sqlite(
                     conn.executemany(sql, rows) if rows is not None else conn.execute(sql)
         finally:
             conn.close()
-
-
-def check_sqlite_file(path: Path) -> None:
-    """Raise InputError unless ``path`` is an existing SQLite file with our application id."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError("no such file", path=path)
-    if path.is_dir():
-        raise InputError("is a folder, expected an onboard DB file (.sqlite)", path=path)
-    with open(path, "rb") as fh:
-        head = fh.read(100)
-    if not head.startswith(SQLITE_MAGIC):
-        raise InputError("not an SQLite database (bad header)", path=path)
-    if len(head) < 100:
-        raise InputError("truncated SQLite file", path=path)
-    app_id = int.from_bytes(head[68:72], "big")
-    if app_id != APPLICATION_ID:
-        raise InputError(
-            f"not a trainpos onboard DB (application_id {app_id:#x}, expected {APPLICATION_ID:#x})", path=path
-        )
-
-
-@contextlib.contextmanager
-def connect_ro(path: Path) -> Iterator[sqlite3.Connection]:
-    """Read-only connection (URI mode=ro, immutable to SQLite's locking)."""
-    check_sqlite_file(path)
-    uri = f"file:{Path(path).resolve()}?mode=ro"
-    try:
-        conn = sqlite3.connect(uri, uri=True)
-    except sqlite3.Error as exc:
-        raise InputError(f"cannot open database: {exc}", path=path) from exc
-    try:
-        yield conn
-    except sqlite3.DatabaseError as exc:
-        raise InputError(f"database is corrupt or unreadable: {exc}", path=path) from exc
-    finally:
-        conn.close()
 
 
 def snapshot_db(src: Path, dst: Path) -> None:
@@ -482,7 +446,7 @@ def _registry_ro(path: Path) -> Iterator[sqlite3.Connection]:
     """A read-only connection to a checked registry; InputError when it cannot be read."""
     _check_registry_file(path)
     try:
-        conn = sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)
+        conn = sqlite3.connect(ro_uri(path), uri=True)
     except sqlite3.Error as exc:
         raise InputError(f"cannot open release registry: {exc}", path=path) from exc
     try:

@@ -23,7 +23,7 @@ from schemas.enums import Severity, Track
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
-from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
+from schemas.tables import FEATURE_POINTS, LINES, SOURCE_HASH_PREFIX, SOURCE_TABLES
 
 
 def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
@@ -89,7 +89,7 @@ def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:
     declared = folder / NETWORK_FILE
     if declared.is_file():
         hashes[declared.name] = sha256_file(declared)
-    meta = {f"source_sha256:{k}": v for k, v in sorted(hashes.items())}
+    meta = {f"{SOURCE_HASH_PREFIX}{k}": v for k, v in sorted(hashes.items())}
     if declared.is_file():
         meta.update(read_declaration(declared))
     return meta

@@ -30,6 +30,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from dbtools.sqlite_file import ro_uri
 from schemas.frames import PANDAS_DTYPE
 from schemas.model import Column, Table
 
@@ -96,7 +97,7 @@ def read_table_columns(
         return {}
     out: dict[str, pd.DataFrame] = {}
     try:
-        with adbc.connect(f"file:{Path(path).resolve()}?mode=ro") as conn, conn.cursor() as cur:
+        with adbc.connect(ro_uri(path)) as conn, conn.cursor() as cur:
             for t in tables:
                 frame = _read_one(cur, t)
                 if frame is not None:

@@ -239,6 +239,11 @@ META = Table(
     primary_key=("key",),
 )
 
+#: Meta key prefix of the SHA-256 of each source file a DB was built from (``source_sha256:gis.csv``).
+SOURCE_HASH_PREFIX = "source_sha256:"
+#: Meta keys of the operating area, metric CRS and heights (``dbtools.gis.georef``).
+GEOREF_META_KEYS = ("area", "area_source", "metric_crs", "metric_crs_source", "height_datum", "geoid_model")
+
 #: Content tables in dependency order (lines first: the others reference it).
 DB_TABLES: tuple[Table, ...] = (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS, *NETWORK_TABLES)
 #: Tables a DB of schema version 1 does not have; read as empty, hashed only when not empty.

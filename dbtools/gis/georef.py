@@ -59,7 +59,7 @@ import numpy.typing as npt
 
 from dbtools.gis.geometry import GEOD, Projector, zone_epsg, zone_for
 from schemas.errors import InputError
-from schemas.tables import JAPAN_AREA
+from schemas.tables import GEOREF_META_KEYS, JAPAN_AREA
 
 F64 = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
@@ -67,7 +67,7 @@ BoolArray = npt.NDArray[np.bool_]
 #: File of a source set declaring area, CRS and heights.
 NETWORK_FILE = "network.toml"
 #: DB meta keys written by ``db build``.
-META_KEYS = ("area", "area_source", "metric_crs", "metric_crs_source", "height_datum", "geoid_model")
+META_KEYS = GEOREF_META_KEYS
 #: A point farther than this outside the operating area is an error [m] (module doc).
 AREA_TOLERANCE_M = 2000.0
 #: Derived areas outside Japan: points within this of the median point [m].
