@@ -254,6 +254,7 @@ def import_(
     for s in res.sources:
         skipped = sum(x["count"] for x in s["skipped"])
         rows.append((f"source {Path(s['file']).name}", f"{s['format']}, {s['records']} records, {skipped} skipped"))
+        rows += [("  note", note) for note in s.get("notes", [])]
         if "clock" in s:
             ck = s["clock"]
             rows.append(
