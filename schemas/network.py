@@ -36,11 +36,13 @@ LINE_CODE_OPTIONAL = Column(
 def _port(name: str, what: str, *, required: bool) -> tuple[Column, Column]:
     """The track and end columns of one switch port."""
     return (
-        Column(f"{name}_track", "str", f"Track at port {name.upper()}: {what}", required=required, nullable=not required),
+        Column(
+            f"{name}_track", "str", f"Track at port {name.upper()}: {what}", required=required, nullable=not required
+        ),
         Column(
             f"{name}_end",
             "str",
-            f"End of that track at the switch (begin/end)",
+            "End of that track at the switch (begin/end)",
             enum=ENDS,
             required=required,
             nullable=not required,
@@ -66,7 +68,12 @@ NETWORK_TRACKS = Table(
             required=False,
             nullable=True,
         ),
-        Column("kind", "str", "main, station, siding, crossover, connecting or yard", enum=tuple(k.value for k in TrackKind)),
+        Column(
+            "kind",
+            "str",
+            "main, station, siding, crossover, connecting or yard",
+            enum=tuple(k.value for k in TrackKind),
+        ),
         Column(
             "km_begin_m",
             "float",
@@ -87,6 +94,16 @@ NETWORK_TRACKS = Table(
         ),
         Column("length_m", "float", "Length along the centreline from begin to end", unit="m", min=0.0),
         Column("name", "str", "Name or description", required=False, nullable=True),
+        *(
+            Column(
+                f"{end}_buffer_stop",
+                "bool",
+                f"1: the track's {end} is a buffer stop (a dead end by design, not a gap in the data)",
+                required=False,
+                nullable=True,
+            )
+            for end in ENDS
+        ),
     ),
     primary_key=("track_id",),
     foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
@@ -180,9 +197,13 @@ SWITCHES = Table(
             max=400.0,
         ),
         LINE_CODE_OPTIONAL,
-        Column("km_m", "float", "Line km of the switch's toe", unit="m", required=False, nullable=True, km_notation=True),
+        Column(
+            "km_m", "float", "Line km of the switch's toe", unit="m", required=False, nullable=True, km_notation=True
+        ),
         Column("lat", "float", "Latitude of the toe", unit="deg", required=False, nullable=True, min=-90.0, max=90.0),
-        Column("lon", "float", "Longitude of the toe", unit="deg", required=False, nullable=True, min=-180.0, max=180.0),
+        Column(
+            "lon", "float", "Longitude of the toe", unit="deg", required=False, nullable=True, min=-180.0, max=180.0
+        ),
         Column("name", "str", "Name or local number", required=False, nullable=True),
     ),
     primary_key=("switch_id",),
