@@ -197,11 +197,8 @@ def build_tables(data: OsmData) -> tuple[dict[str, pd.DataFrame], dict[str, str]
     tracks, points = tracks_and_points(p, attrs, km, j.stops)
     balises, f_bal = balise_groups(data, p, tracks, km)
     switches = _switch_km(pd.DataFrame(j.switches, columns=SWITCHES.column_names), tracks, p, km)
-    no_km = [
-        int(data.ways[int(p.way_index[i])].way_id)
-        for i in range(len(p))
-        if not pd.isna(attrs["line_code"].iloc[i]) and i not in km.posts
-    ]
+    has_line = attrs["line_code"].notna().to_numpy()
+    no_km = [data.ways[int(p.way_index[i])].way_id for i in np.flatnonzero(has_line) if int(i) not in km.posts]
     f_km = (
         [
             _warn(

@@ -211,7 +211,7 @@ def km_model(p: Pieces, lines: list[str | None], nodes: dict[int, OsmNode]) -> K
         tree = shapely.STRtree(geoms[with_line])
         node_xy = {int(p.node[v]): (p.x[v], p.y[v]) for v in on}
         pts_id = [n for n in ids.tolist() if n in node_xy or n in nodes]
-        pts = shapely.points([node_xy.get(n, _xy_of(nodes[n], p.epsg)) for n in pts_id])
+        pts = shapely.points([node_xy[n] if n in node_xy else _xy_of(nodes[n], p.epsg) for n in pts_id])
         qi, ti = tree.query(pts, predicate="dwithin", distance=NEAR_M)
         piece = np.asarray(with_line)[ti]
         along = shapely.line_locate_point(geoms[piece], pts[qi])

@@ -54,12 +54,16 @@ class RailWay:
     lat: F64
     lon: F64
 
-    @property
-    def runs(self) -> list[tuple[int, int]]:
-        """``[start, stop)`` index ranges of consecutive located nodes with ≥ 2 nodes."""
+    runs: list[tuple[int, int]] = field(default_factory=list)
+    """``[start, stop)`` index ranges of consecutive located nodes with ≥ 2 nodes."""
+
+    def __post_init__(self) -> None:
         ok = np.isfinite(self.lat)
+        if ok.all():
+            self.runs = [(0, len(ok))] if len(ok) >= 2 else []
+            return
         edges = np.flatnonzero(np.diff(np.concatenate(([0], ok.astype(np.int8), [0]))))
-        return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= 2]
+        self.runs = [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= 2]
 
 
 @dataclass

@@ -98,14 +98,19 @@ def split_ways(data: OsmData) -> Pieces:
 
     cuts = _cuts(data)
     cut_arr = np.fromiter(cuts, dtype=np.int64, count=len(cuts))
+    sizes_all = np.array([len(w.nodes) for w in data.ways], dtype=np.int64)
+    offsets = np.concatenate(([0], np.cumsum(sizes_all)))
+    flat = np.concatenate([w.nodes for w in data.ways]) if data.ways else np.empty(0, np.int64)
+    is_cut = np.isin(flat, cut_arr)  # one look-up for all nodes of all ways
     tid: list[str] = []
     way_index: list[int] = []
     chunks: list[tuple[int, int, int]] = []  # (way index, first, last) inclusive node indices
     for wi, way in enumerate(data.ways):
         runs = way.runs
         parts: list[tuple[int, int]] = []
+        cut_here = is_cut[offsets[wi] : offsets[wi + 1]]
         for a, b in runs:
-            inner = np.flatnonzero(np.isin(way.nodes[a + 1 : b - 1], cut_arr)) + a + 1
+            inner = np.flatnonzero(cut_here[a + 1 : b - 1]) + a + 1
             bounds = [a, *inner.tolist(), b - 1]
             parts += list(itertools.pairwise(bounds))
         for k, (i, j) in enumerate(parts, start=1):

@@ -41,8 +41,16 @@ def vde(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.mark.parametrize(
     ("text", "metres"),
-    [("12.3", 12300.0), ("12,3", 12300.0), ("km 12.3", 12300.0), ("12.3 km", 12300.0), ("12+345", 12345.0),
-     ("-0.2", -200.0), ("0+050", 50.0), ("12.345", 12345.0)],
+    [
+        ("12.3", 12300.0),
+        ("12,3", 12300.0),
+        ("km 12.3", 12300.0),
+        ("12.3 km", 12300.0),
+        ("12+345", 12345.0),
+        ("-0.2", -200.0),
+        ("0+050", 50.0),
+        ("12.345", 12345.0),
+    ],
 )
 def test_positions_are_read_in_their_usual_forms(text: str, metres: float) -> None:
     assert parse_position(text) == pytest.approx(metres)
@@ -137,13 +145,20 @@ def test_vde_switches_are_all_accounted_for(vde: Path) -> None:
     import osmium
 
     switch_nodes = {
-        o.id for o in osmium.FileProcessor(str(VDE)) if isinstance(o, osmium.osm.Node) and o.tags.get("railway") == "switch"
+        o.id
+        for o in osmium.FileProcessor(str(VDE))
+        if isinstance(o, osmium.osm.Node) and o.tags.get("railway") == "switch"
     }
     assert len(switch_nodes) == 908
     sw = _read(vde, "switches")
     rows = {int(s[1:]) for s in sw["switch_id"]}
     report = json.loads((vde / "import_report.json").read_text())
-    named = {int(e.split("/")[1]) for f in report["findings"] for e in f["keys"].get("element", "").split(",") if e.startswith("node/")}
+    named = {
+        int(e.split("/")[1])
+        for f in report["findings"]
+        for e in f["keys"].get("element", "").split(",")
+        if e.startswith("node/")
+    }
     assert switch_nodes <= rows | named
     assert 780 <= len(sw) <= 908  # 799: the rest lie at the extract's edge (2 tracks) or join 4 tracks
     ports = sw[["a1_track", "a1_end"]].astype(str).agg(":".join, axis=1)
@@ -208,8 +223,10 @@ def test_refusals_and_errors(tmp_path: Path, junction: Path) -> None:
         import_osm(no_rail, tmp_path / "o1")
     assert err.value.exit_code == 1 and not (tmp_path / "o1").exists()
     cut = tmp_path / "cut.osm"
-    cut.write_text('<osm version="0.6"><node id="1" lat="51" lon="11"/><way id="7"><nd ref="1"/><nd ref="9"/>'
-                   '<tag k="railway" v="rail"/></way></osm>')
+    cut.write_text(
+        '<osm version="0.6"><node id="1" lat="51" lon="11"/><way id="7"><nd ref="1"/><nd ref="9"/>'
+        '<tag k="railway" v="rail"/></way></osm>'
+    )
     with pytest.raises(FindingsError) as err2:
         import_osm(cut, tmp_path / "o2")
     assert any(f.keys.get("element") == "way/7" for f in err2.value.findings)
