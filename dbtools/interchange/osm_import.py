@@ -193,7 +193,12 @@ def build_tables(data: OsmData) -> tuple[dict[str, pd.DataFrame], dict[str, str]
     attrs, f_attr = way_attributes(data, p)
     node_ll = {int(n): (float(a), float(o)) for n, a, o in zip(p.node, p.lat, p.lon, strict=True)}
     j = junctions(end_frame(p), p.track_id, data.nodes, node_ll)
-    km = km_model(p, [None if pd.isna(c) else str(c) for c in attrs["line_code"]], data.nodes)
+    index = {t: i for i, t in enumerate(p.track_id)}
+    links = {}
+    for (ta, ea), (tb, eb) in j.runs_on:
+        links[(index[ta], ea)] = (index[tb], eb)
+        links[(index[tb], eb)] = (index[ta], ea)
+    km = km_model(p, [None if pd.isna(c) else str(c) for c in attrs["line_code"]], data.nodes, links)
     tracks, points = tracks_and_points(p, attrs, km, j.stops)
     balises, f_bal = balise_groups(data, p, tracks, km)
     switches = _switch_km(pd.DataFrame(j.switches, columns=SWITCHES.column_names), tracks, p, km)

@@ -13,7 +13,13 @@ a double-track line, both tracks share its km. A post on no rail way counts on e
 with a line within :data:`NEAR_M`. Only tracks with a line get a km (a km names a line's
 kilometrage).
 
-**Interpolation** along a track with ≥ 2 usable posts, by its own distance: linear between
+**Chains.** The km runs on where the line runs straight on: the tracks of one line joined
+at plain joints and through switches from the toe to the through branch (the one not on the
+diverging side) form a *chain* (:func:`km_chains`), and the posts of all its tracks are
+fitted along the chain's length — a short track between two switches gets its km from the
+posts before and after it.
+
+**Interpolation** along a chain with ≥ 2 usable posts, by its own distance: linear between
 consecutive posts, beyond the first/last post continued 1 m of km per metre of track in the
 posts' direction. **Breaks**: posts are sorted by position; the direction of the km is the
 sign of the median step; the longest strictly monotone sequence of posts in that direction
@@ -38,6 +44,8 @@ from dbtools.interchange.osm_read import OsmNode
 from dbtools.interchange.osm_split import Pieces
 from schemas.enums import Severity
 from schemas.findings import Finding
+
+Link = dict[tuple[int, str], tuple[int, str]]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -171,8 +179,8 @@ def _fit(model: KmModel, piece: int, track: str, found: list[tuple[float, float,
     model.used |= {r[2] for r in kept}
 
 
-def km_model(p: Pieces, lines: list[str | None], nodes: dict[int, OsmNode]) -> KmModel:
-    """Usable posts of every track with a line (module doc)."""
+def km_model(p: Pieces, lines: list[str | None], nodes: dict[int, OsmNode], links: Link | None = None) -> KmModel:
+    """Usable posts of every track with a line (module doc); ``links``: see :func:`km_chains`."""
     import shapely
 
     model = KmModel()
@@ -221,9 +229,61 @@ def km_model(p: Pieces, lines: list[str | None], nodes: dict[int, OsmNode]) -> K
             nid = pts_id[q]
             if nid not in line_of_post or line_of_post[nid] == lines[k]:  # off-rail post, or one of this line
                 rows.setdefault(k, []).append((a, posts[nid], nid, o + 1e-3))
-    for k, r in rows.items():
-        _fit(model, k, p.track_id[k], r)
+    for chain in km_chains(len(p), lines, links or {}):
+        _fit_chain(model, p, chain, rows)
     return model
+
+
+def km_chains(n: int, lines: list[str | None], links: Link) -> list[list[tuple[int, bool]]]:
+    """Tracks of a line in running order: (piece, forward) lists, each track once; a link
+    joins two track ends where the line runs straight on (plain joints, switch toe ↔
+    through branch) and both tracks have that line. Tracks without a line are left out."""
+    ok = {a: b for a, b in links.items() if lines[a[0]] is not None and lines[a[0]] == lines[b[0]] and a[0] != b[0]}
+    visited: set[int] = set()
+    out: list[list[tuple[int, bool]]] = []
+    for k in range(n):
+        if k in visited or lines[k] is None:
+            continue
+        cur, fwd, seen = k, True, {k}
+        while (nxt := ok.get((cur, "begin" if fwd else "end"))) is not None and nxt[0] not in seen:
+            cur, fwd = nxt[0], nxt[1] == "end"
+            seen.add(cur)
+        chain: list[tuple[int, bool]] = []
+        while cur not in visited:
+            visited.add(cur)
+            chain.append((cur, fwd))
+            nxt = ok.get((cur, "end" if fwd else "begin"))
+            if nxt is None:
+                break
+            cur, fwd = nxt[0], nxt[1] == "begin"
+        out.append(chain)
+    return out
+
+
+def _fit_chain(
+    model: KmModel, p: Pieces, chain: list[tuple[int, bool]], rows: dict[int, list[tuple[float, float, int, float]]]
+) -> None:
+    """Fit the posts of a chain along its length; each track gets them in its own pos."""
+    length = p.length
+    offset = np.concatenate(([0.0], np.cumsum([length[k] for k, _ in chain])))
+    found = [
+        (offset[i] + (q if fwd else length[k] - q), km, nid, d)
+        for i, (k, fwd) in enumerate(chain)
+        for q, km, nid, d in rows.get(k, [])
+    ]
+    name = p.track_id[chain[0][0]] + (f" (with {len(chain) - 1} track(s) on)" if len(chain) > 1 else "")
+    fitted = KmModel()
+    _fit(fitted, 0, name, found)
+    model.findings += fitted.findings
+    model.used |= fitted.used
+    if 0 not in fitted.posts:
+        return
+    at, km, sign = fitted.posts[0]
+    for i, (k, fwd) in enumerate(chain):
+        if fwd:
+            model.posts[k] = (at - offset[i], km, sign)
+        else:
+            model.posts[k] = ((offset[i] + length[k] - at)[::-1], km[::-1], -sign)
 
 
 def _xy_of(node: OsmNode, epsg: int) -> tuple[float, float]:

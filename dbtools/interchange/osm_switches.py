@@ -62,6 +62,9 @@ class Junctions:
     guessed_sides: int = 0
     dead_ends: int = 0
     untagged: list[int] = field(default_factory=list)
+    runs_on: list[tuple[tuple[str, str], tuple[str, str]]] = field(default_factory=list)
+    """Track ends a line runs straight on through: plain joints and point switches' toe ↔
+    through branch (the branch that is not the diverging side), for the km chains."""
 
     def warn(self, rule: str, node: int, message: str, **keys: Any) -> None:
         self.findings.append(
@@ -137,6 +140,9 @@ def _point(j: Junctions, node: int, tags: dict[str, str], ends: list[End], lat: 
             "name": tags.get("ref") or tags.get("name"),
         }
     )
+    if side is not None:
+        through = right if side == "left" else left
+        j.runs_on.append(((toe[0], toe[1]), (through[0], through[1])))
     _connect(j, toe, left, BOTH, sid)
     _connect(j, toe, right, BOTH, sid)
     _connect(j, left, right, NONE, sid)
@@ -200,6 +206,7 @@ def _at_node(j: Junctions, node_id: int, node: OsmNode | None, ends: list[End], 
                 f"railway={node.kind} joins only two tracks (the rest is not in the file)",
             )
         _connect(j, ends[0], ends[1], BOTH, None)
+        j.runs_on.append(((ends[0][0], ends[0][1]), (ends[1][0], ends[1][1])))
     elif kind == SwitchType.POINT:
         if node is None or node.kind != "switch":
             j.untagged.append(node_id)
