@@ -203,20 +203,17 @@ def build_tables(data: OsmData) -> tuple[dict[str, pd.DataFrame], dict[str, str]
     balises, f_bal = balise_groups(data, p, tracks, km)
     switches = _switch_km(pd.DataFrame(j.switches, columns=SWITCHES.column_names), tracks, p, km)
     has_line = attrs["line_code"].notna().to_numpy()
-    no_km = [data.ways[int(p.way_index[i])].way_id for i in np.flatnonzero(has_line) if int(i) not in km.posts]
-    f_km = (
-        [
-            _warn(
-                "osm.no_km",
-                "tracks",
-                f"{len(no_km)} track(s) with a line but fewer than 2 usable milestones: no km",
-                sorted(set(no_km)),
-                "way",
-            )
-        ]
-        if no_km
-        else []
+    no_km = [p.track_id[i] for i in np.flatnonzero(has_line) if int(i) not in km.posts]
+    ways = sorted(
+        {int(data.ways[int(p.way_index[i])].way_id) for i in np.flatnonzero(has_line) if int(i) not in km.posts}
     )
+    f_km = []
+    if no_km:
+        message = (
+            f"{len(no_km)} track(s) on {len(ways)} way(s) with a line but fewer than 2 usable milestones "
+            "on their chain: no km"
+        )
+        f_km.append(_warn("osm.no_km", "tracks", message, ways, "way"))
     tables = {
         NETWORK_TRACKS.name: tracks,
         TRACK_POINTS.name: points,
