@@ -72,7 +72,7 @@ def parse_position(text: str | None) -> float | None:
         metres = float(m.group(2).replace(",", "."))
         return km * 1000.0 + (metres if km >= 0 else -metres)
     m = _KM.match(t)
-    return float(m.group(1).replace(",", ".")) * 1000.0 if m else None
+    return round(float(m.group(1).replace(",", ".")) * 1000.0, 6) if m else None  # µm: no 0.999… m
 
 
 @dataclass

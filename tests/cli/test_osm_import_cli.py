@@ -51,6 +51,19 @@ def test_the_format_is_taken_from_the_file_name(tmp_path: Path) -> None:
     assert again.exit_code == 3
 
 
+def test_a_bzip2_osm_file_reads_the_same(tmp_path: Path) -> None:
+    import bz2
+
+    src = ROOT / "tests/data/osm/junction.osm"
+    packed = tmp_path / "junction.osm.bz2"
+    packed.write_bytes(bz2.compress(src.read_bytes()))
+    for name, path in (("plain", src), ("bz2", packed)):
+        res = runner.invoke(app, ["db", "import", str(path), "--out", str(tmp_path / name)])
+        assert res.exit_code == 0, res.output
+    for table in ("tracks", "connections", "switches", "track_points"):
+        assert (tmp_path / "plain" / f"{table}.csv").read_text() == (tmp_path / "bz2" / f"{table}.csv").read_text()
+
+
 @pytest.mark.parametrize(("railways", "code"), [("tram", 0), ("subway", 1), (" , ", 2)])
 def test_osm_railway_chooses_the_ways(tmp_path: Path, railways: str, code: int) -> None:
     res = runner.invoke(

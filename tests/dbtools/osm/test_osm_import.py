@@ -11,6 +11,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from dbtools.interchange.osm_import import import_osm
 from dbtools.interchange.osm_km import KmModel, _fit, km_chains, parse_position
@@ -298,3 +300,34 @@ def test_km_chains_follow_links_through_reversed_ways() -> None:
     # met first in its middle (track 0 lies between 1 and 2), the chain is found whole, from its start
     mid = {(1, "end"): (0, "begin"), (0, "begin"): (1, "end"), (0, "end"): (2, "begin"), (2, "begin"): (0, "end")}
     assert km_chains(3, ["L", "L", "L"], mid) == [[(1, True), (0, True), (2, True)]]
+
+
+@given(st.integers(0, 999), st.integers(0, 999))
+def test_km_plus_metres_and_decimal_km_agree(km: int, m: int) -> None:
+    assert parse_position(f"{km}+{m:03d}") == parse_position(f"{km}.{m:03d}") == pytest.approx(km * 1000 + m)
+    assert parse_position(f"km {km},{m:03d}") == pytest.approx(km * 1000 + m)
+
+
+@given(st.floats(0, 2 * np.pi), st.floats(1.0, 20.0), st.booleans(), st.permutations([0, 1, 2]))
+def test_point_switch_ports_do_not_depend_on_rotation_or_order(
+    theta: float, angle_deg: float, diverge_left: bool, order: list[int]
+) -> None:
+    """A turnout rotated anywhere, its ends listed in any order: the toe is A1, the branch
+    turning counter-clockwise (seen from the toe) is B1, and the guessed diverging side is
+    the branch that turns."""
+    from dbtools.interchange.osm_switches import Junctions, _point
+
+    a = np.radians(angle_deg) * (1 if diverge_left else -1)
+
+    def end(name: str, phi: float) -> tuple[str, str, float, float]:
+        return (name, "begin", float(np.cos(phi)), float(np.sin(phi)))
+
+    ends = [end("toe", theta + np.pi), end("through", theta), end("diverging", theta + a)]
+    j = Junctions()
+    _point(j, 1, {}, [ends[i] for i in order], 0.0, 0.0)
+    (row,) = j.switches
+    left, right = ("diverging", "through") if diverge_left else ("through", "diverging")
+    assert (row["a1_track"], row["b1_track"], row["b2_track"]) == ("toe", left, right)
+    assert row["diverging_side"] == ("left" if diverge_left else "right")
+    nav = {(c["track_a"], c["track_b"]): c["navigability"] for c in j.connections}
+    assert nav == {("toe", left): "both", ("toe", right): "both", (left, right): "none"}
