@@ -10,6 +10,8 @@ One pass over the file keeps:
   (:attr:`RailWay.runs`), reported as ``osm.missing_node``;
 * the nodes tagged ``railway=switch|railway_crossing|buffer_stop|milestone|balise_group``
   with their tags and location;
+* the line relations (``type=route`` + ``route=railway|tracks`` with a ``ref``) and their
+  member ways;
 * how many ways carry any other ``railway=*`` value (trams, subways, platforms, disused
   lines …), with their ids, to report what was left out.
 
@@ -40,6 +42,9 @@ RAILWAYS = ("rail",)
 NODE_KINDS = ("switch", "railway_crossing", "buffer_stop", "milestone", "balise_group")
 #: Way tags kept (everything the mapping reads).
 WAY_TAGS = ("railway", "service", "ref", "railway:ref", "railway:track_ref", "name", "usage", "area")
+#: ``route=*`` values of the relations naming a line (the infrastructure; ``route=train``
+#: relations are services — a train number, not a line — and are not read).
+LINE_ROUTES = ("railway", "tracks")
 #: File name endings osmium reads.
 SUFFIXES = (".osm.pbf", ".pbf", ".osm", ".osm.bz2", ".osm.gz")
 
@@ -91,6 +96,8 @@ class OsmData:
     """``railway=*`` value → ids of the ways of that value not imported."""
     n_nodes: int = 0
     n_ways: int = 0
+    routes: dict[int, tuple[str, str | None, int]] = field(default_factory=dict)
+    """Way id → (ref, name, relation id) of the line relation it is a member of."""
 
 
 def is_osm_file(path: Path) -> bool:
@@ -123,9 +130,25 @@ def read_osm(path: Path, railways: tuple[str, ...] = RAILWAYS) -> OsmData:
                     data.other_ways[kind].append(obj.id)
                     continue
                 data.ways.append(_rail_way(obj))
+            elif isinstance(obj, osmium.osm.Relation):
+                _route(data, obj)
     except RuntimeError as exc:  # osmium's parse errors (bad PBF blob, malformed XML, unknown format)
         raise InputError(f"not readable as OpenStreetMap data: {exc}", path=path) from exc
     return data
+
+
+def _route(data: OsmData, rel: osmium.osm.Relation) -> None:
+    """A line relation (``type=route``, ``route=railway|tracks`` with a ``ref``): its member
+    ways take its ref and name (the first relation holding a way wins)."""
+    if rel.tags.get("type") != "route" or rel.tags.get("route") not in LINE_ROUTES:
+        return
+    ref = rel.tags.get("ref")
+    if not ref:
+        return
+    name = rel.tags.get("name")
+    for m in rel.members:
+        if m.type == "w":
+            data.routes.setdefault(int(m.ref), (str(ref), None if name is None else str(name), int(rel.id)))
 
 
 def _rail_way(way: osmium.osm.Way) -> RailWay:

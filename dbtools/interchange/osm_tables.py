@@ -7,10 +7,11 @@ km, balise groups (SPEC §8.1, §8.2).
 itself is not looked at — a guess, reported), else main. Any other ``service`` value →
 siding (reported).
 
-**Line** of a track: the way's ``ref`` (in Germany the line number, *Streckennummer*),
-else ``railway:ref``; several values (``2600;2630``, a shared section) → the first
-(reported). OSM holds no line relation for most tracks: the line's name is the most common
-``name`` of its ways. Local track name: ``railway:track_ref``.
+**Line** of a track: the ``ref`` of the line relation holding its way (``type=route``,
+``route=railway|tracks``; ``route=train`` relations are services, not lines), else the
+way's ``ref`` (in Germany the line number, *Streckennummer*), else ``railway:ref``; several
+values (``2600;2630``, a shared section) → the first (reported). The line's name: its
+relation's ``name``, else the most common ``name`` of its ways. Local track name: ``railway:track_ref``.
 
 **Balise groups** (``railway=balise_group``): a group gives kind ``G`` rows only where the
 node's tags give its ETCS identity — ``railway:etcs:nid_bg`` (or ``nid_bg``) 0…16383 and
@@ -30,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools.interchange.osm_km import KmModel
-from dbtools.interchange.osm_read import OsmData, OsmNode
+from dbtools.interchange.osm_read import OsmData, OsmNode, RailWay
 from dbtools.interchange.osm_split import Pieces, at_pos, grid
 from schemas.enums import BaliseKind, Severity, TrackKind
 from schemas.findings import Finding
@@ -51,26 +52,46 @@ def _first(value: str | None) -> str | None:
     return value.split(";")[0].strip() or None
 
 
+def line_ref(data: OsmData, way: RailWay) -> tuple[str | None, bool]:
+    """The raw line ref of a way (module doc) and whether a line relation gave it."""
+    route = data.routes.get(way.way_id)
+    if route:
+        return route[0], True
+    return way.tags.get("ref") or way.tags.get("railway:ref"), False
+
+
+def _kind(tags: dict[str, str]) -> TrackKind:
+    service = tags.get("service")
+    if service is None:
+        return TrackKind.STATION if tags.get("railway:track_ref") else TrackKind.MAIN
+    return SERVICE_KIND.get(service, TrackKind.SIDING)
+
+
 def way_attributes(data: OsmData, p: Pieces) -> tuple[pd.DataFrame, list[Finding]]:
     """Per piece: line_code, track, kind, name (module doc), and the findings of the guesses."""
     findings: list[Finding] = []
     per_way: list[tuple[str | None, str | None, str, str | None]] = []
     station, odd_service, multi = [], Counter[str](), Counter[str]()
+    from_way: list[int] = []
     for way in data.ways:
         t = way.tags
-        raw = t.get("ref") or t.get("railway:ref")
+        raw, from_route = line_ref(data, way)
+        if raw and not from_route:
+            from_way.append(way.way_id)
         if raw and ";" in raw:
             multi[raw] += 1
-        service = t.get("service")
-        if service is None:
-            kind = TrackKind.STATION if t.get("railway:track_ref") else TrackKind.MAIN
-            if kind == TrackKind.STATION:
-                station.append(way.way_id)
-        else:
-            kind = SERVICE_KIND.get(service, TrackKind.SIDING)
-            if service not in SERVICE_KIND:
-                odd_service[service] += 1
+        kind = _kind(t)
+        if kind == TrackKind.STATION:
+            station.append(way.way_id)
+        elif "service" in t and t["service"] not in SERVICE_KIND:
+            odd_service[t["service"]] += 1
         per_way.append((_first(raw), t.get("railway:track_ref"), kind.value, t.get("name")))
+    if from_way and data.routes:
+        findings.append(
+            _note(
+                "osm.line_guess", "tracks", f"{len(from_way)} way(s) in no line relation: line from the way's ref", []
+            )
+        )
     if station:
         findings.append(
             _note(
@@ -99,10 +120,13 @@ def _note(rule: str, table: str, message: str, ids: list[int], kind: str = "way"
 
 
 def lines_frame(data: OsmData, attrs: pd.DataFrame) -> pd.DataFrame:
-    """One row per line code; name: the most common way name of the line."""
+    """One row per line code; name: the line relation's, else the most common way name."""
     names: dict[str, Counter[str]] = {}
+    for ref, name, _ in data.routes.values():
+        if name:
+            names.setdefault(ref, Counter())[name] += 1_000_000  # a relation's name before any way's
     for way in data.ways:
-        code = _first(way.tags.get("ref") or way.tags.get("railway:ref"))
+        code = _first(line_ref(data, way)[0])
         if code is not None:
             names.setdefault(code, Counter())
             if way.tags.get("name"):

@@ -76,5 +76,14 @@ for i, (nds, tags) in ways.items():
     out += [f'    <nd ref="{n}"/>' for n in nds]
     out += [f'    <tag k="{k}" v="{v}"/>' for k, v in tags.items()]
     out.append("  </way>")
+relations = {
+    201: ([103], {"type": "route", "route": "railway", "ref": "6340", "name": "Testbahn (relation)"}),
+    202: ([101], {"type": "route", "route": "train", "ref": "RE 1", "name": "a service, not a line"}),
+}
+for i, (members, tags) in relations.items():
+    out.append(f'  <relation id="{i}" version="1">')
+    out += [f'    <member type="way" ref="{m}" role=""/>' for m in members]
+    out += [f'    <tag k="{k}" v="{v}"/>' for k, v in tags.items()]
+    out.append("  </relation>")
 out.append("</osm>")
 (Path(__file__).resolve().parents[2] / "data" / "osm" / "junction.osm").open("w").write("\n".join(out) + "\n")

@@ -150,6 +150,15 @@ def test_balise_groups_with_an_identity_become_g_rows(junction: Path) -> None:
     assert (junction / "network.toml").read_text().startswith('metric_crs = "EPSG:32632"')
 
 
+def test_lines_come_from_line_relations_before_way_refs(junction: Path) -> None:
+    lines = _read(junction, "lines")
+    # relation 201 (route=railway, ref 6340) names the line; relation 202 (route=train) is a service
+    assert lines.to_dict("records") == [{"line_code": "6340", "name": "Testbahn (relation)"}]
+    report = json.loads((junction / "import_report.json").read_text())
+    guesses = [f["message"] for f in report["findings"] if f["rule"] == "osm.line_guess"]
+    assert guesses == ["2 way(s) in no line relation: line from the way's ref"]  # ways 101 and 104
+
+
 def test_vde_switches_are_all_accounted_for(vde: Path) -> None:
     """908 railway=switch nodes: each is a switch row n<id> or named in a finding."""
     import osmium
