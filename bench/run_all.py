@@ -91,6 +91,7 @@ BENCHES = (
     ),
     Bench("impact", "db impact vs two audits of the same runs", ("--copies", "2", "--pairs", "1"), ()),
     Bench("audit", "fleet audit scaling, 1 → 2 workers, Dask", ("--runs", "100"), ("--runs", "200")),
+    Bench("osm", "OSM import (Cologne, 3,657 switches) vs osmium's read", ("--repeat", "1"), ("--repeat", "3")),
 )
 
 

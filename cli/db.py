@@ -50,6 +50,7 @@ class ValidateFmt(StrEnum):
 
 class ImportFmt(StrEnum):
     railml = "railml"
+    osm = "osm"
 
 
 @app.command("build")
@@ -326,30 +327,49 @@ def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: 
 @app.command("import")
 @cli_command
 def import_(
-    source: Path = typer.Argument(..., help="railML file (2.0–2.5 or 3.1–3.3)."),
-    fmt: ImportFmt = typer.Option(..., "--format", help="railml."),
+    source: Path = typer.Argument(..., help="railML file (2.0–2.5 or 3.1–3.3) or OpenStreetMap file (.osm.pbf, .osm)."),
+    fmt: ImportFmt | None = typer.Option(
+        None, "--format", help="railml or osm (default: osm for .osm.pbf/.osm/.osm.bz2 files, else railml)."
+    ),
     out: Path = typer.Option(..., "--out", "-o", help="Output source set folder (then: db build SOURCE_DIR)."),
     line_code: Path | None = typer.Option(
         None,
         "--line-code",
-        help="Map (TOML): railML lines/tracks → line_code and track, initial pairs → station codes.",
+        help="railML: map (TOML) of railML lines/tracks → line_code and track, initial pairs → station codes.",
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
     xsd: Path | None = typer.Option(
-        None, "--xsd", help="Validate the file against this XML Schema first (e.g. railML's railml3.xsd)."
+        None, "--xsd", help="railML: validate the file against this XML Schema first (e.g. railML's railml3.xsd)."
+    ),
+    osm_railway: str = typer.Option(
+        "rail",
+        "--osm-railway",
+        help="osm: railway=* values of the ways imported, comma-separated (e.g. rail,light_rail).",
     ),
 ) -> None:
-    """Import a railML file as a source set; every element that cannot be mapped is reported.
+    """Import a railML or OpenStreetMap file as a source set; everything not mapped is reported.
 
-    Writes the source tables, network.toml (when declared), survey/ (centrelines and km
-    posts for gis grid, when the file has coordinates) and import_report.json. Exit 0
-    written (unmapped elements are warnings), 1 errors such as duplicate or missing ids,
+    railML: writes the source tables, network.toml (when declared), survey/ (centrelines
+    and km posts for gis grid, when the file has coordinates) and import_report.json. Exit
+    0 written (unmapped elements are warnings), 1 errors such as duplicate or missing ids,
     positions on undefined tracks, lengths not in metres, an unknown railML version or
     (with --xsd) a schema error (nothing written), 2 unreadable (malformed XML, entity
     declarations, bad map, unreadable XSD), 3 output exists.
 
+    osm: tracks split at switches and junctions, connections, switches, track_points,
+    lines, km from milestones, balise groups with an ETCS identity, network.toml (UTM
+    zone) and import_report.json. Exit 0 written, 1 no rail way could be imported, 2
+    unreadable file, 3 output exists.
+
     Example: trainpos db import line.railml --format railml --out src/ --line-code map.toml
     """
+    from dbtools.interchange.osm_read import is_osm_file
+
+    if fmt is None:
+        fmt = ImportFmt.osm if is_osm_file(source) else ImportFmt.railml
+    if fmt == ImportFmt.osm:
+        _import_osm(source, out, force, osm_railway)
+        return
     from dbtools.interchange.importer import import_railml
 
     result = import_railml(source, out, line_map=line_code, force=force, xsd=xsd)
@@ -366,6 +386,25 @@ def import_(
                 *rows,
             ],
             title="Imported",
+        )
+    )
+
+
+def _import_osm(source: Path, out: Path, force: bool, railways: str) -> None:
+    from dbtools.interchange.osm_import import import_osm
+
+    kinds = tuple(k.strip() for k in railways.split(",") if k.strip())
+    if not kinds:
+        raise UsageError("--osm-railway: give at least one railway=* value, e.g. rail")
+    result = import_osm(source, out, force=force, railways=kinds)
+    out_c = console()
+    if result.findings:
+        print_findings(result.findings, console=out_c, title="Not imported / guessed")
+    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
+    osm = [(f"osm: {k}", v) for k, v in result.counts.items()]
+    out_c.print(
+        key_value_table(
+            [("folder", str(result.out)), ("metric CRS", result.metric_crs), *osm, *rows], title="Imported (OSM)"
         )
     )
 
