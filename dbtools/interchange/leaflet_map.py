@@ -3,7 +3,7 @@
 The page carries everything inline: Leaflet 1.9.4 (BSD-2-Clause, vendored from the npm
 package under ``vendor/leaflet/`` with its LICENSE), the map script ``review_map.js`` and
 the data as JSON (:mod:`dbtools.interchange.netmap` layers plus the changes of
-:func:`dbtools.interchange.svgmap.map_data`). With no tile URL the map draws on a plain
+:func:`dbtools.interchange.mapchanges.map_data`). With no tile URL the map draws on a plain
 background and loads nothing; ``tiles`` adds an XYZ tile layer (``{z}/{x}/{y}`` template,
 e.g. an OpenStreetMap tile server), the only network access the page then makes.
 """
@@ -15,8 +15,8 @@ from importlib import resources
 from typing import Any
 
 from dbtools.gis.geometry import Projector
+from dbtools.interchange.mapchanges import MapData
 from dbtools.interchange.netmap import encode, network_layers, simplify
-from dbtools.interchange.svgmap import MapData
 from dbtools.network import Network
 
 LEAFLET_VERSION = "1.9.4"
@@ -53,12 +53,12 @@ def changes_layer(data: MapData, projector: Projector) -> dict[str, Any]:
     import numpy as np
 
     removed = []
-    for i, line in enumerate(data.removed_lines):
+    for label, line in data.removed_lines:
         if len(line) < 2:
             continue
         lon, lat = np.asarray([p[0] for p in line]), np.asarray([p[1] for p in line])
         keep = simplify(lat, lon, projector)
-        removed.append({"id": f"removed line {i + 1}", "c": encode(lat[keep], lon[keep])})
+        removed.append({"id": label, "c": encode(lat[keep], lon[keep])})
     changes = [
         {
             "kind": c.kind,

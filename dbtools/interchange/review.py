@@ -18,8 +18,8 @@ from dbtools import pagekit as pk
 from dbtools.diff import diff_networks, load_network
 from dbtools.gis.geometry import Projector
 from dbtools.interchange.leaflet_map import OSM_ATTRIBUTION, map_payload, render_map
+from dbtools.interchange.mapchanges import map_data
 from dbtools.interchange.netmap import map_projector
-from dbtools.interchange.svgmap import map_data
 from dbtools.validate import validate_path
 from schemas.enums import Severity
 from schemas.findings import Finding, count_by_severity

@@ -1,6 +1,6 @@
 /* The review page's interactive network map (trainpos db review).
  *
- * Reads the JSON of dbtools/interchange/netmap.py (+ the changes of svgmap.map_data) from
+ * Reads the JSON of dbtools/interchange/netmap.py (+ the changes of mapchanges.map_data) from
  * <script id="review-map-data"> and draws it with the vendored Leaflet (L): tracks (coloured
  * by kind; dashed red: tracks of OLD that NEW no longer has), connections, switches, balise
  * groups, km ticks and the changes, each a layer that the layer control switches on and off.
@@ -65,7 +65,7 @@
   });
   (D.removed_tracks || []).forEach(function (t) {
     var pl = L.polyline(decode(t.c), { color: CHG.removed, weight: 2, dashArray: "6,4", className: "removed-track" });
-    bind(pl, "<b>" + esc(t.id) + "</b><br>track of OLD not in NEW").addTo(tracks);
+    bind(pl, "<b>" + esc(t.id) + "</b><br>line track of OLD not in NEW").addTo(tracks);
   });
 
   var connections = L.layerGroup();

@@ -53,3 +53,26 @@ def test_no_dropped_vertex_is_farther_than_the_tolerance(steps: list[tuple[float
     kept = shapely.linestrings(x[keep], y[keep])
     dist = shapely.distance(shapely.points(x, y), kept)
     assert float(np.max(dist)) <= TOLERANCE_M + 1e-6
+
+
+def test_a_line_track_that_new_lacks_is_drawn_as_removed() -> None:
+    from dbtools.diff import diff_networks, load_network
+    from dbtools.interchange.leaflet_map import map_payload
+    from dbtools.interchange.mapchanges import map_data
+    from dbtools.network import Network
+    from dbtools.sample_network import sample_source_dir
+
+    old, _ = load_network(sample_source_dir())
+    new = Network({**old.tables, "gis": old.gis[old.gis["track"] == "D"].reset_index(drop=True)})
+    d = diff_networks(old, new)
+    data = map_data(old, new, d)
+    assert [label for label, _ in data.removed_lines] == ["0420 U"]
+    payload = map_payload(new, PROJ, data)
+    assert [t["id"] for t in payload["removed_tracks"]] == ["0420 U"]
+    assert [t["id"] for t in payload["tracks"]] == ["0420:D"]
+    kinds = {c["kind"] for c in payload["changes"]}
+    assert kinds == {"removed"}  # the U grid points are gone (GIS point changes)
+    # the removed track, decoded, starts at OLD's first U point
+    u = old.gis[old.gis["track"] == "U"].sort_values("km_m")
+    first = _decode(payload["removed_tracks"][0]["c"])[0]
+    assert abs(first[0] - u["lat"].iloc[0]) <= 0.5e-6 and abs(first[1] - u["lon"].iloc[0]) <= 0.5e-6
