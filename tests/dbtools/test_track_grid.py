@@ -25,6 +25,7 @@ from dbtools.gis.io import grid_files
 from dbtools.gis.track_grid import grid_positions
 from schemas.errors import FindingsError, RefusedError
 from schemas.network import TRACK_POINTS
+from schemas.tables import BALISES, FEATURE_POINTS
 
 LON0, LAT0 = 139.4, 35.9
 TO_LL = Transformer.from_crs(
@@ -252,3 +253,73 @@ def test_a_row_without_a_key_stops_the_files(tmp_path: Path) -> None:
         grid_files(cp, pp, tmp_path / "out" / "gis.csv")
     (f,) = [f for f in exc.value.findings if f.rule == "gisinput.centreline_key"]
     assert f.row == 5 and "line_code and track" in f.message and not (tmp_path / "out").exists()
+
+
+def test_geojson_track_id_property(tmp_path: Path) -> None:
+    """A GeoJSON LineString with a track_id property is a track of its own."""
+    import json
+
+    a = np.linspace(0.0, 30.0 / 190.0, 31)
+    lon, lat = TO_LL.transform(190.0 * np.sin(a), 190.0 * (1.0 - np.cos(a)))
+    dlon, dlat = TO_LL.transform(np.array([-200.0, 300.0]), np.zeros(2))
+    features = [
+        {
+            "type": "Feature",
+            "properties": {"line_code": "0420", "track": "D"},
+            "geometry": {
+                "type": "LineString",
+                "coordinates": [[float(o), float(t)] for o, t in zip(dlon, dlat, strict=True)],
+            },
+        },
+        {
+            "type": "Feature",
+            "properties": {"track_id": "T1-curve"},
+            "geometry": {
+                "type": "LineString",
+                "coordinates": [[float(o), float(t)] for o, t in zip(lon, lat, strict=True)],
+            },
+        },
+    ]
+    cp, pp = tmp_path / "centrelines.geojson", tmp_path / "kmposts.csv"
+    cp.write_text(json.dumps({"type": "FeatureCollection", "features": features}))
+    posts([-200.0, 300.0], [0.0, 0.0], [0.0, 500.0]).to_csv(pp, index=False)
+    written = grid_files(cp, pp, tmp_path / "src" / "gis.csv")
+    tp = written.result.track_points
+    assert tp["track_id"].tolist() == ["T1-curve"] * 3 and tp["pos_m"].tolist() == pytest.approx([0.0, 20.0, 30.0])
+    assert len(written.result.gis) == 26 and written.track_points_path is not None
+
+
+def test_grid_to_db_to_topology(tmp_path: Path) -> None:
+    """``gis grid`` → a source set with tracks.csv → ``db build``: the crossover's
+    centreline in the DB (dbtools.topology.centreline) is its track_points."""
+    from dbtools.build import build_db
+    from dbtools.diff import load_network
+    from dbtools.topology import all_tracks, centreline
+
+    cp, pp = write_inputs(tmp_path)
+    src = tmp_path / "src"
+    written = grid_files(cp, pp, src / "gis.csv")
+    x1 = written.result.own_tracks[0]
+    pd.DataFrame(
+        [
+            {"track_id": "D", "line_code": "0420", "track": "D", "kind": "main", "km_begin_m": 0.0, "km_end_m": 500.0},
+            {
+                "track_id": "X1",
+                "line_code": None,
+                "track": None,
+                "kind": "crossover",
+                "km_begin_m": None,
+                "km_end_m": None,
+            },
+        ]
+    ).assign(length_m=[500.0, round(x1.length_m, 3)]).to_csv(src / "tracks.csv", index=False)
+    pd.DataFrame({"line_code": ["0420"], "name": ["test line"]}).to_csv(src / "lines.csv", index=False)
+    for table in (BALISES, FEATURE_POINTS):  # required files, empty here
+        pd.DataFrame(columns=table.column_names).to_csv(src / f"{table.name}.csv", index=False)
+    db = tmp_path / "net.sqlite"
+    build_db(src, db, db_version="t")
+    net, _ = load_network(db)
+    tracks = all_tracks(net)
+    cl = centreline(net, tracks[tracks["track_id"] == "X1"].iloc[0])
+    assert cl.pos_m[-1] == pytest.approx(x1.length_m, abs=1e-3) and cl.pos_m.size == x1.points
+    np.testing.assert_allclose(cl.lat, written.result.track_points["lat"], atol=1e-9)
