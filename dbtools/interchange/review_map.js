@@ -43,6 +43,7 @@
   }
 
   var map = L.map(el, { zoomSnap: 0.25, maxZoom: 22, preferCanvas: false });
+  map.createPane("points").style.zIndex = 450;
   L.control.scale({ metric: true, imperial: false }).addTo(map);
   if (D.tiles) {
     L.tileLayer(D.tiles, { maxZoom: 19, attribution: esc(D.tiles_attribution || "") }).addTo(map);
@@ -75,7 +76,7 @@
         (c.switch ? ", switch " + esc(c.switch) : "") + ")";
     });
     var m = L.circleMarker([p.lat, p.lon], {
-      radius: 3, color: "#222222", weight: 1, fillColor: "#ffffff", fillOpacity: 1, className: "connection"
+      radius: 3, color: "#222222", weight: 1, fillColor: "#ffffff", fillOpacity: 1, className: "connection", pane: "points"
     });
     bind(m, "<b>connection</b><br>" + rows.join("<br>")).addTo(connections);
   });
@@ -92,7 +93,7 @@
     });
     var m = L.circleMarker([s.lat, s.lon], {
       radius: 6, color: "#ffffff", weight: 1.5, fillColor: SWITCH[s.type] || "#d62728", fillOpacity: 1,
-      className: "switch sw-" + s.type
+      className: "switch sw-" + s.type, pane: "points"
     });
     bind(m, "<b class='tip-switch'>switch " + esc(s.id) + "</b><br>" + esc(s.type) +
       (geo.length ? ", " + geo.join(", ") : "") + "<br>" + ports.join(", ")).addTo(switches);
@@ -101,7 +102,7 @@
   var groups = L.layerGroup();
   D.groups.forEach(function (g) {
     var m = L.circleMarker([g.lat, g.lon], {
-      radius: 5, color: "#4a148c", weight: 1.5, fillColor: "#ce93d8", fillOpacity: 1, className: "balise-group"
+      radius: 5, color: "#4a148c", weight: 1.5, fillColor: "#ce93d8", fillOpacity: 1, className: "balise-group", pane: "points"
     });
     bind(m, "<b>balise group " + esc(g.id) + "</b> (NID_C:NID_BG)<br>" + g.balises.length + " balise(s)" +
       (g.n_total !== null ? " of " + g.n_total : "") + ": " + g.balises.map(esc).join(", ") +
@@ -110,8 +111,9 @@
     ).addTo(groups);
   });
 
-  // km ticks in a pane below the tracks' (overlayPane: 400), so they never hide a switch
-  map.createPane("ticks").style.zIndex = 390;
+  // panes: track lines in the overlay pane (z 400), km ticks above them (420), the point
+  // markers — connections, switches, balise groups, changes — above the ticks (450)
+  map.createPane("ticks").style.zIndex = 420;
   var ticks = L.layerGroup();
   var nTicks = 0;
   D.ticks.forEach(function (t) {
@@ -130,14 +132,14 @@
     var text = esc(c.what) + " " + esc(c.label) + " " + esc(c.kind) +
       (c.shift !== null ? " " + c.shift.toFixed(2) + " m" : "");
     if (c.kind === "moved" && c.old && c.new) {
-      bind(L.polyline([c.old, c.new], { color: CHG.moved, weight: 3, className: "chg moved" }), text).addTo(changes);
-      L.circleMarker(c.new, { radius: 4, color: CHG.moved, fillOpacity: 1, interactive: false }).addTo(changes);
+      bind(L.polyline([c.old, c.new], { color: CHG.moved, weight: 3, className: "chg moved", pane: "points" }), text).addTo(changes);
+      L.circleMarker(c.new, { radius: 4, color: CHG.moved, fillOpacity: 1, interactive: false, pane: "points" }).addTo(changes);
       return;
     }
     var at = c.new || c.old;
     if (!at) { return; }
     var m = L.circleMarker(at, {
-      radius: 6, color: "#ffffff", weight: 1.5, fillColor: CHG[c.kind], fillOpacity: 1, className: "chg " + c.kind
+      radius: 6, color: "#ffffff", weight: 1.5, fillColor: CHG[c.kind], fillOpacity: 1, className: "chg " + c.kind, pane: "points"
     });
     bind(m, text).addTo(changes);
   });
