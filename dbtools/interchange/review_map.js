@@ -175,7 +175,10 @@
       rows.push("<i class='dot' style='background:#ffffff;border:1px solid #222'></i>connection");
     }
     if (D.groups.length) { rows.push("<i class='dot' style='background:#ce93d8'></i>balise group"); }
-    if (nTicks) { rows.push("<i class='dot' style='background:#fff;border:1px solid #555'></i>km tick (every km)"); }
+    if (nTicks) {
+      rows.push("<i class='dot' style='background:#fff;border:1px solid #555'></i>km tick (every km" +
+        (TICK_ZOOM ? ", from zoom " + TICK_ZOOM : "") + ")");
+    }
     if (D.changes && D.changes.length) {
       rows.push("<i class='dot' style='background:" + CHG.added + "'></i>added, <i class='dot' style='background:" +
         CHG.removed + "'></i>removed, <i style='background:" + CHG.moved + "'></i>moved (true scale)");
