@@ -30,6 +30,8 @@ MAP_CSS = """
 .map-legend{background:rgba(255,255,255,.92);padding:6px 10px;font-size:12px;line-height:18px;border-radius:4px}
 .map-legend i{display:inline-block;width:18px;height:4px;margin:0 6px 2px 0;vertical-align:middle}
 .map-legend i.dot{width:10px;height:10px;border-radius:5px}
+.sw-label{font:11px/1.2 system-ui,sans-serif;color:#7a1010;background:rgba(255,255,255,.85);padding:0 3px;
+border-radius:3px;white-space:nowrap;pointer-events:none}
 """
 
 

@@ -82,6 +82,8 @@
   });
 
   var switches = L.layerGroup();
+  // close up, each switch also carries a label: id, 1:n and the diverging side (L/R)
+  var switchLabels = L.layerGroup();
   D.switches.forEach(function (s) {
     var geo = [];
     if (s.n !== null) { geo.push("1:" + s.n); }
@@ -97,6 +99,11 @@
     });
     bind(m, "<b class='tip-switch'>switch " + esc(s.id) + "</b><br>" + esc(s.type) +
       (geo.length ? ", " + geo.join(", ") : "") + "<br>" + ports.join(", ")).addTo(switches);
+    var short = esc(s.id) + (s.n !== null ? " 1:" + s.n : "") + (s.side ? " " + esc(s.side.charAt(0).toUpperCase()) : "");
+    L.marker([s.lat, s.lon], {
+      icon: L.divIcon({ className: "sw-label", html: short, iconSize: null, iconAnchor: [-8, 8] }),
+      interactive: false, keyboard: false, pane: "points"
+    }).addTo(switchLabels);
   });
 
   var groups = L.layerGroup();
@@ -193,7 +200,13 @@
   } else {
     map.setView([0, 0], 2);
   }
+  var LABEL_ZOOM = 16;
+  function showLabels() {
+    if (map.getZoom() >= LABEL_ZOOM && map.hasLayer(switches)) { switchLabels.addTo(map); } else { switchLabels.remove(); }
+  }
   map.on("zoomend", showTicks);
+  map.on("zoomend overlayadd overlayremove", showLabels);
   showTicks();
+  showLabels();
   el.setAttribute("data-ready", "1");
 })();

@@ -233,7 +233,9 @@ def test_map_in_headless_chromium(topo_page: dict[str, Path]) -> None:
         sx, sy, *_ = b.eval(_CENTRE_OF.format(sel="path.sw-point", i=0))
         b.mouse_move(sx, sy)
         tips = b.eval(_TIPS)
-        assert any("switch W" in t and "1:9" in t for t in tips), tips
+        assert any("switch W" in t and "1:9" in t and "diverging" in t for t in tips), tips
+        labels = b.eval('[...document.querySelectorAll(".sw-label")].map(e => e.textContent)')
+        assert "W1 1:9 R" in labels  # close up, switches carry their label
         b.screenshot(topo_page["root"] / "map_zoomed.png")
         assert b.errors() == []
     img = Image.open(topo_page["root"] / "map_zoomed.png").convert("RGB")
