@@ -446,17 +446,28 @@ def review(
     new: Path = typer.Argument(..., help="New onboard DB file (.sqlite) or source set folder."),
     out: Path = typer.Option(..., "--out", "-o", help="Output page (.html), self-contained."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
+    tiles: str | None = typer.Option(
+        None,
+        "--tiles",
+        help="XYZ tile URL template for the map background, e.g. https://tile.openstreetmap.org/{z}/{x}/{y}.png "
+        "(default: no tiles, the page loads nothing from the network).",
+    ),
+    tiles_attribution: str = typer.Option(
+        "© OpenStreetMap contributors", "--tiles-attribution", help="Attribution shown with --tiles."
+    ),
 ) -> None:
-    """One page for the reviewer of a DB change: validation of NEW, the diff, a map of what moved.
+    """One page for the reviewer of a DB change: validation of NEW, the diff, a network map.
 
-    The map is inline SVG drawn in NEW's metric CRS (no tiles, no scripts). Exit 0 written
-    and NEW has no error, 1 written but NEW has errors, 2 unreadable, 3 output exists.
+    The map is interactive (Leaflet, inlined: the single file works offline): NEW's tracks,
+    switches, connections, balise groups and km ticks, and what changed; hover for ids and km.
+    Exit 0 written and NEW has no error, 1 written but NEW has errors, 2 unreadable,
+    3 output exists.
 
     Example: trainpos db review net-2026.10.sqlite net-2026.11.sqlite --out review.html
     """
     from dbtools.interchange.review import write_review
 
-    findings = write_review(old, new, out, force=force)
+    findings = write_review(old, new, out, force=force, tiles=tiles, tiles_attribution=tiles_attribution)
     console().print(f"review page written to {safe(out)}")
     if has_errors(findings):
         raise typer.Exit(1)

@@ -17,5 +17,5 @@ Modules, each small and pure where it can be (files are written by the callers t
 * :mod:`~dbtools.interchange.geojson`, :mod:`~dbtools.interchange.gpkg`,
   :mod:`~dbtools.interchange.geoparquet`, :mod:`~dbtools.interchange.wkb` — GIS exports;
 * :mod:`~dbtools.interchange.ci` — SARIF and JUnit;
-* :mod:`~dbtools.interchange.review` and :mod:`~dbtools.interchange.svgmap` — ``db review``.
+* :mod:`~dbtools.interchange.review` and :mod:`~dbtools.interchange.mapchanges` — ``db review``.
 """
