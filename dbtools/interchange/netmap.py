@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools.gis.geometry import Projector
+from dbtools.gis.georef import projector_for_points
 from dbtools.network import Network
 from dbtools.topology import Centreline, all_tracks, centreline
 
@@ -61,7 +62,7 @@ def map_projector(net: Network) -> Projector | None:
     tp = net.track_points
     if tp.empty:
         return None
-    return Projector.for_points(tp["lat"].to_numpy(float), tp["lon"].to_numpy(float))
+    return projector_for_points(tp["lat"].to_numpy(float), tp["lon"].to_numpy(float))
 
 
 def simplify(lat: np.ndarray, lon: np.ndarray, projector: Projector, tolerance_m: float = TOLERANCE_M) -> np.ndarray:
