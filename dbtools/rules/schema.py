@@ -86,6 +86,9 @@ def check_values(tables: dict[str, pd.DataFrame], config: ValidationConfig, loc:
     return out
 
 
+#: An empty grid where the tracks have their own centrelines (a network without kilometrage,
+#: e.g. imported from RailTopoModel GeoJSON): positions along the tracks, no line km.
+GIS_BESIDE_TRACK_POINTS = "no line grid: the tracks have only their own centrelines (track_points), no line km"
 #: Tables that must not be empty: severity and what an empty one means on board.
 EMPTY_TABLES = {
     GIS.name: (Severity.ERROR, "no GIS grid: no km can be placed on the map, matched to GPS or checked"),
@@ -106,6 +109,9 @@ def check_empty_tables(
         frame = tables.get(name)
         if (tables_read is not None and name not in tables_read) or (frame is not None and len(frame)):
             continue
+        points = tables.get("track_points")
+        if name == GIS.name and points is not None and len(points):
+            severity, meaning = Severity.WARNING, GIS_BESIDE_TRACK_POINTS
         file = loc.file(name)
         where = f"{file} has a header but no rows" if file else f"table '{name}' has no rows"
         out.append(
