@@ -49,6 +49,7 @@ class ValidateFmt(StrEnum):
 
 class ImportFmt(StrEnum):
     railml = "railml"
+    rtm_geojson = "rtm-geojson"
 
 
 @app.command("build")
@@ -302,8 +303,10 @@ def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: 
 @app.command("import")
 @cli_command
 def import_(
-    source: Path = typer.Argument(..., help="railML file (2.0–2.5 or 3.1–3.3)."),
-    fmt: ImportFmt = typer.Option(..., "--format", help="railml."),
+    source: Path = typer.Argument(..., help="railML file (2.0–2.5 or 3.1–3.3) or RailTopoModel GeoJSON (tp-lib)."),
+    fmt: ImportFmt = typer.Option(
+        ..., "--format", help="railml, or rtm-geojson (RailTopoModel netelements/netrelations as tp-lib reads them)."
+    ),
     out: Path = typer.Option(..., "--out", "-o", help="Output source set folder (then: db build SOURCE_DIR)."),
     line_code: Path | None = typer.Option(
         None,
@@ -315,7 +318,8 @@ def import_(
         None, "--xsd", help="Validate the file against this XML Schema first (e.g. railML's railml3.xsd)."
     ),
 ) -> None:
-    """Import a railML file as a source set; every element that cannot be mapped is reported.
+    """Import a railML file or a RailTopoModel GeoJSON network as a source set; every element
+    that cannot be mapped is reported.
 
     Writes the source tables, network.toml (when declared), survey/ (centrelines and km
     posts for gis grid, when the file has coordinates) and import_report.json. Exit 0
@@ -324,8 +328,18 @@ def import_(
     (with --xsd) a schema error (nothing written), 2 unreadable (malformed XML, entity
     declarations, bad map, unreadable XSD), 3 output exists.
 
+    rtm-geojson (docs/howto/import-geojson.md): tracks, connections, inferred point
+    switches and 20 m track_points; exit 0 written (skipped features are warnings), 1 no
+    netelement could be imported, an unknown CRS or no FeatureCollection (nothing written),
+    2 invalid JSON, 3 output exists.
+
     Example: trainpos db import line.railml --format railml --out src/ --line-code map.toml
     """
+    if fmt == ImportFmt.rtm_geojson:
+        if line_code is not None or xsd is not None:
+            raise UsageError("--line-code and --xsd apply to railML only, not --format rtm-geojson")
+        _import_rtm(source, out, force)
+        return
     from dbtools.interchange.importer import import_railml
 
     result = import_railml(source, out, line_map=line_code, force=force, xsd=xsd)
@@ -339,6 +353,29 @@ def import_(
                 ("folder", str(result.out)),
                 ("railML version", result.version),
                 ("balises in the file", result.balises_seen),
+                *rows,
+            ],
+            title="Imported",
+        )
+    )
+
+
+def _import_rtm(source: Path, out: Path, force: bool) -> None:
+    from dbtools.interchange.rtm_import import import_rtm_geojson
+
+    result = import_rtm_geojson(source, out, force=force)
+    out_c = console()
+    if result.findings:
+        print_findings(result.findings, console=out_c, title="Not imported / warnings")
+    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
+    out_c.print(
+        key_value_table(
+            [
+                ("folder", str(result.out)),
+                ("CRS of the file", result.crs),
+                ("netelements in the file", result.netelements_seen),
+                ("netrelations in the file", result.netrelations_seen),
+                ("switches inferred", result.switches_inferred),
                 *rows,
             ],
             title="Imported",

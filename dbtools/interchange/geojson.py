@@ -60,12 +60,17 @@ def collection(features: Iterable[dict[str, Any]], name: str | None = None) -> d
     return out
 
 
+def geojson_text(data: Mapping[str, Any]) -> str:
+    """A FeatureCollection as the text of a file (UTF-8, no NaN: RFC 7946 is JSON)."""
+    return json.dumps(data, ensure_ascii=False, allow_nan=False) + "\n"
+
+
 def write_geojson(
     path: Path, data: Mapping[str, Any], *, force: bool = False, inputs: Iterable[Path | str] = ()
 ) -> Path:
     """Write a FeatureCollection atomically (RefusedError for an existing file without force)."""
     with atomic_file(Path(path), force=force, inputs=inputs) as tmp:  # the output rule (dbtools.atomic)
-        tmp.write_text(json.dumps(data, ensure_ascii=False, allow_nan=False) + "\n", encoding="utf-8")
+        tmp.write_text(geojson_text(data), encoding="utf-8")
     return Path(path)
 
 
