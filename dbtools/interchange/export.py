@@ -78,14 +78,15 @@ def export_network(
         return rtm_counts
     if fmt == ExportFormat.geojson:
         return _write_geojson(network, out, force or empty, inputs)
-    features = network_features(network)
     if fmt == ExportFormat.gpkg:
         from dbtools.interchange.gpkg import write_gpkg
-        from dbtools.interchange.network_layers import network_layer_features
+        from dbtools.interchange.network_layers import network_layer_features, on_track
 
-        features += network_layer_features(network)
+        features = network_features(network, on_track(network)) + network_layer_features(network)
         return write_gpkg(out, features, srs_epsg=geodetic_epsg(network), force=force, inputs=inputs)
     from dbtools.interchange.geoparquet import write_geoparquet
+
+    features = network_features(network)
 
     write_geoparquet(out, features, srs_epsg=geodetic_epsg(network), force=force, inputs=inputs)
     return _layers(features)
@@ -93,9 +94,9 @@ def export_network(
 
 def _write_geojson(network: Network, out: Path, force: bool, inputs: list[Path]) -> dict[str, int]:
     """One file, a folder of one file per layer, or their zip (module doc)."""
-    from dbtools.interchange.network_layers import network_layer_features
+    from dbtools.interchange.network_layers import network_layer_features, on_track
 
-    gj = network_geojson(network)
+    gj = network_geojson(network, on_track(network))
     gj["features"] += network_layer_features(network)
     if out.suffix.lower() in GEOJSON_FILE_SUFFIXES:
         write_geojson(out, gj, force=force, inputs=inputs)

@@ -21,6 +21,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -135,13 +136,27 @@ def _km_posts(tracks: pd.DataFrame, lines: dict[str, Centreline]) -> list[dict[s
     return out
 
 
+def _centrelines(network: Network) -> dict[str, Centreline]:
+    def build() -> dict[str, Centreline]:
+        return {str(row["track_id"]): centreline(network, row) for _, row in all_tracks(network).iterrows()}
+
+    return network.cached(("network_layers", "centrelines"), build)
+
+
+def on_track(network: Network) -> Callable[[Any, Any], Geometry]:
+    """(track_id, km) → the point on that track (as a balise group's: module doc)."""
+    lines = _centrelines(network)
+
+    def place(track_id: Any, km: Any) -> Geometry:
+        return None if _v(km) is None else _along(lines.get(str(track_id)), float(km))
+
+    return place
+
+
 def network_layer_features(network: Network) -> list[dict[str, Any]]:
     """The features of every layer of :data:`LAYERS` (module doc)."""
     tracks = all_tracks(network)
-    lines = {}
-    for _, row in tracks.iterrows():
-        cl = centreline(network, row)
-        lines[cl.track_id] = cl
+    lines = _centrelines(network)
     return (
         _tracks(tracks, lines)
         + _switches(network, lines)
