@@ -18,7 +18,8 @@
 
 Problems are :class:`~schemas.findings.Finding` s (rule ids ``rtm.*``) naming the feature's
 index in ``features`` and its id; a feature with a problem is skipped (warning), the rest
-imported. A relation listed twice (RINF exports list every relation from both sides) is
+imported. A relation whose two ends lie more than :data:`GAP_WARN_M` apart is reported
+(``rtm.gap``: a positionOn the wrong way round?) and kept. A relation listed twice (RINF exports list every relation from both sides) is
 kept once; the copies are counted in the report.
 """
 
@@ -30,13 +31,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from dbtools.interchange.polyline import Polyline, polyline
+from dbtools.interchange.polyline import GEOD, Polyline, polyline
 from schemas.enums import Navigability, Severity
 from schemas.errors import FindingsError, InputError
 from schemas.findings import Finding
 
 WGS84_NAME = "EPSG:4326"
 NAVIGABILITY = {n.value.lower(): n.value for n in Navigability}
+#: Ends joined by a relation farther apart than this are reported (``rtm.gap``) [m]; RINF's
+#: lie up to about 2 m apart.
+GAP_WARN_M = 5.0
 
 
 @dataclass(frozen=True)
@@ -279,7 +283,22 @@ def _relation(doc: RtmDoc, index: int, props: dict[str, Any], ident: Any) -> Non
         got = json.dumps(props.get("navigability"))
         return skip("rtm.navigability", f"navigability {got} is not both, AB, BA or none", "navigability")
     pa, pb = int(pos["positionOnA"] or 0), int(pos["positionOnB"] or 0)
-    _add_relation(doc, NetRelation(str(ident or f"feature{index}"), index, a, pa, b, pb, nav))
+    rel = NetRelation(str(ident or f"feature{index}"), index, a, pa, b, pb, nav)
+    gap = _gap(doc, rel)
+    if gap > GAP_WARN_M:
+        msg = (
+            f"the ends it joins ({a} at {pa}, {b} at {pb}) lie {gap:.1f} m apart (a positionOn the wrong way "
+            "round?): kept as given"
+        )
+        doc.finding("rtm.gap", msg, index, ident, column="positionOnA", table="connections")
+    _add_relation(doc, rel)
+
+
+def _gap(doc: RtmDoc, rel: NetRelation) -> float:
+    """Geodesic distance between the two netelement ends a relation joins [m]."""
+    ea, eb = doc.elements[rel.a].line, doc.elements[rel.b].line
+    ia, ib = (-1 if rel.pos_a else 0), (-1 if rel.pos_b else 0)
+    return float(GEOD.inv(ea.lon[ia], ea.lat[ia], eb.lon[ib], eb.lat[ib])[2])
 
 
 def _oriented(rel: NetRelation, a: str, pos_a: int) -> str:

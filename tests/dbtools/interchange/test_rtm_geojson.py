@@ -143,7 +143,8 @@ def test_bad_features_are_skipped_with_findings(tmp_path: Path) -> None:
         relation("r5", "T", 2, "S", 1, "both"),  # 9
         relation("r6", "T", 0, "S", 1, "sideways"),  # 10
         {"type": "Feature", "geometry": {"type": "Point", "coordinates": [E0, N0]}, "properties": {"id": "P"}},
-        relation("r7", "S", 1.0, "L", "1", "ab"),  # 12: 1.0, "1" and "ab" accepted
+        relation("r7", "S", 1.0, "L", "1", "ab"),  # 12: 1.0, "1" and "ab" accepted; ends 11 m apart
+        relation("r8", "T", 0, "S", 1, "both"),  # 13: 200 m apart
     ]
     r = import_rtm_geojson(write(tmp_path / "t.geojson", collection(feats)), tmp_path / "out")
     by_rule = {(f.rule, f.keys.get("feature")): f for f in r.findings}
@@ -154,13 +155,16 @@ def test_bad_features_are_skipped_with_findings(tmp_path: Path) -> None:
         ("rtm.position", 9),
         ("rtm.navigability", 10),
         ("rtm.geometry", 11),
+        ("rtm.gap", 12),  # 11 m: reported, kept
+        ("rtm.gap", 13),
     }
+    assert "lie 200.1 m apart" in by_rule[("rtm.gap", 13)].message  # 200 grid metres / k0
     f = by_rule[("rtm.unknown_netelement", 8)]
     assert "feature 8 (id 'r4')" in f.message and "'nowhere'" in f.message and f.column == "netelementB"
     assert "positionOnA is 2, not 0 or 1" in by_rule[("rtm.position", 9)].message
     assert all(f.severity == Severity.WARNING and f.file == str(tmp_path / "t.geojson") for f in r.findings)
     conns = csv(tmp_path / "out", "connections")
-    assert len(conns) == 4 and ("S", "end", "L", "end", "AB") in set(
+    assert len(conns) == 5 and ("S", "end", "L", "end", "AB") in set(
         conns[["track_a", "end_a", "track_b", "end_b", "navigability"]].itertuples(index=False, name=None)
     )
 
