@@ -19,8 +19,9 @@
 Problems are :class:`~schemas.findings.Finding` s (rule ids ``rtm.*``) naming the feature's
 index in ``features`` and its id; a feature with a problem is skipped (warning), the rest
 imported. A relation whose two ends lie more than :data:`GAP_WARN_M` apart is reported
-(``rtm.gap``: a positionOn the wrong way round?) and kept. A relation listed twice (RINF exports list every relation from both sides) is
-kept once; the copies are counted in the report.
+(``rtm.gap``: a positionOn the wrong way round?) and kept. A relation listed twice (RINF
+exports list every relation from both sides) is kept once; the copies are counted in the
+report.
 """
 
 from __future__ import annotations
@@ -259,20 +260,36 @@ def _position(v: Any) -> int | None:
     return None
 
 
-def _relation(doc: RtmDoc, index: int, props: dict[str, Any], ident: Any) -> None:
-    def skip(rule: str, message: str, column: str | None = None) -> None:
+def _netelements(doc: RtmDoc, index: int, props: dict[str, Any], ident: Any) -> tuple[str, str] | None:
+    """The two netelement ids of a relation (None, with a finding, when it cannot be used)."""
+
+    def skip(rule: str, message: str, column: str) -> None:
         doc.finding(rule, message + ": skipped", index, ident, column=column, table="connections")
 
     a, b = props.get("netelementA", props.get("from")), props.get("netelementB", props.get("to"))
     for col, v in (("netelementA", a), ("netelementB", b)):
         if v is None or isinstance(v, bool) or not isinstance(v, int | str):
-            return skip("rtm.relation", f"{col} is missing or not an id", col)
+            skip("rtm.relation", f"{col} is missing or not an id", col)
+            return None
     a, b = str(a), str(b)
     for col, v in (("netelementA", a), ("netelementB", b)):
         if v not in doc.elements:
-            return skip("rtm.unknown_netelement", f"{col} '{v}' is no imported netelement", col)
+            skip("rtm.unknown_netelement", f"{col} '{v}' is no imported netelement", col)
+            return None
     if a == b:
-        return skip("rtm.relation", f"joins netelement '{a}' to itself", "netelementB")
+        skip("rtm.relation", f"joins netelement '{a}' to itself", "netelementB")
+        return None
+    return a, b
+
+
+def _relation(doc: RtmDoc, index: int, props: dict[str, Any], ident: Any) -> None:
+    def skip(rule: str, message: str, column: str | None = None) -> None:
+        doc.finding(rule, message + ": skipped", index, ident, column=column, table="connections")
+
+    ab = _netelements(doc, index, props, ident)
+    if ab is None:
+        return
+    a, b = ab
     pos = {}
     for col in ("positionOnA", "positionOnB"):
         pos[col] = _position(props.get(col))
@@ -284,21 +301,21 @@ def _relation(doc: RtmDoc, index: int, props: dict[str, Any], ident: Any) -> Non
         return skip("rtm.navigability", f"navigability {got} is not both, AB, BA or none", "navigability")
     pa, pb = int(pos["positionOnA"] or 0), int(pos["positionOnB"] or 0)
     rel = NetRelation(str(ident or f"feature{index}"), index, a, pa, b, pb, nav)
-    gap = _gap(doc, rel)
-    if gap > GAP_WARN_M:
-        msg = (
-            f"the ends it joins ({a} at {pa}, {b} at {pb}) lie {gap:.1f} m apart (a positionOn the wrong way "
-            "round?): kept as given"
-        )
-        doc.finding("rtm.gap", msg, index, ident, column="positionOnA", table="connections")
+    _check_gap(doc, rel, ident)
     _add_relation(doc, rel)
 
 
-def _gap(doc: RtmDoc, rel: NetRelation) -> float:
-    """Geodesic distance between the two netelement ends a relation joins [m]."""
+def _check_gap(doc: RtmDoc, rel: NetRelation, ident: Any) -> None:
+    """``rtm.gap`` when the geodesic distance between the two ends joined exceeds :data:`GAP_WARN_M`."""
     ea, eb = doc.elements[rel.a].line, doc.elements[rel.b].line
     ia, ib = (-1 if rel.pos_a else 0), (-1 if rel.pos_b else 0)
-    return float(GEOD.inv(ea.lon[ia], ea.lat[ia], eb.lon[ib], eb.lat[ib])[2])
+    gap = float(GEOD.inv(ea.lon[ia], ea.lat[ia], eb.lon[ib], eb.lat[ib])[2])
+    if gap > GAP_WARN_M:
+        msg = (
+            f"the ends it joins ({rel.a} at {rel.pos_a}, {rel.b} at {rel.pos_b}) lie {gap:.1f} m apart "
+            "(a positionOn the wrong way round?): kept as given"
+        )
+        doc.finding("rtm.gap", msg, rel.index, ident, column="positionOnA", table="connections")
 
 
 def _oriented(rel: NetRelation, a: str, pos_a: int) -> str:
