@@ -80,10 +80,11 @@ def export_network(
         return _write_geojson(network, out, force or empty, inputs)
     if fmt == ExportFormat.gpkg:
         from dbtools.interchange.gpkg import write_gpkg
-        from dbtools.interchange.network_layers import network_layer_features, on_track
+        from dbtools.interchange.network_layers import COLUMN_TYPES, network_layer_features, on_track
 
         features = network_features(network, on_track(network)) + network_layer_features(network)
-        return write_gpkg(out, features, srs_epsg=geodetic_epsg(network), force=force, inputs=inputs)
+        epsg = geodetic_epsg(network)
+        return write_gpkg(out, features, srs_epsg=epsg, force=force, inputs=inputs, column_types=COLUMN_TYPES)
     from dbtools.interchange.geoparquet import write_geoparquet
 
     features = network_features(network)

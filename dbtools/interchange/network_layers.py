@@ -31,8 +31,26 @@ from dbtools.interchange.geojson import Geometry, GridLocator, feature, line_str
 from dbtools.network import Network
 from dbtools.topology import Centreline, all_tracks, centreline
 from schemas.enums import BaliseKind, TrackEnd
+from schemas.model import Table
+from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES
+from schemas.tables import BALISES
 
 LAYERS = ("tracks", "switches", "connections", "balise_groups", "km_posts")
+
+
+def _types(*tables: Table, **extra: str) -> dict[str, str]:
+    return {**{c.name: c.sql_type for t in tables for c in t.columns}, **extra}
+
+
+#: SQL type of every attribute of the layers (their schema columns'), for the GeoPackage.
+COLUMN_TYPES: dict[str, dict[str, str]] = {
+    "tracks": _types(NETWORK_TRACKS, implied="INTEGER"),
+    "switches": _types(SWITCHES),
+    "connections": _types(CONNECTIONS),
+    "balise_groups": _types(BALISES, group="TEXT", km_m="REAL"),
+    "km_posts": {"km": "REAL", "km_m": "REAL", "track_id": "TEXT", "line_code": "TEXT", "track": "TEXT"},
+    "balises": _types(BALISES),
+}
 
 
 def _v(v: Any) -> Any:

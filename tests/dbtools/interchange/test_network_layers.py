@@ -78,6 +78,9 @@ def test_geopackage_layers(kvg_db: Path, tmp_path: Path) -> None:
     sw = _frame(out, "switches")
     assert {"switch_id", "type", "switch_number", "diverging_side", "km_m"} <= set(sw.columns)
     assert set(sw["diverging_side"].dropna()) <= {"left", "right"}
+    info = pyogrio.read_info(out, layer="switches")
+    types = dict(zip(info["fields"], info["dtypes"], strict=True))
+    assert types["switch_number"] == "float64" and types["diverging_radius_m"] == "float64"  # all null, still REAL
     conns = _frame(out, "connections")
     assert {"track_a", "end_a", "track_b", "end_b", "navigability", "switch_id"} <= set(conns.columns)
 
