@@ -387,17 +387,27 @@ def _import_rtm(source: Path, out: Path, force: bool) -> None:
 @cli_command
 def export(
     db: Path = typer.Argument(..., help="Onboard DB file (.sqlite) or source set folder."),
-    fmt: str = typer.Option(..., "--format", help="railml (3.2), geojson, gpkg (GeoPackage) or geoparquet."),
-    out: Path = typer.Option(..., "--out", "-o", help="Output file."),
+    fmt: str = typer.Option(
+        ...,
+        "--format",
+        help="railml (3.2), geojson, gpkg (GeoPackage), geoparquet or rtm-geojson (RailTopoModel, as tp-lib reads it).",
+    ),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Output file; geojson: a folder of one file per layer unless .geojson/.json/.zip."
+    ),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
     xsd: Path | None = typer.Option(
         None, "--xsd", help="railML: validate the export against this XML Schema before writing it (railml3.xsd)."
     ),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
-    """Export a DB as railML 3.2 or as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet).
+    """Export a DB as railML 3.2, as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet) or
+    as RailTopoModel GeoJSON (rtm-geojson: netelements and netrelations, as tp-lib reads them).
 
-    Layers: balises, feature_points, gis_points, gis_lines. Exit 0 written, 1 source set
+    Layers: balises, feature_points, gis_points, gis_lines and the network's tracks,
+    switches, connections, balise_groups, km_posts (GeoParquet: the first four). GeoJSON:
+    one file (--out *.geojson or *.json), a folder of LAYER.geojson files, or their zip
+    (--out *.zip). Exit 0 written, 1 source set
     errors or (with --xsd) the export is not valid against the schema (nothing written),
     2 unreadable input or XSD, unknown format, 3 output exists.
 
