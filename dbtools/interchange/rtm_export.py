@@ -9,9 +9,10 @@ tp-lib's reader takes (``tp-core/src/io/geojson.rs``; the reader of this import,
   (tp-lib ignores properties it does not know). A track without a centreline of two
   points cannot be a LineString and is left out (counted as ``tracks_without_geometry``);
 * one **netrelation** per connection: a ``Point`` at track A's connected end with ``type``
-  ``netrelation``, ``id``, ``netelementA``/``netelementB``, ``positionOnA``/``positionOnB``
-  (0 at ``begin``, 1 at ``end``), ``navigability`` (both/AB/BA/none) and ``switch_id``.
-  Connections whose track has no geometry are left out with it;
+  ``netrelation``, ``id`` (``A:end--B:begin``: the DB keeps no relation ids),
+  ``netelementA``/``netelementB``, ``positionOnA``/``positionOnB`` (0 at ``begin``, 1 at
+  ``end``), ``navigability`` (both/AB/BA/none) and ``switch_id``. Connections whose track
+  has no geometry are left out with it;
 * a ``crs`` member naming ``EPSG:4326``: lat/lon are written as the DB holds them (in the
   geodetic datum of the network's metric CRS, within a metre or two of WGS 84, as every
   GeoJSON export of the suite: :mod:`~dbtools.interchange.geojson`).

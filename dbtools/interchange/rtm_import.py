@@ -16,8 +16,9 @@ What is written (:func:`dbtools.sources.write_source_set`, one atomic step):
 * ``gis.csv``, ``balises.csv``, ``feature_points.csv``: header only (the format has no
   line grid, no balises, no curves);
 * ``network.toml``: the operating area (the box of the points, widened by
-  :data:`AREA_MARGIN_DEG`) and the metric CRS (the file's own when it is projected, else the
-  UTM zone of the median point), so that ``db build`` need not derive them from a grid;
+  :data:`AREA_MARGIN_DEG`) and the metric CRS (the file's own when it is projected in
+  metres with an EPSG code, else the UTM zone of the median point), so that ``db build``
+  need not derive them from a grid;
 * ``import_report.json``: counts, what was inferred and every finding.
 
 Exit codes as the railML import: findings on single features are warnings (the feature is
@@ -132,7 +133,8 @@ def declaration(doc: RtmDoc) -> dict[str, str]:
     m = AREA_MARGIN_DEG
     area = Area.box(lat.min() - m, lat.max() + m, lon.min() - m, lon.max() + m)
     crs = CRS.from_user_input("OGC:CRS84" if doc.crs.upper() == "CRS84" else doc.crs)
-    code = crs.to_epsg() if crs.is_projected else None
+    metres = crs.is_projected and all(a.unit_name in ("metre", "meter") for a in crs.axis_info)
+    code = crs.to_epsg() if metres else None
     epsg = code if code is not None else utm_epsg(float(np.median(lat)), float(np.median(lon)))
     return {
         "area": area.to_json(),

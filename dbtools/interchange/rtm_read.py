@@ -27,7 +27,6 @@ report.
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -237,7 +236,7 @@ def _element(doc: RtmDoc, crs: _Crs, index: int, feature: dict[str, Any], props:
     except ValueError as exc:
         doc.finding("rtm.crs", f"{exc}: skipped", index, ident, column="crs")
         return
-    bad = [i for i, (x, y) in enumerate(zip(lon, lat, strict=True)) if not (math.isfinite(x) and abs(y) <= 90)]
+    bad = [i for i, (x, y) in enumerate(zip(lon, lat, strict=True)) if not (abs(x) <= 180 and abs(y) <= 90)]
     if bad:
         msg = f"vertex {bad[0]} {list(xy[bad[0]])} does not lie on the earth in {name}: skipped"
         doc.finding("rtm.geometry", msg, index, ident)

@@ -197,8 +197,13 @@ def test_feature_crs_property_and_rfc7946_default(tmp_path: Path) -> None:
     feats = [
         element("W", [[9.0, 54.0], [9.001, 54.0]]),
         element("U", [[E0, N0], [E0 + 10, N0]], crs="EPSG:25832"),
+        element("X", [[9.0, 54.0], [190.0, 54.0]]),  # longitude beyond 180°
     ]
-    import_rtm_geojson(write(tmp_path / "t.geojson", collection(feats, crs=None)), tmp_path / "out")
+    r = import_rtm_geojson(write(tmp_path / "t.geojson", collection(feats, crs=None)), tmp_path / "out")
+    (f,) = r.findings
+    assert (
+        f.rule == "rtm.geometry" and "feature 2 (id 'X'): vertex 1 [190.0, 54.0] does not lie on the earth" in f.message
+    )
     pts = csv(tmp_path / "out", "track_points").set_index(["track_id", "pos_m"])
     assert pts.loc[("W", 0.0), "lon"] == 9.0 and pts.loc[("U", 0.0), "lon"] == pytest.approx(9.0, abs=1e-9)
 
