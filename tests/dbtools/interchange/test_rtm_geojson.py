@@ -34,6 +34,8 @@ NE_00B6 = "_netelement_00b6f74b-7ca0-428e-a2d2-c2f5f5452310_0.0"
 NE_0FA9 = "_netelement_0fa90553-f256-4ef2-ad39-f27ef2de68a5_0.11291494"
 NE_01FA = "_netelement_01fadff1-852a-4137-b141-867cfc91d09a_0.0"
 NE_F9C4 = "_netelement_f9c4d558-c756-469d-a9f9-f6ce4c4506c2_0.13198151"
+NE_FF1F = "_netelement_ff1fd959-89d3-4ff4-abe1-6564e4fca9dc_0.0"
+NE_01FA_2 = "_netelement_01fadff1-852a-4137-b141-867cfc91d09a_0.11093652"
 
 
 def csv(folder: Path, name: str) -> pd.DataFrame:
@@ -87,6 +89,12 @@ def test_rinf_kvg_counts_ids_and_lengths(kvg: Path) -> None:
     # _netrelation_not_navigable_…01fadff1…_f9c4d558…: both at position 0, none
     assert c.loc[(NE_01FA, "begin", NE_F9C4, "begin"), "navigability"] == "none"
     assert len(sw) == 55 and (sw["type"] == "point").all()
+    # by hand at the end of 01fadff1…_0.0 (12.003491, 60.187778): its last segment heads
+    # (0.000273° · cos 60.19°, 0.000008°); ff1fd959…'s first turns 2.89° counter-clockwise
+    # from that (left, diverging), 01fadff1…_0.11093652's first 0.06° clockwise (through)
+    s = sw.set_index("switch_id").loc[f"switch:{NE_01FA}:end"]
+    assert (s["b1_track"], s["b1_end"], s["diverging_side"]) == (NE_FF1F, "begin", "left")
+    assert (s["b2_track"], s["b2_end"]) == (NE_01FA_2, "begin")
     assert len(report["findings"]) == 6 and {f["rule"] for f in report["findings"]} == {"rtm.switch_ambiguous"}
     # every inferred switch: its three connections carry its id, toe ↔ branches navigable
     for s in sw.to_dict("records"):
