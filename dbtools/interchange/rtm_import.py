@@ -11,7 +11,7 @@ What is written (:func:`dbtools.sources.write_source_set`, one atomic step):
   (position 0, ``begin``), plus its last vertex (``end``), as WGS 84 lat/lon;
 * ``connections.csv``: one row per netrelation (relations listed twice kept once), ends
   ``begin``/``end`` for positionOn 0/1, navigability as given; ``switches.csv``: the point
-  switches inferred from the relations (:mod:`~dbtools.interchange.rtm_switches`), whose id
+  switches and slips inferred from the relations (:mod:`~dbtools.interchange.rtm_switches`), whose id
   the relations through them carry;
 * ``gis.csv``, ``balises.csv``, ``feature_points.csv``: header only (the format has no
   line grid, no balises, no curves);
@@ -54,9 +54,11 @@ REPORT_FILE = "import_report.json"
 #: Margin of the declared operating area around the network's points [deg].
 AREA_MARGIN_DEG = 0.02
 SWITCH_RULE = (
-    "a netelement end with exactly two navigable relations to ends of two other netelements, "
-    "those two joined by a relation of navigability none, is the toe of a point switch; left/right "
-    f"from the cross product of the branch directions {REACH_M:g} m into them"
+    "four ends in two pairs, each pair joined by a relation of navigability none and each end navigable "
+    "only to the other pair, are a double slip (four such joins) or single slip (three); elsewhere a "
+    "netelement end with exactly two navigable relations to ends of two other netelements, those two "
+    "joined by a relation of navigability none, is the toe of a point switch, left/right from the cross "
+    f"product of the branch directions {REACH_M:g} m into them"
 )
 
 

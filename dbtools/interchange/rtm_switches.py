@@ -1,12 +1,21 @@
-"""Point switches inferred from RailTopoModel netrelations (a RailTopoModel GeoJSON network
-has no switch objects: a switch is only the pattern of relations at a node).
+"""Switches inferred from RailTopoModel netrelations (a RailTopoModel GeoJSON network has
+no switch objects: a switch is only the pattern of relations at a node). Every relation
+among a switch's ports gets its id ``switch:<netelement>:<begin|end>`` (of its A1 end).
 
-Rule: a netelement end T is the **toe** of a point switch when exactly two relations that
-are navigable (both, AB or BA) join it to two ends X and Y of two other netelements, and a
-relation of navigability ``none`` joins X and Y (the two branches, between which no train
-may pass). The three relations get the switch's id (``switch:<toe netelement>:<begin|end>``).
-Where a relation would belong to two such patterns (double switches meeting at one node)
-the toe whose id sorts first keeps it and the other is reported, not inferred.
+**Slips** first: four ends P, Q, X, Y where a relation of navigability ``none`` joins P and
+Q and another X and Y, and every navigable relation of each runs to the other pair (P and
+Q each to X and/or Y, X and Y each to P and/or Q). All four joins: a **double slip**, A1 =
+P (the end found first, in sorted order), A2 = Q, B1 the one of X and Y whose direction is
+the straighter continuation of P's track (A1–B1 and A2–B2 are the crossing routes of OSRD's
+ports), B2 the other. Three joins: a **single slip**, A1 the end with two (routes A1–B1,
+A1–B2), A2 the end with one, B2 its partner (route A2–B2).
+
+**Point switches** then, at the ends no slip holds: a netelement end T is the **toe** of a
+point switch when exactly two relations that are navigable (both, AB or BA) join it to two
+ends X and Y of two other netelements, and a relation of navigability ``none`` joins X and
+Y (the two branches, between which no train may pass). Where a relation would belong to two
+such patterns the toe whose id sorts first keeps it and the other is reported
+(``rtm.switch_ambiguous``), not inferred.
 
 **Left and right** (OSRD ports: A1 toe, B1 left, B2 right, seen from the toe towards the
 branches): the direction of each branch leaving the node is the forward azimuth α from the
@@ -79,55 +88,114 @@ def _navigable(rel: NetRelation) -> bool:
     return rel.navigability != Navigability.NONE.value
 
 
-def infer_switches(elements: dict[str, NetElement], relations: list[NetRelation], file: str) -> Inferred:
-    """Point switches by the rule of the module doc."""
-    at: dict[End, list[tuple[End, NetRelation]]] = defaultdict(list)
-    by_ends: dict[frozenset[End], NetRelation] = {}
-    for r in relations:
-        at[(r.a, r.pos_a)].append(((r.b, r.pos_b), r))
-        at[(r.b, r.pos_b)].append(((r.a, r.pos_a), r))
-        by_ends[r.ends] = r
-    out = Inferred()
-    for toe in sorted(at):
-        nav = [(other, r) for other, r in at[toe] if _navigable(r)]
-        if len(nav) != 2:
-            continue
-        (x, rx), (y, ry) = nav
-        between = by_ends.get(frozenset((x, y)))
-        if x[0] == y[0] or toe[0] in (x[0], y[0]) or between is None or _navigable(between):
-            continue
-        keys = [rx.ends, ry.ends, between.ends]
-        taken = [out.by_relation[k] for k in keys if k in out.by_relation]
-        sid = switch_id(toe)
-        if taken:
-            msg = f"the relations at {toe[0]} {end_name(toe[1])} also belong to {taken[0]}: no switch inferred here"
-            out.findings.append(
-                Finding("rtm.switch_ambiguous", Severity.WARNING, "switches", msg, keys={"switch_id": sid}, file=file)
-            )
-            continue
-        left, right, side, problem = _sides(elements, toe, x, y)
-        if problem:
-            out.findings.append(
-                Finding("rtm.switch_sides", Severity.WARNING, "switches", problem, keys={"switch_id": sid}, file=file)
-            )
-        line = elements[toe[0]].line
-        i = -1 if toe[1] == 1 else 0
-        out.switches.append(
-            {
-                "switch_id": sid,
-                "type": SwitchType.POINT.value,
-                **_port("a1", toe),
-                **_port("b1", left),
-                **_port("b2", right),
-                "diverging_side": side,
-                "lat": float(line.lat[i]),
-                "lon": float(line.lon[i]),
-                "name": "inferred from netrelations",
-            }
-        )
-        for k in keys:
-            out.by_relation[k] = sid
+@dataclass
+class _Graph:
+    """The relations at each end: navigable partners and the relation joining two ends."""
+
+    nav: dict[End, set[End]] = field(default_factory=lambda: defaultdict(set))
+    by_ends: dict[frozenset[End], NetRelation] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, relations: list[NetRelation]) -> _Graph:
+        g = cls()
+        for r in relations:
+            g.by_ends[r.ends] = r
+            if _navigable(r):
+                g.nav[(r.a, r.pos_a)].add((r.b, r.pos_b))
+                g.nav[(r.b, r.pos_b)].add((r.a, r.pos_a))
+        return g
+
+    def partners(self, e: End) -> set[End]:
+        return self.nav.get(e, set())
+
+    def barred(self, x: End, y: End) -> bool:
+        """A relation of navigability none joins x and y."""
+        r = self.by_ends.get(frozenset((x, y)))
+        return r is not None and not _navigable(r)
+
+    def keys(self, ends: tuple[End, ...]) -> list[frozenset[End]]:
+        """The relations among these ends."""
+        pairs = {frozenset((u, v)) for u in ends for v in ends if u != v}
+        return sorted((k for k in pairs if k in self.by_ends), key=sorted)
+
+
+def _slip(g: _Graph, elements: dict[str, NetElement], p: End) -> tuple[str, dict[str, End]] | None:
+    """(type, ports) of a slip whose first end is p (module doc), else None."""
+    xs = g.partners(p)
+    if len(xs) != 2:
+        return None
+    x, y = sorted(xs)
+    others = (g.partners(x) | g.partners(y)) - {p}
+    if not g.barred(x, y) or len(others) != 1:
+        return None
+    (q,) = others
+    if q == p or not g.barred(p, q) or not g.partners(q) <= {x, y}:
+        return None
+    if len(g.partners(q)) == 1:  # single slip: a1 has both routes, a2 only the one to b2
+        (b2,) = g.partners(q)
+        return SwitchType.SINGLE_SLIP.value, {"a1": p, "b1": y if b2 == x else x, "a2": q, "b2": b2}
+    through = (azimuth_away(elements[p[0]].line, p[1] == 1, REACH_M) + 180.0) % 360.0
+    turn = {e: abs(_turn(through, azimuth_away(elements[e[0]].line, e[1] == 1, REACH_M))) for e in (x, y)}
+    b1 = min((x, y), key=lambda e: turn[e])  # a1–b1: the straighter (crossing) route
+    return SwitchType.DOUBLE_SLIP.value, {"a1": p, "b1": b1, "a2": q, "b2": y if b1 == x else x}
+
+
+def _row(
+    sid: str, kind: str, ports: dict[str, End], elements: dict[str, NetElement], side: str | None
+) -> dict[str, Any]:
+    a1 = ports["a1"]
+    line = elements[a1[0]].line
+    i = -1 if a1[1] == 1 else 0
+    out: dict[str, Any] = {"switch_id": sid, "type": kind}
+    for name, end in ports.items():
+        out.update(_port(name, end))
+    out.update(diverging_side=side, lat=float(line.lat[i]), lon=float(line.lon[i]), name="inferred from netrelations")
     return out
+
+
+def infer_switches(elements: dict[str, NetElement], relations: list[NetRelation], file: str) -> Inferred:
+    """Slips, then point switches, by the rules of the module doc."""
+    g = _Graph.of(relations)
+    out = Inferred()
+    ends = sorted(set(g.nav))
+    in_slip: set[End] = set()
+    for p in ends:
+        slip = _slip(g, elements, p) if p not in in_slip else None
+        if slip is not None:
+            kind, ports = slip
+            sid = switch_id(p)
+            out.switches.append(_row(sid, kind, ports, elements, None))
+            in_slip |= set(ports.values())
+            out.by_relation.update((k, sid) for k in g.keys(tuple(ports.values())))
+    for toe in ends:
+        if toe not in in_slip:
+            _point(g, elements, toe, out, file)
+    return out
+
+
+def _point(g: _Graph, elements: dict[str, NetElement], toe: End, out: Inferred, file: str) -> None:
+    """The point switch whose toe is ``toe``, if the relations there make one (module doc)."""
+    if len(g.partners(toe)) != 2:
+        return
+    x, y = sorted(g.partners(toe))
+    if x[0] == y[0] or toe[0] in (x[0], y[0]) or not g.barred(x, y):
+        return
+    keys = [frozenset((toe, x)), frozenset((toe, y)), frozenset((x, y))]
+    taken = [out.by_relation[k] for k in keys if k in out.by_relation]
+    sid = switch_id(toe)
+    if taken:
+        msg = f"the relations at {toe[0]} {end_name(toe[1])} also belong to {taken[0]}: no switch inferred here"
+        out.findings.append(
+            Finding("rtm.switch_ambiguous", Severity.WARNING, "switches", msg, keys={"switch_id": sid}, file=file)
+        )
+        return
+    left, right, side, problem = _sides(elements, toe, x, y)
+    if problem:
+        out.findings.append(
+            Finding("rtm.switch_sides", Severity.WARNING, "switches", problem, keys={"switch_id": sid}, file=file)
+        )
+    out.switches.append(_row(sid, SwitchType.POINT.value, {"a1": toe, "b1": left, "b2": right}, elements, side))
+    out.by_relation.update((k, sid) for k in keys)
 
 
 def _port(name: str, end: End) -> dict[str, str]:

@@ -40,7 +40,8 @@ def test_the_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     assert len(pd.read_csv(src / "tracks.csv")) == 99 and len(pd.read_csv(src / "track_points.csv")) == 1757
     assert round(pd.read_csv(src / "tracks.csv")["length_m"].sum() / 1000, 2) == 32.13
     sw = pd.read_csv(src / "switches.csv")
-    assert sw["diverging_side"].value_counts().to_dict() == {"left": 32, "right": 23}
+    assert sw["diverging_side"].value_counts().to_dict() == {"left": 32, "right": 21}
+    assert sw["type"].value_counts().to_dict() == {"point": 53, "double_slip": 2}
     assert 'metric_crs = "EPSG:32633"' in (src / "network.toml").read_text(encoding="utf-8")
     report = json.loads((src / "import_report.json").read_text(encoding="utf-8"))
     assert report["rows"]["connections"] == 182 and report["inferred"]["switches"] == 55

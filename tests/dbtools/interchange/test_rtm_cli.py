@@ -19,7 +19,7 @@ def invoke(*args: object):  # type: ignore[no-untyped-def]
 def test_import_exit_codes(tmp_path: Path) -> None:
     r = invoke("db", "import", KVG, "--format", "rtm-geojson", "--out", tmp_path / "kvg")
     assert r.exit_code == 0, r.output
-    assert "switches inferred" in r.output and "│ 55" in r.output and "rtm.switch_ambiguous" in r.output
+    assert "switches inferred" in r.output and "│ 55" in r.output and "warning" not in r.output
     again = invoke("db", "import", KVG, "--format", "rtm-geojson", "--out", tmp_path / "kvg")
     assert again.exit_code == 3 and "--force" in again.output
     bad = tmp_path / "bad.geojson"

@@ -14,8 +14,9 @@ from dbtools.build import build_db
 from dbtools.interchange.export import ExportFormat, export_network
 from dbtools.interchange.rtm_import import import_rtm_geojson
 from dbtools.validate import validate_path
-from schemas.enums import Severity
+from schemas.enums import Severity, SwitchType
 from schemas.errors import FindingsError, InputError, RefusedError
+from schemas.network import SWITCH_ROUTES
 from tests.dbtools.interchange.rtm_samples import (
     E0,
     KVG,
@@ -88,19 +89,25 @@ def test_rinf_kvg_counts_ids_and_lengths(kvg: Path) -> None:
     assert c.loc[(NE_00B6, "end", NE_0FA9, "begin"), "navigability"] == "both"
     # _netrelation_not_navigable_…01fadff1…_f9c4d558…: both at position 0, none
     assert c.loc[(NE_01FA, "begin", NE_F9C4, "begin"), "navigability"] == "none"
-    assert len(sw) == 55 and (sw["type"] == "point").all()
+    assert sw["type"].value_counts().to_dict() == {"point": 53, "double_slip": 2}
     # by hand at the end of 01fadff1…_0.0 (12.003491, 60.187778): its last segment heads
     # (0.000273° · cos 60.19°, 0.000008°); ff1fd959…'s first turns 2.89° counter-clockwise
     # from that (left, diverging), 01fadff1…_0.11093652's first 0.06° clockwise (through)
     s = sw.set_index("switch_id").loc[f"switch:{NE_01FA}:end"]
     assert (s["b1_track"], s["b1_end"], s["diverging_side"]) == (NE_FF1F, "begin", "left")
     assert (s["b2_track"], s["b2_end"]) == (NE_01FA_2, "begin")
-    assert len(report["findings"]) == 6 and {f["rule"] for f in report["findings"]} == {"rtm.switch_ambiguous"}
-    # every inferred switch: its three connections carry its id, toe ↔ branches navigable
+    # the node at the end of 6ffafb60…: four ends, each of one side joined to both of the
+    # other (both), the two of a side joined by none: a double slip, not a point switch
+    d = sw.set_index("switch_id").loc["switch:_netelement_6ffafb60-df00-4dba-805b-c460839400d8_0.0:end"]
+    assert d["type"] == "double_slip" and d["a2_track"] == "_netelement_d5b44b60-686f-465f-b044-f7ca3acb0362_0.0"
+    assert report["findings"] == []
+    # every inferred switch: the connections among its ports carry its id — a point switch
+    # toe ↔ branches navigable and none between the branches, a double slip four and two
     for s in sw.to_dict("records"):
         mine = conns[conns["switch_id"] == s["switch_id"]]
-        assert len(mine) == 3 and sorted(mine["navigability"]) == ["both", "both", "none"]
-        ends = {(s[f"{p}_track"], s[f"{p}_end"]) for p in ("a1", "b1", "b2")}
+        want = ["both", "both", "none"] if s["type"] == "point" else ["both"] * 4 + ["none"] * 2
+        assert sorted(mine["navigability"]) == want
+        ends = {(s[f"{p}_track"], s[f"{p}_end"]) for p in ("a1", "b1", "b2", "a2")}
         assert {(r["track_a"], r["end_a"]) for r in mine.to_dict("records")} <= ends
 
 
@@ -235,7 +242,7 @@ def test_round_trip_import_build_export_import(kvg: Path, tmp_path: Path) -> Non
     back = tmp_path / "back"
     r = import_rtm_geojson(out, back)
     first = json.loads((kvg / "import_report.json").read_text(encoding="utf-8"))["findings"]
-    assert [f.message for f in r.findings] == [f["message"] for f in first]  # the same 6 ambiguous toes
+    assert r.findings == [] and first == []
     a, b = csv(kvg, "tracks").set_index("track_id"), csv(back, "tracks").set_index("track_id")
     assert list(a.index) == list(b.index)
     assert (a["length_m"] - b["length_m"]).abs().max() < 0.5
@@ -252,3 +259,45 @@ def test_tp_lib_sample_round_trip(tmp_path: Path) -> None:
     a, b = csv(tmp_path / "src", "tracks"), csv(tmp_path / "back", "tracks")
     assert list(a["track_id"]) == list(b["track_id"]) == ["NE001", "NE002"]
     assert (a["length_m"] - b["length_m"]).abs().max() < 0.5
+
+
+def _slip_features(joins: tuple[tuple[str, str], ...]) -> list[dict[str, object]]:
+    """A slip in UTM 32 metres at node (E0 + 100, N0): P comes from the west-south-west and
+    Q from the west-north-west; X leaves to the east-north-east (P → X straight on), Y to
+    the east-south-east (Q → Y straight on). ``joins``: the navigable ones of P–X, P–Y,
+    Q–X, Q–Y; P–Q and X–Y are joined by none."""
+    node = [E0 + 100, N0]
+    feats: list[dict[str, object]] = [
+        element("P", [[E0, N0 - 10], node]),
+        element("Q", [[E0, N0 + 10], node]),
+        element("X", [node, [E0 + 200, N0 + 10]]),
+        element("Y", [node, [E0 + 200, N0 - 10]]),
+        relation("pq", "P", 1, "Q", 1, "none"),
+        relation("xy", "X", 0, "Y", 0, "none"),
+    ]
+    pos = {"P": 1, "Q": 1, "X": 0, "Y": 0}
+    feats += [relation(a + b, a, pos[a], b, pos[b], "both") for a, b in joins]
+    return feats
+
+
+def test_inferred_double_and_single_slip(tmp_path: Path) -> None:
+    both = (("P", "X"), ("P", "Y"), ("Q", "X"), ("Q", "Y"))
+    import_rtm_geojson(write(tmp_path / "d.geojson", collection(_slip_features(both))), tmp_path / "d")
+    (sw,) = csv(tmp_path / "d", "switches").to_dict("records")
+    ports = {p: sw[f"{p}_track"] for p in ("a1", "b1", "a2", "b2")}
+    # A1 = P (sorts first), A1–B1 the straight route P → X, A2 = Q, B2 = Y
+    assert (sw["type"], sw["switch_id"], ports) == (
+        "double_slip",
+        "switch:P:end",
+        {"a1": "P", "b1": "X", "a2": "Q", "b2": "Y"},
+    )
+    assert (csv(tmp_path / "d", "connections")["switch_id"] == "switch:P:end").sum() == 6
+    # without Q–X: a single slip whose A1 (two routes) is P and A2 = Q with its one route to B2 = Y
+    single = (("P", "X"), ("P", "Y"), ("Q", "Y"))
+    import_rtm_geojson(write(tmp_path / "s.geojson", collection(_slip_features(single))), tmp_path / "s")
+    (sw,) = csv(tmp_path / "s", "switches").to_dict("records")
+    ports = {p: sw[f"{p}_track"] for p in ("a1", "b1", "a2", "b2")}
+    assert (sw["type"], ports) == ("single_slip", {"a1": "P", "b1": "X", "a2": "Q", "b2": "Y"})
+    # the routes of a single slip (schemas.network.SWITCH_ROUTES) are exactly the navigable joins
+    routes = {frozenset((ports[u], ports[v])) for u, v in SWITCH_ROUTES[SwitchType.SINGLE_SLIP]}
+    assert routes == {frozenset(j) for j in single}
