@@ -247,8 +247,12 @@ def test_round_trip_import_build_export_import(kvg: Path, tmp_path: Path) -> Non
     assert list(a.index) == list(b.index)
     assert (a["length_m"] - b["length_m"]).abs().max() < 0.5
     assert csv(kvg, "connections").equals(csv(back, "connections"))
-    cols = ["switch_id", "type", "a1_track", "a1_end", "b1_track", "b1_end", "b2_track", "b2_end", "a2_track", "a2_end"]
-    cols.append("diverging_side")
+    cols = [
+        "switch_id",
+        "type",
+        "diverging_side",
+        *(f"{p}_{x}" for p in ("a1", "b1", "b2", "a2") for x in ("track", "end")),
+    ]
     assert csv(kvg, "switches")[cols].equals(csv(back, "switches")[cols])
 
 
