@@ -116,6 +116,8 @@ def test_rinf_kvg_builds_and_validates(kvg: Path, tmp_path: Path) -> None:
     build_db(kvg, db, db_version="kvg")
     findings = validate_path(db)
     assert not [f for f in findings if f.severity == Severity.ERROR], [str(f) for f in findings]
+    (gis,) = [f for f in findings if f.rule == "schema.empty_table" and f.table == "gis"]
+    assert gis.severity == Severity.WARNING and "own centrelines (track_points)" in gis.message
 
 
 def test_projected_crs_turnout_and_inferred_switch(tmp_path: Path) -> None:
