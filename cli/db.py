@@ -51,6 +51,7 @@ class ValidateFmt(StrEnum):
 class ImportFmt(StrEnum):
     railml = "railml"
     osm = "osm"
+    rtm_geojson = "rtm-geojson"
 
 
 @app.command("build")
@@ -327,9 +328,14 @@ def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: 
 @app.command("import")
 @cli_command
 def import_(
-    source: Path = typer.Argument(..., help="railML file (2.0–2.5 or 3.1–3.3) or OpenStreetMap file (.osm.pbf, .osm)."),
+    source: Path = typer.Argument(
+        ..., help="railML file (2.0–2.5 or 3.1–3.3), OpenStreetMap file (.osm.pbf, .osm) or RailTopoModel GeoJSON."
+    ),
     fmt: ImportFmt | None = typer.Option(
-        None, "--format", help="railml or osm (default: osm for .osm.pbf/.osm/.osm.bz2 files, else railml)."
+        None,
+        "--format",
+        help="railml, osm or rtm-geojson (RailTopoModel netelements/netrelations as tp-lib reads them); default: "
+        "osm for .osm.pbf/.osm/.osm.bz2 files, rtm-geojson for .geojson, else railml.",
     ),
     out: Path = typer.Option(..., "--out", "-o", help="Output source set folder (then: db build SOURCE_DIR)."),
     line_code: Path | None = typer.Option(
@@ -347,7 +353,8 @@ def import_(
         help="osm: railway=* values of the ways imported, comma-separated (e.g. rail,light_rail).",
     ),
 ) -> None:
-    """Import a railML or OpenStreetMap file as a source set; everything not mapped is reported.
+    """Import a railML, OpenStreetMap or RailTopoModel GeoJSON file as a source set; every
+    element that cannot be mapped is reported.
 
     railML: writes the source tables, network.toml (when declared), survey/ (centrelines
     and km posts for gis grid, when the file has coordinates) and import_report.json. Exit
@@ -361,14 +368,30 @@ def import_(
     zone) and import_report.json. Exit 0 written, 1 no rail way could be imported, 2
     unreadable file, 3 output exists.
 
+    rtm-geojson (docs/howto/import-geojson.md): tracks, connections, inferred point
+    switches and 20 m track_points; exit 0 written (skipped features are warnings), 1 no
+    netelement could be imported, an unknown CRS or no FeatureCollection (nothing written),
+    2 invalid JSON, 3 output exists.
+
     Example: trainpos db import line.railml --format railml --out src/ --line-code map.toml
     """
     from dbtools.interchange.osm_read import is_osm_file
 
     if fmt is None:
-        fmt = ImportFmt.osm if is_osm_file(source) else ImportFmt.railml
+        fmt = (
+            ImportFmt.osm
+            if is_osm_file(source)
+            else ImportFmt.rtm_geojson
+            if source.suffix.lower() == ".geojson"
+            else ImportFmt.railml
+        )
+    if fmt != ImportFmt.railml and (line_code is not None or xsd is not None):
+        raise UsageError(f"--line-code and --xsd apply to railML only, not --format {fmt.value}")
     if fmt == ImportFmt.osm:
         _import_osm(source, out, force, osm_railway)
+        return
+    if fmt == ImportFmt.rtm_geojson:
+        _import_rtm(source, out, force)
         return
     from dbtools.interchange.importer import import_railml
 
@@ -409,21 +432,54 @@ def _import_osm(source: Path, out: Path, force: bool, railways: str) -> None:
     )
 
 
+def _import_rtm(source: Path, out: Path, force: bool) -> None:
+    from dbtools.interchange.rtm_import import import_rtm_geojson
+
+    result = import_rtm_geojson(source, out, force=force)
+    out_c = console()
+    if result.findings:
+        print_findings(result.findings, console=out_c, title="Not imported / warnings")
+    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
+    out_c.print(
+        key_value_table(
+            [
+                ("folder", str(result.out)),
+                ("CRS of the file", result.crs),
+                ("netelements in the file", result.netelements_seen),
+                ("netrelations in the file", result.netrelations_seen),
+                ("switches inferred", result.switches_inferred),
+                *rows,
+            ],
+            title="Imported",
+        )
+    )
+
+
 @app.command("export")
 @cli_command
 def export(
     db: Path = typer.Argument(..., help="Onboard DB file (.sqlite) or source set folder."),
-    fmt: str = typer.Option(..., "--format", help="railml (3.2), geojson, gpkg (GeoPackage) or geoparquet."),
-    out: Path = typer.Option(..., "--out", "-o", help="Output file."),
+    fmt: str = typer.Option(
+        ...,
+        "--format",
+        help="railml (3.2), geojson, gpkg (GeoPackage), geoparquet or rtm-geojson (RailTopoModel, as tp-lib reads it).",
+    ),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Output file; geojson: a folder of one file per layer unless .geojson/.json/.zip."
+    ),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
     xsd: Path | None = typer.Option(
         None, "--xsd", help="railML: validate the export against this XML Schema before writing it (railml3.xsd)."
     ),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
-    """Export a DB as railML 3.2 or as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet).
+    """Export a DB as railML 3.2, as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet) or
+    as RailTopoModel GeoJSON (rtm-geojson: netelements and netrelations, as tp-lib reads them).
 
-    Layers: balises, feature_points, gis_points, gis_lines. Exit 0 written, 1 source set
+    Layers: balises, feature_points, gis_points, gis_lines and the network's tracks,
+    switches, connections, balise_groups, km_posts (GeoParquet: the first four). GeoJSON:
+    one file (--out *.geojson or *.json), a folder of LAYER.geojson files, or their zip
+    (--out *.zip). Exit 0 written, 1 source set
     errors or (with --xsd) the export is not valid against the schema (nothing written),
     2 unreadable input or XSD, unknown format, 3 output exists.
 

@@ -23,7 +23,7 @@ from schemas.enums import Severity, Track
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
-from schemas.tables import FEATURE_POINTS, LINES, SOURCE_HASH_PREFIX, SOURCE_TABLES
+from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
 
 
 def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
@@ -89,7 +89,7 @@ def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:
     declared = folder / NETWORK_FILE
     if declared.is_file():
         hashes[declared.name] = sha256_file(declared)
-    meta = {f"{SOURCE_HASH_PREFIX}{k}": v for k, v in sorted(hashes.items())}
+    meta = {f"source_sha256:{k}": v for k, v in sorted(hashes.items())}
     if declared.is_file():
         meta.update(read_declaration(declared))
     return meta
@@ -152,12 +152,11 @@ def write_source_set(
     *,
     force: bool = False,
     inputs: Iterable[Path | str] = (),
-    extra: Mapping[str, str] | None = None,
+    extra_files: Mapping[str, str] | None = None,
 ) -> Path:
     """Write a network as CSV source files (the format ``db build`` reads back), under the
-    output rule of :mod:`dbtools.atomic` (``inputs``: never replaced); ``extra``: further
-    text files of the folder (name → content, e.g. an importer's report), written in the
-    same atomic step."""
+    output rule of :mod:`dbtools.atomic` (``inputs``: never replaced). ``extra_files``: file
+    name → UTF-8 text written beside them in the same atomic step (an import report)."""
     from dbtools.atomic import atomic_folder
 
     folder = Path(folder)
@@ -170,6 +169,6 @@ def write_source_set(
             cols = [c for c in table.column_names if c != "attributes_json"]
             frame[cols].to_csv(tmp / f"{name}.csv", index=False, lineterminator="\n")
         write_declaration(network.meta, tmp / NETWORK_FILE)
-        for name, text in (extra or {}).items():
+        for name, text in (extra_files or {}).items():
             (tmp / name).write_text(text, encoding="utf-8")
     return folder

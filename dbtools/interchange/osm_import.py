@@ -272,5 +272,5 @@ def import_osm(source: Path, out: Path, *, force: bool = False, railways: tuple[
     }
     net = Network(tables, origin=str(source), meta=meta)
     text = json.dumps(report, ensure_ascii=False, indent=2) + "\n"
-    write_source_set(net, out, force=force, inputs=[source], extra={REPORT_FILE: text})
+    write_source_set(net, out, force=force, inputs=[source], extra_files={REPORT_FILE: text})
     return OsmImport(out, rows, findings, counts, meta["metric_crs"])
