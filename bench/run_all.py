@@ -230,9 +230,10 @@ class Started:
         return cls(" ".join(["bench/run_all.py", *argv]), _now(), _loads())
 
 
-def write_results(rows: list[Row], out: Path, started: Started, keep: list[str]) -> None:
-    """RESULTS.md: a header dated with the start and end of this run and the load average at each,
-    then one row per benchmark (``keep``: older table lines whose scripts this run did not redo)."""
+def write_results(rows: list[Row], out: Path, started: Started, keep: list[str], *, done: bool = True) -> None:
+    """RESULTS.md: a header dated with the start and end of this run (``done`` False: still
+    running, the time of this write) and the load average at each, then one row per benchmark
+    (``keep``: older table lines whose scripts this run did not redo)."""
     head = [
         "# Benchmark results",
         "",
@@ -240,7 +241,8 @@ def write_results(rows: list[Row], out: Path, started: Started, keep: list[str])
         "re-run a row with its command, or with `bench/run_all.py --only NAME` to update it here.",
         "",
         f"* last written by `{started.argv}`: started {started.when}, load average {started.loads}; "
-        f"finished {_now()}, load average {_loads()} (1 / 5 / 15 min)",
+        f"{'finished' if done else 'not finished (table so far)'} {_now()}, load average {_loads()} "
+        "(1 / 5 / 15 min)",
         f"* commit {_commit()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "",
         "Each row is one benchmark run in its own process (`OMP_NUM_THREADS=1`); *load* is the 1-minute "
@@ -273,7 +275,8 @@ def main() -> None:
         print(f"[{datetime.now():%H:%M:%S}] {b.name} …", flush=True)
         rows.append(_run(b, args.full, args.timeout))
         print(rows[-1].result, flush=True)
-        write_results(rows, args.out, started, keep)  # a partial table survives an interruption
+        write_results(rows, args.out, started, keep, done=False)  # a partial table survives an interruption
+    write_results(rows, args.out, started, keep)
     print(f"wrote {args.out}")
 
 

@@ -51,7 +51,8 @@ SMOKE: dict[str, Smoke] = {
         (r"db build\s+[\d.]+ s wall", r"checked fast build: DuckDB not installed|db build vs the fastest path"),
     ),
     "bench_gis_verify.py": Smoke(
-        "--lines 1 --length-km 3 --runs 2 --variants 1 --defects 1 --workers 1 --sizes 2 --seeds 1",
+        "--lines 1 --length-km 3 --runs 2 --variants 1 --defects 1 --workers 1 --sizes 2 --seeds 1 "
+        "--throughput-fixes 10000",
         (r"recall, all stretches",),
     ),
     "bench_gnss.py": Smoke(

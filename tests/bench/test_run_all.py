@@ -23,6 +23,8 @@ def test_results_are_dated_with_the_load_average(tmp_path: Path) -> None:
     text = out.read_text(encoding="utf-8")
     stamp = r"\d{4}-\d\d-\d\d \d\d:\d\d UTC, load average [\d.]+ / [\d.]+ / [\d.]+"
     assert re.search(rf"`bench/run_all.py --only a`: started {stamp}; finished {stamp}", text)
+    ra.write_results([], out, ra.Started.now([]), [], done=False)
+    assert re.search(rf"started {stamp}; not finished \(table so far\) {stamp}", out.read_text(encoding="utf-8"))
     assert ra.TABLE_HEAD in text
     assert (
         "| the bench_a.py | `.venv/bin/python bench/bench_a.py --x 1` | fast: 3.0×<br>slow \\| 1.0× | 12 s | "
