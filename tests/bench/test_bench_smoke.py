@@ -70,11 +70,13 @@ SMOKE: dict[str, Smoke] = {
         "--lines 2 --points 200 --fixes 1000 --loop-fixes 100 --repeat 1", (r"ratios: ours / loop = [\d.]+×",)
     ),
     "bench_odometry.py": Smoke("--hours 0.1 --slips 2 --repeat 1", (r"ratio naive / vectorised \(CPU\): [\d.]+×",)),
+    "bench_osm.py": Smoke("--smoke", (r"osmium read", r"× osmium's read", r"switches 799")),
     "bench_outputs.py": Smoke("--hours 0.1", (r"writing [\d.]+ %",)),
     "bench_pipeline.py": Smoke("--hours 0.1", (r"pipeline: .*× real time",)),
     "bench_possession.py": Smoke("--runs 5", (r"kind\s+sky\s+runs",)),
     "bench_radar.py": Smoke("throughput --hours 0.01 --loop-minutes 0.1", (r"vectorised [\d.]+× faster",)),
     "bench_radar_pipeline.py": Smoke("--runs 1 --workers 1 --short-m 300", (r"\|km error\| ≤ margin\s+with radar",)),
+    "bench_review_map.py": Smoke("--lines 2 --length-km 5", (r"drawn vertices \d+", r"map fragment [\d.]+ MB")),
     "bench_run.py": Smoke(
         "--hours 0.05 --repeat 1 --breakdown",
         (r"trainpos run, .* parquet .*× real time", r"where one csv run's time goes", r"engine \(run_aids\)\s+[\d.]+"),
