@@ -36,10 +36,12 @@ from dbtools.interchange.curves import map_curves
 from dbtools.interchange.geometry import grid_from_survey, survey_frames
 from dbtools.interchange.mapping import LineMap, Target, line_names, read_map, resolve
 from dbtools.interchange.model import RailmlDoc
+from dbtools.interchange.topology_rows import connection_frame, switch_frame, track_frame
 from dbtools.network import canonical, empty_frame
 from schemas.enums import Severity
 from schemas.errors import FindingsError, RefusedError
 from schemas.findings import Finding
+from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES
 from schemas.tables import BALISES, FEATURE_POINTS, GIS, KM_BREAKS, LINES, SOURCE_TABLES
 
 VERSIONS = ("2.0", "2.1", "2.2", "2.3", "2.4", "2.5", "3.1", "3.2", "3.3")
@@ -50,12 +52,9 @@ SURVEY_DIR = "survey"
 WHY = {
     "signal": "signals are not rows of the onboard DB (a C balise takes its signal_type from its signal)",
     "signalIS": "signals are not rows of the onboard DB (a C balise takes its signal_type from its signal)",
-    "switch": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
-    "switchIS": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
-    "crossing": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
-    "connection": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
-    "netRelation": "track topology (switches, connections) has no counterpart: tracks are chained by "
-    "line, track and km",
+    "switch": "switch not imported (reported above: a leg outside the file or no through leg)",
+    "switchIS": "switch not imported (reported above: its branches name no netRelation of the file)",
+    "crossing": "crossing not imported (reported above: a leg outside the file)",
     "speedChange": "speed data are not part of the onboard positioning DB",
     "infraAttributes": "infrastructure attributes (speed profiles, …) are not part of the onboard positioning DB",
     "visualization": "schematic screen coordinates, not geographic ones: not used for the GIS",
@@ -209,6 +208,9 @@ def _frames(
         columns=LINES.column_names,
     )
     tables = {
+        NETWORK_TRACKS.name: track_frame(doc, targets),
+        CONNECTIONS.name: connection_frame(doc),
+        SWITCHES.name: switch_frame(doc, targets),
         LINES.name: lines,
         GIS.name: gis,
         BALISES.name: pd.DataFrame(balise_rows, columns=BALISES.column_names),
@@ -217,6 +219,27 @@ def _frames(
     }
     extra = {"centrelines": cl, "kmposts": kp, "names": {b.id: b.name for b in doc.balises if b.name}}
     return tables, extra, f_bal + f_cur + f_geo
+
+
+def _nothing(doc: RailmlDoc, tables: dict[str, pd.DataFrame]) -> list[Finding]:
+    """An error when the file holds balises or tracks and none of them became a row: the
+    import has failed even though every step only warned (exit 1, nothing written)."""
+    out = []
+    for what, seen, table in (
+        ("balises", len(doc.balises), BALISES.name),
+        ("tracks", sum(not t.implied for t in doc.tracks.values()), NETWORK_TRACKS.name),
+    ):
+        if seen and tables[table].empty:
+            out.append(
+                xt.finding(
+                    doc.root,
+                    "railml.nothing_imported",
+                    f"the file holds {seen} {what} and none could be imported (see the warnings)",
+                    file=doc.file,
+                    table=table,
+                )
+            )
+    return out
 
 
 def _dedupe(findings: list[Finding]) -> list[Finding]:
@@ -264,7 +287,7 @@ def import_railml(
         schema = load_schema(xsd)
     doc, targets = read_railml(source, lmap, schema=schema, xsd=xsd)
     tables, extra, findings = _frames(doc, lmap, targets)
-    findings = _dedupe(doc.findings + findings + _unmapped(doc, doc.root))
+    findings = _dedupe(doc.findings + findings + _unmapped(doc, doc.root) + _nothing(doc, tables))
     errors = [f for f in findings if f.severity == Severity.ERROR]
     if errors:
         raise FindingsError(f"{len(errors)} error(s) in {source.name}; nothing was written", findings, path=source)
