@@ -15,6 +15,9 @@ suite, so XML Schema validation runs only against one the user gives, ``db expor
 * ``infrastructure/geometry/horizontalCurves``: per feature point the straight – clothoid –
   arc – clothoid – straight pieces its six rows imply (:func:`curves.curves_of_feature`),
   radius negative to the left in increasing km.
+* the network (``tracks``, ``connections``, ``switches``, G balises on their tracks) when the
+  DB has one: :mod:`~dbtools.interchange.topology_out`; the line-and-track netElements above
+  are then the gis grid's carriers (``tpos:implied``), not tracks.
 * ``functionalInfrastructure``: ``balises`` (a ``spotLocation`` with the km as
   ``linearCoordinate``; ``applicationDirection`` normal on D/S, reverse on U), one
   ``baliseGroup`` per initial pair and per C balise, ``lines``, ``tracks`` (with a
@@ -46,42 +49,14 @@ from dbtools.gis.geometry import geodesic_step
 from dbtools.gis.index import network_georef
 from dbtools.interchange.curves import curves_of_feature
 from dbtools.interchange.geometry import WGS84, geodetic_epsg
-from dbtools.interchange.railml_ids import REGISTER, xml_id
+from dbtools.interchange.railml_ids import xml_id
+from dbtools.interchange.railml_xml import DC_NS, NS, XSI_NS, designate, fmt, sub, tpos_name
+from dbtools.interchange.topology_out import write_group_balises, write_topology
 from dbtools.interchange.xmltree import GML_NS, TPOS_NS
 from dbtools.network import Network
 from schemas.enums import BaliseKind, Track
 
-NS = "https://www.railml.org/schemas/3.2"
-DC_NS = "http://purl.org/dc/elements/1.1/"
-XSI_NS = "http://www.w3.org/2001/XMLSchema-instance"
-
-
-def _f(x: Any) -> str:
-    return repr(float(x))
-
-
-def _T(name: str) -> str:
-    return f"{{{TPOS_NS}}}{name}"
-
-
-def _sub(parent: Any, tag: str, ns: str = NS, /, **attrs: Any) -> Any:
-    from lxml import etree
-
-    el = etree.SubElement(parent, f"{{{ns}}}{tag}")
-    for k, v in attrs.items():
-        if v is not None and not (isinstance(v, float) and np.isnan(v)):
-            el.set(k if not k.startswith("tpos_") else _T(k[5:]), v if isinstance(v, str) else _f(v))
-    return el
-
-
-def _designate(el: Any, entry: object) -> None:
-    """``<designator register="_trainpos" entry="DB id"/>`` after the element's names (railML 3
-    puts ``designator`` after ``name`` and before the locations)."""
-    from lxml import etree
-
-    d = etree.Element(f"{{{NS}}}designator", register=REGISTER, entry=str(entry))
-    names = [i for i, c in enumerate(el) if c.tag == f"{{{NS}}}name"]
-    el.insert(names[-1] + 1 if names else 0, d)
+_f, _T, _sub, _designate = fmt, tpos_name, sub, designate
 
 
 class _Track:
@@ -155,7 +130,7 @@ def network_railml(network: Network) -> bytes:
     infra = _sub(root, "infrastructure", id="is")
     topo = _sub(infra, "topology")
     nes = _sub(topo, "netElements")
-    _sub(topo, "netRelations")
+    rels = _sub(topo, "netRelations")
     level = _sub(_sub(_sub(topo, "networks"), "network", id="nw"), "level", id="lv0", descriptionLevel="Micro")
     curves = _sub(_sub(infra, "geometry"), "horizontalCurves")
     fi = _sub(infra, "functionalInfrastructure")
@@ -164,13 +139,15 @@ def network_railml(network: Network) -> bytes:
     _lines(network, lpss, lines_el, tracks)
     _features(network, curves, tracks)
     _balises(network, bal, grp, tracks)
+    nets = write_topology(network, nes, rels, level, fi)
+    write_group_balises(network, bal, grp, nets, {k: t.intrinsic for k, t in tracks.items()})
     return bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True))
 
 
 def _pairs(network: Network) -> list[tuple[str, str]]:
     keys = set()
     for t in ("gis", "balises", "feature_points", "km_breaks"):
-        f = network.tables[t]
+        f = network.tables[t].dropna(subset=["line_code", "track"])
         keys |= set(zip(f["line_code"].astype(str), f["track"].astype(str), strict=True))
     return sorted(keys)
 
@@ -191,6 +168,7 @@ def _net_elements(
             length=tr.length if tr.length > 0 else None,
             tpos_lineCode=line,
             tpos_track=track,
+            tpos_implied="true",
         )
         aps = _sub(ne, "associatedPositioningSystem", id=xml_id("aps", line, track))
         for i, (km, lat, lon, h) in enumerate(
@@ -327,6 +305,8 @@ def _features(network: Network, curves_el: Any, tracks: dict[tuple[str, str], _T
 def _balises(network: Network, bal: Any, grp: Any, tracks: dict[tuple[str, str], _Track]) -> None:
     made: set[str] = set()
     for rec in _records(network.balises):
+        if rec["kind"] == BaliseKind.G:
+            continue  # balise groups: topology_out
         line, track, kind = str(rec["line_code"]), str(rec["track"]), str(rec["kind"])
         group = (
             xml_id("bg", line, rec["station_code"], track) if kind != BaliseKind.C else xml_id("bg", rec["balise_id"])

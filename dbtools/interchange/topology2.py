@@ -69,6 +69,8 @@ TRACK_KINDS = {
     "sidingTrack": TrackKind.SIDING.value,
     "crossover": TrackKind.CROSSOVER.value,
 }
+#: A track end with one of these has no connection (our tracks' ends simply have none).
+ENDINGS = ("openEnd", "bufferStop", "macroscopicNode")
 _RATIO = re.compile(r"1:(\d+(?:[.,]\d+)?)")
 
 End = tuple[str, str]
@@ -139,6 +141,7 @@ def _collect(st: _State, infra: Element) -> list[_Node]:
         track.kind = TRACK_KINDS.get(xt.attr(el, "type") or "")
         topo = xt.child(el, "trackTopology")
         for side, name in ((BEGIN, "trackBegin"), (END, "trackEnd")):
+            st.doc.use(*[e for n in ENDINGS for e in xt.descend(topo, name, n)])
             for c in xt.descend(topo, name, "connection"):
                 if (cid := xt.attr(c, "id")) is not None:
                     st.ends[cid] = (c, (track.id, side))
