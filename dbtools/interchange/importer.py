@@ -287,7 +287,7 @@ def import_railml(
         schema = load_schema(xsd)
     doc, targets = read_railml(source, lmap, schema=schema, xsd=xsd)
     tables, extra, findings = _frames(doc, lmap, targets)
-    findings = _dedupe(doc.findings + findings + _unmapped(doc, doc.root) + _nothing(doc, tables))
+    findings = _dedupe(_nothing(doc, tables) + doc.findings + findings + _unmapped(doc, doc.root))
     errors = [f for f in findings if f.severity == Severity.ERROR]
     if errors:
         raise FindingsError(f"{len(errors)} error(s) in {source.name}; nothing was written", findings, path=source)
