@@ -4,13 +4,17 @@ Steps: safe parse (:mod:`~dbtools.interchange.xmltree`); with ``--xsd`` validati
 that XML Schema (:mod:`~dbtools.interchange.xsd`); version from ``@version`` (else the
 namespace): railML 2.0–2.5 (:mod:`~dbtools.interchange.railml2`) or 3.1–3.3
 (:mod:`~dbtools.interchange.railml3`); the ``--line-code`` map
-(:mod:`~dbtools.interchange.mapping`); balises (:mod:`~dbtools.interchange.balises`),
-feature points (:mod:`~dbtools.interchange.curves`) and geometry
-(:mod:`~dbtools.interchange.geometry`) mapped; every element neither consumed nor covered by
-another finding is reported as ``railml.unmapped`` with its path, id, line and why.
+(:mod:`~dbtools.interchange.mapping`); the network — tracks, connections, switches — from
+the topology (:mod:`~dbtools.interchange.topology2`, :mod:`~dbtools.interchange.topology3`,
+rows: :mod:`~dbtools.interchange.topology_rows`); balises (:mod:`~dbtools.interchange.balises`;
+balise groups as G rows: :mod:`~dbtools.interchange.balise_groups`), feature points
+(:mod:`~dbtools.interchange.curves`) and geometry (:mod:`~dbtools.interchange.geometry`)
+mapped; every element neither consumed nor covered by another finding is reported as
+``railml.unmapped`` with its path, id, line and why.
 
 Errors (unknown version, missing or duplicate ids, positions on undefined tracks or off
-their track, lengths not in metres, values that are not numbers) stop the import: nothing
+their track, lengths not in metres, values that are not numbers, and ``railml.nothing_imported``:
+a file holding balises or tracks none of which became a row) stop the import: nothing
 is written. Otherwise the folder gets the source tables (``gis.csv`` empty when the file
 has no coordinates), ``network.toml`` when something is declared, ``survey/`` (centrelines
 and kilometre posts for ``gis grid``) when the file has coordinates, and

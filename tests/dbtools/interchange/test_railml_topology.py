@@ -184,7 +184,18 @@ def _check_junction(out: Path, t1: str, t2: str, t3: str, number: str) -> None:
     assert _links(out) == links
     (sw,) = _rows(out, "switches")
     assert {k: sw[k] for k in switch} == switch and sw["switch_number"] == number
-    bcols = ["balise_id", "kind", "line_code", "track", "km_actual_m", "track_id", "nid_c", "nid_bg", "n_pig", "n_total"]
+    bcols = [
+        "balise_id",
+        "kind",
+        "line_code",
+        "track",
+        "km_actual_m",
+        "track_id",
+        "nid_c",
+        "nid_bg",
+        "n_pig",
+        "n_total",
+    ]
     assert [[r[c] for c in bcols] for r in _rows(out, "balises")] == balises
 
 
