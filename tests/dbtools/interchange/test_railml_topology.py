@@ -276,3 +276,35 @@ def test_railml3_export_round_trip(name: str, tmp_path: Path) -> None:
     assert not [f for f in r.findings if f.rule in ("railml.unmapped", "railml.switch_open", "railml.dangling_ref")]
     for table in ("tracks", "connections", "switches", "balises"):
         assert _rows(back, table) == _rows(src, table), table
+
+
+def test_railml2_single_slip(tmp_path: Path) -> None:
+    out = tmp_path / "d"
+    import_railml(DATA / "diamond-2.4.railml.xml", out)
+    (sw,) = _rows(out, "switches")
+    ports = [sw[f"{p}_{c}"] for p in ("a1", "b1", "a2", "b2") for c in ("track", "end")]
+    assert sw["type"] == "single_slip" and ports == ["P1", "end", "P2", "begin", "Q1", "end", "Q2", "begin"]
+    assert _links(out) == {
+        _link("P1", "end", "P2", "begin", "both", "C1"),  # a1–b1
+        _link("Q1", "end", "Q2", "begin", "both", "C1"),  # a2–b2
+        _link("P1", "end", "Q2", "begin", "both", "C1"),  # the slip a1–b2
+        _link("Q1", "end", "P2", "begin", "none", "C1"),
+        _link("P1", "end", "Q1", "end", "none", "C1"),
+        _link("P2", "begin", "Q2", "begin", "none", "C1"),
+    }
+    assert {r["kind"] for r in _rows(out, "tracks")} == {"connecting"}  # on no line, no @type
+
+
+def test_railml3_crossover_and_crossing(tmp_path: Path) -> None:
+    out = tmp_path / "x3"
+    import_railml(DATA / "crossover-3.2.railml.xml", out)
+    ports = ["switch_id", "type", "a1_track", "a1_end", "b1_track", "b1_end", "b2_track", "b2_end"]
+    ports += ["a2_track", "a2_end", "diverging_side"]
+    assert [[r[c] for c in ports] for r in _rows(out, "switches")] == [
+        ["C1", "crossing", "P1", "end", "P2", "begin", "Q2", "begin", "Q1", "end", ""],
+        ["S1", "point", "D1", "end", "D2", "begin", "X", "begin", "", "", "right"],
+        ["S2", "point", "U2", "begin", "U1", "end", "X", "end", "", "", "right"],  # opposite continueCourse
+    ]
+    links = _links(out)
+    assert _link("U1", "end", "X", "end", "none", "S2") in links  # the branches' relation, made
+    assert _link("Q1", "end", "Q2", "begin", "AB", "C1") in links and len(links) == 8
