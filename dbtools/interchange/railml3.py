@@ -118,7 +118,11 @@ class _Reader:
             ext = _ext(el)
             track = RTrack(ident, el, name=_name(el), length=self.num(el, "length"), ext=ext)
             track.db_id, track.kind = designator(el), ext.get("kind")
-            track.implied = ext.get("implied") == "true"
+            # our export's line carriers, and meso/macro netElements (aggregates of others):
+            # not tracks
+            groups = [*xt.children(el, "elementCollectionUnordered"), *xt.children(el, "elementCollectionOrdered")]
+            track.implied = ext.get("implied") == "true" or bool(groups)
+            self.doc.use(*groups, *[c for g in groups for c in xt.children(g)])
             self.doc.use(el, *xt.children(el, "name"), *xt.children(el, "designator"))
             self._intrinsic(track)
             self.doc.tracks[ident] = track

@@ -11,8 +11,9 @@
   ``@absPos``, railML 3 the ``linearCoordinate`` of its intrinsic coordinates); ``length_m``
   the piece's length (railML 2 ``trackEnd/@pos`` − ``trackBegin/@pos``, railML 3
   ``@length``), else |km_end − km_begin|; ``name`` the railML name.
-* ``connections`` and ``switches``: as read, track ids translated to ours; a switch's
-  ``line_code`` is its toe track's.
+* ``connections`` and ``switches``: as read, track ids translated to ours (relations of
+  netElements that are no tracks — meso/macro aggregates, our export's line carriers —
+  dropped); a switch's ``line_code`` is its toe track's.
 """
 
 from __future__ import annotations
@@ -71,6 +72,7 @@ def connection_frame(doc: RailmlDoc) -> pd.DataFrame:
             "switch_id": link.switch_id,
         }
         for link in doc.links
+        if not any(t is not None and t.implied for t in (doc.tracks.get(link.track_a), doc.tracks.get(link.track_b)))
     ]
     return pd.DataFrame(rows, columns=CONNECTIONS.column_names)
 

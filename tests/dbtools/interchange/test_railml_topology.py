@@ -308,3 +308,26 @@ def test_railml3_crossover_and_crossing(tmp_path: Path) -> None:
     links = _links(out)
     assert _link("U1", "end", "X", "end", "none", "S2") in links  # the branches' relation, made
     assert _link("Q1", "end", "Q2", "begin", "AB", "C1") in links and len(links) == 8
+
+
+def test_railml3_aggregate_netelements_are_not_tracks(tmp_path: Path) -> None:
+    """A meso-level netElement (a collection of micro ones) and its relations are no tracks."""
+    text = (DATA / "junction-3.2.railml.xml").read_text(encoding="utf-8")
+    text = text.replace(
+        "      </netElements>",
+        '        <netElement id="m1"><elementCollectionUnordered id="ecu1">'
+        '<elementPart ref="ne1"/><elementPart ref="ne2"/></elementCollectionUnordered></netElement>\n'
+        '        <netElement id="m2"><elementCollectionUnordered id="ecu2">'
+        '<elementPart ref="ne3"/></elementCollectionUnordered></netElement>\n'
+        "      </netElements>",
+    ).replace(
+        "      </netRelations>",
+        '        <netRelation id="nrm" positionOnA="1" positionOnB="0" navigability="Both">'
+        '<elementA ref="m1"/><elementB ref="m2"/></netRelation>\n      </netRelations>',
+    )
+    src = tmp_path / "meso.railml"
+    src.write_text(text, encoding="utf-8")
+    out = tmp_path / "m"
+    r = import_railml(src, out)
+    _check_junction(out, "ne1", "ne2", "ne3", "")
+    assert not [f for f in r.findings if f.rule == "railml.unmapped"]
