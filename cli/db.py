@@ -322,8 +322,9 @@ def import_(
     grid, when the file has coordinates) and import_report.json. Exit 0 written (unmapped
     elements are warnings), 1 errors such as duplicate or missing ids, positions on
     undefined tracks, lengths not in metres, an unknown railML version, balises or tracks
-    of which none could be imported, or (with --xsd) a schema error (nothing written), 2 unreadable (malformed XML, entity
-    declarations, bad map, unreadable XSD), 3 output exists.
+    of which none could be imported, or (with --xsd) a schema error (nothing written),
+    2 unreadable (malformed XML, entity declarations, bad map, unreadable XSD), 3 output
+    exists.
 
     Example: trainpos db import line.railml --format railml --out src/ --line-code map.toml
     """
