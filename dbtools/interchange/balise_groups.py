@@ -15,7 +15,8 @@ as they are.
   (less than :data:`NUMBER_SPAN` apart — the Finnish pairs are n and n + 2, 55025/55027).
 * **identity** — NID_C/NID_BG verbatim where stated (range-checked: 0–1023, 0–16383); else
   empty, with one ``railml.balise_identity`` warning per group (the file gives the group no
-  ETCS identity: a name is not one).
+  ETCS identity: a name is not one — the Finnish names 18065 … 55742 are balise numbers, most
+  beyond NID_BG's 14-bit range, different within a pair).
 * **N_PIG** — railML 2 ``@ndx`` where stated; else the balise's rank along the track in the
   group's direction (railML 3 ``@mileageDirection`` nominal = km rising; railML 2 / 3
   balise ``dir``/``applicationDirection``; neither: increasing position), ties in position
