@@ -331,3 +331,70 @@ def test_railml3_aggregate_netelements_are_not_tracks(tmp_path: Path) -> None:
     r = import_railml(src, out)
     _check_junction(out, "ne1", "ne2", "ne3", "")
     assert not [f for f in r.findings if f.rule == "railml.unmapped"]
+
+
+# ------------------------------------------------- one physical switch, every railML 2 description
+
+
+def _track2(ident: str, at_switch: str, conn: str) -> str:
+    """A 100 m railML 2 track whose ``at_switch`` end carries ``conn`` (the other an openEnd)."""
+    ends = {"begin": ("trackBegin", "0"), "end": ("trackEnd", "100")}
+    parts = []
+    for side in ("begin", "end"):
+        tag, pos = ends[side]
+        inner = conn if side == at_switch else f'<openEnd id="{ident}_{side}_open"/>'
+        parts.append(f'<{tag} id="{ident}_{side}" pos="{pos}">{inner}</{tag}>')
+    return f'<track id="{ident}"><trackTopology>{"".join(parts)}{{switch_{ident}}}</trackTopology></track>'
+
+
+MIRROR = {"left": "right", "right": "left"}
+
+
+@pytest.mark.parametrize("holder", ["A", "B"])
+@pytest.mark.parametrize("end_a", ["begin", "end"])
+@pytest.mark.parametrize("end_b", ["begin", "end"])
+@pytest.mark.parametrize("end_c", ["begin", "end"])
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_one_switch_described_every_way_gives_one_row(
+    holder: str, end_a: str, end_b: str, end_c: str, side: str, tmp_path: Path
+) -> None:
+    """Toe track A, through track B, branch C diverging to ``side`` seen from the toe —
+    written with the switch on A or on B and each track in either direction (railML 2:
+    ``@orientation`` and ``@course`` are seen in the direction of the switch's own track).
+    Travelling A → B runs in A's direction when A's end is at the switch and in B's direction
+    when B's begin is: then the branch is outgoing and its course is ``side``; otherwise
+    incoming, course mirrored. Every description gives the same switch row."""
+    ends = {"A": end_a, "B": end_b}
+    along = ends[holder] == ("end" if holder == "A" else "begin")
+    orientation, course = ("outgoing", side) if along else ("incoming", MIRROR[side])
+    through = "B" if holder == "A" else "A"
+    tracks = {
+        "A": _track2("A", end_a, '<connection id="cA" ref="cB"/>'),
+        "B": _track2("B", end_b, '<connection id="cB" ref="cA"/>'),
+        "C": _track2("C", end_c, '<connection id="cC" ref="cS"/>'),
+    }
+    pos = "0" if ends[holder] == "begin" else "100"
+    switch = (
+        f'<connections><switch id="W" pos="{pos}"><connection id="cS" ref="cC" course="{course}" '
+        f'orientation="{orientation}"/></switch></connections>'
+    )
+    body = "".join(t.replace(f"{{switch_{k}}}", switch if k == holder else "") for k, t in tracks.items())
+    src = tmp_path / "w.railml"
+    src.write_text(
+        f'<railml xmlns="https://www.railml.org/schemas/2018" version="2.4"><infrastructure id="i">'
+        f"<tracks>{body}</tracks></infrastructure></railml>",
+        encoding="utf-8",
+    )
+    out = tmp_path / "o"
+    import_railml(src, out)
+    (sw,) = _rows(out, "switches")
+    branches = {side: ("C", end_c), MIRROR[side]: ("B", end_b)}
+    assert (sw["a1_track"], sw["a1_end"]) == ("A", end_a), (holder, through)
+    assert (sw["b1_track"], sw["b1_end"]) == branches["left"]
+    assert (sw["b2_track"], sw["b2_end"]) == branches["right"]
+    assert sw["diverging_side"] == side
+    assert _links(out) == {
+        _link("A", end_a, "B", end_b, "both", "W"),
+        _link("A", end_a, "C", end_c, "both", "W"),
+        _link("B", end_b, "C", end_c, "none", "W"),
+    }
