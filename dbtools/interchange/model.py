@@ -89,10 +89,11 @@ class RTrack:
     kind: str | None = None
     """Our track kind where the file states one (railML 2 ``@type``)."""
     db_id: str | None = None
-    """Our track id when it differs from the railML id (railML 3: the designator of our
-    register that our export writes)."""
+    """Our track id when it differs from the railML id (railML 3: our export's
+    ``tpos:trackId``)."""
     implied: bool = False
-    """Our export's netElement of a line and track (the gis grid's carrier), not a track row."""
+    """Not a track row: our export's netElement of a line and track (the gis grid's carrier),
+    or a meso/macro netElement (a collection of others)."""
 
 
 @dataclass

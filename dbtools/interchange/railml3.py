@@ -17,7 +17,8 @@ curves, mileage changes and gml locations.
 * ``horizontalCurve``: ``@curveType`` (straight, arc, clothoide, …), ``@radius`` (negative
   left as seen from the curve's begin), ``@length``, located by a ``linearLocation``.
 * Topology (netRelations, switchesIS, crossings): :mod:`~dbtools.interchange.topology3`; a
-  netElement's our-track id is the entry of its designator of our register, else ``@id``.
+  netElement's our-track id is our export's ``tpos:trackId`` (or a designator of our
+  register), else ``@id``.
 * Balise groups: ``isEurobaliseGroup/@countryID``/``@groupID`` (NID_C, NID_BG),
   ``@numberOfBalisesInGroup`` (N_TOTAL + 1), ``@mileageDirection`` (the group's direction).
 * Ids: a balise's id, a line's code and a curve's feature id are the ``entry`` of its
@@ -117,7 +118,7 @@ class _Reader:
                 continue
             ext = _ext(el)
             track = RTrack(ident, el, name=_name(el), length=self.num(el, "length"), ext=ext)
-            track.db_id, track.kind = designator(el), ext.get("kind")
+            track.db_id, track.kind = designator(el) or ext.get("trackId"), ext.get("kind")
             # our export's line carriers, and meso/macro netElements (aggregates of others):
             # not tracks
             groups = [*xt.children(el, "elementCollectionUnordered"), *xt.children(el, "elementCollectionOrdered")]

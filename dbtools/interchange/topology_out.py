@@ -2,9 +2,9 @@
 groups (kind G) as railML 3.2, read back by :mod:`~dbtools.interchange.railml3` and
 :mod:`~dbtools.interchange.topology3` to the same rows.
 
-* a ``netElement`` per track (``@id`` ``net_<track>``, our track id in a designator of our
-  register, ``@length`` = length_m, ``tpos:kind``, and ``tpos:lineCode``/``tpos:track`` on a
-  line); where it has km at both ends an ``associatedPositioningSystem`` with intrinsic
+* a ``netElement`` per track (``@id`` ``net_<track>``; our track id in ``tpos:trackId``, as
+  a netElement has no designator in railML 3.2; ``@length`` = length_m, ``tpos:kind``, and
+  ``tpos:lineCode``/``tpos:track`` on a line); where it has km at both ends an ``associatedPositioningSystem`` with intrinsic
   coordinates 0 and 1 whose ``linearCoordinate`` is the km on its line's positioning system;
 * a ``netRelation`` per connection (``positionOnA``/``B`` 0 = begin, 1 = end;
   ``navigability`` Both / AB / BA / None);
@@ -75,12 +75,12 @@ def write_topology(network: Network, nes: Any, rels: Any, level: Any, fi: Any) -
             id=ne_id,
             length=rec["length_m"],
             tpos_kind=rec["kind"],
+            tpos_trackId=tid,
             tpos_lineCode=None if line is None else str(line),
             tpos_track=None if line is None or rec["track"] is None else str(rec["track"]),
         )
         if rec["name"] is not None:
             sub(ne, "name", name=str(rec["name"]), language="en")
-        designate(ne, tid)
         k0, k1 = rec["km_begin_m"], rec["km_end_m"]
         if line is not None and k0 is not None and k1 is not None:
             aps = sub(ne, "associatedPositioningSystem", id=xml_id("aps", "t", tid))

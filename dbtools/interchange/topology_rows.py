@@ -3,7 +3,7 @@
 
 * ``tracks``: one row per railML track / netElement (per piece where a railML 2 switch
   inside a track cuts it, :mod:`~dbtools.interchange.topology2`), our export's line carriers
-  excepted. ``track_id`` verbatim (railML 3: the designator of our register, else ``@id``);
+  excepted. ``track_id`` verbatim (railML 3: our export's ``tpos:trackId``, else ``@id``);
   ``line_code`` and local ``track`` from the ``--line-code`` map / the railML line (empty
   for a track in no line); ``kind`` as stated (railML 2 ``@type``; railML 3 our
   ``tpos:kind``), else ``main`` on a line and ``connecting`` off one; ``km_begin_m`` /
