@@ -4,8 +4,9 @@ groups (kind G) as railML 3.2, read back by :mod:`~dbtools.interchange.railml3` 
 
 * a ``netElement`` per track (``@id`` ``net_<track>``; our track id in ``tpos:trackId``, as
   a netElement has no designator in railML 3.2; ``@length`` = length_m, ``tpos:kind``, and
-  ``tpos:lineCode``/``tpos:track`` on a line); where it has km at both ends an ``associatedPositioningSystem`` with intrinsic
-  coordinates 0 and 1 whose ``linearCoordinate`` is the km on its line's positioning system;
+  ``tpos:lineCode``/``tpos:track`` on a line); where it has km at both ends an
+  ``associatedPositioningSystem`` with intrinsic coordinates 0 and 1 whose
+  ``linearCoordinate`` is the km on its line's positioning system;
 * a ``netRelation`` per connection (``positionOnA``/``B`` 0 = begin, 1 = end;
   ``navigability`` Both / AB / BA / None);
 * a point switch → ``switchIS`` (``ordinarySwitch``; ``branchCourse`` = the diverging side,
