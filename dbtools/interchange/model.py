@@ -135,6 +135,8 @@ class RSwitch:
     km: float | None = None
     name: str | None = None
     track_id: str | None = None
+    lat: float | None = None
+    lon: float | None = None
 
 
 @dataclass

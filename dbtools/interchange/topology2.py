@@ -22,8 +22,8 @@ railML 2 joins tracks by pairs of ``connection`` elements, each naming its partn
   b1 left, b2 right); a ``straight`` branch with ``@trackContinueCourse`` left/right makes the
   through leg the diverging one. No side stated: b1 = through leg, b2 = branch, side empty
   (a warning).
-* Geometry: the switch number n from ``@model`` (``1:n`` in it, e.g. ``EV-UIC60-300-1:9``),
-  the branch's ``@radius`` and ``@maxSpeed`` (2.3+) → diverging radius and speed; km =
+* Geometry: lat/lon from the switch's ``geoCoord``; the switch number n from ``@model``
+  (``1:n`` in it, e.g. ``EV-UIC60-300-1:9``), the branch's ``@radius`` and ``@maxSpeed`` (2.3+) → diverging radius and speed; km =
   ``@absPos`` (else the track's mileage at ``@pos``). ``@normalPosition``, ``@length`` and
   ``@trackContinueRadius`` have no column. ``@passable="false"`` on a branch: its route
   toe → branch gets navigability ``none``.
@@ -352,6 +352,7 @@ def _switch(st: _State, n: _Node, ident: str, own: End, through: End, km: float 
     st.links[frozenset((straight, branch))].switch_id = ident
     model = xt.attr(n.el, "model") or ""
     ratio = _RATIO.search(model)
+    lat, lon = _lat_lon(n.el)
     st.doc.switches[ident] = RSwitch(
         ident,
         n.el,
@@ -364,7 +365,24 @@ def _switch(st: _State, n: _Node, ident: str, own: End, through: End, km: float 
         km=km,
         name=name,
         track_id=toe[0],
+        lat=lat,
+        lon=lon,
     )
+
+
+def _lat_lon(el: Element) -> tuple[float | None, float | None]:
+    """The switch's own ``geoCoord`` (its toe), read as the track's coordinates are
+    (:mod:`~dbtools.interchange.railml2`, which reports a bad one)."""
+    from dbtools.interchange.geometry import to_lonlat
+
+    geo = xt.child(el, "geoCoord")
+    if geo is None:
+        return None, None
+    try:
+        lon, lat, _ = to_lonlat([float(c) for c in (xt.attr(geo, "coord") or "").split()], xt.attr(geo, "epsgCode"))
+    except ValueError:
+        return None, None
+    return lat, lon
 
 
 def _seen_from_toe(course: str | None, mirror: bool) -> str | None:

@@ -11,7 +11,8 @@
   ``@continueCourse``; its branch's ``@radius`` and ``@branchingSpeed`` are the diverging
   radius and speed. km: the ``spotLocation``'s ``linearCoordinate``, else the mileage at its
   ``intrinsicCoord``. The two relations and the branch ↔ branch relation (made with
-  navigability none when the file has none) carry the switch id.
+  navigability none when the file has none) carry the switch id. Our export's
+  ``tpos:switchNumber``, ``tpos:lat``, ``tpos:lon`` are read back.
 * ``crossing`` (simple) and ``switchIS`` ``singleSwitchCrossing`` / ``doubleSwitchCrossing``:
   ``straightBranch`` relations are the routes a1–b1 and a2–b2 (in document order, each
   relation's element A end first), ``turningBranch`` relations the slip routes; type
@@ -157,6 +158,7 @@ def _point(t: _Topo, sw: Element, spot: object) -> None:
         between = t.rels[f"{ident}#branches"] = RLink(b1[0], b1[1], b2[0], b2[1], Navigability.NONE.value, None, sw)
     between.switch_id = sid
     number = xt.tpos(sw, "switchNumber")  # our export (railML 3.2 has no attribute for it)
+    lat, lon = xt.tpos(sw, "lat"), xt.tpos(sw, "lon")
     t.doc.switches[ident] = RSwitch(
         designator(sw) or ident,
         sw,
@@ -169,6 +171,8 @@ def _point(t: _Topo, sw: Element, spot: object) -> None:
         km=_km(t, sw, spot),
         name=_name(sw),
         track_id=a1[0],
+        lat=None if lat is None else float(lat),
+        lon=None if lon is None else float(lon),
     )
 
 

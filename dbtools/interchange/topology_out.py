@@ -12,7 +12,8 @@ groups (kind G) as railML 3.2, read back by :mod:`~dbtools.interchange.railml3` 
 * a point switch → ``switchIS`` (``ordinarySwitch``; ``branchCourse`` = the diverging side,
   ``continueCourse`` the other; ``leftBranch`` = the relation toe–b1, ``rightBranch`` =
   toe–b2, the diverging one with ``@radius`` and ``@branchingSpeed``; ``spotLocation`` at the
-  toe; switch number in ``tpos:switchNumber`` — railML 3.2 has no attribute for it); a
+  toe; switch number and the toe's lat/lon in ``tpos:switchNumber``, ``tpos:lat``,
+  ``tpos:lon`` — railML 3.2 has no attribute for them); a
   crossing → ``crossings/crossing``, a slip → ``switchIS`` single/doubleSwitchCrossing; routes
   a1–b1 and a2–b2 as ``straightBranch``, slip routes a1–b2 (a2–b1) as ``turningBranch``;
 * G balises: a ``baliseGroup`` per (NID_C, NID_BG), or — without an identity — per run of
@@ -173,6 +174,8 @@ def _point(
         branchCourse=side,
         continueCourse=other,
         tpos_switchNumber=rec["switch_number"],
+        tpos_lat=rec["lat"],
+        tpos_lon=rec["lon"],
     )
     _named(sw, rec, sid)
     toe, net = ports["a1"], nets[ports["a1"][0]]

@@ -82,6 +82,7 @@ def switch_frame(doc: RailmlDoc, targets: dict[str, Target]) -> pd.DataFrame:
     rows = []
     for s in doc.switches.values():
         row: dict[str, Any] = {"switch_id": s.id, "type": s.type, "name": s.name, "km_m": s.km}
+        row |= {"lat": s.lat, "lon": s.lon}
         for port, (track, end) in s.ports.items():
             row[f"{port}_track"], row[f"{port}_end"] = _our(doc, track), end
         target = targets.get(parents.get(_our(doc, s.track_id or ""), s.track_id or ""))

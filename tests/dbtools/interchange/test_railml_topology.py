@@ -204,7 +204,9 @@ def test_railml2_junction_exact_rows_build_and_validate(tmp_path: Path) -> None:
     r = import_railml(DATA / "junction-2.4.railml.xml", out)
     _check_junction(out, "T1", "T2", "T3", "9.0")  # 1:9 from @model
     (d,) = [f for f in r.findings if f.rule == "railml.dangling_ref"]
-    assert d.row == 49 and "'t9_begin'" in d.message and d.keys["id"] == "c_t3e"
+    assert d.row == 50 and "'t9_begin'" in d.message and d.keys["id"] == "c_t3e"
+    (sw,) = _rows(out, "switches")
+    assert (float(sw["lat"]), float(sw["lon"])) == (60.0, 25.017966305810422)  # its geoCoord
     assert not [f for f in r.findings if f.rule == "railml.unmapped"]
     db = build_db(out, tmp_path / "j.sqlite", db_version="t")
     assert not [f for f in validate_path(tmp_path / "j.sqlite") if f.severity == "error"]
