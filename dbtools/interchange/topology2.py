@@ -23,8 +23,8 @@ railML 2 joins tracks by pairs of ``connection`` elements, each naming its partn
   through leg the diverging one. No side stated: b1 = through leg, b2 = branch, side empty
   (a warning).
 * Geometry: lat/lon from the switch's ``geoCoord``; the switch number n from ``@model``
-  (``1:n`` in it, e.g. ``EV-UIC60-300-1:9``), the branch's ``@radius`` and ``@maxSpeed`` (2.3+) → diverging radius and speed; km =
-  ``@absPos`` (else the track's mileage at ``@pos``). ``@normalPosition``, ``@length`` and
+  (``1:n`` in it, e.g. ``EV-UIC60-300-1:9``), the branch's ``@radius`` and ``@maxSpeed``
+  (2.3+) → diverging radius and speed; km = ``@absPos`` (else the track's mileage at ``@pos``). ``@normalPosition``, ``@length`` and
   ``@trackContinueRadius`` have no column. ``@passable="false"`` on a branch: its route
   toe → branch gets navigability ``none``.
 * ``crossing``: ``simpleCrossing`` → crossing, ``simpleSwitchCrossing`` → single_slip,
