@@ -24,8 +24,8 @@ railML 2 joins tracks by pairs of ``connection`` elements, each naming its partn
   (a warning).
 * Geometry: lat/lon from the switch's ``geoCoord``; the switch number n from ``@model``
   (``1:n`` in it, e.g. ``EV-UIC60-300-1:9``), the branch's ``@radius`` and ``@maxSpeed``
-  (2.3+) → diverging radius and speed; km = ``@absPos`` (else the track's mileage at ``@pos``). ``@normalPosition``, ``@length`` and
-  ``@trackContinueRadius`` have no column. ``@passable="false"`` on a branch: its route
+  (2.3+) → diverging radius and speed; km = ``@absPos`` (else the track's mileage at
+  ``@pos``). ``@normalPosition``, ``@length`` and ``@trackContinueRadius`` have no column. ``@passable="false"`` on a branch: its route
   toe → branch gets navigability ``none``.
 * ``crossing``: ``simpleCrossing`` → crossing, ``simpleSwitchCrossing`` → single_slip,
   ``doubleSwitchCrossing`` → double_slip; the track and its through partner are route a1–b1,
