@@ -25,8 +25,8 @@ railML 2 joins tracks by pairs of ``connection`` elements, each naming its partn
 * Geometry: lat/lon from the switch's ``geoCoord``; the switch number n from ``@model``
   (``1:n`` in it, e.g. ``EV-UIC60-300-1:9``), the branch's ``@radius`` and ``@maxSpeed``
   (2.3+) → diverging radius and speed; km = ``@absPos`` (else the track's mileage at
-  ``@pos``). ``@normalPosition``, ``@length`` and ``@trackContinueRadius`` have no column. ``@passable="false"`` on a branch: its route
-  toe → branch gets navigability ``none``.
+  ``@pos``). ``@normalPosition``, ``@length`` and ``@trackContinueRadius`` have no column.
+  ``@passable="false"`` on a branch: its route toe → branch gets navigability ``none``.
 * ``crossing``: ``simpleCrossing`` → crossing, ``simpleSwitchCrossing`` → single_slip,
   ``doubleSwitchCrossing`` → double_slip; the track and its through partner are route a1–b1,
   the crossing's two connections a2 and b2 (in document order); slip routes a1–b2 (and
