@@ -74,31 +74,40 @@ def _warn(doc: RailmlDoc, el: Any, rule: str, msg: str) -> Finding:
     return xt.finding(el, rule, msg, file=doc.file, table="balises", severity=Severity.WARNING)
 
 
-def _follow(doc: RailmlDoc, tid: str, pos: float) -> tuple[str, float] | None:
-    """(railML track, pos) after moving past a track end along a plain connection."""
+End = tuple[str, str]
+
+
+def _plain_exits(doc: RailmlDoc) -> dict[End, list[End]]:
+    """Track end → the track ends joined to it by a connection through no switch."""
+    out: dict[End, list[End]] = {}
+    for lk in doc.links:
+        if lk.switch_id is None:
+            a, b = (lk.track_a, lk.end_a), (lk.track_b, lk.end_b)
+            out.setdefault(a, []).append(b)
+            out.setdefault(b, []).append(a)
+    return out
+
+
+def _follow(doc: RailmlDoc, exits: dict[End, list[End]], tid: str, pos: float) -> tuple[str, float] | None:
+    """(railML track, pos) after moving past a track end along plain connections (each
+    step: the distance past the end, from the joined end of the next track)."""
     for _ in range(len(doc.tracks)):
-        t = doc.tracks[tid]
-        length = t.length or 0.0
+        length = doc.tracks[tid].length or 0.0
         if -END_TOLERANCE_M <= pos <= length + END_TOLERANCE_M:
             return tid, pos
         end = TrackEnd.END.value if pos > length else TrackEnd.BEGIN.value
-        nxt = [
-            (lk.track_b, lk.end_b) if (lk.track_a, lk.end_a) == (tid, end) else (lk.track_a, lk.end_a)
-            for lk in doc.links
-            if (tid, end) in ((lk.track_a, lk.end_a), (lk.track_b, lk.end_b)) and lk.switch_id is None
-        ]
+        nxt = exits.get((tid, end), [])
         if len(nxt) != 1 or nxt[0][0] not in doc.tracks:
             return None
         t2, e2 = nxt[0]
-        len2 = doc.tracks[t2].length or 0.0
         past = pos - length if end == TrackEnd.END.value else -pos
-        pos = past if e2 == TrackEnd.BEGIN.value else len2 - past
+        pos = past if e2 == TrackEnd.BEGIN.value else (doc.tracks[t2].length or 0.0) - past
         tid = t2
     return None
 
 
-def _place(doc: RailmlDoc, b: RBalise, findings: list[Finding]) -> _Placed:
-    where = _follow(doc, b.track_id, b.pos)
+def _place(doc: RailmlDoc, exits: dict[End, list[End]], b: RBalise, findings: list[Finding]) -> _Placed:
+    where = _follow(doc, exits, b.track_id, b.pos)
     if where is None:
         piece, local = doc.piece_at(b.track_id, b.pos)
         return _Placed(b, piece, b.track_id, local)
@@ -176,7 +185,8 @@ def map_group_balises(
     """G rows of ``balises`` and the findings (module doc)."""
     findings: list[Finding] = []
     rows: list[dict[str, Any]] = []
-    placed = [_place(doc, b, findings) for b in balises if "kind" not in b.ext]
+    exits = _plain_exits(doc)
+    placed = [_place(doc, exits, b, findings) for b in balises if "kind" not in b.ext]
     rows += [_own_g(doc, b, targets) for b in balises if "kind" in b.ext]
     for key, members in _groups(doc, placed):
         ordered = _order(doc, key, members)
