@@ -356,12 +356,14 @@ def import_(
     """Import a railML, OpenStreetMap or RailTopoModel GeoJSON file as a source set; every
     element that cannot be mapped is reported.
 
-    railML: writes the source tables, network.toml (when declared), survey/ (centrelines
-    and km posts for gis grid, when the file has coordinates) and import_report.json. Exit
-    0 written (unmapped elements are warnings), 1 errors such as duplicate or missing ids,
-    positions on undefined tracks, lengths not in metres, an unknown railML version or
-    (with --xsd) a schema error (nothing written), 2 unreadable (malformed XML, entity
-    declarations, bad map, unreadable XSD), 3 output exists.
+    railML: writes the source tables (the network too: tracks, connections, switches; balise groups
+    as G balises), network.toml (when declared), survey/ (centrelines and km posts for gis
+    grid, when the file has coordinates) and import_report.json. Exit 0 written (unmapped
+    elements are warnings), 1 errors such as duplicate or missing ids, positions on
+    undefined tracks, lengths not in metres, an unknown railML version, balises or tracks
+    of which none could be imported, or (with --xsd) a schema error (nothing written),
+    2 unreadable (malformed XML, entity declarations, bad map, unreadable XSD), 3 output
+    exists.
 
     osm: tracks split at switches and junctions, connections, switches, track_points,
     lines, km from milestones, balise groups with an ETCS identity, network.toml (UTM
