@@ -25,7 +25,7 @@ Reported:
 * false defects per 100 track-km — defects overlapping no true stretch (surveyed DBs) and
   all defects on the truth DB, per 100 km of track that had evidence;
 * throughput of the verify step alone (map-matching + statistics + proposal, pipeline
-  excluded), on the collected fixes and on the fixes replicated to ≥ 1 M;
+  excluded), on the collected fixes and on the fixes replicated to ≥ 1 M (``--throughput-fixes``);
 * small fleets (issue 19): the same at ``--sizes`` runs per track (default 5 and 8), on
   ``--seeds`` random subsets of the simulated runs each, *before* (the per-cell test
   alone, ``scan = false``) and *after* (with the pooled scan): recall (all, and the hardest
@@ -402,6 +402,9 @@ def main() -> None:
     ap.add_argument("--sizes", default="5,8", help="runs per track of the small-fleet table (comma-separated)")
     ap.add_argument("--seeds", type=int, default=3, help="random run subsets per size")
     ap.add_argument("--along", type=int, default=0, help="along-track stretches per track (one more surveyed DB)")
+    ap.add_argument(
+        "--throughput-fixes", type=int, default=1_000_000, help="fixes the replicated throughput is timed on (at least)"
+    )
     args = ap.parse_args()
     cfg = VerifyConfig()
     with tempfile.TemporaryDirectory() as tmp:
@@ -424,7 +427,7 @@ def main() -> None:
             f"pipeline + evidence: {t_pipe:.0f} s ({t_pipe / len(runs):.2f} s/run); fixes used {len(ev.fixes):,} "
             f"of {ev.totals()['gps_fixes']:,}"
         )
-        rate_small, rate_big, n_big = throughput(truth, ev.fixes)
+        rate_small, rate_big, n_big = throughput(truth, ev.fixes, args.throughput_fixes)
 
         rng = np.random.default_rng(args.seed + 99)
         results = []

@@ -52,10 +52,11 @@ def _stops(network: Network, track: str) -> list[float]:
     return sorted(float(k) + sign * 250.0 for k in i1["km_actual_m"])
 
 
-def scenario(i: int, network: Network) -> dict[str, Any]:
+def scenario(i: int, network: Network, short_m: float | None = None) -> dict[str, Any]:
     """Run ``i``: from 15 m past a station stop to 1.2–1.6 km past the next one (a dwell of
     20 s between), 60–95 km/h, tracks alternating, cab R in half the runs, the radar looking
-    toward R in every 8th; two slips and two slides of 2–18 s (none every 5th run)."""
+    toward R in every 8th; two slips and two slides of 2–18 s (none every 5th run).
+    ``short_m``: the run ends this far past its start instead (a smoke run of the script)."""
     rng = np.random.default_rng(9000 + i)
     track = "D" if i % 2 == 0 else "U"
     sign = 1.0 if track == "D" else -1.0
@@ -65,6 +66,8 @@ def scenario(i: int, network: Network) -> dict[str, Any]:
     k = int(rng.integers(0, len(stops) - 2))
     start = stops[k] + sign * 15.0
     end = stops[k + 1] + sign * float(rng.uniform(1200.0, 1600.0))
+    if short_m is not None:
+        end = start + sign * short_m
     slips: dict[str, Any] = (
         {"slips": 0, "slides": 0, "on_grade_curve": False}
         if i % 5 == 4
@@ -86,12 +89,13 @@ def scenario(i: int, network: Network) -> dict[str, Any]:
     }
 
 
-def simulate(i: int, db: str, folder: Path) -> Path:
+def simulate(i: int, db: str, folder: Path, short_m: float | None = None) -> Path:
     """The run folder of run ``i`` (seed 9500 + i), simulated unless it exists."""
     if (folder / "run.json").exists():
         return folder
     net = read_network(Path(db))
-    streams, meta = simulate_run(net, scenario_from_dict(scenario(i, net), f"radar-pipeline-{i}"), seed=9500 + i)
+    sc = scenario_from_dict(scenario(i, net, short_m), f"radar-pipeline-{i}")
+    streams, meta = simulate_run(net, sc, seed=9500 + i)
     return write_run(folder, meta, streams, force=True)
 
 
@@ -157,12 +161,12 @@ def evaluate(folder: Path, db: str, cfg: Any) -> dict[str, Any]:
     }
 
 
-def one(args: tuple[int, str, str, dict[str, Any]]) -> tuple[int, dict[str, Any], dict[str, Any]]:
+def one(args: tuple[int, str, str, dict[str, Any], float | None]) -> tuple[int, dict[str, Any], dict[str, Any]]:
     from fieldlogs.pipeline.config import PipelineConfig
 
-    i, db, root, over = args
+    i, db, root, over, short_m = args
     cfg = PipelineConfig.from_dict({"odometry": over}) if over else PipelineConfig()
-    folder = simulate(i, db, Path(root) / f"run{i:03d}")
+    folder = simulate(i, db, Path(root) / f"run{i:03d}", short_m)
     with tempfile.TemporaryDirectory() as tmp:
         plain = without_radar(folder, Path(tmp) / "plain")
         return i, evaluate(folder, db, cfg), evaluate(plain, db, cfg)
@@ -239,6 +243,9 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--cache", type=Path, default=None, help="keep the simulated run folders here")
     ap.add_argument("--set", action="append", default=[], help="odometry override, e.g. --set ground_detect_z=5")
+    ap.add_argument(
+        "--short-m", type=float, default=None, help="end each run this far past its start [m] (a smoke run)"
+    )
     args = ap.parse_args()
     over = {k: json.loads(v) for k, v in (a.split("=", 1) for a in args.set)}
     from dbtools.sample_network import sample_source_dir
@@ -250,7 +257,7 @@ def main() -> None:
         if not db.exists():
             build_db(sample_source_dir(), db, db_version="sample-1")
         t0 = time.perf_counter()
-        todo = [(i, str(db), str(root), over) for i in range(args.first, args.first + args.runs)]
+        todo = [(i, str(db), str(root), over, args.short_m) for i in range(args.first, args.first + args.runs)]
         with ProcessPoolExecutor(args.workers) as pool:
             out = sorted(pool.map(one, todo))
         wall = time.perf_counter() - t0

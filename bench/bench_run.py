@@ -52,6 +52,16 @@ def _without(total: float, start: float, real_s: float, what: str) -> str:
     return f"{work:.2f} s {what} = {real_s / work:,.0f}×" if work > 0 else f"— {what} (start-up measured longer)"
 
 
+def breakdown(run_args: list[str]) -> str:
+    """The phase table of ``bench/run_breakdown.py`` on ``trainpos run``'s arguments; SystemExit
+    with its error when it fails (a stale stage list is a broken benchmark, not a timing)."""
+    script = str(Path(__file__).resolve().parent / "run_breakdown.py")
+    proc = subprocess.run([sys.executable, script, *run_args], capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise SystemExit(f"bench/run_breakdown.py failed (exit {proc.returncode}):\n{proc.stderr.strip()}")
+    return proc.stderr
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=1.0)
@@ -83,9 +93,7 @@ def main() -> None:
                 flush=True,
             )
             if args.breakdown:
-                script = str(Path(__file__).resolve().parent / "run_breakdown.py")
-                proc = subprocess.run([sys.executable, script, *cmd[2:]], capture_output=True, text=True, check=False)
-                print(f"  where one {fmt} run's time goes  [{load()}]\n{proc.stderr}", flush=True)
+                print(f"  where one {fmt} run's time goes  [{load()}]\n{breakdown(cmd[2:])}", flush=True)
             shutil.rmtree(out, ignore_errors=True)
 
 

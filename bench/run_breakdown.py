@@ -1,21 +1,26 @@
 """Where the time of one ``trainpos run`` process goes: phases and the imports inside them.
 
-Run: ``.venv/bin/python bench/run_breakdown.py RUN_DIR --db DB [--out OUT]`` (or through
+Run: ``.venv/bin/python bench/run_breakdown.py RUN_DIR --db DB --out OUT [--force]`` (or through
 ``bench/bench_run.py --breakdown``). Does what ``trainpos run`` does in this process (the
 CLI's own ``app()``), with the pipeline's stages wrapped in timers, and prints per phase the
 wall and CPU seconds and the modules first imported inside it (outermost import only, its
 nested imports included); the numba dispatcher's compile-or-load-from-cache of each kernel
 is a phase of its own. The interpreter's start-up (before this script's first line) is not
-seen from inside: ``bench_run.py`` prints the whole process beside it. Never fails on timing.
+seen from inside: ``bench_run.py`` prints the whole process beside it. Never fails on timing;
+an entry of :data:`WRAPPED` that no longer resolves stops it before the run, naming the entry,
+and a stage never called is listed after the table.
 """
 
 from __future__ import annotations
 
 import builtins
+import importlib
+import inspect
 import sys
 import time
 from collections import defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -99,56 +104,134 @@ class _Phase:
             _stack[-1][3] += c
 
 
-def _wrap(module: str, attr: str, label: str | None = None) -> None:
-    """Replace ``module.attr`` (a function or a class's method as ``Class.method``) by a timed call."""
-    mod = __import__(module, fromlist=["_"])
-    owner: Any = mod
-    *path, name = attr.split(".")
+@dataclass(frozen=True)
+class Stage:
+    """A stage timed as a phase: ``module.attr`` (a function, a class, or ``Class.method``)."""
+
+    module: str
+    attr: str
+    label: str
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """Where a stage's name is looked up (module or class), the name, and what it is now."""
+
+    stage: Stage
+    owner: Any
+    name: str
+    target: Callable[..., Any]
+    bound: bool  # a classmethod/staticmethod: called through the class, never given ``self``
+
+
+class StaleStage(LookupError):
+    """A :data:`WRAPPED` entry that no longer names a callable (the code moved on)."""
+
+
+def resolve(stage: Stage) -> Resolved:
+    """The callable a stage names; :class:`StaleStage` saying which part is missing."""
+    try:
+        owner: Any = importlib.import_module(stage.module)
+    except ImportError as exc:
+        raise StaleStage(f"{stage.module}.{stage.attr}: module {stage.module!r} not importable ({exc})") from exc
+    *path, name = stage.attr.split(".")
     for p in path:
+        if not hasattr(owner, p):
+            raise StaleStage(f"{stage.module}.{stage.attr}: {owner.__name__} has no attribute {p!r}")
         owner = getattr(owner, p)
-    fn: Callable[..., Any] = getattr(owner, name)
+    if not hasattr(owner, name):
+        raise StaleStage(f"{stage.module}.{stage.attr}: {owner.__name__} has no attribute {name!r}")
+    raw = inspect.getattr_static(owner, name)
+    bound = isinstance(owner, type) and isinstance(raw, classmethod | staticmethod)
+    target = getattr(owner, name) if bound or not isinstance(owner, type) else raw
+    if not callable(target):
+        raise StaleStage(f"{stage.module}.{stage.attr}: not callable ({type(target).__name__})")
+    return Resolved(stage, owner, name, target, bound)
+
+
+def resolve_all(stages: Iterable[Stage]) -> list[Resolved]:
+    """Every stage resolved, or SystemExit naming each stale entry (before anything runs)."""
+    found, stale = [], []
+    for stage in stages:
+        try:
+            found.append(resolve(stage))
+        except StaleStage as exc:
+            stale.append(f"  {stage.label!r}: {exc}")
+    if stale:
+        raise SystemExit(
+            "bench/run_breakdown.py: stale WRAPPED entries (find where each stage now lives in "
+            "fieldlogs/pipeline/ and update WRAPPED):\n" + "\n".join(stale)
+        )
+    return found
+
+
+_calls: dict[str, int] = defaultdict(int)  # label → calls of its wrapped stages
+
+
+def _wrap(r: Resolved) -> None:
+    """Replace the resolved name by a timed call of what it named."""
+    fn, label = r.target, r.stage.label
 
     def timed(*a: Any, **k: Any) -> Any:
-        with _Phase(label or attr):
+        _calls[label] += 1
+        with _Phase(label):
             return fn(*a, **k)
 
-    setattr(owner, name, staticmethod(timed) if isinstance(owner, type) else timed)
+    _calls.setdefault(label, 0)
+    setattr(r.owner, r.name, staticmethod(timed) if r.bound else timed)
 
 
-#: (module, attribute, label) wrapped before the run: the module a caller imports the name
-#: from (``cli.run`` imports inside its function, the pipeline at its module's import).
-WRAPPED = [
-    ("fieldlogs.config", "load_tree", "settings (load_tree)"),
-    ("dbtools.database", "read_network", "read_network (DB, hash)"),
-    ("fieldlogs.io", "read_run", "read_run (run.json)"),
-    ("fieldlogs.pipeline.outputs", "write_results", "write outputs"),
-    ("fieldlogs.pipeline.run", "require_usable", "read streams + usability"),
-    ("fieldlogs.pipeline.run", "clean_stream", "clean streams"),
-    ("fieldlogs.pipeline.run", "build_cycles", "cycles"),
-    ("fieldlogs.pipeline.run", "correct_odometry", "odometry"),
-    ("fieldlogs.pipeline.run", "analyse_gps", "GPS matching/analysis"),
-    ("fieldlogs.pipeline.run", "FeatureUnit", "feature unit"),
-    ("fieldlogs.pipeline.run", "GnssUnit.for_run", "GNSS unit"),
-    ("fieldlogs.pipeline.run", "run_aids", "engine (run_aids)"),
-    ("fieldlogs.pipeline.run", "summarise", "summary"),
-    ("fieldlogs.pipeline.run", "compare_with_truth", "truth comparison"),
-]
+#: Stages wrapped before the run, each in the module a caller looks the name up in (``cli.run``
+#: imports inside its function, the pipeline modules at their import). A stage never called in
+#: the run is reported as such: a name that still resolves but lost its caller.
+WRAPPED = (
+    Stage("fieldlogs.config", "load_tree", "settings (load_tree)"),
+    Stage("dbtools.database", "read_network", "read_network (DB, hash)"),
+    Stage("fieldlogs.io", "read_run", "read_run (run.json)"),
+    Stage("fieldlogs.io", "Run.stream", "read streams"),
+    Stage("fieldlogs.pipeline.windows", "run_pipeline", "pipeline (rest)"),
+    Stage("fieldlogs.pipeline.run", "require_usable", "usability check"),
+    Stage("fieldlogs.pipeline.run", "clean_stream", "clean streams"),
+    Stage("fieldlogs.pipeline.run", "clock_offsets", "clock check"),
+    Stage("fieldlogs.pipeline.run", "build_cycles", "cycles"),
+    Stage("fieldlogs.pipeline.run", "correct_odometry", "odometry"),
+    Stage("fieldlogs.pipeline.run", "analyse_gps", "GPS matching/analysis"),
+    Stage("fieldlogs.pipeline.run", "FeatureUnit", "feature unit"),
+    Stage("fieldlogs.pipeline.run", "GnssUnit.for_run", "GNSS unit"),
+    Stage("fieldlogs.pipeline.wheelscale", "checked_solution", "balise checks (rest)"),
+    Stage("fieldlogs.pipeline.consistency", "run_aids", "engine (run_aids)"),
+    Stage("fieldlogs.pipeline.engine", "positions_frame", "positions frame"),
+    Stage("fieldlogs.pipeline.run", "summarise", "summary"),
+    Stage("fieldlogs.pipeline.run", "compare_with_truth", "truth comparison"),
+    Stage("fieldlogs.pipeline.outputs", "ResultsWriter.add_positions", "write positions"),
+    Stage("fieldlogs.pipeline.outputs", "ResultsWriter.finish", "write events + summary"),
+)
+
+
+#: The imports ``trainpos run`` makes inside its function (``cli/run.py``), in its order, then the
+#: pipeline and the CLI module itself: each a phase of its own.
+RUN_IMPORTS = (
+    "dbtools.database",
+    "fieldlogs.config",
+    "fieldlogs.io",
+    "fieldlogs.pipeline.outputs",
+    "fieldlogs.pipeline.windows",
+    "fieldlogs.pipeline.run",
+    "cli.run",
+)
 
 
 def main() -> None:
+    """Time one ``trainpos run`` (this script's arguments) phase by phase; the table to stderr."""
     builtins.__import__ = _timed_import
     with _Phase("import cli.main"):
         from cli.main import app
     # the imports ``trainpos run`` makes inside its function, in its order, each a phase
-    for mod in ("dbtools.database", "fieldlogs.config", "fieldlogs.io", "fieldlogs.pipeline.outputs"):
+    for mod in RUN_IMPORTS:
         with _Phase(f"import {mod}"):
             __import__(mod)
-    with _Phase("import fieldlogs.pipeline.run"):
-        import fieldlogs.pipeline.run  # noqa: F401
-    with _Phase("import cli.run"):
-        import cli.run  # noqa: F401
-    for module, attr, label in WRAPPED:
-        _wrap(module, attr, label)
+    for r in resolve_all(WRAPPED):
+        _wrap(r)
     with _Phase("CLI parse + run (rest)"):
         try:
             app(["run", *sys.argv[1:]])
@@ -178,6 +261,9 @@ def report(wall: float, cpu: float) -> None:
             parts.append(f"{m} {dt:.2f}" + (f" [{sub}]" if sub else ""))
         print(f"{label:<36} {w:7.3f} {c:7.3f}  {'; '.join(parts)}", file=sys.stderr)
     print(f"{'total (from the script first line)':<36} {wall:7.3f} {cpu:7.3f}", file=sys.stderr)
+    idle = [label for label, n in _calls.items() if n == 0]
+    if idle:
+        print(f"stages never called in this run: {', '.join(idle)}", file=sys.stderr)
 
 
 if __name__ == "__main__":

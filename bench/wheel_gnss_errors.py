@@ -131,6 +131,9 @@ def main() -> None:
     for row in rows:
         print(f"{row[0]:28s} " + " ".join(f"{v:7.4f}" for v in row[1:-1]) + f" {row[-1]:7d}")
     z = np.array([r[1] for r in rows])
+    if z.size < 2:
+        print(f"\n{z.size} runs with GNSS points: too few for the spread of z")
+        return
     half = 1.96 * np.array([r[3] for r in rows])
     err_abs = np.abs([r[2] for r in rows])
     print(

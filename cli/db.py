@@ -50,6 +50,8 @@ class ValidateFmt(StrEnum):
 
 class ImportFmt(StrEnum):
     railml = "railml"
+    osm = "osm"
+    rtm_geojson = "rtm-geojson"
 
 
 @app.command("build")
@@ -326,30 +328,73 @@ def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: 
 @app.command("import")
 @cli_command
 def import_(
-    source: Path = typer.Argument(..., help="railML file (2.0–2.5 or 3.1–3.3)."),
-    fmt: ImportFmt = typer.Option(..., "--format", help="railml."),
+    source: Path = typer.Argument(
+        ..., help="railML file (2.0–2.5 or 3.1–3.3), OpenStreetMap file (.osm.pbf, .osm) or RailTopoModel GeoJSON."
+    ),
+    fmt: ImportFmt | None = typer.Option(
+        None,
+        "--format",
+        help="railml, osm or rtm-geojson (RailTopoModel netelements/netrelations as tp-lib reads them); default: "
+        "osm for .osm.pbf/.osm/.osm.bz2 files, rtm-geojson for .geojson, else railml.",
+    ),
     out: Path = typer.Option(..., "--out", "-o", help="Output source set folder (then: db build SOURCE_DIR)."),
     line_code: Path | None = typer.Option(
         None,
         "--line-code",
-        help="Map (TOML): railML lines/tracks → line_code and track, initial pairs → station codes.",
+        help="railML: map (TOML) of railML lines/tracks → line_code and track, initial pairs → station codes.",
     ),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
     xsd: Path | None = typer.Option(
-        None, "--xsd", help="Validate the file against this XML Schema first (e.g. railML's railml3.xsd)."
+        None, "--xsd", help="railML: validate the file against this XML Schema first (e.g. railML's railml3.xsd)."
+    ),
+    osm_railway: str = typer.Option(
+        "rail",
+        "--osm-railway",
+        help="osm: railway=* values of the ways imported, comma-separated (e.g. rail,light_rail).",
     ),
 ) -> None:
-    """Import a railML file as a source set; every element that cannot be mapped is reported.
+    """Import a railML, OpenStreetMap or RailTopoModel GeoJSON file as a source set; every
+    element that cannot be mapped is reported.
 
-    Writes the source tables, network.toml (when declared), survey/ (centrelines and km
-    posts for gis grid, when the file has coordinates) and import_report.json. Exit 0
-    written (unmapped elements are warnings), 1 errors such as duplicate or missing ids,
-    positions on undefined tracks, lengths not in metres, an unknown railML version or
-    (with --xsd) a schema error (nothing written), 2 unreadable (malformed XML, entity
-    declarations, bad map, unreadable XSD), 3 output exists.
+    railML: writes the source tables (the network too: tracks, connections, switches; balise groups
+    as G balises), network.toml (when declared), survey/ (centrelines and km posts for gis
+    grid, when the file has coordinates) and import_report.json. Exit 0 written (unmapped
+    elements are warnings), 1 errors such as duplicate or missing ids, positions on
+    undefined tracks, lengths not in metres, an unknown railML version, balises or tracks
+    of which none could be imported, or (with --xsd) a schema error (nothing written),
+    2 unreadable (malformed XML, entity declarations, bad map, unreadable XSD), 3 output
+    exists.
+
+    osm: tracks split at switches and junctions, connections, switches, track_points,
+    lines, km from milestones, balise groups with an ETCS identity, network.toml (UTM
+    zone) and import_report.json. Exit 0 written, 1 no rail way could be imported, 2
+    unreadable file, 3 output exists.
+
+    rtm-geojson (docs/howto/import-geojson.md): tracks, connections, inferred point
+    switches and 20 m track_points; exit 0 written (skipped features are warnings), 1 no
+    netelement could be imported, an unknown CRS or no FeatureCollection (nothing written),
+    2 invalid JSON, 3 output exists.
 
     Example: trainpos db import line.railml --format railml --out src/ --line-code map.toml
     """
+    from dbtools.interchange.osm_read import is_osm_file
+
+    if fmt is None:
+        fmt = (
+            ImportFmt.osm
+            if is_osm_file(source)
+            else ImportFmt.rtm_geojson
+            if source.suffix.lower() == ".geojson"
+            else ImportFmt.railml
+        )
+    if fmt != ImportFmt.railml and (line_code is not None or xsd is not None):
+        raise UsageError(f"--line-code and --xsd apply to railML only, not --format {fmt.value}")
+    if fmt == ImportFmt.osm:
+        _import_osm(source, out, force, osm_railway)
+        return
+    if fmt == ImportFmt.rtm_geojson:
+        _import_rtm(source, out, force)
+        return
     from dbtools.interchange.importer import import_railml
 
     result = import_railml(source, out, line_map=line_code, force=force, xsd=xsd)
@@ -370,21 +415,73 @@ def import_(
     )
 
 
+def _import_osm(source: Path, out: Path, force: bool, railways: str) -> None:
+    from dbtools.interchange.osm_import import import_osm
+
+    kinds = tuple(k.strip() for k in railways.split(",") if k.strip())
+    if not kinds:
+        raise UsageError("--osm-railway: give at least one railway=* value, e.g. rail")
+    result = import_osm(source, out, force=force, railways=kinds)
+    out_c = console()
+    if result.findings:
+        print_findings(result.findings, console=out_c, title="Not imported / guessed")
+    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
+    osm = [(f"osm: {k}", v) for k, v in result.counts.items()]
+    out_c.print(
+        key_value_table(
+            [("folder", str(result.out)), ("metric CRS", result.metric_crs), *osm, *rows], title="Imported (OSM)"
+        )
+    )
+
+
+def _import_rtm(source: Path, out: Path, force: bool) -> None:
+    from dbtools.interchange.rtm_import import import_rtm_geojson
+
+    result = import_rtm_geojson(source, out, force=force)
+    out_c = console()
+    if result.findings:
+        print_findings(result.findings, console=out_c, title="Not imported / warnings")
+    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
+    out_c.print(
+        key_value_table(
+            [
+                ("folder", str(result.out)),
+                ("CRS of the file", result.crs),
+                ("netelements in the file", result.netelements_seen),
+                ("netrelations in the file", result.netrelations_seen),
+                ("switches inferred", result.switches_inferred),
+                *rows,
+            ],
+            title="Imported",
+        )
+    )
+
+
 @app.command("export")
 @cli_command
 def export(
     db: Path = typer.Argument(..., help="Onboard DB file (.sqlite) or source set folder."),
-    fmt: str = typer.Option(..., "--format", help="railml (3.2), geojson, gpkg (GeoPackage) or geoparquet."),
-    out: Path = typer.Option(..., "--out", "-o", help="Output file."),
+    fmt: str = typer.Option(
+        ...,
+        "--format",
+        help="railml (3.2), geojson, gpkg (GeoPackage), geoparquet or rtm-geojson (RailTopoModel, as tp-lib reads it).",
+    ),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Output file; geojson: a folder of one file per layer unless .geojson/.json/.zip."
+    ),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
     xsd: Path | None = typer.Option(
         None, "--xsd", help="railML: validate the export against this XML Schema before writing it (railml3.xsd)."
     ),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
-    """Export a DB as railML 3.2 or as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet).
+    """Export a DB as railML 3.2, as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet) or
+    as RailTopoModel GeoJSON (rtm-geojson: netelements and netrelations, as tp-lib reads them).
 
-    Layers: balises, feature_points, gis_points, gis_lines. Exit 0 written, 1 source set
+    Layers: balises, feature_points, gis_points, gis_lines and the network's tracks,
+    switches, connections, balise_groups, km_posts (GeoParquet: the first four). GeoJSON:
+    one file (--out *.geojson or *.json), a folder of LAYER.geojson files, or their zip
+    (--out *.zip). Exit 0 written, 1 source set
     errors or (with --xsd) the export is not valid against the schema (nothing written),
     2 unreadable input or XSD, unknown format, 3 output exists.
 
@@ -407,17 +504,28 @@ def review(
     new: Path = typer.Argument(..., help="New onboard DB file (.sqlite) or source set folder."),
     out: Path = typer.Option(..., "--out", "-o", help="Output page (.html), self-contained."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
+    tiles: str | None = typer.Option(
+        None,
+        "--tiles",
+        help="XYZ tile URL template for the map background, e.g. https://tile.openstreetmap.org/{z}/{x}/{y}.png "
+        "(default: no tiles, the page loads nothing from the network).",
+    ),
+    tiles_attribution: str = typer.Option(
+        "© OpenStreetMap contributors", "--tiles-attribution", help="Attribution shown with --tiles."
+    ),
 ) -> None:
-    """One page for the reviewer of a DB change: validation of NEW, the diff, a map of what moved.
+    """One page for the reviewer of a DB change: validation of NEW, the diff, a network map.
 
-    The map is inline SVG drawn in NEW's metric CRS (no tiles, no scripts). Exit 0 written
-    and NEW has no error, 1 written but NEW has errors, 2 unreadable, 3 output exists.
+    The map is interactive (Leaflet, inlined: the single file works offline): NEW's tracks,
+    switches, connections, balise groups and km ticks, and what changed; hover for ids and km.
+    Exit 0 written and NEW has no error, 1 written but NEW has errors, 2 unreadable,
+    3 output exists.
 
     Example: trainpos db review net-2026.10.sqlite net-2026.11.sqlite --out review.html
     """
     from dbtools.interchange.review import write_review
 
-    findings = write_review(old, new, out, force=force)
+    findings = write_review(old, new, out, force=force, tiles=tiles, tiles_attribution=tiles_attribution)
     console().print(f"review page written to {safe(out)}")
     if has_errors(findings):
         raise typer.Exit(1)

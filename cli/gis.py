@@ -48,8 +48,8 @@ app = typer.Typer(
 def grid(
     centrelines: Path = typer.Argument(
         ...,
-        help="Track centrelines: CSV/XLSX (line_code, track, seq, lon, lat[, height_m]) or GeoJSON "
-        "LineStrings with properties line_code, track.",
+        help="Track centrelines: CSV/XLSX (line_code, track, seq, lon, lat[, height_m][, track_id]) or GeoJSON "
+        "LineStrings with properties line_code, track (or track_id).",
     ),
     posts: Path = typer.Option(
         ..., "--posts", help="Kilometre posts CSV/XLSX: line_code, km_m (or 12k345.6), lon, lat[, km_after_m]."
@@ -62,6 +62,10 @@ def grid(
     Posts are projected onto every track; km is piecewise linear through them (slope 1
     beyond the first/last post). A post's km_after_m is a kilometrage break; breaks are
     written to km_breaks.csv beside the output, which db build reads.
+
+    Centrelines with a track_id (crossovers, connecting and turnout curves: tracks along no
+    line km) get a point every 20 m of their own length and at their end, written to
+    track_points.csv beside the output; km where their line_code's posts lie near them.
 
     Example: trainpos gis grid survey/centrelines.csv --posts survey/kmposts.csv --out src/gis.csv
     """
@@ -78,6 +82,9 @@ def grid(
         rows.append(("km_breaks", f"{written.km_breaks_path} ({len(written.result.km_breaks)} break(s))"))
     if written.removed_stale is not None:
         rows.append(("removed", f"{written.removed_stale} (no breaks any more)"))
+    if written.track_points_path is not None:
+        n_points = len(written.result.track_points)
+        rows.append(("track_points", f"{written.track_points_path} ({n_points} point(s))"))
     rows.append(("points", len(written.result.gis)))
     out_c.print(key_value_table(rows, title="GIS grid"))
     tracks = pd.DataFrame(
@@ -98,6 +105,20 @@ def grid(
         ]
     )
     out_c.print(frame_table(tracks, title="Tracks"))
+    if written.result.own_tracks:
+        own = pd.DataFrame(
+            [
+                {
+                    "track_id": t.track_id,
+                    "points": t.points,
+                    "length_m": f"{t.length_m:.2f}",
+                    "line_code": t.line_code or "",
+                    "km posts": t.posts_used,
+                }
+                for t in written.result.own_tracks
+            ]
+        )
+        out_c.print(frame_table(own, title="Tracks along no line km (track_points)"))
 
 
 class VerifyFmt(StrEnum):

@@ -136,7 +136,7 @@ def position(
     from fieldlogs.gnss.runinputs import run_gnss
     from fieldlogs.gnss.skymask import load_mask
     from fieldlogs.io import read_run
-    from fieldlogs.pipeline.aids.gnss import decided_route
+    from fieldlogs.pipeline.route import decided_route
 
     if (line is None) != (track is None):
         raise UsageError("give --line and --track together (or neither: the pipeline decides the track)")

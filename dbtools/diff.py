@@ -305,6 +305,12 @@ def _georef_summary(old: Network, new: Network) -> list[str]:
     return out
 
 
+def _counts_summary(td: TableDiff) -> list[str]:
+    """One line of counts for a table with no dedicated summary (the network tables)."""
+    c = td.counts
+    return [f"{td.table.name}: {c['added']} added, {c['removed']} removed, {c['changed']} changed"]
+
+
 def summarize(d: DbDiff, old: Network, new: Network) -> list[str]:
     """Plain-language lines, meta first, then one block per table in dependency order."""
     lines: list[str] = []
@@ -328,7 +334,8 @@ def summarize(d: DbDiff, old: Network, new: Network) -> list[str]:
     for t in DB_TABLES:
         td = d.tables[t.name]
         if td.n_changes:
-            lines.extend(_capped(builders[t.name](td), t.name))
+            build = builders.get(t.name, _counts_summary)
+            lines.extend(_capped(build(td), t.name))
     if not d.has_changes:
         n = sum(len(new.tables[t.name]) for t in DB_TABLES)
         same = d.old["actual_content_hash"] == d.new["actual_content_hash"]

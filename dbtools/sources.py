@@ -6,7 +6,7 @@ An optional ``network.toml`` declares the operating area, metric CRS and height 
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +23,7 @@ from schemas.enums import Severity, Track
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
-from schemas.tables import FEATURE_POINTS, LINES, SOURCE_HASH_PREFIX, SOURCE_TABLES
+from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
 
 
 def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
@@ -89,7 +89,7 @@ def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:
     declared = folder / NETWORK_FILE
     if declared.is_file():
         hashes[declared.name] = sha256_file(declared)
-    meta = {f"{SOURCE_HASH_PREFIX}{k}": v for k, v in sorted(hashes.items())}
+    meta = {f"source_sha256:{k}": v for k, v in sorted(hashes.items())}
     if declared.is_file():
         meta.update(read_declaration(declared))
     return meta
@@ -146,9 +146,17 @@ def _line_codes(tables: dict[str, pd.DataFrame], files: dict[str, str]) -> list[
     ]
 
 
-def write_source_set(network: Network, folder: Path, *, force: bool = False, inputs: Iterable[Path | str] = ()) -> Path:
+def write_source_set(
+    network: Network,
+    folder: Path,
+    *,
+    force: bool = False,
+    inputs: Iterable[Path | str] = (),
+    extra_files: Mapping[str, str] | None = None,
+) -> Path:
     """Write a network as CSV source files (the format ``db build`` reads back), under the
-    output rule of :mod:`dbtools.atomic` (``inputs``: never replaced)."""
+    output rule of :mod:`dbtools.atomic` (``inputs``: never replaced). ``extra_files``: file
+    name → UTF-8 text written beside them in the same atomic step (an import report)."""
     from dbtools.atomic import atomic_folder
 
     folder = Path(folder)
@@ -161,4 +169,6 @@ def write_source_set(network: Network, folder: Path, *, force: bool = False, inp
             cols = [c for c in table.column_names if c != "attributes_json"]
             frame[cols].to_csv(tmp / f"{name}.csv", index=False, lineterminator="\n")
         write_declaration(network.meta, tmp / NETWORK_FILE)
+        for name, text in (extra_files or {}).items():
+            (tmp / name).write_text(text, encoding="utf-8")
     return folder

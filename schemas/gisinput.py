@@ -4,14 +4,41 @@
 Centrelines come as CSV/XLSX (one row per vertex, declared below) or as a GeoJSON
 FeatureCollection of LineStrings with properties ``line_code`` and ``track`` (an optional
 third coordinate is the height); GeoJSON is flattened into the same rows before checking.
+
+A centreline is either a line's track (``line_code`` + ``track``: the 20 m km grid of ``gis``)
+or, with ``track_id``, a track along no line km — a crossover, a connecting curve, a turnout's
+diverging curve (SPEC §8.1) — whose grid is every 20 m of its own length (``track_points``);
+its ``line_code``, when given, names the line whose kilometre posts give it km.
 """
 
 from __future__ import annotations
 
 from schemas.model import Column, Table
-from schemas.tables import LAT_RANGE, LINE_CODE, LON_RANGE, TRACK
+from schemas.tables import LAT_RANGE, LINE_CODE, LON_RANGE, TRACKS
 
 LON = Column("lon", "float", "Longitude, JGD2011/WGS84", unit="deg", min=LON_RANGE[0], max=LON_RANGE[1])
+CL_LINE_CODE = Column(
+    "line_code",
+    "str",
+    "Line (route) code; on a track_id row optional: the line whose km posts give the track km",
+    required=False,
+    nullable=True,
+)
+CL_TRACK = Column(
+    "track",
+    "str",
+    "U up, D down, S single (a line's track); empty on a track_id row",
+    enum=TRACKS,
+    required=False,
+    nullable=True,
+)
+CL_TRACK_ID = Column(
+    "track_id",
+    "str",
+    "Track along no line km (crossover, connecting or turnout curve): its grid goes to track_points.csv",
+    required=False,
+    nullable=True,
+)
 LAT = Column("lat", "float", "Latitude, JGD2011/WGS84", unit="deg", min=LAT_RANGE[0], max=LAT_RANGE[1])
 
 CENTRELINE_VERTICES = Table(
@@ -19,11 +46,13 @@ CENTRELINE_VERTICES = Table(
     kind="source",
     description=(
         "Surveyed track centrelines for `gis grid`: one row per vertex, in `seq` order along the "
-        "track (either direction: the kilometre posts decide which end is the low km)."
+        "track. A line's track (line_code, track) may run either way: the kilometre posts decide "
+        "which end is the low km. A track_id track begins at its lowest seq."
     ),
     columns=(
-        LINE_CODE,
-        TRACK,
+        CL_LINE_CODE,
+        CL_TRACK,
+        CL_TRACK_ID,
         Column("seq", "int", "Vertex order along the track (increasing numbers, gaps allowed)"),
         LON,
         LAT,
@@ -38,7 +67,7 @@ CENTRELINE_VERTICES = Table(
             max=4000.0,
         ),
     ),
-    primary_key=("line_code", "track", "seq"),
+    primary_key=("line_code", "track", "track_id", "seq"),
 )
 
 KM_POSTS = Table(

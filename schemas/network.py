@@ -94,6 +94,16 @@ NETWORK_TRACKS = Table(
         ),
         Column("length_m", "float", "Length along the centreline from begin to end", unit="m", min=0.0),
         Column("name", "str", "Name or description", required=False, nullable=True),
+        *(
+            Column(
+                f"{end}_buffer_stop",
+                "bool",
+                f"1: the track's {end} is a buffer stop (a dead end by design, not a gap in the data)",
+                required=False,
+                nullable=True,
+            )
+            for end in ENDS
+        ),
     ),
     primary_key=("track_id",),
     foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),

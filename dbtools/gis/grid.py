@@ -30,7 +30,6 @@ Everything is vectorised over the vertices and grid points; transformers are cac
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,32 +37,28 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from dbtools.gis.geometry import Projector, geodesic_step
+from dbtools.gis.centreline import Polyline, TrackCtx, Where, polyline
+from dbtools.gis.geometry import Projector
 from dbtools.gis.index import projection_for
 from dbtools.gis.posts import PostProjection, Posts, grid_kms, km_runs, project_posts, reference_chainage
+from dbtools.gis.track_grid import OwnTrackSummary, own_track_grid
 from dbtools.network import canonical, empty_frame
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.gisinput import CENTRELINE_VERTICES, KM_POSTS
+from schemas.network import TRACK_POINTS
 from schemas.tables import GIS, KM_BREAKS
 
 FloatArray = npt.NDArray[np.float64]
 
 #: A post farther than this from a track is not used on that track [m].
 MAX_POST_OFFSET_M = 50.0
-#: Consecutive vertices closer than this are duplicates [m].
-DUPLICATE_VERTEX_M = 1e-3
 #: Posts closer than this along a track are the same place [m].
 SAME_PLACE_M = 0.01
 #: Warn when the km difference of two posts differs from the measured distance by more than
 #: max(SPACING_ABS_M, SPACING_REL · distance).
 SPACING_ABS_M = 1.0
 SPACING_REL = 0.01
-
-#: Extra frame columns the readers may add: file line of the row, and a label prefix for
-#: inputs without lines (GeoJSON: "feature 3, vertex 12").
-ROW_COL = "_row"
-LABEL_COL = "_label"
 
 
 @dataclass
@@ -94,48 +89,9 @@ class GridResult:
     """JGD2011 plane rectangular zone used per line (0: another projection, see ``epsg``)."""
     epsg: int = 0
     """EPSG code of the one plane projection of the survey."""
-
-
-class _Where:
-    """Finding locations: file and line of an input row (or a label when there are no lines)."""
-
-    def __init__(self, frame: pd.DataFrame, table: str, file: str | None) -> None:
-        self.table, self.file = table, file
-        self.rows = frame[ROW_COL] if ROW_COL in frame.columns else None
-        self.labels = frame[LABEL_COL] if LABEL_COL in frame.columns else None
-
-    def finding(
-        self,
-        rule: str,
-        severity: Severity,
-        message: str,
-        idx: Any = None,
-        *,
-        keys: Mapping[str, object] | None = None,
-        value: object = None,
-        limit: object = None,
-        column: str | None = None,
-    ) -> Finding:
-        row = None
-        if idx is not None and self.rows is not None:
-            v = self.rows.loc[idx]
-            row = None if pd.isna(v) else int(v)
-        if idx is not None and self.labels is not None:
-            label = self.labels.loc[idx]
-            if isinstance(label, str) and label:
-                message = f"{label}: {message}"
-        return Finding(
-            rule,
-            severity,
-            self.table,
-            message,
-            keys=dict(keys or {}),
-            value=value,
-            limit=limit,
-            file=self.file,
-            row=row,
-            column=column,
-        )
+    track_points: pd.DataFrame = field(default_factory=lambda: empty_frame(TRACK_POINTS))
+    """The grid of the tracks along no line km (centreline rows with track_id)."""
+    own_tracks: list[OwnTrackSummary] = field(default_factory=list)
 
 
 def build_grid(
@@ -146,41 +102,105 @@ def build_grid(
     posts_file: str | None = None,
     max_post_offset_m: float = MAX_POST_OFFSET_M,
 ) -> GridResult:
-    """The GIS grid (and kilometrage breaks) of every line/track; see the module docstring.
+    """The GIS grid (and kilometrage breaks) of every line/track, and the ``track_points`` of
+    every track along no line km (rows with ``track_id``: :mod:`dbtools.gis.track_grid`);
+    see the module docstring.
 
     Inputs are typed frames as declared in :mod:`schemas.gisinput` (already schema-checked).
     Problems come back as findings; tracks with errors produce no grid points.
     """
-    cw = _Where(centrelines, CENTRELINE_VERTICES.name, centrelines_file)
-    pw = _Where(posts, KM_POSTS.name, posts_file)
+    cw = Where(centrelines, CENTRELINE_VERTICES.name, centrelines_file)
+    pw = Where(posts, KM_POSTS.name, posts_file)
     result = GridResult(empty_frame(GIS), empty_frame(KM_BREAKS))
     findings = result.findings
-    post_lines = posts["line_code"].astype(object)
-    line_codes = centrelines["line_code"].astype(object)
+    centrelines = centrelines.assign(
+        **{c: None for c in ("line_code", "track", "track_id", "height_m") if c not in centrelines.columns}
+    )
+    own = centrelines["track_id"].notna().to_numpy()
+    findings.extend(_key_findings(centrelines, own, cw))
+    keyed = centrelines["line_code"].notna().to_numpy() & centrelines["track"].notna().to_numpy()
+    line_rows = centrelines[~own & keyed]
+    line_codes = line_rows["line_code"].astype(object)
+    all_lines = set(centrelines["line_code"].dropna().astype(object))
+    findings.extend(_post_findings(posts, all_lines, pw))
+
+    # one plane for the whole survey, by the grid index's policy (dbtools.gis.index)
+    projector = projection_for(
+        centrelines["lat"].to_numpy(dtype=float, na_value=np.nan),
+        centrelines["lon"].to_numpy(dtype=float, na_value=np.nan),
+    )
+    if projector is None:
+        return result
+    result.epsg = projector.epsg
+    line_posts = {lc: _line_posts(posts, lc, projector) for lc in sorted(all_lines)}
     gis_parts: list[pd.DataFrame] = []
     break_rows: list[dict[str, object]] = []
+    for line_code in sorted(set(line_codes.dropna())):
+        on_line = line_rows[line_codes == line_code]
+        result.zones[line_code] = projector.zone
+        lp = line_posts[line_code]
+        tracks = on_line["track"].astype(object)
+        for track in sorted(set(tracks.dropna())):
+            vertices = on_line[tracks == track].sort_values("seq", kind="stable")
+            built = _track_grid(str(line_code), str(track), vertices, lp, projector, cw, pw, max_post_offset_m)
+            findings.extend(built.findings)
+            if built.gis is not None and built.summary is not None:
+                gis_parts.append(built.gis)
+                break_rows.extend(built.breaks)
+                result.tracks.append(built.summary)
+        findings.extend(_unused_post_findings(posts, lp, str(line_code), max_post_offset_m, pw))
+    if own.any():
+        _own_tracks(result, centrelines[own], line_posts, projector, (cw, pw), max_post_offset_m)
 
-    # posts: breaks must go forward; lines must exist
+    if gis_parts:
+        result.gis = canonical(GIS, pd.concat(gis_parts, ignore_index=True))
+    if break_rows:
+        result.km_breaks = canonical(KM_BREAKS, pd.DataFrame(break_rows))
+    return result
+
+
+def _key_findings(centrelines: pd.DataFrame, own: npt.NDArray[np.bool_], cw: Where) -> list[Finding]:
+    """An error for each row that is neither a line's track (line_code and track) nor a
+    track of its own (track_id)."""
+    lc, tr = centrelines["line_code"].notna().to_numpy(), centrelines["track"].notna().to_numpy()
+    out = []
+    for i in np.flatnonzero(~own & ~(lc & tr)).tolist():
+        missing = "line_code and track" if not lc[i] and not tr[i] else ("track" if lc[i] else "line_code")
+        out.append(
+            cw.finding(
+                "gisinput.centreline_key",
+                Severity.ERROR,
+                f"the vertex has no {missing}: give line_code and track (a line's track) or track_id "
+                "(a track along no line km)",
+                centrelines.index[i],
+                column="track" if missing == "track" else "line_code",
+            )
+        )
+    return out
+
+
+def _post_findings(posts: pd.DataFrame, known_lines: set[object], pw: Where) -> list[Finding]:
+    """Posts alone: breaks must go forward; their line must have a centreline."""
+    out = []
+    post_lines = posts["line_code"].astype(object)
     km_after_all = posts["km_after_m"].to_numpy(dtype=float, na_value=np.nan)
     km_all = posts["km_m"].to_numpy(dtype=float, na_value=np.nan)
     for i in np.flatnonzero(~np.isnan(km_after_all) & (km_after_all <= km_all)).tolist():
-        idx = posts.index[i]
-        findings.append(
+        out.append(
             pw.finding(
                 "gisinput.break_backwards",
                 Severity.ERROR,
                 f"km_after_m {km_after_all[i]:g} is not larger than km_m {km_all[i]:g}: a break must "
                 "jump forward (a repeated kilometrage cannot be held by the gis table)",
-                idx,
+                posts.index[i],
                 keys={"line_code": post_lines.iat[i], "km_m": km_all[i]},
                 value=km_after_all[i],
                 limit=km_all[i],
                 column="km_after_m",
             )
         )
-    known_lines = set(line_codes.dropna())
     for i in np.flatnonzero(~post_lines.isin(known_lines).to_numpy()).tolist():
-        findings.append(
+        out.append(
             pw.finding(
                 "gisinput.unknown_line",
                 Severity.ERROR,
@@ -191,61 +211,72 @@ def build_grid(
                 column="line_code",
             )
         )
+    return out
 
-    # one plane for the whole survey, by the grid index's policy (dbtools.gis.index)
-    projector = projection_for(
-        centrelines["lat"].to_numpy(dtype=float, na_value=np.nan),
-        centrelines["lon"].to_numpy(dtype=float, na_value=np.nan),
+
+def _line_posts(posts: pd.DataFrame, line_code: object, projector: Projector) -> Posts:
+    """The posts of one line in the plane."""
+    sel = np.flatnonzero((posts["line_code"].astype(object) == line_code).to_numpy())
+    px, py = projector.to_xy(posts["lon"].to_numpy(dtype=float)[sel], posts["lat"].to_numpy(dtype=float)[sel])
+    return Posts(
+        frame_index=posts.index[sel],
+        km=posts["km_m"].to_numpy(dtype=float, na_value=np.nan)[sel],
+        km_after=posts["km_after_m"].to_numpy(dtype=float, na_value=np.nan)[sel],
+        x=px,
+        y=py,
+        used=np.zeros(sel.size, dtype=bool),
+        nearest_m=np.full(sel.size, np.inf),
     )
-    for line_code in sorted(known_lines):
-        assert projector is not None  # a known line has vertices
-        on_line = centrelines[line_codes == line_code]
-        result.zones[line_code], result.epsg = projector.zone, projector.epsg
-        sel = np.flatnonzero((post_lines == line_code).to_numpy())
-        px, py = projector.to_xy(posts["lon"].to_numpy(dtype=float)[sel], posts["lat"].to_numpy(dtype=float)[sel])
-        line_posts = Posts(
-            frame_index=posts.index[sel],
-            km=km_all[sel],
-            km_after=km_after_all[sel],
-            x=px,
-            y=py,
-            used=np.zeros(sel.size, dtype=bool),
-            nearest_m=np.full(sel.size, np.inf),
-        )
-        tracks = on_line["track"].astype(object)
-        for track in sorted(set(tracks.dropna())):
-            vertices = on_line[tracks == track].sort_values("seq", kind="stable")
-            built = _track_grid(str(line_code), str(track), vertices, line_posts, projector, cw, pw, max_post_offset_m)
-            findings.extend(built.findings)
-            if built.gis is not None and built.summary is not None:
-                gis_parts.append(built.gis)
-                break_rows.extend(built.breaks)
-                result.tracks.append(built.summary)
-        for j in np.flatnonzero(~line_posts.used).tolist():
-            i = int(sel[j])
-            near = line_posts.nearest_m[j]
-            where = (
-                f"is {near:.1f} m from the nearest track of line '{line_code}'"
-                if math.isfinite(near)
-                else f"lies beyond the ends of every track of line '{line_code}'"
-            )
-            findings.append(
-                pw.finding(
-                    "gisinput.post_off_track",
-                    Severity.ERROR,
-                    f"post km {km_all[i]:g} {where}; a post must lie within {max_post_offset_m:g} m of a track",
-                    posts.index[i],
-                    keys={"line_code": line_code, "km_m": km_all[i]},
-                    value=round(float(near), 3) if math.isfinite(near) else None,
-                    limit=max_post_offset_m,
-                )
-            )
 
-    if gis_parts:
-        result.gis = canonical(GIS, pd.concat(gis_parts, ignore_index=True))
-    if break_rows:
-        result.km_breaks = canonical(KM_BREAKS, pd.DataFrame(break_rows))
-    return result
+
+def _unused_post_findings(
+    posts: pd.DataFrame, lp: Posts, line_code: str, max_post_offset_m: float, pw: Where
+) -> list[Finding]:
+    """An error for each post of the line that no track of it could use."""
+    out = []
+    for j in np.flatnonzero(~lp.used).tolist():
+        near = lp.nearest_m[j]
+        where = (
+            f"is {near:.1f} m from the nearest track of line '{line_code}'"
+            if math.isfinite(near)
+            else f"lies beyond the ends of every track of line '{line_code}'"
+        )
+        out.append(
+            pw.finding(
+                "gisinput.post_off_track",
+                Severity.ERROR,
+                f"post km {lp.km[j]:g} {where}; a post must lie within {max_post_offset_m:g} m of a track",
+                lp.frame_index[j],
+                keys={"line_code": line_code, "km_m": lp.km[j]},
+                value=round(float(near), 3) if math.isfinite(near) else None,
+                limit=max_post_offset_m,
+            )
+        )
+    return out
+
+
+def _own_tracks(
+    result: GridResult,
+    rows: pd.DataFrame,
+    line_posts: dict[object, Posts],
+    projector: Projector,
+    where: tuple[Where, Where],
+    max_post_offset_m: float,
+) -> None:
+    """The ``track_points`` of every track_id (:func:`dbtools.gis.track_grid.own_track_grid`)."""
+    parts = []
+    ids = rows["track_id"].astype(object)
+    for tid in sorted(set(ids)):
+        vertices = rows[ids == tid].sort_values("seq", kind="stable")
+        lines = vertices["line_code"].dropna().astype(object).unique().tolist()
+        lp = line_posts.get(lines[0]) if len(lines) == 1 else None
+        frame, summary, found = own_track_grid(str(tid), vertices, lp, projector, where, max_post_offset_m)
+        result.findings.extend(found)
+        if frame is not None and summary is not None:
+            parts.append(frame)
+            result.own_tracks.append(summary)
+    if parts:
+        result.track_points = canonical(TRACK_POINTS, pd.concat(parts, ignore_index=True))
 
 
 @dataclass
@@ -256,45 +287,20 @@ class _TrackBuilt:
     summary: TrackSummary | None = None
 
 
-@dataclass
-class _Polyline:
-    """One track's cleaned centreline: plane vertices, heights (or None), ground chainage."""
-
-    x: FloatArray
-    y: FloatArray
-    heights: FloatArray | None
-    s: FloatArray
-
-
-@dataclass(frozen=True)
-class _TrackCtx:
-    """Who a track is, for findings."""
-
-    line_code: str
-    track: str
-    first_idx: Any
-    cw: _Where
-    pw: _Where
-
-    @property
-    def keys(self) -> dict[str, object]:
-        return {"line_code": self.line_code, "track": self.track}
-
-
 def _track_grid(
     line_code: str,
     track: str,
     vertices: pd.DataFrame,
     posts: Posts,
     projector: Projector,
-    cw: _Where,
-    pw: _Where,
+    cw: Where,
+    pw: Where,
     max_post_offset_m: float,
 ) -> _TrackBuilt:
     """Steps 1–5 of the module docstring for one track."""
     out = _TrackBuilt([])
-    ctx = _TrackCtx(line_code, track, vertices.index[0], cw, pw)
-    poly = _polyline(vertices, projector, ctx, out.findings)
+    ctx = TrackCtx(line_code, track, vertices.index[0], cw, pw)
+    poly = polyline(vertices, projector, ctx, out.findings)
     if poly is None:
         return out
     proj, usable, reversed_ = _orient(poly, posts, max_post_offset_m)
@@ -340,62 +346,8 @@ def _track_grid(
     return _grid_points(ctx, out, poly, r, runs, projector, (int(sel.size), offset, reversed_))
 
 
-def _polyline(
-    vertices: pd.DataFrame, projector: Projector, ctx: _TrackCtx, findings: list[Finding]
-) -> _Polyline | None:
-    """Step 1: plane vertices without repeats, heights if given on every vertex, chainage
-    on the ground (geodesic, not in the plane: scale factor 0.9999–1.0001); None (and a
-    finding) when fewer than two distinct vertices remain."""
-    lon = vertices["lon"].to_numpy(dtype=float)
-    lat = vertices["lat"].to_numpy(dtype=float)
-    x, y = projector.to_xy(lon, lat)
-    h = vertices["height_m"].to_numpy(dtype=float, na_value=np.nan)
-    step = geodesic_step(lon, lat)
-    dup = np.flatnonzero(step < DUPLICATE_VERTEX_M) + 1
-    if dup.size:
-        findings.append(
-            ctx.cw.finding(
-                "gisinput.duplicate_vertex",
-                Severity.WARNING,
-                f"{dup.size} vertex(es) repeat the previous one and were dropped",
-                vertices.index[dup[0]],
-                keys=ctx.keys,
-                value=int(dup.size),
-            )
-        )
-        keep = np.ones(x.size, dtype=bool)
-        keep[dup] = False
-        x, y, h, step = x[keep], y[keep], h[keep], geodesic_step(lon[keep], lat[keep])
-    if x.size < 2:
-        findings.append(
-            ctx.cw.finding(
-                "gisinput.short_track",
-                Severity.ERROR,
-                f"track {ctx.track} of line '{ctx.line_code}' has fewer than two distinct vertices",
-                ctx.first_idx,
-                keys=ctx.keys,
-                value=int(x.size),
-                limit=2,
-            )
-        )
-        return None
-    has_h = ~np.isnan(h)
-    if has_h.any() and not has_h.all():
-        findings.append(
-            ctx.cw.finding(
-                "gisinput.partial_height",
-                Severity.WARNING,
-                f"height_m is given on {int(has_h.sum())} of {h.size} vertices of the track; heights ignored",
-                ctx.first_idx,
-                keys=ctx.keys,
-                column="height_m",
-            )
-        )
-    return _Polyline(x, y, h if has_h.all() else None, np.concatenate([[0.0], np.cumsum(step)]))
-
-
 def _orient(
-    poly: _Polyline, posts: Posts, max_post_offset_m: float
+    poly: Polyline, posts: Posts, max_post_offset_m: float
 ) -> tuple[PostProjection, npt.NDArray[np.bool_], bool]:
     """Step 2: the posts projected onto the track; a polyline drawn from high to low km is
     reversed in place. Returns (projection, usable posts, reversed)."""
@@ -414,7 +366,7 @@ def _orient(
 
 
 def _check_post_order(
-    ctx: _TrackCtx,
+    ctx: TrackCtx,
     index: pd.Index,
     rp: FloatArray,
     km_before: FloatArray,
@@ -433,7 +385,7 @@ def _check_post_order(
     return ok
 
 
-def _post_pair(ctx: _TrackCtx, idx: Any, rp: tuple[float, float], km: tuple[float, float, float]) -> Finding | None:
+def _post_pair(ctx: TrackCtx, idx: Any, rp: tuple[float, float], km: tuple[float, float, float]) -> Finding | None:
     """The finding (if any) for post b after post a: ``rp`` their reference chainages,
     ``km`` = (km after a, km before a, km before b)."""
     after_a, before_a, before_b = km
@@ -475,9 +427,9 @@ def _post_pair(ctx: _TrackCtx, idx: Any, rp: tuple[float, float], km: tuple[floa
 
 
 def _grid_points(
-    ctx: _TrackCtx,
+    ctx: TrackCtx,
     out: _TrackBuilt,
-    poly: _Polyline,
+    poly: Polyline,
     r: FloatArray,
     runs: list[tuple[list[float], list[float]]],
     projector: Projector,

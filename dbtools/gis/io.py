@@ -11,18 +11,22 @@ from pathlib import Path
 import pandas as pd
 
 from dbtools.atomic import check_target, publish_mode, temp_sibling
-from dbtools.gis.grid import LABEL_COL, MAX_POST_OFFSET_M, ROW_COL, GridResult, build_grid
+from dbtools.gis.centreline import LABEL_COL, ROW_COL
+from dbtools.gis.grid import MAX_POST_OFFSET_M, GridResult, build_grid
 from dbtools.tabular import read_raw_table
 from schemas.enums import Severity
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
 from schemas.gisinput import CENTRELINE_VERTICES, KM_POSTS
+from schemas.network import TRACK_POINTS
 from schemas.tables import GIS, KM_BREAKS
 
 GEOJSON_SUFFIXES = (".geojson", ".json")
 #: File name ``db build`` reads kilometrage breaks from (beside gis.csv).
 KM_BREAKS_FILE = f"{KM_BREAKS.name}.csv"
+#: File name ``db build`` reads the grid of the tracks along no line km from (beside gis.csv).
+TRACK_POINTS_FILE = f"{TRACK_POINTS.name}.csv"
 
 
 @dataclass
@@ -135,6 +139,8 @@ class GridFiles:
     removed_stale: Path | None = None
     """A km_breaks.csv from an earlier run that no longer applies (removed with --force)."""
     warnings: list[Finding] = field(default_factory=list)
+    track_points_path: Path | None = None
+    """track_points.csv written beside the grid (None when no centreline has a track_id)."""
 
 
 def grid_files(
@@ -146,10 +152,13 @@ def grid_files(
     max_post_offset_m: float = MAX_POST_OFFSET_M,
 ) -> GridFiles:
     """Read, check, build and write: ``out`` in the ``gis`` source format and, if the grid
-    has kilometrage breaks, ``km_breaks.csv`` beside it. Nothing is written on an error."""
+    has kilometrage breaks, ``km_breaks.csv`` beside it, and if centrelines have a
+    ``track_id``, their grid as ``track_points.csv`` beside it. Nothing is written on an error."""
     centrelines, posts, out = Path(centrelines), Path(posts), Path(out)
     breaks_path = out.parent / KM_BREAKS_FILE
+    points_path = out.parent / TRACK_POINTS_FILE
     _refuse_overwrite(centrelines, posts, out, breaks_path, force)
+    _refuse_overwrite(centrelines, posts, out, points_path, force)
     cl = read_centrelines(centrelines)
     kp = read_km_posts(posts)
     findings = cl.findings + kp.findings
@@ -169,31 +178,46 @@ def grid_files(
         raise FindingsError(
             f"{len(errors)} error(s) building the grid; nothing was written", findings, path=centrelines
         )
-    has_breaks = not result.km_breaks.empty
-    if has_breaks and breaks_path.exists() and not force:
-        raise RefusedError(f"{KM_BREAKS_FILE} exists beside the output; use --force to replace it", path=breaks_path)
+    has_breaks, has_points = not result.km_breaks.empty, not result.track_points.empty
+    for has, path in ((has_breaks, breaks_path), (has_points, points_path)):
+        if has and path.exists() and not force:
+            raise RefusedError(f"{path.name} exists beside the output; use --force to replace it", path=path)
 
     out.parent.mkdir(parents=True, exist_ok=True)
     files = {out: result.gis[GIS.column_names]}
     if has_breaks:
         files[breaks_path] = result.km_breaks[KM_BREAKS.column_names]
+    if has_points:
+        files[points_path] = result.track_points[TRACK_POINTS.column_names]
     _write_atomically(files)
     removed = None if has_breaks else _stale_breaks(breaks_path, force, findings)
+    if not has_points and points_path.exists():  # never removed: it may come from an import
+        findings.append(
+            Finding(
+                "gisinput.other_track_points",
+                Severity.WARNING,
+                TRACK_POINTS.name,
+                f"no centreline has a track_id, so this grid has no track points; {TRACK_POINTS_FILE} beside "
+                "it is not from this run and was kept (db build will read it)",
+                file=str(points_path),
+            )
+        )
     return GridFiles(
         out,
         breaks_path if has_breaks else None,
         result,
         removed_stale=removed,
         warnings=[f for f in findings if f.severity != Severity.ERROR],
+        track_points_path=points_path if has_points else None,
     )
 
 
-def _refuse_overwrite(centrelines: Path, posts: Path, out: Path, breaks_path: Path, force: bool) -> None:
-    """RefusedError when the output (or km_breaks.csv beside it) would overwrite an input,
-    exists without ``force``, or is a folder."""
+def _refuse_overwrite(centrelines: Path, posts: Path, out: Path, beside: Path, force: bool) -> None:
+    """RefusedError when the output (or a file ``beside`` it: km_breaks.csv, track_points.csv)
+    would overwrite an input, exists without ``force``, or is a folder."""
     check_target(out, force=force, kind="file", inputs=(centrelines, posts))  # the rule of dbtools.atomic
-    if breaks_path.resolve() in (centrelines.resolve(), posts.resolve()):
-        raise RefusedError(f"{KM_BREAKS_FILE} beside the output would overwrite an input", path=breaks_path)
+    if beside.resolve() in (centrelines.resolve(), posts.resolve()):
+        raise RefusedError(f"{beside.name} beside the output would overwrite an input", path=beside)
     if out.is_dir():
         raise RefusedError("output is a folder; give a file name such as gis.csv", path=out)
 

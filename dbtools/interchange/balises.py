@@ -26,6 +26,9 @@ initial pair before it, the further balises of a group (only a group's first bal
 read for correction), a group named as a pair that does not have two balises. A balise of
 our own railML export carries its row in ``tpos:`` attributes and is taken as it is.
 ``km_equipment_m`` = the railML km (railML has one mileage).
+
+Balises of European balise groups, and every balise when the map names no initial pair, are
+G rows instead (:mod:`~dbtools.interchange.balise_groups`).
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from dbtools.interchange import xmltree as xt
+from dbtools.interchange.balise_groups import is_group_balise, map_group_balises
 from dbtools.interchange.mapping import LineMap, Target
 from dbtools.interchange.model import RailmlDoc, RBalise, RSignal
 from schemas.enums import BaliseKind, Severity, Track
@@ -142,10 +146,10 @@ def map_balises(
     doc: RailmlDoc, targets: dict[str, Target], lmap: LineMap
 ) -> tuple[list[dict[str, Any]], list[Finding]]:
     """Rows of the balise table and the findings for every balise not written (module doc)."""
-    rows: list[dict[str, Any]] = []
-    findings: list[Finding] = []
+    group = {id(b) for b in doc.balises if is_group_balise(doc, b, lmap)}
+    rows, findings = map_group_balises(doc, [b for b in doc.balises if id(b) in group], targets)
     placed = []
-    for b in doc.balises:
+    for b in [b for b in doc.balises if id(b) not in group]:
         if b.track_id not in targets:
             findings.append(_warn(doc, b, "railml.unmapped", f"balise {b.id}: its track {b.track_id} has no line code"))
         elif "kind" in b.ext:

@@ -1,6 +1,16 @@
-"""``db export DB --format railml|geojson|gpkg|geoparquet --out FILE``: one network (a DB
-file or a source set) in another format; the output is written atomically and an existing
-one is refused without ``force``, and the source never replaced (checked before any work)."""
+"""``db export DB --format railml|geojson|gpkg|geoparquet|rtm-geojson --out FILE``: one
+network (a DB file or a source set) in another format; the output is written atomically and
+an existing one is refused without ``force``, and the source never replaced (checked before
+any work).
+
+GeoJSON and GeoPackage hold the line-grid layers (balises, feature_points, gis_points,
+gis_lines: :func:`~dbtools.interchange.geojson.network_features`) and the network layers
+(tracks, switches, connections, balise_groups, km_posts:
+:mod:`~dbtools.interchange.network_layers`); a GeoPackage has one table per layer, GeoJSON
+one FeatureCollection with a ``layer`` property (``--out`` ending in ``.geojson`` or
+``.json``), one file ``LAYER.geojson`` per layer in a folder (any other ``--out``), or those
+files in a zip (``--out`` ending in ``.zip``). GeoParquet keeps the line-grid layers.
+``rtm-geojson``: RailTopoModel GeoJSON as tp-lib reads it (:mod:`~dbtools.interchange.rtm_export`)."""
 
 from __future__ import annotations
 
@@ -8,10 +18,10 @@ from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
-from dbtools.atomic import atomic_file, check_target
+from dbtools.atomic import atomic_file, atomic_folder, check_target
 from dbtools.diff import load_network
 from dbtools.gis.index import network_georef
-from dbtools.interchange.geojson import network_features, network_geojson, write_geojson
+from dbtools.interchange.geojson import collection, geojson_text, network_features, network_geojson, write_geojson
 from dbtools.interchange.geometry import WGS84
 from dbtools.interchange.geometry import geodetic_epsg as lonlat_epsg
 from dbtools.network import Network
@@ -23,6 +33,11 @@ class ExportFormat(StrEnum):
     geojson = "geojson"
     gpkg = "gpkg"
     geoparquet = "geoparquet"
+    rtm_geojson = "rtm-geojson"
+
+
+#: ``--out`` endings of a single GeoJSON file; ``.zip`` a zip of per-layer files; else a folder.
+GEOJSON_FILE_SUFFIXES = (".geojson", ".json")
 
 
 def geodetic_epsg(network: Network) -> int:
@@ -42,7 +57,9 @@ def export_network(
     if xsd is not None and fmt != ExportFormat.railml:
         raise UsageError(f"--xsd validates railML only, not --format {fmt.value}")
     inputs = [Path(source)]
-    check_target(out, force=force, kind="file", inputs=inputs)  # before the work
+    folder = fmt == ExportFormat.geojson and out.suffix.lower() not in (*GEOJSON_FILE_SUFFIXES, ".zip")
+    empty = folder and out.is_dir() and not any(out.iterdir())
+    check_target(out, force=force or empty, kind="folder" if folder else "file", inputs=inputs)  # before the work
     schema = None
     if xsd is not None:
         from dbtools.interchange.xsd import load_schema
@@ -53,19 +70,53 @@ def export_network(
     if fmt == ExportFormat.railml:
         _write_railml(network, out, force, schema, xsd, inputs)
         return counts
-    if fmt == ExportFormat.geojson:
-        gj = network_geojson(network)
+    if fmt == ExportFormat.rtm_geojson:
+        from dbtools.interchange.rtm_export import network_rtm_geojson
+
+        gj, rtm_counts = network_rtm_geojson(network)
         write_geojson(out, gj, force=force, inputs=inputs)
-        return _layers(gj["features"])
-    features = network_features(network)
+        return rtm_counts
+    if fmt == ExportFormat.geojson:
+        return _write_geojson(network, out, force or empty, inputs)
     if fmt == ExportFormat.gpkg:
         from dbtools.interchange.gpkg import write_gpkg
+        from dbtools.interchange.network_layers import COLUMN_TYPES, network_layer_features, on_track
 
-        return write_gpkg(out, features, srs_epsg=geodetic_epsg(network), force=force, inputs=inputs)
+        features = network_features(network, on_track(network)) + network_layer_features(network)
+        epsg = geodetic_epsg(network)
+        return write_gpkg(out, features, srs_epsg=epsg, force=force, inputs=inputs, column_types=COLUMN_TYPES)
     from dbtools.interchange.geoparquet import write_geoparquet
+
+    features = network_features(network)
 
     write_geoparquet(out, features, srs_epsg=geodetic_epsg(network), force=force, inputs=inputs)
     return _layers(features)
+
+
+def _write_geojson(network: Network, out: Path, force: bool, inputs: list[Path]) -> dict[str, int]:
+    """One file, a folder of one file per layer, or their zip (module doc)."""
+    from dbtools.interchange.network_layers import network_layer_features, on_track
+
+    gj = network_geojson(network, on_track(network))
+    gj["features"] += network_layer_features(network)
+    if out.suffix.lower() in GEOJSON_FILE_SUFFIXES:
+        write_geojson(out, gj, force=force, inputs=inputs)
+        return _layers(gj["features"])
+    layers: dict[str, list[dict[str, Any]]] = {}
+    for f in gj["features"]:
+        layers.setdefault(str(f["properties"]["layer"]), []).append(f)
+    files = {f"{name}.geojson": geojson_text(collection(feats, name=name)) for name, feats in layers.items()}
+    if out.suffix.lower() == ".zip":
+        import zipfile
+
+        with atomic_file(out, force=force, inputs=inputs) as tmp, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            for name, text in files.items():
+                z.writestr(name, text)
+    else:
+        with atomic_folder(out, force=force, inputs=inputs) as tmp:
+            for name, text in files.items():
+                (tmp / name).write_text(text, encoding="utf-8")
+    return {k: len(v) for k, v in layers.items()}
 
 
 def _write_railml(network: Network, out: Path, force: bool, schema: Any, xsd: Path | None, inputs: list[Path]) -> None:

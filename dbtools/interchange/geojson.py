@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -60,12 +60,17 @@ def collection(features: Iterable[dict[str, Any]], name: str | None = None) -> d
     return out
 
 
+def geojson_text(data: Mapping[str, Any]) -> str:
+    """A FeatureCollection as the text of a file (UTF-8, no NaN: RFC 7946 is JSON)."""
+    return json.dumps(data, ensure_ascii=False, allow_nan=False) + "\n"
+
+
 def write_geojson(
     path: Path, data: Mapping[str, Any], *, force: bool = False, inputs: Iterable[Path | str] = ()
 ) -> Path:
     """Write a FeatureCollection atomically (RefusedError for an existing file without force)."""
     with atomic_file(Path(path), force=force, inputs=inputs) as tmp:  # the output rule (dbtools.atomic)
-        tmp.write_text(json.dumps(data, ensure_ascii=False, allow_nan=False) + "\n", encoding="utf-8")
+        tmp.write_text(geojson_text(data), encoding="utf-8")
     return Path(path)
 
 
@@ -126,12 +131,15 @@ class GridLocator:
         return None if p is None else point(*p)
 
 
-def network_features(network: Network) -> list[dict[str, Any]]:
-    """Balises, feature points, GIS points and one GIS line per line/track."""
+def network_features(network: Network, on_track: Callable[[Any, Any], Geometry] | None = None) -> list[dict[str, Any]]:
+    """Balises, feature points, GIS points and one GIS line per line/track. ``on_track``
+    (track_id, km) places a balise that lies on no line grid but names its track."""
     loc = GridLocator(network)
     out: list[dict[str, Any]] = []
     for rec in network.balises.to_dict("records"):
         geom = loc.point_at(rec["line_code"], rec["track"], rec["km_actual_m"])
+        if geom is None and on_track is not None and _clean(rec.get("track_id")) is not None:
+            geom = on_track(rec["track_id"], rec["km_actual_m"])
         props = {"layer": "balises", **{str(k): _clean(v) for k, v in rec.items()}}
         out.append(feature(geom, props, str(rec["balise_id"])))
     for rec in network.feature_points.to_dict("records"):
@@ -144,8 +152,10 @@ def network_features(network: Network) -> list[dict[str, Any]]:
     return out
 
 
-def network_geojson(network: Network) -> dict[str, Any]:
-    return collection(network_features(network), name=f"trainpos {network.meta.get('db_version', '')}".strip())
+def network_geojson(network: Network, on_track: Callable[[Any, Any], Geometry] | None = None) -> dict[str, Any]:
+    return collection(
+        network_features(network, on_track), name=f"trainpos {network.meta.get('db_version', '')}".strip()
+    )
 
 
 def _km_features(loc: GridLocator, frame: pd.DataFrame, layer: str) -> list[dict[str, Any]]:

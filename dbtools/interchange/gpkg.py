@@ -13,7 +13,7 @@ column per property (INTEGER, REAL or TEXT by its values).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -49,9 +49,11 @@ def _geometry_type(features: Sequence[dict[str, Any]]) -> str:
     return kinds.pop().upper() if len(kinds) == 1 else "GEOMETRY"
 
 
-def _layer(name: str, features: list[dict[str, Any]], srs_id: int, now: str) -> list[tuple[str, Any]]:
+def _layer(
+    name: str, features: list[dict[str, Any]], srs_id: int, now: str, declared: Mapping[str, str]
+) -> list[tuple[str, Any]]:
     cols = sorted({k for f in features for k in f["properties"] if k != "layer"})
-    types = {c: _sql_type(f["properties"].get(c) for f in features) for c in cols}
+    types = {c: declared.get(c) or _sql_type(f["properties"].get(c) for f in features) for c in cols}
     ddl = ", ".join(f'"{c}" {types[c]}' for c in cols)
     boxes = [envelope(f["geometry"]) for f in features if f["geometry"] is not None]
     bbox = (
@@ -103,8 +105,11 @@ def write_gpkg(
     srs_epsg: int = 4326,
     force: bool = False,
     inputs: Sequence[Path | str] = (),
+    column_types: Mapping[str, Mapping[str, str]] | None = None,
 ) -> dict[str, int]:
-    """One GeoPackage with a table per ``layer`` property; returns rows per layer."""
+    """One GeoPackage with a table per ``layer`` property; returns rows per layer. A
+    column's SQL type is ``column_types[layer][column]`` where given (a column of nulls keeps
+    its type: REAL for a switch number nobody knows), else from its values."""
     layers: dict[str, list[dict[str, Any]]] = {}
     for f in features:
         layers.setdefault(str(f["properties"].get("layer", "features")), []).append(f)
@@ -150,7 +155,7 @@ def write_gpkg(
         ),
     ]
     for name, feats in layers.items():
-        script += _layer(name, feats, srs_epsg, now)
+        script += _layer(name, feats, srs_epsg, now, (column_types or {}).get(name, {}))
     write_sqlite(
         path,
         script,

@@ -4,13 +4,17 @@ Steps: safe parse (:mod:`~dbtools.interchange.xmltree`); with ``--xsd`` validati
 that XML Schema (:mod:`~dbtools.interchange.xsd`); version from ``@version`` (else the
 namespace): railML 2.0–2.5 (:mod:`~dbtools.interchange.railml2`) or 3.1–3.3
 (:mod:`~dbtools.interchange.railml3`); the ``--line-code`` map
-(:mod:`~dbtools.interchange.mapping`); balises (:mod:`~dbtools.interchange.balises`),
-feature points (:mod:`~dbtools.interchange.curves`) and geometry
-(:mod:`~dbtools.interchange.geometry`) mapped; every element neither consumed nor covered by
-another finding is reported as ``railml.unmapped`` with its path, id, line and why.
+(:mod:`~dbtools.interchange.mapping`); the network — tracks, connections, switches — from
+the topology (:mod:`~dbtools.interchange.topology2`, :mod:`~dbtools.interchange.topology3`,
+rows: :mod:`~dbtools.interchange.topology_rows`); balises (:mod:`~dbtools.interchange.balises`;
+balise groups as G rows: :mod:`~dbtools.interchange.balise_groups`), feature points
+(:mod:`~dbtools.interchange.curves`) and geometry (:mod:`~dbtools.interchange.geometry`)
+mapped; every element neither consumed nor covered by another finding is reported as
+``railml.unmapped`` with its path, id, line and why.
 
 Errors (unknown version, missing or duplicate ids, positions on undefined tracks or off
-their track, lengths not in metres, values that are not numbers) stop the import: nothing
+their track, lengths not in metres, values that are not numbers, and ``railml.nothing_imported``:
+a file holding balises or tracks none of which became a row) stop the import: nothing
 is written. Otherwise the folder gets the source tables (``gis.csv`` empty when the file
 has no coordinates), ``network.toml`` when something is declared, ``survey/`` (centrelines
 and kilometre posts for ``gis grid``) when the file has coordinates, and
@@ -36,10 +40,12 @@ from dbtools.interchange.curves import map_curves
 from dbtools.interchange.geometry import grid_from_survey, survey_frames
 from dbtools.interchange.mapping import LineMap, Target, line_names, read_map, resolve
 from dbtools.interchange.model import RailmlDoc
+from dbtools.interchange.topology_rows import connection_frame, switch_frame, track_frame
 from dbtools.network import canonical, empty_frame
 from schemas.enums import Severity
 from schemas.errors import FindingsError, RefusedError
 from schemas.findings import Finding
+from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES
 from schemas.tables import BALISES, FEATURE_POINTS, GIS, KM_BREAKS, LINES, SOURCE_TABLES
 
 VERSIONS = ("2.0", "2.1", "2.2", "2.3", "2.4", "2.5", "3.1", "3.2", "3.3")
@@ -50,12 +56,9 @@ SURVEY_DIR = "survey"
 WHY = {
     "signal": "signals are not rows of the onboard DB (a C balise takes its signal_type from its signal)",
     "signalIS": "signals are not rows of the onboard DB (a C balise takes its signal_type from its signal)",
-    "switch": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
-    "switchIS": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
-    "crossing": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
-    "connection": "track topology (switches, connections) has no counterpart: tracks are chained by line, track and km",
-    "netRelation": "track topology (switches, connections) has no counterpart: tracks are chained by "
-    "line, track and km",
+    "switch": "switch not imported (reported above: a leg outside the file or no through leg)",
+    "switchIS": "switch not imported (reported above: its branches name no netRelation of the file)",
+    "crossing": "crossing not imported (reported above: a leg outside the file)",
     "speedChange": "speed data are not part of the onboard positioning DB",
     "infraAttributes": "infrastructure attributes (speed profiles, …) are not part of the onboard positioning DB",
     "visualization": "schematic screen coordinates, not geographic ones: not used for the GIS",
@@ -209,6 +212,9 @@ def _frames(
         columns=LINES.column_names,
     )
     tables = {
+        NETWORK_TRACKS.name: track_frame(doc, targets),
+        CONNECTIONS.name: connection_frame(doc),
+        SWITCHES.name: switch_frame(doc, targets),
         LINES.name: lines,
         GIS.name: gis,
         BALISES.name: pd.DataFrame(balise_rows, columns=BALISES.column_names),
@@ -217,6 +223,27 @@ def _frames(
     }
     extra = {"centrelines": cl, "kmposts": kp, "names": {b.id: b.name for b in doc.balises if b.name}}
     return tables, extra, f_bal + f_cur + f_geo
+
+
+def _nothing(doc: RailmlDoc, tables: dict[str, pd.DataFrame]) -> list[Finding]:
+    """An error when the file holds balises or tracks and none of them became a row: the
+    import has failed even though every step only warned (exit 1, nothing written)."""
+    out = []
+    for what, seen, table in (
+        ("balises", len(doc.balises), BALISES.name),
+        ("tracks", sum(not t.implied for t in doc.tracks.values()), NETWORK_TRACKS.name),
+    ):
+        if seen and tables[table].empty:
+            out.append(
+                xt.finding(
+                    doc.root,
+                    "railml.nothing_imported",
+                    f"the file holds {seen} {what} and none could be imported (see the warnings)",
+                    file=doc.file,
+                    table=table,
+                )
+            )
+    return out
 
 
 def _dedupe(findings: list[Finding]) -> list[Finding]:
@@ -264,7 +291,7 @@ def import_railml(
         schema = load_schema(xsd)
     doc, targets = read_railml(source, lmap, schema=schema, xsd=xsd)
     tables, extra, findings = _frames(doc, lmap, targets)
-    findings = _dedupe(doc.findings + findings + _unmapped(doc, doc.root))
+    findings = _dedupe(_nothing(doc, tables) + doc.findings + findings + _unmapped(doc, doc.root))
     errors = [f for f in findings if f.severity == Severity.ERROR]
     if errors:
         raise FindingsError(f"{len(errors)} error(s) in {source.name}; nothing was written", findings, path=source)

@@ -86,6 +86,57 @@ class RTrack:
     line_id: str | None = None
     geo: list[GeoPoint] = field(default_factory=list)
     ext: dict[str, str] = field(default_factory=dict)
+    kind: str | None = None
+    """Our track kind where the file states one (railML 2 ``@type``)."""
+    db_id: str | None = None
+    """Our track id when it differs from the railML id (railML 3: our export's
+    ``tpos:trackId``)."""
+    implied: bool = False
+    """Not a track row: our export's netElement of a line and track (the gis grid's carrier),
+    or a meso/macro netElement (a collection of others)."""
+
+
+@dataclass
+class RLink:
+    """A connection between two track ends (railML 2 connection pair, railML 3 netRelation)."""
+
+    track_a: str
+    end_a: str
+    track_b: str
+    end_b: str
+    navigability: str = "both"
+    switch_id: str | None = None
+    el: Element = None
+
+
+@dataclass(frozen=True)
+class Piece:
+    """A part of a railML track between its ends and switches inside it: our track ``id``
+    covers the railML track's ``pos`` from ``offset`` to ``offset + length``."""
+
+    id: str
+    offset: float
+    length: float
+
+
+@dataclass
+class RSwitch:
+    """A switch or crossing with its ports (``{"a1": (track, end), …}``, our model: point switch
+    a1 toe, b1 left, b2 right branch; crossings a1–b1 and a2–b2)."""
+
+    id: str
+    el: Element
+    type: str
+    ports: dict[str, tuple[str, str]]
+    diverging_side: str | None = None
+    switch_number: float | None = None
+    radius: float | None = None
+    speed: float | None = None
+    km: float | None = None
+    name: str | None = None
+    track_id: str | None = None
+    lat: float | None = None
+    lon: float | None = None
 
 
 @dataclass
@@ -110,16 +161,28 @@ class RBalise:
     """+1 read in increasing pos, −1 decreasing, 0 both / unknown."""
     group: str | None = None
     ext: dict[str, str] = field(default_factory=dict)
+    nid_c: int | None = None
+    """ETCS identity where the file states it (railML 2 ``@countryID``/``@groupID``/``@ndx``)."""
+    nid_bg: int | None = None
+    n_pig: int | None = None
 
 
 @dataclass
 class RGroup:
-    """A railML 3 baliseGroup: its balises and the signal it belongs to."""
+    """A railML 3 baliseGroup (railML 2.x: a ``baliseGroup`` element): its balises and the
+    signal it belongs to, its ETCS identity and size where stated."""
 
     id: str
     el: Element
     signal_ref: str | None = None
     function: str | None = None
+    nid_c: int | None = None
+    nid_bg: int | None = None
+    n_total: int | None = None
+    direction: int = 0
+    """+1 mileageDirection nominal (km rising), −1 reverse, 0 not stated."""
+    etcs: bool = False
+    """The file says it is a Eurobalise group (railML 3 ``isEurobaliseGroup``)."""
 
 
 @dataclass
@@ -161,6 +224,11 @@ class RailmlDoc:
     signals: dict[str, RSignal] = field(default_factory=dict)
     curves: list[RCurve] = field(default_factory=list)
     km_breaks: list[dict[str, Any]] = field(default_factory=list)
+    links: list[RLink] = field(default_factory=list)
+    switches: dict[str, RSwitch] = field(default_factory=dict)
+    pieces: dict[str, list[Piece]] = field(default_factory=dict)
+    """railML track id → our tracks it is cut into at switches inside it (railML 2: a switch
+    not at a track end); a track that is not cut is absent (one piece, itself)."""
     meta: dict[str, str] = field(default_factory=dict)
     """Declarations carried by our own export (metric CRS, area, height datum)."""
     findings: list[Finding] = field(default_factory=list)
@@ -184,3 +252,22 @@ class RailmlDoc:
 
     def is_used(self, el: Element) -> bool:
         return id(el) in self.used
+
+    def track_rows(self) -> list[tuple[RTrack, Piece]]:
+        """Every railML track (not our export's line carriers) with each of its pieces."""
+        out = []
+        for t in self.tracks.values():
+            if t.implied:
+                continue
+            pieces = self.pieces.get(t.id) or [Piece(t.db_id or t.id, 0.0, t.length or 0.0)]
+            out += [(t, p) for p in pieces]
+        return out
+
+    def piece_at(self, track_id: str, pos: float) -> tuple[str, float]:
+        """Our track and the position along it of ``pos`` on a railML track (its pieces)."""
+        pieces = self.pieces.get(track_id)
+        if not pieces:
+            track = self.tracks.get(track_id)
+            return (track.db_id or track_id) if track is not None else track_id, pos
+        piece = next((p for p in reversed(pieces) if pos >= p.offset), pieces[0])
+        return piece.id, pos - piece.offset

@@ -18,8 +18,9 @@ coordinates.
 
 from __future__ import annotations
 
+from dbtools.interchange import topology2
 from dbtools.interchange import xmltree as xt
-from dbtools.interchange.model import GeoPoint, Mileage, RailmlDoc, RBalise, RCurve, RLine, RSignal, RTrack
+from dbtools.interchange.model import GeoPoint, Mileage, RailmlDoc, RBalise, RCurve, RGroup, RLine, RSignal, RTrack
 from dbtools.interchange.xmltree import Element
 from schemas.enums import Severity
 
@@ -41,6 +42,7 @@ def read(tree: object, file: str, version: str) -> RailmlDoc:
             _track(doc, el)
         for el in xt.descend(infra, "trackGroups", "line"):
             _line(doc, el)
+        topology2.read(doc, infra)
     return doc
 
 
@@ -84,6 +86,8 @@ def _track(doc: RailmlDoc, el: Element) -> None:
             _geo(doc, track, e, geo)
     for b in xt.descend(el, "ocsElements", "balises", "balise"):
         _balise(doc, track, b)
+    for g in xt.descend(el, "ocsElements", "balises", "baliseGroup"):
+        _balise_group(doc, track, g)
     doc.use(*xt.descend(el, "ocsElements", "balises"))
     for s in xt.descend(el, "ocsElements", "signals", "signal"):
         _signal(doc, track, s)
@@ -190,8 +194,13 @@ def _balise(doc: RailmlDoc, track: RTrack, el: Element) -> None:
     if where is None:
         return
     doc.use(el)  # written, or reported by the balise mapping
-    group = xt.attr(el, "groupID") or xt.attr(el, "baliseGroupRef")
+    parent = el.getparent()
+    in_group = parent is not None and xt.local(parent) == "baliseGroup"
+    group = xt.attr(parent, "id") if in_group else xt.attr(el, "baliseGroupRef")
     ext = {k.rsplit("}", 1)[-1]: str(v) for k, v in el.attrib.items() if k.startswith("{" + xt.TPOS_NS)}
+    nid_c, nid_bg = _int(doc, el, "countryID"), _int(doc, el, "groupID")
+    if group is None and nid_bg is not None:
+        group = f"{nid_c}:{nid_bg}"
     doc.balises.append(
         RBalise(
             ident,
@@ -203,8 +212,45 @@ def _balise(doc: RailmlDoc, track: RTrack, el: Element) -> None:
             direction=DIRECTIONS.get(xt.attr(el, "dir") or "", 0),
             group=group,
             ext=ext,
+            nid_c=nid_c,
+            nid_bg=nid_bg,
+            n_pig=_int(doc, el, "ndx"),
         )
     )
+
+
+def _int(doc: RailmlDoc, el: Element, name: str) -> int | None:
+    """An integer attribute (ETCS NID_C, NID_BG, N_PIG): None when absent, a warning when not
+    an integer."""
+    text = xt.attr(el, name)
+    if text is None:
+        return None
+    try:
+        return int(text)
+    except ValueError:
+        doc.findings.append(
+            xt.finding(
+                el,
+                "railml.value",
+                f"@{name} '{text}' is not an integer: ignored",
+                file=doc.file,
+                severity=Severity.WARNING,
+                column=name,
+            )
+        )
+        return None
+
+
+def _balise_group(doc: RailmlDoc, track: RTrack, el: Element) -> None:
+    """railML 2 ``baliseGroup`` holding its ``balise`` elements: the group of each."""
+    ident = xt.attr(el, "id")
+    if ident is None:
+        _err(doc, el, "railml.missing_id", "baliseGroup has no @id", column="id")
+        return
+    doc.use(el)
+    doc.groups[ident] = RGroup(ident, el, nid_c=_int(doc, el, "countryID"), nid_bg=_int(doc, el, "groupID"))
+    for b in xt.children(el, "balise"):
+        _balise(doc, track, b)
 
 
 def _signal(doc: RailmlDoc, track: RTrack, el: Element) -> None:

@@ -16,6 +16,11 @@ curves, mileage changes and gml locations.
   its geodesic chainage scaled to the netElement's length.
 * ``horizontalCurve``: ``@curveType`` (straight, arc, clothoide, …), ``@radius`` (negative
   left as seen from the curve's begin), ``@length``, located by a ``linearLocation``.
+* Topology (netRelations, switchesIS, crossings): :mod:`~dbtools.interchange.topology3`; a
+  netElement's our-track id is our export's ``tpos:trackId`` (or a designator of our
+  register), else ``@id``.
+* Balise groups: ``isEurobaliseGroup/@countryID``/``@groupID`` (NID_C, NID_BG),
+  ``@numberOfBalisesInGroup`` (N_TOTAL + 1), ``@mileageDirection`` (the group's direction).
 * Ids: a balise's id, a line's code and a curve's feature id are the ``entry`` of its
   ``designator`` of our register (:mod:`~dbtools.interchange.railml_ids`, what our export
   writes) when it has one, else its ``@id`` (line: ``@code``; curve: its ``name``).
@@ -25,6 +30,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from dbtools.interchange import topology3
 from dbtools.interchange import xmltree as xt
 from dbtools.interchange.model import GeoPoint, Mileage, RailmlDoc, RBalise, RCurve, RGroup, RLine, RSignal, RTrack
 from dbtools.interchange.railml_ids import REGISTER, designator
@@ -110,8 +116,15 @@ class _Reader:
             if ident is None:
                 self.err(el, "railml.missing_id", "netElement has no @id", column="id")
                 continue
-            track = RTrack(ident, el, name=_name(el), length=self.num(el, "length"), ext=_ext(el))
-            self.doc.use(el, *xt.children(el, "name"))
+            ext = _ext(el)
+            track = RTrack(ident, el, name=_name(el), length=self.num(el, "length"), ext=ext)
+            track.db_id, track.kind = designator(el) or ext.get("trackId"), ext.get("kind")
+            # our export's line carriers, and meso/macro netElements (aggregates of others):
+            # not tracks
+            groups = [*xt.children(el, "elementCollectionUnordered"), *xt.children(el, "elementCollectionOrdered")]
+            track.implied = ext.get("implied") == "true" or bool(groups)
+            self.doc.use(*groups, *[c for g in groups for c in xt.children(g)])
+            self.doc.use(el, *xt.children(el, "name"), *xt.children(el, "designator"))
             self._intrinsic(track)
             self.doc.tracks[ident] = track
 
@@ -184,6 +197,9 @@ class _Reader:
         lin = xt.child(loc, "linearCoordinate")
         km = self._measure(lin) if lin is not None else None
         pos = t * self._scale(track) if t is not None else None
+        own = xt.tpos(el, "kmActual")  # our export's G balise on a track along no line's km
+        if km is None and own is not None:
+            km = float(own)
         if km is None and (pos is None or track.mileage is None):
             self.err(loc, "railml.no_mileage", "no linearCoordinate and no mileage on its netElement")
             return None
@@ -231,6 +247,7 @@ def read(tree: Any, file: str, version: str) -> RailmlDoc:
     r.positioning()
     r.net_elements()
     _mileage_changes(r)
+    topology3.read(r.doc, r.root, r.spot)
     fi = xt.descend(r.root, "infrastructure", "functionalInfrastructure")
     for f in fi:
         r.doc.use(f, *xt.children(f, "lines"), *xt.children(f, "tracks"), *xt.children(f, "balises"))
@@ -366,7 +383,20 @@ def _group(r: _Reader, el: Element) -> None:
     for s in xt.children(el, "spotLocation"):
         r.doc.use(*xt.children(s))
     function = (xt.attr(func, "value") or (func.text or "").strip() or None) if func is not None else None
-    r.doc.groups[ident] = RGroup(ident, el, xt.attr(conn, "ref") if conn is not None else None, function)
+    group = RGroup(ident, el, xt.attr(conn, "ref") if conn is not None else None, function)
+    euro = xt.child(el, "isEurobaliseGroup")
+    if euro is not None:
+        r.doc.use(euro)
+        group.etcs = True
+        group.nid_c, group.nid_bg = _int(r, euro, "countryID"), _int(r, euro, "groupID")
+    group.n_total = _int(r, el, "numberOfBalisesInGroup")
+    group.direction = {"nominal": 1, "reverse": -1}.get(xt.attr(el, "mileageDirection") or "", 0)
+    r.doc.groups[ident] = group
+
+
+def _int(r: _Reader, el: Element, name: str) -> int | None:
+    value = r.num(el, name)
+    return None if value is None else int(value)
 
 
 def _balise_id(r: _Reader, el: Element) -> str | None:

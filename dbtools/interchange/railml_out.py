@@ -15,6 +15,9 @@ suite, so XML Schema validation runs only against one the user gives, ``db expor
 * ``infrastructure/geometry/horizontalCurves``: per feature point the straight – clothoid –
   arc – clothoid – straight pieces its six rows imply (:func:`curves.curves_of_feature`),
   radius negative to the left in increasing km.
+* the network (``tracks``, ``connections``, ``switches``, G balises on their tracks) when the
+  DB has one: :mod:`~dbtools.interchange.topology_out`; the line-and-track netElements above
+  are then the gis grid's carriers (``tpos:implied``), not tracks.
 * ``functionalInfrastructure``: ``balises`` (a ``spotLocation`` with the km as
   ``linearCoordinate``; ``applicationDirection`` normal on D/S, reverse on U), one
   ``baliseGroup`` per initial pair and per C balise, ``lines``, ``tracks`` (with a
@@ -46,42 +49,12 @@ from dbtools.gis.geometry import geodesic_step
 from dbtools.gis.index import network_georef
 from dbtools.interchange.curves import curves_of_feature
 from dbtools.interchange.geometry import WGS84, geodetic_epsg
-from dbtools.interchange.railml_ids import REGISTER, xml_id
+from dbtools.interchange.railml_ids import xml_id
+from dbtools.interchange.railml_xml import DC_NS, NS, XSI_NS, designate, sub, tpos_name
+from dbtools.interchange.topology_out import write_group_balises, write_topology
 from dbtools.interchange.xmltree import GML_NS, TPOS_NS
 from dbtools.network import Network
 from schemas.enums import BaliseKind, Track
-
-NS = "https://www.railml.org/schemas/3.2"
-DC_NS = "http://purl.org/dc/elements/1.1/"
-XSI_NS = "http://www.w3.org/2001/XMLSchema-instance"
-
-
-def _f(x: Any) -> str:
-    return repr(float(x))
-
-
-def _T(name: str) -> str:
-    return f"{{{TPOS_NS}}}{name}"
-
-
-def _sub(parent: Any, tag: str, ns: str = NS, /, **attrs: Any) -> Any:
-    from lxml import etree
-
-    el = etree.SubElement(parent, f"{{{ns}}}{tag}")
-    for k, v in attrs.items():
-        if v is not None and not (isinstance(v, float) and np.isnan(v)):
-            el.set(k if not k.startswith("tpos_") else _T(k[5:]), v if isinstance(v, str) else _f(v))
-    return el
-
-
-def _designate(el: Any, entry: object) -> None:
-    """``<designator register="_trainpos" entry="DB id"/>`` after the element's names (railML 3
-    puts ``designator`` after ``name`` and before the locations)."""
-    from lxml import etree
-
-    d = etree.Element(f"{{{NS}}}designator", register=REGISTER, entry=str(entry))
-    names = [i for i, c in enumerate(el) if c.tag == f"{{{NS}}}name"]
-    el.insert(names[-1] + 1 if names else 0, d)
 
 
 class _Track:
@@ -102,7 +75,7 @@ class _Track:
 
 
 def _spot(parent: Any, ident: str, ne: str, lps: str, tr: _Track | None, km: float, direction: str | None) -> None:
-    loc = _sub(
+    loc = sub(
         parent,
         "spotLocation",
         id=ident,
@@ -110,7 +83,7 @@ def _spot(parent: Any, ident: str, ne: str, lps: str, tr: _Track | None, km: flo
         intrinsicCoord=tr.intrinsic(km) if tr is not None else None,
         applicationDirection=direction,
     )
-    _sub(loc, "linearCoordinate", positioningSystemRef=lps, measure=km)
+    sub(loc, "linearCoordinate", positioningSystemRef=lps, measure=km)
 
 
 def _root(network: Network, geo_epsg: int) -> Any:
@@ -121,7 +94,7 @@ def _root(network: Network, geo_epsg: int) -> Any:
         nsmap={None: NS, "gml": GML_NS, "dc": DC_NS, "tpos": TPOS_NS, "xsi": XSI_NS},
         version="3.2",
     )
-    root.set(_T("gisGrid"), "true")
+    root.set(tpos_name("gisGrid"), "true")
     meta = network.meta
     for src, dst in (
         ("metric_crs", "metricCrs"),
@@ -134,11 +107,11 @@ def _root(network: Network, geo_epsg: int) -> Any:
         ("content_hash", "contentHash"),
     ):
         if meta.get(src):
-            root.set(_T(dst), meta[src])
-    md = _sub(root, "metadata")
-    _sub(md, "title", DC_NS).text = f"trainpos onboard DB {meta.get('db_version', '')}".strip()
-    _sub(md, "source", DC_NS).text = network.origin
-    _sub(md, "description", DC_NS).text = f"lat/lon in EPSG:{geo_epsg}; km in metres"
+            root.set(tpos_name(dst), meta[src])
+    md = sub(root, "metadata")
+    sub(md, "title", DC_NS).text = f"trainpos onboard DB {meta.get('db_version', '')}".strip()
+    sub(md, "source", DC_NS).text = network.origin
+    sub(md, "description", DC_NS).text = f"lat/lon in EPSG:{geo_epsg}; km in metres"
     return root
 
 
@@ -149,28 +122,30 @@ def network_railml(network: Network) -> bytes:
     georef = network_georef(network)
     geo_epsg = geodetic_epsg(georef.crs_epsg) if georef is not None else WGS84
     root = _root(network, geo_epsg)
-    pos = _sub(_sub(root, "common", id="co"), "positioning")
-    lpss, gpss = _sub(pos, "linearPositioningSystems"), _sub(pos, "geometricPositioningSystems")
-    _sub(gpss, "geometricPositioningSystem", id="gps_geo", crsDefinition=f"EPSG:{geo_epsg}")
-    infra = _sub(root, "infrastructure", id="is")
-    topo = _sub(infra, "topology")
-    nes = _sub(topo, "netElements")
-    _sub(topo, "netRelations")
-    level = _sub(_sub(_sub(topo, "networks"), "network", id="nw"), "level", id="lv0", descriptionLevel="Micro")
-    curves = _sub(_sub(infra, "geometry"), "horizontalCurves")
-    fi = _sub(infra, "functionalInfrastructure")
-    bal, grp, lines_el, tracks_el = (_sub(fi, n) for n in ("balises", "baliseGroups", "lines", "tracks"))
+    pos = sub(sub(root, "common", id="co"), "positioning")
+    lpss, gpss = sub(pos, "linearPositioningSystems"), sub(pos, "geometricPositioningSystems")
+    sub(gpss, "geometricPositioningSystem", id="gps_geo", crsDefinition=f"EPSG:{geo_epsg}")
+    infra = sub(root, "infrastructure", id="is")
+    topo = sub(infra, "topology")
+    nes = sub(topo, "netElements")
+    rels = sub(topo, "netRelations")
+    level = sub(sub(sub(topo, "networks"), "network", id="nw"), "level", id="lv0", descriptionLevel="Micro")
+    curves = sub(sub(infra, "geometry"), "horizontalCurves")
+    fi = sub(infra, "functionalInfrastructure")
+    bal, grp, lines_el, tracks_el = (sub(fi, n) for n in ("balises", "baliseGroups", "lines", "tracks"))
     tracks = _net_elements(network, nes, level, tracks_el, geo_epsg)
     _lines(network, lpss, lines_el, tracks)
     _features(network, curves, tracks)
     _balises(network, bal, grp, tracks)
+    nets = write_topology(network, nes, rels, level, fi)
+    write_group_balises(network, bal, grp, nets, {k: t.intrinsic for k, t in tracks.items()})
     return bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True))
 
 
 def _pairs(network: Network) -> list[tuple[str, str]]:
     keys = set()
     for t in ("gis", "balises", "feature_points", "km_breaks"):
-        f = network.tables[t]
+        f = network.tables[t].dropna(subset=["line_code", "track"])
         keys |= set(zip(f["line_code"].astype(str), f["track"].astype(str), strict=True))
     return sorted(keys)
 
@@ -184,26 +159,27 @@ def _net_elements(
         ne_id = xml_id("ne", line, track)
         tr = _Track(gis[(gis["line_code"].astype(str) == line) & (gis["track"].astype(str) == track)])
         out[(line, track)] = tr
-        ne = _sub(
+        ne = sub(
             nes,
             "netElement",
             id=ne_id,
             length=tr.length if tr.length > 0 else None,
             tpos_lineCode=line,
             tpos_track=track,
+            tpos_implied="true",
         )
-        aps = _sub(ne, "associatedPositioningSystem", id=xml_id("aps", line, track))
+        aps = sub(ne, "associatedPositioningSystem", id=xml_id("aps", line, track))
         for i, (km, lat, lon, h) in enumerate(
             tr.frame[["km_m", "lat", "lon", "height_m"]].itertuples(index=False, name=None)
         ):
-            ic = _sub(
+            ic = sub(
                 aps,
                 "intrinsicCoordinate",
                 id=xml_id("ic", line, track, i),
                 intrinsicCoord=tr.s[i] / tr.length if tr.length > 0 else 0.0,
             )
-            _sub(ic, "linearCoordinate", positioningSystemRef=xml_id("lps", line), measure=km)
-            _sub(
+            sub(ic, "linearCoordinate", positioningSystemRef=xml_id("lps", line), measure=km)
+            sub(
                 ic,
                 "geometricCoordinate",
                 positioningSystemRef="gps_geo",
@@ -211,20 +187,20 @@ def _net_elements(
                 y=lat,
                 z=None if pd.isna(h) else float(h),
             )
-        _sub(level, "networkResource", ref=ne_id)
-        t_el = _sub(tracks_el, "track", id=xml_id("tr", line, track))
-        _sub(t_el, "name", name=f"{line} {track}", language="en")
-        _sub(
-            _sub(t_el, "linearLocation", id=xml_id("tr", line, track, "loc")),
+        sub(level, "networkResource", ref=ne_id)
+        t_el = sub(tracks_el, "track", id=xml_id("tr", line, track))
+        sub(t_el, "name", name=f"{line} {track}", language="en")
+        sub(
+            sub(t_el, "linearLocation", id=xml_id("tr", line, track, "loc")),
             "associatedNetElement",
             netElementRef=ne_id,
             intrinsicCoordBegin=0.0,
             intrinsicCoordEnd=1.0,
         )
         if len(tr.frame) >= 2:
-            ls = _sub(_sub(t_el, "gmlLocations"), "LineString", GML_NS, srsName=f"urn:ogc:def:crs:EPSG::{geo_epsg}")
+            ls = sub(sub(t_el, "gmlLocations"), "LineString", GML_NS, srsName=f"urn:ogc:def:crs:EPSG::{geo_epsg}")
             ls.set(f"{{{GML_NS}}}id", xml_id("gml", line, track))
-            _sub(ls, "posList", GML_NS).text = " ".join(
+            sub(ls, "posList", GML_NS).text = " ".join(
                 f"{la!r} {lo!r}" for la, lo in zip(tr.frame["lat"], tr.frame["lon"], strict=True)
             )
     return out
@@ -235,7 +211,7 @@ def _lines(network: Network, lpss: Any, lines_el: Any, tracks: dict[tuple[str, s
     for rec in _records(network.lines):
         line = str(rec["line_code"])
         kms = np.concatenate([t.km for (ln, _), t in tracks.items() if ln == line] or [np.zeros(0)])
-        lps = _sub(
+        lps = sub(
             lpss,
             "linearPositioningSystem",
             id=xml_id("lps", line),
@@ -245,9 +221,9 @@ def _lines(network: Network, lpss: Any, lines_el: Any, tracks: dict[tuple[str, s
             endMeasure=float(kms.max()) if kms.size else None,
             tpos_lineCode=line,
         )
-        _sub(lps, "name", name=line, language="en")
+        sub(lps, "name", name=line, language="en")
         for j, b in enumerate(_records(breaks[breaks["line_code"].astype(str) == line])):
-            _sub(
+            sub(
                 lps,
                 "anchor",
                 id=xml_id("anc", line, j),
@@ -255,7 +231,7 @@ def _lines(network: Network, lpss: Any, lines_el: Any, tracks: dict[tuple[str, s
                 tpos_track=str(b["track"]),
                 tpos_kmTo=float(b["km_to_m"]),
             )
-        el = _sub(
+        el = sub(
             lines_el,
             "line",
             id=xml_id("ln", line),
@@ -263,12 +239,12 @@ def _lines(network: Network, lpss: Any, lines_el: Any, tracks: dict[tuple[str, s
             tpos_attributes=_s(rec["attributes_json"]),
         )
         if _s(rec["name"]) is not None:
-            _sub(el, "name", name=str(rec["name"]), language="en")
-        _designate(el, line)
-        loc = _sub(el, "linearLocation", id=xml_id("ln", line, "loc"))
+            sub(el, "name", name=str(rec["name"]), language="en")
+        designate(el, line)
+        loc = sub(el, "linearLocation", id=xml_id("ln", line, "loc"))
         for ln, track in tracks:
             if ln == line:
-                _sub(
+                sub(
                     loc,
                     "associatedNetElement",
                     netElementRef=xml_id("ne", line, track),
@@ -299,7 +275,7 @@ def _features(network: Network, curves_el: Any, tracks: dict[tuple[str, str], _T
         ne, lps, tr = xml_id("ne", line, track), xml_id("lps", line), tracks.get((str(line), str(track)))
         for n, (kind, k0, k1, radius) in enumerate(pieces):
             is_arc = kind == "arc"
-            el = _sub(
+            el = sub(
                 curves_el,
                 "horizontalCurve",
                 id=xml_id("hc", line, track, fid, n + 1),
@@ -309,40 +285,42 @@ def _features(network: Network, curves_el: Any, tracks: dict[tuple[str, str], _T
                 tpos_featureId=str(fid),
                 tpos_featureRows=payload if is_arc else None,
             )
-            _sub(el, "name", name=str(fid), language="en")
+            sub(el, "name", name=str(fid), language="en")
             if is_arc:
-                _designate(el, fid)
-            loc = _sub(el, "linearLocation", id=xml_id("hc", line, track, fid, n + 1, "loc"))
-            a = _sub(
+                designate(el, fid)
+            loc = sub(el, "linearLocation", id=xml_id("hc", line, track, fid, n + 1, "loc"))
+            a = sub(
                 loc,
                 "associatedNetElement",
                 netElementRef=ne,
                 intrinsicCoordBegin=tr.intrinsic(k0) if tr else None,
                 intrinsicCoordEnd=tr.intrinsic(k1) if tr else None,
             )
-            _sub(a, "linearCoordinateBegin", positioningSystemRef=lps, measure=k0)
-            _sub(a, "linearCoordinateEnd", positioningSystemRef=lps, measure=k1)
+            sub(a, "linearCoordinateBegin", positioningSystemRef=lps, measure=k0)
+            sub(a, "linearCoordinateEnd", positioningSystemRef=lps, measure=k1)
 
 
 def _balises(network: Network, bal: Any, grp: Any, tracks: dict[tuple[str, str], _Track]) -> None:
     made: set[str] = set()
     for rec in _records(network.balises):
+        if rec["kind"] == BaliseKind.G:
+            continue  # balise groups: topology_out
         line, track, kind = str(rec["line_code"]), str(rec["track"]), str(rec["kind"])
         group = (
             xml_id("bg", line, rec["station_code"], track) if kind != BaliseKind.C else xml_id("bg", rec["balise_id"])
         )
         if group not in made:
             made.add(group)
-            g = _sub(
+            g = sub(
                 grp,
                 "baliseGroup",
                 id=group,
                 numberOfBalisesInGroup="1" if kind == BaliseKind.C else "2",
                 mileageDirection="reverse" if track == Track.UP.value else "nominal",
             )
-            _sub(g, "applicationType", value="other:trainpos")
-            _sub(g, "functionalType", value="other:positionCorrection" if kind == BaliseKind.C else "other:initialPair")
-        el = _sub(
+            sub(g, "applicationType", value="other:trainpos")
+            sub(g, "functionalType", value="other:positionCorrection" if kind == BaliseKind.C else "other:initialPair")
+        el = sub(
             bal,
             "balise",
             id=xml_id("bal", rec["balise_id"]),
@@ -352,7 +330,7 @@ def _balises(network: Network, bal: Any, grp: Any, tracks: dict[tuple[str, str],
             tpos_kmEquipment=_n(rec["km_equipment_m"]),
             tpos_distFromInitial=_n(rec["dist_from_initial_m"]),
         )
-        _designate(el, rec["balise_id"])
+        designate(el, rec["balise_id"])
         direction = "reverse" if track == Track.UP.value else "normal"
         _spot(
             el,
@@ -363,7 +341,7 @@ def _balises(network: Network, bal: Any, grp: Any, tracks: dict[tuple[str, str],
             float(rec["km_actual_m"]),
             direction,
         )
-        _sub(el, "belongsToParent", ref=group)
+        sub(el, "belongsToParent", ref=group)
 
 
 def _records(frame: pd.DataFrame) -> list[dict[str, Any]]:

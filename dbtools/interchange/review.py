@@ -1,9 +1,10 @@
 """``db review OLD NEW``: one self-contained page for the reviewer of a DB change (page kit).
 
 Sections: a verdict (errors in NEW, and whether anything changed), the validation of NEW
-(every finding), the ``db diff`` summary lines and the row counts per table, the map of
-what moved (:mod:`~dbtools.interchange.svgmap`, inline SVG), and the changed rows per
-table (capped at :data:`MAX_ROWS` each; ``db diff --format json`` has them all).
+(every finding), the ``db diff`` summary lines and the row counts per table, an interactive
+map of NEW's network and of what changed (:mod:`~dbtools.interchange.leaflet_map`: Leaflet
+inlined, works offline; tiles only with ``tiles``), and the changed rows per table (capped
+at :data:`MAX_ROWS` each; ``db diff --format json`` has them all).
 """
 
 from __future__ import annotations
@@ -16,8 +17,9 @@ import pandas as pd
 from dbtools import pagekit as pk
 from dbtools.diff import diff_networks, load_network
 from dbtools.gis.geometry import Projector
-from dbtools.gis.index import network_georef
-from dbtools.interchange.svgmap import map_data, render_svg
+from dbtools.interchange.leaflet_map import OSM_ATTRIBUTION, map_payload, render_map
+from dbtools.interchange.mapchanges import map_data
+from dbtools.interchange.netmap import map_projector
 from dbtools.validate import validate_path
 from schemas.enums import Severity
 from schemas.findings import Finding, count_by_severity
@@ -56,12 +58,27 @@ def _changes_table(rows: list[dict[str, Any]]) -> str:
     return pk.table(["change", "keys", "values (old → new)"], out, cls="text")
 
 
-def _projector(net: Any) -> Projector | None:
-    g = network_georef(net)
-    return None if g is None else Projector.from_epsg(g.crs_epsg)
+def _map_section(old_net: Any, new_net: Any, d: Any, tiles: str | None, tiles_attribution: str) -> str:
+    proj: Projector | None = map_projector(new_net) or map_projector(old_net)
+    if proj is None:
+        return pk.section("Network map", pk.paragraph("No GIS points: no map.", pk.Status.NOTE))
+    changes = map_data(old_net, new_net, d)
+    payload = map_payload(new_net, proj, changes, tiles=tiles, tiles_attribution=tiles_attribution)
+    caption = (
+        f"NEW's network: {len(payload['tracks'])} track(s), {len(payload['switches'])} switch(es), "
+        f"{len(payload['connections'])} connection place(s), {len(payload['groups'])} balise group(s); "
+        f"{len(payload['changes'])} change(s) marked. Hover for details, click to keep them; "
+        f"lines simplified to 0.5 m; " + ("tiles from " + tiles if tiles else "no background tiles (works offline)")
+    )
+    return pk.section(
+        "Network map",
+        f"<figure id='map'>{render_map(payload)}<figcaption>{pk.escape(caption)}</figcaption></figure>",
+    )
 
 
-def render_review(old: Path, new: Path) -> tuple[str, list[Finding]]:
+def render_review(
+    old: Path, new: Path, *, tiles: str | None = None, tiles_attribution: str = OSM_ATTRIBUTION
+) -> tuple[str, list[Finding]]:
     """The review page of OLD → NEW (DB files or source sets) and NEW's findings."""
     old_net, old_sv = load_network(old)
     new_net, new_sv = load_network(new)
@@ -85,12 +102,6 @@ def render_review(old: Path, new: Path) -> tuple[str, list[Finding]]:
         code=("old content_hash", "new content_hash"),
     )
     counts_frame = pd.DataFrame([{"table": n, **t.counts} for n, t in d.tables.items()])
-    proj = _projector(new_net) or _projector(old_net)
-    svg = (
-        render_svg(map_data(old_net, new_net, d), proj)
-        if proj is not None
-        else pk.paragraph("No GIS points: no map.", pk.Status.NOTE)
-    )
     parts = [
         f"<p id='verdict'>{verdict} {changed}</p>",
         head,
@@ -100,11 +111,7 @@ def render_review(old: Path, new: Path) -> tuple[str, list[Finding]]:
             "<ul id='summary'>" + "".join(f"<li>{pk.escape(s)}</li>" for s in d.summary) + "</ul>",
             pk.frame_table(counts_frame),
         ),
-        pk.section(
-            "Map of the changes",
-            f"<figure id='map'>{svg}<figcaption>{pk.escape('Drawn offline in the metric CRS of NEW')}"
-            f"{pk.escape(f' (EPSG:{proj.epsg})' if proj else '')}</figcaption></figure>",
-        ),
+        _map_section(old_net, new_net, d, tiles, tiles_attribution),
     ]
     for name, t in d.tables.items():
         if t.n_changes:
@@ -124,14 +131,23 @@ def render_review(old: Path, new: Path) -> tuple[str, list[Finding]]:
     return page, findings
 
 
-def write_review(old: Path, new: Path, out: Path, *, force: bool = False) -> list[Finding]:
+def write_review(
+    old: Path,
+    new: Path,
+    out: Path,
+    *,
+    force: bool = False,
+    tiles: str | None = None,
+    tiles_attribution: str = OSM_ATTRIBUTION,
+) -> list[Finding]:
     """Write the page atomically (refused when ``out`` exists without ``force``, before any
-    work); returns NEW's findings."""
+    work); returns NEW's findings. ``tiles``: an XYZ tile URL template for the map's
+    background (none by default: the page then loads nothing from the network)."""
     from dbtools.atomic import atomic_file, check_target
 
     inputs = [Path(old), Path(new)]
     check_target(Path(out), force=force, kind="file", inputs=inputs)  # before the work
-    text, findings = render_review(old, new)
+    text, findings = render_review(old, new, tiles=tiles, tiles_attribution=tiles_attribution)
     with atomic_file(Path(out), force=force, inputs=inputs) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return findings

@@ -26,6 +26,7 @@ from dbtools.rules.config import ValidationConfig
 from schemas.enums import Attribute, Severity
 from schemas.findings import Finding
 from schemas.model import Table
+from schemas.network import TRACK_POINTS
 from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS
 
 F64 = npt.NDArray[np.float64]
@@ -86,6 +87,9 @@ def check_values(tables: dict[str, pd.DataFrame], config: ValidationConfig, loc:
     return out
 
 
+#: An empty grid where the tracks have their own centrelines (a network without kilometrage,
+#: e.g. imported from RailTopoModel GeoJSON): positions along the tracks, no line km.
+GIS_BESIDE_TRACK_POINTS = "no line grid: the tracks have only their own centrelines (track_points), no line km"
 #: Tables that must not be empty: severity and what an empty one means on board.
 EMPTY_TABLES = {
     GIS.name: (Severity.ERROR, "no GIS grid: no km can be placed on the map, matched to GPS or checked"),
@@ -100,12 +104,18 @@ def check_empty_tables(
     tables: dict[str, pd.DataFrame], loc: Locator, *, tables_read: set[str] | None = None
 ) -> list[Finding]:
     """``schema.empty_table`` for each table of :data:`EMPTY_TABLES` without rows
-    (``tables_read``: only these — in a source set, a missing file is its own finding)."""
+    (``tables_read``: only these — in a source set, a missing file is its own finding).
+    An empty ``gis`` is only a warning where ``track_points`` has rows: every track's
+    centreline is there (a network imported from OSM or RailTopoModel, SPEC §8.1), but the
+    line-based positioning has no line grid to run on."""
     out = []
+    points = tables.get(TRACK_POINTS.name)
     for name, (severity, meaning) in EMPTY_TABLES.items():
         frame = tables.get(name)
         if (tables_read is not None and name not in tables_read) or (frame is not None and len(frame)):
             continue
+        if name == GIS.name and points is not None and len(points):
+            severity, meaning = Severity.WARNING, GIS_BESIDE_TRACK_POINTS
         file = loc.file(name)
         where = f"{file} has a header but no rows" if file else f"table '{name}' has no rows"
         out.append(

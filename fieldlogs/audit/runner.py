@@ -53,7 +53,8 @@ from fieldlogs.audit.store import (
 )
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, load_network, open_db
-from fieldlogs.replay.pool import Outcome, error_message, replay
+from fieldlogs.replay.pool import replay
+from fieldlogs.replay.tasks import Outcome, error_message
 from schemas.jsonable import jsonable
 
 __all__ = ["AuditStats", "audit", "audit_one", "discover_runs", "pack", "unpack"]

@@ -189,7 +189,7 @@ def _alarms(run: Any, network: Network, plan_path: str | None, ref: DbRef, tree:
 def _one_version(run: Any, network: Network, ref: DbRef, plan_path: str | None, tree: Any) -> RunFigures:
     """Pipeline (and possession check) of one run on one DB version; an error becomes the figures' message."""
     from fieldlogs.pipeline.run import run_pipeline  # refuses a run it cannot position honestly
-    from fieldlogs.replay.pool import error_message
+    from fieldlogs.replay.tasks import error_message
 
     try:
         figs = figures_of(run_pipeline(run, network, tree.pipeline))

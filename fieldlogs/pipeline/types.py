@@ -12,7 +12,6 @@ from schemas.enums import EventType, FixSource, PositionState
 
 if TYPE_CHECKING:
     from fieldlogs.pipeline.odometry.diagnostics import OdometryDiagnostics
-    from fieldlogs.pipeline.odometry.ground_products import GroundReport
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -28,6 +27,60 @@ radar's ground speed."""
 SpeedSource = Literal["inertial", "radar"]
 """Where a correction's speed came from ("radar": the radar's ground speed, fused with the
 inertial one by their variances and bridging the radar's gaps)."""
+
+
+@dataclass(frozen=True)
+class WheelCalibration:
+    """The wheel diameter from the ground speed: true / nominal, with its 95 % interval."""
+
+    ratio: float
+    """r = ground distance / pulse distance over the adhering stretches [–]."""
+    half_width: float
+    """95 % half-width of r [–]."""
+    distance_m: float
+    """Pulse distance in the estimate [m]."""
+    stretches: int
+    applied: bool
+    """The odometry's scale uses it (setting ``wheel_calibration``)."""
+    applied_from_t: float | None
+    """First cycle the running estimate scaled (None: never) [s]."""
+
+    def to_json(self, nominal_diameter_m: float) -> dict[str, Any]:
+        lo, hi = self.ratio - self.half_width, self.ratio + self.half_width
+        return {
+            "ratio": self.ratio,
+            "ratio_ci95": [lo, hi],
+            "diameter_m": self.ratio * nominal_diameter_m,
+            "diameter_ci95_m": [lo * nominal_diameter_m, hi * nominal_diameter_m],
+            "wear_pct": 100.0 * (1.0 - self.ratio),
+            "distance_m": self.distance_m,
+            "stretches": self.stretches,
+            "applied": self.applied,
+            "applied_from_t": self.applied_from_t,
+        }
+
+
+@dataclass(frozen=True)
+class GroundReport:
+    """What the ground-speed sensor gave the odometry of one run."""
+
+    source: str
+    covered_share: float
+    """Share of the moving cycles (1 s mean pulse speed ≥ CAL_MIN_SPEED_MPS) with a ground speed."""
+    against_cab_s: float
+    """Time the direction check found the vehicle moving against the cab [s]."""
+    low_speed_share: float
+    """Share of the cycles whose speed is the ground speed's (low speed, standstill)."""
+    calibration: WheelCalibration | None
+
+    def to_json(self, nominal_diameter_m: float) -> dict[str, Any]:
+        return {
+            "source": self.source,
+            "covered_share": self.covered_share,
+            "against_cab_s": self.against_cab_s,
+            "low_speed_share": self.low_speed_share,
+            "wheel_calibration": None if self.calibration is None else self.calibration.to_json(nominal_diameter_m),
+        }
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,6 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -39,6 +38,7 @@ from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.io import REQUIRED_STREAMS, Run
 from fieldlogs.quality.clocks import clock_findings
+from fieldlogs.quality.file_findings import FileFindings as _Out
 from fieldlogs.quality.gnss import check_gnss_nav, check_gnss_obs, check_gnss_sbas, check_receivers
 from fieldlogs.quality.radar_if import check_radar_if
 from fieldlogs.quality.tacho import TACHO_RATE_HZ, TachoIssue, TachoLimits, review_tacho, time_order
@@ -126,44 +126,6 @@ def load_db_refs(path: Path) -> DbRefs:
 
 # ---------------------------------------------------------------------------------------
 # helpers
-
-
-class _Out:
-    """Findings of one file, capped per rule."""
-
-    def __init__(self, table: str, file: str, cap: int) -> None:
-        self.table, self.file, self.cap = table, file, cap
-        self.items: list[Finding] = []
-
-    def add(self, rule: str, severity: Severity, message: str, **kw: Any) -> None:
-        self.items.append(Finding(rule, severity, self.table, message, file=self.file, **kw))
-
-    def rows(
-        self,
-        rule: str,
-        severity: Severity,
-        pos: np.ndarray,
-        message: Callable[[int], str],
-        *,
-        column: str | None = None,
-        value: Callable[[int], Any] | None = None,
-        limit: Any = None,
-        what: str = "rows",
-    ) -> None:
-        """One finding per positional row index in ``pos`` (capped), via callables of the k-th."""
-        n = len(pos)
-        for k in range(min(n, self.cap)):
-            self.add(
-                rule,
-                severity,
-                message(k),
-                row=int(pos[k]) + FIRST_DATA_LINE,
-                column=column,
-                value=None if value is None else value(k),
-                limit=limit,
-            )
-        if n > self.cap:
-            self.add(rule, severity, f"{n - self.cap} more {what} like the above", column=column, value=n, limit=0)
 
 
 def _runs(pos: np.ndarray) -> list[tuple[int, int]]:

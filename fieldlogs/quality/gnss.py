@@ -33,7 +33,7 @@ from schemas.gnss import SAT_RE, SIGNAL_RE
 
 if TYPE_CHECKING:
     from fieldlogs.io import Run
-    from fieldlogs.quality.checks import _Out
+    from fieldlogs.quality.file_findings import FileFindings as _Out
 
 KEPLER_NEEDED = ("sqrtA", "Eccentricity", "M0", "Toe", "week")
 GLONASS_NEEDED = ("X", "Y", "Z")

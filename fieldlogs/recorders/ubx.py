@@ -29,7 +29,6 @@ tests (``tests/fieldlogs/recorders``).
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,9 +38,9 @@ import pandas as pd
 
 from fieldlogs.recorders.common import Decoded, known_dop, read_bytes
 from fieldlogs.recorders.timebase import calendar_to_utc_s, utc_to_gps
+from fieldlogs.recorders.ubx_frames import SYNC, Frames, frame
 from schemas.errors import InputError
 
-SYNC = b"\xb5\x62"
 NAV_PVT = (0x01, 0x07)
 NAV_DOP = (0x01, 0x04)
 NAV_HPPOSLLH = (0x01, 0x14)
@@ -126,30 +125,6 @@ DOP_DTYPE = np.dtype(
         ("eDOP", "<u2"),
     ]
 )
-
-
-@dataclass
-class Frames:
-    """Accepted frames of a file: byte offset, class, id and payload length of each."""
-
-    data: npt.NDArray[np.uint8]
-    start: npt.NDArray[np.int64]
-    cls: npt.NDArray[np.int64]
-    mid: npt.NDArray[np.int64]
-    length: npt.NDArray[np.int64]
-
-    def of(self, key: tuple[int, int]) -> npt.NDArray[np.int64]:
-        return np.flatnonzero((self.cls == key[0]) & (self.mid == key[1]))
-
-    def fixed(self, idx: npt.NDArray[np.int64], dtype: np.dtype[np.void], offset: int = 0) -> npt.NDArray[np.void]:
-        """Structured records of ``dtype.itemsize`` bytes at ``offset`` in each payload of ``idx``."""
-        n = dtype.itemsize
-        pos = self.start[idx][:, None] + 6 + offset + np.arange(n)[None, :]
-        return np.ascontiguousarray(self.data[pos]).view(dtype).ravel()
-
-    def payload(self, i: int) -> bytes:
-        a = int(self.start[i]) + 6
-        return self.data[a : a + int(self.length[i])].tobytes()
 
 
 def _candidates(arr: npt.NDArray[np.uint8]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -389,16 +364,6 @@ def read_ubx(path: Path) -> Decoded:
 
 # ---------------------------------------------------------------------------------------
 # writer
-
-
-def frame(cls: int, mid: int, payload: bytes) -> bytes:
-    """One UBX frame with its checksum."""
-    body = bytes((cls, mid)) + len(payload).to_bytes(2, "little") + payload
-    a = b = 0
-    for x in body:
-        a = (a + x) & 0xFF
-        b = (b + a) & 0xFF
-    return SYNC + body + bytes((a, b))
 
 
 def pvt_frames(gps: pd.DataFrame) -> Iterable[tuple[float, bytes]]:

@@ -31,7 +31,7 @@ from fieldlogs.recorders.timebase import fit_clock
 from schemas.errors import InputError
 
 if TYPE_CHECKING:
-    from fieldlogs.recorders.ubx import Frames
+    from fieldlogs.recorders.ubx_frames import Frames
 
 GYRO = {14: "wx", 13: "wy", 5: "wz"}
 ACC = {16: "ax", 17: "ay", 18: "az"}
@@ -164,7 +164,7 @@ def esf_frames(
 
     Sensor time tags in ms of a clock that started at ``t_ref_gps`` and runs ``1 + drift``
     times GNSS time (a drifting recorder for the tests)."""
-    from fieldlogs.recorders.ubx import frame
+    from fieldlogs.recorders.ubx_frames import frame
 
     out: list[tuple[float, bytes]] = []
     if imu is not None and len(imu):

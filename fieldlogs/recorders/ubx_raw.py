@@ -36,7 +36,7 @@ from fieldlogs.recorders.rinex_obs import OBS_COLUMNS
 from schemas.gnss import GNSS_NAV
 
 if TYPE_CHECKING:
-    from fieldlogs.recorders.ubx import Frames
+    from fieldlogs.recorders.ubx_frames import Frames
 
 RAWX_HEAD = np.dtype(
     [
@@ -302,7 +302,7 @@ def _sbas_frame(f: Frames, found: list[tuple[int, int, list[int]]], dec: Decoded
 
 def rawx_frames(obs: pd.DataFrame) -> list[tuple[float, bytes]]:
     """(GPS time, RXM-RAWX frame) per epoch of ``gnss_obs`` rows (one receiver)."""
-    from fieldlogs.recorders.ubx import frame
+    from fieldlogs.recorders.ubx_frames import frame
 
     out = []
     for t, g in obs.groupby("gnss_time_s", sort=True):
@@ -334,7 +334,7 @@ def rawx_frames(obs: pd.DataFrame) -> list[tuple[float, bytes]]:
 
 
 def _sfrbx(gnss: int, sv: int, words: list[int], sig: int = 0) -> bytes:
-    from fieldlogs.recorders.ubx import frame
+    from fieldlogs.recorders.ubx_frames import frame
 
     head = np.zeros(1, dtype=SFRBX_HEAD)
     head["gnssId"] = gnss

@@ -13,7 +13,7 @@ from collections.abc import Callable, Generator
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-from fieldlogs.replay.pool import Outcome, Task, failed, run_task
+from fieldlogs.replay.tasks import Outcome, Task, failed, run_task
 from schemas.errors import InputError
 
 R = TypeVar("R")

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from fieldlogs.gnss.sbas import decode as d
+import fieldlogs.gnss.sbas.decode as d
 from fieldlogs.gnss.sbas.bits import hex_to_bits, message_type, parity_ok, preamble_ok
 from schemas.errors import InputError
 from schemas.gnss import GNSS_SBAS, SBAS_PRN_RANGE

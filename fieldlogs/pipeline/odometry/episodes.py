@@ -73,6 +73,7 @@ With a ground speed (the radar [S004], stage 1b)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -360,3 +361,18 @@ def _end_ground(
     if lim is not None:
         return i0 + lim, False, True
     return s.n - 1, False, False
+
+
+def watch_failsafes(s: AlignedStreams, cfg: OdometryConfig, episodes: Sequence[Episode]) -> tuple[Watch | None, ...]:
+    """Stage 4: the watch of every fail-safe episode (None for the others, and for all
+    when ``failsafe_watch_s`` is 0); a correction fused with a ground speed is watched on
+    its filtered speed."""
+    if cfg.failsafe_watch_s <= 0:
+        return tuple(None for _ in episodes)
+    return tuple(_watch_of(s, cfg, ep) if ep.failsafe else None for ep in episodes)
+
+
+def _watch_of(s: AlignedStreams, cfg: OdometryConfig, ep: Episode) -> Watch | None:
+    if ep.fusion is not None:
+        return watch_fused(s, cfg, ep.fusion, ep.i_end)
+    return watch_failsafe(s, cfg, ep.integration, ep.i_end)

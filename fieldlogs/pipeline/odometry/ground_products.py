@@ -36,7 +36,6 @@ Scale (``wheel_calibration`` setting, default off)
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -44,7 +43,7 @@ from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.odometry.ground import GROUND_BIAS_MPS, GroundSpeed
 from fieldlogs.pipeline.odometry.signals import BoolArray, ma, recent
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
-from fieldlogs.pipeline.types import FloatArray, Odometry, SlipEpisode
+from fieldlogs.pipeline.types import FloatArray, GroundReport, Odometry, SlipEpisode, WheelCalibration
 
 #: Calibration: least ground speed of a cycle used (the radar's systematic error b is
 #: absolute: relatively smaller at speed) [m/s].
@@ -57,60 +56,6 @@ CAL_MIN_M = 500.0
 CAL_MAX_HALF = 0.001
 #: Two-sided 95 % [–].
 Z95 = 1.96
-
-
-@dataclass(frozen=True)
-class WheelCalibration:
-    """The wheel diameter from the ground speed: true / nominal, with its 95 % interval."""
-
-    ratio: float
-    """r = ground distance / pulse distance over the adhering stretches [–]."""
-    half_width: float
-    """95 % half-width of r [–]."""
-    distance_m: float
-    """Pulse distance in the estimate [m]."""
-    stretches: int
-    applied: bool
-    """The odometry's scale uses it (setting ``wheel_calibration``)."""
-    applied_from_t: float | None
-    """First cycle the running estimate scaled (None: never) [s]."""
-
-    def to_json(self, nominal_diameter_m: float) -> dict[str, Any]:
-        lo, hi = self.ratio - self.half_width, self.ratio + self.half_width
-        return {
-            "ratio": self.ratio,
-            "ratio_ci95": [lo, hi],
-            "diameter_m": self.ratio * nominal_diameter_m,
-            "diameter_ci95_m": [lo * nominal_diameter_m, hi * nominal_diameter_m],
-            "wear_pct": 100.0 * (1.0 - self.ratio),
-            "distance_m": self.distance_m,
-            "stretches": self.stretches,
-            "applied": self.applied,
-            "applied_from_t": self.applied_from_t,
-        }
-
-
-@dataclass(frozen=True)
-class GroundReport:
-    """What the ground-speed sensor gave the odometry of one run."""
-
-    source: str
-    covered_share: float
-    """Share of the moving cycles (1 s mean pulse speed ≥ CAL_MIN_SPEED_MPS) with a ground speed."""
-    against_cab_s: float
-    """Time the direction check found the vehicle moving against the cab [s]."""
-    low_speed_share: float
-    """Share of the cycles whose speed is the ground speed's (low speed, standstill)."""
-    calibration: WheelCalibration | None
-
-    def to_json(self, nominal_diameter_m: float) -> dict[str, Any]:
-        return {
-            "source": self.source,
-            "covered_share": self.covered_share,
-            "against_cab_s": self.against_cab_s,
-            "low_speed_share": self.low_speed_share,
-            "wheel_calibration": None if self.calibration is None else self.calibration.to_json(nominal_diameter_m),
-        }
 
 
 def _disturbed(s: AlignedStreams, episodes: list[SlipEpisode], settled: list[int]) -> BoolArray:

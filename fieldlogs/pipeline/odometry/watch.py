@@ -19,9 +19,7 @@ gaps).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,9 +29,6 @@ from fieldlogs.pipeline.odometry.integration import Integration
 from fieldlogs.pipeline.odometry.signals import IntArray, held, ma, readonly
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
 from fieldlogs.pipeline.types import FloatArray, SpeedSource
-
-if TYPE_CHECKING:
-    from fieldlogs.pipeline.odometry.episodes import Episode
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,18 +109,3 @@ def _watch(
     j = int(hit[0]) if hit.size else dv.size - 1
     grow = np.cumsum((dv + own)[1 : j + 1] * s.dt[out[1 : j + 1]])
     return Watch(ie + j, readonly(out[1 : j + 1]), readonly(grow), bool(hit.size), source)
-
-
-def watch_failsafes(s: AlignedStreams, cfg: OdometryConfig, episodes: Sequence[Episode]) -> tuple[Watch | None, ...]:
-    """Stage 4: the watch of every fail-safe episode (None for the others, and for all
-    when ``failsafe_watch_s`` is 0); a correction fused with a ground speed is watched on
-    its filtered speed."""
-    if cfg.failsafe_watch_s <= 0:
-        return tuple(None for _ in episodes)
-    return tuple(_watch_of(s, cfg, ep) if ep.failsafe else None for ep in episodes)
-
-
-def _watch_of(s: AlignedStreams, cfg: OdometryConfig, ep: Episode) -> Watch | None:
-    if ep.fusion is not None:
-        return watch_fused(s, cfg, ep.fusion, ep.i_end)
-    return watch_failsafe(s, cfg, ep.integration, ep.i_end)

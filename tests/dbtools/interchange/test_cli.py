@@ -23,7 +23,11 @@ def invoke(*args: object):  # type: ignore[no-untyped-def]
 def test_import_exit_codes(tmp_path: Path) -> None:
     r = invoke("db", "import", FINLAND, "--format", "railml", "--out", tmp_path / "fi")
     assert r.exit_code == 0, r.output
-    assert "balises in the file" in r.output and "76" in r.output and "railml.no_pair" in r.output
+    assert "balises in the file" in r.output and "76" in r.output and "railml.balise_identity" in r.output
+    m0 = tmp_path / "pairs.toml"
+    m0.write_text('[initial_pairs]\n"none" = "00"\n', encoding="utf-8")
+    r = invoke("db", "import", FINLAND, "--format", "railml", "--out", tmp_path / "fi0", "--line-code", m0)
+    assert r.exit_code == 1 and "railml.nothing_imported" in r.output and not (tmp_path / "fi0").exists()
     again = invoke("db", "import", FINLAND, "--format", "railml", "--out", tmp_path / "fi")
     assert again.exit_code == 3 and "--force" in again.output
     bad = tmp_path / "bad.railml"

@@ -100,6 +100,8 @@ def test_geojson_is_rfc7946(exported: dict[str, Path], sample_db: Path) -> None:
         "feature_points": len(net.feature_points),
         "gis_points": len(net.gis),
         "gis_lines": 2,
+        "tracks": 2,  # the implied tracks 420:D and 420:U (a line-only DB: no switches, no connections)
+        "km_posts": 2 * 15,  # km 16, 17 … 30 on a grid from km 16.000 to 30.980 on each track
     }
 
 
@@ -112,7 +114,7 @@ def test_geopackage_tables_and_binary_geometry(exported: dict[str, Path]) -> Non
         contents = {
             r[0]: r[1:] for r in con.execute("SELECT table_name, data_type, srs_id, min_x, max_x FROM gpkg_contents")
         }
-        assert set(contents) == {"balises", "feature_points", "gis_points", "gis_lines"}
+        assert set(contents) == {"balises", "feature_points", "gis_points", "gis_lines", "tracks", "km_posts"}
         assert all(v[0] == "features" and v[1] == 6668 and 139 < v[2] < v[3] < 140 for v in contents.values())
         types = dict(con.execute("SELECT table_name, geometry_type_name FROM gpkg_geometry_columns"))
         assert types == {
@@ -120,6 +122,8 @@ def test_geopackage_tables_and_binary_geometry(exported: dict[str, Path]) -> Non
             "feature_points": "POINT",
             "gis_points": "POINT",
             "gis_lines": "LINESTRING",
+            "tracks": "LINESTRING",
+            "km_posts": "POINT",
         }
         blob, bid, km = con.execute(
             "SELECT geom, balise_id, km_actual_m FROM balises ORDER BY balise_id LIMIT 1"
@@ -141,14 +145,21 @@ def test_gdal_reads_the_geopackage_and_geojson_as_qgis_would(exported: dict[str,
     from pyogrio.raw import read
 
     layers = {str(name): str(kind) for name, kind in pyogrio.list_layers(exported["gpkg"])}
-    assert layers == {"balises": "Point", "feature_points": "Point", "gis_points": "Point Z", "gis_lines": "LineString"}
+    assert layers == {
+        "balises": "Point",
+        "feature_points": "Point",
+        "gis_points": "Point Z",
+        "gis_lines": "LineString",
+        "tracks": "LineString",
+        "km_posts": "Point",
+    }
     info = pyogrio.read_info(exported["gpkg"], layer="balises")
     assert info["crs"] == "EPSG:6668" and info["features"] == 31 and "station_code" in list(info["fields"])
     _, _, geoms, fields = read(exported["gpkg"], layer="feature_points", columns=["feature_id", "km_m"])
     assert len(geoms) == 108 and all(shapely.from_wkb(g).geom_type == "Point" for g in geoms)
     assert sorted(set(fields[0].tolist()))[:2] == ["F001", "F002"] and float(fields[1].max()) > 29_000
     gj = pyogrio.read_info(exported["geojson"])
-    assert gj["features"] == 31 + 108 + 1500 + 2 and gj["crs"] == "EPSG:4326"
+    assert gj["features"] == 31 + 108 + 1500 + 2 + 2 + 30 and gj["crs"] == "EPSG:4326"
 
 
 def test_geoparquet_metadata_and_wkb(exported: dict[str, Path]) -> None:

@@ -3,10 +3,13 @@ real headless browser (Debian's chromium; skipped when it is not installed)."""
 
 from __future__ import annotations
 
+import json
+import re
 import shutil
 import subprocess
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
@@ -14,7 +17,10 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from dbtools.build import build_db
+from dbtools.interchange.review import write_review
 from dbtools.sample_network import sample_source_dir
+from tests.dbtools.interchange.cdp import Browser
+from tests.dbtools.interchange.network_sources import SWITCH_IDS, TRACK_IDS, write_topology_sources
 
 
 @pytest.fixture(scope="module")
@@ -49,17 +55,40 @@ def change(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return {"old": old, "new": new, "page": page, "root": root, "exit": Path(str(r.exit_code))}
 
 
+def _payload(html: str) -> dict[str, Any]:
+    """The map's data from the page (the JSON script the map script reads)."""
+    m = re.search(r"<script type='application/json' id='review-map-data'>(.*?)</script>", html, re.S)
+    assert m is not None, "the page has no map data"
+    data: dict[str, Any] = json.loads(m.group(1))
+    return data
+
+
+def _outside_scripts(html: str) -> str:
+    return re.sub(r"<(script|style)\b.*?</\1>", "", html, flags=re.S)
+
+
 def test_page_sections_map_and_self_containment(change: dict[str, Path]) -> None:
     html = change["page"].read_text(encoding="utf-8")
-    body = html.split("<body>", 1)[1]
-    assert "<script" not in html and "http" not in body.replace("http://www.w3.org/2000/svg", "")
-    for text in ("Validation of NEW", "What changed", "Map of the changes", "2026.10", "2026.11"):
+    body = _outside_scripts(html.split("<body>", 1)[1])
+    # self-contained: no external script, style sheet, image or link; nothing but inline code
+    assert "http" not in body and "<link" not in html and "<script src" not in html.replace(" ", " ")
+    assert re.search(r"<script[^>]*\bsrc=", html) is None
+    assert "Leaflet 1.9.4, BSD-2-Clause" in html
+    for text in ("Validation of NEW", "What changed", "Network map", "2026.10", "2026.11"):
         assert text in html
     assert "balise 0420-D-C003 (C, 0420 04 D) moved +12.0 m" in html
     assert "GIS 0420 D km 20k000–20k180: 10 points moved" in html
-    assert html.count("class='chg moved'") == 1 + 10 + 6  # the balise, ten GIS points, six feature rows
-    assert html.count("class='chg added'") == 1 and html.count("class='chg removed'") == 1
-    assert "arrows ×" in html and "Legend" in html
+    data = _payload(html)
+    kinds = [c["kind"] for c in data["changes"]]
+    assert kinds.count("moved") == 1 + 10 + 6  # the balise, ten GIS points, six feature rows
+    assert kinds.count("added") == 1 and kinds.count("removed") == 1
+    moved = next(c for c in data["changes"] if c["what"] == "balise" and c["kind"] == "moved")
+    assert moved["shift"] == pytest.approx(12.0)
+    # a line-only DB: its implied line tracks, km ticks every km of both (16k000 … 30k000)
+    assert sorted(t["id"] for t in data["tracks"]) == ["0420:D", "0420:U"]
+    assert all(t["implied"] and t["kind"] == "main" for t in data["tracks"])
+    assert sum(len(t["km"]) for t in data["ticks"]) == 2 * 15 and data["tiles"] is None
+    assert data["switches"] == [] and data["connections"] == [] and data["groups"] == []
 
 
 def test_existing_page_refused(change: dict[str, Path]) -> None:
@@ -93,20 +122,124 @@ def _browser(exe: str, page: Path, *args: str) -> subprocess.CompletedProcess[by
         )
 
 
+@pytest.fixture(scope="module")
+def topo_page(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """OLD = the sample (line only); NEW = the same with declared topology: tracks D1 D2 U1 U2,
+    crossover X1 (track_points), switches W1 W2, their six connections, balise group 3:12."""
+    root = tmp_path_factory.mktemp("review_topo")
+    src = write_topology_sources(root / "src")
+    old, new = root / "old.sqlite", root / "new.sqlite"
+    build_db(sample_source_dir(), old, db_version="2026.10")
+    build_db(src, new, db_version="2026.12")
+    page = root / "review.html"
+    write_review(old, new, page)
+    return {"page": page, "root": root, "old": old, "new": new}
+
+
+def test_topology_layers(topo_page: dict[str, Path]) -> None:
+    html = topo_page["page"].read_text(encoding="utf-8")
+    for line in ("tracks: 5 added, 0 removed, 0 changed", "switches: 2 added, 0 removed, 0 changed"):
+        assert f"<li>{line}</li>" in html  # the diff summary of the network tables
+    data = _payload(html)
+    tracks = {t["id"]: t for t in data["tracks"]}
+    assert sorted(tracks) == sorted(TRACK_IDS)  # declared tracks cover the line: no implied ones
+    assert tracks["X1"]["kind"] == "crossover" and tracks["X1"]["line"] is None
+    assert tracks["D1"]["km0"] == 16000.0 and tracks["D1"]["km1"] == 25000.0
+    sw = {s["id"]: s for s in data["switches"]}
+    assert sorted(sw) == list(SWITCH_IDS)
+    assert (sw["W1"]["type"], sw["W1"]["n"], sw["W1"]["side"]) == ("point", 9.0, "right")
+    assert sw["W2"]["side"] == "left" and sw["W1"]["ports"]["b2"] == "X1"
+    # the switch sits at its toe: the end of D1, i.e. the first point of X1
+    x1 = tracks["X1"]["c"]
+    assert abs(sw["W1"]["lat"] * 1e6 - x1[0]) <= 1 and abs(sw["W1"]["lon"] * 1e6 - x1[1]) <= 1
+    # three connections at each switch, all at the toe: one marker place per switch
+    assert len(data["connections"]) == 2 and sorted(len(p["links"]) for p in data["connections"]) == [3, 3]
+    (group,) = data["groups"]
+    assert group["id"] == "3:12" and group["balises"] == ["BG-3-12-0", "BG-3-12-1"] and group["n_total"] == 2
+    # ticks: D1 16..25, D2 25..30, U1 16..25, U2 26..30 (km 25k000 ends both D1 and D2); none on X1
+    ticks = {t["track"]: t["km"] for t in data["ticks"]}
+    assert {k: len(v) for k, v in ticks.items()} == {"D1": 10, "D2": 6, "U1": 10, "U2": 5}
+    assert ticks["U2"][0] == 26000.0 and ticks["D2"][0] == 25000.0
+
+
+def test_tiles_only_when_asked(topo_page: dict[str, Path]) -> None:
+    out = topo_page["root"] / "tiles.html"
+    url = "https://tile.example.org/{z}/{x}/{y}.png"
+    r = CliRunner().invoke(
+        app, ["db", "review", str(topo_page["old"]), str(topo_page["new"]), "--out", str(out), "--tiles", url]
+    )
+    assert r.exit_code in (0, 1), r.output
+    data = _payload(out.read_text(encoding="utf-8"))
+    assert data["tiles"] == url and data["tiles_attribution"] == "© OpenStreetMap contributors"
+    assert _payload(topo_page["page"].read_text(encoding="utf-8"))["tiles"] is None
+
+
 @pytest.mark.skipif(_chromium() is None, reason="chromium is not installed (.ci/run installs it)")
 def test_page_renders_in_headless_chromium(change: dict[str, Path]) -> None:
+    exe = _chromium()
+    assert exe is not None
+    dom = _browser(exe, change["page"], "--dump-dom").stdout.decode("utf-8", "replace")
+    assert 'id="review-map"' in dom and 'data-ready="1"' in dom and "Validation of NEW" in dom
+    assert "Legend" in dom and dom.count("leaflet-interactive") > 2  # the map script ran and drew
+
+
+_POINT_ON = """(() => {{
+  const p = [...document.querySelectorAll("{sel}")][{i}];
+  const pt = p.getPointAtLength(p.getTotalLength() * {f}), m = p.getScreenCTM();
+  return [pt.x * m.a + pt.y * m.c + m.e, pt.x * m.b + pt.y * m.d + m.f];
+}})()"""
+_CENTRE_OF = """(() => {{
+  const r = [...document.querySelectorAll("{sel}")][{i}].getBoundingClientRect();
+  return [r.x + r.width / 2, r.y + r.height / 2, r.width, r.height];
+}})()"""
+_TIPS = '[...document.querySelectorAll(".leaflet-tooltip")].map(e => e.textContent)'
+
+
+@pytest.mark.skipif(_chromium() is None, reason="chromium is not installed (.ci/run installs it)")
+def test_map_in_headless_chromium(topo_page: dict[str, Path]) -> None:
+    """The real page in a real browser (CDP): loads with no console error and no request
+    beyond itself, draws every track, switch, connection place, balise group and km tick,
+    shows a track's id on hover and a switch's 1:n on hover after zooming in."""
     from PIL import Image
 
     exe = _chromium()
     assert exe is not None
-    dom = _browser(exe, change["page"], "--dump-dom").stdout.decode("utf-8", "replace")
-    assert 'id="review-map"' in dom and "Legend" in dom and "Validation of NEW" in dom
-    png = change["root"] / "review.png"
-    _browser(exe, change["page"], f"--screenshot={png}", "--window-size=1200,1800")
-    assert png.is_file(), "chromium wrote no screenshot"
-    img = Image.open(png).convert("RGB")
+    with Browser(exe, 1200, 900) as b:
+        b.call("Network.enable")
+        b.load(topo_page["page"].as_uri())
+        assert b.errors() == []
+        assert b.requests() == [topo_page["page"].as_uri()]  # offline: nothing fetched
+        assert b.eval('document.getElementById("review-map").dataset.ready') == "1"
+        count = {s: b.eval(f'document.querySelectorAll("{s}").length') for s in ("path.track", "path.switch")}
+        count |= {s: b.eval(f'document.querySelectorAll("{s}").length') for s in ("path.connection", "path.km-tick")}
+        count["group"] = b.eval('document.querySelectorAll("path.balise-group").length')
+        assert count == {"path.track": 5, "path.switch": 2, "path.connection": 2, "path.km-tick": 31, "group": 1}
+        b.eval('document.getElementById("review-map").scrollIntoView()')
+        x, y = b.eval(_POINT_ON.format(sel="path.track", i=0, f=0.3))
+        b.mouse_move(x, y)
+        tips = b.eval(_TIPS)
+        assert len(tips) == 1 and tips[0][:2] in {"D1", "U1"}  # U1 is drawn over D1 (4 m apart)
+        assert "line 0420 track" in tips[0] and "km 16k000.0" in tips[0]
+        b.screenshot(topo_page["root"] / "map.png")
+        # zoom in on W1 (wheel at the switch) until the crossover stands clear of the lines
+        for _ in range(12):
+            *_, w, h = b.eval(_CENTRE_OF.format(sel="path.kind-crossover", i=0))
+            if max(w, h) > 300:  # 100 m of crossover
+                break
+            sx, sy, *_ = b.eval(_CENTRE_OF.format(sel="path.sw-point", i=0))
+            b.call("Input.dispatchMouseEvent", type="mouseWheel", x=sx, y=sy, deltaX=0, deltaY=-60)
+            b.eval("new Promise(r => setTimeout(r, 400))")
+        assert 300 < max(w, h) < 1200, (w, h)
+        sx, sy, *_ = b.eval(_CENTRE_OF.format(sel="path.sw-point", i=0))
+        b.mouse_move(sx, sy)
+        tips = b.eval(_TIPS)
+        assert any("switch W" in t and "1:9" in t and "diverging" in t for t in tips), tips
+        labels = b.eval('[...document.querySelectorAll(".sw-label")].map(e => e.textContent)')
+        assert "W1 1:9 R" in labels  # close up, switches carry their label
+        b.screenshot(topo_page["root"] / "map_zoomed.png")
+        assert b.errors() == []
+    img = Image.open(topo_page["root"] / "map_zoomed.png").convert("RGB")
     colours = img.getcolors(maxcolors=1 << 20) or []
-    assert len(colours) > 50  # not blank: text, tables and the map
-    orange = sum(n for n, (r, g, b) in colours if r > 190 and 90 < g < 140 and b < 40)
-    grey_track = sum(n for n, c in colours if c == (0x9A, 0xA0, 0xA6))
-    assert orange > 20 and grey_track > 200  # the arrows and the track lines were drawn
+    # the crossover's colour #b03a9e (anti-aliased: within 30 per channel)
+    crossover = sum(n for n, c in colours if max(abs(a - b) for a, b in zip(c, (0xB0, 0x3A, 0x9E), strict=True)) < 30)
+    assert crossover > 300

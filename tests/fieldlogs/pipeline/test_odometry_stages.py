@@ -31,11 +31,10 @@ from fieldlogs.pipeline.odometry.assembly import assemble
 from fieldlogs.pipeline.odometry.correct import correct_odometry
 from fieldlogs.pipeline.odometry.detection import detect
 from fieldlogs.pipeline.odometry.diagnostics import EpisodeDiagnostics, OdometryDiagnostics
-from fieldlogs.pipeline.odometry.episodes import find_episodes
+from fieldlogs.pipeline.odometry.episodes import find_episodes, watch_failsafes
 from fieldlogs.pipeline.odometry.ground import align_ground, metres_per_pulse
 from fieldlogs.pipeline.odometry.ground_products import ground_products
 from fieldlogs.pipeline.odometry.streams import align_streams
-from fieldlogs.pipeline.odometry.watch import watch_failsafes
 from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.pipeline.summary import DETAIL_DIGITS
 from fieldlogs.pipeline.types import FailsafeWatch, SlipEpisode

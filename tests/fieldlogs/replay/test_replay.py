@@ -21,7 +21,8 @@ import pytest
 
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, open_db
-from fieldlogs.replay.pool import Outcome, replay
+from fieldlogs.replay.pool import replay
+from fieldlogs.replay.tasks import Outcome
 from tests.fieldlogs.audit.audit_data import AuditData, audit_data
 from tests.fieldlogs.replay.workers import balise_count, crash, run_info
 
