@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.recorders.common import Decoded
+from fieldlogs.recorders.navweeks import WEEK_ROLLOVER
 from fieldlogs.recorders.rinex_obs import epochs_to_gps, gps_calendar, label, split_header, utc_calendar
 from fieldlogs.recorders.timebase import BDT_OFFSET_S, utc_to_gps
 from schemas.errors import InputError
@@ -205,11 +206,6 @@ def read_rinex_nav(path: Path, lines: list[str], dec: Decoded) -> None:
         frame = frame[~dup]
     _resolve_weeks(frame, dec)
     dec.frames["gnss_nav"] = frame.sort_values(["sat", "toc_gps_s"], kind="stable").reset_index(drop=True)
-
-
-#: A broadcast GPS week number is 10 bits (IS-GPS-200 §20.3.3.3.1.1: transmitted modulo 1024);
-#: Galileo's 12-bit GST week starts at GPS week 1024 — both differ from the full week by 1024·k.
-WEEK_ROLLOVER = 1024
 
 
 def _resolve_weeks(frame: pd.DataFrame, dec: Decoded) -> None:

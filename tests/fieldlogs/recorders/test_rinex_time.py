@@ -15,6 +15,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from fieldlogs.quality.file_findings import FileFindings
+from fieldlogs.quality.gnss import check_gnss_nav
+from fieldlogs.recorders.common import Decoded
+from fieldlogs.recorders.navweeks import nav_onto_observations
 from fieldlogs.recorders.rinex import read_rinex
 from fieldlogs.recorders.rinex_nav import write_rinex_nav
 from fieldlogs.recorders.rinex_obs import write_rinex_obs
@@ -135,3 +139,38 @@ def test_a_continuous_week_is_left_alone(tmp_path: Path) -> None:
     dec = read_rinex(p)
     assert dec.frames["gnss_nav"]["week"].tolist() == [2447.0]
     assert dec.notes == []
+
+
+def _decoded(nav: pd.DataFrame, t_obs: float) -> list[Decoded]:
+    obs = Decoded("rx.obs", "rinex", frames={"gnss_obs": pd.DataFrame({"gnss_time_s": [t_obs, t_obs + 60.0]})})
+    return [obs, Decoded("rx.nav", "rinex", frames={"gnss_nav": nav})]
+
+
+def test_a_file_dated_a_rollover_early_is_moved_onto_the_observations() -> None:
+    """A receiver with the rollover bug dates its navigation file 1024 weeks (7168 days) early:
+    toc and week both; the observations are right. Moved by exactly 1024·604800 s, and said."""
+    row = nav_row("G07")
+    early = pd.DataFrame([{**row, "toc_gps_s": float(row["toc_gps_s"]) - 1024 * 604_800.0, "week": 2447.0 - 1024}])
+    dec = _decoded(early, float(row["toc_gps_s"]) + 600.0)
+    assert nav_onto_observations(dec) == []
+    nav = dec[1].frames["gnss_nav"].iloc[0]
+    assert (nav["toc_gps_s"], nav["week"]) == (row["toc_gps_s"], 2447.0)
+    assert len(dec[1].notes) == 1 and "-1024 weeks" in dec[1].notes[0]
+
+
+def test_navigation_records_of_another_day_are_named() -> None:
+    row = nav_row("G07")
+    dec = _decoded(pd.DataFrame([row]), float(row["toc_gps_s"]) + 30 * 86_400.0)
+    found = nav_onto_observations(dec)
+    assert [f.rule for f in found] == ["import.nav_epochs"] and "-30 days" in found[0].message
+    assert dec[1].frames["gnss_nav"].iloc[0]["toc_gps_s"] == row["toc_gps_s"]  # left as it is
+
+
+def test_logs_check_names_an_unresolved_10_bit_week() -> None:
+    """A gnss_nav stream written before this import fix (or by hand): week 399 while toc is in
+    week 2447 → one error naming the week, not a silent 0 % availability."""
+    out = FileFindings("gnss_nav", "gnss_nav.parquet", 10)
+    frame = pd.DataFrame([{**nav_row("G07"), "week": 399.0}, nav_row("G12")])
+    check_gnss_nav(out, frame)
+    weeks = [f for f in out.items if f.rule == "log.nav_week"]
+    assert len(weeks) == 1 and weeks[0].row == 2 and weeks[0].column == "week" and "-2048 weeks" in weeks[0].message
