@@ -150,3 +150,18 @@ def test_logs_check_of_adc_counts(ground: dict[str, np.ndarray], tmp_path: Path)
     declared = _write(tmp_path / "b", counts, {**BLOCK, "full_scale": 2047.0})
     assert [f for f in check_run(declared) if f.table == "radar_if"] == []
     assert set(radar_speed_command(declared).columns["status"]) == {"ok"}
+
+
+def test_the_cli_warns_on_stderr_and_keeps_the_csv_clean(ground: dict[str, np.ndarray], tmp_path: Path) -> None:
+    import io
+
+    from typer.testing import CliRunner
+
+    from cli.main import app
+
+    folder = _write(tmp_path, conjugated(ground), BLOCK)
+    res = CliRunner().invoke(app, ["radar", "speed", str(folder), "--format", "csv"], env={"COLUMNS": "200"})
+    assert res.exit_code == 0
+    assert "radar.iq_convention" in res.stderr and "i-jq" in res.stderr
+    frame = pd.read_csv(io.StringIO(res.stdout))
+    assert set(frame["status"]) == {"no_reflections"}  # as declared; the warning says why
