@@ -148,7 +148,9 @@ def parse_radar_block(data: dict[str, Any], path: Path) -> tuple[RadarParams | N
 
     Absent → (None, []). Every field must be a number inside its range; the beam must stay
     between the horizontal and the vertical, and its footprint inside the unambiguous range
-    c/(2·Δf). Any error → (None, findings).
+    c/(2·Δf). Optional: ``looks_toward`` (F/R), ``iq_convention`` (``RADAR_IQ_CONVENTIONS``,
+    ``i+jq`` default) and ``full_scale`` (``RADAR_FULL_SCALE``, 1 default). Any error → (None,
+    findings).
     """
     if data.get("radar") is None:
         return None, []
