@@ -142,6 +142,7 @@ def position(
     from fieldlogs.gnss.skymask import load_mask
     from fieldlogs.io import read_run
     from fieldlogs.pipeline.route import decided_route
+    from fieldlogs.quality.usability import Purpose, usability_findings
 
     if (line is None) != (track is None):
         raise UsageError("give --line and --track together (or neither: the pipeline decides the track)")
@@ -158,6 +159,13 @@ def position(
     direction = {Facing.increasing: 1, Facing.decreasing: -1, Facing.auto: 0}[facing]  # 0: from the fixes
     facing_source = "given"
     if line is None or track is None:  # only then the pipeline runs (it needs the tacho)
+        unusable = usability_findings(run, Purpose.POSITIONING)
+        if unusable:
+            raise UsageError(
+                f"the pipeline cannot decide this run's track ({'; '.join(f.message for f in unusable[:2])}): give "
+                "--line and --track (a GNSS-only or static receiver is positioned on the track given)",
+                path=run_dir,
+            )
         route = decided_route(run, network, tree.pipeline)
         if route is None:
             raise UsageError("the pipeline decides no track for this run (no balise pair, no GPS decision): give "

@@ -68,7 +68,8 @@ def test_a_gnss_only_run_is_positioned_on_the_given_track(runs: tuple[Path, Path
 
 def test_the_pipeline_still_refuses_a_gnss_only_run_without_the_track(runs: tuple[Path, Path], sample_db: Path) -> None:
     res = invoke("gnss", "position", runs[1], "--db", sample_db)
-    assert res.exit_code != 0
+    assert res.exit_code == 2  # no track decided: usage, naming what to give
+    assert "give --line and --track" in res.stderr and "no tacho stream" in res.stderr
 
 
 def test_facing_by_hand() -> None:
