@@ -118,3 +118,17 @@ def test_a_static_receiver_states_the_facing_unknown(runs: tuple[Path, Path], sa
     assert (half > 0.1).all()  # the antennas sit off the reference point: the facing matters
     widest = np.fmax(p.loc[ok, "uncertainty_m"], m.loc[ok, "uncertainty_m"])
     np.testing.assert_allclose(u.loc[ok, "uncertainty_m"], widest + half, atol=1e-6)
+
+
+def test_a_10_bit_week_is_refused_not_0_percent(runs: tuple[Path, Path], sample_db: Path, tmp_path: Path) -> None:
+    """gnss_nav written with the broadcast week (mod 1024): before, every epoch read
+    'too_few_satellites' and the command exited 0 with 0 % availability."""
+    bad = tmp_path / "week"
+    shutil.copytree(runs[1], bad)
+    nav_file = next(p for p in bad.iterdir() if p.name.startswith("gnss_nav"))
+    nav = pd.read_parquet(nav_file)
+    nav["week"] = nav["week"] % 1024
+    nav.to_parquet(nav_file, index=False)
+    res = invoke("gnss", "position", bad, "--db", sample_db, "--line", "0420", "--track", "D")
+    assert res.exit_code == 1
+    assert "10-bit GPS week" in res.stderr and "navigation weeks" in res.stderr
