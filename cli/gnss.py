@@ -126,7 +126,8 @@ def position(
     cab stream), or states it unknown (the km between both facings, the bound widened).
 
     Exit codes: 0 done; 1 the track cannot carry it (no or partial GIS heights, orthometric
-    heights) or the run's GNSS part is incomplete (no gnss_nav, a receiver without an antenna);
+    heights) or the run's GNSS part is incomplete (no gnss_nav, no ephemeris near the observations,
+    a receiver without an antenna);
     2 unreadable input or bad usage (no gnss_obs, no track decided, a bad sky mask); 3 --out
     exists without --force.
 
