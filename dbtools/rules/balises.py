@@ -20,6 +20,9 @@ the running direction) and −1 on U.
   direction, so the travel distance since the pair can never reach it.
 * ``balise.dist_from_initial`` (warning) — ``dist_from_initial_m`` differs from
   |km(C) − km(I1)| by more than ``dist_tolerance_m``.
+* ``balise.key_fields`` (error) — an I1, I2 or C row without line_code or station_code, or
+  whose track is not U, D or S: the pair key (and a C balise's governing pair) needs all
+  three (G rows may leave them empty: a group names itself by NID_C/NID_BG). Fix: fill them.
 * ``balise.outside_gis`` (error) — ``km_actual_m`` is outside the GIS km range of the
   balise's line/track (or the line/track has no GIS at all).
 """
@@ -289,6 +292,28 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
             limit=round(float(abs(km[gc[j]] - km[gi[j]])), 3),
             column="dist_from_initial_m",
             **loc.at(T, int(gc[j])),
+        ),
+        cap,
+        file,
+    )
+
+    # balise.key_fields
+    tracks_ok = np.isin(track, np.array([t.value for t in Track], dtype=object))
+    bad = np.flatnonzero((is_i1 | is_i2 | is_c) & (pd.isna(line) | pd.isna(station) | ~tracks_ok))
+    out += capped(
+        "balise.key_fields",
+        Severity.ERROR,
+        T,
+        bad,
+        lambda i: Finding(
+            "balise.key_fields",
+            Severity.ERROR,
+            T,
+            f"{kind[i]} balise needs line_code, station_code and a track U, D or S "
+            f"(has {py(line[i])}, {py(station[i])}, {py(track[i])})",
+            keys=keys(i),
+            column="line_code" if pd.isna(line[i]) else "station_code" if pd.isna(station[i]) else "track",
+            **loc.at(T, i),
         ),
         cap,
         file,
