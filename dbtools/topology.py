@@ -51,7 +51,9 @@ def all_tracks(net: Network) -> pd.DataFrame:
         ext = ext[np.asarray(keep, dtype=bool)] if len(ext) else ext
         implied = pd.DataFrame(
             {
-                "track_id": [implied_track_id(str(a), str(b)) for a, b in zip(ext["line_code"], ext["track"], strict=True)],
+                "track_id": [
+                    implied_track_id(str(a), str(b)) for a, b in zip(ext["line_code"], ext["track"], strict=True)
+                ],
                 "line_code": ext["line_code"].astype(object),
                 "track": ext["track"].astype(object),
                 "kind": TrackKind.MAIN.value,
@@ -105,10 +107,12 @@ class Topology:
         return len(self.joined.get((track_id, end), []))
 
 
-def _seen_from_b(nav: str) -> str:
-    return {Navigability.A_TO_B.value: Navigability.B_TO_A.value, Navigability.B_TO_A.value: Navigability.A_TO_B.value}.get(
-        nav, nav
-    )
+_SEEN_FROM_B = {
+    Navigability.A_TO_B.value: Navigability.B_TO_A.value,
+    Navigability.B_TO_A.value: Navigability.A_TO_B.value,
+}
+_FORWARD = frozenset((Navigability.BOTH.value, Navigability.A_TO_B.value))
+_BACKWARD = frozenset((Navigability.BOTH.value, Navigability.B_TO_A.value))
 
 
 def topology(net: Network) -> Topology:
@@ -118,15 +122,16 @@ def topology(net: Network) -> Topology:
         topo = Topology(all_tracks(net), defaultdict(list), defaultdict(list))
         c = net.connections
         cols = [c[k].astype(object).to_numpy() for k in ("track_a", "end_a", "track_b", "end_b", "navigability")]
-        sw = c["switch_id"].astype(object).to_numpy()
+        sw = c["switch_id"].astype(object).where(c["switch_id"].notna(), None).to_numpy()
+        joined, exits = topo.joined, topo.exits
         for ta, ea, tb, eb, nav, s in zip(*cols, sw, strict=True):
-            switch = None if pd.isna(s) else str(s)
-            topo.joined[(ta, ea)].append((tb, eb, nav))
-            topo.joined[(tb, eb)].append((ta, ea, _seen_from_b(nav)))
-            if nav in (Navigability.BOTH.value, Navigability.A_TO_B.value):
-                topo.exits[(ta, ea)].append(Exit(tb, eb, 1 if eb == BEGIN else -1, switch))
-            if nav in (Navigability.BOTH.value, Navigability.B_TO_A.value):
-                topo.exits[(tb, eb)].append(Exit(ta, ea, 1 if ea == BEGIN else -1, switch))
+            switch = None if s is None else str(s)
+            joined[(ta, ea)].append((tb, eb, nav))
+            joined[(tb, eb)].append((ta, ea, _SEEN_FROM_B.get(nav, nav)))
+            if nav in _FORWARD:
+                exits[(ta, ea)].append(Exit(tb, eb, 1 if eb == BEGIN else -1, switch))
+            if nav in _BACKWARD:
+                exits[(tb, eb)].append(Exit(ta, ea, 1 if ea == BEGIN else -1, switch))
         topo.exits, topo.joined = dict(topo.exits), dict(topo.joined)
         return topo
 

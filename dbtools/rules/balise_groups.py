@@ -39,7 +39,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
-from dbtools.rules.common import Locator, capped, column, py
+from dbtools.rules.common import Locator, capped, column, isin, py
 from dbtools.rules.config import ValidationConfig
 from dbtools.topology import all_tracks, topology
 from schemas.enums import BaliseKind, Severity
@@ -57,12 +57,14 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     tid = column(b, "track_id") if "track_id" in b.columns else np.full(n, None, dtype=object)
     km = column(b, "km_actual_m")
     tid = tid.copy()
-    tid[~np.isin(tid, tr["track_id"].astype(object).to_numpy())] = None  # unknown: topology.invalid_reference
+    tid[~isin(tid, tr["track_id"].astype(object).to_numpy())] = None  # unknown: topology.invalid_reference
     free = np.flatnonzero(pd.isna(tid))
     if free.size:
         along = tr[tr["line_code"].notna() & tr["km_begin_m"].notna() & tr["km_end_m"].notna()]
         q = pd.DataFrame({"i": free, "line_code": column(b, "line_code")[free], "track": column(b, "track")[free]})
-        cand = along[["track_id", "line_code", "track", "km_begin_m", "km_end_m"]].astype({"line_code": object, "track": object})
+        cand = along[["track_id", "line_code", "track", "km_begin_m", "km_end_m"]].astype(
+            {"line_code": object, "track": object}
+        )
         m = q.merge(cand, on=["line_code", "track"])
         k = km[m["i"].to_numpy()]
         lo = np.minimum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
@@ -70,9 +72,10 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
         m = m[(k >= lo - 1e-6) & (k <= hi + 1e-6)].drop_duplicates("i")
         tid[m["i"].to_numpy()] = m["track_id"].to_numpy(dtype=object)
     pos = np.full(n, np.nan)
-    t = tr.drop_duplicates("track_id").set_index(tr["track_id"].drop_duplicates().astype(object).to_numpy())
-    has = np.flatnonzero(pd.notna(tid) & np.isin(tid, t.index.to_numpy()))
-    rows = t.loc[tid[has]]
+    t = tr.drop_duplicates("track_id")
+    at = pd.Index(t["track_id"].astype(object).to_numpy()).get_indexer(tid)
+    has = np.flatnonzero(at >= 0)
+    rows = t.iloc[at[has]]
     k0, k1 = column(rows, "km_begin_m"), column(rows, "km_end_m")
     lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
     inside = (km[has] >= lo - 1.0) & (km[has] <= hi + 1.0)
@@ -84,10 +87,10 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
 def _from_points(net: Network, tid: npt.NDArray[np.object_], km: F64, pos: F64) -> None:
     """Position by the km of ``track_points`` (tracks along no line km range)."""
     tp = net.track_points
-    todo = np.flatnonzero(np.isnan(pos) & pd.notna(tid) & np.isin(tid, tp["track_id"].astype(object).unique()))
+    todo = np.flatnonzero(np.isnan(pos) & pd.notna(tid) & isin(tid, tp["track_id"].astype(object).unique()))
     if todo.size == 0:
         return
-    groups = {k: g for k, g in tp[tp["km_m"].notna()].groupby("track_id", observed=True)}
+    groups = dict(iter(tp[tp["km_m"].notna()].groupby("track_id", observed=True)))
     for i in todo:
         g = groups.get(tid[i])
         if g is None:
@@ -127,7 +130,7 @@ def check_balise_network(net: Network, config: ValidationConfig, loc: Locator) -
         cap,
         file,
     )
-    has_track = net.tracks.size > 0 or "track_id" in b.columns and b["track_id"].notna().any()
+    has_track = net.tracks.size > 0 or ("track_id" in b.columns and b["track_id"].notna().any())
     tid, pos = locate(net) if has_track else (np.full(len(b), None, dtype=object), np.full(len(b), np.nan))
     if has_track:
         out += _unplaced(b, tid, pos, is_g, loc, cap)
@@ -138,7 +141,9 @@ def check_balise_network(net: Network, config: ValidationConfig, loc: Locator) -
     return out
 
 
-def _unplaced(b: pd.DataFrame, tid: npt.NDArray[np.object_], pos: F64, is_g: npt.NDArray[np.bool_], loc: Locator, cap: int) -> list[Finding]:
+def _unplaced(
+    b: pd.DataFrame, tid: npt.NDArray[np.object_], pos: F64, is_g: npt.NDArray[np.bool_], loc: Locator, cap: int
+) -> list[Finding]:
     given = column(b, "track_id") if "track_id" in b.columns else np.full(len(b), None, dtype=object)
     bad = np.flatnonzero(np.isnan(pos) & (pd.notna(given) | is_g))
     bid, km = column(b, "balise_id"), column(b, "km_actual_m")
@@ -190,6 +195,7 @@ def _places(
 
 
 def _members(b: pd.DataFrame, places: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
+    places = places.assign(pig_dup=places.duplicated(["place", "n_pig"]).to_numpy())
     g = places.groupby("place")
     stats = g.agg(
         n=("row", "size"),
@@ -197,12 +203,15 @@ def _members(b: pd.DataFrame, places: pd.DataFrame, loc: Locator, cap: int) -> l
         tot_lo=("n_total", "min"),
         tot_hi=("n_total", "max"),
         pig_max=("n_pig", "max"),
-        pig_dup=("n_pig", lambda s: s.duplicated().any()),
+        pig_dup=("pig_dup", "any"),
         nid_c=("nid_c", "first"),
         nid_bg=("nid_bg", "first"),
     )
     bad = stats[
-        stats["pig_dup"] | (stats["pig_max"] >= stats["tot_hi"]) | (stats["tot_lo"] != stats["tot_hi"]) | (stats["tot_hi"] != stats["n"])
+        stats["pig_dup"]
+        | (stats["pig_max"] >= stats["tot_hi"])
+        | (stats["tot_lo"] != stats["tot_hi"])
+        | (stats["tot_hi"] != stats["n"])
     ].reset_index(drop=True)
 
     def why(r: pd.Series) -> str:
@@ -227,7 +236,8 @@ def _members(b: pd.DataFrame, places: pd.DataFrame, loc: Locator, cap: int) -> l
             "balise.group_members",
             Severity.ERROR,
             T,
-            f"group {int(bad['nid_c'][j])}:{int(bad['nid_bg'][j])} (balise {bid[int(bad['row'][j])]}…): {why(bad.iloc[j])}",
+            f"group {int(bad['nid_c'][j])}:{int(bad['nid_bg'][j])} (balise {bid[int(bad['row'][j])]}…): "
+            + why(bad.iloc[j]),
             keys={"nid_c": int(bad["nid_c"][j]), "nid_bg": int(bad["nid_bg"][j])},
             **loc.at(T, int(bad["row"][j])),
         ),
@@ -237,9 +247,15 @@ def _members(b: pd.DataFrame, places: pd.DataFrame, loc: Locator, cap: int) -> l
 
 
 def _duplicates(
-    b: pd.DataFrame, places: pd.DataFrame, walked: set[tuple[int, int]], config: ValidationConfig, loc: Locator, cap: int
+    b: pd.DataFrame,
+    places: pd.DataFrame,
+    walked: set[tuple[int, int]],
+    config: ValidationConfig,
+    loc: Locator,
+    cap: int,
 ) -> list[Finding]:
     first = places.drop_duplicates("place")
+    first = first[first.duplicated(["nid_c", "nid_bg"], keep=False)]
     bid = column(b, "balise_id")
     hits: list[tuple[int, int, str]] = []
     for _, grp in first.groupby(["nid_c", "nid_bg"]):
@@ -281,11 +297,14 @@ def _ambiguous(
     """The route walk (module doc); returns the (row, row) pairs it reported."""
     kind, sig = column(b, "kind"), column(b, "signal_type")
     pair = [
-        (a, s_, t_) for a, s_, t_ in zip(column(b, "line_code"), column(b, "station_code"), column(b, "track"), strict=True)
+        (a, s_, t_)
+        for a, s_, t_ in zip(column(b, "line_code"), column(b, "station_code"), column(b, "track"), strict=True)
     ]
     # one walker per place of a G identity, one per C balise: (row, identity)
     reps = places.drop_duplicates("place")
-    walkers = [(int(r), ("G", int(c), int(g))) for r, c, g in zip(reps["row"], reps["nid_c"], reps["nid_bg"], strict=True)]
+    walkers: list[tuple[int, tuple[object, ...]]] = [
+        (int(r), ("G", int(c), int(g))) for r, c, g in zip(reps["row"], reps["nid_c"], reps["nid_bg"], strict=True)
+    ]
     c_rows = np.flatnonzero((kind == BaliseKind.C.value) & pd.notna(sig))
     walkers += [(int(i), ("C", str(sig[i]))) for i in c_rows]
     count: dict[tuple[object, ...], int] = defaultdict(int)

@@ -56,7 +56,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
-from dbtools.rules.common import Locator, capped, column, fmt_km, py
+from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
 from dbtools.topology import all_tracks
@@ -78,7 +78,12 @@ class _Out:
         self.cap, self.loc, self.config = config.max_findings_per_rule, loc, config
 
     def add(
-        self, rule: str, sev: Severity, table: str, rows: I64 | list[int], build: Callable[[int], tuple[str, dict[str, object]]]
+        self,
+        rule: str,
+        sev: Severity,
+        table: str,
+        rows: I64 | list[int],
+        build: Callable[[int], tuple[str, dict[str, object]]],
     ) -> None:
         """``build(row)`` → (message, extra Finding fields) for each row (a row of ``table``)."""
 
@@ -113,7 +118,7 @@ def check_topology(net: Network, config: ValidationConfig, loc: Locator) -> list
 def _references(net: Network, known: set[str], out: _Out) -> None:
     def missing(frame: pd.DataFrame, col: str) -> I64:
         v = column(frame, col)
-        return np.flatnonzero(pd.notna(v) & ~np.isin(v, np.array(sorted(known), dtype=object)))
+        return np.flatnonzero(pd.notna(v) & ~isin(v, known))
 
     def ref(table: str, frame: pd.DataFrame, col: str, what: str) -> None:
         v = column(frame, col)
@@ -131,7 +136,7 @@ def _references(net: Network, known: set[str], out: _Out) -> None:
         ref(SWITCHES.name, net.switches, f"{p}_track", f"switch port {p.upper()}")
     declared = set(net.tracks["track_id"].astype(object))
     tp_ids = column(net.track_points, "track_id")
-    bad = np.flatnonzero(~np.isin(tp_ids, np.array(sorted(declared), dtype=object)))
+    bad = np.flatnonzero(~isin(tp_ids, declared))
     out.add(
         "topology.invalid_reference",
         Severity.ERROR,
@@ -142,8 +147,8 @@ def _references(net: Network, known: set[str], out: _Out) -> None:
     if "track_id" in net.balises.columns:
         ref(BALISES.name, net.balises, "track_id", "balise")
     sid = column(net.connections, "switch_id")
-    switches = np.array(sorted(set(net.switches["switch_id"].astype(object))), dtype=object)
-    bad = np.flatnonzero(pd.notna(sid) & ~np.isin(sid, switches))
+    switches = net.switches["switch_id"].astype(object).to_numpy()
+    bad = np.flatnonzero(pd.notna(sid) & ~isin(sid, switches))
     out.add(
         "topology.invalid_reference",
         Severity.ERROR,
@@ -188,7 +193,8 @@ def _incidence(c: pd.DataFrame) -> pd.DataFrame:
 
 def _required(ports: pd.DataFrame) -> npt.NDArray[np.bool_]:
     need = {(t.value, p) for t, ps in SWITCH_PORTS.items() for p in ps}
-    return np.array([(t, p) in need for t, p in zip(ports["type"], ports["port"], strict=True)], dtype=bool)
+    t, p = ports["type"].to_numpy(dtype=object), ports["port"].to_numpy(dtype=object)
+    return np.array([(a, b) in need for a, b in zip(t, p, strict=True)], dtype=bool)
 
 
 def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
@@ -200,7 +206,9 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         Severity.ERROR,
         SWITCHES.name,
         empty["row"].to_numpy(),
-        _msg(empty, lambda r: f"{r.type} switch {r.switch_id} needs port {r.port.upper()} ({r.port}_track, {r.port}_end)"),
+        _msg(
+            empty, lambda r: f"{r.type} switch {r.switch_id} needs port {r.port.upper()} ({r.port}_track, {r.port}_end)"
+        ),
     )
     used = inc[inc["switch_id"].notna()][["switch_id", "track", "end"]].drop_duplicates()
     m = ports[given].merge(used, on=["switch_id", "track", "end"], how="left", indicator=True)
@@ -212,8 +220,10 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         unused["row"].to_numpy(),
         _msg(
             unused,
-            lambda r: f"port {r.port.upper()} of switch {r.switch_id} ({r.track} {r.end}) is used by no connection "
-            f"naming the switch",
+            lambda r: (
+                f"port {r.port.upper()} of switch {r.switch_id} ({r.track} {r.end}) is used by no connection "
+                f"naming the switch"
+            ),
         ),
     )
     dup = ports[given & ports.duplicated(["switch_id", "track", "end"], keep="first").to_numpy()]
@@ -222,10 +232,16 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         Severity.ERROR,
         SWITCHES.name,
         dup["row"].to_numpy(),
-        _msg(dup, lambda r: f"track end {r.track} {r.end} is at two ports of switch {r.switch_id} (port {r.port.upper()})"),
+        _msg(
+            dup,
+            lambda r: f"track end {r.track} {r.end} is at two ports of switch {r.switch_id} (port {r.port.upper()})",
+        ),
     )
     m = inc[inc["switch_id"].notna()].merge(
-        ports[given][["switch_id", "track", "end"]].drop_duplicates(), on=["switch_id", "track", "end"], how="left", indicator=True
+        ports[given][["switch_id", "track", "end"]].drop_duplicates(),
+        on=["switch_id", "track", "end"],
+        how="left",
+        indicator=True,
     )
     known = set(net.switches["switch_id"].astype(object))
     stray = m[(m["_merge"] == "left_only") & m["switch_id"].isin(known)].drop_duplicates("row")
@@ -257,11 +273,19 @@ def _navigability(net: Network, ports: pd.DataFrame, out: _Out) -> None:
     p = ports[ports["track"].notna()][["switch_id", "port", "track", "end", "type", "row"]]
     a = c.reset_index().rename(columns={"index": "crow"})
     a = a.astype({"switch_id": object, "track_a": object, "end_a": object, "track_b": object, "end_b": object})
-    a = a.merge(p.rename(columns={"port": "pa", "track": "track_a", "end": "end_a"}), on=["switch_id", "track_a", "end_a"])
-    a = a.merge(p[["switch_id", "port", "track", "end"]].rename(columns={"port": "pb", "track": "track_b", "end": "end_b"}))
-    a["pair"] = [tuple(sorted((x, y))) for x, y in zip(a["pa"], a["pb"], strict=True)]
+    a = a.merge(
+        p.rename(columns={"port": "pa", "track": "track_a", "end": "end_a"}), on=["switch_id", "track_a", "end_a"]
+    )
+    a = a.merge(
+        p[["switch_id", "port", "track", "end"]].rename(columns={"port": "pb", "track": "track_b", "end": "end_b"})
+    )
+    pa, pb = a["pa"].to_numpy(dtype=object), a["pb"].to_numpy(dtype=object)
+    a["pair"] = pd.Series(
+        [(x, y) if x <= y else (y, x) for x, y in zip(pa, pb, strict=True)], index=a.index, dtype=object
+    )
     routes = {t.value: {tuple(sorted(r)) for r in rs} for t, rs in SWITCH_ROUTES.items()}
-    is_route = np.array([pr in routes.get(t, set()) for pr, t in zip(a["pair"], a["type"], strict=True)], dtype=bool)
+    types = a["type"].to_numpy(dtype=object)
+    is_route = np.array([pr in routes.get(t, ()) for pr, t in zip(a["pair"], types, strict=True)], dtype=bool)
     nav = a["navigability"].astype(object).to_numpy()
     bad = a[(is_route & (nav == NONE)) | (~is_route & (nav != NONE))]
     nav_of = dict(zip(bad["crow"], bad["navigability"], strict=True))
@@ -278,7 +302,11 @@ def _navigability(net: Network, ports: pd.DataFrame, out: _Out) -> None:
                 if nav_of[i] == NONE
                 else f"are no route of the switch (branch↔branch) but navigability is {nav_of[i]}; expected none"
             ),
-            {"column": "navigability", "value": nav_of[i], "keys": {"switch_id": py(net.connections["switch_id"].iloc[i])}},
+            {
+                "column": "navigability",
+                "value": nav_of[i],
+                "keys": {"switch_id": py(net.connections["switch_id"].iloc[i])},
+            },
         ),
     )
     have = set(zip(a["switch_id"], a["pair"], strict=True))
@@ -289,8 +317,8 @@ def _navigability(net: Network, ports: pd.DataFrame, out: _Out) -> None:
             if (s, r) not in have and all(pd.notna(sw[f"{q}_track"].iloc[i]) for q in r):
                 missing.append((i, f"{r[0].upper()}–{r[1].upper()}"))
     texts: dict[int, list[str]] = {}
-    for i, r in missing:
-        texts.setdefault(i, []).append(r)
+    for i, route in missing:
+        texts.setdefault(i, []).append(route)
     out.add(
         "topology.navigability",
         Severity.ERROR,
@@ -314,8 +342,10 @@ def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
         bad["row"].to_numpy(),
         _msg(
             bad,
-            lambda r: f"track end {r.track} {r.end} has {r.n} connections, not all at a switch: a train cannot "
-            "leave one end two ways without a switch",
+            lambda r: (
+                f"track end {r.track} {r.end} has {r.n} connections, not all at a switch: a train cannot "
+                "leave one end two ways without a switch"
+            ),
         ),
     )
 
@@ -335,17 +365,18 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
     )
     length = dict(zip(tracks["track_id"].astype(object), tracks["length_m"].to_numpy(dtype=float), strict=True))
     lim = out.config.switch_min_spacing_m
-    per = d.drop_duplicates(["switch_id", "track"]).groupby("track")
+    per = d.drop_duplicates(["switch_id", "track"])
+    per = per[per.duplicated("track", keep=False)]
+    per = per[np.array([length.get(t, np.inf) < lim for t in per["track"].to_numpy(dtype=object)], dtype=bool)]
     rows: list[int] = []
     text: dict[int, str] = {}
-    for track, grp in per:
-        if len(grp) > 1 and length.get(track, np.inf) < lim:
-            i = int(grp["row"].iloc[-1])
-            rows.append(i)
-            text[i] = (
-                f"switches {', '.join(map(str, grp['switch_id']))} are joined by track {track} of only "
-                f"{length[track]:.1f} m (< {lim:g} m): their turnouts overlap"
-            )
+    for track, grp in per.groupby("track"):
+        i = int(grp["row"].iloc[-1])
+        rows.append(i)
+        text[i] = (
+            f"switches {', '.join(map(str, grp['switch_id']))} are joined by track {track} of only "
+            f"{length[track]:.1f} m (< {lim:g} m): their turnouts overlap"
+        )
     out.add("topology.switch_overlap", Severity.ERROR, SWITCHES.name, rows, lambda i: (text[i], {}))
 
 
@@ -354,15 +385,19 @@ def _ends(net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> N
     if net.connections.empty:
         return
     tid = tracks["track_id"].astype(object).to_numpy()
-    connected = set(inc["track"].astype(object))
-    ends_used = set(zip(inc["track"], inc["end"], strict=True))
+    inc_track, inc_end = inc["track"].to_numpy(dtype=object), inc["end"].to_numpy(dtype=object)
+    connected = set(inc_track)
+    ends_used = set(zip(inc_track, inc_end, strict=True))
     isolated = [i for i in range(n_decl) if tid[i] not in connected]
     out.add(
         "topology.isolated_track",
         Severity.WARNING,
         NETWORK_TRACKS.name,
         isolated,
-        lambda i: (f"track {tid[i]} has no connection in a network that has connections", {"keys": {"track_id": tid[i]}}),
+        lambda i: (
+            f"track {tid[i]} has no connection in a network that has connections",
+            {"keys": {"track_id": tid[i]}},
+        ),
     )
     lo, hi = _grid_extent(net)
     line, tr = column(tracks, "line_code"), column(tracks, "track")
@@ -392,10 +427,10 @@ def _ends(net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> N
 def _grid_extent(net: Network) -> tuple[dict[tuple[object, object], float], dict[tuple[object, object], float]]:
     if net.gis.empty:
         return {}, {}
-    g = net.gis.groupby(["line_code", "track"], observed=True)["km_m"].agg(["min", "max"])
-    return (
-        {(str(a), str(b)): float(v) for (a, b), v in g["min"].items()},
-        {(str(a), str(b)): float(v) for (a, b), v in g["max"].items()},
+    g = net.gis.groupby(["line_code", "track"], observed=True)["km_m"].agg(["min", "max"]).reset_index()
+    keys = [(str(a), str(b)) for a, b in zip(column(g, "line_code"), column(g, "track"), strict=True)]
+    return dict(zip(keys, g["min"].to_numpy(float), strict=True)), dict(
+        zip(keys, g["max"].to_numpy(float), strict=True)
     )
 
 
@@ -403,13 +438,14 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
     c = net.connections
     if c.empty:
         return
-    t = tracks.drop_duplicates("track_id").set_index(tracks["track_id"].astype(object).to_numpy())
+    t = tracks.drop_duplicates("track_id")
+    index = pd.Index(t["track_id"].astype(object).to_numpy())
     ta, tb = column(c, "track_a"), column(c, "track_b")
-    ok = np.isin(ta, t.index.to_numpy()) & np.isin(tb, t.index.to_numpy())
-    rows = np.flatnonzero(ok)
+    ia, ib = index.get_indexer(ta), index.get_indexer(tb)
+    rows = np.flatnonzero((ia >= 0) & (ib >= 0))
     if rows.size == 0:
         return
-    a, b = t.loc[ta[rows]], t.loc[tb[rows]]
+    a, b = t.iloc[ia[rows]], t.iloc[ib[rows]]
     la, lb = column(a, "line_code"), column(b, "line_code")
 
     def km(side: pd.DataFrame, ends: npt.NDArray[np.object_]) -> npt.NDArray[np.float64]:
@@ -440,4 +476,3 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
             {"value": round(float(abs(ka[at[i]] - kb[at[i]])), 3), "limit": config.km_jump_m},
         ),
     )
-

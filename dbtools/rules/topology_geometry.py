@@ -11,8 +11,6 @@ compared with α as the ratio measured/α.
 
 from __future__ import annotations
 
-
-
 import numpy as np
 import pandas as pd
 
@@ -123,12 +121,14 @@ def _crossover_angles(
     sw = net.switches
     number = dict(zip(column(sw, "switch_id"), column(sw, "switch_number"), strict=True))
     ref = inc[inc["track"].isin(list(xo)) & inc["switch_id"].notna()].copy()
-    ref = ref[[kind.get(o) != TrackKind.CROSSOVER.value and o in pos.index for o in ref["other"]]]
-    ref["n"] = [number.get(s, np.nan) for s in ref["switch_id"]]
+    known = set(pos.index)
+    other = ref["other"].to_numpy(dtype=object)
+    ref = ref[np.array([kind.get(o) != TrackKind.CROSSOVER.value and o in known for o in other], dtype=bool)]
+    ref["n"] = [number.get(s, np.nan) for s in ref["switch_id"].to_numpy(dtype=object)]
     ref = ref[np.isfinite(ref["n"].to_numpy(float))].drop_duplicates(["track", "end"])
     if ref.empty:
         return []
-    rows = pos.loc[ref["other"].to_numpy()].to_numpy(dtype=np.int64)
+    rows = pos.to_numpy(dtype=np.int64)[pos.index.get_indexer(ref["other"].to_numpy(dtype=object))]
     ref["axis"] = end_coordinates(geo, rows, ref["other_end"].to_numpy(dtype=object))[2]
     chords = chord_azimuths(net.track_points, set(ref["track"]))
     m = chords.merge(ref.rename(columns={"track": "track_id"}), on="track_id")
@@ -166,6 +166,3 @@ def _crossover_angles(
         config.max_findings_per_rule,
         loc.file(NETWORK_TRACKS.name),
     )
-
-
-

@@ -25,7 +25,8 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.geometry import GEOD
-from dbtools.network import Network
+from dbtools.network import Network, sorted_by
+from dbtools.rules.common import column
 from schemas.tables import GIS_SPACING_M
 
 F64 = npt.NDArray[np.float64]
@@ -51,9 +52,10 @@ def track_geometry(net: Network, tracks: pd.DataFrame) -> pd.DataFrame:
     out = {k: _nan(n) for k in ("lat_begin", "lon_begin", "az_begin", "lat_end", "lon_end", "az_end", "geo_length_m")}
     tid = tracks["track_id"].astype(object).to_numpy()
     own = _from_track_points(net.track_points)
-    has_points = np.isin(tid, own.index.to_numpy(dtype=object)) if len(own) else np.zeros(n, dtype=bool)
+    at = own.index.get_indexer(pd.Index(tid)) if len(own) else np.full(n, -1)
+    has_points = at >= 0
     if has_points.any():
-        sel = own.loc[tid[has_points]]
+        sel = own.iloc[at[has_points]]
         for k in out:
             out[k][has_points] = sel[k].to_numpy(dtype=float)
     _from_gis(net.gis, tracks, ~has_points, out)
@@ -95,9 +97,11 @@ def _from_gis(gis: pd.DataFrame, tracks: pd.DataFrame, todo: npt.NDArray[np.bool
     """Fill ``out`` for the tracks along a line grid (module doc)."""
     if gis.empty or not todo.any():
         return
-    g = gis.sort_values(["line_code", "track", "km_m"], kind="stable")
-    key_cols = [g["line_code"].astype(object).to_numpy(), g["track"].astype(object).to_numpy()]
-    codes, uniq = pd.MultiIndex.from_arrays(key_cols).factorize()
+    g = gis if sorted_by(gis, ("line_code", "track", "km_m")) else gis.sort_values(["line_code", "track", "km_m"])
+    grouped = g.groupby(["line_code", "track"], sort=False, observed=True)
+    codes = grouped.ngroup().to_numpy()
+    first = g.iloc[np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])]
+    uniq = pd.MultiIndex.from_arrays([column(first, "line_code"), column(first, "track")])
     km = g["km_m"].to_numpy(float)
     lat, lon = g["lat"].to_numpy(float), g["lon"].to_numpy(float)
     span = float(np.nanmax(km) - np.nanmin(km)) + 10.0 * GIS_SPACING_M
@@ -142,7 +146,9 @@ def _from_gis(gis: pd.DataFrame, tracks: pd.DataFrame, todo: npt.NDArray[np.bool
         out[name][idx] = v
 
 
-def end_coordinates(geo: pd.DataFrame, rows: npt.NDArray[np.int64], ends: npt.NDArray[np.object_]) -> tuple[F64, F64, F64]:
+def end_coordinates(
+    geo: pd.DataFrame, rows: npt.NDArray[np.int64], ends: npt.NDArray[np.object_]
+) -> tuple[F64, F64, F64]:
     """(lat, lon, outward azimuth) of the given track rows at the given ends."""
     is_begin = ends == "begin"
     pick = {c: geo[f"{c}_begin"].to_numpy(float)[rows] for c in ("lat", "lon", "az")}

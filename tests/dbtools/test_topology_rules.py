@@ -32,7 +32,9 @@ def broken(tmp_path: Path, name: str, edit: Callable[[Tables], None]) -> list[Fi
     dst = tmp_path / name
     shutil.copytree(NETWORKS / name, dst)
     tables = {
-        p.stem: pd.read_csv(p, dtype=str, keep_default_na=False) for p in dst.glob("*.csv") if p.stem != "feature_points"
+        p.stem: pd.read_csv(p, dtype=str, keep_default_na=False)
+        for p in dst.glob("*.csv")
+        if p.stem != "feature_points"
     }
     edit(tables)
     for stem, frame in tables.items():
@@ -114,7 +116,9 @@ def test_navigability_route_not_navigable(tmp_path: Path) -> None:
 
 def test_multiple_connections_without_switch(tmp_path: Path) -> None:
     def edit(t: Tables) -> None:
-        t["connections"] = add(t["connections"], track_a="A2", end_a="begin", track_b="A1", end_b="end", navigability="both")
+        t["connections"] = add(
+            t["connections"], track_a="A2", end_a="begin", track_b="A1", end_b="end", navigability="both"
+        )
 
     assert rules(broken(tmp_path, "junction", edit)) == {"topology.multiple_connections"}
 
@@ -212,7 +216,9 @@ def test_isolated_track(tmp_path: Path) -> None:
 
 def test_group_fields(tmp_path: Path) -> None:
     def edit(t: Tables) -> None:
-        t["balises"] = add(t["balises"], balise_id="GX", kind="G", km_actual_m="100", km_equipment_m="100", track_id="A1")
+        t["balises"] = add(
+            t["balises"], balise_id="GX", kind="G", km_actual_m="100", km_equipment_m="100", track_id="A1"
+        )
 
     f = broken(tmp_path, "junction", edit)
     assert rules(f) == {"balise.group_fields"}
@@ -303,7 +309,9 @@ def test_initial_pair_needs_key_fields(tmp_path: Path) -> None:
     def edit(t: Tables) -> None:
         b = t["balises"]
         b = add(b, balise_id="P1", kind="I1", line_code="9001", track="S", km_actual_m="100", km_equipment_m="100")
-        t["balises"] = add(b, balise_id="P2", kind="I2", line_code="9001", track="S", km_actual_m="105", km_equipment_m="105")
+        t["balises"] = add(
+            b, balise_id="P2", kind="I2", line_code="9001", track="S", km_actual_m="105", km_equipment_m="105"
+        )
 
     f = broken(tmp_path, "junction", edit)
     assert rules(f) == {"balise.key_fields"}

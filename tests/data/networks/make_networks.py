@@ -172,7 +172,9 @@ class Net:
             self.gis.append((line, track, km0 + k, *latlon(x, y)))
             k += STEP
 
-    def track(self, tid: str, line: str | None, track: str | None, kind: str, k0: float, k1: float, **kw: object) -> None:
+    def track(
+        self, tid: str, line: str | None, track: str | None, kind: str, k0: float, k1: float, **kw: object
+    ) -> None:
         length = kw.pop("length") if "length" in kw else abs(k1 - k0)
         self.tracks.append(
             {"track_id": tid, "line_code": line, "track": track, "kind": kind, "km_begin_m": k0, "km_end_m": k1}
@@ -251,13 +253,19 @@ def _csv(cols: tuple[str, ...], rows: list[dict[str, object]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _switch_at(line: str, km: float, x: float, y: float, n: float, radius: float, side: str, **kw: object) -> dict[str, object]:
+def _switch_at(
+    line: str, km: float, x: float, y: float, n: float, radius: float, side: str, **kw: object
+) -> dict[str, object]:
     lat, lon = latlon(x, y)
-    return {"switch_number": n, "diverging_radius_m": radius, "diverging_side": side, "line_code": line} | {
-        "km_m": km,
-        "lat": round(lat, 9),
-        "lon": round(lon, 9),
-    } | kw
+    return (
+        {"switch_number": n, "diverging_radius_m": radius, "diverging_side": side, "line_code": line}
+        | {
+            "km_m": km,
+            "lat": round(lat, 9),
+            "lon": round(lon, 9),
+        }
+        | kw
+    )
 
 
 def junction() -> Net:
@@ -310,10 +318,16 @@ def crossover() -> Net:
     n.own_track("X1", None, None, "crossover", crossover_path(300, -HALF_SPACING, d, num, radius, left=True))
     n.own_track("X2", None, None, "crossover", crossover_path(600, HALF_SPACING, d, num, radius, left=False))
     r = round(radius, 1)
-    n.point_switch("W1", ("D1", "end"), ("X1", "begin"), ("D2", "begin"), **_switch_at(line, 300, 300, -2, num, r, "left"))
+    n.point_switch(
+        "W1", ("D1", "end"), ("X1", "begin"), ("D2", "begin"), **_switch_at(line, 300, 300, -2, num, r, "left")
+    )
     n.point_switch("W2", ("U2", "begin"), ("X1", "end"), ("U1", "end"), **_switch_at(line, 360, 360, 2, num, r, "left"))
-    n.point_switch("W3", ("U2", "end"), ("U3", "begin"), ("X2", "begin"), **_switch_at(line, 600, 600, 2, num, r, "right"))
-    n.point_switch("W4", ("D3", "begin"), ("D2", "end"), ("X2", "end"), **_switch_at(line, 660, 660, -2, num, r, "right"))
+    n.point_switch(
+        "W3", ("U2", "end"), ("U3", "begin"), ("X2", "begin"), **_switch_at(line, 600, 600, 2, num, r, "right")
+    )
+    n.point_switch(
+        "W4", ("D3", "begin"), ("D2", "end"), ("X2", "end"), **_switch_at(line, 660, 660, -2, num, r, "right")
+    )
     n.group("D1", line, "D", 200)
     n.group("D2", line, "D", 320)  # beyond facing W1 (D runs km increasing): through branch
     n.group("X1", line, None, 328)  # … diverging branch, on the crossover
@@ -334,7 +348,7 @@ def station4() -> Net:
     a = math.atan(1 / num)
     s = (out - 2 * radius * (1 - math.cos(a))) / math.sin(a)
     ext = 2 * radius * math.sin(a) + s * math.cos(a)
-    for tid, tr, y, sign in (("3", "U", HALF_SPACING, 1.0), ("4", "D", -HALF_SPACING, -1.0)):
+    for tid, y, sign in (("3", HALF_SPACING, 1.0), ("4", -HALF_SPACING, -1.0)):
         p = Path2D(200, y).arc(radius, sign * a).straight(s).arc(radius, -sign * a).straight(600 - 2 * ext)
         p.arc(radius, -sign * a).straight(s).arc(radius, sign * a)
         n.own_track(tid, line, tid, "station", p)
@@ -348,10 +362,18 @@ def station4() -> Net:
     ):
         n.track(tid, line, tr, "main", k0, k1)
     y = HALF_SPACING
-    n.point_switch("W1", ("U1", "end"), ("3", "begin"), ("U2", "begin"), **_switch_at(line, 200, 200, y, num, radius, "left"))
-    n.point_switch("W2", ("U3", "begin"), ("U2", "end"), ("3", "end"), **_switch_at(line, 800, 800, y, num, radius, "right"))
-    n.point_switch("W3", ("D1", "end"), ("D2", "begin"), ("4", "begin"), **_switch_at(line, 200, 200, -y, num, radius, "right"))
-    n.point_switch("W4", ("D3", "begin"), ("4", "end"), ("D2", "end"), **_switch_at(line, 800, 800, -y, num, radius, "left"))
+    n.point_switch(
+        "W1", ("U1", "end"), ("3", "begin"), ("U2", "begin"), **_switch_at(line, 200, 200, y, num, radius, "left")
+    )
+    n.point_switch(
+        "W2", ("U3", "begin"), ("U2", "end"), ("3", "end"), **_switch_at(line, 800, 800, y, num, radius, "right")
+    )
+    n.point_switch(
+        "W3", ("D1", "end"), ("D2", "begin"), ("4", "begin"), **_switch_at(line, 200, 200, -y, num, radius, "right")
+    )
+    n.point_switch(
+        "W4", ("D3", "begin"), ("4", "end"), ("D2", "end"), **_switch_at(line, 800, 800, -y, num, radius, "left")
+    )
     n.group("D1", line, "D", 100)
     n.group("D2", line, "D", 240)  # beyond facing W3 (D: km increasing)
     n.group("4", line, None, 240)
@@ -370,7 +392,12 @@ def double_slip() -> Net:
     a = math.atan(1 / 9)
     n.line("9005", "S", Path2D(0, 0).straight(1000))
     n.line("9006", "S", Path2D(500 - 500 * math.cos(a), -500 * math.sin(a), a).straight(1000))
-    for tid, line, k0, k1 in (("P1", "9005", 0, 500), ("P2", "9005", 500, 1000), ("Q1", "9006", 0, 500), ("Q2", "9006", 500, 1000)):
+    for tid, line, k0, k1 in (
+        ("P1", "9005", 0, 500),
+        ("P2", "9005", 500, 1000),
+        ("Q1", "9006", 0, 500),
+        ("Q2", "9006", 500, 1000),
+    ):
         n.track(tid, line, "S", "main", k0, k1)
     lat, lon = latlon(500, 0)
     n.switches.append(
