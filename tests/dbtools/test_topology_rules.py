@@ -316,3 +316,19 @@ def test_initial_pair_needs_key_fields(tmp_path: Path) -> None:
     f = broken(tmp_path, "junction", edit)
     assert rules(f) == {"balise.key_fields"}
     assert {x.column for x in f} == {"station_code"}
+
+
+def test_sarif_describes_topology_rules_and_points_at_the_line(tmp_path: Path) -> None:
+    from dbtools.interchange.ci import FAMILIES, sarif
+
+    def edit(t: Tables) -> None:
+        c = t["connections"]
+        c.loc[where(c, navigability="none"), "navigability"] = "both"
+
+    log = sarif(broken(tmp_path, "junction", edit))
+    run = log["runs"][0]
+    assert [r["shortDescription"]["text"] for r in run["tool"]["driver"]["rules"]] == [FAMILIES["topology"]]
+    region = run["results"][0]["locations"][0]["physicalLocation"]["region"]
+    lines = (tmp_path / "junction" / "connections.csv").read_text().splitlines()
+    assert {"A2", "B1", "both", "W1"} <= set(lines[region["startLine"] - 1].split(","))  # the branch↔branch row
+    assert region["startColumn"] > 1
