@@ -183,7 +183,7 @@ def centreline(net: Network, track: pd.Series) -> Centreline:
 def _line_grid(net: Network, line_code: str, track: str) -> pd.DataFrame:
     groups = net.cached(
         ("topology", "gis_groups"),
-        lambda: {k: v for k, v in net.gis.groupby(["line_code", "track"], sort=False, observed=True)},
+        lambda: dict(iter(net.gis.groupby(["line_code", "track"], sort=False, observed=True))),
     )
     empty = net.gis.iloc[0:0]
     return groups.get((line_code, track), empty)

@@ -18,7 +18,8 @@ from dbtools.topology import all_tracks
 HERE = Path(__file__).resolve().parents[1] / "data" / "networks"
 
 
-def _generator() -> ModuleType:
+def generator() -> ModuleType:
+    """The generator script as a module."""
     spec = importlib.util.spec_from_file_location("make_networks", HERE / "make_networks.py")
     assert spec and spec.loader
     mod = importlib.util.module_from_spec(spec)
@@ -28,7 +29,7 @@ def _generator() -> ModuleType:
 
 
 def test_committed_files_equal_a_fresh_generation() -> None:
-    fresh = _generator().generate()
+    fresh = generator().generate()
     assert set(fresh) == {p.name for p in HERE.iterdir() if p.is_dir() and not p.name.startswith("_")}
     for name, files in fresh.items():
         assert {p.name for p in (HERE / name).iterdir()} == set(files), name
@@ -38,7 +39,7 @@ def test_committed_files_equal_a_fresh_generation() -> None:
 
 def test_crossover_radius_gives_the_extent() -> None:
     """e = 2·R·tan(α/2) + d·cot α (generator doc): R for 60 m, then the drawn path ends 60 m on, 4 m aside."""
-    g = _generator()
+    g = generator()
     r = g.radius_for_extent(60.0, 4.0, 10.0)
     x, y, h = g.crossover_path(0.0, 0.0, 4.0, 10.0, r, left=True).at(1e9)
     assert (x, y, h) == pytest.approx((60.0, 4.0, 0.0), abs=1e-9)

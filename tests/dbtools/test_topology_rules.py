@@ -7,13 +7,21 @@ from __future__ import annotations
 import shutil
 from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
 
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from dbtools.network import Network, canonical, empty_frame
+from dbtools.rules.common import Locator
 from dbtools.rules.config import ValidationConfig
+from dbtools.rules.topology import check_topology
 from dbtools.validate import validate_path
 from schemas.findings import Finding
+from schemas.tables import DB_TABLES
+from tests.dbtools.test_networks_data import generator as _generator
 
 NETWORKS = Path(__file__).resolve().parents[1] / "data" / "networks"
 NAMES = ("junction", "crossover", "station4", "double_slip")
@@ -267,7 +275,7 @@ def test_c_balises_ambiguous_along_route(tmp_path: Path) -> None:
 
     def edit(t: Tables) -> None:
         b = t["balises"]
-        for bid, kind, line, st, km, sig, dist in (
+        for bid, kind, line, station, km, sig, dist in (
             ("P1", "I1", "9001", "01", "100", "", ""),
             ("P2", "I2", "9001", "01", "105", "", ""),
             ("C1", "C", "9001", "01", "300", "H", "200"),
@@ -275,7 +283,7 @@ def test_c_balises_ambiguous_along_route(tmp_path: Path) -> None:
             ("Q2", "I2", "9002", "02", "105", "", ""),
             ("C2", "C", "9002", "02", "150", "H", "50"),
         ):
-            b = add(b, balise_id=bid, kind=kind, line_code=line, station_code=st, track="S", km_actual_m=km)
+            b = add(b, balise_id=bid, kind=kind, line_code=line, station_code=station, track="S", km_actual_m=km)
             b.loc[b.index[-1], ["km_equipment_m", "signal_type", "dist_from_initial_m"]] = [km, sig, dist]
         t["balises"] = b
 
@@ -332,3 +340,65 @@ def test_sarif_describes_topology_rules_and_points_at_the_line(tmp_path: Path) -
     lines = (tmp_path / "junction" / "connections.csv").read_text().splitlines()
     assert {"A2", "B1", "both", "W1"} <= set(lines[region["startLine"] - 1].split(","))  # the branch↔branch row
     assert region["startColumn"] > 1
+
+
+def test_switch_overlap_by_a_short_track() -> None:
+    """X1 and X2 (60 m) each join two switches: with a 100 m minimum spacing they overlap."""
+    f = validate_path(NETWORKS / "crossover", config=ValidationConfig(switch_min_spacing_m=100.0))
+    assert rules(f) == {"topology.switch_overlap"}
+    assert sorted(x.message.split(" are joined")[0] for x in f) == ["switches W1, W2", "switches W3, W4"]
+
+
+@settings(max_examples=15, database=None)
+@given(n=st.floats(8.0, 18.5), d=st.floats(3.8, 5.0))
+def test_crossover_angle_property(tmp_path_factory: pytest.TempPathFactory, n: float, d: float) -> None:
+    """A crossover drawn with 1:n turnouts (R = 25·n m, typical of 1:9 at 190 m … 1:18.5 at
+    500 m) between tracks d apart passes with switch number n and fails with 1.8·n or n/1.8.
+    (The crossover's far end is left open in this one-switch network: ``topology.open_end``.)"""
+    gen = _generator()
+    path = gen.crossover_path(0.0, 0.0, d, n, 25.0 * n, left=True)
+    length = path.length
+    pos = [*(p for p in range(0, int(length), 20) if length - p >= 1.0), length]
+    points = pd.DataFrame({"track_id": "X", "pos_m": pos})
+    xy = [path.at(p) for p in pos]
+    lat_lon = [gen.latlon(x, y) for x, y, _ in xy]
+    points["lat"], points["lon"] = [a for a, _ in lat_lon], [b for _, b in lat_lon]
+    found = {}
+    for label, number in (("right", n), ("high", 1.8 * n), ("low", n / 1.8)):
+        net = _crossover_network(gen, points, length, xy[-1][0], number)
+        found[label] = [
+            f.rule for f in check_topology(net, ValidationConfig(), Locator()) if f.rule != "topology.open_end"
+        ]
+    assert found == {"right": [], "high": ["topology.crossover_angle"], "low": ["topology.crossover_angle"]}
+
+
+def _crossover_network(gen: ModuleType, points: pd.DataFrame, length: float, x_end: float, number: float) -> Network:
+    """Line L: D at y = 0 and U where the crossover ends (both straight east, km = x), D split
+    at km 0 by switch W1 whose diverging branch is crossover X (``points``) up to U at x_end."""
+    tables = {t.name: empty_frame(t) for t in DB_TABLES}
+    y_u = (float(points["lat"].iloc[-1]) - gen.LAT0) * 111_412.0
+    km = [20.0 * i for i in range(-10, 21)]
+    gis = [("L", "D", k, *gen.latlon(k, 0.0)) for k in km] + [("L", "U", k, *gen.latlon(k, y_u)) for k in km]
+    tracks = [
+        ("D1", "L", "D", "main", -200.0, 0.0, 200.0),
+        ("D2", "L", "D", "main", 0.0, 400.0, 400.0),
+        ("X", None, None, "crossover", None, None, length),
+    ]
+    ports = ["switch_id", "type", "a1_track", "a1_end", "b1_track", "b1_end", "b2_track", "b2_end", "switch_number"]
+    conns = [("D1", "end", "X", "begin", "both", "W1"), ("D1", "end", "D2", "begin", "both", "W1")]
+    frames = {
+        "gis": pd.DataFrame(gis, columns=["line_code", "track", "km_m", "lat", "lon"]),
+        "tracks": pd.DataFrame(
+            tracks, columns=["track_id", "line_code", "track", "kind", "km_begin_m", "km_end_m", "length_m"]
+        ),
+        "switches": pd.DataFrame([("W1", "point", "D1", "end", "X", "begin", "D2", "begin", number)], columns=ports),
+        "connections": pd.DataFrame(
+            [*conns, ("X", "begin", "D2", "begin", "none", "W1")],
+            columns=["track_a", "end_a", "track_b", "end_b", "navigability", "switch_id"],
+        ),
+        "track_points": points,
+    }
+    for t in DB_TABLES:
+        if t.name in frames:
+            tables[t.name] = canonical(t, frames[t.name])
+    return Network(tables, origin="test")
