@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -119,16 +120,24 @@ def main() -> None:
     net = build(args.lines, args.shared_ids)
     t1 = time.perf_counter()
     cfg = ValidationConfig()
+    c1, w1 = time.process_time(), time.perf_counter()
     topo = check_topology(net, cfg, Locator())
-    t2 = time.perf_counter()
+    c2, w2 = time.process_time(), time.perf_counter()
     bal = check_balise_network(net, cfg, Locator())
-    t3 = time.perf_counter()
+    c3, w3 = time.process_time(), time.perf_counter()
     print(
         f"{len(net.tracks)} tracks, {len(net.connections)} connections, {len(net.switches)} switches, "
-        f"{len(net.balises)} balises, {len(net.gis)} GIS points (built in {t1 - t0:.1f} s)"
+        f"{len(net.balises)} balises, {len(net.gis)} GIS points (built in {t1 - t0:.1f} s); "
+        f"load {os.getloadavg()[0]:.1f}/{os.cpu_count()} cores"
     )
-    print(f"check_topology       {t2 - t1:6.2f} s  {len(topo)} findings {sorted({f.rule for f in topo})}")
-    print(f"check_balise_network {t3 - t2:6.2f} s  {len(bal)} findings {sorted({f.rule for f in bal})}")
+    print(
+        f"check_topology       wall {w2 - w1:6.2f} s, CPU {c2 - c1:6.2f} s: {len(topo)} findings "
+        f"{sorted({f.rule for f in topo})}"
+    )
+    print(
+        f"check_balise_network wall {w3 - w2:6.2f} s, CPU {c3 - c2:6.2f} s: {len(bal)} findings "
+        f"{sorted({f.rule for f in bal})}"
+    )
 
 
 if __name__ == "__main__":
