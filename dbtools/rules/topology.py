@@ -256,10 +256,14 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
 
 def _msg(frame: pd.DataFrame, text: Callable[[pd.Series], str]) -> Callable[[int], tuple[str, dict[str, object]]]:
     """Build findings from the rows of ``frame`` whose ``row`` column is the located row."""
-    by_row: dict[int, pd.Series] = {}
-    for _, r in frame.iterrows():
-        by_row.setdefault(int(r["row"]), r)
-    return lambda i: (text(by_row[i]), {"keys": _keys(by_row[i])})
+    rows = frame["row"].to_numpy(dtype=np.int64)
+    first = {int(r): k for k, r in reversed(list(enumerate(rows)))}  # the frame's first row of each located row
+
+    def build(i: int) -> tuple[str, dict[str, object]]:
+        r = frame.iloc[first[i]]
+        return text(r), {"keys": _keys(r)}
+
+    return build
 
 
 def _keys(r: pd.Series) -> dict[str, object]:
