@@ -13,7 +13,7 @@ import pytest
 
 from dbtools.rules.track_geometry import track_geometry
 from dbtools.sources import read_source_set
-from dbtools.topology import all_tracks
+from dbtools.topology import all_tracks, centreline
 
 HERE = Path(__file__).resolve().parents[1] / "data" / "networks"
 
@@ -55,3 +55,18 @@ def test_lengths_are_true_on_the_ellipsoid(name: str) -> None:
     tracks = all_tracks(net)
     geo = track_geometry(net, tracks)
     assert (abs(tracks["length_m"] - geo["geo_length_m"]) < 0.05).all()
+
+
+@pytest.mark.parametrize("name", ["junction", "crossover", "station4", "double_slip"])
+def test_vectorised_ends_agree_with_centreline(name: str) -> None:
+    """track_geometry (all tracks at once) places each end where dbtools.topology.centreline
+    (one track at a time) has its first/last point: the ends lie on the 20 m grid here."""
+    net, _ = read_source_set(HERE / name)
+    tracks = all_tracks(net)
+    geo = track_geometry(net, tracks)
+    for i in range(len(tracks)):
+        c = centreline(net, tracks.iloc[i])
+        assert geo["lat_begin"].iloc[i] == pytest.approx(c.lat[0], abs=1e-9)
+        assert geo["lon_begin"].iloc[i] == pytest.approx(c.lon[0], abs=1e-9)
+        assert geo["lat_end"].iloc[i] == pytest.approx(c.lat[-1], abs=1e-9)
+        assert geo["lon_end"].iloc[i] == pytest.approx(c.lon[-1], abs=1e-9)
