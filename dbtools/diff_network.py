@@ -24,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools.gis.geometry import GEOD
+from dbtools.rules.common import texts
 from schemas.model import Table
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES, TRACK_POINTS
 from schemas.units import format_km
@@ -146,14 +147,14 @@ def track_points_summary(td: RowDiff) -> list[str]:
     count: dict[str, dict[str, int]] = defaultdict(lambda: {"added": 0, "removed": 0, "moved": 0})
     worst: dict[str, float] = defaultdict(float)
     for kind, frame in (("added", td.added), ("removed", td.removed)):
-        for t in frame["track_id"].astype(object):
+        for t in texts(frame["track_id"]):
             count[str(t)][kind] += 1
     if len(td.old):
         o, n = td.old, td.new
         _, _, d = GEOD.inv(
             o["lon"].to_numpy(float), o["lat"].to_numpy(float), n["lon"].to_numpy(float), n["lat"].to_numpy(float)
         )
-        for t, dist in zip(n["track_id"].astype(object), np.atleast_1d(d), strict=True):
+        for t, dist in zip(texts(n["track_id"]), np.atleast_1d(d), strict=True):
             count[str(t)]["moved"] += 1
             worst[str(t)] = max(worst[str(t)], float(dist))
     out = []

@@ -15,7 +15,16 @@ import pyarrow.compute as pc
 from schemas.frames import PANDAS_DTYPE
 from schemas.model import Table
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES, TRACK_POINTS
-from schemas.tables import BALISE_GROUP_COLUMNS, BALISES, DB_TABLES, FEATURE_POINTS, GIS, KM_BREAKS, LINES, TABLES_SINCE_V2
+from schemas.tables import (
+    BALISE_GROUP_COLUMNS,
+    BALISES,
+    DB_TABLES,
+    FEATURE_POINTS,
+    GIS,
+    KM_BREAKS,
+    LINES,
+    TABLES_SINCE_V2,
+)
 
 T = TypeVar("T")
 

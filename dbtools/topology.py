@@ -121,7 +121,8 @@ def topology(net: Network) -> Topology:
     def build() -> Topology:
         topo = Topology(all_tracks(net), defaultdict(list), defaultdict(list))
         c = net.connections
-        cols = [c[k].astype(object).to_numpy() for k in ("track_a", "end_a", "track_b", "end_b", "navigability")]
+        keys = ("track_a", "end_a", "track_b", "end_b", "navigability")
+        cols = [c[k].astype(object).where(c[k].notna(), None).to_numpy() for k in keys]
         sw = c["switch_id"].astype(object).where(c["switch_id"].notna(), None).to_numpy()
         joined, exits = topo.joined, topo.exits
         for ta, ea, tb, eb, nav, s in zip(*cols, sw, strict=True):

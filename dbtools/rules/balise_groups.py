@@ -39,7 +39,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
-from dbtools.rules.common import Locator, capped, column, isin, py
+from dbtools.rules.common import Locator, capped, column, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.topology import all_tracks, topology
 from schemas.enums import BaliseKind, Severity
@@ -57,7 +57,7 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     tid = column(b, "track_id") if "track_id" in b.columns else np.full(n, None, dtype=object)
     km = column(b, "km_actual_m")
     tid = tid.copy()
-    tid[~isin(tid, tr["track_id"].astype(object).to_numpy())] = None  # unknown: topology.invalid_reference
+    tid[~isin(tid, texts(tr["track_id"]))] = None  # unknown: topology.invalid_reference
     free = np.flatnonzero(pd.isna(tid))
     if free.size:
         along = tr[tr["line_code"].notna() & tr["km_begin_m"].notna() & tr["km_end_m"].notna()]
@@ -70,10 +70,10 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
         lo = np.minimum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
         hi = np.maximum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
         m = m[(k >= lo - 1e-6) & (k <= hi + 1e-6)].drop_duplicates("i")
-        tid[m["i"].to_numpy()] = m["track_id"].to_numpy(dtype=object)
+        tid[m["i"].to_numpy()] = texts(m["track_id"])
     pos = np.full(n, np.nan)
     t = tr.drop_duplicates("track_id")
-    at = pd.Index(t["track_id"].astype(object).to_numpy()).get_indexer(tid)
+    at = pd.Index(texts(t["track_id"])).get_indexer(pd.Index(tid))
     has = np.flatnonzero(at >= 0)
     rows = t.iloc[at[has]]
     k0, k1 = column(rows, "km_begin_m"), column(rows, "km_end_m")
@@ -87,7 +87,7 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
 def _from_points(net: Network, tid: npt.NDArray[np.object_], km: F64, pos: F64) -> None:
     """Position by the km of ``track_points`` (tracks along no line km range)."""
     tp = net.track_points
-    todo = np.flatnonzero(np.isnan(pos) & pd.notna(tid) & isin(tid, tp["track_id"].astype(object).unique()))
+    todo = np.flatnonzero(np.isnan(pos) & pd.notna(tid) & isin(tid, texts(tp["track_id"])))
     if todo.size == 0:
         return
     groups = dict(iter(tp[tp["km_m"].notna()].groupby("track_id", observed=True)))
@@ -187,7 +187,7 @@ def _places(
     f = f.sort_values(["nid_c", "nid_bg", "track_id", "pos", "km"], kind="stable")
     ident = f[["nid_c", "nid_bg"]].to_numpy()
     new_id = np.r_[True, np.any(ident[1:] != ident[:-1], axis=1)] if len(f) else np.zeros(0, dtype=bool)
-    tr = f["track_id"].to_numpy(dtype=object)
+    tr = texts(f["track_id"])
     where = np.where(np.isfinite(f["pos"].to_numpy()), f["pos"].to_numpy(), f["km"].to_numpy())
     far = np.r_[True, (tr[1:] != tr[:-1]) | (np.abs(np.diff(where)) > config.group_span_m)] if len(f) else new_id
     f["place"] = np.cumsum(new_id | far) - 1
@@ -315,7 +315,13 @@ def _ambiguous(
     for r, ident in walkers:
         on_track[str(tid[r])].append((float(pos[r]), r, ident))
     topo = topology(net)
-    length = dict(zip(topo.tracks["track_id"].astype(object), topo.tracks["length_m"].to_numpy(float), strict=True))
+    length = dict(
+        zip(
+            texts(topo.tracks["track_id"]),
+            topo.tracks["length_m"].to_numpy(float),
+            strict=True,
+        )
+    )
     found: dict[tuple[int, int], float] = {}
     w = config.id_window_m
     for r, ident in walkers:

@@ -100,3 +100,8 @@ def isin(values: npt.ArrayLike, known: npt.ArrayLike | set[Any]) -> npt.NDArray[
     sorts and compares Python objects: seconds for 10⁵ ids)."""
     index = pd.Index(pd.unique(np.asarray(list(known) if isinstance(known, set) else known, dtype=object)))
     return np.asarray(index.get_indexer(np.asarray(values, dtype=object)) >= 0, dtype=bool)
+
+
+def texts(s: pd.Series) -> npt.NDArray[np.object_]:
+    """A text column as an object array with None (never pd.NA) for missing values."""
+    return np.asarray(s.astype(object).where(s.notna(), None).to_numpy(dtype=object), dtype=object)

@@ -56,7 +56,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
-from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py
+from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
 from dbtools.topology import all_tracks
@@ -101,7 +101,7 @@ def check_topology(net: Network, config: ValidationConfig, loc: Locator) -> list
         return []
     out = _Out(config, loc)
     tracks = all_tracks(net)
-    known = set(tracks["track_id"].astype(object))
+    known = set(texts(tracks["track_id"]))
     _references(net, known, out)
     ports = _ports(net.switches)
     inc = _incidence(net.connections)
@@ -134,7 +134,7 @@ def _references(net: Network, known: set[str], out: _Out) -> None:
         ref(CONNECTIONS.name, net.connections, col, "connection")
     for p in ALL_PORTS:
         ref(SWITCHES.name, net.switches, f"{p}_track", f"switch port {p.upper()}")
-    declared = set(net.tracks["track_id"].astype(object))
+    declared = set(texts(net.tracks["track_id"]))
     tp_ids = column(net.track_points, "track_id")
     bad = np.flatnonzero(~isin(tp_ids, declared))
     out.add(
@@ -147,7 +147,7 @@ def _references(net: Network, known: set[str], out: _Out) -> None:
     if "track_id" in net.balises.columns:
         ref(BALISES.name, net.balises, "track_id", "balise")
     sid = column(net.connections, "switch_id")
-    switches = net.switches["switch_id"].astype(object).to_numpy()
+    switches = texts(net.switches["switch_id"])
     bad = np.flatnonzero(pd.notna(sid) & ~isin(sid, switches))
     out.add(
         "topology.invalid_reference",
@@ -193,7 +193,7 @@ def _incidence(c: pd.DataFrame) -> pd.DataFrame:
 
 def _required(ports: pd.DataFrame) -> npt.NDArray[np.bool_]:
     need = {(t.value, p) for t, ps in SWITCH_PORTS.items() for p in ps}
-    t, p = ports["type"].to_numpy(dtype=object), ports["port"].to_numpy(dtype=object)
+    t, p = texts(ports["type"]), texts(ports["port"])
     return np.array([(a, b) in need for a, b in zip(t, p, strict=True)], dtype=bool)
 
 
@@ -243,7 +243,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         how="left",
         indicator=True,
     )
-    known = set(net.switches["switch_id"].astype(object))
+    known = set(texts(net.switches["switch_id"]))
     stray = m[(m["_merge"] == "left_only") & m["switch_id"].isin(known)].drop_duplicates("row")
     out.add(
         "topology.switch_port",
@@ -283,16 +283,18 @@ def _navigability(net: Network, ports: pd.DataFrame, out: _Out) -> None:
     a = a.merge(
         p[["switch_id", "port", "track", "end"]].rename(columns={"port": "pb", "track": "track_b", "end": "end_b"})
     )
-    pa, pb = a["pa"].to_numpy(dtype=object), a["pb"].to_numpy(dtype=object)
+    pa, pb = texts(a["pa"]), texts(a["pb"])
     a["pair"] = pd.Series(
         [(x, y) if x <= y else (y, x) for x, y in zip(pa, pb, strict=True)], index=a.index, dtype=object
     )
     routes = {t.value: {tuple(sorted(r)) for r in rs} for t, rs in SWITCH_ROUTES.items()}
-    types = a["type"].to_numpy(dtype=object)
+    types = texts(a["type"])
     is_route = np.array([pr in routes.get(t, ()) for pr, t in zip(a["pair"], types, strict=True)], dtype=bool)
-    nav = a["navigability"].astype(object).to_numpy()
-    bad = a[(is_route & (nav == NONE)) | (~is_route & (nav != NONE))]
-    nav_of = dict(zip(bad["crow"], bad["navigability"], strict=True))
+    nav = texts(a["navigability"])
+    given = pd.notna(nav)  # a missing one is schema.required
+    wrong = given & ((is_route & (nav == NONE)) | (~is_route & (nav != NONE)))
+    bad = a[wrong]
+    nav_of = dict(zip(bad["crow"], nav[wrong], strict=True))
     pair_of = dict(zip(bad["crow"], bad["pair"], strict=True))
     out.add(
         "topology.navigability",
@@ -320,16 +322,17 @@ def _navigability(net: Network, ports: pd.DataFrame, out: _Out) -> None:
         for r in routes.get(str(t), set()):
             if (s, r) not in have and all(pd.notna(sw[f"{q}_track"].iloc[i]) for q in r):
                 missing.append((i, f"{r[0].upper()}–{r[1].upper()}"))
-    texts: dict[int, list[str]] = {}
+    route_texts: dict[int, list[str]] = {}
     for i, route in missing:
-        texts.setdefault(i, []).append(route)
+        route_texts.setdefault(i, []).append(route)
     out.add(
         "topology.navigability",
         Severity.ERROR,
         SWITCHES.name,
-        sorted(texts),
+        sorted(route_texts),
         lambda i: (
-            f"route(s) {', '.join(texts[i])} of switch {sw['switch_id'].iloc[i]} have no connection naming the switch",
+            f"route(s) {', '.join(route_texts[i])} of switch {sw['switch_id'].iloc[i]} have no connection "
+            "naming the switch",
             {"keys": {"switch_id": py(sw["switch_id"].iloc[i])}},
         ),
     )
@@ -367,11 +370,17 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
         first["row"].to_numpy(),
         _msg(first, lambda r: f"switches {names[(r.track, r.end)]} share the port {r.track} {r.end}"),
     )
-    length = dict(zip(tracks["track_id"].astype(object), tracks["length_m"].to_numpy(dtype=float), strict=True))
+    length = dict(
+        zip(
+            texts(tracks["track_id"]),
+            tracks["length_m"].to_numpy(dtype=float),
+            strict=True,
+        )
+    )
     lim = out.config.switch_min_spacing_m
     per = d.drop_duplicates(["switch_id", "track"])
     per = per[per.duplicated("track", keep=False)]
-    per = per[np.array([length.get(t, np.inf) < lim for t in per["track"].to_numpy(dtype=object)], dtype=bool)]
+    per = per[np.array([length.get(t, np.inf) < lim for t in texts(per["track"])], dtype=bool)]
     rows: list[int] = []
     text: dict[int, str] = {}
     for track, grp in per.groupby("track"):
@@ -388,8 +397,11 @@ def _ends(net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> N
     n_decl = len(net.tracks)
     if net.connections.empty:
         return
-    tid = tracks["track_id"].astype(object).to_numpy()
-    inc_track, inc_end = inc["track"].to_numpy(dtype=object), inc["end"].to_numpy(dtype=object)
+    tid = texts(tracks["track_id"])
+    inc_track, inc_end = (
+        texts(inc["track"]),
+        texts(inc["end"]),
+    )
     connected = set(inc_track)
     ends_used = set(zip(inc_track, inc_end, strict=True))
     isolated = [i for i in range(n_decl) if tid[i] not in connected]
@@ -443,9 +455,9 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
     if c.empty:
         return
     t = tracks.drop_duplicates("track_id")
-    index = pd.Index(t["track_id"].astype(object).to_numpy())
+    index = pd.Index(texts(t["track_id"]))
     ta, tb = column(c, "track_a"), column(c, "track_b")
-    ia, ib = index.get_indexer(ta), index.get_indexer(tb)
+    ia, ib = index.get_indexer(pd.Index(ta)), index.get_indexer(pd.Index(tb))
     rows = np.flatnonzero((ia >= 0) & (ib >= 0))
     if rows.size == 0:
         return

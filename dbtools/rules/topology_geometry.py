@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools.network import Network
-from dbtools.rules.common import Locator, capped, column, py
+from dbtools.rules.common import Locator, capped, column, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.track_geometry import chord_azimuths, distance_m, end_coordinates, track_geometry
 from schemas.enums import Severity, TrackKind
@@ -27,7 +27,7 @@ def check_geometry(
     net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, config: ValidationConfig, loc: Locator
 ) -> list[Finding]:
     geo = net.cached(("rules", "track_geometry"), lambda: track_geometry(net, tracks))
-    pos = pd.Series(np.arange(len(tracks)), index=tracks["track_id"].astype(object).to_numpy())
+    pos = pd.Series(np.arange(len(tracks)), index=texts(tracks["track_id"]))
     pos = pos[~pos.index.duplicated()]
     return (
         _gaps(net, geo, pos, config, loc)
@@ -114,7 +114,13 @@ def _crossover_angles(
     config: ValidationConfig,
     loc: Locator,
 ) -> list[Finding]:
-    kind = dict(zip(tracks["track_id"].astype(object), tracks["kind"].astype(object), strict=True))
+    kind = dict(
+        zip(
+            texts(tracks["track_id"]),
+            texts(tracks["kind"]),
+            strict=True,
+        )
+    )
     xo = {t for t, k in kind.items() if k == TrackKind.CROSSOVER.value}
     if not xo or net.track_points.empty:
         return []
@@ -122,14 +128,14 @@ def _crossover_angles(
     number = dict(zip(column(sw, "switch_id"), column(sw, "switch_number"), strict=True))
     ref = inc[inc["track"].isin(list(xo)) & inc["switch_id"].notna()].copy()
     known = set(pos.index)
-    other = ref["other"].to_numpy(dtype=object)
+    other = texts(ref["other"])
     ref = ref[np.array([kind.get(o) != TrackKind.CROSSOVER.value and o in known for o in other], dtype=bool)]
-    ref["n"] = [number.get(s, np.nan) for s in ref["switch_id"].to_numpy(dtype=object)]
+    ref["n"] = [number.get(s, np.nan) for s in texts(ref["switch_id"])]
     ref = ref[np.isfinite(ref["n"].to_numpy(float))].drop_duplicates(["track", "end"])
     if ref.empty:
         return []
-    rows = pos.to_numpy(dtype=np.int64)[pos.index.get_indexer(ref["other"].to_numpy(dtype=object))]
-    ref["axis"] = end_coordinates(geo, rows, ref["other_end"].to_numpy(dtype=object))[2]
+    rows = pos.to_numpy(dtype=np.int64)[pos.index.get_indexer(pd.Index(texts(ref["other"])))]
+    ref["axis"] = end_coordinates(geo, rows, texts(ref["other_end"]))[2]
     chords = chord_azimuths(net.track_points, set(ref["track"]))
     m = chords.merge(ref.rename(columns={"track": "track_id"}), on="track_id")
     m["dev"] = np.abs((m["az"] - m["axis"] + 90.0) % 180.0 - 90.0)

@@ -26,7 +26,7 @@ import pandas as pd
 
 from dbtools.gis.geometry import GEOD
 from dbtools.network import Network, sorted_by
-from dbtools.rules.common import column
+from dbtools.rules.common import column, texts
 from schemas.tables import GIS_SPACING_M
 
 F64 = npt.NDArray[np.float64]
@@ -50,7 +50,7 @@ def track_geometry(net: Network, tracks: pd.DataFrame) -> pd.DataFrame:
     ``geo_length_m`` — NaN where the track has no centreline."""
     n = len(tracks)
     out = {k: _nan(n) for k in ("lat_begin", "lon_begin", "az_begin", "lat_end", "lon_end", "az_end", "geo_length_m")}
-    tid = tracks["track_id"].astype(object).to_numpy()
+    tid = texts(tracks["track_id"])
     own = _from_track_points(net.track_points)
     at = own.index.get_indexer(pd.Index(tid)) if len(own) else np.full(n, -1)
     has_points = at >= 0
@@ -67,7 +67,7 @@ def _from_track_points(tp: pd.DataFrame) -> pd.DataFrame:
     if tp.empty:
         return pd.DataFrame()
     tp = tp.sort_values(["track_id", "pos_m"], kind="stable")
-    ids = tp["track_id"].astype(object).to_numpy()
+    ids = texts(tp["track_id"])
     lat, lon = tp["lat"].to_numpy(float), tp["lon"].to_numpy(float)
     first = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     last = np.r_[first[1:] - 1, len(ids) - 1]
@@ -114,7 +114,7 @@ def _from_gis(gis: pd.DataFrame, tracks: pd.DataFrame, todo: npt.NDArray[np.bool
 
     t = tracks[todo]
     idx = np.flatnonzero(todo)
-    q = pd.MultiIndex.from_arrays([t["line_code"].astype(object).to_numpy(), t["track"].astype(object).to_numpy()])
+    q = pd.MultiIndex.from_arrays([texts(t["line_code"]), texts(t["track"])])
     gid = uniq.get_indexer(q)
     k0 = t["km_begin_m"].to_numpy(dtype=float, na_value=np.nan)
     k1 = t["km_end_m"].to_numpy(dtype=float, na_value=np.nan)
@@ -169,7 +169,7 @@ def chord_azimuths(tp: pd.DataFrame, track_ids: set[str]) -> pd.DataFrame:
     """Azimuth [deg] of every chord between consecutive track_points of the given tracks:
     columns ``track_id``, ``az``."""
     sel = tp[tp["track_id"].isin(list(track_ids))].sort_values(["track_id", "pos_m"], kind="stable")
-    ids = sel["track_id"].astype(object).to_numpy()
+    ids = texts(sel["track_id"])
     lat, lon = sel["lat"].to_numpy(float), sel["lon"].to_numpy(float)
     az, _ = _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])
     same = ids[1:] == ids[:-1] if len(ids) else np.zeros(0, dtype=bool)

@@ -402,3 +402,28 @@ def _crossover_network(gen: ModuleType, points: pd.DataFrame, length: float, x_e
         if t.name in frames:
             tables[t.name] = canonical(t, frames[t.name])
     return Network(tables, origin="test")
+
+
+NETWORK_FILES = ("tracks", "connections", "switches", "track_points", "balises")
+JUNK = ("", "x", "-5", "1e9", "begin", "A1", "nan", "W1", "none", "both", "point")
+
+
+@settings(max_examples=20, database=None)
+@given(
+    name=st.sampled_from(NAMES),
+    cuts=st.lists(
+        st.tuples(st.sampled_from(NETWORK_FILES), st.integers(0, 60), st.integers(0, 20), st.sampled_from(JUNK)),
+        min_size=1,
+        max_size=4,
+    ),
+)
+def test_damaged_networks_give_findings_never_a_traceback(
+    tmp_path_factory: pytest.TempPathFactory, name: str, cuts: list[tuple[str, int, int, str]]
+) -> None:
+    def edit(t: Tables) -> None:
+        for table, row, col, junk in cuts:
+            f = t.get(table)
+            if f is not None and len(f):
+                f.iloc[row % len(f), col % len(f.columns)] = junk
+
+    broken(tmp_path_factory.mktemp("damaged"), name, edit)  # raises on a bug
