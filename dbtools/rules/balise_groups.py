@@ -44,7 +44,7 @@ from dbtools.rules.config import ValidationConfig
 from dbtools.topology import all_tracks, topology
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
-from schemas.tables import BALISES
+from schemas.tables import BALISE_GROUP_COLUMNS, BALISES
 
 T = BALISES.name
 F64 = npt.NDArray[np.float64]
@@ -106,6 +106,9 @@ def check_balise_network(net: Network, config: ValidationConfig, loc: Locator) -
     b = net.balises
     if b.empty:
         return []
+    absent = [c.name for c in BALISE_GROUP_COLUMNS if c.name not in b.columns]
+    if absent:  # a frame made before schema version 2 (a v1 DB reads with them empty)
+        b = b.assign(**dict.fromkeys(absent, np.nan))
     out: list[Finding] = []
     cap, file = config.max_findings_per_rule, loc.file(T)
     bid, kind = column(b, "balise_id"), column(b, "kind")
