@@ -103,7 +103,9 @@ def test_finnish_tracks_connections_switches(finland: tuple[Path, list]) -> None
     ]
     links = _links(out)
     assert len(links) == 18 + 6  # the pieces in a row: 28 … 38, 40 … 47 (no 39 in the file), each cut joined
-    assert _link(FI.format(38) + "@879", "end", FI.format(40), "begin", "both", "") in links  # the @ref-names-a-track quirk
+    assert (
+        _link(FI.format(38) + "@879", "end", FI.format(40), "begin", "both", "") in links
+    )  # the @ref-names-a-track quirk
     assert any(f.rule == "railml.quirk" and "tbc_40" in f.message and f.row == 336 for f in findings)
     # the 6 switches lie inside the km pieces and name only track sections outside the file: the
     # piece runs straight through each, whose diverging port is left empty (and said so)
