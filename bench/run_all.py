@@ -68,6 +68,7 @@ BENCHES = (
     ),
     Bench("db", "db build / validate, read_network", ("--lines", "100", "--naive-fraction", "0.01"), ()),
     Bench("review_map", "db review network map: page size, build time", ("--lines", "10"), ("--lines", "50")),
+    Bench("topology", "db validate: topology and balise-group rules, 50,000 tracks", ("--lines", "100"), ()),
     Bench("matching", "GPS map matching", ("--lines", "20", "--fixes", "100000", "--repeat", "2"), ()),
     Bench("pipeline", "pipeline core (1 h run)", (), ()),
     Bench(

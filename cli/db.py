@@ -15,6 +15,7 @@ JSON shapes (``--format json``), stable:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -31,6 +32,8 @@ from schemas.findings import Finding, count_by_severity, findings_report, has_er
 from schemas.registry import DB_VERSION_RULE
 
 if TYPE_CHECKING:
+    from rich.console import Console
+
     from dbtools.diff import DbDiff
 
 app = typer.Typer(help="Build, validate, diff and release onboard DB versions.", no_args_is_help=True)
@@ -83,21 +86,8 @@ def build(
     result = build_db(
         source_dir, out, db_version=version, note=note, force=force, validate=not no_validate, strict=strict
     )
-    out_c = console()
-    if result.warnings:
-        print_findings(result.warnings, console=out_c, title="Source warnings")
-    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
-    out_c.print(
-        key_value_table(
-            [
-                ("file", str(result.path)),
-                ("db_version", result.db_version),
-                ("content_hash", result.content_hash),
-                *rows,
-            ],
-            title="Built",
-        )
-    )
+    head = [("file", str(result.path)), ("db_version", result.db_version), ("content_hash", result.content_hash)]
+    out_c = _written(result.warnings, "Source warnings", head, result.rows, "Built")
     if result.validation is not None:
         counts = count_by_severity(result.validation)
         verdict = "valid" if not result.validation else f"{counts['error']} error(s), {counts['warning']} warning(s)"
@@ -398,21 +388,12 @@ def import_(
     from dbtools.interchange.importer import import_railml
 
     result = import_railml(source, out, line_map=line_code, force=force, xsd=xsd)
-    out_c = console()
-    if result.findings:
-        print_findings(result.findings, console=out_c, title="Not imported / warnings")
-    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
-    out_c.print(
-        key_value_table(
-            [
-                ("folder", str(result.out)),
-                ("railML version", result.version),
-                ("balises in the file", result.balises_seen),
-                *rows,
-            ],
-            title="Imported",
-        )
-    )
+    head = [
+        ("folder", str(result.out)),
+        ("railML version", result.version),
+        ("balises in the file", result.balises_seen),
+    ]
+    _written(result.findings, "Not imported / warnings", head, result.rows, "Imported")
 
 
 def _import_osm(source: Path, out: Path, force: bool, railways: str) -> None:
@@ -422,39 +403,23 @@ def _import_osm(source: Path, out: Path, force: bool, railways: str) -> None:
     if not kinds:
         raise UsageError("--osm-railway: give at least one railway=* value, e.g. rail")
     result = import_osm(source, out, force=force, railways=kinds)
-    out_c = console()
-    if result.findings:
-        print_findings(result.findings, console=out_c, title="Not imported / guessed")
-    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
-    osm = [(f"osm: {k}", v) for k, v in result.counts.items()]
-    out_c.print(
-        key_value_table(
-            [("folder", str(result.out)), ("metric CRS", result.metric_crs), *osm, *rows], title="Imported (OSM)"
-        )
-    )
+    head: list[tuple[str, object]] = [("folder", str(result.out)), ("metric CRS", result.metric_crs)]
+    head += [(f"osm: {k}", v) for k, v in result.counts.items()]
+    _written(result.findings, "Not imported / guessed", head, result.rows, "Imported (OSM)")
 
 
 def _import_rtm(source: Path, out: Path, force: bool) -> None:
     from dbtools.interchange.rtm_import import import_rtm_geojson
 
     result = import_rtm_geojson(source, out, force=force)
-    out_c = console()
-    if result.findings:
-        print_findings(result.findings, console=out_c, title="Not imported / warnings")
-    rows = [(f"rows: {k}", v) for k, v in result.rows.items()]
-    out_c.print(
-        key_value_table(
-            [
-                ("folder", str(result.out)),
-                ("CRS of the file", result.crs),
-                ("netelements in the file", result.netelements_seen),
-                ("netrelations in the file", result.netrelations_seen),
-                ("switches inferred", result.switches_inferred),
-                *rows,
-            ],
-            title="Imported",
-        )
-    )
+    head = [
+        ("folder", str(result.out)),
+        ("CRS of the file", result.crs),
+        ("netelements in the file", result.netelements_seen),
+        ("netrelations in the file", result.netrelations_seen),
+        ("switches inferred", result.switches_inferred),
+    ]
+    _written(result.findings, "Not imported / warnings", head, result.rows, "Imported")
 
 
 @app.command("export")
@@ -534,3 +499,15 @@ def review(
 app.command("info")(info)
 app.command("show")(show)
 app.command("impact")(impact)  # last in the group's help, as before
+
+
+def _written(
+    findings: list[Finding], findings_title: str, head: Sequence[tuple[str, object]], rows: dict[str, int], title: str
+) -> Console:
+    """What a command that writes a DB or a source set prints: its findings (if any), then
+    what was written — ``head`` and the rows per table. Returns the console for more."""
+    out_c = console()
+    if findings:
+        print_findings(findings, console=out_c, title=findings_title)
+    out_c.print(key_value_table([*head, *((f"rows: {k}", v) for k, v in rows.items())], title=title))
+    return out_c

@@ -11,8 +11,10 @@ before matching for the same reason.
 
 On top of the row diff come the domain summaries a maintainer reads at a glance: moved GIS
 points grouped into contiguous km runs with their geodesic displacement, moved balises
-with their signed shift, feature points whose radius or km changed, and the meta changes
-(schema version, db_version, content hash).
+with their signed shift, feature points whose radius or km changed, the network's tracks,
+connections, switches (a moved switch with its km shift and lat/lon displacement) and
+track_points (:mod:`dbtools.diff_network`), and the meta changes (schema version,
+db_version, content hash).
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ import numpy as np
 import pandas as pd
 
 from dbtools.database import read_network, schema_version
+from dbtools.diff_network import NETWORK_SUMMARIES
+from dbtools.diff_network import records as _records
 from dbtools.gis.geometry import GEOD
 from dbtools.gis.index import network_georef
 from dbtools.network import Network, content_hash
@@ -252,18 +256,6 @@ def _differs(a: pd.Series, b: pd.Series) -> np.ndarray:
     return np.asarray(np.where(na_a | na_b, na_a != na_b, ~same), dtype=bool)
 
 
-def _records(frame: pd.DataFrame, cols: list[str]) -> list[dict[str, Any]]:
-    """Rows as dicts of plain Python values (None for nulls), column by column."""
-    if not cols:
-        return [{} for _ in range(len(frame))]
-    lists = [_pylist(frame[c]) for c in cols]
-    return [dict(zip(cols, vals, strict=True)) for vals in zip(*lists, strict=True)]
-
-
-def _pylist(s: pd.Series) -> list[Any]:
-    return s.astype(object).where(s.notna(), None).tolist()
-
-
 def _meta_int(meta: dict[str, str], key: str) -> int | None:
     try:
         return int(meta[key])
@@ -330,6 +322,7 @@ def summarize(d: DbDiff, old: Network, new: Network) -> list[str]:
         BALISES.name: _balises_summary,
         FEATURE_POINTS.name: _features_summary,
         KM_BREAKS.name: _km_breaks_summary,
+        **NETWORK_SUMMARIES,
     }
     for t in DB_TABLES:
         td = d.tables[t.name]

@@ -107,11 +107,12 @@ class Topology:
         return len(self.joined.get((track_id, end), []))
 
 
-def _seen_from_b(nav: str) -> str:
-    return {
-        Navigability.A_TO_B.value: Navigability.B_TO_A.value,
-        Navigability.B_TO_A.value: Navigability.A_TO_B.value,
-    }.get(nav, nav)
+_SEEN_FROM_B = {
+    Navigability.A_TO_B.value: Navigability.B_TO_A.value,
+    Navigability.B_TO_A.value: Navigability.A_TO_B.value,
+}
+_FORWARD = frozenset((Navigability.BOTH.value, Navigability.A_TO_B.value))
+_BACKWARD = frozenset((Navigability.BOTH.value, Navigability.B_TO_A.value))
 
 
 def topology(net: Network) -> Topology:
@@ -120,16 +121,18 @@ def topology(net: Network) -> Topology:
     def build() -> Topology:
         topo = Topology(all_tracks(net), defaultdict(list), defaultdict(list))
         c = net.connections
-        cols = [c[k].astype(object).to_numpy() for k in ("track_a", "end_a", "track_b", "end_b", "navigability")]
-        sw = c["switch_id"].astype(object).to_numpy()
+        keys = ("track_a", "end_a", "track_b", "end_b", "navigability")
+        cols = [c[k].astype(object).where(c[k].notna(), None).to_numpy() for k in keys]
+        sw = c["switch_id"].astype(object).where(c["switch_id"].notna(), None).to_numpy()
+        joined, exits = topo.joined, topo.exits
         for ta, ea, tb, eb, nav, s in zip(*cols, sw, strict=True):
-            switch = None if pd.isna(s) else str(s)
-            topo.joined[(ta, ea)].append((tb, eb, nav))
-            topo.joined[(tb, eb)].append((ta, ea, _seen_from_b(nav)))
-            if nav in (Navigability.BOTH.value, Navigability.A_TO_B.value):
-                topo.exits[(ta, ea)].append(Exit(tb, eb, 1 if eb == BEGIN else -1, switch))
-            if nav in (Navigability.BOTH.value, Navigability.B_TO_A.value):
-                topo.exits[(tb, eb)].append(Exit(ta, ea, 1 if ea == BEGIN else -1, switch))
+            switch = None if s is None else str(s)
+            joined[(ta, ea)].append((tb, eb, nav))
+            joined[(tb, eb)].append((ta, ea, _SEEN_FROM_B.get(nav, nav)))
+            if nav in _FORWARD:
+                exits[(ta, ea)].append(Exit(tb, eb, 1 if eb == BEGIN else -1, switch))
+            if nav in _BACKWARD:
+                exits[(tb, eb)].append(Exit(ta, ea, 1 if ea == BEGIN else -1, switch))
         topo.exits, topo.joined = dict(topo.exits), dict(topo.joined)
         return topo
 

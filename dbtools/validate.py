@@ -8,6 +8,8 @@ Rule families, each in its own pure module (frames in → list of findings):
 * GIS grid — :mod:`dbtools.rules.gis`; its heights — :mod:`dbtools.rules.heights`;
 * balises — :mod:`dbtools.rules.balises`;
 * feature points — :mod:`dbtools.rules.features`;
+* network topology — :mod:`dbtools.rules.topology` (tracks, connections, switches, their
+  geometry) and :mod:`dbtools.rules.balise_groups` (ETCS groups, identification along routes);
 * DB file — :func:`dbtools.database.integrity_findings` (SQLite integrity_check,
   foreign_key_check, meta and content hash) and tables without rows
   (:func:`dbtools.rules.schema.check_empty_tables`; a source set's are found on reading).
@@ -24,6 +26,7 @@ from dbtools.database import integrity_findings, read_network
 from dbtools.gis.index import grid_index
 from dbtools.network import Network
 from dbtools.rules.area import check_area
+from dbtools.rules.balise_groups import check_balise_network
 from dbtools.rules.balises import check_balises
 from dbtools.rules.common import Locator
 from dbtools.rules.config import ValidationConfig
@@ -31,6 +34,7 @@ from dbtools.rules.features import check_features
 from dbtools.rules.gis import check_gis
 from dbtools.rules.heights import check_heights
 from dbtools.rules.schema import check_empty_tables, check_values
+from dbtools.rules.topology import check_topology
 from dbtools.sources import read_source_set
 from schemas.findings import Finding
 from schemas.frames import check_frame
@@ -57,6 +61,8 @@ def validate_network(
     findings.extend(check_heights(network.gis, network.meta, config, loc))
     findings.extend(check_balises(network.balises, grid, config, loc))
     findings.extend(check_features(network.feature_points, grid, config, loc))
+    findings.extend(check_topology(network, config, loc))
+    findings.extend(check_balise_network(network, config, loc))
     return findings
 
 

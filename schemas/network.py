@@ -33,11 +33,14 @@ LINE_CODE_OPTIONAL = Column(
 )
 
 
-def _port(name: str, what: str, *, required: bool) -> tuple[Column, Column]:
-    """The track and end columns of one switch port."""
+def _port(name: str, what: str, *, required: bool, open_ok: bool = False) -> tuple[Column, Column]:
+    """The track and end columns of one switch port; ``open_ok``: a branch may lead out of
+    the DB (an extract's edge: left empty, a warning of validation)."""
+    nullable = not required or open_ok
+    edge = "; empty where the branch leads out of the DB" if open_ok else ""
     return (
         Column(
-            f"{name}_track", "str", f"Track at port {name.upper()}: {what}", required=required, nullable=not required
+            f"{name}_track", "str", f"Track at port {name.upper()}: {what}{edge}", required=required, nullable=nullable
         ),
         Column(
             f"{name}_end",
@@ -45,7 +48,7 @@ def _port(name: str, what: str, *, required: bool) -> tuple[Column, Column]:
             "End of that track at the switch (begin/end)",
             enum=ENDS,
             required=required,
-            nullable=not required,
+            nullable=nullable,
         ),
     )
 
@@ -157,8 +160,15 @@ SWITCHES = Table(
             enum=tuple(s.value for s in SwitchType),
         ),
         *_port("a1", "the toe of a point switch; one end of the first route of a crossing", required=True),
-        *_port("b1", "the left branch of a point switch; the other end of the first route", required=True),
-        *_port("b2", "the right branch of a point switch; one end of the second route of a crossing", required=True),
+        *_port(
+            "b1", "the left branch of a point switch; the other end of the first route", required=True, open_ok=True
+        ),
+        *_port(
+            "b2",
+            "the right branch of a point switch; one end of the second route of a crossing",
+            required=True,
+            open_ok=True,
+        ),
         *_port("a2", "crossings and slips only: the other end of the second route", required=False),
         Column(
             "diverging_side",

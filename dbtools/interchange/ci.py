@@ -35,7 +35,9 @@ FAMILIES = {
     "schema": "Source and table schema: types, required values, enumerations, ranges, keys",
     "source": "Source set files and line codes",
     "gis": "GIS grid: 20 m steps, breaks, spacing, spikes, area",
-    "balise": "Balises: initial pairs, C balises, identification windows, GIS range",
+    "balise": "Balises: initial pairs, C balises, ETCS balise groups, identification windows, GIS range",
+    "topology": "Network topology: track/switch references, switch ports and routes, connection gaps, km, lengths, "
+    "crossover angles, open ends, balise identification along routes",
     "feature": "Feature points: rows, radius and direction against the GIS curvature, straights",
     "db": "DB file: SQLite integrity, foreign keys, meta and content hash",
     "railml": "railML import",

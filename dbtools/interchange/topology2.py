@@ -35,9 +35,13 @@ railML 2 joins tracks by pairs of ``connection`` elements, each naming its partn
   a connection is read as that track's end connection referring back to it, else the only
   end of that track still open (a ``railml.quirk`` warning).
 * A ``@ref`` naming nothing in the file (a track outside the extract): ``railml.dangling_ref``
-  warning naming the element, line and missing id; that end stays open. A switch with a leg
-  outside the file is not imported (a ``railml.switch_open`` warning): the switch table needs
-  every port; the track is then not cut.
+  warning naming the element, line and missing id; that end stays open. A switch inside a
+  track none of whose legs is in the file (the Finnish file: legs named by track sections of
+  the national topology the extract leaves out) is the track running straight through it and
+  a diverging branch outside: the track is cut there (toe and through pieces by the branch's
+  ``@orientation``) and the switch imported with its diverging port empty (a
+  ``railml.switch_open_port`` warning naming where the branch leads). Any other switch with
+  a leg outside the file is not imported (a ``railml.switch_open`` warning).
 """
 
 from __future__ import annotations
@@ -86,6 +90,8 @@ class _Node:
     legs: list[tuple[Element, End]] = field(default_factory=list)
     """(its connection, the track end it leads to)."""
     open: list[Element] = field(default_factory=list)
+    open_branch: Element | None = None
+    """A switch inside a track whose diverging leg leads out of the file: that leg (module doc)."""
 
 
 @dataclass
@@ -211,9 +217,35 @@ def _resolve_leg(st: _State, node: _Node, c: Element, cid: str) -> None:
         node.open.append(c)
 
 
+def _open_switch(st: _State, n: _Node) -> bool:
+    """A switch inside a track none of whose legs is in the file: its straight legs are the
+    track itself running through, so it is kept with the diverging port left empty (a
+    ``railml.switch_open_port`` warning naming where that branch leads)."""
+    if xt.local(n.el) != "switch" or n.legs or _at_end(n) is not None:
+        return False
+    branches = [c for c in n.open if xt.attr(c, "course") not in (None, "straight")]
+    if len(branches) != 1:
+        return False
+    n.open_branch = branches[0]
+    st.doc.findings.append(
+        xt.finding(
+            n.el,
+            "railml.switch_open_port",
+            f"switch {xt.attr(n.el, 'id')} on track {n.track.id}: its diverging branch leads to "
+            f"'{xt.attr(branches[0], 'ref')}', outside the file; imported with that port empty",
+            file=st.doc.file,
+            table="switches",
+            severity=Severity.WARNING,
+        )
+    )
+    return True
+
+
 def _complete(st: _State, n: _Node) -> bool:
     kind = xt.local(n.el)
     st.doc.use(n.el)  # imported, or reported here
+    if _open_switch(st, n):
+        return True
     need = 1 if kind == "switch" else 2
     legs = {e for _, e in n.legs}
     if n.open or len(legs) != need:
@@ -327,7 +359,7 @@ def _km(doc: RailmlDoc, n: _Node) -> float | None:
 
 
 def _switch(st: _State, n: _Node, ident: str, own: End, through: End, km: float | None, name: str | None) -> None:
-    c, branch = n.legs[0]
+    c, branch = n.legs[0] if n.legs else (n.open_branch, None)
     orientation = xt.attr(c, "orientation")
     toe_is_own = orientation is None or (orientation == "outgoing") == (own[1] == END)
     toe, straight = (own, through) if toe_is_own else (through, own)
@@ -344,12 +376,13 @@ def _switch(st: _State, n: _Node, ident: str, own: End, through: End, km: float 
         side, left, right = None, straight, branch
         st.warn(n.el, "railml.switch_side", f"switch {ident}: no side stated (@course): b1 = through, b2 = branch")
     st.link(toe, straight, n.el).switch_id = ident
-    st.link(toe, branch, c).switch_id = ident
-    if xt.attr(c, "passable") == "false":
-        st.links[frozenset((toe, branch))].navigability = NONE
-    st.link(straight, branch, n.el)
-    st.links[frozenset((straight, branch))].navigability = NONE
-    st.links[frozenset((straight, branch))].switch_id = ident
+    if branch is not None:
+        st.link(toe, branch, c).switch_id = ident
+        if xt.attr(c, "passable") == "false":
+            st.links[frozenset((toe, branch))].navigability = NONE
+        st.link(straight, branch, n.el)
+        st.links[frozenset((straight, branch))].navigability = NONE
+        st.links[frozenset((straight, branch))].switch_id = ident
     model = xt.attr(n.el, "model") or ""
     ratio = _RATIO.search(model)
     lat, lon = _lat_lon(n.el)
@@ -357,7 +390,7 @@ def _switch(st: _State, n: _Node, ident: str, own: End, through: End, km: float 
         ident,
         n.el,
         SwitchType.POINT.value,
-        {"a1": toe, "b1": left, "b2": right},
+        {k: v for k, v in (("a1", toe), ("b1", left), ("b2", right)) if v is not None},
         diverging_side=side,
         switch_number=float(ratio.group(1).replace(",", ".")) if ratio else None,
         radius=_abs_num(c, "radius"),

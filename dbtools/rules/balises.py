@@ -20,11 +20,11 @@ the running direction) and −1 on U.
   direction, so the travel distance since the pair can never reach it.
 * ``balise.dist_from_initial`` (warning) — ``dist_from_initial_m`` differs from
   |km(C) − km(I1)| by more than ``dist_tolerance_m``.
+* ``balise.key_fields`` (error) — an I1, I2 or C row without line_code or station_code, or
+  whose track is not U, D or S: the pair key (and a C balise's governing pair) needs all
+  three (G rows may leave them empty: a group names itself by NID_C/NID_BG). Fix: fill them.
 * ``balise.outside_gis`` (error) — ``km_actual_m`` is outside the GIS km range of the
   balise's line/track (or the line/track has no GIS at all).
-* ``balise.s003_key`` (error) — an I1, I2 or C balise without line_code or station_code, or
-  on a track other than U, D or S: S003 pairs and C balises are keyed by them (a G balise of
-  a European group may leave them empty: it is identified by NID_C/NID_BG).
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
     file = loc.file(T)
     if balises.empty:
         return out
-    out += _s003_keys(balises, loc, cap)
+    out += _key_fields(balises, loc, cap)
     bid = column(balises, "balise_id")
     kind = column(balises, "kind")
     line, station, track = column(balises, "line_code"), column(balises, "station_code"), column(balises, "track")
@@ -334,8 +334,8 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
     return out
 
 
-def _s003_keys(balises: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
-    """``balise.s003_key`` (module docstring)."""
+def _key_fields(balises: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
+    """``balise.key_fields`` (module docstring)."""
     kind, line = column(balises, "kind"), column(balises, "line_code")
     station, track = column(balises, "station_code"), column(balises, "track")
     s003 = np.isin(kind, [k.value for k in S003_KINDS])
@@ -351,7 +351,7 @@ def _s003_keys(balises: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
             col = "line_code" if pd.isna(line[i]) else "station_code"
             what, value = f"has no {col}", None
         return Finding(
-            "balise.s003_key",
+            "balise.key_fields",
             Severity.ERROR,
             T,
             f"{kind[i]} balise {bid[i]} {what}: initial pairs and C balises are keyed by line, station and track",
@@ -362,5 +362,5 @@ def _s003_keys(balises: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
         )
 
     return capped(
-        "balise.s003_key", Severity.ERROR, T, np.flatnonzero(s003 & (bad_track | missing)), finding, cap, loc.file(T)
+        "balise.key_fields", Severity.ERROR, T, np.flatnonzero(s003 & (bad_track | missing)), finding, cap, loc.file(T)
     )

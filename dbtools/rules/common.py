@@ -93,3 +93,15 @@ def wrap_angle(a: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
 def fmt_km(km: float) -> str:
     """Kilometrage for messages: ``12k345.6``."""
     return format_km(float(km))
+
+
+def isin(values: npt.ArrayLike, known: npt.ArrayLike | set[Any]) -> npt.NDArray[np.bool_]:
+    """``values[i] in known`` for text ids, by a hash look-up (``np.isin`` on object arrays
+    sorts and compares Python objects: seconds for 10⁵ ids)."""
+    index = pd.Index(pd.unique(np.asarray(list(known) if isinstance(known, set) else known, dtype=object)))
+    return np.asarray(index.get_indexer(np.asarray(values, dtype=object)) >= 0, dtype=bool)
+
+
+def texts(s: pd.Series) -> npt.NDArray[np.object_]:
+    """A text column as an object array with None (never pd.NA) for missing values."""
+    return np.asarray(s.astype(object).where(s.notna(), None).to_numpy(dtype=object), dtype=object)

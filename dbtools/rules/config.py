@@ -77,6 +77,32 @@ class ValidationConfig:
     height_radius_error_m: float = 250.0
     """… below this: error — a spike of ~0.8 m on one point [m]."""
 
+    # -- network topology (dbtools.rules.topology, dbtools.rules.balise_groups) --------------
+    connection_gap_m: float = 1.0
+    """Two joined track ends farther apart than this (``topology.gap``) [m]: survey noise is
+    centimetres, a wrong end or a wrong track is metres."""
+    km_jump_m: float = 1.0
+    """Two tracks of one line whose km at the joined ends differ by more than this, without a
+    ``km_breaks`` row for it (``topology.km_jump``) [m]."""
+    switch_min_spacing_m: float = 5.0
+    """Two switches joined by a track shorter than this overlap (``topology.switch_overlap``):
+    shorter than any turnout's switch panel [m]."""
+    length_tolerance_m: float = 2.0
+    """``length_m`` vs the centreline's length: error beyond the larger of this [m] …"""
+    length_tolerance_rel: float = 0.01
+    """… and this fraction of the length (``topology.track_length``) [–]: the chords of a 20 m
+    grid are shorter than the arc by L³/24R² (8 mm per step at R = 200 m) and a parallel
+    track's length differs from its km difference by d/R (0.6 % at R = 300 m)."""
+    crossover_angle_range: tuple[float, float] = (0.6, 1.25)
+    """Largest angle of a crossover's chords to the main track / atan(1/n) must lie in this
+    range (``topology.crossover_angle``) [–]: 20 m chords of the turnout curve read less than
+    the frog angle (down to α/2 on the first chord, the straight between the frogs gives α
+    itself); more than α is never right. It separates 1:9 from 1:15 and 1:6."""
+    group_span_m: float = 30.0
+    """Balises of one group identity farther apart than this (or on two tracks) stand at two
+    places (``balise.group_duplicate``) [m]: the balises of a group are a few metres apart
+    (SUBSET-036: ≥ 2.3 m, the group a few times that)."""
+
     # -- reporting -------------------------------------------------------------------------
     max_findings_per_rule: int = 1000
     """Findings listed per rule; the rest are summed up in one extra finding."""

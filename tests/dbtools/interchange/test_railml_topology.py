@@ -93,7 +93,8 @@ def test_finnish_balises_are_groups_on_their_tracks(finland: tuple[Path, list]) 
 def test_finnish_tracks_connections_switches(finland: tuple[Path, list]) -> None:  # type: ignore[type-arg]
     out, findings = finland
     tracks = pd.read_csv(out / "tracks.csv", dtype=str).set_index("track_id")
-    assert len(tracks) == 19 and set(tracks["kind"]) == {"main"} and set(tracks["line_code"]) == {"line_007_28_47"}
+    # 19 km pieces, three of them cut at the switches inside them (31 at 235, 563, 812; 33 at 280, 417; 38 at 879)
+    assert len(tracks) == 19 + 6 and set(tracks["kind"]) == {"main"} and set(tracks["line_code"]) == {"line_007_28_47"}
     assert tracks.loc[FI.format(41), ["km_begin_m", "km_end_m", "length_m", "name"]].tolist() == [
         "40003.0",
         "41003.0",
@@ -101,13 +102,24 @@ def test_finnish_tracks_connections_switches(finland: tuple[Path, list]) -> None
         "007 - 41",
     ]
     links = _links(out)
-    assert len(links) == 18  # 19 pieces in a row: 28 … 38, 40 … 47 (no 39 in the file)
-    assert _link(FI.format(38), "end", FI.format(40), "begin", "both", "") in links  # the @ref-names-a-track quirk
+    assert len(links) == 18 + 6  # the pieces in a row: 28 … 38, 40 … 47 (no 39 in the file), each cut joined
+    assert (
+        _link(FI.format(38) + "@879", "end", FI.format(40), "begin", "both", "") in links
+    )  # the @ref-names-a-track quirk
     assert any(f.rule == "railml.quirk" and "tbc_40" in f.message and f.row == 336 for f in findings)
-    # the 6 switches lead only to track sections outside the file: reported, not invented
-    assert not (out / "switches.csv").exists()
-    open_ = [f for f in findings if f.rule == "railml.switch_open"]
-    assert len(open_) == 6 and all("lead out of the file" in f.message for f in open_)
+    # the 6 switches lie inside the km pieces and name only track sections outside the file: the
+    # piece runs straight through each, whose diverging port is left empty (and said so)
+    sw = pd.read_csv(out / "switches.csv", dtype=str).set_index("switch_id")
+    assert len(sw) == 6 and set(sw["type"]) == {"point"}
+    assert sw["a1_track"].notna().all() and (sw["b1_track"].isna() ^ sw["b2_track"].isna()).all()
+    # KYT V0657 at 31+235: its branch leaves "outgoing" to the right, so the toe is the piece before
+    v0657 = sw.loc["x.x.xxx.LIVI.INFRA.24.102930"]
+    assert (v0657["a1_track"], v0657["a1_end"]) == (FI.format(31), "end")
+    assert (v0657["b1_track"], v0657["b1_end"]) == (FI.format(31) + "@235", "begin")
+    assert v0657["diverging_side"] == "right" and float(v0657["km_m"]) == 31235.0 and v0657["name"] == "KYT V0657"
+    open_ = [f for f in findings if f.rule == "railml.switch_open_port"]
+    assert len(open_) == 6 and all("outside the file" in f.message for f in open_)
+    assert not [f for f in findings if f.rule == "railml.switch_open"]
     dangling = [f for f in findings if f.rule == "railml.dangling_ref"]
     assert len(dangling) == 3 + 18
     first = next(f for f in dangling if f.row == 56)

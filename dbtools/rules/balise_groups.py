@@ -1,0 +1,370 @@
+"""Balise rules on a network: ETCS balise groups (SPEC §8.2, SUBSET-026 §3.4, §7: NID_C,
+NID_BG, N_PIG, N_TOTAL) and identification along routes (SPEC §8.1, §3 "balise.ambiguous").
+
+A balise stands on a track (``track_id``, or else the track of its line and U/D/S track
+whose km range holds its ``km_actual_m``) at the distance from the track's begin where its
+km lies (|km − km at begin| along a line grid; interpolated in ``track_points.km_m``
+elsewhere). The rows of one group identity (NID_C, NID_BG) on one track within
+``group_span_m`` of each other are one *place* of the group.
+
+* ``balise.group_fields`` (error) — a G row without nid_c, nid_bg, n_pig or n_total. Fix:
+  fill them from the balise's telegram data.
+* ``balise.group_members`` (error) — within a place: two balises with the same N_PIG, an
+  N_PIG ≥ N_TOTAL, N_TOTAL differing between its balises or not equal to the number of
+  balises. Fix: the group's rows.
+* ``balise.group_duplicate`` (error) — one group identity at two places (NID_C:NID_BG must be
+  unique: a group read is an absolute fix) that lie farther apart than the identification
+  window along every route. Fix: the identity of one of them.
+* ``topology.balise_ambiguous`` (error) — two groups of the same identity, or two C balises
+  with the same signal type governed by different initial pairs (the same pair's are
+  ``balise.ambiguous``), reachable from each other along a route of the network within the
+  identification window ``id_window_m``: after a switch the onboard unit cannot tell them
+  apart. Fix: another identity or signal type for one of them.
+* ``topology.balise_position`` (error) — a balise with a track whose km does not lie on that
+  track (outside its km range by more than ``km_jump_m``), or that no track holds. Fix: the
+  track_id or km.
+
+The route walk starts only at balises whose identity (group identity or C signal type)
+occurs at more than one place, runs both ways along ``Topology.next_tracks`` and stops at
+the window: linear in the number of such balises, each walk bounded by the tracks within
+the window.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from dbtools.network import Network
+from dbtools.rules.common import Locator, capped, column, isin, py, texts
+from dbtools.rules.config import ValidationConfig
+from dbtools.topology import all_tracks, topology
+from schemas.enums import BaliseKind, Severity
+from schemas.findings import Finding
+from schemas.tables import BALISE_GROUP_COLUMNS, BALISES
+
+T = BALISES.name
+F64 = npt.NDArray[np.float64]
+
+
+def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
+    """Track id and distance from the track's begin of every balise (None/NaN: not placed)."""
+    b, tr = net.balises, all_tracks(net)
+    n = len(b)
+    tid = column(b, "track_id") if "track_id" in b.columns else np.full(n, None, dtype=object)
+    km = column(b, "km_actual_m")
+    tid = tid.copy()
+    tid[~isin(tid, texts(tr["track_id"]))] = None  # unknown: topology.invalid_reference
+    free = np.flatnonzero(pd.isna(tid))
+    if free.size:
+        along = tr[tr["line_code"].notna() & tr["km_begin_m"].notna() & tr["km_end_m"].notna()]
+        q = pd.DataFrame({"i": free, "line_code": column(b, "line_code")[free], "track": column(b, "track")[free]})
+        cand = along[["track_id", "line_code", "track", "km_begin_m", "km_end_m"]].astype(
+            {"line_code": object, "track": object}
+        )
+        m = q.merge(cand, on=["line_code", "track"])
+        k = km[m["i"].to_numpy()]
+        lo = np.minimum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
+        hi = np.maximum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
+        m = m[(k >= lo - 1e-6) & (k <= hi + 1e-6)].drop_duplicates("i")
+        tid[m["i"].to_numpy()] = texts(m["track_id"])
+    pos = np.full(n, np.nan)
+    t = tr.drop_duplicates("track_id")
+    at = pd.Index(texts(t["track_id"])).get_indexer(pd.Index(tid))
+    has = np.flatnonzero(at >= 0)
+    rows = t.iloc[at[has]]
+    k0, k1 = column(rows, "km_begin_m"), column(rows, "km_end_m")
+    lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
+    inside = (km[has] >= lo - 1.0) & (km[has] <= hi + 1.0)
+    pos[has[inside]] = np.abs(km[has[inside]] - k0[inside])
+    _from_points(net, tid, km, pos)
+    return tid, pos
+
+
+def _from_points(net: Network, tid: npt.NDArray[np.object_], km: F64, pos: F64) -> None:
+    """Position by the km of ``track_points`` (tracks along no line km range)."""
+    tp = net.track_points
+    todo = np.flatnonzero(np.isnan(pos) & pd.notna(tid) & isin(tid, texts(tp["track_id"])))
+    if todo.size == 0:
+        return
+    groups = dict(iter(tp[tp["km_m"].notna()].groupby("track_id", observed=True)))
+    for i in todo:
+        g = groups.get(tid[i])
+        if g is None:
+            continue
+        k, p = g["km_m"].to_numpy(float), g["pos_m"].to_numpy(float)
+        order = np.argsort(k)
+        if k.size and k.min() - 1.0 <= km[i] <= k.max() + 1.0 and np.all(np.diff(k[order]) > 0):
+            pos[i] = float(np.interp(km[i], k[order], p[order]))
+
+
+def check_balise_network(net: Network, config: ValidationConfig, loc: Locator) -> list[Finding]:
+    """The rules of the module doc."""
+    b = net.balises
+    if b.empty:
+        return []
+    absent = [c.name for c in BALISE_GROUP_COLUMNS if c.name not in b.columns]
+    if absent:  # a frame made before schema version 2 (a v1 DB reads with them empty)
+        b = b.assign(**dict.fromkeys(absent, np.nan))
+    out: list[Finding] = []
+    cap, file = config.max_findings_per_rule, loc.file(T)
+    bid, kind = column(b, "balise_id"), column(b, "kind")
+    is_g = kind == BaliseKind.G.value
+    cols = ("nid_c", "nid_bg", "n_pig", "n_total")
+    missing = {c: np.isnan(column(b, c)) for c in cols}
+    bad = np.flatnonzero(is_g & np.any([missing[c] for c in cols], axis=0))
+    out += capped(
+        "balise.group_fields",
+        Severity.ERROR,
+        T,
+        bad,
+        lambda i: Finding(
+            "balise.group_fields",
+            Severity.ERROR,
+            T,
+            "G balise needs " + ", ".join(c for c in cols if missing[c][i]),
+            keys={"balise_id": py(bid[i])},
+            column=next(c for c in cols if missing[c][i]),
+            **loc.at(T, i),
+        ),
+        cap,
+        file,
+    )
+    has_track = net.tracks.size > 0 or ("track_id" in b.columns and b["track_id"].notna().any())
+    tid, pos = locate(net) if has_track else (np.full(len(b), None, dtype=object), np.full(len(b), np.nan))
+    if has_track:
+        out += _unplaced(b, tid, pos, is_g, loc, cap)
+    places = _places(b, tid, pos, is_g & ~np.any([missing[c] for c in cols], axis=0), config)
+    out += _members(b, places, loc, cap)
+    walked = _ambiguous(net, b, tid, pos, places, config, loc, out) if has_track else set()
+    out += _duplicates(b, places, walked, config, loc, cap)
+    return out
+
+
+def _unplaced(
+    b: pd.DataFrame, tid: npt.NDArray[np.object_], pos: F64, is_g: npt.NDArray[np.bool_], loc: Locator, cap: int
+) -> list[Finding]:
+    given = column(b, "track_id") if "track_id" in b.columns else np.full(len(b), None, dtype=object)
+    bad = np.flatnonzero(np.isnan(pos) & (pd.notna(given) | is_g))
+    bid, km = column(b, "balise_id"), column(b, "km_actual_m")
+    return capped(
+        "topology.balise_position",
+        Severity.ERROR,
+        T,
+        bad,
+        lambda i: Finding(
+            "topology.balise_position",
+            Severity.ERROR,
+            T,
+            f"balise {bid[i]} at km {km[i]:g} lies on no track"
+            + (f" (km outside track {tid[i]}'s km range)" if pd.notna(tid[i]) else " of its line and track"),
+            keys={"balise_id": py(bid[i])},
+            column="track_id" if pd.notna(given[i]) else "km_actual_m",
+            value=py(km[i]),
+            **loc.at(T, i),
+        ),
+        cap,
+        loc.file(T),
+    )
+
+
+def _places(
+    b: pd.DataFrame, tid: npt.NDArray[np.object_], pos: F64, ok: npt.NDArray[np.bool_], config: ValidationConfig
+) -> pd.DataFrame:
+    """Rows of complete G balises with ``place`` (id of one place of one identity)."""
+    f = pd.DataFrame(
+        {
+            "row": np.flatnonzero(ok),
+            "nid_c": column(b, "nid_c")[ok],
+            "nid_bg": column(b, "nid_bg")[ok],
+            "n_pig": column(b, "n_pig")[ok],
+            "n_total": column(b, "n_total")[ok],
+            "track_id": pd.Series(tid[ok], dtype=object).fillna(""),
+            "pos": np.nan_to_num(pos[ok], nan=np.inf),
+            "km": column(b, "km_actual_m")[ok],
+        }
+    )
+    f = f.sort_values(["nid_c", "nid_bg", "track_id", "pos", "km"], kind="stable")
+    ident = f[["nid_c", "nid_bg"]].to_numpy()
+    new_id = np.r_[True, np.any(ident[1:] != ident[:-1], axis=1)] if len(f) else np.zeros(0, dtype=bool)
+    tr = texts(f["track_id"])
+    where = np.where(np.isfinite(f["pos"].to_numpy()), f["pos"].to_numpy(), f["km"].to_numpy())
+    far = np.r_[True, (tr[1:] != tr[:-1]) | (np.abs(np.diff(where)) > config.group_span_m)] if len(f) else new_id
+    f["place"] = np.cumsum(new_id | far) - 1
+    return f
+
+
+def _members(b: pd.DataFrame, places: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
+    places = places.assign(pig_dup=places.duplicated(["place", "n_pig"]).to_numpy())
+    g = places.groupby("place")
+    stats = g.agg(
+        n=("row", "size"),
+        row=("row", "first"),
+        tot_lo=("n_total", "min"),
+        tot_hi=("n_total", "max"),
+        pig_max=("n_pig", "max"),
+        pig_dup=("pig_dup", "any"),
+        nid_c=("nid_c", "first"),
+        nid_bg=("nid_bg", "first"),
+    )
+    bad = stats[
+        stats["pig_dup"]
+        | (stats["pig_max"] >= stats["tot_hi"])
+        | (stats["tot_lo"] != stats["tot_hi"])
+        | (stats["tot_hi"] != stats["n"])
+    ].reset_index(drop=True)
+
+    def why(r: pd.Series) -> str:
+        parts = []
+        if r["pig_dup"]:
+            parts.append("two balises share one N_PIG")
+        if r["pig_max"] >= r["tot_hi"]:
+            parts.append(f"N_PIG {int(r['pig_max'])} is not below N_TOTAL {int(r['tot_hi'])}")
+        if r["tot_lo"] != r["tot_hi"]:
+            parts.append(f"N_TOTAL differs between its balises ({int(r['tot_lo'])}–{int(r['tot_hi'])})")
+        elif r["tot_hi"] != r["n"]:
+            parts.append(f"N_TOTAL is {int(r['tot_hi'])} but the group has {int(r['n'])} balise(s)")
+        return "; ".join(parts)
+
+    bid = column(b, "balise_id")
+    return capped(
+        "balise.group_members",
+        Severity.ERROR,
+        T,
+        np.arange(len(bad)),
+        lambda j: Finding(
+            "balise.group_members",
+            Severity.ERROR,
+            T,
+            f"group {int(bad['nid_c'][j])}:{int(bad['nid_bg'][j])} (balise {bid[int(bad['row'][j])]}…): "
+            + why(bad.iloc[j]),
+            keys={"nid_c": int(bad["nid_c"][j]), "nid_bg": int(bad["nid_bg"][j])},
+            **loc.at(T, int(bad["row"][j])),
+        ),
+        cap,
+        loc.file(T),
+    )
+
+
+def _duplicates(
+    b: pd.DataFrame,
+    places: pd.DataFrame,
+    walked: set[tuple[int, int]],
+    config: ValidationConfig,
+    loc: Locator,
+    cap: int,
+) -> list[Finding]:
+    first = places.drop_duplicates("place")
+    first = first[first.duplicated(["nid_c", "nid_bg"], keep=False)]
+    bid = column(b, "balise_id")
+    hits: list[tuple[int, int, str]] = []
+    for _, grp in first.groupby(["nid_c", "nid_bg"]):
+        rows = grp["row"].to_numpy()
+        for other in rows[1:]:
+            pair = (min(int(rows[0]), int(other)), max(int(rows[0]), int(other)))
+            if pair not in walked:
+                hits.append((int(other), int(rows[0]), f"{int(grp['nid_c'].iloc[0])}:{int(grp['nid_bg'].iloc[0])}"))
+    return capped(
+        "balise.group_duplicate",
+        Severity.ERROR,
+        T,
+        np.arange(len(hits)),
+        lambda j: Finding(
+            "balise.group_duplicate",
+            Severity.ERROR,
+            T,
+            f"group identity {hits[j][2]} of balise {bid[hits[j][0]]} is already used by balise {bid[hits[j][1]]} at "
+            "another place: a group read must name one place",
+            keys={"balise_id": py(bid[hits[j][0]]), "other_balise_id": py(bid[hits[j][1]])},
+            value=hits[j][2],
+            **loc.at(T, hits[j][0]),
+        ),
+        cap,
+        loc.file(T),
+    )
+
+
+def _ambiguous(
+    net: Network,
+    b: pd.DataFrame,
+    tid: npt.NDArray[np.object_],
+    pos: F64,
+    places: pd.DataFrame,
+    config: ValidationConfig,
+    loc: Locator,
+    out: list[Finding],
+) -> set[tuple[int, int]]:
+    """The route walk (module doc); returns the (row, row) pairs it reported."""
+    kind, sig = column(b, "kind"), column(b, "signal_type")
+    pair = [
+        (a, s_, t_)
+        for a, s_, t_ in zip(column(b, "line_code"), column(b, "station_code"), column(b, "track"), strict=True)
+    ]
+    # one walker per place of a G identity, one per C balise: (row, identity)
+    reps = places.drop_duplicates("place")
+    walkers: list[tuple[int, tuple[object, ...]]] = [
+        (int(r), ("G", int(c), int(g))) for r, c, g in zip(reps["row"], reps["nid_c"], reps["nid_bg"], strict=True)
+    ]
+    c_rows = np.flatnonzero((kind == BaliseKind.C.value) & pd.notna(sig))
+    walkers += [(int(i), ("C", str(sig[i]))) for i in c_rows]
+    count: dict[tuple[object, ...], int] = defaultdict(int)
+    for _, ident in walkers:
+        count[ident] += 1
+    walkers = [(r, i) for r, i in walkers if count[i] > 1 and pd.notna(tid[r]) and np.isfinite(pos[r])]
+    on_track: dict[str, list[tuple[float, int, tuple[object, ...]]]] = defaultdict(list)
+    for r, ident in walkers:
+        on_track[str(tid[r])].append((float(pos[r]), r, ident))
+    topo = topology(net)
+    length = dict(
+        zip(
+            texts(topo.tracks["track_id"]),
+            topo.tracks["length_m"].to_numpy(float),
+            strict=True,
+        )
+    )
+    found: dict[tuple[int, int], float] = {}
+    w = config.id_window_m
+    for r, ident in walkers:
+        for d0 in (1, -1):
+            stack = [(str(tid[r]), d0, -float(pos[r]) if d0 > 0 else float(pos[r]) - length[str(tid[r])])]
+            best: dict[tuple[str, int], float] = {}
+            while stack:
+                t, d, off = stack.pop()  # off: route distance at the track's begin (d>0) / end (d<0)
+                if best.get((t, d), np.inf) <= off:
+                    continue
+                best[(t, d)] = off
+                ln = length.get(t, 0.0)
+                for p, o, oid in on_track.get(t, ()):
+                    dist = off + (p if d > 0 else ln - p)
+                    if o != r and oid == ident and 0 < dist <= w and not (ident[0] == "C" and pair[o] == pair[r]):
+                        key = (min(r, o), max(r, o))
+                        found[key] = min(found.get(key, np.inf), dist)
+                exit_at = off + ln
+                if exit_at < w:
+                    stack += [(e.track_id, e.direction, exit_at) for e in topo.next_tracks(t, d)]
+    bid = column(b, "balise_id")
+    hits = sorted(found)
+    out += capped(
+        "topology.balise_ambiguous",
+        Severity.ERROR,
+        T,
+        np.arange(len(hits)),
+        lambda j: Finding(
+            "topology.balise_ambiguous",
+            Severity.ERROR,
+            T,
+            f"balises {bid[hits[j][0]]} and {bid[hits[j][1]]} carry the same "
+            + ("group identity" if kind[hits[j][0]] == BaliseKind.G.value else f"signal type '{sig[hits[j][0]]}'")
+            + f" and are {found[hits[j]]:.1f} m apart along a route (identification window {w:g} m)",
+            keys={"balise_id": py(bid[hits[j][1]]), "other_balise_id": py(bid[hits[j][0]])},
+            value=round(float(found[hits[j]]), 3),
+            limit=w,
+            **loc.at(T, hits[j][1]),
+        ),
+        config.max_findings_per_rule,
+        loc.file(T),
+    )
+    return set(hits)
