@@ -25,7 +25,7 @@ from dbtools.integrity import check_content_hash
 from dbtools.network import Network, canonical, empty_frame, network_content_hash
 from dbtools.sqlite_columns import insert_tables, read_table_columns
 from schemas.enums import Severity
-from schemas.errors import InputError
+from schemas.errors import BusyError, InputError
 from schemas.findings import Finding
 from schemas.model import Table
 from schemas.registry import REGISTRY_APPLICATION_ID, REGISTRY_SCHEMA_VERSION, RELEASES
@@ -153,6 +153,27 @@ def write_sqlite(
             conn.close()
 
 
+#: Seconds a release waits for another process's write lock on the registry before it gives up (BusyError).
+REGISTRY_LOCK_WAIT_S = 30.0
+#: SQLite's primary result codes of a database another connection holds (SQLITE_BUSY, SQLITE_LOCKED).
+SQLITE_BUSY_CODES = (5, 6)
+
+
+def sqlite_input_error(exc: Exception, path: Path, message: str) -> InputError | BusyError:
+    """The error to raise for a ``sqlite3`` error on the database ``path``: a database
+    locked by another process (still locked after SQLite's wait) is :class:`BusyError`
+    ("in use by another trainpos process; try again", exit 3), anything else an InputError
+    ``message: reason`` (exit 2). Every reader and writer of a trainpos database maps its
+    ``sqlite3`` errors through here."""
+    code = getattr(exc, "sqlite_errorcode", None)
+    if (code is not None and code & 0xFF in SQLITE_BUSY_CODES) or "database is locked" in str(exc):
+        return BusyError(
+            "is in use by another trainpos process (the database is locked); try again when it has finished",
+            path=path,
+        )
+    return InputError(f"{message}: {exc}", path=path)
+
+
 def check_sqlite_file(path: Path) -> None:
     """Raise InputError unless ``path`` is an existing SQLite file with our application id."""
     path = Path(path)
@@ -181,11 +202,11 @@ def connect_ro(path: Path) -> Iterator[sqlite3.Connection]:
     try:
         conn = sqlite3.connect(uri, uri=True)
     except sqlite3.Error as exc:
-        raise InputError(f"cannot open database: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "cannot open database") from exc
     try:
         yield conn
     except sqlite3.DatabaseError as exc:
-        raise InputError(f"database is corrupt or unreadable: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "database is corrupt or unreadable") from exc
     finally:
         conn.close()
 
@@ -276,8 +297,42 @@ def _read_sqlite3(conn: sqlite3.Connection, t: Table, path: Path) -> pd.DataFram
     try:
         frame = pd.read_sql_query(f"SELECT {cols} FROM [{t.name}]", conn)
     except (sqlite3.DatabaseError, pd.errors.DatabaseError) as exc:
-        raise InputError(f"table '{t.name}' cannot be read: {exc}", path=path) from exc
-    return canonical(t, frame)
+        raise sqlite_input_error(exc, path, f"table '{t.name}' cannot be read") from exc
+    try:
+        return canonical(t, frame)
+    except (ValueError, TypeError, OverflowError) as exc:  # a value of another storage class
+        raise _storage_class_error(conn, t, path, present) or InputError(
+            f"table '{t.name}' cannot be read: {exc}", path=path
+        ) from exc
+
+
+#: SQLite storage classes (``typeof``) each declared dtype accepts.
+STORAGE_CLASSES = {"float": ("real", "integer", "null"), "int": ("integer", "null"), "bool": ("integer", "null")}
+
+
+def _storage_class_error(conn: sqlite3.Connection, t: Table, path: Path, present: set[str]) -> InputError | None:
+    """InputError naming table, column, row and value of the first cell whose storage class
+    the declared type does not take (text or a blob in a REAL column, 2.5 in an INTEGER
+    one); None when every cell fits."""
+    for c in t.columns:
+        allowed = STORAGE_CLASSES.get(c.dtype)
+        if allowed is None or c.name not in present:
+            continue
+        marks = ",".join("?" * len(allowed))
+        hit = conn.execute(
+            f"SELECT rowid, typeof([{c.name}]), quote([{c.name}]) FROM [{t.name}] "
+            f"WHERE typeof([{c.name}]) NOT IN ({marks}) LIMIT 1",
+            allowed,
+        ).fetchone()
+        if hit is not None:
+            rowid, kind, value = hit
+            return InputError(
+                f"table '{t.name}' row {rowid}: {kind} {str(value)[:60]} where a {c.sql_type} ({c.dtype}) is "
+                "declared; the DB was not written by trainpos or was edited: rebuild it from its sources",
+                path=path,
+                column=c.name,
+            )
+    return None
 
 
 def integrity_findings(path: Path, network: Network | None = None) -> list[Finding]:
@@ -394,9 +449,9 @@ def registry_transaction(path: Path) -> Iterator[sqlite3.Connection]:
         _create_registry(path)
     _check_registry_file(path)
     try:
-        conn = sqlite3.connect(path, isolation_level=None, timeout=30)
+        conn = sqlite3.connect(path, isolation_level=None, timeout=REGISTRY_LOCK_WAIT_S)
     except sqlite3.Error as exc:
-        raise InputError(f"cannot open release registry: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "cannot open release registry") from exc
     try:
         _check_registry_schema(conn, path)
         conn.execute("BEGIN IMMEDIATE")
@@ -407,7 +462,7 @@ def registry_transaction(path: Path) -> Iterator[sqlite3.Connection]:
             raise
         conn.execute("COMMIT")
     except sqlite3.DatabaseError as exc:
-        raise InputError(f"release registry is corrupt or unreadable: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "release registry is corrupt or unreadable") from exc
     finally:
         conn.close()
 
@@ -484,11 +539,11 @@ def _registry_ro(path: Path) -> Iterator[sqlite3.Connection]:
     try:
         conn = sqlite3.connect(f"file:{path.resolve()}?mode=ro", uri=True)
     except sqlite3.Error as exc:
-        raise InputError(f"cannot open release registry: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "cannot open release registry") from exc
     try:
         _check_registry_schema(conn, path)
         yield conn
     except sqlite3.DatabaseError as exc:
-        raise InputError(f"release registry is corrupt or unreadable: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "release registry is corrupt or unreadable") from exc
     finally:
         conn.close()
