@@ -400,6 +400,8 @@ def check_frame(
         check = str(check)
         shown = group.head(max_per_check)
         for _, case in shown.iterrows():
+            if _rule_for(check) == "range" and _infinite(case["failure_case"]):
+                continue  # one finding per problem: infinity is ``schema.not_finite`` (DBs) or ``schema.type`` (files)
             idx = case["index"]
             idx = int(idx) if idx is not None and not pd.isna(idx) else None
             if _rule_for(check) == "duplicate_key":
@@ -422,6 +424,10 @@ def check_frame(
                 )
             )
     return findings
+
+
+def _infinite(value: object) -> bool:
+    return isinstance(value, float | np.floating) and bool(np.isinf(value))
 
 
 def _rule_for(check: str) -> str:
