@@ -59,6 +59,9 @@ def build(
     version: str | None = typer.Option(None, "--version", help=f"DB version: {DB_VERSION_RULE} (default: UTC time)."),
     note: str = typer.Option("", "--note", help="Release note: who and why."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output file."),
+    config: Path | None = typer.Option(
+        None, "--config", help="Settings (TOML): its [input] section (limits of .xlsx source files)."
+    ),
 ) -> None:
     """Build an onboard DB version from a source set.
 

@@ -15,6 +15,7 @@ import sqlite_utils
 
 from dbtools.atomic import refuse_registry
 from dbtools.database import SQLITE_MAGIC, create_tables, sqlite_input_error
+from dbtools.inputs import regular_file
 from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION, AUDIT_TABLES, AUDIT_VIEWS, ROUTE_SUMMARY
 from schemas.errors import InputError
 from schemas.model import Table
@@ -80,8 +81,7 @@ def _audit_probe(path: Path) -> tuple[int, int]:
 def _is_audit_file(path: Path) -> bool:
     """True when ``path`` is an audit DB, False when it is an empty file (or an empty SQLite
     DB) that may become one; InputError for anything else."""
-    if path.is_dir():
-        raise InputError("is a folder, expected an audit database file (.sqlite)", path=path)
+    regular_file(path, "audit database file (.sqlite)")
     with open(path, "rb") as fh:
         head = fh.read(100)
     if not head:

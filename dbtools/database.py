@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import pandas as pd
 
 from dbtools.atomic import atomic_file, sweep_stale, temp_sibling
+from dbtools.inputs import regular_file
 from dbtools.integrity import check_content_hash
 from dbtools.network import Network, canonical, empty_frame, network_content_hash
 from dbtools.sqlite_columns import insert_tables, read_table_columns
@@ -176,11 +177,7 @@ def sqlite_input_error(exc: Exception, path: Path, message: str) -> InputError |
 
 def check_sqlite_file(path: Path) -> None:
     """Raise InputError unless ``path`` is an existing SQLite file with our application id."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError("no such file", path=path)
-    if path.is_dir():
-        raise InputError("is a folder, expected an onboard DB file (.sqlite)", path=path)
+    path = regular_file(Path(path), "onboard DB file (.sqlite)")
     with open(path, "rb") as fh:
         head = fh.read(100)
     if not head.startswith(SQLITE_MAGIC):
@@ -385,8 +382,7 @@ def integrity_findings(path: Path, network: Network | None = None) -> list[Findi
 
 
 def _check_registry_file(path: Path) -> None:
-    if path.is_dir():
-        raise InputError("is a folder, expected the release registry (registry.sqlite)", path=path)
+    regular_file(path, "release registry (registry.sqlite)")
     with open(path, "rb") as fh:
         head = fh.read(100)
     if not head.startswith(SQLITE_MAGIC) or len(head) < 100:

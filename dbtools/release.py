@@ -180,26 +180,24 @@ def release_db(
     """
     file, registry = Path(file), Path(registry)
     check_sqlite_file(file)
-    if registry.exists() and not registry.is_dir():
+    if (new_folder := not registry.exists()) is False and not registry.is_dir():
         raise InputError("release registry must be a folder", path=registry)
-    new_folder = not registry.exists()
     with output_errors(registry, registry):  # disk full, read-only …: reported against the registry
         registry.mkdir(parents=True, exist_ok=True)
         sweep_stale(registry / _SNAPSHOT)  # snapshots of killed releases
         snap = temp_sibling(registry / _SNAPSHOT)
-    try:
-        with output_errors(registry, registry):
+        try:
             release, findings = _snapshot_and_validate(file, snap, note=note, now=now, user=user)
             impact_path = _publish(registry, snap, release, impact)
-        return ReleaseResult(release, registry / release.file, findings, impact_path)
-    except BaseException:
-        if new_folder:  # nothing was released: leave no empty registry folder behind
-            with contextlib.suppress(OSError):
-                snap.unlink(missing_ok=True)
-                registry.rmdir()
-        raise
-    finally:
-        snap.unlink(missing_ok=True)
+            return ReleaseResult(release, registry / release.file, findings, impact_path)
+        except BaseException:
+            if new_folder:  # nothing was released: leave no empty registry folder behind
+                with contextlib.suppress(OSError):
+                    snap.unlink(missing_ok=True)
+                    registry.rmdir()
+            raise
+        finally:
+            snap.unlink(missing_ok=True)
 
 
 def _snapshot_and_validate(

@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
+from dbtools.inputs import check_zip, regular_file
 from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
@@ -98,9 +99,7 @@ def read_table_file(
     (module docstring) for ``table``. ``code_columns``: the columns whose numeric .xlsx
     cells are reported; ``text_columns``: those whose date cells are. InputError when the
     file cannot be read at all."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError("no such file", path=path)
+    path = regular_file(Path(path), "CSV or .xlsx file")
     if path.suffix.lower() == ".xlsx":
         tf = _read_xlsx(path, sheet, table, _TextColumns(frozenset(code_columns), frozenset(text_columns)))
     else:
@@ -407,6 +406,7 @@ def _read_xlsx(path: Path, sheet: str | None, table: str, columns: _TextColumns)
     import openpyxl
     from openpyxl.utils.exceptions import InvalidFileException
 
+    check_zip(path)  # a zip bomb is refused before openpyxl reads a member
     try:
         book = openpyxl.load_workbook(path, read_only=True, data_only=True, keep_links=False)
     except (zipfile.BadZipFile, InvalidFileException, ValueError, OSError, KeyError) as exc:

@@ -27,8 +27,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dbtools.inputs import read_head
 from fieldlogs.io import RunMeta, write_run
-from fieldlogs.recorders.common import FORMATS, Decoded, read_bytes, sha256_of
+from fieldlogs.recorders.common import FORMATS, Decoded, sha256_of
 from fieldlogs.recorders.timebase import gps_to_iso
 from fieldlogs.recorders.vehicle import load_vehicle, receivers, tacho_wheel
 from schemas.enums import Severity
@@ -56,7 +57,7 @@ def detect_format(path: Path) -> str:
     """nmea, ubx, rinex or csv from the file's first bytes (and name for tables)."""
     if path.suffix.lower() in TABLE_SUFFIXES:
         return "csv"
-    head = read_bytes(path)[:4096]
+    head = read_head(path)  # a few KB, whatever the file's size
     if head[:2] == b"\xb5\x62" or (b"\xb5\x62" in head[:512] and head.count(b"\xb5\x62") > 1):
         return "ubx"
     if b"RINEX VERSION / TYPE" in head[:200] or b"CRINEX VERS" in head[:200]:
