@@ -44,7 +44,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Literal
 
-from schemas.errors import RefusedError
+from schemas.errors import RefusedError, TrainposError
 
 #: Marker file in every output folder trainpos writes.
 MARKER = ".trainpos-output"
@@ -152,6 +152,8 @@ def machine_errno(exc: BaseException) -> int | None:
     SQLite's reason — or None when ``exc`` is not one."""
     if isinstance(exc, OSError):
         return exc.errno if exc.errno in MACHINE_ERRNOS else None
+    if isinstance(exc, TrainposError):
+        return None  # already reported against its own file (an input read while writing)
     code = getattr(exc, "sqlite_errorcode", None)
     if isinstance(code, int) and code & 0xFF in SQLITE_ERRNOS:
         return SQLITE_ERRNOS[code & 0xFF]

@@ -83,6 +83,16 @@ def regular_file(path: Path, what: str = "file") -> Path:
     raise InputError(f"is {kind}, not a regular file ({what} expected); it was not opened", path=path)
 
 
+def not_special(path: Path, what: str = "file") -> Path:
+    """``path``, unless it exists and is a FIFO, a device or a socket: then InputError, and it
+    is never opened. A missing path or a folder is left to the caller's own message (a
+    reader that says "vehicle file not found")."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        regular_file(path, what)
+    return path
+
+
 def _too_big(path: Path, size: int, compressed: int, limits: InputLimits) -> InputError | None:
     """The refusal of ``size`` decompressed bytes from ``compressed`` bytes, or None."""
     if size > limits.max_bytes:
@@ -99,6 +109,14 @@ def _too_big(path: Path, size: int, compressed: int, limits: InputLimits) -> Inp
             path=path,
         )
     return None
+
+
+def check_decompressed(path: Path, size: int, compressed: int) -> None:
+    """InputError when ``size`` bytes decompressed from ``compressed`` pass the ``[input]``
+    limits (a decoder that cannot stream, e.g. Hatanaka's: checked on its output)."""
+    err = _too_big(Path(path), size, compressed, current_limits())
+    if err is not None:
+        raise err
 
 
 def read_input_bytes(path: Path) -> bytes:

@@ -72,8 +72,10 @@ def sha256_file(path: Path) -> str:
 
 
 def find_table_file(folder: Path, stem: str) -> Path | None:
-    """``stem.csv`` or ``stem.xlsx`` in ``folder``; an error when both exist."""
-    found = [folder / f"{stem}{s}" for s in TABULAR_SUFFIXES if (folder / f"{stem}{s}").is_file()]
+    """``stem.csv`` or ``stem.xlsx`` in ``folder``; an error when both exist. Anything of
+    that name but a folder counts: a FIFO or device is then refused by name when read
+    (:func:`dbtools.inputs.regular_file`), not reported missing."""
+    found = [p for s in TABULAR_SUFFIXES if (p := folder / f"{stem}{s}").exists() and not p.is_dir()]
     if len(found) > 1:
         raise InputError(f"both {found[0].name} and {found[1].name} exist; keep one", path=folder)
     return found[0] if found else None

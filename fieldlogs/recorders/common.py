@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from dbtools.inputs import read_input_bytes
+from dbtools.inputs import check_decompressed, read_input_bytes
 from schemas.errors import InputError
 
 #: Formats ``logs import`` reads.
@@ -90,7 +90,8 @@ def read_text(path: Path) -> str:
         import hatanaka  # lazy: only for Hatanaka-compressed RINEX
 
         try:
-            raw = hatanaka.decompress(raw)
+            compressed, raw = len(raw), hatanaka.decompress(raw)
         except (ValueError, RuntimeError, OSError) as exc:
             raise InputError(f"Hatanaka decompression failed: {exc}", path=path) from exc
+        check_decompressed(path, len(raw), compressed)
     return raw.decode("ascii", errors="replace")

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dbtools.inputs import read_head
+from dbtools.inputs import read_head, regular_file
 from fieldlogs.io import RunMeta, write_run
 from fieldlogs.recorders.common import FORMATS, Decoded, sha256_of
 from fieldlogs.recorders.timebase import gps_to_iso
@@ -189,6 +189,7 @@ def import_run(
     if out.exists() and not force:
         raise RefusedError("output folder exists; use --force to replace it", path=out)
     for s in sources:
+        regular_file(Path(s), "source file")  # a FIFO, device or socket: refused, never opened
         if out.resolve() in Path(s).resolve().parents:
             raise RefusedError("a source lies inside the output folder", path=s)
     if vehicle is None:

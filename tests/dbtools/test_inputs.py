@@ -210,12 +210,25 @@ def test_regular_file_refuses_what_is_not_one(tmp_path: Path) -> None:
             regular_file(sock_path)
 
 
-@pytest.mark.parametrize("command", ["validate", "run", "diff", "logs import", "release", "gz"])
+@pytest.mark.parametrize(
+    "command",
+    ["validate", "run", "diff", "logs import", "release", "gz", "vehicle", "config", "railml", "build", "build csv"],
+)
 def test_a_fifo_given_as_an_input_is_refused_not_opened(tmp_path: Path, sample_db: Path, command: str) -> None:
     fifo = tmp_path / ("in.nmea.gz" if command == "gz" else "in.sqlite")
     os.mkfifo(fifo)
     vehicle = ["--vehicle", str(RECORDERS / "vehicle.toml")]
+    src = tmp_path / "src"
+    if command in ("build", "build csv"):  # a source set whose balises.xlsx (.csv) is a FIFO
+        shutil.copytree(sample_source_dir(), src)
+        (src / "balises.csv").unlink()
+        os.mkfifo(src / ("balises.xlsx" if command == "build" else "balises.csv"))
     args = {
+        "vehicle": ["logs", "import", str(RECORDERS / "sample.nmea"), "--vehicle", str(fifo), "--out", "o"],
+        "config": ["run", str(tmp_path), "--db", str(sample_db), "--config", str(fifo), "--out", "o"],
+        "railml": ["db", "import", str(fifo), "--format", "railml", "--out", "o"],
+        "build": ["db", "build", str(src), "--out", "o.sqlite"],
+        "build csv": ["db", "build", str(src), "--out", "o.sqlite"],
         "validate": ["db", "validate", str(fifo)],
         "run": ["run", str(tmp_path), "--db", str(fifo), "--out", "o"],
         "diff": ["db", "diff", str(sample_db), str(fifo)],
@@ -226,3 +239,18 @@ def test_a_fifo_given_as_an_input_is_refused_not_opened(tmp_path: Path, sample_d
     res = _cli(args, tmp_path)
     assert res.returncode == 2, res.stderr
     assert "FIFO" in res.stderr and "not opened" in " ".join(res.stderr.split())
+
+
+def test_hatanaka_output_is_within_the_limits(tmp_path: Path) -> None:
+    import hatanaka
+
+    from fieldlogs.recorders.common import read_text
+
+    rnx = ROOT / "tests" / "data" / "rinex" / "OPEC00NOR_S_20220010000_01D_30S_MO_excerpt.rnx"
+    crx = tmp_path / "rx.crx"
+    crx.write_bytes(hatanaka.rnx2crx(rnx.read_bytes()))
+    size = len(read_text(crx))
+    assert size > len(crx.read_bytes())
+    limit = (size - 1) / MB
+    with input_limits(InputLimits(max_decompressed_mb=limit)), pytest.raises(InputError, match="max_decompressed_mb"):
+        read_text(crx)

@@ -15,6 +15,7 @@ import pytest
 
 from dbtools.atomic import atomic_file, atomic_folder, machine_errno
 from dbtools.sample_network import sample_source_dir
+from schemas.errors import InputError
 from tests.fieldlogs.make_runs import make_run
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -54,6 +55,8 @@ def test_errors_about_other_files_pass_unchanged(tmp_path: Path) -> None:
     with pytest.raises(sqlite3.IntegrityError), atomic_file(tmp_path / "out2"):
         raise sqlite3.IntegrityError("UNIQUE constraint failed")
     assert machine_errno(ValueError("x")) is None
+    with pytest.raises(InputError), atomic_file(tmp_path / "out3"):  # an input's error keeps its path
+        raise InputError("cannot open database: unable to open database file", path=src)
 
 
 def _limited(limit: int, args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
