@@ -254,3 +254,15 @@ def test_hatanaka_output_is_within_the_limits(tmp_path: Path) -> None:
     limit = (size - 1) / MB
     with input_limits(InputLimits(max_decompressed_mb=limit)), pytest.raises(InputError, match="max_decompressed_mb"):
         read_text(crx)
+
+
+def test_out_of_memory_is_exit_2_with_a_message(monkeypatch: pytest.MonkeyPatch, sample_db: Path) -> None:
+    import dbtools.validate
+
+    def exhausted(*_: object, **__: object) -> None:
+        raise MemoryError
+
+    monkeypatch.setattr(dbtools.validate, "validate_path", exhausted)
+    res = CliRunner().invoke(app, ["db", "validate", str(sample_db)], env={"COLUMNS": "300"})
+    assert res.exit_code == 2 and "out of memory" in res.output and "[input] max_decompressed_mb" in res.output
+    assert "internal error" not in res.output
