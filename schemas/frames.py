@@ -427,6 +427,7 @@ def check_frame(
 
 
 def _infinite(value: object) -> bool:
+    """True for a float ±inf (a pandera failure case)."""
     return isinstance(value, float | np.floating) and bool(np.isinf(value))
 
 

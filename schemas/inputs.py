@@ -41,4 +41,5 @@ class InputLimits:
 
     @property
     def max_bytes(self) -> int:
+        """``max_decompressed_mb`` in bytes."""
         return int(self.max_decompressed_mb * (1 << 20))
