@@ -232,6 +232,9 @@ def import_(
     ),
     run_id: str | None = typer.Option(None, "--run-id", help="run_id (default: the first source's name)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
+    config: Path | None = typer.Option(
+        None, "--config", help="Settings (TOML): its [input] section (limits of compressed sources)."
+    ),
 ) -> None:
     """Import recorder files into a new run folder on one time base (GNSS time).
 

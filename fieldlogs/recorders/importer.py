@@ -29,8 +29,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dbtools.inputs import read_head, regular_file
 from fieldlogs.io import RunMeta, write_run
-from fieldlogs.recorders.common import FORMATS, Decoded, read_bytes, sha256_of
+from fieldlogs.recorders.common import FORMATS, Decoded, sha256_of
 from fieldlogs.recorders.navweeks import nav_onto_observations
 from fieldlogs.recorders.timebase import gps_to_iso
 from fieldlogs.recorders.vehicle import load_vehicle, receivers, tacho_wheel
@@ -59,7 +60,7 @@ def detect_format(path: Path) -> str:
     """nmea, ubx, rinex or csv from the file's first bytes (and name for tables)."""
     if path.suffix.lower() in TABLE_SUFFIXES:
         return "csv"
-    head = read_bytes(path)[:4096]
+    head = read_head(path)  # a few KB, whatever the file's size
     if head[:2] == b"\xb5\x62" or (b"\xb5\x62" in head[:512] and head.count(b"\xb5\x62") > 1):
         return "ubx"
     if b"RINEX VERSION / TYPE" in head[:200] or b"CRINEX VERS" in head[:200]:
@@ -191,6 +192,7 @@ def import_run(
     if out.exists() and not force:
         raise RefusedError("output folder exists; use --force to replace it", path=out)
     for s in sources:
+        regular_file(Path(s), "source file")  # a FIFO, device or socket: refused, never opened
         if out.resolve() in Path(s).resolve().parents:
             raise RefusedError("a source lies inside the output folder", path=s)
     if vehicle is None:
