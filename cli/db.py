@@ -103,6 +103,13 @@ def validate(
         ValidateFmt.table, "--format", help="table, json, sarif (SARIF 2.1.0) or junit (JUnit XML) for CI."
     ),
     strict: bool = typer.Option(False, "--strict", help="Warnings also fail (exit 1)."),
+    help_uri_base: str = typer.Option(
+        "",
+        "--help-uri-base",
+        envvar="TRAINPOS_HELP_URI_BASE",
+        help="SARIF: base of each rule's helpUri (BASE + docs/reference/rules.md#RULE), e.g. "
+        "https://github.com/ORG/trainpos/blob/main/; empty: the repository-relative path.",
+    ),
 ) -> None:
     """Check every consistency rule; exit 0 clean, 1 errors (or warnings with --strict), 2 unreadable.
 
@@ -112,7 +119,7 @@ def validate(
 
     findings = validate_path(target)
     if fmt in (ValidateFmt.sarif, ValidateFmt.junit):
-        _ci_report(findings, target, fmt, strict)
+        _ci_report(findings, target, fmt, strict, help_uri_base)
     elif fmt == ValidateFmt.json:
         report = findings_report(findings)
         report["ok"] = not has_errors(findings, strict)
@@ -300,17 +307,19 @@ def verify_release(
         raise typer.Exit(1)
 
 
-def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: bool) -> None:
+def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: bool, help_uri_base: str) -> None:
     """SARIF or JUnit on stdout (dbtools.interchange.ci)."""
     import sys
 
     from dbtools.build import tool_version
-    from dbtools.interchange.ci import junit, sarif_text
+    from dbtools.interchange.ci import db_source_files, junit, sarif_text
 
     if fmt == ValidateFmt.sarif:
-        sys.stdout.write(
-            sarif_text(findings, target=None if target.is_dir() else str(target), tool_version=tool_version())
+        sources = {} if target.is_dir() else db_source_files(target)
+        text = sarif_text(
+            findings, target=target, tool_version=tool_version(), help_uri_base=help_uri_base, source_files=sources
         )
+        sys.stdout.write(text)
     else:
         sys.stdout.write(junit(findings, target=str(target), strict=strict))
 

@@ -68,13 +68,49 @@ class RuleDoc:
 
     @property
     def anchor(self) -> str:
-        """The id as a URL fragment of the rule reference (``balise-pair_count``)."""
-        return self.id.replace(".", "-")
+        """The URL fragment of the rule in the rule reference: the id itself (the reference
+        gives every rule an ``<a id="family.name">`` anchor)."""
+        return self.id
+
+    @property
+    def summary(self) -> str:
+        """The meaning's first sentence or clause (outside parentheses, at least a few words),
+        as plain text: a title. Capitalised unless it starts with a name in backquotes."""
+        text = _first_clause(plain(self.meaning))
+        starts_with_name = markdown(self.meaning).startswith("`")
+        return text if starts_with_name else text[:1].upper() + text[1:]
+
+    def text(self) -> str:
+        """Meaning and fix as plain text."""
+        return f"{plain(self.meaning)} Fix: {plain(self.fix)}"
 
     def markdown(self) -> str:
-        """The help text in Markdown: severity, meaning and fix."""
+        """The help text in Markdown: id, severity, meaning and fix."""
         sev = f" ({self.severity})" if self.severity else ""
-        return f"**{self.id}**{sev}: {self.meaning}\n\n**Fix:** {self.fix}"
+        return f"**{self.id}**{sev}: {markdown(self.meaning)}\n\n**Fix:** {markdown(self.fix)}"
+
+
+_ROLE = re.compile(r":[a-z]+:`~?([^`]+)`")
+
+
+def markdown(rst: str) -> str:
+    """Docstring markup as Markdown: ````x```` and Sphinx roles (``:mod:`x```) become ```x```."""
+    return _ROLE.sub(r"`\1`", rst).replace("``", "`")
+
+
+def _first_clause(text: str, min_chars: int = 20) -> str:
+    """``text`` up to the first ". ", ": " or "; " outside parentheses after ``min_chars``."""
+    depth = 0
+    for i, ch in enumerate(text):
+        depth += (ch in "([") - (ch in ")]")
+        if depth == 0 and i >= min_chars and ch in ".:;" and text[i + 1 : i + 2] in (" ", ""):
+            return text[:i]
+    return text.rstrip(".:;")
+
+
+def plain(rst: str) -> str:
+    """Docstring markup as plain text (no backquotes)."""
+    return markdown(rst).replace("`", "")
 
 
 def _bullets(doc: str) -> list[tuple[str, str, str]]:

@@ -82,10 +82,17 @@ def test_a_rule_documented_in_two_modules_gets_both(tmp_path: Path) -> None:
     (tmp_path / "schemas").mkdir()
     doc = catalogue_from(tmp_path)["schema.range"]
     assert (doc.meaning, doc.fix, doc.modules) == ("a. b.", "one. two.", ("dbtools.a", "dbtools.b"))
-    assert doc.anchor == "schema-range" and doc.family == "schema"
+    assert doc.anchor == "schema.range" and doc.family == "schema" and doc.summary == "A"
     assert doc.markdown().startswith("**schema.range** (error): a. b.\n\n**Fix:** one. two.")
 
 
 @pytest.mark.parametrize("rule", ["balise.pair_count", "topology.gap", "db.content_hash"])
 def test_known_rules_have_their_module(rule: str) -> None:
     assert rule_catalogue()[rule].modules
+
+
+def test_markup_becomes_markdown_and_plain_text() -> None:
+    doc = rule_catalogue()["topology.gap"]
+    assert "``" not in doc.markdown() and ":mod:" not in doc.markdown() and "`connection_gap_m`" in doc.markdown()
+    assert "`" not in doc.text() and "Fix: " in doc.text()
+    assert doc.summary.startswith("The coordinates of two joined ends are more than connection_gap_m apart")
