@@ -447,6 +447,14 @@ def export(
     xsd: Path | None = typer.Option(
         None, "--xsd", help="railML: validate the export against this XML Schema before writing it (railml3.xsd)."
     ),
+    layers: str | None = typer.Option(
+        None, "--layers", help="GIS formats: only these layers, comma-separated (e.g. tracks,switches,balises)."
+    ),
+    crs: str | None = typer.Option(
+        None,
+        "--crs",
+        help="GIS formats: reproject every layer to EPSG:XXXX (GeoJSON other than EPSG:4326: with a 'crs' member).",
+    ),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Export a DB as railML 3.2, as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet) or
@@ -455,19 +463,24 @@ def export(
     Layers: balises, feature_points, gis_points, gis_lines and the network's tracks,
     switches, connections, balise_groups, km_posts (GeoParquet: the first four). GeoJSON:
     one file (--out *.geojson or *.json), a folder of LAYER.geojson files, or their zip
-    (--out *.zip). Exit 0 written, 1 source set
+    (--out *.zip). --layers picks layers, --crs EPSG:XXXX reprojects them (GeoJSON, which
+    RFC 7946 keeps in WGS 84, then names the CRS in the GeoJSON 2008 'crs' member that GDAL
+    and QGIS read). Exit 0 written, 1 source set
     errors or (with --xsd) the export is not valid against the schema (nothing written),
     2 unreadable input or XSD, unknown format, 3 output exists.
 
     Example: trainpos db export net.sqlite --format gpkg --out net.gpkg
     """
-    from dbtools.interchange.export import ExportFormat, export_network
+    from dbtools.interchange.export import ExportFormat, GisOptions, export_network
+    from dbtools.interchange.reproject import parse_crs
 
     try:
         kind = ExportFormat(fmt)
     except ValueError:
         raise UsageError(f"--format '{fmt}': use one of {', '.join(f.value for f in ExportFormat)}") from None
-    counts = export_network(db, out, kind, force=force, xsd=xsd)
+    chosen = None if layers is None else tuple(name.strip() for name in layers.split(",") if name.strip())
+    gis = GisOptions(layers=chosen, crs=None if crs is None else parse_crs(crs))
+    counts = export_network(db, out, kind, force=force, xsd=xsd, gis=gis)
     console().print(key_value_table([("file", str(out)), ("format", kind.value), *counts.items()], title="Exported"))
 
 

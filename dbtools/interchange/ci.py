@@ -192,7 +192,7 @@ def rule_descriptor(rule: str, help_uri_base: str = "") -> dict[str, Any]:
     base = _uri_base(help_uri_base)
     out.update(
         shortDescription={"text": doc.summary},
-        fullDescription={"text": doc.text().split(" Fix: ")[0]},
+        fullDescription={"text": doc.description},
         help={"text": doc.text(), "markdown": doc.markdown()},
         helpUri=f"{base}{RULES_DOC}#{doc.anchor}",
         properties={"tags": [family], "family": FAMILIES.get(family, family)},

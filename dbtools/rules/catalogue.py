@@ -76,13 +76,19 @@ class RuleDoc:
     def summary(self) -> str:
         """The meaning's first sentence or clause (outside parentheses, at least a few words),
         as plain text: a title. Capitalised unless it starts with a name in backquotes."""
-        text = _first_clause(plain(self.meaning))
-        starts_with_name = markdown(self.meaning).startswith("`")
-        return text if starts_with_name else text[:1].upper() + text[1:]
+        return self._capital(_first_clause(plain(self.meaning)))
+
+    @property
+    def description(self) -> str:
+        """The whole meaning as plain text, capitalised like :attr:`summary`."""
+        return self._capital(plain(self.meaning))
+
+    def _capital(self, text: str) -> str:
+        return text if markdown(self.meaning).startswith("`") else text[:1].upper() + text[1:]
 
     def text(self) -> str:
         """Meaning and fix as plain text."""
-        return f"{plain(self.meaning)} Fix: {plain(self.fix)}"
+        return f"{self.description} Fix: {plain(self.fix)}"
 
     def markdown(self) -> str:
         """The help text in Markdown: id, severity, meaning and fix."""

@@ -82,7 +82,7 @@ def test_a_rule_documented_in_two_modules_gets_both(tmp_path: Path) -> None:
     (tmp_path / "schemas").mkdir()
     doc = catalogue_from(tmp_path)["schema.range"]
     assert (doc.meaning, doc.fix, doc.modules) == ("a. b.", "one. two.", ("dbtools.a", "dbtools.b"))
-    assert doc.anchor == "schema.range" and doc.family == "schema" and doc.summary == "A"
+    assert doc.anchor == "schema.range" and doc.family == "schema" and doc.summary == "A. b"
     assert doc.markdown().startswith("**schema.range** (error): a. b.\n\n**Fix:** one. two.")
 
 
