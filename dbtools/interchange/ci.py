@@ -86,7 +86,7 @@ class _Bases:
 
 def _rel(p: Path, root: Path) -> str:
     rel = p.relative_to(root).as_posix()
-    return "" if rel == "." else rel + ("/" if p.is_dir() else "")
+    return "./" if rel == "." else rel + ("/" if p.is_dir() else "")
 
 
 def _columns(file: str, row: int, column: str, cache: dict[str, list[str]]) -> tuple[int, int] | None:

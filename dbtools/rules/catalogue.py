@@ -175,6 +175,11 @@ def catalogue_from(root: Path) -> dict[str, RuleDoc]:
 
 
 @cache
+def _catalogue() -> dict[str, RuleDoc]:
+    return catalogue_from(Path(__file__).resolve().parents[2])
+
+
 def rule_catalogue() -> dict[str, RuleDoc]:
-    """Every documented rule id → its :class:`RuleDoc` (module doc); parsed once."""
-    return dict(catalogue_from(Path(__file__).resolve().parents[2]))
+    """Every documented rule id → its :class:`RuleDoc`, sorted by id (module doc); the
+    docstrings are parsed once, each call gets its own dict."""
+    return dict(_catalogue())

@@ -154,6 +154,7 @@ def test_uris_are_relative_to_a_declared_base(broken_sources: Path, tmp_path: Pa
     monkeypatch.chdir(elsewhere)  # the source set lies outside the working folder
     run = _sarif(broken_sources)["runs"][0]
     artifacts = _artifacts(run)
+    assert len(artifacts) == len(run["results"])  # every result located
     assert artifacts and all(a["uriBaseId"] == "TARGETROOT" and ":" not in a["uri"] for a in artifacts)
     assert "balises.csv" in {a["uri"] for a in artifacts}
     assert run["originalUriBaseIds"] == {"TARGETROOT": {"uri": broken_sources.resolve().as_uri() + "/"}}
@@ -180,6 +181,7 @@ def test_a_db_finding_is_located_in_the_db_and_its_source_file(sample_db: Path, 
     con.commit()
     con.close()
     run = _sarif(db)["runs"][0]
+    assert run["results"] and all("physicalLocation" in r["locations"][0] for r in run["results"])
     pair = next(r for r in run["results"] if r["ruleId"].startswith("balise.pair"))
     assert pair["locations"][0]["physicalLocation"]["artifactLocation"] == {
         "uri": "edited.sqlite",
