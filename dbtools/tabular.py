@@ -31,6 +31,17 @@ What spreadsheet tools commonly get wrong, and what happens to it here:
 
 :func:`read_table_file` returns the frame with these findings; :func:`read_raw_table`
 (log streams, plans, survey files) raises the first error as an InputError instead.
+
+Findings:
+
+* ``source.delimiter`` (error) — the fields of a CSV are separated by semicolons or tabs, not
+  commas. Fix: save the file as CSV (comma delimited).
+* ``source.encoding`` (warning) — the file is not UTF-8; it was read in another encoding.
+  Fix: check the text in the output and save the file as UTF-8.
+* ``source.duplicate_column`` (error) — a column name appears twice in the header; only the
+  first is read. Fix: rename or delete the others.
+* ``source.numeric_code`` (error) — an .xlsx cell of a code column holds a number, which has
+  lost its leading zeros (01 → 1). Fix: format the column as Text and type the codes again.
 """
 
 from __future__ import annotations

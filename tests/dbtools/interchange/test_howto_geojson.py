@@ -32,7 +32,7 @@ def commands() -> list[list[str]]:
 def test_the_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)
     calls = commands()
-    assert len(calls) == 9
+    assert len(calls) == 10
     for argv in calls:
         r = CliRunner().invoke(app, argv, env={"COLUMNS": "200"})
         if argv[:2] == ["db", "validate"]:  # the RINF extract's own errors, as the page says
@@ -60,3 +60,8 @@ def test_the_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
         "switches.geojson",
         "connections.geojson",
     }
+    import pyogrio
+
+    chosen = tmp_path / "kvg-tracks.gpkg"
+    assert {str(n) for n, _ in pyogrio.list_layers(chosen)} == {"tracks", "switches"}
+    assert pyogrio.read_info(chosen, layer="tracks")["crs"] == "EPSG:25833"
