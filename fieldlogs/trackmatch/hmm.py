@@ -140,7 +140,7 @@ def decode(coff: I64, loge: F64, poff: I64, logt: F64) -> tuple[I64, F64, B8, F6
     beta = _backward(coff, loge, poff, logt, start)
     best, logz = _decode(coff, delta, alpha, back, start)
     step = np.repeat(np.arange(len(coff) - 1), np.diff(coff))
-    gamma = np.exp(alpha + beta - logz[step]) if len(step) else np.empty(0)
+    gamma = np.minimum(np.exp(alpha + beta - logz[step]), 1.0) if len(step) else np.empty(0)  # rounding: ≤ 1
     return best, gamma, start, alpha, beta
 
 

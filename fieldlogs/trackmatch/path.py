@@ -61,7 +61,7 @@ def _xi(hmm: _Hmm, dec: Decoded, k: int, logz: float) -> tuple[float, int]:
     i, j = int(best[k - 1]), int(best[k])
     m = int(hmm.coff[k + 1] - hmm.coff[k])
     pair = int(hmm.poff[k]) + (i - int(hmm.coff[k - 1])) * m + (j - int(hmm.coff[k]))
-    v = float(np.exp(alpha[i] + hmm.logt[pair] + hmm.loge[j] + beta[j] - logz))
+    v = min(1.0, float(np.exp(alpha[i] + hmm.logt[pair] + hmm.loge[j] + beta[j] - logz)))
     return v, int(hmm.ends[pair])
 
 
