@@ -4,10 +4,9 @@ A fix (plane x, y) and a segment from P0 with direction D: the foot of the perpe
 u = clamp(((X − P0)·D) / |D|², 0, 1), distance d = |X − (P0 + u·D)|, signed offset positive
 left of the track's direction (begin → end): sign of D × (X − P0). A segment within radius r
 of a fix has its midpoint within r + ½·longest segment, so a k-d tree over the midpoints
-(scipy ``cKDTree``, its ``k`` nearest within that bound) gives a superset of the segments in
-reach; per (fix, track) the nearest of them is kept, and per fix at most ``max_tracks``
-tracks, nearest first. ``k`` nearest midpoints bound the work per fix; with segments of at
-most 25 m, ``k = 48`` covers a radius of 50 m across about eight parallel tracks.
+(scipy ``cKDTree``: the ``k`` nearest within that bound, ``k`` raised for the fixes where
+all ``k`` are within it) gives every segment in reach; per (fix, track) the nearest of them
+is kept, and per fix at most ``max_tracks`` tracks, nearest first.
 """
 
 from __future__ import annotations
@@ -22,8 +21,8 @@ from fieldlogs.trackmatch.geometry import TrackGeometry
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 
-#: Midpoints looked at per fix.
-K_NEAREST = 48
+#: Midpoints looked at per fix at first (more where these do not reach the bound).
+K_FIRST = 16
 
 
 @dataclass(frozen=True)
@@ -52,22 +51,36 @@ def _tree(geo: TrackGeometry) -> object:
     return cKDTree(np.column_stack([mx, my]))
 
 
+def _near_segments(tree: object, xy: F64, bound: float, n_seg: int) -> tuple[I64, I64]:
+    """(fix, segment) of every segment midpoint within ``bound`` of each fix: the ``K_FIRST``
+    nearest first; the fixes whose last one is still within the bound (there may be more)
+    asked again with four times as many, until none is cut short."""
+    fixes, segs = [], []
+    todo = np.arange(len(xy), dtype=np.int64)
+    k = min(K_FIRST, n_seg)
+    while len(todo):
+        dist, idx = tree.query(xy[todo], k=k, distance_upper_bound=bound)  # type: ignore[attr-defined]
+        idx = np.asarray(idx, dtype=np.int64).reshape(len(todo), k)
+        full = np.isfinite(np.asarray(dist).reshape(len(todo), k)[:, -1]) & (k < n_seg)
+        done = todo[~full]
+        fixes.append(np.repeat(done, k))
+        segs.append(idx[~full].ravel())
+        todo, k = todo[full], min(4 * k, n_seg)
+    fix, seg = np.concatenate(fixes), np.concatenate(segs)
+    keep = seg < n_seg
+    return fix[keep], seg[keep]
+
+
 def find_candidates(
     geo: TrackGeometry, tree: object, x: F64, y: F64, radius_m: float, max_tracks: int
 ) -> Candidates:
     """Candidates of fixes at plane (x, y) within ``radius_m`` (see the module docstring)."""
     n = len(x)
     half = 0.5 * float(np.max(np.hypot(geo.dx, geo.dy))) if len(geo.dx) else 0.0
-    k = min(K_NEAREST, len(geo.dx))
-    if n == 0 or k == 0:
+    if n == 0 or len(geo.dx) == 0:
         e = np.empty(0)
         return Candidates(np.zeros(n + 1, dtype=np.int64), e.astype(np.int64), e, e, e, e, e, e)
-    _, idx = tree.query(np.column_stack([x, y]), k=k, distance_upper_bound=radius_m + half)  # type: ignore[attr-defined]
-    idx = np.asarray(idx, dtype=np.int64).reshape(n, k)
-    fix = np.repeat(np.arange(n, dtype=np.int64), k)
-    seg = idx.ravel()
-    keep = seg < len(geo.dx)
-    fix, seg = fix[keep], seg[keep]
+    fix, seg = _near_segments(tree, np.column_stack([x, y]), radius_m + half, len(geo.dx))
     px, py = x[fix] - geo.x0[seg], y[fix] - geo.y0[seg]
     dx, dy = geo.dx[seg], geo.dy[seg]
     l2 = np.maximum(dx * dx + dy * dy, 1e-12)

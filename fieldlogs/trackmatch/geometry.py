@@ -56,7 +56,7 @@ class TrackGeometry:
 
 def _polylines(net: Network) -> tuple[pd.DataFrame, list[str], F64]:
     """Centreline vertices (track, pos_m, km_m, lat, lon) of every track, begin to end."""
-    from dbtools.topology import all_tracks, centreline
+    from dbtools.topology import all_tracks
 
     tracks = all_tracks(net)
     ids = [str(t) for t in tracks["track_id"]]
@@ -64,17 +64,45 @@ def _polylines(net: Network) -> tuple[pd.DataFrame, list[str], F64]:
     own = tp[["track_id", "pos_m", "km_m", "lat", "lon"]].astype(
         {"track_id": object, "pos_m": float, "km_m": float, "lat": float, "lon": float}
     )
-    has_points = set(own["track_id"].astype(str))
-    parts = [own]
-    for _, row in tracks[~tracks["track_id"].astype(str).isin(has_points)].iterrows():
-        c = centreline(net, row)
-        parts.append(pd.DataFrame({"track_id": str(row["track_id"]), "pos_m": c.pos_m, "km_m": c.km_m,
-                                   "lat": c.lat, "lon": c.lon}))  # fmt: skip
-    pts = pd.concat(parts, ignore_index=True)
+    rest = tracks[~tracks["track_id"].astype(str).isin(set(own["track_id"].astype(str)))]
+    pts = pd.concat([own, _on_lines(net, rest)], ignore_index=True)
     pts = pts[np.isfinite(pts["lat"].to_numpy(float)) & np.isfinite(pts["lon"].to_numpy(float))]
     pts = pts.sort_values(["track_id", "pos_m"], kind="stable").reset_index(drop=True)
     length = tracks["length_m"].to_numpy(dtype=float, na_value=np.nan)
     return pts, ids, length
+
+
+def _on_lines(net: Network, tracks: pd.DataFrame) -> pd.DataFrame:
+    """The ``gis`` grid points of each track along a line between its end km, ``pos`` =
+    |km − km at begin| (:func:`dbtools.topology.centreline`, for all tracks at once)."""
+    cols = ["track_id", "pos_m", "km_m", "lat", "lon"]
+    t = tracks[tracks["line_code"].notna() & tracks["km_begin_m"].notna() & tracks["km_end_m"].notna()]
+    if t.empty or net.gis.empty:
+        return pd.DataFrame({c: [] for c in cols})
+    t = pd.DataFrame(
+        {
+            "track_id": t["track_id"].astype(str).to_numpy(),
+            "line_code": t["line_code"].astype(str).to_numpy(),
+            "track": t["track"].astype(str).to_numpy(),
+            "k0": t["km_begin_m"].to_numpy(float),
+            "k1": t["km_end_m"].to_numpy(float),
+        }
+    )
+    g = net.gis[["line_code", "track", "km_m", "lat", "lon"]]
+    g = pd.DataFrame(
+        {
+            "line_code": g["line_code"].astype(str).to_numpy(),
+            "track": g["track"].astype(str).to_numpy(),
+            "km_m": g["km_m"].to_numpy(float),
+            "lat": g["lat"].to_numpy(float),
+            "lon": g["lon"].to_numpy(float),
+        }
+    )
+    m = g.merge(t, on=["line_code", "track"], how="inner")
+    km = m["km_m"].to_numpy(float)
+    lo, hi = np.minimum(m["k0"], m["k1"]).to_numpy(), np.maximum(m["k0"], m["k1"]).to_numpy()
+    m = m[(km >= lo - 1e-6) & (km <= hi + 1e-6)]
+    return m.assign(pos_m=(m["km_m"] - m["k0"]).abs())[cols]
 
 
 def _projector(net: Network, lat: F64, lon: F64) -> Projector:
