@@ -74,7 +74,7 @@ BASES = ("relative", "unix", "gps", "utc")
 PLAUSIBILITY_SAMPLES = 200_000
 SECTIONS = {"stream", "time", "columns", "units", "axes", "offsets"}
 #: gps columns a trace may lack (module docstring).
-GPS_QUALITY = ("fix", "nsat")
+GPS_QUALITY = ("fix", "nsat", "hdop")
 
 
 def load_mapping(path: Path) -> dict[str, Any]:
@@ -332,8 +332,9 @@ def _gps_quality(out: dict[str, Any], n: int) -> None:
     if "fix" not in out:
         lat, lon = out.get("lat", np.full(n, np.nan)), out.get("lon", np.full(n, np.nan))
         out["fix"] = (np.isfinite(lat) & np.isfinite(lon)).astype(np.float64)
-    if "nsat" not in out:
-        out["nsat"] = np.full(n, np.nan)
+    for name in ("nsat", "hdop"):
+        if name not in out:
+            out[name] = np.full(n, np.nan)
 
 
 def read_mapped(path: Path, mapping: dict[str, Any], mapping_file: str = "") -> Decoded:

@@ -93,7 +93,8 @@ def find_candidates(
     # nearest segment per (fix, track), then tracks by distance within each fix
     order = np.lexsort((seg, d, trk, fix))
     fix, seg, u, d, trk = fix[order], seg[order], u[order], d[order], trk[order]
-    first = np.r_[True, (fix[1:] != fix[:-1]) | (trk[1:] != trk[:-1])]
+    first = np.ones(len(fix), dtype=bool)
+    first[1:] = (fix[1:] != fix[:-1]) | (trk[1:] != trk[:-1])
     fix, seg, u, d, trk = fix[first], seg[first], u[first], d[first], trk[first]
     order = np.lexsort((trk, d, fix))
     fix, seg, u, d, trk = fix[order], seg[order], u[order], d[order], trk[order]

@@ -116,3 +116,11 @@ def test_a_reversal_inside_a_passed_track_is_not_a_route() -> None:
     xy = [(x, 0.1 * x) for x in range(300, 100, -10)] + [(x, -0.1 * x) for x in range(100, 300, 10)]
     r = match_trace(net, *fixes(xy), settings=MatchSettings(radius_m=8.0))
     assert list(r.path["track_id"]) == ["L", "R"] and list(r.path["chain"]) == [0, 1]
+
+
+@pytest.mark.parametrize("xy", [[(100, -200), (100, -300)], np.zeros((0, 2)), [(np.nan, np.nan)]])
+def test_nothing_to_match(xy: object) -> None:
+    net = make_network({"A": [(0, 0), (200, 0)]})
+    r = match_trace(net, *fixes(xy))  # type: ignore[arg-type]
+    assert r.summary["matched"] == 0 and r.path.empty and r.summary["chains"] == 0
+    assert len(r.fixes) == len(np.asarray(xy).reshape(-1, 2)) and r.fixes["track_id"].isna().all()
