@@ -10,7 +10,8 @@ Run on demand (prints numbers, never pass/fail)::
 The network is ``bench_topology.build`` (double-track lines 5 km long, 1.1 km apart, D and U
 split every 250 m, a crossover at every odd split: 50 tracks per line). The trace: per line
 ``--per-line`` fixes evenly spaced along its 5 km (20 m at the default 250, i.e. 1 Hz at
-72 km/h) with 3 m Gaussian noise, on D, through the crossover at 2250 m and on U after it; the trace jumps from line to line (no route between lines: a new chain each).
+72 km/h) with 3 m Gaussian noise, on D, through the crossover at 2250 m and on U after it;
+the trace jumps from line to line (no route between lines: a new chain each).
 
 *Whole path calculation* = :func:`fieldlogs.trackmatch.match.match_trace` on a loaded
 network whose geometry index is built (built once per DB, timed apart): projection of the
@@ -32,8 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
-
 from bench_topology import M_LAT, build
+
 from dbtools.network import Network
 from fieldlogs.trackmatch.candidates import find_candidates
 from fieldlogs.trackmatch.match import MatchSettings, _model, match_trace

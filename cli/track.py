@@ -48,7 +48,9 @@ def render_table(result: TrackMatch, c: Console) -> None:
 def match(
     run_dir: Path = typer.Argument(..., help="Run folder with a gps stream (no odometry needed)."),
     db: Path = typer.Option(..., "--db", help="Onboard DB (.sqlite) whose network (tracks, connections) is matched."),
-    fmt: Fmt = typer.Option(Fmt.table, "--format", help="table, json, geojson (path + fixes) or csv (one row per fix)."),
+    fmt: Fmt = typer.Option(
+        Fmt.table, "--format", help="table, json, geojson (path + fixes) or csv (one row per fix)."
+    ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file instead of the terminal."),
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
     radius: float = typer.Option(50.0, "--radius", min=1.0, help="Search radius around a fix [m]."),

@@ -179,6 +179,20 @@ def _fitted(path: Path, raw: pd.DataFrame, tm: dict[str, Any], tau: np.ndarray, 
     return fit.apply(tau)
 
 
+def _utc_stamps(path: Path, col: pd.Series, tm: dict[str, Any]) -> np.ndarray:
+    """ISO 8601 stamps → GPS seconds, offset-less ones in ``[time] timezone``."""
+    zone = None
+    if "timezone" in tm:
+        try:
+            zone = time_zone(str(tm["timezone"]))
+        except ValueError as exc:
+            raise InputError(f"time.timezone: {exc}", path=path, column="time.timezone") from exc
+    try:
+        return stamps_to_gps(col.tolist(), zone)
+    except StampError as exc:
+        raise InputError(f"time column: {exc}", path=path, row=exc.row + 2, column=str(tm["column"])) from exc
+
+
 def _abs_time(path: Path, raw: pd.DataFrame, tm: dict[str, Any], dec: Decoded) -> tuple[np.ndarray, bool]:
     """(GPS seconds per row — or recorder seconds when relative without start, is absolute)."""
     col = _column(path, raw, tm["column"], "t")
@@ -186,17 +200,7 @@ def _abs_time(path: Path, raw: pd.DataFrame, tm: dict[str, Any], dec: Decoded) -
     if base not in BASES:
         raise InputError(f"time base '{base}' is not one of {', '.join(BASES)}", path=path, column="time.base")
     if base == "utc":
-        zone = None
-        if "timezone" in tm:
-            try:
-                zone = time_zone(str(tm["timezone"]))
-            except ValueError as exc:
-                raise InputError(f"time.timezone: {exc}", path=path, column="time.timezone") from exc
-        try:
-            g = stamps_to_gps(col.to_numpy(dtype=object), zone)
-        except StampError as exc:
-            raise InputError(f"time column: {exc}", path=path, row=exc.row + 2, column=str(tm["column"])) from exc
-        return g, True
+        return _utc_stamps(path, col, tm), True
     unit = tm.get("unit", "s")
     if unit not in TIME_UNITS:
         raise InputError(f"time unit '{unit}' is not one of s, ms, us", path=path, column="time.unit")

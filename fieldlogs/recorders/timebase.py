@@ -14,6 +14,7 @@ residual (RMS and max |g − ĝ|) is reported in the run's provenance; a fit wit
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta, timezone, tzinfo
@@ -170,14 +171,12 @@ def time_zone(text: str) -> tzinfo:
     s = text.strip()
     if s.upper() in ("UTC", "Z", "GMT"):
         return UTC
-    if s[:1] in "+-" and s[1:].replace(":", "").isdigit():
-        digits = s[1:].replace(":", "")
-        if len(digits) in (2, 4):
-            hours, minutes = int(digits[:2]), int(digits[2:] or 0)
-            if hours <= 14 and minutes < 60:
-                sign = 1 if s[0] == "+" else -1
-                return timezone(sign * timedelta(hours=hours, minutes=minutes))
-        raise ValueError(f"'{text}' is not an offset ±HH:MM")
+    if s[:1] in ("+", "-"):
+        m = re.fullmatch(r"([+-])(\d\d)(?::?(\d\d))?", s)
+        if m is None or int(m.group(2)) > 14 or int(m.group(3) or 0) >= 60:
+            raise ValueError(f"'{text}' is not an offset ±HH:MM")
+        sign = 1 if m.group(1) == "+" else -1
+        return timezone(sign * timedelta(hours=int(m.group(2)), minutes=int(m.group(3) or 0)))
     try:
         return ZoneInfo(s)
     except (ZoneInfoNotFoundError, ValueError) as exc:

@@ -71,9 +71,7 @@ def _near_segments(tree: object, xy: F64, bound: float, n_seg: int) -> tuple[I64
     return fix[keep], seg[keep]
 
 
-def find_candidates(
-    geo: TrackGeometry, tree: object, x: F64, y: F64, radius_m: float, max_tracks: int
-) -> Candidates:
+def find_candidates(geo: TrackGeometry, tree: object, x: F64, y: F64, radius_m: float, max_tracks: int) -> Candidates:
     """Candidates of fixes at plane (x, y) within ``radius_m`` (see the module docstring)."""
     n = len(x)
     half = 0.5 * float(np.max(np.hypot(geo.dx, geo.dy))) if len(geo.dx) else 0.0

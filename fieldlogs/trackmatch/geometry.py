@@ -100,9 +100,11 @@ def _on_lines(net: Network, tracks: pd.DataFrame) -> pd.DataFrame:
     )
     m = g.merge(t, on=["line_code", "track"], how="inner")
     km = m["km_m"].to_numpy(float)
-    lo, hi = np.minimum(m["k0"], m["k1"]).to_numpy(), np.maximum(m["k0"], m["k1"]).to_numpy()
+    k0, k1 = m["k0"].to_numpy(float), m["k1"].to_numpy(float)
+    lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
     m = m[(km >= lo - 1e-6) & (km <= hi + 1e-6)]
-    return m.assign(pos_m=(m["km_m"] - m["k0"]).abs())[cols]
+    out: pd.DataFrame = m.assign(pos_m=np.abs(m["km_m"].to_numpy(float) - m["k0"].to_numpy(float)))[cols]
+    return out
 
 
 def _projector(net: Network, lat: F64, lon: F64) -> Projector:
@@ -144,7 +146,7 @@ def build_geometry(net: Network, *, max_segment_m: float = MAX_SEGMENT_M) -> Tra
         cl_len[tid[last]] = pos[last]
         length = np.where(np.isfinite(length) & (length > 0), length, cl_len)
         return TrackGeometry(
-            ids, length, proj, tid[rep], x0, y0, lerp(x, f1) - x0, lerp(y, f1) - y0, s0,
+            ids, length, proj, tid[rep].astype(np.int64), x0, y0, lerp(x, f1) - x0, lerp(y, f1) - y0, s0,
             lerp(pos, f1) - s0, k0, lerp(km, f1) - k0,
         )  # fmt: skip
 

@@ -30,6 +30,31 @@ NEG = -np.inf
 
 
 @njit(cache=True, nogil=True)
+def _into(  # pragma: no cover - numba
+    j: int, p0: int, p1: int, col: int, m: int, logt: F64, delta: F64, alpha: F64
+) -> tuple[float, int, float]:
+    """max and argmax of δ_{k−1}(i) + log a(i, j), logsumexp of α_{k−1}(i) + log a(i, j);
+    ``col`` = poff[k] + (j − a0), ``m`` candidates at step k."""
+    best, arg, mx = NEG, -1, NEG
+    for i in range(p0, p1):
+        lt = logt[col + (i - p0) * m]
+        v = delta[i] + lt
+        if v > best:
+            best, arg = v, i
+        w = alpha[i] + lt
+        if w > mx:
+            mx = w
+    if arg < 0:
+        return NEG, -1, NEG
+    s = 0.0
+    for i in range(p0, p1):
+        w = alpha[i] + logt[col + (i - p0) * m]
+        if w > NEG:
+            s += np.exp(w - mx)
+    return best, arg, mx + np.log(s)
+
+
+@njit(cache=True, nogil=True)
 def _forward(coff: I64, loge: F64, poff: I64, logt: F64) -> tuple[F64, F64, I64, B8]:  # pragma: no cover - numba
     n = len(coff) - 1
     nc = len(loge)
@@ -41,35 +66,15 @@ def _forward(coff: I64, loge: F64, poff: I64, logt: F64) -> tuple[F64, F64, I64,
         a0, a1 = coff[k], coff[k + 1]
         feasible = False
         if k > 0:
-            p0, p1 = coff[k - 1], coff[k]
-            m = a1 - a0
-            base = poff[k]
             for j in range(a0, a1):
-                best, arg, mx = NEG, -1, NEG
-                for i in range(p0, p1):
-                    lt = logt[base + (i - p0) * m + (j - a0)]
-                    v = delta[i] + lt
-                    if v > best:
-                        best, arg = v, i
-                    w = alpha[i] + lt
-                    if w > mx:
-                        mx = w
+                best, arg, lse = _into(j, coff[k - 1], coff[k], poff[k] + (j - a0), a1 - a0, logt, delta, alpha)
                 if arg >= 0:
                     feasible = True
-                    s = 0.0
-                    for i in range(p0, p1):
-                        w = alpha[i] + logt[base + (i - p0) * m + (j - a0)]
-                        if w > NEG:
-                            s += np.exp(w - mx)
-                    delta[j] = best + loge[j]
-                    alpha[j] = mx + np.log(s) + loge[j]
-                    back[j] = arg
+                    delta[j], alpha[j], back[j] = best + loge[j], lse + loge[j], arg
         if not feasible:
             start[k] = True
             for j in range(a0, a1):
-                delta[j] = loge[j]
-                alpha[j] = loge[j]
-                back[j] = -1
+                delta[j], alpha[j], back[j] = loge[j], loge[j], -1
     return delta, alpha, back, start
 
 

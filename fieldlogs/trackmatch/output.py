@@ -18,12 +18,13 @@ def match_geojson(net: Network, result: TrackMatch, name: str = "track-match") -
     from dbtools.interchange.geojson import collection, feature, frame_points, line_string
     from dbtools.topology import all_tracks, centreline
 
-    tracks = all_tracks(net).set_index("track_id", drop=False)
+    tracks = all_tracks(net)
+    row_of = {str(t): i for i, t in enumerate(tracks["track_id"])}
     feats = []
-    for row in result.path.itertuples(index=False):
-        c = centreline(net, tracks.loc[row.track_id])
+    for rec in result.path.to_dict("records"):
+        c = centreline(net, tracks.iloc[row_of[str(rec["track_id"])]])
         geom = line_string(list(zip(c.lon, c.lat, strict=True)))
-        props = {"layer": "path", **{k: (None if pd.isna(v) else v) for k, v in row._asdict().items()}}
+        props = {"layer": "path", **{str(k): (None if pd.isna(v) else v) for k, v in rec.items()}}
         feats.append(feature(geom, props))
     feats += frame_points(result.fixes, "fix")
     return collection(feats, name)

@@ -46,13 +46,20 @@ def _fix_frame(
             "lat": lat,
             "lon": lon,
             "status": status,
-            "track_id": np.where(has, ids[c.track[k]] if len(c.track) else None, None),
+            "track_id": _names(ids, c.track, k, has),
             "offset_m": pick(c.offset_m),
             "distance_m": pick(c.pos_m),
             "km_m": pick(c.km_m),
             "probability": prob,
         }
     )
+
+
+def _names(ids: npt.NDArray[np.object_], track: I64, k: I64, has: npt.NDArray[np.bool_]) -> npt.NDArray[np.object_]:
+    """Track id of each fix's chosen candidate, None where it has none."""
+    out = np.full(len(k), None, dtype=object)
+    out[has] = ids[track[k[has]]]
+    return out
 
 
 def _xi(hmm: _Hmm, dec: Decoded, k: int, logz: float) -> tuple[float, int]:

@@ -108,7 +108,9 @@ def test_geojson_csv_table_and_the_output_rule(geojson_run: Path, kvg_db: Path, 
     assert res.exit_code == 0 and "Track match" in res.output and "Path" in res.output
     res = invoke("track", "match", geojson_run, "--db", kvg_db, "--format", "csv", "--out", csv)
     assert res.exit_code == 3
-    assert invoke("track", "match", geojson_run, "--db", kvg_db, "--format", "csv", "--out", csv, "--force").exit_code == 0
+    assert (
+        invoke("track", "match", geojson_run, "--db", kvg_db, "--format", "csv", "--out", csv, "--force").exit_code == 0
+    )
 
 
 def test_exit_codes_without_gps_or_without_a_match(geojson_run: Path, kvg_db: Path, tmp_path: Path) -> None:

@@ -5,6 +5,8 @@ drawn lengths and offsets are true on the ground)."""
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import numpy as np
 import pandas as pd
 from pyproj import Proj
@@ -23,7 +25,7 @@ def lonlat(x: object, y: object) -> tuple[np.ndarray, np.ndarray]:
 
 def _densify(pts: list[tuple[float, float]], step: float = 20.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     xs, ys = [pts[0][0]], [pts[0][1]]
-    for (x0, y0), (x1, y1) in zip(pts[:-1], pts[1:], strict=True):
+    for (x0, y0), (x1, y1) in pairwise(pts):
         n = max(1, int(np.ceil(np.hypot(x1 - x0, y1 - y0) / step)))
         f = np.arange(1, n + 1) / n
         xs += list(x0 + f * (x1 - x0))

@@ -4,6 +4,7 @@ a connected path: every consecutive pair of path tracks joined by a navigable co
 from __future__ import annotations
 
 from datetime import timedelta, timezone
+from itertools import pairwise
 from pathlib import Path
 
 import pandas as pd
@@ -34,9 +35,8 @@ def _match(net: Network, gnss: Path) -> TrackMatch:
 
 def connected(net: Network, path: pd.DataFrame) -> bool:
     topo = topology(net)
-    for (ca, a), (cb, b) in zip(
-        zip(path["chain"], path["track_id"], strict=True), list(zip(path["chain"], path["track_id"], strict=True))[1:]
-    ):
+    rows = list(zip(path["chain"], path["track_id"], strict=True))
+    for (ca, a), (cb, b) in pairwise(rows):
         nxt = {x.track_id for d in (1, -1) for x in topo.next_tracks(a, d)}
         if ca == cb and b not in nxt:
             return False
@@ -49,7 +49,10 @@ def test_rinf_kvg_gnss_matched_to_a_connected_path(tmp_path: Path) -> None:
     assert r.summary["fixes"] == 149 and r.summary["matched"] == 149 and r.summary["chains"] == 1
     assert connected(net, r.path) and len(r.path) >= 5
     # ids verbatim from the source
-    assert set(r.path["track_id"]) <= set(net.tracks["track_id"]) and r.path["track_id"].str.startswith("_netelement_").all()
+    assert (
+        set(r.path["track_id"]) <= set(net.tracks["track_id"])
+        and r.path["track_id"].str.startswith("_netelement_").all()
+    )
     # the path covers the trace in time order, every fix on a path track
     assert r.path["t_from"].is_monotonic_increasing and r.summary["max_abs_offset_m"] < 15.0
     assert set(r.fixes["track_id"]) <= set(r.path["track_id"])
