@@ -18,7 +18,7 @@ from schemas.jsonable import jsonable
 if TYPE_CHECKING:
     from rich.console import Console
 
-    from fieldlogs.trackmatch.match import TrackMatch
+    from fieldlogs.trackmatch.result import TrackMatch
 
 app = typer.Typer(help="Track-level positioning on the network (SPEC §8.3).", no_args_is_help=True)
 

@@ -35,25 +35,20 @@ chains (a new chain is not connected to the one before).
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.trackmatch.candidates import Candidates, _tree, find_candidates
 from fieldlogs.trackmatch.geometry import TrackGeometry, build_geometry
+from fieldlogs.trackmatch.result import MATCHED, NO_CANDIDATE, NO_POSITION, OUTLIER, Hmm, TrackMatch
 from fieldlogs.trackmatch.routes import Routes, route_distances
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 #: Decoding passes at most (each may set aside a short chain of outliers).
 MAX_PASSES = 5
-#: Status of a fix in the result.
-MATCHED, NO_CANDIDATE, OUTLIER, NO_POSITION = "matched", "no_candidate", "outlier", "no_position"
-FIX_COLUMNS = ("t", "lat", "lon", "status", "track_id", "offset_m", "distance_m", "km_m", "probability")
-PATH_COLUMNS = ("chain", "track_id", "probability", "t_from", "t_to", "fixes")
 
 
 @dataclass(frozen=True)
@@ -69,22 +64,6 @@ class MatchSettings:
     route_factor: float = 3.0
     route_margin_m: float = 200.0
     outlier_run: int = 10
-
-
-@dataclass
-class TrackMatch:
-    """The matched path, every fix's projection and a summary."""
-
-    path: pd.DataFrame
-    fixes: pd.DataFrame
-    summary: dict[str, Any]
-
-    def to_json(self) -> dict[str, Any]:
-        def rows(frame: pd.DataFrame) -> list[dict[str, Any]]:
-            clean = frame.astype(object).where(frame.notna(), None)
-            return [dict(zip(clean.columns, r, strict=True)) for r in clean.itertuples(index=False)]
-
-        return {"summary": self.summary, "path": rows(self.path), "fixes": rows(self.fixes)}
 
 
 @dataclass
@@ -125,20 +104,7 @@ def _emissions(c: Candidates, fix_of: I64, sigma: F64, hx: F64, hy: F64, s: Matc
     return loge
 
 
-@dataclass
-class _Hmm:
-    steps: I64
-    """Fix index of each step."""
-    coff: I64
-    cand: I64
-    """Candidate (index into the Candidates arrays) of each step's entries."""
-    loge: F64
-    poff: I64
-    logt: F64
-    ends: npt.NDArray[np.int8]
-
-
-def _build(c: Candidates, steps: I64, loge_all: F64, x: F64, y: F64, model: _Model, s: MatchSettings) -> _Hmm:
+def _build(c: Candidates, steps: I64, loge_all: F64, x: F64, y: F64, model: _Model, s: MatchSettings) -> Hmm:
     counts = (c.offsets[steps + 1] - c.offsets[steps]).astype(np.int64)
     coff = np.r_[0, np.cumsum(counts)].astype(np.int64)
     cand = (np.repeat(c.offsets[steps] - coff[:-1], counts) + np.arange(coff[-1])).astype(np.int64)
@@ -156,7 +122,7 @@ def _build(c: Candidates, steps: I64, loge_all: F64, x: F64, y: F64, model: _Mod
         model.routes, c.track[i], c.pos_m[i], c.track[j], c.pos_m[j], s.route_factor * g + s.route_margin_m
     )
     logt = -np.abs(route - g) / s.beta_m
-    return _Hmm(steps, coff, cand, loge_all[cand], poff, logt, ends)
+    return Hmm(steps, coff, cand, loge_all[cand], poff, logt, ends)
 
 
 def _outliers(start: npt.NDArray[np.bool_], steps: I64, run: int) -> I64:

@@ -10,7 +10,7 @@ from typing import Any
 import pandas as pd
 
 from dbtools.network import Network
-from fieldlogs.trackmatch.match import TrackMatch
+from fieldlogs.trackmatch.result import TrackMatch
 
 
 def match_geojson(net: Network, result: TrackMatch, name: str = "track-match") -> dict[str, Any]:

@@ -10,11 +10,11 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
+from fieldlogs.trackmatch.result import FIX_COLUMNS, PATH_COLUMNS, Hmm, TrackMatch
 
 if TYPE_CHECKING:
     from fieldlogs.trackmatch.candidates import Candidates
     from fieldlogs.trackmatch.geometry import TrackGeometry
-    from fieldlogs.trackmatch.match import TrackMatch, _Hmm
     from fieldlogs.trackmatch.routes import Routes
 
 F64 = npt.NDArray[np.float64]
@@ -23,7 +23,7 @@ Decoded = tuple[I64, F64, npt.NDArray[np.bool_], F64, F64]
 
 
 def _fix_frame(
-    geo: TrackGeometry, c: Candidates, hmm: _Hmm, dec: Decoded, t: F64, lat: F64, lon: F64, status: Any
+    geo: TrackGeometry, c: Candidates, hmm: Hmm, dec: Decoded, t: F64, lat: F64, lon: F64, status: Any
 ) -> pd.DataFrame:
     best, gamma = dec[0], dec[1]
     n = len(t)
@@ -51,7 +51,8 @@ def _fix_frame(
             "distance_m": pick(c.pos_m),
             "km_m": pick(c.km_m),
             "probability": prob,
-        }
+        },
+        columns=list(FIX_COLUMNS),
     )
 
 
@@ -62,7 +63,7 @@ def _names(ids: npt.NDArray[np.object_], track: I64, k: I64, has: npt.NDArray[np
     return out
 
 
-def _xi(hmm: _Hmm, dec: Decoded, k: int, logz: float) -> tuple[float, int]:
+def _xi(hmm: Hmm, dec: Decoded, k: int, logz: float) -> tuple[float, int]:
     """Posterior of the chosen transition into step k and the ends code it takes."""
     best, _, _, alpha, beta = dec
     i, j = int(best[k - 1]), int(best[k])
@@ -72,7 +73,7 @@ def _xi(hmm: _Hmm, dec: Decoded, k: int, logz: float) -> tuple[float, int]:
     return v, int(hmm.ends[pair])
 
 
-def _rows(geo: TrackGeometry, routes: Routes, c: Candidates, hmm: _Hmm, dec: Decoded, t: F64) -> list[list[Any]]:
+def _rows(geo: TrackGeometry, routes: Routes, c: Candidates, hmm: Hmm, dec: Decoded, t: F64) -> list[list[Any]]:
     """Path rows [chain, track index, probabilities, t_from, t_to, fixes] before merging."""
     best, gamma, start, alpha, _ = dec
     rows: list[list[Any]] = []
@@ -108,7 +109,7 @@ def assemble(
     geo: TrackGeometry,
     routes: Routes,
     c: Candidates,
-    hmm: _Hmm,
+    hmm: Hmm,
     dec: Decoded,
     t: F64,
     lat: F64,
@@ -116,8 +117,6 @@ def assemble(
     status: Any,
 ) -> TrackMatch:
     """Fix frame, path frame and summary of a decoded HMM."""
-    from fieldlogs.trackmatch.match import PATH_COLUMNS, TrackMatch
-
     del net
     fixes = _fix_frame(geo, c, hmm, dec, t, lat, lon, status)
     rows = _rows(geo, routes, c, hmm, dec, t)
