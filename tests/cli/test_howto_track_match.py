@@ -44,7 +44,7 @@ def test_the_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     assert round(s["mean_abs_offset_m"], 2) == 1.50
     first = doc["path"][0]
     assert first["track_id"] == "_netelement_94cd1b3d-9ef1-42dc-b7f6-32932adf7d6f_0.12594356"
-    assert (round(first["probability"], 3), first["t_from"], first["t_to"]) == (0.970, 0.0, 18.0)
+    assert (round(first["probability"], 3), first["t_from"], first["t_to"]) == (0.972, 0.0, 18.0)
     assert all(f["km_m"] is None for f in doc["fixes"])
     topo = topology(read_network(tmp_path / "kvg.sqlite"))
     for a, b in zip(doc["path"][:-1], doc["path"][1:], strict=True):
