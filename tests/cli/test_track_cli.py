@@ -126,3 +126,15 @@ def test_exit_codes_without_gps_or_without_a_match(geojson_run: Path, kvg_db: Pa
     gps.assign(lat=gps["lat"] - 0.1).to_parquet(far / "gps.parquet")  # 11 km south of every track
     res = invoke("track", "match", far, "--db", kvg_db)
     assert res.exit_code == 1 and "none of the 149 fixes" in res.output
+
+
+def test_tp_lib_teaching_trace_with_offsets(tmp_path: Path) -> None:
+    out = tmp_path / "sample"
+    res = invoke("logs", "import", DATA / "tp-lib" / "sample_gnss.geojson", "--vehicle", TM / "road_rail.toml",
+                 "--out", out)  # fmt: skip
+    assert res.exit_code == 0, res.output
+    run = read_run(out)
+    gps = run.stream("gps")
+    assert gps is not None and list(gps["t"]) == [0.0, 5.0, 10.0]
+    assert list(gps["speed_mps"].round(3)) == [round(v / 3.6, 3) for v in (120, 122, 118)]
+    assert run.meta is not None and run.meta.start_time.startswith("2024-01-15T09:30:00")  # 10:30 at +01:00
