@@ -4,5 +4,6 @@ A hidden Markov model over candidate tracks with Viterbi decoding [Newson & Krum
 :mod:`.geometry` (the network's centrelines as short plane segments), :mod:`.candidates`
 (tracks within the search radius of each fix), :mod:`.routes` (route distances through the
 topology, navigability respected), :mod:`.hmm` (Viterbi and forward–backward in log space),
-:mod:`.match` (the whole calculation and its result).
+:mod:`.match` (the whole calculation), :mod:`.path` and :mod:`.result` (what it returns),
+:mod:`.trace` (a run's ``gps`` stream as fixes), :mod:`.output` (GeoJSON).
 """

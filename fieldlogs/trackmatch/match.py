@@ -174,13 +174,13 @@ def match_trace(
     loge_all = _emissions(c, fix_of, sig, hx, hy, s)
     outlier = np.zeros(len(t), dtype=bool)
     with_cand = np.diff(c.offsets) > 0
-    for _ in range(MAX_PASSES):
+    for n_pass in range(MAX_PASSES):
         steps = np.flatnonzero(with_cand & ~outlier)
         hmm = _build(c, steps, loge_all, x, y, model, s)
         best, gamma, start, alpha, beta = decode(hmm.coff, hmm.loge, hmm.poff, hmm.logt)
         drop = _outliers(start, steps, s.outlier_run)
-        if not len(drop):
-            break
+        if not len(drop) or n_pass == MAX_PASSES - 1:
+            break  # the last pass decoded is the result: nothing set aside after it
         outlier[drop] = True
     status = np.where(~has_pos, NO_POSITION, np.where(outlier, OUTLIER, np.where(with_cand, MATCHED, NO_CANDIDATE)))
     result = assemble(net, model.geo, model.routes, c, hmm, (best, gamma, start, alpha, beta), t, lat, lon, status)
