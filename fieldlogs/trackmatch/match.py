@@ -12,7 +12,8 @@ heading — the chord from the previous to the next fix, where it is at least
 known, so the angle is taken modulo 180°).
 
 **Transition** between candidates i (fix a) and j (fix b, the next fix with candidates):
-log a = −|r − g|/β − λ·[the tracks differ], g the plane distance between the two fixes, r the
+log a = −|r − g|/β − λ·[the tracks differ], g the plane distance between the two fixes (the
+network's metric CRS: within 0.04 % of the great-circle distance in a UTM zone), r the
 route distance between
 the candidates' positions through the topology (:mod:`.routes`: the same track |Δs|; else
 through whole tracks over navigable connections only), searched up to
