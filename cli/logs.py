@@ -212,16 +212,19 @@ class ImportFmt(StrEnum):
     ubx = "ubx"
     rinex = "rinex"
     csv = "csv"
+    geojson = "geojson"
 
 
 @app.command("import")
 @cli_command
 def import_(
     sources: list[Path] = typer.Argument(
-        ..., help="Recorder files: NMEA, UBX, RINEX obs/nav (.gz, .crx), CSV/Parquet."
+        ..., help="Recorder files: NMEA, UBX, RINEX obs/nav (.gz, .crx), CSV/Parquet, GeoJSON point traces."
     ),
     out: Path = typer.Option(..., "--out", "-o", help="New run folder to write."),
-    fmt: ImportFmt = typer.Option(ImportFmt.auto, "--format", help="auto (from the content), nmea, ubx, rinex, csv."),
+    fmt: ImportFmt = typer.Option(
+        ImportFmt.auto, "--format", help="auto (from the content), nmea, ubx, rinex, csv, geojson."
+    ),
     mapping: list[Path] | None = typer.Option(
         None, "--mapping", help="Mapping TOML of a CSV/Parquet source (README); one per table source, in order."
     ),
@@ -234,6 +237,12 @@ def import_(
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
     config: Path | None = typer.Option(
         None, "--config", help="Settings (TOML): its [input] section (limits of compressed sources)."
+    ),
+    time_zone: str | None = typer.Option(
+        None,
+        "--time-zone",
+        help="Time zone of time stamps without a UTC offset (GeoJSON traces; CSV: a mapping's [time] timezone "
+        "comes first): UTC, +02:00 or an IANA name such as Europe/Oslo.",
     ),
 ) -> None:
     """Import recorder files into a new run folder on one time base (GNSS time).
@@ -248,7 +257,10 @@ def import_(
     from fieldlogs.quality.checks import check_run as _check
     from fieldlogs.recorders.importer import import_run
 
-    res = import_run(sources, out, fmt=fmt.value, mapping=mapping or [], vehicle=vehicle, run_id=run_id, force=force)
+    res = import_run(
+        sources, out, fmt=fmt.value, mapping=mapping or [], vehicle=vehicle, run_id=run_id, force=force,
+        time_zone=time_zone,
+    )  # fmt: skip
     c = console()
     if res.warnings:
         print_findings(res.warnings, console=c, title="Warnings")

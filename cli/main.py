@@ -11,7 +11,7 @@ from typer._coercion import RuntimeParam
 from typer._param_types import coerce_cli_path
 from typer.core import TyperCommand, TyperGroup, _TyperParameter
 
-from cli import audit, config, db, demo, gis, gnss, logs, possession, radar, run, schema, simulate, survey
+from cli import audit, config, db, demo, gis, gnss, logs, possession, radar, run, schema, simulate, survey, track
 
 
 class Group(TyperGroup):
@@ -86,6 +86,7 @@ app.add_typer(possession.app, name="possession", cls=Group)
 app.add_typer(config.app, name="config", cls=Group)
 app.add_typer(radar.app, name="radar", cls=Group)
 app.add_typer(gnss.app, name="gnss", cls=Group)
+app.add_typer(track.app, name="track", cls=Group)
 app.command("simulate")(simulate.simulate)
 app.command("run", cls=PathCommand)(run.run)
 app.command("audit")(audit.audit)

@@ -135,7 +135,7 @@ GPS = Table(
         Column("lat", "float", "Latitude", unit="deg", nullable=True, min=LAT_RANGE[0], max=LAT_RANGE[1]),
         Column("lon", "float", "Longitude", unit="deg", nullable=True, min=LON_RANGE[0], max=LON_RANGE[1]),
         Column("fix", "int", "0 none, 1 GPS, 2 D-GPS", min=0, max=2),
-        Column("nsat", "int", "Satellites used", min=0, max=64),
+        Column("nsat", "int", "Satellites used; empty where the source does not log it", nullable=True, min=0, max=64),
         Column("hdop", "float", "Horizontal dilution of precision", nullable=True, min=0.0, max=99.9),
         *GPS_RECORDER_COLUMNS,
     ),

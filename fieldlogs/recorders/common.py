@@ -22,7 +22,7 @@ from dbtools.inputs import check_decompressed, read_input_bytes
 from schemas.errors import InputError
 
 #: Formats ``logs import`` reads.
-FORMATS = ("nmea", "ubx", "rinex", "csv")
+FORMATS = ("nmea", "ubx", "rinex", "csv", "geojson")
 
 #: The largest DOP the ``gps`` stream holds (schemas/logs.py); receivers write 99.99 for
 #: "no DOP" (u-blox NMEA GGA/GSA without a fix, NAV-DOP 9999 · 0.01).

@@ -2,7 +2,7 @@
 
 1. Each source is decoded by its reader (format given or detected from the content: UBX
    sync bytes, ``$`` sentences, a RINEX header line, a ``.csv``/``.parquet`` name with a
-   mapping) into frames on absolute GPS time (``common.Decoded``).
+   mapping, a ``.geojson`` point trace) into frames on absolute GPS time (``common.Decoded``).
 2. The run's ``t = 0`` is the earliest absolute time of any row (navigation records
    excluded); ``t = gnss_time_s − t0`` for every stream, ``start_time`` = t0 in UTC.
    A relative recorder without a start time is aligned to t0 (noted in its provenance);
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from datetime import tzinfo
 from pathlib import Path
 from typing import Any
 
@@ -60,6 +61,8 @@ def detect_format(path: Path) -> str:
     """nmea, ubx, rinex or csv from the file's first bytes (and name for tables)."""
     if path.suffix.lower() in TABLE_SUFFIXES:
         return "csv"
+    if path.suffix.lower() == ".geojson":
+        return "geojson"
     head = read_head(path)  # a few KB, whatever the file's size
     if head[:2] == b"\xb5\x62" or (b"\xb5\x62" in head[:512] and head.count(b"\xb5\x62") > 1):
         return "ubx"
@@ -72,9 +75,13 @@ def detect_format(path: Path) -> str:
     )
 
 
-def decode(path: Path, fmt: str, mapping: Path | None) -> Decoded:
-    from fieldlogs.recorders import nmea, rinex, tabular, ubx
+def decode(path: Path, fmt: str, mapping: Path | None, time_zone: str | None = None) -> Decoded:
+    """One source decoded; ``time_zone``: of its time stamps without a UTC offset (GeoJSON;
+    a CSV mapping's own ``[time] timezone`` comes first)."""
+    from fieldlogs.recorders import geojson, nmea, rinex, tabular, ubx
 
+    if fmt == "geojson":
+        return geojson.read_geojson(path, _zone(time_zone))
     if fmt == "nmea":
         return nmea.read_nmea(path)
     if fmt == "ubx":
@@ -83,7 +90,21 @@ def decode(path: Path, fmt: str, mapping: Path | None) -> Decoded:
         return rinex.read_rinex(path)
     if mapping is None:
         raise UsageError(f"{path}: --format csv needs --mapping MAP.toml")
-    return tabular.read_mapped(path, tabular.load_mapping(mapping), str(mapping))
+    m = tabular.load_mapping(mapping)
+    if time_zone is not None:
+        m["time"].setdefault("timezone", time_zone)
+    return tabular.read_mapped(path, m, str(mapping))
+
+
+def _zone(text: str | None) -> tzinfo | None:
+    from fieldlogs.recorders.timebase import time_zone
+
+    if text is None:
+        return None
+    try:
+        return time_zone(text)
+    except ValueError as exc:
+        raise UsageError(f"--time-zone: {exc}") from exc
 
 
 def _t0(decoded: Sequence[Decoded]) -> float:
@@ -182,10 +203,12 @@ def import_run(
     vehicle: Path | None = None,
     run_id: str | None = None,
     force: bool = False,
+    time_zone: str | None = None,
 ) -> ImportResult:
     """Decode ``sources`` and write one run folder at ``out`` (see the module docstring).
 
-    ``mapping``: one mapping TOML per CSV/Parquet source, in the order of those sources."""
+    ``mapping``: one mapping TOML per CSV/Parquet source, in the order of those sources;
+    ``time_zone``: of time stamps without a UTC offset (``timebase.time_zone``)."""
     out = Path(out)
     if fmt != "auto" and fmt not in FORMATS:
         raise UsageError(f"--format {fmt}: one of auto, {', '.join(FORMATS)}")
@@ -207,7 +230,9 @@ def import_run(
             "table source, in the same order"
         )
     maps = iter(mapping)
-    decoded = [decode(Path(s), f, next(maps) if f == "csv" else None) for s, f in zip(sources, formats, strict=True)]
+    decoded = [
+        decode(Path(s), f, next(maps) if f == "csv" else None, time_zone) for s, f in zip(sources, formats, strict=True)
+    ]
     nav_warnings = nav_onto_observations(decoded)  # the 10-bit week rollover, before any time is used
     t0 = _t0(decoded)
     streams = _merge(decoded, t0)

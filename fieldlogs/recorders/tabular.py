@@ -6,7 +6,9 @@ Mapping (every key documented in README "logs import"):
 * ``[time]`` — ``column``, ``unit`` (s, ms, us/µs), ``base``: ``relative`` (recorder
   seconds since its start; ``start`` = ISO 8601 time of 0, else the run's start),
   ``unix`` (UTC seconds since 1970, no leap seconds), ``gps`` (continuous GPS seconds),
-  ``utc`` (ISO 8601 text with an offset; leap seconds applied); optional ``gnss_column``
+  ``utc`` (ISO 8601 text, leap seconds applied; stamps without an offset — a vendor's local
+  time — need ``timezone``: ``UTC``, ``±HH:MM`` or an IANA name such as ``Europe/Oslo``;
+  fractions of any number of digits, ``09:32:54.400`` beside ``09:32:55``); optional ``gnss_column``
   (+ ``gnss_base`` gps|unix|utc, seconds): GNSS time logged on some rows — the recorder
   clock is fitted to those pairs (``timebase.fit_clock``) and every row mapped through it;
 * ``[columns]`` — target = source column name (targets not listed are taken by their own
@@ -16,6 +18,10 @@ Mapping (every key documented in README "logs import"):
   accelerometer and the gyro alike; must be a rotation (a signed permutation with
   determinant +1);
 * ``[offsets]`` — constants added after the unit conversion, in the stream's units.
+
+A ``gps`` trace may lack the quality columns (a vendor CSV of time, latitude and longitude
+only): ``fix`` absent is 1 (a position of unknown quality) where lat and lon are given and 0
+elsewhere; ``nsat`` and ``hdop`` absent are left empty (unknown).
 
 Checks that refuse the file (nothing written): a mapped column that is not in the file,
 a required column neither mapped nor present, unknown units, a reflection in ``[axes]``,
@@ -35,7 +41,15 @@ import pandas as pd
 
 from dbtools.inputs import not_special
 from fieldlogs.recorders.common import Decoded
-from fieldlogs.recorders.timebase import fit_clock, iso_to_gps, unix_to_gps, utc_to_gps
+from fieldlogs.recorders.timebase import (
+    StampError,
+    fit_clock,
+    iso_to_gps,
+    stamps_to_gps,
+    time_zone,
+    unix_to_gps,
+    utc_to_gps,
+)
 from schemas.enums import Severity
 from schemas.errors import FindingsError, InputError
 from schemas.findings import Finding
@@ -60,6 +74,8 @@ BASES = ("relative", "unix", "gps", "utc")
 #: Rows (a regular subsample) the unit plausibility statistics are taken over.
 PLAUSIBILITY_SAMPLES = 200_000
 SECTIONS = {"stream", "time", "columns", "units", "axes", "offsets"}
+#: gps columns a trace may lack (module docstring).
+GPS_QUALITY = ("fix", "nsat", "hdop")
 
 
 def load_mapping(path: Path) -> dict[str, Any]:
@@ -164,6 +180,20 @@ def _fitted(path: Path, raw: pd.DataFrame, tm: dict[str, Any], tau: np.ndarray, 
     return fit.apply(tau)
 
 
+def _utc_stamps(path: Path, col: pd.Series, tm: dict[str, Any]) -> np.ndarray:
+    """ISO 8601 stamps → GPS seconds, offset-less ones in ``[time] timezone``."""
+    zone = None
+    if "timezone" in tm:
+        try:
+            zone = time_zone(str(tm["timezone"]))
+        except ValueError as exc:
+            raise InputError(f"time.timezone: {exc}", path=path, column="time.timezone") from exc
+    try:
+        return stamps_to_gps(col.tolist(), zone)
+    except StampError as exc:
+        raise InputError(f"time column: {exc}", path=path, row=exc.row + 2, column=str(tm["column"])) from exc
+
+
 def _abs_time(path: Path, raw: pd.DataFrame, tm: dict[str, Any], dec: Decoded) -> tuple[np.ndarray, bool]:
     """(GPS seconds per row — or recorder seconds when relative without start, is absolute)."""
     col = _column(path, raw, tm["column"], "t")
@@ -171,11 +201,7 @@ def _abs_time(path: Path, raw: pd.DataFrame, tm: dict[str, Any], dec: Decoded) -
     if base not in BASES:
         raise InputError(f"time base '{base}' is not one of {', '.join(BASES)}", path=path, column="time.base")
     if base == "utc":
-        try:
-            g = np.array([iso_to_gps(str(x)) for x in col], dtype=np.float64)
-        except ValueError as exc:
-            raise InputError(f"UTC time column: {exc}", path=path, column=str(tm["column"])) from exc
-        return g, True
+        return _utc_stamps(path, col, tm), True
     unit = tm.get("unit", "s")
     if unit not in TIME_UNITS:
         raise InputError(f"time unit '{unit}' is not one of s, ms, us", path=path, column="time.unit")
@@ -296,12 +322,24 @@ def _extract(path: Path, raw: pd.DataFrame, cols: dict[str, str], stream: str) -
             continue
         src = cols.get(c.name, c.name if c.name in raw.columns else None)
         if src is None:
+            if stream == "gps" and c.name in GPS_QUALITY:
+                continue  # filled by _gps_quality
             if c.required:
                 raise InputError(f"{stream} needs column '{c.name}': map it in [columns]", path=path, column=c.name)
             continue
         s = _column(path, raw, src, c.name)
         out[c.name] = _numeric(path, s, str(src)) if c.dtype in ("float", "int") else s.astype("string").to_numpy()
     return out
+
+
+def _gps_quality(out: dict[str, Any], n: int) -> None:
+    """A gps trace without its quality columns (module docstring)."""
+    if "fix" not in out:
+        lat, lon = out.get("lat", np.full(n, np.nan)), out.get("lon", np.full(n, np.nan))
+        out["fix"] = (np.isfinite(lat) & np.isfinite(lon)).astype(np.float64)
+    for name in ("nsat", "hdop"):
+        if name not in out:
+            out[name] = np.full(n, np.nan)
 
 
 def read_mapped(path: Path, mapping: dict[str, Any], mapping_file: str = "") -> Decoded:
@@ -324,6 +362,8 @@ def read_mapped(path: Path, mapping: dict[str, Any], mapping_file: str = "") -> 
             column=f"columns.{unknown[0]}",
         )
     out = _extract(path, raw, cols, stream)
+    if stream == "gps":
+        _gps_quality(out, len(raw))
     _units(path, mapping, out, stream)
     if stream == "imu":
         _axes(path, mapping, out)

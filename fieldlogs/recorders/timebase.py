@@ -14,8 +14,11 @@ residual (RMS and max |g − ĝ|) is reported in the run's provenance; a fit wit
 
 from __future__ import annotations
 
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
-from datetime import UTC, datetime, timedelta
+from datetime import UTC, datetime, timedelta, timezone, tzinfo
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import numpy as np
 import numpy.typing as npt
@@ -171,3 +174,59 @@ def fit_clock(tau: npt.ArrayLike, gnss: npt.ArrayLike) -> ClockFit:
     offset = float(gm - slope * tm)
     res = g - (offset + slope * t)
     return ClockFit(offset, slope, drift, len(t), float(np.sqrt(np.mean(res**2))), float(np.max(np.abs(res))))
+
+
+def time_zone(text: str) -> tzinfo:
+    """A declared time zone: ``UTC``/``Z``, a fixed offset ``±HH:MM`` (``±HHMM``, ``±HH``), or
+    an IANA name such as ``Europe/Oslo`` (daylight saving applied; in the repeated hour of
+    autumn the first, summer-time instant is taken — PEP 495 ``fold = 0``)."""
+    s = text.strip()
+    if s.upper() in ("UTC", "Z", "GMT"):
+        return UTC
+    if s[:1] in ("+", "-"):
+        m = re.fullmatch(r"([+-])(\d\d)(?::?(\d\d))?", s)
+        if m is None or int(m.group(2)) > 14 or int(m.group(3) or 0) >= 60:
+            raise ValueError(f"'{text}' is not an offset ±HH:MM")
+        sign = 1 if m.group(1) == "+" else -1
+        return timezone(sign * timedelta(hours=int(m.group(2)), minutes=int(m.group(3) or 0)))
+    try:
+        return ZoneInfo(s)
+    except (ZoneInfoNotFoundError, ValueError) as exc:
+        raise ValueError(f"'{text}' is not a time zone (UTC, ±HH:MM or an IANA name such as Europe/Oslo)") from exc
+
+
+class StampError(ValueError):
+    """A time stamp that cannot be read; ``row`` its index (0-based)."""
+
+    def __init__(self, row: int, message: str) -> None:
+        super().__init__(message)
+        self.row = row
+
+
+def stamps_to_gps(texts: Sequence[object], zone: tzinfo | None) -> FloatArray:
+    """ISO 8601 stamps → GPS seconds; a stamp without an offset is taken in ``zone``. Any
+    number of fraction digits (``09:32:54.400`` beside ``09:32:55``; beyond microseconds
+    cut). Raises :class:`StampError` naming the first stamp that cannot be read."""
+    out = np.empty(len(texts), dtype=np.float64)
+    for i, text in enumerate(texts):
+        try:
+            dt = datetime.fromisoformat(_fraction_6(str(text).strip()))
+        except ValueError as exc:
+            raise StampError(i, f"'{text}' is not an ISO 8601 time stamp") from exc
+        if dt.tzinfo is None:
+            if zone is None:
+                raise StampError(i, f"'{text}' has no UTC offset: declare the time zone of the stamps")
+            dt = dt.replace(tzinfo=zone)
+        out[i] = (dt - GPS_EPOCH).total_seconds()
+    return utc_to_gps(out)
+
+
+def _fraction_6(text: str) -> str:
+    """Seconds with more than 6 fraction digits cut to microseconds (what datetime holds)."""
+    dot = text.find(".", text.rfind(":") + 1)
+    if dot < 0:
+        return text
+    end = dot + 1
+    while end < len(text) and text[end].isdigit():
+        end += 1
+    return text[: min(end, dot + 7)] + text[end:] if end - dot - 1 > 6 else text

@@ -66,6 +66,9 @@ SMOKE: dict[str, Smoke] = {
         (r"NMEA .*→ ×[\d.]+", r"RINEX .*→ ×[\d.]+"),
     ),
     "bench_logs.py": Smoke("--hours 0.1 --repeat 1", (r"ours / fastest",)),
+    "bench_track_match.py": Smoke(
+        "--lines 2 --per-line 50 --repeat 1", (r"ratio track match / nearest-track: [\d.]+×", r"fixes/s")
+    ),
     "bench_matching.py": Smoke(
         "--lines 2 --points 200 --fixes 1000 --loop-fixes 100 --repeat 1", (r"ratios: ours / loop = [\d.]+×",)
     ),
