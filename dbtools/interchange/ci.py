@@ -26,22 +26,12 @@ from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import escape, quoteattr
 
+from dbtools.rules.catalog import FAMILIES
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.jsonable import jsonable
 
 SARIF_SCHEMA = "https://docs.oasis-open.org/sarif/sarif/v2.1.0/errata01/os/schemas/sarif-schema-2.1.0.json"
-FAMILIES = {
-    "schema": "Source and table schema: types, required values, enumerations, ranges, keys",
-    "source": "Source set files and line codes",
-    "gis": "GIS grid: 20 m steps, breaks, spacing, spikes, area",
-    "balise": "Balises: initial pairs, C balises, ETCS balise groups, identification windows, GIS range",
-    "topology": "Network topology: track/switch references, switch ports and routes, connection gaps, km, lengths, "
-    "crossover angles, open ends, balise identification along routes",
-    "feature": "Feature points: rows, radius and direction against the GIS curvature, straights",
-    "db": "DB file: SQLite integrity, foreign keys, meta and content hash",
-    "railml": "railML import",
-}
 
 
 def _uri(file: str) -> str:
