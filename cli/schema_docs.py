@@ -203,7 +203,8 @@ def config_markdown() -> str:
     if top:
         tree = {"": top, **{k: v for k, v in tree.items() if k not in top}}
     for section, keys in tree.items():
-        out += [f"## `[{section}]`" if section else "## Top level", "", "| setting | default | unit | range | meaning |", "|---|---|---|---|---|"]
+        out += [f"## `[{section}]`" if section else "## Top level", ""]
+        out += ["| setting | default | unit | range | meaning |", "|---|---|---|---|---|"]
         for key, s in keys.items():
             value = s.get("value")
             shown = "" if value is None else str(value).lower() if isinstance(value, bool) else str(value)
@@ -220,7 +221,10 @@ def config_keys() -> set[tuple[str, str]]:
     from fieldlogs.config import load_tree, show_dict
 
     tree = show_dict(load_tree(None), None)
-    return {("", s) if "value" in keys else (s, k) for s, keys in tree.items() for k in ([s] if "value" in keys else keys)}
+    out: set[tuple[str, str]] = set()
+    for section, keys in tree.items():
+        out |= {("", section)} if "value" in keys else {(section, k) for k in keys}
+    return out
 
 
 # --- rules ------------------------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""The architecture page (docs/explanation/architecture.md, once README's "Architecture" section) stays true to the tree: every package and module it names
+"""The architecture page (docs/explanation/architecture.md, once README's "Architecture"
+section) stays true to the tree: every package and module it names
 exists, every code name it quotes is defined in the suite, and every application package
 of ``dbtools/`` and ``fieldlogs/`` is named (a new package is documented, a removed one is
 not left behind). The import direction itself is checked by ``tests/test_architecture.py``."""

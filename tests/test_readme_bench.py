@@ -1,4 +1,5 @@
-"""The performance page (docs/explanation/performance.md, once README's section) points at the benchmark results `make bench` writes, and
+"""The performance page (docs/explanation/performance.md, once README's section) points
+at the benchmark results `make bench` writes, and
 names every benchmark script."""
 
 from __future__ import annotations

@@ -225,9 +225,7 @@ def _tail(text: str, n: int = 40) -> str:
     return "\n".join(text.rstrip().splitlines()[-n:])
 
 
-def run_all(
-    base: Path, timings: list[tuple[float, Command]] | None = None, only: str | None = None
-) -> Iterator[str]:
+def run_all(base: Path, timings: list[tuple[float, Command]] | None = None, only: str | None = None) -> Iterator[str]:
     """Run the walk-through under ``base``; yield one report per command that does not exit as
     its page says (``timings``: gets each command's wall time; ``only``: one page alone)."""
     env = _env()

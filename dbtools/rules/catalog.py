@@ -186,7 +186,7 @@ def rule_catalog() -> dict[str, Rule]:
 
 def rule_ids_in_source(texts: dict[str, str]) -> set[str]:
     """The rule ids string literals of ``texts`` (path → Python source) name."""
-    pattern = re.compile(r"(?:%s)\.[a-z_0-9]+" % "|".join(FAMILIES))
+    pattern = re.compile(r"(?:{})\.[a-z_0-9]+".format("|".join(FAMILIES)))
     found = set()
     for path, text in texts.items():
         for node in ast.walk(ast.parse(text, filename=path)):
