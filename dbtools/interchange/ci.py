@@ -2,7 +2,8 @@
 JUnit XML (GitLab, Jenkins, most CI test reports).
 
 SARIF (OASIS SARIF 2.1.0, validated in the tests against the OASIS JSON schema): one run
-of the ``trainpos`` driver; one ``reportingDescriptor`` per rule id found; one result per
+of the ``trainpos`` driver; one ``reportingDescriptor`` per rule id found (its family as the
+short description, its meaning and fix from :mod:`dbtools.rules.catalog` as the full one); one result per
 finding with ``level`` error or warning, the message, and a location — for a finding in a
 source set the file (URI relative to the working directory when inside it) with
 ``region.startLine`` = the file line and, for CSV, ``startColumn``/``endColumn`` of the
@@ -26,7 +27,7 @@ from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import escape, quoteattr
 
-from dbtools.rules.catalog import FAMILIES
+from dbtools.rules.catalog import FAMILIES, rule_catalog
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.jsonable import jsonable
@@ -91,14 +92,17 @@ def sarif(findings: Sequence[Finding], *, target: str | None = None, tool_versio
     """The SARIF 2.1.0 log of ``findings`` (module doc); ``target`` names the validated DB."""
     rules = sorted({f.rule for f in findings})
     index = {r: i for i, r in enumerate(rules)}
-    descriptors = [
-        {
+    catalog = rule_catalog() if rules else {}
+    descriptors = []
+    for r in rules:
+        descriptor: dict[str, Any] = {
             "id": r,
             "name": r.replace(".", "_"),
             "shortDescription": {"text": FAMILIES.get(r.split(".")[0], r)},
         }
-        for r in rules
-    ]
+        if r in catalog:  # its meaning and fix, as docs/reference/rules.md gives them
+            descriptor["fullDescription"] = {"text": catalog[r].meaning}
+        descriptors.append(descriptor)
     cache: dict[str, list[str]] = {}
     results = []
     for f in findings:
