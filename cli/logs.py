@@ -230,7 +230,7 @@ def import_(
     vehicle: Path | None = typer.Option(
         None,
         "--vehicle",
-        help="VEHICLE.toml (needed: run.json's vehicle_id, kind, wheel and teeth come from it; see the field-logs guide).",
+        help="VEHICLE.toml (needed: run.json's vehicle_id, kind, wheel, teeth come from it; see the field-logs guide).",
     ),
     run_id: str | None = typer.Option(None, "--run-id", help="run_id (default: the first source's name)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
