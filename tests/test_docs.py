@@ -218,3 +218,13 @@ def test_the_site_builds_strict(tmp_path: Path) -> None:
     )
     assert res.returncode == 0, res.stdout + res.stderr
     assert (tmp_path / "site" / "reference" / "rules.html").is_file()
+
+
+def test_the_report_summary_explains_every_term() -> None:
+    """`make demo` / `trainpos demo` prints the report tables and one line per term they use."""
+    from cli.audit import LABELS, LEGEND, OTHER_COLUMNS, PCT_COLUMNS
+
+    explained = {t.strip() for key in LEGEND for t in key.split(",")}
+    shown = [LABELS[c] for c in (*PCT_COLUMNS, *OTHER_COLUMNS)]
+    assert not [s for s in shown if s not in explained], "report columns without a line in cli/audit.py LEGEND"
+    assert all(len(line) <= 100 for line in LEGEND.values())
