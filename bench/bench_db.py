@@ -36,6 +36,7 @@ import argparse
 import csv
 import math
 import os
+import re
 import resource
 import shutil
 import sqlite3
@@ -136,7 +137,8 @@ def naive_build(src: Path, out: Path, fraction: float) -> tuple[float, int]:
         conn.execute(ddl)
         with open(src / f"{name}.csv", newline="", encoding="utf-8") as fh:
             rows = list(csv.DictReader(fh))
-        keep = rows[: max(1, int(len(rows) * fraction))]
+        cols = re.findall(r"(\w+) (?:TEXT|REAL|INTEGER)", ddl)  # the line-only columns (not the v2 ones)
+        keep = [{k: r[k] for k in cols} for r in rows[: max(1, int(len(rows) * fraction))]]
         for row in keep:
             values = []
             for key, cell in row.items():
@@ -204,7 +206,8 @@ def build_floor(src: Path, out: Path) -> None:
         cur.execute("PRAGMA synchronous=OFF")
         for name, ddl in _NAIVE_DDL.items():
             cur.execute(ddl)
-            cur.adbc_ingest(name, pcsv.read_csv(src / f"{name}.csv"), mode="append")
+            cols = re.findall(r"(\w+) (?:TEXT|REAL|INTEGER)", ddl)  # the line-only columns (not the v2 ones)
+            cur.adbc_ingest(name, pcsv.read_csv(src / f"{name}.csv").select(cols), mode="append")
 
 
 class _Stages:

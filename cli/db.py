@@ -71,6 +71,9 @@ def build(
     no_validate: bool = typer.Option(
         False, "--no-validate", help="Skip the validation rules (only the sources' own checks run)."
     ),
+    config: Path | None = typer.Option(
+        None, "--config", help="Settings (TOML): its [input] section (limits of .xlsx source files)."
+    ),
 ) -> None:
     """Build an onboard DB version from a source set, and validate it.
 

@@ -2,17 +2,20 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import functools
 import os
 import sys
 import traceback
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, TypeVar
 
 import typer
 
 from cli.render import err_console, print_findings, safe
+from dbtools.inputs import input_limits
 from dbtools.integrity import HashPolicy, hash_policy
 from schemas.errors import EXIT_UNREADABLE, FindingsError, TrainposError
 
@@ -30,7 +33,10 @@ def cli_command(fn: F) -> F:
     @functools.wraps(fn)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
-            with hash_policy(verify=not kwargs.get("no_verify_hash", False)) as policy:
+            with (
+                hash_policy(verify=not kwargs.get("no_verify_hash", False)) as policy,
+                _input_limits(kwargs.get("config")),
+            ):
                 try:
                     return fn(*args, **kwargs)
                 finally:
@@ -47,6 +53,13 @@ def cli_command(fn: F) -> F:
         except KeyboardInterrupt:
             err_console().print("interrupted")
             raise typer.Exit(130) from None
+        except MemoryError:  # the environment, not a bug: an input too large for this machine
+            err_console().print(
+                "[bold red]error:[/] out of memory: an input is too large for this machine's memory "
+                + safe("(compressed inputs: lower [input] max_decompressed_mb in a --config file to be told which)"),
+                highlight=False,
+            )
+            raise typer.Exit(EXIT_UNREADABLE) from None
         except OSError as exc:  # the environment, not a bug: permission denied, disk full, …
             err_console().print(f"[bold red]error:[/] {safe(environment_message(exc))}", highlight=False)
             raise typer.Exit(EXIT_UNREADABLE) from None
@@ -61,6 +74,15 @@ def cli_command(fn: F) -> F:
             raise typer.Exit(EXIT_INTERNAL) from None
 
     return wrapper  # type: ignore[return-value]
+
+
+def _input_limits(config: object) -> contextlib.AbstractContextManager[object]:
+    """The ``[input]`` limits of a command's ``--config`` file in force (:mod:`dbtools.inputs`)."""
+    if not isinstance(config, Path):
+        return contextlib.nullcontext()
+    from fieldlogs.config import load_tree
+
+    return input_limits(load_tree(config).input)
 
 
 def _warn_unverified(policy: HashPolicy) -> None:

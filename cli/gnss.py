@@ -75,7 +75,7 @@ def _table_frame(report: GnssPositionReport) -> pd.DataFrame:
 
 def render_table(report: GnssPositionReport, c: Console) -> None:
     a = report.availability
-    facing = "increasing km" if report.direction > 0 else "decreasing km"
+    facing = {1: "increasing km", -1: "decreasing km", 0: "unknown (km between both facings)"}[report.direction]
     rows = [
         ("run", report.run_id),
         ("track", f"{report.line_code} / {report.track} ({report.track_source})"),
@@ -101,7 +101,10 @@ def position(
     ),
     systems: str | None = typer.Option(None, "--systems", help="Satellite systems, e.g. G,E,J (default: [gnss])."),
     facing: Facing = typer.Option(
-        Facing.auto, "--facing", help="Which way the vehicle's F end faces (auto: from the pipeline, else increasing)."
+        Facing.auto,
+        "--facing",
+        help="Which way the vehicle's F end faces (auto: from the pipeline, or with --line/--track from the fixes' "
+        "motion, else unknown).",
     ),
     fmt: Fmt = typer.Option(Fmt.table, "--format", help="table or json."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file instead of the terminal."),
@@ -118,10 +121,13 @@ def position(
     experiment, 47 % → 93 %). Without --line/--track the track is the one the positioning
     pipeline decides for the run (with the GNSS aid off): the line/track of most of its
     determined cycles, set by balise pairs or the GPS up/down decision; a run without either
-    needs --line and --track.
+    needs --line and --track. With --line/--track no pipeline runs (a GNSS-only or static
+    receiver is positioned): --facing auto takes the facing from the fixes' motion (and the
+    cab stream), or states it unknown (the km between both facings, the bound widened).
 
     Exit codes: 0 done; 1 the track cannot carry it (no or partial GIS heights, orthometric
-    heights) or the run's GNSS part is incomplete (no gnss_nav, a receiver without an antenna);
+    heights) or the run's GNSS part is incomplete (no gnss_nav, no ephemeris near the observations,
+    a receiver without an antenna);
     2 unreadable input or bad usage (no gnss_obs, no track decided, a bad sky mask); 3 --out
     exists without --force.
 
@@ -137,6 +143,7 @@ def position(
     from fieldlogs.gnss.skymask import load_mask
     from fieldlogs.io import read_run
     from fieldlogs.pipeline.route import decided_route
+    from fieldlogs.quality.usability import Purpose, usability_findings
 
     if (line is None) != (track is None):
         raise UsageError("give --line and --track together (or neither: the pipeline decides the track)")
@@ -150,21 +157,29 @@ def position(
     if g is None:
         raise UsageError("the run has no gnss_obs (raw observations)", path=run_dir)
     mask = load_mask(sky_mask)
-    route = decided_route(run, network, tree.pipeline) if line is None or facing == Facing.auto else None
-    if line is None or track is None:
+    direction = {Facing.increasing: 1, Facing.decreasing: -1, Facing.auto: 0}[facing]  # 0: from the fixes
+    facing_source = "given"
+    if line is None or track is None:  # only then the pipeline runs (it needs the tacho)
+        unusable = usability_findings(run, Purpose.POSITIONING)
+        if unusable:
+            raise UsageError(
+                f"the pipeline cannot decide this run's track ({'; '.join(f.message for f in unusable[:2])}): give "
+                "--line and --track (a GNSS-only or static receiver is positioned on the track given)",
+                path=run_dir,
+            )
+        route = decided_route(run, network, tree.pipeline)
         if route is None:
             raise UsageError("the pipeline decides no track for this run (no balise pair, no GPS decision): give "
                              "--line and --track", path=run_dir)  # fmt: skip
         line, track, track_source = route[0], route[1], "pipeline"
+        if facing == Facing.auto:
+            direction, facing_source = route[2], "pipeline"
     else:
         track_source = "given"
-    if facing == Facing.auto:
-        direction, facing_source = (route[2], "pipeline") if route is not None else (1, "assumed")
-    else:
-        direction, facing_source = (1 if facing == Facing.increasing else -1), "given"
     report = position_report(
         run.run_id, g, gis_track(network, line, track), direction, cfg=tree.gnss, systems=_systems(systems),
         sky_mask=mask, sky_mask_name=sky_mask, track_source=track_source, facing_source=facing_source,
+        cab=run.stream("cab"),
     )  # fmt: skip
     if fmt == Fmt.json:
         text = json.dumps(jsonable(report.to_json()), ensure_ascii=False, indent=2) + "\n"

@@ -234,6 +234,9 @@ def import_(
     ),
     run_id: str | None = typer.Option(None, "--run-id", help="run_id (default: the first source's name)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
+    config: Path | None = typer.Option(
+        None, "--config", help="Settings (TOML): its [input] section (limits of compressed sources)."
+    ),
 ) -> None:
     """Import recorder files into a new run folder on one time base (GNSS time).
 
@@ -256,6 +259,7 @@ def import_(
     for s in res.sources:
         skipped = sum(x["count"] for x in s["skipped"])
         rows.append((f"source {Path(s['file']).name}", f"{s['format']}, {s['records']} records, {skipped} skipped"))
+        rows += [("  note", note) for note in s.get("notes", [])]
         if "clock" in s:
             ck = s["clock"]
             rows.append(

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from cli.errors import cli_command
-from cli.render import console, frame_table, key_value_table, print_json
+from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -72,6 +72,8 @@ def speed(
 
     result = radar_speed_command(run_dir, fmt=fmt.value, out=out, plot=plot, plot_t=plot_t, force=force)
     c = console()
+    if result.findings:  # on stderr: stdout may be the csv
+        print_findings(result.findings, console=err_console(), title="Warnings")
     if out is None and fmt == Fmt.csv:
         result.to_frame().to_csv(sys.stdout, index=False, float_format="%.6g", lineterminator="\n")
     elif out is None and fmt == Fmt.json:

@@ -15,6 +15,12 @@
 * outputs honour the umask (the temporary files Python makes are private; the final file or
   folder gets the permissions a plain ``open`` would give).
 
+**Errors of the machine** while an output is written — disk full, a read-only or
+write-protected folder, a file too large, an I/O error; OSErrors and the same errors of SQLite
+(:func:`output_errors`) — are reported against the output path the user gave (``--out``),
+never against a temporary file nor without a path: an OSError naming that path, with the
+reason (the CLI's exit 2).
+
 **Atomic writes**: the output is written into a temporary sibling and renamed into place, so
 an interrupted command never leaves a half-written output under the requested name. A
 temporary sibling carries an unmistakable signature, ``.NAME.trainpos-tmp.PID.TOKEN`` (TOKEN:
@@ -28,6 +34,7 @@ kill between the two renames); it touches no other file, whatever its name looks
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import secrets
@@ -37,7 +44,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Literal
 
-from schemas.errors import RefusedError
+from schemas.errors import RefusedError, TrainposError
 
 #: Marker file in every output folder trainpos writes.
 MARKER = ".trainpos-output"
@@ -121,6 +128,71 @@ def refuse_existing(path: Path, force: bool) -> None:
     """An existing output is refused without ``force`` (the first part of the rule)."""
     if Path(path).exists() and not force:
         raise RefusedError("output exists; use --force to replace it", path=path)
+
+
+#: Errors of the machine an output write meets (errno): reported against the output path.
+MACHINE_ERRNOS = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO, errno.ENAMETOOLONG}
+)
+#: SQLite's primary result codes of the same errors, and what each means as an errno
+#: (SQLITE_PERM, SQLITE_READONLY, SQLITE_IOERR, SQLITE_FULL, SQLITE_CANTOPEN).
+SQLITE_ERRNOS = {3: errno.EACCES, 8: errno.EROFS, 10: errno.EIO, 13: errno.ENOSPC, 14: errno.EACCES}
+#: The same, by the words of SQLite's messages (drivers that keep only the message: ADBC).
+SQLITE_WORDS = {
+    "disk is full": errno.ENOSPC,
+    "readonly database": errno.EROFS,
+    "disk i/o error": errno.EIO,
+    "unable to open database file": errno.EACCES,
+}
+
+
+def machine_errno(exc: BaseException) -> int | None:
+    """The errno of an error of the machine (disk full, read-only, permission, I/O) behind
+    ``exc`` — an OSError, a ``sqlite3`` error or another database driver's error naming
+    SQLite's reason — or None when ``exc`` is not one."""
+    if isinstance(exc, OSError):
+        return exc.errno if exc.errno in MACHINE_ERRNOS else None
+    if isinstance(exc, TrainposError):
+        return None  # already reported against its own file (an input read while writing)
+    code = getattr(exc, "sqlite_errorcode", None)
+    if isinstance(code, int) and code & 0xFF in SQLITE_ERRNOS:
+        return SQLITE_ERRNOS[code & 0xFF]
+    text = str(exc).lower()
+    return next((e for words, e in SQLITE_WORDS.items() if words in text), None)
+
+
+def _names_other_file(exc: BaseException, path: Path, tmp: Path | None) -> bool:
+    """True when ``exc`` is an OSError about a file that is neither the output, its folder,
+    its temporary nor a file inside or beside that temporary (SQLite's journal): an input
+    read while writing, whose own message stands."""
+    name = getattr(exc, "filename", None) if isinstance(exc, OSError) else None
+    if name is None:
+        return False
+    p = Path(os.fsdecode(name)).absolute()
+    out = Path(path).absolute()
+    if p in (out, out.parent):
+        return False
+    m = TEMP_RE.match(p.name)
+    if m is not None and m["name"] == out.name and p.parent == out.parent:
+        return False  # a temporary sibling of the output (its signature)
+    if tmp is None:
+        return True
+    t = tmp.absolute()
+    return not (p == t or t in p.parents or p.name.startswith(t.name))
+
+
+@contextlib.contextmanager
+def output_errors(path: Path, tmp: Path | None = None) -> Iterator[None]:
+    """Errors of the machine raised inside the block (:func:`machine_errno`) while the output
+    ``path`` is written (through its temporary ``tmp``) become an OSError naming ``path``
+    with the reason; other errors pass unchanged."""
+    try:
+        yield
+    except Exception as exc:
+        code = machine_errno(exc)
+        if code is None or _names_other_file(exc, Path(path), tmp):
+            raise
+        raise OSError(code, os.strerror(code), str(path)) from exc
 
 
 def temp_sibling(target: Path, *, folder: bool = False, tag: str = TEMP_TAG) -> Path:
@@ -211,16 +283,18 @@ def atomic_folder(path: Path, *, force: bool = False, inputs: Iterable[Path | st
     """Yield a temporary folder; on success it replaces ``path`` (see the module rule)."""
     path = Path(path)
     check_target(path, force=force, kind="folder", inputs=inputs)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = temp_sibling(path, folder=True)
+    with output_errors(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = temp_sibling(path, folder=True)
     try:
-        yield tmp
-        (tmp / MARKER).write_text("written by trainpos; --force may replace this folder\n", encoding="utf-8")
-        publish_mode(tmp)
-        if path.exists():
-            _replace_folder(tmp, path)
-        else:
-            os.replace(tmp, path)
+        with output_errors(path, tmp):
+            yield tmp
+            (tmp / MARKER).write_text("written by trainpos; --force may replace this folder\n", encoding="utf-8")
+            publish_mode(tmp)
+            if path.exists():
+                _replace_folder(tmp, path)
+            else:
+                os.replace(tmp, path)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -245,12 +319,14 @@ def atomic_file(path: Path, *, force: bool = False, inputs: Iterable[Path | str]
     """Yield a temporary file path beside ``path``; on success it is renamed to ``path``."""
     path = Path(path)
     check_target(path, force=force, kind="file", inputs=inputs)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = temp_sibling(path)
+    with output_errors(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = temp_sibling(path)
     try:
-        yield tmp
-        publish_mode(tmp)
-        os.replace(tmp, path)
+        with output_errors(path, tmp):
+            yield tmp
+            publish_mode(tmp)
+            os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()

@@ -14,7 +14,8 @@ import pandas as pd
 import sqlite_utils
 
 from dbtools.atomic import refuse_registry
-from dbtools.database import SQLITE_MAGIC, create_tables
+from dbtools.database import SQLITE_MAGIC, create_tables, sqlite_input_error
+from dbtools.inputs import regular_file
 from dbtools.sqlite_file import ro_uri
 from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION, AUDIT_TABLES, AUDIT_VIEWS, ROUTE_SUMMARY
 from schemas.errors import InputError
@@ -64,6 +65,10 @@ def _enum_checks(conn: sqlite3.Connection, tables: tuple[Table, ...]) -> None:
                 )
 
 
+#: Seconds an audit waits for another process's lock on its audit DB before it gives up (BusyError).
+AUDIT_LOCK_WAIT_S = 5.0
+
+
 def _audit_probe(path: Path) -> tuple[int, int]:
     """(application_id, number of schema objects) as SQLite sees them, write-ahead log included."""
     try:
@@ -71,14 +76,13 @@ def _audit_probe(path: Path) -> tuple[int, int]:
             app_id = int(conn.execute("PRAGMA application_id").fetchone()[0])
             return app_id, int(conn.execute("SELECT COUNT(*) FROM sqlite_master").fetchone()[0])
     except sqlite3.DatabaseError as exc:
-        raise InputError(f"audit database is unreadable: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "audit database is unreadable") from exc
 
 
 def _is_audit_file(path: Path) -> bool:
     """True when ``path`` is an audit DB, False when it is an empty file (or an empty SQLite
     DB) that may become one; InputError for anything else."""
-    if path.is_dir():
-        raise InputError("is a folder, expected an audit database file (.sqlite)", path=path)
+    regular_file(path, "audit database file (.sqlite)")
     with open(path, "rb") as fh:
         head = fh.read(100)
     if not head:
@@ -130,9 +134,13 @@ def _connect_audit(path: Path, *, create: bool, is_audit: bool) -> sqlite3.Conne
     if create:
         path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        conn = sqlite3.connect(path) if create else sqlite3.connect(ro_uri(path), uri=True)
+        conn = (
+            sqlite3.connect(path, timeout=AUDIT_LOCK_WAIT_S)
+            if create
+            else sqlite3.connect(ro_uri(path), uri=True, timeout=AUDIT_LOCK_WAIT_S)
+        )
     except sqlite3.Error as exc:
-        raise InputError(f"cannot open audit database: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "cannot open audit database") from exc
     try:
         _check_audit_version(conn, path, is_audit)
         conn.execute("PRAGMA foreign_keys=ON")
@@ -144,7 +152,7 @@ def _connect_audit(path: Path, *, create: bool, is_audit: bool) -> sqlite3.Conne
     except BaseException as exc:
         conn.close()
         if isinstance(exc, sqlite3.DatabaseError):
-            raise InputError(f"audit database is unreadable: {exc}", path=path) from exc
+            raise sqlite_input_error(exc, path, "audit database is unreadable") from exc
         raise
     return conn
 
@@ -241,7 +249,7 @@ def open_audit_db(path: Path, *, create: bool = True) -> Iterator[AuditDB]:
     try:
         yield AuditDB(conn, path)
     except sqlite3.DatabaseError as exc:
-        raise InputError(f"audit database error: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "audit database error") from exc
     finally:
         if create:
             with contextlib.suppress(sqlite3.DatabaseError):  # a reader still open keeps the WAL

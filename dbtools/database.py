@@ -22,12 +22,15 @@ from typing import TYPE_CHECKING
 import pandas as pd
 
 from dbtools.atomic import atomic_file, sweep_stale, temp_sibling
+from dbtools.inputs import regular_file
 from dbtools.integrity import check_content_hash
 from dbtools.network import Network, canonical, empty_frame, network_content_hash
 from dbtools.sqlite_columns import insert_tables, read_table_columns
+from dbtools.sqlite_file import SQLITE_BUSY_CODES as SQLITE_BUSY_CODES
 from dbtools.sqlite_file import SQLITE_MAGIC as SQLITE_MAGIC
 from dbtools.sqlite_file import check_sqlite_file as check_sqlite_file
 from dbtools.sqlite_file import connect_ro, ro_uri
+from dbtools.sqlite_file import sqlite_input_error as sqlite_input_error
 from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
@@ -154,6 +157,10 @@ def write_sqlite(
             conn.close()
 
 
+#: Seconds a release waits for another process's write lock on the registry before it gives up (BusyError).
+REGISTRY_LOCK_WAIT_S = 30.0
+
+
 def snapshot_db(src: Path, dst: Path) -> None:
     """Copy an onboard DB as SQLite reads it — its write-ahead log included — into the new
     file ``dst``, in a rollback-journal mode (a reader of the copy needs no -wal/-shm and
@@ -240,8 +247,42 @@ def _read_sqlite3(conn: sqlite3.Connection, t: Table, path: Path) -> pd.DataFram
     try:
         frame = pd.read_sql_query(f"SELECT {cols} FROM [{t.name}]", conn)
     except (sqlite3.DatabaseError, pd.errors.DatabaseError) as exc:
-        raise InputError(f"table '{t.name}' cannot be read: {exc}", path=path) from exc
-    return canonical(t, frame)
+        raise sqlite_input_error(exc, path, f"table '{t.name}' cannot be read") from exc
+    try:
+        return canonical(t, frame)
+    except (ValueError, TypeError, OverflowError) as exc:  # a value of another storage class
+        raise _storage_class_error(conn, t, path, present) or InputError(
+            f"table '{t.name}' cannot be read: {exc}", path=path
+        ) from exc
+
+
+#: SQLite storage classes (``typeof``) each declared dtype accepts.
+STORAGE_CLASSES = {"float": ("real", "integer", "null"), "int": ("integer", "null"), "bool": ("integer", "null")}
+
+
+def _storage_class_error(conn: sqlite3.Connection, t: Table, path: Path, present: set[str]) -> InputError | None:
+    """InputError naming table, column, row and value of the first cell whose storage class
+    the declared type does not take (text or a blob in a REAL column, 2.5 in an INTEGER
+    one); None when every cell fits."""
+    for c in t.columns:
+        allowed = STORAGE_CLASSES.get(c.dtype)
+        if allowed is None or c.name not in present:
+            continue
+        marks = ",".join("?" * len(allowed))
+        hit = conn.execute(
+            f"SELECT rowid, typeof([{c.name}]), quote([{c.name}]) FROM [{t.name}] "
+            f"WHERE typeof([{c.name}]) NOT IN ({marks}) LIMIT 1",
+            allowed,
+        ).fetchone()
+        if hit is not None:
+            rowid, kind, value = hit
+            return InputError(
+                f"table '{t.name}' row {rowid}: {kind} {str(value)[:60]} where a {c.sql_type} ({c.dtype}) is "
+                "declared; the DB was not written by trainpos or was edited: rebuild it from its sources",
+                path=path,
+                column=c.name,
+            )
+    return None
 
 
 def integrity_findings(path: Path, network: Network | None = None) -> list[Finding]:
@@ -294,8 +335,7 @@ def integrity_findings(path: Path, network: Network | None = None) -> list[Findi
 
 
 def _check_registry_file(path: Path) -> None:
-    if path.is_dir():
-        raise InputError("is a folder, expected the release registry (registry.sqlite)", path=path)
+    regular_file(path, "release registry (registry.sqlite)")
     with open(path, "rb") as fh:
         head = fh.read(100)
     if not head.startswith(SQLITE_MAGIC) or len(head) < 100:
@@ -358,9 +398,9 @@ def registry_transaction(path: Path) -> Iterator[sqlite3.Connection]:
         _create_registry(path)
     _check_registry_file(path)
     try:
-        conn = sqlite3.connect(path, isolation_level=None, timeout=30)
+        conn = sqlite3.connect(path, isolation_level=None, timeout=REGISTRY_LOCK_WAIT_S)
     except sqlite3.Error as exc:
-        raise InputError(f"cannot open release registry: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "cannot open release registry") from exc
     try:
         _check_registry_schema(conn, path)
         conn.execute("BEGIN IMMEDIATE")
@@ -371,7 +411,7 @@ def registry_transaction(path: Path) -> Iterator[sqlite3.Connection]:
             raise
         conn.execute("COMMIT")
     except sqlite3.DatabaseError as exc:
-        raise InputError(f"release registry is corrupt or unreadable: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "release registry is corrupt or unreadable") from exc
     finally:
         conn.close()
 
@@ -448,11 +488,11 @@ def _registry_ro(path: Path) -> Iterator[sqlite3.Connection]:
     try:
         conn = sqlite3.connect(ro_uri(path), uri=True)
     except sqlite3.Error as exc:
-        raise InputError(f"cannot open release registry: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "cannot open release registry") from exc
     try:
         _check_registry_schema(conn, path)
         yield conn
     except sqlite3.DatabaseError as exc:
-        raise InputError(f"release registry is corrupt or unreadable: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "release registry is corrupt or unreadable") from exc
     finally:
         conn.close()

@@ -41,7 +41,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from dbtools.atomic import process_alive, sweep_stale, temp_sibling
+from dbtools.atomic import output_errors, process_alive, sweep_stale, temp_sibling
 from dbtools.database import (
     check_sqlite_file,
     integrity_findings,
@@ -180,24 +180,24 @@ def release_db(
     """
     file, registry = Path(file), Path(registry)
     check_sqlite_file(file)
-    if registry.exists() and not registry.is_dir():
+    if (new_folder := not registry.exists()) is False and not registry.is_dir():
         raise InputError("release registry must be a folder", path=registry)
-    new_folder = not registry.exists()
-    registry.mkdir(parents=True, exist_ok=True)
-    sweep_stale(registry / _SNAPSHOT)  # snapshots of killed releases
-    snap = temp_sibling(registry / _SNAPSHOT)
-    try:
-        release, findings = _snapshot_and_validate(file, snap, note=note, now=now, user=user)
-        impact_path = _publish(registry, snap, release, impact)
-        return ReleaseResult(release, registry / release.file, findings, impact_path)
-    except BaseException:
-        if new_folder:  # nothing was released: leave no empty registry folder behind
-            with contextlib.suppress(OSError):
-                snap.unlink(missing_ok=True)
-                registry.rmdir()
-        raise
-    finally:
-        snap.unlink(missing_ok=True)
+    with output_errors(registry, registry):  # disk full, read-only …: reported against the registry
+        registry.mkdir(parents=True, exist_ok=True)
+        sweep_stale(registry / _SNAPSHOT)  # snapshots of killed releases
+        snap = temp_sibling(registry / _SNAPSHOT)
+        try:
+            release, findings = _snapshot_and_validate(file, snap, note=note, now=now, user=user)
+            impact_path = _publish(registry, snap, release, impact)
+            return ReleaseResult(release, registry / release.file, findings, impact_path)
+        except BaseException:
+            if new_folder:  # nothing was released: leave no empty registry folder behind
+                with contextlib.suppress(OSError):
+                    snap.unlink(missing_ok=True)
+                    registry.rmdir()
+            raise
+        finally:
+            snap.unlink(missing_ok=True)
 
 
 def _snapshot_and_validate(

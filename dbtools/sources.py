@@ -17,7 +17,7 @@ from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.rules.area import check_area
 from dbtools.rules.common import Locator
 from dbtools.rules.schema import check_empty_tables
-from dbtools.tabular import code_columns, find_table_file, read_table_file, sha256_file
+from dbtools.tabular import code_columns, find_table_file, read_table_file, sha256_file, text_columns
 from dbtools.typed_csv import read_csv_typed
 from schemas.enums import Severity, Track
 from schemas.errors import InputError
@@ -58,7 +58,9 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
             continue
         raw = read_csv_typed(table, path) if path.suffix.lower() == ".csv" else None  # None: as text
         if raw is None:
-            tf = read_table_file(path, table=name, sheet=name, code_columns=code_columns(table))
+            tf = read_table_file(
+                path, table=name, sheet=name, code_columns=code_columns(table), text_columns=text_columns(table)
+            )
             raw = tf.frame
             findings.extend(tf.findings)
         files[name] = str(path)

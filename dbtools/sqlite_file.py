@@ -9,19 +9,35 @@ import sqlite3
 from collections.abc import Iterator
 from pathlib import Path
 
-from schemas.errors import InputError
+from dbtools.inputs import regular_file
+from schemas.errors import BusyError, InputError
 from schemas.tables import APPLICATION_ID
 
 SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
+#: SQLite's primary result codes of a database another connection holds (SQLITE_BUSY, SQLITE_LOCKED).
+SQLITE_BUSY_CODES = (5, 6)
+
+
+def sqlite_input_error(exc: Exception, path: Path, message: str) -> InputError | BusyError:
+    """The error to raise for a ``sqlite3`` error on the database ``path``: a database
+    locked by another process (still locked after SQLite's wait) is :class:`BusyError`
+    ("in use by another trainpos process; try again", exit 3), anything else an InputError
+    ``message: reason`` (exit 2). Every reader and writer of a trainpos database maps its
+    ``sqlite3`` errors through here."""
+    code = getattr(exc, "sqlite_errorcode", None)
+    if (code is not None and code & 0xFF in SQLITE_BUSY_CODES) or "database is locked" in str(exc):
+        return BusyError(
+            "is in use by another trainpos process (the database is locked); try again when it has finished",
+            path=path,
+        )
+    return InputError(f"{message}: {exc}", path=path)
+
+
 def check_sqlite_file(path: Path) -> None:
-    """Raise InputError unless ``path`` is an existing SQLite file with our application id."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError("no such file", path=path)
-    if path.is_dir():
-        raise InputError("is a folder, expected an onboard DB file (.sqlite)", path=path)
+    """Raise InputError unless ``path`` is an existing regular SQLite file with our application id."""
+    path = regular_file(Path(path), "onboard DB file (.sqlite)")
     with open(path, "rb") as fh:
         head = fh.read(100)
     if not head.startswith(SQLITE_MAGIC):
@@ -50,10 +66,10 @@ def connect_ro(path: Path) -> Iterator[sqlite3.Connection]:
     try:
         conn = sqlite3.connect(uri, uri=True)
     except sqlite3.Error as exc:
-        raise InputError(f"cannot open database: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "cannot open database") from exc
     try:
         yield conn
     except sqlite3.DatabaseError as exc:
-        raise InputError(f"database is corrupt or unreadable: {exc}", path=path) from exc
+        raise sqlite_input_error(exc, path, "database is corrupt or unreadable") from exc
     finally:
         conn.close()

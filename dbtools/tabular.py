@@ -20,6 +20,14 @@ What spreadsheet tools commonly get wrong, and what happens to it here:
 * **codes in .xlsx** — a number in a code column has lost its leading zeros in the
   workbook (01 → 1): an error (``source.numeric_code``) naming the cell, unless the cell's
   number format displays the zeros (``00``), in which case the cell is read as displayed.
+* **dates in text columns of .xlsx** — a date or time in a text column (a code such as
+  ``2026-01`` that Excel turned into a date): an error (``source.date_in_text``) naming the
+  sheet and the cell; format the column as Text.
+* **which sheet of an .xlsx** — the sheet named like the table, else the first *visible*
+  sheet. A hidden (or very hidden) sheet is never read silently: the sheet named like the
+  table being hidden is an error (``source.hidden_sheet``), hidden sheets before the first
+  visible one are skipped with a warning naming them; a workbook without a visible sheet is
+  refused.
 
 :func:`read_table_file` returns the frame with these findings; :func:`read_raw_table`
 (log streams, plans, survey files) raises the first error as an InputError instead.
@@ -28,6 +36,7 @@ What spreadsheet tools commonly get wrong, and what happens to it here:
 from __future__ import annotations
 
 import csv
+import datetime as dt
 import hashlib
 import io
 import re
@@ -39,6 +48,7 @@ from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
+from dbtools.inputs import check_zip, regular_file
 from schemas.enums import Severity
 from schemas.errors import InputError
 from schemas.findings import Finding
@@ -62,8 +72,10 @@ def sha256_file(path: Path) -> str:
 
 
 def find_table_file(folder: Path, stem: str) -> Path | None:
-    """``stem.csv`` or ``stem.xlsx`` in ``folder``; an error when both exist."""
-    found = [folder / f"{stem}{s}" for s in TABULAR_SUFFIXES if (folder / f"{stem}{s}").is_file()]
+    """``stem.csv`` or ``stem.xlsx`` in ``folder``; an error when both exist. Anything of
+    that name but a folder counts: a FIFO or device is then refused by name when read
+    (:func:`dbtools.inputs.regular_file`), not reported missing."""
+    found = [p for s in TABULAR_SUFFIXES if (p := folder / f"{stem}{s}").exists() and not p.is_dir()]
     if len(found) > 1:
         raise InputError(f"both {found[0].name} and {found[1].name} exist; keep one", path=folder)
     return found[0] if found else None
@@ -78,15 +90,22 @@ class TableFile:
 
 
 def read_table_file(
-    path: Path, *, table: str = "", sheet: str | None = None, code_columns: Collection[str] = ()
+    path: Path,
+    *,
+    table: str = "",
+    sheet: str | None = None,
+    code_columns: Collection[str] = (),
+    text_columns: Collection[str] = (),
 ) -> TableFile:
     """All cells as text (leading zeros kept, empty cells as empty strings), plus findings
     (module docstring) for ``table``. ``code_columns``: the columns whose numeric .xlsx
-    cells are reported. InputError when the file cannot be read at all."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError("no such file", path=path)
-    tf = _read_xlsx(path, sheet, table, code_columns) if path.suffix.lower() == ".xlsx" else _read_csv(path, table)
+    cells are reported; ``text_columns``: those whose date cells are. InputError when the
+    file cannot be read at all."""
+    path = regular_file(Path(path), "CSV or .xlsx file")
+    if path.suffix.lower() == ".xlsx":
+        tf = _read_xlsx(path, sheet, table, _TextColumns(frozenset(code_columns), frozenset(text_columns)))
+    else:
+        tf = _read_csv(path, table)
     empty = [i + 1 for i, c in enumerate(tf.frame.columns) if str(c).startswith("Unnamed:") or not str(c).strip()]
     if empty:
         raise InputError(f"header has empty column name(s) at position {empty}", path=path, row=1)
@@ -97,7 +116,10 @@ def read_raw_table(path: Path, sheet: str | None = None, declared: Table | None 
     """:func:`read_table_file`'s frame; its first error finding raised as an InputError.
     ``declared``: the file's table, whose :func:`code_columns` are checked in a workbook."""
     codes = code_columns(declared) if declared is not None else ()
-    tf = read_table_file(path, table=declared.name if declared is not None else "", sheet=sheet, code_columns=codes)
+    texts = text_columns(declared) if declared is not None else ()
+    tf = read_table_file(
+        path, table=declared.name if declared is not None else "", sheet=sheet, code_columns=codes, text_columns=texts
+    )
     for f in tf.findings:
         if f.severity == Severity.ERROR:
             raise InputError(f.message, path=path, row=f.row, column=f.column)
@@ -112,6 +134,11 @@ def code_columns(table: Table) -> list[str]:
         for c in table.columns
         if c.dtype == "str" and (c.name in table.primary_key or c.name.endswith(("_code", "_id")))
     ]
+
+
+def text_columns(table: Table) -> list[str]:
+    """Every text column of ``table``: a date there is a value Excel turned into a date."""
+    return [c.name for c in table.columns if c.dtype == "str"]
 
 
 # ------------------------------------------------------------------------------------ CSV
@@ -369,22 +396,72 @@ def _read_csv_fast(path: Path) -> pd.DataFrame | None:
 # ----------------------------------------------------------------------------------- XLSX
 
 
-def _read_xlsx(path: Path, sheet: str | None, table: str, code_columns: Collection[str]) -> TableFile:
+@dataclass(frozen=True)
+class _TextColumns:
+    """The columns of a sheet whose cells are checked: codes (numbers) and text (dates)."""
+
+    codes: frozenset[str]
+    texts: frozenset[str]
+
+
+def _read_xlsx(path: Path, sheet: str | None, table: str, columns: _TextColumns) -> TableFile:
     import openpyxl
     from openpyxl.utils.exceptions import InvalidFileException
 
+    check_zip(path)  # a zip bomb is refused before openpyxl reads a member
     try:
         book = openpyxl.load_workbook(path, read_only=True, data_only=True, keep_links=False)
     except (zipfile.BadZipFile, InvalidFileException, ValueError, OSError, KeyError) as exc:
         raise InputError(f"not a readable .xlsx workbook: {exc}", path=path) from exc
     try:
-        name = sheet if sheet in book.sheetnames else book.sheetnames[0]
+        ws, chosen = _choose_sheet(book, sheet, path, table)
         try:
-            return _sheet(book[name], path, table, code_columns)
+            tf = _sheet(ws, path, table, columns)
         except (ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile) as exc:
-            raise InputError(f"sheet '{name}' cannot be read: {exc}", path=path) from exc
+            raise InputError(f"sheet '{ws.title}' cannot be read: {exc}", path=path) from exc
+        return TableFile(tf.frame, chosen + tf.findings)
     finally:
         book.close()  # an open workbook leaks a ResourceWarning later
+
+
+def _choose_sheet(book: Any, wanted: str | None, path: Path, table: str) -> tuple[Any, list[Finding]]:
+    """The worksheet to read (module docstring) and the findings of that choice."""
+    sheets = list(book.worksheets)
+    named = [ws for ws in sheets if wanted is not None and ws.title == wanted]
+    if named:
+        ws = named[0]
+        if ws.sheet_state == "visible":
+            return ws, []
+        return ws, [
+            Finding(
+                "source.hidden_sheet",
+                Severity.ERROR,
+                table,
+                f"sheet '{ws.title}' is hidden ({ws.sheet_state}): a hidden sheet often holds old data; unhide it "
+                "if it holds the current data, else delete it",
+                file=str(path),
+                value=ws.title,
+                limit="visible",
+            )
+        ]
+    visible = [ws for ws in sheets if ws.sheet_state == "visible"]
+    if not visible:
+        raise InputError("the workbook has no visible worksheet: unhide the sheet to read", path=path)
+    ws = visible[0]
+    skipped = sheets[: sheets.index(ws)]
+    return ws, [
+        Finding(
+            "source.hidden_sheet",
+            Severity.WARNING,
+            table,
+            f"sheet '{h.title}' is hidden ({h.sheet_state}) and was not read; sheet '{ws.title}', the first visible "
+            "one, was: delete the hidden sheet, or name the sheet to read like the table",
+            file=str(path),
+            value=h.title,
+            limit="visible",
+        )
+        for h in skipped
+    ]
 
 
 def _cell_text(v: object) -> str:
@@ -397,19 +474,25 @@ def _cell_text(v: object) -> str:
 
 
 _ZEROS = re.compile(r"0+")
+#: Cell values of a date, time or duration (what Excel makes of a code typed as ``01-02``).
+_DATES = (dt.date, dt.time, dt.timedelta)
+#: Cells of one column recorded for a finding: (row, cell reference, text).
+_Cells = dict[str, list[tuple[int, str, str]]]
 
 
-def _sheet(ws: Any, path: Path, table: str, code_columns: Collection[str]) -> TableFile:
+def _sheet(ws: Any, path: Path, table: str, columns: _TextColumns) -> TableFile:
     rows = ws.iter_rows()
     header = next(rows, None)
     if header is None:
-        raise InputError("sheet is empty (no header row)", path=path)
+        raise InputError(f"sheet '{ws.title}' is empty (no header row)", path=path)
     names = [_cell_text(c.value).strip() for c in header]
     while names and not names[-1]:
         names.pop()
-    codes = {i for i, n in enumerate(names) if n in code_columns}
+    codes = {i for i, n in enumerate(names) if n in columns.codes}
+    texts = {i for i, n in enumerate(names) if n in columns.texts or n in columns.codes}
     data: list[list[str]] = []
-    numeric: dict[str, list[tuple[int, str, str]]] = {}
+    numeric: _Cells = {}
+    dates: _Cells = {}
     for r, cells in enumerate(rows, start=2):
         vals = [_cell_text(c.value) for c in cells]
         if not any(v.strip() for v in vals):
@@ -419,13 +502,16 @@ def _sheet(ws: Any, path: Path, table: str, code_columns: Collection[str]) -> Ta
         for i in codes:
             if i < len(cells) and cells[i].data_type == "n" and cells[i].value is not None:
                 vals[i] = _numeric_code(cells[i], vals[i], names[i], r, numeric)
+        for i in texts:
+            if i < len(cells) and isinstance(cells[i].value, _DATES):
+                dates.setdefault(names[i], []).append((r, f"{cells[i].column_letter}{r}", vals[i]))
         data.append((vals + [""] * len(names))[: len(names)])
     names = [n if n else f"Unnamed: {i}" for i, n in enumerate(names)]  # refused by the caller
     frame, findings = _drop_duplicates(pd.DataFrame(data, columns=names, dtype=object), names, path, table)
-    return TableFile(frame, findings + _numeric_findings(numeric, path, table))
+    return TableFile(frame, findings + _cell_findings(numeric, dates, path, table, ws.title))
 
 
-def _numeric_code(cell: Any, text: str, name: str, row: int, numeric: dict[str, list[tuple[int, str, str]]]) -> str:
+def _numeric_code(cell: Any, text: str, name: str, row: int, numeric: _Cells) -> str:
     """A numeric cell of a code column: as displayed when its format shows the zeros
     (``00`` → 01), else recorded for a finding and read as its digits."""
     fmt = str(cell.number_format or "")
@@ -436,35 +522,53 @@ def _numeric_code(cell: Any, text: str, name: str, row: int, numeric: dict[str, 
     return text
 
 
-def _numeric_findings(numeric: dict[str, list[tuple[int, str, str]]], path: Path, table: str) -> list[Finding]:
+def _cell_findings(numeric: _Cells, dates: _Cells, path: Path, table: str, sheet: str) -> list[Finding]:
+    """``source.numeric_code`` and ``source.date_in_text`` errors, one per cell up to
+    :data:`MAX_CELLS_NAMED` a column, then one counting the rest."""
+    kinds = (
+        (
+            "source.numeric_code",
+            numeric,
+            "the number {text}, not text: a code stored as a number has lost its leading zeros (01 → 1)",
+            "numbers",
+        ),
+        (
+            "source.date_in_text",
+            dates,
+            "a date ({text}), not text: Excel turned the value typed there into a date",
+            "dates",
+        ),
+    )
     out: list[Finding] = []
-    for name, cells in numeric.items():
-        for row, ref, text in cells[:MAX_CELLS_NAMED]:
-            out.append(
-                Finding(
-                    "source.numeric_code",
-                    Severity.ERROR,
-                    table,
-                    f"cell {ref} holds the number {text}, not text: a code stored as a number has lost its "
-                    "leading zeros (01 → 1); format the column as Text and type the codes again",
-                    file=str(path),
-                    row=row,
-                    column=name,
-                    value=text,
-                    limit="text",
+    for rule, found, what, plural in kinds:
+        for name, cells in found.items():
+            for row, ref, text in cells[:MAX_CELLS_NAMED]:
+                out.append(
+                    Finding(
+                        rule,
+                        Severity.ERROR,
+                        table,
+                        f"cell {ref} holds {what.format(text=text)}; format the column as Text and type the "
+                        f"values again (sheet '{sheet}')",
+                        file=str(path),
+                        row=row,
+                        column=name,
+                        value=text,
+                        limit="text",
+                    )
                 )
-            )
-        if len(cells) > MAX_CELLS_NAMED:
-            out.append(
-                Finding(
-                    "source.numeric_code",
-                    Severity.ERROR,
-                    table,
-                    f"{len(cells) - MAX_CELLS_NAMED} more cells of '{name}' hold numbers, not text",
-                    file=str(path),
-                    column=name,
-                    value=len(cells),
-                    limit=0,
+            if len(cells) > MAX_CELLS_NAMED:
+                out.append(
+                    Finding(
+                        rule,
+                        Severity.ERROR,
+                        table,
+                        f"{len(cells) - MAX_CELLS_NAMED} more cells of '{name}' (sheet '{sheet}') hold {plural}, "
+                        "not text",
+                        file=str(path),
+                        column=name,
+                        value=len(cells),
+                        limit=0,
+                    )
                 )
-            )
     return out

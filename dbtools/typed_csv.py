@@ -48,6 +48,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from dbtools.inputs import regular_file
 from schemas.model import Table
 
 #: Bytes Arrow's CSV reader parses per block (its default).
@@ -411,8 +412,9 @@ def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
     :data:`PIECE_BYTES` (a piece it declines, e.g. one with blanks, by Arrow); any other
     by Arrow's streaming reader, block by block. Each block's numbers are copied into the
     final arrays, so the file is held once: a whole table beside its concatenated columns
-    cost a second copy of every number and, with it, most of the time (bench/NOTES.md)."""
-    path = Path(path)
+    cost a second copy of every number and, with it, most of the time (bench/NOTES.md).
+    InputError, before it is opened, when ``path`` is not a regular file (a FIFO …)."""
+    path = regular_file(Path(path), "CSV file")
     blocks = _blocks(table, path, PIECE_BYTES)
     if blocks is None:
         return None
@@ -432,7 +434,7 @@ def iter_csv_typed(table: Table, path: Path, rows: int) -> Iterator[pd.DataFrame
     the caller drops what it has and reads the file as text."""
     if rows < 1:
         raise ValueError(f"rows must be positive, not {rows}")
-    path = Path(path)
+    path = regular_file(Path(path), "CSV file")
     blocks = _blocks(table, path, max(1 << 16, min(PIECE_BYTES, rows * _row_bytes(path))))
     return None if blocks is None else _frames(blocks, rows)
 

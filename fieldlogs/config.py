@@ -5,7 +5,8 @@ One TOML file (``--config FILE.toml``) configures every command: ``run``, ``audi
 ``[gps]``, ``[margin]``, ``[gnss]``, ``[clock]``, ``[window]``, ``cycle_s``), ``gis verify`` also ``[gis_verify]``,
 ``possession check`` reads ``[gps]`` and ``[possession]``, ``survey`` the pipeline's sections
 and ``[survey]``; each command refuses unknown sections and keys, wrong types and values out
-of range. ``trainpos config show`` prints the whole tree (or one section) with every
+of range; every command with ``--config`` applies its ``[input]`` section (limits of compressed
+inputs, :mod:`dbtools.inputs`). ``trainpos config show`` prints the whole tree (or one section) with every
 default, unit, range and meaning as commented TOML; fed back with ``--config`` it changes
 nothing.
 """
@@ -34,6 +35,7 @@ from fieldlogs.pipeline.config import (
 from fieldlogs.possession.config import PossessionConfig
 from fieldlogs.survey.config import SurveyConfig
 from schemas.errors import InputError, UsageError
+from schemas.inputs import InputLimits
 from schemas.settings import SettingError, check_ranges, describe, render_toml, section_from_dict, setting, typed
 
 
@@ -52,6 +54,7 @@ class SuiteConfig:
     possession: PossessionConfig = field(default_factory=PossessionConfig)
     survey: SurveyConfig = field(default_factory=SurveyConfig)
     gis_verify: VerifyConfig = field(default_factory=VerifyConfig)
+    input: InputLimits = field(default_factory=InputLimits)
     cycle_s: float = setting(**CYCLE_S)
 
     def __post_init__(self) -> None:

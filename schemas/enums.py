@@ -139,6 +139,19 @@ class RadarStatus(StrEnum):
     """Too few lines, missing samples, no clear direction or too large an uncertainty: no speed."""
 
 
+class IqConvention(StrEnum):
+    """How a radar's recorded I and Q samples form the complex IF signal [S004 §2].
+
+    ``i+jq``: z = I + jQ (the default; a target approaching where the radar looks gives a
+    positive Doppler frequency and the f1–f2 phase difference gives its range). ``i-jq``:
+    z = I − jQ — the quadrature channel recorded with the other sign (a common wiring):
+    the recorded spectrum is the mirror image, Doppler and range phase both change sign.
+    """
+
+    I_PLUS_JQ = "i+jq"
+    I_MINUS_JQ = "i-jq"
+
+
 def direction_sign(track: str) -> int:
     """+1 where km grows in the track's normal running direction (D, S), −1 on U."""
     return -1 if track == Track.UP else 1

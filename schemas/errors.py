@@ -3,12 +3,13 @@
 Library code raises these; the CLI prints ``str(error)`` on one line to stderr and exits
 with ``error.exit_code``. No other exception should reach a user.
 
-Exit codes (documented in README):
+Exit codes (documented in docs/reference/behaviour.md):
 
 * 0 — success, nothing to report
 * 1 — the input was read but has errors (findings), or a check failed
 * 2 — the input cannot be read at all (missing, not CSV/SQLite, corrupt), or bad usage
-* 3 — refused: the output exists, a version is already released, an input would be modified
+* 3 — refused: the output exists, a version is already released, an input would be modified,
+  a database is in use by another trainpos process (try again)
 """
 
 from __future__ import annotations
@@ -75,5 +76,12 @@ class FindingsError(TrainposError):
 
 class RefusedError(TrainposError):
     """An action refused to protect existing data (overwrite, re-release, immutability)."""
+
+    exit_code = EXIT_REFUSED
+
+
+class BusyError(TrainposError):
+    """A database locked by another process (SQLite's "database is locked" after its wait):
+    nothing is wrong with it — try again once the other trainpos process has finished."""
 
     exit_code = EXIT_REFUSED

@@ -1,6 +1,6 @@
 """Declarative column and table model: the single source of truth for every table.
 
-Readers, validators, the SQLite DDL, README tables and ``trainpos schema show`` are all
+Readers, validators, the SQLite DDL, the docs' schema reference and ``trainpos schema show`` are all
 derived from these declarations.
 """
 
@@ -10,6 +10,11 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 DType = Literal["str", "int", "float", "bool", "bytes"]
+
+#: The plausible range of every kilometrage column (``km_notation``): ±2,000 km. No line is
+#: longer; a km beyond it is a typing error (23469.0 → 234690000) or a value that was
+#: never a km (1e308), caught as ``schema.range`` in sources and DBs alike.
+KM_PLAUSIBLE_M = 2_000_000.0
 Kind = Literal["db", "source", "log", "output", "plan", "audit"]
 
 
@@ -29,10 +34,16 @@ class Column:
     min: float | None = None
     max: float | None = None
     km_notation: bool = False
-    """Accept ``12k345.6`` as well as plain metres when reading sources."""
+    """Accept ``12k345.6`` as well as plain metres when reading sources; the column's range
+    is then at most :data:`KM_PLAUSIBLE_M` either way."""
     float32: bool = False
     """Stored as 32-bit float in Parquet and read back as float32 (raw radar samples, where
     4 bytes per value halve a 10 kHz stream); ``t`` and every derived value stay 64-bit."""
+
+    def __post_init__(self) -> None:
+        if self.km_notation:  # every km column: within the plausible range unless it declares a narrower one
+            object.__setattr__(self, "min", -KM_PLAUSIBLE_M if self.min is None else max(self.min, -KM_PLAUSIBLE_M))
+            object.__setattr__(self, "max", KM_PLAUSIBLE_M if self.max is None else min(self.max, KM_PLAUSIBLE_M))
 
     @property
     def sql_type(self) -> str:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from schemas.enums import CabDirection, Severity
+from schemas.enums import CabDirection, IqConvention, Severity
 from schemas.findings import Finding
 from schemas.units import SPEED_OF_LIGHT_MPS
 
@@ -41,6 +41,13 @@ RUN_JSON_RADAR: tuple[RadarField, ...] = (
     RadarField("beam_az_deg", "deg", "Half-power half-width in azimuth (Table 1: ±3.0°)", 0.5, 30.0),
 )
 RADAR_LOOKS_TOWARD = (CabDirection.FORWARD.value, CabDirection.REVERSE.value)
+#: Optional: how I and Q form the complex signal (``schemas.enums.IqConvention``, ``i+jq`` default).
+RADAR_IQ_CONVENTIONS = tuple(c.value for c in IqConvention)
+#: Optional: the sample value at the ADC's full scale (``radar_if`` samples are I/full_scale,
+#: Q/full_scale in FS, ±1; 1 default: samples already normalised; e.g. 2047 for 12-bit counts).
+RADAR_FULL_SCALE = RadarField(
+    "full_scale", "counts", "Sample value at the ADC full scale (1: samples already in FS, ±1)", 1e-6, 1e9
+)
 
 
 @dataclass(frozen=True)
@@ -56,6 +63,13 @@ class RadarParams:
     beam_elev_deg: float
     beam_az_deg: float
     looks_toward: str = "F"
+    iq_convention: str = IqConvention.I_PLUS_JQ.value
+    full_scale: float = 1.0
+
+    @property
+    def q_sign(self) -> float:
+        """+1 for ``i+jq``, −1 for ``i-jq``: z = (I + j·q_sign·Q) / full_scale."""
+        return -1.0 if self.iq_convention == IqConvention.I_MINUS_JQ.value else 1.0
 
     @property
     def wavelength_m(self) -> float:
@@ -99,7 +113,11 @@ class RadarParams:
         return math.radians(max(lo, 0.5)), math.radians(min(hi, 89.5))
 
     def to_json(self) -> dict[str, float | str]:
-        return {f.name: getattr(self, f.name) for f in RUN_JSON_RADAR} | {"looks_toward": self.looks_toward}
+        return {f.name: getattr(self, f.name) for f in RUN_JSON_RADAR} | {
+            "looks_toward": self.looks_toward,
+            "iq_convention": self.iq_convention,
+            "full_scale": self.full_scale,
+        }
 
 
 def _suggest(name: str, known: list[str]) -> str | None:
@@ -130,7 +148,9 @@ def parse_radar_block(data: dict[str, Any], path: Path) -> tuple[RadarParams | N
 
     Absent → (None, []). Every field must be a number inside its range; the beam must stay
     between the horizontal and the vertical, and its footprint inside the unambiguous range
-    c/(2·Δf). Any error → (None, findings).
+    c/(2·Δf). Optional: ``looks_toward`` (F/R), ``iq_convention`` (``RADAR_IQ_CONVENTIONS``,
+    ``i+jq`` default) and ``full_scale`` (``RADAR_FULL_SCALE``, 1 default). Any error → (None,
+    findings).
     """
     if data.get("radar") is None:
         return None, []
@@ -147,7 +167,20 @@ def parse_radar_block(data: dict[str, Any], path: Path) -> tuple[RadarParams | N
     looks = block.get("looks_toward", "F")
     if looks not in RADAR_LOOKS_TOWARD:
         findings.append(_radar_finding(path, "radar.looks_toward", f"radar.looks_toward = {looks!r} is not F or R"))
-    known = {f.name for f in RUN_JSON_RADAR} | {"looks_toward"}
+    iq = block.get("iq_convention", IqConvention.I_PLUS_JQ.value)
+    if iq not in RADAR_IQ_CONVENTIONS:
+        findings.append(
+            _radar_finding(
+                path,
+                "radar.iq_convention",
+                f"radar.iq_convention = {iq!r} is not one of {', '.join(RADAR_IQ_CONVENTIONS)}",
+            )
+        )
+    full_scale: float | None = 1.0
+    if "full_scale" in block:
+        full_scale, bad = _radar_number(block, RADAR_FULL_SCALE, path)
+        findings += [bad] if bad is not None else []
+    known = {f.name for f in RUN_JSON_RADAR} | {"looks_toward", "iq_convention", "full_scale"}
     for k in sorted(set(block) - known):
         hint = _suggest(k, sorted(known))
         findings.append(
@@ -162,7 +195,7 @@ def parse_radar_block(data: dict[str, Any], path: Path) -> tuple[RadarParams | N
         )
     if any(f.severity == Severity.ERROR for f in findings):
         return None, findings
-    params = RadarParams(**values, looks_toward=looks)
+    params = RadarParams(**values, looks_toward=looks, iq_convention=iq, full_scale=full_scale or 1.0)
     geometry = _radar_geometry(params, path)
     return (None, findings + geometry) if geometry else (params, findings)
 

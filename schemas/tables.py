@@ -9,7 +9,7 @@ key/value table.
 from __future__ import annotations
 
 from schemas.enums import Attribute, BaliseKind, Track
-from schemas.model import Column, ForeignKey, Table
+from schemas.model import KM_PLAUSIBLE_M, Column, ForeignKey, Table
 from schemas.network import NETWORK_TABLES
 
 #: Bumped whenever a DB table changes shape; stored as ``PRAGMA user_version``.
@@ -133,6 +133,7 @@ BALISE_GROUP_COLUMNS = (
         required=False,
         nullable=True,
         min=0.0,
+        max=KM_PLAUSIBLE_M,
     ),
 )
 
@@ -174,6 +175,7 @@ BALISES = Table(
             required=False,
             nullable=True,
             min=0.0,
+            max=KM_PLAUSIBLE_M,
         ),
         *BALISE_GROUP_COLUMNS,
     ),

@@ -33,6 +33,7 @@ import pandas as pd
 
 from dbtools.atomic import atomic_folder
 from dbtools.gis.georef import NETWORK_FILE, write_declaration
+from dbtools.inputs import regular_file
 from dbtools.interchange import railml2, railml3
 from dbtools.interchange import xmltree as xt
 from dbtools.interchange.balises import map_balises
@@ -262,7 +263,7 @@ def read_railml(
 ) -> tuple[RailmlDoc, dict[str, Target]]:
     """Parse and read a railML file (errors raise): the document and its track targets.
     With ``schema`` (the XML Schema loaded from ``xsd``) the file is validated first."""
-    file = str(source)
+    file = str(regular_file(Path(source), "railML file"))
     tree = xt.parse(source)
     if schema is not None and xsd is not None:
         from dbtools.interchange.xsd import check_valid

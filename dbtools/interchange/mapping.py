@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from dbtools.inputs import not_special
 from dbtools.interchange.model import RailmlDoc
 from schemas.enums import Track
 from schemas.errors import InputError
@@ -74,7 +75,7 @@ def read_map(path: Path | None) -> LineMap:
     """The map (empty without a file); InputError naming the file and key on anything unusable."""
     if path is None:
         return LineMap()
-    path = Path(path)
+    path = not_special(Path(path), "--line-code map (TOML)")
     if not path.is_file():
         raise InputError("no such file (the --line-code map)", path=path)
     try:

@@ -23,6 +23,8 @@ the running direction) and −1 on U.
 * ``balise.key_fields`` (error) — an I1, I2 or C row without line_code or station_code, or
   whose track is not U, D or S: the pair key (and a C balise's governing pair) needs all
   three (G rows may leave them empty: a group names itself by NID_C/NID_BG). Fix: fill them.
+* ``balise.km_equipment`` (error) — ``km_equipment_m`` differs from ``km_actual_m`` by
+  more than ``km_equipment_tolerance_m`` (a typing error in one of them).
 * ``balise.outside_gis`` (error) — ``km_actual_m`` is outside the GIS km range of the
   balise's line/track (or the line/track has no GIS at all).
 """
@@ -37,6 +39,7 @@ from dbtools.rules.common import Locator, capped, column, fmt_km, py
 from dbtools.rules.config import ValidationConfig
 from schemas.enums import S003_KINDS, BaliseKind, Severity, Track
 from schemas.findings import Finding
+from schemas.model import KM_PLAUSIBLE_M
 from schemas.tables import BALISES
 
 T = BALISES.name
@@ -50,6 +53,7 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
     if balises.empty:
         return out
     out += _key_fields(balises, loc, cap)
+    out += _km_equipment(balises, config, loc)
     bid = column(balises, "balise_id")
     kind = column(balises, "kind")
     line, station, track = column(balises, "line_code"), column(balises, "station_code"), column(balises, "track")
@@ -364,3 +368,30 @@ def _key_fields(balises: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
     return capped(
         "balise.key_fields", Severity.ERROR, T, np.flatnonzero(s003 & (bad_track | missing)), finding, cap, loc.file(T)
     )
+
+
+def _km_equipment(balises: pd.DataFrame, config: ValidationConfig, loc: Locator) -> list[Finding]:
+    """``balise.km_equipment`` (module docstring)."""
+    actual, equipment = column(balises, "km_actual_m"), column(balises, "km_equipment_m")
+    bid = column(balises, "balise_id")
+    tol = config.km_equipment_tolerance_m
+    with np.errstate(invalid="ignore", over="ignore"):
+        off = np.abs(equipment - actual)
+    plausible = (np.abs(actual) <= KM_PLAUSIBLE_M) & (np.abs(equipment) <= KM_PLAUSIBLE_M)  # else schema.range
+    bad = np.flatnonzero(plausible & (off > tol))
+
+    def finding(i: int) -> Finding:
+        return Finding(
+            "balise.km_equipment",
+            Severity.ERROR,
+            T,
+            f"balise {bid[i]}: km_equipment_m {fmt_km(equipment[i])} is {off[i]:.1f} m from km_actual_m "
+            f"{fmt_km(actual[i])} (at most {tol:g} m): one of them is mistyped",
+            keys={"balise_id": py(bid[i])},
+            column="km_equipment_m",
+            value={"km_equipment_m": py(equipment[i]), "km_actual_m": py(actual[i])},
+            limit=tol,
+            **loc.at(T, i),
+        )
+
+    return capped("balise.km_equipment", Severity.ERROR, T, bad, finding, config.max_findings_per_rule, loc.file(T))

@@ -83,6 +83,17 @@ OTHER_RULES: dict[str, tuple[str, str]] = {
         "an Excel cell holds a code (line, station) as a number, which has lost its leading zeros. Fix: format the "
         "column as text and type the code again.",
     ),
+    "source.hidden_sheet": (
+        "error / warning",
+        "an .xlsx workbook's sheet is hidden: an error when it is the one read (a hidden sheet often holds old "
+        "data), a warning when it was skipped for the first visible one. Fix: unhide or delete it, or name the "
+        "sheet like the table.",
+    ),
+    "source.date_in_text": (
+        "error",
+        "an .xlsx cell of a text column (a code) holds a date: Excel turned what was typed into a date. Fix: "
+        "format the column as Text and type the value again.",
+    ),
     "source.unknown_line": ("error", "a line_code is used but not listed in lines. Fix: add the line to lines."),
     "db.integrity": ("error", "SQLite's integrity_check fails: the file is damaged. Fix: build the DB again."),
     "db.foreign_key": (

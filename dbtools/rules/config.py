@@ -20,6 +20,11 @@ class ValidationConfig:
     """C-balise identification window: two C balises with the same signal type after the same
     pair whose ``dist_from_initial_m`` differ by ≤ this are ambiguous (``balise.ambiguous``) [m].
     Same value as the pipeline's ``BaliseConfig.id_window_m``."""
+    km_equipment_tolerance_m: float = 1000.0
+    """|km_equipment_m − km_actual_m| of a balise above this: error (``balise.km_equipment``)
+    [m]. The equipment km is the actual km of an older survey; re-surveys move it by metres to
+    hundreds of metres, never by kilometres — beyond, one of them was typed wrong (23469.0 →
+    234690.0)."""
     dist_tolerance_m: float = 1.0
     """``dist_from_initial_m`` vs |km_actual(C) − km_actual(I1)|: warning beyond this
     (``balise.dist_from_initial``) [m]. The stored value is a travel distance, so it may

@@ -19,6 +19,11 @@ sky on any run. One row per receiver-epoch:
 With SBAS/MSAS messages in the run (``gnss_sbas``) the report says which GEO, how many
 messages were used or dropped and how many observation rows were corrected (``sbas``).
 
+Facing (which way the F end faces, for the antennas' offsets from the reference point): given,
+the pipeline's, or — ``direction`` 0 — from the fixes' motion (``fieldlogs.gnss.facing``);
+unknown when they barely move: both facings solved, km their mean, U widened by half their
+difference (``_either_facing``).
+
 Availability: the share of epochs (receivers' epochs within 20 ms are one epoch) with an
 available constrained solution from at least one receiver, against the share with an
 available unconstrained one, and the same per receiver.
@@ -33,16 +38,20 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.gnss.config import GnssConfig, position_config
+from fieldlogs.gnss.facing import facing_from_motion
 from fieldlogs.gnss.geodesy import ecef_to_geodetic
 from fieldlogs.gnss.gis import GisTrack
 from fieldlogs.gnss.observables import FLAG_NAMES, Epochs
-from fieldlogs.gnss.ontrack import solve_on_track
+from fieldlogs.gnss.ontrack import TrackSolutions, solve_on_track
+from fieldlogs.gnss.position import PositionConfig
 from fieldlogs.gnss.runinputs import RunGnss
 from fieldlogs.gnss.skymask import SkyMask
 
 if TYPE_CHECKING:
     from fieldlogs.gnss.sbas import SbasCorrections
 
+#: JSON ``facing`` of a direction (0: unknown, ``fieldlogs.gnss.facing``).
+FACING_NAMES = {1: "increasing_km", -1: "decreasing_km", 0: "unknown"}
 #: Flags of an FDE decision (reported as ``excluded``, the others as ``not_used``).
 _FDE = ("fde_excluded", "no_track_solution")
 
@@ -56,6 +65,7 @@ class GnssPositionReport:
     track: str
     track_source: str
     direction: int
+    """+1 / −1: the F end faces increasing / decreasing km; 0: unknown (both facings merged)."""
     facing_source: str
     sky_mask: str
     systems: tuple[str, ...]
@@ -71,7 +81,7 @@ class GnssPositionReport:
             "line_code": self.line_code,
             "track": self.track,
             "track_source": self.track_source,
-            "facing": "increasing_km" if self.direction > 0 else "decreasing_km",
+            "facing": FACING_NAMES[self.direction],
             "facing_source": self.facing_source,
             "sky_mask": self.sky_mask,
             "systems": list(self.systems),
@@ -137,6 +147,52 @@ COLUMNS = (
 )  # fmt: skip
 
 
+def _table(sols: TrackSolutions, track: GisTrack) -> pd.DataFrame:
+    tb = sols.table.copy()
+    tb["ok"] = tb["ok"].astype(bool)
+    used, excluded, other = _sat_lists(sols.result.observations)
+    tb["used"], tb["excluded"] = used, excluded
+    tb["not_used"] = pd.Series(other, index=tb.index, dtype=object)
+    tb["available"] = tb["ok"]
+    tb = pd.concat([tb, _lsq_columns(tb, track)], axis=1)
+    if "antenna_distance_ok" not in tb:
+        tb["antenna_distance_ok"] = True
+    return tb
+
+
+def _either_facing(plus: pd.DataFrame, minus: pd.DataFrame) -> pd.DataFrame:
+    """Facing unknown: the rows solved with d = +1 and d = −1 as one. The reference point lies
+    at km₊ or km₋ (the antennas' along/lateral offsets mirrored): km = (km₊ + km₋)/2 with the
+    bound U = max(U₊, U₋) + |km₊ − km₋|/2 (and σ likewise), available only where both are."""
+    tb = plus.copy()
+    m = minus.reindex(plus.index)
+    ka, kb = plus["km_m"].to_numpy(float), m["km_m"].to_numpy(float)
+    half = 0.5 * np.abs(ka - kb)
+    tb["km_m"] = 0.5 * (ka + kb)
+    for col in ("uncertainty_m", "sigma_m"):
+        tb[col] = np.fmax(plus[col].to_numpy(float), m[col].to_numpy(float)) + half
+    both = plus["ok"].to_numpy(bool) & m["ok"].to_numpy(bool, na_value=False)
+    tb["ok"] = tb["available"] = both
+    tb["status"] = np.where(plus["ok"].to_numpy(bool), m["status"].to_numpy(object), plus["status"].to_numpy(object))
+    return tb
+
+
+def _solve(
+    g: RunGnss, track: GisTrack, direction: int, pc: PositionConfig, sky_mask: SkyMask | None, cab: pd.DataFrame | None
+) -> tuple[pd.DataFrame, int, str | None]:
+    """(report rows, facing, how it was decided — None when given); ``direction`` 0: from the fixes."""
+    if direction != 0:
+        return _table(solve_on_track(g, track, direction, pc, sky_mask=sky_mask), track), direction, None
+    plus = solve_on_track(g, track, 1, pc, sky_mask=sky_mask)
+    decision = facing_from_motion(plus.best.reset_index(), cab)
+    if decision.direction == 1:
+        return _table(plus, track), 1, decision.source
+    minus = _table(solve_on_track(g, track, -1, pc, sky_mask=sky_mask), track)
+    if decision.direction == -1:
+        return minus, -1, decision.source
+    return _either_facing(_table(plus, track), minus), 0, decision.source
+
+
 def position_report(
     run_id: str,
     g: RunGnss,
@@ -149,20 +205,14 @@ def position_report(
     sky_mask_name: str = "none",
     track_source: str = "given",
     facing_source: str = "given",
+    cab: pd.DataFrame | None = None,
 ) -> GnssPositionReport:
-    """Every epoch of the run on ``track`` (module docstring)."""
+    """Every epoch of the run on ``track`` (module docstring). ``direction`` +1/−1 is the
+    facing given; 0: decided from the fixes' motion (and ``cab``), or unknown and stated so
+    (``fieldlogs.gnss.facing``)."""
     cfg = cfg or GnssConfig()
     pc = position_config(cfg, systems)
-    sols = solve_on_track(g, track, direction, pc, sky_mask=sky_mask)
-    tb = sols.table.copy()
-    tb["ok"] = tb["ok"].astype(bool)
-    used, excluded, other = _sat_lists(sols.result.observations)
-    tb["used"], tb["excluded"] = used, excluded
-    tb["not_used"] = pd.Series(other, index=tb.index, dtype=object)
-    tb["available"] = tb["ok"]
-    tb = pd.concat([tb, _lsq_columns(tb, track)], axis=1)
-    if "antenna_distance_ok" not in tb:
-        tb["antenna_distance_ok"] = True
+    tb, direction, decided = _solve(g, track, direction, pc, sky_mask, cab)
     tb = tb.sort_values(["t", "receiver"], kind="stable").reset_index(drop=True)
     sb = g.sbas if pc.use_sbas else None
     return GnssPositionReport(
@@ -171,7 +221,7 @@ def position_report(
         track.track,
         track_source,
         direction,
-        facing_source,
+        facing_source if decided is None else decided,
         sky_mask_name,
         pc.systems,
         tb[list(COLUMNS)],

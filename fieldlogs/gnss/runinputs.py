@@ -115,11 +115,45 @@ def antennas_of(vehicle: Mapping[str, Any] | None) -> dict[str, Antenna]:
     return out
 
 
+#: An ephemeris further than this from every observation epoch serves none [s] (the longest
+#: fit interval of a broadcast ephemeris is hours; a day is far beyond any).
+NAV_REACH_S = 86_400.0
+
+
+def _check_nav_epochs(obs: pd.DataFrame, nav: pd.DataFrame, folder: str) -> None:
+    """Refuse navigation data none of whose reference epochs (Toe = week·604800 + Toe for
+    Keplerian records, toc for GLONASS) lies within ``NAV_REACH_S`` of the observations: every
+    epoch would read as too few satellites. The usual cause is a 10-bit week (modulo 1024,
+    IS-GPS-200 §20.3.3.3.1.1) left unresolved, which is named with the weeks found."""
+    if "gnss_time_s" not in obs.columns or not {"week", "Toe", "toc_gps_s"} <= set(nav.columns):
+        return
+    g = obs["gnss_time_s"].to_numpy(dtype=float, na_value=np.nan)
+    g = g[np.isfinite(g)]
+    toe = nav["week"].to_numpy(dtype=float, na_value=np.nan) * 604_800.0 + nav["Toe"].to_numpy(
+        dtype=float, na_value=np.nan
+    )
+    ref = np.where(np.isfinite(toe), toe, nav["toc_gps_s"].to_numpy(dtype=float, na_value=np.nan))
+    ref = ref[np.isfinite(ref)]
+    if not g.size or not ref.size:
+        return
+    if bool(((ref >= g.min() - NAV_REACH_S) & (ref <= g.max() + NAV_REACH_S)).any()):
+        return
+    weeks = np.floor(ref / 604_800.0)
+    raise GnssInputError(
+        f"no ephemeris of gnss_nav lies within a day of the observations (GPS week {int(g.min() // 604_800)}; "
+        f"navigation weeks {int(weeks.min())}–{int(weeks.max())}): a 10-bit GPS week (modulo 1024) not resolved, "
+        "or a navigation file of another day — re-import with logs import, see logs check",
+        reason="nav_epochs",
+        path=folder,
+    )
+
+
 def run_gnss(run: Run) -> RunGnss | None:
     """The run's GNSS inputs, or None when it has no ``gnss_obs`` rows.
 
     Raises :class:`GnssInputError` when observations exist but cannot be positioned: no
-    ``gnss_nav``, or a receiver without an antenna in the vehicle block.
+    ``gnss_nav``, none of its ephemerides near the observations (``_check_nav_epochs``), or
+    a receiver without an antenna in the vehicle block.
     """
     obs = run.stream("gnss_obs")
     if obs is None or not len(obs):
@@ -129,6 +163,7 @@ def run_gnss(run: Run) -> RunGnss | None:
         raise GnssInputError(
             "the run has gnss_obs but no gnss_nav (ephemerides)", reason="no_nav", path=str(run.folder)
         )
+    _check_nav_epochs(obs, nav, str(run.folder))
     meta = run.meta
     antennas = antennas_of(meta.vehicle if meta is not None else None)
     observed = {str(r) for r in pd.unique(obs["receiver"].to_numpy(dtype=object))}

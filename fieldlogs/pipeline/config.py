@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from dbtools.inputs import not_special
 from fieldlogs.gnss.config import GnssConfig
 from schemas.errors import InputError
 from schemas.settings import SettingError, check_ranges, section_from_dict, setting, typed
@@ -354,12 +355,13 @@ def check_budgets(balise: BaliseConfig, feature: FeatureConfig, clock: ClockConf
 
 
 #: Sections of the configuration tree that belong to other applications.
-FOREIGN_SECTIONS = frozenset({"possession", "gis_verify", "survey"})
+FOREIGN_SECTIONS = frozenset({"possession", "gis_verify", "survey", "input"})
 
 
 def read_toml(path: Path) -> dict[str, Any]:
     """A TOML file as a dict (missing file or bad TOML: InputError naming the file)."""
     path = Path(path)
+    not_special(path, "config file (TOML)")
     try:
         return tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError as exc:

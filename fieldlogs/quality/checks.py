@@ -40,6 +40,7 @@ from fieldlogs.io import REQUIRED_STREAMS, Run
 from fieldlogs.quality.clocks import clock_findings
 from fieldlogs.quality.file_findings import FileFindings as _Out
 from fieldlogs.quality.gnss import check_gnss_nav, check_gnss_obs, check_gnss_sbas, check_receivers
+from fieldlogs.quality.radar_if import check_radar_if
 from fieldlogs.quality.tacho import TACHO_RATE_HZ, TachoIssue, TachoLimits, review_tacho, time_order
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
@@ -490,20 +491,15 @@ def check_stream(run: Run, name: str, db: DbRefs | None = None, limits: CheckLim
             value=0,
         )
         return read + out.items
-    _check_values(out, table, frame, read)
+    values = frame
+    if name == "radar_if":  # values in FS after the declared full_scale; the I/Q convention
+        values, radar_found = check_radar_if(run, frame, out.file)
+        out.items += radar_found
+    _check_values(out, table, values, read)
     if name in GNSS_CHECKS:
         GNSS_CHECKS[name](out, frame)
         return read + out.items
     _check_time(out, table, frame, limits, run.stream_rate_hz(name))
-    if name == "radar_if" and run.raw_json.get("radar") is None:
-        out.add(
-            "log.radar_params",
-            Severity.ERROR,
-            "raw radar samples need the radar's parameters: run.json has no 'radar' block "
-            "(f0_hz, delta_f_hz, t_pri_s, t_epi_s, height_m, depression_deg, beam_elev_deg, beam_az_deg); "
-            "the rate is checked against Table 1's 1/(2·50 µs)",
-            column="radar",
-        )
     if name == "tacho":
         _check_tacho(out, run, frame, limits)
     elif name == "imu":

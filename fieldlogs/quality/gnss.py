@@ -118,6 +118,33 @@ def check_gnss_nav(out: _Out, frame: pd.DataFrame) -> None:
         out.rows("log.nav_range", Severity.ERROR, bad, msg, column=c, value=val, limit=[lo, hi])
     dup = np.flatnonzero(frame.duplicated(keep="first").to_numpy())
     out.rows("log.duplicate_row", Severity.WARNING, dup, lambda k: "ephemeris repeats an earlier row exactly")
+    _check_nav_week(out, frame, letter)
+
+
+def _check_nav_week(out: _Out, frame: pd.DataFrame, letter: np.ndarray) -> None:
+    """Toe (week·604800 + Toe) more than a week from the record's own epoch toc: the week is
+    not the continuous one (RINEX 3.05 Table A6) — a 10-bit broadcast week (mod 1024,
+    IS-GPS-200 §20.3.3.3.1.1) left unresolved, which matches no observation epoch."""
+    kepler = np.isin(letter, ("G", "E", "J"))
+    week = frame["week"].to_numpy(dtype=float, na_value=np.nan)
+    off = (week * 604_800.0 + frame["Toe"].to_numpy(dtype=float, na_value=np.nan)) - frame["toc_gps_s"].to_numpy(
+        dtype=float, na_value=np.nan
+    )
+    weeks = off / 604_800.0
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero(kepler & (np.abs(weeks) > 1.0))
+    out.rows(
+        "log.nav_week",
+        Severity.ERROR,
+        bad,
+        lambda k: (
+            f"week {week[bad[k]]:.0f} puts Toe {weeks[bad[k]]:+.0f} weeks from the record epoch toc: a 10-bit "
+            "week (modulo 1024, IS-GPS-200 §20.3.3.3.1.1) not resolved — no ephemeris matches the observations "
+            "(logs import resolves it against the record epoch)"
+        ),
+        column="week",
+        value=lambda k: float(week[bad[k]]),
+    )
 
 
 def check_receivers(run: Run) -> list[Any]:

@@ -21,7 +21,8 @@ from schemas.logs import LOG_STREAMS
 from schemas.model import Table
 
 #: Streams whose limits are applied: the sensors the pipeline reads. The truth is the
-#: simulator's, and raw radar IF samples are scaled by the radar module (ADC counts).
+#: simulator's, and raw radar IF samples are scaled by the radar module (ADC counts over
+#: run.json's ``radar.full_scale``, the I/Q sign of ``radar.iq_convention``: ``radar.framing``).
 LIMITED_STREAMS = ("tacho", "imu", "gps", "cab", "radar")
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 from dbtools.atomic import check_target
 from fieldlogs.io import Run
 from fieldlogs.radar.config import RadarConfig
+from fieldlogs.radar.convention import check_convention, convention_finding
 from fieldlogs.radar.speed import OutFormat, RadarSpeed, process_frames, run_frames, write_speed
 from schemas.errors import UsageError
 
@@ -23,7 +24,8 @@ def radar_speed_command(
 ) -> RadarSpeed:
     """Ground speed of every frame of ``run_dir``'s radar_if; with ``out`` written as CSV or
     JSON, with ``plot`` a PNG (``plots.plot_run``). Existing outputs are refused before any
-    work unless ``force``; both are written atomically."""
+    work unless ``force``; both are written atomically. Samples that look recorded in the
+    other I/Q convention than declared give a warning in ``result.findings`` (``convention``)."""
     if out is not None and fmt not in ("csv", "json"):
         raise UsageError("--out writes csv or json: add --format csv or --format json")
     inputs = [Path(run_dir)]
@@ -34,6 +36,8 @@ def radar_speed_command(
     frames, params = run_frames(run)
     result = process_frames(frames, params, cfg)
     result.run_id = run.run_id
+    found = convention_finding(check_convention(frames, params, cfg), str(run.stream_file("radar_if")))
+    result.findings += [found] if found is not None else []
     if out is not None:
         fmt_out: OutFormat = "csv" if fmt == "csv" else "json"
         write_speed(result, out, fmt_out, force=force, inputs=inputs)

@@ -7,6 +7,12 @@ by one reshape — views, no copy — (or one scatter when slots are missing, un
 repeated: the first row of a slot wins, empty slots stay 0 and count as missing), and
 z_i = i_i + j·q_i is built block by block. Rows with a NaN in t or a sample are missing
 slots. Only whole frames are kept.
+
+The samples are first put in the one convention the rest of the chain assumes, from the
+run.json ``radar`` block: i ← I/full_scale, q ← q_sign·Q/full_scale (``RadarParams.q_sign``:
+−1 when the recorder's quadrature channel has the other sign, ``iq_convention = "i-jq"``,
+so that z = I − jQ; conjugating z mirrors the spectrum, f_d → −f_d, and the f1–f2 phase
+difference, Δφ → −Δφ, of S004 eq. 1's range R = c·Δφ/(4π·Δf)).
 """
 
 from __future__ import annotations
@@ -103,9 +109,13 @@ def frame_samples(
     q2: npt.ArrayLike,
     params: RadarParams,
 ) -> Frames:
-    """Cut the samples of a run into frames of N = round(T_epi / (2·T_pri)) pairs."""
+    """Cut the samples of a run into frames of N = round(T_epi / (2·T_pri)) pairs, in FS and
+    the ``i+jq`` convention (module docstring)."""
     t = np.asarray(t, dtype=np.float64)
     cols = [np.asarray(c, dtype=np.float32) for c in (i1, q1, i2, q2)]
+    if params.full_scale != 1.0 or params.q_sign != 1.0:  # else keep the views (no copy)
+        gains = (1.0, params.q_sign, 1.0, params.q_sign)
+        cols = [(c * np.float32(g / params.full_scale)).astype(np.float32) for c, g in zip(cols, gains, strict=True)]
     rate = params.sample_rate_hz
     n_per = params.samples_per_frame
     if len(t) >= n_per and _regular(t, rate) and all(bool(np.isfinite(c).all()) for c in cols):

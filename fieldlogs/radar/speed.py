@@ -45,6 +45,7 @@ from fieldlogs.radar.solve import FrameFit, LineClass, fit_frames
 from fieldlogs.radar.spectrum import Lines, detect_lines, spectra
 from schemas.enums import RadarStatus
 from schemas.errors import InputError, UsageError
+from schemas.findings import Finding
 from schemas.outputs import RADAR_SPEED
 from schemas.radar import RadarParams
 
@@ -61,6 +62,8 @@ class RadarSpeed:
     columns: dict[str, npt.NDArray[Any]]
     run_id: str = ""
     cfg: RadarConfig = field(default_factory=RadarConfig)
+    findings: list[Finding] = field(default_factory=list)
+    """Warnings about the input (``convention``: samples in the other I/Q convention)."""
 
     def __len__(self) -> int:
         return len(self.columns["t"])
@@ -245,7 +248,13 @@ def speed_json(result: RadarSpeed) -> dict[str, Any]:
     """JSON document: run, radar, summary and one record per frame (NaN → null)."""
     frame = result.to_frame().astype(object)
     records = frame.where(pd.notna(frame), None).to_dict(orient="records")
-    return {"run_id": result.run_id, "radar": result.params.to_json(), "summary": result.summary(), "frames": records}
+    return {
+        "run_id": result.run_id,
+        "radar": result.params.to_json(),
+        "summary": result.summary(),
+        "findings": [f.to_dict() for f in result.findings],
+        "frames": records,
+    }
 
 
 def write_speed(

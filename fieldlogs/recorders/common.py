@@ -8,7 +8,6 @@ sources on one time base and turns ``gnss_time_s`` into the run's ``t``.
 
 from __future__ import annotations
 
-import gzip
 import hashlib
 from collections import Counter
 from dataclasses import dataclass, field
@@ -19,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.inputs import check_decompressed, read_input_bytes
 from schemas.errors import InputError
 
 #: Formats ``logs import`` reads.
@@ -77,20 +77,9 @@ def sha256_of(path: Path) -> str:
 
 
 def read_bytes(path: Path) -> bytes:
-    """File content, gunzipped when it is gzip (by magic number, not by name)."""
-    path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError as exc:
-        raise InputError("source file not found", path=path) from exc
-    except IsADirectoryError as exc:
-        raise InputError("is a folder, not a source file", path=path) from exc
-    if raw[:2] == b"\x1f\x8b":
-        try:
-            return gzip.decompress(raw)
-        except (OSError, EOFError) as exc:
-            raise InputError(f"truncated or corrupt gzip file: {exc}", path=path) from exc
-    return raw
+    """File content, gunzipped when it is gzip (by magic number, not by name), within the
+    ``[input]`` limits: :func:`dbtools.inputs.read_input_bytes`."""
+    return read_input_bytes(Path(path))
 
 
 def read_text(path: Path) -> str:
@@ -101,7 +90,8 @@ def read_text(path: Path) -> str:
         import hatanaka  # lazy: only for Hatanaka-compressed RINEX
 
         try:
-            raw = hatanaka.decompress(raw)
+            compressed, raw = len(raw), hatanaka.decompress(raw)
         except (ValueError, RuntimeError, OSError) as exc:
             raise InputError(f"Hatanaka decompression failed: {exc}", path=path) from exc
+        check_decompressed(path, len(raw), compressed)
     return raw.decode("ascii", errors="replace")

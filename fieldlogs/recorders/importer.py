@@ -7,6 +7,8 @@
    excluded); ``t = gnss_time_s − t0`` for every stream, ``start_time`` = t0 in UTC.
    A relative recorder without a start time is aligned to t0 (noted in its provenance);
    recorder clocks with logged GNSS time pairs were already fitted by their readers.
+   Navigation records dated whole 10-bit week rollovers from the observations are first
+   moved onto them, others far from them named (``navweeks``).
 3. ``gnss_obs`` of several receivers and ``gnss_nav`` of several files are concatenated
    (exact duplicate ephemerides dropped); any other stream from two sources is refused.
 4. The vehicle file is checked (``recorders.vehicle``); run.json gets vehicle_id,
@@ -27,8 +29,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dbtools.inputs import read_head, regular_file
 from fieldlogs.io import RunMeta, write_run
-from fieldlogs.recorders.common import FORMATS, Decoded, read_bytes, sha256_of
+from fieldlogs.recorders.common import FORMATS, Decoded, sha256_of
+from fieldlogs.recorders.navweeks import nav_onto_observations
 from fieldlogs.recorders.timebase import gps_to_iso
 from fieldlogs.recorders.vehicle import load_vehicle, receivers, tacho_wheel
 from schemas.enums import Severity
@@ -56,7 +60,7 @@ def detect_format(path: Path) -> str:
     """nmea, ubx, rinex or csv from the file's first bytes (and name for tables)."""
     if path.suffix.lower() in TABLE_SUFFIXES:
         return "csv"
-    head = read_bytes(path)[:4096]
+    head = read_head(path)  # a few KB, whatever the file's size
     if head[:2] == b"\xb5\x62" or (b"\xb5\x62" in head[:512] and head.count(b"\xb5\x62") > 1):
         return "ubx"
     if b"RINEX VERSION / TYPE" in head[:200] or b"CRINEX VERS" in head[:200]:
@@ -188,6 +192,7 @@ def import_run(
     if out.exists() and not force:
         raise RefusedError("output folder exists; use --force to replace it", path=out)
     for s in sources:
+        regular_file(Path(s), "source file")  # a FIFO, device or socket: refused, never opened
         if out.resolve() in Path(s).resolve().parents:
             raise RefusedError("a source lies inside the output folder", path=s)
     if vehicle is None:
@@ -203,9 +208,11 @@ def import_run(
         )
     maps = iter(mapping)
     decoded = [decode(Path(s), f, next(maps) if f == "csv" else None) for s, f in zip(sources, formats, strict=True)]
+    nav_warnings = nav_onto_observations(decoded)  # the 10-bit week rollover, before any time is used
     t0 = _t0(decoded)
     streams = _merge(decoded, t0)
     veh, warnings = load_vehicle(vehicle, has_tacho="tacho" in streams)
+    warnings = [*nav_warnings, *warnings]
     _check_receivers(streams, veh, Path(vehicle))
     # load_vehicle refused a train, or a run with a tacho stream, without its tacho axle: a
     # wheel is missing only where run.json may go without one (a road-rail vehicle, a station)

@@ -25,7 +25,6 @@ import pandas as pd
 from fieldlogs.recorders import rinex_obs as r3
 from fieldlogs.recorders.common import Decoded, read_text
 from fieldlogs.recorders.rinex_nav import read_rinex_nav
-from fieldlogs.recorders.timebase import calendar_to_utc_s
 from schemas.errors import InputError
 from schemas.gnss import SYSTEMS
 
@@ -105,17 +104,16 @@ def _epoch_fields2(path: Path, ln: str, row: int) -> tuple[int, int]:
     return flag, n
 
 
-def _epoch_time2(path: Path, ln: str, row: int) -> float:
-    """The epoch time of a flag 0/1/6 record, in seconds of the file's time scale."""
+def _epoch_time2(path: Path, ln: str, row: int) -> list[float]:
+    """The epoch fields (year, month, day, hour, minute, second) of a flag 0/1/6 record;
+    their ranges are checked by ``rinex_obs.epochs_to_gps``."""
     try:
         yy, mo, d, h, mi = (int(ln[k : k + 3]) for k in (0, 3, 6, 9, 12))
         s = float(ln[15:26])
     except ValueError as exc:
         raise InputError("blank or malformed epoch record", path=path, row=row) from exc
-    if not (1 <= mo <= 12 and 1 <= d <= 31 and 0 <= h <= 23 and 0 <= mi <= 59 and 0 <= s < 61):
-        raise InputError("malformed epoch record: date or time out of range", path=path, row=row)
     y = yy + (1900 if yy >= 80 else 2000)
-    return float(calendar_to_utc_s(y, mo, d, h * 3600.0 + mi * 60.0 + s))
+    return [float(y), float(mo), float(d), float(h), float(mi), s]
 
 
 def _data_block2(path: Path, shaped: np.ndarray, first: int, i: int, end: int, n: int, row: int) -> None:
@@ -151,11 +149,11 @@ def _sat_list2(path: Path, body: list[str], i: int, n: int, row: int) -> tuple[l
 
 def _walk2(
     path: Path, body: list[str], first: int, n_lines: int
-) -> tuple[list[float], list[int], list[str], list[int], int]:
-    """Epoch times (file scale), per satellite record its epoch, joined 80-column lines and
+) -> tuple[list[list[float]], list[int], list[str], list[int], int]:
+    """Epoch fields and their file lines, per satellite record its epoch, joined 80-column lines and
     the file line of its epoch record; and the number of skipped special records."""
     shaped = pd.Series(body, dtype=object).str.match(EPOCH2).to_numpy(dtype=bool)
-    times: list[float] = []
+    times: list[list[float]] = []
     owner: list[int] = []
     joined: list[str] = []
     rows: list[int] = []
@@ -178,7 +176,7 @@ def _walk2(
             skipped += n
             i += n * n_lines
             continue
-        times.append(t)
+        times.append([*t, float(row)])
         for sat in sats:
             joined.append(sat + "".join(x[:80].ljust(80) for x in body[i : i + n_lines]))
             i += n_lines
@@ -202,7 +200,9 @@ def read_rinex_obs2(path: Path, lines: list[str], dec: Decoded) -> None:
         raise InputError(f"unknown satellite system '{letters[bad[0]]}'", path=path, row=rec_rows[int(bad[0])])
     default = "GLO" if header[0][40] == "R" else "GPS"
     named = r3.time_system(header)
-    t_gps = r3.time_system_to_gps(np.array(times), named or default)
+    cols = np.array(times, dtype=np.float64).reshape(-1, 7).T
+    fields = dict(zip(("year", "month", "day", "hour", "minute", "second"), cols[:6], strict=True))
+    t_gps = r3.epochs_to_gps(path, cols[6].astype(np.int64), fields, named or default)
     parts = []
     for letter in sorted(set(letters)):
         sel = np.flatnonzero(letters == letter)

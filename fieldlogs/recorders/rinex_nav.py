@@ -22,8 +22,9 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.recorders.common import Decoded
-from fieldlogs.recorders.rinex_obs import gps_calendar, label, split_header, utc_calendar
-from fieldlogs.recorders.timebase import BDT_OFFSET_S, calendar_to_utc_s, utc_to_gps
+from fieldlogs.recorders.navweeks import WEEK_ROLLOVER
+from fieldlogs.recorders.rinex_obs import epochs_to_gps, gps_calendar, label, split_header, utc_calendar
+from fieldlogs.recorders.timebase import BDT_OFFSET_S, utc_to_gps
 from schemas.errors import InputError
 from schemas.gnss import GNSS_NAV, SYSTEMS
 
@@ -82,7 +83,13 @@ def _record(path: Path, lines: list[str], i: int, version: int) -> tuple[str, fl
         vals = _numbers(first.ljust(57), 3)
     except ValueError as exc:
         raise InputError(f"malformed navigation record: {exc}", path=path, row=i + 1) from exc
-    t = float(calendar_to_utc_s(y, mo, d, h * 3600.0 + mi * 60.0 + s))
+    fields = {
+        k: np.array([float(v)])
+        for k, v in zip(("year", "month", "day", "hour", "minute", "second"), (y, mo, d, h, mi, s), strict=True)
+    }
+    # validated as on a continuous scale (no conversion): a record epoch (toc, on 15-minute or
+    # 2-hour marks) with second 60 is refused with its line, never moved into the next minute
+    t = float(epochs_to_gps(path, np.array([i + 1]), fields, "GPS")[0])
     return sat, t, vals
 
 
@@ -197,7 +204,35 @@ def read_rinex_nav(path: Path, lines: list[str], dec: Decoded) -> None:
     if dup.any():
         dec.skipped["repeated navigation records"] += int(dup.sum())
         frame = frame[~dup]
+    _resolve_weeks(frame, dec)
     dec.frames["gnss_nav"] = frame.sort_values(["sat", "toc_gps_s"], kind="stable").reset_index(drop=True)
+
+
+def _resolve_weeks(frame: pd.DataFrame, dec: Decoded) -> None:
+    """Make ``week`` the continuous GPS week RINEX 3.05 Table A6 asks for ("continuous number,
+    not mod(1024)"), in place.
+
+    A receiver that writes the broadcast 10-bit week (mod 1024, IS-GPS-200 §20.3.3.3.1.1) puts
+    Toe 1024·k weeks (19.6 years) before the record's own epoch ``toc``, written as a calendar
+    date: the week is resolved to the rollover nearest that epoch,
+    ``w = w₁₀ + 1024·round((⌊toc/604800⌋ − w₁₀) / 1024)`` (Toe and toc lie within a week of
+    each other), and the change is stated in the import's notes — never left to surface as
+    0 % availability when positioning.
+    """
+    week = frame["week"].to_numpy(dtype=np.float64)
+    toc_week = np.floor(frame["toc_gps_s"].to_numpy(dtype=np.float64) / 604_800.0)
+    k = np.round((toc_week - week) / WEEK_ROLLOVER)
+    moved = np.isfinite(k) & (k != 0)
+    if not moved.any():
+        return
+    frame.loc[moved, "week"] = week[moved] + WEEK_ROLLOVER * k[moved]
+    shifts = sorted({int(x) for x in k[moved]})
+    dec.notes.append(
+        f"navigation records with a week number {', '.join(f'{1024 * x:+d}' for x in shifts)} weeks off their "
+        f"record epoch (the 10-bit broadcast week, modulo {WEEK_ROLLOVER}, IS-GPS-200 §20.3.3.3.1.1): "
+        f"{int(moved.sum())} record(s) resolved to the week rollover nearest the record epoch "
+        f"(weeks {int(frame.loc[moved, 'week'].min())}–{int(frame.loc[moved, 'week'].max())})"
+    )
 
 
 # ---------------------------------------------------------------------------------------

@@ -27,7 +27,13 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.recorders.common import Decoded
-from fieldlogs.recorders.timebase import BDT_OFFSET_S, calendar_to_utc_s, gps_to_utc, utc_to_gps
+from fieldlogs.recorders.timebase import (
+    BDT_OFFSET_S,
+    calendar_to_utc_s,
+    ends_with_leap_second,
+    gps_to_utc,
+    utc_to_gps,
+)
 from schemas.errors import InputError
 from schemas.gnss import SYSTEMS
 
@@ -63,6 +69,81 @@ def time_system_to_gps(utc_like: np.ndarray, system: str) -> np.ndarray:
     if system == "BDS":
         return utc_like + BDT_OFFSET_S
     return utc_like
+
+
+#: Time systems of a RINEX file that count leap seconds (RINEX 3.05 §6.3: GPS, GAL, QZS, BDS
+#: and IRN time are continuous; GLONASS time is UTC(SU) + 3 h).
+UTC_SCALES = ("GLO", "UTC")
+_EPOCH_KEYS = (
+    ("year", "y", 1980.0),
+    ("month", "mo", 1.0),
+    ("day", "d", 6.0),
+    ("hour", "h", 0.0),
+    ("minute", "mi", 0.0),
+    ("second", "s", 0.0),
+)
+_RANGES = (("month", 1, 12), ("day", 1, 31), ("hour", 0, 23), ("minute", 0, 59))
+
+
+def _check_calendar(path: Path, rows: np.ndarray, fields: dict[str, np.ndarray]) -> None:
+    """Refuse the first epoch whose month, day (of that month), hour or minute is out of range."""
+    for name, lo, hi in _RANGES:
+        v = fields[name]
+        bad = np.flatnonzero((v < lo) | (v > hi) | (v != np.floor(v)))
+        if len(bad):
+            k = int(bad[0])
+            raise InputError(
+                f"epoch record out of range: {name} {v[k]:g} (RINEX: {lo}-{hi})", path=path, row=int(rows[k])
+            )
+    y, mo = fields["year"].astype(np.int64), fields["month"].astype(np.int64)
+    first = (y - 1970).astype("datetime64[Y]").astype("datetime64[M]") + (mo - 1).astype("timedelta64[M]")
+    days = ((first + np.timedelta64(1, "M")).astype("datetime64[D]") - first.astype("datetime64[D]")).astype(np.int64)
+    bad = np.flatnonzero(fields["day"] > days)
+    if len(bad):
+        k = int(bad[0])
+        raise InputError(
+            f"epoch record out of range: day {fields['day'][k]:g} of a {days[k]}-day month",
+            path=path,
+            row=int(rows[k]),
+        )
+
+
+def epochs_to_gps(path: Path, rows: np.ndarray, fields: dict[str, np.ndarray], system: str) -> np.ndarray:
+    """Validated epoch fields (``year month day hour minute second`` arrays, ``rows`` their
+    file lines) of a file on time system ``system`` → continuous GPS seconds.
+
+    RINEX 3.05 §6.3 / 2.11 §7: 0 ≤ minute < 60, 0 ≤ hour < 24, 0 ≤ second < 61, where
+    60 ≤ s < 61 exists only as an inserted leap second, 23:59:60 UTC at the end of a day that
+    ends with one (IERS Bulletin C, ``timebase.LEAP_SECONDS``), and so only on a UTC-like
+    scale (``UTC_SCALES``). Such a second is placed exactly: ``gps = utc→gps(23:59:(s−1)) + 1 s``
+    (the leap second is the last second with the old GPS − UTC). Any other s ≥ 60 is refused
+    with its line and field, never carried into the next minute (which would move the epoch).
+    """
+    _check_calendar(path, rows, fields)
+    s = fields["second"]
+    bad = np.flatnonzero(~((s >= 0) & (s < 61)))
+    if len(bad):
+        k = int(bad[0])
+        raise InputError(
+            f"epoch record out of range: second {s[k]:.7f} (RINEX: 0 ≤ s < 61)", path=path, row=int(rows[k])
+        )
+    day0 = calendar_to_utc_s(fields["year"], fields["month"], fields["day"], 0.0)
+    sixty = s >= 60
+    leap = sixty & (fields["hour"] == 23) & (fields["minute"] == 59) & ends_with_leap_second(day0)
+    wrong = np.flatnonzero(sixty & ~(leap & (system in UTC_SCALES)))
+    if len(wrong):
+        k = int(wrong[0])
+        raise InputError(
+            f"epoch record: second {s[k]:.7f} is a leap second, which exists only at 23:59:60 UTC at the end "
+            f"of a day that ends with one (IERS Bulletin C) on a UTC time scale; this epoch on {system} time is "
+            "not one (refused rather than carried into the next minute, which would move the epoch)",
+            path=path,
+            row=int(rows[k]),
+        )
+    step = leap.astype(np.float64)
+    t_file = day0 + fields["hour"] * 3600.0 + fields["minute"] * 60.0 + s - step
+    out: np.ndarray = time_system_to_gps(t_file, system) + step
+    return out
 
 
 def _obs_types(path: Path, header: list[str]) -> dict[str, list[str]]:
@@ -232,8 +313,9 @@ def read_rinex_obs3(path: Path, lines: list[str], dec: Decoded) -> None:
         raise InputError(
             f"unknown satellite system '{sys_letter[unknown[0]]}'", path=path, row=start + 1 + int(sat_pos[unknown[0]])
         )
-    t_file = calendar_to_utc_s(ep["y"], ep["mo"], ep["d"], ep["h"] * 3600.0 + ep["mi"] * 60.0 + ep["s"])
-    t_gps = time_system_to_gps(t_file, time_system(header) or "GPS")
+    timed = (flags <= 1) | (flags == 6)
+    fields = {name: np.where(timed, ep[k].to_numpy(dtype=np.float64), default) for name, k, default in _EPOCH_KEYS}
+    t_gps = epochs_to_gps(path, ep["line"].to_numpy(), fields, time_system(header) or "GPS")
     out = []
     for letter in sorted(set(sys_letter)):
         if letter not in types:

@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dbtools.inputs import not_special
 from fieldlogs.recorders.common import Decoded
 from fieldlogs.recorders.timebase import fit_clock, iso_to_gps, unix_to_gps, utc_to_gps
 from schemas.enums import Severity
@@ -63,7 +64,7 @@ SECTIONS = {"stream", "time", "columns", "units", "axes", "offsets"}
 
 def load_mapping(path: Path) -> dict[str, Any]:
     try:
-        m = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        m = tomllib.loads(not_special(Path(path), "mapping file (TOML)").read_text(encoding="utf-8"))
     except FileNotFoundError as exc:
         raise InputError("mapping file not found", path=path) from exc
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

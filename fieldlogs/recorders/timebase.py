@@ -62,6 +62,18 @@ def leap_seconds_utc(utc_s_since_gps_epoch: npt.ArrayLike) -> FloatArray:
     return np.where(idx > 0, _LEAP_N[np.maximum(idx - 1, 0)], 0.0)
 
 
+#: UTC days (seconds since 1980-01-06 of their midnight) that end with an inserted leap
+#: second 23:59:60: the day before each date of ``LEAP_SECONDS`` (IERS Bulletin C).
+_LEAP_DAY_START_S = _LEAP_UTC_S - 86400.0
+
+
+def ends_with_leap_second(day_start_s: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+    """Whether the UTC day starting at ``day_start_s`` (seconds since 1980-01-06, UTC scale,
+    a multiple of 86400) ends with a leap second 23:59:60 (IERS Bulletin C table)."""
+    out: npt.NDArray[np.bool_] = np.isin(np.asarray(day_start_s, dtype=np.float64), _LEAP_DAY_START_S)
+    return out
+
+
 def utc_to_gps(utc_s_since_gps_epoch: npt.ArrayLike) -> FloatArray:
     """UTC seconds since 1980-01-06 (UTC scale) → continuous GPS seconds."""
     u = np.asarray(utc_s_since_gps_epoch, dtype=np.float64)

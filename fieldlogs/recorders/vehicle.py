@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from dbtools.inputs import not_special
 from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError
 from schemas.findings import Finding
@@ -224,7 +225,7 @@ def receivers(vehicle: dict[str, Any]) -> list[str]:
 def load_vehicle(path: Path, *, has_tacho: bool = False) -> tuple[dict[str, Any], list[Finding]]:
     """A VEHICLE.toml, checked: (block, warnings). InputError when it is not TOML,
     FindingsError (exit 1) when it has errors."""
-    path = Path(path)
+    path = not_special(Path(path), "vehicle file (TOML)")
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError as exc:
