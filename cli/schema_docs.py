@@ -153,6 +153,12 @@ def _param_row(p: Any) -> str:
     return f"| {name} | {kind} | {_cell(_default(p))} | {required} | {_cell(p.help or '')} |"
 
 
+def _examples(text: str) -> str:
+    """A help text's ``Example: trainpos …`` lines as console blocks (tests/test_docs.py checks them)."""
+    block = "Example:\n\n```console\n$ {}\n```"
+    return re.sub(r"^Example: (trainpos .*)$", lambda m: block.format(m.group(1)), text, flags=re.M)
+
+
 def commands_markdown() -> str:
     import typer
 
@@ -173,7 +179,7 @@ def commands_markdown() -> str:
     for path, cmd in command_paths(root):
         name = " ".join(("trainpos", *path))
         out += [f"## `{name}`", ""]
-        out += [(cmd.help or "").strip().replace("\b\n", ""), ""]
+        out += [_examples((cmd.help or "").strip().replace("\b\n", "")), ""]
         params = [p for p in cmd.params if p.name != "help"]
         if params:
             out += ["| argument / option | type | default | required | meaning |", "|---|---|---|---|---|"]

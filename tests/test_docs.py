@@ -133,6 +133,9 @@ def _invocations(text: str) -> list[list[str]]:
 def test_examples_name_real_commands_and_options() -> None:
     calls = [(page, argv) for page, text in ALL.items() for argv in _invocations(text)]
     assert len(calls) >= 60
+    helps = re.findall(r"^\$ trainpos (.*)$", COMMANDS_PAGE, flags=re.M)  # every --help's example
+    assert len(helps) >= len(COMMANDS) - 2
+    calls += [("trainpos --help example", shlex.split(line.split(" > ")[0])) for line in helps]
     for page, argv in calls:
         group: Any = ROOT_CMD
         path: list[str] = []
