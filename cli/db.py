@@ -106,6 +106,13 @@ def validate(
         ValidateFmt.table, "--format", help="table, json, sarif (SARIF 2.1.0) or junit (JUnit XML) for CI."
     ),
     strict: bool = typer.Option(False, "--strict", help="Warnings also fail (exit 1)."),
+    help_uri_base: str = typer.Option(
+        "",
+        "--help-uri-base",
+        envvar="TRAINPOS_HELP_URI_BASE",
+        help="SARIF: base of each rule's helpUri (BASE + docs/reference/rules.md#RULE), e.g. "
+        "https://github.com/ORG/trainpos/blob/main/; empty: the repository-relative path.",
+    ),
 ) -> None:
     """Check every consistency rule; exit 0 clean, 1 errors (or warnings with --strict), 2 unreadable.
 
@@ -115,7 +122,7 @@ def validate(
 
     findings = validate_path(target)
     if fmt in (ValidateFmt.sarif, ValidateFmt.junit):
-        _ci_report(findings, target, fmt, strict)
+        _ci_report(findings, target, fmt, strict, help_uri_base)
     elif fmt == ValidateFmt.json:
         report = findings_report(findings)
         report["ok"] = not has_errors(findings, strict)
@@ -303,17 +310,19 @@ def verify_release(
         raise typer.Exit(1)
 
 
-def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: bool) -> None:
+def _ci_report(findings: list[Finding], target: Path, fmt: ValidateFmt, strict: bool, help_uri_base: str) -> None:
     """SARIF or JUnit on stdout (dbtools.interchange.ci)."""
     import sys
 
     from dbtools.build import tool_version
-    from dbtools.interchange.ci import junit, sarif_text
+    from dbtools.interchange.ci import db_source_files, junit, sarif_text
 
     if fmt == ValidateFmt.sarif:
-        sys.stdout.write(
-            sarif_text(findings, target=None if target.is_dir() else str(target), tool_version=tool_version())
+        sources = {} if target.is_dir() else db_source_files(target)
+        text = sarif_text(
+            findings, target=target, tool_version=tool_version(), help_uri_base=help_uri_base, source_files=sources
         )
+        sys.stdout.write(text)
     else:
         sys.stdout.write(junit(findings, target=str(target), strict=strict))
 
@@ -441,6 +450,14 @@ def export(
     xsd: Path | None = typer.Option(
         None, "--xsd", help="railML: validate the export against this XML Schema before writing it (railml3.xsd)."
     ),
+    layers: str | None = typer.Option(
+        None, "--layers", help="GIS formats: only these layers, comma-separated (e.g. tracks,switches,balises)."
+    ),
+    crs: str | None = typer.Option(
+        None,
+        "--crs",
+        help="GIS formats: reproject every layer to EPSG:XXXX (GeoJSON other than EPSG:4326: with a 'crs' member).",
+    ),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Export a DB as railML 3.2, as GIS layers for QGIS (GeoJSON, GeoPackage, GeoParquet) or
@@ -449,19 +466,24 @@ def export(
     Layers: balises, feature_points, gis_points, gis_lines and the network's tracks,
     switches, connections, balise_groups, km_posts (GeoParquet: the first four). GeoJSON:
     one file (--out *.geojson or *.json), a folder of LAYER.geojson files, or their zip
-    (--out *.zip). Exit 0 written, 1 source set
+    (--out *.zip). --layers picks layers, --crs EPSG:XXXX reprojects them (GeoJSON, which
+    RFC 7946 keeps in WGS 84, then names the CRS in the GeoJSON 2008 'crs' member that GDAL
+    and QGIS read). Exit 0 written, 1 source set
     errors or (with --xsd) the export is not valid against the schema (nothing written),
     2 unreadable input or XSD, unknown format, 3 output exists.
 
     Example: trainpos db export net.sqlite --format gpkg --out net.gpkg
     """
-    from dbtools.interchange.export import ExportFormat, export_network
+    from dbtools.interchange.export import ExportFormat, GisOptions, export_network
+    from dbtools.interchange.reproject import parse_crs
 
     try:
         kind = ExportFormat(fmt)
     except ValueError:
         raise UsageError(f"--format '{fmt}': use one of {', '.join(f.value for f in ExportFormat)}") from None
-    counts = export_network(db, out, kind, force=force, xsd=xsd)
+    chosen = None if layers is None else tuple(name.strip() for name in layers.split(",") if name.strip())
+    gis = GisOptions(layers=chosen, crs=None if crs is None else parse_crs(crs))
+    counts = export_network(db, out, kind, force=force, xsd=xsd, gis=gis)
     console().print(key_value_table([("file", str(out)), ("format", kind.value), *counts.items()], title="Exported"))
 
 

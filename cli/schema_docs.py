@@ -4,8 +4,8 @@
 * ``docs/reference/schemas.md`` — the generated sections (between their markers) of every
   table, source file and log stream of ``schemas/``, and the event types;
 * ``docs/reference/config.md`` — every setting of the configuration tree;
-* ``docs/reference/rules.md`` — every finding rule id with its meaning and fix
-  (:mod:`dbtools.rules.catalog`).
+* ``docs/reference/rules.md`` — every finding rule id with its meaning and fix, one anchor
+  per rule id (the SARIF ``helpUri``; :func:`dbtools.rules.catalogue.rule_catalogue`).
 
 ``tests/test_docs.py`` fails when a page is stale. Citations of the source papers by their
 keys in the code's texts (``[S004]``) become links to the bibliography
@@ -237,9 +237,9 @@ def config_keys() -> set[tuple[str, str]]:
 
 
 def rules_markdown() -> str:
-    from dbtools.rules.catalog import FAMILIES, rule_catalog
+    from dbtools.rules.catalogue import FAMILIES, markdown, rule_catalogue
 
-    rules = rule_catalog()
+    rules = rule_catalogue()
     out = [
         "# Finding rules",
         "",
@@ -248,15 +248,18 @@ def rules_markdown() -> str:
         "Every rule id `trainpos db validate` and `trainpos db import` report (in a table, JSON,",
         "SARIF `ruleId` or JUnit test case), by family, with its severity, what it means and how to",
         "fix it. An error fails `db validate` (exit 1), a warning only with `--strict`. The limits",
-        "named here are the defaults of `ValidationConfig` (`dbtools/rules/config.py`).",
+        "named here are the defaults of `ValidationConfig` (`dbtools/rules/config.py`). Each rule is",
+        "documented where it is checked, in its module's docstring; `db validate --format sarif`",
+        "links every rule here (`helpUri`).",
         "",
     ]
     for family, meaning in FAMILIES.items():
-        out += [f"## `{family}` — {meaning}", "", "| rule | severity | meaning and fix |", "|---|---|---|"]
+        out += [f"## `{family}` — {meaning}", "", "| rule | severity | meaning | fix |", "|---|---|---|---|"]
         out += [
-            f"| `{r.rule_id}` | {r.severity} | {_cell(r.meaning)} |"
+            f'| <a id="{r.anchor}"></a>`{r.id}` | {r.severity or "per table"} | {_cell(markdown(r.meaning))} | '
+            f"{_cell(markdown(r.fix))} |"
             for r in rules.values()
-            if r.rule_id.split(".")[0] == family
+            if r.family == family
         ]
         out.append("")
     return cite("\n".join(out).rstrip() + "\n")

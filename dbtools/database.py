@@ -7,6 +7,19 @@ validating or diffing a released DB cannot modify it (:mod:`dbtools.sqlite_file`
 read-only connection of ``db info`` and ``db show`` too). Every table is created from its
 declaration in ``schemas/`` (:func:`create_tables`). Whole content tables are read as Arrow
 columns by :mod:`dbtools.sqlite_columns`.
+
+Findings of :func:`check_db` (``db validate`` of a DB file):
+
+* ``db.integrity`` (error) — SQLite's ``integrity_check`` reports damage (a file cut short,
+  bytes overwritten). Fix: take the DB again from the release registry or rebuild it with
+  ``db build``; never edit a DB file by hand.
+* ``db.foreign_key`` (error) — a row references a missing row of its parent table. Fix:
+  rebuild the DB from its source set (``db build``); a DB edited by hand is not a release.
+* ``db.meta`` (error) — the ``meta`` table lacks a required key (``content_hash``,
+  ``db_version`` …). Fix: rebuild the DB with ``db build``, which writes every key.
+* ``db.content_hash`` (error) — the content hash does not match ``meta``: the DB was
+  modified after it was built. Fix: rebuild it from its source set with ``db build`` (or take
+  the released file again); do not edit a built DB.
 """
 
 from __future__ import annotations

@@ -1,7 +1,16 @@
 """Reading a source set (SPEC §3 "Source files") into a :class:`Network` plus findings.
 
 An optional ``network.toml`` declares the operating area, metric CRS and height datum
-(:func:`dbtools.gis.georef.read_declaration`); its entries go to ``Network.meta``."""
+(:func:`dbtools.gis.georef.read_declaration`); its entries go to ``Network.meta``.
+
+Findings:
+
+* ``source.missing_file`` (error) — a required source file (``NAME.csv`` or ``.xlsx``) is not
+  in the source set folder. Fix: add the file (a header line is enough for an empty table),
+  or point the command at the right folder.
+* ``source.unknown_line`` (error) — a ``line_code`` is used in a table but not listed in
+  ``lines``. Fix: add the line to ``lines.csv``, or correct the code.
+"""
 
 from __future__ import annotations
 

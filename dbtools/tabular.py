@@ -31,6 +31,23 @@ What spreadsheet tools commonly get wrong, and what happens to it here:
 
 :func:`read_table_file` returns the frame with these findings; :func:`read_raw_table`
 (log streams, plans, survey files) raises the first error as an InputError instead.
+
+Findings:
+
+* ``source.delimiter`` (error) — the fields of a CSV are separated by semicolons or tabs, not
+  commas. Fix: save the file as CSV (comma delimited).
+* ``source.encoding`` (warning) — the file is not UTF-8; it was read in another encoding.
+  Fix: check the text in the output and save the file as UTF-8.
+* ``source.duplicate_column`` (error) — a column name appears twice in the header; only the
+  first is read. Fix: rename or delete the others.
+* ``source.numeric_code`` (error) — an .xlsx cell of a code column holds a number, which has
+  lost its leading zeros (01 → 1). Fix: format the column as Text and type the codes again.
+* ``source.date_in_text`` (error) — an .xlsx cell of a text column holds a date: Excel turned
+  the value typed there into one. Fix: format the column as Text and type the value again.
+* ``source.hidden_sheet`` (warning / error) — a sheet of the workbook is hidden: an error
+  when it is the sheet that was read (a hidden sheet often holds old data), a warning when it
+  was skipped for the first visible one. Fix: unhide the sheet if it holds the current data,
+  else delete it, or name the sheet to read like the table.
 """
 
 from __future__ import annotations

@@ -4,6 +4,25 @@ Used for every source file, log stream and plan: read everything as text, coerce
 column to its declared type (a cell that does not parse is a finding naming row and
 column), then let pandera check nullability, enumerations, ranges and keys lazily so that
 *every* problem is collected.
+
+Findings (one per cell or row, capped per check):
+
+* ``schema.missing_column`` (error) — a required column is not in the header. Fix: add the
+  column (its name exactly as the table declares it).
+* ``schema.unknown_column`` (warning) — a column the table does not declare (a typo of a
+  known name is named in the message); it is ignored. Fix: rename it to the declared name, or
+  delete it.
+* ``schema.type`` (error) — a cell is not a valid value of its column's type (number, integer,
+  km, date …). Fix: correct the cell (decimal point, not comma; no units in the cell).
+* ``schema.null`` (error) — a required cell is empty. Fix: fill it.
+* ``schema.enum`` (error) — a cell holds a value not among the column's allowed values. Fix:
+  use one of the values the message lists.
+* ``schema.range`` (error) — a value outside its column's declared range (lat/lon off the
+  globe, a negative length …). Fix: correct the value.
+* ``schema.duplicate_key`` (error) — two rows with the same key (e.g. one km twice on one
+  line/track). Fix: delete the duplicate row, or correct its key columns.
+* ``schema.check`` (error) — a row fails another declared check of its table. Fix: correct
+  the row as the message says.
 """
 
 from __future__ import annotations

@@ -7,7 +7,10 @@ operations of the kinds maintenance staff produce — rows dropped or duplicated
 corrupted (empty, text, huge, non-finite, railway km gone wrong, a stray quote), columns
 swapped or reordered, files truncated (mid-line, mid-character), missing, empty or
 header-only, text in number columns, another encoding (Shift-JIS, UTF-16, Latin-1),
-another delimiter, a BOM, trailing garbage, a sheet saved as .xlsx with numeric codes.
+another delimiter, a BOM, trailing garbage, a sheet saved as .xlsx with numeric codes, a
+workbook whose first sheet is a hidden stale copy, an Excel date in a text column, a km typed
+ten times too large (issue 32: never silently read; a DB that is released is exactly the one
+validated — each example that builds is released and its release verified).
 
 ``db build`` refuses source errors (the rules of reading: types, enumerations, ranges,
 keys, the file-level findings); the cross-table rules of ``db validate`` (GIS geometry,
@@ -50,6 +53,9 @@ OPS = (
     "bom",
     "garbage",
     "xlsx",
+    "hidden_sheet",
+    "excel_date",
+    "km_times_ten",
 )
 
 
@@ -110,6 +116,40 @@ def _to_xlsx(path: Path) -> None:
     path.unlink()
 
 
+def _to_xlsx_with(path: Path, op: str, frac: float) -> None:
+    """As :func:`_to_xlsx`, with a hidden stale first sheet (``hidden_sheet``) or a date in a
+    random text cell (``excel_date``: what Excel makes of a code such as 1-1)."""
+    import datetime
+
+    _to_xlsx(path)
+    xlsx = path.with_suffix(".xlsx")
+    book = openpyxl.load_workbook(xlsx)
+    ws = book.active
+    if op == "hidden_sheet":
+        stale = book.create_sheet("old", 0)
+        for row in list(ws.iter_rows(values_only=True))[: max(2, int(ws.max_row * frac))]:
+            stale.append(list(row))
+        stale.sheet_state = "hidden"
+    else:
+        texts = [(r, c) for r in range(2, ws.max_row + 1) for c in range(1, ws.max_column + 1)]
+        texts = [rc for rc in texts if isinstance(ws.cell(*rc).value, str)]
+        if texts:
+            ws.cell(*texts[int(frac * len(texts)) % len(texts)]).value = datetime.datetime(2026, 1, 1)
+    book.save(xlsx)
+
+
+def _km_times_ten(path: Path, frac: float) -> None:
+    rows = _rows(path)
+    cols = [k for k, c in enumerate(rows[0]) if c.endswith("km_equipment_m") or c == "km_m"] if rows else []
+    if len(rows) > 1 and cols:
+        r = 1 + int(frac * (len(rows) - 1)) % (len(rows) - 1)
+        try:
+            rows[r][cols[0]] = repr(float(rows[r][cols[0]]) * 10.0)
+        except (ValueError, IndexError):
+            return
+        _write_rows(path, rows)
+
+
 def _damage(src: Path, op: str, name: str, frac: float, cell: str) -> None:
     path = src / f"{name}.csv"
     if not path.exists():
@@ -138,6 +178,16 @@ def _damage(src: Path, op: str, name: str, frac: float, cell: str) -> None:
             _to_xlsx(path)
         except UnicodeDecodeError:
             return  # damaged beyond a spreadsheet already
+    elif op in ("hidden_sheet", "excel_date"):
+        try:
+            _to_xlsx_with(path, op, frac)
+        except UnicodeDecodeError:
+            return
+    elif op == "km_times_ten":
+        try:
+            _km_times_ten(path, frac)
+        except UnicodeDecodeError:
+            return
     else:
         try:
             _edit_rows(path, op, frac, cell)
@@ -178,7 +228,9 @@ def test_damaged_source_sets_never_crash_nor_build_with_errors(
     _clean(build, ops)
     assert build.exit_code in (0, 1, 2), (ops, build.output)
     assert _digest(src) == before, "an input was modified"
-    assert sorted(p.name for p in work.iterdir()) == (["net.sqlite", "src"] if build.exit_code == 0 else ["src"])
+    assert sorted(p.name for p in work.iterdir() if p.name != "releases") == (
+        ["net.sqlite", "src"] if build.exit_code == 0 else ["src"]
+    )
     if validate.exit_code == 2:  # unreadable: build refuses it the same way
         assert build.exit_code == 2, (ops, build.output)
         return
@@ -192,3 +244,10 @@ def test_damaged_source_sets_never_crash_nor_build_with_errors(
         errors = {f["rule"] for f in report["findings"] if f["severity"] == "error"}
         db_errors = {f["rule"] for f in json.loads(db_report.stdout)["findings"] if f["severity"] == "error"}
         assert db_errors == errors, (ops, db_errors, errors)
+        if not errors:  # released: what the registry holds is what was validated, and it verifies
+            reg = work / "releases"
+            rel = runner.invoke(app, ["db", "release", str(out), "--registry", str(reg)])
+            _clean(rel, ops)
+            assert rel.exit_code == 0, (ops, rel.output)
+            check = runner.invoke(app, ["db", "verify-release", "--registry", str(reg)])
+            assert check.exit_code == 0, (ops, check.output)

@@ -2,14 +2,30 @@
 JUnit XML (GitLab, Jenkins, most CI test reports).
 
 SARIF (OASIS SARIF 2.1.0, validated in the tests against the OASIS JSON schema): one run
-of the ``trainpos`` driver; one ``reportingDescriptor`` per rule id found (its family as the
-short description, its meaning and fix from :mod:`dbtools.rules.catalog` as the full one); one result per
-finding with ``level`` error or warning, the message, and a location — for a finding in a
-source set the file (URI relative to the working directory when inside it) with
-``region.startLine`` = the file line and, for CSV, ``startColumn``/``endColumn`` of the
-named column's cell on that line; for a finding in a DB file the DB as the artifact and a
-``logicalLocation`` ``table/key=value,…`` (rows of a DB have no lines). The finding's keys,
-value and limit go to the result's ``properties``.
+of the ``trainpos`` driver; one ``reportingDescriptor`` per rule id found, from the rule
+catalogue (:func:`dbtools.rules.catalogue.rule_catalogue`): ``shortDescription`` (the
+meaning's first clause), ``fullDescription`` (the meaning), ``help`` (text and Markdown with
+the fix), ``helpUri`` = ``HELP_URI_BASE`` + ``docs/reference/rules.md#<rule id>``
+(``help_uri_base``, ``db validate --help-uri-base``; by default the repository-relative path,
+which code-scanning platforms resolve against the repository — SARIF §3.49.12 prefers an
+absolute URI: give the base, e.g. ``https://github.com/ORG/trainpos/blob/main/``), the
+``defaultConfiguration.level`` of a rule with one severity and the family as a tag.
+
+One result per finding with ``level`` error or warning, the message and a location. Every
+artifact URI is relative with a ``uriBaseId`` that ``run.originalUriBaseIds`` defines:
+``%SRCROOT%`` the working folder (GitHub's convention), ``TARGETROOT`` the validated source
+set (or the DB's folder) for a file outside the working folder; only a path on another drive
+stays an absolute ``file:`` URI. The location of a finding:
+
+* in a source set: the file with ``region.startLine`` = the file line and, for CSV,
+  ``startColumn``/``endColumn`` of the named column's cell on that line; a finding without a
+  file (a whole-network rule) names the table's file in the set (``TABLE.csv``/``.xlsx``);
+* in a DB file: the DB as the artifact and a ``logicalLocation`` ``table/key=value,…`` (rows
+  of a DB have no lines); when the DB records the source file the table was built from (meta
+  ``source_sha256:<file>``), a ``relatedLocation`` names that file under the uriBaseId
+  ``SOURCESET`` (where the set lies is not recorded: a consumer maps it).
+
+The finding's keys, value and limit go to the result's ``properties``.
 
 JUnit: one ``testsuite`` with a test case per finding (``classname`` = the rule family,
 ``name`` = rule id and where) — an error is a ``failure``, a warning passes with the
@@ -22,25 +38,55 @@ from __future__ import annotations
 import csv
 import io
 import json
-from collections.abc import Sequence
+import os
+import sqlite3
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import escape, quoteattr
 
-from dbtools.rules.catalog import FAMILIES, rule_catalog
+from dbtools.rules.catalogue import FAMILIES, rule_catalogue
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.jsonable import jsonable
 
 SARIF_SCHEMA = "https://docs.oasis-open.org/sarif/sarif/v2.1.0/errata01/os/schemas/sarif-schema-2.1.0.json"
+#: The rule reference, relative to the repository (and to ``help_uri_base``).
+RULES_DOC = "docs/reference/rules.md"
+SRCROOT = "%SRCROOT%"
+TARGETROOT = "TARGETROOT"
+SOURCESET = "SOURCESET"
+__all__ = ["FAMILIES", "RULES_DOC", "junit", "rule_descriptor", "sarif", "sarif_text"]
 
 
-def _uri(file: str) -> str:
-    p = Path(file)
-    try:
-        return p.resolve().relative_to(Path.cwd().resolve()).as_posix()
-    except ValueError:
-        return p.resolve().as_uri()
+@dataclass(frozen=True)
+class _Bases:
+    """The folders relative URIs are taken against: ``%SRCROOT%`` first, then ``TARGETROOT``."""
+
+    cwd: Path
+    target_root: Path | None
+
+    def location(self, file: str | Path) -> dict[str, Any]:
+        """An ``artifactLocation``: a relative URI and its uriBaseId (module doc)."""
+        p = Path(file).resolve()
+        for base_id, root in ((SRCROOT, self.cwd), (TARGETROOT, self.target_root)):
+            if root is not None and p.is_relative_to(root):
+                return {"uri": _rel(p, root), "uriBaseId": base_id}
+        try:
+            return {"uri": Path(os.path.relpath(p, self.cwd)).as_posix(), "uriBaseId": SRCROOT}
+        except ValueError:  # another drive (Windows): no relative path exists
+            return {"uri": p.as_uri()}
+
+    def original(self, used: set[str]) -> dict[str, Any]:
+        """``run.originalUriBaseIds`` of the bases ``used`` (absolute ``file:`` URIs ending in /)."""
+        roots = {SRCROOT: self.cwd, TARGETROOT: self.target_root}
+        return {k: {"uri": root.as_uri().rstrip("/") + "/"} for k, root in roots.items() if k in used and root}
+
+
+def _rel(p: Path, root: Path) -> str:
+    rel = p.relative_to(root).as_posix()
+    return "./" if rel == "." else rel + ("/" if p.is_dir() else "")
 
 
 def _columns(file: str, row: int, column: str, cache: dict[str, list[str]]) -> tuple[int, int] | None:
@@ -72,54 +118,150 @@ def _logical(f: Finding) -> dict[str, Any]:
     return {"name": name, "fullyQualifiedName": name, "kind": "object"}
 
 
-def _location(f: Finding, target: str | None, cache: dict[str, list[str]]) -> dict[str, Any]:
+def _table_file(folder: Path, table: str) -> Path | None:
+    """The source file of ``table`` in a source-set folder, if there is one."""
+    for suffix in (".csv", ".xlsx"):
+        if (folder / f"{table}{suffix}").is_file():
+            return folder / f"{table}{suffix}"
+    return None
+
+
+@dataclass(frozen=True)
+class _Target:
+    """What was validated: a source-set folder or a DB file (and the source files it records)."""
+
+    path: Path | None
+    source_files: Mapping[str, str]
+    bases: _Bases
+
+    @property
+    def is_db(self) -> bool:
+        return self.path is not None and not self.path.is_dir()
+
+
+def _file_location(file: str, row: int | None, column: str | None, t: _Target, cache: dict[str, list[str]]) -> Any:
+    phys: dict[str, Any] = {"artifactLocation": t.bases.location(file)}
+    if row:
+        region: dict[str, Any] = {"startLine": int(row)}
+        cols = _columns(file, int(row), column, cache) if column else None
+        if cols:
+            region.update(startColumn=cols[0], endColumn=cols[1])
+        phys["region"] = region
+    return phys
+
+
+def _locations(f: Finding, t: _Target, cache: dict[str, list[str]]) -> dict[str, Any]:
+    """``locations`` (and ``relatedLocations`` for a DB) of one result (module doc)."""
     if f.file:
-        phys: dict[str, Any] = {"artifactLocation": {"uri": _uri(f.file)}}
-        if f.row:
-            region: dict[str, Any] = {"startLine": int(f.row)}
-            cols = _columns(f.file, int(f.row), f.column, cache) if f.column else None
-            if cols:
-                region.update(startColumn=cols[0], endColumn=cols[1])
-            phys["region"] = region
-        return {"physicalLocation": phys}
+        return {"locations": [{"physicalLocation": _file_location(f.file, f.row, f.column, t, cache)}]}
     loc: dict[str, Any] = {"logicalLocations": [_logical(f)]}
-    if target:
-        loc["physicalLocation"] = {"artifactLocation": {"uri": _uri(target)}}
-    return loc
+    out: dict[str, Any] = {"locations": [loc]}
+    if t.path is None:
+        return out
+    if not t.is_db:
+        table_file = _table_file(t.path, f.table)
+        loc["physicalLocation"] = {"artifactLocation": t.bases.location(table_file or t.path)}
+        return out
+    loc["physicalLocation"] = {"artifactLocation": t.bases.location(t.path)}
+    source = t.source_files.get(f.table)
+    if source:
+        out["relatedLocations"] = [
+            {
+                "id": 1,
+                "physicalLocation": {"artifactLocation": {"uri": source, "uriBaseId": SOURCESET}},
+                "message": {"text": f"source file of table {f.table} the DB was built from"},
+            }
+        ]
+    return out
 
 
-def sarif(findings: Sequence[Finding], *, target: str | None = None, tool_version: str = "0") -> dict[str, Any]:
-    """The SARIF 2.1.0 log of ``findings`` (module doc); ``target`` names the validated DB."""
+def _uri_base(base: str) -> str:
+    """``base`` ending in a slash (empty: repository-relative)."""
+    return base if not base or base.endswith("/") else base + "/"
+
+
+def rule_descriptor(rule: str, help_uri_base: str = "") -> dict[str, Any]:
+    """The SARIF ``reportingDescriptor`` of ``rule`` from the rule catalogue (module doc); a
+    rule the catalogue lacks gets its family's description only."""
+    family = rule.split(".")[0]
+    out: dict[str, Any] = {"id": rule, "name": rule.replace(".", "_")}
+    doc = rule_catalogue().get(rule)
+    if doc is None:
+        out["shortDescription"] = {"text": FAMILIES.get(family, rule)}
+        return out
+    base = _uri_base(help_uri_base)
+    out.update(
+        shortDescription={"text": doc.summary},
+        fullDescription={"text": doc.description},
+        help={"text": doc.text(), "markdown": doc.markdown()},
+        helpUri=f"{base}{RULES_DOC}#{doc.anchor}",
+        properties={"tags": [family], "family": FAMILIES.get(family, family)},
+    )
+    if doc.severity in ("error", "warning"):
+        out["defaultConfiguration"] = {"level": doc.severity}
+    return out
+
+
+def sarif(
+    findings: Sequence[Finding],
+    *,
+    target: str | Path | None = None,
+    tool_version: str = "0",
+    help_uri_base: str = "",
+    source_files: Mapping[str, str] | None = None,
+    cwd: Path | None = None,
+) -> dict[str, Any]:
+    """The SARIF 2.1.0 log of ``findings`` (module doc). ``target`` is what was validated (a
+    DB file or a source-set folder), ``source_files`` the source file a DB records per table,
+    ``cwd`` the folder of ``%SRCROOT%`` (the working folder)."""
+    path = Path(target).resolve() if target is not None else None
+    root = None if path is None else (path if path.is_dir() else path.parent)
+    bases = _Bases((cwd or Path.cwd()).resolve(), root)
+    t = _Target(path, source_files or {}, bases)
     rules = sorted({f.rule for f in findings})
     index = {r: i for i, r in enumerate(rules)}
-    catalog = rule_catalog() if rules else {}
-    descriptors = []
-    for r in rules:
-        descriptor: dict[str, Any] = {
-            "id": r,
-            "name": r.replace(".", "_"),
-            "shortDescription": {"text": FAMILIES.get(r.split(".")[0], r)},
-        }
-        if r in catalog:  # its meaning and fix, as docs/reference/rules.md gives them
-            descriptor["fullDescription"] = {"text": catalog[r].meaning}
-        descriptors.append(descriptor)
     cache: dict[str, list[str]] = {}
     results = []
     for f in findings:
-        results.append(
-            {
-                "ruleId": f.rule,
-                "ruleIndex": index[f.rule],
-                "level": "error" if f.severity == Severity.ERROR else "warning",
-                "message": {"text": f"{f.where}: {f.message}"},
-                "locations": [_location(f, target, cache)],
-                "properties": jsonable(
-                    {"table": f.table, "keys": f.keys, "value": f.value, "limit": f.limit, "column": f.column}, 6
-                ),
-            }
-        )
-    driver = {"name": "trainpos", "version": tool_version, "semanticVersion": tool_version, "rules": descriptors}
-    return {"$schema": SARIF_SCHEMA, "version": "2.1.0", "runs": [{"tool": {"driver": driver}, "results": results}]}
+        result: dict[str, Any] = {
+            "ruleId": f.rule,
+            "ruleIndex": index[f.rule],
+            "level": "error" if f.severity == Severity.ERROR else "warning",
+            "message": {"text": f"{f.where}: {f.message}"},
+            **_locations(f, t, cache),
+            "properties": jsonable(
+                {"table": f.table, "keys": f.keys, "value": f.value, "limit": f.limit, "column": f.column}, 6
+            ),
+        }
+        results.append(result)
+    driver: dict[str, Any] = {"name": "trainpos", "version": tool_version, "semanticVersion": tool_version}
+    if help_uri_base:  # an absolute URI (the schema's format): only with a base
+        driver["informationUri"] = f"{_uri_base(help_uri_base)}{RULES_DOC}"
+    driver["rules"] = [rule_descriptor(r, help_uri_base) for r in rules]
+    used = {
+        loc["physicalLocation"]["artifactLocation"].get("uriBaseId")
+        for r in results
+        for loc in r["locations"]
+        if "physicalLocation" in loc
+    }
+    run: dict[str, Any] = {"tool": {"driver": driver}, "results": results}
+    original = bases.original({u for u in used if u})
+    if original:
+        run["originalUriBaseIds"] = original
+    return {"$schema": SARIF_SCHEMA, "version": "2.1.0", "runs": [run]}
+
+
+def db_source_files(db: Path) -> dict[str, str]:
+    """Table → the source file the DB records it was built from (meta ``source_sha256:<file>``);
+    empty when the DB cannot be read (its own findings say why)."""
+    from dbtools.db_info import db_info
+    from schemas.errors import TrainposError
+
+    try:
+        recorded = db_info(db, verify=False).source_sha256
+    except (TrainposError, OSError, sqlite3.Error):
+        return {}
+    return {Path(name).stem: name for name in recorded}
 
 
 def sarif_text(findings: Sequence[Finding], **kw: Any) -> str:

@@ -1,14 +1,18 @@
-"""GeoPackage (OGC 12-128r18, 1.4) of the GeoJSON layers, for QGIS: one feature table per
+"""GeoPackage (OGC 12-128, version 1.3) of the GeoJSON layers, for QGIS: one feature table per
 layer (balises, feature_points, gis_points, gis_lines …), written with SQLite through
 :func:`dbtools.database.write_sqlite` — the format is a plain SQLite file, so no GDAL-based
 library (pyogrio, fiona: large binary wheels) is needed.
 
 What a reader requires and this writes: ``PRAGMA application_id`` 0x47504B47 ("GPKG") and
-``user_version`` 10400; ``gpkg_spatial_ref_sys`` with the three mandatory rows (4326, −1,
-0) plus the network's geodetic CRS (WKT from PROJ); ``gpkg_contents`` (one ``features`` row
-per layer with its bounding box); ``gpkg_geometry_columns``; each table an ``fid INTEGER
-PRIMARY KEY AUTOINCREMENT``, a ``geom`` BLOB in GeoPackage binary (:mod:`.wkb`) and one
-column per property (INTEGER, REAL or TEXT by its values).
+``user_version`` 10300 (GeoPackage 1.3.0: GDAL 3.6 — a QGIS LTR's, issue 33 — accepts 102xx
+and 103xx silently and warns that a 1.4 file "may be only partially supported"; newer GDAL
+reads 1.2–1.4; the tables written here are the same in 1.3 and 1.4);
+``gpkg_spatial_ref_sys`` with the three mandatory rows (4326, −1, 0) plus the CRS of the
+layers (the network's geodetic CRS, or the export's ``--crs``; WKT from PROJ);
+``gpkg_contents`` (one ``features`` row per layer with its bounding box);
+``gpkg_geometry_columns``; each table an ``fid INTEGER PRIMARY KEY AUTOINCREMENT``, a
+``geom`` BLOB in GeoPackage binary (:mod:`.wkb`) and one column per property (INTEGER, REAL
+or TEXT by its values).
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ from dbtools.database import write_sqlite
 from dbtools.interchange.wkb import envelope, gpkg_geometry
 
 APPLICATION_ID = 0x47504B47
-USER_VERSION = 10400
+#: GeoPackage 1.3.0 (module doc: read without a warning by GDAL 3.6 and newer).
+USER_VERSION = 10300
 _SRS = [
     ("Undefined cartesian SRS", -1, "NONE", -1, "undefined", "undefined cartesian coordinate reference system"),
     ("Undefined geographic SRS", 0, "NONE", 0, "undefined", "undefined geographic coordinate reference system"),
@@ -33,6 +38,12 @@ def _wkt(epsg: int) -> str:
     from pyproj import CRS
 
     return str(CRS.from_epsg(epsg).to_wkt("WKT1_GDAL"))
+
+
+def _crs_name(epsg: int) -> str:
+    from pyproj import CRS
+
+    return str(CRS.from_epsg(epsg).name)
 
 
 def _sql_type(values: Iterable[Any]) -> str:
@@ -126,7 +137,7 @@ def write_gpkg(
         *_SRS,
     ]
     if srs_epsg != 4326:
-        srs.append((f"EPSG:{srs_epsg}", srs_epsg, "EPSG", srs_epsg, _wkt(srs_epsg), "lat/lon datum of the network"))
+        srs.append((f"EPSG:{srs_epsg}", srs_epsg, "EPSG", srs_epsg, _wkt(srs_epsg), _crs_name(srs_epsg)))
     script: list[tuple[str, Any]] = [
         (
             "CREATE TABLE gpkg_spatial_ref_sys (srs_name TEXT NOT NULL, srs_id INTEGER PRIMARY KEY, "

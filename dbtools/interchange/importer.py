@@ -20,6 +20,67 @@ has no coordinates), ``network.toml`` when something is declared, ``survey/`` (c
 and kilometre posts for ``gis grid``) when the file has coordinates, and
 ``import_report.json``: every finding, and the railML name of every imported balise and
 feature (our tables have no name column).
+
+Findings (errors stop the import; warnings are in ``import_report.json``):
+
+* ``railml.version`` (error) — the root element is no railML 2.x or 3.x (``@version``). Fix:
+  import a railML 2.x/3.x file, or convert it first.
+* ``railml.duplicate_id`` (error) — an ``@id`` is used twice in the file. Fix: make the ids
+  unique in the exporting tool.
+* ``railml.missing_id`` (error) — a track, netElement, line, balise, baliseGroup or
+  positioning system without ``@id``. Fix: give it an id.
+* ``railml.value`` (error / warning) — an attribute that must be a number is not, or an ETCS
+  value (NID_C, NID_BG) is out of range and left empty. Fix: correct the attribute.
+* ``railml.units`` (error) — a linear positioning system in other units than metres. Fix:
+  export the positioning system in metres.
+* ``railml.topology`` (error / warning) — a railML 2 track without trackBegin/trackEnd, or a
+  railML 3 netRelation whose ``@positionOnA``/``@positionOnB`` is not 0 or 1 (dropped). Fix:
+  complete the element's topology.
+* ``railml.mileage`` (error / warning) — a mileageChange without its positions, or an
+  ``@absPos`` that differs from the km derived from ``@pos`` (the ``@absPos`` is used). Fix:
+  correct the mileage change or the element's ``@absPos``/``@pos``.
+* ``railml.position`` (error / warning) — an element without a position on its track, or a
+  position outside the track (placed by its ``@absPos`` or on the continuing track where
+  possible). Fix: correct ``@pos``/``intrinsicCoord`` or the element's track.
+* ``railml.no_mileage`` (error) — an element whose km cannot be derived: no ``@absPos`` and no
+  mileage on its track. Fix: add the ``@absPos`` (linearCoordinate), or the track's mileage.
+* ``railml.geocoord`` (error) — a coordinate that cannot be read or transformed. Fix: correct
+  the coordinate or its CRS (``@epsgCode``).
+* ``railml.undefined_track`` (error) — a reference to a track or netElement that is not in the
+  file. Fix: correct the reference, or export the referenced element too.
+* ``railml.undefined_ref`` (error) — a reference to a positioning system or balise group that
+  is not defined (or not linear in metres). Fix: correct the reference, or define it.
+* ``railml.dangling_ref`` (warning) — a connection or netRelation naming something not in the
+  file (an extract's edge): imported as an open end, or dropped. Fix: none needed at an
+  extract's edge; otherwise export the neighbouring element too.
+* ``railml.quirk`` (warning) — a known deviation from railML read the way its writer meant it
+  (e.g. a connection ``@ref`` naming a track). Fix: check the result; correct the exporter.
+* ``railml.switch_open`` (warning) — a switch or crossing not imported (a port without a
+  connection, a type we cannot map). Fix: complete the switch's connections in the file, or
+  add the switch to ``switches.csv`` by hand.
+* ``railml.switch_open_port`` (warning) — a switch whose diverging branch leads out of the
+  file: imported with that port empty. Fix: none needed at an extract's edge; otherwise export
+  the neighbouring track.
+* ``railml.switch_side`` (warning) — a switch without ``@course``: b1 is taken as the through
+  leg, b2 as the branch. Fix: state ``@course`` in the file, or check b1/b2 of the switch.
+* ``railml.unmapped`` (warning) — an element not imported: no line code for its track, a
+  balise that is not the first of its group, a kind we do not map. Fix: map the track's line
+  (the map's ``[lines]``), or accept that the element is not used onboard.
+* ``railml.pair`` (warning) — a group named as an initial pair has not two balises. Fix: the
+  map's ``[initial_pairs]`` or the group in the file.
+* ``railml.no_pair`` (warning) — a C balise with no initial pair before it in running
+  direction. Fix: name the pair in the map's ``[initial_pairs]``.
+* ``railml.balise_identity`` (warning) — a balise group without ETCS identity (NID_C/NID_BG):
+  imported with nid_bg empty. Fix: add the identity in the file or fill it in ``balises.csv``.
+* ``railml.balise_count`` (warning) — ``numberOfBalisesInGroup`` differs from the balises in
+  the file. Fix: the group's balises or its stated number.
+* ``railml.curve`` (warning) — a horizontal curve that cannot become a feature (no six-row
+  pattern: a missing transition, a radius we cannot read). Fix: check the curve in the file;
+  add the feature rows by hand if it matters.
+* ``railml.geometry`` (warning) — no usable coordinates: ``gis.csv`` stays empty or no grid is
+  built. Fix: build the GIS grid from a survey (``gis grid``), or export coordinates.
+* ``railml.nothing_imported`` (error) — the file holds balises or tracks and none could be
+  imported. Fix: see the warnings before it (mostly ``railml.unmapped``: map the lines).
 """
 
 from __future__ import annotations

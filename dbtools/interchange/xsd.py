@@ -9,6 +9,10 @@ the element's path and line and the schema's own reason.
 
 An XSD that cannot be read or is not a valid schema is an :class:`InputError` (exit 2);
 a document the schema rejects is a :class:`FindingsError` (exit 1) and nothing is written.
+
+* ``railml.xsd`` (error) — the railML document is not valid against the given XML Schema
+  (the message has the element's path, line and the schema's reason). Fix: correct the
+  element in the file (or, for an export, report it: the writer must produce valid railML).
 """
 
 from __future__ import annotations

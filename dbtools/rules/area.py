@@ -2,9 +2,11 @@
 
 * ``schema.range`` (error) — a point more than ``AREA_TOLERANCE_M`` (2 km) outside the
   declared or derived operating area (a wrong sign, swapped lat/lon, a lost decimal
-  point); the point is left out of the grid index.
+  point); the point is left out of the grid index. Fix: correct the value (sign, swapped
+  lat/lon, decimal point), or the declared limits (the operating area in the DB meta).
 * ``gis.outside_area`` (warning) — a point outside the area but within the tolerance (an
-  area drawn slightly tight); the point is used.
+  area drawn slightly tight); the point is used. Fix: widen the declared operating area, or
+  correct the point.
 
 Points off the globe (|lat| > 90°, |lon| > 180°) are the schema's own range findings.
 """

@@ -4,29 +4,40 @@ An initial pair is keyed by (line_code, station_code, track); a C balise names i
 pair with the same three columns. ``sign`` below is +1 on D and S tracks (km increasing in
 the running direction) and −1 on U.
 
-* ``balise.pair_count`` (error) — a pair key does not have exactly one I1 and one I2.
+* ``balise.pair_count`` (error) — a pair key does not have exactly one I1 and one I2. Fix: give
+  the pair key exactly one I1 and one I2 row (delete the duplicate, add the missing balise, or
+  correct line_code/station_code/track of a row filed under the wrong pair).
 * ``balise.pair_spacing`` (error) — |km(I2) − km(I1)| differs from 5 m by more than
-  ``pair_spacing_tolerance_m``.
+  ``pair_spacing_tolerance_m``. Fix: correct ``km_actual_m`` of the I1 or I2 row from the
+  survey (or the tolerance in the validation config if the pair really stands farther apart).
 * ``balise.pair_order`` (error) — I2 is not after I1 in running direction
-  (sign·(km(I2) − km(I1)) ≤ 0).
-* ``balise.c_pair`` (error) — a C balise names a pair that has no I1.
+  (sign·(km(I2) − km(I1)) ≤ 0). Fix: swap the kinds of the two rows (I1 comes first in running
+  direction), or correct the track (U runs toward decreasing km).
+* ``balise.c_pair`` (error) — a C balise names a pair that has no I1. Fix: add the pair's I1
+  row, or correct the C balise's line_code/station_code/track to name an existing pair.
 * ``balise.c_fields`` (error) — a C balise without ``signal_type`` or ``dist_from_initial_m``.
+  Fix: fill ``signal_type`` and ``dist_from_initial_m`` of the C row.
 * ``balise.initial_fields`` (warning) — an I1/I2 row carries ``signal_type`` or
-  ``dist_from_initial_m`` (they are ignored).
+  ``dist_from_initial_m`` (they are ignored). Fix: empty those cells of the I1/I2 row.
 * ``balise.ambiguous`` (error) — two C balises after the same pair with the same signal type
   whose ``dist_from_initial_m`` differ by ≤ ``id_window_m``: the onboard unit cannot tell them
-  apart.
+  apart. Fix: give one of them another signal type, or move it outside the window (correct its
+  ``dist_from_initial_m`` if it is wrong).
 * ``balise.c_direction`` (warning) — a C balise lies behind its governing pair in running
-  direction, so the travel distance since the pair can never reach it.
+  direction, so the travel distance since the pair can never reach it. Fix: correct the C
+  balise's km or track, or name the pair that is before it in running direction.
 * ``balise.dist_from_initial`` (warning) — ``dist_from_initial_m`` differs from
-  |km(C) − km(I1)| by more than ``dist_tolerance_m``.
+  |km(C) − km(I1)| by more than ``dist_tolerance_m``. Fix: correct ``dist_from_initial_m`` (or
+  ``km_actual_m``) so that both agree.
 * ``balise.key_fields`` (error) — an I1, I2 or C row without line_code or station_code, or
   whose track is not U, D or S: the pair key (and a C balise's governing pair) needs all
   three (G rows may leave them empty: a group names itself by NID_C/NID_BG). Fix: fill them.
 * ``balise.km_equipment`` (error) — ``km_equipment_m`` differs from ``km_actual_m`` by
-  more than ``km_equipment_tolerance_m`` (a typing error in one of them).
+  more than ``km_equipment_tolerance_m`` (a typing error in one of them). Fix: correct the
+  one that was mistyped.
 * ``balise.outside_gis`` (error) — ``km_actual_m`` is outside the GIS km range of the
-  balise's line/track (or the line/track has no GIS at all).
+  balise's line/track (or the line/track has no GIS at all). Fix: correct ``km_actual_m``,
+  line_code or track, or extend the GIS grid to that km.
 """
 
 from __future__ import annotations

@@ -7,23 +7,33 @@ left|right (radius R > 0), transition, straight, none. Rows 1–2 are the entry 
 
 Structure:
 
-* ``feature.rows`` (error) — not exactly six rows with seq 1, 2, …, 6.
-* ``feature.pattern`` (error) — a row's attribute breaks the Table-1 pattern.
+* ``feature.rows`` (error) — not exactly six rows with seq 1, 2, …, 6. Fix: give the feature
+  exactly six rows, numbered 1–6 in running order.
+* ``feature.pattern`` (error) — a row's attribute breaks the Table-1 pattern. Fix: the
+  attributes in running order are straight, transition, left or right, transition, straight,
+  none.
 * ``feature.order`` (error) — km not monotonic in running direction (sign·Δkm < 0 between
-  rows, or a curve body of zero length).
+  rows, or a curve body of zero length). Fix: correct the km of the rows (in running
+  direction; on U toward decreasing km).
 * ``feature.straight_length`` (error) — entry or exit straight shorter than
-  ``min_straight_m`` (20 m).
+  ``min_straight_m`` (20 m). Fix: correct the km of rows 1–2 or 5–6, or drop the feature if
+  the straight is really that short.
 
 Against the GIS grid (curvature κ at grid vertices, positive left of increasing km, see
 :mod:`dbtools.rules.gis`):
 
-* ``feature.outside_gis`` (error) — a row's km is outside the GIS range of its line/track.
+* ``feature.outside_gis`` (error) — a row's km is outside the GIS range of its line/track. Fix:
+  correct the row's km, line_code or track, or extend the GIS grid.
 * ``feature.direction`` (error) — the mean GIS κ over the body (vertices between rows 3 and 4)
   turns the other way: a *left* curve in running direction has κ > 0 on D/S and κ < 0 on U
-  (the U attribute is as seen running toward decreasing km).
+  (the U attribute is as seen running toward decreasing km). Fix: swap left and right (on U as
+  seen running toward decreasing km), or check the track.
 * ``feature.radius`` (error) — |mean κ| over the body outside (1/R)(1 ± ``feature_tolerance``).
+  Fix: correct ``radius_m`` (or the km of rows 3–4) from the curve list; if the GIS is wrong,
+  fix the grid.
 * ``feature.straight`` (error) — max |κ| at the vertices of the entry (exit) straight above
-  ``straight_kappa_max`` + :func:`stencil_leak` of the adjacent transition.
+  ``straight_kappa_max`` + :func:`stencil_leak` of the adjacent transition. Fix: move rows 2
+  and 5 (the transitions' ends) to where the GIS is straight, or fix a kink in the grid.
 """
 
 from __future__ import annotations

@@ -9,21 +9,28 @@ feature-point and balise rules use the same index.
 
 Rules:
 
-* ``gis.km_grid`` (error) — km is not a multiple of the grid spacing (20 m).
+* ``gis.km_grid`` (error) — km is not a multiple of the grid spacing (20 m). Fix: round the km
+  of the point to the 20 m grid (re-run ``gis grid`` from the survey).
 * ``gis.km_step`` (error) — consecutive km of a line/track do not differ by 20 m and the
-  jump is not listed in ``km_breaks`` (a duplicate km is ``schema.duplicate_key``).
-* ``gis.km_break_unused`` (warning) — a ``km_breaks`` row matches no jump of the grid.
+  jump is not listed in ``km_breaks`` (a duplicate km is ``schema.duplicate_key``). Fix: add
+  the missing points, delete the extra ones, or add a ``km_breaks`` row for a real kilometrage
+  jump.
+* ``gis.km_break_unused`` (warning) — a ``km_breaks`` row matches no jump of the grid. Fix:
+  correct the row's km (from/to) or delete it.
 * ``gis.step_length`` (error) — the geodesic distance between consecutive points is not
   consistent with their km difference Δ: it must lie in
   [chord(Δ, R_min) − tol, Δ + tol], tol = ``step_tolerance_m`` + ``step_tolerance_rel``·Δ,
   where chord(Δ, R) = 2R·sin(Δ/2R) is the chord of an arc of length Δ and
-  R_min = spacing / ``spike_max_turn_rad`` the tightest radius the grid accepts.
+  R_min = spacing / ``spike_max_turn_rad`` the tightest radius the grid accepts. Fix: correct
+  the coordinates of the point (a typo, a swapped lat/lon) or its km.
 * ``gis.spike`` (error) — the angle between consecutive 20 m segments exceeds
-  ``spike_max_turn_rad``.
+  ``spike_max_turn_rad``. Fix: correct the coordinates of the point at the kink.
 * ``gis.track_spacing`` (warning / error) — on a double-track line the U and D points of
   the same km are closer than ``track_spacing_warning_m`` (``…_error_m``) where the two
   tracks are parallel (heading difference < ``parallel_max_rad``); consecutive offending
-  points are reported as one finding per stretch.
+  points are reported as one finding per stretch. Fix: correct the track (U/D) of the points,
+  or the coordinates of one track; widen the limits in the validation config where the tracks
+  really are that close.
 """
 
 from __future__ import annotations

@@ -15,15 +15,18 @@ Rules:
 
 * ``gis.height_partial`` (error) — ``height_m`` is given on some but not all points of a
   line/track (the GNSS aid refuses such a track); reported once per line/track with the first
-  empty row;
+  empty row. Fix: fill ``height_m`` on every point of the line/track, or empty it everywhere.
 * ``gis.height_grade`` (warning / error) — |g| above ``height_grade_warning_permille`` (an
-  unusual gradient: check the survey) / ``height_grade_error_permille`` (no railway);
+  unusual gradient: check the survey) / ``height_grade_error_permille`` (no railway). Fix:
+  check the survey's heights of that stretch and correct the wrong ones.
 * ``gis.height_curvature`` (warning / error) — |κ| above 1/``height_radius_warning_m`` /
-  1/``height_radius_error_m`` (a spike or a step in the heights);
+  1/``height_radius_error_m`` (a spike or a step in the heights). Fix: correct the height of
+  the point (a spike or a step), or smooth the survey.
 * ``gis.height_datum`` (warning) — heights present but the DB meta declares them orthometric
   (``height_datum``; ``geoid_model``): the GNSS aid needs ellipsoidal heights and no geoid model
   is shipped. A DB whose meta does not state the datum is taken as ellipsoidal, which is what the
-  ``gis.height_m`` column declares; no finding.
+  ``gis.height_m`` column declares; no finding. Fix: convert the heights to ellipsoidal
+  heights and set ``height_datum`` to ``ellipsoidal``.
 
 Consecutive offending steps of one line/track are reported as one finding per stretch (the
 first point, the stretch's extreme value and its length in points).

@@ -5,14 +5,17 @@ are declared in :mod:`schemas.tables` and checked by :func:`schemas.frames.check
 Here:
 
 * ``schema.radius`` (error) — a ``left``/``right`` feature row needs radius_m > 0; every
-  other row radius_m = 0.
+  other row radius_m = 0. Fix: set ``radius_m`` of left/right rows to the curve radius, of
+  every other row to 0.
 * ``schema.not_finite`` (error) — ±inf in a numeric column (a DB can store it; source
-  readers already reject it as ``schema.type``).
+  readers already reject it as ``schema.type``). Fix: replace the infinite value by the real
+  one.
 * ``schema.empty_table`` — a header-only source file (or a DB table without rows): an error
   for ``gis`` (no km can be placed, matched or checked without the grid), a warning for
   ``balises`` (a train never gets an initial position [S003 §4]; only what needs no balise
   works, e.g. the GPS-based possession check of road-rail vehicles [S001 §6]). An empty
-  ``feature_points`` is no finding: a network without curves is possible.
+  ``feature_points`` is no finding: a network without curves is possible. Fix: add the rows
+  (build the grid with ``gis grid``; list the balises).
 """
 
 from __future__ import annotations

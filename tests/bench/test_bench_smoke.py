@@ -84,6 +84,9 @@ SMOKE: dict[str, Smoke] = {
     ),
     "bench_scaling.py": Smoke("--hours 0.05 0.1", (r"log-log slope of CPU time on run length",)),
     "bench_simulate.py": Smoke("--km 3 --slice 100 --repeat 1", (r"naive loop .* → ×\d+",)),
+    "bench_topology.py": Smoke(
+        "--lines 2 --shared-ids", (r"check_topology\s+wall\s+[\d.]+ s", r"check_balise_network\s+wall")
+    ),
     "bench_startup.py": Smoke("--repeat 1 --only run", (r"trainpos --help: [\d.]+ s wall",)),
     "bench_survey.py": Smoke("--lines 1 --length-km 12 --runs 1 --workers 1", (r"metric\s+value\s+target",)),
     "calibration_faults.py": Smoke("clean", (r"clean\s+determined\s+\d+\s+within margin",)),

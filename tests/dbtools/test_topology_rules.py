@@ -355,6 +355,7 @@ def test_initial_pair_needs_key_fields(tmp_path: Path) -> None:
 
 def test_sarif_describes_topology_rules_and_points_at_the_line(tmp_path: Path) -> None:
     from dbtools.interchange.ci import FAMILIES, sarif
+    from dbtools.rules.catalogue import rule_catalogue
 
     def edit(t: Tables) -> None:
         c = t["connections"]
@@ -362,7 +363,9 @@ def test_sarif_describes_topology_rules_and_points_at_the_line(tmp_path: Path) -
 
     log = sarif(broken(tmp_path, "junction", edit))
     run = log["runs"][0]
-    assert [r["shortDescription"]["text"] for r in run["tool"]["driver"]["rules"]] == [FAMILIES["topology"]]
+    (descriptor,) = run["tool"]["driver"]["rules"]
+    assert descriptor["shortDescription"]["text"] == rule_catalogue()["topology.navigability"].summary
+    assert descriptor["properties"]["family"] == FAMILIES["topology"]
     region = run["results"][0]["locations"][0]["physicalLocation"]["region"]
     lines = (tmp_path / "junction" / "connections.csv").read_text().splitlines()
     assert {"A2", "B1", "both", "W1"} <= set(lines[region["startLine"] - 1].split(","))  # the branch↔branch row

@@ -8,13 +8,18 @@ import shutil
 import sqlite3
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 import jsonschema
 import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from dbtools.interchange.ci import db_source_files, rule_descriptor, sarif
+from dbtools.rules.catalogue import plain, rule_catalogue
 from dbtools.sample_network import sample_source_dir
+from schemas.enums import Severity
+from schemas.findings import Finding
 
 SCHEMA = json.loads(
     (Path(__file__).resolve().parents[2] / "data" / "sarif" / "sarif-schema-2.1.0.json").read_text(encoding="utf-8")
@@ -96,3 +101,94 @@ def test_junit(broken_sources: Path, sample_db: Path) -> None:
     code, out = _run("db", "validate", sample_db, "--format", "junit")
     suite = ET.fromstring(out).find("testsuite")
     assert code == 0 and suite is not None and suite.get("failures") == "0"
+
+
+def _sarif(*args: object) -> dict[str, Any]:
+    code, out = _run("db", "validate", *args, "--format", "sarif")
+    assert code in (0, 1), out
+    log: dict[str, Any] = json.loads(out)
+    jsonschema.Draft4Validator(SCHEMA).validate(log)
+    return log
+
+
+def test_sarif_describes_every_rule_from_the_catalogue(broken_sources: Path) -> None:
+    run = _sarif(broken_sources)["runs"][0]
+    rules = run["tool"]["driver"]["rules"]
+    catalogue = rule_catalogue()
+    assert {r["id"] for r in rules} >= {"schema.enum", "balise.dist_from_initial"}
+    for r in rules:
+        doc = catalogue[r["id"]]
+        assert r["shortDescription"]["text"] == doc.summary
+        assert r["fullDescription"]["text"] and "Fix" not in r["fullDescription"]["text"]
+        assert "**Fix:**" in r["help"]["markdown"] and "``" not in r["help"]["markdown"]
+        assert r["help"]["text"].endswith(plain(doc.fix))
+        assert r["helpUri"] == f"docs/reference/rules.md#{r['id']}"
+    balise = [r["shortDescription"]["text"] for r in rules if r["id"].startswith("balise.")]
+    assert len(balise) == len(set(balise)) >= 1
+    assert "informationUri" not in run["tool"]["driver"]  # absolute only
+
+
+def test_every_balise_rule_has_its_own_description() -> None:
+    descriptors = [rule_descriptor(r) for r in rule_catalogue() if r.startswith("balise.")]
+    assert len({d["shortDescription"]["text"] for d in descriptors}) == len(descriptors) > 10
+    assert all(d["defaultConfiguration"]["level"] in ("error", "warning") for d in descriptors)
+
+
+def test_help_uri_base_from_the_option_and_the_environment(broken_sources: Path, monkeypatch: Any) -> None:
+    run = _sarif(broken_sources, "--help-uri-base", "https://example.org/trainpos/blob/main")["runs"][0]
+    uris = {r["helpUri"] for r in run["tool"]["driver"]["rules"]}
+    assert "https://example.org/trainpos/blob/main/docs/reference/rules.md#schema.enum" in uris
+    assert run["tool"]["driver"]["informationUri"] == "https://example.org/trainpos/blob/main/docs/reference/rules.md"
+    monkeypatch.setenv("TRAINPOS_HELP_URI_BASE", "https://docs.example.org/")
+    run = _sarif(broken_sources)["runs"][0]
+    assert run["tool"]["driver"]["rules"][0]["helpUri"].startswith("https://docs.example.org/docs/reference/rules.md#")
+
+
+def _artifacts(run: dict[str, Any]) -> list[dict[str, Any]]:
+    return [loc["physicalLocation"]["artifactLocation"] for r in run["results"] for loc in r["locations"]]
+
+
+def test_uris_are_relative_to_a_declared_base(broken_sources: Path, tmp_path: Path, monkeypatch: Any) -> None:
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)  # the source set lies outside the working folder
+    run = _sarif(broken_sources)["runs"][0]
+    artifacts = _artifacts(run)
+    assert len(artifacts) == len(run["results"])  # every result located
+    assert artifacts and all(a["uriBaseId"] == "TARGETROOT" and ":" not in a["uri"] for a in artifacts)
+    assert "balises.csv" in {a["uri"] for a in artifacts}
+    assert run["originalUriBaseIds"] == {"TARGETROOT": {"uri": broken_sources.resolve().as_uri() + "/"}}
+    monkeypatch.chdir(tmp_path)  # now inside it
+    run = _sarif(broken_sources)["runs"][0]
+    assert {a["uriBaseId"] for a in _artifacts(run)} == {"%SRCROOT%"}
+    assert "src/balises.csv" in {a["uri"] for a in _artifacts(run)}
+    assert run["originalUriBaseIds"] == {"%SRCROOT%": {"uri": tmp_path.resolve().as_uri() + "/"}}
+
+
+def test_a_whole_network_finding_of_a_source_set_names_the_table_file(tmp_path: Path) -> None:
+    f = Finding("topology.gap", Severity.ERROR, "connections", "far apart", keys={"connection_id": "C1"})
+    (tmp_path / "connections.csv").write_text("connection_id\nC1\n", encoding="utf-8")
+    loc = sarif([f], target=tmp_path, cwd=tmp_path)["runs"][0]["results"][0]["locations"][0]
+    assert loc["physicalLocation"]["artifactLocation"] == {"uri": "connections.csv", "uriBaseId": "%SRCROOT%"}
+    assert loc["logicalLocations"][0]["name"] == "connections/connection_id=C1"
+
+
+def test_a_db_finding_is_located_in_the_db_and_its_source_file(sample_db: Path, tmp_path: Path) -> None:
+    db = tmp_path / "edited.sqlite"
+    shutil.copy(sample_db, db)
+    con = sqlite3.connect(db)
+    con.execute("UPDATE balises SET km_actual_m = km_actual_m + 15 WHERE balise_id = '0420-02-D-I2'")
+    con.commit()
+    con.close()
+    run = _sarif(db)["runs"][0]
+    assert run["results"] and all("physicalLocation" in r["locations"][0] for r in run["results"])
+    pair = next(r for r in run["results"] if r["ruleId"].startswith("balise.pair"))
+    assert pair["locations"][0]["physicalLocation"]["artifactLocation"] == {
+        "uri": "edited.sqlite",
+        "uriBaseId": "TARGETROOT",
+    }
+    assert pair["locations"][0]["logicalLocations"][0]["name"].startswith("balises/")
+    (related,) = pair["relatedLocations"]
+    assert related["physicalLocation"]["artifactLocation"] == {"uri": "balises.csv", "uriBaseId": "SOURCESET"}
+    assert db_source_files(db)["balises"] == "balises.csv"
+    assert db_source_files(tmp_path / "missing.sqlite") == {}

@@ -109,7 +109,7 @@ def test_geopackage_tables_and_binary_geometry(exported: dict[str, Path]) -> Non
     con = sqlite3.connect(exported["gpkg"])
     try:
         assert con.execute("PRAGMA application_id").fetchone()[0] == 0x47504B47
-        assert con.execute("PRAGMA user_version").fetchone()[0] == 10400
+        assert con.execute("PRAGMA user_version").fetchone()[0] == 10300
         assert {r[0] for r in con.execute("SELECT srs_id FROM gpkg_spatial_ref_sys")} == {4326, 6668, -1, 0}
         contents = {
             r[0]: r[1:] for r in con.execute("SELECT table_name, data_type, srs_id, min_x, max_x FROM gpkg_contents")
