@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-fast lint bench clean
+.PHONY: demo test test-fast lint bench docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -45,5 +45,11 @@ bench: $(STAMP)
 	OMP_NUM_THREADS=1 $(BIN)/python bench/run_all.py
 	OMP_NUM_THREADS=1 $(BIN)/python bench/accuracy.py --runs 50
 
+# the user guide as a site (docs/ → site/, MkDocs; --strict: a dead link or anchor fails);
+# regenerates the reference pages from the code first
+docs: $(STAMP)
+	$(BIN)/python -m cli.schema_docs
+	$(BIN)/mkdocs build --strict
+
 clean:
-	rm -rf $(VENV) demo-out .pytest_cache .ruff_cache .hypothesis
+	rm -rf $(VENV) site demo-out .pytest_cache .ruff_cache .hypothesis

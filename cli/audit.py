@@ -171,6 +171,31 @@ LABELS = {
 }
 
 
+#: One line per column of the report tables: what the printed term means (issue 33: a summary
+#: explains its terms).
+LEGEND = {
+    "runs": "runs audited without error",
+    "km": "distance travelled (corrected odometry)",
+    "balise corr.": "position corrections at balises",
+    "mean %, median %, max %": "correction ÷ distance since the previous correction × 100, over balise corrections",
+    "> target": "share (0–1) of balise corrections above the target % (--target-pct)",
+    "feature corr., refused": "corrections at curves (feature points) accepted, and refused by a diagnostic",
+    "slips, re-adhered": "wheel slip/slide episodes corrected inertially, and those that re-adhered in time",
+    "max slip err. m": "largest error budget of a slip correction, in metres",
+    "GPS decisions": "up/down track decisions made from trusted GPS fixes",
+    "GPS trusted": "mean share (0–1) of GPS fixes that passed the trust checks",
+    "fail-safe": "fail-safe events (a slip correction lasted too long)",
+    "anomalies": "balise anomalies (telegrams that do not fit the DB; the events name them)",
+}
+
+
+def print_legend(c: Console) -> None:
+    """The report tables' terms, one line each."""
+    width = max(len(k) for k in LEGEND)
+    for term, meaning in LEGEND.items():
+        c.print(f"  [bold]{term:<{width}}[/]  {meaning}", highlight=False, soft_wrap=True)
+
+
 def _view(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:
     """Rounded, missing values blank, short column labels."""
     f = frame[cols].round(3)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from cli.audit import ProgressBar, render_tables
+from cli.audit import ProgressBar, print_legend, render_tables
 from cli.errors import cli_command
 from cli.options import workers_option
 from cli.render import console, err_console, print_findings, progress, safe
@@ -75,6 +75,8 @@ def demo(
         )
     rep = build_report(audit_db)
     render_tables(rep, c)
+    c.print("What the columns mean:")
+    print_legend(c)
     html = out / "report.html"
     html.write_text(render_html(rep, audit_db), encoding="utf-8")
     c.print(f"[bold]4.[/] HTML report: {safe(html)}")

@@ -226,12 +226,14 @@ def import_(
         ImportFmt.auto, "--format", help="auto (from the content), nmea, ubx, rinex, csv, geojson."
     ),
     mapping: list[Path] | None = typer.Option(
-        None, "--mapping", help="Mapping TOML of a CSV/Parquet source (README); one per table source, in order."
+        None,
+        "--mapping",
+        help="Mapping TOML of a CSV/Parquet source (see the field-logs guide); one per table source, in order.",
     ),
     vehicle: Path | None = typer.Option(
         None,
         "--vehicle",
-        help="VEHICLE.toml (needed: run.json's vehicle_id, kind, wheel and teeth come from it; README).",
+        help="VEHICLE.toml (needed: run.json's vehicle_id, kind, wheel, teeth come from it; see the field-logs guide).",
     ),
     run_id: str | None = typer.Option(None, "--run-id", help="run_id (default: the first source's name)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),

@@ -24,7 +24,7 @@ class Fmt(StrEnum):
 
 
 def schema_markdown(t: Table) -> str:
-    """README-ready markdown for one declaration."""
+    """Markdown for one declaration (the docs' schema reference, ``schema show --format markdown``)."""
     lines = [
         f"**{t.name}** ({t.kind}) — {t.description}",
         "",

@@ -42,6 +42,12 @@ Findings:
   first is read. Fix: rename or delete the others.
 * ``source.numeric_code`` (error) — an .xlsx cell of a code column holds a number, which has
   lost its leading zeros (01 → 1). Fix: format the column as Text and type the codes again.
+* ``source.date_in_text`` (error) — an .xlsx cell of a text column holds a date: Excel turned
+  the value typed there into one. Fix: format the column as Text and type the value again.
+* ``source.hidden_sheet`` (warning / error) — a sheet of the workbook is hidden: an error
+  when it is the sheet that was read (a hidden sheet often holds old data), a warning when it
+  was skipped for the first visible one. Fix: unhide the sheet if it holds the current data,
+  else delete it, or name the sheet to read like the table.
 """
 
 from __future__ import annotations

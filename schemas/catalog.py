@@ -1,5 +1,5 @@
 """Every declaration of :mod:`schemas` by name (:data:`ALL_SCHEMAS`), for ``trainpos schema
-show`` and the README's schema section."""
+show`` and the docs' schema reference (docs/reference/schemas.md)."""
 
 from __future__ import annotations
 

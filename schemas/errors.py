@@ -3,7 +3,7 @@
 Library code raises these; the CLI prints ``str(error)`` on one line to stderr and exits
 with ``error.exit_code``. No other exception should reach a user.
 
-Exit codes (documented in README):
+Exit codes (documented in docs/reference/behaviour.md):
 
 * 0 — success, nothing to report
 * 1 — the input was read but has errors (findings), or a check failed

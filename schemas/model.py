@@ -1,6 +1,6 @@
 """Declarative column and table model: the single source of truth for every table.
 
-Readers, validators, the SQLite DDL, README tables and ``trainpos schema show`` are all
+Readers, validators, the SQLite DDL, the docs' schema reference and ``trainpos schema show`` are all
 derived from these declarations.
 """
 

@@ -1,8 +1,12 @@
-"""README's examples run top to bottom as written (the README contract).
+"""README's and the docs pages' examples run top to bottom as written (the docs contract).
 
 The convention (README states it in a comment under its title):
 
-* Every ```` ```sh ```` block of README.md is run, in README's order, in one scratch working
+* The walk-through is README.md followed by the docs pages of :data:`WALK_PAGES`, in that
+  order (the how-to guides continue README's quick start: each uses files the ones before it
+  wrote); each tutorial of :data:`TUTORIALS` runs alone, top to bottom, in its own scratch
+  folder. ``docs/howto/`` pages have tests of their own.
+* Every ```` ```sh ```` block of those pages is run, in that order, in one scratch working
   folder: a temporary folder holding copies of the repository's data paths the commands name
   (anything under ``dbtools/``, ``fieldlogs/`` or ``tests/data/`` that exists in the checkout),
   with the test's own venv first on ``PATH`` (so ``trainpos`` is the checkout's), and
@@ -19,10 +23,10 @@ The convention (README states it in a comment under its title):
   Other comment lines may stand between marker and block.
 * ```` ```toml ````, ```` ```yaml ````, ```` ```text ```` and ```` ```console ```` blocks are never run.
 
-The first command that does not exit as README says fails the test with README's line,
+The first command that does not exit as its page says fails the test with the page and line,
 the command, its exit code and the tail of its output. ``python tests/test_walkthrough.py``
 runs the same walk-through in a kept folder and reports every failing command, not just the
-first (for fixing README).
+first (for fixing the pages; `python tests/test_walkthrough.py PAGE` runs one page alone).
 """
 
 from __future__ import annotations
@@ -43,6 +47,28 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+#: The pages that continue README's walk-through, in its order (each a former README section).
+WALK_PAGES = (
+    "README.md",
+    "docs/reference/behaviour.md",
+    "docs/guide/onboard-db.md",
+    "docs/guide/field-logs.md",
+    "docs/guide/radar.md",
+    "docs/guide/pipeline.md",
+    "docs/guide/gnss.md",
+    "docs/guide/audits.md",
+    "docs/guide/survey.md",
+    "docs/guide/possessions.md",
+    "docs/explanation/performance.md",
+    "docs/development.md",
+)
+#: The tutorials: each runs alone in its own scratch folder.
+TUTORIALS = (
+    "docs/tutorials/first-network.md",
+    "docs/tutorials/import-network.md",
+    "docs/tutorials/fleet-audit.md",
+    "docs/tutorials/ci-validation.md",
+)
 #: README paths under these prefixes are the repository's data: copied into the scratch folder.
 DATA_PREFIXES = ("dbtools/", "fieldlogs/", "tests/data/")
 RUN_LANG = "sh"
@@ -53,26 +79,28 @@ TIMEOUT_S = 1200
 
 @dataclass
 class Command:
-    line: int  # README line of the command's first line (1-based)
+    line: int  # page line of the command's first line (1-based)
     text: str  # continuation lines joined
     expected_exit: int
+    page: str = "README.md"
 
 
 @dataclass
 class Block:
-    line: int  # README line of the opening fence
+    line: int  # page line of the opening fence
     lang: str
     marker: str | None  # "skip", "fresh" or None
     reason: str
     body: list[tuple[int, str]] = field(default_factory=list)
+    page: str = "README.md"
 
     @property
     def runs(self) -> bool:
         return self.lang == RUN_LANG and self.marker != "skip"
 
 
-def blocks(text: str) -> list[Block]:
-    """README's fenced blocks with their walk-through markers."""
+def blocks(text: str, page: str = "README.md") -> list[Block]:
+    """A page's fenced blocks with their walk-through markers."""
     out: list[Block] = []
     lines = text.splitlines()
     current: Block | None = None
@@ -85,8 +113,8 @@ def blocks(text: str) -> list[Block]:
                 current.body.append((no, line))
         elif line.startswith("```"):
             marker, reason = _marker_before(lines, no - 1)
-            current = Block(no, line[3:].strip(), marker, reason)
-    assert current is None, f"README.md line {current.line}: unclosed ``` block"
+            current = Block(no, line[3:].strip(), marker, reason, page=page)
+    assert current is None, f"{page} line {current.line}: unclosed ``` block"
     return out
 
 
@@ -120,9 +148,9 @@ def commands(block: Block) -> list[Command]:
             continue
         text = "\n".join(pending)
         m = EXPECTED_EXIT.search(text)
-        out.append(Command(start, text, int(m.group(1)) if m else 0))
+        out.append(Command(start, text, int(m.group(1)) if m else 0, block.page))
         pending = []
-    assert not pending, f"README.md line {start}: incomplete shell command {pending!r}"
+    assert not pending, f"{block.page} line {start}: incomplete shell command {pending!r}"
     return out
 
 
@@ -158,17 +186,30 @@ def scratch(folder: Path, cmds: list[Command]) -> Path:
     return folder
 
 
-def walkthrough(text: str) -> list[tuple[int, Block, list[Command]]]:
-    """The runnable blocks in README's order, each with its scratch folder's number: 0 for the
-    walk-through's one folder, a new number for every ``fresh`` block (it runs alone)."""
+def page_text(page: str) -> str:
+    return (ROOT / page).read_text(encoding="utf-8")
+
+
+def walkthrough(text: str | None = None, page: str = "README.md") -> list[tuple[int, Block, list[Command]]]:
+    """The runnable blocks in the walk-through's order, each with its scratch folder's number:
+    0 for the walk-through's one folder, a new number for every ``fresh`` block and every
+    tutorial (it runs alone). ``text``: one page only (``page`` names it)."""
+    pages = [(page, text)] if text is not None else [(p, page_text(p)) for p in (*WALK_PAGES, *TUTORIALS)]
     out: list[tuple[int, Block, list[Command]]] = []
     fresh = 0
-    for block in blocks(text):
-        if not block.runs:
-            continue
-        if block.marker == "fresh":
+    for name, body in pages:
+        tutorial = name in TUTORIALS
+        if tutorial:
             fresh += 1
-        out.append((fresh if block.marker == "fresh" else 0, block, commands(block)))
+        own = fresh
+        for block in blocks(body, name):
+            if not block.runs:
+                continue
+            if block.marker == "fresh":
+                fresh += 1
+                out.append((fresh, block, commands(block)))
+            else:
+                out.append((own if tutorial else 0, block, commands(block)))
     return out
 
 
@@ -184,11 +225,11 @@ def _tail(text: str, n: int = 40) -> str:
     return "\n".join(text.rstrip().splitlines()[-n:])
 
 
-def run_all(base: Path, timings: list[tuple[float, Command]] | None = None) -> Iterator[str]:
+def run_all(base: Path, timings: list[tuple[float, Command]] | None = None, only: str | None = None) -> Iterator[str]:
     """Run the walk-through under ``base``; yield one report per command that does not exit as
-    README says (``timings``: gets each command's wall time)."""
+    its page says (``timings``: gets each command's wall time; ``only``: one page alone)."""
     env = _env()
-    steps = walkthrough(README.read_text(encoding="utf-8"))
+    steps = walkthrough(page_text(only), only) if only else walkthrough()
     folders: dict[int, Path] = {}
     for k, block, cmds in steps:
         if k not in folders:
@@ -209,8 +250,8 @@ def run_all(base: Path, timings: list[tuple[float, Command]] | None = None) -> I
                 timings.append((time.perf_counter() - t0, cmd))
             if res.returncode != cmd.expected_exit:
                 yield (
-                    f"README.md line {cmd.line} (block at line {block.line}, run in {folder}):\n"
-                    f"$ {cmd.text}\nexit {res.returncode}, README says {cmd.expected_exit}\n"
+                    f"{cmd.page} line {cmd.line} (block at line {block.line}, run in {folder}):\n"
+                    f"$ {cmd.text}\nexit {res.returncode}, the page says {cmd.expected_exit}\n"
                     f"--- stdout (tail)\n{_tail(res.stdout)}\n--- stderr (tail)\n{_tail(res.stderr)}"
                 )
 
@@ -231,15 +272,25 @@ def test_the_first_commands_are_make_demo_and_make_test() -> None:
     assert first.marker == "skip"
 
 
+def test_every_page_with_examples_is_walked() -> None:
+    """Every docs page with ```sh blocks is in the walk-through or a tutorial (docs/howto/: own tests)."""
+    walked = {*WALK_PAGES, *TUTORIALS}
+    for path in sorted((ROOT / "docs").rglob("*.md")):
+        rel = path.relative_to(ROOT).as_posix()
+        if rel.startswith("docs/howto/") or rel in walked:
+            continue
+        assert not [b for b in blocks(page_text(rel), rel) if b.lang == RUN_LANG], f"{rel}: sh blocks nobody runs"
+    assert all((ROOT / p).is_file() for p in walked)
+
+
 def test_every_shell_block_runs_or_says_why_not() -> None:
-    text = README.read_text(encoding="utf-8")
-    for block in blocks(text):
+    for block in [b for p in (*WALK_PAGES, *TUTORIALS) for b in blocks(page_text(p), p)]:
         if block.lang == RUN_LANG and block.marker == "skip":
-            assert block.reason, f"README.md line {block.line}: a skipped block must give its reason"
+            assert block.reason, f"{block.page} line {block.line}: a skipped block must give its reason"
             assert all(line.split("#")[0].strip().startswith("make ") for _, line in block.body if line.strip()), (
-                f"README.md line {block.line}: only the make set-up commands are exempt from the walk-through"
+                f"{block.page} line {block.line}: only the make set-up commands are exempt from the walk-through"
             )
-    cmds = [c for _, _, cs in walkthrough(text) for c in cs]
+    cmds = [c for _, _, cs in walkthrough() for c in cs]
     assert len(cmds) >= 60, len(cmds)
     assert any(c.expected_exit == 1 for c in cmds), "README shows commands failing on purpose (# exit 1)"
 
@@ -285,12 +336,13 @@ def test_readme_walkthrough_runs_as_written(tmp_path: Path) -> None:
     assert not (ROOT / "dbtools" / "sample_network" / "sources" / "survey_changes.json").exists()
 
 
-if __name__ == "__main__":  # every failure at once, in a kept folder (for fixing README)
+if __name__ == "__main__":  # every failure at once, in a kept folder (for fixing the pages)
+    # `python tests/test_walkthrough.py [PAGE]`: the whole walk-through, or one page alone
     base = Path(tempfile.mkdtemp(prefix="walkthrough-"))
     timings: list[tuple[float, Command]] = []
-    failures = list(run_all(base, timings))
+    failures = list(run_all(base, timings, sys.argv[1] if len(sys.argv) > 1 else None))
     slowest = sorted(timings, key=lambda x: -x[0])[:15]
     sys.stdout.write("\n\n".join(failures) + f"\n{len(failures)} failing command(s); folder {base}\n")
     sys.stdout.write(f"{len(timings)} commands, {sum(t for t, _ in timings):.0f} s; slowest:\n")
-    sys.stdout.write("".join(f"{t:7.1f} s  line {c.line}: {c.text.splitlines()[0][:100]}\n" for t, c in slowest))
+    sys.stdout.write("".join(f"{t:7.1f} s  {c.page}:{c.line}: {c.text.splitlines()[0][:100]}\n" for t, c in slowest))
     sys.exit(1 if failures else 0)

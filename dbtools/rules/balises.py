@@ -33,7 +33,8 @@ the running direction) and −1 on U.
   whose track is not U, D or S: the pair key (and a C balise's governing pair) needs all
   three (G rows may leave them empty: a group names itself by NID_C/NID_BG). Fix: fill them.
 * ``balise.km_equipment`` (error) — ``km_equipment_m`` differs from ``km_actual_m`` by
-  more than ``km_equipment_tolerance_m`` (a typing error in one of them).
+  more than ``km_equipment_tolerance_m`` (a typing error in one of them). Fix: correct the
+  one that was mistyped.
 * ``balise.outside_gis`` (error) — ``km_actual_m`` is outside the GIS km range of the
   balise's line/track (or the line/track has no GIS at all). Fix: correct ``km_actual_m``,
   line_code or track, or extend the GIS grid to that km.

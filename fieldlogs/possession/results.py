@@ -1,5 +1,5 @@
 """What a possession check returns: alarms and notices, the per-period timeline, the run's
-result and its documented JSON shape (``{"runs": [...]}``, README "possession check")."""
+result and its documented JSON shape (``{"runs": [...]}``, docs/guide/possessions.md)."""
 
 from __future__ import annotations
 

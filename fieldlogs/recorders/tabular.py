@@ -1,6 +1,6 @@
 """Vendor CSV / Parquet with a mapping TOML → one log stream (imu, tacho, radar, gps, …).
 
-Mapping (every key documented in README "logs import"):
+Mapping (every key documented in docs/guide/field-logs.md, "logs import"):
 
 * ``stream`` — the target stream (``schemas.logs.LOG_STREAMS``, not gnss_obs/gnss_nav);
 * ``[time]`` — ``column``, ``unit`` (s, ms, us/µs), ``base``: ``relative`` (recorder

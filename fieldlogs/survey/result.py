@@ -98,7 +98,7 @@ class SurveyReport:
         )
 
     def to_dict(self) -> dict[str, Any]:
-        """The documented JSON shape (README, ``trainpos survey --help``)."""
+        """The documented JSON shape (docs/guide/survey.md, ``trainpos survey --help``)."""
         gis = None
         if self.gis is not None:
             gis = {k: v for k, v in self.gis.to_dict().items() if k != "cells"}

@@ -124,6 +124,8 @@ def test_demo_on_fixture_network_and_logs(data: AuditData, tmp_path: Path, monke
         assert res.exit_code == 0, res.output + res.stderr
         assert f"audited {N} runs (0 failed)" in res.stdout
         assert "Position correction by route" in res.stdout and "HTML report" in res.stdout
+        legend = res.stdout.split("What the columns mean:", 1)[1]  # every term, one line each (issue 33)
+        assert "> target " in legend and "GPS trusted " in legend
     assert (out / "sample-network.sqlite").is_file() and (out / "audit.sqlite").is_file()
     assert (out / "report.html").read_text(encoding="utf-8").count("<img") >= 5
 
