@@ -354,6 +354,9 @@ def import_(
         "--osm-railway",
         help="osm: railway=* values of the ways imported, comma-separated (e.g. rail,light_rail).",
     ),
+    config: Path | None = typer.Option(
+        None, "--config", help="Settings (TOML): its [input] section (size limits of XML and compressed inputs)."
+    ),
 ) -> None:
     """Import a railML, OpenStreetMap or RailTopoModel GeoJSON file as a source set; every
     element that cannot be mapped is reported.

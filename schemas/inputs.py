@@ -1,7 +1,8 @@
 """Limits on what reading one input file may cost: the ``[input]`` section of the
 configuration tree, applied by the one input-opening mechanism (:mod:`dbtools.inputs`) to
 every compressed input — a gzip file (``.nmea.gz``, ``.ubx.gz``, ``.obs.gz``), the members
-of an ``.xlsx`` workbook (a zip) — before its content is held in memory."""
+of an ``.xlsx`` workbook (a zip) — before its content is held in memory, and to an XML
+file (railML) before it is parsed."""
 
 from __future__ import annotations
 
@@ -34,6 +35,14 @@ class InputLimits:
         "decompression bomb); recorder logs compress 3–20×, workbooks up to ~50×",
         "",
         gt=1,
+    )
+
+    max_xml_mb: float = setting(
+        256.0,
+        "largest XML file (railML) read: it is parsed as a whole tree so that every finding can name "
+        "its line, about 15 bytes of memory per byte of file (256 MB: about 4 GB)",
+        "MB",
+        gt=0,
     )
 
     def __post_init__(self) -> None:

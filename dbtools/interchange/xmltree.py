@@ -29,9 +29,21 @@ def parse(path: Path) -> Any:
     """The document tree of ``path``; InputError naming the line on malformed XML."""
     from lxml import etree
 
+    from dbtools.inputs import current_limits, regular_file
+
     path = Path(path)
     if not path.is_file():
         raise InputError("no such file" if not path.exists() else "not a file", path=path)
+    path = regular_file(path, "XML file")
+    limit = current_limits().max_xml_mb
+    size_mb = path.stat().st_size / (1 << 20)
+    if size_mb > limit:
+        raise InputError(
+            f"{size_mb:.0f} MB of XML is more than the {limit:g} MB this tool reads (a railML file is parsed as a "
+            "whole tree, about 15× its size in memory): raise [input] max_xml_mb in a --config file if the "
+            "machine has the memory",
+            path=path,
+        )
     parser = etree.XMLParser(
         resolve_entities=False,
         no_network=True,
