@@ -474,17 +474,23 @@ def _balise_groups(frame: pd.DataFrame, kind: str) -> list[str]:
         return []
     out = []
     recs = _records(frame, BALISES.column_names)
-    groups: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
-    for r in recs:
-        groups.setdefault((r["line_code"], r["station_code"], r["track"]), []).append(r)
-    for (line, station, track), rs in sorted(groups.items(), key=lambda kv: tuple(str(x) for x in kv[0])):
+    groups: dict[tuple[object, ...], list[dict[str, Any]]] = {}
+    for r in recs:  # an S003 pair's station, or a European group's identity (kind G)
+        key = ("G", r["nid_c"], r["nid_bg"]) if r["kind"] == "G" else (r["line_code"], r["station_code"], r["track"])
+        groups.setdefault(key, []).append(r)
+    for key, rs in sorted(groups.items(), key=lambda kv: tuple(str(x) for x in kv[0])):
         if len(rs) == 1:
             r = rs[0]
             out.append(f"{_balise_label(r)} {kind} at km_actual {_km1(r['km_actual_m'])}")
             continue
         ids = [str(r["balise_id"]) for r in rs]
         listed = ", ".join(ids[:MAX_IDS]) + (f", … ({len(ids) - MAX_IDS} more)" if len(ids) > MAX_IDS else "")
-        out.append(f"{len(rs)} balises {kind} at station {station} ({line} {track}): {listed}")
+        where = (
+            f"in balise group {_val(key[1])}:{_val(key[2])} (track {_val(rs[0]['track_id'])})"
+            if key[0] == "G"
+            else f"at station {key[1]} ({key[0]} {key[2]})"
+        )
+        out.append(f"{len(rs)} balises {kind} {where}: {listed}")
     return out
 
 

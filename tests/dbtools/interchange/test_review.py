@@ -138,7 +138,12 @@ def topo_page(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def test_topology_layers(topo_page: dict[str, Path]) -> None:
     html = topo_page["page"].read_text(encoding="utf-8")
-    for line in ("tracks: 5 added, 0 removed, 0 changed", "switches: 2 added, 0 removed, 0 changed"):
+    for line in (
+        "track X1 (100.079 m, crossover) added",
+        "switch W1 (point 1:9 at 0420 km 25k000.0) added",
+        "connection D1 end ↔ X1 begin (both, switch W1) added",
+        "2 balises added in balise group 3:12 (track D1): BG-3-12-0, BG-3-12-1",
+    ):
         assert f"<li>{line}</li>" in html  # the diff summary of the network tables
     data = _payload(html)
     tracks = {t["id"]: t for t in data["tracks"]}

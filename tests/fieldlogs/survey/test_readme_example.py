@@ -1,6 +1,6 @@
-"""README's survey maintenance loop — survey → --propose → db build → db diff → db impact →
+"""The user guide's survey maintenance loop (docs/guide/survey.md) — survey → --propose → db build → db diff → db impact →
 db release — runs as written, every command succeeding (``set -e``; the survey's exit 1 is
-the README's own ``|| [ $? -eq 1 ]``), in a scratch folder that sees the repository's
+the page's own ``|| [ $? -eq 1 ]``), in a scratch folder that sees the repository's
 ``dbtools`` and ``fieldlogs`` under the same relative paths."""
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ ROOT = Path(__file__).resolve().parents[3]
 
 
 def _block() -> str:
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    text = (ROOT / "docs" / "guide" / "survey.md").read_text(encoding="utf-8")
     m = re.search(r"<!-- survey-example:begin -->\n```bash\n(.*?)```\n<!-- survey-example:end -->", text, re.S)
-    assert m is not None, "README lost the survey example"
+    assert m is not None, "docs/guide/survey.md lost the survey example"
     return m.group(1)
 
 
