@@ -1,6 +1,6 @@
 """The user guide's survey maintenance loop (docs/guide/survey.md) — survey → --propose →
-db build → db diff → db impact → db release — runs as written, every command succeeding (``set -e``; the survey's exit 1 is
-the page's own ``|| [ $? -eq 1 ]``), in a scratch folder that sees the repository's
+db build → db diff → db impact → db release — runs as written, every command succeeding
+(``set -e``; the survey's exit 1 is the page's own ``|| [ $? -eq 1 ]``), in a scratch folder that sees the repository's
 ``dbtools`` and ``fieldlogs`` under the same relative paths."""
 
 from __future__ import annotations
