@@ -476,8 +476,8 @@ def _balise_groups(frame: pd.DataFrame, kind: str) -> list[str]:
     recs = _records(frame, BALISES.column_names)
     groups: dict[tuple[object, ...], list[dict[str, Any]]] = {}
     for r in recs:  # an S003 pair's station, or a European group's identity (kind G)
-        key = ("G", r["nid_c"], r["nid_bg"]) if r["kind"] == "G" else (r["line_code"], r["station_code"], r["track"])
-        groups.setdefault(key, []).append(r)
+        group: tuple[object, ...] = ("G", r["nid_c"], r["nid_bg"]) if r["kind"] == "G" else ()
+        groups.setdefault(group or (r["line_code"], r["station_code"], r["track"]), []).append(r)
     for key, rs in sorted(groups.items(), key=lambda kv: tuple(str(x) for x in kv[0])):
         if len(rs) == 1:
             r = rs[0]
