@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dbtools.interchange.osm_km import km_model
+from dbtools.interchange.osm_km import km_model, switch_links
 from dbtools.interchange.osm_read import RAILWAYS, OsmData, read_osm
 from dbtools.interchange.osm_split import Pieces, end_frame, split_ways
 from dbtools.interchange.osm_switches import Junctions, junctions
@@ -84,6 +84,17 @@ def _read_findings(data: OsmData) -> list[Finding]:
         )
         for kind, ids in sorted(data.other_ways.items())
     ]
+    if data.areas:
+        out.append(
+            _warn(
+                "osm.area",
+                "tracks",
+                f"{len(data.areas)} closed way(s) railway=rail with an area tag (building, area=yes …): "
+                "outlines, not tracks — not imported",
+                data.areas,
+                "way",
+            )
+        )
     for way in data.ways:
         missing = int(np.count_nonzero(~np.isfinite(way.lat)))
         if missing and way.runs:
@@ -194,11 +205,18 @@ def build_tables(data: OsmData) -> tuple[dict[str, pd.DataFrame], dict[str, str]
     node_ll = {int(n): (float(a), float(o)) for n, a, o in zip(p.node, p.lat, p.lon, strict=True)}
     j = junctions(end_frame(p), p.track_id, data.nodes, node_ll)
     index = {t: i for i, t in enumerate(p.track_id)}
-    links = {}
-    for (ta, ea), (tb, eb) in j.runs_on:
+    lines = [None if pd.isna(c) else str(c) for c in attrs["line_code"]]
+    links: dict[tuple[int, str], tuple[int, str]] = {}
+    for (ta, ea), (tb, eb) in j.runs_on + switch_links(j.points, dict(zip(p.track_id, lines, strict=True))):
         links[(index[ta], ea)] = (index[tb], eb)
         links[(index[tb], eb)] = (index[ta], ea)
-    km = km_model(p, [None if pd.isna(c) else str(c) for c in attrs["line_code"]], data.nodes, links)
+    joins: dict[tuple[int, str], list[tuple[int, str]]] = {}
+    for c in j.connections:
+        if c["navigability"] == "both" and c["track_a"] != c["track_b"]:
+            a, b = (index[c["track_a"]], c["end_a"]), (index[c["track_b"]], c["end_b"])
+            joins.setdefault(a, []).append(b)
+            joins.setdefault(b, []).append(a)
+    km = km_model(p, lines, data.nodes, links, joins)
     tracks, points = tracks_and_points(p, attrs, km, j.stops)
     balises, f_bal = balise_groups(data, p, tracks, km)
     switches = _switch_km(pd.DataFrame(j.switches, columns=SWITCHES.column_names), tracks, p, km)

@@ -19,6 +19,17 @@ diverging side) form a *chain* (:func:`km_chains`), and the posts of all its tra
 fitted along the chain's length — a short track between two switches gets its km from the
 posts before and after it.
 
+At a point switch the line runs on to the
+through branch, unless only the diverging branch has the toe's line (:func:`switch_links`:
+OSM ways often follow the line through the diverging branch).
+
+**Anchors.** Where a chain ends at a track of its own line that it does not run on (the
+diverging branch of a switch whose toe and through branch carry the line, a passing loop
+rejoining it), the km must not jump at the joint (``topology.km_jump``). Every chain is
+first fitted on its own posts; then, the chains with most posts first, each chain is fitted
+again with an *anchor* post at each such end: the km of the joined track there. A loop with
+no post of its own gets its km from the two switches it leaves and rejoins.
+
 **Interpolation** along a chain with ≥ 2 usable posts, by its own distance: linear between
 consecutive posts, beyond the first/last post continued 1 m of km per metre of track in the
 posts' direction. **Breaks**: posts are sorted by position; the direction of the km is the
@@ -26,7 +37,8 @@ sign of the median step; the longest strictly monotone sequence of posts in that
 is kept, every other post is reported (``osm.km_break``, node ids) and not used. Between two
 kept posts whose km step differs from their distance by more than
 :data:`JUMP_M` + :data:`JUMP_SHARE` of it a *km jump* is reported (both node ids); the km
-there is still interpolated linearly (OSM does not say where the jump lies).
+there is still interpolated linearly (OSM does not say where the jump lies). An anchor takes part like
+a post (a jump or break against it names only the milestone's node).
 """
 
 from __future__ import annotations
@@ -46,6 +58,10 @@ from schemas.enums import Severity
 from schemas.findings import Finding
 
 Link = dict[tuple[int, str], tuple[int, str]]
+Joins = dict[tuple[int, str], list[tuple[int, str]]]
+End = tuple[str, str]
+#: Node id of an anchor among the posts (OSM ids are > 0).
+ANCHOR = 0
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -155,10 +171,11 @@ def _fit(model: KmModel, piece: int, track: str, found: list[tuple[float, float,
     keep = _monotone(km, sign)
     dropped = sorted(set(range(len(rows))) - set(keep))
     for i in dropped:
+        what = "milestone" if rows[i][2] != ANCHOR else "km of the track joined"
         model.findings.append(
             _finding(
-                f"milestone {rows[i][1] / 1000:g} km at {rows[i][0]:.0f} m breaks the km order along {track}: not used",
-                [rows[i][2]],
+                f"{what} {rows[i][1] / 1000:g} km at {rows[i][0]:.0f} m breaks the km order along {track}: not used",
+                [n for n in [rows[i][2]] if n != ANCHOR],
                 track,
             )
         )
@@ -171,7 +188,7 @@ def _fit(model: KmModel, piece: int, track: str, found: list[tuple[float, float,
             model.findings.append(
                 _finding(
                     f"km jump on {track}: {a[1] / 1000:g} → {b[1] / 1000:g} km over {dist:.0f} m of track",
-                    [a[2], b[2]],
+                    [n for n in (a[2], b[2]) if n != ANCHOR],
                     track,
                 )
             )
@@ -179,8 +196,27 @@ def _fit(model: KmModel, piece: int, track: str, found: list[tuple[float, float,
     model.used |= {r[2] for r in kept}
 
 
-def km_model(p: Pieces, lines: list[str | None], nodes: dict[int, OsmNode], links: Link | None = None) -> KmModel:
-    """Usable posts of every track with a line (module doc); ``links``: see :func:`km_chains`."""
+def switch_links(points: list[tuple[End, End, End]], lines: dict[str, str | None]) -> list[tuple[End, End]]:
+    """Toe ↔ the branch a point switch's line runs on (module doc, *Chains*): the through
+    branch, unless only the diverging branch has the toe's line (a line leaving its way's
+    straight course, or a through branch that is a siding)."""
+    out = []
+    for toe, through, diverging in points:
+        line = lines.get(toe[0])
+        on_diverging = line is not None and lines.get(diverging[0]) == line and lines.get(through[0]) != line
+        out.append((toe, diverging if on_diverging else through))
+    return out
+
+
+def km_model(
+    p: Pieces,
+    lines: list[str | None],
+    nodes: dict[int, OsmNode],
+    links: Link | None = None,
+    joins: Joins | None = None,
+) -> KmModel:
+    """Usable posts of every track with a line (module doc); ``links``: see :func:`km_chains`;
+    ``joins``: every pair of track ends joined ``both`` (both directions), for the anchors."""
     import shapely
 
     model = KmModel()
@@ -229,9 +265,50 @@ def km_model(p: Pieces, lines: list[str | None], nodes: dict[int, OsmNode], link
             nid = pts_id[q]
             if nid not in line_of_post or line_of_post[nid] == lines[k]:  # off-rail post, or one of this line
                 rows.setdefault(k, []).append((a, posts[nid], nid, o + 1e-3))
-    for chain in km_chains(len(p), lines, links or {}):
-        _fit_chain(model, p, chain, rows)
+    _fit_chains(model, p, km_chains(len(p), lines, links or {}), rows, lines, joins or {})
     return model
+
+
+def _fit_chains(
+    model: KmModel,
+    p: Pieces,
+    chains: list[list[tuple[int, bool]]],
+    rows: dict[int, list[tuple[float, float, int, float]]],
+    lines: list[str | None],
+    joins: Joins,
+) -> None:
+    """Fit every chain on its posts, then again — the chains with most posts first — with
+    *anchors* at its two ends: the km of a track of its line joined there, as fitted so far
+    (module doc, *Anchors*)."""
+    per: dict[int, KmModel] = {}
+    for c, chain in enumerate(chains):
+        per[c] = _fit_chain(model, p, chain, rows, [])
+    order = sorted(range(len(chains)), key=lambda c: (-sum(len(rows.get(k, [])) for k, _ in chains[c]), c))
+    for c in order:
+        anchors = _anchors(model, p, chains[c], lines, joins)
+        if anchors:
+            per[c] = _fit_chain(model, p, chains[c], rows, anchors)
+    for c in range(len(chains)):
+        model.findings += per[c].findings
+        model.used |= per[c].used
+
+
+def _anchors(
+    model: KmModel, p: Pieces, chain: list[tuple[int, bool]], lines: list[str | None], joins: Joins
+) -> list[tuple[bool, float]]:
+    """(at the chain's end?, km) of the fitted tracks of the chain's line joined at its ends."""
+    members = {k for k, _ in chain}
+    line = lines[chain[0][0]]
+    out = []
+    for at_end, (k, fwd) in ((False, chain[0]), (True, chain[-1])):
+        end = ("end" if fwd else "begin") if at_end else ("begin" if fwd else "end")
+        ok = [o for o in joins.get((k, end), []) if o[0] not in members and lines[o[0]] == line and o[0] in model.posts]
+        if not ok:
+            continue
+        other = ok[0]
+        pos = 0.0 if other[1] == "begin" else float(p.length[other[0]])
+        out.append((at_end, float(model.at(np.array([other[0]]), np.array([pos]))[0])))
+    return out
 
 
 def km_chains(n: int, lines: list[str | None], links: Link) -> list[list[tuple[int, bool]]]:
@@ -261,9 +338,14 @@ def km_chains(n: int, lines: list[str | None], links: Link) -> list[list[tuple[i
 
 
 def _fit_chain(
-    model: KmModel, p: Pieces, chain: list[tuple[int, bool]], rows: dict[int, list[tuple[float, float, int, float]]]
-) -> None:
-    """Fit the posts of a chain along its length; each track gets them in its own pos."""
+    model: KmModel,
+    p: Pieces,
+    chain: list[tuple[int, bool]],
+    rows: dict[int, list[tuple[float, float, int, float]]],
+    anchors: list[tuple[bool, float]],
+) -> KmModel:
+    """Fit the posts (and anchors) of a chain along its length; each track gets them in its
+    own pos. Returns the chain's own fit (its findings and used posts)."""
     length = p.length
     offset = np.concatenate(([0.0], np.cumsum([length[k] for k, _ in chain])))
     found = [
@@ -271,19 +353,22 @@ def _fit_chain(
         for i, (k, fwd) in enumerate(chain)
         for q, km, nid, d in rows.get(k, [])
     ]
+    found += [(float(offset[-1]) if at_end else 0.0, km, ANCHOR, -1.0) for at_end, km in anchors]
     name = p.track_id[chain[0][0]] + (f" (with {len(chain) - 1} track(s) on)" if len(chain) > 1 else "")
     fitted = KmModel()
     _fit(fitted, 0, name, found)
-    model.findings += fitted.findings
-    model.used |= fitted.used
+    fitted.used.discard(ANCHOR)
+    for k, _ in chain:
+        model.posts.pop(k, None)
     if 0 not in fitted.posts:
-        return
+        return fitted
     at, km, sign = fitted.posts[0]
     for i, (k, fwd) in enumerate(chain):
         if fwd:
             model.posts[k] = (at - offset[i], km, sign)
         else:
             model.posts[k] = ((offset[i] + length[k] - at)[::-1], km[::-1], -sign)
+    return fitted
 
 
 def _xy_of(node: OsmNode, epsg: int) -> tuple[float, float]:

@@ -13,7 +13,13 @@ One pass over the file keeps:
 * the line relations (``type=route`` + ``route=railway|tracks`` with a ``ref``) and their
   member ways;
 * how many ways carry any other ``railway=*`` value (trams, subways, platforms, disused
-  lines …), with their ids, to report what was left out.
+  lines …), with their ids, to report what was left out;
+* the ids of the *areas* tagged ``railway=rail``: a closed way (first node = last node) that
+  also carries one of :data:`AREA_KEYS` (``building=yes`` + ``railway=rail`` is a mapper's
+  way of saying "a railway building", e.g. a substation) or ``area=yes`` is an outline, not a
+  centreline (OSM wiki "Area": a closed way with an area tag is an area). Imported as a track
+  it would be a ring a few metres long whose ends are one point; it is left out and reported
+  (``osm.area``).
 
 OSM data: © OpenStreetMap contributors, ODbL 1.0 (https://www.openstreetmap.org/copyright).
 """
@@ -42,6 +48,8 @@ RAILWAYS = ("rail",)
 NODE_KINDS = ("switch", "railway_crossing", "buffer_stop", "milestone", "balise_group")
 #: Way tags kept (everything the mapping reads).
 WAY_TAGS = ("railway", "service", "ref", "railway:ref", "railway:track_ref", "name", "usage", "area")
+#: Tags that make a closed rail way an area (module doc).
+AREA_KEYS = ("building", "landuse", "amenity", "power", "man_made")
 #: ``route=*`` values of the relations naming a line (the infrastructure; ``route=train``
 #: relations are services — a train number, not a line — and are not read).
 LINE_ROUTES = ("railway", "tracks")
@@ -94,6 +102,8 @@ class OsmData:
     nodes: dict[int, OsmNode] = field(default_factory=dict)
     other_ways: dict[str, list[int]] = field(default_factory=lambda: defaultdict(list))
     """``railway=*`` value → ids of the ways of that value not imported."""
+    areas: list[int] = field(default_factory=list)
+    """Ids of the closed ``railway=rail`` ways that are areas (module doc), not imported."""
     n_nodes: int = 0
     n_ways: int = 0
     routes: dict[int, tuple[str, str | None, int]] = field(default_factory=dict)
@@ -122,19 +132,35 @@ def read_osm(path: Path, railways: tuple[str, ...] = RAILWAYS) -> OsmData:
                 if kind in kinds and obj.location.valid():
                     data.nodes[obj.id] = OsmNode(obj.id, obj.location.lat, obj.location.lon, dict(obj.tags))
             elif isinstance(obj, osmium.osm.Way):
-                data.n_ways += 1
-                kind = obj.tags.get("railway")
-                if kind is None:
-                    continue
-                if kind not in wanted:
-                    data.other_ways[kind].append(obj.id)
-                    continue
-                data.ways.append(_rail_way(obj))
+                _way(data, obj, wanted)
             elif isinstance(obj, osmium.osm.Relation):
                 _route(data, obj)
     except RuntimeError as exc:  # osmium's parse errors (bad PBF blob, malformed XML, unknown format)
         raise InputError(f"not readable as OpenStreetMap data: {exc}", path=path) from exc
     return data
+
+
+def _way(data: OsmData, way: osmium.osm.Way, wanted: set[str]) -> None:
+    """A way: kept (a rail way), counted as left out (another ``railway=*`` or an area), or
+    ignored (no ``railway``)."""
+    data.n_ways += 1
+    kind = way.tags.get("railway")
+    if kind is None:
+        return
+    if kind not in wanted:
+        data.other_ways[kind].append(way.id)
+    elif is_area(way):
+        data.areas.append(int(way.id))
+    else:
+        data.ways.append(_rail_way(way))
+
+
+def is_area(way: osmium.osm.Way) -> bool:
+    """A closed way with an area tag (module doc): an outline, not a track."""
+    nodes = way.nodes
+    if len(nodes) < 4 or nodes[0].ref != nodes[len(nodes) - 1].ref:
+        return False
+    return way.tags.get("area") == "yes" or any(k in way.tags for k in AREA_KEYS)
 
 
 def _route(data: OsmData, rel: osmium.osm.Relation) -> None:

@@ -24,6 +24,12 @@ The ends meeting at a node (directions d pointing *away* from the node along eac
   b1's side (d_b1·d > 0), a2 the last; the routes of :data:`schemas.network.SWITCH_ROUTES`
   ``both``, every other pair ``none``. Which diagonal of a single slip has the slip route
   OSM does not say: A1–B2 is assumed (reported).
+* **4 ends with ``railway=switch``** and no slip tag (``railway:switch`` missing or
+  ``default``) whose directions form two sides of two ends each (:func:`two_sides`): two
+  tracks cross at a node with switch blades — a slip. Which one OSM does not say: imported as
+  a *double slip* (every route from one side to the other; which end pairs count as straight
+  through then does not matter; a route assumed costs the matcher an extra candidate, a route
+  missing loses the train), reported (``osm.switch_inferred``). Without two straight pairs: as *any other*.
 * **any other** — no switch row; every pair of ends whose directions are opposite within
   60° (dᵢ·dⱼ < −½) is joined ``both``, the others ``none`` (reported).
 """
@@ -63,8 +69,12 @@ class Junctions:
     dead_ends: int = 0
     untagged: list[int] = field(default_factory=list)
     runs_on: list[tuple[tuple[str, str], tuple[str, str]]] = field(default_factory=list)
-    """Track ends a line runs straight on through: plain joints and point switches' toe ↔
-    through branch (the branch that is not the diverging side), for the km chains."""
+    """Track ends a line runs straight on through: plain joints and the straight routes of
+    crossings and slips (A1–B1, A2–B2), for the km chains."""
+    points: list[tuple[tuple[str, str], tuple[str, str], tuple[str, str]]] = field(default_factory=list)
+    """Point switches' (toe, through branch, diverging branch) ends; the through branch is the
+    one not on the diverging side (the left one of a wye). Which branch the line runs on is
+    decided with the lines (:func:`dbtools.interchange.osm_km.switch_links`)."""
 
     def warn(self, rule: str, node: int, message: str, **keys: Any) -> None:
         self.findings.append(
@@ -140,9 +150,8 @@ def _point(j: Junctions, node: int, tags: dict[str, str], ends: list[End], lat: 
             "name": tags.get("ref") or tags.get("name"),
         }
     )
-    if side is not None:
-        through = right if side == "left" else left
-        j.runs_on.append(((toe[0], toe[1]), (through[0], through[1])))
+    through, diverging = (right, left) if side == "left" else (left, right)
+    j.points.append(((toe[0], toe[1]), (through[0], through[1]), (diverging[0], diverging[1])))
     _connect(j, toe, left, BOTH, sid)
     _connect(j, toe, right, BOTH, sid)
     _connect(j, left, right, NONE, sid)
@@ -168,6 +177,7 @@ def _crossing(
     for name in SWITCH_PORTS[kind]:
         row[f"{name}_track"], row[f"{name}_end"] = port[name][0], port[name][1]
     j.switches.append(row)
+    j.runs_on += [((a1[0], a1[1]), (b1[0], b1[1])), ((a2[0], a2[1]), (b2[0], b2[1]))]
     routes = {frozenset(r) for r in SWITCH_ROUTES[kind]}
     names = list(SWITCH_PORTS[kind])
     for i, p in enumerate(names):
@@ -192,6 +202,17 @@ def _kind_of(node: OsmNode | None, degree: int) -> SwitchType | None:
     if degree == 4 and node.kind == "switch":
         return SLIPS.get(node.tags.get("railway:switch", ""))
     return SwitchType.POINT if degree == 3 else None
+
+
+def two_sides(ends: list[End]) -> bool:
+    """Whether 4 ends form two sides of two ends each — within a side the directions agree
+    (dᵢ·dⱼ > −:data:`OPPOSITE`, under 60° apart), across the sides they are opposite
+    (dᵢ·dⱼ < :data:`OPPOSITE`): two tracks crossing at a node at a small angle."""
+    same = [[k for k in range(4) if k != i and _dot(ends[i], ends[k]) > -OPPOSITE] for i in range(4)]
+    if any(len(s) != 1 or same[s[0]] != [i] for i, s in enumerate(same)):
+        return False
+    mate = same[0][0]
+    return all(_dot(ends[i], ends[k]) < OPPOSITE for i in (0, mate) for k in range(4) if k not in (0, mate))
 
 
 def _at_node(j: Junctions, node_id: int, node: OsmNode | None, ends: list[End], ll: tuple[float, float]) -> None:
@@ -219,6 +240,15 @@ def _at_node(j: Junctions, node_id: int, node: OsmNode | None, ends: list[End], 
         _point(j, node_id, tags, ends, *ll)
     elif kind is not None:
         _crossing(j, node_id, kind, tags, ends, ll)
+    elif deg == 4 and node is not None and node.kind == "switch" and two_sides(ends):
+        j.warn(
+            "osm.switch_inferred",
+            node_id,
+            f"railway=switch where two tracks cross (4 ends, two on each side) without "
+            f"railway:switch=single_slip|double_slip ({tags.get('railway:switch', 'no railway:switch')}): "
+            "imported as a double slip (both slip routes assumed; tag the slip type)",
+        )
+        _crossing(j, node_id, SwitchType.DOUBLE_SLIP, tags, ends, ll)
     else:
         what = f"railway={node.kind}" if node is not None else "untagged"
         _generic(

@@ -7,6 +7,7 @@ import json
 import os
 import re
 import shlex
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -26,19 +27,36 @@ def _commands() -> list[list[str]]:
 
 
 def test_the_guide_workflow_runs_on_the_vde_file(tmp_path: Path) -> None:
+    """The guide's commands as written; ``db validate`` says what the guide says it says
+    (section "What db validate reports on the VDE 8.2 file": exit 1, 10 switch_overlap
+    errors, 169 + 4 + 2 warnings)."""
     cmds = _commands()
     assert [c[:2] for c in cmds] == [["db", "import"], ["db", "build"], ["db", "validate"]]
     cwd = os.getcwd()
     os.chdir(tmp_path)
     try:
         (tmp_path / "tests").symlink_to(ROOT / "tests")
-        for cmd in cmds:
+        outputs = []
+        for cmd, code in zip(cmds, (0, 0, 1), strict=True):
             res = runner.invoke(app, cmd)
-            assert res.exit_code == 0, (cmd, res.output)
+            assert res.exit_code == code, (cmd, res.output)
+            outputs.append(res.output)
+        res = runner.invoke(app, [*cmds[2], "--format", "json"])
     finally:
         os.chdir(cwd)
     report = json.loads((tmp_path / "vde-src" / "import_report.json").read_text())
-    assert report["rows"]["switches"] == 799 and (tmp_path / "vde.sqlite").is_file()
+    assert report["rows"]["switches"] == 811 and (tmp_path / "vde.sqlite").is_file()
+    assert "10 error(s), 175 warning(s)" in outputs[2]
+    counts = Counter((f["severity"], f["rule"]) for f in json.loads(res.output)["findings"])
+    assert counts == {
+        ("error", "topology.switch_overlap"): 10,
+        ("warning", "topology.open_end"): 169,
+        ("warning", "topology.isolated_track"): 4,
+        ("warning", "schema.empty_table"): 2,
+    }
+    guide = GUIDE.read_text(encoding="utf-8")
+    for (severity, rule), n in counts.items():
+        assert f"| `{rule}` ({severity}) | {n} |" in guide
 
 
 def test_the_format_is_taken_from_the_file_name(tmp_path: Path) -> None:

@@ -114,7 +114,10 @@ def test_km_is_interpolated_between_posts_and_breaks_are_reported(junction: Path
     # the parallel track of the same line (5 m away) takes the posts too, extrapolated beyond
     par = tp[tp["track_id"] == "w103_1"].set_index("pos_m")["km_m"]
     assert par[200.0] == pytest.approx(1100, abs=0.3) and par[600.0] == pytest.approx(1500, abs=0.3)
-    assert tp[tp["track_id"] == "w104"]["km_m"].isna().all()  # the crossover: no post, not on a through route
+    # the crossover w104 (line 6340, no post of its own, on no through route) runs from switch
+    # n9 (x = 700 on w103: km 1.6) to n4 (x = 800 on w101: km 1.7): anchored at both ends
+    cross = tp[tp["track_id"] == "w104"]["km_m"].to_numpy()
+    assert cross[0] == pytest.approx(1600, abs=0.3) and cross[-1] == pytest.approx(1700, abs=0.3)
     # the km runs on along the line: through the switch n2 (toe → through branch w101_2),
     # the plain route on through n4 (toe w101_3 → through w101_2) and n9 on the other track
     t = _read(junction, "tracks").set_index("track_id")
@@ -207,15 +210,16 @@ def test_vde_switches_checked_by_hand(vde: Path) -> None:
 
 def test_vde_counts_and_km(vde: Path) -> None:
     t = _read(vde, "tracks")
-    assert len(t) == 2453 and t["track_id"].is_unique
+    assert len(t) == 2451 and t["track_id"].is_unique  # ways 927446286, 935171552: building outlines, not tracks
     c = _read(vde, "connections")
     assert 3500 <= len(c) <= 3800
     known = set(t["track_id"])
     assert set(c["track_a"]) <= known and set(c["track_b"]) <= known
-    # 1,074 of the 1,327 tracks with a line get a km: 455 of their 507 km (the km runs on
-    # through plain joints and switches' through branches, posts are sparse in OSM)
+    # 1,162 of the 1,327 tracks with a line get a km: 473 of their 507 km (the km runs on
+    # through plain joints and switches' through branches, a track joining its line at both
+    # ends takes the km there; posts are sparse in OSM)
     with_km = t["km_begin_m"].notna()
-    assert with_km.sum() >= 1000 and t.loc[with_km, "length_m"].sum() > 400_000
+    assert with_km.sum() >= 1150 and t.loc[with_km, "length_m"].sum() > 470_000
     # along a track the km changes by its length (1 m per m), give or take the posts' spacing
     change = (t["km_end_m"] - t["km_begin_m"]).abs()[with_km]
     assert (np.abs(change - t.loc[with_km, "length_m"]) < 0.1 * t.loc[with_km, "length_m"] + 60).mean() > 0.95
@@ -258,9 +262,11 @@ def test_cologne_imports_and_accounts_for_every_switch(tmp_path: Path) -> None:
     res = import_osm(COLOGNE, tmp_path / "k")
     nodes = _switch_nodes(COLOGNE)
     assert len(nodes) == 3657
-    # 2,963 switch rows: the others are on light rail and tram ways (excluded, reported as
-    # unplaced), at the extract's edge or where 4 tracks meet without a slip tag
-    assert res.rows["switches"] == 2963
+    # 2,982 switch rows (19 of them railway=switch nodes where two tracks cross, taken as
+    # double slips): the others are on light rail and tram ways (excluded, reported as
+    # unplaced), at the extract's edge or where 4 tracks meet in no slip's shape
+    assert res.rows["switches"] == 2982
+    assert sum(f.rule == "osm.switch_inferred" for f in res.findings) == 19
     sw = pd.read_csv(tmp_path / "k" / "switches.csv")
     rows = {int(s[1:]) for s in sw["switch_id"]}
     report = json.loads((tmp_path / "k" / "import_report.json").read_text())
