@@ -1,4 +1,5 @@
-"""README's ``logs import`` examples on the repository's hand-made files run as written."""
+"""The user guide's ``logs import`` examples (docs/guide/field-logs.md) on the repository's
+hand-made files run as written."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[3]
 
 
 def _examples() -> list[list[str]]:
-    text = (ROOT / "README.md").read_text(encoding="utf-8").replace("\\\n", " ")
+    text = (ROOT / "docs" / "guide" / "field-logs.md").read_text(encoding="utf-8").replace("\\\n", " ")
     return [shlex.split(m)[1:] for m in re.findall(r"^trainpos logs import tests/data/recorders/.*$", text, re.M)]
 
 
