@@ -115,7 +115,7 @@ def _invocations(text: str) -> list[list[str]]:
     calls = []
     for block in re.findall(r"```sh\n(.*?)```", text, flags=re.S):
         for line in block.replace("\\\n", " ").splitlines():
-            line = line.split("#")[0].strip()
+            line = re.split(r"\s(?:\|\||&&|\||;)\s", line.split("#")[0])[0].strip()  # the command, not `|| …`
             if line.startswith("trainpos "):
                 calls.append(shlex.split(line)[1:])
     return calls
