@@ -234,10 +234,11 @@ def test_index_is_cached_per_network(demo):
 
 
 def test_warm_up_loads_the_kernel_a_run_uses() -> None:
-    """The fork-server warm-up (fieldlogs.pipeline.warm) loads the very overload a match
-    uses: after it, matching the demo line adds no compiled signature."""
+    """The fork-server warm-up (fieldlogs.pipeline.warm, imported after the server's
+    fieldlogs.replay._server) loads the very overload a match uses: after it, matching the
+    demo line adds no compiled signature."""
     code = (
-        "import fieldlogs.pipeline.warm\n"
+        "import fieldlogs.replay._server, fieldlogs.pipeline.warm\n"
         "from dbtools.gis import match_kernel as k, matching as m\n"
         "from dbtools.gis.geometry import Projector\n"
         "from dbtools.synthetic.network import build_network, demo_line\n"
