@@ -35,7 +35,6 @@ from __future__ import annotations
 import contextlib
 import gc
 import importlib
-import io
 import os
 import signal
 import sys
@@ -183,7 +182,7 @@ def fork_worker_init(coordinator: int) -> None:
         if old is None:
             continue
         try:
-            new = io.open(fd, "w", encoding=old.encoding, errors=old.errors, closefd=False, buffering=1)
+            new = open(fd, "w", encoding=old.encoding, errors=old.errors, closefd=False, buffering=1)
         except (OSError, ValueError, AttributeError):  # no such descriptor: keep the old one
             continue
         setattr(sys, name, new)

@@ -99,7 +99,9 @@ def test_errors_are_records_ordered_or_as_completed_with_progress(runs: list[Pat
             assert os.getpid() not in pids  # this process only stored results
 
 
-def test_the_pool_starts_no_more_workers_than_the_fleet_pays_for(runs: list[Path], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_pool_starts_no_more_workers_than_the_fleet_pays_for(
+    runs: list[Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     """At least two runs per worker, never more workers than cores; one = in this process."""
     monkeypatch.setattr(os, "sched_getaffinity", lambda _pid: {0, 1})
     assert [pool_size(2, n) for n in (0, 1, 2, 3, 4, 5, 100)] == [1, 1, 1, 1, 2, 2, 2]
