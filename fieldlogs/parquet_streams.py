@@ -344,15 +344,22 @@ class StreamCursor:
             groups = self._groups(t0, t1)
             rows: Selection = (0, 0)
             keep: Selection = (0, 0)
+            held = True
             for col in sorted(self.present, key=lambda c: c.name != "t"):  # t first: it selects
                 self._append(col.name, groups)
                 if col.name == "t":
                     rows, keep = self._rows(t0, t1), self._rows(carry, math.inf)
+                    held = _count(keep) <= MAX_CARRY * _count(rows)
                 fast[col.name] = _arrow_column(col, _selected(self.buf[col.name], rows))
-                # only the overlap with the next window stays
-                self.buf[col.name] = _selected(self.buf[col.name], keep, compact=True)
-            self.t0 = carry
+                if held:  # only the overlap with the next window stays
+                    self.buf[col.name] = _selected(self.buf[col.name], keep, compact=True)
+                else:  # none: the next window decodes its groups again
+                    del self.buf[col.name]
             n_rows = len(fast["t"])
+            if held:
+                self.t0 = carry
+            else:
+                self.buf, self.next_group = {}, 0
         except (pa.ArrowException, OSError):
             self.reset()
             return None
@@ -403,13 +410,27 @@ class StreamCursor:
 
 #: Rows of a cursor's buffer: (offset, length) or a boolean mask.
 Selection = tuple[int, int] | pa.ChunkedArray
+#: Most rows a cursor keeps for the next window, as a share of the window's rows: more (a
+#: long row group decoded beyond the window — the simulator's tacho, GPS and truth files
+#: are one group up to a day) and the group is decoded again by the next window instead,
+#: so the memory a cursor holds stays a fraction of a window's.
+MAX_CARRY = 0.5
+
+
+def _count(rows: Selection) -> int:
+    import pyarrow.compute as pc
+
+    return rows[1] if isinstance(rows, tuple) else int(pc.sum(rows).as_py() or 0)
 
 
 def _selected(arr: pa.ChunkedArray, rows: Selection, *, compact: bool = False) -> pa.ChunkedArray:
-    """``rows`` of ``arr``: a zero-copy slice, or the masked rows (``compact``: in buffers of
-    their own, not the group's; a slice keeps a group's buffers until its last row goes)."""
+    """``rows`` of ``arr``: a zero-copy slice, or the masked rows; ``compact``: in buffers of
+    their own (what a cursor keeps: a slice would keep its whole row group's buffers)."""
     if isinstance(rows, tuple):
-        return arr if rows == (0, len(arr)) else arr.slice(*rows)
+        if rows == (0, len(arr)):
+            return arr
+        out = arr.slice(*rows)
+        return _compact(out) if compact else out
     out = arr.filter(rows)
     return _compact(out) if compact else out
 
