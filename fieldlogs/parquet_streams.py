@@ -15,7 +15,7 @@ from __future__ import annotations
 import itertools
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 import numpy as np
 import pandas as pd
@@ -398,7 +398,8 @@ class StreamCursor:
         if t.size < 2 or bool(np.all(t[1:] >= t[:-1])):  # sorted (no NaN)
             i0, i1 = (int(i) for i in np.searchsorted(t, [t0, t1], side="left"))
             return i0, i1 - i0
-        return pc.and_(pc.greater_equal(self.buf["t"], t0), pc.less(self.buf["t"], t1))
+        mask: Selection = pc.and_(pc.greater_equal(self.buf["t"], t0), pc.less(self.buf["t"], t1))
+        return mask
 
     def _trim(self, t0: float) -> None:
         """Drop the buffered rows with t < t0 (no later window needs them)."""
@@ -409,7 +410,7 @@ class StreamCursor:
 
 
 #: Rows of a cursor's buffer: (offset, length) or a boolean mask.
-Selection = tuple[int, int] | pa.ChunkedArray
+Selection: TypeAlias = tuple[int, int] | Any
 #: Most rows a cursor keeps for the next window, as a share of the window's rows: more (a
 #: long row group decoded beyond the window — the simulator's tacho, GPS and truth files
 #: are one group up to a day) and the group is decoded again by the next window instead,
