@@ -262,11 +262,18 @@ def context_on(
 
 
 def run_pipeline(
-    run: Run, network: Network, cfg: PipelineConfig | None = None, *, clock_offsets: Offsets | None = None
+    run: Run,
+    network: Network,
+    cfg: PipelineConfig | None = None,
+    *,
+    clock_offsets: Offsets | None = None,
+    summary: bool = True,
 ) -> PipelineResult:
     """Replay a run through the onboard logic; raises FindingsError when run.json is unusable.
     ``clock_offsets``: applied instead of those the run's own clock check finds (or a
-    function of those giving the ones to apply, :data:`Offsets`)."""
+    function of those giving the ones to apply, :data:`Offsets`). ``summary``: False for a
+    result whose summary is not wanted (a window of a long run: the run's is made from the
+    windows' parts, :mod:`fieldlogs.pipeline.windows`), then empty."""
     cfg = cfg or PipelineConfig()
     ctx, pre = prepare_run(run, network, cfg, clock_offsets)
     first = ctx
@@ -280,10 +287,12 @@ def run_pipeline(
     events.sort(key=lambda e: e.t)
     ev_frame = events_frame(events)
     truth = ctx.streams["truth"]
-    summary = summarise(run, network, cfg, sol.positions, ev_frame, odo, ctx.gps, wheel_scale=scale)
-    if truth is not None and len(truth):
-        summary["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
+    figures: dict[str, Any] = {}
+    if summary:
+        figures = summarise(run, network, cfg, sol.positions, ev_frame, odo, ctx.gps, wheel_scale=scale)
+        if truth is not None and len(truth):
+            figures["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
     kappa = ctx.features.kappa if ctx.features is not None else None
     return PipelineResult(
-        run.run_id, sol.positions, ev_frame, summary, odo, ctx.gps, kappa, truth, ctx.cycles, ctx.gnss, scale
+        run.run_id, sol.positions, ev_frame, figures, odo, ctx.gps, kappa, truth, ctx.cycles, ctx.gnss, scale
     )

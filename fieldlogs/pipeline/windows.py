@@ -141,7 +141,8 @@ class Kept:
 
     window: Window
     result: PipelineResult
-    """The window's result restricted to its kept cycles (its summary is the window's own)."""
+    """The window's result restricted to its kept cycles (its summary empty: the run's is
+    made from the windows' :attr:`parts`)."""
     parts: RunParts
     """The summary's parts of the kept span."""
     lead_m: float
@@ -156,7 +157,7 @@ def replay_windows(run: Run, network: Network, cfg: PipelineConfig, windows: lis
     try:
         for w in windows:
             view = _view(run, windows, w)
-            part = run_pipeline(view, network, cfg, clock_offsets=offsets.chooser(w.index))
+            part = run_pipeline(view, network, cfg, clock_offsets=offsets.chooser(w.index), summary=False)
             del view
             kept = _kept(w, part, run.meta.wheel_diameter_m)
             del part
@@ -387,20 +388,15 @@ def _last_position(pos: pd.DataFrame) -> tuple[float, float] | None:
 
 
 def _give_back_memory() -> None:
-    """Return a finished window's memory to the system before the next one is read: Arrow's
-    pool keeps freed buffers, and glibc keeps freed heap pages resident (``malloc_trim``, as
-    Dask's workers do); without it each window would start above the last one's peak."""
-    import ctypes
+    """Free a finished window's cyclic garbage before the next one is read: a collection
+    of the young generations only (a full one visits every object of the process — the
+    DB, the modules — 0.1 s a window). Freed memory is not handed back to the system
+    (``malloc_trim``, Arrow's ``release_unused``): the next window, the same size, reuses
+    it instead of faulting in fresh pages (0.3–0.6 s of system time at 8–24 h, for
+    10–15 MB more peak; bench/NOTES.md, "issue 34")."""
     import gc
 
-    import pyarrow as pa
-
     gc.collect(1)
-    pa.default_memory_pool().release_unused()
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc: the allocator keeps what it keeps
-        pass
 
 
 def _kept(w: Window, part: PipelineResult, wheel_diameter_m: float | None) -> Kept:
