@@ -33,6 +33,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -69,9 +70,10 @@ def one(run_dir: Path, db: Path) -> dict[str, float]:
     return {"hours": duration / 3600.0, "cpu": best_c, "wall": best_w, "cycles": cycles}
 
 
-def worker(run_dir: Path, db: Path) -> dict[str, float]:
+def worker(run_dir: Path, db: Path, *, whole: bool = False) -> dict[str, float]:
     """Peak memory of one run processed as ``trainpos run`` does it: reading included, a long
-    run replayed in windows, the positions written to the output files as they come."""
+    run replayed in windows (``whole``: never, ``[window] length_h = 0``), the positions
+    written to the output files as they come."""
     from dbtools.database import read_network
     from fieldlogs.io import read_run
     from fieldlogs.pipeline.config import PipelineConfig
@@ -88,7 +90,10 @@ def worker(run_dir: Path, db: Path) -> dict[str, float]:
             if f.is_file() and f.name != "truth.parquet":
                 os.link(f, field / f.name)
         with streamed_results(Path(tmp) / "out") as sink:
-            res = replay_bounded(read_run(field), net, PipelineConfig(), lambda p: sink.add_positions(p.positions))
+            cfg = PipelineConfig()
+            if whole:
+                cfg = replace(cfg, window=replace(cfg.window, length_h=0.0))
+            res = replay_bounded(read_run(field), net, cfg, lambda p: sink.add_positions(p.positions))
             sink.finish(res.events, res.summary)
     cpu = time.process_time() - c0
     return {
@@ -112,15 +117,44 @@ def _child(flag: str, run_dir: Path, db: Path) -> dict[str, float]:
     return out
 
 
+def _windowed_against_whole(run_dir: Path, db: Path, hours: float, rounds: int) -> None:
+    """CPU and peak memory of the windowed worker over the whole replay's, in ``rounds``
+    interleaved pairs of fresh processes (target: CPU ≤ 1.1×, the memory a window's)."""
+    ratios, peaks = [], []
+    for _ in range(rounds):
+        a, b = _child("--worker", run_dir, db), _child("--worker-whole", run_dir, db)
+        ratios.append(a["worker_cpu"] / b["worker_cpu"])
+        peaks.append((a["rss_mb"], b["rss_mb"]))
+        print(
+            f"        windowed {a['worker_cpu']:.2f} s CPU, peak {a['rss_mb']:.0f} MB; whole {b['worker_cpu']:.2f} s, "
+            f"{b['rss_mb']:.0f} MB  [{load()}]",
+            flush=True,
+        )
+    print(
+        f"{hours:6.2f} h windowed / whole worker CPU: median {float(np.median(ratios)):.2f}× "
+        f"({', '.join(f'{x:.2f}' for x in ratios)}); peak RSS "
+        f"{', '.join(f'{a:.0f}/{b:.0f}' for a, b in peaks)} MB (target CPU ≤ 1.1×)",
+        flush=True,
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, nargs="+", default=[0.25, 1.0, 4.0])
     ap.add_argument("--dir", type=Path, default=None, help="keep the simulated runs here (reused)")
     ap.add_argument("--one", nargs=2, type=Path, metavar=("RUN", "DB"), help=argparse.SUPPRESS)
     ap.add_argument("--worker", nargs=2, type=Path, metavar=("RUN", "DB"), help=argparse.SUPPRESS)
+    ap.add_argument("--worker-whole", nargs=2, type=Path, metavar=("RUN", "DB"), help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--rounds", type=int, default=2, help="windowed / whole worker pairs per run replayed in windows (default 2)"
+    )
     args = ap.parse_args()
-    if args.one or args.worker:
-        print(json.dumps(one(*args.one) if args.one else worker(*args.worker)))
+    if args.one or args.worker or args.worker_whole:
+        if args.one:
+            out = one(*args.one)
+        else:
+            out = worker(*args.worker) if args.worker else worker(*args.worker_whole, whole=True)
+        print(json.dumps(out))
         return
     with tempfile.TemporaryDirectory() as tmpd:
         folder = args.dir or Path(tmpd)
@@ -139,6 +173,8 @@ def main() -> None:
                 f"[{load()}]",
                 flush=True,
             )
+            if r["windows"]:
+                _windowed_against_whole(run_dir, db, r["hours"], args.rounds)
     hours = np.array([r["hours"] for r in rows])
     cpu = np.array([r["cpu"] for r in rows])
     wall = np.array([r["wall"] for r in rows])

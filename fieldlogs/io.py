@@ -34,6 +34,7 @@ from dbtools.atomic import atomic_folder
 from dbtools.tabular import read_raw_table
 from dbtools.typed_csv import read_csv_typed
 from fieldlogs.parquet_streams import (
+    StreamCursor,
     parquet_windowable,
     read_parquet_stream,
     read_parquet_stream_between,
@@ -283,6 +284,10 @@ class Run:
         self.span: tuple[float, float] | None = None
         """Set on a :meth:`window` view: only the rows with span[0] ≤ t < span[1] are read."""
         self.spooled: dict[str, Path] = {}
+        self.carry_from: float | None = None
+        """Set on a :meth:`window` view: where the next window will start."""
+        self._cursors: dict[str, StreamCursor] = {}
+        """Per stream, consecutive windows' reader (:meth:`window`; shared by the views)."""
         """CSV streams also written as Parquet (:mod:`fieldlogs.csv_spool`), which windows read."""
         self._scan()
         self.findings.extend(_block_findings(data, json_path, has_tacho=self.has("tacho")))
@@ -392,7 +397,9 @@ class Run:
                 self.findings.extend(findings)
         return self._streams[name]
 
-    def window(self, t0: float, t1: float, streams: Iterable[str] | None = None) -> Run | None:
+    def window(
+        self, t0: float, t1: float, streams: Iterable[str] | None = None, *, carry_from: float | None = None
+    ) -> Run | None:
         """A view of this run holding only the rows with t0 ≤ t < t1 of every stream (run.json,
         files and findings so far shared), each stream (or its spooled copy) read by time window
         (:func:`fieldlogs.parquet_streams.read_parquet_stream_between`): the memory of a long
@@ -400,10 +407,17 @@ class Run:
         run that cannot be read by windows — a CSV stream, a Parquet column that must be
         coerced — gives None (the caller reads it whole, where the findings are made).
         :meth:`release` then :meth:`stream` reads the window again. ``streams``: only these
-        are read now (the others on first access)."""
+        are read now (the others on first access).
+
+        Consecutive windows whose bounds never go back are read through one cursor per stream
+        (:class:`fieldlogs.parquet_streams.StreamCursor`): each row group is decoded once, not
+        once per window it reaches; ``carry_from`` (where the next window starts) lets the
+        cursor drop at once the rows no later window needs. :meth:`close_windows` drops what
+        the cursors hold."""
         wanted = set(self.streams_present() if streams is None else streams)
         view = copy.copy(self)
         view.span = (t0, t1)
+        view.carry_from = carry_from
         view.findings = list(self.findings)
         view._streams = {}
         view._stream_findings = {}
@@ -436,7 +450,25 @@ class Run:
             except InputError:
                 return None
         t0, t1 = self.span
-        return read_parquet_stream_between(table, path, -math.inf if table.held else t0, t1)
+        lo = -math.inf if table.held else t0
+        cursor = self._cursors.get(name)
+        if cursor is None or cursor.path != path:
+            cursor = self._cursors[name] = StreamCursor(table, path)
+        read = cursor.between(lo, t1, None if table.held else self.carry_from)
+        if read is not None:
+            return read
+        return read_parquet_stream_between(table, path, lo, t1)
+
+    def lookahead(self) -> Run:
+        """This run with cursors of its own (:meth:`window`), to read windows ahead of the
+        ones this run's cursors are reading without moving them back."""
+        ahead = copy.copy(self)
+        ahead._cursors = {}
+        return ahead
+
+    def close_windows(self) -> None:
+        """Drop the rows the window cursors hold (:meth:`window`)."""
+        self._cursors.clear()
 
     def loaded(self, name: str) -> bool:
         """Whether the stream is in memory (read and not released)."""

@@ -25,6 +25,7 @@ loop over the few moments an aid speaks):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -58,6 +59,10 @@ __all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
 
 #: Streams the pipeline reads.
 STREAMS = ("tacho", "imu", "balise", "gps", "cab", "truth", "radar", "radar_if")
+#: Clock offsets given to :func:`run_pipeline`: those to apply, or a function of those the
+#: run's own check finds giving those to apply (a window of a long run,
+#: :mod:`fieldlogs.pipeline.windows`, borrows what it could not determine).
+Offsets = list[ClockOffset] | Callable[[list[ClockOffset]], list[ClockOffset]]
 #: Streams the clock check reads (:func:`fieldlogs.quality.clocks.clock_offsets`).
 CLOCK_STREAMS = ("tacho", "imu", "gps", "cab")
 
@@ -151,16 +156,18 @@ def clocks_aligned(
     teeth: int | None,
     cfg: PipelineConfig,
     events: list[Event],
-    offsets: list[ClockOffset] | None = None,
+    offsets: Offsets | None = None,
 ) -> dict[str, pd.DataFrame | None]:
     """The IMU and GPS on the tacho's clock: a determined offset beyond ``clock.tolerance_s``
     (:func:`fieldlogs.quality.clocks.clock_offsets`, the check ``logs check`` reports as
     ``log.clock_offset``, or ``offsets`` when given: a window of a long run borrows what it
-    could not determine, :mod:`fieldlogs.pipeline.windows`) moves the stream's t back by it,
-    each a ``clock_offset`` event."""
+    could not determine, :mod:`fieldlogs.pipeline.windows`; or a function of the offsets the
+    check finds giving those to apply) moves the stream's t back by it, each a
+    ``clock_offset`` event."""
     out = dict(streams)
-    if offsets is None:
-        offsets = clock_offsets(streams, wheel_diameter_m, teeth, cfg.clock, cfg.cycle_s)
+    if offsets is None or callable(offsets):
+        own = clock_offsets(streams, wheel_diameter_m, teeth, cfg.clock, cfg.cycle_s)
+        offsets = own if offsets is None else offsets(own)
     for o in offsets:
         frame = out.get(o.stream)
         if not o.beyond_tolerance or frame is None:
@@ -196,11 +203,12 @@ def run_clock_offsets(run: Run, cfg: PipelineConfig) -> list[ClockOffset]:
 
 
 def prepare_run(
-    run: Run, network: Network, cfg: PipelineConfig, offsets: list[ClockOffset] | None = None
+    run: Run, network: Network, cfg: PipelineConfig, offsets: Offsets | None = None
 ) -> tuple[RunContext, list[Event]]:
     """Stages 1–4 of the module docstring: the context the aids are built from, and the
     ``input_repaired`` events of the cleaning; raises FindingsError when run.json is unusable.
-    ``offsets``: the clock offsets to apply instead of those the run's own check finds.
+    ``offsets``: the clock offsets to apply instead of those the run's own check finds (or
+    a function of those, :data:`Offsets`).
     The IMU stream is released once its cycle means are built, unless the caller had loaded
     it (:meth:`Run.release`: the memory of a long run is then its cycles, not its samples)."""
     keep_imu = run.loaded("imu")
@@ -254,10 +262,18 @@ def context_on(
 
 
 def run_pipeline(
-    run: Run, network: Network, cfg: PipelineConfig | None = None, *, clock_offsets: list[ClockOffset] | None = None
+    run: Run,
+    network: Network,
+    cfg: PipelineConfig | None = None,
+    *,
+    clock_offsets: Offsets | None = None,
+    summary: bool = True,
 ) -> PipelineResult:
     """Replay a run through the onboard logic; raises FindingsError when run.json is unusable.
-    ``clock_offsets``: applied instead of those the run's own clock check finds."""
+    ``clock_offsets``: applied instead of those the run's own clock check finds (or a
+    function of those giving the ones to apply, :data:`Offsets`). ``summary``: False for a
+    result whose summary is not wanted (a window of a long run: the run's is made from the
+    windows' parts, :mod:`fieldlogs.pipeline.windows`), then empty."""
     cfg = cfg or PipelineConfig()
     ctx, pre = prepare_run(run, network, cfg, clock_offsets)
     first = ctx
@@ -271,10 +287,12 @@ def run_pipeline(
     events.sort(key=lambda e: e.t)
     ev_frame = events_frame(events)
     truth = ctx.streams["truth"]
-    summary = summarise(run, network, cfg, sol.positions, ev_frame, odo, ctx.gps, wheel_scale=scale)
-    if truth is not None and len(truth):
-        summary["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
+    figures: dict[str, Any] = {}
+    if summary:
+        figures = summarise(run, network, cfg, sol.positions, ev_frame, odo, ctx.gps, wheel_scale=scale)
+        if truth is not None and len(truth):
+            figures["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
     kappa = ctx.features.kappa if ctx.features is not None else None
     return PipelineResult(
-        run.run_id, sol.positions, ev_frame, summary, odo, ctx.gps, kappa, truth, ctx.cycles, ctx.gnss, scale
+        run.run_id, sol.positions, ev_frame, figures, odo, ctx.gps, kappa, truth, ctx.cycles, ctx.gnss, scale
     )

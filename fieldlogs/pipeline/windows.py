@@ -141,7 +141,8 @@ class Kept:
 
     window: Window
     result: PipelineResult
-    """The window's result restricted to its kept cycles (its summary is the window's own)."""
+    """The window's result restricted to its kept cycles (its summary empty: the run's is
+    made from the windows' :attr:`parts`)."""
     parts: RunParts
     """The summary's parts of the kept span."""
     lead_m: float
@@ -152,19 +153,25 @@ def replay_windows(run: Run, network: Network, cfg: PipelineConfig, windows: lis
     """Each window's kept part, in time order (module docstring). Raises what
     :func:`run_pipeline` raises on a window, InputError when a stream cannot be read by time."""
     assert run.meta is not None
-    offsets = window_offsets(run, cfg, windows)
-    for w, own in zip(windows, offsets, strict=True):
-        view = _view(run, w)
-        part = run_pipeline(view, network, cfg, clock_offsets=own)
-        del view
-        kept = _kept(w, part, run.meta.wheel_diameter_m)
-        del part
-        _give_back_memory()
-        yield kept
+    offsets = _WindowOffsets(run, cfg, windows)
+    try:
+        for w in windows:
+            view = _view(run, windows, w)
+            part = run_pipeline(view, network, cfg, clock_offsets=offsets.chooser(w.index), summary=False)
+            del view
+            kept = _kept(w, part, run.meta.wheel_diameter_m)
+            del part
+            _give_back_memory()
+            yield kept
+    finally:
+        run.close_windows()
 
 
-def _view(run: Run, w: Window, streams: tuple[str, ...] | None = None) -> Run:
-    view = run.window(w.read_from, w.read_to, streams)
+def _view(run: Run, windows: list[Window], w: Window, streams: tuple[str, ...] | None = None) -> Run:
+    """Window ``w`` of ``run``, read through the run's cursors (:meth:`Run.window`): the
+    rows before the next window's start are not kept for it."""
+    nxt = windows[w.index + 1].read_from if w.index + 1 < len(windows) else None
+    view = run.window(w.read_from, w.read_to, streams, carry_from=nxt)
     if view is None:
         raise InputError("a stream could not be read by time window", path=run.folder)
     return view
@@ -176,23 +183,63 @@ MIN_AGREEING_WINDOWS = 2
 
 
 def window_offsets(run: Run, cfg: PipelineConfig, windows: list[Window]) -> list[list[ClockOffset]]:
-    """The clock offsets each window applies: its own where its clock check determines one;
-    else, when at least :data:`MIN_AGREEING_WINDOWS` other windows determined the stream's
-    offset and they agree within ``clock.tolerance_s``, the one of those nearest to it (the
-    earlier on a tie; ``from_t`` says which). A clock offset belongs to the recorder, not to
-    a part of the run, so a window with too little motion to find it must not run on a
-    wrong clock; but one window's finding alone is not taken for the others (on a 3-minute
-    window of the tunnel sample run the GPS check "finds" −0.96 s; spread to its neighbours
-    it put 5 % of their cycles outside the margin). A first pass: the IMU is read twice."""
-    found = []
-    for w in windows:
-        view = _view(run, w, CLOCK_STREAMS)
-        found.append(run_clock_offsets(view, cfg))
-        del view
-        _give_back_memory()
-    first = windows[0].keep_to - cfg.window.length_h * 3600.0  # where the first window's part starts
-    out: list[list[ClockOffset]] = []
-    for k, own in enumerate(found):
+    """The clock offsets each window applies (:func:`choose_offset`), every window's clock
+    check made first (a pass of its own over the clock streams; the replay itself makes a
+    window's check once, in its own pipeline, and looks ahead only for a window that could
+    not determine an offset: :class:`_WindowOffsets`)."""
+    found = _WindowOffsets(run, cfg, windows)
+    return [found.chosen(k, found.own(k)) for k in range(len(windows))]
+
+
+class _WindowOffsets:
+    """The clock offsets of a long run's windows: its own where a window's clock check
+    determines one; else, when at least :data:`MIN_AGREEING_WINDOWS` other windows
+    determined the stream's offset and they agree within ``clock.tolerance_s``, the one of
+    those nearest to it (the earlier on a tie; ``from_t`` says which). A clock offset
+    belongs to the recorder, not to a part of the run, so a window with too little motion
+    to find it must not run on a wrong clock; but one window's finding alone is not taken
+    for the others (on a 3-minute window of the tunnel sample run the GPS check "finds"
+    −0.96 s; spread to its neighbours it put 5 % of their cycles outside the margin).
+
+    A window's own check is made once: in its replay (:meth:`chooser`, on the streams its
+    pipeline has cleaned) or, when an earlier window needs every window's finding because
+    it determined nothing for a stream, by reading the later windows' clock streams ahead
+    (their own cursors; the replay then reuses those findings)."""
+
+    def __init__(self, run: Run, cfg: PipelineConfig, windows: list[Window]) -> None:
+        self.run, self.cfg, self.windows = run, cfg, windows
+        self.found: dict[int, list[ClockOffset]] = {}
+
+    def chooser(self, k: int) -> Callable[[list[ClockOffset]], list[ClockOffset]]:
+        """For :func:`run_pipeline`: window k's own findings → the offsets it applies."""
+
+        def choose(own: list[ClockOffset]) -> list[ClockOffset]:
+            self.found.setdefault(k, own)
+            return self.chosen(k, self.found[k])
+
+        return choose
+
+    def own(self, k: int) -> list[ClockOffset]:
+        """Window k's own findings, its clock streams read by a cursor of their own."""
+        if k not in self.found:
+            ahead = self.run.lookahead()
+            try:
+                for j, w in enumerate(self.windows):  # every window not replayed yet, in order
+                    if j not in self.found:
+                        view = _view(ahead, self.windows, w, CLOCK_STREAMS)
+                        self.found[j] = run_clock_offsets(view, self.cfg)
+                        del view
+                        _give_back_memory()
+            finally:
+                ahead.close_windows()
+        return self.found[k]
+
+    def chosen(self, k: int, own: list[ClockOffset]) -> list[ClockOffset]:
+        windows, cfg = self.windows, self.cfg
+        if all(o.determined for o in own):
+            return own
+        found = [own if j == k else self.own(j) for j in range(len(windows))]
+        first = windows[0].keep_to - cfg.window.length_h * 3600.0  # where the first window's part starts
         chosen = []
         for o in own:
             others = [(abs(j - k), j, x) for j, f in enumerate(found) if j != k for x in f if x.stream == o.stream]
@@ -206,8 +253,7 @@ def window_offsets(run: Run, cfg: PipelineConfig, windows: list[Window]) -> list
             _, j, x = min(agreeing, key=lambda e: (e[0], e[1]))
             start = windows[j].keep_from
             chosen.append(replace(x, from_t=start if math.isfinite(start) else first))
-        out.append(chosen)
-    return out
+        return chosen
 
 
 @dataclass
@@ -342,20 +388,15 @@ def _last_position(pos: pd.DataFrame) -> tuple[float, float] | None:
 
 
 def _give_back_memory() -> None:
-    """Return a finished window's memory to the system before the next one is read: Arrow's
-    pool keeps freed buffers, and glibc keeps freed heap pages resident (``malloc_trim``, as
-    Dask's workers do); without it each window would start above the last one's peak."""
-    import ctypes
+    """Free a finished window's cyclic garbage before the next one is read: a collection
+    of the young generations only (a full one visits every object of the process — the
+    DB, the modules — 0.1 s a window). Freed memory is not handed back to the system
+    (``malloc_trim``, Arrow's ``release_unused``): the next window, the same size, reuses
+    it instead of faulting in fresh pages (0.3–0.6 s of system time at 8–24 h, for
+    10–15 MB more peak; bench/NOTES.md, "issue 34")."""
     import gc
 
-    import pyarrow as pa
-
-    gc.collect()
-    pa.default_memory_pool().release_unused()
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc: the allocator keeps what it keeps
-        pass
+    gc.collect(1)
 
 
 def _kept(w: Window, part: PipelineResult, wheel_diameter_m: float | None) -> Kept:

@@ -9,11 +9,18 @@ as does a worker process that dies, and the other runs go on.
 Where the runs go (one call path, :func:`run_task`, for all three):
 
 * ``workers=1`` (or a single run): in this process;
-* ``workers=N``: a pool of N processes forked from a fork server that imports the
-  worker's module once (not ``fork``: the caller may run threads — a progress bar, a Dask
-  client, BLAS). Starting the server takes seconds, so meanwhile this process replays runs
-  from the back of the queue itself until the pool's first result arrives: a small replay
-  is never slower than one worker and a large one loses no time to the start-up;
+* ``workers=N``: a pool of at most N processes, never more than the runs
+  (:func:`pool_size`). On Linux they are forked from this process (``START_METHOD``
+  "fork") once it has imported the worker's modules: they start in milliseconds with
+  everything this process loaded (the DB of :mod:`fieldlogs.replay.network` included) and
+  this process only stores results — the pool's fixed cost is a few tens of ms of CPU, not a
+  second interpreter's imports (bench/NOTES.md, "Audit on 2 workers, issue 34"). A fork
+  is safe here although the caller may run threads (a progress bar's refresh): a worker
+  touches none of their locks, gets fresh standard streams (:func:`fork_worker_init`),
+  and the stdlib re-creates the import and logging locks. Elsewhere they come from a fork
+  server that imports the worker's module once; starting it takes seconds, so meanwhile
+  this process replays runs from the back of the queue itself until the pool's first
+  result arrives;
 * ``scheduler="tcp://host:8786"``: an existing Dask cluster (:mod:`fieldlogs.replay.cluster`),
   whose workers must see the runs and the DB under the same paths.
 
@@ -27,7 +34,10 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import importlib
 import os
+import signal
+import sys
 import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -46,6 +56,20 @@ from fieldlogs.replay.tasks import (
 )
 
 R = TypeVar("R")
+
+#: How pool workers start: "fork" (Linux) or "forkserver" (module docstring).
+START_METHOD = "fork" if sys.platform.startswith("linux") else "forkserver"
+#: Fewest runs per pool worker: below, fewer workers (at one, the runs stay in this process).
+MIN_RUNS_PER_WORKER = 2
+
+
+def pool_size(workers: int, runs: int) -> int:
+    """Worker processes for ``runs`` runs asked to go on ``workers``: no more than the
+    cores, and each with at least ``MIN_RUNS_PER_WORKER`` runs (a worker that would replay
+    one run costs its start and its first run's warm-up for at most one run's time); 1 =
+    in this process."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return max(1, min(workers, cores, runs // MIN_RUNS_PER_WORKER))
 
 
 def replay(
@@ -122,11 +146,12 @@ def _in_order(source: Outcomes[R]) -> Outcomes[R]:
 
 
 def _local(worker: Callable[..., R], tasks: list[Task], n: int, preload: list[str]) -> Outcomes[R]:
-    if n <= 1 or len(tasks) <= 1:
+    n = pool_size(n, len(tasks))
+    if n <= 1:
         for i, (run, args) in enumerate(tasks):
             yield run_task(worker, i, run, args)
         return
-    with LocalPool(min(n, len(tasks)), preload) as pool:
+    with LocalPool(n, preload) as pool:
         yield from pool.outcomes(worker, tasks)
 
 
@@ -140,6 +165,29 @@ def worker_init() -> None:
         os._exit(0)
 
 
+def fork_worker_init(coordinator: int) -> None:
+    """Start of a pool worker forked from the coordinating process (``START_METHOD``
+    "fork"): ignore SIGINT (the coordinator handles Ctrl-C and stops the workers), die with
+    the coordinator and exit at once when it is already gone; new standard streams, since
+    a thread of the coordinator (a progress bar) may have held the old ones' locks at the
+    fork; the garbage collector back on (:meth:`LocalPool.restart` froze it for the fork)."""
+    from fieldlogs.replay._server import die_with_parent
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent()
+    if os.getppid() != coordinator:
+        os._exit(0)
+    for name, fd in (("stdout", 1), ("stderr", 2)):
+        old = getattr(sys, name, None)
+        if old is None:
+            continue
+        try:
+            new = open(fd, "w", encoding=old.encoding, errors=old.errors, closefd=False, buffering=1)
+        except (OSError, ValueError, AttributeError):  # no such descriptor: keep the old one
+            continue
+        setattr(sys, name, new)
+
+
 class LocalPool:
     """A fork-server process pool for one replay, stopped with everything it started.
 
@@ -151,13 +199,20 @@ class LocalPool:
 
     def __init__(self, n: int, preload: list[str]) -> None:
         self.n = n
+        self.method = START_METHOD
         self.preload = ["fieldlogs.replay._server", *dict.fromkeys(preload)]
         self.pool: ProcessPoolExecutor | None = None
         self.own_server = self.own_tracker = False
+        self.frozen = False
 
     def __enter__(self) -> LocalPool:
         from multiprocessing import forkserver, get_context, resource_tracker
 
+        if self.method == "fork":  # the workers inherit what this process imported
+            for name in self.preload[1:]:
+                importlib.import_module(name)
+            self.restart()
+            return self
         ctx = get_context("forkserver")
         ctx.set_forkserver_preload(self.preload)  # for a server started now (a running one keeps its own)
         tracker, server = _pid(resource_tracker, "_resource_tracker"), _pid(forkserver, "_forkserver")
@@ -180,9 +235,23 @@ class LocalPool:
 
         if self.pool is not None:
             self._shutdown(cancel=True)
-        self.pool = ProcessPoolExecutor(
-            max_workers=self.n, mp_context=get_context("forkserver"), initializer=worker_init
-        )
+        if self.method == "fork":
+            # the workers fork at the first submit; objects already here are kept out of
+            # their collections (a collection writes to every object it visits: a private
+            # copy of each page of the coordinator's heap per worker)
+            if not self.frozen:
+                gc.freeze()
+                self.frozen = True
+            self.pool = ProcessPoolExecutor(
+                max_workers=self.n,
+                mp_context=get_context("fork"),
+                initializer=fork_worker_init,
+                initargs=(os.getpid(),),
+            )
+        else:
+            self.pool = ProcessPoolExecutor(
+                max_workers=self.n, mp_context=get_context("forkserver"), initializer=worker_init
+            )
         return self.pool
 
     def _shutdown(self, *, cancel: bool) -> None:
@@ -204,6 +273,11 @@ class LocalPool:
         from multiprocessing import forkserver, resource_tracker
 
         self._shutdown(cancel=cancel)
+        if self.frozen:
+            gc.unfreeze()
+            self.frozen = False
+        if self.method == "fork":
+            return  # no server, no tracker: a forked pool's semaphores are unlinked at once
         gc.collect()  # release the pool's semaphores before their tracker stops
         if self.own_server:
             _stop(forkserver, "_forkserver")
@@ -218,11 +292,12 @@ class LocalPool:
 class _Schedule(Generic[R]):
     """Which run goes where, and when.
 
-    Start-up: the fork server imports the worker's modules for seconds and ``submit``
-    blocks meanwhile, so a thread submits the first runs while this process replays runs
-    from the back of the queue itself until the pool's first result arrives: a small replay
-    is never slower than one worker and a large one loses no time to the start-up. Then:
-    at most ``2 n`` runs in the pool, the next submitted as one completes.
+    Start-up, fork server only: the server imports the worker's modules for seconds and
+    ``submit`` blocks meanwhile, so a thread submits the first runs while this process
+    replays runs from the back of the queue itself until the pool's first result arrives.
+    Forked workers start at once: this process only stores results (a third CPU-bound
+    process would take a core from the workers). Then: at most ``2 n`` runs in the pool,
+    the next submitted as one completes.
     """
 
     def __init__(self, owner: LocalPool, worker: Callable[..., R], tasks: list[Task]) -> None:
@@ -235,8 +310,14 @@ class _Schedule(Generic[R]):
         self.strikes: dict[int, int] = {}
         self.restarts = 0
         self.lock = threading.Lock()
+        self.helps = owner.method != "fork"
 
     def outcomes(self) -> Iterator[Outcome[R]]:
+        if not self.helps:
+            while self.inflight or self.queue:
+                self._fill()
+                yield from self._completed()
+            return
         feeder = threading.Thread(target=self._fill, name="replay-submit", daemon=True)
         feeder.start()
         try:

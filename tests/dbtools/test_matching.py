@@ -233,11 +233,23 @@ def test_index_is_cached_per_network(demo):
     assert track_index_for(other) is not index
 
 
-def test_warm_up_loads_the_kernel_a_run_uses() -> None:
-    """The fork-server warm-up (fieldlogs.pipeline.warm) loads the very overload a match
-    uses: after it, matching the demo line adds no compiled signature."""
+def test_warm_up_outside_a_fork_server_leaves_the_kernel_alone() -> None:
+    """A coordinator that forks its pool's workers imports fieldlogs.pipeline.warm too: it
+    must not import the kernel's module (a match takes the kernel whenever that module is
+    loaded, and every worker would then load numba on its first run)."""
     code = (
-        "import fieldlogs.pipeline.warm\n"
+        "import sys, fieldlogs.pipeline.warm\n"
+        "print('dbtools.gis.match_kernel' in sys.modules, 'numba' in sys.modules)\n"
+    )
+    assert fresh_python(code).split() == ["False", "False"]
+
+
+def test_warm_up_loads_the_kernel_a_run_uses() -> None:
+    """The fork-server warm-up (fieldlogs.pipeline.warm, imported after the server's
+    fieldlogs.replay._server) loads the very overload a match uses: after it, matching the
+    demo line adds no compiled signature."""
+    code = (
+        "import fieldlogs.replay._server, fieldlogs.pipeline.warm\n"
         "from dbtools.gis import match_kernel as k, matching as m\n"
         "from dbtools.gis.geometry import Projector\n"
         "from dbtools.synthetic.network import build_network, demo_line\n"

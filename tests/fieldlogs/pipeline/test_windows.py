@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 from dbtools.csvwrite import write_csv
 from dbtools.database import read_network
 from fieldlogs.io import convert_run, read_run
-from fieldlogs.parquet_streams import read_parquet_stream, read_parquet_stream_between, stream_t_range
+from fieldlogs.parquet_streams import StreamCursor, read_parquet_stream, read_parquet_stream_between, stream_t_range
 from fieldlogs.pipeline.config import PipelineConfig, WindowConfig
 from fieldlogs.pipeline.outputs import streamed_results
 from fieldlogs.pipeline.run import PipelineResult, run_pipeline
@@ -120,6 +120,86 @@ def test_a_window_is_the_rows_of_the_whole_read_in_it(
     expected = whole[(tt >= a) & (tt < b)].reset_index(drop=True)
     pd.testing.assert_frame_equal(part, expected)
     assert findings == []
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    t=st.lists(st.one_of(st.floats(0.0, 100.0), st.just(float("nan"))), min_size=1, max_size=80),
+    group=st.integers(1, 30),
+    starts=st.lists(st.floats(-10.0, 110.0), min_size=1, max_size=6),
+    width=st.floats(0.0, 40.0),
+    ahead=st.floats(0.0, 10.0),
+    order=st.sampled_from(["sorted", "groups", "any"]),
+)
+def test_a_cursor_reads_each_window_as_the_window_reader(
+    tmp_path: Path, t: list[float], group: int, starts: list[float], width: float, ahead: float, order: str
+) -> None:
+    """Windows one after the other (and one going back), each told where the next starts:
+    the cursor's rows are read_parquet_stream_between's — sorted t with repeats and NaN,
+    groups in time order but rows unsorted inside, or any order (then the cursor declines)."""
+    if order == "sorted":
+        t = sorted(t, key=lambda x: (math.isnan(x), x))
+        t = [x for x in t if not math.isnan(x)] or [0.0]
+    elif order == "groups":
+        t = [x for x in t if not math.isnan(x)] or [0.0]
+        t = sorted(t)
+        t = [x for k in range(0, len(t), group) for x in reversed(t[k : k + group])]
+    n = len(t)
+    rng = np.random.default_rng(n)
+    frame = pd.DataFrame(
+        {
+            "t": t,
+            "x": rng.normal(size=n),
+            "n": pd.array([None if i % 7 == 3 else i for i in range(n)], dtype="Int64"),
+            "s": [None if i % 5 == 1 else f"v{i % 3}" for i in range(n)],
+        }
+    )
+    path = tmp_path / "small.parquet"
+    pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, row_group_size=group)
+    cursor = StreamCursor(SMALL, path)
+    bounds = sorted(starts)
+    windows = [(a, a + width + ahead) for a in bounds] + [(bounds[0], bounds[0] + width)]  # the last one goes back
+    for k, (a, b) in enumerate(windows):
+        nxt = windows[k + 1][0] if k + 1 < len(windows) else None
+        got = cursor.between(a, b, nxt)
+        want = read_parquet_stream_between(SMALL, path, a, b)
+        assert want is not None
+        if got is None:
+            assert order == "any"
+            continue
+        pd.testing.assert_frame_equal(got[0], want[0])
+        assert got[1] == want[1]
+
+
+def test_a_cursor_decodes_each_row_group_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Consecutive overlapping windows over 10 groups: each column of each group decoded
+    once (the window reader decodes a group once per window it reaches); a file of one
+    group much longer than a window is decoded again by each window instead of being held."""
+    t = np.arange(1000, dtype=float) / 10.0
+    frame = pd.DataFrame({"t": t, "x": t * 2.0, "n": pd.array(np.arange(1000), dtype="Int64"), "s": ["a"] * 1000})
+    reads: list[int] = []
+    original = pq.ParquetFile.read_row_group
+
+    def counted(self: pq.ParquetFile, i: int, *args: object, **kwargs: object) -> pa.Table:
+        reads.append(i)
+        return original(self, i, *args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pq.ParquetFile, "read_row_group", counted)
+    starts = [0.0, 40.0, 80.0]  # 40 s windows reading 5 s before and 3 s after: groups of 10 s
+    for group, decoded in ((100, [g for g in range(10) for _ in range(4)]), (1000, [0] * 4 * len(starts))):
+        path = tmp_path / f"small-{group}.parquet"
+        pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, row_group_size=group)
+        cursor = StreamCursor(SMALL, path)
+        reads.clear()
+        rows = 0
+        for k, a in enumerate(starts):
+            last = k + 1 == len(starts)
+            t0, t1 = (a - 5.0 if k else -math.inf), (math.inf if last else a + 43.0)
+            got = cursor.between(t0, t1, None if last else a + 35.0)
+            assert got is not None
+            rows += len(got[0])
+        assert sorted(reads) == sorted(decoded)  # t, x, n, s
+        assert rows == 1000 + 2 * 80  # the windows overlap by 8 s
 
 
 def test_a_stream_that_must_be_coerced_is_not_read_by_window(tmp_path: Path) -> None:

@@ -19,9 +19,10 @@ from typing import Any
 import psutil
 import pytest
 
+from fieldlogs.replay import pool
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, open_db
-from fieldlogs.replay.pool import replay
+from fieldlogs.replay.pool import pool_size, replay
 from fieldlogs.replay.tasks import Outcome
 from tests.fieldlogs.audit.audit_data import AuditData, audit_data
 from tests.fieldlogs.replay.workers import balise_count, crash, run_info
@@ -38,6 +39,14 @@ def runs(tmp_path: Path) -> list[Path]:
         (folder / "run.json").write_text(json.dumps({"run_id": f"R{i}"}), encoding="utf-8")
     (tmp_path / "logs" / "run-3" / "run.json").write_text('{"run_id": ', encoding="utf-8")
     return discover_runs([tmp_path / "logs"])
+
+
+@pytest.fixture(params=["fork", "forkserver"])
+def start(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Both ways pool workers start (``pool.START_METHOD``): forked from this process, or
+    from a fork server while this process replays runs itself."""
+    monkeypatch.setattr(pool, "START_METHOD", request.param)
+    return str(request.param)
 
 
 def tasks(runs: list[Path], *args: Any) -> list[tuple[str, tuple[Any, ...]]]:
@@ -74,7 +83,7 @@ def check(outcomes: list[Outcome[Any]], runs: list[Path]) -> None:
 
 
 @pytest.mark.parametrize("workers", [1, 2])
-def test_errors_are_records_ordered_or_as_completed_with_progress(runs: list[Path], workers: int) -> None:
+def test_errors_are_records_ordered_or_as_completed_with_progress(runs: list[Path], workers: int, start: str) -> None:
     calls: list[tuple[int, int, str]] = []
     ordered = list(replay(run_info, tasks(runs), workers=workers, ordered=True, progress=lambda *a: calls.append(a)))
     assert [o.index for o in ordered] == list(range(N))
@@ -83,11 +92,27 @@ def test_errors_are_records_ordered_or_as_completed_with_progress(runs: list[Pat
     assert [r for _, _, r in calls] == [o.run for o in ordered]
     completed = list(replay(run_info, tasks(runs, 0.05), workers=workers))
     check(completed, runs)
-    if workers == 2:  # the pool did work, and so did this process while the pool started
-        assert len({o.value["pid"] for o in completed if o.value}) >= 2
+    if workers == 2:  # the pool did work (and, with a fork server, this process while it started)
+        pids = {o.value["pid"] for o in completed if o.value}
+        assert len(pids) >= 2
+        if start == "fork":
+            assert os.getpid() not in pids  # this process only stored results
 
 
-def test_a_worker_process_that_dies_fails_its_run_only(runs: list[Path]) -> None:
+def test_the_pool_starts_no_more_workers_than_the_fleet_pays_for(
+    runs: list[Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """At least two runs per worker, never more workers than cores; one = in this process."""
+    monkeypatch.setattr(os, "sched_getaffinity", lambda _pid: {0, 1})
+    assert [pool_size(2, n) for n in (0, 1, 2, 3, 4, 5, 100)] == [1, 1, 1, 1, 2, 2, 2]
+    assert pool_size(8, 100) == 2 and pool_size(1, 100) == 1
+    before = descendants()
+    three = list(replay(run_info, tasks(runs[:3]), workers=2))  # too few runs for two workers
+    assert {o.value["pid"] for o in three if o.value} == {os.getpid()}
+    assert not descendants() - before
+
+
+def test_a_worker_process_that_dies_fails_its_run_only(runs: list[Path], start: str) -> None:
     """Workers exit abruptly on run-1 (40 tasks, five of them run-1): each time the pool is
     restarted and the runs that were in it are retried one at a time, so only run-1 tasks
     are errors (those this process replayed itself during the pool's start-up succeed)."""
@@ -119,9 +144,9 @@ def slow_tasks(runs: list[Path]) -> list[tuple[str, tuple[Any, ...]]]:
     return [(str(r), (1.0,)) for r in runs if not r.name.endswith("3")] * 4
 
 
-def test_cancelling_a_replay_leaves_no_process_behind(runs: list[Path]) -> None:
-    """Ctrl-C while a local replay runs: the workers, the fork server and the resource
-    tracker it started are all gone."""
+def test_cancelling_a_replay_leaves_no_process_behind(runs: list[Path], start: str) -> None:
+    """Ctrl-C while a local replay runs: the workers (and the fork server and the resource
+    tracker it started) are all gone."""
     before = descendants()
     seen: set[int] = set()
     results = replay(run_info, slow_tasks(runs), workers=2)
@@ -131,12 +156,12 @@ def test_cancelling_a_replay_leaves_no_process_behind(runs: list[Path]) -> None:
             seen |= descendants() - before
             if i == 3:
                 raise KeyboardInterrupt
-    assert len(seen) >= 3, seen  # fork server, resource tracker, workers
+    assert len(seen) >= (2 if start == "fork" else 3), seen  # workers (+ fork server, resource tracker)
     assert_gone(seen)
     assert not descendants() - before
 
 
-def test_replay_closed_by_garbage_collection_stops_its_pool(runs: list[Path]) -> None:
+def test_replay_closed_by_garbage_collection_stops_its_pool(runs: list[Path], start: str) -> None:
     before = descendants()
     results: Iterator[Outcome[Any]] | None = replay(run_info, slow_tasks(runs), workers=2)
     assert results is not None
