@@ -21,7 +21,7 @@ import copy
 import json
 import math
 from collections.abc import Callable, Iterable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Literal
 
@@ -40,17 +40,17 @@ from fieldlogs.parquet_streams import (
     read_parquet_stream_between,
     read_parquet_table,
 )
+from fieldlogs.run_json import RunMeta as RunMeta  # where its callers have always found it
+from fieldlogs.run_json import block_findings, load_run_json, parse_run_json, typed_fields, wheel_needed
 from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.findings import Finding
 from schemas.frames import PANDAS_DTYPE, coerce_frame, suggest
-from schemas.logs import LOG_STREAMS, RUN_JSON, RunField
+from schemas.logs import LOG_STREAMS
 from schemas.model import Table
 from schemas.radar import parse_radar_block
 
 LogFormat = Literal["csv", "parquet"]
-#: run.json blocks written only when present.
-OPTIONAL_BLOCKS = ("vehicle", "gnss", "sources")
 STREAM_SUFFIXES = (".parquet", ".csv")
 #: Rows per row group of a stream written as Parquet (≈ 22 min of IMU at 100 Hz): a window of a
 #: long run's replay (:mod:`fieldlogs.pipeline.windows`) decodes only the groups it reaches.
@@ -64,151 +64,6 @@ REQUIRED_STREAMS: dict[str, tuple[str, ...]] = {
     VehicleKind.TRAIN.value: ("tacho", "imu"),
     VehicleKind.ROAD_RAIL.value: ("gps", "cab"),
 }
-
-
-@dataclass
-class RunMeta:
-    """``run.json``."""
-
-    run_id: str
-    vehicle_id: str
-    vehicle_kind: str
-    wheel_diameter_m: float | None
-    """Needed for a train and wherever the run has a tacho stream (``Run`` says so); None otherwise."""
-    teeth: int | None
-    start_time: str
-    db_version: str | None = None
-    notes: str = ""
-    vehicle: dict[str, Any] | None = None
-    """Vehicle geometry (``schemas.vehicle``), checked by ``recorders.vehicle``."""
-    gnss: dict[str, Any] | None = None
-    """Navigation-header parameters (``schemas.gnss.GNSS_BLOCK``)."""
-    sources: list[Any] | None = None
-    """Provenance of an imported run (``logs import``)."""
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    def to_json(self) -> dict[str, Any]:
-        d = asdict(self)
-        extra = d.pop("extra")
-        for block in OPTIONAL_BLOCKS:
-            if d[block] is None:
-                del d[block]
-        return {**d, **extra}
-
-
-def _load_run_json(path: Path) -> tuple[Any, list[Finding]]:
-    try:
-        return json.loads(Path(path).read_text(encoding="utf-8")), []
-    except FileNotFoundError:
-        return None, [
-            Finding("log.missing_run_json", Severity.ERROR, "run.json", "run.json is missing", file=str(path))
-        ]
-    except IsADirectoryError:
-        return None, [Finding("log.bad_run_json", Severity.ERROR, "run.json", "run.json is a folder", file=str(path))]
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        return None, [
-            Finding(
-                "log.bad_run_json",
-                Severity.ERROR,
-                "run.json",
-                f"not valid JSON: {exc}",
-                file=str(path),
-                row=getattr(exc, "lineno", None),
-            )
-        ]
-
-
-def _field_finding(path: Path, name: str, message: str, value: object = None, limit: object = None) -> Finding:
-    return Finding(
-        "log.run_json_field", Severity.ERROR, "run.json", message, file=str(path), column=name, value=value, limit=limit
-    )
-
-
-def _typed_value(f: RunField, raw: Any, path: Path) -> tuple[Any, Finding | None]:
-    """One present field of ``run.json`` as its declared type, or the finding why not."""
-    if f.type in (dict, list):
-        if isinstance(raw, f.type):
-            return raw, None
-        kind = "object" if f.type is dict else "list"
-        return None, _field_finding(path, f.name, f"field '{f.name}' must be a JSON {kind}", type(raw).__name__)
-    try:
-        if f.type is int and (isinstance(raw, bool) or (isinstance(raw, float) and not raw.is_integer())):
-            raise ValueError(raw)
-        v = f.type(raw)
-        if f.type is float and not np.isfinite(v):
-            raise ValueError(raw)
-    except (TypeError, ValueError, OverflowError):
-        return None, _field_finding(path, f.name, f"field '{f.name}' = {raw!r} is not a {f.type.__name__}", str(raw))
-    return v, None
-
-
-def _typed_fields(data: dict[str, Any], path: Path) -> tuple[dict[str, Any], list[Finding]]:
-    """Every field of ``run.json`` that parses, plus findings for the others."""
-    findings: list[Finding] = []
-    values: dict[str, Any] = {}
-    for f in RUN_JSON:
-        if f.name not in data or data[f.name] in (None, ""):
-            if f.required:
-                findings.append(_field_finding(path, f.name, f"field '{f.name}' is missing"))
-            continue
-        v, problem = _typed_value(f, data[f.name], path)
-        if problem is not None:
-            findings.append(problem)
-        else:
-            values[f.name] = v
-    kinds = [k.value for k in VehicleKind]
-    kind = values.get("vehicle_kind")
-    if kind is not None and kind not in kinds:
-        findings.append(
-            _field_finding(path, "vehicle_kind", f"vehicle_kind '{kind}' is not train or road_rail", kind, kinds)
-        )
-        del values["vehicle_kind"]
-    if values.get("vehicle_kind") == VehicleKind.TRAIN.value:
-        findings += _wheel_needed(values, path, "a train's pulses are its odometry")
-    for name in ("wheel_diameter_m", "teeth"):
-        v = values.get(name)
-        if v is not None and not v > 0:
-            findings.append(_field_finding(path, name, f"{name} must be > 0", v, 0))
-            del values[name]
-    return values, findings
-
-
-def _wheel_needed(values: dict[str, Any], path: Path, why: str) -> list[Finding]:
-    """A finding for each wheel field (wheel_diameter_m, teeth) that ``values`` lacks."""
-    return [
-        _field_finding(path, name, f"field '{name}' is missing ({why})")
-        for name in ("wheel_diameter_m", "teeth")
-        if values.get(name) is None
-    ]
-
-
-def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
-    """Read and check ``run.json``; findings for missing or mistyped fields."""
-    data, findings = _load_run_json(path)
-    if findings:
-        return None, findings
-    if not isinstance(data, dict):
-        return None, [Finding("log.bad_run_json", Severity.ERROR, "run.json", "must be a JSON object", file=str(path))]
-    values, findings = _typed_fields(data, path)
-    if any(f.severity == Severity.ERROR for f in findings):
-        return None, findings
-    known = {f.name for f in RUN_JSON}
-    values.setdefault("wheel_diameter_m", None)
-    values.setdefault("teeth", None)
-    meta = RunMeta(**values, extra={k: v for k, v in data.items() if k not in known})
-    return meta, findings
-
-
-def _block_findings(data: dict[str, Any], path: Path, *, has_tacho: bool) -> list[Finding]:
-    """Findings of run.json's vehicle and gnss blocks (``recorders.vehicle``, ``recorders.blocks``)."""
-    from fieldlogs.recorders.blocks import check_gnss_block, check_vehicle_block
-
-    out: list[Finding] = []
-    if isinstance(data.get("vehicle"), dict):
-        out += check_vehicle_block(data, str(path), has_tacho=has_tacho)
-    if isinstance(data.get("gnss"), dict):
-        out += check_gnss_block(data["gnss"], str(path))
-    return out
 
 
 def stream_path(folder: Path, name: str) -> Path | None:
@@ -251,7 +106,7 @@ def read_stream(table: Table, path: Path) -> tuple[pd.DataFrame, list[Finding]]:
 
 def _run_field(data: dict[str, Any], name: str) -> Any:
     """One field of a (possibly partly broken) run.json, typed and positive, or None."""
-    values, _ = _typed_fields({name: data.get(name)}, Path(RUN_JSON_NAME))
+    values, _ = typed_fields({name: data.get(name)}, Path(RUN_JSON_NAME))
     return values.get(name)
 
 
@@ -268,7 +123,7 @@ class Run:
         if not self.folder.is_dir():
             raise InputError("not a run folder (expected run.json and stream files)", path=self.folder)
         json_path = self.folder / RUN_JSON_NAME
-        data, bad = _load_run_json(json_path)
+        data, bad = load_run_json(json_path)
         if bad:
             raise InputError(bad[0].message, path=json_path, row=bad[0].row)
         if not isinstance(data, dict):
@@ -290,9 +145,9 @@ class Run:
         """Per stream, consecutive windows' reader (:meth:`window`; shared by the views)."""
         """CSV streams also written as Parquet (:mod:`fieldlogs.csv_spool`), which windows read."""
         self._scan()
-        self.findings.extend(_block_findings(data, json_path, has_tacho=self.has("tacho")))
+        self.findings.extend(block_findings(data, json_path, has_tacho=self.has("tacho")))
         if self.meta is not None and self.has("tacho"):
-            missing = _wheel_needed(asdict(self.meta), json_path, "the run has a tacho stream")
+            missing = wheel_needed(asdict(self.meta), json_path, "the run has a tacho stream")
             if missing:  # the pulses cannot be turned into metres: run.json is unusable
                 self.findings.extend(missing)
                 self.meta = None
