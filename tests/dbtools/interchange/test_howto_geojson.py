@@ -5,8 +5,6 @@ repository's), and exits 0; the numbers the page states are checked on the resul
 from __future__ import annotations
 
 import json
-import re
-import shlex
 from pathlib import Path
 
 import pandas as pd
@@ -14,19 +12,14 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from tests.howto import page_commands
 
 ROOT = Path(__file__).resolve().parents[3]
 PAGE = ROOT / "docs" / "howto" / "import-geojson.md"
 
 
 def commands() -> list[list[str]]:
-    out = []
-    for block in re.findall(r"```sh\n(.*?)```", PAGE.read_text(encoding="utf-8"), flags=re.S):
-        for line in block.splitlines():
-            if line.strip().startswith("trainpos "):
-                argv = shlex.split(line)[1:]
-                out.append([str(ROOT / a) if a.startswith("tests/data/") else a for a in argv])
-    return out
+    return page_commands(PAGE)
 
 
 def test_the_page_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
