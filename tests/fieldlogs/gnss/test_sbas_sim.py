@@ -14,7 +14,7 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from dbtools.database import read_network
-from fieldlogs.gnss import experiment as ex
+from fieldlogs.experiments import gnss as ex
 from fieldlogs.gnss.observables import Epochs
 from fieldlogs.gnss.sbas import SbasCorrections
 from fieldlogs.io import read_run
