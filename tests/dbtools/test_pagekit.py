@@ -8,6 +8,7 @@ from html.parser import HTMLParser
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from dbtools import pagekit as kit
 from tests.fresh import fresh_python
@@ -69,7 +70,9 @@ def test_page_skeleton_badge_legend_and_key_values() -> None:
         kit.key_value_table([("run", "runs/a"), ("n", 3)], code=("run",)),
         kit.section("Part", "<p>x</p>", level=3),
         heading_text="Heading",
+        verdict=kit.Verdict("Passed: 0 errors, 1 warning", kit.Status.OK),
     )
+    assert "<h1>Heading</h1>\n<p id='verdict' class='verdict ok'>Passed: 0 errors, 1 warning</p>" in html
     assert html.startswith("<!doctype html><html lang='en'><head><meta charset='utf-8'>")
     assert "<title>t &lt;1&gt;</title>" in html and "<h1>Heading</h1>" in html and html.endswith("</body></html>")
     assert "<p class='note'>a &amp; b</p>" in html and "<span class='badge alarm'>3 alarm(s)</span>" in html
@@ -83,14 +86,44 @@ def test_figure_is_an_embedded_png() -> None:
     plt = kit.pyplot()
     fig, ax = plt.subplots(figsize=(2, 2))
     ax.plot([0, 1], [0, 1])
+    ax.set(xlabel="t [s]", ylabel="km\n[m]")
     data = kit.png(fig)
+    assert data.axes == "x: t [s]; y: km [m]"
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
     html = kit.figure(data, 'a "quoted" alt', "caption")
     src = html.split('src="', 1)[1].split('"', 1)[0]
     head, b64 = src.split(",", 1)
     assert head == "data:image/png;base64" and base64.b64decode(b64) == data
-    assert 'alt="a &quot;quoted&quot; alt"' in html and "<figcaption>caption</figcaption>" in html
+    assert 'alt="a &quot;quoted&quot; alt (x: t [s]; y: km [m])"' in html and 'data-axes="x: t [s]; y: km [m]"' in html and "<figcaption>caption</figcaption>" in html
     assert plt.get_fignums() == []  # the figure was closed
+
+
+def test_a_plot_without_quantity_and_unit_on_an_axis_is_refused() -> None:
+    """Every plot names each axis's quantity and unit; a shared x axis may leave it to the
+    plot below; a figure refused is closed all the same."""
+    plt = kit.pyplot()
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    ax.set(xlabel="km", ylabel="offset [m]", title="Line 1")
+    with pytest.raises(ValueError, match=r"plot 'Line 1': the x axis needs a label 'quantity \[unit\]', has 'km'"):
+        kit.png(fig)
+    fig, axes = plt.subplots(2, 1, sharex=True)
+    for a in axes:
+        a.plot([0, 1], [0, 1])
+        a.set_ylabel("offset [m]")
+    axes[1].set_xlabel("km [km]")
+    assert kit.png(fig).axes == "y: offset [m]; x: km [km]"
+    fig, ax = plt.subplots()
+    ax.set_xlabel("t [s]")
+    with pytest.raises(ValueError, match="the y axis"):
+        kit.png(fig)
+    assert plt.get_fignums() == []
+
+
+def test_shares_are_percentages_and_columns_carry_labels() -> None:
+    html = kit.frame_table(pd.DataFrame({"km_m": [20.0], "verified_share": [0.9934], "n_runs": [3]}))
+    assert "<thead><tr><th>km [m]</th><th>verified share [%]</th><th>runs</th></tr></thead>" in html
+    assert [c for _, c in parse(html).cells] == ["20.000", "99.3 %", "3"]
 
 
 def test_matplotlib_is_imported_lazily() -> None:
