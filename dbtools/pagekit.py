@@ -46,12 +46,13 @@ if TYPE_CHECKING:
 
 CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;margin:2em;color:#222;max-width:1400px}
-p,li,dd,dt,figcaption,h1,h2,h3,td,th{overflow-wrap:break-word}
+p,li,dd,dt,figcaption,h1,h2,h3{overflow-wrap:break-word}
+td{white-space:nowrap}td.wrap{white-space:normal;min-width:16em}.nw{white-space:nowrap}
 table{border-collapse:separate;border-spacing:0;margin:1em 0;font-size:13px}
 th,td{border:1px solid #ccc;border-width:0 1px 1px 0;padding:3px 8px;text-align:right;vertical-align:top}
 tr>:first-child{border-left-width:1px}tr:first-child>*{border-top-width:1px}
 th{background:#f0f0f0}thead th{position:sticky;top:0;z-index:1;box-shadow:0 1px 0 #ccc}
-.scroll{overflow:auto;max-height:80vh;max-width:100%}.scroll>table{margin:0}
+.scroll{overflow:auto;max-height:80vh;max-width:100%;width:fit-content}.scroll>table{margin:0}
 p.verdict{font-size:1.15em;padding:.4em .7em;border-left:6px solid #888;background:#f6f6f6}
 p.verdict.ok{border-color:#2a7d2a}p.verdict.warn,p.verdict.alarm{border-color:#b00}
 p.verdict.caution{border-color:#c77c00}
@@ -138,15 +139,26 @@ def default_cell(column: str, v: object) -> Cell:
     return Cell(percent_text(float(v)) if is_share(column) else number_text(v))
 
 
+#: Longest cell kept on one line (a number, a code, a timestamp); a longer text wraps at spaces.
+MAX_NOWRAP = 40
+
+
 def _td(cell: Cell) -> str:
-    cls = f' class="{escape(cell.cls)}"' if cell.cls else ""
+    classes = " ".join(c for c in (cell.cls, "wrap" if len(cell.text) > MAX_NOWRAP else None) if c)
+    cls = f' class="{escape(classes)}"' if classes else ""
     return f"<td{cls}>{escape(cell.text)}</td>"
+
+
+def _th(text: str) -> str:
+    """A header cell wrapping at spaces only (``re-adhered`` is not broken at its hyphen)."""
+    words = (f"<span class='nw'>{escape(w)}</span>" if "-" in w else escape(w) for w in text.split(" "))
+    return f"<th>{' '.join(words)}</th>"
 
 
 def table(header: Sequence[str], rows: Iterable[Sequence[Cell]], *, cls: str | None = None, scroll: bool = True) -> str:
     """A table of ready cells under a header row (``<thead>``: it stays in view while the rows
     scroll in their box)."""
-    head = "".join(f"<th>{escape(c)}</th>" for c in header)
+    head = "".join(_th(c) for c in header)
     body = "".join("<tr>" + "".join(_td(c) for c in row) + "</tr>" for row in rows)
     klass = f" class='{escape(cls)}'" if cls else ""
     out = f"<table{klass}><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"

@@ -15,7 +15,8 @@ machine files and a percentage for people: :func:`display` says to multiply it b
 (:data:`PERCENT`), so no person reads 0.993 for 99.3 %.
 
 Words: the unit suffix is dropped, a count's ``n_`` prefix too (``n_slips`` → ``slips``),
-underscores become spaces, abbreviations are spelt as people write them (:data:`WORDS`:
+underscores become spaces (a name qualifying a declared one, ``lat_new`` or ``t_pass``, takes its
+unit), abbreviations are spelt as people write them (:data:`WORDS`:
 ``gps`` → ``GPS``), and a few identifiers read better by their short name (:data:`NAMES`:
 ``line_code`` → ``line``). A text that is not a machine name (it has a space, a bracket, a
 capital …) is a label already and is returned as given.
@@ -127,6 +128,11 @@ def display(name: str) -> Display:
         if name.endswith(suffix) and len(name) > len(suffix):
             stem, unit = name[: -len(suffix)], unit or suffix_unit
             break
+    parts = name.split("_")
+    for k in range(len(parts) - 1, 0, -1):  # lat_new, t_pass: the unit of the declared quantity they qualify
+        if unit:
+            break
+        unit = declared_units().get("_".join(parts[:k]), "")
     if name in NAMES:
         stem = NAMES[name]
     elif stem.startswith("n_"):

@@ -91,9 +91,10 @@ def slip_episodes(trace: pd.DataFrame, episodes: list[dict[str, float]], run_id:
         ax.axvspan(ep["t_start"], ep["t_end"], color="orange", alpha=0.2)
         state = "fail-safe" if ep.get("failsafe") else "re-adhered" if ep.get("readhered") else ""
         ax.set_title(f"{ep.get('kind', 'slip')} at t = {ep['t_start']:.0f} s {state}", fontsize=9)
+        ax.grid(alpha=0.3)
+    for ax in axes[0]:
         ax.set_xlabel("t [s]")
         ax.set_ylabel("speed [km/h]")
-        ax.grid(alpha=0.3)
     _legend(axes[0][0], fontsize=8)
     if not eps:
         _empty(axes[0][0], "no slip/slide episodes")

@@ -4,6 +4,8 @@ page skeleton, and matplotlib imported only when a figure is drawn."""
 from __future__ import annotations
 
 import base64
+from pathlib import Path
+from typing import Any
 from html.parser import HTMLParser
 
 import numpy as np
@@ -12,6 +14,7 @@ import pytest
 
 from dbtools import pagekit as kit
 from tests.fresh import fresh_python
+from tests.pages import check_page
 
 
 class Cells(HTMLParser):
@@ -132,3 +135,32 @@ def test_matplotlib_is_imported_lazily() -> None:
         "print('matplotlib' in sys.modules)"
     )
     assert fresh_python(code).strip() == "False"
+
+
+def test_kit_page_standard_in_the_browser(browser: Any, tmp_path: Path) -> None:
+    """A kit page with a long table (its header stays in view while its rows scroll), a table
+    far wider than 1,280 px (it scrolls in its box, the page does not) and a long unbroken
+    path in a paragraph (it wraps): the standard of tests/pages.py holds."""
+    plt = kit.pyplot()
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 2])
+    ax.set(xlabel="t [s]", ylabel="km [m]")
+    long = pd.DataFrame({"km_m": np.arange(200) * 20.0, "gps_trusted_share": np.linspace(0, 1, 200)})
+    wide = pd.DataFrame({f"figure_{k}_m": [123456.789 * k] for k in range(40)})
+    html = kit.page(
+        "kit",
+        kit.paragraph("/data/" + "x" * 400 + "/run"),
+        kit.frame_table(wide),
+        kit.frame_table(long),
+        kit.figure(kit.png(fig), "a plot"),
+        verdict=kit.Verdict("Passed: 0 errors, 0 warnings", kit.Status.OK),
+    )
+    page = tmp_path / "kit.html"
+    page.write_text(html, encoding="utf-8")
+    assert check_page(browser, page, tmp_path / "shots", long_table=True) == {
+        "verdict": "Passed: 0 errors, 0 warnings",
+        "plots": 1,
+        "long_table": True,
+    }
+    widest = browser.eval('Math.max(...[...document.querySelectorAll(".scroll")].map(b => b.scrollWidth))')
+    assert widest > 1280  # the wide table is wider than the window, yet the page does not scroll sideways

@@ -19,7 +19,8 @@ from cli.main import app
 from dbtools.build import build_db
 from dbtools.interchange.review import write_review
 from dbtools.sample_network import sample_source_dir
-from tests.dbtools.interchange.cdp import Browser
+from tests.cdp import Browser
+from tests.pages import check_page
 from tests.dbtools.interchange.network_sources import SWITCH_IDS, TRACK_IDS, write_topology_sources
 
 
@@ -186,6 +187,13 @@ def test_page_renders_in_headless_chromium(change: dict[str, Path]) -> None:
     dom = _browser(exe, change["page"], "--dump-dom").stdout.decode("utf-8", "replace")
     assert 'id="review-map"' in dom and 'data-ready="1"' in dom and "Validation of NEW" in dom
     assert "Legend" in dom and dom.count("leaflet-interactive") > 2  # the map script ran and drew
+
+
+def test_page_standard_in_the_browser(change: dict[str, Path], browser: Any, tmp_path: Path) -> None:
+    """The rendering standard (tests/pages.py) on the review page: the verdict first, no
+    sideways scroll at 1,280 px (the map included), sticky headers."""
+    seen = check_page(browser, change["page"], tmp_path / "shots")
+    assert re.fullmatch(r"(Passed|Failed): \d+ errors?, \d+ warnings? in NEW; content changed\.", seen["verdict"])
 
 
 _POINT_ON = """(() => {{
