@@ -169,7 +169,7 @@ LEGEND = {
 
 def print_legend(c: Console) -> None:
     """The report tables' terms, one line each (a key/value table: records at 80 columns)."""
-    c.print(key_value_table(LEGEND.items(), title="Terms"))
+    c.print(key_value_table(LEGEND.items(), title="What the columns mean"))
 
 
 def _view(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:

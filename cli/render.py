@@ -197,11 +197,13 @@ def records(table: Table, width: int = 80) -> list[Text]:
     else:
         labels = [" ".join(_plain(c.header).split()) or f"column {k + 1}" for k, c in enumerate(table.columns)]
         columns = [list(c.cells) for c in table.columns]
-        pairs = [[(lab, _plain(col[r])) for lab, col in zip(labels, columns, strict=True)] for r in range(table.row_count)]
-    for r, row in enumerate(pairs):
+        pairs = [
+            [(lab, _plain(col[r])) for lab, col in zip(labels, columns, strict=True)] for r in range(table.row_count)
+        ]
+    for row in pairs:
         indent = min(max((len(lab) for lab, _ in row), default=0) + 2, width // 2)
         body = "\n".join(_field(lab, v, indent, width) for lab, v in row if v.strip())
-        out.append(Text(body or "(empty row)", end="\n\n" if r < len(pairs) - 1 else "\n"))
+        out.append(Text(body or "(empty row)", end="\n\n"))  # a blank line after each record
     return out
 
 

@@ -61,9 +61,7 @@ AXIS = re.compile(r"[xy]: \S.*\[[^\]]+\].*")
 def open_page(browser: Browser, page: Path) -> None:
     """``page`` in the session's browser at 1,280 × 800, the events of earlier pages forgotten."""
     browser.events.clear()
-    browser.call(
-        "Emulation.setDeviceMetricsOverride", width=WIDTH, height=HEIGHT, deviceScaleFactor=1, mobile=False
-    )
+    browser.call("Emulation.setDeviceMetricsOverride", width=WIDTH, height=HEIGHT, deviceScaleFactor=1, mobile=False)
     browser.load(page.as_uri())
 
 

@@ -85,8 +85,7 @@ def _verdict(d: dict[str, Any]) -> kit.Verdict:
     t = d["totals"]
     if t["runs_failed"]["new"] > t["runs_failed"]["old"]:
         return kit.Verdict(
-            f"Failed: the new version cannot replay {t['runs_failed']['new']} run(s) "
-            f"(old: {t['runs_failed']['old']}).",
+            f"Failed: the new version cannot replay {t['runs_failed']['new']} run(s) (old: {t['runs_failed']['old']}).",
             kit.Status.WARN,
         )
     if d["same_content"]:

@@ -112,7 +112,9 @@ def wheel_trend(wheel_runs: pd.DataFrame) -> bytes:
     its start time."""
     w = wheel_runs.assign(time=pd.to_datetime(wheel_runs["start_time"], utc=True, errors="coerce", format="ISO8601"))
     vehicles = sorted(w["vehicle_id"].unique())[:MAX_FIGURES] or ["—"]
-    fig, axes = kit.pyplot().subplots(len(vehicles), 1, figsize=(12, 2.2 * len(vehicles) + 0.6), sharex=True, squeeze=False)
+    fig, axes = kit.pyplot().subplots(
+        len(vehicles), 1, figsize=(12, 2.2 * len(vehicles) + 0.6), sharex=True, squeeze=False
+    )
     for ax, vid in zip(axes[:, 0], vehicles, strict=True):
         g = w[w["vehicle_id"] == vid].sort_values("time")
         ok = np.isfinite(g["diameter_m"].to_numpy(dtype=float)) & g["time"].notna().to_numpy()

@@ -4,9 +4,9 @@ page skeleton, and matplotlib imported only when a figure is drawn."""
 from __future__ import annotations
 
 import base64
+from html.parser import HTMLParser
 from pathlib import Path
 from typing import Any
-from html.parser import HTMLParser
 
 import numpy as np
 import pandas as pd
@@ -97,7 +97,11 @@ def test_figure_is_an_embedded_png() -> None:
     src = html.split('src="', 1)[1].split('"', 1)[0]
     head, b64 = src.split(",", 1)
     assert head == "data:image/png;base64" and base64.b64decode(b64) == data
-    assert 'alt="a &quot;quoted&quot; alt (x: t [s]; y: km [m])"' in html and 'data-axes="x: t [s]; y: km [m]"' in html and "<figcaption>caption</figcaption>" in html
+    assert (
+        'alt="a &quot;quoted&quot; alt (x: t [s]; y: km [m])"' in html
+        and 'data-axes="x: t [s]; y: km [m]"' in html
+        and "<figcaption>caption</figcaption>" in html
+    )
     assert plt.get_fignums() == []  # the figure was closed
 
 

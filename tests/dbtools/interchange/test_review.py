@@ -20,8 +20,8 @@ from dbtools.build import build_db
 from dbtools.interchange.review import write_review
 from dbtools.sample_network import sample_source_dir
 from tests.cdp import Browser
-from tests.pages import check_page
 from tests.dbtools.interchange.network_sources import SWITCH_IDS, TRACK_IDS, write_topology_sources
+from tests.pages import check_page
 
 
 @pytest.fixture(scope="module")

@@ -161,7 +161,9 @@ def test_page_standard_in_the_browser(
     scroll, sticky headers, the bar chart's axes named with units."""
     page = tmp_path / "impact.html"
     runs = [str(SAMPLE_LOGS / "sim-d-evening")]
-    res = runner.invoke(app, ["db", "impact", str(sample_db), str(moved_db), *runs, "--format", "html", "--out", str(page)])
+    res = runner.invoke(
+        app, ["db", "impact", str(sample_db), str(moved_db), *runs, "--format", "html", "--out", str(page)]
+    )
     assert res.exit_code == 0, res.output
     seen = check_page(browser, page, tmp_path / "shots")
     assert seen["verdict"].startswith("Changes: ") and seen["plots"] == 1
