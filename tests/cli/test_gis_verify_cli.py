@@ -85,7 +85,8 @@ def test_html_of_a_mostly_unverified_grid_is_not_green(runner: CliRunner, data: 
     r = invoke(runner, "gis", "verify", data.surveyed_db, data.runs[0], data.runs[1], "--format", "html", "--out", html)
     assert r.exit_code == 0, r.output
     text = html.read_text(encoding="utf-8")
-    assert "<p class='ok'>" not in text and "<p class='caution'>No defect found where the evidence suffices" in text
+    assert "class='verdict ok'" not in text
+    assert "<p id='verdict' class='verdict caution'>Mostly unverified: no defect found where the evidence" in text
     assert f"line {LINE}: " in text and "km unverified" in text
 
 
