@@ -133,8 +133,9 @@ def _longest_line(text: str) -> int:
 def fit_widths(table: Table, max_width: int) -> list[int] | None:
     """Content width of each column so that ``table`` fits ``max_width`` with its borders and
     no word or number is split: every column at least its longest word (a ``no_wrap`` column
-    its longest line), the room left shared out in proportion to what each column lacks of
-    its longest line. None when even the longest words do not fit (print records instead).
+    its longest line), the room left given to the columns that lack least of their longest
+    line first (short columns whole, the long texts wrap). None when even the longest words
+    do not fit (print records instead).
 
     Rich, left to itself, narrows the widest columns first and then crops: a number split
     across lines, a border lost at 80 columns. Widths fixed here leave it nothing to squeeze."""
@@ -151,10 +152,11 @@ def fit_widths(table: Table, max_width: int) -> list[int] | None:
         return None
     if sum(natural) <= room:
         return natural
-    spare, lack = room - sum(least), [n - a for a, n in zip(least, natural, strict=True)]
-    widths = [a + spare * k // sum(lack) for a, k in zip(least, lack, strict=True)]
-    for i in sorted(range(len(widths)), key=lambda i: widths[i] - natural[i])[: room - sum(widths)]:
-        widths[i] += 1  # the rounding's leftover to the columns furthest below their natural width
+    widths, spare = list(least), room - sum(least)
+    for i in sorted(range(len(widths)), key=lambda i: natural[i] - least[i]):  # the nearly whole first
+        grant = min(natural[i] - least[i], spare)
+        widths[i] += grant
+        spare -= grant
     return widths
 
 
