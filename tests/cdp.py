@@ -163,7 +163,7 @@ class Browser:
             msg = json.loads(self.ws.recv())
             self.events.append(msg)
             if msg.get("method") == method:
-                return msg
+                return dict(msg)
 
     def load(self, url: str) -> None:
         for domain in ("Page", "Runtime", "Log"):
