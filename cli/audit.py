@@ -155,13 +155,13 @@ LEGEND = {
     "mean correction [%], median correction [%], max correction [%]": (
         "correction ÷ distance since the previous correction × 100, over balise corrections"
     ),
-    "share above target [%]": "share of balise corrections above the target % (--target-pct)",
+    "share above target": "share of balise corrections above the target % (--target-pct)",
     "feature corrections, feature corrections refused": "corrections at curves (feature points) accepted, and refused",
     "failed diagnostics (count)": "the diagnostics that refused feature-point corrections, with their counts",
     "slips, slips re-adhered": "wheel slip/slide episodes corrected inertially, and those that re-adhered in time",
     "max slip error [m]": "largest error budget of a slip correction",
     "GPS decisions": "up/down track decisions made from trusted GPS fixes",
-    "GPS trusted share [%]": "mean share of GPS fixes that passed the trust checks",
+    "GPS trusted share": "mean share of GPS fixes that passed the trust checks",
     "fail-safe events": "fail-safe events (a slip correction lasted too long)",
     "anomalies": "balise anomalies (telegrams that do not fit the DB; the events name them)",
 }

@@ -3,7 +3,7 @@
 A machine name (``km_m``, ``mean_correction_pct``, ``gps_trusted_share``) is what CSV, JSON
 and Parquet files meant for programs carry; a person reads its label, the same in the
 terminal and on an HTML page: the quantity in words, then its unit in brackets
-(``km [m]``, ``mean correction [%]``, ``GPS trusted share [%]``).
+(``km [m]``, ``mean correction [%]``; a share, whose values carry their ``%``: ``GPS trusted share``).
 
 The unit is the one the column's declaration in :mod:`schemas` gives (``Column.unit``, looked
 up by name over :data:`schemas.catalog.ALL_SCHEMAS`; no name is declared with two units, a test
@@ -122,7 +122,7 @@ def display(name: str) -> Display:
     if not _MACHINE.fullmatch(name):
         return Display(name, "")
     if is_share(name):
-        return Display(f"{_words(NAMES.get(name, name))} [{PERCENT}]", PERCENT, 100.0)
+        return Display(_words(NAMES.get(name, name)), PERCENT, 100.0)  # the value carries its "%"
     stem, unit = name, declared_units().get(name, "")
     for suffix, suffix_unit in SUFFIX_UNITS.items():
         if name.endswith(suffix) and len(name) > len(suffix):

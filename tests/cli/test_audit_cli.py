@@ -127,7 +127,7 @@ def test_demo_on_fixture_network_and_logs(data: AuditData, tmp_path: Path, monke
         assert f"audited {N} runs (0 failed)" in res.stdout
         assert "Position correction by route" in res.stdout and "HTML report" in res.stdout
         legend = res.stdout.split("What the columns mean", 1)[1]  # every term, one line each (issue 33)
-        assert "share above target [%]" in legend and "GPS trusted share [%]" in legend
+        assert "share above target" in legend and "GPS trusted share" in legend and "share [%]" not in legend
     assert (out / "sample-network.sqlite").is_file() and (out / "audit.sqlite").is_file()
     assert (out / "report.html").read_text(encoding="utf-8").count("<img") >= 5
 
@@ -149,7 +149,8 @@ def test_report_table_piped_at_80_columns(audited: Path, columns: str | None) ->
         assert len(line) <= 80, line
         if line.startswith(("│", "┃")):
             assert line.rstrip().endswith(("│", "┃")), line
-    assert "mean correction [%]" in text and "GPS trusted share [%]" in text and "_pct" not in text
+    assert "mean correction [%]" in text and "GPS trusted share:" in text
+    assert "share [%]" not in text and "_pct" not in text
     csv = invoke("report", audited, "--format", "csv", "--by", "run").stdout  # the same rows, machine names
     runs = pd.read_csv(io.StringIO(csv)).to_dict("records")
     words = {w for line in text.splitlines() for w in line.replace("│", " ").replace("┃", " ").split()}

@@ -21,8 +21,8 @@ from schemas.labels import SUFFIX_UNITS, declared_units, display, label
         ("n_slips", "slips"),
         ("n_corrections", "balise corrections"),
         ("line_code", "line"),
-        ("gps_trusted_share", "GPS trusted share [%]"),
-        ("share_above_target", "share above target [%]"),
+        ("gps_trusted_share", "GPS trusted share"),
+        ("share_above_target", "share above target"),
         ("cn0_dbhz", "C/N0 [dB-Hz]"),
         ("track", "track"),
         ("mean %", "mean %"),  # a label already: as given
