@@ -1,7 +1,11 @@
 """Reading a source set (SPEC §3 "Source files") into a :class:`Network` plus findings.
 
 An optional ``network.toml`` declares the operating area, metric CRS and height datum
-(:func:`dbtools.gis.georef.read_declaration`); its entries go to ``Network.meta``.
+(:func:`dbtools.gis.georef.read_declaration`); its entries go to ``Network.meta``. Its
+``[csv]`` table declares the convention of the CSV files (``delimiter = ";"``,
+``decimal = ","``: :func:`declared_locale`), for source sets saved from a spreadsheet in a
+European locale; without it the convention is detected (:mod:`dbtools.csv_locale`), and
+the options of ``db build`` / ``db validate`` come before it.
 
 Findings:
 
@@ -15,12 +19,14 @@ Findings:
 from __future__ import annotations
 
 import json
+import tomllib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from dbtools.csv_locale import CsvLocale, sniff_delimiter
 from dbtools.gis.georef import NETWORK_FILE, read_declaration, write_declaration
 from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.rules.area import check_area
@@ -29,17 +35,18 @@ from dbtools.rules.schema import check_empty_tables
 from dbtools.tabular import code_columns, find_table_file, read_table_file, sha256_file, text_columns
 from dbtools.typed_csv import read_csv_typed
 from schemas.enums import Severity, Track
-from schemas.errors import InputError
+from schemas.errors import InputError, UsageError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
 from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
 
 
-def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
+def read_source_set(folder: Path, locale: CsvLocale | None = None) -> tuple[Network, list[Finding]]:
     """Read every source file of a folder; returns the network and all findings.
 
     Rows with errors stay in the frames (so later checks can still run); callers decide
-    whether errors block them.
+    whether errors block them. ``locale``: the CSV convention declared by the caller's
+    options, over the folder's ``network.toml [csv]`` (:func:`declared_locale`).
     """
     folder = Path(folder)
     if not folder.exists():
@@ -47,6 +54,7 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
     if not folder.is_dir():
         raise InputError("not a folder (expected a source set with gis, balises, feature_points)", path=folder)
     findings: list[Finding] = []
+    locale = (locale or CsvLocale()).over(declared_locale(folder))
     tables: dict[str, pd.DataFrame] = {}
     files: dict[str, str] = {}
     hashes: dict[str, str] = {}
@@ -65,10 +73,16 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
                 )
             tables[name] = empty_frame(table)
             continue
-        raw = read_csv_typed(table, path) if path.suffix.lower() == ".csv" else None  # None: as text
+        raw = read_csv_typed(table, path) if _machine_csv(path, locale) else None  # None: as text
         if raw is None:
             tf = read_table_file(
-                path, table=name, sheet=name, code_columns=code_columns(table), text_columns=text_columns(table)
+                path,
+                table=name,
+                sheet=name,
+                code_columns=code_columns(table),
+                text_columns=text_columns(table),
+                locale=locale,
+                numeric_columns=[c.name for c in table.columns if c.dtype in ("float", "int")],
             )
             raw = tf.frame
             findings.extend(tf.findings)
@@ -93,6 +107,33 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
     findings.extend(check_empty_tables(net.tables, loc, tables_read=set(files)))
     findings.extend(check_area(net, loc))
     return net, findings
+
+
+def declared_locale(folder: Path) -> CsvLocale:
+    """The ``[csv]`` table of the folder's ``network.toml`` (``delimiter``: ``,``, ``;``,
+    ``tab`` or ``|``; ``decimal``: ``.`` or ``,``); nothing declared without one. InputError
+    naming the file on an unknown key or value."""
+    path = Path(folder) / NETWORK_FILE
+    if not path.is_file():
+        return CsvLocale()
+    try:
+        table = tomllib.loads(path.read_text(encoding="utf-8-sig")).get("csv", {})
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return CsvLocale()  # read_declaration names the problem
+    unknown = sorted(set(table) - {"delimiter", "decimal"}) if isinstance(table, dict) else ["csv"]
+    if unknown:
+        raise InputError(f"[csv]: unknown key(s) {', '.join(unknown)} (known: delimiter, decimal)", path=path)
+    try:
+        return CsvLocale(table.get("delimiter"), table.get("decimal"), f"{path.name} [csv]")
+    except UsageError as exc:
+        raise InputError(exc.message, path=path, column="csv") from exc
+
+
+def _machine_csv(path: Path, locale: CsvLocale) -> bool:
+    """A ``.csv`` that may be in the machine format, for the typed reader (which declines a
+    file that is not): no decimal comma declared, and comma-separated as far as the head
+    shows (:func:`dbtools.csv_locale.sniff_delimiter`; a contradiction is refused there)."""
+    return path.suffix.lower() == ".csv" and locale.decimal != "," and sniff_delimiter(path, locale)[0] == ","
 
 
 def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:

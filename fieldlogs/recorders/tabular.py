@@ -17,7 +17,11 @@ Mapping (every key documented in docs/guide/field-logs.md, "logs import"):
 * ``[axes]`` — IMU mounting: body axis = ± sensor axis, e.g. ``x = "+y"``, applied to the
   accelerometer and the gyro alike; must be a rotation (a signed permutation with
   determinant +1);
-* ``[offsets]`` — constants added after the unit conversion, in the stream's units.
+* ``[offsets]`` — constants added after the unit conversion, in the stream's units;
+* ``[csv]`` — ``delimiter`` (``,``, ``;``, ``tab``, ``|``) and ``decimal`` (``.``, ``,``) of a
+  CSV saved in a European spreadsheet locale (``logs import --delimiter/--decimal`` come
+  first); without them the convention is detected (:mod:`dbtools.csv_locale`: one
+  ``source.locale`` warning; a mixed or ambiguous file refused).
 
 A ``gps`` trace may lack the quality columns (a vendor CSV of time, latitude and longitude
 only): ``fix`` absent is 1 (a position of unknown quality) where lat and lon are given and 0
@@ -39,6 +43,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dbtools.csv_locale import CsvLocale, read_dialect, sniff_delimiter
 from dbtools.inputs import not_special
 from fieldlogs.recorders.common import Decoded
 from fieldlogs.recorders.timebase import (
@@ -51,7 +56,7 @@ from fieldlogs.recorders.timebase import (
     utc_to_gps,
 )
 from schemas.enums import Severity
-from schemas.errors import FindingsError, InputError
+from schemas.errors import FindingsError, InputError, UsageError
 from schemas.findings import Finding
 from schemas.frames import suggest
 from schemas.logs import LOG_STREAMS, MAX_ABS_RATE_RADPS
@@ -73,7 +78,7 @@ GRAVITY_BAND = (7.0, 13.0)
 BASES = ("relative", "unix", "gps", "utc")
 #: Rows (a regular subsample) the unit plausibility statistics are taken over.
 PLAUSIBILITY_SAMPLES = 200_000
-SECTIONS = {"stream", "time", "columns", "units", "axes", "offsets"}
+SECTIONS = {"stream", "time", "columns", "units", "axes", "offsets", "csv"}
 #: gps columns a trace may lack (module docstring).
 GPS_QUALITY = ("fix", "nsat", "hdop")
 
@@ -109,12 +114,26 @@ def _wanted(mapping: dict[str, Any]) -> dict[str, bool]:
     return out
 
 
-def _read_table(path: Path, mapping: dict[str, Any]) -> pd.DataFrame:
+def mapping_locale(mapping: dict[str, Any], mapping_file: str, given: CsvLocale | None) -> CsvLocale:
+    """The CSV convention: ``given`` (the options) over the mapping's ``[csv]`` table."""
+    table = mapping.get("csv", {})
+    unknown = sorted(set(table) - {"delimiter", "decimal"}) if isinstance(table, dict) else ["csv"]
+    if unknown:
+        raise InputError(f"[csv]: unknown key(s) {', '.join(unknown)} (known: delimiter, decimal)", path=mapping_file)
+    try:
+        declared = CsvLocale(table.get("delimiter"), table.get("decimal"), f"{Path(mapping_file).name} [csv]")
+    except UsageError as exc:
+        raise InputError(exc.message, path=mapping_file, column="csv") from exc
+    return (given or CsvLocale()).over(declared)
+
+
+def _read_table(path: Path, mapping: dict[str, Any], locale: CsvLocale) -> tuple[pd.DataFrame, Finding | None]:
     """Only the columns the mapping reads, numeric ones parsed straight to float64 (pyarrow's
     type inference costs more than the parse); a cell that is not a number falls back to
-    text so that ``_numeric`` names its row. ``attrs['all_columns']``: every column name."""
-    import pyarrow as pa
-
+    text so that ``_numeric`` names its row. ``attrs['all_columns']``: every column name.
+    A CSV in a spreadsheet locale (:mod:`dbtools.csv_locale`) is read as text and its number
+    cells put in machine notation; the finding names its convention."""
+    note = None
     try:
         if path.suffix.lower() == ".parquet":
             import pyarrow.parquet as pq  # lazy: heavy
@@ -123,25 +142,40 @@ def _read_table(path: Path, mapping: dict[str, Any]) -> pd.DataFrame:
             keep = [c for c in _wanted(mapping) if c in names]
             frame: pd.DataFrame = pq.read_table(path, columns=keep).to_pandas()
         else:
-            import pyarrow.csv as pcsv
-
-            opts = pcsv.ReadOptions(use_threads=False, block_size=1 << 24)
-            names = pcsv.open_csv(path, read_options=pcsv.ReadOptions(use_threads=False)).schema.names
-            want = {c: numeric for c, numeric in _wanted(mapping).items() if c in names}
-            types = {c: pa.float64() if numeric else pa.string() for c, numeric in want.items()}
-            conv = pcsv.ConvertOptions(include_columns=list(want), column_types=types)
-            try:
-                arrow = pcsv.read_csv(path, read_options=opts, convert_options=conv)
-            except pa.ArrowInvalid:
-                text = pcsv.ConvertOptions(include_columns=list(want), column_types=dict.fromkeys(want, pa.string()))
-                arrow = pcsv.read_csv(path, read_options=opts, convert_options=text)
-            frame = arrow.to_pandas(split_blocks=True, self_destruct=True)  # no 2-D block copy
+            frame, names, note = _read_csv(path, mapping, locale)
     except FileNotFoundError as exc:
         raise InputError("source file not found", path=path) from exc
     except (OSError, ValueError) as exc:
         raise InputError(f"not a readable CSV/Parquet table: {exc}", path=path) from exc
     frame.attrs["all_columns"] = list(names)
-    return frame
+    return frame, note
+
+
+def _read_csv(path: Path, mapping: dict[str, Any], locale: CsvLocale) -> tuple[pd.DataFrame, list[str], Finding | None]:
+    """:func:`_read_table` of a CSV: the frame, every column name, the locale's finding."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    sniffed = sniff_delimiter(path, locale)
+    opts = pcsv.ReadOptions(use_threads=False, block_size=1 << 24)
+    parse = pcsv.ParseOptions(delimiter=sniffed[0])
+    names = pcsv.open_csv(path, read_options=pcsv.ReadOptions(use_threads=False), parse_options=parse).schema.names
+    want = {c: numeric for c, numeric in _wanted(mapping).items() if c in names}
+    strings = dict.fromkeys(want, pa.string())
+    if sniffed[0] != "," or locale.decimal == ",":  # a spreadsheet locale: text, then machine notation
+        text = pcsv.ConvertOptions(include_columns=list(want), column_types=strings, strings_can_be_null=True)
+        arrow = pcsv.read_csv(path, read_options=opts, parse_options=parse, convert_options=text)
+        frame = arrow.to_pandas(split_blocks=True, self_destruct=True)
+        frame, dialect = read_dialect(frame, [c for c, n in want.items() if n], path, locale, sniffed)
+        return frame, names, dialect.finding(path, str(mapping["stream"]))
+    types = {c: pa.float64() if numeric else pa.string() for c, numeric in want.items()}
+    conv = pcsv.ConvertOptions(include_columns=list(want), column_types=types)
+    try:
+        arrow = pcsv.read_csv(path, read_options=opts, convert_options=conv)
+    except pa.ArrowInvalid:
+        text = pcsv.ConvertOptions(include_columns=list(want), column_types=strings)
+        arrow = pcsv.read_csv(path, read_options=opts, convert_options=text)
+    return arrow.to_pandas(split_blocks=True, self_destruct=True), names, None  # no 2-D block copy
 
 
 def _column(path: Path, raw: pd.DataFrame, source: str, target: str) -> pd.Series:
@@ -342,12 +376,16 @@ def _gps_quality(out: dict[str, Any], n: int) -> None:
             out[name] = np.full(n, np.nan)
 
 
-def read_mapped(path: Path, mapping: dict[str, Any], mapping_file: str = "") -> Decoded:
+def read_mapped(
+    path: Path, mapping: dict[str, Any], mapping_file: str = "", locale: CsvLocale | None = None
+) -> Decoded:
     """One vendor table → its stream with ``gnss_time_s`` (absolute) or ``recorder_s``
-    (relative time without a start: the importer aligns it to the run's start)."""
+    (relative time without a start: the importer aligns it to the run's start).
+    ``locale``: the CSV convention declared by the options (over the mapping's ``[csv]``)."""
     path = Path(path)
     dec = Decoded(str(path), "csv" if path.suffix.lower() != ".parquet" else "parquet")
-    raw = _read_table(path, mapping)
+    raw, note = _read_table(path, mapping, mapping_locale(mapping, mapping_file, locale))
+    dec.findings += [note] if note is not None else []
     dec.records = len(raw)
     stream = str(mapping["stream"])
     table = LOG_STREAMS[stream]
