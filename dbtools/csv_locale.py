@@ -64,7 +64,7 @@ from schemas.errors import InputError, UsageError
 from schemas.findings import Finding
 
 #: Delimiters recognised, with their names for messages.
-DELIMITERS = {",": "commas", ";": "semicolons", "\t": "tabs", "|": "vertical bars"}
+DELIMITERS = {",": "comma", ";": "semicolon", "\t": "tab", "|": "vertical bar"}
 #: Names a delimiter may be given by on the command line (a tab is hard to type).
 DELIMITER_WORDS = {"comma": ",", "semicolon": ";", "tab": "\t", "\\t": "\t", "pipe": "|"}
 #: Decimal separators, with their names for messages.
@@ -81,6 +81,11 @@ OPTIONS = "--delimiter/--decimal"
 
 def _shown(sep: str) -> str:
     return "tab" if sep == "\t" else f"'{sep}'"
+
+
+def _said(given: CsvLocale, option: str) -> str:
+    """Who declared it, for messages: ``--decimal``, or the file and table of a setting."""
+    return f"--{option}" if given.origin == OPTIONS else given.origin
 
 
 @dataclass(frozen=True)
@@ -154,7 +159,8 @@ class Dialect:
             Severity.WARNING,
             table,
             f"{self.describe()}: read in that convention (a spreadsheet locale's CSV); declare it "
-            f"({OPTIONS}, or [csv] in a source set's network.toml) to read it without this warning",
+            f"({OPTIONS}, or a [csv] table in the source set's network.toml or the CSV's mapping) to read it "
+            "without this warning",
             file=str(path),
             value=self.describe(),
             limit="`,`-separated with decimal points",
@@ -214,7 +220,7 @@ def sniff_delimiter(path: Path, given: CsvLocale) -> tuple[str, bool, bool]:
             sep, fields = next(iter(found.items()))
             raise InputError(
                 f"the first {n} line(s) are {DELIMITERS[sep]}-separated ({fields} fields each), not "
-                f"{DELIMITERS[given.delimiter]}-separated as {given.origin} says",
+                f"{DELIMITERS[given.delimiter]}-separated as {_said(given, 'delimiter')} says",
                 path=path,
                 row=1,
             )
@@ -241,7 +247,7 @@ def machine_delimiter_finding(path: Path, table: str) -> tuple[str, Finding | No
         "source.delimiter",
         Severity.ERROR,
         table,
-        f"fields are separated by {DELIMITERS[sep]} ({sep!r}), not commas: save the file as CSV (comma delimited)",
+        f"fields are separated by {DELIMITERS[sep]}s ({sep!r}), not commas: save the file as CSV (comma delimited)",
         file=str(path),
         row=1,
         value=sep,
@@ -318,7 +324,8 @@ def decide_decimal(
     if delimiter == ",":
         if given.decimal == ",":
             raise InputError(
-                f"the file is comma-separated, so its decimal separator cannot be a comma ({given.origin} says ',')",
+                f"the file is comma-separated, so its decimal separator cannot be a comma "
+                f"({_said(given, 'decimal')} says ',')",
                 path=path,
                 row=1,
             )
@@ -337,8 +344,8 @@ def decide_decimal(
             raise _refuse(
                 path,
                 wrong,
-                f"has a decimal {'point' if given.decimal == ',' else 'comma'}, but {given.origin} says the decimal "
-                f"separator is '{given.decimal}'",
+                f"has a decimal {'point' if given.decimal == ',' else 'comma'}, but {_said(given, 'decimal')} says "
+                f"the decimal separator is '{given.decimal}'",
             )
         return given.decimal, False
     if kinds.comma is not None and kinds.point is not None:
