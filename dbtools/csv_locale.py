@@ -282,25 +282,44 @@ def _first(current: _Cell | None, mask: np.ndarray, s: pd.Series, column: str, f
     if not mask.any():
         return current
     i = int(mask.argmax())
-    cell = _Cell(i + first_line, column, str(s.iat[i]))
+    cell = _Cell(i + first_line, column, str(s.iat[i]).strip())
     return cell if current is None or cell.line < current.line else current
+
+
+#: Digits with a space, no-break space, narrow no-break space or apostrophe between them.
+_SPACED = r"\d[ \x{a0}\x{202f}']+\d"
+#: One separator with exactly three digits after it and at most three before: a thousands group?
+_GROUPED = r"^\s*[+-]?\d{1,3}[.,]\d{3}\s*$"
+
+
+def _masks(s: pd.Series) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(thousands separator, one decimal comma, one decimal point, grouped) per cell, by
+    Arrow's string kernels (one pass each over the column's buffer)."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    arr = pa.array(s, type=pa.large_string(), from_pandas=True)
+    commas = pc.count_substring(arr, ",").to_numpy(zero_copy_only=False)
+    points = pc.count_substring(arr, ".").to_numpy(zero_copy_only=False)
+
+    def mask(regex: str) -> np.ndarray:
+        return np.asarray(pc.fill_null(pc.match_substring_regex(arr, regex), False).to_numpy(zero_copy_only=False))
+
+    commas, points = np.nan_to_num(commas.astype(float)), np.nan_to_num(points.astype(float))
+    thousands = ((commas > 0) & (points > 0)) | (commas > 1) | (points > 1) | mask(_SPACED)
+    return thousands, (commas == 1) & ~thousands, (points == 1) & ~thousands, mask(_GROUPED)
 
 
 def _classify(frame: pd.DataFrame, numeric: Collection[str], first_line: int) -> _Kinds:
     out = _Kinds()
     for column in (c for c in frame.columns if c in numeric):
-        s = frame[column].astype("string").str.strip().fillna("")
-        commas, points = s.str.count(","), s.str.count(r"\.")
-        spaced = s.str.contains(r"\d[ \u00a0\u202f']+\d", regex=True)
-        thousands = ((commas > 0) & (points > 0)) | (commas > 1) | (points > 1) | spaced
-        comma, point = (commas == 1) & ~thousands, (points == 1) & ~thousands
-        arr = {k: m.to_numpy(dtype=bool, na_value=False) for k, m in (("t", thousands), ("c", comma), ("p", point))}
-        out.thousands = _first(out.thousands, arr["t"], s, str(column), first_line)
-        out.comma = _first(out.comma, arr["c"], s, str(column), first_line)
-        out.point = _first(out.point, arr["p"], s, str(column), first_line)
-        grouped = s.str.fullmatch(r"[+-]?\d{1,3}[.,]\d{3}").to_numpy(dtype=bool, na_value=False)
-        out.comma_grouped &= bool(grouped[arr["c"]].all())
-        out.point_grouped &= bool(grouped[arr["p"]].all())
+        s = frame[column]
+        thousands, comma, point, grouped = _masks(s)
+        out.thousands = _first(out.thousands, thousands, s, str(column), first_line)
+        out.comma = _first(out.comma, comma, s, str(column), first_line)
+        out.point = _first(out.point, point, s, str(column), first_line)
+        out.comma_grouped &= bool(grouped[comma].all())
+        out.point_grouped &= bool(grouped[point].all())
     return out
 
 
@@ -376,9 +395,13 @@ def machine_numbers(frame: pd.DataFrame, numeric: Collection[str], decimal: str)
     cols = [c for c in frame.columns if c in numeric]
     if decimal == "." or not cols:
         return frame
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
     out = frame.copy()
     for c in cols:
-        out[c] = out[c].astype("string").str.replace(",", ".", regex=False).astype(frame[c].dtype)
+        arr = pc.replace_substring(pa.array(frame[c], type=pa.large_string(), from_pandas=True), ",", ".")
+        out[c] = pd.Series(arr.to_pandas(), index=frame.index).astype(frame[c].dtype)
     return out
 
 
