@@ -30,10 +30,14 @@ through this module, so one file is judged the same way everywhere:
   file that is not comma-separated, whatever is declared.
 
 A file read in a detected non-machine convention gives **one** finding naming it (not one
-per cell). The cells of number columns are turned into the machine notation
-(:func:`machine_numbers`: ``12,5`` → ``12.5``) before the usual typed reading, so a source
-set in a locale builds the same DB (the same content hash) as its machine-format copy. The
-suite's own outputs stay in the machine format.
+per cell). A source file whose head settles its notation (:func:`head_dialect`) is parsed
+by the typed reader in it (:class:`dbtools.typed_csv.Notation`: every cell is parsed, so a
+cell of another notation or with a thousands separator further down declines the file);
+any other file is read as text, judged on every cell (:func:`read_dialect`) and its number
+cells turned into the machine notation (:func:`machine_numbers`: ``12,5`` → ``12.5``)
+before the usual coercion. Both give the numbers of the machine-format copy bit for bit
+(fast_float, correctly rounded with either separator), so a source set in a locale builds
+the same DB — the same content hash. The suite's own outputs stay in the machine format.
 
 Findings:
 
@@ -414,3 +418,38 @@ def read_dialect(
     decimal, dec_detected = decide_decimal(frame, numeric, sep, given, path)
     detected = frozenset(k for k, d in (("delimiter", sep_detected), ("decimal", dec_detected)) if d)
     return machine_numbers(frame, numeric, decimal), Dialect(sep, decimal, bom, detected)
+
+
+def head_dialect(path: Path, numeric: Collection[str], given: CsvLocale) -> Dialect | None:
+    """The dialect of a CSV file settled by its head alone, for the typed reader
+    (:mod:`dbtools.typed_csv`, which parses every cell in it: a cell of another notation or
+    with a thousands separator does not parse, and the file goes to the text path, which
+    names it); None when the head cannot settle it — a decimal comma declared for a
+    comma-separated file, no decimal separator in the head's number cells, a mix, every one
+    a three-digit group, a thousands separator: the text path (:func:`read_dialect`)
+    judges every cell. InputError as :func:`sniff_delimiter`."""
+    sep, sep_detected, bom = sniff_delimiter(path, given)
+    detected = {"delimiter"} if sep_detected else set()
+    if sep == ",":
+        return None if given.decimal == "," else Dialect(",", ".", bom)
+    if given.decimal is not None:
+        return Dialect(sep, given.decimal, bom, frozenset(detected))
+    rows = _field_rows(_head_lines(read_head(path, SNIFF_BYTES)), sep)
+    if len(rows) < 2 or len(set(rows[0])) != len(rows[0]):
+        return None
+    head = pd.DataFrame([r for r in rows[1:] if len(r) == len(rows[0])], columns=rows[0], dtype=object)
+    kinds = _classify(head, numeric, 2)
+    if kinds.thousands is not None or (kinds.comma is not None and kinds.point is not None):
+        return None
+    if kinds.comma is not None and not kinds.comma_grouped:
+        return Dialect(sep, ",", bom, frozenset({*detected, "decimal"}))
+    if kinds.point is not None and not kinds.point_grouped:
+        return Dialect(sep, ".", bom, frozenset({*detected, "decimal"}))
+    return None
+
+
+def _field_rows(lines: list[str], sep: str) -> list[list[str]]:
+    try:
+        return [[c.strip() for c in row] for row in csv.reader(lines, delimiter=sep)]
+    except csv.Error:
+        return []

@@ -26,18 +26,19 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from dbtools.csv_locale import CsvLocale, sniff_delimiter
+from dbtools.csv_locale import CsvLocale, head_dialect
 from dbtools.gis.georef import NETWORK_FILE, read_declaration, write_declaration
 from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.rules.area import check_area
 from dbtools.rules.common import Locator
 from dbtools.rules.schema import check_empty_tables
 from dbtools.tabular import code_columns, find_table_file, read_table_file, sha256_file, text_columns
-from dbtools.typed_csv import read_csv_typed
+from dbtools.typed_csv import Notation, read_csv_typed
 from schemas.enums import Severity, Track
 from schemas.errors import InputError, UsageError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
+from schemas.model import Table
 from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
 
 
@@ -73,7 +74,7 @@ def read_source_set(folder: Path, locale: CsvLocale | None = None) -> tuple[Netw
                 )
             tables[name] = empty_frame(table)
             continue
-        raw = read_csv_typed(table, path) if _machine_csv(path, locale) else None  # None: as text
+        raw = _read_typed(table, path, locale, findings)  # None: as text
         if raw is None:
             tf = read_table_file(
                 path,
@@ -82,7 +83,7 @@ def read_source_set(folder: Path, locale: CsvLocale | None = None) -> tuple[Netw
                 code_columns=code_columns(table),
                 text_columns=text_columns(table),
                 locale=locale,
-                numeric_columns=[c.name for c in table.columns if c.dtype in ("float", "int")],
+                numeric_columns=_numbers(table),
             )
             raw = tf.frame
             findings.extend(tf.findings)
@@ -129,11 +130,23 @@ def declared_locale(folder: Path) -> CsvLocale:
         raise InputError(exc.message, path=path, column="csv") from exc
 
 
-def _machine_csv(path: Path, locale: CsvLocale) -> bool:
-    """A ``.csv`` that may be in the machine format, for the typed reader (which declines a
-    file that is not): no decimal comma declared, and comma-separated as far as the head
-    shows (:func:`dbtools.csv_locale.sniff_delimiter`; a contradiction is refused there)."""
-    return path.suffix.lower() == ".csv" and locale.decimal != "," and sniff_delimiter(path, locale)[0] == ","
+def _read_typed(table: Table, path: Path, locale: CsvLocale, findings: list[Finding]) -> pd.DataFrame | None:
+    """A ``.csv`` read by the typed reader in the notation its head settles
+    (:func:`dbtools.csv_locale.head_dialect`; the convention's finding added), or None for
+    the text path (a workbook, a file the head cannot settle or the typed reader declines)."""
+    if path.suffix.lower() != ".csv":
+        return None
+    dialect = head_dialect(path, _numbers(table), locale)
+    if dialect is None:
+        return None
+    raw = read_csv_typed(table, path, Notation(dialect.delimiter, dialect.decimal))
+    note = dialect.finding(path, table.name) if raw is not None else None
+    findings += [note] if note is not None else []
+    return raw
+
+
+def _numbers(table: Table) -> list[str]:
+    return [c.name for c in table.columns if c.dtype in ("float", "int")]
 
 
 def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:

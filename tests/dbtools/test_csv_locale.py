@@ -22,13 +22,15 @@ from dbtools.build import build_db
 from dbtools.csv_locale import CsvLocale, Dialect, consistent_delimiters, sniff_delimiter
 from dbtools.sources import read_source_set
 from dbtools.tabular import read_table_file
-from dbtools.typed_csv import read_csv_typed
+from dbtools.typed_csv import MACHINE, Notation, read_csv_typed
 from fieldlogs.possession.plan import read_plan
 from fieldlogs.recorders.importer import import_run
 from schemas.enums import Severity
 from schemas.errors import InputError, UsageError
 from schemas.findings import Finding
+from schemas.logs import LOG_STREAMS
 from schemas.model import Table
+from schemas.tables import GIS
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "european_csv"
 RECORDERS = DATA.parent / "recorders"
@@ -244,20 +246,35 @@ def test_a_utf16_tab_file_excel_unicode_text_is_read_with_both_findings(tmp_path
 # --------------------------------------------------------------------------------- machine format
 
 
-def test_machine_files_are_unchanged_and_read_typed(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A comma-separated file is read by the typed reader as before, with no finding."""
-    seen: list[str] = []
+def test_the_typed_reader_reads_what_the_head_settles(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Machine files are read typed as before, with no finding; a locale file whose head
+    settles its notation (decimal commas in gis and feature_points) is read typed in it;
+    one whose head does not (balises: whole numbers only; lines: no number) as text."""
+    seen: dict[str, Notation] = {}
 
-    def spy(table: Table, path: Path) -> pd.DataFrame | None:
-        seen.append(path.name)
-        return read_csv_typed(table, path)
+    def spy(table: Table, path: Path, notation: Notation = MACHINE) -> pd.DataFrame | None:
+        seen[path.name] = notation
+        return read_csv_typed(table, path, notation)
 
     monkeypatch.setattr("dbtools.sources.read_csv_typed", spy)
     _, findings = read_source_set(DATA / "sources_machine")
-    assert not locale_findings(findings) and sorted(seen) == sorted(CSV_FILES)
+    assert not locale_findings(findings) and seen == dict.fromkeys(CSV_FILES, MACHINE)
     seen.clear()
-    read_source_set(DATA / "sources_de")
-    assert seen == []  # not comma-separated: the text path
+    _, findings = read_source_set(DATA / "sources_de")
+    assert seen == {"gis.csv": Notation(";", ","), "feature_points.csv": Notation(";", ",")}
+    assert len(locale_findings(findings)) == 4  # the same findings by either path
+    seen.clear()
+    read_source_set(DATA / "sources_fi", CsvLocale("tab", ","))
+    assert set(seen) == set(CSV_FILES) and set(seen.values()) == {Notation("\t", ",")}  # declared: all typed
+
+
+def test_a_bad_cell_beyond_the_head_sends_the_file_to_the_text_path_which_names_it(de: Path) -> None:
+    edit_cell(de / "gis.csv", 250, "height_m", "55.020,5")
+    assert read_csv_typed(GIS, de / "gis.csv", Notation(";", ",")) is None
+    with pytest.raises(InputError) as exc:
+        read_source_set(de)
+    assert (Path(str(exc.value.path)).name, exc.value.row, exc.value.column) == ("gis.csv", 250, "height_m")
+    assert "thousands separator" in exc.value.message
 
 
 def test_dialect_description() -> None:
@@ -383,3 +400,36 @@ def test_a_frame_round_trips_through_a_locale_csv(rows: list[tuple[float, float]
             assert cells and all(len(v.split(",")[1]) == 3 and len(v.lstrip("-").split(",")[0]) <= 3 for v in cells)
             return
         pd.testing.assert_frame_equal(detected.frame, tf.frame)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(st.tuples(_VALUES, _VALUES, _VALUES), min_size=1, max_size=30),
+    st.sampled_from([";", "\t", "|"]),
+    st.booleans(),
+)
+def test_the_typed_reader_in_a_locale_notation_reads_the_text_paths_numbers(
+    rows: list[tuple[float, float, float]], sep: str, text_column: bool
+) -> None:
+    """Both typed parsers (pandas's C parser for a file of numbers, Arrow's with a text
+    column) read decimal commas and another delimiter to the same floats as the text path,
+    bit for bit."""
+    import tempfile
+
+    imu = LOG_STREAMS["imu"]
+    table = GIS if text_column else Table("n", imu.kind, "numbers", tuple(imu.column(c) for c in ("t", "ax", "ay")))
+    names = ["km_m", "lat", "lon"] if text_column else ["t", "ax", "ay"]
+    frame = pd.DataFrame(rows, columns=names)
+    if text_column:
+        frame.insert(0, "line_code", "0420")
+        frame.insert(1, "track", "D")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "t.csv"
+        path.write_text(frame.to_csv(sep=sep, decimal=",", index=False), encoding="utf-8")
+        typed = read_csv_typed(table, path, Notation(sep, ","))
+        assert typed is not None
+        text = read_table_file(path, locale=CsvLocale(sep, ","), numeric_columns=names).frame
+        for c in names:
+            want = frame[c].to_numpy()
+            assert np.array_equal(typed[c].to_numpy(dtype=float), want)
+            assert np.array_equal(pd.to_numeric(text[c]).to_numpy(dtype=float), want)
