@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dbtools.csv_locale import CsvLocale, read_dialect, sniff_delimiter
+from dbtools.csv_locale import CsvLocale, head_dialect, read_dialect, sniff_delimiter
 from dbtools.inputs import not_special
 from fieldlogs.recorders.common import Decoded
 from fieldlogs.recorders.timebase import (
@@ -152,7 +152,11 @@ def _read_table(path: Path, mapping: dict[str, Any], locale: CsvLocale) -> tuple
 
 
 def _read_csv(path: Path, mapping: dict[str, Any], locale: CsvLocale) -> tuple[pd.DataFrame, list[str], Finding | None]:
-    """:func:`_read_table` of a CSV: the frame, every column name, the locale's finding."""
+    """:func:`_read_table` of a CSV: the frame, every column name, the locale's finding.
+    Numbers are parsed by Arrow in the notation the head settles
+    (:func:`dbtools.csv_locale.head_dialect`); a file it does not settle, or with a cell
+    that does not parse so, is read as text: a machine-format file for ``_numeric`` to name
+    the cell, a locale's judged on every cell (:func:`dbtools.csv_locale.read_dialect`)."""
     import pyarrow as pa
     import pyarrow.csv as pcsv
 
@@ -161,21 +165,26 @@ def _read_csv(path: Path, mapping: dict[str, Any], locale: CsvLocale) -> tuple[p
     parse = pcsv.ParseOptions(delimiter=sniffed[0])
     names = pcsv.open_csv(path, read_options=pcsv.ReadOptions(use_threads=False), parse_options=parse).schema.names
     want = {c: numeric for c, numeric in _wanted(mapping).items() if c in names}
+    numbers = [c for c, n in want.items() if n]
     strings = dict.fromkeys(want, pa.string())
-    if sniffed[0] != "," or locale.decimal == ",":  # a spreadsheet locale: text, then machine notation
-        text = pcsv.ConvertOptions(include_columns=list(want), column_types=strings, strings_can_be_null=True)
-        arrow = pcsv.read_csv(path, read_options=opts, parse_options=parse, convert_options=text)
-        frame = arrow.to_pandas(split_blocks=True, self_destruct=True)
-        frame, dialect = read_dialect(frame, [c for c, n in want.items() if n], path, locale, sniffed)
-        return frame, names, dialect.finding(path, str(mapping["stream"]))
-    types = {c: pa.float64() if numeric else pa.string() for c, numeric in want.items()}
-    conv = pcsv.ConvertOptions(include_columns=list(want), column_types=types)
-    try:
-        arrow = pcsv.read_csv(path, read_options=opts, convert_options=conv)
-    except pa.ArrowInvalid:
+    dialect = head_dialect(path, numbers, locale)
+    if dialect is not None:
+        types = {c: pa.float64() if numeric else pa.string() for c, numeric in want.items()}
+        conv = pcsv.ConvertOptions(include_columns=list(want), column_types=types, decimal_point=dialect.decimal)
+        try:
+            arrow = pcsv.read_csv(path, read_options=opts, parse_options=parse, convert_options=conv)
+            frame = arrow.to_pandas(split_blocks=True, self_destruct=True)  # no 2-D block copy
+            return frame, names, dialect.finding(path, str(mapping["stream"]))
+        except pa.ArrowInvalid:
+            pass
+    if sniffed[0] == "," and locale.decimal != ",":  # the machine format: text, for _numeric to name the cell
         text = pcsv.ConvertOptions(include_columns=list(want), column_types=strings)
         arrow = pcsv.read_csv(path, read_options=opts, convert_options=text)
-    return arrow.to_pandas(split_blocks=True, self_destruct=True), names, None  # no 2-D block copy
+        return arrow.to_pandas(split_blocks=True, self_destruct=True), names, None
+    text = pcsv.ConvertOptions(include_columns=list(want), column_types=strings, strings_can_be_null=True)
+    arrow = pcsv.read_csv(path, read_options=opts, parse_options=parse, convert_options=text)
+    frame, found = read_dialect(arrow.to_pandas(split_blocks=True, self_destruct=True), numbers, path, locale, sniffed)
+    return frame, names, found.finding(path, str(mapping["stream"]))
 
 
 def _column(path: Path, raw: pd.DataFrame, source: str, target: str) -> pd.Series:

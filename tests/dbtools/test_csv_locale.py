@@ -433,3 +433,15 @@ def test_the_typed_reader_in_a_locale_notation_reads_the_text_paths_numbers(
             want = frame[c].to_numpy()
             assert np.array_equal(typed[c].to_numpy(dtype=float), want)
             assert np.array_equal(pd.to_numeric(text[c]).to_numpy(dtype=float), want)
+
+
+def test_a_mapped_csv_mixing_separators_past_the_head_is_refused_naming_the_cell(tmp_path: Path) -> None:
+    """The head settles decimal commas (Arrow parses in them); a point on line 40 makes the
+    parse fail, and the text path names the cell: nothing is written."""
+    path = tmp_path / "imu_de.csv"
+    shutil.copy(DATA / "imu_de.csv", path)
+    edit_cell(path, 40, "acc_x", "0.010")
+    with pytest.raises(InputError) as exc:
+        import_run([path], tmp_path / "r", mapping=[RECORDERS / "imu_mapping.toml"], vehicle=RECORDERS / "vehicle.toml")
+    assert (exc.value.row, exc.value.column) == (40, "acc_x") and "mixes decimal separators" in exc.value.message
+    assert not (tmp_path / "r").exists()
