@@ -131,6 +131,19 @@ class CsvLocale:
         )
 
 
+def csv_table(table: object, path: Path | str) -> CsvLocale:
+    """The convention a ``[csv]`` table of a TOML file declares (``delimiter``: ``,``, ``;``,
+    ``tab``, ``|``; ``decimal``: ``.``, ``,``; a source set's ``network.toml``, a mapping);
+    InputError naming the file on an unknown key or value."""
+    unknown = sorted(set(table) - {"delimiter", "decimal"}) if isinstance(table, dict) else ["csv"]
+    if unknown or not isinstance(table, dict):
+        raise InputError(f"[csv]: unknown key(s) {', '.join(unknown)} (known: delimiter, decimal)", path=path)
+    try:
+        return CsvLocale(table.get("delimiter"), table.get("decimal"), f"{Path(path).name} [csv]")
+    except UsageError as exc:
+        raise InputError(exc.message, path=path, column="csv") from exc
+
+
 @dataclass(frozen=True)
 class Dialect:
     """How a file was read: its delimiter, decimal separator, whether it had a UTF-8

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from dbtools.csv_locale import CsvLocale, head_dialect
+from dbtools.csv_locale import CsvLocale, csv_table, head_dialect
 from dbtools.gis.georef import NETWORK_FILE, read_declaration, write_declaration
 from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.rules.area import check_area
@@ -35,7 +35,7 @@ from dbtools.rules.schema import check_empty_tables
 from dbtools.tabular import code_columns, find_table_file, read_table_file, sha256_file, text_columns
 from dbtools.typed_csv import Notation, read_csv_typed
 from schemas.enums import Severity, Track
-from schemas.errors import InputError, UsageError
+from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
 from schemas.model import Table
@@ -121,13 +121,7 @@ def declared_locale(folder: Path) -> CsvLocale:
         table = tomllib.loads(path.read_text(encoding="utf-8-sig")).get("csv", {})
     except (UnicodeDecodeError, tomllib.TOMLDecodeError):
         return CsvLocale()  # read_declaration names the problem
-    unknown = sorted(set(table) - {"delimiter", "decimal"}) if isinstance(table, dict) else ["csv"]
-    if unknown:
-        raise InputError(f"[csv]: unknown key(s) {', '.join(unknown)} (known: delimiter, decimal)", path=path)
-    try:
-        return CsvLocale(table.get("delimiter"), table.get("decimal"), f"{path.name} [csv]")
-    except UsageError as exc:
-        raise InputError(exc.message, path=path, column="csv") from exc
+    return csv_table(table, path)
 
 
 def _read_typed(table: Table, path: Path, locale: CsvLocale, findings: list[Finding]) -> pd.DataFrame | None:

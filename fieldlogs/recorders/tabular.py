@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from dbtools.csv_locale import CsvLocale, head_dialect, read_dialect, sniff_delimiter
+from dbtools.csv_locale import CsvLocale, csv_table, head_dialect, read_dialect, sniff_delimiter
 from dbtools.inputs import not_special
 from fieldlogs.recorders.common import Decoded
 from fieldlogs.recorders.timebase import (
@@ -56,7 +56,7 @@ from fieldlogs.recorders.timebase import (
     utc_to_gps,
 )
 from schemas.enums import Severity
-from schemas.errors import FindingsError, InputError, UsageError
+from schemas.errors import FindingsError, InputError
 from schemas.findings import Finding
 from schemas.frames import suggest
 from schemas.logs import LOG_STREAMS, MAX_ABS_RATE_RADPS
@@ -116,15 +116,7 @@ def _wanted(mapping: dict[str, Any]) -> dict[str, bool]:
 
 def mapping_locale(mapping: dict[str, Any], mapping_file: str, given: CsvLocale | None) -> CsvLocale:
     """The CSV convention: ``given`` (the options) over the mapping's ``[csv]`` table."""
-    table = mapping.get("csv", {})
-    unknown = sorted(set(table) - {"delimiter", "decimal"}) if isinstance(table, dict) else ["csv"]
-    if unknown:
-        raise InputError(f"[csv]: unknown key(s) {', '.join(unknown)} (known: delimiter, decimal)", path=mapping_file)
-    try:
-        declared = CsvLocale(table.get("delimiter"), table.get("decimal"), f"{Path(mapping_file).name} [csv]")
-    except UsageError as exc:
-        raise InputError(exc.message, path=mapping_file, column="csv") from exc
-    return (given or CsvLocale()).over(declared)
+    return (given or CsvLocale()).over(csv_table(mapping.get("csv", {}), mapping_file))
 
 
 def _read_table(path: Path, mapping: dict[str, Any], locale: CsvLocale) -> tuple[pd.DataFrame, Finding | None]:

@@ -445,3 +445,12 @@ def test_a_mapped_csv_mixing_separators_past_the_head_is_refused_naming_the_cell
         import_run([path], tmp_path / "r", mapping=[RECORDERS / "imu_mapping.toml"], vehicle=RECORDERS / "vehicle.toml")
     assert (exc.value.row, exc.value.column) == (40, "acc_x") and "mixes decimal separators" in exc.value.message
     assert not (tmp_path / "r").exists()
+
+
+def test_a_bad_csv_table_in_a_mapping_is_refused_naming_it(tmp_path: Path) -> None:
+    mapping = tmp_path / "imu.toml"
+    text = (RECORDERS / "imu_mapping.toml").read_text(encoding="utf-8")
+    mapping.write_text(text + '\n[csv]\ndecimal = "·"\n', encoding="utf-8")
+    with pytest.raises(InputError) as exc:
+        import_run([DATA / "imu_de.csv"], tmp_path / "r", mapping=[mapping], vehicle=RECORDERS / "vehicle.toml")
+    assert exc.value.path == str(mapping) and "imu.toml [csv]: decimal separator '·'" in exc.value.message
