@@ -24,6 +24,8 @@ through this module, so one file is judged the same way everywhere:
   one file is a mix and refused, naming the first cell of the later kind. When every such
   cell has exactly three digits after its separator (``1,234``, ``1.234``) it may as well
   be a thousands separator: ambiguous, refused until ``--decimal`` says which.
+* **Excel's ``sep=;`` hint line** (some exports put it before the header) is refused,
+  naming it: delete that line.
 * **Thousands separators are never read as decimals**: a number cell with both a comma
   and a point (``1.234,5``, ``1,234.5``), two of either (``1.234.567``), or a space,
   no-break space or apostrophe between digits (``1 234,5``, ``1'234.5``) is refused in a
@@ -55,6 +57,7 @@ Findings:
 from __future__ import annotations
 
 import csv
+import re
 from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
@@ -230,8 +233,16 @@ def sniff_delimiter(path: Path, given: CsvLocale) -> tuple[str, bool, bool]:
     InputError when the head contradicts the declared delimiter or splits evenly on two."""
     head = read_head(path, SNIFF_BYTES)
     bom = head.startswith(UTF8_BOM)
+    lines = _head_lines(head)
+    if lines and re.fullmatch(r'"?sep=.?"?', lines[0].strip(), flags=re.IGNORECASE):
+        raise InputError(
+            f"line 1 ({lines[0].strip()!r}) is Excel's delimiter hint, not the header: delete that line (the delimiter "
+            f"is detected, or declared with {OPTIONS})",
+            path=path,
+            row=1,
+        )
     found = consistent_delimiters(head)
-    n = len(_head_lines(head))
+    n = len(lines)
     if given.delimiter is not None:
         if found and given.delimiter not in found:
             sep, fields = next(iter(found.items()))

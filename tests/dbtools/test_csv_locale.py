@@ -454,3 +454,11 @@ def test_a_bad_csv_table_in_a_mapping_is_refused_naming_it(tmp_path: Path) -> No
     with pytest.raises(InputError) as exc:
         import_run([DATA / "imu_de.csv"], tmp_path / "r", mapping=[mapping], vehicle=RECORDERS / "vehicle.toml")
     assert exc.value.path == str(mapping) and "imu.toml [csv]: decimal separator '·'" in exc.value.message
+
+
+def test_excels_delimiter_hint_line_is_refused_naming_it(de: Path) -> None:
+    path = de / "gis.csv"
+    path.write_bytes(b"sep=;\r\n" + path.read_bytes().removeprefix(b"\xef\xbb\xbf"))
+    with pytest.raises(InputError) as exc:
+        read_source_set(de)
+    assert (exc.value.path, exc.value.row) == (str(path), 1) and "Excel's delimiter hint" in exc.value.message
