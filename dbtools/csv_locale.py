@@ -141,6 +141,8 @@ def csv_table(table: object, path: Path | str) -> CsvLocale:
     unknown = sorted(set(table) - {"delimiter", "decimal"}) if isinstance(table, dict) else ["csv"]
     if unknown or not isinstance(table, dict):
         raise InputError(f"[csv]: unknown key(s) {', '.join(unknown)} (known: delimiter, decimal)", path=path)
+    if not all(isinstance(v, str) for v in table.values()):
+        raise InputError('[csv]: delimiter and decimal are text (delimiter = ";", decimal = ",")', path=path)
     try:
         return CsvLocale(table.get("delimiter"), table.get("decimal"), f"{Path(path).name} [csv]")
     except UsageError as exc:

@@ -124,6 +124,8 @@ def test_options_come_before_network_toml(tmp_path: Path) -> None:
         ('[csv]\ndecimal = ";"\n', "decimal separator ';'"),
         ('[csv]\ndelimiter = ","\ndecimal = ","\n', "needs another delimiter"),
         ('[csv]\nseparator = ";"\n', "unknown key(s) separator"),
+        ("[csv]\ndecimal = 1\n", "are text"),
+        ('csv = ";"\n', "unknown key(s) csv"),
     ],
 )
 def test_a_bad_csv_table_in_network_toml_is_refused(tmp_path: Path, toml: str, words: str) -> None:
