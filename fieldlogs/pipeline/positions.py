@@ -19,13 +19,19 @@ less for shorter ones), which the accuracy bench shows to hold.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.network import Network
+from dbtools.topology import all_tracks, implied_track_id
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
+from fieldlogs.pipeline.hypotheses import TrackLines, track_lines
+from fieldlogs.pipeline.metric import IDENTITY
 from fieldlogs.pipeline.types import Fix, FloatArray
 from schemas.enums import FixSource, PositionState
 
@@ -54,55 +60,134 @@ def text_column(codes: npt.NDArray[np.uint8], values: dict[str, int]) -> npt.NDA
 def positions_frame(
     travel: Travel, fixes: list[Fix], cfg: MarginConfig, geometry: VehicleGeometry | None = None
 ) -> pd.DataFrame:
-    """Per-cycle state, km, equipment km, margin and source from the fixes in force, and the
-    vehicle's head and tail km (:mod:`fieldlogs.pipeline.geometry`; NaN without its extent)."""
+    """Per-cycle state, track, km, equipment km, margin and source from the fixes in force, and
+    the vehicle's head and tail km (:mod:`fieldlogs.pipeline.geometry`; NaN without its
+    extent). A fix with network candidates (:mod:`fieldlogs.pipeline.hypotheses`) is dead-reckoned
+    per candidate along its track: one gives track, pos and km; several give state
+    ``ambiguous``, no track or km, and the ``candidates`` column (:func:`candidates_text`)."""
     geometry = geometry or VehicleGeometry()
-    t, d = travel.t, travel.d
+    t = travel.t
     n = t.size
     # state and source as codes of their few distinct texts (the enums' values), made text once
-    states, sources = {PositionState.UNDETERMINED.value: 0}, {FixSource.NONE.value: 0}
-    state = np.zeros(n, dtype=np.uint8)
-    source = np.zeros(n, dtype=np.uint8)
-    line = np.full(n, None, dtype=object)  # None: one object, every cell shares it
-    track = np.full(n, None, dtype=object)
-    km = np.full(n, np.nan)
-    km_eq = np.full(n, np.nan)
-    margin = np.full(n, np.nan)
-    k_sign = np.full(n, np.nan)
+    cols = _Columns(n)
     if fixes:
         t_eff = np.array([f.t_effective for f in fixes])
         idx = np.searchsorted(t_eff, t, side="right") - 1
-        has = idx >= 0
-        cyc = np.flatnonzero(has)
+        cyc = np.flatnonzero(idx >= 0)
         j = idx[cyc]
         order = np.argsort(j, kind="stable")  # cycles grouped by fix in force, ascending
         groups, first = np.unique(j[order], return_index=True)
         for jj, sel in zip(groups.tolist(), np.split(cyc[order], first[1:]), strict=True):
             f = fixes[jj]  # the fix in force on cycles ``sel``: dead reckoning and margin
-            if f.state == PositionState.UNDETERMINED:
-                continue
-            est = travel.km(f, travel.s[sel])
-            km[sel] = est
-            km_eq[sel] = est + (f.km_equipment_m - f.km_m)
-            margin[sel] = margin_m(f, d[sel], travel.allowance[sel], cfg)
-            k_sign[sel] = f.k
-            state[sel] = states.setdefault(str(f.state), len(states))
-            line[sel] = f.line_code
-            track[sel] = f.track
-            source[sel] = sources.setdefault(str(f.source), len(sources))
-    head, tail = geometry.ends(km, k_sign, np.asarray(travel.cab, dtype=float))
+            if f.state != PositionState.UNDETERMINED:
+                cols.fill(travel, f, sel, cfg)
+    head, tail = geometry.ends(cols.km, cols.k_sign, np.asarray(travel.cab, dtype=float))
     return pd.DataFrame(
         {
             "t": t,
-            "state": text_column(state, states),
-            "line_code": pd.array(line, dtype="string"),
-            "track": pd.array(track, dtype="string"),
-            "km_m": km,
-            "km_equipment_m": km_eq,
+            "state": text_column(cols.state, cols.states),
+            "line_code": pd.array(cols.line, dtype="string"),
+            "track": pd.array(cols.track, dtype="string"),
+            "track_id": pd.array(cols.track_id, dtype="string"),
+            "pos_m": cols.pos,
+            "km_m": cols.km,
+            "km_equipment_m": cols.km_eq,
             "speed_mps": travel.v,
-            "margin_m": margin,
-            "last_fix_source": pd.array(text_column(source, sources), dtype="string"),
+            "margin_m": cols.margin,
+            "last_fix_source": pd.array(text_column(cols.source, cols.sources), dtype="string"),
             "km_head_m": head,
             "km_tail_m": tail,
+            "candidates": pd.array(cols.candidates, dtype="string"),
         }
     )
+
+
+class _Columns:
+    """The per-cycle columns of :func:`positions_frame`, filled one fix at a time."""
+
+    def __init__(self, n: int) -> None:
+        self.states, self.sources = {PositionState.UNDETERMINED.value: 0}, {FixSource.NONE.value: 0}
+        self.state = np.zeros(n, dtype=np.uint8)
+        self.source = np.zeros(n, dtype=np.uint8)
+        self.line = np.full(n, None, dtype=object)  # None: one object, every cell shares it
+        self.track = np.full(n, None, dtype=object)
+        self.track_id = np.full(n, None, dtype=object)
+        self.candidates = np.full(n, None, dtype=object)
+        self.km, self.km_eq, self.pos = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+        self.margin, self.k_sign = np.full(n, np.nan), np.full(n, np.nan)
+
+    def fill(self, travel: Travel, f: Fix, sel: npt.NDArray[np.int64], cfg: MarginConfig) -> None:
+        base = margin_m(f, travel.d[sel], travel.allowance[sel], cfg)
+        state = f.state
+        if len(f.hyps) > 1:
+            state = PositionState.AMBIGUOUS
+            lines = track_lines(_network(travel))
+            self.candidates[sel] = candidates_text(f, travel.s[sel], base, lines)
+            self.margin[sel] = base + max(h.extra_m for h in f.hyps)
+        elif f.hyps:
+            h = f.hyps[0]
+            tl = track_lines(_network(travel))[h.track_id]
+            pos = h.pos_m + h.kp * (travel.s[sel] - f.s_ref)
+            est = tl.km_of_pos(pos)
+            self._claim(sel, est, est + _eq_offset(f), pos, base + h.extra_m, h.kp * tl.km_sign)
+            self.line[sel], self.track[sel], self.track_id[sel] = tl.line_code or None, tl.track or None, h.track_id
+        else:
+            est = travel.km(f, travel.s[sel])
+            self._claim(sel, est, est + (f.km_equipment_m - f.km_m), legacy_pos(travel, f, est), base, f.k)
+            self.line[sel], self.track[sel] = f.line_code, f.track
+            self.track_id[sel] = legacy_track_id(travel, f)
+        self.state[sel] = self.states.setdefault(str(state), len(self.states))
+        self.source[sel] = self.sources.setdefault(str(f.source), len(self.sources))
+
+    def _claim(
+        self, sel: npt.NDArray[np.int64], km: FloatArray, km_eq: FloatArray, pos: FloatArray, margin: FloatArray, k: int
+    ) -> None:
+        self.km[sel], self.km_eq[sel], self.pos[sel], self.margin[sel], self.k_sign[sel] = km, km_eq, pos, margin, k
+
+
+def _network(travel: Travel) -> Network:
+    if travel.network is None:
+        raise ValueError("a fix with network candidates needs the travel's network")
+    return travel.network
+
+
+def _eq_offset(f: Fix) -> float:
+    off = f.km_equipment_m - f.km_m
+    return off if np.isfinite(off) else 0.0
+
+
+def legacy_track_id(travel: Travel, f: Fix) -> str | None:
+    """The implied track id of a line-based fix (None on a network that has no such track)."""
+    if not f.line_code:
+        return None
+    tid = implied_track_id(f.line_code, f.track)
+    net = travel.network
+    if net is None or tid in net.cached(("positions", "track_ids"), lambda: set(all_tracks(net)["track_id"])):
+        return tid
+    return None
+
+
+def legacy_pos(travel: Travel, f: Fix, km: FloatArray) -> FloatArray:
+    """Distance along the implied line track from its lowest km (NaN without a line grid)."""
+    m = travel.metric(f)
+    if m is IDENTITY:
+        return np.full(km.shape, np.nan)
+    return np.asarray(m.c_of_km(km) - m.c[0], dtype=float)
+
+
+def candidates_text(f: Fix, s: FloatArray, base: FloatArray, lines: TrackLines) -> list[str]:
+    """The ``candidates`` cell of each cycle: a JSON list of objects ``track_id``, ``pos_m``,
+    ``km_m`` (null off a line) and ``margin_m``, rounded to mm, in the fix's candidate order."""
+    per: list[tuple[str, FloatArray, FloatArray, FloatArray]] = []
+    for h in f.hyps:
+        pos = h.pos_m + h.kp * (s - f.s_ref)
+        per.append((h.track_id, pos, lines[h.track_id].km_of_pos(pos), base + h.extra_m))
+    out: list[str] = []
+    for i in range(s.size):
+        items = [{"track_id": tid, "pos_m": _r(p[i]), "km_m": _r(k[i]), "margin_m": _r(m[i])} for tid, p, k, m in per]
+        out.append(json.dumps(items, separators=(",", ":")))
+    return out
+
+
+def _r(x: float) -> float | None:
+    return round(float(x), 3) if np.isfinite(x) else None
