@@ -89,7 +89,8 @@ class BaliseAid(StaticAid):
         if tel is None:
             return
         for row in tel.astype(object).where(tel.notna(), None).to_dict("records"):
-            yield Observation(float(row["t"]), row)
+            if row["kind"] != BaliseKind.G:  # ETCS groups: the balise-group aid's
+                yield Observation(float(row["t"]), row)
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         self._u = self.cfg.fix_uncertainty_m + self.cfg.latency_budget_s * float(view.travel.v[view.i])
