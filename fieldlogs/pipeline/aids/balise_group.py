@@ -124,8 +124,8 @@ class BaliseGroupAid(StaticAid):
         on = [h for h in fix.hyps if h.track_id == tid]
         names = [h.track_id for h in fix.hyps]
         if not on:
-            detail = {"reason": "balise group on none of the candidate tracks", "group": group, "candidates": names}
-            return Outcome([Event(view.t, EventType.BALISE_ANOMALY, view.km, detail=detail)], forget=True)
+            why = {"reason": "balise group on none of the candidate tracks", "group": group, "candidates": names}
+            return Outcome([Event(view.t, EventType.BALISE_ANOMALY, view.km, detail=why)], forget=True)
         h = on[0]
         pos = self.lines[tid].pos_of_km(km)
         if not np.isfinite(pos):
