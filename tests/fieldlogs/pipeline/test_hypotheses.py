@@ -1,0 +1,245 @@
+"""Track-selective positioning on the hand-made networks (tests/data/networks): candidates
+carried along the topology and the evidence aids, on synthetic travel (no simulator)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from dbtools.network import Network
+from dbtools.sources import read_source_set
+from fieldlogs.pipeline.aid import Observation, Outcome, Priority, StaticAid
+from fieldlogs.pipeline.aids.balise_group import BaliseGroupAid, group_table
+from fieldlogs.pipeline.aids.topology import TopologyAid
+from fieldlogs.pipeline.aids.track_gps import TrackGpsAid, gps_llr
+from fieldlogs.pipeline.aids.track_imu import TrackImuAid, heading_llr, kept, turnouts
+from fieldlogs.pipeline.config import BaliseConfig, GpsConfig, MarginConfig, TrackSelectConfig
+from fieldlogs.pipeline.engine import Solution, run_aids
+from fieldlogs.pipeline.estimate import Travel
+from fieldlogs.pipeline.hypotheses import track_lines
+from fieldlogs.pipeline.types import Fix
+from schemas.enums import EventType, FixSource
+
+NETWORKS = Path(__file__).resolve().parents[2] / "data" / "networks"
+_NETS: dict[str, Network] = {}
+MARGIN = MarginConfig()
+CFG = TrackSelectConfig()
+
+
+def net(name: str) -> Network:
+    if name not in _NETS:
+        _NETS[name] = read_source_set(NETWORKS / name)[0]
+    return _NETS[name]
+
+
+def travel(network: Network, v: np.ndarray, cab: int = 1) -> Travel:
+    """Travel at speeds ``v`` (signed: + toward the F end) on a 0.1 s grid, cab ``cab``."""
+    n = v.size
+    t = np.arange(n) * 0.1
+    ds = np.concatenate([[0.0], np.cumsum(v[:-1] * 0.1)])
+    d = np.concatenate([[0.0], np.cumsum(np.abs(v[:-1]) * 0.1)])
+    return Travel(
+        t, d, ds * cab, np.abs(v), np.full(n, cab, dtype=np.int8), np.ones(n, dtype=bool), np.zeros(n), network
+    )
+
+
+class Start(StaticAid):
+    """An S003-like initial fix at t = 0 on a line, track and km."""
+
+    name = "start"
+    priority = Priority.TELEGRAM
+
+    def __init__(self, line: str, track: str, km: float, k: int) -> None:
+        self.fix = (line, track, km, k)
+
+    def observations(self) -> list[Observation]:
+        return [Observation(0.0)]
+
+    def observe(self, obs: Observation, view: object) -> Outcome:
+        line, track, km, k = self.fix
+        return Outcome([], Fix(0.0, 0.0, 0.0, km, km, line, track, k, FixSource.BALISE, 1.0))
+
+
+def run(network: Network, tr: Travel, start: Start, *extra: object) -> Solution:
+    aids = [start, TopologyAid(track_lines(network), MARGIN), *extra]
+    return run_aids(tr, aids, MARGIN)  # type: ignore[arg-type]
+
+
+def types(sol: Solution) -> list[str]:
+    return [str(e.type) for e in sol.events]
+
+
+def test_facing_switch_splits_into_both_branches() -> None:
+    # junction: A1 (km 0–400) → W1 (facing) → A2 (through) | B1 (diverging); 10 m/s from km 300
+    n = net("junction")
+    sol = run(n, travel(n, np.full(300, 10.0)), Start("9001", "S", 300.0, 1))
+    p = sol.positions
+    before = p[p["t"] < 9.9]
+    assert (before["state"] == "determined").all() and (before["track_id"] == "A1").all()
+    assert before["pos_m"].iloc[50] == pytest.approx(350.0, abs=0.01)  # 5 s later: 50 m on
+    after = p[p["t"] > 10.2]
+    assert (after["state"] == "ambiguous").all() and after["track_id"].isna().all() and after["km_m"].isna().all()
+    row = pd.read_json(__import__("io").StringIO(after["candidates"].iloc[0]))
+    assert sorted(row["track_id"]) == ["A2", "B1"]
+    assert row["pos_m"].tolist() == pytest.approx([row["pos_m"].iloc[0]] * 2)
+    split = [e for e in sol.events if e.type == EventType.SWITCH_SPLIT]
+    assert len(split) == 1 and split[0].detail["switch_id"] == "W1"
+
+
+def test_buffer_stop_drops_and_forgets() -> None:
+    # the line ends 600 m after W1 on both branches: beyond the end by more than the margin
+    n = net("junction")
+    sol = run(n, travel(n, np.full(900, 10.0)), Start("9001", "S", 300.0, 1))
+    drops = [e for e in sol.events if e.type == EventType.HYPOTHESIS_DROPPED]
+    assert {e.detail["track_id"] for e in drops} == {"A2", "B1"}
+    p = sol.positions
+    last = p.iloc[-1]
+    assert last["state"] == "undetermined"
+    # dropped only once the whole interval is beyond the end: km 1000 + margin
+    t_drop = drops[0].t
+    s_drop = 10.0 * t_drop
+    margin = 1.0 + 0.02 * s_drop
+    assert 300.0 + s_drop - 1000.0 == pytest.approx(margin, abs=1.1)
+
+
+def test_trailing_switch_moves_without_ambiguity_and_never_crosses_none() -> None:
+    # from B1 km 100 running toward its begin (k = −1): trailing through W1 onto A1; the
+    # B1–A2 relation is "none", so A2 is never a candidate
+    n = net("junction")
+    sol = run(n, travel(n, np.full(300, 10.0)), Start("9002", "S", 100.0, -1))
+    p = sol.positions
+    assert set(p["state"]) == {"determined"}
+    assert set(p["track_id"]) == {"B1", "A1"}
+    assert "A2" not in "".join(p["candidates"].dropna())
+    on_a1 = p[p["track_id"] == "A1"]
+    assert on_a1["km_m"].iloc[-1] == pytest.approx(400.0 - (29.9 * 10.0 - 100.0), abs=0.05)
+
+
+def test_split_then_reversal_merges_back() -> None:
+    # over W1 onto both branches, then back: both candidates return onto A1 and merge
+    n = net("junction")
+    v = np.concatenate([np.full(150, 10.0), np.full(150, -10.0)])
+    sol = run(n, travel(n, v), Start("9001", "S", 350.0, 1))
+    p = sol.positions
+    assert "ambiguous" in set(p["state"])
+    end = p.iloc[-1]
+    assert end["state"] == "determined" and end["track_id"] == "A1"
+    assert end["km_m"] == pytest.approx(350.0 + 1.0, abs=0.01)  # 150 cycles on, 149 back
+
+
+def _g(t: float, group: int, pig: int) -> dict[str, object]:
+    return {"t": t, "kind": "G", "nid_c": 230, "nid_bg": group, "n_pig": pig}
+
+
+def _group_aid(n: Network, rows: list[dict[str, object]]) -> BaliseGroupAid:
+    return BaliseGroupAid(group_table(n), track_lines(n), BaliseConfig(), pd.DataFrame(rows))
+
+
+def test_balise_group_beyond_the_switch_is_decisive() -> None:
+    # group 3 stands on B1 at its km 40 (diverging branch): read 14 s after km 300
+    n = net("junction")
+    aid = _group_aid(n, [_g(14.0, 3, 0)])
+    sol = run(n, travel(n, np.full(300, 10.0)), Start("9001", "S", 300.0, 1), aid)
+    p = sol.positions
+    late = p[p["t"] >= 14.0]
+    assert (late["state"] == "determined").all() and (late["track_id"] == "B1").all()
+    assert late["km_m"].iloc[0] == pytest.approx(40.0, abs=0.01)
+    res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
+    assert res[0].detail["evidence"] == "balise_group" and res[0].detail["after_switch_m"] == pytest.approx(40, abs=1)
+
+
+def test_balise_group_on_no_candidate_forgets() -> None:
+    # group 1 stands on A1 (before the switch): read after the split it contradicts both candidates
+    n = net("junction")
+    aid = _group_aid(n, [_g(14.0, 1, 0)])
+    sol = run(n, travel(n, np.full(300, 10.0)), Start("9001", "S", 300.0, 1), aid)
+    assert EventType.BALISE_ANOMALY in [e.type for e in sol.events]
+    assert (sol.positions[sol.positions["t"] >= 14.0]["state"] == "undetermined").all()
+
+
+def test_balise_group_pair_sets_initial_position_and_direction() -> None:
+    # no estimate: balises 0 then 1 of group 4 (A2 km 800, 803) read 0.3 s apart: km increasing
+    n = net("junction")
+    aid = _group_aid(n, [_g(1.0, 4, 0), _g(1.3, 4, 1)])
+    tr = travel(n, np.full(100, 10.0))
+    sol = run_aids(tr, [TopologyAid(track_lines(n), MARGIN), aid], MARGIN)
+    p = sol.positions
+    assert p.loc[p["t"].sub(3.3).abs().idxmin(), "km_m"] == pytest.approx(823.0, abs=0.01)
+    assert p.loc[p["t"].sub(3.3).abs().idxmin(), "track_id"] == "A2"
+
+
+def test_heading_llr_hand_computed() -> None:
+    # 1:10: α = atan(0.1) = 5.711°; measured 5.5°, σ 0.5°: LLR(div vs through) = (5.5² − 0.211²)/(2·0.25)
+    a = math.degrees(math.atan(0.1))
+    llr = heading_llr(math.radians(5.5), [math.radians(a), 0.0], math.radians(0.5))
+    assert llr[0, 1] == pytest.approx((5.5**2 - (5.5 - a) ** 2) / 0.5, rel=1e-9)
+    assert kept(llr, CFG.threshold) == [0]
+    assert kept(heading_llr(math.radians(a / 2), [math.radians(a), 0.0], math.radians(0.5)), CFG.threshold) == [0, 1]
+
+
+def _imu_case(diverging: bool, noise_deg: float = 0.0) -> Solution:
+    # crossover: D1 km 200 at 10 m/s; W1 (km 300, 1:10, left) splits into D2 (through) and X1
+    n = net("crossover")
+    tr = travel(n, np.full(400, 10.0))
+    sw = turnouts(n.switches)
+    r = float(n.switches.set_index("switch_id").loc["W1", "diverging_radius_m"])
+    wz = np.zeros(tr.n)
+    if diverging:  # on the lead's curve: ωz = v/R for R·α of travel after the toe (left: +)
+        on = (tr.d >= 100.0) & (tr.d < 100.0 + r * math.atan(0.1))
+        wz[on] = 10.0 / r
+    wz[np.searchsorted(tr.d, 100.0)] += math.radians(noise_deg) / 0.1
+    aid = TrackImuAid(wz, sw, track_lines(n), CFG, MARGIN)
+    return run(n, tr, Start("9003", "D", 200.0, 1), aid)
+
+
+@pytest.mark.parametrize(("diverging", "track"), [(True, "X1"), (False, "D2")])
+def test_turnout_yaw_signature_resolves(diverging: bool, track: str) -> None:
+    sol = _imu_case(diverging)
+    res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
+    assert len(res) == 1 and res[0].detail["evidence"] == "imu" and res[0].detail["track_id"] == track
+    expected = math.degrees(math.atan(0.1)) if diverging else 0.0
+    assert res[0].detail["heading_change_deg"] == pytest.approx(expected, abs=0.15)
+    assert sol.positions["track_id"].iloc[-1] in {track, "U2"}
+
+
+@settings(max_examples=40, deadline=None)
+@given(diverging=st.booleans(), noise=st.floats(-1.0, 1.0))
+def test_no_determined_cycle_on_a_wrong_track(diverging: bool, noise: float) -> None:
+    # gyro noise within 2σ of the model: either resolved right or left ambiguous, never wrong
+    sol = _imu_case(diverging, noise)
+    p = sol.positions
+    truth = {"X1", "U2"} if diverging else {"D2"}
+    after = p[(p["t"] > 10.1) & (p["state"] == "determined")]
+    assert set(after["track_id"]) <= truth
+
+
+def test_gps_llr_hand_computed() -> None:
+    # two tracks 4 m apart, fixes 1 m off A toward B: r_A = 1, r_B = −3; Q = n·r²/(σw² + n·σb²)
+    r = lambda k: np.array([[1.0] * k, [-3.0] * k])  # noqa: E731
+    llr = gps_llr(r(3), 1.0, 0.1)
+    assert llr[0, 1] == pytest.approx(0.5 * 3 * (9 - 1) / (1.0 + 3 * 0.01))
+    assert kept(gps_llr(r(2), 1.0, 0.1), CFG.threshold) == [0, 1]  # 7.84: not yet
+    assert kept(gps_llr(r(3), 1.0, 0.1), CFG.threshold) == [0]  # 11.65: A wins
+    # a large bias σ: the evidence saturates at 8/(2·9) — ambiguous however many fixes
+    assert kept(gps_llr(r(500), 1.0, 3.0), CFG.threshold) == [0, 1]
+
+
+def test_gps_offsets_resolve_the_crossover() -> None:
+    # crossover: split at W1 (km 300) into D2 and X1; the train is on D2: fixes on D's grid
+    n = net("crossover")
+    tr = travel(n, np.full(400, 10.0))
+    g = n.gis[(n.gis["line_code"] == "9003") & (n.gis["track"] == "D")].set_index("km_m")
+    t = np.arange(12.0, 20.0, 1.0)  # km 320 … 390
+    km = 200.0 + 10.0 * t
+    lat, lon = np.interp(km, g.index, g["lat"]), np.interp(km, g.index, g["lon"])
+    aid = TrackGpsAid(t, lat, lon, track_lines(n), CFG, GpsConfig())
+    sol = run(n, tr, Start("9003", "D", 200.0, 1), aid)
+    res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
+    assert res and res[0].detail["evidence"] == "gps" and res[0].detail["track_id"] == "D2"
+    assert (sol.positions[sol.positions["t"] >= 20.0]["track_id"] == "D2").all()
