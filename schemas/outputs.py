@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from schemas.enums import PositionState, RadarStatus, Track
+from schemas.enums import PositionState, RadarStatus
 from schemas.model import Column, Table
 
 POSITIONS = Table(
@@ -19,7 +19,12 @@ POSITIONS = Table(
             enum=tuple(s.value for s in PositionState),
         ),
         Column("line_code", "str", "Line", nullable=True),
-        Column("track", "str", "Track", nullable=True, enum=tuple(t.value for t in Track)),
+        Column(
+            "track",
+            "str",
+            "Local track name: U/D/S on a line; on a network also a station track's (1, 2…)",
+            nullable=True,
+        ),
         Column(
             "track_id",
             "str",
