@@ -196,7 +196,13 @@ def _moved(h: Hypothesis, ex: Exit, out: float, lines: TrackLines, end: str) -> 
     """``h`` carried ``out`` beyond ``end`` onto ``ex``: entry at ``ex.end``, away from it."""
     entry = 0.0 if ex.end == BEGIN else lines[ex.track_id].length_m
     motion = h.kp if end == END else -h.kp  # sign of dS that moves h outward at this end
-    return replace(h, track_id=ex.track_id, pos_m=entry + ex.direction * out, kp=ex.direction * motion)
+    return replace(
+        h,
+        track_id=ex.track_id,
+        pos_m=entry + ex.direction * out,
+        kp=ex.direction * motion,
+        came_from=(h.track_id, end),
+    )
 
 
 def _at_end(

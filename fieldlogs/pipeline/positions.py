@@ -19,18 +19,16 @@ less for shorter ones), which the accuracy bench shows to hold.
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from dbtools.network import Network
 from dbtools.topology import all_tracks, implied_track_id
+from fieldlogs.pipeline.claims import claims, entries, max_margin
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
-from fieldlogs.pipeline.hypotheses import TrackLines, track_lines
+from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.metric import IDENTITY
 from fieldlogs.pipeline.types import Fix, FloatArray
 from schemas.enums import FixSource, PositionState
@@ -118,26 +116,45 @@ class _Columns:
 
     def fill(self, travel: Travel, f: Fix, sel: npt.NDArray[np.int64], cfg: MarginConfig) -> None:
         base = margin_m(f, travel.d[sel], travel.allowance[sel], cfg)
-        state = f.state
-        if len(f.hyps) > 1:
-            state = PositionState.AMBIGUOUS
-            lines = track_lines(_network(travel))
-            self.candidates[sel] = candidates_text(f, travel.s[sel], base, lines)
-            self.margin[sel] = base + max(h.extra_m for h in f.hyps)
-        elif f.hyps:
-            h = f.hyps[0]
-            tl = track_lines(_network(travel))[h.track_id]
-            pos = h.pos_m + h.kp * (travel.s[sel] - f.s_ref)
-            est = tl.km_of_pos(pos)
-            self._claim(sel, est, est + _eq_offset(f), pos, base + h.extra_m, h.kp * tl.km_sign)
-            self.line[sel], self.track[sel], self.track_id[sel] = tl.line_code or None, tl.track or None, h.track_id
+        state = np.full(sel.size, self.code(str(f.state)), dtype=np.uint8)
+        if f.hyps:
+            self._network(travel, f, sel, base, state)
         else:
             est = travel.km(f, travel.s[sel])
             self._claim(sel, est, est + (f.km_equipment_m - f.km_m), legacy_pos(travel, f, est), base, f.k)
             self.line[sel], self.track[sel] = f.line_code, f.track
             self.track_id[sel] = legacy_track_id(travel, f)
-        self.state[sel] = self.states.setdefault(str(state), len(self.states))
+        self.state[sel] = state
         self.source[sel] = self.sources.setdefault(str(f.source), len(self.sources))
+
+    def code(self, state: str) -> int:
+        return self.states.setdefault(state, len(self.states))
+
+    def _network(
+        self, travel: Travel, f: Fix, sel: npt.NDArray[np.int64], base: FloatArray, state: npt.NDArray[np.uint8]
+    ) -> None:
+        """A fix with candidates (:mod:`fieldlogs.pipeline.claims`): determined cycles claim the
+        one track; ambiguous ones list the candidates (and keep km where they agree on it)."""
+        if travel.network is None:
+            raise ValueError("a fix with network candidates needs the travel's network")
+        lines = track_lines(travel.network)
+        ents = entries(f, travel.s[sel], _motion(travel)[sel], base, lines)
+        cl = claims(ents)
+        own = ents[0]
+        tl = lines[own.track_id]
+        self._claim(sel, own.km, own.km + _eq_offset(f), own.pos, own.margin, own.kp * tl.km_sign)
+        det = sel[~cl.ambiguous]
+        self.line[det], self.track[det], self.track_id[det] = tl.line_code or None, tl.track or None, own.track_id
+        amb = sel[cl.ambiguous]
+        if amb.size:
+            state[cl.ambiguous] = self.code(PositionState.AMBIGUOUS.value)
+            self.candidates[amb] = np.array(cl.text, dtype=object)[cl.ambiguous]
+            self.margin[amb] = max_margin(ents)[cl.ambiguous]
+            self.pos[amb] = np.nan
+            keep = sel[cl.same_line]
+            self.line[keep], self.track[keep] = tl.line_code or None, tl.track or None
+            lost = sel[cl.ambiguous & ~cl.same_line]
+            self.km[lost], self.km_eq[lost], self.k_sign[lost] = np.nan, np.nan, np.nan
 
     def _claim(
         self, sel: npt.NDArray[np.int64], km: FloatArray, km_eq: FloatArray, pos: FloatArray, margin: FloatArray, k: int
@@ -145,10 +162,12 @@ class _Columns:
         self.km[sel], self.km_eq[sel], self.pos[sel], self.margin[sel], self.k_sign[sel] = km, km_eq, pos, margin, k
 
 
-def _network(travel: Travel) -> Network:
-    if travel.network is None:
-        raise ValueError("a fix with network candidates needs the travel's network")
-    return travel.network
+def _motion(travel: Travel) -> FloatArray:
+    """The sign of the signed travel's step into each cycle (0 standing; the first cycle: its next step)."""
+    ds = np.diff(travel.s, prepend=travel.s[0])
+    if ds.size > 1:
+        ds[0] = ds[1]
+    return np.sign(ds)
 
 
 def _eq_offset(f: Fix) -> float:
@@ -173,21 +192,3 @@ def legacy_pos(travel: Travel, f: Fix, km: FloatArray) -> FloatArray:
     if m is IDENTITY:
         return np.full(km.shape, np.nan)
     return np.asarray(m.c_of_km(km) - m.c[0], dtype=float)
-
-
-def candidates_text(f: Fix, s: FloatArray, base: FloatArray, lines: TrackLines) -> list[str]:
-    """The ``candidates`` cell of each cycle: a JSON list of objects ``track_id``, ``pos_m``,
-    ``km_m`` (null off a line) and ``margin_m``, rounded to mm, in the fix's candidate order."""
-    per: list[tuple[str, FloatArray, FloatArray, FloatArray]] = []
-    for h in f.hyps:
-        pos = h.pos_m + h.kp * (s - f.s_ref)
-        per.append((h.track_id, pos, lines[h.track_id].km_of_pos(pos), base + h.extra_m))
-    out: list[str] = []
-    for i in range(s.size):
-        items = [{"track_id": tid, "pos_m": _r(p[i]), "km_m": _r(k[i]), "margin_m": _r(m[i])} for tid, p, k, m in per]
-        out.append(json.dumps(items, separators=(",", ":")))
-    return out
-
-
-def _r(x: float) -> float | None:
-    return round(float(x), 3) if np.isfinite(x) else None

@@ -226,6 +226,8 @@ class Hypothesis:
     """The facing switch whose split made this candidate (None: none since the last determination)."""
     split_d: float | None = None
     """Unsigned travel d at that split [m]."""
+    came_from: tuple[str, str] | None = None
+    """The track and end dead reckoning carried it from onto this track (None: placed here)."""
 
 
 @dataclass(frozen=True)
