@@ -5,8 +5,8 @@ fix's cycles: pos(S) = pos_h + kp·(S − s_ref), margin m_h = the fix's margin 
 Its interval [pos − m_h, pos + m_h] may reach over an end of its track: the train may then
 be on a track beyond that end, at the distance the interval reaches beyond the joint — ahead
 (moving toward that end) every navigable exit there; behind (moving away) the track it came
-from (``Hypothesis.came_from``; any track joined there by a relation other than ``none``
-when it was placed, not carried, onto this track); standing, both. Such a *neighbour* is a
+from where it entered at that end (``Hypothesis.came_from``), else any track joined there by a
+relation other than ``none``; standing, both. Such a *neighbour* is a
 candidate of the cycle too, at
 
     pos' = entry + dir·out,   out = pos − L (end) or −pos (begin),

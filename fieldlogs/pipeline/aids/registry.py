@@ -61,7 +61,8 @@ def _imu_gap(ctx: RunContext) -> Aid | None:
 
 
 def _has_topology(ctx: RunContext) -> bool:
-    return len(ctx.network.connections) > 0
+    net = ctx.network
+    return net.cached(("registry", "has_topology"), lambda: len(net.connections) > 0)
 
 
 def _topology(ctx: RunContext) -> Aid | None:
