@@ -39,7 +39,7 @@ class Truth:
 def walk(lines: TrackLines, tid: str, pos: float, kp: int, v: np.ndarray, branch: list[int]) -> Truth:
     """The true track and pos per cycle for signed speeds ``v``; at a facing switch the exit
     ``branch[k] % n`` of the k-th one; the train stops at a dead end; yaw rate on turnout leads."""
-    sw = turnouts(lines_net(lines).switches)
+    sw = {str(r["switch_id"]): r for r in lines_net(lines).switches.to_dict("records")}
     tracks, poss, s_out, d_out, wz = [], [], [], [], np.zeros(v.size)
     s = d = 0.0
     nfacing = 0
@@ -51,7 +51,7 @@ def walk(lines: TrackLines, tid: str, pos: float, kp: int, v: np.ndarray, branch
         d_out.append(d)
         step = vi * DT
         if turn is not None:
-            wz[i] = turn[0] * math.copysign(1.0, 1.0)
+            wz[i] = turn[0]
             turn = (turn[0], turn[1] - abs(step)) if turn[1] - abs(step) > 0 else None
         new = pos + kp * step
         tl = lines[tid]
@@ -66,10 +66,12 @@ def walk(lines: TrackLines, tid: str, pos: float, kp: int, v: np.ndarray, branch
         ex = exits[branch[nfacing % len(branch)] % len(exits)] if len(exits) > 1 else exits[0]
         if len(exits) > 1:
             nfacing += 1
-            t = sw.get(ex.switch_id or "")
-            if t is not None and t.heading.get(ex.track_id, 0.0) != 0.0:
-                r = t.lead_m / t.angle
-                turn = (math.copysign(abs(vi) / r, t.heading[ex.track_id]), t.lead_m)
+            row = sw.get(ex.switch_id or "")
+            if row is not None and row["type"] == "point" and row["diverging_side"] in ("left", "right"):
+                left = row["diverging_side"] == "left"  # the diverging branch turns left: ωz > 0
+                if ex.track_id == row["b1_track" if left else "b2_track"]:
+                    r, a = float(row["diverging_radius_m"]), math.atan(1.0 / float(row["switch_number"]))
+                    turn = (abs(vi) / r * (1.0 if left else -1.0), r * a)
         out = new - tl.length_m if end == END else -new
         motion = kp if end == END else -kp
         entry = 0.0 if ex.end == BEGIN else lines[ex.track_id].length_m
