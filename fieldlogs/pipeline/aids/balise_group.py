@@ -28,6 +28,7 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
+from fieldlogs.pipeline.aids.balise import telegram_observations
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.config import BaliseConfig
 from fieldlogs.pipeline.hypotheses import TrackLines
@@ -71,9 +72,7 @@ class BaliseGroupAid(StaticAid):
     priority = Priority.TELEGRAM
 
     def observations(self) -> Iterator[Observation]:
-        tel = self.telegrams
-        for row in tel.astype(object).where(tel.notna(), None).to_dict("records"):
-            yield Observation(float(row["t"]), row)
+        return telegram_observations(self.telegrams)
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         tel: dict[str, Any] = obs.payload
