@@ -1,7 +1,7 @@
 """SBAS L1 message encoder (RTCA DO-229 Appendix A), written from the standard's tables apart
 from the decoder so that each checks the other: plain Python integers, the CRC-24Q by bitwise
 long division (the decoder's is table-driven over numpy bit arrays). The simulator's SBAS
-stream (``fieldlogs.gnss.sbas.simulate``) and the tests use it.
+stream (``fieldlogs.simulate.gnss.sbas_stream``) and the tests use it.
 
 Field layouts, MSB first after the 8-bit preamble and 6-bit message type (212 data bits):
 

@@ -7,13 +7,13 @@ height from the grid's height spline, so ellipsoidal like the grid) at the true 
 car faces increasing km when its F end does (``Motion.facing``). The heading is the azimuth of
 increasing km, from the ENU difference of the track points 0.5 m either side. Antennas are at
 x = ``antennas_x_m`` (toward the F end), y = 0, z = ``antenna_z_m`` above the rail, one receiver
-each (rx1, rx2, …) with its own clock. :func:`fieldlogs.gnss.simulate.simulate` then gives the
+each (rx1, rx2, …) with its own clock. :func:`fieldlogs.simulate.gnss.observations.simulate` then gives the
 pseudoranges, carrier, Doppler and C/N0 (ionosphere, troposphere, orbit/clock errors, multipath,
 noise by C/N0, NLOS beside buildings).
 
 Sky: the run's tunnels (``gps.outages_km_m``) block every satellite; ``corridor = "mixed"`` adds
 the seeded buildings, cuttings, overpasses and short tunnel of
-:func:`fieldlogs.gnss.scenario.mixed_corridor` along the route. ``noise = false`` switches the
+:func:`fieldlogs.simulate.gnss.scenario.mixed_corridor` along the route. ``noise = false`` switches the
 random error components off (the receivers' clocks stay). ``sbas = true`` adds broadcast
 orbit/clock errors to the truth and a ``gnss_sbas`` stream (MSAS PRN 137) that corrects them.
 
@@ -32,10 +32,10 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.gnss.constants import OBS_COLUMNS, FloatArray
-from fieldlogs.gnss.constellation import constellation_nav
 from fieldlogs.gnss.geodesy import enu_basis, geodetic_to_ecef
-from fieldlogs.gnss.scenario import mixed_corridor
-from fieldlogs.gnss.simulate import (
+from fieldlogs.recorders.timebase import gps_to_utc, leap_seconds_utc
+from fieldlogs.simulate.gnss.constellation import constellation_nav
+from fieldlogs.simulate.gnss.observations import (
     KLOBUCHAR_ALPHA,
     KLOBUCHAR_BETA,
     Corridor,
@@ -46,7 +46,7 @@ from fieldlogs.gnss.simulate import (
     simulate,
     with_sat_errors,
 )
-from fieldlogs.recorders.timebase import gps_to_utc, leap_seconds_utc
+from fieldlogs.simulate.gnss.scenario import mixed_corridor
 
 #: The simulated car: length, F end and tacho axle (x from the reference point at its centre).
 CAR_LENGTH_M = 20.0
@@ -69,7 +69,7 @@ class RawGnssSpec:
     tunnels_km_m: tuple[tuple[float, float], ...] = ()
     sbas: bool = False
     """Broadcast orbit/clock errors in the truth and an MSAS ``gnss_sbas`` stream correcting them
-    (:mod:`fieldlogs.gnss.sbas.simulate`; it starts with the run, so its first minute is not yet
+    (:mod:`fieldlogs.simulate.gnss.sbas_stream`; it starts with the run, so its first minute is not yet
     corrected)."""
 
 
@@ -156,7 +156,7 @@ def raw_gnss(motion: Any, geom: Any, spec: RawGnssSpec, rng: np.random.Generator
     block = {"klobuchar_alpha": list(KLOBUCHAR_ALPHA), "klobuchar_beta": list(KLOBUCHAR_BETA), "leap_seconds": leap}
     sbas = None
     if spec.sbas:
-        from fieldlogs.gnss.sbas.simulate import sbas_stream
+        from fieldlogs.simulate.gnss.sbas_stream import sbas_stream
 
         sbas = sbas_stream(sim, seed=int(seeds[2]), t0_gps=spec.start_gps_s)
     return RawGnss(obs[list(OBS_COLUMNS)], sim.nav, block, receivers, sbas)

@@ -1,4 +1,5 @@
-"""Look-up tables of RTCA DO-229 (Appendix A) used by the SBAS decoder and its user algorithms.
+"""Look-up tables of RTCA DO-229 (Appendix A): the standard, read by the SBAS decoder and its user
+algorithms (``fieldlogs.gnss.sbas``) and by the simulated SBAS stream (``fieldlogs.simulate.gnss``).
 
 * UDREI → UDRE [m] and σ²_UDRE [m²] (Table A-6); 14 "not monitored", 15 "do not use";
 * GIVEI → GIVE [m] and σ²_GIVE [m²] (Table A-17); 15 "not monitored";
@@ -26,7 +27,7 @@ from typing import Final
 
 import numpy as np
 
-from fieldlogs.gnss.sbas.bits import IntArray
+from fieldlogs.gnss.constants import IntArray
 
 NAN: Final = float("nan")
 UDREI_NOT_MONITORED: Final = 14

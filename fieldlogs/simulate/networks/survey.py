@@ -1,8 +1,8 @@
 """Synthetic surveys of a known line: the inputs of ``gis grid`` (track centreline vertices
-and kilometre posts) generated from a :class:`~dbtools.synthetic.network.LineSpec`.
+and kilometre posts) generated from a :class:`~fieldlogs.simulate.networks.synthetic.LineSpec`.
 
 Used by the bundled sample network and by the grid round-trip tests: gridding the survey
-must give back :func:`dbtools.synthetic.network.gis_grid` of the same line.
+must give back :func:`fieldlogs.simulate.networks.synthetic.gis_grid` of the same line.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic.network import LineSpec
+from fieldlogs.simulate.networks.synthetic import LineSpec
 
 
 def centreline_vertices(spec: LineSpec, projector: Projector, spacing_m: float = 10.0) -> pd.DataFrame:

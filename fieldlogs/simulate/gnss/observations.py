@@ -119,7 +119,7 @@ class ErrorSpec:
     min_elevation_deg: float = 5.0
     orbit_sigma_m: float = 0.0
     """Broadcast orbit error per ECEF axis (constant + drift per satellite), 0: none. Only a
-    run written with an SBAS stream sets it (``fieldlogs.gnss.sbas.simulate``): the long-term
+    run written with an SBAS stream sets it (``fieldlogs.simulate.gnss.sbas_stream``): the long-term
     corrections then have something to remove; drawn from its own generator, so the other
     error components of a seed stay the same."""
     orbit_rate_sigma_mps: float = 0.0

@@ -1,7 +1,7 @@
 """Station layouts on synthetic double-track lines: the network tables of a national-scale
 benchmark network (``bench/bench_db.py``) and of tests.
 
-At every station of a :class:`~dbtools.synthetic.network.LineSpec` with tracks D and U, a
+At every station of a :class:`~fieldlogs.simulate.networks.synthetic.LineSpec` with tracks D and U, a
 loop track beside each main track (station tracks ``3`` beside D, ``4`` beside U, from 120 m
 before to 120 m after the station centre) and one crossover D → U just after the loops; the
 main tracks are split into tracks at every switch. Geometry comes from the alignment itself
@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic.network import LineSpec
+from fieldlogs.simulate.networks.synthetic import LineSpec
 from schemas.enums import BaliseKind, Navigability, Side, SwitchType, Track, TrackKind
 from schemas.tables import GIS_SPACING_M, TRACK_SPACING_M
 

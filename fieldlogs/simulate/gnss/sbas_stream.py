@@ -1,7 +1,7 @@
-"""A ``gnss_sbas`` stream consistent with a simulated run (``fieldlogs.gnss.simulate``).
+"""A ``gnss_sbas`` stream consistent with a simulated run (``fieldlogs.simulate.gnss.observations``).
 
 The GEO (MSAS PRN 137 by default) sends one message per second, encoded with the real bit
-layouts and CRC (:mod:`fieldlogs.gnss.sbas.encode`). Per 6-second frame: MT 2, 3, 4 (fast
+layouts and CRC (:mod:`fieldlogs.simulate.gnss.sbas_encode`). Per 6-second frame: MT 2, 3, 4 (fast
 corrections of the 31 GPS satellites in mask order, fresh every 6 s), then three messages of a
 rotating queue — MT 1 (PRN mask: every GPS satellite of the navigation data), MT 7 (a_i = 1:
 5·10⁻⁵ m/s², 180 s time-out, t_lat 2 s), MT 10, MT 6, MT 18 per band, MT 25 (velocity code 1,
@@ -31,9 +31,9 @@ import pandas as pd
 from fieldlogs.gnss.constants import C_MPS, GPS_PI, FloatArray
 from fieldlogs.gnss.ephemeris import NavTable, nav_table, select_ephemeris
 from fieldlogs.gnss.geodesy import ecef_to_geodetic
-from fieldlogs.gnss.sbas import encode as enc
-from fieldlogs.gnss.sbas.tables import SIGMA2_GIVE_M2, band_igps
-from fieldlogs.gnss.simulate import KLOBUCHAR_ALPHA, KLOBUCHAR_BETA, SatErrors, Simulated
+from fieldlogs.gnss.sbas_tables import SIGMA2_GIVE_M2, band_igps
+from fieldlogs.simulate.gnss import sbas_encode as enc
+from fieldlogs.simulate.gnss.observations import KLOBUCHAR_ALPHA, KLOBUCHAR_BETA, SatErrors, Simulated
 
 MT10_SIM = enc.Mt10(b_rrc=0.01, i_ltc_v1=300, i_ltc_v0=120, c_iono_step=0.01, i_iono=300, c_iono_ramp=5e-6)
 UDREI_SIM = 3

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from fieldlogs.trackmatch.geometry import TrackGeometry
+from dbtools.gis.track_segments import TrackGeometry
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -44,7 +44,7 @@ class Candidates:
     uy: F64
 
 
-def _tree(geo: TrackGeometry) -> object:
+def segment_tree(geo: TrackGeometry) -> object:
     from scipy.spatial import cKDTree
 
     mx, my = geo.x0 + 0.5 * geo.dx, geo.y0 + 0.5 * geo.dy

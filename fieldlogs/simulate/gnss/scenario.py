@@ -19,8 +19,8 @@ import numpy as np
 
 from fieldlogs.gnss.constants import FloatArray
 from fieldlogs.gnss.geodesy import enu_basis, geodetic_to_ecef
-from fieldlogs.gnss.simulate import Corridor, Section, Trajectory
 from fieldlogs.gnss.track import TrackLine
+from fieldlogs.simulate.gnss.observations import Corridor, Section, Trajectory
 
 BASE_LAT_DEG = 35.68
 BASE_LON_DEG = 139.77

@@ -2,7 +2,7 @@
 
 Used by the bundled sample network (an alignment fitted to a real line), by tests (small
 hand-specified lines with known curves) and by benchmarks (national-scale networks).
-Everything is derived from the :class:`~dbtools.synthetic.alignment.Alignment`, so the tables
+Everything is derived from the :class:`~fieldlogs.simulate.networks.alignment.Alignment`, so the tables
 are mutually consistent by construction; validation rules are tested by breaking them.
 
 Track layout: trains keep left in Japan, so the down track (running in increasing km) lies
@@ -19,7 +19,7 @@ import pandas as pd
 
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical, empty_frame
-from dbtools.synthetic.alignment import Alignment, Curve
+from fieldlogs.simulate.networks.alignment import Alignment, Curve
 from schemas.enums import Track
 from schemas.tables import (
     BALISES,

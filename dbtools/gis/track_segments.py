@@ -8,7 +8,7 @@ a segment; only directions and perpendicular offsets are taken in the plane — 
 network's one metric CRS (:func:`dbtools.gis.index.network_georef`, else derived from the
 points: :func:`dbtools.gis.index.projection_for`). Segments longer than ``max_segment_m``
 are split (same line, interpolated pos/km) so that a search radius around segment midpoints
-stays tight (:mod:`.candidates`).
+stays tight (:mod:`dbtools.gis.track_candidates`).
 """
 
 from __future__ import annotations
@@ -150,4 +150,4 @@ def build_geometry(net: Network, *, max_segment_m: float = MAX_SEGMENT_M) -> Tra
             lerp(pos, f1) - s0, k0, lerp(km, f1) - k0,
         )  # fmt: skip
 
-    return net.cached(("trackmatch", "geometry", max_segment_m), build)
+    return net.cached(("track_segments", max_segment_m), build)

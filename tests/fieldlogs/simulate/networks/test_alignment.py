@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dbtools.gis.geometry import signed_curvature
-from dbtools.synthetic.alignment import Alignment, Curve
+from fieldlogs.simulate.networks.alignment import Alignment, Curve
 
 
 def test_quarter_circle_left_ends_at_r_r() -> None:

@@ -1,8 +1,8 @@
 """Regenerate the bundled sample network from the copied raw data.
 
-    .venv/bin/python -m dbtools.sample_network.build [--plot fit.png]
+    .venv/bin/python -m fieldlogs.simulate.networks.sample_build [--plot fit.png]
 
-Steps: fit an alignment to the real polyline (:mod:`dbtools.sample_network.fit`), set the
+Steps: fit an alignment to the real polyline (:mod:`fieldlogs.simulate.networks.sample_fit`), set the
 kilometrage (Kawagoe station = 16k100, its distance from Ōmiya where the line's km starts),
 synthesise a gradient profile, survey both tracks (``survey/centrelines.csv``) and
 kilometre posts every 1 km and at the stations (``survey/kmposts.csv``), turn the survey
@@ -27,10 +27,10 @@ from dbtools.build import build_db
 from dbtools.gis.io import grid_files
 from dbtools.network import canonical
 from dbtools.sample_network import PACKAGE_DIR
-from dbtools.sample_network.fit import FitResult, FitSettings, fit_alignment, project_brute
-from dbtools.synthetic.alignment import Alignment
-from dbtools.synthetic.network import LineSpec, Station, balises, feature_points
-from dbtools.synthetic.survey import centreline_vertices, km_posts
+from fieldlogs.simulate.networks.alignment import Alignment
+from fieldlogs.simulate.networks.sample_fit import FitResult, FitSettings, fit_alignment, project_brute
+from fieldlogs.simulate.networks.survey import centreline_vertices, km_posts
+from fieldlogs.simulate.networks.synthetic import LineSpec, Station, balises, feature_points
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.model import Table
@@ -290,7 +290,9 @@ def build(settings: FitSettings | None = None, plot: Path | None = None) -> tupl
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m dbtools.sample_network.build", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(
+        prog="python -m fieldlogs.simulate.networks.sample_build", description=__doc__.split("\n")[0]
+    )
     parser.add_argument("--plot", type=Path, help="also write a PNG of raw vs fitted geometry and curvature")
     args = parser.parse_args(argv)
     report, findings = build(plot=args.plot)

@@ -3,7 +3,7 @@
 The polylines of public map data (here mini-tokyo-3d, vertices ~50–100 m apart, denser in
 curves) follow the real line but their curvature is useless for a feature-point table:
 a polyline is straight between vertices and turns only at them. This module replaces it
-by an :class:`~dbtools.synthetic.alignment.Alignment` whose curvature is railway-like:
+by an :class:`~fieldlogs.simulate.networks.alignment.Alignment` whose curvature is railway-like:
 
 1. **Plane.** Vertices to the JGD2011 plane rectangular zone of the area (zone IX here).
 2. **Smoothed heading.** The polyline's heading is piecewise constant in chainage; sampled
@@ -38,7 +38,7 @@ from scipy.optimize import least_squares
 
 from dbtools.gis.geometry import Projector
 from dbtools.gis.georef import projector_for_points
-from dbtools.synthetic.alignment import Alignment, Curve
+from fieldlogs.simulate.networks.alignment import Alignment, Curve
 
 FloatArray = npt.NDArray[np.float64]
 

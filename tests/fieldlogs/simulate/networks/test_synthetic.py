@@ -9,7 +9,7 @@ from dbtools.database import integrity_findings, read_network
 from dbtools.gis.geometry import Projector
 from dbtools.network import content_hash
 from dbtools.sources import read_source_set, write_source_set
-from dbtools.synthetic.network import build_network, demo_line
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 
 
 def test_source_roundtrip_is_exact(tmp_path: Path) -> None:

@@ -1,7 +1,7 @@
 """Seeded simulated experiments of the track-constrained positioning (bench and tests) [S002].
 
 One case: a constellation (seeded orbits, clocks and start time anywhere in the week), the
-synthetic 3-D track of ``scenario``, a run with stops, two receivers with antennas 8 m
+synthetic 3-D track of ``fieldlogs.simulate.gnss.scenario``, a run with stops, two receivers with antennas 8 m
 ahead of and behind the vehicle's centre at 3.8 m above the rail (different clocks), the
 sky mask of the paper's experiment (west half blocked), and optionally D-GPS corrections and
 one faulty satellite (a step or a slow ramp on a satellite the clean solution uses, from
@@ -28,11 +28,12 @@ import numpy as np
 import pandas as pd
 
 from fieldlogs.gnss.constants import WEEK_S
-from fieldlogs.gnss.constellation import constellation_nav
 from fieldlogs.gnss.observables import FLAG_CODE_CARRIER, FLAG_EXCLUDED, FLAG_NO_TRACK_SOLUTION
 from fieldlogs.gnss.position import PositionConfig, PositionResult, position_run
-from fieldlogs.gnss.scenario import SyntheticTrack, mixed_corridor, run_profile, synthetic_track, trajectory
-from fieldlogs.gnss.simulate import (
+from fieldlogs.gnss.skymask import load_mask
+from fieldlogs.gnss.track import Antenna
+from fieldlogs.simulate.gnss.constellation import constellation_nav
+from fieldlogs.simulate.gnss.observations import (
     Corridor,
     ErrorSpec,
     ReceiverSpec,
@@ -42,8 +43,7 @@ from fieldlogs.gnss.simulate import (
     simulate,
     with_sat_errors,
 )
-from fieldlogs.gnss.skymask import load_mask
-from fieldlogs.gnss.track import Antenna
+from fieldlogs.simulate.gnss.scenario import SyntheticTrack, mixed_corridor, run_profile, synthetic_track, trajectory
 
 ANTENNAS = {"rx1": Antenna(8.0, 0.0, 3.8), "rx2": Antenna(-8.0, 0.0, 3.8)}
 
@@ -67,7 +67,7 @@ class CaseSpec:
     sat_errors: bool = False
     """Broadcast orbit and clock errors in the truth (``simulate.with_sat_errors``), as an SBAS run has them."""
     sbas: bool = False
-    """Write an SBAS stream for the run (``fieldlogs.gnss.sbas.simulate``, with ``sat_errors``)
+    """Write an SBAS stream for the run (``fieldlogs.simulate.gnss.sbas_stream``, with ``sat_errors``)
     and position with it."""
     two_geos: bool = False
     """With ``sbas``: two GEOs (``two_geo_stream``) instead of PRN 137 alone."""
@@ -108,7 +108,7 @@ def _simulate(spec: CaseSpec) -> tuple[Simulated, np.ndarray, np.ndarray, pd.Dat
     sim = simulate(traj, nav, rx, corridor, seed=spec.seed + 1_000_003, errors=errors, systems=spec.systems)
     corr = dgps_corrections(sim, seed=spec.seed + 7) if spec.dgps else None
     if spec.sbas:
-        from fieldlogs.gnss.sbas.simulate import sbas_stream
+        from fieldlogs.simulate.gnss.sbas_stream import sbas_stream
 
         corr = sbas_stream(sim, seed=spec.seed + 11, lead_s=120.0)
         if spec.two_geos:
@@ -129,7 +129,7 @@ def two_geo_stream(s137: pd.DataFrame, s129: pd.DataFrame) -> pd.DataFrame:
     ``SILENT_137_S`` and PRN 129's message at ``MT0_129_S`` replaced by an MT 0, in time order:
     137 until it times out (18 s into the silence), then 129 (kept when 137 is back), then 137
     again from 129's MT 0 (``sbas.geo_select``)."""
-    from fieldlogs.gnss.sbas import encode as enc
+    from fieldlogs.simulate.gnss import sbas_encode as enc
 
     t = s137["t"].to_numpy(dtype=float)
     a = s137[(t < SILENT_137_S[0]) | (t >= SILENT_137_S[1])]
