@@ -13,6 +13,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from dbtools.network import Network
 from dbtools.topology import BEGIN, END
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gps import TrackGpsAid
@@ -21,7 +22,7 @@ from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.engine import run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import TrackLines, track_lines
-from tests.fieldlogs.pipeline.test_hypotheses import CFG, MARGIN, Start, net
+from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net
 
 DT = 0.1
 _R = 6_371_000.0
@@ -36,10 +37,10 @@ class Truth:
     wz: np.ndarray
 
 
-def walk(lines: TrackLines, tid: str, pos: float, kp: int, v: np.ndarray, branch: list[int]) -> Truth:
+def walk(network: Network, lines: TrackLines, tid: str, pos: float, kp: int, v: np.ndarray, branch: list[int]) -> Truth:
     """The true track and pos per cycle for signed speeds ``v``; at a facing switch the exit
     ``branch[k] % n`` of the k-th one; the train stops at a dead end; yaw rate on turnout leads."""
-    sw = {str(r["switch_id"]): r for r in lines_net(lines).switches.to_dict("records")}
+    sw = {str(r["switch_id"]): r for r in network.switches.to_dict("records")}
     tracks, poss, s_out, d_out, wz = [], [], [], [], np.zeros(v.size)
     s = d = 0.0
     nfacing = 0
@@ -80,13 +81,6 @@ def walk(lines: TrackLines, tid: str, pos: float, kp: int, v: np.ndarray, branch
     return Truth(tracks, np.array(poss), np.array(s_out), np.array(d_out), wz)
 
 
-_NETS_BY_LINES: dict[int, object] = {}
-
-
-def lines_net(lines: TrackLines) -> object:
-    return _NETS_BY_LINES[id(lines)]
-
-
 def latlon(lines: TrackLines, tid: str, pos: float) -> tuple[float, float]:
     tl = lines[tid]
     x, y, _, _ = tl.point(pos)
@@ -122,14 +116,13 @@ def test_no_determined_cycle_on_a_wrong_track(
 ) -> None:
     n = net(name)
     lines = track_lines(n)
-    _NETS_BY_LINES[id(lines)] = n
     on_line = [t for t in sorted(lines.lines) if lines[t].line_code and lines[t].metric is not None]
     tid = on_line[start % len(on_line)]
     tl = lines[tid]
     pos0 = 20.0 + (start % 97) / 97.0 * max(tl.length_m - 40.0, 1.0)
-    steps = int(round(600.0 / speed / DT))  # 600 m, then back for reverse_at × that
+    steps = round(600.0 / speed / DT)  # 600 m, then back for reverse_at × that
     v = np.concatenate([np.full(steps, speed), np.full(int(steps * reverse_at), -speed)])
-    truth = walk(lines, tid, pos0, kp, v, branch)
+    truth = walk(n, lines, tid, pos0, kp, v, branch)
     rng = np.random.default_rng(seed)
     # the estimate: odometry with a scale error inside margin.distance_pct (2 %)
     m = truth.s.size
