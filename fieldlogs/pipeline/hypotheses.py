@@ -16,11 +16,10 @@ end of its track (out = pos − L beyond the end, −pos beyond the begin):
   interval lies beyond the end — the odometry says the train cannot be there.
 
 Candidates on the same track running the same way are merged into one whose interval covers
-both (a trailing merge after two branches rejoin). The track claimed is that of the
-dead-reckoned point: within the margin of a joint the train may still be (or already be) on
-the neighbouring track, which the margin, measured along the path, covers. The position is *determined* while one
-candidate remains, *ambiguous* otherwise; aids (balise groups, GNSS, IMU) drop the candidates
-their evidence contradicts.
+both (a trailing merge after two branches rejoin). Aids (balise groups, GNSS, IMU) drop
+the candidates their evidence contradicts. What a cycle claims — one track only when every
+candidate's interval lies on it, joints within the margin included — is
+:mod:`fieldlogs.pipeline.claims`'.
 
 :class:`TrackLine` maps pos ↔ km per track: along a line through the line grid's own
 length (:mod:`fieldlogs.pipeline.metric`), so pos is the distance the wheels roll; for a
