@@ -217,3 +217,40 @@ def test_gps_offsets_resolve_the_crossover() -> None:
     res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
     assert res and res[0].detail["evidence"] == "gps" and res[0].detail["track_id"] == "D2"
     assert (sol.positions[sol.positions["t"] >= 20.0]["track_id"] == "D2").all()
+
+
+def test_joint_inside_a_line_track_keeps_km_behind_only_the_track_it_came_from() -> None:
+    # from A2 km 500 toward W1 (k = −1): trailing onto A1 at t = 10 s (100 m). Then the interval
+    # reaches back over A1's end: behind is A2 only (it came from there, B1 never), and A1/A2
+    # being one line track (9001/S) the cycle keeps line, track and km, without a track_id
+    n = net("junction")
+    sol = run(n, travel(n, np.full(150, 10.0)), Start("9001", "S", 500.0, -1))
+    p = sol.positions
+    row = p[p["t"].sub(10.2).abs() < 1e-6].iloc[0]  # on A1 2 m from its end, margin 1 + 2.04 m
+    assert row["state"] == "ambiguous" and pd.isna(row["track_id"])
+    assert row["line_code"] == "9001" and row["track"] == "S" and row["km_m"] == pytest.approx(398.0, abs=0.01)
+    cands = json.loads(row["candidates"])
+    assert [c["track_id"] for c in cands] == ["A1", "A2"]
+    assert [c["pos_m"] for c in cands] == pytest.approx([398.0, -2.0], abs=0.01)
+    assert [c["km_m"] for c in cands] == pytest.approx([398.0, 398.0], abs=0.01)
+    ahead = p[p["t"].sub(9.9).abs() < 1e-6].iloc[0]  # on A2 1 m before the joint: ahead is A1 only
+    assert [c["track_id"] for c in json.loads(ahead["candidates"])] == ["A2", "A1"]
+    behind = p[p["t"].sub(10.1).abs() < 1e-6].iloc[0]  # on A1 1 m past it: behind is A2, not B1
+    assert [c["track_id"] for c in json.loads(behind["candidates"])] == ["A1", "A2"]
+    clear = p[p["t"] >= 10.4]  # x m past the joint clear once x > 1 + 0.02·(100 + x): x > 3.12 m
+    assert (clear["state"] == "determined").all() and (clear["track_id"] == "A1").all()
+
+
+def test_balise_group_on_the_determined_track_corrects_its_position() -> None:
+    # group 4 (A2 km 800) read at 35.5 s, 355 m from km 440: dead reckoning says 795, placed at 800
+    n = net("junction")
+    aid = _group_aid(n, [_g(35.5, 4, 0)])
+    sol = run(n, travel(n, np.full(400, 10.0)), Start("9001", "S", 440.0, 1), aid)
+    p = sol.positions
+    at = p[p["t"].sub(35.5).abs() < 1e-6].iloc[0]
+    assert at["state"] == "determined" and at["track_id"] == "A2"
+    u = BaliseConfig().fix_uncertainty_m + BaliseConfig().latency_budget_s * 10.0
+    assert at["km_m"] == pytest.approx(800.0, abs=0.01) and at["margin_m"] == pytest.approx(u)
+    before = p[p["t"].sub(35.4).abs() < 1e-6].iloc[0]
+    assert before["km_m"] == pytest.approx(794.0, abs=0.01)
+    assert EventType.TRACK_RESOLVED not in [e.type for e in sol.events]
