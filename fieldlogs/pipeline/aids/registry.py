@@ -20,6 +20,7 @@ from fieldlogs.pipeline.aids.radar import RadarSpeedAid
 from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
+from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import TrackGpsAid
 from fieldlogs.pipeline.aids.track_imu import TrackImuAid, turnouts
 from fieldlogs.pipeline.config import PipelineConfig
@@ -102,6 +103,13 @@ def _track_gps(ctx: RunContext) -> Aid | None:
     return TrackGpsAid(t, lat, lon, lines, ctx.cfg.track_select, ctx.cfg.gps, ctx.geometry.gps_antenna_x_m)
 
 
+def _track_gnss(ctx: RunContext) -> Aid | None:
+    g = ctx.gnss
+    if g is None or g.inputs is None or not _has_topology(ctx):
+        return None
+    return TrackGnssAid(g, g.epoch_times(), track_lines(ctx.network), g.cfg)
+
+
 def _balise(ctx: RunContext) -> Aid | None:
     db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
     return BaliseAid(db, ctx.cfg.balise, ctx.streams.get("balise"), ctx.geometry.reader_x_m)
@@ -134,6 +142,7 @@ POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
     _balise_group,
     _track_imu,
     _track_gps,
+    _track_gnss,
 )
 """Position aids in registry order (simultaneous observations are ordered by priority)."""
 

@@ -13,8 +13,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dbtools.network import Network
+from fieldlogs.gnss.config import GnssConfig
+from fieldlogs.gnss.ontrack import TrackSolutions
 from fieldlogs.pipeline.aids.balise_group import BaliseGroupAid, group_table
 from fieldlogs.pipeline.aids.topology import TopologyAid
+from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import TrackGpsAid, gps_llr
 from fieldlogs.pipeline.aids.track_imu import TrackImuAid, heading_llr, kept, turnouts
 from fieldlogs.pipeline.config import BaliseConfig, GpsConfig
@@ -254,3 +257,33 @@ def test_balise_group_on_the_determined_track_corrects_its_position() -> None:
     before = p[p["t"].sub(35.4).abs() < 1e-6].iloc[0]
     assert before["km_m"] == pytest.approx(794.0, abs=0.01)
     assert EventType.TRACK_RESOLVED not in [e.type for e in sol.events]
+
+
+class _Fits:
+    """Constrained-fit tables per (line, track, facing): test statistic ``good`` on 9001/S,
+    ``bad`` on 9002/S, one receiver, epochs every 1 s, 4 satellites (dof 1)."""
+
+    def __init__(self, good: float, bad: float) -> None:
+        self.test = {("9001", "S", 1): good, ("9002", "S", 1): bad}
+
+    def solutions(self, line_code: str, track: str, direction: int) -> TrackSolutions:
+        ep = np.arange(41)
+        tb = pd.DataFrame({"receiver": "r", "epoch": ep, "t": ep.astype(float), "dof": 1, "n_used": 4, "ok": True})
+        tb["test"] = self.test[(line_code, track, direction)]
+        return TrackSolutions(line_code, track, direction, None, tb, tb)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(("bad", "resolved"), [(40.0, True), (2.5, False)])
+def test_gnss_fit_on_the_wrong_branch_leaves_large_residuals(bad: float, resolved: bool) -> None:
+    # split at W1 at 10.1 s; from epoch 11 on, 20 epochs (gnss.track_min_epochs) with a median
+    # excess above gnss.track_chi2 are there at t = 30 s: B1 (line 9002) is dropped
+    n = net("junction")
+    g = GnssConfig()
+    aid = TrackGnssAid(_Fits(2.0, bad), np.arange(41.0), track_lines(n), g)
+    sol = run(n, travel(n, np.full(400, 10.0)), Start("9001", "S", 300.0, 1), aid)
+    res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
+    if resolved:
+        assert len(res) == 1 and res[0].t == 30.0 and res[0].detail["evidence"] == "gnss"
+        assert res[0].detail["track_id"] == "A2"
+    else:
+        assert not res and (sol.positions[sol.positions["t"] > 11.0]["state"] == "ambiguous").all()
