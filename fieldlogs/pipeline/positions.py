@@ -113,6 +113,11 @@ class _Columns:
         self.candidates = np.full(n, None, dtype=object)
         self.km, self.km_eq, self.pos = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
         self.margin, self.k_sign = np.full(n, np.nan), np.full(n, np.nan)
+        self._ids: dict[str | None, str | None] = {None: None}
+
+    def interned(self, text: str | None) -> str | None:
+        """One str object per track id (the cells share it, as the other text columns do)."""
+        return self._ids.setdefault(text, text)
 
     def fill(self, travel: Travel, f: Fix, sel: npt.NDArray[np.int64], cfg: MarginConfig) -> None:
         base = margin_m(f, travel.d[sel], travel.allowance[sel], cfg)
@@ -123,7 +128,7 @@ class _Columns:
             est = travel.km(f, travel.s[sel])
             self._claim(sel, est, est + (f.km_equipment_m - f.km_m), legacy_pos(travel, f, est), base, f.k)
             self.line[sel], self.track[sel] = f.line_code, f.track
-            self.track_id[sel] = legacy_track_id(travel, f)
+            self.track_id[sel] = self.interned(legacy_track_id(travel, f))
         self.state[sel] = state
         self.source[sel] = self.sources.setdefault(str(f.source), len(self.sources))
 
@@ -144,7 +149,11 @@ class _Columns:
         tl = lines[own.track_id]
         self._claim(sel, own.km, own.km + _eq_offset(f), own.pos, own.margin, own.kp * tl.km_sign)
         det = sel[~cl.ambiguous]
-        self.line[det], self.track[det], self.track_id[det] = tl.line_code or None, tl.track or None, own.track_id
+        self.line[det], self.track[det], self.track_id[det] = (
+            tl.line_code or None,
+            tl.track or None,
+            self.interned(own.track_id),
+        )
         amb = sel[cl.ambiguous]
         if amb.size:
             state[cl.ambiguous] = self.code(PositionState.AMBIGUOUS.value)
