@@ -63,11 +63,16 @@ BALISE = Table(
     description="Balise telegrams received, one row per balise passed.",
     columns=(
         T,
-        Column("kind", "str", "I1, I2 or C", enum=tuple(k.value for k in BaliseKind)),
+        Column("kind", "str", "I1, I2, C or G (ETCS group)", enum=tuple(k.value for k in BaliseKind)),
         Column("line_code", "str", "Line code (I1)", nullable=True),
         Column("station_code", "str", "Station code (I2)", nullable=True),
         Column("track", "str", "Up/down (I2)", nullable=True, enum=tuple(t.value for t in Track)),
         Column("signal_type", "str", "Signal type (C)", nullable=True),
+        Column("nid_c", "int", "ETCS country/region code NID_C (G)", nullable=True, required=False, min=0),
+        Column("nid_bg", "int", "ETCS balise group identity NID_BG (G)", nullable=True, required=False, min=0),
+        Column(
+            "n_pig", "int", "ETCS position of the balise in its group N_PIG (G)", nullable=True, required=False, min=0
+        ),
     ),
     required=False,
 )

@@ -123,7 +123,7 @@ def balise_intervals(fixes: list[Fix], travel: Travel) -> list[Interval]:
         if f.source == FixSource.NONE:
             prev = None
             continue
-        if f.source != FixSource.BALISE:
+        if f.source != FixSource.BALISE or f.carried or not np.isfinite(f.km_m):
             continue
         if prev is not None and prev.line_code == f.line_code and f.d_ref - prev.d_ref >= MIN_INTERVAL_M:
             i0, i1 = _cycle(travel, prev.reference_t), _cycle(travel, f.reference_t)

@@ -20,7 +20,7 @@ base of the C balises); it speaks at every telegram.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -85,11 +85,8 @@ class BaliseAid(StaticAid):
     priority = Priority.TELEGRAM
 
     def observations(self) -> Iterator[Observation]:
-        tel = self.telegrams
-        if tel is None:
-            return
-        for row in tel.astype(object).where(tel.notna(), None).to_dict("records"):
-            yield Observation(float(row["t"]), row)
+        # ETCS groups are the balise-group aid's
+        return telegram_observations(self.telegrams, lambda row: row["kind"] != BaliseKind.G)
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         self._u = self.cfg.fix_uncertainty_m + self.cfg.latency_budget_s * float(view.travel.v[view.i])
@@ -255,6 +252,18 @@ class BaliseAid(StaticAid):
                 detail={**base, "balise_id": c["balise_id"], "kind": "C"},
             )
         ], fix
+
+
+def telegram_observations(
+    tel: pd.DataFrame | None, keep: Callable[[dict[str, Any]], bool] = lambda row: True
+) -> Iterator[Observation]:
+    """One observation per telegram row ``keep`` accepts (NaN cells as None), at its t."""
+    if tel is None:
+        return
+    rows: list[dict[str, Any]] = tel.astype(object).where(tel.notna(), None).to_dict("records")  # type: ignore[assignment]
+    for row in rows:
+        if keep(row):
+            yield Observation(float(row["t"]), row)
 
 
 def _s(v: Any) -> str | None:
