@@ -26,7 +26,20 @@ TACHO = Table(
     name="tacho",
     kind="log",
     description="Tachometer: cumulative pulse count every 100 ms cycle.",
-    columns=(T, Column("pulses", "int", "Cumulative pulse count, never decreasing", min=0)),
+    columns=(
+        T,
+        Column("pulses", "int", "Cumulative pulse count, never decreasing (teeth passed in either sense)", min=0),
+        Column(
+            "direction",
+            "int",
+            "Sense of motion from a two-phase tachometer over the cycle: +1 toward the vehicle's F end, "
+            "−1 toward its R end (rolling back), 0 standstill or not known; absent: the driving cab's",
+            nullable=True,
+            required=False,
+            min=-1,
+            max=1,
+        ),
+    ),
     rate_hz=10.0,
     required=False,
 )
