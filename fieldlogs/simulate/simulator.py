@@ -92,14 +92,23 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
     # one child per concern; new concerns are appended so the earlier children stay the same
     names = ("wheel", "slip", "imu", "gps", "radar", "balise", "radar_if", "gnss_raw")
     rngs = dict(zip(names, np.random.default_rng(seed).spawn(len(names)), strict=True))
-    line, track = _pick_route(network, scenario)
-    path = scenario.route.path_km_m
-    try:
-        geom = TrackGeometry.from_network(network, line, track, (min(path), max(path)) if path else None)
-    except TrackLookupError as exc:
-        raise ScenarioError(str(exc), path=scenario.source, key="route.path_km_m") from None
-    balises = track_balises(network.s003_balises, line, track)
-    motion = plan_motion(geom, scenario, [] if scenario.is_road_rail else _stations(balises, geom, scenario))
+    plan = None
+    if scenario.network.active:  # a route over the network's tracks (fieldlogs.simulate.netsim)
+        from fieldlogs.simulate.netsim import network_plan
+
+        plan = network_plan(network, scenario)
+        geom, scenario, balises, stations = plan.geom, plan.scenario, plan.balises, []
+        line, track = "", ""
+    else:
+        line, track = _pick_route(network, scenario)
+        path = scenario.route.path_km_m
+        try:
+            geom = TrackGeometry.from_network(network, line, track, (min(path), max(path)) if path else None)
+        except TrackLookupError as exc:
+            raise ScenarioError(str(exc), path=scenario.source, key="route.path_km_m") from None
+        balises = track_balises(network.s003_balises, line, track)
+        stations = [] if scenario.is_road_rail else _stations(balises, geom, scenario)
+    motion = plan_motion(geom, scenario, stations)
     d_true, wear = _wheel(scenario, rngs["wheel"])
     episodes = place_episodes(scenario, motion, geom, rngs["slip"])
     factor, slipping = wheel_factor(episodes, motion.t)
@@ -117,12 +126,16 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
     outages: list[tuple[float, float]] = []
     if sensors.gps:
         streams["gps"], outages = gps_stream(motion, geom, scenario, rngs["gps"])
+        if plan is not None:
+            streams["gps"] = plan.multipath(streams["gps"], motion)
     streams["cab"] = cab_events(motion)
     if sensors.truth:
-        streams["truth"] = truth_stream(motion, slipping, line, track)
+        streams["truth"] = truth_stream(motion, slipping, line, track) if plan is None else plan.truth(motion, slipping)
     if sensors.radar:
         streams["radar"] = radar_stream(motion, scenario, rngs["radar"])
     meta = _meta(network, scenario, seed, line, track, geom, motion, d_true, wear, episodes, outages, rolled)
+    if plan is not None:
+        plan.patch_meta(meta, seed)
     if sensors.radar_if:
         from fieldlogs.simulate.radar import radar_if_stream  # numba: only when asked for
 
