@@ -72,7 +72,7 @@ def balise_events(balises: pd.DataFrame, motion: Motion, rng: np.random.Generato
     is_g = kind == BaliseKind.G
     if is_g.any():  # an ETCS group balise's telegram: its group identity and place in the group
         for c in GROUP_COLUMNS:
-            out[c] = rows[c].astype("Int64").where(is_g, pd.NA)
+            out[c] = rows[c].astype("Int64").mask(~is_g)
     return out
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -83,8 +84,8 @@ class Turnout:
     facing: bool
 
 
-def _opt(v: object) -> str | None:
-    return None if v is None or (isinstance(v, float) and math.isnan(v)) or pd.isna(v) else str(v)
+def _opt(v: Any) -> str | None:
+    return None if v is None or pd.isna(v) else str(v)
 
 
 def _heights(net: Network, row: pd.Series, pos: FloatArray) -> FloatArray:
@@ -94,20 +95,22 @@ def _heights(net: Network, row: pd.Series, pos: FloatArray) -> FloatArray:
     own = tp[tp["track_id"] == tid]
     if len(own):
         own = own.sort_values("pos_m")
-        return np.interp(pos, own["pos_m"].to_numpy(float), own["height_m"].to_numpy(float, na_value=np.nan))
+        return np.asarray(
+            np.interp(pos, own["pos_m"].to_numpy(float), own["height_m"].to_numpy(float, na_value=np.nan))
+        )
     g = net.gis
     g = g[(g["line_code"] == row["line_code"]) & (g["track"] == row["track"])].sort_values("km_m")
     if g.empty or "height_m" not in g:
         return np.full(len(pos), np.nan)
     k0, k1 = float(row["km_begin_m"]), float(row["km_end_m"])
     km = k0 + math.copysign(1.0, k1 - k0) * pos
-    return np.interp(km, g["km_m"].to_numpy(float), g["height_m"].to_numpy(float, na_value=np.nan))
+    return np.asarray(np.interp(km, g["km_m"].to_numpy(float), g["height_m"].to_numpy(float, na_value=np.nan)))
 
 
 def _arc(x0: float, y0: float, heading: float, side: int, radius: float, length: float) -> tuple[FloatArray, ...]:
     """(u, x, y): the circular arc of ``radius`` from (x0, y0) tangent to ``heading``, turning to
     the left for side +1, every ARC_STEP_M up to ``length`` (u = arc length)."""
-    n = max(int(math.ceil(length / ARC_STEP_M)), 1)
+    n = max(math.ceil(length / ARC_STEP_M), 1)
     u = np.linspace(0.0, length, n + 1)[1:]
     phi = u / radius
     along, across = radius * np.sin(phi), side * radius * (1.0 - np.cos(phi))
@@ -124,10 +127,13 @@ class RouteGeometry(TrackGeometry):
         tracks = all_tracks(net).drop_duplicates("track_id").set_index("track_id", drop=False)
         self.legs = legs
         self.segments: list[Segment] = []
-        rho_l, lat_l, lon_l, h_l = [], [], [], []
+        rho_l: list[FloatArray] = []
+        lat_l: list[FloatArray] = []
+        lon_l: list[FloatArray] = []
+        h_l: list[FloatArray] = []
         rho0 = 0.0
         for leg in legs:
-            row = tracks.loc[leg.track_id]
+            row = tracks.loc[[leg.track_id]].iloc[0]
             cl = centreline(net, row)
             if len(cl.pos_m) < 2:
                 raise ValueError(f"track {leg.track_id} has no centreline (no gis grid or track_points)")
@@ -164,7 +170,7 @@ class RouteGeometry(TrackGeometry):
         for prev, (i, leg) in zip(self.legs, enumerate(self.legs[1:], start=1), strict=False):
             if leg.switch_in is None or leg.switch_in not in sw.index:
                 continue
-            s = sw.loc[leg.switch_in]
+            s = sw.loc[[leg.switch_in]].iloc[0]
             geom = _diverging(s, prev, leg)
             if geom is None:
                 continue

@@ -126,6 +126,21 @@ class NetworkPlan:
             return np.empty(0), np.empty(0), np.empty(0, dtype=object)
         return np.concatenate(xs), np.concatenate(ys), np.concatenate(ids)
 
+    def finish(
+        self,
+        streams: dict[str, pd.DataFrame],
+        motion: Motion,
+        slipping: npt.NDArray[np.bool_],
+        meta: RunMeta,
+        seed: int,
+    ) -> None:
+        """The network's truth, GPS multipath and run.json route in place of one line's."""
+        if "truth" in streams:
+            streams["truth"] = self.truth(motion, slipping)
+        if "gps" in streams:
+            streams["gps"] = self.multipath(streams["gps"], motion)
+        self.patch_meta(meta, seed)
+
     def patch_meta(self, meta: RunMeta, seed: int) -> None:
         """run.json: the route's tracks and points instead of one line/track's km path."""
         st: dict[str, Any] = meta.extra["sim_truth"]
@@ -161,7 +176,9 @@ def _points(geom: RouteGeometry, scenario: Scenario) -> list[float]:
         if r is None:
             on = ", ".join(f"{s.track_id} (0–{s.length:.0f} m)" for s in geom.segments)
             raise ScenarioError(
-                f"[{tid}, {pos}] is not on the route (its tracks: {on})", path=scenario.source, key=f"network.points[{i}]"
+                f"[{tid}, {pos}] is not on the route (its tracks: {on})",
+                path=scenario.source,
+                key=f"network.points[{i}]",
             )
         out.append(r)
     return out

@@ -213,7 +213,9 @@ class _Driving:
         def f(q: FloatArray) -> FloatArray:
             km = self.geom.km_at(sigma_start + move.direction * q)
             scale = self.geom.cant_scale(km)
-            lim = curve_limit(self.geom.curvature(km), self.cant, self.unbalanced_mps2, None if scale is None else scale[0])
+            lim = curve_limit(
+                self.geom.curvature(km), self.cant, self.unbalanced_mps2, None if scale is None else scale[0]
+            )
             cap = self.geom.speed_cap(km)
             if cap is not None:
                 lim = np.minimum(lim, cap)

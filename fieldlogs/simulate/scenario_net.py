@@ -45,11 +45,16 @@ def check_network(n: NetworkCfg) -> tuple[str, str] | None:
     for i, (_, pos) in enumerate(n.points):
         if not (math.isfinite(pos) and pos >= 0):
             return f"network.points[{i}]", f"pos_m must be ≥ 0, got {pos}"
-    for key, spans in (("network.gnss_outages", n.gnss_outages), ("network.multipath", n.multipath)):
-        for i, span in enumerate(spans):
-            a, b = span[1], span[2]
-            if not (math.isfinite(a) and math.isfinite(b) and 0 <= a < b):
-                return f"{key}[{i}]", f"needs [track_id, from_pos_m, to_pos_m] with 0 ≤ from < to, got [{a}, {b}]"
+    ranges = [("network.gnss_outages", i, a, b) for i, (_, a, b) in enumerate(n.gnss_outages)]
+    ranges += [("network.multipath", i, a, b) for i, (_, a, b, _) in enumerate(n.multipath)]
+    for key, i, a, b in ranges:
+        if not (math.isfinite(a) and math.isfinite(b) and 0 <= a < b):
+            return f"{key}[{i}]", f"needs [track_id, from_pos_m, to_pos_m] with 0 ≤ from < to, got [{a}, {b}]"
+    return _check_values(n)
+
+
+def _check_values(n: NetworkCfg) -> tuple[str, str] | None:
+    """The numeric knobs of ``[network]``."""
     for i, m in enumerate(n.multipath):
         if not (math.isfinite(m[3]) and abs(m[3]) <= 100):
             return f"network.multipath[{i}]", f"bias_m must be within ±100 m, got {m[3]}"

@@ -1,0 +1,168 @@
+"""Runs routed over a network (issue 31 item 4) on the hand-made networks of tests/data/networks.
+
+The crossover network (``make_networks.crossover``): double-track line 9003, U at y = +2 m and
+D at −2 m, crossover X1 from D km 300 (switch W1, toe west, diverging left) up to U km 360
+(W2), four 1:10 turnouts of radius R = (e − d·cot α)/(2·tan(α/2)) for the x-extent e = 60 m
+and the track distance d = 4 m, α = atan(1/10).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from dbtools.build import build_db
+from dbtools.database import read_network
+from dbtools.network import Network
+from fieldlogs.simulate.netsim import network_plan
+from fieldlogs.simulate.scenario import ScenarioError, scenario_from_dict
+from fieldlogs.simulate.simulator import SimulatedRun, simulate_run
+
+NETWORKS = Path(__file__).resolve().parents[2] / "data" / "networks"
+ALPHA = math.atan(1 / 10)
+D_TRACKS = 4.0
+RADIUS = (60.0 - D_TRACKS / math.tan(ALPHA)) / (2 * math.tan(ALPHA / 2))
+#: Length of the crossover: two arcs R·α and the straight between them (module docstring).
+X_LENGTH = 2 * RADIUS * ALPHA + (D_TRACKS - 2 * RADIUS * (1 - math.cos(ALPHA))) / math.sin(ALPHA)
+
+
+@pytest.fixture(scope="module")
+def crossover(tmp_path_factory: pytest.TempPathFactory) -> Network:
+    db = tmp_path_factory.mktemp("xo") / "xo.sqlite"
+    build_db(NETWORKS / "crossover", db)
+    return read_network(db)
+
+
+def run(net: Network, network: dict[str, Any], **over: Any) -> SimulatedRun:
+    base = {"noise": False, "slip": {"slips": 0, "slides": 0}, "running": {"line_speed_kmh": 60.0}}
+    return simulate_run(net, scenario_from_dict({**base, **over, "network": network}))
+
+
+def changes(values: pd.Series) -> list[str]:
+    v = values.astype(str).tolist()
+    return [a for i, a in enumerate(v) if i == 0 or a != v[i - 1]]
+
+
+def test_hand_computed_radius_and_length() -> None:
+    assert RADIUS == pytest.approx(200.5, abs=0.05)  # the switches table's diverging_radius_m
+    assert X_LENGTH == pytest.approx(60.166, abs=0.001)  # 0.166 m more than the 60 m of km it spans
+
+
+def test_crossover_run_truth_goes_u_crossover_d(crossover: Network) -> None:
+    streams, meta = run(crossover, {"from_track": "D1", "to_track": "U3", "via": ["X1"]})
+    truth = streams["truth"]
+    assert changes(truth["track_id"]) == ["D1", "X1", "U2", "U3"]
+    on_x = truth[truth["track_id"] == "X1"]
+    assert on_x["track"].isna().all() and on_x["line_code"].isna().all()
+    assert set(changes(truth["track"].dropna())) == {"D", "U"}
+    assert [r["track_id"] for r in meta.extra["sim_truth"]["route"]] == ["D1", "X1", "U2", "U3"]
+    # travel on the crossover is longer than the km it spans [S003]: X_LENGTH vs 60 m of km;
+    # the route's ground arc length over X1 (splines through the true turnout arcs) is X_LENGTH
+    geom = network_plan(crossover, scenario_from_dict({"network": {"tracks": ["D1", "X1", "U2"]}})).geom
+    x1 = geom.segments[1]
+    assert x1.length == pytest.approx(X_LENGTH, abs=0.001)
+    arc = float(np.diff(geom.sigma([x1.rho0, x1.rho0 + x1.length]))[0])
+    assert arc == pytest.approx(X_LENGTH, abs=0.02)
+    assert on_x["km_m"].max() - on_x["km_m"].min() == pytest.approx(60.0, abs=1.0)
+    assert on_x["pos_m"].is_monotonic_increasing and 0.0 <= on_x["pos_m"].min() <= on_x["pos_m"].max() <= X_LENGTH
+
+
+def test_turnout_yaw_from_imu(crossover: Network) -> None:
+    """The diverging branch turns by atan(1/10) at ωz ≈ v/R; the through branch does not."""
+    streams, _ = run(crossover, {"tracks": ["D1", "X1", "U2", "U3"]})
+    imu, truth = streams["imu"], streams["truth"]
+    t, wz = imu["t"].to_numpy(), imu["wz"].to_numpy()
+    tt, tid, pos = truth["t"].to_numpy(), truth["track_id"].to_numpy(), truth["pos_m"].to_numpy()
+    on_x = tt[tid == "X1"]
+    t_mid = tt[(tid == "X1") & (pos <= X_LENGTH / 2)][-1]
+    first = (t >= on_x[0] - 5.0) & (t <= t_mid)
+    assert np.trapezoid(wz[first], t[first]) == pytest.approx(ALPHA, rel=0.02)  # left: + heading
+    second = (t > t_mid) & (t <= on_x[-1] + 5.0)
+    assert np.trapezoid(wz[second], t[second]) == pytest.approx(-ALPHA, rel=0.02)
+    # on the first arc (pos 2…R·α − 2 m, clear of the spline's ringing at the curvature steps)
+    arc = (tid == "X1") & (pos > 2.0) & (pos < RADIUS * ALPHA - 2.0)
+    v = np.abs(truth["speed_mps"].to_numpy()[arc])
+    w = np.interp(tt[arc], t, wz)
+    assert np.median(w / (v / RADIUS)) == pytest.approx(1.0, abs=0.03)
+    # through: D1 → D2 → D3 never turns
+    through, _ = run(crossover, {"tracks": ["D1", "D2", "D3"]})
+    assert np.abs(through["imu"]["wz"]).max() < 1e-3
+
+
+def test_switch_speed(crossover: Network) -> None:
+    streams, meta = run(crossover, {"tracks": ["D1", "X1", "U2", "U3"]})
+    truth = streams["truth"]
+    v_x = truth.loc[truth["track_id"] == "X1", "speed_mps"].abs().max()
+    assert v_x <= math.sqrt(0.8 * 200.5) + 1e-6  # the DB's R 200.5 m, a_ub 0.8 m/s², no cant
+    assert [t["switch_id"] for t in meta.extra["sim_truth"]["turnouts"]] == ["W1", "W2"]
+    slow, _ = run(crossover, {"tracks": ["D1", "X1", "U2", "U3"], "switch_speed_kmh": 25.0})
+    truth = slow["truth"]
+    assert truth.loc[truth["track_id"] == "X1", "speed_mps"].abs().max() <= 25.0 / 3.6 + 1e-6
+
+
+def test_navigability_none_is_never_crossed(crossover: Network) -> None:
+    # D2's begin meets X1's begin at W1 as its two branches: navigability none
+    with pytest.raises(ScenarioError, match="navigability none") as exc:
+        run(crossover, {"tracks": ["D2", "X1"], "direction": -1})
+    assert exc.value.key == "network.tracks[1]"
+    with pytest.raises(ScenarioError, match="no navigable route from D2 to X1"):
+        run(crossover, {"from_track": "D2", "to_track": "X1", "direction": -1})
+    with pytest.raises(ScenarioError, match="did you mean 'X1'"):
+        run(crossover, {"tracks": ["D1", "X11"]})
+
+
+def test_turnback_retraces_with_cab_change(crossover: Network) -> None:
+    streams, _ = run(crossover, {"tracks": ["D1", "D2"], "points": [["D1", 100.0], ["D2", 200.0], ["D1", 150.0]]})
+    truth = streams["truth"]
+    assert changes(truth["track_id"]) == ["D1", "D2", "D1"]
+    assert truth["speed_mps"].min() < -1.0 < 1.0 < truth["speed_mps"].max()  # second leg toward the R end
+    assert streams["cab"]["direction"].tolist() == ["F", "R"]
+    end = truth.iloc[-1]
+    assert (end["track_id"], end["pos_m"]) == ("D1", pytest.approx(150.0, abs=0.05))
+    # the group on D2 at 320/323 m km: read N_PIG 0, 1 going east, 1, 0 coming back
+    b = streams["balise"]
+    assert b.loc[b["nid_bg"] == 2, "n_pig"].tolist() == [0, 1, 1, 0]
+    assert b["kind"].unique().tolist() == ["G"]
+    assert b.loc[b["nid_bg"] == 1, "n_pig"].tolist() == [0, 1, 1, 0]
+
+
+def test_gnss_outage_and_multipath_by_track_range(crossover: Network) -> None:
+    streams, _ = run(
+        crossover,
+        {
+            "tracks": ["D1", "X1", "U2", "U3"],
+            "gnss_outages": [["X1", 0.0, 70.0]],
+            "multipath": [["D1", 100.0, 250.0, 3.0]],
+        },
+    )
+    gps, truth = streams["gps"], streams["truth"]
+    tid = np.asarray(pd.Series(truth["track_id"]).iloc[np.searchsorted(truth["t"], gps["t"])], dtype=object)
+    assert (gps.loc[tid == "X1", "fix"] == 0).all() and (gps.loc[tid == "X1", "lat"]).isna().all()
+    assert (gps.loc[tid == "D1", "fix"] == 2).all()
+    # D at y = −2 m, U at +2 m: biased 3 m toward U the fixes are 1 m north of the line's axis
+    from pyproj import Proj
+
+    proj = Proj(proj="aeqd", lat_0=60.2, lon_0=24.9, ellps="GRS80", units="m")
+    _, y = proj(gps["lon"].to_numpy(float), gps["lat"].to_numpy(float))
+    pos = np.interp(gps["t"], truth["t"], truth["pos_m"])
+    biased = (tid == "D1") & (pos > 100.0) & (pos < 250.0)
+    plain = (tid == "D1") & ((pos < 95.0) | (pos > 255.0))
+    assert y[biased] == pytest.approx(1.0, abs=0.05)
+    assert y[plain] == pytest.approx(-2.0, abs=0.05)
+
+
+def test_network_knobs_are_checked() -> None:
+    with pytest.raises(ScenarioError) as exc:
+        scenario_from_dict({"network": {"tracks": ["A"], "from_track": "B", "to_track": "C"}})
+    assert exc.value.key == "network.tracks"
+    with pytest.raises(ScenarioError) as exc:
+        scenario_from_dict({"network": {"tracks": ["A"]}, "gps": {"outages_km_m": [[1.0, 2.0]]}})
+    assert exc.value.key == "gps.outages_km_m"
+    with pytest.raises(ScenarioError) as exc:
+        scenario_from_dict({"network": {"tracks": ["A"], "gnss_outages": [["A", 5.0, 1.0]]}})
+    assert exc.value.key == "network.gnss_outages[0]"
