@@ -127,7 +127,7 @@ class _Frame:
         return np.round(lat, 9), np.round(lon, 9)
 
     def height(self, km: np.ndarray) -> np.ndarray:
-        return np.round(np.interp(km, self.km, self.h), 3)
+        return np.asarray(np.round(np.interp(km, self.km, self.h), 3))
 
 
 class _Tables:
@@ -163,8 +163,9 @@ class _Tables:
             )
         )
         line = LINE if track else None
+        row: dict[str, object] = {"track_id": tid, "line_code": line, "track": track, "kind": kind}
         self.tracks.append(
-            {"track_id": tid, "line_code": line, "track": track, "kind": kind}
+            row
             | {
                 "km_begin_m": float(round(km[0], 3)) if line else None,
                 "km_end_m": float(round(km[-1], 3)) if line else None,
@@ -283,23 +284,21 @@ def network_tables(gis: pd.DataFrame, km_first: float, km_last: float) -> dict[s
         **xo,
     )
     sw("W9", ("0420-D5", e), ("0421-S1", b), ("0420-D6", b), km_m=toe["junction"], l=0.0, diverging_side=left, **jn)
-    for bg, (tid, line, track, km) in enumerate(
-        (
-            ("0420-D1", LINE, "D", 20_700.0),  # before the station (D trains)
-            ("0420-D2", LINE, "D", 20_840.0),  # beyond facing W1: through …
-            ("0420-3", LINE, None, 20_860.0),  # … and diverging (loop 3)
-            ("0420-U5", LINE, "U", 21_640.0),  # before the crossovers (U trains)
-            ("0420-U2", LINE, "U", 21_277.0),  # beyond facing W4: through …
-            ("0420-4", LINE, None, 21_257.0),  # … and diverging (loop 4)
-            ("0420-D4", LINE, "D", 21_437.0),  # beyond facing W5: through …
-            ("0420-X1", LINE, None, 21_420.0),  # … and diverging (crossover X1)
-            ("0420-U3", LINE, "U", 21_417.0),  # beyond facing W6 (U trains): through
-            ("0420-D6", LINE, "D", 22_040.0),  # beyond facing W9: through …
-            ("0421-S1", BRANCH, "S", 40.0),  # … and diverging (the branch line)
-        ),
-        start=1,
-    ):
-        t.group(bg, tid, line, track, km)
+    groups: tuple[tuple[str, str, str | None, float], ...] = (
+        ("0420-D1", LINE, "D", 20_700.0),  # before the station (D trains)
+        ("0420-D2", LINE, "D", 20_840.0),  # beyond facing W1: through …
+        ("0420-3", LINE, None, 20_860.0),  # … and diverging (loop 3)
+        ("0420-U5", LINE, "U", 21_640.0),  # before the crossovers (U trains)
+        ("0420-U2", LINE, "U", 21_277.0),  # beyond facing W4: through …
+        ("0420-4", LINE, None, 21_257.0),  # … and diverging (loop 4)
+        ("0420-D4", LINE, "D", 21_437.0),  # beyond facing W5: through …
+        ("0420-X1", LINE, None, 21_420.0),  # … and diverging (crossover X1)
+        ("0420-U3", LINE, "U", 21_417.0),  # beyond facing W6 (U trains): through
+        ("0420-D6", LINE, "D", 22_040.0),  # beyond facing W9: through …
+        ("0421-S1", BRANCH, "S", 40.0),  # … and diverging (the branch line)
+    )
+    for bg, group in enumerate(groups, start=1):
+        t.group(bg, *group)
     return {
         "tracks": pd.DataFrame(t.tracks),
         "connections": pd.DataFrame(t.conns),
