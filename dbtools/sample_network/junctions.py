@@ -1,5 +1,7 @@
 """The network part of the bundled sample: a four-track station, a crossover pair and a
-junction on the straight between Matoba (km 21k061) and the curve at km 22k703.
+junction on the straight between Matoba (km 21k061) and the curve at km 22k703, west of
+the stretch the road-rail sample works in (km 22k032–22k632: its off-rail GPS fixes 8 m
+left of D must not lie near the branch).
 
 Drawn on the sample's own double track (the ``gis`` grid: D 1.9 m left of the centreline in
 increasing km, U 1.9 m right), in a local frame (a along D from its km 20k800 point, l to the
@@ -12,7 +14,7 @@ left), and turned back into latitude/longitude with the grid's projection:
 * **crossover pair**: X1 from D km 21k400 to U km 21k460 and X2 from U km 21k540 to D km
   21k600, 1:10 turnouts whose radius gives the 60 m extent e = 2·R·tan(α/2) + d·cot α between
   toes on the 20 m grid (d = 3.8 m: R ≈ 220.5 m);
-* **junction**: the single-track branch line ``0421`` leaves D at km 22k000 to the left by a
+* **junction**: the single-track branch line ``0421`` leaves D at km 21k700 to the left by a
   1:12 turnout of R = 300 m, then 40 m straight, a R = 500 m curve to 30° and straight, 1.5 km
   of its own km (its ``gis`` grid, every 20 m).
 
@@ -45,7 +47,7 @@ KM0, KM_STRAIGHT_END = 20_800.0, 22_700.0
 TRACK_SPACING = 3.8
 LOOP_OUT = 4.5
 STEP = 20.0
-TOES = {"loop_lo": 20_800.0, "loop_hi": 21_320.0, "x1": 21_400.0, "x2": 21_540.0, "junction": 22_000.0}
+TOES = {"loop_lo": 20_800.0, "loop_hi": 21_320.0, "x1": 21_400.0, "x2": 21_540.0, "junction": 21_700.0}
 X_EXTENT = 60.0
 
 
@@ -294,7 +296,7 @@ def network_tables(gis: pd.DataFrame, km_first: float, km_last: float) -> dict[s
         ("0420-D4", LINE, "D", 21_437.0),  # beyond facing W5: through …
         ("0420-X1", LINE, None, 21_420.0),  # … and diverging (crossover X1)
         ("0420-U3", LINE, "U", 21_417.0),  # beyond facing W6 (U trains): through
-        ("0420-D6", LINE, "D", 22_040.0),  # beyond facing W9: through …
+        ("0420-D6", LINE, "D", 21_740.0),  # beyond facing W9: through …
         ("0421-S1", BRANCH, "S", 40.0),  # … and diverging (the branch line)
     )
     for bg, group in enumerate(groups, start=1):
