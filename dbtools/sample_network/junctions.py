@@ -35,6 +35,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools.gis.georef import projector_for_points
+from dbtools.synthetic.turnout import radius_for_extent
 from schemas.enums import BaliseKind, Navigability, Side, SwitchType, TrackKind
 from schemas.model import Table
 
@@ -98,12 +99,6 @@ def reverse_curves(a0: float, l0: float, offset: float, n: float, radius: float,
 
 def extent(p: Path2D) -> float:
     return p.at(p.length)[0] - p.a0
-
-
-def radius_for_extent(e: float, d: float, n: float) -> float:
-    """R giving the extent e between the toes of a crossover d wide: R = (e − d·cot α)/(2·tan(α/2))."""
-    alpha = math.atan(1.0 / n)
-    return (e - d / math.tan(alpha)) / (2 * math.tan(alpha / 2))
 
 
 class _Frame:

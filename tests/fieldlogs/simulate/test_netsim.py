@@ -18,10 +18,15 @@ import pytest
 
 from dbtools.build import build_db
 from dbtools.database import read_network
-from dbtools.network import Network
+from dbtools.gis.geometry import Projector
+from dbtools.network import Network, canonical
+from dbtools.synthetic.network import build_network, demo_line
+from dbtools.synthetic.topology import station_network
 from fieldlogs.simulate.netsim import network_plan
 from fieldlogs.simulate.scenario import ScenarioError, scenario_from_dict
 from fieldlogs.simulate.simulator import SimulatedRun, simulate_run
+from schemas.network import NETWORK_TABLES
+from schemas.tables import BALISES
 
 NETWORKS = Path(__file__).resolve().parents[2] / "data" / "networks"
 ALPHA = math.atan(1 / 10)
@@ -166,3 +171,41 @@ def test_network_knobs_are_checked() -> None:
     with pytest.raises(ScenarioError) as exc:
         scenario_from_dict({"network": {"tracks": ["A"], "gnss_outages": [["A", 5.0, 1.0]]}})
     assert exc.value.key == "network.gnss_outages[0]"
+
+
+def synthetic_stations() -> Network:
+    """The demo line with the synthetic station layouts of :mod:`dbtools.synthetic.topology`."""
+    spec, proj = demo_line(), Projector(9)
+    net = build_network([spec], proj)
+    parts = station_network(spec, proj)
+    tables = dict(net.tables)
+    tables[BALISES.name] = canonical(BALISES, pd.concat([net.balises, parts.pop("balises")], ignore_index=True))
+    tables.update({t.name: canonical(t, parts[t.name]) for t in NETWORK_TABLES})
+    return Network(tables, meta=net.meta)
+
+
+def test_synthetic_loop_turns_by_the_frog_angle() -> None:
+    """Entering loop 3 of a synthetic station: the route's heading turns by atan(1/8) against the
+    main track's at the same km (the layout's 1:8 turnout), and the IMU shows it."""
+    net = synthetic_stations()
+    w1 = net.switches.set_index("switch_id").loc[["0900-02-3-W1"]].iloc[0]
+    n, radius = float(w1["switch_number"]), float(w1["diverging_radius_m"])
+    loop = {"from_track": "0900-D-0", "to_track": "0900-D-9", "via": ["0900-02-3"]}
+    plan = network_plan(net, scenario_from_dict({"network": loop}))
+    through = network_plan(net, scenario_from_dict({"network": {"from_track": "0900-D-0", "to_track": "0900-D-9"}}))
+    seg = next(s for s in plan.geom.segments if s.track_id == "0900-02-3")
+    rho = seg.rho0 + radius * math.atan(1 / n)  # the end of the turnout curve
+    km = float(plan.geom.locate([rho])["km_m"][0])
+    rho_main = float(np.interp(km, *_km_rho(through)))
+    a, b = plan.geom.state([rho]), through.geom.state([rho_main])
+    turn = math.atan2(a.sin_psi[0], a.cos_psi[0]) - math.atan2(b.sin_psi[0], b.cos_psi[0])
+    assert turn == pytest.approx(math.atan(1 / n), rel=0.02)  # D's loop 3 lies left: + heading
+    streams, _ = simulate_run(
+        net, scenario_from_dict({"noise": False, "slip": {"slips": 0, "slides": 0}, "network": loop})
+    )
+    assert np.abs(streams["imu"]["wz"]).max() > 0.5 * 8.0 / radius  # seen at any speed above 8 m/s
+
+
+def _km_rho(plan: Any) -> tuple[np.ndarray, np.ndarray]:
+    rho = np.arange(plan.geom.km_min, plan.geom.km_max, 1.0)
+    return plan.geom.locate(rho)["km_m"], rho

@@ -14,7 +14,8 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.network import Network
 from dbtools.sample_network import sample_source_dir
-from dbtools.sample_network.junctions import TRACK_SPACING, radius_for_extent, reverse_curves
+from dbtools.sample_network.junctions import TRACK_SPACING, reverse_curves
+from dbtools.synthetic.turnout import radius_for_extent
 from dbtools.topology import all_tracks
 from fieldlogs.io import read_run, write_run
 from fieldlogs.quality.checks import check_run, load_db_refs

@@ -1,0 +1,38 @@
+"""Turnout geometry for drawn networks: the diverging way of a point switch.
+
+A turnout of switch number n has the frog angle α = atan(1/n); its diverging branch leaves
+the through track tangentially on a circular arc of the diverging radius R until it reaches α.
+A loop track or a crossover that ends up ``d`` to the side uses the reverse curve
+arc R (0 → α), straight s, arc R (α → 0) with d = 2·R·(1 − cos α) + s·sin α; measured along
+the main track its extent is e = 2·R·sin α + s·cos α = 2·R·tan(α/2) + d·cot α, so the radius
+that fits a given extent between switch toes is R = (e − d·cot α) / (2·tan(α/2)).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+
+def radius_for_extent(extent: float, offset: float, n: float) -> float:
+    """R of the reverse curve reaching ``offset`` over ``extent`` along the main track (module doc)."""
+    alpha = math.atan(1.0 / n)
+    r = (extent - offset / math.tan(alpha)) / (2 * math.tan(alpha / 2))
+    if r <= 0:
+        raise ValueError(f"a 1:{n:g} turnout cannot reach {offset} m to the side within {extent} m")
+    return r
+
+
+def reverse_curve_offset(along: npt.ArrayLike, extent: float, offset: float, n: float) -> npt.NDArray[np.float64]:
+    """Lateral offset of the reverse curve at distances ``along`` the straight main track from
+    the toe (0 … extent; clipped outside): arc, straight of slope tan α, mirrored arc."""
+    r = radius_for_extent(extent, offset, n)
+    alpha = math.atan(1.0 / n)
+    a = np.clip(np.asarray(along, dtype=float), 0.0, extent)
+    a1 = r * math.sin(alpha)
+    first = r - np.sqrt(np.maximum(r * r - np.minimum(a, a1) ** 2, 0.0))
+    mid = r * (1 - math.cos(alpha)) + (a - a1) * math.tan(alpha)
+    last = offset - (r - np.sqrt(np.maximum(r * r - np.minimum(extent - a, a1) ** 2, 0.0)))
+    return np.asarray(np.where(a <= a1, first, np.where(a >= extent - a1, last, mid)), dtype=float)
