@@ -4,7 +4,9 @@ A balise is passed when the true km crosses its ``km_actual_m`` (the reference p
 vehicle carries the antenna). Within one move the km is monotone, so each crossing time is
 a ``searchsorted`` plus a linear interpolation; reversals cross balises again in the other
 order. Telegram contents [S003 §4]: I1 carries the line code, I2 the station code and the
-track, C the signal type; other fields are empty.
+track, C the signal type; other fields are empty. A kind G balise (an ETCS group, SUBSET-026)
+carries its group's NID_C, NID_BG, its N_PIG and the group size: read in N_PIG order one way
+and reversed the other, it tells the direction of travel.
 """
 
 from __future__ import annotations
