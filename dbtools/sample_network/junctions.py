@@ -28,14 +28,13 @@ from __future__ import annotations
 
 import io
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from dbtools.gis.georef import projector_for_points
-from dbtools.synthetic.turnout import radius_for_extent
+from dbtools.synthetic.turnout import Path2D, radius_for_extent, reverse_curves
 from schemas.enums import BaliseKind, Navigability, Side, SwitchType, TrackKind
 from schemas.model import Table
 
@@ -52,53 +51,8 @@ TOES = {"loop_lo": 20_800.0, "loop_hi": 21_320.0, "x1": 21_400.0, "x2": 21_540.0
 X_EXTENT = 60.0
 
 
-@dataclass
-class Path2D:
-    """Straights and circular arcs from (a0, l0) at heading h0 (rad from +a, toward +l)."""
-
-    a0: float
-    l0: float
-    h0: float = 0.0
-    pieces: list[tuple[float, float]] = field(default_factory=list)
-
-    def straight(self, length: float) -> Path2D:
-        self.pieces.append((length, 0.0))
-        return self
-
-    def arc(self, radius: float, turn: float) -> Path2D:
-        self.pieces.append((radius * abs(turn), math.copysign(1.0 / radius, turn)))
-        return self
-
-    @property
-    def length(self) -> float:
-        return sum(p[0] for p in self.pieces)
-
-    def at(self, s: float) -> tuple[float, float]:
-        a, lat, h = self.a0, self.l0, self.h0
-        for length, k in self.pieces:
-            d = min(s, length)
-            if k == 0.0:
-                a, lat = a + d * math.cos(h), lat + d * math.sin(h)
-            else:
-                a += (math.sin(h + k * d) - math.sin(h)) / k
-                lat -= (math.cos(h + k * d) - math.cos(h)) / k
-                h += k * d
-            s -= d
-            if s <= 0:
-                break
-        return a, lat
-
-
-def reverse_curves(a0: float, l0: float, offset: float, n: float, radius: float, sign: float) -> Path2D:
-    """Arc R (0 → α), straight, arc R (α → 0): a turnout's diverging curve and its way to a
-    track ``offset`` to the side (sign +1: left)."""
-    alpha = math.atan(1.0 / n)
-    s = (offset - 2 * radius * (1 - math.cos(alpha))) / math.sin(alpha)
-    return Path2D(a0, l0).arc(radius, sign * alpha).straight(s).arc(radius, -sign * alpha)
-
-
 def extent(p: Path2D) -> float:
-    return p.at(p.length)[0] - p.a0
+    return p.at(p.length)[0] - p.x0
 
 
 class _Frame:
@@ -150,7 +104,7 @@ class _Tables:
         if length - pos[-1] < 1.0:
             pos.pop()
         pos.append(length)
-        al = np.array([path.at(p) for p in pos])
+        al = np.array([path.at(p)[:2] for p in pos])
         km = KM0 + al[:, 0]
         lat, lon = self.f.latlon(al[:, 0], al[:, 1])
         self.points.append(
@@ -219,7 +173,7 @@ def _branch_gis(tables: _Tables) -> None:
     p.arc(500.0, math.radians(30.0) - alpha)
     p.straight(BRANCH_LENGTH - p.length)
     k = np.arange(0.0, BRANCH_LENGTH + STEP / 2, STEP)
-    al = np.array([p.at(v) for v in k])
+    al = np.array([p.at(v)[:2] for v in k])
     lat, lon = tables.f.latlon(al[:, 0], al[:, 1])
     h = np.full(len(k), float(tables.f.height(np.array([TOES["junction"]]))[0]))
     tables.gis.append(

@@ -11,6 +11,7 @@ that fits a given extent between switch toes is R = (e − d·cot α) / (2·tan(
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -36,3 +37,50 @@ def reverse_curve_offset(along: npt.ArrayLike, extent: float, offset: float, n: 
     mid = r * (1 - math.cos(alpha)) + (a - a1) * math.tan(alpha)
     last = offset - (r - np.sqrt(np.maximum(r * r - np.minimum(extent - a, a1) ** 2, 0.0)))
     return np.asarray(np.where(a <= a1, first, np.where(a >= extent - a1, last, mid)), dtype=float)
+
+
+@dataclass
+class Path2D:
+    """A polyline of straights and circular arcs from (x0, y0) at heading h0 (rad from +x toward
+    +y); ``arc(R, turn)`` turns to the left for turn > 0 (exact, no sampling)."""
+
+    x0: float
+    y0: float
+    h0: float = 0.0
+    pieces: list[tuple[float, float]] = field(default_factory=list)  # (length, curvature)
+
+    def straight(self, length: float) -> Path2D:
+        self.pieces.append((length, 0.0))
+        return self
+
+    def arc(self, radius: float, turn: float) -> Path2D:
+        self.pieces.append((radius * abs(turn), math.copysign(1.0 / radius, turn)))
+        return self
+
+    @property
+    def length(self) -> float:
+        return sum(p[0] for p in self.pieces)
+
+    def at(self, s: float) -> tuple[float, float, float]:
+        """(x, y, heading) at arc length s."""
+        x, y, h = self.x0, self.y0, self.h0
+        for length, k in self.pieces:
+            d = min(s, length)
+            if k == 0.0:
+                x, y = x + d * math.cos(h), y + d * math.sin(h)
+            else:
+                x += (math.sin(h + k * d) - math.sin(h)) / k
+                y -= (math.cos(h + k * d) - math.cos(h)) / k
+                h += k * d
+            s -= d
+            if s <= 0:
+                break
+        return x, y, h
+
+
+def reverse_curves(x0: float, y0: float, offset: float, n: float, radius: float, sign: float) -> Path2D:
+    """Arc R (0 → α), straight, arc R (α → 0) from (x0, y0) heading +x: a turnout's diverging
+    curve and its way to a parallel track ``offset`` to the side (sign +1: left, +y)."""
+    alpha = math.atan(1.0 / n)
+    s = (offset - 2 * radius * (1 - math.cos(alpha))) / math.sin(alpha)
+    return Path2D(x0, y0).arc(radius, sign * alpha).straight(s).arc(radius, -sign * alpha)
