@@ -23,6 +23,8 @@ def radius_for_extent(extent: float, offset: float, n: float) -> float:
     r = (extent - offset / math.tan(alpha)) / (2 * math.tan(alpha / 2))
     if r <= 0:
         raise ValueError(f"a 1:{n:g} turnout cannot reach {offset} m to the side within {extent} m")
+    if 2 * r * (1 - math.cos(alpha)) > offset:  # the two arcs alone go further: no straight
+        raise ValueError(f"{extent} m is too long for a 1:{n:g} reverse curve {offset} m wide (e ≤ d·cot α + d/sin α)")
     return r
 
 
