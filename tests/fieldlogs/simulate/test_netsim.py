@@ -209,3 +209,29 @@ def test_synthetic_loop_turns_by_the_frog_angle() -> None:
 def _km_rho(plan: Any) -> tuple[np.ndarray, np.ndarray]:
     rho = np.arange(plan.geom.km_min, plan.geom.km_max, 1.0)
     return plan.geom.locate(rho)["km_m"], rho
+
+
+def test_cli_network_scenario(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from cli.main import app
+    from fieldlogs.io import read_run
+
+    db = tmp_path / "xo.sqlite"
+    build_db(NETWORKS / "crossover", db)
+    scen = tmp_path / "xo.toml"
+    scen.write_text('[network]\ntracks = ["D1", "X1", "U2", "U3"]\n[slip]\nslips = 0\nslides = 0\n', encoding="utf-8")
+    out = tmp_path / "run"
+    res = CliRunner().invoke(app, ["simulate", "--db", str(db), "--out", str(out), "--scenario", str(scen)])
+    assert res.exit_code == 0, res.output
+    run = read_run(out)
+    streams = run.load_all()
+    assert run.findings == []
+    assert set(streams["truth"]["track_id"].dropna()) == {"D1", "X1", "U2", "U3"}
+    assert run.raw_json["sim_truth"]["turnouts"][0]["switch_id"] == "W1"
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[network]\ntracks = ["D2", "X1"]\ndirection = -1\n', encoding="utf-8")
+    res = CliRunner().invoke(app, ["simulate", "--db", str(db), "--out", str(tmp_path / "r2"), "--scenario", str(bad)])
+    assert res.exit_code == 2
+    assert "network.tracks[1]" in res.output and "navigability none" in res.output
+    assert "Traceback" not in res.output
