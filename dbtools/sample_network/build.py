@@ -277,7 +277,7 @@ def build(settings: FitSettings | None = None, plot: Path | None = None) -> tupl
     write_table(BALISES, balises(spec), SOURCES_DIR / "balises.csv")
     write_table(FEATURE_POINTS, feature_points(spec), SOURCES_DIR / "feature_points.csv")
     write_table(LINES, pd.DataFrame({"line_code": [LINE_CODE], "name": [LINE_NAME]}), SOURCES_DIR / "lines.csv")
-    add_network(SOURCES_DIR)  # the station, crossovers and junction, drawn on the grid just made
+    add_network(SOURCES_DIR, PACKAGE_DIR / "network_sources")  # + station, crossovers, junction
     report = fit_report(sample)
     REPORT_FILE.write_text(json.dumps(report, ensure_ascii=False, indent=2) + "\n", encoding="utf-8")
     if plot is not None:
@@ -287,7 +287,7 @@ def build(settings: FitSettings | None = None, plot: Path | None = None) -> tupl
 
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "sample.sqlite"
-        build_db(SOURCES_DIR, db, db_version="sample", note="bundled sample network")
+        build_db(PACKAGE_DIR / "network_sources", db, db_version="sample", note="bundled sample network")
         findings = validate_path(db)
     return report, findings
 

@@ -121,7 +121,7 @@ class _Tables:
                 "km_begin_m": float(round(km[0], 3)) if line else None,
                 "km_end_m": float(round(km[-1], 3)) if line else None,
             }
-            | {"length_m": round(length, 3), "name": name}
+            | {"length_m": round(length, 3), "name": None}
         )
 
     def switch(
@@ -181,7 +181,7 @@ def _branch_gis(tables: _Tables) -> None:
     )
     tables.tracks.append(
         {"track_id": f"{BRANCH}-S1", "line_code": BRANCH, "track": "S", "kind": TrackKind.MAIN.value}
-        | {"km_begin_m": 0.0, "km_end_m": BRANCH_LENGTH, "length_m": BRANCH_LENGTH, "name": BRANCH_NAME}
+        | {"km_begin_m": 0.0, "km_end_m": BRANCH_LENGTH, "length_m": BRANCH_LENGTH, "name": None}
     )
 
 
@@ -261,11 +261,14 @@ def network_tables(gis: pd.DataFrame, km_first: float, km_last: float) -> dict[s
     }
 
 
-def add_network(sources: Path) -> None:
-    """(Re)write the network part of the source set in ``sources`` from its line ``0420`` grid:
-    the branch line's gis rows and lines row, the G balises and the network tables; the line's
-    own rows (its grid, S003 balises) are kept as they are. ``python -m
-    dbtools.sample_network.junctions`` runs it alone, without refitting the line."""
+def add_network(sources: Path, out: Path) -> None:
+    """Write the sample network's source set with its station, crossovers and junction to
+    ``out``: the line-only set in ``sources`` (its grid, S003 balises, feature points, lines)
+    copied unchanged, plus the branch line's gis rows and lines row, the G balises and the
+    network tables. ``python -m dbtools.sample_network.junctions`` runs it alone, without
+    refitting the line."""
+    import shutil
+
     from dbtools.network import canonical
     from schemas.network import NETWORK_TABLES
     from schemas.tables import BALISES, LINES
@@ -274,25 +277,24 @@ def add_network(sources: Path) -> None:
         cols = [c for c in table.column_names if c != "attributes_json"]
         canonical(table, frame)[cols].to_csv(path, index=False, lineterminator="\n")
 
-    text = (sources / "gis.csv").read_text(encoding="utf-8").splitlines(keepends=True)
-    own = [text[0], *(r for r in text[1:] if not r.startswith(f"{BRANCH},"))]
-    gis = pd.read_csv(io.StringIO("".join(own)), dtype={"line_code": str, "track": str})
+    out.mkdir(exist_ok=True)
+    for f in sources.glob("*.csv"):
+        shutil.copyfile(f, out / f.name)
+    own = (sources / "gis.csv").read_text(encoding="utf-8")
+    gis = pd.read_csv(io.StringIO(own), dtype={"line_code": str, "track": str})
     line = gis[gis["line_code"] == LINE]
     net = network_tables(gis, float(line["km_m"].min()), float(line["km_m"].max()))
     branch = net["gis"].to_csv(index=False, header=False, lineterminator="\n")
-    (sources / "gis.csv").write_text("".join(own) + branch, encoding="utf-8", newline="\n")
+    (out / "gis.csv").write_text(own + branch, encoding="utf-8", newline="\n")
     b = pd.read_csv(sources / "balises.csv", dtype={"line_code": str, "station_code": str, "track": str})
-    b = b[b["kind"] != BaliseKind.G.value]
-    write(BALISES, pd.concat([b, net["balises"]], ignore_index=True), sources / "balises.csv")
+    write(BALISES, pd.concat([b, net["balises"]], ignore_index=True), out / "balises.csv")
     lines = pd.read_csv(sources / "lines.csv", dtype={"line_code": str})
-    write(
-        LINES, pd.concat([lines[lines["line_code"] != BRANCH], net["lines"]], ignore_index=True), sources / "lines.csv"
-    )
+    write(LINES, pd.concat([lines, net["lines"]], ignore_index=True), out / "lines.csv")
     for table in NETWORK_TABLES:
-        write(table, net[table.name], sources / f"{table.name}.csv")
+        write(table, net[table.name], out / f"{table.name}.csv")
 
 
 if __name__ == "__main__":
-    from dbtools.sample_network import sample_source_dir
+    from dbtools.sample_network import sample_network_source_dir, sample_source_dir
 
-    add_network(sample_source_dir())
+    add_network(sample_source_dir(), sample_network_source_dir())

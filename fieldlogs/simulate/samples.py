@@ -132,12 +132,12 @@ def main() -> None:
     import tempfile
 
     from dbtools.build import build_db
-    from dbtools.sample_network import sample_source_dir
+    from dbtools.sample_network import sample_network_source_dir
 
     target = Path(__file__).resolve().parent.parent / "sample_logs"
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "sample.sqlite"
-        build_db(sample_source_dir(), db, db_version="sample-1")
+        build_db(sample_network_source_dir(), db, db_version="sample-1")
         for path in make_sample_runs(db, target, force=True):
             print(path)
 

@@ -13,7 +13,7 @@ import pytest
 from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.network import Network
-from dbtools.sample_network import sample_source_dir
+from dbtools.sample_network import sample_network_source_dir
 from dbtools.sample_network.junctions import TRACK_SPACING
 from dbtools.synthetic.turnout import radius_for_extent, reverse_curves
 from dbtools.topology import all_tracks
@@ -27,7 +27,7 @@ from fieldlogs.simulate.simulator import simulate_run
 @pytest.fixture(scope="module")
 def sample_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     db = tmp_path_factory.mktemp("sample") / "sample.sqlite"
-    build_db(sample_source_dir(), db, db_version="sample-1")
+    build_db(sample_network_source_dir(), db, db_version="sample-1")
     return db
 
 

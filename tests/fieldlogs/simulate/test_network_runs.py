@@ -11,7 +11,7 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
-from dbtools.sample_network import sample_source_dir
+from dbtools.sample_network import sample_network_source_dir
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.simulate.netsim import network_plan
@@ -25,7 +25,7 @@ NETWORKS = Path(__file__).resolve().parents[2] / "data" / "networks"
 @pytest.fixture(scope="module")
 def sample(tmp_path_factory: pytest.TempPathFactory) -> Network:
     db = tmp_path_factory.mktemp("sample") / "sample.sqlite"
-    build_db(sample_source_dir(), db)
+    build_db(sample_network_source_dir(), db)
     return read_network(db)
 
 
