@@ -4,7 +4,7 @@ A railway alignment fitted to the line's real (coarse) geometry from ``nagix/min
 (MIT licence, © nagix; station data originally from ODPT), with a GIS grid for two tracks,
 balises at its six real stations and feature points at its real curves. See ``SOURCE.md``
 for the source, licence and method; regenerate with
-``python -m dbtools.sample_network.build``.
+``python -m fieldlogs.simulate.networks.sample_build``.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ def sample_source_dir() -> Path:
 def sample_network_source_dir() -> Path:
     """The same line with a four-track station, a crossover pair and a junction (tracks,
     connections, switches, track_points, ETCS-style balise groups, branch line 0421;
-    :mod:`dbtools.sample_network.junctions`): what the demo and the ``sim-net-*`` sample runs use."""
+    :mod:`fieldlogs.simulate.networks.sample_junctions`): what the demo and the ``sim-net-*`` sample runs use."""
     return PACKAGE_DIR / "network_sources"
 
 

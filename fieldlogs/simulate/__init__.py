@@ -12,7 +12,7 @@ nothing). The pieces, one concern per module:
 * ``slip`` — slip/slide episodes; ``sensors`` — IMU, tacho, GPS, radar, truth;
 * ``radar`` — raw IF samples of the 2-frequency CW radar (``sensors.radar_if``);
 * ``events`` — balise telegrams and cab events;
-* raw GNSS (``[gnss_raw]``, off by default) — :mod:`fieldlogs.gnss.trainsim`;
+* raw GNSS (``[gnss_raw]``, off by default) — :mod:`fieldlogs.simulate.gnss.trainsim`;
 * a run routed over a network (``[network]``, ``scenario_net``): ``netroute`` the tracks of the
   route, ``netgeom`` its geometry (one route coordinate through the centrelines, true turnout
   arcs, no cant and a speed cap on turnouts, truth track_id/pos_m), ``netsim`` what the route

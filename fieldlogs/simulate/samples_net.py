@@ -1,5 +1,5 @@
 """Bundled sample runs over the sample network's station, crossovers and junction
-(:mod:`dbtools.sample_network.junctions`), routed by the ``[network]`` scenario table:
+(:mod:`fieldlogs.simulate.networks.sample_junctions`), routed by the ``[network]`` scenario table:
 
 * ``sim-net-crossover`` — an up train (km decreasing) crosses from U to D on crossover X1 and
   runs on down the D track (U → crossover → D);

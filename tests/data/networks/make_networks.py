@@ -31,7 +31,7 @@ from pathlib import Path
 
 from pyproj import Proj
 
-from dbtools.synthetic.turnout import Path2D, radius_for_extent, reverse_curves
+from fieldlogs.simulate.networks.turnout import Path2D, radius_for_extent, reverse_curves
 
 HERE = Path(__file__).resolve().parent
 LAT0, LON0 = 60.2, 24.9

@@ -20,9 +20,9 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical
-from dbtools.synthetic.network import build_network, demo_line
-from dbtools.synthetic.topology import station_network
 from fieldlogs.simulate.netsim import network_plan
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
+from fieldlogs.simulate.networks.topology import station_network
 from fieldlogs.simulate.scenario import ScenarioError, scenario_from_dict
 from fieldlogs.simulate.simulator import SimulatedRun, simulate_run
 from schemas.network import NETWORK_TABLES
@@ -174,7 +174,7 @@ def test_network_knobs_are_checked() -> None:
 
 
 def synthetic_stations() -> Network:
-    """The demo line with the synthetic station layouts of :mod:`dbtools.synthetic.topology`."""
+    """The demo line with the synthetic station layouts of :mod:`fieldlogs.simulate.networks.topology`."""
     spec, proj = demo_line(), Projector(9)
     net = build_network([spec], proj)
     parts = station_network(spec, proj)

@@ -1,5 +1,5 @@
 """The bundled sample network's station, crossover pair and junction
-(:mod:`dbtools.sample_network.junctions`) and the sample runs over them
+(:mod:`fieldlogs.simulate.networks.sample_junctions`) and the sample runs over them
 (:mod:`fieldlogs.simulate.samples_net`)."""
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.network import Network
 from dbtools.sample_network import sample_network_source_dir
-from dbtools.sample_network.junctions import TRACK_SPACING
-from dbtools.synthetic.turnout import radius_for_extent, reverse_curves
 from dbtools.topology import all_tracks
 from fieldlogs.io import read_run, write_run
 from fieldlogs.quality.checks import check_run, load_db_refs
+from fieldlogs.simulate.networks.sample_junctions import TRACK_SPACING
+from fieldlogs.simulate.networks.turnout import radius_for_extent, reverse_curves
 from fieldlogs.simulate.samples_net import network_sample_scenarios
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run

@@ -13,9 +13,9 @@ from dbtools.gis.geometry import Projector
 from dbtools.network import Network
 from dbtools.sample_network import sample_network_source_dir
 from dbtools.sources import write_source_set
-from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.simulate.netsim import network_plan
 from fieldlogs.simulate.network_runs import feature_of, feature_tracks, network_runs
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 
