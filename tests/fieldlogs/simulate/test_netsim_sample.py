@@ -10,10 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.network import Network
-from dbtools.sample_network import sample_network_source_dir
 from dbtools.topology import all_tracks
 from fieldlogs.io import read_run, write_run
 from fieldlogs.quality.checks import check_run, load_db_refs
@@ -25,15 +23,8 @@ from fieldlogs.simulate.simulator import simulate_run
 
 
 @pytest.fixture(scope="module")
-def sample_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    db = tmp_path_factory.mktemp("sample") / "sample.sqlite"
-    build_db(sample_network_source_dir(), db, db_version="sample-1")
-    return db
-
-
-@pytest.fixture(scope="module")
-def sample(sample_db: Path) -> Network:
-    return read_network(sample_db)
+def sample(sample_network_db: Path) -> Network:
+    return read_network(sample_network_db)
 
 
 def test_turnout_geometry_hand_computed() -> None:
@@ -60,8 +51,8 @@ def test_sample_network_tables(sample: Network) -> None:
     assert set(sample.s003_balises["kind"]) == {"I1", "I2", "C"}  # the line's S003 balises unchanged
 
 
-def test_sample_network_runs(sample: Network, sample_db: Path, tmp_path: Path) -> None:
-    refs = load_db_refs(sample_db)
+def test_sample_network_runs(sample: Network, sample_network_db: Path, tmp_path: Path) -> None:
+    refs = load_db_refs(sample_network_db)
     scenarios = network_sample_scenarios(sample)
     assert list(scenarios) == ["sim-net-crossover", "sim-net-station", "sim-net-junction", "sim-net-turnback"]
     ids: dict[str, list[str]] = {}

@@ -11,7 +11,6 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
-from dbtools.sample_network import sample_network_source_dir
 from dbtools.sources import write_source_set
 from fieldlogs.simulate.netsim import network_plan
 from fieldlogs.simulate.network_runs import feature_of, feature_tracks, network_runs
@@ -23,10 +22,8 @@ NETWORKS = Path(__file__).resolve().parents[2] / "data" / "networks"
 
 
 @pytest.fixture(scope="module")
-def sample(tmp_path_factory: pytest.TempPathFactory) -> Network:
-    db = tmp_path_factory.mktemp("sample") / "sample.sqlite"
-    build_db(sample_network_source_dir(), db)
-    return read_network(db)
+def sample(sample_network_db: Path) -> Network:
+    return read_network(sample_network_db)
 
 
 def test_feature_tracks(sample: Network) -> None:
