@@ -81,10 +81,14 @@ BALISE = Table(
         Column("station_code", "str", "Station code (I2)", nullable=True),
         Column("track", "str", "Up/down (I2)", nullable=True, enum=tuple(t.value for t in Track)),
         Column("signal_type", "str", "Signal type (C)", nullable=True),
-        Column("nid_c", "int", "ETCS country/region code NID_C (G)", nullable=True, required=False, min=0),
-        Column("nid_bg", "int", "ETCS balise group identity NID_BG (G)", nullable=True, required=False, min=0),
-        Column(
-            "n_pig", "int", "ETCS position of the balise in its group N_PIG (G)", nullable=True, required=False, min=0
+        *(
+            Column(name, "int", f"G (ETCS balise group) only: {what}", required=False, nullable=True, min=lo, max=hi)
+            for name, what, lo, hi in (
+                ("nid_c", "country or region NID_C of the group", 0, 1023),
+                ("nid_bg", "identity NID_BG of the group", 0, 16383),
+                ("n_pig", "position N_PIG of the balise in its group", 0, 7),
+                ("n_total", "balises in the group (N_TOTAL + 1), as in the balises table", 1, 8),
+            )
         ),
     ),
     required=False,
@@ -185,6 +189,22 @@ TRUTH = Table(
         Column("km_m", "float", "True actual kilometrage", unit="m", nullable=True),
         Column("speed_mps", "float", "True speed over ground (signed: + in cab forward)", unit="m/s"),
         Column("slipping", "int", "1 while the wheel slips or slides", min=0, max=1),
+        Column(
+            "track_id",
+            "str",
+            "True track (netElement) of a run routed over a network; empty on a one-line run",
+            required=False,
+            nullable=True,
+        ),
+        Column(
+            "pos_m",
+            "float",
+            "True distance along that track from its begin",
+            unit="m",
+            required=False,
+            nullable=True,
+            min=0.0,
+        ),
     ),
     required=False,
 )
