@@ -13,6 +13,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from schemas.enums import S003_KINDS
+from schemas.frame_screen import key_order
 from schemas.frames import PANDAS_DTYPE
 from schemas.model import Table
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES, TRACK_POINTS
@@ -147,30 +148,9 @@ def sorted_by(frame: pd.DataFrame, keys: tuple[str, ...]) -> bool:
     """True when the rows are already in the order a stable sort on ``keys`` gives (each
     row's key tuple ≤ the next one's), so the sort can be skipped: frames read back from a
     DB are (tables are read in key order). False whenever a key has a missing value (the
-    sort puts those last) or is not text or a number; the caller then sorts."""
-    n = len(frame)
-    if n < 2:
-        return True
-    undecided = np.ones(n - 1, dtype=bool)  # pairs equal on every key so far
-    for k in keys:
-        s = frame[k]
-        if s.isna().any():
-            return False
-        if isinstance(s.dtype, pd.StringDtype):
-            arr = pa.array(s.array, from_pandas=True)
-            lt = pc.less(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False)
-            eq = pc.equal(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False)
-        elif pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
-            v = s.to_numpy(dtype=np.float64)
-            lt, eq = v[:-1] < v[1:], v[:-1] == v[1:]
-        else:
-            return False
-        if (undecided & ~lt & ~eq).any():
-            return False  # a pair out of order
-        undecided &= eq
-        if not undecided.any():
-            return True
-    return True
+    sort puts those last) or is not text or a number; the caller then sorts
+    (:func:`schemas.frame_screen.key_order`)."""
+    return key_order(frame, keys)[0]
 
 
 def joined_text(s: pd.Series) -> bytes:
