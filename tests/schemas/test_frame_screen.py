@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import schemas.frames as frames_mod
+from schemas.findings import Finding
 from schemas.frame_screen import key_order, passes_checks
 from schemas.frames import check_frame
-from schemas.findings import Finding
 from schemas.model import Table
 from schemas.tables import BALISES, FEATURE_POINTS, GIS
 
