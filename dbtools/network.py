@@ -138,7 +138,7 @@ def canonical_with_index(table: Table, frame: pd.DataFrame) -> tuple[pd.DataFram
         else:
             s = pd.to_numeric(s).astype("float64")
         cols[c.name] = s
-    out = pd.DataFrame(cols, index=frame.index)
+    out = pd.DataFrame(cols, index=frame.index, copy=False)  # no copy into one float block
     if table.primary_key and len(out) and not sorted_by(out, table.primary_key):
         out = out.sort_values(list(table.primary_key), kind="stable")
     return out.reset_index(drop=True), out.index.to_numpy()
@@ -164,9 +164,11 @@ def joined_text(s: pd.Series) -> bytes:
         arr = arr.combine_chunks()
     if len(arr) == 0:
         return b""
-    offsets = np.frombuffer(arr.buffers()[1], dtype=np.int64)[arr.offset : arr.offset + len(arr) + 1]
-    data = np.frombuffer(arr.buffers()[2], dtype=np.uint8)[offsets[0] : offsets[-1]]
-    return np.insert(data, offsets[1:-1] - offsets[0], 0x1F).tobytes()
+    # each value followed by 0x1F (a join of [value, ""] with that separator), the last one dropped
+    sep = pa.scalar("\x1f", pa.large_string())
+    each = pc.binary_join_element_wise(arr, pa.scalar("", pa.large_string()), sep)
+    offsets = np.frombuffer(each.buffers()[1], dtype=np.int64)[each.offset : each.offset + len(each) + 1]
+    return np.frombuffer(each.buffers()[2], dtype=np.uint8)[offsets[0] : offsets[-1] - 1].tobytes()
 
 
 def content_hash(tables: dict[str, pd.DataFrame]) -> str:
@@ -192,11 +194,13 @@ def content_hash(tables: dict[str, pd.DataFrame]) -> str:
                 h.update(joined_text(s))
             elif c.dtype in ("int", "bool"):
                 arr = s.astype("Float64").to_numpy(dtype=np.float64, na_value=np.nan)
-                h.update(np.ascontiguousarray(arr).tobytes())
+                h.update(np.ascontiguousarray(arr).data)  # the array's bytes, not a copy of them
             else:
                 arr = s.to_numpy(dtype=np.float64, na_value=np.nan)
-                arr = np.where(np.isnan(arr), np.nan, arr)  # one NaN bit pattern
-                h.update(np.ascontiguousarray(arr).tobytes())
+                nan = np.isnan(arr)
+                if nan.any():
+                    arr = np.where(nan, np.nan, arr)  # one NaN bit pattern
+                h.update(np.ascontiguousarray(arr).data)
     return h.hexdigest()
 
 

@@ -85,6 +85,8 @@ GRS80_E2: float = GEOD.es
 KAPPA_MAX = 1.0 / (GRS80_A * (1.0 - GRS80_E2))
 #: Rounding allowance of :func:`chord_bounds` on either side [m].
 CHORD_ROUNDING_M = 1e-6
+#: Points per block of the element-wise geometry of a whole network (bounds its temporaries).
+BLOCK = 1 << 16
 #: Gap between consecutive tracks in the sorted km key [m].
 KEY_GAP_M = 1000.0
 #: A listed kilometrage break matches consecutive points whose km agree within this [m].
@@ -194,6 +196,18 @@ def chord_bounds(lon: F64, lat: F64) -> tuple[F64, F64]:
     return c - CHORD_ROUNDING_M, high + CHORD_ROUNDING_M
 
 
+def _blockwise_curvature(x: F64, y: F64) -> F64:
+    """:func:`~dbtools.gis.geometry.signed_curvature` of the whole polyline, computed
+    ``BLOCK`` vertices at a time (each with its two neighbours): the same values with
+    temporaries of a block, not of a million points."""
+    n = x.size
+    out = np.full(n, np.nan)
+    for a in range(1, n - 1, BLOCK):
+        b = min(a + BLOCK, n - 1)
+        out[a:b] = signed_curvature(x[a - 1 : b + 1], y[a - 1 : b + 1])[1:-1]
+    return out
+
+
 def _wrap(a: F64) -> F64:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
@@ -282,7 +296,11 @@ class GridIndex:
             with np.errstate(invalid="ignore"):
                 bad = where & ((d < lo) | (d > hi) | ~np.isfinite(d))
             return np.flatnonzero(bad), d
-        low, high = chord_bounds(self.lon, self.lat)
+        low, high = np.empty(self.n - 1), np.empty(self.n - 1)
+        for a in range(0, self.n - 1, BLOCK):  # blocks: bounded temporaries, same values
+            low[a : a + BLOCK], high[a : a + BLOCK] = chord_bounds(
+                self.lon[a : a + BLOCK + 1], self.lat[a : a + BLOCK + 1]
+            )
         with np.errstate(invalid="ignore"):
             doubt = np.flatnonzero(where & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
         d = np.full(self.n - 1, np.nan)
@@ -399,7 +417,7 @@ class GridIndex:
         turn = np.full(n, np.nan)
         turn[1:-1] = _wrap(seg_h[1:] - seg_h[:-1])
         turn[~both] = np.nan
-        kappa = signed_curvature(x, y)
+        kappa = _blockwise_curvature(x, y)
         kappa[~both] = np.nan
         # heading at a vertex: chord of its neighbours, else the one regular step it has
         heading = np.full(n, np.nan)

@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import dbtools.gis.index as index_mod
 from dbtools.gis.geometry import GEOD
 from dbtools.gis.index import CHORD_ROUNDING_M, KAPPA_MAX, GridIndex, chord_bounds
 
@@ -74,3 +76,27 @@ def test_steps_outside_equals_the_full_geodesic(jitter: list[float], lo_m: float
     np.testing.assert_array_equal(d[bad], full[bad])  # the exact lengths the messages print
     again, d2 = fresh.steps_outside(where, lo, hi)  # dist known now: taken as it is
     assert again.tolist() == expected.tolist() and d2 is full
+
+
+def test_blocks_give_the_values_of_one_block(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Block-wise curvature and chord bounds (BLOCK points at a time) equal the whole-array ones."""
+    rng = np.random.default_rng(3)
+    n = 500
+    lon0, lat0, _ = GEOD.fwd(np.full(n, 139.0), np.full(n, 35.0), np.full(n, 60.0), 20.0 * np.arange(n))
+    lon, lat, _ = GEOD.fwd(lon0, lat0, np.full(n, 150.0), rng.normal(0.0, 2.0, n))
+    g = pd.DataFrame({"line_code": "L", "track": ["U"] * 250 + ["D"] * 250, "km_m": 20.0 * (np.arange(n) % 250)})
+    g["lat"], g["lon"] = lat, lon
+    where = np.ones(n - 1, dtype=bool)
+    lo, hi = np.full(n - 1, 18.0), np.full(n - 1, 21.0)
+    whole = GridIndex(g)
+    kappa, (bad, _) = whole.shape(20.0, 1e-3).kappa, whole.steps_outside(where, lo, hi)
+    monkeypatch.setattr(index_mod, "BLOCK", 7)
+    blocks = GridIndex(g)
+    np.testing.assert_array_equal(blocks.shape(20.0, 1e-3).kappa, kappa)
+    assert blocks.steps_outside(where, lo, hi)[0].tolist() == bad.tolist() != []
+    np.testing.assert_array_equal(np.concatenate(chord_bounds(lon, lat)), np.concatenate(_blocked(lon, lat)))
+
+
+def _blocked(lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    parts = [chord_bounds(lon[a : a + 8], lat[a : a + 8]) for a in range(0, lon.size - 1, 7)]
+    return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
