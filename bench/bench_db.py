@@ -540,10 +540,10 @@ def compare_bounds(src: Path, db: Path, work: Path, rounds: int) -> None:
     cli = [py, "-c", "import sys; sys.argv[0] = 'trainpos'; from cli.main import app; app()"]
     out = work / "bound-build.sqlite"
     runs = {
-        "db validate": cli + ["db", "validate", str(db)],
+        "db validate": [*cli, "db", "validate", str(db)],
         "validate bound": [py, me, "--child", "validate-bound", str(db)],
-        "db build --no-validate": cli + ["db", "build", str(src), "-o", str(out), "--force", "--no-validate"],
-        "db build": cli + ["db", "build", str(src), "-o", str(out), "--force"],
+        "db build --no-validate": [*cli, "db", "build", str(src), "-o", str(out), "--force", "--no-validate"],
+        "db build": [*cli, "db", "build", str(src), "-o", str(out), "--force"],
         "DuckDB build": [py, me, "--child", "duckdb-build", str(src), str(out)],
     }
     got: dict[str, list[tuple[float, float]]] = {k: [] for k in runs}
