@@ -55,6 +55,8 @@ import pyarrow as pa
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from _db_bounds import compare_bounds, duckdb_build, validate_bound, write_keyed
+
 from dbtools.browse import select_rows
 from dbtools.build import build_db
 from dbtools.db_info import db_info
@@ -266,19 +268,16 @@ def checked_fast_build(src: Path, out: Path, reader: str = "arrow") -> str:
     checks, the source-file hashes. Returns the content hash. Holds for source sets in
     plain numbers (a km in 12k345.6 notation, an .xlsx file or a ``seq`` left blank need
     our text path) and stops at the first problem instead of naming each."""
-    import adbc_driver_sqlite.dbapi as adbc
     import duckdb
     import pyarrow.csv as pcsv
-    import sqlite_utils
 
-    from dbtools.database import _create_indexes, create_tables
     from dbtools.gis.index import network_georef
     from dbtools.rules.area import check_area
     from dbtools.rules.common import Locator
     from dbtools.tabular import sha256_file
     from dbtools.typed_csv import BLANK_CELLS
     from schemas.frames import stripped_text
-    from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, DB_TABLES, SCHEMA_VERSION, SOURCE_TABLES
+    from schemas.tables import DB_TABLES, SOURCE_TABLES
 
     stages = _Stages()
     sql_type = {"str": "VARCHAR", "float": "DOUBLE", "int": "DOUBLE", "bool": "VARCHAR"}
@@ -347,27 +346,8 @@ def checked_fast_build(src: Path, out: Path, reader: str = "arrow") -> str:
     digest = content_hash(net.tables)
     stages.lap("content hash")
     meta = {"content_hash": digest, **net.meta, **(georef.to_meta() if georef is not None else {})}
-    out.unlink(missing_ok=True)
-    conn = sqlite3.connect(out)
-    for pragma in ("journal_mode=OFF", "synchronous=OFF", "cache_size=-262144", f"application_id={APPLICATION_ID}"):
-        conn.execute(f"PRAGMA {pragma}")
-    conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
-    db = sqlite_utils.Database(conn)
-    create_tables(db, ALL_DB_TABLES, indexes=False)
-    conn.commit()
-    with adbc.connect(str(out), autocommit=True) as ac, ac.cursor() as cur:
-        for pragma in ("journal_mode=OFF", "synchronous=OFF", "cache_size=-262144"):
-            cur.execute(f"PRAGMA {pragma}")
-        for t in DB_TABLES:
-            if len(frames[t.name]):
-                data = pa.Table.from_pandas(frames[t.name][t.column_names], preserve_index=False)
-                cur.adbc_ingest(t.name, data, mode="append")
-    with conn:
-        conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", sorted(meta.items()))
-    _create_indexes(db, ALL_DB_TABLES)
-    if conn.execute("PRAGMA foreign_key_check").fetchone() is not None:
-        raise sqlite3.IntegrityError("FOREIGN KEY constraint failed")
-    conn.close()
+    data = {t.name: pa.Table.from_pandas(frames[t.name][t.column_names], preserve_index=False) for t in DB_TABLES}
+    write_keyed(out, {k: v for k, v in data.items() if v.num_rows}, meta)
     stages.lap("SQLite write (schema, ADBC insert, indexes, FK check)")
     if os.environ.get("BENCH_STAGES"):
         print("  stages (CPU s): " + ", ".join(f"{k} {v:.2f}" for k, v in stages.cpu.items()))
@@ -442,132 +422,6 @@ def compare_checked_builds(src: Path, work: Path, rounds: int) -> None:
         + "; ".join(f"{k} {best[k]:.2f} s" for k in alts)
         + f"; ours / fastest ({fastest}) = {best['db build'] / best[fastest]:.2f}× best of {rounds}, "
         f"median of the rounds' ratios {ratio:.2f}× (target ≤ 1.3×); {same}  [load {os.getloadavg()[0]:.2f}]"
-    )
-
-
-# ----------------------------------------------------------------------------- issue 34: the two bounds
-
-
-def validate_bound(db: Path) -> None:
-    """The bound ``db validate`` is measured against (issue 34): SQLite's integrity and
-    foreign-key checks and every table read into pandas (ADBC → Arrow → ``to_pandas``)."""
-    import adbc_driver_sqlite.dbapi as adbc
-
-    with sqlite3.connect(f"file:{db}?mode=ro", uri=True) as conn:
-        conn.execute("PRAGMA integrity_check").fetchall()
-        conn.execute("PRAGMA foreign_key_check").fetchall()
-        names = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")]
-    with adbc.connect(str(db)) as ac, ac.cursor() as cur:
-        for name in names:
-            cur.execute(f"SELECT * FROM [{name}]")
-            cur.fetch_arrow_table().to_pandas()
-
-
-def duckdb_build(src: Path, out: Path) -> None:
-    """The bound ``db build`` is measured against (issue 34): DuckDB ``read_csv`` of every
-    source file with the declared column types, sorted by the primary key into Arrow, bulk
-    inserted by the ADBC driver into the schema ``db build`` creates (same tables, keys,
-    indexes after the load, pragmas; foreign-key check); no row checks, no content hash."""
-    import adbc_driver_sqlite.dbapi as adbc
-    import duckdb
-    import sqlite_utils
-
-    from dbtools.database import _create_indexes, create_tables
-    from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, SCHEMA_VERSION, SOURCE_TABLES
-
-    sql_type = {"str": "VARCHAR", "float": "DOUBLE", "int": "BIGINT", "bool": "BOOLEAN"}
-    con = duckdb.connect()
-    arrow = {}
-    for name, table in SOURCE_TABLES.items():
-        path = src / f"{name}.csv"
-        if not path.exists():
-            continue
-        header = path.open(encoding="utf-8").readline().strip().split(",")
-        known = [c for c in header if c in table.column_names]
-        cols = ", ".join(f"'{c}': '{sql_type[table.column(c).dtype]}'" for c in known)
-        keys = ", ".join(f'"{k}"' for k in table.primary_key)
-        select = ", ".join(f'"{c}"' for c in known)
-        arrow[name] = con.sql(
-            f"SELECT {select} FROM read_csv('{path}', "
-            f"header=true, auto_detect=false, columns={{{cols}}}) ORDER BY {keys}"
-        ).to_arrow_table()
-    out.unlink(missing_ok=True)
-    conn = sqlite3.connect(out)
-    for pragma in ("journal_mode=OFF", "synchronous=OFF", "cache_size=-262144", f"application_id={APPLICATION_ID}"):
-        conn.execute(f"PRAGMA {pragma}")
-    conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
-    db = sqlite_utils.Database(conn)
-    create_tables(db, ALL_DB_TABLES, indexes=False)
-    conn.commit()
-    with adbc.connect(str(out), autocommit=True) as ac, ac.cursor() as cur:
-        for pragma in ("journal_mode=OFF", "synchronous=OFF", "cache_size=-262144"):
-            cur.execute(f"PRAGMA {pragma}")
-        for name, data in arrow.items():
-            cur.adbc_ingest(name, data, mode="append")
-    _create_indexes(db, ALL_DB_TABLES)
-    if conn.execute("PRAGMA foreign_key_check").fetchone() is not None:
-        raise sqlite3.IntegrityError("FOREIGN KEY constraint failed")
-    conn.close()
-
-
-def _child(args: list[str]) -> tuple[float, float]:
-    """(CPU s = user + system, peak RSS MB) of one fresh process (``os.wait4``'s own rusage)."""
-    import subprocess
-
-    root = str(Path(__file__).resolve().parents[1])
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH")])])}
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
-    _, status, ru = os.wait4(proc.pid, 0)
-    assert proc.stderr is not None
-    err = proc.stderr.read().decode()
-    proc.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f"{' '.join(args)} failed: {err[-400:]}")
-    return ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024.0
-
-
-def compare_bounds(src: Path, db: Path, work: Path, rounds: int) -> None:
-    """Issue 34 item 2, as interleaved pairs of fresh processes: ``trainpos db validate``
-    against :func:`validate_bound` (CPU and peak RSS, targets ≤ 1.5×) and ``trainpos db build``
-    (``--no-validate``: the build itself; and as run by default, with the validation rules)
-    against :func:`duckdb_build` (CPU, target ≤ 1.3×). Medians of the rounds' ratios."""
-    try:
-        import duckdb  # noqa: F401
-    except ImportError:
-        print("bounds: DuckDB not installed (pip install -e '.[bench]'); skipped")
-        return
-    py, me = sys.executable, str(Path(__file__).resolve())
-    cli = [py, "-c", "import sys; sys.argv[0] = 'trainpos'; from cli.main import app; app()"]
-    out = work / "bound-build.sqlite"
-    runs = {
-        "db validate": [*cli, "db", "validate", str(db)],
-        "validate bound": [py, me, "--child", "validate-bound", str(db)],
-        "db build --no-validate": [*cli, "db", "build", str(src), "-o", str(out), "--force", "--no-validate"],
-        "db build": [*cli, "db", "build", str(src), "-o", str(out), "--force"],
-        "DuckDB build": [py, me, "--child", "duckdb-build", str(src), str(out)],
-    }
-    got: dict[str, list[tuple[float, float]]] = {k: [] for k in runs}
-    load0 = os.getloadavg()[0]
-    for _ in range(rounds):
-        for k, args in runs.items():
-            got[k].append(_child(args))
-
-    def ratio(a: str, b: str, i: int) -> float:
-        return float(np.median([x[i] / y[i] for x, y in zip(got[a], got[b], strict=True)]))
-
-    def med(k: str, i: int) -> float:
-        return float(np.median([x[i] for x in got[k]]))
-
-    print(f"fresh processes, {rounds} interleaved rounds, medians  [load {load0:.2f} → {os.getloadavg()[0]:.2f}]")
-    for k in runs:
-        print(f"  {k:24s} {med(k, 0):6.2f} s CPU  peak RSS {med(k, 1):5.0f} MB")
-    print(
-        f"db validate / bound: CPU {ratio('db validate', 'validate bound', 0):.2f}× (target ≤ 1.5×), "
-        f"peak RSS {ratio('db validate', 'validate bound', 1):.2f}× (target ≤ 1.5×)"
-    )
-    print(
-        f"db build / DuckDB build: CPU {ratio('db build --no-validate', 'DuckDB build', 0):.2f}× --no-validate, "
-        f"{ratio('db build', 'DuckDB build', 0):.2f}× with the validation rules (target ≤ 1.3×)"
     )
 
 
