@@ -38,7 +38,8 @@ def duckdb_build(src: Path, out: Path) -> None:
     from schemas.tables import SOURCE_TABLES
 
     sql_type = {"str": "VARCHAR", "float": "DOUBLE", "int": "BIGINT", "bool": "BOOLEAN"}
-    con = duckdb.connect(config={"enable_progress_bar": False})
+    con = duckdb.connect()
+    con.execute("SET enable_progress_bar = false")
     arrow = {}
     for name, table in SOURCE_TABLES.items():
         path = src / f"{name}.csv"
