@@ -89,19 +89,27 @@ def write_keyed(out: Path, tables: dict[str, Any], meta: dict[str, str] | None =
 
 
 def _child(args: list[str]) -> tuple[float, float]:
-    """(CPU s = user + system, peak RSS MB) of one fresh process (``os.wait4``'s own rusage)."""
+    """(CPU s = user + system, peak RSS MB) of one fresh process, as ``/usr/bin/time`` reports
+    them: a child forked from this (large) process would start with its resident pages and
+    ``ru_maxrss`` would count them. Without ``/usr/bin/time``: the children's CPU, RSS NaN."""
+    import resource
     import subprocess
+    import tempfile
 
     root = str(Path(__file__).resolve().parents[1])
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH")])])}
-    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
-    _, status, ru = os.wait4(proc.pid, 0)
-    assert proc.stderr is not None
-    err = proc.stderr.read().decode()
-    proc.stderr.close()
-    if os.waitstatus_to_exitcode(status) != 0:
-        raise RuntimeError(f"{' '.join(args)} failed: {err[-400:]}")
-    return ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024.0
+    timer = Path("/usr/bin/time")
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    with tempfile.NamedTemporaryFile("r", suffix=".time") as report:
+        wrapped = [str(timer), "-f", "%U %S %M", "-o", report.name, *args] if timer.exists() else args
+        proc = subprocess.run(wrapped, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, check=False)
+        if proc.returncode != 0:
+            raise RuntimeError(f"{' '.join(args)} failed: {proc.stderr.decode()[-400:]}")
+        if timer.exists():
+            user, system, peak_kb = report.read().split()[-3:]
+            return float(user) + float(system), float(peak_kb) / 1024.0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime, float("nan")
 
 
 def compare_bounds(src: Path, db: Path, work: Path, rounds: int) -> None:
