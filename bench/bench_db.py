@@ -6,6 +6,7 @@ Run on demand (never part of the test suite; prints numbers, never pass/fail)::
     .venv/bin/python bench/bench_db.py --lines 100     # a quick smaller run
     .venv/bin/python bench/bench_db.py --workdir /tmp/tp-bench --keep
     .venv/bin/python bench/bench_db.py --workdir /tmp/tp-bench --keep --naive-fraction 0 --rounds 5
+    .venv/bin/python bench/bench_db.py --workdir /tmp/tp-bench --keep --naive-fraction 0 --processes 3
 
 Targets (SPEC / brief): 1,000,000 GIS points, ~50,000 balises, ~10,000 features;
 ``db build`` ≤ 10 s and ``db validate`` ≤ 15 s on one core, peak memory ≤ 4 GB. Also
@@ -24,6 +25,11 @@ same row checks, read by Arrow or by DuckDB, checked in DuckDB SQL, written by t
 bulk insert (the fastest SQLite writer measured; ``executemany`` of the same rows took
 twice its time). ``--rounds`` interleaves ``db build`` and those paths in one process
 (needs ``pip install -e '.[bench]'`` for DuckDB; skipped without it).
+
+Issue 34 (``--processes N``, interleaved rounds of fresh processes, :mod:`_db_bounds`): ``db
+validate`` against SQLite's integrity and foreign-key checks plus every table read into pandas
+(CPU and peak RSS, target ≤ 1.5× each), ``db build`` against DuckDB ``read_csv`` → Arrow →
+the same SQLite schema and indexes (CPU, target ≤ 1.3×); prints both ratios.
 
 The naive baseline is what a straightforward script would do: ``csv.DictReader``, per-row
 type and range checks in Python, one ``INSERT`` per row in autocommit mode. It runs on a
