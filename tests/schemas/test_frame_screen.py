@@ -76,7 +76,7 @@ def test_each_kind_of_problem_goes_to_pandera(monkeypatch: pytest.MonkeyPatch) -
         assert bool(found) == (value is not math.inf), (column, value)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=60, deadline=None)
 @given(st.data())
 def test_findings_are_pandera_s(data: st.DataObject) -> None:
     cells = {k: list(v) for k, v in _CLEAN_GIS.items()}
