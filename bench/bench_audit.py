@@ -47,7 +47,7 @@ from dbtools.sources import write_source_set
 from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.audit.runner import audit
 from fieldlogs.audit.store import read_table
-from fieldlogs.io import write_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 

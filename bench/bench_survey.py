@@ -62,7 +62,7 @@ from dbtools.network import Network
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import LineSpec, Station, build_network, random_alignment
 from fieldlogs.gisverify.evidence import verify_runs
-from fieldlogs.io import write_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from fieldlogs.survey.features import db_features

@@ -30,8 +30,8 @@ from typing import TYPE_CHECKING
 import pandas as pd
 
 from dbtools.atomic import atomic_folder
-from fieldlogs.io import Run
 from fieldlogs.recorders.timebase import iso_to_gps
+from fieldlogs.runs.handle import Run
 from schemas.errors import InputError, UsageError
 
 if TYPE_CHECKING:

@@ -24,7 +24,7 @@ from dbtools.gis.geometry import Projector
 from dbtools.gis.verify.proposal import shift_grid_points
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import build_network, demo_line
-from fieldlogs.io import write_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 

@@ -19,9 +19,9 @@ from fieldlogs.gnss.observables import Epochs
 from fieldlogs.gnss.sbas import SbasCorrections
 from fieldlogs.gnss.sbas.simulate import sbas_stream
 from fieldlogs.gnss.simulate import Simulated
-from fieldlogs.io import read_run
 from fieldlogs.recorders.ubx import read_ubx
 from fieldlogs.recorders.ubx_raw import rawx_frames, sbas_sfrbx_frames
+from fieldlogs.runs.handle import read_run
 from tests.fieldlogs.gnss.runs import simulate_gnss_run
 
 Case = tuple[ex.CaseSpec, Simulated, pd.DataFrame, pd.DataFrame]

@@ -16,8 +16,8 @@ from dbtools.build import build_db
 from dbtools.gis.geometry import Projector
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import build_network, demo_line
-from fieldlogs.io import Run
 from fieldlogs.quality.dbfit import MIN_FIXES, db_fit_findings
+from fieldlogs.runs.handle import Run
 
 SAMPLES = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"
 

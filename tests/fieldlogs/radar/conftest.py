@@ -12,7 +12,7 @@ from dbtools.gis.geometry import Projector
 from dbtools.network import Network
 from dbtools.sources import write_source_set
 from dbtools.synthetic.network import build_network, demo_line
-from fieldlogs.io import write_run
+from fieldlogs.runs.write import write_run
 from tests.fieldlogs.radar.runs import simulate_radar_run
 
 
