@@ -42,7 +42,7 @@ def network_db(folder: Path) -> Path:
     from dbtools.build import build_db
     from dbtools.gis.geometry import Projector
     from dbtools.sources import write_source_set
-    from dbtools.synthetic.network import build_network, demo_line
+    from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 
     db = folder / "net.sqlite"
     if not db.exists():

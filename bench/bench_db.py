@@ -13,7 +13,7 @@ Targets (SPEC / brief): 1,000,000 GIS points, ~50,000 balises, ~10,000 features;
 ``COUNT(*)`` and ``LIMIT``ed reads only, fast whatever the size).
 
 The network: ``--lines`` lines on a square grid of 15 km cells around the origin of
-JGD2011 zone 9 (each line is a :func:`~dbtools.synthetic.network.random_alignment` starting near its
+JGD2011 zone 9 (each line is a :func:`~fieldlogs.simulate.networks.synthetic.random_alignment` starting near its
 cell centre, so lines do not overlap), double track, a station every 1.1 km (initial pair,
 home-signal C balise per station and track), one feature per curve and track.
 
@@ -61,9 +61,9 @@ from dbtools.db_info import db_info
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical, content_hash, empty_frame
 from dbtools.sources import write_source_set
-from dbtools.synthetic.network import LineSpec, Station, balises, feature_points, gis_grid, random_alignment
-from dbtools.synthetic.topology import station_network
 from dbtools.validate import validate_path
+from fieldlogs.simulate.networks.synthetic import LineSpec, Station, balises, feature_points, gis_grid, random_alignment
+from fieldlogs.simulate.networks.topology import station_network
 from schemas.enums import Severity
 from schemas.network import NETWORK_TABLES
 from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS, KM_BREAKS, LAT_RANGE, LINES, LON_RANGE
@@ -78,7 +78,7 @@ STATION_SPACING_M = 1_100.0
 def national_network(n_lines: int, length_m: float, seed: int = 2026, *, topology: bool = False) -> Network:
     """``n_lines`` double-track lines of ``length_m`` each, one per grid cell (zone 9);
     ``topology``: with a loop pair and a crossover at every station, the main tracks split at
-    their switches (:mod:`dbtools.synthetic.topology`: ≈ 9 tracks and 6 switches a station)."""
+    their switches (:mod:`fieldlogs.simulate.networks.topology`: ≈ 9 tracks and 6 switches a station)."""
     rng = np.random.default_rng(seed)
     side = math.ceil(math.sqrt(n_lines))
     projector = Projector(9)

@@ -1,6 +1,6 @@
 """Bench of the track-constrained GNSS positioning [S002] (SPEC §5.6, issue 17 phase 1).
 
-(a) The paper's experiment on simulated runs (``fieldlogs.gnss.experiment``): GPS only, the
+(a) The paper's experiment on simulated runs (``fieldlogs.experiments.gnss``): GPS only, the
     west half of the sky blocked, the synthetic 3-D track, two receivers; standalone and with
     D-GPS-level corrections; then a faulty satellite (50 m step, 0.2 m/s ramp) from mid-run;
     and a multi-GNSS run through a mixed corridor (buildings, cuttings, overpasses, tunnels);
@@ -35,8 +35,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from fieldlogs.experiments.gnss import ANTENNAS, CaseSpec, _simulate, _solve, _track, run_case, summarise
 from fieldlogs.gnss.constrained import STATUS_OK, Rows, solve_constrained
-from fieldlogs.gnss.experiment import ANTENNAS, CaseSpec, _simulate, _solve, _track, run_case, summarise
 from fieldlogs.gnss.position import receiver_rows
 from fieldlogs.gnss.reference import solve_epoch
 

@@ -1,7 +1,7 @@
 """Fault detection and exclusion of the track-constrained GNSS solution on seeded runs [S002].
 
 The cases of ``bench_gnss.py``'s paper rows (GPS, west half of the sky blocked, standalone,
-two receivers; ``fieldlogs.gnss.experiment``): clean, a 50 m step and a 0.2 m/s ramp on the
+two receivers; ``fieldlogs.experiments.gnss``): clean, a 50 m step and a 0.2 m/s ramp on the
 satellite the clean solution uses most, from mid-run, in every receiver. Printed per case:
 
 * epochs: receiver-epochs after onset with the faulty satellite among ≥ 3 usable;
@@ -31,7 +31,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fieldlogs.gnss.experiment import CaseResult, CaseSpec, _simulate, run_case, summarise
+from fieldlogs.experiments.gnss import CaseResult, CaseSpec, _simulate, run_case, summarise
 from fieldlogs.gnss.observables import carrier_smoothed
 
 

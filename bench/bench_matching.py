@@ -10,7 +10,8 @@ Target (brief): ≥ 300,000 fixes/s on one core against a 1,000,000-point grid; 
 
 The grid: ``--lines`` double-track lines of ``--points`` grid points per track (100 km at
 20 m), one per 120 km cell of a square layout in JGD2011 zone 9, drawn by
-:func:`dbtools.synthetic.network.random_alignment` and gridded by :func:`dbtools.synthetic.network.gis_grid`.
+:func:`fieldlogs.simulate.networks.synthetic.random_alignment` and gridded by
+:func:`fieldlogs.simulate.networks.synthetic.gis_grid`.
 The fixes: uniformly random positions on random tracks (in random order — the worst case for
 tree caches; :class:`TrackIndex` sorts them spatially itself) plus 2 m noise per axis, as
 latitude/longitude, so the timing includes the projection to the plane.
@@ -45,7 +46,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dbtools.gis.geometry import Projector
 from dbtools.gis.matching import TrackIndex
-from dbtools.synthetic.network import LineSpec, gis_grid, random_alignment
+from fieldlogs.simulate.networks.synthetic import LineSpec, gis_grid, random_alignment
 
 CELL_M = 120_000.0
 

@@ -27,10 +27,10 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.sources import write_source_set
-from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.runs.handle import read_run
 from fieldlogs.runs.write import write_run
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from schemas.units import kmh_s_to_mps2, metres_per_pulse

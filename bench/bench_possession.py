@@ -46,10 +46,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.possession.check import check_streams
 from fieldlogs.possession.config import PossessionConfig, config_from_dict
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, MISTAKE_ALARMS, PossessionCase, make_cases
 from schemas.enums import AlarmType
 from schemas.errors import InputError

@@ -18,8 +18,8 @@ import time
 import numpy as np
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.simulate.kinematics import body_kinematics
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from fieldlogs.simulate.running import Motion, cant_model, plan_motion
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run

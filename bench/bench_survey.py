@@ -10,7 +10,7 @@ Run on demand (prints a table, never pass/fail)::
 
 How the errors are made. A synthetic network (``--lines`` double-track lines of
 ``--length-km``, stations every 3 km with initial pairs and home/block C balises,
-:mod:`dbtools.synthetic`) is the *truth*; ``--runs`` runs per track are simulated on it
+:mod:`fieldlogs.simulate.networks`) is the *truth*; ``--runs`` runs per track are simulated on it
 (:mod:`fieldlogs.simulate`, default scenario: slips and slides, D-GPS, wheel wear) by four
 vehicles whose true wheel diameter wears a little from run to run (run.json ``sim_truth``).
 The *surveyed* DB — the one the survey checks — then has, per track: two C balises moved
@@ -60,9 +60,9 @@ from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
 from dbtools.sources import write_source_set
-from dbtools.synthetic.network import LineSpec, Station, build_network, random_alignment
 from fieldlogs.gisverify.evidence import verify_runs
 from fieldlogs.runs.write import write_run
+from fieldlogs.simulate.networks.synthetic import LineSpec, Station, build_network, random_alignment
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from fieldlogs.survey.features import db_features

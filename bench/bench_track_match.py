@@ -35,8 +35,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np
 from bench_topology import M_LAT, build
 
+from dbtools.gis.track_candidates import find_candidates
 from dbtools.network import Network
-from fieldlogs.trackmatch.candidates import find_candidates
 from fieldlogs.trackmatch.match import MatchSettings, _model, match_trace
 
 

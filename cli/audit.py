@@ -125,7 +125,7 @@ class ReportFmt(StrEnum):
     html = "html"
 
 
-#: Columns of the terminal tables (CSV, JSON and HTML keep the full names) and their labels.
+#: Columns of the terminal tables (labelled by schemas.labels, as on the HTML page).
 PCT_COLUMNS = [
     "n_runs",
     "distance_km",
@@ -146,60 +146,36 @@ OTHER_COLUMNS = [
     "n_failsafe",
     "n_anomalies",
 ]
-LABELS = {
-    "line_code": "line",
-    "direction": "dir",
-    "run_id": "run",
-    "vehicle_id": "vehicle",
-    "n_runs": "runs",
-    "distance_km": "km",
-    "n_corrections": "balise corr.",
-    "mean_correction_pct": "mean %",
-    "median_correction_pct": "median %",
-    "max_correction_pct": "max %",
-    "share_above_target": "> target",
-    "n_feature_corrections": "feature corr.",
-    "n_feature_refused": "refused",
-    "refusal_reasons": "failed diagnostics (count)",
-    "n_slips": "slips",
-    "n_slips_readhered": "re-adhered",
-    "max_slip_error_m": "max slip err. m",
-    "gps_decisions": "GPS decisions",
-    "gps_trusted_share": "GPS trusted",
-    "n_failsafe": "fail-safe",
-    "n_anomalies": "anomalies",
-}
-
-
 #: One line per column of the report tables: what the printed term means (issue 33: a summary
 #: explains its terms).
 LEGEND = {
     "runs": "runs audited without error",
-    "km": "distance travelled (corrected odometry)",
-    "balise corr.": "position corrections at balises",
-    "mean %, median %, max %": "correction ÷ distance since the previous correction × 100, over balise corrections",
-    "> target": "share (0–1) of balise corrections above the target % (--target-pct)",
-    "feature corr., refused": "corrections at curves (feature points) accepted, and refused by a diagnostic",
-    "slips, re-adhered": "wheel slip/slide episodes corrected inertially, and those that re-adhered in time",
-    "max slip err. m": "largest error budget of a slip correction, in metres",
+    "distance [km]": "distance travelled (corrected odometry)",
+    "balise corrections": "position corrections at balises",
+    "mean correction [%], median correction [%], max correction [%]": (
+        "correction ÷ distance since the previous correction × 100, over balise corrections"
+    ),
+    "share above target": "share of balise corrections above the target % (--target-pct)",
+    "feature corrections, feature corrections refused": "corrections at curves (feature points) accepted, and refused",
+    "failed diagnostics (count)": "the diagnostics that refused feature-point corrections, with their counts",
+    "slips, slips re-adhered": "wheel slip/slide episodes corrected inertially, and those that re-adhered in time",
+    "max slip error [m]": "largest error budget of a slip correction",
     "GPS decisions": "up/down track decisions made from trusted GPS fixes",
-    "GPS trusted": "mean share (0–1) of GPS fixes that passed the trust checks",
-    "fail-safe": "fail-safe events (a slip correction lasted too long)",
+    "GPS trusted share": "mean share of GPS fixes that passed the trust checks",
+    "fail-safe events": "fail-safe events (a slip correction lasted too long)",
     "anomalies": "balise anomalies (telegrams that do not fit the DB; the events name them)",
 }
 
 
 def print_legend(c: Console) -> None:
-    """The report tables' terms, one line each."""
-    width = max(len(k) for k in LEGEND)
-    for term, meaning in LEGEND.items():
-        c.print(f"  [bold]{term:<{width}}[/]  {meaning}", highlight=False, soft_wrap=True)
+    """The report tables' terms, one line each (a key/value table: records at 80 columns)."""
+    c.print(key_value_table(LEGEND.items(), title="What the columns mean"))
 
 
 def _view(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:
-    """Rounded, missing values blank, short column labels."""
+    """Rounded, missing values blank (the columns keep their machine names: the table labels them)."""
     f = frame[cols].round(3)
-    return f.astype(object).where(f.notna(), None).rename(columns=LABELS)
+    return f.astype(object).where(f.notna(), None)
 
 
 def render_tables(rep: Report, c: Console) -> None:

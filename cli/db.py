@@ -25,7 +25,7 @@ import typer
 from cli.db_impact import _impact_attachment, impact
 from cli.db_inspect import info, show
 from cli.errors import cli_command
-from cli.options import NO_VERIFY_HASH, workers_option
+from cli.options import DECIMAL, DELIMITER, NO_VERIFY_HASH, csv_locale, workers_option
 from cli.render import console, key_value_table, print_findings, print_json, rich_table, safe
 from schemas.errors import UsageError
 from schemas.findings import Finding, count_by_severity, findings_report, has_errors
@@ -74,6 +74,8 @@ def build(
     config: Path | None = typer.Option(
         None, "--config", help="Settings (TOML): its [input] section (limits of .xlsx source files)."
     ),
+    delimiter: str | None = DELIMITER,
+    decimal: str | None = DECIMAL,
 ) -> None:
     """Build an onboard DB version from a source set, and validate it.
 
@@ -87,7 +89,14 @@ def build(
     if strict and no_validate:
         raise UsageError("--strict needs the validation rules: drop --no-validate")
     result = build_db(
-        source_dir, out, db_version=version, note=note, force=force, validate=not no_validate, strict=strict
+        source_dir,
+        out,
+        db_version=version,
+        note=note,
+        force=force,
+        validate=not no_validate,
+        strict=strict,
+        locale=csv_locale(delimiter, decimal),
     )
     head = [("file", str(result.path)), ("db_version", result.db_version), ("content_hash", result.content_hash)]
     out_c = _written(result.warnings, "Source warnings", head, result.rows, "Built")
@@ -113,6 +122,8 @@ def validate(
         help="SARIF: base of each rule's helpUri (BASE + docs/reference/rules.md#RULE), e.g. "
         "https://github.com/ORG/trainpos/blob/main/; empty: the repository-relative path.",
     ),
+    delimiter: str | None = DELIMITER,
+    decimal: str | None = DECIMAL,
 ) -> None:
     """Check every consistency rule; exit 0 clean, 1 errors (or warnings with --strict), 2 unreadable.
 
@@ -120,7 +131,7 @@ def validate(
     """
     from dbtools.validate import validate_path
 
-    findings = validate_path(target)
+    findings = validate_path(target, locale=csv_locale(delimiter, decimal))
     if fmt in (ValidateFmt.sarif, ValidateFmt.junit):
         _ci_report(findings, target, fmt, strict, help_uri_base)
     elif fmt == ValidateFmt.json:

@@ -75,7 +75,6 @@ def demo(
         )
     rep = build_report(audit_db)
     render_tables(rep, c)
-    c.print("What the columns mean:")
     print_legend(c)
     html = out / "report.html"
     html.write_text(render_html(rep, audit_db), encoding="utf-8")

@@ -9,7 +9,7 @@ from typing import Any
 import typer
 
 from cli.errors import cli_command
-from cli.options import NO_VERIFY_HASH
+from cli.options import DECIMAL, DELIMITER, NO_VERIFY_HASH, csv_locale
 from cli.render import console, err_console, frame_table, key_value_table, print_findings, print_json, safe
 from schemas.errors import EXIT_FINDINGS, EXIT_OK, EXIT_UNREADABLE, InputError
 from schemas.findings import has_errors
@@ -246,6 +246,8 @@ def import_(
         help="Time zone of time stamps without a UTC offset (GeoJSON traces; CSV: a mapping's [time] timezone "
         "comes first): UTC, +02:00 or an IANA name such as Europe/Oslo.",
     ),
+    delimiter: str | None = DELIMITER,
+    decimal: str | None = DECIMAL,
 ) -> None:
     """Import recorder files into a new run folder on one time base (GNSS time).
 
@@ -261,7 +263,7 @@ def import_(
 
     res = import_run(
         sources, out, fmt=fmt.value, mapping=mapping or [], vehicle=vehicle, run_id=run_id, force=force,
-        time_zone=time_zone,
+        time_zone=time_zone, locale=csv_locale(delimiter, decimal),
     )  # fmt: skip
     c = console()
     if res.warnings:

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 import typer
 
 from cli.errors import cli_command
-from cli.options import NO_VERIFY_HASH, workers_option
+from cli.options import DECIMAL, DELIMITER, NO_VERIFY_HASH, csv_locale, workers_option
 from cli.render import (
     check_outputs,
     console,
@@ -144,6 +144,8 @@ def check(
     force: bool = typer.Option(False, "--force", help="Replace an existing --out file."),
     no_verify_hash: bool = NO_VERIFY_HASH,
     workers: int | None = workers_option("checking runs"),
+    delimiter: str | None = DELIMITER,
+    decimal: str | None = DECIMAL,
 ) -> None:
     """Check road-rail runs against a possession plan: wrong track, overrun, released or not started while on rail.
 
@@ -176,7 +178,9 @@ def check(
 
     bar = _Bar(progress(err_console()))
     try:
-        report = check_files(runs, db, plan, config, work=work, workers=workers, progress=bar)
+        report = check_files(
+            runs, db, plan, config, work=work, workers=workers, progress=bar, locale=csv_locale(delimiter, decimal)
+        )
     finally:
         if bar.task is not None:
             bar.bar.stop()

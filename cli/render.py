@@ -31,7 +31,9 @@ MAX_TABLE_ROWS = 200
 def console() -> Console:
     from rich.console import Console
 
-    return Console(highlight=False, soft_wrap=False, emoji=False)  # ":x:" in a path stays text
+    # ":x:" in a path stays text; soft wrap: a line longer than the terminal (a record's long
+    # path) is the terminal's to wrap, never cropped; tables are drawn to the width anyway
+    return Console(highlight=False, soft_wrap=True, emoji=False)
 
 
 def err_console() -> Console:
@@ -49,34 +51,16 @@ def print_json(data: Any, out: Console | None = None) -> None:
         out.print(text, markup=False, highlight=False, soft_wrap=True)
 
 
-#: Widest cell kept on one line whatever the terminal: numbers and codes are never split.
-MAX_UNSPLIT = 24
-
-
-def _unsplit_width(cells: Iterable[str]) -> int:
-    """Width that keeps every short cell (a number, a code) on one line."""
-    return min(max((len(c) for c in cells), default=1), MAX_UNSPLIT)
-
-
 def findings_table(findings: Sequence[Finding], title: str = "Findings") -> Table:
-    """Findings as a table: severity, rule, value and limit never wrap (a number is never split
-    across lines, at 80 columns or piped); the location and the message wrap at spaces."""
+    """Findings as a table (:func:`rich_table`: a record per finding where it cannot fit)."""
     from rich.text import Text
 
-    shown = findings[:MAX_TABLE_ROWS]
-    rows = [(str(f.severity), f.rule, f.where, _cell(f.value), _cell(f.limit), f.message) for f in shown]
-    t = rich_table(title=title, show_lines=False)
-    for k, col in enumerate(("severity", "rule", "where", "value", "limit", "message")):
-        if col == "where":  # "file:row," stays whole (a table that cannot hold it is printed as blocks)
-            first = [r[k].split(" ", 1)[0] for r in rows]
-            t.add_column(col, overflow="fold", ratio=1, min_width=max(map(len, first), default=1))
-        elif col == "message":
-            t.add_column(col, overflow="fold", ratio=2)
-        else:
-            t.add_column(col, no_wrap=True, min_width=_unsplit_width(r[k] for r in rows))
-    for f, r in zip(shown, rows, strict=True):
+    t = rich_table(title=title)
+    for col in ("severity", "rule", "where", "value", "limit", "message"):
+        t.add_column(col, justify="right" if col in ("value", "limit") else "left")
+    for f in findings[:MAX_TABLE_ROWS]:
         style = "red" if f.severity == "error" else "yellow"
-        t.add_row(Text(r[0], style=style), *r[1:])
+        t.add_row(Text(str(f.severity), style=style), f.rule, f.where, _cell(f.value), _cell(f.limit), f.message)
     return t
 
 
@@ -102,9 +86,12 @@ def safe(text: object) -> str:
     return escape(visible(text) + " ")[:-1]
 
 
-def _cell(v: Any) -> str:
-    if v is None:
+def _cell(v: Any, scale: float = 1.0) -> str:
+    """A value as printed: floats to 4 significant digits, a share (``scale`` 100) as ``12.3 %``."""
+    if v is None or (isinstance(v, float) and v != v and scale != 1.0):
         return ""
+    if scale != 1.0 and isinstance(v, int | float) and not isinstance(v, bool):
+        return f"{v * scale:.1f} %"
     if isinstance(v, float):
         return f"{v:.4g}"
     if isinstance(v, (list, tuple)):
@@ -113,49 +100,122 @@ def _cell(v: Any) -> str:
 
 
 def print_findings(findings: Sequence[Finding], console: Console | None = None, title: str = "Findings") -> None:
-    """Findings as a table when it fits the terminal, else one block per finding (a number
-    is never split across lines either way)."""
+    """Findings as a table when it fits the terminal, else one record per finding (no word
+    or number split across lines either way)."""
     out = console or globals()["console"]()
     if findings:
-        table = findings_table(findings, title)
-        if _table_min_width(table) <= out.width:
-            out.print(table)
-        else:
-            for block in findings_blocks(findings[:MAX_TABLE_ROWS], title):
-                out.print(block, soft_wrap=True)  # long lines are the terminal's to wrap: no split
+        out.print(findings_table(findings, title))
         if len(findings) > MAX_TABLE_ROWS:
             out.print(f"… {len(findings) - MAX_TABLE_ROWS} more (use --format json for all)")
     counts = count_by_severity(findings)
     out.print(f"{safe(counts['error'])} error(s), {safe(counts['warning'])} warning(s)")
 
 
-#: Narrowest message column worth a table (below it the blocks read better).
-MIN_MESSAGE_WIDTH = 20
-
-
-def _table_min_width(table: Table) -> int:
-    """Width the table needs so that no unsplittable cell is cut: the columns' minimum widths
-    (the message at least MIN_MESSAGE_WIDTH), cell padding and the borders."""
-    widths = [max(c.min_width or 1, MIN_MESSAGE_WIDTH if c.header == "message" else 1) for c in table.columns]
-    return sum(widths) + 3 * len(widths) + 1
-
-
-def findings_blocks(findings: Sequence[Finding], title: str = "Findings") -> list[Text]:
-    """One block per finding for narrow terminals: a head line, then the message."""
+def _plain(renderable: Any) -> str:
+    """The text of a cell or header (a ``Text``, a ``str``; anything else by ``str``)."""
     from rich.text import Text
 
-    blocks = [Text(title, style="bold")]
-    for f in findings:
-        head = f"{f.severity} {f.rule} {f.where}"
-        extra = ", ".join(f"{k} {_cell(v)}" for k, v in (("value", f.value), ("limit", f.limit)) if v is not None)
-        blocks.append(Text(f"{head}{' — ' + extra if extra else ''}\n  {f.message}"))
-    return blocks
+    return renderable.plain if isinstance(renderable, Text) else str(renderable or "")
+
+
+def _longest_word(text: str) -> int:
+    from rich.cells import cell_len
+
+    return max((cell_len(w) for w in text.split()), default=0)
+
+
+def _longest_line(text: str) -> int:
+    from rich.cells import cell_len
+
+    return max((cell_len(line) for line in text.splitlines()), default=0)
+
+
+def fit_widths(table: Table, max_width: int) -> list[int] | None:
+    """Content width of each column so that ``table`` fits ``max_width`` with its borders and
+    no word or number is split: every column at least its longest word (a ``no_wrap`` column
+    its longest line), the room left given to the columns that lack least of their longest
+    line first (short columns whole, the long texts wrap). None when even the longest words
+    do not fit (print records instead).
+
+    Rich, left to itself, narrows the widest columns first and then crops: a number split
+    across lines, a border lost at 80 columns. Widths fixed here leave it nothing to squeeze."""
+    texts = [[_plain(c.header), *(_plain(x) for x in c.cells)] for c in table.columns]
+    natural = [max(_longest_line(t) for t in col) or 1 for col in texts]
+    least = [
+        max(n if c.no_wrap else max(_longest_word(t) for t in col), c.min_width or 0, 1)
+        for c, col, n in zip(table.columns, texts, natural, strict=True)
+    ]
+    natural = [max(a, n) for a, n in zip(least, natural, strict=True)]
+    frame = 3 * len(texts) + 1  # padding of one space each side, a border between and around
+    room = max_width - frame
+    if sum(least) > room:
+        return None
+    if sum(natural) <= room:
+        return natural
+    widths, spare = list(least), room - sum(least)
+    for i in sorted(range(len(widths)), key=lambda i: natural[i] - least[i]):  # the nearly whole first
+        grant = min(natural[i] - least[i], spare)
+        widths[i] += grant
+        spare -= grant
+    return widths
+
+
+def _field(label: str, value: str, indent: int, width: int) -> str:
+    """``label: value`` wrapped at spaces to ``width`` under a hanging indent: no word split; a
+    word too long for the indent starts its own line at the margin (longer than the
+    terminal, it is the terminal's to wrap)."""
+    import textwrap
+
+    lines = textwrap.wrap(
+        " ".join(value.split()),
+        max(width, indent + 1),
+        initial_indent=f"{label + ':':<{indent}}",
+        subsequent_indent=" " * indent,
+        break_long_words=False,
+        break_on_hyphens=False,
+    ) or [label + ":"]
+    out = []
+    for line in lines:
+        if len(line) > width and line.startswith(" " * indent):
+            line = line.lstrip(" ")
+        elif len(line) > width and len(line) - indent <= width:  # the label alone, the word below
+            out.append(line[:indent].rstrip())
+            line = line[indent:]
+        out.append(line)
+    return "\n".join(out)
+
+
+def records(table: Table, width: int = 80) -> list[Text]:
+    """``table`` as one record per row, for a terminal ``width`` columns wide: its title, then
+    per row a ``label: value`` line per non-empty cell (values aligned, wrapped at spaces),
+    rows apart by a blank line. The layout of a table too wide for the terminal: every column
+    kept, no cell cut, no word or number split."""
+    from rich.text import Text
+
+    title = _plain(table.title) if table.title else ""
+    out = [Text(title, style="bold")] if title else []
+    if not table.show_header and len(table.columns) == 2:  # a key/value table: keys are the labels
+        pairs = [[(_plain(k), _plain(v)) for k, v in zip(*(c.cells for c in table.columns), strict=True)]]
+    else:
+        labels = [" ".join(_plain(c.header).split()) or f"column {k + 1}" for k, c in enumerate(table.columns)]
+        columns = [list(c.cells) for c in table.columns]
+        pairs = [
+            [(lab, _plain(col[r])) for lab, col in zip(labels, columns, strict=True)] for r in range(table.row_count)
+        ]
+    for row in pairs:
+        indent = min(max((len(lab) for lab, _ in row), default=0) + 2, width // 2)
+        body = "\n".join(_field(lab, v, indent, width) for lab, v in row if v.strip())
+        out.append(Text(body or "(empty row)", end="\n\n"))  # a blank line after each record
+    return out
 
 
 @functools.cache
 def _plain_table() -> type[Table]:
     """``rich.table.Table`` whose title and ``str`` cells are plain text (:func:`visible`),
-    never markup: a path, run id or note is printed as written. Styled cells are ``Text``."""
+    never markup: a path, run id or note is printed as written. Styled cells are ``Text``.
+
+    Drawn at the width it is printed at by :func:`fit_widths`, or as :func:`records` when it
+    cannot fit: at 80 columns or piped, a table keeps its borders and splits no word or number."""
     from rich.table import Table
     from rich.text import Text
 
@@ -163,11 +223,22 @@ def _plain_table() -> type[Table]:
         def add_row(self, *renderables: Any, **kwargs: Any) -> None:
             super().add_row(*(Text(visible(c)) if isinstance(c, str) else c for c in renderables), **kwargs)
 
+        def __rich_console__(self, console: Console, options: Any) -> Any:
+            widths = fit_widths(self, options.max_width)
+            if widths is None:
+                for block in records(self, options.max_width):
+                    yield from console.render(block, options.update(no_wrap=True, overflow="ignore"))
+                return
+            for column, width in zip(self.columns, widths, strict=True):
+                column.width = width
+            yield from super().__rich_console__(console, options)
+
     return PlainTable
 
 
 def rich_table(title: str | None = None, **kwargs: Any) -> Table:
-    """The table every command draws with (:func:`_plain_table`): title and cells plain text."""
+    """The table every command draws with (:func:`_plain_table`): title and cells plain text,
+    a table where it fits, records where not."""
     from rich.text import Text
 
     return _plain_table()(title=Text(visible(title)) if isinstance(title, str) else title, **kwargs)
@@ -176,79 +247,37 @@ def rich_table(title: str | None = None, **kwargs: Any) -> Table:
 def key_value_table(rows: Iterable[tuple[str, Any]], title: str | None = None) -> Table:
     t = rich_table(title=title, show_header=False)
     t.add_column("key", style="bold")
-    t.add_column("value", overflow="fold")
+    t.add_column("value")
     for k, v in rows:
         t.add_row(k, _cell(v))
     return t
 
 
-#: Narrowest text column worth a table (below it a text column would shrink to nothing).
-MIN_TEXT_WIDTH = 8
+def frame_table(frame: Any, title: str | None = None, max_rows: int = 200) -> Table:
+    """A pandas DataFrame for the terminal (:func:`rich_table`): each column under its label
+    (:func:`schemas.labels.display`: words and ``[unit]``), a share as ``%``, numbers right-aligned."""
+    from schemas.labels import display
+
+    shown = [display(str(c)) for c in frame.columns]
+    rows = [
+        [_cell(v, d.scale) for v, d in zip(row, shown, strict=True)]
+        for row in frame.head(max_rows).itertuples(index=False, name=None)
+    ]
+    return rows_table([d.label for d in shown], rows, title)
 
 
-class FrameView:
-    """A pandas DataFrame for the terminal: a table when it fits the console's width (no
-    number split across lines, text wraps at spaces), else one block per row (``column=value``
-    pairs, wrapped between pairs) so that no column is squeezed out of sight at 80
-    columns. Rendered by Rich (``console.print(view)``) at the width it is printed at.
-    Built by :func:`frame_table` (a DataFrame) or :func:`rows_table` (rows of text)."""
+def rows_table(names: Sequence[str], rows: Sequence[Sequence[str]], title: str | None = None) -> Table:
+    """Rows of text cells (as they are to be shown) under ``names``, no pandas needed; a column
+    of numbers is right-aligned."""
+    from rich.text import Text
 
-    def __init__(self, names: Sequence[str], rows: Sequence[Sequence[str]], title: str | None) -> None:
-        self.title = title
-        self.names = list(names)
-        self.rows = [list(r) for r in rows]
-        self.numeric = [all(_NUMBER.fullmatch(r[k]) for r in self.rows if r[k]) for k in range(len(self.names))]
-
-    def table(self) -> Table:
-        from rich.text import Text
-
-        t = rich_table(title=self.title)
-        for name, numeric, width in zip(self.names, self.numeric, self._widths(), strict=True):
-            # rich never narrows a column below its min_width: a number column holds its widest number
-            t.add_column(Text(name), overflow="fold", min_width=width, justify="right" if numeric else "left")
-        for r in self.rows:
-            t.add_row(*(Text(c) for c in r))  # as written: "[s]" in a header is a unit, not markup
-        return t
-
-    def blocks(self) -> list[Text]:
-        from rich.text import Text
-
-        out = [Text(self.title, style="bold")] if self.title else []
-        for r in self.rows:
-            pairs = [f"{n}={v}" for n, v in zip(self.names, r, strict=True) if v]
-            out.append(Text("  ".join(pairs) or "(empty row)"))
-        return out
-
-    def _widths(self) -> list[int]:
-        """Narrowest width of each column: a number column its widest cell (numbers are never
-        split; its header wraps at spaces), a text column MIN_TEXT_WIDTH or its longest cell."""
-        widths = []
-        for k, name in enumerate(self.names):
-            cells = [r[k] for r in self.rows]
-            if self.numeric[k]:
-                widths.append(max(_unsplit_width(cells), *(len(w) for w in name.split()), 1))
-            else:
-                widths.append(min(max((len(c) for c in [name, *cells]), default=1), MIN_TEXT_WIDTH))
-        return widths
-
-    def __rich_console__(self, console: Console, options: Any) -> Iterable[Table | Text]:
-        table = self.table()
-        if _table_min_width(table) <= options.max_width:
-            yield table
-        else:
-            yield from self.blocks()
-
-
-def frame_table(frame: Any, title: str | None = None, max_rows: int = 200) -> FrameView:
-    """A pandas DataFrame as a Rich renderable (:class:`FrameView`): a table, or one block
-    per row when the table cannot fit the terminal."""
-    rows = [[_cell(v) for v in row] for row in frame.head(max_rows).itertuples(index=False, name=None)]
-    return FrameView([str(c) for c in frame.columns], rows, title)
-
-
-def rows_table(names: Sequence[str], rows: Sequence[Sequence[str]], title: str | None = None) -> FrameView:
-    """Rows of text cells (as they are to be shown) as a :class:`FrameView`, no pandas needed."""
-    return FrameView(names, rows, title)
+    t = rich_table(title=title)
+    for k, name in enumerate(names):
+        numeric = all(_NUMBER.fullmatch(r[k]) for r in rows if r[k])
+        t.add_column(Text(name), justify="right" if numeric and rows else "left")  # "[s]" is a unit, not markup
+    for r in rows:
+        t.add_row(*(Text(c) for c in r))
+    return t
 
 
 _NUMBER = re.compile(r"[-+]?(\d[\d,]*(\.\d*)?|\.\d+)([eE][-+]?\d+)?( ?%| ?[a-zA-Z/²]{1,5})?|—|nan|inf|-inf")
@@ -312,7 +341,7 @@ def emit_rendered(
     from rich.console import Console
 
     buf = io.StringIO()
-    render(Console(file=buf, width=width, color_system=None))
+    render(Console(file=buf, width=width, color_system=None, soft_wrap=True))
     write_out(out, buf.getvalue(), force=force, inputs=inputs)
 
 

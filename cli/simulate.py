@@ -60,7 +60,7 @@ def simulate(
     inputs = [p for p in (db, scenario) if p is not None]  # never replaced by --out
     files: list[Path] = []
     if fmt.value in ("nmea", "ubx", "rinex"):
-        from fieldlogs.recorders.export import simulate_with_recorder
+        from fieldlogs.simulate.recorder import simulate_with_recorder
 
         result, files = simulate_with_recorder(db, out, fmt.value, scenario=sc, seed=seed, force=force, inputs=inputs)
     else:

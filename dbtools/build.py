@@ -9,6 +9,7 @@ from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
+from dbtools.csv_locale import CsvLocale
 from dbtools.database import write_db
 from dbtools.gis.index import network_georef
 from dbtools.network import content_hash
@@ -50,12 +51,14 @@ def build_db(
     now: datetime | None = None,
     validate: bool = False,
     strict: bool = False,
+    locale: CsvLocale | None = None,
 ) -> BuildResult:
     """Read, check and write. Nothing is written when a source has an error or
     ``db_version`` is no valid DB version (:data:`schemas.registry.DB_VERSION_PATTERN`:
     UsageError). ``validate``: also run the domain rules of ``db validate`` (the DB would
     fail them: the result carries them); ``strict``: their errors stop the build too
-    (FindingsError, nothing written)."""
+    (FindingsError, nothing written). ``locale``: the CSV convention of the source files
+    (:func:`dbtools.sources.read_source_set`)."""
     problem = db_version_problem(db_version) if db_version is not None else None
     if problem is not None:
         raise UsageError(f"version '{db_version}' {problem}: a DB version is {DB_VERSION_RULE}")
@@ -64,7 +67,7 @@ def build_db(
         raise RefusedError("the output must not be written into the source folder", path=out)
     if out.exists() and not force:
         raise RefusedError("output exists; use --force to replace it", path=out)
-    network, findings = read_source_set(source_dir)
+    network, findings = read_source_set(source_dir, locale)
     errors = [f for f in findings if f.severity == Severity.ERROR]
     if errors:
         raise FindingsError(f"{len(errors)} error(s) in the source set; nothing was written", findings, path=source_dir)

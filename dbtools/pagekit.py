@@ -1,5 +1,14 @@
 """One kit for the suite's self-contained HTML pages (audit report, GIS verification,
-possession check; DB-review and survey pages to come).
+possession check, DB review, DB impact, survey), and its rendering standard (issue 33):
+
+* the page opens with a plain-language verdict under its heading (:func:`page` requires a
+  :class:`Verdict`: ``Passed: 0 errors, 2 warnings``);
+* a table's columns carry the suite's labels with units (:func:`schemas.labels.display`:
+  ``km_m`` → ``km [m]``), a share (0–1) is shown as a percentage;
+* a table's header stays in view while its rows scroll (``position: sticky`` in a box of at
+  most 80 % of the window's height), a wide table scrolls inside its box, long words wrap:
+  the page never scrolls sideways at 1,280 px;
+* every plot names each axis's quantity and unit (:func:`png` refuses a figure that does not).
 
 A page is one string: inline CSS, figures as PNG ``data:`` URIs, no script and no external
 resource, so the file works offline and can be mailed. Every text that reaches the page goes
@@ -20,6 +29,7 @@ import base64
 import html
 import io
 import math
+import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -36,15 +46,23 @@ if TYPE_CHECKING:
 
 CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',sans-serif;margin:2em;color:#222;max-width:1400px}
-table{border-collapse:collapse;margin:1em 0;font-size:13px}
-th,td{border:1px solid #ccc;padding:3px 8px;text-align:right;vertical-align:top}
-th{background:#f0f0f0}td.l,th.l,table.kv td,table.kv th,table.text td,table.text th{text-align:left}
+p,li,dd,dt,figcaption,h1,h2,h3{overflow-wrap:break-word}
+td{white-space:nowrap}td.wrap{white-space:normal;min-width:16em}.nw{white-space:nowrap}
+table{border-collapse:separate;border-spacing:0;margin:1em 0;font-size:13px}
+th,td{border:1px solid #ccc;border-width:0 1px 1px 0;padding:3px 8px;text-align:right;vertical-align:top}
+tr>:first-child{border-left-width:1px}tr:first-child>*{border-top-width:1px}
+th{background:#f0f0f0}thead th{position:sticky;top:0;z-index:1;box-shadow:0 1px 0 #ccc}
+.scroll{overflow:auto;max-height:80vh;max-width:100%;width:fit-content}.scroll>table{margin:0}
+p.verdict{font-size:1.15em;padding:.4em .7em;border-left:6px solid #888;background:#f6f6f6}
+p.verdict.ok{border-color:#2a7d2a}p.verdict.warn,p.verdict.alarm{border-color:#b00}
+p.verdict.caution{border-color:#c77c00}
+td.l,th.l,table.kv td,table.kv th,table.text td,table.text th{text-align:left}
 .warn,.alarm{color:#b00;font-weight:bold}.ok{color:#070;font-weight:bold}.note{color:#666}
 .caution{color:#a60;font-weight:bold}
 .badge{display:inline-block;padding:1px 8px;border-radius:9px;font-size:12px;font-weight:bold;color:#fff}
 .badge.ok{background:#2a7d2a}.badge.warn,.badge.alarm{background:#b00}.badge.caution{background:#c77c00}
 .badge.note{background:#888}
-figure{margin:1.5em 0}img{max-width:100%}.scroll{overflow-x:auto}code{font-size:12px}
+figure{margin:1.5em 0}img{max-width:100%}code{font-size:12px}
 dl.legend{font-size:13px}dl.legend dt{font-weight:bold;float:left;clear:left;margin-right:.5em}
 dl.legend dd{margin:0 0 .2em 0}
 """
@@ -73,6 +91,15 @@ class Cell:
     cls: str | None = None
 
 
+@dataclass(frozen=True)
+class Verdict:
+    """A page's first words: a plain sentence of what was found (``Passed: 0 errors, 2
+    warnings``) and its tone."""
+
+    text: str
+    status: Status
+
+
 def escape(value: object) -> str:
     """Text for HTML (``&``, ``<``, ``>``, quotes escaped)."""
     return html.escape(str(value))
@@ -94,35 +121,58 @@ def number_text(v: int | float | np.integer[Any] | np.floating[Any]) -> str:
     return f"{x:,.0f}" if abs(x) >= 100 else f"{x:.3f}"
 
 
+def percent_text(share: float) -> str:
+    """A share (0–1) as people read it: ``99.3 %``."""
+    return f"{100.0 * share:.1f} %"
+
+
 def default_cell(column: str, v: object) -> Cell:
-    """Empty for a missing value; numbers by :func:`number_text`; everything else as
+    """Empty for a missing value; a share (:func:`schemas.labels.is_share`) by
+    :func:`percent_text`, other numbers by :func:`number_text`; everything else as
     left-aligned text."""
+    from schemas.labels import is_share
+
     if is_missing(v):
         return Cell("")
     if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
         return Cell(str(v), "l")
-    return Cell(number_text(v))
+    return Cell(percent_text(float(v)) if is_share(column) else number_text(v))
+
+
+#: Longest cell kept on one line (a number, a code, a timestamp); a longer text wraps at spaces.
+MAX_NOWRAP = 40
 
 
 def _td(cell: Cell) -> str:
-    cls = f' class="{escape(cell.cls)}"' if cell.cls else ""
+    classes = " ".join(c for c in (cell.cls, "wrap" if len(cell.text) > MAX_NOWRAP else None) if c)
+    cls = f' class="{escape(classes)}"' if classes else ""
     return f"<td{cls}>{escape(cell.text)}</td>"
 
 
+def _th(text: str) -> str:
+    """A header cell wrapping at spaces only (``re-adhered`` is not broken at its hyphen)."""
+    words = (f"<span class='nw'>{escape(w)}</span>" if "-" in w else escape(w) for w in text.split(" "))
+    return f"<th>{' '.join(words)}</th>"
+
+
 def table(header: Sequence[str], rows: Iterable[Sequence[Cell]], *, cls: str | None = None, scroll: bool = True) -> str:
-    """A table of ready cells under a header row."""
-    head = "".join(f"<th>{escape(c)}</th>" for c in header)
+    """A table of ready cells under a header row (``<thead>``: it stays in view while the rows
+    scroll in their box)."""
+    head = "".join(_th(c) for c in header)
     body = "".join("<tr>" + "".join(_td(c) for c in row) + "</tr>" for row in rows)
     klass = f" class='{escape(cls)}'" if cls else ""
-    out = f"<table{klass}><tr>{head}</tr>{body}</table>"
+    out = f"<table{klass}><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
     return f"<div class='scroll'>{out}</div>" if scroll else out
 
 
 def frame_table(frame: pd.DataFrame, cell: Callable[[str, Any], Cell] = default_cell) -> str:
-    """A DataFrame as a table, each value through ``cell(column, value)``."""
+    """A DataFrame as a table, each value through ``cell(column, value)`` (the machine name),
+    each column under its label (:func:`schemas.labels.label`: words and ``[unit]``)."""
+    from schemas.labels import label
+
     columns = [str(c) for c in frame.columns]
     rows = ([cell(c, v) for c, v in zip(columns, rec, strict=True)] for rec in frame.itertuples(index=False, name=None))
-    return table(columns, rows)
+    return table([label(c) for c in columns], rows)
 
 
 def key_value_table(rows: Sequence[tuple[str, object]], *, code: Sequence[str] = ()) -> str:
@@ -132,7 +182,7 @@ def key_value_table(rows: Sequence[tuple[str, object]], *, code: Sequence[str] =
         text = escape("" if value is None else value)
         shown = f"<code>{text}</code>" if label in code else text
         body.append(f"<tr><th>{escape(label)}</th><td>{shown}</td></tr>")
-    return f"<table class='kv'>{''.join(body)}</table>"
+    return f"<div class='scroll'><table class='kv'>{''.join(body)}</table></div>"
 
 
 def paragraph(text: str, status: Status | None = None) -> str:
@@ -172,8 +222,19 @@ def generated() -> str:
     return f"generated {datetime.now(UTC):%Y-%m-%d %H:%M} UTC"
 
 
-def page(title: str, *parts: str, heading_text: str | None = None, description: str = "") -> str:
-    """The whole page: doctype, charset, viewport, title, the kit's CSS, an ``<h1>`` and the parts."""
+def verdict_paragraph(v: Verdict) -> str:
+    """The verdict paragraph (``id='verdict'``), the first text under the page's heading."""
+    return f"<p id='verdict' class='verdict {v.status.value}'>{escape(v.text)}</p>"
+
+
+def counts_text(n_errors: int, n_warnings: int) -> str:
+    """``0 errors, 1 warning``: counts in words, singular or plural."""
+    return f"{n_errors} error{'s' * (n_errors != 1)}, {n_warnings} warning{'s' * (n_warnings != 1)}"
+
+
+def page(title: str, *parts: str, verdict: Verdict, heading_text: str | None = None, description: str = "") -> str:
+    """The whole page: doctype, charset, viewport, title, the kit's CSS, an ``<h1>``, the
+    verdict (:func:`verdict_paragraph`) and the parts."""
     meta = f"<meta name='description' content='{escape(description)}'>" if description else ""
     head = (
         "<!doctype html><html lang='en'><head><meta charset='utf-8'>"
@@ -181,7 +242,7 @@ def page(title: str, *parts: str, heading_text: str | None = None, description: 
         f"{meta}<title>{escape(title)}</title><style>{CSS}</style></head><body>"
     )
     h1 = f"<h1>{escape(heading_text or title)}</h1>"
-    return "\n".join([head, h1, *parts, "</body></html>"])
+    return "\n".join([head, h1, verdict_paragraph(verdict), *parts, "</body></html>"])
 
 
 # ------------------------------------------------------------------------------ figures
@@ -197,18 +258,63 @@ def pyplot() -> ModuleType:
     return plt
 
 
-def png(fig: Figure, dpi: int = 96) -> bytes:
-    """A matplotlib figure as PNG bytes (tight bounding box); the figure is closed."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
-    pyplot().close(fig)
-    return buf.getvalue()
+#: An axis label names a quantity, then its unit in brackets: ``t [s]``, ``km [m]``, ``share [%]``.
+AXIS_LABEL = re.compile(r"\S.*\[[^\]]+\].*")
+
+
+class Png(bytes):
+    """PNG bytes of a figure, with the labels of its axes (``x: t [s]; y: km [m]``) for the page."""
+
+    axes: str = ""
+
+
+def _label(axis: Any) -> str:
+    return " ".join(axis.get_label_text().split())
+
+
+def axis_labels(fig: Figure) -> list[str]:
+    """Every axis label of ``fig``'s drawn axes (``x: …``, ``y: …``); ValueError naming the
+    plot when an axis has no quantity-and-unit label (:data:`AXIS_LABEL`). An axis shared with
+    other axes may leave its label to one of them (one x label under a column of plots)."""
+    out: list[str] = []
+    for ax in fig.get_axes():
+        if not ax.get_visible() or not ax.axison:
+            continue
+        for name, group in (("x", ax.get_shared_x_axes()), ("y", ax.get_shared_y_axes())):
+            axis = ax.xaxis if name == "x" else ax.yaxis
+            if not axis.get_visible():
+                continue
+            text = _label(axis)
+            siblings = [_label(s.xaxis if name == "x" else s.yaxis) for s in group.get_siblings(ax)]
+            if not any(AXIS_LABEL.fullmatch(t) for t in [text, *siblings]):
+                title = ax.get_title() or f"axes {fig.get_axes().index(ax) + 1}"
+                raise ValueError(f"plot {title!r}: the {name} axis needs a label 'quantity [unit]', has {text!r}")
+            if text:
+                out.append(f"{name}: {text}")
+    return out
+
+
+def png(fig: Figure, dpi: int = 96) -> Png:
+    """A matplotlib figure as PNG bytes (tight bounding box), its axis labels checked
+    (:func:`axis_labels`); the figure is closed."""
+    try:
+        labels = axis_labels(fig)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
+    finally:
+        pyplot().close(fig)
+    out = Png(buf.getvalue())
+    out.axes = "; ".join(dict.fromkeys(labels))
+    return out
 
 
 def figure(png_bytes: bytes, alt: str, caption: str | None = None) -> str:
-    """A PNG embedded as a ``data:`` URI, with ``alt`` text and a caption (``alt`` by default)."""
+    """A PNG embedded as a ``data:`` URI, with ``alt`` text and a caption (``alt`` by default);
+    the axes of a :class:`Png` named in ``data-axes`` and at the end of ``alt``."""
     data = base64.b64encode(png_bytes).decode()
+    axes = getattr(png_bytes, "axes", "")
+    described = f"{alt} ({axes})" if axes else alt
     return (
-        f'<figure><img alt="{escape(alt)}" src="data:image/png;base64,{data}">'
+        f'<figure><img alt="{escape(described)}" data-axes="{escape(axes)}" src="data:image/png;base64,{data}">'
         f"<figcaption>{escape(caption if caption is not None else alt)}</figcaption></figure>"
     )

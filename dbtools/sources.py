@@ -1,7 +1,11 @@
 """Reading a source set (SPEC §3 "Source files") into a :class:`Network` plus findings.
 
 An optional ``network.toml`` declares the operating area, metric CRS and height datum
-(:func:`dbtools.gis.georef.read_declaration`); its entries go to ``Network.meta``.
+(:func:`dbtools.gis.georef.read_declaration`); its entries go to ``Network.meta``. Its
+``[csv]`` table declares the convention of the CSV files (``delimiter = ";"``,
+``decimal = ","``: :func:`declared_locale`), for source sets saved from a spreadsheet in a
+European locale; without it the convention is detected (:mod:`dbtools.csv_locale`), and
+the options of ``db build`` / ``db validate`` come before it.
 
 Findings:
 
@@ -15,31 +19,35 @@ Findings:
 from __future__ import annotations
 
 import json
+import tomllib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from dbtools.csv_locale import CsvLocale, csv_table, head_dialect
 from dbtools.gis.georef import NETWORK_FILE, read_declaration, write_declaration
 from dbtools.network import Network, canonical_with_index, empty_frame
 from dbtools.rules.area import check_area
 from dbtools.rules.common import Locator
 from dbtools.rules.schema import check_empty_tables
 from dbtools.tabular import code_columns, find_table_file, read_table_file, sha256_file, text_columns
-from dbtools.typed_csv import read_csv_typed
+from dbtools.typed_csv import Notation, read_csv_typed
 from schemas.enums import Severity, Track
 from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
+from schemas.model import Table
 from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
 
 
-def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
+def read_source_set(folder: Path, locale: CsvLocale | None = None) -> tuple[Network, list[Finding]]:
     """Read every source file of a folder; returns the network and all findings.
 
     Rows with errors stay in the frames (so later checks can still run); callers decide
-    whether errors block them.
+    whether errors block them. ``locale``: the CSV convention declared by the caller's
+    options, over the folder's ``network.toml [csv]`` (:func:`declared_locale`).
     """
     folder = Path(folder)
     if not folder.exists():
@@ -47,6 +55,7 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
     if not folder.is_dir():
         raise InputError("not a folder (expected a source set with gis, balises, feature_points)", path=folder)
     findings: list[Finding] = []
+    locale = (locale or CsvLocale()).over(declared_locale(folder))
     tables: dict[str, pd.DataFrame] = {}
     files: dict[str, str] = {}
     hashes: dict[str, str] = {}
@@ -65,10 +74,16 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
                 )
             tables[name] = empty_frame(table)
             continue
-        raw = read_csv_typed(table, path) if path.suffix.lower() == ".csv" else None  # None: as text
+        raw = _read_typed(table, path, locale, findings)  # None: as text
         if raw is None:
             tf = read_table_file(
-                path, table=name, sheet=name, code_columns=code_columns(table), text_columns=text_columns(table)
+                path,
+                table=name,
+                sheet=name,
+                code_columns=code_columns(table),
+                text_columns=text_columns(table),
+                locale=locale,
+                numeric_columns=_numbers(table),
             )
             raw = tf.frame
             findings.extend(tf.findings)
@@ -93,6 +108,39 @@ def read_source_set(folder: Path) -> tuple[Network, list[Finding]]:
     findings.extend(check_empty_tables(net.tables, loc, tables_read=set(files)))
     findings.extend(check_area(net, loc))
     return net, findings
+
+
+def declared_locale(folder: Path) -> CsvLocale:
+    """The ``[csv]`` table of the folder's ``network.toml`` (``delimiter``: ``,``, ``;``,
+    ``tab`` or ``|``; ``decimal``: ``.`` or ``,``); nothing declared without one. InputError
+    naming the file on an unknown key or value."""
+    path = Path(folder) / NETWORK_FILE
+    if not path.is_file():
+        return CsvLocale()
+    try:
+        table = tomllib.loads(path.read_text(encoding="utf-8-sig")).get("csv", {})
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return CsvLocale()  # read_declaration names the problem
+    return csv_table(table, path)
+
+
+def _read_typed(table: Table, path: Path, locale: CsvLocale, findings: list[Finding]) -> pd.DataFrame | None:
+    """A ``.csv`` read by the typed reader in the notation its head settles
+    (:func:`dbtools.csv_locale.head_dialect`; the convention's finding added), or None for
+    the text path (a workbook, a file the head cannot settle or the typed reader declines)."""
+    if path.suffix.lower() != ".csv":
+        return None
+    dialect = head_dialect(path, _numbers(table), locale)
+    if dialect is None:
+        return None
+    raw = read_csv_typed(table, path, Notation(dialect.delimiter, dialect.decimal))
+    note = dialect.finding(path, table.name) if raw is not None else None
+    findings += [note] if note is not None else []
+    return raw
+
+
+def _numbers(table: Table) -> list[str]:
+    return [c.name for c in table.columns if c.dtype in ("float", "int")]
 
 
 def _declared_meta(folder: Path, hashes: dict[str, str]) -> dict[str, str]:

@@ -9,9 +9,12 @@ What spreadsheet tools commonly get wrong, and what happens to it here:
   starts with a UTF-16 byte-order mark (Excel's "Unicode text") is read in that encoding,
   with a warning (``source.encoding``) naming it and the first line that is not UTF-8;
   anything else is refused (InputError) naming that line.
-* **delimiter** — a header without a comma that splits on ``;``, tab or ``|`` is read with
-  that delimiter, so that the other findings name the right cells, and is an error
-  (``source.delimiter``): the source format is comma-separated.
+* **delimiter and decimal separator** — a reader given a :class:`~dbtools.csv_locale.CsvLocale`
+  (source sets, possession plans) reads a spreadsheet locale's CSV (``;`` or tab, decimal
+  commas) as :mod:`dbtools.csv_locale` decides, with one ``source.locale`` finding; for the
+  others (run folders' streams, ``gis grid`` inputs) a header without a comma that splits on
+  ``;``, tab or ``|`` is read with that delimiter, so that the other findings name the right
+  cells, and is an error (``source.delimiter``): their format is comma-separated.
 * **quotes** — an opening quote that is never closed, and a quoted cell that spans lines
   (a stray quote that swallowed the rows up to the next quote), are refused (InputError)
   naming the line and the column: no cell of a table holds a line break.
@@ -34,8 +37,6 @@ What spreadsheet tools commonly get wrong, and what happens to it here:
 
 Findings:
 
-* ``source.delimiter`` (error) — the fields of a CSV are separated by semicolons or tabs, not
-  commas. Fix: save the file as CSV (comma delimited).
 * ``source.encoding`` (warning) — the file is not UTF-8; it was read in another encoding.
   Fix: check the text in the output and save the file as UTF-8.
 * ``source.duplicate_column`` (error) — a column name appears twice in the header; only the
@@ -65,6 +66,7 @@ from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
+from dbtools.csv_locale import CsvLocale, machine_delimiter_finding, read_dialect, sniff_delimiter
 from dbtools.inputs import check_zip, regular_file
 from schemas.enums import Severity
 from schemas.errors import InputError
@@ -74,8 +76,6 @@ if TYPE_CHECKING:
     from schemas.model import Table
 
 TABULAR_SUFFIXES = (".csv", ".xlsx")
-#: Delimiters recognised in a header without commas, with their names for messages.
-OTHER_DELIMITERS = {";": "semicolons", "\t": "tabs", "|": "vertical bars"}
 #: Cells named one by one per column for numeric codes; beyond, one finding counts the rest.
 MAX_CELLS_NAMED = 10
 
@@ -113,34 +113,54 @@ def read_table_file(
     sheet: str | None = None,
     code_columns: Collection[str] = (),
     text_columns: Collection[str] = (),
+    locale: CsvLocale | None = None,
+    numeric_columns: Collection[str] = (),
 ) -> TableFile:
     """All cells as text (leading zeros kept, empty cells as empty strings), plus findings
     (module docstring) for ``table``. ``code_columns``: the columns whose numeric .xlsx
-    cells are reported; ``text_columns``: those whose date cells are. InputError when the
+    cells are reported; ``text_columns``: those whose date cells are. ``locale``: a CSV in a
+    spreadsheet locale is read as :mod:`dbtools.csv_locale` decides (None: the machine
+    format only), its ``numeric_columns`` turned into machine notation. InputError when the
     file cannot be read at all."""
     path = regular_file(Path(path), "CSV or .xlsx file")
     if path.suffix.lower() == ".xlsx":
         tf = _read_xlsx(path, sheet, table, _TextColumns(frozenset(code_columns), frozenset(text_columns)))
     else:
-        tf = _read_csv(path, table)
+        tf = _read_csv(path, table, locale, numeric_columns)
     empty = [i + 1 for i, c in enumerate(tf.frame.columns) if str(c).startswith("Unnamed:") or not str(c).strip()]
     if empty:
         raise InputError(f"header has empty column name(s) at position {empty}", path=path, row=1)
     return tf
 
 
-def read_raw_table(path: Path, sheet: str | None = None, declared: Table | None = None) -> pd.DataFrame:
-    """:func:`read_table_file`'s frame; its first error finding raised as an InputError.
-    ``declared``: the file's table, whose :func:`code_columns` are checked in a workbook."""
+def read_checked_table(
+    path: Path, sheet: str | None = None, declared: Table | None = None, locale: CsvLocale | None = None
+) -> TableFile:
+    """:func:`read_table_file` of a file of ``declared`` (its :func:`code_columns` checked in
+    a workbook, its number columns read in ``locale``); its first error finding raised as an
+    InputError, the warnings returned with the frame."""
     codes = code_columns(declared) if declared is not None else ()
     texts = text_columns(declared) if declared is not None else ()
+    numbers = [c.name for c in declared.columns if c.dtype in ("float", "int")] if declared is not None else ()
     tf = read_table_file(
-        path, table=declared.name if declared is not None else "", sheet=sheet, code_columns=codes, text_columns=texts
+        path,
+        table=declared.name if declared is not None else "",
+        sheet=sheet,
+        code_columns=codes,
+        text_columns=texts,
+        locale=locale,
+        numeric_columns=numbers,
     )
     for f in tf.findings:
         if f.severity == Severity.ERROR:
             raise InputError(f.message, path=path, row=f.row, column=f.column)
-    return tf.frame
+    return tf
+
+
+def read_raw_table(path: Path, sheet: str | None = None, declared: Table | None = None) -> pd.DataFrame:
+    """:func:`read_checked_table`'s frame of a file in the machine format (run folders'
+    streams, ``gis grid`` inputs)."""
+    return read_checked_table(path, sheet, declared).frame
 
 
 def code_columns(table: Table) -> list[str]:
@@ -161,27 +181,18 @@ def text_columns(table: Table) -> list[str]:
 # ------------------------------------------------------------------------------------ CSV
 
 
-def _read_csv(path: Path, table: str) -> TableFile:
+def _read_csv(path: Path, table: str, locale: CsvLocale | None, numeric: Collection[str]) -> TableFile:
     findings: list[Finding] = []
     with open(path, "rb") as fh:
         head = fh.read(1 << 16)
     if not head.strip():
         raise InputError("file is empty (no header line)", path=path)
-    sep = _delimiter(head)
-    if sep != ",":
-        findings.append(
-            Finding(
-                "source.delimiter",
-                Severity.ERROR,
-                table,
-                f"fields are separated by {OTHER_DELIMITERS[sep]} ({sep!r}), not commas: "
-                "save the file as CSV (comma delimited)",
-                file=str(path),
-                row=1,
-                value=sep,
-                limit=",",
-            )
-        )
+    if locale is None:
+        sep, wrong = machine_delimiter_finding(path, table)
+        findings += [wrong] if wrong is not None else []
+    else:
+        sniffed = sniff_delimiter(path, locale)
+        sep = sniffed[0]
     fast = _read_csv_fast(path) if sep == "," else None  # checked for line breaks already
     utf8 = None if head.startswith((b"\xff\xfe", b"\xfe\xff")) else fast if fast is not None else _utf8(path, sep)
     if utf8 is None:  # not UTF-8: the whole file decoded in the encoding it has
@@ -195,18 +206,11 @@ def _read_csv(path: Path, table: str) -> TableFile:
     if fast is None:
         _refuse_multiline(frame, path)
     frame, dups = _drop_duplicates(frame, _header_names(header, sep), path, table)
+    if locale is not None:
+        frame, dialect = read_dialect(frame, numeric, path, locale, sniffed)
+        found = dialect.finding(path, table)
+        findings += [found] if found is not None else []
     return TableFile(frame, findings + dups)
-
-
-def _delimiter(head: bytes) -> str:
-    """``,`` unless the header line has no comma and splits on another delimiter."""
-    first = head.split(b"\n", 1)[0].replace(b"\x00", b"")  # (UTF-16: the ASCII bytes)
-    if b"," in first:
-        return ","
-    for sep in OTHER_DELIMITERS:
-        if first.count(sep.encode()) >= 1:
-            return sep
-    return ","
 
 
 def _utf8(path: Path, sep: str) -> pd.DataFrame | None:

@@ -21,6 +21,11 @@ not a declared one or repeated, a text field starts with a blank (the C parser's
 quote handling, which is faster; the text path reads quoted cells and names an unclosed
 quote's line). A header-only file, a file in another encoding or with
 another delimiter declines too: the text path reports those (:mod:`dbtools.tabular`).
+A file in a spreadsheet locale (``;``, tabs, decimal commas: :mod:`dbtools.csv_locale`)
+is read with its :class:`Notation` once that module has judged it from the head: both
+parsers take the delimiter and the decimal separator (correctly rounded with a decimal comma
+too), and a cell of another notation (``12.5`` among decimal commas, ``1.234,5``) does not
+parse, so the file declines and the text path names the cell.
 Cells the text path treats as blank — empty, or ``nan``/``na``/``null`` in any letter
 case, padded or not — are nulls here too. Text columns are read as text and coerced
 exactly as before. A whole number column is parsed
@@ -41,7 +46,7 @@ import re
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -63,6 +68,17 @@ PIECE_BYTES = 1 << 30
 #: ``float_precision``, pandas-dev/pandas#64432); before, its "high" converter was not
 #: (1 ulp off on some cells), so Arrow's parser reads every file.
 C_PARSER_EXACT = tuple(int(p) for p in re.findall(r"\d+", pd.__version__)[:2]) >= (3, 1)
+
+
+class Notation(NamedTuple):
+    """The delimiter and decimal separator a file is parsed with (the machine format's by
+    default)."""
+
+    delimiter: str = ","
+    decimal: str = "."
+
+
+MACHINE = Notation()
 
 
 def _case_variants(word: str) -> list[str]:
@@ -128,7 +144,9 @@ def _numeric(table: Table) -> set[str]:
     return {c.name for c in table.columns if c.dtype in ("float", "int")}
 
 
-def _arrow_blocks(source: Path | pa.NativeFile, table: Table, block_bytes: int, size: int) -> Iterator[_Block]:
+def _arrow_blocks(
+    source: Path | pa.NativeFile, table: Table, block_bytes: int, size: int, notation: Notation = MACHINE
+) -> Iterator[_Block]:
     """Arrow's streaming parse of ``source``, one block per record batch; raises
     :class:`TextPathNeeded` when the file does not parse with the declared types or its
     columns are not declared ones (module docstring)."""
@@ -137,13 +155,17 @@ def _arrow_blocks(source: Path | pa.NativeFile, table: Table, block_bytes: int, 
     numeric = _numeric(table)
     types = {c.name: (pa.float64() if c.name in numeric else pa.string()) for c in table.columns}  # absent: ignored
     convert = pcsv.ConvertOptions(
-        column_types=types, null_values=BLANK_CELLS, strings_can_be_null=False, quoted_strings_can_be_null=False
+        column_types=types,
+        null_values=BLANK_CELLS,
+        strings_can_be_null=False,
+        quoted_strings_can_be_null=False,
+        decimal_point=notation.decimal,
     )
     try:
         reader = pcsv.open_csv(
             source,
             read_options=pcsv.ReadOptions(block_size=block_bytes, use_threads=False),
-            parse_options=pcsv.ParseOptions(quote_char=False),
+            parse_options=pcsv.ParseOptions(quote_char=False, delimiter=notation.delimiter),
             convert_options=convert,
         )
         names = reader.schema.names
@@ -189,9 +211,9 @@ class _Range(io.RawIOBase):
         return got
 
 
-def _header(fh: BinaryIO) -> tuple[bytes, list[str]] | None:
+def _header(fh: BinaryIO, delimiter: str = ",") -> tuple[bytes, list[str]] | None:
     """The header line (BOM and line end included) and its names; None when it is not
-    a plain comma-separated UTF-8 line (Arrow's path judges those)."""
+    a plain ``delimiter``-separated UTF-8 line (Arrow's path judges those)."""
     line = fh.readline(1 << 16)
     if not line.endswith(b"\n"):
         return None
@@ -199,7 +221,7 @@ def _header(fh: BinaryIO) -> tuple[bytes, list[str]] | None:
         text = line.removeprefix(b"\xef\xbb\xbf").rstrip(b"\r\n").decode("utf-8")
     except UnicodeDecodeError:
         return None
-    return line, text.split(",")
+    return line, text.split(delimiter)
 
 
 def _piece_ends(fh: BinaryIO, start: int, size: int, piece_bytes: int) -> list[int]:
@@ -228,7 +250,9 @@ def _piece_ends(fh: BinaryIO, start: int, size: int, piece_bytes: int) -> list[i
     return ends
 
 
-def _c_numbers(source: Path | _Range, names: list[str]) -> tuple[dict[str, np.ndarray], dict[str, int]] | None:
+def _c_numbers(
+    source: Path | _Range, names: list[str], notation: Notation = MACHINE
+) -> tuple[dict[str, np.ndarray], dict[str, int]] | None:
     """pandas's C parser on one piece of a file of number columns only (correctly rounded
     since pandas 3.1: fast_float, the parser Arrow uses): its number columns and their
     null counts, or None for Arrow's path to read the piece.
@@ -250,6 +274,8 @@ def _c_numbers(source: Path | _Range, names: list[str]) -> tuple[dict[str, np.nd
     try:
         frame = pd.read_csv(
             source,
+            sep=notation.delimiter,
+            decimal=notation.decimal,
             dtype="float64",
             engine="c",
             quoting=csv.QUOTE_NONE,
@@ -273,12 +299,12 @@ def _c_numbers(source: Path | _Range, names: list[str]) -> tuple[dict[str, np.nd
     return numbers, {n: int(np.count_nonzero(np.isnan(v))) for n, v in numbers.items()}
 
 
-def _c_blocks(path: Path, table: Table, piece_bytes: int) -> Iterator[_Block] | None:
+def _c_blocks(path: Path, table: Table, piece_bytes: int, notation: Notation = MACHINE) -> Iterator[_Block] | None:
     """The blocks of a file whose columns are all declared number columns: pandas's C
     parser piece by piece (faster than Arrow's by ≈ 15–25 %, bench/NOTES.md), Arrow's path
     for a piece it declines. None when the header is not of such a file."""
     with open(path, "rb") as fh:
-        head = _header(fh)
+        head = _header(fh, notation.delimiter)
     if head is None:
         return None
     header, names = head
@@ -290,10 +316,12 @@ def _c_blocks(path: Path, table: Table, piece_bytes: int) -> Iterator[_Block] | 
         or not all(n in numeric for n in names)
     ):
         return None
-    return _c_pieces(path, table, header, names, piece_bytes)
+    return _c_pieces(path, table, header, names, piece_bytes, notation)
 
 
-def _c_pieces(path: Path, table: Table, header: bytes, names: list[str], piece_bytes: int) -> Iterator[_Block]:
+def _c_pieces(
+    path: Path, table: Table, header: bytes, names: list[str], piece_bytes: int, notation: Notation = MACHINE
+) -> Iterator[_Block]:
     """The pieces of a number file, one block each from the C parser, or Arrow's blocks of
     a piece it declines (the file itself when it is one piece; else the piece read in
     place, never a copy of it in memory)."""
@@ -302,27 +330,27 @@ def _c_pieces(path: Path, table: Table, header: bytes, names: list[str], piece_b
         start = len(header)
         for end in _piece_ends(fh, start, size, piece_bytes):
             whole = start == len(header) and end == size
-            parsed = _c_numbers(path if whole else _Range(fh, header, start, end), names)
+            parsed = _c_numbers(path if whole else _Range(fh, header, start, end), names, notation)
             if parsed is not None:
                 numbers, nulls = parsed
                 yield _Block(names, numbers, nulls, {}, len(numbers[names[0]]), end - start, True)
             else:
                 source = path if whole else pa.PythonFile(_Range(fh, header, start, end), mode="r")
-                for block in _arrow_blocks(source, table, BLOCK_BYTES, end - start):
+                for block in _arrow_blocks(source, table, BLOCK_BYTES, end - start, notation):
                     if block.names != names:
                         raise TextPathNeeded
                     yield block
             start = end
 
 
-def _blocks(table: Table, path: Path, piece_bytes: int) -> Iterator[_Block] | None:
+def _blocks(table: Table, path: Path, piece_bytes: int, notation: Notation = MACHINE) -> Iterator[_Block] | None:
     """The file's blocks, checked one by one (:func:`_fits`), or None when it is known
     from its header that the text path must read it; the iterator raises
     :class:`TextPathNeeded` when that is found later."""
     try:
-        blocks = _c_blocks(path, table, piece_bytes)
+        blocks = _c_blocks(path, table, piece_bytes, notation)
         if blocks is None:
-            blocks = _arrow_blocks(path, table, BLOCK_BYTES, path.stat().st_size)
+            blocks = _arrow_blocks(path, table, BLOCK_BYTES, path.stat().st_size, notation)
     except OSError:
         return None
     first = _first(blocks)
@@ -404,7 +432,7 @@ def _joined(blocks: Iterator[_Block], size: int) -> pd.DataFrame:
     return _frame(first.names, {n: c.done() for n, c in numbers.items()}, {n: _chunked(c) for n, c in text.items()})
 
 
-def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
+def read_csv_typed(table: Table, path: Path, notation: Notation = MACHINE) -> pd.DataFrame | None:
     """The raw frame of a CSV file of ``table`` with its number columns already parsed
     (float64), or None when the caller must read the file as text (module docstring).
 
@@ -413,9 +441,10 @@ def read_csv_typed(table: Table, path: Path) -> pd.DataFrame | None:
     by Arrow's streaming reader, block by block. Each block's numbers are copied into the
     final arrays, so the file is held once: a whole table beside its concatenated columns
     cost a second copy of every number and, with it, most of the time (bench/NOTES.md).
+    ``notation``: the delimiter and decimal separator :mod:`dbtools.csv_locale` found.
     InputError, before it is opened, when ``path`` is not a regular file (a FIFO …)."""
     path = regular_file(Path(path), "CSV file")
-    blocks = _blocks(table, path, PIECE_BYTES)
+    blocks = _blocks(table, path, PIECE_BYTES, notation)
     if blocks is None:
         return None
     try:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from dbtools.csv_locale import CsvLocale
 from dbtools.database import integrity_findings, read_network
 from dbtools.gis.index import grid_index
 from dbtools.network import Network
@@ -66,14 +67,17 @@ def validate_network(
     return findings
 
 
-def validate_path(path: Path, *, config: ValidationConfig | None = None) -> list[Finding]:
-    """Validate a DB file (with SQLite integrity and content hash) or a source set folder.
+def validate_path(
+    path: Path, *, config: ValidationConfig | None = None, locale: CsvLocale | None = None
+) -> list[Finding]:
+    """Validate a DB file (with SQLite integrity and content hash) or a source set folder
+    (``locale``: the CSV convention of its files, :func:`dbtools.sources.read_source_set`).
 
     Raises :class:`~schemas.errors.InputError` (exit 2) when the input cannot be read.
     """
     path = Path(path)
     if path.is_dir():
-        network, findings = read_source_set(path)
+        network, findings = read_source_set(path, locale)
         return findings + validate_network(network, schema_checks=False, config=config)
     network = read_network(path, verify=False)  # the hash is a finding here (integrity_findings)
     empty = check_empty_tables(network.tables, Locator())  # sources: checked on reading

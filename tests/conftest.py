@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -39,3 +41,16 @@ def sample_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     db = tmp_path_factory.mktemp("sample-db") / "sample.sqlite"
     build_db(sample_source_dir(), db, db_version="sample-test")
     return db
+
+
+@pytest.fixture(scope="session")
+def browser() -> Iterator[Any]:
+    """One headless Chromium for the session's page tests (tests/pages.py); skipped where
+    chromium is not installed (.ci/run installs it)."""
+    from tests.cdp import Browser, chromium
+
+    exe = chromium()
+    if exe is None:
+        pytest.skip("chromium is not installed (.ci/run installs it)")
+    with Browser(exe, 1280, 800) as b:
+        yield b

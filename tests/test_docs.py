@@ -216,9 +216,10 @@ def test_the_site_builds_strict(tmp_path: Path) -> None:
 
 def test_the_report_summary_explains_every_term() -> None:
     """`make demo` / `trainpos demo` prints the report tables and one line per term they use."""
-    from cli.audit import LABELS, LEGEND, OTHER_COLUMNS, PCT_COLUMNS
+    from cli.audit import LEGEND, OTHER_COLUMNS, PCT_COLUMNS
+    from schemas.labels import label
 
     explained = {t.strip() for key in LEGEND for t in key.split(",")}
-    shown = [LABELS[c] for c in (*PCT_COLUMNS, *OTHER_COLUMNS)]
+    shown = [label(c) for c in (*PCT_COLUMNS, *OTHER_COLUMNS, "refusal_reasons")]
     assert not [s for s in shown if s not in explained], "report columns without a line in cli/audit.py LEGEND"
     assert all(len(line) <= 100 for line in LEGEND.values())

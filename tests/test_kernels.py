@@ -18,8 +18,8 @@ from hypothesis import strategies as st
 from dbtools.gis import match_kernel, match_numpy
 from dbtools.gis.geometry import Projector
 from dbtools.gis.matching import TrackIndex, track_index_for
-from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.simulate import radar
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from fieldlogs.simulate.scenario import RadarIfCfg
 from tests.fresh import fresh_python
 
@@ -175,7 +175,7 @@ def test_match_xy_takes_numpy_for_few_fixes_and_the_kernel_for_many() -> None:
         "import sys\nimport numpy as np\n"
         "from dbtools.gis.geometry import Projector\n"
         "from dbtools.gis.matching import track_index_for\n"
-        "from dbtools.synthetic.network import build_network, demo_line\n"
+        "from fieldlogs.simulate.networks.synthetic import build_network, demo_line\n"
         "idx = track_index_for(build_network([demo_line()], Projector(9)))\n"
         "rng = np.random.default_rng(5)\n"
         "sel = rng.integers(0, idx.x.size, 3000)\n"
@@ -199,7 +199,7 @@ def test_a_days_gps_fixes_are_matched_without_numba_in_bounded_memory() -> None:
         "import sys\nfrom pathlib import Path\nimport numpy as np\n"
         "from dbtools.gis.geometry import Projector\n"
         "from dbtools.gis.matching import track_index_for\n"
-        "from dbtools.synthetic.network import build_network, demo_line\n"
+        "from fieldlogs.simulate.networks.synthetic import build_network, demo_line\n"
         "def status(key):\n"
         "    line = [s for s in Path('/proc/self/status').read_text().splitlines() if s.startswith(key)]\n"
         "    return int(line[0].split()[1]) / 1024\n"

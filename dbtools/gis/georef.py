@@ -269,7 +269,8 @@ def read_declaration(path: Path) -> dict[str, str]:
 
     Keys: ``metric_crs = "EPSG:32632"``; ``height_datum = "ellipsoidal" | "orthometric"``,
     ``geoid_model = "…"``; ``[area]`` with ``lat_min``, ``lat_max``, ``lon_min``,
-    ``lon_max`` [deg] or ``polygon = [[lon, lat], …]``.
+    ``lon_max`` [deg] or ``polygon = [[lon, lat], …]``. ``[csv]`` (the convention of the
+    source files, :func:`dbtools.sources.declared_locale`) is no meta entry.
     """
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
@@ -277,10 +278,10 @@ def read_declaration(path: Path) -> dict[str, str]:
         raise InputError(f"not UTF-8 text (byte {exc.start})", path=path) from exc
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"not valid TOML: {exc}", path=path) from exc
-    unknown = sorted(set(data) - {"area", "metric_crs", "height_datum", "geoid_model"})
+    unknown = sorted(set(data) - {"area", "metric_crs", "height_datum", "geoid_model", "csv"})
     if unknown:
         raise InputError(
-            f"unknown key(s) {', '.join(unknown)} (known: area, metric_crs, height_datum, geoid_model)", path=path
+            f"unknown key(s) {', '.join(unknown)} (known: area, metric_crs, height_datum, geoid_model, csv)", path=path
         )
     meta: dict[str, str] = {}
     if "area" in data:

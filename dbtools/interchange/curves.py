@@ -10,7 +10,7 @@ exit transition (L2)::
     rows (D, S) = [TS − 20, TS, TS + 0.8·L1, ST − 0.8·L2, ST, ST + 20]
 
 and on U (running km-decreasing) the same points in reverse order, left and right swapped
-— exactly as :func:`dbtools.synthetic.network.feature_rows` lays them out. A curve is a
+— exactly as :func:`fieldlogs.simulate.networks.synthetic.feature_rows` lays them out. A curve is a
 feature only where the geometry allows: an arc with a radius, each side either a clothoid
 or nothing (the curvature then jumps at the arc end), and a straight of at least 20 m
 beyond; everything else (compound curves, reverse curves without a straight between them,

@@ -86,10 +86,11 @@ def render_review(
     findings = validate_path(new)
     counts = count_by_severity(findings)
     ok = counts["error"] == 0
-    verdict = pk.badge(
-        f"{counts['error']} error(s), {counts['warning']} warning(s) in NEW", pk.Status.OK if ok else pk.Status.WARN
+    changed = "content changed" if d.has_changes else "no content change"
+    verdict = pk.Verdict(
+        f"{'Passed' if ok else 'Failed'}: {pk.counts_text(counts['error'], counts['warning'])} in NEW; {changed}.",
+        pk.Status.OK if ok else pk.Status.WARN,
     )
-    changed = pk.badge("changes" if d.has_changes else "no content change", pk.Status.NOTE)
     head = pk.key_value_table(
         [
             ("old", str(old)),
@@ -103,7 +104,6 @@ def render_review(
     )
     counts_frame = pd.DataFrame([{"table": n, **t.counts} for n, t in d.tables.items()])
     parts = [
-        f"<p id='verdict'>{verdict} {changed}</p>",
         head,
         pk.section("Validation of NEW", _findings_table(findings)),
         pk.section(
@@ -127,6 +127,7 @@ def render_review(
         f"DB review {d.old.get('db_version', old)} → {d.new.get('db_version', new)}",
         *parts,
         description="trainpos db review: validation, diff and map of a DB change",
+        verdict=verdict,
     )
     return page, findings
 

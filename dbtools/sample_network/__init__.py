@@ -4,7 +4,7 @@ A railway alignment fitted to the line's real (coarse) geometry from ``nagix/min
 (MIT licence, © nagix; station data originally from ODPT), with a GIS grid for two tracks,
 balises at its six real stations and feature points at its real curves. See ``SOURCE.md``
 for the source, licence and method; regenerate with
-``python -m dbtools.sample_network.build``.
+``python -m fieldlogs.simulate.networks.sample_build``.
 """
 
 from __future__ import annotations

@@ -89,7 +89,7 @@ def offset_along_line(cells: pd.DataFrame, defects: pd.DataFrame, line_code: str
         ax.plot(mid, ct["km_residual_mean_m"].to_numpy(dtype=float), ".", ms=3, label=f"track {track}")
     ax.axhline(0.0, color="0.5", lw=0.6)
     ax.set_ylabel("along-track\nresidual [m]")
-    ax.set_xlabel("km")
+    ax.set_xlabel("km [km]")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="lower right", fontsize=7)
     else:
@@ -133,23 +133,23 @@ def mostly_unverified(coverage: pd.DataFrame) -> pd.DataFrame:
     return per[(per["length_km"] > 0) & (per["unverified_km"] > MAX_UNVERIFIED_SHARE * per["length_km"])]
 
 
-def verdict(coverage: pd.DataFrame, n_defects: int, n_km_defects: int = 0) -> str:
+def verdict(coverage: pd.DataFrame, n_defects: int, n_km_defects: int = 0) -> kit.Verdict:
     """Defects in red; "No defect found." in green only when no line is mostly unverified,
     else in amber, naming those lines and how much of them is unverified."""
     if n_defects or n_km_defects:
         km = f" and {n_km_defects} along-track (km) defect(s)" if n_km_defects else ""
-        return kit.paragraph(f"{n_defects} defect(s){km} found.", kit.Status.WARN)
+        return kit.Verdict(f"Failed: {n_defects} defect(s){km} found.", kit.Status.WARN)
     if coverage.empty or not float(coverage["length_km"].sum()) > 0:
-        return kit.paragraph("No defect found, but no grid cell could be checked.", kit.Status.CAUTION)
+        return kit.Verdict("Not verified: no defect found, but no grid cell could be checked.", kit.Status.CAUTION)
     thin = mostly_unverified(coverage)
     if thin.empty:
-        return kit.paragraph("No defect found.", kit.Status.OK)
+        return kit.Verdict("Passed: no defect found.", kit.Status.OK)
     lines = "; ".join(
         f"line {r.line_code}: {r.unverified_km:.1f} of {r.length_km:.1f} km unverified" for r in thin.itertuples()
     )
-    return kit.paragraph(
-        f"No defect found where the evidence suffices, but most of the grid is unverified ({lines}): "
-        "the grid there is not shown to be right.",
+    return kit.Verdict(
+        f"Mostly unverified: no defect found where the evidence suffices, but most of the grid is unverified "
+        f"({lines}): the grid there is not shown to be right.",
         kit.Status.CAUTION,
     )
 
@@ -195,7 +195,6 @@ def render_html(report: VerifyReport) -> str:
     parts = [
         f"<p>DB {kit.code(report.db)} (version <b>{kit.escape(report.db_version)}</b>), "
         f"{len(report.runs)} run(s), {v.counts.get('fixes_matched', 0):,} fixes used; {kit.generated()}.</p>",
-        verdict(v.coverage, n_def, len(v.km_defects)),
         _method(report),
         kit.section("Coverage", table_html(v.coverage)),
         kit.section("Defects", table_html(v.defects) if n_def else "<p>None.</p>"),
@@ -219,4 +218,9 @@ def render_html(report: VerifyReport) -> str:
             ),
         )
     )
-    return kit.page("trainpos gis verify", *parts, heading_text="GIS grid verification")
+    return kit.page(
+        "trainpos gis verify",
+        *parts,
+        heading_text="GIS grid verification",
+        verdict=verdict(v.coverage, n_def, len(v.km_defects)),
+    )

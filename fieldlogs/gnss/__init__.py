@@ -8,7 +8,8 @@ Modules, one concern each:
 * ``atmosphere`` — Klobuchar, the Galileo effective-ionisation model, Saastamoinen;
 * ``corrections`` — the D-GPS corrections seam and the per-row corrections form;
 * ``sbas`` — SBAS/MSAS L1 messages (RTCA DO-229): stream screening, decoding, fast/long-term
-  corrections with σ_flt, the ionospheric grid, the simulator's stream;
+  corrections with σ_flt, the ionospheric grid;
+* ``sbas_tables`` — DO-229's look-up tables and IGP bands (the decoder's and the simulator's);
 * ``observables`` — gnss_obs + gnss_nav frames → corrected pseudorange arrays per epoch;
 * ``errormodel`` — pseudorange σ from elevation and C/N0;
 * ``lsq`` — the unconstrained (x, y, z, clock [, inter-system bias]) least squares, DOPs;
@@ -18,10 +19,6 @@ Modules, one concern each:
 * ``coasting`` — receiver clock prediction for epochs the satellites alone cannot carry;
 * ``prechecks`` — the paper's per-epoch input checks; ``skymask`` — blocked sky;
 * ``position`` — one run: pre-checks, geometry, constrained and unconstrained solutions;
-* ``constellation`` / ``simulate`` / ``scenario`` — GPS/Galileo/QZSS broadcast ephemerides,
-  observations, a synthetic 3-D track with runs and corridors; ``experiment`` — seeded cases
-  and their statistics for the bench and the tests; ``trainsim`` — the same driven by the
-  train simulator's truth (``[gnss_raw]``);
 * ``gis`` — the DB's GIS grid of a line/track as the 3-D polyline (heights required,
   ellipsoidal) with km; ``runinputs`` — a run's observations, ephemerides, ionosphere
   parameters and antennas; ``ontrack`` — a run solved on a track, the best receiver per epoch,
@@ -29,5 +26,7 @@ Modules, one concern each:
   ``[gnss]`` section.
 
 Nothing here imports the pipeline: its GNSS aid (``fieldlogs.pipeline.aids.gnss``) uses
-``ontrack``.
+``ontrack``. Nor the simulator: the simulated constellation, observations, SBAS stream and
+test track are in ``fieldlogs.simulate.gnss``, the seeded experiments in
+``fieldlogs.experiments.gnss``.
 """

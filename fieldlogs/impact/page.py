@@ -56,6 +56,7 @@ def pct_figure(runs: list[dict[str, Any]]) -> bytes:
     ax.bar(x + 0.2, [np.nan if v is None else v for v in new], 0.4, label="new", color="tab:blue")
     ax.set_xticks(x, names, rotation=60, ha="right", fontsize=7)
     ax.set_ylabel("mean balise correction [%]")
+    ax.set_xlabel("run [id]")
     ax.legend(fontsize=8)
     fig.tight_layout()
     return kit.png(fig)
@@ -80,19 +81,19 @@ def refusal_frame(routes: list[dict[str, Any]]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _verdict(d: dict[str, Any]) -> str:
+def _verdict(d: dict[str, Any]) -> kit.Verdict:
     t = d["totals"]
     if t["runs_failed"]["new"] > t["runs_failed"]["old"]:
-        return kit.paragraph(
-            f"The new version cannot replay {t['runs_failed']['new']} run(s) (old: {t['runs_failed']['old']}).",
+        return kit.Verdict(
+            f"Failed: the new version cannot replay {t['runs_failed']['new']} run(s) (old: {t['runs_failed']['old']}).",
             kit.Status.WARN,
         )
     if d["same_content"]:
-        return kit.paragraph("Both files have the same content: nothing changes.", kit.Status.OK)
+        return kit.Verdict("No change: both files have the same content.", kit.Status.OK)
     if not t["runs_changed"]:
-        return kit.paragraph(f"None of the {t['runs']} run(s) changes.", kit.Status.OK)
-    return kit.paragraph(
-        f"{t['runs_changed']} of {t['runs']} run(s) change; {t['corrections_changed']} correction(s) differ.",
+        return kit.Verdict(f"No change: none of the {t['runs']} run(s) changes.", kit.Status.OK)
+    return kit.Verdict(
+        f"Changes: {t['runs_changed']} of {t['runs']} run(s) change; {t['corrections_changed']} correction(s) differ.",
         kit.Status.CAUTION,
     )
 
@@ -120,7 +121,6 @@ def render_html(report: ImpactReport) -> str:
     ]
     parts = [
         kit.paragraph(f"{kit.generated()}."),
-        _verdict(d),
         kit.key_value_table(sides),
         kit.section(
             "Per route", kit.frame_table(figure_frame(d["routes"], ("line_code", "track", "direction", "runs")), _cell)
@@ -144,4 +144,4 @@ def render_html(report: ImpactReport) -> str:
     if failed:
         frame = pd.DataFrame([{"run": r["run"], "old": r["errors"]["old"], "new": r["errors"]["new"]} for r in failed])
         parts.append(kit.section("Runs a version cannot replay", kit.frame_table(frame), status=kit.Status.WARN))
-    return kit.page("trainpos db impact", *parts, heading_text="Impact of a new DB version")
+    return kit.page("trainpos db impact", *parts, heading_text="Impact of a new DB version", verdict=_verdict(d))

@@ -41,6 +41,7 @@ from fieldlogs.runs.handle import Run
 from schemas.errors import InputError
 
 if TYPE_CHECKING:
+    from dbtools.csv_locale import CsvLocale
     from fieldlogs.replay.network import DbRef
 
 Progress = Callable[[int, int, str], None]
@@ -253,8 +254,10 @@ def check_files(
     *,
     workers: int | None = None,
     progress: Progress | None = None,
+    locale: CsvLocale | None = None,
 ) -> PossessionReport:
-    """Read the DB and the plan (FindingsError on plan errors), then check every run through
+    """Read the DB and the plan (FindingsError on plan errors; ``locale``: its declared CSV
+    convention, :mod:`dbtools.csv_locale`), then check every run through
     the replayer (:func:`fieldlogs.replay.pool.replay`: this process or ``workers`` local
     processes; ``progress(done, total, run)`` after each run). A run that cannot be read or
     checked is listed in :attr:`PossessionReport.failed` with its error and the others go
@@ -268,7 +271,7 @@ def check_files(
 
     tree = load_tree(config_path)
     ref, network = open_db(Path(db_path))
-    plan = load_plan(Path(plan_path), network)
+    plan = load_plan(Path(plan_path), network, locale)
     folders = run_folders(run_dirs)
     tasks = [(str(p), (ref, plan.possessions, tree.gps, tree.possession, work)) for p in folders]
     checks, failed = replay_values(

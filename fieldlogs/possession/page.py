@@ -174,4 +174,13 @@ def render_html(
         parts.append(kit.section("Runs that could not be checked", f"<ul>{items}</ul>"))
     for c in checks:
         parts += _run_parts(c)
-    return kit.page("trainpos possession check", *parts, heading_text="Possession check")
+    n_failed = len(failed or [])
+    unchecked = f"; {n_failed} run(s) could not be checked" if n_failed else ""
+    if n_alarms:
+        runs = sum(1 for c in checks if c.alarms)
+        v = kit.Verdict(f"Alarm: {n_alarms} alarm(s) in {runs} of {len(checks)} run(s){unchecked}.", kit.Status.ALARM)
+    elif n_failed or not checks:
+        v = kit.Verdict(f"Incomplete: no alarm in {len(checks)} run(s) checked{unchecked}.", kit.Status.CAUTION)
+    else:
+        v = kit.Verdict(f"Passed: no alarm in {len(checks)} run(s).", kit.Status.OK)
+    return kit.page("trainpos possession check", *parts, heading_text="Possession check", verdict=v)

@@ -31,8 +31,9 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.csv_locale import CsvLocale
 from dbtools.network import Network
-from dbtools.tabular import read_raw_table
+from dbtools.tabular import read_checked_table
 from schemas.enums import Severity
 from schemas.errors import FindingsError, UsageError
 from schemas.findings import Finding
@@ -218,16 +219,19 @@ def _possessions(
     return possessions
 
 
-def read_plan(path: Path, network: Network | None = None) -> Plan:
+def read_plan(path: Path, network: Network | None = None, locale: CsvLocale | None = None) -> Plan:
     """Read and check a plan file; rows with errors are left out of ``possessions``.
+    ``locale``: the CSV convention declared (``--delimiter``/``--decimal``); else a plan
+    saved from a spreadsheet in a European locale is detected (:mod:`dbtools.csv_locale`:
+    one ``source.locale`` warning).
 
     Raises :class:`~schemas.errors.InputError` when the file cannot be read at all.
     """
     path = Path(path)
-    raw = read_raw_table(path, sheet=POSSESSIONS.name, declared=POSSESSIONS)
+    tf = read_checked_table(path, sheet=POSSESSIONS.name, declared=POSSESSIONS, locale=locale or CsvLocale())
     file = str(path)
-    co = read_and_check(POSSESSIONS, raw, file=file)
-    findings = list(co.findings)
+    co = read_and_check(POSSESSIONS, tf.frame, file=file)
+    findings = [*tf.findings, *co.findings]
     if any(f.rule == "schema.missing_column" for f in findings):
         return Plan([], findings, file)
     rows = _Rows(co.frame, file, findings)
@@ -300,9 +304,9 @@ def _outside_grid(
     )
 
 
-def load_plan(path: Path, network: Network | None = None) -> Plan:
+def load_plan(path: Path, network: Network | None = None, locale: CsvLocale | None = None) -> Plan:
     """:func:`read_plan`, raising :class:`~schemas.errors.FindingsError` (exit 1) on any error."""
-    plan = read_plan(path, network)
+    plan = read_plan(path, network, locale)
     if plan.errors:
         raise FindingsError(
             f"the possession plan has {len(plan.errors)} error(s); fix them and check again", plan.errors, path=path

@@ -20,6 +20,7 @@ import pandas as pd
 
 from dbtools.inputs import check_decompressed, read_input_bytes
 from schemas.errors import InputError
+from schemas.findings import Finding
 
 #: Formats ``logs import`` reads.
 FORMATS = ("nmea", "ubx", "rinex", "csv", "geojson")
@@ -51,6 +52,8 @@ class Decoded:
     clock: dict[str, Any] | None = None
     """Recorder clock fit (``timebase.ClockFit.to_dict``) when the source had its own clock."""
     notes: list[str] = field(default_factory=list)
+    findings: list[Finding] = field(default_factory=list)
+    """Warnings of the reading (a CSV in a spreadsheet locale: ``source.locale``)."""
 
     def provenance(self, sha256: str) -> dict[str, Any]:
         d: dict[str, Any] = {

@@ -1,8 +1,7 @@
 """A run's GNSS streams written as a recorder would: NMEA, UBX or RINEX (``simulate --format``).
 
-The seam for the constellation simulator: every writer takes whatever ``gps``,
-``gnss_obs`` and ``gnss_nav`` frames the run holds (``gnss_time_s`` from ``t`` and the
-run's ``start_time`` where the gps stream has none). Files go to ``RUN/recorder/``:
+Every writer takes whatever ``gps``, ``gnss_obs`` and ``gnss_nav`` frames the run holds
+(``gnss_time_s`` from ``t`` and the run's ``start_time`` where the gps stream has none). Files go to ``RUN/recorder/``:
 
 * ``nmea``: ``gnss.nmea`` from gps (RMC, VTG, GGA, GSA, GST);
 * ``ubx``: ``gnss.ubx`` from gps (NAV-PVT, NAV-HPPOSLLH, NAV-DOP) — with the run's gnss_obs
@@ -18,14 +17,13 @@ run's ``start_time`` where the gps stream has none). Files go to ``RUN/recorder/
 With a run.json ``vehicle`` block, ``vehicle.toml`` (the ``logs import --vehicle`` file) is
 written beside them, so that the recorder files import back into a run.
 
-The folder is written atomically and replaced only with ``force``.
+The folder is written atomically and replaced only with ``force``. A simulated run with its
+recorder files in one step: :func:`fieldlogs.simulate.recorder.simulate_with_recorder`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import pandas as pd
 
@@ -33,10 +31,6 @@ from dbtools.atomic import atomic_folder
 from fieldlogs.recorders.timebase import iso_to_gps
 from fieldlogs.runs.handle import Run
 from schemas.errors import InputError, UsageError
-
-if TYPE_CHECKING:
-    from fieldlogs.simulate.scenario import Scenario
-    from fieldlogs.simulate.simulator import SimulationSummary
 
 RECORDER_FOLDER = "recorder"
 EXPORT_FORMATS = ("nmea", "ubx", "rinex")
@@ -136,33 +130,3 @@ def vehicle_toml(vehicle: dict[str, object]) -> str:
                 if isinstance(item, dict):
                     lines += ["", f"[[{k}]]", *(f"{kk} = {_toml_value(vv)}" for kk, vv in item.items())]
     return "\n".join(lines) + "\n"
-
-
-def simulate_with_recorder(
-    db_path: Path,
-    out: Path,
-    fmt: str,
-    *,
-    scenario: Scenario | None = None,
-    seed: int | None = None,
-    force: bool = False,
-    inputs: Iterable[Path | str] = (),
-) -> tuple[SimulationSummary, list[Path]]:
-    """``simulate`` into a temporary folder, add the recorder files, then rename into ``out``:
-    nothing is left behind when the recorder format cannot be written. ``rinex`` switches the
-    scenario's raw GNSS (``[gnss_raw]``) on: RINEX observations are what it writes."""
-    from dataclasses import replace
-
-    from fieldlogs.simulate.scenario import load_scenario
-    from fieldlogs.simulate.simulator import simulate_to_folder
-
-    if fmt not in EXPORT_FORMATS:
-        raise UsageError(f"recorder format '{fmt}' is not one of {', '.join(EXPORT_FORMATS)}")
-    if fmt == "rinex":
-        scenario = scenario if scenario is not None else load_scenario()
-        scenario = replace(scenario, gnss_raw=replace(scenario.gnss_raw, enabled=True))
-    with atomic_folder(Path(out), force=force, inputs=[Path(db_path), *inputs]) as tmp:
-        summary = simulate_to_folder(db_path, tmp, scenario, seed=seed, fmt="parquet", force=True)
-        files = write_recorder_files(tmp, fmt)
-    summary.path = Path(out)
-    return summary, [Path(out) / RECORDER_FOLDER / f.name for f in files]

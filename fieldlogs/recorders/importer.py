@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dbtools.csv_locale import CsvLocale
 from dbtools.inputs import read_head, regular_file
 from fieldlogs.recorders.common import FORMATS, Decoded, sha256_of
 from fieldlogs.recorders.navweeks import nav_onto_observations
@@ -76,9 +77,12 @@ def detect_format(path: Path) -> str:
     )
 
 
-def decode(path: Path, fmt: str, mapping: Path | None, time_zone: str | None = None) -> Decoded:
+def decode(
+    path: Path, fmt: str, mapping: Path | None, time_zone: str | None = None, locale: CsvLocale | None = None
+) -> Decoded:
     """One source decoded; ``time_zone``: of its time stamps without a UTC offset (GeoJSON;
-    a CSV mapping's own ``[time] timezone`` comes first)."""
+    a CSV mapping's own ``[time] timezone`` comes first); ``locale``: the declared convention
+    of a mapped CSV (:mod:`dbtools.csv_locale`)."""
     from fieldlogs.recorders import geojson, nmea, rinex, tabular, ubx
 
     if fmt == "geojson":
@@ -94,7 +98,7 @@ def decode(path: Path, fmt: str, mapping: Path | None, time_zone: str | None = N
     m = tabular.load_mapping(mapping)
     if time_zone is not None:
         m["time"].setdefault("timezone", time_zone)
-    return tabular.read_mapped(path, m, str(mapping))
+    return tabular.read_mapped(path, m, str(mapping), locale)
 
 
 def _zone(text: str | None) -> tzinfo | None:
@@ -205,11 +209,13 @@ def import_run(
     run_id: str | None = None,
     force: bool = False,
     time_zone: str | None = None,
+    locale: CsvLocale | None = None,
 ) -> ImportResult:
     """Decode ``sources`` and write one run folder at ``out`` (see the module docstring).
 
     ``mapping``: one mapping TOML per CSV/Parquet source, in the order of those sources;
-    ``time_zone``: of time stamps without a UTC offset (``timebase.time_zone``)."""
+    ``time_zone``: of time stamps without a UTC offset (``timebase.time_zone``); ``locale``:
+    the CSV convention of the mapped CSV sources (``--delimiter``/``--decimal``)."""
     out = Path(out)
     if fmt != "auto" and fmt not in FORMATS:
         raise UsageError(f"--format {fmt}: one of auto, {', '.join(FORMATS)}")
@@ -232,13 +238,14 @@ def import_run(
         )
     maps = iter(mapping)
     decoded = [
-        decode(Path(s), f, next(maps) if f == "csv" else None, time_zone) for s, f in zip(sources, formats, strict=True)
+        decode(Path(s), f, next(maps) if f == "csv" else None, time_zone, locale)
+        for s, f in zip(sources, formats, strict=True)
     ]
     nav_warnings = nav_onto_observations(decoded)  # the 10-bit week rollover, before any time is used
     t0 = _t0(decoded)
     streams = _merge(decoded, t0)
     veh, warnings = load_vehicle(vehicle, has_tacho="tacho" in streams)
-    warnings = [*nav_warnings, *warnings]
+    warnings = [*(f for d in decoded for f in d.findings), *nav_warnings, *warnings]
     _check_receivers(streams, veh, Path(vehicle))
     # load_vehicle refused a train, or a run with a tacho stream, without its tacho axle: a
     # wheel is missing only where run.json may go without one (a road-rail vehicle, a station)

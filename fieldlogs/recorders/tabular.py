@@ -17,7 +17,11 @@ Mapping (every key documented in docs/guide/field-logs.md, "logs import"):
 * ``[axes]`` — IMU mounting: body axis = ± sensor axis, e.g. ``x = "+y"``, applied to the
   accelerometer and the gyro alike; must be a rotation (a signed permutation with
   determinant +1);
-* ``[offsets]`` — constants added after the unit conversion, in the stream's units.
+* ``[offsets]`` — constants added after the unit conversion, in the stream's units;
+* ``[csv]`` — ``delimiter`` (``,``, ``;``, ``tab``, ``|``) and ``decimal`` (``.``, ``,``) of a
+  CSV saved in a European spreadsheet locale (``logs import --delimiter/--decimal`` come
+  first); without them the convention is detected (:mod:`dbtools.csv_locale`: one
+  ``source.locale`` warning; a mixed or ambiguous file refused).
 
 A ``gps`` trace may lack the quality columns (a vendor CSV of time, latitude and longitude
 only): ``fix`` absent is 1 (a position of unknown quality) where lat and lon are given and 0
@@ -39,6 +43,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from dbtools.csv_locale import CsvLocale, csv_table, head_dialect, read_dialect, sniff_delimiter
 from dbtools.inputs import not_special
 from fieldlogs.recorders.common import Decoded
 from fieldlogs.recorders.timebase import (
@@ -73,7 +78,7 @@ GRAVITY_BAND = (7.0, 13.0)
 BASES = ("relative", "unix", "gps", "utc")
 #: Rows (a regular subsample) the unit plausibility statistics are taken over.
 PLAUSIBILITY_SAMPLES = 200_000
-SECTIONS = {"stream", "time", "columns", "units", "axes", "offsets"}
+SECTIONS = {"stream", "time", "columns", "units", "axes", "offsets", "csv"}
 #: gps columns a trace may lack (module docstring).
 GPS_QUALITY = ("fix", "nsat", "hdop")
 
@@ -109,12 +114,18 @@ def _wanted(mapping: dict[str, Any]) -> dict[str, bool]:
     return out
 
 
-def _read_table(path: Path, mapping: dict[str, Any]) -> pd.DataFrame:
+def mapping_locale(mapping: dict[str, Any], mapping_file: str, given: CsvLocale | None) -> CsvLocale:
+    """The CSV convention: ``given`` (the options) over the mapping's ``[csv]`` table."""
+    return (given or CsvLocale()).over(csv_table(mapping.get("csv", {}), mapping_file))
+
+
+def _read_table(path: Path, mapping: dict[str, Any], locale: CsvLocale) -> tuple[pd.DataFrame, Finding | None]:
     """Only the columns the mapping reads, numeric ones parsed straight to float64 (pyarrow's
     type inference costs more than the parse); a cell that is not a number falls back to
-    text so that ``_numeric`` names its row. ``attrs['all_columns']``: every column name."""
-    import pyarrow as pa
-
+    text so that ``_numeric`` names its row. ``attrs['all_columns']``: every column name.
+    A CSV in a spreadsheet locale (:mod:`dbtools.csv_locale`) is read as text and its number
+    cells put in machine notation; the finding names its convention."""
+    note = None
     try:
         if path.suffix.lower() == ".parquet":
             import pyarrow.parquet as pq  # lazy: heavy
@@ -123,25 +134,49 @@ def _read_table(path: Path, mapping: dict[str, Any]) -> pd.DataFrame:
             keep = [c for c in _wanted(mapping) if c in names]
             frame: pd.DataFrame = pq.read_table(path, columns=keep).to_pandas()
         else:
-            import pyarrow.csv as pcsv
-
-            opts = pcsv.ReadOptions(use_threads=False, block_size=1 << 24)
-            names = pcsv.open_csv(path, read_options=pcsv.ReadOptions(use_threads=False)).schema.names
-            want = {c: numeric for c, numeric in _wanted(mapping).items() if c in names}
-            types = {c: pa.float64() if numeric else pa.string() for c, numeric in want.items()}
-            conv = pcsv.ConvertOptions(include_columns=list(want), column_types=types)
-            try:
-                arrow = pcsv.read_csv(path, read_options=opts, convert_options=conv)
-            except pa.ArrowInvalid:
-                text = pcsv.ConvertOptions(include_columns=list(want), column_types=dict.fromkeys(want, pa.string()))
-                arrow = pcsv.read_csv(path, read_options=opts, convert_options=text)
-            frame = arrow.to_pandas(split_blocks=True, self_destruct=True)  # no 2-D block copy
+            frame, names, note = _read_csv(path, mapping, locale)
     except FileNotFoundError as exc:
         raise InputError("source file not found", path=path) from exc
     except (OSError, ValueError) as exc:
         raise InputError(f"not a readable CSV/Parquet table: {exc}", path=path) from exc
     frame.attrs["all_columns"] = list(names)
-    return frame
+    return frame, note
+
+
+def _read_csv(path: Path, mapping: dict[str, Any], locale: CsvLocale) -> tuple[pd.DataFrame, list[str], Finding | None]:
+    """:func:`_read_table` of a CSV: the frame, every column name, the locale's finding.
+    Numbers are parsed by Arrow in the notation the head settles
+    (:func:`dbtools.csv_locale.head_dialect`); a file it does not settle, or with a cell
+    that does not parse so, is read as text: a machine-format file for ``_numeric`` to name
+    the cell, a locale's judged on every cell (:func:`dbtools.csv_locale.read_dialect`)."""
+    import pyarrow as pa
+    import pyarrow.csv as pcsv
+
+    sniffed = sniff_delimiter(path, locale)
+    opts = pcsv.ReadOptions(use_threads=False, block_size=1 << 24)
+    parse = pcsv.ParseOptions(delimiter=sniffed[0])
+    names = pcsv.open_csv(path, read_options=pcsv.ReadOptions(use_threads=False), parse_options=parse).schema.names
+    want = {c: numeric for c, numeric in _wanted(mapping).items() if c in names}
+    numbers = [c for c, n in want.items() if n]
+    strings = dict.fromkeys(want, pa.string())
+    dialect = head_dialect(path, numbers, locale)
+    if dialect is not None:
+        types = {c: pa.float64() if numeric else pa.string() for c, numeric in want.items()}
+        conv = pcsv.ConvertOptions(include_columns=list(want), column_types=types, decimal_point=dialect.decimal)
+        try:
+            arrow = pcsv.read_csv(path, read_options=opts, parse_options=parse, convert_options=conv)
+            frame = arrow.to_pandas(split_blocks=True, self_destruct=True)  # no 2-D block copy
+            return frame, names, dialect.finding(path, str(mapping["stream"]))
+        except pa.ArrowInvalid:
+            pass
+    if sniffed[0] == "," and locale.decimal != ",":  # the machine format: text, for _numeric to name the cell
+        text = pcsv.ConvertOptions(include_columns=list(want), column_types=strings)
+        arrow = pcsv.read_csv(path, read_options=opts, convert_options=text)
+        return arrow.to_pandas(split_blocks=True, self_destruct=True), names, None
+    text = pcsv.ConvertOptions(include_columns=list(want), column_types=strings, strings_can_be_null=True)
+    arrow = pcsv.read_csv(path, read_options=opts, parse_options=parse, convert_options=text)
+    frame, found = read_dialect(arrow.to_pandas(split_blocks=True, self_destruct=True), numbers, path, locale, sniffed)
+    return frame, names, found.finding(path, str(mapping["stream"]))
 
 
 def _column(path: Path, raw: pd.DataFrame, source: str, target: str) -> pd.Series:
@@ -342,12 +377,16 @@ def _gps_quality(out: dict[str, Any], n: int) -> None:
             out[name] = np.full(n, np.nan)
 
 
-def read_mapped(path: Path, mapping: dict[str, Any], mapping_file: str = "") -> Decoded:
+def read_mapped(
+    path: Path, mapping: dict[str, Any], mapping_file: str = "", locale: CsvLocale | None = None
+) -> Decoded:
     """One vendor table → its stream with ``gnss_time_s`` (absolute) or ``recorder_s``
-    (relative time without a start: the importer aligns it to the run's start)."""
+    (relative time without a start: the importer aligns it to the run's start).
+    ``locale``: the CSV convention declared by the options (over the mapping's ``[csv]``)."""
     path = Path(path)
     dec = Decoded(str(path), "csv" if path.suffix.lower() != ".parquet" else "parquet")
-    raw = _read_table(path, mapping)
+    raw, note = _read_table(path, mapping, mapping_locale(mapping, mapping_file, locale))
+    dec.findings += [note] if note is not None else []
     dec.records = len(raw)
     stream = str(mapping["stream"])
     table = LOG_STREAMS[stream]

@@ -79,7 +79,28 @@ def render_html(report: Report, audit_path: Path) -> str:
         )
     )
     parts += _run_plots(report, audit_path)
-    return kit.page("trainpos audit", *parts, heading_text="Positioning audit")
+    return kit.page("trainpos audit", *parts, heading_text="Positioning audit", verdict=verdict(report))
+
+
+def verdict(report: Report) -> kit.Verdict:
+    """Passed when every route's mean position-correction % is within the target and no run
+    failed; else how many routes are above it and how many runs failed."""
+    t = report.target_pct
+    means = report.routes["mean_correction_pct"] if "mean_correction_pct" in report.routes else pd.Series([])
+    above = int((means > t).sum())
+    n_routes, n_failed = len(report.routes), len(report.failed_runs)
+    failed = f"; {n_failed} run(s) failed to audit" if n_failed else ""
+    if above:
+        text = f"Above target: {above} of {n_routes} route(s) with a mean position correction above {t:g} %{failed}."
+        return kit.Verdict(text, kit.Status.WARN)
+    if n_failed or not n_routes:
+        text = f"Incomplete: {n_routes} route(s) within the {t:g} % target{failed or '; no run audited'}."
+        return kit.Verdict(text, kit.Status.CAUTION)
+    return kit.Verdict(
+        f"Passed: all {n_routes} route(s) within the {t:g} % position-correction target (mean), "
+        f"{len(report.runs)} run(s) audited.",
+        kit.Status.OK,
+    )
 
 
 def _run_plots(report: Report, audit_path: Path) -> list[str]:

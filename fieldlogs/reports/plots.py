@@ -72,7 +72,7 @@ def margin_along_run(trace: pd.DataFrame, run_id: str) -> bytes:
     if trace["margin_m"].isna().all():
         _empty(ax, "position never determined")
     ax.set_xlabel("t [s]")
-    ax.set_ylabel("[m]")
+    ax.set_ylabel("margin, error [m]")
     ax.set_title(f"Margin along run {run_id}")
     ax.grid(alpha=0.3)
     _legend(ax, fontsize=8)
@@ -91,9 +91,10 @@ def slip_episodes(trace: pd.DataFrame, episodes: list[dict[str, float]], run_id:
         ax.axvspan(ep["t_start"], ep["t_end"], color="orange", alpha=0.2)
         state = "fail-safe" if ep.get("failsafe") else "re-adhered" if ep.get("readhered") else ""
         ax.set_title(f"{ep.get('kind', 'slip')} at t = {ep['t_start']:.0f} s {state}", fontsize=9)
-        ax.set_xlabel("t [s]")
-        ax.set_ylabel("km/h")
         ax.grid(alpha=0.3)
+    for ax in axes[0]:
+        ax.set_xlabel("t [s]")
+        ax.set_ylabel("speed [km/h]")
     _legend(axes[0][0], fontsize=8)
     if not eps:
         _empty(axes[0][0], "no slip/slide episodes")
@@ -136,8 +137,8 @@ def curvature_vs_db(trace: pd.DataFrame, features: pd.DataFrame, track: str, run
     else:
         _empty(ax, "no curvature trace (no IMU or never determined)")
     ax.axhline(0.0, color="0.5", lw=0.6)
-    ax.set_xlabel("km")
-    ax.set_ylabel("κ [1/km], + left")
+    ax.set_xlabel("km [km]")
+    ax.set_ylabel("κ [1/km] (+ left)")
     ax.set_title(f"Curvature against the feature-point DB, run {run_id} (track {track}, normal direction)")
     ax.grid(alpha=0.3)
     _legend(ax, fontsize=8)

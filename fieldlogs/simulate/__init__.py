@@ -12,7 +12,7 @@ nothing). The pieces, one concern per module:
 * ``slip`` — slip/slide episodes; ``sensors`` — IMU, tacho, GPS, radar, truth;
 * ``radar`` — raw IF samples of the 2-frequency CW radar (``sensors.radar_if``);
 * ``events`` — balise telegrams and cab events;
-* raw GNSS (``[gnss_raw]``, off by default) — :mod:`fieldlogs.gnss.trainsim`.
+* raw GNSS (``[gnss_raw]``, off by default) — :mod:`fieldlogs.simulate.gnss.trainsim`.
 
 Everything random comes from ``np.random.default_rng(seed)`` (one child generator per
 concern, so switching a sensor off does not change the others).

@@ -142,9 +142,9 @@ def _add_raw_gnss(
     geom: TrackGeometry,
     rng: np.random.Generator,
 ) -> None:
-    """gnss_obs, gnss_nav and the run.json vehicle and gnss blocks (``fieldlogs.gnss.trainsim``)."""
-    from fieldlogs.gnss.trainsim import RawGnssSpec, raw_gnss, vehicle_block
+    """gnss_obs, gnss_nav and the run.json vehicle and gnss blocks (``fieldlogs.simulate.gnss.trainsim``)."""
     from fieldlogs.recorders.timebase import iso_to_gps
+    from fieldlogs.simulate.gnss.trainsim import RawGnssSpec, raw_gnss, vehicle_block
 
     g = scenario.gnss_raw
     spec = RawGnssSpec(

@@ -27,7 +27,7 @@ when at least ``min_passes`` runs covered it with a usable κ, else *unverified*
 surveyed curve no DB feature overlaps is *new*.
 
 **Proposal** (new and moved curves): the six rows of [S000 Table 1] as
-:func:`dbtools.synthetic.network.feature_rows` builds them — in running order the
+:func:`fieldlogs.simulate.networks.synthetic.feature_rows` builds them — in running order the
 transition start t_s − 20 m (straight), t_s (transition), entry crossing (left/right, R),
 exit crossing (transition), transition end t_e (straight), t_e + 20 m (none). t_s, t_e
 come from the mean profile: where |κ̄| crosses 0.2/R outside the crossings, extended
@@ -55,7 +55,7 @@ from schemas.enums import direction_sign
 
 FloatArray = npt.NDArray[np.float64]
 OK, MOVED, NEW, NOT_SEEN, UNVERIFIED = "ok", "moved", "new", "not seen", "unverified"
-#: Straight checked before and after a curve [m] (SPEC §5.3, as ``dbtools.synthetic`` builds features).
+#: Straight checked before and after a curve [m] (SPEC §5.3, as ``fieldlogs.simulate.networks`` builds features).
 STRAIGHT_M = 20.0
 #: Level of the transition fit, as a share of 1/R (the lower limit is 1 − tol).
 TRANSITION_LEVEL = 0.2

@@ -54,7 +54,7 @@ def balise_residuals(balises: pd.DataFrame, line: str, moved_min_m: float) -> by
         ax.set_ylabel(f"track {track}\nresidual [m]")
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper right", fontsize=7, ncols=5)
-    axes[-1, 0].set_xlabel("km")
+    axes[-1, 0].set_xlabel("km [km]")
     axes[0, 0].set_title(f"Line {line}: balise residual DB km − runs' km (95 % interval)")
     return kit.png(fig)
 
@@ -95,7 +95,7 @@ def curvature_overlay(rep: SurveyReport, key: tuple[str, str]) -> bytes:
         "proposed",
     )
     ax.axhline(0.0, color="0.5", lw=0.6)
-    ax.set_xlabel("km")
+    ax.set_xlabel("km [km]")
     ax.set_ylabel("κ [1/m] (+ left)")
     ax.set_title(f"Line {key[0]} track {key[1]}: curvature in the normal running direction")
     if ax.get_legend_handles_labels()[0]:
@@ -112,7 +112,9 @@ def wheel_trend(wheel_runs: pd.DataFrame) -> bytes:
     its start time."""
     w = wheel_runs.assign(time=pd.to_datetime(wheel_runs["start_time"], utc=True, errors="coerce", format="ISO8601"))
     vehicles = sorted(w["vehicle_id"].unique())[:MAX_FIGURES] or ["—"]
-    fig, axes = kit.pyplot().subplots(len(vehicles), 1, figsize=(12, 2.2 * len(vehicles) + 0.6), squeeze=False)
+    fig, axes = kit.pyplot().subplots(
+        len(vehicles), 1, figsize=(12, 2.2 * len(vehicles) + 0.6), sharex=True, squeeze=False
+    )
     for ax, vid in zip(axes[:, 0], vehicles, strict=True):
         g = w[w["vehicle_id"] == vid].sort_values("time")
         ok = np.isfinite(g["diameter_m"].to_numpy(dtype=float)) & g["time"].notna().to_numpy()
@@ -140,6 +142,7 @@ def wheel_trend(wheel_runs: pd.DataFrame) -> bytes:
             ax.text(0.5, 0.5, "no estimate", ha="center", va="center", transform=ax.transAxes, color="0.4")
         ax.set_ylabel(f"{vid}\nD [mm]")
     axes[0, 0].set_title("Wheel diameter per run (95 % interval)")
+    axes[-1, 0].set_xlabel("run start [UTC]")
     fig.autofmt_xdate()
     return kit.png(fig)
 
@@ -170,7 +173,7 @@ def _table(frame: pd.DataFrame, cell: Any = _cell) -> str:
     return kit.frame_table(frame, cell) if len(frame) else "<p>None.</p>"
 
 
-def _verdict(rep: SurveyReport) -> str:
+def _verdict(rep: SurveyReport) -> kit.Verdict:
     s = rep.summary()
     if rep.flagged:
         parts = [f"{v} {k} balise(s)" for k, v in s["balises"].items() if k in ("moved", "missed")]
@@ -185,15 +188,15 @@ def _verdict(rep: SurveyReport) -> str:
             parts.append(f"{s['gis_defects']} GIS defect(s)")
         if s["failed_runs"]:
             parts.append(f"{s['failed_runs']} run(s) failed")
-        return kit.paragraph("To act on: " + ", ".join(parts) + ".", kit.Status.WARN)
+        return kit.Verdict("To act on: " + ", ".join(parts) + ".", kit.Status.WARN)
     n = max(sum(s["balises"].values()), 1)
     if s["balises"].get("unverified", 0) > n / 2:
-        return kit.paragraph(
-            f"Nothing flagged, but {s['balises']['unverified']} of {n} balises are unverified: "
+        return kit.Verdict(
+            f"Mostly unverified: nothing flagged, but {s['balises']['unverified']} of {n} balises are unverified: "
             "the DB is not shown to be right.",
             kit.Status.CAUTION,
         )
-    return kit.paragraph("Nothing flagged.", kit.Status.OK)
+    return kit.Verdict("Passed: nothing flagged.", kit.Status.OK)
 
 
 def _figures(rep: SurveyReport) -> list[str]:
@@ -224,7 +227,6 @@ def render_html(rep: SurveyReport) -> str:
     rows += [("GIS defects", s["gis_defects"] if s["gis_defects"] is not None else rep.gis_note)]
     parts = [
         f"<p>{kit.generated()}.</p>",
-        _verdict(rep),
         kit.key_value_table(rows),
         kit.section("Along the lines", *_figures(rep)),
         kit.section(
@@ -246,4 +248,6 @@ def render_html(rep: SurveyReport) -> str:
         )
     parts.append(kit.section("Changes --propose writes", _table(rep.changes)))
     parts.append(kit.section("Runs", _table(rep.runs), _table(rep.failed_runs)))
-    return kit.page("trainpos survey", *parts, heading_text="Survey of balises, feature points and wheels")
+    return kit.page(
+        "trainpos survey", *parts, heading_text="Survey of balises, feature points and wheels", verdict=_verdict(rep)
+    )

@@ -46,9 +46,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import numpy.typing as npt
 
+from dbtools.gis.track_candidates import Candidates, find_candidates, segment_tree
+from dbtools.gis.track_segments import TrackGeometry, build_geometry
 from dbtools.network import Network
-from fieldlogs.trackmatch.candidates import Candidates, _tree, find_candidates
-from fieldlogs.trackmatch.geometry import TrackGeometry, build_geometry
 from fieldlogs.trackmatch.result import MATCHED, NO_CANDIDATE, NO_POSITION, OUTLIER, Hmm, TrackMatch
 from fieldlogs.trackmatch.routes import Routes, route_distances
 
@@ -86,7 +86,7 @@ def _model(net: Network) -> _Model:
 
     def build() -> _Model:
         geo = build_geometry(net)
-        return _Model(geo, Routes(topology(net), geo.index_of, geo.length_m), _tree(geo))
+        return _Model(geo, Routes(topology(net), geo.index_of, geo.length_m), segment_tree(geo))
 
     return net.cached(("trackmatch", "model"), build)
 

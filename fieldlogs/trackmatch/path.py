@@ -13,8 +13,8 @@ from dbtools.network import Network
 from fieldlogs.trackmatch.result import FIX_COLUMNS, PATH_COLUMNS, Hmm, TrackMatch
 
 if TYPE_CHECKING:
-    from fieldlogs.trackmatch.candidates import Candidates
-    from fieldlogs.trackmatch.geometry import TrackGeometry
+    from dbtools.gis.track_candidates import Candidates
+    from dbtools.gis.track_segments import TrackGeometry
     from fieldlogs.trackmatch.routes import Routes
 
 F64 = npt.NDArray[np.float64]

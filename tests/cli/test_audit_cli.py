@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import io
 import json
 import shutil
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from typer.testing import CliRunner, Result
 
@@ -124,11 +126,34 @@ def test_demo_on_fixture_network_and_logs(data: AuditData, tmp_path: Path, monke
         assert res.exit_code == 0, res.output + res.stderr
         assert f"audited {N} runs (0 failed)" in res.stdout
         assert "Position correction by route" in res.stdout and "HTML report" in res.stdout
-        legend = res.stdout.split("What the columns mean:", 1)[1]  # every term, one line each (issue 33)
-        assert "> target " in legend and "GPS trusted " in legend
+        legend = res.stdout.split("What the columns mean", 1)[1]  # every term, one line each (issue 33)
+        assert "share above target" in legend and "GPS trusted share" in legend and "share [%]" not in legend
     assert (out / "sample-network.sqlite").is_file() and (out / "audit.sqlite").is_file()
     assert (out / "report.html").read_text(encoding="utf-8").count("<img") >= 5
 
     monkeypatch.setattr(demo_mod, "sample_logs_dir", lambda: tmp_path / "missing")
     res = invoke("demo", "--out", out)
     assert res.exit_code == 2 and "sample logs are missing" in res.stderr
+
+
+@pytest.mark.parametrize("columns", ["80", None])
+def test_report_table_piped_at_80_columns(audited: Path, columns: str | None) -> None:
+    """``trainpos report`` piped (not a terminal), at 80 columns or with no width given: every
+    table keeps its borders or is printed as records, the columns under their labels with
+    units, the shares as %, and every figure of the JSON report printed whole."""
+    env = {"COLUMNS": columns} if columns else {}
+    res = CliRunner().invoke(app, ["report", str(audited), "--by", "run"], env=env)
+    assert res.exit_code == 0, res.output
+    text = res.stdout
+    for line in text.splitlines():
+        assert len(line) <= 80, line
+        if line.startswith(("│", "┃")):
+            assert line.rstrip().endswith(("│", "┃")), line
+    assert "mean correction [%]" in text and "GPS trusted share:" in text
+    assert "share [%]" not in text and "_pct" not in text
+    csv = invoke("report", audited, "--format", "csv", "--by", "run").stdout  # the same rows, machine names
+    runs = pd.read_csv(io.StringIO(csv)).to_dict("records")
+    words = {w for line in text.splitlines() for w in line.replace("│", " ").replace("┃", " ").split()}
+    for r in runs:
+        assert r["run_id"] in words and f"{round(r['mean_correction_pct'], 3):.4g}" in words, r["run_id"]
+        assert f"{100 * round(r['gps_trusted_share'], 3):.1f}" in words

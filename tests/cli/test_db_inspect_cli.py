@@ -181,7 +181,7 @@ def test_show_wide_rows_keep_every_column_at_80_columns(runner: CliRunner, sampl
         assert result.exit_code == 0, result.output
         _bordered(result.stdout, 80)
     flat = " ".join(_run(runner, ["db", "show", str(sample_db), "balises"], columns=80).stdout.split())
-    assert "balise_id=" in flat and "km_equipment_m=" in flat  # a record per row where a table cannot fit
+    assert "balise_id:" in flat and "km_equipment_m:" in flat  # a record per row where a table cannot fit
 
 
 def test_show_unknown_table_lists_the_tables(runner: CliRunner, sample_db: Path) -> None:

@@ -7,6 +7,7 @@ import json
 import re
 import shutil
 from pathlib import Path
+from typing import Any
 
 import pytest
 from typer.testing import CliRunner
@@ -14,6 +15,7 @@ from typer.testing import CliRunner
 from cli.main import app
 from schemas.units import parse_km
 from tests.dbtools.gis_verify_data import DEFECT_KM, DEFECT_TRACK, LINE, VerifyData, verify_data
+from tests.pages import check_page
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +85,8 @@ def test_html_of_a_mostly_unverified_grid_is_not_green(runner: CliRunner, data: 
     r = invoke(runner, "gis", "verify", data.surveyed_db, data.runs[0], data.runs[1], "--format", "html", "--out", html)
     assert r.exit_code == 0, r.output
     text = html.read_text(encoding="utf-8")
-    assert "<p class='ok'>" not in text and "<p class='caution'>No defect found where the evidence suffices" in text
+    assert "class='verdict ok'" not in text
+    assert "<p id='verdict' class='verdict caution'>Mostly unverified: no defect found where the evidence" in text
     assert f"line {LINE}: " in text and "km unverified" in text
 
 
@@ -133,3 +136,14 @@ def test_options_default_to_the_config_and_override_it(runner: CliRunner, data: 
     assert r.exit_code == 2 and "'gis_verify.scan_correction' = 'max' is not one of" in r.output
     r = invoke(runner, "config", "show", "--section", "gis_verify")
     assert r.exit_code == 0 and "scan_windows_m = [100.0, 140.0, 200.0, 300.0, 400.0, 500.0]" in r.output
+
+
+def test_page_standard_in_the_browser(runner: CliRunner, data: VerifyData, browser: Any, tmp_path: Path) -> None:
+    """The rendering standard (tests/pages.py) on the GIS-verify page: verdict first, no
+    sideways scroll, sticky headers (the long cells table scrolls under its header), every
+    plot's axes named with units."""
+    html = tmp_path / "gis.html"
+    r = invoke(runner, "gis", "verify", data.surveyed_db, data.logs, "--format", "html", "--out", html)
+    assert r.exit_code == 1, r.output
+    seen = check_page(browser, html, tmp_path / "shots")
+    assert seen["verdict"].startswith("Failed: ") and seen["plots"] >= 1

@@ -12,7 +12,7 @@ from cli.main import app
 from dbtools.build import build_db
 from dbtools.gis.geometry import Projector
 from dbtools.sources import write_source_set
-from dbtools.synthetic.network import build_network, demo_line
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from fieldlogs.simulate.possession import make_case
 
 

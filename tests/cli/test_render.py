@@ -83,9 +83,9 @@ def test_frame_number_columns_never_wrap(width: int) -> None:
         assert re.search(rf"(?<![\d.]){re.escape(token)}(?![\d])", text), (token, text)
 
 
-def test_a_frame_too_wide_for_80_columns_is_printed_as_row_blocks_with_every_column() -> None:
+def test_a_frame_too_wide_for_80_columns_is_printed_as_records_with_every_column() -> None:
     """Eleven number columns and two text columns cannot share 80 columns: rather than the
-    text columns shrinking out of sight, every row is printed as column=value pairs."""
+    text columns shrinking out of sight, every row is printed as a record of label: value lines."""
     frame = pd.DataFrame(
         {
             "run_id": ["RUN-2026-12-01-vehicle-0042", "RUN-2026-12-01-vehicle-0043"],
@@ -98,9 +98,45 @@ def test_a_frame_too_wide_for_80_columns_is_printed_as_row_blocks_with_every_col
     narrow = _render(frame_table(frame, title="Runs"), 80)
     assert "┃" not in narrow
     assert all(len(line) <= 80 for line in narrow.splitlines())
-    flat = " ".join(narrow.split())
-    for token in ("run_id=RUN-2026-12-01-vehicle-0042", "figure_10=1.235e+05", "refusal_reasons=upper_limit 1"):
-        assert token in flat, (token, narrow)
+    lines = [" ".join(line.split()) for line in narrow.splitlines()]
+    assert lines[:2] == ["Runs", "run: RUN-2026-12-01-vehicle-0042"]
+    assert "figure 10: 1.235e+05" in lines and "failed diagnostics (count): upper_limit 1" in lines
+    assert lines[lines.index("failed diagnostics (count): entry_straight 2, min_speed 2") + 1] == ""  # records apart
+    assert narrow.splitlines()[1].index("RUN") == narrow.splitlines()[2].index("1.235e+05")  # values aligned
+
+
+words = st.text(st.characters(min_codepoint=33, max_codepoint=126), min_size=1, max_size=30)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.lists(st.lists(words, min_size=1, max_size=6), min_size=4, max_size=4), min_size=1, max_size=5),
+    st.integers(24, 160),
+)
+def test_any_table_keeps_its_borders_and_every_word_whole(rows: list[list[list[str]]], width: int) -> None:
+    """Whatever the cells and the width: a table whose every line fits and ends in a border,
+    or records; either way every word of every cell is printed whole (never split or cut)."""
+    from cli.render import rows_table
+
+    cells = [[" ".join(w) for w in r] for r in rows]
+    text = _render(rows_table(["alpha", "beta gamma", "delta_m", "share [%]"], cells, title="T"), width)
+    lines = text.splitlines()
+    if "┃" in text:
+        drawn = [line for line in lines if line[:1] in "┏┃┡│└"]
+        assert all(len(line) <= width and line[-1] in "┓┃┩│┘" for line in drawn), text
+    else:
+        assert "alpha:" in text
+    printed = [line.strip(" │┃") for line in lines]
+    for word in {w for r in rows for c in r for w in c}:
+        assert any(word in line for line in printed) or len(word) > width, (word, text)
+
+
+def test_labels_and_shares_in_the_terminal() -> None:
+    """The machine names read as words with their unit; a share (0–1) as a percentage."""
+    frame = pd.DataFrame({"line_code": ["0420"], "mean_correction_pct": [1.25], "gps_trusted_share": [0.993]})
+    text = _render(frame_table(frame), 120)
+    assert "line" in text and "line_code" not in text and "mean correction [%]" in text
+    assert "GPS trusted share" in text and "share [%]" not in text and "99.3 %" in text and "0.993" not in text
 
 
 def test_frame_headers_and_cells_are_printed_as_written_not_as_markup() -> None:

@@ -22,10 +22,10 @@ from dbtools.gis.index import grid_index
 from dbtools.gis.matching import track_index_for
 from dbtools.network import Network
 from dbtools.sources import read_source_set, write_source_set
-from dbtools.synthetic.alignment import Alignment, Curve
-from dbtools.synthetic.network import LineSpec, Station, build_network, demo_line
 from dbtools.validate import validate_network, validate_path
 from fieldlogs.pipeline.metric import track_metric
+from fieldlogs.simulate.networks.alignment import Alignment, Curve
+from fieldlogs.simulate.networks.synthetic import LineSpec, Station, build_network, demo_line
 from schemas.enums import Severity
 from schemas.errors import FindingsError, InputError
 

@@ -28,8 +28,8 @@ from dbtools.gis.verify.scan import (
     window_tests,
 )
 from dbtools.network import Network
-from dbtools.synthetic.alignment import Alignment
-from dbtools.synthetic.network import LineSpec, build_network
+from fieldlogs.simulate.networks.alignment import Alignment
+from fieldlogs.simulate.networks.synthetic import LineSpec, build_network
 from schemas.errors import InputError
 
 PROJECTOR = Projector(9)

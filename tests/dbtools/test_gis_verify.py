@@ -27,9 +27,9 @@ from dbtools.gis.verify.defects import merge_defects
 from dbtools.gis.verify.proposal import proposed_network, shift_grid_points
 from dbtools.gis.verify.run import verify_fixes
 from dbtools.network import Network
-from dbtools.synthetic.alignment import Alignment
-from dbtools.synthetic.network import LineSpec, build_network
 from fieldlogs.gisverify.evidence import collect_evidence
+from fieldlogs.simulate.networks.alignment import Alignment
+from fieldlogs.simulate.networks.synthetic import LineSpec, build_network
 from schemas.errors import InputError
 from tests.dbtools.gis_verify_data import (
     DEFECT_KM,

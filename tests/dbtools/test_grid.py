@@ -13,8 +13,8 @@ import pytest
 from dbtools.gis.geometry import GEOD, Projector
 from dbtools.gis.grid import build_grid
 from dbtools.gis.io import grid_files, read_centrelines
-from dbtools.synthetic.network import demo_line, gis_grid
-from dbtools.synthetic.survey import centreline_vertices, km_posts
+from fieldlogs.simulate.networks.survey import centreline_vertices, km_posts
+from fieldlogs.simulate.networks.synthetic import demo_line, gis_grid
 from schemas.errors import FindingsError, InputError, RefusedError
 
 LON0, LAT0 = 139.4, 35.9

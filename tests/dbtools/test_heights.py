@@ -12,8 +12,8 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.heights import check_heights
-from dbtools.synthetic.network import build_network, demo_line
 from dbtools.validate import validate_network
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from schemas.enums import Severity
 
 

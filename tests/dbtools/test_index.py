@@ -10,8 +10,8 @@ import pytest
 from dbtools.gis.geometry import GEOD, Projector
 from dbtools.gis.index import GridIndex, PieceRule, grid_index
 from dbtools.gis.matching import track_index_for
-from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.pipeline.metric import track_metric
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 
 P = Projector(9)
 

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from dbtools.gis.geometry import Projector
 from dbtools.gis.matching import MATCH_COLUMNS, TrackIndex, track_index_for
-from dbtools.synthetic.network import TRACK_OFFSETS, build_network, demo_line
+from fieldlogs.simulate.networks.synthetic import TRACK_OFFSETS, build_network, demo_line
 from tests.fresh import fresh_python
 
 P = Projector(9)
@@ -252,7 +252,7 @@ def test_warm_up_loads_the_kernel_a_run_uses() -> None:
         "import fieldlogs.replay._server, fieldlogs.pipeline.warm\n"
         "from dbtools.gis import match_kernel as k, matching as m\n"
         "from dbtools.gis.geometry import Projector\n"
-        "from dbtools.synthetic.network import build_network, demo_line\n"
+        "from fieldlogs.simulate.networks.synthetic import build_network, demo_line\n"
         "before = list(k.match_kernel.signatures)\n"
         "idx = m.track_index_for(build_network([demo_line()], Projector(9)))\n"
         "x, y = idx.x[:50] + 3.0, idx.y[:50] - 2.0\n"

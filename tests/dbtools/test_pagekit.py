@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import base64
 from html.parser import HTMLParser
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from dbtools import pagekit as kit
 from tests.fresh import fresh_python
+from tests.pages import check_page
 
 
 class Cells(HTMLParser):
@@ -69,7 +73,9 @@ def test_page_skeleton_badge_legend_and_key_values() -> None:
         kit.key_value_table([("run", "runs/a"), ("n", 3)], code=("run",)),
         kit.section("Part", "<p>x</p>", level=3),
         heading_text="Heading",
+        verdict=kit.Verdict("Passed: 0 errors, 1 warning", kit.Status.OK),
     )
+    assert "<h1>Heading</h1>\n<p id='verdict' class='verdict ok'>Passed: 0 errors, 1 warning</p>" in html
     assert html.startswith("<!doctype html><html lang='en'><head><meta charset='utf-8'>")
     assert "<title>t &lt;1&gt;</title>" in html and "<h1>Heading</h1>" in html and html.endswith("</body></html>")
     assert "<p class='note'>a &amp; b</p>" in html and "<span class='badge alarm'>3 alarm(s)</span>" in html
@@ -83,14 +89,48 @@ def test_figure_is_an_embedded_png() -> None:
     plt = kit.pyplot()
     fig, ax = plt.subplots(figsize=(2, 2))
     ax.plot([0, 1], [0, 1])
+    ax.set(xlabel="t [s]", ylabel="km\n[m]")
     data = kit.png(fig)
+    assert data.axes == "x: t [s]; y: km [m]"
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
     html = kit.figure(data, 'a "quoted" alt', "caption")
     src = html.split('src="', 1)[1].split('"', 1)[0]
     head, b64 = src.split(",", 1)
     assert head == "data:image/png;base64" and base64.b64decode(b64) == data
-    assert 'alt="a &quot;quoted&quot; alt"' in html and "<figcaption>caption</figcaption>" in html
+    assert (
+        'alt="a &quot;quoted&quot; alt (x: t [s]; y: km [m])"' in html
+        and 'data-axes="x: t [s]; y: km [m]"' in html
+        and "<figcaption>caption</figcaption>" in html
+    )
     assert plt.get_fignums() == []  # the figure was closed
+
+
+def test_a_plot_without_quantity_and_unit_on_an_axis_is_refused() -> None:
+    """Every plot names each axis's quantity and unit; a shared x axis may leave it to the
+    plot below; a figure refused is closed all the same."""
+    plt = kit.pyplot()
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    ax.set(xlabel="km", ylabel="offset [m]", title="Line 1")
+    with pytest.raises(ValueError, match=r"plot 'Line 1': the x axis needs a label 'quantity \[unit\]', has 'km'"):
+        kit.png(fig)
+    fig, axes = plt.subplots(2, 1, sharex=True)
+    for a in axes:
+        a.plot([0, 1], [0, 1])
+        a.set_ylabel("offset [m]")
+    axes[1].set_xlabel("km [km]")
+    assert kit.png(fig).axes == "y: offset [m]; x: km [km]"
+    fig, ax = plt.subplots()
+    ax.set_xlabel("t [s]")
+    with pytest.raises(ValueError, match="the y axis"):
+        kit.png(fig)
+    assert plt.get_fignums() == []
+
+
+def test_shares_are_percentages_and_columns_carry_labels() -> None:
+    html = kit.frame_table(pd.DataFrame({"km_m": [20.0], "verified_share": [0.9934], "n_runs": [3]}))
+    assert "<thead><tr><th>km [m]</th><th>verified share</th><th>runs</th></tr></thead>" in html
+    assert [c for _, c in parse(html).cells] == ["20.000", "99.3 %", "3"]
 
 
 def test_matplotlib_is_imported_lazily() -> None:
@@ -99,3 +139,32 @@ def test_matplotlib_is_imported_lazily() -> None:
         "print('matplotlib' in sys.modules)"
     )
     assert fresh_python(code).strip() == "False"
+
+
+def test_kit_page_standard_in_the_browser(browser: Any, tmp_path: Path) -> None:
+    """A kit page with a long table (its header stays in view while its rows scroll), a table
+    far wider than 1,280 px (it scrolls in its box, the page does not) and a long unbroken
+    path in a paragraph (it wraps): the standard of tests/pages.py holds."""
+    plt = kit.pyplot()
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 2])
+    ax.set(xlabel="t [s]", ylabel="km [m]")
+    long = pd.DataFrame({"km_m": np.arange(200) * 20.0, "gps_trusted_share": np.linspace(0, 1, 200)})
+    wide = pd.DataFrame({f"figure_{k}_m": [123456.789 * k] for k in range(40)})
+    html = kit.page(
+        "kit",
+        kit.paragraph("/data/" + "x" * 400 + "/run"),
+        kit.frame_table(wide),
+        kit.frame_table(long),
+        kit.figure(kit.png(fig), "a plot"),
+        verdict=kit.Verdict("Passed: 0 errors, 0 warnings", kit.Status.OK),
+    )
+    page = tmp_path / "kit.html"
+    page.write_text(html, encoding="utf-8")
+    assert check_page(browser, page, tmp_path / "shots", long_table=True) == {
+        "verdict": "Passed: 0 errors, 0 warnings",
+        "plots": 1,
+        "long_table": True,
+    }
+    widest = browser.eval('Math.max(...[...document.querySelectorAll(".scroll")].map(b => b.scrollWidth))')
+    assert widest > 1280  # the wide table is wider than the window, yet the page does not scroll sideways

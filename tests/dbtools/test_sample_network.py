@@ -16,7 +16,7 @@ from cli.main import app
 from dbtools.build import build_db
 from dbtools.gis.geometry import GEOD, Projector
 from dbtools.sample_network import PACKAGE_DIR, sample_raw_dir, sample_source_dir, sample_survey_dir
-from dbtools.sample_network.fit import project_brute
+from fieldlogs.simulate.networks.sample_fit import project_brute
 from schemas.enums import Severity
 
 REPORT = json.loads((PACKAGE_DIR / "fit_report.json").read_text(encoding="utf-8"))

@@ -333,7 +333,7 @@ def test_blocks_concatenate_to_the_whole_frame(  # type: ignore[no-untyped-def]
     pieces: list[int] = []
     c_numbers = typed_csv._c_numbers
 
-    def counted(source, names):  # type: ignore[no-untyped-def]
+    def counted(source, names, *notation):  # type: ignore[no-untyped-def]
         # the whole file (a path) or a piece of it (bytes _pos:_end, before it is read)
         size = (
             source.stat().st_size - len(path.read_bytes().split(b"\n", 1)[0]) - 1
@@ -341,7 +341,7 @@ def test_blocks_concatenate_to_the_whole_frame(  # type: ignore[no-untyped-def]
             else source._end - source._pos
         )
         pieces.append(size)
-        return c_numbers(source, names)
+        return c_numbers(source, names, *notation)
 
     monkeypatch.setattr(typed_csv, "_c_numbers", counted)
     frames = iter_csv_typed(LOG_STREAMS[name], path, rows)

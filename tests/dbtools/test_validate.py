@@ -15,9 +15,9 @@ from dbtools.network import Network, canonical, empty_frame
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.features import stencil_leak
 from dbtools.sources import write_source_set
-from dbtools.synthetic.alignment import Alignment, Curve
-from dbtools.synthetic.network import LineSpec, Station, build_network, demo_line, random_alignment
 from dbtools.validate import validate_network, validate_path
+from fieldlogs.simulate.networks.alignment import Alignment, Curve
+from fieldlogs.simulate.networks.synthetic import LineSpec, Station, build_network, demo_line, random_alignment
 from schemas.enums import Severity, Track
 from schemas.findings import Finding
 from schemas.tables import DB_TABLES, GIS, KM_BREAKS, LINES

@@ -1,14 +1,17 @@
 """SBAS/MSAS L1 corrections (RTCA DO-229 Appendix A) for the GNSS core [S002].
 
-* ``bits`` — bit fields and the CRC-24Q; ``tables`` — DO-229's look-up tables and IGP bands;
-* ``encode`` — an encoder written from the standard's tables (simulator and tests);
+* ``bits`` — bit fields and the CRC-24Q (DO-229's look-up tables and IGP bands, which the
+  simulator reads too, are ``fieldlogs.gnss.sbas_tables``, outside this package);
 * ``decode`` — MT 0, 1, 2–7, 9, 10, 12, 17, 18, 24–28 → frames, vectorised per type;
 * ``messages`` — a ``gnss_sbas`` stream screened (length, PRN, preamble, CRC) and decoded;
 * ``clock_orbit`` — fast + long-term corrections and σ_flt per observation row;
 * ``grid`` — the ionospheric grid at the pierce point and σ_UIRE;
 * ``delta_udre`` — δUDRE of MT 27 (service regions) or MT 28 (covariance) in σ_flt;
-* ``geo_select`` — which GEO's complete set applies when several are logged;
-* ``simulate`` — a ``gnss_sbas`` stream consistent with a simulated run's errors.
+* ``geo_select`` — which GEO's complete set applies when several are logged.
+
+The encoder (written from the standard's tables apart from the decoder, so that each checks
+the other) and the simulated stream are the simulator's: ``fieldlogs.simulate.gnss.sbas_encode``
+and ``fieldlogs.simulate.gnss.sbas_stream``.
 
 :class:`SbasCorrections` (every GEO's :class:`GeoSet` and the timeline of the GEO in use) is what
 the core takes (``observables.build_epochs`` and

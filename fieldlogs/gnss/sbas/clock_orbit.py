@@ -41,7 +41,7 @@ from fieldlogs.gnss.constants import FloatArray, StrArray
 from fieldlogs.gnss.corrections import RowCorrections
 from fieldlogs.gnss.sbas.decode import MT10_FIELDS
 from fieldlogs.gnss.sbas.messages import SbasMessages
-from fieldlogs.gnss.sbas.tables import (
+from fieldlogs.gnss.sbas_tables import (
     FC_DEGRADATION_MPS2,
     FC_TIMEOUT_S,
     NO_MT10_DEGRADATION_M,

@@ -1,6 +1,6 @@
 """Decoding of SBAS L1 messages (RTCA DO-229 Appendix A), vectorised over the messages of a type.
 
-Bit layouts (the field tables are in :mod:`fieldlogs.gnss.sbas.encode`'s docstring, each with
+Bit layouts (the field tables are in :mod:`fieldlogs.simulate.gnss.sbas_encode`'s docstring, each with
 its DO-229 table): positions count from bit 0, the first preamble bit, so the data of every
 type start at bit 14. Each decoder takes the (N, 256) bits of N messages of its type and their
 reception times ``t_rx`` [GPS s] and SBAS PRNs ``geo``, and returns one row per message and

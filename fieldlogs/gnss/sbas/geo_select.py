@@ -31,7 +31,7 @@ import pandas as pd
 
 from fieldlogs.gnss.constants import FloatArray
 from fieldlogs.gnss.sbas.messages import SbasMessages
-from fieldlogs.gnss.sbas.tables import TIMEOUT_S
+from fieldlogs.gnss.sbas_tables import TIMEOUT_S
 
 NO_GEO: Final = -1
 IntArray = npt.NDArray[np.int64]

@@ -39,7 +39,7 @@ import pandas as pd
 from fieldlogs.gnss.constants import F_L1_HZ, BoolArray, FloatArray
 from fieldlogs.gnss.sbas.decode import MT10_FIELDS
 from fieldlogs.gnss.sbas.messages import RECEPTION_DELAY_S, SbasMessages
-from fieldlogs.gnss.sbas.tables import (
+from fieldlogs.gnss.sbas_tables import (
     GIVEI_NOT_MONITORED,
     GRID_MAX_LAT_DEG,
     GRID_WIDE_CELL_LAT_DEG,

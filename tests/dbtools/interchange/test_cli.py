@@ -88,7 +88,7 @@ def test_possession_geojson(tmp_path: Path) -> None:
     from dbtools.build import build_db
     from dbtools.gis.geometry import Projector
     from dbtools.sources import write_source_set
-    from dbtools.synthetic.network import build_network, demo_line
+    from fieldlogs.simulate.networks.synthetic import build_network, demo_line
     from fieldlogs.simulate.possession import make_case
 
     net = build_network([demo_line()], Projector(9))

@@ -6,8 +6,6 @@ from __future__ import annotations
 import json
 import re
 import shutil
-import subprocess
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -19,8 +17,9 @@ from cli.main import app
 from dbtools.build import build_db
 from dbtools.interchange.review import write_review
 from dbtools.sample_network import sample_source_dir
-from tests.dbtools.interchange.cdp import Browser
+from tests.cdp import Browser
 from tests.dbtools.interchange.network_sources import SWITCH_IDS, TRACK_IDS, write_topology_sources
+from tests.pages import check_page, open_page
 
 
 @pytest.fixture(scope="module")
@@ -96,32 +95,6 @@ def test_existing_page_refused(change: dict[str, Path]) -> None:
     assert r.exit_code == 3
 
 
-def _chromium() -> str | None:
-    return shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
-
-
-def _browser(exe: str, page: Path, *args: str) -> subprocess.CompletedProcess[bytes]:
-    with tempfile.TemporaryDirectory() as profile:
-        return subprocess.run(
-            [
-                exe,
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--no-first-run",
-                f"--user-data-dir={profile}",
-                *args,
-                page.as_uri(),
-            ],
-            capture_output=True,
-            timeout=90,
-            check=False,
-        )
-
-
 @pytest.fixture(scope="module")
 def topo_page(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """OLD = the sample (line only); NEW = the same with declared topology: tracks D1 D2 U1 U2,
@@ -179,13 +152,18 @@ def test_tiles_only_when_asked(topo_page: dict[str, Path]) -> None:
     assert _payload(topo_page["page"].read_text(encoding="utf-8"))["tiles"] is None
 
 
-@pytest.mark.skipif(_chromium() is None, reason="chromium is not installed (.ci/run installs it)")
-def test_page_renders_in_headless_chromium(change: dict[str, Path]) -> None:
-    exe = _chromium()
-    assert exe is not None
-    dom = _browser(exe, change["page"], "--dump-dom").stdout.decode("utf-8", "replace")
+def test_page_renders_in_headless_chromium(change: dict[str, Path], browser: Browser) -> None:
+    open_page(browser, change["page"])
+    dom = browser.eval("document.documentElement.outerHTML")
     assert 'id="review-map"' in dom and 'data-ready="1"' in dom and "Validation of NEW" in dom
     assert "Legend" in dom and dom.count("leaflet-interactive") > 2  # the map script ran and drew
+
+
+def test_page_standard_in_the_browser(change: dict[str, Path], browser: Browser, tmp_path: Path) -> None:
+    """The rendering standard (tests/pages.py) on the review page: the verdict first, no
+    sideways scroll at 1,280 px (the map included), sticky headers."""
+    seen = check_page(browser, change["page"], tmp_path / "shots")
+    assert re.fullmatch(r"(Passed|Failed): \d+ errors?, \d+ warnings? in NEW; content changed\.", seen["verdict"])
 
 
 _POINT_ON = """(() => {{
@@ -200,49 +178,46 @@ _CENTRE_OF = """(() => {{
 _TIPS = '[...document.querySelectorAll(".leaflet-tooltip")].map(e => e.textContent)'
 
 
-@pytest.mark.skipif(_chromium() is None, reason="chromium is not installed (.ci/run installs it)")
-def test_map_in_headless_chromium(topo_page: dict[str, Path]) -> None:
+def test_map_in_headless_chromium(topo_page: dict[str, Path], browser: Browser) -> None:
     """The real page in a real browser (CDP): loads with no console error and no request
     beyond itself, draws every track, switch, connection place, balise group and km tick,
     shows a track's id on hover and a switch's 1:n on hover after zooming in."""
     from PIL import Image
 
-    exe = _chromium()
-    assert exe is not None
-    with Browser(exe, 1200, 900) as b:
-        b.call("Network.enable")
-        b.load(topo_page["page"].as_uri())
-        assert b.errors() == []
-        assert b.requests() == [topo_page["page"].as_uri()]  # offline: nothing fetched
-        assert b.eval('document.getElementById("review-map").dataset.ready') == "1"
-        count = {s: b.eval(f'document.querySelectorAll("{s}").length') for s in ("path.track", "path.switch")}
-        count |= {s: b.eval(f'document.querySelectorAll("{s}").length') for s in ("path.connection", "path.km-tick")}
-        count["group"] = b.eval('document.querySelectorAll("path.balise-group").length')
-        assert count == {"path.track": 5, "path.switch": 2, "path.connection": 2, "path.km-tick": 31, "group": 1}
-        b.eval('document.getElementById("review-map").scrollIntoView()')
-        x, y = b.eval(_POINT_ON.format(sel="path.track", i=0, f=0.3))
-        b.mouse_move(x, y)
-        tips = b.eval(_TIPS)
-        assert len(tips) == 1 and tips[0][:2] in {"D1", "U1"}  # U1 is drawn over D1 (4 m apart)
-        assert "line 0420 track" in tips[0] and "km 16k000.0" in tips[0]
-        b.screenshot(topo_page["root"] / "map.png")
-        # zoom in on W1 (wheel at the switch) until the crossover stands clear of the lines
-        for _ in range(12):
-            *_, w, h = b.eval(_CENTRE_OF.format(sel="path.kind-crossover", i=0))
-            if max(w, h) > 300:  # 100 m of crossover
-                break
-            sx, sy, *_ = b.eval(_CENTRE_OF.format(sel="path.sw-point", i=0))
-            b.call("Input.dispatchMouseEvent", type="mouseWheel", x=sx, y=sy, deltaX=0, deltaY=-60)
-            b.eval("new Promise(r => setTimeout(r, 400))")
-        assert 300 < max(w, h) < 1200, (w, h)
+    b = browser  # the session's (tests/conftest.py)
+    b.call("Network.enable")
+    open_page(b, topo_page["page"])
+    assert b.errors() == []
+    assert b.requests() == [topo_page["page"].as_uri()]  # offline: nothing fetched
+    assert b.eval('document.getElementById("review-map").dataset.ready') == "1"
+    count = {s: b.eval(f'document.querySelectorAll("{s}").length') for s in ("path.track", "path.switch")}
+    count |= {s: b.eval(f'document.querySelectorAll("{s}").length') for s in ("path.connection", "path.km-tick")}
+    count["group"] = b.eval('document.querySelectorAll("path.balise-group").length')
+    assert count == {"path.track": 5, "path.switch": 2, "path.connection": 2, "path.km-tick": 31, "group": 1}
+    b.eval('document.getElementById("review-map").scrollIntoView()')
+    x, y = b.eval(_POINT_ON.format(sel="path.track", i=0, f=0.3))
+    b.mouse_move(x, y)
+    tips = b.eval(_TIPS)
+    assert len(tips) == 1 and tips[0][:2] in {"D1", "U1"}  # U1 is drawn over D1 (4 m apart)
+    assert "line 0420 track" in tips[0] and "km 16k000.0" in tips[0]
+    b.screenshot(topo_page["root"] / "map.png")
+    # zoom in on W1 (wheel at the switch) until the crossover stands clear of the lines
+    for _ in range(12):
+        *_, w, h = b.eval(_CENTRE_OF.format(sel="path.kind-crossover", i=0))
+        if max(w, h) > 300:  # 100 m of crossover
+            break
         sx, sy, *_ = b.eval(_CENTRE_OF.format(sel="path.sw-point", i=0))
-        b.mouse_move(sx, sy)
-        tips = b.eval(_TIPS)
-        assert any("switch W" in t and "1:9" in t and "diverging" in t for t in tips), tips
-        labels = b.eval('[...document.querySelectorAll(".sw-label")].map(e => e.textContent)')
-        assert "W1 1:9 R" in labels  # close up, switches carry their label
-        b.screenshot(topo_page["root"] / "map_zoomed.png")
-        assert b.errors() == []
+        b.call("Input.dispatchMouseEvent", type="mouseWheel", x=sx, y=sy, deltaX=0, deltaY=-60)
+        b.eval("new Promise(r => setTimeout(r, 400))")
+    assert 300 < max(w, h) < 1200, (w, h)
+    sx, sy, *_ = b.eval(_CENTRE_OF.format(sel="path.sw-point", i=0))
+    b.mouse_move(sx, sy)
+    tips = b.eval(_TIPS)
+    assert any("switch W" in t and "1:9" in t and "diverging" in t for t in tips), tips
+    labels = b.eval('[...document.querySelectorAll(".sw-label")].map(e => e.textContent)')
+    assert "W1 1:9 R" in labels  # close up, switches carry their label
+    b.screenshot(topo_page["root"] / "map_zoomed.png")
+    assert b.errors() == []
     img = Image.open(topo_page["root"] / "map_zoomed.png").convert("RGB")
     colours = img.getcolors(maxcolors=1 << 20) or []
     # the crossover's colour #b03a9e (anti-aliased: within 30 per channel)

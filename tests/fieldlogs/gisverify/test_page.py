@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pandas as pd
 
+from dbtools.pagekit import Status, Verdict
 from fieldlogs.gisverify.page import mostly_unverified, verdict
 
 
@@ -19,13 +20,14 @@ def coverage(unverified_d: float, unverified_u: float) -> pd.DataFrame:
 
 
 def test_green_only_when_most_of_every_line_is_verified() -> None:
-    assert verdict(coverage(1.0, 2.9), 0) == "<p class='ok'>No defect found.</p>"  # 3.9 of 8 km: not most
-    text = verdict(coverage(1.5, 3.0), 0)  # 4.5 of 8 km unverified
-    assert "class='ok'" not in text and text.startswith("<p class='caution'>")
+    assert verdict(coverage(1.0, 2.9), 0) == Verdict("Passed: no defect found.", Status.OK)  # 3.9 of 8 km: not most
+    v = verdict(coverage(1.5, 3.0), 0)  # 4.5 of 8 km unverified
+    text = v.text
+    assert v.status == Status.CAUTION and text.startswith("Mostly unverified: ")
     assert "line 0420: 4.5 of 8.0 km unverified" in text and "0500" not in text
     assert mostly_unverified(coverage(1.5, 3.0))["line_code"].tolist() == ["0420"]
 
 
 def test_defects_are_red_and_empty_coverage_is_not_green() -> None:
-    assert verdict(coverage(4.0, 4.0), 2) == "<p class='warn'>2 defect(s) found.</p>"
-    assert verdict(coverage(0.0, 0.0).iloc[:0], 0).startswith("<p class='caution'>")
+    assert verdict(coverage(4.0, 4.0), 2) == Verdict("Failed: 2 defect(s) found.", Status.WARN)
+    assert verdict(coverage(0.0, 0.0).iloc[:0], 0).status == Status.CAUTION

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from fieldlogs.gnss import ephemeris as eph
 from fieldlogs.gnss.constants import C_MPS, F_L1_HZ, F_L2_HZ, F_L5_HZ, GALILEO, GPS, NAV_COLUMNS, WEEK_S
-from fieldlogs.gnss.constellation import constellation_nav
+from fieldlogs.simulate.gnss.constellation import constellation_nav
 
 # Real GPS PRN 1 broadcast record of 2013-06-01 02:00 GPST (week 1742, Toe 352800), as printed
 # in the docstring of gnsstoolbox's orbits.getEphemeris (J. Beilin, ENSG).

@@ -7,10 +7,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from fieldlogs.experiments.gnss import CaseSpec, run_case, summarise
 from fieldlogs.gnss.constants import WEEK_S
-from fieldlogs.gnss.constellation import constellation_nav
-from fieldlogs.gnss.experiment import CaseSpec, run_case, summarise
 from fieldlogs.gnss.observables import FLAG_CODE_CARRIER, build_epochs, carrier_smoothed
+from fieldlogs.simulate.gnss.constellation import constellation_nav
 
 LAM = 299_792_458.0 / 1575.42e6
 T0 = 2300 * WEEK_S + 7200.0

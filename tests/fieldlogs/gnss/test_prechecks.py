@@ -10,7 +10,6 @@ import pytest
 
 from fieldlogs.gnss import skymask
 from fieldlogs.gnss.constants import WEEK_S
-from fieldlogs.gnss.constellation import constellation_nav
 from fieldlogs.gnss.corrections import match_corrections
 from fieldlogs.gnss.observables import FLAG_NAV_MISMATCH, FLAG_PR_DIFFERENCE, build_epochs, carrier_smoothed
 from fieldlogs.gnss.prechecks import (
@@ -19,6 +18,7 @@ from fieldlogs.gnss.prechecks import (
     flag_nav_mismatch,
     pseudorange_difference_check,
 )
+from fieldlogs.simulate.gnss.constellation import constellation_nav
 from schemas.errors import InputError
 
 T0 = 2300 * WEEK_S + 3600.0

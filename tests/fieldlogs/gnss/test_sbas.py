@@ -10,11 +10,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fieldlogs.gnss.sbas import SbasCorrections
-from fieldlogs.gnss.sbas import encode as enc
 from fieldlogs.gnss.sbas.bits import crc24q_bytes, parity_ok
 from fieldlogs.gnss.sbas.grid import pierce_point
 from fieldlogs.gnss.sbas.messages import SbasStreamError, read_messages
-from fieldlogs.gnss.sbas.tables import band_igps
+from fieldlogs.gnss.sbas_tables import band_igps
+from fieldlogs.simulate.gnss import sbas_encode as enc
 
 T0 = 1_400_000_000.0  # a GPS time (continuous seconds)
 

@@ -9,8 +9,8 @@ import pytest
 
 from fieldlogs.gnss.report import sbas_summary
 from fieldlogs.gnss.sbas import SbasCorrections
-from fieldlogs.gnss.sbas import encode as enc
 from fieldlogs.gnss.sbas.geo_select import NO_GEO
+from fieldlogs.simulate.gnss import sbas_encode as enc
 
 T0 = 1_400_000_000.0
 LAG = 1.125  # reception 1.125 s after the time of applicability
@@ -103,7 +103,7 @@ def test_a_pinned_prn_uses_that_geo_only() -> None:
 
 
 def test_qzss_slots_of_the_mask_are_corrected_and_galileo_never() -> None:
-    from fieldlogs.gnss.sbas.tables import mask_slot_sat
+    from fieldlogs.gnss.sbas_tables import mask_slot_sat
 
     assert mask_slot_sat(np.array([1, 37, 38, 61, 62, 120, 158, 183, 192, 193, 202, 203])) == [
         "G01", "G37", "R01", "R24", "", "S20", "S58", "", "", "J01", "J10", ""]  # fmt: skip

@@ -9,10 +9,10 @@ import pandas as pd
 import pytest
 
 from fieldlogs.gnss.sbas import SbasCorrections
-from fieldlogs.gnss.sbas import encode as enc
 from fieldlogs.gnss.sbas.bits import getbits, getbitu, parity_ok
 from fieldlogs.gnss.sbas.delta_udre import DELTA_UDRE, DeltaUdre, in_region
 from fieldlogs.gnss.sbas.messages import read_messages
+from fieldlogs.simulate.gnss import sbas_encode as enc
 
 T0 = 1_400_000_000.0
 

@@ -8,9 +8,9 @@ import pandas as pd
 import pytest
 
 from fieldlogs.gnss.sbas import SbasCorrections
-from fieldlogs.gnss.sbas import encode as enc
 from fieldlogs.gnss.sbas.grid import H_I_M, R_E_M, pierce_point
-from fieldlogs.gnss.sbas.tables import band_igps, igp_key
+from fieldlogs.gnss.sbas_tables import band_igps, igp_key
+from fieldlogs.simulate.gnss import sbas_encode as enc
 
 T0 = 1_400_000_000.0
 

@@ -14,14 +14,14 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from dbtools.database import read_network
-from fieldlogs.gnss import experiment as ex
+from fieldlogs.experiments import gnss as ex
 from fieldlogs.gnss.observables import Epochs
 from fieldlogs.gnss.sbas import SbasCorrections
-from fieldlogs.gnss.sbas.simulate import sbas_stream
-from fieldlogs.gnss.simulate import Simulated
 from fieldlogs.recorders.ubx import read_ubx
 from fieldlogs.recorders.ubx_raw import rawx_frames, sbas_sfrbx_frames
 from fieldlogs.runs.handle import read_run
+from fieldlogs.simulate.gnss.observations import Simulated
+from fieldlogs.simulate.gnss.sbas_stream import sbas_stream
 from tests.fieldlogs.gnss.runs import simulate_gnss_run
 
 Case = tuple[ex.CaseSpec, Simulated, pd.DataFrame, pd.DataFrame]
@@ -141,7 +141,7 @@ def test_gnss_position_on_a_simulated_run_with_an_msas_stream(sample_db: Path, t
 
 
 def test_an_mt27_delta_udre_widens_the_corrected_rows_sigma_only(case: Case) -> None:
-    from fieldlogs.gnss.sbas import encode as enc
+    from fieldlogs.simulate.gnss import sbas_encode as enc
 
     spec, sim, corr, prior = case
     t_rx = float(corr["gnss_time_s"].iloc[0]) - 0.5

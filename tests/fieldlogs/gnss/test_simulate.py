@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fieldlogs.experiments.gnss import CaseSpec, run_case, summarise
 from fieldlogs.gnss.constants import NAV_COLUMNS, OBS_COLUMNS, WEEK_S
-from fieldlogs.gnss.constellation import TOE_SPACING_S, constellation_nav
 from fieldlogs.gnss.ephemeris import nav_table, satellite_states, select_ephemeris
-from fieldlogs.gnss.experiment import CaseSpec, run_case, summarise
 from fieldlogs.gnss.geodesy import azimuth_elevation, geodetic_to_ecef
 from fieldlogs.gnss.position import PositionConfig, position_run
-from fieldlogs.gnss.scenario import run_profile, synthetic_track, trajectory
-from fieldlogs.gnss.simulate import Corridor, ErrorSpec, ReceiverSpec, Section, simulate
 from fieldlogs.gnss.track import Antenna
+from fieldlogs.simulate.gnss.constellation import TOE_SPACING_S, constellation_nav
+from fieldlogs.simulate.gnss.observations import Corridor, ErrorSpec, ReceiverSpec, Section, simulate
+from fieldlogs.simulate.gnss.scenario import run_profile, synthetic_track, trajectory
 
 T0 = 2300 * WEEK_S + 5 * 3600.0
 
@@ -115,7 +115,7 @@ def test_trajectory_from_geodetic_matches_ecef() -> None:
     s = np.array([100.0, 200.0])
     ref = trajectory(tr, s, T0, 1.0)
     from fieldlogs.gnss.geodesy import ecef_to_geodetic
-    from fieldlogs.gnss.simulate import Trajectory
+    from fieldlogs.simulate.gnss.observations import Trajectory
 
     lat, lon, h = ecef_to_geodetic(ref.ref_ecef)
     geo = Trajectory.from_geodetic(ref.t, np.degrees(lat), np.degrees(lon), h, np.degrees(ref.heading_rad), s)

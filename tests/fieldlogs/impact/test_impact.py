@@ -9,6 +9,7 @@ import os
 import shutil
 import stat
 from pathlib import Path
+from typing import Any
 
 import pytest
 from typer.testing import CliRunner
@@ -20,6 +21,7 @@ from dbtools.sample_network import sample_source_dir
 from fieldlogs.impact.replay import RunFigures
 from fieldlogs.impact.report import FIGURES, changed_corrections
 from fieldlogs.impact.runner import impact_runs
+from tests.pages import check_page
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"
 MOVED = "0420-D-C001"
@@ -150,3 +152,18 @@ def test_release_with_impact(runner: CliRunner, sample_db: Path, moved_db: Path,
     report = verify_releases(reg)
     assert not report.ok and report.failed("sample-moved")
     assert any(f.rule == "release.impact" for f in report.findings)
+
+
+def test_page_standard_in_the_browser(
+    runner: CliRunner, sample_db: Path, moved_db: Path, browser: Any, tmp_path: Path
+) -> None:
+    """The rendering standard (tests/pages.py) on the impact page: verdict first, no sideways
+    scroll, sticky headers, the bar chart's axes named with units."""
+    page = tmp_path / "impact.html"
+    runs = [str(SAMPLE_LOGS / "sim-d-evening")]
+    res = runner.invoke(
+        app, ["db", "impact", str(sample_db), str(moved_db), *runs, "--format", "html", "--out", str(page)]
+    )
+    assert res.exit_code == 0, res.output
+    seen = check_page(browser, page, tmp_path / "shots")
+    assert seen["verdict"].startswith("Changes: ") and seen["plots"] == 1

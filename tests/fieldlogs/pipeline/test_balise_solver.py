@@ -1,6 +1,6 @@
 """Balise state machine (SPEC §5.2) and the solver's dead reckoning, hand-computed.
 
-A tiny network: line 0900, stations with pairs on D and U (dbtools.synthetic.network), a train
+A tiny network: line 0900, stations with pairs on D and U (fieldlogs.simulate.networks.synthetic), a train
 with a known travel profile; telegrams are written by hand.
 """
 
@@ -11,11 +11,11 @@ import pandas as pd
 import pytest
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.pipeline.aids.balise import BaliseDb
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.types import Odometry, SlipEpisode
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from tests.fieldlogs.pipeline.engine_cases import solve
 
 CFG = PipelineConfig()

@@ -1,7 +1,7 @@
 """Feature-point unit (SPEC §5.3, [S000 §3.2]) on hand-made κ traces.
 
 A double-track line with two curves of known radius (400 m left, 800 m right, 60 m
-transitions), its feature table from ``dbtools.synthetic.network``; a train at constant speed
+transitions), its feature table from ``fieldlogs.simulate.networks.synthetic``; a train at constant speed
 whose yaw rate is v·κ of the track it runs on (travel direction, left positive) plus
 0.1 deg/s of white noise per cycle (about 7× an ADIS16480's). Independent of the simulator.
 
@@ -19,14 +19,14 @@ import pytest
 import fieldlogs.pipeline.aids.features as features_mod
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
-from dbtools.synthetic.alignment import Alignment, Curve
-from dbtools.synthetic.network import LineSpec, Station, build_network
 from fieldlogs.pipeline.aids.balise import BaliseDb
 from fieldlogs.pipeline.aids.features import FeatureUnit, KmBetween
 from fieldlogs.pipeline.config import FeatureConfig, PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.estimate import signed_travel
 from fieldlogs.pipeline.types import FeatureOutcome, Fix, FloatArray, Odometry
+from fieldlogs.simulate.networks.alignment import Alignment, Curve
+from fieldlogs.simulate.networks.synthetic import LineSpec, Station, build_network
 from tests.fieldlogs.pipeline.engine_cases import solve
 
 LINE = "0900"

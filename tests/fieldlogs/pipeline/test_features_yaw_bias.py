@@ -15,11 +15,11 @@ import pytest
 
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
-from dbtools.synthetic.network import build_network
 from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.cycles import Cycles, standstill_mean
 from fieldlogs.pipeline.estimate import signed_travel
 from fieldlogs.pipeline.types import Odometry
+from fieldlogs.simulate.networks.synthetic import build_network
 from tests.fieldlogs.pipeline.test_features import CFG, DT, KM0, NOISE_RAD_S, SPEC, between, fix_at_start, outcomes
 
 BIAS = 0.002  # rad/s (0.11 °/s, ~2σ of an ADIS16480)

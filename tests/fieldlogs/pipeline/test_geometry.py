@@ -8,7 +8,6 @@ import pandas as pd
 import pytest
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
 from fieldlogs.pipeline.aids.gps import GpsAid
 from fieldlogs.pipeline.config import PipelineConfig
@@ -16,6 +15,7 @@ from fieldlogs.pipeline.engine import run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.types import GpsAnalysis, TrackDecision
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from tests.fieldlogs.pipeline.test_balise_solver import balise_km, cycles_const, tel
 
 CFG = PipelineConfig()

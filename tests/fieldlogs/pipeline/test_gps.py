@@ -16,12 +16,12 @@ import pandas as pd
 import pytest
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic.network import TRACK_OFFSETS, build_network, demo_line
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.gps.analysis import DECIDED_COLUMNS, FIX_COLUMNS, analyse_gps
 from fieldlogs.pipeline.gps.evidence import mean_variance_factor
 from fieldlogs.pipeline.gps.trust import trust_filter
+from fieldlogs.simulate.networks.synthetic import TRACK_OFFSETS, build_network, demo_line
 
 P = Projector(9)
 SPEC = demo_line()

@@ -19,7 +19,6 @@ import pandas as pd
 import pytest
 
 from dbtools.gis.geometry import Projector
-from dbtools.synthetic.network import build_network, demo_line
 from fieldlogs.config import SuiteConfig
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.types import Event, GpsAnalysis, TrackDecision
@@ -31,6 +30,7 @@ from fieldlogs.possession.periods import RailPeriod, rail_periods
 from fieldlogs.possession.plan import Possession, PossessionState, load_plan, plan_frame, possessions_for, read_plan
 from fieldlogs.possession.results import RunCheck, checks_json
 from fieldlogs.possession.tacho import Tacho, tacho_problem, tacho_track
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from fieldlogs.simulate.possession import EXPECTED_ALARM, KINDS, PossessionCase, make_case
 from schemas.errors import FindingsError, InputError, UsageError
 

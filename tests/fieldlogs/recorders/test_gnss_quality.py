@@ -126,7 +126,7 @@ def _with_sbas(tmp_path: Path, rows: list[dict[str, object]]) -> Path:
 
 
 def _sbas_row(t: float, prn: int, seq: int) -> dict[str, object]:
-    from fieldlogs.gnss.sbas.encode import mt1
+    from fieldlogs.simulate.gnss.sbas_encode import mt1
 
     return {"t": t, "gnss_time_s": 1e9 + t, "prn": prn, "msg_type": 1, "message_hex": mt1([7, 11], 0, seq).hex()}
 

@@ -1,6 +1,6 @@
 """Hand-computed physics of the simulator (SPEC §4.1 frame), noise switched off.
 
-Each test builds a small crafted line with ``dbtools.synthetic.network`` (an alignment we specify),
+Each test builds a small crafted line with ``fieldlogs.simulate.networks.synthetic`` (an alignment we specify),
 builds an onboard DB in a tmp folder, runs ``simulate_run`` through its public API and
 checks the output streams against values computed here by hand — never with the
 simulator's own helpers.
@@ -22,8 +22,8 @@ from dbtools.gis.geometry import PolylineIndex, Projector
 from dbtools.gis.georef import projector_for_points
 from dbtools.network import Network
 from dbtools.sources import write_source_set
-from dbtools.synthetic.alignment import Alignment, Curve
-from dbtools.synthetic.network import LineSpec, Station, build_network, demo_line
+from fieldlogs.simulate.networks.alignment import Alignment, Curve
+from fieldlogs.simulate.networks.synthetic import LineSpec, Station, build_network, demo_line
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from schemas.units import KMH_PER_S, G

@@ -7,12 +7,14 @@ import hashlib
 import json
 import re
 from pathlib import Path
+from typing import Any
 
 import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
 from tests.fieldlogs.survey.survey_data import MOVED, REMOVED_BALISE, SurveyData, survey_data
+from tests.pages import check_page
 
 
 @pytest.fixture(scope="module")
@@ -129,3 +131,15 @@ def test_unreadable_inputs_exit_2(data: SurveyData, tmp_path: Path, runner: CliR
     assert res.exit_code == 2 and "no run folders" in res.output
     res = runner.invoke(app, ["survey", str(data.logs), "--db", str(tmp_path / "none.sqlite")])
     assert res.exit_code == 2
+
+
+def test_page_standard_in_the_browser(data: SurveyData, browser: Any, tmp_path: Path, runner: CliRunner) -> None:
+    """The rendering standard (tests/pages.py) on the survey page: verdict first, no sideways
+    scroll, sticky headers, every plot's axes named with units."""
+    html = tmp_path / "survey.html"
+    res = runner.invoke(
+        app, ["survey", str(data.logs), "--db", str(data.db), "-j", "1", "--format", "html", "--out", str(html)]
+    )
+    assert res.exit_code == 1, res.output
+    seen = check_page(browser, html, tmp_path / "shots")
+    assert seen["verdict"].startswith("To act on: ") and seen["plots"] >= 2

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
+from dbtools.gis.track_segments import build_geometry
 from dbtools.sources import read_source_set
 from dbtools.topology import all_tracks, centreline
-from fieldlogs.trackmatch.geometry import build_geometry
 
 CROSSOVER = Path(__file__).resolve().parents[2] / "data" / "networks" / "crossover"
 
