@@ -19,8 +19,9 @@ def sample_logs_dir() -> Path:
 
 
 def sample_source_dir() -> Path:
-    """The bundled sample network's source set (``dbtools/sample_network``)."""
-    from dbtools.sample_network import sample_source_dir as bundled
+    """The bundled sample network's source set with its station, crossovers and junction
+    (``dbtools/sample_network/network_sources``)."""
+    from dbtools.sample_network import sample_network_source_dir as bundled
 
     return Path(bundled())
 

@@ -2,7 +2,8 @@
 
 One TOML file (``--config FILE.toml``) configures every command: ``run``, ``audit`` and
 ``gis verify`` read the pipeline's sections (``[odometry]``, ``[balise]``, ``[feature]``,
-``[gps]``, ``[margin]``, ``[gnss]``, ``[clock]``, ``[window]``, ``cycle_s``), ``gis verify`` also ``[gis_verify]``,
+``[gps]``, ``[margin]``, ``[gnss]``, ``[clock]``, ``[window]``, ``[track_select]``, ``cycle_s``), ``gis verify``
+also ``[gis_verify]``,
 ``possession check`` reads ``[gps]`` and ``[possession]``, ``survey`` the pipeline's sections
 and ``[survey]``; each command refuses unknown sections and keys, wrong types and values out
 of range; every command with ``--config`` applies its ``[input]`` section (limits of compressed
@@ -28,6 +29,7 @@ from fieldlogs.pipeline.config import (
     MarginConfig,
     OdometryConfig,
     PipelineConfig,
+    TrackSelectConfig,
     WindowConfig,
     check_budgets,
     read_toml,
@@ -51,6 +53,7 @@ class SuiteConfig:
     gnss: GnssConfig = field(default_factory=GnssConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
     window: WindowConfig = field(default_factory=WindowConfig)
+    track_select: TrackSelectConfig = field(default_factory=TrackSelectConfig)
     possession: PossessionConfig = field(default_factory=PossessionConfig)
     survey: SurveyConfig = field(default_factory=SurveyConfig)
     gis_verify: VerifyConfig = field(default_factory=VerifyConfig)
@@ -72,6 +75,7 @@ class SuiteConfig:
             gnss=self.gnss,
             clock=self.clock,
             window=self.window,
+            track_select=self.track_select,
         )
 
     @classmethod

@@ -123,6 +123,9 @@ class PositionState(StrEnum):
     UNDETERMINED = "undetermined"
     DETERMINED = "determined"
     UNCERTAIN = "uncertain"
+    AMBIGUOUS = "ambiguous"
+    """On a network after a facing switch: several candidate tracks remain (``candidates``);
+    no track is claimed until evidence leaves one."""
 
 
 class RadarStatus(StrEnum):
@@ -204,6 +207,9 @@ class EventType(StrEnum):
     CLOCK_OFFSET = "clock_offset"
     WHEEL_SCALE = "wheel_scale"
     BALISE_CLOCK = "balise_clock"
+    SWITCH_SPLIT = "switch_split"
+    TRACK_RESOLVED = "track_resolved"
+    HYPOTHESIS_DROPPED = "hypothesis_dropped"
 
 
 EVENT_MEANING: dict[EventType, str] = {
@@ -242,6 +248,11 @@ EVENT_MEANING: dict[EventType, str] = {
     "margin's distance share was widened to cover it",
     EventType.BALISE_CLOCK: "warning: the balise corrections follow the speed at the telegrams (a late or early "
     "balise clock); the telegrams' t was moved back by the offset, or the balises refused",
+    EventType.SWITCH_SPLIT: "dead reckoning reached a facing switch: one candidate per branch, position ambiguous",
+    EventType.TRACK_RESOLVED: "evidence (detail.evidence: balise_group, gps, imu, or the aid that set a track) "
+    "left one candidate track; detail.after_switch_m is the travel since the split",
+    EventType.HYPOTHESIS_DROPPED: "a candidate ran past a buffer stop or a non-navigable end, or evidence ruled it "
+    "out; with none left the position is forgotten",
 }
 
 #: Events that correct the km, and the one the position-correction % is defined on [S003 §5.2].

@@ -26,7 +26,20 @@ TACHO = Table(
     name="tacho",
     kind="log",
     description="Tachometer: cumulative pulse count every 100 ms cycle.",
-    columns=(T, Column("pulses", "int", "Cumulative pulse count, never decreasing", min=0)),
+    columns=(
+        T,
+        Column("pulses", "int", "Cumulative pulse count, never decreasing (teeth passed in either sense)", min=0),
+        Column(
+            "direction",
+            "int",
+            "Sense of motion from a two-phase tachometer over the cycle: +1 toward the vehicle's F end, "
+            "−1 toward its R end (rolling back), 0 standstill or not known; absent: the driving cab's",
+            nullable=True,
+            required=False,
+            min=-1,
+            max=1,
+        ),
+    ),
     rate_hz=10.0,
     required=False,
 )
@@ -63,11 +76,20 @@ BALISE = Table(
     description="Balise telegrams received, one row per balise passed.",
     columns=(
         T,
-        Column("kind", "str", "I1, I2 or C", enum=tuple(k.value for k in BaliseKind)),
+        Column("kind", "str", "I1, I2, C or G (ETCS group)", enum=tuple(k.value for k in BaliseKind)),
         Column("line_code", "str", "Line code (I1)", nullable=True),
         Column("station_code", "str", "Station code (I2)", nullable=True),
         Column("track", "str", "Up/down (I2)", nullable=True, enum=tuple(t.value for t in Track)),
         Column("signal_type", "str", "Signal type (C)", nullable=True),
+        *(
+            Column(name, "int", f"G (ETCS balise group) only: {what}", required=False, nullable=True, min=lo, max=hi)
+            for name, what, lo, hi in (
+                ("nid_c", "country or region NID_C of the group", 0, 1023),
+                ("nid_bg", "identity NID_BG of the group", 0, 16383),
+                ("n_pig", "position N_PIG of the balise in its group", 0, 7),
+                ("n_total", "balises in the group (N_TOTAL + 1), as in the balises table", 1, 8),
+            )
+        ),
     ),
     required=False,
 )
@@ -167,6 +189,22 @@ TRUTH = Table(
         Column("km_m", "float", "True actual kilometrage", unit="m", nullable=True),
         Column("speed_mps", "float", "True speed over ground (signed: + in cab forward)", unit="m/s"),
         Column("slipping", "int", "1 while the wheel slips or slides", min=0, max=1),
+        Column(
+            "track_id",
+            "str",
+            "True track (netElement) of a run routed over a network; empty on a one-line run",
+            required=False,
+            nullable=True,
+        ),
+        Column(
+            "pos_m",
+            "float",
+            "True distance along that track from its begin",
+            unit="m",
+            required=False,
+            nullable=True,
+            min=0.0,
+        ),
     ),
     required=False,
 )

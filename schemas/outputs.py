@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from schemas.enums import PositionState, RadarStatus, Track
+from schemas.enums import PositionState, RadarStatus
 from schemas.model import Column, Table
 
 POSITIONS = Table(
@@ -12,9 +12,26 @@ POSITIONS = Table(
     description="One row per 100 ms cycle: what the onboard unit concluded.",
     columns=(
         Column("t", "float", "Cycle time", unit="s"),
-        Column("state", "str", "undetermined, determined or uncertain", enum=tuple(s.value for s in PositionState)),
+        Column(
+            "state",
+            "str",
+            "undetermined, determined, uncertain or ambiguous (candidate tracks in candidates)",
+            enum=tuple(s.value for s in PositionState),
+        ),
         Column("line_code", "str", "Line", nullable=True),
-        Column("track", "str", "Track", nullable=True, enum=tuple(t.value for t in Track)),
+        Column(
+            "track",
+            "str",
+            "Local track name: U/D/S on a line; on a network also a station track's (1, 2…)",
+            nullable=True,
+        ),
+        Column(
+            "track_id",
+            "str",
+            "Network track (netElement) claimed; on a line-only DB the implied LINE:TRACK",
+            nullable=True,
+        ),
+        Column("pos_m", "float", "Distance along that track from its begin", unit="m", nullable=True),
         Column("km_m", "float", "Actual kilometrage", unit="m", nullable=True),
         Column("km_equipment_m", "float", "Equipment kilometrage", unit="m", nullable=True),
         Column("speed_mps", "float", "Speed estimate", unit="m/s"),
@@ -23,6 +40,13 @@ POSITIONS = Table(
         Column("km_head_m", "float", "km of the vehicle's leading end (needs its geometry)", unit="m", nullable=True),
         Column(
             "km_tail_m", "float", "km of its trailing end: the vehicle occupies [tail, head]", unit="m", nullable=True
+        ),
+        Column(
+            "candidates",
+            "str",
+            "State ambiguous: JSON list of the candidate tracks, each "
+            '{"track_id", "pos_m", "km_m" (null off a line), "margin_m"}',
+            nullable=True,
         ),
     ),
 )

@@ -44,6 +44,17 @@ def sample_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def sample_network_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The sample network with its station, crossovers and junction (``network_sources``), once."""
+    from dbtools.build import build_db
+    from dbtools.sample_network import sample_network_source_dir
+
+    db = tmp_path_factory.mktemp("sample-network-db") / "sample.sqlite"
+    build_db(sample_network_source_dir(), db, db_version="sample-1")
+    return db
+
+
+@pytest.fixture(scope="session")
 def browser() -> Iterator[Any]:
     """One headless Chromium for the session's page tests (tests/pages.py); skipped where
     chromium is not installed (.ci/run installs it)."""

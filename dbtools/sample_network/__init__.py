@@ -19,6 +19,13 @@ def sample_source_dir() -> Path:
     return PACKAGE_DIR / "sources"
 
 
+def sample_network_source_dir() -> Path:
+    """The same line with a four-track station, a crossover pair and a junction (tracks,
+    connections, switches, track_points, ETCS-style balise groups, branch line 0421;
+    :mod:`fieldlogs.simulate.networks.sample_junctions`): what the demo and the ``sim-net-*`` sample runs use."""
+    return PACKAGE_DIR / "network_sources"
+
+
 def sample_survey_dir() -> Path:
     """The packaged survey (centrelines.csv, kmposts.csv) that ``gis grid`` turns into gis.csv."""
     return PACKAGE_DIR / "survey"

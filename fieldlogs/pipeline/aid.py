@@ -105,8 +105,9 @@ class EngineView(Protocol):
         ...
 
     @property
-    def cab(self) -> int:
-        """+1 running toward the F end, −1 reversed (at cycle ``i``)."""
+    def motion(self) -> int:
+        """Sense of motion at cycle ``i``: +1 toward the F end, −1 toward the R end (the driving
+        cab's direction, or a two-phase tachometer's where the run has one)."""
         ...
 
     @property

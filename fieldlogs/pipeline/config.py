@@ -1,7 +1,8 @@
 """Every tuning parameter of the positioning pipeline, with SPEC defaults, units and ranges.
 
 One frozen section per concern — ``[odometry]``, ``[balise]``, ``[feature]``, ``[gps]``,
-``[margin]``, ``[clock]``, ``[window]`` of a ``--config`` TOML file, plus ``cycle_s``, and ``[gnss]`` (declared in
+``[margin]``, ``[clock]``, ``[window]``, ``[track_select]`` of a ``--config`` TOML file, plus ``cycle_s``,
+and ``[gnss]`` (declared in
 :mod:`fieldlogs.gnss.config`) — each field declared with
 :func:`schemas.settings.setting` (default, one-line meaning, unit, allowed range), so that
 ``trainpos config show`` prints them all and a value out of range is refused wherever it
@@ -12,6 +13,7 @@ non-SPEC defaults are in ``bench/NOTES.md``.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
@@ -289,6 +291,36 @@ CYCLE_S: dict[str, Any] = {
 
 
 @dataclass(frozen=True)
+class TrackSelectConfig:
+    """Which track after a facing switch: the evidence tests of the network aids
+    (:mod:`fieldlogs.pipeline.aids.track_gps`, :mod:`fieldlogs.pipeline.aids.track_imu`).
+
+    A candidate is dropped when another one's log-likelihood ratio against it reaches
+    A = ln((1 − β)/α) (Wald's upper threshold): α the accepted probability of dropping the true
+    track, β that of not deciding on evidence that should decide.
+    """
+
+    alpha: float = setting(1e-4, "accepted probability that evidence drops the true track", gt=0, lt=0.5)
+    beta: float = setting(0.01, "accepted probability of not deciding when the evidence should", gt=0, lt=0.5)
+    gyro_bias_dps: float = setting(0.05, "1σ of the yaw-rate bias over a turnout", "deg/s", ge=0)
+    gyro_noise_dps_rthz: float = setting(0.02, "yaw-rate white noise density", "deg/s/√Hz", ge=0)
+    heading_geometry_deg: float = setting(
+        0.5, "1σ of a turnout's heading change from laying tolerances and car-body motion", "deg", gt=0
+    )
+    imu_max_margin_m: float = setting(
+        30.0, "no IMU test when the margin at the switch exceeds this (the window would hold other curves)", "m", gt=0
+    )
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "track_select")
+
+    @property
+    def threshold(self) -> float:
+        """Wald's A = ln((1 − β)/α)."""
+        return math.log((1.0 - self.beta) / self.alpha)
+
+
+@dataclass(frozen=True)
 class PipelineConfig:
     """The pipeline's sections of the configuration tree."""
 
@@ -301,6 +333,7 @@ class PipelineConfig:
     gnss: GnssConfig = field(default_factory=GnssConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
     window: WindowConfig = field(default_factory=WindowConfig)
+    track_select: TrackSelectConfig = field(default_factory=TrackSelectConfig)
 
     def __post_init__(self) -> None:
         check_ranges(self)

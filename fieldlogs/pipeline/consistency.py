@@ -123,12 +123,12 @@ def balise_intervals(fixes: list[Fix], travel: Travel) -> list[Interval]:
         if f.source == FixSource.NONE:
             prev = None
             continue
-        if f.source != FixSource.BALISE:
+        if f.source != FixSource.BALISE or f.carried or not np.isfinite(f.km_m):
             continue
         if prev is not None and prev.line_code == f.line_code and f.d_ref - prev.d_ref >= MIN_INTERVAL_M:
             i0, i1 = _cycle(travel, prev.reference_t), _cycle(travel, f.reference_t)
             amount = float(travel.km(prev, f.s_ref)) - f.km_m
-            c0, c1 = float(travel.cab[i0]), float(travel.cab[i1])
+            c0, c1 = float(travel.motion[i0]), float(travel.motion[i1])
             along = amount * prev.k * c1
             dv = float(travel.v[i1]) - c0 * c1 * float(travel.v[i0])
             budget = travel.allowance_at(f.reference_t) - travel.allowance_at(prev.reference_t)

@@ -60,6 +60,19 @@ class Cycles:
     """1 on rail (road-rail vehicles), 0 off; 1 for trains."""
     has_tacho: bool
     has_imu: bool
+    rotation: npt.NDArray[np.int8] | None = None
+    """Sense of motion from a two-phase tachometer (the tacho ``direction``: +1 toward the F
+    end, −1 toward the R end, 0 where not known); None without one."""
+
+    @property
+    def motion(self) -> npt.NDArray[np.int8]:
+        """Sense of motion per cycle: +1 toward the F end, −1 toward the R end. The driving
+        cab's direction, except where a two-phase tachometer tells otherwise — a train rolling
+        back on a gradient moves against its cab [S003 §2]: the last sense it gave holds while
+        it gives none (standstill), and the cab's before its first."""
+        if self.rotation is None:
+            return self.cab
+        return tacho_motion(self.rotation, self.cab)
 
     @property
     def n(self) -> int:
@@ -68,6 +81,15 @@ class Cycles:
     @property
     def dt(self) -> FloatArray:
         return np.diff(self.t, prepend=self.t[0] - 0.1 if self.t.size else 0.0)
+
+
+def tacho_motion(rotation: npt.NDArray[np.int8], cab: npt.NDArray[np.int8]) -> npt.NDArray[np.int8]:
+    """Sense of motion from the tacho's ``direction`` (0: keep the last sense given; the cab's
+    before the first): see :attr:`Cycles.motion`."""
+    r = np.asarray(rotation, dtype=np.int8)
+    known = r != 0
+    last = np.maximum.accumulate(np.where(known, np.arange(r.size), -1)) if r.size else np.zeros(0, np.int64)
+    return np.where(last >= 0, r[np.maximum(last, 0)], np.asarray(cab, dtype=np.int8)).astype(np.int8)
 
 
 def step_values(t_cycles: FloatArray, t_events: FloatArray, values: npt.ArrayLike, default: float) -> FloatArray:
@@ -138,7 +160,10 @@ def build_cycles(
     else:
         cab_sign = np.ones(t.size, dtype=np.int8)
         pto = np.ones(t.size, dtype=np.int8)
-    return Cycles(t, pulses, d, v, imu_means, cab_sign, pto, has_tacho, has_imu)
+    rotation = None
+    if has_tacho and tacho is not None and "direction" in tacho.columns and tacho["direction"].notna().any():
+        rotation = np.sign(tacho["direction"].to_numpy(dtype=float, na_value=0.0)).astype(np.int8)
+    return Cycles(t, pulses, d, v, imu_means, cab_sign, pto, has_tacho, has_imu, rotation)
 
 
 def imu_cycle_means(t_cycles: FloatArray, imu: pd.DataFrame) -> dict[str, FloatArray]:

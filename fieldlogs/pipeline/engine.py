@@ -57,8 +57,8 @@ class _View:
     s: float
 
     @property
-    def cab(self) -> int:
-        return int(self.engine.travel.cab[self.i])
+    def motion(self) -> int:
+        return int(self.engine.travel.motion[self.i])
 
     @property
     def travel(self) -> Travel:

@@ -1,9 +1,11 @@
 """Dead reckoning between absolute fixes, and the travel it runs on.
 
-With the corrected unsigned travel d (odometry, never decreasing) and the cab direction
-(+1 toward the vehicle's F end, −1 reversed), the signed body-forward travel is
+With the corrected unsigned travel d (odometry, never decreasing) and the sense of motion m
+(+1 toward the vehicle's F end, −1 toward its R end: the driving cab's direction, or a
+two-phase tachometer's sense where the run has one — :attr:`fieldlogs.pipeline.cycles.Cycles.motion`),
+the signed body-forward travel is
 
-    S(t) = Σ cab·Δd,
+    S(t) = Σ m·Δd,
 
 and from a fix (km_m, k, s_ref) the position is
 
@@ -32,9 +34,9 @@ Metric = Callable[[Fix], TrackMetric]
 
 
 def signed_travel(cycles: Cycles, odo: Odometry) -> FloatArray:
-    """S = Σ cab·Δd: travel toward the vehicle's F end (+) or R end (−)."""
+    """S = Σ m·Δd: travel toward the vehicle's F end (+) or R end (−), m the sense of motion."""
     dd = np.diff(odo.d, prepend=odo.d[0] if odo.d.size else 0.0)
-    return np.cumsum(cycles.cab.astype(float) * dd)
+    return np.cumsum(cycles.motion.astype(float) * dd)
 
 
 def km_along(fix: Fix, s: FloatArray | float, m: TrackMetric) -> FloatArray:
@@ -54,17 +56,27 @@ class Travel:
     v: FloatArray
     """Corrected speed [m/s]."""
     cab: np.ndarray
+    """The driving cab: +1 toward the F end, −1 reversed."""
     on_track: np.ndarray
     """True where the vehicle is on the track (PTO on for road-rail vehicles; trains always)."""
     allowance: FloatArray
     """Cumulative slip-correction error budget (eq. 13) [m]."""
     network: Network | None = None
     """With a network, dead reckoning runs along each track's own length."""
+    rotation_motion: np.ndarray | None = None
+    """The sense of motion where a two-phase tachometer gives it (None: the cab's)."""
 
     @classmethod
     def of(cls, cycles: Cycles, odo: Odometry, network: Network | None = None) -> Travel:
         on_track = np.asarray(cycles.pto) != 0
-        return cls(cycles.t, odo.d, signed_travel(cycles, odo), odo.v, cycles.cab, on_track, odo.allowance, network)
+        s = signed_travel(cycles, odo)
+        motion = None if cycles.rotation is None else cycles.motion
+        return cls(cycles.t, odo.d, s, odo.v, cycles.cab, on_track, odo.allowance, network, motion)
+
+    @property
+    def motion(self) -> np.ndarray:
+        """Sense of motion per cycle (+1 toward the F end): :attr:`Cycles.motion`."""
+        return self.cab if self.rotation_motion is None else self.rotation_motion
 
     @property
     def n(self) -> int:

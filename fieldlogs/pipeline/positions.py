@@ -23,9 +23,13 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.topology import all_tracks, implied_track_id
+from fieldlogs.pipeline.claims import claims, entries, max_margin
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
+from fieldlogs.pipeline.hypotheses import track_lines
+from fieldlogs.pipeline.metric import IDENTITY
 from fieldlogs.pipeline.types import Fix, FloatArray
 from schemas.enums import FixSource, PositionState
 
@@ -54,55 +58,146 @@ def text_column(codes: npt.NDArray[np.uint8], values: dict[str, int]) -> npt.NDA
 def positions_frame(
     travel: Travel, fixes: list[Fix], cfg: MarginConfig, geometry: VehicleGeometry | None = None
 ) -> pd.DataFrame:
-    """Per-cycle state, km, equipment km, margin and source from the fixes in force, and the
-    vehicle's head and tail km (:mod:`fieldlogs.pipeline.geometry`; NaN without its extent)."""
+    """Per-cycle state, track, km, equipment km, margin and source from the fixes in force, and
+    the vehicle's head and tail km (:mod:`fieldlogs.pipeline.geometry`; NaN without its
+    extent). A fix with network candidates (:mod:`fieldlogs.pipeline.hypotheses`) is dead-reckoned
+    per candidate along its track: one gives track, pos and km; several give state
+    ``ambiguous``, no track or km, and the ``candidates`` column (:func:`candidates_text`)."""
     geometry = geometry or VehicleGeometry()
-    t, d = travel.t, travel.d
+    t = travel.t
     n = t.size
     # state and source as codes of their few distinct texts (the enums' values), made text once
-    states, sources = {PositionState.UNDETERMINED.value: 0}, {FixSource.NONE.value: 0}
-    state = np.zeros(n, dtype=np.uint8)
-    source = np.zeros(n, dtype=np.uint8)
-    line = np.full(n, None, dtype=object)  # None: one object, every cell shares it
-    track = np.full(n, None, dtype=object)
-    km = np.full(n, np.nan)
-    km_eq = np.full(n, np.nan)
-    margin = np.full(n, np.nan)
-    k_sign = np.full(n, np.nan)
+    cols = _Columns(n)
     if fixes:
         t_eff = np.array([f.t_effective for f in fixes])
         idx = np.searchsorted(t_eff, t, side="right") - 1
-        has = idx >= 0
-        cyc = np.flatnonzero(has)
+        cyc = np.flatnonzero(idx >= 0)
         j = idx[cyc]
         order = np.argsort(j, kind="stable")  # cycles grouped by fix in force, ascending
         groups, first = np.unique(j[order], return_index=True)
         for jj, sel in zip(groups.tolist(), np.split(cyc[order], first[1:]), strict=True):
             f = fixes[jj]  # the fix in force on cycles ``sel``: dead reckoning and margin
-            if f.state == PositionState.UNDETERMINED:
-                continue
-            est = travel.km(f, travel.s[sel])
-            km[sel] = est
-            km_eq[sel] = est + (f.km_equipment_m - f.km_m)
-            margin[sel] = margin_m(f, d[sel], travel.allowance[sel], cfg)
-            k_sign[sel] = f.k
-            state[sel] = states.setdefault(str(f.state), len(states))
-            line[sel] = f.line_code
-            track[sel] = f.track
-            source[sel] = sources.setdefault(str(f.source), len(sources))
-    head, tail = geometry.ends(km, k_sign, np.asarray(travel.cab, dtype=float))
+            if f.state != PositionState.UNDETERMINED:
+                cols.fill(travel, f, sel, cfg)
+    head, tail = geometry.ends(cols.km, cols.k_sign, np.asarray(travel.cab, dtype=float))
     return pd.DataFrame(
         {
             "t": t,
-            "state": text_column(state, states),
-            "line_code": pd.array(line, dtype="string"),
-            "track": pd.array(track, dtype="string"),
-            "km_m": km,
-            "km_equipment_m": km_eq,
+            "state": text_column(cols.state, cols.states),
+            "line_code": pd.array(cols.line, dtype="string"),
+            "track": pd.array(cols.track, dtype="string"),
+            "track_id": pd.array(cols.track_id, dtype="string"),
+            "pos_m": cols.pos,
+            "km_m": cols.km,
+            "km_equipment_m": cols.km_eq,
             "speed_mps": travel.v,
-            "margin_m": margin,
-            "last_fix_source": pd.array(text_column(source, sources), dtype="string"),
+            "margin_m": cols.margin,
+            "last_fix_source": pd.array(text_column(cols.source, cols.sources), dtype="string"),
             "km_head_m": head,
             "km_tail_m": tail,
+            "candidates": pd.array(cols.candidates, dtype="string"),
         }
     )
+
+
+class _Columns:
+    """The per-cycle columns of :func:`positions_frame`, filled one fix at a time."""
+
+    def __init__(self, n: int) -> None:
+        self.states, self.sources = {PositionState.UNDETERMINED.value: 0}, {FixSource.NONE.value: 0}
+        self.state = np.zeros(n, dtype=np.uint8)
+        self.source = np.zeros(n, dtype=np.uint8)
+        self.line = np.full(n, None, dtype=object)  # None: one object, every cell shares it
+        self.track = np.full(n, None, dtype=object)
+        self.track_id = np.full(n, None, dtype=object)
+        self.candidates = np.full(n, None, dtype=object)
+        self.km, self.km_eq, self.pos = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
+        self.margin, self.k_sign = np.full(n, np.nan), np.full(n, np.nan)
+        self._ids: dict[str | None, str | None] = {None: None}
+
+    def interned(self, text: str | None) -> str | None:
+        """One str object per track id (the cells share it, as the other text columns do)."""
+        return self._ids.setdefault(text, text)
+
+    def fill(self, travel: Travel, f: Fix, sel: npt.NDArray[np.int64], cfg: MarginConfig) -> None:
+        base = margin_m(f, travel.d[sel], travel.allowance[sel], cfg)
+        state = np.full(sel.size, self.code(str(f.state)), dtype=np.uint8)
+        if f.hyps:
+            self._network(travel, f, sel, base, state)
+        else:
+            est = travel.km(f, travel.s[sel])
+            self._claim(sel, est, est + (f.km_equipment_m - f.km_m), legacy_pos(travel, f, est), base, f.k)
+            self.line[sel], self.track[sel] = f.line_code, f.track
+            self.track_id[sel] = self.interned(legacy_track_id(travel, f))
+        self.state[sel] = state
+        self.source[sel] = self.sources.setdefault(str(f.source), len(self.sources))
+
+    def code(self, state: str) -> int:
+        return self.states.setdefault(state, len(self.states))
+
+    def _network(
+        self, travel: Travel, f: Fix, sel: npt.NDArray[np.int64], base: FloatArray, state: npt.NDArray[np.uint8]
+    ) -> None:
+        """A fix with candidates (:mod:`fieldlogs.pipeline.claims`): determined cycles claim the
+        one track; ambiguous ones list the candidates (and keep km where they agree on it)."""
+        if travel.network is None:
+            raise ValueError("a fix with network candidates needs the travel's network")
+        lines = track_lines(travel.network)
+        ents = entries(f, travel.s[sel], _motion(travel)[sel], base, lines)
+        cl = claims(ents)
+        own = ents[0]
+        tl = lines[own.track_id]
+        self._claim(sel, own.km, own.km + _eq_offset(f), own.pos, own.margin, own.kp * tl.km_sign)
+        det = sel[~cl.ambiguous]
+        self.line[det], self.track[det], self.track_id[det] = (
+            tl.line_code or None,
+            tl.track or None,
+            self.interned(own.track_id),
+        )
+        amb = sel[cl.ambiguous]
+        if amb.size:
+            state[cl.ambiguous] = self.code(PositionState.AMBIGUOUS.value)
+            self.candidates[amb] = np.array(cl.text, dtype=object)[cl.ambiguous]
+            self.margin[amb] = max_margin(ents)[cl.ambiguous]
+            self.pos[amb] = np.nan
+            keep = sel[cl.same_line]
+            self.line[keep], self.track[keep] = tl.line_code or None, tl.track or None
+            lost = sel[cl.ambiguous & ~cl.same_line]
+            self.km[lost], self.km_eq[lost], self.k_sign[lost] = np.nan, np.nan, np.nan
+
+    def _claim(
+        self, sel: npt.NDArray[np.int64], km: FloatArray, km_eq: FloatArray, pos: FloatArray, margin: FloatArray, k: int
+    ) -> None:
+        self.km[sel], self.km_eq[sel], self.pos[sel], self.margin[sel], self.k_sign[sel] = km, km_eq, pos, margin, k
+
+
+def _motion(travel: Travel) -> FloatArray:
+    """The sign of the signed travel's step into each cycle (0 standing; the first cycle: its next step)."""
+    ds = np.diff(travel.s, prepend=travel.s[0])
+    if ds.size > 1:
+        ds[0] = ds[1]
+    return np.sign(ds)
+
+
+def _eq_offset(f: Fix) -> float:
+    off = f.km_equipment_m - f.km_m
+    return off if np.isfinite(off) else 0.0
+
+
+def legacy_track_id(travel: Travel, f: Fix) -> str | None:
+    """The implied track id of a line-based fix (None on a network that has no such track)."""
+    if not f.line_code:
+        return None
+    tid = implied_track_id(f.line_code, f.track)
+    net = travel.network
+    if net is None or tid in net.cached(("positions", "track_ids"), lambda: set(all_tracks(net)["track_id"])):
+        return tid
+    return None
+
+
+def legacy_pos(travel: Travel, f: Fix, km: FloatArray) -> FloatArray:
+    """Distance along the implied line track from its lowest km (NaN without a line grid)."""
+    m = travel.metric(f)
+    if m is IDENTITY:
+        return np.full(km.shape, np.nan)
+    return np.asarray(m.c_of_km(km) - m.c[0], dtype=float)

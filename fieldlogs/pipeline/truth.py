@@ -15,7 +15,8 @@ def compare_with_truth(positions: pd.DataFrame, truth: pd.DataFrame) -> pd.DataF
 
     Cycles are compared only where the pipeline claims a position (not undetermined).
     A different line or track than the truth is flagged ``wrong_track`` where the position
-    is *determined*; an *uncertain* position (fail-safe: the onboard unit tells the driver
+    is *determined* (a different ``track_id`` where the truth has one: network runs); an
+    *uncertain* position (fail-safe: the onboard unit tells the driver
     not to rely on it) may carry a track in doubt.
     """
     t = positions["t"].to_numpy(dtype=float)
@@ -31,6 +32,12 @@ def compare_with_truth(positions: pd.DataFrame, truth: pd.DataFrame) -> pd.DataF
     track = positions["track"].astype("string").fillna("").to_numpy(dtype=object)
     determined = positions["state"].to_numpy(dtype=object) == PositionState.DETERMINED.value
     wrong = determined & ((line != line_true) | (track != track_true))
+    if "track_id" in truth and "track_id" in positions:
+        # on a network the track is its id: a station track has no U/D name, a line track is
+        # cut at its switches — where the truth names one, that is what must match
+        id_true = truth["track_id"].astype("string").fillna("").to_numpy(dtype=object)[idx]
+        claimed_id = positions["track_id"].astype("string").fillna("").to_numpy(dtype=object)
+        wrong = np.where(id_true != "", determined & (claimed_id != id_true), wrong)
     return pd.DataFrame(
         {
             "t": t,

@@ -208,6 +208,29 @@ class Event:
 
 
 @dataclass(frozen=True)
+class Hypothesis:
+    """One candidate of a position on a network [SPEC §8.3]: a track, the distance along it
+    from its begin at the fix's reference travel ``s_ref`` and the sign of that distance per
+    metre of body-forward travel, so that pos(S) = ``pos_m`` + ``kp``·(S − s_ref)
+    (:mod:`fieldlogs.pipeline.hypotheses`)."""
+
+    track_id: str
+    pos_m: float
+    kp: int
+    """+1: pos grows with body-forward travel S, −1 it shrinks."""
+    extra_m: float = 0.0
+    """Added to the fix's margin (the spread of hypotheses merged into this one) [m]."""
+    hid: int = 0
+    """Lineage: kept when dead reckoning carries the candidate onto the next track, new at a split."""
+    switch_id: str | None = None
+    """The facing switch whose split made this candidate (None: none since the last determination)."""
+    split_d: float | None = None
+    """Unsigned travel d at that split [m]."""
+    came_from: tuple[str, str] | None = None
+    """The track and end dead reckoning carried it from onto this track (None: placed here)."""
+
+
+@dataclass(frozen=True)
 class Fix:
     """An estimate anchor: from ``t_effective`` on, km follows from ``km_m`` after a travel
     k·(S − s_ref) along the track's own length (:func:`fieldlogs.pipeline.estimate.km_along`),
@@ -239,6 +262,13 @@ class Fix:
     engine when the fix takes effect)."""
     uncertain_since_d: float | None = None
     """Travel d at which the position became uncertain (fail-safe), if it is."""
+    hyps: tuple[Hypothesis, ...] = ()
+    """On a network: every candidate (one: determined on its track; several: ambiguous, and
+    ``line_code``/``track`` empty so that no line-based aid acts on one of them). Empty: the
+    fix was set by a line-based aid and is not yet placed on a network track."""
+    carried: bool = False
+    """Dead reckoning carried this estimate onto another track or changed its candidates: no
+    new measurement (the balise-interval checks skip it)."""
 
     @property
     def reference_t(self) -> float:

@@ -450,6 +450,7 @@ def _kept_cycles(cycles: Cycles | None, rows: slice, n: int) -> Cycles | None:
         cycles.pto[rows].copy(),
         cycles.has_tacho,
         False,
+        None if cycles.rotation is None else cycles.rotation[rows].copy(),
     )
 
 

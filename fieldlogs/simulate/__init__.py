@@ -12,7 +12,12 @@ nothing). The pieces, one concern per module:
 * ``slip`` — slip/slide episodes; ``sensors`` — IMU, tacho, GPS, radar, truth;
 * ``radar`` — raw IF samples of the 2-frequency CW radar (``sensors.radar_if``);
 * ``events`` — balise telegrams and cab events;
-* raw GNSS (``[gnss_raw]``, off by default) — :mod:`fieldlogs.simulate.gnss.trainsim`.
+* raw GNSS (``[gnss_raw]``, off by default) — :mod:`fieldlogs.simulate.gnss.trainsim`;
+* a run routed over a network (``[network]``, ``scenario_net``): ``netroute`` the tracks of the
+  route, ``netgeom`` its geometry (one route coordinate through the centrelines, true turnout
+  arcs, no cant and a speed cap on turnouts, truth track_id/pos_m), ``netsim`` what the route
+  changes in the run; ``samples_net`` the sample runs over the sample network's switches,
+  ``network_runs`` many seeded runs through a network's switches for statistics.
 
 Everything random comes from ``np.random.default_rng(seed)`` (one child generator per
 concern, so switching a sensor off does not change the others).

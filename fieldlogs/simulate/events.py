@@ -4,7 +4,9 @@ A balise is passed when the true km crosses its ``km_actual_m`` (the reference p
 vehicle carries the antenna). Within one move the km is monotone, so each crossing time is
 a ``searchsorted`` plus a linear interpolation; reversals cross balises again in the other
 order. Telegram contents [S003 §4]: I1 carries the line code, I2 the station code and the
-track, C the signal type; other fields are empty.
+track, C the signal type; other fields are empty. A kind G balise (an ETCS group, SUBSET-026)
+carries its group's NID_C, NID_BG, its N_PIG and the group size: read in N_PIG order one way
+and reversed the other, it tells the direction of travel.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from fieldlogs.simulate.running import Motion
 from schemas.enums import BaliseKind
 
 BALISE_COLUMNS = ["t", "kind", "line_code", "station_code", "track", "signal_type"]
+#: The telegram fields of a kind G balise (ETCS group), written only where the run reads one.
+GROUP_COLUMNS = ("nid_c", "nid_bg", "n_pig", "n_total")
 
 
 def track_balises(balises: pd.DataFrame, line_code: str, track: str) -> pd.DataFrame:
@@ -57,7 +61,7 @@ def balise_events(balises: pd.DataFrame, motion: Motion, rng: np.random.Generato
     kind = rows["kind"].astype("string")
     is_i1, is_i2, is_c = kind == BaliseKind.I1, kind == BaliseKind.I2, kind == BaliseKind.C
     na = pd.Series(pd.NA, index=rows.index, dtype="string")
-    return pd.DataFrame(
+    out = pd.DataFrame(
         {
             "t": np.round(t_all, 3),
             "kind": kind,
@@ -67,6 +71,11 @@ def balise_events(balises: pd.DataFrame, motion: Motion, rng: np.random.Generato
             "signal_type": rows["signal_type"].astype("string").where(is_c, na),
         }
     )
+    is_g = kind == BaliseKind.G
+    if is_g.any():  # an ETCS group balise's telegram: its group identity and place in the group
+        for c in GROUP_COLUMNS:
+            out[c] = rows[c].astype("Int64").mask(~is_g)
+    return out
 
 
 def cab_events(motion: Motion) -> pd.DataFrame:

@@ -55,6 +55,9 @@ def body_kinematics(geom: TrackGeometry, cant: Cant, motion: Motion) -> BodyKine
     th_t = st.theta
     cth, sth = np.cos(th_t), np.sin(th_t)
     roll_t, droll_dkm = cant.roll(st.kappa, st.dkappa_dkm)
+    scale = geom.cant_scale(motion.km)  # no cant on a route's turnouts
+    if scale is not None:
+        roll_t, droll_dkm = roll_t * scale[0], droll_dkm * scale[0] + roll_t * scale[1]
     kdot = u / st.j  # dkm/dt
     # attitude of the body
     theta, roll = f * th_t, f * roll_t

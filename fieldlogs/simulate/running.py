@@ -104,10 +104,12 @@ def cant_model(scenario: Scenario) -> Cant:
     return Cant(coef_m2=r.cant_coefficient * v_design**2 / 1000.0, max_m=r.cant_max_mm / 1000.0, gauge_m=r.gauge_m)
 
 
-def curve_limit(kappa: FloatArray, cant: Cant, unbalanced_mps2: float) -> FloatArray:
-    """v_max = √((a_ub + G·cant/gauge)·R) [m/s]; +inf on straights."""
+def curve_limit(kappa: FloatArray, cant: Cant, unbalanced_mps2: float, scale: FloatArray | None = None) -> FloatArray:
+    """v_max = √((a_ub + G·cant/gauge)·R) [m/s]; +inf on straights; ``scale``: the share of the
+    cant laid (none on a turnout: v_max = √(a_ub·R))."""
+    laid = cant.cant_m(kappa) if scale is None else cant.cant_m(kappa) * scale
     with np.errstate(divide="ignore"):
-        return np.sqrt((unbalanced_mps2 + G * cant.cant_m(kappa) / cant.gauge_m) / np.abs(kappa))
+        return np.sqrt((unbalanced_mps2 + G * laid / cant.gauge_m) / np.abs(kappa))
 
 
 def speed_profile(vlim: FloatArray, ds: float, accel: float, brake: float) -> FloatArray:
@@ -210,7 +212,13 @@ class _Driving:
     def vlim_for(self, move: Move, sigma_start: float) -> SpeedLimit:
         def f(q: FloatArray) -> FloatArray:
             km = self.geom.km_at(sigma_start + move.direction * q)
-            lim = curve_limit(self.geom.curvature(km), self.cant, self.unbalanced_mps2)
+            scale = self.geom.cant_scale(km)
+            lim = curve_limit(
+                self.geom.curvature(km), self.cant, self.unbalanced_mps2, None if scale is None else scale[0]
+            )
+            cap = self.geom.speed_cap(km)
+            if cap is not None:
+                lim = np.minimum(lim, cap)
             return np.asarray(np.minimum(self.v_line, lim), dtype=float)
 
         return f

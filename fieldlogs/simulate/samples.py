@@ -8,7 +8,8 @@
 * ``sim-d-reversal`` — down track, stop, change ends, run back reversed (cab R);
 * ``sim-d-evening``, ``sim-u-evening`` — another vehicle on both tracks (for per-route statistics);
 * ``sim-road-rail`` — road-rail vehicle: on rail at a km (PTO 1), works back and forth in a
-  600 m section at 15 km/h, off rail; GPS + cab + tacho, no balises.
+  600 m section at 15 km/h, off rail; GPS + cab + tacho, no balises;
+* over a network's station, crossovers and junction: ``sim-net-*`` (:mod:`.samples_net`).
 
 Each run's ``run.json`` carries ``sim_truth`` (true wheel diameter, slip episodes, outages).
 """
@@ -21,6 +22,7 @@ from typing import Any
 from dbtools.database import read_network
 from fieldlogs.runs.typed import LogFormat
 from fieldlogs.runs.write import write_run
+from fieldlogs.simulate.samples_net import network_sample_scenarios
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from schemas.enums import Track
@@ -118,7 +120,8 @@ def make_sample_runs(
     if network.gis.empty:
         raise InputError("the DB has no GIS grid to run on", path=db_path)
     out: list[Path] = []
-    for name, over in sample_scenarios(network, line_code).items():
+    runs = {**sample_scenarios(network, line_code), **network_sample_scenarios(network)}
+    for name, over in runs.items():
         scenario = scenario_from_dict(over, source=f"sample '{name}'")
         streams, meta = simulate_run(network, scenario)
         out.append(write_run(Path(out_dir) / name, meta, streams, fmt=fmt, force=force))
@@ -130,12 +133,12 @@ def main() -> None:
     import tempfile
 
     from dbtools.build import build_db
-    from dbtools.sample_network import sample_source_dir
+    from dbtools.sample_network import sample_network_source_dir
 
     target = Path(__file__).resolve().parent.parent / "sample_logs"
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "sample.sqlite"
-        build_db(sample_source_dir(), db, db_version="sample-1")
+        build_db(sample_network_source_dir(), db, db_version="sample-1")
         for path in make_sample_runs(db, target, force=True):
             print(path)
 

@@ -17,6 +17,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from fieldlogs.simulate.scenario_net import NetworkCfg, check_network
 from schemas.enums import CabDirection, Track, VehicleKind
 from schemas.errors import UsageError
 from schemas.frames import suggest
@@ -221,6 +222,7 @@ class Scenario:
     radar_if: RadarIfCfg = field(default_factory=RadarIfCfg)
     balise: BaliseCfg = field(default_factory=BaliseCfg)
     gnss_raw: GnssRawCfg = field(default_factory=GnssRawCfg)
+    network: NetworkCfg = field(default_factory=NetworkCfg)
     source: str = field(default="<default scenario>", compare=False)
     """Where it was loaded from (for messages); not a knob."""
 
@@ -320,6 +322,7 @@ def _check(s: Scenario) -> None:
         _check_episodes,
         _check_radar,
         _check_gnss_raw,
+        _check_network,
     )
     for check in checks:
         problem = check(s)
@@ -511,6 +514,22 @@ def _check_gnss_raw(s: Scenario) -> Problem:
     if g.corridor not in ("open", "mixed"):
         return "gnss_raw.corridor", "must be 'open' or 'mixed'"
     return None
+
+
+def _check_network(s: Scenario) -> Problem:
+    """The ``[network]`` knobs; on a network route the km-based knobs of one line do not apply."""
+    if not s.network.active:
+        return None
+    km_knobs = {
+        "route.path_km_m": s.route.path_km_m,
+        "running.stations_km_m": s.running.stations_km_m,
+        "gps.outages_km_m": s.gps.outages_km_m,
+        "gps.poor_sky_km_m": s.gps.poor_sky_km_m,
+    }
+    for key, value in km_knobs.items():
+        if value:
+            return key, "a network route ([network] tracks/from_track) takes network.points and network.gnss_outages"
+    return check_network(s.network)
 
 
 def scenario_from_dict(data: dict[str, Any], source: str = "<dict>", *, base: dict[str, Any] | None = None) -> Scenario:

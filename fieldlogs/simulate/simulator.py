@@ -18,6 +18,7 @@ from fieldlogs.runs.typed import LogFormat
 from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.events import balise_events, cab_events, track_balises
 from fieldlogs.simulate.kinematics import body_kinematics
+from fieldlogs.simulate.netsim import NetworkPlan, network_plan
 from fieldlogs.simulate.running import Motion, cant_model, plan_motion
 from fieldlogs.simulate.scenario import Scenario, ScenarioError, load_scenario
 from fieldlogs.simulate.sensors import (
@@ -88,20 +89,38 @@ def _wheel(scenario: Scenario, rng: np.random.Generator) -> tuple[float, float]:
     return scenario.tacho.wheel_diameter_m * (1.0 - wear / 100.0), wear
 
 
-def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) -> SimulatedRun:
-    """Simulate one run over ``network`` (see module docstring); ``seed`` overrides the scenario's."""
-    seed = scenario.seed if seed is None else seed
-    # one child per concern; new concerns are appended so the earlier children stay the same
-    names = ("wheel", "slip", "imu", "gps", "radar", "balise", "radar_if", "gnss_raw")
-    rngs = dict(zip(names, np.random.default_rng(seed).spawn(len(names)), strict=True))
+def _route(
+    network: Network, scenario: Scenario
+) -> tuple[NetworkPlan | None, TrackGeometry, Scenario, pd.DataFrame, list[float], str, str]:
+    """The run's route: over the network's tracks (``[network]``, :mod:`.netsim`: the scenario is
+    rewritten in route coordinates) or along one line/track; its geometry, balises and stops."""
+    if scenario.network.active:
+        plan = network_plan(network, scenario)
+        return plan, plan.geom, plan.scenario, plan.balises, [], "", ""
+    line, track, geom, balises = _line_route(network, scenario)
+    stations = [] if scenario.is_road_rail else _stations(balises, geom, scenario)
+    return None, geom, scenario, balises, stations, line, track
+
+
+def _line_route(network: Network, scenario: Scenario) -> tuple[str, str, TrackGeometry, pd.DataFrame]:
+    """Line, track, geometry and balises of a run along one line/track (``[route]``)."""
     line, track = _pick_route(network, scenario)
     path = scenario.route.path_km_m
     try:
         geom = TrackGeometry.from_network(network, line, track, (min(path), max(path)) if path else None)
     except TrackLookupError as exc:
         raise ScenarioError(str(exc), path=scenario.source, key="route.path_km_m") from None
-    balises = track_balises(network.s003_balises, line, track)
-    motion = plan_motion(geom, scenario, [] if scenario.is_road_rail else _stations(balises, geom, scenario))
+    return line, track, geom, track_balises(network.s003_balises, line, track)
+
+
+def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) -> SimulatedRun:
+    """Simulate one run over ``network`` (see module docstring); ``seed`` overrides the scenario's."""
+    seed = scenario.seed if seed is None else seed
+    # one child per concern; new concerns are appended so the earlier children stay the same
+    names = ("wheel", "slip", "imu", "gps", "radar", "balise", "radar_if", "gnss_raw")
+    rngs = dict(zip(names, np.random.default_rng(seed).spawn(len(names)), strict=True))
+    plan, geom, scenario, balises, stations, line, track = _route(network, scenario)
+    motion = plan_motion(geom, scenario, stations)
     d_true, wear = _wheel(scenario, rngs["wheel"])
     episodes = place_episodes(scenario, motion, geom, rngs["slip"])
     factor, slipping = wheel_factor(episodes, motion.t)
@@ -125,6 +144,8 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
     if sensors.radar:
         streams["radar"] = radar_stream(motion, scenario, rngs["radar"])
     meta = _meta(network, scenario, seed, line, track, geom, motion, d_true, wear, episodes, outages, rolled)
+    if plan is not None:  # a network route: truth with track_id/pos_m, multipath, run.json route
+        plan.finish(streams, motion, slipping, meta, seed)
     if sensors.radar_if:
         from fieldlogs.simulate.radar import radar_if_stream  # numba: only when asked for
 

@@ -221,6 +221,15 @@ class TrackGeometry:
     def lonlat(self, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
         return self.projector.to_lonlat(x, y)
 
+    def cant_scale(self, km: npt.ArrayLike) -> tuple[FloatArray, FloatArray] | None:
+        """Share of the curvature's cant laid at ``km`` and its derivative d/dkm; None: all of it
+        everywhere (a line track; a network route has none on turnouts, :mod:`.netgeom`)."""
+        return None
+
+    def speed_cap(self, km: npt.ArrayLike) -> FloatArray | None:
+        """A speed limit [m/s] at ``km`` besides line speed and curves (turnouts); None: none."""
+        return None
+
     def height(self, km: npt.ArrayLike) -> FloatArray:
         """Rail height h(km) of the grid's spline (the grid's datum: ellipsoidal) [m]."""
         return np.asarray(self._sh(np.asarray(km, dtype=float)), dtype=float)

@@ -20,7 +20,7 @@ base of the C balises); it speaks at every telegram.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -85,15 +85,12 @@ class BaliseAid(StaticAid):
     priority = Priority.TELEGRAM
 
     def observations(self) -> Iterator[Observation]:
-        tel = self.telegrams
-        if tel is None:
-            return
-        for row in tel.astype(object).where(tel.notna(), None).to_dict("records"):
-            yield Observation(float(row["t"]), row)
+        # ETCS groups are the balise-group aid's
+        return telegram_observations(self.telegrams, lambda row: row["kind"] != BaliseKind.G)
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         self._u = self.cfg.fix_uncertainty_m + self.cfg.latency_budget_s * float(view.travel.v[view.i])
-        evs, fix = self.on_telegram(obs.payload, view.i, view.t, view.d, view.s, view.cab, view.estimate, view.km)
+        evs, fix = self.on_telegram(obs.payload, view.i, view.t, view.d, view.s, view.motion, view.estimate, view.km)
         return Outcome(evs, fix if evs else None)
 
     def on_telegram(
@@ -103,7 +100,7 @@ class BaliseAid(StaticAid):
         t: float,
         d: float,
         s: float,
-        cab: int,
+        motion: int,
         estimate: Fix | None,
         km_now: float | None,
     ) -> tuple[list[Event], Fix | None]:
@@ -114,9 +111,9 @@ class BaliseAid(StaticAid):
         if kind == BaliseKind.I1:
             return self._on_i1(tel, i, t, d)
         if kind == BaliseKind.I2:
-            return self._on_i2(tel, i, t, d, cab, estimate, km_now)
+            return self._on_i2(tel, i, t, d, motion, estimate, km_now)
         if kind == BaliseKind.C:
-            return self._on_c(tel, i, t, d, cab, estimate, km_now)
+            return self._on_c(tel, i, t, d, motion, estimate, km_now)
         return [Event(t, EventType.BALISE_ANOMALY, km_now, detail={"reason": f"unknown telegram kind {kind!r}"})], None
 
     def _on_i1(self, tel: dict[str, Any], i: int, t: float, d: float) -> tuple[list[Event], Fix | None]:
@@ -132,7 +129,7 @@ class BaliseAid(StaticAid):
         return [], None
 
     def _on_i2(
-        self, tel: dict[str, Any], i: int, t: float, d: float, cab: int, estimate: Fix | None, km_now: float | None
+        self, tel: dict[str, Any], i: int, t: float, d: float, motion: int, estimate: Fix | None, km_now: float | None
     ) -> tuple[list[Event], Fix | None]:
         station, track = _s(tel.get("station_code")), _s(tel.get("track"))
         pending, self.pending = self.pending, None
@@ -165,7 +162,7 @@ class BaliseAid(StaticAid):
             ], None
         i2 = pair["I2"]
         km_db, km_eq = float(i2["km_actual_m"]), float(i2["km_equipment_m"])
-        k = direction_sign(key[2]) * (1 if cab >= 0 else -1)
+        k = direction_sign(key[2]) * (1 if motion >= 0 else -1)
         at_ref = -k * self.reader_x_m  # the reader is x_r ahead of the reference point (geometry.py)
         fix = Fix(
             t,
@@ -193,7 +190,7 @@ class BaliseAid(StaticAid):
         i: int,
         t: float,
         d: float,
-        cab: int,
+        motion: int,
         estimate: Fix | None,
         km_now: float | None,
     ) -> tuple[list[Event], Fix | None]:
@@ -203,7 +200,7 @@ class BaliseAid(StaticAid):
                 Event(t, EventType.C_BALISE_IGNORED, detail={"reason": "no initial pair yet", "signal_type": sig})
             ], None
         key, d_i1 = self.last_pair
-        if estimate.k * cab != direction_sign(key[2]):
+        if estimate.k * motion != direction_sign(key[2]):
             return [
                 Event(
                     t,
@@ -255,6 +252,18 @@ class BaliseAid(StaticAid):
                 detail={**base, "balise_id": c["balise_id"], "kind": "C"},
             )
         ], fix
+
+
+def telegram_observations(
+    tel: pd.DataFrame | None, keep: Callable[[dict[str, Any]], bool] = lambda row: True
+) -> Iterator[Observation]:
+    """One observation per telegram row ``keep`` accepts (NaN cells as None), at its t."""
+    if tel is None:
+        return
+    rows: list[dict[str, Any]] = tel.astype(object).where(tel.notna(), None).to_dict("records")  # type: ignore[assignment]
+    for row in rows:
+        if keep(row):
+            yield Observation(float(row["t"]), row)
 
 
 def _s(v: Any) -> str | None:

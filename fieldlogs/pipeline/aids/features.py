@@ -153,7 +153,7 @@ class FeatureUnit:
         padded = np.concatenate([raw, np.full(half, np.nan)])
         self.kappa = moving_average(padded, self.n_smooth)[half:] if n else raw
         self._half_m = 0.5 * self.n_smooth * self._v * self._dt
-        cab = np.asarray(c.cab, dtype=np.int64)
+        cab = np.asarray(c.motion, dtype=np.int64)
         self._cab = np.where(cab < 0, -1, 1)
         self._segment = np.concatenate([[0], np.cumsum(self._cab[1:] != self._cab[:-1])]) if n else np.zeros(0, int)
         self._changes = np.flatnonzero(self._cab[1:] != self._cab[:-1]) + 1

@@ -139,6 +139,8 @@ class GnssAid(StaticAid):
         fix = view.estimate
         if fix is None:
             return self._initial(int(obs.payload), view)
+        if fix.state == PositionState.AMBIGUOUS:
+            return Outcome()  # no line track to constrain to (network candidates: the track aids)
         sols = self._solutions(fix.line_code, fix.track, fix.k, view)
         if not isinstance(sols, TrackSolutions):
             return sols

@@ -65,7 +65,7 @@ class GpsAid(StaticAid):
         detail = {"line_code": dec.line_code, "track": dec.track, **dec.evidence}
         if self.cfg.allow_initial and dec.km_dir != 0:
             ev = Event(view.t, EventType.INITIAL_POSITION_GPS, dec.km_m, detail=detail)
-            k = dec.km_dir * view.cab
+            k = dec.km_dir * view.motion
             km = dec.km_m - k * self.antenna_x_m  # the fix is at the antenna (geometry.py)
             new = Fix(
                 view.t,

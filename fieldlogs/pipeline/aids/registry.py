@@ -11,6 +11,7 @@ import pandas as pd
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import Aid, SpeedAid
 from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
+from fieldlogs.pipeline.aids.balise_group import BaliseGroupAid, group_table
 from fieldlogs.pipeline.aids.failsafe import FailsafeAid
 from fieldlogs.pipeline.aids.features import FeatureAid, FeatureUnit
 from fieldlogs.pipeline.aids.gnss import GnssAid, GnssUnit
@@ -18,11 +19,17 @@ from fieldlogs.pipeline.aids.gps import GpsAid
 from fieldlogs.pipeline.aids.radar import RadarSpeedAid
 from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
+from fieldlogs.pipeline.aids.topology import TopologyAid
+from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
+from fieldlogs.pipeline.aids.track_gps import TrackGpsAid
+from fieldlogs.pipeline.aids.track_imu import TrackImuAid, turnouts
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.geometry import VehicleGeometry
+from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.imugap import ImuGap, ImuGapAid
 from fieldlogs.pipeline.types import GpsAnalysis, Odometry
+from schemas.enums import BaliseKind
 from schemas.radar import RadarParams
 
 
@@ -54,6 +61,55 @@ def _imu_gap(ctx: RunContext) -> Aid | None:
     return ImuGapAid(list(ctx.imu_gaps), ctx.cfg.margin.imu_gap_share) if ctx.imu_gaps else None
 
 
+def _has_topology(ctx: RunContext) -> bool:
+    net = ctx.network
+    return net.cached(("registry", "has_topology"), lambda: len(net.connections) > 0)
+
+
+def _topology(ctx: RunContext) -> Aid | None:
+    if not _has_topology(ctx):
+        return None  # a line-only DB: no candidates to carry, every output as before
+    return TopologyAid(track_lines(ctx.network), ctx.cfg.margin)
+
+
+def _balise_group(ctx: RunContext) -> Aid | None:
+    tel = ctx.streams.get("balise")
+    if tel is None or not _has_topology(ctx):
+        return None
+    g = tel[tel["kind"] == BaliseKind.G.value]
+    if not len(g):
+        return None
+    groups = ctx.network.cached("balise_groups", lambda: group_table(ctx.network))
+    return BaliseGroupAid(groups, track_lines(ctx.network), ctx.cfg.balise, g, ctx.geometry.reader_x_m)
+
+
+def _track_imu(ctx: RunContext) -> Aid | None:
+    wz = ctx.cycles.imu.get("wz") if ctx.cycles.has_imu else None
+    if wz is None or not _has_topology(ctx):
+        return None
+    sw = ctx.network.cached("turnouts", lambda: turnouts(ctx.network.switches))
+    return TrackImuAid(wz, sw, track_lines(ctx.network), ctx.cfg.track_select, ctx.cfg.margin)
+
+
+def _track_gps(ctx: RunContext) -> Aid | None:
+    g = ctx.gps
+    if g is None or g.fixes is None or not len(g.fixes) or not _has_topology(ctx):
+        return None
+    f = g.fixes[g.fixes["trusted"].to_numpy(dtype=bool)]
+    if not len(f):
+        return None
+    t, lat, lon = (f[c].to_numpy(dtype=float) for c in ("t", "lat", "lon"))
+    lines = track_lines(ctx.network)
+    return TrackGpsAid(t, lat, lon, lines, ctx.cfg.track_select, ctx.cfg.gps, ctx.geometry.gps_antenna_x_m)
+
+
+def _track_gnss(ctx: RunContext) -> Aid | None:
+    g = ctx.gnss
+    if g is None or g.inputs is None or not _has_topology(ctx):
+        return None
+    return TrackGnssAid(g, g.epoch_times(), track_lines(ctx.network), g.cfg)
+
+
 def _balise(ctx: RunContext) -> Aid | None:
     db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
     return BaliseAid(db, ctx.cfg.balise, ctx.streams.get("balise"), ctx.geometry.reader_x_m)
@@ -82,6 +138,11 @@ POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
     _gps,
     _features,
     _gnss,
+    _topology,
+    _balise_group,
+    _track_imu,
+    _track_gps,
+    _track_gnss,
 )
 """Position aids in registry order (simultaneous observations are ordered by priority)."""
 

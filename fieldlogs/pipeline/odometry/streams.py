@@ -1,8 +1,10 @@
 """Stage 1: the aligned, smoothed streams of one run (:class:`AlignedStreams`).
 
 Travel frame
-    Pulses are unsigned, the IMU is body-fixed. With ``cab`` = +1 the travel direction is
-    body +x, with −1 it is −x: the travel frame is the body frame turned 180° about z, so
+    Pulses are unsigned, the IMU is body-fixed. With the sense of motion
+    (:attr:`fieldlogs.pipeline.cycles.Cycles.motion`: the driving cab's direction, or a
+    two-phase tachometer's — a train rolling back) = +1 the travel direction is body +x, with
+    −1 it is −x: the travel frame is the body frame turned 180° about z, so
     ``ax, ay, wx, wy`` change sign and ``az, wz`` do not. x along travel, y left, z up
     (SPEC §4.1); pitch θ is nose-up in the travel direction (the gradient climbed), roll ψ
     is positive with the left side up.
@@ -218,7 +220,7 @@ def align_streams(cycles: Cycles, cfg: OdometryConfig) -> AlignedStreams:
     dt = np.where(np.isfinite(dt_raw) & (dt_raw > 0), dt_raw, cyc)
     f = make_filters(cfg, cyc)
 
-    cab = np.asarray(cycles.cab)
+    cab = np.asarray(cycles.motion)
     reversed_cab = not bool((cab >= 0).all())
     sgn = np.where(cab < 0, -1.0, 1.0) if reversed_cab else np.ones(n)
     imu = Imu(*(readonly(np.asarray(cycles.imu[c], dtype=float)) for c in IMU_COLUMNS))

@@ -7,7 +7,8 @@ kilometrage (Kawagoe station = 16k100, its distance from Ōmiya where the line's
 synthesise a gradient profile, survey both tracks (``survey/centrelines.csv``) and
 kilometre posts every 1 km and at the stations (``survey/kmposts.csv``), turn the survey
 into ``sources/gis.csv`` with the ``gis grid`` code, derive balises and feature points from
-the alignment, write ``fit_report.json``, then build and validate the DB as a check.
+the alignment, write ``fit_report.json``, add the station, crossovers and junction
+(:mod:`fieldlogs.simulate.networks.sample_junctions`), then build and validate the DB as a check.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from dbtools.network import canonical
 from dbtools.sample_network import PACKAGE_DIR
 from fieldlogs.simulate.networks.alignment import Alignment
 from fieldlogs.simulate.networks.sample_fit import FitResult, FitSettings, fit_alignment, project_brute
+from fieldlogs.simulate.networks.sample_junctions import add_network
 from fieldlogs.simulate.networks.survey import centreline_vertices, km_posts
 from fieldlogs.simulate.networks.synthetic import LineSpec, Station, balises, feature_points
 from schemas.enums import Severity
@@ -275,6 +277,7 @@ def build(settings: FitSettings | None = None, plot: Path | None = None) -> tupl
     write_table(BALISES, balises(spec), SOURCES_DIR / "balises.csv")
     write_table(FEATURE_POINTS, feature_points(spec), SOURCES_DIR / "feature_points.csv")
     write_table(LINES, pd.DataFrame({"line_code": [LINE_CODE], "name": [LINE_NAME]}), SOURCES_DIR / "lines.csv")
+    add_network(SOURCES_DIR, PACKAGE_DIR / "network_sources")  # + station, crossovers, junction
     report = fit_report(sample)
     REPORT_FILE.write_text(json.dumps(report, ensure_ascii=False, indent=2) + "\n", encoding="utf-8")
     if plot is not None:
@@ -284,7 +287,7 @@ def build(settings: FitSettings | None = None, plot: Path | None = None) -> tupl
 
     with tempfile.TemporaryDirectory() as tmp:
         db = Path(tmp) / "sample.sqlite"
-        build_db(SOURCES_DIR, db, db_version="sample", note="bundled sample network")
+        build_db(PACKAGE_DIR / "network_sources", db, db_version="sample", note="bundled sample network")
         findings = validate_path(db)
     return report, findings
 

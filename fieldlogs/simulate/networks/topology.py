@@ -7,10 +7,11 @@ before to 120 m after the station centre) and one crossover D → U just after t
 main tracks are split into tracks at every switch. Geometry comes from the alignment itself
 (:meth:`Alignment.xy` at a lateral offset), so the tables are consistent by construction:
 
-* a loop leaves its main track at a switch, reaches ``LOOP_OFFSET_M`` beside it after
-  ``LEAD_M`` (the offset growing linearly: a turnout of switch number n = LEAD_M / offset) and
-  comes back the same way;
-* the crossover's offset goes linearly from D's to U's over ``LEAD_M``: n = LEAD_M / spacing.
+* a loop leaves its main track at a 1:``LOOP_N`` switch, reaches ``LOOP_OFFSET_M`` beside it
+  after ``LEAD_M`` on the turnout's reverse curve (:mod:`fieldlogs.simulate.networks.turnout`: arc of the
+  diverging radius to the frog angle atan(1/n), straight, arc back) and comes back the same way;
+* the crossover goes from D to U over ``LEAD_M`` on the reverse curve of two 1:``CROSSOVER_N``
+  turnouts. The switches carry their switch number and diverging radius.
 
 Switch ends are on the 20 m km grid, so a main track's pieces meet at grid points and each
 piece's centreline is its line grid between its end km.
@@ -26,13 +27,16 @@ import pandas as pd
 
 from dbtools.gis.geometry import Projector
 from fieldlogs.simulate.networks.synthetic import LineSpec
+from fieldlogs.simulate.networks.turnout import radius_for_extent, reverse_curve_offset
 from schemas.enums import BaliseKind, Navigability, Side, SwitchType, Track, TrackKind
-from schemas.tables import GIS_SPACING_M, TRACK_SPACING_M
+from schemas.tables import GIS_SPACING_M
 
 #: Lateral distance of a loop track from its main track [m].
 LOOP_OFFSET_M = 4.5
 #: Length over which a turnout or crossover reaches its full offset [m] (on the 20 m grid).
-LEAD_M = 40.0
+LEAD_M = 60.0
+#: Switch numbers of the loop turnouts (R ≈ 193 m over LEAD_M) and of the crossovers (R ≈ 220 m).
+LOOP_N, CROSSOVER_N = 8.0, 10.0
 #: Half length of a loop, from the station centre to each of its switches [m].
 LOOP_HALF_M = 120.0
 
@@ -88,7 +92,9 @@ class _Layout:
             }
         )
 
-    def switch(self, sid: str, main: str, km: float, branch: tuple[str, str], side: str, n: float) -> None:
+    def switch(
+        self, sid: str, main: str, km: float, branch: tuple[str, str], side: str, n: float, radius: float
+    ) -> None:
         """A point switch on main track ``main`` at ``km`` whose diverging branch is the given
         track end; the toe is the main piece on the far side from the branch (placeholder
         track ids ``<main>@<km>@lo|hi`` are resolved once the main tracks are split)."""
@@ -107,6 +113,7 @@ class _Layout:
                 "b2": right,
                 "diverging_side": side,
                 "switch_number": n,
+                "diverging_radius_m": round(radius, 1),
                 "line_code": self.spec.line_code,
                 "km_m": km,
                 "lat": float(lat[0]),
@@ -120,14 +127,15 @@ def _station(lay: _Layout, code: str, centre: float) -> None:
     k1, k2 = _grid(centre - LOOP_HALF_M), _grid(centre + LOOP_HALF_M)
     for main, name, off, sign in ((Track.DOWN, "3", d_off, 1.0), (Track.UP, "4", u_off, -1.0)):
         km = np.arange(k1, k2 + GIS_SPACING_M / 2, GIS_SPACING_M)
-        ramp = np.clip(np.minimum(km - k1, k2 - km) / LEAD_M, 0.0, 1.0)
+        out = reverse_curve_offset(np.minimum(km - k1, k2 - km), LEAD_M, LOOP_OFFSET_M, LOOP_N)
         tid = f"{spec.line_code}-{code}-{name}"
         ident = (int(spec.line_code) * 100 + int(code)) * 2 + (0 if sign > 0 else 1)  # a group per loop
-        lay.side_track(tid, name, TrackKind.STATION.value, km, off + sign * LOOP_OFFSET_M * ramp)
+        lay.side_track(tid, name, TrackKind.STATION.value, km, off + sign * out)
         # D's loop lies left of increasing km, U's right of it; seen from the toe at k2 the sides swap
         near, far = (Side.LEFT.value, Side.RIGHT.value) if sign > 0 else (Side.RIGHT.value, Side.LEFT.value)
-        lay.switch(f"{tid}-W1", main, k1, (tid, "begin"), near, LEAD_M / LOOP_OFFSET_M)
-        lay.switch(f"{tid}-W2", main, k2, (tid, "end"), far, LEAD_M / LOOP_OFFSET_M)
+        r_loop = radius_for_extent(LEAD_M, LOOP_OFFSET_M, LOOP_N)
+        lay.switch(f"{tid}-W1", main, k1, (tid, "begin"), near, LOOP_N, r_loop)
+        lay.switch(f"{tid}-W2", main, k2, (tid, "end"), far, LOOP_N, r_loop)
         for n_pig in range(2):
             lay.balises.append(
                 {
@@ -147,10 +155,12 @@ def _station(lay: _Layout, code: str, centre: float) -> None:
     kc = k2 + GIS_SPACING_M * 2
     km = np.arange(kc, kc + LEAD_M + GIS_SPACING_M / 2, GIS_SPACING_M)
     tid = f"{spec.line_code}-{code}-X"
-    lay.side_track(tid, f"X{code}", TrackKind.CROSSOVER.value, km, d_off + (u_off - d_off) * (km - kc) / LEAD_M)
-    n = LEAD_M / TRACK_SPACING_M
-    lay.switch(f"{tid}-W1", Track.DOWN, kc, (tid, "begin"), Side.RIGHT.value, n)
-    lay.switch(f"{tid}-W2", Track.UP, kc + LEAD_M, (tid, "end"), Side.RIGHT.value, n)
+    spacing = abs(u_off - d_off)
+    shift = np.sign(u_off - d_off) * reverse_curve_offset(km - kc, LEAD_M, spacing, CROSSOVER_N)
+    lay.side_track(tid, f"X{code}", TrackKind.CROSSOVER.value, km, d_off + shift)
+    r_x = radius_for_extent(LEAD_M, spacing, CROSSOVER_N)
+    lay.switch(f"{tid}-W1", Track.DOWN, kc, (tid, "begin"), Side.RIGHT.value, CROSSOVER_N, r_x)
+    lay.switch(f"{tid}-W2", Track.UP, kc + LEAD_M, (tid, "end"), Side.RIGHT.value, CROSSOVER_N, r_x)
 
 
 def _split_mains(lay: _Layout) -> dict[tuple[str, float, str], tuple[str, str]]:

@@ -31,6 +31,8 @@ from pathlib import Path
 
 from pyproj import Proj
 
+from fieldlogs.simulate.networks.turnout import Path2D, radius_for_extent, reverse_curves
+
 HERE = Path(__file__).resolve().parent
 LAT0, LON0 = 60.2, 24.9
 _PROJ = Proj(proj="aeqd", lat_0=LAT0, lon_0=LON0, ellps="GRS80", units="m")
@@ -87,57 +89,9 @@ def latlon(x: float, y: float) -> tuple[float, float]:
     return float(lat), float(lon)
 
 
-@dataclass
-class Path2D:
-    """A polyline of straights and circular arcs from (x0, y0) at heading h0 (rad from east,
-    counter-clockwise). ``arc(R, turn)``: a left turn for turn > 0."""
-
-    x0: float
-    y0: float
-    h0: float = 0.0
-    pieces: list[tuple[float, float]] = field(default_factory=list)  # (length, curvature)
-
-    def straight(self, length: float) -> Path2D:
-        self.pieces.append((length, 0.0))
-        return self
-
-    def arc(self, radius: float, turn: float) -> Path2D:
-        self.pieces.append((radius * abs(turn), math.copysign(1.0 / radius, turn)))
-        return self
-
-    @property
-    def length(self) -> float:
-        return sum(p[0] for p in self.pieces)
-
-    def at(self, s: float) -> tuple[float, float, float]:
-        """(x, y, heading) at arc length s."""
-        x, y, h = self.x0, self.y0, self.h0
-        for length, k in self.pieces:
-            d = min(s, length)
-            if k == 0.0:
-                x, y = x + d * math.cos(h), y + d * math.sin(h)
-            else:
-                x += (math.sin(h + k * d) - math.sin(h)) / k
-                y -= (math.cos(h + k * d) - math.cos(h)) / k
-                h += k * d
-            s -= d
-            if s <= 0:
-                break
-        return x, y, h
-
-
 def crossover_path(x0: float, y0: float, d: float, n: float, radius: float, *, left: bool) -> Path2D:
     """Arc R (0 → α), straight, arc R (α → 0) joining two parallel eastward tracks d apart."""
-    a = math.atan(1.0 / n)
-    s = (d - 2 * radius * (1 - math.cos(a))) / math.sin(a)
-    t = a if left else -a
-    return Path2D(x0, y0).arc(radius, t).straight(s).arc(radius, -t)
-
-
-def radius_for_extent(extent: float, d: float, n: float) -> float:
-    """The crossover radius giving x-extent ``extent`` (module doc): R = (e − d·cot α) / (2·tan(α/2))."""
-    a = math.atan(1.0 / n)
-    return (extent - d / math.tan(a)) / (2 * math.tan(a / 2))
+    return reverse_curves(x0, y0, d, n, radius, 1.0 if left else -1.0)
 
 
 def f(v: float | int | str | None, digits: int = 3) -> str:

@@ -65,11 +65,11 @@ def test_positions_text_columns_share_one_str_per_value(monkeypatch: pytest.Monk
     monkeypatch.setattr(positions_mod, "pd", SimpleNamespace(DataFrame=frame, array=array))
     travel = _travel()
     pos = positions_frame(travel, _fixes(), MarginConfig())
-    assert len(handed) == 4  # state, line_code, track, last_fix_source
+    assert len(handed) == 6  # state, line_code, track, track_id, last_fix_source, candidates
     for col in handed:
         assert col.size == travel.n
         assert len({id(v) for v in col}) == len(set(col.tolist()))
-    assert set(pos["state"]) == {str(s) for s in PositionState}
+    assert set(pos["state"]) == {str(s) for s in PositionState} - {"ambiguous"}  # line fixes: never ambiguous
     assert set(pos["last_fix_source"]) == {str(s) for s in FixSource}
 
 

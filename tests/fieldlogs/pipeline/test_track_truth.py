@@ -141,3 +141,32 @@ def test_never_determined_after_a_switch_is_unresolved(crossover: Network) -> No
     f = track_figures(positions, truth, crossover)
     assert f.passages == 2 and f.resolved_correct == 0 and f.resolved_wrong == 0 and f.wrong_cycles == 0
     assert f.summary()["median_resolution_m"] is None
+
+
+def test_compare_with_truth_judges_the_track_by_its_id_where_the_truth_has_one() -> None:
+    from fieldlogs.pipeline.truth import compare_with_truth
+
+    # a station track "3" has no U/D name: line and track agree (both empty / the line's),
+    # only the id tells the claim on D2 from the truth on 3; a line-only truth row (no id)
+    # still compares line and track
+    truth = pd.DataFrame(
+        {
+            "t": [0.0, 1.0, 2.0],
+            "line_code": ["0420", "0420", "0420"],
+            "track": [None, None, "D"],
+            "km_m": [100.0, 110.0, 120.0],
+            "track_id": ["0420-3", "0420-3", None],
+        }
+    )
+    positions = pd.DataFrame(
+        {
+            "t": [0.0, 1.0, 2.0],
+            "state": ["determined", "determined", "determined"],
+            "line_code": ["0420", "0420", "0420"],
+            "track": [None, None, "U"],
+            "km_m": [100.0, 110.0, 120.0],
+            "margin_m": [5.0, 5.0, 5.0],
+            "track_id": ["0420-3", "0420-D2", "0420-U1"],
+        }
+    )
+    assert compare_with_truth(positions, truth)["wrong_track"].tolist() == [False, True, True]

@@ -1,0 +1,279 @@
+"""Track-selective positioning: candidate tracks carried along the topology [SPEC §8.3].
+
+On a network the position is one or more :class:`~fieldlogs.pipeline.types.Hypothesis`
+(track, distance ``pos`` along it from its begin, its sign per metre of body-forward travel,
+an extra margin). Dead reckoning moves every candidate by the same signed travel S:
+pos(S) = pos_ref + kp·(S − s_ref). With the fix's margin m (:func:`fieldlogs.pipeline.
+positions.margin_m`, plus the candidate's ``extra_m``) and the track's own length L, at each
+end of its track (out = pos − L beyond the end, −pos beyond the begin):
+
+* **one navigable exit** (plain joint, trailing switch): when the dead-reckoned point passes
+  the end (out > 0) the candidate moves onto the next track at pos = entry + out, travelling
+  away from the entry end (:class:`dbtools.topology.Exit`);
+* **two or more exits** (a facing switch): when the dead-reckoned point passes the toe, one
+  candidate per branch (*split*), each ``out`` beyond its entry;
+* **no navigable exit** (buffer stop, ``none``): the candidate is dropped when its whole
+  interval lies beyond the end — the odometry says the train cannot be there.
+
+Candidates on the same track running the same way are merged into one whose interval covers
+both (a trailing merge after two branches rejoin). Aids (balise groups, GNSS, IMU) drop
+the candidates their evidence contradicts. What a cycle claims — one track only when every
+candidate's interval lies on it, joints within the margin included — is
+:mod:`fieldlogs.pipeline.claims`'.
+
+:class:`TrackLine` maps pos ↔ km per track: along a line through the line grid's own
+length (:mod:`fieldlogs.pipeline.metric`), so pos is the distance the wheels roll; for a
+track with ``track_points`` by their ``pos_m``/``km_m``; km is NaN off a line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import pandas as pd
+
+from dbtools.network import Network
+from dbtools.topology import BEGIN, END, Exit, Topology, all_tracks, centreline, topology
+from fieldlogs.pipeline.metric import IDENTITY, TrackMetric, track_metric
+from fieldlogs.pipeline.types import FloatArray, Hypothesis
+
+#: Earth radius of the local plane of a track's centreline (equirectangular) [m].
+_R_EARTH = 6_371_000.0
+
+
+@dataclass(frozen=True)
+class TrackLine:
+    """One track's length, its pos ↔ km map and its centreline in a local metric plane."""
+
+    track_id: str
+    line_code: str
+    """Empty off a line."""
+    track: str
+    length_m: float
+    metric: TrackMetric | None
+    """Line tracks: the line grid's metric (km ↔ rolled length c); None: by ``pos``/``km``."""
+    c_begin: float
+    dirn: int
+    """+1 when km grows from the begin to the end, −1 otherwise."""
+    pos: FloatArray
+    km: FloatArray
+    xy: FloatArray
+    """(n, 2) centreline east/north [m] in the plane centred at ``origin`` (lat, lon)."""
+    cpos: FloatArray
+    """pos of each centreline point."""
+    origin: tuple[float, float]
+
+    def km_of_pos(self, pos: FloatArray | float) -> FloatArray:
+        p = np.asarray(pos, dtype=float)
+        if self.metric is not None:
+            return np.asarray(self.metric.km_of_c(self.c_begin + self.dirn * p), dtype=float)
+        if not self.line_code or self.pos.size < 2:
+            return np.full(p.shape, np.nan)
+        return _extrap(p, self.pos, self.km)
+
+    def pos_of_km(self, km: float) -> float:
+        if self.metric is not None:
+            return float(self.dirn * (float(self.metric.c_of_km(km)) - self.c_begin))
+        if not self.line_code or self.pos.size < 2:
+            return math.nan
+        order = np.argsort(self.km)
+        return float(_extrap(np.asarray(km, dtype=float), self.km[order], self.pos[order]))
+
+    @property
+    def km_sign(self) -> int:
+        """Sign of dkm/dpos (+1 when unknown)."""
+        if self.metric is not None:
+            return self.dirn
+        if self.km.size >= 2 and np.isfinite(self.km[[0, -1]]).all() and self.km[-1] < self.km[0]:
+            return -1
+        return 1
+
+    def point(self, pos: float) -> tuple[float, float, float, float]:
+        """East, north of the centreline at ``pos`` and its unit tangent (toward the end)."""
+        p = min(max(pos, float(self.cpos[0])), float(self.cpos[-1]))
+        j = int(np.clip(np.searchsorted(self.cpos, p, side="right") - 1, 0, self.cpos.size - 2))
+        (x0, y0), (x1, y1) = self.xy[j], self.xy[j + 1]
+        seg = max(float(self.cpos[j + 1] - self.cpos[j]), 1e-9)
+        u = (p - float(self.cpos[j])) / seg
+        dx, dy = x1 - x0, y1 - y0
+        norm = max(math.hypot(dx, dy), 1e-9)
+        return x0 + u * dx, y0 + u * dy, dx / norm, dy / norm
+
+    def plane(self, lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """lat/lon [deg] in this track's local plane [m]."""
+        lat0, lon0 = self.origin
+        k = math.pi / 180.0 * _R_EARTH
+        return (np.asarray(lon) - lon0) * k * math.cos(math.radians(lat0)), (np.asarray(lat) - lat0) * k
+
+
+def _extrap(x: FloatArray, xp: FloatArray, fp: FloatArray) -> FloatArray:
+    """Linear interpolation, extended beyond both ends with the end segments' slopes."""
+    out = np.interp(x, xp, fp)
+    lo = fp[0] + (x - xp[0]) * (fp[1] - fp[0]) / max(xp[1] - xp[0], 1e-9)
+    hi = fp[-1] + (x - xp[-1]) * (fp[-1] - fp[-2]) / max(xp[-1] - xp[-2], 1e-9)
+    return np.asarray(np.where(x < xp[0], lo, np.where(x > xp[-1], hi, out)), dtype=float)
+
+
+def _text(v: object) -> str:
+    return "" if v is None or (isinstance(v, float) and math.isnan(v)) or v is pd.NA else str(v)
+
+
+def _track_line(net: Network, row: pd.Series) -> TrackLine:
+    tid, line, track = str(row["track_id"]), _text(row["line_code"]), _text(row["track"])
+    cl = centreline(net, row)
+    has_points = bool((net.track_points["track_id"] == tid).any())
+    k0, k1 = row["km_begin_m"], row["km_end_m"]
+    lat0, lon0 = (float(cl.lat[0]), float(cl.lon[0])) if cl.lat.size else (0.0, 0.0)
+    metric: TrackMetric | None = None
+    c_begin, dirn, length = 0.0, 1, float(row["length_m"])
+    if line and not has_points and pd.notna(k0) and pd.notna(k1):
+        m = track_metric(net, line, track)
+        dirn = 1 if float(k1) >= float(k0) else -1
+        metric = m
+        c_begin = float(m.c_of_km(float(k0)))
+        length = abs(float(m.c_of_km(float(k1))) - c_begin) if m is not IDENTITY else abs(float(k1) - float(k0))
+    pos = cl.pos_m.astype(float) if has_points else np.empty(0)
+    km = cl.km_m.astype(float) if has_points else np.empty(0)
+    tl = TrackLine(tid, line, track, length, metric, c_begin, dirn, pos, km, np.zeros((0, 2)), cl.pos_m, (lat0, lon0))
+    x, y = tl.plane(cl.lat, cl.lon)
+    return replace(tl, xy=np.column_stack([x, y]) if cl.lat.size >= 2 else np.zeros((0, 2)))
+
+
+@dataclass(frozen=True)
+class TrackLines:
+    """Every track's :class:`TrackLine` and the topology, built once per loaded network."""
+
+    lines: dict[str, TrackLine]
+    by_line: dict[tuple[str, str], list[TrackLine]]
+    topo: Topology
+
+    def __getitem__(self, track_id: str) -> TrackLine:
+        return self.lines[track_id]
+
+    def locate(self, line_code: str, track: str, km: float, tol_m: float = 0.5) -> tuple[TrackLine, float] | None:
+        """The track of ``line_code``/``track`` holding ``km`` and the pos there (the one with
+        km farthest inside when it lies on a joint); None when no track holds it."""
+        best: tuple[float, TrackLine, float] | None = None
+        for tl in self.by_line.get((line_code, track), []):
+            p = tl.pos_of_km(km)
+            inside = min(p, tl.length_m - p)
+            if math.isfinite(p) and inside >= -tol_m and (best is None or inside > best[0]):
+                best = (inside, tl, p)
+        return None if best is None else (best[1], best[2])
+
+
+def track_lines(net: Network) -> TrackLines:
+    def build() -> TrackLines:
+        lines: dict[str, TrackLine] = {}
+        by_line: dict[tuple[str, str], list[TrackLine]] = {}
+        for _, row in all_tracks(net).iterrows():
+            tl = _track_line(net, row)
+            lines[tl.track_id] = tl
+            if tl.line_code:
+                by_line.setdefault((tl.line_code, tl.track), []).append(tl)
+        return TrackLines(lines, by_line, topology(net))
+
+    return net.cached(("hypotheses", "track_lines"), build)
+
+
+@dataclass
+class Changes:
+    """What :func:`advance` did: splits (switch, from track, to tracks) and drops (track, reason)."""
+
+    splits: list[tuple[str | None, str, list[str]]]
+    drops: list[tuple[str, str]]
+
+
+def outward(h: Hypothesis, length: float, end: str) -> float:
+    """How far the candidate's point lies beyond ``end`` of its track (negative: inside)."""
+    return h.pos_m - length if end == END else -h.pos_m
+
+
+def _moved(h: Hypothesis, ex: Exit, out: float, lines: TrackLines, end: str) -> Hypothesis:
+    """``h`` carried ``out`` beyond ``end`` onto ``ex``: entry at ``ex.end``, away from it."""
+    entry = 0.0 if ex.end == BEGIN else lines[ex.track_id].length_m
+    motion = h.kp if end == END else -h.kp  # sign of dS that moves h outward at this end
+    return replace(
+        h,
+        track_id=ex.track_id,
+        pos_m=entry + ex.direction * out,
+        kp=ex.direction * motion,
+        came_from=(h.track_id, end),
+    )
+
+
+def _at_end(
+    h: Hypothesis, end: str, m: float, d: float, lines: TrackLines, ids: list[int], ch: Changes
+) -> list[Hypothesis]:
+    """The candidates ``h`` becomes at ``end`` of its track (itself when nothing happens)."""
+    tl = lines[h.track_id]
+    out = outward(h, tl.length_m, end)
+    exits = lines.topo.exits.get((h.track_id, end), [])
+    if not exits:
+        if out - (m + h.extra_m) > 0:
+            ch.drops.append((h.track_id, f"beyond its {end}: no navigable exit (buffer stop or none)"))
+            return []
+        return [h]
+    if out <= 0:
+        return [h]
+    if len(exits) == 1:
+        return [_moved(h, exits[0], out, lines, end)]
+    res: list[Hypothesis] = []
+    for ex in exits:
+        ids[0] += 1
+        res.append(replace(_moved(h, ex, out, lines, end), hid=ids[0], switch_id=ex.switch_id, split_d=d))
+    ch.splits.append((exits[0].switch_id, h.track_id, [e.track_id for e in exits]))
+    return res
+
+
+def merge(hyps: list[Hypothesis]) -> list[Hypothesis]:
+    """One candidate per (track, kp): the interval covering all of them (first one's lineage)."""
+    groups: dict[tuple[str, int], list[Hypothesis]] = {}
+    for h in hyps:
+        groups.setdefault((h.track_id, h.kp), []).append(h)
+    out: list[Hypothesis] = []
+    for g in groups.values():
+        if len(g) == 1:
+            out.append(g[0])
+            continue
+        lo = min(h.pos_m - h.extra_m for h in g)
+        hi = max(h.pos_m + h.extra_m for h in g)
+        out.append(replace(g[0], pos_m=(lo + hi) / 2, extra_m=(hi - lo) / 2))
+    return out
+
+
+def advance(
+    hyps: list[Hypothesis], m: float, d: float, lines: TrackLines, next_id: int
+) -> tuple[list[Hypothesis], Changes, int]:
+    """Apply the rules of the module docstring to candidates placed at the present travel
+    (margin ``m`` without their extra, unsigned travel ``d``) until none applies; returns them,
+    what happened, and the last lineage id used."""
+    ch = Changes([], [])
+    ids = [next_id]
+    for _ in range(16):  # a short track may be crossed within one step: repeat
+        new: list[Hypothesis] = []
+        for h in hyps:
+            for_end = _at_end(h, END, m, d, lines, ids, ch)
+            new.extend(x for g in for_end for x in _at_end(g, BEGIN, m, d, lines, ids, ch))
+        new = merge(new)
+        if new == hyps:
+            break
+        hyps = new
+    return hyps, ch, ids[0]
+
+
+def triggers(h: Hypothesis, pos: FloatArray, m: FloatArray, lines: TrackLines) -> FloatArray:
+    """Where (over arrays of the candidate's pos and margin) one of the rules applies."""
+    tl = lines[h.track_id]
+    hit = np.zeros(pos.shape, dtype=bool)
+    for end in (END, BEGIN):
+        out = pos - tl.length_m if end == END else -pos
+        hit |= out > (0.0 if lines.topo.exits.get((h.track_id, end)) else m + h.extra_m)
+    return hit
+
+
+def rebased(hyps: tuple[Hypothesis, ...], s_ref: float, s: float) -> list[Hypothesis]:
+    """The candidates with their pos at signed travel ``s`` instead of ``s_ref``."""
+    return [replace(h, pos_m=h.pos_m + h.kp * (s - s_ref)) for h in hyps]
