@@ -308,7 +308,7 @@ def _navigability(net: Network, ports: pd.DataFrame, out: _Out) -> None:
     a["pair"] = pd.Series(
         [(x, y) if x <= y else (y, x) for x, y in zip(pa, pb, strict=True)], index=a.index, dtype=object
     )
-    routes = {t.value: {tuple(sorted(r)) for r in rs} for t, rs in SWITCH_ROUTES.items()}
+    routes = {t.value: tuple(tuple(sorted(r)) for r in rs) for t, rs in SWITCH_ROUTES.items()}  # declared order
     types = texts(a["type"])
     is_route = np.array([pr in routes.get(t, ()) for pr, t in zip(a["pair"], types, strict=True)], dtype=bool)
     nav = texts(a["navigability"])
@@ -340,7 +340,7 @@ def _navigability(net: Network, ports: pd.DataFrame, out: _Out) -> None:
     sw = net.switches
     missing: list[tuple[int, str]] = []
     for i, (s, t) in enumerate(zip(column(sw, "switch_id"), column(sw, "type"), strict=True)):
-        for r in routes.get(str(t), set()):
+        for r in routes.get(str(t), ()):
             if (s, r) not in have and all(pd.notna(sw[f"{q}_track"].iloc[i]) for q in r):
                 missing.append((i, f"{r[0].upper()}–{r[1].upper()}"))
     route_texts: dict[int, list[str]] = {}
