@@ -15,9 +15,12 @@ enters the other track at the connected end and so travels on it away from that 
 from __future__ import annotations
 
 from collections import defaultdict
-from dataclasses import dataclass, field
+from collections.abc import Iterable
+from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network, canonical
@@ -83,16 +86,85 @@ class Exit:
     switch_id: str | None
 
 
-@dataclass
-class Topology:
-    """Adjacency of track ends; see the module docstring for the rules."""
+@dataclass(frozen=True)
+class Graph:
+    """The navigable graph in integer codes, for walks over the whole network.
 
-    tracks: pd.DataFrame
-    exits: dict[tuple[str, str], list[Exit]] = field(default_factory=dict)
-    """(track_id, end) → where a train leaving there may go."""
-    joined: dict[tuple[str, str], list[tuple[str, str, str]]] = field(default_factory=dict)
-    """(track_id, end) → every (other track, other end, navigability as seen from here)
-    connected there, navigable or not."""
+    Every track id of ``tracks`` and of ``connections`` (a missing id included) has a code:
+    ``names[code]``. A *state* ``2 · code + k`` is a train on that track travelling towards
+    its end (k = 1, direction +1) or its begin (k = 0, direction −1); the states it may go
+    to on leaving there are ``succ[ptr[state]:ptr[state + 1]]`` (CSR), the rules of the
+    module docstring. ``length[code]`` is the track's ``length_m`` (the last row of an id
+    given twice; 0 for an id no track has)."""
+
+    names: pd.Index
+    length: npt.NDArray[np.float64]
+    ptr: npt.NDArray[np.int64]
+    succ: npt.NDArray[np.int64]
+
+    def codes(self, ids: npt.ArrayLike) -> npt.NDArray[np.int64]:
+        """Codes of track ids (−1: no such id)."""
+        return np.asarray(self.names.get_indexer(pd.Index(np.asarray(ids, dtype=object))), dtype=np.int64)
+
+
+class Topology:
+    """Adjacency of track ends; see the module docstring for the rules. ``exits`` and
+    ``joined`` are dicts keyed by (track_id, end), made on first use; :attr:`graph` holds
+    the same navigable adjacency in integer arrays."""
+
+    def __init__(self, tracks: pd.DataFrame, connections: pd.DataFrame) -> None:
+        self.tracks, self.connections = tracks, connections
+
+    @cached_property
+    def _cols(self) -> list[npt.NDArray[np.object_]]:
+        c = self.connections
+        keys = ("track_a", "end_a", "track_b", "end_b", "navigability", "switch_id")
+        return [c[k].astype(object).where(c[k].notna(), None).to_numpy() for k in keys]
+
+    @cached_property
+    def _dicts(self) -> tuple[dict[tuple[str, str], list[Exit]], dict[tuple[str, str], list[tuple[str, str, str]]]]:
+        exits: defaultdict[tuple[str, str], list[Exit]] = defaultdict(list)
+        joined: defaultdict[tuple[str, str], list[tuple[str, str, str]]] = defaultdict(list)
+        for ta, ea, tb, eb, nav, s in zip(*self._cols, strict=True):
+            switch = None if s is None else str(s)
+            joined[(ta, ea)].append((tb, eb, nav))
+            joined[(tb, eb)].append((ta, ea, _SEEN_FROM_B.get(nav, nav)))
+            if nav in _FORWARD:
+                exits[(ta, ea)].append(Exit(tb, eb, 1 if eb == BEGIN else -1, switch))
+            if nav in _BACKWARD:
+                exits[(tb, eb)].append(Exit(ta, ea, 1 if ea == BEGIN else -1, switch))
+        return dict(exits), dict(joined)
+
+    @property
+    def exits(self) -> dict[tuple[str, str], list[Exit]]:
+        """(track_id, end) → where a train leaving there may go."""
+        return self._dicts[0]
+
+    @property
+    def joined(self) -> dict[tuple[str, str], list[tuple[str, str, str]]]:
+        """(track_id, end) → every (other track, other end, navigability as seen from here)
+        connected there, navigable or not."""
+        return self._dicts[1]
+
+    @cached_property
+    def graph(self) -> Graph:
+        """The navigable adjacency in codes (:class:`Graph`)."""
+        ta, ea, tb, eb, nav, _ = self._cols
+        tid = self.tracks["track_id"].astype(object).where(self.tracks["track_id"].notna(), None).to_numpy()
+        codes, uniq = pd.factorize(np.concatenate([tid, ta, tb]), use_na_sentinel=False)
+        names = pd.Index(uniq, dtype=object)
+        n_t, n_c = len(tid), len(ta)
+        ct, ca, cb = codes[:n_t], codes[n_t : n_t + n_c], codes[n_t + n_c :]
+        length = np.zeros(len(names))
+        last = len(ct) - 1 - np.unique(ct[::-1], return_index=True)[1]  # the last row of each id
+        length[ct[last]] = self.tracks["length_m"].to_numpy(dtype=float, na_value=np.nan)[last]
+        fwd, bwd = _among(nav, _FORWARD), _among(nav, _BACKWARD)
+        leave_a, leave_b = fwd & _among(ea, (BEGIN, END)), bwd & _among(eb, (BEGIN, END))
+        src = np.concatenate([2 * ca[leave_a] + (ea[leave_a] == END), 2 * cb[leave_b] + (eb[leave_b] == END)])
+        dst = np.concatenate([2 * cb[leave_a] + (eb[leave_a] == BEGIN), 2 * ca[leave_b] + (ea[leave_b] == BEGIN)])
+        order = np.argsort(src, kind="stable")
+        ptr = np.searchsorted(src[order], np.arange(2 * len(names) + 1)).astype(np.int64)
+        return Graph(names, length, ptr, dst[order].astype(np.int64))
 
     @property
     def track_ids(self) -> list[str]:
@@ -115,28 +187,14 @@ _FORWARD = frozenset((Navigability.BOTH.value, Navigability.A_TO_B.value))
 _BACKWARD = frozenset((Navigability.BOTH.value, Navigability.B_TO_A.value))
 
 
+def _among(values: npt.NDArray[np.object_], options: Iterable[str]) -> npt.NDArray[np.bool_]:
+    return np.asarray(pd.Series(values, dtype=object).isin(list(options)).to_numpy(), dtype=bool)
+
+
 def topology(net: Network) -> Topology:
-    """The graph of the network's track ends (built once per loaded network)."""
-
-    def build() -> Topology:
-        topo = Topology(all_tracks(net), defaultdict(list), defaultdict(list))
-        c = net.connections
-        keys = ("track_a", "end_a", "track_b", "end_b", "navigability")
-        cols = [c[k].astype(object).where(c[k].notna(), None).to_numpy() for k in keys]
-        sw = c["switch_id"].astype(object).where(c["switch_id"].notna(), None).to_numpy()
-        joined, exits = topo.joined, topo.exits
-        for ta, ea, tb, eb, nav, s in zip(*cols, sw, strict=True):
-            switch = None if s is None else str(s)
-            joined[(ta, ea)].append((tb, eb, nav))
-            joined[(tb, eb)].append((ta, ea, _SEEN_FROM_B.get(nav, nav)))
-            if nav in _FORWARD:
-                exits[(ta, ea)].append(Exit(tb, eb, 1 if eb == BEGIN else -1, switch))
-            if nav in _BACKWARD:
-                exits[(tb, eb)].append(Exit(ta, ea, 1 if ea == BEGIN else -1, switch))
-        topo.exits, topo.joined = dict(topo.exits), dict(topo.joined)
-        return topo
-
-    return net.cached(("topology", "graph"), build)
+    """The graph of the network's track ends (built once per loaded network, shared by the
+    rules and the track matcher; its parts are made on first use)."""
+    return net.cached(("topology", "graph"), lambda: Topology(all_tracks(net), net.connections))
 
 
 @dataclass(frozen=True)

@@ -314,37 +314,37 @@ def _ambiguous(
     for _, ident in walkers:
         count[ident] += 1
     walkers = [(r, i) for r, i in walkers if count[i] > 1 and pd.notna(tid[r]) and np.isfinite(pos[r])]
-    on_track: dict[str, list[tuple[float, int, tuple[object, ...]]]] = defaultdict(list)
+    g = topology(net).graph
+    at = g.codes(tid)  # every located balise's track is a track of the graph
+    length = g.length.tolist()
+    on_track: dict[int, list[tuple[float, int, tuple[object, ...]]]] = defaultdict(list)
     for r, ident in walkers:
-        on_track[str(tid[r])].append((float(pos[r]), r, ident))
-    topo = topology(net)
-    length = dict(
-        zip(
-            texts(topo.tracks["track_id"]),
-            topo.tracks["length_m"].to_numpy(float),
-            strict=True,
-        )
-    )
+        on_track[int(at[r])].append((float(pos[r]), r, ident))
+    ptr, succ = g.ptr.tolist(), g.succ.tolist()
     found: dict[tuple[int, int], float] = {}
     w = config.id_window_m
     for r, ident in walkers:
-        for d0 in (1, -1):
-            stack = [(str(tid[r]), d0, -float(pos[r]) if d0 > 0 else float(pos[r]) - length[str(tid[r])])]
-            best: dict[tuple[str, int], float] = {}
+        t0 = int(at[r])
+        for up in (1, 0):
+            # state 2·track + up (travelling towards the end: up = 1); off: route distance at
+            # the track's begin (up) / end (down)
+            stack = [(2 * t0 + up, -float(pos[r]) if up else float(pos[r]) - length[t0])]
+            best: dict[int, float] = {}
             while stack:
-                t, d, off = stack.pop()  # off: route distance at the track's begin (d>0) / end (d<0)
-                if best.get((t, d), np.inf) <= off:
+                state, off = stack.pop()
+                if best.get(state, np.inf) <= off:
                     continue
-                best[(t, d)] = off
-                ln = length.get(t, 0.0)
+                best[state] = off
+                t = state >> 1
+                ln = length[t]
                 for p, o, oid in on_track.get(t, ()):
-                    dist = off + (p if d > 0 else ln - p)
+                    dist = off + (p if state & 1 else ln - p)
                     if o != r and oid == ident and 0 < dist <= w and not (ident[0] == "C" and pair[o] == pair[r]):
                         key = (min(r, o), max(r, o))
                         found[key] = min(found.get(key, np.inf), dist)
                 exit_at = off + ln
                 if exit_at < w:
-                    stack += [(e.track_id, e.direction, exit_at) for e in topo.next_tracks(t, d)]
+                    stack += [(x, exit_at) for x in succ[ptr[state] : ptr[state + 1]]]
     bid = column(b, "balise_id")
     hits = sorted(found)
     out += capped(
