@@ -25,6 +25,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.geometry import GEOD
+from dbtools.gis.index import grid_index
 from dbtools.network import Network, sorted_by
 from dbtools.rules.common import column, texts
 from schemas.tables import GIS_SPACING_M
@@ -58,7 +59,7 @@ def track_geometry(net: Network, tracks: pd.DataFrame) -> pd.DataFrame:
         sel = own.iloc[at[has_points]]
         for k in out:
             out[k][has_points] = sel[k].to_numpy(dtype=float)
-    _from_gis(net.gis, tracks, ~has_points, out)
+    _from_gis(net, tracks, ~has_points, out)
     return pd.DataFrame(out, index=tracks.index)
 
 
@@ -93,8 +94,22 @@ def _from_track_points(tp: pd.DataFrame) -> pd.DataFrame:
     )
 
 
-def _from_gis(gis: pd.DataFrame, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], out: dict[str, F64]) -> None:
+def _steps(net: Network, g: pd.DataFrame) -> F64:
+    """Ellipsoidal distance between consecutive rows of ``g`` (the grid sorted by line,
+    track and km): the grid index's (:attr:`GridIndex.dist`, computed once per network) when
+    it holds the same points in the same order, as it does for a valid grid."""
+    if g is net.gis:
+        grid = grid_index(net)
+        n = len(g)
+        if grid.pos.size == n and (n == 0 or (grid.pos[0] == 0 and bool(np.all(np.diff(grid.pos) == 1)))):
+            return grid.dist
+    lat, lon = g["lat"].to_numpy(float), g["lon"].to_numpy(float)
+    return _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])[1]
+
+
+def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], out: dict[str, F64]) -> None:
     """Fill ``out`` for the tracks along a line grid (module doc)."""
+    gis = net.gis
     if gis.empty or not todo.any():
         return
     g = gis if sorted_by(gis, ("line_code", "track", "km_m")) else gis.sort_values(["line_code", "track", "km_m"])
@@ -107,7 +122,7 @@ def _from_gis(gis: pd.DataFrame, tracks: pd.DataFrame, todo: npt.NDArray[np.bool
     span = float(np.nanmax(km) - np.nanmin(km)) + 10.0 * GIS_SPACING_M
     base = float(np.nanmin(km))
     key = codes * span + (km - base)
-    _, dist = _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])
+    dist = _steps(net, g)
     cum = np.r_[0.0, np.cumsum(np.where(codes[1:] == codes[:-1], dist, 0.0))]
     lo = pd.Series(km).groupby(codes).min().to_numpy()
     hi = pd.Series(km).groupby(codes).max().to_numpy()
