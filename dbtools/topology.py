@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from dbtools.network import Network, canonical
+from dbtools.network import Network, canonical, sorted_by
 from schemas.enums import Navigability, TrackEnd, TrackKind
 from schemas.network import NETWORK_TRACKS
 
@@ -35,10 +35,30 @@ def implied_track_id(line_code: str, track: str) -> str:
     return f"{line_code}:{track}"
 
 
+def grid_extents(net: Network) -> pd.DataFrame:
+    """Lowest and highest km of each (line_code, track) of the grid, in (line_code, track)
+    order (built once per loaded network); for a grid sorted by line, track and km (as read
+    from a DB) also ``start``, the row where each one's run begins."""
+    return net.cached(("topology", "grid_extents"), lambda: _grid_extents(net.gis))
+
+
 def _grid_extents(gis: pd.DataFrame) -> pd.DataFrame:
-    """Lowest and highest km of each (line_code, track) of the grid."""
     if gis.empty:
         return pd.DataFrame({"line_code": [], "track": [], "km_lo": [], "km_hi": []})
+    if sorted_by(gis, ("line_code", "track", "km_m")):  # as read from a DB: runs of rows, no group-by
+        line, _ = pd.factorize(gis["line_code"])
+        track, _ = pd.factorize(gis["track"])
+        start = np.flatnonzero(np.r_[True, (line[1:] != line[:-1]) | (track[1:] != track[:-1])])
+        km = gis["km_m"].to_numpy(dtype=float, na_value=np.nan)
+        return pd.DataFrame(
+            {
+                "start": start,
+                "line_code": gis["line_code"].iloc[start].to_numpy(),
+                "track": gis["track"].iloc[start].to_numpy(),
+                "km_lo": np.fmin.reduceat(km, start),
+                "km_hi": np.fmax.reduceat(km, start),
+            }
+        )
     g = gis.groupby(["line_code", "track"], sort=True, observed=True)["km_m"].agg(["min", "max"]).reset_index()
     return g.rename(columns={"min": "km_lo", "max": "km_hi"})
 
@@ -48,7 +68,7 @@ def all_tracks(net: Network) -> pd.DataFrame:
 
     def build() -> pd.DataFrame:
         declared = net.tracks
-        ext = _grid_extents(net.gis)
+        ext = grid_extents(net)
         covered = set(zip(declared["line_code"].astype(object), declared["track"].astype(object), strict=True))
         keep = [(lc, tr) not in covered for lc, tr in zip(ext["line_code"], ext["track"], strict=True)]
         ext = ext[np.asarray(keep, dtype=bool)] if len(ext) else ext

@@ -64,7 +64,7 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
-from dbtools.topology import all_tracks
+from dbtools.topology import all_tracks, grid_extents
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCH_ROUTES, SWITCHES, TRACK_POINTS
@@ -109,12 +109,12 @@ def check_topology(net: Network, config: ValidationConfig, loc: Locator) -> list
     _references(net, tracks, out)
     ports = _ports(net.switches)
     inc = _incidence(net.connections)
-    _code(inc, ports)
+    _code(net, inc, ports)
     _switch_ports(net, ports, inc, out)
     _navigability(net, ports, inc, out)
     _multiple(net, inc, out)
     _overlap(net, ports, tracks, out)
-    _ends(net, tracks, inc, out)
+    _ends(net, tracks, out)
     _km_jump(net, tracks, config, out)
     out.items += check_geometry(net, tracks, inc, config, loc)
     return out.items
@@ -216,35 +216,35 @@ def _incidence(c: pd.DataFrame) -> pd.DataFrame:
     )
 
 
-def _shared_codes(*arrays: npt.NDArray[np.object_]) -> list[I64]:
-    """Integer codes shared by the arrays: equal values (a missing one included) get equal
-    codes, so that joins and duplicate tests run on integers."""
-    codes, _ = pd.factorize(np.concatenate(arrays), use_na_sentinel=False)
-    return np.split(codes.astype(np.int64), np.cumsum([len(a) for a in arrays])[:-1])
+def _shared_codes(*columns: pd.Series) -> list[I64]:
+    """Integer codes shared by the columns: equal values (a missing one included) get equal
+    codes, so that joins and duplicate tests run on integers (Arrow's hashing of the text
+    as held, no Python strings)."""
+    codes, _ = pd.factorize(pd.concat(columns, ignore_index=True), use_na_sentinel=False)
+    return np.split(codes.astype(np.int64), np.cumsum([len(c) for c in columns])[:-1])
 
 
-def _code(inc: pd.DataFrame, ports: pd.DataFrame) -> None:
+def _code(net: Network, inc: pd.DataFrame, ports: pd.DataFrame) -> None:
     """Add codes of switch (``sk``), track (``tk``, ``ok`` of the other track) and end
     (``ek``, ``oek``) to the incidence and port tables, and ``key`` = the (switch, track,
     end) triple as one integer."""
-    inc["sk"], ports["sk"] = _shared_codes(
-        inc["switch_id"].to_numpy(dtype=object), ports["switch_id"].to_numpy(dtype=object)
-    )
-    inc["tk"], inc["ok"], ports["tk"] = _shared_codes(
-        *(f[k].to_numpy(dtype=object) for f, k in ((inc, "track"), (inc, "other"), (ports, "track")))
-    )
-    inc["ek"], inc["oek"], ports["ek"] = _shared_codes(
-        *(f[k].to_numpy(dtype=object) for f, k in ((inc, "end"), (inc, "other_end"), (ports, "end")))
-    )
-    n_t, n_e = (
-        1 + max((int(f[k].max()) for f, k in cols if len(f)), default=0)
-        for cols in (
-            ((inc, "tk"), (inc, "ok"), (ports, "tk")),
-            ((inc, "ek"), (inc, "oek"), (ports, "ek")),
-        )
-    )
+    c, sw = net.connections, net.switches
+    csk, ssk = _shared_codes(c["switch_id"], sw["switch_id"])
+    inc["sk"], ports["sk"] = np.concatenate([csk, csk]), np.tile(ssk, len(ALL_PORTS))
+    n_code = []
+    for what, inc_cols, port_cols in (("track", ("tk", "ok"), "tk"), ("end", ("ek", "oek"), "ek")):
+        ca, cb, *cp = _shared_codes(c[f"{what}_a"], c[f"{what}_b"], *(sw[f"{p}_{what}"] for p in ALL_PORTS))
+        inc[inc_cols[0]], inc[inc_cols[1]] = np.concatenate([ca, cb]), np.concatenate([cb, ca])
+        ports[port_cols] = np.concatenate(cp)
+        n_code.append(1 + max((int(x.max()) for x in (ca, cb, *cp) if len(x)), default=0))
+    n_t, n_e = n_code
     for f in (inc, ports):
         f["key"] = (f["sk"].to_numpy() * n_t + f["tk"].to_numpy()) * n_e + f["ek"].to_numpy()
+
+
+def _int_isin(values: npt.ArrayLike, known: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+    """``np.isin`` for integer keys by a hash look-up (no sort)."""
+    return np.asarray(pd.Series(np.asarray(values)).isin(np.asarray(known)).to_numpy(), dtype=bool)
 
 
 #: Ports that may be empty: a branch leading out of the DB (``schemas.network``).
@@ -287,7 +287,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         ),
     )
     with_switch = inc["switch_id"].notna().to_numpy()
-    unused = ports[given & ~np.isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])]
+    unused = ports[given & ~_int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])]
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -313,7 +313,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         ),
     )
     m = inc[with_switch]
-    m = m[~np.isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])]
+    m = m[~_int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])]
     stray = m[isin(m["switch_id"].to_numpy(dtype=object), texts(net.switches["switch_id"]))].drop_duplicates("row")
     out.add(
         "topology.switch_port",
@@ -415,7 +415,7 @@ def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out:
     rows, order, names = [], [], []
     for t, routes in _ROUTES.items():
         for j, (code, (lo, hi)) in enumerate(routes):
-            hit = np.flatnonzero((types == t) & has_track[lo] & has_track[hi] & ~np.isin(sk * 16 + code, have))
+            hit = np.flatnonzero((types == t) & has_track[lo] & has_track[hi] & ~_int_isin(sk * 16 + code, have))
             rows.append(hit)
             order.append(np.full(hit.size, j))
             names += [f"{lo.upper()}–{hi.upper()}"] * hit.size
@@ -495,13 +495,14 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
     out.add("topology.switch_overlap", Severity.ERROR, SWITCHES.name, rows, lambda i: (text[i], {}))
 
 
-def _ends(net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
+def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     n_decl = len(net.tracks)
     if net.connections.empty:
         return
     tid = texts(tracks["track_id"])[:n_decl]
-    inc_track, inc_end = inc["track"].to_numpy(dtype=object), inc["end"].to_numpy(dtype=object)
-    connected = isin(tid, inc_track)
+    ids, c = tracks["track_id"].iloc[:n_decl], net.connections
+    at, at_end = (pd.concat([c[f"{k}_a"], c[f"{k}_b"]], ignore_index=True) for k in ("track", "end"))
+    connected = _is_in(ids, at)
     isolated = np.flatnonzero(~connected)
     out.add(
         "topology.isolated_track",
@@ -522,7 +523,7 @@ def _ends(net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> N
         with np.errstate(invalid="ignore"):
             boundary = np.isfinite(k) & ((np.abs(k - lo) <= 1.0) | (np.abs(k - hi) <= 1.0))
         stopped = np.array([x is not None and bool(x) for x in stop], dtype=bool)
-        used = isin(tid, inc_track[inc_end == e])
+        used = _is_in(ids, at[(at_end == e).fillna(False).to_numpy(dtype=bool)])
         opened[e] = connected & ~used & ~stopped & ~boundary
 
     def text(i: int) -> str:
@@ -543,12 +544,12 @@ def _grid_extent(
     net: Network, line: npt.NDArray[np.object_], track: npt.NDArray[np.object_]
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """Lowest and highest km of the grid of each (line, track) given (NaN: no grid)."""
-    if net.gis.empty:
+    g = grid_extents(net)
+    if g.empty or not len(line):
         return np.full(len(line), np.nan), np.full(len(line), np.nan)
-    g = net.gis.groupby(["line_code", "track"], observed=True)["km_m"].agg(["min", "max"]).reset_index()
     keys = pd.MultiIndex.from_arrays([texts(g["line_code"]), texts(g["track"])])
-    at = keys.get_indexer(pd.MultiIndex.from_arrays([line, track])) if len(line) else np.zeros(0, dtype=np.int64)
-    lo, hi = g["min"].to_numpy(float), g["max"].to_numpy(float)
+    at = keys.get_indexer(pd.MultiIndex.from_arrays([line, track]))
+    lo, hi = g["km_lo"].to_numpy(float), g["km_hi"].to_numpy(float)
     return np.where(at >= 0, lo[at], np.nan), np.where(at >= 0, hi[at], np.nan)
 
 

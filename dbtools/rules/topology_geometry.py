@@ -114,22 +114,17 @@ def _crossover_angles(
     config: ValidationConfig,
     loc: Locator,
 ) -> list[Finding]:
-    kind = dict(
-        zip(
-            texts(tracks["track_id"]),
-            texts(tracks["kind"]),
-            strict=True,
-        )
-    )
-    xo = {t for t, k in kind.items() if k == TrackKind.CROSSOVER.value}
+    ids = texts(tracks["track_id"])
+    kinds = pd.Series(texts(tracks["kind"]), index=ids)
+    kinds = kinds[~kinds.index.duplicated(keep="last")]  # a track id given twice: its last row
+    xo = set(kinds.index[(kinds == TrackKind.CROSSOVER.value).to_numpy()])
     if not xo or net.track_points.empty:
         return []
     sw = net.switches
     number = dict(zip(column(sw, "switch_id"), column(sw, "switch_number"), strict=True))
     ref = inc[inc["track"].isin(list(xo)) & inc["switch_id"].notna()].copy()
-    known = set(pos.index)
-    other = texts(ref["other"])
-    ref = ref[np.array([kind.get(o) != TrackKind.CROSSOVER.value and o in known for o in other], dtype=bool)]
+    other = pd.Index(texts(ref["other"]))
+    ref = ref[(kinds.reindex(other).to_numpy() != TrackKind.CROSSOVER.value) & other.isin(pos.index)]
     ref["n"] = [number.get(s, np.nan) for s in texts(ref["switch_id"])]
     ref = ref[np.isfinite(ref["n"].to_numpy(float))].drop_duplicates(["track", "end"])
     if ref.empty:
@@ -144,7 +139,7 @@ def _crossover_angles(
     worst["ratio"] = worst["dev"] / worst["alpha"]
     lo, hi = config.crossover_angle_range
     bad = worst[(worst["ratio"] < lo) | (worst["ratio"] > hi)].reset_index(drop=True)
-    tid = column(net.tracks, "track_id")
+    tid = column(net.tracks, "track_id") if len(bad) else np.empty(0, dtype=object)
     row_of = {t: i for i, t in enumerate(tid)}
 
     def build(j: int) -> Finding:

@@ -28,6 +28,7 @@ from dbtools.gis.geometry import GEOD
 from dbtools.gis.index import grid_index
 from dbtools.network import Network, sorted_by
 from dbtools.rules.common import column, texts
+from dbtools.topology import grid_extents
 from schemas.tables import GIS_SPACING_M
 
 F64 = npt.NDArray[np.float64]
@@ -67,8 +68,9 @@ def _from_track_points(tp: pd.DataFrame) -> pd.DataFrame:
     """End points, outward end azimuths and polyline length of every track in track_points."""
     if tp.empty:
         return pd.DataFrame()
-    tp = tp.sort_values(["track_id", "pos_m"], kind="stable")
-    ids = texts(tp["track_id"])
+    if not sorted_by(tp, ("track_id", "pos_m")):
+        tp = tp.sort_values(["track_id", "pos_m"], kind="stable")
+    ids, _ = pd.factorize(tp["track_id"], use_na_sentinel=False)  # equal ids, equal codes
     lat, lon = tp["lat"].to_numpy(float), tp["lon"].to_numpy(float)
     first = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     last = np.r_[first[1:] - 1, len(ids) - 1]
@@ -90,7 +92,7 @@ def _from_track_points(tp: pd.DataFrame) -> pd.DataFrame:
             "az_end": az_e,
             "geo_length_m": cum[last] - cum[first],
         },
-        index=pd.Index(ids[first], dtype=object),
+        index=pd.Index(texts(tp["track_id"].iloc[first]), dtype=object),
     )
 
 
@@ -112,11 +114,18 @@ def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], o
     gis = net.gis
     if gis.empty or not todo.any():
         return
-    g = gis if sorted_by(gis, ("line_code", "track", "km_m")) else gis.sort_values(["line_code", "track", "km_m"])
-    grouped = g.groupby(["line_code", "track"], sort=False, observed=True)
-    codes = grouped.ngroup().to_numpy()
-    first = g.iloc[np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])]
-    uniq = pd.MultiIndex.from_arrays([column(first, "line_code"), column(first, "track")])
+    if sorted_by(gis, ("line_code", "track", "km_m")):  # as read from a DB: the grid's runs, no group-by
+        g, ext = gis, grid_extents(net)
+        codes = np.repeat(np.arange(len(ext)), np.diff(np.r_[ext["start"].to_numpy(), len(g)]))
+        uniq = pd.MultiIndex.from_arrays([texts(ext["line_code"]), texts(ext["track"])])
+        lo, hi = ext["km_lo"].to_numpy(float), ext["km_hi"].to_numpy(float)
+    else:
+        g = gis.sort_values(["line_code", "track", "km_m"])
+        codes = g.groupby(["line_code", "track"], sort=False, observed=True).ngroup().to_numpy()
+        first = g.iloc[np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])]
+        uniq = pd.MultiIndex.from_arrays([column(first, "line_code"), column(first, "track")])
+        lo = pd.Series(g["km_m"].to_numpy(float)).groupby(codes).min().to_numpy()
+        hi = pd.Series(g["km_m"].to_numpy(float)).groupby(codes).max().to_numpy()
     km = g["km_m"].to_numpy(float)
     lat, lon = g["lat"].to_numpy(float), g["lon"].to_numpy(float)
     span = float(np.nanmax(km) - np.nanmin(km)) + 10.0 * GIS_SPACING_M
@@ -124,8 +133,6 @@ def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], o
     key = codes * span + (km - base)
     dist = _steps(net, g)
     cum = np.r_[0.0, np.cumsum(np.where(codes[1:] == codes[:-1], dist, 0.0))]
-    lo = pd.Series(km).groupby(codes).min().to_numpy()
-    hi = pd.Series(km).groupby(codes).max().to_numpy()
 
     t = tracks[todo]
     idx = np.flatnonzero(todo)
@@ -183,7 +190,9 @@ def distance_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
 def chord_azimuths(tp: pd.DataFrame, track_ids: set[str]) -> pd.DataFrame:
     """Azimuth [deg] of every chord between consecutive track_points of the given tracks:
     columns ``track_id``, ``az``."""
-    sel = tp[tp["track_id"].isin(list(track_ids))].sort_values(["track_id", "pos_m"], kind="stable")
+    sel = tp[tp["track_id"].isin(list(track_ids))]
+    if not sorted_by(sel, ("track_id", "pos_m")):
+        sel = sel.sort_values(["track_id", "pos_m"], kind="stable")
     ids = texts(sel["track_id"])
     lat, lon = sel["lat"].to_numpy(float), sel["lon"].to_numpy(float)
     az, _ = _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])
