@@ -53,6 +53,7 @@ Balise rules that need the network are in :mod:`dbtools.rules.balise_groups`.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -183,17 +184,27 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
         )
 
 
+def _text(frame: pd.DataFrame, name: str) -> npt.NDArray[np.object_]:
+    """A text column as objects with NaN for missing, as pandas' ``str`` columns give them
+    (the tables below are held as objects: no conversion to Arrow text and back)."""
+    return np.asarray(frame[name].to_numpy(dtype=object, na_value=np.nan), dtype=object)
+
+
+def _objects(columns: dict[str, npt.NDArray[Any]]) -> pd.DataFrame:
+    return pd.DataFrame({k: pd.Series(v, dtype=v.dtype) for k, v in columns.items()})
+
+
 def _ports(sw: pd.DataFrame) -> pd.DataFrame:
     """Long table of switch ports: row (of switches), switch_id, type, port, track, end."""
     n, k = len(sw), len(ALL_PORTS)
-    return pd.DataFrame(
+    return _objects(
         {
             "row": np.tile(np.arange(n), k),
-            "switch_id": np.tile(column(sw, "switch_id"), k),
-            "type": np.tile(column(sw, "type"), k),
+            "switch_id": np.tile(_text(sw, "switch_id"), k),
+            "type": np.tile(_text(sw, "type"), k),
             "port": np.repeat(np.array(ALL_PORTS, dtype=object), n),
-            "track": np.concatenate([column(sw, f"{p}_track") for p in ALL_PORTS]),
-            "end": np.concatenate([column(sw, f"{p}_end") for p in ALL_PORTS]),
+            "track": np.concatenate([_text(sw, f"{p}_track") for p in ALL_PORTS]),
+            "end": np.concatenate([_text(sw, f"{p}_end") for p in ALL_PORTS]),
         }
     )
 
@@ -201,9 +212,9 @@ def _ports(sw: pd.DataFrame) -> pd.DataFrame:
 def _incidence(c: pd.DataFrame) -> pd.DataFrame:
     """Both ends of every connection: row (of connections), side a/b, track, end, switch_id,
     other track and end."""
-    ta, ea, tb, eb, sid = (column(c, k) for k in ("track_a", "end_a", "track_b", "end_b", "switch_id"))
+    ta, ea, tb, eb, sid = (_text(c, k) for k in ("track_a", "end_a", "track_b", "end_b", "switch_id"))
     rows = np.arange(len(c))
-    return pd.DataFrame(
+    return _objects(
         {
             "track": np.concatenate([ta, tb]),
             "end": np.concatenate([ea, eb]),

@@ -123,8 +123,8 @@ def _crossover_angles(
     sw = net.switches
     number = dict(zip(column(sw, "switch_id"), column(sw, "switch_number"), strict=True))
     ref = inc[inc["track"].isin(list(xo)) & inc["switch_id"].notna()].copy()
-    other = pd.Index(texts(ref["other"]))
-    ref = ref[(kinds.reindex(other).to_numpy() != TrackKind.CROSSOVER.value) & other.isin(pos.index)]
+    other = pd.Index(texts(ref["other"]), dtype=object)
+    ref = ref[(kinds.reindex(other).to_numpy() != TrackKind.CROSSOVER.value) & (pos.index.get_indexer(other) >= 0)]
     ref["n"] = [number.get(s, np.nan) for s in texts(ref["switch_id"])]
     ref = ref[np.isfinite(ref["n"].to_numpy(float))].drop_duplicates(["track", "end"])
     if ref.empty:
@@ -142,8 +142,10 @@ def _crossover_angles(
     tid = column(net.tracks, "track_id") if len(bad) else np.empty(0, dtype=object)
     row_of = {t: i for i, t in enumerate(tid)}
 
+    cols = {k: bad[k].tolist() for k in bad.columns}
+
     def build(j: int) -> Finding:
-        r = bad.iloc[j]
+        r = {k: v[j] for k, v in cols.items()}
         i = row_of.get(r["track_id"])
         return Finding(
             "topology.crossover_angle",
