@@ -61,16 +61,11 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     free = np.flatnonzero(pd.isna(tid))
     if free.size:
         along = tr[tr["line_code"].notna() & tr["km_begin_m"].notna() & tr["km_end_m"].notna()]
-        q = pd.DataFrame({"i": free, "line_code": column(b, "line_code")[free], "track": column(b, "track")[free]})
-        cand = along[["track_id", "line_code", "track", "km_begin_m", "km_end_m"]].astype(
-            {"line_code": object, "track": object}
-        )
-        m = q.merge(cand, on=["line_code", "track"])
-        k = km[m["i"].to_numpy()]
-        lo = np.minimum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
-        hi = np.maximum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
-        m = m[(k >= lo - 1e-6) & (k <= hi + 1e-6)].drop_duplicates("i")
-        tid[m["i"].to_numpy()] = texts(m["track_id"])
+        line, track = column(b, "line_code")[free], column(b, "track")[free]
+        hit = _by_km(along, line, track, km[free])
+        if hit is None:
+            hit = _by_km_merge(along, line, track, km[free])
+        tid[free] = np.where(pd.notna(hit), hit, tid[free])
     pos = np.full(n, np.nan)
     t = tr.drop_duplicates("track_id")
     at = pd.Index(texts(t["track_id"])).get_indexer(pd.Index(tid))
@@ -82,6 +77,58 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     pos[has[inside]] = np.abs(km[has[inside]] - k0[inside])
     _from_points(net, tid, km, pos)
     return tid, pos
+
+
+def _by_km_merge(
+    along: pd.DataFrame, line: npt.NDArray[np.object_], track: npt.NDArray[np.object_], km: F64
+) -> npt.NDArray[np.object_]:
+    """For each (line, track, km): the first track of ``along`` (in its order) of that line
+    and track whose km range holds km (±1e-6 m), else None."""
+    q = pd.DataFrame({"i": np.arange(len(km)), "line_code": line, "track": track})
+    cand = along[["track_id", "line_code", "track", "km_begin_m", "km_end_m"]].astype(
+        {"line_code": object, "track": object}
+    )
+    m = q.merge(cand, on=["line_code", "track"])
+    k = km[m["i"].to_numpy()]
+    lo = np.minimum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
+    hi = np.maximum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
+    m = m[(k >= lo - 1e-6) & (k <= hi + 1e-6)].drop_duplicates("i")
+    out = np.full(len(km), None, dtype=object)
+    out[m["i"].to_numpy()] = texts(m["track_id"])
+    return out
+
+
+def _by_km(
+    along: pd.DataFrame, line: npt.NDArray[np.object_], track: npt.NDArray[np.object_], km: F64
+) -> npt.NDArray[np.object_] | None:
+    """:func:`_by_km_merge` by a sorted search, for the usual case: no key missing, finite km
+    ranges of at least 1 mm that do not overlap within a line and track (touching ends may
+    both hold a km: the first in ``along`` is taken). None when that does not hold."""
+    cl, ct = column(along, "line_code"), column(along, "track")
+    if len(along) == 0 or pd.isna(cl).any() or pd.isna(ct).any() or pd.isna(line).any() or pd.isna(track).any():
+        return None
+    k0, k1 = column(along, "km_begin_m"), column(along, "km_end_m")
+    lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all() and np.all(hi - lo >= 1e-3)):
+        return None
+    keys = pd.MultiIndex.from_arrays([cl, ct])
+    uniq = keys.unique()
+    cg, qg = uniq.get_indexer(keys), uniq.get_indexer(pd.MultiIndex.from_arrays([line, track]))
+    order = np.lexsort((lo, cg))
+    cg, lo, hi = cg[order], lo[order], hi[order]
+    same = cg[1:] == cg[:-1]
+    if np.any(same & (lo[1:] < hi[:-1])):
+        return None  # overlapping ranges: the general path
+    span = float(hi.max() - lo.min()) + 10.0
+    base = float(lo.min())
+    at = np.searchsorted(cg * span + (lo - 1e-6 - base), qg * span + (km - base), side="right") - 1
+    best = np.full(len(km), len(along))  # position in ``along`` of the first track holding km
+    for d in (-2, -1, 0, 1):
+        j = np.clip(at + d, 0, len(lo) - 1)
+        holds = (qg >= 0) & (cg[j] == qg) & (km >= lo[j] - 1e-6) & (km <= hi[j] + 1e-6)
+        best = np.where(holds, np.minimum(best, order[j]), best)
+    ids = np.append(texts(along["track_id"]), None)
+    return np.asarray(ids[best], dtype=object)
 
 
 def _from_points(net: Network, tid: npt.NDArray[np.object_], km: F64, pos: F64) -> None:
@@ -317,9 +364,9 @@ def _ambiguous(
     g = topology(net).graph
     at = g.codes(tid)  # every located balise's track is a track of the graph
     length = g.length.tolist()
-    on_track: dict[int, list[tuple[float, int, tuple[object, ...]]]] = defaultdict(list)
+    on_track: dict[tuple[int, tuple[object, ...]], list[tuple[float, int]]] = defaultdict(list)
     for r, ident in walkers:
-        on_track[int(at[r])].append((float(pos[r]), r, ident))
+        on_track[(int(at[r]), ident)].append((float(pos[r]), r))
     ptr, succ = g.ptr.tolist(), g.succ.tolist()
     found: dict[tuple[int, int], float] = {}
     w = config.id_window_m
@@ -337,9 +384,9 @@ def _ambiguous(
                 best[state] = off
                 t = state >> 1
                 ln = length[t]
-                for p, o, oid in on_track.get(t, ()):
+                for p, o in on_track.get((t, ident), ()):
                     dist = off + (p if state & 1 else ln - p)
-                    if o != r and oid == ident and 0 < dist <= w and not (ident[0] == "C" and pair[o] == pair[r]):
+                    if o != r and 0 < dist <= w and not (ident[0] == "C" and pair[o] == pair[r]):
                         key = (min(r, o), max(r, o))
                         found[key] = min(found.get(key, np.inf), dist)
                 exit_at = off + ln
