@@ -22,6 +22,8 @@ from functools import cached_property
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from dbtools.network import Network, canonical, sorted_by
 from schemas.enums import Navigability, TrackEnd, TrackKind
@@ -205,6 +207,24 @@ _SEEN_FROM_B = {
 }
 _FORWARD = frozenset((Navigability.BOTH.value, Navigability.A_TO_B.value))
 _BACKWARD = frozenset((Navigability.BOTH.value, Navigability.B_TO_A.value))
+
+
+def first_rows(ids: pd.Series, values: pd.Series) -> npt.NDArray[np.int64]:
+    """For each of ``values``: the first position in ``ids`` holding it (−1: none), by
+    Arrow's hash look-up when both are held as Arrow text."""
+    to_a, to_b = getattr(ids.array, "__arrow_array__", None), getattr(values.array, "__arrow_array__", None)
+    if to_a is not None and to_b is not None:
+        a, b = to_a(), to_b()
+        if a.type == b.type and (pa.types.is_string(a.type) or pa.types.is_large_string(a.type)):
+            at = pc.index_in(b, value_set=a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a)
+            return np.asarray(pc.fill_null(at, -1).to_numpy(zero_copy_only=False), dtype=np.int64)
+    index = pd.Index(np.asarray(ids.to_numpy(dtype=object, na_value=None), dtype=object), dtype=object)
+    first = ~index.duplicated()
+    pos = np.flatnonzero(first)
+    at = index[first].get_indexer(
+        pd.Index(np.asarray(values.to_numpy(dtype=object, na_value=None), dtype=object), dtype=object)
+    )
+    return np.where(at >= 0, pos[np.maximum(at, 0)], -1).astype(np.int64)
 
 
 def _among(values: npt.NDArray[np.object_], options: Iterable[str]) -> npt.NDArray[np.bool_]:

@@ -65,7 +65,7 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
-from dbtools.topology import all_tracks, grid_extents
+from dbtools.topology import all_tracks, first_rows, grid_extents
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCH_ROUTES, SWITCHES, TRACK_POINTS
@@ -568,13 +568,12 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
     c = net.connections
     if c.empty:
         return
-    t = tracks.drop_duplicates("track_id")
-    index = pd.Index(texts(t["track_id"]))
-    ta, tb = column(c, "track_a"), column(c, "track_b")
-    ia, ib = index.get_indexer(pd.Index(ta)), index.get_indexer(pd.Index(tb))
+    t = tracks
+    ia, ib = (first_rows(tracks["track_id"], c[k]) for k in ("track_a", "track_b"))
     rows = np.flatnonzero((ia >= 0) & (ib >= 0))
     if rows.size == 0:
         return
+    ta, tb = column(c, "track_a"), column(c, "track_b")
     line, k0, k1 = (column(t, k) for k in ("line_code", "km_begin_m", "km_end_m"))
     a, b = ia[rows], ib[rows]
     la, lb = line[a], line[b]

@@ -18,6 +18,7 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.track_geometry import chord_azimuths, distance_m, end_coordinates, track_geometry
+from dbtools.topology import first_rows
 from schemas.enums import Severity, TrackKind
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS
@@ -30,27 +31,28 @@ def check_geometry(
     pos = pd.Series(np.arange(len(tracks)), index=texts(tracks["track_id"]))
     pos = pos[~pos.index.duplicated()]
     return (
-        _gaps(net, geo, pos, config, loc)
+        _gaps(net, tracks, geo, config, loc)
         + _lengths(net, geo, config, loc)
         + _crossover_angles(net, tracks, geo, pos, inc, config, loc)
     )
 
 
-def _gaps(net: Network, geo: pd.DataFrame, pos: pd.Series, config: ValidationConfig, loc: Locator) -> list[Finding]:
+def _gaps(
+    net: Network, tracks: pd.DataFrame, geo: pd.DataFrame, config: ValidationConfig, loc: Locator
+) -> list[Finding]:
     c = net.connections
     if c.empty:
         return []
-    ta, tb = column(c, "track_a"), column(c, "track_b")
+    ra, rb = (first_rows(tracks["track_id"], c[k]) for k in ("track_a", "track_b"))
     ea, eb = column(c, "end_a"), column(c, "end_b")
-    ra = pos.reindex(ta).to_numpy(dtype=float)
-    rb = pos.reindex(tb).to_numpy(dtype=float)
-    ok = np.isfinite(ra) & np.isfinite(rb)
+    ok = (ra >= 0) & (rb >= 0)
     rows = np.flatnonzero(ok)
-    la, lo_a, _ = end_coordinates(geo, ra[ok].astype(np.int64), ea[ok])
-    lb, lo_b, _ = end_coordinates(geo, rb[ok].astype(np.int64), eb[ok])
+    la, lo_a, _ = end_coordinates(geo, ra[ok], ea[ok])
+    lb, lo_b, _ = end_coordinates(geo, rb[ok], eb[ok])
     gap = distance_m(la, lo_a, lb, lo_b)
     with np.errstate(invalid="ignore"):
         bad = np.flatnonzero(gap > config.connection_gap_m)
+    ta, tb = (column(c, k) if bad.size else np.empty(0, dtype=object) for k in ("track_a", "track_b"))
     return capped(
         "topology.gap",
         Severity.ERROR,
