@@ -41,7 +41,7 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, isin, py, texts
 from dbtools.rules.config import ValidationConfig
-from dbtools.topology import all_tracks, topology
+from dbtools.topology import all_tracks, first_rows, topology
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
 from schemas.tables import BALISE_GROUP_COLUMNS, BALISES
@@ -57,7 +57,8 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     tid = column(b, "track_id") if "track_id" in b.columns else np.full(n, None, dtype=object)
     km = column(b, "km_actual_m")
     tid = tid.copy()
-    tid[~isin(tid, texts(tr["track_id"]))] = None  # unknown: topology.invalid_reference
+    if "track_id" in b.columns:
+        tid[first_rows(tr["track_id"], b["track_id"]) < 0] = None  # unknown: topology.invalid_reference
     free = np.flatnonzero(pd.isna(tid))
     if free.size:
         along = tr[tr["line_code"].notna() & tr["km_begin_m"].notna() & tr["km_end_m"].notna()]
@@ -67,10 +68,9 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
             hit = _by_km_merge(along, line, track, km[free])
         tid[free] = np.where(pd.notna(hit), hit, tid[free])
     pos = np.full(n, np.nan)
-    t = tr.drop_duplicates("track_id")
-    at = pd.Index(texts(t["track_id"])).get_indexer(pd.Index(tid))
+    at = first_rows(tr["track_id"], pd.Series(tid, dtype=object))
     has = np.flatnonzero(at >= 0)
-    rows = t.iloc[at[has]]
+    rows = tr.iloc[at[has]]
     k0, k1 = column(rows, "km_begin_m"), column(rows, "km_end_m")
     lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
     inside = (km[has] >= lo - 1.0) & (km[has] <= hi + 1.0)

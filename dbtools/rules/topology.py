@@ -298,7 +298,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         ),
     )
     with_switch = inc["switch_id"].notna().to_numpy()
-    unused = ports[given & ~_int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])]
+    unused = _merged(ports[given & ~_int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])])
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -333,6 +333,13 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         stray["row"].to_numpy(),
         _msg(stray, lambda r: f"connection names switch {r.switch_id} but {r.track} {r.end} is none of its ports"),
     )
+
+
+def _merged(frame: pd.DataFrame) -> pd.DataFrame:
+    """The rows as the pandas merge the rule was first made with gave them: a missing
+    switch_id is None, not NaN (its message says ``switch None``)."""
+    sid = frame["switch_id"].to_numpy(dtype=object)
+    return frame.assign(switch_id=pd.Series(np.where(pd.isna(sid), None, sid), index=frame.index, dtype=object))
 
 
 def _msg(frame: pd.DataFrame, text: Callable[[pd.Series], str]) -> Callable[[int], tuple[str, dict[str, object]]]:

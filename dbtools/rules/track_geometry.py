@@ -28,7 +28,7 @@ from dbtools.gis.geometry import GEOD
 from dbtools.gis.index import grid_index
 from dbtools.network import Network, sorted_by
 from dbtools.rules.common import column, texts
-from dbtools.topology import grid_extents
+from dbtools.topology import first_rows, grid_extents
 from schemas.tables import GIS_SPACING_M
 
 F64 = npt.NDArray[np.float64]
@@ -190,7 +190,7 @@ def distance_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
 def chord_azimuths(tp: pd.DataFrame, track_ids: set[str]) -> pd.DataFrame:
     """Azimuth [deg] of every chord between consecutive track_points of the given tracks:
     columns ``track_id``, ``az``."""
-    sel = tp[tp["track_id"].isin(list(track_ids))]
+    sel = tp[first_rows(pd.Series(sorted(track_ids), dtype=object), tp["track_id"]) >= 0]
     if not sorted_by(sel, ("track_id", "pos_m")):
         sel = sel.sort_values(["track_id", "pos_m"], kind="stable")
     ids = texts(sel["track_id"])
