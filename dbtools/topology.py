@@ -26,6 +26,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from dbtools.network import Network, canonical, sorted_by
+from dbtools.rules.common import texts
 from schemas.enums import Navigability, TrackEnd, TrackKind
 from schemas.network import NETWORK_TRACKS
 
@@ -218,12 +219,10 @@ def first_rows(ids: pd.Series, values: pd.Series) -> npt.NDArray[np.int64]:
         if a.type == b.type and (pa.types.is_string(a.type) or pa.types.is_large_string(a.type)):
             at = pc.index_in(b, value_set=a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a)
             return np.asarray(pc.fill_null(at, -1).to_numpy(zero_copy_only=False), dtype=np.int64)
-    index = pd.Index(np.asarray(ids.to_numpy(dtype=object, na_value=None), dtype=object), dtype=object)
+    index = pd.Index(texts(ids), dtype="object")
     first = ~index.duplicated()
     pos = np.flatnonzero(first)
-    at = index[first].get_indexer(
-        pd.Index(np.asarray(values.to_numpy(dtype=object, na_value=None), dtype=object), dtype=object)
-    )
+    at = index[first].get_indexer(pd.Index(texts(values), dtype="object"))
     return np.where(at >= 0, pos[np.maximum(at, 0)], -1).astype(np.int64)
 
 

@@ -127,7 +127,7 @@ def _by_km(
         j = np.clip(at + d, 0, len(lo) - 1)
         holds = (qg >= 0) & (cg[j] == qg) & (km >= lo[j] - 1e-6) & (km <= hi[j] + 1e-6)
         best = np.where(holds, np.minimum(best, order[j]), best)
-    ids = np.append(texts(along["track_id"]), None)
+    ids = np.concatenate([texts(along["track_id"]), np.array([None], dtype=object)])
     return np.asarray(ids[best], dtype=object)
 
 

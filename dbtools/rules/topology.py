@@ -53,7 +53,6 @@ Balise rules that need the network are in :mod:`dbtools.rules.balise_groups`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -65,6 +64,7 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
+from dbtools.rules.topology_tables import ALL_PORTS, add_codes, incidence_table, int_isin, port_table
 from dbtools.topology import all_tracks, first_rows, grid_extents
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
@@ -72,7 +72,6 @@ from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCH_RO
 from schemas.tables import BALISES
 
 I64 = npt.NDArray[np.int64]
-ALL_PORTS = ("a1", "b1", "b2", "a2")
 NONE = Navigability.NONE.value
 
 
@@ -108,9 +107,9 @@ def check_topology(net: Network, config: ValidationConfig, loc: Locator) -> list
     out = _Out(config, loc)
     tracks = all_tracks(net)
     _references(net, tracks, out)
-    ports = _ports(net.switches)
-    inc = _incidence(net.connections)
-    _code(net, inc, ports)
+    ports = port_table(net.switches)
+    inc = incidence_table(net.connections)
+    add_codes(net, inc, ports)
     _switch_ports(net, ports, inc, out)
     _navigability(net, ports, inc, out)
     _multiple(net, inc, out)
@@ -184,80 +183,6 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
         )
 
 
-def _text(frame: pd.DataFrame, name: str) -> npt.NDArray[np.object_]:
-    """A text column as objects with NaN for missing, as pandas' ``str`` columns give them
-    (the tables below are held as objects: no conversion to Arrow text and back)."""
-    return np.asarray(frame[name].to_numpy(dtype=object, na_value=np.nan), dtype=object)
-
-
-def _objects(columns: dict[str, npt.NDArray[Any]]) -> pd.DataFrame:
-    return pd.DataFrame({k: pd.Series(v, dtype=v.dtype) for k, v in columns.items()})
-
-
-def _ports(sw: pd.DataFrame) -> pd.DataFrame:
-    """Long table of switch ports: row (of switches), switch_id, type, port, track, end."""
-    n, k = len(sw), len(ALL_PORTS)
-    return _objects(
-        {
-            "row": np.tile(np.arange(n), k),
-            "switch_id": np.tile(_text(sw, "switch_id"), k),
-            "type": np.tile(_text(sw, "type"), k),
-            "port": np.repeat(np.array(ALL_PORTS, dtype=object), n),
-            "track": np.concatenate([_text(sw, f"{p}_track") for p in ALL_PORTS]),
-            "end": np.concatenate([_text(sw, f"{p}_end") for p in ALL_PORTS]),
-        }
-    )
-
-
-def _incidence(c: pd.DataFrame) -> pd.DataFrame:
-    """Both ends of every connection: row (of connections), side a/b, track, end, switch_id,
-    other track and end."""
-    ta, ea, tb, eb, sid = (_text(c, k) for k in ("track_a", "end_a", "track_b", "end_b", "switch_id"))
-    rows = np.arange(len(c))
-    return _objects(
-        {
-            "track": np.concatenate([ta, tb]),
-            "end": np.concatenate([ea, eb]),
-            "other": np.concatenate([tb, ta]),
-            "other_end": np.concatenate([eb, ea]),
-            "row": np.concatenate([rows, rows]),
-            "side": np.repeat(np.array(["a", "b"], dtype=object), len(c)),
-            "switch_id": np.concatenate([sid, sid]),
-        }
-    )
-
-
-def _shared_codes(*columns: pd.Series) -> list[I64]:
-    """Integer codes shared by the columns: equal values (a missing one included) get equal
-    codes, so that joins and duplicate tests run on integers (Arrow's hashing of the text
-    as held, no Python strings)."""
-    codes, _ = pd.factorize(pd.concat(columns, ignore_index=True), use_na_sentinel=False)
-    return np.split(codes.astype(np.int64), np.cumsum([len(c) for c in columns])[:-1])
-
-
-def _code(net: Network, inc: pd.DataFrame, ports: pd.DataFrame) -> None:
-    """Add codes of switch (``sk``), track (``tk``, ``ok`` of the other track) and end
-    (``ek``, ``oek``) to the incidence and port tables, and ``key`` = the (switch, track,
-    end) triple as one integer."""
-    c, sw = net.connections, net.switches
-    csk, ssk = _shared_codes(c["switch_id"], sw["switch_id"])
-    inc["sk"], ports["sk"] = np.concatenate([csk, csk]), np.tile(ssk, len(ALL_PORTS))
-    n_code = []
-    for what, inc_cols, port_cols in (("track", ("tk", "ok"), "tk"), ("end", ("ek", "oek"), "ek")):
-        ca, cb, *cp = _shared_codes(c[f"{what}_a"], c[f"{what}_b"], *(sw[f"{p}_{what}"] for p in ALL_PORTS))
-        inc[inc_cols[0]], inc[inc_cols[1]] = np.concatenate([ca, cb]), np.concatenate([cb, ca])
-        ports[port_cols] = np.concatenate(cp)
-        n_code.append(1 + max((int(x.max()) for x in (ca, cb, *cp) if len(x)), default=0))
-    n_t, n_e = n_code
-    for f in (inc, ports):
-        f["key"] = (f["sk"].to_numpy() * n_t + f["tk"].to_numpy()) * n_e + f["ek"].to_numpy()
-
-
-def _int_isin(values: npt.ArrayLike, known: npt.ArrayLike) -> npt.NDArray[np.bool_]:
-    """``np.isin`` for integer keys by a hash look-up (no sort)."""
-    return np.asarray(pd.Series(np.asarray(values)).isin(np.asarray(known)).to_numpy(), dtype=bool)
-
-
 #: Ports that may be empty: a branch leading out of the DB (``schemas.network``).
 OPEN_PORTS = ("b1", "b2")
 
@@ -298,7 +223,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         ),
     )
     with_switch = inc["switch_id"].notna().to_numpy()
-    unused = _merged(ports[given & ~_int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])])
+    unused = _merged(ports[given & ~int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])])
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -324,7 +249,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         ),
     )
     m = inc[with_switch]
-    m = m[~_int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])]
+    m = m[~int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])]
     stray = m[isin(m["switch_id"].to_numpy(dtype=object), texts(net.switches["switch_id"]))].drop_duplicates("row")
     out.add(
         "topology.switch_port",
@@ -338,8 +263,9 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
 def _merged(frame: pd.DataFrame) -> pd.DataFrame:
     """The rows as the pandas merge the rule was first made with gave them: a missing
     switch_id is None, not NaN (its message says ``switch None``)."""
-    sid = frame["switch_id"].to_numpy(dtype=object)
-    return frame.assign(switch_id=pd.Series(np.where(pd.isna(sid), None, sid), index=frame.index, dtype=object))
+    sid = frame["switch_id"].to_numpy(dtype=object, copy=True)
+    sid[pd.isna(sid)] = None
+    return frame.assign(switch_id=pd.Series(sid, index=frame.index, dtype="object"))
 
 
 def _msg(frame: pd.DataFrame, text: Callable[[pd.Series], str]) -> Callable[[int], tuple[str, dict[str, object]]]:
@@ -369,7 +295,7 @@ _ROUTES = {
 
 def _pair_codes(pa_: npt.NDArray[np.object_], pb: npt.NDArray[np.object_]) -> I64:
     digits = np.array([_PORT_DIGIT[p] for p in ALL_PORTS])
-    da, db = (digits[pd.Index(ALL_PORTS).get_indexer(x)] for x in (pa_, pb))
+    da, db = (digits[pd.Index(ALL_PORTS).get_indexer(pd.Index(x))] for x in (pa_, pb))
     return np.asarray(np.minimum(da, db) * 4 + np.maximum(da, db), dtype=np.int64)
 
 
@@ -432,10 +358,10 @@ def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out:
     has_track = {p: ports["track"].notna().to_numpy()[k * n : (k + 1) * n] for k, p in enumerate(ALL_PORTS)}
     rows, order, names = [], [], []
     for t, routes in _ROUTES.items():
-        for j, (code, (lo, hi)) in enumerate(routes):
-            hit = np.flatnonzero((types == t) & has_track[lo] & has_track[hi] & ~_int_isin(sk * 16 + code, have))
+        for n_route, (code, (lo, hi)) in enumerate(routes):
+            hit = np.flatnonzero((types == t) & has_track[lo] & has_track[hi] & ~int_isin(sk * 16 + code, have))
             rows.append(hit)
-            order.append(np.full(hit.size, j))
+            order.append(np.full(hit.size, n_route))
             names += [f"{lo.upper()}–{hi.upper()}"] * hit.size
     row, j = np.concatenate(rows), np.concatenate(order)
     route_texts: dict[int, list[str]] = {}

@@ -116,12 +116,12 @@ def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], o
         return
     if sorted_by(gis, ("line_code", "track", "km_m")):  # as read from a DB: the grid's runs, no group-by
         g, ext = gis, grid_extents(net)
-        codes = np.repeat(np.arange(len(ext)), np.diff(np.r_[ext["start"].to_numpy(), len(g)]))
+        codes: npt.NDArray[np.int64] = np.repeat(np.arange(len(ext)), np.diff(np.r_[ext["start"].to_numpy(), len(g)]))
         uniq = pd.MultiIndex.from_arrays([texts(ext["line_code"]), texts(ext["track"])])
         lo, hi = ext["km_lo"].to_numpy(float), ext["km_hi"].to_numpy(float)
     else:
         g = gis.sort_values(["line_code", "track", "km_m"])
-        codes = g.groupby(["line_code", "track"], sort=False, observed=True).ngroup().to_numpy()
+        codes = g.groupby(["line_code", "track"], sort=False, observed=True).ngroup().to_numpy().astype(np.int64)
         first = g.iloc[np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])]
         uniq = pd.MultiIndex.from_arrays([column(first, "line_code"), column(first, "track")])
         lo = pd.Series(g["km_m"].to_numpy(float)).groupby(codes).min().to_numpy()
