@@ -15,7 +15,6 @@ enters the other track at the connected end and so travels on it away from that 
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -172,19 +171,21 @@ class Topology:
     @cached_property
     def graph(self) -> Graph:
         """The navigable adjacency in codes (:class:`Graph`)."""
-        ta, ea, tb, eb, nav, _ = self._cols
-        tid = self.tracks["track_id"].astype(object).where(self.tracks["track_id"].notna(), None).to_numpy()
-        codes, uniq = pd.factorize(np.concatenate([tid, ta, tb]), use_na_sentinel=False)
-        names = pd.Index(uniq, dtype=object)
-        n_t, n_c = len(tid), len(ta)
+        t, c = self.tracks, self.connections
+        ids = pd.concat([t["track_id"], c["track_a"], c["track_b"]], ignore_index=True)
+        codes, uniq = pd.factorize(ids, use_na_sentinel=False)  # a missing id is one more id
+        names = pd.Index(texts(pd.Series(uniq)), dtype="object")
+        n_t, n_c = len(t), len(c)
         ct, ca, cb = codes[:n_t], codes[n_t : n_t + n_c], codes[n_t + n_c :]
         length = np.zeros(len(names))
         last = len(ct) - 1 - np.unique(ct[::-1], return_index=True)[1]  # the last row of each id
-        length[ct[last]] = self.tracks["length_m"].to_numpy(dtype=float, na_value=np.nan)[last]
-        fwd, bwd = _among(nav, _FORWARD), _among(nav, _BACKWARD)
-        leave_a, leave_b = fwd & _among(ea, (BEGIN, END)), bwd & _among(eb, (BEGIN, END))
-        src = np.concatenate([2 * ca[leave_a] + (ea[leave_a] == END), 2 * cb[leave_b] + (eb[leave_b] == END)])
-        dst = np.concatenate([2 * cb[leave_a] + (eb[leave_a] == BEGIN), 2 * ca[leave_b] + (ea[leave_b] == BEGIN)])
+        length[ct[last]] = t["length_m"].to_numpy(dtype=float, na_value=np.nan)[last]
+        nav = c["navigability"]
+        end_a, end_b, begin_a, begin_b = (_is(c[k], e) for e in (END, BEGIN) for k in ("end_a", "end_b"))
+        leave_a = _is(nav, *_FORWARD) & (begin_a | end_a)
+        leave_b = _is(nav, *_BACKWARD) & (begin_b | end_b)
+        src = np.concatenate([2 * ca[leave_a] + end_a[leave_a], 2 * cb[leave_b] + end_b[leave_b]])
+        dst = np.concatenate([2 * cb[leave_a] + begin_b[leave_a], 2 * ca[leave_b] + begin_a[leave_b]])
         order = np.argsort(src, kind="stable")
         ptr = np.searchsorted(src[order], np.arange(2 * len(names) + 1)).astype(np.int64)
         return Graph(names, length, ptr, dst[order].astype(np.int64))
@@ -226,8 +227,9 @@ def first_rows(ids: pd.Series, values: pd.Series) -> npt.NDArray[np.int64]:
     return np.where(at >= 0, pos[np.maximum(at, 0)], -1).astype(np.int64)
 
 
-def _among(values: npt.NDArray[np.object_], options: Iterable[str]) -> npt.NDArray[np.bool_]:
-    return np.asarray(pd.Series(values, dtype=object).isin(list(options)).to_numpy(), dtype=bool)
+def _is(values: pd.Series, *options: str) -> npt.NDArray[np.bool_]:
+    """``values[i]`` is one of the options (False where missing)."""
+    return np.asarray(values.isin(list(options)).to_numpy(dtype=bool, na_value=False), dtype=bool)
 
 
 def topology(net: Network) -> Topology:
