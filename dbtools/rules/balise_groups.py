@@ -25,7 +25,8 @@ elsewhere). The rows of one group identity (NID_C, NID_BG) on one track within
   track_id or km.
 
 The route walk starts only at balises whose identity (group identity or C signal type)
-occurs at more than one place, runs both ways along ``Topology.next_tracks`` and stops at
+occurs at more than one place, runs both ways along the navigable graph in integer codes
+(``Topology.graph``: the successors of each track and direction, as ``Topology.next_tracks``) and stops at
 the window: linear in the number of such balises, each walk bounded by the tracks within
 the window.
 """

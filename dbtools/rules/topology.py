@@ -4,7 +4,10 @@
 Tracks are :func:`dbtools.topology.all_tracks` (declared plus implied line tracks). A
 *port* is the track end a switch names in ``a1/b1/b2/a2`` (:data:`schemas.network.SWITCH_PORTS`
 per type); the *routes* of a switch are :data:`schemas.network.SWITCH_ROUTES`. Every rule
-is vectorised over the whole network (merges and group-bys, no per-track loop).
+is vectorised over the whole network (no per-track loop): switch ports and connection ends
+are long tables with shared integer codes of switch, track and end
+(:mod:`dbtools.rules.topology_tables`), so joins and duplicate tests run on integers, and
+track ids are looked up by Arrow's hashing of the text as held (issue 30: ≥ 50,000 tracks).
 
 * ``topology.invalid_reference`` (error) — a connection, switch port, track_points row or
   balise names a track id that does not exist, or a connection a switch_id that does not.
