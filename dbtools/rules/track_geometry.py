@@ -179,9 +179,14 @@ def end_coordinates(
 
 
 def distance_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
-    """Ellipsoidal distance [m], NaN where a coordinate is missing."""
+    """Ellipsoidal distance [m], NaN where a coordinate is missing; 0 where the points are
+    the same (as the geodesic gives it; most joined track ends coincide, so the geodesic is
+    solved only for the others)."""
     out = _nan(len(lat0))
     ok = np.isfinite(lat0) & np.isfinite(lon0) & np.isfinite(lat1) & np.isfinite(lon1)
+    same = ok & (lat0 == lat1) & (lon0 == lon1)
+    out[same] = 0.0
+    ok &= ~same
     if ok.any():
         out[ok] = _inv(lat0[ok], lon0[ok], lat1[ok], lon1[ok])[1]
     return out
