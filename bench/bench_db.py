@@ -44,6 +44,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -563,8 +564,8 @@ def compare_topology(n_lines: int, length_m: float, rounds: int) -> int:
             for topo, src in srcs.items():
                 db = work / f"db-{int(topo)}.sqlite"
                 db.unlink(missing_ok=True)
-                (_, c_build), _ = timed(lambda src=src, db=db: build_db(src, db, db_version="bench"))
-                (_, c_val), findings = timed(lambda db=db: validate_path(db))
+                (_, c_build), _ = timed(partial(build_db, src, db, db_version="bench"))
+                (_, c_val), findings = timed(partial(validate_path, db))
                 n = counts[topo][0]
                 if r == 0:
                     continue
