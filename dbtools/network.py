@@ -95,19 +95,23 @@ class Network:
     @property
     def tracks(self) -> pd.DataFrame:
         """The declared tracks (empty for a line-only network: see :mod:`dbtools.topology`)."""
-        return self.tables.get(NETWORK_TRACKS.name, empty_frame(NETWORK_TRACKS))
+        t = self.tables.get(NETWORK_TRACKS.name)
+        return t if t is not None else empty_frame(NETWORK_TRACKS)
 
     @property
     def connections(self) -> pd.DataFrame:
-        return self.tables.get(CONNECTIONS.name, empty_frame(CONNECTIONS))
+        t = self.tables.get(CONNECTIONS.name)
+        return t if t is not None else empty_frame(CONNECTIONS)
 
     @property
     def switches(self) -> pd.DataFrame:
-        return self.tables.get(SWITCHES.name, empty_frame(SWITCHES))
+        t = self.tables.get(SWITCHES.name)
+        return t if t is not None else empty_frame(SWITCHES)
 
     @property
     def track_points(self) -> pd.DataFrame:
-        return self.tables.get(TRACK_POINTS.name, empty_frame(TRACK_POINTS))
+        t = self.tables.get(TRACK_POINTS.name)
+        return t if t is not None else empty_frame(TRACK_POINTS)
 
 
 _DTYPES = {name: pd.Series([], dtype=dtype).dtype for name, dtype in PANDAS_DTYPE.items()}

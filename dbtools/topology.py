@@ -15,12 +15,17 @@ enters the other track at the connected end and so travels on it away from that 
 from __future__ import annotations
 
 from collections import defaultdict
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
-from dbtools.network import Network, canonical
+from dbtools.network import Network, canonical, sorted_by
+from dbtools.rules.common import texts
 from schemas.enums import Navigability, TrackEnd, TrackKind
 from schemas.network import NETWORK_TRACKS
 
@@ -32,10 +37,30 @@ def implied_track_id(line_code: str, track: str) -> str:
     return f"{line_code}:{track}"
 
 
+def grid_extents(net: Network) -> pd.DataFrame:
+    """Lowest and highest km of each (line_code, track) of the grid, in (line_code, track)
+    order (built once per loaded network); for a grid sorted by line, track and km (as read
+    from a DB) also ``start``, the row where each one's run begins."""
+    return net.cached(("topology", "grid_extents"), lambda: _grid_extents(net.gis))
+
+
 def _grid_extents(gis: pd.DataFrame) -> pd.DataFrame:
-    """Lowest and highest km of each (line_code, track) of the grid."""
     if gis.empty:
         return pd.DataFrame({"line_code": [], "track": [], "km_lo": [], "km_hi": []})
+    if sorted_by(gis, ("line_code", "track", "km_m")):  # as read from a DB: runs of rows, no group-by
+        line, _ = pd.factorize(gis["line_code"])
+        track, _ = pd.factorize(gis["track"])
+        start = np.flatnonzero(np.r_[True, (line[1:] != line[:-1]) | (track[1:] != track[:-1])])
+        km = gis["km_m"].to_numpy(dtype=float, na_value=np.nan)
+        return pd.DataFrame(
+            {
+                "start": start,
+                "line_code": gis["line_code"].iloc[start].to_numpy(),
+                "track": gis["track"].iloc[start].to_numpy(),
+                "km_lo": np.fmin.reduceat(km, start),
+                "km_hi": np.fmax.reduceat(km, start),
+            }
+        )
     g = gis.groupby(["line_code", "track"], sort=True, observed=True)["km_m"].agg(["min", "max"]).reset_index()
     return g.rename(columns={"min": "km_lo", "max": "km_hi"})
 
@@ -45,7 +70,7 @@ def all_tracks(net: Network) -> pd.DataFrame:
 
     def build() -> pd.DataFrame:
         declared = net.tracks
-        ext = _grid_extents(net.gis)
+        ext = grid_extents(net)
         covered = set(zip(declared["line_code"].astype(object), declared["track"].astype(object), strict=True))
         keep = [(lc, tr) not in covered for lc, tr in zip(ext["line_code"], ext["track"], strict=True)]
         ext = ext[np.asarray(keep, dtype=bool)] if len(ext) else ext
@@ -83,16 +108,87 @@ class Exit:
     switch_id: str | None
 
 
-@dataclass
-class Topology:
-    """Adjacency of track ends; see the module docstring for the rules."""
+@dataclass(frozen=True)
+class Graph:
+    """The navigable graph in integer codes, for walks over the whole network.
 
-    tracks: pd.DataFrame
-    exits: dict[tuple[str, str], list[Exit]] = field(default_factory=dict)
-    """(track_id, end) → where a train leaving there may go."""
-    joined: dict[tuple[str, str], list[tuple[str, str, str]]] = field(default_factory=dict)
-    """(track_id, end) → every (other track, other end, navigability as seen from here)
-    connected there, navigable or not."""
+    Every track id of ``tracks`` and of ``connections`` (a missing id included) has a code:
+    ``names[code]``. A *state* ``2 · code + k`` is a train on that track travelling towards
+    its end (k = 1, direction +1) or its begin (k = 0, direction −1); the states it may go
+    to on leaving there are ``succ[ptr[state]:ptr[state + 1]]`` (CSR), the rules of the
+    module docstring. ``length[code]`` is the track's ``length_m`` (the last row of an id
+    given twice; 0 for an id no track has)."""
+
+    names: pd.Index
+    length: npt.NDArray[np.float64]
+    ptr: npt.NDArray[np.int64]
+    succ: npt.NDArray[np.int64]
+
+    def codes(self, ids: npt.ArrayLike) -> npt.NDArray[np.int64]:
+        """Codes of track ids (−1: no such id)."""
+        return np.asarray(self.names.get_indexer(pd.Index(np.asarray(ids, dtype=object))), dtype=np.int64)
+
+
+class Topology:
+    """Adjacency of track ends; see the module docstring for the rules. ``exits`` and
+    ``joined`` are dicts keyed by (track_id, end), made on first use; :attr:`graph` holds
+    the same navigable adjacency in integer arrays."""
+
+    def __init__(self, tracks: pd.DataFrame, connections: pd.DataFrame) -> None:
+        self.tracks, self.connections = tracks, connections
+
+    @cached_property
+    def _cols(self) -> list[npt.NDArray[np.object_]]:
+        c = self.connections
+        keys = ("track_a", "end_a", "track_b", "end_b", "navigability", "switch_id")
+        return [c[k].astype(object).where(c[k].notna(), None).to_numpy() for k in keys]
+
+    @cached_property
+    def _dicts(self) -> tuple[dict[tuple[str, str], list[Exit]], dict[tuple[str, str], list[tuple[str, str, str]]]]:
+        exits: defaultdict[tuple[str, str], list[Exit]] = defaultdict(list)
+        joined: defaultdict[tuple[str, str], list[tuple[str, str, str]]] = defaultdict(list)
+        for ta, ea, tb, eb, nav, s in zip(*self._cols, strict=True):
+            switch = None if s is None else str(s)
+            joined[(ta, ea)].append((tb, eb, nav))
+            joined[(tb, eb)].append((ta, ea, _SEEN_FROM_B.get(nav, nav)))
+            if nav in _FORWARD:
+                exits[(ta, ea)].append(Exit(tb, eb, 1 if eb == BEGIN else -1, switch))
+            if nav in _BACKWARD:
+                exits[(tb, eb)].append(Exit(ta, ea, 1 if ea == BEGIN else -1, switch))
+        return dict(exits), dict(joined)
+
+    @property
+    def exits(self) -> dict[tuple[str, str], list[Exit]]:
+        """(track_id, end) → where a train leaving there may go."""
+        return self._dicts[0]
+
+    @property
+    def joined(self) -> dict[tuple[str, str], list[tuple[str, str, str]]]:
+        """(track_id, end) → every (other track, other end, navigability as seen from here)
+        connected there, navigable or not."""
+        return self._dicts[1]
+
+    @cached_property
+    def graph(self) -> Graph:
+        """The navigable adjacency in codes (:class:`Graph`)."""
+        t, c = self.tracks, self.connections
+        ids = pd.concat([t["track_id"], c["track_a"], c["track_b"]], ignore_index=True)
+        codes, uniq = pd.factorize(ids, use_na_sentinel=False)  # a missing id is one more id
+        names = pd.Index(texts(pd.Series(uniq)), dtype="object")
+        n_t, n_c = len(t), len(c)
+        ct, ca, cb = codes[:n_t], codes[n_t : n_t + n_c], codes[n_t + n_c :]
+        length = np.zeros(len(names))
+        last = len(ct) - 1 - np.unique(ct[::-1], return_index=True)[1]  # the last row of each id
+        length[ct[last]] = t["length_m"].to_numpy(dtype=float, na_value=np.nan)[last]
+        nav = c["navigability"]
+        end_a, end_b, begin_a, begin_b = (_is(c[k], e) for e in (END, BEGIN) for k in ("end_a", "end_b"))
+        leave_a = _is(nav, *_FORWARD) & (begin_a | end_a)
+        leave_b = _is(nav, *_BACKWARD) & (begin_b | end_b)
+        src = np.concatenate([2 * ca[leave_a] + end_a[leave_a], 2 * cb[leave_b] + end_b[leave_b]])
+        dst = np.concatenate([2 * cb[leave_a] + begin_b[leave_a], 2 * ca[leave_b] + begin_a[leave_b]])
+        order = np.argsort(src, kind="stable")
+        ptr = np.searchsorted(src[order], np.arange(2 * len(names) + 1)).astype(np.int64)
+        return Graph(names, length, ptr, dst[order].astype(np.int64))
 
     @property
     def track_ids(self) -> list[str]:
@@ -115,28 +211,31 @@ _FORWARD = frozenset((Navigability.BOTH.value, Navigability.A_TO_B.value))
 _BACKWARD = frozenset((Navigability.BOTH.value, Navigability.B_TO_A.value))
 
 
+def first_rows(ids: pd.Series, values: pd.Series) -> npt.NDArray[np.int64]:
+    """For each of ``values``: the first position in ``ids`` holding it (−1: none), by
+    Arrow's hash look-up when both are held as Arrow text."""
+    to_a, to_b = getattr(ids.array, "__arrow_array__", None), getattr(values.array, "__arrow_array__", None)
+    if to_a is not None and to_b is not None:
+        a, b = to_a(), to_b()
+        if a.type == b.type and (pa.types.is_string(a.type) or pa.types.is_large_string(a.type)):
+            at = pc.index_in(b, value_set=a.combine_chunks() if isinstance(a, pa.ChunkedArray) else a)
+            return np.asarray(pc.fill_null(at, -1).to_numpy(zero_copy_only=False), dtype=np.int64)
+    index = pd.Index(texts(ids), dtype="object")
+    first = ~index.duplicated()
+    pos = np.flatnonzero(first)
+    at = index[first].get_indexer(pd.Index(texts(values), dtype="object"))
+    return np.where(at >= 0, pos[np.maximum(at, 0)], -1).astype(np.int64)
+
+
+def _is(values: pd.Series, *options: str) -> npt.NDArray[np.bool_]:
+    """``values[i]`` is one of the options (False where missing)."""
+    return np.asarray(values.isin(list(options)).to_numpy(dtype=bool, na_value=False), dtype=bool)
+
+
 def topology(net: Network) -> Topology:
-    """The graph of the network's track ends (built once per loaded network)."""
-
-    def build() -> Topology:
-        topo = Topology(all_tracks(net), defaultdict(list), defaultdict(list))
-        c = net.connections
-        keys = ("track_a", "end_a", "track_b", "end_b", "navigability")
-        cols = [c[k].astype(object).where(c[k].notna(), None).to_numpy() for k in keys]
-        sw = c["switch_id"].astype(object).where(c["switch_id"].notna(), None).to_numpy()
-        joined, exits = topo.joined, topo.exits
-        for ta, ea, tb, eb, nav, s in zip(*cols, sw, strict=True):
-            switch = None if s is None else str(s)
-            joined[(ta, ea)].append((tb, eb, nav))
-            joined[(tb, eb)].append((ta, ea, _SEEN_FROM_B.get(nav, nav)))
-            if nav in _FORWARD:
-                exits[(ta, ea)].append(Exit(tb, eb, 1 if eb == BEGIN else -1, switch))
-            if nav in _BACKWARD:
-                exits[(tb, eb)].append(Exit(ta, ea, 1 if ea == BEGIN else -1, switch))
-        topo.exits, topo.joined = dict(topo.exits), dict(topo.joined)
-        return topo
-
-    return net.cached(("topology", "graph"), build)
+    """The graph of the network's track ends (built once per loaded network, shared by the
+    rules and the track matcher; its parts are made on first use)."""
+    return net.cached(("topology", "graph"), lambda: Topology(all_tracks(net), net.connections))
 
 
 @dataclass(frozen=True)

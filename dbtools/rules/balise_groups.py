@@ -25,7 +25,8 @@ elsewhere). The rows of one group identity (NID_C, NID_BG) on one track within
   track_id or km.
 
 The route walk starts only at balises whose identity (group identity or C signal type)
-occurs at more than one place, runs both ways along ``Topology.next_tracks`` and stops at
+occurs at more than one place, runs both ways along the navigable graph in integer codes
+(``Topology.graph``: the successors of each track and direction, as ``Topology.next_tracks``) and stops at
 the window: linear in the number of such balises, each walk bounded by the tracks within
 the window.
 """
@@ -41,7 +42,7 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, isin, py, texts
 from dbtools.rules.config import ValidationConfig
-from dbtools.topology import all_tracks, topology
+from dbtools.topology import all_tracks, first_rows, topology
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
 from schemas.tables import BALISE_GROUP_COLUMNS, BALISES
@@ -57,31 +58,78 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     tid = column(b, "track_id") if "track_id" in b.columns else np.full(n, None, dtype=object)
     km = column(b, "km_actual_m")
     tid = tid.copy()
-    tid[~isin(tid, texts(tr["track_id"]))] = None  # unknown: topology.invalid_reference
+    if "track_id" in b.columns:
+        tid[first_rows(tr["track_id"], b["track_id"]) < 0] = None  # unknown: topology.invalid_reference
     free = np.flatnonzero(pd.isna(tid))
     if free.size:
         along = tr[tr["line_code"].notna() & tr["km_begin_m"].notna() & tr["km_end_m"].notna()]
-        q = pd.DataFrame({"i": free, "line_code": column(b, "line_code")[free], "track": column(b, "track")[free]})
-        cand = along[["track_id", "line_code", "track", "km_begin_m", "km_end_m"]].astype(
-            {"line_code": object, "track": object}
-        )
-        m = q.merge(cand, on=["line_code", "track"])
-        k = km[m["i"].to_numpy()]
-        lo = np.minimum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
-        hi = np.maximum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
-        m = m[(k >= lo - 1e-6) & (k <= hi + 1e-6)].drop_duplicates("i")
-        tid[m["i"].to_numpy()] = texts(m["track_id"])
+        line, track = column(b, "line_code")[free], column(b, "track")[free]
+        hit = _by_km(along, line, track, km[free])
+        if hit is None:
+            hit = _by_km_merge(along, line, track, km[free])
+        tid[free] = np.where(pd.notna(hit), hit, tid[free])
     pos = np.full(n, np.nan)
-    t = tr.drop_duplicates("track_id")
-    at = pd.Index(texts(t["track_id"])).get_indexer(pd.Index(tid))
+    at = first_rows(tr["track_id"], pd.Series(tid, dtype=object))
     has = np.flatnonzero(at >= 0)
-    rows = t.iloc[at[has]]
+    rows = tr.iloc[at[has]]
     k0, k1 = column(rows, "km_begin_m"), column(rows, "km_end_m")
     lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
     inside = (km[has] >= lo - 1.0) & (km[has] <= hi + 1.0)
     pos[has[inside]] = np.abs(km[has[inside]] - k0[inside])
     _from_points(net, tid, km, pos)
     return tid, pos
+
+
+def _by_km_merge(
+    along: pd.DataFrame, line: npt.NDArray[np.object_], track: npt.NDArray[np.object_], km: F64
+) -> npt.NDArray[np.object_]:
+    """For each (line, track, km): the first track of ``along`` (in its order) of that line
+    and track whose km range holds km (±1e-6 m), else None."""
+    q = pd.DataFrame({"i": np.arange(len(km)), "line_code": line, "track": track})
+    cand = along[["track_id", "line_code", "track", "km_begin_m", "km_end_m"]].astype(
+        {"line_code": object, "track": object}
+    )
+    m = q.merge(cand, on=["line_code", "track"])
+    k = km[m["i"].to_numpy()]
+    lo = np.minimum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
+    hi = np.maximum(m["km_begin_m"].to_numpy(float), m["km_end_m"].to_numpy(float))
+    m = m[(k >= lo - 1e-6) & (k <= hi + 1e-6)].drop_duplicates("i")
+    out = np.full(len(km), None, dtype=object)
+    out[m["i"].to_numpy()] = texts(m["track_id"])
+    return out
+
+
+def _by_km(
+    along: pd.DataFrame, line: npt.NDArray[np.object_], track: npt.NDArray[np.object_], km: F64
+) -> npt.NDArray[np.object_] | None:
+    """:func:`_by_km_merge` by a sorted search, for the usual case: no key missing, finite km
+    ranges of at least 1 mm that do not overlap within a line and track (touching ends may
+    both hold a km: the first in ``along`` is taken). None when that does not hold."""
+    cl, ct = column(along, "line_code"), column(along, "track")
+    if len(along) == 0 or pd.isna(cl).any() or pd.isna(ct).any() or pd.isna(line).any() or pd.isna(track).any():
+        return None
+    k0, k1 = column(along, "km_begin_m"), column(along, "km_end_m")
+    lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all() and np.all(hi - lo >= 1e-3)):
+        return None
+    keys = pd.MultiIndex.from_arrays([cl, ct])
+    uniq = keys.unique()
+    cg, qg = uniq.get_indexer(keys), uniq.get_indexer(pd.MultiIndex.from_arrays([line, track]))
+    order = np.lexsort((lo, cg))
+    cg, lo, hi = cg[order], lo[order], hi[order]
+    same = cg[1:] == cg[:-1]
+    if np.any(same & (lo[1:] < hi[:-1])):
+        return None  # overlapping ranges: the general path
+    span = float(hi.max() - lo.min()) + 10.0
+    base = float(lo.min())
+    at = np.searchsorted(cg * span + (lo - 1e-6 - base), qg * span + (km - base), side="right") - 1
+    best = np.full(len(km), len(along))  # position in ``along`` of the first track holding km
+    for d in (-2, -1, 0, 1):
+        j = np.clip(at + d, 0, len(lo) - 1)
+        holds = (qg >= 0) & (cg[j] == qg) & (km >= lo[j] - 1e-6) & (km <= hi[j] + 1e-6)
+        best = np.where(holds, np.minimum(best, order[j]), best)
+    ids = np.concatenate([texts(along["track_id"]), np.array([None], dtype=object)])
+    return np.asarray(ids[best], dtype=object)
 
 
 def _from_points(net: Network, tid: npt.NDArray[np.object_], km: F64, pos: F64) -> None:
@@ -314,37 +362,37 @@ def _ambiguous(
     for _, ident in walkers:
         count[ident] += 1
     walkers = [(r, i) for r, i in walkers if count[i] > 1 and pd.notna(tid[r]) and np.isfinite(pos[r])]
-    on_track: dict[str, list[tuple[float, int, tuple[object, ...]]]] = defaultdict(list)
+    g = topology(net).graph
+    at = g.codes(tid)  # every located balise's track is a track of the graph
+    length = g.length.tolist()
+    on_track: dict[tuple[int, tuple[object, ...]], list[tuple[float, int]]] = defaultdict(list)
     for r, ident in walkers:
-        on_track[str(tid[r])].append((float(pos[r]), r, ident))
-    topo = topology(net)
-    length = dict(
-        zip(
-            texts(topo.tracks["track_id"]),
-            topo.tracks["length_m"].to_numpy(float),
-            strict=True,
-        )
-    )
+        on_track[(int(at[r]), ident)].append((float(pos[r]), r))
+    ptr, succ = g.ptr.tolist(), g.succ.tolist()
     found: dict[tuple[int, int], float] = {}
     w = config.id_window_m
     for r, ident in walkers:
-        for d0 in (1, -1):
-            stack = [(str(tid[r]), d0, -float(pos[r]) if d0 > 0 else float(pos[r]) - length[str(tid[r])])]
-            best: dict[tuple[str, int], float] = {}
+        t0 = int(at[r])
+        for up in (1, 0):
+            # state 2·track + up (travelling towards the end: up = 1); off: route distance at
+            # the track's begin (up) / end (down)
+            stack = [(2 * t0 + up, -float(pos[r]) if up else float(pos[r]) - length[t0])]
+            best: dict[int, float] = {}
             while stack:
-                t, d, off = stack.pop()  # off: route distance at the track's begin (d>0) / end (d<0)
-                if best.get((t, d), np.inf) <= off:
+                state, off = stack.pop()
+                if best.get(state, np.inf) <= off:
                     continue
-                best[(t, d)] = off
-                ln = length.get(t, 0.0)
-                for p, o, oid in on_track.get(t, ()):
-                    dist = off + (p if d > 0 else ln - p)
-                    if o != r and oid == ident and 0 < dist <= w and not (ident[0] == "C" and pair[o] == pair[r]):
+                best[state] = off
+                t = state >> 1
+                ln = length[t]
+                for p, o in on_track.get((t, ident), ()):
+                    dist = off + (p if state & 1 else ln - p)
+                    if o != r and 0 < dist <= w and not (ident[0] == "C" and pair[o] == pair[r]):
                         key = (min(r, o), max(r, o))
                         found[key] = min(found.get(key, np.inf), dist)
                 exit_at = off + ln
                 if exit_at < w:
-                    stack += [(e.track_id, e.direction, exit_at) for e in topo.next_tracks(t, d)]
+                    stack += [(x, exit_at) for x in succ[ptr[state] : ptr[state + 1]]]
     bid = column(b, "balise_id")
     hits = sorted(found)
     out += capped(

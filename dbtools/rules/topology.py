@@ -4,7 +4,10 @@
 Tracks are :func:`dbtools.topology.all_tracks` (declared plus implied line tracks). A
 *port* is the track end a switch names in ``a1/b1/b2/a2`` (:data:`schemas.network.SWITCH_PORTS`
 per type); the *routes* of a switch are :data:`schemas.network.SWITCH_ROUTES`. Every rule
-is vectorised over the whole network (merges and group-bys, no per-track loop).
+is vectorised over the whole network (no per-track loop): switch ports and connection ends
+are long tables with shared integer codes of switch, track and end
+(:mod:`dbtools.rules.topology_tables`), so joins and duplicate tests run on integers, and
+track ids are looked up by Arrow's hashing of the text as held (issue 30: ≥ 50,000 tracks).
 
 * ``topology.invalid_reference`` (error) — a connection, switch port, track_points row or
   balise names a track id that does not exist, or a connection a switch_id that does not.
@@ -57,19 +60,21 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
-from dbtools.topology import all_tracks
+from dbtools.rules.topology_tables import ALL_PORTS, add_codes, incidence_table, int_isin, port_table
+from dbtools.topology import all_tracks, first_rows, grid_extents
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCH_ROUTES, SWITCHES, TRACK_POINTS
 from schemas.tables import BALISES
 
 I64 = npt.NDArray[np.int64]
-ALL_PORTS = ("a1", "b1", "b2", "a2")
 NONE = Navigability.NONE.value
 
 
@@ -104,32 +109,51 @@ def check_topology(net: Network, config: ValidationConfig, loc: Locator) -> list
         return []
     out = _Out(config, loc)
     tracks = all_tracks(net)
-    known = set(texts(tracks["track_id"]))
-    _references(net, known, out)
-    ports = _ports(net.switches)
-    inc = _incidence(net.connections)
+    _references(net, tracks, out)
+    ports = port_table(net.switches)
+    inc = incidence_table(net.connections)
+    add_codes(net, inc, ports)
     _switch_ports(net, ports, inc, out)
-    _navigability(net, ports, out)
+    _navigability(net, ports, inc, out)
     _multiple(net, inc, out)
     _overlap(net, ports, tracks, out)
-    _ends(net, tracks, inc, out)
+    _ends(net, tracks, out)
     _km_jump(net, tracks, config, out)
     out.items += check_geometry(net, tracks, inc, config, loc)
     return out.items
 
 
-def _references(net: Network, known: set[str], out: _Out) -> None:
-    def missing(frame: pd.DataFrame, col: str) -> I64:
-        v = column(frame, col)
-        return np.flatnonzero(pd.notna(v) & ~isin(v, known))
+def _arrow(s: pd.Series) -> pa.ChunkedArray | None:
+    """A text column as Arrow strings (None: not held as Arrow strings)."""
+    to_arrow = getattr(s.array, "__arrow_array__", None)
+    a = to_arrow() if to_arrow is not None else None
+    return a if a is not None and (pa.types.is_string(a.type) or pa.types.is_large_string(a.type)) else None
+
+
+def _is_in(s: pd.Series, known: pd.Series) -> npt.NDArray[np.bool_]:
+    """``s[i]`` is one of ``known`` (a missing value is when ``known`` has one), by Arrow's
+    hash look-up on the Arrow-held text (no Python strings), else :func:`isin`."""
+    a, k = _arrow(s), _arrow(known)
+    if a is None or k is None:
+        return isin(texts(s), texts(known))
+    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(a.type)
+    hit = pc.is_in(a, value_set=values)
+    return np.asarray(hit.to_numpy(zero_copy_only=False), dtype=bool)
+
+
+def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
+    known = tracks["track_id"]
 
     def ref(table: str, frame: pd.DataFrame, col: str, what: str) -> None:
+        bad = np.flatnonzero(frame[col].notna().to_numpy() & ~_is_in(frame[col], known))
+        if bad.size == 0:
+            return
         v = column(frame, col)
         out.add(
             "topology.invalid_reference",
             Severity.ERROR,
             table,
-            missing(frame, col),
+            bad,
             lambda i: (f"{col} '{v[i]}' names no track ({what})", {"column": col, "value": py(v[i])}),
         )
 
@@ -137,61 +161,29 @@ def _references(net: Network, known: set[str], out: _Out) -> None:
         ref(CONNECTIONS.name, net.connections, col, "connection")
     for p in ALL_PORTS:
         ref(SWITCHES.name, net.switches, f"{p}_track", f"switch port {p.upper()}")
-    declared = set(texts(net.tracks["track_id"]))
-    tp_ids = column(net.track_points, "track_id")
-    bad = np.flatnonzero(~isin(tp_ids, declared))
-    out.add(
-        "topology.invalid_reference",
-        Severity.ERROR,
-        TRACK_POINTS.name,
-        bad,
-        lambda i: (f"track_points of '{tp_ids[i]}', which tracks does not declare", {"column": "track_id"}),
-    )
+    bad = np.flatnonzero(~_is_in(net.track_points["track_id"], net.tracks["track_id"]))
+    if bad.size:
+        tp_ids = column(net.track_points, "track_id")
+        out.add(
+            "topology.invalid_reference",
+            Severity.ERROR,
+            TRACK_POINTS.name,
+            bad,
+            lambda i: (f"track_points of '{tp_ids[i]}', which tracks does not declare", {"column": "track_id"}),
+        )
     if "track_id" in net.balises.columns:
         ref(BALISES.name, net.balises, "track_id", "balise")
-    sid = column(net.connections, "switch_id")
-    switches = texts(net.switches["switch_id"])
-    bad = np.flatnonzero(pd.notna(sid) & ~isin(sid, switches))
-    out.add(
-        "topology.invalid_reference",
-        Severity.ERROR,
-        CONNECTIONS.name,
-        bad,
-        lambda i: (f"switch_id '{sid[i]}' names no switch", {"column": "switch_id", "value": py(sid[i])}),
-    )
-
-
-def _ports(sw: pd.DataFrame) -> pd.DataFrame:
-    """Long table of switch ports: row (of switches), switch_id, type, port, track, end."""
-    parts = []
-    for p in ALL_PORTS:
-        parts.append(
-            pd.DataFrame(
-                {
-                    "row": np.arange(len(sw)),
-                    "switch_id": column(sw, "switch_id"),
-                    "type": column(sw, "type"),
-                    "port": p,
-                    "track": column(sw, f"{p}_track"),
-                    "end": column(sw, f"{p}_end"),
-                }
-            )
+    c = net.connections
+    bad = np.flatnonzero(c["switch_id"].notna().to_numpy() & ~_is_in(c["switch_id"], net.switches["switch_id"]))
+    if bad.size:
+        sid = column(c, "switch_id")
+        out.add(
+            "topology.invalid_reference",
+            Severity.ERROR,
+            CONNECTIONS.name,
+            bad,
+            lambda i: (f"switch_id '{sid[i]}' names no switch", {"column": "switch_id", "value": py(sid[i])}),
         )
-    return pd.concat(parts, ignore_index=True)
-
-
-def _incidence(c: pd.DataFrame) -> pd.DataFrame:
-    """Both ends of every connection: row (of connections), side a/b, track, end, switch_id,
-    other track and end."""
-    a = pd.DataFrame({"track": column(c, "track_a"), "end": column(c, "end_a"), "other": column(c, "track_b")})
-    a["other_end"] = column(c, "end_b")
-    b = pd.DataFrame({"track": column(c, "track_b"), "end": column(c, "end_b"), "other": column(c, "track_a")})
-    b["other_end"] = column(c, "end_a")
-    rows = np.arange(len(c))
-    a["row"], b["row"], a["side"], b["side"] = rows, rows, "a", "b"
-    sid = column(c, "switch_id")
-    a["switch_id"], b["switch_id"] = sid, sid
-    return pd.concat([a, b], ignore_index=True)
 
 
 #: Ports that may be empty: a branch leading out of the DB (``schemas.network``).
@@ -199,9 +191,11 @@ OPEN_PORTS = ("b1", "b2")
 
 
 def _required(ports: pd.DataFrame) -> npt.NDArray[np.bool_]:
-    need = {(t.value, p) for t, ps in SWITCH_PORTS.items() for p in ps}
-    t, p = texts(ports["type"]), texts(ports["port"])
-    return np.array([(a, b) in need for a, b in zip(t, p, strict=True)], dtype=bool)
+    t, p = ports["type"].to_numpy(dtype=object), ports["port"].to_numpy(dtype=object)
+    need = np.zeros(len(ports), dtype=bool)
+    for kind, names in SWITCH_PORTS.items():
+        need |= (t == kind.value) & np.isin(p, names)
+    return need
 
 
 def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
@@ -231,9 +225,8 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             ),
         ),
     )
-    used = inc[inc["switch_id"].notna()][["switch_id", "track", "end"]].drop_duplicates()
-    m = ports[given].merge(used, on=["switch_id", "track", "end"], how="left", indicator=True)
-    unused = m[m["_merge"] == "left_only"]
+    with_switch = inc["switch_id"].notna().to_numpy()
+    unused = _merged(ports[given & ~int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])])
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -247,7 +240,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             ),
         ),
     )
-    dup = ports[given & ports.duplicated(["switch_id", "track", "end"], keep="first").to_numpy()]
+    dup = ports[given & ports["key"].duplicated(keep="first").to_numpy()]
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -258,14 +251,9 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             lambda r: f"track end {r.track} {r.end} is at two ports of switch {r.switch_id} (port {r.port.upper()})",
         ),
     )
-    m = inc[inc["switch_id"].notna()].merge(
-        ports[given][["switch_id", "track", "end"]].drop_duplicates(),
-        on=["switch_id", "track", "end"],
-        how="left",
-        indicator=True,
-    )
-    known = set(texts(net.switches["switch_id"]))
-    stray = m[(m["_merge"] == "left_only") & m["switch_id"].isin(known)].drop_duplicates("row")
+    m = inc[with_switch]
+    m = m[~int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])]
+    stray = m[isin(m["switch_id"].to_numpy(dtype=object), texts(net.switches["switch_id"]))].drop_duplicates("row")
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -273,6 +261,14 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         stray["row"].to_numpy(),
         _msg(stray, lambda r: f"connection names switch {r.switch_id} but {r.track} {r.end} is none of its ports"),
     )
+
+
+def _merged(frame: pd.DataFrame) -> pd.DataFrame:
+    """The rows as the pandas merge the rule was first made with gave them: a missing
+    switch_id is None, not NaN (its message says ``switch None``)."""
+    sid = frame["switch_id"].to_numpy(dtype=object, copy=True)
+    sid[pd.isna(sid)] = None
+    return frame.assign(switch_id=pd.Series(sid, index=frame.index, dtype="object"))
 
 
 def _msg(frame: pd.DataFrame, text: Callable[[pd.Series], str]) -> Callable[[int], tuple[str, dict[str, object]]]:
@@ -291,61 +287,89 @@ def _keys(r: pd.Series) -> dict[str, object]:
     return {k: py(r[k]) for k in ("switch_id", "track") if k in r.index and py(r[k]) is not None}
 
 
-def _navigability(net: Network, ports: pd.DataFrame, out: _Out) -> None:
-    c = net.connections[net.connections["switch_id"].notna()]
-    if c.empty:
+#: Port → digit of a port pair's code (the pair's smaller and larger port: 4·lo + hi).
+_PORT_DIGIT = {p: i for i, p in enumerate(sorted(ALL_PORTS))}
+#: Switch type → codes of its routes, in declared order, with the routes as sorted pairs.
+_ROUTES = {
+    t.value: [(_PORT_DIGIT[lo] * 4 + _PORT_DIGIT[hi], (lo, hi)) for lo, hi in (sorted(r) for r in rs)]
+    for t, rs in SWITCH_ROUTES.items()
+}
+
+
+def _pair_codes(pa_: npt.NDArray[np.object_], pb: npt.NDArray[np.object_]) -> I64:
+    digits = np.array([_PORT_DIGIT[p] for p in ALL_PORTS])
+    da, db = (digits[pd.Index(ALL_PORTS).get_indexer(pd.Index(x))] for x in (pa_, pb))
+    return np.asarray(np.minimum(da, db) * 4 + np.maximum(da, db), dtype=np.int64)
+
+
+def _switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
+    """Connections naming a switch, with the ports of that switch their ends are at (a row
+    per pair of ports; none where an end is at no port): crow (row of connections), pa/pb,
+    the switch's type and the port pair's code ``pair``."""
+    a = inc[(inc["side"] == "a").to_numpy() & inc["switch_id"].notna().to_numpy()]
+    a = a[["row", "sk", "tk", "ek", "ok", "oek"]].rename(columns={"row": "crow"})
+    p = ports[ports["track"].notna().to_numpy()][["sk", "tk", "ek", "port", "type", "row"]]
+    a = a.merge(p.rename(columns={"port": "pa"}), on=["sk", "tk", "ek"])
+    a = a.merge(p[["sk", "tk", "ek", "port"]].rename(columns={"port": "pb", "tk": "ok", "ek": "oek"}))
+    a["pair"] = _pair_codes(a["pa"].to_numpy(dtype=object), a["pb"].to_numpy(dtype=object))
+    return a
+
+
+def _navigability(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
+    c = net.connections
+    if not c["switch_id"].notna().any():
         return
-    p = ports[ports["track"].notna()][["switch_id", "port", "track", "end", "type", "row"]]
-    a = c.reset_index().rename(columns={"index": "crow"})
-    a = a.astype({"switch_id": object, "track_a": object, "end_a": object, "track_b": object, "end_b": object})
-    a = a.merge(
-        p.rename(columns={"port": "pa", "track": "track_a", "end": "end_a"}), on=["switch_id", "track_a", "end_a"]
-    )
-    a = a.merge(
-        p[["switch_id", "port", "track", "end"]].rename(columns={"port": "pb", "track": "track_b", "end": "end_b"})
-    )
-    pa, pb = texts(a["pa"]), texts(a["pb"])
-    a["pair"] = pd.Series(
-        [(x, y) if x <= y else (y, x) for x, y in zip(pa, pb, strict=True)], index=a.index, dtype=object
-    )
-    routes = {t.value: {tuple(sorted(r)) for r in rs} for t, rs in SWITCH_ROUTES.items()}
-    types = texts(a["type"])
-    is_route = np.array([pr in routes.get(t, ()) for pr, t in zip(a["pair"], types, strict=True)], dtype=bool)
-    nav = texts(a["navigability"])
+    a = _switch_pairs(ports, inc)
+    types, pair = a["type"].to_numpy(dtype=object), a["pair"].to_numpy()
+    is_route = np.zeros(len(a), dtype=bool)
+    for t, routes in _ROUTES.items():
+        is_route |= (types == t) & np.isin(pair, [code for code, _ in routes])
+    nav_all = column(c, "navigability")
+    crow = a["crow"].to_numpy()
+    nav = nav_all[crow]
     given = pd.notna(nav)  # a missing one is schema.required
     wrong = given & ((is_route & (nav == NONE)) | (~is_route & (nav != NONE)))
     bad = a[wrong]
     nav_of = dict(zip(bad["crow"], nav[wrong], strict=True))
-    pair_of = dict(zip(bad["crow"], bad["pair"], strict=True))
+    pair_of = {
+        r: (pa_, pb) if pa_ <= pb else (pb, pa_) for r, pa_, pb in zip(bad["crow"], bad["pa"], bad["pb"], strict=True)
+    }
+    sid = column(c, "switch_id")
     out.add(
         "topology.navigability",
         Severity.ERROR,
         CONNECTIONS.name,
         bad["crow"].to_numpy(),
         lambda i: (
-            f"ports {pair_of[i][0].upper()}–{pair_of[i][1].upper()} of switch {net.connections['switch_id'].iloc[i]} "
+            f"ports {pair_of[i][0].upper()}–{pair_of[i][1].upper()} of switch {sid[i]} "
             + (
                 "are a route but the connection is not navigable (none)"
                 if nav_of[i] == NONE
                 else f"are no route of the switch (branch↔branch) but navigability is {nav_of[i]}; expected none"
             ),
-            {
-                "column": "navigability",
-                "value": nav_of[i],
-                "keys": {"switch_id": py(net.connections["switch_id"].iloc[i])},
-            },
+            {"column": "navigability", "value": nav_of[i], "keys": {"switch_id": py(sid[i])}},
         ),
     )
-    have = set(zip(a["switch_id"], a["pair"], strict=True))
-    sw = net.switches
-    missing: list[tuple[int, str]] = []
-    for i, (s, t) in enumerate(zip(column(sw, "switch_id"), column(sw, "type"), strict=True)):
-        for r in routes.get(str(t), set()):
-            if (s, r) not in have and all(pd.notna(sw[f"{q}_track"].iloc[i]) for q in r):
-                missing.append((i, f"{r[0].upper()}–{r[1].upper()}"))
+    _missing_routes(net.switches, ports, a, out)
+
+
+def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out: _Out) -> None:
+    """Routes of a switch that no connection naming the switch (by id) joins."""
+    n = len(sw)
+    have = a["sk"].to_numpy() * 16 + a["pair"].to_numpy()
+    sk, types = ports["sk"].to_numpy()[:n], ports["type"].to_numpy(dtype=object)[:n]
+    has_track = {p: ports["track"].notna().to_numpy()[k * n : (k + 1) * n] for k, p in enumerate(ALL_PORTS)}
+    rows, order, names = [], [], []
+    for t, routes in _ROUTES.items():
+        for n_route, (code, (lo, hi)) in enumerate(routes):
+            hit = np.flatnonzero((types == t) & has_track[lo] & has_track[hi] & ~int_isin(sk * 16 + code, have))
+            rows.append(hit)
+            order.append(np.full(hit.size, n_route))
+            names += [f"{lo.upper()}–{hi.upper()}"] * hit.size
+    row, j = np.concatenate(rows), np.concatenate(order)
     route_texts: dict[int, list[str]] = {}
-    for i, route in missing:
-        route_texts.setdefault(i, []).append(route)
+    for k in np.lexsort((j, row)):
+        route_texts.setdefault(int(row[k]), []).append(names[k])
     out.add(
         "topology.navigability",
         Severity.ERROR,
@@ -360,8 +384,11 @@ def _navigability(net: Network, ports: pd.DataFrame, out: _Out) -> None:
 
 
 def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
-    g = inc.assign(free=inc["switch_id"].isna()).groupby(["track", "end"], sort=False)
-    stats = g.agg(n=("row", "size"), free=("free", "any"), row=("row", "min")).reset_index()
+    ends = inc[inc["track"].notna().to_numpy() & inc["end"].notna().to_numpy()]
+    g = ends.assign(free=ends["switch_id"].isna()).groupby(["tk", "ek"], sort=False)
+    stats = g.agg(
+        n=("row", "size"), free=("free", "any"), row=("row", "min"), track=("track", "first"), end=("end", "first")
+    )
     bad = stats[(stats["n"] > 1) & stats["free"]]
     out.add(
         "topology.multiple_connections",
@@ -378,11 +405,17 @@ def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
     )
 
 
+def _last_length(tracks: pd.DataFrame) -> pd.Series:
+    """``length_m`` by track id (the last row of an id given twice)."""
+    s = pd.Series(tracks["length_m"].to_numpy(dtype=float, na_value=np.nan), index=texts(tracks["track_id"]))
+    return s[~s.index.duplicated(keep="last")]
+
+
 def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out) -> None:
-    p = ports[ports["track"].notna() & ports["end"].notna()]
-    d = p.drop_duplicates(["switch_id", "track", "end"])
-    shared = d[d.duplicated(["track", "end"], keep=False)]
-    first = shared.drop_duplicates(["track", "end"], keep="last")
+    p = ports[ports["track"].notna().to_numpy() & ports["end"].notna().to_numpy()]
+    d = p[~p["key"].duplicated().to_numpy()]
+    shared = d[d.duplicated(["tk", "ek"], keep=False).to_numpy()]
+    first = shared.drop_duplicates(["tk", "ek"], keep="last")
     names = shared.groupby(["track", "end"])["switch_id"].agg(lambda s: ", ".join(map(str, s)))
     out.add(
         "topology.switch_overlap",
@@ -391,17 +424,12 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
         first["row"].to_numpy(),
         _msg(first, lambda r: f"switches {names[(r.track, r.end)]} share the port {r.track} {r.end}"),
     )
-    length = dict(
-        zip(
-            texts(tracks["track_id"]),
-            tracks["length_m"].to_numpy(dtype=float),
-            strict=True,
-        )
-    )
+    length = _last_length(tracks)
     lim = out.config.switch_min_spacing_m
-    per = d.drop_duplicates(["switch_id", "track"])
-    per = per[per.duplicated("track", keep=False)]
-    per = per[np.array([length.get(t, np.inf) < lim for t in texts(per["track"])], dtype=bool)]
+    per = d.drop_duplicates(["sk", "tk"])
+    per = per[per.duplicated("tk", keep=False).to_numpy()]
+    with np.errstate(invalid="ignore"):
+        per = per[length.reindex(per["track"].to_numpy(dtype=object)).to_numpy() < lim]
     rows: list[int] = []
     text: dict[int, str] = {}
     for track, grp in per.groupby("track"):
@@ -414,18 +442,15 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
     out.add("topology.switch_overlap", Severity.ERROR, SWITCHES.name, rows, lambda i: (text[i], {}))
 
 
-def _ends(net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
+def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     n_decl = len(net.tracks)
     if net.connections.empty:
         return
-    tid = texts(tracks["track_id"])
-    inc_track, inc_end = (
-        texts(inc["track"]),
-        texts(inc["end"]),
-    )
-    connected = set(inc_track)
-    ends_used = set(zip(inc_track, inc_end, strict=True))
-    isolated = [i for i in range(n_decl) if tid[i] not in connected]
+    tid = texts(tracks["track_id"])[:n_decl]
+    ids, c = tracks["track_id"].iloc[:n_decl], net.connections
+    at, at_end = (pd.concat([c[f"{k}_a"], c[f"{k}_b"]], ignore_index=True) for k in ("track", "end"))
+    connected = _is_in(ids, at)
+    isolated = np.flatnonzero(~connected)
     out.add(
         "topology.isolated_track",
         Severity.WARNING,
@@ -436,61 +461,60 @@ def _ends(net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> N
             {"keys": {"track_id": tid[i]}},
         ),
     )
-    lo, hi = _grid_extent(net)
-    line, tr = column(tracks, "line_code"), column(tracks, "track")
-    k = {"begin": column(tracks, "km_begin_m"), "end": column(tracks, "km_end_m")}
-    open_rows: list[int] = []
-    text: dict[int, str] = {}
-    stops = {e: column(tracks, f"{e}_buffer_stop") if f"{e}_buffer_stop" in tracks.columns else None for e in k}
-    for i in range(n_decl):
-        if tid[i] not in connected:
-            continue
-        for e in ("begin", "end"):
-            stop = stops[e]
-            if (tid[i], e) in ends_used or (stop is not None and stop[i] is not None and bool(stop[i])):
-                continue  # connected, or a buffer stop stands there
-            ext = (lo.get((line[i], tr[i])), hi.get((line[i], tr[i])))
-            if np.isfinite(k[e][i]) and any(x is not None and abs(k[e][i] - x) <= 1.0 for x in ext):
-                continue  # the end of the line's grid: the network's boundary
-            open_rows.append(i)
-            text[i] = text.get(i, f"track {tid[i]}: ") + f"{e} has no connection (no buffer stop is recorded); "
+    decl = tracks.iloc[:n_decl]
+    lo, hi = _grid_extent(net, column(decl, "line_code"), column(decl, "track"))
+    opened = {}
+    for e in ("begin", "end"):
+        k = column(decl, f"km_{e}_m")
+        stop = column(decl, f"{e}_buffer_stop") if f"{e}_buffer_stop" in decl.columns else np.full(n_decl, None)
+        with np.errstate(invalid="ignore"):
+            boundary = np.isfinite(k) & ((np.abs(k - lo) <= 1.0) | (np.abs(k - hi) <= 1.0))
+        stopped = np.array([x is not None and bool(x) for x in stop], dtype=bool)
+        used = _is_in(ids, at[(at_end == e).fillna(False).to_numpy(dtype=bool)])
+        opened[e] = connected & ~used & ~stopped & ~boundary
+
+    def text(i: int) -> str:
+        return f"track {tid[i]}: " + "; ".join(
+            f"{e} has no connection (no buffer stop is recorded)" for e in ("begin", "end") if opened[e][i]
+        )
+
     out.add(
         "topology.open_end",
         Severity.WARNING,
         NETWORK_TRACKS.name,
-        sorted(set(open_rows)),
-        lambda i: (text[i].rstrip("; "), {"keys": {"track_id": tid[i]}}),
+        np.flatnonzero(opened["begin"] | opened["end"]),
+        lambda i: (text(i), {"keys": {"track_id": tid[i]}}),
     )
 
 
-def _grid_extent(net: Network) -> tuple[dict[tuple[object, object], float], dict[tuple[object, object], float]]:
-    if net.gis.empty:
-        return {}, {}
-    g = net.gis.groupby(["line_code", "track"], observed=True)["km_m"].agg(["min", "max"]).reset_index()
-    keys = [(str(a), str(b)) for a, b in zip(column(g, "line_code"), column(g, "track"), strict=True)]
-    return dict(zip(keys, g["min"].to_numpy(float), strict=True)), dict(
-        zip(keys, g["max"].to_numpy(float), strict=True)
-    )
+def _grid_extent(
+    net: Network, line: npt.NDArray[np.object_], track: npt.NDArray[np.object_]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Lowest and highest km of the grid of each (line, track) given (NaN: no grid)."""
+    g = grid_extents(net)
+    if g.empty or not len(line):
+        return np.full(len(line), np.nan), np.full(len(line), np.nan)
+    keys = pd.MultiIndex.from_arrays([texts(g["line_code"]), texts(g["track"])])
+    at = keys.get_indexer(pd.MultiIndex.from_arrays([line, track]))
+    lo, hi = g["km_lo"].to_numpy(float), g["km_hi"].to_numpy(float)
+    return np.where(at >= 0, lo[at], np.nan), np.where(at >= 0, hi[at], np.nan)
 
 
 def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: _Out) -> None:
     c = net.connections
     if c.empty:
         return
-    t = tracks.drop_duplicates("track_id")
-    index = pd.Index(texts(t["track_id"]))
-    ta, tb = column(c, "track_a"), column(c, "track_b")
-    ia, ib = index.get_indexer(pd.Index(ta)), index.get_indexer(pd.Index(tb))
+    t = tracks
+    ia, ib = (first_rows(tracks["track_id"], c[k]) for k in ("track_a", "track_b"))
     rows = np.flatnonzero((ia >= 0) & (ib >= 0))
     if rows.size == 0:
         return
-    a, b = t.iloc[ia[rows]], t.iloc[ib[rows]]
-    la, lb = column(a, "line_code"), column(b, "line_code")
-
-    def km(side: pd.DataFrame, ends: npt.NDArray[np.object_]) -> npt.NDArray[np.float64]:
-        return np.where(ends == "begin", column(side, "km_begin_m"), column(side, "km_end_m")).astype(float)
-
-    ka, kb = km(a, column(c, "end_a")[rows]), km(b, column(c, "end_b")[rows])
+    ta, tb = column(c, "track_a"), column(c, "track_b")
+    line, k0, k1 = (column(t, k) for k in ("line_code", "km_begin_m", "km_end_m"))
+    a, b = ia[rows], ib[rows]
+    la, lb = line[a], line[b]
+    ka = np.where(column(c, "end_a")[rows] == "begin", k0[a], k1[a]).astype(float)
+    kb = np.where(column(c, "end_b")[rows] == "begin", k0[b], k1[b]).astype(float)
     with np.errstate(invalid="ignore"):
         jump = (la == lb) & pd.notna(la) & (np.abs(ka - kb) > config.km_jump_m)
     br = net.km_breaks

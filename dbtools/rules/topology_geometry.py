@@ -18,6 +18,7 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.track_geometry import chord_azimuths, distance_m, end_coordinates, track_geometry
+from dbtools.topology import first_rows
 from schemas.enums import Severity, TrackKind
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS
@@ -30,27 +31,28 @@ def check_geometry(
     pos = pd.Series(np.arange(len(tracks)), index=texts(tracks["track_id"]))
     pos = pos[~pos.index.duplicated()]
     return (
-        _gaps(net, geo, pos, config, loc)
+        _gaps(net, tracks, geo, config, loc)
         + _lengths(net, geo, config, loc)
         + _crossover_angles(net, tracks, geo, pos, inc, config, loc)
     )
 
 
-def _gaps(net: Network, geo: pd.DataFrame, pos: pd.Series, config: ValidationConfig, loc: Locator) -> list[Finding]:
+def _gaps(
+    net: Network, tracks: pd.DataFrame, geo: pd.DataFrame, config: ValidationConfig, loc: Locator
+) -> list[Finding]:
     c = net.connections
     if c.empty:
         return []
-    ta, tb = column(c, "track_a"), column(c, "track_b")
+    ra, rb = (first_rows(tracks["track_id"], c[k]) for k in ("track_a", "track_b"))
     ea, eb = column(c, "end_a"), column(c, "end_b")
-    ra = pos.reindex(ta).to_numpy(dtype=float)
-    rb = pos.reindex(tb).to_numpy(dtype=float)
-    ok = np.isfinite(ra) & np.isfinite(rb)
+    ok = (ra >= 0) & (rb >= 0)
     rows = np.flatnonzero(ok)
-    la, lo_a, _ = end_coordinates(geo, ra[ok].astype(np.int64), ea[ok])
-    lb, lo_b, _ = end_coordinates(geo, rb[ok].astype(np.int64), eb[ok])
+    la, lo_a, _ = end_coordinates(geo, ra[ok], ea[ok])
+    lb, lo_b, _ = end_coordinates(geo, rb[ok], eb[ok])
     gap = distance_m(la, lo_a, lb, lo_b)
     with np.errstate(invalid="ignore"):
         bad = np.flatnonzero(gap > config.connection_gap_m)
+    ta, tb = (column(c, k) if bad.size else np.empty(0, dtype=object) for k in ("track_a", "track_b"))
     return capped(
         "topology.gap",
         Severity.ERROR,
@@ -114,22 +116,17 @@ def _crossover_angles(
     config: ValidationConfig,
     loc: Locator,
 ) -> list[Finding]:
-    kind = dict(
-        zip(
-            texts(tracks["track_id"]),
-            texts(tracks["kind"]),
-            strict=True,
-        )
-    )
-    xo = {t for t, k in kind.items() if k == TrackKind.CROSSOVER.value}
+    ids = texts(tracks["track_id"])
+    kinds = pd.Series(texts(tracks["kind"]), index=ids)
+    kinds = kinds[~kinds.index.duplicated(keep="last")]  # a track id given twice: its last row
+    xo = set(kinds.index[(kinds == TrackKind.CROSSOVER.value).to_numpy()])
     if not xo or net.track_points.empty:
         return []
     sw = net.switches
     number = dict(zip(column(sw, "switch_id"), column(sw, "switch_number"), strict=True))
     ref = inc[inc["track"].isin(list(xo)) & inc["switch_id"].notna()].copy()
-    known = set(pos.index)
-    other = texts(ref["other"])
-    ref = ref[np.array([kind.get(o) != TrackKind.CROSSOVER.value and o in known for o in other], dtype=bool)]
+    other = pd.Index(texts(ref["other"]), dtype=object)
+    ref = ref[(kinds.reindex(other).to_numpy() != TrackKind.CROSSOVER.value) & (pos.index.get_indexer(other) >= 0)]
     ref["n"] = [number.get(s, np.nan) for s in texts(ref["switch_id"])]
     ref = ref[np.isfinite(ref["n"].to_numpy(float))].drop_duplicates(["track", "end"])
     if ref.empty:
@@ -144,11 +141,13 @@ def _crossover_angles(
     worst["ratio"] = worst["dev"] / worst["alpha"]
     lo, hi = config.crossover_angle_range
     bad = worst[(worst["ratio"] < lo) | (worst["ratio"] > hi)].reset_index(drop=True)
-    tid = column(net.tracks, "track_id")
+    tid = column(net.tracks, "track_id") if len(bad) else np.empty(0, dtype=object)
     row_of = {t: i for i, t in enumerate(tid)}
 
+    cols = {k: bad[k].tolist() for k in bad.columns}
+
     def build(j: int) -> Finding:
-        r = bad.iloc[j]
+        r = {k: v[j] for k, v in cols.items()}
         i = row_of.get(r["track_id"])
         return Finding(
             "topology.crossover_angle",

@@ -25,8 +25,10 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.geometry import GEOD
+from dbtools.gis.index import grid_index
 from dbtools.network import Network, sorted_by
 from dbtools.rules.common import column, texts
+from dbtools.topology import first_rows, grid_extents
 from schemas.tables import GIS_SPACING_M
 
 F64 = npt.NDArray[np.float64]
@@ -58,7 +60,7 @@ def track_geometry(net: Network, tracks: pd.DataFrame) -> pd.DataFrame:
         sel = own.iloc[at[has_points]]
         for k in out:
             out[k][has_points] = sel[k].to_numpy(dtype=float)
-    _from_gis(net.gis, tracks, ~has_points, out)
+    _from_gis(net, tracks, ~has_points, out)
     return pd.DataFrame(out, index=tracks.index)
 
 
@@ -66,8 +68,9 @@ def _from_track_points(tp: pd.DataFrame) -> pd.DataFrame:
     """End points, outward end azimuths and polyline length of every track in track_points."""
     if tp.empty:
         return pd.DataFrame()
-    tp = tp.sort_values(["track_id", "pos_m"], kind="stable")
-    ids = texts(tp["track_id"])
+    if not sorted_by(tp, ("track_id", "pos_m")):
+        tp = tp.sort_values(["track_id", "pos_m"], kind="stable")
+    ids, _ = pd.factorize(tp["track_id"], use_na_sentinel=False)  # equal ids, equal codes
     lat, lon = tp["lat"].to_numpy(float), tp["lon"].to_numpy(float)
     first = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     last = np.r_[first[1:] - 1, len(ids) - 1]
@@ -89,28 +92,47 @@ def _from_track_points(tp: pd.DataFrame) -> pd.DataFrame:
             "az_end": az_e,
             "geo_length_m": cum[last] - cum[first],
         },
-        index=pd.Index(ids[first], dtype=object),
+        index=pd.Index(texts(tp["track_id"].iloc[first]), dtype=object),
     )
 
 
-def _from_gis(gis: pd.DataFrame, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], out: dict[str, F64]) -> None:
+def _steps(net: Network, g: pd.DataFrame) -> F64:
+    """Ellipsoidal distance between consecutive rows of ``g`` (the grid sorted by line,
+    track and km): the grid index's (:attr:`GridIndex.dist`, computed once per network) when
+    it holds the same points in the same order, as it does for a valid grid."""
+    if g is net.gis:
+        grid = grid_index(net)
+        n = len(g)
+        if grid.pos.size == n and (n == 0 or (grid.pos[0] == 0 and bool(np.all(np.diff(grid.pos) == 1)))):
+            return grid.dist
+    lat, lon = g["lat"].to_numpy(float), g["lon"].to_numpy(float)
+    return _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])[1]
+
+
+def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], out: dict[str, F64]) -> None:
     """Fill ``out`` for the tracks along a line grid (module doc)."""
+    gis = net.gis
     if gis.empty or not todo.any():
         return
-    g = gis if sorted_by(gis, ("line_code", "track", "km_m")) else gis.sort_values(["line_code", "track", "km_m"])
-    grouped = g.groupby(["line_code", "track"], sort=False, observed=True)
-    codes = grouped.ngroup().to_numpy()
-    first = g.iloc[np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])]
-    uniq = pd.MultiIndex.from_arrays([column(first, "line_code"), column(first, "track")])
+    if sorted_by(gis, ("line_code", "track", "km_m")):  # as read from a DB: the grid's runs, no group-by
+        g, ext = gis, grid_extents(net)
+        codes: npt.NDArray[np.int64] = np.repeat(np.arange(len(ext)), np.diff(np.r_[ext["start"].to_numpy(), len(g)]))
+        uniq = pd.MultiIndex.from_arrays([texts(ext["line_code"]), texts(ext["track"])])
+        lo, hi = ext["km_lo"].to_numpy(float), ext["km_hi"].to_numpy(float)
+    else:
+        g = gis.sort_values(["line_code", "track", "km_m"])
+        codes = g.groupby(["line_code", "track"], sort=False, observed=True).ngroup().to_numpy().astype(np.int64)
+        first = g.iloc[np.flatnonzero(np.r_[True, codes[1:] != codes[:-1]])]
+        uniq = pd.MultiIndex.from_arrays([column(first, "line_code"), column(first, "track")])
+        lo = pd.Series(g["km_m"].to_numpy(float)).groupby(codes).min().to_numpy()
+        hi = pd.Series(g["km_m"].to_numpy(float)).groupby(codes).max().to_numpy()
     km = g["km_m"].to_numpy(float)
     lat, lon = g["lat"].to_numpy(float), g["lon"].to_numpy(float)
     span = float(np.nanmax(km) - np.nanmin(km)) + 10.0 * GIS_SPACING_M
     base = float(np.nanmin(km))
     key = codes * span + (km - base)
-    _, dist = _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])
+    dist = _steps(net, g)
     cum = np.r_[0.0, np.cumsum(np.where(codes[1:] == codes[:-1], dist, 0.0))]
-    lo = pd.Series(km).groupby(codes).min().to_numpy()
-    hi = pd.Series(km).groupby(codes).max().to_numpy()
 
     t = tracks[todo]
     idx = np.flatnonzero(todo)
@@ -157,9 +179,14 @@ def end_coordinates(
 
 
 def distance_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
-    """Ellipsoidal distance [m], NaN where a coordinate is missing."""
+    """Ellipsoidal distance [m], NaN where a coordinate is missing; 0 where the points are
+    the same (as the geodesic gives it; most joined track ends coincide, so the geodesic is
+    solved only for the others)."""
     out = _nan(len(lat0))
     ok = np.isfinite(lat0) & np.isfinite(lon0) & np.isfinite(lat1) & np.isfinite(lon1)
+    same = ok & (lat0 == lat1) & (lon0 == lon1)
+    out[same] = 0.0
+    ok &= ~same
     if ok.any():
         out[ok] = _inv(lat0[ok], lon0[ok], lat1[ok], lon1[ok])[1]
     return out
@@ -168,7 +195,9 @@ def distance_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
 def chord_azimuths(tp: pd.DataFrame, track_ids: set[str]) -> pd.DataFrame:
     """Azimuth [deg] of every chord between consecutive track_points of the given tracks:
     columns ``track_id``, ``az``."""
-    sel = tp[tp["track_id"].isin(list(track_ids))].sort_values(["track_id", "pos_m"], kind="stable")
+    sel = tp[first_rows(pd.Series(sorted(track_ids), dtype=object), tp["track_id"]) >= 0]
+    if not sorted_by(sel, ("track_id", "pos_m")):
+        sel = sel.sort_values(["track_id", "pos_m"], kind="stable")
     ids = texts(sel["track_id"])
     lat, lon = sel["lat"].to_numpy(float), sel["lon"].to_numpy(float)
     az, _ = _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])

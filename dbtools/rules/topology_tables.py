@@ -1,0 +1,93 @@
+"""The long tables the topology rules work on (:mod:`dbtools.rules.topology`): one row per
+switch port and one per connection end, their text held as objects (NaN for missing, as
+pandas' ``str`` columns give it), with shared integer codes of switch, track and end so
+that joins, duplicate tests and look-ups run on integers (issue 30: a national network has
+≥ 50,000 tracks)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from dbtools.network import Network
+
+I64 = npt.NDArray[np.int64]
+ALL_PORTS = ("a1", "b1", "b2", "a2")
+
+
+def text_objects(frame: pd.DataFrame, name: str) -> npt.NDArray[np.object_]:
+    """A text column as objects with NaN for missing, as pandas' ``str`` columns give them
+    (the tables below are held as objects: no conversion to Arrow text and back)."""
+    return np.asarray(frame[name].to_numpy(dtype=object, na_value=np.nan), dtype=object)
+
+
+def object_frame(columns: dict[str, npt.NDArray[Any]]) -> pd.DataFrame:
+    """A frame of the arrays as they are (pandas would turn object text into ``str``)."""
+    return pd.DataFrame({k: pd.Series(v, dtype=v.dtype) for k, v in columns.items()})
+
+
+def port_table(sw: pd.DataFrame) -> pd.DataFrame:
+    """Long table of switch ports: row (of switches), switch_id, type, port, track, end."""
+    n, k = len(sw), len(ALL_PORTS)
+    return object_frame(
+        {
+            "row": np.tile(np.arange(n), k),
+            "switch_id": np.tile(text_objects(sw, "switch_id"), k),
+            "type": np.tile(text_objects(sw, "type"), k),
+            "port": np.repeat(np.array(ALL_PORTS, dtype=object), n),
+            "track": np.concatenate([text_objects(sw, f"{p}_track") for p in ALL_PORTS]),
+            "end": np.concatenate([text_objects(sw, f"{p}_end") for p in ALL_PORTS]),
+        }
+    )
+
+
+def incidence_table(c: pd.DataFrame) -> pd.DataFrame:
+    """Both ends of every connection: row (of connections), side a/b, track, end, switch_id,
+    other track and end."""
+    ta, ea, tb, eb, sid = (text_objects(c, k) for k in ("track_a", "end_a", "track_b", "end_b", "switch_id"))
+    rows = np.arange(len(c))
+    return object_frame(
+        {
+            "track": np.concatenate([ta, tb]),
+            "end": np.concatenate([ea, eb]),
+            "other": np.concatenate([tb, ta]),
+            "other_end": np.concatenate([eb, ea]),
+            "row": np.concatenate([rows, rows]),
+            "side": np.repeat(np.array(["a", "b"], dtype=object), len(c)),
+            "switch_id": np.concatenate([sid, sid]),
+        }
+    )
+
+
+def shared_codes(*columns: pd.Series) -> list[I64]:
+    """Integer codes shared by the columns: equal values (a missing one included) get equal
+    codes, so that joins and duplicate tests run on integers (Arrow's hashing of the text
+    as held, no Python strings)."""
+    codes, _ = pd.factorize(pd.concat(columns, ignore_index=True), use_na_sentinel=False)
+    return np.split(codes.astype(np.int64), np.cumsum([len(c) for c in columns])[:-1])
+
+
+def add_codes(net: Network, inc: pd.DataFrame, ports: pd.DataFrame) -> None:
+    """Add codes of switch (``sk``), track (``tk``, ``ok`` of the other track) and end
+    (``ek``, ``oek``) to the incidence and port tables, and ``key`` = the (switch, track,
+    end) triple as one integer."""
+    c, sw = net.connections, net.switches
+    csk, ssk = shared_codes(c["switch_id"], sw["switch_id"])
+    inc["sk"], ports["sk"] = np.concatenate([csk, csk]), np.tile(ssk, len(ALL_PORTS))
+    n_code = []
+    for what, inc_cols, port_cols in (("track", ("tk", "ok"), "tk"), ("end", ("ek", "oek"), "ek")):
+        ca, cb, *cp = shared_codes(c[f"{what}_a"], c[f"{what}_b"], *(sw[f"{p}_{what}"] for p in ALL_PORTS))
+        inc[inc_cols[0]], inc[inc_cols[1]] = np.concatenate([ca, cb]), np.concatenate([cb, ca])
+        ports[port_cols] = np.concatenate(cp)
+        n_code.append(1 + max((int(x.max()) for x in (ca, cb, *cp) if len(x)), default=0))
+    n_t, n_e = n_code
+    for f in (inc, ports):
+        f["key"] = (f["sk"].to_numpy() * n_t + f["tk"].to_numpy()) * n_e + f["ek"].to_numpy()
+
+
+def int_isin(values: npt.ArrayLike, known: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+    """``np.isin`` for integer keys by a hash look-up (no sort)."""
+    return np.asarray(pd.Series(np.asarray(values)).isin(np.asarray(known)).to_numpy(), dtype=bool)
