@@ -333,7 +333,8 @@ def load_plan(path: Path, network: Network | None = None, locale: CsvLocale | No
 
 
 def plan_frame(possessions: list[Possession]) -> pd.DataFrame:
-    """Possessions as a plan table (text times), e.g. to write a CSV."""
+    """Possessions as a plan table (text times), e.g. to write a CSV; the optional
+    ``track_id`` column only when some possession names its track."""
     rows = []
     for p in possessions:
         rows.append(
@@ -344,9 +345,11 @@ def plan_frame(possessions: list[Possession]) -> pd.DataFrame:
                 "km_from_m": p.km_from_m,
                 "km_to_m": p.km_to_m,
                 **{c: (getattr(p, c).isoformat() if getattr(p, c) else "") for c in TIME_COLUMNS},
+                "track_id": p.track_id,
             }
         )
-    return pd.DataFrame(rows, columns=POSSESSIONS.column_names)
+    with_ids = any(p.track_id is not None for p in possessions)
+    return pd.DataFrame(rows, columns=[c for c in POSSESSIONS.column_names if with_ids or c != "track_id"])
 
 
 def possessions_for(

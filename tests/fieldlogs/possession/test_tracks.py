@@ -15,7 +15,7 @@ from dbtools.database import read_network
 from dbtools.topology import Topology
 from fieldlogs.io import read_run
 from fieldlogs.possession.check import check_run
-from fieldlogs.possession.plan import Possession, load_plan, read_plan
+from fieldlogs.possession.plan import Possession, load_plan, plan_frame, read_plan
 from fieldlogs.possession.tracks import crossover_between, possessed_at, track_alarms
 from schemas.enums import AlarmType, NoticeType
 
@@ -149,3 +149,13 @@ def test_unknown_track_id_is_a_plan_error(sample_network_db: Path, tmp_path: Pat
     errors = [(f.rule, f.row, f.column) for f in plan.errors]
     assert errors == [("plan.unknown_track_id", 5, "track_id")]
     assert "0420-D9" in plan.errors[0].message and "0420-D2" in plan.errors[0].message
+
+
+def test_plan_frame_writes_track_id_only_when_a_possession_has_one(sample_network_db: Path, tmp_path: Path) -> None:
+    plan = load_plan(DATA / "crossover_plan.csv", read_network(sample_network_db))
+    frame = plan_frame(plan.possessions)
+    assert list(frame["track_id"]) == ["0420-U5", "0420-U4", "0420-D3", "0420-D2"]
+    frame.to_csv(tmp_path / "again.csv", index=False)
+    again = load_plan(tmp_path / "again.csv", read_network(sample_network_db))
+    assert [p.track_id for p in again.possessions] == [p.track_id for p in plan.possessions]
+    assert "track_id" not in plan_frame([_poss("W0", None)]).columns  # line-only plans keep their columns
