@@ -279,6 +279,7 @@ class NoticeType(StrEnum):
     CROSSOVER = "crossover"
     POSITION_UNCERTAIN = "position_uncertain"
     POSITION_UNDETERMINED = "position_undetermined"
+    TRACK_UNCONFIRMED = "track_unconfirmed"
 
 
 ALARM_MEANING: dict[AlarmType | NoticeType, str] = {
@@ -293,4 +294,5 @@ ALARM_MEANING: dict[AlarmType | NoticeType, str] = {
     NoticeType.CROSSOVER: "a crossover to the other track was detected",
     NoticeType.POSITION_UNCERTAIN: "the km is uncertain (poor GPS); alarms held",
     NoticeType.POSITION_UNDETERMINED: "no km yet on this on-rail period",
+    NoticeType.TRACK_UNCONFIRMED: "ambiguous among tracks that include the possessed one: not yet confirmed on it",
 }
