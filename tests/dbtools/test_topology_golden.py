@@ -2,7 +2,7 @@
 topology and balise-group rules were made faster, their findings must stay the same).
 
 Each case is a source set — one of the hand-made networks of ``tests/data/networks`` or a
-small synthetic network with station layouts (:mod:`dbtools.synthetic.topology`) — whose CSV
+small synthetic network with station layouts (:mod:`fieldlogs.simulate.networks.topology`) — whose CSV
 cells are damaged by a seeded generator: one or two cells side by side copied from another row, a
 cell blanked (or two cells side by side), a number moved, a row dropped or repeated. The damage is aimed at the network
 tables (tracks, connections, switches, track_points, balises), so that every rule of
@@ -31,9 +31,9 @@ import pytest
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network, canonical
 from dbtools.sources import write_source_set
-from dbtools.synthetic.network import build_network, demo_line
-from dbtools.synthetic.topology import station_network
 from dbtools.validate import validate_path
+from fieldlogs.simulate.networks.synthetic import build_network, demo_line
+from fieldlogs.simulate.networks.topology import station_network
 from schemas.network import NETWORK_TABLES
 from schemas.tables import BALISES
 

@@ -13,7 +13,7 @@ import pytest
 
 from dbtools.database import read_network
 from dbtools.topology import Topology
-from fieldlogs.io import read_run
+from fieldlogs.runs.handle import read_run
 from fieldlogs.possession.check import check_run
 from fieldlogs.possession.plan import Possession, load_plan, plan_frame, read_plan
 from fieldlogs.possession.tracks import crossover_between, possessed_at, track_alarms
@@ -29,14 +29,16 @@ TOPO = Topology(
     tracks=pd.DataFrame(
         {"track_id": ["A", "B", "C", "D", "X"], "kind": ["main", "main", "station", "main", "crossover"]}
     ),
-    joined={
-        ("X", "begin"): [("A", "end", "both"), ("D", "begin", "none")],
-        ("X", "end"): [("B", "begin", "both")],
-        ("A", "end"): [("X", "begin", "both")],
-        ("B", "begin"): [("X", "end", "both")],
-        ("C", "begin"): [("A", "end", "both")],
-        ("C", "end"): [("B", "begin", "both")],
-    },
+    connections=pd.DataFrame(
+        [
+            ("X", "begin", "A", "end", "both"),
+            ("X", "begin", "D", "begin", "none"),
+            ("X", "end", "B", "begin", "both"),
+            ("C", "begin", "A", "end", "both"),
+            ("C", "end", "B", "begin", "both"),
+        ],
+        columns=["track_a", "end_a", "track_b", "end_b", "navigability"],
+    ).assign(switch_id=None),
 )
 
 
