@@ -44,7 +44,7 @@ from dbtools.database import read_network
 from fieldlogs.io import read_run, write_run
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import run_pipeline
-from fieldlogs.pipeline.track_truth import TrackFigures, track_figures
+from fieldlogs.pipeline.track_truth import TrackFigures, compare_tracks, track_figures
 from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.simulate.network_runs import network_runs
 from fieldlogs.simulate.scenario import scenario_from_dict
@@ -91,7 +91,7 @@ def one(args: tuple[int, str, str, dict[str, Any]]) -> dict[str, Any]:
     res = run_pipeline(read_run(folder), net, PipelineConfig.from_dict(cfg))
     elapsed = time.perf_counter() - t0
     truth = streams["truth"]
-    figs = track_figures(res.positions, truth, net)
+    figs = track_figures(res.positions, truth, net)  # the same comparison as ``tc`` below
     cmp = compare_with_truth(res.positions, truth)
     det = res.positions["state"].to_numpy(dtype=object) == PositionState.DETERMINED.value
     claimed = cmp["claimed"].to_numpy(dtype=bool)
@@ -106,6 +106,8 @@ def one(args: tuple[int, str, str, dict[str, Any]]) -> dict[str, Any]:
         t_split = float(r["t"])
         kmh = 3.6 * float(np.interp(t_split, tt, v))
         resolved.append((str(d.get("evidence")), float(d["after_switch_m"]), kmh))
+    tc = compare_tracks(res.positions, truth, net)
+    wrong = tc.loc[tc["wrong"], "t"].to_numpy(dtype=float)
     gps = streams.get("gps")
     fix1 = float((gps["fix"] == 1).mean()) if gps is not None and len(gps) else 0.0
     uncovered = cmp.loc[det & ~within, "t"].to_numpy(dtype=float)
@@ -123,6 +125,7 @@ def one(args: tuple[int, str, str, dict[str, Any]]) -> dict[str, Any]:
         "refused": int((ev["type"] == EventType.TRACK_CHANGE_REFUSED.value).sum()),
         "name": run["name"],
         "fix1": fix1,
+        "wrong": (float(wrong.min()), float(wrong.max()), len(wrong)) if len(wrong) else None,
     }
 
 
@@ -140,6 +143,15 @@ def _mean(xs: list[float]) -> float | None:
 
 def _median(xs: list[float]) -> float | None:
     return float(np.median(xs)) if xs else None
+
+
+def _runs(results: list[dict[str, Any]], key: str) -> str:
+    """The five runs with most cycles of ``key`` (wrong, uncovered): index, condition, name, t span."""
+    worst = sorted((r for r in results if r[key]), key=lambda r: -r[key][2])[:5]
+    return "".join(
+        f"; run {r['i']} {r['condition']} ({r['name']}): {r[key][2]} at t {r[key][0]:.0f}–{r[key][1]:.0f} s"
+        for r in worst
+    )
 
 
 def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
@@ -166,7 +178,10 @@ def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
             "  fix-1 share of GPS fixes, GNSS-only runs",
             pct(_mean([r["fix1"] for r in results if r["condition"] == "GNSS-only"])),
         ),
-        ("wrong-track claims (determined cycles)", f"{s['wrong_track_cycles']}  (target 0)  {verdict(s['wrong_track_cycles'] == 0)}"),
+        (
+            "wrong-track claims (determined cycles)",
+            f"{s['wrong_track_cycles']}  (target 0)  {verdict(s['wrong_track_cycles'] == 0)}" + _runs(results, "wrong"),
+        ),
         (
             "parallel-track selectivity, all",
             f"{pct(sel)} over {s['parallel_km']:.1f} km (Heirich 99.3 %; ratio "
@@ -197,13 +212,11 @@ def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     for evidence in sorted(ev):
         if evidence != "imu":
             rows.append((f"  median by {evidence}", f"{_median(ev[evidence]) or float('nan'):.1f} m (n={len(ev[evidence])})"))
-    worst = sorted((r for r in results if r["uncovered"]), key=lambda r: -r["uncovered"][2])[:5]
     rows += [
         (
             "|error| ≤ margin, determined cycles",
             f"{pct(cover)} of {det}  (target ≥ 99.9 %)  {verdict(cover is not None and cover >= 0.999)}"
-            + "".join(f"; run {r['i']} ({r['name']}): {r['uncovered'][2]} at t {r['uncovered'][0]:.0f}–"
-                      f"{r['uncovered'][1]:.0f} s" for r in worst),
+            + _runs(results, "uncovered"),
         ),
         ("  all claimed cycles (ambiguous by candidates)", f"{pct(cl_in / cl if cl else None)} of {cl}"),
         ("line-based track changes refused by the topology", f"{sum(r['refused'] for r in results)}"),
