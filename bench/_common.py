@@ -73,7 +73,7 @@ def simulated_run(
     """(run folder, DB) of a simulated run of about ``hours`` on the benchmark line, 10 slips
     and 10 slides, written once under ``folder`` (reused when it is already there)."""
     from dbtools.database import read_network
-    from fieldlogs.io import write_run
+    from fieldlogs.runs.write import write_run
     from fieldlogs.simulate.scenario import scenario_from_dict
     from fieldlogs.simulate.simulator import simulate_run
 

@@ -6,6 +6,7 @@ Run on demand (never part of the test suite; prints numbers, never pass/fail)::
     .venv/bin/python bench/bench_db.py --lines 100     # a quick smaller run
     .venv/bin/python bench/bench_db.py --workdir /tmp/tp-bench --keep
     .venv/bin/python bench/bench_db.py --workdir /tmp/tp-bench --keep --naive-fraction 0 --rounds 5
+    .venv/bin/python bench/bench_db.py --workdir /tmp/tp-bench --keep --naive-fraction 0 --processes 3
 
 Targets (SPEC / brief): 1,000,000 GIS points, ~50,000 balises, ~10,000 features;
 ``db build`` ≤ 10 s and ``db validate`` ≤ 15 s on one core, peak memory ≤ 4 GB. Also
@@ -24,6 +25,11 @@ same row checks, read by Arrow or by DuckDB, checked in DuckDB SQL, written by t
 bulk insert (the fastest SQLite writer measured; ``executemany`` of the same rows took
 twice its time). ``--rounds`` interleaves ``db build`` and those paths in one process
 (needs ``pip install -e '.[bench]'`` for DuckDB; skipped without it).
+
+Issue 34 (``--processes N``, interleaved rounds of fresh processes, :mod:`_db_bounds`): ``db
+validate`` against SQLite's integrity and foreign-key checks plus every table read into pandas
+(CPU and peak RSS, target ≤ 1.5× each), ``db build`` against DuckDB ``read_csv`` → Arrow →
+the same SQLite schema and indexes (CPU, target ≤ 1.3×); prints both ratios.
 
 The naive baseline is what a straightforward script would do: ``csv.DictReader``, per-row
 type and range checks in Python, one ``INSERT`` per row in autocommit mode. It runs on a
@@ -54,6 +60,8 @@ import pandas as pd
 import pyarrow as pa
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from _db_bounds import compare_bounds, duckdb_build, validate_bound, write_keyed
 
 from dbtools.browse import select_rows
 from dbtools.build import build_db
@@ -266,19 +274,16 @@ def checked_fast_build(src: Path, out: Path, reader: str = "arrow") -> str:
     checks, the source-file hashes. Returns the content hash. Holds for source sets in
     plain numbers (a km in 12k345.6 notation, an .xlsx file or a ``seq`` left blank need
     our text path) and stops at the first problem instead of naming each."""
-    import adbc_driver_sqlite.dbapi as adbc
     import duckdb
     import pyarrow.csv as pcsv
-    import sqlite_utils
 
-    from dbtools.database import _create_indexes, create_tables
     from dbtools.gis.index import network_georef
     from dbtools.rules.area import check_area
     from dbtools.rules.common import Locator
     from dbtools.tabular import sha256_file
     from dbtools.typed_csv import BLANK_CELLS
     from schemas.frames import stripped_text
-    from schemas.tables import ALL_DB_TABLES, APPLICATION_ID, DB_TABLES, SCHEMA_VERSION, SOURCE_TABLES
+    from schemas.tables import DB_TABLES, SOURCE_TABLES
 
     stages = _Stages()
     sql_type = {"str": "VARCHAR", "float": "DOUBLE", "int": "DOUBLE", "bool": "VARCHAR"}
@@ -347,27 +352,8 @@ def checked_fast_build(src: Path, out: Path, reader: str = "arrow") -> str:
     digest = content_hash(net.tables)
     stages.lap("content hash")
     meta = {"content_hash": digest, **net.meta, **(georef.to_meta() if georef is not None else {})}
-    out.unlink(missing_ok=True)
-    conn = sqlite3.connect(out)
-    for pragma in ("journal_mode=OFF", "synchronous=OFF", "cache_size=-262144", f"application_id={APPLICATION_ID}"):
-        conn.execute(f"PRAGMA {pragma}")
-    conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
-    db = sqlite_utils.Database(conn)
-    create_tables(db, ALL_DB_TABLES, indexes=False)
-    conn.commit()
-    with adbc.connect(str(out), autocommit=True) as ac, ac.cursor() as cur:
-        for pragma in ("journal_mode=OFF", "synchronous=OFF", "cache_size=-262144"):
-            cur.execute(f"PRAGMA {pragma}")
-        for t in DB_TABLES:
-            if len(frames[t.name]):
-                data = pa.Table.from_pandas(frames[t.name][t.column_names], preserve_index=False)
-                cur.adbc_ingest(t.name, data, mode="append")
-    with conn:
-        conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", sorted(meta.items()))
-    _create_indexes(db, ALL_DB_TABLES)
-    if conn.execute("PRAGMA foreign_key_check").fetchone() is not None:
-        raise sqlite3.IntegrityError("FOREIGN KEY constraint failed")
-    conn.close()
+    data = {t.name: pa.Table.from_pandas(frames[t.name][t.column_names], preserve_index=False) for t in DB_TABLES}
+    write_keyed(out, {k: v for k, v in data.items() if v.num_rows}, meta)
     stages.lap("SQLite write (schema, ADBC insert, indexes, FK check)")
     if os.environ.get("BENCH_STAGES"):
         print("  stages (CPU s): " + ", ".join(f"{k} {v:.2f}" for k, v in stages.cpu.items()))
@@ -469,12 +455,26 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--rounds", type=int, default=3, help="interleaved rounds of the checked-build comparison")
     p.add_argument("--cores", type=int, default=1, help="pin the process to this many cores (default 1)")
     p.add_argument(
+        "--processes",
+        type=int,
+        default=3,
+        help="interleaved rounds of fresh processes against the issue-34 bounds (0 skips them)",
+    )
+    p.add_argument("--child", nargs="+", help=argparse.SUPPRESS)  # one bound, in a fresh process
+    p.add_argument(
         "--topology",
         action="store_true",
         help="compare build and validate per grid point: the lines with station layouts (tracks, switches, "
         "connections, balise groups) against the same lines alone",
     )
     args = p.parse_args(argv)
+    if args.child:
+        what, *paths = args.child
+        if what == "validate-bound":
+            validate_bound(Path(paths[0]))
+        else:
+            duckdb_build(Path(paths[0]), Path(paths[1]))
+        return 0
     os.sched_setaffinity(0, sorted(os.sched_getaffinity(0))[: args.cores])
     if args.topology:
         return compare_topology(args.lines, args.length_m, args.rounds)
@@ -517,6 +517,8 @@ def main(argv: list[str] | None = None) -> int:
         )
         print(f"peak RSS            {peak_rss_mb():7.0f} MB (after build {rss_build:.0f} MB; target ≤ 4096 MB)")
         compare_read_build(src, db, work, c_build, args.rounds)
+        if args.processes > 0:
+            compare_bounds(src, db, work, args.processes)
         if args.naive_fraction > 0:
             naive_db = work / "naive.sqlite"
             naive_db.unlink(missing_ok=True)

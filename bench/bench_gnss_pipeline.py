@@ -33,10 +33,11 @@ from accuracy import scenario
 from dbtools.build import build_db
 from dbtools.database import read_network
 from fieldlogs.gnss.config import GnssConfig
-from fieldlogs.io import read_run, write_run
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
+from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 

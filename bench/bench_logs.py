@@ -30,8 +30,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np
 import pandas as pd
 
-from fieldlogs.io import Run, write_run
 from fieldlogs.quality.checks import check_run
+from fieldlogs.runs.handle import Run
+from fieldlogs.runs.write import write_run
 from schemas.logs import LOG_STREAMS, MAX_ABS_ACCEL_MPS2, MAX_ABS_RATE_RADPS
 from tests.fieldlogs.make_runs import make_meta, synthetic_streams
 

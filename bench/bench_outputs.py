@@ -22,9 +22,9 @@ from _common import best_of, load, simulated_run
 
 from dbtools.csvwrite import csv_bytes
 from dbtools.database import read_network
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.outputs import write_results
 from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.runs.handle import read_run
 
 
 def _read(run_dir: Path):  # type: ignore[no-untyped-def]

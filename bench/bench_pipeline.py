@@ -27,8 +27,9 @@ from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.sources import write_source_set
-from fieldlogs.io import read_run, write_run
 from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run

@@ -36,7 +36,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.network import Network
-from fieldlogs.io import read_run, write_run
+from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 

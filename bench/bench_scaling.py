@@ -51,8 +51,8 @@ def peak_rss_mb() -> float:
 def one(run_dir: Path, db: Path) -> dict[str, float]:
     """Time the pipeline on one simulated run (in this process)."""
     from dbtools.database import read_network
-    from fieldlogs.io import read_run
     from fieldlogs.pipeline.run import run_pipeline
+    from fieldlogs.runs.handle import read_run
 
     net = read_network(db)
     run = read_run(run_dir)
@@ -75,10 +75,10 @@ def worker(run_dir: Path, db: Path, *, whole: bool = False) -> dict[str, float]:
     run replayed in windows (``whole``: never, ``[window] length_h = 0``), the positions
     written to the output files as they come."""
     from dbtools.database import read_network
-    from fieldlogs.io import read_run
     from fieldlogs.pipeline.config import PipelineConfig
     from fieldlogs.pipeline.outputs import streamed_results
     from fieldlogs.pipeline.windows import replay_bounded
+    from fieldlogs.runs.handle import read_run
 
     base = peak_rss_mb()
     net = read_network(db)

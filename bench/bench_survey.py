@@ -61,7 +61,7 @@ from dbtools.gis.geometry import Projector
 from dbtools.network import Network
 from dbtools.sources import write_source_set
 from fieldlogs.gisverify.evidence import verify_runs
-from fieldlogs.io import write_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.networks.synthetic import LineSpec, Station, build_network, random_alignment
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run

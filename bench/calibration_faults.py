@@ -27,9 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.sample_network import sample_source_dir
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
+from fieldlogs.runs.handle import read_run
 from tests.test_damage import SAMPLE, _damage
 
 W5, B1 = ("scale", "tacho", 0.05), ("late", "balise", 0.1)

@@ -187,8 +187,8 @@ def _wrap(r: Resolved) -> None:
 WRAPPED = (
     Stage("fieldlogs.config", "load_tree", "settings (load_tree)"),
     Stage("dbtools.database", "read_network", "read_network (DB, hash)"),
-    Stage("fieldlogs.io", "read_run", "read_run (run.json)"),
-    Stage("fieldlogs.io", "Run.stream", "read streams"),
+    Stage("fieldlogs.runs.handle", "read_run", "read_run (run.json)"),
+    Stage("fieldlogs.runs.handle", "Run.stream", "read streams"),
     Stage("fieldlogs.pipeline.windows", "run_pipeline", "pipeline (rest)"),
     Stage("fieldlogs.pipeline.run", "require_usable", "usability check"),
     Stage("fieldlogs.pipeline.run", "clean_stream", "clean streams"),
@@ -213,7 +213,7 @@ WRAPPED = (
 RUN_IMPORTS = (
     "dbtools.database",
     "fieldlogs.config",
-    "fieldlogs.io",
+    "fieldlogs.runs.handle",
     "fieldlogs.pipeline.outputs",
     "fieldlogs.pipeline.windows",
     "fieldlogs.pipeline.run",

@@ -46,10 +46,11 @@ from accuracy import _truth_dist, scenario  # type: ignore[import-not-found]
 
 from dbtools.build import build_db
 from dbtools.database import read_network
-from fieldlogs.io import read_run, write_run
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import build_cycles
 from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from fieldlogs.simulate.track import TrackGeometry

@@ -71,26 +71,31 @@ def wrapped(name: str, f: Callable[..., Any]) -> Callable[..., Any]:
 def main() -> None:
     import pyarrow as pa
 
-    import fieldlogs.io as io
     import fieldlogs.pipeline.run as pipeline
     from dbtools.database import read_network
+    from fieldlogs.runs.csv_reader import CsvStream
+    from fieldlogs.runs.handle import read_run
+    from fieldlogs.runs.parquet_reader import ParquetStream
 
     run_dir, db = Path(sys.argv[1]), Path(sys.argv[2])
     for name in STAGES:
         setattr(pipeline, name, wrapped(name, getattr(pipeline, name)))
-    read_stream = io.read_stream
 
-    def read(table: Any, path: Path) -> Any:
-        out = read_stream(table, path)
-        s, pool = status(), pa.default_memory_pool()
-        print(
-            f"  read {table.name:10s} RSS {s['VmRSS']:7.0f} HWM {s['VmHWM']:7.0f} MB  "
-            f"Arrow pool ({pool.backend_name}) {pool.bytes_allocated() / 1e6:.0f} MB",
-            flush=True,
-        )
-        return out
+    def reporting(read_stream: Any) -> Any:
+        def read(self: Any, window: Any = None) -> Any:
+            out = read_stream(self, window)
+            s, pool = status(), pa.default_memory_pool()
+            print(
+                f"  read {self.table.name:10s} RSS {s['VmRSS']:7.0f} HWM {s['VmHWM']:7.0f} MB  "
+                f"Arrow pool ({pool.backend_name}) {pool.bytes_allocated() / 1e6:.0f} MB",
+                flush=True,
+            )
+            return out
 
-    io.read_stream = read
+        return read
+
+    for reader in (CsvStream, ParquetStream):
+        reader.read = reporting(reader.read)  # type: ignore[method-assign]
     net = read_network(db)
     if TRACE:
         tracemalloc.start(25)
@@ -100,7 +105,7 @@ def main() -> None:
         for f in run_dir.iterdir():
             if f.is_file() and f.name != "truth.parquet":
                 os.link(f, field / f.name)
-        pipeline.run_pipeline(io.read_run(field), net)
+        pipeline.run_pipeline(read_run(field), net)
     print("end", status())
 
 

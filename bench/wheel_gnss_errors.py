@@ -33,10 +33,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 def _points(job: tuple[str, str]) -> dict[str, Any]:
     """One run's GNSS points, truth and diameters."""
     from dbtools.database import read_network
-    from fieldlogs.io import read_run
     from fieldlogs.pipeline.config import PipelineConfig
     from fieldlogs.pipeline.metric import track_metric
     from fieldlogs.pipeline.run import run_pipeline
+    from fieldlogs.runs.handle import read_run
     from fieldlogs.survey.config import SurveyConfig
     from fieldlogs.survey.extract import _Trace, find_segments
     from fieldlogs.survey.wheelaids import GNSS, SegmentSpan, along_track

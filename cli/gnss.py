@@ -141,9 +141,9 @@ def position(
     from fieldlogs.gnss.report import position_report
     from fieldlogs.gnss.runinputs import run_gnss
     from fieldlogs.gnss.skymask import load_mask
-    from fieldlogs.io import read_run
     from fieldlogs.pipeline.route import decided_route
     from fieldlogs.quality.usability import Purpose, usability_findings
+    from fieldlogs.runs.handle import read_run
 
     if (line is None) != (track is None):
         raise UsageError("give --line and --track together (or neither: the pipeline decides the track)")

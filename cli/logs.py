@@ -137,7 +137,7 @@ def convert(
 
     Example: trainpos logs convert runs/2026-01-15-V01 --to parquet --out runs/2026-01-15-V01-pq
     """
-    from fieldlogs.io import convert_run
+    from fieldlogs.runs.write import convert_run
 
     res = convert_run(run, out, to.value, force=force)
     c = console()

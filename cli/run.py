@@ -32,9 +32,9 @@ def run(
     """
     from dbtools.database import read_network
     from fieldlogs.config import load_tree
-    from fieldlogs.io import read_run
     from fieldlogs.pipeline.outputs import streamed_results
     from fieldlogs.pipeline.windows import replay_bounded
+    from fieldlogs.runs.handle import read_run
 
     cfg = load_tree(config).pipeline
     network = read_network(db)

@@ -71,7 +71,7 @@ def match(
     Example: trainpos track match runs/rr1 --db net.sqlite --format json --out match.json
     """
     from dbtools.database import read_network
-    from fieldlogs.io import read_run
+    from fieldlogs.runs.handle import read_run
     from fieldlogs.trackmatch.match import MatchSettings, match_trace
     from fieldlogs.trackmatch.trace import gps_fixes
 

@@ -13,6 +13,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from schemas.enums import S003_KINDS
+from schemas.frame_screen import key_order
 from schemas.frames import PANDAS_DTYPE
 from schemas.model import Table
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES, TRACK_POINTS
@@ -137,7 +138,7 @@ def canonical_with_index(table: Table, frame: pd.DataFrame) -> tuple[pd.DataFram
         else:
             s = pd.to_numeric(s).astype("float64")
         cols[c.name] = s
-    out = pd.DataFrame(cols, index=frame.index)
+    out = pd.DataFrame(cols, index=frame.index, copy=False)  # no copy into one float block
     if table.primary_key and len(out) and not sorted_by(out, table.primary_key):
         out = out.sort_values(list(table.primary_key), kind="stable")
     return out.reset_index(drop=True), out.index.to_numpy()
@@ -147,30 +148,9 @@ def sorted_by(frame: pd.DataFrame, keys: tuple[str, ...]) -> bool:
     """True when the rows are already in the order a stable sort on ``keys`` gives (each
     row's key tuple ≤ the next one's), so the sort can be skipped: frames read back from a
     DB are (tables are read in key order). False whenever a key has a missing value (the
-    sort puts those last) or is not text or a number; the caller then sorts."""
-    n = len(frame)
-    if n < 2:
-        return True
-    undecided = np.ones(n - 1, dtype=bool)  # pairs equal on every key so far
-    for k in keys:
-        s = frame[k]
-        if s.isna().any():
-            return False
-        if isinstance(s.dtype, pd.StringDtype):
-            arr = pa.array(s.array, from_pandas=True)
-            lt = pc.less(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False)
-            eq = pc.equal(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False)
-        elif pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
-            v = s.to_numpy(dtype=np.float64)
-            lt, eq = v[:-1] < v[1:], v[:-1] == v[1:]
-        else:
-            return False
-        if (undecided & ~lt & ~eq).any():
-            return False  # a pair out of order
-        undecided &= eq
-        if not undecided.any():
-            return True
-    return True
+    sort puts those last) or is not text or a number; the caller then sorts
+    (:func:`schemas.frame_screen.key_order`)."""
+    return key_order(frame, keys)[0]
 
 
 def joined_text(s: pd.Series) -> bytes:
@@ -184,9 +164,11 @@ def joined_text(s: pd.Series) -> bytes:
         arr = arr.combine_chunks()
     if len(arr) == 0:
         return b""
-    offsets = np.frombuffer(arr.buffers()[1], dtype=np.int64)[arr.offset : arr.offset + len(arr) + 1]
-    data = np.frombuffer(arr.buffers()[2], dtype=np.uint8)[offsets[0] : offsets[-1]]
-    return np.insert(data, offsets[1:-1] - offsets[0], 0x1F).tobytes()
+    # each value followed by 0x1F (a join of [value, ""] with that separator), the last one dropped
+    sep = pa.scalar("\x1f", pa.large_string())
+    each = pc.binary_join_element_wise(arr, pa.scalar("", pa.large_string()), sep)
+    offsets = np.frombuffer(each.buffers()[1], dtype=np.int64)[each.offset : each.offset + len(each) + 1]
+    return np.frombuffer(each.buffers()[2], dtype=np.uint8)[offsets[0] : offsets[-1] - 1].tobytes()
 
 
 def content_hash(tables: dict[str, pd.DataFrame]) -> str:
@@ -212,11 +194,13 @@ def content_hash(tables: dict[str, pd.DataFrame]) -> str:
                 h.update(joined_text(s))
             elif c.dtype in ("int", "bool"):
                 arr = s.astype("Float64").to_numpy(dtype=np.float64, na_value=np.nan)
-                h.update(np.ascontiguousarray(arr).tobytes())
+                h.update(np.ascontiguousarray(arr).data)  # the array's bytes, not a copy of them
             else:
                 arr = s.to_numpy(dtype=np.float64, na_value=np.nan)
-                arr = np.where(np.isnan(arr), np.nan, arr)  # one NaN bit pattern
-                h.update(np.ascontiguousarray(arr).tobytes())
+                nan = np.isnan(arr)
+                if nan.any():
+                    arr = np.where(nan, np.nan, arr)  # one NaN bit pattern
+                h.update(np.ascontiguousarray(arr).data)
     return h.hexdigest()
 
 

@@ -76,7 +76,7 @@ class Table:
     """Nominal sampling rate of a log stream (None for event streams)."""
     held: bool = False
     """Log streams: each row holds until a later one (a state, e.g. the cab's direction), so a
-    time window of the stream also takes every row before it (:meth:`fieldlogs.io.Run.window`)."""
+    time window of the stream also takes every row before it (:meth:`fieldlogs.runs.handle.Run.window`)."""
     extra: dict[str, str] = field(default_factory=dict)
 
     @property

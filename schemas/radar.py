@@ -1,7 +1,7 @@
 """The optional ``radar`` block of ``run.json``: the 2-frequency CW radar [S004 Table 1]
 that recorded a run's ``radar_if`` samples, its plausible ranges and what follows from it
 (λ, sample rate, frame length, ΔV, Vmax, Rmax); ``parse_radar_block`` checks a block into
-findings (read by ``fieldlogs.io.Run``)."""
+findings (read by ``fieldlogs.runs.handle.Run``)."""
 
 from __future__ import annotations
 

@@ -34,10 +34,7 @@ SIMULATOR_USERS = {
 
 #: What the simulator may load outside itself, ``schemas`` and ``dbtools`` (a name covers its submodules).
 SHARED = {
-    "fieldlogs.io": "run folders: the log streams' one reader and writer",
-    "fieldlogs.runs": "run folders (where fieldlogs.io is going)",
-    "fieldlogs.run_json": "run.json parsing, part of the run folders",
-    "fieldlogs.parquet_streams": "Parquet streams of run folders",
+    "fieldlogs.runs": "run folders: the log streams' one reader and writer, run.json and the vehicle",
     "fieldlogs.recorders": "receiver file formats (simulate --format) and the GPS/UTC time scales",
     "fieldlogs.gnss.constants": "ICD constants and frame columns",
     "fieldlogs.gnss.geodesy": "ECEF, geodetic, ENU",
@@ -139,8 +136,8 @@ def test_simulator_loads_no_positioning_code(graph: dict[str, set[str]]) -> None
 
 def test_allow_lists_name_real_modules(graph: dict[str, set[str]]) -> None:
     """An entry that names no module is a rule nobody enforces; a shared module the simulator
-    does not load is an exception nobody needs (one not there at all, e.g. ``fieldlogs.io``
-    once it has moved, is skipped)."""
+    does not load is an exception nobody needs (one not there at all, e.g. a module
+    that has moved, is skipped)."""
     missing = [n for n in [*SIMULATOR_USERS, *POSITIONING] if not any(_under(m, [n]) for m in graph)]
     assert not missing, missing
     used = set().union(*(loaded_by(graph, m) for m in graph if _under(m, [SIMULATOR])))

@@ -138,7 +138,8 @@ def test_run_of_a_recorded_run_imports_neither_numba_nor_the_checkers(
     :data:`NOT_FOR_A_RUN` imported."""
     run_dir = ROOT / "fieldlogs" / "sample_logs" / "sim-d-evening"
     if fmt == "csv":
-        from fieldlogs.io import read_run, write_run
+        from fieldlogs.runs.handle import read_run
+        from fieldlogs.runs.write import write_run
 
         run = read_run(run_dir)
         streams = {p.stem: run.stream(p.stem) for p in run_dir.glob("*.parquet")}

@@ -114,8 +114,6 @@ class Area:
     def distance_m(self, lat: npt.ArrayLike, lon: npt.ArrayLike) -> F64:
         """Distance of each point to the area [m]: 0 inside (or on the edge), NaN for a
         non-finite coordinate (equirectangular at the area's mean latitude)."""
-        import shapely
-
         la = np.atleast_1d(np.asarray(lat, dtype=float))
         lo = np.atleast_1d(np.asarray(lon, dtype=float))
         out = np.full(la.shape, np.nan)
@@ -124,7 +122,9 @@ class Area:
             in_box = ok & (la >= self.lat_min) & (la <= self.lat_max) & (lo >= self.lon_min) & (lo <= self.lon_max)
         out[in_box] = 0.0
         todo = np.flatnonzero(ok & (~in_box | bool(self.polygon)))
-        if todo.size:
+        if todo.size:  # shapely only for points outside the box, or a polygon
+            import shapely
+
             shape, scale = self._shape()
             shapely.prepare(shape)
             pts = shapely.points(lo[todo] * scale, la[todo])

@@ -78,6 +78,15 @@ ObjArray = npt.NDArray[np.object_]
 
 #: Mean Earth radius for the rail height's length factor 1 + h/R_E [m].
 EARTH_RADIUS_M = 6_371_000.0
+#: GRS80 semi-major axis [m] and first eccentricity squared (the ellipsoid of ``GEOD``).
+GRS80_A: float = GEOD.a
+GRS80_E2: float = GEOD.es
+#: Largest normal curvature of the GRS80 ellipsoid: 1 / (meridian radius at the equator) [1/m].
+KAPPA_MAX = 1.0 / (GRS80_A * (1.0 - GRS80_E2))
+#: Rounding allowance of :func:`chord_bounds` on either side [m].
+CHORD_ROUNDING_M = 1e-6
+#: Points per block of the element-wise geometry of a whole network (bounds its temporaries).
+BLOCK = 1 << 16
 #: Gap between consecutive tracks in the sorted km key [m].
 KEY_GAP_M = 1000.0
 #: A listed kilometrage break matches consecutive points whose km agree within this [m].
@@ -125,6 +134,22 @@ def _column(frame: pd.DataFrame, name: str, numeric: bool) -> npt.NDArray[Any]:
     return np.asarray(s.astype(object).where(s.notna(), None).to_numpy(dtype=object))
 
 
+def _codes(frame: pd.DataFrame, name: str) -> tuple[I64, npt.NDArray[np.object_]]:
+    """Codes of a text column in sorted order of its values (−1: missing) and the values:
+    factorized in Arrow, no Python string per row."""
+    if name not in frame.columns:
+        return np.full(len(frame), -1, dtype=np.int64), np.empty(0, dtype=object)
+    codes, uniq = pd.factorize(frame[name], sort=True)
+    return np.asarray(codes, dtype=np.int64), np.asarray(uniq, dtype=object)
+
+
+def _lex_sorted(a: I64, b: I64, c: F64) -> bool:
+    """True when the rows are in the order ``np.lexsort((c, b, a))`` gives (a stable sort:
+    then it is the identity); ``c`` finite."""
+    da, db, dc = np.diff(a), np.diff(b), np.diff(c)
+    return bool(np.all((da > 0) | ((da == 0) & ((db > 0) | ((db == 0) & (dc >= 0))))))
+
+
 def _menger_squared(lon: F64, lat: F64, step: F64) -> F64:
     """κ² at each point of one track from geodesic sides (module doc, "Track length"; an end
     point takes its neighbour's)."""
@@ -140,6 +165,46 @@ def _menger_squared(lon: F64, lat: F64, step: F64) -> F64:
         k2 = np.maximum(a16, 0.0) / (a * a * b * b * c * c)
     out[1:-1] = np.where(np.isfinite(k2), k2, 0.0)
     out[0], out[-1] = out[1], out[-2]
+    return out
+
+
+def chord_bounds(lon: F64, lat: F64) -> tuple[F64, F64]:
+    """Bounds [low, high] of the geodesic (GRS80) length of each step i → i + 1 from its
+    straight chord c between the two points on the ellipsoid (height 0, where the geodesic
+    lies): 4 trigonometric functions a point instead of an inverse geodesic problem a step.
+
+    A geodesic of the ellipsoid has no geodesic curvature, so its curvature is its normal
+    curvature, at most κ = 1/M_min = 1/(a(1 − e²)) (the meridian radius at the equator,
+    6 335 439 m). A curve of length s ≤ π/κ with curvature ≤ κ has a chord
+    c ≥ (2/κ)·sin(κs/2) (Schur's comparison with the circle), and no curve is shorter than
+    its chord, so c ≤ s ≤ (2/κ)·arcsin(κc/2) = c + κ²c³/24 + …: the gap is 8·10⁻¹² m at
+    20 m and 1·10⁻⁶ m at 1 km. s ≤ π/κ (19 903 km) holds where |Δlat| and |Δlon| ≤ 1°: a
+    path along a meridian and a parallel is then shorter than 2·(π/180)·a/√(1 − e²) ≈
+    224 km; steps farther apart get NaN bounds (the caller solves them exactly). Both bounds
+    are widened by ``CHORD_ROUNDING_M`` for rounding (the coordinates, ≈ 6.4·10⁶ m, carry
+    ≈ 10⁻⁹ m each; ``Geod.inv`` is accurate to 15 nm)."""
+    phi, lam = np.radians(lat), np.radians(lon)
+    cos_phi = np.cos(phi)
+    sin_phi = np.sin(phi)
+    n = GRS80_A / np.sqrt(1.0 - GRS80_E2 * sin_phi * sin_phi)
+    xyz = (n * cos_phi * np.cos(lam), n * cos_phi * np.sin(lam), n * (1.0 - GRS80_E2) * sin_phi)
+    c = np.sqrt(sum(np.diff(v) ** 2 for v in xyz))
+    with np.errstate(invalid="ignore"):
+        near = (np.abs(np.diff(lat)) <= 1.0) & (np.abs(np.diff(lon)) <= 1.0)
+        c = np.where(near, c, np.nan)
+        high = (2.0 / KAPPA_MAX) * np.arcsin(np.minimum(0.5 * KAPPA_MAX * (c + CHORD_ROUNDING_M), 1.0))
+    return c - CHORD_ROUNDING_M, high + CHORD_ROUNDING_M
+
+
+def _blockwise_curvature(x: F64, y: F64) -> F64:
+    """:func:`~dbtools.gis.geometry.signed_curvature` of the whole polyline, computed
+    ``BLOCK`` vertices at a time (each with its two neighbours): the same values with
+    temporaries of a block, not of a million points."""
+    n = x.size
+    out = np.full(n, np.nan)
+    for a in range(1, n - 1, BLOCK):
+        b = min(a + BLOCK, n - 1)
+        out[a:b] = signed_curvature(x[a - 1 : b + 1], y[a - 1 : b + 1])[1:-1]
     return out
 
 
@@ -165,17 +230,17 @@ class GridIndex:
     ) -> None:
         self.gis = gis
         self.km_breaks = km_breaks
-        line, track = _column(gis, "line_code", False), _column(gis, "track", False)
+        (lcode, luniq), (tcode, tuniq) = _codes(gis, "line_code"), _codes(gis, "track")
         km, lat, lon = (_column(gis, c, True) for c in ("km_m", "lat", "lon"))
         self.georef = georef if georef is not None else derive(lat, lon)
         with np.errstate(invalid="ignore"):
-            ok = pd.notna(line) & pd.notna(track) & np.isfinite(km) & self._inside(lat, lon)
+            ok = (lcode >= 0) & (tcode >= 0) & np.isfinite(km) & self._inside(lat, lon)
         pos = np.flatnonzero(ok)
-        lcode, luniq = pd.factorize(pd.Series(line[pos], dtype=object), sort=True)
-        tcode, tuniq = pd.factorize(pd.Series(track[pos], dtype=object), sort=True)
-        order = np.lexsort((km[pos], tcode, lcode))
-        self.pos: I64 = pos[order].astype(np.int64)
-        lcode, tcode = lcode[order], tcode[order]
+        lcode, tcode = lcode[pos], tcode[pos]
+        if not _lex_sorted(lcode, tcode, km[pos]):  # frames of a Network are: no sort
+            order = np.lexsort((km[pos], tcode, lcode))
+            pos, lcode, tcode = pos[order], lcode[order], tcode[order]
+        self.pos: I64 = pos.astype(np.int64)
         self.km: F64 = km[self.pos]
         self.lat: F64 = lat[self.pos]
         self.lon: F64 = lon[self.pos]
@@ -218,6 +283,34 @@ class GridIndex:
     def dist(self) -> F64:
         """Geodesic distance to the next point [m] (length n − 1; computed on first use)."""
         return geodesic_step(self.lon, self.lat) if self.n > 1 else np.zeros(0)
+
+    def steps_outside(self, where: BoolArray, lo: F64, hi: F64) -> tuple[I64, F64]:
+        """The steps i with ``where[i]`` whose geodesic length ``dist[i]`` is not finite or lies
+        outside [``lo[i]``, ``hi[i]``], and ``dist`` (exact, GRS80 ``Geod.inv``) at least at
+        those steps — what ``np.flatnonzero(where & ((dist < lo) | (dist > hi) |
+        ~np.isfinite(dist)))`` gives, without the geodesic of every step when :attr:`dist`
+        has not been computed: a step is cleared by its straight 3-D chord (module doc,
+        :func:`chord_bounds`) and only the steps the chord cannot clear are solved exactly."""
+        if "dist" in self.__dict__ or self.n < 2:
+            d = self.dist
+            with np.errstate(invalid="ignore"):
+                bad = where & ((d < lo) | (d > hi) | ~np.isfinite(d))
+            return np.flatnonzero(bad), d
+        low, high = np.empty(self.n - 1), np.empty(self.n - 1)
+        for a in range(0, self.n - 1, BLOCK):  # blocks: bounded temporaries, same values
+            low[a : a + BLOCK], high[a : a + BLOCK] = chord_bounds(
+                self.lon[a : a + BLOCK + 1], self.lat[a : a + BLOCK + 1]
+            )
+        with np.errstate(invalid="ignore"):
+            doubt = np.flatnonzero(where & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
+        d = np.full(self.n - 1, np.nan)
+        if doubt.size:
+            _, _, exact = GEOD.inv(self.lon[doubt], self.lat[doubt], self.lon[doubt + 1], self.lat[doubt + 1])
+            d[doubt] = exact
+        dd, lo_d, hi_d = d[doubt], lo[doubt], hi[doubt]
+        with np.errstate(invalid="ignore"):
+            bad = (dd < lo_d) | (dd > hi_d) | ~np.isfinite(dd)
+        return doubt[bad], d
 
     @cached_property
     def c(self) -> F64:
@@ -324,7 +417,7 @@ class GridIndex:
         turn = np.full(n, np.nan)
         turn[1:-1] = _wrap(seg_h[1:] - seg_h[:-1])
         turn[~both] = np.nan
-        kappa = signed_curvature(x, y)
+        kappa = _blockwise_curvature(x, y)
         kappa[~both] = np.nan
         # heading at a vertex: chord of its neighbours, else the one regular step it has
         heading = np.full(n, np.nan)

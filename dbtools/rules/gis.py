@@ -145,7 +145,7 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
         lo, hi = chord - tol, dk + tol
         with np.errstate(invalid="ignore"):
             check = (dk > config.km_epsilon_m) & ~is_break
-            bad = np.flatnonzero(check & ((grid.dist < lo) | (grid.dist > hi) | ~np.isfinite(grid.dist)))
+        bad, dist = grid.steps_outside(check, lo, hi)  # dist: exact at least at the bad steps
         out += capped(
             "gis.step_length",
             Severity.ERROR,
@@ -155,9 +155,9 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
                 "gis.step_length",
                 Severity.ERROR,
                 T,
-                f"points {grid.dist[i]:.2f} m apart but their km differ by {dk[i]:g} m (from km {fmt_km(grid.km[i])})",
+                f"points {dist[i]:.2f} m apart but their km differ by {dk[i]:g} m (from km {fmt_km(grid.km[i])})",
                 keys=_gis_keys(grid, i + 1),
-                value=round(float(grid.dist[i]), 3),
+                value=round(float(dist[i]), 3),
                 limit=[round(float(lo[i]), 3), round(float(hi[i]), 3)],
                 **at(i + 1),
             ),

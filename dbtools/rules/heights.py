@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.network import sorted_by
 from dbtools.rules.common import Locator, capped, fmt_km, py
 from dbtools.rules.config import ValidationConfig
 from schemas.enums import Severity
@@ -49,17 +50,21 @@ from schemas.tables import GIS
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
+#: The order the rules read the points in: by line, track and km (the GIS key).
+_ORDER = ("line_code", "track", "km_m")
 
 
 def check_heights(gis: pd.DataFrame, meta: Mapping[str, str], config: ValidationConfig, loc: Locator) -> list[Finding]:
     """All height rules (module docstring)."""
     if "height_m" not in gis.columns or not gis["height_m"].notna().any():
         return []
-    g = gis.reset_index(drop=True)
-    g = g.assign(_pos=np.arange(len(g))).sort_values(["line_code", "track", "km_m"], kind="stable")
+    g = gis.reset_index(drop=True).assign(_pos=np.arange(len(gis)))
+    if not sorted_by(g, _ORDER):  # a Network's frame is (canonical): no sort, no copy
+        g = g.sort_values(list(_ORDER), kind="stable")
+    key = _track_key(g)
     out = _datum(meta, loc)
-    out += _partial(g, config, loc)
-    steps = _steps(g, config)
+    out += _partial(g, key, config, loc)
+    steps = _steps(g, key, config)
     for rule, values, warn, err, what in (
         ("gis.height_grade", steps["grade"], config.height_grade_warning_permille, config.height_grade_error_permille,
          "grade"),
@@ -90,37 +95,56 @@ def _datum(meta: Mapping[str, str], loc: Locator) -> list[Finding]:
     ]
 
 
-def _partial(g: pd.DataFrame, config: ValidationConfig, loc: Locator) -> list[Finding]:
-    has = g["height_m"].notna()
+def _track_key(g: pd.DataFrame) -> I64:
+    """One integer per (line_code, track) pair of each row, equal for equal pairs; a row
+    missing either gets a key of its own (negative), equal to no other row's."""
+    lc, _ = pd.factorize(g["line_code"])
+    tc, tu = pd.factorize(g["track"])
+    key = lc.astype(np.int64) * (len(tu) + 1) + tc
+    missing = (lc < 0) | (tc < 0)
+    key[missing] = -1 - np.flatnonzero(missing)
+    return np.asarray(key, dtype=np.int64)
+
+
+def _partial(g: pd.DataFrame, key: I64, config: ValidationConfig, loc: Locator) -> list[Finding]:
+    """``gis.height_partial`` per line/track in key order (the rows of a pair are
+    consecutive in ``g``, sorted by line, track and km; pairs with a missing key are left
+    out, as ``groupby`` leaves them)."""
+    has = g["height_m"].notna().to_numpy(dtype=bool)
+    n = len(g)
+    starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]])) if n else np.zeros(0, dtype=np.int64)
+    ends = np.append(starts[1:], n)
+    n_has = np.add.reduceat(has.astype(np.int64), starts) if n else np.zeros(0, dtype=np.int64)
+    partial = np.flatnonzero((key[starts] >= 0) & (n_has > 0) & (n_has < ends - starts))
+    km_m, pos = g["km_m"].to_numpy(dtype=float), g["_pos"].to_numpy(dtype=np.int64)
     out: list[Finding] = []
-    for (line, track), grp in has.groupby([g["line_code"], g["track"]], sort=True):
-        n_has = int(grp.sum())
-        if 0 < n_has < len(grp):
-            first = int(g.loc[grp.index[~grp.to_numpy()][0], "_pos"])
-            km = float(g.loc[grp.index[~grp.to_numpy()][0], "km_m"])
-            out.append(
-                Finding(
-                    "gis.height_partial",
-                    Severity.ERROR,
-                    GIS.name,
-                    f"height_m is given on {n_has} of {len(grp)} points of {line}/{track}; the first empty one is "
-                    f"km {fmt_km(km)}",
-                    keys={"line_code": py(line), "track": py(track), "km_m": km},
-                    value=n_has,
-                    limit=len(grp),
-                    column="height_m",
-                    **loc.at(GIS.name, first),
-                )
+    for r in partial[: config.max_findings_per_rule]:
+        a, b = int(starts[r]), int(ends[r])
+        row = a + int(np.flatnonzero(~has[a:b])[0])
+        line, track = g["line_code"].iat[row], g["track"].iat[row]
+        km = float(km_m[row])
+        out.append(
+            Finding(
+                "gis.height_partial",
+                Severity.ERROR,
+                GIS.name,
+                f"height_m is given on {int(n_has[r])} of {b - a} points of {line}/{track}; the first empty one is "
+                f"km {fmt_km(km)}",
+                keys={"line_code": py(line), "track": py(track), "km_m": km},
+                value=int(n_has[r]),
+                limit=b - a,
+                column="height_m",
+                **loc.at(GIS.name, int(pos[row])),
             )
-    return out[: config.max_findings_per_rule]
+        )
+    return out
 
 
-def _steps(g: pd.DataFrame, config: ValidationConfig) -> dict[str, Any]:
+def _steps(g: pd.DataFrame, key: I64, config: ValidationConfig) -> dict[str, Any]:
     """Per step j (point j → j+1 of one line/track): grade [‰] and, at point j+1, the radius of
     the vertical curve between steps j and j+1 [m] (NaN where not both regular)."""
     km = g["km_m"].to_numpy(dtype=float)
     h = g["height_m"].to_numpy(dtype=float, na_value=np.nan)
-    key = (g["line_code"].astype(str) + "\x1f" + g["track"].astype(str)).to_numpy()
     same = key[1:] == key[:-1]
     dkm = np.diff(km)
     regular = same & (np.abs(dkm - config.gis_spacing_m) <= config.km_epsilon_m)
@@ -135,8 +159,8 @@ def _steps(g: pd.DataFrame, config: ValidationConfig) -> dict[str, Any]:
         "pos": g["_pos"].to_numpy(dtype=np.int64),
         "km": km,
         "key": key,
-        "line": g["line_code"].to_numpy(dtype=object),
-        "track": g["track"].to_numpy(dtype=object),
+        "line": g["line_code"].array,
+        "track": g["track"].array,
     }
 
 

@@ -60,7 +60,7 @@ from schemas.jsonable import jsonable
 __all__ = ["AuditStats", "audit", "audit_one", "discover_runs", "pack", "unpack"]
 
 #: Modules the replay's fork server imports once, besides this one.
-PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.io", "fieldlogs.pipeline.warm")
+PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.runs.handle", "fieldlogs.pipeline.warm")
 #: Figures of the pipeline summary copied into a run's record.
 SUMMARY_FIELDS = (
     "duration_s",
@@ -163,9 +163,9 @@ def audit_one(
     ``{"record": ..., "unchanged": True}`` when the content fingerprint equals
     ``known_fingerprint``.
     """
-    from fieldlogs.io import read_run
     from fieldlogs.pipeline.config import PipelineConfig
     from fieldlogs.pipeline.windows import replay_bounded
+    from fieldlogs.runs.handle import read_run
 
     t0, c0 = time.perf_counter(), time.process_time()
     base: dict[str, Any] = {

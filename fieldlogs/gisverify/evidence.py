@@ -34,12 +34,12 @@ from dbtools.gis.verify.config import FIX_COLUMNS, KM_EPOCH_COLUMN, VerifyConfig
 from dbtools.gis.verify.result import GisVerification
 from dbtools.gis.verify.run import verify_fixes
 from dbtools.network import Network
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, load_network, open_db
 from fieldlogs.replay.pool import replay
+from fieldlogs.runs.handle import read_run
 from schemas.enums import PositionState
 from schemas.errors import InputError, TrainposError
 

@@ -26,7 +26,7 @@ import pandas as pd
 
 from fieldlogs.gnss.observables import epoch_keys
 from fieldlogs.gnss.track import Antenna
-from fieldlogs.io import Run
+from fieldlogs.runs.handle import Run
 from schemas.errors import EXIT_FINDINGS, TrainposError
 
 if TYPE_CHECKING:

@@ -202,7 +202,7 @@ def _one_version(run: Any, network: Network, ref: DbRef, plan_path: str | None, 
 def impact_one(run_path: str, old: DbRef, new: DbRef, plan_path: str | None, tree: Any) -> dict[str, Any]:
     """Replayer worker: one run, read once, against both DB versions:
     ``{"run": path, "old": RunFigures, "new": RunFigures}``."""
-    from fieldlogs.io import read_run
+    from fieldlogs.runs.handle import read_run
 
     net_old, net_new = load_pair(old, new)
     run = read_run(Path(run_path))

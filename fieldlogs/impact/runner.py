@@ -17,7 +17,7 @@ from fieldlogs.replay.pool import replay
 from schemas.errors import InputError
 
 #: Modules the replay's fork server imports once, besides the worker's.
-PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.io", "fieldlogs.pipeline.warm")
+PRELOAD = ("fieldlogs.pipeline.run", "fieldlogs.runs.handle", "fieldlogs.pipeline.warm")
 
 Progress = Callable[[int, int, str], None]
 

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 
 from dbtools.network import Network
-from fieldlogs.io import Run
 from fieldlogs.pipeline.estimate import signed_travel
 from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.runs.handle import Run
 
 
 def decided_route(run: Run, network: Network, cfg: Any) -> tuple[str, str, int] | None:

@@ -33,7 +33,6 @@ import numpy as np
 import pandas as pd
 
 from dbtools.network import Network
-from fieldlogs.io import Run
 from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.aids.gnss import GnssUnit
 from fieldlogs.pipeline.aids.registry import RunContext, speed_aids
@@ -52,6 +51,7 @@ from fieldlogs.quality.dbfit import require_db_fit
 from fieldlogs.quality.limits import masked
 from fieldlogs.quality.tacho import cumulative_again
 from fieldlogs.quality.usability import Purpose, require_usable
+from fieldlogs.runs.handle import Run
 from schemas.enums import EventType, VehicleKind
 from schemas.frames import FIRST_DATA_LINE
 

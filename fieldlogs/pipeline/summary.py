@@ -18,10 +18,10 @@ import numpy as np
 import pandas as pd
 
 from dbtools.network import Network
-from fieldlogs.io import Run
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.corrections import run_correction_stats
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry, SlipEpisode
+from fieldlogs.runs.handle import Run
 from schemas.enums import CORRECTION_EVENTS, SLIP_EVENTS, EventType, PositionState
 from schemas.jsonable import jsonable
 from schemas.outputs import EVENTS

@@ -19,10 +19,9 @@ LAZY_MODULES = (
     "pyarrow.parquet",
     "pyarrow.dataset",
     "shapely",
-    "fieldlogs.recorders.blocks",
-    "fieldlogs.recorders.vehicle",
+    "fieldlogs.runs.blocks",
+    "fieldlogs.runs.vehicle",
     "fieldlogs.pipeline.windows",
-    "fieldlogs.csv_spool",
     "numpy.fft",
 )
 

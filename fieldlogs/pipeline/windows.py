@@ -8,7 +8,7 @@ each window is an ordinary :func:`run_pipeline` on the rows of every stream with
 
     [keep_from − overlap, keep_to + lookahead)
 
-read by time from the files' row groups (:meth:`fieldlogs.io.Run.window`), of which only
+read by time from the files' row groups (:meth:`fieldlogs.runs.handle.Run.window`), of which only
 the cycles with keep_from ≤ t < keep_to are kept. The overlap lets the position settle
 before the kept part begins (a balise pair, a GPS decision, the odometry's trailing filters
 and pulse-delay lead, an open slip episode); the look-ahead covers what is decided after
@@ -30,7 +30,7 @@ offsets, repairs: t = 0 of its replay) are kept at its ``keep_from`` with the wi
 ``detail``. :func:`run_bounded` joins the parts into one result (tests, bench, callers that
 want the whole table).
 
-A long CSV run is first spooled to Parquet block by block (:mod:`fieldlogs.csv_spool`). A run
+A long CSV run is first spooled to Parquet block by block (:meth:`fieldlogs.runs.handle.Run.spool`). A run
 that cannot be read by window (a CSV stream the block parser declines, a Parquet column that
 must be coerced, no tacho stream to define the cycles) is replayed whole.
 """
@@ -49,9 +49,6 @@ import numpy as np
 import pandas as pd
 
 from dbtools.network import Network
-from fieldlogs.csv_spool import csv_t_span, spool_csv_streams
-from fieldlogs.io import Run
-from fieldlogs.parquet_streams import parquet_rows, stream_t_range
 from fieldlogs.pipeline.config import PipelineConfig, WindowConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.run import CLOCK_STREAMS, PipelineResult, run_clock_offsets, run_pipeline
@@ -59,6 +56,7 @@ from fieldlogs.pipeline.summary import RunParts, summarise_parts
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import GpsAnalysis, Odometry
 from fieldlogs.quality.clocks import ClockOffset
+from fieldlogs.runs.handle import Run
 from schemas.enums import EventType
 from schemas.errors import InputError
 from schemas.jsonable import jsonable
@@ -124,11 +122,9 @@ SPAN_PER_ROWS = 10.0
 def plan_run(run: Run, cfg: WindowConfig) -> list[Window]:
     """The windows of ``run`` (none: replay it whole): its tacho's span from the Parquet
     statistics, every stream readable by window (:meth:`Run.windowable`)."""
-    tacho = run.spooled.get("tacho") or run.stream_file("tacho")
-    if tacho is None or tacho.suffix != ".parquet" or not run.windowable():
+    if not run.has("tacho") or not run.windowable():
         return []
-    span = stream_t_range(tacho)
-    rows = parquet_rows(tacho)
+    span, rows = run.t_span("tacho"), run.rows("tacho")
     rate = TACHO.rate_hz or 10.0
     if span is None or rows is None or span[1] - span[0] > SPAN_PER_ROWS * rows / rate:
         return []  # a time base its rows do not cover (t in ms?): whole, where the usability rule says so
@@ -287,19 +283,18 @@ def replay_bounded(
     """The run through the pipeline, whole or (:func:`plan_run`) window by window, each
     result — the whole run's, or each window's kept part — handed to ``consume`` as it is
     made and then dropped; returns the summary and the events. A long CSV run is spooled
-    to Parquet first (:mod:`fieldlogs.csv_spool`, in a temporary folder removed after)."""
+    to Parquet first (:meth:`Run.spool`, in a temporary folder removed after)."""
     with tempfile.TemporaryDirectory(prefix="trainpos-spool-") as tmp:
         if _long_csv(run, cfg.window):
-            spool_csv_streams(run, Path(tmp))
+            run.spool(Path(tmp))
         return _replay(run, network, cfg, consume)
 
 
 def _long_csv(run: Run, cfg: WindowConfig) -> bool:
     """A CSV tacho whose first and last t are more than 1.5 window lengths apart."""
-    tacho = run.stream_file("tacho")
-    if tacho is None or tacho.suffix == ".parquet":
+    if run.stream_format("tacho") != "csv":
         return False
-    span = csv_t_span(tacho)
+    span = run.t_span("tacho")  # from the file's first and last lines
     return span is not None and long_enough(span[1] - span[0], cfg)
 
 

@@ -29,7 +29,6 @@ from typing import TYPE_CHECKING, Any
 import pandas as pd
 
 from dbtools.network import Network
-from fieldlogs.io import Run
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.possession.alarms import evaluate_period
 from fieldlogs.possession.config import PossessionConfig
@@ -38,6 +37,7 @@ from fieldlogs.possession.plan import Plan, Possession, possessions_for
 from fieldlogs.possession.results import Alarm, PeriodResult, RunCheck, checks_json
 from fieldlogs.possession.tacho import Tacho, tacho_problem, tacho_track, tacho_unused
 from fieldlogs.replay.discovery import discover_runs
+from fieldlogs.runs.handle import Run
 from schemas.errors import InputError
 
 if TYPE_CHECKING:
@@ -222,8 +222,8 @@ def check_one(
 ) -> RunCheck:
     """Replayer worker: :func:`check_run` of one run folder against the DB of ``db`` (loaded
     once per worker process)."""
-    from fieldlogs.io import read_run
     from fieldlogs.replay.network import load_network
+    from fieldlogs.runs.handle import read_run
 
     return check_run(read_run(Path(folder)), load_network(db), possessions, gps_cfg, cfg, work=work)
 

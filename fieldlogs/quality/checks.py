@@ -36,12 +36,12 @@ import pandas as pd
 
 from dbtools.database import read_network
 from dbtools.network import Network
-from fieldlogs.io import REQUIRED_STREAMS, Run
 from fieldlogs.quality.clocks import clock_findings
 from fieldlogs.quality.file_findings import FileFindings as _Out
 from fieldlogs.quality.gnss import check_gnss_nav, check_gnss_obs, check_gnss_sbas, check_receivers
 from fieldlogs.quality.radar_if import check_radar_if
 from fieldlogs.quality.tacho import TACHO_RATE_HZ, TachoIssue, TachoLimits, review_tacho, time_order
+from fieldlogs.runs.handle import REQUIRED_STREAMS, Run
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, check_frame

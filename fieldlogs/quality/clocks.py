@@ -45,11 +45,11 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from fieldlogs.io import Run
 from fieldlogs.pipeline.block_means import BLOCK_ROWS
 from fieldlogs.pipeline.config import ClockConfig
 from fieldlogs.pipeline.cycles import cab_signs
 from fieldlogs.quality.limits import masked
+from fieldlogs.runs.handle import Run
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.units import metres_per_pulse

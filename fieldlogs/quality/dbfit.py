@@ -20,8 +20,8 @@ import numpy as np
 import pandas as pd
 
 from dbtools.network import Network
-from fieldlogs.io import Run
 from fieldlogs.quality.checks import CheckLimits, DbRefs, area_box
+from fieldlogs.runs.handle import Run
 from schemas.enums import BaliseKind, Severity
 from schemas.errors import FindingsError
 from schemas.findings import Finding

@@ -32,8 +32,8 @@ from schemas.enums import Severity
 from schemas.gnss import SAT_RE, SIGNAL_RE
 
 if TYPE_CHECKING:
-    from fieldlogs.io import Run
     from fieldlogs.quality.file_findings import FileFindings as _Out
+    from fieldlogs.runs.handle import Run
 
 KEPLER_NEEDED = ("sqrtA", "Eccentricity", "M0", "Toe", "week")
 GLONASS_NEEDED = ("X", "Y", "Z")

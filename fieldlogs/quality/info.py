@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from fieldlogs.io import Run
 from fieldlogs.quality.tacho import cumulative_again, time_order
+from fieldlogs.runs.handle import Run
 from schemas.enums import GpsFix, Severity
 from schemas.units import metres_per_pulse
 

@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from fieldlogs.io import Run
 from fieldlogs.radar.convention import check_convention, convention_finding
 from fieldlogs.radar.framing import frame_samples
+from fieldlogs.runs.handle import Run
 from schemas.enums import Severity
 from schemas.findings import Finding
 

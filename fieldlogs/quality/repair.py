@@ -33,9 +33,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from fieldlogs.io import LogFormat, Run, check_output_folder, write_run
 from fieldlogs.quality.checks import check_run
 from fieldlogs.quality.tacho import cumulative_again
+from fieldlogs.runs.handle import Run
+from fieldlogs.runs.typed import LogFormat
+from fieldlogs.runs.write import check_output_folder, write_run
 from schemas.enums import Severity
 from schemas.errors import FindingsError, RefusedError
 from schemas.findings import Finding, count_by_severity

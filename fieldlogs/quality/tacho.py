@@ -23,7 +23,7 @@ any problem of 1–5 (:func:`unusable_reason`): a false standstill would freeze 
 moving vehicle, while a speed jump is what wheels do.
 
 Rows are positional indexes into the frame; messages name file lines (header = line 1, see
-:mod:`fieldlogs.io`).
+:mod:`fieldlogs.runs.handle`).
 """
 
 from __future__ import annotations

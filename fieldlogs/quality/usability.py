@@ -37,9 +37,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from fieldlogs.io import REQUIRED_STREAMS, Run
 from fieldlogs.pipeline.block_means import BLOCK_ROWS
 from fieldlogs.quality.tacho import counter_problem
+from fieldlogs.runs.handle import REQUIRED_STREAMS, Run
 from schemas.enums import Severity, VehicleKind
 from schemas.errors import FindingsError
 from schemas.findings import Finding

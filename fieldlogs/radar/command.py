@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from dbtools.atomic import check_target
-from fieldlogs.io import Run
 from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.convention import check_convention, convention_finding
 from fieldlogs.radar.speed import OutFormat, RadarSpeed, process_frames, run_frames, write_speed
+from fieldlogs.runs.handle import Run
 from schemas.errors import UsageError
 
 

@@ -23,11 +23,11 @@ import numpy as np
 import numpy.typing as npt
 
 from dbtools.atomic import atomic_file
-from fieldlogs.io import Run
 from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.framing import Frames
 from fieldlogs.radar.solve import range_gate
 from fieldlogs.radar.speed import FrameDetail, RadarSpeed, frame_detail
+from fieldlogs.runs.handle import Run
 from schemas.enums import GpsFix, RadarStatus
 
 KMH = 3.6

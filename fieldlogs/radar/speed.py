@@ -38,11 +38,11 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.atomic import atomic_file
-from fieldlogs.io import Run
 from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.framing import Frames, frame_samples
 from fieldlogs.radar.solve import FrameFit, LineClass, fit_frames
 from fieldlogs.radar.spectrum import Lines, detect_lines, spectra
+from fieldlogs.runs.handle import Run
 from schemas.enums import RadarStatus
 from schemas.errors import InputError, UsageError
 from schemas.findings import Finding

@@ -28,8 +28,8 @@ from pathlib import Path
 import pandas as pd
 
 from dbtools.atomic import atomic_folder
-from fieldlogs.io import Run
 from fieldlogs.recorders.timebase import iso_to_gps
+from fieldlogs.runs.handle import Run
 from schemas.errors import InputError, UsageError
 
 RECORDER_FOLDER = "recorder"

@@ -11,12 +11,12 @@
    moved onto them, others far from them named (``navweeks``).
 3. ``gnss_obs`` of several receivers and ``gnss_nav`` of several files are concatenated
    (exact duplicate ephemerides dropped); any other stream from two sources is refused.
-4. The vehicle file is checked (``recorders.vehicle``); run.json gets vehicle_id,
+4. The vehicle file is checked (``runs.vehicle``); run.json gets vehicle_id,
    vehicle_kind, wheel_diameter_m and teeth (its tacho axle's; none for a road-rail vehicle
    or a station without one) from it, the ``vehicle`` and ``gnss`` blocks
    and ``sources`` (file, sha256, format, counts, skipped records with reasons, clock fit).
    Every receiver of ``gnss_obs`` must have an antenna.
-5. Written atomically (``fieldlogs.io.write_run``); nothing is written on any error.
+5. Written atomically (``fieldlogs.runs.write.write_run``); nothing is written on any error.
 """
 
 from __future__ import annotations
@@ -32,11 +32,12 @@ import pandas as pd
 
 from dbtools.csv_locale import CsvLocale
 from dbtools.inputs import read_head, regular_file
-from fieldlogs.io import RunMeta, write_run
 from fieldlogs.recorders.common import FORMATS, Decoded, sha256_of
 from fieldlogs.recorders.navweeks import nav_onto_observations
 from fieldlogs.recorders.timebase import gps_to_iso
-from fieldlogs.recorders.vehicle import load_vehicle, receivers, tacho_wheel
+from fieldlogs.runs.meta import RunMeta
+from fieldlogs.runs.vehicle import load_vehicle, receivers, tacho_wheel
+from fieldlogs.runs.write import write_run
 from schemas.enums import Severity
 from schemas.errors import FindingsError, InputError, RefusedError, UsageError
 from schemas.findings import Finding

@@ -2,7 +2,7 @@
 
 ``simulate_run(network, scenario, seed)`` returns the stream frames (``schemas.logs``
 columns) and the ``run.json`` metadata; ``simulate_to_folder`` reads the DB and writes the
-run with ``fieldlogs.io.write_run`` (both in :mod:`.simulator`; this package file imports
+run with ``fieldlogs.runs.write.write_run`` (both in :mod:`.simulator`; this package file imports
 nothing). The pieces, one concern per module:
 
 * ``scenario`` — knobs (TOML, documented in ``fieldlogs/simulate/scenarios/default.toml``);

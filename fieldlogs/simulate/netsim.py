@@ -27,7 +27,7 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.rules.balise_groups import locate as locate_balises
 from dbtools.topology import all_tracks, centreline
-from fieldlogs.io import RunMeta
+from fieldlogs.runs.meta import RunMeta
 from fieldlogs.simulate.netgeom import RouteGeometry
 from fieldlogs.simulate.netroute import resolve_route
 from fieldlogs.simulate.running import Motion

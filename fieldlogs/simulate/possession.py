@@ -32,8 +32,10 @@ import numpy as np
 import pandas as pd
 
 from dbtools.network import Network
-from fieldlogs.io import LogFormat, RunMeta, write_run
 from fieldlogs.possession.plan import Possession, plan_frame
+from fieldlogs.runs.meta import RunMeta
+from fieldlogs.runs.typed import LogFormat
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import Scenario, scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from schemas.enums import AlarmType

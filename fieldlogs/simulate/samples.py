@@ -20,7 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from dbtools.database import read_network
-from fieldlogs.io import LogFormat, write_run
+from fieldlogs.runs.typed import LogFormat
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.samples_net import network_sample_scenarios
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run

@@ -13,7 +13,9 @@ import pandas as pd
 
 from dbtools.database import read_network
 from dbtools.network import Network
-from fieldlogs.io import LogFormat, RunMeta, write_run
+from fieldlogs.runs.meta import RunMeta
+from fieldlogs.runs.typed import LogFormat
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.events import balise_events, cab_events, track_balises
 from fieldlogs.simulate.kinematics import body_kinematics
 from fieldlogs.simulate.netsim import NetworkPlan, network_plan

@@ -55,11 +55,11 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.gisverify.evidence import RunEvidence, fixes_from_result
-from fieldlogs.io import Run, read_run
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.run import PipelineResult, clean_stream, run_pipeline
 from fieldlogs.replay.network import DbRef, load_network
+from fieldlogs.runs.handle import Run, read_run
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.dbindex import BaliseIndex, balise_index
 from fieldlogs.survey.wheelaids import AidScale, SegmentSpan, radar_scale, run_gnss_scale

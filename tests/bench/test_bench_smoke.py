@@ -24,7 +24,7 @@ BENCH = ROOT / "bench"
 #: The sample run the scripts that take a run folder read (with the ``sample_db`` fixture).
 SAMPLE_RUN = ROOT / "fieldlogs" / "sample_logs" / "sim-d-slips"
 #: Modules of bench/ that are not scripts.
-NOT_SCRIPTS = {"_common.py"}
+NOT_SCRIPTS = {"_common.py", "_db_bounds.py"}
 #: Seconds one script may take before it counts as hung (the slowest takes ~10 s on 2 cores).
 TIMEOUT_S = 300.0
 
@@ -50,8 +50,12 @@ SMOKE: dict[str, Smoke] = {
     ),
     "bench_audit.py": Smoke("--runs 2 --workers 1 --no-dask", (r"speed-up [\d.]+×",)),
     "bench_db.py": Smoke(
-        "--lines 2 --length-m 2000 --rounds 1",
-        (r"db build\s+[\d.]+ s wall", r"checked fast build: DuckDB not installed|db build vs the fastest path"),
+        "--lines 2 --length-m 2000 --rounds 1 --processes 1",
+        (
+            r"db build\s+[\d.]+ s wall",
+            r"checked fast build: DuckDB not installed|db build vs the fastest path",
+            r"bounds: DuckDB not installed|db validate / bound: CPU [\d.]+× \(target ≤ 1\.5×\), peak RSS",
+        ),
     ),
     "bench_gis_verify.py": Smoke(
         "--lines 1 --length-km 3 --runs 2 --variants 1 --defects 1 --workers 1 --sizes 2 --seeds 1 "

@@ -13,7 +13,7 @@ from typer.testing import CliRunner, Result
 from cli.main import app
 from dbtools.build import build_db
 from dbtools.database import read_network
-from fieldlogs.io import read_run
+from fieldlogs.runs.handle import read_run
 from tests.fieldlogs.gnss.runs import simulate_gnss_run
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[2] / "fieldlogs" / "sample_logs"

@@ -15,7 +15,7 @@ from typer.testing import CliRunner, Result
 from cli.main import app
 from dbtools.build import build_db
 from dbtools.interchange.rtm_import import import_rtm_geojson
-from fieldlogs.io import read_run
+from fieldlogs.runs.handle import read_run
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 KVG = DATA / "tp-lib" / "rinf-kvg"

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from dbtools import typed_csv
 from dbtools.tabular import read_raw_table
 from dbtools.typed_csv import TextPathNeeded, iter_csv_typed, read_csv_typed
-from fieldlogs.io import coerce_stream, read_stream
+from fieldlogs.runs.csv_reader import CsvStream
+from fieldlogs.runs.typed import coerce_stream
 from schemas.errors import InputError
 from schemas.logs import LOG_STREAMS
 
@@ -53,7 +54,7 @@ def csv_cell(cell: str) -> str:
 
 def same_as_text_path(name: str, path: Path) -> None:
     ref_frame, ref_findings = text_path(name, path)
-    frame, findings = read_stream(LOG_STREAMS[name], path)
+    frame, findings = CsvStream(LOG_STREAMS[name], path).read()
     pd.testing.assert_frame_equal(frame, ref_frame, check_exact=True)
     assert [repr(f.__dict__) for f in findings] == [repr(f.__dict__) for f in ref_findings]  # NaN-safe
 
@@ -127,7 +128,7 @@ def test_a_stream_with_absent_optional_columns_and_text_is_read_typed(tmp_path: 
     )
     typed = read_csv_typed(LOG_STREAMS["balise"], path)
     assert typed is not None and frames._already_typed(LOG_STREAMS["balise"], typed) is not None
-    frame, _ = read_stream(LOG_STREAMS["balise"], path)
+    frame, _ = CsvStream(LOG_STREAMS["balise"], path).read()
     assert frame["kind"].tolist() == ["I1", "I2"] and frame["line_code"].isna().tolist() == [False, True]
     assert frame["signal_type"].isna().all() and frame["line_code"].iloc[0] == "0420"
     same_as_text_path("balise", path)
@@ -282,9 +283,9 @@ def test_line_shapes_of_a_number_file_read_as_the_text_path(tmp_path: Path, name
     path.write_bytes(body.encode("utf-8"))
     try:
         text_path(name, path)
-    except InputError as exc:  # the text path refuses the file: so does read_stream, the same way
+    except InputError as exc:  # the text path refuses the file: so does the CSV reader, the same way
         with pytest.raises(InputError) as got:
-            read_stream(LOG_STREAMS[name], path)
+            CsvStream(LOG_STREAMS[name], path).read()
         assert str(got.value) == str(exc)
         return
     same_as_text_path(name, path)

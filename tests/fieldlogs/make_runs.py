@@ -12,7 +12,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from fieldlogs.io import LogFormat, RunMeta, write_run
+from fieldlogs.runs.meta import RunMeta
+from fieldlogs.runs.typed import LogFormat
+from fieldlogs.runs.write import write_run
 from schemas.units import metres_per_pulse
 
 G = 9.80665

@@ -11,9 +11,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from fieldlogs import io, parquet_streams
-from fieldlogs.io import Run, check_output_folder, convert_run, read_run, write_run
-from fieldlogs.parquet_streams import read_parquet_stream
+from fieldlogs.runs import parquet_reader, typed
+from fieldlogs.runs.handle import Run, read_run
+from fieldlogs.runs.parquet_reader import ParquetStream
+from fieldlogs.runs.write import check_output_folder, convert_run, write_run
 from schemas.errors import FindingsError, InputError, RefusedError
 from schemas.logs import LOG_STREAMS
 from tests.fieldlogs.make_runs import make_meta, make_run, synthetic_streams
@@ -186,8 +187,8 @@ def test_parquet_fast_path_has_no_per_cell_python(tmp_path: Path, monkeypatch: p
     def boom(*a: object, **k: object) -> None:
         raise AssertionError("coerce_frame called on typed Parquet")
 
-    monkeypatch.setattr(io, "coerce_frame", boom)
-    monkeypatch.setattr(parquet_streams, "coerce_frame", boom)
+    monkeypatch.setattr(typed, "coerce_frame", boom)
+    monkeypatch.setattr(parquet_reader, "coerce_frame", boom)
     assert len(Run(folder).load_all()) == 5
 
 
@@ -202,8 +203,8 @@ def test_parquet_read_a_column_at_a_time_equals_the_whole_table(tmp_path: Path) 
     pq.write_table(table, tmp_path / "one.parquet")
     pq.write_table(table, tmp_path / "many.parquet", row_group_size=7)
     assert pq.ParquetFile(tmp_path / "many.parquet").metadata.num_row_groups > 3
-    whole, f_whole = read_parquet_stream(LOG_STREAMS["gps"], tmp_path / "one.parquet")
-    parts, f_parts = read_parquet_stream(LOG_STREAMS["gps"], tmp_path / "many.parquet")
+    whole, f_whole = ParquetStream(LOG_STREAMS["gps"], tmp_path / "one.parquet").read()
+    parts, f_parts = ParquetStream(LOG_STREAMS["gps"], tmp_path / "many.parquet").read()
     pd.testing.assert_frame_equal(whole, parts, check_exact=True)
     assert list(whole.columns) == LOG_STREAMS["gps"].column_names and whole["nsat"].isna().sum() == 1
     assert (

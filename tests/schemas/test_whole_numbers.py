@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from dbtools.sample_network import sample_source_dir
-from fieldlogs.io import read_run
+from fieldlogs.runs.handle import read_run
 from schemas.frames import coerce_frame
 from schemas.logs import LOG_STREAMS
 from schemas.tables import FEATURE_POINTS

@@ -47,11 +47,11 @@ from fieldlogs.gnss.config import GnssConfig, position_config
 from fieldlogs.gnss.gis import GnssTrackError, gis_track
 from fieldlogs.gnss.ontrack import TrackEvidence, TrackSolutions, solve_on_track
 from fieldlogs.gnss.runinputs import GnssInputError, RunGnss, run_gnss
-from fieldlogs.io import Run
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.types import Event, Fix, GpsAnalysis
+from fieldlogs.runs.handle import Run
 from schemas.enums import EventType, FixSource, PositionState
 
 

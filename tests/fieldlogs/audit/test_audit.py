@@ -28,12 +28,12 @@ from dbtools.audit_db import AuditDB
 from dbtools.database import read_network
 from fieldlogs.audit.runner import audit, pack, unpack
 from fieldlogs.audit.store import open_audit, read_table, read_trace, store_run
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.reports.page import render_html
 from fieldlogs.reports.report import RUN_JSON_KEYS, build_report, report_json
+from fieldlogs.runs.handle import read_run
 from schemas.errors import InputError
 from tests.fieldlogs.audit.audit_data import RUNS, AuditData, audit_data
 from tests.pages import check_page

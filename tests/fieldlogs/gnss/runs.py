@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from dbtools.network import Network
-from fieldlogs.io import write_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 

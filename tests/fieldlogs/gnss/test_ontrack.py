@@ -20,8 +20,8 @@ from fieldlogs.gnss.gis import GnssTrackError, gis_track
 from fieldlogs.gnss.observables import epoch_keys
 from fieldlogs.gnss.ontrack import TrackEvidence, TrackSolutions, solve_on_track
 from fieldlogs.gnss.runinputs import iono_params, run_gnss
-from fieldlogs.io import read_run
 from fieldlogs.quality.checks import DbRefs, check_run
+from fieldlogs.runs.handle import read_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from tests.fieldlogs.gnss.runs import gnss_scenario, simulate_gnss_run

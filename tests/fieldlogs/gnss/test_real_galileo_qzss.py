@@ -27,9 +27,9 @@ import pytest
 
 from fieldlogs.gnss import ephemeris as eph
 from fieldlogs.gnss.constants import C_MPS, F_L1_HZ, F_L5_HZ, GALILEO, GPS, QZSS, WEEK_S
-from fieldlogs.io import read_run
 from fieldlogs.recorders.importer import import_run
 from fieldlogs.recorders.rinex import read_rinex
+from fieldlogs.runs.handle import read_run
 from tests.fieldlogs.gnss.test_ephemeris import _gnsstoolbox
 from tests.fieldlogs.gnss.test_real_rinex import _vehicle
 

@@ -17,8 +17,8 @@ from fieldlogs.gnss.gis import GisTrack
 from fieldlogs.gnss.report import position_report
 from fieldlogs.gnss.runinputs import run_gnss
 from fieldlogs.gnss.track import TrackLine
-from fieldlogs.io import read_run
 from fieldlogs.recorders.importer import import_run
+from fieldlogs.runs.handle import read_run
 
 DATA = Path(__file__).resolve().parents[2] / "data" / "rinex"
 

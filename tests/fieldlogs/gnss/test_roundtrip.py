@@ -18,9 +18,9 @@ from dbtools.network import Network
 from fieldlogs.gnss.gis import gis_track
 from fieldlogs.gnss.report import position_report
 from fieldlogs.gnss.runinputs import run_gnss
-from fieldlogs.io import read_run
 from fieldlogs.recorders.export import write_recorder_files
 from fieldlogs.recorders.importer import import_run
+from fieldlogs.runs.handle import read_run
 from tests.fieldlogs.gnss.runs import simulate_gnss_run
 
 

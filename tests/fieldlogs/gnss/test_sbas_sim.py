@@ -17,9 +17,9 @@ from dbtools.database import read_network
 from fieldlogs.experiments import gnss as ex
 from fieldlogs.gnss.observables import Epochs
 from fieldlogs.gnss.sbas import SbasCorrections
-from fieldlogs.io import read_run
 from fieldlogs.recorders.ubx import read_ubx
 from fieldlogs.recorders.ubx_raw import rawx_frames, sbas_sfrbx_frames
+from fieldlogs.runs.handle import read_run
 from fieldlogs.simulate.gnss.observations import Simulated
 from fieldlogs.simulate.gnss.sbas_stream import sbas_stream
 from tests.fieldlogs.gnss.runs import simulate_gnss_run

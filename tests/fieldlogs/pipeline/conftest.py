@@ -7,10 +7,10 @@ from pathlib import Path
 import pytest
 
 from dbtools.database import read_network
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.aids.registry import RunContext
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import prepare_run
+from fieldlogs.runs.handle import read_run
 
 SAMPLE_LOGS = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"
 

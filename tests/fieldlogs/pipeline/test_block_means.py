@@ -12,9 +12,9 @@ import pandas as pd
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.block_means import BlockCycleMeans, means_by_blocks
 from fieldlogs.pipeline.cycles import IMU_COLUMNS, cycle_index, cycle_means, imu_cycle_means, segments
+from fieldlogs.runs.handle import read_run
 from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
 from tests.fieldlogs.pipeline.test_cycles import reference_means
 

@@ -13,7 +13,6 @@ import pandas as pd
 import pytest
 
 from dbtools.database import read_network
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.config import ClockConfig, MarginConfig, PipelineConfig
 from fieldlogs.pipeline.consistency import Interval, balise_intervals, fit_evidence, scale_rate
 from fieldlogs.pipeline.cycles import Cycles
@@ -21,6 +20,7 @@ from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.types import Fix
 from fieldlogs.pipeline.wheelscale import scaled_cycles
+from fieldlogs.runs.handle import read_run
 from schemas.enums import FixSource
 
 SAMPLE = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs" / "sim-d-slips"
@@ -247,7 +247,7 @@ def test_a_clean_shuttle_between_termini_gets_no_balise_clock(sample_db: Path, t
     refused (offset not determined)" on a clean run (on N: e 0.271 %, L −0.002 s); the 24 h
     shuttle of bench/bench_scaling.py had its telegrams moved back by 0.61 s instead, and 25 %
     of its claimed cycles outside their margin."""
-    from fieldlogs.io import write_run
+    from fieldlogs.runs.write import write_run
     from fieldlogs.simulate.scenario import scenario_from_dict
     from fieldlogs.simulate.simulator import simulate_run
 

@@ -13,9 +13,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dbtools.database import read_network
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.cycles import cycle_index, cycle_means, segments
 from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.runs.handle import read_run
 from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
 
 

@@ -225,8 +225,8 @@ def test_a_trains_pto_column_is_ignored(sample_db, tmp_path) -> None:  # type: i
     import shutil
 
     from dbtools.database import read_network
-    from fieldlogs.io import read_run
     from fieldlogs.pipeline.run import run_pipeline
+    from fieldlogs.runs.handle import read_run
     from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
 
     run_dir = tmp_path / "run"
@@ -251,8 +251,8 @@ def test_an_imu_gap_makes_the_position_uncertain_and_the_margin_hold(sample_db, 
     import pandas as pd
 
     from dbtools.database import read_network
-    from fieldlogs.io import read_run
     from fieldlogs.pipeline.run import run_pipeline
+    from fieldlogs.runs.handle import read_run
     from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
 
     run_dir = tmp_path / "run"

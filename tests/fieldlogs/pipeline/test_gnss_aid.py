@@ -15,10 +15,10 @@ import pytest
 from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.gnss.config import GnssConfig
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.config import GpsConfig, PipelineConfig
 from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
+from fieldlogs.runs.handle import read_run
 from schemas.enums import EventType
 from tests.fieldlogs.gnss.runs import simulate_gnss_run
 

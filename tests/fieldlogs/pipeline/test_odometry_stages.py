@@ -23,7 +23,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dbtools.database import read_network
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.aid import SpeedOnCycles
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles
@@ -38,6 +37,7 @@ from fieldlogs.pipeline.odometry.streams import align_streams
 from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.pipeline.summary import DETAIL_DIGITS
 from fieldlogs.pipeline.types import FailsafeWatch, SlipEpisode
+from fieldlogs.runs.handle import read_run
 from schemas.jsonable import jsonable
 from tests.fieldlogs.pipeline.test_odometry import Scenario, const, scenario, slip_pulse
 

@@ -20,13 +20,16 @@ from hypothesis import strategies as st
 
 from dbtools.csvwrite import write_csv
 from dbtools.database import read_network
-from fieldlogs.io import convert_run, read_run
-from fieldlogs.parquet_streams import StreamCursor, read_parquet_stream, read_parquet_stream_between, stream_t_range
 from fieldlogs.pipeline.config import PipelineConfig, WindowConfig
 from fieldlogs.pipeline.outputs import streamed_results
 from fieldlogs.pipeline.run import PipelineResult, run_pipeline
 from fieldlogs.pipeline.summary import RunParts, summarise, summarise_parts
 from fieldlogs.pipeline.windows import plan_run, plan_windows, replay_bounded, run_bounded
+from fieldlogs.runs.cursor import StreamCursor
+from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.parquet_file import stream_t_range
+from fieldlogs.runs.parquet_reader import ParquetStream, read_between
+from fieldlogs.runs.write import convert_run
 from schemas.logs import CAB, GPS, TACHO
 from schemas.model import Column, Table
 
@@ -111,9 +114,9 @@ def test_a_window_is_the_rows_of_the_whole_read_in_it(
     )
     path = tmp_path / "small.parquet"
     pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, row_group_size=group)
-    whole, _ = read_parquet_stream(SMALL, path)
+    whole, _ = ParquetStream(SMALL, path).read()
     b = a + width
-    read = read_parquet_stream_between(SMALL, path, a, b)
+    read = read_between(SMALL, path, a, b)
     assert read is not None
     part, findings = read
     tt = whole["t"].to_numpy(dtype=float)
@@ -135,7 +138,7 @@ def test_a_cursor_reads_each_window_as_the_window_reader(
     tmp_path: Path, t: list[float], group: int, starts: list[float], width: float, ahead: float, order: str
 ) -> None:
     """Windows one after the other (and one going back), each told where the next starts:
-    the cursor's rows are read_parquet_stream_between's — sorted t with repeats and NaN,
+    the cursor's rows are read_between's — sorted t with repeats and NaN,
     groups in time order but rows unsorted inside, or any order (then the cursor declines)."""
     if order == "sorted":
         t = sorted(t, key=lambda x: (math.isnan(x), x))
@@ -162,7 +165,7 @@ def test_a_cursor_reads_each_window_as_the_window_reader(
     for k, (a, b) in enumerate(windows):
         nxt = windows[k + 1][0] if k + 1 < len(windows) else None
         got = cursor.between(a, b, nxt)
-        want = read_parquet_stream_between(SMALL, path, a, b)
+        want = read_between(SMALL, path, a, b)
         assert want is not None
         if got is None:
             assert order == "any"
@@ -205,7 +208,7 @@ def test_a_cursor_decodes_each_row_group_once(tmp_path: Path, monkeypatch: pytes
 def test_a_stream_that_must_be_coerced_is_not_read_by_window(tmp_path: Path) -> None:
     path = tmp_path / "tacho.parquet"
     pq.write_table(pa.table({"t": ["0.0", "0.1"], "pulses": [0, 1]}), path)
-    assert read_parquet_stream_between(TACHO, path, 0.0, 1.0) is None
+    assert read_between(TACHO, path, 0.0, 1.0) is None
 
 
 def test_stream_t_range_is_read_from_the_statistics(tmp_path: Path) -> None:
@@ -467,16 +470,14 @@ def test_a_long_csv_run_is_spooled_and_replayed_as_its_parquet_twin(
     run = read_run(tmp_path / "csv")
     csv_res = run_bounded(run, net, cfg)
     assert csv_res.summary["windows"] == pq_res.summary["windows"]
-    assert set(run.spooled) == set(run.streams_present())
-    assert not any(p.exists() for p in run.spooled.values())  # the spool folder is removed
+    assert set(run.spooled()) == set(run.streams_present())
+    assert not any(p.exists() for p in run.spooled().values())  # the spool folder is removed
     pd.testing.assert_frame_equal(csv_res.positions, pq_res.positions)
     assert {f.name: f.read_bytes() for f in (tmp_path / "csv").iterdir()} == before  # the input untouched
 
 
 def test_a_csv_stream_the_block_parser_declines_keeps_the_run_whole(tmp_path: Path, parquet_runs: Path) -> None:
     """A quoted cell in the IMU: that stream needs the text path, the run is not spooled."""
-    from fieldlogs.csv_spool import csv_t_span, spool_csv_streams
-
     convert_run(parquet_runs / "sim-d-slips", tmp_path / "csv", "csv")
     imu = tmp_path / "csv" / "imu.csv"
     lines = imu.read_text(encoding="utf-8").splitlines(keepends=True)
@@ -484,8 +485,8 @@ def test_a_csv_stream_the_block_parser_declines_keeps_the_run_whole(tmp_path: Pa
     lines[5] = ",".join([first[0], f'"{first[1]}"', *first[2:]])
     imu.write_text("".join(lines), encoding="utf-8")
     run = read_run(tmp_path / "csv")
-    span = csv_t_span(run.stream_file("tacho"))  # type: ignore[arg-type]
+    span = run.t_span("tacho")  # from the CSV file's first and last lines
     assert span is not None and span[1] - span[0] > 600.0
     (tmp_path / "spool").mkdir()
-    assert not spool_csv_streams(run, tmp_path / "spool")
-    assert "imu" not in run.spooled and not run.windowable()
+    assert not run.spool(tmp_path / "spool")
+    assert "imu" not in run.spooled() and not run.windowable()

@@ -14,8 +14,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dbtools.build import build_db
-from fieldlogs.io import write_run
 from fieldlogs.quality.checks import CheckLimits, DbRefs, check_run, load_db_refs
+from fieldlogs.runs.write import write_run
 from schemas.errors import InputError, TrainposError
 from schemas.findings import Finding
 from tests.conftest import DATA

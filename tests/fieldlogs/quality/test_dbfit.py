@@ -15,8 +15,8 @@ from cli.main import app
 from dbtools.build import build_db
 from dbtools.gis.geometry import Projector
 from dbtools.sources import write_source_set
-from fieldlogs.io import Run
 from fieldlogs.quality.dbfit import MIN_FIXES, db_fit_findings
+from fieldlogs.runs.handle import Run
 from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 
 SAMPLES = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"

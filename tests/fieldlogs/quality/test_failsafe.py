@@ -13,13 +13,13 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import build_cycles
 from fieldlogs.pipeline.odometry.streams import align_streams
 from fieldlogs.quality.checks import check_run
 from fieldlogs.quality.tacho import MAX_ROWS_BELOW, counter_problem
 from fieldlogs.quality.usability import Purpose, time_span_problem, time_unit_problem, usability_findings
+from fieldlogs.runs.handle import read_run
 
 LOGS = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"
 K = 0.01  # metres per pulse of the hand-made counters below

@@ -10,9 +10,10 @@ import pandas as pd
 import pytest
 
 from dbtools.tabular import sha256_file
-from fieldlogs.io import Run, write_run
 from fieldlogs.quality.checks import check_run
 from fieldlogs.quality.repair import REPAIR_LOG, repair_run, repair_stream
+from fieldlogs.runs.handle import Run
+from fieldlogs.runs.write import write_run
 from schemas.errors import FindingsError, RefusedError
 from tests.fieldlogs.make_runs import make_meta, make_run, synthetic_streams
 

@@ -14,10 +14,10 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from dbtools.database import read_network
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.quality.checks import check_run
 from fieldlogs.quality.usability import Purpose, time_unit_problem, usability_findings
+from fieldlogs.runs.handle import read_run
 from schemas.errors import FindingsError
 
 LOGS = Path(__file__).resolve().parents[3] / "fieldlogs" / "sample_logs"

@@ -11,7 +11,7 @@ from dbtools.database import read_network
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
 from dbtools.sources import write_source_set
-from fieldlogs.io import write_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from tests.fieldlogs.radar.runs import simulate_radar_run
 

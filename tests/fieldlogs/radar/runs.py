@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools.network import Network
-from fieldlogs.io import RunMeta
+from fieldlogs.runs.meta import RunMeta
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from schemas.radar import RadarParams

@@ -12,9 +12,10 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from fieldlogs.io import Run, write_run
 from fieldlogs.quality.checks import check_run
 from fieldlogs.quality.info import run_info
+from fieldlogs.runs.handle import Run
+from fieldlogs.runs.write import write_run
 from schemas.enums import Severity
 from schemas.radar import RadarParams, parse_radar_block
 from tests.fieldlogs.make_runs import make_meta, synthetic_streams

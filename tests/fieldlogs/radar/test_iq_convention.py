@@ -17,12 +17,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fieldlogs.io import write_run
 from fieldlogs.quality.checks import check_run
 from fieldlogs.radar.command import radar_speed_command
 from fieldlogs.radar.convention import check_convention, convention_finding
 from fieldlogs.radar.framing import frame_samples
 from fieldlogs.radar.speed import RadarSpeed, process_if
+from fieldlogs.runs.write import write_run
 from schemas.enums import RadarStatus, Severity
 from schemas.radar import RadarParams, parse_radar_block
 from tests.fieldlogs.make_runs import make_meta, synthetic_streams

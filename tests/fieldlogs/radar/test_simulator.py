@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from dbtools.network import Network
-from fieldlogs.io import read_run
+from fieldlogs.runs.handle import read_run
 from fieldlogs.simulate.radar import Ground, echo, ground, reference_power, view
 from fieldlogs.simulate.scenario import load_scenario, scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run

@@ -8,10 +8,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fieldlogs.io import Run, RunMeta, convert_run, write_run
 from fieldlogs.quality.checks import check_run
 from fieldlogs.quality.info import run_info
 from fieldlogs.quality.repair import repair_run
+from fieldlogs.runs.handle import Run
+from fieldlogs.runs.meta import RunMeta
+from fieldlogs.runs.write import convert_run, write_run
 from tests.fieldlogs.make_runs import synthetic_streams
 from tests.fieldlogs.recorders.conftest import nav_row, obs_frame
 
@@ -114,7 +116,7 @@ def test_gnss_streams_read_in_both_formats(tmp_path: Path, fmt: str) -> None:
 
 
 def _with_sbas(tmp_path: Path, rows: list[dict[str, object]]) -> Path:
-    from fieldlogs.io import read_run
+    from fieldlogs.runs.handle import read_run
 
     run = read_run(_run(tmp_path, obs_frame(3), pd.DataFrame([nav_row("G07"), nav_row("E11")])))
     streams = {n: run.stream(n) for n in ("gnss_obs", "gnss_nav")}

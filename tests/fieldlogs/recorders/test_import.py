@@ -13,10 +13,10 @@ import pytest
 from typer.testing import CliRunner, Result
 
 from cli.main import app
-from fieldlogs.io import Run
 from fieldlogs.recorders.export import write_recorder_files
 from fieldlogs.recorders.timebase import UNIX_TO_GPS_S, iso_to_gps
 from fieldlogs.recorders.ubx import write_ubx
+from fieldlogs.runs.handle import Run
 from tests.fieldlogs.audit.audit_data import AuditData, audit_data
 from tests.fieldlogs.recorders.conftest import gps_frame, obs_frame
 

@@ -10,8 +10,10 @@ from typing import Any
 
 import pytest
 
-from fieldlogs.io import Run, RunMeta, write_run
-from fieldlogs.recorders.vehicle import check_vehicle, load_vehicle, tacho_wheel
+from fieldlogs.runs.handle import Run
+from fieldlogs.runs.meta import RunMeta
+from fieldlogs.runs.vehicle import check_vehicle, load_vehicle, tacho_wheel
+from fieldlogs.runs.write import write_run
 from schemas.errors import FindingsError
 
 

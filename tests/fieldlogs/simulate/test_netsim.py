@@ -215,7 +215,7 @@ def test_cli_network_scenario(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
     from cli.main import app
-    from fieldlogs.io import read_run
+    from fieldlogs.runs.handle import read_run
 
     db = tmp_path / "xo.sqlite"
     build_db(NETWORKS / "crossover", db)

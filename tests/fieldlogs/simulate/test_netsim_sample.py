@@ -13,8 +13,9 @@ import pytest
 from dbtools.database import read_network
 from dbtools.network import Network
 from dbtools.topology import all_tracks
-from fieldlogs.io import read_run, write_run
 from fieldlogs.quality.checks import check_run, load_db_refs
+from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.networks.sample_junctions import TRACK_SPACING
 from fieldlogs.simulate.networks.turnout import radius_for_extent, reverse_curves
 from fieldlogs.simulate.samples_net import network_sample_scenarios

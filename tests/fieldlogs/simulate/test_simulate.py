@@ -15,8 +15,8 @@ from dbtools.build import build_db
 from dbtools.gis.geometry import PolylineIndex, Projector
 from dbtools.gis.georef import projector_for_points
 from dbtools.sources import write_source_set
-from fieldlogs.io import read_run
 from fieldlogs.quality.checks import check_run, load_db_refs
+from fieldlogs.runs.handle import read_run
 from fieldlogs.simulate.networks.synthetic import build_network, demo_line
 from fieldlogs.simulate.samples import make_sample_runs
 from fieldlogs.simulate.scenario import DEFAULT_SCENARIO, Scenario, ScenarioError, load_scenario, scenario_from_dict

@@ -24,7 +24,7 @@ from dbtools.database import read_network
 from dbtools.network import Network
 from dbtools.sample_network import sample_source_dir
 from dbtools.sources import write_source_set
-from fieldlogs.io import write_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 

@@ -15,8 +15,8 @@ import pytest
 from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.sample_network import sample_source_dir
-from fieldlogs.io import write_run
 from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from fieldlogs.survey.result import SurveyReport

@@ -1,6 +1,7 @@
 """``run.json`` of a run folder (SPEC §4): its typed fields (:data:`schemas.logs.RUN_JSON`),
 the optional blocks (vehicle, GNSS receiver, sources, radar) and every problem as a finding
-naming the file and the field. Read by :mod:`fieldlogs.io` (the run folder's reader)."""
+naming the file and the field. Read by :class:`fieldlogs.runs.handle.Run`; the blocks are checked by
+:mod:`fieldlogs.runs.blocks` and :mod:`fieldlogs.runs.vehicle`."""
 
 from __future__ import annotations
 
@@ -33,7 +34,7 @@ class RunMeta:
     db_version: str | None = None
     notes: str = ""
     vehicle: dict[str, Any] | None = None
-    """Vehicle geometry (``schemas.vehicle``), checked by ``recorders.vehicle``."""
+    """Vehicle geometry (``schemas.vehicle``), checked by ``runs.vehicle``."""
     gnss: dict[str, Any] | None = None
     """Navigation-header parameters (``schemas.gnss.GNSS_BLOCK``)."""
     sources: list[Any] | None = None
@@ -153,8 +154,8 @@ def parse_run_json(path: Path) -> tuple[RunMeta | None, list[Finding]]:
 
 
 def block_findings(data: dict[str, Any], path: Path, *, has_tacho: bool) -> list[Finding]:
-    """Findings of run.json's vehicle and gnss blocks (``recorders.vehicle``, ``recorders.blocks``)."""
-    from fieldlogs.recorders.blocks import check_gnss_block, check_vehicle_block
+    """Findings of run.json's vehicle and gnss blocks (``runs.vehicle``, ``runs.blocks``)."""
+    from fieldlogs.runs.blocks import check_gnss_block, check_vehicle_block
 
     out: list[Finding] = []
     if isinstance(data.get("vehicle"), dict):

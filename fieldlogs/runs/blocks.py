@@ -1,6 +1,6 @@
 """Checks of run.json's ``vehicle`` and ``gnss`` blocks (findings, never exceptions).
 
-``vehicle``: everything ``recorders.vehicle.check_vehicle`` checks, plus agreement with the
+``vehicle``: everything ``runs.vehicle.check_vehicle`` checks, plus agreement with the
 top-level fields: vehicle_id and vehicle_kind equal, wheel_diameter_m and teeth equal to
 the tacho axle's. ``gnss``: known keys (``schemas.gnss.GNSS_BLOCK``), coefficient lists of
 the right length with finite numbers, an integer leap-second count in [0, 100], time
@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from fieldlogs.recorders.vehicle import check_vehicle, tacho_wheel
+from fieldlogs.runs.vehicle import check_vehicle, tacho_wheel
 from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.frames import suggest
