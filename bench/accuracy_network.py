@@ -41,11 +41,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from dbtools.build import build_db
 from dbtools.database import read_network
-from fieldlogs.io import read_run, write_run
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.track_truth import TrackFigures, compare_tracks, track_figures
 from fieldlogs.pipeline.truth import compare_with_truth
+from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.network_runs import network_runs
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
@@ -60,7 +61,7 @@ IMU_MIN_KMH = 15.0
 
 def with_condition(run: dict[str, Any], condition: str) -> dict[str, Any]:
     """The scenario override ``run`` with its GNSS replaced by ``condition`` (module docstring)."""
-    out = json.loads(json.dumps(run))
+    out: dict[str, Any] = json.loads(json.dumps(run))
     net = out["network"]
     net.pop("gnss_outages", None)
     sensors = {k: v for k, v in out.get("sensors", {}).items() if k != "gps"}

@@ -336,7 +336,8 @@ def segments(lines: TrackLines) -> Segments:
     """:class:`Segments` of ``lines`` (tracks without a centreline have none)."""
     ids = list(lines.lines)
     origin = next((tl.origin for tl in lines.lines.values() if tl.xy.shape[0] >= 2), (0.0, 0.0))
-    seg = Segments(ids, np.empty(0, np.int64), *(np.empty(0) for _ in range(6)), origin)
+    empty = np.empty(0)
+    seg = Segments(ids, np.empty(0, np.int64), empty, empty, empty, empty, empty, empty, origin)
     parts: list[list[FloatArray]] = [[] for _ in range(7)]
     for j, tid in enumerate(ids):
         tl = lines[tid]
@@ -345,11 +346,11 @@ def segments(lines: TrackLines) -> Segments:
         xy = seg.to_plane(tl, tl.xy)
         cols = (np.full(len(xy) - 1, j), xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1], tl.cpos[:-1], tl.cpos[1:])
         for store, col in zip(parts, cols, strict=True):
-            store.append(np.asarray(col))
+            store.append(np.asarray(col, dtype=float))
     if not parts[0]:
         return seg
-    track, *rest = (np.concatenate(p) for p in parts)
-    return Segments(ids, track.astype(np.int64), *rest, origin)
+    c = [np.concatenate(p) for p in parts]
+    return Segments(ids, c[0].astype(np.int64), c[1], c[2], c[3], c[4], c[5], c[6], origin)
 
 
 def parallel_candidates(h: Hypothesis, radius_m: float, lines: TrackLines, seg: Segments) -> list[Hypothesis]:

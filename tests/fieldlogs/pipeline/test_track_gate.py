@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from dbtools.database import read_network
-from fieldlogs.io import read_run
 from fieldlogs.pipeline.aid import Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gps import TrackGpsAid
@@ -23,6 +22,7 @@ from fieldlogs.pipeline.hypotheses import parallel_candidates, reachable, segmen
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.track_truth import compare_tracks
 from fieldlogs.pipeline.types import Fix, Hypothesis
+from fieldlogs.runs.handle import read_run
 from schemas.enums import EventType, FixSource
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
 
@@ -121,7 +121,9 @@ def test_multipath_beside_a_parallel_track_never_claims_it(sample_network_db: Pa
     ev = res.events
     assert (ev["type"] == EventType.CROSSOVER.value).any()
     assert (ev["type"] == EventType.TRACK_CHANGE_REFUSED.value).any()
-    cmp = compare_tracks(res.positions, run.stream("truth"), network)
+    truth = run.stream("truth")
+    assert truth is not None
+    cmp = compare_tracks(res.positions, truth, network)
     assert int(cmp["wrong"].sum()) == 0
 
 
@@ -134,7 +136,7 @@ def test_imu_window_that_may_reach_the_crossovers_far_turnout_is_not_tested(pct:
     n = net("crossover")
     margin = MarginConfig(distance_pct=pct)
     tr = travel(n, np.full(400, 10.0))
-    r = float(n.switches.set_index("switch_id").loc["W1", "diverging_radius_m"])
+    r = float(n.switches["diverging_radius_m"][n.switches["switch_id"] == "W1"].iloc[0])
     wz = np.where((tr.d >= 100.0) & (tr.d < 100.0 + r * math.atan(0.1)), 10.0 / r, 0.0)
     aid = TrackImuAid(wz, turnouts(n.switches), track_lines(n), CFG, margin)
     aids = [Start("9003", "D", 200.0, 1), TopologyAid(track_lines(n), margin), aid]
