@@ -210,6 +210,7 @@ class EventType(StrEnum):
     SWITCH_SPLIT = "switch_split"
     TRACK_RESOLVED = "track_resolved"
     HYPOTHESIS_DROPPED = "hypothesis_dropped"
+    TRACK_CHANGE_REFUSED = "track_change_refused"
 
 
 EVENT_MEANING: dict[EventType, str] = {
@@ -253,6 +254,9 @@ EVENT_MEANING: dict[EventType, str] = {
     "left one candidate track; detail.after_switch_m is the travel since the split",
     EventType.HYPOTHESIS_DROPPED: "a candidate ran past a buffer stop or a non-navigable end, or evidence ruled it "
     "out; with none left the position is forgotten",
+    EventType.TRACK_CHANGE_REFUSED: "a line-based aid (GPS decision, balise, feature point) put the position on a "
+    "track no navigable path reaches from the candidates within the travel and the margin: refused, the "
+    "candidates kept",
 }
 
 #: Events that correct the km, and the one the position-correction % is defined on [S003 §5.2].

@@ -13,10 +13,10 @@ import pytest
 
 from dbtools.database import read_network
 from dbtools.topology import Topology
-from fieldlogs.runs.handle import read_run
 from fieldlogs.possession.check import check_run
 from fieldlogs.possession.plan import Possession, load_plan, plan_frame, read_plan
 from fieldlogs.possession.tracks import crossover_between, possessed_at, track_alarms
+from fieldlogs.runs.handle import read_run
 from schemas.enums import AlarmType, NoticeType
 
 DATA = Path(__file__).parents[2] / "data" / "possession_network"
