@@ -74,6 +74,9 @@ class RunningCfg:
     reversal_dwell_s: float = 90.0
     standstill_start_s: float = 20.0
     standstill_end_s: float = 20.0
+    rollback_m: float = 0.0
+    rollback_min_gradient_permille: float = 0.0
+    rollback_speed_mps: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -113,6 +116,7 @@ class TachoCfg:
     teeth: int = 90
     wheel_diameter_m: float = 0.86
     wear_pct: tuple[float, float] = (0.0, 0.5)
+    two_phase: bool = False
 
 
 @dataclass(frozen=True)
@@ -382,6 +386,7 @@ def _check_non_negative(s: Scenario) -> Problem:
         "running.reversal_dwell_s": s.running.reversal_dwell_s,
         "running.standstill_start_s": s.running.standstill_start_s,
         "running.standstill_end_s": s.running.standstill_end_s,
+        "running.rollback_m": s.running.rollback_m,
         "road_rail.off_rail_before_s": s.road_rail.off_rail_before_s,
         "road_rail.off_rail_after_s": s.road_rail.off_rail_after_s,
         "road_rail.transfer_s": s.road_rail.transfer_s,
@@ -405,6 +410,8 @@ def _check_non_negative(s: Scenario) -> Problem:
 def _check_bounds(s: Scenario) -> Problem:
     if s.running.cant_max_mm >= 1000 * s.running.gauge_m:
         return "running.cant_max_mm", "must be smaller than the gauge"
+    if not 0 < s.running.rollback_speed_mps <= 2:
+        return "running.rollback_speed_mps", "must be > 0 and ≤ 2 m/s (a train rolling back)"
     if not 0 <= s.balise.miss_probability <= 1:
         return "balise.miss_probability", "must be between 0 and 1"
     if not 0 <= s.gps.nsat <= 64:

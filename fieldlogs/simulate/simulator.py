@@ -126,7 +126,7 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
     streams: dict[str, pd.DataFrame] = {}
     rolled = wheel_distance(motion, factor)
     if sensors.tacho:
-        streams["tacho"] = tacho_stream(rolled, motion, d_true, scenario.tacho.teeth)
+        streams["tacho"] = tacho_stream(rolled, motion, d_true, scenario.tacho.teeth, scenario.tacho.two_phase)
     if sensors.imu:
         kin = body_kinematics(geom, cant_model(scenario), motion)
         true = {"ax": kin.ax, "ay": kin.ay, "az": kin.az, "wx": kin.wx, "wy": kin.wy, "wz": kin.wz}
