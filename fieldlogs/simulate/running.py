@@ -229,6 +229,10 @@ class _Driving:
     rollback_speed: float = 0.5
     min_still_s: float = 0.0
 
+    def rollback_limit(self, q: FloatArray) -> FloatArray:
+        """Speed limit of a rollback [m/s]."""
+        return np.full(q.shape, self.rollback_speed)
+
     def rollback_at(self, move: Move, sigma: float) -> float:
         """Distance rolled back before starting ``move`` from rest at ``sigma`` (0: none)."""
         if self.rollback_m <= 0:
@@ -265,8 +269,7 @@ def _drive(tl: _Timeline, drv: _Driving, mv: Move, stations_sigma: FloatArray, d
             tl.stops_km.append(float(drv.geom.km_at(a0)))
         rb = drv.rollback_at(mv, a0)
         if rb > 0:
-            cap = drv.rollback_speed
-            tl.add(-segment_samples(rb, lambda q: np.full(q.shape, cap), ROLLBACK_ACCEL, ROLLBACK_ACCEL))
+            tl.add(-segment_samples(rb, drv.rollback_limit, ROLLBACK_ACCEL, ROLLBACK_ACCEL))
             tl.still(drv.min_still_s)
             tl.rolled = True
         a0 -= mv.direction * rb

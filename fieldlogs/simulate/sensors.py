@@ -9,8 +9,8 @@
   = wheel rolled distance / (π·D_true); the wheel rolls at |v|·(1 ± slip). Pulses never
   decrease whatever the direction. A two-phase tachometer (``tacho.two_phase``) also gives the
   sense of rotation per cycle, the ``direction`` column in the body frame: the sign of the
-  displacement toward the F end over the cycle (k−1, k] where a pulse came, 0 where none did. Distance by pulses with the nominal diameter is
-  rolled distance × D_nominal / D_true.
+  displacement toward the F end over the cycle (k−1, k] where a pulse came, 0 where none did.
+  Distance by pulses with the nominal diameter is rolled distance × D_nominal / D_true.
 * **D-GPS** (1 Hz): true track position (DB GIS geometry) + Gauss-Markov error (σ, τ) +
   multipath bursts; outages (tunnels) fix 0 with empty lat/lon; fix 1 (no differential
   correction, larger error) for a while after an outage; nsat/hdop follow the conditions.
