@@ -26,7 +26,7 @@ loop over the few moments an aid speaks):
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -43,6 +43,7 @@ from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.gps.analysis import analyse_gps
 from fieldlogs.pipeline.imugap import imu_gaps, with_gap_allowance
 from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.pipeline.rollback import Rollback, detect_rollbacks, inferred_rotation
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
@@ -229,11 +230,14 @@ def prepare_run(
         cycle_s=cfg.cycle_s,
         uses_pto=run.meta.vehicle_kind == VehicleKind.ROAD_RAIL,
     )
+    rollbacks = tuple(detect_rollbacks(cycles))  # a tacho without its sense: the IMU's (fail-safe)
+    if rollbacks:
+        cycles = replace(cycles, rotation=inferred_rotation(cycles, list(rollbacks)))
     if not keep_imu:
         streams["imu"] = None  # read only through the cycles from here on
         run.release("imu")
     gnss = GnssUnit.for_run(run, network, cfg.gnss)
-    return context_on(cycles, run, network, cfg, streams, gnss), pre
+    return context_on(cycles, run, network, cfg, streams, gnss, rollbacks), pre
 
 
 def context_on(
@@ -243,6 +247,7 @@ def context_on(
     cfg: PipelineConfig,
     streams: dict[str, pd.DataFrame | None],
     gnss: GnssUnit | None,
+    rollbacks: tuple[Rollback, ...] = (),
 ) -> RunContext:
     """Stages 3–4 of the module docstring on ``cycles``: what :func:`prepare_run` builds after
     the cycles, and again on the cycles with the wheel scale divided out
@@ -257,8 +262,9 @@ def context_on(
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
     geometry = VehicleGeometry.of(run.meta.vehicle)
     return RunContext(
-        network, cfg, streams, cycles, odo, gps, features, geometry=geometry, gnss=gnss, imu_gaps=tuple(gaps)
-    )
+        network, cfg, streams, cycles, odo, gps, features, geometry=geometry, gnss=gnss, imu_gaps=tuple(gaps),
+        rollbacks=rollbacks,
+    )  # fmt: skip
 
 
 def run_pipeline(
@@ -279,7 +285,9 @@ def run_pipeline(
     first = ctx
 
     def rescaled(scale: float) -> RunContext:
-        return context_on(scaled_cycles(first.cycles, scale), run, network, cfg, first.streams, first.gnss)
+        return context_on(
+            scaled_cycles(first.cycles, scale), run, network, cfg, first.streams, first.gnss, first.rollbacks
+        )
 
     ctx, scale, sol, checks = wheel_corrected(ctx, rescaled, cfg)
     odo = ctx.odometry
