@@ -53,7 +53,7 @@ from fieldlogs.quality.dbfit import require_db_fit
 from fieldlogs.quality.limits import masked
 from fieldlogs.quality.tacho import cumulative_again
 from fieldlogs.quality.usability import Purpose, require_usable
-from schemas.enums import EventType, VehicleKind
+from schemas.enums import CabDirection, EventType, VehicleKind
 from schemas.frames import FIRST_DATA_LINE
 
 __all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
@@ -218,6 +218,7 @@ def prepare_run(
     assert run.meta is not None
     pre: list[Event] = []
     streams = clean_streams(run, pre)
+    streams["balise"] = own_reader(streams.get("balise"))
     streams = clocks_aligned(streams, run.meta.wheel_diameter_m, run.meta.teeth, cfg, pre, offsets)
     t_end = max((float(s["t"].iloc[-1]) for s in streams.values() if s is not None and len(s)), default=0.0)
     cycles = build_cycles(
@@ -238,6 +239,16 @@ def prepare_run(
         run.release("imu")
     gnss = GnssUnit.for_run(run, network, cfg.gnss)
     return context_on(cycles, run, network, cfg, streams, gnss, rollbacks), pre
+
+
+def own_reader(balise: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The telegrams of the unit's own balise reader: on a vehicle with one per cab (the stream's
+    ``reader`` column) the F cab's — the unit's own cab, F for unit F and, in its mirrored view,
+    for unit R too (:mod:`fieldlogs.pipeline.units`) [S003 §2]; without the column, all."""
+    if balise is None or "reader" not in balise.columns:
+        return balise
+    reader = balise["reader"].astype("string")
+    return balise[(reader.isna() | (reader == CabDirection.FORWARD.value)).to_numpy(dtype=bool)].reset_index(drop=True)
 
 
 def context_on(

@@ -10,7 +10,10 @@ sees the same run from the R cab: its body frame is the vehicle's turned half ro
 * the cab's F and R swap (its forward is its own cab), a two-phase tacho's ``direction``
   changes sign, and so does the truth's ``speed_mps`` (toward the unit's forward end);
 * run.json's vehicle geometry has every ``x_m`` and ``y_m`` negated (the reader, antennas and
-  IMU seen from the other end) and a radar ``looks_toward`` F ↔ R.
+  IMU seen from the other end) and a radar ``looks_toward`` F ↔ R;
+* on a vehicle with a balise reader in each cab (the balise stream's ``reader`` column, run.json
+  vehicle ``balise_reader`` and ``balise_reader_r``) the readers swap too: each unit reads its
+  own cab's reader, "F" in its own frame (:func:`fieldlogs.pipeline.run.own_reader`).
 
 Both units position the vehicle's **reference point** (run.json ``vehicle``), so the known
 distance between their positions along the track is 0 (each cab end lies its ``x_m`` from it).
@@ -68,10 +71,11 @@ def mirrored_streams(streams: dict[str, pd.DataFrame]) -> dict[str, pd.DataFrame
         out["tacho"] = _negated(out["tacho"], ("direction",))
     if "truth" in out:
         out["truth"] = _negated(out["truth"], ("speed_mps",))
-    if "cab" in out:
-        cab = out["cab"].copy()
-        cab["direction"] = cab["direction"].astype(str).map(SWAP).astype(out["cab"]["direction"].dtype)
-        out["cab"] = cab
+    for name, column in (("cab", "direction"), ("balise", "reader")):
+        if name in out and column in out[name].columns:
+            frame = out[name].copy()
+            frame[column] = frame[column].astype("string").map(SWAP, na_action="ignore").astype("string")
+            out[name] = frame
     return out
 
 
@@ -94,7 +98,10 @@ def mirrored_meta(meta: RunMeta) -> RunMeta:
     extra = dict(meta.extra)
     if "radar" in extra:
         extra["radar"] = mirrored_block(extra["radar"])
-    return replace(meta, vehicle=mirrored_block(meta.vehicle), extra=extra)
+    vehicle = meta.vehicle
+    if vehicle is not None and "balise_reader_r" in vehicle:  # the other cab's reader is unit R's own
+        vehicle = {**vehicle, "balise_reader": vehicle["balise_reader_r"], "balise_reader_r": vehicle["balise_reader"]}
+    return replace(meta, vehicle=mirrored_block(vehicle), extra=extra)
 
 
 def unit_run(run: Run, unit: str, folder: Path) -> Run:

@@ -193,6 +193,7 @@ class RadarIfCfg:
 @dataclass(frozen=True)
 class BaliseCfg:
     miss_probability: float = 0.0
+    readers_x_m: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -322,6 +323,7 @@ def _check(s: Scenario) -> None:
         _check_positive,
         _check_non_negative,
         _check_bounds,
+        _check_cabs,
         _check_spans,
         _check_episodes,
         _check_radar,
@@ -410,8 +412,6 @@ def _check_non_negative(s: Scenario) -> Problem:
 def _check_bounds(s: Scenario) -> Problem:
     if s.running.cant_max_mm >= 1000 * s.running.gauge_m:
         return "running.cant_max_mm", "must be smaller than the gauge"
-    if not 0 < s.running.rollback_speed_mps <= 2:
-        return "running.rollback_speed_mps", "must be > 0 and ≤ 2 m/s (a train rolling back)"
     if not 0 <= s.balise.miss_probability <= 1:
         return "balise.miss_probability", "must be between 0 and 1"
     if not 0 <= s.gps.nsat <= 64:
@@ -432,6 +432,15 @@ def _check_bounds(s: Scenario) -> Problem:
     for key, ((lo, hi), vmin, vmax) in ranges.items():
         if not (vmin <= lo <= hi <= vmax):
             return key, f"needs [low, high] with {vmin} ≤ low ≤ high ≤ {vmax}, got [{lo}, {hi}]"
+    return None
+
+
+def _check_cabs(s: Scenario) -> Problem:
+    """Rolling back and a balise reader per cab."""
+    if not 0 < s.running.rollback_speed_mps <= 2:
+        return "running.rollback_speed_mps", "must be > 0 and ≤ 2 m/s (a train rolling back)"
+    if len(s.balise.readers_x_m) not in (0, 2) or any(not abs(x) <= 50 for x in s.balise.readers_x_m):
+        return "balise.readers_x_m", "[] or [x of the F cab's reader, x of the R cab's] within ±50 m"
     return None
 
 

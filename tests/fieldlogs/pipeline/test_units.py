@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from cli.main import app
 from dbtools.database import read_network
 from fieldlogs.io import read_run, write_run
-from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.pipeline.run import own_reader, run_pipeline
 from fieldlogs.pipeline.units import compare_units, mirrored_block, mirrored_streams, unit_run
 from fieldlogs.simulate.samples_net import network_sample_scenarios
 from fieldlogs.simulate.scenario import scenario_from_dict
@@ -122,3 +122,36 @@ def test_run_unit_both_cli(turnback: Path, sample_network_db: Path, tmp_path: Pa
     assert bad.exit_code == UsageError.exit_code
     assert "--unit must be F, R or both" in bad.output
     assert not (tmp_path / "x").exists()
+
+
+def test_own_reader_keeps_the_units_cab() -> None:
+    b = pd.DataFrame(
+        {"t": [1.0, 2.0, 3.0], "kind": ["C", "C", "C"], "reader": pd.array(["F", "R", None], dtype="string")}
+    )
+    assert own_reader(b)["t"].tolist() == [1.0, 3.0]
+    assert own_reader(mirrored_streams({"balise": b})["balise"])["t"].tolist() == [2.0, 3.0]
+    plain = b.drop(columns="reader")
+    assert own_reader(plain) is plain
+
+
+def test_a_reader_per_cab_two_independent_units(sample_network_db: Path, tmp_path: Path) -> None:
+    """The turnback with a balise reader in each cab 9.5 m from the reference point: each unit
+    corrects on its own reader's telegrams, so the units differ, and agree within their margins."""
+    net = read_network(sample_network_db)
+    over = dict(network_sample_scenarios(net)["sim-net-turnback"])
+    over["running"] = {"rollback_m": 3.0}
+    over["tacho"] = {"two_phase": True}
+    over["balise"] = {"readers_x_m": [9.5, -9.5]}
+    streams, meta = simulate_run(net, scenario_from_dict(over, source="test"))
+    assert streams["balise"]["reader"].value_counts().to_dict() == {"F": 14, "R": 14}
+    assert meta.vehicle is not None and meta.vehicle["balise_reader_r"] == {"x_m": -9.5, "y_m": 0.0}
+    folder = write_run(tmp_path / "two-readers", meta, streams)
+    pos = {}
+    for unit in ("F", "R"):
+        res = run_pipeline(unit_run(read_run(folder), unit, tmp_path / unit), net)
+        pos[unit] = res.positions
+        judged = res.positions[res.positions["state"] != "undetermined"]
+        assert len(judged) > 3000
+    _, s = compare_units(pos["F"], pos["R"])
+    assert 0.5 < s["max_abs_difference_m"] < 20.0
+    assert s["cycles_beyond_margins"] == 0 and s["cycles_on_other_tracks"] == 0 and s["disagreements"] == []
