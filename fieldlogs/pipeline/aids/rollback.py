@@ -10,12 +10,13 @@ by ``margin.uncertain_growth_pct`` of the travel since, as after a slip/slide fa
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
+from fieldlogs.pipeline.aids.failsafe import uncertain_outcome
 from fieldlogs.pipeline.rollback import Rollback
 from fieldlogs.pipeline.types import Event
-from schemas.enums import EventType, PositionState
+from schemas.enums import EventType
 
 
 @dataclass(eq=False)
@@ -33,8 +34,4 @@ class RollbackAid(StaticAid):
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         rb: Rollback = obs.payload
         detail = {"t_start": rb.t_start, "distance_m": round(rb.distance_m, 3), "imu_ratio": round(rb.ratio, 3)}
-        ev = Event(view.t, EventType.ROLLBACK_SUSPECTED, view.km, detail=detail)
-        fix = view.estimate
-        if fix is None:
-            return Outcome([ev])
-        return Outcome([ev], replace(fix, t_effective=view.t, state=PositionState.UNCERTAIN, uncertain_since_d=view.d))
+        return uncertain_outcome(Event(view.t, EventType.ROLLBACK_SUSPECTED, view.km, detail=detail), view)
