@@ -127,3 +127,7 @@ def test_rollback_knobs_checked() -> None:
         scenario_from_dict({"running": {"rollback_speed_mps": 5.0}})
     with pytest.raises(ScenarioError, match="rollback_m"):
         scenario_from_dict({"running": {"rollback_m": -1.0}})
+    with pytest.raises(ScenarioError, match="readers_x_m"):
+        scenario_from_dict({"balise": {"readers_x_m": [9.5]}})
+    with pytest.raises(ScenarioError, match="readers_x_m"):
+        scenario_from_dict({"balise": {"readers_x_m": [9.5, float("nan")]}})
