@@ -211,6 +211,7 @@ class EventType(StrEnum):
     TRACK_RESOLVED = "track_resolved"
     HYPOTHESIS_DROPPED = "hypothesis_dropped"
     TRACK_CHANGE_REFUSED = "track_change_refused"
+    ROLLBACK_SUSPECTED = "rollback_suspected"
 
 
 EVENT_MEANING: dict[EventType, str] = {
@@ -229,6 +230,8 @@ EVENT_MEANING: dict[EventType, str] = {
     EventType.SLIP: "wheel slip (traction) corrected inertially [S000 §3.1]",
     EventType.SLIDE: "wheel slide (braking) corrected inertially [S000 §3.1]",
     EventType.FAILSAFE: "a slip/slide correction exceeded the maximum correction time: position uncertain",
+    EventType.ROLLBACK_SUSPECTED: "a start moved against the cab by the IMU (rolling back; the tacho gives no "
+    "sense): travel taken as backward, position uncertain [S003 §5.3(2)]",
     EventType.IMU_LOST: "the IMU fell silent while moving: slips cannot be detected; position uncertain, margin grows",
     EventType.IMU_BACK: "the IMU samples are back (the position stays uncertain until the next absolute fix)",
     EventType.TRACK_DECISION: "trusted GPS fixes decided line and track (up/down) [S001 §4.2]",
