@@ -128,14 +128,7 @@ def _stretches_on_truth(path: pd.DataFrame, run: str) -> list[tuple[str, float]]
         "crossover",
         "junction",
         "turnback",
-        pytest.param(
-            "station",
-            marks=pytest.mark.xfail(
-                strict=True,
-                reason="the pipeline claims 0420-U1 (determined) for 5 s at t≈169-174 s while the truth is on "
-                "0420-D1: a wrong-track claim of the hypothesis engine, which the audit path shows",
-            ),
-        ),
+        "station",
     ],
 )
 def test_sim_net_path_is_the_truth_track_sequence(net_audit: Path, run: str) -> None:
