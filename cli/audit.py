@@ -116,6 +116,7 @@ class By(StrEnum):
     route = "route"
     run = "run"
     vehicle = "vehicle"
+    track = "track"
 
 
 class ReportFmt(StrEnum):
@@ -179,9 +180,14 @@ def _view(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:
 
 
 def render_tables(rep: Report, c: Console) -> None:
-    from fieldlogs.reports.report import ROUTE_KEYS
+    from fieldlogs.reports.report import ROUTE_KEYS, TRACK_KEYS
 
-    keys = {"route": ROUTE_KEYS, "run": ["run_id", "vehicle_id", *ROUTE_KEYS], "vehicle": ["vehicle_id"]}[rep.by]
+    keys = {
+        "route": ROUTE_KEYS,
+        "run": ["run_id", "vehicle_id", *ROUTE_KEYS],
+        "vehicle": ["vehicle_id"],
+        "track": TRACK_KEYS,
+    }[rep.by]
     g = rep.groups.assign(distance_km=(rep.groups["distance_m"] / 1000.0).round(1))
     pct = [col for col in PCT_COLUMNS if not (rep.by == "run" and col == "n_runs")]
     title = f"Position correction by {rep.by} (balise corrections, target {rep.target_pct:g} %)"
@@ -197,7 +203,11 @@ def render_tables(rep: Report, c: Console) -> None:
 @cli_command
 def report(
     audit_db: Path = typer.Argument(..., help="Audit database written by `trainpos audit`."),
-    by: By = typer.Option(By.route, "--by", help="Group by route (line, track, direction), run or vehicle."),
+    by: By = typer.Option(
+        By.route,
+        "--by",
+        help="Group by route (line, track, direction), run, vehicle or track (track_id: the runs' paths of tracks).",
+    ),
     fmt: ReportFmt = typer.Option(ReportFmt.table, "--format", help="table, csv, json or html."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),
     target_pct: float = typer.Option(TARGET_PCT, "--target-pct", min=0.0, help="Position-correction target [%]."),
@@ -207,8 +217,8 @@ def report(
     """Position-correction percentages, slips, feature points, GPS and alarms per route/run/vehicle.
 
     Correction statistics are over balise corrections; feature-point corrections are
-    counted separately. JSON has a stable shape (routes, runs, vehicles, failed_runs)
-    whatever --by is; csv and table follow --by; html is one self-contained file.
+    counted separately. JSON has a stable shape (routes, runs, vehicles, failed_runs, tracks,
+    paths) whatever --by is; csv and table follow --by; html is one self-contained file.
 
     Example: trainpos report audit.sqlite --format html --out audit.html
     """

@@ -292,8 +292,9 @@ def verify(
     """Verify the 20 m GIS grid against the trusted GPS fixes of recorded runs.
 
     Every run is replayed through the positioning pipeline on DB; trusted fixes on a track
-    known from balises or the GPS up/down decision (never guessed) are map-matched to that
-    track. Per 20 m cell the runs' mean lateral offsets are t-tested against 0 (the run is
+    known from balises or the GPS up/down decision (never guessed), or on a network from
+    the track determined by the hypothesis engine, are map-matched to that track (tracks off
+    a line: to their track_points grid). Per 20 m cell the runs' mean lateral offsets are t-tested against 0 (the run is
     the unit, the spread is at least the track's pooled one), Benjamini–Hochberg over all
     cells. The scan pools neighbouring cells: over windows of 100–500 m each run's offset
     is compared with its own offset either side (removing its slow GPS error), the runs'
@@ -306,7 +307,9 @@ def verify(
     JSON (--format json): {"db", "db_version", "evidence", "runs", "config", "counts",
     "km_residual", "coverage": [per line/track], "defects": [...], "proposal": [moved
     points], "km_defects": [along-track stretches], "scan": {"lateral", "along_track"},
-    "cells": [every cell with at least one fix]}.
+    "cells": [every cell with at least one fix], "track_points": {the same keys from "config"
+    on, for the tracks off a line — station tracks, crossovers — per track_id: line_code = the
+    track id, km = distance along it; only for a DB with track_points}}.
 
     Exit codes: 0 no defect, 1 defects found, 2 unreadable DB/run or bad usage,
     3 --propose/--out exists (use --force).
@@ -339,7 +342,7 @@ def verify(
     if propose is not None:
         _write_proposal(report, propose, force, inputs)
     _emit_report(report, fmt, out, force, inputs)
-    if report.verification.has_defects:
+    if report.verification.has_defects or (report.track_points is not None and report.track_points.has_defects):
         raise typer.Exit(EXIT_FINDINGS)
 
 

@@ -45,12 +45,22 @@ class _PlainPath(RuntimeParam):
         )
 
 
+@dataclass(frozen=True)
+class _PlainStr(RuntimeParam):
+    """typer's coercion of a plain ``str`` parameter without pydantic (``TypeAdapter(str)`` of
+    a command-line text is the text itself)."""
+
+    def _coerce_value(self, value: Any, param: Any, ctx: Any) -> Any:
+        return value
+
+
 class PathCommand(TyperCommand):
     """typer's command, its plain ``Path`` parameters coerced without importing pydantic
     (0.1–0.2 s of a ``trainpos run``, issue 21) and its ``--help`` flag defaulting to False
     (as :class:`Group`'s). Plain: annotated ``Path`` (or ``Path |
     None``), none of typer's path checks (exists, resolve_path, allow_dash, path_type),
-    which keep typer's own coercion; every other parameter too."""
+    which keep typer's own coercion; every other parameter too. A plain ``str`` (no parser)
+    is taken as given, as pydantic would."""
 
     def get_help_option(self, ctx: Any) -> Any:
         return _help_default_false(super().get_help_option(ctx))
@@ -59,7 +69,14 @@ class PathCommand(TyperCommand):
         for p in self.params:
             if isinstance(p, _TyperParameter) and p._runtime_param is None and _plain_path(p):
                 p._runtime_param = _PlainPath(p.type_descriptor.parameter_info, Path)
+            elif isinstance(p, _TyperParameter) and p._runtime_param is None and _plain_str(p):
+                p._runtime_param = _PlainStr(p.type_descriptor.parameter_info, str)
         return super().parse_args(ctx, args)
+
+
+def _plain_str(p: _TyperParameter) -> bool:
+    d = p.type_descriptor
+    return d.annotation is str and d.parameter_info.parser is None and not (p.multiple or p.nargs != 1)
 
 
 def _plain_path(p: _TyperParameter) -> bool:

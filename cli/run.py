@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -19,6 +20,12 @@ def run(
     out: Path = typer.Option(..., "--out", "-o", help="Output folder for positions, events, summary.json."),
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML, see trainpos config show)."),
     force: bool = typer.Option(False, "--force", help="Replace an existing output folder."),
+    unit: str = typer.Option(
+        "F",
+        "--unit",
+        help="Positioning unit [S003 §2: one per cab]: F (the F cab's), R (the R cab's: the run seen from "
+        "the other end), both (OUT/F and OUT/R, compared in OUT/units.json).",
+    ),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Replay a run cycle by cycle (100 ms) through the onboard positioning logic.
@@ -30,18 +37,46 @@ def run(
 
     Example: trainpos run logs/run-001 --db net.sqlite --out out/run-001
     """
+    import tempfile
+
     from dbtools.database import read_network
     from fieldlogs.config import load_tree
     from fieldlogs.pipeline.outputs import streamed_results
+    from fieldlogs.pipeline.units import UNITS, replay_units, unit_run
     from fieldlogs.pipeline.windows import replay_bounded
     from fieldlogs.runs.handle import read_run
+    from schemas.errors import UsageError
 
+    if unit not in (*UNITS, "both"):
+        raise UsageError(f"--unit must be F, R or both, got {unit!r}")
     cfg = load_tree(config).pipeline
     network = read_network(db)
     inputs = [p for p in (run_dir, db, config) if p is not None]  # never replaced by --out
-    with streamed_results(out, force=force, inputs=inputs) as sink:  # a long Parquet run: by windows
-        result = replay_bounded(read_run(run_dir), network, cfg, lambda part: sink.add_positions(part.positions))
+    if unit == "both":
+        results, cmp = replay_units(run_dir, network, cfg, out, force=force, inputs=inputs)
+        for u in UNITS:
+            _print_result(results[u], cfg.window.length_h, out / u)
+        console().print(key_value_table(_comparison_rows(cmp), title=f"Units F and R compared → {out / 'units.json'}"))
+        return
+    with streamed_results(out, force=force, inputs=inputs) as sink, tempfile.TemporaryDirectory() as scratch:
+        view = unit_run(read_run(run_dir), unit, Path(scratch))  # a long Parquet run: by windows
+        result = replay_bounded(view, network, cfg, lambda part: sink.add_positions(part.positions))
         sink.finish(result.events, result.summary)
+    _print_result(result, cfg.window.length_h, out)
+
+
+def _comparison_rows(cmp: dict[str, Any]) -> list[tuple[str, Any]]:
+    worst = cmp["max_abs_difference_m"]
+    return [
+        ("cycles compared", cmp["cycles_compared"]),
+        ("max |km F − km R|", "—" if worst is None else f"{worst:.2f} m"),
+        ("beyond the sum of margins", cmp["cycles_beyond_margins"]),
+        ("on other tracks", cmp["cycles_on_other_tracks"]),
+        ("disagreements", len(cmp["disagreements"])),
+    ]
+
+
+def _print_result(result: Any, window_h: float, out: Path) -> None:
     s = result.summary
     rows = [
         ("run", s["run_id"]),
@@ -73,7 +108,7 @@ def run(
         km, margin = result.last_position
         rows.append(("last position", f"{format_km(km)} ± {margin:.1f} m"))
     if result.windows:
-        rows.append(("replayed", f"in {result.windows} windows of {cfg.window.length_h:g} h"))
+        rows.append(("replayed", f"in {result.windows} windows of {window_h:g} h"))
     console().print(key_value_table(rows, title=f"Positioning → {out}"))
 
 

@@ -24,7 +24,7 @@ from schemas.model import Table
 # --------------------------------------------------------------------------- audit databases
 
 AUDIT_NAMES: dict[str, Table] = {t.name: t for t in (*AUDIT_TABLES, *AUDIT_VIEWS)}
-_RUNS, _EVENTS, _TRACES, _META = (t.name for t in AUDIT_TABLES)
+_RUNS, _EVENTS, _TRACES, _META, _PATH = (t.name for t in AUDIT_TABLES)
 
 #: ``route_summary`` (columns: :data:`schemas.audit.ROUTE_SUMMARY`): per (line, track,
 #: direction) over the runs with status ok; mean/max % over their balise corrections.
@@ -176,15 +176,21 @@ class AuditDB:
             self.conn.execute(f"UPDATE {_RUNS} SET quick_key = ? WHERE run_path = ?", (quick_key, run_path))
 
     def store_run(
-        self, record: Mapping[str, Any], events: Iterable[Sequence[Any]], trace: bytes | None, trace_rows: int = 0
+        self,
+        record: Mapping[str, Any],
+        events: Iterable[Sequence[Any]],
+        trace: bytes | None,
+        trace_rows: int = 0,
+        track_path: Iterable[Sequence[Any]] = (),
     ) -> None:
         """Replace one run's rows in a single transaction: its record (columns of
-        ``audit_runs``), events (rows in ``audit_events`` column order after run_path) and
-        trace blob."""
+        ``audit_runs``), events (rows in ``audit_events`` column order after run_path),
+        trace blob and path of tracks (rows in ``audit_track_path`` column order after run_path)."""
         runs, ev_cols = AUDIT_NAMES[_RUNS].column_names, AUDIT_NAMES[_EVENTS].column_names
+        path_cols = AUDIT_NAMES[_PATH].column_names
         path = record["run_path"]
         with self.conn:
-            for table in (_EVENTS, _TRACES, _RUNS):
+            for table in (_EVENTS, _TRACES, _PATH, _RUNS):
                 self.conn.execute(f"DELETE FROM {table} WHERE run_path = ?", (path,))
             self.conn.execute(
                 f"INSERT INTO {_RUNS} ({','.join(runs)}) VALUES ({','.join('?' * len(runs))})",
@@ -193,6 +199,10 @@ class AuditDB:
             self.conn.executemany(
                 f"INSERT INTO {_EVENTS} ({','.join(ev_cols)}) VALUES ({','.join('?' * len(ev_cols))})",
                 ((path, *r) for r in events),
+            )
+            self.conn.executemany(
+                f"INSERT INTO {_PATH} ({','.join(path_cols)}) VALUES ({','.join('?' * len(path_cols))})",
+                ((path, *r) for r in track_path),
             )
             if trace:
                 self.conn.execute(

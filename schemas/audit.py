@@ -15,7 +15,8 @@ from schemas.outputs import EVENTS
 AUDIT_APPLICATION_ID = 0x54504155
 #: ``PRAGMA user_version`` of an audit DB. 2: tables declared in ``schemas/`` and renamed
 #: ``audit_*``; the run context hashes the DB's actual content (1 used its meta hash).
-AUDIT_SCHEMA_VERSION = 2
+#: 3: ``audit_track_path`` (a run's route as a path of tracks).
+AUDIT_SCHEMA_VERSION = 3
 
 RUN_PATH = Column("run_path", "str", "Run folder (absolute path): the run's identity in the audit")
 
@@ -94,6 +95,32 @@ AUDIT_TRACES = Table(
     foreign_keys=(ForeignKey(("run_path",), AUDIT_RUNS.name, ("run_path",)),),
 )
 
+AUDIT_TRACK_PATH = Table(
+    name="audit_track_path",
+    kind="audit",
+    description=(
+        "A run's route as a path of tracks: one row per maximal stretch of cycles claimed on one "
+        "track (state determined) or ambiguous among candidate tracks, in order (seq)."
+    ),
+    columns=(
+        RUN_PATH,
+        Column("seq", "int", "Order of the entry in the run's path (0, 1, …)", min=0),
+        Column("state", "str", "determined (one track) or ambiguous (candidates)", enum=("determined", "ambiguous")),
+        _n("track_id", "Track (netElement) claimed; the implied LINE:TRACK on a line-only DB", "str"),
+        _n("line_code", "Line of that track (display; null off a line)", "str"),
+        _n("track", "Local name of that track (U/D/S, a station track's 1, 2 …; display)", "str"),
+        _n("candidates", "State ambiguous: JSON list of every candidate track id of the stretch", "str"),
+        Column("t_from", "float", "First cycle of the stretch", unit="s"),
+        Column("t_to", "float", "Last cycle of the stretch", unit="s"),
+        Column("distance_m", "float", "Distance travelled over the stretch (Σ |v|·Δt)", unit="m"),
+        _n("pos_from_m", "Distance along the track from its begin at the first cycle", "float", "m"),
+        _n("pos_to_m", "Distance along the track from its begin at the last cycle", "float", "m"),
+        Column("n_cycles", "int", "Cycles of the stretch", min=1),
+    ),
+    primary_key=("run_path", "seq"),
+    foreign_keys=(ForeignKey(("run_path",), AUDIT_RUNS.name, ("run_path",)),),
+)
+
 AUDIT_META = Table(
     name="audit_meta",
     kind="audit",
@@ -125,6 +152,6 @@ ROUTE_SUMMARY = Table(
 )
 
 #: Tables of an audit DB in dependency order (runs first: the others reference it).
-AUDIT_TABLES: tuple[Table, ...] = (AUDIT_RUNS, AUDIT_EVENTS, AUDIT_TRACES, AUDIT_META)
+AUDIT_TABLES: tuple[Table, ...] = (AUDIT_RUNS, AUDIT_EVENTS, AUDIT_TRACES, AUDIT_META, AUDIT_TRACK_PATH)
 #: Views of an audit DB.
 AUDIT_VIEWS: tuple[Table, ...] = (ROUTE_SUMMARY,)

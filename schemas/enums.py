@@ -210,6 +210,8 @@ class EventType(StrEnum):
     SWITCH_SPLIT = "switch_split"
     TRACK_RESOLVED = "track_resolved"
     HYPOTHESIS_DROPPED = "hypothesis_dropped"
+    TRACK_CHANGE_REFUSED = "track_change_refused"
+    ROLLBACK_SUSPECTED = "rollback_suspected"
 
 
 EVENT_MEANING: dict[EventType, str] = {
@@ -228,6 +230,8 @@ EVENT_MEANING: dict[EventType, str] = {
     EventType.SLIP: "wheel slip (traction) corrected inertially [S000 §3.1]",
     EventType.SLIDE: "wheel slide (braking) corrected inertially [S000 §3.1]",
     EventType.FAILSAFE: "a slip/slide correction exceeded the maximum correction time: position uncertain",
+    EventType.ROLLBACK_SUSPECTED: "a start moved against the cab by the IMU (rolling back; the tacho gives no "
+    "sense): travel taken as backward, position uncertain [S003 §5.3(2)]",
     EventType.IMU_LOST: "the IMU fell silent while moving: slips cannot be detected; position uncertain, margin grows",
     EventType.IMU_BACK: "the IMU samples are back (the position stays uncertain until the next absolute fix)",
     EventType.TRACK_DECISION: "trusted GPS fixes decided line and track (up/down) [S001 §4.2]",
@@ -253,6 +257,9 @@ EVENT_MEANING: dict[EventType, str] = {
     "left one candidate track; detail.after_switch_m is the travel since the split",
     EventType.HYPOTHESIS_DROPPED: "a candidate ran past a buffer stop or a non-navigable end, or evidence ruled it "
     "out; with none left the position is forgotten",
+    EventType.TRACK_CHANGE_REFUSED: "a line-based aid (GPS decision, balise, feature point) put the position on a "
+    "track no navigable path reaches from the candidates within the travel and the margin: refused, the "
+    "candidates kept",
 }
 
 #: Events that correct the km, and the one the position-correction % is defined on [S003 §5.2].
@@ -279,6 +286,7 @@ class NoticeType(StrEnum):
     CROSSOVER = "crossover"
     POSITION_UNCERTAIN = "position_uncertain"
     POSITION_UNDETERMINED = "position_undetermined"
+    TRACK_UNCONFIRMED = "track_unconfirmed"
 
 
 ALARM_MEANING: dict[AlarmType | NoticeType, str] = {
@@ -293,4 +301,5 @@ ALARM_MEANING: dict[AlarmType | NoticeType, str] = {
     NoticeType.CROSSOVER: "a crossover to the other track was detected",
     NoticeType.POSITION_UNCERTAIN: "the km is uncertain (poor GPS); alarms held",
     NoticeType.POSITION_UNDETERMINED: "no km yet on this on-rail period",
+    NoticeType.TRACK_UNCONFIRMED: "ambiguous among tracks that include the possessed one: not yet confirmed on it",
 }

@@ -90,6 +90,15 @@ BALISE = Table(
                 ("n_total", "balises in the group (N_TOTAL + 1), as in the balises table", 1, 8),
             )
         ),
+        Column(
+            "reader",
+            "str",
+            "Which cab's balise reader read the telegram on a vehicle with one per cab (F, R; run.json vehicle "
+            "balise_reader and balise_reader_r); absent: the one reader",
+            required=False,
+            nullable=True,
+            enum=tuple(d.value for d in CabDirection),
+        ),
     ),
     required=False,
 )

@@ -24,6 +24,14 @@ POSSESSIONS = Table(
         Column("released_at", "str", "Actual release (ISO 8601)", nullable=True),
         Column("vehicle_id", "str", "Vehicle the work is for (empty: any vehicle)", nullable=True, required=False),
         Column(
+            "track_id",
+            "str",
+            "Network track of the possession (a station track, a crossover …; trainpos db tracks lists them): "
+            "the wrong-track rule among n tracks uses it (empty: the line and track)",
+            nullable=True,
+            required=False,
+        ),
+        Column(
             "purpose",
             "str",
             "work, or protection: an adjacent-line protection possession [S001 §3.1(e)] that never "

@@ -102,6 +102,7 @@ AXLE: tuple[VehicleField, ...] = (
 VEHICLE_SECTIONS: tuple[tuple[str, tuple[VehicleField, ...], bool], ...] = (
     ("antennas", ANTENNA, True),
     ("balise_reader", BALISE_READER, False),
+    ("balise_reader_r", BALISE_READER, False),  # the R cab's, on a vehicle with a reader per cab [S003 §2]
     ("imu", IMU, False),
     ("axles", AXLE, True),
 )

@@ -46,11 +46,13 @@ from fieldlogs.audit.store import (
     fingerprints,
     open_audit,
     pack,
+    path_rows,
     set_meta,
     store_run,
     touch_run,
     unpack,
 )
+from fieldlogs.audit.track_path import append_path, empty_path, track_path
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, load_network, open_db
 from fieldlogs.replay.pool import replay
@@ -192,7 +194,8 @@ def audit_one(
             "elapsed_s": time.perf_counter() - t0,
             "cpu_s": time.process_time() - c0,
         }
-        return {"record": record, "events": pack(result.events), "trace": encode_trace(seen.trace())}
+        trace = encode_trace(seen.trace())
+        return {"record": record, "events": pack(result.events), "trace": trace, "path": path_rows(seen.path)}
     except Exception as exc:  # a bad run or a bug on one run must not stop a fleet audit
         msg = error_message(exc)
     end = {"elapsed_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
@@ -201,10 +204,11 @@ def audit_one(
 
 class _Seen:
     """What the audit keeps of a run's results as they come (the whole run's, or each
-    window's of a long one): its 1 Hz trace and its first and last km."""
+    window's of a long one): its 1 Hz trace, its path of tracks and its first and last km."""
 
     def __init__(self) -> None:
         self.traces: list[pd.DataFrame] = []
+        self.path = empty_path()
         self.episodes: list[Any] = []
         self.first_km: float | None = None
         self.last_km: float | None = None
@@ -213,6 +217,7 @@ class _Seen:
     def add(self, result: Any) -> None:
         self.traces.append(_trace(result, self.episodes))
         self.episodes += result.odometry.episodes
+        self.path = append_path(self.path, track_path(result.positions))
         km = result.positions["km_m"].dropna()
         if len(km):
             self.first_km = float(km.iloc[0]) if self.first_km is None else self.first_km
@@ -363,7 +368,7 @@ def _store(conn: AuditDB, out: Outcome[dict[str, Any]], context: str, stats: Aud
         touch_run(conn, rec["run_path"], rec["quick_key"])
         stats.skipped += 1
         return
-    store_run(conn, rec, res.get("events"), res.get("trace"))
+    store_run(conn, rec, res.get("events"), res.get("trace"), res.get("path"))
     if rec.get("status") == "error":
         stats.failed += 1
         stats.errors.append((rec["run_path"], rec.get("error") or ""))

@@ -22,6 +22,9 @@ config) is already recorded as audited.
   corrections with mean/max %, feature corrections, slips, fail-safe, anomalies. Always up
   to date, since it is computed from the committed rows. ``trainpos report`` adds the
   median and the share above target.
+* ``audit_track_path`` — a run's route as a path of tracks
+  (:mod:`fieldlogs.audit.track_path`): one row per stretch claimed on one track (or
+  ambiguous among candidates), in order, with its times and distance.
 * ``audit_meta`` — key/value: onboard DB path, version and content hash, config (JSON),
   time of the last audit.
 """
@@ -41,11 +44,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from dbtools.audit_db import AuditDB, open_audit_db
-from schemas.audit import AUDIT_EVENTS, AUDIT_RUNS
+from schemas.audit import AUDIT_EVENTS, AUDIT_RUNS, AUDIT_TRACK_PATH
 from schemas.jsonable import jsonable
 
 RUN_COLUMNS = tuple(AUDIT_RUNS.column_names)
 EVENT_COLUMNS = tuple(AUDIT_EVENTS.column_names[1:])  # after run_path
+PATH_COLUMNS = tuple(AUDIT_TRACK_PATH.column_names[1:])  # after run_path
 TRACE_COLUMNS = ("t", "km_m", "margin_m", "speed_mps", "v_pulse_mps", "kappa", "lat", "lon", "error_m", "state")
 #: Trace columns kept in float64 (time, position); the others are stored as float32 (plots).
 TRACE_FLOAT64 = frozenset({"t", "km_m", "lat", "lon"})
@@ -157,15 +161,25 @@ def store_run(
     record: Mapping[str, Any],
     events: pd.DataFrame | Packed | None,
     trace: pd.DataFrame | bytes | None,
+    track_path: pd.DataFrame | Sequence[Sequence[Any]] | None = None,
 ) -> None:
     """Replace one run's rows in a single transaction (``events`` as a frame or as
-    :func:`pack` made it, ``trace`` as a frame or as the bytes of :func:`encode_trace`)."""
+    :func:`pack` made it, ``trace`` as a frame or as the bytes of :func:`encode_trace`,
+    ``track_path`` as a frame or rows of :func:`path_rows`)."""
     empty = events is None or (events.empty if isinstance(events, pd.DataFrame) else not _length(events))
     rows = iter(()) if events is None or empty else _rows(events, EVENT_COLUMNS)
     if isinstance(trace, pd.DataFrame):
         trace = encode_trace(trace) if not trace.empty else None
     n = pq.read_metadata(pa.BufferReader(trace)).num_rows if trace else 0
-    conn.store_run(record, rows, trace or None, n)
+    if isinstance(track_path, pd.DataFrame):
+        track_path = path_rows(track_path)
+    conn.store_run(record, rows, trace or None, n, track_path or ())
+
+
+def path_rows(track_path: pd.DataFrame) -> list[tuple[Any, ...]]:
+    """A path frame (:func:`fieldlogs.audit.track_path.track_path`) as plain rows in
+    ``audit_track_path`` column order after run_path: small to send from a worker."""
+    return list(_rows(track_path, PATH_COLUMNS))
 
 
 def set_meta(conn: AuditDB, values: Mapping[str, Any]) -> None:

@@ -6,9 +6,14 @@ against the DB under test. A fix is evidence only when
 
 * the GPS unit trusts it (the 5/15/30 s RMS filter of :mod:`fieldlogs.pipeline.gps`);
 * the pipeline's position at that moment is not *undetermined* and names a line and
-  track — known from balises, or from a GPS up/down decision the pipeline accepted;
+  track — known from balises, or from a GPS up/down decision the pipeline accepted — or,
+  on a network, a ``track_id`` (a station track, a crossover: the fix's ``track_id``
+  column; such fixes are verified against the ``track_points`` grid,
+  :mod:`dbtools.gis.verify.track_points`);
 * the GPS decision in force, if any, does not name a different track (a disagreement
-  means one of them is wrong: the fix is dropped, never guessed).
+  means one of them is wrong: the fix is dropped, never guessed). An up/down decision
+  speaks of a line's U/D/S tracks only: on a station track or a crossover (determined by
+  the hypothesis engine) it neither contradicts nor confirms.
 
 The track is therefore never inferred from the fix itself. The pipeline km at the fix time
 (``km_ref_m``, linear between the two 100 ms cycles around it) is attached only where the
@@ -33,6 +38,7 @@ from dbtools.database import read_network
 from dbtools.gis.verify.config import FIX_COLUMNS, KM_EPOCH_COLUMN, VerifyConfig
 from dbtools.gis.verify.result import GisVerification
 from dbtools.gis.verify.run import verify_fixes
+from dbtools.gis.verify.track_points import verify_track_points
 from dbtools.network import Network
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import PipelineResult, run_pipeline
@@ -42,6 +48,7 @@ from fieldlogs.replay.pool import replay
 from fieldlogs.runs.handle import read_run
 from schemas.enums import PositionState
 from schemas.errors import InputError, TrainposError
+from schemas.tables import TRACKS
 
 #: Sources of the last absolute fix whose km may serve as the along-track reference.
 KM_REF_SOURCES = ("balise", "feature")
@@ -77,13 +84,18 @@ def fixes_from_result(result: PipelineResult, run_id: str, max_km_margin_m: floa
     i1 = np.minimum(i0 + 1, n_c - 1)
     state0, state1 = _text_at(pos["state"], i0), _text_at(pos["state"], i1)
     line, track = _text_at(pos["line_code"], i0), _text_at(pos["track"], i0)
+    tid = _text_at(pos["track_id"], i0) if "track_id" in pos else np.full(len(i0), "", dtype=object)
     line1, track1 = _text_at(pos["line_code"], i1), _text_at(pos["track"], i1)
     trusted = f["trusted"].to_numpy(dtype=bool)
     before = t >= tc[0]
-    known = before & (state0 != PositionState.UNDETERMINED.value) & (line != "") & (track != "")
+    named = ((line != "") & (track != "")) | (tid != "")  # a line track, or a network track off a line
+    known = before & (state0 != PositionState.UNDETERMINED.value) & named
     dec_line, dec_track = _text(f["decided_line_code"]), _text(f["decided_track"])
     has_dec = (dec_line != "") & (dec_track != "")
-    conflict = known & has_dec & ((dec_line != line) | (dec_track != track))
+    # an up/down decision speaks of a line's U/D/S tracks: it cannot contradict a station track
+    # or a crossover the hypothesis engine determined (nor confirm it: that track is the engine's)
+    line_track = np.isin(track, TRACKS)
+    conflict = known & has_dec & line_track & ((dec_line != line) | (dec_track != track))
     use = trusted & known & ~conflict
 
     km = pos["km_m"].to_numpy(dtype=float)
@@ -112,6 +124,7 @@ def fixes_from_result(result: PipelineResult, run_id: str, max_km_margin_m: floa
             "lon": f["lon"].to_numpy(dtype=float)[sel],
             "line_code": line[sel].astype(str),
             "track": track[sel].astype(str),
+            "track_id": tid[sel].astype(str),
             "km_ref_m": km_ref[sel],
             KM_EPOCH_COLUMN: epoch[i0[sel]],
         }
@@ -244,10 +257,15 @@ class VerifyReport:
     evidence: dict[str, int]
     runs: list[dict[str, Any]]
     network: Network
+    track_points: GisVerification | None = None
+    """The verification of the ``track_points`` grid (tracks off a line, per track_id;
+    :mod:`dbtools.gis.verify.track_points`); None when the DB has none."""
 
     def to_dict(self) -> dict[str, Any]:
         out = {"db": self.db, "db_version": self.db_version, "evidence": self.evidence, "runs": self.runs}
         out.update(self.verification.to_dict())
+        if self.track_points is not None:  # only a network DB has them: line-only output unchanged
+            out["track_points"] = self.track_points.to_dict()
         return out
 
 
@@ -286,4 +304,5 @@ def verify_runs(
         ev.totals(),
         [{"run_id": r.run_id, "folder": r.folder, **r.counts} for r in ev.runs],
         network,
+        verify_track_points(network, ev.fixes, config),
     )

@@ -32,6 +32,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
@@ -277,3 +278,107 @@ def triggers(h: Hypothesis, pos: FloatArray, m: FloatArray, lines: TrackLines) -
 def rebased(hyps: tuple[Hypothesis, ...], s_ref: float, s: float) -> list[Hypothesis]:
     """The candidates with their pos at signed travel ``s`` instead of ``s_ref``."""
     return [replace(h, pos_m=h.pos_m + h.kp * (s - s_ref)) for h in hyps]
+
+
+def reachable(hyps: list[Hypothesis], reach_m: float, lines: TrackLines) -> set[str]:
+    """Tracks a train may be on after at most ``reach_m`` metres of travel (either way) from
+    any of the candidates (each widened by its ``extra_m``): a breadth-first walk over the
+    navigable exits, each track entered with the reach left at its entry, so a track counts
+    only where a navigable path of length ≤ ``reach_m`` leads to it. The gate of
+    :mod:`fieldlogs.pipeline.aids.topology`: a line-based aid may move the position only onto
+    one of these tracks."""
+    out: set[str] = set()
+    todo: list[tuple[str, str, float]] = []  # (track, end to leave by, reach left at the candidate)
+    for h in hyps:
+        out.add(h.track_id)
+        r = reach_m + h.extra_m
+        length = lines[h.track_id].length_m
+        todo.append((h.track_id, END, r - max(length - h.pos_m, 0.0)))
+        todo.append((h.track_id, BEGIN, r - max(h.pos_m, 0.0)))
+    best: dict[tuple[str, str], float] = {}
+    while todo:
+        tid, end, left = todo.pop()
+        if left < 0.0 or best.get((tid, end), -1.0) >= left:
+            continue
+        best[(tid, end)] = left
+        for ex in lines.topo.exits.get((tid, end), []):
+            out.add(ex.track_id)
+            far = END if ex.end == BEGIN else BEGIN
+            todo.append((ex.track_id, far, left - lines[ex.track_id].length_m))
+    return out
+
+
+@dataclass(frozen=True)
+class Segments:
+    """Every track's centreline segments in one local plane (equirectangular at ``origin``):
+    ends (x0, y0)–(x1, y1) [m], the pos at each end and the index of the track in ``ids``."""
+
+    ids: list[str]
+    track: npt.NDArray[np.int64]
+    x0: FloatArray
+    y0: FloatArray
+    x1: FloatArray
+    y1: FloatArray
+    p0: FloatArray
+    p1: FloatArray
+    origin: tuple[float, float]
+
+    def to_plane(self, tl: TrackLine, xy: FloatArray) -> FloatArray:
+        """(n, 2) points of ``tl``'s own plane in this one."""
+        k = math.pi / 180.0 * _R_EARTH
+        (lat0, lon0), (la, lo) = tl.origin, self.origin
+        lat = xy[:, 1] / k + lat0
+        lon = xy[:, 0] / (k * math.cos(math.radians(lat0))) + lon0
+        return np.column_stack([(lon - lo) * k * math.cos(math.radians(la)), (lat - la) * k])
+
+
+def segments(lines: TrackLines) -> Segments:
+    """:class:`Segments` of ``lines`` (tracks without a centreline have none)."""
+    ids = list(lines.lines)
+    origin = next((tl.origin for tl in lines.lines.values() if tl.xy.shape[0] >= 2), (0.0, 0.0))
+    empty = np.empty(0)
+    seg = Segments(ids, np.empty(0, np.int64), empty, empty, empty, empty, empty, empty, origin)
+    parts: list[list[FloatArray]] = [[] for _ in range(7)]
+    for j, tid in enumerate(ids):
+        tl = lines[tid]
+        if tl.xy.shape[0] < 2:
+            continue
+        xy = seg.to_plane(tl, tl.xy)
+        cols = (np.full(len(xy) - 1, j), xy[:-1, 0], xy[:-1, 1], xy[1:, 0], xy[1:, 1], tl.cpos[:-1], tl.cpos[1:])
+        for store, col in zip(parts, cols, strict=True):
+            store.append(np.asarray(col, dtype=float))
+    if not parts[0]:
+        return seg
+    c = [np.concatenate(p) for p in parts]
+    return Segments(ids, c[0].astype(np.int64), c[1], c[2], c[3], c[4], c[5], c[6], origin)
+
+
+def parallel_candidates(h: Hypothesis, radius_m: float, lines: TrackLines, seg: Segments) -> list[Hypothesis]:
+    """Candidates on the other tracks whose centreline passes within ``radius_m`` of ``h``'s
+    point (nearest point inside the track, not at one of its ends: a continuation beyond a
+    joint is no parallel track), each at the pos of that nearest point and running the way
+    ``h`` runs (kp = h.kp · sign(t_h · t_other), t the unit tangents toward increasing pos).
+    The line's other track is kept as well: the line-based decision that placed ``h`` tested
+    only the line's two tracks, with the line geometry, not the network's."""
+    tl = lines[h.track_id]
+    if tl.xy.shape[0] < 2 or not seg.ids:
+        return []
+    x, y, tx, ty = tl.point(h.pos_m)
+    (px, py), (qx, qy) = seg.to_plane(tl, np.array([[x, y], [x + tx, y + ty]]))
+    tx, ty = qx - px, qy - py
+    dx, dy = seg.x1 - seg.x0, seg.y1 - seg.y0
+    u = np.clip(((px - seg.x0) * dx + (py - seg.y0) * dy) / np.maximum(dx * dx + dy * dy, 1e-12), 0.0, 1.0)
+    dist = np.hypot(seg.x0 + u * dx - px, seg.y0 + u * dy - py)
+    out: list[Hypothesis] = []
+    for j in np.unique(seg.track[dist <= radius_m]):
+        other = lines[seg.ids[int(j)]]
+        if other.track_id == tl.track_id:
+            continue
+        mine = np.flatnonzero(seg.track == j)
+        k = int(mine[np.argmin(dist[mine])])
+        pos = float(seg.p0[k] + u[k] * (seg.p1[k] - seg.p0[k]))
+        if not 0.5 < pos < other.length_m - 0.5:
+            continue
+        sign = 1 if tx * dx[k] + ty * dy[k] >= 0.0 else -1
+        out.append(Hypothesis(other.track_id, pos, h.kp * sign, extra_m=h.extra_m))
+    return out

@@ -26,7 +26,7 @@ loop over the few moments an aid speaks):
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -42,6 +42,7 @@ from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.gps.analysis import analyse_gps
 from fieldlogs.pipeline.imugap import imu_gaps, with_gap_allowance
 from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.pipeline.rollback import Rollback, detect_rollbacks, inferred_rotation
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
 from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
@@ -52,7 +53,7 @@ from fieldlogs.quality.limits import masked
 from fieldlogs.quality.tacho import cumulative_again
 from fieldlogs.quality.usability import Purpose, require_usable
 from fieldlogs.runs.handle import Run
-from schemas.enums import EventType, VehicleKind
+from schemas.enums import CabDirection, EventType, VehicleKind
 from schemas.frames import FIRST_DATA_LINE
 
 __all__ = ["PipelineConfig", "PipelineResult", "run_pipeline"]
@@ -217,6 +218,7 @@ def prepare_run(
     assert run.meta is not None
     pre: list[Event] = []
     streams = clean_streams(run, pre)
+    streams["balise"] = own_reader(streams.get("balise"))
     streams = clocks_aligned(streams, run.meta.wheel_diameter_m, run.meta.teeth, cfg, pre, offsets)
     t_end = max((float(s["t"].iloc[-1]) for s in streams.values() if s is not None and len(s)), default=0.0)
     cycles = build_cycles(
@@ -229,11 +231,24 @@ def prepare_run(
         cycle_s=cfg.cycle_s,
         uses_pto=run.meta.vehicle_kind == VehicleKind.ROAD_RAIL,
     )
+    rollbacks = tuple(detect_rollbacks(cycles))  # a tacho without its sense: the IMU's (fail-safe)
+    if rollbacks:
+        cycles = replace(cycles, rotation=inferred_rotation(cycles, list(rollbacks)))
     if not keep_imu:
         streams["imu"] = None  # read only through the cycles from here on
         run.release("imu")
     gnss = GnssUnit.for_run(run, network, cfg.gnss)
-    return context_on(cycles, run, network, cfg, streams, gnss), pre
+    return context_on(cycles, run, network, cfg, streams, gnss, rollbacks), pre
+
+
+def own_reader(balise: pd.DataFrame | None) -> pd.DataFrame | None:
+    """The telegrams of the unit's own balise reader: on a vehicle with one per cab (the stream's
+    ``reader`` column) the F cab's — the unit's own cab, F for unit F and, in its mirrored view,
+    for unit R too (:mod:`fieldlogs.pipeline.units`) [S003 §2]; without the column, all."""
+    if balise is None or "reader" not in balise.columns:
+        return balise
+    reader = balise["reader"].astype("string")
+    return balise[(reader.isna() | (reader == CabDirection.FORWARD.value)).to_numpy(dtype=bool)].reset_index(drop=True)
 
 
 def context_on(
@@ -243,6 +258,7 @@ def context_on(
     cfg: PipelineConfig,
     streams: dict[str, pd.DataFrame | None],
     gnss: GnssUnit | None,
+    rollbacks: tuple[Rollback, ...] = (),
 ) -> RunContext:
     """Stages 3–4 of the module docstring on ``cycles``: what :func:`prepare_run` builds after
     the cycles, and again on the cycles with the wheel scale divided out
@@ -257,8 +273,9 @@ def context_on(
     features = FeatureUnit(cycles, odo, network, cfg.feature) if cycles.has_imu and cycles.has_tacho else None
     geometry = VehicleGeometry.of(run.meta.vehicle)
     return RunContext(
-        network, cfg, streams, cycles, odo, gps, features, geometry=geometry, gnss=gnss, imu_gaps=tuple(gaps)
-    )
+        network, cfg, streams, cycles, odo, gps, features, geometry=geometry, gnss=gnss, imu_gaps=tuple(gaps),
+        rollbacks=rollbacks,
+    )  # fmt: skip
 
 
 def run_pipeline(
@@ -279,7 +296,9 @@ def run_pipeline(
     first = ctx
 
     def rescaled(scale: float) -> RunContext:
-        return context_on(scaled_cycles(first.cycles, scale), run, network, cfg, first.streams, first.gnss)
+        return context_on(
+            scaled_cycles(first.cycles, scale), run, network, cfg, first.streams, first.gnss, first.rollbacks
+        )
 
     ctx, scale, sol, checks = wheel_corrected(ctx, rescaled, cfg)
     odo = ctx.odometry

@@ -151,7 +151,23 @@ def check_run(
     )
     if unreadable is not None:
         res.tacho = tacho_unused(unreadable)
+    own = possessions_for(possessions, vehicle_id=run.meta.vehicle_id, work=work)
+    if any(p.track_id is not None for p in own):
+        _add_track_alarms(res, run, network, own, start)
     return res
+
+
+def _add_track_alarms(res: RunCheck, run: Run, network: Network, own: list[Possession], start: datetime) -> None:
+    """The rule among n tracks (:mod:`fieldlogs.possession.tracks`) over the run's positions
+    from the pipeline (default settings), added to the km rules' alarms and notices."""
+    from dbtools.topology import topology
+    from fieldlogs.pipeline.run import run_pipeline
+    from fieldlogs.possession.tracks import track_alarms
+
+    positions = run_pipeline(run, network, summary=False).positions
+    alarms, notices = track_alarms(positions, own, start, topology(network))
+    res.alarms = sorted([*res.alarms, *alarms], key=lambda a: (a.t, a.type))
+    res.notices = sorted([*res.notices, *notices], key=lambda a: (a.t, a.type))
 
 
 def _usable_tacho(

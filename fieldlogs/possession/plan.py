@@ -13,7 +13,9 @@ is a finding naming file, line and column:
 * ``km_from_m < km_to_m``; ``planned_start < planned_end``;
 * ``released_at`` only after a ``started_at``, and not before it;
 * the line and track exist in the onboard DB (GIS grid); a km range reaching beyond the
-  track's grid is a warning.
+  track's grid is a warning;
+* a ``track_id`` (optional column: the possessed track of a network — a station track, a
+  crossover) is a track of the onboard DB.
 
 States [S001 §4.2.4]: at wall-clock time T a possession is *not started* (no
 ``started_at``, or T before it), *started*, or *released* (``released_at`` ≤ T).
@@ -34,6 +36,7 @@ import pandas as pd
 from dbtools.csv_locale import CsvLocale
 from dbtools.network import Network
 from dbtools.tabular import read_checked_table
+from dbtools.topology import all_tracks
 from schemas.enums import Severity
 from schemas.errors import FindingsError, UsageError
 from schemas.findings import Finding
@@ -69,6 +72,8 @@ class Possession:
     released_at: datetime | None = None
     vehicle_id: str | None = None
     """The vehicle the work is for (None: any)."""
+    track_id: str | None = None
+    """The network track possessed (a station track, a crossover …); None: the line and track."""
     purpose: str = "work"
     """``work`` or ``protection`` (adjacent-line protection: never legitimises running on it)."""
     row: int | None = None
@@ -212,6 +217,7 @@ def _possessions(
                 started_at=times["started_at"][i],
                 released_at=times["released_at"][i],
                 vehicle_id=_text(frame["vehicle_id"].iat[i]) if "vehicle_id" in frame.columns else None,
+                track_id=_text(frame["track_id"].iat[i]) if "track_id" in frame.columns else None,
                 purpose=_text(frame["purpose"].iat[i]) or "work" if "purpose" in frame.columns else "work",
                 row=i + FIRST_DATA_LINE,
             )
@@ -237,13 +243,25 @@ def read_plan(path: Path, network: Network | None = None, locale: CsvLocale | No
     rows = _Rows(co.frame, file, findings)
     times = _parse_times(rows)
     tracks = _db_tracks(network)
+    ids = None if network is None else {str(t) for t in all_tracks(network)["track_id"]}
     km_from = co.frame["km_from_m"].to_numpy(dtype=float, na_value=np.nan)
     km_to = co.frame["km_to_m"].to_numpy(dtype=float, na_value=np.nan)
     for i in range(len(co.frame)):
         _order_rules(rows, i, times, float(km_from[i]), float(km_to[i]))
         if tracks is not None:
             _db_rules(rows, i, tracks, float(km_from[i]), float(km_to[i]))
+        if ids is not None and "track_id" in co.frame.columns:
+            _track_id_rule(rows, i, ids)
     return Plan(_possessions(rows, times, km_from, km_to), findings, file)
+
+
+def _track_id_rule(rows: _Rows, i: int, ids: set[str]) -> None:
+    """A possession's ``track_id`` is a track of the onboard DB (declared or implied)."""
+    tid = _text(rows.frame["track_id"].iat[i])
+    if tid is not None and tid not in ids:
+        near = sorted(t for t in ids if t.split("-")[0] == tid.split("-")[0])[:12] or sorted(ids)[:12]
+        msg = f"track_id '{tid}' is not a track of the onboard DB (e.g. {', '.join(near)})"
+        rows.error("plan.unknown_track_id", i, "track_id", msg, tid, near)
 
 
 def _db_tracks(network: Network | None) -> dict[tuple[str, str], tuple[float, float]] | None:
@@ -315,7 +333,8 @@ def load_plan(path: Path, network: Network | None = None, locale: CsvLocale | No
 
 
 def plan_frame(possessions: list[Possession]) -> pd.DataFrame:
-    """Possessions as a plan table (text times), e.g. to write a CSV."""
+    """Possessions as a plan table (text times), e.g. to write a CSV; the optional
+    ``track_id`` column only when some possession names its track."""
     rows = []
     for p in possessions:
         rows.append(
@@ -326,9 +345,11 @@ def plan_frame(possessions: list[Possession]) -> pd.DataFrame:
                 "km_from_m": p.km_from_m,
                 "km_to_m": p.km_to_m,
                 **{c: (getattr(p, c).isoformat() if getattr(p, c) else "") for c in TIME_COLUMNS},
+                "track_id": p.track_id,
             }
         )
-    return pd.DataFrame(rows, columns=POSSESSIONS.column_names)
+    with_ids = any(p.track_id is not None for p in possessions)
+    return pd.DataFrame(rows, columns=[c for c in POSSESSIONS.column_names if with_ids or c != "track_id"])
 
 
 def possessions_for(

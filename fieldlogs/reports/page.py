@@ -23,7 +23,7 @@ from dbtools import pagekit as kit
 from dbtools.database import read_network
 from fieldlogs.audit.store import read_table, read_trace
 from fieldlogs.reports import plots
-from fieldlogs.reports.report import CORRECTION_STATS, OTHER_STATS, ROUTE_KEYS, Report
+from fieldlogs.reports.report import CORRECTION_STATS, OTHER_STATS, ROUTE_KEYS, TRACK_KEYS, Report
 from schemas.audit import AUDIT_RUNS
 from schemas.errors import TrainposError
 
@@ -68,6 +68,7 @@ def render_html(report: Report, audit_path: Path) -> str:
     ]
     if report.by == "vehicle":
         parts.append(kit.section("Per vehicle", _table(report.vehicles, t)))
+    parts += _path_sections(report)
     parts.append(kit.section("Runs", _table(report.runs.drop(columns=["run_path"]), t)))
     if len(report.failed_runs):
         parts.append(kit.section("Runs that failed", _table(report.failed_runs), status=kit.Status.WARN))
@@ -80,6 +81,46 @@ def render_html(report: Report, audit_path: Path) -> str:
     )
     parts += _run_plots(report, audit_path)
     return kit.page("trainpos audit", *parts, heading_text="Positioning audit", verdict=verdict(report))
+
+
+def path_text(path: pd.DataFrame) -> str:
+    """A run's path of tracks in one line: ``0420-U4 (48 m) → {0420-U3|0420-X1} (28 m) → …``,
+    an ambiguous stretch as its candidates in braces."""
+    out = []
+    for r in path.itertuples(index=False):
+        cands = json.loads(str(r.candidates)) if isinstance(r.candidates, str) else []
+        name = str(r.track_id) if r.state == "determined" else "{" + "|".join(cands) + "}"
+        out.append(f"{name} ({float(str(r.distance_m)):.0f} m)")
+    return " → ".join(out)
+
+
+def network_paths(report: Report) -> pd.DataFrame:
+    """run_id, path (text) of the runs whose path has more than one stretch (network runs:
+    a run on one line and track has a path of one entry and its route says it all)."""
+    rows = [
+        {"run_id": g["run_id"].iloc[0], "path": path_text(g)}
+        for _, g in report.paths.groupby("run_path", sort=True)
+        if len(g) > 1
+    ]
+    return pd.DataFrame(rows, columns=["run_id", "path"])
+
+
+def _path_sections(report: Report) -> list[str]:
+    """For network runs: each run's route as a path of tracks, and the per-track table."""
+    paths = network_paths(report)
+    if paths.empty:
+        return []
+    note = kit.paragraph(
+        "Each run's route as the tracks it was claimed on, in order, with the distance travelled on each; "
+        "{A|B}: ambiguous among candidate tracks A and B (not yet told which way a switch went).",
+        kit.Status.NOTE,
+    )
+    return [
+        kit.section("Routes as paths of tracks", note, _table(paths)),
+        kit.section(
+            "Position correction per track", _table(report.tracks[[*TRACK_KEYS, *CORRECTION_STATS]], report.target_pct)
+        ),
+    ]
 
 
 def verdict(report: Report) -> kit.Verdict:

@@ -7,7 +7,8 @@ feature-point correction often follows a balise within a few hundred metres, whi
 its percentage meaningless; feature-point corrections are counted separately
 (``n_feature_corrections``, ``n_feature_refused`` with the failed diagnostics).
 
-Columns of every grouping (route = line, track, direction; run; vehicle):
+Columns of every grouping (route = line, track, direction; run; vehicle; track = track_id
+with its line and local name):
 
 ==========================  ==========================================================
 n_runs                      runs audited without error
@@ -26,6 +27,14 @@ gps_decisions               up/down (track) decisions from trusted GPS fixes;
                             ``gps_trusted_share`` mean share of trusted fixes
 n_failsafe, n_anomalies     fail-safe events (slip correction too long), balise anomalies
 ==========================  ==========================================================
+
+Per track (``--by track``) the rows come from the runs' paths of tracks
+(``audit_track_path``, :mod:`fieldlogs.audit.track_path`): ``n_runs`` = runs claimed on the
+track, ``distance_m`` = distance travelled while determined on it, and the events counted
+on a track are those whose time falls within a determined stretch on it (an event during an
+ambiguous or undetermined stretch belongs to no track); ``n_failsafe`` and ``n_anomalies``
+are then counted from those events, ``gps_decisions`` from its ``track_decision`` events and
+``gps_trusted_share`` (a figure of the whole run) is left empty.
 """
 
 from __future__ import annotations
@@ -36,16 +45,18 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from fieldlogs.audit.store import read_meta, read_table
 from fieldlogs.pipeline.corrections import STAT_COLUMNS, correction_stats
-from schemas.audit import AUDIT_EVENTS, AUDIT_RUNS
+from schemas.audit import AUDIT_EVENTS, AUDIT_RUNS, AUDIT_TRACK_PATH
 from schemas.enums import CORRECTION_EVENTS, SLIP_EVENTS, EventType
 from schemas.jsonable import jsonable
 
-By = Literal["route", "run", "vehicle"]
+By = Literal["route", "run", "vehicle", "track"]
 ROUTE_KEYS = ["line_code", "track", "direction"]
+TRACK_KEYS = ["track_id", "line_code", "track"]
 #: Per-route (or per-group) statistics, in the order reports show them: position correction …
 CORRECTION_STATS = ["n_runs", "distance_m", *STAT_COLUMNS]
 #: … and everything else.
@@ -77,6 +88,7 @@ ROUTE_JSON_KEYS = (
     "max_correction_pct",
     "share_above_target",
 )
+TRACK_JSON_KEYS = ("track_id", "line_code", "track", *ROUTE_JSON_KEYS[3:])
 RUN_JSON_KEYS = (
     "run_id",
     "vehicle_id",
@@ -140,6 +152,11 @@ class Report:
     meta: dict[str, str]
     failed_runs: pd.DataFrame
     """run_path, error of the runs recorded with status error."""
+    tracks: pd.DataFrame
+    """One row per track claimed by some run (``TRACK_KEYS`` + the statistics)."""
+    paths: pd.DataFrame
+    """Every run's path of tracks (``audit_track_path`` rows of the runs audited without
+    error, with their run_id), in run_path, seq order."""
 
 
 def _details(frame: pd.DataFrame) -> list[dict[str, Any]]:
@@ -172,13 +189,21 @@ def build_report(audit_path: Path, *, by: By = "route", target_pct: float = 0.5)
         [",".join(d.get("failed", [])) or "unknown" for d in _details(refused)], index=refused.index, dtype=object
     )
     parts = {"corr": corr, "slips": slips, "refused": refused, "ev": ev}
+    paths = read_table(audit_path, AUDIT_TRACK_PATH.name, order_by=("run_path", "seq"))
+    paths = paths.merge(runs[["run_path", "run_id"]], on="run_path", how="inner")
+    tracks = _by_track(paths, parts, target_pct)
 
     routes = _aggregate(runs, parts, ROUTE_KEYS, target_pct)
     by_run = _aggregate(runs, parts, ["run_path"], target_pct)
     run_cols = runs[["run_path", "run_id", "vehicle_id", *ROUTE_KEYS, "max_margin_m"]]
     run_view = run_cols.merge(by_run, on="run_path", how="left")[RUN_VIEW]
     vehicles = _aggregate(runs, parts, ["vehicle_id"], target_pct)
-    groups = {"route": routes, "run": run_cols.merge(by_run, on="run_path", how="left"), "vehicle": vehicles}[by]
+    groups = {
+        "route": routes,
+        "run": run_cols.merge(by_run, on="run_path", how="left"),
+        "vehicle": vehicles,
+        "track": tracks,
+    }[by]
     return Report(
         by,
         target_pct,
@@ -189,7 +214,49 @@ def build_report(audit_path: Path, *, by: By = "route", target_pct: float = 0.5)
         corr.reset_index(drop=True),
         meta,
         failed,
+        tracks,
+        paths,
     )
+
+
+def _on_track(frame: pd.DataFrame, stretches: pd.DataFrame) -> pd.DataFrame:
+    """The rows of an event frame whose ``t`` falls within a determined stretch of their run,
+    with that stretch's ``TRACK_KEYS``."""
+    if frame.empty or stretches.empty:
+        return frame.iloc[:0].drop(columns=ROUTE_KEYS, errors="ignore").assign(**dict.fromkeys(TRACK_KEYS, ""))
+    left = frame.drop(columns=ROUTE_KEYS, errors="ignore").assign(t=pd.to_numeric(frame["t"])).sort_values("t")
+    right = stretches[["run_path", "t_from", "t_to", *TRACK_KEYS]].sort_values("t_from")
+    m = pd.merge_asof(left, right, left_on="t", right_on="t_from", by="run_path", direction="backward")
+    return m[m["t"] <= m["t_to"]].drop(columns=["t_from", "t_to"])
+
+
+def _by_track(paths: pd.DataFrame, parts: dict[str, pd.DataFrame], target: float) -> pd.DataFrame:
+    """Per track statistics (module docstring): the determined stretches stand for runs."""
+    det = paths[paths["state"] == "determined"].copy()
+    for c in TRACK_KEYS:
+        det[c] = det[c].fillna(UNKNOWN).astype(str)
+    det["t_from"] = pd.to_numeric(det["t_from"])
+    det["t_to"] = pd.to_numeric(det["t_to"])
+    on = {k: _on_track(v, det) for k, v in parts.items()}
+    ev = on["ev"]
+    per_run = det.groupby(["run_path", *TRACK_KEYS], sort=True).agg(distance_m=("distance_m", "sum")).reset_index()
+    if per_run.empty:
+        cols = [*TRACK_KEYS, *CORRECTION_STATS, *OTHER_STATS]
+        return pd.DataFrame({c: pd.Series(dtype=object) for c in cols})
+
+    def count(kind: str) -> npt.NDArray[np.int64]:
+        sel = ev[ev["type"] == kind]
+        n: pd.Series = sel.groupby(["run_path", *TRACK_KEYS]).size()
+        idx = pd.MultiIndex.from_frame(per_run[["run_path", *TRACK_KEYS]])
+        return n.reindex(idx, fill_value=0).to_numpy(dtype=np.int64)
+
+    pseudo = per_run.assign(
+        n_failsafe=count(EventType.FAILSAFE),
+        n_anomalies=count(EventType.BALISE_ANOMALY),
+        gps_decisions=count(EventType.TRACK_DECISION),
+        gps_trusted_share=np.nan,
+    )
+    return _aggregate(pseudo, on, TRACK_KEYS, target)
 
 
 def _aggregate(runs: pd.DataFrame, parts: dict[str, pd.DataFrame], keys: list[str], target: float) -> pd.DataFrame:
@@ -261,9 +328,14 @@ def report_json(report: Report) -> dict[str, Any]:
                    n_slips, n_failsafe}],
          "vehicles": [{vehicle_id, n_runs, n_corrections, distance_m, mean_correction_pct,
                        median_correction_pct, max_correction_pct, share_above_target}],
-         "failed_runs": [{run_path, error}]}
+         "failed_runs": [{run_path, error}],
+         "tracks": [{track_id, line_code, track, n_runs, n_corrections, distance_m,
+                     mean_correction_pct, median_correction_pct, max_correction_pct,
+                     share_above_target}],
+         "paths": [{run_id, path: [{track_id, state, candidates, t_from, t_to, distance_m}]}]}
 
-    Corrections and their % are balise corrections; unknown values are null.
+    Corrections and their % are balise corrections; unknown values are null; ``candidates``
+    (ambiguous stretches) is the list of candidate track ids.
     """
     return {
         "target_pct": report.target_pct,
@@ -271,4 +343,21 @@ def report_json(report: Report) -> dict[str, Any]:
         "runs": _records(report.runs, RUN_JSON_KEYS),
         "vehicles": _records(report.vehicles, VEHICLE_JSON_KEYS),
         "failed_runs": _records(report.failed_runs, ("run_path", "error")),
+        "tracks": _records(report.tracks, TRACK_JSON_KEYS),
+        "paths": [
+            {"run_id": _num(g["run_id"].iloc[0]), "path": [_stretch(r) for r in g.itertuples(index=False)]}
+            for _, g in report.paths.groupby("run_path", sort=True)
+        ],
+    }
+
+
+def _stretch(row: Any) -> dict[str, Any]:
+    cands = json.loads(row.candidates) if isinstance(row.candidates, str) and row.candidates else None
+    return {
+        "track_id": _num(row.track_id),
+        "state": row.state,
+        "candidates": cands,
+        "t_from": _num(row.t_from),
+        "t_to": _num(row.t_to),
+        "distance_m": _num(row.distance_m),
     }

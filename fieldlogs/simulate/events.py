@@ -6,16 +6,20 @@ a ``searchsorted`` plus a linear interpolation; reversals cross balises again in
 order. Telegram contents [S003 §4]: I1 carries the line code, I2 the station code and the
 track, C the signal type; other fields are empty. A kind G balise (an ETCS group, SUBSET-026)
 carries its group's NID_C, NID_BG, its N_PIG and the group size: read in N_PIG order one way
-and reversed the other, it tells the direction of travel.
+and reversed the other, it tells the direction of travel. A vehicle with a reader in each cab
+(``balise.readers_x_m``) has every balise read by both, each at its own place on the vehicle.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 
 from fieldlogs.simulate.running import Motion
-from schemas.enums import BaliseKind
+from schemas.enums import BaliseKind, CabDirection
 
 BALISE_COLUMNS = ["t", "kind", "line_code", "station_code", "track", "signal_type"]
 #: The telegram fields of a kind G balise (ETCS group), written only where the run reads one.
@@ -76,6 +80,25 @@ def balise_events(balises: pd.DataFrame, motion: Motion, rng: np.random.Generato
         for c in GROUP_COLUMNS:
             out[c] = rows[c].astype("Int64").mask(~is_g)
     return out
+
+
+def reader_events(
+    balises: pd.DataFrame,
+    motion: Motion,
+    km_of_sigma: Callable[[np.ndarray], np.ndarray],
+    rng: np.random.Generator,
+    miss_p: float,
+    readers_x_m: tuple[float, ...],
+) -> pd.DataFrame:
+    """Telegrams of a vehicle with a balise reader in each cab [S003 §2]: the F cab's reader
+    ``readers_x_m[0]`` and the R cab's ``readers_x_m[1]`` forward of the reference point, each
+    passing a balise when its own km (σ + facing·x) crosses it; the ``reader`` column says which."""
+    frames = []
+    for name, x in zip((CabDirection.FORWARD.value, CabDirection.REVERSE.value), readers_x_m, strict=True):
+        frame = balise_events(balises, replace(motion, km=km_of_sigma(motion.sigma + motion.facing * x)), rng, miss_p)
+        frame["reader"] = pd.array([name] * len(frame), dtype="string")
+        frames.append(frame)
+    return pd.concat(frames, ignore_index=True).sort_values("t", kind="stable").reset_index(drop=True)
 
 
 def cab_events(motion: Motion) -> pd.DataFrame:

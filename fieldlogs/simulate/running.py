@@ -17,6 +17,15 @@
    integral of the smoothed speed and acceleration its central difference, so s, v and a
    are mutually consistent; since averaging commutes with integration, the vehicle still
    stops exactly at every stop (dwells are longer than T).
+6. **Rolling back** (``running.rollback_m`` = r > 0): at a start from rest whose gradient in the
+   direction of the move is uphill by at least ``rollback_min_gradient_permille``, the train first
+   rolls back r metres (a rest-to-rest profile at ≤ ``rollback_speed_mps``, accelerating and braking
+   at :data:`ROLLBACK_ACCEL`, with the speed *negative* along the move), stands for the smoothing window
+   + 1 s, and then drives r + the segment's length: it still ends exactly at the planned stop. The cab
+   does not change (a train rolling back on a gradient, S003 §2 / §5.3(2)). Each 100 Hz step belongs to
+   the move whose timeline it lies in (the boundary in the middle of the dwell before the move), the
+   signed speed is integrated into the position along the move and its magnitude into the travelled
+   distance. Without any rollback the computation is the one above, step for step.
 """
 
 from __future__ import annotations
@@ -42,6 +51,8 @@ DS_M = 1.0
 """Distance grid of the speed profile [m]."""
 STOP_MARGIN_M = 50.0
 """A station closer than this to a move's ends is not a separate stop [m]."""
+ROLLBACK_ACCEL = 0.1
+"""Acceleration and braking of a rollback [m/s²] (≈ a 10 ‰ gradient less the train's resistance)."""
 
 
 @dataclass(frozen=True)
@@ -66,9 +77,9 @@ class Motion:
     v: FloatArray
     """Speed over ground ≥ 0 [m/s]."""
     a: FloatArray
-    """dv/dt [m/s²]."""
+    """dv/dt [m/s²] of the speed along the move (signed: negative while rolling back)."""
     p: FloatArray
-    """Travelled distance [m]."""
+    """Travelled distance [m] (never decreasing, rollbacks included)."""
     sigma: FloatArray
     """Arc length along the track [m] (increasing with km)."""
     km: FloatArray
@@ -185,6 +196,10 @@ class _Timeline:
     cab_events: list[tuple[float, str, int | None]] = field(default_factory=list)
     stops_km: list[float] = field(default_factory=list)
     n: int = 0
+    marks: list[tuple[int, int]] = field(default_factory=list)
+    """(first step, move index) of each move's stretch of the timeline."""
+    rolled: bool = False
+    """Whether a rollback (negative speed block) was added."""
 
     def add(self, arr: FloatArray) -> None:
         self.blocks.append(arr)
@@ -208,6 +223,22 @@ class _Driving:
     v_line: float
     cant: Cant
     unbalanced_mps2: float
+    rollback_m: float = 0.0
+    rollback_min_grade: float = 0.0
+    """Minimum uphill gradient of a start that rolls back [m/m]."""
+    rollback_speed: float = 0.5
+    min_still_s: float = 0.0
+
+    def rollback_limit(self, q: FloatArray) -> FloatArray:
+        """Speed limit of a rollback [m/s]."""
+        return np.full(q.shape, self.rollback_speed)
+
+    def rollback_at(self, move: Move, sigma: float) -> float:
+        """Distance rolled back before starting ``move`` from rest at ``sigma`` (0: none)."""
+        if self.rollback_m <= 0:
+            return 0.0
+        theta = float(self.geom.state(np.asarray([self.geom.km_at(sigma)])).theta[0])
+        return self.rollback_m if move.direction * np.tan(theta) >= self.rollback_min_grade else 0.0
 
     def vlim_for(self, move: Move, sigma_start: float) -> SpeedLimit:
         def f(q: FloatArray) -> FloatArray:
@@ -236,6 +267,12 @@ def _drive(tl: _Timeline, drv: _Driving, mv: Move, stations_sigma: FloatArray, d
         if j > 0:
             tl.still(dwell_s)
             tl.stops_km.append(float(drv.geom.km_at(a0)))
+        rb = drv.rollback_at(mv, a0)
+        if rb > 0:
+            tl.add(-segment_samples(rb, drv.rollback_limit, ROLLBACK_ACCEL, ROLLBACK_ACCEL))
+            tl.still(drv.min_still_s)
+            tl.rolled = True
+        a0 -= mv.direction * rb
         tl.add(segment_samples(abs(a1 - a0), drv.vlim_for(mv, a0), drv.accel, drv.brake))
 
 
@@ -248,7 +285,10 @@ def plan_motion(geom: TrackGeometry, scenario: Scenario, stations_km: list[float
     window_s = w * DT
     min_still = window_s + 1.0
     moves, facing = plan_moves(geom, scenario)
-    drv = _Driving(geom, accel, brake, r.line_speed_kmh * KMH, cant_model(scenario), r.unbalanced_lateral_mps2)
+    drv = _Driving(
+        geom, accel, brake, r.line_speed_kmh * KMH, cant_model(scenario), r.unbalanced_lateral_mps2,
+        r.rollback_m, r.rollback_min_gradient_permille / 1000.0, r.rollback_speed_mps, min_still,
+    )  # fmt: skip
     stations_sigma = np.sort(geom.sigma(np.asarray(stations_km, dtype=float))) if stations_km else np.empty(0)
     tl = _Timeline()
     tl.cab_events.append((0.0, moves[0].cab, 0 if road_rail else None))
@@ -258,6 +298,7 @@ def plan_motion(geom: TrackGeometry, scenario: Scenario, stations_km: list[float
         t_on = tl.t
         tl.cab_events.append((round(t_on, 2), moves[0].cab, 1))
     tl.still(max(r.standstill_start_s, min_still))
+    tl.marks.append((0, 0))
     for i, mv in enumerate(moves):
         _drive(tl, drv, mv, stations_sigma, max(r.dwell_s, min_still), r.stop_at_stations and not road_rail)
         if i + 1 < len(moves):
@@ -265,6 +306,7 @@ def plan_motion(geom: TrackGeometry, scenario: Scenario, stations_km: list[float
             k0 = tl.n
             k = tl.still(max(r.reversal_dwell_s if reverse else r.dwell_s, min_still))
             tl.stops_km.append(float(geom.km_at(mv.sigma1)))
+            tl.marks.append((k0 + k // 2, i + 1))
             if moves[i + 1].cab != mv.cab:
                 tl.cab_events.append((round((k0 + k // 2) * DT, 2), moves[i + 1].cab, 1 if road_rail else None))
     tl.still(max(r.standstill_end_s, min_still))
@@ -280,17 +322,24 @@ def _motion(
 ) -> Motion:
     """Smoothed speeds → distance, along-track position, km, signed speed per 100 Hz step."""
     v_raw = np.concatenate(tl.blocks)
-    v = np.clip(moving_average(v_raw, w), 0.0, None)
+    vs = moving_average(v_raw, w)  # speed along the move (negative: rolling back)
+    if not tl.rolled:
+        vs = np.clip(vs, 0.0, None)
+    v = np.abs(vs) if tl.rolled else vs
     n = len(v)
     t = np.arange(n) / 100.0
-    c = np.cumsum(v)
-    p = DT * (c - 0.5 * (v[0] + v))
-    a = np.gradient(v, DT) if n > 1 else np.zeros(n)
+    q = _integral(vs)  # position along the moves
+    p = _integral(v) if tl.rolled else q
+    a = np.gradient(vs, DT) if n > 1 else np.zeros(n)
     starts = np.concatenate([[0.0], np.cumsum([mv.length for mv in moves])])
-    idx = np.clip(np.searchsorted(starts[1:-1], p, side="right"), 0, len(moves) - 1).astype(np.int64)
+    if tl.rolled:
+        first = np.array([k for k, _ in tl.marks])
+        idx = np.asarray([i for _, i in tl.marks], dtype=np.int64)[np.searchsorted(first, np.arange(n), "right") - 1]
+    else:
+        idx = np.clip(np.searchsorted(starts[1:-1], q, side="right"), 0, len(moves) - 1).astype(np.int64)
     s0 = np.array([mv.sigma0 for mv in moves])
     d = np.array([mv.direction for mv in moves], dtype=float)
-    sigma = s0[idx] + d[idx] * (p - starts[idx])
+    sigma = s0[idx] + d[idx] * (q - starts[idx])
     # end of the run: never beyond the last path point (float drift of ~1e-9 m)
     sigma = np.clip(sigma, geom.sigma(geom.km_min), geom.sigma(geom.km_max))
     if on_rail is not None:
@@ -304,7 +353,7 @@ def _motion(
         p=p,
         sigma=sigma,
         km=geom.km_at(sigma),
-        u=d[idx] * v,
+        u=d[idx] * vs,
         udot=d[idx] * a,
         move=idx,
         on_rail=on,
@@ -314,3 +363,9 @@ def _motion(
         window_s=w * DT,
         stops_km=tl.stops_km,
     )
+
+
+def _integral(x: FloatArray) -> FloatArray:
+    """Trapezoid integral of a 100 Hz series from its first step."""
+    c = np.cumsum(x)
+    return np.asarray(DT * (c - 0.5 * (x[0] + x)), dtype=float)

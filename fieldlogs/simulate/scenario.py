@@ -74,6 +74,9 @@ class RunningCfg:
     reversal_dwell_s: float = 90.0
     standstill_start_s: float = 20.0
     standstill_end_s: float = 20.0
+    rollback_m: float = 0.0
+    rollback_min_gradient_permille: float = 0.0
+    rollback_speed_mps: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -113,6 +116,7 @@ class TachoCfg:
     teeth: int = 90
     wheel_diameter_m: float = 0.86
     wear_pct: tuple[float, float] = (0.0, 0.5)
+    two_phase: bool = False
 
 
 @dataclass(frozen=True)
@@ -189,6 +193,7 @@ class RadarIfCfg:
 @dataclass(frozen=True)
 class BaliseCfg:
     miss_probability: float = 0.0
+    readers_x_m: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -318,6 +323,7 @@ def _check(s: Scenario) -> None:
         _check_positive,
         _check_non_negative,
         _check_bounds,
+        _check_cabs,
         _check_spans,
         _check_episodes,
         _check_radar,
@@ -382,6 +388,7 @@ def _check_non_negative(s: Scenario) -> Problem:
         "running.reversal_dwell_s": s.running.reversal_dwell_s,
         "running.standstill_start_s": s.running.standstill_start_s,
         "running.standstill_end_s": s.running.standstill_end_s,
+        "running.rollback_m": s.running.rollback_m,
         "road_rail.off_rail_before_s": s.road_rail.off_rail_before_s,
         "road_rail.off_rail_after_s": s.road_rail.off_rail_after_s,
         "road_rail.transfer_s": s.road_rail.transfer_s,
@@ -425,6 +432,15 @@ def _check_bounds(s: Scenario) -> Problem:
     for key, ((lo, hi), vmin, vmax) in ranges.items():
         if not (vmin <= lo <= hi <= vmax):
             return key, f"needs [low, high] with {vmin} ≤ low ≤ high ≤ {vmax}, got [{lo}, {hi}]"
+    return None
+
+
+def _check_cabs(s: Scenario) -> Problem:
+    """Rolling back and a balise reader per cab."""
+    if not 0 < s.running.rollback_speed_mps <= 2:
+        return "running.rollback_speed_mps", "must be > 0 and ≤ 2 m/s (a train rolling back)"
+    if len(s.balise.readers_x_m) not in (0, 2) or any(not abs(x) <= 50 for x in s.balise.readers_x_m):
+        return "balise.readers_x_m", "[] or [x of the F cab's reader, x of the R cab's] within ±50 m"
     return None
 
 

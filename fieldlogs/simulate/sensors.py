@@ -6,9 +6,11 @@
   x[k+1] = φ·x[k] + √(1 − φ²)·σ·w, φ = exp(−Δt/τ), generated at 1 Hz (``lfilter``) and
   interpolated.
 * **Tachometer** (10 Hz): cumulative pulses = floor(wheel revolutions × teeth), revolutions
-  = wheel rolled distance / (π·D_true); the wheel rolls at v·(1 ± slip). Pulses never
-  decrease whatever the direction. Distance by pulses with the nominal diameter is
-  rolled distance × D_nominal / D_true.
+  = wheel rolled distance / (π·D_true); the wheel rolls at |v|·(1 ± slip). Pulses never
+  decrease whatever the direction. A two-phase tachometer (``tacho.two_phase``) also gives the
+  sense of rotation per cycle, the ``direction`` column in the body frame: the sign of the
+  displacement toward the F end over the cycle (k−1, k] where a pulse came, 0 where none did.
+  Distance by pulses with the nominal diameter is rolled distance × D_nominal / D_true.
 * **D-GPS** (1 Hz): true track position (DB GIS geometry) + Gauss-Markov error (σ, τ) +
   multipath bursts; outages (tunnels) fix 0 with empty lat/lon; fix 1 (no differential
   correction, larger error) for a while after an outage; nsat/hdop follow the conditions.
@@ -94,11 +96,19 @@ def wheel_distance(motion: Motion, factor: FloatArray) -> FloatArray:
     return np.asarray(DT * (c - 0.5 * (vw[0] + vw)), dtype=float)
 
 
-def tacho_stream(rolled: FloatArray, motion: Motion, d_true: float, teeth: int) -> pd.DataFrame:
+def tacho_stream(
+    rolled: FloatArray, motion: Motion, d_true: float, teeth: int, two_phase: bool = False
+) -> pd.DataFrame:
     k = np.arange(0, motion.n, TACHO_STEP)
     revs = rolled[k] / wheel_circumference_m(d_true)
-    pulses = np.floor(revs * teeth + 1e-9).astype(np.int64)
-    return pd.DataFrame({"t": motion.t[k], "pulses": np.maximum.accumulate(pulses)})
+    pulses = np.maximum.accumulate(np.floor(revs * teeth + 1e-9).astype(np.int64))
+    frame = pd.DataFrame({"t": motion.t[k], "pulses": pulses})
+    if two_phase:
+        toward_f = np.cumsum(motion.speed_toward_f)[k]  # ∝ displacement toward the F end
+        moved = np.diff(toward_f, prepend=0.0)
+        came = np.diff(pulses, prepend=pulses[:1]) > 0
+        frame["direction"] = np.where(came, np.sign(moved), 0).astype(np.int64)
+    return frame
 
 
 def truth_stream(motion: Motion, slipping: npt.NDArray[np.bool_], line_code: str, track: str) -> pd.DataFrame:

@@ -16,7 +16,7 @@ from dbtools.network import Network
 from fieldlogs.runs.meta import RunMeta
 from fieldlogs.runs.typed import LogFormat
 from fieldlogs.runs.write import write_run
-from fieldlogs.simulate.events import balise_events, cab_events, track_balises
+from fieldlogs.simulate.events import balise_events, cab_events, reader_events, track_balises
 from fieldlogs.simulate.kinematics import body_kinematics
 from fieldlogs.simulate.netsim import NetworkPlan, network_plan
 from fieldlogs.simulate.running import Motion, cant_model, plan_motion
@@ -128,13 +128,13 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
     streams: dict[str, pd.DataFrame] = {}
     rolled = wheel_distance(motion, factor)
     if sensors.tacho:
-        streams["tacho"] = tacho_stream(rolled, motion, d_true, scenario.tacho.teeth)
+        streams["tacho"] = tacho_stream(rolled, motion, d_true, scenario.tacho.teeth, scenario.tacho.two_phase)
     if sensors.imu:
         kin = body_kinematics(geom, cant_model(scenario), motion)
         true = {"ax": kin.ax, "ay": kin.ay, "az": kin.az, "wx": kin.wx, "wy": kin.wy, "wz": kin.wz}
         streams["imu"] = imu_stream(true, motion, scenario, rngs["imu"])
     if sensors.balise and not scenario.is_road_rail:
-        streams["balise"] = balise_events(balises, motion, rngs["balise"], scenario.balise.miss_probability)
+        streams["balise"] = _telegrams(balises, motion, geom, scenario, rngs["balise"])
     outages: list[tuple[float, float]] = []
     if sensors.gps:
         streams["gps"], outages = gps_stream(motion, geom, scenario, rngs["gps"])
@@ -152,7 +152,35 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
         streams["radar_if"], meta.extra["radar"] = radar_if_stream(motion, geom, scenario, rngs["radar_if"])
     if scenario.gnss_raw.enabled:
         _add_raw_gnss(streams, meta, scenario, motion, geom, rngs["gnss_raw"])
+    _add_readers(meta, scenario)
     return SimulatedRun(streams, meta)
+
+
+def _telegrams(
+    balises: pd.DataFrame, motion: Motion, geom: TrackGeometry, scenario: Scenario, rng: np.random.Generator
+) -> pd.DataFrame:
+    """The balise stream: one reader at the reference point, or one per cab (``balise.readers_x_m``)."""
+    miss = scenario.balise.miss_probability
+    if not scenario.balise.readers_x_m:
+        return balise_events(balises, motion, rng, miss)
+    lo, hi = geom.sigma(geom.km_min), geom.sigma(geom.km_max)
+    return reader_events(
+        balises, motion, lambda s: geom.km_at(np.clip(s, lo, hi)), rng, miss, scenario.balise.readers_x_m
+    )
+
+
+def _add_readers(meta: RunMeta, scenario: Scenario) -> None:
+    """run.json vehicle ``balise_reader`` (the F cab's) and ``balise_reader_r`` (the R cab's), with
+    a reader per cab."""
+    if not scenario.balise.readers_x_m:
+        return
+    from fieldlogs.simulate.gnss.trainsim import vehicle_block
+
+    block = meta.vehicle or vehicle_block(
+        meta.vehicle_id, meta.vehicle_kind, [], scenario.tacho.wheel_diameter_m, scenario.tacho.teeth
+    )
+    x_f, x_r = scenario.balise.readers_x_m
+    meta.vehicle = {**block, "balise_reader": {"x_m": x_f, "y_m": 0.0}, "balise_reader_r": {"x_m": x_r, "y_m": 0.0}}
 
 
 def _add_raw_gnss(

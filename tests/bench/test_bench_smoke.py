@@ -45,6 +45,9 @@ class Smoke:
 
 SMOKE: dict[str, Smoke] = {
     "accuracy.py": Smoke("--runs 1 --workers 1", (r"\|km error\| ≤ margin\s+\d",)),
+    "accuracy_network.py": Smoke(
+        "--runs 4 --workers 1", (r"wrong-track claims \(determined cycles\)\s+\d", r"selectivity D-GPS\s+[\d.]+ %")
+    ),
     "bench_audit.py": Smoke("--runs 2 --workers 1 --no-dask", (r"speed-up [\d.]+×",)),
     "bench_db.py": Smoke(
         "--lines 2 --length-m 2000 --rounds 1 --processes 1",

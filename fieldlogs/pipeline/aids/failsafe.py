@@ -39,7 +39,13 @@ class FailsafeAid(StaticAid):
                 "kind": ep.kind,
             },
         )
-        fix = view.estimate
-        if fix is None:
-            return Outcome([ev])
-        return Outcome([ev], replace(fix, t_effective=view.t, state=PositionState.UNCERTAIN, uncertain_since_d=view.d))
+        return uncertain_outcome(ev, view)
+
+
+def uncertain_outcome(ev: Event, view: EngineView) -> Outcome:
+    """``ev`` and, where a position exists, that position made *uncertain* from here (its margin
+    growing with the travel since, until the next absolute fix)."""
+    fix = view.estimate
+    if fix is None:
+        return Outcome([ev])
+    return Outcome([ev], replace(fix, t_effective=view.t, state=PositionState.UNCERTAIN, uncertain_since_d=view.d))

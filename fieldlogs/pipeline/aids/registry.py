@@ -19,6 +19,7 @@ from fieldlogs.pipeline.aids.gps import GpsAid
 from fieldlogs.pipeline.aids.radar import RadarSpeedAid
 from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
+from fieldlogs.pipeline.aids.rollback import RollbackAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import TrackGpsAid
@@ -28,6 +29,7 @@ from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.imugap import ImuGap, ImuGapAid
+from fieldlogs.pipeline.rollback import Rollback
 from fieldlogs.pipeline.types import GpsAnalysis, Odometry
 from schemas.enums import BaliseKind
 from schemas.radar import RadarParams
@@ -47,6 +49,8 @@ class RunContext:
     geometry: VehicleGeometry = field(default_factory=VehicleGeometry)
     gnss: GnssUnit | None = None
     imu_gaps: tuple[ImuGap, ...] = ()
+    rollbacks: tuple[Rollback, ...] = ()
+    """Starts the IMU saw rolling back against the cab (:mod:`fieldlogs.pipeline.rollback`)."""
 
 
 def _rail(ctx: RunContext) -> Aid | None:
@@ -55,6 +59,10 @@ def _rail(ctx: RunContext) -> Aid | None:
 
 def _failsafe(ctx: RunContext) -> Aid | None:
     return FailsafeAid(ctx.odometry.episodes)
+
+
+def _rollback(ctx: RunContext) -> Aid | None:
+    return RollbackAid(ctx.rollbacks) if ctx.rollbacks else None
 
 
 def _imu_gap(ctx: RunContext) -> Aid | None:
@@ -133,6 +141,7 @@ def _gnss(ctx: RunContext) -> Aid | None:
 POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
     _rail,
     _failsafe,
+    _rollback,
     _imu_gap,
     _balise,
     _gps,

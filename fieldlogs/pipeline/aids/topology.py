@@ -26,12 +26,26 @@ import numpy as np
 
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.config import MarginConfig
-from fieldlogs.pipeline.hypotheses import TrackLines, advance, rebased, triggers
+from fieldlogs.pipeline.hypotheses import (
+    Segments,
+    TrackLines,
+    advance,
+    parallel_candidates,
+    reachable,
+    rebased,
+    segments,
+    triggers,
+)
 from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.types import Event, Fix, Hypothesis
-from schemas.enums import EventType, PositionState
+from schemas.enums import EventType, FixSource, PositionState
 
 _LOCATE, _STEP = "locate", "step"
+#: Sources that decide only among a line's tracks (S001 up/down, S002 on the decided track):
+#: on a network they leave every track within ``PARALLEL_M`` a candidate.
+LINE_ONLY = (FixSource.GPS, FixSource.GNSS)
+#: Parallel tracks a line-based GNSS decision cannot have told apart [m] (Heirich 2016's radius).
+PARALLEL_M = 20.0
 #: First window of the forward search [cycles] (doubled until a rule applies or the run ends).
 _CHUNK = 512
 
@@ -102,6 +116,10 @@ class TopologyAid:
     """The last fix with candidates this aid saw (to report a resolution by another aid)."""
     unplaced: Fix | None = None
     """The last fix that lies on no network track (left as it is)."""
+    segments: Segments | None = None
+    """Every track's centreline in one plane (built at the first GPS placement)."""
+    previous_d: float = 0.0
+    """Unsigned travel d at which ``previous`` was in force (carried to)."""
 
     def observations(self) -> list[Observation]:
         return []
@@ -112,7 +130,7 @@ class TopologyAid:
             return None
         if not placed(fix, self.lines):
             return Observation(view.t, _LOCATE)
-        self.previous = fix
+        self._remember(fix, view.d)
         t = self._next_rule(fix, view)
         return None if t is None else Observation(t, _STEP)
 
@@ -146,14 +164,53 @@ class TopologyAid:
             self.unplaced = fix
             return Outcome()
         tl, pos = hit
+        prev = self.previous
+        if prev is not None and prev.hyps and prev.state != PositionState.UNDETERMINED:
+            refused = self._gate(fix, prev, tl.track_id, view)
+            if refused is not None:
+                return refused
         self.next_id += 1
         h = Hypothesis(tl.track_id, pos, fix.k * tl.km_sign, hid=self.next_id)
-        new = with_hyps(fix, [h], view.t, view.s, self.lines)
+        hyps = [h]
+        if fix.source in LINE_ONLY:
+            if self.segments is None:
+                self.segments = segments(self.lines)
+            hyps += parallel_candidates(h, PARALLEL_M, self.lines, self.segments)
+            for j in range(1, len(hyps)):
+                self.next_id += 1
+                hyps[j] = replace(hyps[j], hid=self.next_id)
+        new = with_hyps(fix, hyps, view.t, view.s, self.lines)
         events: list[Event] = []
-        prev = self.previous
-        if prev is not None and len(prev.hyps) > 1:
+        if prev is not None and len(prev.hyps) > 1 and len(hyps) == 1:
             events.append(self._resolved(view, prev.hyps, h, str(fix.source)))
-        self.previous = new
+        self._remember(new, view.d)
+        return Outcome(events, new)
+
+    def _remember(self, fix: Fix, d: float) -> None:
+        if fix is not self.previous:
+            self.previous, self.previous_d = fix, d
+
+    def _gate(self, fix: Fix, prev: Fix, track_id: str, view: EngineView) -> Outcome | None:
+        """None when ``track_id`` is reachable from ``prev``'s candidates within the travel since
+        and the margin (:func:`~fieldlogs.pipeline.hypotheses.reachable`); otherwise the refusal:
+        ``prev``'s candidates carried to now stay in force, a ``track_change_refused`` event."""
+        m = float(margin_m(prev, view.d, view.travel.allowance_at(view.t), self.margin))
+        hyps = rebased(prev.hyps, prev.s_ref, view.s)
+        if track_id in reachable(hyps, abs(view.d - self.previous_d) + m, self.lines):
+            return None
+        hyps, _, self.next_id = advance(hyps, m, view.d, self.lines, self.next_id)
+        detail: dict[str, Any] = {
+            "evidence": str(fix.source),
+            "track_id": track_id,
+            "candidates": [h.track_id for h in prev.hyps],
+            "reason": "no navigable path from the candidates within the travel and the margin",
+        }
+        events = [Event(view.t, EventType.TRACK_CHANGE_REFUSED, view.km, detail=detail)]
+        if not hyps:
+            self.previous = None
+            return Outcome(events, forget=True)
+        new = with_hyps(prev, hyps, view.t, view.s, self.lines)
+        self._remember(new, view.d)
         return Outcome(events, new)
 
     def _resolved(self, view: EngineView, before: tuple[Hypothesis, ...], h: Hypothesis, evidence: str) -> Event:
@@ -184,5 +241,5 @@ class TopologyAid:
         if len(fix.hyps) > 1 and len(hyps) == 1:
             events.append(self._resolved(view, fix.hyps, hyps[0], "topology"))
         new = with_hyps(fix, hyps, view.t, view.s, self.lines)
-        self.previous = new
+        self._remember(new, view.d)
         return Outcome(events, new)

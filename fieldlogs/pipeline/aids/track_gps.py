@@ -13,7 +13,11 @@ The log-likelihood ratio of a against b is ½(Q_b − Q_a); b is dropped once so
 Wald's A = ln((1 − β)/α) (``track_select``), the sequential test S001 runs for up/down. A
 bias saturates the evidence: two tracks 4 m apart separate (LLR → (c² − 2bc)/(2σ_b²)), two
 tracks within the bias do not, and the position stays ambiguous. The sums restart at every
-change of the candidate set.
+change of the candidate set. A fix joins the evidence only after ``MIN_SPACING_M`` of travel
+since the last one used: at a standstill the slow error does not decorrelate from fix to fix
+(the simulator's and the S001 D-GPS error is Gauss–Markov with τ ≈ 3 min), so a train standing
+18 m past a toe, where the branches are 0.8 m apart, would otherwise count the same error a
+hundred times as independent noise and decide on it.
 """
 
 from __future__ import annotations
@@ -28,6 +32,9 @@ from fieldlogs.pipeline.aids.track_imu import kept, resolve
 from fieldlogs.pipeline.config import GpsConfig, TrackSelectConfig
 from fieldlogs.pipeline.hypotheses import TrackLines
 from fieldlogs.pipeline.types import Fix, FloatArray, Hypothesis
+
+#: Travel between two fixes used as evidence [m] (module docstring).
+MIN_SPACING_M = 1.0
 
 
 def offset(lines: TrackLines, h: Hypothesis, pos: float, lat: float, lon: float) -> float:
@@ -70,6 +77,8 @@ class TrackGpsAid:
     needs_track: bool = True
     key: tuple[tuple[int, str], ...] = ()
     rows: list[list[float]] = field(default_factory=list)
+    last_d: float = float("-inf")
+    """Unsigned travel at the last fix used."""
 
     def observations(self) -> list[Observation]:
         return []
@@ -88,7 +97,11 @@ class TrackGpsAid:
         key = tuple((h.hid, h.track_id) for h in fix.hyps)
         if tuple(k[0] for k in key) != tuple(k[0] for k in self.key):
             self.rows = []  # a new candidate set: the evidence starts again
+            self.last_d = float("-inf")
         self.key = key
+        if view.d - self.last_d < MIN_SPACING_M:
+            return Outcome()  # standing: no independent evidence
+        self.last_d = view.d
         j: int = obs.payload
         self.rows.append(self._offsets(fix, view, float(self.lat[j]), float(self.lon[j])))
         r = np.asarray(self.rows, dtype=float).T

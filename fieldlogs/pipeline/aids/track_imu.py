@@ -14,7 +14,12 @@ the yaw rate (+ turning left, body frame) integrated over the travel window
 spread σ_geo: ``track_select.gyro_*``, ``heading_geometry_deg``), the log-likelihood ratio of
 a against b is LLR_ab = ((Δψ − μ_b)² − (Δψ − μ_a)²) / (2σ²); b is dropped when some a reaches
 Wald's A = ln((1 − β)/α) (``track_select.alpha``, ``beta``). One test per split; no test
-without the switch's number and radius or when m exceeds ``track_select.imu_max_margin_m``.
+without the switch's number and radius or when m exceeds ``track_select.imu_max_margin_m``,
+and none when a branch is shorter than 2·R·α + m + m_end (m_end the margin at the window's
+end): the true window, up to R·α + m + m_end beyond the toe, could then reach the branch's
+own far turnout (a crossover's reverse curve, R·α before its end), whose opposite turn would
+cancel the signature — a 60 m crossover of 1:10 turnouts (R·α = 20 m) is tested only while
+m + m_end ≤ 20 m.
 A crossover's first turnout is such a facing switch (S001 §7 (c): the heading against the track).
 """
 
@@ -120,6 +125,10 @@ class TrackImuAid:
             return None
         i1 = int(np.searchsorted(tr.d, split_d + to.lead_m + m))
         if i1 >= tr.n:
+            return None
+        m_end = float(margin_m(fix, float(tr.d[i1]), tr.allowance[i1], self.margin))
+        if any(self.lines[h.track_id].length_m < 2.0 * to.lead_m + m + m_end for h in fix.hyps):
+            self.done.add((sid, split_d))  # the window may reach the branch's far turnout: no test
             return None
         return Observation(max(float(tr.t[i1]), view.t), (sid, split_d, m))
 

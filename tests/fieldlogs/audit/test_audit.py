@@ -416,7 +416,7 @@ def test_report_statistics_are_over_balise_corrections(hand_made: Path) -> None:
 
 def test_report_json_has_the_documented_shape(hand_made: Path) -> None:
     data = json.loads(json.dumps(report_json(build_report(hand_made))))
-    assert set(data) == {"target_pct", "routes", "runs", "vehicles", "failed_runs"}
+    assert set(data) == {"target_pct", "routes", "runs", "vehicles", "failed_runs", "tracks", "paths"}
     assert data["target_pct"] == 0.5
     route_keys = [
         "line_code",

@@ -35,7 +35,7 @@ from dbtools.network import content_hash
 from fieldlogs.audit.runner import audit
 from fieldlogs.audit.store import open_audit, read_table
 from fieldlogs.reports.report import build_report
-from schemas.audit import AUDIT_APPLICATION_ID
+from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION
 from schemas.errors import InputError
 from tests.fieldlogs.audit.audit_data import RUNS, AuditData, audit_data
 
@@ -201,7 +201,7 @@ def old_audit_db(path: Path) -> Path:
 def test_audit_db_of_schema_1_is_refused_with_a_clear_message(data: AuditData, tmp_path: Path) -> None:
     old = old_audit_db(tmp_path / "old.sqlite")
     raw = old.read_bytes()
-    with pytest.raises(InputError, match=r"schema 1 is older than this tool's \(2\)"):
+    with pytest.raises(InputError, match=rf"schema 1 is older than this tool's \({AUDIT_SCHEMA_VERSION}\)"):
         build_report(old)
     with pytest.raises(InputError, match="audit the runs again into a new audit database"), open_audit(old):
         pass

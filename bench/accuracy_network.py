@@ -1,0 +1,269 @@
+"""Track-selective accuracy on the network sample over many seeded runs (issue 31).
+
+    .venv/bin/python bench/accuracy_network.py [--runs 100] [--workers 2] [--seed 31]
+
+Builds the bundled network source set (4-track station, crossover pair, junction), draws
+``--runs`` routes with :func:`fieldlogs.simulate.network_runs.network_runs`, simulates each
+(``simulate_run``), replays it (``run_pipeline``) and sums the truth figures of
+:mod:`fieldlogs.pipeline.track_truth`. Run i gets the GNSS condition ``CONDITIONS[i % 4]``
+in place of the one drawn (the drawn multipath is kept where GNSS is on):
+
+* **D-GPS**: differential fixes (fix 2) along the whole route;
+* **GNSS-only**: no differential corrections — the simulator's fix-1 model (σ ``fix1_sigma_m``
+  Gauss–Markov, 30 s) from the first second on (a 2 m outage at the start point and a
+  reacquisition time longer than the run);
+* **IMU-only**: no GNSS (a tunnel over the whole route, every switch in it): IMU, tacho, balises;
+* **balise-only**: no GNSS and no IMU evidence — the pipeline needs the IMU stream for slips
+  and slides, so it stays, and the turnout-signature test is switched off
+  (``track_select.imu_max_margin_m`` = 1e-9 m: no switch is ever passed with a smaller margin).
+
+Printed: wrong-track claims, parallel-track selectivity [Heirich 2016] overall and per
+condition, facing switches resolved correctly and the median distance after the switch until
+resolved (overall, with D-GPS, and per ``track_resolved`` evidence — the IMU's at ≥ 15 km/h),
+the |error| ≤ margin share of determined cycles (and of all claimed cycles, ambiguous ones
+judged by their candidates), each against its target, and the ratios to Heirich 2016.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from dbtools.build import build_db
+from dbtools.database import read_network
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.pipeline.track_truth import TrackFigures, compare_tracks, track_figures
+from fieldlogs.pipeline.truth import compare_with_truth
+from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.write import write_run
+from fieldlogs.simulate.network_runs import network_runs
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
+from schemas.enums import EventType, PositionState
+
+CONDITIONS = ("D-GPS", "GNSS-only", "IMU-only", "balise-only")
+#: Heirich 2016: parallel-track selectivity and facing switch ways resolved.
+HEIRICH_SELECTIVITY, HEIRICH_SWITCHES = 0.993, 0.972
+#: The IMU signature's resolution-distance target holds at or above this speed [km/h].
+IMU_MIN_KMH = 15.0
+
+
+def with_condition(run: dict[str, Any], condition: str) -> dict[str, Any]:
+    """The scenario override ``run`` with its GNSS replaced by ``condition`` (module docstring)."""
+    out: dict[str, Any] = json.loads(json.dumps(run))
+    net = out["network"]
+    net.pop("gnss_outages", None)
+    sensors = {k: v for k, v in out.get("sensors", {}).items() if k != "gps"}
+    if condition == "GNSS-only":
+        track, pos = net["points"][0]
+        net["gnss_outages"] = [[track, max(float(pos) - 1.0, 0.0), float(pos) + 1.0]]
+        out["gps"] = {**out.get("gps", {}), "reacquire_s": 1.0e6}
+    elif condition in ("IMU-only", "balise-only"):
+        net.pop("multipath", None)
+        sensors["gps"] = False
+    if sensors:
+        out["sensors"] = sensors
+    else:
+        out.pop("sensors", None)
+    return out
+
+
+def one(args: tuple[int, str, str, dict[str, Any]]) -> dict[str, Any]:
+    i, db, tmp, run = args
+    net = read_network(Path(db))
+    condition = CONDITIONS[i % len(CONDITIONS)]
+    sc = with_condition(run, condition)
+    streams, meta = simulate_run(net, scenario_from_dict(sc, source=sc["name"]))
+    folder = Path(tmp) / f"net{i:04d}"
+    write_run(folder, meta, streams, force=True)
+    t0 = time.perf_counter()
+    cfg = {"track_select": {"imu_max_margin_m": 1e-9}} if condition == "balise-only" else {}
+    res = run_pipeline(read_run(folder), net, PipelineConfig.from_dict(cfg))
+    elapsed = time.perf_counter() - t0
+    truth = streams["truth"]
+    figs = track_figures(res.positions, truth, net)  # the same comparison as ``tc`` below
+    cmp = compare_with_truth(res.positions, truth)
+    det = res.positions["state"].to_numpy(dtype=object) == PositionState.DETERMINED.value
+    claimed = cmp["claimed"].to_numpy(dtype=bool)
+    within = cmp["within_margin"].to_numpy(dtype=bool)
+    ev = res.events
+    tt, v = truth["t"].to_numpy(dtype=float), np.abs(truth["speed_mps"].to_numpy(dtype=float))
+    resolved = []
+    for _, r in ev[ev["type"] == EventType.TRACK_RESOLVED.value].iterrows():
+        d = json.loads(r["detail"])
+        if d.get("after_switch_m") is None:
+            continue
+        t_split = float(r["t"])
+        kmh = 3.6 * float(np.interp(t_split, tt, v))
+        resolved.append((str(d.get("evidence")), float(d["after_switch_m"]), kmh))
+    tc = compare_tracks(res.positions, truth, net)
+    wrong = tc.loc[tc["wrong"], "t"].to_numpy(dtype=float)
+    gps = streams.get("gps")
+    fix1 = float((gps["fix"] == 1).mean()) if gps is not None and len(gps) else 0.0
+    uncovered = cmp.loc[det & ~within, "t"].to_numpy(dtype=float)
+    return {
+        "i": i,
+        "condition": condition,
+        "elapsed": elapsed,
+        "figures": figs,
+        "determined": int(det.sum()),
+        "det_within": int((det & within).sum()),
+        "claimed": int(claimed.sum()),
+        "claimed_within": int((claimed & within).sum()),
+        "uncovered": (float(uncovered.min()), float(uncovered.max()), len(uncovered)) if len(uncovered) else None,
+        "resolved": resolved,
+        "refused": int((ev["type"] == EventType.TRACK_CHANGE_REFUSED.value).sum()),
+        "name": run["name"],
+        "fix1": fix1,
+        "wrong": (float(wrong.min()), float(wrong.max()), len(wrong)) if len(wrong) else None,
+        "parallel_by_state": tc[tc["parallel"]].groupby("state")["ds_m"].sum().to_dict(),
+    }
+
+
+def verdict(ok: bool) -> str:
+    return "PASS" if ok else "FAIL"
+
+
+def pct(x: float | None) -> str:
+    return "n/a" if x is None else f"{100 * x:.2f} %"
+
+
+def _mean(xs: list[float]) -> float | None:
+    return float(np.mean(xs)) if xs else None
+
+
+def _median(xs: list[float]) -> float | None:
+    return float(np.median(xs)) if xs else None
+
+
+def _runs(results: list[dict[str, Any]], key: str) -> str:
+    """The five runs with most cycles of ``key`` (wrong, uncovered): index, condition, name, t span."""
+    worst = sorted((r for r in results if r[key]), key=lambda r: -r[key][2])[:5]
+    return "".join(
+        f"; run {r['i']} {r['condition']} ({r['name']}): {r[key][2]} at t {r[key][0]:.0f}–{r[key][1]:.0f} s"
+        for r in worst
+    )
+
+
+def _selectivity(results: list[dict[str, Any]], condition: str, s: dict[str, Any]) -> str:
+    """Selectivity of one condition, its target (D-GPS), and where the parallel distance not
+    selected went (by state: ambiguous near switches, uncertain after a fail-safe, undetermined)."""
+    states: dict[str, float] = {}
+    for r in results:
+        if r["condition"] == condition:
+            for k, v in r["parallel_by_state"].items():
+                states[k] = states.get(k, 0.0) + v
+    total = sum(states.values())
+    lost = ", ".join(f"{k} {100 * v / total:.1f} %" for k, v in sorted(states.items()) if k != "determined")
+    target = "  (target ≥ 99.5 %)  " + verdict((s["selectivity"] or 0.0) >= 0.995) if condition == "D-GPS" else ""
+    return f"{pct(s['selectivity'])} over {s['parallel_km']:.1f} km{target}; not determined: {lost or 'none'}"
+
+
+def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
+    """The accuracy table's rows (label, value with target and verdict)."""
+    total = sum((r["figures"] for r in results), TrackFigures())
+    s = total.summary()
+    by = {c: sum((r["figures"] for r in results if r["condition"] == c), TrackFigures()).summary() for c in CONDITIONS}
+    det = sum(r["determined"] for r in results)
+    det_in = sum(r["det_within"] for r in results)
+    cl, cl_in = sum(r["claimed"] for r in results), sum(r["claimed_within"] for r in results)
+    cover = det_in / det if det else None
+    sel, sw = s["selectivity"], s["switches_resolved_correctly"]
+    dgps = by["D-GPS"]
+    ev: dict[str, list[float]] = {}
+    for r in results:
+        for evidence, dist, kmh in r["resolved"]:
+            if evidence != "imu" or kmh >= IMU_MIN_KMH:
+                ev.setdefault(evidence, []).append(dist)
+    imu_med = _median(ev.get("imu", []))
+    dgps_med = dgps["median_resolution_m"]
+    rows = [
+        ("runs (per condition)", ", ".join(f"{c} {sum(r['condition'] == c for r in results)}" for c in CONDITIONS)),
+        (
+            "  fix-1 share of GPS fixes, GNSS-only runs",
+            pct(_mean([r["fix1"] for r in results if r["condition"] == "GNSS-only"])),
+        ),
+        (
+            "wrong-track claims (determined cycles)",
+            f"{s['wrong_track_cycles']}  (target 0)  {verdict(s['wrong_track_cycles'] == 0)}" + _runs(results, "wrong"),
+        ),
+        (
+            "parallel-track selectivity, all",
+            f"{pct(sel)} over {s['parallel_km']:.1f} km (Heirich 99.3 %; ratio "
+            f"{sel / HEIRICH_SELECTIVITY if sel is not None else float('nan'):.3f})",
+        ),
+    ]
+    for c in CONDITIONS:
+        rows.append((f"  selectivity {c}", _selectivity(results, c, by[c])))
+    rows += [
+        (
+            "facing switches resolved correctly",
+            f"{pct(sw)} of {s['facing_switches']} ({s['switches_resolved_wrongly']} wrongly)  (target ≥ 99 %)  "
+            f"{verdict((sw or 0.0) >= 0.99)}; Heirich 97.2 %, ratio "
+            f"{sw / HEIRICH_SWITCHES if sw is not None else float('nan'):.3f}",
+        ),
+        ("  median distance after the switch, all", f"{s['median_resolution_m'] or float('nan'):.1f} m"),
+        (
+            "  median distance, D-GPS runs",
+            f"{dgps_med or float('nan'):.1f} m  (target ≤ 100 m)  {verdict(dgps_med is not None and dgps_med <= 100)}",
+        ),
+        (
+            f"  median by the IMU signature (≥ {IMU_MIN_KMH:.0f} km/h)",
+            f"{imu_med or float('nan'):.1f} m (n={len(ev.get('imu', []))})  (target ≤ 60 m)  "
+            f"{verdict(imu_med is not None and imu_med <= 60)}",
+        ),
+    ]
+    for evidence in sorted(ev):
+        if evidence != "imu":
+            rows.append(
+                (f"  median by {evidence}", f"{_median(ev[evidence]) or float('nan'):.1f} m (n={len(ev[evidence])})")
+            )
+    rows += [
+        (
+            "|error| ≤ margin, determined cycles",
+            f"{pct(cover)} of {det}  (target ≥ 99.9 %)  {verdict(cover is not None and cover >= 0.999)}"
+            + _runs(results, "uncovered"),
+        ),
+        ("  all claimed cycles (ambiguous by candidates)", f"{pct(cl_in / cl if cl else None)} of {cl}"),
+        ("line-based track changes refused by the topology", f"{sum(r['refused'] for r in results)}"),
+        ("pipeline time per run", f"{np.mean([r['elapsed'] for r in results]):.3f} s"),
+    ]
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--runs", type=int, default=100)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=31)
+    args = ap.parse_args()
+    from dbtools.sample_network import sample_network_source_dir
+
+    with tempfile.TemporaryDirectory() as tmpd:
+        db = Path(tmpd) / "net.sqlite"
+        build_db(sample_network_source_dir(), db)
+        runs = network_runs(read_network(db), args.runs, args.seed)
+        t0 = time.perf_counter()
+        with ProcessPoolExecutor(args.workers) as pool:
+            results = list(pool.map(one, [(i, str(db), tmpd, r) for i, r in enumerate(runs)]))
+        wall = time.perf_counter() - t0
+    print(f"network accuracy over {args.runs} seeded runs (seed {args.seed}) on the network sample ({wall:.1f} s wall)")
+    rows = table(results)
+    w = max(len(a) for a, _ in rows)
+    for a, b in rows:
+        print(f"  {a:<{w}}  {b}")
+
+
+if __name__ == "__main__":
+    main()

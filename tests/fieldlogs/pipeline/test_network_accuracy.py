@@ -1,0 +1,32 @@
+"""The floor of the network accuracy bench (bench/accuracy_network.py, issue 31) on fewer runs:
+40 seeded runs over the network sample (10 per GNSS condition), simulated and replayed —
+no wrong-track claim, ≥ 99 % of the facing switches resolved correctly, |error| ≤ margin
+on ≥ 99.9 % of the determined cycles."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from dbtools.database import read_network
+from fieldlogs.pipeline.track_truth import TrackFigures
+from fieldlogs.simulate.network_runs import network_runs
+from tests.bench.scripts import load_script
+
+RUNS, SEED = 40, 31
+
+
+@pytest.mark.slow
+def test_network_accuracy_floor(sample_network_db: Path, tmp_path: Path) -> None:
+    bench = load_script("accuracy_network")
+    runs = network_runs(read_network(sample_network_db), RUNS, SEED)
+    results = [bench.one((i, str(sample_network_db), str(tmp_path), r)) for i, r in enumerate(runs)]
+    assert {r["condition"] for r in results} == set(bench.CONDITIONS)
+    s = sum((r["figures"] for r in results), TrackFigures()).summary()
+    assert s["facing_switches"] >= 100
+    assert s["wrong_track_cycles"] == 0
+    assert s["switches_resolved_wrongly"] == 0
+    assert s["switches_resolved_correctly"] >= 0.99
+    determined = sum(r["determined"] for r in results)
+    assert sum(r["det_within"] for r in results) >= 0.999 * determined > 0
