@@ -196,6 +196,25 @@ def chord_bounds(lon: F64, lat: F64) -> tuple[F64, F64]:
     return c - CHORD_ROUNDING_M, high + CHORD_ROUNDING_M
 
 
+def step_bounds(lon: F64, lat: F64) -> tuple[F64, F64]:
+    """:func:`chord_bounds` of every step i → i + 1 of a whole network's points, ``BLOCK``
+    points at a time (bounded temporaries, the same values); NaN where the chord cannot bound
+    the step (far apart or a coordinate missing: solve it with :func:`exact_steps`)."""
+    n = max(lon.size - 1, 0)
+    low, high = np.empty(n), np.empty(n)
+    for a in range(0, n, BLOCK):
+        low[a : a + BLOCK], high[a : a + BLOCK] = chord_bounds(lon[a : a + BLOCK + 1], lat[a : a + BLOCK + 1])
+    return low, high
+
+
+def exact_steps(lon: F64, lat: F64, steps: I64) -> F64:
+    """Geodesic (GRS80 ``Geod.inv``) length [m] of the given steps i → i + 1 only."""
+    if steps.size == 0:
+        return np.empty(0)
+    _, _, d = GEOD.inv(lon[steps], lat[steps], lon[steps + 1], lat[steps + 1])
+    return np.asarray(d, dtype=float)
+
+
 def _blockwise_curvature(x: F64, y: F64) -> F64:
     """:func:`~dbtools.gis.geometry.signed_curvature` of the whole polyline, computed
     ``BLOCK`` vertices at a time (each with its two neighbours): the same values with
@@ -296,17 +315,11 @@ class GridIndex:
             with np.errstate(invalid="ignore"):
                 bad = where & ((d < lo) | (d > hi) | ~np.isfinite(d))
             return np.flatnonzero(bad), d
-        low, high = np.empty(self.n - 1), np.empty(self.n - 1)
-        for a in range(0, self.n - 1, BLOCK):  # blocks: bounded temporaries, same values
-            low[a : a + BLOCK], high[a : a + BLOCK] = chord_bounds(
-                self.lon[a : a + BLOCK + 1], self.lat[a : a + BLOCK + 1]
-            )
+        low, high = step_bounds(self.lon, self.lat)
         with np.errstate(invalid="ignore"):
             doubt = np.flatnonzero(where & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
         d = np.full(self.n - 1, np.nan)
-        if doubt.size:
-            _, _, exact = GEOD.inv(self.lon[doubt], self.lat[doubt], self.lon[doubt + 1], self.lat[doubt + 1])
-            d[doubt] = exact
+        d[doubt] = exact_steps(self.lon, self.lat, doubt)
         dd, lo_d, hi_d = d[doubt], lo[doubt], hi[doubt]
         with np.errstate(invalid="ignore"):
             bad = (dd < lo_d) | (dd > hi_d) | ~np.isfinite(dd)

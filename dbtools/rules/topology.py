@@ -67,7 +67,7 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
-from dbtools.rules.topology_tables import ALL_PORTS, add_codes, incidence_table, int_isin, port_table
+from dbtools.rules.topology_tables import ALL_PORTS, add_codes, incidence_table, int_isin, int_join, port_table
 from dbtools.topology import all_tracks, first_rows, grid_extents
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
@@ -305,14 +305,26 @@ def _pair_codes(pa_: npt.NDArray[np.object_], pb: npt.NDArray[np.object_]) -> I6
 def _switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
     """Connections naming a switch, with the ports of that switch their ends are at (a row
     per pair of ports; none where an end is at no port): crow (row of connections), pa/pb,
-    the switch's type and the port pair's code ``pair``."""
-    a = inc[(inc["side"] == "a").to_numpy() & inc["switch_id"].notna().to_numpy()]
-    a = a[["row", "sk", "tk", "ek", "ok", "oek"]].rename(columns={"row": "crow"})
-    p = ports[ports["track"].notna().to_numpy()][["sk", "tk", "ek", "port", "type", "row"]]
-    a = a.merge(p.rename(columns={"port": "pa"}), on=["sk", "tk", "ek"])
-    a = a.merge(p[["sk", "tk", "ek", "port"]].rename(columns={"port": "pb", "tk": "ok", "ek": "oek"}))
-    a["pair"] = _pair_codes(a["pa"].to_numpy(dtype=object), a["pb"].to_numpy(dtype=object))
-    return a
+    the switch's type, sk (the switch's code) and the port pair's code ``pair`` — joined on
+    the integer (switch, track, end) keys (:func:`int_join`)."""
+    at = np.flatnonzero((inc["side"] == "a").to_numpy() & inc["switch_id"].notna().to_numpy())
+    on = np.flatnonzero(ports["track"].notna().to_numpy())
+    port_key = ports["key"].to_numpy()[on]
+    i, j = int_join(inc["key"].to_numpy()[at], port_key)  # end a at port pa
+    k, m = int_join(inc["okey"].to_numpy()[at[i]], port_key)  # end b at port pb
+    pa_rows, pb_rows = on[j[k]], on[m]
+    port = ports["port"].to_numpy(dtype=object)
+    pa_, pb = port[pa_rows], port[pb_rows]
+    return pd.DataFrame(
+        {
+            "crow": inc["row"].to_numpy()[at[i[k]]],
+            "sk": inc["sk"].to_numpy()[at[i[k]]],
+            "pa": pa_,
+            "pb": pb,
+            "type": ports["type"].to_numpy(dtype=object)[pa_rows],
+            "pair": _pair_codes(pa_, pb),
+        }
+    )
 
 
 def _navigability(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:

@@ -11,6 +11,8 @@ compared with α as the ratio measured/α.
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 import pandas as pd
 
@@ -27,7 +29,8 @@ from schemas.network import CONNECTIONS, NETWORK_TRACKS
 def check_geometry(
     net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, config: ValidationConfig, loc: Locator
 ) -> list[Finding]:
-    geo = net.cached(("rules", "track_geometry"), lambda: track_geometry(net, tracks))
+    key = ("rules", "track_geometry", config.length_tolerance_m, config.length_tolerance_rel)
+    geo = net.cached(key, lambda: track_geometry(net, tracks, partial(_length_in_doubt, net, config)))
     pos = pd.Series(np.arange(len(tracks)), index=texts(tracks["track_id"]))
     pos = pos[~pos.index.duplicated()]
     return (
@@ -72,6 +75,28 @@ def _gaps(
         config.max_findings_per_rule,
         loc.file(CONNECTIONS.name),
     )
+
+
+#: Margin [m] by which a length's bracket must clear its limit to be decided without the exact
+#: length (far above the rounding of the comparison, far below any tolerance).
+LENGTH_MARGIN_M = 1e-6
+
+
+def _length_in_doubt(net: Network, config: ValidationConfig, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Rows of :func:`dbtools.topology.all_tracks` whose centreline length the track-length
+    rule needs exactly: a declared track whose length bracket [low, high] does not prove
+    |length_m − real| ≤ max(tol, rel·real) for every real in it (the worst real is an end of
+    the bracket; the limit is smallest at ``low``) — the tracks with a finding and those near
+    their limit. Undeclared rows (implied tracks) and a missing length_m: never."""
+    n = len(net.tracks)
+    out = np.zeros(len(low), dtype=bool)
+    stated = column(net.tracks, "length_m").astype(float)
+    lo, hi = low[:n], high[:n]
+    worst = np.maximum(np.abs(stated - lo), np.abs(stated - hi))
+    lim = np.maximum(config.length_tolerance_m, config.length_tolerance_rel * lo)
+    with np.errstate(invalid="ignore"):
+        out[:n] = worst > lim - LENGTH_MARGIN_M
+    return out
 
 
 def _lengths(net: Network, geo: pd.DataFrame, config: ValidationConfig, loc: Locator) -> list[Finding]:

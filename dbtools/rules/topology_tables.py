@@ -72,8 +72,8 @@ def shared_codes(*columns: pd.Series) -> list[I64]:
 
 def add_codes(net: Network, inc: pd.DataFrame, ports: pd.DataFrame) -> None:
     """Add codes of switch (``sk``), track (``tk``, ``ok`` of the other track) and end
-    (``ek``, ``oek``) to the incidence and port tables, and ``key`` = the (switch, track,
-    end) triple as one integer."""
+    (``ek``, ``oek``) to the incidence and port tables, ``key`` = the (switch, track,
+    end) triple as one integer and, to the incidence table, ``okey`` = that of the other end."""
     c, sw = net.connections, net.switches
     csk, ssk = shared_codes(c["switch_id"], sw["switch_id"])
     inc["sk"], ports["sk"] = np.concatenate([csk, csk]), np.tile(ssk, len(ALL_PORTS))
@@ -86,8 +86,22 @@ def add_codes(net: Network, inc: pd.DataFrame, ports: pd.DataFrame) -> None:
     n_t, n_e = n_code
     for f in (inc, ports):
         f["key"] = (f["sk"].to_numpy() * n_t + f["tk"].to_numpy()) * n_e + f["ek"].to_numpy()
+    inc["okey"] = (inc["sk"].to_numpy() * n_t + inc["ok"].to_numpy()) * n_e + inc["oek"].to_numpy()
 
 
 def int_isin(values: npt.ArrayLike, known: npt.ArrayLike) -> npt.NDArray[np.bool_]:
     """``np.isin`` for integer keys by a hash look-up (no sort)."""
     return np.asarray(pd.Series(np.asarray(values)).isin(np.asarray(known)).to_numpy(), dtype=bool)
+
+
+def int_join(left: I64, right: I64) -> tuple[I64, I64]:
+    """Row pairs (i, j) with ``left[i] == right[j]`` in the order of an inner
+    ``DataFrame.merge`` (by i, then by j): ``right`` sorted once (stable), each key's run
+    found by ``np.searchsorted``."""
+    order = np.argsort(right, kind="stable")
+    r = right[order]
+    lo = np.searchsorted(r, left, "left")
+    cnt = np.searchsorted(r, left, "right") - lo
+    li = np.repeat(np.arange(len(left), dtype=np.int64), cnt)
+    within = np.arange(int(cnt.sum()), dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    return li, np.asarray(order[np.repeat(lo, cnt) + within], dtype=np.int64)

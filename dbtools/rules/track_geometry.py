@@ -12,6 +12,14 @@ network (no per-track Python loop: a national network has ≥ 50,000 tracks).
   the two end km; the outward azimuth at an end is that of the chord from the grid point
   ``GIS_SPACING_M`` inside the track to the end.
 
+**Lengths without a geodesic a step** (:func:`dbtools.gis.index.step_bounds`): every step's
+geodesic length lies in [low, high] from its straight chord, so each length is bracketed by
+the same sums over the lower and the upper bounds (a length is a sum of steps with weights in
+[0, 1], the interpolated part steps included). ``track_geometry(…, doubtful)`` asks the caller
+which brackets decide nothing (the track-length rule: a bracket that straddles its limit);
+only the steps of those tracks are solved exactly (``Geod.inv``). Without ``doubtful`` every
+length is exact.
+
 Interpolation runs over all grid tracks in one call: each (line, track) grid is shifted to
 its own band of a single increasing key (band index × span + km), and end km are clamped
 into their own grid's range before the look-up, so no interpolation crosses from one
@@ -20,12 +28,14 @@ grid into the next.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.geometry import GEOD
-from dbtools.gis.index import grid_index
+from dbtools.gis.index import exact_steps, grid_index, step_bounds
 from dbtools.network import Network, sorted_by
 from dbtools.rules.common import column, texts
 from dbtools.topology import first_rows, grid_extents
@@ -46,43 +56,123 @@ def _nan(n: int) -> F64:
     return np.full(n, np.nan)
 
 
-def track_geometry(net: Network, tracks: pd.DataFrame) -> pd.DataFrame:
+#: Per step (length n − 1): the geodesic length's lower and upper bounds, 0 across groups.
+Bounds = tuple[F64, F64]
+
+
+class _Lengths:
+    """Lengths of some rows of the track table, each a function of the step lengths ``d`` of
+    one point sequence (``lon``, ``lat``; ``same[i]``: step i joins two points of one group);
+    ``steps(rows)`` the steps the lengths of those rows depend on."""
+
+    def __init__(
+        self,
+        rows: npt.NDArray[np.int64],
+        lon: F64,
+        lat: F64,
+        same: npt.NDArray[np.bool_],
+        of: Callable[[F64], F64],
+        steps: Callable[[npt.NDArray[np.bool_]], npt.NDArray[np.bool_]],
+        exact: F64 | None = None,
+    ) -> None:
+        self.rows, self.lon, self.lat, self.same, self.of, self.steps = rows, lon, lat, same, of, steps
+        if exact is not None:
+            self.low = self.high = np.where(same, exact, 0.0)
+        else:
+            low, high = step_bounds(lon, lat)
+            far = np.flatnonzero(same & ~(np.isfinite(low) & np.isfinite(high)))
+            low[far] = high[far] = exact_steps(lon, lat, far)  # the chord bounds nothing: solved
+            self.low, self.high = np.where(same, low, 0.0), np.where(same, high, 0.0)
+
+    def bounds(self) -> Bounds:
+        return self.of(self.low), self.of(self.high)
+
+    def exact(self, which: npt.NDArray[np.bool_]) -> F64:
+        """Exact lengths of the rows ``which`` (a mask over ``rows``); others from the lower bounds."""
+        if self.low is self.high:
+            return self.of(self.low)
+        need = np.flatnonzero(self.steps(which) & self.same)
+        d = self.low.copy()
+        d[need] = exact_steps(self.lon, self.lat, need)
+        return self.of(d)
+
+
+def track_geometry(
+    net: Network, tracks: pd.DataFrame, doubtful: Callable[[F64, F64], npt.NDArray[np.bool_]] | None = None
+) -> pd.DataFrame:
     """Per row of ``tracks`` (:func:`dbtools.topology.all_tracks`): ``lat_begin, lon_begin,
-    az_begin, lat_end, lon_end, az_end`` (azimuths outward, degrees from north) and
-    ``geo_length_m`` — NaN where the track has no centreline."""
+    az_begin, lat_end, lon_end, az_end`` (azimuths outward, degrees from north),
+    ``geo_length_low_m`` ≤ ``geo_length_high_m`` bounding the centreline's length and
+    ``geo_length_m`` — exact where ``doubtful(low, high)`` (all rows at once) is true or
+    ``doubtful`` is not given, else NaN; NaN everywhere where the track has no centreline."""
     n = len(tracks)
-    out = {k: _nan(n) for k in ("lat_begin", "lon_begin", "az_begin", "lat_end", "lon_end", "az_end", "geo_length_m")}
+    out = {k: _nan(n) for k in ("lat_begin", "lon_begin", "az_begin", "lat_end", "lon_end", "az_end")}
     tid = texts(tracks["track_id"])
-    own = _from_track_points(net.track_points)
+    own, own_len = _from_track_points(net.track_points)
     at = own.index.get_indexer(pd.Index(tid)) if len(own) else np.full(n, -1)
     has_points = at >= 0
+    parts = []
     if has_points.any():
         sel = own.iloc[at[has_points]]
         for k in out:
             out[k][has_points] = sel[k].to_numpy(dtype=float)
-    _from_gis(net, tracks, ~has_points, out)
-    return pd.DataFrame(out, index=tracks.index)
+        assert own_len is not None
+        parts.append(own_len.select(np.flatnonzero(has_points), at[has_points]))
+    grid_len = _from_gis(net, tracks, ~has_points, out)
+    if grid_len is not None:
+        parts.append(grid_len)
+    low, high, exact = _nan(n), _nan(n), _nan(n)
+    for part in parts:
+        low[part.rows], high[part.rows] = part.bounds()
+    want = np.ones(n, dtype=bool) if doubtful is None else np.asarray(doubtful(low, high), dtype=bool)
+    for part in parts:
+        which = want[part.rows]
+        if which.any():
+            exact[part.rows[which]] = part.exact(which)[which]
+    return pd.DataFrame(
+        {**out, "geo_length_low_m": low, "geo_length_high_m": high, "geo_length_m": exact}, index=tracks.index
+    )
 
 
-def _from_track_points(tp: pd.DataFrame) -> pd.DataFrame:
-    """End points, outward end azimuths and polyline length of every track in track_points."""
+class _OwnLengths:
+    """Polyline lengths of the tracks of track_points (one group of points per track)."""
+
+    def __init__(self, lon: F64, lat: F64, ids: npt.NDArray[np.intp], first: npt.NDArray[np.intp]) -> None:
+        self.lon, self.lat, self.ids, self.first = lon, lat, ids, first
+        self.last = np.r_[first[1:] - 1, len(ids) - 1]
+        self.same = ids[1:] == ids[:-1]
+
+    def select(self, rows: npt.NDArray[np.int64], groups: npt.NDArray[np.intp]) -> _Lengths:
+        """The lengths of the track groups ``groups``, for the track-table rows ``rows``."""
+        first, last, ids = self.first[groups], self.last[groups], self.ids
+
+        def of(d: F64) -> F64:
+            cum = np.r_[0.0, np.cumsum(d)]
+            return np.asarray(cum[last] - cum[first], dtype=float)
+
+        def steps(which: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+            return np.isin(ids[:-1], ids[first[which]])
+
+        return _Lengths(rows, self.lon, self.lat, self.same, of, steps)
+
+
+def _from_track_points(tp: pd.DataFrame) -> tuple[pd.DataFrame, _OwnLengths | None]:
+    """End points and outward end azimuths of every track in track_points (the first and last
+    chord's ``Geod.inv`` only), and their polyline lengths."""
     if tp.empty:
-        return pd.DataFrame()
+        return pd.DataFrame(), None
     if not sorted_by(tp, ("track_id", "pos_m")):
         tp = tp.sort_values(["track_id", "pos_m"], kind="stable")
     ids, _ = pd.factorize(tp["track_id"], use_na_sentinel=False)  # equal ids, equal codes
     lat, lon = tp["lat"].to_numpy(float), tp["lon"].to_numpy(float)
     first = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     last = np.r_[first[1:] - 1, len(ids) - 1]
-    az, dist = _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])
-    same = ids[1:] == ids[:-1]
-    seg_len = np.where(same, dist, 0.0)
-    cum = np.r_[0.0, np.cumsum(seg_len)]
     single = first == last
-    nxt, prv = np.minimum(first, len(az) - 1), np.maximum(last - 1, 0)
-    az_b = np.where(single, np.nan, (az[nxt] + 180.0) % 360.0 if len(az) else np.nan)
-    az_e = np.where(single, np.nan, az[prv] if len(az) else np.nan)
-    return pd.DataFrame(
+    nxt, prv = first[~single], last[~single] - 1
+    az_b, az_e = _nan(len(first)), _nan(len(first))
+    az_b[~single] = (_inv(lat[nxt], lon[nxt], lat[nxt + 1], lon[nxt + 1])[0] + 180.0) % 360.0
+    az_e[~single] = _inv(lat[prv], lon[prv], lat[prv + 1], lon[prv + 1])[0]
+    ends = pd.DataFrame(
         {
             "lat_begin": lat[first],
             "lon_begin": lon[first],
@@ -90,30 +180,32 @@ def _from_track_points(tp: pd.DataFrame) -> pd.DataFrame:
             "lat_end": lat[last],
             "lon_end": lon[last],
             "az_end": az_e,
-            "geo_length_m": cum[last] - cum[first],
         },
         index=pd.Index(texts(tp["track_id"].iloc[first]), dtype=object),
     )
+    return ends, _OwnLengths(lon, lat, ids, first)
 
 
-def _steps(net: Network, g: pd.DataFrame) -> F64:
-    """Ellipsoidal distance between consecutive rows of ``g`` (the grid sorted by line,
-    track and km): the grid index's (:attr:`GridIndex.dist`, computed once per network) when
-    it holds the same points in the same order, as it does for a valid grid."""
+def _cached_steps(net: Network, g: pd.DataFrame) -> F64 | None:
+    """The grid index's exact steps (:attr:`GridIndex.dist`) when already computed and it holds
+    the points of ``g`` (the grid sorted by line, track and km) in the same order."""
     if g is net.gis:
         grid = grid_index(net)
         n = len(g)
-        if grid.pos.size == n and (n == 0 or (grid.pos[0] == 0 and bool(np.all(np.diff(grid.pos) == 1)))):
+        if (
+            "dist" in grid.__dict__
+            and grid.pos.size == n
+            and (n == 0 or (grid.pos[0] == 0 and bool(np.all(np.diff(grid.pos) == 1))))
+        ):
             return grid.dist
-    lat, lon = g["lat"].to_numpy(float), g["lon"].to_numpy(float)
-    return _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])[1]
+    return None
 
 
-def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], out: dict[str, F64]) -> None:
-    """Fill ``out`` for the tracks along a line grid (module doc)."""
+def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], out: dict[str, F64]) -> _Lengths | None:
+    """Fill ``out`` for the tracks along a line grid (module doc); their lengths."""
     gis = net.gis
     if gis.empty or not todo.any():
-        return
+        return None
     if sorted_by(gis, ("line_code", "track", "km_m")):  # as read from a DB: the grid's runs, no group-by
         g, ext = gis, grid_extents(net)
         codes: npt.NDArray[np.int64] = np.repeat(np.arange(len(ext)), np.diff(np.r_[ext["start"].to_numpy(), len(g)]))
@@ -131,8 +223,6 @@ def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], o
     span = float(np.nanmax(km) - np.nanmin(km)) + 10.0 * GIS_SPACING_M
     base = float(np.nanmin(km))
     key = codes * span + (km - base)
-    dist = _steps(net, g)
-    cum = np.r_[0.0, np.cumsum(np.where(codes[1:] == codes[:-1], dist, 0.0))]
 
     t = tracks[todo]
     idx = np.flatnonzero(todo)
@@ -143,17 +233,20 @@ def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], o
     ok = (gid >= 0) & np.isfinite(k0) & np.isfinite(k1)
     idx, gid, k0, k1 = idx[ok], gid[ok], k0[ok], k1[ok]
     if idx.size == 0:
-        return
+        return None
 
-    def at(k: F64) -> tuple[F64, F64, F64]:
-        kk = gid * span + (np.clip(k, lo[gid], hi[gid]) - base)
-        return np.interp(kk, key, lat), np.interp(kk, key, lon), np.interp(kk, key, cum)
+    def key_at(k: F64) -> F64:
+        return np.asarray(gid * span + (np.clip(k, lo[gid], hi[gid]) - base), dtype=float)
 
-    la0, lo0, c0 = at(k0)
-    la1, lo1, c1 = at(k1)
+    def at(k: F64) -> tuple[F64, F64]:
+        kk = key_at(k)
+        return np.interp(kk, key, lat), np.interp(kk, key, lon)
+
+    la0, lo0 = at(k0)
+    la1, lo1 = at(k1)
     inward = np.sign(k1 - k0) * GIS_SPACING_M
-    li0, loi0, _ = at(k0 + inward)
-    li1, loi1, _ = at(k1 - inward)
+    li0, loi0 = at(k0 + inward)
+    li1, loi1 = at(k1 - inward)
     az_b, _ = _inv(li0, loi0, la0, lo0)
     az_e, _ = _inv(li1, loi1, la1, lo1)
     for name, v in (
@@ -163,9 +256,18 @@ def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], o
         ("lat_end", la1),
         ("lon_end", lo1),
         ("az_end", az_e),
-        ("geo_length_m", np.abs(c1 - c0)),
     ):
         out[name][idx] = v
+    kk0, kk1 = key_at(k0), key_at(k1)
+
+    def of(d: F64) -> F64:
+        cum = np.r_[0.0, np.cumsum(d)]
+        return np.abs(np.interp(kk1, key, cum) - np.interp(kk0, key, cum))
+
+    def steps(which: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
+        return np.isin(codes[:-1], gid[which])  # the whole grid of each track's line and track
+
+    return _Lengths(idx, lon, lat, codes[1:] == codes[:-1], of, steps, _cached_steps(net, g))
 
 
 def end_coordinates(
