@@ -130,11 +130,17 @@ def _longest_line(text: str) -> int:
     return max((cell_len(line) for line in text.splitlines()), default=0)
 
 
+#: A column lacking at most this many characters of its longest line is given them whole.
+SHORT_LACK = 8
+
+
 def fit_widths(table: Table, max_width: int) -> list[int] | None:
     """Content width of each column so that ``table`` fits ``max_width`` with its borders and
     no word or number is split: every column at least its longest word (a ``no_wrap`` column
-    its longest line), the room left given to the columns that lack least of their longest
-    line first (short columns whole, the long texts wrap). None when even the longest words
+    its longest line), the room left first to the columns that lack at most
+    :data:`SHORT_LACK` characters (or an even share) of their longest line — short columns
+    whole — and the rest shared in proportion to what each long column lacks (the long texts
+    wrap side by side). None when even the longest words
     do not fit (print records instead).
 
     Rich, left to itself, narrows the widest columns first and then crops: a number split
@@ -153,10 +159,18 @@ def fit_widths(table: Table, max_width: int) -> list[int] | None:
     if sum(natural) <= room:
         return natural
     widths, spare = list(least), room - sum(least)
+    short = max(SHORT_LACK, spare // len(widths))
     for i in sorted(range(len(widths)), key=lambda i: natural[i] - least[i]):  # the nearly whole first
-        grant = min(natural[i] - least[i], spare)
-        widths[i] += grant
-        spare -= grant
+        if natural[i] - least[i] <= min(short, spare):
+            spare -= natural[i] - least[i]
+            widths[i] = natural[i]
+    lack = [natural[i] - widths[i] for i in range(len(widths))]
+    total = sum(lack)
+    if total:  # the rest shared in proportion to what each column lacks: no column starves
+        grants = [spare * k // total for k in lack]
+        for i in sorted(range(len(widths)), key=lambda i: -lack[i])[: spare - sum(grants)]:
+            grants[i] += 1
+        widths = [w + min(g, k) for w, g, k in zip(widths, grants, lack, strict=True)]
     return widths
 
 

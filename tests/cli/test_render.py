@@ -144,3 +144,23 @@ def test_frame_headers_and_cells_are_printed_as_written_not_as_markup() -> None:
     frame = pd.DataFrame({"stream": ["tacho [x]"], "t from [s]": [0.0], "declared [Hz]": [10]})
     text = _render(frame_table(frame), 80)
     assert "[s]" in text and "[Hz]" in text and "tacho [x]" in text
+
+
+def test_long_columns_share_the_room_in_proportion_to_what_they_lack() -> None:
+    # 80 columns: borders and padding take 7, so 73 for the text; column 1's longest word is 10
+    # and its line 65 (lacks 55), column 2's 11 and 107 (lacks 96): the 52 spare characters go
+    # 52·55/151 = 18.9 → 18 and 52·96/151 = 33.1 → 33, the one left over to the column that lacks
+    # most — 28 and 45; the old rule (the nearly whole column first) gave 62 and 11
+    from cli.render import fit_widths, rich_table
+
+    table = rich_table()
+    table.add_column("t")
+    table.add_column("u")
+    table.add_row(" ".join(["abcdefghij"] * 6), " ".join(["abcdefghijk"] * 9))
+    assert fit_widths(table, 80) == [28, 45]
+    # a short column lacking a few characters is still given them whole
+    short = rich_table()
+    short.add_column("key")
+    short.add_column("text")
+    short.add_row("ab cd", " ".join(["abcdefghijk"] * 9))
+    assert fit_widths(short, 80)[0] == len("ab cd")
