@@ -75,6 +75,10 @@ def visible(text: object) -> str:
     return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", str(text))
 
 
+#: A "[" after a backslash that starts no Rich tag (``rich.markup.RE_TAGS``'s tag start).
+_LONE_BRACKET = re.compile(r"(?<=\\)\[(?![a-z#/@][^[]*?\])")
+
+
 def safe(text: object) -> str:
     """User-supplied text (a path, an id, an exception's message) for a Rich markup string:
     :func:`visible`, and ``[`` escaped so that ``[/x]`` or ``[bold]`` in a path is printed as
@@ -83,7 +87,10 @@ def safe(text: object) -> str:
 
     # escape() doubles a trailing backslash (so that a tag pasted right after it stays a tag):
     # none of our messages puts a tag there, and the path must print as written
-    return escape(visible(text) + " ")[:-1]
+    escaped = escape(visible(text) + " ")[:-1]
+    # escape() leaves a "[" that starts no tag alone, but Rich still reads "\[" before it as an
+    # escaped bracket and drops the backslash: one more backslash keeps "\[" as written
+    return _LONE_BRACKET.sub(r"\\[", escaped)
 
 
 def _cell(v: Any, scale: float = 1.0) -> str:

@@ -33,6 +33,12 @@ def test_safe_text_prints_as_written(text: str) -> None:
     assert _printed(f"[bold]error:[/] {safe(text)}") == f"error: {visible(text)}".rstrip()
 
 
+@pytest.mark.parametrize("text", ["\\[", "a\\[b", "\\\\[", "\\[x]", "\\[[x]", "[\\[x]", "\\[\\["])
+def test_a_backslash_before_a_bracket_prints_as_written(text: str) -> None:
+    # Rich drops the backslash of "\[" even where the "[" starts no tag (found by the property above)
+    assert _printed(f"[bold]error:[/] {safe(text)}") == f"error: {text}"
+
+
 def test_control_characters_are_shown_not_sent() -> None:
     assert visible("run\x1b[2Jid\x07") == "run\\x1b[2Jid\\x07"
     assert visible("tab\tand\nnewline") == "tab\tand\nnewline"
