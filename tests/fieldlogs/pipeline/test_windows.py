@@ -90,18 +90,9 @@ SMALL = Table(
 )
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(
-    t=st.lists(st.one_of(st.floats(0.0, 100.0), st.just(float("nan"))), min_size=1, max_size=80),
-    group=st.integers(1, 30),
-    a=st.floats(-10.0, 110.0),
-    width=st.floats(0.0, 120.0),
-)
-def test_a_window_is_the_rows_of_the_whole_read_in_it(
-    tmp_path: Path, t: list[float], group: int, a: float, width: float
-) -> None:
-    """Any order, repeated and missing t, nulls, several row groups: the window's rows are
-    those of the whole read with a ≤ t < b, in file order, typed the same."""
+def _small_stream(tmp_path: Path, t: list[float], group: int) -> Path:
+    """A Parquet stream with these t, a float, a nullable int and a nullable text column (nulls
+    on a fixed pattern), ``group`` rows per row group."""
     n = len(t)
     rng = np.random.default_rng(n)
     frame = pd.DataFrame(
@@ -114,6 +105,22 @@ def test_a_window_is_the_rows_of_the_whole_read_in_it(
     )
     path = tmp_path / "small.parquet"
     pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, row_group_size=group)
+    return path
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    t=st.lists(st.one_of(st.floats(0.0, 100.0), st.just(float("nan"))), min_size=1, max_size=80),
+    group=st.integers(1, 30),
+    a=st.floats(-10.0, 110.0),
+    width=st.floats(0.0, 120.0),
+)
+def test_a_window_is_the_rows_of_the_whole_read_in_it(
+    tmp_path: Path, t: list[float], group: int, a: float, width: float
+) -> None:
+    """Any order, repeated and missing t, nulls, several row groups: the window's rows are
+    those of the whole read with a ≤ t < b, in file order, typed the same."""
+    path = _small_stream(tmp_path, t, group)
     whole, _ = ParquetStream(SMALL, path).read()
     b = a + width
     read = read_between(SMALL, path, a, b)
@@ -147,18 +154,7 @@ def test_a_cursor_reads_each_window_as_the_window_reader(
         t = [x for x in t if not math.isnan(x)] or [0.0]
         t = sorted(t)
         t = [x for k in range(0, len(t), group) for x in reversed(t[k : k + group])]
-    n = len(t)
-    rng = np.random.default_rng(n)
-    frame = pd.DataFrame(
-        {
-            "t": t,
-            "x": rng.normal(size=n),
-            "n": pd.array([None if i % 7 == 3 else i for i in range(n)], dtype="Int64"),
-            "s": [None if i % 5 == 1 else f"v{i % 3}" for i in range(n)],
-        }
-    )
-    path = tmp_path / "small.parquet"
-    pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), path, row_group_size=group)
+    path = _small_stream(tmp_path, t, group)
     cursor = StreamCursor(SMALL, path)
     bounds = sorted(starts)
     windows = [(a, a + width + ahead) for a in bounds] + [(bounds[0], bounds[0] + width)]  # the last one goes back
