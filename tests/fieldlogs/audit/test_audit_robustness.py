@@ -96,16 +96,32 @@ def stored_runs(out: Path) -> int:
         return 0
 
 
-def wait_for_workers(proc: subprocess.Popen[bytes], out: Path, timeout_s: float = 240.0) -> set[int]:
-    """Once at least one run is stored and the pool runs, the coordinator's descendants."""
+def freeze_when_running(proc: subprocess.Popen[bytes], out: Path, timeout_s: float = 240.0) -> set[int]:
+    """Once at least one run is stored and the pool runs, stop the whole job (SIGSTOP to
+    its process group, as a terminal's Ctrl-Z) and return the coordinator's descendants.
+
+    Stopping first makes the interruption deterministic: however loaded the machine, the
+    audit cannot finish between "it is running" and the signal under test (a bare poll
+    lost that race once in CI). Signals sent while stopped stay pending; ``resume`` lets
+    them be delivered."""
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout_s:
         assert proc.poll() is None, "the audit finished before it could be interrupted"
         kids = {p.pid for p in psutil.Process(proc.pid).children(recursive=True)}
         if stored_runs(out) >= 1 and len(kids) >= 2:  # the workers (forked: no server, no tracker)
+            os.killpg(proc.pid, signal.SIGSTOP)
+            assert proc.poll() is None, "the audit finished before it could be stopped"
             return kids
-        time.sleep(0.1)
+        time.sleep(0.05)
     raise AssertionError("the audit did not start its pool in time")
+
+
+def resume(proc: subprocess.Popen[bytes]) -> None:
+    """SIGCONT to the job's process group: pending signals are delivered now."""
+    try:
+        os.killpg(proc.pid, signal.SIGCONT)
+    except ProcessLookupError:  # the group is already gone
+        pass
 
 
 def assert_gone(pids: set[int], timeout_s: float = 30.0) -> None:
@@ -124,8 +140,9 @@ def test_audit_killed_with_sigkill_can_be_reported_and_resumed_and_leaves_no_pro
 ) -> None:
     out = tmp_path / "audit.sqlite"
     with audit_process(many_logs, data.db, out) as proc:
-        kids = wait_for_workers(proc, out)
+        kids = freeze_when_running(proc, out)
         os.kill(proc.pid, signal.SIGKILL)
+        resume(proc)  # the orphaned workers wake up to find their parent gone
         proc.communicate(timeout=30)
     assert_gone(kids)  # no worker survives
     kept = stored_runs(out)
@@ -147,8 +164,9 @@ def test_audit_interrupted_with_ctrl_c_exits_130_keeps_runs_and_leaves_no_proces
 ) -> None:
     out = tmp_path / "audit.sqlite"
     with audit_process(many_logs, data.db, out) as proc:
-        kids = wait_for_workers(proc, out)
+        kids = freeze_when_running(proc, out)
         os.killpg(proc.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
+        resume(proc)
         _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err.decode()
     assert b"interrupted" in err and b"Traceback" not in err
