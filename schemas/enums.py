@@ -211,6 +211,7 @@ class EventType(StrEnum):
     TRACK_RESOLVED = "track_resolved"
     HYPOTHESIS_DROPPED = "hypothesis_dropped"
     TRACK_CHANGE_REFUSED = "track_change_refused"
+    GPS_CORRECTION = "gps_correction"
     ROLLBACK_SUSPECTED = "rollback_suspected"
 
 
@@ -260,6 +261,8 @@ EVENT_MEANING: dict[EventType, str] = {
     EventType.TRACK_CHANGE_REFUSED: "a line-based aid (GPS decision, balise, feature point) put the position on a "
     "track no navigable path reaches from the candidates within the travel and the margin: refused, the "
     "candidates kept",
+    EventType.GPS_CORRECTION: "on a network, a trusted D-GPS fix on the determined track, agreeing with the "
+    "estimate and with an along-track uncertainty well below the margin, corrected the distance along the track",
 }
 
 #: Events that correct the km, and the one the position-correction % is defined on [S003 §5.2].

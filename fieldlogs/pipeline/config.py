@@ -293,7 +293,8 @@ CYCLE_S: dict[str, Any] = {
 @dataclass(frozen=True)
 class TrackSelectConfig:
     """Which track after a facing switch: the evidence tests of the network aids
-    (:mod:`fieldlogs.pipeline.aids.track_gps`, :mod:`fieldlogs.pipeline.aids.track_imu`).
+    (:mod:`fieldlogs.pipeline.aids.track_gps`, :mod:`fieldlogs.pipeline.aids.track_imu`), and the
+    D-GPS corrections along a determined track (:mod:`fieldlogs.pipeline.aids.track_gps_along`).
 
     A candidate is dropped when another one's log-likelihood ratio against it reaches
     A = ln((1 − β)/α) (Wald's upper threshold): α the accepted probability of dropping the true
@@ -309,6 +310,19 @@ class TrackSelectConfig:
     )
     imu_max_margin_m: float = setting(
         30.0, "no IMU test when the margin at the switch exceeds this (the window would hold other curves)", "m", gt=0
+    )
+    gps_along_k: float = setting(
+        4.0, "a D-GPS fix's along-track margin in σ of its error (noise_sigma_m, noise_white_m)", gt=0
+    )
+    gps_along_map_m: float = setting(0.5, "the centreline's own along-track error, added to that margin", "m", ge=0)
+    gps_along_ratio: float = setting(
+        1.5, "a D-GPS fix corrects the distance along the track only when the margin exceeds this × its own", gt=1
+    )
+    gps_along_confirm: int = setting(
+        5, "D-GPS fixes in a row, each step agreeing with the odometry, before one corrects the position", ge=2
+    )
+    gps_along_step_m: float = setting(
+        1.5, "a fix-to-fix step of a D-GPS fix along the track beyond this from the odometry's is a jump", "m", gt=0
     )
 
     def __post_init__(self) -> None:

@@ -63,7 +63,7 @@ class TrackLine:
     xy: FloatArray
     """(n, 2) centreline east/north [m] in the plane centred at ``origin`` (lat, lon)."""
     cpos: FloatArray
-    """pos of each centreline point."""
+    """pos of each centreline point (as a candidate's: rail length from the begin, not km)."""
     origin: tuple[float, float]
 
     def km_of_pos(self, pos: FloatArray | float) -> FloatArray:
@@ -102,6 +102,30 @@ class TrackLine:
         norm = max(math.hypot(dx, dy), 1e-9)
         return x0 + u * dx, y0 + u * dy, dx / norm, dy / norm
 
+    def project(self, x: float, y: float, near: float, window_m: float) -> tuple[float, float]:
+        """(pos, offset) of the plane point (x, y) on the centreline: the nearest point of the
+        segments whose ``cpos`` lies within ``near`` ± ``window_m`` (pos along the track,
+        offset + left of the begin→end direction); (NaN, NaN) when no segment lies there.
+        The point's foot on segment j is u = clip(((p − a_j)·(b_j − a_j)) / |b_j − a_j|², 0, 1)."""
+        n = self.cpos.size
+        if n < 2:
+            return math.nan, math.nan
+        lo = max(int(np.searchsorted(self.cpos, near - window_m, side="right")) - 1, 0)
+        hi = min(int(np.searchsorted(self.cpos, near + window_m, side="left")) + 1, n)
+        if hi - lo < 2:
+            return math.nan, math.nan
+        a, b = self.xy[lo : hi - 1], self.xy[lo + 1 : hi]
+        ab = b - a
+        l2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
+        u = np.clip(((x - a[:, 0]) * ab[:, 0] + (y - a[:, 1]) * ab[:, 1]) / l2, 0.0, 1.0)
+        fx, fy = a[:, 0] + u * ab[:, 0], a[:, 1] + u * ab[:, 1]
+        j = int(np.argmin((x - fx) ** 2 + (y - fy) ** 2))
+        c0, c1 = float(self.cpos[lo + j]), float(self.cpos[lo + j + 1])
+        pos = c0 + float(u[j]) * (c1 - c0)
+        norm = max(math.sqrt(float(l2[j])), 1e-9)
+        off = (-(x - float(fx[j])) * float(ab[j, 1]) + (y - float(fy[j])) * float(ab[j, 0])) / norm
+        return pos, off
+
     def plane(self, lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:
         """lat/lon [deg] in this track's local plane [m]."""
         lat0, lon0 = self.origin
@@ -137,7 +161,11 @@ def _track_line(net: Network, row: pd.Series) -> TrackLine:
         length = abs(float(m.c_of_km(float(k1))) - c_begin) if m is not IDENTITY else abs(float(k1) - float(k0))
     pos = cl.pos_m.astype(float) if has_points else np.empty(0)
     km = cl.km_m.astype(float) if has_points else np.empty(0)
-    tl = TrackLine(tid, line, track, length, metric, c_begin, dirn, pos, km, np.zeros((0, 2)), cl.pos_m, (lat0, lon0))
+    cpos = cl.pos_m.astype(float)
+    if metric is not None and cl.km_m.size:
+        # the grid's pos is |km − km at begin|; a candidate's pos is rail length (the metric's c)
+        cpos = dirn * (np.asarray(metric.c_of_km(cl.km_m.astype(float)), dtype=float) - c_begin)
+    tl = TrackLine(tid, line, track, length, metric, c_begin, dirn, pos, km, np.zeros((0, 2)), cpos, (lat0, lon0))
     x, y = tl.plane(cl.lat, cl.lon)
     return replace(tl, xy=np.column_stack([x, y]) if cl.lat.size >= 2 else np.zeros((0, 2)))
 

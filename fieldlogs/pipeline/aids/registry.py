@@ -23,6 +23,7 @@ from fieldlogs.pipeline.aids.rollback import RollbackAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import TrackGpsAid
+from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid
 from fieldlogs.pipeline.aids.track_imu import TrackImuAid, turnouts
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
@@ -30,7 +31,7 @@ from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.imugap import ImuGap, ImuGapAid
 from fieldlogs.pipeline.rollback import Rollback
-from fieldlogs.pipeline.types import GpsAnalysis, Odometry
+from fieldlogs.pipeline.types import FloatArray, GpsAnalysis, Odometry
 from schemas.enums import BaliseKind
 from schemas.radar import RadarParams
 
@@ -99,7 +100,8 @@ def _track_imu(ctx: RunContext) -> Aid | None:
     return TrackImuAid(wz, sw, track_lines(ctx.network), ctx.cfg.track_select, ctx.cfg.margin)
 
 
-def _track_gps(ctx: RunContext) -> Aid | None:
+def _trusted_fixes(ctx: RunContext) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """t, lat, lon of the run's trusted GPS fixes on a network DB (None: none, or no topology)."""
     g = ctx.gps
     if g is None or g.fixes is None or not len(g.fixes) or not _has_topology(ctx):
         return None
@@ -107,8 +109,24 @@ def _track_gps(ctx: RunContext) -> Aid | None:
     if not len(f):
         return None
     t, lat, lon = (f[c].to_numpy(dtype=float) for c in ("t", "lat", "lon"))
+    return t, lat, lon
+
+
+def _track_gps(ctx: RunContext) -> Aid | None:
+    fixes = _trusted_fixes(ctx)
+    if fixes is None:
+        return None
     lines = track_lines(ctx.network)
-    return TrackGpsAid(t, lat, lon, lines, ctx.cfg.track_select, ctx.cfg.gps, ctx.geometry.gps_antenna_x_m)
+    return TrackGpsAid(*fixes, lines, ctx.cfg.track_select, ctx.cfg.gps, ctx.geometry.gps_antenna_x_m)
+
+
+def _track_gps_along(ctx: RunContext) -> Aid | None:
+    fixes = _trusted_fixes(ctx)
+    if fixes is None:
+        return None
+    cfg = ctx.cfg
+    lines = track_lines(ctx.network)
+    return TrackGpsAlongAid(*fixes, lines, cfg.track_select, cfg.gps, cfg.margin, ctx.geometry.gps_antenna_x_m)
 
 
 def _track_gnss(ctx: RunContext) -> Aid | None:
@@ -151,6 +169,7 @@ POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
     _balise_group,
     _track_imu,
     _track_gps,
+    _track_gps_along,
     _track_gnss,
 )
 """Position aids in registry order (simultaneous observations are ordered by priority)."""

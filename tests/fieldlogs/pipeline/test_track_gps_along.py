@@ -1,0 +1,149 @@
+"""D-GPS corrections along the determined track (fieldlogs/pipeline/aids/track_gps_along.py):
+hand-computed projections, gates and the end of an uncertain position."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
+from fieldlogs.pipeline.aids.topology import TopologyAid
+from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid, along_uncertainty
+from fieldlogs.pipeline.config import GpsConfig
+from fieldlogs.pipeline.engine import Solution, run_aids
+from fieldlogs.pipeline.hypotheses import TrackLine, track_lines
+from schemas.enums import EventType, PositionState
+from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
+
+GPS = GpsConfig()
+#: U = 4·√(0.75² + 0.25²) + 0.5 = 3.662 m with the default settings.
+U = 4.0 * math.hypot(0.75, 0.25) + 0.5
+
+
+def _straight() -> TrackLine:
+    """A 100 m track running east from the plane's origin."""
+    xy = np.array([[0.0, 0.0], [50.0, 0.0], [100.0, 0.0]])
+    cpos = np.array([0.0, 50.0, 100.0])
+    return TrackLine("T", "", "", 100.0, None, 0.0, 1, np.empty(0), np.empty(0), xy, cpos, (35.0, 139.0))
+
+
+def test_projection_hand_computed() -> None:
+    tl = _straight()
+    assert tl.project(30.0, 2.0, 50.0, 60.0) == pytest.approx((30.0, 2.0))  # north is left of east
+    assert tl.project(70.0, -1.5, 60.0, 20.0) == pytest.approx((70.0, -1.5))
+    assert tl.project(130.0, -1.0, 90.0, 50.0) == pytest.approx((100.0, -1.0))  # beyond the end: its end
+    assert all(math.isnan(v) for v in tl.project(30.0, 0.0, 500.0, 10.0))  # no segment near 500 ± 10
+
+
+def test_along_uncertainty_default() -> None:
+    assert along_uncertainty(CFG, GPS) == pytest.approx(U)
+    assert U == pytest.approx(3.662, abs=1e-3)
+
+
+def _fixes(along: list[tuple[float, float, float]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fixes on the junction network's A1 (9001/S, pos = km): (t, pos, offset + left)."""
+    tl = track_lines(net("junction"))["A1"]
+    lat0, lon0 = tl.origin
+    k = math.pi / 180.0 * 6_371_000.0
+    t, lat, lon = [], [], []
+    for ti, pos, off in along:
+        x, y, ux, uy = tl.point(pos)
+        x, y = x - off * uy, y + off * ux
+        t.append(ti)
+        lat.append(lat0 + y / k)
+        lon.append(lon0 + x / (k * math.cos(math.radians(lat0))))
+    return np.array(t), np.array(lat), np.array(lon)
+
+
+def _run(fixes: list[tuple[float, float, float]], *extra: object, seconds: float = 28.0) -> Solution:
+    n = net("junction")
+    lines = track_lines(n)
+    aid = TrackGpsAlongAid(*_fixes(fixes), lines, CFG, GPS, MARGIN)
+    tr = travel(n, np.full(int(seconds * 10), 10.0))
+    aids = [Start("9001", "S", 100.0, 1), TopologyAid(lines, MARGIN), *extra, aid]
+    return run_aids(tr, aids, MARGIN)  # type: ignore[arg-type]
+
+
+def _at(sol: Solution, t: float) -> dict[str, object]:
+    p = sol.positions
+    return dict(p[p["t"].sub(t).abs() < 1e-6].iloc[0])
+
+
+def test_a_steady_chain_of_fixes_corrects_once_the_margin_is_wide() -> None:
+    # 10 m/s from km 100, margin 1 m + 2 % of the travel; fixes every second from t = 21 s, each
+    # 2 m beyond dead reckoning and 0.3 m to the left. The fifth of the chain (t = 25 s) is the
+    # first usable one, and the margin there (6 m) exceeds 1.5·U = 5.49 m: km 352, margin U.
+    # Afterwards dead reckoning agrees with the fixes and the margin is small: no more.
+    sol = _run([(t, 100.0 + 10.0 * t + 2.0, 0.3) for t in np.arange(21.0, 28.0)])
+    ev = [e for e in sol.events if e.type == EventType.GPS_CORRECTION]
+    assert len(ev) == 1 and ev[0].t == 25.0
+    assert ev[0].correction_m == pytest.approx(-2.0, abs=0.01)
+    assert ev[0].detail["margin_before_m"] == pytest.approx(6.0, abs=0.01)
+    assert ev[0].detail["offset_m"] == pytest.approx(0.3, abs=0.01)
+    at = _at(sol, 25.0)
+    assert at["km_m"] == pytest.approx(352.0, abs=0.01) and at["margin_m"] == pytest.approx(U, abs=1e-6)
+    assert at["track_id"] == "A1" and at["state"] == PositionState.DETERMINED.value
+    assert _at(sol, 24.9)["km_m"] == pytest.approx(349.0, abs=0.01)
+    assert _at(sol, 27.0)["km_m"] == pytest.approx(372.0, abs=0.01)  # 20 m on from the correction
+
+
+def _corrections(fixes: list[tuple[float, float, float]]) -> list[float]:
+    return [e.t for e in _run(fixes).events if e.type == EventType.GPS_CORRECTION]
+
+
+def test_fixes_off_the_track_against_the_estimate_or_after_a_jump_are_not_used() -> None:
+    t = np.arange(15.0, 28.0)
+    clean = [(ti, 100.0 + 10.0 * ti, 0.0) for ti in t]
+    assert _corrections(clean) == [23.0]  # margin 1 + 0.02·230 = 5.6 m > 5.49 m
+    # 4 m to the side at t = 22 (> U): the chain restarts, five more fixes (t = 23 … 27) are needed
+    side = [(ti, p, 4.0 if ti == 22.0 else o) for ti, p, o in clean]
+    assert _corrections(side) == [27.0]
+    # every fix 12 m ahead: the chain is steady but beyond margin + U (7.9 … 9.7 m): never used
+    assert _corrections([(ti, p + 12.0, o) for ti, p, o in clean]) == []
+    # from t = 20 the fixes are 3 m ahead (a multipath plateau): the step at 20 (3 m against the
+    # odometry's 10 m) is a jump, and nothing is used for gps.jump_hold_s = 30 s
+    assert _corrections([(ti, p + (3.0 if ti >= 20.0 else 0.0), o) for ti, p, o in clean]) == []
+
+
+class _Uncertain(StaticAid):
+    """Makes the position uncertain at t = 5 s (as a slip fail-safe does)."""
+
+    name = "failsafe"
+    priority = Priority.INTEGRITY
+
+    def observations(self) -> list[Observation]:
+        return [Observation(5.0)]
+
+    def observe(self, obs: Observation, view: EngineView) -> Outcome:
+        fix = view.estimate
+        assert fix is not None
+        return Outcome([], replace(fix, t_effective=view.t, state=PositionState.UNCERTAIN, uncertain_since_d=view.d))
+
+
+@pytest.mark.parametrize(("bad_at", "back_at"), [(None, 14.0), (12.0, 17.0)])
+def test_five_agreeing_fixes_make_an_uncertain_position_determined(bad_at: float | None, back_at: float) -> None:
+    # uncertain from t = 5 s; fixes every second from t = 10, 1 m beyond dead reckoning. Five in a
+    # row passing the gates (t = 10 … 14) end it; a fix 5 m to the side at t = 12 restarts the count
+    # (t = 13 … 17).
+    fixes = [(t, 100.0 + 10.0 * t + 1.0, 5.0 if t == bad_at else 0.2) for t in np.arange(10.0, 19.0)]
+    sol = _run(fixes, _Uncertain())
+    p = sol.positions
+    assert (p[(p["t"] > 5.0) & (p["t"] < back_at)]["state"] == PositionState.UNCERTAIN.value).all()
+    at = _at(sol, back_at)
+    assert at["state"] == PositionState.DETERMINED.value and at["margin_m"] == pytest.approx(U, abs=1e-6)
+    assert at["km_m"] == pytest.approx(100.0 + 10.0 * back_at + 1.0, abs=0.01)
+    ev = [e for e in sol.events if e.type == EventType.GPS_CORRECTION]
+    assert ev[0].t == back_at and ev[0].detail["confirmed_by_fixes"] == 5
+
+
+def test_fixes_that_disagree_among_themselves_leave_it_uncertain() -> None:
+    # the along-track residuals alternate +1 / +6 m (spread 5 m > U): the odometry and the fixes
+    # do not tell one story, so the fail-safe holds
+    fixes = [(t, 100.0 + 10.0 * t + (1.0 if int(t) % 2 else 6.0), 0.2) for t in np.arange(10.0, 19.0)]
+    sol = _run(fixes, _Uncertain())
+    p = sol.positions
+    assert (p[p["t"] > 5.0]["state"] == PositionState.UNCERTAIN.value).all()
+    assert not [e for e in sol.events if e.type == EventType.GPS_CORRECTION]
