@@ -24,6 +24,7 @@ from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import TrackGpsAid
 from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid
+from fieldlogs.pipeline.aids.track_gps_initial import TrackGpsInitialAid
 from fieldlogs.pipeline.aids.track_imu import TrackImuAid, turnouts
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
@@ -129,6 +130,14 @@ def _track_gps_along(ctx: RunContext) -> Aid | None:
     return TrackGpsAlongAid(*fixes, lines, cfg.track_select, cfg.gps, cfg.margin, ctx.geometry.gps_antenna_x_m)
 
 
+def _track_gps_initial(ctx: RunContext) -> Aid | None:
+    fixes = _trusted_fixes(ctx)
+    if fixes is None:
+        return None
+    lines = track_lines(ctx.network)
+    return TrackGpsInitialAid(*fixes, lines, ctx.cfg.track_select, ctx.cfg.gps, ctx.geometry.gps_antenna_x_m)
+
+
 def _track_gnss(ctx: RunContext) -> Aid | None:
     g = ctx.gnss
     if g is None or g.inputs is None or not _has_topology(ctx):
@@ -170,6 +179,7 @@ POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
     _track_imu,
     _track_gps,
     _track_gps_along,
+    _track_gps_initial,
     _track_gnss,
 )
 """Position aids in registry order (simultaneous observations are ordered by priority)."""

@@ -1,8 +1,9 @@
-"""D-GPS corrections along the determined track (fieldlogs/pipeline/aids/track_gps_along.py):
-hand-computed projections, gates and the end of an uncertain position."""
+"""D-GPS on a network's tracks (fieldlogs/pipeline/aids/track_gps_along.py, track_gps_initial.py):
+hand-computed projections, gates, the end of an uncertain position and the initial position."""
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import replace
 
@@ -12,9 +13,10 @@ import pytest
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid, along_uncertainty
+from fieldlogs.pipeline.aids.track_gps_initial import TrackGpsInitialAid, near_tracks
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.engine import Solution, run_aids
-from fieldlogs.pipeline.hypotheses import TrackLine, track_lines
+from fieldlogs.pipeline.hypotheses import TrackLine, segments, track_lines
 from schemas.enums import EventType, PositionState
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
 
@@ -147,3 +149,75 @@ def test_fixes_that_disagree_among_themselves_leave_it_uncertain() -> None:
     p = sol.positions
     assert (p[p["t"] > 5.0]["state"] == PositionState.UNCERTAIN.value).all()
     assert not [e for e in sol.events if e.type == EventType.GPS_CORRECTION]
+
+
+def _fixes_on(network: str, track_id: str, along: list[tuple[float, float, float]]) -> tuple[np.ndarray, ...]:
+    """Fixes (t, pos, offset + left) on any track of a test network."""
+    tl = track_lines(net(network))[track_id]
+    lat0, lon0 = tl.origin
+    k = math.pi / 180.0 * 6_371_000.0
+    rows = []
+    for ti, pos, off in along:
+        x, y, ux, uy = tl.point(pos)
+        x, y = x - off * uy, y + off * ux
+        rows.append((ti, lat0 + y / k, lon0 + x / (k * math.cos(math.radians(lat0)))))
+    t, lat, lon = (np.array(c) for c in zip(*rows, strict=True))
+    return t, lat, lon
+
+
+def test_near_tracks_hand_computed() -> None:
+    # crossover network: D1 and U1 run parallel; a point 1 m left of D1 at pos 100 is 1 m from D1
+    # (at pos 100) and, the tracks being 4 m apart, 3 m from U1
+    lines = track_lines(net("crossover"))
+    seg = segments(lines)
+    t, lat, lon = _fixes_on("crossover", "D1", [(0.0, 100.0, 1.0)])
+    aid = TrackGpsInitialAid(t, lat, lon, lines, CFG, GPS)
+    aid.seg = seg
+    (x,), (y,) = aid._plane(0)
+    got = {seg.ids[j]: (pos, dist) for j, pos, dist, _tx, _ty in near_tracks(seg, x, y, 20.0)}
+    assert set(got) == {"D1", "U1"}
+    assert got["D1"] == pytest.approx((100.0, 1.0), abs=0.01)
+    assert got["U1"][1] == pytest.approx(3.0, abs=0.05)
+
+
+def _initial(fixes: tuple[np.ndarray, ...], v: float = 10.0, cab: int = 1) -> Solution:
+    n = net("crossover")
+    lines = track_lines(n)
+    aid = TrackGpsInitialAid(*fixes, lines, CFG, GPS)
+    tr = travel(n, np.full(150, v), cab=cab)
+    return run_aids(tr, [TopologyAid(lines, MARGIN), aid], MARGIN)  # type: ignore[list-item]
+
+
+@pytest.mark.parametrize("v", [10.0, -10.0])
+def test_a_steady_chain_starts_the_position_among_the_parallel_tracks(v: float) -> None:
+    # no balise: fixes every second on D1 from pos 50 with the train running toward D1's end
+    # (v > 0 with cab F) or toward its begin (the same fixes reversed in time, v < 0: the cab's
+    # forward is then toward D1's begin, kp = −1 for the same body-forward sign). The fifth fix
+    # (t = 4 s, 40 m travelled ≥ 10 m) starts it, ambiguous between D1 and U1 (4 m apart).
+    pos = [50.0 + 10.0 * t for t in range(8)] if v > 0 else [120.0 - 10.0 * t for t in range(8)]
+    sol = _initial(
+        _fixes_on("crossover", "D1", [(float(t), p, 0.2) for t, p in enumerate(pos)]), v=abs(v), cab=1 if v > 0 else -1
+    )
+    ev = [e for e in sol.events if e.type == EventType.INITIAL_POSITION_GPS]
+    assert len(ev) == 1 and ev[0].t == 4.0
+    assert ev[0].detail["evidence"] == "network" and sorted(ev[0].detail["candidates"]) == ["D1", "U1"]
+    at = _at(sol, 4.0)
+    assert at["state"] == PositionState.AMBIGUOUS.value
+    cands = {c["track_id"]: c for c in json.loads(str(at["candidates"]))}
+    assert cands["D1"]["pos_m"] == pytest.approx(pos[4], abs=0.05)
+    later = json.loads(str(_at(sol, 6.0)["candidates"]))
+    d1 = next(c for c in later if c["track_id"] == "D1")
+    assert d1["pos_m"] == pytest.approx(pos[6], abs=0.05)  # carried the right way along D1
+    assert (sol.positions[sol.positions["t"] < 4.0]["state"] == PositionState.UNDETERMINED.value).all()
+
+
+def _never_started(sol: Solution) -> None:
+    assert not sol.events and (sol.positions["state"] == PositionState.UNDETERMINED.value).all()
+
+
+def test_no_start_off_every_track_or_on_a_jumping_chain() -> None:
+    along = [(float(t), 50.0 + 10.0 * t, 0.2) for t in range(8)]
+    off = [(t, p, 10.0) for t, p, _ in along]  # 10 m left of D1, 14 m from U1: on no track (> U)
+    _never_started(_initial(_fixes_on("crossover", "D1", off)))
+    jumpy = [(t, p + (6.0 if int(t) % 2 else 0.0), o) for t, p, o in along]  # steps of 16 m / 4 m for 10 m
+    _never_started(_initial(_fixes_on("crossover", "D1", jumpy)))

@@ -1,0 +1,142 @@
+"""An initial position on a network from D-GPS fixes: every track near them a candidate [SPEC §8.3; S001 §4.2].
+
+Without a position, the line's GPS aid (:mod:`fieldlogs.pipeline.aids.gps`) starts one only from
+an up/down decision between the line's two tracks; a train standing in a station on track 3 or
+in a siding is on neither, and stays undetermined until a balise pair. On a network the fixes
+can start the position themselves, among the network's own tracks, without deciding anything:
+
+* a **steady chain** of ``track_select.gps_along_confirm`` trusted fixes, at most
+  ``gps.max_gap_s`` apart, each step's length agreeing with the odometry's
+  (| |p_i − p_i−1| − |S_i − S_i−1| | ≤ ``gps_along_step_m``; no track is known yet, so the
+  plane distance is compared), spanning at least ``gps.km_dir_min_m`` of travel so that the
+  direction is seen;
+* **on a track**: the last fix lies within U of some centreline (U below); otherwise the train
+  is on none the DB knows (an unmapped siding) and nothing is started;
+* **candidates**: every track whose centreline passes within 20 m (Heirich's parallel radius,
+  the same as for a line-based GPS decision placed on the network) of the last fix, at the
+  nearest point inside it (not at one of its ends: a continuation beyond a joint is not
+  another track), each at distance s − kp·x_a along it (x_a the antenna forward of the
+  reference point) with uncertainty U (:func:`fieldlogs.pipeline.aids.track_gps_along.along_uncertainty`);
+* **direction**: the chain's displacement D = p_last − p_first against the candidate's tangent t
+  (toward its end) and the signed travel ΔS: kp = sign(D·t)·sign(ΔS).
+
+The position is ``ambiguous`` among those candidates (one alone: determined), an
+``initial_position_gps`` event with ``detail.evidence`` = ``network`` and the candidates; the
+GPS offsets test (:mod:`fieldlogs.pipeline.aids.track_gps`) then decides among them with their
+true centrelines, as after a facing switch. Nothing is claimed that the fixes cannot tell
+apart. ``gps.allow_initial`` = false switches it off, as it does the line's.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
+from fieldlogs.pipeline.aids.topology import PARALLEL_M, with_hyps
+from fieldlogs.pipeline.aids.track_gps_along import along_uncertainty
+from fieldlogs.pipeline.config import GpsConfig, TrackSelectConfig
+from fieldlogs.pipeline.hypotheses import Segments, TrackLines, segments
+from fieldlogs.pipeline.types import Event, Fix, FloatArray, Hypothesis
+from schemas.enums import EventType, FixSource
+
+#: Keep the nearest point this far inside a candidate's ends [m] (as parallel_candidates does).
+_INSIDE_M = 0.5
+
+
+def near_tracks(seg: Segments, x: float, y: float, radius_m: float) -> list[tuple[int, float, float, float, float]]:
+    """Per track whose centreline passes within ``radius_m`` of (x, y) in ``seg``'s plane:
+    (track index, pos of the nearest point, its distance, tangent x, tangent y) — the nearest
+    segment's foot u = clip(((p − a)·(b − a))/|b − a|², 0, 1)."""
+    dx, dy = seg.x1 - seg.x0, seg.y1 - seg.y0
+    u = np.clip(((x - seg.x0) * dx + (y - seg.y0) * dy) / np.maximum(dx * dx + dy * dy, 1e-12), 0.0, 1.0)
+    dist = np.hypot(seg.x0 + u * dx - x, seg.y0 + u * dy - y)
+    out = []
+    for j in np.unique(seg.track[dist <= radius_m]):
+        mine = np.flatnonzero(seg.track == j)
+        k = int(mine[np.argmin(dist[mine])])
+        norm = max(math.hypot(float(dx[k]), float(dy[k])), 1e-9)
+        pos = float(seg.p0[k] + u[k] * (seg.p1[k] - seg.p0[k]))
+        out.append((int(j), pos, float(dist[k]), float(dx[k]) / norm, float(dy[k]) / norm))
+    return out
+
+
+@dataclass(eq=False)
+class TrackGpsInitialAid:
+    """The initial position among the network's tracks (module docstring)."""
+
+    t: FloatArray
+    lat: FloatArray
+    lon: FloatArray
+    """Trusted fixes, in time order."""
+    lines: TrackLines
+    cfg: TrackSelectConfig
+    gps: GpsConfig
+    antenna_x_m: float = 0.0
+    name: str = "track_gps_initial"
+    priority: Priority = Priority.TRACK
+    needs_track: bool = True
+    chain: list[tuple[float, float, float, float]] | None = None
+    """(t, S, x, y) of the current steady chain."""
+    seg: Segments | None = None
+    next_hid: int = -1
+    """Lineage ids of the candidates started here (negative: apart from the topology aid's)."""
+
+    def observations(self) -> list[Observation]:
+        return [Observation(float(t), j) for j, t in enumerate(self.t)] if self.gps.allow_initial else []
+
+    def next_observation(self, view: EngineView) -> Observation | None:
+        return None
+
+    def observe(self, obs: Observation, view: EngineView) -> Outcome:
+        if view.estimate is not None:
+            self.chain = None
+            return Outcome()
+        if self.seg is None:
+            self.seg = segments(self.lines)
+        j: int = obs.payload
+        (x,), (y,) = self._plane(j)
+        prev = self.chain[-1] if self.chain else None
+        steady = (
+            prev is not None
+            and view.t - prev[0] <= self.gps.max_gap_s
+            and abs(math.hypot(x - prev[2], y - prev[3]) - abs(view.s - prev[1])) <= self.cfg.gps_along_step_m
+        )
+        self.chain = [*(self.chain or []), (view.t, view.s, x, y)] if steady else [(view.t, view.s, x, y)]
+        first = self.chain[0]
+        ds = view.s - first[1]
+        if len(self.chain) < self.cfg.gps_along_confirm or abs(ds) < self.gps.km_dir_min_m:
+            return Outcome()
+        return self._start(view, x - first[2], y - first[3], ds, x, y)
+
+    def _plane(self, j: int) -> tuple[FloatArray, FloatArray]:
+        assert self.seg is not None
+        lat0, lon0 = self.seg.origin
+        k = math.pi / 180.0 * 6_371_000.0
+        lat, lon = np.array([self.lat[j]]), np.array([self.lon[j]])
+        return (lon - lon0) * k * math.cos(math.radians(lat0)), (lat - lat0) * k
+
+    def _start(self, view: EngineView, dx: float, dy: float, ds: float, x: float, y: float) -> Outcome:
+        assert self.seg is not None
+        near = near_tracks(self.seg, x, y, PARALLEL_M)
+        u = along_uncertainty(self.cfg, self.gps)
+        if not near or min(n[2] for n in near) > u:
+            return Outcome()  # on no track of the DB (an unmapped siding?): nothing to claim
+        hyps: list[Hypothesis] = []
+        for j, pos, _dist, tx, ty in near:
+            tl = self.lines[self.seg.ids[j]]
+            kp = (1 if dx * tx + dy * ty >= 0.0 else -1) * (1 if ds > 0 else -1)
+            p = pos - kp * self.antenna_x_m
+            if _INSIDE_M < pos < tl.length_m - _INSIDE_M:
+                hyps.append(Hypothesis(tl.track_id, p, kp, hid=self.next_hid))
+                self.next_hid -= 1
+        if not hyps:
+            return Outcome()
+        nan = math.nan
+        seed = Fix(view.t, view.s, view.d, nan, nan, "", "", 1, FixSource.GPS, u, t_ref=view.t)
+        new = replace(with_hyps(seed, hyps, view.t, view.s, self.lines), carried=False)
+        detail = {"evidence": "network", "candidates": [h.track_id for h in hyps], "fixes": len(self.chain or [])}
+        self.chain = None
+        return Outcome([Event(view.t, EventType.INITIAL_POSITION_GPS, new.km_m, detail=detail)], new)
