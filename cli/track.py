@@ -20,7 +20,9 @@ if TYPE_CHECKING:
 
     from fieldlogs.trackmatch.result import TrackMatch
 
-app = typer.Typer(help="Track-level positioning on the network (SPEC §8.3).", no_args_is_help=True)
+app = typer.Typer(
+    help="Track-level positioning on the network: GNSS-only traces matched to a path of tracks.", no_args_is_help=True
+)
 
 
 class Fmt(StrEnum):

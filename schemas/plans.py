@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from schemas.model import Column, Table
-from schemas.tables import LINE_CODE, TRACK
+from schemas.tables import LINE_CODE
 
 POSSESSIONS = Table(
     name="possessions",
@@ -15,7 +15,12 @@ POSSESSIONS = Table(
     columns=(
         Column("work_no", "str", "Work number"),
         LINE_CODE,
-        TRACK,
+        Column(
+            "track",
+            "str",
+            "U up (km decreasing), D down (km increasing), S single — or, on a network DB, the name of "
+            "a station track of the line (e.g. 3): the possession is then on that network track",
+        ),
         Column("km_from_m", "float", "Section start", unit="m", km_notation=True),
         Column("km_to_m", "float", "Section end", unit="m", km_notation=True),
         Column("planned_start", "str", "Planned start (ISO 8601)"),

@@ -15,7 +15,12 @@ is a finding naming file, line and column:
 * the line and track exist in the onboard DB (GIS grid); a km range reaching beyond the
   track's grid is a warning;
 * a ``track_id`` (optional column: the possessed track of a network — a station track, a
-  crossover) is a track of the onboard DB.
+  crossover) is a track of the onboard DB;
+* on a network DB, ``track`` may also name a station track of the line (``3`` of line
+  ``0420``: the tracks table's ``line_code``/``track``, km within its ``km_begin_m``…``km_end_m``):
+  without a ``track_id`` the possession is on that network track — the one of that name whose
+  km range overlaps the row's; several (a station track split at a joint) are the error
+  ``plan.track_id_needed``: name the possessed one in ``track_id``.
 
 States [S001 §4.2.4]: at wall-clock time T a possession is *not started* (no
 ``started_at``, or T before it), *started*, or *released* (``released_at`` ≤ T).
@@ -196,9 +201,14 @@ def _db_rules(
 
 
 def _possessions(
-    rows: _Rows, times: dict[str, list[datetime | None]], km_from: FloatArray, km_to: FloatArray
+    rows: _Rows,
+    times: dict[str, list[datetime | None]],
+    km_from: FloatArray,
+    km_to: FloatArray,
+    station: list[str | None],
 ) -> list[Possession]:
-    """The rows without an error, as possessions."""
+    """The rows without an error, as possessions (``station``: the network track a row naming
+    a station track possesses)."""
     frame = rows.frame
     possessions = []
     for i in range(len(frame)):
@@ -217,7 +227,7 @@ def _possessions(
                 started_at=times["started_at"][i],
                 released_at=times["released_at"][i],
                 vehicle_id=_text(frame["vehicle_id"].iat[i]) if "vehicle_id" in frame.columns else None,
-                track_id=_text(frame["track_id"].iat[i]) if "track_id" in frame.columns else None,
+                track_id=(_text(frame["track_id"].iat[i]) if "track_id" in frame.columns else None) or station[i],
                 purpose=_text(frame["purpose"].iat[i]) or "work" if "purpose" in frame.columns else "work",
                 row=i + FIRST_DATA_LINE,
             )
@@ -252,7 +262,8 @@ def read_plan(path: Path, network: Network | None = None, locale: CsvLocale | No
             _db_rules(rows, i, tracks, float(km_from[i]), float(km_to[i]))
         if ids is not None and "track_id" in co.frame.columns:
             _track_id_rule(rows, i, ids)
-    return Plan(_possessions(rows, times, km_from, km_to), findings, file)
+    station = _station_track_ids(rows, network, km_from, km_to)
+    return Plan(_possessions(rows, times, km_from, km_to, station), findings, file)
 
 
 def _track_id_rule(rows: _Rows, i: int, ids: set[str]) -> None:
@@ -265,14 +276,66 @@ def _track_id_rule(rows: _Rows, i: int, ids: set[str]) -> None:
 
 
 def _db_tracks(network: Network | None) -> dict[tuple[str, str], tuple[float, float]] | None:
+    """(line, track) → (km min, km max) of the GIS grid's line tracks and of the network's named
+    tracks off that grid (station tracks)."""
     if network is None:
         return None
+    out: dict[tuple[str, str], tuple[float, float]] = {}
     g = network.gis
-    if g.empty:
-        return {}
-    ext = g.groupby([g["line_code"].astype(str), g["track"].astype(str)])["km_m"].agg(["min", "max"])
-    keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in ext.index]
-    return dict(zip(keys, zip(ext["min"].astype(float), ext["max"].astype(float), strict=True), strict=True))
+    if not g.empty:
+        ext = g.groupby([g["line_code"].astype(str), g["track"].astype(str)])["km_m"].agg(["min", "max"])
+        keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in ext.index]
+        out.update(zip(keys, zip(ext["min"].astype(float), ext["max"].astype(float), strict=True), strict=True))
+    for key, (lo, hi, _ids) in _station_tracks(network).items():
+        out.setdefault(key, (lo, hi))
+    return out
+
+
+def _station_tracks(network: Network) -> dict[tuple[str, str], tuple[float, float, list[tuple[str, float, float]]]]:
+    """(line, track) → (km min, km max, [(track_id, km lo, km hi)]) of the network tracks named
+    by a line and track that the GIS grid does not hold (station tracks with their own points)."""
+    t = all_tracks(network)
+    grid = set(zip(network.gis["line_code"].astype(str), network.gis["track"].astype(str), strict=True))
+    out: dict[tuple[str, str], tuple[float, float, list[tuple[str, float, float]]]] = {}
+    for tid, line, track, k0, k1 in zip(
+        t["track_id"], t["line_code"], t["track"], t["km_begin_m"], t["km_end_m"], strict=True
+    ):
+        key = (_text(line), _text(track))
+        if key[0] is None or key[1] is None or (key[0], key[1]) in grid or pd.isna(k0) or pd.isna(k1):
+            continue
+        lo, hi = min(float(k0), float(k1)), max(float(k0), float(k1))
+        prev = out.get((key[0], key[1]))
+        ids = [*(prev[2] if prev else []), (str(tid), lo, hi)]
+        out[(key[0], key[1])] = (min(lo, prev[0]) if prev else lo, max(hi, prev[1]) if prev else hi, ids)
+    return out
+
+
+def _station_track_ids(
+    rows: _Rows, network: Network | None, km_from: FloatArray, km_to: FloatArray
+) -> list[str | None]:
+    """Per row, the network track a station-track row possesses (None: a line track, or a
+    ``track_id`` given); ``plan.track_id_needed`` where several tracks of that name overlap."""
+    frame = rows.frame
+    out: list[str | None] = [None] * len(frame)
+    if network is None:
+        return out
+    named = _station_tracks(network)
+    given = frame["track_id"] if "track_id" in frame.columns else pd.Series([None] * len(frame), index=frame.index)
+    for i in range(len(frame)):
+        key = (_text(frame["line_code"].iat[i]), _text(frame["track"].iat[i]))
+        if _text(given.iat[i]) is not None or key[0] is None or key[1] is None or (key[0], key[1]) not in named:
+            continue
+        lo, hi = min(km_from[i], km_to[i]), max(km_from[i], km_to[i])
+        hit = [tid for tid, a, b in named[(key[0], key[1])][2] if a < hi and lo < b]
+        if len(hit) == 1:
+            out[i] = hit[0]
+        elif len(hit) > 1:
+            msg = (
+                f"line '{key[0]}' track '{key[1]}' is {len(hit)} network tracks over this km range "
+                f"({', '.join(hit)}): name the possessed one in track_id"
+            )
+            rows.error("plan.track_id_needed", i, "track", msg, key[1], hit)
+    return out
 
 
 def _track_errors(
