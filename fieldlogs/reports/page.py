@@ -23,12 +23,12 @@ from dbtools import pagekit as kit
 from dbtools.database import read_network
 from fieldlogs.audit.store import read_table, read_trace
 from fieldlogs.reports import plots
-from fieldlogs.reports.report import CORRECTION_STATS, OTHER_STATS, ROUTE_KEYS, TRACK_KEYS, Report
+from fieldlogs.reports.report import CORRECTION_STATS, OTHER_STATS, ROUTE_COLUMNS, TRACK_COLUMNS, Report
 from schemas.audit import AUDIT_RUNS
 from schemas.errors import TrainposError
 
-CORRECTION_COLUMNS = [*ROUTE_KEYS, *CORRECTION_STATS]
-OTHER_COLUMNS = [*ROUTE_KEYS, *OTHER_STATS]
+CORRECTION_COLUMNS = [*ROUTE_COLUMNS, *CORRECTION_STATS]
+OTHER_COLUMNS = [*ROUTE_COLUMNS, *OTHER_STATS]
 
 
 def _cells(target: float | None) -> Callable[[str, Any], kit.Cell]:
@@ -69,6 +69,7 @@ def render_html(report: Report, audit_path: Path) -> str:
     if report.by == "vehicle":
         parts.append(kit.section("Per vehicle", _table(report.vehicles, t)))
     parts += _path_sections(report)
+    parts += _unit_sections(report)
     parts.append(kit.section("Runs", _table(report.runs.drop(columns=["run_path"]), t)))
     if len(report.failed_runs):
         parts.append(kit.section("Runs that failed", _table(report.failed_runs), status=kit.Status.WARN))
@@ -118,9 +119,35 @@ def _path_sections(report: Report) -> list[str]:
     return [
         kit.section("Routes as paths of tracks", note, _table(paths)),
         kit.section(
-            "Position correction per track", _table(report.tracks[[*TRACK_KEYS, *CORRECTION_STATS]], report.target_pct)
+            "Position correction per track",
+            _table(report.tracks[[*TRACK_COLUMNS, *CORRECTION_STATS]], report.target_pct),
         ),
     ]
+
+
+def unit_spans_text(spans: object) -> str:
+    """A run's disagreement spans (JSON ``[[t_from, t_to], …]``) in one line: ``12.3–14.0 s, …``."""
+    items = json.loads(spans) if isinstance(spans, str) and spans else []
+    return ", ".join(f"{float(a):.1f}–{float(b):.1f} s" for a, b in items)
+
+
+def units_view(report: Report) -> pd.DataFrame:
+    """The runs audited with both units: their comparison, the spans as text."""
+    return report.units.assign(unit_disagreement_spans=[unit_spans_text(v) for v in report.units["unit_disagreement_spans"]])
+
+
+def _unit_sections(report: Report) -> list[str]:
+    """For runs audited with ``--unit both``: the units' comparison per run."""
+    if report.units.empty:
+        return []
+    n = int((report.units["unit_disagreements"].fillna(0) > 0).sum())
+    note = kit.paragraph(
+        "Unit F's figures are reported; unit R (the R cab's) replayed the same run. A disagreement: both "
+        "claim a km and |km F − km R| exceeds the sum of their margins, or both are determined on different "
+        f"tracks. {n} of {len(report.units)} run(s) with a disagreement.",
+        kit.Status.WARN if n else kit.Status.NOTE,
+    )
+    return [kit.section("Units F and R compared", note, _table(units_view(report)))]
 
 
 def verdict(report: Report) -> kit.Verdict:
@@ -153,10 +180,10 @@ def _run_plots(report: Report, audit_path: Path) -> list[str]:
     run_id = str(row["run_id"])
     trace = read_trace(audit_path, str(row["run_path"]))
     summary = json.loads(row["summary_json"] or "{}")
+    names = " ".join(str(row[c]) for c in ("line_code", "track") if isinstance(row[c], str) and row[c])
+    where = f"track {row['track_id'] or '—'}" + (f" = {names}" if names else "")
     out = [
-        kit.heading(
-            f"Run {run_id} ({row['line_code']} {row['track']}, {float(row['distance_m'] or 0) / 1000:.1f} km)", 3
-        ),
+        kit.heading(f"Run {run_id} ({where}, {float(row['distance_m'] or 0) / 1000:.1f} km)", 3),
         kit.figure(plots.margin_along_run(trace, run_id), f"Margin along run {run_id}"),
         kit.figure(
             plots.slip_episodes(trace, summary.get("episodes", []), run_id),
