@@ -19,6 +19,7 @@ from dbtools.inputs import regular_file
 from dbtools.sqlite_file import ro_uri
 from schemas.audit import (
     AUDIT_APPLICATION_ID,
+    AUDIT_SCHEMA_CHANGE,
     AUDIT_SCHEMA_VERSION,
     AUDIT_TABLES,
     AUDIT_VIEWS,
@@ -147,8 +148,8 @@ def _check_audit_version(conn: sqlite3.Connection, path: Path, is_audit: bool) -
         )
     if is_audit and version < AUDIT_SCHEMA_VERSION:
         raise InputError(
-            f"audit database schema {version} is older than this tool's ({AUDIT_SCHEMA_VERSION}): "
-            "audit the runs again into a new audit database",
+            f"audit database schema {version} is older than this tool's ({AUDIT_SCHEMA_VERSION}: "
+            f"{AUDIT_SCHEMA_CHANGE}): audit the runs again into a new audit database",
             path=path,
         )
 

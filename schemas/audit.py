@@ -25,6 +25,8 @@ AUDIT_APPLICATION_ID = 0x54504155
 #: ``track_id`` (``audit_runs.track_id``, ``route_summary`` per track_id and direction, the
 #: ``track_summary`` view), the positioning unit audited and the units' comparison.
 AUDIT_SCHEMA_VERSION = 4
+#: What the current schema changed, for the message refusing an older audit DB.
+AUDIT_SCHEMA_CHANGE = "runs, routes and tracks keyed by track_id; the unit audited"
 
 #: ``trainpos audit --unit``: the positioning unit replayed [S003 §2: one per cab] — F (the
 #: pipeline as it always runs), R (the R cab's) or both (F's figures stored, compared with R's).

@@ -133,7 +133,9 @@ def unit_spans_text(spans: object) -> str:
 
 def units_view(report: Report) -> pd.DataFrame:
     """The runs audited with both units: their comparison, the spans as text."""
-    return report.units.assign(unit_disagreement_spans=[unit_spans_text(v) for v in report.units["unit_disagreement_spans"]])
+    return report.units.assign(
+        unit_disagreement_spans=[unit_spans_text(v) for v in report.units["unit_disagreement_spans"]]
+    )
 
 
 def _unit_sections(report: Report) -> list[str]:

@@ -87,7 +87,12 @@ def test_audit_stores_runs_events_traces_and_route_view(audited: Path, data: Aud
     assert set(runs.index) == {f"RUN-{name}" for name, *_ in RUNS}
     assert (runs["status"] == "ok").all()
     assert set(runs["direction"]) == {"down", "up"}
-    assert runs.loc["RUN-d-west", ["track_id", "line_code", "track", "direction"]].tolist() == ["0900:D", "0900", "D", "down"]
+    assert runs.loc["RUN-d-west", ["track_id", "line_code", "track", "direction"]].tolist() == [
+        "0900:D",
+        "0900",
+        "D",
+        "down",
+    ]
     assert (runs["unit"] == "F").all() and runs["unit_disagreements"].isna().all()
     assert runs.loc["RUN-u-east", ["track", "direction"]].tolist() == ["U", "up"]
     assert (runs["distance_m"].between(2800, 3300)).all()
@@ -302,7 +307,16 @@ def test_dask_cluster_audit_equals_local_pool(cluster: Any, data: AuditData, aud
     out = tmp_path / "dask.sqlite"
     stats = audit([data.logs], data.db, out, scheduler=cluster.scheduler_address)
     assert (stats.total, stats.audited, stats.failed) == (N, N, 0), stats.errors
-    cols = ["run_path", "track_id", "line_code", "track", "direction", "n_corrections", "mean_correction_pct", "n_slips"]
+    cols = [
+        "run_path",
+        "track_id",
+        "line_code",
+        "track",
+        "direction",
+        "n_corrections",
+        "mean_correction_pct",
+        "n_slips",
+    ]
     local = read_table(audited, "audit_runs")[cols].sort_values("run_path").reset_index(drop=True)
     remote = read_table(out, "audit_runs")[cols].sort_values("run_path").reset_index(drop=True)
     pd.testing.assert_frame_equal(local, remote)
