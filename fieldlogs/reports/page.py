@@ -107,22 +107,37 @@ def network_paths(report: Report) -> pd.DataFrame:
 
 
 def _path_sections(report: Report) -> list[str]:
-    """For network runs: each run's route as a path of tracks, and the per-track table."""
+    """For network runs: each run's route as a path of tracks; then the per-track tables (by
+    track_id, line and local name as display) for network runs or ``--by track``."""
     paths = network_paths(report)
-    if paths.empty:
-        return []
-    note = kit.paragraph(
-        "Each run's route as the tracks it was claimed on, in order, with the distance travelled on each; "
-        "{A|B}: ambiguous among candidate tracks A and B (not yet told which way a switch went).",
-        kit.Status.NOTE,
-    )
-    return [
-        kit.section("Routes as paths of tracks", note, _table(paths)),
+    out = []
+    if not paths.empty:
+        note = kit.paragraph(
+            "Each run's route as the tracks it was claimed on, in order, with the distance travelled on each; "
+            "{A|B}: ambiguous among candidate tracks A and B (not yet told which way a switch went).",
+            kit.Status.NOTE,
+        )
+        out.append(kit.section("Routes as paths of tracks", note, _table(paths)))
+    if paths.empty and report.by != "track":
+        return out
+    tracks = report.tracks
+    out.append(
         kit.section(
             "Position correction per track",
-            _table(report.tracks[[*TRACK_COLUMNS, *CORRECTION_STATS]], report.target_pct),
-        ),
-    ]
+            kit.paragraph(
+                "Per track id over the stretches determined on it; line and track are its names (empty off a line).",
+                kit.Status.NOTE,
+            ),
+            _table(tracks[[*TRACK_COLUMNS, *CORRECTION_STATS]], report.target_pct),
+        )
+    )
+    if report.by == "track":
+        out.append(
+            kit.section(
+                "Slips, feature points, GPS and alarms per track", _table(tracks[[*TRACK_COLUMNS, *OTHER_STATS]])
+            )
+        )
+    return out
 
 
 def unit_spans_text(spans: object) -> str:

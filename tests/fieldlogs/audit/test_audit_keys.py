@@ -142,6 +142,12 @@ def test_crossover_and_station_runs_count_on_their_own_tracks(net_audit: Path, s
     assert (tracks.loc["0420-X1", "line_code"], tracks.loc["0420-X1", "track"]) == ("", "")
     crossing = next(t for t in report_json(rep)["tracks"] if t["track_id"] == "0420-X1")
     assert crossing["line_code"] is None and crossing["track"] is None
+    res = CliRunner().invoke(app, ["report", str(net_audit), "--by", "track", "--format", "csv"])
+    assert res.exit_code == 0, res.output
+    rows = {line.split(",")[0]: line.split(",")[1:4] for line in res.output.splitlines()[1:]}
+    assert rows["0420-X1"] == ["", "", "1"] and rows["0420-3"] == ["0420", "3", "1"]  # line, track, runs
+    html = render_html(rep, net_audit)
+    assert "Slips, feature points, GPS and alarms per track" in html and "0420-X1" in html
 
 
 def test_track_summary_view_equals_report_by_track(net_audit: Path) -> None:
@@ -217,6 +223,9 @@ def test_line_only_audit_keeps_its_route_numbers(line_audit: Path) -> None:
         == old[["line_code", "track", "direction", "n_runs"]].values.tolist()
     )
     np.testing.assert_allclose(routes["mean_correction_pct"], mean.to_numpy())
+    by_track = build_report(line_audit, by="track")
+    assert sorted(by_track.tracks["track_id"]) == ["0420:D", "0420:U"]
+    assert "Position correction per track" in render_html(by_track, line_audit)
 
 
 # -- units ---------------------------------------------------------------------------------
