@@ -40,6 +40,22 @@ def _n(name: str, description: str, dtype: DType = "int", unit: str = "") -> Col
     return Column(name, dtype, description, unit=unit, nullable=True)
 
 
+def _track_names() -> tuple[Column, Column]:
+    """The display names beside a ``track_id``."""
+    return (
+        _n("line_code", "Line of that track (display; null off a line)", "str"),
+        _n("track", "Local name of that track (display; null off a line)", "str"),
+    )
+
+
+def _correction_pcts() -> tuple[Column, Column]:
+    """Mean and largest position-correction % over balise corrections."""
+    return (
+        _n("mean_correction_pct", "Mean balise position-correction %", "float", "%"),
+        _n("max_correction_pct", "Largest balise position-correction %", "float", "%"),
+    )
+
+
 AUDIT_RUNS = Table(
     name="audit_runs",
     kind="audit",
@@ -59,16 +75,14 @@ AUDIT_RUNS = Table(
         _n("error", "Why the run failed", "str"),
         _n("db_version", "Onboard DB version the run was audited with", "str"),
         _n("track_id", "Track of the run: the one claimed on most cycles (the route's key)", "str"),
-        _n("line_code", "Line of that track (display; null off a line)", "str"),
-        _n("track", "Local name of that track (display; null off a line)", "str"),
+        *_track_names(),
         _n("direction", "down when the km increased over the run, up otherwise", "str"),
         _n("duration_s", "Run duration", "float", "s"),
         _n("distance_m", "Travelled distance (corrected odometry)", "float", "m"),
         _n("n_corrections", "Balise position corrections"),
         _n("n_feature_corrections", "Accepted feature-point corrections"),
         _n("n_feature_refused", "Refused feature-point corrections"),
-        _n("mean_correction_pct", "Mean balise position-correction %", "float", "%"),
-        _n("max_correction_pct", "Largest balise position-correction %", "float", "%"),
+        *_correction_pcts(),
         _n("n_slips", "Slip and slide episodes"),
         _n("n_failsafe", "Fail-safe events"),
         _n("n_anomalies", "Balise anomalies"),
@@ -163,14 +177,12 @@ ROUTE_SUMMARY = Table(
     description="View: per route (the run's track_id, direction) over the runs with status ok.",
     columns=(
         _n("track_id", "Track of the runs (audit_runs.track_id)", "str"),
-        _n("line_code", "Line of that track (display; null off a line)", "str"),
-        _n("track", "Local name of that track (display; null off a line)", "str"),
+        *_track_names(),
         _n("direction", "down or up", "str"),
         Column("n_runs", "int", "Runs audited without error"),
         _n("distance_m", "Travelled distance", "float", "m"),
         _n("n_corrections", "Balise corrections"),
-        _n("mean_correction_pct", "Mean balise position-correction %", "float", "%"),
-        _n("max_correction_pct", "Largest balise position-correction %", "float", "%"),
+        *_correction_pcts(),
         _n("n_feature_corrections", "Accepted feature-point corrections"),
         _n("n_feature_refused", "Refused feature-point corrections"),
         _n("n_slips", "Slip and slide episodes"),
@@ -189,14 +201,12 @@ TRACK_SUMMARY = Table(
     ),
     columns=(
         _n("track_id", "Track", "str"),
-        _n("line_code", "Line of that track (display; null off a line)", "str"),
-        _n("track", "Local name of that track (display; null off a line)", "str"),
+        *_track_names(),
         Column("n_runs", "int", "Runs determined on the track at some time"),
         _n("distance_m", "Distance travelled while determined on the track", "float", "m"),
         Column("n_cycles", "int", "Cycles determined on the track"),
         _n("n_corrections", "Balise corrections within its stretches"),
-        _n("mean_correction_pct", "Mean balise position-correction %", "float", "%"),
-        _n("max_correction_pct", "Largest balise position-correction %", "float", "%"),
+        *_correction_pcts(),
         _n("n_slips", "Slip and slide episodes starting within its stretches"),
         _n("n_failsafe", "Fail-safe events within its stretches"),
         _n("n_anomalies", "Balise anomalies within its stretches"),
