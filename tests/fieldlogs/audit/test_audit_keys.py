@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import shutil
 import sqlite3
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,10 @@ from fieldlogs.pipeline.units import compare_units, unit_run
 from fieldlogs.reports.page import render_html, unit_spans_text
 from fieldlogs.reports.report import build_report, report_json
 from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.write import write_run
+from fieldlogs.simulate.samples_net import network_sample_scenarios
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION
 from schemas.errors import InputError
 
@@ -282,6 +287,33 @@ def test_audit_with_both_units_stores_their_comparison(
     again = audit([net_logs], sample_network_db, out, workers=2, unit="F")
     assert (again.skipped, again.audited) == (0, len(NET_RUNS))
     assert audit([net_logs], sample_network_db, out, workers=2, unit="F").skipped == len(NET_RUNS)
+
+
+def test_both_units_catch_a_misplaced_reader(sample_network_db: Path, tmp_path: Path) -> None:
+    """The station run with a balise reader in each cab at x = ±9.5 m, run.json placing the R
+    cab's reader at +30 m instead of −9.5 m: unit R corrects its km 30 − (−9.5) = 39.5 m off at
+    every balise, so the units disagree by about 39.5 m beyond their margins (a few metres) in
+    spans the audit stores as a direct replay of the two units gives them."""
+    net = read_network(sample_network_db)
+    over = dict(network_sample_scenarios(net)["sim-net-station"])
+    over["balise"] = {"readers_x_m": [9.5, -9.5]}
+    streams, meta = simulate_run(net, scenario_from_dict(over, source="test"))
+    assert meta.vehicle is not None
+    meta = replace(meta, vehicle={**meta.vehicle, "balise_reader_r": {"x_m": 30.0, "y_m": 0.0}})
+    folder = write_run(tmp_path / "logs" / "misplaced-r", meta, streams)
+    out = tmp_path / "both.sqlite"
+    assert audit([tmp_path / "logs"], sample_network_db, out, workers=1, unit="both").audited == 1
+    rec = read_table(out, "audit_runs").iloc[0]
+    assert rec["unit_max_difference_m"] == pytest.approx(39.5, abs=1.5)
+    assert rec["unit_cycles_beyond_margins"] > 1000 and rec["unit_disagreements"] >= 1
+    spans = json.loads(rec["unit_disagreement_spans"])
+    assert len(spans) == rec["unit_disagreements"] and all(a <= b for a, b in spans)
+    pos = {u: run_pipeline(unit_run(read_run(folder), u, tmp_path / u), net).positions for u in ("F", "R")}
+    expected = comparison_fields(compare_units(pos["F"], pos["R"])[1])
+    assert {k: rec[k] for k in expected} == pytest.approx(expected)
+    rep = build_report(out)
+    assert rep.units["unit_disagreements"].tolist() == [rec["unit_disagreements"]]
+    assert "1 of 1 run(s) with a disagreement" in render_html(rep, out)
 
 
 def _hand_run(path: str, **kw: Any) -> dict[str, Any]:
