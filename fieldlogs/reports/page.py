@@ -168,15 +168,24 @@ def _unit_sections(report: Report) -> list[str]:
 
 
 def verdict(report: Report) -> kit.Verdict:
-    """Passed when every route's mean position-correction % is within the target and no run
-    failed; else how many routes are above it and how many runs failed."""
+    """Passed when every route's mean position-correction % is within the target, no run
+    failed and (runs audited with both units) the units agree; else how many routes are above
+    it, how many runs failed and in how many the units disagree."""
     t = report.target_pct
     means = report.routes["mean_correction_pct"] if "mean_correction_pct" in report.routes else pd.Series([])
     above = int((means > t).sum())
     n_routes, n_failed = len(report.routes), len(report.failed_runs)
     failed = f"; {n_failed} run(s) failed to audit" if n_failed else ""
+    n_split = int((report.units["unit_disagreements"].fillna(0) > 0).sum())
+    split = f"; units F and R disagree in {n_split} run(s)" if n_split else ""
     if above:
-        text = f"Above target: {above} of {n_routes} route(s) with a mean position correction above {t:g} %{failed}."
+        text = (
+            f"Above target: {above} of {n_routes} route(s) with a mean position correction above {t:g} %"
+            f"{failed}{split}."
+        )
+        return kit.Verdict(text, kit.Status.WARN)
+    if n_split:
+        text = f"Units disagree: {n_routes} route(s) within the {t:g} % target{failed}{split}."
         return kit.Verdict(text, kit.Status.WARN)
     if n_failed or not n_routes:
         text = f"Incomplete: {n_routes} route(s) within the {t:g} % target{failed or '; no run audited'}."

@@ -313,7 +313,8 @@ def test_both_units_catch_a_misplaced_reader(sample_network_db: Path, tmp_path: 
     assert {k: rec[k] for k in expected} == pytest.approx(expected)
     rep = build_report(out)
     assert rep.units["unit_disagreements"].tolist() == [rec["unit_disagreements"]]
-    assert "1 of 1 run(s) with a disagreement" in render_html(rep, out)
+    html = render_html(rep, out)
+    assert "1 of 1 run(s) with a disagreement" in html and "units F and R disagree in 1 run(s)" in html
 
 
 def _hand_run(path: str, **kw: Any) -> dict[str, Any]:
