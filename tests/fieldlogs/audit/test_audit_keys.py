@@ -37,6 +37,7 @@ from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION
 from schemas.errors import InputError
+from tests.pages import check_page
 
 SAMPLE_LOGS = Path(__file__).parents[3] / "fieldlogs" / "sample_logs"
 NET_RUNS = ("crossover", "junction", "station", "turnback")
@@ -289,25 +290,36 @@ def test_audit_with_both_units_stores_their_comparison(
     assert audit([net_logs], sample_network_db, out, workers=2, unit="F").skipped == len(NET_RUNS)
 
 
-def test_both_units_catch_a_misplaced_reader(sample_network_db: Path, tmp_path: Path) -> None:
-    """The station run with a balise reader in each cab at x = ±9.5 m, run.json placing the R
-    cab's reader at +30 m instead of −9.5 m: unit R corrects its km 30 − (−9.5) = 39.5 m off at
-    every balise, so the units disagree by about 39.5 m beyond their margins (a few metres) in
-    spans the audit stores as a direct replay of the two units gives them."""
+@pytest.fixture(scope="module")
+def misplaced(sample_network_db: Path, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """(audit DB with both units, run folder) of the station run with a balise reader in each
+    cab at x = ±9.5 m, run.json placing the R cab's reader at +30 m instead of −9.5 m."""
+    tmp = tmp_path_factory.mktemp("misplaced")
     net = read_network(sample_network_db)
     over = dict(network_sample_scenarios(net)["sim-net-station"])
     over["balise"] = {"readers_x_m": [9.5, -9.5]}
     streams, meta = simulate_run(net, scenario_from_dict(over, source="test"))
     assert meta.vehicle is not None
     meta = replace(meta, vehicle={**meta.vehicle, "balise_reader_r": {"x_m": 30.0, "y_m": 0.0}})
-    folder = write_run(tmp_path / "logs" / "misplaced-r", meta, streams)
-    out = tmp_path / "both.sqlite"
-    assert audit([tmp_path / "logs"], sample_network_db, out, workers=1, unit="both").audited == 1
+    folder = write_run(tmp / "logs" / "misplaced-r", meta, streams)
+    out = tmp / "both.sqlite"
+    assert audit([tmp / "logs"], sample_network_db, out, workers=1, unit="both").audited == 1
+    return out, folder
+
+
+def test_both_units_catch_a_misplaced_reader(
+    misplaced: tuple[Path, Path], sample_network_db: Path, tmp_path: Path
+) -> None:
+    """Unit R corrects its km 30 − (−9.5) = 39.5 m off at every balise, so the units disagree
+    by about 39.5 m beyond their margins (a few metres), in spans the audit stores as a direct
+    replay of the two units gives them."""
+    out, folder = misplaced
     rec = read_table(out, "audit_runs").iloc[0]
     assert rec["unit_max_difference_m"] == pytest.approx(39.5, abs=1.5)
     assert rec["unit_cycles_beyond_margins"] > 1000 and rec["unit_disagreements"] >= 1
     spans = json.loads(rec["unit_disagreement_spans"])
     assert len(spans) == rec["unit_disagreements"] and all(a <= b for a, b in spans)
+    net = read_network(sample_network_db)
     pos = {u: run_pipeline(unit_run(read_run(folder), u, tmp_path / u), net).positions for u in ("F", "R")}
     expected = comparison_fields(compare_units(pos["F"], pos["R"])[1])
     assert {k: rec[k] for k in expected} == pytest.approx(expected)
@@ -315,6 +327,15 @@ def test_both_units_catch_a_misplaced_reader(sample_network_db: Path, tmp_path: 
     assert rep.units["unit_disagreements"].tolist() == [rec["unit_disagreements"]]
     html = render_html(rep, out)
     assert "1 of 1 run(s) with a disagreement" in html and "units F and R disagree in 1 run(s)" in html
+
+
+def test_units_report_in_the_browser(misplaced: tuple[Path, Path], browser: Any, tmp_path: Path) -> None:
+    """The rendering standard (tests/pages.py) on a page with the units' table, the paths of
+    tracks and the per-track tables: verdict first, no sideways scroll, sticky headers."""
+    page = tmp_path / "units.html"
+    page.write_text(render_html(build_report(misplaced[0], by="track"), misplaced[0]), encoding="utf-8")
+    seen = check_page(browser, page, tmp_path / "shots")
+    assert seen["verdict"].startswith("Units disagree") or seen["verdict"].startswith("Above target")
 
 
 def _hand_run(path: str, **kw: Any) -> dict[str, Any]:
