@@ -57,6 +57,12 @@ class ProgressBar:
         self.bar.update(self.task, completed=done, total=total, rate=f"{rate:.2f} runs/s")
 
 
+class Unit(StrEnum):
+    F = "F"
+    R = "R"
+    both = "both"
+
+
 @cli_command
 def audit(
     log_roots: list[Path] = typer.Argument(..., help="Run folders or folders to search for runs (run.json)."),
@@ -65,12 +71,18 @@ def audit(
     workers: int | None = workers_option("running the pipeline"),
     dask_scheduler: str | None = DASK_SCHEDULER,
     config: Path | None = typer.Option(None, "--config", help="Settings (TOML, see trainpos config show)."),
+    unit: Unit = typer.Option(
+        Unit.F,
+        "--unit",
+        help="Positioning unit [S003 §2: one per cab]: F (the F cab's), R (the R cab's: the run seen from the "
+        "other end), both (unit F's figures stored with the two units' disagreements).",
+    ),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
     """Run the positioning pipeline on every run found and store the results as each run finishes.
 
     Resumes an interrupted audit; skips runs already audited with the same file contents,
-    DB content and config; a failing run is recorded with its error and the others go on.
+    DB content, config and unit; a failing run is recorded with its error and the others go on.
     Exit 0 when every run was audited (or skipped), 1 when some run failed, 2 when the DB,
     a log root or the audit database cannot be read, 3 when --out is inside a release
     registry (nothing is ever written there).
@@ -90,6 +102,7 @@ def audit(
             workers=workers,
             scheduler=dask_scheduler,
             progress=ProgressBar(bar, "auditing"),
+            unit=unit.value,
         )
     rows = [
         ("runs found", stats.total),
@@ -180,13 +193,14 @@ def _view(frame: pd.DataFrame, cols: list[str]) -> pd.DataFrame:
 
 
 def render_tables(rep: Report, c: Console) -> None:
-    from fieldlogs.reports.report import ROUTE_KEYS, TRACK_KEYS
+    from fieldlogs.reports.page import units_view
+    from fieldlogs.reports.report import ROUTE_COLUMNS, TRACK_COLUMNS
 
     keys = {
-        "route": ROUTE_KEYS,
-        "run": ["run_id", "vehicle_id", *ROUTE_KEYS],
+        "route": ROUTE_COLUMNS,
+        "run": ["run_id", "vehicle_id", *ROUTE_COLUMNS],
         "vehicle": ["vehicle_id"],
-        "track": TRACK_KEYS,
+        "track": TRACK_COLUMNS,
     }[rep.by]
     g = rep.groups.assign(distance_km=(rep.groups["distance_m"] / 1000.0).round(1))
     pct = [col for col in PCT_COLUMNS if not (rep.by == "run" and col == "n_runs")]
@@ -196,6 +210,8 @@ def render_tables(rep: Report, c: Console) -> None:
     refused = g[g["refusal_reasons"] != ""]
     if len(refused):
         c.print(frame_table(_view(refused, [*keys, "refusal_reasons"]), title="Feature points refused"))
+    if len(rep.units):
+        c.print(frame_table(_view(units_view(rep), list(rep.units.columns)), title="Units F and R compared"))
     if len(rep.failed_runs):
         c.print(frame_table(rep.failed_runs, title="Runs that failed"))
 
@@ -206,7 +222,8 @@ def report(
     by: By = typer.Option(
         By.route,
         "--by",
-        help="Group by route (line, track, direction), run, vehicle or track (track_id: the runs' paths of tracks).",
+        help="Group by route (the run's track_id and direction), run, vehicle or track (track_id: the runs' "
+        "paths of tracks); line and track are shown as names.",
     ),
     fmt: ReportFmt = typer.Option(ReportFmt.table, "--format", help="table, csv, json or html."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Write to this file (required for html)."),

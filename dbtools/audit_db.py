@@ -17,7 +17,16 @@ from dbtools.atomic import refuse_registry
 from dbtools.database import SQLITE_MAGIC, create_tables, sqlite_input_error
 from dbtools.inputs import regular_file
 from dbtools.sqlite_file import ro_uri
-from schemas.audit import AUDIT_APPLICATION_ID, AUDIT_SCHEMA_VERSION, AUDIT_TABLES, AUDIT_VIEWS, ROUTE_SUMMARY
+from schemas.audit import (
+    AUDIT_APPLICATION_ID,
+    AUDIT_SCHEMA_CHANGE,
+    AUDIT_SCHEMA_VERSION,
+    AUDIT_TABLES,
+    AUDIT_VIEWS,
+    ROUTE_SUMMARY,
+    TRACK_SUMMARY,
+)
+from schemas.enums import SLIP_EVENTS
 from schemas.errors import InputError
 from schemas.model import Table
 
@@ -26,26 +35,56 @@ from schemas.model import Table
 AUDIT_NAMES: dict[str, Table] = {t.name: t for t in (*AUDIT_TABLES, *AUDIT_VIEWS)}
 _RUNS, _EVENTS, _TRACES, _META, _PATH = (t.name for t in AUDIT_TABLES)
 
-#: ``route_summary`` (columns: :data:`schemas.audit.ROUTE_SUMMARY`): per (line, track,
-#: direction) over the runs with status ok; mean/max % over their balise corrections.
+#: ``route_summary`` (columns: :data:`schemas.audit.ROUTE_SUMMARY`): per (track_id, direction)
+#: over the runs with status ok, line and track as display names; mean/max % over their
+#: balise corrections.
 ROUTE_SUMMARY_SQL = f"""
-SELECT r.line_code, r.track, r.direction,
+SELECT r.track_id, MIN(r.line_code) AS line_code, MIN(r.track) AS track, r.direction,
        COUNT(*) AS n_runs,
        SUM(r.distance_m) AS distance_m,
        SUM(r.n_corrections) AS n_corrections,
        (SELECT AVG(e.correction_pct) FROM {_EVENTS} e JOIN {_RUNS} r2 USING (run_path)
-         WHERE e.type = 'balise_correction' AND r2.status = 'ok' AND r2.line_code IS r.line_code
-           AND r2.track IS r.track AND r2.direction IS r.direction) AS mean_correction_pct,
+         WHERE e.type = 'balise_correction' AND r2.status = 'ok' AND r2.track_id IS r.track_id
+           AND r2.direction IS r.direction) AS mean_correction_pct,
        (SELECT MAX(e.correction_pct) FROM {_EVENTS} e JOIN {_RUNS} r2 USING (run_path)
-         WHERE e.type = 'balise_correction' AND r2.status = 'ok' AND r2.line_code IS r.line_code
-           AND r2.track IS r.track AND r2.direction IS r.direction) AS max_correction_pct,
+         WHERE e.type = 'balise_correction' AND r2.status = 'ok' AND r2.track_id IS r.track_id
+           AND r2.direction IS r.direction) AS max_correction_pct,
        SUM(r.n_feature_corrections) AS n_feature_corrections,
        SUM(r.n_feature_refused) AS n_feature_refused,
        SUM(r.n_slips) AS n_slips,
        SUM(r.n_failsafe) AS n_failsafe,
        SUM(r.n_anomalies) AS n_anomalies
 FROM {_RUNS} r WHERE r.status = 'ok'
-GROUP BY r.line_code, r.track, r.direction
+GROUP BY r.track_id, r.direction
+"""
+
+_SLIPS = ", ".join(f"'{t.value}'" for t in SLIP_EVENTS)
+#: ``track_summary`` (columns: :data:`schemas.audit.TRACK_SUMMARY`): per track_id over the
+#: determined stretches of ``audit_track_path`` (runs with status ok); an event belongs to
+#: the track of the stretch whose [t_from, t_to] holds its time (stretches of a run do not
+#: overlap), as ``trainpos report --by track`` counts them.
+TRACK_SUMMARY_SQL = f"""
+WITH s AS (
+  SELECT p.run_path, p.track_id, p.line_code, p.track, p.t_from, p.t_to, p.distance_m, p.n_cycles
+  FROM {_PATH} p JOIN {_RUNS} r USING (run_path)
+  WHERE r.status = 'ok' AND p.state = 'determined'),
+e AS (
+  SELECT s.track_id, ev.type, ev.correction_pct
+  FROM s JOIN {_EVENTS} ev ON ev.run_path = s.run_path AND ev.t BETWEEN s.t_from AND s.t_to),
+b AS (
+  SELECT track_id, COUNT(*) AS n, AVG(correction_pct) AS mean_pct, MAX(correction_pct) AS max_pct
+  FROM e WHERE type = 'balise_correction' GROUP BY track_id),
+o AS (
+  SELECT track_id, SUM(type IN ({_SLIPS})) AS n_slips, SUM(type = 'failsafe') AS n_failsafe,
+         SUM(type = 'balise_anomaly') AS n_anomalies
+  FROM e GROUP BY track_id)
+SELECT s.track_id, MIN(s.line_code) AS line_code, MIN(s.track) AS track,
+       COUNT(DISTINCT s.run_path) AS n_runs, SUM(s.distance_m) AS distance_m, SUM(s.n_cycles) AS n_cycles,
+       COALESCE(MIN(b.n), 0) AS n_corrections, MIN(b.mean_pct) AS mean_correction_pct,
+       MIN(b.max_pct) AS max_correction_pct, COALESCE(MIN(o.n_slips), 0) AS n_slips,
+       COALESCE(MIN(o.n_failsafe), 0) AS n_failsafe, COALESCE(MIN(o.n_anomalies), 0) AS n_anomalies
+FROM s LEFT JOIN b USING (track_id) LEFT JOIN o USING (track_id)
+GROUP BY s.track_id
 """
 
 
@@ -109,8 +148,8 @@ def _check_audit_version(conn: sqlite3.Connection, path: Path, is_audit: bool) -
         )
     if is_audit and version < AUDIT_SCHEMA_VERSION:
         raise InputError(
-            f"audit database schema {version} is older than this tool's ({AUDIT_SCHEMA_VERSION}): "
-            "audit the runs again into a new audit database",
+            f"audit database schema {version} is older than this tool's ({AUDIT_SCHEMA_VERSION}: "
+            f"{AUDIT_SCHEMA_CHANGE}): audit the runs again into a new audit database",
             path=path,
         )
 
@@ -127,6 +166,7 @@ def _create_audit_schema(conn: sqlite3.Connection) -> None:
     create_tables(db, AUDIT_TABLES, if_not_exists=True)
     _enum_checks(conn, AUDIT_TABLES)
     db.create_view(ROUTE_SUMMARY.name, ROUTE_SUMMARY_SQL, ignore=True)
+    db.create_view(TRACK_SUMMARY.name, TRACK_SUMMARY_SQL, ignore=True)
     conn.commit()
 
 

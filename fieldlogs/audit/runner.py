@@ -15,6 +15,15 @@ back) the worker hashes the content and an unchanged fingerprint is still skippe
 recorded with status ``error`` are retried. The context is kept per run, so resuming an
 audit interrupted under another config or DB never skips a run audited with the old one.
 
+Unit: ``unit`` F (the default: the pipeline as it always runs), R (the R cab's unit) or both
+(unit F's figures stored with the units' comparison), :mod:`fieldlogs.audit.units`. A unit
+other than F is part of the context, so switching units re-audits every run.
+
+A run's route is keyed by its **track id**: the track claimed (state not undetermined) on
+the most cycles, ties broken by line, local name, then id — on a line-only DB the same
+(line, track) as the pipeline summary's main route; ``line_code`` and ``track`` of the
+record are that track's display names (null off a line: a crossover, a connecting curve).
+
 A run fails (status ``error``, message stored) when run.json is unusable, a stream its
 vehicle kind needs (tacho and IMU for a train, GPS and cab for a road-rail vehicle) is
 missing or has no usable row, or the pipeline raises; the other runs go on.
@@ -53,10 +62,12 @@ from fieldlogs.audit.store import (
     unpack,
 )
 from fieldlogs.audit.track_path import append_path, empty_path, track_path
+from fieldlogs.audit.units import check_unit
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, load_network, open_db
 from fieldlogs.replay.pool import replay
 from fieldlogs.replay.tasks import Outcome, error_message
+from schemas.enums import PositionState
 from schemas.jsonable import jsonable
 
 __all__ = ["AuditStats", "audit", "audit_one", "discover_runs", "pack", "unpack"]
@@ -88,9 +99,11 @@ def quick_key(run: Path) -> str:
     return h.hexdigest()
 
 
-def context_key(db_hash: str, cfg_json: str) -> str:
-    """What a run's result depends on besides its files: DB content and pipeline config."""
-    return hashlib.sha256(db_hash.encode() + b"\0" + cfg_json.encode()).hexdigest()
+def context_key(db_hash: str, cfg_json: str, unit: str = "F") -> str:
+    """What a run's result depends on besides its files: DB content, pipeline config and
+    (when not F, the default) the unit replayed."""
+    extra = b"" if unit == "F" else b"\0unit=" + unit.encode()
+    return hashlib.sha256(db_hash.encode() + b"\0" + cfg_json.encode() + extra).hexdigest()
 
 
 def content_fingerprint(run: Path, context: str) -> str:
@@ -157,16 +170,19 @@ def _trace(result: Any, earlier: list[Any] | None = None) -> pd.DataFrame:
 
 
 def audit_one(
-    run_path: str, db: DbRef, cfg_json: str, context: str, known_fingerprint: str | None = None
+    run_path: str, db: DbRef, cfg_json: str, context: str, known_fingerprint: str | None = None, unit: str = "F"
 ) -> dict[str, Any]:
-    """Worker: run the pipeline on one run. Never raises: errors become a record.
+    """Worker: run the pipeline on one run with ``unit`` (:mod:`fieldlogs.audit.units`).
+    Never raises: errors become a record.
 
     Returns ``{"record": {...}, "events": pack(events), "trace": Parquet bytes}``, or
     ``{"record": ..., "unchanged": True}`` when the content fingerprint equals
     ``known_fingerprint``.
     """
+    import tempfile
+
+    from fieldlogs.audit.units import replay_unit
     from fieldlogs.pipeline.config import PipelineConfig
-    from fieldlogs.pipeline.windows import replay_bounded
     from fieldlogs.runs.handle import read_run
 
     t0, c0 = time.perf_counter(), time.process_time()
@@ -176,6 +192,7 @@ def audit_one(
         "context": context,
         "fingerprint": "",
         "audited_at": _now(),
+        "unit": unit,
     }
     try:
         base["quick_key"] = quick_key(Path(run_path))
@@ -187,10 +204,13 @@ def audit_one(
         cfg = PipelineConfig.from_dict(json.loads(cfg_json))
         run = read_run(Path(run_path))
         seen = _Seen()
-        result = replay_bounded(run, network, cfg, seen.add)  # refuses an unusable run; a long one by windows
+        with tempfile.TemporaryDirectory(prefix="trainpos-unit-") as scratch:
+            # refuses an unusable run; a long one by windows
+            result, compared = replay_unit(run, network, cfg, unit, seen.add, Path(scratch))
         record = {
             **base,
-            **_record(result.summary, seen.direction()),
+            **_record(result.summary, seen.route(), seen.direction()),
+            **compared,
             "elapsed_s": time.perf_counter() - t0,
             "cpu_s": time.process_time() - c0,
         }
@@ -213,16 +233,40 @@ class _Seen:
         self.first_km: float | None = None
         self.last_km: float | None = None
         self.kms = 0
+        self.claims: dict[str, list[Any]] = {}
+        """track_id → [claimed cycles, line_code, track]."""
 
     def add(self, result: Any) -> None:
         self.traces.append(_trace(result, self.episodes))
         self.episodes += result.odometry.episodes
         self.path = append_path(self.path, track_path(result.positions))
+        self._claims(result.positions)
         km = result.positions["km_m"].dropna()
         if len(km):
             self.first_km = float(km.iloc[0]) if self.first_km is None else self.first_km
             self.last_km = float(km.iloc[-1])
             self.kms += len(km)
+
+    def _claims(self, pos: pd.DataFrame) -> None:
+        """Count the cycles claimed (state not undetermined) on each track."""
+        claimed = pos[(pos["state"].astype(str) != PositionState.UNDETERMINED.value) & pos["track_id"].notna()]
+        if claimed.empty:
+            return
+        g = claimed.groupby(claimed["track_id"].astype(str), sort=True)
+        n, lines, tracks = g.size(), g["line_code"].first(), g["track"].first()
+        for tid in n.index:
+            entry = self.claims.setdefault(str(tid), [0, _name(lines[tid]), _name(tracks[tid])])
+            entry[0] += int(n[tid])
+
+    def route(self) -> tuple[str | None, str | None, str | None]:
+        """(track_id, line_code, track) of the track claimed on most cycles; ties: by line,
+        local name, id (the pipeline summary's order of its (line, track) routes)."""
+        if not self.claims:
+            return None, None, None
+        tid, (_, line, trk) = min(
+            self.claims.items(), key=lambda kv: (-kv[1][0], kv[1][1] or "", kv[1][2] or "", kv[0])
+        )
+        return tid, line, trk
 
     def direction(self) -> str | None:
         """``down`` when the km grew over the run, ``up`` when it fell (None if never determined)."""
@@ -234,12 +278,20 @@ class _Seen:
         return self.traces[0] if len(self.traces) == 1 else pd.concat(self.traces, ignore_index=True)
 
 
-def _record(s: dict[str, Any], direction: str | None) -> dict[str, Any]:
+def _name(v: Any) -> str | None:
+    """A display name of the positions (line code, local track name); None when missing."""
+    return None if v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA else str(v)
+
+
+def _record(
+    s: dict[str, Any], route: tuple[str | None, str | None, str | None], direction: str | None
+) -> dict[str, Any]:
     """The record fields of a run the pipeline went through (``elapsed_s``: wall time in
     the worker, ``cpu_s`` its CPU time; wall / CPU > 1: a busy machine)."""
     return {
         "status": "ok",
-        **{k: s[k] for k in ("run_id", "vehicle_id", "vehicle_kind", "db_version", "line_code", "track")},
+        **{k: s[k] for k in ("run_id", "vehicle_id", "vehicle_kind", "db_version")},
+        **dict(zip(("track_id", "line_code", "track"), route, strict=True)),
         "direction": direction,
         **{k: s[k] for k in ("n_corrections", "mean_correction_pct", "max_correction_pct")},
         **{k: s.get(k) for k in SUMMARY_FIELDS},
@@ -287,8 +339,11 @@ def audit(
     workers: int | None = None,
     scheduler: str | None = None,
     progress: ProgressFn | None = None,
+    unit: str = "F",
 ) -> AuditStats:
     """Audit every run below ``roots`` into ``audit_path`` (created or resumed).
+
+    ``unit``: the positioning unit replayed, F (default), R or both (module docstring).
 
     ``workers``: processes of the local pool (default: all cores; 1 = in this process).
     ``scheduler``: address of a Dask scheduler (``tcp://host:8786``); its workers must see
@@ -296,10 +351,11 @@ def audit(
     """
     from fieldlogs.pipeline.config import PipelineConfig
 
+    check_unit(unit)
     cfg = config or PipelineConfig()
     cfg_json = json.dumps(jsonable(cfg.to_dict()), sort_keys=True)
     db, net = open_db(Path(db_path))  # fails early (exit 2) on an unreadable DB
-    context = context_key(db.content_hash, cfg_json)
+    context = context_key(db.content_hash, cfg_json, unit)
     runs = discover_runs(roots)
     stats = AuditStats(total=len(runs))
     if net.meta.get("content_hash") != db.content_hash:
@@ -315,16 +371,17 @@ def audit(
                 "db_version": net.meta.get("db_version", ""),
                 "db_content_hash": db.content_hash,
                 "config": cfg_json,
+                "unit": unit,
             },
         )
         todo = _plan(conn, runs, context, stats)
         if progress:
             progress(stats.done, stats.total, "")
-        tasks = [(p, (db, cfg_json, context, k)) for p, k in todo]
+        tasks = [(p, (db, cfg_json, context, k, unit)) for p, k in todo]
         results = replay(audit_one, tasks, workers=workers, scheduler=scheduler, preload=PRELOAD)
         with closing(results):  # interrupted: stop the pool / cluster work at once
             for out in results:
-                _store(conn, out, context, stats)
+                _store(conn, out, context, unit, stats)
                 if progress:
                     progress(stats.done, stats.total, out.run)
         set_meta(conn, {"last_audit_at": datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")})
@@ -348,13 +405,14 @@ def _plan(conn: AuditDB, runs: list[Path], context: str, stats: AuditStats) -> l
     return todo
 
 
-def _store(conn: AuditDB, out: Outcome[dict[str, Any]], context: str, stats: AuditStats) -> None:
+def _store(conn: AuditDB, out: Outcome[dict[str, Any]], context: str, unit: str, stats: AuditStats) -> None:
     """Record one run's outcome; a worker that died becomes an error record of its run
     (retried by the next audit)."""
     res = out.value
     if res is None:
         res = {
             "record": {
+                "unit": unit,
                 "run_path": out.run,
                 "fingerprint": "",
                 "context": context,

@@ -23,12 +23,12 @@ from dbtools import pagekit as kit
 from dbtools.database import read_network
 from fieldlogs.audit.store import read_table, read_trace
 from fieldlogs.reports import plots
-from fieldlogs.reports.report import CORRECTION_STATS, OTHER_STATS, ROUTE_KEYS, TRACK_KEYS, Report
+from fieldlogs.reports.report import CORRECTION_STATS, OTHER_STATS, ROUTE_COLUMNS, TRACK_COLUMNS, Report
 from schemas.audit import AUDIT_RUNS
 from schemas.errors import TrainposError
 
-CORRECTION_COLUMNS = [*ROUTE_KEYS, *CORRECTION_STATS]
-OTHER_COLUMNS = [*ROUTE_KEYS, *OTHER_STATS]
+CORRECTION_COLUMNS = [*ROUTE_COLUMNS, *CORRECTION_STATS]
+OTHER_COLUMNS = [*ROUTE_COLUMNS, *OTHER_STATS]
 
 
 def _cells(target: float | None) -> Callable[[str, Any], kit.Cell]:
@@ -69,6 +69,7 @@ def render_html(report: Report, audit_path: Path) -> str:
     if report.by == "vehicle":
         parts.append(kit.section("Per vehicle", _table(report.vehicles, t)))
     parts += _path_sections(report)
+    parts += _unit_sections(report)
     parts.append(kit.section("Runs", _table(report.runs.drop(columns=["run_path"]), t)))
     if len(report.failed_runs):
         parts.append(kit.section("Runs that failed", _table(report.failed_runs), status=kit.Status.WARN))
@@ -106,33 +107,85 @@ def network_paths(report: Report) -> pd.DataFrame:
 
 
 def _path_sections(report: Report) -> list[str]:
-    """For network runs: each run's route as a path of tracks, and the per-track table."""
+    """For network runs: each run's route as a path of tracks; then the per-track tables (by
+    track_id, line and local name as display) for network runs or ``--by track``."""
     paths = network_paths(report)
-    if paths.empty:
-        return []
-    note = kit.paragraph(
-        "Each run's route as the tracks it was claimed on, in order, with the distance travelled on each; "
-        "{A|B}: ambiguous among candidate tracks A and B (not yet told which way a switch went).",
-        kit.Status.NOTE,
-    )
-    return [
-        kit.section("Routes as paths of tracks", note, _table(paths)),
+    out = []
+    if not paths.empty:
+        note = kit.paragraph(
+            "Each run's route as the tracks it was claimed on, in order, with the distance travelled on each; "
+            "{A|B}: ambiguous among candidate tracks A and B (not yet told which way a switch went).",
+            kit.Status.NOTE,
+        )
+        out.append(kit.section("Routes as paths of tracks", note, _table(paths)))
+    if paths.empty and report.by != "track":
+        return out
+    tracks = report.tracks
+    out.append(
         kit.section(
-            "Position correction per track", _table(report.tracks[[*TRACK_KEYS, *CORRECTION_STATS]], report.target_pct)
-        ),
-    ]
+            "Position correction per track",
+            kit.paragraph(
+                "Per track id over the stretches determined on it; line and track are its names (empty off a line).",
+                kit.Status.NOTE,
+            ),
+            _table(tracks[[*TRACK_COLUMNS, *CORRECTION_STATS]], report.target_pct),
+        )
+    )
+    if report.by == "track":
+        out.append(
+            kit.section(
+                "Slips, feature points, GPS and alarms per track", _table(tracks[[*TRACK_COLUMNS, *OTHER_STATS]])
+            )
+        )
+    return out
+
+
+def unit_spans_text(spans: object) -> str:
+    """A run's disagreement spans (JSON ``[[t_from, t_to], …]``) in one line: ``12.3–14.0 s, …``."""
+    items = json.loads(spans) if isinstance(spans, str) and spans else []
+    return ", ".join(f"{float(a):.1f}–{float(b):.1f} s" for a, b in items)
+
+
+def units_view(report: Report) -> pd.DataFrame:
+    """The runs audited with both units: their comparison, the spans as text."""
+    return report.units.assign(
+        unit_disagreement_spans=[unit_spans_text(v) for v in report.units["unit_disagreement_spans"]]
+    )
+
+
+def _unit_sections(report: Report) -> list[str]:
+    """For runs audited with ``--unit both``: the units' comparison per run."""
+    if report.units.empty:
+        return []
+    n = int((report.units["unit_disagreements"].fillna(0) > 0).sum())
+    note = kit.paragraph(
+        "Unit F's figures are reported; unit R (the R cab's) replayed the same run. A disagreement: both "
+        "claim a km and |km F − km R| exceeds the sum of their margins, or both are determined on different "
+        f"tracks. {n} of {len(report.units)} run(s) with a disagreement.",
+        kit.Status.WARN if n else kit.Status.NOTE,
+    )
+    return [kit.section("Units F and R compared", note, _table(units_view(report)))]
 
 
 def verdict(report: Report) -> kit.Verdict:
-    """Passed when every route's mean position-correction % is within the target and no run
-    failed; else how many routes are above it and how many runs failed."""
+    """Passed when every route's mean position-correction % is within the target, no run
+    failed and (runs audited with both units) the units agree; else how many routes are above
+    it, how many runs failed and in how many the units disagree."""
     t = report.target_pct
     means = report.routes["mean_correction_pct"] if "mean_correction_pct" in report.routes else pd.Series([])
     above = int((means > t).sum())
     n_routes, n_failed = len(report.routes), len(report.failed_runs)
     failed = f"; {n_failed} run(s) failed to audit" if n_failed else ""
+    n_split = int((report.units["unit_disagreements"].fillna(0) > 0).sum())
+    split = f"; units F and R disagree in {n_split} run(s)" if n_split else ""
     if above:
-        text = f"Above target: {above} of {n_routes} route(s) with a mean position correction above {t:g} %{failed}."
+        text = (
+            f"Above target: {above} of {n_routes} route(s) with a mean position correction above {t:g} %"
+            f"{failed}{split}."
+        )
+        return kit.Verdict(text, kit.Status.WARN)
+    if n_split:
+        text = f"Units disagree: {n_routes} route(s) within the {t:g} % target{failed}{split}."
         return kit.Verdict(text, kit.Status.WARN)
     if n_failed or not n_routes:
         text = f"Incomplete: {n_routes} route(s) within the {t:g} % target{failed or '; no run audited'}."
@@ -153,10 +206,10 @@ def _run_plots(report: Report, audit_path: Path) -> list[str]:
     run_id = str(row["run_id"])
     trace = read_trace(audit_path, str(row["run_path"]))
     summary = json.loads(row["summary_json"] or "{}")
+    names = " ".join(str(row[c]) for c in ("line_code", "track") if isinstance(row[c], str) and row[c])
+    where = f"track {row['track_id'] or '—'}" + (f" = {names}" if names else "")
     out = [
-        kit.heading(
-            f"Run {run_id} ({row['line_code']} {row['track']}, {float(row['distance_m'] or 0) / 1000:.1f} km)", 3
-        ),
+        kit.heading(f"Run {run_id} ({where}, {float(row['distance_m'] or 0) / 1000:.1f} km)", 3),
         kit.figure(plots.margin_along_run(trace, run_id), f"Margin along run {run_id}"),
         kit.figure(
             plots.slip_episodes(trace, summary.get("episodes", []), run_id),

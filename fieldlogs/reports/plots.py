@@ -29,12 +29,13 @@ def _legend(ax: Axes, **kw: Any) -> None:
 
 def correction_vs_distance(corrections: pd.DataFrame, target_pct: float) -> bytes:
     """Position-correction % of balise corrections against the distance since the previous
-    correction, one colour per route; feature-point corrections as grey crosses (not part of
-    the statistics: their % is meaningless a few hundred metres after a balise)."""
+    correction, one colour per route (track id and direction); feature-point corrections as
+    grey crosses (not part of the statistics: their % is meaningless a few hundred metres
+    after a balise)."""
     fig, ax = kit.pyplot().subplots(figsize=(8, 4.5))
     c = corrections.dropna(subset=["correction_pct", "distance_since_m"])
     bal = c[c["type"] == EventType.BALISE_CORRECTION]
-    for key, g in bal.groupby(["line_code", "track", "direction"], dropna=False):
+    for key, g in bal.groupby(["track_id", "direction"], dropna=False):
         label = " ".join(map(str, key))
         ax.scatter(g["distance_since_m"] / 1000.0, g["correction_pct"], s=18, alpha=0.8, label=f"{label} (balise)")
     feat = c[c["type"] == EventType.FEATURE_CORRECTION]

@@ -7,8 +7,11 @@ feature-point correction often follows a balise within a few hundred metres, whi
 its percentage meaningless; feature-point corrections are counted separately
 (``n_feature_corrections``, ``n_feature_refused`` with the failed diagnostics).
 
-Columns of every grouping (route = line, track, direction; run; vehicle; track = track_id
-with its line and local name):
+A track is named by one key, ``track_id``, everywhere; ``line_code`` and ``track`` are its
+display names (empty for a track off any line: a crossover, a connecting curve). Columns of
+every grouping (route = the run's track_id — the track it was claimed on most,
+:mod:`fieldlogs.audit.runner` — and direction; run; vehicle; track = track_id), after the
+keys and display names:
 
 ==========================  ==========================================================
 n_runs                      runs audited without error
@@ -35,6 +38,10 @@ on a track are those whose time falls within a determined stretch on it (an even
 ambiguous or undetermined stretch belongs to no track); ``n_failsafe`` and ``n_anomalies``
 are then counted from those events, ``gps_decisions`` from its ``track_decision`` events and
 ``gps_trusted_share`` (a figure of the whole run) is left empty.
+
+Runs audited with ``--unit both`` (:mod:`fieldlogs.audit.units`) are listed in ``units``
+with the two units' comparison: cycles compared, largest |km_F − km_R|, cycles beyond the
+sum of the margins or on other tracks, and the disagreement spans.
 """
 
 from __future__ import annotations
@@ -55,8 +62,14 @@ from schemas.enums import CORRECTION_EVENTS, SLIP_EVENTS, EventType
 from schemas.jsonable import jsonable
 
 By = Literal["route", "run", "vehicle", "track"]
-ROUTE_KEYS = ["line_code", "track", "direction"]
-TRACK_KEYS = ["track_id", "line_code", "track"]
+#: What a route is grouped by, and its columns with the display names.
+ROUTE_KEYS = ["track_id", "direction"]
+ROUTE_COLUMNS = ["track_id", "line_code", "track", "direction"]
+#: What a track is grouped by, and its columns with the display names.
+TRACK_KEYS = ["track_id"]
+TRACK_COLUMNS = ["track_id", "line_code", "track"]
+#: Display names of a track (empty off a line; the unknown route's are UNKNOWN).
+NAMES = ["line_code", "track"]
 #: Per-route (or per-group) statistics, in the order reports show them: position correction …
 CORRECTION_STATS = ["n_runs", "distance_m", *STAT_COLUMNS]
 #: … and everything else.
@@ -77,6 +90,7 @@ UNKNOWN = "—"
 """Route key of runs whose position was never determined."""
 
 ROUTE_JSON_KEYS = (
+    "track_id",
     "line_code",
     "track",
     "direction",
@@ -88,10 +102,12 @@ ROUTE_JSON_KEYS = (
     "max_correction_pct",
     "share_above_target",
 )
-TRACK_JSON_KEYS = ("track_id", "line_code", "track", *ROUTE_JSON_KEYS[3:])
+TRACK_JSON_KEYS = ("track_id", "line_code", "track", *ROUTE_JSON_KEYS[4:])
 RUN_JSON_KEYS = (
     "run_id",
     "vehicle_id",
+    "unit",
+    "track_id",
     "line_code",
     "track",
     "n_corrections",
@@ -109,11 +125,22 @@ VEHICLE_JSON_KEYS = (
     "max_correction_pct",
     "share_above_target",
 )
+#: Columns of the units' comparison (``--unit both``), per run.
+UNIT_COLUMNS = [
+    "unit_cycles_compared",
+    "unit_max_difference_m",
+    "unit_cycles_beyond_margins",
+    "unit_cycles_on_other_tracks",
+    "unit_disagreements",
+    "unit_disagreement_spans",
+]
+UNIT_JSON_KEYS = ("run_id", "vehicle_id", *UNIT_COLUMNS[:-1])
 RUN_VIEW = [
     "run_path",
     "run_id",
     "vehicle_id",
-    *ROUTE_KEYS,
+    "unit",
+    *ROUTE_COLUMNS,
     "distance_m",
     "n_corrections",
     "mean_correction_pct",
@@ -142,7 +169,7 @@ class Report:
     groups: pd.DataFrame
     """One row per route / run / vehicle (``by``)."""
     routes: pd.DataFrame
-    """One row per route (line, track, direction)."""
+    """One row per route (``ROUTE_COLUMNS``: track_id, its display names, direction)."""
     runs: pd.DataFrame
     """One row per run audited without error (columns ``RUN_VIEW``)."""
     vehicles: pd.DataFrame
@@ -153,10 +180,12 @@ class Report:
     failed_runs: pd.DataFrame
     """run_path, error of the runs recorded with status error."""
     tracks: pd.DataFrame
-    """One row per track claimed by some run (``TRACK_KEYS`` + the statistics)."""
+    """One row per track claimed by some run (``TRACK_COLUMNS`` + the statistics)."""
     paths: pd.DataFrame
     """Every run's path of tracks (``audit_track_path`` rows of the runs audited without
     error, with their run_id), in run_path, seq order."""
+    units: pd.DataFrame
+    """run_id, vehicle_id and ``UNIT_COLUMNS`` of the runs audited with both units."""
 
 
 def _details(frame: pd.DataFrame) -> list[dict[str, Any]]:
@@ -170,11 +199,11 @@ def build_report(audit_path: Path, *, by: By = "route", target_pct: float = 0.5)
     # in their own order): the same audit gives the same report and the same plots
     events = read_table(audit_path, AUDIT_EVENTS.name).sort_values("run_path", kind="stable", ignore_index=True)
     meta = read_meta(audit_path)
-    runs = runs_all[runs_all["status"] == "ok"].copy()
+    runs = _named(runs_all[runs_all["status"] == "ok"].copy())
     failed = runs_all.loc[runs_all["status"] == "error", ["run_path", "error"]].reset_index(drop=True)
-    for c in [*ROUTE_KEYS, "vehicle_id", "run_id"]:
+    for c in ["direction", "vehicle_id", "run_id", "unit"]:
         runs[c] = runs[c].fillna(UNKNOWN).astype(str)
-    ev = events.merge(runs[["run_path", "run_id", "vehicle_id", *ROUTE_KEYS]], on="run_path", how="inner")
+    ev = events.merge(runs[["run_path", "run_id", "vehicle_id", *ROUTE_COLUMNS]], on="run_path", how="inner")
     ev["correction_pct"] = pd.to_numeric(ev["correction_pct"])
     corr = ev[ev["type"].isin(CORRECTION_EVENTS)].copy()
     corr["distance_since_m"] = pd.to_numeric(
@@ -193,9 +222,9 @@ def build_report(audit_path: Path, *, by: By = "route", target_pct: float = 0.5)
     paths = paths.merge(runs[["run_path", "run_id"]], on="run_path", how="inner")
     tracks = _by_track(paths, parts, target_pct)
 
-    routes = _aggregate(runs, parts, ROUTE_KEYS, target_pct)
+    routes = _with_names(_aggregate(runs, parts, ROUTE_KEYS, target_pct), runs, ROUTE_COLUMNS)
     by_run = _aggregate(runs, parts, ["run_path"], target_pct)
-    run_cols = runs[["run_path", "run_id", "vehicle_id", *ROUTE_KEYS, "max_margin_m"]]
+    run_cols = runs[["run_path", "run_id", "vehicle_id", "unit", *ROUTE_COLUMNS, "max_margin_m"]]
     run_view = run_cols.merge(by_run, on="run_path", how="left")[RUN_VIEW]
     vehicles = _aggregate(runs, parts, ["vehicle_id"], target_pct)
     groups = {
@@ -216,15 +245,35 @@ def build_report(audit_path: Path, *, by: By = "route", target_pct: float = 0.5)
         failed,
         tracks,
         paths,
+        runs.loc[runs["unit"] == "both", ["run_id", "vehicle_id", *UNIT_COLUMNS]].reset_index(drop=True),
     )
+
+
+def _named(frame: pd.DataFrame) -> pd.DataFrame:
+    """``track_id`` and its display names filled: a missing track id is UNKNOWN (the route of
+    runs never positioned, whose names are UNKNOWN too), a missing name of a known track is
+    empty (a track off any line)."""
+    known = frame["track_id"].notna().to_numpy()
+    frame["track_id"] = frame["track_id"].fillna(UNKNOWN).astype(str)
+    for c in NAMES:
+        frame[c] = np.where(known, frame[c].fillna("").astype(str), UNKNOWN)
+    return frame
+
+
+def _with_names(groups: pd.DataFrame, named: pd.DataFrame, columns: list[str]) -> pd.DataFrame:
+    """Groups keyed by track_id with its display names from ``named`` (after :func:`_named`)
+    inserted after it, in ``columns`` order."""
+    names = named.groupby("track_id", sort=True)[NAMES].first().reset_index()
+    out = groups.merge(names, on="track_id", how="left")
+    return out[[*columns, *[c for c in out.columns if c not in columns]]]
 
 
 def _on_track(frame: pd.DataFrame, stretches: pd.DataFrame) -> pd.DataFrame:
     """The rows of an event frame whose ``t`` falls within a determined stretch of their run,
-    with that stretch's ``TRACK_KEYS``."""
+    with that stretch's ``TRACK_KEYS`` (instead of the run's ``ROUTE_COLUMNS``)."""
     if frame.empty or stretches.empty:
-        return frame.iloc[:0].drop(columns=ROUTE_KEYS, errors="ignore").assign(**dict.fromkeys(TRACK_KEYS, ""))
-    left = frame.drop(columns=ROUTE_KEYS, errors="ignore").assign(t=pd.to_numeric(frame["t"])).sort_values("t")
+        return frame.iloc[:0].drop(columns=ROUTE_COLUMNS, errors="ignore").assign(**dict.fromkeys(TRACK_KEYS, ""))
+    left = frame.drop(columns=ROUTE_COLUMNS, errors="ignore").assign(t=pd.to_numeric(frame["t"])).sort_values("t")
     right = stretches[["run_path", "t_from", "t_to", *TRACK_KEYS]].sort_values("t_from")
     m = pd.merge_asof(left, right, left_on="t", right_on="t_from", by="run_path", direction="backward")
     return m[m["t"] <= m["t_to"]].drop(columns=["t_from", "t_to"])
@@ -232,16 +281,14 @@ def _on_track(frame: pd.DataFrame, stretches: pd.DataFrame) -> pd.DataFrame:
 
 def _by_track(paths: pd.DataFrame, parts: dict[str, pd.DataFrame], target: float) -> pd.DataFrame:
     """Per track statistics (module docstring): the determined stretches stand for runs."""
-    det = paths[paths["state"] == "determined"].copy()
-    for c in TRACK_KEYS:
-        det[c] = det[c].fillna(UNKNOWN).astype(str)
+    det = _named(paths[paths["state"] == "determined"].copy())
     det["t_from"] = pd.to_numeric(det["t_from"])
     det["t_to"] = pd.to_numeric(det["t_to"])
     on = {k: _on_track(v, det) for k, v in parts.items()}
     ev = on["ev"]
     per_run = det.groupby(["run_path", *TRACK_KEYS], sort=True).agg(distance_m=("distance_m", "sum")).reset_index()
     if per_run.empty:
-        cols = [*TRACK_KEYS, *CORRECTION_STATS, *OTHER_STATS]
+        cols = [*TRACK_COLUMNS, *CORRECTION_STATS, *OTHER_STATS]
         return pd.DataFrame({c: pd.Series(dtype=object) for c in cols})
 
     def count(kind: str) -> npt.NDArray[np.int64]:
@@ -256,7 +303,7 @@ def _by_track(paths: pd.DataFrame, parts: dict[str, pd.DataFrame], target: float
         gps_decisions=count(EventType.TRACK_DECISION),
         gps_trusted_share=np.nan,
     )
-    return _aggregate(pseudo, on, TRACK_KEYS, target)
+    return _with_names(_aggregate(pseudo, on, TRACK_KEYS, target), det, TRACK_COLUMNS)
 
 
 def _aggregate(runs: pd.DataFrame, parts: dict[str, pd.DataFrame], keys: list[str], target: float) -> pd.DataFrame:
@@ -313,29 +360,39 @@ def _num(v: Any) -> Any:
     return None if isinstance(v, str) and v == UNKNOWN else jsonable(v)
 
 
+def _value(key: str, v: Any) -> Any:
+    """:func:`_num`, and an empty display name (a track off any line) as null."""
+    return None if key in NAMES and v == "" else _num(v)
+
+
 def _records(frame: pd.DataFrame, keys: tuple[str, ...]) -> list[dict[str, Any]]:
-    return [{k: _num(v) for k, v in zip(keys, row, strict=True)} for row in frame[list(keys)].itertuples(index=False)]
+    rows = frame[list(keys)].itertuples(index=False)
+    return [{k: _value(k, v) for k, v in zip(keys, row, strict=True)} for row in rows]
 
 
 def report_json(report: Report) -> dict[str, Any]:
     """The documented, stable JSON shape (whatever ``by`` is)::
 
         {"target_pct": 0.5,
-         "routes": [{line_code, track, direction, n_runs, n_corrections, distance_m,
+         "routes": [{track_id, line_code, track, direction, n_runs, n_corrections, distance_m,
                      mean_correction_pct, median_correction_pct, max_correction_pct,
                      share_above_target}],
-         "runs": [{run_id, vehicle_id, line_code, track, n_corrections, mean_correction_pct,
-                   n_slips, n_failsafe}],
+         "runs": [{run_id, vehicle_id, unit, track_id, line_code, track, n_corrections,
+                   mean_correction_pct, n_slips, n_failsafe}],
          "vehicles": [{vehicle_id, n_runs, n_corrections, distance_m, mean_correction_pct,
                        median_correction_pct, max_correction_pct, share_above_target}],
          "failed_runs": [{run_path, error}],
          "tracks": [{track_id, line_code, track, n_runs, n_corrections, distance_m,
                      mean_correction_pct, median_correction_pct, max_correction_pct,
                      share_above_target}],
-         "paths": [{run_id, path: [{track_id, state, candidates, t_from, t_to, distance_m}]}]}
+         "paths": [{run_id, path: [{track_id, state, candidates, t_from, t_to, distance_m}]}],
+         "units": [{run_id, vehicle_id, unit_cycles_compared, unit_max_difference_m,
+                    unit_cycles_beyond_margins, unit_cycles_on_other_tracks, unit_disagreements,
+                    unit_disagreement_spans: [[t_from, t_to]]}]}
 
-    Corrections and their % are balise corrections; unknown values are null; ``candidates``
-    (ambiguous stretches) is the list of candidate track ids.
+    Corrections and their % are balise corrections; unknown values are null, and so are the
+    line_code and track of a track off any line; ``candidates`` (ambiguous stretches) is the
+    list of candidate track ids; ``units`` lists the runs audited with ``--unit both``.
     """
     return {
         "target_pct": report.target_pct,
@@ -347,6 +404,12 @@ def report_json(report: Report) -> dict[str, Any]:
         "paths": [
             {"run_id": _num(g["run_id"].iloc[0]), "path": [_stretch(r) for r in g.itertuples(index=False)]}
             for _, g in report.paths.groupby("run_path", sort=True)
+        ],
+        "units": [
+            {**rec, "unit_disagreement_spans": json.loads(str(spans or "[]"))}
+            for rec, spans in zip(
+                _records(report.units, UNIT_JSON_KEYS), report.units["unit_disagreement_spans"], strict=True
+            )
         ],
     }
 

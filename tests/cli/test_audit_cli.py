@@ -94,7 +94,10 @@ def test_report_formats(audited: Path, tmp_path: Path) -> None:
     res = invoke("report", audited, "--format", "csv", "--by", "run")
     assert res.exit_code == 0
     lines = res.stdout.strip().splitlines()
-    assert lines[0].startswith("run_path,run_id,vehicle_id,line_code,track,direction") and len(lines) == N + 1
+    assert (
+        lines[0].startswith("run_path,run_id,vehicle_id,unit,track_id,line_code,track,direction")
+        and len(lines) == N + 1
+    )
 
     res = invoke("report", audited, "--by", "vehicle")
     assert res.exit_code == 0 and "EMU-01" in res.stdout and "EMU-02" in res.stdout

@@ -87,7 +87,13 @@ def test_audit_stores_runs_events_traces_and_route_view(audited: Path, data: Aud
     assert set(runs.index) == {f"RUN-{name}" for name, *_ in RUNS}
     assert (runs["status"] == "ok").all()
     assert set(runs["direction"]) == {"down", "up"}
-    assert runs.loc["RUN-d-west", ["line_code", "track", "direction"]].tolist() == ["0900", "D", "down"]
+    assert runs.loc["RUN-d-west", ["track_id", "line_code", "track", "direction"]].tolist() == [
+        "0900:D",
+        "0900",
+        "D",
+        "down",
+    ]
+    assert (runs["unit"] == "F").all() and runs["unit_disagreements"].isna().all()
     assert runs.loc["RUN-u-east", ["track", "direction"]].tolist() == ["U", "up"]
     assert (runs["distance_m"].between(2800, 3300)).all()
     assert (runs["n_slips"] >= 1).all()
@@ -301,7 +307,16 @@ def test_dask_cluster_audit_equals_local_pool(cluster: Any, data: AuditData, aud
     out = tmp_path / "dask.sqlite"
     stats = audit([data.logs], data.db, out, scheduler=cluster.scheduler_address)
     assert (stats.total, stats.audited, stats.failed) == (N, N, 0), stats.errors
-    cols = ["run_path", "line_code", "track", "direction", "n_corrections", "mean_correction_pct", "n_slips"]
+    cols = [
+        "run_path",
+        "track_id",
+        "line_code",
+        "track",
+        "direction",
+        "n_corrections",
+        "mean_correction_pct",
+        "n_slips",
+    ]
     local = read_table(audited, "audit_runs")[cols].sort_values("run_path").reset_index(drop=True)
     remote = read_table(out, "audit_runs")[cols].sort_values("run_path").reset_index(drop=True)
     pd.testing.assert_frame_equal(local, remote)
@@ -328,10 +343,12 @@ def _run(path: str, **kw: Any) -> dict[str, Any]:
         "vehicle_id": "V1",
         "fingerprint": f"fp-{path}",
         "status": "ok",
+        "track_id": "0900:D",
         "line_code": "0900",
         "track": "D",
         "direction": "down",
         "audited_at": "2026-02-01T00:00:00Z",
+        "unit": "F",
         "n_failsafe": 0,
         "n_anomalies": 0,
         "gps_decisions": 0,
@@ -375,7 +392,7 @@ def hand_made(tmp_path: Path) -> Path:
             ),
             None,
         )
-        store_run(conn, _run("c", track="U", direction="up", distance_m=5000.0), None, None)
+        store_run(conn, _run("c", track_id="0900:U", track="U", direction="up", distance_m=5000.0), None, None)
         store_run(
             conn,
             {"run_path": "d", "fingerprint": "", "status": "error", "error": "boom", "audited_at": "x"},
@@ -416,9 +433,10 @@ def test_report_statistics_are_over_balise_corrections(hand_made: Path) -> None:
 
 def test_report_json_has_the_documented_shape(hand_made: Path) -> None:
     data = json.loads(json.dumps(report_json(build_report(hand_made))))
-    assert set(data) == {"target_pct", "routes", "runs", "vehicles", "failed_runs", "tracks", "paths"}
-    assert data["target_pct"] == 0.5
+    assert set(data) == {"target_pct", "routes", "runs", "vehicles", "failed_runs", "tracks", "paths", "units"}
+    assert data["target_pct"] == 0.5 and data["units"] == []
     route_keys = [
+        "track_id",
         "line_code",
         "track",
         "direction",
@@ -434,6 +452,8 @@ def test_report_json_has_the_documented_shape(hand_made: Path) -> None:
     run_keys = [
         "run_id",
         "vehicle_id",
+        "unit",
+        "track_id",
         "line_code",
         "track",
         "n_corrections",
@@ -443,6 +463,7 @@ def test_report_json_has_the_documented_shape(hand_made: Path) -> None:
     ]
     assert list(RUN_JSON_KEYS) == run_keys and all(list(r) == run_keys for r in data["runs"])
     assert data["routes"][0] == {
+        "track_id": "0900:D",
         "line_code": "0900",
         "track": "D",
         "direction": "down",
@@ -458,6 +479,8 @@ def test_report_json_has_the_documented_shape(hand_made: Path) -> None:
     assert data["runs"][0] == {
         "run_id": "A",
         "vehicle_id": "V1",
+        "unit": "F",
+        "track_id": "0900:D",
         "line_code": "0900",
         "track": "D",
         "n_corrections": 3,

@@ -219,7 +219,7 @@ def old_audit_db(path: Path) -> Path:
 def test_audit_db_of_schema_1_is_refused_with_a_clear_message(data: AuditData, tmp_path: Path) -> None:
     old = old_audit_db(tmp_path / "old.sqlite")
     raw = old.read_bytes()
-    with pytest.raises(InputError, match=rf"schema 1 is older than this tool's \({AUDIT_SCHEMA_VERSION}\)"):
+    with pytest.raises(InputError, match=rf"schema 1 is older than this tool's \({AUDIT_SCHEMA_VERSION}: "):
         build_report(old)
     with pytest.raises(InputError, match="audit the runs again into a new audit database"), open_audit(old):
         pass

@@ -432,7 +432,7 @@ def test_an_audit_worker_keeps_the_trace_and_direction_of_a_windowed_run(parquet
     win = audit_one(run, ref, json.dumps(cfg.to_dict()), "windows")
     a, b = whole["record"], win["record"]
     assert b["status"] == "ok", b.get("error")
-    for key in ("line_code", "track", "direction", "n_corrections"):
+    for key in ("track_id", "line_code", "track", "direction", "n_corrections"):
         assert a[key] == b[key], key
     assert json.loads(b["summary_json"])["windows"]["count"] == 2
     ta, tb = decode_trace(whole["trace"]), decode_trace(win["trace"])
