@@ -117,25 +117,24 @@ def _track_gps(ctx: RunContext) -> Aid | None:
     fixes = _trusted_fixes(ctx)
     if fixes is None:
         return None
-    lines = track_lines(ctx.network)
-    return TrackGpsAid(*fixes, lines, ctx.cfg.track_select, ctx.cfg.gps, ctx.geometry.gps_antenna_x_m)
+    cfg, x_a = ctx.cfg, ctx.geometry.gps_antenna_x_m
+    return TrackGpsAid(*fixes, track_lines(ctx.network), cfg.track_select, cfg.gps, x_a)
 
 
 def _track_gps_along(ctx: RunContext) -> Aid | None:
     fixes = _trusted_fixes(ctx)
     if fixes is None:
         return None
-    cfg = ctx.cfg
-    lines = track_lines(ctx.network)
-    return TrackGpsAlongAid(*fixes, lines, cfg.track_select, cfg.gps, cfg.margin, ctx.geometry.gps_antenna_x_m)
+    cfg, x_a = ctx.cfg, ctx.geometry.gps_antenna_x_m
+    return TrackGpsAlongAid(*fixes, track_lines(ctx.network), cfg.track_select, cfg.gps, cfg.margin, x_a)
 
 
 def _track_gps_initial(ctx: RunContext) -> Aid | None:
     fixes = _trusted_fixes(ctx)
     if fixes is None:
         return None
-    lines = track_lines(ctx.network)
-    return TrackGpsInitialAid(*fixes, lines, ctx.cfg.track_select, ctx.cfg.gps, ctx.geometry.gps_antenna_x_m)
+    cfg, x_a = ctx.cfg, ctx.geometry.gps_antenna_x_m
+    return TrackGpsInitialAid(*fixes, track_lines(ctx.network), cfg.track_select, cfg.gps, x_a)
 
 
 def _track_gnss(ctx: RunContext) -> Aid | None:

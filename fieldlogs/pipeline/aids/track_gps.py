@@ -61,8 +61,9 @@ def gps_llr(offsets: FloatArray, sigma_w: float, sigma_b: float) -> FloatArray:
 
 
 @dataclass(eq=False)
-class TrackGpsAid:
-    """The GPS offset test (module docstring)."""
+class NetworkFixes:
+    """What every GPS aid on a network's tracks holds: the run's trusted fixes, the tracks and
+    the settings."""
 
     t: FloatArray
     lat: FloatArray
@@ -71,6 +72,12 @@ class TrackGpsAid:
     lines: TrackLines
     cfg: TrackSelectConfig
     gps: GpsConfig
+
+
+@dataclass(eq=False)
+class TrackGpsAid(NetworkFixes):
+    """The GPS offset test (module docstring)."""
+
     antenna_x_m: float = 0.0
     name: str = "track_gps"
     priority: Priority = Priority.TRACK

@@ -59,10 +59,10 @@ import numpy as np
 
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.topology import with_hyps
+from fieldlogs.pipeline.aids.track_gps import NetworkFixes
 from fieldlogs.pipeline.config import GpsConfig, MarginConfig, TrackSelectConfig
-from fieldlogs.pipeline.hypotheses import TrackLines
 from fieldlogs.pipeline.positions import margin_m
-from fieldlogs.pipeline.types import Event, FloatArray, Hypothesis
+from fieldlogs.pipeline.types import Event, Hypothesis
 from schemas.enums import EventType, FixSource, PositionState
 
 #: Search window beyond margin + U either way along the track [m].
@@ -75,16 +75,9 @@ def along_uncertainty(cfg: TrackSelectConfig, gps: GpsConfig) -> float:
 
 
 @dataclass(eq=False)
-class TrackGpsAlongAid:
+class TrackGpsAlongAid(NetworkFixes):
     """D-GPS corrections along the determined track (module docstring)."""
 
-    t: FloatArray
-    lat: FloatArray
-    lon: FloatArray
-    """Trusted fixes, in time order."""
-    lines: TrackLines
-    cfg: TrackSelectConfig
-    gps: GpsConfig
     margin: MarginConfig
     antenna_x_m: float = 0.0
     name: str = "track_gps_along"

@@ -36,9 +36,9 @@ import numpy as np
 
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.topology import PARALLEL_M, with_hyps
+from fieldlogs.pipeline.aids.track_gps import NetworkFixes
 from fieldlogs.pipeline.aids.track_gps_along import along_uncertainty
-from fieldlogs.pipeline.config import GpsConfig, TrackSelectConfig
-from fieldlogs.pipeline.hypotheses import Segments, TrackLines, segments
+from fieldlogs.pipeline.hypotheses import Segments, segments
 from fieldlogs.pipeline.types import Event, Fix, FloatArray, Hypothesis
 from schemas.enums import EventType, FixSource
 
@@ -64,16 +64,9 @@ def near_tracks(seg: Segments, x: float, y: float, radius_m: float) -> list[tupl
 
 
 @dataclass(eq=False)
-class TrackGpsInitialAid:
+class TrackGpsInitialAid(NetworkFixes):
     """The initial position among the network's tracks (module docstring)."""
 
-    t: FloatArray
-    lat: FloatArray
-    lon: FloatArray
-    """Trusted fixes, in time order."""
-    lines: TrackLines
-    cfg: TrackSelectConfig
-    gps: GpsConfig
     antenna_x_m: float = 0.0
     name: str = "track_gps_initial"
     priority: Priority = Priority.TRACK
