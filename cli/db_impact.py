@@ -61,8 +61,8 @@ def impact(
 
     JSON (--format json): {"old": {path, db_version, content_hash}, "new": {…}, "plan",
     "same_content", "totals": {runs, runs_changed, runs_failed: {old, new},
-    corrections_changed}, "routes": [{line_code, track, direction, runs, replayed, old,
-    new, delta, refusals: {old, new}}], "runs": [{run, run_id, vehicle_id, vehicle_kind, line_code, track,
+    corrections_changed}, "routes": [{track_id, line_code, track, direction, runs, replayed, old,
+    new, delta, refusals: {old, new}}], "runs": [{run, run_id, vehicle_id, vehicle_kind, track_id, line_code, track,
     direction, old, new, delta, refusals, alarms, errors, changed_corrections}]}; the
     figures of old/new/delta: n_balise, balise_mean_pct, balise_max_pct, n_feature,
     feature_mean_pct, feature_max_pct, n_refused, n_anomalies, n_failsafe, n_alarms,
@@ -128,7 +128,9 @@ def _route_table(r: dict[str, Any]) -> RichTable:
     """One route: every figure old, new and the change."""
     from fieldlogs.impact.report import FIGURES
 
-    t = rich_table(title=f"{r['line_code']} {r['track']} {r['direction']}: {r['runs']} run(s)")
+    names = " ".join(str(r[k]) for k in ("line_code", "track") if r[k] not in (None, "—"))
+    where = f"{r['track_id']} ({names})" if names and names != str(r["track_id"]) else str(r["track_id"])
+    t = rich_table(title=f"{where} {r['direction']}: {r['runs']} run(s)")
     for c in ("figure", "old", "new", "change"):
         t.add_column(c, justify="left" if c == "figure" else "right")
     for k, label in FIGURES.items():

@@ -63,11 +63,11 @@ from fieldlogs.audit.store import (
 )
 from fieldlogs.audit.track_path import append_path, empty_path, track_path
 from fieldlogs.audit.units import check_unit
+from fieldlogs.pipeline.summary import TrackClaims, main_track, merge_claims, track_claims
 from fieldlogs.replay.discovery import discover_runs
 from fieldlogs.replay.network import DbRef, load_network, open_db
 from fieldlogs.replay.pool import replay
 from fieldlogs.replay.tasks import Outcome, error_message
-from schemas.enums import PositionState
 from schemas.jsonable import jsonable
 
 __all__ = ["AuditStats", "audit", "audit_one", "discover_runs", "pack", "unpack"]
@@ -233,40 +233,23 @@ class _Seen:
         self.first_km: float | None = None
         self.last_km: float | None = None
         self.kms = 0
-        self.claims: dict[str, list[Any]] = {}
-        """track_id → [claimed cycles, line_code, track]."""
+        self.claims: TrackClaims = {}
 
     def add(self, result: Any) -> None:
         self.traces.append(_trace(result, self.episodes))
         self.episodes += result.odometry.episodes
         self.path = append_path(self.path, track_path(result.positions))
-        self._claims(result.positions)
+        self.claims = merge_claims([self.claims, track_claims(result.positions)])
         km = result.positions["km_m"].dropna()
         if len(km):
             self.first_km = float(km.iloc[0]) if self.first_km is None else self.first_km
             self.last_km = float(km.iloc[-1])
             self.kms += len(km)
 
-    def _claims(self, pos: pd.DataFrame) -> None:
-        """Count the cycles claimed (state not undetermined) on each track."""
-        claimed = pos[(pos["state"].astype(str) != PositionState.UNDETERMINED.value) & pos["track_id"].notna()]
-        if claimed.empty:
-            return
-        g = claimed.groupby(claimed["track_id"].astype(str), sort=True)
-        n, lines, tracks = g.size(), g["line_code"].first(), g["track"].first()
-        for tid in n.index:
-            entry = self.claims.setdefault(str(tid), [0, _name(lines[tid]), _name(tracks[tid])])
-            entry[0] += int(n[tid])
-
     def route(self) -> tuple[str | None, str | None, str | None]:
-        """(track_id, line_code, track) of the track claimed on most cycles; ties: by line,
-        local name, id (the pipeline summary's order of its (line, track) routes)."""
-        if not self.claims:
-            return None, None, None
-        tid, (_, line, trk) = min(
-            self.claims.items(), key=lambda kv: (-kv[1][0], kv[1][1] or "", kv[1][2] or "", kv[0])
-        )
-        return tid, line, trk
+        """(track_id, line_code, track) of the track claimed on most cycles
+        (:func:`fieldlogs.pipeline.summary.main_track`)."""
+        return main_track(self.claims)
 
     def direction(self) -> str | None:
         """``down`` when the km grew over the run, ``up`` when it fell (None if never determined)."""
@@ -276,11 +259,6 @@ class _Seen:
 
     def trace(self) -> pd.DataFrame:
         return self.traces[0] if len(self.traces) == 1 else pd.concat(self.traces, ignore_index=True)
-
-
-def _name(v: Any) -> str | None:
-    """A display name of the positions (line code, local track name); None when missing."""
-    return None if v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA else str(v)
 
 
 def _record(

@@ -70,6 +70,7 @@ def refusal_frame(routes: list[dict[str, Any]]) -> pd.DataFrame:
         for diag in diags:
             rows.append(
                 {
+                    "track_id": r["track_id"],
                     "line_code": r["line_code"],
                     "track": r["track"],
                     "direction": r["direction"],
@@ -123,7 +124,8 @@ def render_html(report: ImpactReport) -> str:
         kit.paragraph(f"{kit.generated()}."),
         kit.key_value_table(sides),
         kit.section(
-            "Per route", kit.frame_table(figure_frame(d["routes"], ("line_code", "track", "direction", "runs")), _cell)
+            "Per route",
+            kit.frame_table(figure_frame(d["routes"], ("track_id", "line_code", "track", "direction", "runs")), _cell),
         ),
     ]
     refusals = refusal_frame(d["routes"])
@@ -134,7 +136,9 @@ def render_html(report: ImpactReport) -> str:
         parts.append(
             kit.section(
                 "Per run",
-                kit.frame_table(figure_frame(d["runs"], ("run_id", "vehicle_id", "line_code", "track")), _cell),
+                kit.frame_table(
+                    figure_frame(d["runs"], ("run_id", "vehicle_id", "track_id", "line_code", "track")), _cell
+                ),
             )
         )
     changed = _changed_runs(d["runs"])

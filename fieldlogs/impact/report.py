@@ -2,8 +2,9 @@
 
 Per run and version the figures of :mod:`fieldlogs.impact.replay`; per run the difference
 new − old of every figure and the corrections that changed (matched by type, DB row and
-time: the same balise read at the same moment), appeared or disappeared. Per route (line,
-track, direction of the old version's replay) the correction statistics are recomputed over
+time: the same balise read at the same moment), appeared or disappeared. Per route (track id —
+the track claimed on most cycles — with its line and track names, and direction of the old
+version's replay) the correction statistics are recomputed over
 the route's corrections with :func:`fieldlogs.pipeline.corrections.correction_stats` — the
 mean % of a route is the mean over its corrections, not a mean of run means.
 """
@@ -36,7 +37,9 @@ FIGURES = {
 }
 #: A correction amount that moved less than this is unchanged [m].
 CHANGE_TOL_M = 0.01
-ROUTE_KEYS = ("line_code", "track", "direction")
+#: A route: the track claimed on most cycles (the summary's ``track_id``), its display names and
+#: the direction; the names are attributes of the id, so grouping by all four is by the id.
+ROUTE_KEYS = ("track_id", "line_code", "track", "direction")
 
 
 def run_figures(f: RunFigures) -> dict[str, Any]:
@@ -182,7 +185,7 @@ def _route_refusals(runs: list[RunImpact]) -> dict[tuple[str, ...], dict[str, di
 
 
 def route_table(runs: list[RunImpact]) -> list[dict[str, Any]]:
-    """Per route: ``{line_code, track, direction, runs, replayed, old: {figures}, new: {…},
+    """Per route: ``{track_id, line_code, track, direction, runs, replayed, old: {figures}, new: {…},
     delta: {…}, refusals: {old, new: {diagnostic: count}}}``."""
     if not runs:
         return []

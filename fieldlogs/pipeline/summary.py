@@ -11,6 +11,7 @@ wheel calibration.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -28,6 +29,45 @@ from schemas.outputs import EVENTS
 
 #: Decimals kept in the events' ``detail`` JSON (µm, µs: below every sensor's resolution).
 DETAIL_DIGITS = 6
+
+
+TrackClaims = dict[str, tuple[int, str | None, str | None]]
+"""track_id → (claimed cycles, line_code, track): the display names of the track (None off a line)."""
+
+
+def _name(v: Any) -> str | None:
+    """A display name of the positions (line code, local track name); None when missing."""
+    return None if v is None or (isinstance(v, float) and np.isnan(v)) or v is pd.NA else str(v)
+
+
+def track_claims(pos: pd.DataFrame) -> TrackClaims:
+    """Cycles claimed (state not undetermined) on each track id of ``pos``."""
+    claimed = pos[(pos["state"].astype(str) != PositionState.UNDETERMINED.value) & pos["track_id"].notna()]
+    if claimed.empty:
+        return {}
+    g = claimed.groupby(claimed["track_id"].astype(str), sort=True)
+    n, lines, tracks = g.size(), g["line_code"].first(), g["track"].first()
+    return {str(tid): (int(n[tid]), _name(lines[tid]), _name(tracks[tid])) for tid in n.index}
+
+
+def merge_claims(parts: Iterable[TrackClaims]) -> TrackClaims:
+    """The claims of consecutive spans added up (names as first seen)."""
+    out: TrackClaims = {}
+    for part in parts:
+        for tid, (n, line, track) in part.items():
+            prev = out.get(tid)
+            out[tid] = (n + prev[0], prev[1], prev[2]) if prev else (n, line, track)
+    return out
+
+
+def main_track(claims: TrackClaims) -> tuple[str | None, str | None, str | None]:
+    """(track_id, line_code, track) of a run's route: the track claimed on most cycles; ties
+    broken by line, local name, then id (on a line-only DB the order of the (line, track)
+    routes, so ``track_id`` is the implied id of the summary's ``line_code``/``track``)."""
+    if not claims:
+        return None, None, None
+    tid, (_, line, track) = min(claims.items(), key=lambda kv: (-kv[1][0], kv[1][1] or "", kv[1][2] or "", kv[0]))
+    return tid, line, track
 
 
 def episode_events(odo: Odometry, km: np.ndarray) -> list[Event]:
@@ -98,6 +138,8 @@ class RunParts:
     """``radar`` and ``wheel_calibration`` of the summary (empty without a ground-speed sensor)."""
     ground_cycles: int = 0
     """Cycles the ground report is of (the weight of its shares when spans are merged)."""
+    tracks: TrackClaims = field(default_factory=dict)
+    """Claimed cycles per track id, with the track's display names (:func:`track_claims`)."""
 
     @classmethod
     def of(
@@ -133,6 +175,7 @@ class RunParts:
             gps_trusted=int(fixes["trusted"].sum()) if has_fixes else 0,
             ground=ground,
             ground_cycles=len(pos) if ground else 0,
+            tracks=track_claims(pos),
         )
 
     @staticmethod
@@ -164,6 +207,7 @@ class RunParts:
             gps_trusted=sum(p.gps_trusted for p in parts),
             ground=_merged_ground(parts),
             ground_cycles=sum(p.ground_cycles for p in parts),
+            tracks=merge_claims(p.tracks for p in parts),
         )
 
 
@@ -213,6 +257,7 @@ def summarise_parts(
         "distance_m": parts.distance_m,
         "line_code": main_route[0],
         "track": main_route[1],
+        "track_id": main_track(parts.tracks)[0],
         "first_determined_t": parts.first_claimed_t,
         "state_share": {k: round(v / parts.cycles, 6) for k, v in parts.states.items()},
         **run_correction_stats(ev, population="balise"),

@@ -23,10 +23,11 @@ from typer.testing import CliRunner
 
 from cli.main import app
 from dbtools.database import read_network
-from fieldlogs.audit.runner import _Seen, audit
+from fieldlogs.audit.runner import audit
 from fieldlogs.audit.store import open_audit, read_table, store_run
 from fieldlogs.audit.units import check_unit, comparison_fields
 from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.pipeline.summary import main_track, merge_claims, track_claims
 from fieldlogs.pipeline.units import compare_units, unit_run
 from fieldlogs.reports.page import render_html, unit_spans_text
 from fieldlogs.reports.report import build_report, report_json
@@ -100,23 +101,22 @@ def _cycles(*blocks: tuple[int, str, str | None, str | None, str | None]) -> pd.
 def test_route_is_the_track_claimed_on_most_cycles() -> None:
     """3 cycles on 0900-D1, 5 on the crossover X1 (4 determined, 1 uncertain), 6 undetermined
     cycles that still carry D1: X1 is the route, with no line and no local name."""
-    seen = _Seen()
     pos = _cycles(
         (3, "determined", "0900-D1", "0900", "D"),
         (4, "determined", "X1", None, None),
         (1, "uncertain", "X1", None, None),
         (6, "undetermined", "0900-D1", "0900", "D"),
     )
-    seen._claims(pos)
-    assert seen.route() == ("X1", None, None)
+    claims = track_claims(pos)
+    assert claims == {"0900-D1": (3, "0900", "D"), "X1": (5, None, None)}
+    assert main_track(claims) == ("X1", None, None)
     # a second window of the same run: 3 more on D1 → 6 against 5
-    seen._claims(_cycles((3, "determined", "0900-D1", "0900", "D")))
-    assert seen.route() == ("0900-D1", "0900", "D")
+    claims = merge_claims([claims, track_claims(_cycles((3, "determined", "0900-D1", "0900", "D")))])
+    assert main_track(claims) == ("0900-D1", "0900", "D")
     # ties: the pipeline summary's order of (line, track), then the id
-    tie = _Seen()
-    tie._claims(_cycles((2, "determined", "0900:U", "0900", "U"), (2, "determined", "0900:D", "0900", "D")))
-    assert tie.route() == ("0900:D", "0900", "D")
-    assert _Seen().route() == (None, None, None)
+    tie = track_claims(_cycles((2, "determined", "0900:U", "0900", "U"), (2, "determined", "0900:D", "0900", "D")))
+    assert main_track(tie) == ("0900:D", "0900", "D")
+    assert main_track({}) == (None, None, None)
 
 
 # -- the network sample --------------------------------------------------------------------
