@@ -23,6 +23,7 @@ from dbtools.gis.verify.config import DEFECT, UNVERIFIED, VERIFIED
 from schemas.units import format_km
 
 if TYPE_CHECKING:
+    from dbtools.gis.verify.result import GisVerification
     from fieldlogs.gisverify.evidence import VerifyReport
 
 #: At most this many lines get a figure in the HTML (lines with defects first).
@@ -125,11 +126,13 @@ def table_html(frame: pd.DataFrame) -> str:
 
 
 def mostly_unverified(coverage: pd.DataFrame) -> pd.DataFrame:
-    """Lines (all tracks together) with more than :data:`MAX_UNVERIFIED_SHARE` of their
-    length unverified: ``line_code``, ``length_km``, ``unverified_km``."""
+    """Lines (all tracks together; a track off a line on its own, its ``where`` label given)
+    with more than :data:`MAX_UNVERIFIED_SHARE` of their length unverified: ``where``,
+    ``length_km``, ``unverified_km``."""
     if coverage.empty:
-        return pd.DataFrame({"line_code": [], "length_km": [], "unverified_km": []})
-    per = coverage.groupby(coverage["line_code"].astype(str))[["length_km", "unverified_km"]].sum().reset_index()
+        return pd.DataFrame({"where": [], "length_km": [], "unverified_km": []})
+    where = coverage["where"] if "where" in coverage else "line " + coverage["line_code"].astype(str)
+    per = coverage.groupby(where.rename("where"))[["length_km", "unverified_km"]].sum().reset_index()
     return per[(per["length_km"] > 0) & (per["unverified_km"] > MAX_UNVERIFIED_SHARE * per["length_km"])]
 
 
@@ -144,9 +147,7 @@ def verdict(coverage: pd.DataFrame, n_defects: int, n_km_defects: int = 0) -> ki
     thin = mostly_unverified(coverage)
     if thin.empty:
         return kit.Verdict("Passed: no defect found.", kit.Status.OK)
-    lines = "; ".join(
-        f"line {r.line_code}: {r.unverified_km:.1f} of {r.length_km:.1f} km unverified" for r in thin.itertuples()
-    )
+    lines = "; ".join(f"{r.where}: {r.unverified_km:.1f} of {r.length_km:.1f} km unverified" for r in thin.itertuples())
     return kit.Verdict(
         f"Mostly unverified: no defect found where the evidence suffices, but most of the grid is unverified "
         f"({lines}): the grid there is not shown to be right.",
@@ -192,6 +193,7 @@ def render_html(report: VerifyReport) -> str:
     """The whole verification as one HTML string."""
     v = report.verification
     n_def = len(v.defects)
+    n_tp = len(report.track_points.defects) if report.track_points is not None else 0
     parts = [
         f"<p>DB {kit.code(report.db)} (version <b>{kit.escape(report.db_version)}</b>), "
         f"{len(report.runs)} run(s), {v.counts.get('fixes_matched', 0):,} fixes used; {kit.generated()}.</p>",
@@ -207,6 +209,8 @@ def render_html(report: VerifyReport) -> str:
     flagged = v.cells[v.cells["status"] == DEFECT]
     if len(flagged):
         parts.append(kit.section("Defect cells", table_html(flagged)))
+    if report.track_points is not None:
+        parts.append(_track_points_section(report.track_points))
     residual = ", ".join(f"{k} {val}" for k, val in v.km_residual.items())
     parts.append(
         kit.section(
@@ -222,5 +226,39 @@ def render_html(report: VerifyReport) -> str:
         "trainpos gis verify",
         *parts,
         heading_text="GIS grid verification",
-        verdict=verdict(v.coverage, n_def, len(v.km_defects)),
+        verdict=verdict(_all_coverage(report), n_def + n_tp, len(v.km_defects)),
     )
+
+
+def _all_coverage(report: VerifyReport) -> pd.DataFrame:
+    """The coverage of the line grid and of the tracks off a line together (the verdict's)."""
+    tp = report.track_points
+    lines = report.verification.coverage
+    if tp is None or tp.coverage.empty:
+        return lines
+    lines = lines.assign(where="line " + lines["line_code"].astype(str))
+    tracks = tp.coverage.assign(where="track " + tp.coverage["track_id"].astype(str))
+    return pd.concat([lines, tracks], ignore_index=True)
+
+
+def _track_points_section(tp: GisVerification) -> str:
+    """The tracks off a line (``track_points``), per track_id: coverage, defects, proposed
+    points and defect cells, positions in metres along the track from its begin."""
+    parts = [
+        kit.paragraph(
+            f"Station tracks, crossovers and connecting curves verified against their own 20 m grid "
+            f"(track_points), per track_id; positions (pos_*) in metres along the track from its begin, offsets "
+            f"positive to the left of begin → end. {tp.counts.get('fixes_matched', 0):,} fixes used.",
+            kit.Status.NOTE,
+        ),
+        kit.section("Coverage of the tracks off a line", table_html(tp.coverage), level=3),
+        kit.section(
+            "Defects of the tracks off a line", table_html(tp.defects) if len(tp.defects) else "<p>None.</p>", level=3
+        ),
+    ]
+    if len(tp.proposal):
+        parts.append(kit.section("Proposed track points", table_html(tp.proposal), level=3))
+    flagged = tp.cells[tp.cells["status"] == DEFECT]
+    if len(flagged):
+        parts.append(kit.section("Defect cells of the tracks off a line", table_html(flagged), level=3))
+    return kit.section("Tracks off a line (track_points)", *parts)
