@@ -271,12 +271,12 @@ def proposed_network(network: Network, result: GisVerification, track_points: Gi
 
 def _moved_track_points(tp: pd.DataFrame, proposal: pd.DataFrame) -> pd.DataFrame:
     """``track_points`` with the proposed points (``track_id``, ``pos_m`` → ``lat_new``, ``lon_new``) moved."""
-    out = tp.copy()
+    out = tp.reset_index(drop=True)
     key = pd.MultiIndex.from_arrays([out["track_id"].astype(str), out["pos_m"].astype(float)])
     pkey = pd.MultiIndex.from_arrays([proposal["track_id"].astype(str), proposal["pos_m"].astype(float)])
     pos = key.get_indexer(pkey)
     if (pos < 0).any():
         raise ValueError("a proposed point is not a track point")
-    out.iloc[pos, out.columns.get_loc("lat")] = proposal["lat_new"].to_numpy(dtype=float)
-    out.iloc[pos, out.columns.get_loc("lon")] = proposal["lon_new"].to_numpy(dtype=float)
+    out.loc[pos, "lat"] = proposal["lat_new"].to_numpy(dtype=float)
+    out.loc[pos, "lon"] = proposal["lon_new"].to_numpy(dtype=float)
     return canonical(TRACK_POINTS, out)

@@ -87,8 +87,9 @@ def on_tracks(network: Network, result: GisVerification) -> GisVerification:
         out = frame.rename(columns=POS_NAMES)
         tid = out["track_id"].astype(str)
         for col in ("line_code", "track"):
-            values = names[col].astype(object).reindex(tid)
-            out[col] = values.where(values.notna(), None).to_numpy(dtype=object)
+            values = names[col].astype(object).reindex(tid).to_numpy(dtype=object, copy=True)
+            values[pd.isna(values)] = None  # a track along no line: empty, not NaN
+            out[col] = pd.Series(values, index=out.index, dtype=object)
         return out
 
     return GisVerification(
