@@ -305,6 +305,8 @@ def survey_geojson(network: Network, report: Any) -> dict[str, Any]:
         feats += _curve_features(loc, report.features)
     if report.gis is not None:
         feats += _verification_features(loc, report.gis)
+    if getattr(report, "gis_tracks", None) is not None:
+        feats += _verification_features(GridLocator.along_tracks(network), report.gis_tracks, "pos")
     out = collection(feats, name="survey")
     out.update(
         jsonable(
