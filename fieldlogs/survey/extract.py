@@ -68,6 +68,7 @@ from fieldlogs.replay.network import DbRef, load_network
 from fieldlogs.runs.handle import Run, read_run
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.dbindex import BaliseIndex, balise_index
+from fieldlogs.survey.groups import group_passes, group_places
 from fieldlogs.survey.wheelaids import AidScale, SegmentSpan, radar_scale, run_gnss_scale
 from schemas.enums import BaliseKind, PositionState
 from schemas.errors import InputError, TrainposError
@@ -504,6 +505,12 @@ def extract(
     index = network.cached("survey_balise_index", lambda: balise_index(network))
     reads, counts = read_frame(telegram_frame(run), segs, tr, index, cfg)
     passes = pass_frame(segs, tr, reads, index, cfg, pipeline.margin.distance_pct)
+    places = network.cached("survey_group_places", lambda: group_places(network))
+    if len(places):  # the G balises of a network's groups, per track (fieldlogs.survey.groups)
+        known = _text(result.positions["state"]) != PositionState.UNDETERMINED.value
+        got = reads[reads["status"] == IDENTIFIED]
+        more = group_passes(places, tr.t, tr.km, tr.margin, tr.track_id, known, got, cfg)
+        passes = pd.concat([passes, more], ignore_index=True) if len(more) else passes
     kappa, coverage = kappa_frames(result, segs, tr, network, pipeline, cfg)
     gis = fixes_from_result(result, run.run_id)
     gis.folder = folder

@@ -32,6 +32,7 @@ from fieldlogs.survey.balises import MISSED, MOVED, OK, UNVERIFIED, Adjustment, 
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.extract import UNKNOWN, RunSurvey
 from fieldlogs.survey.trajectory import BaliseTable, Trajectory
+from schemas.enums import BaliseKind
 
 FloatArray = npt.NDArray[np.float64]
 BALISE_COLUMNS = (
@@ -264,3 +265,51 @@ def candidates(
             }
         )
     return pd.DataFrame(rows, columns=list(CANDIDATE_COLUMNS))
+
+
+#: The reason of a group's G balise that is not missed (:mod:`fieldlogs.survey.groups`).
+NOT_PLACED = "balise of a group: its place is not surveyed"
+
+
+def group_status(
+    network: Network, balise_track_ids: dict[str, str], passes: pd.DataFrame, reads: pd.Series, cfg: SurveyConfig
+) -> pd.DataFrame:
+    """One row per G balise of the network's groups (:data:`BALISE_COLUMNS`; the status of
+    :mod:`fieldlogs.survey.groups`): missed on the rule of the other balises, else unverified."""
+    b = network.balises
+    g = b[b["kind"].astype(str) == BaliseKind.G] if len(b) else b
+    if not len(g):
+        return pd.DataFrame()
+    ids = g["balise_id"].astype(str)
+    by = passes.groupby("balise_id")["read"] if len(passes) else None
+    n_pass = (by.size() if by is not None else pd.Series(dtype=int)).reindex(ids, fill_value=0).to_numpy()
+    n_read = (by.sum() if by is not None else pd.Series(dtype=int)).reindex(ids, fill_value=0).to_numpy()
+    n_reads = reads.reindex(ids, fill_value=0).to_numpy(dtype=np.int64)
+    missed = (n_reads == 0) & (n_pass >= cfg.min_missed_passes)
+    reason = [
+        f"never read (on {p} passes)" if m else (f"{NOT_PLACED} ({r} reads)" if r or p else "no run passed it")
+        for m, p, r in zip(missed, n_pass, n_reads, strict=True)
+    ]
+    out = pd.DataFrame(
+        {
+            "balise_id": ids.to_numpy(dtype=object),
+            "kind": BaliseKind.G.value,
+            "track_id": [balise_track_ids.get(i, "") for i in ids],
+            "line_code": g["line_code"].astype(object).where(g["line_code"].notna(), "").to_numpy(),
+            "station_code": "",
+            "track": g["track"].astype(object).where(g["track"].notna(), "").to_numpy(),
+            "signal_type": "",
+            "km_db_m": g["km_actual_m"].to_numpy(dtype=float),
+            "status": np.where(missed, MISSED, UNVERIFIED),
+            "reason": reason,
+            "passes": n_pass.astype(np.int64),
+            "reads": n_reads,
+            "missed_passes": (n_pass - n_read).astype(np.int64),
+            "n_estimates": 0,
+            "residual_m": np.nan,
+            "ci95_m": np.nan,
+            "spread_m": np.nan,
+            "km_surveyed_m": np.nan,
+        }
+    )
+    return out[list(BALISE_COLUMNS)]

@@ -29,10 +29,11 @@ from fieldlogs.replay.pool import replay_values
 from fieldlogs.survey.balises import adjust
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.curvature import place_samples
+from fieldlogs.survey.dbindex import balise_index
 from fieldlogs.survey.extract import IDENTIFIED, RunSurvey, survey_one
 from fieldlogs.survey.featurecompare import compare
 from fieldlogs.survey.features import Rule, survey_track
-from fieldlogs.survey.inspection import balise_status, candidates, missed_passes, pass_table
+from fieldlogs.survey.inspection import balise_status, candidates, group_status, missed_passes, pass_table
 from fieldlogs.survey.propose import build_proposal
 from fieldlogs.survey.result import SurveyReport
 from fieldlogs.survey.trajectory import balise_table, chained_reads, trajectories
@@ -154,6 +155,10 @@ def aggregate(
     all_reads = [r.reads.loc[r.reads["status"] == IDENTIFIED, "balise_id"] for r in runs if len(r.reads)]
     per_balise = pd.concat(all_reads).value_counts() if all_reads else pd.Series(dtype=np.int64)
     balises = balise_status(table, adj, passes, per_balise, cfg)
+    index = network.cached("survey_balise_index", lambda: balise_index(network))
+    groups = group_status(network, index.track_ids, passes, per_balise, cfg)
+    if len(groups):  # a network's balise groups (fieldlogs.survey.groups)
+        balises = pd.concat([balises, groups], ignore_index=True)
     samples, coverage = place_samples(runs, traj, adj.scale, network)
     rule = Rule.of(pipeline.feature, cfg)
     curves = {k: survey_track(k, s, rule) for k, s in sorted(samples.items())}
