@@ -184,6 +184,17 @@ def _stretch_start(known: npt.NDArray[np.bool_], cab_i: IntArray) -> IntArray:
     return np.asarray(np.maximum.accumulate(np.where(change, np.arange(n), 0)), dtype=np.int64)
 
 
+def coordinate(pos: pd.DataFrame) -> tuple[FloatArray, npt.NDArray[np.object_]]:
+    """Per cycle the place the survey works in — the line km, or on a track off every line
+    the distance along it (``pos_m``) — and the cycle's ``track_id`` ("" where none)."""
+    km = pos["km_m"].to_numpy(dtype=float)
+    tid = _text(pos["track_id"]) if "track_id" in pos else np.full(len(pos), "", dtype=object)
+    if "pos_m" in pos:
+        off = (_text(pos["line_code"]) == "") & (tid != "")
+        km = np.where(off, pos["pos_m"].to_numpy(dtype=float, na_value=np.nan), km)
+    return np.asarray(km, dtype=float), tid
+
+
 def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extrapolate_m: float) -> list[_Seg]:
     """Segments of the module docstring (vectorised over cycles, a loop over segments)."""
     n = len(pos)
@@ -201,7 +212,7 @@ def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extra
     change[1:] = (key[1:] != key[:-1]) | (cab_i[1:] != cab_i[:-1])
     starts = np.flatnonzero(change)
     ends = np.append(starts[1:], n)
-    km = pos["km_m"].to_numpy(dtype=float)
+    km = coordinate(pos)[0]
     first = _stretch_start(known, cab_i)
     out: list[_Seg] = []
     for ia, ib in zip(starts.tolist(), ends.tolist(), strict=True):
@@ -236,11 +247,7 @@ class _Trace:
     def of(cls, result: PipelineResult) -> _Trace:
         pos, odo = result.positions, result.odometry
         cab = np.asarray(result.cycles.cab if result.cycles is not None else np.ones(len(pos)), dtype=np.int64)
-        km = pos["km_m"].to_numpy(dtype=float)
-        tid = _text(pos["track_id"]) if "track_id" in pos else np.full(len(pos), "", dtype=object)
-        if "pos_m" in pos:
-            off = (_text(pos["line_code"]) == "") & (tid != "")
-            km = np.where(off, pos["pos_m"].to_numpy(dtype=float, na_value=np.nan), km)
+        km, tid = coordinate(pos)
         return cls(
             pos["t"].to_numpy(dtype=float),
             np.asarray(odo.d, dtype=float),
