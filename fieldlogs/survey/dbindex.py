@@ -164,10 +164,8 @@ def _network_keys(network: Network) -> tuple[dict[tuple[int, int, int], tuple[st
     groups: dict[tuple[int, int, int], tuple[str, str, str]] = {}
     if all(c in b for c in BaliseIndex.GROUP_CODES):
         g = b[(b["kind"].astype(str) == BaliseKind.G) & b["nid_c"].notna() & b["nid_bg"].notna() & b["n_pig"].notna()]
-        for r in g.itertuples(index=False):
-            groups[(int(r.nid_c), int(r.nid_bg), int(r.n_pig))] = (
-                str(r.balise_id),
-                "" if pd.isna(r.line_code) else str(r.line_code),
-                "" if pd.isna(r.track) else str(r.track),
-            )
+        nid = [g[c].to_numpy(dtype=float).astype(np.int64).tolist() for c in BaliseIndex.GROUP_CODES]
+        names = [g[c].astype(object).where(g[c].notna(), "").astype(str).tolist() for c in ("line_code", "track")]
+        for i, bid in enumerate(g["balise_id"].astype(str).tolist()):
+            groups[(nid[0][i], nid[1][i], nid[2][i])] = (bid, names[0][i], names[1][i])
     return groups, dict(zip(ids.tolist(), [str(t) for t in tid], strict=True))

@@ -315,7 +315,7 @@ def read_frame(
     rows: list[dict[str, Any]] = []
     counts = {"telegrams": int(t.size), IDENTIFIED: 0, UNKNOWN: 0, UNLOCATED: 0, WRONG_DIRECTION: 0}
     texts = {c: _text(tel[c]) if c in tel.columns else np.full(t.size, "", dtype=object) for c in index.CODES}
-    group = {c: tel[c].to_numpy(dtype=object, na_value=None) if c in tel.columns else None for c in index.GROUP_CODES}
+    group = {c: tel[c].to_numpy(dtype=object) if c in tel.columns else None for c in index.GROUP_CODES}
     for j in range(t.size):
         row: dict[str, Any] = {
             "t": float(t[j]),

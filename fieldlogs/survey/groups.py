@@ -85,7 +85,9 @@ def group_passes(
     change = np.r_[True, key[1:] != key[:-1]]
     starts = np.flatnonzero(change)
     ends = np.r_[starts[1:], key.size]
-    read_t = {bid: g["t"].to_numpy(dtype=float) for bid, g in reads.groupby("balise_id")} if len(reads) else {}
+    read_t: dict[str, FloatArray] = {}
+    for bid, g in reads.groupby("balise_id") if len(reads) else ():
+        read_t[str(bid)] = g["t"].to_numpy(dtype=float)
     by_track = {str(k): g for k, g in places.groupby("track_id")}
     m_all = np.where(np.isfinite(margin), margin, np.inf) + cfg.pass_margin_m
     for a, b in zip(starts.tolist(), ends.tolist(), strict=True):
