@@ -340,8 +340,12 @@ def verify(
     "km_residual", "coverage": [per line/track], "defects": [...], "proposal": [moved
     points], "km_defects": [along-track stretches], "scan": {"lateral", "along_track"},
     "cells": [every cell with at least one fix], "track_points": {the same keys from "config"
-    on, for the tracks off a line — station tracks, crossovers — per track_id: line_code = the
-    track id, km = distance along it; only for a DB with track_points}}.
+    on, for the tracks off a line — station tracks, crossovers — with pos_from_m, pos_to_m,
+    pos_m (metres along the track from its begin) in the place of km; only for a DB with
+    track_points}}. Every row of coverage, defects, proposal, km_defects and cells is keyed
+    by track_id (a line's cells: the declared track holding them, else the implied
+    LINE:TRACK); line_code and track are the track's names, empty for a track off every line.
+    The table, html and geojson outputs and --propose cover the tracks off a line too.
 
     Exit codes: 0 no defect, 1 defects found, 2 unreadable DB/run or bad usage,
     3 --propose/--out exists (use --force).

@@ -240,9 +240,16 @@ def survey(
     are flagged; alert beyond [survey] wheel_alert_share. GIS: the gis verify statistics on the same runs. Thresholds
     are in [survey] (trainpos config show --section survey).
 
+    Per network track: every balise, missed pass, candidate, feature and change row carries
+    its track_id (the declared track holding it; on a line-only DB the implied LINE:TRACK).
+    On a network, runs on tracks off every line (crossovers) are surveyed along their pos_m,
+    and the G balises of balise groups are identified by NID_C/NID_BG/N_PIG and listed with
+    their passes and reads (missed when never read; their place is not surveyed).
+
     JSON (--format json): {"db", "db_version", "config", "summary", "runs", "failed_runs",
     "balises", "missed_passes", "candidates", "features", "wheels": {"vehicles", "runs"},
-    "gis", "gis_note", "changes"}.
+    "gis" (with "track_points": the tracks off a line per track_id, on a DB with track
+    points), "gis_note", "changes"}.
 
     Exit codes: 0 nothing to act on, 1 something flagged (moved or missed balise, confirmed
     candidate, moved/new/not seen feature, wheel alert or disagreeing wheel sources, GIS
