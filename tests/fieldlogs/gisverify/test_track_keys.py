@@ -21,11 +21,13 @@ import pytest
 from typer.testing import CliRunner
 
 from cli.main import app
+from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.gis.verify.config import VerifyConfig
 from dbtools.gis.verify.proposal import proposed_network
 from dbtools.gis.verify.track_points import verify_track_points
 from dbtools.network import Network
+from dbtools.sources import write_source_set
 from dbtools.topology import grid_track_ids
 from fieldlogs.gisverify.evidence import VerifyReport
 from fieldlogs.gisverify.page import render_html
@@ -118,6 +120,20 @@ def test_the_displaced_points_are_proposed_and_moved_left(displaced: tuple[Netwo
     assert np.abs(dist.loc[[(TRACK, k) for k in inner["pos_m"]]].to_numpy() - SHIFT_M).max() < 0.15
     untouched = ~old.index.isin(list(zip(p["track_id"], p["pos_m"], strict=True)))
     assert dist[untouched].max() < 1e-6  # every other track point stays
+
+
+def test_the_proposed_source_set_builds_with_the_moved_track_points(
+    displaced: tuple[Network, object], tmp_path: Path
+) -> None:
+    """What ``gis verify --propose`` writes: the source set builds, its track points moved."""
+    net, tp = displaced
+    src = write_source_set(proposed_network(net, _line_stub(net), tp), tmp_path / "src")  # type: ignore[arg-type]
+    build_db(src, tmp_path / "new.sqlite", db_version="proposed")
+    new = read_network(tmp_path / "new.sqlite").track_points.set_index(["track_id", "pos_m"])
+    old = net.track_points.set_index(["track_id", "pos_m"])
+    moved = (new.loc[old.index, "lat"] - old["lat"]).abs() > 1e-9
+    assert set(moved[moved].index.get_level_values(0)) == {TRACK}
+    assert sorted(moved[moved].index.get_level_values(1)) == sorted(tp.proposal["pos_m"])  # type: ignore[attr-defined]
 
 
 def _line_stub(net: Network):  # type: ignore[no-untyped-def]

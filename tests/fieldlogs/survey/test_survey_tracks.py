@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from dbtools.build import build_db
+from dbtools.interchange.geojson import survey_geojson
 from dbtools.network import Network
 from dbtools.sample_network import sample_source_dir
 from fieldlogs.survey.config import SurveyConfig
@@ -127,6 +128,9 @@ def test_the_station_run_is_surveyed_per_track(station) -> None:  # type: ignore
     out = station.to_dict()
     assert out["gis"]["track_points"]["coverage"][0]["track_id"] == "0420-3"
     assert {f["track_id"] for f in out["features"]} <= {"0420-D1", "0420-D2", "0420-D6", "0420-U1", "0420-U5"}
+    feats = survey_geojson(station.network, station)["features"]
+    cells = [f for f in feats if f["properties"]["layer"] == "cells" and f["properties"]["track_id"] == "0420-3"]
+    assert cells and all(f["geometry"] is not None and "pos_from_m" in f["properties"] for f in cells)
 
 
 def test_on_a_line_only_db_every_track_id_is_line_colon_track(tmp_path: Path) -> None:
