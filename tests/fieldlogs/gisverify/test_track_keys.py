@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -31,6 +32,7 @@ from dbtools.sources import write_source_set
 from dbtools.topology import grid_track_ids
 from fieldlogs.gisverify.evidence import VerifyReport
 from fieldlogs.gisverify.page import render_html
+from tests.pages import check_page
 
 R = 6_378_137.0
 TRACK = "0420-4"
@@ -144,12 +146,19 @@ def _line_stub(net: Network):  # type: ignore[no-untyped-def]
     return verify_fixes(net, empty.assign(run_id=pd.Series([], dtype=str), line_code="", track=""))
 
 
-def test_page_and_table_show_the_track_off_a_line(displaced: tuple[Network, object], sample_network_db: Path) -> None:
+def test_page_and_json_show_the_track_off_a_line(
+    displaced: tuple[Network, object], sample_network_db: Path, browser: Any, tmp_path: Path
+) -> None:
     net, tp = displaced
     report = VerifyReport(str(sample_network_db), "sample-1", _line_stub(net), {}, [], net, tp)  # type: ignore[arg-type]
     html = render_html(report)
     assert "Tracks off a line (track_points)" in html and "Proposed track points" in html
+    assert "Offsets along the tracks off a line" in html  # the figure of 0420-4
     assert "Failed: 1 defect(s) found." in html
+    page = tmp_path / "gis.html"
+    page.write_text(html, encoding="utf-8")
+    seen = check_page(browser, page, tmp_path / "shots")  # the rendering standard holds with the new section
+    assert seen["verdict"].startswith("Failed: ")
     data = report.to_dict()["track_points"]
     assert data["defects"][0]["track_id"] == TRACK and "pos_from_m" in data["defects"][0]
 
