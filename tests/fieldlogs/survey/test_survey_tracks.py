@@ -142,3 +142,40 @@ def test_on_a_line_only_db_every_track_id_is_line_colon_track(tmp_path: Path) ->
         implied = frame["line_code"].astype(str) + ":" + frame["track"].astype(str)
         assert (frame["track_id"] == implied).all()
     assert rep.gis_tracks is None and "track_points" not in (rep.to_dict()["gis"] or {})
+
+
+def test_an_unread_group_balise_on_a_driven_track_is_missed(tmp_path: Path) -> None:
+    """A G balise added to the DB on 0420-D1 at km 19k000 (group 99: no run reads it): the
+    station and junction runs drive D1 past it with a determined position — two passes
+    without a read, so it is missed, with its passes in the inspection list."""
+    from dbtools.sample_network import sample_network_source_dir
+
+    src = tmp_path / "src"
+    shutil.copytree(sample_network_source_dir(), src)
+    balises = src / "balises.csv"
+    header = balises.read_text(encoding="utf-8").splitlines()[0].split(",")
+    row = dict.fromkeys(header, "") | {
+        "balise_id": "BG99.0",
+        "kind": "G",
+        "line_code": "0420",
+        "track": "D",
+        "km_actual_m": "19000.0",
+        "km_equipment_m": "19000.0",
+        "track_id": "0420-D1",
+        "nid_c": "800",
+        "nid_bg": "99",
+        "n_pig": "0",
+        "n_total": "1",
+    }
+    with balises.open("a", encoding="utf-8") as f:
+        f.write(",".join(row[c] for c in header) + "\n")
+    db = tmp_path / "net.sqlite"
+    build_db(src, db, db_version="with-bg99")
+    for r in ("station", "junction"):
+        shutil.copytree(SAMPLE_LOGS / f"sim-net-{r}", tmp_path / "logs" / f"sim-net-{r}")
+    rep = survey([tmp_path / "logs"], db, workers=1)
+    b = rep.balises.set_index("balise_id")
+    assert b.loc["BG99.0", ["track_id", "status", "passes", "reads"]].tolist() == ["0420-D1", "missed", 2, 0]
+    m = rep.missed[rep.missed["balise_id"] == "BG99.0"]
+    assert len(m) == 2 and set(m["track_id"]) == {"0420-D1"}
+    assert rep.flagged  # a missed balise is something to act on
