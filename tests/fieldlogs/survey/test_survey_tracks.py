@@ -175,7 +175,7 @@ def test_an_unread_group_balise_on_a_driven_track_is_missed(tmp_path: Path) -> N
         shutil.copytree(SAMPLE_LOGS / f"sim-net-{r}", tmp_path / "logs" / f"sim-net-{r}")
     rep = survey([tmp_path / "logs"], db, workers=1)
     b = rep.balises.set_index("balise_id")
-    assert b.loc["BG99.0", ["track_id", "status", "passes", "reads"]].tolist() == ["0420-D1", "missed", 2, 0]
+    assert [b.loc["BG99.0", c] for c in ("track_id", "status", "passes", "reads")] == ["0420-D1", "missed", 2, 0]
     m = rep.missed[rep.missed["balise_id"] == "BG99.0"]
     assert len(m) == 2 and set(m["track_id"]) == {"0420-D1"}
     assert rep.flagged  # a missed balise is something to act on
