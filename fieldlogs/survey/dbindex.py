@@ -149,6 +149,37 @@ def balise_index(network: Network) -> BaliseIndex:
     return BaliseIndex(i1, i2, c, tracks, groups, track_ids)
 
 
+def surveyed_balises(network: Network) -> pd.DataFrame:
+    """The balises the survey places by dead reckoning between their neighbours: the I1/I2/C
+    ones, and the G balises of groups that lie along a line — their line and local track
+    from their row, or where it names none from their track's ``tracks`` row (a station
+    track along the line: ``0420-3`` is track ``3``). A G balise on a track off every line
+    (a crossover) is left out: its passes and reads are counted (:mod:`fieldlogs.survey.groups`)."""
+
+    def build() -> pd.DataFrame:
+        b = network.s003_balises
+        g = _placed_groups(network)
+        return b if not len(g) else pd.concat([b, g], ignore_index=True)
+
+    return network.cached("survey_surveyed_balises", build)
+
+
+def _placed_groups(network: Network) -> pd.DataFrame:
+    b = network.balises
+    g = b[b["kind"].astype(str) == BaliseKind.G] if len(b) else b
+    if not len(g) or "track_id" not in g:
+        return g.iloc[0:0]
+    t = network.tracks
+    names = t.assign(track_id=t["track_id"].astype(str)).drop_duplicates("track_id").set_index("track_id")
+    tid = g["track_id"].astype(object).where(g["track_id"].notna(), "").astype(str)
+    own = g["track"].astype(object).where(g["track"].notna(), "").astype(str)
+    track = own.where(own != "", names["track"].astype(object).reindex(tid).fillna("").astype(str).to_numpy())
+    line = g["line_code"].astype(object).where(g["line_code"].notna(), "").astype(str)
+    out = g.assign(track=track, station_code="", signal_type="")
+    keep = (line != "") & (track != "") & np.isfinite(g["km_actual_m"].to_numpy(dtype=float))
+    return out[keep.to_numpy(dtype=bool)].reset_index(drop=True)
+
+
 def _network_keys(network: Network) -> tuple[dict[tuple[int, int, int], tuple[str, str, str]], dict[str, str]]:
     """The G balises by (NID_C, NID_BG, N_PIG), and every balise's track id (module docstring)."""
     b = network.balises
@@ -162,8 +193,10 @@ def _network_keys(network: Network) -> tuple[dict[tuple[int, int, int], tuple[st
         own = b["track_id"].to_numpy(dtype=object, na_value="")
         tid = np.where(own != "", own, tid)
     groups: dict[tuple[int, int, int], tuple[str, str, str]] = {}
+    placed = _placed_groups(network).set_index("balise_id")["track"].astype(str).to_dict()
     if all(c in b for c in BaliseIndex.GROUP_CODES):
         g = b[(b["kind"].astype(str) == BaliseKind.G) & b["nid_c"].notna() & b["nid_bg"].notna() & b["n_pig"].notna()]
+        g = g.assign(track=[placed.get(str(i), t) for i, t in zip(g["balise_id"], g["track"], strict=True)])
         nid = [g[c].to_numpy(dtype=float).astype(np.int64).tolist() for c in BaliseIndex.GROUP_CODES]
         names = [g[c].astype(object).where(g[c].notna(), "").astype(str).tolist() for c in ("line_code", "track")]
         for i, bid in enumerate(g["balise_id"].astype(str).tolist()):

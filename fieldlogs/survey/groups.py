@@ -15,11 +15,12 @@ is *read* when an identified read of it falls in the stretch's time span. A read
 a pass: a read no such pass holds (read before the position named the track, which is what
 a group tells an ambiguous position) counts as a pass of its own.
 
-Status (:func:`fieldlogs.survey.inspection.group_status`): **missed** when never read on at least ``min_missed_passes``
-passes (the same rule as for I1/I2/C balises); otherwise **unverified** with the reason —
-the survey places the I1/I2/C balises by dead reckoning between their neighbours
-(:mod:`fieldlogs.survey.balises`) but not, yet, the balises of groups, so no G balise is
-shown **ok** or **moved**.
+Status: a G balise along a line is placed like the I1/I2/C balises, by dead reckoning
+between its neighbours (:func:`fieldlogs.survey.dbindex.surveyed_balises`,
+:mod:`fieldlogs.survey.balises`), with these passes; one on a track off every line (a
+crossover: no line km to place it on) gets :func:`fieldlogs.survey.inspection.group_status`
+— **missed** when never read on at least ``min_missed_passes`` passes (the rule of the
+other balises), otherwise **unverified**, its place not surveyed.
 """
 
 from __future__ import annotations

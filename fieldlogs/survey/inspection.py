@@ -272,12 +272,18 @@ NOT_PLACED = "balise of a group: its place is not surveyed"
 
 
 def group_status(
-    network: Network, balise_track_ids: dict[str, str], passes: pd.DataFrame, reads: pd.Series, cfg: SurveyConfig
+    network: Network,
+    balise_track_ids: dict[str, str],
+    passes: pd.DataFrame,
+    reads: pd.Series,
+    cfg: SurveyConfig,
+    skip: set[str] | frozenset[str] = frozenset(),
 ) -> pd.DataFrame:
-    """One row per G balise of the network's groups (:data:`BALISE_COLUMNS`; the status of
-    :mod:`fieldlogs.survey.groups`): missed on the rule of the other balises, else unverified."""
+    """One row per G balise of the network's groups not in ``skip`` (those the adjustment
+    places; :data:`BALISE_COLUMNS`, the status of :mod:`fieldlogs.survey.groups`): missed on
+    the rule of the other balises, else unverified."""
     b = network.balises
-    g = b[b["kind"].astype(str) == BaliseKind.G] if len(b) else b
+    g = b[(b["kind"].astype(str) == BaliseKind.G) & ~b["balise_id"].astype(str).isin(skip)] if len(b) else b
     if not len(g):
         return pd.DataFrame()
     ids = g["balise_id"].astype(str)

@@ -156,7 +156,7 @@ def aggregate(
     per_balise = pd.concat(all_reads).value_counts() if all_reads else pd.Series(dtype=np.int64)
     balises = balise_status(table, adj, passes, per_balise, cfg)
     index = network.cached("survey_balise_index", lambda: balise_index(network))
-    groups = group_status(network, index.track_ids, passes, per_balise, cfg)
+    groups = group_status(network, index.track_ids, passes, per_balise, cfg, skip=set(table.row))
     if len(groups):  # a network's balise groups (fieldlogs.survey.groups)
         balises = pd.concat([balises, groups], ignore_index=True)
     samples, coverage = place_samples(runs, traj, adj.scale, network)

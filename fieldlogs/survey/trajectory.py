@@ -31,7 +31,7 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.pipeline.metric import track_metric
-from fieldlogs.survey.dbindex import balise_index
+from fieldlogs.survey.dbindex import balise_index, surveyed_balises
 from fieldlogs.survey.extract import IDENTIFIED, RunSurvey
 from schemas.enums import direction_sign
 
@@ -60,8 +60,9 @@ class BaliseTable:
 
 
 def balise_table(network: Network, cluster_m: float) -> BaliseTable:
-    """:class:`BaliseTable` of the network's balises."""
-    b = network.s003_balises.reset_index(drop=True).copy()
+    """:class:`BaliseTable` of the network's balises the survey places
+    (:func:`~fieldlogs.survey.dbindex.surveyed_balises`: I1/I2/C, and G along a line)."""
+    b = surveyed_balises(network).reset_index(drop=True).copy()
     for col in ("balise_id", "kind", "line_code", "station_code", "track"):
         b[col] = b[col].astype(str)
     km = b["km_actual_m"].to_numpy(dtype=float)

@@ -179,3 +179,31 @@ def test_an_unread_group_balise_on_a_driven_track_is_missed(tmp_path: Path) -> N
     m = rep.missed[rep.missed["balise_id"] == "BG99.0"]
     assert len(m) == 2 and set(m["track_id"]) == {"0420-D1"}
     assert rep.flagged  # a missed balise is something to act on
+
+
+def test_a_group_balise_along_a_line_is_placed_between_its_neighbours(tmp_path: Path) -> None:
+    """Group BG1 (0420-D1, km 20k700/20k703) moved +3 m in the DB: the runs that read it
+    place it by dead reckoning from the C balise before it (20k611) — residual DB km −
+    runs' km ≈ +3.0 m on both balises of the group, keyed by 0420-D1."""
+    from dbtools.sample_network import sample_network_source_dir
+
+    src = tmp_path / "src"
+    shutil.copytree(sample_network_source_dir(), src)
+    balises = src / "balises.csv"
+    lines = balises.read_text(encoding="utf-8").splitlines()
+    for i, line in enumerate(lines):
+        for old, new in (
+            ("BG1.0,G,0420,,D,,20700.0,20700.0,", "BG1.0,G,0420,,D,,20703.0,20703.0,"),
+            ("BG1.1,G,0420,,D,,20703.0,20703.0,", "BG1.1,G,0420,,D,,20706.0,20706.0,"),
+        ):
+            if line.startswith(old):
+                lines[i] = new + line[len(old) :]
+    balises.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    db = tmp_path / "net.sqlite"
+    build_db(src, db, db_version="bg1-moved")
+    for r in ("station", "junction", "crossover"):
+        shutil.copytree(SAMPLE_LOGS / f"sim-net-{r}", tmp_path / "logs" / f"sim-net-{r}")
+    b = survey([tmp_path / "logs"], db, workers=1).balises.set_index("balise_id")
+    for bid in ("BG1.0", "BG1.1"):
+        assert b.loc[bid, "track_id"] == "0420-D1" and b.loc[bid, "n_estimates"] >= 1
+        assert abs(float(b.loc[bid, "residual_m"]) - 3.0) < 0.5
