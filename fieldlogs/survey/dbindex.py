@@ -172,12 +172,14 @@ def _placed_groups(network: Network) -> pd.DataFrame:
     t = network.tracks
     names = t.assign(track_id=t["track_id"].astype(str)).drop_duplicates("track_id").set_index("track_id")
     tid = g["track_id"].astype(object).where(g["track_id"].notna(), "").astype(str)
-    own = g["track"].astype(object).where(g["track"].notna(), "").astype(str)
-    track = own.where(own != "", names["track"].astype(object).reindex(tid).fillna("").astype(str).to_numpy())
+    own = g["track"].astype(object).where(g["track"].notna(), "").astype(str).to_numpy(dtype=object)
+    named = names["track"].astype(object).reindex(tid).fillna("").astype(str).to_numpy(dtype=object)
+    track = np.where(own != "", own, named)
     line = g["line_code"].astype(object).where(g["line_code"].notna(), "").astype(str)
     out = g.assign(track=track, station_code="", signal_type="")
-    keep = (line != "") & (track != "") & np.isfinite(g["km_actual_m"].to_numpy(dtype=float))
-    return out[keep.to_numpy(dtype=bool)].reset_index(drop=True)
+    keep = (line.to_numpy(dtype=object) != "") & (track != "") & np.isfinite(g["km_actual_m"].to_numpy(dtype=float))
+    placed: pd.DataFrame = out[np.asarray(keep, dtype=bool)].reset_index(drop=True)
+    return placed
 
 
 def _network_keys(network: Network) -> tuple[dict[tuple[int, int, int], tuple[str, str, str]], dict[str, str]]:
