@@ -1,6 +1,6 @@
 """GIS verification, steps 1–4 and 7 (:mod:`dbtools.gis.verify`): the cells of the grid
 index, fixes matched onto their known track, run-level cell statistics, the t-test with
-multiple-testing correction, the cell status and the coverage per line/track."""
+multiple-testing correction, the cell status and the coverage per track (``track_id``)."""
 
 from __future__ import annotations
 

@@ -77,7 +77,7 @@ KM_DEFECT_COLUMNS = (
     "p_value",
     "q_value",
 )
-#: Columns of :attr:`GisVerification.coverage` (one row per line/track of the DB).
+#: Columns of :attr:`GisVerification.coverage` (one row per track of the grid, keyed by ``track_id``).
 COVERAGE_COLUMNS = (
     "track_id",
     "line_code",
