@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from rich.console import Console
     from rich.progress import Progress, TaskID
 
+    from dbtools.gis.verify.result import GisVerification
     from fieldlogs.gisverify.evidence import VerifyReport
 
 app = typer.Typer(
@@ -150,11 +151,12 @@ def _km_range(a: float, b: float) -> str:
 
 
 def render_verification(report: VerifyReport, c: Console) -> None:
-    """Terminal tables of ``gis verify``: summary, coverage, defects, proposal."""
-    import pandas as pd
-
+    """Terminal tables of ``gis verify``: summary, then coverage, defects and along-track
+    defects per track (``track_id`` first) — of the line grid, and of the tracks off a line
+    (``track_points``, positions in metres along the track) where the DB has them."""
     v = report.verification
     ev = report.evidence
+    tp = report.track_points
     rows: list[tuple[str, object]] = [
         ("DB", f"{report.db} (version {report.db_version or '—'})"),
         ("runs", len(report.runs)),
@@ -166,7 +168,7 @@ def render_verification(report: VerifyReport, c: Console) -> None:
             f"{v.counts.get('fixes_far', 0):,} beyond {v.config.max_offset_m:g} m",
         ),
         ("fixes used", f"{v.counts.get('fixes_matched', 0):,}"),
-        ("cells", ", ".join(f"{n} {s}" for s, n in v.cells["status"].value_counts().sort_index().items()) or "—"),
+        ("cells", _statuses(v)),
     ]
     r = v.km_residual
     if r.get("n"):
@@ -182,14 +184,45 @@ def render_verification(report: VerifyReport, c: Console) -> None:
             )
     if len(v.km_defects):
         rows.append(("along-track defects", len(v.km_defects)))
+    if tp is not None:
+        rows.append(("tracks off a line", f"{tp.counts.get('fixes_matched', 0):,} fixes used, cells {_statuses(tp)}"))
+        rows.append(("their defects", len(tp.defects)))
     c.print(key_value_table(rows, title="GIS verification"))
+    _track_tables(v, c, "km", "")
+    if tp is not None:
+        _track_tables(tp, c, "pos m", " — tracks off a line (track_points)")
+
+
+def _statuses(v: GisVerification) -> str:
+    return ", ".join(f"{n} {s}" for s, n in v.cells["status"].value_counts().sort_index().items()) or "—"
+
+
+def _span(frame: pd.DataFrame, along: str) -> list[str]:
+    """The rows' stretch: a km range on a line, metres along the track off a line."""
+    if along == "km":
+        return [_km_range(a, b) for a, b in zip(frame["km_from_m"], frame["km_to_m"], strict=True)]
+    return [f"{a:.0f}–{b:.0f}" for a, b in zip(frame["pos_from_m"], frame["pos_to_m"], strict=True)]
+
+
+def _names(frame: pd.DataFrame) -> dict[str, pd.Series]:
+    """The key and display columns: track_id, then the line and track names (empty off a line)."""
+    return {
+        "track_id": frame["track_id"],
+        "line": frame["line_code"].fillna(""),
+        "track": frame["track"].fillna(""),
+    }
+
+
+def _track_tables(v: GisVerification, c: Console, along: str, title: str) -> None:
+    """Coverage, defects and along-track defects of one verification, keyed by track_id."""
+    import pandas as pd
+
     cov = v.coverage
     c.print(
         frame_table(
             pd.DataFrame(
                 {
-                    "line": cov["line_code"],
-                    "track": cov["track"],
+                    **_names(cov),
                     "km": [f"{k:.2f}" for k in cov["length_km"]],
                     "verified": _shares(cov["verified_km"], cov["verified_share"]),
                     "unverified": _shares(cov["unverified_km"], cov["unverified_share"]),
@@ -199,7 +232,7 @@ def render_verification(report: VerifyReport, c: Console) -> None:
                     "fixes": cov["fixes"],
                 }
             ),
-            title="Coverage (km, share of the track)",
+            title=f"Coverage (km, share of the track){title}",
         )
     )
     if len(v.defects):
@@ -207,9 +240,8 @@ def render_verification(report: VerifyReport, c: Console) -> None:
         shown = pd.DataFrame(
             {
                 "#": d["defect_id"],
-                "line": d["line_code"],
-                "track": d["track"],
-                "km": [_km_range(a, b) for a, b in zip(d["km_from_m"], d["km_to_m"], strict=True)],
+                **_names(d),
+                along: _span(d, along),
                 "shift m": [f"{x:+.2f}" for x in d["shift_m"]],
                 "spread m": [f"{x:.2f}" for x in d["spread_m"]],
                 "runs": d["runs"],
@@ -218,21 +250,21 @@ def render_verification(report: VerifyReport, c: Console) -> None:
                 "moved": d["points_moved"],
             }
         )
-        c.print(frame_table(shown, title="Defects (shift + = the track lies left of the GIS in increasing km)"))
+        side = "increasing km" if along == "km" else "the track's begin → end"
+        c.print(frame_table(shown, title=f"Defects{title} (shift + = the track lies left of the GIS in {side})"))
     if len(v.km_defects):
         k = v.km_defects
         km_shown = pd.DataFrame(
             {
-                "line": k["line_code"],
-                "track": k["track"],
-                "km": [_km_range(a, b) for a, b in zip(k["km_from_m"], k["km_to_m"], strict=True)],
+                **_names(k),
+                along: _span(k, along),
                 "residual m": [f"{x:+.2f}" for x in k["residual_m"]],
                 "se m": [f"{x:.2f}" for x in k["se_m"]],
                 "run-epochs": k["run_epochs"],
                 "q": [f"{x:.0e}" for x in k["q_value"]],
             }
         )
-        c.print(frame_table(km_shown, title="Along-track defects (residual = GIS km − pipeline km)"))
+        c.print(frame_table(km_shown, title=f"Along-track defects{title} (residual = GIS km − pipeline km)"))
 
 
 def _shares(km: pd.Series, share: pd.Series) -> list[str]:
@@ -308,8 +340,12 @@ def verify(
     "km_residual", "coverage": [per line/track], "defects": [...], "proposal": [moved
     points], "km_defects": [along-track stretches], "scan": {"lateral", "along_track"},
     "cells": [every cell with at least one fix], "track_points": {the same keys from "config"
-    on, for the tracks off a line — station tracks, crossovers — per track_id: line_code = the
-    track id, km = distance along it; only for a DB with track_points}}.
+    on, for the tracks off a line — station tracks, crossovers — with pos_from_m, pos_to_m,
+    pos_m (metres along the track from its begin) in the place of km; only for a DB with
+    track_points}}. Every row of coverage, defects, proposal, km_defects and cells is keyed
+    by track_id (a line's cells: the declared track holding them, else the implied
+    LINE:TRACK); line_code and track are the track's names, empty for a track off every line.
+    The table, html and geojson outputs and --propose cover the tracks off a line too.
 
     Exit codes: 0 no defect, 1 defects found, 2 unreadable DB/run or bad usage,
     3 --propose/--out exists (use --force).
@@ -358,10 +394,13 @@ def _write_proposal(report: VerifyReport, propose: Path, force: bool, inputs: li
     from dbtools.sources import write_source_set
 
     v = report.verification
-    write_source_set(proposed_network(report.network, v), propose, force=force, inputs=inputs)
-    moved = len(v.proposal)
+    tp = report.track_points
+    write_source_set(proposed_network(report.network, v, tp), propose, force=force, inputs=inputs)
+    moved_tp = len(tp.proposal) if tp is not None else 0
+    moved = len(v.proposal) + moved_tp
     err_console().print(
-        f"proposed source set written to {propose} ({moved} GIS point(s) moved)"
+        f"proposed source set written to {propose} ({len(v.proposal)} GIS point(s) moved"
+        + (f", {moved_tp} track point(s) moved)" if tp is not None else ")")
         + ("; build it with: trainpos db build " + str(propose) + " --out NEW.sqlite" if moved else ""),
         highlight=False,
     )
@@ -380,7 +419,8 @@ def _emit_report(report: VerifyReport, fmt: VerifyFmt, out: Path | None, force: 
         from dbtools.interchange.geojson import verification_geojson, write_geojson
 
         assert out is not None
-        write_geojson(out, verification_geojson(report.network, report.verification), force=force, inputs=inputs)
+        gj = verification_geojson(report.network, report.verification, report.track_points)
+        write_geojson(out, gj, force=force, inputs=inputs)
         console().print(f"GeoJSON written to {safe(out)}")
     elif fmt == VerifyFmt.json:
         text = json.dumps(report.to_dict(), ensure_ascii=False, indent=2, default=str) + "\n"

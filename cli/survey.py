@@ -58,6 +58,7 @@ def _balise_table(rep: SurveyReport) -> pd.DataFrame:
         {
             "balise": b["balise_id"],
             "kind": b["kind"],
+            "track_id": b["track_id"],
             "line": b["line_code"],
             "track": b["track"],
             "km (DB)": [_km(v) for v in b["km_db_m"]],
@@ -78,6 +79,7 @@ def _feature_table(rep: SurveyReport) -> pd.DataFrame:
     return pd.DataFrame(
         {
             "feature": f["feature_id"].fillna(f["curve_id"]),
+            "track_id": f["track_id"],
             "line": f["line_code"],
             "track": f["track"],
             "status": f["status"],
@@ -167,8 +169,11 @@ def render_survey(rep: SurveyReport, c: Console) -> None:
         (len(rep.changes) > 0, rep.changes.drop(columns=["line_code", "track"]), "Changes --propose writes"),
     ]
     if rep.gis is not None and len(rep.gis.defects):
-        cols = ["defect_id", "line_code", "track", "km_from_m", "km_to_m", "shift_m", "runs"]
+        cols = ["defect_id", "track_id", "line_code", "track", "km_from_m", "km_to_m", "shift_m", "runs"]
         tables.insert(-1, (True, rep.gis.defects[cols].round(2), "GIS defects"))
+    if rep.gis_tracks is not None and len(rep.gis_tracks.defects):
+        cols = ["defect_id", "track_id", "line_code", "track", "pos_from_m", "pos_to_m", "shift_m", "runs"]
+        tables.insert(-1, (True, rep.gis_tracks.defects[cols].round(2), "GIS defects of tracks off a line (pos m)"))
     for show, frame, title in tables:
         if show:
             c.print(frame_table(frame, title=title))
@@ -235,9 +240,16 @@ def survey(
     are flagged; alert beyond [survey] wheel_alert_share. GIS: the gis verify statistics on the same runs. Thresholds
     are in [survey] (trainpos config show --section survey).
 
+    Per network track: every balise, missed pass, candidate, feature and change row carries
+    its track_id (the declared track holding it; on a line-only DB the implied LINE:TRACK).
+    On a network, runs on tracks off every line (crossovers) are surveyed along their pos_m,
+    and the G balises of balise groups are identified by NID_C/NID_BG/N_PIG and listed with
+    their passes and reads (missed when never read; their place is not surveyed).
+
     JSON (--format json): {"db", "db_version", "config", "summary", "runs", "failed_runs",
     "balises", "missed_passes", "candidates", "features", "wheels": {"vehicles", "runs"},
-    "gis", "gis_note", "changes"}.
+    "gis" (with "track_points": the tracks off a line per track_id, on a DB with track
+    points), "gis_note", "changes"}.
 
     Exit codes: 0 nothing to act on, 1 something flagged (moved or missed balise, confirmed
     candidate, moved/new/not seen feature, wheel alert or disagreeing wheel sources, GIS

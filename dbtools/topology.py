@@ -37,6 +37,37 @@ def implied_track_id(line_code: str, track: str) -> str:
     return f"{line_code}:{track}"
 
 
+def grid_track_ids(
+    net: Network, line_code: npt.ArrayLike, track: npt.ArrayLike, km: npt.ArrayLike
+) -> npt.NDArray[np.object_]:
+    """The track id of each point (line_code, track, km) of a line grid: the declared track
+    of that line and track whose km span holds it — the one begun last at or below km
+    (the first one below its begin, the last one past its end) — else the implied
+    ``LINE:TRACK`` (:func:`implied_track_id`). The points are grouped once; one search per
+    declared line/track."""
+    lc = np.asarray(line_code, dtype=object).astype(str)
+    tr = np.asarray(track, dtype=object).astype(str)
+    k = np.asarray(km, dtype=float)
+    out = np.asarray(np.char.add(np.char.add(lc.astype(str), ":"), tr.astype(str)), dtype=object)
+    d = net.tracks
+    d = d[d["line_code"].notna() & d["track"].notna()]
+    if not len(d) or not out.size:
+        return out
+    points = pd.Series(out).groupby(out, sort=False).indices  # LINE:TRACK → its points
+    for (line, name), g in d.groupby([d["line_code"].astype(str), d["track"].astype(str)], sort=False):
+        on = points.get(implied_track_id(str(line), str(name)))
+        if on is None:
+            continue
+        lo = np.fmin(
+            g["km_begin_m"].to_numpy(dtype=float, na_value=np.nan), g["km_end_m"].to_numpy(float, na_value=np.nan)
+        )
+        order = np.argsort(np.where(np.isnan(lo), -np.inf, lo), kind="stable")
+        starts = np.where(np.isnan(lo), -np.inf, lo)[order]
+        j = np.clip(np.searchsorted(starts, k[on], side="right") - 1, 0, len(order) - 1)
+        out[on] = g["track_id"].astype(str).to_numpy(dtype=object)[order][j]
+    return out
+
+
 def grid_extents(net: Network) -> pd.DataFrame:
     """Lowest and highest km of each (line_code, track) of the grid, in (line_code, track)
     order (built once per loaded network); for a grid sorted by line, track and km (as read

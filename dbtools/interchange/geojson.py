@@ -130,6 +130,21 @@ class GridLocator:
         p = self.at(line, track, km)
         return None if p is None else point(*p)
 
+    @classmethod
+    def along_tracks(cls, network: Network) -> GridLocator:
+        """The same look-ups on the ``track_points`` grids: keyed (track_id, ""), the
+        position being the distance along the track from its begin (``pos_m``)."""
+        loc = cls.__new__(cls)
+        loc.tracks = {}
+        tp = network.track_points.sort_values(["track_id", "pos_m"])
+        for tid, g in tp.groupby(tp["track_id"].astype(str), sort=True):
+            loc.tracks[(str(tid), "")] = (
+                g["pos_m"].to_numpy(dtype=float),
+                g["lon"].to_numpy(dtype=float),
+                g["lat"].to_numpy(dtype=float),
+            )
+        return loc
+
 
 def network_features(network: Network, on_track: Callable[[Any, Any], Geometry] | None = None) -> list[dict[str, Any]]:
     """Balises, feature points, GIS points and one GIS line per line/track. ``on_track``
@@ -158,18 +173,23 @@ def network_geojson(network: Network, on_track: Callable[[Any, Any], Geometry] |
     )
 
 
-def _km_features(loc: GridLocator, frame: pd.DataFrame, layer: str) -> list[dict[str, Any]]:
-    """A LineString along the grid from km_from_m to km_to_m for every row."""
+def _km_features(loc: GridLocator, frame: pd.DataFrame, layer: str, along: str = "km") -> list[dict[str, Any]]:
+    """A LineString along the grid from km_from_m to km_to_m for every row (``along`` "pos":
+    from pos_from_m to pos_to_m along its track_id's track points)."""
     out = []
     for rec in frame.to_dict("records"):
-        coords = loc.between(rec["line_code"], rec["track"], rec["km_from_m"], rec["km_to_m"])
+        if along == "km":
+            coords = loc.between(rec["line_code"], rec["track"], rec["km_from_m"], rec["km_to_m"])
+        else:
+            coords = loc.between(rec["track_id"], "", rec["pos_from_m"], rec["pos_to_m"])
         out.append(feature(line_string(coords), {"layer": layer, **{str(k): _clean(v) for k, v in rec.items()}}))
     return out
 
 
-def _verification_features(loc: GridLocator, verification: Any) -> list[dict[str, Any]]:
-    feats = _km_features(loc, verification.defects, "defects") + _km_features(loc, verification.cells, "cells")
-    feats += _km_features(loc, verification.km_defects, "km_defects")
+def _verification_features(loc: GridLocator, verification: Any, along: str = "km") -> list[dict[str, Any]]:
+    feats = _km_features(loc, verification.defects, "defects", along)
+    feats += _km_features(loc, verification.cells, "cells", along)
+    feats += _km_features(loc, verification.km_defects, "km_defects", along)
     for rec in verification.proposal.to_dict("records"):
         props = {"layer": "proposal", **{str(k): _clean(v) for k, v in rec.items()}}
         feats.append(feature(point(_num(rec["lon"]), _num(rec["lat"])), props))
@@ -178,11 +198,17 @@ def _verification_features(loc: GridLocator, verification: Any) -> list[dict[str
     return feats
 
 
-def verification_geojson(network: Network, verification: Any) -> dict[str, Any]:
+def verification_geojson(network: Network, verification: Any, track_points: Any = None) -> dict[str, Any]:
     """``gis verify`` results: defects, along-track defects (``km_defects``) and cells (with
     their mean offset, the residual) as lines along the grid, proposed moves as points at the
-    old position with the new one as a property and a short line from old to new."""
-    return collection(_verification_features(GridLocator(network), verification), name="gis verify")
+    old position with the new one as a property and a short line from old to new; every
+    feature carries its ``track_id``. ``track_points``: the verification of the tracks off a
+    line, the same layers along their track points (``pos_from_m``, ``pos_to_m``, ``pos_m``
+    in the place of km)."""
+    feats = _verification_features(GridLocator(network), verification)
+    if track_points is not None:
+        feats += _verification_features(GridLocator.along_tracks(network), track_points, "pos")
+    return collection(feats, name="gis verify")
 
 
 def possession_geojson(network: Network, report: Mapping[str, Any], possessions: Sequence[Any]) -> dict[str, Any]:
@@ -279,6 +305,8 @@ def survey_geojson(network: Network, report: Any) -> dict[str, Any]:
         feats += _curve_features(loc, report.features)
     if report.gis is not None:
         feats += _verification_features(loc, report.gis)
+    if getattr(report, "gis_tracks", None) is not None:
+        feats += _verification_features(GridLocator.along_tracks(network), report.gis_tracks, "pos")
     out = collection(feats, name="survey")
     out.update(
         jsonable(

@@ -2,7 +2,9 @@
 
 One figure per line: per track, the mean lateral offset of every cell (the run-level mean,
 with its 95 % interval) along the km, coloured by status, defects shaded, the ±min-shift
-band drawn; below, the along-track residual (GPS km − pipeline km) per cell. Matplotlib
+band drawn; below, the along-track residual (GPS km − pipeline km) per cell. The tracks off
+a line (``track_points``, per track_id) get their own section, with one figure whose panels
+are those tracks, along the distance from each track's begin. Matplotlib
 headless (Agg, through :func:`dbtools.pagekit.pyplot`), PNG bytes; the page
 (:mod:`dbtools.pagekit`) embeds them as ``data:`` URIs (no external resource, no script:
 the file works offline and can be mailed).
@@ -23,6 +25,7 @@ from dbtools.gis.verify.config import DEFECT, UNVERIFIED, VERIFIED
 from schemas.units import format_km
 
 if TYPE_CHECKING:
+    from dbtools.gis.verify.result import GisVerification
     from fieldlogs.gisverify.evidence import VerifyReport
 
 #: At most this many lines get a figure in the HTML (lines with defects first).
@@ -37,6 +40,44 @@ STATUS_STYLE = {
 }
 
 
+def _offset_panel(ax: Any, ct: pd.DataFrame, dt: pd.DataFrame, min_shift_m: float, along: str, scale: float) -> None:
+    """One track's mean lateral offset per cell (95 % interval) coloured by status, the
+    ±min-shift band, its defects shaded; x = ``{along}_from_m``/``{along}_to_m`` ÷ ``scale``."""
+    lo, hi = f"{along}_from_m", f"{along}_to_m"
+    mid = (ct[lo].to_numpy(dtype=float) + ct[hi].to_numpy(dtype=float)) / (2.0 * scale)
+    for status, (colour, label) in STATUS_STYLE.items():
+        m = (ct["status"] == status).to_numpy()
+        if not m.any():
+            continue
+        half = 1.96 * ct["se_m"].to_numpy(dtype=float)[m]
+        ax.errorbar(
+            mid[m],
+            ct["offset_mean_m"].to_numpy(dtype=float)[m],
+            yerr=np.where(np.isfinite(half), half, 0.0),
+            fmt="o",
+            ms=2.5,
+            lw=0.6,
+            color=colour,
+            label=label,
+        )
+    ax.axhspan(-min_shift_m, min_shift_m, color="0.9", zorder=0, label=f"±{min_shift_m:g} m")
+    ax.axhline(0.0, color="0.5", lw=0.6)
+    for r in dt.to_dict("records"):
+        ax.axvspan(r[lo] / scale, r[hi] / scale, color="tab:red", alpha=0.15)
+        ax.annotate(
+            f"#{r['defect_id']} {r['shift_m']:+.2f} m",
+            (r[lo] / scale, 1.0),
+            xycoords=("data", "axes fraction"),
+            va="top",
+            fontsize=8,
+            color="tab:red",
+        )
+    if ct.empty:
+        ax.text(0.5, 0.5, "no evidence", ha="center", va="center", transform=ax.transAxes, color="0.4")
+    elif ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="lower right", fontsize=7, ncols=4)
+
+
 def offset_along_line(cells: pd.DataFrame, defects: pd.DataFrame, line_code: str, min_shift_m: float) -> bytes:
     """Mean lateral offset per cell along one line, one panel per track, plus the
     along-track residual; defects shaded."""
@@ -47,41 +88,9 @@ def offset_along_line(cells: pd.DataFrame, defects: pd.DataFrame, line_code: str
     )
     d_line = defects[defects["line_code"].astype(str) == str(line_code)] if len(defects) else defects
     for ax, track in zip(axes[:-1, 0], tracks, strict=True):
-        ct = c[c["track"].astype(str) == track]
-        mid = (ct["km_from_m"].to_numpy(dtype=float) + ct["km_to_m"].to_numpy(dtype=float)) / 2000.0
-        for status, (colour, label) in STATUS_STYLE.items():
-            m = (ct["status"] == status).to_numpy()
-            if not m.any():
-                continue
-            half = 1.96 * ct["se_m"].to_numpy(dtype=float)[m]
-            ax.errorbar(
-                mid[m],
-                ct["offset_mean_m"].to_numpy(dtype=float)[m],
-                yerr=np.where(np.isfinite(half), half, 0.0),
-                fmt="o",
-                ms=2.5,
-                lw=0.6,
-                color=colour,
-                label=label,
-            )
-        ax.axhspan(-min_shift_m, min_shift_m, color="0.9", zorder=0, label=f"±{min_shift_m:g} m")
-        ax.axhline(0.0, color="0.5", lw=0.6)
-        if len(d_line):
-            for r in d_line[d_line["track"].astype(str) == track].itertuples():
-                ax.axvspan(r.km_from_m / 1000.0, r.km_to_m / 1000.0, color="tab:red", alpha=0.15)
-                ax.annotate(
-                    f"#{r.defect_id} {r.shift_m:+.2f} m",
-                    (r.km_from_m / 1000.0, 1.0),
-                    xycoords=("data", "axes fraction"),
-                    va="top",
-                    fontsize=8,
-                    color="tab:red",
-                )
+        dt = d_line[d_line["track"].astype(str) == track] if len(d_line) else d_line
+        _offset_panel(ax, c[c["track"].astype(str) == track], dt, min_shift_m, "km", 1000.0)
         ax.set_ylabel(f"track {track}\noffset [m] (+ left)")
-        if ct.empty:
-            ax.text(0.5, 0.5, "no evidence", ha="center", va="center", transform=ax.transAxes, color="0.4")
-        elif ax.get_legend_handles_labels()[0]:
-            ax.legend(loc="lower right", fontsize=7, ncols=4)
     ax = axes[-1, 0]
     for track in tracks:
         ct = c[(c["track"].astype(str) == track) & c["km_residual_mean_m"].notna()]
@@ -95,6 +104,19 @@ def offset_along_line(cells: pd.DataFrame, defects: pd.DataFrame, line_code: str
     else:
         ax.text(0.5, 0.5, "no pipeline km with a small margin", ha="center", va="center", transform=ax.transAxes)
     axes[0, 0].set_title(f"Line {line_code}: mean lateral offset per 20 m cell (95 % interval)")
+    return kit.png(fig)
+
+
+def offset_along_tracks(cells: pd.DataFrame, defects: pd.DataFrame, track_ids: list[str], min_shift_m: float) -> bytes:
+    """Mean lateral offset per cell along each of ``track_ids`` (tracks off a line: x is the
+    distance from the track's begin, pos), one panel per track; defects shaded."""
+    fig, axes = kit.pyplot().subplots(len(track_ids), 1, figsize=(12, 2.6 * len(track_ids) + 0.6), squeeze=False)
+    for ax, tid in zip(axes[:, 0], track_ids, strict=True):
+        dt = defects[defects["track_id"].astype(str) == tid] if len(defects) else defects
+        _offset_panel(ax, cells[cells["track_id"].astype(str) == tid], dt, min_shift_m, "pos", 1.0)
+        ax.set_ylabel(f"{tid}\noffset [m] (+ left)")
+    axes[-1, 0].set_xlabel("pos [m] along the track from its begin")
+    axes[0, 0].set_title("Tracks off a line: mean lateral offset per 20 m cell (95 % interval)")
     return kit.png(fig)
 
 
@@ -125,11 +147,13 @@ def table_html(frame: pd.DataFrame) -> str:
 
 
 def mostly_unverified(coverage: pd.DataFrame) -> pd.DataFrame:
-    """Lines (all tracks together) with more than :data:`MAX_UNVERIFIED_SHARE` of their
-    length unverified: ``line_code``, ``length_km``, ``unverified_km``."""
+    """Lines (all tracks together; a track off a line on its own, its ``where`` label given)
+    with more than :data:`MAX_UNVERIFIED_SHARE` of their length unverified: ``where``,
+    ``length_km``, ``unverified_km``."""
     if coverage.empty:
-        return pd.DataFrame({"line_code": [], "length_km": [], "unverified_km": []})
-    per = coverage.groupby(coverage["line_code"].astype(str))[["length_km", "unverified_km"]].sum().reset_index()
+        return pd.DataFrame({"where": [], "length_km": [], "unverified_km": []})
+    where = coverage["where"] if "where" in coverage else "line " + coverage["line_code"].astype(str)
+    per = coverage.groupby(where.rename("where"))[["length_km", "unverified_km"]].sum().reset_index()
     return per[(per["length_km"] > 0) & (per["unverified_km"] > MAX_UNVERIFIED_SHARE * per["length_km"])]
 
 
@@ -144,9 +168,7 @@ def verdict(coverage: pd.DataFrame, n_defects: int, n_km_defects: int = 0) -> ki
     thin = mostly_unverified(coverage)
     if thin.empty:
         return kit.Verdict("Passed: no defect found.", kit.Status.OK)
-    lines = "; ".join(
-        f"line {r.line_code}: {r.unverified_km:.1f} of {r.length_km:.1f} km unverified" for r in thin.itertuples()
-    )
+    lines = "; ".join(f"{r.where}: {r.unverified_km:.1f} of {r.length_km:.1f} km unverified" for r in thin.itertuples())
     return kit.Verdict(
         f"Mostly unverified: no defect found where the evidence suffices, but most of the grid is unverified "
         f"({lines}): the grid there is not shown to be right.",
@@ -192,6 +214,7 @@ def render_html(report: VerifyReport) -> str:
     """The whole verification as one HTML string."""
     v = report.verification
     n_def = len(v.defects)
+    n_tp = len(report.track_points.defects) if report.track_points is not None else 0
     parts = [
         f"<p>DB {kit.code(report.db)} (version <b>{kit.escape(report.db_version)}</b>), "
         f"{len(report.runs)} run(s), {v.counts.get('fixes_matched', 0):,} fixes used; {kit.generated()}.</p>",
@@ -207,6 +230,8 @@ def render_html(report: VerifyReport) -> str:
     flagged = v.cells[v.cells["status"] == DEFECT]
     if len(flagged):
         parts.append(kit.section("Defect cells", table_html(flagged)))
+    if report.track_points is not None:
+        parts.append(_track_points_section(report.track_points))
     residual = ", ".join(f"{k} {val}" for k, val in v.km_residual.items())
     parts.append(
         kit.section(
@@ -222,5 +247,45 @@ def render_html(report: VerifyReport) -> str:
         "trainpos gis verify",
         *parts,
         heading_text="GIS grid verification",
-        verdict=verdict(v.coverage, n_def, len(v.km_defects)),
+        verdict=verdict(_all_coverage(report), n_def + n_tp, len(v.km_defects)),
     )
+
+
+def _all_coverage(report: VerifyReport) -> pd.DataFrame:
+    """The coverage of the line grid and of the tracks off a line together (the verdict's)."""
+    tp = report.track_points
+    lines = report.verification.coverage
+    if tp is None or tp.coverage.empty:
+        return lines
+    lines = lines.assign(where="line " + lines["line_code"].astype(str))
+    tracks = tp.coverage.assign(where="track " + tp.coverage["track_id"].astype(str))
+    return pd.concat([lines, tracks], ignore_index=True)
+
+
+def _track_points_section(tp: GisVerification) -> str:
+    """The tracks off a line (``track_points``), per track_id: coverage, defects, proposed
+    points and defect cells, positions in metres along the track from its begin."""
+    parts = [
+        kit.paragraph(
+            f"Station tracks, crossovers and connecting curves verified against their own 20 m grid "
+            f"(track_points), per track_id; positions (pos_*) in metres along the track from its begin, offsets "
+            f"positive to the left of begin → end. {tp.counts.get('fixes_matched', 0):,} fixes used.",
+            kit.Status.NOTE,
+        ),
+        kit.section("Coverage of the tracks off a line", table_html(tp.coverage), level=3),
+        kit.section(
+            "Defects of the tracks off a line", table_html(tp.defects) if len(tp.defects) else "<p>None.</p>", level=3
+        ),
+    ]
+    if len(tp.proposal):
+        parts.append(kit.section("Proposed track points", table_html(tp.proposal), level=3))
+    seen = list(dict.fromkeys(tp.cells["track_id"].astype(str)))  # the tracks with evidence, defects first
+    with_defects = set(tp.defects["track_id"].astype(str)) if len(tp.defects) else set()
+    seen.sort(key=lambda t: t not in with_defects)
+    if seen:
+        png = offset_along_tracks(tp.cells, tp.defects, seen[:MAX_LINE_FIGURES], tp.config.min_shift_m)
+        parts.append(kit.figure(png, "Offsets along the tracks off a line"))
+    flagged = tp.cells[tp.cells["status"] == DEFECT]
+    if len(flagged):
+        parts.append(kit.section("Defect cells of the tracks off a line", table_html(flagged), level=3))
+    return kit.section("Tracks off a line (track_points)", *parts)

@@ -6,7 +6,10 @@ the feature unit's curvature trace ``κ = (ωz − b)/v`` with the yaw bias ``b`
 cycles) — nothing in the pipeline is changed.
 
 **Segments.** Cycles with a position (determined or uncertain) on one line/track and one
-cab direction form a *segment*; its *motion* σ = ±1 is the sign of km per metre of travel
+cab direction form a *segment* — on a network, also cycles on one track off every line
+(a crossover, a connecting curve: its ``track_id``, no line), whose place is the distance
+along that track (``pos_m``) in the place of km; each segment carries the network track
+(``track_id``) of its first cycle; its *motion* σ = ±1 is the sign of km per metre of travel
 (the km change from its first to its last cycle; a segment that moves less than 50 m has
 none and is not used). The first segment of a cab direction is extended *backwards* over
 the undetermined cycles before it by dead reckoning, km(d) = km_first − σ·(d_first − d), up
@@ -22,7 +25,10 @@ whose km is nearest, within ``match_window_m``. This is the pipeline's identific
 made positional: a C balise after a pair whose I1 was not read is still identified
 (the pipeline, which identifies C balises by the travel since the last pair, cannot).
 Telegrams with no such balise are *unknown* (candidates for the DB); a telegram read
-against the track's direction is not used.
+against the track's direction is not used. A G telegram (a balise of a European group) is
+identified by its NID_C, NID_BG and N_PIG alone (:mod:`fieldlogs.survey.dbindex`); on a
+track off every line no I1/I2/C telegram is identified (their DB place is a line km). Every
+read carries the ``track_id`` the run was on.
 
 **Passes.** A DB balise on a segment's line/track whose track runs in the segment's
 direction is *passed* when the segment's km covers it with ``pass_margin_m`` plus the
@@ -62,8 +68,9 @@ from fieldlogs.replay.network import DbRef, load_network
 from fieldlogs.runs.handle import Run, read_run
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.dbindex import BaliseIndex, balise_index
+from fieldlogs.survey.groups import group_passes, group_places
 from fieldlogs.survey.wheelaids import AidScale, SegmentSpan, radar_scale, run_gnss_scale
-from schemas.enums import PositionState
+from schemas.enums import BaliseKind, PositionState
 from schemas.errors import InputError, TrainposError
 
 FloatArray = npt.NDArray[np.float64]
@@ -88,12 +95,26 @@ READ_COLUMNS = (
     "balise_id",
     "line_code",
     "track",
+    "track_id",
     "match_m",
     "status",
 )
 #: ``status`` of a read.
 IDENTIFIED, UNKNOWN, UNLOCATED, WRONG_DIRECTION = "identified", "unknown", "unlocated", "wrong_direction"
-SEGMENT_COLUMNS = ("seg", "line_code", "track", "motion", "cab", "t0", "t1", "d0_m", "d1_m", "km0_m", "km1_m")
+SEGMENT_COLUMNS = (
+    "seg",
+    "line_code",
+    "track",
+    "track_id",
+    "motion",
+    "cab",
+    "t0",
+    "t1",
+    "d0_m",
+    "d1_m",
+    "km0_m",
+    "km1_m",
+)
 PASS_COLUMNS = ("balise_id", "seg", "t_pass", "km_pass_m", "read")
 
 
@@ -135,6 +156,8 @@ class _Seg:
     track: str
     motion: int
     cab: int
+    track_id: str = ""
+    """The network track of the segment's first cycle (its only one off a line)."""
 
 
 def _text(s: pd.Series) -> npt.NDArray[np.object_]:
@@ -161,20 +184,35 @@ def _stretch_start(known: npt.NDArray[np.bool_], cab_i: IntArray) -> IntArray:
     return np.asarray(np.maximum.accumulate(np.where(change, np.arange(n), 0)), dtype=np.int64)
 
 
+def coordinate(pos: pd.DataFrame) -> tuple[FloatArray, npt.NDArray[np.object_]]:
+    """Per cycle the place the survey works in — the line km, or on a track off every line
+    the distance along it (``pos_m``) — and the cycle's ``track_id`` ("" where none)."""
+    km = pos["km_m"].to_numpy(dtype=float)
+    tid = _text(pos["track_id"]) if "track_id" in pos else np.full(len(pos), "", dtype=object)
+    if "pos_m" in pos:
+        off = (_text(pos["line_code"]) == "") & (tid != "")
+        km = np.where(off, pos["pos_m"].to_numpy(dtype=float, na_value=np.nan), km)
+    return np.asarray(km, dtype=float), tid
+
+
 def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extrapolate_m: float) -> list[_Seg]:
     """Segments of the module docstring (vectorised over cycles, a loop over segments)."""
     n = len(pos)
     if n == 0:
         return []
     (lc, lines), (tc, tracks) = _codes(pos["line_code"]), _codes(pos["track"])
-    known = (_text(pos["state"]) != PositionState.UNDETERMINED.value) & (lc >= 0) & (tc >= 0)
-    key = np.where(known, lc * (tracks.size + 1) + tc, -1)
+    ic, ids = _codes(pos["track_id"]) if "track_id" in pos else (np.full(n, -1, dtype=np.int64), np.empty(0, object))
+    on_line = (lc >= 0) & (tc >= 0)
+    off_line = ~on_line & (ic >= 0)  # a network track along no line: keyed by its id
+    known = (_text(pos["state"]) != PositionState.UNDETERMINED.value) & (on_line | off_line)
+    n_line = (lines.size + 1) * (tracks.size + 1)
+    key = np.where(known & on_line, lc * (tracks.size + 1) + tc, np.where(known, n_line + ic, -1))
     cab_i = np.where(np.asarray(cab) < 0, -1, 1)
     change = np.ones(n, dtype=bool)
     change[1:] = (key[1:] != key[:-1]) | (cab_i[1:] != cab_i[:-1])
     starts = np.flatnonzero(change)
     ends = np.append(starts[1:], n)
-    km = pos["km_m"].to_numpy(dtype=float)
+    km = coordinate(pos)[0]
     first = _stretch_start(known, cab_i)
     out: list[_Seg] = []
     for ia, ib in zip(starts.tolist(), ends.tolist(), strict=True):
@@ -186,7 +224,9 @@ def find_segments(pos: pd.DataFrame, d: FloatArray, cab: npt.NDArray[Any], extra
         if ia > 0 and not known[ia - 1] and cab_i[ia - 1] == cab_i[ia]:
             j = int(first[ia - 1])  # the undetermined stretch before, with the same cab
             ie = max(j, int(np.searchsorted(d, d[ia] - extrapolate_m, side="left")))
-        out.append(_Seg(ia, ib, ie, str(lines[lc[ia]]), str(tracks[tc[ia]]), motion, int(cab_i[ia])))
+        tid = str(ids[ic[ia]]) if ic[ia] >= 0 else ""
+        line, track = (str(lines[lc[ia]]), str(tracks[tc[ia]])) if on_line[ia] else ("", "")
+        out.append(_Seg(ia, ib, ie, line, track, motion, int(cab_i[ia]), tid))
     return out
 
 
@@ -199,19 +239,23 @@ class _Trace:
     allowance: FloatArray
     cab: npt.NDArray[np.int64]
     km: FloatArray
+    """The line km; on a track off every line the distance along it (``pos_m``)."""
     margin: FloatArray
+    track_id: npt.NDArray[np.object_]
 
     @classmethod
     def of(cls, result: PipelineResult) -> _Trace:
         pos, odo = result.positions, result.odometry
         cab = np.asarray(result.cycles.cab if result.cycles is not None else np.ones(len(pos)), dtype=np.int64)
+        km, tid = coordinate(pos)
         return cls(
             pos["t"].to_numpy(dtype=float),
             np.asarray(odo.d, dtype=float),
             np.asarray(odo.allowance, dtype=float),
             np.where(cab < 0, -1, 1),
-            pos["km_m"].to_numpy(dtype=float),
+            km,
             pos["margin_m"].to_numpy(dtype=float),
+            tid,
         )
 
     def km_at(self, g: _Seg, x: FloatArray | float) -> FloatArray:
@@ -228,6 +272,7 @@ def segment_frame(segs: list[_Seg], tr: _Trace) -> pd.DataFrame:
             "seg": k,
             "line_code": g.line_code,
             "track": g.track,
+            "track_id": g.track_id,
             "motion": g.motion,
             "cab": g.cab,
             "t0": float(tr.t[g.ie]),
@@ -270,6 +315,7 @@ def read_frame(
     rows: list[dict[str, Any]] = []
     counts = {"telegrams": int(t.size), IDENTIFIED: 0, UNKNOWN: 0, UNLOCATED: 0, WRONG_DIRECTION: 0}
     texts = {c: _text(tel[c]) if c in tel.columns else np.full(t.size, "", dtype=object) for c in index.CODES}
+    group = {c: tel[c].to_numpy(dtype=object) if c in tel.columns else None for c in index.GROUP_CODES}
     for j in range(t.size):
         row: dict[str, Any] = {
             "t": float(t[j]),
@@ -287,22 +333,31 @@ def read_frame(
             "balise_id": "",
             "line_code": "",
             "track": "",
+            "track_id": str(tr.track_id[int(i0[j])]) if tr.track_id.size else "",
             "match_m": np.nan,
             "status": UNLOCATED,
         }
         rows.append(row)
-        if seg[j] < 0 or segs[int(seg[j])].motion == 0:
-            counts[UNLOCATED] += 1
-            continue
-        g = segs[int(seg[j])]
-        ii = int(i0[j])
-        km = tr.km[ii] + g.motion * (d_t[j] - tr.d[ii]) if ii >= g.ia else float(tr.km_at(g, d_t[j]))
-        row.update(km_est_m=float(km), motion=g.motion, line_code=g.line_code, track=g.track)
-        hit = index.identify(row, g.line_code, g.track, g.motion, cfg.match_window_m)
-        if hit is None:
-            row["status"] = WRONG_DIRECTION if index.against(row, g.line_code, g.motion) else UNKNOWN
-        else:
-            row.update(balise_id=hit[0], line_code=hit[1], track=hit[2], match_m=hit[3], status=IDENTIFIED)
+        located = seg[j] >= 0 and segs[int(seg[j])].motion != 0
+        if located:
+            g = segs[int(seg[j])]
+            ii = int(i0[j])
+            km = tr.km[ii] + g.motion * (d_t[j] - tr.d[ii]) if ii >= g.ia else float(tr.km_at(g, d_t[j]))
+            row.update(km_est_m=float(km), motion=g.motion, line_code=g.line_code, track=g.track)
+        if row["kind"] == BaliseKind.G:  # by its group's identity, wherever the run is
+            hit_g = index.identify_group({c: None if v is None else v[j] for c, v in group.items()})
+            if hit_g is not None:
+                row.update(balise_id=hit_g[0], line_code=hit_g[1], track=hit_g[2], status=IDENTIFIED)
+            elif located:
+                row["status"] = UNKNOWN
+        elif located and g.line_code:
+            hit = index.identify(row, g.line_code, g.track, g.motion, cfg.match_window_m)
+            if hit is None:
+                row["status"] = WRONG_DIRECTION if index.against(row, g.line_code, g.motion) else UNKNOWN
+            else:
+                row.update(balise_id=hit[0], line_code=hit[1], track=hit[2], match_m=hit[3], status=IDENTIFIED)
+        elif located:  # an I1/I2/C telegram on a track off every line: its DB place is a line km
+            row["status"] = UNKNOWN
         counts[row["status"]] += 1
     frame = pd.DataFrame(rows, columns=list(READ_COLUMNS))
     return frame, counts
@@ -457,10 +512,20 @@ def extract(
     index = network.cached("survey_balise_index", lambda: balise_index(network))
     reads, counts = read_frame(telegram_frame(run), segs, tr, index, cfg)
     passes = pass_frame(segs, tr, reads, index, cfg, pipeline.margin.distance_pct)
+    places = network.cached("survey_group_places", lambda: group_places(network))
+    if len(places):  # the G balises of a network's groups, per track (fieldlogs.survey.groups)
+        known = _text(result.positions["state"]) != PositionState.UNDETERMINED.value
+        got = reads[reads["status"] == IDENTIFIED]
+        more = group_passes(places, tr.t, tr.km, tr.margin, tr.track_id, known, got, cfg)
+        passes = pd.concat([passes, more], ignore_index=True) if len(more) else passes
     kappa, coverage = kappa_frames(result, segs, tr, network, pipeline, cfg)
     gis = fixes_from_result(result, run.run_id)
     gis.folder = folder
-    spans = [SegmentSpan(float(tr.t[g.ia]), float(tr.t[g.ib - 1]), g.line_code, g.track, g.motion, g.cab) for g in segs]
+    spans = [  # the GNSS wheel scale works on line km: tracks off a line are left out
+        SegmentSpan(float(tr.t[g.ia]), float(tr.t[g.ib - 1]), g.line_code, g.track, g.motion, g.cab)
+        for g in segs
+        if g.line_code
+    ]
     return RunSurvey(
         run_id=run.run_id,
         folder=folder,

@@ -8,11 +8,14 @@ from collections.abc import Mapping
 import numpy as np
 import pandas as pd
 
+from dbtools.network import Network
+from dbtools.topology import grid_track_ids
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.curvature import Coverage, TrackKey
 from fieldlogs.survey.features import MOVED, NEW, NOT_SEEN, OK, UNVERIFIED, TrackCurves, db_features
 
 FEATURE_COLUMNS = (
+    "track_id",
     "line_code",
     "track",
     "feature_id",
@@ -85,8 +88,11 @@ def compare(
     surveyed: Mapping[TrackKey, TrackCurves],
     coverage: Mapping[TrackKey, Coverage],
     cfg: SurveyConfig,
+    network: Network | None = None,
 ) -> pd.DataFrame:
-    """One row per DB feature and per new curve (:data:`FEATURE_COLUMNS`)."""
+    """One row per DB feature and per new curve (:data:`FEATURE_COLUMNS`); ``track_id`` the
+    network track holding its entry (:func:`dbtools.topology.grid_track_ids`; without a
+    network the implied ``LINE:TRACK``)."""
     dbf = db_features(feature_points)
     rows: list[dict[str, object]] = []
     matched: set[str] = set()
@@ -121,4 +127,9 @@ def compare(
                 continue
             why = "" if c["straights_ok"] else "no 20 m straight on both sides: not a feature point"
             rows.append(_row(None, c, NEW, why, int(c["passes"])))
-    return pd.DataFrame(rows, columns=list(FEATURE_COLUMNS))
+    out = pd.DataFrame(rows, columns=list(FEATURE_COLUMNS))
+    if len(out):
+        entry = out["entry_km_db_m"].astype(float).fillna(out["entry_km_m"].astype(float))
+        net = network if network is not None else Network({})
+        out["track_id"] = grid_track_ids(net, out["line_code"], out["track"], entry)
+    return out

@@ -9,7 +9,8 @@
 * **Candidates**: telegrams the DB does not know (no balise of that kind and content
   within the match window), placed on the track through their chain's trajectory
   (:mod:`fieldlogs.survey.trajectory`), grouped by line, track, kind and content where
-  they lie within ``candidate_radius_m`` of each other; a group read by at least
+  they lie within ``candidate_radius_m`` of each other (each group with the network track
+  of its place, ``track_id``); a group read by at least
   ``candidate_runs`` runs is *confirmed* (a balise the DB lacks, or one whose DB row has
   the wrong codes: the nearest DB balise is named).
 """
@@ -25,16 +26,19 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
+from dbtools.topology import grid_track_ids
 from fieldlogs.pipeline.metric import track_metric
 from fieldlogs.survey.balises import MISSED, MOVED, OK, UNVERIFIED, Adjustment, qualifies
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.extract import UNKNOWN, RunSurvey
 from fieldlogs.survey.trajectory import BaliseTable, Trajectory
+from schemas.enums import BaliseKind
 
 FloatArray = npt.NDArray[np.float64]
 BALISE_COLUMNS = (
     "balise_id",
     "kind",
+    "track_id",
     "line_code",
     "station_code",
     "track",
@@ -51,10 +55,22 @@ BALISE_COLUMNS = (
     "spread_m",
     "km_surveyed_m",
 )
-MISSED_COLUMNS = ("balise_id", "kind", "line_code", "track", "km_db_m", "run_id", "vehicle_id", "t_pass", "time")
+MISSED_COLUMNS = (
+    "balise_id",
+    "kind",
+    "track_id",
+    "line_code",
+    "track",
+    "km_db_m",
+    "run_id",
+    "vehicle_id",
+    "t_pass",
+    "time",
+)
 CANDIDATE_COLUMNS = (
     "candidate_id",
     "kind",
+    "track_id",
     "line_code",
     "track",
     "tel_line_code",
@@ -127,6 +143,7 @@ def balise_status(
         {
             "balise_id": f["balise_id"],
             "kind": f["kind"],
+            "track_id": f["track_id"],
             "line_code": f["line_code"],
             "track": f["track"],
             "station_code": f["station_code"],
@@ -165,7 +182,7 @@ def missed_passes(status: pd.DataFrame, passes: pd.DataFrame) -> pd.DataFrame:
     if not ids or not len(passes):
         return pd.DataFrame(columns=list(MISSED_COLUMNS))
     p = passes[passes["balise_id"].isin(ids)]
-    info = status.set_index("balise_id")[["kind", "line_code", "track", "km_db_m"]]
+    info = status.set_index("balise_id")[["kind", "track_id", "line_code", "track", "km_db_m"]]
     p = p.join(info, on="balise_id")
     p = p.assign(time=[_iso(s, t) for s, t in zip(p["start_time"], p["t_pass"], strict=True)])
     return p.sort_values(["balise_id", "time"], kind="stable")[list(MISSED_COLUMNS)].reset_index(drop=True)
@@ -232,10 +249,12 @@ def candidates(
         on = f[(f["line_code"] == g["line_code"].iloc[0]) & (f["track"] == g["track"].iloc[0])]
         dist = np.abs(on["km_actual_m"].to_numpy(dtype=float) - km.mean())
         j = int(np.argmin(dist)) if dist.size else -1
+        line, track = str(g["line_code"].iloc[0]), str(g["track"].iloc[0])
         rows.append(
             {
                 **{c: g[c].iloc[0] for c in keys},
                 "candidate_id": f"K{group:03d}",
+                "track_id": str(grid_track_ids(network, [line], [track], [float(km.mean())])[0]),
                 "km_m": float(km.mean()),
                 "ci95_m": float(1.96 * km.std(ddof=1) / np.sqrt(km.size)) if km.size > 1 else np.nan,
                 "runs": n_runs,
@@ -246,3 +265,57 @@ def candidates(
             }
         )
     return pd.DataFrame(rows, columns=list(CANDIDATE_COLUMNS))
+
+
+#: The reason of a group's G balise that is not missed (:mod:`fieldlogs.survey.groups`).
+NOT_PLACED = "balise of a group: its place is not surveyed"
+
+
+def group_status(
+    network: Network,
+    balise_track_ids: dict[str, str],
+    passes: pd.DataFrame,
+    reads: pd.Series,
+    cfg: SurveyConfig,
+    skip: set[str] | frozenset[str] = frozenset(),
+) -> pd.DataFrame:
+    """One row per G balise of the network's groups not in ``skip`` (those the adjustment
+    places; :data:`BALISE_COLUMNS`, the status of :mod:`fieldlogs.survey.groups`): missed on
+    the rule of the other balises, else unverified."""
+    b = network.balises
+    g = b[(b["kind"].astype(str) == BaliseKind.G) & ~b["balise_id"].astype(str).isin(skip)] if len(b) else b
+    if not len(g):
+        return pd.DataFrame()
+    ids = g["balise_id"].astype(str)
+    by = passes.groupby("balise_id")["read"] if len(passes) else None
+    n_pass = (by.size() if by is not None else pd.Series(dtype=int)).reindex(ids, fill_value=0).to_numpy()
+    n_read = (by.sum() if by is not None else pd.Series(dtype=int)).reindex(ids, fill_value=0).to_numpy()
+    n_reads = reads.reindex(ids, fill_value=0).to_numpy(dtype=np.int64)
+    missed = (n_reads == 0) & (n_pass >= cfg.min_missed_passes)
+    reason = [
+        f"never read (on {p} passes)" if m else (f"{NOT_PLACED} ({r} reads)" if r or p else "no run passed it")
+        for m, p, r in zip(missed, n_pass, n_reads, strict=True)
+    ]
+    out = pd.DataFrame(
+        {
+            "balise_id": ids.to_numpy(dtype=object),
+            "kind": BaliseKind.G.value,
+            "track_id": [balise_track_ids.get(i, "") for i in ids],
+            "line_code": g["line_code"].astype(object).where(g["line_code"].notna(), "").to_numpy(),
+            "station_code": "",
+            "track": g["track"].astype(object).where(g["track"].notna(), "").to_numpy(),
+            "signal_type": "",
+            "km_db_m": g["km_actual_m"].to_numpy(dtype=float),
+            "status": np.where(missed, MISSED, UNVERIFIED),
+            "reason": reason,
+            "passes": n_pass.astype(np.int64),
+            "reads": n_reads,
+            "missed_passes": (n_pass - n_read).astype(np.int64),
+            "n_estimates": 0,
+            "residual_m": np.nan,
+            "ci95_m": np.nan,
+            "spread_m": np.nan,
+            "km_surveyed_m": np.nan,
+        }
+    )
+    return out[list(BALISE_COLUMNS)]

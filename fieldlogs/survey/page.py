@@ -242,6 +242,15 @@ def render_html(rep: SurveyReport) -> str:
     ]
     if rep.gis is not None:
         parts.append(kit.section("GIS grid (gis verify)", _table(rep.gis.coverage), _table(rep.gis.defects)))
+    if rep.gis_tracks is not None:
+        tp = rep.gis_tracks
+        parts.append(
+            kit.section(
+                "GIS of the tracks off a line (track_points, pos m along the track)",
+                _table(tp.coverage),
+                _table(tp.defects),
+            )
+        )
     else:
         parts.append(
             kit.section("GIS grid (gis verify)", kit.paragraph(rep.gis_note or "not verified", kit.Status.NOTE))

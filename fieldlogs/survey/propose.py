@@ -47,6 +47,7 @@ CHANGE_COLUMNS = (
     "table",
     "action",
     "key",
+    "track_id",
     "line_code",
     "track",
     "old",
@@ -79,6 +80,8 @@ class Change:
     """move: Δkm; balise add: the row; feature add/replace: the six rows."""
     note: str = ""
     applied: bool = True
+    track_id: str = ""
+    """The network track of the changed item (its finding's ``track_id``)."""
 
 
 def _balise_moves(balises: pd.DataFrame) -> list[Change]:
@@ -97,6 +100,7 @@ def _balise_moves(balises: pd.DataFrame) -> list[Change]:
                 f"residual {r.residual_m:+.2f} m ± {r.ci95_m:.2f} (95 %), {r.n_estimates} passes, {r.reads} reads",
                 {"balise_id": str(r.balise_id), "pair": (str(r.line_code), str(r.station_code), str(r.track))},
                 delta,
+                track_id=str(r.track_id),
             )
         )
     return out
@@ -146,7 +150,8 @@ def _candidate_change(c: Any, b: pd.DataFrame, used: set[str]) -> Change:
     gov = _governing_pair(b, line, track, km) if c.kind == BaliseKind.C else None
     if gov is None:
         why = "no initial pair before it" if c.kind == BaliseKind.C else "an unknown initial-pair telegram: inspect"
-        return Change(BALISES.name, "add", str(c.candidate_id), line, track, "", "", ev, {}, None, why, False)
+        cid = str(c.candidate_id)
+        return Change(BALISES.name, "add", cid, line, track, "", "", ev, {}, None, why, False, str(c.track_id))
     bid = f"{line}-{track}-S{c.candidate_id}"
     while bid in used:
         bid += "x"
@@ -163,7 +168,10 @@ def _candidate_change(c: Any, b: pd.DataFrame, used: set[str]) -> Change:
         "dist_from_initial_m": round(abs(km - float(gov["km_actual_m"])), 2),
     }
     new = f"C {c.tel_signal_type} at {km:.2f}"
-    return Change(BALISES.name, "add", bid, line, track, "", new, ev, {"balise_id": bid}, row, EQUIPMENT_NOTE)
+    scope = {"balise_id": bid}
+    return Change(
+        BALISES.name, "add", bid, line, track, "", new, ev, scope, row, EQUIPMENT_NOTE, track_id=str(c.track_id)
+    )
 
 
 def _candidate_changes(cands: pd.DataFrame, b: pd.DataFrame) -> list[Change]:
@@ -193,14 +201,32 @@ def _feature_changes(features: pd.DataFrame, curves: dict[tuple[str, str], Any],
         action = "add" if f.status == NEW else "replace"
         if not bool(curve["straights_ok"]):
             note = "no 20 m straight on both sides"
-            out.append(Change(FEATURE_POINTS.name, action, str(f.curve_id), *key, "", "", ev, {}, None, note, False))
+            cid = str(f.curve_id)
+            out.append(
+                Change(FEATURE_POINTS.name, action, cid, *key, "", "", ev, {}, None, note, False, str(f.track_id))
+            )
             continue
         fid = _next_id(used.setdefault(key, set())) if f.status == NEW else str(f.feature_id)
         old = "" if f.status == NEW else f"exit {f.exit_km_db_m:.1f}, R {f.radius_db_m:.0f} {f.attribute_db}"
         new = f"exit {f.exit_km_m:.1f}, R {float(f.radius_m):.0f} {f.attribute}"
         scope = {"line_code": key[0], "track": key[1], "feature_id": fid}
         six = proposed_rows(curve, fid)
-        out.append(Change(FEATURE_POINTS.name, action, fid, *key, old, new, ev, scope, six, str(f.reason or "")))
+        out.append(
+            Change(
+                FEATURE_POINTS.name,
+                action,
+                fid,
+                *key,
+                old,
+                new,
+                ev,
+                scope,
+                six,
+                str(f.reason or ""),
+                True,
+                str(f.track_id),
+            )
+        )
     return out
 
 

@@ -55,6 +55,9 @@ class SurveyReport:
     wheels: pd.DataFrame
     gis: GisVerification | None
     gis_note: str = ""
+    gis_tracks: GisVerification | None = None
+    """The GIS verification of the tracks off a line (``track_points``, per track_id;
+    :mod:`dbtools.gis.verify.track_points`); None on a DB without track points."""
     changes: pd.DataFrame = field(default_factory=pd.DataFrame)
     """What ``--propose`` changes (:mod:`fieldlogs.survey.propose`)."""
     proposed: Network | None = field(default=None, repr=False)
@@ -76,7 +79,11 @@ class SurveyReport:
             "features": {str(k): int(v) for k, v in sorted(f.items())},
             "wheels": {str(k): int(v) for k, v in sorted(w.items())},
             "wheels_inconsistent": int((self.wheels["consistent"] == False).sum()) if len(self.wheels) else 0,  # noqa: E712
-            "gis_defects": len(self.gis.defects) if self.gis is not None else None,
+            "gis_defects": (
+                len(self.gis.defects) + (len(self.gis_tracks.defects) if self.gis_tracks is not None else 0)
+                if self.gis is not None
+                else None
+            ),
             "changes": len(self.changes),
         }
 
@@ -102,6 +109,8 @@ class SurveyReport:
         gis = None
         if self.gis is not None:
             gis = {k: v for k, v in self.gis.to_dict().items() if k != "cells"}
+            if self.gis_tracks is not None:  # only a network DB has them: line-only output unchanged
+                gis["track_points"] = {k: v for k, v in self.gis_tracks.to_dict().items() if k != "cells"}
         return {
             "db": self.db,
             "db_version": self.db_version,

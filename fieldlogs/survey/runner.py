@@ -20,6 +20,7 @@ import pandas as pd
 from dbtools.database import read_network
 from dbtools.gis.verify.config import VerifyConfig
 from dbtools.gis.verify.run import verify_fixes
+from dbtools.gis.verify.track_points import verify_track_points
 from dbtools.network import Network
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.replay.discovery import discover_runs
@@ -28,10 +29,11 @@ from fieldlogs.replay.pool import replay_values
 from fieldlogs.survey.balises import adjust
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.curvature import place_samples
+from fieldlogs.survey.dbindex import balise_index
 from fieldlogs.survey.extract import IDENTIFIED, RunSurvey, survey_one
 from fieldlogs.survey.featurecompare import compare
 from fieldlogs.survey.features import Rule, survey_track
-from fieldlogs.survey.inspection import balise_status, candidates, missed_passes, pass_table
+from fieldlogs.survey.inspection import balise_status, candidates, group_status, missed_passes, pass_table
 from fieldlogs.survey.propose import build_proposal
 from fieldlogs.survey.result import SurveyReport
 from fieldlogs.survey.trajectory import balise_table, chained_reads, trajectories
@@ -91,17 +93,19 @@ def replay_runs(
     return done, failed
 
 
-def _gis(network: Network, runs: Sequence[RunSurvey]) -> tuple[object | None, str]:
-    """The ``gis verify`` result on the runs' evidence (or why there is none)."""
+def _gis(network: Network, runs: Sequence[RunSurvey]) -> tuple[object | None, object | None, str]:
+    """The ``gis verify`` results on the runs' evidence — of the line grid, and of the tracks
+    off a line (``track_points``, per track_id; None without them) — or why there is none."""
     frames = [r.gis.fixes.assign(run_id=r.run_id) for r in runs if r.gis is not None and len(r.gis.fixes)]
     if not frames:
-        return None, "no trusted GPS fix on a known track"
+        return None, None, "no trusted GPS fix on a known track"
     if not len(network.gis):
-        return None, "the DB has no GIS grid"
+        return None, None, "the DB has no GIS grid"
+    fixes = pd.concat(frames, ignore_index=True)
     try:
-        return verify_fixes(network, pd.concat(frames, ignore_index=True), VerifyConfig()), ""
+        return verify_fixes(network, fixes, VerifyConfig()), verify_track_points(network, fixes, VerifyConfig()), ""
     except InputError as exc:
-        return None, exc.message
+        return None, None, exc.message
 
 
 def _run_frame(runs: Sequence[RunSurvey]) -> pd.DataFrame:
@@ -151,11 +155,15 @@ def aggregate(
     all_reads = [r.reads.loc[r.reads["status"] == IDENTIFIED, "balise_id"] for r in runs if len(r.reads)]
     per_balise = pd.concat(all_reads).value_counts() if all_reads else pd.Series(dtype=np.int64)
     balises = balise_status(table, adj, passes, per_balise, cfg)
+    index = network.cached("survey_balise_index", lambda: balise_index(network))
+    groups = group_status(network, index.track_ids, passes, per_balise, cfg, skip=set(table.row))
+    if len(groups):  # a network's balise groups (fieldlogs.survey.groups)
+        balises = pd.concat([balises, groups], ignore_index=True)
     samples, coverage = place_samples(runs, traj, adj.scale, network)
     rule = Rule.of(pipeline.feature, cfg)
     curves = {k: survey_track(k, s, rule) for k, s in sorted(samples.items())}
     wheel_runs = run_wheels(runs, adj.scale, adj.scale_se, adj.scale_distance_m, cfg)
-    gis, note = _gis(network, runs)
+    gis, gis_tracks, note = _gis(network, runs)
     report = SurveyReport(
         db=db,
         db_version=network.meta.get("db_version"),
@@ -166,11 +174,12 @@ def aggregate(
         balises=balises,
         missed=missed_passes(balises, passes),
         candidates=candidates(runs, traj, network, table, cfg),
-        features=compare(network.feature_points, curves, coverage, cfg),
+        features=compare(network.feature_points, curves, coverage, cfg, network),
         curves=curves,
         wheel_runs=wheel_runs,
         wheels=vehicle_wheels(wheel_runs, cfg),
         gis=gis,  # type: ignore[arg-type]
+        gis_tracks=gis_tracks,  # type: ignore[arg-type]
         gis_note=note,
         iterations=adj.iterations,
     )

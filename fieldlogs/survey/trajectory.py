@@ -31,6 +31,7 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.pipeline.metric import track_metric
+from fieldlogs.survey.dbindex import balise_index, surveyed_balises
 from fieldlogs.survey.extract import IDENTIFIED, RunSurvey
 from schemas.enums import direction_sign
 
@@ -43,7 +44,7 @@ class BaliseTable:
     """The DB's balises with what the survey computes from them (index = row number)."""
 
     frame: pd.DataFrame
-    """balise_id, kind, line_code, station_code, track, signal_type, km_actual_m,
+    """balise_id, kind, line_code, station_code, track, track_id (its network track), signal_type, km_actual_m,
     km_equipment_m, dist_from_initial_m, c_m (track length at the km), slope (dkm/dc),
     direction (±1), cluster (balises closer than ``cluster_m`` on a track share one)."""
     row: dict[str, int]
@@ -59,8 +60,9 @@ class BaliseTable:
 
 
 def balise_table(network: Network, cluster_m: float) -> BaliseTable:
-    """:class:`BaliseTable` of the network's balises."""
-    b = network.s003_balises.reset_index(drop=True).copy()
+    """:class:`BaliseTable` of the network's balises the survey places
+    (:func:`~fieldlogs.survey.dbindex.surveyed_balises`: I1/I2/C, and G along a line)."""
+    b = surveyed_balises(network).reset_index(drop=True).copy()
     for col in ("balise_id", "kind", "line_code", "station_code", "track"):
         b[col] = b[col].astype(str)
     km = b["km_actual_m"].to_numpy(dtype=float)
@@ -79,6 +81,8 @@ def balise_table(network: Network, cluster_m: float) -> BaliseTable:
         next_cluster = int(cluster[order].max()) + 1
     b["c_m"], b["slope"], b["cluster"] = c, slope, cluster
     b["direction"] = [direction_sign(t) for t in b["track"]]
+    index = network.cached("survey_balise_index", lambda: balise_index(network))
+    b["track_id"] = b["balise_id"].map(index.track_ids).astype(object)
     return BaliseTable(b, {bid: i for i, bid in enumerate(b["balise_id"])})
 
 

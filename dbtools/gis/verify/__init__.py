@@ -85,6 +85,12 @@ defect); cells it does not select keep the status of 4 — a window that tested 
 makes an unverified cell verified. The same scan on the along-track residual of 7, with the
 run-epoch as the unit, gives the ``km_defects`` (reported, not proposed).
 
+**Keys.** Every row of the result names its network track, ``track_id``: on a line grid the
+declared track whose km span holds the row's first cell (:func:`dbtools.topology.grid_track_ids`),
+else the implied ``LINE:TRACK``; ``line_code`` and ``track`` are kept as its names. The tracks
+off a line (``track_points``) are verified by :mod:`~dbtools.gis.verify.track_points`, their
+rows keyed the same way with ``pos_*`` (metres along the track) in the place of ``km_*``.
+
 Modules: :mod:`~dbtools.gis.verify.config` (thresholds, column sets),
 :mod:`~dbtools.gis.verify.cells` (steps 1–4, 7 and the coverage),
 :mod:`~dbtools.gis.verify.defects` (step 5 and the scan's defects),

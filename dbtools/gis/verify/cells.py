@@ -1,6 +1,6 @@
 """GIS verification, steps 1–4 and 7 (:mod:`dbtools.gis.verify`): the cells of the grid
 index, fixes matched onto their known track, run-level cell statistics, the t-test with
-multiple-testing correction, the cell status and the coverage per line/track."""
+multiple-testing correction, the cell status and the coverage per track (``track_id``)."""
 
 from __future__ import annotations
 
@@ -23,6 +23,8 @@ from dbtools.gis.verify.config import (
     VERIFIED,
     VerifyConfig,
 )
+from dbtools.network import Network
+from dbtools.topology import grid_track_ids
 
 IntArray = npt.NDArray[np.int64]
 
@@ -41,9 +43,16 @@ class Cells:
     has_next: npt.NDArray[np.bool_]
 
     @classmethod
-    def build(cls, grid: GridIndex) -> Cells:
+    def build(cls, grid: GridIndex, network: Network | None = None) -> Cells:
+        """The cells of ``grid``; each point's ``track_id`` is the network's track that holds
+        it (:func:`dbtools.topology.grid_track_ids`; the implied ``LINE:TRACK`` without a network)."""
         g = grid.gis.iloc[grid.pos]
         frame = g.assign(line_code=g["line_code"].astype(str), track=g["track"].astype(str)).reset_index(drop=True)
+        if network is not None:
+            ids = grid_track_ids(network, frame["line_code"], frame["track"], frame["km_m"])
+        else:
+            ids = (frame["line_code"] + ":" + frame["track"]).to_numpy(dtype=object)
+        frame["track_id"] = ids
         has_next = np.zeros(grid.n, dtype=bool)
         if grid.n > 1:
             dkm = np.diff(grid.km)
@@ -301,7 +310,7 @@ def classify(cells: pd.DataFrame, pooled: FloatArray, track_runs: FloatArray, cf
 
 
 def empty_cells() -> pd.DataFrame:
-    cols = [c for c in CELL_COLUMNS if c not in ("line_code", "track", "km_from_m", "km_to_m")]
+    cols = [c for c in CELL_COLUMNS if c not in ("track_id", "line_code", "track", "km_from_m", "km_to_m")]
     return pd.DataFrame({c: pd.Series([], dtype=object if c in ("status", "reason") else float) for c in cols})
 
 
@@ -312,13 +321,16 @@ def cell_frame(cells: pd.DataFrame, grid: Cells) -> pd.DataFrame:
     out.insert(0, "km_from_m", grid.km[j])
     out.insert(0, "track", grid.frame["track"].to_numpy()[j])
     out.insert(0, "line_code", grid.frame["line_code"].to_numpy()[j])
+    out.insert(0, "track_id", grid.frame["track_id"].to_numpy()[j])
     for c in ("runs", "fixes", "km_residual_runs"):
         out[c] = out[c].astype(np.int64)
     return out[list(CELL_COLUMNS)]
 
 
 def coverage(cells: pd.DataFrame, grid: Cells, defects: pd.DataFrame, rc: pd.DataFrame) -> pd.DataFrame:
-    """Per line/track of the DB: cells and km verified / unverified / defect."""
+    """Per track of the DB (``track_id``, with its line and track names): cells and km
+    verified / unverified / defect, defects (counted on the track where they begin), runs
+    and fixes."""
     n = grid.km.size
     starts = np.flatnonzero(grid.has_next)
     length = np.zeros(n)
@@ -326,25 +338,26 @@ def coverage(cells: pd.DataFrame, grid: Cells, defects: pd.DataFrame, rc: pd.Dat
     status = np.full(n, UNVERIFIED, dtype=object)
     if len(cells):
         status[cells.index.to_numpy(dtype=np.int64)] = cells["status"].to_numpy()
+    g = grid.frame
     frame = pd.DataFrame(
         {
-            "line_code": grid.frame["line_code"].to_numpy()[starts],
-            "track": grid.frame["track"].to_numpy()[starts],
+            "track_id": g["track_id"].to_numpy()[starts],
             "len": length[starts] / 1000.0,
             "status": status[starts],
         }
     )
-    cov = frame.pivot_table(
-        index=["line_code", "track"], columns="status", values="len", aggfunc="sum", fill_value=0.0
-    ).reindex(columns=[VERIFIED, UNVERIFIED, DEFECT], fill_value=0.0)
-    keys = grid.frame[["line_code", "track"]].drop_duplicates()
-    cov = cov.reindex(pd.MultiIndex.from_frame(keys), fill_value=0.0)
+    cov = frame.pivot_table(index="track_id", columns="status", values="len", aggfunc="sum", fill_value=0.0).reindex(
+        columns=[VERIFIED, UNVERIFIED, DEFECT], fill_value=0.0
+    )
+    keys = g.drop_duplicates("track_id")  # every track of the grid, in grid order
+    cov = cov.reindex(pd.Index(keys["track_id"]), fill_value=0.0)
     total = cov.sum(axis=1).to_numpy()
-    ncell = frame.groupby(["line_code", "track"]).size().reindex(cov.index, fill_value=0)
+    ncell = frame.groupby("track_id").size().reindex(cov.index, fill_value=0)
     out = pd.DataFrame(
         {
-            "line_code": cov.index.get_level_values(0),
-            "track": cov.index.get_level_values(1),
+            "track_id": keys["track_id"].to_numpy(),
+            "line_code": keys["line_code"].to_numpy(),
+            "track": keys["track"].to_numpy(),
             "cells": ncell.to_numpy(dtype=np.int64),
             "length_km": total,
             "verified_km": cov[VERIFIED].to_numpy(),
@@ -355,15 +368,13 @@ def coverage(cells: pd.DataFrame, grid: Cells, defects: pd.DataFrame, rc: pd.Dat
     with np.errstate(invalid="ignore", divide="ignore"):
         for s in (VERIFIED, UNVERIFIED, DEFECT):
             out[f"{s}_share"] = np.where(total > 0, out[f"{s}_km"] / total, np.nan)
-    nd = defects.groupby(["line_code", "track"]).size() if len(defects) else pd.Series(dtype=np.int64)
-    out["defects"] = [int(nd.get((lc, tr), 0)) for lc, tr in zip(out["line_code"], out["track"], strict=True)]
-    tid_rc = grid.tid[rc["cell"].to_numpy()]
+    nd = defects.groupby("track_id").size() if len(defects) else pd.Series(dtype=np.int64)
+    out["defects"] = nd.reindex(out["track_id"], fill_value=0).to_numpy(dtype=np.int64)
+    tid_rc = g["track_id"].to_numpy()[rc["cell"].to_numpy()]
     runs = pd.Series(rc["run"].to_numpy()).groupby(tid_rc).nunique()
     fixes = pd.Series(rc["n"].to_numpy()).groupby(tid_rc).sum()
-    ids = {key: i for i, key in enumerate(grid.keys)}
-    t_out = [ids[(lc, tr)] for lc, tr in zip(out["line_code"], out["track"], strict=True)]
-    out["runs"] = runs.reindex(t_out, fill_value=0).to_numpy(dtype=np.int64)
-    out["fixes"] = fixes.reindex(t_out, fill_value=0).to_numpy(dtype=np.int64)
+    out["runs"] = runs.reindex(out["track_id"], fill_value=0).to_numpy(dtype=np.int64)
+    out["fixes"] = fixes.reindex(out["track_id"], fill_value=0).to_numpy(dtype=np.int64)
     return out[list(COVERAGE_COLUMNS)].reset_index(drop=True)
 
 

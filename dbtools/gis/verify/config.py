@@ -17,6 +17,7 @@ KM_EPOCH_COLUMN = "km_ref_epoch"
 VERIFIED, UNVERIFIED, DEFECT = "verified", "unverified", "defect"
 #: Columns of :attr:`GisVerification.cells` (one row per cell with at least one fix).
 CELL_COLUMNS = (
+    "track_id",
     "line_code",
     "track",
     "km_from_m",
@@ -39,6 +40,7 @@ CELL_COLUMNS = (
 #: Columns of :attr:`GisVerification.defects`.
 DEFECT_COLUMNS = (
     "defect_id",
+    "track_id",
     "line_code",
     "track",
     "km_from_m",
@@ -62,6 +64,7 @@ DEFECT_COLUMNS = (
 #: Columns of :attr:`GisVerification.km_defects` (the along-track scan's windows).
 KM_DEFECT_COLUMNS = (
     "km_defect_id",
+    "track_id",
     "line_code",
     "track",
     "km_from_m",
@@ -74,8 +77,9 @@ KM_DEFECT_COLUMNS = (
     "p_value",
     "q_value",
 )
-#: Columns of :attr:`GisVerification.coverage` (one row per line/track of the DB).
+#: Columns of :attr:`GisVerification.coverage` (one row per track of the grid, keyed by ``track_id``).
 COVERAGE_COLUMNS = (
+    "track_id",
     "line_code",
     "track",
     "cells",
@@ -91,7 +95,18 @@ COVERAGE_COLUMNS = (
     "fixes",
 )
 #: Columns of :attr:`GisVerification.proposal` (one row per GIS point moved).
-PROPOSAL_COLUMNS = ("defect_id", "line_code", "track", "km_m", "shift_m", "lat", "lon", "lat_new", "lon_new")
+PROPOSAL_COLUMNS = (
+    "defect_id",
+    "track_id",
+    "line_code",
+    "track",
+    "km_m",
+    "shift_m",
+    "lat",
+    "lon",
+    "lat_new",
+    "lon_new",
+)
 #: Cells next to a defect that may still be displaced (half-displaced, or short of evidence):
 #: left out of the background, and their points part of the proposal's fit.
 EDGE_CELLS = 2

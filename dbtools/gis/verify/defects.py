@@ -131,6 +131,7 @@ def defect_table(
     table = pd.DataFrame(
         {
             "defect_id": np.arange(1, n_def + 1),
+            "track_id": g["track_id"].to_numpy()[first],
             "line_code": g["line_code"].to_numpy()[first],
             "track": g["track"].to_numpy()[first],
             "km_from_m": grid.km[first],
@@ -199,6 +200,7 @@ def km_defect_table(selected: pd.DataFrame, grid: Cells) -> pd.DataFrame:
     out = pd.DataFrame(
         {
             "km_defect_id": np.arange(1, len(selected) + 1),
+            "track_id": g["track_id"].to_numpy()[a],
             "line_code": g["line_code"].to_numpy()[a],
             "track": g["track"].to_numpy()[a],
             "km_from_m": grid.km[a],

@@ -23,6 +23,7 @@ from dbtools.gis.verify.config import (
 )
 from dbtools.gis.verify.result import GisVerification
 from dbtools.network import Network, canonical
+from schemas.network import TRACK_POINTS
 from schemas.tables import GIS
 
 IntArray = npt.NDArray[np.int64]
@@ -226,6 +227,7 @@ def build_proposal(
             pd.DataFrame(
                 {
                     "defect_id": int(d),
+                    "track_id": g["track_id"].to_numpy(),
                     "line_code": g["line_code"].to_numpy(),
                     "track": g["track"].to_numpy(),
                     "km_m": grid.km[pts],
@@ -246,8 +248,10 @@ def build_proposal(
     return out[keep].reset_index(drop=True)
 
 
-def proposed_network(network: Network, result: GisVerification) -> Network:
-    """``network`` with the GIS points of the proposal moved (every other table unchanged)."""
+def proposed_network(network: Network, result: GisVerification, track_points: GisVerification | None = None) -> Network:
+    """``network`` with the GIS points of the proposal moved, and the track points of
+    ``track_points``' proposal (:func:`dbtools.gis.verify.track_points.verify_track_points`,
+    keyed by ``track_id`` and ``pos_m``); every other table unchanged."""
     tables = dict(network.tables)
     gis = network.gis.copy()
     p = result.proposal
@@ -260,4 +264,19 @@ def proposed_network(network: Network, result: GisVerification) -> Network:
         gis.loc[pos, "lat"] = p["lat_new"].to_numpy(dtype=float)
         gis.loc[pos, "lon"] = p["lon_new"].to_numpy(dtype=float)
     tables[GIS.name] = canonical(GIS, gis)
+    if track_points is not None and len(track_points.proposal):
+        tables[TRACK_POINTS.name] = _moved_track_points(network.track_points, track_points.proposal)
     return Network(tables, origin=f"{network.origin} + gis verify proposal", meta={})
+
+
+def _moved_track_points(tp: pd.DataFrame, proposal: pd.DataFrame) -> pd.DataFrame:
+    """``track_points`` with the proposed points (``track_id``, ``pos_m`` → ``lat_new``, ``lon_new``) moved."""
+    out = tp.reset_index(drop=True)
+    key = pd.MultiIndex.from_arrays([out["track_id"].astype(str), out["pos_m"].astype(float)])
+    pkey = pd.MultiIndex.from_arrays([proposal["track_id"].astype(str), proposal["pos_m"].astype(float)])
+    pos = key.get_indexer(pkey)
+    if (pos < 0).any():
+        raise ValueError("a proposed point is not a track point")
+    out.loc[pos, "lat"] = proposal["lat_new"].to_numpy(dtype=float)
+    out.loc[pos, "lon"] = proposal["lon_new"].to_numpy(dtype=float)
+    return canonical(TRACK_POINTS, out)

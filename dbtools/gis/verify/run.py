@@ -54,7 +54,7 @@ def verify_fixes(network: Network, fixes: pd.DataFrame, cfg: VerifyConfig | None
         raise InputError("the DB has no GIS grid to verify", path=network.origin or None)
     gi = grid_index(network)
     index = track_index_for(network)
-    grid = network.cached(("gis_verify_cells", id(gi)), lambda: Cells.build(gi))
+    grid = network.cached(("gis_verify_cells", id(gi)), lambda: Cells.build(gi, network))
     matched, counts = match_fixes(fixes, index, grid, cfg.max_offset_m)
     matched = matched.sort_values("cell", kind="stable", ignore_index=True)
     rc = run_cell_means(matched)

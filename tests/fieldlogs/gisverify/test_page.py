@@ -25,7 +25,7 @@ def test_green_only_when_most_of_every_line_is_verified() -> None:
     text = v.text
     assert v.status == Status.CAUTION and text.startswith("Mostly unverified: ")
     assert "line 0420: 4.5 of 8.0 km unverified" in text and "0500" not in text
-    assert mostly_unverified(coverage(1.5, 3.0))["line_code"].tolist() == ["0420"]
+    assert mostly_unverified(coverage(1.5, 3.0))["where"].tolist() == ["line 0420"]
 
 
 def test_defects_are_red_and_empty_coverage_is_not_green() -> None:

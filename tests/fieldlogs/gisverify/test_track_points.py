@@ -32,7 +32,7 @@ def test_fixes_on_station_tracks_and_crossovers_are_verified_per_track(sample_ne
     rep = verify_runs(sample_network_db, [logs], workers=1)
     tp = rep.track_points
     assert tp is not None
-    cov = tp.coverage.set_index("line_code")
+    cov = tp.coverage.set_index("track_id")
     assert set(cov.index) == {"0420-3", "0420-4", "0420-X1", "0420-X2"}
     # the turnback runs onto station track 4 and back, the crossover run over X1; the station
     # run's track 3 is under a roof (few trusted fixes)
@@ -65,8 +65,8 @@ def test_a_shifted_station_track_shows_the_shift(sample_network_db: Path, logs: 
     base = verify_track_points(net, ev.fixes, cfg)
     moved = verify_track_points(_shifted(net, "0420-4", 3.0), ev.fixes, cfg)
     assert base is not None and moved is not None
-    b = base.cells[base.cells["line_code"] == "0420-4"].set_index("km_from_m")["offset_mean_m"]
-    m = moved.cells[moved.cells["line_code"] == "0420-4"].set_index("km_from_m")["offset_mean_m"]
+    b = base.cells[base.cells["track_id"] == "0420-4"].set_index("pos_from_m")["offset_mean_m"]
+    m = moved.cells[moved.cells["track_id"] == "0420-4"].set_index("pos_from_m")["offset_mean_m"]
     common = b.index.intersection(m.index)
     assert len(common) >= 10
     diff = (m[common] - b[common]).to_numpy()

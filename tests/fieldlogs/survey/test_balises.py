@@ -31,6 +31,7 @@ def table(km: list[float], kinds: list[str] | None = None, track: str = "D", clu
             "line_code": "0001",
             "station_code": "01",
             "track": track,
+            "track_id": f"0001:{track}",
             "signal_type": "home",
             "km_actual_m": km,
             "km_equipment_m": km,
