@@ -212,6 +212,7 @@ class EventType(StrEnum):
     HYPOTHESIS_DROPPED = "hypothesis_dropped"
     TRACK_CHANGE_REFUSED = "track_change_refused"
     ROLLBACK_SUSPECTED = "rollback_suspected"
+    UNITS_DISAGREE = "units_disagree"
 
 
 EVENT_MEANING: dict[EventType, str] = {
@@ -260,6 +261,9 @@ EVENT_MEANING: dict[EventType, str] = {
     EventType.TRACK_CHANGE_REFUSED: "a line-based aid (GPS decision, balise, feature point) put the position on a "
     "track no navigable path reaches from the candidates within the travel and the margin: refused, the "
     "candidates kept",
+    EventType.UNITS_DISAGREE: "the other cab's positioning unit disagrees (run --unit both) [S003 §2]: both claim a "
+    "km and |km_F − km_R| exceeds the sum of their margins, or both are determined on different tracks; one "
+    "event per span (t to detail.t_to), detail gives the largest difference, its bound and the tracks",
 }
 
 #: Events that correct the km, and the one the position-correction % is defined on [S003 §5.2].
