@@ -203,6 +203,7 @@ TRUTH = Table(
             "int",
             "1 while the R cab's tacho axle slips or slides (a run with the R cab's own sensors, tacho_r)",
             required=False,
+            nullable=True,
             min=0,
             max=1,
         ),
