@@ -207,11 +207,12 @@ def compare_units(pos_f: pd.DataFrame, pos_r: pd.DataFrame) -> tuple[pd.DataFram
     )
     t = frame["t"].to_numpy()
     spans = [[float(t[a]), float(t[b - 1])] for a, b in _spans(frame["disagree"].to_numpy(dtype=bool))]
+    sized = both & (bound > 0)  # the share of a zero bound (both margins 0) is not a number
     summary = {
         "cycles": len(frame),
         "cycles_compared": int(both.sum()),
         "max_abs_difference_m": float(np.nanmax(np.abs(diff))) if both.any() else None,
-        "max_difference_share_of_bound": float(np.nanmax(np.abs(diff) / bound)) if both.any() else None,
+        "max_difference_share_of_bound": float(np.max(np.abs(diff[sized]) / bound[sized])) if sized.any() else None,
         "cycles_beyond_margins": int(beyond.sum()),
         "cycles_on_other_tracks": int(other_track.sum()),
         "disagreements": spans,

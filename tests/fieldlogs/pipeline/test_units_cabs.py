@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from cli.main import app
@@ -140,6 +142,40 @@ def test_disagreement_events_hand_computed() -> None:
     assert merged["t"].tolist() == pytest.approx([0.2, 0.25, 0.25])
 
 
+_STATES = st.sampled_from(["determined", "ambiguous", "uncertain", "undetermined"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            _STATES, _STATES, st.floats(-50, 50), st.floats(0, 20), st.floats(0, 20), st.sampled_from(["A", "B"])
+        ),
+        min_size=1,
+        max_size=40,
+    )
+)
+def test_one_event_per_span_in_each_unit(rows: list[tuple[str, str, float, float, float, str]]) -> None:
+    """Any two units' positions: each unit gets one ``units_disagree`` event per disagreement
+    span of the summary, at its start, the worst |difference| beyond the bound unless the span
+    is a track disagreement only, and the two units' differences of opposite sign."""
+    n = len(rows)
+    t = np.round(np.arange(n) * 0.1, 1)
+    f = pd.DataFrame({"t": t, "km_m": 1000.0, "margin_m": [r[3] for r in rows], "state": [r[0] for r in rows],
+                      "track_id": "A"})  # fmt: skip
+    r = pd.DataFrame({"t": t, "km_m": [1000.0 + x[2] for x in rows], "margin_m": [x[4] for x in rows],
+                      "state": [x[1] for x in rows], "track_id": [x[5] for x in rows]})  # fmt: skip
+    frame, summary = compare_units(f, r)
+    ev = {u: disagreement_events(frame, u) for u in "FR"}
+    for u in "FR":
+        assert ev[u]["t"].tolist() == [span[0] for span in summary["disagreements"]]
+    for df, dr in zip(ev["F"]["detail"], ev["R"]["detail"], strict=True):
+        a, b = json.loads(df), json.loads(dr)
+        assert a["t_to"] == b["t_to"] and a["cycles"] == b["cycles"]
+        if a["cycles_beyond_margins"]:
+            assert abs(a["difference_m"]) > a["bound_m"] and a["difference_m"] == -b["difference_m"]
+
+
 def _turnback(net_db: Path, folder: Path, **cab_r: float) -> Path:
     net = read_network(net_db)
     over = dict(network_sample_scenarios(net)["sim-net-turnback"])
@@ -169,6 +205,14 @@ def test_units_on_their_own_sensors_agree_on_a_turnback(sample_network_db: Path,
         assert not (events[u]["type"] == EventType.UNITS_DISAGREE.value).any()
         assert summaries[u]["truth"]["within_margin_share"] == 1.0
         assert summaries[u]["truth"]["wrong_track_cycles"] == 0
+    # --unit R alone: the same unit R, and it says what it read
+    out_r = tmp_path / "out-r"
+    res = CliRunner().invoke(app, ["run", str(run), "--db", str(sample_network_db), "--out", str(out_r), "--unit", "R"])
+    assert res.exit_code == 0, res.output
+    assert "Unit R read the R cab's own imu_r, tacho_r, gps_r." in res.output
+    pd.testing.assert_frame_equal(
+        pd.read_parquet(out_r / "positions.parquet"), pd.read_parquet(tmp_path / "out" / "R" / "positions.parquet")
+    )
 
 
 def test_an_uncorrected_r_wheel_raises_disagreement_events(sample_network_db: Path, tmp_path: Path) -> None:
