@@ -21,7 +21,7 @@ cab's frame; the simulator's ``[cab_r]``) gives unit R those streams as its ``im
 and ``gps``, as they are: the two units then work from independent sensors. Its geometry is the
 vehicle block's ``gps_antenna_r`` and ``imu_r`` (swapped with ``gps_antenna`` and ``imu``
 before the mirror above; a run without ``gps_antenna_r`` has the R antenna at the reference
-point), its truth's ``slipping`` the R axle's ``slipping_r``, its wheel run.json's nominal one.
+point, :data:`R_DEFAULT`), its truth's ``slipping`` the R axle's ``slipping_r``, its wheel run.json's nominal one.
 A stream without its R counterpart falls back to the turned view of the F one (and so do the
 shared sensors: balise readers as above, radar); ``units.json`` says which stream unit R read
 (``unit_r``: :func:`r_sources`).
@@ -106,14 +106,21 @@ def mirrored_block(value: Any) -> Any:
     return value
 
 
+#: Where unit R's own sensor is when run.json's vehicle block does not say (``<section>_r``
+#: absent): the GPS antenna at the reference point; the IMU's lever arm is not used.
+R_DEFAULT: dict[str, dict[str, float] | None] = {"gps_antenna": {"x_m": 0.0, "y_m": 0.0}, "imu": None}
+
+
 def _swapped(vehicle: dict[str, Any], section: str, own: bool) -> dict[str, Any]:
     """``vehicle`` with ``section`` and ``section_r`` swapped: the R cab's is unit R's own (with its
-    own stream, ``own``, an absent R section is the reference point)."""
+    own stream, ``own``, an absent R section is :data:`R_DEFAULT`)."""
     other = f"{section}_r"
     if other not in vehicle and not own:
         return vehicle
     out = {k: v for k, v in vehicle.items() if k not in (section, other)}
-    out[section] = vehicle.get(other, {"x_m": 0.0, "y_m": 0.0})
+    mine = vehicle.get(other, R_DEFAULT.get(section))
+    if mine is not None:
+        out[section] = mine
     if section in vehicle:
         out[other] = vehicle[section]
     return out

@@ -5,6 +5,7 @@ simulated turnbacks whose units agree or whose R wheel is off."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,7 @@ from fieldlogs.simulate.simulator import simulate_run
 from schemas.enums import EventType
 from schemas.units import G
 
-TEETH, D = 10, 1 / np.pi  # 0.1 m per pulse
+TEETH, D = 30, 3 / np.pi  # 0.1 m per pulse
 
 
 def _left_turn(folder: Path, own: bool) -> Path:
@@ -65,6 +66,8 @@ def _left_turn(folder: Path, own: bool) -> Path:
             "length_m": 20.0,
             "reference": "centre",
             "front_x_m": 10.0,
+            "tacho_axle": "A1",
+            "axles": [{"id": "A1", "x_m": 8.0, "wheel_diameter_m": D, "teeth": TEETH}],
             "gps_antenna": {"x_m": 0.0, "y_m": 0.0},
             "gps_antenna_r": {"x_m": -9.5, "y_m": 0.0},
             "imu_r": {"x_m": -9.5, "y_m": 0.0, "z_m": 0.0},
@@ -84,6 +87,7 @@ def test_a_left_turn_seen_by_each_unit_on_its_own_sensors(tmp_path: Path) -> Non
     its cab R) at 10 m/s with ωz = +0.02 and ay = −0.2, so κ = ωz/|v| = +1/500 (left in the
     direction of travel) for both units; its GPS antenna is 9.5 m ahead in its own frame."""
     run = read_run(_left_turn(tmp_path / "lt", own=True))
+    assert [f for f in run.findings if f.severity == "error"] == []
     assert r_sources(run) == {"imu": "imu_r", "tacho": "tacho_r", "gps": "gps_r"}
     assert r_view(r_sources(run)) == "the R cab's own imu_r, tacho_r, gps_r"
     view = unit_run(run, "R", tmp_path / "R")
@@ -101,6 +105,25 @@ def test_a_left_turn_seen_by_each_unit_on_its_own_sensors(tmp_path: Path) -> Non
         assert c.v_pulse[moving] == pytest.approx(10.0)
         assert c.imu["wz"][moving] / c.v_pulse[moving] == pytest.approx(1 / 500)
         assert c.imu["ay"][moving] == pytest.approx(ay)
+
+
+def test_r_streams_without_their_places_in_the_vehicle_block(tmp_path: Path) -> None:
+    """R cab streams on a vehicle block that gives their sensors no place: unit R's GPS antenna
+    is the reference point (not the F antenna seen from the other end), its IMU section absent;
+    the view's run.json is a valid run."""
+    folder = _left_turn(tmp_path / "lt", own=True)
+    meta = read_run(folder).meta
+    assert meta is not None and meta.vehicle is not None
+    vehicle = {k: v for k, v in meta.vehicle.items() if not k.endswith("_r")}
+    vehicle["gps_antenna"] = {"x_m": 4.0, "y_m": 0.5}
+    vehicle["imu"] = {"x_m": 2.0, "y_m": 0.0, "z_m": 1.0}
+    run = read_run(write_run(tmp_path / "plain", replace(meta, vehicle=vehicle), read_run(folder).load_all()))
+    view = unit_run(run, "R", tmp_path / "R")
+    assert view.meta is not None and view.meta.vehicle is not None
+    assert view.meta.vehicle["gps_antenna"] == {"x_m": -0.0, "y_m": -0.0}
+    assert view.meta.vehicle["gps_antenna_r"] == {"x_m": -4.0, "y_m": -0.5}
+    assert "imu" not in view.meta.vehicle and view.meta.vehicle["imu_r"]["x_m"] == -2.0
+    assert [f for f in view.findings if f.severity == "error"] == []
 
 
 def test_without_r_streams_unit_r_turns_the_f_ones_round(tmp_path: Path) -> None:
