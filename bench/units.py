@@ -26,9 +26,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
-import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +33,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from dbtools.build import build_db
+from _common import over_network_runs, print_rows
+
 from dbtools.database import read_network
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import run_pipeline
@@ -44,7 +42,6 @@ from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.pipeline.units import UNITS, compare_units, unit_run
 from fieldlogs.runs.handle import read_run
 from fieldlogs.runs.write import write_run
-from fieldlogs.simulate.network_runs import network_runs
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 
@@ -123,23 +120,10 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=6)
     ap.add_argument("--wheel-error-pct", type=float, default=10.0)
     args = ap.parse_args()
-    from dbtools.sample_network import sample_network_source_dir
-
-    with tempfile.TemporaryDirectory() as tmpd:
-        db = Path(tmpd) / "net.sqlite"
-        build_db(sample_network_source_dir(), db)
-        runs = network_runs(read_network(db), args.runs, args.seed)
-        t0 = time.perf_counter()
-        with ProcessPoolExecutor(args.workers) as pool:
-            jobs = [(i, str(db), tmpd, r, args.wheel_error_pct) for i, r in enumerate(runs)]
-            results = list(pool.map(one, jobs))
-        wall = time.perf_counter() - t0
+    results, wall = over_network_runs(one, args.runs, args.seed, args.workers, args.wheel_error_pct)
     print(f"units F and R over {args.runs} seeded network runs (seed {args.seed}), each on its own sensors", end="")
     print(f" ({wall:.1f} s wall)")
-    rows = table(results, args.wheel_error_pct)
-    w = max(len(a) for a, _ in rows)
-    for a, b in rows:
-        print(f"  {a:<{w}}  {b}")
+    print_rows(table(results, args.wheel_error_pct))
 
 
 if __name__ == "__main__":
