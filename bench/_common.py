@@ -85,3 +85,35 @@ def simulated_run(
         streams, meta = simulate_run(net, scenario_from_dict(scenario), seed=seed)
         write_run(run, meta, streams, fmt=fmt)
     return run, db
+
+
+def over_network_runs(
+    job: Callable[[Any], Any], runs: int, seed: int, workers: int, *extra: Any
+) -> tuple[list[Any], float]:
+    """``job((i, db, tmp, run, *extra))`` for each of ``runs`` seeded routes over the bundled
+    network sample (:func:`fieldlogs.simulate.network_runs.network_runs`), in ``workers``
+    processes: (the results in run order, wall s). ``db`` is the sample built in the temporary
+    folder ``tmp``, which the jobs may write into."""
+    import tempfile
+    from concurrent.futures import ProcessPoolExecutor
+
+    from dbtools.build import build_db
+    from dbtools.database import read_network
+    from dbtools.sample_network import sample_network_source_dir
+    from fieldlogs.simulate.network_runs import network_runs
+
+    with tempfile.TemporaryDirectory() as tmpd:
+        db = Path(tmpd) / "net.sqlite"
+        build_db(sample_network_source_dir(), db)
+        drawn = network_runs(read_network(db), runs, seed)
+        t0 = time.perf_counter()
+        with ProcessPoolExecutor(workers) as pool:
+            results = list(pool.map(job, [(i, str(db), tmpd, r, *extra) for i, r in enumerate(drawn)]))
+        return results, time.perf_counter() - t0
+
+
+def print_rows(rows: list[tuple[str, str]]) -> None:
+    """A two-column figure table, names padded to the longest."""
+    w = max(len(a) for a, _ in rows)
+    for a, b in rows:
+        print(f"  {a:<{w}}  {b}")

@@ -29,9 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
 import time
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +37,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from dbtools.build import build_db
+from _common import over_network_runs, print_rows
+
 from dbtools.database import read_network
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import run_pipeline
@@ -47,7 +46,6 @@ from fieldlogs.pipeline.track_truth import TrackFigures, compare_tracks, track_f
 from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.runs.handle import read_run
 from fieldlogs.runs.write import write_run
-from fieldlogs.simulate.network_runs import network_runs
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
 from schemas.enums import EventType, PositionState
@@ -248,21 +246,9 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=31)
     args = ap.parse_args()
-    from dbtools.sample_network import sample_network_source_dir
-
-    with tempfile.TemporaryDirectory() as tmpd:
-        db = Path(tmpd) / "net.sqlite"
-        build_db(sample_network_source_dir(), db)
-        runs = network_runs(read_network(db), args.runs, args.seed)
-        t0 = time.perf_counter()
-        with ProcessPoolExecutor(args.workers) as pool:
-            results = list(pool.map(one, [(i, str(db), tmpd, r) for i, r in enumerate(runs)]))
-        wall = time.perf_counter() - t0
+    results, wall = over_network_runs(one, args.runs, args.seed, args.workers)
     print(f"network accuracy over {args.runs} seeded runs (seed {args.seed}) on the network sample ({wall:.1f} s wall)")
-    rows = table(results)
-    w = max(len(a) for a, _ in rows)
-    for a, b in rows:
-        print(f"  {a:<{w}}  {b}")
+    print_rows(table(results))
 
 
 if __name__ == "__main__":

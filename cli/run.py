@@ -23,8 +23,9 @@ def run(
     unit: str = typer.Option(
         "F",
         "--unit",
-        help="Positioning unit [S003 §2: one per cab]: F (the F cab's), R (the R cab's: the run seen from "
-        "the other end), both (OUT/F and OUT/R, compared in OUT/units.json).",
+        help="Positioning unit [S003 §2: one per cab]: F (the F cab's), R (the R cab's: its own imu_r, tacho_r, "
+        "gps_r where the run has them, else the F streams seen from the other end), both (OUT/F and OUT/R, "
+        "compared in OUT/units.json; disagreements are units_disagree events).",
     ),
     no_verify_hash: bool = NO_VERIFY_HASH,
 ) -> None:
@@ -42,7 +43,7 @@ def run(
     from dbtools.database import read_network
     from fieldlogs.config import load_tree
     from fieldlogs.pipeline.outputs import streamed_results
-    from fieldlogs.pipeline.units import UNITS, replay_units, unit_run
+    from fieldlogs.pipeline.units import UNITS, r_sources, r_view, replay_units, unit_run
     from fieldlogs.pipeline.windows import replay_bounded
     from fieldlogs.runs.handle import read_run
     from schemas.errors import UsageError
@@ -63,11 +64,14 @@ def run(
         result = replay_bounded(view, network, cfg, lambda part: sink.add_positions(part.positions))
         sink.finish(result.events, result.summary)
     _print_result(result, cfg.window.length_h, out)
+    if unit == "R":
+        console().print(f"Unit R read {r_view(r_sources(read_run(run_dir)))}.", highlight=False)
 
 
 def _comparison_rows(cmp: dict[str, Any]) -> list[tuple[str, Any]]:
     worst = cmp["max_abs_difference_m"]
     return [
+        ("unit R read", cmp["unit_r"]["view"]),
         ("cycles compared", cmp["cycles_compared"]),
         ("max |km F − km R|", "—" if worst is None else f"{worst:.2f} m"),
         ("beyond the sum of margins", cmp["cycles_beyond_margins"]),

@@ -213,6 +213,7 @@ class EventType(StrEnum):
     TRACK_CHANGE_REFUSED = "track_change_refused"
     GPS_CORRECTION = "gps_correction"
     ROLLBACK_SUSPECTED = "rollback_suspected"
+    UNITS_DISAGREE = "units_disagree"
 
 
 EVENT_MEANING: dict[EventType, str] = {
@@ -263,6 +264,9 @@ EVENT_MEANING: dict[EventType, str] = {
     "candidates kept",
     EventType.GPS_CORRECTION: "on a network, a trusted D-GPS fix on the determined track, agreeing with the "
     "estimate and with an along-track uncertainty well below the margin, corrected the distance along the track",
+    EventType.UNITS_DISAGREE: "the other cab's positioning unit disagrees (run --unit both) [S003 §2]: both claim a "
+    "km and |km_F − km_R| exceeds the sum of their margins, or both are determined on different tracks; one "
+    "event per span (t to detail.t_to), detail gives the largest difference, its bound and the tracks",
 }
 
 #: Events that correct the km, and the one the position-correction % is defined on [S003 §5.2].

@@ -8,7 +8,7 @@ wy < 0 nose pitching up).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from schemas.enums import BaliseKind, CabDirection, Track, VehicleKind
@@ -199,6 +199,15 @@ TRUTH = Table(
         Column("speed_mps", "float", "True speed over ground (signed: + in cab forward)", unit="m/s"),
         Column("slipping", "int", "1 while the wheel slips or slides", min=0, max=1),
         Column(
+            "slipping_r",
+            "int",
+            "1 while the R cab's tacho axle slips or slides (a run with the R cab's own sensors, tacho_r)",
+            required=False,
+            nullable=True,
+            min=0,
+            max=1,
+        ),
+        Column(
             "track_id",
             "str",
             "True track (netElement) of a run routed over a network; empty on a one-line run",
@@ -254,9 +263,47 @@ RADAR_IF = Table(
     required=False,
 )
 
+#: The R cab's own sensors on a vehicle with a positioning unit in each cab [S003 §2]: the
+#: stream of the F cab's sensor (or the vehicle's one) → the R cab's, same columns. Each is
+#: recorded in the R cab's own frame, x toward the vehicle's R end, y left of it, z up (the
+#: vehicle's frame turned half round about z); its sensor's place is run.json vehicle
+#: ``imu_r``, ``gps_antenna_r`` (the tacho: run.json's nominal wheel, its own axle).
+CAB_R_STREAMS: dict[str, str] = {"imu": "imu_r", "tacho": "tacho_r", "gps": "gps_r"}
+
+
+def _in_r_cab(table: Table) -> Table:
+    """``table`` as the R cab's own sensor records it (:data:`CAB_R_STREAMS`)."""
+    columns = tuple(
+        replace(
+            c,
+            description="Sense of motion from the R cab's two-phase tachometer over the cycle: +1 toward the "
+            "vehicle's R end (the R cab's forward), −1 toward its F end, 0 standstill or not known",
+        )
+        if c.name == "direction"
+        else c
+        for c in table.columns
+    )
+    what = f"The R cab's own {table.name} (a unit per cab), in the R cab's frame (x toward the vehicle's R end)"
+    return replace(table, name=CAB_R_STREAMS[table.name], description=f"{what}: {table.description}", columns=columns)
+
+
 #: Every stream, in the order they are listed and checked.
 LOG_STREAMS: dict[str, Table] = {
-    t.name: t for t in (TACHO, IMU, BALISE, GPS, CAB, TRUTH, RADAR, RADAR_IF, GNSS_OBS, GNSS_NAV, GNSS_SBAS)
+    t.name: t
+    for t in (
+        TACHO,
+        IMU,
+        BALISE,
+        GPS,
+        CAB,
+        TRUTH,
+        RADAR,
+        RADAR_IF,
+        GNSS_OBS,
+        GNSS_NAV,
+        GNSS_SBAS,
+        *(_in_r_cab(t) for t in (IMU, TACHO, GPS)),
+    )
 }
 
 

@@ -8,6 +8,10 @@ below is in metres in that frame.
   occupies x ∈ [front_x_m − length_m, front_x_m];
 * ``antennas`` — one per GNSS receiver (the ``receiver`` of ``gnss_obs`` rows);
 * ``balise_reader`` — the antenna that reads balises;
+* ``gps_antenna`` — the antenna of the ``gps`` stream (absent: the first of ``antennas``);
+* ``balise_reader_r``, ``gps_antenna_r``, ``imu_r`` — on a vehicle with a positioning unit in
+  each cab [S003 §2], the R cab's own reader and the sensors of its ``gps_r`` and ``imu_r``
+  streams (``schemas.logs.CAB_R_STREAMS``), in this same vehicle frame;
 * ``imu`` — lever arm of the IMU and the rotation of the (remapped) sensor axes to the
   body axes, z-y-x Tait–Bryan angles (yaw, then pitch, then roll) in degrees;
 * ``axles`` — wheels; the axle named by ``tacho_axle`` carries the tachometer of the
@@ -69,6 +73,11 @@ BALISE_READER: tuple[VehicleField, ...] = (
     _Y,
     VehicleField("z_m", "float", "Above the rail top", "m", required=False, min=-1.0, max=2.0),
 )
+GPS_ANTENNA: tuple[VehicleField, ...] = (
+    _X,
+    _Y,
+    VehicleField("z_m", "float", "Above the rail top", "m", required=False, min=-1.0, max=8.0),
+)
 IMU: tuple[VehicleField, ...] = (
     _X,
     _Y,
@@ -103,6 +112,9 @@ VEHICLE_SECTIONS: tuple[tuple[str, tuple[VehicleField, ...], bool], ...] = (
     ("antennas", ANTENNA, True),
     ("balise_reader", BALISE_READER, False),
     ("balise_reader_r", BALISE_READER, False),  # the R cab's, on a vehicle with a reader per cab [S003 §2]
+    ("gps_antenna", GPS_ANTENNA, False),
+    ("gps_antenna_r", GPS_ANTENNA, False),  # the R cab's (gps_r stream), a unit per cab [S003 §2]
     ("imu", IMU, False),
+    ("imu_r", IMU, False),  # the R cab's (imu_r stream), a unit per cab [S003 §2]
     ("axles", AXLE, True),
 )

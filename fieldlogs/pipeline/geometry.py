@@ -34,7 +34,7 @@ class VehicleGeometry:
     reader_x_m: float = 0.0
     """The balise reader."""
     gps_antenna_x_m: float = 0.0
-    """The antenna of the ``gps`` stream (the first antenna of the vehicle block)."""
+    """The antenna of the ``gps`` stream (the vehicle block's ``gps_antenna``, else its first antenna)."""
     front_x_m: float | None = None
     """The F end (None: extent unknown)."""
     length_m: float | None = None
@@ -45,10 +45,11 @@ class VehicleGeometry:
         if not vehicle:
             return cls()
         reader = vehicle.get("balise_reader") or {}
-        antennas = vehicle.get("antennas") or []
+        antennas = vehicle.get("antennas") or [{}]
+        gps = vehicle.get("gps_antenna") or antennas[0]
         return cls(
             reader_x_m=float(reader.get("x_m", 0.0)),
-            gps_antenna_x_m=float(antennas[0].get("x_m", 0.0)) if antennas else 0.0,
+            gps_antenna_x_m=float(gps.get("x_m", 0.0)),
             front_x_m=_opt(vehicle.get("front_x_m")),
             length_m=_opt(vehicle.get("length_m")),
         )

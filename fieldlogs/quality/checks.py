@@ -45,7 +45,7 @@ from fieldlogs.runs.handle import REQUIRED_STREAMS, Run
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, check_frame
-from schemas.logs import LOG_STREAMS
+from schemas.logs import CAB_R_STREAMS, LOG_STREAMS
 from schemas.model import Table
 
 G = 9.80665
@@ -471,6 +471,10 @@ GNSS_CHECKS: dict[str, Callable[[_Out, pd.DataFrame], None]] = {
 }
 
 
+#: The sensor each of the R cab's own streams is (``imu_r`` → ``imu``…), checked as it is.
+SENSOR_OF_R_STREAM = {r: f for f, r in CAB_R_STREAMS.items()}
+
+
 def check_stream(run: Run, name: str, db: DbRefs | None = None, limits: CheckLimits = CheckLimits()) -> list[Finding]:
     """Read findings plus every check of one stream (empty when the stream is absent)."""
     path = run.stream_file(name)
@@ -500,11 +504,12 @@ def check_stream(run: Run, name: str, db: DbRefs | None = None, limits: CheckLim
         GNSS_CHECKS[name](out, frame)
         return read + out.items
     _check_time(out, table, frame, limits, run.stream_rate_hz(name))
-    if name == "tacho":
+    sensor = SENSOR_OF_R_STREAM.get(name, name)  # the R cab's own imu_r… are checked as imu…
+    if sensor == "tacho":
         _check_tacho(out, run, frame, limits)
-    elif name == "imu":
+    elif sensor == "imu":
         _check_imu(out, frame, limits)
-    elif name == "gps" and db is not None:
+    elif sensor == "gps" and db is not None:
         _check_gps(out, frame, db, limits)
     elif name == "balise":
         _check_balise(out, frame, db)

@@ -129,7 +129,7 @@ def _sections(sink: _Sink, data: dict[str, Any]) -> dict[str, Any]:
 def _points(v: dict[str, Any]) -> list[tuple[str, float]]:
     pts = [(f"antennas[{i}].x_m", a["x_m"]) for i, a in enumerate(v.get("antennas", [])) if "x_m" in a]
     pts += [(f"axles[{i}].x_m", a["x_m"]) for i, a in enumerate(v.get("axles", [])) if "x_m" in a]
-    for sec in ("balise_reader", "imu"):
+    for sec in ("balise_reader", "balise_reader_r", "gps_antenna", "gps_antenna_r", "imu", "imu_r"):
         if "x_m" in v.get(sec, {}):
             pts.append((f"{sec}.x_m", v[sec]["x_m"]))
     return pts

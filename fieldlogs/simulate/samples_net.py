@@ -8,7 +8,9 @@
   GPS fixes 2.5 m toward the U track over 1 km before the station;
 * ``sim-net-junction`` — a down train takes the branch line 0421 at the 1:12 junction, with a
   300 m tunnel on the branch;
-* ``sim-net-turnback`` — an up train arrives on loop track 4, changes ends and runs back.
+* ``sim-net-turnback`` — an up train arrives on loop track 4, changes ends and runs back; it
+  records the R cab's own sensors too (``[cab_r]``: ``imu_r``, ``tacho_r``, ``gps_r``), for a
+  positioning unit in each cab.
 
 They exist only where the network has those tracks (the bundled sample network).
 """
@@ -77,5 +79,6 @@ def network_sample_scenarios(network: Network) -> dict[str, dict[str, Any]]:
                 "points": [["0420-U5", 2200.0], ["0420-4", 250.0], ["0420-U5", 1800.0]],
             },
             "slip": no_slip,
+            "cab_r": {"sensors": True},  # a unit per cab, each on its own sensors [S003 §2]
         },
     }

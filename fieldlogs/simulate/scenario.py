@@ -17,6 +17,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from fieldlogs.simulate.scenario_cabs import CabRCfg, check_cab_r
 from fieldlogs.simulate.scenario_net import NetworkCfg, check_network
 from schemas.enums import CabDirection, Track, VehicleKind
 from schemas.errors import UsageError
@@ -228,6 +229,7 @@ class Scenario:
     balise: BaliseCfg = field(default_factory=BaliseCfg)
     gnss_raw: GnssRawCfg = field(default_factory=GnssRawCfg)
     network: NetworkCfg = field(default_factory=NetworkCfg)
+    cab_r: CabRCfg = field(default_factory=CabRCfg)
     source: str = field(default="<default scenario>", compare=False)
     """Where it was loaded from (for messages); not a knob."""
 
@@ -436,12 +438,12 @@ def _check_bounds(s: Scenario) -> Problem:
 
 
 def _check_cabs(s: Scenario) -> Problem:
-    """Rolling back and a balise reader per cab."""
+    """Rolling back, a balise reader per cab and the R cab's own sensors."""
     if not 0 < s.running.rollback_speed_mps <= 2:
         return "running.rollback_speed_mps", "must be > 0 and ≤ 2 m/s (a train rolling back)"
     if len(s.balise.readers_x_m) not in (0, 2) or any(not abs(x) <= 50 for x in s.balise.readers_x_m):
         return "balise.readers_x_m", "[] or [x of the F cab's reader, x of the R cab's] within ±50 m"
-    return None
+    return check_cab_r(s.cab_r)
 
 
 def _check_spans(s: Scenario) -> Problem:
@@ -590,11 +592,4 @@ def load_scenario(path: Path | None = None, overrides: dict[str, Any] | None = N
     return s
 
 
-__all__ = [
-    "DEFAULT_SCENARIO",
-    "Episode",
-    "Scenario",
-    "ScenarioError",
-    "load_scenario",
-    "scenario_from_dict",
-]
+__all__ = ["DEFAULT_SCENARIO", "Episode", "Scenario", "ScenarioError", "load_scenario", "scenario_from_dict"]

@@ -89,6 +89,14 @@ def imu_stream(
     return pd.DataFrame(out)
 
 
+def wheel_draw(scenario: Scenario, rng: np.random.Generator) -> tuple[float, float]:
+    """(true diameter [m], wear [%]) of a tacho wheel: the nominal diameter worn by a draw of
+    ``tacho.wear_pct``."""
+    lo, hi = scenario.tacho.wear_pct
+    wear = float(rng.uniform(lo, hi)) if hi > lo else lo
+    return scenario.tacho.wheel_diameter_m * (1.0 - wear / 100.0), wear
+
+
 def wheel_distance(motion: Motion, factor: FloatArray) -> FloatArray:
     """Distance rolled by the wheel circumference [m], cumulative at every step."""
     vw = motion.v * factor
@@ -97,14 +105,16 @@ def wheel_distance(motion: Motion, factor: FloatArray) -> FloatArray:
 
 
 def tacho_stream(
-    rolled: FloatArray, motion: Motion, d_true: float, teeth: int, two_phase: bool = False
+    rolled: FloatArray, motion: Motion, d_true: float, teeth: int, two_phase: bool = False, sense: int = 1
 ) -> pd.DataFrame:
+    """The pulses of a wheel that rolled ``rolled``; ``sense`` = −1: the ``direction`` of the R
+    cab's tacho, in its own frame (+1 toward the vehicle's R end)."""
     k = np.arange(0, motion.n, TACHO_STEP)
     revs = rolled[k] / wheel_circumference_m(d_true)
     pulses = np.maximum.accumulate(np.floor(revs * teeth + 1e-9).astype(np.int64))
     frame = pd.DataFrame({"t": motion.t[k], "pulses": pulses})
     if two_phase:
-        toward_f = np.cumsum(motion.speed_toward_f)[k]  # ∝ displacement toward the F end
+        toward_f = np.cumsum(sense * motion.speed_toward_f)[k]  # ∝ displacement toward the cab's forward end
         moved = np.diff(toward_f, prepend=0.0)
         came = np.diff(pulses, prepend=pulses[:1]) > 0
         frame["direction"] = np.where(came, np.sign(moved), 0).astype(np.int64)

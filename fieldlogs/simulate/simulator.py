@@ -17,7 +17,7 @@ from fieldlogs.runs.meta import RunMeta
 from fieldlogs.runs.typed import LogFormat
 from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.events import balise_events, cab_events, reader_events, track_balises
-from fieldlogs.simulate.kinematics import body_kinematics
+from fieldlogs.simulate.kinematics import BodyKinematics, body_kinematics
 from fieldlogs.simulate.netsim import NetworkPlan, network_plan
 from fieldlogs.simulate.running import Motion, cant_model, plan_motion
 from fieldlogs.simulate.scenario import Scenario, ScenarioError, load_scenario
@@ -28,6 +28,7 @@ from fieldlogs.simulate.sensors import (
     tacho_stream,
     truth_stream,
     wheel_distance,
+    wheel_draw,
 )
 from fieldlogs.simulate.slip import SlipEpisode, place_episodes, wheel_factor
 from fieldlogs.simulate.track import TrackGeometry, TrackLookupError
@@ -83,12 +84,6 @@ def _stations(balises: pd.DataFrame, geom: TrackGeometry, scenario: Scenario) ->
     return sorted(float(k) for k in km if geom.km_min <= k <= geom.km_max)
 
 
-def _wheel(scenario: Scenario, rng: np.random.Generator) -> tuple[float, float]:
-    lo, hi = scenario.tacho.wear_pct
-    wear = float(rng.uniform(lo, hi)) if hi > lo else lo
-    return scenario.tacho.wheel_diameter_m * (1.0 - wear / 100.0), wear
-
-
 def _route(
     network: Network, scenario: Scenario
 ) -> tuple[NetworkPlan | None, TrackGeometry, Scenario, pd.DataFrame, list[float], str, str]:
@@ -117,11 +112,11 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
     """Simulate one run over ``network`` (see module docstring); ``seed`` overrides the scenario's."""
     seed = scenario.seed if seed is None else seed
     # one child per concern; new concerns are appended so the earlier children stay the same
-    names = ("wheel", "slip", "imu", "gps", "radar", "balise", "radar_if", "gnss_raw")
+    names = ("wheel", "slip", "imu", "gps", "radar", "balise", "radar_if", "gnss_raw", "cab_r")
     rngs = dict(zip(names, np.random.default_rng(seed).spawn(len(names)), strict=True))
     plan, geom, scenario, balises, stations, line, track = _route(network, scenario)
     motion = plan_motion(geom, scenario, stations)
-    d_true, wear = _wheel(scenario, rngs["wheel"])
+    d_true, wear = wheel_draw(scenario, rngs["wheel"])
     episodes = place_episodes(scenario, motion, geom, rngs["slip"])
     factor, slipping = wheel_factor(episodes, motion.t)
     sensors = scenario.sensors
@@ -129,8 +124,8 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
     rolled = wheel_distance(motion, factor)
     if sensors.tacho:
         streams["tacho"] = tacho_stream(rolled, motion, d_true, scenario.tacho.teeth, scenario.tacho.two_phase)
-    if sensors.imu:
-        kin = body_kinematics(geom, cant_model(scenario), motion)
+    kin = body_kinematics(geom, cant_model(scenario), motion) if sensors.imu else None
+    if kin is not None:
         true = {"ax": kin.ax, "ay": kin.ay, "az": kin.az, "wx": kin.wx, "wy": kin.wy, "wz": kin.wz}
         streams["imu"] = imu_stream(true, motion, scenario, rngs["imu"])
     if sensors.balise and not scenario.is_road_rail:
@@ -153,7 +148,21 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
     if scenario.gnss_raw.enabled:
         _add_raw_gnss(streams, meta, scenario, motion, geom, rngs["gnss_raw"])
     _add_readers(meta, scenario)
+    _add_cab_r(streams, meta, (scenario, motion, geom, plan, kin), rngs["cab_r"])
     return SimulatedRun(streams, meta)
+
+
+def _add_cab_r(
+    streams: dict[str, pd.DataFrame],
+    meta: RunMeta,
+    src: tuple[Scenario, Motion, TrackGeometry, NetworkPlan | None, BodyKinematics | None],
+    rng: np.random.Generator,
+) -> None:
+    """The R cab's own sensors with ``[cab_r] sensors = true`` (:mod:`fieldlogs.simulate.cab_r`)."""
+    if src[0].cab_r.sensors:
+        from fieldlogs.simulate.cab_r import CabR, add_cab_r
+
+        add_cab_r(streams, meta, CabR(*src), rng)
 
 
 def _telegrams(

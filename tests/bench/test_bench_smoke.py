@@ -112,6 +112,10 @@ SMOKE: dict[str, Smoke] = {
     "slip_study.py": Smoke("--runs 1 --workers 1 --show none", (r"detected \d+/\d+",)),
     "stage_memory.py": Smoke("{run} {db}", (r"correct_odometry\s+RSS",)),
     "wheel_gnss_errors.py": Smoke("{run} --db {db} --workers 1", (r"run\s+z\s+err%",)),
+    "units.py": Smoke(
+        "--runs 2 --workers 1",
+        (r"honest: runs with units_disagree\s+\d+ / 2", r"no correction: runs with units_disagree\s+\d"),
+    ),
 }
 
 SCRIPTS = sorted(p.name for p in BENCH.glob("*.py") if p.name not in NOT_SCRIPTS)

@@ -81,11 +81,12 @@ def test_the_other_cab_sees_the_body_turned_half_round() -> None:
 @pytest.fixture(scope="module")
 def turnback(sample_network_db: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The sample turnback (cab change on station track 4), rolling back 3 m at its uphill
-    starts, with a two-phase tacho."""
+    starts, with a two-phase tacho, recording one set of sensors (unit R turns them round)."""
     net = read_network(sample_network_db)
     over = dict(network_sample_scenarios(net)["sim-net-turnback"])
     over["running"] = {"rollback_m": 3.0}
     over["tacho"] = {"two_phase": True}
+    over["cab_r"] = {"sensors": False}
     streams, meta = simulate_run(net, scenario_from_dict(over, source="test"))
     return write_run(tmp_path_factory.mktemp("units") / "turnback", meta, streams)
 
@@ -116,6 +117,10 @@ def test_run_unit_both_cli(turnback: Path, sample_network_db: Path, tmp_path: Pa
         assert {p.name for p in (out / unit).iterdir()} >= {"positions.parquet", "events.csv", "summary.json"}
     cmp = json.loads((out / "units.json").read_text(encoding="utf-8"))
     assert cmp["cycles_beyond_margins"] == 0 and cmp["disagreements"] == []
+    assert cmp["unit_r"] == {
+        "view": "the F cab's streams turned round (the run has no R cab streams)",
+        "streams": {"imu": "imu", "tacho": "tacho", "gps": "gps"},
+    }
     assert "Units F and R compared" in res.output
     bad = runner.invoke(
         app, ["run", str(turnback), "--db", str(sample_network_db), "--out", str(tmp_path / "x"), "--unit", "Q"]
@@ -143,6 +148,7 @@ def test_a_reader_per_cab_two_independent_units(sample_network_db: Path, tmp_pat
     over["running"] = {"rollback_m": 3.0}
     over["tacho"] = {"two_phase": True}
     over["balise"] = {"readers_x_m": [9.5, -9.5]}
+    over["cab_r"] = {"sensors": False}
     streams, meta = simulate_run(net, scenario_from_dict(over, source="test"))
     assert streams["balise"]["reader"].value_counts().to_dict() == {"F": 14, "R": 14}
     assert meta.vehicle is not None and meta.vehicle["balise_reader_r"] == {"x_m": -9.5, "y_m": 0.0}

@@ -52,6 +52,8 @@ def _messages(data: Any, **kw: Any) -> list[tuple[str, str]]:
         (lambda v: v["axles"][0].pop("teeth"), "axles[0].teeth", "tacho axle 'A1' needs it"),
         (lambda v: v["axles"][0].update(teeth=90.5), "axles[0].teeth", "not a whole number"),
         (lambda v: v.update(antennas={"id": "x"}), "antennas", "must be a list of tables"),
+        (lambda v: v.update(gps_antenna_r={"x_m": -12.0, "y_m": 0.0}), "gps_antenna_r.x_m", "outside the vehicle"),
+        (lambda v: v.update(imu_r={"x_m": -9.0, "y_m": 0.0}), "imu_r.z_m", "is missing"),
     ],
 )
 def test_each_check(vehicle: dict[str, Any], edit: Any, column: str, text: str) -> None:
