@@ -37,8 +37,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from _common import over_network_runs, print_rows
-
+from bench._common import over_network_runs, print_rows
 from dbtools.database import read_network
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.run import run_pipeline
