@@ -87,6 +87,20 @@ def with_hyps(fix: Fix, hyps: list[Hypothesis], t: float, s: float, lines: Track
     )
 
 
+def _same_track(fix: Fix, prev: Fix | None, track_id: str) -> bool:
+    """A raw-GNSS correction of a position determined (or uncertain) on that very track: the
+    fit was constrained to the track in force [S002], so it moves the km along the track and
+    says nothing for or against a parallel one — the single candidate is kept (re-opening the
+    parallel tracks at every epoch would undo the raw-GNSS track test at every epoch)."""
+    return (
+        fix.source == FixSource.GNSS
+        and prev is not None
+        and prev.state in (PositionState.DETERMINED, PositionState.UNCERTAIN)
+        and len(prev.hyps) == 1
+        and prev.hyps[0].track_id == track_id
+    )
+
+
 def placed(fix: Fix, lines: TrackLines) -> bool:
     """The fix's candidates agree with what it says (a fix with several is its own truth)."""
     if len(fix.hyps) > 1:
@@ -172,7 +186,7 @@ class TopologyAid:
         self.next_id += 1
         h = Hypothesis(tl.track_id, pos, fix.k * tl.km_sign, hid=self.next_id)
         hyps = [h]
-        if fix.source in LINE_ONLY:
+        if fix.source in LINE_ONLY and not _same_track(fix, prev, tl.track_id):
             if self.segments is None:
                 self.segments = segments(self.lines)
             hyps += parallel_candidates(h, PARALLEL_M, self.lines, self.segments)

@@ -1,14 +1,21 @@
 """Raw GNSS fits constrained to each candidate track as an aid [SPEC §8.3; S002].
 
 The track-constrained pseudorange fit (:mod:`fieldlogs.gnss.ontrack`) holds the antenna on a
-given line track; on the wrong track the fit leaves large residuals. While the estimate is
-ambiguous and every candidate lies along a line (its line, track and the facing given by the
-sign of its km per forward metre), at each GNSS epoch the candidates are compared pairwise
+given track; on the wrong track the fit leaves large residuals: a track d metres to the side
+shifts each range by d·cos E·sin(A − ψ), of which the clock and the along-track position absorb
+only the common and along-track parts (4 m between D and U of the network sample: residual RMS
+≈ 2.5–3 m against ≈ 1.5 m on the right track, tests/fieldlogs/pipeline/test_network_raw_gnss.py).
+Each candidate is fitted on its own polyline: a line track of the GIS grid by (line, track,
+facing by the sign of its km per forward metre), a track off the grid — a station track or a
+crossover — on its ``track_points`` (:func:`fieldlogs.gnss.gis.points_track`, facing by the
+sign of its pos per forward metre); the solver marks epochs beyond a short track's ends off
+track, so they are not compared. While the estimate is ambiguous, at each GNSS epoch the
+candidates are compared pairwise
 with the GNSS aid's own test (:class:`fieldlogs.gnss.ontrack.TrackEvidence`): over the
 epochs since the split (at most ``gnss.track_window_s``), when at least ``gnss.track_min_epochs``
 epochs have a fit on both, the median excess of a's test statistic over b's is above
-``gnss.track_chi2`` and b fits better on ``gnss.track_share`` of them, a is dropped. A
-candidate off a line (a crossover) stops the test: there is no fit to compare.
+``gnss.track_chi2`` and b fits better on ``gnss.track_share`` of them, a is dropped (event
+evidence ``track_gnss``).
 """
 
 from __future__ import annotations
@@ -52,13 +59,16 @@ class TrackGnssAid:
         return []
 
     def keys(self, fix: Fix) -> list[Key] | None:
-        """(line, track, facing) of each candidate; None when one lies off a line or two share one."""
+        """The polyline and facing of each candidate: (line, track, facing by km) on a line
+        track of the grid, ("", track id, facing by pos) on a track of ``track_points`` (a
+        station or crossover track); None when two share one."""
         out = []
         for h in fix.hyps:
             tl = self.lines[h.track_id]
-            if not tl.line_code:
-                return None
-            out.append((tl.line_code, tl.track, 1 if h.kp * tl.km_sign >= 0 else -1))
+            if tl.metric is not None:
+                out.append((tl.line_code, tl.track, 1 if h.kp * tl.km_sign >= 0 else -1))
+            else:
+                out.append(("", tl.track_id, 1 if h.kp >= 0 else -1))
         return out if len(set(out)) == len(out) > 1 else None
 
     def next_observation(self, view: EngineView) -> Observation | None:
@@ -95,4 +105,4 @@ class TrackGnssAid:
                     drop.add(i)
         keep = [i for i in range(len(keys)) if i not in drop]
         after = round(view.d - max(split), 2) if split else None
-        return resolve(fix, keep, view, self.lines, {"evidence": "gnss", "after_switch_m": after})
+        return resolve(fix, keep, view, self.lines, {"evidence": "track_gnss", "after_switch_m": after})

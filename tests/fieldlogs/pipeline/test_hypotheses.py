@@ -283,7 +283,7 @@ def test_gnss_fit_on_the_wrong_branch_leaves_large_residuals(bad: float, resolve
     sol = run(n, travel(n, np.full(400, 10.0)), Start("9001", "S", 300.0, 1), aid)
     res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
     if resolved:
-        assert len(res) == 1 and res[0].t == 30.0 and res[0].detail["evidence"] == "gnss"
+        assert len(res) == 1 and res[0].t == 30.0 and res[0].detail["evidence"] == "track_gnss"
         assert res[0].detail["track_id"] == "A2"
     else:
         assert not res and (sol.positions[sol.positions["t"] > 11.0]["state"] == "ambiguous").all()
