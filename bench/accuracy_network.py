@@ -295,7 +295,11 @@ def raw_table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
             f"{pct(len(gnss) / sum(map(len, ev.values())) if ev else None)}",
         ),
     ]
-    rows += [(f"  median by {e}", f"{_median(d) or float('nan'):.1f} m (n={len(d)})") for e, d in sorted(ev.items())]
+    rows += [
+        (f"  median by {e}", f"{_median(d) or float('nan'):.1f} m (n={len(d)})")
+        for e, d in sorted(ev.items())
+        if e != "track_gnss"
+    ]
     rows.append(("  |error| ≤ margin, determined cycles", f"{pct(cover)} of {det}" + _runs(raw, "uncovered")))
     return rows
 

@@ -6,7 +6,10 @@ The rules are in :mod:`fieldlogs.pipeline.hypotheses`; this aid applies them in 
   point: ``Fix.hyps`` empty, or its one candidate no longer where the fix says) is *placed*
   on the network track holding its line, track and km — the position is determined there; if
   it was ambiguous before, that is a ``track_resolved`` event naming the aid as evidence
-  (an S003 pair beyond the innermost switch is decisive);
+  (an S003 pair beyond the innermost switch is decisive). A GPS or GNSS fix (``LINE_ONLY``)
+  decided among the line's tracks only, so every other track within ``PARALLEL_M`` stays a
+  candidate — except a GNSS correction of a position determined (or uncertain) on that very
+  track, whose fit was constrained to it [S002] and says nothing about a parallel one;
 * :meth:`TopologyAid.next_observation` finds, vectorised over the cycles ahead, the first
   cycle at which a rule applies to a candidate (its point passing a joint, its margin reaching
   a facing switch, its interval leaving a track or passing a buffer stop), and there
