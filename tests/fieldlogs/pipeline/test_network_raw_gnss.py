@@ -38,14 +38,16 @@ from tests.fieldlogs.pipeline.network_cases import MARGIN, Start, travel
 pytestmark = pytest.mark.slow
 
 
-def _raw_run(network: Network, folder: Path, tracks: list[str], points: list[list[object]], seed: int) -> Path:
-    sc = {
+def _raw_run(
+    network: Network, folder: Path, tracks: list[str], points: list[list[object]], seed: int, **net: object
+) -> Path:
+    sc: dict[str, object] = {
         "name": "raw gnss on the network",
         "seed": seed,
         "sensors": {"gps": False},
         "slip": {"slips": 0, "slides": 0},
         "running": {"line_speed_kmh": 60.0},
-        "network": {"tracks": tracks, "points": points},
+        "network": {"tracks": tracks, "points": points, **net},
         "gnss_raw": {"enabled": True},
     }
     streams, meta = simulate_run(network, scenario_from_dict(sc, source="test"))
@@ -56,6 +58,29 @@ def _raw_run(network: Network, folder: Path, tracks: list[str], points: list[lis
 @pytest.fixture(scope="module")
 def network(sample_network_db: Path) -> Network:
     return read_network(sample_network_db)
+
+
+def test_raw_observables_along_a_network_route_with_a_tunnel(network: Network, tmp_path: Path) -> None:
+    # U1 → 4 with a tunnel over 4's first 200 m: no epoch while the car centre is in it, and
+    # epochs on either side (pseudoranges of both receivers, the run's vehicle block)
+    tunnel = ["0420-4", 0.0, 200.0]
+    folder = _raw_run(
+        network,
+        tmp_path / "t",
+        ["0420-U1", "0420-4"],
+        [["0420-U1", 4700.0], ["0420-4", 400.0]],
+        3,
+        gnss_outages=[tunnel],
+    )
+    run = read_run(folder)
+    obs, truth = run.stream("gnss_obs"), run.stream("truth")
+    assert obs is not None and truth is not None and run.meta is not None and run.meta.vehicle is not None
+    assert set(obs["receiver"]) == {"rx1", "rx2"}
+    at = np.searchsorted(truth["t"].to_numpy(dtype=float), obs["t"].to_numpy(dtype=float), side="right") - 1
+    tid, pos = truth["track_id"].astype(str).to_numpy()[at], truth["pos_m"].to_numpy(dtype=float)[at]
+    inside = (tid == "0420-4") & (pos > 1.0) & (pos < 199.0)
+    assert not inside.any()
+    assert ((tid == "0420-4") & (pos > 201.0)).any() and (tid == "0420-U1").any()
 
 
 def test_the_wrong_parallel_track_leaves_large_residuals(network: Network, tmp_path: Path) -> None:
