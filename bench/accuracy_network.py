@@ -1,6 +1,6 @@
 """Track-selective accuracy on the network sample over many seeded runs (issue 31).
 
-    .venv/bin/python bench/accuracy_network.py [--runs 100] [--workers 2] [--seed 31]
+    .venv/bin/python bench/accuracy_network.py [--runs 100] [--raw-runs 40] [--workers 2] [--seed 31]
 
 Builds the bundled network source set (4-track station, crossover pair, junction), draws
 ``--runs`` routes with :func:`fieldlogs.simulate.network_runs.network_runs`, simulates each
@@ -16,6 +16,15 @@ in place of the one drawn (the drawn multipath is kept where GNSS is on):
 * **balise-only**: no GNSS and no IMU evidence — the pipeline needs the IMU stream for slips
   and slides, so it stays, and the turnout-signature test is switched off
   (``track_select.imu_max_margin_m`` = 1e-9 m: no switch is ever passed with a smaller margin).
+
+Then ``--raw-runs`` more runs (i = runs … runs + raw_runs − 1 of the same draw, so the runs
+above keep their routes and seeds) get the condition **raw GNSS**: balise-only plus raw GNSS
+observables (``[gnss_raw]``: GPS, Galileo and QZSS pseudoranges of two antennas 16 m apart at
+1 Hz with the simulator's error models, the drawn tunnel blocking the sky; every other run
+under buildings and cuttings, ``corridor = "mixed"``), so the raw-GNSS track test
+(:mod:`fieldlogs.pipeline.aids.track_gnss`, evidence ``track_gnss``) and the balise groups and
+pairs are the only track evidence. Its figures are printed apart; the rows above are over the first
+``--runs`` runs only.
 
 Printed: wrong-track claims, parallel-track selectivity [Heirich 2016] overall and per
 condition, facing switches resolved correctly and the median distance after the switch until
@@ -50,14 +59,24 @@ from fieldlogs.simulate.simulator import simulate_run
 from schemas.enums import EventType, PositionState
 
 CONDITIONS = ("D-GPS", "GNSS-only", "IMU-only", "balise-only")
+#: The raw-GNSS condition of the extra runs (module docstring).
+RAW = "raw GNSS"
 #: Heirich 2016: parallel-track selectivity and facing switch ways resolved.
 HEIRICH_SELECTIVITY, HEIRICH_SWITCHES = 0.993, 0.972
 #: The IMU signature's resolution-distance target holds at or above this speed [km/h].
 IMU_MIN_KMH = 15.0
 
 
-def with_condition(run: dict[str, Any], condition: str) -> dict[str, Any]:
-    """The scenario override ``run`` with its GNSS replaced by ``condition`` (module docstring)."""
+def with_condition(run: dict[str, Any], condition: str, i: int = 0) -> dict[str, Any]:
+    """The scenario override ``run`` with its GNSS replaced by ``condition`` (module docstring;
+    run ``i`` of the raw condition sets the corridor)."""
+    if condition == RAW:
+        raw = with_condition(run, "balise-only")
+        tunnel = run["network"].get("gnss_outages")
+        if tunnel:
+            raw["network"]["gnss_outages"] = tunnel
+        raw["gnss_raw"] = {"enabled": True, "corridor": "mixed" if i % 2 else "open"}
+        return raw
     out: dict[str, Any] = json.loads(json.dumps(run))
     net = out["network"]
     net.pop("gnss_outages", None)
@@ -76,16 +95,24 @@ def with_condition(run: dict[str, Any], condition: str) -> dict[str, Any]:
     return out
 
 
-def one(args: tuple[int, str, str, dict[str, Any]]) -> dict[str, Any]:
-    i, db, tmp, run = args
+def one_of(args: tuple[Any, ...]) -> dict[str, Any]:
+    """``one`` of job ``(i, db, tmp, run, n_plain)``: the raw GNSS condition from run ``n_plain`` on."""
+    i, db, tmp, run, n_plain = args
+    return one((i, db, tmp, run) if i < n_plain else (i, db, tmp, run, RAW))
+
+
+def one(args: tuple[Any, ...]) -> dict[str, Any]:
+    """Simulate, replay and judge run ``(i, db, tmp, run[, condition])``; the condition is
+    ``CONDITIONS[i % 4]`` unless given."""
+    i, db, tmp, run = args[:4]
     net = read_network(Path(db))
-    condition = CONDITIONS[i % len(CONDITIONS)]
-    sc = with_condition(run, condition)
+    condition = args[4] if len(args) > 4 else CONDITIONS[i % len(CONDITIONS)]
+    sc = with_condition(run, condition, i)
     streams, meta = simulate_run(net, scenario_from_dict(sc, source=sc["name"]))
     folder = Path(tmp) / f"net{i:04d}"
     write_run(folder, meta, streams, force=True)
     t0 = time.perf_counter()
-    cfg = {"track_select": {"imu_max_margin_m": 1e-9}} if condition == "balise-only" else {}
+    cfg = {"track_select": {"imu_max_margin_m": 1e-9}} if condition in ("balise-only", RAW) else {}
     res = run_pipeline(read_run(folder), net, PipelineConfig.from_dict(cfg))
     elapsed = time.perf_counter() - t0
     truth = streams["truth"]
@@ -239,15 +266,58 @@ def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     return rows
 
 
+def raw_table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
+    """The raw-GNSS condition's rows (module docstring): wrong-track claims, selectivity beside
+    balise-only's, facing switches resolved and the median distance by each evidence."""
+    raw = [r for r in results if r["condition"] == RAW]
+    s = sum((r["figures"] for r in raw), TrackFigures()).summary()
+    sw = s["switches_resolved_correctly"]
+    ev: dict[str, list[float]] = {}
+    for r in raw:
+        for evidence, dist, _ in r["resolved"]:
+            ev.setdefault(evidence, []).append(dist)
+    det = sum(r["determined"] for r in raw)
+    cover = sum(r["det_within"] for r in raw) / det if det else None
+    gnss = ev.get("track_gnss", [])
+    rows = [
+        (f"{RAW}: runs", f"{len(raw)} (balise-only + raw pseudoranges, half under a mixed corridor)"),
+        (
+            "  wrong-track claims (determined cycles)",
+            f"{s['wrong_track_cycles']}  (target 0)  {verdict(s['wrong_track_cycles'] == 0)}" + _runs(raw, "wrong"),
+        ),
+        ("  selectivity", _selectivity(raw, RAW, s)),
+        (
+            "  facing switches resolved correctly",
+            f"{pct(sw)} of {s['facing_switches']} ({s['switches_resolved_wrongly']} wrongly)  (target ≥ 99 %)  "
+            f"{verdict((sw or 0.0) >= 0.99 and s['switches_resolved_wrongly'] == 0)}",
+        ),
+        ("  median distance after the switch, all", f"{s['median_resolution_m'] or float('nan'):.1f} m"),
+        (
+            "  median by track_gnss (raw-GNSS fits)",
+            f"{_median(gnss) or float('nan'):.1f} m (n={len(gnss)}); share of the resolutions "
+            f"{pct(len(gnss) / sum(map(len, ev.values())) if ev else None)}",
+        ),
+    ]
+    rows += [
+        (f"  median by {e}", f"{_median(d) or float('nan'):.1f} m (n={len(d)})")
+        for e, d in sorted(ev.items())
+        if e != "track_gnss"
+    ]
+    rows.append(("  |error| ≤ margin, determined cycles", f"{pct(cover)} of {det}" + _runs(raw, "uncovered")))
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=100)
+    ap.add_argument("--raw-runs", type=int, default=40)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=31)
     args = ap.parse_args()
-    results, wall = over_network_runs(one, args.runs, args.seed, args.workers)
+    results_all, wall = over_network_runs(one_of, args.runs + args.raw_runs, args.seed, args.workers, args.runs)
     print(f"network accuracy over {args.runs} seeded runs (seed {args.seed}) on the network sample ({wall:.1f} s wall)")
-    print_rows(table(results))
+    results = [r for r in results_all if r["condition"] != RAW]
+    print_rows((table(results) if results else []) + (raw_table(results_all) if args.raw_runs else []))
 
 
 if __name__ == "__main__":

@@ -56,6 +56,12 @@ class GnssConfig:
         10.83, "the other track fits far better: median test-statistic excess above this (χ²₁ at 10⁻³)", gt=0
     )
     track_share: float = setting(0.9, "… and the share of epochs where the other track fits better", gt=0, le=1)
+    split_epochs: int = setting(
+        5,
+        "network candidates (after a facing switch): epochs counted as independent evidence — judged from this "
+        "many epochs on, when the median excess × this count is above track_chi2",
+        ge=1,
+    )
 
     def __post_init__(self) -> None:
         check_ranges(self, "gnss")

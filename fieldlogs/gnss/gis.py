@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.gnss.constants import FloatArray
@@ -85,7 +86,28 @@ def gis_track(network: Network, line_code: str, track: str) -> GisTrack:
 
 
 def _build(network: Network, line_code: str, track: str) -> GisTrack:
-    where = f"{line_code}/{track}"
+    _check_datum(network)
+    g = network.gis
+    g = g[(g["line_code"] == line_code) & (g["track"] == track)].sort_values("km_m", kind="stable")
+    return _polyline(network, line_code, track, g, "km_m", "GIS")
+
+
+def points_track(network: Network, track_id: str) -> GisTrack:
+    """The 3-D polyline of a network track from its ``track_points`` (lat, lon, rail height by
+    ``pos_m``: a station or crossover track off the line grid), with ``pos_m`` in place of km
+    (``line_code`` empty, ``track`` the track id); cached per network. Raises
+    :class:`GnssTrackError` as :func:`gis_track` does."""
+    return network.cached(("gnss_points_track", track_id), lambda: _points_build(network, track_id))
+
+
+def _points_build(network: Network, track_id: str) -> GisTrack:
+    _check_datum(network)
+    tp = network.track_points
+    tp = tp[tp["track_id"].astype(str) == track_id].sort_values("pos_m", kind="stable")
+    return _polyline(network, "", track_id, tp, "pos_m", "track_points")
+
+
+def _check_datum(network: Network) -> None:
     datum, geoid = height_datum(network)
     if datum != ELLIPSOIDAL:
         raise GnssTrackError(
@@ -94,23 +116,26 @@ def _build(network: Network, line_code: str, track: str) -> GisTrack:
             reason="orthometric_heights",
             path=network.origin or None,
         )
-    g = network.gis
-    g = g[(g["line_code"] == line_code) & (g["track"] == track)].sort_values("km_m", kind="stable")
+
+
+def _polyline(network: Network, line_code: str, track: str, g: pd.DataFrame, along: str, table: str) -> GisTrack:
+    """The polyline of the rows ``g`` (lat, lon, height_m, sorted by ``along``) as a GisTrack."""
+    where = f"{line_code}/{track}" if line_code else track
     if len(g) < 2:
         raise GnssTrackError(
-            f"track {where} has {len(g)} GIS point(s): no 3-D track", reason="unknown_track", path=network.origin
+            f"track {where} has {len(g)} {table} point(s): no 3-D track", reason="unknown_track", path=network.origin
         )
     h = g["height_m"].to_numpy(dtype=float, na_value=np.nan) if "height_m" in g else np.full(len(g), np.nan)
     missing = int((~np.isfinite(h)).sum())
     if missing:
         reason = "no_heights" if missing == len(g) else "partial_heights"
         raise GnssTrackError(
-            f"track {where}: height_m is empty on {missing} of {len(g)} GIS points; track-constrained GNSS "
+            f"track {where}: height_m is empty on {missing} of {len(g)} {table} points; track-constrained GNSS "
             "needs the rail height of every point",
             reason=reason,
             path=network.origin or None,
         )
-    km = g["km_m"].to_numpy(dtype=float)
+    km = g[along].to_numpy(dtype=float)
     xyz = geodetic_to_ecef(np.radians(g["lat"].to_numpy(dtype=float)), np.radians(g["lon"].to_numpy(dtype=float)), h)
     keep = np.concatenate([[True], np.linalg.norm(np.diff(xyz, axis=0), axis=1) > 1e-6])
     return GisTrack(line_code, track, TrackLine.from_ecef(xyz[keep]), km[keep])

@@ -12,7 +12,10 @@
 * GPS multipath near a parallel track (``network.multipath``): over each range the fix is
   moved by bias_m along the route's normal toward (bias > 0) the nearest point of another
   track's centreline within ``multipath_search_m`` (none there: no bias);
-* truth: ``track_id`` and ``pos_m`` besides line, track (U/D/S only) and km (:meth:`.locate`).
+* truth: ``track_id`` and ``pos_m`` besides line, track (U/D/S only) and km (:meth:`.locate`);
+* raw GNSS (``[gnss_raw] enabled = true``): :func:`fieldlogs.simulate.gnss.trainsim.raw_gnss` on
+  the route geometry — antennas above the true route (turnout arcs included), the
+  ``network.gnss_outages`` as tunnels; ``network.multipath`` moves the GPS fixes only.
 """
 
 from __future__ import annotations

@@ -46,7 +46,13 @@ class Smoke:
 SMOKE: dict[str, Smoke] = {
     "accuracy.py": Smoke("--runs 1 --workers 1", (r"\|km error\| ≤ margin\s+\d",)),
     "accuracy_network.py": Smoke(
-        "--runs 4 --workers 1", (r"wrong-track claims \(determined cycles\)\s+\d", r"selectivity D-GPS\s+[\d.]+ %")
+        "--runs 4 --raw-runs 1 --workers 1",
+        (
+            r"wrong-track claims \(determined cycles\)\s+\d",
+            r"selectivity D-GPS\s+[\d.]+ %",
+            r"raw GNSS: runs\s+1 ",
+            r"median by track_gnss \(raw-GNSS fits\)\s+\S+ m \(n=\d+\)",
+        ),
     ),
     "bench_audit.py": Smoke("--runs 2 --workers 1 --no-dask", (r"speed-up [\d.]+×",)),
     "bench_db.py": Smoke(

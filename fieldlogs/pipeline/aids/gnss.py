@@ -44,7 +44,7 @@ import numpy as np
 
 from dbtools.network import Network
 from fieldlogs.gnss.config import GnssConfig, position_config
-from fieldlogs.gnss.gis import GnssTrackError, gis_track
+from fieldlogs.gnss.gis import GnssTrackError, gis_track, points_track
 from fieldlogs.gnss.ontrack import TrackEvidence, TrackSolutions, solve_on_track
 from fieldlogs.gnss.runinputs import GnssInputError, RunGnss, run_gnss
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
@@ -82,12 +82,14 @@ class GnssUnit:
         return self.inputs.epoch_times if self.inputs is not None else np.zeros(0)
 
     def solutions(self, line_code: str, track: str, direction: int) -> TrackSolutions | GnssTrackError:
-        """The run's solutions on a track for a facing (cached), or why there are none."""
+        """The run's solutions on a track for a facing (cached), or why there are none; with
+        ``line_code`` empty, ``track`` is a network track id fitted on its ``track_points``
+        (:func:`fieldlogs.gnss.gis.points_track`)."""
         key = (line_code, track, direction)
         if key not in self._solutions:
             assert self.inputs is not None
             try:
-                gt = gis_track(self.network, line_code, track)
+                gt = gis_track(self.network, line_code, track) if line_code else points_track(self.network, track)
                 self._solutions[key] = solve_on_track(self.inputs, gt, direction, position_config(self.cfg))
             except GnssTrackError as exc:
                 self._solutions[key] = exc

@@ -6,7 +6,10 @@ The rules are in :mod:`fieldlogs.pipeline.hypotheses`; this aid applies them in 
   point: ``Fix.hyps`` empty, or its one candidate no longer where the fix says) is *placed*
   on the network track holding its line, track and km — the position is determined there; if
   it was ambiguous before, that is a ``track_resolved`` event naming the aid as evidence
-  (an S003 pair beyond the innermost switch is decisive);
+  (an S003 pair beyond the innermost switch is decisive). A GPS or GNSS fix (``LINE_ONLY``)
+  decided among the line's tracks only, so every other track within ``PARALLEL_M`` stays a
+  candidate — except a GNSS correction of a position determined (or uncertain) on that very
+  track, whose fit was constrained to it [S002] and says nothing about a parallel one;
 * :meth:`TopologyAid.next_observation` finds, vectorised over the cycles ahead, the first
   cycle at which a rule applies to a candidate (its point passing a joint, its margin reaching
   a facing switch, its interval leaving a track or passing a buffer stop), and there
@@ -84,6 +87,20 @@ def with_hyps(fix: Fix, hyps: list[Hypothesis], t: float, s: float, lines: Track
         state=state,
         hyps=(h,),
         carried=True,
+    )
+
+
+def _same_track(fix: Fix, prev: Fix | None, track_id: str) -> bool:
+    """A raw-GNSS correction of a position determined (or uncertain) on that very track: the
+    fit was constrained to the track in force [S002], so it moves the km along the track and
+    says nothing for or against a parallel one — the single candidate is kept (re-opening the
+    parallel tracks at every epoch would undo the raw-GNSS track test at every epoch)."""
+    return (
+        fix.source == FixSource.GNSS
+        and prev is not None
+        and prev.state in (PositionState.DETERMINED, PositionState.UNCERTAIN)
+        and len(prev.hyps) == 1
+        and prev.hyps[0].track_id == track_id
     )
 
 
@@ -172,7 +189,7 @@ class TopologyAid:
         self.next_id += 1
         h = Hypothesis(tl.track_id, pos, fix.k * tl.km_sign, hid=self.next_id)
         hyps = [h]
-        if fix.source in LINE_ONLY:
+        if fix.source in LINE_ONLY and not _same_track(fix, prev, tl.track_id):
             if self.segments is None:
                 self.segments = segments(self.lines)
             hyps += parallel_candidates(h, PARALLEL_M, self.lines, self.segments)

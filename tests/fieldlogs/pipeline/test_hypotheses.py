@@ -273,17 +273,18 @@ class _Fits:
         return TrackSolutions(line_code, track, direction, None, tb, tb)  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize(("bad", "resolved"), [(40.0, True), (2.5, False)])
+@pytest.mark.parametrize(("bad", "resolved"), [(40.0, True), (4.4, True), (4.0, False), (2.5, False)])
 def test_gnss_fit_on_the_wrong_branch_leaves_large_residuals(bad: float, resolved: bool) -> None:
-    # split at W1 at 10.1 s; from epoch 11 on, 20 epochs (gnss.track_min_epochs) with a median
-    # excess above gnss.track_chi2 are there at t = 30 s: B1 (line 9002) is dropped
+    # split at W1 at 10.1 s; epochs 11…15 are the first gnss.split_epochs = 5 on both branches,
+    # all favouring A2 (share 1 ≥ 0.9): B1 (line 9002) is dropped at t = 15 s when 5 × the
+    # excess (bad − 2) is above gnss.track_chi2 = 10.83: 190 and 12 are, 10 and 2.5 never are
     n = net("junction")
     g = GnssConfig()
     aid = TrackGnssAid(_Fits(2.0, bad), np.arange(41.0), track_lines(n), g)
     sol = run(n, travel(n, np.full(400, 10.0)), Start("9001", "S", 300.0, 1), aid)
     res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
     if resolved:
-        assert len(res) == 1 and res[0].t == 30.0 and res[0].detail["evidence"] == "gnss"
+        assert len(res) == 1 and res[0].t == 15.0 and res[0].detail["evidence"] == "track_gnss"
         assert res[0].detail["track_id"] == "A2"
     else:
         assert not res and (sol.positions[sol.positions["t"] > 11.0]["state"] == "ambiguous").all()

@@ -1,4 +1,5 @@
-"""The floor of the network accuracy bench (bench/accuracy_network.py, issue 31) on fewer runs:
+"""The floor of the network accuracy bench (bench/accuracy_network.py, issue 31) on fewer runs (and of
+its raw-GNSS condition below):
 40 seeded runs over the network sample (10 per GNSS condition), simulated and replayed —
 no wrong-track claim, ≥ 99 % of the facing switches resolved correctly, |error| ≤ margin
 on ≥ 99.9 % of the determined cycles, and the D-GPS selectivity the D-GPS aids along the
@@ -34,3 +35,22 @@ def test_network_accuracy_floor(sample_network_db: Path, tmp_path: Path) -> None
     assert dgps["selectivity"] >= 0.82, dgps
     determined = sum(r["determined"] for r in results)
     assert sum(r["det_within"] for r in results) >= 0.999 * determined > 0
+
+
+RAW_RUNS = 12
+
+
+@pytest.mark.slow
+def test_network_accuracy_raw_gnss(sample_network_db: Path, tmp_path: Path) -> None:
+    """The bench's raw-GNSS condition (runs 40–51 of the same draw, as ``--runs 40 --raw-runs
+    12``): simulated pseudoranges along the routes, balise-only otherwise — no wrong-track claim,
+    no facing switch resolved wrongly, |error| ≤ margin on every determined cycle."""
+    bench = load_script("accuracy_network")
+    runs = network_runs(read_network(sample_network_db), RUNS + RAW_RUNS, SEED)[RUNS:]
+    results = [bench.one((RUNS + j, str(sample_network_db), str(tmp_path), r, bench.RAW)) for j, r in enumerate(runs)]
+    assert {r["condition"] for r in results} == {bench.RAW}
+    s = sum((r["figures"] for r in results), TrackFigures()).summary()
+    assert s["facing_switches"] >= 20
+    assert s["wrong_track_cycles"] == 0 and s["switches_resolved_wrongly"] == 0
+    determined = sum(r["determined"] for r in results)
+    assert sum(r["det_within"] for r in results) == determined > 0

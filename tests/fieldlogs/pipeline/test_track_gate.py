@@ -36,15 +36,15 @@ class LineGps(StaticAid):
     name = "line_gps"
     priority = Priority.TELEGRAM
 
-    def __init__(self, t: float, line: str, track: str, km: float, k: int) -> None:
-        self.t, self.fix = t, (line, track, km, k)
+    def __init__(self, t: float, line: str, track: str, km: float, k: int, source: FixSource = FixSource.GPS) -> None:
+        self.t, self.fix, self.source = t, (line, track, km, k), source
 
     def observations(self) -> list[Observation]:
         return [Observation(self.t)]
 
     def observe(self, obs: Observation, view: object) -> Outcome:
         line, track, km, k = self.fix
-        return Outcome([], Fix(self.t, 10.0 * self.t, 10.0 * self.t, km, km, line, track, k, FixSource.GPS, 2.5))
+        return Outcome([], Fix(self.t, 10.0 * self.t, 10.0 * self.t, km, km, line, track, k, self.source, 2.5))
 
 
 def _run(name: str, v: np.ndarray, start: Start, *extra: object) -> Solution:
@@ -81,6 +81,24 @@ def test_gps_track_change_without_a_crossover_is_refused() -> None:
     assert set(det["track_id"]) == {"D1"}
     at10 = det[np.isclose(det["t"], 10.0)]
     assert at10["km_m"].iloc[0] == pytest.approx(200.0, abs=0.01)
+
+
+@pytest.mark.parametrize(("source", "reopened"), [(FixSource.GPS, True), (FixSource.GNSS, False)])
+def test_a_correction_on_the_determined_track_reopens_the_parallel_one_only_from_gps(
+    source: FixSource, reopened: bool
+) -> None:
+    # on D1 from km 100 at 10 m/s; at t = 5 s a line fix on D itself at km 151 (1 m ahead of
+    # the dead reckoning). A GPS decision compared only the line's tracks: U1, 4 m beside, is a
+    # candidate again. A raw-GNSS correction was fitted on D1 itself (S002): D1 alone stays.
+    fix = LineGps(5.0, "9003", "D", 151.0, 1, source)
+    p = _run("crossover", np.full(90, 10.0), Start("9003", "D", 100.0, 1), fix).positions
+    row = p[np.isclose(p["t"], 5.0)].iloc[0]
+    if reopened:
+        assert row["state"] == "ambiguous"
+        assert sorted(c["track_id"] for c in json.loads(row["candidates"])) == ["D1", "U1"]
+    else:
+        assert row["state"] == "determined" and row["track_id"] == "D1"
+        assert row["km_m"] == pytest.approx(151.0, abs=0.01)
 
 
 def test_gps_track_change_over_the_crossover_is_taken_with_its_parallel_track() -> None:
