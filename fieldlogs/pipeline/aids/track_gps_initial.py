@@ -8,8 +8,11 @@ can start the position themselves, among the network's own tracks, without decid
 * a **steady chain** of ``track_select.gps_along_confirm`` trusted fixes, at most
   ``gps.max_gap_s`` apart, each step's length agreeing with the odometry's
   (| |p_i − p_i−1| − |S_i − S_i−1| | ≤ ``gps_along_step_m``; no track is known yet, so the
-  plane distance is compared), spanning at least ``gps.km_dir_min_m`` of travel so that the
-  direction is seen;
+  plane distance is compared), whose last ``gps_along_confirm`` fixes span at least
+  ``gps.km_dir_min_m`` of travel and move one way throughout — every step of S of one sign,
+  every step of the fixes forward along their net displacement — so that the direction is seen
+  (a chain through a standstill or a rollback the odometry counted forward would give it
+  wrongly);
 * **on a track**: the last fix lies within U of some centreline (U below); otherwise the train
   is on none the DB knows (an unmapped siding) and nothing is started;
 * **candidates**: every track whose centreline passes within 20 m (Heirich's parallel radius,
@@ -17,8 +20,8 @@ can start the position themselves, among the network's own tracks, without decid
   nearest point inside it (not at one of its ends: a continuation beyond a joint is not
   another track), each at distance s − kp·x_a along it (x_a the antenna forward of the
   reference point) with uncertainty U (:func:`fieldlogs.pipeline.aids.track_gps_along.along_uncertainty`);
-* **direction**: the chain's displacement D = p_last − p_first against the candidate's tangent t
-  (toward its end) and the signed travel ΔS: kp = sign(D·t)·sign(ΔS).
+* **direction**: those fixes' displacement D = p_last − p_first against the candidate's tangent t
+  (toward its end) and the signed travel ΔS over them: kp = sign(D·t)·sign(ΔS).
 
 The position is ``ambiguous`` among those candidates (one alone: determined), an
 ``initial_position_gps`` event with ``detail.evidence`` = ``network`` and the candidates; the
@@ -98,11 +101,16 @@ class TrackGpsInitialAid(NetworkFixes):
             and abs(math.hypot(x - prev[2], y - prev[3]) - abs(view.s - prev[1])) <= self.cfg.gps_along_step_m
         )
         self.chain = [*(self.chain or []), (view.t, view.s, x, y)] if steady else [(view.t, view.s, x, y)]
-        first = self.chain[0]
-        ds = view.s - first[1]
-        if len(self.chain) < self.cfg.gps_along_confirm or abs(ds) < self.gps.km_dir_min_m:
+        if len(self.chain) < self.cfg.gps_along_confirm:
             return Outcome()
-        return self._start(view, x - first[2], y - first[3], ds, x, y)
+        last = np.asarray(self.chain[-self.cfg.gps_along_confirm :], dtype=float)
+        dx, dy, ds = last[-1, 2] - last[0, 2], last[-1, 3] - last[0, 3], last[-1, 1] - last[0, 1]
+        steps = np.diff(last, axis=0)
+        if abs(ds) < self.gps.km_dir_min_m or not (
+            (steps[:, 1] * ds > 0.0).all() and (steps[:, 2] * dx + steps[:, 3] * dy > 0.0).all()
+        ):
+            return Outcome()  # standing, or not moving one way throughout: the direction is not seen
+        return self._start(view, dx, dy, ds, x, y)
 
     def _plane(self, j: int) -> tuple[FloatArray, FloatArray]:
         assert self.seg is not None

@@ -127,10 +127,15 @@ def test_unsigned_tacho_rollbacks_found_by_the_imu(rolled_run: tuple[Path, Path]
     assert [json.loads(e)["distance_m"] for e in found["detail"]] == pytest.approx([ROLLBACK_M] * 2, abs=0.1)
     assert (judged["error_m"].abs() <= judged["margin_m"]).all()
     assert not judged["wrong_track"].any()
-    # after the later rollback (a position existed) the position is uncertain, not determined
+    # after the later rollback (a position existed) the position is uncertain, not determined,
+    # until five agreeing D-GPS fixes along the track confirm it (aids/track_gps_along.py)
     t1 = float(found["t"].iloc[1])
-    after = positions[(positions["t"] > t1) & (positions["t"] < t1 + 5.0)]
-    assert (after["state"] == PositionState.UNCERTAIN.value).all()
+    confirmed = events[(events["type"] == EventType.GPS_CORRECTION.value) & (events["t"] > t1)]
+    confirmed = confirmed[[("confirmed_by_fixes" in json.loads(d)) for d in confirmed["detail"]]]
+    t2 = float(confirmed["t"].iloc[0]) if len(confirmed) else t1 + 5.0
+    assert t2 - t1 >= 4.0  # five fixes at 1 Hz at the least
+    after = positions[(positions["t"] > t1) & (positions["t"] < t2)]
+    assert len(after) and (after["state"] == PositionState.UNCERTAIN.value).all()
 
 
 def test_without_the_detection_the_error_leaves_the_margin(

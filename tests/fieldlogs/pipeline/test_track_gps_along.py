@@ -221,3 +221,21 @@ def test_no_start_off_every_track_or_on_a_jumping_chain() -> None:
     _never_started(_initial(_fixes_on("crossover", "D1", off)))
     jumpy = [(t, p + (6.0 if int(t) % 2 else 0.0), o) for t, p, o in along]  # steps of 16 m / 4 m for 10 m
     _never_started(_initial(_fixes_on("crossover", "D1", jumpy)))
+
+
+def test_no_start_before_the_fixes_move_one_way() -> None:
+    # 10 m/s toward D1's end for 3 s from pos 100, then back: the fixes t = 0 … 3 and 3 … 7 each
+    # move one way, but a window holding the turn does not. The first window of five one-way
+    # fixes ends at t = 7 (fixes 3 … 7, all backward); from there pos falls with the travel.
+    v = np.where(np.arange(150) < 30, 10.0, -10.0)
+    pos = [100.0 + 10.0 * t if t <= 3 else 130.0 - 10.0 * (t - 3) for t in range(15)]
+    n = net("crossover")
+    lines = track_lines(n)
+    aid = TrackGpsInitialAid(
+        *_fixes_on("crossover", "D1", [(float(t), p, 0.1) for t, p in enumerate(pos)]), lines, CFG, GPS
+    )
+    sol = run_aids(travel(n, v), [TopologyAid(lines, MARGIN), aid], MARGIN)  # type: ignore[list-item]
+    ev = [e for e in sol.events if e.type == EventType.INITIAL_POSITION_GPS]
+    assert ev and ev[0].t == 7.0
+    later = {c["track_id"]: c for c in json.loads(str(_at(sol, 9.0)["candidates"]))}
+    assert later["D1"]["pos_m"] == pytest.approx(pos[9], abs=0.05)
