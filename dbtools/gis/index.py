@@ -303,6 +303,12 @@ class GridIndex:
         """Geodesic distance to the next point [m] (length n − 1; computed on first use)."""
         return geodesic_step(self.lon, self.lat) if self.n > 1 else np.zeros(0)
 
+    @cached_property
+    def bounds(self) -> tuple[F64, F64]:
+        """:func:`step_bounds` of every step (length n − 1; computed on first use, then shared
+        by the GIS rules and the topology rules' track lengths). Read-only: do not modify."""
+        return step_bounds(self.lon, self.lat)
+
     def steps_outside(self, where: BoolArray, lo: F64, hi: F64) -> tuple[I64, F64]:
         """The steps i with ``where[i]`` whose geodesic length ``dist[i]`` is not finite or lies
         outside [``lo[i]``, ``hi[i]``], and ``dist`` (exact, GRS80 ``Geod.inv``) at least at
@@ -315,7 +321,7 @@ class GridIndex:
             with np.errstate(invalid="ignore"):
                 bad = where & ((d < lo) | (d > hi) | ~np.isfinite(d))
             return np.flatnonzero(bad), d
-        low, high = step_bounds(self.lon, self.lat)
+        low, high = self.bounds
         with np.errstate(invalid="ignore"):
             doubt = np.flatnonzero(where & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
         d = np.full(self.n - 1, np.nan)
