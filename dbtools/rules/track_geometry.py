@@ -312,9 +312,9 @@ def distance_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
 def chord_azimuths(tp: pd.DataFrame, track_ids: set[str]) -> pd.DataFrame:
     """Azimuth [deg] of every chord between consecutive track_points of the given tracks:
     columns ``track_id``, ``az``."""
-    ids = tp["track_id"]
-    wanted = pd.Series(sorted(track_ids), dtype=ids.dtype if isinstance(ids.dtype, pd.StringDtype) else object)
-    sel = tp[first_rows(wanted, ids) >= 0]  # as Arrow text when tp holds it: Arrow's hash look-up
+    held = tp["track_id"]
+    wanted = pd.Series(sorted(track_ids), dtype=held.dtype if isinstance(held.dtype, pd.StringDtype) else object)
+    sel = tp[first_rows(wanted, held) >= 0]  # as Arrow text when tp holds it: Arrow's hash look-up
     if not sorted_by(sel, ("track_id", "pos_m")):
         sel = sel.sort_values(["track_id", "pos_m"], kind="stable")
     ids = texts(sel["track_id"])
