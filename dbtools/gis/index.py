@@ -304,6 +304,13 @@ class GridIndex:
         return geodesic_step(self.lon, self.lat) if self.n > 1 else np.zeros(0)
 
     @cached_property
+    def whole_frame(self) -> bool:
+        """Every row of the frame is a point, in the frame's order (``pos`` = 0 … n − 1): the
+        frame is sorted by (line, track, km) and no key is missing — as read from a DB."""
+        n = len(self.gis)
+        return self.pos.size == n and bool(np.array_equal(self.pos, np.arange(n)))
+
+    @cached_property
     def bounds(self) -> tuple[F64, F64]:
         """:func:`step_bounds` of every step (length n − 1; computed on first use, then shared
         by the GIS rules and the topology rules' track lengths). Read-only: do not modify."""
@@ -514,4 +521,14 @@ def grid_index(network: Network) -> GridIndex:
     table replaced after loading gets a new index."""
     gis, kb = network.gis, network.tables.get("km_breaks")
     georef = network_georef(network)
-    return network.cached(("grid_index", id(gis), id(kb)), lambda: GridIndex(gis, kb, georef=georef))
+    return network.cached(_grid_key(network), lambda: GridIndex(gis, kb, georef=georef))
+
+
+def _grid_key(network: Network) -> tuple[str, int, int]:
+    return ("grid_index", id(network.gis), id(network.tables.get("km_breaks")))
+
+
+def built_grid_index(network: Network) -> GridIndex | None:
+    """The :func:`grid_index` of ``network`` if it was already built, else None (not built)."""
+    grid = network.peek(_grid_key(network))
+    return grid if isinstance(grid, GridIndex) else None

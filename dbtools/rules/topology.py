@@ -191,11 +191,18 @@ OPEN_PORTS = ("b1", "b2")
 
 
 def _required(ports: pd.DataFrame) -> npt.NDArray[np.bool_]:
-    t, p = ports["type"].to_numpy(dtype=object), ports["port"].to_numpy(dtype=object)
-    need = np.zeros(len(ports), dtype=bool)
+    """The ports a switch of its type needs. The port table holds the switches' rows once per
+    port, in the order of ``ALL_PORTS`` (:func:`port_table`): the test runs on the switches'
+    types once and is repeated per port."""
+    n = len(ports) // len(ALL_PORTS)
+    t = ports["type"].to_numpy(dtype=object)[:n]
+    is_kind = {kind: t == kind.value for kind in SWITCH_PORTS}
+    need = [np.zeros(n, dtype=bool) for _ in ALL_PORTS]
     for kind, names in SWITCH_PORTS.items():
-        need |= (t == kind.value) & np.isin(p, names)
-    return need
+        for k, port in enumerate(ALL_PORTS):
+            if port in names:
+                need[k] |= is_kind[kind]
+    return np.concatenate(need) if need else np.zeros(0, dtype=bool)
 
 
 def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
@@ -296,9 +303,10 @@ _ROUTES = {
 }
 
 
-def _pair_codes(pa_: npt.NDArray[np.object_], pb: npt.NDArray[np.object_]) -> I64:
+def _pair_codes(ka: I64, kb: I64) -> I64:
+    """Codes of port pairs given as indexes into ``ALL_PORTS``."""
     digits = np.array([_PORT_DIGIT[p] for p in ALL_PORTS])
-    da, db = (digits[pd.Index(ALL_PORTS).get_indexer(pd.Index(x))] for x in (pa_, pb))
+    da, db = digits[ka], digits[kb]
     return np.asarray(np.minimum(da, db) * 4 + np.maximum(da, db), dtype=np.int64)
 
 
@@ -313,16 +321,17 @@ def _switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
     i, j = int_join(inc["key"].to_numpy()[at], port_key)  # end a at port pa
     k, m = int_join(inc["okey"].to_numpy()[at[i]], port_key)  # end b at port pb
     pa_rows, pb_rows = on[j[k]], on[m]
-    port = ports["port"].to_numpy(dtype=object)
-    pa_, pb = port[pa_rows], port[pb_rows]
+    n_sw = len(ports) // len(ALL_PORTS)  # port_table: the switches once per port of ALL_PORTS
+    ka, kb = pa_rows // n_sw, pb_rows // n_sw
+    names = np.array(ALL_PORTS, dtype=object)
     return pd.DataFrame(
         {
             "crow": inc["row"].to_numpy()[at[i[k]]],
             "sk": inc["sk"].to_numpy()[at[i[k]]],
-            "pa": pa_,
-            "pb": pb,
+            "pa": names[ka],
+            "pb": names[kb],
             "type": ports["type"].to_numpy(dtype=object)[pa_rows],
-            "pair": _pair_codes(pa_, pb),
+            "pair": _pair_codes(ka, kb),
         }
     )
 
@@ -370,11 +379,16 @@ def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out:
     n = len(sw)
     have = a["sk"].to_numpy() * 16 + a["pair"].to_numpy()
     sk, types = ports["sk"].to_numpy()[:n], ports["type"].to_numpy(dtype=object)[:n]
-    has_track = {p: ports["track"].notna().to_numpy()[k * n : (k + 1) * n] for k, p in enumerate(ALL_PORTS)}
+    # (switch code, pair code) pairs present, as a dense table: codes are small non-negative integers
+    present = np.zeros(16 * (1 + max(int(sk.max(initial=0)), int(have.max(initial=0)) // 16)), dtype=bool)
+    present[have] = True
+    given = ports["track"].notna().to_numpy()
+    has_track = {p: given[k * n : (k + 1) * n] for k, p in enumerate(ALL_PORTS)}
     rows, order, names = [], [], []
     for t, routes in _ROUTES.items():
+        of_type = types == t
         for n_route, (code, (lo, hi)) in enumerate(routes):
-            hit = np.flatnonzero((types == t) & has_track[lo] & has_track[hi] & ~int_isin(sk * 16 + code, have))
+            hit = np.flatnonzero(of_type & has_track[lo] & has_track[hi] & ~present[sk * 16 + code])
             rows.append(hit)
             order.append(np.full(hit.size, n_route))
             names += [f"{lo.upper()}–{hi.upper()}"] * hit.size
@@ -396,12 +410,30 @@ def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out:
 
 
 def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
-    ends = inc[inc["track"].notna().to_numpy() & inc["end"].notna().to_numpy()]
-    g = ends.assign(free=ends["switch_id"].isna()).groupby(["tk", "ek"], sort=False)
-    stats = g.agg(
-        n=("row", "size"), free=("free", "any"), row=("row", "min"), track=("track", "first"), end=("end", "first")
+    """Track ends (integer track and end codes) with more than one connection, one of them
+    without a switch; in the order of each end's first connection end in ``inc``."""
+    ends = np.flatnonzero(inc["track"].notna().to_numpy() & inc["end"].notna().to_numpy())
+    tk, ek = inc["tk"].to_numpy()[ends], inc["ek"].to_numpy()[ends]
+    group, _ = pd.factorize(tk * (1 + int(ek.max(initial=0))) + ek)  # in order of first appearance
+    n = np.bincount(group)
+    free = np.bincount(group, weights=inc["switch_id"].isna().to_numpy()[ends]) > 0
+    bad_group = np.flatnonzero((n > 1) & free)
+    is_bad = np.zeros(len(n), dtype=bool)
+    is_bad[bad_group] = True
+    at = np.flatnonzero(is_bad[group])  # the bad ends' rows, each group's first one first
+    row = inc["row"].to_numpy()[ends[at]]
+    first = at[np.unique(group[at], return_index=True)[1]]  # first end of each bad group (by group code)
+    low = np.full(len(n), np.iinfo(np.int64).max)
+    np.minimum.at(low, group[at], row)
+    bad = pd.DataFrame(
+        {
+            "n": n[bad_group],
+            "free": free[bad_group],
+            "row": low[bad_group],
+            "track": inc["track"].to_numpy(dtype=object)[ends[first]],
+            "end": inc["end"].to_numpy(dtype=object)[ends[first]],
+        }
     )
-    bad = stats[(stats["n"] > 1) & stats["free"]]
     out.add(
         "topology.multiple_connections",
         Severity.ERROR,
@@ -424,10 +456,14 @@ def _last_length(tracks: pd.DataFrame) -> pd.Series:
 
 
 def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out) -> None:
-    p = ports[ports["track"].notna().to_numpy() & ports["end"].notna().to_numpy()]
-    d = p[~p["key"].duplicated().to_numpy()]
-    shared = d[d.duplicated(["tk", "ek"], keep=False).to_numpy()]
-    first = shared.drop_duplicates(["tk", "ek"], keep="last")
+    """The duplicate tests on the integer codes of a frame of the port rows' codes; the port
+    table's own rows (text) only for what is reported."""
+    ok = np.flatnonzero(ports["track"].notna().to_numpy() & ports["end"].notna().to_numpy())
+    codes = pd.DataFrame({k: ports[k].to_numpy()[ok] for k in ("key", "sk", "tk", "ek")}, index=ok)
+    d = codes[~codes["key"].duplicated().to_numpy()]
+    dup = d.duplicated(["tk", "ek"], keep=False).to_numpy()
+    shared = ports.loc[d.index[dup]]
+    first = ports.loc[d[dup].drop_duplicates(["tk", "ek"], keep="last").index]
     names = shared.groupby(["track", "end"])["switch_id"].agg(lambda s: ", ".join(map(str, s)))
     out.add(
         "topology.switch_overlap",
@@ -440,8 +476,12 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
     lim = out.config.switch_min_spacing_m
     per = d.drop_duplicates(["sk", "tk"])
     per = per[per.duplicated("tk", keep=False).to_numpy()]
+    tk = per["tk"].to_numpy()
+    _, at, back = np.unique(tk, return_index=True, return_inverse=True)  # each track looked up once
+    track_text = ports["track"].to_numpy(dtype=object)
+    per_length = length.reindex(track_text[per.index.to_numpy()[at]]).to_numpy()[back.reshape(-1)]
     with np.errstate(invalid="ignore"):
-        per = per[length.reindex(per["track"].to_numpy(dtype=object)).to_numpy() < lim]
+        per = ports.loc[per.index[per_length < lim]]
     rows: list[int] = []
     text: dict[int, str] = {}
     for track, grp in per.groupby("track"):
@@ -481,7 +521,11 @@ def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
         stop = column(decl, f"{e}_buffer_stop") if f"{e}_buffer_stop" in decl.columns else np.full(n_decl, None)
         with np.errstate(invalid="ignore"):
             boundary = np.isfinite(k) & ((np.abs(k - lo) <= 1.0) | (np.abs(k - hi) <= 1.0))
-        stopped = np.array([x is not None and bool(x) for x in stop], dtype=bool)
+        held = decl[f"{e}_buffer_stop"] if f"{e}_buffer_stop" in decl.columns else None
+        if held is not None and isinstance(held.dtype, pd.BooleanDtype):  # the canonical dtype: no loop
+            stopped = held.to_numpy(dtype=bool, na_value=False)
+        else:
+            stopped = np.array([x is not None and bool(x) for x in stop], dtype=bool)
         used = _is_in(ids, at[(at_end == e).fillna(False).to_numpy(dtype=bool)])
         opened[e] = connected & ~used & ~stopped & ~boundary
 

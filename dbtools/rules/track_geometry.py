@@ -208,8 +208,7 @@ def _cached_steps(net: Network, g: pd.DataFrame) -> tuple[F64 | None, Bounds | N
     grid sorted by line, track and km) in the same order; (None, None) otherwise."""
     if g is net.gis:
         grid = grid_index(net)
-        n = len(g)
-        if grid.pos.size == n and (n == 0 or (grid.pos[0] == 0 and bool(np.all(np.diff(grid.pos) == 1)))):
+        if grid.whole_frame:
             if "dist" in grid.__dict__:
                 return grid.dist, None
             if "bounds" in grid.__dict__:
