@@ -67,7 +67,15 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
-from dbtools.rules.topology_tables import ALL_PORTS, add_codes, incidence_table, int_isin, int_join, port_table
+from dbtools.rules.topology_tables import (
+    ALL_PORTS,
+    add_codes,
+    incidence_table,
+    int_isin,
+    int_join,
+    object_frame,
+    port_table,
+)
 from dbtools.topology import all_tracks, first_rows, grid_extents
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
@@ -141,11 +149,33 @@ def _is_in(s: pd.Series, known: pd.Series) -> npt.NDArray[np.bool_]:
     return np.asarray(hit.to_numpy(zero_copy_only=False), dtype=bool)
 
 
-def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
-    known = tracks["track_id"]
+def _is_in_each(columns: list[pd.Series], known: pd.Series) -> list[npt.NDArray[np.bool_]]:
+    """:func:`_is_in` of each column, in one hash look-up when all are held as Arrow text
+    (the set of ``known`` is hashed once, not once a column)."""
+    arrays, k = [_arrow(s) for s in columns], _arrow(known)
+    if k is None or any(a is None for a in arrays):
+        return [_is_in(s, known) for s in columns]
+    chunks = [ch.cast(pa.large_string()) for a in arrays if a is not None for ch in a.chunks]
+    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(pa.large_string())
+    hit = np.asarray(
+        pc.is_in(pa.chunked_array(chunks, pa.large_string()), value_set=values).to_numpy(zero_copy_only=False),
+        dtype=bool,
+    )
+    return np.split(hit, np.cumsum([len(s) for s in columns])[:-1])
 
-    def ref(table: str, frame: pd.DataFrame, col: str, what: str) -> None:
-        bad = np.flatnonzero(frame[col].notna().to_numpy() & ~_is_in(frame[col], known))
+
+def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
+    refs = [
+        *((CONNECTIONS.name, net.connections, col, "connection") for col in ("track_a", "track_b")),
+        *((SWITCHES.name, net.switches, f"{p}_track", f"switch port {p.upper()}") for p in ALL_PORTS),
+    ]
+    if "track_id" in net.balises.columns:
+        refs.append((BALISES.name, net.balises, "track_id", "balise"))
+    known = _is_in_each([f[col] for _, f, col, _ in refs], tracks["track_id"])
+
+    def ref(k: int) -> None:
+        table, frame, col, what = refs[k]
+        bad = np.flatnonzero(frame[col].notna().to_numpy() & ~known[k])
         if bad.size == 0:
             return
         v = column(frame, col)
@@ -157,10 +187,8 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
             lambda i: (f"{col} '{v[i]}' names no track ({what})", {"column": col, "value": py(v[i])}),
         )
 
-    for col in ("track_a", "track_b"):
-        ref(CONNECTIONS.name, net.connections, col, "connection")
-    for p in ALL_PORTS:
-        ref(SWITCHES.name, net.switches, f"{p}_track", f"switch port {p.upper()}")
+    for k in range(2 + len(ALL_PORTS)):  # connections, then switch ports
+        ref(k)
     bad = np.flatnonzero(~_is_in(net.track_points["track_id"], net.tracks["track_id"]))
     if bad.size:
         tp_ids = column(net.track_points, "track_id")
@@ -171,8 +199,8 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
             bad,
             lambda i: (f"track_points of '{tp_ids[i]}', which tracks does not declare", {"column": "track_id"}),
         )
-    if "track_id" in net.balises.columns:
-        ref(BALISES.name, net.balises, "track_id", "balise")
+    if len(refs) > 2 + len(ALL_PORTS):  # balises
+        ref(len(refs) - 1)
     c = net.connections
     bad = np.flatnonzero(c["switch_id"].notna().to_numpy() & ~_is_in(c["switch_id"], net.switches["switch_id"]))
     if bad.size:
@@ -207,7 +235,7 @@ def _required(ports: pd.DataFrame) -> npt.NDArray[np.bool_]:
 
 def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
     req = _required(ports)
-    given = ports["track"].notna().to_numpy() & ports["end"].notna().to_numpy()
+    given = ports["has_track"].to_numpy() & ports["has_end"].to_numpy()
     may_be_open = ports["port"].isin(OPEN_PORTS).to_numpy()
     empty = ports[req & ~given & ~may_be_open]
     out.add(
@@ -232,7 +260,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             ),
         ),
     )
-    with_switch = inc["switch_id"].notna().to_numpy()
+    with_switch = inc["has_switch"].to_numpy()
     unused = _merged(ports[given & ~int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])])
     out.add(
         "topology.switch_port",
@@ -313,10 +341,11 @@ def _pair_codes(ka: I64, kb: I64) -> I64:
 def _switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
     """Connections naming a switch, with the ports of that switch their ends are at (a row
     per pair of ports; none where an end is at no port): crow (row of connections), pa/pb,
-    the switch's type, sk (the switch's code) and the port pair's code ``pair`` — joined on
+    ``row`` (pa's row of the port table), sk (the switch's code) and the port pair's code ``pair`` — joined on
     the integer (switch, track, end) keys (:func:`int_join`)."""
-    at = np.flatnonzero((inc["side"] == "a").to_numpy() & inc["switch_id"].notna().to_numpy())
-    on = np.flatnonzero(ports["track"].notna().to_numpy())
+    side_a = np.arange(len(inc)) < len(inc) // 2  # incidence_table: every end a, then every end b
+    at = np.flatnonzero(side_a & inc["has_switch"].to_numpy())
+    on = np.flatnonzero(ports["has_track"].to_numpy())
     port_key = ports["key"].to_numpy()[on]
     i, j = int_join(inc["key"].to_numpy()[at], port_key)  # end a at port pa
     k, m = int_join(inc["okey"].to_numpy()[at[i]], port_key)  # end b at port pb
@@ -324,13 +353,13 @@ def _switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
     n_sw = len(ports) // len(ALL_PORTS)  # port_table: the switches once per port of ALL_PORTS
     ka, kb = pa_rows // n_sw, pb_rows // n_sw
     names = np.array(ALL_PORTS, dtype=object)
-    return pd.DataFrame(
+    return object_frame(  # the text columns stay objects (no conversion to Arrow text and back)
         {
             "crow": inc["row"].to_numpy()[at[i[k]]],
             "sk": inc["sk"].to_numpy()[at[i[k]]],
             "pa": names[ka],
             "pb": names[kb],
-            "type": ports["type"].to_numpy(dtype=object)[pa_rows],
+            "row": pa_rows,
             "pair": _pair_codes(ka, kb),
         }
     )
@@ -341,17 +370,22 @@ def _navigability(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
     if not c["switch_id"].notna().any():
         return
     a = _switch_pairs(ports, inc)
-    types, pair = a["type"].to_numpy(dtype=object), a["pair"].to_numpy()
-    is_route = np.zeros(len(a), dtype=bool)
+    n_sw = len(ports) // len(ALL_PORTS)
+    kind, kinds = pd.factorize(ports["type"].to_numpy()[:n_sw])  # −1: missing
+    route = np.zeros((len(kinds) + 1, 16), dtype=bool)  # (switch type, port pair) → a route; last row: no type
     for t, routes in _ROUTES.items():
-        is_route |= (types == t) & np.isin(pair, [code for code, _ in routes])
-    nav_all = column(c, "navigability")
+        at = np.flatnonzero(np.asarray(kinds, dtype=object) == t)
+        for code, _ in routes:
+            route[at, code] = True
+    pair = a["pair"].to_numpy()
+    is_route = route[kind[a["row"].to_numpy() % n_sw], pair] if n_sw else np.zeros(len(a), dtype=bool)
     crow = a["crow"].to_numpy()
-    nav = nav_all[crow]
-    given = pd.notna(nav)  # a missing one is schema.required
-    wrong = given & ((is_route & (nav == NONE)) | (~is_route & (nav != NONE)))
+    navs = c["navigability"]
+    given = navs.notna().to_numpy()[crow]  # a missing one is schema.required
+    is_none = np.asarray((navs == NONE).to_numpy(dtype=bool, na_value=False), dtype=bool)[crow]
+    wrong = given & ((is_route & is_none) | (~is_route & ~is_none))
     bad = a[wrong]
-    nav_of = dict(zip(bad["crow"], nav[wrong], strict=True))
+    nav_of = dict(zip(bad["crow"], column(c.iloc[bad["crow"].to_numpy()], "navigability"), strict=True))
     pair_of = {
         r: (pa_, pb) if pa_ <= pb else (pb, pa_) for r, pa_, pb in zip(bad["crow"], bad["pa"], bad["pb"], strict=True)
     }
@@ -382,7 +416,7 @@ def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out:
     # (switch code, pair code) pairs present, as a dense table: codes are small non-negative integers
     present = np.zeros(16 * (1 + max(int(sk.max(initial=0)), int(have.max(initial=0)) // 16)), dtype=bool)
     present[have] = True
-    given = ports["track"].notna().to_numpy()
+    given = ports["has_track"].to_numpy()
     has_track = {p: given[k * n : (k + 1) * n] for k, p in enumerate(ALL_PORTS)}
     rows, order, names = [], [], []
     for t, routes in _ROUTES.items():
@@ -412,11 +446,11 @@ def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out:
 def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
     """Track ends (integer track and end codes) with more than one connection, one of them
     without a switch; in the order of each end's first connection end in ``inc``."""
-    ends = np.flatnonzero(inc["track"].notna().to_numpy() & inc["end"].notna().to_numpy())
+    ends = np.flatnonzero(inc["has_track"].to_numpy() & inc["has_end"].to_numpy())
     tk, ek = inc["tk"].to_numpy()[ends], inc["ek"].to_numpy()[ends]
     group, _ = pd.factorize(tk * (1 + int(ek.max(initial=0))) + ek)  # in order of first appearance
     n = np.bincount(group)
-    free = np.bincount(group, weights=inc["switch_id"].isna().to_numpy()[ends]) > 0
+    free = np.bincount(group, weights=~inc["has_switch"].to_numpy()[ends]) > 0
     bad_group = np.flatnonzero((n > 1) & free)
     is_bad = np.zeros(len(n), dtype=bool)
     is_bad[bad_group] = True
@@ -458,7 +492,7 @@ def _last_length(tracks: pd.DataFrame) -> pd.Series:
 def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out) -> None:
     """The duplicate tests on the integer codes of a frame of the port rows' codes; the port
     table's own rows (text) only for what is reported."""
-    ok = np.flatnonzero(ports["track"].notna().to_numpy() & ports["end"].notna().to_numpy())
+    ok = np.flatnonzero(ports["has_track"].to_numpy() & ports["has_end"].to_numpy())
     codes = pd.DataFrame({k: ports[k].to_numpy()[ok] for k in ("key", "sk", "tk", "ek")}, index=ok)
     d = codes[~codes["key"].duplicated().to_numpy()]
     dup = d.duplicated(["tk", "ek"], keep=False).to_numpy()
@@ -500,8 +534,18 @@ def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
         return
     tid = texts(tracks["track_id"])[:n_decl]
     ids, c = tracks["track_id"].iloc[:n_decl], net.connections
-    at, at_end = (pd.concat([c[f"{k}_a"], c[f"{k}_b"]], ignore_index=True) for k in ("track", "end"))
-    connected = _is_in(ids, at)
+    at_end = pd.concat([c["end_a"], c["end_b"]], ignore_index=True)
+    # each connection end's track as its first row in ``ids`` (one hash of the ids): a row of
+    # ``ids`` is in a set of ends' tracks when the first row of its id is among theirs
+    end_row = np.concatenate([first_rows(ids, c["track_a"]), first_rows(ids, c["track_b"])])
+    own_row = first_rows(ids, ids)
+
+    def among(ends: npt.NDArray[np.bool_] | None) -> npt.NDArray[np.bool_]:
+        hit = np.zeros(n_decl + 1, dtype=bool)
+        hit[end_row if ends is None else end_row[ends]] = True  # −1 (no such id) marks the spare last slot
+        return np.asarray(hit[own_row], dtype=bool)
+
+    connected = among(None)
     isolated = np.flatnonzero(~connected)
     out.add(
         "topology.isolated_track",
@@ -518,15 +562,15 @@ def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     opened = {}
     for e in ("begin", "end"):
         k = column(decl, f"km_{e}_m")
-        stop = column(decl, f"{e}_buffer_stop") if f"{e}_buffer_stop" in decl.columns else np.full(n_decl, None)
         with np.errstate(invalid="ignore"):
             boundary = np.isfinite(k) & ((np.abs(k - lo) <= 1.0) | (np.abs(k - hi) <= 1.0))
         held = decl[f"{e}_buffer_stop"] if f"{e}_buffer_stop" in decl.columns else None
         if held is not None and isinstance(held.dtype, pd.BooleanDtype):  # the canonical dtype: no loop
             stopped = held.to_numpy(dtype=bool, na_value=False)
         else:
+            stop = column(decl, f"{e}_buffer_stop") if held is not None else np.full(n_decl, None)
             stopped = np.array([x is not None and bool(x) for x in stop], dtype=bool)
-        used = _is_in(ids, at[(at_end == e).fillna(False).to_numpy(dtype=bool)])
+        used = among((at_end == e).fillna(False).to_numpy(dtype=bool))
         opened[e] = connected & ~used & ~stopped & ~boundary
 
     def text(i: int) -> str:
@@ -565,14 +609,18 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
     rows = np.flatnonzero((ia >= 0) & (ib >= 0))
     if rows.size == 0:
         return
-    ta, tb = column(c, "track_a"), column(c, "track_b")
-    line, k0, k1 = (column(t, k) for k in ("line_code", "km_begin_m", "km_end_m"))
+    k0, k1 = (column(t, k) for k in ("km_begin_m", "km_end_m"))
+    line_code, lines = pd.factorize(t["line_code"])  # −1: missing
     a, b = ia[rows], ib[rows]
-    la, lb = line[a], line[b]
-    ka = np.where(column(c, "end_a")[rows] == "begin", k0[a], k1[a]).astype(float)
-    kb = np.where(column(c, "end_b")[rows] == "begin", k0[b], k1[b]).astype(float)
+    ca, cb = line_code[a], line_code[b]
+    la = np.append(np.asarray(lines, dtype=object), None)[ca]  # −1: None
+    begin_a, begin_b = (
+        np.asarray((c[k] == "begin").to_numpy(dtype=bool, na_value=False))[rows] for k in ("end_a", "end_b")
+    )
+    ka = np.where(begin_a, k0[a], k1[a]).astype(float)
+    kb = np.where(begin_b, k0[b], k1[b]).astype(float)
     with np.errstate(invalid="ignore"):
-        jump = (la == lb) & pd.notna(la) & (np.abs(ka - kb) > config.km_jump_m)
+        jump = (ca == cb) & (ca >= 0) & (np.abs(ka - kb) > config.km_jump_m)
     br = net.km_breaks
     breaks = {
         (str(lc), round(min(x, y), 3), round(max(x, y), 3))
@@ -584,6 +632,7 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
         if (str(la[j]), round(min(ka[j], kb[j]), 3), round(max(ka[j], kb[j]), 3)) not in breaks
     ]
     at = {int(rows[j]): j for j in hit}
+    ta, tb = (column(c, k) if at else np.empty(0, dtype=object) for k in ("track_a", "track_b"))
     out.add(
         "topology.km_jump",
         Severity.ERROR,

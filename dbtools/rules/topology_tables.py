@@ -70,11 +70,23 @@ def shared_codes(*columns: pd.Series) -> list[I64]:
     return np.split(codes.astype(np.int64), np.cumsum([len(c) for c in columns])[:-1])
 
 
+def _given(*columns: pd.Series) -> npt.NDArray[np.bool_]:
+    """Which values of the columns, one after the other, are not missing (from the columns as
+    held: Arrow's validity bitmap, not a test of each object)."""
+    return np.concatenate([np.asarray(c.notna().to_numpy(), dtype=bool) for c in columns])
+
+
 def add_codes(net: Network, inc: pd.DataFrame, ports: pd.DataFrame) -> None:
     """Add codes of switch (``sk``), track (``tk``, ``ok`` of the other track) and end
     (``ek``, ``oek``) to the incidence and port tables, ``key`` = the (switch, track,
-    end) triple as one integer and, to the incidence table, ``okey`` = that of the other end."""
+    end) triple as one integer and, to the incidence table, ``okey`` = that of the other end;
+    and which values are given: ``has_track``, ``has_end`` (both tables), ``has_switch``
+    (the incidence table)."""
     c, sw = net.connections, net.switches
+    inc["has_track"], inc["has_end"] = _given(c["track_a"], c["track_b"]), _given(c["end_a"], c["end_b"])
+    inc["has_switch"] = _given(c["switch_id"], c["switch_id"])
+    ports["has_track"] = _given(*(sw[f"{p}_track"] for p in ALL_PORTS))
+    ports["has_end"] = _given(*(sw[f"{p}_end"] for p in ALL_PORTS))
     csk, ssk = shared_codes(c["switch_id"], sw["switch_id"])
     inc["sk"], ports["sk"] = np.concatenate([csk, csk]), np.tile(ssk, len(ALL_PORTS))
     n_code = []
