@@ -70,10 +70,13 @@ from dbtools.rules.topology_geometry import check_geometry
 from dbtools.rules.topology_tables import (
     ALL_PORTS,
     add_codes,
+    held_objects,
+    incidence_rows,
     incidence_table,
     int_isin,
     int_join,
     object_frame,
+    port_rows,
     port_table,
 )
 from dbtools.topology import all_tracks, first_rows, grid_extents
@@ -127,7 +130,7 @@ def check_topology(net: Network, config: ValidationConfig, loc: Locator) -> list
     _overlap(net, ports, tracks, out)
     _ends(net, tracks, out)
     _km_jump(net, tracks, config, out)
-    out.items += check_geometry(net, tracks, inc, config, loc)
+    out.items += check_geometry(net, tracks, config, loc)
     return out.items
 
 
@@ -218,12 +221,12 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
 OPEN_PORTS = ("b1", "b2")
 
 
-def _required(ports: pd.DataFrame) -> npt.NDArray[np.bool_]:
+def _required(net: Network) -> npt.NDArray[np.bool_]:
     """The ports a switch of its type needs. The port table holds the switches' rows once per
     port, in the order of ``ALL_PORTS`` (:func:`port_table`): the test runs on the switches'
     types once and is repeated per port."""
-    n = len(ports) // len(ALL_PORTS)
-    t = ports["type"].to_numpy(dtype=object)[:n]
+    t = held_objects(net, SWITCHES.name, "type")
+    n = len(t)
     is_kind = {kind: t == kind.value for kind in SWITCH_PORTS}
     need = [np.zeros(n, dtype=bool) for _ in ALL_PORTS]
     for kind, names in SWITCH_PORTS.items():
@@ -234,10 +237,10 @@ def _required(ports: pd.DataFrame) -> npt.NDArray[np.bool_]:
 
 
 def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
-    req = _required(ports)
+    req = _required(net)
     given = ports["has_track"].to_numpy() & ports["has_end"].to_numpy()
-    may_be_open = ports["port"].isin(OPEN_PORTS).to_numpy()
-    empty = ports[req & ~given & ~may_be_open]
+    may_be_open = np.isin(np.array(ALL_PORTS)[ports["pk"].to_numpy()], OPEN_PORTS)
+    empty = port_rows(net, ports[req & ~given & ~may_be_open])
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -247,7 +250,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             empty, lambda r: f"{r.type} switch {r.switch_id} needs port {r.port.upper()} ({r.port}_track, {r.port}_end)"
         ),
     )
-    edge = ports[req & ~given & may_be_open]
+    edge = port_rows(net, ports[req & ~given & may_be_open])
     out.add(
         "topology.switch_open_port",
         Severity.WARNING,
@@ -261,7 +264,9 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         ),
     )
     with_switch = inc["has_switch"].to_numpy()
-    unused = _merged(ports[given & ~int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])])
+    unused = _merged(
+        port_rows(net, ports[given & ~int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])])
+    )
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -275,7 +280,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             ),
         ),
     )
-    dup = ports[given & ports["key"].duplicated(keep="first").to_numpy()]
+    dup = port_rows(net, ports[given & ports["key"].duplicated(keep="first").to_numpy()])
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -287,7 +292,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         ),
     )
     m = inc[with_switch]
-    m = m[~int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])]
+    m = incidence_rows(net, m[~int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])])
     stray = m[isin(m["switch_id"].to_numpy(dtype=object), texts(net.switches["switch_id"]))].drop_duplicates("row")
     out.add(
         "topology.switch_port",
@@ -371,7 +376,7 @@ def _navigability(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         return
     a = _switch_pairs(ports, inc)
     n_sw = len(ports) // len(ALL_PORTS)
-    kind, kinds = pd.factorize(ports["type"].to_numpy()[:n_sw])  # −1: missing
+    kind, kinds = pd.factorize(held_objects(net, SWITCHES.name, "type"))  # −1: missing
     route = np.zeros((len(kinds) + 1, 16), dtype=bool)  # (switch type, port pair) → a route; last row: no type
     for t, routes in _ROUTES.items():
         at = np.flatnonzero(np.asarray(kinds, dtype=object) == t)
@@ -405,14 +410,15 @@ def _navigability(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             {"column": "navigability", "value": nav_of[i], "keys": {"switch_id": py(sid[i])}},
         ),
     )
-    _missing_routes(net.switches, ports, a, out)
+    _missing_routes(net, ports, a, out)
 
 
-def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out: _Out) -> None:
+def _missing_routes(net: Network, ports: pd.DataFrame, a: pd.DataFrame, out: _Out) -> None:
     """Routes of a switch that no connection naming the switch (by id) joins."""
+    sw = net.switches
     n = len(sw)
     have = a["sk"].to_numpy() * 16 + a["pair"].to_numpy()
-    sk, types = ports["sk"].to_numpy()[:n], ports["type"].to_numpy(dtype=object)[:n]
+    sk, types = ports["sk"].to_numpy()[:n], held_objects(net, SWITCHES.name, "type")
     # (switch code, pair code) pairs present, as a dense table: codes are small non-negative integers
     present = np.zeros(16 * (1 + max(int(sk.max(initial=0)), int(have.max(initial=0)) // 16)), dtype=bool)
     present[have] = True
@@ -459,13 +465,14 @@ def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
     first = at[np.unique(group[at], return_index=True)[1]]  # first end of each bad group (by group code)
     low = np.full(len(n), np.iinfo(np.int64).max)
     np.minimum.at(low, group[at], row)
+    text = incidence_rows(net, inc.iloc[ends[first]])[["track", "end"]].to_numpy(dtype=object)
     bad = pd.DataFrame(
         {
             "n": n[bad_group],
             "free": free[bad_group],
             "row": low[bad_group],
-            "track": inc["track"].to_numpy(dtype=object)[ends[first]],
-            "end": inc["end"].to_numpy(dtype=object)[ends[first]],
+            "track": text[:, 0],
+            "end": text[:, 1],
         }
     )
     out.add(
@@ -483,10 +490,15 @@ def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
     )
 
 
-def _last_length(tracks: pd.DataFrame) -> pd.Series:
-    """``length_m`` by track id (the last row of an id given twice)."""
-    s = pd.Series(tracks["length_m"].to_numpy(dtype=float, na_value=np.nan), index=texts(tracks["track_id"]))
-    return s[~s.index.duplicated(keep="last")]
+def _last_length(tracks: pd.DataFrame, ids: npt.NDArray[np.object_]) -> npt.NDArray[np.float64]:
+    """``length_m`` of the given track ids (the last row of an id given twice; NaN: no such
+    track), looked up by Arrow's hashing when the ids are held as Arrow text."""
+    held = tracks["track_id"]
+    n = len(held)
+    named = pd.Series(ids, dtype=held.dtype if isinstance(held.dtype, pd.StringDtype) else object)
+    last = (n - 1) - first_rows(held.iloc[::-1].reset_index(drop=True), named)  # n: none
+    length = np.append(tracks["length_m"].to_numpy(dtype=float, na_value=np.nan), np.nan)
+    return np.asarray(length[last], dtype=float)
 
 
 def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out) -> None:
@@ -496,8 +508,8 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
     codes = pd.DataFrame({k: ports[k].to_numpy()[ok] for k in ("key", "sk", "tk", "ek")}, index=ok)
     d = codes[~codes["key"].duplicated().to_numpy()]
     dup = d.duplicated(["tk", "ek"], keep=False).to_numpy()
-    shared = ports.loc[d.index[dup]]
-    first = ports.loc[d[dup].drop_duplicates(["tk", "ek"], keep="last").index]
+    shared = port_rows(net, ports.loc[d.index[dup]])
+    first = port_rows(net, ports.loc[d[dup].drop_duplicates(["tk", "ek"], keep="last").index])
     names = shared.groupby(["track", "end"])["switch_id"].agg(lambda s: ", ".join(map(str, s)))
     out.add(
         "topology.switch_overlap",
@@ -506,16 +518,16 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
         first["row"].to_numpy(),
         _msg(first, lambda r: f"switches {names[(r.track, r.end)]} share the port {r.track} {r.end}"),
     )
-    length = _last_length(tracks)
     lim = out.config.switch_min_spacing_m
     per = d.drop_duplicates(["sk", "tk"])
     per = per[per.duplicated("tk", keep=False).to_numpy()]
     tk = per["tk"].to_numpy()
     _, at, back = np.unique(tk, return_index=True, return_inverse=True)  # each track looked up once
-    track_text = ports["track"].to_numpy(dtype=object)
-    per_length = length.reindex(track_text[per.index.to_numpy()[at]]).to_numpy()[back.reshape(-1)]
+    track_text = port_rows(net, ports.loc[per.index[at]])["track"].to_numpy(dtype=object)
+    length = dict(zip(track_text, _last_length(tracks, track_text), strict=True))
+    per_length = np.array([length[t] for t in track_text], dtype=float)[back.reshape(-1)]
     with np.errstate(invalid="ignore"):
-        per = ports.loc[per.index[per_length < lim]]
+        per = port_rows(net, ports.loc[per.index[per_length < lim]])
     rows: list[int] = []
     text: dict[int, str] = {}
     for track, grp in per.groupby("track"):
@@ -613,7 +625,7 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
     line_code, lines = pd.factorize(t["line_code"])  # −1: missing
     a, b = ia[rows], ib[rows]
     ca, cb = line_code[a], line_code[b]
-    la = np.append(np.asarray(lines, dtype=object), None)[ca]  # −1: None
+    la = np.asarray([*lines, None], dtype=object)[ca]  # −1: None
     begin_a, begin_b = (
         np.asarray((c[k] == "begin").to_numpy(dtype=bool, na_value=False))[rows] for k in ("end_a", "end_b")
     )

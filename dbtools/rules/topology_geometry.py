@@ -26,9 +26,7 @@ from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS
 
 
-def check_geometry(
-    net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, config: ValidationConfig, loc: Locator
-) -> list[Finding]:
+def check_geometry(net: Network, tracks: pd.DataFrame, config: ValidationConfig, loc: Locator) -> list[Finding]:
     ref = _crossover_ends(net, tracks)
     axes = np.zeros(len(tracks), dtype=bool)  # the only azimuths the rules use: the crossovers' main-track axes
     if ref is not None:

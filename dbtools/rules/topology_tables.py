@@ -1,8 +1,8 @@
 """The long tables the topology rules work on (:mod:`dbtools.rules.topology`): one row per
-switch port and one per connection end, their text held as objects (NaN for missing, as
-pandas' ``str`` columns give it), with shared integer codes of switch, track and end so
+switch port and one per connection end, with shared integer codes of switch, track and end so
 that joins, duplicate tests and look-ups run on integers (issue 30: a national network has
-≥ 50,000 tracks)."""
+≥ 50,000 tracks); their text (objects, NaN for missing, as pandas' ``str`` columns give it)
+only for the rows a rule reports (:func:`port_rows`, :func:`incidence_rows`)."""
 
 from __future__ import annotations
 
@@ -13,53 +13,83 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.network import Network
+from schemas.network import CONNECTIONS, SWITCHES
 
 I64 = npt.NDArray[np.int64]
 ALL_PORTS = ("a1", "b1", "b2", "a2")
 
 
 def text_objects(frame: pd.DataFrame, name: str) -> npt.NDArray[np.object_]:
-    """A text column as objects with NaN for missing, as pandas' ``str`` columns give them
-    (the tables below are held as objects: no conversion to Arrow text and back)."""
+    """A text column as objects with NaN for missing, as pandas' ``str`` columns give them."""
     return np.asarray(frame[name].to_numpy(dtype=object, na_value=np.nan), dtype=object)
 
 
-def object_frame(columns: dict[str, npt.NDArray[Any]]) -> pd.DataFrame:
+def held_objects(net: Network, table: str, name: str) -> npt.NDArray[np.object_]:
+    """:func:`text_objects` of a column of one of the network's tables, converted once per
+    loaded network (the rules pick rows of it)."""
+    return net.cached(("text_objects", table, name), lambda: text_objects(net.tables[table], name))
+
+
+def object_frame(columns: dict[str, npt.NDArray[Any]], index: pd.Index | None = None) -> pd.DataFrame:
     """A frame of the arrays as they are (pandas would turn object text into ``str``)."""
-    return pd.DataFrame({k: pd.Series(v, dtype=v.dtype) for k, v in columns.items()})
+    return pd.DataFrame({k: pd.Series(v, dtype=v.dtype, index=index) for k, v in columns.items()}, index=index)
 
 
 def port_table(sw: pd.DataFrame) -> pd.DataFrame:
-    """Long table of switch ports: row (of switches), switch_id, type, port, track, end."""
+    """Long table of switch ports, one row per switch and port of ``ALL_PORTS`` (port-major:
+    rows k·n … (k+1)·n − 1 are port ``ALL_PORTS[k]`` of the n switches): ``row`` (of
+    switches) and ``pk`` (k); the text of chosen rows by :func:`port_rows`."""
     n, k = len(sw), len(ALL_PORTS)
-    return object_frame(
+    return pd.DataFrame({"row": np.tile(np.arange(n), k), "pk": np.repeat(np.arange(k), n)})
+
+
+def port_rows(net: Network, ports: pd.DataFrame) -> pd.DataFrame:
+    """Rows of the port table (a selection of it) with their text: switch_id, type, port,
+    track, end — objects, NaN for missing (read from the switches' rows they stand for)."""
+    srow, pk = ports["row"].to_numpy(), ports["pk"].to_numpy()
+    track, end = np.empty(len(ports), dtype=object), np.empty(len(ports), dtype=object)
+    for k, p in enumerate(ALL_PORTS):
+        at = np.flatnonzero(pk == k)
+        if at.size:
+            track[at], end[at] = (held_objects(net, SWITCHES.name, f"{p}_{w}")[srow[at]] for w in ("track", "end"))
+    text = object_frame(
         {
-            "row": np.tile(np.arange(n), k),
-            "switch_id": np.tile(text_objects(sw, "switch_id"), k),
-            "type": np.tile(text_objects(sw, "type"), k),
-            "port": np.repeat(np.array(ALL_PORTS, dtype=object), n),
-            "track": np.concatenate([text_objects(sw, f"{p}_track") for p in ALL_PORTS]),
-            "end": np.concatenate([text_objects(sw, f"{p}_end") for p in ALL_PORTS]),
-        }
+            "switch_id": held_objects(net, SWITCHES.name, "switch_id")[srow],
+            "type": held_objects(net, SWITCHES.name, "type")[srow],
+            "port": np.array(ALL_PORTS, dtype=object)[pk],
+            "track": track,
+            "end": end,
+        },
+        ports.index,
     )
+    return pd.concat([ports, text], axis=1)
 
 
 def incidence_table(c: pd.DataFrame) -> pd.DataFrame:
-    """Both ends of every connection: row (of connections), side a/b, track, end, switch_id,
-    other track and end."""
-    ta, ea, tb, eb, sid = (text_objects(c, k) for k in ("track_a", "end_a", "track_b", "end_b", "switch_id"))
+    """Both ends of every connection (every end a, then every end b): ``row`` (of
+    connections); the text of chosen rows by :func:`incidence_rows`."""
     rows = np.arange(len(c))
-    return object_frame(
+    return pd.DataFrame({"row": np.concatenate([rows, rows])})
+
+
+def incidence_rows(net: Network, inc: pd.DataFrame) -> pd.DataFrame:
+    """Rows of the incidence table (a selection of it) with their text: track, end, other
+    track and end, side a/b, switch_id — objects, NaN for missing."""
+    crow, b_side = inc["row"].to_numpy(), inc.index.to_numpy() >= len(net.connections)
+    side = np.where(b_side, "b", "a").astype(object)
+    ta, ea, tb, eb = (held_objects(net, CONNECTIONS.name, k)[crow] for k in ("track_a", "end_a", "track_b", "end_b"))
+    text = object_frame(
         {
-            "track": np.concatenate([ta, tb]),
-            "end": np.concatenate([ea, eb]),
-            "other": np.concatenate([tb, ta]),
-            "other_end": np.concatenate([eb, ea]),
-            "row": np.concatenate([rows, rows]),
-            "side": np.repeat(np.array(["a", "b"], dtype=object), len(c)),
-            "switch_id": np.concatenate([sid, sid]),
-        }
+            "track": np.where(b_side, tb, ta),
+            "end": np.where(b_side, eb, ea),
+            "other": np.where(b_side, ta, tb),
+            "other_end": np.where(b_side, ea, eb),
+            "side": side,
+            "switch_id": held_objects(net, CONNECTIONS.name, "switch_id")[crow],
+        },
+        inc.index,
     )
+    return pd.concat([inc, text], axis=1)
 
 
 def shared_codes(*columns: pd.Series) -> list[I64]:
