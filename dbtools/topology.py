@@ -253,6 +253,19 @@ def first_rows(ids: pd.Series, values: pd.Series) -> npt.NDArray[np.int64]:
     return np.where(at >= 0, pos[np.maximum(at, 0)], -1).astype(np.int64)
 
 
+def connection_rows(net: Network, tracks: pd.DataFrame) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """For every connection: the first row of ``tracks`` holding its ``track_a`` and its
+    ``track_b`` (−1: none) — one hash look-up of both, kept per network when ``tracks`` is
+    :func:`all_tracks` (the topology rules all ask for it)."""
+
+    def build() -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        c = net.connections
+        both = first_rows(tracks["track_id"], pd.concat([c["track_a"], c["track_b"]], ignore_index=True))
+        return both[: len(c)], both[len(c) :]
+
+    return net.cached(("topology", "connection_rows"), build) if tracks is all_tracks(net) else build()
+
+
 def _is(values: pd.Series, *options: str) -> npt.NDArray[np.bool_]:
     """``values[i]`` is one of the options (False where missing)."""
     return np.asarray(values.isin(list(options)).to_numpy(dtype=bool, na_value=False), dtype=bool)

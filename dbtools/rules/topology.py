@@ -79,7 +79,7 @@ from dbtools.rules.topology_tables import (
     port_rows,
     port_table,
 )
-from dbtools.topology import all_tracks, first_rows, grid_extents
+from dbtools.topology import all_tracks, connection_rows, first_rows, grid_extents
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCH_ROUTES, SWITCHES, TRACK_POINTS
@@ -549,7 +549,8 @@ def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     at_end = pd.concat([c["end_a"], c["end_b"]], ignore_index=True)
     # each connection end's track as its first row in ``ids`` (one hash of the ids): a row of
     # ``ids`` is in a set of ends' tracks when the first row of its id is among theirs
-    end_row = np.concatenate([first_rows(ids, c["track_a"]), first_rows(ids, c["track_b"])])
+    end_row = np.concatenate(connection_rows(net, tracks))
+    end_row[end_row >= n_decl] = -1  # a track only implied: not among the declared ``ids``
     own_row = first_rows(ids, ids)
 
     def among(ends: npt.NDArray[np.bool_] | None) -> npt.NDArray[np.bool_]:
@@ -617,7 +618,7 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
     if c.empty:
         return
     t = tracks
-    ia, ib = (first_rows(tracks["track_id"], c[k]) for k in ("track_a", "track_b"))
+    ia, ib = connection_rows(net, tracks)
     rows = np.flatnonzero((ia >= 0) & (ib >= 0))
     if rows.size == 0:
         return

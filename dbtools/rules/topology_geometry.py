@@ -20,7 +20,7 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.track_geometry import chord_azimuths, distance_m, end_coordinates, track_geometry
-from dbtools.topology import first_rows
+from dbtools.topology import connection_rows, first_rows
 from schemas.enums import Severity, TrackKind
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS
@@ -46,7 +46,7 @@ def _gaps(
     c = net.connections
     if c.empty:
         return []
-    ra, rb = (first_rows(tracks["track_id"], c[k]) for k in ("track_a", "track_b"))
+    ra, rb = connection_rows(net, tracks)
     ea, eb = column(c, "end_a"), column(c, "end_b")
     ok = (ra >= 0) & (rb >= 0)
     rows = np.flatnonzero(ok)
@@ -149,8 +149,9 @@ def _crossover_ends(net: Network, tracks: pd.DataFrame) -> pd.DataFrame | None:
         return None
     c = net.connections
     sides = []
+    rows_of = dict(zip("ab", connection_rows(net, tracks), strict=True))
     for a, b in (("a", "b"), ("b", "a")):  # the incidence table's order: every end a, then every end b
-        f_t, f_o = first_rows(ids, c[f"track_{a}"]), first_rows(ids, c[f"track_{b}"])
+        f_t, f_o = rows_of[a], rows_of[b]
         xo_t = (f_t >= 0) & is_xo[np.maximum(f_t, 0)]
         main_o = (f_o >= 0) & ~is_xo[np.maximum(f_o, 0)]
         hit = np.flatnonzero(xo_t & main_o & c["switch_id"].notna().to_numpy())
