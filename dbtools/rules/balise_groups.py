@@ -69,7 +69,8 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
             hit = _by_km_merge(along, line, track, km[free])
         tid[free] = np.where(pd.notna(hit), hit, tid[free])
     pos = np.full(n, np.nan)
-    at = first_rows(tr["track_id"], pd.Series(tid, dtype=object))
+    held = tr["track_id"].dtype
+    at = first_rows(tr["track_id"], pd.Series(tid, dtype=held if isinstance(held, pd.StringDtype) else object))
     has = np.flatnonzero(at >= 0)
     rows = tr.iloc[at[has]]
     k0, k1 = column(rows, "km_begin_m"), column(rows, "km_end_m")

@@ -224,8 +224,9 @@ def _from_gis(
     gis = net.gis
     if gis.empty or not todo.any():
         return None
-    if sorted_by(gis, ("line_code", "track", "km_m")):  # as read from a DB: the grid's runs, no group-by
-        g, ext = gis, grid_extents(net)
+    ext = grid_extents(net)
+    if "start" in ext.columns:  # sorted by line, track and km, as read from a DB: the grid's runs, no group-by
+        g = gis
         codes: npt.NDArray[np.int64] = np.repeat(np.arange(len(ext)), np.diff(np.r_[ext["start"].to_numpy(), len(g)]))
         uniq = pd.MultiIndex.from_arrays([texts(ext["line_code"]), texts(ext["track"])])
         lo, hi = ext["km_lo"].to_numpy(float), ext["km_hi"].to_numpy(float)
