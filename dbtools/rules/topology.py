@@ -60,8 +60,6 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
-import pyarrow as pa
-import pyarrow.compute as pc
 
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py, texts
@@ -69,20 +67,23 @@ from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
 from dbtools.rules.topology_tables import (
     ALL_PORTS,
+    ROUTES,
     add_codes,
     held_objects,
     incidence_rows,
     incidence_table,
     int_isin,
-    int_join,
-    object_frame,
+    is_in,
+    is_in_each,
+    last_length,
     port_rows,
     port_table,
+    switch_pairs,
 )
 from dbtools.topology import all_tracks, connection_rows, first_rows, grid_extents
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
-from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCH_ROUTES, SWITCHES, TRACK_POINTS
+from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCHES, TRACK_POINTS
 from schemas.tables import BALISES
 
 I64 = npt.NDArray[np.int64]
@@ -134,39 +135,6 @@ def check_topology(net: Network, config: ValidationConfig, loc: Locator) -> list
     return out.items
 
 
-def _arrow(s: pd.Series) -> pa.ChunkedArray | None:
-    """A text column as Arrow strings (None: not held as Arrow strings)."""
-    to_arrow = getattr(s.array, "__arrow_array__", None)
-    a = to_arrow() if to_arrow is not None else None
-    return a if a is not None and (pa.types.is_string(a.type) or pa.types.is_large_string(a.type)) else None
-
-
-def _is_in(s: pd.Series, known: pd.Series) -> npt.NDArray[np.bool_]:
-    """``s[i]`` is one of ``known`` (a missing value is when ``known`` has one), by Arrow's
-    hash look-up on the Arrow-held text (no Python strings), else :func:`isin`."""
-    a, k = _arrow(s), _arrow(known)
-    if a is None or k is None:
-        return isin(texts(s), texts(known))
-    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(a.type)
-    hit = pc.is_in(a, value_set=values)
-    return np.asarray(hit.to_numpy(zero_copy_only=False), dtype=bool)
-
-
-def _is_in_each(columns: list[pd.Series], known: pd.Series) -> list[npt.NDArray[np.bool_]]:
-    """:func:`_is_in` of each column, in one hash look-up when all are held as Arrow text
-    (the set of ``known`` is hashed once, not once a column)."""
-    arrays, k = [_arrow(s) for s in columns], _arrow(known)
-    if k is None or any(a is None for a in arrays):
-        return [_is_in(s, known) for s in columns]
-    chunks = [ch.cast(pa.large_string()) for a in arrays if a is not None for ch in a.chunks]
-    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(pa.large_string())
-    hit = np.asarray(
-        pc.is_in(pa.chunked_array(chunks, pa.large_string()), value_set=values).to_numpy(zero_copy_only=False),
-        dtype=bool,
-    )
-    return np.split(hit, np.cumsum([len(s) for s in columns])[:-1])
-
-
 def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     refs = [
         *((CONNECTIONS.name, net.connections, col, "connection") for col in ("track_a", "track_b")),
@@ -174,7 +142,7 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     ]
     if "track_id" in net.balises.columns:
         refs.append((BALISES.name, net.balises, "track_id", "balise"))
-    known = _is_in_each([f[col] for _, f, col, _ in refs], tracks["track_id"])
+    known = is_in_each([f[col] for _, f, col, _ in refs], tracks["track_id"])
 
     def ref(k: int) -> None:
         table, frame, col, what = refs[k]
@@ -192,7 +160,7 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
 
     for k in range(2 + len(ALL_PORTS)):  # connections, then switch ports
         ref(k)
-    bad = np.flatnonzero(~_is_in(net.track_points["track_id"], net.tracks["track_id"]))
+    bad = np.flatnonzero(~is_in(net.track_points["track_id"], net.tracks["track_id"]))
     if bad.size:
         tp_ids = column(net.track_points, "track_id")
         out.add(
@@ -205,7 +173,7 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     if len(refs) > 2 + len(ALL_PORTS):  # balises
         ref(len(refs) - 1)
     c = net.connections
-    bad = np.flatnonzero(c["switch_id"].notna().to_numpy() & ~_is_in(c["switch_id"], net.switches["switch_id"]))
+    bad = np.flatnonzero(c["switch_id"].notna().to_numpy() & ~is_in(c["switch_id"], net.switches["switch_id"]))
     if bad.size:
         sid = column(c, "switch_id")
         out.add(
@@ -327,58 +295,15 @@ def _keys(r: pd.Series) -> dict[str, object]:
     return {k: py(r[k]) for k in ("switch_id", "track") if k in r.index and py(r[k]) is not None}
 
 
-#: Port → digit of a port pair's code (the pair's smaller and larger port: 4·lo + hi).
-_PORT_DIGIT = {p: i for i, p in enumerate(sorted(ALL_PORTS))}
-#: Switch type → codes of its routes, in declared order, with the routes as sorted pairs.
-_ROUTES = {
-    t.value: [(_PORT_DIGIT[lo] * 4 + _PORT_DIGIT[hi], (lo, hi)) for lo, hi in (sorted(r) for r in rs)]
-    for t, rs in SWITCH_ROUTES.items()
-}
-
-
-def _pair_codes(ka: I64, kb: I64) -> I64:
-    """Codes of port pairs given as indexes into ``ALL_PORTS``."""
-    digits = np.array([_PORT_DIGIT[p] for p in ALL_PORTS])
-    da, db = digits[ka], digits[kb]
-    return np.asarray(np.minimum(da, db) * 4 + np.maximum(da, db), dtype=np.int64)
-
-
-def _switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
-    """Connections naming a switch, with the ports of that switch their ends are at (a row
-    per pair of ports; none where an end is at no port): crow (row of connections), pa/pb,
-    ``row`` (pa's row of the port table), sk (the switch's code) and the port pair's code ``pair`` — joined on
-    the integer (switch, track, end) keys (:func:`int_join`)."""
-    side_a = np.arange(len(inc)) < len(inc) // 2  # incidence_table: every end a, then every end b
-    at = np.flatnonzero(side_a & inc["has_switch"].to_numpy())
-    on = np.flatnonzero(ports["has_track"].to_numpy())
-    port_key = ports["key"].to_numpy()[on]
-    i, j = int_join(inc["key"].to_numpy()[at], port_key)  # end a at port pa
-    k, m = int_join(inc["okey"].to_numpy()[at[i]], port_key)  # end b at port pb
-    pa_rows, pb_rows = on[j[k]], on[m]
-    n_sw = len(ports) // len(ALL_PORTS)  # port_table: the switches once per port of ALL_PORTS
-    ka, kb = pa_rows // n_sw, pb_rows // n_sw
-    names = np.array(ALL_PORTS, dtype=object)
-    return object_frame(  # the text columns stay objects (no conversion to Arrow text and back)
-        {
-            "crow": inc["row"].to_numpy()[at[i[k]]],
-            "sk": inc["sk"].to_numpy()[at[i[k]]],
-            "pa": names[ka],
-            "pb": names[kb],
-            "row": pa_rows,
-            "pair": _pair_codes(ka, kb),
-        }
-    )
-
-
 def _navigability(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
     c = net.connections
     if not c["switch_id"].notna().any():
         return
-    a = _switch_pairs(ports, inc)
+    a = switch_pairs(ports, inc)
     n_sw = len(ports) // len(ALL_PORTS)
     kind, kinds = pd.factorize(held_objects(net, SWITCHES.name, "type"))  # −1: missing
     route = np.zeros((len(kinds) + 1, 16), dtype=bool)  # (switch type, port pair) → a route; last row: no type
-    for t, routes in _ROUTES.items():
+    for t, routes in ROUTES.items():
         at = np.flatnonzero(np.asarray(kinds, dtype=object) == t)
         for code, _ in routes:
             route[at, code] = True
@@ -425,7 +350,7 @@ def _missing_routes(net: Network, ports: pd.DataFrame, a: pd.DataFrame, out: _Ou
     given = ports["has_track"].to_numpy()
     has_track = {p: given[k * n : (k + 1) * n] for k, p in enumerate(ALL_PORTS)}
     rows, order, names = [], [], []
-    for t, routes in _ROUTES.items():
+    for t, routes in ROUTES.items():
         of_type = types == t
         for n_route, (code, (lo, hi)) in enumerate(routes):
             hit = np.flatnonzero(of_type & has_track[lo] & has_track[hi] & ~present[sk * 16 + code])
@@ -490,17 +415,6 @@ def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
     )
 
 
-def _last_length(tracks: pd.DataFrame, ids: npt.NDArray[np.object_]) -> npt.NDArray[np.float64]:
-    """``length_m`` of the given track ids (the last row of an id given twice; NaN: no such
-    track), looked up by Arrow's hashing when the ids are held as Arrow text."""
-    held = tracks["track_id"]
-    n = len(held)
-    named = pd.Series(ids, dtype=held.dtype if isinstance(held.dtype, pd.StringDtype) else object)
-    last = (n - 1) - first_rows(held.iloc[::-1].reset_index(drop=True), named)  # n: none
-    length = np.append(tracks["length_m"].to_numpy(dtype=float, na_value=np.nan), np.nan)
-    return np.asarray(length[last], dtype=float)
-
-
 def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out) -> None:
     """The duplicate tests on the integer codes of a frame of the port rows' codes; the port
     table's own rows (text) only for what is reported."""
@@ -524,7 +438,7 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
     tk = per["tk"].to_numpy()
     _, at, back = np.unique(tk, return_index=True, return_inverse=True)  # each track looked up once
     track_text = port_rows(net, ports.loc[per.index[at]])["track"].to_numpy(dtype=object)
-    length = dict(zip(track_text, _last_length(tracks, track_text), strict=True))
+    length = dict(zip(track_text, last_length(tracks, track_text), strict=True))
     per_length = np.array([length[t] for t in track_text], dtype=float)[back.reshape(-1)]
     with np.errstate(invalid="ignore"):
         per = port_rows(net, ports.loc[per.index[per_length < lim]])

@@ -11,9 +11,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from dbtools.network import Network
-from schemas.network import CONNECTIONS, SWITCHES
+from dbtools.rules.common import isin as text_isin
+from dbtools.rules.common import texts
+from dbtools.topology import first_rows
+from schemas.network import CONNECTIONS, SWITCH_ROUTES, SWITCHES
 
 I64 = npt.NDArray[np.int64]
 ALL_PORTS = ("a1", "b1", "b2", "a2")
@@ -147,3 +152,90 @@ def int_join(left: I64, right: I64) -> tuple[I64, I64]:
     li = np.repeat(np.arange(len(left), dtype=np.int64), cnt)
     within = np.arange(int(cnt.sum()), dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     return li, np.asarray(order[np.repeat(lo, cnt) + within], dtype=np.int64)
+
+
+def arrow_text(s: pd.Series) -> pa.ChunkedArray | None:
+    """A text column as Arrow strings (None: not held as Arrow strings)."""
+    to_arrow = getattr(s.array, "__arrow_array__", None)
+    a = to_arrow() if to_arrow is not None else None
+    return a if a is not None and (pa.types.is_string(a.type) or pa.types.is_large_string(a.type)) else None
+
+
+def is_in(s: pd.Series, known: pd.Series) -> npt.NDArray[np.bool_]:
+    """``s[i]`` is one of ``known`` (a missing value is when ``known`` has one), by Arrow's
+    hash look-up on the Arrow-held text (no Python strings), else :func:`dbtools.rules.common.isin`."""
+    a, k = arrow_text(s), arrow_text(known)
+    if a is None or k is None:
+        return text_isin(texts(s), texts(known))
+    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(a.type)
+    hit = pc.is_in(a, value_set=values)
+    return np.asarray(hit.to_numpy(zero_copy_only=False), dtype=bool)
+
+
+def is_in_each(columns: list[pd.Series], known: pd.Series) -> list[npt.NDArray[np.bool_]]:
+    """:func:`is_in` of each column, in one hash look-up when all are held as Arrow text
+    (the set of ``known`` is hashed once, not once a column)."""
+    arrays, k = [arrow_text(s) for s in columns], arrow_text(known)
+    if k is None or any(a is None for a in arrays):
+        return [is_in(s, known) for s in columns]
+    chunks = [ch.cast(pa.large_string()) for a in arrays if a is not None for ch in a.chunks]
+    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(pa.large_string())
+    hit = np.asarray(
+        pc.is_in(pa.chunked_array(chunks, pa.large_string()), value_set=values).to_numpy(zero_copy_only=False),
+        dtype=bool,
+    )
+    return np.split(hit, np.cumsum([len(s) for s in columns])[:-1])
+
+
+#: Port → digit of a port pair's code (the pair's smaller and larger port: 4·lo + hi).
+PORT_DIGIT = {p: i for i, p in enumerate(sorted(ALL_PORTS))}
+#: Switch type → codes of its routes, in declared order, with the routes as sorted pairs.
+ROUTES = {
+    t.value: [(PORT_DIGIT[lo] * 4 + PORT_DIGIT[hi], (lo, hi)) for lo, hi in (sorted(r) for r in rs)]
+    for t, rs in SWITCH_ROUTES.items()
+}
+
+
+def pair_codes(ka: I64, kb: I64) -> I64:
+    """Codes of port pairs given as indexes into ``ALL_PORTS``."""
+    digits = np.array([PORT_DIGIT[p] for p in ALL_PORTS])
+    da, db = digits[ka], digits[kb]
+    return np.asarray(np.minimum(da, db) * 4 + np.maximum(da, db), dtype=np.int64)
+
+
+def switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
+    """Connections naming a switch, with the ports of that switch their ends are at (a row
+    per pair of ports; none where an end is at no port): crow (row of connections), pa/pb,
+    ``row`` (pa's row of the port table), sk (the switch's code) and the port pair's code ``pair`` — joined on
+    the integer (switch, track, end) keys (:func:`int_join`)."""
+    side_a = np.arange(len(inc)) < len(inc) // 2  # incidence_table: every end a, then every end b
+    at = np.flatnonzero(side_a & inc["has_switch"].to_numpy())
+    on = np.flatnonzero(ports["has_track"].to_numpy())
+    port_key = ports["key"].to_numpy()[on]
+    i, j = int_join(inc["key"].to_numpy()[at], port_key)  # end a at port pa
+    k, m = int_join(inc["okey"].to_numpy()[at[i]], port_key)  # end b at port pb
+    pa_rows, pb_rows = on[j[k]], on[m]
+    n_sw = len(ports) // len(ALL_PORTS)  # port_table: the switches once per port of ALL_PORTS
+    ka, kb = pa_rows // n_sw, pb_rows // n_sw
+    names = np.array(ALL_PORTS, dtype=object)
+    return object_frame(  # the text columns stay objects (no conversion to Arrow text and back)
+        {
+            "crow": inc["row"].to_numpy()[at[i[k]]],
+            "sk": inc["sk"].to_numpy()[at[i[k]]],
+            "pa": names[ka],
+            "pb": names[kb],
+            "row": pa_rows,
+            "pair": pair_codes(ka, kb),
+        }
+    )
+
+
+def last_length(tracks: pd.DataFrame, ids: npt.NDArray[np.object_]) -> npt.NDArray[np.float64]:
+    """``length_m`` of the given track ids (the last row of an id given twice; NaN: no such
+    track), looked up by Arrow's hashing when the ids are held as Arrow text."""
+    held = tracks["track_id"]
+    n = len(held)
+    named = pd.Series(ids, dtype=held.dtype if isinstance(held.dtype, pd.StringDtype) else object)
+    last = (n - 1) - first_rows(held.iloc[::-1].reset_index(drop=True), named)  # n: none
+    length = np.append(tracks["length_m"].to_numpy(dtype=float, na_value=np.nan), np.nan)
+    return np.asarray(length[last], dtype=float)
