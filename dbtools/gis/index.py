@@ -246,9 +246,13 @@ class GridIndex:
         km_breaks: pd.DataFrame | None = None,
         projector: Projector | None = None,
         georef: Georef | None = None,
+        keep_bounds: bool = False,
     ) -> None:
         self.gis = gis
         self.km_breaks = km_breaks
+        self.keep_bounds = keep_bounds
+        """Keep the step bounds :meth:`steps_outside` computes (:attr:`bounds`: 16 bytes a
+        point, for the topology rules' track lengths) instead of dropping them."""
         (lcode, luniq), (tcode, tuniq) = _codes(gis, "line_code"), _codes(gis, "track")
         km, lat, lon = (_column(gis, c, True) for c in ("km_m", "lat", "lon"))
         self.georef = georef if georef is not None else derive(lat, lon)
@@ -328,7 +332,7 @@ class GridIndex:
             with np.errstate(invalid="ignore"):
                 bad = where & ((d < lo) | (d > hi) | ~np.isfinite(d))
             return np.flatnonzero(bad), d
-        low, high = self.bounds
+        low, high = self.bounds if self.keep_bounds or "bounds" in self.__dict__ else step_bounds(self.lon, self.lat)
         with np.errstate(invalid="ignore"):
             doubt = np.flatnonzero(where & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
         d = np.full(self.n - 1, np.nan)
@@ -521,7 +525,8 @@ def grid_index(network: Network) -> GridIndex:
     table replaced after loading gets a new index."""
     gis, kb = network.gis, network.tables.get("km_breaks")
     georef = network_georef(network)
-    return network.cached(_grid_key(network), lambda: GridIndex(gis, kb, georef=georef))
+    keep = not network.tracks.empty  # a network with tracks: its topology rules reuse the step bounds
+    return network.cached(_grid_key(network), lambda: GridIndex(gis, kb, georef=georef, keep_bounds=keep))
 
 
 def _grid_key(network: Network) -> tuple[str, int, int]:
