@@ -59,6 +59,10 @@ class Network:
             self._cache[key] = factory()
         return self._cache[key]  # type: ignore[return-value]
 
+    def peek(self, key: object) -> object | None:
+        """What :meth:`cached` holds under ``key``, or None when it was not built yet."""
+        return self._cache.get(key)
+
     @property
     def gis(self) -> pd.DataFrame:
         return self.tables[GIS.name]

@@ -14,9 +14,11 @@ enters the other track at the connected end and so travels on it away from that 
 
 from __future__ import annotations
 
+import sys
 from collections import defaultdict
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -28,6 +30,9 @@ from dbtools.network import Network, canonical, sorted_by
 from dbtools.rules.common import texts
 from schemas.enums import Navigability, TrackEnd, TrackKind
 from schemas.network import NETWORK_TRACKS
+
+if TYPE_CHECKING:
+    from dbtools.gis.index import GridIndex
 
 BEGIN, END = TrackEnd.BEGIN.value, TrackEnd.END.value
 
@@ -72,12 +77,33 @@ def grid_extents(net: Network) -> pd.DataFrame:
     """Lowest and highest km of each (line_code, track) of the grid, in (line_code, track)
     order (built once per loaded network); for a grid sorted by line, track and km (as read
     from a DB) also ``start``, the row where each one's run begins."""
-    return net.cached(("topology", "grid_extents"), lambda: _grid_extents(net.gis))
+    return net.cached(("topology", "grid_extents"), lambda: _grid_extents(net.gis, _whole_grid(net)))
 
 
-def _grid_extents(gis: pd.DataFrame) -> pd.DataFrame:
+def _whole_grid(net: Network) -> GridIndex | None:
+    """The network's grid index when already built and holding every GIS row in frame order:
+    its runs of (line, track) are then the grid's (no second factorization of the grid's text)."""
+    if "dbtools.gis.index" not in sys.modules:  # no grid index was built (and pyproj stays unloaded)
+        return None
+    from dbtools.gis.index import built_grid_index
+
+    grid = built_grid_index(net)
+    return grid if grid is not None and grid.gis is net.gis and grid.whole_frame else None
+
+
+def _grid_extents(gis: pd.DataFrame, grid: GridIndex | None = None) -> pd.DataFrame:
     if gis.empty:
         return pd.DataFrame({"line_code": [], "track": [], "km_lo": [], "km_hi": []})
+    if grid is not None:  # sorted, every key given: the grid index's runs are the rows' runs
+        return pd.DataFrame(
+            {
+                "start": grid.start,
+                "line_code": grid.lines,
+                "track": grid.tracks,
+                "km_lo": np.fmin.reduceat(grid.km, grid.start),
+                "km_hi": np.fmax.reduceat(grid.km, grid.start),
+            }
+        )
     if sorted_by(gis, ("line_code", "track", "km_m")):  # as read from a DB: runs of rows, no group-by
         line, _ = pd.factorize(gis["line_code"])
         track, _ = pd.factorize(gis["track"])
@@ -256,6 +282,19 @@ def first_rows(ids: pd.Series, values: pd.Series) -> npt.NDArray[np.int64]:
     pos = np.flatnonzero(first)
     at = index[first].get_indexer(pd.Index(texts(values), dtype="object"))
     return np.where(at >= 0, pos[np.maximum(at, 0)], -1).astype(np.int64)
+
+
+def connection_rows(net: Network, tracks: pd.DataFrame) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """For every connection: the first row of ``tracks`` holding its ``track_a`` and its
+    ``track_b`` (−1: none) — one hash look-up of both, kept per network when ``tracks`` is
+    :func:`all_tracks` (the topology rules all ask for it)."""
+
+    def build() -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        c = net.connections
+        both = first_rows(tracks["track_id"], pd.concat([c["track_a"], c["track_b"]], ignore_index=True))
+        return both[: len(c)], both[len(c) :]
+
+    return net.cached(("topology", "connection_rows"), build) if tracks is all_tracks(net) else build()
 
 
 def _is(values: pd.Series, *options: str) -> npt.NDArray[np.bool_]:

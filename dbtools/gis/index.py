@@ -246,9 +246,13 @@ class GridIndex:
         km_breaks: pd.DataFrame | None = None,
         projector: Projector | None = None,
         georef: Georef | None = None,
+        keep_bounds: bool = False,
     ) -> None:
         self.gis = gis
         self.km_breaks = km_breaks
+        self.keep_bounds = keep_bounds
+        """Keep the step bounds :meth:`steps_outside` computes (:attr:`bounds`: 16 bytes a
+        point, for the topology rules' track lengths) instead of dropping them."""
         (lcode, luniq), (tcode, tuniq) = _codes(gis, "line_code"), _codes(gis, "track")
         km, lat, lon = (_column(gis, c, True) for c in ("km_m", "lat", "lon"))
         self.georef = georef if georef is not None else derive(lat, lon)
@@ -303,6 +307,19 @@ class GridIndex:
         """Geodesic distance to the next point [m] (length n − 1; computed on first use)."""
         return geodesic_step(self.lon, self.lat) if self.n > 1 else np.zeros(0)
 
+    @cached_property
+    def whole_frame(self) -> bool:
+        """Every row of the frame is a point, in the frame's order (``pos`` = 0 … n − 1): the
+        frame is sorted by (line, track, km) and no key is missing — as read from a DB."""
+        n = len(self.gis)
+        return self.pos.size == n and bool(np.array_equal(self.pos, np.arange(n)))
+
+    @cached_property
+    def bounds(self) -> tuple[F64, F64]:
+        """:func:`step_bounds` of every step (length n − 1; computed on first use, then shared
+        by the GIS rules and the topology rules' track lengths). Read-only: do not modify."""
+        return step_bounds(self.lon, self.lat)
+
     def steps_outside(self, where: BoolArray, lo: F64, hi: F64) -> tuple[I64, F64]:
         """The steps i with ``where[i]`` whose geodesic length ``dist[i]`` is not finite or lies
         outside [``lo[i]``, ``hi[i]``], and ``dist`` (exact, GRS80 ``Geod.inv``) at least at
@@ -315,7 +332,7 @@ class GridIndex:
             with np.errstate(invalid="ignore"):
                 bad = where & ((d < lo) | (d > hi) | ~np.isfinite(d))
             return np.flatnonzero(bad), d
-        low, high = step_bounds(self.lon, self.lat)
+        low, high = self.bounds if self.keep_bounds or "bounds" in self.__dict__ else step_bounds(self.lon, self.lat)
         with np.errstate(invalid="ignore"):
             doubt = np.flatnonzero(where & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
         d = np.full(self.n - 1, np.nan)
@@ -508,4 +525,15 @@ def grid_index(network: Network) -> GridIndex:
     table replaced after loading gets a new index."""
     gis, kb = network.gis, network.tables.get("km_breaks")
     georef = network_georef(network)
-    return network.cached(("grid_index", id(gis), id(kb)), lambda: GridIndex(gis, kb, georef=georef))
+    keep = not network.tracks.empty  # a network with tracks: its topology rules reuse the step bounds
+    return network.cached(_grid_key(network), lambda: GridIndex(gis, kb, georef=georef, keep_bounds=keep))
+
+
+def _grid_key(network: Network) -> tuple[str, int, int]:
+    return ("grid_index", id(network.gis), id(network.tables.get("km_breaks")))
+
+
+def built_grid_index(network: Network) -> GridIndex | None:
+    """The :func:`grid_index` of ``network`` if it was already built, else None (not built)."""
+    grid = network.peek(_grid_key(network))
+    return grid if isinstance(grid, GridIndex) else None

@@ -69,7 +69,8 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
             hit = _by_km_merge(along, line, track, km[free])
         tid[free] = np.where(pd.notna(hit), hit, tid[free])
     pos = np.full(n, np.nan)
-    at = first_rows(tr["track_id"], pd.Series(tid, dtype=object))
+    held = tr["track_id"].dtype
+    at = first_rows(tr["track_id"], pd.Series(tid, dtype=held if isinstance(held, pd.StringDtype) else object))
     has = np.flatnonzero(at >= 0)
     rows = tr.iloc[at[has]]
     k0, k1 = column(rows, "km_begin_m"), column(rows, "km_end_m")
@@ -347,10 +348,6 @@ def _ambiguous(
 ) -> set[tuple[int, int]]:
     """The route walk (module doc); returns the (row, row) pairs it reported."""
     kind, sig = column(b, "kind"), column(b, "signal_type")
-    pair = [
-        (a, s_, t_)
-        for a, s_, t_ in zip(column(b, "line_code"), column(b, "station_code"), column(b, "track"), strict=True)
-    ]
     # one walker per place of a G identity, one per C balise: (row, identity)
     reps = places.drop_duplicates("place")
     walkers: list[tuple[int, tuple[object, ...]]] = [
@@ -361,38 +358,11 @@ def _ambiguous(
     count: dict[tuple[object, ...], int] = defaultdict(int)
     for _, ident in walkers:
         count[ident] += 1
-    walkers = [(r, i) for r, i in walkers if count[i] > 1 and pd.notna(tid[r]) and np.isfinite(pos[r])]
-    g = topology(net).graph
-    at = g.codes(tid)  # every located balise's track is a track of the graph
-    length = g.length.tolist()
-    on_track: dict[tuple[int, tuple[object, ...]], list[tuple[float, int]]] = defaultdict(list)
-    for r, ident in walkers:
-        on_track[(int(at[r]), ident)].append((float(pos[r]), r))
-    ptr, succ = g.ptr.tolist(), g.succ.tolist()
-    found: dict[tuple[int, int], float] = {}
+    placed = (pd.notna(tid) & np.isfinite(pos)).tolist()
+    walkers = [(r, i) for r, i in walkers if count[i] > 1 and placed[r]]
+    found = _walk(net, walkers, tid, pos, _pair_codes(b), config.id_window_m)
     w = config.id_window_m
-    for r, ident in walkers:
-        t0 = int(at[r])
-        for up in (1, 0):
-            # state 2·track + up (travelling towards the end: up = 1); off: route distance at
-            # the track's begin (up) / end (down)
-            stack = [(2 * t0 + up, -float(pos[r]) if up else float(pos[r]) - length[t0])]
-            best: dict[int, float] = {}
-            while stack:
-                state, off = stack.pop()
-                if best.get(state, np.inf) <= off:
-                    continue
-                best[state] = off
-                t = state >> 1
-                ln = length[t]
-                for p, o in on_track.get((t, ident), ()):
-                    dist = off + (p if state & 1 else ln - p)
-                    if o != r and 0 < dist <= w and not (ident[0] == "C" and pair[o] == pair[r]):
-                        key = (min(r, o), max(r, o))
-                        found[key] = min(found.get(key, np.inf), dist)
-                exit_at = off + ln
-                if exit_at < w:
-                    stack += [(x, exit_at) for x in succ[ptr[state] : ptr[state + 1]]]
+
     bid = column(b, "balise_id")
     hits = sorted(found)
     out += capped(
@@ -416,3 +386,61 @@ def _ambiguous(
         loc.file(T),
     )
     return set(hits)
+
+
+def _pair_codes(b: pd.DataFrame) -> list[int]:
+    """(line, station, track) of each balise as one integer: equal triples (a missing part
+    equal to a missing part) get equal codes."""
+    pair_code = np.zeros(len(b), dtype=np.int64)
+    for k in ("line_code", "station_code", "track"):
+        code, uniq = pd.factorize(b[k], use_na_sentinel=False)
+        pair_code = pair_code * (len(uniq) + 1) + code
+    return [int(x) for x in pair_code.tolist()]
+
+
+def _walk(
+    net: Network,
+    walkers: list[tuple[int, tuple[object, ...]]],
+    tid: npt.NDArray[np.object_],
+    pos: F64,
+    pair: list[int],
+    w: float,
+) -> dict[tuple[int, int], float]:
+    """The route walk of each walker (row, identity) both ways within ``w`` (module doc):
+    (row, row) → the shortest route distance found between two balises of one identity (C
+    balises of the same (line, station, track) ``pair`` code excepted)."""
+    g = topology(net).graph
+    at = g.codes(tid)  # every located balise's track is a track of the graph
+    length = g.length.tolist()
+    # identity → track → [(pos, row)] of its walkers there, in walker order
+    on_track: dict[tuple[object, ...], dict[int, list[tuple[float, int]]]] = defaultdict(lambda: defaultdict(list))
+    for r, ident in walkers:
+        on_track[ident][int(at[r])].append((float(pos[r]), r))
+    ptr, succ = g.ptr.tolist(), g.succ.tolist()
+    found: dict[tuple[int, int], float] = {}
+    inf = float("inf")
+    for r, ident in walkers:
+        t0 = int(at[r])
+        here = on_track[ident]
+        is_c, pair_r = ident[0] == "C", pair[r]
+        for up in (1, 0):
+            # state 2·track + up (travelling towards the end: up = 1); off: route distance at
+            # the track's begin (up) / end (down)
+            stack = [(2 * t0 + up, -float(pos[r]) if up else float(pos[r]) - length[t0])]
+            best: dict[int, float] = {}
+            while stack:
+                state, off = stack.pop()
+                if best.get(state, inf) <= off:
+                    continue
+                best[state] = off
+                t = state >> 1
+                ln = length[t]
+                for p, o in here.get(t, ()):
+                    dist = off + (p if state & 1 else ln - p)
+                    if o != r and 0 < dist <= w and not (is_c and pair[o] == pair_r):
+                        key = (min(r, o), max(r, o))
+                        found[key] = min(found.get(key, inf), dist)
+                exit_at = off + ln
+                if exit_at < w:
+                    stack += [(x, exit_at) for x in succ[ptr[state] : ptr[state + 1]]]
+    return found

@@ -60,18 +60,30 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
-import pyarrow as pa
-import pyarrow.compute as pc
 
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, fmt_km, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.topology_geometry import check_geometry
-from dbtools.rules.topology_tables import ALL_PORTS, add_codes, incidence_table, int_isin, int_join, port_table
-from dbtools.topology import all_tracks, first_rows, grid_extents
+from dbtools.rules.topology_tables import (
+    ALL_PORTS,
+    ROUTES,
+    add_codes,
+    held_objects,
+    incidence_rows,
+    incidence_table,
+    int_isin,
+    is_in,
+    is_in_each,
+    last_length,
+    port_rows,
+    port_table,
+    switch_pairs,
+)
+from dbtools.topology import all_tracks, connection_rows, first_rows, grid_extents
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
-from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCH_ROUTES, SWITCHES, TRACK_POINTS
+from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCHES, TRACK_POINTS
 from schemas.tables import BALISES
 
 I64 = npt.NDArray[np.int64]
@@ -119,33 +131,22 @@ def check_topology(net: Network, config: ValidationConfig, loc: Locator) -> list
     _overlap(net, ports, tracks, out)
     _ends(net, tracks, out)
     _km_jump(net, tracks, config, out)
-    out.items += check_geometry(net, tracks, inc, config, loc)
+    out.items += check_geometry(net, tracks, config, loc)
     return out.items
 
 
-def _arrow(s: pd.Series) -> pa.ChunkedArray | None:
-    """A text column as Arrow strings (None: not held as Arrow strings)."""
-    to_arrow = getattr(s.array, "__arrow_array__", None)
-    a = to_arrow() if to_arrow is not None else None
-    return a if a is not None and (pa.types.is_string(a.type) or pa.types.is_large_string(a.type)) else None
-
-
-def _is_in(s: pd.Series, known: pd.Series) -> npt.NDArray[np.bool_]:
-    """``s[i]`` is one of ``known`` (a missing value is when ``known`` has one), by Arrow's
-    hash look-up on the Arrow-held text (no Python strings), else :func:`isin`."""
-    a, k = _arrow(s), _arrow(known)
-    if a is None or k is None:
-        return isin(texts(s), texts(known))
-    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(a.type)
-    hit = pc.is_in(a, value_set=values)
-    return np.asarray(hit.to_numpy(zero_copy_only=False), dtype=bool)
-
-
 def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
-    known = tracks["track_id"]
+    refs = [
+        *((CONNECTIONS.name, net.connections, col, "connection") for col in ("track_a", "track_b")),
+        *((SWITCHES.name, net.switches, f"{p}_track", f"switch port {p.upper()}") for p in ALL_PORTS),
+    ]
+    if "track_id" in net.balises.columns:
+        refs.append((BALISES.name, net.balises, "track_id", "balise"))
+    known = is_in_each([f[col] for _, f, col, _ in refs], tracks["track_id"])
 
-    def ref(table: str, frame: pd.DataFrame, col: str, what: str) -> None:
-        bad = np.flatnonzero(frame[col].notna().to_numpy() & ~_is_in(frame[col], known))
+    def ref(k: int) -> None:
+        table, frame, col, what = refs[k]
+        bad = np.flatnonzero(frame[col].notna().to_numpy() & ~known[k])
         if bad.size == 0:
             return
         v = column(frame, col)
@@ -157,11 +158,9 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
             lambda i: (f"{col} '{v[i]}' names no track ({what})", {"column": col, "value": py(v[i])}),
         )
 
-    for col in ("track_a", "track_b"):
-        ref(CONNECTIONS.name, net.connections, col, "connection")
-    for p in ALL_PORTS:
-        ref(SWITCHES.name, net.switches, f"{p}_track", f"switch port {p.upper()}")
-    bad = np.flatnonzero(~_is_in(net.track_points["track_id"], net.tracks["track_id"]))
+    for k in range(2 + len(ALL_PORTS)):  # connections, then switch ports
+        ref(k)
+    bad = np.flatnonzero(~is_in(net.track_points["track_id"], net.tracks["track_id"]))
     if bad.size:
         tp_ids = column(net.track_points, "track_id")
         out.add(
@@ -171,10 +170,10 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
             bad,
             lambda i: (f"track_points of '{tp_ids[i]}', which tracks does not declare", {"column": "track_id"}),
         )
-    if "track_id" in net.balises.columns:
-        ref(BALISES.name, net.balises, "track_id", "balise")
+    if len(refs) > 2 + len(ALL_PORTS):  # balises
+        ref(len(refs) - 1)
     c = net.connections
-    bad = np.flatnonzero(c["switch_id"].notna().to_numpy() & ~_is_in(c["switch_id"], net.switches["switch_id"]))
+    bad = np.flatnonzero(c["switch_id"].notna().to_numpy() & ~is_in(c["switch_id"], net.switches["switch_id"]))
     if bad.size:
         sid = column(c, "switch_id")
         out.add(
@@ -190,19 +189,26 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
 OPEN_PORTS = ("b1", "b2")
 
 
-def _required(ports: pd.DataFrame) -> npt.NDArray[np.bool_]:
-    t, p = ports["type"].to_numpy(dtype=object), ports["port"].to_numpy(dtype=object)
-    need = np.zeros(len(ports), dtype=bool)
+def _required(net: Network) -> npt.NDArray[np.bool_]:
+    """The ports a switch of its type needs. The port table holds the switches' rows once per
+    port, in the order of ``ALL_PORTS`` (:func:`port_table`): the test runs on the switches'
+    types once and is repeated per port."""
+    t = held_objects(net, SWITCHES.name, "type")
+    n = len(t)
+    is_kind = {kind: t == kind.value for kind in SWITCH_PORTS}
+    need = [np.zeros(n, dtype=bool) for _ in ALL_PORTS]
     for kind, names in SWITCH_PORTS.items():
-        need |= (t == kind.value) & np.isin(p, names)
-    return need
+        for k, port in enumerate(ALL_PORTS):
+            if port in names:
+                need[k] |= is_kind[kind]
+    return np.concatenate(need) if need else np.zeros(0, dtype=bool)
 
 
 def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
-    req = _required(ports)
-    given = ports["track"].notna().to_numpy() & ports["end"].notna().to_numpy()
-    may_be_open = ports["port"].isin(OPEN_PORTS).to_numpy()
-    empty = ports[req & ~given & ~may_be_open]
+    req = _required(net)
+    given = ports["has_track"].to_numpy() & ports["has_end"].to_numpy()
+    may_be_open = np.isin(np.array(ALL_PORTS)[ports["pk"].to_numpy()], OPEN_PORTS)
+    empty = port_rows(net, ports[req & ~given & ~may_be_open])
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -212,7 +218,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             empty, lambda r: f"{r.type} switch {r.switch_id} needs port {r.port.upper()} ({r.port}_track, {r.port}_end)"
         ),
     )
-    edge = ports[req & ~given & may_be_open]
+    edge = port_rows(net, ports[req & ~given & may_be_open])
     out.add(
         "topology.switch_open_port",
         Severity.WARNING,
@@ -225,8 +231,10 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             ),
         ),
     )
-    with_switch = inc["switch_id"].notna().to_numpy()
-    unused = _merged(ports[given & ~int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])])
+    with_switch = inc["has_switch"].to_numpy()
+    unused = _merged(
+        port_rows(net, ports[given & ~int_isin(ports["key"].to_numpy(), inc["key"].to_numpy()[with_switch])])
+    )
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -240,7 +248,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             ),
         ),
     )
-    dup = ports[given & ports["key"].duplicated(keep="first").to_numpy()]
+    dup = port_rows(net, ports[given & ports["key"].duplicated(keep="first").to_numpy()])
     out.add(
         "topology.switch_port",
         Severity.ERROR,
@@ -252,7 +260,7 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
         ),
     )
     m = inc[with_switch]
-    m = m[~int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])]
+    m = incidence_rows(net, m[~int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])])
     stray = m[isin(m["switch_id"].to_numpy(dtype=object), texts(net.switches["switch_id"]))].drop_duplicates("row")
     out.add(
         "topology.switch_port",
@@ -287,62 +295,27 @@ def _keys(r: pd.Series) -> dict[str, object]:
     return {k: py(r[k]) for k in ("switch_id", "track") if k in r.index and py(r[k]) is not None}
 
 
-#: Port → digit of a port pair's code (the pair's smaller and larger port: 4·lo + hi).
-_PORT_DIGIT = {p: i for i, p in enumerate(sorted(ALL_PORTS))}
-#: Switch type → codes of its routes, in declared order, with the routes as sorted pairs.
-_ROUTES = {
-    t.value: [(_PORT_DIGIT[lo] * 4 + _PORT_DIGIT[hi], (lo, hi)) for lo, hi in (sorted(r) for r in rs)]
-    for t, rs in SWITCH_ROUTES.items()
-}
-
-
-def _pair_codes(pa_: npt.NDArray[np.object_], pb: npt.NDArray[np.object_]) -> I64:
-    digits = np.array([_PORT_DIGIT[p] for p in ALL_PORTS])
-    da, db = (digits[pd.Index(ALL_PORTS).get_indexer(pd.Index(x))] for x in (pa_, pb))
-    return np.asarray(np.minimum(da, db) * 4 + np.maximum(da, db), dtype=np.int64)
-
-
-def _switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
-    """Connections naming a switch, with the ports of that switch their ends are at (a row
-    per pair of ports; none where an end is at no port): crow (row of connections), pa/pb,
-    the switch's type, sk (the switch's code) and the port pair's code ``pair`` — joined on
-    the integer (switch, track, end) keys (:func:`int_join`)."""
-    at = np.flatnonzero((inc["side"] == "a").to_numpy() & inc["switch_id"].notna().to_numpy())
-    on = np.flatnonzero(ports["track"].notna().to_numpy())
-    port_key = ports["key"].to_numpy()[on]
-    i, j = int_join(inc["key"].to_numpy()[at], port_key)  # end a at port pa
-    k, m = int_join(inc["okey"].to_numpy()[at[i]], port_key)  # end b at port pb
-    pa_rows, pb_rows = on[j[k]], on[m]
-    port = ports["port"].to_numpy(dtype=object)
-    pa_, pb = port[pa_rows], port[pb_rows]
-    return pd.DataFrame(
-        {
-            "crow": inc["row"].to_numpy()[at[i[k]]],
-            "sk": inc["sk"].to_numpy()[at[i[k]]],
-            "pa": pa_,
-            "pb": pb,
-            "type": ports["type"].to_numpy(dtype=object)[pa_rows],
-            "pair": _pair_codes(pa_, pb),
-        }
-    )
-
-
 def _navigability(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
     c = net.connections
     if not c["switch_id"].notna().any():
         return
-    a = _switch_pairs(ports, inc)
-    types, pair = a["type"].to_numpy(dtype=object), a["pair"].to_numpy()
-    is_route = np.zeros(len(a), dtype=bool)
-    for t, routes in _ROUTES.items():
-        is_route |= (types == t) & np.isin(pair, [code for code, _ in routes])
-    nav_all = column(c, "navigability")
+    a = switch_pairs(ports, inc)
+    n_sw = len(ports) // len(ALL_PORTS)
+    kind, kinds = pd.factorize(held_objects(net, SWITCHES.name, "type"))  # −1: missing
+    route = np.zeros((len(kinds) + 1, 16), dtype=bool)  # (switch type, port pair) → a route; last row: no type
+    for t, routes in ROUTES.items():
+        at = np.flatnonzero(np.asarray(kinds, dtype=object) == t)
+        for code, _ in routes:
+            route[at, code] = True
+    pair = a["pair"].to_numpy()
+    is_route = route[kind[a["row"].to_numpy() % n_sw], pair] if n_sw else np.zeros(len(a), dtype=bool)
     crow = a["crow"].to_numpy()
-    nav = nav_all[crow]
-    given = pd.notna(nav)  # a missing one is schema.required
-    wrong = given & ((is_route & (nav == NONE)) | (~is_route & (nav != NONE)))
+    navs = c["navigability"]
+    given = navs.notna().to_numpy()[crow]  # a missing one is schema.required
+    is_none = np.asarray((navs == NONE).to_numpy(dtype=bool, na_value=False), dtype=bool)[crow]
+    wrong = given & ((is_route & is_none) | (~is_route & ~is_none))
     bad = a[wrong]
-    nav_of = dict(zip(bad["crow"], nav[wrong], strict=True))
+    nav_of = dict(zip(bad["crow"], column(c.iloc[bad["crow"].to_numpy()], "navigability"), strict=True))
     pair_of = {
         r: (pa_, pb) if pa_ <= pb else (pb, pa_) for r, pa_, pb in zip(bad["crow"], bad["pa"], bad["pb"], strict=True)
     }
@@ -362,19 +335,25 @@ def _navigability(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             {"column": "navigability", "value": nav_of[i], "keys": {"switch_id": py(sid[i])}},
         ),
     )
-    _missing_routes(net.switches, ports, a, out)
+    _missing_routes(net, ports, a, out)
 
 
-def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out: _Out) -> None:
+def _missing_routes(net: Network, ports: pd.DataFrame, a: pd.DataFrame, out: _Out) -> None:
     """Routes of a switch that no connection naming the switch (by id) joins."""
+    sw = net.switches
     n = len(sw)
     have = a["sk"].to_numpy() * 16 + a["pair"].to_numpy()
-    sk, types = ports["sk"].to_numpy()[:n], ports["type"].to_numpy(dtype=object)[:n]
-    has_track = {p: ports["track"].notna().to_numpy()[k * n : (k + 1) * n] for k, p in enumerate(ALL_PORTS)}
+    sk, types = ports["sk"].to_numpy()[:n], held_objects(net, SWITCHES.name, "type")
+    # (switch code, pair code) pairs present, as a dense table: codes are small non-negative integers
+    present = np.zeros(16 * (1 + max(int(sk.max(initial=0)), int(have.max(initial=0)) // 16)), dtype=bool)
+    present[have] = True
+    given = ports["has_track"].to_numpy()
+    has_track = {p: given[k * n : (k + 1) * n] for k, p in enumerate(ALL_PORTS)}
     rows, order, names = [], [], []
-    for t, routes in _ROUTES.items():
+    for t, routes in ROUTES.items():
+        of_type = types == t
         for n_route, (code, (lo, hi)) in enumerate(routes):
-            hit = np.flatnonzero((types == t) & has_track[lo] & has_track[hi] & ~int_isin(sk * 16 + code, have))
+            hit = np.flatnonzero(of_type & has_track[lo] & has_track[hi] & ~present[sk * 16 + code])
             rows.append(hit)
             order.append(np.full(hit.size, n_route))
             names += [f"{lo.upper()}–{hi.upper()}"] * hit.size
@@ -396,12 +375,31 @@ def _missing_routes(sw: pd.DataFrame, ports: pd.DataFrame, a: pd.DataFrame, out:
 
 
 def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
-    ends = inc[inc["track"].notna().to_numpy() & inc["end"].notna().to_numpy()]
-    g = ends.assign(free=ends["switch_id"].isna()).groupby(["tk", "ek"], sort=False)
-    stats = g.agg(
-        n=("row", "size"), free=("free", "any"), row=("row", "min"), track=("track", "first"), end=("end", "first")
+    """Track ends (integer track and end codes) with more than one connection, one of them
+    without a switch; in the order of each end's first connection end in ``inc``."""
+    ends = np.flatnonzero(inc["has_track"].to_numpy() & inc["has_end"].to_numpy())
+    tk, ek = inc["tk"].to_numpy()[ends], inc["ek"].to_numpy()[ends]
+    group, _ = pd.factorize(tk * (1 + int(ek.max(initial=0))) + ek)  # in order of first appearance
+    n = np.bincount(group)
+    free = np.bincount(group, weights=~inc["has_switch"].to_numpy()[ends]) > 0
+    bad_group = np.flatnonzero((n > 1) & free)
+    is_bad = np.zeros(len(n), dtype=bool)
+    is_bad[bad_group] = True
+    at = np.flatnonzero(is_bad[group])  # the bad ends' rows, each group's first one first
+    row = inc["row"].to_numpy()[ends[at]]
+    first = at[np.unique(group[at], return_index=True)[1]]  # first end of each bad group (by group code)
+    low = np.full(len(n), np.iinfo(np.int64).max)
+    np.minimum.at(low, group[at], row)
+    text = incidence_rows(net, inc.iloc[ends[first]])[["track", "end"]].to_numpy(dtype=object)
+    bad = pd.DataFrame(
+        {
+            "n": n[bad_group],
+            "free": free[bad_group],
+            "row": low[bad_group],
+            "track": text[:, 0],
+            "end": text[:, 1],
+        }
     )
-    bad = stats[(stats["n"] > 1) & stats["free"]]
     out.add(
         "topology.multiple_connections",
         Severity.ERROR,
@@ -417,17 +415,15 @@ def _multiple(net: Network, inc: pd.DataFrame, out: _Out) -> None:
     )
 
 
-def _last_length(tracks: pd.DataFrame) -> pd.Series:
-    """``length_m`` by track id (the last row of an id given twice)."""
-    s = pd.Series(tracks["length_m"].to_numpy(dtype=float, na_value=np.nan), index=texts(tracks["track_id"]))
-    return s[~s.index.duplicated(keep="last")]
-
-
 def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out) -> None:
-    p = ports[ports["track"].notna().to_numpy() & ports["end"].notna().to_numpy()]
-    d = p[~p["key"].duplicated().to_numpy()]
-    shared = d[d.duplicated(["tk", "ek"], keep=False).to_numpy()]
-    first = shared.drop_duplicates(["tk", "ek"], keep="last")
+    """The duplicate tests on the integer codes of a frame of the port rows' codes; the port
+    table's own rows (text) only for what is reported."""
+    ok = np.flatnonzero(ports["has_track"].to_numpy() & ports["has_end"].to_numpy())
+    codes = pd.DataFrame({k: ports[k].to_numpy()[ok] for k in ("key", "sk", "tk", "ek")}, index=ok)
+    d = codes[~codes["key"].duplicated().to_numpy()]
+    dup = d.duplicated(["tk", "ek"], keep=False).to_numpy()
+    shared = port_rows(net, ports.loc[d.index[dup]])
+    first = port_rows(net, ports.loc[d[dup].drop_duplicates(["tk", "ek"], keep="last").index])
     names = shared.groupby(["track", "end"])["switch_id"].agg(lambda s: ", ".join(map(str, s)))
     out.add(
         "topology.switch_overlap",
@@ -436,12 +432,16 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
         first["row"].to_numpy(),
         _msg(first, lambda r: f"switches {names[(r.track, r.end)]} share the port {r.track} {r.end}"),
     )
-    length = _last_length(tracks)
     lim = out.config.switch_min_spacing_m
     per = d.drop_duplicates(["sk", "tk"])
     per = per[per.duplicated("tk", keep=False).to_numpy()]
+    tk = per["tk"].to_numpy()
+    _, at, back = np.unique(tk, return_index=True, return_inverse=True)  # each track looked up once
+    track_text = port_rows(net, ports.loc[per.index[at]])["track"].to_numpy(dtype=object)
+    length = dict(zip(track_text, last_length(tracks, track_text), strict=True))
+    per_length = np.array([length[t] for t in track_text], dtype=float)[back.reshape(-1)]
     with np.errstate(invalid="ignore"):
-        per = per[length.reindex(per["track"].to_numpy(dtype=object)).to_numpy() < lim]
+        per = port_rows(net, ports.loc[per.index[per_length < lim]])
     rows: list[int] = []
     text: dict[int, str] = {}
     for track, grp in per.groupby("track"):
@@ -460,8 +460,19 @@ def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
         return
     tid = texts(tracks["track_id"])[:n_decl]
     ids, c = tracks["track_id"].iloc[:n_decl], net.connections
-    at, at_end = (pd.concat([c[f"{k}_a"], c[f"{k}_b"]], ignore_index=True) for k in ("track", "end"))
-    connected = _is_in(ids, at)
+    at_end = pd.concat([c["end_a"], c["end_b"]], ignore_index=True)
+    # each connection end's track as its first row in ``ids`` (one hash of the ids): a row of
+    # ``ids`` is in a set of ends' tracks when the first row of its id is among theirs
+    end_row = np.concatenate(connection_rows(net, tracks))
+    end_row[end_row >= n_decl] = -1  # a track only implied: not among the declared ``ids``
+    own_row = first_rows(ids, ids)
+
+    def among(ends: npt.NDArray[np.bool_] | None) -> npt.NDArray[np.bool_]:
+        hit = np.zeros(n_decl + 1, dtype=bool)
+        hit[end_row if ends is None else end_row[ends]] = True  # −1 (no such id) marks the spare last slot
+        return np.asarray(hit[own_row], dtype=bool)
+
+    connected = among(None)
     isolated = np.flatnonzero(~connected)
     out.add(
         "topology.isolated_track",
@@ -478,11 +489,15 @@ def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     opened = {}
     for e in ("begin", "end"):
         k = column(decl, f"km_{e}_m")
-        stop = column(decl, f"{e}_buffer_stop") if f"{e}_buffer_stop" in decl.columns else np.full(n_decl, None)
         with np.errstate(invalid="ignore"):
             boundary = np.isfinite(k) & ((np.abs(k - lo) <= 1.0) | (np.abs(k - hi) <= 1.0))
-        stopped = np.array([x is not None and bool(x) for x in stop], dtype=bool)
-        used = _is_in(ids, at[(at_end == e).fillna(False).to_numpy(dtype=bool)])
+        held = decl[f"{e}_buffer_stop"] if f"{e}_buffer_stop" in decl.columns else None
+        if held is not None and isinstance(held.dtype, pd.BooleanDtype):  # the canonical dtype: no loop
+            stopped = held.to_numpy(dtype=bool, na_value=False)
+        else:
+            stop = column(decl, f"{e}_buffer_stop") if held is not None else np.full(n_decl, None)
+            stopped = np.array([x is not None and bool(x) for x in stop], dtype=bool)
+        used = among((at_end == e).fillna(False).to_numpy(dtype=bool))
         opened[e] = connected & ~used & ~stopped & ~boundary
 
     def text(i: int) -> str:
@@ -517,18 +532,22 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
     if c.empty:
         return
     t = tracks
-    ia, ib = (first_rows(tracks["track_id"], c[k]) for k in ("track_a", "track_b"))
+    ia, ib = connection_rows(net, tracks)
     rows = np.flatnonzero((ia >= 0) & (ib >= 0))
     if rows.size == 0:
         return
-    ta, tb = column(c, "track_a"), column(c, "track_b")
-    line, k0, k1 = (column(t, k) for k in ("line_code", "km_begin_m", "km_end_m"))
+    k0, k1 = (column(t, k) for k in ("km_begin_m", "km_end_m"))
+    line_code, lines = pd.factorize(t["line_code"])  # −1: missing
     a, b = ia[rows], ib[rows]
-    la, lb = line[a], line[b]
-    ka = np.where(column(c, "end_a")[rows] == "begin", k0[a], k1[a]).astype(float)
-    kb = np.where(column(c, "end_b")[rows] == "begin", k0[b], k1[b]).astype(float)
+    ca, cb = line_code[a], line_code[b]
+    la = np.asarray([*lines, None], dtype=object)[ca]  # −1: None
+    begin_a, begin_b = (
+        np.asarray((c[k] == "begin").to_numpy(dtype=bool, na_value=False))[rows] for k in ("end_a", "end_b")
+    )
+    ka = np.where(begin_a, k0[a], k1[a]).astype(float)
+    kb = np.where(begin_b, k0[b], k1[b]).astype(float)
     with np.errstate(invalid="ignore"):
-        jump = (la == lb) & pd.notna(la) & (np.abs(ka - kb) > config.km_jump_m)
+        jump = (ca == cb) & (ca >= 0) & (np.abs(ka - kb) > config.km_jump_m)
     br = net.km_breaks
     breaks = {
         (str(lc), round(min(x, y), 3), round(max(x, y), 3))
@@ -540,6 +559,7 @@ def _km_jump(net: Network, tracks: pd.DataFrame, config: ValidationConfig, out: 
         if (str(la[j]), round(min(ka[j], kb[j]), 3), round(max(ka[j], kb[j]), 3)) not in breaks
     ]
     at = {int(rows[j]): j for j in hit}
+    ta, tb = (column(c, k) if at else np.empty(0, dtype=object) for k in ("track_a", "track_b"))
     out.add(
         "topology.km_jump",
         Severity.ERROR,

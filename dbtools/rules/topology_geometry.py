@@ -20,23 +20,23 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.track_geometry import chord_azimuths, distance_m, end_coordinates, track_geometry
-from dbtools.topology import first_rows
+from dbtools.topology import connection_rows, first_rows
 from schemas.enums import Severity, TrackKind
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS
 
 
-def check_geometry(
-    net: Network, tracks: pd.DataFrame, inc: pd.DataFrame, config: ValidationConfig, loc: Locator
-) -> list[Finding]:
+def check_geometry(net: Network, tracks: pd.DataFrame, config: ValidationConfig, loc: Locator) -> list[Finding]:
+    ref = _crossover_ends(net, tracks)
+    axes = np.zeros(len(tracks), dtype=bool)  # the only azimuths the rules use: the crossovers' main-track axes
+    if ref is not None:
+        axes[ref["rows"].to_numpy()] = True
     key = ("rules", "track_geometry", config.length_tolerance_m, config.length_tolerance_rel)
-    geo = net.cached(key, lambda: track_geometry(net, tracks, partial(_length_in_doubt, net, config)))
-    pos = pd.Series(np.arange(len(tracks)), index=texts(tracks["track_id"]))
-    pos = pos[~pos.index.duplicated()]
+    geo = net.cached(key, lambda: track_geometry(net, tracks, partial(_length_in_doubt, net, config), axes))
     return (
         _gaps(net, tracks, geo, config, loc)
         + _lengths(net, geo, config, loc)
-        + _crossover_angles(net, tracks, geo, pos, inc, config, loc)
+        + _crossover_angles(net, geo, ref, config, loc)
     )
 
 
@@ -46,7 +46,7 @@ def _gaps(
     c = net.connections
     if c.empty:
         return []
-    ra, rb = (first_rows(tracks["track_id"], c[k]) for k in ("track_a", "track_b"))
+    ra, rb = connection_rows(net, tracks)
     ea, eb = column(c, "end_a"), column(c, "end_b")
     ok = (ra >= 0) & (rb >= 0)
     rows = np.flatnonzero(ok)
@@ -132,48 +132,90 @@ def _lengths(net: Network, geo: pd.DataFrame, config: ValidationConfig, loc: Loc
     )
 
 
-def _crossover_angles(
-    net: Network,
-    tracks: pd.DataFrame,
-    geo: pd.DataFrame,
-    pos: pd.Series,
-    inc: pd.DataFrame,
-    config: ValidationConfig,
-    loc: Locator,
-) -> list[Finding]:
-    ids = texts(tracks["track_id"])
-    kinds = pd.Series(texts(tracks["kind"]), index=ids)
-    kinds = kinds[~kinds.index.duplicated(keep="last")]  # a track id given twice: its last row
-    xo = set(kinds.index[(kinds == TrackKind.CROSSOVER.value).to_numpy()])
-    if not xo or net.track_points.empty:
-        return []
+def _crossover_ends(net: Network, tracks: pd.DataFrame) -> pd.DataFrame | None:
+    """The switch ends of crossovers (the module doc), one row per (crossover, end) — the
+    first connection end of the crossover (``track``, ``end``) naming a switch whose
+    ``switch_number`` is known and joining a track that is no crossover (``other``,
+    ``other_end``; ``rows``: its first row in ``tracks``) — with ``switch_id`` and ``n``;
+    None when there is none. A track id given twice has the kind of its last row. Ids are
+    looked up by Arrow's hashing of the text as held (:func:`first_rows`)."""
+    if net.track_points.empty:
+        return None
+    ids = tracks["track_id"]
+    n_t = len(tracks)
+    last = (n_t - 1) - first_rows(ids.iloc[::-1].reset_index(drop=True), ids)  # the last row of each row's id
+    is_xo = texts(tracks["kind"])[last] == TrackKind.CROSSOVER.value
+    if not is_xo.any():
+        return None
+    c = net.connections
+    sides = []
+    rows_of = dict(zip("ab", connection_rows(net, tracks), strict=True))
+    for a, b in (("a", "b"), ("b", "a")):  # the incidence table's order: every end a, then every end b
+        f_t, f_o = rows_of[a], rows_of[b]
+        xo_t = (f_t >= 0) & is_xo[np.maximum(f_t, 0)]
+        main_o = (f_o >= 0) & ~is_xo[np.maximum(f_o, 0)]
+        hit = np.flatnonzero(xo_t & main_o & c["switch_id"].notna().to_numpy())
+        sides.append(
+            pd.DataFrame(
+                {
+                    "track": texts(c[f"track_{a}"].iloc[hit]),
+                    "end": texts(c[f"end_{a}"].iloc[hit]),
+                    "other_end": texts(c[f"end_{b}"].iloc[hit]),
+                    "switch_id": texts(c["switch_id"].iloc[hit]),
+                    "rows": f_o[hit],
+                }
+            )
+        )
+    ref = pd.concat(sides, ignore_index=True)
     sw = net.switches
     number = dict(zip(column(sw, "switch_id"), column(sw, "switch_number"), strict=True))
-    ref = inc[inc["track"].isin(list(xo)) & inc["switch_id"].notna()].copy()
-    other = pd.Index(texts(ref["other"]), dtype=object)
-    ref = ref[(kinds.reindex(other).to_numpy() != TrackKind.CROSSOVER.value) & (pos.index.get_indexer(other) >= 0)]
-    ref["n"] = [number.get(s, np.nan) for s in texts(ref["switch_id"])]
+    ref["n"] = np.array([number.get(s, np.nan) for s in ref["switch_id"]], dtype=float)
     ref = ref[np.isfinite(ref["n"].to_numpy(float))].drop_duplicates(["track", "end"])
-    if ref.empty:
-        return []
-    rows = pos.to_numpy(dtype=np.int64)[pos.index.get_indexer(pd.Index(texts(ref["other"])))]
-    ref["axis"] = end_coordinates(geo, rows, texts(ref["other_end"]))[2]
+    return None if ref.empty else ref.reset_index(drop=True)
+
+
+def _worst_deviation(net: Network, geo: pd.DataFrame, ref: pd.DataFrame) -> pd.DataFrame:
+    """Per switch end of a crossover (``ref``, one row per crossover and end): the largest
+    angle ``dev`` [deg] between a chord of the crossover and the main track's axis (taken
+    modulo 180°), in (track_id, end) order; ends without a chord or an end are left out."""
+    ref = ref[ref["end"].notna().to_numpy()]
+    axis = end_coordinates(geo, ref["rows"].to_numpy(), ref["other_end"].to_numpy(dtype=object))[2]
     chords = chord_azimuths(net.track_points, set(ref["track"]))
-    m = chords.merge(ref.rename(columns={"track": "track_id"}), on="track_id")
-    m["dev"] = np.abs((m["az"] - m["axis"] + 90.0) % 180.0 - 90.0)
-    worst = m.groupby(["track_id", "end", "switch_id", "n"], sort=True)["dev"].max().reset_index()
+    cid, az = chords["track_id"].to_numpy(dtype=object), chords["az"].to_numpy(float)
+    start = np.flatnonzero(np.r_[True, cid[1:] != cid[:-1]]) if len(cid) else np.zeros(0, dtype=np.int64)
+    run = pd.Index(cid[start], dtype=object)  # chord_azimuths gives each track's chords as one run
+    at = run.get_indexer(pd.Index(ref["track"].to_numpy(dtype=object), dtype=object))
+    has = np.flatnonzero(at >= 0)
+    s0, cnt = start[at[has]], np.diff(np.r_[start, len(cid)])[at[has]]
+    each = np.repeat(np.arange(has.size), cnt)
+    chord = np.repeat(s0 - np.r_[0, np.cumsum(cnt)[:-1]], cnt) + np.arange(int(cnt.sum()))
+    dev = np.abs((az[chord] - axis[has][each] + 90.0) % 180.0 - 90.0)
+    worst = ref.iloc[has][["track", "end", "switch_id", "n"]].rename(columns={"track": "track_id"})
+    worst["dev"] = np.fmax.reduceat(dev, np.r_[0, np.cumsum(cnt)[:-1]]) if dev.size else np.zeros(0)
+    key = list(zip(worst["track_id"].tolist(), worst["end"].tolist(), strict=True))
+    return worst.iloc[sorted(range(len(key)), key=key.__getitem__)].reset_index(drop=True)
+
+
+def _crossover_angles(
+    net: Network, geo: pd.DataFrame, ref: pd.DataFrame | None, config: ValidationConfig, loc: Locator
+) -> list[Finding]:
+    if ref is None:
+        return []
+    worst = _worst_deviation(net, geo, ref)
     worst["alpha"] = np.degrees(np.arctan(1.0 / worst["n"].to_numpy(float)))
     worst["ratio"] = worst["dev"] / worst["alpha"]
     lo, hi = config.crossover_angle_range
     bad = worst[(worst["ratio"] < lo) | (worst["ratio"] > hi)].reset_index(drop=True)
-    tid = column(net.tracks, "track_id") if len(bad) else np.empty(0, dtype=object)
-    row_of = {t: i for i, t in enumerate(tid)}
+    ids = net.tracks["track_id"]
+    named = pd.Series(bad["track_id"].to_numpy(dtype=object), dtype=ids.dtype)
+    last = len(ids) - 1 - first_rows(ids.iloc[::-1].reset_index(drop=True), named)  # the id's last row
+    row_of = np.where(last < len(ids), last, -1)
 
     cols = {k: bad[k].tolist() for k in bad.columns}
 
     def build(j: int) -> Finding:
         r = {k: v[j] for k, v in cols.items()}
-        i = row_of.get(r["track_id"])
+        i = int(row_of[j]) if row_of[j] >= 0 else None
         return Finding(
             "topology.crossover_angle",
             Severity.WARNING,

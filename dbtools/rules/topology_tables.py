@@ -1,8 +1,8 @@
 """The long tables the topology rules work on (:mod:`dbtools.rules.topology`): one row per
-switch port and one per connection end, their text held as objects (NaN for missing, as
-pandas' ``str`` columns give it), with shared integer codes of switch, track and end so
+switch port and one per connection end, with shared integer codes of switch, track and end so
 that joins, duplicate tests and look-ups run on integers (issue 30: a national network has
-≥ 50,000 tracks)."""
+≥ 50,000 tracks); their text (objects, NaN for missing, as pandas' ``str`` columns give it)
+only for the rows a rule reports (:func:`port_rows`, :func:`incidence_rows`)."""
 
 from __future__ import annotations
 
@@ -11,55 +11,90 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from dbtools.network import Network
+from dbtools.rules.common import isin as text_isin
+from dbtools.rules.common import texts
+from dbtools.topology import first_rows
+from schemas.network import CONNECTIONS, SWITCH_ROUTES, SWITCHES
 
 I64 = npt.NDArray[np.int64]
 ALL_PORTS = ("a1", "b1", "b2", "a2")
 
 
 def text_objects(frame: pd.DataFrame, name: str) -> npt.NDArray[np.object_]:
-    """A text column as objects with NaN for missing, as pandas' ``str`` columns give them
-    (the tables below are held as objects: no conversion to Arrow text and back)."""
+    """A text column as objects with NaN for missing, as pandas' ``str`` columns give them."""
     return np.asarray(frame[name].to_numpy(dtype=object, na_value=np.nan), dtype=object)
 
 
-def object_frame(columns: dict[str, npt.NDArray[Any]]) -> pd.DataFrame:
+def held_objects(net: Network, table: str, name: str) -> npt.NDArray[np.object_]:
+    """:func:`text_objects` of a column of one of the network's tables, converted once per
+    loaded network (the rules pick rows of it)."""
+    return net.cached(("text_objects", table, name), lambda: text_objects(net.tables[table], name))
+
+
+def object_frame(columns: dict[str, npt.NDArray[Any]], index: pd.Index | None = None) -> pd.DataFrame:
     """A frame of the arrays as they are (pandas would turn object text into ``str``)."""
-    return pd.DataFrame({k: pd.Series(v, dtype=v.dtype) for k, v in columns.items()})
+    return pd.DataFrame({k: pd.Series(v, dtype=v.dtype, index=index) for k, v in columns.items()}, index=index)
 
 
 def port_table(sw: pd.DataFrame) -> pd.DataFrame:
-    """Long table of switch ports: row (of switches), switch_id, type, port, track, end."""
+    """Long table of switch ports, one row per switch and port of ``ALL_PORTS`` (port-major:
+    rows k·n … (k+1)·n − 1 are port ``ALL_PORTS[k]`` of the n switches): ``row`` (of
+    switches) and ``pk`` (k); the text of chosen rows by :func:`port_rows`."""
     n, k = len(sw), len(ALL_PORTS)
-    return object_frame(
+    return pd.DataFrame({"row": np.tile(np.arange(n), k), "pk": np.repeat(np.arange(k), n)})
+
+
+def port_rows(net: Network, ports: pd.DataFrame) -> pd.DataFrame:
+    """Rows of the port table (a selection of it) with their text: switch_id, type, port,
+    track, end — objects, NaN for missing (read from the switches' rows they stand for)."""
+    srow, pk = ports["row"].to_numpy(), ports["pk"].to_numpy()
+    track, end = np.empty(len(ports), dtype=object), np.empty(len(ports), dtype=object)
+    for k, p in enumerate(ALL_PORTS):
+        at = np.flatnonzero(pk == k)
+        if at.size:
+            track[at], end[at] = (held_objects(net, SWITCHES.name, f"{p}_{w}")[srow[at]] for w in ("track", "end"))
+    text = object_frame(
         {
-            "row": np.tile(np.arange(n), k),
-            "switch_id": np.tile(text_objects(sw, "switch_id"), k),
-            "type": np.tile(text_objects(sw, "type"), k),
-            "port": np.repeat(np.array(ALL_PORTS, dtype=object), n),
-            "track": np.concatenate([text_objects(sw, f"{p}_track") for p in ALL_PORTS]),
-            "end": np.concatenate([text_objects(sw, f"{p}_end") for p in ALL_PORTS]),
-        }
+            "switch_id": held_objects(net, SWITCHES.name, "switch_id")[srow],
+            "type": held_objects(net, SWITCHES.name, "type")[srow],
+            "port": np.array(ALL_PORTS, dtype=object)[pk],
+            "track": track,
+            "end": end,
+        },
+        ports.index,
     )
+    return pd.concat([ports, text], axis=1)
 
 
 def incidence_table(c: pd.DataFrame) -> pd.DataFrame:
-    """Both ends of every connection: row (of connections), side a/b, track, end, switch_id,
-    other track and end."""
-    ta, ea, tb, eb, sid = (text_objects(c, k) for k in ("track_a", "end_a", "track_b", "end_b", "switch_id"))
+    """Both ends of every connection (every end a, then every end b): ``row`` (of
+    connections); the text of chosen rows by :func:`incidence_rows`."""
     rows = np.arange(len(c))
-    return object_frame(
+    return pd.DataFrame({"row": np.concatenate([rows, rows])})
+
+
+def incidence_rows(net: Network, inc: pd.DataFrame) -> pd.DataFrame:
+    """Rows of the incidence table (a selection of it) with their text: track, end, other
+    track and end, side a/b, switch_id — objects, NaN for missing."""
+    crow, b_side = inc["row"].to_numpy(), inc.index.to_numpy() >= len(net.connections)
+    side = np.where(b_side, "b", "a").astype(object)
+    ta, ea, tb, eb = (held_objects(net, CONNECTIONS.name, k)[crow] for k in ("track_a", "end_a", "track_b", "end_b"))
+    text = object_frame(
         {
-            "track": np.concatenate([ta, tb]),
-            "end": np.concatenate([ea, eb]),
-            "other": np.concatenate([tb, ta]),
-            "other_end": np.concatenate([eb, ea]),
-            "row": np.concatenate([rows, rows]),
-            "side": np.repeat(np.array(["a", "b"], dtype=object), len(c)),
-            "switch_id": np.concatenate([sid, sid]),
-        }
+            "track": np.where(b_side, tb, ta),
+            "end": np.where(b_side, eb, ea),
+            "other": np.where(b_side, ta, tb),
+            "other_end": np.where(b_side, ea, eb),
+            "side": side,
+            "switch_id": held_objects(net, CONNECTIONS.name, "switch_id")[crow],
+        },
+        inc.index,
     )
+    return pd.concat([inc, text], axis=1)
 
 
 def shared_codes(*columns: pd.Series) -> list[I64]:
@@ -70,11 +105,23 @@ def shared_codes(*columns: pd.Series) -> list[I64]:
     return np.split(codes.astype(np.int64), np.cumsum([len(c) for c in columns])[:-1])
 
 
+def _given(*columns: pd.Series) -> npt.NDArray[np.bool_]:
+    """Which values of the columns, one after the other, are not missing (from the columns as
+    held: Arrow's validity bitmap, not a test of each object)."""
+    return np.concatenate([np.asarray(c.notna().to_numpy(), dtype=bool) for c in columns])
+
+
 def add_codes(net: Network, inc: pd.DataFrame, ports: pd.DataFrame) -> None:
     """Add codes of switch (``sk``), track (``tk``, ``ok`` of the other track) and end
     (``ek``, ``oek``) to the incidence and port tables, ``key`` = the (switch, track,
-    end) triple as one integer and, to the incidence table, ``okey`` = that of the other end."""
+    end) triple as one integer and, to the incidence table, ``okey`` = that of the other end;
+    and which values are given: ``has_track``, ``has_end`` (both tables), ``has_switch``
+    (the incidence table)."""
     c, sw = net.connections, net.switches
+    inc["has_track"], inc["has_end"] = _given(c["track_a"], c["track_b"]), _given(c["end_a"], c["end_b"])
+    inc["has_switch"] = _given(c["switch_id"], c["switch_id"])
+    ports["has_track"] = _given(*(sw[f"{p}_track"] for p in ALL_PORTS))
+    ports["has_end"] = _given(*(sw[f"{p}_end"] for p in ALL_PORTS))
     csk, ssk = shared_codes(c["switch_id"], sw["switch_id"])
     inc["sk"], ports["sk"] = np.concatenate([csk, csk]), np.tile(ssk, len(ALL_PORTS))
     n_code = []
@@ -105,3 +152,90 @@ def int_join(left: I64, right: I64) -> tuple[I64, I64]:
     li = np.repeat(np.arange(len(left), dtype=np.int64), cnt)
     within = np.arange(int(cnt.sum()), dtype=np.int64) - np.repeat(np.cumsum(cnt) - cnt, cnt)
     return li, np.asarray(order[np.repeat(lo, cnt) + within], dtype=np.int64)
+
+
+def arrow_text(s: pd.Series) -> pa.ChunkedArray | None:
+    """A text column as Arrow strings (None: not held as Arrow strings)."""
+    to_arrow = getattr(s.array, "__arrow_array__", None)
+    a = to_arrow() if to_arrow is not None else None
+    return a if a is not None and (pa.types.is_string(a.type) or pa.types.is_large_string(a.type)) else None
+
+
+def is_in(s: pd.Series, known: pd.Series) -> npt.NDArray[np.bool_]:
+    """``s[i]`` is one of ``known`` (a missing value is when ``known`` has one), by Arrow's
+    hash look-up on the Arrow-held text (no Python strings), else :func:`dbtools.rules.common.isin`."""
+    a, k = arrow_text(s), arrow_text(known)
+    if a is None or k is None:
+        return text_isin(texts(s), texts(known))
+    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(a.type)
+    hit = pc.is_in(a, value_set=values)
+    return np.asarray(hit.to_numpy(zero_copy_only=False), dtype=bool)
+
+
+def is_in_each(columns: list[pd.Series], known: pd.Series) -> list[npt.NDArray[np.bool_]]:
+    """:func:`is_in` of each column, in one hash look-up when all are held as Arrow text
+    (the set of ``known`` is hashed once, not once a column)."""
+    arrays, k = [arrow_text(s) for s in columns], arrow_text(known)
+    if k is None or any(a is None for a in arrays):
+        return [is_in(s, known) for s in columns]
+    chunks = [ch.cast(pa.large_string()) for a in arrays if a is not None for ch in a.chunks]
+    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(pa.large_string())
+    hit = np.asarray(
+        pc.is_in(pa.chunked_array(chunks, pa.large_string()), value_set=values).to_numpy(zero_copy_only=False),
+        dtype=bool,
+    )
+    return np.split(hit, np.cumsum([len(s) for s in columns])[:-1])
+
+
+#: Port → digit of a port pair's code (the pair's smaller and larger port: 4·lo + hi).
+PORT_DIGIT = {p: i for i, p in enumerate(sorted(ALL_PORTS))}
+#: Switch type → codes of its routes, in declared order, with the routes as sorted pairs.
+ROUTES = {
+    t.value: [(PORT_DIGIT[lo] * 4 + PORT_DIGIT[hi], (lo, hi)) for lo, hi in (sorted(r) for r in rs)]
+    for t, rs in SWITCH_ROUTES.items()
+}
+
+
+def pair_codes(ka: I64, kb: I64) -> I64:
+    """Codes of port pairs given as indexes into ``ALL_PORTS``."""
+    digits = np.array([PORT_DIGIT[p] for p in ALL_PORTS])
+    da, db = digits[ka], digits[kb]
+    return np.asarray(np.minimum(da, db) * 4 + np.maximum(da, db), dtype=np.int64)
+
+
+def switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
+    """Connections naming a switch, with the ports of that switch their ends are at (a row
+    per pair of ports; none where an end is at no port): crow (row of connections), pa/pb,
+    ``row`` (pa's row of the port table), sk (the switch's code) and the port pair's code ``pair`` — joined on
+    the integer (switch, track, end) keys (:func:`int_join`)."""
+    side_a = np.arange(len(inc)) < len(inc) // 2  # incidence_table: every end a, then every end b
+    at = np.flatnonzero(side_a & inc["has_switch"].to_numpy())
+    on = np.flatnonzero(ports["has_track"].to_numpy())
+    port_key = ports["key"].to_numpy()[on]
+    i, j = int_join(inc["key"].to_numpy()[at], port_key)  # end a at port pa
+    k, m = int_join(inc["okey"].to_numpy()[at[i]], port_key)  # end b at port pb
+    pa_rows, pb_rows = on[j[k]], on[m]
+    n_sw = len(ports) // len(ALL_PORTS)  # port_table: the switches once per port of ALL_PORTS
+    ka, kb = pa_rows // n_sw, pb_rows // n_sw
+    names = np.array(ALL_PORTS, dtype=object)
+    return object_frame(  # the text columns stay objects (no conversion to Arrow text and back)
+        {
+            "crow": inc["row"].to_numpy()[at[i[k]]],
+            "sk": inc["sk"].to_numpy()[at[i[k]]],
+            "pa": names[ka],
+            "pb": names[kb],
+            "row": pa_rows,
+            "pair": pair_codes(ka, kb),
+        }
+    )
+
+
+def last_length(tracks: pd.DataFrame, ids: npt.NDArray[np.object_]) -> npt.NDArray[np.float64]:
+    """``length_m`` of the given track ids (the last row of an id given twice; NaN: no such
+    track), looked up by Arrow's hashing when the ids are held as Arrow text."""
+    held = tracks["track_id"]
+    n = len(held)
+    named = pd.Series(ids, dtype=held.dtype if isinstance(held.dtype, pd.StringDtype) else object)
+    last = (n - 1) - first_rows(held.iloc[::-1].reset_index(drop=True), named)  # n: none
+    length = np.append(tracks["length_m"].to_numpy(dtype=float, na_value=np.nan), np.nan)
+    return np.asarray(length[last], dtype=float)

@@ -74,14 +74,17 @@ class _Lengths:
         of: Callable[[F64], F64],
         steps: Callable[[npt.NDArray[np.bool_]], npt.NDArray[np.bool_]],
         exact: F64 | None = None,
+        bounds: Bounds | None = None,
     ) -> None:
         self.rows, self.lon, self.lat, self.same, self.of, self.steps = rows, lon, lat, same, of, steps
         if exact is not None:
             self.low = self.high = np.where(same, exact, 0.0)
         else:
-            low, high = step_bounds(lon, lat)
+            low, high = bounds if bounds is not None else step_bounds(lon, lat)
             far = np.flatnonzero(same & ~(np.isfinite(low) & np.isfinite(high)))
-            low[far] = high[far] = exact_steps(lon, lat, far)  # the chord bounds nothing: solved
+            if far.size:
+                low, high = low.copy(), high.copy()  # ``bounds`` may be the grid index's own
+                low[far] = high[far] = exact_steps(lon, lat, far)  # the chord bounds nothing: solved
             self.low, self.high = np.where(same, low, 0.0), np.where(same, high, 0.0)
 
     def bounds(self) -> Bounds:
@@ -98,15 +101,21 @@ class _Lengths:
 
 
 def track_geometry(
-    net: Network, tracks: pd.DataFrame, doubtful: Callable[[F64, F64], npt.NDArray[np.bool_]] | None = None
+    net: Network,
+    tracks: pd.DataFrame,
+    doubtful: Callable[[F64, F64], npt.NDArray[np.bool_]] | None = None,
+    azimuths: npt.NDArray[np.bool_] | None = None,
 ) -> pd.DataFrame:
     """Per row of ``tracks`` (:func:`dbtools.topology.all_tracks`): ``lat_begin, lon_begin,
     az_begin, lat_end, lon_end, az_end`` (azimuths outward, degrees from north),
     ``geo_length_low_m`` ≤ ``geo_length_high_m`` bounding the centreline's length and
     ``geo_length_m`` — exact where ``doubtful(low, high)`` (all rows at once) is true or
-    ``doubtful`` is not given, else NaN; NaN everywhere where the track has no centreline."""
+    ``doubtful`` is not given, else NaN; NaN everywhere where the track has no centreline.
+    ``azimuths`` (a mask over the rows): the only rows whose azimuths are wanted (the others'
+    are NaN: two ``Geod.inv`` a track saved); all rows when not given."""
     n = len(tracks)
     out = {k: _nan(n) for k in ("lat_begin", "lon_begin", "az_begin", "lat_end", "lon_end", "az_end")}
+    want_az = np.ones(n, dtype=bool) if azimuths is None else np.asarray(azimuths, dtype=bool)
     tid = texts(tracks["track_id"])
     own, own_len = _from_track_points(net.track_points)
     at = own.index.get_indexer(pd.Index(tid)) if len(own) else np.full(n, -1)
@@ -114,11 +123,13 @@ def track_geometry(
     parts = []
     if has_points.any():
         sel = own.iloc[at[has_points]]
-        for k in out:
+        for k in ("lat_begin", "lon_begin", "lat_end", "lon_end"):
             out[k][has_points] = sel[k].to_numpy(dtype=float)
         assert own_len is not None
+        az_rows = np.flatnonzero(has_points & want_az)
+        out["az_begin"][az_rows], out["az_end"][az_rows] = own_len.azimuths(at[az_rows])
         parts.append(own_len.select(np.flatnonzero(has_points), at[has_points]))
-    grid_len = _from_gis(net, tracks, ~has_points, out)
+    grid_len = _from_gis(net, tracks, ~has_points, out, want_az)
     if grid_len is not None:
         parts.append(grid_len)
     low, high, exact = _nan(n), _nan(n), _nan(n)
@@ -142,6 +153,18 @@ class _OwnLengths:
         self.last = np.r_[first[1:] - 1, len(ids) - 1]
         self.same = ids[1:] == ids[:-1]
 
+    def azimuths(self, groups: npt.NDArray[np.intp]) -> tuple[F64, F64]:
+        """Outward azimuths [deg] at the begin and the end of the track groups ``groups``: the
+        first chord's reversed, the last chord's (NaN for a track of a single point)."""
+        first, last = self.first[groups], self.last[groups]
+        single = first == last
+        nxt, prv = first[~single], last[~single] - 1
+        lat, lon = self.lat, self.lon
+        az_b, az_e = _nan(len(groups)), _nan(len(groups))
+        az_b[~single] = (_inv(lat[nxt], lon[nxt], lat[nxt + 1], lon[nxt + 1])[0] + 180.0) % 360.0
+        az_e[~single] = _inv(lat[prv], lon[prv], lat[prv + 1], lon[prv + 1])[0]
+        return az_b, az_e
+
     def select(self, rows: npt.NDArray[np.int64], groups: npt.NDArray[np.intp]) -> _Lengths:
         """The lengths of the track groups ``groups``, for the track-table rows ``rows``."""
         first, last, ids = self.first[groups], self.last[groups], self.ids
@@ -157,8 +180,8 @@ class _OwnLengths:
 
 
 def _from_track_points(tp: pd.DataFrame) -> tuple[pd.DataFrame, _OwnLengths | None]:
-    """End points and outward end azimuths of every track in track_points (the first and last
-    chord's ``Geod.inv`` only), and their polyline lengths."""
+    """End points of every track in track_points, and their polyline lengths and outward end
+    azimuths (:meth:`_OwnLengths.azimuths`: the first and last chord's ``Geod.inv`` only)."""
     if tp.empty:
         return pd.DataFrame(), None
     if not sorted_by(tp, ("track_id", "pos_m")):
@@ -167,47 +190,43 @@ def _from_track_points(tp: pd.DataFrame) -> tuple[pd.DataFrame, _OwnLengths | No
     lat, lon = tp["lat"].to_numpy(float), tp["lon"].to_numpy(float)
     first = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     last = np.r_[first[1:] - 1, len(ids) - 1]
-    single = first == last
-    nxt, prv = first[~single], last[~single] - 1
-    az_b, az_e = _nan(len(first)), _nan(len(first))
-    az_b[~single] = (_inv(lat[nxt], lon[nxt], lat[nxt + 1], lon[nxt + 1])[0] + 180.0) % 360.0
-    az_e[~single] = _inv(lat[prv], lon[prv], lat[prv + 1], lon[prv + 1])[0]
     ends = pd.DataFrame(
         {
             "lat_begin": lat[first],
             "lon_begin": lon[first],
-            "az_begin": az_b,
             "lat_end": lat[last],
             "lon_end": lon[last],
-            "az_end": az_e,
         },
         index=pd.Index(texts(tp["track_id"].iloc[first]), dtype=object),
     )
     return ends, _OwnLengths(lon, lat, ids, first)
 
 
-def _cached_steps(net: Network, g: pd.DataFrame) -> F64 | None:
-    """The grid index's exact steps (:attr:`GridIndex.dist`) when already computed and it holds
-    the points of ``g`` (the grid sorted by line, track and km) in the same order."""
+def _cached_steps(net: Network, g: pd.DataFrame) -> tuple[F64 | None, Bounds | None]:
+    """The grid index's exact steps (:attr:`GridIndex.dist`) or else its step bounds
+    (:attr:`GridIndex.bounds`), when already computed and it holds the points of ``g`` (the
+    grid sorted by line, track and km) in the same order; (None, None) otherwise."""
     if g is net.gis:
         grid = grid_index(net)
-        n = len(g)
-        if (
-            "dist" in grid.__dict__
-            and grid.pos.size == n
-            and (n == 0 or (grid.pos[0] == 0 and bool(np.all(np.diff(grid.pos) == 1))))
-        ):
-            return grid.dist
-    return None
+        if grid.whole_frame:
+            if "dist" in grid.__dict__:
+                return grid.dist, None
+            if "bounds" in grid.__dict__:
+                return None, grid.bounds
+    return None, None
 
 
-def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], out: dict[str, F64]) -> _Lengths | None:
-    """Fill ``out`` for the tracks along a line grid (module doc); their lengths."""
+def _from_gis(
+    net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], out: dict[str, F64], want_az: npt.NDArray[np.bool_]
+) -> _Lengths | None:
+    """Fill ``out`` for the tracks along a line grid (module doc; azimuths only where
+    ``want_az``); their lengths."""
     gis = net.gis
     if gis.empty or not todo.any():
         return None
-    if sorted_by(gis, ("line_code", "track", "km_m")):  # as read from a DB: the grid's runs, no group-by
-        g, ext = gis, grid_extents(net)
+    ext = grid_extents(net)
+    if "start" in ext.columns:  # sorted by line, track and km, as read from a DB: the grid's runs, no group-by
+        g = gis
         codes: npt.NDArray[np.int64] = np.repeat(np.arange(len(ext)), np.diff(np.r_[ext["start"].to_numpy(), len(g)]))
         uniq = pd.MultiIndex.from_arrays([texts(ext["line_code"]), texts(ext["track"])])
         lo, hi = ext["km_lo"].to_numpy(float), ext["km_hi"].to_numpy(float)
@@ -235,29 +254,25 @@ def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], o
     if idx.size == 0:
         return None
 
-    def key_at(k: F64) -> F64:
-        return np.asarray(gid * span + (np.clip(k, lo[gid], hi[gid]) - base), dtype=float)
+    def key_at(k: F64, some: npt.NDArray[np.intp] | None = None) -> F64:
+        g_ = gid if some is None else gid[some]
+        return np.asarray(g_ * span + (np.clip(k, lo[g_], hi[g_]) - base), dtype=float)
 
-    def at(k: F64) -> tuple[F64, F64]:
-        kk = key_at(k)
+    def at(k: F64, some: npt.NDArray[np.intp] | None = None) -> tuple[F64, F64]:
+        """Lat and lon at km ``k`` of the tracks ``gid`` (``gid[some]`` when given)."""
+        kk = key_at(k, some)
         return np.interp(kk, key, lat), np.interp(kk, key, lon)
 
     la0, lo0 = at(k0)
     la1, lo1 = at(k1)
-    inward = np.sign(k1 - k0) * GIS_SPACING_M
-    li0, loi0 = at(k0 + inward)
-    li1, loi1 = at(k1 - inward)
-    az_b, _ = _inv(li0, loi0, la0, lo0)
-    az_e, _ = _inv(li1, loi1, la1, lo1)
-    for name, v in (
-        ("lat_begin", la0),
-        ("lon_begin", lo0),
-        ("az_begin", az_b),
-        ("lat_end", la1),
-        ("lon_end", lo1),
-        ("az_end", az_e),
-    ):
+    for name, v in (("lat_begin", la0), ("lon_begin", lo0), ("lat_end", la1), ("lon_end", lo1)):
         out[name][idx] = v
+    az = np.flatnonzero(want_az[idx])
+    inward = np.sign(k1[az] - k0[az]) * GIS_SPACING_M
+    li0, loi0 = at(k0[az] + inward, az)
+    li1, loi1 = at(k1[az] - inward, az)
+    out["az_begin"][idx[az]] = _inv(li0, loi0, la0[az], lo0[az])[0]
+    out["az_end"][idx[az]] = _inv(li1, loi1, la1[az], lo1[az])[0]
     kk0, kk1 = key_at(k0), key_at(k1)
 
     def of(d: F64) -> F64:
@@ -267,7 +282,7 @@ def _from_gis(net: Network, tracks: pd.DataFrame, todo: npt.NDArray[np.bool_], o
     def steps(which: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
         return np.isin(codes[:-1], gid[which])  # the whole grid of each track's line and track
 
-    return _Lengths(idx, lon, lat, codes[1:] == codes[:-1], of, steps, _cached_steps(net, g))
+    return _Lengths(idx, lon, lat, codes[1:] == codes[:-1], of, steps, *_cached_steps(net, g))
 
 
 def end_coordinates(
@@ -297,7 +312,9 @@ def distance_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
 def chord_azimuths(tp: pd.DataFrame, track_ids: set[str]) -> pd.DataFrame:
     """Azimuth [deg] of every chord between consecutive track_points of the given tracks:
     columns ``track_id``, ``az``."""
-    sel = tp[first_rows(pd.Series(sorted(track_ids), dtype=object), tp["track_id"]) >= 0]
+    held = tp["track_id"]
+    wanted = pd.Series(sorted(track_ids), dtype=held.dtype if isinstance(held.dtype, pd.StringDtype) else object)
+    sel = tp[first_rows(wanted, held) >= 0]  # as Arrow text when tp holds it: Arrow's hash look-up
     if not sorted_by(sel, ("track_id", "pos_m")):
         sel = sel.sort_values(["track_id", "pos_m"], kind="stable")
     ids = texts(sel["track_id"])
