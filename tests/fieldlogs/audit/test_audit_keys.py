@@ -270,7 +270,8 @@ def test_audit_with_both_units_stores_their_comparison(
     run_path = str(next(p for p in both.index if p.endswith("sim-net-turnback")))
     pos = {u: run_pipeline(unit_run(read_run(Path(run_path)), u, tmp_path / u), net).positions for u in ("F", "R")}
     expected = comparison_fields(compare_units(pos["F"], pos["R"])[1])
-    assert expected["unit_cycles_compared"] > 3000
+    claimed = min(int(pos[u]["km_m"].notna().sum()) for u in pos)  # unit R, on its own sensors, starts later
+    assert expected["unit_cycles_compared"] >= 0.95 * claimed > 2000
     assert {k: both.loc[run_path, k] for k in expected} == pytest.approx(expected)
     assert (both["unit_disagreements"] == 0).all()  # the sample's two units agree (pipeline/test_units.py)
     rep = build_report(out)
@@ -283,7 +284,11 @@ def test_audit_with_both_units_stores_their_comparison(
     assert audit([net_logs], sample_network_db, r_out, workers=2, unit="R").audited == len(NET_RUNS)
     r = read_table(r_out, "audit_runs").set_index("run_path").sort_index()
     assert (r["unit"] == "R").all() and r["unit_disagreements"].isna().all()
-    np.testing.assert_allclose(r["distance_m"], f["distance_m"], rtol=1e-9)  # the units agree on the sample
+    # the units agree on the sample: exactly on the turned view of one set of sensors; within
+    # 1 % on sim-net-turnback, whose R cab has its own axle, wheel and slips
+    own = r.index.str.endswith("sim-net-turnback")
+    np.testing.assert_allclose(r.loc[~own, "distance_m"], f.loc[~own, "distance_m"], rtol=1e-9)
+    np.testing.assert_allclose(r.loc[own, "distance_m"], f.loc[own, "distance_m"], rtol=1e-2)
     # the same audit DB with another unit: nothing skipped
     again = audit([net_logs], sample_network_db, out, workers=2, unit="F")
     assert (again.skipped, again.audited) == (0, len(NET_RUNS))

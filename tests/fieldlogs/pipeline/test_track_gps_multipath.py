@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fieldlogs.pipeline.aids.topology import TopologyAid
-from fieldlogs.pipeline.aids.track_gps import TrackGpsAid
+from fieldlogs.pipeline.aids.track_gps import TrackGpsAid, chi2_upper
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.engine import Solution, run_aids
 from fieldlogs.pipeline.hypotheses import track_lines
@@ -72,3 +72,12 @@ def test_the_jump_test_sees_a_step_in_every_candidate() -> None:
     assert aid._jumped(1.0, [0.1 + limit + 0.01, 0.1 + limit + 0.2])  # one previous offset: the parent track
     assert not aid._jumped(2.0, [0.1 + limit + 0.02, 0.1 + 0.2])  # the first candidate moved by noise
     assert not aid._jumped(5.0, [9.0, 9.0])  # 3 s after the last fix (> gps.max_gap_s): no test
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 10, 30, 100])
+def test_chi2_quantile_wilson_hilferty_is_close_and_not_below(n: int) -> None:
+    from scipy.stats import chi2
+
+    exact = float(chi2.ppf(1.0 - CFG.alpha, n))
+    got = chi2_upper(1.0 - CFG.alpha, n)
+    assert exact <= got <= exact * 1.08
