@@ -128,9 +128,15 @@ class TrackLine:
 
     def plane(self, lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:
         """lat/lon [deg] in this track's local plane [m]."""
-        lat0, lon0 = self.origin
-        k = math.pi / 180.0 * _R_EARTH
-        return (np.asarray(lon) - lon0) * k * math.cos(math.radians(lat0)), (np.asarray(lat) - lat0) * k
+        return equirect(self.origin, lat, lon)
+
+
+def equirect(origin: tuple[float, float], lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """lat/lon [deg] in the equirectangular plane centred at ``origin`` (lat, lon) [m]: east
+    (lon − lon0)·k·cos(lat0), north (lat − lat0)·k, k = π/180·R."""
+    lat0, lon0 = origin
+    k = math.pi / 180.0 * _R_EARTH
+    return (np.asarray(lon) - lon0) * k * math.cos(math.radians(lat0)), (np.asarray(lat) - lat0) * k
 
 
 def _extrap(x: FloatArray, xp: FloatArray, fp: FloatArray) -> FloatArray:
@@ -354,10 +360,26 @@ class Segments:
     def to_plane(self, tl: TrackLine, xy: FloatArray) -> FloatArray:
         """(n, 2) points of ``tl``'s own plane in this one."""
         k = math.pi / 180.0 * _R_EARTH
-        (lat0, lon0), (la, lo) = tl.origin, self.origin
+        lat0, lon0 = tl.origin
         lat = xy[:, 1] / k + lat0
         lon = xy[:, 0] / (k * math.cos(math.radians(lat0))) + lon0
-        return np.column_stack([(lon - lo) * k * math.cos(math.radians(la)), (lat - la) * k])
+        return np.column_stack(equirect(self.origin, lat, lon))
+
+    def nearest(self, x: float, y: float, radius_m: float) -> list[tuple[int, float, float, float, float]]:
+        """Per track whose centreline passes within ``radius_m`` of (x, y) in this plane:
+        (track index in ``ids``, pos of its nearest point, that point's distance, unit tangent
+        x, y toward increasing pos) — the nearest segment's foot u = clip(((p − a)·(b − a))/|b − a|², 0, 1)."""
+        dx, dy = self.x1 - self.x0, self.y1 - self.y0
+        u = np.clip(((x - self.x0) * dx + (y - self.y0) * dy) / np.maximum(dx * dx + dy * dy, 1e-12), 0.0, 1.0)
+        dist = np.hypot(self.x0 + u * dx - x, self.y0 + u * dy - y)
+        out = []
+        for j in np.unique(self.track[dist <= radius_m]):
+            mine = np.flatnonzero(self.track == j)
+            k = int(mine[np.argmin(dist[mine])])
+            norm = max(math.hypot(float(dx[k]), float(dy[k])), 1e-9)
+            pos = float(self.p0[k] + u[k] * (self.p1[k] - self.p0[k]))
+            out.append((int(j), pos, float(dist[k]), float(dx[k]) / norm, float(dy[k]) / norm))
+        return out
 
 
 def segments(lines: TrackLines) -> Segments:
@@ -394,19 +416,11 @@ def parallel_candidates(h: Hypothesis, radius_m: float, lines: TrackLines, seg: 
     x, y, tx, ty = tl.point(h.pos_m)
     (px, py), (qx, qy) = seg.to_plane(tl, np.array([[x, y], [x + tx, y + ty]]))
     tx, ty = qx - px, qy - py
-    dx, dy = seg.x1 - seg.x0, seg.y1 - seg.y0
-    u = np.clip(((px - seg.x0) * dx + (py - seg.y0) * dy) / np.maximum(dx * dx + dy * dy, 1e-12), 0.0, 1.0)
-    dist = np.hypot(seg.x0 + u * dx - px, seg.y0 + u * dy - py)
     out: list[Hypothesis] = []
-    for j in np.unique(seg.track[dist <= radius_m]):
-        other = lines[seg.ids[int(j)]]
-        if other.track_id == tl.track_id:
+    for j, pos, _dist, ox, oy in seg.nearest(float(px), float(py), radius_m):
+        other = lines[seg.ids[j]]
+        if other.track_id == tl.track_id or not 0.5 < pos < other.length_m - 0.5:
             continue
-        mine = np.flatnonzero(seg.track == j)
-        k = int(mine[np.argmin(dist[mine])])
-        pos = float(seg.p0[k] + u[k] * (seg.p1[k] - seg.p0[k]))
-        if not 0.5 < pos < other.length_m - 0.5:
-            continue
-        sign = 1 if tx * dx[k] + ty * dy[k] >= 0.0 else -1
+        sign = 1 if tx * ox + ty * oy >= 0.0 else -1
         out.append(Hypothesis(other.track_id, pos, h.kp * sign, extra_m=h.extra_m))
     return out

@@ -41,29 +41,13 @@ from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.topology import PARALLEL_M, with_hyps
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes
 from fieldlogs.pipeline.aids.track_gps_along import along_uncertainty
-from fieldlogs.pipeline.hypotheses import Segments, segments
-from fieldlogs.pipeline.types import Event, Fix, FloatArray, Hypothesis
+from fieldlogs.pipeline.hypotheses import Segments, equirect, segments
+from fieldlogs.pipeline.types import Event, Fix, Hypothesis
 from schemas.enums import EventType, FixSource
 
-#: Keep the nearest point this far inside a candidate's ends [m] (as parallel_candidates does).
+#: Keep the nearest point this far inside a candidate's ends [m] (as parallel_candidates does;
+#: :meth:`~fieldlogs.pipeline.hypotheses.Segments.nearest` finds it).
 _INSIDE_M = 0.5
-
-
-def near_tracks(seg: Segments, x: float, y: float, radius_m: float) -> list[tuple[int, float, float, float, float]]:
-    """Per track whose centreline passes within ``radius_m`` of (x, y) in ``seg``'s plane:
-    (track index, pos of the nearest point, its distance, tangent x, tangent y) — the nearest
-    segment's foot u = clip(((p − a)·(b − a))/|b − a|², 0, 1)."""
-    dx, dy = seg.x1 - seg.x0, seg.y1 - seg.y0
-    u = np.clip(((x - seg.x0) * dx + (y - seg.y0) * dy) / np.maximum(dx * dx + dy * dy, 1e-12), 0.0, 1.0)
-    dist = np.hypot(seg.x0 + u * dx - x, seg.y0 + u * dy - y)
-    out = []
-    for j in np.unique(seg.track[dist <= radius_m]):
-        mine = np.flatnonzero(seg.track == j)
-        k = int(mine[np.argmin(dist[mine])])
-        norm = max(math.hypot(float(dx[k]), float(dy[k])), 1e-9)
-        pos = float(seg.p0[k] + u[k] * (seg.p1[k] - seg.p0[k]))
-        out.append((int(j), pos, float(dist[k]), float(dx[k]) / norm, float(dy[k]) / norm))
-    return out
 
 
 @dataclass(eq=False)
@@ -93,7 +77,7 @@ class TrackGpsInitialAid(NetworkFixes):
         if self.seg is None:
             self.seg = segments(self.lines)
         j: int = obs.payload
-        (x,), (y,) = self._plane(j)
+        (x,), (y,) = equirect(self.seg.origin, self.lat[j : j + 1], self.lon[j : j + 1])
         prev = self.chain[-1] if self.chain else None
         steady = (
             prev is not None
@@ -112,16 +96,9 @@ class TrackGpsInitialAid(NetworkFixes):
             return Outcome()  # standing, or not moving one way throughout: the direction is not seen
         return self._start(view, dx, dy, ds, x, y)
 
-    def _plane(self, j: int) -> tuple[FloatArray, FloatArray]:
-        assert self.seg is not None
-        lat0, lon0 = self.seg.origin
-        k = math.pi / 180.0 * 6_371_000.0
-        lat, lon = np.array([self.lat[j]]), np.array([self.lon[j]])
-        return (lon - lon0) * k * math.cos(math.radians(lat0)), (lat - lat0) * k
-
     def _start(self, view: EngineView, dx: float, dy: float, ds: float, x: float, y: float) -> Outcome:
         assert self.seg is not None
-        near = near_tracks(self.seg, x, y, PARALLEL_M)
+        near = self.seg.nearest(x, y, PARALLEL_M)
         u = along_uncertainty(self.cfg, self.gps)
         if not near or min(n[2] for n in near) > u:
             return Outcome()  # on no track of the DB (an unmapped siding?): nothing to claim

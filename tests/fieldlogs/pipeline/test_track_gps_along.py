@@ -13,10 +13,10 @@ import pytest
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid, along_uncertainty
-from fieldlogs.pipeline.aids.track_gps_initial import TrackGpsInitialAid, near_tracks
+from fieldlogs.pipeline.aids.track_gps_initial import TrackGpsInitialAid
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.engine import Solution, run_aids
-from fieldlogs.pipeline.hypotheses import TrackLine, segments, track_lines
+from fieldlogs.pipeline.hypotheses import TrackLine, equirect, segments, track_lines
 from schemas.enums import EventType, PositionState
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
 
@@ -170,11 +170,9 @@ def test_near_tracks_hand_computed() -> None:
     # (at pos 100) and, the tracks being 4 m apart, 3 m from U1
     lines = track_lines(net("crossover"))
     seg = segments(lines)
-    t, lat, lon = _fixes_on("crossover", "D1", [(0.0, 100.0, 1.0)])
-    aid = TrackGpsInitialAid(t, lat, lon, lines, CFG, GPS)
-    aid.seg = seg
-    (x,), (y,) = aid._plane(0)
-    got = {seg.ids[j]: (pos, dist) for j, pos, dist, _tx, _ty in near_tracks(seg, x, y, 20.0)}
+    _t, lat, lon = _fixes_on("crossover", "D1", [(0.0, 100.0, 1.0)])
+    (x,), (y,) = equirect(seg.origin, lat, lon)
+    got = {seg.ids[j]: (pos, dist) for j, pos, dist, _tx, _ty in seg.nearest(float(x), float(y), 20.0)}
     assert set(got) == {"D1", "U1"}
     assert got["D1"] == pytest.approx((100.0, 1.0), abs=0.01)
     assert got["U1"][1] == pytest.approx(3.0, abs=0.05)
