@@ -22,7 +22,7 @@ from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.aids.rollback import RollbackAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
-from fieldlogs.pipeline.aids.track_gps import TrackGpsAid
+from fieldlogs.pipeline.aids.track_gps import NetworkFixes, TrackGpsAid
 from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid
 from fieldlogs.pipeline.aids.track_gps_initial import TrackGpsInitialAid
 from fieldlogs.pipeline.aids.track_imu import TrackImuAid, turnouts
@@ -32,7 +32,7 @@ from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.imugap import ImuGap, ImuGapAid
 from fieldlogs.pipeline.rollback import Rollback
-from fieldlogs.pipeline.types import FloatArray, GpsAnalysis, Odometry
+from fieldlogs.pipeline.types import GpsAnalysis, Odometry
 from schemas.enums import BaliseKind
 from schemas.radar import RadarParams
 
@@ -101,8 +101,9 @@ def _track_imu(ctx: RunContext) -> Aid | None:
     return TrackImuAid(wz, sw, track_lines(ctx.network), ctx.cfg.track_select, ctx.cfg.margin)
 
 
-def _trusted_fixes(ctx: RunContext) -> tuple[FloatArray, FloatArray, FloatArray] | None:
-    """t, lat, lon of the run's trusted GPS fixes on a network DB (None: none, or no topology)."""
+def _network_fixes(ctx: RunContext) -> NetworkFixes | None:
+    """The run's trusted GPS fixes on a network DB with its tracks and settings, what every GPS
+    aid on the network's tracks holds (None: no trusted fix, or no topology)."""
     g = ctx.gps
     if g is None or g.fixes is None or not len(g.fixes) or not _has_topology(ctx):
         return None
@@ -110,31 +111,23 @@ def _trusted_fixes(ctx: RunContext) -> tuple[FloatArray, FloatArray, FloatArray]
     if not len(f):
         return None
     t, lat, lon = (f[c].to_numpy(dtype=float) for c in ("t", "lat", "lon"))
-    return t, lat, lon
+    return NetworkFixes(t, lat, lon, track_lines(ctx.network), ctx.cfg.track_select, ctx.cfg.gps)
 
 
 def _track_gps(ctx: RunContext) -> Aid | None:
-    fixes = _trusted_fixes(ctx)
-    if fixes is None:
-        return None
-    cfg, x_a = ctx.cfg, ctx.geometry.gps_antenna_x_m
-    return TrackGpsAid(*fixes, track_lines(ctx.network), cfg.track_select, cfg.gps, x_a)
+    f = _network_fixes(ctx)
+    return None if f is None else TrackGpsAid(**vars(f), antenna_x_m=ctx.geometry.gps_antenna_x_m)
 
 
 def _track_gps_along(ctx: RunContext) -> Aid | None:
-    fixes = _trusted_fixes(ctx)
-    if fixes is None:
-        return None
-    cfg, x_a = ctx.cfg, ctx.geometry.gps_antenna_x_m
-    return TrackGpsAlongAid(*fixes, track_lines(ctx.network), cfg.track_select, cfg.gps, cfg.margin, x_a)
+    f = _network_fixes(ctx)
+    x_a = ctx.geometry.gps_antenna_x_m
+    return None if f is None else TrackGpsAlongAid(**vars(f), margin=ctx.cfg.margin, antenna_x_m=x_a)
 
 
 def _track_gps_initial(ctx: RunContext) -> Aid | None:
-    fixes = _trusted_fixes(ctx)
-    if fixes is None:
-        return None
-    cfg, x_a = ctx.cfg, ctx.geometry.gps_antenna_x_m
-    return TrackGpsInitialAid(*fixes, track_lines(ctx.network), cfg.track_select, cfg.gps, x_a)
+    f = _network_fixes(ctx)
+    return None if f is None else TrackGpsInitialAid(**vars(f), antenna_x_m=ctx.geometry.gps_antenna_x_m)
 
 
 def _track_gnss(ctx: RunContext) -> Aid | None:
