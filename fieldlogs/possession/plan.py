@@ -29,6 +29,7 @@ States [S001 §4.2.4]: at wall-clock time T a possession is *not started* (no
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from datetime import datetime
 from enum import StrEnum
@@ -252,7 +253,8 @@ def read_plan(path: Path, network: Network | None = None, locale: CsvLocale | No
         return Plan([], findings, file)
     rows = _Rows(co.frame, file, findings)
     times = _parse_times(rows)
-    tracks = _db_tracks(network)
+    named = {} if network is None else _station_tracks(network, grid := _grid_extents(network))
+    tracks = None if network is None else {**_extents(named), **grid}
     ids = None if network is None else {str(t) for t in all_tracks(network)["track_id"]}
     km_from = co.frame["km_from_m"].to_numpy(dtype=float, na_value=np.nan)
     km_to = co.frame["km_to_m"].to_numpy(dtype=float, na_value=np.nan)
@@ -262,7 +264,7 @@ def read_plan(path: Path, network: Network | None = None, locale: CsvLocale | No
             _db_rules(rows, i, tracks, float(km_from[i]), float(km_to[i]))
         if ids is not None and "track_id" in co.frame.columns:
             _track_id_rule(rows, i, ids)
-    station = _station_track_ids(rows, network, km_from, km_to)
+    station = _station_track_ids(rows, named, km_from, km_to)
     return Plan(_possessions(rows, times, km_from, km_to, station), findings, file)
 
 
@@ -275,58 +277,52 @@ def _track_id_rule(rows: _Rows, i: int, ids: set[str]) -> None:
         rows.error("plan.unknown_track_id", i, "track_id", msg, tid, near)
 
 
-def _db_tracks(network: Network | None) -> dict[tuple[str, str], tuple[float, float]] | None:
-    """(line, track) → (km min, km max) of the GIS grid's line tracks and of the network's named
-    tracks off that grid (station tracks)."""
-    if network is None:
-        return None
-    out: dict[tuple[str, str], tuple[float, float]] = {}
+NamedTracks = dict[tuple[str, str], list[tuple[str, float, float]]]
+"""(line, track) → [(track_id, km lo, km hi)] of network tracks named by a line and track."""
+
+
+def _grid_extents(network: Network) -> dict[tuple[str, str], tuple[float, float]]:
+    """(line, track) → (km min, km max) of the GIS grid's line tracks."""
     g = network.gis
-    if not g.empty:
-        ext = g.groupby([g["line_code"].astype(str), g["track"].astype(str)])["km_m"].agg(["min", "max"])
-        keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in ext.index]
-        out.update(zip(keys, zip(ext["min"].astype(float), ext["max"].astype(float), strict=True), strict=True))
-    for key, (lo, hi, _ids) in _station_tracks(network).items():
-        out.setdefault(key, (lo, hi))
-    return out
+    if g.empty:
+        return {}
+    ext = g.groupby([g["line_code"].astype(str), g["track"].astype(str)])["km_m"].agg(["min", "max"])
+    keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in ext.index]
+    return dict(zip(keys, zip(ext["min"].astype(float), ext["max"].astype(float), strict=True), strict=True))
 
 
-def _station_tracks(network: Network) -> dict[tuple[str, str], tuple[float, float, list[tuple[str, float, float]]]]:
-    """(line, track) → (km min, km max, [(track_id, km lo, km hi)]) of the network tracks named
-    by a line and track that the GIS grid does not hold (station tracks with their own points)."""
+def _station_tracks(network: Network, grid: Collection[tuple[str, str]]) -> NamedTracks:
+    """The network tracks named by a line and track that the GIS ``grid`` does not hold
+    (station tracks with their own points)."""
     t = all_tracks(network)
-    grid = set(zip(network.gis["line_code"].astype(str), network.gis["track"].astype(str), strict=True))
-    out: dict[tuple[str, str], tuple[float, float, list[tuple[str, float, float]]]] = {}
+    out: NamedTracks = {}
     for tid, line, track, k0, k1 in zip(
         t["track_id"], t["line_code"], t["track"], t["km_begin_m"], t["km_end_m"], strict=True
     ):
         key = (_text(line), _text(track))
         if key[0] is None or key[1] is None or (key[0], key[1]) in grid or pd.isna(k0) or pd.isna(k1):
             continue
-        lo, hi = min(float(k0), float(k1)), max(float(k0), float(k1))
-        prev = out.get((key[0], key[1]))
-        ids = [*(prev[2] if prev else []), (str(tid), lo, hi)]
-        out[(key[0], key[1])] = (min(lo, prev[0]) if prev else lo, max(hi, prev[1]) if prev else hi, ids)
+        out.setdefault((key[0], key[1]), []).append((str(tid), min(float(k0), float(k1)), max(float(k0), float(k1))))
     return out
 
 
-def _station_track_ids(
-    rows: _Rows, network: Network | None, km_from: FloatArray, km_to: FloatArray
-) -> list[str | None]:
+def _extents(named: NamedTracks) -> dict[tuple[str, str], tuple[float, float]]:
+    """(line, track) → (km min, km max) over the named tracks."""
+    return {k: (min(lo for _, lo, _ in v), max(hi for _, _, hi in v)) for k, v in named.items()}
+
+
+def _station_track_ids(rows: _Rows, named: NamedTracks, km_from: FloatArray, km_to: FloatArray) -> list[str | None]:
     """Per row, the network track a station-track row possesses (None: a line track, or a
     ``track_id`` given); ``plan.track_id_needed`` where several tracks of that name overlap."""
     frame = rows.frame
     out: list[str | None] = [None] * len(frame)
-    if network is None:
-        return out
-    named = _station_tracks(network)
     given = frame["track_id"] if "track_id" in frame.columns else pd.Series([None] * len(frame), index=frame.index)
     for i in range(len(frame)):
         key = (_text(frame["line_code"].iat[i]), _text(frame["track"].iat[i]))
         if _text(given.iat[i]) is not None or key[0] is None or key[1] is None or (key[0], key[1]) not in named:
             continue
         lo, hi = min(km_from[i], km_to[i]), max(km_from[i], km_to[i])
-        hit = [tid for tid, a, b in named[(key[0], key[1])][2] if a < hi and lo < b]
+        hit = [tid for tid, a, b in named[(key[0], key[1])] if a < hi and lo < b]
         if len(hit) == 1:
             out[i] = hit[0]
         elif len(hit) > 1:
