@@ -42,7 +42,7 @@ import pandas as pd
 from dbtools.csv_locale import CsvLocale
 from dbtools.network import Network
 from dbtools.tabular import read_checked_table
-from dbtools.topology import all_tracks
+from dbtools.topology import all_tracks, grid_extents
 from schemas.enums import Severity
 from schemas.errors import FindingsError, UsageError
 from schemas.findings import Finding
@@ -282,13 +282,11 @@ NamedTracks = dict[tuple[str, str], list[tuple[str, float, float]]]
 
 
 def _grid_extents(network: Network) -> dict[tuple[str, str], tuple[float, float]]:
-    """(line, track) → (km min, km max) of the GIS grid's line tracks."""
-    g = network.gis
-    if g.empty:
-        return {}
-    ext = g.groupby([g["line_code"].astype(str), g["track"].astype(str)])["km_m"].agg(["min", "max"])
-    keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in ext.index]
-    return dict(zip(keys, zip(ext["min"].astype(float), ext["max"].astype(float), strict=True), strict=True))
+    """(line, track) → (km min, km max) of the GIS grid's line tracks
+    (:func:`dbtools.topology.grid_extents`)."""
+    ext = grid_extents(network)
+    keys = zip(ext["line_code"].astype(str), ext["track"].astype(str), strict=True)
+    return dict(zip(keys, zip(ext["km_lo"].astype(float), ext["km_hi"].astype(float), strict=True), strict=True))
 
 
 def _station_tracks(network: Network, grid: Collection[tuple[str, str]]) -> NamedTracks:
