@@ -215,11 +215,13 @@ def compare_units(pos_f: pd.DataFrame, pos_r: pd.DataFrame) -> tuple[pd.DataFram
     t = frame["t"].to_numpy()
     spans = [[float(t[a]), float(t[b - 1])] for a, b in _spans(frame["disagree"].to_numpy(dtype=bool))]
     sized = both & (bound > 0)  # the share of a zero bound (both margins 0) is not a number
+    with np.errstate(over="ignore"):  # a subnormal bound: the share is inf, and says so
+        shares = np.abs(diff[sized]) / bound[sized]
     summary = {
         "cycles": len(frame),
         "cycles_compared": int(both.sum()),
         "max_abs_difference_m": float(np.nanmax(np.abs(diff))) if both.any() else None,
-        "max_difference_share_of_bound": float(np.max(np.abs(diff[sized]) / bound[sized])) if sized.any() else None,
+        "max_difference_share_of_bound": float(np.max(shares)) if sized.any() else None,
         "cycles_beyond_margins": int(beyond.sum()),
         "cycles_on_other_tracks": int(other_track.sum()),
         "disagreements": spans,
@@ -237,8 +239,8 @@ def disagreement_events(frame: pd.DataFrame, unit: str) -> pd.DataFrame:
     """One ``units_disagree`` event per span of disagreement of :func:`compare_units`' ``frame``,
     as unit ``unit`` records it: at the span's first cycle, its own km there; ``detail`` the
     other unit, the span's end ``t_to``, its cycles beyond the margins and on other tracks, and
-    at its largest |d| (``t_worst``) the difference own − other, the bound m_F + m_R, both units'
-    km and their tracks (``track_id``, ``other_track_id``)."""
+    at its worst cycle (``t_worst``, :func:`_worst`) the difference own − other, the bound
+    m_F + m_R, both units' km and their tracks (``track_id``, ``other_track_id``)."""
     from fieldlogs.pipeline.summary import events_frame
     from fieldlogs.pipeline.types import Event
 
@@ -247,8 +249,7 @@ def disagreement_events(frame: pd.DataFrame, unit: str) -> pd.DataFrame:
     events = []
     for a, b in _spans(frame["disagree"].to_numpy(dtype=bool)):
         span = frame.iloc[a:b]
-        d = span["difference_m"].abs().to_numpy(dtype=float)
-        w = span.iloc[int(np.nanargmax(d)) if np.isfinite(d).any() else 0]
+        w = span.iloc[_worst(span)]
         detail = {
             "other_unit": "R" if unit == "F" else "F",
             "t_to": float(span["t"].iloc[-1]),
@@ -266,6 +267,19 @@ def disagreement_events(frame: pd.DataFrame, unit: str) -> pd.DataFrame:
         km = span[f"km_{own}_m"].iloc[0]
         events.append(Event(float(span["t"].iloc[0]), EventType.UNITS_DISAGREE, _num(km), detail=detail))
     return events_frame(events)
+
+
+def _worst(span: pd.DataFrame) -> int:
+    """The span's worst cycle: the largest share |d| / (m_F + m_R) of the bound — a cycle beyond
+    the margins where the span has one, as ``max_difference_share_of_bound`` measures — else the
+    largest |d|, else the first."""
+    d = span["difference_m"].abs().to_numpy(dtype=float)
+    bound = span["bound_m"].to_numpy(dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        share = np.where(np.isfinite(d) & (bound > 0), d / bound, np.nan)
+    if np.isfinite(share).any():
+        return int(np.nanargmax(share))
+    return int(np.nanargmax(d)) if np.isfinite(d).any() else 0
 
 
 def _num(v: Any) -> float | None:
