@@ -21,7 +21,10 @@ Then ``--raw-runs`` more runs (i = runs … runs + raw_runs − 1 of the same dr
 above keep their routes and seeds) get the condition **raw GNSS**: balise-only plus raw GNSS
 observables (``[gnss_raw]``: GPS, Galileo and QZSS pseudoranges of two antennas 16 m apart at
 1 Hz with the simulator's error models, the drawn tunnel blocking the sky; every other run
-under buildings and cuttings, ``corridor = "mixed"``), so the raw-GNSS track test
+under buildings and cuttings, ``corridor = "mixed"``; the drawn multipath kept, and the runs
+i ≡ 2, 3 (mod 4) — half of each corridor — with ``network.multipath`` over their whole route,
+bias ``RAW_MULTIPATH_M``: a reflecting surface at every neighbouring track within 25 m,
+:mod:`fieldlogs.simulate.gnss.reflection`), so the raw-GNSS track test
 (:mod:`fieldlogs.pipeline.aids.track_gnss`, evidence ``track_gnss``) and the balise groups and
 pairs are the only track evidence. Its figures are printed apart; the rows above are over the first
 ``--runs`` runs only.
@@ -61,6 +64,8 @@ from schemas.enums import EventType, PositionState
 CONDITIONS = ("D-GPS", "GNSS-only", "IMU-only", "balise-only")
 #: The raw-GNSS condition of the extra runs (module docstring).
 RAW = "raw GNSS"
+#: The multipath bias over the whole route of half the raw-GNSS runs [m] (module docstring).
+RAW_MULTIPATH_M = 2.5
 #: Heirich 2016: parallel-track selectivity and facing switch ways resolved.
 HEIRICH_SELECTIVITY, HEIRICH_SWITCHES = 0.993, 0.972
 #: The IMU signature's resolution-distance target holds at or above this speed [km/h].
@@ -76,6 +81,10 @@ def with_condition(run: dict[str, Any], condition: str, i: int = 0) -> dict[str,
         if tunnel:
             raw["network"]["gnss_outages"] = tunnel
         raw["gnss_raw"] = {"enabled": True, "corridor": "mixed" if i % 2 else "open"}
+        route = [[t, 0.0, 1.0e5, RAW_MULTIPATH_M] for t in run["network"]["tracks"]] if i % 4 >= 2 else []
+        multipath = run["network"].get("multipath", []) + route
+        if multipath:
+            raw["network"]["multipath"] = multipath
         return raw
     out: dict[str, Any] = json.loads(json.dumps(run))
     net = out["network"]
@@ -152,6 +161,7 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
         "fix1": fix1,
         "wrong": (float(wrong.min()), float(wrong.max()), len(wrong)) if len(wrong) else None,
         "parallel_by_state": tc[tc["parallel"]].groupby("state")["ds_m"].sum().to_dict(),
+        "multipath": bool(sc["network"].get("multipath")),
     }
 
 
@@ -280,7 +290,11 @@ def raw_table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     cover = sum(r["det_within"] for r in raw) / det if det else None
     gnss = ev.get("track_gnss", [])
     rows = [
-        (f"{RAW}: runs", f"{len(raw)} (balise-only + raw pseudoranges, half under a mixed corridor)"),
+        (
+            f"{RAW}: runs",
+            f"{len(raw)} (balise-only + raw pseudoranges, half under a mixed corridor, "
+            f"{sum(r['multipath'] for r in raw)} with multipath)",
+        ),
         (
             "  wrong-track claims (determined cycles)",
             f"{s['wrong_track_cycles']}  (target 0)  {verdict(s['wrong_track_cycles'] == 0)}" + _runs(raw, "wrong"),
