@@ -129,3 +129,42 @@ def test_track_gnss_resolves_the_station_loop_on_simulated_pseudoranges(network:
     true_track = truth["track_id"].astype(str).to_numpy()[at]
     det = (p["state"] == "determined").to_numpy()
     assert det.any() and (p["track_id"].astype(str).to_numpy()[det] == true_track[det]).all()
+
+
+def test_track_gnss_stays_fail_safe_under_multipath_at_the_neighbouring_track(network: Network, tmp_path: Path) -> None:
+    """The station loop as above with ``network.multipath`` over the whole route: a reflecting
+    surface at the neighbouring track (U2 beside loop 4, the other main track beside U1/U3),
+    amplitude 0.5 (fieldlogs.simulate.gnss.reflection); the pseudoranges of the satellites
+    across from it carry the two-path errors, metres of either sign held over seconds. No cycle
+    is determined on a wrong track, whichever evidence resolves the loop."""
+    tracks = ["0420-U1", "0420-4", "0420-U3"]
+    folder = _raw_run(
+        network,
+        tmp_path / "mp",
+        tracks,
+        [["0420-U1", 4500.0], ["0420-U3", 100.0]],
+        11,
+        multipath=[[t, 0.0, 1.0e5, 2.5] for t in tracks],
+    )
+    run = read_run(folder)
+    truth = run.stream("truth")
+    assert truth is not None and run.meta is not None
+    refl = run.meta.extra["sim_truth"]["gnss_raw"]["reflection"]
+    assert refl["observations"] > 100 and refl["code_min_m"] < -2.0
+    unit = GnssUnit.for_run(run, network, GnssConfig())
+    km0 = float(truth["km_m"].iloc[0])
+    k = 1 if float(truth["km_m"].iloc[-1]) > km0 else -1
+    tr = travel(network, truth["speed_mps"].to_numpy(dtype=float))
+    lines = track_lines(network)
+    aids = [
+        Start("0420", "U", km0, k),
+        TopologyAid(lines, MARGIN),
+        TrackGnssAid(unit, unit.epoch_times(), lines, unit.cfg),
+    ]
+    p = run_aids(tr, aids, MARGIN).positions  # type: ignore[arg-type]
+    at = np.searchsorted(truth["t"].to_numpy(dtype=float), p["t"].to_numpy(dtype=float), side="right") - 1
+    det = (p["state"] == "determined").to_numpy()
+    assert (
+        det.any()
+        and (p["track_id"].astype(str).to_numpy()[det] == truth["track_id"].astype(str).to_numpy()[at][det]).all()
+    )
