@@ -43,12 +43,14 @@ RAW_RUNS = 12
 @pytest.mark.slow
 def test_network_accuracy_raw_gnss(sample_network_db: Path, tmp_path: Path) -> None:
     """The bench's raw-GNSS condition (runs 40–51 of the same draw, as ``--runs 40 --raw-runs
-    12``): simulated pseudoranges along the routes, balise-only otherwise — no wrong-track claim,
-    no facing switch resolved wrongly, |error| ≤ margin on every determined cycle."""
+    12``): simulated pseudoranges along the routes, balise-only otherwise, half of the runs with
+    multipath at the neighbouring tracks over the whole route — no wrong-track claim, no facing
+    switch resolved wrongly, |error| ≤ margin on every determined cycle."""
     bench = load_script("accuracy_network")
     runs = network_runs(read_network(sample_network_db), RUNS + RAW_RUNS, SEED)[RUNS:]
     results = [bench.one((RUNS + j, str(sample_network_db), str(tmp_path), r, bench.RAW)) for j, r in enumerate(runs)]
     assert {r["condition"] for r in results} == {bench.RAW}
+    assert sum(r["multipath"] for r in results) >= RAW_RUNS // 2
     s = sum((r["figures"] for r in results), TrackFigures()).summary()
     assert s["facing_switches"] >= 20
     assert s["wrong_track_cycles"] == 0 and s["switches_resolved_wrongly"] == 0
