@@ -3,10 +3,12 @@ cell keys of its candidate index (the method: :mod:`dbtools.gis.matching`).
 
 The same answer as the compiled loop of :mod:`dbtools.gis.match_kernel`, bit for bit (the
 same float operations in the same order, the same tie rules; a hypothesis test compares
-the two): per fix every vertex of the 3 × 3 cells of side R around it, both segments
-adjacent to each, per track the nearest within ``max_d2`` (lowest segment index on exact
-ties), tracks nearest first. The pairs (fix, candidate segment) are materialised, a block
-of fixes at a time: for the few thousand fixes of a run this costs milliseconds, where
+the two): per fix every vertex of the 3 × 3 cells of side R around it, the segments
+adjacent to each (each segment once, where the kernel meets some twice: the same set), per
+track the nearest within ``max_d2`` (lowest segment index on exact ties: one integer sort by
+(fix, track) and group minima), tracks nearest first. The pairs (fix, candidate segment)
+are materialised, a block of fixes at a time: for the few thousand fixes of a run this
+costs milliseconds, where
 importing numba and loading the kernel from its disk cache costs a few tenths of a second
 (bench/NOTES.md, "Whole-process run (issue 21, third pass)"); for many fixes the kernel is
 faster (:data:`NUMPY_MAX_FIXES`).
@@ -26,9 +28,11 @@ CELL_OFFSET = 1 << 24
 CELL_STRIDE = 1 << 26
 #: Up to this many fixes a match is done here unless the compiled kernel is already loaded: a
 #: day of GPS at 1 Hz (86,400 fixes), so a 24 h run's one match needs no numba. At 100,000 fixes
-#: this path takes ≈ 0.3 s and ≈ 60 MB of peak (blocks of BLOCK_FIXES), where importing numba
-#: and loading the kernel takes ≈ 0.5 s and ≈ 190 MB of RSS before it matches them in 0.03 s
-#: (bench/NOTES.md, "Day-long runs without numba"); beyond ≈ 180,000 fixes the kernel is faster.
+#: on the demo line this path takes ≈ 0.2 s CPU (0.37 s before the grouping by one sort) and
+#: ≈ 60 MB of peak (blocks of BLOCK_FIXES), where importing numba and loading the kernel takes
+#: ≈ 0.5 s and ≈ 190 MB of RSS before it matches them in 0.03 s (bench/NOTES.md, "Day-long runs
+#: without numba" and "Map matching: which path the bench timed"); the kernel is faster in a
+#: fresh process beyond ≈ 300,000 fixes, and at any size once loaded.
 NUMPY_MAX_FIXES = 100_000
 #: Fixes per block of materialised candidate pairs (bounds the memory: ~ 20–60 pairs a fix).
 BLOCK_FIXES = 8192
