@@ -83,7 +83,8 @@ SMOKE: dict[str, Smoke] = {
         "--lines 2 --per-line 50 --repeat 1", (r"ratio track match / nearest-track: [\d.]+×", r"fixes/s")
     ),
     "bench_matching.py": Smoke(
-        "--lines 2 --points 200 --fixes 1000 --loop-fixes 100 --repeat 1", (r"ratios: ours / loop = [\d.]+×",)
+        "--lines 2 --points 200 --fixes 1000 --loop-fixes 100 --repeat 1",
+        (r"ratios: ours / loop = [\d.]+×", r"numpy twin .* fixes/s CPU; frames equal: True"),
     ),
     "bench_odometry.py": Smoke("--hours 0.1 --slips 2 --repeat 1", (r"ratio naive / vectorised \(CPU\): [\d.]+×",)),
     "bench_osm.py": Smoke("--smoke", (r"osmium read", r"× osmium.s read", r"switches \d+")),

@@ -88,6 +88,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from dbtools.masks import sign_runs
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, load_tables
@@ -309,7 +310,7 @@ class FeatureUnit:
         cycle i)."""
         d, x, kap, u = self._d, self._x, self.kappa, c.u
         best: tuple[float, float, float, int] | None = None
-        for j0, j1, sgn in _runs(kap[i_a : i_hi + 1], x[i_a : i_hi + 1], k_lo, self.cfg.crossing_merge_m):
+        for j0, j1, sgn in sign_runs(kap[i_a : i_hi + 1], x[i_a : i_hi + 1], k_lo, self.cfg.crossing_merge_m):
             if j0 < 1 or j1 > i_hi - i_a:
                 continue  # a crossing outside the window
             xe = _cross(x, kap, i_a + j0 - 1, i_a + j0, k_lo, sgn)
@@ -434,24 +435,6 @@ class FeatureUnit:
         detail["min_speed_kmh"] = round(v_min * 3.6, 2)
         if not v_min * 3.6 >= self.cfg.min_speed_kmh:
             failed.append("min_speed")
-
-
-def _runs(k: FloatArray, x: FloatArray, level: float, merge_m: float) -> list[tuple[int, int, int]]:
-    """Runs (first index, index after the last, sign) where ±κ ≥ level; same-sign runs
-    separated by less than ``merge_m`` of travel are merged."""
-    out: list[tuple[int, int, int]] = []
-    for sgn in (1, -1):
-        above = np.nan_to_num(sgn * k, nan=-np.inf) >= level
-        edges = np.diff(np.concatenate([[0], above.astype(np.int8), [0]]))
-        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        merged: list[list[int]] = []
-        for s, e in zip(starts.tolist(), ends.tolist(), strict=True):
-            if merged and x[s] - x[merged[-1][1] - 1] < merge_m:
-                merged[-1][1] = e
-            else:
-                merged.append([s, e])
-        out += [(s, e, sgn) for s, e in merged]
-    return out
 
 
 def _cross(x: FloatArray, k: FloatArray, i0: int, i1: int, level: float, sgn: int) -> float:
