@@ -29,7 +29,7 @@ track with ``track_points`` by their ``pos_m``/``km_m``; km is NaN off a line.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -183,6 +183,8 @@ class TrackLines:
     lines: dict[str, TrackLine]
     by_line: dict[tuple[str, str], list[TrackLine]]
     topo: Topology
+    headings: dict[str, FloatArray] = field(default_factory=dict, repr=False, compare=False)
+    """Chord headings per track, made on first use (:mod:`fieldlogs.pipeline.track_heading`)."""
 
     def __getitem__(self, track_id: str) -> TrackLine:
         return self.lines[track_id]
