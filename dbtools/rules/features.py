@@ -104,7 +104,7 @@ def _range_stat(values: F64, lo: npt.NDArray[np.int64], hi: npt.NDArray[np.int64
 
 
 @dataclass(frozen=True)
-class _Rows:
+class FeatureRows:
     """The feature-point columns as arrays, and how findings name a row. ``where`` holds the
     columns that name the feature's track (``line_code``, ``track`` in ``feature_points``;
     ``track_id`` in ``track_feature_points``) and ``km`` the row positions (``km_m`` or
@@ -130,7 +130,7 @@ class _Rows:
         table: str = T,
         where: tuple[str, ...] = ("line_code", "track"),
         pos_col: str = "km_m",
-    ) -> _Rows:
+    ) -> FeatureRows:
         fid, seq, km = column(fp, "feature_id"), column(fp, "seq"), column(fp, pos_col)
         radius, attr = column(fp, "radius_m"), column(fp, "attribute")
         cols = {c: column(fp, c) for c in where}
@@ -180,7 +180,7 @@ def check_features(fp: pd.DataFrame, grid: GridIndex, config: ValidationConfig, 
     """All feature-point rules (see module docstring)."""
     if fp.empty:
         return []
-    r = _Rows.of(fp, config, loc)
+    r = FeatureRows.of(fp, config, loc)
     out, in_gis = _outside_gis(r, grid)
     sign = np.where(r.track == Track.UP.value, -1.0, 1.0)
     found, b, order_bad = check_structure(r, sign)
@@ -199,7 +199,7 @@ def check_features(fp: pd.DataFrame, grid: GridIndex, config: ValidationConfig, 
     return out
 
 
-def check_structure(r: _Rows, sign: F64) -> tuple[list[Finding], _Blocks | None, npt.NDArray[np.bool_]]:
+def check_structure(r: FeatureRows, sign: F64) -> tuple[list[Finding], _Blocks | None, npt.NDArray[np.bool_]]:
     """``feature.rows``, ``feature.pattern``, ``feature.order`` and ``feature.straight_length``
     of the rows ``r`` (``sign`` per row: +1 where the running order is increasing position);
     the well-formed six-row blocks (None: none) and which of them break the order."""
@@ -217,7 +217,7 @@ def check_structure(r: _Rows, sign: F64) -> tuple[list[Finding], _Blocks | None,
     return out, b, order_bad
 
 
-def _outside_gis(r: _Rows, grid: GridIndex) -> tuple[list[Finding], npt.NDArray[np.bool_]]:
+def _outside_gis(r: FeatureRows, grid: GridIndex) -> tuple[list[Finding], npt.NDArray[np.bool_]]:
     """``feature.outside_gis`` (every row, whatever its feature looks like); rows in the grid."""
     line, track, km, eps = r.line, r.track, r.km, r.config.km_epsilon_m
     rows = np.flatnonzero(pd.notna(line) & pd.notna(track) & np.isfinite(km))
@@ -246,7 +246,7 @@ def _outside_gis(r: _Rows, grid: GridIndex) -> tuple[list[Finding], npt.NDArray[
     return r.capped("feature.outside_gis", np.flatnonzero(outside), build), in_gis
 
 
-def _six_rows(r: _Rows) -> tuple[list[Finding], npt.NDArray[np.int64]]:
+def _six_rows(r: FeatureRows) -> tuple[list[Finding], npt.NDArray[np.int64]]:
     """``feature.rows``; the (k, 6) frame rows of the features with seq 1…6."""
     named = np.all([pd.notna(v) for v in (*r.where.values(), r.fid)], axis=0)
     keyed = np.flatnonzero(named)
@@ -280,7 +280,7 @@ def _six_rows(r: _Rows) -> tuple[list[Finding], npt.NDArray[np.int64]]:
     return r.capped("feature.rows", bad_feat, build), np.asarray(block[ok_seq], dtype=np.int64)
 
 
-def _pattern(r: _Rows, block: npt.NDArray[np.int64]) -> list[Finding]:
+def _pattern(r: FeatureRows, block: npt.NDArray[np.int64]) -> list[Finding]:
     """``feature.pattern``: each row's attribute against [S000 Table 1]."""
     a6 = r.attr[block]
     pat_bad = np.zeros(a6.shape, dtype=bool)
@@ -304,7 +304,7 @@ def _pattern(r: _Rows, block: npt.NDArray[np.int64]) -> list[Finding]:
     return r.capped("feature.pattern", np.arange(len(pr)), build)
 
 
-def _order(r: _Rows, b: _Blocks, order_bad: npt.NDArray[np.bool_]) -> list[Finding]:
+def _order(r: FeatureRows, b: _Blocks, order_bad: npt.NDArray[np.bool_]) -> list[Finding]:
     """``feature.order``: km monotonic in running direction, a curve body of non-zero length."""
 
     def build(j: int) -> Finding:
@@ -323,7 +323,7 @@ def _order(r: _Rows, b: _Blocks, order_bad: npt.NDArray[np.bool_]) -> list[Findi
     return r.capped("feature.order", np.flatnonzero(order_bad), build)
 
 
-def _straight_length(r: _Rows, b: _Blocks, good: npt.NDArray[np.bool_]) -> list[Finding]:
+def _straight_length(r: FeatureRows, b: _Blocks, good: npt.NDArray[np.bool_]) -> list[Finding]:
     """``feature.straight_length``: entry (rows 1–2) and exit (rows 5–6) long enough."""
     out: list[Finding] = []
     min_m = r.config.min_straight_m
@@ -347,7 +347,7 @@ def _straight_length(r: _Rows, b: _Blocks, good: npt.NDArray[np.bool_]) -> list[
 
 
 def _span(
-    r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], c0: int, c1: int
+    r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], c0: int, c1: int
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Grid points between rows c0 and c1 of each feature (ε-inclusive)."""
     eps = r.config.km_epsilon_m
@@ -356,7 +356,7 @@ def _span(
     return grid.searchsorted(gid, lo_km - eps, "left"), grid.searchsorted(gid, hi_km + eps, "right")
 
 
-def _body_curvature(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> F64:
+def _body_curvature(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> F64:
     """Mean GIS κ over the body (rows 3–4); a body shorter than the grid spacing takes the
     vertex nearest its middle."""
     lo, hi = _span(r, b, grid, gid, 2, 3)
@@ -372,7 +372,7 @@ def _body_curvature(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.i
     return mean
 
 
-def _body(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> list[Finding]:
+def _body(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> list[Finding]:
     """``feature.direction`` and ``feature.radius`` from the mean κ over the body."""
     blk, sg, tol = b.block, b.sign, r.config.feature_tolerance
     R = r.radius[blk[:, 2]]
@@ -421,7 +421,7 @@ def _body(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kap
     )
 
 
-def _straights(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> list[Finding]:
+def _straights(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> list[Finding]:
     """``feature.straight``: entry (rows 1–2, transition rows 2–3) and exit (rows 5–6,
     transition 4–5) straight on the grid, allowing the stencil leak of the transition."""
     out: list[Finding] = []
