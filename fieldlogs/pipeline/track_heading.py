@@ -21,6 +21,7 @@ unknown (None): no one can say which way the train came or went.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -123,7 +124,7 @@ def arc_turn(u: FloatArray, radius_m: float) -> float:
     return float((u[3] - u[2] + 0.5 * (u[2] - u[1]) + 0.5 * (u[4] - u[3])) / radius_m)
 
 
-def violation_llr(violation: list[float | None], sigma: float) -> FloatArray:
+def violation_llr(violation: Sequence[float | None], sigma: float) -> FloatArray:
     """LLR[a, b] of candidate a against b from each one's violation δ_c ≥ 0 [rad] (how far the
     measurement lies outside what its track allows): LLR_ab = (δ_b² − δ_a²) / (2σ²), the
     Gaussian LLR of the best-fitting geometry of each (so no candidate is judged by a geometry

@@ -9,6 +9,8 @@ to α = atan(1/9) (R·α = 21.03 m), 40 m straight, arc R 500 m to 30° (500·(3
 from __future__ import annotations
 
 import math
+from typing import Any
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -78,13 +80,14 @@ def wz_on_curves(tr: Travel, pos_of_d: np.ndarray, turn: float) -> np.ndarray:
     return wz
 
 
-def solve(n: Network, tr: Travel, start: StaticAid, wz: np.ndarray) -> Solution:
+def solve(n: Network, tr: Travel, start: Start | Ambiguous, wz: np.ndarray) -> Solution:
     lines = track_lines(n)
     aid = TrackFeatureAid(track_feature_tables(n, lines), lines, wz, CFG, MARGIN)
-    return run_aids(tr, [start, TopologyAid(lines, MARGIN), aid], MARGIN)
+    aids: list[Any] = [start, TopologyAid(lines, MARGIN), aid]
+    return run_aids(tr, aids, MARGIN)
 
 
-def resolved(sol: Solution) -> list[dict[str, object]]:
+def resolved(sol: Solution) -> list[dict[str, Any]]:
     return [e.detail for e in sol.events if e.type == EventType.TRACK_RESOLVED]
 
 
