@@ -40,7 +40,8 @@ def source(tmp_path: Path, rows: str = ROWS, name: str = "src") -> Path:
 
 def rules(tmp_path: Path, rows: str) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
-    for f in validate_path(source(tmp_path, rows, "bad")):
+    n = len(list(tmp_path.glob("bad*")))
+    for f in validate_path(source(tmp_path, rows, f"bad{n}")):
         if f.table == "track_feature_points":
             out.setdefault(f.rule, []).append(f.message)
     return out
@@ -117,3 +118,16 @@ def test_diff_names_the_feature_on_its_track(tmp_path: Path) -> None:
     assert "feature F1 on track B1 added (pos 21.0–307.5 m, left R 500 m)" in d.summary
     assert d.tables["track_feature_points"].counts == {"added": 6, "removed": 0, "changed": 0}
     assert isinstance(d.tables["track_feature_points"].added, pd.DataFrame)
+
+
+def test_turn_against_the_centreline(tmp_path: Path) -> None:
+    # B1's chords at the straights' middles (pos 41, 287.5) head 6.34° and 30°: a turn of
+    # +23.66° = the feature's (267.49 − 61.03)/500 rad. Mirrored, or at R 250 m (θ = 47.3°),
+    # it is off by more than 20 % + 20 m/(2R).
+    assert "feature.track_turn" not in rules(tmp_path, ROWS)
+    mirrored = rules(tmp_path, ROWS.replace("500,left", "500,right"))["feature.track_turn"]
+    assert mirrored == [
+        "the centreline of track B1 turns +23.7° between the straights, the feature -23.7° "
+        "(± 5.9°; + left from the track's begin)"
+    ]
+    assert len(rules(tmp_path, ROWS.replace("500,left", "250,left"))["feature.track_turn"]) == 1

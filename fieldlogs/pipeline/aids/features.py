@@ -162,6 +162,11 @@ class FeatureUnit:
         self.tables, self.skipped = load_tables(self.network.feature_points)
         self._done: dict[tuple[str, str, str, int], int] = {}
 
+    @property
+    def dt(self) -> float:
+        """The cycle time the κ smoothing counts in [s]."""
+        return self._dt
+
     # -- scheduling ---------------------------------------------------------------------
     def margin(self, fix: Fix, idx: npt.ArrayLike) -> FloatArray:
         """Search margin w at cycles ``idx`` under ``fix`` [m]."""

@@ -9,6 +9,7 @@ to α = atan(1/9) (R·α = 21.03 m), 40 m straight, arc R 500 m to 30° (500·(3
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -19,13 +20,17 @@ from hypothesis import strategies as st
 
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import Observation, Outcome, Priority, StaticAid
+from fieldlogs.pipeline.aids.feature_table import Candidate
+from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.aids.topology import TopologyAid
-from fieldlogs.pipeline.aids.track_features import TrackFeatureAid, track_feature_tables
+from fieldlogs.pipeline.aids.track_features import TrackFeatureAid, TrackFeatureFixAid, track_feature_tables
+from fieldlogs.pipeline.config import FeatureConfig
+from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.engine import Solution, run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.track_heading import arc_turn, headings, rises, turn_range, violation_llr
-from fieldlogs.pipeline.types import Fix, Hypothesis
+from fieldlogs.pipeline.types import Fix, Hypothesis, Odometry
 from schemas.enums import EventType, FixSource, PositionState
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
 
@@ -196,3 +201,64 @@ def test_no_features_no_aid_effect() -> None:
     assert not track_feature_tables(n, lines)
     sol = run_aids(tr, [Start("9001", "S", 300.0, 1), TopologyAid(lines, MARGIN)], MARGIN)
     assert sol.positions["state"].iloc[-1] == "ambiguous"
+
+
+#: A curve with 20 m clothoid transitions (R 500 m, left), rows r1…r6 along B1, for the
+#: correction test: its κ is drawn into the yaw rate directly (the aid reads only ωz and the rows).
+CLOTHOID = np.array([61.0, 81.0, 101.0, 277.5, 297.5, 337.5])
+
+
+def _branch_run(start_pos: float, seconds: float, v: float = 10.0) -> tuple[Cycles, Odometry]:
+    """Cycles and odometry of a train running B1 forward at ``v`` from ``start_pos``, its yaw
+    rate v·κ of :data:`CLOTHOID`'s curve, no noise."""
+    t = np.arange(0.0, seconds + 1e-9, 0.1)
+    n = t.size
+    d = v * t
+    pos = start_pos + d - 0.05 * v  # cycle means stand for mid-cycle
+    r = CLOTHOID
+    kappa = np.interp(pos, [r[1], r[2], r[3], r[4]], [0.0, 1 / 500.0, 1 / 500.0, 0.0], left=0.0, right=0.0)
+    imu = {c: np.zeros(n) for c in ("ax", "ay", "az", "wx", "wy")} | {"wz": v * kappa}
+    ones = np.ones(n, dtype=np.int8)
+    c = Cycles(t, d.copy(), d.copy(), np.full(n, v), imu, ones, ones, True, True)
+    return c, Odometry(d, np.full(n, v), np.zeros(n, dtype=bool), np.zeros(n))
+
+
+def test_correction_along_a_track_at_its_curve() -> None:
+    # determined on B1 with the estimate 8 m ahead of the truth (pos 2 at t = 0), within the
+    # 40 m search margin. The exit crossing of κ = (1 − 20 %)/R lies 20 % into the exit
+    # transition, at pos 281.5 (the 1 s smoothing moves a linear ramp's crossing by nothing):
+    # the fix is on B1 at row 4's pos 277.5 — the S000 correction point — and the 8 m error
+    # becomes 281.5 − 277.5 = 4 m behind the truth.
+    fp = FEATURE.assign(pos_m=CLOTHOID)
+    n = Network({**net("junction").tables, "track_feature_points": fp}, origin="junction+F1")
+    c, odo = _branch_run(2.0, 45.0)
+    tr = Travel.of(c, odo, n)
+    lines = track_lines(n)
+    unit = FeatureUnit(c, odo, n, FeatureConfig(search_margin_m=40.0))
+    fix_aid = TrackFeatureFixAid(unit, track_feature_tables(n, lines).own, lines)
+    aids: list[Any] = [Start("9002", "S", 10.0, 1), TopologyAid(lines, MARGIN), fix_aid]
+    sol = run_aids(tr, aids, MARGIN)
+    ev = [e for e in sol.events if e.type == EventType.FEATURE_CORRECTION]
+    assert len(ev) == 1 and ev[0].detail["track_id"] == "B1" and ev[0].detail["feature_id"] == "F1"
+    assert ev[0].km_m == pytest.approx(277.5, abs=0.01) and ev[0].detail["pos_db_m"] == pytest.approx(277.5)
+    assert ev[0].correction_m == pytest.approx(8.0 + 4.0, abs=1.0)
+    p = sol.positions
+    t = p["t"].to_numpy(float)
+    err = p["pos_m"].to_numpy(float) - (2.0 + 10.0 * t)
+    after = t >= ev[0].t - 1e-9
+    assert np.allclose(err[~after & (t > 1.0)], 8.0, atol=0.01)  # pos from km 10 by the grid's length
+    assert np.allclose(err[after], -4.0, atol=1.0)
+    assert (p.loc[after, "track_id"] == "B1").all() and (p.loc[after, "state"] == "determined").all()
+
+
+def test_a_short_curve_at_speed_is_not_judged() -> None:
+    # a 20 m curve without transitions: at 60 km/h the 1 s smoothing (w = 16.9 m incl. the odd
+    # sample count) shortens it by 0.6·w = 10.1 m > max(20 % of 20 m, 10 m); at 40 km/h by 6.7 m
+    unit = SimpleNamespace(n_smooth=11, dt=0.1, cfg=FeatureConfig())
+    aid = TrackFeatureFixAid(unit, {}, track_lines(net("junction")))  # type: ignore[arg-type]
+    u = np.array([0.0, 30.0, 30.0, 50.0, 50.0, 80.0])
+    cand = Candidate("F", "", "T", 1, False, u, u, 200.0, 1, 5.0, 0)
+    assert aid._unresolvable(cand, {"min_speed_kmh": 60.0})
+    assert not aid._unresolvable(cand, {"min_speed_kmh": 40.0})
+    with_transitions = Candidate("F", "", "T", 1, False, u + np.array([0, 0, 5, 0, 5, 5]), u, 200.0, 1, 5.0, 0)
+    assert not aid._unresolvable(with_transitions, {"min_speed_kmh": 60.0})
