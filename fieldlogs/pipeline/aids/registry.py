@@ -104,7 +104,7 @@ def _track_imu(ctx: RunContext) -> Aid | None:
 
 def _track_features(ctx: RunContext) -> Aid | None:
     wz = ctx.cycles.imu.get("wz") if ctx.cycles.has_imu else None
-    if wz is None or not _has_topology(ctx):
+    if wz is None or not _has_topology(ctx) or not ctx.cfg.track_select.feature_headings:
         return None
     lines = track_lines(ctx.network)
     tables = track_feature_tables(ctx.network, lines)
