@@ -92,6 +92,24 @@ def _beyond(
     return headings(lines, ex.track_id, kp * along, lo, hi, depth + 1)
 
 
+def sure_turns(lines: TrackLines, track_id: str, kd: int, p_lo: float, p_hi: float) -> tuple[float, float]:
+    """(left, right): the turns a train running ``kd`` along the track surely made while
+    passing every chord lying wholly within pos [``p_lo``, ``p_hi``] of its own track — the
+    greatest rise and fall (:func:`rises`) of those chords' headings in travel order. The track
+    is smooth and passes through the centreline's points, so somewhere on each chord it heads
+    as the chord does (the mean value theorem): a train that ran over chords j and then k
+    turned by ψ_k − ψ_j on the way. (0, 0) with fewer than two such chords."""
+    psi = chord_headings(lines, track_id)
+    cpos = lines[track_id].cpos
+    if psi.size < 2:
+        return 0.0, 0.0
+    inside = np.flatnonzero((cpos[:-1] >= p_lo) & (cpos[1:] <= p_hi))
+    if inside.size < 2:
+        return 0.0, 0.0
+    seq = psi[inside] if kd > 0 else psi[inside][::-1]
+    return rises(seq)
+
+
 def turn_range(start: FloatArray, end: FloatArray) -> tuple[float, float]:
     """(least, greatest) heading change from a heading in ``start`` to one in ``end``, each
     wrapped to within π of the first start heading (turns over a window are far below π)."""

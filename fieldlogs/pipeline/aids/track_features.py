@@ -16,19 +16,32 @@ Evidence (:class:`TrackFeatureAid`, while the position is ambiguous)
     at cycle i, m the margin at the evaluation (plus a's ``extra_m``), and r2, r5 the rows
     where the curve's transitions begin and end (travel order), the window runs from the last
     cycle i0 with u_a ≤ r2 − m to the first cycle i1 with u_a ≥ r5 + m: if a is the true
-    track the train is before the curve at i0 and beyond it at i1. The measured heading
-    change is Δψ = Σ_{i0 < i ≤ i1} ωz,i·Δt_i; each candidate c (margin m_c = m + its
-    ``extra_m``) expects a change anywhere in [min ψ_end − max ψ_start, max ψ_end − min ψ_start]
-    with ψ_start the travel headings its track can have within ±m_c of its position at i0,
-    ψ_end the same at i1 (:mod:`fieldlogs.pipeline.track_heading`, from the centrelines,
-    across joints with one exit). With δ_c the distance of Δψ from c's range and
-    σ² = (b_g·T)² + q²·T + σ_geo² as in :mod:`fieldlogs.pipeline.aids.track_imu` (T = t_i1 −
-    t_i0), LLR_ab = (δ_b² − δ_a²) / (2σ²) and b is dropped when some a reaches Wald's A
-    (``track_select.alpha``, ``beta``). So a curve seen where one candidate has it and another
-    runs straight drops the straight one, a straight run drops the curved one, and a curve
-    of the same turn on two candidates decides nothing; a candidate whose geometry is unknown
-    over its interval (beyond a facing switch, no centreline) is never dropped. No test when
-    the cab direction changes in the window or the yaw rate is missing.
+    track the train is before the curve at i0 and beyond it at i1. The yaw rate gives the
+    heading profile ψ_i = Σ_{i0 < j ≤ i} ωz,j·Δt_j over the window (net change Δψ = ψ_i1,
+    span max ψ − min ψ, greatest rise and fall :func:`~fieldlogs.pipeline.track_heading.rises`).
+    Each candidate c (margin m_c = m + its ``extra_m``, positions p0, p1 at i0, i1) allows,
+    from the centrelines (:mod:`fieldlogs.pipeline.track_heading`, across joints with one
+    exit):
+
+    * a net change in [min ψ_end − max ψ_start, max ψ_end − min ψ_start], ψ_start the travel
+      headings its track can have within p0 ± m_c, ψ_end the same at p1;
+    * a span no larger than the headings' over [p0 − m_c, p1 + m_c];
+    * a rise and a fall at least those of the chords lying wholly within [p0 + m_c, p1 − m_c]
+      (:func:`~fieldlogs.pipeline.track_heading.sure_turns`: run over for certain);
+    * for each curve of its feature tables wholly within [p0 + m_c, p1 − m_c] (rows 2–5), a
+      turn its way of at least (r4 − r3 + (r3 − r2)/2 + (r5 − r4)/2)/R.
+
+    Its violation δ_c is how far the profile lies outside the worst of these (a constraint
+    whose geometry is unknown adds none, so unknown geometry never counts against a
+    candidate). With σ² = (b_g·T)² + q²·T + σ_geo² as in
+    :mod:`fieldlogs.pipeline.aids.track_imu` (T = t_i1 − t_i0), LLR_ab = (δ_b² − δ_a²) / (2σ²)
+    and b is dropped when some a reaches Wald's A (``track_select.alpha``, ``beta``): the true
+    candidate is dropped only if its own δ, a deviation of the gyro from the true track's
+    turns, reaches √(2A)·σ. So a curve seen where one candidate has it and another runs
+    straight drops the straight one, a straight run drops the curved one, and a curve of the
+    same turn on two candidates decides nothing. No test when the sense of motion changes
+    in the window or the yaw rate is missing; ``track_select.feature_headings`` = false
+    switches the test off.
 
 Correction (:class:`TrackFeatureFixAid`, while determined on one track)
     The S000 feature unit (:class:`~fieldlogs.pipeline.aids.features.FeatureUnit`: search
@@ -59,7 +72,15 @@ from fieldlogs.pipeline.config import MarginConfig, TrackSelectConfig
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import TrackLine, TrackLines
 from fieldlogs.pipeline.positions import margin_m
-from fieldlogs.pipeline.track_heading import arc_turn, headings, rises, span, turn_range, violation_llr
+from fieldlogs.pipeline.track_heading import (
+    arc_turn,
+    headings,
+    rises,
+    span,
+    sure_turns,
+    turn_range,
+    violation_llr,
+)
 from fieldlogs.pipeline.types import Event, Fix, FloatArray, Hypothesis
 from schemas.enums import EventType, FixSource, PositionState
 
@@ -281,6 +302,8 @@ class TrackFeatureAid:
         if whole is not None:
             out = max(out, float(np.ptp(prof)) - span(whole))
         left, right = rises(prof)
+        sure_left, sure_right = sure_turns(self.lines, h.track_id, kd, min(p0, p1) + m, max(p0, p1) - m)
+        out = max(out, sure_left - left, sure_right - right)
         u0, u1 = kd * p0 + m, kd * p1 - m
         for tab in self.tables.on(h.track_id):
             u_all, _, sign = tab.travel_rows(kd)

@@ -29,7 +29,7 @@ from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.engine import Solution, run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import track_lines
-from fieldlogs.pipeline.track_heading import arc_turn, headings, rises, turn_range, violation_llr
+from fieldlogs.pipeline.track_heading import arc_turn, headings, rises, sure_turns, turn_range, violation_llr
 from fieldlogs.pipeline.types import Fix, Hypothesis, Odometry
 from schemas.enums import EventType, FixSource, PositionState
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
@@ -122,6 +122,20 @@ def test_headings_along_the_branch_and_across_the_toe() -> None:
     assert back is not None and np.allclose(np.cos(back), -1.0, atol=1e-6)
     # beyond A1's end lies the facing switch W1: two exits, unknown
     assert headings(lines, "A1", 1, 390.0, 410.0) is None
+
+
+def test_sure_turns_of_the_chords_run_over() -> None:
+    # B1's grid points every 20 m of km (= pos); chords wholly within pos 70–260 run from
+    # [80, 100] to [240, 260], all on the R 500 m arc: their headings differ by the arc between
+    # their middles, (250 − 90)/500 rad = 18.33° — a left turn running begin → end, a right
+    # turn the other way; on A2 (straight) none
+    lines = track_lines(junction())
+    left, right = sure_turns(lines, "B1", 1, 70.0, 260.0)
+    # (within 0.05°: the local equirectangular plane against the grid's own projection)
+    assert math.degrees(left) == pytest.approx(math.degrees(160.0 / 500.0), abs=0.05) and right == pytest.approx(0.0)
+    assert sure_turns(lines, "B1", -1, 70.0, 260.0) == pytest.approx((0.0, left))
+    assert sure_turns(lines, "A2", 1, 10.0, 500.0) == pytest.approx((0.0, 0.0), abs=2e-4)  # plane drift 0.01°
+    assert sure_turns(lines, "B1", 1, 70.0, 95.0) == (0.0, 0.0)  # fewer than two chords
 
 
 def test_tables_of_both_forms() -> None:
