@@ -276,3 +276,28 @@ def test_a_short_curve_at_speed_is_not_judged() -> None:
     assert not aid._unresolvable(cand, {"min_speed_kmh": 40.0})
     with_transitions = Candidate("F", "", "T", 1, False, u + np.array([0, 0, 5, 0, 5, 5]), u, 200.0, 1, 5.0, 0)
     assert not aid._unresolvable(with_transitions, {"min_speed_kmh": 60.0})
+
+
+@settings(max_examples=60, deadline=None)
+@given(p=st.floats(-30.0, 590.0), width=st.floats(0.0, 60.0))
+def test_headings_reverse_by_half_a_turn(p: float, width: float) -> None:
+    # the same stretch run the other way: every heading turned by π; behind B1's begin lies
+    # A1 (one exit), beyond its end nothing (no exit: unknown)
+    lines = track_lines(junction())
+    fwd = headings(lines, "B1", 1, p, p + width)
+    back = headings(lines, "B1", -1, p, p + width)
+    if p + width > 600.0:
+        assert fwd is None and back is None
+        return
+    assert fwd is not None and back is not None
+    assert np.allclose(np.cos(back - fwd), -1.0, atol=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(h=st.lists(st.floats(-1.0, 1.0), min_size=1, max_size=30))
+def test_rises_of_the_reversed_profile(h: list[float]) -> None:
+    # run backwards, a left turn is a right one: rises(reversed) = (fall, rise)
+    a = np.array(h)
+    left, right = rises(a)
+    assert rises(a[::-1]) == pytest.approx((right, left))
+    assert left >= 0.0 and right >= 0.0 and max(left, right) <= np.ptp(a) + 1e-12
