@@ -107,7 +107,7 @@ class TrackFeatureTables:
 
 def _mapped(tab: FeatureTable, tl: TrackLine) -> FeatureTable | None:
     """The line table's features lying on ``tl`` (all six rows within its length), by pos."""
-    pos = np.array([[tl.pos_of_km(float(k)) for k in row] for row in tab.km]).reshape(-1, 6)
+    pos = tl.pos_of_kms(tab.km).reshape(-1, 6)
     inside = np.isfinite(pos).all(axis=1) & (pos.min(axis=1) >= -0.5) & (pos.max(axis=1) <= tl.length_m + 0.5)
     if not inside.any():
         return None
