@@ -15,7 +15,8 @@ in place of the one drawn (the drawn multipath is kept where GNSS is on):
 * **IMU-only**: no GNSS (a tunnel over the whole route, every switch in it): IMU, tacho, balises;
 * **balise-only**: no GNSS and no IMU evidence — the pipeline needs the IMU stream for slips
   and slides, so it stays, and the turnout-signature test is switched off
-  (``track_select.imu_max_margin_m`` = 1e-9 m: no switch is ever passed with a smaller margin).
+  (``track_select.imu_max_margin_m`` = 1e-9 m: no switch is ever passed with a smaller margin),
+  and so is the feature points' heading test (``track_select.feature_headings`` = false).
 
 Then ``--raw-runs`` more runs (i = runs … runs + raw_runs − 1 of the same draw, so the runs
 above keep their routes and seeds) get the condition **raw GNSS**: balise-only plus raw GNSS
@@ -121,7 +122,8 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
     folder = Path(tmp) / f"net{i:04d}"
     write_run(folder, meta, streams, force=True)
     t0 = time.perf_counter()
-    cfg = {"track_select": {"imu_max_margin_m": 1e-9}} if condition in ("balise-only", RAW) else {}
+    no_imu = {"imu_max_margin_m": 1e-9, "feature_headings": False}
+    cfg = {"track_select": no_imu} if condition in ("balise-only", RAW) else {}
     res = run_pipeline(read_run(folder), net, PipelineConfig.from_dict(cfg))
     elapsed = time.perf_counter() - t0
     truth = streams["truth"]

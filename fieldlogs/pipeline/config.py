@@ -293,7 +293,8 @@ CYCLE_S: dict[str, Any] = {
 @dataclass(frozen=True)
 class TrackSelectConfig:
     """Which track after a facing switch: the evidence tests of the network aids
-    (:mod:`fieldlogs.pipeline.aids.track_gps`, :mod:`fieldlogs.pipeline.aids.track_imu`), and the
+    (:mod:`fieldlogs.pipeline.aids.track_gps`, :mod:`fieldlogs.pipeline.aids.track_imu`,
+    :mod:`fieldlogs.pipeline.aids.track_features`), and the
     D-GPS corrections along a determined track (:mod:`fieldlogs.pipeline.aids.track_gps_along`).
 
     A candidate is dropped when another one's log-likelihood ratio against it reaches
@@ -310,6 +311,9 @@ class TrackSelectConfig:
     )
     imu_max_margin_m: float = setting(
         30.0, "no IMU test when the margin at the switch exceeds this (the window would hold other curves)", "m", gt=0
+    )
+    feature_headings: bool = setting(
+        True, "curve feature points of the tracks are evidence while the track is ambiguous (the IMU heading test)"
     )
     gps_along_k: float = setting(
         4.0, "a D-GPS fix's along-track margin in σ of its error (noise_sigma_m, noise_white_m)", gt=0

@@ -163,6 +163,11 @@ class FeatureUnit:
         self.tables, self.skipped = load_tables(self.network.feature_points)
         self._done: dict[tuple[str, str, str, int], int] = {}
 
+    @property
+    def dt(self) -> float:
+        """The cycle time the κ smoothing counts in [s]."""
+        return self._dt
+
     # -- scheduling ---------------------------------------------------------------------
     def margin(self, fix: Fix, idx: npt.ArrayLike) -> FloatArray:
         """Search margin w at cycles ``idx`` under ``fix`` [m]."""
@@ -174,18 +179,24 @@ class FeatureUnit:
         )
         return np.asarray(np.maximum(grown, self.cfg.search_margin_m), dtype=float)
 
-    def next_evaluation(self, fix: Fix, after_i: int, km_between: KmBetween) -> tuple[int, Candidate] | None:
+    def next_evaluation(
+        self, fix: Fix, after_i: int, km_between: KmBetween, table: FeatureTable | None = None, k: int | None = None
+    ) -> tuple[int, Candidate] | None:
         """Cycle and candidate of the next feature ahead (module docstring), or None.
         ``km_between(i0, i1)`` is the estimate on cycles [i0, i1): the scan reads only as far
-        ahead as the feature lies (:meth:`_first_passed`)."""
-        table = self.tables.get((fix.line_code, fix.track))
+        ahead as the feature lies (:meth:`_first_passed`). ``table`` and ``k`` (position per
+        metre of body-forward travel) default to the fix's line/track and its k; a track's
+        own table with a candidate's pos as ``km_between`` and its kp runs the same scan
+        along a network track (:mod:`fieldlogs.pipeline.aids.track_features`)."""
+        table = self.tables.get((fix.line_code, fix.track)) if table is None else table
+        k = fix.k if k is None else k
         n = self._d.size
         if not self.available or table is None or not 0 <= after_i < n:
             return None
         i_ref = min(int(np.searchsorted(self._d, fix.d_ref, side="left")), n - 1)
         bounds = [after_i, *self._changes[self._changes > after_i].tolist(), n]
         for s0, s1 in itertools.pairwise(bounds):
-            sdir = int(fix.k * self._cab[s0])
+            sdir = int(k * self._cab[s0])
             u_all, km_all, sign_all = table.travel_rows(sdir)
             seg_first = int(self._changes[self._changes <= s0][-1]) if (self._changes <= s0).any() else 0
             i_start = max(i_ref, seg_first)

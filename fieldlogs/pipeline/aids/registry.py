@@ -21,6 +21,7 @@ from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.aids.rollback import RollbackAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
+from fieldlogs.pipeline.aids.track_features import TrackFeatureAid, TrackFeatureFixAid, track_feature_tables
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes, TrackGpsAid
 from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid
@@ -101,6 +102,23 @@ def _track_imu(ctx: RunContext) -> Aid | None:
     return TrackImuAid(wz, sw, track_lines(ctx.network), ctx.cfg.track_select, ctx.cfg.margin)
 
 
+def _track_features(ctx: RunContext) -> Aid | None:
+    wz = ctx.cycles.imu.get("wz") if ctx.cycles.has_imu else None
+    if wz is None or not _has_topology(ctx) or not ctx.cfg.track_select.feature_headings:
+        return None
+    lines = track_lines(ctx.network)
+    tables = track_feature_tables(ctx.network, lines)
+    return TrackFeatureAid(tables, lines, wz, ctx.cfg.track_select, ctx.cfg.margin) if tables else None
+
+
+def _track_feature_fix(ctx: RunContext) -> Aid | None:
+    if ctx.features is None or not _has_topology(ctx):
+        return None
+    lines = track_lines(ctx.network)
+    own = track_feature_tables(ctx.network, lines).own
+    return TrackFeatureFixAid(ctx.features, own, lines) if own else None
+
+
 def _network_fixes(ctx: RunContext) -> NetworkFixes | None:
     """The run's trusted GPS fixes on a network DB with its tracks and settings, what every GPS
     aid on the network's tracks holds (None: no trusted fix, or no topology)."""
@@ -169,6 +187,8 @@ POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
     _topology,
     _balise_group,
     _track_imu,
+    _track_features,
+    _track_feature_fix,
     _track_gps,
     _track_gps_along,
     _track_gps_initial,
