@@ -6,6 +6,7 @@ evidence — an initial position's chain, the track before a split) and the IMU 
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,8 +18,8 @@ from fieldlogs.pipeline.aids.track_imu import LOOK_M, expected_span, heading_llr
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.engine import run_aids
 from fieldlogs.pipeline.hypotheses import track_lines
-from fieldlogs.pipeline.types import Event
-from schemas.enums import EventType
+from fieldlogs.pipeline.types import Event, Fix, Hypothesis
+from schemas.enums import EventType, FixSource
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, net, travel
 from tests.fieldlogs.pipeline.test_track_gps_along import _fixes_on
 
@@ -166,3 +167,22 @@ def test_wald_bound_with_imu_looks(diverging: bool) -> None:
 def test_imu_looks_ignoring_the_toes_uncertainty_break_the_bound() -> None:
     share, bound = _imu_wrong_share(True, toe_known=True)
     assert share > bound
+
+
+def test_a_split_keeps_each_lineages_offsets() -> None:
+    # before: D1 and U1 ambiguous (lineages 7 and 8) with two fixes of evidence between them;
+    # W1 splits D1 into D2 and X1 (new lineages 9, 10, came from D1's end), U1 runs on (8):
+    # the branches take D1's offsets, U1 keeps its own — the evidence against U1 is not lost
+    lines = track_lines(net("crossover"))
+    aid = TrackGpsAid(np.zeros(0), np.zeros(0), np.zeros(0), lines, CFG, GPS)
+    aid.times, aid.cols, aid.tracks = [1.0, 2.0], {7: [0.1, 0.2], 8: [-3.9, -3.8]}, {7: "D1", 8: "U1"}
+    hyps = (
+        Hypothesis("D2", 1.0, 1, hid=9, switch_id="W1", split_d=10.0, came_from=("D1", "end")),
+        Hypothesis("X1", 1.0, 1, hid=10, switch_id="W1", split_d=10.0, came_from=("D1", "end")),
+        Hypothesis("U1", 300.0, 1, hid=8),
+    )
+    fix = Fix(3.0, 0.0, 0.0, math.nan, math.nan, "", "", 1, FixSource.GPS, 1.0, hyps=hyps)
+    aid._begin(fix, SimpleNamespace(t=3.0))  # type: ignore[arg-type]
+    assert aid.times == [1.0, 2.0]
+    assert aid.cols == {9: [0.1, 0.2], 10: [0.1, 0.2], 8: [-3.9, -3.8]}
+    assert aid.set_t == 3.0 and aid.tracks == {9: "D2", 10: "X1", 8: "U1"}
