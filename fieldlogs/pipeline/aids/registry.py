@@ -21,6 +21,7 @@ from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.aids.rollback import RollbackAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
+from fieldlogs.pipeline.aids.track_balise import TrackBaliseAid
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes, TrackGpsAid
 from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid
@@ -91,6 +92,17 @@ def _balise_group(ctx: RunContext) -> Aid | None:
         return None
     groups = ctx.network.cached("balise_groups", lambda: group_table(ctx.network))
     return BaliseGroupAid(groups, track_lines(ctx.network), ctx.cfg.balise, g, ctx.geometry.reader_x_m)
+
+
+def _track_balise(ctx: RunContext) -> Aid | None:
+    tel = ctx.streams.get("balise")
+    if tel is None or not _has_topology(ctx):
+        return None
+    i2 = tel[tel["kind"] == BaliseKind.I2.value]
+    if not len(i2):
+        return None
+    db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
+    return TrackBaliseAid(db, track_lines(ctx.network), ctx.cfg.balise, ctx.cfg.margin, i2, ctx.geometry.reader_x_m)
 
 
 def _track_imu(ctx: RunContext) -> Aid | None:
@@ -168,6 +180,7 @@ POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
     _gnss,
     _topology,
     _balise_group,
+    _track_balise,
     _track_imu,
     _track_gps,
     _track_gps_along,
