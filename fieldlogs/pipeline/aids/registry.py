@@ -83,23 +83,26 @@ def _topology(ctx: RunContext) -> Aid | None:
     return TopologyAid(track_lines(ctx.network), ctx.cfg.margin)
 
 
-def _balise_group(ctx: RunContext) -> Aid | None:
+def _network_telegrams(ctx: RunContext, kind: BaliseKind) -> pd.DataFrame | None:
+    """The run's balise telegrams of ``kind`` on a network DB (None: none, or no topology)."""
     tel = ctx.streams.get("balise")
     if tel is None or not _has_topology(ctx):
         return None
-    g = tel[tel["kind"] == BaliseKind.G.value]
-    if not len(g):
+    rows = tel[tel["kind"] == kind.value]
+    return rows if len(rows) else None
+
+
+def _balise_group(ctx: RunContext) -> Aid | None:
+    g = _network_telegrams(ctx, BaliseKind.G)
+    if g is None:
         return None
     groups = ctx.network.cached("balise_groups", lambda: group_table(ctx.network))
     return BaliseGroupAid(groups, track_lines(ctx.network), ctx.cfg.balise, g, ctx.geometry.reader_x_m)
 
 
 def _track_balise(ctx: RunContext) -> Aid | None:
-    tel = ctx.streams.get("balise")
-    if tel is None or not _has_topology(ctx):
-        return None
-    i2 = tel[tel["kind"] == BaliseKind.I2.value]
-    if not len(i2):
+    i2 = _network_telegrams(ctx, BaliseKind.I2)
+    if i2 is None:
         return None
     db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
     return TrackBaliseAid(db, track_lines(ctx.network), ctx.cfg.balise, ctx.cfg.margin, i2, ctx.geometry.reader_x_m)
