@@ -136,8 +136,12 @@ def _track_gps(ctx: RunContext) -> Aid | None:
 
 def _track_gps_along(ctx: RunContext) -> Aid | None:
     f = _network_fixes(ctx)
+    if f is None or ctx.gps is None:
+        return None
+    u = ctx.gps.fixes[ctx.gps.fixes["usable"].to_numpy(dtype=bool)]
+    usable = (u["t"].to_numpy(dtype=float), u["lat"].to_numpy(dtype=float), u["lon"].to_numpy(dtype=float))
     x_a = ctx.geometry.gps_antenna_x_m
-    return None if f is None else TrackGpsAlongAid(**vars(f), margin=ctx.cfg.margin, antenna_x_m=x_a)
+    return TrackGpsAlongAid(**vars(f), margin=ctx.cfg.margin, antenna_x_m=x_a, usable=usable)
 
 
 def _track_gps_initial(ctx: RunContext) -> Aid | None:
