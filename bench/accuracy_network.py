@@ -50,9 +50,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from bench._causes import CAUSES, causes
 from bench._common import over_network_runs, print_rows
 from dbtools.database import read_network
 from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.track_truth import TrackFigures, compare_tracks, track_figures
 from fieldlogs.pipeline.truth import compare_with_truth
@@ -147,6 +149,14 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
     gps = streams.get("gps")
     fix1 = float((gps["fix"] == 1).mean()) if gps is not None and len(gps) else 0.0
     uncovered = cmp.loc[det & ~within, "t"].to_numpy(dtype=float)
+    trusted = res.gps.fixes if res.gps is not None else None
+    times = (
+        np.sort(trusted.loc[trusted["trusted"].to_numpy(dtype=bool), "t"].to_numpy(dtype=float))
+        if trusted is not None and len(trusted)
+        else np.empty(0),
+        np.sort(ev.loc[ev["type"] == EventType.SWITCH_SPLIT.value, "t"].to_numpy(dtype=float)),
+    )
+    lost = causes(tc, res.positions, res.fixes, times, PipelineConfig().track_select.gps_min_fixes, track_lines(net))
     return {
         "i": i,
         "condition": condition,
@@ -164,6 +174,7 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
         "wrong": (float(wrong.min()), float(wrong.max()), len(wrong)) if len(wrong) else None,
         "parallel_by_state": tc[tc["parallel"]].groupby("state")["ds_m"].sum().to_dict(),
         "multipath": bool(sc["network"].get("multipath")),
+        "lost": lost,
     }
 
 
@@ -206,6 +217,20 @@ def _selectivity(results: list[dict[str, Any]], condition: str, s: dict[str, Any
     return f"{pct(s['selectivity'])} over {s['parallel_km']:.1f} km{target}; not determined: {lost or 'none'}"
 
 
+def _lost(results: list[dict[str, Any]], condition: str) -> str:
+    """The parallel distance of ``condition`` not selected, by cause (:mod:`bench._causes`), in %
+    of its parallel distance."""
+    total = sum(r["figures"].parallel_m for r in results if r["condition"] == condition)
+    by: dict[str, float] = {}
+    for r in results:
+        if r["condition"] == condition:
+            for k, v in r["lost"].items():
+                by[k] = by.get(k, 0.0) + v
+    if not total:
+        return "n/a"
+    return ", ".join(f"{k} {100 * by[k] / total:.2f} %" for k in CAUSES if by.get(k)) or "none"
+
+
 def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     """The accuracy table's rows (label, value with target and verdict)."""
     total = sum((r["figures"] for r in results), TrackFigures())
@@ -242,6 +267,7 @@ def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     ]
     for c in CONDITIONS:
         rows.append((f"  selectivity {c}", _selectivity(results, c, by[c])))
+        rows.append(("    not selected, by cause", _lost(results, c)))
     rows += [
         (
             "facing switches resolved correctly",
@@ -302,6 +328,7 @@ def raw_table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
             f"{s['wrong_track_cycles']}  (target 0)  {verdict(s['wrong_track_cycles'] == 0)}" + _runs(raw, "wrong"),
         ),
         ("  selectivity", _selectivity(raw, RAW, s)),
+        ("    not selected, by cause", _lost(raw, RAW)),
         (
             "  facing switches resolved correctly",
             f"{pct(sw)} of {s['facing_switches']} ({s['switches_resolved_wrongly']} wrongly)  (target ≥ 99 %)  "

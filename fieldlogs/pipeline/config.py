@@ -325,7 +325,9 @@ class TrackSelectConfig:
     gps_along_confirm: int = setting(
         5, "D-GPS fixes in a row, each step agreeing with the odometry, before one corrects the position", ge=2
     )
-    gps_min_fixes: int = setting(5, "GPS fixes needed after a split before their offsets may decide", ge=1)
+    gps_min_fixes: int = setting(
+        5, "GPS fixes at which two candidates' offsets differ before those offsets may decide between them", ge=1
+    )
     gps_jump_sigma: float = setting(
         3.5, "a fix-to-fix change of every candidate's GPS offset beyond this many σ (white, √2) is a jump", gt=0
     )
