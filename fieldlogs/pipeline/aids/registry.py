@@ -21,8 +21,8 @@ from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.aids.rollback import RollbackAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
-from fieldlogs.pipeline.aids.track_features import TrackFeatureAid, TrackFeatureFixAid, track_feature_tables
 from fieldlogs.pipeline.aids.track_balise import TrackBaliseAid
+from fieldlogs.pipeline.aids.track_features import TrackFeatureAid, TrackFeatureFixAid, track_feature_tables
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes, TrackGpsAid
 from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid
