@@ -275,6 +275,12 @@ def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
             f"{verdict((sw or 0.0) >= 0.99)}; Heirich 97.2 %, ratio "
             f"{sw / HEIRICH_SWITCHES if sw is not None else float('nan'):.3f}",
         ),
+        (
+            "  by condition (the rest: never determined again before the run ends)",
+            ", ".join(
+                f"{c} {pct(by[c]['switches_resolved_correctly'])} of {by[c]['facing_switches']}" for c in CONDITIONS
+            ),
+        ),
         ("  median distance after the switch, all", f"{s['median_resolution_m'] or float('nan'):.1f} m"),
         (
             "  median distance, D-GPS runs",
