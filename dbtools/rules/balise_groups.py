@@ -28,7 +28,7 @@ The route walk starts only at balises whose identity (group identity or C signal
 occurs at more than one place, runs both ways along the navigable graph in integer codes
 (``Topology.graph``: the successors of each track and direction, as ``Topology.next_tracks``) and stops at
 the window: linear in the number of such balises, each walk bounded by the tracks within
-the window.
+the window; all walks run at once over arrays (:mod:`dbtools.rules.route_walk`).
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, isin, py, texts
 from dbtools.rules.config import ValidationConfig
+from dbtools.rules.route_walk import walk
 from dbtools.topology import all_tracks, first_rows, topology
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
@@ -406,41 +407,9 @@ def _walk(
     pair: list[int],
     w: float,
 ) -> dict[tuple[int, int], float]:
-    """The route walk of each walker (row, identity) both ways within ``w`` (module doc):
-    (row, row) → the shortest route distance found between two balises of one identity (C
-    balises of the same (line, station, track) ``pair`` code excepted)."""
+    """The route walk of each walker (row, identity) both ways within ``w``
+    (:mod:`dbtools.rules.route_walk`): (row, row) → the shortest route distance found between
+    two balises of one identity (C balises of the same (line, station, track) ``pair`` code
+    excepted)."""
     g = topology(net).graph
-    at = g.codes(tid)  # every located balise's track is a track of the graph
-    length = g.length.tolist()
-    # identity → track → [(pos, row)] of its walkers there, in walker order
-    on_track: dict[tuple[object, ...], dict[int, list[tuple[float, int]]]] = defaultdict(lambda: defaultdict(list))
-    for r, ident in walkers:
-        on_track[ident][int(at[r])].append((float(pos[r]), r))
-    ptr, succ = g.ptr.tolist(), g.succ.tolist()
-    found: dict[tuple[int, int], float] = {}
-    inf = float("inf")
-    for r, ident in walkers:
-        t0 = int(at[r])
-        here = on_track[ident]
-        is_c, pair_r = ident[0] == "C", pair[r]
-        for up in (1, 0):
-            # state 2·track + up (travelling towards the end: up = 1); off: route distance at
-            # the track's begin (up) / end (down)
-            stack = [(2 * t0 + up, -float(pos[r]) if up else float(pos[r]) - length[t0])]
-            best: dict[int, float] = {}
-            while stack:
-                state, off = stack.pop()
-                if best.get(state, inf) <= off:
-                    continue
-                best[state] = off
-                t = state >> 1
-                ln = length[t]
-                for p, o in here.get(t, ()):
-                    dist = off + (p if state & 1 else ln - p)
-                    if o != r and 0 < dist <= w and not (is_c and pair[o] == pair_r):
-                        key = (min(r, o), max(r, o))
-                        found[key] = min(found.get(key, inf), dist)
-                exit_at = off + ln
-                if exit_at < w:
-                    stack += [(x, exit_at) for x in succ[ptr[state] : ptr[state + 1]]]
-    return found
+    return walk(g, walkers, g.codes(tid), pos, pair, w)  # every located balise's track is one of the graph
