@@ -73,8 +73,7 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     held = tr["track_id"].dtype
     at = first_rows(tr["track_id"], pd.Series(tid, dtype=held if isinstance(held, pd.StringDtype) else object))
     has = np.flatnonzero(at >= 0)
-    rows = tr.iloc[at[has]]
-    k0, k1 = column(rows, "km_begin_m"), column(rows, "km_end_m")
+    k0, k1 = (tr[k].to_numpy(dtype=float, na_value=np.nan)[at[has]] for k in ("km_begin_m", "km_end_m"))
     lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
     inside = (km[has] >= lo - 1.0) & (km[has] <= hi + 1.0)
     pos[has[inside]] = np.abs(km[has[inside]] - k0[inside])
@@ -137,7 +136,10 @@ def _by_km(
 def _from_points(net: Network, tid: npt.NDArray[np.object_], km: F64, pos: F64) -> None:
     """Position by the km of ``track_points`` (tracks along no line km range)."""
     tp = net.track_points
-    todo = np.flatnonzero(np.isnan(pos) & pd.notna(tid) & isin(tid, texts(tp["track_id"])))
+    todo = np.flatnonzero(np.isnan(pos) & pd.notna(tid))
+    if todo.size == 0:
+        return
+    todo = todo[isin(tid[todo], texts(tp["track_id"]))]
     if todo.size == 0:
         return
     groups = dict(iter(tp[tp["km_m"].notna()].groupby("track_id", observed=True)))
