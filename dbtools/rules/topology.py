@@ -78,6 +78,7 @@ from dbtools.rules.topology_tables import (
     last_length,
     port_rows,
     port_table,
+    port_tracks,
     switch_pairs,
 )
 from dbtools.topology import all_tracks, connection_rows, first_rows, grid_extents
@@ -437,11 +438,12 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
     per = per[per.duplicated("tk", keep=False).to_numpy()]
     tk = per["tk"].to_numpy()
     _, at, back = np.unique(tk, return_index=True, return_inverse=True)  # each track looked up once
-    track_text = port_rows(net, ports.loc[per.index[at]])["track"].to_numpy(dtype=object)
-    length = dict(zip(track_text, last_length(tracks, track_text), strict=True))
-    per_length = np.array([length[t] for t in track_text], dtype=float)[back.reshape(-1)]
+    port_of = per.index
+    each = last_length(tracks, port_tracks(net, port_of[at]))  # the text only of the short ones
     with np.errstate(invalid="ignore"):
-        per = port_rows(net, ports.loc[per.index[per_length < lim]])
+        short = np.flatnonzero(each < lim)
+        per = port_rows(net, ports.loc[port_of[each[back.reshape(-1)] < lim]])
+    length = dict(zip(port_rows(net, ports.loc[port_of[at[short]]])["track"], each[short], strict=True))
     rows: list[int] = []
     text: dict[int, str] = {}
     for track, grp in per.groupby("track"):
