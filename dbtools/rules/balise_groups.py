@@ -33,8 +33,6 @@ the window; all walks run at once over arrays (:mod:`dbtools.rules.route_walk`).
 
 from __future__ import annotations
 
-from collections import defaultdict
-
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
@@ -42,7 +40,7 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, isin, py, texts
 from dbtools.rules.config import ValidationConfig
-from dbtools.rules.route_walk import walk
+from dbtools.rules.route_walk import Walkers, walk
 from dbtools.topology import all_tracks, first_rows, topology
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
@@ -351,19 +349,7 @@ def _ambiguous(
 ) -> set[tuple[int, int]]:
     """The route walk (module doc); returns the (row, row) pairs it reported."""
     kind, sig = column(b, "kind"), column(b, "signal_type")
-    # one walker per place of a G identity, one per C balise: (row, identity)
-    reps = places.drop_duplicates("place")
-    walkers: list[tuple[int, tuple[object, ...]]] = [
-        (int(r), ("G", int(c), int(g))) for r, c, g in zip(reps["row"], reps["nid_c"], reps["nid_bg"], strict=True)
-    ]
-    c_rows = np.flatnonzero((kind == BaliseKind.C.value) & pd.notna(sig))
-    walkers += [(int(i), ("C", str(sig[i]))) for i in c_rows]
-    count: dict[tuple[object, ...], int] = defaultdict(int)
-    for _, ident in walkers:
-        count[ident] += 1
-    placed = (pd.notna(tid) & np.isfinite(pos)).tolist()
-    walkers = [(r, i) for r, i in walkers if count[i] > 1 and placed[r]]
-    found = _walk(net, walkers, tid, pos, _pair_codes(b), config.id_window_m)
+    found = _walk(net, _walkers(places, kind, sig, tid, pos), tid, pos, _pair_codes(b), config.id_window_m)
     w = config.id_window_m
 
     bid = column(b, "balise_id")
@@ -391,6 +377,30 @@ def _ambiguous(
     return set(hits)
 
 
+def _walkers(
+    places: pd.DataFrame,
+    kind: npt.NDArray[np.object_],
+    sig: npt.NDArray[np.object_],
+    tid: npt.NDArray[np.object_],
+    pos: F64,
+) -> Walkers:
+    """One walker per place of a G identity (its first row; the identity NID_C:NID_BG as whole
+    numbers), then one per C balise with a signal type (the identity its signal type), kept
+    where the identity has more than one walker and the balise is placed on a track."""
+    reps = places.drop_duplicates("place")
+    g_rows = reps["row"].to_numpy(dtype=np.int64)
+    whole = pd.MultiIndex.from_arrays([np.trunc(reps[k].to_numpy(dtype=float)) for k in ("nid_c", "nid_bg")])
+    g_ident, g_uniq = pd.factorize(whole)
+    c_rows = np.flatnonzero((kind == BaliseKind.C.value) & pd.notna(sig))
+    c_ident, _ = pd.factorize(pd.Index(np.array([str(x) for x in sig[c_rows]], dtype=object)))
+    rows = np.concatenate([g_rows, c_rows]).astype(np.int64)
+    ident = np.concatenate([g_ident, len(g_uniq) + c_ident]).astype(np.int64)
+    is_c = np.r_[np.zeros(len(g_rows), dtype=bool), np.ones(len(c_rows), dtype=bool)]
+    placed = pd.notna(tid) & np.isfinite(pos)
+    keep = (np.bincount(ident, minlength=1)[ident] > 1) & np.asarray(placed, dtype=bool)[rows]
+    return Walkers(rows[keep], ident[keep], is_c[keep])
+
+
 def _pair_codes(b: pd.DataFrame) -> list[int]:
     """(line, station, track) of each balise as one integer: equal triples (a missing part
     equal to a missing part) get equal codes."""
@@ -402,16 +412,12 @@ def _pair_codes(b: pd.DataFrame) -> list[int]:
 
 
 def _walk(
-    net: Network,
-    walkers: list[tuple[int, tuple[object, ...]]],
-    tid: npt.NDArray[np.object_],
-    pos: F64,
-    pair: list[int],
-    w: float,
+    net: Network, walkers: Walkers, tid: npt.NDArray[np.object_], pos: F64, pair: list[int], w: float
 ) -> dict[tuple[int, int], float]:
-    """The route walk of each walker (row, identity) both ways within ``w``
-    (:mod:`dbtools.rules.route_walk`): (row, row) → the shortest route distance found between
-    two balises of one identity (C balises of the same (line, station, track) ``pair`` code
-    excepted)."""
+    """The route walk of each walker both ways within ``w`` (:mod:`dbtools.rules.route_walk`):
+    (row, row) → the shortest route distance found between two balises of one identity (C
+    balises of the same (line, station, track) ``pair`` code excepted)."""
     g = topology(net).graph
-    return walk(g, walkers, g.codes(tid), pos, pair, w)  # every located balise's track is one of the graph
+    at = np.full(len(tid), -1, dtype=np.int64)
+    at[walkers.rows] = g.codes(tid[walkers.rows])  # every located balise's track is one of the graph
+    return walk(g, walkers, at, pos, pair, w)

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -43,8 +44,18 @@ from dbtools.topology import Graph
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
-#: (balise row, identity) of each walker; an identity is any hashable (``("C", signal)``…).
-Walkers = Sequence[tuple[int, tuple[object, ...]]]
+
+
+@dataclass(frozen=True)
+class Walkers:
+    """The walkers, one per element: balise ``rows``, ``ident`` (equal codes: one identity)
+    and ``is_c`` (a C balise: not compared with those of its own ``pair`` code)."""
+
+    rows: I64
+    ident: I64
+    is_c: npt.NDArray[np.bool_]
+
+
 Found = dict[tuple[int, int], float]
 
 
@@ -59,21 +70,24 @@ def walk_each(
 ) -> Found:
     """The depth-first walk of each walker (module doc): (row, row) → the smallest route
     distance found between two balises of one identity. ``at``: each balise row's track code
-    in ``g``; ``pos``: its position on that track; ``pair``: the (line, station, track)
-    code of each row (C balises of one code are not compared); ``only``: the walkers (their
-    indexes) that walk, all by default (all are met on the way)."""
+    in ``g`` (only the walkers' rows are read); ``pos``: its position on that track;
+    ``pair``: the (line, station, track) code of each row (C balises of one code are not
+    compared); ``only``: the walkers (their indexes) that walk, all by default (all are met
+    on the way)."""
     length = g.length.tolist()
+    rows, idents, c_kind = walkers.rows.tolist(), walkers.ident.tolist(), walkers.is_c.tolist()
     # identity → track → [(pos, row)] of its walkers there, in walker order
-    on_track: dict[tuple[object, ...], dict[int, list[tuple[float, int]]]] = defaultdict(lambda: defaultdict(list))
-    for r, ident in walkers:
+    on_track: dict[int, dict[int, list[tuple[float, int]]]] = defaultdict(lambda: defaultdict(list))
+    for r, ident in zip(rows, idents, strict=True):
         on_track[ident][int(at[r])].append((float(pos[r]), r))
     ptr, succ = g.ptr.tolist(), g.succ.tolist()
     found: Found = {}
     inf = float("inf")
-    for r, ident in walkers if only is None else [walkers[i] for i in only]:
+    for k in range(len(rows)) if only is None else only:
+        r = rows[k]
         t0 = int(at[r])
-        here = on_track[ident]
-        is_c, pair_r = ident[0] == "C", pair[r]
+        here = on_track[idents[k]]
+        is_c, pair_r = c_kind[k], pair[r]
         for up in (1, 0):
             # state 2·track + up (travelling towards the end: up = 1); off: route distance at
             # the track's begin (up) / end (down)
@@ -133,14 +147,11 @@ def _smallest_offsets(g: Graph, start: I64, off0: F64, w: float) -> tuple[I64, I
 
 def walk(g: Graph, walkers: Walkers, at: I64, pos: F64, pair: Sequence[int], w: float) -> Found:
     """:func:`walk_each`'s result, computed for all walkers at once (module doc)."""
-    if not walkers:
+    if not len(walkers.rows):
         return {}
     if not (np.isfinite(g.length).all() and (g.length >= 0).all()):
         return walk_each(g, walkers, at, pos, pair, w)
-    rows = np.fromiter((r for r, _ in walkers), dtype=np.int64, count=len(walkers))
-    ident_of: dict[tuple[object, ...], int] = {}
-    ident = np.fromiter((ident_of.setdefault(i, len(ident_of)) for _, i in walkers), np.int64, len(walkers))
-    is_c = np.fromiter((i[0] == "C" for _, i in walkers), dtype=bool, count=len(walkers))
+    rows, ident, is_c = walkers.rows, walkers.ident, walkers.is_c
     pair_code = np.asarray(pair, dtype=np.int64)
     track, p = np.asarray(at, dtype=np.int64)[rows], np.asarray(pos, dtype=float)[rows]
     # walk 2k: walker k towards the end (up), 2k + 1: towards the begin
