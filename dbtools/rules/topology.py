@@ -208,7 +208,7 @@ def _required(net: Network) -> npt.NDArray[np.bool_]:
 def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
     req = _required(net)
     given = ports["has_track"].to_numpy() & ports["has_end"].to_numpy()
-    may_be_open = np.isin(np.array(ALL_PORTS)[ports["pk"].to_numpy()], OPEN_PORTS)
+    may_be_open = np.isin(ports["pk"].to_numpy(), [ALL_PORTS.index(p) for p in OPEN_PORTS])
     empty = port_rows(net, ports[req & ~given & ~may_be_open])
     out.add(
         "topology.switch_port",
@@ -260,8 +260,8 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             lambda r: f"track end {r.track} {r.end} is at two ports of switch {r.switch_id} (port {r.port.upper()})",
         ),
     )
-    m = inc[with_switch]
-    m = incidence_rows(net, m[~int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])])
+    at = np.flatnonzero(with_switch)
+    m = incidence_rows(net, inc.iloc[at[~int_isin(inc["key"].to_numpy()[at], ports["key"].to_numpy()[given])]])
     stray = m[isin(m["switch_id"].to_numpy(dtype=object), texts(net.switches["switch_id"]))].drop_duplicates("row")
     out.add(
         "topology.switch_port",
