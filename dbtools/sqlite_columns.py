@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -52,14 +53,25 @@ def _column(col: pa.ChunkedArray, c: Column) -> pd.Series | None:
     if c.dtype == "float" and (t == pa.float64() or t == pa.int64() or all_null):
         return pd.Series(col.cast(pa.float64()).to_numpy(zero_copy_only=False), dtype="float64")
     if c.dtype == "int" and (t == pa.int64() or all_null):
-        return pd.Series(pd.array(col.cast(pa.int64()), dtype="Int64"))
+        values, missing = _values_and_mask(col)
+        return pd.Series(pd.arrays.IntegerArray(values, missing))
     if c.dtype == "bool" and (t == pa.int64() or all_null):
         ints = col.cast(pa.int64())
         valid = ints.drop_null()
         if len(valid) and not pc.all(pc.is_in(valid, pa.array([0, 1]))).as_py():
             return None
-        return pd.Series(pd.array(ints, dtype="Int64")).astype(_DTYPES["bool"])
+        values, missing = _values_and_mask(ints)
+        return pd.Series(pd.arrays.BooleanArray(values != 0, missing))
     return None
+
+
+def _values_and_mask(col: pa.ChunkedArray) -> tuple[np.ndarray, np.ndarray]:
+    """An integer column's values (0 where missing) and its missing-value mask, from the
+    Arrow buffers: ``pd.array(…, dtype="Int64")`` of the same column gives the same array
+    but converts a column with missing values ≈ 30× slower (88,000 balises: 35 ms a column)."""
+    ints = col.cast(pa.int64()).combine_chunks()
+    missing = np.asarray(ints.is_null().to_numpy(zero_copy_only=False), dtype=bool)
+    return np.asarray(ints.fill_null(0).to_numpy(zero_copy_only=False), dtype=np.int64), missing
 
 
 def _read_one(cur: Any, table: Table) -> pd.DataFrame | None:

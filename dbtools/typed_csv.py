@@ -383,6 +383,28 @@ def _checked_blocks(first: _Block, rest: Iterator[_Block], table: Table) -> Iter
 
 #: A padded cell (skipinitialspace would strip it), a quote (read as text here), a line break.
 _TEXT_DECLINES = r'^[ \t]|[\r\n"]'
+#: The bytes of :data:`_TEXT_DECLINES`: anywhere in a cell, and at its start.
+_ANY_DECLINES, _FIRST_DECLINES = (b'"', b"\r", b"\n"), np.array([ord(" "), ord("\t")], dtype=np.uint8)
+
+
+def _text_declines(a: pa.Array) -> bool:
+    """Whether a cell of the text column ``a`` matches :data:`_TEXT_DECLINES`, by its bytes:
+    the three are ASCII, which UTF-8 never uses inside a multi-byte character, so a byte
+    search of the column's data (``bytes.find``, ``memchr``) and a look at each non-empty
+    cell's first byte give the regular expression's answer without running it per cell."""
+    if not (pa.types.is_string(a.type) or pa.types.is_large_string(a.type)) or len(a) == 0:
+        return bool(pc.any(pc.match_substring_regex(a, _TEXT_DECLINES)).as_py())
+    width = np.int64 if pa.types.is_large_string(a.type) else np.int32
+    offsets = np.frombuffer(a.buffers()[1], dtype=width)[a.offset : a.offset + len(a) + 1].astype(np.int64)
+    data = a.buffers()[2]
+    if data is None:
+        return False
+    raw = np.frombuffer(data, dtype=np.uint8)[offsets[0] : offsets[-1]]
+    text = raw.tobytes()
+    if any(text.find(b) >= 0 for b in _ANY_DECLINES):
+        return True
+    starts = offsets[:-1][offsets[1:] > offsets[:-1]] - offsets[0]
+    return bool(np.isin(raw[starts], _FIRST_DECLINES).any())
 
 
 def _fits(block: _Block, table: Table) -> bool:
@@ -398,7 +420,7 @@ def _fits(block: _Block, table: Table) -> bool:
             return False
         if declared[name].dtype == "int" and (values[~np.isnan(values)] % 1.0 != 0.0).any():
             return False
-    return not any(pc.any(pc.match_substring_regex(a, _TEXT_DECLINES)).as_py() for a in block.text.values())
+    return not any(_text_declines(a) for a in block.text.values())
 
 
 def _frame(

@@ -28,12 +28,10 @@ The route walk starts only at balises whose identity (group identity or C signal
 occurs at more than one place, runs both ways along the navigable graph in integer codes
 (``Topology.graph``: the successors of each track and direction, as ``Topology.next_tracks``) and stops at
 the window: linear in the number of such balises, each walk bounded by the tracks within
-the window.
+the window; all walks run at once over arrays (:mod:`dbtools.rules.route_walk`).
 """
 
 from __future__ import annotations
-
-from collections import defaultdict
 
 import numpy as np
 import numpy.typing as npt
@@ -42,6 +40,7 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, isin, py, texts
 from dbtools.rules.config import ValidationConfig
+from dbtools.rules.route_walk import Walkers, walk
 from dbtools.topology import all_tracks, first_rows, topology
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
@@ -72,8 +71,7 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     held = tr["track_id"].dtype
     at = first_rows(tr["track_id"], pd.Series(tid, dtype=held if isinstance(held, pd.StringDtype) else object))
     has = np.flatnonzero(at >= 0)
-    rows = tr.iloc[at[has]]
-    k0, k1 = column(rows, "km_begin_m"), column(rows, "km_end_m")
+    k0, k1 = (tr[k].to_numpy(dtype=float, na_value=np.nan)[at[has]] for k in ("km_begin_m", "km_end_m"))
     lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
     inside = (km[has] >= lo - 1.0) & (km[has] <= hi + 1.0)
     pos[has[inside]] = np.abs(km[has[inside]] - k0[inside])
@@ -136,7 +134,10 @@ def _by_km(
 def _from_points(net: Network, tid: npt.NDArray[np.object_], km: F64, pos: F64) -> None:
     """Position by the km of ``track_points`` (tracks along no line km range)."""
     tp = net.track_points
-    todo = np.flatnonzero(np.isnan(pos) & pd.notna(tid) & isin(tid, texts(tp["track_id"])))
+    todo = np.flatnonzero(np.isnan(pos) & pd.notna(tid))
+    if todo.size == 0:
+        return
+    todo = todo[isin(tid[todo], texts(tp["track_id"]))]
     if todo.size == 0:
         return
     groups = dict(iter(tp[tp["km_m"].notna()].groupby("track_id", observed=True)))
@@ -348,19 +349,7 @@ def _ambiguous(
 ) -> set[tuple[int, int]]:
     """The route walk (module doc); returns the (row, row) pairs it reported."""
     kind, sig = column(b, "kind"), column(b, "signal_type")
-    # one walker per place of a G identity, one per C balise: (row, identity)
-    reps = places.drop_duplicates("place")
-    walkers: list[tuple[int, tuple[object, ...]]] = [
-        (int(r), ("G", int(c), int(g))) for r, c, g in zip(reps["row"], reps["nid_c"], reps["nid_bg"], strict=True)
-    ]
-    c_rows = np.flatnonzero((kind == BaliseKind.C.value) & pd.notna(sig))
-    walkers += [(int(i), ("C", str(sig[i]))) for i in c_rows]
-    count: dict[tuple[object, ...], int] = defaultdict(int)
-    for _, ident in walkers:
-        count[ident] += 1
-    placed = (pd.notna(tid) & np.isfinite(pos)).tolist()
-    walkers = [(r, i) for r, i in walkers if count[i] > 1 and placed[r]]
-    found = _walk(net, walkers, tid, pos, _pair_codes(b), config.id_window_m)
+    found = _walk(net, _walkers(places, kind, sig, tid, pos), tid, pos, _pair_codes(b), config.id_window_m)
     w = config.id_window_m
 
     bid = column(b, "balise_id")
@@ -388,6 +377,30 @@ def _ambiguous(
     return set(hits)
 
 
+def _walkers(
+    places: pd.DataFrame,
+    kind: npt.NDArray[np.object_],
+    sig: npt.NDArray[np.object_],
+    tid: npt.NDArray[np.object_],
+    pos: F64,
+) -> Walkers:
+    """One walker per place of a G identity (its first row; the identity NID_C:NID_BG as whole
+    numbers), then one per C balise with a signal type (the identity its signal type), kept
+    where the identity has more than one walker and the balise is placed on a track."""
+    reps = places.drop_duplicates("place")
+    g_rows = reps["row"].to_numpy(dtype=np.int64)
+    whole = pd.MultiIndex.from_arrays([np.trunc(reps[k].to_numpy(dtype=float)) for k in ("nid_c", "nid_bg")])
+    g_ident, g_uniq = pd.factorize(whole)
+    c_rows = np.flatnonzero((kind == BaliseKind.C.value) & pd.notna(sig))
+    c_ident, _ = pd.factorize(pd.Index(np.array([str(x) for x in sig[c_rows]], dtype=object)))
+    rows = np.concatenate([g_rows, c_rows]).astype(np.int64)
+    ident = np.concatenate([g_ident, len(g_uniq) + c_ident]).astype(np.int64)
+    is_c = np.r_[np.zeros(len(g_rows), dtype=bool), np.ones(len(c_rows), dtype=bool)]
+    placed = pd.notna(tid) & np.isfinite(pos)
+    keep = (np.bincount(ident, minlength=1)[ident] > 1) & np.asarray(placed, dtype=bool)[rows]
+    return Walkers(rows[keep], ident[keep], is_c[keep])
+
+
 def _pair_codes(b: pd.DataFrame) -> list[int]:
     """(line, station, track) of each balise as one integer: equal triples (a missing part
     equal to a missing part) get equal codes."""
@@ -399,48 +412,12 @@ def _pair_codes(b: pd.DataFrame) -> list[int]:
 
 
 def _walk(
-    net: Network,
-    walkers: list[tuple[int, tuple[object, ...]]],
-    tid: npt.NDArray[np.object_],
-    pos: F64,
-    pair: list[int],
-    w: float,
+    net: Network, walkers: Walkers, tid: npt.NDArray[np.object_], pos: F64, pair: list[int], w: float
 ) -> dict[tuple[int, int], float]:
-    """The route walk of each walker (row, identity) both ways within ``w`` (module doc):
+    """The route walk of each walker both ways within ``w`` (:mod:`dbtools.rules.route_walk`):
     (row, row) → the shortest route distance found between two balises of one identity (C
     balises of the same (line, station, track) ``pair`` code excepted)."""
     g = topology(net).graph
-    at = g.codes(tid)  # every located balise's track is a track of the graph
-    length = g.length.tolist()
-    # identity → track → [(pos, row)] of its walkers there, in walker order
-    on_track: dict[tuple[object, ...], dict[int, list[tuple[float, int]]]] = defaultdict(lambda: defaultdict(list))
-    for r, ident in walkers:
-        on_track[ident][int(at[r])].append((float(pos[r]), r))
-    ptr, succ = g.ptr.tolist(), g.succ.tolist()
-    found: dict[tuple[int, int], float] = {}
-    inf = float("inf")
-    for r, ident in walkers:
-        t0 = int(at[r])
-        here = on_track[ident]
-        is_c, pair_r = ident[0] == "C", pair[r]
-        for up in (1, 0):
-            # state 2·track + up (travelling towards the end: up = 1); off: route distance at
-            # the track's begin (up) / end (down)
-            stack = [(2 * t0 + up, -float(pos[r]) if up else float(pos[r]) - length[t0])]
-            best: dict[int, float] = {}
-            while stack:
-                state, off = stack.pop()
-                if best.get(state, inf) <= off:
-                    continue
-                best[state] = off
-                t = state >> 1
-                ln = length[t]
-                for p, o in here.get(t, ()):
-                    dist = off + (p if state & 1 else ln - p)
-                    if o != r and 0 < dist <= w and not (is_c and pair[o] == pair_r):
-                        key = (min(r, o), max(r, o))
-                        found[key] = min(found.get(key, inf), dist)
-                exit_at = off + ln
-                if exit_at < w:
-                    stack += [(x, exit_at) for x in succ[ptr[state] : ptr[state + 1]]]
-    return found
+    at = np.full(len(tid), -1, dtype=np.int64)
+    at[walkers.rows] = g.codes(tid[walkers.rows])  # every located balise's track is one of the graph
+    return walk(g, walkers, at, pos, pair, w)

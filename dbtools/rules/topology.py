@@ -78,6 +78,7 @@ from dbtools.rules.topology_tables import (
     last_length,
     port_rows,
     port_table,
+    port_tracks,
     switch_pairs,
 )
 from dbtools.topology import all_tracks, connection_rows, first_rows, grid_extents
@@ -207,7 +208,7 @@ def _required(net: Network) -> npt.NDArray[np.bool_]:
 def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Out) -> None:
     req = _required(net)
     given = ports["has_track"].to_numpy() & ports["has_end"].to_numpy()
-    may_be_open = np.isin(np.array(ALL_PORTS)[ports["pk"].to_numpy()], OPEN_PORTS)
+    may_be_open = np.isin(ports["pk"].to_numpy(), [ALL_PORTS.index(p) for p in OPEN_PORTS])
     empty = port_rows(net, ports[req & ~given & ~may_be_open])
     out.add(
         "topology.switch_port",
@@ -259,8 +260,8 @@ def _switch_ports(net: Network, ports: pd.DataFrame, inc: pd.DataFrame, out: _Ou
             lambda r: f"track end {r.track} {r.end} is at two ports of switch {r.switch_id} (port {r.port.upper()})",
         ),
     )
-    m = inc[with_switch]
-    m = incidence_rows(net, m[~int_isin(m["key"].to_numpy(), ports["key"].to_numpy()[given])])
+    at = np.flatnonzero(with_switch)
+    m = incidence_rows(net, inc.iloc[at[~int_isin(inc["key"].to_numpy()[at], ports["key"].to_numpy()[given])]])
     stray = m[isin(m["switch_id"].to_numpy(dtype=object), texts(net.switches["switch_id"]))].drop_duplicates("row")
     out.add(
         "topology.switch_port",
@@ -437,11 +438,12 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
     per = per[per.duplicated("tk", keep=False).to_numpy()]
     tk = per["tk"].to_numpy()
     _, at, back = np.unique(tk, return_index=True, return_inverse=True)  # each track looked up once
-    track_text = port_rows(net, ports.loc[per.index[at]])["track"].to_numpy(dtype=object)
-    length = dict(zip(track_text, last_length(tracks, track_text), strict=True))
-    per_length = np.array([length[t] for t in track_text], dtype=float)[back.reshape(-1)]
+    port_of = per.index
+    each = last_length(tracks, port_tracks(net, port_of[at]))  # the text only of the short ones
     with np.errstate(invalid="ignore"):
-        per = port_rows(net, ports.loc[per.index[per_length < lim]])
+        short = np.flatnonzero(each < lim)
+        per = port_rows(net, ports.loc[port_of[each[back.reshape(-1)] < lim]])
+    length = dict(zip(port_rows(net, ports.loc[port_of[at[short]]])["track"], each[short], strict=True))
     rows: list[int] = []
     text: dict[int, str] = {}
     for track, grp in per.groupby("track"):

@@ -144,10 +144,14 @@ def _crossover_ends(net: Network, tracks: pd.DataFrame) -> pd.DataFrame | None:
     ids = tracks["track_id"]
     n_t = len(tracks)
     last = (n_t - 1) - first_rows(ids.iloc[::-1].reset_index(drop=True), ids)  # the last row of each row's id
-    is_xo = texts(tracks["kind"])[last] == TrackKind.CROSSOVER.value
+    kind = tracks["kind"] == TrackKind.CROSSOVER.value  # False where missing
+    is_xo = np.asarray(kind.to_numpy(dtype=bool, na_value=False), dtype=bool)[last]
     if not is_xo.any():
         return None
-    c = net.connections
+    c, sw = net.connections, net.switches
+    # each connection's switch number: that of the last switch row of its switch_id (NaN: none)
+    last_sw = (len(sw) - 1) - first_rows(sw["switch_id"].iloc[::-1].reset_index(drop=True), c["switch_id"])
+    number = np.append(sw["switch_number"].to_numpy(dtype=float, na_value=np.nan), np.nan)[last_sw]
     sides = []
     rows_of = dict(zip("ab", connection_rows(net, tracks), strict=True))
     for a, b in (("a", "b"), ("b", "a")):  # the incidence table's order: every end a, then every end b
@@ -163,13 +167,11 @@ def _crossover_ends(net: Network, tracks: pd.DataFrame) -> pd.DataFrame | None:
                     "other_end": texts(c[f"end_{b}"].iloc[hit]),
                     "switch_id": texts(c["switch_id"].iloc[hit]),
                     "rows": f_o[hit],
+                    "n": number[hit],
                 }
             )
         )
     ref = pd.concat(sides, ignore_index=True)
-    sw = net.switches
-    number = dict(zip(column(sw, "switch_id"), column(sw, "switch_number"), strict=True))
-    ref["n"] = np.array([number.get(s, np.nan) for s in ref["switch_id"]], dtype=float)
     ref = ref[np.isfinite(ref["n"].to_numpy(float))].drop_duplicates(["track", "end"])
     return None if ref.empty else ref.reset_index(drop=True)
 

@@ -70,6 +70,15 @@ def port_rows(net: Network, ports: pd.DataFrame) -> pd.DataFrame:
     return pd.concat([ports, text], axis=1)
 
 
+def port_tracks(net: Network, rows: npt.ArrayLike) -> pd.Series:
+    """The track of the port table's rows ``rows`` as the switches hold it (Arrow text: no
+    Python string per value), for look-ups by :func:`last_length`."""
+    held = net.cached(
+        ("port_tracks",), lambda: pd.concat([net.switches[f"{p}_track"] for p in ALL_PORTS], ignore_index=True)
+    )
+    return held.iloc[np.asarray(rows, dtype=np.int64)].reset_index(drop=True)
+
+
 def incidence_table(c: pd.DataFrame) -> pd.DataFrame:
     """Both ends of every connection (every end a, then every end b): ``row`` (of
     connections); the text of chosen rows by :func:`incidence_rows`."""
@@ -230,12 +239,15 @@ def switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
     )
 
 
-def last_length(tracks: pd.DataFrame, ids: npt.NDArray[np.object_]) -> npt.NDArray[np.float64]:
+def last_length(tracks: pd.DataFrame, ids: npt.NDArray[np.object_] | pd.Series) -> npt.NDArray[np.float64]:
     """``length_m`` of the given track ids (the last row of an id given twice; NaN: no such
     track), looked up by Arrow's hashing when the ids are held as Arrow text."""
     held = tracks["track_id"]
     n = len(held)
-    named = pd.Series(ids, dtype=held.dtype if isinstance(held.dtype, pd.StringDtype) else object)
+    if isinstance(ids, pd.Series):
+        named = ids
+    else:
+        named = pd.Series(ids, dtype=held.dtype if isinstance(held.dtype, pd.StringDtype) else object)
     last = (n - 1) - first_rows(held.iloc[::-1].reset_index(drop=True), named)  # n: none
     length = np.append(tracks["length_m"].to_numpy(dtype=float, na_value=np.nan), np.nan)
     return np.asarray(length[last], dtype=float)

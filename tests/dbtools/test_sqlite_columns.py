@@ -95,3 +95,24 @@ def test_bulk_insert_stores_what_executemany_stores(
     assert bulk == rows
     assert bulk == stored_rows(sample_db)
     assert any(r for r in bulk["gis"])
+
+
+def test_whole_numbers_and_flags_with_missing_values_are_the_sqlite3_frames(tmp_path: Path) -> None:
+    """A network DB (ETCS group columns, buffer-stop flags) with missing values among given
+    ones: the integer and boolean columns built from Arrow's buffers (values and mask) are
+    the sqlite3 path's ``Int64`` and ``boolean`` columns."""
+    from dbtools.build import build_db
+
+    db = tmp_path / "net.sqlite"
+    build_db(Path(__file__).resolve().parents[1] / "data" / "networks" / "station4", db, db_version="t1")
+    with sqlite3.connect(db) as conn:
+        conn.execute("UPDATE balises SET nid_c = NULL, n_pig = NULL WHERE rowid = 1")
+        conn.execute("UPDATE tracks SET begin_buffer_stop = 1, end_buffer_stop = NULL WHERE rowid = 1")
+        conn.execute("UPDATE tracks SET begin_buffer_stop = 0, end_buffer_stop = 1 WHERE rowid = 2")
+    fast = read_table_columns(db, DB_TABLES, min_bytes=0)
+    ref = sqlite3_frames(db)
+    assert {"balises", "tracks"} <= set(fast)
+    assert fast["balises"]["nid_c"].isna().sum() == 1 and fast["balises"]["nid_c"].notna().any()
+    assert fast["tracks"]["begin_buffer_stop"].tolist()[:2] == [True, False]
+    for name, frame in fast.items():
+        assert_same(frame, ref[name])

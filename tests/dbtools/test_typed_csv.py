@@ -387,3 +387,28 @@ def test_a_number_file_of_many_pieces_reads_as_the_text_path(tmp_path: Path, mon
     assert frame is not None and frame["ay"].isna().sum() == 3 and len(frame) == 2000
     assert calls == [] or not typed_csv.C_PARSER_EXACT
     same_as_text_path("imu", path)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.text(alphabet=st.sampled_from(["a", "é", "漢", " ", "\t", '"', "\r", "\n", ",", "x"]), max_size=4)),
+    st.integers(0, 3),
+    st.booleans(),
+)
+def test_the_byte_test_of_text_cells_is_the_regular_expression(cells: list[str], cut: int, large: bool) -> None:
+    """``_text_declines`` (bytes of the column) answers as ``match_substring_regex`` of
+    ``_TEXT_DECLINES`` on every column, sliced ones (an offset into shared buffers) included."""
+    import pyarrow.compute as pc
+
+    a = pa.array(cells, type=pa.large_string() if large else pa.string()).slice(min(cut, len(cells)))
+    want = bool(pc.any(pc.match_substring_regex(a, typed_csv._TEXT_DECLINES)).as_py())
+    assert typed_csv._text_declines(a) == want
+
+
+def test_the_byte_test_by_hand() -> None:
+    assert not typed_csv._text_declines(pa.array(["a b", "", "x\t"]))
+    assert typed_csv._text_declines(pa.array(["ab", " b"]))  # a padded cell
+    assert typed_csv._text_declines(pa.array(["ab", "\tb"]))
+    assert typed_csv._text_declines(pa.array(['a"b']))
+    assert typed_csv._text_declines(pa.array(["a\rb"]))
+    assert not typed_csv._text_declines(pa.array([" b", "c"]).slice(1))  # the padded cell sliced off
