@@ -20,6 +20,7 @@ import pytest
 from cli.survey import _feature_table
 from dbtools.build import build_db
 from dbtools.database import read_network
+from dbtools.interchange.geojson import survey_geojson
 from dbtools.network import Network
 from dbtools.sample_network import sample_network_source_dir
 from dbtools.sources import write_source_set
@@ -155,6 +156,9 @@ def test_the_loop_curves_are_compared_per_track_id(report) -> None:  # type: ign
     table = _feature_table(report)
     assert set(table.loc[table["track_id"] == TRACK, "feature"]) == {"F2", "0420-4-001"}
     assert "Curvature, track 0420-4 (pos from its begin)" in render_html(report)
+    feats = survey_geojson(report.network, report)["features"]
+    mine = [f for f in feats if f["properties"].get("track_id") == TRACK and f["properties"]["layer"] == "features"]
+    assert len(mine) == 2 and all(f["geometry"]["type"] == "LineString" for f in mine)
 
 
 def test_the_proposal_writes_track_feature_points_that_build_and_validate(  # type: ignore[no-untyped-def]
@@ -176,7 +180,7 @@ def test_the_proposal_writes_track_feature_points_that_build_and_validate(  # ty
     assert f2.loc[3, "pos_m"] == pytest.approx(455.241, abs=1.0)
     assert f2.loc[4, "pos_m"] == pytest.approx(475.175, abs=1.0)
     assert f2.loc[3, "attribute"] == "left"
-    assert float(f2.loc[3, "radius_m"]) == pytest.approx(R, rel=0.05)
+    assert f2["radius_m"].to_numpy(dtype=float)[2] == pytest.approx(R, rel=0.05)
     s1 = mine[mine["feature_id"] == "S001"].set_index("seq")
     assert s1.loc[3, "pos_m"] == pytest.approx(45.208, abs=1.0)
     assert (s1["pos_m"].diff().dropna() >= 0).all()  # running order: pos increasing
