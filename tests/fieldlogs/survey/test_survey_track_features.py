@@ -30,7 +30,7 @@ from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.curvature import place_samples
 from fieldlogs.survey.extract import PASS_COLUMNS, READ_COLUMNS, SEGMENT_COLUMNS, RunSurvey
 from fieldlogs.survey.page import render_html
-from fieldlogs.survey.runner import aggregate
+from fieldlogs.survey.runner import aggregate, survey
 from schemas.enums import Severity
 
 TRACK, LENGTH, R = "0420-4", 520.383, 200.0
@@ -188,3 +188,51 @@ def test_the_proposal_writes_track_feature_points_that_build_and_validate(  # ty
     before = read_network(Path(report.db)).track_feature_points
     other = before[before["track_id"] != TRACK].reset_index(drop=True)
     pd.testing.assert_frame_equal(tfp[tfp["track_id"] != TRACK].reset_index(drop=True), other)
+
+
+SAMPLE_LOGS = Path(__file__).parents[3] / "fieldlogs" / "sample_logs"
+
+
+def test_the_station_run_surveys_the_loop_curve_through_the_pipeline(tmp_path: Path) -> None:
+    """End to end on the simulator's own run: the sample's station run (over loop 0420-3 at
+    about 45 km/h) three times, replayed against the sample with 0420-3 off line 0420 and its
+    F1 removed. Its F2 (R 200 right, pos 455.2–475.2) is found and matched on its track;
+    where F1 was a new curve is found (its exit within 1 m of 65.1), but not proposed: the
+    simulated track there is drawn through 20 m track points, so the runs see the curvature
+    smeared over the straights (the lower-limit crossings 14 m apart, not 20). The curves
+    of every other track are judged exactly as on the sample itself (where 0420-3 lies
+    along line 0420 and its curves are surveyed on the line's km)."""
+    src = tmp_path / "src"
+    shutil.copytree(sample_network_source_dir(), src)
+    tracks = src / "tracks.csv"
+    tracks.write_text(
+        tracks.read_text(encoding="utf-8").replace("0420-3,0420,3,station,20800.0,21320.0,", "0420-3,,,station,,,"),
+        encoding="utf-8",
+    )
+    tfp_csv = src / "track_feature_points.csv"
+    lines = tfp_csv.read_text(encoding="utf-8").splitlines()
+    tfp_csv.write_text("\n".join(r for r in lines if not r.startswith("0420-3,F1,")) + "\n", encoding="utf-8")
+    build_db(src, tmp_path / "off.sqlite", db_version="loop-3-off-line")
+    build_db(sample_network_source_dir(), tmp_path / "on.sqlite", db_version="sample")
+    for i in range(3):
+        shutil.copytree(SAMPLE_LOGS / "sim-net-station", tmp_path / "logs" / f"station-{i}")
+    off = survey([tmp_path / "logs"], tmp_path / "off.sqlite", config=CFG, workers=1)
+    f = off.features[off.features["track_id"] == "0420-3"].set_index("status")
+    assert sorted(f.index) == ["new", "ok"]
+    ok, new = f.loc["ok"], f.loc["new"]
+    assert (ok["feature_id"], ok["attribute"], ok["passes"]) == ("F2", "right", 3)
+    assert abs(f["entry_diff_m"].to_numpy(dtype=float)[list(f.index).index("ok")]) < 2.0
+    assert new["attribute"] == "right"
+    assert f["exit_km_m"].to_numpy(dtype=float)[list(f.index).index("new")] == pytest.approx(65.142, abs=1.0)
+    assert str(new["reason"]).startswith("no 20 m straight")
+    ch = off.changes[off.changes["track_id"] == "0420-3"]
+    assert ch["table"].tolist() == ["track_feature_points"] and not ch["applied"].any()
+    on = survey([tmp_path / "logs"], tmp_path / "on.sqlite", config=CFG, workers=1)
+    loop = on.features["track_id"] == "0420-3"  # along line 0420: its curves in km, as before
+    assert len(on.features[loop]) and set(on.features.loc[loop, "line_code"]) == {"0420"}
+    pd.testing.assert_frame_equal(
+        off.features[off.features["track_id"] != "0420-3"].reset_index(drop=True),
+        on.features[~loop].reset_index(drop=True),
+        check_exact=False,
+        atol=1e-4,  # the balise adjustment holds BG3's reads on the sample, not off line 0420
+    )
