@@ -242,9 +242,11 @@ def survey(
 
     Per network track: every balise, missed pass, candidate, feature and change row carries
     its track_id (the declared track holding it; on a line-only DB the implied LINE:TRACK).
-    On a network, runs on tracks off every line (crossovers) are surveyed along their pos_m,
-    and the G balises of balise groups are identified by NID_C/NID_BG/N_PIG and listed with
-    their passes and reads (missed when never read; their place is not surveyed).
+    On a network, runs on tracks off every line (crossovers) are surveyed along their pos_m
+    (their curves against track_feature_points, per track_id, pos in the km columns;
+    --propose writes track_feature_points rows), and the G balises of balise groups are
+    identified by NID_C/NID_BG/N_PIG and listed with their passes and reads (missed when never
+    read; their place is not surveyed).
 
     JSON (--format json): {"db", "db_version", "config", "summary", "runs", "failed_runs",
     "balises", "missed_passes", "candidates", "features", "wheels": {"vehicles", "runs"},

@@ -276,17 +276,26 @@ def _span(loc: GridLocator, rec: Mapping[str, Any], suffix: str) -> Geometry:
     return line_string(loc.between(rec["line_code"], rec["track"], float(a), float(b)))
 
 
-def _curve_features(loc: GridLocator, features: pd.DataFrame) -> list[dict[str, Any]]:
+def _curve_features(
+    loc: GridLocator, features: pd.DataFrame, tracks: GridLocator | None = None
+) -> list[dict[str, Any]]:
     """Curves (a DB feature point's entry to exit, or a new curve's as the runs place it) as
     lines along the grid, layer ``features`` with its status; moved and new ones also as the
-    runs place them (layer ``feature_proposals``, the position ``--propose`` writes)."""
+    runs place them (layer ``feature_proposals``, the position ``--propose`` writes). A row
+    with no line (a curve of ``track_feature_points``, its entry/exit the pos along its
+    track) is drawn along its track's ``track_points`` (``tracks``)."""
     out = []
     for rec in _records(features):
         props = {"layer": "features", **rec}
-        geom = _span(loc, rec, "_db_m") if rec.get("feature_id") is not None else _span(loc, rec, "_m")
+        where = rec
+        if not rec.get("line_code") and tracks is not None:
+            loc_r, where = tracks, {**rec, "line_code": rec.get("track_id"), "track": ""}
+        else:
+            loc_r = loc
+        geom = _span(loc_r, where, "_db_m") if rec.get("feature_id") is not None else _span(loc_r, where, "_m")
         out.append(feature(geom, props))
         if rec["status"] in ("moved", "new"):
-            out.append(feature(_span(loc, rec, "_m"), {**props, "layer": "feature_proposals"}))
+            out.append(feature(_span(loc_r, where, "_m"), {**props, "layer": "feature_proposals"}))
     return out
 
 
@@ -302,7 +311,8 @@ def survey_geojson(network: Network, report: Any) -> dict[str, Any]:
     loc = GridLocator(network)
     feats = _balise_features(loc, report.balises) + _candidate_features(loc, report.candidates)
     if len(report.features):
-        feats += _curve_features(loc, report.features)
+        off = report.features["line_code"].fillna("").astype(str) == ""
+        feats += _curve_features(loc, report.features, GridLocator.along_tracks(network) if off.any() else None)
     if report.gis is not None:
         feats += _verification_features(loc, report.gis)
     if getattr(report, "gis_tracks", None) is not None:

@@ -17,12 +17,27 @@ A *pass* is one run's chain over the track (one segment: a run that comes back o
 track after a reversal passes it twice). Per track the samples are averaged per
 ``profile_bin_m`` bin, first within a pass, then over passes: the mean profile κ̄(km) and
 the number of passes per bin.
+
+**Tracks off every line** (a network track with no line km, :mod:`fieldlogs.survey.extract`
+keeps its place as ``pos_m``, the distance from the track's begin): no balise chain reaches
+them (their balises carry no line km), so a segment there is placed by dead reckoning from
+the pipeline's position at its first cycle, with the run's wheel scale:
+
+    pos(x) = pos₀ + σ·λ·(x − d₀)
+
+(pos₀, d₀ the segment's place and travel at its first cycle, σ its motion, λ the run's
+wheel scale — the travel is 1/λ times the true distance). Starting from the first cycle,
+not interpolating to the last, keeps the pipeline's own curve correction (which a
+``track_feature_points`` feature applies at its exit) out of the place of that curve.
+Such a track is keyed ``("", track_id)`` and its normal running direction is the one of
+``pos_m`` increasing (as ``track_feature_points`` are written): κ_n = κ·σ/λ.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -36,6 +51,7 @@ from schemas.enums import direction_sign
 
 FloatArray = npt.NDArray[np.float64]
 TrackKey = tuple[str, str]
+"""(line_code, track) along a line; ("", track_id) on a track off every line."""
 #: Pass id = run index × this + segment.
 PASS_BASE = 100_000
 
@@ -85,25 +101,48 @@ def place_samples(
         k_x, k_v = rs.kappa["x_m"].to_numpy(dtype=float), rs.kappa["kappa"].to_numpy(dtype=float)
         c_seg = rs.coverage["seg"].to_numpy(dtype=np.int64)
         c_x0, c_x1 = rs.coverage["x0_m"].to_numpy(dtype=float), rs.coverage["x1_m"].to_numpy(dtype=float)
-        for seg, line, track, cab in zip(
-            sg["seg"].tolist(), sg["line_code"].tolist(), sg["track"].tolist(), sg["cab"].tolist(), strict=True
-        ):
-            tj = traj.get((r, int(seg)))
-            if tj is None:
+        for g in sg.to_dict("records"):
+            seg = int(g["seg"])
+            placed = _placement(network, g, traj.get((r, seg)), lam, rs.reader_x_m)
+            if placed is None:
                 continue
-            key = (str(line), str(track))
-            to_km = _to_km(network, key, tj, int(cab), rs.reader_x_m)
+            key, to_km, sign, (reach_lo, reach_hi) = placed
             sel = k_seg == seg
             km = to_km(k_x[sel])
-            kn = k_v[sel] * tj.motion * direction_sign(key[1]) / lam
+            kn = k_v[sel] * sign / lam
             ok = np.isfinite(km)
             parts.setdefault(key, []).append((r * PASS_BASE + seg, km[ok], kn[ok]))
             sel = c_seg == seg
-            reach_lo, reach_hi = tj.d[0] - tj.reach_m, tj.d[-1] + tj.reach_m
             a = to_km(np.clip(c_x0[sel], reach_lo, reach_hi))
             b = to_km(np.clip(c_x1[sel], reach_lo, reach_hi))
             cov.setdefault(key, []).append((r * PASS_BASE + seg, np.fmin(a, b), np.fmax(a, b)))
     return {k: _samples(v) for k, v in parts.items()}, {k: _coverage(v) for k, v in cov.items()}
+
+
+Placement = tuple[TrackKey, Callable[[FloatArray], FloatArray], int, tuple[float, float]]
+
+
+def _placement(
+    network: Network, seg: Mapping[Any, Any], tj: Trajectory | None, lam: float, reader_x_m: float
+) -> Placement | None:
+    """Key, travel → place, σ·s_track and the travel reach of one segment (module docstring);
+    None where it cannot be placed (a line segment without a chain, no motion)."""
+    line, track, tid = (str(seg[c]) if pd.notna(seg[c]) else "" for c in ("line_code", "track", "track_id"))
+    if not line:
+        motion = int(seg["motion"])
+        if not tid or motion == 0:
+            return None
+        pos0, d0 = float(seg["km0_m"]), float(seg["d0_m"])
+
+        def to_pos(x: FloatArray) -> FloatArray:
+            return np.asarray(pos0 + motion * lam * (x - d0), dtype=float)
+
+        return ("", tid), to_pos, motion, (d0, float(seg["d1_m"]))
+    if tj is None:
+        return None
+    key = (line, track)
+    to_km = _to_km(network, key, tj, int(seg["cab"]), reader_x_m)
+    return key, to_km, tj.motion * direction_sign(track), (tj.d[0] - tj.reach_m, tj.d[-1] + tj.reach_m)
 
 
 def _to_km(

@@ -40,7 +40,8 @@ nothing about the balises.
 
 **Curvature.** κ samples (at the cycle's mid travel, SPEC §5.3) with a speed of at least
 ``min_speed_kmh`` (and the pipeline's feature ``min_speed_kmh``) are kept where a curve may be: within
-``curve_pad_m`` of a sample with |κ| ≥ (1 − tol)/``max_radius_m`` or of a DB feature span;
+``curve_pad_m`` of a sample with |κ| ≥ (1 − tol)/``max_radius_m`` or of a DB feature span
+(on a track off every line, of its ``track_feature_points`` by pos);
 the travel intervals with a usable κ are kept too (coverage). Their km is only computed
 by the aggregation (:mod:`fieldlogs.survey.trajectory`), from the balises as surveyed.
 
@@ -471,12 +472,14 @@ def usable_intervals(x: FloatArray, usable: npt.NDArray[np.bool_], seg_of: IntAr
 def _feature_spans(x: FloatArray, segs: list[_Seg], tr: _Trace, network: Network, pad: float) -> npt.NDArray[np.bool_]:
     """Samples whose pipeline km lies within ``pad`` of a DB feature's six rows."""
     out = np.zeros(x.size, dtype=bool)
-    fp = network.feature_points
-    if not len(fp):
+    fp, tfp = network.feature_points, network.track_feature_points
+    if not len(fp) and not len(tfp):
         return out
-    spans = network.cached("survey_feature_spans", lambda: _spans(fp))
+    spans = network.cached("survey_feature_spans", lambda: _spans(fp) if len(fp) else {})
+    if len(tfp):  # off a line the segment's place is the pos along its track: keyed ("", track_id)
+        spans = spans | network.cached("survey_track_feature_spans", lambda: _spans(features_by_pos(tfp)))
     for g in segs:
-        sp = spans.get((g.line_code, g.track))
+        sp = spans.get((g.line_code, g.track) if g.line_code else ("", g.track_id))
         if sp is None or g.motion == 0:
             continue
         sl = slice(g.ie, g.ib)
@@ -487,6 +490,11 @@ def _feature_spans(x: FloatArray, segs: list[_Seg], tr: _Trace, network: Network
         inside[ok] = km[ok] <= sp[lo[ok], 1] + pad
         out[sl] |= inside
     return out
+
+
+def features_by_pos(tfp: pd.DataFrame) -> pd.DataFrame:
+    """``track_feature_points`` as feature rows keyed ("", track_id), pos in the place of km."""
+    return tfp.assign(line_code="", track=tfp["track_id"].astype(str), km_m=tfp["pos_m"])
 
 
 def _spans(fp: pd.DataFrame) -> dict[tuple[str, str], FloatArray]:

@@ -1,5 +1,6 @@
 """Surveyed curves against the DB's feature points: ok / moved / new / not seen / unverified
-(the rules are in :mod:`fieldlogs.survey.features`, "Comparison")."""
+(the rules are in :mod:`fieldlogs.survey.features`, "Comparison"); on tracks off every line
+against ``track_feature_points``, per ``track_id``, pos in the place of km."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from dbtools.network import Network
 from dbtools.topology import grid_track_ids
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.curvature import Coverage, TrackKey
-from fieldlogs.survey.features import MOVED, NEW, NOT_SEEN, OK, UNVERIFIED, TrackCurves, db_features
+from fieldlogs.survey.features import MOVED, NEW, NOT_SEEN, OK, UNVERIFIED, TrackCurves, db_features, db_track_features
 
 FEATURE_COLUMNS = (
     "track_id",
@@ -89,11 +90,14 @@ def compare(
     coverage: Mapping[TrackKey, Coverage],
     cfg: SurveyConfig,
     network: Network | None = None,
+    track_feature_points: pd.DataFrame | None = None,
 ) -> pd.DataFrame:
     """One row per DB feature and per new curve (:data:`FEATURE_COLUMNS`); ``track_id`` the
     network track holding its entry (:func:`dbtools.topology.grid_track_ids`; without a
-    network the implied ``LINE:TRACK``)."""
-    dbf = db_features(feature_points)
+    network the implied ``LINE:TRACK``). The features of ``track_feature_points`` on tracks
+    off every line (key ``("", track_id)``) are compared with those tracks' curves: their
+    rows have no line/track, their track_id, and pos in the km columns."""
+    dbf = _db_features(feature_points, track_feature_points, network)
     rows: list[dict[str, object]] = []
     matched: set[str] = set()
     for _, db in dbf.iterrows():
@@ -129,7 +133,37 @@ def compare(
             rows.append(_row(None, c, NEW, why, int(c["passes"])))
     out = pd.DataFrame(rows, columns=list(FEATURE_COLUMNS))
     if len(out):
-        entry = out["entry_km_db_m"].astype(float).fillna(out["entry_km_m"].astype(float))
-        net = network if network is not None else Network({})
-        out["track_id"] = grid_track_ids(net, out["line_code"], out["track"], entry)
+        out["track_id"] = _track_ids(out, network)
+        out.loc[out["line_code"] == "", "track"] = ""
     return out
+
+
+def _db_features(fp: pd.DataFrame, tfp: pd.DataFrame | None, network: Network | None) -> pd.DataFrame:
+    """The DB's features of the lines and of the tracks off every line (keyed ("", track_id))."""
+    dbf = db_features(fp)
+    off = _off_line(tfp, network) if tfp is not None and len(tfp) else None
+    if off is None or not len(off):
+        return dbf
+    return pd.concat([dbf, db_track_features(off)], ignore_index=True) if len(dbf) else db_track_features(off)
+
+
+def _track_ids(out: pd.DataFrame, network: Network | None) -> pd.Series:
+    """Each row's track: the declared track holding the entry km along a line
+    (:func:`dbtools.topology.grid_track_ids`), its own ``track`` key off every line."""
+    entry = out["entry_km_db_m"].astype(float).fillna(out["entry_km_m"].astype(float))
+    net = network if network is not None else Network({})
+    off = (out["line_code"] == "").to_numpy()
+    ids = out["track"].astype(object).copy()
+    if (~off).any():
+        ids[~off] = grid_track_ids(net, out["line_code"][~off], out["track"][~off], entry[~off])
+    return ids
+
+
+def _off_line(tfp: pd.DataFrame, network: Network | None) -> pd.DataFrame:
+    """The rows of ``track_feature_points`` on tracks off every line (no ``line_code`` in
+    ``tracks``): the survey places its curves by pos only there."""
+    if network is None or not len(network.tracks):
+        return tfp.iloc[0:0]
+    t = network.tracks
+    off = set(t.loc[t["line_code"].isna() | (t["line_code"].astype(str) == ""), "track_id"].astype(str))
+    return tfp[tfp["track_id"].astype(str).isin(off)]

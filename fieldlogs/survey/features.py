@@ -35,6 +35,12 @@ linearly to κ = 0 (a linear transition has κ = 0.8/R at 0.8 of its length, so
 t_s = x₀.₂ − (x₀.₈ − x₀.₂)/3). A curve whose 20 m straights are not straight on the
 profile (|κ̄| above the pipeline's ``straight_kappa_max``) cannot be a feature point and
 is reported, not proposed.
+
+**Tracks off every line** (key ``("", track_id)``, :mod:`fieldlogs.survey.curvature`): the
+same detection, location and comparison on ``pos_m`` in the place of km, against the
+track's ``track_features`` rows (``track_feature_points``); the running direction is that
+of ``pos_m`` increasing; a curve row's ``track`` holds the track_id and its entry/exit
+"km" columns the pos; the proposal is six ``track_feature_points`` rows (``pos_m``).
 """
 
 from __future__ import annotations
@@ -52,6 +58,7 @@ from fieldlogs.pipeline.config import FeatureConfig
 from fieldlogs.survey.balises import t_quantile
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.curvature import TrackKey, TrackSamples, mean_profile
+from fieldlogs.survey.extract import features_by_pos
 from schemas.enums import direction_sign
 
 FloatArray = npt.NDArray[np.float64]
@@ -254,7 +261,7 @@ def survey_track(key: TrackKey, s: TrackSamples, rule: Rule) -> TrackCurves:
     """Detect and locate the curves of one track (module docstring)."""
     profile = mean_profile(s, rule.cfg.profile_bin_m)
     km, kap = profile["km_m"].to_numpy(dtype=float), profile["kappa"].to_numpy(dtype=float)
-    sign_n = direction_sign(key[1])
+    sign_n = direction_sign(key[1]) if key[0] else 1  # off a line: pos increasing
     rows, per_run = [], {}
     for k, curve in enumerate(detect(profile, rule)):
         pr = run_crossings(s, curve, rule)
@@ -267,7 +274,7 @@ def survey_track(key: TrackKey, s: TrackSamples, rule: Rule) -> TrackCurves:
         ts_lo = _transition_end(km, kap, lo, curve["sign"], radius, -1, 1.0 - rule.tol)
         ts_hi = _transition_end(km, kap, hi, curve["sign"], radius, +1, 1.0 - rule.tol)
         entry, exit_ = (lo, hi) if sign_n > 0 else (hi, lo)
-        cid = f"{key[0]}-{key[1]}-{k + 1:03d}"
+        cid = f"{key[0]}-{key[1]}-{k + 1:03d}" if key[0] else f"{key[1]}-{k + 1:03d}"
         rows.append(
             {
                 "line_code": key[0],
@@ -290,6 +297,14 @@ def survey_track(key: TrackKey, s: TrackSamples, rule: Rule) -> TrackCurves:
     return TrackCurves(pd.DataFrame(rows, columns=list(CURVE_COLUMNS)), profile, per_run)
 
 
+def db_track_features(tfp: pd.DataFrame) -> pd.DataFrame:
+    """:func:`db_features` of ``track_feature_points``: keyed ``("", track_id)`` (line_code "",
+    track = the track_id), pos in the place of km (module docstring)."""
+    if not len(tfp):
+        return db_features(tfp)
+    return db_features(features_by_pos(tfp))
+
+
 def db_features(fp: pd.DataFrame) -> pd.DataFrame:
     """One row per DB feature: line, track, feature_id, entry/exit km (rows 3/4), radius,
     attribute, span (rows 1–6)."""
@@ -310,8 +325,10 @@ def db_features(fp: pd.DataFrame) -> pd.DataFrame:
 
 
 def proposed_rows(curve: pd.Series, feature_id: str) -> list[dict[str, Any]]:
-    """The six rows of a surveyed curve (module docstring, "Proposal")."""
-    sign = direction_sign(str(curve["track"]))
+    """The six rows of a surveyed curve (module docstring, "Proposal"); of a track off every
+    line (``line_code`` "") as ``track_feature_points`` rows (track_id, pos_m)."""
+    off = not str(curve["line_code"])
+    sign = 1 if off else direction_sign(str(curve["track"]))
     u = [
         sign * curve["transition_start_km_m"] - STRAIGHT_M,
         sign * curve["transition_start_km_m"],
@@ -332,13 +349,17 @@ def proposed_rows(curve: pd.Series, feature_id: str) -> list[dict[str, Any]]:
         ("straight", 0.0, "exit straight check starts"),
         ("none", 0.0, "exit straight check ends"),
     ]
+    where = (
+        {"track_id": str(curve["track"])}
+        if off
+        else {"line_code": str(curve["line_code"]), "track": str(curve["track"])}
+    )
     return [
-        {
-            "line_code": str(curve["line_code"]),
-            "track": str(curve["track"]),
+        where
+        | {
             "feature_id": feature_id,
             "seq": i + 1,
-            "km_m": round(float(sign * x), 1),
+            "pos_m" if off else "km_m": round(float(sign * x), 1),
             "radius_m": r,
             "attribute": attr,
             "role": role,

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools import pagekit as kit
-from fieldlogs.survey.features import db_features
+from fieldlogs.survey.features import db_features, db_track_features
 from fieldlogs.survey.frames import rows as frame_rows
 from schemas.units import format_km
 
@@ -78,7 +78,7 @@ def curvature_overlay(rep: SurveyReport, key: tuple[str, str]) -> bytes:
     if tc is not None and len(tc.profile):
         p = tc.profile
         ax.plot(p["km_m"] / 1000.0, p["kappa"], ".", ms=1.5, color="0.3", label="runs' mean κ")
-    dbf = db_features(rep.network.feature_points)
+    dbf = db_features(rep.network.feature_points) if key[0] else db_track_features(rep.network.track_feature_points)
     dbf = dbf[(dbf["line_code"] == key[0]) & (dbf["track"] == key[1])]
     _feature_bands(
         ax,
@@ -87,7 +87,8 @@ def curvature_overlay(rep: SurveyReport, key: tuple[str, str]) -> bytes:
         "DB feature",
     )
     f = rep.features
-    prop = f[(f["line_code"] == key[0]) & (f["track"] == key[1]) & f["status"].isin(["new", "moved"])]
+    here = (f["line_code"] == key[0]) & (f["track"] == key[1]) if key[0] else f["track_id"] == key[1]
+    prop = f[here & f["status"].isin(["new", "moved"])]
     _feature_bands(
         ax,
         prop.rename(columns={"entry_km_m": "entry", "exit_km_m": "exit", "radius_m": "radius"}),
@@ -95,9 +96,10 @@ def curvature_overlay(rep: SurveyReport, key: tuple[str, str]) -> bytes:
         "proposed",
     )
     ax.axhline(0.0, color="0.5", lw=0.6)
-    ax.set_xlabel("km [km]")
+    ax.set_xlabel("km [km]" if key[0] else "pos from the track's begin [km]")
     ax.set_ylabel("κ [1/m] (+ left)")
-    ax.set_title(f"Line {key[0]} track {key[1]}: curvature in the normal running direction")
+    where = f"Line {key[0]} track {key[1]}" if key[0] else f"Track {key[1]}"
+    ax.set_title(f"{where}: curvature in the normal running direction")
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="upper right", fontsize=7)
     return kit.png(fig)
@@ -199,16 +201,23 @@ def _verdict(rep: SurveyReport) -> kit.Verdict:
     return kit.Verdict("Passed: nothing flagged.", kit.Status.OK)
 
 
+def _key(line: object, track: object, track_id: object) -> tuple[str, str]:
+    """A feature row's curvature key: (line, track), or ("", track_id) off every line."""
+    return (str(line), str(track)) if isinstance(line, str) and line else ("", str(track_id))
+
+
+def _title(key: tuple[str, str]) -> str:
+    return f"Curvature, line {key[0]} track {key[1]}" if key[0] else f"Curvature, track {key[1]} (pos from its begin)"
+
+
 def _figures(rep: SurveyReport) -> list[str]:
     out = []
     lines = sorted(rep.balises["line_code"].unique())
     for line in lines[:MAX_FIGURES]:
         out.append(kit.figure(balise_residuals(rep.balises, line, rep.config.moved_min_m), f"Balises, line {line}"))
-    keys = sorted(
-        set(rep.curves) | {(str(a), str(b)) for a, b in rep.features[["line_code", "track"]].itertuples(index=False)}
-    )
+    keys = sorted(set(rep.curves) | {_key(*k) for k in rep.features[["line_code", "track", "track_id"]].to_numpy()})
     for key in keys[:MAX_FIGURES]:
-        out.append(kit.figure(curvature_overlay(rep, key), f"Curvature, line {key[0]} track {key[1]}"))
+        out.append(kit.figure(curvature_overlay(rep, key), _title(key)))
     if len(keys) > MAX_FIGURES or len(lines) > MAX_FIGURES:
         out.append(kit.paragraph("More lines/tracks not drawn (the tables have them all).", kit.Status.NOTE))
     return out

@@ -11,7 +11,9 @@ each change with its evidence in a sidecar (``survey_changes.json`` / ``.csv``).
   Unknown I1/I2 telegrams are listed for inspection, not proposed: an initial pair needs
   its station and both balises checked on site;
 * a *new* curve with straights on both sides: six rows (``S001``, … not used on its track);
-  a *moved* feature: its six rows replaced by the surveyed ones, same ``feature_id``.
+  a *moved* feature: its six rows replaced by the surveyed ones, same ``feature_id``; on a
+  track off every line these are ``track_feature_points`` rows (``pos_m``) of that
+  ``track_id`` (:mod:`fieldlogs.survey.features`, "Tracks off every line").
 
 Balises and features that are missed, unverified or not seen are reported, never removed:
 they need an inspection, not a DB edit. The proposal is checked with the ``db validate``
@@ -40,7 +42,7 @@ from fieldlogs.survey.features import MOVED as F_MOVED
 from fieldlogs.survey.features import NEW, proposed_rows
 from fieldlogs.survey.frames import rows
 from schemas.enums import BaliseKind, Severity, direction_sign
-from schemas.tables import BALISES, FEATURE_POINTS, PAIR_SPACING_M
+from schemas.tables import BALISES, FEATURE_POINTS, PAIR_SPACING_M, TRACK_FEATURE_POINTS
 
 CHANGE_COLUMNS = (
     "change_id",
@@ -189,12 +191,25 @@ def _next_id(used: set[str]) -> str:
     return f"S{n:03d}"
 
 
-def _feature_changes(features: pd.DataFrame, curves: dict[tuple[str, str], Any], fp: pd.DataFrame) -> list[Change]:
+def _used_ids(fp: pd.DataFrame, tfp: pd.DataFrame) -> dict[tuple[str, str], set[str]]:
+    """Feature ids in use per key: (line_code, track), and ("", track_id) off a line."""
+    used = {(str(k[0]), str(k[1])): set(g["feature_id"].astype(str)) for k, g in fp.groupby(["line_code", "track"])}
+    if len(tfp):
+        used |= {("", str(k)): set(g["feature_id"].astype(str)) for k, g in tfp.groupby("track_id")}
+    return used
+
+
+def _feature_changes(
+    features: pd.DataFrame, curves: dict[tuple[str, str], Any], fp: pd.DataFrame, tfp: pd.DataFrame
+) -> list[Change]:
     """New and moved features as six surveyed rows each (module docstring)."""
     out: list[Change] = []
-    used = {(str(k[0]), str(k[1])): set(g["feature_id"].astype(str)) for k, g in fp.groupby(["line_code", "track"])}
+    used = _used_ids(fp, tfp)
     for f in rows(features[features["status"].isin([NEW, F_MOVED])]):
-        key = (str(f.line_code), str(f.track))
+        off = not str(f.line_code)  # a track off every line: track_feature_points by its track_id
+        key = ("", str(f.track_id)) if off else (str(f.line_code), str(f.track))
+        table = TRACK_FEATURE_POINTS.name if off else FEATURE_POINTS.name
+        where = ("", "") if off else key
         curve = curves[key].curves.set_index("curve_id").loc[str(f.curve_id)].copy()
         curve["line_code"], curve["track"] = key
         ev = f"{f.passes} passes: exit {f.exit_km_m:.1f} ± {f.exit_ci95_m:.1f} m, R {f.radius_m:.0f} m, {f.attribute}"
@@ -202,25 +217,23 @@ def _feature_changes(features: pd.DataFrame, curves: dict[tuple[str, str], Any],
         if not bool(curve["straights_ok"]):
             note = "no 20 m straight on both sides"
             cid = str(f.curve_id)
-            out.append(
-                Change(FEATURE_POINTS.name, action, cid, *key, "", "", ev, {}, None, note, False, str(f.track_id))
-            )
+            out.append(Change(table, action, cid, *where, "", "", ev, {}, None, note, False, str(f.track_id)))
             continue
         fid = _next_id(used.setdefault(key, set())) if f.status == NEW else str(f.feature_id)
         old = "" if f.status == NEW else f"exit {f.exit_km_db_m:.1f}, R {f.radius_db_m:.0f} {f.attribute_db}"
         new = f"exit {f.exit_km_m:.1f}, R {float(f.radius_m):.0f} {f.attribute}"
-        scope = {"line_code": key[0], "track": key[1], "feature_id": fid}
+        scope = {"track_id": key[1]} if off else {"line_code": key[0], "track": key[1]}
         six = proposed_rows(curve, fid)
         out.append(
             Change(
-                FEATURE_POINTS.name,
+                table,
                 action,
                 fid,
-                *key,
+                *where,
                 old,
                 new,
                 ev,
-                scope,
+                scope | {"feature_id": fid},
                 six,
                 str(f.reason or ""),
                 True,
@@ -230,6 +243,20 @@ def _feature_changes(features: pd.DataFrame, curves: dict[tuple[str, str], Any],
     return out
 
 
+def _apply_features(frame: pd.DataFrame, changes: list[Change], where: tuple[str, ...]) -> pd.DataFrame:
+    """``frame`` (feature_points or track_feature_points) with the changes' six rows: a
+    replaced feature's old rows (same ``where`` keys and feature_id) dropped first."""
+    for c in changes:
+        if c.action == "replace":
+            mine = frame["feature_id"] == c.key
+            for k in where:
+                mine &= frame[k] == c.scope[k]
+            frame = frame[~mine]
+    if changes:
+        frame = pd.concat([frame, pd.DataFrame([r for c in changes for r in c.payload])], ignore_index=True)
+    return frame
+
+
 def apply_changes(network: Network, changes: list[Change]) -> Network:
     """The network with every applied change."""
     on = [c for c in changes if c.applied]
@@ -237,17 +264,15 @@ def apply_changes(network: Network, changes: list[Change]) -> Network:
     added = [c.payload for c in on if c.table == BALISES.name and c.action == "add"]
     if added:
         b = pd.concat([b, pd.DataFrame(added)], ignore_index=True)
-    fp = network.feature_points
     feats = [c for c in on if c.table == FEATURE_POINTS.name]
-    for c in feats:
-        if c.action == "replace":
-            mine = (fp["line_code"] == c.line_code) & (fp["track"] == c.track) & (fp["feature_id"] == c.key)
-            fp = fp[~mine]
-    if feats:
-        fp = pd.concat([fp, pd.DataFrame([r for c in feats for r in c.payload])], ignore_index=True)
+    fp = _apply_features(network.feature_points, feats, ("line_code", "track"))
     tables = dict(network.tables)
     tables[BALISES.name] = canonical(BALISES, b)
     tables[FEATURE_POINTS.name] = canonical(FEATURE_POINTS, fp)
+    on_tracks = [c for c in on if c.table == TRACK_FEATURE_POINTS.name]
+    if on_tracks:  # only then: a network without the table keeps it absent
+        tfp = _apply_features(network.track_feature_points, on_tracks, ("track_id",))
+        tables[TRACK_FEATURE_POINTS.name] = canonical(TRACK_FEATURE_POINTS, tfp)
     return Network(tables, origin="survey proposal", meta=dict(network.meta))
 
 
@@ -269,7 +294,7 @@ def _responsible(change: Change, keys: dict[str, Any]) -> bool:
     if "station_code" in keys:
         return bool((keys.get("line_code"), keys["station_code"], keys.get("track")) == s.get("pair"))
     if "feature_id" in keys:
-        return all(keys.get(k) == s.get(k) for k in ("line_code", "track", "feature_id"))
+        return all(keys.get(k) == v for k, v in s.items())
     return False
 
 
@@ -305,7 +330,7 @@ def build_proposal(report: Any) -> Proposal:
     changes = (
         _balise_moves(report.balises)
         + _candidate_changes(report.candidates, network.balises)
-        + _feature_changes(report.features, report.curves, network.feature_points)
+        + _feature_changes(report.features, report.curves, network.feature_points, network.track_feature_points)
     )
     proposed = _guard(network, changes) if changes else network
     table = [

@@ -174,7 +174,7 @@ def aggregate(
         balises=balises,
         missed=missed_passes(balises, passes),
         candidates=candidates(runs, traj, network, table, cfg),
-        features=compare(network.feature_points, curves, coverage, cfg, network),
+        features=compare(network.feature_points, curves, coverage, cfg, network, network.track_feature_points),
         curves=curves,
         wheel_runs=wheel_runs,
         wheels=vehicle_wheels(wheel_runs, cfg),
