@@ -58,6 +58,7 @@ point (Δkm = 40 m over 40 m) is not a cut.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -129,8 +130,9 @@ def _column(frame: pd.DataFrame, name: str, numeric: bool) -> npt.NDArray[Any]:
     if name not in frame.columns:
         return np.full(len(frame), np.nan if numeric else None, dtype=float if numeric else object)
     s = frame[name]
-    if numeric:
-        return np.asarray(pd.to_numeric(s, errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan))
+    if numeric:  # a float64 column (a Network's): a read-only view of it, not a copy
+        num = s if s.dtype == np.float64 else pd.to_numeric(s, errors="coerce")
+        return np.asarray(num.to_numpy(dtype=np.float64, na_value=np.nan))
     return np.asarray(s.astype(object).where(s.notna(), None).to_numpy(dtype=object))
 
 
@@ -145,9 +147,13 @@ def _codes(frame: pd.DataFrame, name: str) -> tuple[I64, npt.NDArray[np.object_]
 
 def _lex_sorted(a: I64, b: I64, c: F64) -> bool:
     """True when the rows are in the order ``np.lexsort((c, b, a))`` gives (a stable sort:
-    then it is the identity); ``c`` finite."""
-    da, db, dc = np.diff(a), np.diff(b), np.diff(c)
-    return bool(np.all((da > 0) | ((da == 0) & ((db > 0) | ((db == 0) & (dc >= 0))))))
+    then it is the identity); ``c`` finite. ``BLOCK`` rows at a time: bounded temporaries."""
+    for s in range(0, max(a.size - 1, 0), BLOCK):
+        e = s + BLOCK + 1
+        da, db, dc = np.diff(a[s:e]), np.diff(b[s:e]), np.diff(c[s:e])
+        if not np.all((da > 0) | ((da == 0) & ((db > 0) | ((db == 0) & (dc >= 0))))):
+            return False
+    return True
 
 
 def _menger_squared(lon: F64, lat: F64, step: F64) -> F64:
@@ -257,25 +263,36 @@ class GridIndex:
         km, lat, lon = (_column(gis, c, True) for c in ("km_m", "lat", "lon"))
         self.georef = georef if georef is not None else derive(lat, lon)
         with np.errstate(invalid="ignore"):
-            ok = (lcode >= 0) & (tcode >= 0) & np.isfinite(km) & self._inside(lat, lon)
-        pos = np.flatnonzero(ok)
-        lcode, tcode = lcode[pos], tcode[pos]
-        if not _lex_sorted(lcode, tcode, km[pos]):  # frames of a Network are: no sort
-            order = np.lexsort((km[pos], tcode, lcode))
+            ok = (lcode >= 0) & (tcode >= 0) & np.isfinite(km)
+        ok &= self._inside(lat, lon)
+        n = int(np.count_nonzero(ok))
+        if n < ok.size:  # rows left out: the points are copies
+            pos = np.flatnonzero(ok)
+            lcode, tcode = lcode[pos], tcode[pos]
+            km, lat, lon = km[pos], lat[pos], lon[pos]
+        else:  # every row a point (a DB's frame): no copy of the frame's columns
+            pos = np.arange(n, dtype=np.int64)
+        del ok
+        if not _lex_sorted(lcode, tcode, km):  # frames of a Network are: no sort
+            order = np.lexsort((km, tcode, lcode))
             pos, lcode, tcode = pos[order], lcode[order], tcode[order]
-        self.pos: I64 = pos.astype(np.int64)
-        self.km: F64 = km[self.pos]
-        self.lat: F64 = lat[self.pos]
-        self.lon: F64 = lon[self.pos]
-        n = self.pos.size
-        pair = lcode.astype(np.int64) * max(len(tuniq), 1) + tcode
+            km, lat, lon = km[order], lat[order], lon[order]
+            del order
+        self.pos: I64 = np.asarray(pos, dtype=np.int64)
+        self.km: F64 = km
+        self.lat: F64 = lat
+        self.lon: F64 = lon
         new = np.ones(n, dtype=bool)
-        new[1:] = pair[1:] != pair[:-1]
-        self.tid: I64 = (np.cumsum(new) - 1).astype(np.int64)
+        np.not_equal(lcode[1:], lcode[:-1], out=new[1:])
+        new[1:] |= tcode[1:] != tcode[:-1]
+        self.tid: I64 = np.cumsum(new, dtype=np.int64)
+        self.tid -= 1
         self.start: I64 = np.flatnonzero(new).astype(np.int64)
+        del new
         self.end: I64 = np.append(self.start[1:], n)[: self.start.size].astype(np.int64)
         self.lines: ObjArray = np.asarray(luniq, dtype=object)[lcode[self.start]]
         self.tracks: ObjArray = np.asarray(tuniq, dtype=object)[tcode[self.start]]
+        del lcode, tcode
         self.keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in zip(self.lines, self.tracks, strict=True)]
         self._key_id = {key: i for i, key in enumerate(self.keys)}
         if projector is None and self.georef is not None:
@@ -285,22 +302,32 @@ class GridIndex:
             self.x, self.y = self.projector.to_xy(self.lon, self.lat)
         else:
             self.x, self.y = np.zeros(n), np.zeros(n)
-        same = self.tid[1:] == self.tid[:-1]
-        self.dkm: F64 = np.where(same, np.diff(self.km), np.nan)
-        self.seg: F64 = np.hypot(np.diff(self.x), np.diff(self.y))
+        self.dkm: F64 = np.diff(self.km)
+        self.dkm[self.tid[1:] != self.tid[:-1]] = np.nan
         self._build_key()
         self._shapes: dict[tuple[float, float], GridShape] = {}
         self._cuts: dict[PieceRule, BoolArray] = {}
         self._breaks: dict[float, tuple[BoolArray, I64]] = {}
 
     def _inside(self, lat: F64, lon: F64) -> BoolArray:
-        """Finite, on the globe and not far outside the operating area."""
+        """Finite, on the globe and not far outside the operating area (``BLOCK`` points at a
+        time: bounded temporaries)."""
         with np.errstate(invalid="ignore"):
             ok = (np.abs(lat) <= LAT_RANGE[1]) & (np.abs(lon) <= LON_RANGE[1])
         if self.georef is None or not ok.any():
             return np.asarray(ok, dtype=bool)
-        ok[ok] = self.georef.area.distance_m(lat[ok], lon[ok]) <= AREA_TOLERANCE_M
+        area = self.georef.area
+        for a in range(0, ok.size, BLOCK):
+            part = ok[a : a + BLOCK]  # a view: written in place
+            rows = slice(a, a + BLOCK) if part.all() else a + np.flatnonzero(part)
+            part[part] = area.distance_m(lat[rows], lon[rows]) <= AREA_TOLERANCE_M
         return np.asarray(ok, dtype=bool)
+
+    @cached_property
+    def seg(self) -> F64:
+        """Plane distance to the next point [m] (length n − 1; computed on first use)."""
+        seg = np.diff(self.x)
+        return np.hypot(seg, np.diff(self.y), out=seg)
 
     @cached_property
     def dist(self) -> F64:
@@ -320,27 +347,45 @@ class GridIndex:
         by the GIS rules and the topology rules' track lengths). Read-only: do not modify."""
         return step_bounds(self.lon, self.lat)
 
-    def steps_outside(self, where: BoolArray, lo: F64, hi: F64) -> tuple[I64, F64]:
+    def steps_outside(
+        self, where: BoolArray, limits: Callable[[int, int], tuple[F64, F64]]
+    ) -> tuple[I64, F64, F64, F64]:
         """The steps i with ``where[i]`` whose geodesic length ``dist[i]`` is not finite or lies
-        outside [``lo[i]``, ``hi[i]``], and ``dist`` (exact, GRS80 ``Geod.inv``) at least at
-        those steps — what ``np.flatnonzero(where & ((dist < lo) | (dist > hi) |
-        ~np.isfinite(dist)))`` gives, without the geodesic of every step when :attr:`dist`
-        has not been computed: a step is cleared by its straight 3-D chord (module doc,
-        :func:`chord_bounds`) and only the steps the chord cannot clear are solved exactly."""
-        if "dist" in self.__dict__ or self.n < 2:
-            d = self.dist
+        outside [lo[i], hi[i]] (``limits(a, b)``: lo and hi of the steps a:b, element-wise), with
+        their exact length (GRS80 ``Geod.inv``), lo and hi: what ``np.flatnonzero(where & ((dist
+        < lo) | (dist > hi) | ~np.isfinite(dist)))`` gives, ``BLOCK`` steps at a time (bounded
+        temporaries) and without the geodesic of every step when :attr:`dist` has not been
+        computed: a step is cleared by its straight 3-D chord (module doc, :func:`chord_bounds`)
+        and only the steps the chord cannot clear are solved exactly."""
+        parts: list[tuple[I64, F64, F64, F64]] = []
+        exact = "dist" in self.__dict__
+        shared = self.keep_bounds or "bounds" in self.__dict__
+        for a in range(0, max(self.n - 1, 0), BLOCK):
+            b = min(a + BLOCK, self.n - 1)
+            w = where[a:b]
+            if not w.any():
+                continue
+            lo, hi = limits(a, b)
+            if exact:
+                doubt = np.flatnonzero(w)
+                d = self.dist[a:b][doubt]
+            else:
+                low, high = (
+                    (self.bounds[0][a:b], self.bounds[1][a:b])
+                    if shared
+                    else chord_bounds(self.lon[a : b + 1], self.lat[a : b + 1])
+                )
+                with np.errstate(invalid="ignore"):
+                    doubt = np.flatnonzero(w & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
+                d = exact_steps(self.lon, self.lat, doubt + a)
+            lo_d, hi_d = lo[doubt], hi[doubt]
             with np.errstate(invalid="ignore"):
-                bad = where & ((d < lo) | (d > hi) | ~np.isfinite(d))
-            return np.flatnonzero(bad), d
-        low, high = self.bounds if self.keep_bounds or "bounds" in self.__dict__ else step_bounds(self.lon, self.lat)
-        with np.errstate(invalid="ignore"):
-            doubt = np.flatnonzero(where & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
-        d = np.full(self.n - 1, np.nan)
-        d[doubt] = exact_steps(self.lon, self.lat, doubt)
-        dd, lo_d, hi_d = d[doubt], lo[doubt], hi[doubt]
-        with np.errstate(invalid="ignore"):
-            bad = (dd < lo_d) | (dd > hi_d) | ~np.isfinite(dd)
-        return doubt[bad], d
+                bad = (d < lo_d) | (d > hi_d) | ~np.isfinite(d)
+            parts.append((doubt[bad] + a, d[bad], lo_d[bad], hi_d[bad]))
+        if not parts:
+            return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(0)
+        idx, dist, lo_b, hi_b = (np.concatenate(p) for p in zip(*parts, strict=True))
+        return idx.astype(np.int64), dist, lo_b, hi_b
 
     @cached_property
     def c(self) -> F64:
@@ -381,7 +426,8 @@ class GridIndex:
             self.shift: F64 = np.concatenate([[0.0], np.cumsum(span)[:-1]]) - lo
         else:
             self.shift = np.zeros(0)
-        self.key: F64 = self.km + self.shift[self.tid] if self.n else np.zeros(0)
+        self.key: F64 = self.shift[self.tid] if self.n else np.zeros(0)
+        self.key += self.km
 
     # ------------------------------------------------------------------------------ access
     @property
@@ -443,16 +489,25 @@ class GridIndex:
         regular = (self.tid[1:] == self.tid[:-1]) & (np.abs(self.dkm - spacing_m) <= epsilon_m)
         both = np.zeros(n, dtype=bool)
         both[1:-1] = regular[:-1] & regular[1:]
-        seg_h = np.arctan2(np.diff(y), np.diff(x)) if n > 1 else np.zeros(0)
+        seg_h = np.zeros(0)
+        if n > 1:  # arctan2(Δy, Δx) of each segment, in place
+            seg_h = np.diff(y)
+            np.arctan2(seg_h, np.diff(x), out=seg_h)
         turn = np.full(n, np.nan)
-        turn[1:-1] = _wrap(seg_h[1:] - seg_h[:-1])
+        inner = turn[1:-1]  # _wrap(seg_h[1:] − seg_h[:-1]), in place
+        np.subtract(seg_h[1:], seg_h[:-1], out=inner)
+        inner += np.pi
+        np.remainder(inner, 2 * np.pi, out=inner)
+        inner -= np.pi
         turn[~both] = np.nan
         kappa = _blockwise_curvature(x, y)
         kappa[~both] = np.nan
         # heading at a vertex: chord of its neighbours, else the one regular step it has
         heading = np.full(n, np.nan)
         if n > 1:
-            heading[1:-1] = np.arctan2(y[2:] - y[:-2], x[2:] - x[:-2])
+            inner = heading[1:-1]
+            np.subtract(y[2:], y[:-2], out=inner)
+            np.arctan2(inner, x[2:] - x[:-2], out=inner)
             heading[~both] = np.nan
             fwd = np.zeros(n, dtype=bool)
             fwd[:-1] = regular

@@ -70,8 +70,12 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
         return loc.at(T, int(grid.pos[i]))
 
     # gis.km_grid
-    off = np.abs(grid.km - sp * np.round(grid.km / sp))
-    bad = np.flatnonzero(off > config.km_epsilon_m)
+    off = grid.km / sp  # |km − sp·round(km / sp)|, in place (one temporary)
+    np.round(off, out=off)
+    off *= sp
+    np.subtract(grid.km, off, out=off)
+    bad = np.flatnonzero(np.abs(off, out=off) > config.km_epsilon_m)
+    del off
     out += capped(
         "gis.km_grid",
         Severity.ERROR,
@@ -139,27 +143,32 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
     # gis.step_length
     if grid.n > 1:
         dk = grid.dkm
-        tol = config.step_tolerance_m + config.step_tolerance_rel * np.abs(dk)
         r_min = sp / config.spike_max_turn_rad
-        chord = 2 * r_min * np.sin(np.minimum(np.abs(dk) / (2 * r_min), np.pi / 2))
-        lo, hi = chord - tol, dk + tol
+
+        def limits(a: int, b: int) -> tuple[F64, F64]:
+            d = dk[a:b]
+            tol = config.step_tolerance_m + config.step_tolerance_rel * np.abs(d)
+            chord = 2 * r_min * np.sin(np.minimum(np.abs(d) / (2 * r_min), np.pi / 2))
+            return chord - tol, d + tol
+
         with np.errstate(invalid="ignore"):
             check = (dk > config.km_epsilon_m) & ~is_break
-        bad, dist = grid.steps_outside(check, lo, hi)  # dist: exact at least at the bad steps
+        bad, dist, lo, hi = grid.steps_outside(check, limits)  # aligned with bad
         out += capped(
             "gis.step_length",
             Severity.ERROR,
             T,
-            bad,
-            lambda i: Finding(
+            np.arange(bad.size),
+            lambda j: Finding(
                 "gis.step_length",
                 Severity.ERROR,
                 T,
-                f"points {dist[i]:.2f} m apart but their km differ by {dk[i]:g} m (from km {fmt_km(grid.km[i])})",
-                keys=_gis_keys(grid, i + 1),
-                value=round(float(dist[i]), 3),
-                limit=[round(float(lo[i]), 3), round(float(hi[i]), 3)],
-                **at(i + 1),
+                f"points {dist[j]:.2f} m apart but their km differ by {dk[bad[j]]:g} m "
+                f"(from km {fmt_km(grid.km[bad[j]])})",
+                keys=_gis_keys(grid, bad[j] + 1),
+                value=round(float(dist[j]), 3),
+                limit=[round(float(lo[j]), 3), round(float(hi[j]), 3)],
+                **at(bad[j] + 1),
             ),
             cap,
             file,
