@@ -59,7 +59,7 @@ def validate_network(
     findings.extend(check_values(network.tables, config, loc))
     grid = grid_index(network)
     findings.extend(check_gis(grid, network.km_breaks, config, loc))
-    findings.extend(check_heights(network.gis, network.meta, config, loc))
+    findings.extend(check_heights(network.gis, network.meta, config, loc, grid))
     findings.extend(check_balises(network.balises, grid, config, loc))
     findings.extend(check_features(network.feature_points, grid, config, loc))
     findings.extend(check_topology(network, config, loc))

@@ -445,12 +445,13 @@ class GridIndex:
     def track_ids(self, lines: npt.ArrayLike, tracks: npt.ArrayLike) -> I64:
         """Track id of each (line, track) pair (−1: missing, or not a track of the grid);
         strings are factorized once and the few distinct pairs looked up."""
-        lc_codes, lc_uniq = pd.factorize(pd.Series(np.asarray(lines, dtype=object)), use_na_sentinel=True)
-        tr_codes, tr_uniq = pd.factorize(pd.Series(np.asarray(tracks, dtype=object)), use_na_sentinel=True)
+        lc_codes, lc_uniq = pd.factorize(np.asarray(lines, dtype=object), use_na_sentinel=True)
+        tr_codes, tr_uniq = pd.factorize(np.asarray(tracks, dtype=object), use_na_sentinel=True)
         table = np.full((len(lc_uniq) + 1, len(tr_uniq) + 1), -1, dtype=np.int64)
-        for i, lc in enumerate(lc_uniq):
-            for j, tr in enumerate(tr_uniq):
-                table[i, j] = self._key_id.get((str(lc), str(tr)), -1)
+        tr_text = [str(tr) for tr in tr_uniq.tolist()]
+        for i, lc in enumerate(lc_uniq.tolist()):
+            for j, tr in enumerate(tr_text):
+                table[i, j] = self._key_id.get((str(lc), tr), -1)
         return np.asarray(table[lc_codes, tr_codes], dtype=np.int64)  # sentinel −1: last row/col
 
     def km_range(self, tid: I64) -> tuple[F64, F64]:

@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.gis.index import GridIndex
 from dbtools.network import sorted_by
 from dbtools.rules.common import Locator, capped, fmt_km, py
 from dbtools.rules.config import ValidationConfig
@@ -54,17 +55,28 @@ I64 = npt.NDArray[np.int64]
 _ORDER = ("line_code", "track", "km_m")
 
 
-def check_heights(gis: pd.DataFrame, meta: Mapping[str, str], config: ValidationConfig, loc: Locator) -> list[Finding]:
-    """All height rules (module docstring)."""
+def check_heights(
+    gis: pd.DataFrame,
+    meta: Mapping[str, str],
+    config: ValidationConfig,
+    loc: Locator,
+    grid: GridIndex | None = None,
+) -> list[Finding]:
+    """All height rules (module docstring). ``grid``: the frame's grid index, if built — when
+    every row is one of its points, in its order (a DB's frame), its track ids are the rows'
+    (line, track) keys: no sort, no factorizing, no copy of the frame."""
     if "height_m" not in gis.columns or not gis["height_m"].notna().any():
         return []
-    g = gis.reset_index(drop=True).assign(_pos=np.arange(len(gis)))
-    if not sorted_by(g, _ORDER):  # a Network's frame is (canonical): no sort, no copy
-        g = g.sort_values(list(_ORDER), kind="stable")
-    key = _track_key(g)
+    if grid is not None and grid.gis is gis and grid.whole_frame:
+        g, key, pos = gis, grid.tid, grid.pos
+    else:
+        g = gis.reset_index(drop=True).assign(_pos=np.arange(len(gis)))
+        if not sorted_by(g, _ORDER):  # a Network's frame is (canonical): no sort, no copy
+            g = g.sort_values(list(_ORDER), kind="stable")
+        key, pos = _track_key(g), g["_pos"].to_numpy(dtype=np.int64)
     out = _datum(meta, loc)
-    out += _partial(g, key, config, loc)
-    steps = _steps(g, key, config)
+    out += _partial(g, key, pos, config, loc)
+    steps = _steps(g, key, pos, config)
     for rule, values, warn, err, what in (
         ("gis.height_grade", steps["grade"], config.height_grade_warning_permille, config.height_grade_error_permille,
          "grade"),
@@ -106,7 +118,7 @@ def _track_key(g: pd.DataFrame) -> I64:
     return np.asarray(key, dtype=np.int64)
 
 
-def _partial(g: pd.DataFrame, key: I64, config: ValidationConfig, loc: Locator) -> list[Finding]:
+def _partial(g: pd.DataFrame, key: I64, pos: I64, config: ValidationConfig, loc: Locator) -> list[Finding]:
     """``gis.height_partial`` per line/track in key order (the rows of a pair are
     consecutive in ``g``, sorted by line, track and km; pairs with a missing key are left
     out, as ``groupby`` leaves them)."""
@@ -116,7 +128,7 @@ def _partial(g: pd.DataFrame, key: I64, config: ValidationConfig, loc: Locator) 
     ends = np.append(starts[1:], n)
     n_has = np.add.reduceat(has.astype(np.int64), starts) if n else np.zeros(0, dtype=np.int64)
     partial = np.flatnonzero((key[starts] >= 0) & (n_has > 0) & (n_has < ends - starts))
-    km_m, pos = g["km_m"].to_numpy(dtype=float), g["_pos"].to_numpy(dtype=np.int64)
+    km_m = g["km_m"].to_numpy(dtype=float)
     out: list[Finding] = []
     for r in partial[: config.max_findings_per_rule]:
         a, b = int(starts[r]), int(ends[r])
@@ -140,23 +152,37 @@ def _partial(g: pd.DataFrame, key: I64, config: ValidationConfig, loc: Locator) 
     return out
 
 
-def _steps(g: pd.DataFrame, key: I64, config: ValidationConfig) -> dict[str, Any]:
+def _steps(g: pd.DataFrame, key: I64, pos: I64, config: ValidationConfig) -> dict[str, Any]:
     """Per step j (point j → j+1 of one line/track): grade [‰] and, at point j+1, the radius of
-    the vertical curve between steps j and j+1 [m] (NaN where not both regular)."""
+    the vertical curve between steps j and j+1 [m] (NaN where not both regular). Computed in
+    place: a few arrays of the grid's length, no temporaries beside them."""
     km = g["km_m"].to_numpy(dtype=float)
     h = g["height_m"].to_numpy(dtype=float, na_value=np.nan)
-    same = key[1:] == key[:-1]
     dkm = np.diff(km)
-    regular = same & (np.abs(dkm - config.gis_spacing_m) <= config.km_epsilon_m)
+    off = dkm - config.gis_spacing_m
+    regular = (key[1:] == key[:-1]) & (np.abs(off, out=off) <= config.km_epsilon_m)
+    del off
     with np.errstate(invalid="ignore", divide="ignore"):
-        grade = np.where(regular, np.diff(h) / dkm, np.nan)
+        grade = np.diff(h)  # Δh / Δkm on regular steps, NaN elsewhere
+        grade /= dkm
+        grade[~regular] = np.nan
         both = regular[1:] & regular[:-1]
-        curv = np.where(both, np.diff(grade) / (0.5 * (dkm[1:] + dkm[:-1])), np.nan)
-        radius = np.concatenate([[np.nan], np.abs(1.0 / curv)])
+        radius = np.full(grade.size, np.nan)  # |1 / κ| at the point between two regular steps
+        curv = radius[1:]
+        np.subtract(grade[1:], grade[:-1], out=curv)
+        half = dkm[1:] + dkm[:-1]
+        half *= 0.5
+        curv /= half
+        del half
+        curv[~both] = np.nan
+        np.divide(1.0, curv, out=curv)
+        np.abs(curv, out=curv)
+        np.abs(grade, out=grade)
+        grade *= 1000.0
     return {
-        "grade": 1000.0 * np.abs(grade),
+        "grade": grade,
         "curv_radius": radius,
-        "pos": g["_pos"].to_numpy(dtype=np.int64),
+        "pos": pos,
         "km": km,
         "key": key,
         "line": g["line_code"].array,
