@@ -85,19 +85,16 @@ def stencil_leak(kappa: F64, transition_m: F64, spacing_m: float) -> F64:
 
 
 class _RangeStats:
-    """(mean, max |·|, count) of the finite values of an array over ranges ``lo:hi``, from
-    prefix sums built once for every range asked (the body and both straights)."""
+    """(mean, max |·|, count) of the finite values of an array over ranges ``lo:hi``: the means
+    from prefix sums built once for every range asked (the body and both straights), the
+    counts and maxima from the values of the ranges alone (no other array of the grid's size)."""
 
     def __init__(self, values: F64) -> None:
         self.values = values
-        n = values.size
-        finite = np.isfinite(values)
-        self.sums = np.zeros(n + 1)  # [0, cumsum of the finite values]
-        np.cumsum(np.where(finite, values, 0.0), out=self.sums[1:])
-        self.counts = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(finite, out=self.counts[1:])
-        self.absval = np.full(n + 1, np.nan)  # |finite value|, NaN otherwise (and one past the end)
-        np.abs(values, out=self.absval[:n], where=finite)
+        self.sums = np.zeros(values.size + 1)  # [0, cumsum of the finite values], in place
+        finite = self.sums[1:]
+        np.copyto(finite, values, where=np.isfinite(values))
+        np.cumsum(finite, out=finite)
 
     def value(self, i: npt.NDArray[np.int64]) -> F64:
         """The values at ``i``."""
@@ -105,16 +102,19 @@ class _RangeStats:
 
     def of(self, lo: npt.NDArray[np.int64], hi: npt.NDArray[np.int64]) -> tuple[F64, F64, F64]:
         """(mean, max |·|, count) of the finite ``values[lo:hi]`` for each pair of bounds."""
-        cs, cn = self.sums, self.counts
-        count = (cn[hi] - cn[lo]).astype(float)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mean = (cs[hi] - cs[lo]) / count
         mx = np.full(len(lo), np.nan)
+        count = np.zeros(len(lo))
         nonempty = np.flatnonzero(hi > lo)
         if len(nonempty):
-            idx = np.empty(2 * len(nonempty), dtype=np.int64)
-            idx[0::2], idx[1::2] = lo[nonempty], hi[nonempty]
-            mx[nonempty] = np.fmax.reduceat(self.absval, idx)[0::2]
+            size = hi[nonempty] - lo[nonempty]
+            first = np.concatenate([[0], np.cumsum(size)[:-1]])  # each range's start in ``idx``
+            idx = np.repeat(lo[nonempty] - first, size) + np.arange(int(size.sum()))
+            v = self.values[idx]
+            finite = np.isfinite(v)
+            count[nonempty] = np.add.reduceat(finite.astype(np.int64), first)
+            mx[nonempty] = np.fmax.reduceat(np.where(finite, np.abs(v), np.nan), first)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = (self.sums[hi] - self.sums[lo]) / count
         return mean, mx, count
 
 

@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.gis import index as grid_blocks
 from dbtools.gis.index import GridIndex
 from dbtools.network import sorted_by
 from dbtools.rules.common import Locator, capped, fmt_km, py
@@ -154,29 +155,33 @@ def _partial(g: pd.DataFrame, key: I64, pos: I64, config: ValidationConfig, loc:
 
 def _steps(g: pd.DataFrame, key: I64, pos: I64, config: ValidationConfig) -> dict[str, Any]:
     """Per step j (point j → j+1 of one line/track): grade [‰] and, at point j+1, the radius of
-    the vertical curve between steps j and j+1 [m] (NaN where not both regular). Computed in
-    place: a few arrays of the grid's length, no temporaries beside them."""
+    the vertical curve between steps j and j+1 [m] (NaN where not both regular). ``BLOCK``
+    steps at a time: the two results and block-sized temporaries."""
     km = g["km_m"].to_numpy(dtype=float)
     h = g["height_m"].to_numpy(dtype=float, na_value=np.nan)
-    dkm = np.diff(km)
-    off = dkm - config.gis_spacing_m
-    regular = (key[1:] == key[:-1]) & (np.abs(off, out=off) <= config.km_epsilon_m)
-    del off
+    n = max(km.size - 1, 0)
+    grade, radius, regular = np.empty(n), np.full(n, np.nan), np.empty(n, dtype=bool)
     with np.errstate(invalid="ignore", divide="ignore"):
-        grade = np.diff(h)  # Δh / Δkm on regular steps, NaN elsewhere
-        grade /= dkm
-        grade[~regular] = np.nan
-        both = regular[1:] & regular[:-1]
-        radius = np.full(grade.size, np.nan)  # |1 / κ| at the point between two regular steps
-        curv = radius[1:]
-        np.subtract(grade[1:], grade[:-1], out=curv)
-        half = dkm[1:] + dkm[:-1]
-        half *= 0.5
-        curv /= half
-        del half
-        curv[~both] = np.nan
-        np.divide(1.0, curv, out=curv)
-        np.abs(curv, out=curv)
+        for a in range(0, n, grid_blocks.BLOCK):  # grade Δh / Δkm on regular steps, NaN elsewhere
+            b = min(a + grid_blocks.BLOCK, n)
+            dkm = km[a + 1 : b + 1] - km[a:b]
+            off = np.abs(dkm - config.gis_spacing_m)
+            reg = regular[a:b]
+            np.logical_and(key[a + 1 : b + 1] == key[a:b], off <= config.km_epsilon_m, out=reg)
+            part = grade[a:b]
+            np.subtract(h[a + 1 : b + 1], h[a:b], out=part)
+            part /= dkm
+            part[~reg] = np.nan
+        for a in range(1, n, grid_blocks.BLOCK):  # |1 / κ|, κ = Δgrade / mean Δkm of two regular steps
+            b = min(a + grid_blocks.BLOCK, n)
+            curv = radius[a:b]
+            np.subtract(grade[a:b], grade[a - 1 : b - 1], out=curv)
+            half = (km[a + 1 : b + 1] - km[a:b]) + (km[a:b] - km[a - 1 : b - 1])
+            half *= 0.5
+            curv /= half
+            curv[~(regular[a:b] & regular[a - 1 : b - 1])] = np.nan
+            np.divide(1.0, curv, out=curv)
+            np.abs(curv, out=curv)
         np.abs(grade, out=grade)
         grade *= 1000.0
     return {

@@ -117,3 +117,18 @@ def test_the_grid_index_of_a_whole_frame_gives_the_same_findings(net: Network) -
     assert check_heights(gis, net.meta, cfg, Locator(), grid) == plain
     shuffled = gis.sample(frac=1.0, random_state=1)  # not the grid's frame: read as before
     assert check_heights(shuffled, net.meta, cfg, Locator(), GridIndex(shuffled)) == plain
+
+
+def test_blocks_of_any_size_give_the_same_findings(net: Network, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Grade and vertical radius computed ``BLOCK`` steps at a time (a spike and a steep
+    stretch across block ends) give the findings of one block."""
+    import dbtools.gis.index as index_mod
+
+    rows = _track_rows(net)
+    net.gis.loc[rows[[100, 107]], "height_m"] += 0.8
+    net.gis.loc[rows[200:260], "height_m"] += np.linspace(0.0, 4.0, 60)
+    whole = check_heights(net.gis, net.meta, ValidationConfig(), Locator())
+    assert {f.rule for f in whole} == {"gis.height_curvature", "gis.height_grade"}
+    for block in (7, 50):
+        monkeypatch.setattr(index_mod, "BLOCK", block)
+        assert check_heights(net.gis, net.meta, ValidationConfig(), Locator()) == whole
