@@ -266,19 +266,19 @@ class GridIndex:
             ok = (lcode >= 0) & (tcode >= 0) & np.isfinite(km)
         ok &= self._inside(lat, lon)
         n = int(np.count_nonzero(ok))
+        rows: I64 | None = None  # the frame's row of each point; None: every row, in order
         if n < ok.size:  # rows left out: the points are copies
-            pos = np.flatnonzero(ok)
-            lcode, tcode = lcode[pos], tcode[pos]
-            km, lat, lon = km[pos], lat[pos], lon[pos]
-        else:  # every row a point (a DB's frame): no copy of the frame's columns
-            pos = np.arange(n, dtype=np.int64)
+            rows = np.flatnonzero(ok).astype(np.int64)
+            lcode, tcode = lcode[rows], tcode[rows]
+            km, lat, lon = km[rows], lat[rows], lon[rows]
         del ok
         if not _lex_sorted(lcode, tcode, km):  # frames of a Network are: no sort
             order = np.lexsort((km, tcode, lcode))
-            pos, lcode, tcode = pos[order], lcode[order], tcode[order]
+            rows = order.astype(np.int64) if rows is None else rows[order]
+            lcode, tcode = lcode[order], tcode[order]
             km, lat, lon = km[order], lat[order], lon[order]
             del order
-        self.pos: I64 = np.asarray(pos, dtype=np.int64)
+        self._rows = rows
         self.km: F64 = km
         self.lat: F64 = lat
         self.lon: F64 = lon
@@ -339,7 +339,16 @@ class GridIndex:
         """Every row of the frame is a point, in the frame's order (``pos`` = 0 … n − 1): the
         frame is sorted by (line, track, km) and no key is missing — as read from a DB."""
         n = len(self.gis)
-        return self.pos.size == n and bool(np.array_equal(self.pos, np.arange(n)))
+        return self._rows is None and self.n == n
+
+    @cached_property
+    def pos(self) -> I64:
+        """The frame's row of each point (an ``arange`` for a whole frame: built on first use)."""
+        return np.arange(self.n, dtype=np.int64) if self._rows is None else self._rows
+
+    def row(self, i: int | np.integer[Any]) -> int:
+        """The frame's row of point ``i`` (``pos[i]`` without building ``pos``)."""
+        return int(i) if self._rows is None else int(self._rows[i])
 
     @cached_property
     def bounds(self) -> tuple[F64, F64]:
@@ -411,7 +420,8 @@ class GridIndex:
         out = np.zeros(self.n)
         if "height_m" not in self.gis:
             return out
-        h = _column(self.gis, "height_m", True)[self.pos]
+        h = _column(self.gis, "height_m", True)
+        h = h if self._rows is None else h[self._rows]
         for s, e in zip(self.start, self.end, strict=True):
             ok = np.isfinite(h[s:e])
             if ok.any():

@@ -68,7 +68,7 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
     sp = config.gis_spacing_m
 
     def at(i: int) -> dict[str, Any]:
-        return loc.at(T, int(grid.pos[i]))
+        return loc.at(T, grid.row(i))
 
     # gis.km_grid
     off = grid.km / sp  # |km − sp·round(km / sp)|, in place (one temporary)
@@ -234,7 +234,7 @@ def _track_spacing(grid: GridIndex, shape: GridShape, config: ValidationConfig, 
             keys={"line_code": py(grid.lines[grid.tid[i]]), "km_m": py(grid.km[i])},
             value=round(float(sep[m]), 3),
             limit=lim,
-            **loc.at(T, int(grid.pos[i])),
+            **loc.at(T, grid.row(i)),
         )
 
     out: list[Finding] = []

@@ -69,7 +69,7 @@ def check_heights(
     if "height_m" not in gis.columns or not gis["height_m"].notna().any():
         return []
     if grid is not None and grid.gis is gis and grid.whole_frame:
-        g, key, pos = gis, grid.tid, grid.pos
+        g, key, pos = gis, grid.tid, None  # row j is point j
     else:
         g = gis.reset_index(drop=True).assign(_pos=np.arange(len(gis)))
         if not sorted_by(g, _ORDER):  # a Network's frame is (canonical): no sort, no copy
@@ -119,7 +119,7 @@ def _track_key(g: pd.DataFrame) -> I64:
     return np.asarray(key, dtype=np.int64)
 
 
-def _partial(g: pd.DataFrame, key: I64, pos: I64, config: ValidationConfig, loc: Locator) -> list[Finding]:
+def _partial(g: pd.DataFrame, key: I64, pos: I64 | None, config: ValidationConfig, loc: Locator) -> list[Finding]:
     """``gis.height_partial`` per line/track in key order (the rows of a pair are
     consecutive in ``g``, sorted by line, track and km; pairs with a missing key are left
     out, as ``groupby`` leaves them)."""
@@ -147,13 +147,13 @@ def _partial(g: pd.DataFrame, key: I64, pos: I64, config: ValidationConfig, loc:
                 value=int(n_has[r]),
                 limit=b - a,
                 column="height_m",
-                **loc.at(GIS.name, int(pos[row])),
+                **loc.at(GIS.name, _row(pos, row)),
             )
         )
     return out
 
 
-def _steps(g: pd.DataFrame, key: I64, pos: I64, config: ValidationConfig) -> dict[str, Any]:
+def _steps(g: pd.DataFrame, key: I64, pos: I64 | None, config: ValidationConfig) -> dict[str, Any]:
     """Per step j (point j → j+1 of one line/track): grade [‰] and, at point j+1, the radius of
     the vertical curve between steps j and j+1 [m] (NaN where not both regular). ``BLOCK``
     steps at a time: the two results and block-sized temporaries."""
@@ -193,6 +193,11 @@ def _steps(g: pd.DataFrame, key: I64, pos: I64, config: ValidationConfig) -> dic
         "line": g["line_code"].array,
         "track": g["track"].array,
     }
+
+
+def _row(pos: I64 | None, i: int) -> int:
+    """The frame's row of the ``i``-th point in key order (``pos`` None: the same)."""
+    return i if pos is None else int(pos[i])
 
 
 def _stretches(bad: npt.NDArray[np.bool_], key: npt.NDArray[Any]) -> list[tuple[int, int]]:
@@ -239,7 +244,7 @@ def _limits(
             value=round(worst, 3),
             limit=limit,
             column="height_m",
-            **loc.at(GIS.name, int(st["pos"][p])),
+            **loc.at(GIS.name, _row(st["pos"], p)),
         )
 
     return capped(rule, Severity.WARNING, GIS.name, np.arange(len(runs)), build, config.max_findings_per_rule,
