@@ -36,7 +36,6 @@ from dbtools.rules.gis import check_gis
 from dbtools.rules.heights import check_heights
 from dbtools.rules.schema import check_empty_tables, check_values
 from dbtools.rules.topology import check_topology
-from dbtools.sources import read_source_set
 from schemas.findings import Finding
 from schemas.frames import check_frame
 from schemas.tables import DB_TABLES
@@ -77,6 +76,8 @@ def validate_path(
     """
     path = Path(path)
     if path.is_dir():
+        from dbtools.sources import read_source_set  # a source set's readers: not loaded for a DB
+
         network, findings = read_source_set(path, locale)
         return findings + validate_network(network, schema_checks=False, config=config)
     network = read_network(path, verify=False)  # the hash is a finding here (integrity_findings)

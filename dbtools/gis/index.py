@@ -310,8 +310,7 @@ class GridIndex:
         self._breaks: dict[float, tuple[BoolArray, I64]] = {}
 
     def _inside(self, lat: F64, lon: F64) -> BoolArray:
-        """Finite, on the globe and not far outside the operating area (``BLOCK`` points at a
-        time: bounded temporaries)."""
+        """Finite, on the globe and not far outside the operating area (``BLOCK`` points at a time)."""
         with np.errstate(invalid="ignore"):
             ok = (np.abs(lat) <= LAT_RANGE[1]) & (np.abs(lon) <= LON_RANGE[1])
         if self.georef is None or not ok.any():
@@ -322,6 +321,9 @@ class GridIndex:
             rows = slice(a, a + BLOCK) if part.all() else a + np.flatnonzero(part)
             part[part] = area.distance_m(lat[rows], lon[rows]) <= AREA_TOLERANCE_M
         return np.asarray(ok, dtype=bool)
+
+    def _chords(self, a: int, b: int) -> tuple[F64, F64]:
+        return chord_bounds(self.lon[a : b + 1], self.lat[a : b + 1])
 
     @cached_property
     def seg(self) -> F64:
@@ -359,13 +361,10 @@ class GridIndex:
     def steps_outside(
         self, where: BoolArray, limits: Callable[[int, int], tuple[F64, F64]]
     ) -> tuple[I64, F64, F64, F64]:
-        """The steps i with ``where[i]`` whose geodesic length ``dist[i]`` is not finite or lies
-        outside [lo[i], hi[i]] (``limits(a, b)``: lo and hi of the steps a:b, element-wise), with
-        their exact length (GRS80 ``Geod.inv``), lo and hi: what ``np.flatnonzero(where & ((dist
-        < lo) | (dist > hi) | ~np.isfinite(dist)))`` gives, ``BLOCK`` steps at a time (bounded
-        temporaries) and without the geodesic of every step when :attr:`dist` has not been
-        computed: a step is cleared by its straight 3-D chord (module doc, :func:`chord_bounds`)
-        and only the steps the chord cannot clear are solved exactly."""
+        """The steps i with ``where[i]`` whose geodesic length ``dist[i]`` is not finite or outside
+        [lo[i], hi[i]] (``limits(a, b)``: lo, hi of steps a:b), with that length (``Geod.inv``), lo
+        and hi; ``BLOCK`` steps at a time. Unless :attr:`dist` is known, a step is cleared by its
+        3-D chord (:func:`chord_bounds`) and only the steps it cannot clear are solved exactly."""
         parts: list[tuple[I64, F64, F64, F64]] = []
         exact = "dist" in self.__dict__
         shared = self.keep_bounds or "bounds" in self.__dict__
@@ -379,11 +378,7 @@ class GridIndex:
                 doubt = np.flatnonzero(w)
                 d = self.dist[a:b][doubt]
             else:
-                low, high = (
-                    (self.bounds[0][a:b], self.bounds[1][a:b])
-                    if shared
-                    else chord_bounds(self.lon[a : b + 1], self.lat[a : b + 1])
-                )
+                low, high = (self.bounds[0][a:b], self.bounds[1][a:b]) if shared else self._chords(a, b)
                 with np.errstate(invalid="ignore"):
                     doubt = np.flatnonzero(w & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
                 d = exact_steps(self.lon, self.lat, doubt + a)
