@@ -28,8 +28,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import numpy.typing as npt
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -56,7 +54,7 @@ def _column(col: pa.ChunkedArray, c: Column) -> pd.Series | None:
         # batch alive, all its columns), and one chunk is what Arrow's kernels read fastest
         return pd.Series(pd.array(col.cast(pa.large_string()).combine_chunks(), dtype=_DTYPES["str"]))
     if c.dtype == "float" and (t == pa.float64() or t == pa.int64() or all_null):
-        return pd.Series(_floats(col.cast(pa.float64())), dtype="float64", copy=False)
+        return pd.Series(col.cast(pa.float64()).to_numpy(zero_copy_only=False), dtype="float64")
     if c.dtype == "int" and (t == pa.int64() or all_null):
         return pd.Series(pd.array(col.cast(pa.int64()), dtype="Int64"))
     if c.dtype == "bool" and (t == pa.int64() or all_null):
@@ -66,17 +64,6 @@ def _column(col: pa.ChunkedArray, c: Column) -> pd.Series | None:
             return None
         return pd.Series(pd.array(ints, dtype="Int64")).astype(_DTYPES["bool"])
     return None
-
-
-def _floats(col: pa.ChunkedArray) -> npt.NDArray[np.float64]:
-    """A float64 column's values (NaN for NULL) in one new array, batch by batch: one copy,
-    owned by the array (no view into the driver's batches, no second copy by pandas)."""
-    out = np.empty(len(col))
-    at = 0
-    for chunk in col.chunks:
-        out[at : at + len(chunk)] = chunk.to_numpy(zero_copy_only=False)
-        at += len(chunk)
-    return out
 
 
 def _read_one(cur: Any, table: Table) -> pd.DataFrame | None:
