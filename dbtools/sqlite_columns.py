@@ -42,6 +42,12 @@ _TEXT = (pa.string(), pa.large_string())
 #: Files smaller than this are left to ``sqlite3``: loading the driver (≈ 15 ms) costs more
 #: than it saves on a regional DB.
 MIN_FILE_BYTES = 4 << 20
+#: Rows per record batch the driver decodes (its default: 1 024). Large batches are fewer,
+#: larger allocations that go back to the system when freed instead of leaving holes in the
+#: C heap, and less per-batch work: the national DB reads in 0.53 s instead of 0.57 s with a
+#: 17 MB lower peak (bench/bench_db.py). The driver infers a column's type from the first batch.
+BATCH_ROWS = 1 << 16
+BATCH_ROWS_OPTION = "adbc.sqlite.query.batch_rows"
 
 
 def _column(col: pa.ChunkedArray, c: Column) -> pd.Series | None:
@@ -72,6 +78,7 @@ def _read_one(cur: Any, table: Table) -> pd.DataFrame | None:
     cols = ",".join(f"[{c}]" for c in table.column_names)
     order = f" ORDER BY {','.join(f'[{k}]' for k in table.primary_key)}" if table.primary_key else ""
     try:
+        cur.adbc_statement.set_options(**{BATCH_ROWS_OPTION: str(BATCH_ROWS)})
         cur.execute(f"SELECT {cols} FROM [{table.name}]{order}")
         data: Any = cur.fetch_arrow_table()
     except Exception:  # any driver failure: the sqlite3 path reports it
