@@ -67,6 +67,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.gis.frame_columns import frame_column, lex_sorted, text_codes
 from dbtools.gis.geometry import GEOD, Projector, geodesic_step, signed_curvature
 from dbtools.gis.georef import AREA_TOLERANCE_M, Georef, derive, georef_of
 from dbtools.network import Network
@@ -84,10 +85,10 @@ GRS80_A: float = GEOD.a
 GRS80_E2: float = GEOD.es
 #: Largest normal curvature of the GRS80 ellipsoid: 1 / (meridian radius at the equator) [1/m].
 KAPPA_MAX = 1.0 / (GRS80_A * (1.0 - GRS80_E2))
-#: Rounding allowance of :func:`chord_bounds` on either side [m].
-CHORD_ROUNDING_M = 1e-6
 #: Points per block of the element-wise geometry of a whole network (bounds its temporaries).
 BLOCK = 1 << 16
+#: Rounding allowance of :func:`chord_bounds` on either side [m].
+CHORD_ROUNDING_M = 1e-6
 #: Gap between consecutive tracks in the sorted km key [m].
 KEY_GAP_M = 1000.0
 #: A listed kilometrage break matches consecutive points whose km agree within this [m].
@@ -124,36 +125,6 @@ def projection_for(lat: F64, lon: F64) -> Projector | None:
     "Projection policy"); None when there are no points."""
     g = derive(lat, lon)
     return None if g is None else Projector.from_epsg(g.crs_epsg)
-
-
-def _column(frame: pd.DataFrame, name: str, numeric: bool) -> npt.NDArray[Any]:
-    if name not in frame.columns:
-        return np.full(len(frame), np.nan if numeric else None, dtype=float if numeric else object)
-    s = frame[name]
-    if numeric:  # a float64 column (a Network's): a read-only view of it, not a copy
-        num = s if s.dtype == np.float64 else pd.to_numeric(s, errors="coerce")
-        return np.asarray(num.to_numpy(dtype=np.float64, na_value=np.nan))
-    return np.asarray(s.astype(object).where(s.notna(), None).to_numpy(dtype=object))
-
-
-def _codes(frame: pd.DataFrame, name: str) -> tuple[I64, npt.NDArray[np.object_]]:
-    """Codes of a text column in sorted order of its values (−1: missing) and the values:
-    factorized in Arrow, no Python string per row."""
-    if name not in frame.columns:
-        return np.full(len(frame), -1, dtype=np.int64), np.empty(0, dtype=object)
-    codes, uniq = pd.factorize(frame[name], sort=True)
-    return np.asarray(codes, dtype=np.int64), np.asarray(uniq, dtype=object)
-
-
-def _lex_sorted(a: I64, b: I64, c: F64) -> bool:
-    """True when the rows are in the order ``np.lexsort((c, b, a))`` gives (a stable sort:
-    then it is the identity); ``c`` finite. ``BLOCK`` rows at a time: bounded temporaries."""
-    for s in range(0, max(a.size - 1, 0), BLOCK):
-        e = s + BLOCK + 1
-        da, db, dc = np.diff(a[s:e]), np.diff(b[s:e]), np.diff(c[s:e])
-        if not np.all((da > 0) | ((da == 0) & ((db > 0) | ((db == 0) & (dc >= 0))))):
-            return False
-    return True
 
 
 def _menger_squared(lon: F64, lat: F64, step: F64) -> F64:
@@ -259,8 +230,8 @@ class GridIndex:
         self.keep_bounds = keep_bounds
         """Keep the step bounds :meth:`steps_outside` computes (:attr:`bounds`: 16 bytes a
         point, for the topology rules' track lengths) instead of dropping them."""
-        (lcode, luniq), (tcode, tuniq) = _codes(gis, "line_code"), _codes(gis, "track")
-        km, lat, lon = (_column(gis, c, True) for c in ("km_m", "lat", "lon"))
+        (lcode, luniq), (tcode, tuniq) = text_codes(gis, "line_code"), text_codes(gis, "track")
+        km, lat, lon = (frame_column(gis, c, True) for c in ("km_m", "lat", "lon"))
         self.georef = georef if georef is not None else derive(lat, lon)
         with np.errstate(invalid="ignore"):
             ok = (lcode >= 0) & (tcode >= 0) & np.isfinite(km)
@@ -272,7 +243,7 @@ class GridIndex:
             lcode, tcode = lcode[rows], tcode[rows]
             km, lat, lon = km[rows], lat[rows], lon[rows]
         del ok
-        if not _lex_sorted(lcode, tcode, km):  # frames of a Network are: no sort
+        if not lex_sorted(lcode, tcode, km, BLOCK):  # frames of a Network are: no sort
             order = np.lexsort((km, tcode, lcode))
             rows = order.astype(np.int64) if rows is None else rows[order]
             lcode, tcode = lcode[order], tcode[order]
@@ -415,7 +386,7 @@ class GridIndex:
         out = np.zeros(self.n)
         if "height_m" not in self.gis:
             return out
-        h = _column(self.gis, "height_m", True)
+        h = frame_column(self.gis, "height_m", True)
         h = h if self._rows is None else h[self._rows]
         for s, e in zip(self.start, self.end, strict=True):
             ok = np.isfinite(h[s:e])
@@ -538,8 +509,8 @@ class GridIndex:
             return is_break, np.zeros(0, dtype=np.int64)
         if self.n < 2:
             return is_break, np.arange(len(kb), dtype=np.int64)
-        lines, tracks = _column(kb, "line_code", False), _column(kb, "track", False)
-        k_from, k_to = _column(kb, "km_from_m", True), _column(kb, "km_to_m", True)
+        lines, tracks = frame_column(kb, "line_code", False), frame_column(kb, "track", False)
+        k_from, k_to = frame_column(kb, "km_from_m", True), frame_column(kb, "km_to_m", True)
         ok = pd.notna(lines) & pd.notna(tracks) & np.isfinite(k_from) & np.isfinite(k_to)
         tid = np.full(len(kb), -1, dtype=np.int64)
         tid[ok] = self.track_ids(lines[ok], tracks[ok])
@@ -574,7 +545,7 @@ def network_georef(network: Network) -> Georef | None:
     gis = network.gis
 
     def build() -> tuple[pd.DataFrame, Georef | None]:
-        lat, lon = _column(gis, "lat", True), _column(gis, "lon", True)
+        lat, lon = frame_column(gis, "lat", True), frame_column(gis, "lon", True)
         return gis, georef_of(network.meta, lat, lon, network.origin)
 
     return network.cached(("georef", id(gis)), build)[1]
