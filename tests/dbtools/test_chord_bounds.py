@@ -91,12 +91,9 @@ def _limits(lo: np.ndarray, hi: np.ndarray) -> Callable[[int, int], tuple[np.nda
 
 def test_blocks_give_the_values_of_one_block(monkeypatch: pytest.MonkeyPatch) -> None:
     """Block-wise curvature and chord bounds (BLOCK points at a time) equal the whole-array ones."""
-    rng = np.random.default_rng(3)
     n = 500
-    lon0, lat0, _ = GEOD.fwd(np.full(n, 139.0), np.full(n, 35.0), np.full(n, 60.0), 20.0 * np.arange(n))
-    lon, lat, _ = GEOD.fwd(lon0, lat0, np.full(n, 150.0), rng.normal(0.0, 2.0, n))
-    g = pd.DataFrame({"line_code": "L", "track": ["U"] * 250 + ["D"] * 250, "km_m": 20.0 * (np.arange(n) % 250)})
-    g["lat"], g["lon"] = lat, lon
+    g = _two_tracks(n, ("U", "D"), seed=3)
+    lon, lat = g["lon"].to_numpy(), g["lat"].to_numpy()
     where = np.ones(n - 1, dtype=bool)
     lo, hi = np.full(n - 1, 18.0), np.full(n - 1, 21.0)
     whole = GridIndex(g)
@@ -115,6 +112,18 @@ def test_blocks_give_the_values_of_one_block(monkeypatch: pytest.MonkeyPatch) ->
     np.testing.assert_array_equal(np.concatenate(chord_bounds(lon, lat)), np.concatenate(_blocked(lon, lat)))
 
 
+def _two_tracks(n: int, tracks: tuple[str, str], seed: int) -> pd.DataFrame:
+    """``n`` points 20 m apart jittered sideways (σ 2 m), the first half on ``tracks[0]``, the
+    second on ``tracks[1]``, each track's km from 0."""
+    rng = np.random.default_rng(seed)
+    lon0, lat0, _ = GEOD.fwd(np.full(n, 139.0), np.full(n, 35.0), np.full(n, 60.0), 20.0 * np.arange(n))
+    lon, lat, _ = GEOD.fwd(lon0, lat0, np.full(n, 150.0), rng.normal(0.0, 2.0, n))
+    half = n // 2
+    g = pd.DataFrame({"line_code": "L", "track": [tracks[0]] * half + [tracks[1]] * half})
+    g["km_m"], g["lat"], g["lon"] = 20.0 * (np.arange(n) % half), lat, lon
+    return g
+
+
 def _blocked(lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     parts = [chord_bounds(lon[a : a + 8], lat[a : a + 8]) for a in range(0, lon.size - 1, 7)]
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
@@ -123,12 +132,7 @@ def _blocked(lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def test_a_shuffled_frame_with_rows_left_out_gives_the_index_of_the_sorted_one() -> None:
     """Rows out of order, and rows left out (a missing lat, a missing track): the index holds
     the same points as that of the sorted frame of the valid rows, ``pos`` naming each row."""
-    rng = np.random.default_rng(5)
-    n = 300
-    lon0, lat0, _ = GEOD.fwd(np.full(n, 139.0), np.full(n, 35.0), np.full(n, 60.0), 20.0 * np.arange(n))
-    lon, lat, _ = GEOD.fwd(lon0, lat0, np.full(n, 150.0), rng.normal(0.0, 2.0, n))
-    g = pd.DataFrame({"line_code": "L", "track": ["D"] * 150 + ["U"] * 150, "km_m": 20.0 * (np.arange(n) % 150)})
-    g["lat"], g["lon"] = lat, lon
+    g = _two_tracks(300, ("D", "U"), seed=5)
     bad = pd.DataFrame({"line_code": ["L", "L"], "track": ["U", None], "km_m": [5.0, 7.0], "lat": [np.nan, 35.0]})
     bad["lon"] = [139.0, 139.0]
     shuffled = pd.concat([g, bad], ignore_index=True).sample(frac=1.0, random_state=2).reset_index(drop=True)
