@@ -15,13 +15,17 @@ in place of the one drawn (the drawn multipath is kept where GNSS is on):
 * **IMU-only**: no GNSS (a tunnel over the whole route, every switch in it): IMU, tacho, balises;
 * **balise-only**: no GNSS and no IMU evidence — the pipeline needs the IMU stream for slips
   and slides, so it stays, and the turnout-signature test is switched off
-  (``track_select.imu_max_margin_m`` = 1e-9 m: no switch is ever passed with a smaller margin).
+  (``track_select.imu_max_margin_m`` = 1e-9 m: no switch is ever passed with a smaller margin),
+  and so is the feature points' heading test (``track_select.feature_headings`` = false).
 
 Then ``--raw-runs`` more runs (i = runs … runs + raw_runs − 1 of the same draw, so the runs
 above keep their routes and seeds) get the condition **raw GNSS**: balise-only plus raw GNSS
 observables (``[gnss_raw]``: GPS, Galileo and QZSS pseudoranges of two antennas 16 m apart at
 1 Hz with the simulator's error models, the drawn tunnel blocking the sky; every other run
-under buildings and cuttings, ``corridor = "mixed"``), so the raw-GNSS track test
+under buildings and cuttings, ``corridor = "mixed"``; the drawn multipath kept, and the runs
+i ≡ 2, 3 (mod 4) — half of each corridor — with ``network.multipath`` over their whole route,
+bias ``RAW_MULTIPATH_M``: a reflecting surface at every neighbouring track within 25 m,
+:mod:`fieldlogs.simulate.gnss.reflection`), so the raw-GNSS track test
 (:mod:`fieldlogs.pipeline.aids.track_gnss`, evidence ``track_gnss``) and the balise groups and
 pairs are the only track evidence. Its figures are printed apart; the rows above are over the first
 ``--runs`` runs only.
@@ -46,9 +50,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from bench._causes import CAUSES, causes
 from bench._common import over_network_runs, print_rows
 from dbtools.database import read_network
 from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.track_truth import TrackFigures, compare_tracks, track_figures
 from fieldlogs.pipeline.truth import compare_with_truth
@@ -61,6 +67,8 @@ from schemas.enums import EventType, PositionState
 CONDITIONS = ("D-GPS", "GNSS-only", "IMU-only", "balise-only")
 #: The raw-GNSS condition of the extra runs (module docstring).
 RAW = "raw GNSS"
+#: The multipath bias over the whole route of half the raw-GNSS runs [m] (module docstring).
+RAW_MULTIPATH_M = 2.5
 #: Heirich 2016: parallel-track selectivity and facing switch ways resolved.
 HEIRICH_SELECTIVITY, HEIRICH_SWITCHES = 0.993, 0.972
 #: The IMU signature's resolution-distance target holds at or above this speed [km/h].
@@ -76,6 +84,10 @@ def with_condition(run: dict[str, Any], condition: str, i: int = 0) -> dict[str,
         if tunnel:
             raw["network"]["gnss_outages"] = tunnel
         raw["gnss_raw"] = {"enabled": True, "corridor": "mixed" if i % 2 else "open"}
+        route = [[t, 0.0, 1.0e5, RAW_MULTIPATH_M] for t in run["network"]["tracks"]] if i % 4 >= 2 else []
+        multipath = run["network"].get("multipath", []) + route
+        if multipath:
+            raw["network"]["multipath"] = multipath
         return raw
     out: dict[str, Any] = json.loads(json.dumps(run))
     net = out["network"]
@@ -112,7 +124,8 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
     folder = Path(tmp) / f"net{i:04d}"
     write_run(folder, meta, streams, force=True)
     t0 = time.perf_counter()
-    cfg = {"track_select": {"imu_max_margin_m": 1e-9}} if condition in ("balise-only", RAW) else {}
+    no_imu = {"imu_max_margin_m": 1e-9, "feature_headings": False}
+    cfg = {"track_select": no_imu} if condition in ("balise-only", RAW) else {}
     res = run_pipeline(read_run(folder), net, PipelineConfig.from_dict(cfg))
     elapsed = time.perf_counter() - t0
     truth = streams["truth"]
@@ -136,6 +149,14 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
     gps = streams.get("gps")
     fix1 = float((gps["fix"] == 1).mean()) if gps is not None and len(gps) else 0.0
     uncovered = cmp.loc[det & ~within, "t"].to_numpy(dtype=float)
+    trusted = res.gps.fixes if res.gps is not None else None
+    times = (
+        np.sort(trusted.loc[trusted["trusted"].to_numpy(dtype=bool), "t"].to_numpy(dtype=float))
+        if trusted is not None and len(trusted)
+        else np.empty(0),
+        np.sort(ev.loc[ev["type"] == EventType.SWITCH_SPLIT.value, "t"].to_numpy(dtype=float)),
+    )
+    lost = causes(tc, res.positions, res.fixes, times, PipelineConfig().track_select.gps_min_fixes, track_lines(net))
     return {
         "i": i,
         "condition": condition,
@@ -152,6 +173,8 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
         "fix1": fix1,
         "wrong": (float(wrong.min()), float(wrong.max()), len(wrong)) if len(wrong) else None,
         "parallel_by_state": tc[tc["parallel"]].groupby("state")["ds_m"].sum().to_dict(),
+        "multipath": bool(sc["network"].get("multipath")),
+        "lost": lost,
     }
 
 
@@ -194,6 +217,20 @@ def _selectivity(results: list[dict[str, Any]], condition: str, s: dict[str, Any
     return f"{pct(s['selectivity'])} over {s['parallel_km']:.1f} km{target}; not determined: {lost or 'none'}"
 
 
+def _lost(results: list[dict[str, Any]], condition: str) -> str:
+    """The parallel distance of ``condition`` not selected, by cause (:mod:`bench._causes`), in %
+    of its parallel distance."""
+    total = sum(r["figures"].parallel_m for r in results if r["condition"] == condition)
+    by: dict[str, float] = {}
+    for r in results:
+        if r["condition"] == condition:
+            for k, v in r["lost"].items():
+                by[k] = by.get(k, 0.0) + v
+    if not total:
+        return "n/a"
+    return ", ".join(f"{k} {100 * by[k] / total:.2f} %" for k in CAUSES if by.get(k)) or "none"
+
+
 def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     """The accuracy table's rows (label, value with target and verdict)."""
     total = sum((r["figures"] for r in results), TrackFigures())
@@ -230,6 +267,7 @@ def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     ]
     for c in CONDITIONS:
         rows.append((f"  selectivity {c}", _selectivity(results, c, by[c])))
+        rows.append(("    not selected, by cause", _lost(results, c)))
     rows += [
         (
             "facing switches resolved correctly",
@@ -280,12 +318,17 @@ def raw_table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     cover = sum(r["det_within"] for r in raw) / det if det else None
     gnss = ev.get("track_gnss", [])
     rows = [
-        (f"{RAW}: runs", f"{len(raw)} (balise-only + raw pseudoranges, half under a mixed corridor)"),
+        (
+            f"{RAW}: runs",
+            f"{len(raw)} (balise-only + raw pseudoranges, half under a mixed corridor, "
+            f"{sum(r['multipath'] for r in raw)} with multipath)",
+        ),
         (
             "  wrong-track claims (determined cycles)",
             f"{s['wrong_track_cycles']}  (target 0)  {verdict(s['wrong_track_cycles'] == 0)}" + _runs(raw, "wrong"),
         ),
         ("  selectivity", _selectivity(raw, RAW, s)),
+        ("    not selected, by cause", _lost(raw, RAW)),
         (
             "  facing switches resolved correctly",
             f"{pct(sw)} of {s['facing_switches']} ({s['switches_resolved_wrongly']} wrongly)  (target ≥ 99 %)  "

@@ -56,7 +56,7 @@ from schemas.tables import (
     META,
     READABLE_SCHEMA_VERSIONS,
     SCHEMA_VERSION,
-    TABLES_SINCE_V2,
+    tables_absent_in,
 )
 
 if TYPE_CHECKING:
@@ -233,7 +233,7 @@ def read_network(path: Path, *, verify: bool = True) -> Network:
             readable = ", ".join(map(str, READABLE_SCHEMA_VERSIONS))
             raise InputError(f"schema version {version} is not supported (this tool reads {readable})", path=path)
         existing = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        since = TABLES_SINCE_V2 if version < 2 else ()
+        since = tables_absent_in(version)
         missing = [t.name for t in DB_TABLES if t.name not in existing and t not in since]
         if missing:
             raise InputError(f"table '{missing[0]}' is missing", path=path)

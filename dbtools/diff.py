@@ -2,7 +2,8 @@
 
 Rows are matched on their domain keys, the declared primary keys (balises by
 ``balise_id``; gis by ``(line_code, track, km_m)``; feature_points by
-``(line_code, track, feature_id, seq)``; lines by ``line_code``; km_breaks by
+``(line_code, track, feature_id, seq)``; track_feature_points by
+``(track_id, feature_id, seq)``; lines by ``line_code``; km_breaks by
 ``(line_code, track, km_from_m)``), with one outer merge per table. A matched row is
 *changed* when any other column differs: nulls equal nulls, floats are equal within
 ``FLOAT_ATOL`` (far below survey precision, so ``12k345.6`` and ``12345.6`` written in two
@@ -11,15 +12,15 @@ before matching for the same reason.
 
 On top of the row diff come the domain summaries a maintainer reads at a glance: moved GIS
 points grouped into contiguous km runs with their geodesic displacement, moved balises
-with their signed shift, feature points whose radius or km changed, the network's tracks,
-connections, switches (a moved switch with its km shift and lat/lon displacement) and
-track_points (:mod:`dbtools.diff_network`), and the meta changes (schema version,
-db_version, content hash).
+with their signed shift, feature points whose radius or km (pos) changed
+(:mod:`dbtools.diff_features`), the network's tracks, connections, switches (a moved
+switch with its km shift and lat/lon displacement) and track_points
+(:mod:`dbtools.diff_network`), and the meta changes (schema version, db_version, content
+hash).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,8 +29,10 @@ import numpy as np
 import pandas as pd
 
 from dbtools.database import read_network, schema_version
+from dbtools.diff_features import features_summary
 from dbtools.diff_network import NETWORK_SUMMARIES
 from dbtools.diff_network import records as _records
+from dbtools.diff_network import value_text as _val
 from dbtools.gis.geometry import GEOD
 from dbtools.gis.index import network_georef
 from dbtools.network import Network, content_hash
@@ -37,7 +40,16 @@ from dbtools.sources import read_source_set
 from schemas.enums import Severity
 from schemas.errors import FindingsError
 from schemas.model import Table
-from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS, GIS_SPACING_M, KM_BREAKS, LINES
+from schemas.tables import (
+    BALISES,
+    DB_TABLES,
+    FEATURE_POINTS,
+    GIS,
+    GIS_SPACING_M,
+    KM_BREAKS,
+    LINES,
+    TRACK_FEATURE_POINTS,
+)
 from schemas.units import format_km
 
 #: Two floats closer than this are equal (metres or degrees: 1e-9° ≈ 0.1 mm).
@@ -320,7 +332,8 @@ def summarize(d: DbDiff, old: Network, new: Network) -> list[str]:
         LINES.name: _lines_summary,
         GIS.name: _gis_summary,
         BALISES.name: _balises_summary,
-        FEATURE_POINTS.name: _features_summary,
+        FEATURE_POINTS.name: features_summary,
+        TRACK_FEATURE_POINTS.name: features_summary,
         KM_BREAKS.name: _km_breaks_summary,
         **NETWORK_SUMMARIES,
     }
@@ -361,14 +374,6 @@ def _km1(metres: Any) -> str:
 
 def _metres(x: float) -> str:
     return f"{x:.1f}" if abs(x) >= 1 else f"{x:.2f}"
-
-
-def _val(v: Any) -> str:
-    if v is None or (isinstance(v, float) and np.isnan(v)):
-        return "—"
-    if isinstance(v, float):
-        return f"{v:g}"
-    return str(v)
 
 
 def _plural(n: int, word: str) -> str:
@@ -492,78 +497,6 @@ def _balise_groups(frame: pd.DataFrame, kind: str) -> list[str]:
         )
         out.append(f"{len(rs)} balises {kind} {where}: {listed}")
     return out
-
-
-def _feature_key(r: dict[str, Any]) -> tuple[str, str, str]:
-    return (str(r["line_code"]), str(r["track"]), str(r["feature_id"]))
-
-
-def _features_summary(td: TableDiff) -> list[str]:
-    """ "feature F12 0420 D: radius 400 → 450 m", one line per feature."""
-    cols = FEATURE_POINTS.column_names
-    added: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
-    removed: dict[tuple[str, str, str], list[dict[str, Any]]] = {}
-    changed: dict[tuple[str, str, str], list[_Change]] = {}
-    for r in _records(td.added, cols):
-        added.setdefault(_feature_key(r), []).append(r)
-    for r in _records(td.removed, cols):
-        removed.setdefault(_feature_key(r), []).append(r)
-    masks = _records(td.changed_cols, td.values)
-    for o, n, m in zip(_records(td.old, cols), _records(td.new, cols), masks, strict=True):
-        changed.setdefault(_feature_key(n), []).append((o, n, m))
-    out = []
-    for key in sorted(set(added) | set(removed) | set(changed)):
-        line, track, fid = key
-        label = f"feature {fid} {line} {track}"
-        add, rem, chg = added.get(key, []), removed.get(key, []), changed.get(key, [])
-        if add and not rem and not chg and len(add) >= 6:
-            out.append(f"{label} added ({_feature_shape(add)})")
-            continue
-        if rem and not add and not chg and len(rem) >= 6:
-            out.append(f"{label} removed ({_feature_shape(rem)})")
-            continue
-        out.append(f"{label}: " + "; ".join(_feature_changes(add, rem, chg)))
-    return out
-
-
-_Change = tuple[dict[str, Any], dict[str, Any], dict[str, Any]]
-
-
-def _feature_changes(add: list[dict[str, Any]], rem: list[dict[str, Any]], chg: list[_Change]) -> list[str]:
-    """What changed in one feature's rows: radius, km (one shift or row by row), attribute,
-    role, rows added and removed."""
-    parts: list[str] = []
-    radius = [(o["radius_m"], n["radius_m"]) for o, n, m in chg if m["radius_m"]]
-    if radius:
-        parts.append(", ".join(f"radius {_val(a)} → {_val(b)} m" for a, b in dict.fromkeys(radius)))
-    km = [(o["seq"], o["km_m"], n["km_m"]) for o, n, m in chg if m["km_m"]]
-    if km:
-        deltas = {round(b - a, 3) for _, a, b in km if a is not None and b is not None}
-        seqs = _seq_list(s for s, _, _ in km)
-        if len(deltas) == 1 and len(km) > 1:
-            parts.append(f"km {next(iter(deltas)):+.1f} m ({seqs})")
-        else:
-            parts.append(", ".join(f"row {s} km {_km1(a)} → {_km1(b)}" for s, a, b in km))
-    for c in ("attribute", "role"):
-        vals = [(o["seq"], o[c], n[c]) for o, n, m in chg if m[c]]
-        parts.extend(f"row {s} {c} {_val(a)} → {_val(b)}" for s, a, b in vals)
-    if add:
-        parts.append(f"{_seq_list(r['seq'] for r in add)} added")
-    if rem:
-        parts.append(f"{_seq_list(r['seq'] for r in rem)} removed")
-    return parts
-
-
-def _seq_list(seqs: Iterable[Any]) -> str:
-    s = sorted(int(x) for x in seqs if x is not None)
-    return ("row " if len(s) == 1 else "rows ") + ",".join(str(x) for x in s)
-
-
-def _feature_shape(rows: list[dict[str, Any]]) -> str:
-    kms = [r["km_m"] for r in rows if r["km_m"] is not None]
-    curves = [f"{r['attribute']} R {_val(r['radius_m'])} m" for r in rows if r["radius_m"]]
-    span = f"km {_km1(min(kms))}–{_km1(max(kms))}" if kms else "km —"
-    return span + (", " + ", ".join(curves) if curves else "")
 
 
 def _lines_summary(td: TableDiff) -> list[str]:

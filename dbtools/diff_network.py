@@ -52,7 +52,8 @@ def records(frame: pd.DataFrame, cols: list[str]) -> list[dict[str, Any]]:
     return [dict(zip(cols, vals, strict=True)) for vals in zip(*lists, strict=True)]
 
 
-def _v(v: Any) -> str:
+def value_text(v: Any) -> str:
+    """A cell for a summary line: — for null, %g for floats."""
     if v is None or (isinstance(v, float) and np.isnan(v)):
         return "—"
     if isinstance(v, float):
@@ -60,7 +61,8 @@ def _v(v: Any) -> str:
     return str(v)
 
 
-def _km(v: Any) -> str:
+def km_text(v: Any) -> str:
+    """A km for a summary line (— for null)."""
     return "—" if v is None else format_km(float(v), 1)
 
 
@@ -76,14 +78,16 @@ def _changes(td: RowDiff) -> list[tuple[dict[str, Any], dict[str, Any], list[str
 
 def _plain(o: dict[str, Any], n: dict[str, Any], cols: list[str], unit: dict[str, str] | None = None) -> list[str]:
     unit = unit or {}
-    return [f"{c} {_v(o[c])} → {_v(n[c])}{unit.get(c, '')}" for c in cols]
+    return [f"{c} {value_text(o[c])} → {value_text(n[c])}{unit.get(c, '')}" for c in cols]
 
 
 def _track_label(r: dict[str, Any]) -> str:
     where = (
-        f"{r['line_code']} {_v(r['track'])}, km {_km(r['km_begin_m'])}–{_km(r['km_end_m'])}, " if r["line_code"] else ""
+        f"{r['line_code']} {value_text(r['track'])}, km {km_text(r['km_begin_m'])}–{km_text(r['km_end_m'])}, "
+        if r["line_code"]
+        else ""
     )
-    return f"track {r['track_id']} ({where}{_v(r['length_m'])} m, {r['kind']})"
+    return f"track {r['track_id']} ({where}{value_text(r['length_m'])} m, {r['kind']})"
 
 
 def tracks_summary(td: RowDiff) -> list[str]:
@@ -112,8 +116,8 @@ def connections_summary(td: RowDiff) -> list[str]:
 
 
 def _switch_label(r: dict[str, Any]) -> str:
-    at = f" at {r['line_code']} km {_km(r['km_m'])}" if r["line_code"] and r["km_m"] is not None else ""
-    n = f" 1:{_v(r['switch_number'])}" if r["switch_number"] is not None else ""
+    at = f" at {r['line_code']} km {km_text(r['km_m'])}" if r["line_code"] and r["km_m"] is not None else ""
+    n = f" 1:{value_text(r['switch_number'])}" if r["switch_number"] is not None else ""
     return f"switch {r['switch_id']} ({r['type']}{n}{at})"
 
 
@@ -121,7 +125,7 @@ def _moved(o: dict[str, Any], n: dict[str, Any]) -> str | None:
     """``moved +10.0 m in km (400 → 410), 10.0 m by lat/lon`` when km or lat/lon changed."""
     parts = []
     if o["km_m"] is not None and n["km_m"] is not None and o["km_m"] != n["km_m"]:
-        parts.append(f"{n['km_m'] - o['km_m']:+.1f} m in km ({_km(o['km_m'])} → {_km(n['km_m'])})")
+        parts.append(f"{n['km_m'] - o['km_m']:+.1f} m in km ({km_text(o['km_m'])} → {km_text(n['km_m'])})")
     coords = (o["lat"], o["lon"], n["lat"], n["lon"])
     if None not in coords and (o["lat"], o["lon"]) != (n["lat"], n["lon"]):
         _, _, d = GEOD.inv(o["lon"], o["lat"], n["lon"], n["lat"])

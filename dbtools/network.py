@@ -26,7 +26,8 @@ from schemas.tables import (
     GIS,
     KM_BREAKS,
     LINES,
-    TABLES_SINCE_V2,
+    TABLES_ADDED,
+    TRACK_FEATURE_POINTS,
 )
 
 T = TypeVar("T")
@@ -49,7 +50,7 @@ class Network:
 
     def __post_init__(self) -> None:
         # a network always holds the network tables (empty for a line-only one)
-        for t in TABLES_SINCE_V2:
+        for t in TABLES_ADDED:
             if t.name not in self.tables:
                 self.tables[t.name] = empty_frame(t)
 
@@ -88,6 +89,12 @@ class Network:
     @property
     def feature_points(self) -> pd.DataFrame:
         return self.tables[FEATURE_POINTS.name]
+
+    @property
+    def track_feature_points(self) -> pd.DataFrame:
+        """Feature points of network tracks by distance along the track (empty: none)."""
+        t = self.tables.get(TRACK_FEATURE_POINTS.name)
+        return t if t is not None else empty_frame(TRACK_FEATURE_POINTS)
 
     @property
     def lines(self) -> pd.DataFrame:
@@ -222,13 +229,14 @@ def content_hash(tables: dict[str, pd.DataFrame]) -> str:
 
     Identical whether the frames come from a source set being built or from a DB read
     back, so a hand-edited or corrupted DB no longer matches the hash in its meta table.
-    What schema version 2 added (the network tables, the balise-group columns) enters only
-    when it holds something: a line-only network hashes as it did under version 1.
+    What schema versions 2 and 3 added (the network tables, the balise-group columns,
+    ``track_feature_points``) enters only when it holds something: a line-only network hashes
+    as it did under version 1, a network without track feature points as under version 2.
     """
     h = hashlib.sha256()
     for table in DB_TABLES:
         frame = canonical(table, tables.get(table.name, empty_frame(table)))
-        if table in TABLES_SINCE_V2 and frame.empty:
+        if table in TABLES_ADDED and frame.empty:
             continue
         h.update(f"table:{table.name}:{len(frame)}\n".encode())
         for c in table.columns:

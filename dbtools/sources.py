@@ -39,7 +39,7 @@ from schemas.errors import InputError
 from schemas.findings import Finding
 from schemas.frames import FIRST_DATA_LINE, read_and_check
 from schemas.model import Table
-from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES
+from schemas.tables import FEATURE_POINTS, LINES, SOURCE_TABLES, TRACK_FEATURE_POINTS
 
 
 def read_source_set(folder: Path, locale: CsvLocale | None = None) -> tuple[Network, list[Finding]]:
@@ -96,6 +96,7 @@ def read_source_set(folder: Path, locale: CsvLocale | None = None) -> tuple[Netw
             frame = _lines_attributes(frame, table.column_names)
         tables[name] = frame
     tables[FEATURE_POINTS.name] = _with_seq(tables[FEATURE_POINTS.name])
+    tables[TRACK_FEATURE_POINTS.name] = _with_seq(tables[TRACK_FEATURE_POINTS.name])
     findings.extend(_line_codes(tables, files))
     net = Network({}, origin=str(folder), files=files)
     for name, frame in tables.items():
@@ -166,15 +167,22 @@ def _lines_attributes(frame: pd.DataFrame, known: list[str]) -> pd.DataFrame:
 
 
 def _with_seq(fp: pd.DataFrame) -> pd.DataFrame:
-    """Derive ``seq`` (1–6 in running order) where the source does not give it."""
+    """Derive ``seq`` (1–6 in running order) where the source does not give it: by km in the
+    track's normal direction (``feature_points``: decreasing on U) or by increasing ``pos_m``
+    (``track_feature_points``)."""
     if fp.empty or fp["seq"].notna().all():
         return fp
     fp = fp.copy()
-    sign = np.where(fp["track"].astype(object) == Track.UP.value, -1.0, 1.0)
-    fp["_order"] = fp["km_m"].to_numpy(dtype=float, na_value=np.nan) * sign
+    if "track_id" in fp.columns:
+        keys, order = ["track_id", "feature_id"], fp["pos_m"].to_numpy(dtype=float, na_value=np.nan)
+    else:
+        keys = ["line_code", "track", "feature_id"]
+        sign = np.where(fp["track"].astype(object) == Track.UP.value, -1.0, 1.0)
+        order = fp["km_m"].to_numpy(dtype=float, na_value=np.nan) * sign
+    fp["_order"] = order
     fp["_pos"] = np.arange(len(fp))
-    fp = fp.sort_values(["line_code", "track", "feature_id", "_order", "_pos"], kind="stable")
-    seq = fp.groupby(["line_code", "track", "feature_id"], dropna=False).cumcount() + 1
+    fp = fp.sort_values([*keys, "_order", "_pos"], kind="stable")
+    seq = fp.groupby(keys, dropna=False).cumcount() + 1
     fp["seq"] = fp["seq"].fillna(seq.astype("Int64"))
     return fp.sort_values("_pos").drop(columns=["_order", "_pos"])
 

@@ -7,7 +7,8 @@ Rule families, each in its own pure module (frames in → list of findings):
   non-finite numbers);
 * GIS grid — :mod:`dbtools.rules.gis`; its heights — :mod:`dbtools.rules.heights`;
 * balises — :mod:`dbtools.rules.balises`;
-* feature points — :mod:`dbtools.rules.features`;
+* feature points — :mod:`dbtools.rules.features`, those of network tracks
+  :mod:`dbtools.rules.track_features`;
 * network topology — :mod:`dbtools.rules.topology` (tracks, connections, switches, their
   geometry) and :mod:`dbtools.rules.balise_groups` (ETCS groups, identification along routes);
 * DB file — :func:`dbtools.database.integrity_findings` (SQLite integrity_check,
@@ -36,6 +37,7 @@ from dbtools.rules.gis import check_gis
 from dbtools.rules.heights import check_heights
 from dbtools.rules.schema import check_empty_tables, check_values
 from dbtools.rules.topology import check_topology
+from dbtools.rules.track_features import check_track_features
 from schemas.findings import Finding
 from schemas.frames import check_frame
 from schemas.tables import DB_TABLES
@@ -62,6 +64,7 @@ def validate_network(
     findings.extend(check_balises(network.balises, grid, config, loc))
     findings.extend(check_features(network.feature_points, grid, config, loc))
     findings.extend(check_topology(network, config, loc))
+    findings.extend(check_track_features(network, config, loc))
     findings.extend(check_balise_network(network, config, loc))
     return findings
 

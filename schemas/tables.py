@@ -10,14 +10,16 @@ from __future__ import annotations
 
 from schemas.enums import Attribute, BaliseKind, Track
 from schemas.model import KM_PLAUSIBLE_M, Column, ForeignKey, Table
-from schemas.network import NETWORK_TABLES
+from schemas.network import NETWORK_TABLES, TRACK_ID
 
 #: Bumped whenever a DB table changes shape; stored as ``PRAGMA user_version``.
 #: 2: the network tables (tracks, connections, switches, track_points) and the balise-group
 #: columns of ``balises``. A version-1 DB is still read: it is a network without them.
-SCHEMA_VERSION = 2
+#: 3: ``track_feature_points`` (curve feature points of network tracks by distance along the
+#: track). A version-2 DB is read as one without them.
+SCHEMA_VERSION = 3
 #: The versions this tool reads.
-READABLE_SCHEMA_VERSIONS = (1, 2)
+READABLE_SCHEMA_VERSIONS = (1, 2, 3)
 #: ``PRAGMA application_id`` of every onboard DB: ASCII "TPOS".
 APPLICATION_ID = 0x54504F53
 
@@ -184,6 +186,15 @@ BALISES = Table(
     indexes=(("line_code", "station_code", "track"), ("kind",)),
 )
 
+#: Columns of a feature row that do not depend on how its position is given.
+FEATURE_ID = Column("feature_id", "str", "Feature (curve) identifier within the line/track")
+FEATURE_SEQ = Column("seq", "int", "Row number 1–6 in running order (derived at build)", required=False, min=1, max=6)
+FEATURE_RADIUS = Column("radius_m", "float", "Curve radius; 0 on straight/transition/none rows", unit="m", min=0.0)
+FEATURE_ATTRIBUTE = Column(
+    "attribute", "str", "straight, transition, left, right or none", enum=tuple(a.value for a in Attribute)
+)
+FEATURE_ROLE = Column("role", "str", "Free text: what the row marks", required=False, nullable=True)
+
 FEATURE_POINTS = Table(
     name="feature_points",
     kind="db",
@@ -195,16 +206,46 @@ FEATURE_POINTS = Table(
     columns=(
         LINE_CODE,
         TRACK,
-        Column("feature_id", "str", "Feature (curve) identifier within the line/track"),
-        Column("seq", "int", "Row number 1–6 in running order (derived at build)", required=False, min=1, max=6),
+        FEATURE_ID,
+        FEATURE_SEQ,
         Column("km_m", "float", "Kilometrage of the row", unit="m", km_notation=True),
-        Column("radius_m", "float", "Curve radius; 0 on straight/transition/none rows", unit="m", min=0.0),
-        Column("attribute", "str", "straight, transition, left, right or none", enum=tuple(a.value for a in Attribute)),
-        Column("role", "str", "Free text: what the row marks", required=False, nullable=True),
+        FEATURE_RADIUS,
+        FEATURE_ATTRIBUTE,
+        FEATURE_ROLE,
     ),
     primary_key=("line_code", "track", "feature_id", "seq"),
     foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
     indexes=(("line_code", "track", "km_m"),),
+)
+
+TRACK_FEATURE_POINTS = Table(
+    name="track_feature_points",
+    kind="db",
+    description=(
+        "Curve feature points of network tracks, placed by distance along the track: curves on "
+        "tracks without line km (crossovers, connecting curves, sidings, station tracks) or on any "
+        "other track. Six rows per feature in running order [S000 Table 1], as in feature_points, "
+        "with running order and attributes as seen by a train running from the track's begin to "
+        "its end (pos_m increasing)."
+    ),
+    columns=(
+        TRACK_ID,
+        Column("feature_id", "str", "Feature (curve) identifier within the track"),
+        FEATURE_SEQ,
+        Column(
+            "pos_m",
+            "float",
+            "Distance of the row along the track from its begin (as track_points.pos_m)",
+            unit="m",
+            min=0.0,
+        ),
+        FEATURE_RADIUS,
+        FEATURE_ATTRIBUTE,
+        FEATURE_ROLE,
+    ),
+    primary_key=("track_id", "feature_id", "seq"),
+    foreign_keys=(ForeignKey(("track_id",), "tracks", ("track_id",)),),
+    required=False,
 )
 
 KM_BREAKS = Table(
@@ -247,9 +288,20 @@ SOURCE_HASH_PREFIX = "source_sha256:"
 GEOREF_META_KEYS = ("area", "area_source", "metric_crs", "metric_crs_source", "height_datum", "geoid_model")
 
 #: Content tables in dependency order (lines first: the others reference it).
-DB_TABLES: tuple[Table, ...] = (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS, *NETWORK_TABLES)
+DB_TABLES: tuple[Table, ...] = (LINES, GIS, BALISES, FEATURE_POINTS, KM_BREAKS, *NETWORK_TABLES, TRACK_FEATURE_POINTS)
 #: Tables a DB of schema version 1 does not have; read as empty, hashed only when not empty.
 TABLES_SINCE_V2: tuple[Table, ...] = NETWORK_TABLES
+#: Tables a DB of schema version 2 does not have; read as empty, hashed only when not empty.
+TABLES_SINCE_V3: tuple[Table, ...] = (TRACK_FEATURE_POINTS,)
+#: Tables added after version 1: read as empty where a DB lacks them, hashed only when not empty.
+TABLES_ADDED: tuple[Table, ...] = (*TABLES_SINCE_V2, *TABLES_SINCE_V3)
+
+
+def tables_absent_in(version: int) -> tuple[Table, ...]:
+    """The content tables a DB of schema ``version`` does not have (read as empty)."""
+    return (*(TABLES_SINCE_V2 if version < 2 else ()), *(TABLES_SINCE_V3 if version < 3 else ()))
+
+
 ALL_DB_TABLES: tuple[Table, ...] = (*DB_TABLES, META)
 #: Tables read from a source set, by file stem.
 SOURCE_TABLES: dict[str, Table] = {t.name: t for t in DB_TABLES}

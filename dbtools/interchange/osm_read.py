@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
+from dbtools.masks import true_runs
 from schemas.errors import InputError
 
 if TYPE_CHECKING:
@@ -75,8 +76,7 @@ class RailWay:
         if ok.all():
             self.runs = [(0, len(ok))] if len(ok) >= 2 else []
             return
-        edges = np.flatnonzero(np.diff(np.concatenate(([0], ok.astype(np.int8), [0]))))
-        self.runs = [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2], strict=True) if b - a >= 2]
+        self.runs = [(int(a), int(b)) for a, b in zip(*true_runs(ok), strict=True) if b - a >= 2]
 
 
 @dataclass

@@ -119,11 +119,14 @@ class _RangeStats:
 
 
 @dataclass(frozen=True)
-class _Rows:
-    """The feature-point columns as arrays, and how findings name a row."""
+class FeatureRows:
+    """The feature-point columns as arrays, and how findings name a row. ``where`` holds the
+    columns that name the feature's track (``line_code``, ``track`` in ``feature_points``;
+    ``track_id`` in ``track_feature_points``) and ``km`` the row positions (``km_m`` or
+    ``pos_m``, the column named ``pos_col``)."""
 
-    line: npt.NDArray[Any]
-    track: npt.NDArray[Any]
+    table: str
+    where: dict[str, npt.NDArray[Any]]
     fid: npt.NDArray[Any]
     seq: F64
     km: F64
@@ -131,24 +134,50 @@ class _Rows:
     attr: npt.NDArray[Any]
     config: ValidationConfig
     loc: Locator
+    pos_col: str = "km_m"
 
     @classmethod
-    def of(cls, fp: pd.DataFrame, config: ValidationConfig, loc: Locator) -> _Rows:
-        line, track, fid = column(fp, "line_code"), column(fp, "track"), column(fp, "feature_id")
-        seq, km, radius, attr = column(fp, "seq"), column(fp, "km_m"), column(fp, "radius_m"), column(fp, "attribute")
-        return cls(line, track, fid, seq, km, radius, attr, config, loc)
+    def of(
+        cls,
+        fp: pd.DataFrame,
+        config: ValidationConfig,
+        loc: Locator,
+        table: str = T,
+        where: tuple[str, ...] = ("line_code", "track"),
+        pos_col: str = "km_m",
+    ) -> FeatureRows:
+        fid, seq, km = column(fp, "feature_id"), column(fp, "seq"), column(fp, pos_col)
+        radius, attr = column(fp, "radius_m"), column(fp, "attribute")
+        cols = {c: column(fp, c) for c in where}
+        return cls(table, cols, fid, seq, km, radius, attr, config, loc, pos_col)
+
+    @property
+    def line(self) -> npt.NDArray[Any]:
+        return self.where["line_code"]
+
+    @property
+    def track(self) -> npt.NDArray[Any]:
+        return self.where["track"]
 
     def row_keys(self, i: int) -> dict[str, object]:
         return {**self.feat_keys(i), "seq": py(self.seq[i])}
 
     def feat_keys(self, i: int) -> dict[str, object]:
-        return {"line_code": py(self.line[i]), "track": py(self.track[i]), "feature_id": py(self.fid[i])}
+        return {**{c: py(v[i]) for c, v in self.where.items()}, "feature_id": py(self.fid[i])}
+
+    def running(self, i: int) -> str:
+        """The running direction of row ``i``'s track, for messages."""
+        if self.pos_col == "km_m":
+            return f"in the running direction of track {self.track[i]}"
+        return f"from the begin of track {self.where['track_id'][i]}"
 
     def capped(self, rule: str, items: npt.NDArray[np.int64], build: Callable[[int], Finding]) -> list[Finding]:
-        return capped(rule, Severity.ERROR, T, items, build, self.config.max_findings_per_rule, self.loc.file(T))
+        return capped(
+            rule, Severity.ERROR, self.table, items, build, self.config.max_findings_per_rule, self.loc.file(self.table)
+        )
 
     def finding(self, rule: str, message: str, at: int, **kw: Any) -> Finding:
-        return Finding(rule, Severity.ERROR, T, message, **kw, **self.loc.at(T, at))
+        return Finding(rule, Severity.ERROR, self.table, message, **kw, **self.loc.at(self.table, at))
 
 
 @dataclass(frozen=True)
@@ -166,25 +195,18 @@ def check_features(fp: pd.DataFrame, grid: GridIndex, config: ValidationConfig, 
     """All feature-point rules (see module docstring)."""
     if fp.empty:
         return []
-    r = _Rows.of(fp, config, loc)
+    r = FeatureRows.of(fp, config, loc)
     out, in_gis = _outside_gis(r, grid)
-    found, block = _six_rows(r)
+    sign = np.where(r.track == Track.UP.value, -1.0, 1.0)
+    found, b, order_bad = check_structure(r, sign)
     out += found
-    if len(block) == 0:
+    if b is None:
         return out
-    out += _pattern(r, block)
-    k6 = r.km[block]
-    sign = np.where(r.track[block[:, 0]] == Track.UP.value, -1.0, 1.0)
-    b = _Blocks(block, k6, sign, sign[:, None] * np.diff(k6, axis=1))
-    with np.errstate(invalid="ignore"):
-        order_bad = ~np.all(b.step >= 0, axis=1) | ~(b.step[:, 2] > 0)
-    out += _order(r, b, order_bad)
-    out += _straight_length(r, b, ~order_bad)
     # against the GIS curvature: only well-formed features wholly inside the grid
-    fi = np.flatnonzero(~order_bad & np.all(in_gis[block], axis=1))
+    fi = np.flatnonzero(~order_bad & np.all(in_gis[b.block], axis=1))
     if len(fi) == 0 or grid.n < 3:
         return out
-    g = _Blocks(block[fi], k6[fi], sign[fi], b.step[fi])
+    g = _Blocks(b.block[fi], b.k6[fi], b.sign[fi], b.step[fi])
     kappa = _RangeStats(grid.shape(config.gis_spacing_m, config.km_epsilon_m).kappa)
     gid = grid.track_ids(r.line[g.block[:, 0]], r.track[g.block[:, 0]])
     out += _body(r, g, grid, gid, kappa)
@@ -192,7 +214,25 @@ def check_features(fp: pd.DataFrame, grid: GridIndex, config: ValidationConfig, 
     return out
 
 
-def _outside_gis(r: _Rows, grid: GridIndex) -> tuple[list[Finding], npt.NDArray[np.bool_]]:
+def check_structure(r: FeatureRows, sign: F64) -> tuple[list[Finding], _Blocks | None, npt.NDArray[np.bool_]]:
+    """``feature.rows``, ``feature.pattern``, ``feature.order`` and ``feature.straight_length``
+    of the rows ``r`` (``sign`` per row: +1 where the running order is increasing position);
+    the well-formed six-row blocks (None: none) and which of them break the order."""
+    out, block = _six_rows(r)
+    if len(block) == 0:
+        return out, None, np.zeros(0, dtype=bool)
+    out += _pattern(r, block)
+    k6 = r.km[block]
+    sg = sign[block[:, 0]]
+    b = _Blocks(block, k6, sg, sg[:, None] * np.diff(k6, axis=1))
+    with np.errstate(invalid="ignore"):
+        order_bad = ~np.all(b.step >= 0, axis=1) | ~(b.step[:, 2] > 0)
+    out += _order(r, b, order_bad)
+    out += _straight_length(r, b, ~order_bad)
+    return out, b, order_bad
+
+
+def _outside_gis(r: FeatureRows, grid: GridIndex) -> tuple[list[Finding], npt.NDArray[np.bool_]]:
     """``feature.outside_gis`` (every row, whatever its feature looks like); rows in the grid."""
     line, track, km, eps = r.line, r.track, r.km, r.config.km_epsilon_m
     rows = np.flatnonzero(pd.notna(line) & pd.notna(track) & np.isfinite(km))
@@ -221,17 +261,14 @@ def _outside_gis(r: _Rows, grid: GridIndex) -> tuple[list[Finding], npt.NDArray[
     return r.capped("feature.outside_gis", np.flatnonzero(outside), build), in_gis
 
 
-def _six_rows(r: _Rows) -> tuple[list[Finding], npt.NDArray[np.int64]]:
+def _six_rows(r: FeatureRows) -> tuple[list[Finding], npt.NDArray[np.int64]]:
     """``feature.rows``; the (k, 6) frame rows of the features with seq 1…6."""
-    keyed = np.flatnonzero(pd.notna(r.line) & pd.notna(r.track) & pd.notna(r.fid))
+    named = np.all([pd.notna(v) for v in (*r.where.values(), r.fid)], axis=0)
+    keyed = np.flatnonzero(named)
     if len(keyed) == 0:
         return [], np.zeros((0, 6), dtype=np.int64)
-    fgid = (
-        pd.DataFrame({"l": r.line[keyed], "t": r.track[keyed], "f": r.fid[keyed]})
-        .groupby(["l", "t", "f"], sort=False)
-        .ngroup()
-        .to_numpy()
-    )
+    cols = {f"k{j}": v[keyed] for j, v in enumerate((*r.where.values(), r.fid))}
+    fgid = pd.DataFrame(cols).groupby(list(cols), sort=False).ngroup().to_numpy()
     order = np.lexsort((np.nan_to_num(r.seq[keyed], nan=np.inf), fgid))
     rows, g = keyed[order], fgid[order]
     n_feat = int(g.max()) + 1
@@ -258,7 +295,7 @@ def _six_rows(r: _Rows) -> tuple[list[Finding], npt.NDArray[np.int64]]:
     return r.capped("feature.rows", bad_feat, build), np.asarray(block[ok_seq], dtype=np.int64)
 
 
-def _pattern(r: _Rows, block: npt.NDArray[np.int64]) -> list[Finding]:
+def _pattern(r: FeatureRows, block: npt.NDArray[np.int64]) -> list[Finding]:
     """``feature.pattern``: each row's attribute against [S000 Table 1]."""
     a6 = r.attr[block]
     pat_bad = np.zeros(a6.shape, dtype=bool)
@@ -282,7 +319,7 @@ def _pattern(r: _Rows, block: npt.NDArray[np.int64]) -> list[Finding]:
     return r.capped("feature.pattern", np.arange(len(pr)), build)
 
 
-def _order(r: _Rows, b: _Blocks, order_bad: npt.NDArray[np.bool_]) -> list[Finding]:
+def _order(r: FeatureRows, b: _Blocks, order_bad: npt.NDArray[np.bool_]) -> list[Finding]:
     """``feature.order``: km monotonic in running direction, a curve body of non-zero length."""
 
     def build(j: int) -> Finding:
@@ -290,19 +327,18 @@ def _order(r: _Rows, b: _Blocks, order_bad: npt.NDArray[np.bool_]) -> list[Findi
         word = "decreasing" if b.sign[j] < 0 else "increasing"
         return r.finding(
             "feature.order",
-            f"km of rows 1–6 ({', '.join(f'{v:g}' for v in b.k6[j])}) are not "
-            f"{word} in the running direction of track {r.track[i]}",
+            f"{r.pos_col} of rows 1–6 ({', '.join(f'{v:g}' for v in b.k6[j])}) are not {word} {r.running(i)}",
             i,
             keys=r.feat_keys(i),
             value=[py(v) for v in b.k6[j]],
             limit=word,
-            column="km_m",
+            column=r.pos_col,
         )
 
     return r.capped("feature.order", np.flatnonzero(order_bad), build)
 
 
-def _straight_length(r: _Rows, b: _Blocks, good: npt.NDArray[np.bool_]) -> list[Finding]:
+def _straight_length(r: FeatureRows, b: _Blocks, good: npt.NDArray[np.bool_]) -> list[Finding]:
     """``feature.straight_length``: entry (rows 1–2) and exit (rows 5–6) long enough."""
     out: list[Finding] = []
     min_m = r.config.min_straight_m
@@ -318,7 +354,7 @@ def _straight_length(r: _Rows, b: _Blocks, good: npt.NDArray[np.bool_]) -> list[
                 keys=r.feat_keys(int(b.block[j, 0])),
                 value=round(float(b.step[j, a]), 3),
                 limit=min_m,
-                column="km_m",
+                column=r.pos_col,
             )
 
         out += r.capped("feature.straight_length", bad, short)
@@ -326,7 +362,7 @@ def _straight_length(r: _Rows, b: _Blocks, good: npt.NDArray[np.bool_]) -> list[
 
 
 def _span(
-    r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], c0: int, c1: int
+    r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], c0: int, c1: int
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Grid points between rows c0 and c1 of each feature (ε-inclusive)."""
     eps = r.config.km_epsilon_m
@@ -335,7 +371,7 @@ def _span(
     return grid.searchsorted(gid, lo_km - eps, "left"), grid.searchsorted(gid, hi_km + eps, "right")
 
 
-def _body_curvature(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: _RangeStats) -> F64:
+def _body_curvature(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: _RangeStats) -> F64:
     """Mean GIS κ over the body (rows 3–4); a body shorter than the grid spacing takes the
     vertex nearest its middle."""
     lo, hi = _span(r, b, grid, gid, 2, 3)
@@ -351,7 +387,7 @@ def _body_curvature(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.i
     return mean
 
 
-def _body(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: _RangeStats) -> list[Finding]:
+def _body(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: _RangeStats) -> list[Finding]:
     """``feature.direction`` and ``feature.radius`` from the mean κ over the body."""
     blk, sg, tol = b.block, b.sign, r.config.feature_tolerance
     R = r.radius[blk[:, 2]]
@@ -400,7 +436,9 @@ def _body(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kap
     )
 
 
-def _straights(r: _Rows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: _RangeStats) -> list[Finding]:
+def _straights(
+    r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: _RangeStats
+) -> list[Finding]:
     """``feature.straight``: entry (rows 1–2, transition rows 2–3) and exit (rows 5–6,
     transition 4–5) straight on the grid, allowing the stencil leak of the transition."""
     out: list[Finding] = []

@@ -30,7 +30,7 @@ from schemas.enums import Attribute, Severity
 from schemas.findings import Finding
 from schemas.model import Table
 from schemas.network import TRACK_POINTS
-from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS
+from schemas.tables import BALISES, DB_TABLES, FEATURE_POINTS, GIS, TRACK_FEATURE_POINTS
 
 F64 = npt.NDArray[np.float64]
 
@@ -40,29 +40,10 @@ CURVE = (Attribute.LEFT.value, Attribute.RIGHT.value)
 def check_values(tables: dict[str, pd.DataFrame], config: ValidationConfig, loc: Locator) -> list[Finding]:
     out: list[Finding] = []
     cap = config.max_findings_per_rule
-    fp = tables.get(FEATURE_POINTS.name)
-    if fp is not None and not fp.empty:
-        T = FEATURE_POINTS.name
-        attr, radius = column(fp, "attribute"), column(fp, "radius_m")
-        is_curve = np.isin(attr, CURVE)
-        known = pd.notna(attr) & np.isfinite(radius)
-        bad = np.flatnonzero(known & ((is_curve & (radius <= 0)) | (~is_curve & (radius != 0))))
-
-        def build(i: int) -> Finding:
-            curve = bool(is_curve[i])
-            return Finding(
-                "schema.radius",
-                Severity.ERROR,
-                T,
-                f"a '{attr[i]}' row needs radius_m {'> 0' if curve else '= 0 (0 means straight)'}, found {radius[i]:g}",
-                keys={k: py(fp[k].iat[i]) for k in FEATURE_POINTS.primary_key},
-                value=py(radius[i]),
-                limit="> 0" if curve else 0,
-                column="radius_m",
-                **loc.at(T, i),
-            )
-
-        out += capped("schema.radius", Severity.ERROR, T, bad, build, cap, loc.file(T))
+    for feat in (FEATURE_POINTS, TRACK_FEATURE_POINTS):
+        fp = tables.get(feat.name)
+        if fp is not None and not fp.empty:
+            out += _radius(feat, fp, cap, loc)
     for table in DB_TABLES:
         frame = tables.get(table.name)
         if frame is None or frame.empty:
@@ -134,3 +115,29 @@ def check_empty_tables(
             )
         )
     return out
+
+
+def _radius(feat: Table, fp: pd.DataFrame, cap: int, loc: Locator) -> list[Finding]:
+    """``schema.radius`` of the rows of a feature-point table (``feature_points`` or
+    ``track_feature_points``)."""
+    T = feat.name
+    attr, radius = column(fp, "attribute"), column(fp, "radius_m")
+    is_curve = np.isin(attr, CURVE)
+    known = pd.notna(attr) & np.isfinite(radius)
+    bad = np.flatnonzero(known & ((is_curve & (radius <= 0)) | (~is_curve & (radius != 0))))
+
+    def build(i: int) -> Finding:
+        curve = bool(is_curve[i])
+        return Finding(
+            "schema.radius",
+            Severity.ERROR,
+            T,
+            f"a '{attr[i]}' row needs radius_m {'> 0' if curve else '= 0 (0 means straight)'}, found {radius[i]:g}",
+            keys={k: py(fp[k].iat[i]) for k in feat.primary_key},
+            value=py(radius[i]),
+            limit="> 0" if curve else 0,
+            column="radius_m",
+            **loc.at(T, i),
+        )
+
+    return capped("schema.radius", Severity.ERROR, T, bad, build, cap, loc.file(T))

@@ -293,7 +293,8 @@ CYCLE_S: dict[str, Any] = {
 @dataclass(frozen=True)
 class TrackSelectConfig:
     """Which track after a facing switch: the evidence tests of the network aids
-    (:mod:`fieldlogs.pipeline.aids.track_gps`, :mod:`fieldlogs.pipeline.aids.track_imu`), and the
+    (:mod:`fieldlogs.pipeline.aids.track_gps`, :mod:`fieldlogs.pipeline.aids.track_imu`,
+    :mod:`fieldlogs.pipeline.aids.track_features`), and the
     D-GPS corrections along a determined track (:mod:`fieldlogs.pipeline.aids.track_gps_along`).
 
     A candidate is dropped when another one's log-likelihood ratio against it reaches
@@ -311,6 +312,9 @@ class TrackSelectConfig:
     imu_max_margin_m: float = setting(
         30.0, "no IMU test when the margin at the switch exceeds this (the window would hold other curves)", "m", gt=0
     )
+    feature_headings: bool = setting(
+        True, "curve feature points of the tracks are evidence while the track is ambiguous (the IMU heading test)"
+    )
     gps_along_k: float = setting(
         4.0, "a D-GPS fix's along-track margin in σ of its error (noise_sigma_m, noise_white_m)", gt=0
     )
@@ -321,7 +325,9 @@ class TrackSelectConfig:
     gps_along_confirm: int = setting(
         5, "D-GPS fixes in a row, each step agreeing with the odometry, before one corrects the position", ge=2
     )
-    gps_min_fixes: int = setting(5, "GPS fixes needed after a split before their offsets may decide", ge=1)
+    gps_min_fixes: int = setting(
+        5, "GPS fixes at which two candidates' offsets differ before those offsets may decide between them", ge=1
+    )
     gps_jump_sigma: float = setting(
         3.5, "a fix-to-fix change of every candidate's GPS offset beyond this many σ (white, √2) is a jump", gt=0
     )

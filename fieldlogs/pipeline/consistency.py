@@ -31,11 +31,23 @@ their σ from the residuals (cov = s²·(XᵀWX)⁻¹); with fewer intervals, or
 between the balises, e alone (L = 0). The pipeline
 (:mod:`fieldlogs.pipeline.run`) then
 
-* moves the telegrams' t back by L̂ when |L̂| > ``clock.balise_tolerance_s`` and σ_L is at most half
-  of it or a tenth of |L̂| (``balise_clock`` event), replays the aids and fits again (the speeds
-  are read at the stamped times, so a large offset is found in steps; ``BALISE_PASSES``);
-* refuses the balises when |L̂| − 2σ_L > ``clock.balise_tolerance_s`` but L̂ is not determined
-  (``balise_clock`` event; the run stays undetermined rather than wrongly determined);
+* moves the telegrams' t back by L̂ when |L̂| > ``clock.balise_tolerance_s`` and σ_L + B_L is at
+  most half of it or a tenth of |L̂| (``balise_clock`` event), replays the aids and fits again
+  (the speeds are read at the stamped times, so a large offset is found in steps; ``BALISE_PASSES``);
+* refuses the balises when |L̂| − 2σ_L − B_L > ``clock.balise_tolerance_s`` but L̂ is not
+  determined (``balise_clock`` event; the run stays undetermined rather than wrongly determined);
+
+B_L = Σ_j |∂L̂/∂a_j|·ΔA_j is the part of L̂ the slip budgets can make: a slip, which comes in
+an acceleration (wheel fast: a_j > 0 where Δv_j > 0), and a slide, in braking (wheel slow:
+a_j < 0 where Δv_j < 0), both leave a correction of the sign of Δv_j — what a late clock
+leaves. The slip/slide correction [S000] keeps that error within ΔA_j (the margin's own term)
+but not below it, and σ_L, from the residuals of a few intervals (two degrees of freedom at
+``MIN_INTERVALS``), does not see it: one slide in the braking before a balise read
+L̂ = 0.27 ± 0.06 s on a correction of −4.8 m within a budget of 25 m, and every balise of the
+run was refused (tests/fieldlogs/pipeline/test_balise_clock_slips.py). A clock offset is
+judged only beyond what the slip budgets explain; what they hide is the same as what a run
+without speed changes hides, held by the latency budget in the fixes' uncertainty. Without
+slips (ΔA = 0) B_L = 0.
 * judges the clock only on a wheel that measures right (|ê| ≤ ``margin.scale_check_pct``;
   a larger scale is first divided out of the pulses and the run replayed,
   :mod:`fieldlogs.pipeline.wheelscale`);
@@ -56,7 +68,7 @@ from typing import Any
 import numpy as np
 
 from fieldlogs.pipeline.aids.registry import RunContext, position_aids
-from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.config import ClockConfig, PipelineConfig
 from fieldlogs.pipeline.engine import Solution, run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.positions import positions_frame
@@ -111,6 +123,13 @@ class BaliseEvidence:
     lag_sigma_s: float
     n: int
     rms_m: float
+    lag_slip_s: float = 0.0
+    """B_L: the part of L̂ the intervals' slip budgets can make, Σ_j |∂L̂/∂a_j|·ΔA_j [s]."""
+
+    @property
+    def lag_doubt_s(self) -> float:
+        """σ_L + B_L: how far L̂ may lie from the clock's offset (module docstring) [s]."""
+        return self.lag_sigma_s + self.lag_slip_s
 
 
 def balise_intervals(fixes: list[Fix], travel: Travel) -> list[Interval]:
@@ -159,8 +178,10 @@ def fit_evidence(intervals: list[Interval]) -> BaliseEvidence | None:
         rms = float(np.sqrt(np.mean(res**2)))
         return BaliseEvidence(e, float(np.sqrt(s2 / float(d @ d))), 0.0, float("inf"), len(y), rms)
     beta = np.linalg.solve(xtx, x.T @ y)
+    gain = np.linalg.solve(xtx, x.T) * w  # ∂β/∂a_j: the weighted least squares is linear in a
     res = y - x @ beta
     cov = float(res @ res) / (len(y) - 2) * np.linalg.inv(xtx)
+    slip = float(np.abs(gain[1]) @ np.array([iv.allowance_m for iv in intervals]))
     return BaliseEvidence(
         float(beta[0]),
         float(np.sqrt(cov[0, 0])),
@@ -168,6 +189,7 @@ def fit_evidence(intervals: list[Interval]) -> BaliseEvidence | None:
         float(np.sqrt(cov[1, 1])),
         len(y),
         float(np.sqrt(np.mean(res**2))),
+        slip,
     )
 
 
@@ -213,33 +235,46 @@ def checked_solution(ctx: RunContext, travel: Travel, cfg: PipelineConfig) -> tu
     return sol, events
 
 
+def clock_action(ev: BaliseEvidence, cfg: ClockConfig, shifted: float, last_pass: bool) -> str | None:
+    """What the balise clock check does with the fit ``ev`` (module docstring): "shift" the
+    telegrams back by L̂, "refuse" the balises, or None (the clock is within tolerance, or its
+    offset is not beyond what the fit's noise and the slip budgets explain). ``shifted``: the
+    offset already moved back; ``last_pass``: no more shifts."""
+    tol = cfg.balise_tolerance_s
+    if cfg.max_lag_s <= 0 or abs(ev.lag_s) <= tol:
+        return None
+    precise = ev.lag_doubt_s <= max(0.5 * tol, RELATIVE_SIGMA * abs(ev.lag_s))
+    if not last_pass and precise and abs(shifted + ev.lag_s) <= cfg.max_lag_s:
+        return "shift"
+    if abs(ev.lag_s) - 2.0 * ev.lag_sigma_s - ev.lag_slip_s > tol:
+        return "refuse"
+    return None
+
+
 def _balise_clock_checked(ctx: RunContext, travel: Travel, cfg: PipelineConfig) -> tuple[Solution, list[Event]]:
     """The solution with the balise clock moved back (or the balises refused) as the module
     docstring says; at most one ``balise_clock`` event (the offset as finally applied)."""
     sol = run_aids(travel, position_aids(ctx), cfg.margin, ctx.geometry)
-    tol = cfg.clock.balise_tolerance_s
     shifted = 0.0
     detail: dict[str, Any] | None = None
     for k in range(BALISE_PASSES + 1):  # the last pass only judges what the shifts left
         ev = balise_evidence(sol.fixes, travel)
         tel = ctx.streams.get("balise")
-        if ev is None or tel is None or cfg.clock.max_lag_s <= 0 or abs(ev.lag_s) <= tol:
-            break
-        if 100.0 * abs(ev.scale) > cfg.margin.scale_check_pct:
+        if ev is None or tel is None or 100.0 * abs(ev.scale) > cfg.margin.scale_check_pct:
             break  # a clock is judged on a wheel that measures right: the scale check speaks
-        precise = ev.lag_sigma_s <= max(0.5 * tol, RELATIVE_SIGMA * abs(ev.lag_s))
-        if k < BALISE_PASSES and precise and abs(shifted + ev.lag_s) <= cfg.clock.max_lag_s:
+        what = clock_action(ev, cfg.clock, shifted, k == BALISE_PASSES)
+        if what == "shift":
             shifted += ev.lag_s
             ctx = replace(ctx, streams={**ctx.streams, "balise": tel.assign(t=tel["t"] - ev.lag_s)})
             action = "telegrams' t moved back by the offset"
-        elif abs(ev.lag_s) - 2.0 * ev.lag_sigma_s > tol:
+        elif what == "refuse":
             ctx = replace(ctx, streams={**ctx.streams, "balise": None})
             action = "balises refused (offset not determined)"
         else:
             break
         offset = shifted if shifted else ev.lag_s
         detail = {"stream": "balise", "offset_s": round(offset, 3), "sigma_s": round(ev.lag_sigma_s, 3)}
-        detail |= {"intervals": ev.n, "action": action}
+        detail |= {"slip_budget_s": round(ev.lag_slip_s, 3), "intervals": ev.n, "action": action}
         sol = run_aids(travel, position_aids(ctx), cfg.margin, ctx.geometry)
         if ctx.streams.get("balise") is None:
             break

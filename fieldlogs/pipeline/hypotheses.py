@@ -29,7 +29,7 @@ track with ``track_points`` by their ``pos_m``/``km_m``; km is NaN off a line.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -75,12 +75,17 @@ class TrackLine:
         return _extrap(p, self.pos, self.km)
 
     def pos_of_km(self, km: float) -> float:
+        return float(self.pos_of_kms(np.asarray(km, dtype=float)))
+
+    def pos_of_kms(self, km: FloatArray) -> FloatArray:
+        """:meth:`pos_of_km` of an array of km (NaN off a line)."""
+        k = np.asarray(km, dtype=float)
         if self.metric is not None:
-            return float(self.dirn * (float(self.metric.c_of_km(km)) - self.c_begin))
+            return np.asarray(self.dirn * (np.asarray(self.metric.c_of_km(k), dtype=float) - self.c_begin), dtype=float)
         if not self.line_code or self.pos.size < 2:
-            return math.nan
+            return np.full(k.shape, np.nan)
         order = np.argsort(self.km)
-        return float(_extrap(np.asarray(km, dtype=float), self.km[order], self.pos[order]))
+        return _extrap(k, self.km[order], self.pos[order])
 
     @property
     def km_sign(self) -> int:
@@ -183,6 +188,8 @@ class TrackLines:
     lines: dict[str, TrackLine]
     by_line: dict[tuple[str, str], list[TrackLine]]
     topo: Topology
+    headings: dict[str, FloatArray] = field(default_factory=dict, repr=False, compare=False)
+    """Chord headings per track, made on first use (:mod:`fieldlogs.pipeline.track_heading`)."""
 
     def __getitem__(self, track_id: str) -> TrackLine:
         return self.lines[track_id]

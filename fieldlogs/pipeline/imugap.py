@@ -21,6 +21,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from dbtools.masks import true_runs
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.cycles import IMU_COLUMNS, Cycles
 from fieldlogs.pipeline.types import Event, Odometry
@@ -45,8 +46,7 @@ def imu_gaps(cycles: Cycles, min_gap_s: float, min_speed_mps: float) -> list[Imu
     missing = np.zeros(cycles.n, dtype=bool)
     for c in IMU_COLUMNS:
         missing |= ~np.isfinite(cycles.imu[c])
-    edges = np.diff(np.concatenate([[0], missing.astype(np.int8), [0]]))
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    starts, ends = true_runs(missing)
     t, v = cycles.t, np.nan_to_num(cycles.v_pulse, nan=0.0)
     out = []
     for a, b in zip(starts, ends, strict=True):

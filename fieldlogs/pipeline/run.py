@@ -45,7 +45,7 @@ from fieldlogs.pipeline.odometry.correct import correct_odometry
 from fieldlogs.pipeline.rollback import Rollback, detect_rollbacks, inferred_rotation
 from fieldlogs.pipeline.summary import episode_events, events_frame, summarise
 from fieldlogs.pipeline.truth import compare_with_truth, truth_summary
-from fieldlogs.pipeline.types import Event, GpsAnalysis, Odometry
+from fieldlogs.pipeline.types import Event, Fix, GpsAnalysis, Odometry
 from fieldlogs.pipeline.wheelscale import scaled_cycles, wheel_corrected
 from fieldlogs.quality.clocks import ClockOffset, clock_offsets
 from fieldlogs.quality.dbfit import require_db_fit
@@ -83,6 +83,8 @@ class PipelineResult:
     """The run's raw GNSS inputs and the track solutions the aid computed (None without)."""
     wheel_scale: float = 1.0
     """The scale the pulse distance was divided by (:mod:`fieldlogs.pipeline.wheelscale`)."""
+    fixes: list[Fix] = field(default_factory=list, repr=False)
+    """The engine's estimates in time order (the per-cycle positions are evaluated from them)."""
 
 
 def clean_stream(frame: pd.DataFrame | None, name: str, events: list[Event]) -> pd.DataFrame | None:
@@ -313,5 +315,5 @@ def run_pipeline(
             figures["truth"] = truth_summary(compare_with_truth(sol.positions, truth))
     kappa = ctx.features.kappa if ctx.features is not None else None
     return PipelineResult(
-        run.run_id, sol.positions, ev_frame, figures, odo, ctx.gps, kappa, truth, ctx.cycles, ctx.gnss, scale
+        run.run_id, sol.positions, ev_frame, figures, odo, ctx.gps, kappa, truth, ctx.cycles, ctx.gnss, scale, sol.fixes
     )

@@ -51,6 +51,7 @@ import numpy as np
 import pandas as pd
 
 from dbtools.atomic import atomic_folder
+from dbtools.masks import true_runs
 from dbtools.network import Network
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.outputs import ResultsWriter
@@ -231,8 +232,8 @@ def compare_units(pos_f: pd.DataFrame, pos_r: pd.DataFrame) -> tuple[pd.DataFram
 
 def _spans(bad: np.ndarray) -> list[tuple[int, int]]:
     """(first, end exclusive) of every run of True."""
-    edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1).tolist(), np.flatnonzero(edges == -1).tolist(), strict=True))
+    starts, ends = true_runs(bad)
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
 def disagreement_events(frame: pd.DataFrame, unit: str) -> pd.DataFrame:

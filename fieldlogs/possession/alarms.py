@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from dbtools.masks import merge_runs, true_runs
 from fieldlogs.pipeline.config import GpsConfig
 from fieldlogs.pipeline.gps.analysis import TrackOdds
 from fieldlogs.pipeline.types import TrackDecision
@@ -68,18 +69,8 @@ BoolArray = npt.NDArray[np.bool_]
 
 def episodes(mask: BoolArray, t: FloatArray, merge_s: float) -> list[tuple[int, int]]:
     """(first, last) index of each run of True, runs closer than ``merge_s`` merged."""
-    if not mask.any():
-        return []
-    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
-    starts = np.flatnonzero(np.diff(m) == 1)
-    ends = np.flatnonzero(np.diff(m) == -1) - 1
-    out: list[tuple[int, int]] = []
-    for s, e in zip(starts, ends, strict=True):
-        if out and t[s] - t[out[-1][1]] < merge_s:
-            out[-1] = (out[-1][0], int(e))
-        else:
-            out.append((int(s), int(e)))
-    return out
+    starts, ends = merge_runs(*true_runs(mask), t, merge_s)
+    return [(int(s), int(e) - 1) for s, e in zip(starts, ends, strict=True)]
 
 
 def _rel(start: datetime, when: datetime | None) -> float:

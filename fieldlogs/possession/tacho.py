@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.masks import true_runs
 from fieldlogs.pipeline.cycles import build_cycles
 from fieldlogs.possession.config import PossessionConfig
 from fieldlogs.quality.tacho import TachoLimits, review_tacho, unusable_reason
@@ -118,9 +119,7 @@ def _standstills(t: FloatArray, still: BoolArray) -> FloatArray:
     n = t.size
     if not still.any():
         return np.array([], dtype=float).reshape(0, 2)
-    m = np.r_[0, still.astype(np.int8), 0]
-    a = np.flatnonzero(np.diff(m) == 1)
-    b = np.flatnonzero(np.diff(m) == -1)  # first row after each run (n at the end)
+    a, b = true_runs(still)  # b: first row after each run (n at the end)
     dt_med = float(np.median(np.diff(t))) if n > 1 else 0.1
     bb = np.clip(b, 0, n - 1)
     joined = (b < n) & (t[bb] - t[np.clip(b - 1, 0, None)] <= TACHO_GAP_S)

@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dbtools.atomic import atomic_file
+from dbtools.masks import true_runs
 from fieldlogs.radar.config import RadarConfig
 from fieldlogs.radar.framing import Frames
 from fieldlogs.radar.solve import range_gate
@@ -75,8 +76,7 @@ def _gnss_lost(ax: Any, run: Run) -> None:
         return
     t = gps["t"].to_numpy(dtype=float, na_value=np.nan)
     lost = gps["fix"].to_numpy(dtype=float, na_value=0.0) < GpsFix.GPS
-    edges = np.diff(np.concatenate([[0], lost.astype(np.int8), [0]]))
-    for k, (a, b) in enumerate(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True)):
+    for k, (a, b) in enumerate(zip(*true_runs(lost), strict=True)):
         ax.axvspan(
             t[a] - 0.5, t[b - 1] + 0.5, color="tab:olive", alpha=0.15, lw=0, label="no GNSS fix" if k == 0 else None
         )

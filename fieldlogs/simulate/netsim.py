@@ -15,12 +15,14 @@
 * truth: ``track_id`` and ``pos_m`` besides line, track (U/D/S only) and km (:meth:`.locate`);
 * raw GNSS (``[gnss_raw] enabled = true``): :func:`fieldlogs.simulate.gnss.trainsim.raw_gnss` on
   the route geometry — antennas above the true route (turnout arcs included), the
-  ``network.gnss_outages`` as tunnels; ``network.multipath`` moves the GPS fixes only.
+  ``network.gnss_outages`` as tunnels; ``network.multipath`` puts a reflecting surface at the
+  neighbouring track's centreline (:meth:`NetworkPlan.reflectors`): the pseudoranges gain the
+  reflection's code, carrier and C/N0 errors of :mod:`fieldlogs.simulate.gnss.reflection`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -31,6 +33,7 @@ from dbtools.network import Network
 from dbtools.rules.balise_groups import locate as locate_balises
 from dbtools.topology import all_tracks, centreline
 from fieldlogs.runs.meta import RunMeta
+from fieldlogs.simulate.gnss.reflection import Reflectors, ReflectorsAt, amplitude
 from fieldlogs.simulate.netgeom import RouteGeometry
 from fieldlogs.simulate.netroute import resolve_route
 from fieldlogs.simulate.running import Motion
@@ -39,6 +42,9 @@ from fieldlogs.simulate.sensors import TACHO_STEP
 from schemas.enums import Track
 
 TRACK_NAMES = frozenset(t.value for t in Track)
+#: Nearest centreline points searched for another track's, beyond the own track's 2 m points
+#: within the reach r (at most r + 1 of them).
+NEIGHBOUR_K = 64
 
 
 @dataclass
@@ -49,6 +55,8 @@ class NetworkPlan:
     balises: pd.DataFrame
     network: Network
     points_rho: list[float]
+    _points: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    _tree: Any = field(default=None, repr=False)
 
     def truth(self, motion: Motion, slipping: npt.NDArray[np.bool_]) -> pd.DataFrame:
         """The truth stream at 10 Hz with ``track_id`` and ``pos_m``."""
@@ -75,17 +83,12 @@ class NetworkPlan:
             return gps
         t = gps["t"].to_numpy(float)
         rho = np.interp(t, motion.t, motion.km)
-        at = self.geom.locate(rho)
-        bias = np.zeros(len(t))
-        for tid, a, b, m in cfg.multipath:
-            bias += np.where((at["track_id"] == tid) & (at["pos_m"] >= a) & (at["pos_m"] <= b), m, 0.0)
+        bias, own = self._bias(rho)
         hit = np.flatnonzero((bias != 0) & gps["lat"].notna().to_numpy())
         if hit.size == 0:
             return gps
-        x, y = self.geom.xy(rho[hit])
-        nx, ny = self.geom.xy(rho[hit], 1.0)
-        nx, ny = nx - x, ny - y  # unit normal, left of the route
-        side = self._neighbour_side(x, y, nx, ny, at["track_id"][hit], cfg.multipath_search_m)
+        x, y, nx, ny = self._frame(rho[hit])
+        side, _ = self._neighbour(x, y, nx, ny, own[hit])
         gx, gy = self.geom.projector.to_xy(gps["lon"].to_numpy(float)[hit], gps["lat"].to_numpy(float)[hit])
         shift = bias[hit] * side
         lon, lat = self.geom.lonlat(gx + shift * nx, gy + shift * ny)
@@ -94,27 +97,71 @@ class NetworkPlan:
         out.loc[out.index[hit], "lon"] = np.round(lon, 9)
         return out
 
-    def _neighbour_side(
-        self, x: np.ndarray, y: np.ndarray, nx: np.ndarray, ny: np.ndarray, own: np.ndarray, search_m: float
-    ) -> np.ndarray:
-        """+1 / −1: the nearest other track lies left / right of the route; 0: none within reach."""
-        from scipy.spatial import cKDTree
+    def reflectors(self) -> ReflectorsAt | None:
+        """The reflecting surfaces of ``network.multipath`` for raw GNSS, by route coordinate ρ:
+        over each range a surface at the nearest other track's centreline within
+        ``multipath_search_m`` (side and perpendicular distance from the route's centreline; none
+        there: no surface), amplitude :func:`~fieldlogs.simulate.gnss.reflection.amplitude` of the
+        range's bias_m; None without multipath (module docstring)."""
+        if not self.scenario.network.multipath:
+            return None
+        lo, hi = self.geom.segments[0].rho0, self.geom.segments[-1].rho0 + self.geom.segments[-1].length
 
+        def at(rho: np.ndarray) -> Reflectors:
+            r = np.clip(np.asarray(rho, dtype=float), lo, hi)
+            bias, own = self._bias(r)
+            side, dist = np.zeros(r.size), np.zeros(r.size)
+            hit = np.flatnonzero(bias != 0)
+            if hit.size:
+                side[hit], dist[hit] = self._neighbour(*self._frame(r[hit]), own[hit])
+            return Reflectors(side, dist, amplitude(bias, dist) * (side != 0))
+
+        return at
+
+    def _bias(self, rho: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The summed ``network.multipath`` bias_m at route coordinates ρ and the track there."""
+        at = self.geom.locate(rho)
+        bias = np.zeros(len(rho))
+        for tid, a, b, m in self.scenario.network.multipath:
+            bias += np.where((at["track_id"] == tid) & (at["pos_m"] >= a) & (at["pos_m"] <= b), m, 0.0)
+        return bias, at["track_id"]
+
+    def _frame(self, rho: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Centreline point (x, y) at ρ and the unit normal (nx, ny) left of the route."""
+        x, y = self.geom.xy(rho)
+        nx, ny = self.geom.xy(rho, 1.0)
+        return x, y, nx - x, ny - y
+
+    def _neighbour(
+        self, x: np.ndarray, y: np.ndarray, nx: np.ndarray, ny: np.ndarray, own: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(side, d): +1 / −1 where the nearest point of another track within
+        ``multipath_search_m`` lies left / right of the route (0: none within reach), and its
+        distance along the normal [m]."""
         px, py, pid = self._other_points()
-        side = np.zeros(len(x))
-        if len(px) == 0:
-            return side
-        tree = cKDTree(np.column_stack([px, py]))
-        for i in range(len(x)):
-            near = tree.query_ball_point((x[i], y[i]), search_m)
-            near = [j for j in near if pid[j] != own[i]]
-            if near:
-                j = min(near, key=lambda q: (px[q] - x[i]) ** 2 + (py[q] - y[i]) ** 2)
-                side[i] = np.sign((px[j] - x[i]) * nx[i] + (py[j] - y[i]) * ny[i])
-        return side
+        side, dist = np.zeros(len(x)), np.zeros(len(x))
+        if len(px) == 0 or len(x) == 0:
+            return side, dist
+        if self._tree is None:
+            from scipy.spatial import cKDTree
+
+            self._tree = cKDTree(np.column_stack([px, py]))
+        reach = self.scenario.network.multipath_search_m
+        k = min(int(reach) + 1 + NEIGHBOUR_K, len(px))
+        dd, jj = self._tree.query(np.column_stack([x, y]), k=k, distance_upper_bound=reach)
+        dd, jj = dd.reshape(len(x), k), jj.reshape(len(x), k)
+        ok = np.isfinite(dd)
+        ok[ok] = pid[jj[ok]] != np.repeat(own, k).reshape(len(x), k)[ok]
+        found = ok.any(axis=1)
+        j = jj[np.arange(len(x)), np.argmax(ok, axis=1)][found]
+        along = (px[j] - x[found]) * nx[found] + (py[j] - y[found]) * ny[found]
+        side[found], dist[found] = np.sign(along), np.abs(along)
+        return side, dist
 
     def _other_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Centreline points of every track, resampled every 2 m, in the route's plane."""
+        """Centreline points of every track, resampled every 2 m, in the route's plane (once)."""
+        if self._points is not None:
+            return self._points
         xs, ys, ids = [], [], []
         for _, row in all_tracks(self.network).iterrows():
             cl = centreline(self.network, row)
@@ -126,8 +173,10 @@ class NetworkPlan:
             ys.append(np.interp(p, cl.pos_m, y))
             ids.append(np.full(len(p), str(row["track_id"]), dtype=object))
         if not xs:
-            return np.empty(0), np.empty(0), np.empty(0, dtype=object)
-        return np.concatenate(xs), np.concatenate(ys), np.concatenate(ids)
+            self._points = np.empty(0), np.empty(0), np.empty(0, dtype=object)
+        else:
+            self._points = np.concatenate(xs), np.concatenate(ys), np.concatenate(ids)
+        return self._points
 
     def finish(
         self,

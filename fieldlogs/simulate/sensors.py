@@ -29,6 +29,7 @@ import numpy.typing as npt
 import pandas as pd
 from scipy.signal import lfilter
 
+from dbtools.masks import true_runs
 from fieldlogs.simulate.running import DT, Motion
 from fieldlogs.simulate.scenario import Scenario
 from fieldlogs.simulate.track import TrackGeometry
@@ -276,7 +277,6 @@ def gps_stream(
     lat = np.where(outage, np.nan, np.round(lat, 9))
     lon = np.where(outage, np.nan, np.round(lon, 9))
     frame = pd.DataFrame({"t": t, "lat": lat, "lon": lon, "fix": fix, "nsat": nsat, "hdop": hdop})
-    starts = np.flatnonzero(np.diff(np.concatenate([[0], outage.astype(np.int8), [0]])) == 1)
-    ends = np.flatnonzero(np.diff(np.concatenate([[0], outage.astype(np.int8), [0]])) == -1)
+    starts, ends = true_runs(outage)
     spans = [(float(t[s]), float(t[e - 1])) for s, e in zip(starts, ends, strict=True)]
     return frame, spans

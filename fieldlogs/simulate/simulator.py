@@ -146,7 +146,7 @@ def simulate_run(network: Network, scenario: Scenario, seed: int | None = None) 
 
         streams["radar_if"], meta.extra["radar"] = radar_if_stream(motion, geom, scenario, rngs["radar_if"])
     if scenario.gnss_raw.enabled:
-        _add_raw_gnss(streams, meta, scenario, motion, geom, rngs["gnss_raw"])
+        _add_raw_gnss(streams, meta, (scenario, motion, geom, plan), rngs["gnss_raw"])
     _add_readers(meta, scenario)
     _add_cab_r(streams, meta, (scenario, motion, geom, plan, kin), rngs["cab_r"])
     return SimulatedRun(streams, meta)
@@ -195,19 +195,20 @@ def _add_readers(meta: RunMeta, scenario: Scenario) -> None:
 def _add_raw_gnss(
     streams: dict[str, pd.DataFrame],
     meta: RunMeta,
-    scenario: Scenario,
-    motion: Motion,
-    geom: TrackGeometry,
+    src: tuple[Scenario, Motion, TrackGeometry, NetworkPlan | None],
     rng: np.random.Generator,
 ) -> None:
-    """gnss_obs, gnss_nav and the run.json vehicle and gnss blocks (``fieldlogs.simulate.gnss.trainsim``)."""
+    """gnss_obs, gnss_nav and the run.json vehicle and gnss blocks (``fieldlogs.simulate.gnss.trainsim``);
+    on a network route its ``network.multipath`` reflectors."""
     from fieldlogs.recorders.timebase import iso_to_gps
     from fieldlogs.simulate.gnss.trainsim import RawGnssSpec, raw_gnss, vehicle_block
 
+    scenario, motion, geom, plan = src
     g = scenario.gnss_raw
     spec = RawGnssSpec(
         g.systems, g.interval_s, g.antennas_x_m, g.antenna_z_m, g.corridor, scenario.noise,
         iso_to_gps(scenario.run.start_time), scenario.gps.outages_km_m, g.sbas,
+        None if plan is None else plan.reflectors(),
     )  # fmt: skip
     raw = raw_gnss(motion, geom, spec, rng)
     streams["gnss_obs"], streams["gnss_nav"] = raw.obs, raw.nav
@@ -230,6 +231,8 @@ def _add_raw_gnss(
         "corridor": g.corridor,
         "systems": list(g.systems),
     }
+    if raw.reflection is not None:
+        meta.extra["sim_truth"]["gnss_raw"]["reflection"] = raw.reflection
 
 
 def _meta(

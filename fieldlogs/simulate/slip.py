@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import numpy.typing as npt
 
+from dbtools.masks import true_runs
 from fieldlogs.simulate.running import DT, Motion
 from fieldlogs.simulate.scenario import Scenario, SlipCfg
 from fieldlogs.simulate.track import TrackGeometry
@@ -37,12 +38,6 @@ class SlipEpisode:
 
     def to_json(self) -> dict[str, object]:
         return {k: round(v, 3) if isinstance(v, float) else v for k, v in asdict(self).items()}
-
-
-def _runs(mask: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """(start, end exclusive) of every run of True."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
 
 
 def place_episodes(
@@ -106,7 +101,7 @@ def _place(
     """One episode wholly inside a free run of ``phase`` (shortened to fit, ≥ 1 s), or None."""
     duration = float(rng.uniform(*cfg.duration_s))
     depth = float(rng.uniform(*cfg.depth))
-    starts, ends = _runs(phase & ~busy)
+    starts, ends = true_runs(phase & ~busy)
     if len(starts) == 0:
         return None
     lengths = (ends - starts) * DT

@@ -47,6 +47,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.masks import sign_runs as shared_sign_runs
 from fieldlogs.pipeline.config import FeatureConfig
 from fieldlogs.survey.balises import t_quantile
 from fieldlogs.survey.config import SurveyConfig
@@ -98,19 +99,7 @@ class Rule:
 def sign_runs(km: FloatArray, kappa: FloatArray, level: float, merge_m: float) -> list[tuple[int, int, int]]:
     """(first, last, sign) of every same-sign run where ±κ ≥ level (``km`` ascending);
     runs of one sign closer than ``merge_m`` merged."""
-    out: list[tuple[int, int, int]] = []
-    for sgn in (1, -1):
-        above = np.nan_to_num(sgn * kappa, nan=-np.inf) >= level
-        edges = np.diff(np.concatenate([[0], above.astype(np.int8), [0]]))
-        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
-        if starts.size == 0:
-            continue
-        gap = km[starts[1:]] - km[ends[:-1]]
-        keep = np.concatenate([[True], gap >= merge_m])
-        first = starts[keep]
-        last = np.concatenate([ends[np.flatnonzero(keep)[1:] - 1], [ends[-1]]])
-        out += [(int(a), int(b), sgn) for a, b in zip(first, last, strict=True)]
-    return sorted(out)
+    return sorted((a, b - 1, sgn) for a, b, sgn in shared_sign_runs(kappa, km, level, merge_m))
 
 
 def crossing(km: FloatArray, kappa: FloatArray, i_out: int, i_in: int, level: float, sgn: int) -> float:

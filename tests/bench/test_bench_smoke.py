@@ -24,7 +24,7 @@ BENCH = ROOT / "bench"
 #: The sample run the scripts that take a run folder read (with the ``sample_db`` fixture).
 SAMPLE_RUN = ROOT / "fieldlogs" / "sample_logs" / "sim-d-slips"
 #: Modules of bench/ that are not scripts.
-NOT_SCRIPTS = {"_common.py", "_db_bounds.py"}
+NOT_SCRIPTS = {"_causes.py", "_common.py", "_db_bounds.py"}
 #: Seconds one script may take before it counts as hung (the slowest takes ~10 s on 2 cores).
 TIMEOUT_S = 300.0
 
@@ -50,6 +50,7 @@ SMOKE: dict[str, Smoke] = {
         (
             r"wrong-track claims \(determined cycles\)\s+\d",
             r"selectivity D-GPS\s+[\d.]+ %",
+            r"not selected, by cause\s+\S",
             r"raw GNSS: runs\s+1 ",
             r"median by track_gnss \(raw-GNSS fits\)\s+\S+ m \(n=\d+\)",
         ),
@@ -83,7 +84,8 @@ SMOKE: dict[str, Smoke] = {
         "--lines 2 --per-line 50 --repeat 1", (r"ratio track match / nearest-track: [\d.]+×", r"fixes/s")
     ),
     "bench_matching.py": Smoke(
-        "--lines 2 --points 200 --fixes 1000 --loop-fixes 100 --repeat 1", (r"ratios: ours / loop = [\d.]+×",)
+        "--lines 2 --points 200 --fixes 1000 --loop-fixes 100 --repeat 1",
+        (r"ratios: ours / loop = [\d.]+×", r"numpy twin .* fixes/s CPU; frames equal: True"),
     ),
     "bench_odometry.py": Smoke("--hours 0.1 --slips 2 --repeat 1", (r"ratio naive / vectorised \(CPU\): [\d.]+×",)),
     "bench_osm.py": Smoke("--smoke", (r"osmium read", r"× osmium.s read", r"switches \d+")),

@@ -88,6 +88,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from dbtools.masks import sign_runs
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, load_tables
@@ -162,6 +163,11 @@ class FeatureUnit:
         self.tables, self.skipped = load_tables(self.network.feature_points)
         self._done: dict[tuple[str, str, str, int], int] = {}
 
+    @property
+    def dt(self) -> float:
+        """The cycle time the κ smoothing counts in [s]."""
+        return self._dt
+
     # -- scheduling ---------------------------------------------------------------------
     def margin(self, fix: Fix, idx: npt.ArrayLike) -> FloatArray:
         """Search margin w at cycles ``idx`` under ``fix`` [m]."""
@@ -173,18 +179,24 @@ class FeatureUnit:
         )
         return np.asarray(np.maximum(grown, self.cfg.search_margin_m), dtype=float)
 
-    def next_evaluation(self, fix: Fix, after_i: int, km_between: KmBetween) -> tuple[int, Candidate] | None:
+    def next_evaluation(
+        self, fix: Fix, after_i: int, km_between: KmBetween, table: FeatureTable | None = None, k: int | None = None
+    ) -> tuple[int, Candidate] | None:
         """Cycle and candidate of the next feature ahead (module docstring), or None.
         ``km_between(i0, i1)`` is the estimate on cycles [i0, i1): the scan reads only as far
-        ahead as the feature lies (:meth:`_first_passed`)."""
-        table = self.tables.get((fix.line_code, fix.track))
+        ahead as the feature lies (:meth:`_first_passed`). ``table`` and ``k`` (position per
+        metre of body-forward travel) default to the fix's line/track and its k; a track's
+        own table with a candidate's pos as ``km_between`` and its kp runs the same scan
+        along a network track (:mod:`fieldlogs.pipeline.aids.track_features`)."""
+        table = self.tables.get((fix.line_code, fix.track)) if table is None else table
+        k = fix.k if k is None else k
         n = self._d.size
         if not self.available or table is None or not 0 <= after_i < n:
             return None
         i_ref = min(int(np.searchsorted(self._d, fix.d_ref, side="left")), n - 1)
         bounds = [after_i, *self._changes[self._changes > after_i].tolist(), n]
         for s0, s1 in itertools.pairwise(bounds):
-            sdir = int(fix.k * self._cab[s0])
+            sdir = int(k * self._cab[s0])
             u_all, km_all, sign_all = table.travel_rows(sdir)
             seg_first = int(self._changes[self._changes <= s0][-1]) if (self._changes <= s0).any() else 0
             i_start = max(i_ref, seg_first)
@@ -309,7 +321,7 @@ class FeatureUnit:
         cycle i)."""
         d, x, kap, u = self._d, self._x, self.kappa, c.u
         best: tuple[float, float, float, int] | None = None
-        for j0, j1, sgn in _runs(kap[i_a : i_hi + 1], x[i_a : i_hi + 1], k_lo, self.cfg.crossing_merge_m):
+        for j0, j1, sgn in sign_runs(kap[i_a : i_hi + 1], x[i_a : i_hi + 1], k_lo, self.cfg.crossing_merge_m):
             if j0 < 1 or j1 > i_hi - i_a:
                 continue  # a crossing outside the window
             xe = _cross(x, kap, i_a + j0 - 1, i_a + j0, k_lo, sgn)
@@ -434,24 +446,6 @@ class FeatureUnit:
         detail["min_speed_kmh"] = round(v_min * 3.6, 2)
         if not v_min * 3.6 >= self.cfg.min_speed_kmh:
             failed.append("min_speed")
-
-
-def _runs(k: FloatArray, x: FloatArray, level: float, merge_m: float) -> list[tuple[int, int, int]]:
-    """Runs (first index, index after the last, sign) where ±κ ≥ level; same-sign runs
-    separated by less than ``merge_m`` of travel are merged."""
-    out: list[tuple[int, int, int]] = []
-    for sgn in (1, -1):
-        above = np.nan_to_num(sgn * k, nan=-np.inf) >= level
-        edges = np.diff(np.concatenate([[0], above.astype(np.int8), [0]]))
-        starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        merged: list[list[int]] = []
-        for s, e in zip(starts.tolist(), ends.tolist(), strict=True):
-            if merged and x[s] - x[merged[-1][1] - 1] < merge_m:
-                merged[-1][1] = e
-            else:
-                merged.append([s, e])
-        out += [(s, e, sgn) for s, e in merged]
-    return out
 
 
 def _cross(x: FloatArray, k: FloatArray, i0: int, i1: int, level: float, sgn: int) -> float:

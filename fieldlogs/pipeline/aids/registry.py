@@ -21,6 +21,8 @@ from fieldlogs.pipeline.aids.radar_if import RadarIfSpeedAid
 from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.aids.rollback import RollbackAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
+from fieldlogs.pipeline.aids.track_balise import TrackBaliseAid
+from fieldlogs.pipeline.aids.track_features import TrackFeatureAid, TrackFeatureFixAid, track_feature_tables
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes, TrackGpsAid
 from fieldlogs.pipeline.aids.track_gps_along import TrackGpsAlongAid
@@ -82,15 +84,29 @@ def _topology(ctx: RunContext) -> Aid | None:
     return TopologyAid(track_lines(ctx.network), ctx.cfg.margin)
 
 
-def _balise_group(ctx: RunContext) -> Aid | None:
+def _network_telegrams(ctx: RunContext, kind: BaliseKind) -> pd.DataFrame | None:
+    """The run's balise telegrams of ``kind`` on a network DB (None: none, or no topology)."""
     tel = ctx.streams.get("balise")
     if tel is None or not _has_topology(ctx):
         return None
-    g = tel[tel["kind"] == BaliseKind.G.value]
-    if not len(g):
+    rows = tel[tel["kind"] == kind.value]
+    return rows if len(rows) else None
+
+
+def _balise_group(ctx: RunContext) -> Aid | None:
+    g = _network_telegrams(ctx, BaliseKind.G)
+    if g is None:
         return None
     groups = ctx.network.cached("balise_groups", lambda: group_table(ctx.network))
     return BaliseGroupAid(groups, track_lines(ctx.network), ctx.cfg.balise, g, ctx.geometry.reader_x_m)
+
+
+def _track_balise(ctx: RunContext) -> Aid | None:
+    i2 = _network_telegrams(ctx, BaliseKind.I2)
+    if i2 is None:
+        return None
+    db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
+    return TrackBaliseAid(db, track_lines(ctx.network), ctx.cfg.balise, ctx.cfg.margin, i2, ctx.geometry.reader_x_m)
 
 
 def _track_imu(ctx: RunContext) -> Aid | None:
@@ -99,6 +115,23 @@ def _track_imu(ctx: RunContext) -> Aid | None:
         return None
     sw = ctx.network.cached("turnouts", lambda: turnouts(ctx.network.switches))
     return TrackImuAid(wz, sw, track_lines(ctx.network), ctx.cfg.track_select, ctx.cfg.margin)
+
+
+def _track_features(ctx: RunContext) -> Aid | None:
+    wz = ctx.cycles.imu.get("wz") if ctx.cycles.has_imu else None
+    if wz is None or not _has_topology(ctx) or not ctx.cfg.track_select.feature_headings:
+        return None
+    lines = track_lines(ctx.network)
+    tables = track_feature_tables(ctx.network, lines)
+    return TrackFeatureAid(tables, lines, wz, ctx.cfg.track_select, ctx.cfg.margin) if tables else None
+
+
+def _track_feature_fix(ctx: RunContext) -> Aid | None:
+    if ctx.features is None or not _has_topology(ctx):
+        return None
+    lines = track_lines(ctx.network)
+    own = track_feature_tables(ctx.network, lines).own
+    return TrackFeatureFixAid(ctx.features, own, lines) if own else None
 
 
 def _network_fixes(ctx: RunContext) -> NetworkFixes | None:
@@ -121,8 +154,12 @@ def _track_gps(ctx: RunContext) -> Aid | None:
 
 def _track_gps_along(ctx: RunContext) -> Aid | None:
     f = _network_fixes(ctx)
+    if f is None or ctx.gps is None:
+        return None
+    u = ctx.gps.fixes[ctx.gps.fixes["usable"].to_numpy(dtype=bool)]
+    usable = (u["t"].to_numpy(dtype=float), u["lat"].to_numpy(dtype=float), u["lon"].to_numpy(dtype=float))
     x_a = ctx.geometry.gps_antenna_x_m
-    return None if f is None else TrackGpsAlongAid(**vars(f), margin=ctx.cfg.margin, antenna_x_m=x_a)
+    return TrackGpsAlongAid(**vars(f), margin=ctx.cfg.margin, antenna_x_m=x_a, usable=usable)
 
 
 def _track_gps_initial(ctx: RunContext) -> Aid | None:
@@ -168,7 +205,10 @@ POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
     _gnss,
     _topology,
     _balise_group,
+    _track_balise,
     _track_imu,
+    _track_features,
+    _track_feature_fix,
     _track_gps,
     _track_gps_along,
     _track_gps_initial,

@@ -3,19 +3,43 @@
 While the estimate is ambiguous, every trusted GPS fix (:mod:`fieldlogs.pipeline.gps`) is
 compared with each candidate: r_j = the signed offset (left of body-forward) of the antenna from
 candidate j's centreline at the candidate's dead-reckoned position. The GPS error is a slow
-bias b common to the fixes of the evidence (σ_b = ``gps.noise_sigma_m``; its correlation
-time is long against a switch's evidence) plus white noise σ_w (``gps.noise_white_m``), so
-the n offsets r of the true candidate have covariance C = σ_w²·I + σ_b²·11ᵀ and
+Gauss–Markov bias b (σ_b = ``gps.noise_sigma_m``, correlation time τ = ``gps.noise_tau_s``, the
+S001 D-GPS model and the simulator's) plus white noise σ_w (``gps.noise_white_m``), so the n
+offsets r of the true candidate at times t_i have covariance
 
-    Q_j = rᵀC⁻¹r = (Σr² − σ_b²(Σr)²/(σ_w² + n·σ_b²)) / σ_w²     (Sherman–Morrison).
+    C_ik = σ_w²·δ_ik + σ_b²·exp(−|t_i − t_k|/τ),     Q_j = r_jᵀC⁻¹r_j
 
-The log-likelihood ratio of a against b is ½(Q_b − Q_a); b is dropped once some a reaches
-Wald's A = ln((1 − β)/α) (``track_select``), the sequential test S001 runs for up/down. A
-bias saturates the evidence: two tracks 4 m apart separate (LLR → (c² − 2bc)/(2σ_b²)), two
-tracks within the bias do not, and the position stays ambiguous. The sums restart at every
-change of the candidate set.
+(one Cholesky factorisation for every candidate; τ = ∞ gives the constant bias, C = σ_w²·I +
+σ_b²·11ᵀ and Q = (Σr² − σ_b²(Σr)²/(σ_w² + n·σ_b²))/σ_w² by Sherman–Morrison). The
+log-likelihood ratio of a against b is ½(Q_b − Q_a); b is dropped once some a reaches Wald's
+A = ln((1 − β)/α) (``track_select``), the sequential test S001 runs for up/down. Under the model
+the likelihood ratio of a wrong candidate against the true one is a non-negative martingale of
+mean 1 as fixes are added, so by Ville's inequality the chance that it *ever* reaches e^A is at
+most e^−A = α/(1 − β), whatever the number of fixes: with k candidates the true one is dropped
+with probability at most (k − 1)·α/(1 − β). A bias saturates the evidence: two tracks c apart
+with a bias b toward the other one separate only while (c² − 2bc)/(2σ_b²) ≥ A (tracks 3.8 m
+apart: b ≤ 0.54 m), and the position stays ambiguous until the bias decorrelates (τ) or other
+evidence comes.
 
-**Multipath steps.** The model holds a bias that is constant over the evidence; a multipath step
+**Evidence before the set.** The likelihood of a candidate is that of its whole path: the
+fixes before a candidate set began count as well, each on the track the candidate was on then.
+
+* After a split (or a candidate dropped), each candidate keeps its lineage's offsets: its own,
+  or its parent's — the candidate of the last set on the track it came from — before the
+  split. Two branches of one split share their parent's rows (equal offsets: no evidence
+  between them, but the slow bias is seen before the toe); two candidates from different
+  parents (an ambiguity among parallel tracks carried through a switch) keep the evidence
+  already gathered between them. On the one determined track the latest ``MAX_PREFIX`` fixes in
+  a row are kept for the next split (no jump, no gap over ``gps.max_gap_s``).
+* A set whose candidates have no lineage (the initial position among parallel tracks, a
+  line-based placement with its parallel tracks) takes the trusted fixes before it, back to
+  ``MAX_PREFIX`` of them while every candidate's dead-reckoned antenna stays on its own track
+  and the fixes follow at most ``gps.max_gap_s`` apart, cut after any jump in them: the
+  initial position's steady chain is evidence at once, not five fixes later.
+
+Evidence longer than ``MAX_ROWS`` fixes keeps its last ``MAX_PREFIX`` (a new test, as a restart).
+
+**Multipath steps.** The model holds a bias that changes slowly; a multipath step
 toward the neighbouring track (a station roof, the simulator's ``network.multipath``: 2–4 m,
 lasting hundreds of metres) shortly after the split breaks it: the true candidate's offsets
 jump, the wrong branch, diverging through the same metres, changes less, and with a 4 m step
@@ -28,7 +52,8 @@ saw one, is not decided by GPS at all (the IMU, a balise group or a later split 
 And the model must fit: under the hypothesis that candidate j is the true track Q_j ~ χ²(n);
 when even the best candidate's Q exceeds χ²(n)'s 1 − α quantile (α = ``track_select.alpha``),
 no candidate explains the fixes, and the evidence restarts from the latest one. Nor does the
-test decide on fewer than ``track_select.gps_min_fixes`` fixes: a step of about the branches'
+test decide between two candidates on fewer than ``track_select.gps_min_fixes`` fixes at which
+their offsets differ (the rows before their split do not count): a step of about the branches'
 divergence over one second (2 m, 1–2 s past the toe of a 1:9 turnout) passes for noise on the
 wrong branch, and only the following fixes show that neither branch has a constant offset. A fix joins
 the evidence only after ``MIN_SPACING_M`` of travel
@@ -52,9 +77,15 @@ from fieldlogs.pipeline.aids.track_imu import kept, resolve
 from fieldlogs.pipeline.config import GpsConfig, TrackSelectConfig
 from fieldlogs.pipeline.hypotheses import TrackLines
 from fieldlogs.pipeline.types import Fix, FloatArray, Hypothesis
+from schemas.enums import PositionState
 
 #: Travel between two fixes used as evidence [m] (module docstring).
 MIN_SPACING_M = 1.0
+#: Fixes kept as the start of a new candidate set's evidence: on the determined track before a
+#: split, or evaluated back along the candidates' own tracks (module docstring).
+MAX_PREFIX = 30
+#: Longest evidence: beyond it, only its last ``MAX_PREFIX`` fixes are kept (module docstring).
+MAX_ROWS = 200
 
 
 def offset(lines: TrackLines, h: Hypothesis, pos: float, lat: float, lon: float) -> float:
@@ -68,10 +99,30 @@ def offset(lines: TrackLines, h: Hypothesis, pos: float, lat: float, lon: float)
     return float(-(float(px[0]) - x) * uy + (float(py[0]) - y) * ux)
 
 
-def quad(r: FloatArray, sigma_w: float, sigma_b: float) -> float:
-    """Q = rᵀC⁻¹r for C = σ_w²·I + σ_b²·11ᵀ (module docstring)."""
-    n = r.size
-    return float((np.sum(r * r) - sigma_b**2 * np.sum(r) ** 2 / (sigma_w**2 + n * sigma_b**2)) / sigma_w**2)
+def quad(r: FloatArray, sigma_w: float, sigma_b: float, t: FloatArray | None = None, tau_s: float = math.inf) -> float:
+    """Q = rᵀC⁻¹r of one candidate's offsets (module docstring); see :func:`quads`."""
+    return float(quads(np.atleast_2d(r), sigma_w, sigma_b, t, tau_s)[0])
+
+
+def quads(
+    r: FloatArray, sigma_w: float, sigma_b: float, t: FloatArray | None = None, tau_s: float = math.inf
+) -> FloatArray:
+    """Q_j = r_jᵀC⁻¹r_j for each row of the (candidates × fixes) offsets, with the fixes' error
+    covariance C_ik = σ_w²·δ_ik + σ_b²·exp(−|t_i − t_k|/τ) (a Gauss–Markov bias of correlation
+    time τ plus white noise; τ = ∞ or no times: the constant bias C = σ_w²·I + σ_b²·11ᵀ, whose
+    Q is (Σr² − σ_b²(Σr)²/(σ_w² + n·σ_b²))/σ_w² by Sherman–Morrison). One Cholesky
+    factorisation C = LLᵀ serves every candidate: Q_j = |L⁻¹r_j|²."""
+    n = r.shape[1]
+    if t is None or not math.isfinite(tau_s):
+        corr = np.ones((n, n))
+    elif tau_s <= 0.0:
+        corr = np.eye(n)
+    else:
+        tt = np.asarray(t, dtype=float)
+        corr = np.exp(-np.abs(tt[:, None] - tt[None, :]) / tau_s)
+    c = sigma_b**2 * corr + sigma_w**2 * np.eye(n)
+    z = np.linalg.solve(np.linalg.cholesky(c), np.asarray(r, dtype=float).T)
+    return np.asarray(np.sum(z * z, axis=0), dtype=float)
 
 
 def chi2_upper(p: float, n: int) -> float:
@@ -84,9 +135,11 @@ def chi2_upper(p: float, n: int) -> float:
     return float(n * (1.0 - a + z * math.sqrt(a)) ** 3)
 
 
-def gps_llr(offsets: FloatArray, sigma_w: float, sigma_b: float) -> FloatArray:
-    """LLR[a, b] = ½(Q_b − Q_a) for the (candidates × fixes) offsets."""
-    q = np.array([quad(row, sigma_w, sigma_b) for row in offsets])
+def gps_llr(
+    offsets: FloatArray, sigma_w: float, sigma_b: float, t: FloatArray | None = None, tau_s: float = math.inf
+) -> FloatArray:
+    """LLR[a, b] = ½(Q_b − Q_a) for the (candidates × fixes) offsets (:func:`quads`)."""
+    q = quads(np.asarray(offsets, dtype=float), sigma_w, sigma_b, t, tau_s)
     return np.asarray(0.5 * (q[None, :] - q[:, None]), dtype=float)
 
 
@@ -112,8 +165,14 @@ class TrackGpsAid(NetworkFixes):
     name: str = "track_gps"
     priority: Priority = Priority.TRACK
     needs_track: bool = True
-    key: tuple[tuple[int, str], ...] = ()
-    rows: list[list[float]] = field(default_factory=list)
+    key: tuple[int, ...] = ()
+    """Lineage ids of the candidates the evidence is held for."""
+    times: list[float] = field(default_factory=list)
+    """Times of the fixes of the evidence."""
+    cols: dict[int, list[float]] = field(default_factory=dict)
+    """Per candidate lineage: its offsets at ``times`` (its ancestors' before a split)."""
+    tracks: dict[int, str] = field(default_factory=dict)
+    """Per candidate lineage of the current set: its track (a split's parent is found by it)."""
     last_d: float = float("-inf")
     """Unsigned travel at the last fix used."""
     set_t: float = float("-inf")
@@ -136,43 +195,125 @@ class TrackGpsAid(NetworkFixes):
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate
         if fix is None or not fix.hyps:
-            self.prev = None
+            self.prev, self.key = None, ()
+            self._keep([])
             return Outcome()
         j: int = obs.payload
-        off = self._offsets(fix, view, float(self.lat[j]), float(self.lon[j]))
+        off = self._offsets(fix, view.s, float(self.lat[j]), float(self.lon[j]))
+        single = len(fix.hyps) < 2
         if self._jumped(view.t, off):
             self.jump_t = view.t
-        if len(fix.hyps) < 2:
-            self.key = ()
-            return Outcome()
-        key = tuple((h.hid, h.track_id) for h in fix.hyps)
-        if tuple(k[0] for k in key) != tuple(k[0] for k in self.key):
-            self.rows, self.last_d, self.set_t = [], float("-inf"), view.t  # a new candidate set: start again
-        self.key = key
-        if self.jump_t >= self.set_t - self.gps.jump_hold_s:
-            return Outcome()  # a jump in or just before this evidence: no GPS decision on it (docstring)
+            self._keep([])  # no evidence across a jump
+        elif single and (fix.state != PositionState.DETERMINED or self._gap(view.t)):
+            self._keep([])  # the track before a split: determined, fixes in a row
+        key = tuple(h.hid for h in fix.hyps)
+        if key != self.key:
+            self._begin(fix, view)  # a new candidate set: its evidence from the fixes before it
+            self.key = key
         if view.d - self.last_d < MIN_SPACING_M:
             return Outcome()  # standing: no independent evidence
         self.last_d = view.d
-        self.rows.append(off)
-        r = np.asarray(self.rows, dtype=float).T
+        self._append(view.t, dict(zip(key, off, strict=True)))
+        if single or self.jump_t >= self.set_t - self.gps.jump_hold_s:
+            return Outcome()  # a jump in or just before this evidence: no GPS decision on it (docstring)
+        return self._test(fix, view)
+
+    def _test(self, fix: Fix, view: EngineView) -> Outcome:
+        """The sequential test on the evidence (module docstring)."""
+        r = np.asarray([self.cols[h.hid] for h in fix.hyps], dtype=float)
         if not np.isfinite(r).all():
             return Outcome()
         sw, sb = max(self.gps.noise_white_m, 1e-3), self.gps.noise_sigma_m
-        q = np.array([quad(row, sw, sb) for row in r])
+        q = quads(r, sw, sb, np.asarray(self.times, dtype=float), self.gps.noise_tau_s)
         if float(q.min()) > chi2_upper(1.0 - self.cfg.alpha, r.shape[1]):
-            self.rows = self.rows[-1:]  # no candidate explains the fixes: start again from this one
+            self._keep([-1])  # no candidate explains the fixes: start again from this one
             return Outcome()
-        if r.shape[1] < self.cfg.gps_min_fixes:
-            return Outcome()  # too few fixes for a multipath step to show (docstring)
-        llr = np.asarray(0.5 * (q[None, :] - q[:, None]), dtype=float)
+        # a pair is decided only on gps_min_fixes fixes at which the two candidates' offsets differ
+        # (not the common track before their split): too few for a multipath step to show (docstring)
+        apart = (r[:, None, :] != r[None, :, :]).sum(axis=2)
+        llr = np.where(apart >= self.cfg.gps_min_fixes, 0.5 * (q[None, :] - q[:, None]), -np.inf)
         detail: dict[str, Any] = {
             "evidence": "gps",
-            "fixes": int(r.shape[1]),
-            "llr": round(float(np.max(llr)), 2),
+            "fixes": int(apart.max()),
+            "llr": round(float(np.max(llr)), 2) if np.isfinite(llr).any() else None,
             "after_switch_m": _after(fix, view.d),
         }
         return resolve(fix, kept(llr, self.cfg.threshold), view, self.lines, detail)
+
+    def _gap(self, t: float) -> bool:
+        return bool(self.times) and t - self.times[-1] > self.gps.max_gap_s
+
+    def _keep(self, rows: list[int]) -> None:
+        """Keep only the evidence rows ``rows`` (indexes into ``times``)."""
+        self.times = [self.times[k] for k in rows] if self.times else []
+        self.cols = {h: [c[k] for k in rows] for h, c in self.cols.items()} if self.times else {}
+        if not self.times:
+            self.last_d = float("-inf")
+
+    def _append(self, t: float, offsets: dict[int, float]) -> None:
+        if len(self.times) >= MAX_ROWS:
+            self._keep(list(range(len(self.times) - MAX_PREFIX, len(self.times))))
+        if not self.times:
+            self.cols = {}
+        self.times.append(t)
+        for h, o in offsets.items():
+            self.cols.setdefault(h, []).append(o)
+
+    def _begin(self, fix: Fix, view: EngineView) -> None:
+        """The evidence of a new candidate set (module docstring, *evidence before the set*): each
+        candidate's lineage's offsets — its own, or its parent's before a split (the candidate of
+        the last set on the track it came from) — when every candidate has one; otherwise the fixes
+        before now evaluated on every candidate's own track, dead reckoned back."""
+        self.set_t = view.t
+        old = dict(self.cols)
+        parent = {h.hid: h.hid for h in fix.hyps if h.hid in old}
+        on = {t: hid for hid, t in self.tracks.items() if hid in old}
+        for h in fix.hyps:
+            if h.hid not in parent and h.came_from is not None and h.came_from[0] in on:
+                parent[h.hid] = on[h.came_from[0]]
+        if self.times and len(parent) == len(fix.hyps):
+            self.cols = {h.hid: list(old[parent[h.hid]]) for h in fix.hyps}
+        else:
+            back = self._backfill(fix, view)
+            self.times = [t for t, _ in back]
+            self.cols = {h.hid: [o[k] for _, o in back] for k, h in enumerate(fix.hyps)}
+            self.last_d = float(np.interp(back[-1][0], view.travel.t, view.travel.d)) if back else float("-inf")
+        self.tracks = {h.hid: h.track_id for h in fix.hyps}
+
+    def _backfill(self, fix: Fix, view: EngineView) -> list[tuple[float, list[float]]]:
+        """Trusted fixes before ``view.t`` (newest first until one lies more than
+        ``gps.max_gap_s`` from the next, a candidate's dead-reckoned antenna leaves its own track,
+        or ``MAX_PREFIX`` are taken; at least ``MIN_SPACING_M`` of travel apart), each with its
+        offset from every candidate's track there, oldest first, cut after the last jump in them."""
+        out: list[tuple[float, list[float]]] = []
+        j = int(np.searchsorted(self.t, view.t, side="left")) - 1
+        t_next, d_next = view.t, view.d
+        while j >= 0 and len(out) < MAX_PREFIX:
+            tj = float(self.t[j])
+            if t_next - tj > self.gps.max_gap_s:
+                break
+            s_j = float(np.interp(tj, view.travel.t, view.travel.s))
+            d_j = float(np.interp(tj, view.travel.t, view.travel.d))
+            if not all(self._inside(h, fix, s_j) for h in fix.hyps):
+                break
+            if d_next - d_j >= MIN_SPACING_M:
+                out.append((tj, self._offsets(fix, s_j, float(self.lat[j]), float(self.lon[j]))))
+                d_next = d_j
+            t_next, j = tj, j - 1
+        out.reverse()
+        for k in range(len(out) - 1, 0, -1):
+            if np.all(np.abs(np.subtract(out[k][1], out[k - 1][1])) > self._limit()):
+                self.jump_t = max(self.jump_t, out[k][0])
+                return out[k:]
+        return out
+
+    def _limit(self) -> float:
+        """The jump test's limit on a fix-to-fix change of an offset: ``gps_jump_sigma``·σ_w·√2."""
+        return self.cfg.gps_jump_sigma * max(self.gps.noise_white_m, 1e-3) * math.sqrt(2.0)
+
+    def _inside(self, h: Hypothesis, fix: Fix, s: float) -> bool:
+        pos = h.pos_m + h.kp * (s - fix.s_ref) + h.kp * self.antenna_x_m
+        return 0.0 <= pos <= self.lines[h.track_id].length_m
 
     def _jumped(self, t: float, off: list[float]) -> bool:
         """No candidate's offset can have moved by noise since the last fix (every |Δr_j| beyond
@@ -184,13 +325,13 @@ class TrackGpsAid(NetworkFixes):
         before = prev[1] * len(off) if len(prev[1]) == 1 else prev[1]
         if len(before) != len(off):
             return False
-        limit = self.cfg.gps_jump_sigma * max(self.gps.noise_white_m, 1e-3) * float(np.sqrt(2.0))
-        return bool(np.all(np.abs(np.asarray(off, dtype=float) - np.asarray(before, dtype=float)) > limit))
+        return bool(np.all(np.abs(np.asarray(off, dtype=float) - np.asarray(before, dtype=float)) > self._limit()))
 
-    def _offsets(self, fix: Fix, view: EngineView, lat: float, lon: float) -> list[float]:
+    def _offsets(self, fix: Fix, s: float, lat: float, lon: float) -> list[float]:
+        """Each candidate's offset (+ left of body-forward) from its track at signed travel ``s``."""
         out = []
         for h in fix.hyps:
-            pos = h.pos_m + h.kp * (view.s - fix.s_ref) + h.kp * self.antenna_x_m
+            pos = h.pos_m + h.kp * (s - fix.s_ref) + h.kp * self.antenna_x_m
             out.append(h.kp * offset(self.lines, h, pos, lat, lon))  # + left of body-forward
         return out
 

@@ -43,7 +43,12 @@ s_g − s_dr agree among themselves (spread ≤ U: the odometry carried the posi
 between them) and that lies on this track on average (|mean o| ≤ ``gps.decide_max_mean_m``, the
 up/down test's "not between two tracks"). Its error is then that of the fix, independent of the
 odometry that failed: the position is *determined* again (detail ``confirmed_by_fixes``), as a
-balise pair would make it.
+balise pair would make it. For this the aid reads every *usable* fix (quality, HDOP), not only
+the trusted ones: the trust filter keeps a multipath burst's fixes out for its 30 s RMS window
+and hold, during which the fail-safe would otherwise last (hundreds of metres), while the
+confirmation carries its own checks against a burst — each step against the odometry (a larger
+one holds every fix back for ``gps.jump_hold_s``), each fix on the track, the five residuals
+within U of each other (a burst ramping on moves them apart) and on the track on average.
 
 The aid only exists on a DB with connections and acts only on a determined (or uncertain) single
 candidate, so line-only runs and ambiguous estimates are untouched (the offsets test of
@@ -62,7 +67,7 @@ from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes
 from fieldlogs.pipeline.config import GpsConfig, MarginConfig, TrackSelectConfig
 from fieldlogs.pipeline.positions import margin_m
-from fieldlogs.pipeline.types import Event, Hypothesis
+from fieldlogs.pipeline.types import Event, FloatArray, Hypothesis
 from schemas.enums import EventType, FixSource, PositionState
 
 #: Search window beyond margin + U either way along the track [m].
@@ -93,6 +98,9 @@ class TrackGpsAlongAid(NetworkFixes):
     """Fixes in a row on the track, each step agreeing with the odometry."""
     hold_until: float = -math.inf
     """No fix is used before this time (a jump was seen)."""
+    usable: tuple[FloatArray, FloatArray, FloatArray] | None = None
+    """(t, lat, lon) of every usable fix (quality, HDOP), trusted or not: an uncertain position
+    is confirmed from these (module docstring)."""
 
     def observations(self) -> list[Observation]:
         return []
@@ -101,8 +109,13 @@ class TrackGpsAlongAid(NetworkFixes):
         fix = view.estimate
         if fix is None or len(fix.hyps) != 1:
             return None
-        j = int(np.searchsorted(self.t, view.t, side="right"))
-        return Observation(float(self.t[j]), j) if j < self.t.size else None
+        t, lat, lon = self.usable if self.usable is not None and fix.state == PositionState.UNCERTAIN else self.trusted
+        j = int(np.searchsorted(t, view.t, side="right"))
+        return Observation(float(t[j]), (float(lat[j]), float(lon[j]))) if j < t.size else None
+
+    @property
+    def trusted(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return self.t, self.lat, self.lon
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate
@@ -115,8 +128,8 @@ class TrackGpsAlongAid(NetworkFixes):
         u = along_uncertainty(self.cfg, self.gps)
         m = float(margin_m(fix, view.d, view.travel.allowance_at(view.t), self.margin)) + h.extra_m
         s_dr = h.pos_m + h.kp * (view.s - fix.s_ref) + h.kp * self.antenna_x_m
-        j: int = obs.payload
-        x, y = tl.plane(np.array([self.lat[j]]), np.array([self.lon[j]]))
+        lat, lon = obs.payload
+        x, y = tl.plane(np.array([lat]), np.array([lon]))
         s_g, off = tl.project(float(x[0]), float(y[0]), s_dr, m + u + _WINDOW_M)
         if not self._steady(view, h, s_g, off, s_dr, u, tl.length_m):
             return Outcome()

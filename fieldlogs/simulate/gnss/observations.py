@@ -16,7 +16,10 @@ test checks). For each receiver, epoch and satellite:
   all receivers), I the true ionosphere = Klobuchar × (1 + run scale) × (1 + per-satellite
   scale), T = Saastamoinen × (1 + run scale), m multipath (Gauss–Markov by receiver and
   satellite, σ growing at low elevation and beside buildings), n white code noise whose σ
-  follows C/N0 (0.3 m at 45 dB-Hz);
+  follows C/N0 (0.3 m at 45 dB-Hz); with ``reflectors`` (a surface beside the track, per
+  antenna arc length s + direction·f) the reflection's code, carrier and C/N0 errors of
+  :mod:`fieldlogs.simulate.gnss.reflection` besides, drawn from their own generator (a run
+  without reflectors keeps every other draw);
 * C/N0 = 33 + 14 sin E dB-Hz + N(0, 1), 3 dB less beside buildings, 8 dB less for NLOS;
 * the sky by side: ``Corridor`` sections (buildings on the left or right up to an
   elevation, cuttings on both sides, overpasses and tunnels that block everything) as
@@ -43,6 +46,7 @@ from fieldlogs.gnss.atmosphere import klobuchar_s, tropo_delay_m
 from fieldlogs.gnss.constants import C_MPS, F_L1_HZ, OBS_COLUMNS, FloatArray, IntArray, system_of
 from fieldlogs.gnss.ephemeris import NavTable, group_delay_s, nav_table, satellite_states, select_ephemeris
 from fieldlogs.gnss.geodesy import azimuth_elevation, ecef_to_geodetic, enu_basis, geodetic_to_ecef
+from fieldlogs.simulate.gnss.reflection import ReflectionErrors, ReflectorsAt, phase_walk, reflection_errors
 
 KLOBUCHAR_ALPHA = (1.1176e-08, 7.4506e-09, -5.9605e-08, -5.9605e-08)
 KLOBUCHAR_BETA = (90112.0, 0.0, -196608.0, -65536.0)
@@ -173,7 +177,8 @@ class Simulated:
     truth: pd.DataFrame
     """Per receiver × epoch: antenna ECEF, clock bias [m], s."""
     rows: pd.DataFrame
-    """Per observation: the error components (sis, iono, tropo, multipath, noise, nlos) [m]."""
+    """Per observation: the error components (sis, iono, tropo, multipath, noise, nlos, the
+    reflection's code error) [m]."""
     truth_errors: SatErrors | None = None
     """Per epoch and satellite, the errors an augmentation could know (SBAS simulator)."""
 
@@ -240,10 +245,12 @@ def simulate(
     seed: int,
     errors: ErrorSpec | None = None,
     systems: tuple[str, ...] = ("G", "E", "J"),
+    reflectors: ReflectorsAt | None = None,
 ) -> Simulated:
     """Simulate every receiver's ``gnss_obs`` rows along ``traj`` (module docstring)."""
     err = errors or ErrorSpec()
     rng = np.random.default_rng(seed)
+    rng_refl = np.random.default_rng([seed, 0x4D50])
     table = nav_table(nav)
     sats = np.array(sorted({s for s in nav["sat"].unique() if s[0] in systems}))
     n_t, n_s = traj.t.size, sats.size
@@ -284,13 +291,14 @@ def simulate(
             buildings[:, None], err.mp_buildings_factor, 1.0
         )
         mp = _gauss_markov(rng, n_t, n_s, dt, err.mp_tau_s, mp_sigma)
+        refl = _reflections(reflectors, traj, rx, el, az - track_heading[:, None], (dt, err.mp_tau_s), rng_refl)
         cn0 = 33.0 + 14.0 * np.sin(np.maximum(el, 0.0)) + rng.normal(0.0, 1.0, el.shape)
-        cn0 = cn0 - 3.0 * buildings[:, None] - 8.0 * nlos
+        cn0 = cn0 - 3.0 * buildings[:, None] - 8.0 * nlos + refl.cn0_db
         noise = err.noise_45_m * 10.0 ** ((45.0 - cn0) / 20.0) * rng.standard_normal(el.shape)
         walk = np.cumsum(rng.normal(0.0, rx.clock_walk_m * np.sqrt(dt), n_t))
         clock_m = C_MPS * (rx.clock_bias_s + rx.clock_drift_sps * (traj.t - traj.t[0])) + walk
         extra = np.where(nlos, nlos_bias[None, :], 0.0)
-        pr = rng_m + clock_m[:, None] - C_MPS * clock_f + sis + iono + tropo + mp + noise + extra
+        pr = rng_m + clock_m[:, None] - C_MPS * clock_f + sis + iono + tropo + mp + noise + extra + refl.code_m
         lam = C_MPS / F_L1_HZ
         u = (rot - ant[:, None, :]) / rng_m[..., None]
         sat_side = 0.0
@@ -306,6 +314,7 @@ def simulate(
         carrier = (
             rng_m + clock_m[:, None] - C_MPS * clock_f + sis - iono + tropo + 0.01 * mp + extra + carrier_noise
         ) / lam + amb
+        carrier = carrier + refl.carrier_m / lam
         if orbit is not None:
             carrier = carrier + sat_side / lam
         keep = visible & (idx >= 0)
@@ -339,6 +348,7 @@ def simulate(
                     "multipath_m": mp[e_i, s_i],
                     "noise_m": noise[e_i, s_i],
                     "nlos_m": extra[e_i, s_i],
+                    "reflection_m": refl.code_m[e_i, s_i],
                     "elevation_deg": np.degrees(el[e_i, s_i]),
                 }
             )
@@ -375,6 +385,25 @@ def simulate(
         pd.concat(row_frames, ignore_index=True),
         truth_err,
     )
+
+
+def _reflections(
+    at: ReflectorsAt | None,
+    traj: Trajectory,
+    rx: ReceiverSpec,
+    el: FloatArray,
+    rel_az: FloatArray,
+    dt_tau: tuple[float, float],
+    rng: np.random.Generator,
+) -> ReflectionErrors:
+    """The reflection errors at receiver ``rx``'s antenna (arc length s + direction·forward), all
+    zero without reflectors (module docstring)."""
+    if at is None:
+        z = np.zeros(el.shape)
+        return ReflectionErrors(z, z, z, z)
+    refl = at(traj.s + traj.direction * rx.forward_m)
+    phi = phase_walk(rng, el.shape[0], el.shape[1], *dt_tau)
+    return reflection_errors(refl, el, rel_az, rx.up_m, phi)
 
 
 def _orbit_clock_errors(

@@ -9,7 +9,8 @@ increasing km, from the ENU difference of the track points 0.5 m either side. An
 x = ``antennas_x_m`` (toward the F end), y = 0, z = ``antenna_z_m`` above the rail, one receiver
 each (rx1, rx2, …) with its own clock. :func:`fieldlogs.simulate.gnss.observations.simulate` then gives the
 pseudoranges, carrier, Doppler and C/N0 (ionosphere, troposphere, orbit/clock errors, multipath,
-noise by C/N0, NLOS beside buildings).
+noise by C/N0, NLOS beside buildings) and, on a network run with ``network.multipath``, the
+reflections off a surface at the neighbouring track (``RawGnssSpec.reflectors``).
 
 Sky: the run's tunnels (``gps.outages_km_m``) block every satellite; ``corridor = "mixed"`` adds
 the seeded buildings, cuttings, overpasses and short tunnel of
@@ -46,6 +47,7 @@ from fieldlogs.simulate.gnss.observations import (
     simulate,
     with_sat_errors,
 )
+from fieldlogs.simulate.gnss.reflection import ReflectorsAt
 from fieldlogs.simulate.gnss.scenario import mixed_corridor
 
 #: The simulated car: length, F end and tacho axle (x from the reference point at its centre).
@@ -71,6 +73,9 @@ class RawGnssSpec:
     """Broadcast orbit/clock errors in the truth and an MSAS ``gnss_sbas`` stream correcting them
     (:mod:`fieldlogs.simulate.gnss.sbas_stream`; it starts with the run, so its first minute is not yet
     corrected)."""
+    reflectors: ReflectorsAt | None = None
+    """Reflecting surfaces beside the track by km (a network run's ``network.multipath``:
+    :meth:`fieldlogs.simulate.netsim.NetworkPlan.reflectors`, :mod:`fieldlogs.simulate.gnss.reflection`)."""
 
 
 @dataclass
@@ -80,6 +85,9 @@ class RawGnss:
     gnss_block: dict[str, Any]
     receivers: list[ReceiverSpec]
     sbas: pd.DataFrame | None = None
+    reflection: dict[str, Any] | None = None
+    """With reflectors: the reflected observations' count and their code errors' RMS and range
+    [m] (run.json ``sim_truth.gnss_raw.reflection``)."""
 
 
 def _headings(geom: Any, km: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
@@ -148,7 +156,10 @@ def raw_gnss(motion: Any, geom: Any, spec: RawGnssSpec, rng: np.random.Generator
     ]
     corridor = _corridor(spec, float(np.min(motion.km)), float(np.max(motion.km)), int(seeds[1]))
     errors = _errors(spec.noise, spec.sbas)
-    sim = simulate(traj, nav, receivers, corridor, seed=int(seeds[2]), errors=errors, systems=spec.systems)
+    sim = simulate(
+        traj, nav, receivers, corridor, seed=int(seeds[2]), errors=errors, systems=spec.systems,
+        reflectors=spec.reflectors,
+    )  # fmt: skip
     obs = sim.obs.copy()
     obs["t"] = obs["t"].to_numpy(dtype=float) - spec.start_gps_s  # run clock of the epoch
     obs = obs.sort_values(["t", "receiver", "sat", "signal"], kind="stable").reset_index(drop=True)
@@ -159,7 +170,22 @@ def raw_gnss(motion: Any, geom: Any, spec: RawGnssSpec, rng: np.random.Generator
         from fieldlogs.simulate.gnss.sbas_stream import sbas_stream
 
         sbas = sbas_stream(sim, seed=int(seeds[2]), t0_gps=spec.start_gps_s)
-    return RawGnss(obs[list(OBS_COLUMNS)], sim.nav, block, receivers, sbas)
+    return RawGnss(obs[list(OBS_COLUMNS)], sim.nav, block, receivers, sbas, _reflection(sim.rows, spec))
+
+
+def _reflection(rows: pd.DataFrame, spec: RawGnssSpec) -> dict[str, Any] | None:
+    """The truth of the reflections (``RawGnss.reflection``), None without reflectors."""
+    if spec.reflectors is None:
+        return None
+    e = rows["reflection_m"].to_numpy(dtype=float)
+    e = e[e != 0.0]
+    return {
+        "observations": int(e.size),
+        "of": len(rows),
+        "code_rms_m": round(float(np.sqrt(np.mean(e * e))), 3) if e.size else 0.0,
+        "code_min_m": round(float(e.min()), 3) if e.size else 0.0,
+        "code_max_m": round(float(e.max()), 3) if e.size else 0.0,
+    }
 
 
 def vehicle_block(

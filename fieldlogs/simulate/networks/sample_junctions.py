@@ -18,6 +18,11 @@ left), and turned back into latitude/longitude with the grid's projection:
   1:12 turnout of R = 300 m, then 40 m straight, a R = 500 m curve to 30° and straight, 1.5 km
   of its own km (its ``gis`` grid, every 20 m).
 
+Every arc of these paths with straights of at least ``MIN_STRAIGHT`` on both sides on its own
+track is a curve feature point of ``track_feature_points`` (:func:`path_features`): the inner
+reverse curves of the loops and the branch's R = 500 m curve. The turnout arcs at the toes
+(no straight before them on the track) and the crossovers' arcs (16 m apart) are not.
+
 The main tracks are split at every switch toe (all on the 20 m grid). ETCS-style balise
 groups (kind G, two balises 3 m apart) stand just beyond each facing switch on each branch
 and on each loop (S003 §4.3: after a junction the next group names the track); NID_C 800
@@ -35,7 +40,7 @@ import pandas as pd
 
 from dbtools.gis.georef import projector_for_points
 from fieldlogs.simulate.networks.turnout import Path2D, radius_for_extent, reverse_curves
-from schemas.enums import BaliseKind, Navigability, Side, SwitchType, TrackKind
+from schemas.enums import Attribute, BaliseKind, Navigability, Side, SwitchType, TrackKind
 from schemas.model import Table
 
 LINE = "0420"
@@ -49,6 +54,44 @@ LOOP_OUT = 4.5
 STEP = 20.0
 TOES = {"loop_lo": 20_800.0, "loop_hi": 21_320.0, "x1": 21_400.0, "x2": 21_540.0, "junction": 21_700.0}
 X_EXTENT = 60.0
+
+
+#: A drawn arc is a feature point where straights of at least this length lie on both sides of
+#: it on its own track [m] (the S000 straight checks: ``validate.min_straight_m``).
+MIN_STRAIGHT = 20.0
+#: Rows 1 and 6 (where the straight checks start and end) at most this far from the curve [m].
+STRAIGHT_CHECK = 40.0
+
+
+def path_features(tid: str, path: Path2D) -> list[dict[str, object]]:
+    """``track_feature_points`` rows of the arcs of ``path`` (track ``tid``, pos = arc length
+    along the path) with straights of at least ``MIN_STRAIGHT`` on both sides: six rows each
+    [S000 Table 1], no transitions (rows 2–3 and 4–5 coincide), left/right as seen begin → end."""
+    rows: list[dict[str, object]] = []
+    at, n = 0.0, 0
+    pc = path.pieces
+    for j, (length, k) in enumerate(pc):
+        inner = 0 < j < len(pc) - 1 and k != 0.0 and pc[j - 1][1] == 0.0 and pc[j + 1][1] == 0.0
+        if inner and min(pc[j - 1][0], pc[j + 1][0]) >= MIN_STRAIGHT:
+            n += 1
+            a0, a1 = at, at + length
+            before, after = min(pc[j - 1][0], STRAIGHT_CHECK), min(pc[j + 1][0], STRAIGHT_CHECK)
+            side = Attribute.LEFT.value if k > 0 else Attribute.RIGHT.value
+            spec = (
+                (a0 - before, 0.0, Attribute.STRAIGHT.value, "entry straight check starts"),
+                (a0, 0.0, Attribute.TRANSITION.value, "entry straight check ends"),
+                (a0, round(1.0 / abs(k), 1), side, "curve entry"),
+                (a1, 0.0, Attribute.TRANSITION.value, "curve exit"),
+                (a1, 0.0, Attribute.STRAIGHT.value, "exit straight check starts"),
+                (a1 + after, 0.0, Attribute.NONE.value, "exit straight check ends"),
+            )
+            for seq, (pos, radius, attr, role) in enumerate(spec, start=1):
+                rows.append(
+                    {"track_id": tid, "feature_id": f"F{n}", "seq": seq, "pos_m": round(pos, 3)}
+                    | {"radius_m": radius, "attribute": attr, "role": role}
+                )
+        at += length
+    return rows
 
 
 def extent(p: Path2D) -> float:
@@ -90,6 +133,7 @@ class _Tables:
         self.points: list[pd.DataFrame] = []
         self.balises: list[dict[str, object]] = []
         self.gis: list[pd.DataFrame] = []
+        self.features: list[dict[str, object]] = []
 
     def main(self, tid: str, track: str, k0: float, k1: float) -> None:
         self.tracks.append(
@@ -113,6 +157,7 @@ class _Tables:
                 | {"height_m": self.f.height(km)}
             )
         )
+        self.features += path_features(tid, path)
         line = LINE if track else None
         row: dict[str, object] = {"track_id": tid, "line_code": line, "track": track, "kind": kind}
         self.tracks.append(
@@ -179,6 +224,7 @@ def _branch_gis(tables: _Tables) -> None:
     tables.gis.append(
         pd.DataFrame({"line_code": BRANCH, "track": "S", "km_m": k, "lat": lat, "lon": lon, "height_m": h})
     )
+    tables.features += path_features(f"{BRANCH}-S1", p)
     tables.tracks.append(
         {"track_id": f"{BRANCH}-S1", "line_code": BRANCH, "track": "S", "kind": TrackKind.MAIN.value}
         | {"km_begin_m": 0.0, "km_end_m": BRANCH_LENGTH, "length_m": BRANCH_LENGTH, "name": None}
@@ -186,8 +232,9 @@ def _branch_gis(tables: _Tables) -> None:
 
 
 def network_tables(gis: pd.DataFrame, km_first: float, km_last: float) -> dict[str, pd.DataFrame]:
-    """The network rows (tracks, connections, switches, track_points), the G balises, the branch
-    line's ``gis`` rows and its ``lines`` row, drawn on the sample's D/U grid (module docstring)."""
+    """The network rows (tracks, connections, switches, track_points, track_feature_points), the
+    G balises, the branch line's ``gis`` rows and its ``lines`` row, drawn on the sample's D/U
+    grid (module docstring)."""
     t = _Tables(_Frame(gis))
     toe = TOES
     d_cuts = [km_first, toe["loop_lo"], toe["loop_hi"], toe["x1"], toe["x2"] + X_EXTENT, toe["junction"], km_last]
@@ -255,6 +302,7 @@ def network_tables(gis: pd.DataFrame, km_first: float, km_last: float) -> dict[s
         "connections": pd.DataFrame(t.conns),
         "switches": pd.DataFrame(t.switches),
         "track_points": pd.concat(t.points, ignore_index=True),
+        "track_feature_points": pd.DataFrame(t.features),
         "balises": pd.DataFrame(t.balises),
         "gis": pd.concat(t.gis, ignore_index=True),
         "lines": pd.DataFrame({"line_code": [BRANCH], "name": [BRANCH_NAME]}),
@@ -271,7 +319,7 @@ def add_network(sources: Path, out: Path) -> None:
 
     from dbtools.network import canonical
     from schemas.network import NETWORK_TABLES
-    from schemas.tables import BALISES, LINES
+    from schemas.tables import BALISES, LINES, TRACK_FEATURE_POINTS
 
     def write(table: Table, frame: pd.DataFrame, path: Path) -> None:
         cols = [c for c in table.column_names if c != "attributes_json"]
@@ -290,7 +338,7 @@ def add_network(sources: Path, out: Path) -> None:
     write(BALISES, pd.concat([b, net["balises"]], ignore_index=True), out / "balises.csv")
     lines = pd.read_csv(sources / "lines.csv", dtype={"line_code": str})
     write(LINES, pd.concat([lines, net["lines"]], ignore_index=True), out / "lines.csv")
-    for table in NETWORK_TABLES:
+    for table in (*NETWORK_TABLES, TRACK_FEATURE_POINTS):
         write(table, net[table.name], out / f"{table.name}.csv")
 
 

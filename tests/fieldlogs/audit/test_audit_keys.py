@@ -139,9 +139,12 @@ def test_crossover_and_station_runs_count_on_their_own_tracks(net_audit: Path, s
         assert set(on["run_path"].map(lambda p: p.rsplit("-", 1)[-1])) == {run}, track_id
         assert row["n_runs"] == 1 and row["distance_m"] == pytest.approx(on["distance_m"].sum())
         # determined on it for part of the way the truth travelled on it (the rest is ambiguous
-        # at its switches), never more than its length
+        # at its switches), never more than its length; the audit measures with the odometry's
+        # speed, whose error the margin bounds by margin.distance_pct (2 %) of the travel: the IMU
+        # test now resolves the turnback's 0420-4 10 m past the toe: 529 m determined by the
+        # odometry's speed against the truth's 520 m, and no cycle determined on another track
         truth = _truth_m(run, track_id)
-        assert 0.3 * truth < row["distance_m"] <= min(length, truth) + 2.0, (track_id, row["distance_m"], truth)
+        assert 0.3 * truth < row["distance_m"] <= min(length, truth) * 1.02 + 2.0, (track_id, row["distance_m"], truth)
     assert bool(summary["line_code"].isna()["0420-X1"]) and summary.loc["0420-3", "track"] == "3"
     rep = build_report(net_audit, by="track")
     tracks = rep.groups.set_index("track_id")

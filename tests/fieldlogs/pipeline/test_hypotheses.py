@@ -173,13 +173,20 @@ def _imu_case(diverging: bool, noise_deg: float = 0.0) -> Solution:
     return run(n, tr, Start("9003", "D", 200.0, 1), aid)
 
 
-@pytest.mark.parametrize(("diverging", "track"), [(True, "X1"), (False, "D2")])
-def test_turnout_yaw_signature_resolves(diverging: bool, track: str) -> None:
+@pytest.mark.parametrize(("diverging", "track", "after"), [(True, "X1", 8.0), (False, "D2", 14.0)])
+def test_turnout_yaw_signature_resolves(diverging: bool, track: str, after: float) -> None:
+    # looks every 2 m past the split (d = 100, m = 1 + 2 % of 100 = 3 m; lead R·α = 19.99 m,
+    # x_end = 22.99 m: L = 12 looks). Diverging, look x = 8: window d 97 … 108 holds 9 cycles of
+    # the curve, Δψ = 9·0.1 s·10/200.5 = 2.572° inside X1's span 5.71°·[5, 11]/19.99 =
+    # [1.43°, 3.14°]: LLR = 2.572²/(2·0.504²) = 13.02 ≥ A + ln 12 + ln(1 + 1.71°·√(2/π)/0.504°)
+    # = 9.20 + 2.48 + 1.31 = 12.99. Through, Δψ = 0: at x = 12 X1's span starts at 2.57°,
+    # LLR 12.8 < 13.0; at x = 14 at 3.14°, LLR = 3.14²/(2·0.509²) = 19.0.
     sol = _imu_case(diverging)
     res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
     assert len(res) == 1 and res[0].detail["evidence"] == "imu" and res[0].detail["track_id"] == track
-    expected = math.degrees(math.atan(0.1)) if diverging else 0.0
-    assert res[0].detail["heading_change_deg"] == pytest.approx(expected, abs=0.15)
+    assert res[0].detail["after_switch_m"] == pytest.approx(after)
+    expected = math.degrees(0.9 * 10.0 / 200.5) if diverging else 0.0
+    assert res[0].detail["heading_change_deg"] == pytest.approx(expected, abs=0.01)
     # 25 s: 250 m from D km 200, past the crossover (≈ 60 m) onto U2, or on D2 at km 450
     at = sol.positions[sol.positions["t"].sub(25.0).abs() < 1e-6].iloc[0]
     assert at["state"] == "determined" and at["track_id"] == ("U2" if diverging else "D2")

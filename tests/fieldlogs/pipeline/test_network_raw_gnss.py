@@ -18,6 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from dbtools.database import read_network
@@ -27,9 +28,9 @@ from fieldlogs.gnss.ontrack import TrackEvidence, TrackSolutions
 from fieldlogs.pipeline.aids.gnss import GnssUnit
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
-from fieldlogs.pipeline.engine import run_aids
+from fieldlogs.pipeline.engine import Solution, run_aids
 from fieldlogs.pipeline.hypotheses import track_lines
-from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.handle import Run, read_run
 from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
 from fieldlogs.simulate.simulator import simulate_run
@@ -102,12 +103,14 @@ def test_the_wrong_parallel_track_leaves_large_residuals(network: Network, tmp_p
     assert not any(TrackEvidence.between(right, wrong).far_better(float(t), *args) for t in ev.t)
 
 
-def test_track_gnss_resolves_the_station_loop_on_simulated_pseudoranges(network: Network, tmp_path: Path) -> None:
-    # U1 → facing switch W3 → station track 4 (520 m beside U2, no GIS grid: its track_points)
-    folder = _raw_run(
-        network, tmp_path / "loop", ["0420-U1", "0420-4", "0420-U3"], [["0420-U1", 4500.0], ["0420-U3", 100.0]], 11
-    )
-    run = read_run(folder)
+LOOP = ["0420-U1", "0420-4", "0420-U3"]
+"""U1 → facing switch W3 → station track 4 (520 m beside U2, no GIS grid: its track_points)."""
+
+
+def _loop(network: Network, folder: Path, **net: object) -> tuple[Solution, pd.DataFrame, Run]:
+    """The station loop's raw run (seed 11) replayed with the start, topology and track_gnss
+    aids; its solution, truth and run; the determined cycles checked against the truth."""
+    run = read_run(_raw_run(network, folder, LOOP, [["0420-U1", 4500.0], ["0420-U3", 100.0]], 11, **net))
     truth = run.stream("truth")
     assert truth is not None
     unit = GnssUnit.for_run(run, network, GnssConfig())
@@ -121,11 +124,28 @@ def test_track_gnss_resolves_the_station_loop_on_simulated_pseudoranges(network:
         TrackGnssAid(unit, unit.epoch_times(), lines, unit.cfg),
     ]
     sol = run_aids(tr, aids, MARGIN)  # type: ignore[arg-type]
-    res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
-    assert len(res) == 1 and res[0].detail["evidence"] == "track_gnss"
-    assert res[0].detail["track_id"] == "0420-4" and sorted(res[0].detail["candidates"]) == ["0420-4", "0420-U2"]
     p = sol.positions
     at = np.searchsorted(truth["t"].to_numpy(dtype=float), p["t"].to_numpy(dtype=float), side="right") - 1
     true_track = truth["track_id"].astype(str).to_numpy()[at]
     det = (p["state"] == "determined").to_numpy()
     assert det.any() and (p["track_id"].astype(str).to_numpy()[det] == true_track[det]).all()
+    return sol, truth, run
+
+
+def test_track_gnss_resolves_the_station_loop_on_simulated_pseudoranges(network: Network, tmp_path: Path) -> None:
+    sol, _, _ = _loop(network, tmp_path / "loop")
+    res = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
+    assert len(res) == 1 and res[0].detail["evidence"] == "track_gnss"
+    assert res[0].detail["track_id"] == "0420-4" and sorted(res[0].detail["candidates"]) == ["0420-4", "0420-U2"]
+
+
+def test_track_gnss_stays_fail_safe_under_multipath_at_the_neighbouring_track(network: Network, tmp_path: Path) -> None:
+    """The station loop as above with ``network.multipath`` over the whole route: a reflecting
+    surface at the neighbouring track (U2 beside loop 4, the other main track beside U1/U3),
+    amplitude 0.5 (fieldlogs.simulate.gnss.reflection); the pseudoranges of the satellites
+    across from it carry the two-path errors, metres of either sign held over seconds. No cycle
+    is determined on a wrong track (``_loop``), whichever evidence resolves the loop."""
+    _, _, run = _loop(network, tmp_path / "mp", multipath=[[t, 0.0, 1.0e5, 2.5] for t in LOOP])
+    assert run.meta is not None
+    refl = run.meta.extra["sim_truth"]["gnss_raw"]["reflection"]
+    assert refl["observations"] > 100 and refl["code_min_m"] < -2.0

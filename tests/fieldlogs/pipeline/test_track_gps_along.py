@@ -237,3 +237,20 @@ def test_no_start_before_the_fixes_move_one_way() -> None:
     assert ev and ev[0].t == 7.0
     later = {c["track_id"]: c for c in json.loads(str(_at(sol, 9.0)["candidates"]))}
     assert later["D1"]["pos_m"] == pytest.approx(pos[9], abs=0.05)
+
+
+def test_an_uncertain_position_is_confirmed_from_usable_fixes_the_trust_filter_holds_back() -> None:
+    # the same clean fixes from t = 10, but none trusted before t = 40 (the trust filter's window
+    # after a burst): the uncertain position reads every usable fix and ends at t = 14 as above;
+    # a determined one would use only trusted fixes (none here before t = 40: no correction)
+    along = [(t, 100.0 + 10.0 * t + 1.0, 0.2) for t in np.arange(10.0, 19.0)]
+    n = net("junction")
+    lines = track_lines(n)
+    t, lat, lon = _fixes(along)
+    late = t >= 40.0
+    aid = TrackGpsAlongAid(t[late], lat[late], lon[late], lines, CFG, GPS, MARGIN, usable=(t, lat, lon))
+    aids = [Start("9001", "S", 100.0, 1), TopologyAid(lines, MARGIN), _Uncertain(), aid]
+    sol = run_aids(travel(n, np.full(280, 10.0)), aids, MARGIN)  # type: ignore[arg-type]
+    ev = [e for e in sol.events if e.type == EventType.GPS_CORRECTION]
+    assert len(ev) == 1 and ev[0].t == 14.0 and ev[0].detail["confirmed_by_fixes"] == 5
+    assert _at(sol, 15.0)["state"] == PositionState.DETERMINED.value

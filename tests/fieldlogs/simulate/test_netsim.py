@@ -161,6 +161,31 @@ def test_gnss_outage_and_multipath_by_track_range(crossover: Network) -> None:
     assert y[plain] == pytest.approx(-2.0, abs=0.05)
 
 
+def test_raw_gnss_reflector_at_the_neighbouring_track(crossover: Network) -> None:
+    """``network.multipath`` on raw GNSS: a surface at U's centreline, 4 m left of D travelling
+    east, amplitude min(3 m / 4 m, 0.5); the pseudoranges change there, the truth does not."""
+    route = {"tracks": ["D1", "X1", "U2", "U3"], "multipath": [["D1", 100.0, 250.0, 3.0]]}
+    plan = network_plan(crossover, scenario_from_dict({"network": route}))
+    at = plan.reflectors()
+    assert (
+        at is not None
+        and network_plan(crossover, scenario_from_dict({"network": {"tracks": ["D1"]}})).reflectors() is None
+    )
+    d1 = plan.geom.segments[0]
+    r = at(d1.rho_of(np.array([50.0, 150.0, 240.0, 260.0])))
+    assert r.side.tolist() == [0.0, 1.0, 1.0, 0.0]
+    assert r.dist_m[1:3] == pytest.approx(4.0, abs=0.05)
+    assert r.amp.tolist() == pytest.approx([0.0, 0.5, 0.5, 0.0])
+    raw = {"gnss_raw": {"enabled": True}}
+    with_mp, meta = run(crossover, route, **raw)
+    plain, _ = run(crossover, {"tracks": route["tracks"]}, **raw)
+    pd.testing.assert_frame_equal(with_mp["truth"], plain["truth"])
+    refl = meta.extra["sim_truth"]["gnss_raw"]["reflection"]
+    assert refl["observations"] > 0 and refl["code_min_m"] < 0 < refl["code_max_m"]
+    diff = with_mp["gnss_obs"]["pseudorange_m"].to_numpy() - plain["gnss_obs"]["pseudorange_m"].to_numpy()
+    assert int((diff != 0).sum()) == refl["observations"]
+
+
 def test_network_knobs_are_checked() -> None:
     with pytest.raises(ScenarioError) as exc:
         scenario_from_dict({"network": {"tracks": ["A"], "from_track": "B", "to_track": "C"}})
