@@ -21,9 +21,7 @@ Measurements: bench/bench_db.py (read_network and db build against the alternati
 
 from __future__ import annotations
 
-import ctypes
 import sqlite3
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -45,7 +43,8 @@ MIN_FILE_BYTES = 4 << 20
 #: Rows per record batch the driver decodes (its default: 1 024). Large batches are fewer,
 #: larger allocations that go back to the system when freed instead of leaving holes in the
 #: C heap, and less per-batch work: the national DB reads in 0.53 s instead of 0.57 s with a
-#: 17 MB lower peak (bench/bench_db.py). The driver infers a column's type from the first batch.
+#: 17 MB lower peak (bench/bench_db.py; trimming the heap after the read then gains nothing
+#: more). The driver infers a column's type from the first batch.
 BATCH_ROWS = 1 << 16
 BATCH_ROWS_OPTION = "adbc.sqlite.query.batch_rows"
 
@@ -115,22 +114,7 @@ def read_table_columns(
                     out[t.name] = frame
     except Exception:  # opening or closing failed: the sqlite3 path reports it
         return {}
-    _trim_heap()
     return out
-
-
-def _trim_heap() -> None:
-    """Hand the C heap's free pages back to the system (glibc ``malloc_trim``; elsewhere
-    nothing). The driver decodes a table in many small record batches allocated in the C
-    heap; once the columns are copied out of them (text: ``combine_chunks``) they are freed,
-    but the holes they leave between live blocks stay resident: 50 MB on the national DB
-    (bench/bench_db.py), a fifth of what reading it holds. The trim costs a few ms."""
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc
-        pass
 
 
 def insert_tables(path: Path, frames: Sequence[tuple[Table, pd.DataFrame]]) -> bool:
