@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import TypeVar
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -134,11 +135,19 @@ def empty_frame(table: Table) -> pd.DataFrame:
 
 def canonical(table: Table, frame: pd.DataFrame) -> pd.DataFrame:
     """Declared columns in declared order, declared dtypes, sorted by primary key."""
-    return canonical_with_index(table, frame)[0]
+    return _in_key_order(table, frame).reset_index(drop=True)
 
 
 def canonical_with_index(table: Table, frame: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray]:
     """:func:`canonical` plus the index label of the input row behind each output row."""
+    out = _in_key_order(table, frame)
+    return out.reset_index(drop=True), out.index.to_numpy()
+
+
+def _in_key_order(table: Table, frame: pd.DataFrame) -> pd.DataFrame:
+    """The declared columns and dtypes of ``frame``, sorted by the primary key, with the
+    input's index labels (never materialised here: a frame's range index would keep the
+    array of its labels, 8 MB for a million rows, cached)."""
     cols: dict[str, pd.Series] = {}
     for c in table.columns:
         s = frame[c.name] if c.name in frame.columns else pd.Series([None] * len(frame), index=frame.index)
@@ -156,7 +165,7 @@ def canonical_with_index(table: Table, frame: pd.DataFrame) -> tuple[pd.DataFram
     out = pd.DataFrame(cols, index=frame.index, copy=False)  # no copy into one float block
     if table.primary_key and len(out) and not sorted_by(out, table.primary_key):
         out = out.sort_values(list(table.primary_key), kind="stable")
-    return out.reset_index(drop=True), out.index.to_numpy()
+    return out
 
 
 def sorted_by(frame: pd.DataFrame, keys: tuple[str, ...]) -> bool:
@@ -172,18 +181,47 @@ def joined_text(s: pd.Series) -> bytes:
     """The UTF-8 bytes of a text column's values joined by 0x1f, a missing value as the
     empty string — the bytes every stored ``content_hash`` was made of (the former
     ``s.astype(object).where(s.notna(), "\\x00")``, whose NUL fill value pandas turns into
-    ""). Built from the column's bytes in Arrow, no Python string per value."""
+    ""). The concatenation of :func:`joined_text_parts`."""
+    return b"".join(bytes(part) for part in joined_text_parts(s))
+
+
+#: Values per part of :func:`joined_text_parts` (bounds its temporaries).
+TEXT_BLOCK = 1 << 16
+
+
+def joined_text_parts(s: pd.Series) -> Iterator[npt.NDArray[np.uint8]]:
+    """:func:`joined_text` in consecutive parts of ``TEXT_BLOCK`` values (the hash is fed part
+    by part: no copy of the whole column), from the column's Arrow buffers, no Python string
+    per value: each part is its values' bytes with 0x1f after every value but the column's
+    last — a reshape when the values share one length (codes, tracks), else ``np.insert`` of
+    the separators at the values' ends."""
     arr = pa.array(s.array if isinstance(s.dtype, pd.StringDtype) else s.astype(object), from_pandas=True)
-    arr = pc.fill_null(arr.cast(pa.large_string()), "")
-    if isinstance(arr, pa.ChunkedArray):
-        arr = arr.combine_chunks()
-    if len(arr) == 0:
-        return b""
-    # each value followed by 0x1F (a join of [value, ""] with that separator), the last one dropped
-    sep = pa.scalar("\x1f", pa.large_string())
-    each = pc.binary_join_element_wise(arr, pa.scalar("", pa.large_string()), sep)
-    offsets = np.frombuffer(each.buffers()[1], dtype=np.int64)[each.offset : each.offset + len(each) + 1]
-    return np.frombuffer(each.buffers()[2], dtype=np.uint8)[offsets[0] : offsets[-1] - 1].tobytes()
+    n = len(arr)
+    for a in range(0, n, TEXT_BLOCK):
+        part = arr.slice(a, TEXT_BLOCK)
+        if isinstance(part, pa.ChunkedArray):  # a DB's column comes in many small batches
+            part = part.combine_chunks()
+        if not (pa.types.is_string(part.type) or pa.types.is_large_string(part.type)):
+            part = part.cast(pa.large_string())
+        if part.null_count:
+            part = pc.fill_null(part, "")
+        m = len(part)
+        _, offsets_buf, data_buf = part.buffers()
+        offset_type = np.int64 if pa.types.is_large_string(part.type) else np.int32
+        off = np.frombuffer(offsets_buf, dtype=offset_type)[part.offset : part.offset + m + 1].astype(np.int64)
+        data = np.zeros(0, np.uint8) if data_buf is None else np.frombuffer(data_buf, dtype=np.uint8)
+        body = data[off[0] : off[-1]]
+        lengths = np.diff(off)
+        out: npt.NDArray[np.uint8]
+        if m and np.all(lengths == lengths[0]):
+            width = int(lengths[0])
+            rows = np.empty((m, width + 1), dtype=np.uint8)
+            rows[:, :width] = body.reshape(m, width)
+            rows[:, width] = 0x1F
+            out = rows.reshape(-1)
+        else:
+            out = np.insert(body, off[1:] - off[0], np.uint8(0x1F))
+        yield out[:-1] if a + m == n else out
 
 
 def content_hash(tables: dict[str, pd.DataFrame]) -> str:
@@ -207,7 +245,8 @@ def content_hash(tables: dict[str, pd.DataFrame]) -> str:
             h.update(f"col:{c.name}\n".encode())
             s = frame[c.name]
             if c.dtype == "str":
-                h.update(joined_text(s))
+                for part in joined_text_parts(s):
+                    h.update(part.data)
             elif c.dtype in ("int", "bool"):
                 arr = s.astype("Float64").to_numpy(dtype=np.float64, na_value=np.nan)
                 h.update(np.ascontiguousarray(arr).data)  # the array's bytes, not a copy of them

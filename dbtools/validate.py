@@ -38,7 +38,6 @@ from dbtools.rules.heights import check_heights
 from dbtools.rules.schema import check_empty_tables, check_values
 from dbtools.rules.topology import check_topology
 from dbtools.rules.track_features import check_track_features
-from dbtools.sources import read_source_set
 from schemas.findings import Finding
 from schemas.frames import check_frame
 from schemas.tables import DB_TABLES
@@ -61,7 +60,7 @@ def validate_network(
     findings.extend(check_values(network.tables, config, loc))
     grid = grid_index(network)
     findings.extend(check_gis(grid, network.km_breaks, config, loc))
-    findings.extend(check_heights(network.gis, network.meta, config, loc))
+    findings.extend(check_heights(network.gis, network.meta, config, loc, grid))
     findings.extend(check_balises(network.balises, grid, config, loc))
     findings.extend(check_features(network.feature_points, grid, config, loc))
     findings.extend(check_topology(network, config, loc))
@@ -80,6 +79,8 @@ def validate_path(
     """
     path = Path(path)
     if path.is_dir():
+        from dbtools.sources import read_source_set  # a source set's readers: not loaded for a DB
+
         network, findings = read_source_set(path, locale)
         return findings + validate_network(network, schema_checks=False, config=config)
     network = read_network(path, verify=False)  # the hash is a finding here (integrity_findings)

@@ -58,6 +58,7 @@ point (Δkm = 40 m over 40 m) is not a cut.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -66,6 +67,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.gis.frame_columns import frame_column, lex_sorted, text_codes
 from dbtools.gis.geometry import GEOD, Projector, geodesic_step, signed_curvature
 from dbtools.gis.georef import AREA_TOLERANCE_M, Georef, derive, georef_of
 from dbtools.network import Network
@@ -83,10 +85,10 @@ GRS80_A: float = GEOD.a
 GRS80_E2: float = GEOD.es
 #: Largest normal curvature of the GRS80 ellipsoid: 1 / (meridian radius at the equator) [1/m].
 KAPPA_MAX = 1.0 / (GRS80_A * (1.0 - GRS80_E2))
-#: Rounding allowance of :func:`chord_bounds` on either side [m].
-CHORD_ROUNDING_M = 1e-6
 #: Points per block of the element-wise geometry of a whole network (bounds its temporaries).
 BLOCK = 1 << 16
+#: Rounding allowance of :func:`chord_bounds` on either side [m].
+CHORD_ROUNDING_M = 1e-6
 #: Gap between consecutive tracks in the sorted km key [m].
 KEY_GAP_M = 1000.0
 #: A listed kilometrage break matches consecutive points whose km agree within this [m].
@@ -123,31 +125,6 @@ def projection_for(lat: F64, lon: F64) -> Projector | None:
     "Projection policy"); None when there are no points."""
     g = derive(lat, lon)
     return None if g is None else Projector.from_epsg(g.crs_epsg)
-
-
-def _column(frame: pd.DataFrame, name: str, numeric: bool) -> npt.NDArray[Any]:
-    if name not in frame.columns:
-        return np.full(len(frame), np.nan if numeric else None, dtype=float if numeric else object)
-    s = frame[name]
-    if numeric:
-        return np.asarray(pd.to_numeric(s, errors="coerce").to_numpy(dtype=np.float64, na_value=np.nan))
-    return np.asarray(s.astype(object).where(s.notna(), None).to_numpy(dtype=object))
-
-
-def _codes(frame: pd.DataFrame, name: str) -> tuple[I64, npt.NDArray[np.object_]]:
-    """Codes of a text column in sorted order of its values (−1: missing) and the values:
-    factorized in Arrow, no Python string per row."""
-    if name not in frame.columns:
-        return np.full(len(frame), -1, dtype=np.int64), np.empty(0, dtype=object)
-    codes, uniq = pd.factorize(frame[name], sort=True)
-    return np.asarray(codes, dtype=np.int64), np.asarray(uniq, dtype=object)
-
-
-def _lex_sorted(a: I64, b: I64, c: F64) -> bool:
-    """True when the rows are in the order ``np.lexsort((c, b, a))`` gives (a stable sort:
-    then it is the identity); ``c`` finite."""
-    da, db, dc = np.diff(a), np.diff(b), np.diff(c)
-    return bool(np.all((da > 0) | ((da == 0) & ((db > 0) | ((db == 0) & (dc >= 0))))))
 
 
 def _menger_squared(lon: F64, lat: F64, step: F64) -> F64:
@@ -253,29 +230,40 @@ class GridIndex:
         self.keep_bounds = keep_bounds
         """Keep the step bounds :meth:`steps_outside` computes (:attr:`bounds`: 16 bytes a
         point, for the topology rules' track lengths) instead of dropping them."""
-        (lcode, luniq), (tcode, tuniq) = _codes(gis, "line_code"), _codes(gis, "track")
-        km, lat, lon = (_column(gis, c, True) for c in ("km_m", "lat", "lon"))
+        (lcode, luniq), (tcode, tuniq) = text_codes(gis, "line_code"), text_codes(gis, "track")
+        km, lat, lon = (frame_column(gis, c, True) for c in ("km_m", "lat", "lon"))
         self.georef = georef if georef is not None else derive(lat, lon)
         with np.errstate(invalid="ignore"):
-            ok = (lcode >= 0) & (tcode >= 0) & np.isfinite(km) & self._inside(lat, lon)
-        pos = np.flatnonzero(ok)
-        lcode, tcode = lcode[pos], tcode[pos]
-        if not _lex_sorted(lcode, tcode, km[pos]):  # frames of a Network are: no sort
-            order = np.lexsort((km[pos], tcode, lcode))
-            pos, lcode, tcode = pos[order], lcode[order], tcode[order]
-        self.pos: I64 = pos.astype(np.int64)
-        self.km: F64 = km[self.pos]
-        self.lat: F64 = lat[self.pos]
-        self.lon: F64 = lon[self.pos]
-        n = self.pos.size
-        pair = lcode.astype(np.int64) * max(len(tuniq), 1) + tcode
+            ok = (lcode >= 0) & (tcode >= 0) & np.isfinite(km)
+        ok &= self._inside(lat, lon)
+        n = int(np.count_nonzero(ok))
+        rows: I64 | None = None  # the frame's row of each point; None: every row, in order
+        if n < ok.size:  # rows left out: the points are copies
+            rows = np.flatnonzero(ok).astype(np.int64)
+            lcode, tcode = lcode[rows], tcode[rows]
+            km, lat, lon = km[rows], lat[rows], lon[rows]
+        del ok
+        if not lex_sorted(lcode, tcode, km, BLOCK):  # frames of a Network are: no sort
+            order = np.lexsort((km, tcode, lcode))
+            rows = order.astype(np.int64) if rows is None else rows[order]
+            lcode, tcode = lcode[order], tcode[order]
+            km, lat, lon = km[order], lat[order], lon[order]
+            del order
+        self._rows = rows
+        self.km: F64 = km
+        self.lat: F64 = lat
+        self.lon: F64 = lon
         new = np.ones(n, dtype=bool)
-        new[1:] = pair[1:] != pair[:-1]
-        self.tid: I64 = (np.cumsum(new) - 1).astype(np.int64)
+        np.not_equal(lcode[1:], lcode[:-1], out=new[1:])
+        new[1:] |= tcode[1:] != tcode[:-1]
+        self.tid: I64 = np.cumsum(new, dtype=np.int64)
+        self.tid -= 1
         self.start: I64 = np.flatnonzero(new).astype(np.int64)
+        del new
         self.end: I64 = np.append(self.start[1:], n)[: self.start.size].astype(np.int64)
         self.lines: ObjArray = np.asarray(luniq, dtype=object)[lcode[self.start]]
         self.tracks: ObjArray = np.asarray(tuniq, dtype=object)[tcode[self.start]]
+        del lcode, tcode
         self.keys: list[tuple[str, str]] = [(str(a), str(b)) for a, b in zip(self.lines, self.tracks, strict=True)]
         self._key_id = {key: i for i, key in enumerate(self.keys)}
         if projector is None and self.georef is not None:
@@ -285,22 +273,34 @@ class GridIndex:
             self.x, self.y = self.projector.to_xy(self.lon, self.lat)
         else:
             self.x, self.y = np.zeros(n), np.zeros(n)
-        same = self.tid[1:] == self.tid[:-1]
-        self.dkm: F64 = np.where(same, np.diff(self.km), np.nan)
-        self.seg: F64 = np.hypot(np.diff(self.x), np.diff(self.y))
+        self.dkm: F64 = np.diff(self.km)
+        self.dkm[self.tid[1:] != self.tid[:-1]] = np.nan
         self._build_key()
         self._shapes: dict[tuple[float, float], GridShape] = {}
         self._cuts: dict[PieceRule, BoolArray] = {}
         self._breaks: dict[float, tuple[BoolArray, I64]] = {}
 
     def _inside(self, lat: F64, lon: F64) -> BoolArray:
-        """Finite, on the globe and not far outside the operating area."""
+        """Finite, on the globe and not far outside the operating area (``BLOCK`` points at a time)."""
         with np.errstate(invalid="ignore"):
             ok = (np.abs(lat) <= LAT_RANGE[1]) & (np.abs(lon) <= LON_RANGE[1])
         if self.georef is None or not ok.any():
             return np.asarray(ok, dtype=bool)
-        ok[ok] = self.georef.area.distance_m(lat[ok], lon[ok]) <= AREA_TOLERANCE_M
+        area = self.georef.area
+        for a in range(0, ok.size, BLOCK):
+            part = ok[a : a + BLOCK]  # a view: written in place
+            rows = slice(a, a + BLOCK) if part.all() else a + np.flatnonzero(part)
+            part[part] = area.distance_m(lat[rows], lon[rows]) <= AREA_TOLERANCE_M
         return np.asarray(ok, dtype=bool)
+
+    def _chords(self, a: int, b: int) -> tuple[F64, F64]:
+        return chord_bounds(self.lon[a : b + 1], self.lat[a : b + 1])
+
+    @cached_property
+    def seg(self) -> F64:
+        """Plane distance to the next point [m] (length n − 1; computed on first use)."""
+        seg = np.diff(self.x)
+        return np.hypot(seg, np.diff(self.y), out=seg)
 
     @cached_property
     def dist(self) -> F64:
@@ -312,7 +312,16 @@ class GridIndex:
         """Every row of the frame is a point, in the frame's order (``pos`` = 0 … n − 1): the
         frame is sorted by (line, track, km) and no key is missing — as read from a DB."""
         n = len(self.gis)
-        return self.pos.size == n and bool(np.array_equal(self.pos, np.arange(n)))
+        return self._rows is None and self.n == n
+
+    @cached_property
+    def pos(self) -> I64:
+        """The frame's row of each point (an ``arange`` for a whole frame: built on first use)."""
+        return np.arange(self.n, dtype=np.int64) if self._rows is None else self._rows
+
+    def row(self, i: int | np.integer[Any]) -> int:
+        """The frame's row of point ``i`` (``pos[i]`` without building ``pos``)."""
+        return int(i) if self._rows is None else int(self._rows[i])
 
     @cached_property
     def bounds(self) -> tuple[F64, F64]:
@@ -320,27 +329,38 @@ class GridIndex:
         by the GIS rules and the topology rules' track lengths). Read-only: do not modify."""
         return step_bounds(self.lon, self.lat)
 
-    def steps_outside(self, where: BoolArray, lo: F64, hi: F64) -> tuple[I64, F64]:
-        """The steps i with ``where[i]`` whose geodesic length ``dist[i]`` is not finite or lies
-        outside [``lo[i]``, ``hi[i]``], and ``dist`` (exact, GRS80 ``Geod.inv``) at least at
-        those steps — what ``np.flatnonzero(where & ((dist < lo) | (dist > hi) |
-        ~np.isfinite(dist)))`` gives, without the geodesic of every step when :attr:`dist`
-        has not been computed: a step is cleared by its straight 3-D chord (module doc,
-        :func:`chord_bounds`) and only the steps the chord cannot clear are solved exactly."""
-        if "dist" in self.__dict__ or self.n < 2:
-            d = self.dist
+    def steps_outside(
+        self, where: BoolArray, limits: Callable[[int, int], tuple[F64, F64]]
+    ) -> tuple[I64, F64, F64, F64]:
+        """The steps i with ``where[i]`` whose geodesic length ``dist[i]`` is not finite or outside
+        [lo[i], hi[i]] (``limits(a, b)``: lo, hi of steps a:b), with that length (``Geod.inv``), lo
+        and hi; ``BLOCK`` steps at a time. Unless :attr:`dist` is known, a step is cleared by its
+        3-D chord (:func:`chord_bounds`) and only the steps it cannot clear are solved exactly."""
+        parts: list[tuple[I64, F64, F64, F64]] = []
+        exact = "dist" in self.__dict__
+        shared = self.keep_bounds or "bounds" in self.__dict__
+        for a in range(0, max(self.n - 1, 0), BLOCK):
+            b = min(a + BLOCK, self.n - 1)
+            w = where[a:b]
+            if not w.any():
+                continue
+            lo, hi = limits(a, b)
+            if exact:
+                doubt = np.flatnonzero(w)
+                d = self.dist[a:b][doubt]
+            else:
+                low, high = (self.bounds[0][a:b], self.bounds[1][a:b]) if shared else self._chords(a, b)
+                with np.errstate(invalid="ignore"):
+                    doubt = np.flatnonzero(w & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
+                d = exact_steps(self.lon, self.lat, doubt + a)
+            lo_d, hi_d = lo[doubt], hi[doubt]
             with np.errstate(invalid="ignore"):
-                bad = where & ((d < lo) | (d > hi) | ~np.isfinite(d))
-            return np.flatnonzero(bad), d
-        low, high = self.bounds if self.keep_bounds or "bounds" in self.__dict__ else step_bounds(self.lon, self.lat)
-        with np.errstate(invalid="ignore"):
-            doubt = np.flatnonzero(where & ~((low >= lo) & (high <= hi)))  # NaN: in doubt
-        d = np.full(self.n - 1, np.nan)
-        d[doubt] = exact_steps(self.lon, self.lat, doubt)
-        dd, lo_d, hi_d = d[doubt], lo[doubt], hi[doubt]
-        with np.errstate(invalid="ignore"):
-            bad = (dd < lo_d) | (dd > hi_d) | ~np.isfinite(dd)
-        return doubt[bad], d
+                bad = (d < lo_d) | (d > hi_d) | ~np.isfinite(d)
+            parts.append((doubt[bad] + a, d[bad], lo_d[bad], hi_d[bad]))
+        if not parts:
+            return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0), np.zeros(0)
+        idx, dist, lo_b, hi_b = (np.concatenate(p) for p in zip(*parts, strict=True))
+        return idx.astype(np.int64), dist, lo_b, hi_b
 
     @cached_property
     def c(self) -> F64:
@@ -366,7 +386,8 @@ class GridIndex:
         out = np.zeros(self.n)
         if "height_m" not in self.gis:
             return out
-        h = _column(self.gis, "height_m", True)[self.pos]
+        h = frame_column(self.gis, "height_m", True)
+        h = h if self._rows is None else h[self._rows]
         for s, e in zip(self.start, self.end, strict=True):
             ok = np.isfinite(h[s:e])
             if ok.any():
@@ -381,7 +402,8 @@ class GridIndex:
             self.shift: F64 = np.concatenate([[0.0], np.cumsum(span)[:-1]]) - lo
         else:
             self.shift = np.zeros(0)
-        self.key: F64 = self.km + self.shift[self.tid] if self.n else np.zeros(0)
+        self.key: F64 = self.shift[self.tid] if self.n else np.zeros(0)
+        self.key += self.km
 
     # ------------------------------------------------------------------------------ access
     @property
@@ -399,12 +421,13 @@ class GridIndex:
     def track_ids(self, lines: npt.ArrayLike, tracks: npt.ArrayLike) -> I64:
         """Track id of each (line, track) pair (−1: missing, or not a track of the grid);
         strings are factorized once and the few distinct pairs looked up."""
-        lc_codes, lc_uniq = pd.factorize(pd.Series(np.asarray(lines, dtype=object)), use_na_sentinel=True)
-        tr_codes, tr_uniq = pd.factorize(pd.Series(np.asarray(tracks, dtype=object)), use_na_sentinel=True)
+        lc_codes, lc_uniq = pd.factorize(np.asarray(lines, dtype=object), use_na_sentinel=True)
+        tr_codes, tr_uniq = pd.factorize(np.asarray(tracks, dtype=object), use_na_sentinel=True)
         table = np.full((len(lc_uniq) + 1, len(tr_uniq) + 1), -1, dtype=np.int64)
-        for i, lc in enumerate(lc_uniq):
-            for j, tr in enumerate(tr_uniq):
-                table[i, j] = self._key_id.get((str(lc), str(tr)), -1)
+        tr_text = [str(tr) for tr in tr_uniq.tolist()]
+        for i, lc in enumerate(lc_uniq.tolist()):
+            for j, tr in enumerate(tr_text):
+                table[i, j] = self._key_id.get((str(lc), tr), -1)
         return np.asarray(table[lc_codes, tr_codes], dtype=np.int64)  # sentinel −1: last row/col
 
     def km_range(self, tid: I64) -> tuple[F64, F64]:
@@ -443,16 +466,25 @@ class GridIndex:
         regular = (self.tid[1:] == self.tid[:-1]) & (np.abs(self.dkm - spacing_m) <= epsilon_m)
         both = np.zeros(n, dtype=bool)
         both[1:-1] = regular[:-1] & regular[1:]
-        seg_h = np.arctan2(np.diff(y), np.diff(x)) if n > 1 else np.zeros(0)
+        seg_h = np.zeros(0)
+        if n > 1:  # arctan2(Δy, Δx) of each segment, in place
+            seg_h = np.diff(y)
+            np.arctan2(seg_h, np.diff(x), out=seg_h)
         turn = np.full(n, np.nan)
-        turn[1:-1] = _wrap(seg_h[1:] - seg_h[:-1])
+        inner = turn[1:-1]  # _wrap(seg_h[1:] − seg_h[:-1]), in place
+        np.subtract(seg_h[1:], seg_h[:-1], out=inner)
+        inner += np.pi
+        np.remainder(inner, 2 * np.pi, out=inner)
+        inner -= np.pi
         turn[~both] = np.nan
         kappa = _blockwise_curvature(x, y)
         kappa[~both] = np.nan
         # heading at a vertex: chord of its neighbours, else the one regular step it has
         heading = np.full(n, np.nan)
         if n > 1:
-            heading[1:-1] = np.arctan2(y[2:] - y[:-2], x[2:] - x[:-2])
+            inner = heading[1:-1]
+            np.subtract(y[2:], y[:-2], out=inner)
+            np.arctan2(inner, x[2:] - x[:-2], out=inner)
             heading[~both] = np.nan
             fwd = np.zeros(n, dtype=bool)
             fwd[:-1] = regular
@@ -477,8 +509,8 @@ class GridIndex:
             return is_break, np.zeros(0, dtype=np.int64)
         if self.n < 2:
             return is_break, np.arange(len(kb), dtype=np.int64)
-        lines, tracks = _column(kb, "line_code", False), _column(kb, "track", False)
-        k_from, k_to = _column(kb, "km_from_m", True), _column(kb, "km_to_m", True)
+        lines, tracks = frame_column(kb, "line_code", False), frame_column(kb, "track", False)
+        k_from, k_to = frame_column(kb, "km_from_m", True), frame_column(kb, "km_to_m", True)
         ok = pd.notna(lines) & pd.notna(tracks) & np.isfinite(k_from) & np.isfinite(k_to)
         tid = np.full(len(kb), -1, dtype=np.int64)
         tid[ok] = self.track_ids(lines[ok], tracks[ok])
@@ -513,7 +545,7 @@ def network_georef(network: Network) -> Georef | None:
     gis = network.gis
 
     def build() -> tuple[pd.DataFrame, Georef | None]:
-        lat, lon = _column(gis, "lat", True), _column(gis, "lon", True)
+        lat, lon = frame_column(gis, "lat", True), frame_column(gis, "lon", True)
         return gis, georef_of(network.meta, lat, lon, network.origin)
 
     return network.cached(("georef", id(gis)), build)[1]

@@ -56,6 +56,8 @@ def column(frame: pd.DataFrame, name: str) -> npt.NDArray[Any]:
         return s.to_numpy(dtype=np.float64, na_value=np.nan)
     if pd.api.types.is_integer_dtype(s.dtype):
         return s.to_numpy(dtype=np.float64, na_value=np.nan)
+    if isinstance(s.dtype, pd.StringDtype):  # the same values in one pass
+        return np.asarray(s.array.to_numpy(dtype=object, na_value=None), dtype=object)
     return s.astype(object).where(s.notna(), None).to_numpy(dtype=object)
 
 

@@ -84,23 +84,38 @@ def stencil_leak(kappa: F64, transition_m: F64, spacing_m: float) -> F64:
     return np.asarray(np.abs(kappa) * y / h**2, dtype=np.float64)
 
 
-def _range_stat(values: F64, lo: npt.NDArray[np.int64], hi: npt.NDArray[np.int64]) -> tuple[F64, F64, F64]:
-    """(mean, max |·|, count) of the finite ``values[lo:hi]`` for each pair of bounds."""
-    finite = np.isfinite(values)
-    v = np.where(finite, values, 0.0)
-    cs = np.concatenate([[0.0], np.cumsum(v)])
-    cn = np.concatenate([[0], np.cumsum(finite)])
-    count = (cn[hi] - cn[lo]).astype(float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = (cs[hi] - cs[lo]) / count
-    mx = np.full(len(lo), np.nan)
-    nonempty = np.flatnonzero(hi > lo)
-    if len(nonempty):
-        absval = np.append(np.where(finite, np.abs(values), np.nan), np.nan)
-        idx = np.empty(2 * len(nonempty), dtype=np.int64)
-        idx[0::2], idx[1::2] = lo[nonempty], hi[nonempty]
-        mx[nonempty] = np.fmax.reduceat(absval, idx)[0::2]
-    return mean, mx, count
+class _RangeStats:
+    """(mean, max |·|, count) of the finite values of an array over ranges ``lo:hi``: the means
+    from prefix sums built once for every range asked (the body and both straights), the
+    counts and maxima from the values of the ranges alone (no other array of the grid's size)."""
+
+    def __init__(self, values: F64) -> None:
+        self.values = values
+        self.sums = np.zeros(values.size + 1)  # [0, cumsum of the finite values], in place
+        finite = self.sums[1:]
+        np.copyto(finite, values, where=np.isfinite(values))
+        np.cumsum(finite, out=finite)
+
+    def value(self, i: npt.NDArray[np.int64]) -> F64:
+        """The values at ``i``."""
+        return np.asarray(self.values[i], dtype=np.float64)
+
+    def of(self, lo: npt.NDArray[np.int64], hi: npt.NDArray[np.int64]) -> tuple[F64, F64, F64]:
+        """(mean, max |·|, count) of the finite ``values[lo:hi]`` for each pair of bounds."""
+        mx = np.full(len(lo), np.nan)
+        count = np.zeros(len(lo))
+        nonempty = np.flatnonzero(hi > lo)
+        if len(nonempty):
+            size = hi[nonempty] - lo[nonempty]
+            first = np.concatenate([[0], np.cumsum(size)[:-1]])  # each range's start in ``idx``
+            idx = np.repeat(lo[nonempty] - first, size) + np.arange(int(size.sum()))
+            v = self.values[idx]
+            finite = np.isfinite(v)
+            count[nonempty] = np.add.reduceat(finite.astype(np.int64), first)
+            mx[nonempty] = np.fmax.reduceat(np.where(finite, np.abs(v), np.nan), first)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = (self.sums[hi] - self.sums[lo]) / count
+        return mean, mx, count
 
 
 @dataclass(frozen=True)
@@ -192,7 +207,7 @@ def check_features(fp: pd.DataFrame, grid: GridIndex, config: ValidationConfig, 
     if len(fi) == 0 or grid.n < 3:
         return out
     g = _Blocks(b.block[fi], b.k6[fi], b.sign[fi], b.step[fi])
-    kappa = grid.shape(config.gis_spacing_m, config.km_epsilon_m).kappa
+    kappa = _RangeStats(grid.shape(config.gis_spacing_m, config.km_epsilon_m).kappa)
     gid = grid.track_ids(r.line[g.block[:, 0]], r.track[g.block[:, 0]])
     out += _body(r, g, grid, gid, kappa)
     out += _straights(r, g, grid, gid, kappa)
@@ -356,11 +371,11 @@ def _span(
     return grid.searchsorted(gid, lo_km - eps, "left"), grid.searchsorted(gid, hi_km + eps, "right")
 
 
-def _body_curvature(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> F64:
+def _body_curvature(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: _RangeStats) -> F64:
     """Mean GIS κ over the body (rows 3–4); a body shorter than the grid spacing takes the
     vertex nearest its middle."""
     lo, hi = _span(r, b, grid, gid, 2, 3)
-    mean, _, count = _range_stat(kappa, lo, hi)
+    mean, _, count = kappa.of(lo, hi)
     empty = np.flatnonzero(count == 0)
     if len(empty):
         mid = 0.5 * (b.k6[empty, 2] + b.k6[empty, 3])
@@ -368,11 +383,11 @@ def _body_curvature(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArra
         j = np.clip(j, grid.start[gid[empty]], grid.end[gid[empty]] - 1)
         jm = np.maximum(j - 1, grid.start[gid[empty]])
         pick = np.where(np.abs(grid.km[jm] - mid) < np.abs(grid.km[j] - mid), jm, j)
-        mean[empty] = kappa[pick]
+        mean[empty] = kappa.value(pick)
     return mean
 
 
-def _body(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> list[Finding]:
+def _body(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: _RangeStats) -> list[Finding]:
     """``feature.direction`` and ``feature.radius`` from the mean κ over the body."""
     blk, sg, tol = b.block, b.sign, r.config.feature_tolerance
     R = r.radius[blk[:, 2]]
@@ -421,7 +436,9 @@ def _body(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64
     )
 
 
-def _straights(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: F64) -> list[Finding]:
+def _straights(
+    r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.int64], kappa: _RangeStats
+) -> list[Finding]:
     """``feature.straight``: entry (rows 1–2, transition rows 2–3) and exit (rows 5–6,
     transition 4–5) straight on the grid, allowing the stencil leak of the transition."""
     out: list[Finding] = []
@@ -431,7 +448,7 @@ def _straights(r: FeatureRows, b: _Blocks, grid: GridIndex, gid: npt.NDArray[np.
         kappa_r = np.where(np.isfinite(R) & (R > 0), 1.0 / np.where(R > 0, R, 1.0), 0.0)
     for name, c0, c1, t0, t1 in (("entry", 0, 1, 1, 2), ("exit", 4, 5, 3, 4)):
         lo, hi = _span(r, b, grid, gid, c0, c1)
-        _, mx, count = _range_stat(kappa, lo, hi)
+        _, mx, count = kappa.of(lo, hi)
         lt = np.abs(b.k6[:, t1] - b.k6[:, t0]) / (1 - tol)
         limit = r.config.straight_kappa_max + stencil_leak(kappa_r, lt, r.config.gis_spacing_m)
         bad = np.flatnonzero((count > 0) & (mx > limit))

@@ -41,6 +41,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.gis import index as grid_blocks
 from dbtools.gis.index import GridIndex, GridShape
 from dbtools.rules.common import Locator, capped, fmt_km, py, wrap_angle
 from dbtools.rules.config import ValidationConfig
@@ -67,11 +68,15 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
     sp = config.gis_spacing_m
 
     def at(i: int) -> dict[str, Any]:
-        return loc.at(T, int(grid.pos[i]))
+        return loc.at(T, grid.row(i))
 
     # gis.km_grid
-    off = np.abs(grid.km - sp * np.round(grid.km / sp))
-    bad = np.flatnonzero(off > config.km_epsilon_m)
+    off = grid.km / sp  # |km − sp·round(km / sp)|, in place (one temporary)
+    np.round(off, out=off)
+    off *= sp
+    np.subtract(grid.km, off, out=off)
+    bad = np.flatnonzero(np.abs(off, out=off) > config.km_epsilon_m)
+    del off
     out += capped(
         "gis.km_grid",
         Severity.ERROR,
@@ -139,27 +144,32 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
     # gis.step_length
     if grid.n > 1:
         dk = grid.dkm
-        tol = config.step_tolerance_m + config.step_tolerance_rel * np.abs(dk)
         r_min = sp / config.spike_max_turn_rad
-        chord = 2 * r_min * np.sin(np.minimum(np.abs(dk) / (2 * r_min), np.pi / 2))
-        lo, hi = chord - tol, dk + tol
+
+        def limits(a: int, b: int) -> tuple[F64, F64]:
+            d = dk[a:b]
+            tol = config.step_tolerance_m + config.step_tolerance_rel * np.abs(d)
+            chord = 2 * r_min * np.sin(np.minimum(np.abs(d) / (2 * r_min), np.pi / 2))
+            return chord - tol, d + tol
+
         with np.errstate(invalid="ignore"):
             check = (dk > config.km_epsilon_m) & ~is_break
-        bad, dist = grid.steps_outside(check, lo, hi)  # dist: exact at least at the bad steps
+        bad, dist, lo, hi = grid.steps_outside(check, limits)  # aligned with bad
         out += capped(
             "gis.step_length",
             Severity.ERROR,
             T,
-            bad,
-            lambda i: Finding(
+            np.arange(bad.size),
+            lambda j: Finding(
                 "gis.step_length",
                 Severity.ERROR,
                 T,
-                f"points {dist[i]:.2f} m apart but their km differ by {dk[i]:g} m (from km {fmt_km(grid.km[i])})",
-                keys=_gis_keys(grid, i + 1),
-                value=round(float(dist[i]), 3),
-                limit=[round(float(lo[i]), 3), round(float(hi[i]), 3)],
-                **at(i + 1),
+                f"points {dist[j]:.2f} m apart but their km differ by {dk[bad[j]]:g} m "
+                f"(from km {fmt_km(grid.km[bad[j]])})",
+                keys=_gis_keys(grid, bad[j] + 1),
+                value=round(float(dist[j]), 3),
+                limit=[round(float(lo[j]), 3), round(float(hi[j]), 3)],
+                **at(bad[j] + 1),
             ),
             cap,
             file,
@@ -195,42 +205,26 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
 def _track_spacing(grid: GridIndex, shape: GridShape, config: ValidationConfig, loc: Locator) -> list[Finding]:
     """``gis.track_spacing``: U vs D points of the same line and km, where parallel."""
     T = GIS.name
-    u_groups = np.flatnonzero(grid.tracks == Track.UP.value)
-    d_of_u = grid.track_ids(grid.lines[u_groups], np.full(len(u_groups), Track.DOWN.value, dtype=object))
-    u_groups, d_of_u = u_groups[d_of_u >= 0], d_of_u[d_of_u >= 0]
-    if len(u_groups) == 0:
-        return []
-    u = np.concatenate([np.arange(grid.start[g], grid.end[g]) for g in u_groups])
-    dg = np.repeat(d_of_u, grid.end[u_groups] - grid.start[u_groups])
-    j = np.minimum(grid.searchsorted(dg, grid.km[u] - config.km_epsilon_m), grid.n - 1)
-    match = (grid.tid[j] == dg) & (np.abs(grid.km[j] - grid.km[u]) <= config.km_epsilon_m)
-    ui, di = u[match], j[match]
+    ui, sep = _close_up_points(grid, shape, config)
     if len(ui) == 0:
         return []
-    sep = np.hypot(grid.x[ui] - grid.x[di], grid.y[ui] - grid.y[di])
-    dh = np.abs(wrap_angle(shape.heading[ui] - shape.heading[di]))
-    with np.errstate(invalid="ignore"):
-        flag = (dh < config.parallel_max_rad) & (sep < config.track_spacing_warning_m)
-    k = np.flatnonzero(flag)
-    if len(k) == 0:
-        return []
     # stretches: consecutive flagged U points of one group → one finding each, at its minimum
-    brk = np.ones(len(k), dtype=bool)
-    brk[1:] = (ui[k[1:]] != ui[k[:-1]] + 1) | (grid.tid[ui[k[1:]]] != grid.tid[ui[k[:-1]]])
+    brk = np.ones(len(ui), dtype=bool)
+    brk[1:] = (ui[1:] != ui[:-1] + 1) | (grid.tid[ui[1:]] != grid.tid[ui[:-1]])
     starts = np.flatnonzero(brk)
-    ends = np.append(starts[1:], len(k))
-    run_min = np.minimum.reduceat(sep[k], starts)
+    ends = np.append(starts[1:], len(ui))
+    run_min = np.minimum.reduceat(sep, starts)
     is_error = run_min < config.track_spacing_error_m
     warn = config.track_spacing_warning_m
 
     def build(r: int) -> Finding:
-        idx = k[starts[r] : ends[r]]
-        m = idx[int(np.argmin(sep[idx]))]
+        a, b = int(starts[r]), int(ends[r])
+        m = a + int(np.argmin(sep[a:b]))
         i = int(ui[m])
         sev = Severity.ERROR if is_error[r] else Severity.WARNING
         lim = config.track_spacing_error_m if is_error[r] else warn
-        km_a, km_b = grid.km[ui[idx[0]]], grid.km[ui[idx[-1]]]
-        stretch = f"km {fmt_km(km_a)}" if len(idx) == 1 else f"km {fmt_km(km_a)}–{fmt_km(km_b)} ({len(idx)} points)"
+        km_a, km_b = grid.km[ui[a]], grid.km[ui[b - 1]]
+        stretch = f"km {fmt_km(km_a)}" if b - a == 1 else f"km {fmt_km(km_a)}–{fmt_km(km_b)} ({b - a} points)"
         return Finding(
             "gis.track_spacing",
             sev,
@@ -240,10 +234,40 @@ def _track_spacing(grid: GridIndex, shape: GridShape, config: ValidationConfig, 
             keys={"line_code": py(grid.lines[grid.tid[i]]), "km_m": py(grid.km[i])},
             value=round(float(sep[m]), 3),
             limit=lim,
-            **loc.at(T, int(grid.pos[i])),
+            **loc.at(T, grid.row(i)),
         )
 
     out: list[Finding] = []
     for sev, runs in ((Severity.ERROR, np.flatnonzero(is_error)), (Severity.WARNING, np.flatnonzero(~is_error))):
         out += capped("gis.track_spacing", sev, T, runs, build, config.max_findings_per_rule, loc.file(T))
     return out
+
+
+def _close_up_points(grid: GridIndex, shape: GridShape, config: ValidationConfig) -> tuple[I64, F64]:
+    """The U points closer than ``track_spacing_warning_m`` to the D point of the same line and
+    km where the two are parallel, in grid order, and that distance [m]: the U tracks taken
+    ``BLOCK`` points at a time (whole tracks; bounded temporaries)."""
+    u_groups = np.flatnonzero(grid.tracks == Track.UP.value)
+    d_of_u = grid.track_ids(grid.lines[u_groups], np.full(len(u_groups), Track.DOWN.value, dtype=object))
+    u_groups, d_of_u = u_groups[d_of_u >= 0], d_of_u[d_of_u >= 0]
+    sizes = grid.end[u_groups] - grid.start[u_groups]
+    first = np.concatenate([[0], np.cumsum(sizes)])  # points of the U tracks before each
+    flagged: list[tuple[I64, F64]] = []
+    g = 0
+    while g < len(u_groups):  # tracks g:h hold about BLOCK points (at least one track)
+        h = max(int(np.searchsorted(first, first[g] + grid_blocks.BLOCK, side="right")) - 1, g + 1)
+        part = u_groups[g:h]
+        u = np.concatenate([np.arange(grid.start[t], grid.end[t]) for t in part])
+        dg = np.repeat(d_of_u[g:h], sizes[g:h])
+        j = np.minimum(grid.searchsorted(dg, grid.km[u] - config.km_epsilon_m), grid.n - 1)
+        match = (grid.tid[j] == dg) & (np.abs(grid.km[j] - grid.km[u]) <= config.km_epsilon_m)
+        ui, di = u[match], j[match]
+        sep = np.hypot(grid.x[ui] - grid.x[di], grid.y[ui] - grid.y[di])
+        dh = np.abs(wrap_angle(shape.heading[ui] - shape.heading[di]))
+        with np.errstate(invalid="ignore"):
+            flag = (dh < config.parallel_max_rad) & (sep < config.track_spacing_warning_m)
+        flagged.append((ui[flag], sep[flag]))
+        g = h
+    if not flagged:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    return np.concatenate([f[0] for f in flagged]).astype(np.int64), np.concatenate([f[1] for f in flagged])

@@ -41,6 +41,8 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.gis import index as grid_blocks
+from dbtools.gis.index import GridIndex
 from dbtools.network import sorted_by
 from dbtools.rules.common import Locator, capped, fmt_km, py
 from dbtools.rules.config import ValidationConfig
@@ -54,17 +56,28 @@ I64 = npt.NDArray[np.int64]
 _ORDER = ("line_code", "track", "km_m")
 
 
-def check_heights(gis: pd.DataFrame, meta: Mapping[str, str], config: ValidationConfig, loc: Locator) -> list[Finding]:
-    """All height rules (module docstring)."""
+def check_heights(
+    gis: pd.DataFrame,
+    meta: Mapping[str, str],
+    config: ValidationConfig,
+    loc: Locator,
+    grid: GridIndex | None = None,
+) -> list[Finding]:
+    """All height rules (module docstring). ``grid``: the frame's grid index, if built — when
+    every row is one of its points, in its order (a DB's frame), its track ids are the rows'
+    (line, track) keys: no sort, no factorizing, no copy of the frame."""
     if "height_m" not in gis.columns or not gis["height_m"].notna().any():
         return []
-    g = gis.reset_index(drop=True).assign(_pos=np.arange(len(gis)))
-    if not sorted_by(g, _ORDER):  # a Network's frame is (canonical): no sort, no copy
-        g = g.sort_values(list(_ORDER), kind="stable")
-    key = _track_key(g)
+    if grid is not None and grid.gis is gis and grid.whole_frame:
+        g, key, pos = gis, grid.tid, None  # row j is point j
+    else:
+        g = gis.reset_index(drop=True).assign(_pos=np.arange(len(gis)))
+        if not sorted_by(g, _ORDER):  # a Network's frame is (canonical): no sort, no copy
+            g = g.sort_values(list(_ORDER), kind="stable")
+        key, pos = _track_key(g), g["_pos"].to_numpy(dtype=np.int64)
     out = _datum(meta, loc)
-    out += _partial(g, key, config, loc)
-    steps = _steps(g, key, config)
+    out += _partial(g, key, pos, config, loc)
+    steps = _steps(g, key, pos, config)
     for rule, values, warn, err, what in (
         ("gis.height_grade", steps["grade"], config.height_grade_warning_permille, config.height_grade_error_permille,
          "grade"),
@@ -106,7 +119,7 @@ def _track_key(g: pd.DataFrame) -> I64:
     return np.asarray(key, dtype=np.int64)
 
 
-def _partial(g: pd.DataFrame, key: I64, config: ValidationConfig, loc: Locator) -> list[Finding]:
+def _partial(g: pd.DataFrame, key: I64, pos: I64 | None, config: ValidationConfig, loc: Locator) -> list[Finding]:
     """``gis.height_partial`` per line/track in key order (the rows of a pair are
     consecutive in ``g``, sorted by line, track and km; pairs with a missing key are left
     out, as ``groupby`` leaves them)."""
@@ -116,7 +129,7 @@ def _partial(g: pd.DataFrame, key: I64, config: ValidationConfig, loc: Locator) 
     ends = np.append(starts[1:], n)
     n_has = np.add.reduceat(has.astype(np.int64), starts) if n else np.zeros(0, dtype=np.int64)
     partial = np.flatnonzero((key[starts] >= 0) & (n_has > 0) & (n_has < ends - starts))
-    km_m, pos = g["km_m"].to_numpy(dtype=float), g["_pos"].to_numpy(dtype=np.int64)
+    km_m = g["km_m"].to_numpy(dtype=float)
     out: list[Finding] = []
     for r in partial[: config.max_findings_per_rule]:
         a, b = int(starts[r]), int(ends[r])
@@ -134,34 +147,57 @@ def _partial(g: pd.DataFrame, key: I64, config: ValidationConfig, loc: Locator) 
                 value=int(n_has[r]),
                 limit=b - a,
                 column="height_m",
-                **loc.at(GIS.name, int(pos[row])),
+                **loc.at(GIS.name, _row(pos, row)),
             )
         )
     return out
 
 
-def _steps(g: pd.DataFrame, key: I64, config: ValidationConfig) -> dict[str, Any]:
+def _steps(g: pd.DataFrame, key: I64, pos: I64 | None, config: ValidationConfig) -> dict[str, Any]:
     """Per step j (point j → j+1 of one line/track): grade [‰] and, at point j+1, the radius of
-    the vertical curve between steps j and j+1 [m] (NaN where not both regular)."""
+    the vertical curve between steps j and j+1 [m] (NaN where not both regular). ``BLOCK``
+    steps at a time: the two results and block-sized temporaries."""
     km = g["km_m"].to_numpy(dtype=float)
     h = g["height_m"].to_numpy(dtype=float, na_value=np.nan)
-    same = key[1:] == key[:-1]
-    dkm = np.diff(km)
-    regular = same & (np.abs(dkm - config.gis_spacing_m) <= config.km_epsilon_m)
+    n = max(km.size - 1, 0)
+    grade, radius, regular = np.empty(n), np.full(n, np.nan), np.empty(n, dtype=bool)
     with np.errstate(invalid="ignore", divide="ignore"):
-        grade = np.where(regular, np.diff(h) / dkm, np.nan)
-        both = regular[1:] & regular[:-1]
-        curv = np.where(both, np.diff(grade) / (0.5 * (dkm[1:] + dkm[:-1])), np.nan)
-        radius = np.concatenate([[np.nan], np.abs(1.0 / curv)])
+        for a in range(0, n, grid_blocks.BLOCK):  # grade Δh / Δkm on regular steps, NaN elsewhere
+            b = min(a + grid_blocks.BLOCK, n)
+            dkm = km[a + 1 : b + 1] - km[a:b]
+            off = np.abs(dkm - config.gis_spacing_m)
+            reg = regular[a:b]
+            np.logical_and(key[a + 1 : b + 1] == key[a:b], off <= config.km_epsilon_m, out=reg)
+            part = grade[a:b]
+            np.subtract(h[a + 1 : b + 1], h[a:b], out=part)
+            part /= dkm
+            part[~reg] = np.nan
+        for a in range(1, n, grid_blocks.BLOCK):  # |1 / κ|, κ = Δgrade / mean Δkm of two regular steps
+            b = min(a + grid_blocks.BLOCK, n)
+            curv = radius[a:b]
+            np.subtract(grade[a:b], grade[a - 1 : b - 1], out=curv)
+            half = (km[a + 1 : b + 1] - km[a:b]) + (km[a:b] - km[a - 1 : b - 1])
+            half *= 0.5
+            curv /= half
+            curv[~(regular[a:b] & regular[a - 1 : b - 1])] = np.nan
+            np.divide(1.0, curv, out=curv)
+            np.abs(curv, out=curv)
+        np.abs(grade, out=grade)
+        grade *= 1000.0
     return {
-        "grade": 1000.0 * np.abs(grade),
+        "grade": grade,
         "curv_radius": radius,
-        "pos": g["_pos"].to_numpy(dtype=np.int64),
+        "pos": pos,
         "km": km,
         "key": key,
         "line": g["line_code"].array,
         "track": g["track"].array,
     }
+
+
+def _row(pos: I64 | None, i: int) -> int:
+    """The frame's row of the ``i``-th point in key order (``pos`` None: the same)."""
+    return i if pos is None else int(pos[i])
 
 
 def _stretches(bad: npt.NDArray[np.bool_], key: npt.NDArray[Any]) -> list[tuple[int, int]]:
@@ -208,7 +244,7 @@ def _limits(
             value=round(worst, 3),
             limit=limit,
             column="height_m",
-            **loc.at(GIS.name, int(st["pos"][p])),
+            **loc.at(GIS.name, _row(st["pos"], p)),
         )
 
     return capped(rule, Severity.WARNING, GIS.name, np.arange(len(runs)), build, config.max_findings_per_rule,

@@ -3,6 +3,8 @@ error, and GridIndex.steps_outside finds exactly the steps the geodesic of every
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -67,36 +69,76 @@ def test_steps_outside_equals_the_full_geodesic(jitter: list[float], lo_m: float
     where = np.arange(m) % 5 != 3
     lo, hi = np.full(m, lo_m), np.full(m, hi_m)
     lo[0] = np.nan
-    bad, d = fresh.steps_outside(where, lo, hi)
+    limits = _limits(lo, hi)
+    bad, d, lo_b, hi_b = fresh.steps_outside(where, limits)
     assert "dist" not in fresh.__dict__  # not the whole geodesic
     full = fresh.dist
     with np.errstate(invalid="ignore"):
         expected = np.flatnonzero(where & ((full < lo) | (full > hi) | ~np.isfinite(full)))
     assert bad.tolist() == expected.tolist()
-    np.testing.assert_array_equal(d[bad], full[bad])  # the exact lengths the messages print
-    again, d2 = fresh.steps_outside(where, lo, hi)  # dist known now: taken as it is
-    assert again.tolist() == expected.tolist() and d2 is full
+    np.testing.assert_array_equal(d, full[bad])  # the exact lengths the messages print
+    np.testing.assert_array_equal(lo_b, lo[bad])
+    np.testing.assert_array_equal(hi_b, hi[bad])
+    again, d2, _, _ = fresh.steps_outside(where, limits)  # dist known now: taken as it is
+    assert again.tolist() == expected.tolist()
+    np.testing.assert_array_equal(d2, full[bad])
+
+
+def _limits(lo: np.ndarray, hi: np.ndarray) -> Callable[[int, int], tuple[np.ndarray, np.ndarray]]:
+    """``steps_outside``'s limits of steps a:b from whole arrays."""
+    return lambda a, b: (lo[a:b], hi[a:b])
 
 
 def test_blocks_give_the_values_of_one_block(monkeypatch: pytest.MonkeyPatch) -> None:
     """Block-wise curvature and chord bounds (BLOCK points at a time) equal the whole-array ones."""
-    rng = np.random.default_rng(3)
     n = 500
-    lon0, lat0, _ = GEOD.fwd(np.full(n, 139.0), np.full(n, 35.0), np.full(n, 60.0), 20.0 * np.arange(n))
-    lon, lat, _ = GEOD.fwd(lon0, lat0, np.full(n, 150.0), rng.normal(0.0, 2.0, n))
-    g = pd.DataFrame({"line_code": "L", "track": ["U"] * 250 + ["D"] * 250, "km_m": 20.0 * (np.arange(n) % 250)})
-    g["lat"], g["lon"] = lat, lon
+    g = _two_tracks(n, ("U", "D"), seed=3)
+    lon, lat = g["lon"].to_numpy(), g["lat"].to_numpy()
     where = np.ones(n - 1, dtype=bool)
     lo, hi = np.full(n - 1, 18.0), np.full(n - 1, 21.0)
     whole = GridIndex(g)
-    kappa, (bad, _) = whole.shape(20.0, 1e-3).kappa, whole.steps_outside(where, lo, hi)
+    whole_shape, whole_out = whole.shape(20.0, 1e-3), whole.steps_outside(where, _limits(lo, hi))
     monkeypatch.setattr(index_mod, "BLOCK", 7)
     blocks = GridIndex(g)
-    np.testing.assert_array_equal(blocks.shape(20.0, 1e-3).kappa, kappa)
-    assert blocks.steps_outside(where, lo, hi)[0].tolist() == bad.tolist() != []
+    block_shape = blocks.shape(20.0, 1e-3)
+    for name in ("kappa", "turn", "heading", "regular"):
+        np.testing.assert_array_equal(getattr(block_shape, name), getattr(whole_shape, name))
+    block_out = blocks.steps_outside(where, _limits(lo, hi))
+    assert block_out[0].tolist() == whole_out[0].tolist() != []
+    for a, b in zip(block_out, whole_out, strict=True):
+        np.testing.assert_array_equal(a, b)
+    for name in ("pos", "km", "lat", "lon", "tid", "x", "y", "dkm", "seg", "key"):
+        np.testing.assert_array_equal(getattr(blocks, name), getattr(whole, name))
     np.testing.assert_array_equal(np.concatenate(chord_bounds(lon, lat)), np.concatenate(_blocked(lon, lat)))
+
+
+def _two_tracks(n: int, tracks: tuple[str, str], seed: int) -> pd.DataFrame:
+    """``n`` points 20 m apart jittered sideways (σ 2 m), the first half on ``tracks[0]``, the
+    second on ``tracks[1]``, each track's km from 0."""
+    rng = np.random.default_rng(seed)
+    lon0, lat0, _ = GEOD.fwd(np.full(n, 139.0), np.full(n, 35.0), np.full(n, 60.0), 20.0 * np.arange(n))
+    lon, lat, _ = GEOD.fwd(lon0, lat0, np.full(n, 150.0), rng.normal(0.0, 2.0, n))
+    half = n // 2
+    g = pd.DataFrame({"line_code": "L", "track": [tracks[0]] * half + [tracks[1]] * half})
+    g["km_m"], g["lat"], g["lon"] = 20.0 * (np.arange(n) % half), lat, lon
+    return g
 
 
 def _blocked(lon: np.ndarray, lat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     parts = [chord_bounds(lon[a : a + 8], lat[a : a + 8]) for a in range(0, lon.size - 1, 7)]
     return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+
+def test_a_shuffled_frame_with_rows_left_out_gives_the_index_of_the_sorted_one() -> None:
+    """Rows out of order, and rows left out (a missing lat, a missing track): the index holds
+    the same points as that of the sorted frame of the valid rows, ``pos`` naming each row."""
+    g = _two_tracks(300, ("D", "U"), seed=5)
+    bad = pd.DataFrame({"line_code": ["L", "L"], "track": ["U", None], "km_m": [5.0, 7.0], "lat": [np.nan, 35.0]})
+    bad["lon"] = [139.0, 139.0]
+    shuffled = pd.concat([g, bad], ignore_index=True).sample(frac=1.0, random_state=2).reset_index(drop=True)
+    whole, mixed = GridIndex(g), GridIndex(shuffled)
+    assert whole.whole_frame and not mixed.whole_frame
+    for name in ("km", "lat", "lon", "tid", "start", "end", "x", "y", "dkm", "seg", "key"):
+        np.testing.assert_array_equal(getattr(mixed, name), getattr(whole, name))
+    np.testing.assert_array_equal(shuffled["km_m"].to_numpy()[mixed.pos], whole.km)
+    assert mixed.keys == whole.keys == [("L", "D"), ("L", "U")]

@@ -24,3 +24,27 @@ def test_joined_text_is_the_former_join(values: list[str | None], dtype: str) ->
 
 def test_a_missing_value_is_the_empty_string() -> None:
     assert joined_text(pd.Series(["a", None, "é"], dtype="string")) == "a\x1f\x1fé".encode()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.one_of(st.none(), st.sampled_from(["", "a", "bc", "U", "é"])), max_size=20), st.integers(1, 4))
+def test_parts_of_any_size_join_to_the_former_bytes(values: list[str | None], block: int) -> None:
+    """Parts of ``block`` values (equal lengths reshaped, others with inserted separators),
+    over a column of several Arrow chunks, concatenate to the former join."""
+    import pyarrow as pa
+
+    import dbtools.network as network_mod
+
+    s = pd.Series(values, dtype="string")
+    chunked = pd.Series(
+        pd.arrays.ArrowStringArray(
+            pa.chunked_array([pa.array(values[:3], pa.string()), pa.array(values[3:], pa.string())])
+        )
+    )
+    old = network_mod.TEXT_BLOCK
+    network_mod.TEXT_BLOCK = block
+    try:
+        assert joined_text(s) == former(s)
+        assert joined_text(chunked) == former(s)
+    finally:
+        network_mod.TEXT_BLOCK = old

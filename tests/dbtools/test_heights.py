@@ -95,3 +95,40 @@ def test_a_kilometrage_break_is_no_step(net: Network) -> None:
     h[rows[200:]] += 5.0  # would be 250 ‰ over 20 m if it were a step
     net.gis["height_m"] = h
     assert _rules(net) == []
+
+
+def test_the_grid_index_of_a_whole_frame_gives_the_same_findings(net: Network) -> None:
+    """With the frame's grid index (every row a point, in its order) the rules take its track
+    ids as the rows' keys instead of factorizing the frame: the same findings, in order."""
+    from dbtools.gis.index import GridIndex
+    from dbtools.network import canonical
+    from schemas.tables import GIS
+
+    rows = _track_rows(net)
+    net.gis.loc[rows[[10, 11, 40]], "height_m"] = np.nan  # partial
+    net.gis.loc[rows[100], "height_m"] += 0.8  # a spike
+    net.gis.loc[rows[200:260], "height_m"] += np.linspace(0.0, 4.0, 60)  # a steep stretch
+    gis = canonical(GIS, net.gis)
+    grid = GridIndex(gis)
+    assert grid.whole_frame
+    cfg = ValidationConfig(max_findings_per_rule=2)
+    plain = check_heights(gis, net.meta, cfg, Locator())
+    assert {f.rule for f in plain} == {"gis.height_partial", "gis.height_curvature", "gis.height_grade"}
+    assert check_heights(gis, net.meta, cfg, Locator(), grid) == plain
+    shuffled = gis.sample(frac=1.0, random_state=1)  # not the grid's frame: read as before
+    assert check_heights(shuffled, net.meta, cfg, Locator(), GridIndex(shuffled)) == plain
+
+
+def test_blocks_of_any_size_give_the_same_findings(net: Network, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Grade and vertical radius computed ``BLOCK`` steps at a time (a spike and a steep
+    stretch across block ends) give the findings of one block."""
+    import dbtools.gis.index as index_mod
+
+    rows = _track_rows(net)
+    net.gis.loc[rows[[100, 107]], "height_m"] += 0.8
+    net.gis.loc[rows[200:260], "height_m"] += np.linspace(0.0, 4.0, 60)
+    whole = check_heights(net.gis, net.meta, ValidationConfig(), Locator())
+    assert {f.rule for f in whole} == {"gis.height_curvature", "gis.height_grade"}
+    for block in (7, 50):
+        monkeypatch.setattr(index_mod, "BLOCK", block)
+        assert check_heights(net.gis, net.meta, ValidationConfig(), Locator()) == whole
