@@ -71,6 +71,7 @@ BENCHES = (
     Bench("topology", "db validate: topology and balise-group rules, 50,000 tracks", ("--lines", "100"), ()),
     Bench("matching", "GPS map matching", ("--lines", "20", "--fixes", "100000", "--repeat", "2"), ()),
     Bench("track_match", "track match: GNSS-only trace → network path, 10,000 tracks", ("--lines", "40"), ()),
+    Bench("engine", "network engine: line runs on the network DB / on the line-only DB", ("--rounds", "3"), ()),
     Bench("pipeline", "pipeline core (1 h run)", (), ()),
     Bench(
         "scaling",

@@ -64,6 +64,10 @@ SMOKE: dict[str, Smoke] = {
             r"bounds: DuckDB not installed|db validate / bound: CPU [\d.]+× \(target ≤ 1\.5×\), peak RSS",
         ),
     ),
+    "bench_engine.py": Smoke(
+        "--rounds 1 --runs 1",
+        (r"line runs on the network DB / on the line-only DB: median [\d.]+×", r"sim-net-station\s+[\d.]+ s CPU"),
+    ),
     "bench_gis_verify.py": Smoke(
         "--lines 1 --length-km 3 --runs 2 --variants 1 --defects 1 --workers 1 --sizes 2 --seeds 1 "
         "--throughput-fixes 10000",
