@@ -25,7 +25,9 @@ import shutil
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -33,6 +35,10 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench._common import load
+
+if TYPE_CHECKING:
+    from dbtools.network import Network
+    from fieldlogs.runs.handle import Run
 
 #: The network tables a line-only source set leaves out.
 NETWORK_TABLES = ("tracks", "connections", "switches", "track_points", "track_feature_points")
@@ -54,14 +60,14 @@ def line_only_sources(src: Path, out: Path) -> Path:
     return out
 
 
-def cpu_of(runs: list[object], net: object) -> float:
+def cpu_of(runs: Sequence[Run], net: Network) -> float:
     """CPU seconds of replaying ``runs`` through the pipeline on ``net``."""
     from fieldlogs.pipeline.config import PipelineConfig
     from fieldlogs.pipeline.run import run_pipeline
 
     c0 = time.process_time()
     for run in runs:
-        run_pipeline(run, net, PipelineConfig())  # type: ignore[arg-type]
+        run_pipeline(run, net, PipelineConfig())
     return time.process_time() - c0
 
 
