@@ -154,8 +154,20 @@ def turn_angle(x: npt.ArrayLike, y: npt.ArrayLike) -> FloatArray:
     if xa.size < 3:
         return out
     h = np.arctan2(np.diff(ya), np.diff(xa))
-    out[1:-1] = (np.diff(h) + np.pi) % (2 * np.pi) - np.pi
+    out[1:-1] = wrap_angle(np.diff(h))
     return out
+
+
+def wrap_angle(a: FloatArray) -> FloatArray:
+    """Angle to [−π, π): (a + π) mod 2π − π."""
+    return np.asarray((a + np.pi) % (2 * np.pi) - np.pi, dtype=float)
+
+
+def arc_turn(u: FloatArray, radius_m: float) -> float:
+    """Heading change [rad] over a curve with clothoid transitions of radius ``radius_m``, its
+    six feature rows r1…r6 at ``u`` (positions in running order): (r4 − r3 + (r3 − r2)/2 +
+    (r5 − r4)/2) / R (a transition of length L turns by L/2R) [S000 Table 1 rows 2–5]."""
+    return float((u[3] - u[2] + 0.5 * (u[2] - u[1]) + 0.5 * (u[4] - u[3])) / radius_m)
 
 
 @dataclass

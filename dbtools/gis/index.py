@@ -204,10 +204,6 @@ def _blockwise_curvature(x: F64, y: F64) -> F64:
     return out
 
 
-def _wrap(a: F64) -> F64:
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 class GridIndex:
     """The grid index of one GIS frame (see module docstring).
 
@@ -471,7 +467,7 @@ class GridIndex:
             seg_h = np.diff(y)
             np.arctan2(seg_h, np.diff(x), out=seg_h)
         turn = np.full(n, np.nan)
-        inner = turn[1:-1]  # _wrap(seg_h[1:] − seg_h[:-1]), in place
+        inner = turn[1:-1]  # wrap_angle(seg_h[1:] − seg_h[:-1]) (dbtools.gis.geometry), in place
         np.subtract(seg_h[1:], seg_h[:-1], out=inner)
         inner += np.pi
         np.remainder(inner, 2 * np.pi, out=inner)

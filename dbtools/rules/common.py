@@ -87,11 +87,6 @@ def capped(
     return out
 
 
-def wrap_angle(a: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-    """Angle to [−π, π)."""
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def fmt_km(km: float) -> str:
     """Kilometrage for messages: ``12k345.6``."""
     return format_km(float(km))

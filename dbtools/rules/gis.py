@@ -42,8 +42,9 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis import index as grid_blocks
+from dbtools.gis.geometry import wrap_angle
 from dbtools.gis.index import GridIndex, GridShape
-from dbtools.rules.common import Locator, capped, fmt_km, py, wrap_angle
+from dbtools.rules.common import Locator, capped, fmt_km, py
 from dbtools.rules.config import ValidationConfig
 from schemas.enums import Severity, Track
 from schemas.findings import Finding

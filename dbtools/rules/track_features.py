@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.gis.geometry import arc_turn
 from dbtools.network import Network
 from dbtools.rules.common import Locator, column, py
 from dbtools.rules.config import ValidationConfig
@@ -118,7 +119,7 @@ def _turns(
         u = r.km[blk]
         radius = float(r.radius[blk[2]])
         sign = 1.0 if r.attr[blk[2]] == Attribute.LEFT.value else -1.0
-        theta = sign * (u[3] - u[2] + 0.5 * (u[2] - u[1]) + 0.5 * (u[4] - u[3])) / radius
+        theta = sign * arc_turn(u, radius)
         j = np.clip(np.searchsorted(pos, [(u[0] + u[1]) / 2, (u[4] + u[5]) / 2], side="right") - 1, 0, psi.size - 1)
         turn = float(psi[j[1]] - psi[j[0]])
         if abs(turn - theta) > tol * abs(theta) + spacing / (2.0 * radius):

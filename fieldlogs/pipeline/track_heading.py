@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from dbtools.gis.geometry import wrap_angle
 from dbtools.topology import BEGIN, END
 from fieldlogs.pipeline.hypotheses import TrackLines
 from fieldlogs.pipeline.types import FloatArray
@@ -114,18 +115,14 @@ def turn_range(start: FloatArray, end: FloatArray) -> tuple[float, float]:
     """(least, greatest) heading change from a heading in ``start`` to one in ``end``, each
     wrapped to within π of the first start heading (turns over a window are far below π)."""
     ref = float(start[0])
-    s = ref + _wrap(start - ref)
-    e = ref + _wrap(end - ref)
+    s = ref + wrap_angle(start - ref)
+    e = ref + wrap_angle(end - ref)
     return float(e.min() - s.max()), float(e.max() - s.min())
-
-
-def _wrap(a: FloatArray) -> FloatArray:
-    return np.asarray((a + math.pi) % (2.0 * math.pi) - math.pi, dtype=float)
 
 
 def span(values: FloatArray) -> float:
     """max − min of headings wrapped to within π of the first."""
-    w = float(values[0]) + _wrap(values - float(values[0]))
+    w = float(values[0]) + wrap_angle(values - float(values[0]))
     return float(w.max() - w.min())
 
 
@@ -133,13 +130,6 @@ def rises(h: FloatArray) -> tuple[float, float]:
     """(greatest rise, greatest fall) of the heading profile ``h`` in time order:
     max over j ≤ k of h_k − h_j, and of h_j − h_k (a left and a right turn somewhere in it)."""
     return float(np.max(h - np.minimum.accumulate(h))), float(np.max(np.maximum.accumulate(h) - h))
-
-
-def arc_turn(u: FloatArray, radius_m: float) -> float:
-    """Heading change over a feature's curve with clothoid transitions, rows r1…r6 in travel
-    order: (r4 − r3 + (r3 − r2)/2 + (r5 − r4)/2) / R [rad] (a transition of length L turns by
-    L/2R; S000 Table 1 rows 2–5)."""
-    return float((u[3] - u[2] + 0.5 * (u[2] - u[1]) + 0.5 * (u[4] - u[3])) / radius_m)
 
 
 def violation_llr(violation: Sequence[float | None], sigma: float) -> FloatArray:

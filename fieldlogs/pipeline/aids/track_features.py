@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from dbtools.gis.geometry import arc_turn
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, load_tables
@@ -73,7 +74,6 @@ from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import TrackLine, TrackLines
 from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.track_heading import (
-    arc_turn,
     headings,
     rises,
     span,

@@ -18,6 +18,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from dbtools.gis.geometry import arc_turn
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.aids.feature_table import Candidate
@@ -29,7 +30,7 @@ from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.engine import Solution, run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import track_lines
-from fieldlogs.pipeline.track_heading import arc_turn, headings, rises, sure_turns, turn_range, violation_llr
+from fieldlogs.pipeline.track_heading import headings, rises, sure_turns, turn_range, violation_llr
 from fieldlogs.pipeline.types import Fix, Hypothesis, Odometry
 from schemas.enums import EventType, FixSource, PositionState
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
