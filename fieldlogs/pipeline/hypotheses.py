@@ -29,6 +29,7 @@ track with ``track_points`` by their ``pos_m``/``km_m``; km is NaN off a line.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -314,6 +315,14 @@ def triggers(h: Hypothesis, pos: FloatArray, m: FloatArray, lines: TrackLines) -
         out = pos - tl.length_m if end == END else -pos
         hit |= out > (0.0 if lines.topo.exits.get((h.track_id, end)) else m + h.extra_m)
     return hit
+
+
+def after_switch_m(hyps: Iterable[Hypothesis], d: float) -> float | None:
+    """Travel [m] from the latest split among ``hyps`` (their ``split_d``) to travel ``d``,
+    to the cm; None when none of them came out of a split: the ``after_switch_m`` of the
+    evidence events."""
+    split = [h.split_d for h in hyps if h.split_d is not None]
+    return round(d - max(split), 2) if split else None
 
 
 def rebased(hyps: tuple[Hypothesis, ...], s_ref: float, s: float) -> list[Hypothesis]:

@@ -31,7 +31,7 @@ from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, S
 from fieldlogs.pipeline.aids.balise import telegram_observations
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.config import BaliseConfig
-from fieldlogs.pipeline.hypotheses import TrackLines
+from fieldlogs.pipeline.hypotheses import TrackLines, after_switch_m
 from fieldlogs.pipeline.types import Event, Fix, Hypothesis
 from schemas.enums import BaliseKind, EventType, FixSource
 
@@ -132,13 +132,12 @@ class BaliseGroupAid(StaticAid):
         new = self._fix(replace(h, pos_m=pos - h.kp * self.reader_x_m, extra_m=0.0), view)
         events: list[Event] = []
         if len(fix.hyps) > 1:
-            split = [c.split_d for c in fix.hyps if c.split_d is not None]
             detail: dict[str, Any] = {
                 "evidence": "balise_group",
                 "group": group,
                 "track_id": tid,
                 "candidates": names,
-                "after_switch_m": round(view.d - max(split), 2) if split else None,
+                "after_switch_m": after_switch_m(fix.hyps, view.d),
                 "switch_id": h.switch_id,
             }
             events.append(Event(view.t, EventType.TRACK_RESOLVED, new.km_m, detail=detail))

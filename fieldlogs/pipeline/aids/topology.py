@@ -33,6 +33,7 @@ from fieldlogs.pipeline.hypotheses import (
     Segments,
     TrackLines,
     advance,
+    after_switch_m,
     parallel_candidates,
     reachable,
     rebased,
@@ -231,12 +232,11 @@ class TopologyAid:
         return Outcome(events, new)
 
     def _resolved(self, view: EngineView, before: tuple[Hypothesis, ...], h: Hypothesis, evidence: str) -> Event:
-        split = [c.split_d for c in before if c.split_d is not None]
         detail: dict[str, Any] = {
             "evidence": evidence,
             "track_id": h.track_id,
             "candidates": [c.track_id for c in before],
-            "after_switch_m": round(view.d - max(split), 2) if split else None,
+            "after_switch_m": after_switch_m(before, view.d),
             "switch_id": next((c.switch_id for c in before if c.switch_id), None),
         }
         return Event(view.t, EventType.TRACK_RESOLVED, view.km, detail=detail)

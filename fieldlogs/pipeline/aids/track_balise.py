@@ -32,7 +32,7 @@ from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, S
 from fieldlogs.pipeline.aids.balise import BaliseDb, telegram_observations
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.config import BaliseConfig, MarginConfig
-from fieldlogs.pipeline.hypotheses import TrackLines
+from fieldlogs.pipeline.hypotheses import TrackLines, after_switch_m
 from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.types import Event, Fix, Hypothesis
 from schemas.enums import BaliseKind, EventType, FixSource
@@ -84,13 +84,12 @@ class TrackBaliseAid(StaticAid):
             with_hyps(new, [replace(h, pos_m=p_b - h.kp * self.reader_x_m, extra_m=0.0)], view.t, view.s, self.lines),
             carried=False,
         )
-        split = [c.split_d for c in fix.hyps if c.split_d is not None]
         detail: dict[str, Any] = {
             "evidence": "balise",
             "balise_id": balise_id,
             "track_id": h.track_id,
             "candidates": [c.track_id for c in fix.hyps],
-            "after_switch_m": round(view.d - max(split), 2) if split else None,
+            "after_switch_m": after_switch_m(fix.hyps, view.d),
             "switch_id": h.switch_id,
         }
         return Outcome([Event(view.t, EventType.TRACK_RESOLVED, new.km_m, detail=detail)], new)

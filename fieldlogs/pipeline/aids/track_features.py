@@ -71,7 +71,7 @@ from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.aids.track_imu import kept, resolve
 from fieldlogs.pipeline.config import MarginConfig, TrackSelectConfig
 from fieldlogs.pipeline.estimate import Travel
-from fieldlogs.pipeline.hypotheses import TrackLine, TrackLines
+from fieldlogs.pipeline.hypotheses import TrackLine, TrackLines, after_switch_m
 from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.track_heading import (
     headings,
@@ -261,7 +261,6 @@ class TrackFeatureAid:
         viol = [self._violation(h, h.kp * mot, fix, tr, (i0, i1), m + h.extra_m, prof) for h in fix.hyps]
         sigma = self._sigma(float(tr.t[i1] - tr.t[i0]))
         keep = kept(violation_llr(viol, sigma), self.cfg.threshold)
-        split = [h.split_d for h in fix.hyps if h.split_d is not None]
         detail: dict[str, Any] = {
             "evidence": "feature",
             "feature_id": test.feature_id,
@@ -271,7 +270,7 @@ class TrackFeatureAid:
             "heading_span_deg": round(math.degrees(float(np.ptp(prof))), 3),
             "sigma_deg": round(math.degrees(sigma), 3),
             "violation_deg": {h.track_id: round(math.degrees(v), 3) for h, v in zip(fix.hyps, viol, strict=True)},
-            "after_switch_m": round(view.d - max(split), 2) if split else None,
+            "after_switch_m": after_switch_m(fix.hyps, view.d),
             "switch_id": next((h.switch_id for h in fix.hyps if h.switch_id), None),
         }
         return resolve(fix, keep, view, self.lines, detail)

@@ -75,7 +75,7 @@ import numpy as np
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.track_imu import kept, resolve
 from fieldlogs.pipeline.config import GpsConfig, TrackSelectConfig
-from fieldlogs.pipeline.hypotheses import TrackLines
+from fieldlogs.pipeline.hypotheses import TrackLines, after_switch_m
 from fieldlogs.pipeline.types import Fix, FloatArray, Hypothesis
 from schemas.enums import PositionState
 
@@ -236,7 +236,7 @@ class TrackGpsAid(NetworkFixes):
             "evidence": "gps",
             "fixes": int(apart.max()),
             "llr": round(float(np.max(llr)), 2) if np.isfinite(llr).any() else None,
-            "after_switch_m": _after(fix, view.d),
+            "after_switch_m": after_switch_m(fix.hyps, view.d),
         }
         return resolve(fix, kept(llr, self.cfg.threshold), view, self.lines, detail)
 
@@ -334,8 +334,3 @@ class TrackGpsAid(NetworkFixes):
             pos = h.pos_m + h.kp * (s - fix.s_ref) + h.kp * self.antenna_x_m
             out.append(h.kp * offset(self.lines, h, pos, lat, lon))  # + left of body-forward
         return out
-
-
-def _after(fix: Fix, d: float) -> float | None:
-    split = [h.split_d for h in fix.hyps if h.split_d is not None]
-    return round(d - max(split), 2) if split else None
