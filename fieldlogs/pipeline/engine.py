@@ -191,7 +191,7 @@ class _Engine:
         for k in which:
             nxt = self.aids[k].next_observation(view)
             if nxt is not None:
-                self.push(k, replace(nxt, version=self.version))
+                self.push(k, Observation(nxt.t, nxt.payload, self.version))
 
 
 def run_aids(

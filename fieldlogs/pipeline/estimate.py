@@ -21,7 +21,7 @@ reversal after the fix is followed without a new fix [S003 §5.3].
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -65,6 +65,9 @@ class Travel:
     """With a network, dead reckoning runs along each track's own length."""
     rotation_motion: np.ndarray | None = None
     """The sense of motion where a two-phase tachometer gives it (None: the cab's)."""
+    _at: dict[float, tuple[int, float, float]] = field(default_factory=dict, init=False, repr=False, compare=False)
+    """:meth:`at` of the times already asked (the aids of one fix time share it)."""
+    _allow: dict[float, float] = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @classmethod
     def of(cls, cycles: Cycles, odo: Odometry, network: Network | None = None) -> Travel:
@@ -92,12 +95,19 @@ class Travel:
         return km_along(fix, s, self.metric(fix))
 
     def at(self, t: float) -> tuple[int, float, float]:
-        """Cycle index at or after ``t`` and the travel d, S interpolated at ``t``."""
-        i = min(int(np.searchsorted(self.t, t, side="left")), self.t.size - 1)
-        return i, interp_at(t, self.t, self.d), interp_at(t, self.t, self.s)
+        """Cycle index at or after ``t`` and the travel d, S interpolated at ``t`` (remembered:
+        several aids are heard at one time)."""
+        hit = self._at.get(t)
+        if hit is None:
+            i = min(int(np.searchsorted(self.t, t, side="left")), self.t.size - 1)
+            hit = self._at[t] = (i, interp_at(t, self.t, self.d), interp_at(t, self.t, self.s))
+        return hit
 
     def allowance_at(self, t: float) -> float:
-        return interp_at(t, self.t, self.allowance)
+        hit = self._allow.get(t)
+        if hit is None:
+            hit = self._allow[t] = interp_at(t, self.t, self.allowance)
+        return hit
 
 
 def interp_at(x: float, xp: FloatArray, fp: FloatArray) -> float:

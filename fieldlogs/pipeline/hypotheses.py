@@ -28,9 +28,11 @@ track with ``track_points`` by their ``pos_m``/``km_m``; km is NaN off a line.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -98,15 +100,23 @@ class TrackLine:
         return 1
 
     def point(self, pos: float) -> tuple[float, float, float, float]:
-        """East, north of the centreline at ``pos`` and its unit tangent (toward the end)."""
-        p = min(max(pos, float(self.cpos[0])), float(self.cpos[-1]))
-        j = int(np.clip(np.searchsorted(self.cpos, p, side="right") - 1, 0, self.cpos.size - 2))
-        (x0, y0), (x1, y1) = self.xy[j], self.xy[j + 1]
-        seg = max(float(self.cpos[j + 1] - self.cpos[j]), 1e-9)
-        u = (p - float(self.cpos[j])) / seg
+        """East, north of the centreline at ``pos`` and its unit tangent (toward the end).
+        Scalar arithmetic on the points as Python floats (the same IEEE operations as on
+        NumPy scalars: it is called once per candidate per GPS fix)."""
+        cp, xy = self._points
+        p = min(max(pos, cp[0]), cp[-1])
+        j = min(max(bisect.bisect_right(cp, p) - 1, 0), len(cp) - 2)
+        (x0, y0), (x1, y1) = xy[j], xy[j + 1]
+        seg = max(cp[j + 1] - cp[j], 1e-9)
+        u = (p - cp[j]) / seg
         dx, dy = x1 - x0, y1 - y0
         norm = max(math.hypot(dx, dy), 1e-9)
         return x0 + u * dx, y0 + u * dy, dx / norm, dy / norm
+
+    @cached_property
+    def _points(self) -> tuple[list[float], list[list[float]]]:
+        """``cpos`` and ``xy`` as Python lists (:meth:`point`)."""
+        return [float(c) for c in self.cpos], self.xy.tolist()
 
     def project(self, x: float, y: float, near: float, window_m: float) -> tuple[float, float]:
         """(pos, offset) of the plane point (x, y) on the centreline: the nearest point of the
