@@ -126,6 +126,7 @@ class _Engine:
         for k, aid in enumerate(self.aids):
             for obs in aid.observations():
                 self.push(k, obs)
+        self.travel.prime(np.array([e[0] for e in self.heap], dtype=float))
         end = self.travel.t[-1] + 1e-9 if self.travel.n else -np.inf
         while self.heap:
             t, _prio, _n, k, obs = heapq.heappop(self.heap)

@@ -103,6 +103,18 @@ class Travel:
             hit = self._at[t] = (i, interp_at(t, self.t, self.d), interp_at(t, self.t, self.s))
         return hit
 
+    def prime(self, ts: FloatArray) -> None:
+        """Remember :meth:`at` of many times at once (the aids' known moments): vectorised, the
+        same numbers (``searchsorted`` and ``np.interp`` are elementwise; :func:`interp_at` is
+        ``np.interp`` of one time)."""
+        ts = np.unique(np.asarray(ts, dtype=float))
+        ts = ts[np.isfinite(ts)]
+        if self.t.size < 2 or ts.size == 0:
+            return
+        i = np.minimum(np.searchsorted(self.t, ts, side="left"), self.t.size - 1)
+        d, s = np.interp(ts, self.t, self.d), np.interp(ts, self.t, self.s)
+        self._at.update(zip(ts.tolist(), zip(i.tolist(), d.tolist(), s.tolist(), strict=True), strict=True))
+
     def allowance_at(self, t: float) -> float:
         hit = self._allow.get(t)
         if hit is None:

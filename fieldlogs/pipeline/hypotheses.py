@@ -118,6 +118,12 @@ class TrackLine:
         """``cpos`` and ``xy`` as Python lists (:meth:`point`)."""
         return [float(c) for c in self.cpos], self.xy.tolist()
 
+    @cached_property
+    def _segments(self) -> tuple[FloatArray, FloatArray]:
+        """Each centreline segment's b − a and max(|b − a|², 1e-18) (:meth:`project`)."""
+        ab = self.xy[1:] - self.xy[:-1]
+        return ab, np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
+
     def project(self, x: float, y: float, near: float, window_m: float) -> tuple[float, float]:
         """(pos, offset) of the plane point (x, y) on the centreline: the nearest point of the
         segments whose ``cpos`` lies within ``near`` ± ``window_m`` (pos along the track,
@@ -130,9 +136,8 @@ class TrackLine:
         hi = min(int(np.searchsorted(self.cpos, near + window_m, side="left")) + 1, n)
         if hi - lo < 2:
             return math.nan, math.nan
-        a, b = self.xy[lo : hi - 1], self.xy[lo + 1 : hi]
-        ab = b - a
-        l2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
+        a = self.xy[lo : hi - 1]
+        ab, l2 = self._segments[0][lo : hi - 1], self._segments[1][lo : hi - 1]
         u = np.clip(((x - a[:, 0]) * ab[:, 0] + (y - a[:, 1]) * ab[:, 1]) / l2, 0.0, 1.0)
         fx, fy = a[:, 0] + u * ab[:, 0], a[:, 1] + u * ab[:, 1]
         j = int(np.argmin((x - fx) ** 2 + (y - fy) ** 2))
