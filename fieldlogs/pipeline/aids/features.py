@@ -81,7 +81,7 @@ in the same direction without a cab reversal in between).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -90,7 +90,7 @@ import numpy.typing as npt
 
 from dbtools.masks import sign_runs
 from dbtools.network import Network
-from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
+from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, Scan, StaticAid, drained, scanned
 from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, load_tables
 from fieldlogs.pipeline.config import FeatureConfig
 from fieldlogs.pipeline.cycles import Cycles, moving_average, standstill_mean
@@ -101,6 +101,9 @@ from schemas.enums import EventType, FixSource, PositionState
 KAPPA_MIN_SPEED_MPS = 0.5
 #: Cycles read in the first chunk of the scheduling scan (then doubling): ~4 min at 10 Hz.
 SCAN_CHUNK = 2048
+#: Cycles of the first chunk the engine's scan reads before it waits for the engine to reach
+#: them (:class:`~fieldlogs.pipeline.aid.Resume`): an estimate changed meanwhile ends it.
+PROBE_CHUNK = 128
 #: ``km_between(i0, i1)``: the estimate in force on cycles [i0, i1) (the engine's view).
 KmBetween = Callable[[int, int], FloatArray]
 #: Diagnostic names, in the order they are reported.
@@ -188,6 +191,20 @@ class FeatureUnit:
         metre of body-forward travel) default to the fix's line/track and its k; a track's
         own table with a candidate's pos as ``km_between`` and its kp runs the same scan
         along a network track (:mod:`fieldlogs.pipeline.aids.track_features`)."""
+        return drained(self.evaluation_scan(fix, after_i, km_between, table, k))
+
+    def evaluation_scan(
+        self,
+        fix: Fix,
+        after_i: int,
+        km_between: KmBetween,
+        table: FeatureTable | None = None,
+        k: int | None = None,
+        chunk: int = SCAN_CHUNK,
+    ) -> Generator[int, None, tuple[int, Candidate] | None]:
+        """:meth:`next_evaluation` as a resumable scan (:class:`~fieldlogs.pipeline.aid.Resume`):
+        it yields each cycle it reaches with the feature not yet passed (the evaluation is not
+        before it) and returns the result; its first chunk reads ``chunk`` cycles."""
         table = self.tables.get((fix.line_code, fix.track)) if table is None else table
         k = fix.k if k is None else k
         n = self._d.size
@@ -209,7 +226,7 @@ class FeatureUnit:
                 fid = str(table.feature_id[j])
                 if self._done.get((table.line_code, table.track, fid, sdir)) == seg:
                     continue
-                i_eval = self._first_passed(fix, sdir, float(u_all[j, 5]), s0, s1, km_between)
+                i_eval = yield from self._first_passed(fix, sdir, float(u_all[j, 5]), (s0, s1, chunk), km_between)
                 if i_eval is None:
                     break  # not reached in this segment; farther features neither
                 cand = Candidate(
@@ -228,12 +245,18 @@ class FeatureUnit:
                 return i_eval, cand
         return None
 
-    def _first_passed(self, fix: Fix, sdir: int, u6: float, s0: int, s1: int, km_between: KmBetween) -> int | None:
-        """First cycle of [s0, s1) where the estimate u = sdir·km has passed ``u6`` by the
-        search margin, or None. Read in chunks of doubling length from ``s0``, so the cost is
-        in the distance to that cycle, not in the run's length."""
-        a, step = s0, SCAN_CHUNK
+    def _first_passed(
+        self, fix: Fix, sdir: int, u6: float, span: tuple[int, int, int], km_between: KmBetween
+    ) -> Generator[int, None, int | None]:
+        """First cycle of [s0, s1) = ``span[:2]`` where the estimate u = sdir·km has passed ``u6``
+        by the search margin, or None. Read in chunks of doubling length from ``s0`` (the first
+        ``span[2]`` cycles), so the cost is in the distance to that cycle, not in the run's
+        length; yields the first cycle of each chunk after the first."""
+        s0, s1, step = span
+        a = s0
         while a < s1:
+            if a > s0:
+                yield a
             b = min(a + step, s1)
             u = sdir * km_between(a, b)
             passed = np.flatnonzero(u - u6 >= self.margin(fix, np.arange(a, b)))
@@ -474,11 +497,19 @@ class FeatureAid(StaticAid):
         fix = view.estimate
         if fix is None or fix.state != PositionState.DETERMINED:
             return None
-        nxt = self.unit.next_evaluation(fix, view.i, view.km_between)
-        if nxt is None:
-            return None
-        i_eval, cand = nxt
-        return Observation(float(self.unit.cycles.t[i_eval]), cand)
+        return scanned(self._scan(fix, view.i, view.km_between))
+
+    def _scan(self, fix: Fix, after_i: int, km_between: KmBetween) -> Scan:
+        """:meth:`FeatureUnit.evaluation_scan` in time: read as the engine reaches it."""
+        t = self.unit.cycles.t
+        scan = self.unit.evaluation_scan(fix, after_i, km_between, chunk=PROBE_CHUNK)
+        while True:
+            try:
+                yield float(t[next(scan)])
+            except StopIteration as stop:
+                nxt: tuple[int, Candidate] | None = stop.value
+                break
+        return None if nxt is None else Observation(float(t[nxt[0]]), nxt[1])
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate
