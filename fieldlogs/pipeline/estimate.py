@@ -104,7 +104,7 @@ class Travel:
         return hit
 
     def prime(self, ts: FloatArray) -> None:
-        """Remember :meth:`at` of many times at once (the aids' known moments): vectorised, the
+        """Remember :meth:`at` and :meth:`allowance_at` of many times at once (the aids' known moments): vectorised, the
         same numbers (``searchsorted`` and ``np.interp`` are elementwise; :func:`interp_at` is
         ``np.interp`` of one time)."""
         ts = np.unique(np.asarray(ts, dtype=float))
@@ -113,7 +113,9 @@ class Travel:
             return
         i = np.minimum(np.searchsorted(self.t, ts, side="left"), self.t.size - 1)
         d, s = np.interp(ts, self.t, self.d), np.interp(ts, self.t, self.s)
-        self._at.update(zip(ts.tolist(), zip(i.tolist(), d.tolist(), s.tolist(), strict=True), strict=True))
+        keys = ts.tolist()
+        self._at.update(zip(keys, zip(i.tolist(), d.tolist(), s.tolist(), strict=True), strict=True))
+        self._allow.update(zip(keys, np.interp(ts, self.t, self.allowance).tolist(), strict=True))
 
     def allowance_at(self, t: float) -> float:
         hit = self._allow.get(t)

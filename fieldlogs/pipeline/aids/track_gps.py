@@ -65,6 +65,7 @@ hundred times as independent noise and decide on it.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from statistics import NormalDist
@@ -157,6 +158,15 @@ class NetworkFixes:
         default_factory=dict, repr=False, kw_only=True
     )
     """The fixes in each track's local plane, made on first use (shared by the aids made from one)."""
+    t_list: list[float] = field(default_factory=list, repr=False, kw_only=True)
+    """:meth:`fix_times`, made on first use."""
+
+    def fix_times(self) -> list[float]:
+        """``t`` as a list, for ``bisect`` at every scheduling (the index ``np.searchsorted``
+        gives: the times are in order)."""
+        if not self.t_list and self.t.size:
+            self.t_list.extend(self.t.tolist())
+        return self.t_list
 
     def plane_of(self, tl: TrackLine, j: int) -> tuple[float, float]:
         """Fix ``j`` in ``tl``'s local plane [m] (:meth:`TrackLine.plane`, elementwise: the same
@@ -200,8 +210,9 @@ class TrackGpsAid(NetworkFixes):
         fix = view.estimate
         if fix is None or not fix.hyps:
             return None
-        j = int(np.searchsorted(self.t, view.t, side="right"))
-        return Observation(float(self.t[j]), j) if j < self.t.size else None
+        ts = self.fix_times()
+        j = bisect.bisect_right(ts, view.t)
+        return Observation(ts[j], j) if j < len(ts) else None
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate

@@ -57,6 +57,7 @@ candidate, so line-only runs and ambiguous estimates are untouched (the offsets 
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field, replace
 
@@ -104,6 +105,8 @@ class TrackGpsAlongAid(NetworkFixes):
     is confirmed from these (module docstring)."""
     usable_planes: dict[tuple[float, float], tuple[list[float], list[float]]] = field(default_factory=dict, repr=False)
     """The usable fixes in each track's local plane, made on first use."""
+    usable_t: list[float] = field(default_factory=list, repr=False)
+    """Their times as a list (:meth:`NetworkFixes.fix_times`)."""
 
     def observations(self) -> list[Observation]:
         return []
@@ -113,9 +116,14 @@ class TrackGpsAlongAid(NetworkFixes):
         if fix is None or len(fix.hyps) != 1:
             return None
         usable = self.usable is not None and fix.state == PositionState.UNCERTAIN
-        t = self.usable[0] if self.usable is not None and usable else self.t
-        j = int(np.searchsorted(t, view.t, side="right"))
-        return Observation(float(t[j]), (j, usable)) if j < t.size else None
+        if self.usable is not None and usable:
+            if not self.usable_t and self.usable[0].size:
+                self.usable_t.extend(self.usable[0].tolist())
+            t = self.usable_t
+        else:
+            t = self.fix_times()
+        j = bisect.bisect_right(t, view.t)
+        return Observation(t[j], (j, usable)) if j < len(t) else None
 
     def _plane(self, tl: TrackLine, j: int, usable: bool) -> tuple[float, float]:
         """Trusted (or usable) fix ``j`` in ``tl``'s local plane, each track's computed once."""
