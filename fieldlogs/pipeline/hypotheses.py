@@ -119,37 +119,54 @@ class TrackLine:
         return [float(c) for c in self.cpos], self.xy.tolist()
 
     @cached_property
-    def _segments(self) -> tuple[FloatArray, FloatArray]:
+    def _segments(self) -> tuple[list[list[float]], list[float]]:
         """Each centreline segment's b − a and max(|b − a|², 1e-18) (:meth:`project`)."""
         ab = self.xy[1:] - self.xy[:-1]
-        return ab, np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
+        return ab.tolist(), np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18).tolist()
 
     def project(self, x: float, y: float, near: float, window_m: float) -> tuple[float, float]:
         """(pos, offset) of the plane point (x, y) on the centreline: the nearest point of the
         segments whose ``cpos`` lies within ``near`` ± ``window_m`` (pos along the track,
         offset + left of the begin→end direction); (NaN, NaN) when no segment lies there.
-        The point's foot on segment j is u = clip(((p − a_j)·(b_j − a_j)) / |b_j − a_j|², 0, 1)."""
-        n = self.cpos.size
+        The point's foot on segment j is u = clip(((p − a_j)·(b_j − a_j)) / |b_j − a_j|², 0, 1);
+        the nearest foot the first of least squared distance (a NaN one first, as ``np.argmin``).
+        A handful of segments per call: Python floats, the same IEEE operations as NumPy's."""
+        cp, xy = self._points
+        n = len(cp)
         if n < 2:
             return math.nan, math.nan
-        lo = max(int(np.searchsorted(self.cpos, near - window_m, side="right")) - 1, 0)
-        hi = min(int(np.searchsorted(self.cpos, near + window_m, side="left")) + 1, n)
+        lo = max(bisect.bisect_right(cp, near - window_m) - 1, 0)
+        hi = min(bisect.bisect_left(cp, near + window_m) + 1, n)
         if hi - lo < 2:
             return math.nan, math.nan
-        a = self.xy[lo : hi - 1]
-        ab, l2 = self._segments[0][lo : hi - 1], self._segments[1][lo : hi - 1]
-        u = np.clip(((x - a[:, 0]) * ab[:, 0] + (y - a[:, 1]) * ab[:, 1]) / l2, 0.0, 1.0)
-        fx, fy = a[:, 0] + u * ab[:, 0], a[:, 1] + u * ab[:, 1]
-        j = int(np.argmin((x - fx) ** 2 + (y - fy) ** 2))
-        c0, c1 = float(self.cpos[lo + j]), float(self.cpos[lo + j + 1])
-        pos = c0 + float(u[j]) * (c1 - c0)
-        norm = max(math.sqrt(float(l2[j])), 1e-9)
-        off = (-(x - float(fx[j])) * float(ab[j, 1]) + (y - float(fy[j])) * float(ab[j, 0])) / norm
+        abs_, l2s = self._segments
+        best = (math.inf, -1, 0.0, 0.0, 0.0)
+        for j in range(lo, hi - 1):
+            (ax, ay), (dx, dy) = xy[j], abs_[j]
+            u = _clip01(((x - ax) * dx + (y - ay) * dy) / l2s[j])
+            fx, fy = ax + u * dx, ay + u * dy
+            d2 = (x - fx) * (x - fx) + (y - fy) * (y - fy)
+            if d2 != d2:  # NaN
+                best = (d2, j, u, fx, fy)
+                break
+            if d2 < best[0] or best[1] < 0:
+                best = (d2, j, u, fx, fy)
+        _, j, u, fx, fy = best
+        pos = cp[j] + u * (cp[j + 1] - cp[j])
+        norm = max(math.sqrt(l2s[j]), 1e-9)
+        off = (-(x - fx) * abs_[j][1] + (y - fy) * abs_[j][0]) / norm
         return pos, off
 
     def plane(self, lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:
         """lat/lon [deg] in this track's local plane [m]."""
         return equirect(self.origin, lat, lon)
+
+
+def _clip01(v: float) -> float:
+    """``np.clip(v, 0.0, 1.0)`` of one float (NaN stays NaN)."""
+    if v != v:
+        return v
+    return 1.0 if v > 1.0 else (v if v > 0.0 else 0.0)
 
 
 def equirect(origin: tuple[float, float], lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:
