@@ -39,9 +39,11 @@ def signed_travel(cycles: Cycles, odo: Odometry) -> FloatArray:
     return np.cumsum(cycles.motion.astype(float) * dd)
 
 
-def km_along(fix: Fix, s: FloatArray | float, m: TrackMetric) -> FloatArray:
-    """Dead reckoning from ``fix``: travel S − S_ref along the track's own length, as km."""
-    return m.km_of_c(m.c_of_km(fix.km_m) + fix.k * (np.asarray(s, dtype=float) - fix.s_ref))
+def km_along(fix: Fix, s: FloatArray | float, m: TrackMetric, c_ref: FloatArray | None = None) -> FloatArray:
+    """Dead reckoning from ``fix``: travel S − S_ref along the track's own length, as km
+    (``c_ref``: ``m.c_of_km(fix.km_m)`` when known)."""
+    c0 = m.c_of_km(fix.km_m) if c_ref is None else c_ref
+    return m.km_of_c(c0 + fix.k * (np.asarray(s, dtype=float) - fix.s_ref))
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,10 @@ class Travel:
     _at: dict[float, tuple[int, float, float]] = field(default_factory=dict, init=False, repr=False, compare=False)
     """:meth:`at` of the times already asked (the aids of one fix time share it)."""
     _allow: dict[float, float] = field(default_factory=dict, init=False, repr=False, compare=False)
+    _refs: dict[int, tuple[Fix, TrackMetric, FloatArray]] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+    """Per fix (by id, the fix kept): its metric and ``c_of_km(km_m)`` (:meth:`km`)."""
 
     @classmethod
     def of(cls, cycles: Cycles, odo: Odometry, network: Network | None = None) -> Travel:
@@ -91,8 +97,13 @@ class Travel:
         return track_metric(self.network, fix.line_code, fix.track)
 
     def km(self, fix: Fix, s: FloatArray | float) -> FloatArray:
-        """km of ``fix`` dead-reckoned to signed travel ``s``."""
-        return km_along(fix, s, self.metric(fix))
+        """km of ``fix`` dead-reckoned to signed travel ``s`` (its metric and rolled length at
+        the fix made once per fix: the engine's aids read the estimate many times)."""
+        ref = self._refs.get(id(fix))
+        if ref is None or ref[0] is not fix:
+            m = self.metric(fix)
+            ref = self._refs[id(fix)] = (fix, m, m.c_of_km(fix.km_m))
+        return km_along(fix, s, ref[1], ref[2])
 
     def at(self, t: float) -> tuple[int, float, float]:
         """Cycle index at or after ``t`` and the travel d, S interpolated at ``t`` (remembered:
