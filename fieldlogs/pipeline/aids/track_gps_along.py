@@ -67,8 +67,8 @@ from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes
 from fieldlogs.pipeline.config import GpsConfig, MarginConfig, TrackSelectConfig
-from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.hypotheses import TrackLine
+from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.types import Event, FloatArray, Hypothesis
 from schemas.enums import EventType, FixSource, PositionState
 
