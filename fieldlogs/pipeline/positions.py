@@ -44,7 +44,7 @@ def margin_m(fix: Fix, d: FloatArray | float, allowance: FloatArray | float, cfg
     """The margin of the module docstring for ``fix`` at travel ``d`` and slip budget ``allowance``
     (one travel as floats: the same operations on floats, as the aids ask at every observation)."""
     if isinstance(d, float) and isinstance(allowance, float):
-        return _grown(fix, d, max(allowance - fix.allowance_ref_m, 0.0), cfg)
+        return float(_grown(fix, d, max(allowance - fix.allowance_ref_m, 0.0), cfg))
     d_a = np.asarray(d, dtype=float)
     slip = np.maximum(np.asarray(allowance, dtype=float) - fix.allowance_ref_m, 0.0)
     return np.asarray(_grown(fix, d_a, slip, cfg), dtype=float)
