@@ -116,7 +116,7 @@ def claims(ents: list[Entry]) -> Claims:
         same &= ~e.mask | agree
     text: list[str | None] = [None] * n
     idx = np.flatnonzero(ambiguous)
-    cells = [_Cells.of(e, idx) for e in ents]
+    cells = [_Cells.of(e, idx) for e in ents] if idx.size else []
     for j, i in enumerate(idx.tolist()):
         text[i] = _json([c.item(j) for c in cells if c.mask[j]])
     return Claims(ambiguous, same, text)

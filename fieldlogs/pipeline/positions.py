@@ -129,6 +129,7 @@ class _Columns:
         self.km, self.km_eq, self.pos = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
         self.margin, self.k_sign = np.full(n, np.nan), np.full(n, np.nan)
         self._ids: dict[str | None, str | None] = {None: None}
+        self._run_motion: FloatArray | None = None
 
     def interned(self, text: str | None) -> str | None:
         """One str object per track id (the cells share it, as the other text columns do)."""
@@ -158,7 +159,9 @@ class _Columns:
         if travel.network is None:
             raise ValueError("a fix with network candidates needs the travel's network")
         lines = track_lines(travel.network)
-        ents = entries(f, travel.s[sel], _motion(travel)[sel], base, lines)
+        if self._run_motion is None:
+            self._run_motion = _motion(travel)  # the run's, once: every fix reads its cycles of it
+        ents = entries(f, travel.s[sel], self._run_motion[sel], base, lines)
         cl = claims(ents)
         own = ents[0]
         tl = lines[own.track_id]
