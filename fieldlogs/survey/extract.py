@@ -69,7 +69,7 @@ from fieldlogs.replay.network import DbRef, load_network
 from fieldlogs.runs.handle import Run, read_run
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.dbindex import BaliseIndex, balise_index
-from fieldlogs.survey.groups import group_passes, group_places
+from fieldlogs.survey.groups import PLACEMENT_COLUMNS, TrackTrace, group_passes, group_places, run_placements
 from fieldlogs.survey.wheelaids import AidScale, SegmentSpan, radar_scale, run_gnss_scale
 from schemas.enums import BaliseKind, PositionState
 from schemas.errors import InputError, TrainposError
@@ -144,6 +144,8 @@ class RunSurvey:
     """The wheel scale from the radar's calibration (:mod:`fieldlogs.survey.wheelaids`)."""
     gnss: AidScale | None = None
     """The wheel scale from GNSS or D-GPS along-track positions."""
+    group_placements: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=list(PLACEMENT_COLUMNS)))
+    """Reads of G balises off every line placed from the run's earlier position (:mod:`fieldlogs.survey.groupfix`)."""
 
 
 @dataclass
@@ -521,11 +523,15 @@ def extract(
     reads, counts = read_frame(telegram_frame(run), segs, tr, index, cfg)
     passes = pass_frame(segs, tr, reads, index, cfg, pipeline.margin.distance_pct)
     places = network.cached("survey_group_places", lambda: group_places(network))
+    placed = pd.DataFrame(columns=list(PLACEMENT_COLUMNS))
+    reader_x = VehicleGeometry.of(meta.vehicle).reader_x_m
     if len(places):  # the G balises of a network's groups, per track (fieldlogs.survey.groups)
         known = _text(result.positions["state"]) != PositionState.UNDETERMINED.value
         got = reads[reads["status"] == IDENTIFIED]
         more = group_passes(places, tr.t, tr.km, tr.margin, tr.track_id, known, got, cfg)
         passes = pd.concat([passes, more], ignore_index=True) if len(more) else passes
+        trace = TrackTrace(tr.t, tr.d, tr.km, tr.margin, tr.track_id, tr.cab, known)
+        placed = run_placements(places, trace, got, reader_x, pipeline.margin.distance_pct)
     kappa, coverage = kappa_frames(result, segs, tr, network, pipeline, cfg)
     gis = fixes_from_result(result, run.run_id)
     gis.folder = folder
@@ -540,7 +546,7 @@ def extract(
         vehicle_id=str(meta.vehicle_id),
         start_time=str(meta.start_time),
         wheel_diameter_m=float(meta.wheel_diameter_m) if meta.wheel_diameter_m is not None else float("nan"),
-        reader_x_m=VehicleGeometry.of(meta.vehicle).reader_x_m,
+        reader_x_m=reader_x,
         duration_s=float(tr.t[-1] - tr.t[0]) if tr.t.size else 0.0,
         distance_m=float(tr.d[-1]) if tr.d.size else 0.0,
         segments=segment_frame(segs, tr),
@@ -552,6 +558,7 @@ def extract(
         counts=counts,
         radar=radar_scale(result.odometry, cfg),
         gnss=run_gnss_scale(result, network, spans, cfg),
+        group_placements=placed,
     )
 
 
