@@ -41,7 +41,8 @@ nothing about the balises.
 **Curvature.** κ samples (at the cycle's mid travel, SPEC §5.3) with a speed of at least
 ``min_speed_kmh`` (and the pipeline's feature ``min_speed_kmh``) are kept where a curve may be: within
 ``curve_pad_m`` of a sample with |κ| ≥ (1 − tol)/``max_radius_m`` or of a DB feature span
-(on a track off every line, of its ``track_feature_points`` by pos);
+(on a track off every line, of its ``track_feature_points`` by pos; along a line, also of
+the ``track_feature_points`` of its tracks on the line's km, :mod:`fieldlogs.survey.trackform`);
 the travel intervals with a usable κ are kept too (coverage). Their km is only computed
 by the aggregation (:mod:`fieldlogs.survey.trajectory`), from the balises as surveyed.
 
@@ -70,6 +71,7 @@ from fieldlogs.runs.handle import Run, read_run
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.dbindex import BaliseIndex, balise_index
 from fieldlogs.survey.groups import PLACEMENT_COLUMNS, TrackTrace, group_passes, group_places, run_placements
+from fieldlogs.survey.trackform import km_features
 from fieldlogs.survey.wheelaids import AidScale, SegmentSpan, radar_scale, run_gnss_scale
 from schemas.enums import BaliseKind, PositionState
 from schemas.errors import InputError, TrainposError
@@ -477,7 +479,9 @@ def _feature_spans(x: FloatArray, segs: list[_Seg], tr: _Trace, network: Network
     fp, tfp = network.feature_points, network.track_feature_points
     if not len(fp) and not len(tfp):
         return out
-    spans = network.cached("survey_feature_spans", lambda: _spans(fp) if len(fp) else {})
+    along = km_features(network)  # curves held per track along a line, on its km (fieldlogs.survey.trackform)
+    line_form = pd.concat([fp, along], ignore_index=True) if len(along) else fp
+    spans = network.cached("survey_feature_spans", lambda: _spans(line_form) if len(line_form) else {})
     if len(tfp):  # off a line the segment's place is the pos along its track: keyed ("", track_id)
         spans = spans | network.cached("survey_track_feature_spans", lambda: _spans(features_by_pos(tfp)))
     for g in segs:
