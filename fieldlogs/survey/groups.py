@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.masks import run_around
 from dbtools.network import Network
 from fieldlogs.survey.config import SurveyConfig
 from schemas.enums import BaliseKind
@@ -183,13 +184,7 @@ def _first_of_pass(times: FloatArray, t_read: float) -> float:
 def _motion(tr: TrackTrace, i: int) -> int:
     """σ: the sign of the place's change over the stretch of known cycles on cycle ``i``'s
     track with its cab (0 when it does not move)."""
-    same = tr.known & (tr.track_id == tr.track_id[i]) & (tr.cab == tr.cab[i])
-    a = i
-    while a > 0 and same[a - 1]:
-        a -= 1
-    b = i
-    while b < same.size - 1 and same[b + 1]:
-        b += 1
+    a, b = run_around(tr.known & (tr.track_id == tr.track_id[i]) & (tr.cab == tr.cab[i]), i)
     return int(np.sign(tr.u[b] - tr.u[a])) if np.isfinite(tr.u[b] - tr.u[a]) else 0
 
 
