@@ -244,9 +244,12 @@ def survey(
     its track_id (the declared track holding it; on a line-only DB the implied LINE:TRACK).
     On a network, runs on tracks off every line (crossovers) are surveyed along their pos_m
     (their curves against track_feature_points, per track_id, pos in the km columns;
-    --propose writes track_feature_points rows), and the G balises of balise groups are
+    --propose writes track_feature_points rows); the track_feature_points of tracks along
+    a line are compared on the line's km and proposed back by pos (each feature row names
+    its db_table), and the G balises of balise groups are
     identified by NID_C/NID_BG/N_PIG and listed with their passes and reads (missed when never
-    read; their place is not surveyed).
+    read); one on a track off every line is placed by dead reckoning from the run's position
+    before its group (the reference's margin in its interval).
 
     JSON (--format json): {"db", "db_version", "config", "summary", "runs", "failed_runs",
     "balises", "missed_passes", "candidates", "features", "wheels": {"vehicles", "runs"},

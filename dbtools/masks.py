@@ -23,6 +23,16 @@ def true_runs(mask: npt.ArrayLike) -> tuple[IntArray, IntArray]:
     return np.flatnonzero(d == 1).astype(np.int64), np.flatnonzero(d == -1).astype(np.int64)
 
 
+def run_around(mask: npt.ArrayLike, i: int) -> tuple[int, int]:
+    """First and last index (inclusive) of the run of True in ``mask`` that holds index ``i``
+    (``mask[i]`` True): the run widened from ``i`` to the nearest False on each side."""
+    m = np.asarray(mask, dtype=bool)
+    off_before, off_after = np.flatnonzero(~m[:i]), np.flatnonzero(~m[i + 1 :])
+    a = int(off_before[-1]) + 1 if off_before.size else 0
+    b = i + int(off_after[0]) if off_after.size else m.size - 1
+    return a, b
+
+
 def merge_runs(starts: IntArray, ends: IntArray, x: npt.NDArray[np.float64], gap: float) -> tuple[IntArray, IntArray]:
     """Runs of :func:`true_runs` merged where they are close: a run joins the previous one
     when ``x[start] − x[previous end − 1] < gap`` (``x`` the abscissa of the samples: travel,

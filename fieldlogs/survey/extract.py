@@ -41,7 +41,8 @@ nothing about the balises.
 **Curvature.** κ samples (at the cycle's mid travel, SPEC §5.3) with a speed of at least
 ``min_speed_kmh`` (and the pipeline's feature ``min_speed_kmh``) are kept where a curve may be: within
 ``curve_pad_m`` of a sample with |κ| ≥ (1 − tol)/``max_radius_m`` or of a DB feature span
-(on a track off every line, of its ``track_feature_points`` by pos);
+(on a track off every line, of its ``track_feature_points`` by pos; along a line, also of
+the ``track_feature_points`` of its tracks on the line's km, :mod:`fieldlogs.survey.trackform`);
 the travel intervals with a usable κ are kept too (coverage). Their km is only computed
 by the aggregation (:mod:`fieldlogs.survey.trajectory`), from the balises as surveyed.
 
@@ -69,7 +70,8 @@ from fieldlogs.replay.network import DbRef, load_network
 from fieldlogs.runs.handle import Run, read_run
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.dbindex import BaliseIndex, balise_index
-from fieldlogs.survey.groups import group_passes, group_places
+from fieldlogs.survey.groups import PLACEMENT_COLUMNS, TrackTrace, group_passes, group_places, run_placements
+from fieldlogs.survey.trackform import km_features
 from fieldlogs.survey.wheelaids import AidScale, SegmentSpan, radar_scale, run_gnss_scale
 from schemas.enums import BaliseKind, PositionState
 from schemas.errors import InputError, TrainposError
@@ -144,6 +146,8 @@ class RunSurvey:
     """The wheel scale from the radar's calibration (:mod:`fieldlogs.survey.wheelaids`)."""
     gnss: AidScale | None = None
     """The wheel scale from GNSS or D-GPS along-track positions."""
+    group_placements: pd.DataFrame = field(default_factory=lambda: pd.DataFrame(columns=list(PLACEMENT_COLUMNS)))
+    """Reads of G balises off every line placed from the run's earlier position (:mod:`fieldlogs.survey.groupfix`)."""
 
 
 @dataclass
@@ -475,7 +479,9 @@ def _feature_spans(x: FloatArray, segs: list[_Seg], tr: _Trace, network: Network
     fp, tfp = network.feature_points, network.track_feature_points
     if not len(fp) and not len(tfp):
         return out
-    spans = network.cached("survey_feature_spans", lambda: _spans(fp) if len(fp) else {})
+    along = km_features(network)  # curves held per track along a line, on its km (fieldlogs.survey.trackform)
+    line_form = pd.concat([fp, along], ignore_index=True) if len(along) else fp
+    spans = network.cached("survey_feature_spans", lambda: _spans(line_form) if len(line_form) else {})
     if len(tfp):  # off a line the segment's place is the pos along its track: keyed ("", track_id)
         spans = spans | network.cached("survey_track_feature_spans", lambda: _spans(features_by_pos(tfp)))
     for g in segs:
@@ -521,11 +527,15 @@ def extract(
     reads, counts = read_frame(telegram_frame(run), segs, tr, index, cfg)
     passes = pass_frame(segs, tr, reads, index, cfg, pipeline.margin.distance_pct)
     places = network.cached("survey_group_places", lambda: group_places(network))
+    placed = pd.DataFrame(columns=list(PLACEMENT_COLUMNS))
+    reader_x = VehicleGeometry.of(meta.vehicle).reader_x_m
     if len(places):  # the G balises of a network's groups, per track (fieldlogs.survey.groups)
         known = _text(result.positions["state"]) != PositionState.UNDETERMINED.value
         got = reads[reads["status"] == IDENTIFIED]
         more = group_passes(places, tr.t, tr.km, tr.margin, tr.track_id, known, got, cfg)
         passes = pd.concat([passes, more], ignore_index=True) if len(more) else passes
+        trace = TrackTrace(tr.t, tr.d, tr.km, tr.margin, tr.track_id, tr.cab, known)
+        placed = run_placements(places, trace, got, reader_x, pipeline.margin.distance_pct)
     kappa, coverage = kappa_frames(result, segs, tr, network, pipeline, cfg)
     gis = fixes_from_result(result, run.run_id)
     gis.folder = folder
@@ -540,7 +550,7 @@ def extract(
         vehicle_id=str(meta.vehicle_id),
         start_time=str(meta.start_time),
         wheel_diameter_m=float(meta.wheel_diameter_m) if meta.wheel_diameter_m is not None else float("nan"),
-        reader_x_m=VehicleGeometry.of(meta.vehicle).reader_x_m,
+        reader_x_m=reader_x,
         duration_s=float(tr.t[-1] - tr.t[0]) if tr.t.size else 0.0,
         distance_m=float(tr.d[-1]) if tr.d.size else 0.0,
         segments=segment_frame(segs, tr),
@@ -552,6 +562,7 @@ def extract(
         counts=counts,
         radar=radar_scale(result.odometry, cfg),
         gnss=run_gnss_scale(result, network, spans, cfg),
+        group_placements=placed,
     )
 
 

@@ -1,6 +1,11 @@
 """Surveyed curves against the DB's feature points: ok / moved / new / not seen / unverified
 (the rules are in :mod:`fieldlogs.survey.features`, "Comparison"); on tracks off every line
-against ``track_feature_points``, per ``track_id``, pos in the place of km."""
+against ``track_feature_points``, per ``track_id``, pos in the place of km; on tracks along a
+line against their ``track_feature_points`` too, mapped onto the line's km
+(:mod:`fieldlogs.survey.trackform`). Each row's ``db_table`` names the table its DB feature
+comes from, or for a new curve the one a proposal writes it to (the track's own
+``track_feature_points`` where the track holds its curves per track or lies off every line).
+"""
 
 from __future__ import annotations
 
@@ -14,6 +19,7 @@ from dbtools.topology import grid_track_ids
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.curvature import Coverage, TrackKey
 from fieldlogs.survey.features import MOVED, NEW, NOT_SEEN, OK, UNVERIFIED, TrackCurves, db_features, db_track_features
+from fieldlogs.survey.trackform import along_line, km_features
 
 FEATURE_COLUMNS = (
     "track_id",
@@ -36,7 +42,9 @@ FEATURE_COLUMNS = (
     "exit_km_m",
     "exit_diff_m",
     "exit_ci95_m",
+    "db_table",
 )
+LINE_FORM, TRACK_FORM = "feature_points", "track_feature_points"
 
 
 def _overlap(a0: float, a1: float, b0: float, b1: float) -> float:
@@ -66,6 +74,7 @@ def _row(db: pd.Series | None, c: pd.Series | None, status: str, reason: str, pa
     out.update(line_code=src["line_code"], track=src["track"], status=status, reason=reason, passes=passes)
     if db is not None:
         out.update(
+            db_table=db["db_table"],
             feature_id=db["feature_id"],
             attribute_db=db["attribute"],
             radius_db_m=db["radius_m"],
@@ -134,17 +143,31 @@ def compare(
     out = pd.DataFrame(rows, columns=list(FEATURE_COLUMNS))
     if len(out):
         out["track_id"] = _track_ids(out, network)
-        out.loc[out["line_code"] == "", "track"] = ""
+        off = out["line_code"] == ""
+        out.loc[off, "track"] = ""
+        held = set(along_line(network)) if network is not None else set()
+        new = out["db_table"].isna()  # a new curve goes where its track keeps its curves
+        out.loc[new, "db_table"] = np.where(off[new] | out.loc[new, "track_id"].isin(held), TRACK_FORM, LINE_FORM)
     return out
 
 
 def _db_features(fp: pd.DataFrame, tfp: pd.DataFrame | None, network: Network | None) -> pd.DataFrame:
-    """The DB's features of the lines and of the tracks off every line (keyed ("", track_id))."""
-    dbf = db_features(fp)
+    """The DB's features of the lines, of the tracks along a line that hold their curves per
+    track (:func:`fieldlogs.survey.trackform.km_features`: on the line's km) and of the
+    tracks off every line (keyed ("", track_id)), each with its ``db_table``."""
+    parts = [db_features(fp).assign(db_table=LINE_FORM)]
+    if network is not None and len(along := km_features(network)):
+        parts.append(db_features(along).assign(db_table=TRACK_FORM))
     off = _off_line(tfp, network) if tfp is not None and len(tfp) else None
-    if off is None or not len(off):
-        return dbf
-    return pd.concat([dbf, db_track_features(off)], ignore_index=True) if len(dbf) else db_track_features(off)
+    if off is not None and len(off):
+        parts.append(db_track_features(off).assign(db_table=TRACK_FORM))
+    parts = [p for p in parts if len(p)]
+    return pd.concat(parts, ignore_index=True) if parts else _empty()
+
+
+def _empty() -> pd.DataFrame:
+    """No DB feature at all: :func:`db_features`' empty frame with its ``db_table``."""
+    return db_features(pd.DataFrame()).assign(db_table="")
 
 
 def _track_ids(out: pd.DataFrame, network: Network | None) -> pd.Series:

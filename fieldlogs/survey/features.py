@@ -53,6 +53,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.masks import run_around
 from dbtools.masks import sign_runs as shared_sign_runs
 from fieldlogs.pipeline.config import FeatureConfig
 from fieldlogs.survey.balises import t_quantile
@@ -133,12 +134,7 @@ def _body(km: FloatArray, kap: FloatArray, i0: int, i1: int, sgn: int, level: fl
     above = sgn * kap >= level
     if not above[peak]:
         return None
-    a = peak
-    while a > 0 and above[a - 1]:
-        a -= 1
-    b = peak
-    while b < km.size - 1 and above[b + 1]:
-        b += 1
+    a, b = run_around(above, peak)
     return crossing(km, kap, a - 1, a, level, sgn), crossing(km, kap, b + 1, b, level, sgn)
 
 

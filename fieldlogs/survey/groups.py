@@ -20,15 +20,19 @@ between its neighbours (:func:`fieldlogs.survey.dbindex.surveyed_balises`,
 :mod:`fieldlogs.survey.balises`), with these passes; one on a track off every line (a
 crossover: no line km to place it on) gets :func:`fieldlogs.survey.inspection.group_status`
 — **missed** when never read on at least ``min_missed_passes`` passes (the rule of the
-other balises), otherwise **unverified**, its place not surveyed.
+other balises), otherwise the status of its place by dead reckoning from each run's earlier
+reference (:func:`run_placements` here per run, :mod:`fieldlogs.survey.groupfix` over runs).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from dbtools.masks import run_around
 from dbtools.network import Network
 from fieldlogs.survey.config import SurveyConfig
 from schemas.enums import BaliseKind
@@ -36,13 +40,16 @@ from schemas.enums import BaliseKind
 FloatArray = npt.NDArray[np.float64]
 #: Reads of one balise closer than this in time are one pass; a read this close to a pass is that pass [s].
 SAME_PASS_S = 30.0
+#: One dead-reckoned read of a G balise off every line (:mod:`fieldlogs.survey.groupfix`).
+PLACEMENT_COLUMNS = ("balise_id", "track_id", "t_read", "pos_ref_m", "travel_m", "reader_m", "margin_m")
 
 
 def group_places(network: Network) -> pd.DataFrame:
     """balise_id, track_id, place (km along a line, else pos along the track; NaN where
-    neither is known) of every G balise with a track (module docstring)."""
+    neither is known), off_line (its track lies along no line) and group (NID_C/NID_BG, else
+    the balise id) of every G balise with a track (module docstring)."""
     b = network.balises
-    empty = pd.DataFrame({"balise_id": [], "track_id": [], "place": []})
+    empty = pd.DataFrame({"balise_id": [], "track_id": [], "place": [], "off_line": [], "group": []})
     if not len(b) or "track_id" not in b:
         return empty
     g = b[(b["kind"].astype(str) == BaliseKind.G) & b["track_id"].notna()]
@@ -56,13 +63,25 @@ def group_places(network: Network) -> pd.DataFrame:
     tp = network.track_points
     for track in set(tid) - on_line:
         at = np.flatnonzero(tid == track)
-        pts = tp[(tp["track_id"].astype(str) == track) & tp["km_m"].notna()].sort_values("km_m")
-        k, p = pts["km_m"].to_numpy(dtype=float), pts["pos_m"].to_numpy(dtype=float)
+        k, p = track_km(tp, track)
         inside = (km[at] >= k[0]) & (km[at] <= k[-1]) if k.size >= 2 else np.zeros(at.size, dtype=bool)
         place[at] = np.where(inside, np.interp(km[at], k, p) if k.size >= 2 else np.nan, np.nan)
-    return pd.DataFrame(
-        {"balise_id": g["balise_id"].astype(str).to_numpy(dtype=object), "track_id": tid, "place": place}
-    )
+    ids = g["balise_id"].astype(str).to_numpy(dtype=object)
+    group = ids.copy()
+    if "nid_c" in g and "nid_bg" in g:
+        coded = (g["nid_c"].notna() & g["nid_bg"].notna()).to_numpy()
+        nid = [g[c].to_numpy(dtype=float, na_value=np.nan) for c in ("nid_c", "nid_bg")]
+        group[coded] = [f"{int(a)}/{int(b)}" for a, b in zip(nid[0][coded], nid[1][coded], strict=True)]
+    off = np.array([t not in on_line for t in tid], dtype=bool)
+    return pd.DataFrame({"balise_id": ids, "track_id": tid, "place": place, "off_line": off, "group": group})
+
+
+def track_km(track_points: pd.DataFrame, track: str) -> tuple[FloatArray, FloatArray]:
+    """km and pos of a track's ``track_points`` that carry a km, sorted by km (the km ↔ pos
+    mapping, linear between them)."""
+    tp = track_points
+    pts = tp[(tp["track_id"].astype(str) == track) & tp["km_m"].notna()].sort_values("km_m")
+    return pts["km_m"].to_numpy(dtype=float), pts["pos_m"].to_numpy(dtype=float)
 
 
 def group_passes(
@@ -134,3 +153,66 @@ def _read_passes(cols: dict[str, list[object]], read_t: dict[str, FloatArray], p
                 cols["km_pass_m"].append(place[bid])
                 cols["read"].append(True)
             last = tr
+
+
+@dataclass(frozen=True)
+class TrackTrace:
+    """Per cycle of one run: time, travel, place (km, or pos off a line), margin, track, cab,
+    and whether the position is known (determined or uncertain)."""
+
+    t: FloatArray
+    d: FloatArray
+    u: FloatArray
+    margin: FloatArray
+    track_id: npt.NDArray[np.object_]
+    cab: npt.NDArray[np.int64]
+    known: npt.NDArray[np.bool_]
+
+
+def _first_of_pass(times: FloatArray, t_read: float) -> float:
+    """The earliest read of the group in the pass holding ``t_read``: reads of the group
+    closer than :data:`SAME_PASS_S` in a chain back from it."""
+    before = np.sort(times[times <= t_read])[::-1]
+    first = t_read
+    for tb in before.tolist():
+        if first - tb > SAME_PASS_S:
+            break
+        first = min(first, tb)
+    return first
+
+
+def _motion(tr: TrackTrace, i: int) -> int:
+    """σ: the sign of the place's change over the stretch of known cycles on cycle ``i``'s
+    track with its cab (0 when it does not move)."""
+    a, b = run_around(tr.known & (tr.track_id == tr.track_id[i]) & (tr.cab == tr.cab[i]), i)
+    return int(np.sign(tr.u[b] - tr.u[a])) if np.isfinite(tr.u[b] - tr.u[a]) else 0
+
+
+def run_placements(
+    places: pd.DataFrame, tr: TrackTrace, reads: pd.DataFrame, reader_x_m: float, distance_pct: float
+) -> pd.DataFrame:
+    """One row per identified read of a G balise off every line that has a reference
+    (:mod:`fieldlogs.survey.groupfix`): :data:`PLACEMENT_COLUMNS`, the travel σ-signed and
+    not yet scaled by the run's wheel scale."""
+    cols: dict[str, list[object]] = {c: [] for c in PLACEMENT_COLUMNS}
+    off = places[places["off_line"].astype(bool) & np.isfinite(places["place"].to_numpy(dtype=float))]
+    if not len(off) or not len(reads) or not tr.t.size:
+        return pd.DataFrame(cols)
+    track = dict(zip(off["balise_id"], off["track_id"], strict=True))
+    group = dict(zip(places["balise_id"], places["group"], strict=True))
+    rid = reads["balise_id"].astype(str).to_numpy(dtype=object)
+    rt = reads["t"].to_numpy(dtype=float)
+    rgroup = np.array([group.get(b, "") for b in rid], dtype=object)
+    for bid, t_read in zip(rid, rt, strict=True):
+        if bid not in track:
+            continue
+        i = int(np.searchsorted(tr.t, _first_of_pass(rt[rgroup == group[bid]], float(t_read)), side="left")) - 1
+        ok = i >= 0 and tr.known[i] and tr.track_id[i] == track[bid] and np.isfinite([tr.u[i], tr.margin[i]]).all()
+        sigma = _motion(tr, i) if ok else 0
+        if sigma == 0:
+            continue
+        dd = float(np.interp(t_read, tr.t, tr.d)) - float(tr.d[i])
+        row = (bid, track[bid], float(t_read), float(tr.u[i]), sigma * dd, sigma * int(tr.cab[i]) * reader_x_m)
+        for c, v in zip(PLACEMENT_COLUMNS, (*row, float(tr.margin[i]) + distance_pct / 100.0 * abs(dd)), strict=True):
+            cols[c].append(v)
+    return pd.DataFrame(cols)

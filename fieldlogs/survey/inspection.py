@@ -31,6 +31,7 @@ from fieldlogs.pipeline.metric import track_metric
 from fieldlogs.survey.balises import MISSED, MOVED, OK, UNVERIFIED, Adjustment, qualifies
 from fieldlogs.survey.config import SurveyConfig
 from fieldlogs.survey.extract import UNKNOWN, RunSurvey
+from fieldlogs.survey.groupfix import FIX_COLUMNS, fix_status
 from fieldlogs.survey.trajectory import BaliseTable, Trajectory
 from schemas.enums import BaliseKind
 
@@ -278,10 +279,13 @@ def group_status(
     reads: pd.Series,
     cfg: SurveyConfig,
     skip: set[str] | frozenset[str] = frozenset(),
+    fixes: pd.DataFrame | None = None,
 ) -> pd.DataFrame:
     """One row per G balise of the network's groups not in ``skip`` (those the adjustment
     places; :data:`BALISE_COLUMNS`, the status of :mod:`fieldlogs.survey.groups`): missed on
-    the rule of the other balises, else unverified."""
+    the rule of the other balises, else — where ``fixes`` places it by dead reckoning
+    (:func:`fieldlogs.survey.groupfix.group_fixes`) — ok, moved or unverified on that place,
+    else unverified."""
     b = network.balises
     g = b[(b["kind"].astype(str) == BaliseKind.G) & ~b["balise_id"].astype(str).isin(skip)] if len(b) else b
     if not len(g):
@@ -296,6 +300,11 @@ def group_status(
         f"never read (on {p} passes)" if m else (f"{NOT_PLACED} ({r} reads)" if r or p else "no run passed it")
         for m, p, r in zip(missed, n_pass, n_reads, strict=True)
     ]
+    status = np.where(missed, MISSED, UNVERIFIED).astype(object)
+    fx = (fixes if fixes is not None and len(fixes) else pd.DataFrame(columns=list(FIX_COLUMNS))).set_index("balise_id")
+    fx = fx.reindex(ids)
+    for j in np.flatnonzero(~missed & fx["n_estimates"].notna().to_numpy()):
+        status[j], reason[j] = fix_status(fx.iloc[j], cfg)
     out = pd.DataFrame(
         {
             "balise_id": ids.to_numpy(dtype=object),
@@ -306,16 +315,16 @@ def group_status(
             "track": g["track"].astype(object).where(g["track"].notna(), "").to_numpy(),
             "signal_type": "",
             "km_db_m": g["km_actual_m"].to_numpy(dtype=float),
-            "status": np.where(missed, MISSED, UNVERIFIED),
+            "status": status,
             "reason": reason,
             "passes": n_pass.astype(np.int64),
             "reads": n_reads,
             "missed_passes": (n_pass - n_read).astype(np.int64),
-            "n_estimates": 0,
-            "residual_m": np.nan,
-            "ci95_m": np.nan,
-            "spread_m": np.nan,
-            "km_surveyed_m": np.nan,
+            "n_estimates": fx["n_estimates"].fillna(0).to_numpy(dtype=np.int64),
+            "residual_m": fx["residual_m"].to_numpy(dtype=float),
+            "ci95_m": fx["ci95_m"].to_numpy(dtype=float),
+            "spread_m": fx["spread_m"].to_numpy(dtype=float),
+            "km_surveyed_m": fx["km_surveyed_m"].to_numpy(dtype=float),
         }
     )
     return out[list(BALISE_COLUMNS)]

@@ -13,7 +13,9 @@ each change with its evidence in a sidecar (``survey_changes.json`` / ``.csv``).
 * a *new* curve with straights on both sides: six rows (``S001``, … not used on its track);
   a *moved* feature: its six rows replaced by the surveyed ones, same ``feature_id``; on a
   track off every line these are ``track_feature_points`` rows (``pos_m``) of that
-  ``track_id`` (:mod:`fieldlogs.survey.features`, "Tracks off every line").
+  ``track_id`` (:mod:`fieldlogs.survey.features`, "Tracks off every line"), and so on a track
+  along a line that holds its curves per track (the feature's ``db_table``): the surveyed km
+  rows mapped back to its pos (:mod:`fieldlogs.survey.trackform`).
 
 Balises and features that are missed, unverified or not seen are reported, never removed:
 they need an inspection, not a DB edit. The proposal is checked with the ``db validate``
@@ -41,6 +43,7 @@ from fieldlogs.survey.balises import MOVED
 from fieldlogs.survey.features import MOVED as F_MOVED
 from fieldlogs.survey.features import NEW, proposed_rows
 from fieldlogs.survey.frames import rows
+from fieldlogs.survey.trackform import pos_rows
 from schemas.enums import BaliseKind, Severity, direction_sign
 from schemas.tables import BALISES, FEATURE_POINTS, PAIR_SPACING_M, TRACK_FEATURE_POINTS
 
@@ -199,16 +202,15 @@ def _used_ids(fp: pd.DataFrame, tfp: pd.DataFrame) -> dict[tuple[str, str], set[
     return used
 
 
-def _feature_changes(
-    features: pd.DataFrame, curves: dict[tuple[str, str], Any], fp: pd.DataFrame, tfp: pd.DataFrame
-) -> list[Change]:
+def _feature_changes(features: pd.DataFrame, curves: dict[tuple[str, str], Any], network: Network) -> list[Change]:
     """New and moved features as six surveyed rows each (module docstring)."""
     out: list[Change] = []
-    used = _used_ids(fp, tfp)
+    used = _used_ids(network.feature_points, network.track_feature_points)
     for f in rows(features[features["status"].isin([NEW, F_MOVED])]):
         off = not str(f.line_code)  # a track off every line: track_feature_points by its track_id
         key = ("", str(f.track_id)) if off else (str(f.line_code), str(f.track))
-        table = TRACK_FEATURE_POINTS.name if off else FEATURE_POINTS.name
+        per_track = str(f.db_table) == TRACK_FEATURE_POINTS.name  # off a line, or a track holding its own
+        table = TRACK_FEATURE_POINTS.name if per_track else FEATURE_POINTS.name
         where = ("", "") if off else key
         curve = curves[key].curves.set_index("curve_id").loc[str(f.curve_id)].copy()
         curve["line_code"], curve["track"] = key
@@ -219,11 +221,14 @@ def _feature_changes(
             cid = str(f.curve_id)
             out.append(Change(table, action, cid, *where, "", "", ev, {}, None, note, False, str(f.track_id)))
             continue
-        fid = _next_id(used.setdefault(key, set())) if f.status == NEW else str(f.feature_id)
+        id_key = ("", str(f.track_id)) if per_track else key
+        fid = _next_id(used.setdefault(id_key, set())) if f.status == NEW else str(f.feature_id)
         old = "" if f.status == NEW else f"exit {f.exit_km_db_m:.1f}, R {f.radius_db_m:.0f} {f.attribute_db}"
         new = f"exit {f.exit_km_m:.1f}, R {float(f.radius_m):.0f} {f.attribute}"
-        scope = {"track_id": key[1]} if off else {"line_code": key[0], "track": key[1]}
+        scope = {"track_id": id_key[1]} if per_track else {"line_code": key[0], "track": key[1]}
         six = proposed_rows(curve, fid)
+        if per_track and not off:  # a track along a line: its km rows back to its pos (fieldlogs.survey.trackform)
+            six = pos_rows(six, str(f.track_id), network)
         out.append(
             Change(
                 table,
@@ -330,7 +335,7 @@ def build_proposal(report: Any) -> Proposal:
     changes = (
         _balise_moves(report.balises)
         + _candidate_changes(report.candidates, network.balises)
-        + _feature_changes(report.features, report.curves, network.feature_points, network.track_feature_points)
+        + _feature_changes(report.features, report.curves, network)
     )
     proposed = _guard(network, changes) if changes else network
     table = [

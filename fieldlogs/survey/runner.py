@@ -33,6 +33,8 @@ from fieldlogs.survey.dbindex import balise_index
 from fieldlogs.survey.extract import IDENTIFIED, RunSurvey, survey_one
 from fieldlogs.survey.featurecompare import compare
 from fieldlogs.survey.features import Rule, survey_track
+from fieldlogs.survey.groupfix import group_fixes
+from fieldlogs.survey.groups import group_places
 from fieldlogs.survey.inspection import balise_status, candidates, group_status, missed_passes, pass_table
 from fieldlogs.survey.propose import build_proposal
 from fieldlogs.survey.result import SurveyReport
@@ -156,7 +158,9 @@ def aggregate(
     per_balise = pd.concat(all_reads).value_counts() if all_reads else pd.Series(dtype=np.int64)
     balises = balise_status(table, adj, passes, per_balise, cfg)
     index = network.cached("survey_balise_index", lambda: balise_index(network))
-    groups = group_status(network, index.track_ids, passes, per_balise, cfg, skip=set(table.row))
+    places = network.cached("survey_group_places", lambda: group_places(network))
+    fixes = group_fixes([r.group_placements for r in runs], adj.scale, network, places)
+    groups = group_status(network, index.track_ids, passes, per_balise, cfg, skip=set(table.row), fixes=fixes)
     if len(groups):  # a network's balise groups (fieldlogs.survey.groups)
         balises = pd.concat([balises, groups], ignore_index=True)
     samples, coverage = place_samples(runs, traj, adj.scale, network)

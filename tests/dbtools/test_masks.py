@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from dbtools.masks import merge_runs, sign_runs, true_runs
+from dbtools.masks import merge_runs, run_around, sign_runs, true_runs
 
 
 def test_true_runs_by_hand() -> None:
@@ -63,3 +63,20 @@ def test_runs_match_a_loop(mask: list[bool], gap: float) -> None:
     plain = true_runs(mask)
     assert all(np.asarray(mask)[a:b].all() for a, b in zip(*plain, strict=True))
     assert int(sum(b - a for a, b in zip(*plain, strict=True))) == sum(mask)
+
+
+def test_run_around_by_hand() -> None:
+    mask = [False, True, True, True, False, True]
+    assert run_around(mask, 2) == (1, 3)
+    assert run_around(mask, 5) == (5, 5)  # a run at the end
+    assert run_around([True, True], 0) == (0, 1)
+
+
+@given(st.lists(st.booleans(), min_size=1, max_size=40), st.integers(0, 39))
+def test_run_around_is_the_true_run_holding_i(mask: list[bool], i: int) -> None:
+    i = i % len(mask)
+    if not mask[i]:
+        return
+    starts, ends = true_runs(mask)
+    k = int(np.searchsorted(starts, i, side="right")) - 1
+    assert run_around(mask, i) == (int(starts[k]), int(ends[k]) - 1)

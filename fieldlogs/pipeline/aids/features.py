@@ -58,6 +58,15 @@ Diagnostics (``evaluate``), each named in refusal events
     * ``no_slip``: no cycle of the feature span has a slip/slide correction running;
     * ``min_speed``: v ≥ ``min_speed_kmh`` on every cycle of the feature span.
 
+    A curve *without transitions* (r2 = r3 or r4 = r5, a plain arc between straights) is a
+    step of κ from 0 to 1/R at the row: the centred average ramps it over w = n·v·Δt and its
+    lower-limit crossing lies (½ − tol)·n cycles inside the curve (about 0.3·w). The step is
+    placed back there (:meth:`FeatureUnit._ends`, exact for a step in the cycle means) and
+    stands for the crossing in every diagnostic and as the correction point: the straights
+    end at the step, where the smoothing spread q/(2h)/R is exactly the ramp's κ, and the
+    length is measured step to step. An arc whose body is shorter than w at the window's
+    highest speed is not judged (the ramps overlap; no event).
+
     The correction point is the exit crossing: ``i_ref`` = the cycle whose travel is
     nearest x_x (quantisation ≤ v·Δt/2, reported as ``ref_offset_m``), ``km_db`` = the km
     of r4 (DB row 4, or row 3 when running reversed); the solver's correction amount is
@@ -65,7 +74,8 @@ Diagnostics (``evaluate``), each named in refusal events
     ``fix_uncertainty_m`` and ``crossing_z`` σ of the crossing, σ_x = σ_ω / (v·s) with s the
     κ slope of the DB exit transition (a κ error δ moves the crossing by δ/s), plus
     ``clock_budget_s``·v (an IMU clock offset L within the clock tolerance, not corrected,
-    moves the crossing by L·v).
+    moves the crossing by L·v). Without an exit transition s is the smoothed step's ramp,
+    1/(R·w): σ_x = σ_ω·R·n·Δt.
 
     ``detail`` of the outcome: direction (normal/reversed), attribute (in the travel
     direction), R_m, lower/upper_kappa, search_margin_m, db_length_m, length_m,
@@ -301,6 +311,9 @@ class FeatureUnit:
             failed.append("start_point")
             return out()
         i_lo, i_a, i_hi, ue = window
+        if self._arc_unjudged(c, i_a, i_hi, detail):
+            failed.append("start_point")
+            return out()
         best = self._curve(c, ue, i_lo, i_a, i_hi, k_lo)
         if best is None:
             detail["reason"] = "no curve (pair of lower-limit crossings) in the search window"
@@ -308,16 +321,17 @@ class FeatureUnit:
             self._slip_speed(np.arange(i_a, i_hi + 1), failed, detail)
             return out()
         xe, xx, sgn = best
-        ia, ib = self._span(c, xe, xx)
+        pe, px = self._ends(c, xe, xx)
+        ia, ib = self._span(c, pe, px)
         span = np.arange(ia, ib)
-        i_ref = self._nearest_cycle(xx)
+        i_ref = self._nearest_cycle(px)
         ue_ref = float(c.sdir * km_between(i_ref, i_ref + 1)[0])
-        self._measure(c, ue_ref, xe, xx, sgn, i_ref, detail)
+        self._measure(c, ue_ref, (xe, xx), (pe, px), sgn, i_ref, detail)
         reasons = self._span_problems(ia, ib, i_hi)
         if reasons:
             detail["reason"] = "; ".join(reasons)
             failed.append("start_point")
-        failed += self._shape_failures(c, xe, xx, sgn, k_lo, k_hi, detail)
+        failed += self._shape_failures(c, pe, px, sgn, k_lo, k_hi, detail)
         self._slip_speed(span, failed, detail)
         return out(i_ref)
 
@@ -356,6 +370,47 @@ class FeatureUnit:
                 best = (cost, xe, xx, sgn)
         return None if best is None else best[1:]
 
+    def _arc_unjudged(self, c: Candidate, i_a: int, i_hi: int, detail: dict[str, Any]) -> bool:
+        """A curve with an end without transition whose body L = r4 − r3 is shorter than the
+        smoothing length w = n·v·Δt at the highest speed of the window: the two ramps of the
+        smoothed steps overlap, the body never reaches 1/R and the step model of
+        :meth:`_ends` does not hold — not judged (``detail["not_judged"]``, with w as
+        ``smoothing_m``). Curves with both transitions are never affected."""
+        if not _steps(c.u) or i_hi < i_a:
+            return False
+        w = self.n_smooth * self._dt * float(np.nanmax(self._v[i_a : i_hi + 1]))
+        detail["smoothing_m"] = round(w, 2)
+        if float(c.u[3] - c.u[2]) >= w:
+            return False
+        detail["not_judged"] = True
+        detail["reason"] = f"curve without transitions shorter than the κ smoothing ({w:.1f} m at the speed run)"
+        return True
+
+    def _ends(self, c: Candidate, xe: float, xx: float) -> tuple[float, float]:
+        """Travel of the DB curve's entry and exit (rows r3, r4) from the lower-limit crossings
+        x_e, x_x. With a transition the crossing is the row (a linear ramp stays linear under
+        the centred average). Without one (r2 = r3 or r4 = r5) κ steps from 0 to 1/R at the
+        row, and the raw κ of cycle j (its mean over the cycle, standing for x_j) is
+        clip(j + ½ − s, 0, 1)/R for a step at fractional cycle s; the centred average of n
+        cycles is then ((i − s)/n + ½)/R on the ramp, which reaches (1 − tol)/R at
+        i = s + (½ − tol)·n. So the step lies (½ − tol)·n cycles before the entry crossing
+        and after the exit crossing (about 0.3·w, 6 m at 20 m/s with 1 s smoothing), read
+        back to travel through the cycles' own x (exact at any speed profile up to the
+        variation of v within one cycle)."""
+        cut = (0.5 - self.cfg.tolerance) * self.n_smooth
+        pe = self._shift_cycles(xe, -cut) if c.u[2] <= c.u[1] else xe
+        px = self._shift_cycles(xx, cut) if c.u[4] <= c.u[3] else xx
+        return pe, px
+
+    def _shift_cycles(self, x0: float, cycles: float) -> float:
+        """Travel ``cycles`` (fractional) cycles from travel ``x0``, linear between cycles."""
+        x = self._x
+        j = int(np.clip(np.searchsorted(x, x0, side="right"), 1, x.size - 1))
+        dx = float(x[j] - x[j - 1])
+        s = (j - 1) + ((x0 - float(x[j - 1])) / dx if dx > 0 else 0.0) + cycles
+        k = int(np.clip(np.floor(s), 0, x.size - 2))
+        return float(x[k] + (s - k) * (x[k + 1] - x[k]))
+
     def _span(self, c: Candidate, xe: float, xx: float) -> tuple[int, int]:
         """Cycles [ia, ib) of the feature span [x_e − (r3 − r1) − h, x_x + (r6 − r4) + h]."""
         x, u = self._x, c.u
@@ -373,10 +428,20 @@ class FeatureUnit:
         return i_x if abs(d[i_x] - xx) <= abs(d[i_x - 1] - xx) else i_x - 1
 
     def _measure(
-        self, c: Candidate, ue_ref: float, xe: float, xx: float, sgn: int, i_ref: int, detail: dict[str, Any]
+        self,
+        c: Candidate,
+        ue_ref: float,
+        crossings: tuple[float, float],
+        ends: tuple[float, float],
+        sgn: int,
+        i_ref: int,
+        detail: dict[str, Any],
     ) -> None:
-        """What was measured of the curve (``detail``; ``ue_ref`` = u at ``i_ref``)."""
+        """What was measured of the curve (``detail``; ``ue_ref`` = u at ``i_ref``): the body
+        between the ``crossings``, the length and the exit between the curve's ``ends``
+        (:meth:`_ends`)."""
         d, x, cfg = self._d, self._x, self.cfg
+        (xe, xx), (pe, px) = crossings, ends
         body = np.abs(self.kappa[int(np.searchsorted(x, xe)) : int(np.searchsorted(x, xx))])
         body = body[np.isfinite(body)]
         middle = body[body.size // 4 : body.size - body.size // 4]
@@ -385,10 +450,10 @@ class FeatureUnit:
             measured_radius_m=round(1.0 / float(np.median(middle)), 1) if middle.size else None,
             max_kappa=float(np.max(body)) if body.size else float("nan"),
             measured_sign=int(sgn),
-            length_m=round(xx - xe, 2),
+            length_m=round(px - pe, 2),
             length_tol_m=round(max(cfg.length_tolerance * db_len, cfg.length_tolerance_min_m), 2),
-            km_est_exit_m=round(float(c.sdir * (ue_ref - (d[i_ref] - xx))), 2),
-            ref_offset_m=round(float(d[i_ref] - xx), 3),
+            km_est_exit_m=round(float(c.sdir * (ue_ref - (d[i_ref] - px))), 2),
+            ref_offset_m=round(float(d[i_ref] - px), 3),
             t_exit=float(self.cycles.t[i_ref]),
         )
 
@@ -430,17 +495,19 @@ class FeatureUnit:
         """Uncertainty of the exit crossing as a correction [m]: max(fix_uncertainty_m,
         crossing_z · σ_ω / (v · κ_lo / (r5 − r4))) + clock_budget_s · v (config docstrings:
         an IMU clock offset within the clock tolerance moves the crossing by up to that); no
-        transition in the DB (r5 = r4) leaves the least value (+ the clock budget)."""
+        transition in the DB (r5 = r4): the smoothed step's ramp, slope s = 1/(R·w) with
+        w = n·v·Δt, so σ_x = σ_ω·R·n·Δt; the step is a fixed (½ − tol)·n cycles from the
+        crossing (:meth:`_ends`), so its place has the crossing's error."""
         cfg = self.cfg
         transition = float(c.u[4] - c.u[3])
         v = float(self._v[i_ref])
         clock_m = cfg.clock_budget_s * max(v, 0.0)
-        if transition <= 0.0 or v <= 0.0:
+        if v <= 0.0:
             return cfg.fix_uncertainty_m + clock_m
         sigma = cfg.yaw_rate_sigma_rad_s
         if not self._bias_known[i_ref]:  # no standstill yet: the bias is unknown
             sigma = float(np.hypot(sigma, cfg.yaw_bias_sigma_rad_s))
-        slope = k_lo / transition
+        slope = k_lo / transition if transition > 0.0 else 1.0 / (c.radius_m * self.n_smooth * v * self._dt)
         return max(cfg.fix_uncertainty_m, cfg.crossing_z * sigma / (v * slope)) + clock_m
 
     def _straight(self, x0: float, x1: float, x_ts: float, slope: float, radius: float) -> tuple[bool, float | None]:
@@ -469,6 +536,11 @@ class FeatureUnit:
         detail["min_speed_kmh"] = round(v_min * 3.6, 2)
         if not v_min * 3.6 >= self.cfg.min_speed_kmh:
             failed.append("min_speed")
+
+
+def _steps(u: FloatArray) -> bool:
+    """Has the curve (rows r1…r6 in travel order) an end without transition (r2 = r3 or r4 = r5)?"""
+    return bool(u[2] <= u[1] or u[4] <= u[3])
 
 
 def _cross(x: FloatArray, k: FloatArray, i0: int, i1: int, level: float, sgn: int) -> float:
@@ -516,6 +588,8 @@ class FeatureAid(StaticAid):
         if fix is None:
             return Outcome()
         out = self.unit.evaluate(obs.payload, fix, view.km_between, view.i)
+        if out.detail.get("not_judged"):
+            return Outcome()
         if not (out.accepted and out.i_ref is not None and out.km_db is not None):
             detail = {"feature_id": out.feature_id, "failed": out.failed, **out.detail}
             return Outcome([Event(view.t, EventType.FEATURE_REFUSED, view.km, detail=detail)])

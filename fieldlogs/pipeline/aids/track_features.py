@@ -351,23 +351,6 @@ class TrackFeatureFixAid:
         tab = self.tables.get(fix.hyps[0].track_id)
         return None if tab is None else (fix.hyps[0], tab)
 
-    def _unresolvable(self, cand: Candidate, detail: dict[str, Any]) -> bool:
-        """A curve without transitions too short for the κ smoothing at the speed it was run:
-        the centred average over w = n·v·Δt turns its body (κ = 1/R over length L ≥ w) into a
-        trapezoid with ramps w wide, which crosses the lower limit (1 − tol)/R at w/2 − tol·w
-        inside each end: the measured length is L − (1 − 2·tol)·w (L − 0.6·w at tol 20 %).
-        Where (1 − 2·tol)·w at the least speed over the curve exceeds the length tolerance
-        max(``length_tolerance``·L, ``length_tolerance_min_m``), the ``length`` diagnostic
-        fails on the true curve (and for L < w the peak falls below the limit): such a curve —
-        a station's 20 m reverse curve at line speed — is not judged rather than reported
-        refused."""
-        u, cfg = cand.u, self.unit.cfg
-        if u[2] > u[1] or u[4] > u[3] or detail.get("min_speed_kmh") is None:
-            return False
-        w = self.unit.n_smooth * float(detail["min_speed_kmh"]) / 3.6 * self.unit.dt
-        body = float(u[3] - u[2])
-        return (1.0 - 2.0 * cfg.tolerance) * w > max(cfg.length_tolerance * body, cfg.length_tolerance_min_m)
-
     def next_observation(self, view: EngineView) -> Observation | None:
         fix = view.estimate
         on = self._on(fix)
@@ -391,7 +374,7 @@ class TrackFeatureFixAid:
         out = self.unit.evaluate(cand, fix, self._pos(fix, h, tr), view.i)
         detail = {"feature_id": out.feature_id, "track_id": h.track_id, **out.detail}
         if not (out.accepted and out.i_ref is not None and out.km_db is not None):
-            if self._unresolvable(cand, out.detail):
+            if out.detail.get("not_judged"):  # an arc shorter than the κ smoothing (FeatureUnit._arc_unjudged)
                 return Outcome()
             return Outcome([Event(view.t, EventType.FEATURE_REFUSED, view.km, detail={**detail, "failed": out.failed})])
         s_ref = float(tr.s[out.i_ref])

@@ -9,7 +9,6 @@ to α = atan(1/9) (R·α = 21.03 m), 40 m straight, arc R 500 m to 30° (500·(3
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -21,7 +20,6 @@ from hypothesis import strategies as st
 from dbtools.gis.geometry import arc_turn
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import Observation, Outcome, Priority, StaticAid
-from fieldlogs.pipeline.aids.feature_table import Candidate
 from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_features import TrackFeatureAid, TrackFeatureFixAid, track_feature_tables
@@ -264,19 +262,6 @@ def test_correction_along_a_track_at_its_curve() -> None:
     assert np.allclose(err[~after & (t > 1.0)], 8.0, atol=0.01)  # pos from km 10 by the grid's length
     assert np.allclose(err[after], -4.0, atol=1.0)
     assert (p.loc[after, "track_id"] == "B1").all() and (p.loc[after, "state"] == "determined").all()
-
-
-def test_a_short_curve_at_speed_is_not_judged() -> None:
-    # a 20 m curve without transitions: at 60 km/h the 1 s smoothing (w = 16.9 m incl. the odd
-    # sample count) shortens it by 0.6·w = 10.1 m > max(20 % of 20 m, 10 m); at 40 km/h by 6.7 m
-    unit = SimpleNamespace(n_smooth=11, dt=0.1, cfg=FeatureConfig())
-    aid = TrackFeatureFixAid(unit, {}, track_lines(net("junction")))  # type: ignore[arg-type]
-    u = np.array([0.0, 30.0, 30.0, 50.0, 50.0, 80.0])
-    cand = Candidate("F", "", "T", 1, False, u, u, 200.0, 1, 5.0, 0)
-    assert aid._unresolvable(cand, {"min_speed_kmh": 60.0})
-    assert not aid._unresolvable(cand, {"min_speed_kmh": 40.0})
-    with_transitions = Candidate("F", "", "T", 1, False, u + np.array([0, 0, 5, 0, 5, 5]), u, 200.0, 1, 5.0, 0)
-    assert not aid._unresolvable(with_transitions, {"min_speed_kmh": 60.0})
 
 
 @settings(max_examples=60, deadline=None)

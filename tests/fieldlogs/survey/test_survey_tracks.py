@@ -127,7 +127,14 @@ def test_the_station_run_is_surveyed_per_track(station) -> None:  # type: ignore
     assert tp.loc["0420-3", "runs"] == 1 and tp.loc["0420-3", "track"] == "3"
     out = station.to_dict()
     assert out["gis"]["track_points"]["coverage"][0]["track_id"] == "0420-3"
-    assert {f["track_id"] for f in out["features"]} <= {"0420-D1", "0420-D2", "0420-D6", "0420-U1", "0420-U5"}
+    line_tracks = {"0420-D1", "0420-D2", "0420-D6", "0420-U1", "0420-U5"}
+    assert {f["track_id"] for f in out["features"] if f["db_table"] == "feature_points"} <= line_tracks
+    # the loops' and the branch's own curves (track_feature_points) on the line's km: one pass of 3
+    own = {(f["track_id"], f["feature_id"], f["status"]) for f in out["features"] if f["db_table"] != "feature_points"}
+    assert {(t, f) for t, f, _ in own} == {(t, f) for t in ("0420-3", "0420-4") for f in ("F1", "F2")} | {
+        ("0421-S1", "F1")
+    }
+    assert {s for *_, s in own} == {"unverified"}
     feats = survey_geojson(station.network, station)["features"]
     cells = [f for f in feats if f["properties"]["layer"] == "cells" and f["properties"]["track_id"] == "0420-3"]
     assert cells and all(f["geometry"] is not None and "pos_from_m" in f["properties"] for f in cells)
