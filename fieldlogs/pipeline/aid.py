@@ -13,6 +13,9 @@ visits those moments in time order and knows no sensor: it asks each aid
   depends on it (a feature point is evaluated once the estimate has passed it, so where it
   lies depends on the fix in force); an observation scheduled under an older estimate is
   dropped when the estimate changes;
+  a moment that takes a long scan ahead to find may be given as a :class:`Resume`: a
+  *probe* at the time the scan has reached, which the engine resumes there (the scan goes on
+  only as far as the engine has come, and ends unread when the estimate changes first);
 * :meth:`Aid.observe` — what it says at that moment, given an :class:`EngineView` (time,
   cycle, travel, cab direction, the estimate in force and its km): events, and optionally a
   new estimate (an absolute fix, the same fix made *uncertain* or moved to another track) or
@@ -33,10 +36,10 @@ lower, on the odometry, through :class:`SpeedAid`.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Generator, Iterable, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar, runtime_checkable
 
 from fieldlogs.pipeline.types import Event, Fix, FloatArray
 
@@ -69,6 +72,42 @@ class Observation:
     """Whatever the aid needs back in :meth:`Aid.observe` (a telegram, a decision, …)."""
     version: int | None = None
     """Estimate version it was scheduled under (dynamic observations); None: always valid."""
+
+
+_T = TypeVar("_T")
+
+#: A resumable search for an aid's next moment: yields a time the moment is not before (the
+#: scan has reached it), returns the moment (or None: there is none).
+Scan = Generator[float, None, "Observation | None"]
+
+
+@dataclass(frozen=True)
+class Resume:
+    """Payload of a probe: the moment is not before the probe's time; the engine resumes the
+    scan there, and what it returns takes the probe's place in the order of simultaneous
+    observations (so the answer is that of the whole scan made at once)."""
+
+    scan: Scan
+
+
+def scanned(scan: Scan) -> Observation | None:
+    """Advance ``scan`` by one step: the moment it returns, or a probe at the time it reached."""
+    try:
+        t = next(scan)
+    except StopIteration as stop:
+        found: Observation | None = stop.value
+        return found
+    return Observation(t, Resume(scan))
+
+
+def drained(scan: Generator[object, None, _T]) -> _T:
+    """What a resumable scan returns, read to its end at once."""
+    while True:
+        try:
+            next(scan)
+        except StopIteration as stop:
+            result: _T = stop.value
+            return result
 
 
 @dataclass

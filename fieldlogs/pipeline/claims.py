@@ -22,9 +22,11 @@ its ``candidates`` cell lists every candidate (:func:`candidates_text`).
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from dbtools.topology import BEGIN, END
 from fieldlogs.pipeline.hypotheses import TrackLines
@@ -113,22 +115,55 @@ def claims(ents: list[Entry]) -> Claims:
         agree = (e.line == first.line) & bool(first.line[0]) & (np.abs(e.km - first.km) <= KM_AGREE_M)
         same &= ~e.mask | agree
     text: list[str | None] = [None] * n
-    for i in np.flatnonzero(ambiguous).tolist():
-        text[i] = candidates_text([e for e in ents if e.mask[i]], i)
+    idx = np.flatnonzero(ambiguous)
+    cells = [_Cells.of(e, idx) for e in ents] if idx.size else []
+    for j, i in enumerate(idx.tolist()):
+        text[i] = _json([c.item(j) for c in cells if c.mask[j]])
     return Claims(ambiguous, same, text)
+
+
+@dataclass
+class _Cells:
+    """An entry's ``candidates`` items on the ambiguous cycles, made at once (:func:`claims`)."""
+
+    track_id: str
+    mask: list[bool]
+    pos: list[float | None]
+    km: list[float | None]
+    margin: list[float | None]
+
+    @classmethod
+    def of(cls, e: Entry, idx: npt.NDArray[np.int64]) -> _Cells:
+        return cls(e.track_id, e.mask[idx].tolist(), _rs(e.pos[idx]), _rs(e.km[idx]), _rs(e.margin[idx]))
+
+    def item(self, j: int) -> tuple[str, dict[str, object]]:
+        return self.track_id, _item(self.track_id, self.pos[j], self.km[j], self.margin[j])
+
+
+def _json(items: list[tuple[str, dict[str, object]]]) -> str:
+    """The ``candidates`` cell of :func:`candidates_text` from its items: one per track (the first)."""
+    seen: set[str] = set()
+    out = []
+    for tid, item in items:
+        if tid not in seen:
+            seen.add(tid)
+            out.append(item)
+    return json.dumps(out, separators=(",", ":"))
+
+
+def _rs(x: FloatArray) -> list[float | None]:
+    """:func:`_r` of every element."""
+    return [round(v, 3) if math.isfinite(v) else None for v in x.tolist()]
 
 
 def candidates_text(ents: list[Entry], i: int) -> str:
     """The ``candidates`` cell of cycle ``i``: a JSON list of objects ``track_id``, ``pos_m``,
     ``km_m`` (null off a line) and ``margin_m``, rounded to mm; one per track (the first)."""
-    seen: set[str] = set()
-    items = []
-    for e in ents:
-        if e.track_id in seen:
-            continue
-        seen.add(e.track_id)
-        items.append({"track_id": e.track_id, "pos_m": _r(e.pos[i]), "km_m": _r(e.km[i]), "margin_m": _r(e.margin[i])})
-    return json.dumps(items, separators=(",", ":"))
+    return _json([(e.track_id, _item(e.track_id, _r(e.pos[i]), _r(e.km[i]), _r(e.margin[i]))) for e in ents])
+
+
+def _item(track_id: str, pos: float | None, km: float | None, margin: float | None) -> dict[str, object]:
+    return {"track_id": track_id, "pos_m": pos, "km_m": km, "margin_m": margin}
 
 
 def max_margin(ents: list[Entry]) -> FloatArray:

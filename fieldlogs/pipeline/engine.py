@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pandas as pd
 
-from fieldlogs.pipeline.aid import Aid, Observation, Outcome
+from fieldlogs.pipeline.aid import Aid, Observation, Outcome, Resume, scanned
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
@@ -101,8 +101,9 @@ class _Engine:
         self.last_abs: Fix | None = None
         self._km_cache: tuple[int, FloatArray] | None = None
 
-    def push(self, k: int, obs: Observation) -> None:
-        heapq.heappush(self.heap, (obs.t, int(self.aids[k].priority), next(self.arrival), k, obs))
+    def push(self, k: int, obs: Observation, arrival: int | None = None) -> None:
+        n = next(self.arrival) if arrival is None else arrival
+        heapq.heappush(self.heap, (obs.t, int(self.aids[k].priority), n, k, obs))
 
     def km_estimate(self) -> FloatArray:
         if self.fix is None:
@@ -126,18 +127,26 @@ class _Engine:
         for k, aid in enumerate(self.aids):
             for obs in aid.observations():
                 self.push(k, obs)
+        self.travel.prime(np.array([e[0] for e in self.heap], dtype=float))
         end = self.travel.t[-1] + 1e-9 if self.travel.n else -np.inf
         while self.heap:
-            t, _prio, _n, k, obs = heapq.heappop(self.heap)
+            t, _prio, n, k, obs = heapq.heappop(self.heap)
             if t > end:
                 break
-            self.step(t, k, obs)
+            self.step(t, k, obs, n)
 
-    def step(self, t: float, k: int, obs: Observation) -> None:
+    def step(self, t: float, k: int, obs: Observation, arrival: int | None = None) -> None:
         """Hear aid ``k`` at ``t`` (unless its observation is stale or it needs the track and
-        the vehicle is not on it), apply what it says, ask for what follows."""
+        the vehicle is not on it), apply what it says, ask for what follows. A probe
+        (:class:`~fieldlogs.pipeline.aid.Resume`) is no observation: its scan goes on, and
+        what it finds keeps the probe's place (``arrival``) among simultaneous ones."""
         if obs.version is not None and obs.version != self.version:
             return  # scheduled under an estimate that has changed since
+        if isinstance(obs.payload, Resume):
+            found = scanned(obs.payload.scan)
+            if found is not None:
+                self.push(k, Observation(found.t, found.payload, obs.version), arrival)
+            return
         i, d, s = self.travel.at(t)
         aid = self.aids[k]
         if aid.needs_track and not self.travel.on_track[i]:
@@ -191,7 +200,7 @@ class _Engine:
         for k in which:
             nxt = self.aids[k].next_observation(view)
             if nxt is not None:
-                self.push(k, replace(nxt, version=self.version))
+                self.push(k, Observation(nxt.t, nxt.payload, self.version))
 
 
 def run_aids(

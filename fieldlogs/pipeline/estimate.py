@@ -21,7 +21,7 @@ reversal after the fix is followed without a new fix [S003 §5.3].
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -39,9 +39,11 @@ def signed_travel(cycles: Cycles, odo: Odometry) -> FloatArray:
     return np.cumsum(cycles.motion.astype(float) * dd)
 
 
-def km_along(fix: Fix, s: FloatArray | float, m: TrackMetric) -> FloatArray:
-    """Dead reckoning from ``fix``: travel S − S_ref along the track's own length, as km."""
-    return m.km_of_c(m.c_of_km(fix.km_m) + fix.k * (np.asarray(s, dtype=float) - fix.s_ref))
+def km_along(fix: Fix, s: FloatArray | float, m: TrackMetric, c_ref: FloatArray | None = None) -> FloatArray:
+    """Dead reckoning from ``fix``: travel S − S_ref along the track's own length, as km
+    (``c_ref``: ``m.c_of_km(fix.km_m)`` when known)."""
+    c0 = m.c_of_km(fix.km_m) if c_ref is None else c_ref
+    return m.km_of_c(c0 + fix.k * (np.asarray(s, dtype=float) - fix.s_ref))
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,13 @@ class Travel:
     """With a network, dead reckoning runs along each track's own length."""
     rotation_motion: np.ndarray | None = None
     """The sense of motion where a two-phase tachometer gives it (None: the cab's)."""
+    _at: dict[float, tuple[int, float, float]] = field(default_factory=dict, init=False, repr=False, compare=False)
+    """:meth:`at` of the times already asked (the aids of one fix time share it)."""
+    _allow: dict[float, float] = field(default_factory=dict, init=False, repr=False, compare=False)
+    _refs: dict[int, tuple[Fix, TrackMetric, FloatArray]] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+    """Per fix (by id, the fix kept): its metric and ``c_of_km(km_m)`` (:meth:`km`)."""
 
     @classmethod
     def of(cls, cycles: Cycles, odo: Odometry, network: Network | None = None) -> Travel:
@@ -88,16 +97,42 @@ class Travel:
         return track_metric(self.network, fix.line_code, fix.track)
 
     def km(self, fix: Fix, s: FloatArray | float) -> FloatArray:
-        """km of ``fix`` dead-reckoned to signed travel ``s``."""
-        return km_along(fix, s, self.metric(fix))
+        """km of ``fix`` dead-reckoned to signed travel ``s`` (its metric and rolled length at
+        the fix made once per fix: the engine's aids read the estimate many times)."""
+        ref = self._refs.get(id(fix))
+        if ref is None or ref[0] is not fix:
+            m = self.metric(fix)
+            ref = self._refs[id(fix)] = (fix, m, m.c_of_km(fix.km_m))
+        return km_along(fix, s, ref[1], ref[2])
 
     def at(self, t: float) -> tuple[int, float, float]:
-        """Cycle index at or after ``t`` and the travel d, S interpolated at ``t``."""
-        i = min(int(np.searchsorted(self.t, t, side="left")), self.t.size - 1)
-        return i, interp_at(t, self.t, self.d), interp_at(t, self.t, self.s)
+        """Cycle index at or after ``t`` and the travel d, S interpolated at ``t`` (remembered:
+        several aids are heard at one time)."""
+        hit = self._at.get(t)
+        if hit is None:
+            i = min(int(np.searchsorted(self.t, t, side="left")), self.t.size - 1)
+            hit = self._at[t] = (i, interp_at(t, self.t, self.d), interp_at(t, self.t, self.s))
+        return hit
+
+    def prime(self, ts: FloatArray) -> None:
+        """Remember :meth:`at` and :meth:`allowance_at` of many times at once (the aids' known moments): vectorised, the
+        same numbers (``searchsorted`` and ``np.interp`` are elementwise; :func:`interp_at` is
+        ``np.interp`` of one time)."""
+        ts = np.unique(np.asarray(ts, dtype=float))
+        ts = ts[np.isfinite(ts)]
+        if self.t.size < 2 or ts.size == 0:
+            return
+        i = np.minimum(np.searchsorted(self.t, ts, side="left"), self.t.size - 1)
+        d, s = np.interp(ts, self.t, self.d), np.interp(ts, self.t, self.s)
+        keys = ts.tolist()
+        self._at.update(zip(keys, zip(i.tolist(), d.tolist(), s.tolist(), strict=True), strict=True))
+        self._allow.update(zip(keys, np.interp(ts, self.t, self.allowance).tolist(), strict=True))
 
     def allowance_at(self, t: float) -> float:
-        return interp_at(t, self.t, self.allowance)
+        hit = self._allow.get(t)
+        if hit is None:
+            hit = self._allow[t] = interp_at(t, self.t, self.allowance)
+        return hit
 
 
 def interp_at(x: float, xp: FloatArray, fp: FloatArray) -> float:

@@ -28,9 +28,11 @@ track with ``track_points`` by their ``pos_m``/``km_m``; km is NaN off a line.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 import numpy.typing as npt
@@ -98,43 +100,73 @@ class TrackLine:
         return 1
 
     def point(self, pos: float) -> tuple[float, float, float, float]:
-        """East, north of the centreline at ``pos`` and its unit tangent (toward the end)."""
-        p = min(max(pos, float(self.cpos[0])), float(self.cpos[-1]))
-        j = int(np.clip(np.searchsorted(self.cpos, p, side="right") - 1, 0, self.cpos.size - 2))
-        (x0, y0), (x1, y1) = self.xy[j], self.xy[j + 1]
-        seg = max(float(self.cpos[j + 1] - self.cpos[j]), 1e-9)
-        u = (p - float(self.cpos[j])) / seg
+        """East, north of the centreline at ``pos`` and its unit tangent (toward the end).
+        Scalar arithmetic on the points as Python floats (the same IEEE operations as on
+        NumPy scalars: it is called once per candidate per GPS fix)."""
+        cp, xy = self._points
+        p = min(max(pos, cp[0]), cp[-1])
+        j = min(max(bisect.bisect_right(cp, p) - 1, 0), len(cp) - 2)
+        (x0, y0), (x1, y1) = xy[j], xy[j + 1]
+        seg = max(cp[j + 1] - cp[j], 1e-9)
+        u = (p - cp[j]) / seg
         dx, dy = x1 - x0, y1 - y0
         norm = max(math.hypot(dx, dy), 1e-9)
         return x0 + u * dx, y0 + u * dy, dx / norm, dy / norm
+
+    @cached_property
+    def _points(self) -> tuple[list[float], list[list[float]]]:
+        """``cpos`` and ``xy`` as Python lists (:meth:`point`)."""
+        return [float(c) for c in self.cpos], self.xy.tolist()
+
+    @cached_property
+    def _segments(self) -> tuple[list[list[float]], list[float]]:
+        """Each centreline segment's b − a and max(|b − a|², 1e-18) (:meth:`project`)."""
+        ab = self.xy[1:] - self.xy[:-1]
+        return ab.tolist(), np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18).tolist()
 
     def project(self, x: float, y: float, near: float, window_m: float) -> tuple[float, float]:
         """(pos, offset) of the plane point (x, y) on the centreline: the nearest point of the
         segments whose ``cpos`` lies within ``near`` ± ``window_m`` (pos along the track,
         offset + left of the begin→end direction); (NaN, NaN) when no segment lies there.
-        The point's foot on segment j is u = clip(((p − a_j)·(b_j − a_j)) / |b_j − a_j|², 0, 1)."""
-        n = self.cpos.size
+        The point's foot on segment j is u = clip(((p − a_j)·(b_j − a_j)) / |b_j − a_j|², 0, 1);
+        the nearest foot the first of least squared distance (a NaN one first, as ``np.argmin``).
+        A handful of segments per call: Python floats, the same IEEE operations as NumPy's."""
+        cp, xy = self._points
+        n = len(cp)
         if n < 2:
             return math.nan, math.nan
-        lo = max(int(np.searchsorted(self.cpos, near - window_m, side="right")) - 1, 0)
-        hi = min(int(np.searchsorted(self.cpos, near + window_m, side="left")) + 1, n)
+        lo = max(bisect.bisect_right(cp, near - window_m) - 1, 0)
+        hi = min(bisect.bisect_left(cp, near + window_m) + 1, n)
         if hi - lo < 2:
             return math.nan, math.nan
-        a, b = self.xy[lo : hi - 1], self.xy[lo + 1 : hi]
-        ab = b - a
-        l2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
-        u = np.clip(((x - a[:, 0]) * ab[:, 0] + (y - a[:, 1]) * ab[:, 1]) / l2, 0.0, 1.0)
-        fx, fy = a[:, 0] + u * ab[:, 0], a[:, 1] + u * ab[:, 1]
-        j = int(np.argmin((x - fx) ** 2 + (y - fy) ** 2))
-        c0, c1 = float(self.cpos[lo + j]), float(self.cpos[lo + j + 1])
-        pos = c0 + float(u[j]) * (c1 - c0)
-        norm = max(math.sqrt(float(l2[j])), 1e-9)
-        off = (-(x - float(fx[j])) * float(ab[j, 1]) + (y - float(fy[j])) * float(ab[j, 0])) / norm
+        abs_, l2s = self._segments
+        best = (math.inf, -1, 0.0, 0.0, 0.0)
+        for j in range(lo, hi - 1):
+            (ax, ay), (dx, dy) = xy[j], abs_[j]
+            u = _clip01(((x - ax) * dx + (y - ay) * dy) / l2s[j])
+            fx, fy = ax + u * dx, ay + u * dy
+            d2 = (x - fx) * (x - fx) + (y - fy) * (y - fy)
+            if d2 != d2:  # NaN
+                best = (d2, j, u, fx, fy)
+                break
+            if d2 < best[0] or best[1] < 0:
+                best = (d2, j, u, fx, fy)
+        _, j, u, fx, fy = best
+        pos = cp[j] + u * (cp[j + 1] - cp[j])
+        norm = max(math.sqrt(l2s[j]), 1e-9)
+        off = (-(x - fx) * abs_[j][1] + (y - fy) * abs_[j][0]) / norm
         return pos, off
 
     def plane(self, lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:
         """lat/lon [deg] in this track's local plane [m]."""
         return equirect(self.origin, lat, lon)
+
+
+def _clip01(v: float) -> float:
+    """``np.clip(v, 0.0, 1.0)`` of one float (NaN stays NaN)."""
+    if v != v:
+        return v
+    return 1.0 if v > 1.0 else (v if v > 0.0 else 0.0)
 
 
 def equirect(origin: tuple[float, float], lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -19,6 +19,8 @@ less for shorter ones), which the accuracy bench shows to hold.
 
 from __future__ import annotations
 
+from typing import Any, overload
+
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
@@ -34,14 +36,27 @@ from fieldlogs.pipeline.types import Fix, FloatArray
 from schemas.enums import FixSource, PositionState
 
 
-def margin_m(fix: Fix, d: FloatArray | float, allowance: FloatArray | float, cfg: MarginConfig) -> FloatArray:
-    """The margin of the module docstring for ``fix`` at travel ``d`` and slip budget ``allowance``."""
+@overload
+def margin_m(fix: Fix, d: float, allowance: float, cfg: MarginConfig) -> float: ...
+@overload
+def margin_m(fix: Fix, d: FloatArray, allowance: FloatArray, cfg: MarginConfig) -> FloatArray: ...
+def margin_m(fix: Fix, d: FloatArray | float, allowance: FloatArray | float, cfg: MarginConfig) -> FloatArray | float:
+    """The margin of the module docstring for ``fix`` at travel ``d`` and slip budget ``allowance``
+    (one travel as floats: the same operations on floats, as the aids ask at every observation)."""
+    if isinstance(d, float) and isinstance(allowance, float):
+        return float(_grown(fix, d, max(allowance - fix.allowance_ref_m, 0.0), cfg))
     d_a = np.asarray(d, dtype=float)
-    m = fix.uncertainty_m + cfg.distance_pct / 100.0 * np.abs(d_a - fix.d_ref)
-    m = m + np.maximum(np.asarray(allowance, dtype=float) - fix.allowance_ref_m, 0.0)
+    slip = np.maximum(np.asarray(allowance, dtype=float) - fix.allowance_ref_m, 0.0)
+    return np.asarray(_grown(fix, d_a, slip, cfg), dtype=float)
+
+
+def _grown(fix: Fix, d: Any, slip: Any, cfg: MarginConfig) -> Any:
+    """U + distance_pct·|d − d_ref| + slip (+ uncertain_growth_pct·|d − d_uncertain|), of floats or arrays."""
+    m = fix.uncertainty_m + cfg.distance_pct / 100.0 * abs(d - fix.d_ref)
+    m = m + slip
     if fix.uncertain_since_d is not None:
-        m = m + cfg.uncertain_growth_pct / 100.0 * np.abs(d_a - fix.uncertain_since_d)
-    return np.asarray(m, dtype=float)
+        m = m + cfg.uncertain_growth_pct / 100.0 * abs(d - fix.uncertain_since_d)
+    return m
 
 
 def text_column(codes: npt.NDArray[np.uint8], values: dict[str, int]) -> npt.NDArray[np.object_]:
@@ -114,6 +129,7 @@ class _Columns:
         self.km, self.km_eq, self.pos = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
         self.margin, self.k_sign = np.full(n, np.nan), np.full(n, np.nan)
         self._ids: dict[str | None, str | None] = {None: None}
+        self._run_motion: FloatArray | None = None
 
     def interned(self, text: str | None) -> str | None:
         """One str object per track id (the cells share it, as the other text columns do)."""
@@ -143,7 +159,9 @@ class _Columns:
         if travel.network is None:
             raise ValueError("a fix with network candidates needs the travel's network")
         lines = track_lines(travel.network)
-        ents = entries(f, travel.s[sel], _motion(travel)[sel], base, lines)
+        if self._run_motion is None:
+            self._run_motion = _motion(travel)  # the run's, once: every fix reads its cycles of it
+        ents = entries(f, travel.s[sel], self._run_motion[sel], base, lines)
         cl = claims(ents)
         own = ents[0]
         tl = lines[own.track_id]

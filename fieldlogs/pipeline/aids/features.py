@@ -91,7 +91,7 @@ in the same direction without a cab reversal in between).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -100,12 +100,11 @@ import numpy.typing as npt
 
 from dbtools.masks import sign_runs
 from dbtools.network import Network
-from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
+from fieldlogs.pipeline.aid import drained
 from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, load_tables
 from fieldlogs.pipeline.config import FeatureConfig
 from fieldlogs.pipeline.cycles import Cycles, moving_average, standstill_mean
-from fieldlogs.pipeline.types import Event, FeatureOutcome, Fix, FloatArray, Odometry
-from schemas.enums import EventType, FixSource, PositionState
+from fieldlogs.pipeline.types import FeatureOutcome, Fix, FloatArray, Odometry
 
 #: Below this speed κ = ωz / v is not computed (NaN): the division only amplifies noise [m/s].
 KAPPA_MIN_SPEED_MPS = 0.5
@@ -198,6 +197,20 @@ class FeatureUnit:
         metre of body-forward travel) default to the fix's line/track and its k; a track's
         own table with a candidate's pos as ``km_between`` and its kp runs the same scan
         along a network track (:mod:`fieldlogs.pipeline.aids.track_features`)."""
+        return drained(self.evaluation_scan(fix, after_i, km_between, table, k))
+
+    def evaluation_scan(
+        self,
+        fix: Fix,
+        after_i: int,
+        km_between: KmBetween,
+        table: FeatureTable | None = None,
+        k: int | None = None,
+        chunk: int = SCAN_CHUNK,
+    ) -> Generator[int, None, tuple[int, Candidate] | None]:
+        """:meth:`next_evaluation` as a resumable scan (:class:`~fieldlogs.pipeline.aid.Resume`):
+        it yields each cycle it reaches with the feature not yet passed (the evaluation is not
+        before it) and returns the result; its first chunk reads ``chunk`` cycles."""
         table = self.tables.get((fix.line_code, fix.track)) if table is None else table
         k = fix.k if k is None else k
         n = self._d.size
@@ -219,7 +232,7 @@ class FeatureUnit:
                 fid = str(table.feature_id[j])
                 if self._done.get((table.line_code, table.track, fid, sdir)) == seg:
                     continue
-                i_eval = self._first_passed(fix, sdir, float(u_all[j, 5]), s0, s1, km_between)
+                i_eval = yield from self._first_passed(fix, sdir, float(u_all[j, 5]), (s0, s1, chunk), km_between)
                 if i_eval is None:
                     break  # not reached in this segment; farther features neither
                 cand = Candidate(
@@ -238,12 +251,18 @@ class FeatureUnit:
                 return i_eval, cand
         return None
 
-    def _first_passed(self, fix: Fix, sdir: int, u6: float, s0: int, s1: int, km_between: KmBetween) -> int | None:
-        """First cycle of [s0, s1) where the estimate u = sdir·km has passed ``u6`` by the
-        search margin, or None. Read in chunks of doubling length from ``s0``, so the cost is
-        in the distance to that cycle, not in the run's length."""
-        a, step = s0, SCAN_CHUNK
+    def _first_passed(
+        self, fix: Fix, sdir: int, u6: float, span: tuple[int, int, int], km_between: KmBetween
+    ) -> Generator[int, None, int | None]:
+        """First cycle of [s0, s1) = ``span[:2]`` where the estimate u = sdir·km has passed ``u6``
+        by the search margin, or None. Read in chunks of doubling length from ``s0`` (the first
+        ``span[2]`` cycles), so the cost is in the distance to that cycle, not in the run's
+        length; yields the first cycle of each chunk after the first."""
+        s0, s1, step = span
+        a = s0
         while a < s1:
+            if a > s0:
+                yield a
             b = min(a + step, s1)
             u = sdir * km_between(a, b)
             passed = np.flatnonzero(u - u6 >= self.margin(fix, np.arange(a, b)))
@@ -527,62 +546,3 @@ def _cross(x: FloatArray, k: FloatArray, i0: int, i1: int, level: float, sgn: in
         return float(x[i1])
     f = float(np.clip((level - a) / (b - a), 0.0, 1.0))
     return float(x[i0] + f * (x[i1] - x[i0]))
-
-
-@dataclass(eq=False)
-class FeatureAid(StaticAid):
-    """Feature points as an aid of the engine: the next feature ahead is evaluated once the
-    estimate has passed it (an estimate-dependent moment); an accepted one is an absolute
-    fix at its exit crossing, a refused one an event naming the failed diagnostics."""
-
-    unit: FeatureUnit
-    name = "feature"
-    priority = Priority.FEATURE
-
-    def observations(self) -> Iterator[Observation]:
-        return iter(())
-
-    def next_observation(self, view: EngineView) -> Observation | None:
-        fix = view.estimate
-        if fix is None or fix.state != PositionState.DETERMINED:
-            return None
-        nxt = self.unit.next_evaluation(fix, view.i, view.km_between)
-        if nxt is None:
-            return None
-        i_eval, cand = nxt
-        return Observation(float(self.unit.cycles.t[i_eval]), cand)
-
-    def observe(self, obs: Observation, view: EngineView) -> Outcome:
-        fix = view.estimate
-        if fix is None:
-            return Outcome()
-        out = self.unit.evaluate(obs.payload, fix, view.km_between, view.i)
-        if out.detail.get("not_judged"):
-            return Outcome()
-        if not (out.accepted and out.i_ref is not None and out.km_db is not None):
-            detail = {"feature_id": out.feature_id, "failed": out.failed, **out.detail}
-            return Outcome([Event(view.t, EventType.FEATURE_REFUSED, view.km, detail=detail)])
-        travel = view.travel
-        s_ref, d_ref = float(travel.s[out.i_ref]), float(travel.d[out.i_ref])
-        km_comp = view.km_at(s_ref)
-        ev = Event(
-            view.t,
-            EventType.FEATURE_CORRECTION,
-            out.km_db,
-            km_comp - out.km_db,
-            detail={"feature_id": out.feature_id, **out.detail},
-        )
-        new = Fix(
-            view.t,
-            s_ref,
-            d_ref,
-            out.km_db,
-            out.km_db + (fix.km_equipment_m - fix.km_m),
-            fix.line_code,
-            fix.track,
-            fix.k,
-            FixSource.FEATURE,
-            max(out.uncertainty_m or 0.0, self.unit.cfg.fix_uncertainty_m),
-            t_ref=float(travel.t[out.i_ref]),
-        )
-        return Outcome([ev], new)

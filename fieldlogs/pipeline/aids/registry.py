@@ -13,7 +13,8 @@ from fieldlogs.pipeline.aid import Aid, SpeedAid
 from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
 from fieldlogs.pipeline.aids.balise_group import BaliseGroupAid, group_table
 from fieldlogs.pipeline.aids.failsafe import FailsafeAid
-from fieldlogs.pipeline.aids.features import FeatureAid, FeatureUnit
+from fieldlogs.pipeline.aids.feature_aid import FeatureAid
+from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.aids.gnss import GnssAid, GnssUnit
 from fieldlogs.pipeline.aids.gps import GpsAid
 from fieldlogs.pipeline.aids.radar import RadarSpeedAid

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
+from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, Scan, scanned
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.hypotheses import (
     Segments,
@@ -50,8 +50,9 @@ _LOCATE, _STEP = "locate", "step"
 LINE_ONLY = (FixSource.GPS, FixSource.GNSS)
 #: Parallel tracks a line-based GNSS decision cannot have told apart [m] (Heirich 2016's radius).
 PARALLEL_M = 20.0
-#: First window of the forward search [cycles] (doubled until a rule applies or the run ends).
-_CHUNK = 512
+#: First window of the forward search [cycles] (doubled until a rule applies or the run ends;
+#: each after the first read once the engine reaches it).
+_CHUNK = 64
 
 
 def with_hyps(fix: Fix, hyps: list[Hypothesis], t: float, s: float, lines: TrackLines) -> Fix:
@@ -149,21 +150,25 @@ class TopologyAid:
         if not placed(fix, self.lines):
             return Observation(view.t, _LOCATE)
         self._remember(fix, view.d)
-        t = self._next_rule(fix, view)
-        return None if t is None else Observation(t, _STEP)
+        return scanned(self._next_rule(fix, view))
 
-    def _next_rule(self, fix: Fix, view: EngineView) -> float | None:
+    def _next_rule(self, fix: Fix, view: EngineView) -> Scan:
+        """The first cycle after ``view``'s where a candidate's interval reaches a rule of
+        :func:`~fieldlogs.pipeline.hypotheses.triggers`, read in chunks of doubling length as
+        the engine reaches them (:class:`~fieldlogs.pipeline.aid.Resume`)."""
         tr = view.travel
         i0 = view.i + 1 if tr.t[view.i] <= view.t else view.i
-        chunk = _CHUNK
+        chunk, first = _CHUNK, i0
         while i0 < tr.n:
+            if i0 > first:
+                yield float(tr.t[i0])
             w = slice(i0, min(i0 + chunk, tr.n))
             m = margin_m(fix, tr.d[w], tr.allowance[w], self.margin)
             hit = np.zeros(w.stop - w.start, dtype=bool)
             for h in fix.hyps:
                 hit |= triggers(h, h.pos_m + h.kp * (tr.s[w] - fix.s_ref), m, self.lines)
             if hit.any():
-                return float(tr.t[i0 + int(np.argmax(hit))])
+                return Observation(float(tr.t[i0 + int(np.argmax(hit))]), _STEP)
             i0, chunk = w.stop, chunk * 2
         return None
 

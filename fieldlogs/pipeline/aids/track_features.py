@@ -49,7 +49,7 @@ Correction (:class:`TrackFeatureFixAid`, while determined on one track)
     pos instead of the line km, with the track form's features of its track: an accepted
     feature is an absolute fix on that track at pos r4 (travel order), a refused one a
     ``feature_refused`` event. Line-form features of a line track are the line aid's
-    (:class:`~fieldlogs.pipeline.aids.features.FeatureAid`), so none is applied twice.
+    (:class:`~fieldlogs.pipeline.aids.feature_aid.FeatureAid`), so none is applied twice.
 """
 
 from __future__ import annotations

@@ -65,6 +65,7 @@ hundred times as independent noise and decide on it.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from statistics import NormalDist
@@ -75,7 +76,7 @@ import numpy as np
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.track_imu import kept, resolve
 from fieldlogs.pipeline.config import GpsConfig, TrackSelectConfig
-from fieldlogs.pipeline.hypotheses import TrackLines, after_switch_m
+from fieldlogs.pipeline.hypotheses import TrackLine, TrackLines, after_switch_m
 from fieldlogs.pipeline.types import Fix, FloatArray, Hypothesis
 from schemas.enums import PositionState
 
@@ -88,15 +89,13 @@ MAX_PREFIX = 30
 MAX_ROWS = 200
 
 
-def offset(lines: TrackLines, h: Hypothesis, pos: float, lat: float, lon: float) -> float:
-    """Signed offset [m] (+ left of the track's begin→end direction) of (lat, lon) from the
-    centreline of ``h``'s track at ``pos``."""
-    tl = lines[h.track_id]
+def offset(tl: TrackLine, pos: float, px: float, py: float) -> float:
+    """Signed offset [m] (+ left of the track's begin→end direction) of the point (px, py) of
+    ``tl``'s plane from its centreline at ``pos``."""
     if tl.xy.shape[0] < 2:
         return float("nan")
     x, y, ux, uy = tl.point(pos)
-    px, py = tl.plane(np.array([lat]), np.array([lon]))
-    return float(-(float(px[0]) - x) * uy + (float(py[0]) - y) * ux)
+    return float(-(px - x) * uy + (py - y) * ux)
 
 
 def quad(r: FloatArray, sigma_w: float, sigma_b: float, t: FloatArray | None = None, tau_s: float = math.inf) -> float:
@@ -155,6 +154,28 @@ class NetworkFixes:
     lines: TrackLines
     cfg: TrackSelectConfig
     gps: GpsConfig
+    planes: dict[tuple[float, float], tuple[list[float], list[float]]] = field(
+        default_factory=dict, repr=False, kw_only=True
+    )
+    """The fixes in each track's local plane, made on first use (shared by the aids made from one)."""
+    t_list: list[float] = field(default_factory=list, repr=False, kw_only=True)
+    """:meth:`fix_times`, made on first use."""
+
+    def fix_times(self) -> list[float]:
+        """``t`` as a list, for ``bisect`` at every scheduling (the index ``np.searchsorted``
+        gives: the times are in order)."""
+        if not self.t_list and self.t.size:
+            self.t_list.extend(self.t.tolist())
+        return self.t_list
+
+    def plane_of(self, tl: TrackLine, j: int) -> tuple[float, float]:
+        """Fix ``j`` in ``tl``'s local plane [m] (:meth:`TrackLine.plane`, elementwise: the same
+        numbers as one fix at a time)."""
+        xy = self.planes.get(tl.origin)
+        if xy is None:
+            x, y = tl.plane(self.lat, self.lon)
+            xy = self.planes[tl.origin] = (x.tolist(), y.tolist())
+        return xy[0][j], xy[1][j]
 
 
 @dataclass(eq=False)
@@ -189,8 +210,9 @@ class TrackGpsAid(NetworkFixes):
         fix = view.estimate
         if fix is None or not fix.hyps:
             return None
-        j = int(np.searchsorted(self.t, view.t, side="right"))
-        return Observation(float(self.t[j]), j) if j < self.t.size else None
+        ts = self.fix_times()
+        j = bisect.bisect_right(ts, view.t)
+        return Observation(ts[j], j) if j < len(ts) else None
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate
@@ -199,7 +221,7 @@ class TrackGpsAid(NetworkFixes):
             self._keep([])
             return Outcome()
         j: int = obs.payload
-        off = self._offsets(fix, view.s, float(self.lat[j]), float(self.lon[j]))
+        off = self._offsets(fix, view.s, j)
         single = len(fix.hyps) < 2
         if self._jumped(view.t, off):
             self.jump_t = view.t
@@ -297,7 +319,7 @@ class TrackGpsAid(NetworkFixes):
             if not all(self._inside(h, fix, s_j) for h in fix.hyps):
                 break
             if d_next - d_j >= MIN_SPACING_M:
-                out.append((tj, self._offsets(fix, s_j, float(self.lat[j]), float(self.lon[j]))))
+                out.append((tj, self._offsets(fix, s_j, j)))
                 d_next = d_j
             t_next, j = tj, j - 1
         out.reverse()
@@ -325,12 +347,15 @@ class TrackGpsAid(NetworkFixes):
         before = prev[1] * len(off) if len(prev[1]) == 1 else prev[1]
         if len(before) != len(off):
             return False
-        return bool(np.all(np.abs(np.asarray(off, dtype=float) - np.asarray(before, dtype=float)) > self._limit()))
+        limit = self._limit()
+        return all(abs(a - b) > limit for a, b in zip(off, before, strict=True))
 
-    def _offsets(self, fix: Fix, s: float, lat: float, lon: float) -> list[float]:
-        """Each candidate's offset (+ left of body-forward) from its track at signed travel ``s``."""
+    def _offsets(self, fix: Fix, s: float, j: int) -> list[float]:
+        """Each candidate's offset (+ left of body-forward) from its track at signed travel ``s``
+        of fix ``j``."""
         out = []
         for h in fix.hyps:
             pos = h.pos_m + h.kp * (s - fix.s_ref) + h.kp * self.antenna_x_m
-            out.append(h.kp * offset(self.lines, h, pos, lat, lon))  # + left of body-forward
+            tl = self.lines[h.track_id]
+            out.append(h.kp * offset(tl, pos, *self.plane_of(tl, j)))  # + left of body-forward
         return out

@@ -57,6 +57,7 @@ candidate, so line-only runs and ambiguous estimates are untouched (the offsets 
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field, replace
 
@@ -66,6 +67,7 @@ from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes
 from fieldlogs.pipeline.config import GpsConfig, MarginConfig, TrackSelectConfig
+from fieldlogs.pipeline.hypotheses import TrackLine
 from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.types import Event, FloatArray, Hypothesis
 from schemas.enums import EventType, FixSource, PositionState
@@ -101,6 +103,10 @@ class TrackGpsAlongAid(NetworkFixes):
     usable: tuple[FloatArray, FloatArray, FloatArray] | None = None
     """(t, lat, lon) of every usable fix (quality, HDOP), trusted or not: an uncertain position
     is confirmed from these (module docstring)."""
+    usable_planes: dict[tuple[float, float], tuple[list[float], list[float]]] = field(default_factory=dict, repr=False)
+    """The usable fixes in each track's local plane, made on first use."""
+    usable_t: list[float] = field(default_factory=list, repr=False)
+    """Their times as a list (:meth:`NetworkFixes.fix_times`)."""
 
     def observations(self) -> list[Observation]:
         return []
@@ -109,13 +115,25 @@ class TrackGpsAlongAid(NetworkFixes):
         fix = view.estimate
         if fix is None or len(fix.hyps) != 1:
             return None
-        t, lat, lon = self.usable if self.usable is not None and fix.state == PositionState.UNCERTAIN else self.trusted
-        j = int(np.searchsorted(t, view.t, side="right"))
-        return Observation(float(t[j]), (float(lat[j]), float(lon[j]))) if j < t.size else None
+        usable = self.usable is not None and fix.state == PositionState.UNCERTAIN
+        if self.usable is not None and usable:
+            if not self.usable_t and self.usable[0].size:
+                self.usable_t.extend(self.usable[0].tolist())
+            t = self.usable_t
+        else:
+            t = self.fix_times()
+        j = bisect.bisect_right(t, view.t)
+        return Observation(t[j], (j, usable)) if j < len(t) else None
 
-    @property
-    def trusted(self) -> tuple[FloatArray, FloatArray, FloatArray]:
-        return self.t, self.lat, self.lon
+    def _plane(self, tl: TrackLine, j: int, usable: bool) -> tuple[float, float]:
+        """Trusted (or usable) fix ``j`` in ``tl``'s local plane, each track's computed once."""
+        if self.usable is None or not usable:
+            return self.plane_of(tl, j)
+        xy = self.usable_planes.get(tl.origin)
+        if xy is None:
+            x, y = tl.plane(self.usable[1], self.usable[2])
+            xy = self.usable_planes[tl.origin] = (x.tolist(), y.tolist())
+        return xy[0][j], xy[1][j]
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate
@@ -128,9 +146,8 @@ class TrackGpsAlongAid(NetworkFixes):
         u = along_uncertainty(self.cfg, self.gps)
         m = float(margin_m(fix, view.d, view.travel.allowance_at(view.t), self.margin)) + h.extra_m
         s_dr = h.pos_m + h.kp * (view.s - fix.s_ref) + h.kp * self.antenna_x_m
-        lat, lon = obs.payload
-        x, y = tl.plane(np.array([lat]), np.array([lon]))
-        s_g, off = tl.project(float(x[0]), float(y[0]), s_dr, m + u + _WINDOW_M)
+        x, y = self._plane(tl, *obs.payload)
+        s_g, off = tl.project(x, y, s_dr, m + u + _WINDOW_M)
         if not self._steady(view, h, s_g, off, s_dr, u, tl.length_m):
             return Outcome()
         uncertain = fix.state == PositionState.UNCERTAIN

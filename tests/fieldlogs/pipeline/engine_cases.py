@@ -8,7 +8,8 @@ from dbtools.network import Network
 from fieldlogs.pipeline.aid import Aid
 from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
 from fieldlogs.pipeline.aids.failsafe import FailsafeAid
-from fieldlogs.pipeline.aids.features import FeatureAid, FeatureUnit
+from fieldlogs.pipeline.aids.feature_aid import FeatureAid
+from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.aids.gps import GpsAid
 from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.config import PipelineConfig
