@@ -8,6 +8,8 @@ import re
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from tests.bench.scripts import load_script
 
 ra = load_script("run_all")
@@ -78,7 +80,7 @@ def _full(name: str, result: str, when: str = "2026-12-05 04:00 UTC") -> Any:
 def _quick_then_full(out: Path) -> list[str]:
     """A quick table of two rows, then a full table of two rows of one script: the quick lines."""
     ra.write_results([_row("bench_a.py", "a quick"), _row("bench_db.py", "db quick")], out, ra.Started.now([]), [])
-    quick = ra.kept_rows(out)
+    quick: list[str] = ra.kept_rows(out)
     full = [_full("db", "db full: 1.2× (target ≤ 1.3×): met"), _full("db_network", "net full")]
     ra.write_results(full, out, ra.Started.now(["--full"]), [], table=ra.FULL)
     return quick
@@ -146,3 +148,21 @@ def test_every_full_row_has_a_size_a_target_and_a_unique_name() -> None:
     assert issue_rows <= {b.name for b in full}
     scripts = [b.path.name for b in ra.BENCHES if b.quick is not None]
     assert len(scripts) == len(set(scripts)), "two quick rows of one script would replace each other"
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["--full", "--only", "pipeline"], "no full size for pipeline"),
+        (["--only", "db_network"], "no quick size for db_network"),
+        (["--full", "--only", "nosuch"], "no benchmark named nosuch"),
+    ],
+)
+def test_only_names_a_row_of_the_table_it_writes(
+    argv: list[str], says: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr("sys.argv", ["run_all.py", *argv, "--out", str(tmp_path / "R.md")])
+    with pytest.raises(SystemExit):
+        ra.main()
+    assert says in capsys.readouterr().err
+    assert not (tmp_path / "R.md").exists()
