@@ -191,13 +191,20 @@ def compare(one: Mode, many: Mode, ceiling: float) -> float:
     return speed
 
 
+#: Issue 34 states the pool's speed-up (≥ 1.6× one worker) for a fleet of 20 one-hour runs;
+#: at any fleet size the pool must never be slower than one worker.
+SPEED_UP_RUNS = 20
+
+
 def issue_34(workers: int, runs: int, speeds: list[float], fixed: list[float]) -> None:
     """The verdicts of issue 34 item 1 over the rounds: the pool's speed-up over one worker
-    (median, ≥ 1.6×; the slowest round never below 1×) and the pool's own fixed CPU — its CPU
-    outside the runs less one worker's (the coordinator's storing, which both pay) — ≤ 0.5 s."""
+    (median ≥ 1.6× from :data:`SPEED_UP_RUNS` runs on, printed without a target below; the
+    slowest round never below 1× at any size) and the pool's own fixed CPU — its CPU outside
+    the runs less one worker's (the coordinator's storing, which both pay) — ≤ 0.5 s."""
     med, low, cpu = median(speeds), min(speeds), median(fixed)
     rounds = ", ".join(f"{s:.2f}" for s in speeds)
-    print(f"{workers} workers / 1 worker, {runs} runs: median {med:.2f}× {verdict('≥ 1.6×', med >= 1.6)}; {rounds}")
+    target = f" {verdict('≥ 1.6×', med >= 1.6)}" if runs >= SPEED_UP_RUNS else ""
+    print(f"{workers} workers / 1 worker, {runs} runs: median {med:.2f}×{target}; rounds {rounds}")
     print(f"{workers} workers / 1 worker, {runs} runs: slowest round {low:.2f}× {verdict('≥ 1×', low >= 1.0)}")
     print(
         f"the pool's fixed CPU (outside the runs, over one worker's): median {cpu:.2f} s "

@@ -208,6 +208,17 @@ BENCHES = (
         Full(("--runs", "20", "--rounds", "3", "--no-dask"), "20 one-hour runs, 3 rounds", AUDIT_TARGET),
     ),
     Bench(
+        "audit_small",
+        "fleet audit, a small fleet: 1 → 2 workers",
+        None,
+        Full(
+            ("--runs", "4", "--rounds", "3", "--no-dask"),
+            "4 one-hour runs (the smallest fleet the pool takes), 3 rounds",
+            "issue 34: 2 workers never slower than one worker at any fleet size",
+        ),
+        script="bench_audit.py",
+    ),
+    Bench(
         "osm",
         "OSM import (Cologne, 3,657 switches) vs osmium's read",
         ("--repeat", "1"),
