@@ -27,6 +27,7 @@ import argparse
 import os
 import platform
 import re
+import resource
 import subprocess
 import sys
 import time
@@ -259,14 +260,16 @@ QUICK = Table(
     TABLE_HEAD,
     "Each row is one benchmark at a quick size, run in its own process (`OMP_NUM_THREADS=1`); *load* is the "
     "1-minute load average before → after it (above the core count the figures are pessimistic: the benchmark "
-    "waited for a core); *when* is when it started (rows an `--only` run did not redo keep their date).",
+    "waited for a core); *wall* is followed by the CPU of its processes; *when* is when it started (rows an "
+    "`--only` run did not redo keep their date).",
 )
 FULL = Table(
     "## Full sizes: the issues' targets (`make bench-full`)",
     FULL_HEAD,
     "Each row is one benchmark at the size an issue states its target for (`bench/run_all.py --full`), in its "
     "own process (`OMP_NUM_THREADS=1`); *verdict* is what the benchmark itself prints about the target "
-    "(`(target …): met` or `not met`); *load* is the 1-minute load average before → after it: the issues' "
+    "(`(target …): met` or `not met`); *wall* is followed by the CPU of its processes; *load* is the 1-minute "
+    "load average before → after it: the issues' "
     "figures are stated for a quiet machine (load < 1.5), a row measured above that is to be run again with "
     "`bench/run_all.py --full --only NAME`, which redoes that row only.",
 )
@@ -288,6 +291,8 @@ class Row:
     name: str = ""
     size: str = ""
     target: str = ""
+    cpu_s: float | None = None
+    """CPU (user + system) of the benchmark's process and every process it waited for."""
 
     @property
     def script(self) -> str:
@@ -303,9 +308,13 @@ class Row:
         """What a line of ``table`` is replaced by: the row's name (full), its script (quick)."""
         return self.name if table.full else self.script
 
+    @property
+    def _cpu(self) -> str:
+        return "" if self.cpu_s is None else f" ({self.cpu_s:.0f} s CPU)"
+
     def markdown(self, table: Table = QUICK) -> str:
         tail = (
-            f"| `{self.command}` | {_cell(self.result)} | {self.wall_s:.0f} s | "
+            f"| `{self.command}` | {_cell(self.result)} | {self.wall_s:.0f} s{self._cpu} | "
             f"{self.load_before:.1f} → {self.load_after:.1f} | {self.when} |"
         )
         if table.full:
@@ -334,14 +343,14 @@ def _run(b: Bench, full: bool, timeout_s: float) -> Row:
     shown = " ".join([".venv/bin/python", f"bench/{b.path.name}", *args])
     size, target = (b.full.size, b.full.target) if full and b.full else ("", "")
 
-    def row(out: str, wall_s: float, load0: float, load1: float, when: str) -> Row:
-        return Row(b.component, shown, out, wall_s, load0, load1, when, b.name, size, target)
+    def row(out: str, wall_s: float, load0: float, load1: float, when: str, cpu_s: float | None = None) -> Row:
+        return Row(b.component, shown, out, wall_s, load0, load1, when, b.name, size, target, cpu_s)
 
     when, load0 = _now(), os.getloadavg()[0]
     if not b.path.exists():
         return row("not run: the script does not exist", 0.0, load0, load0, when)
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _children_cpu()
     try:
         proc = subprocess.run(
             [sys.executable, str(b.path), *args],
@@ -358,7 +367,13 @@ def _run(b: Bench, full: bool, timeout_s: float) -> Row:
             out = f"{out}\nFAILED (exit {proc.returncode}): {last}".strip()
     except subprocess.TimeoutExpired:
         out = f"FAILED: no result within {timeout_s:.0f} s"
-    return row(out, time.perf_counter() - t0, load0, os.getloadavg()[0], when)
+    return row(out, time.perf_counter() - t0, load0, os.getloadavg()[0], when, _children_cpu() - c0)
+
+
+def _children_cpu() -> float:
+    """CPU (user + system) of the processes this one has waited for, theirs included [s]."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
 
 def _cell(text: str) -> str:

@@ -101,6 +101,8 @@ def test_a_full_run_writes_its_own_table_and_keeps_the_quick_one(tmp_path: Path)
     )
     assert "| net full | 30 s | 0.5 → 0.9 | 2026-12-05 04:00 UTC |" in full[1]
     assert "| db_network | size of db_network | target of db_network | — |" in full[1]  # no verdict printed
+    timed = ra.Row("c", "bench/bench_x.py", "r", 31.6, 0.5, 0.9, "now", cpu_s=28.2).markdown()
+    assert "| r | 32 s (28 s CPU) | 0.5 → 0.9 | now |" in timed
 
 
 def test_a_partial_full_run_replaces_only_its_full_row(tmp_path: Path) -> None:
