@@ -42,6 +42,8 @@ from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.frame_screen import passes_checks
 from schemas.model import Column, Table
+from schemas.text_cells import BLANK_WORDS as BLANK_WORDS
+from schemas.text_cells import stripped_text as stripped_text
 from schemas.units import parse_km_array
 
 if TYPE_CHECKING:
@@ -119,10 +121,6 @@ def coerce_frame(
     return Coerced(pd.DataFrame(out, index=raw.index), findings, missing)
 
 
-#: Text cells taken for blank once stripped, in lower case (as :func:`_blank`).
-BLANK_WORDS = ("nan", "na", "null")
-
-
 def _already_typed(table: Table, raw: pd.DataFrame) -> pd.DataFrame | None:
     """The frame :func:`coerce_frame` returns, built without its per-column machinery when
     nothing in ``raw`` can give a finding: every column a declared one, none repeated, every
@@ -193,17 +191,6 @@ def _null_column(col: Column, n: int) -> object:
     if col.dtype == "int":
         return pd.arrays.IntegerArray(np.zeros(n, dtype=np.int64), np.ones(n, dtype=bool))
     return pd.Series([None] * n, dtype=PANDAS_DTYPE[col.dtype]).array
-
-
-def stripped_text(arr: pa_arrow.ChunkedArray) -> pa_arrow.ChunkedArray:
-    """Text cells as :func:`_coerce_column` types them: ``str.strip()`` (Arrow's
-    ``utf8_trim_whitespace``, the kernel pandas's Arrow strings call), null where
-    :func:`_blank` finds a blank (null, empty, or nan/na/null in any letter case once
-    stripped)."""
-    trimmed = pc.utf8_trim_whitespace(arr)
-    words = pa_arrow.array(BLANK_WORDS)
-    blank = pc.fill_null(pc.or_kleene(pc.equal(trimmed, ""), pc.is_in(pc.utf8_lower(trimmed), value_set=words)), True)
-    return pc.if_else(blank, pa_arrow.scalar(None, pa_arrow.string()), trimmed)
 
 
 def _missing_columns(table: Table, raw: pd.DataFrame, extras: list[str], file: str | None) -> list[Finding]:
