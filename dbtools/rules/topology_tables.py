@@ -188,21 +188,6 @@ def is_in(s: pd.Series, known: pd.Series) -> npt.NDArray[np.bool_]:
     return np.asarray(hit.to_numpy(zero_copy_only=False), dtype=bool)
 
 
-def is_in_each(columns: list[pd.Series], known: pd.Series) -> list[npt.NDArray[np.bool_]]:
-    """:func:`is_in` of each column, in one hash look-up when all are held as Arrow text
-    (the set of ``known`` is hashed once, not once a column)."""
-    arrays, k = [arrow_text(s) for s in columns], arrow_text(known)
-    if k is None or any(a is None for a in arrays):
-        return [is_in(s, known) for s in columns]
-    chunks = [ch.cast(pa.large_string()) for a in arrays if a is not None for ch in a.chunks]
-    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(pa.large_string())
-    hit = np.asarray(
-        pc.is_in(pa.chunked_array(chunks, pa.large_string()), value_set=values).to_numpy(zero_copy_only=False),
-        dtype=bool,
-    )
-    return np.split(hit, np.cumsum([len(s) for s in columns])[:-1])
-
-
 #: Port → digit of a port pair's code (the pair's smaller and larger port: 4·lo + hi).
 PORT_DIGIT = {p: i for i, p in enumerate(sorted(ALL_PORTS))}
 #: Switch type → codes of its routes, in declared order, with the routes as sorted pairs.
