@@ -486,7 +486,10 @@ class GridIndex:
     def _shape(self, spacing_m: float, epsilon_m: float) -> GridShape:
         n = self.n
         # dkm is NaN across tracks, so a regular step is within one track
-        regular = np.abs(self.dkm - spacing_m) <= epsilon_m
+        regular = np.empty(max(n - 1, 0), dtype=bool)
+        for a in range(0, n - 1, BLOCK):  # |dkm − spacing| ≤ ε, one temporary of a block
+            d = self.dkm[a : a + BLOCK] - spacing_m
+            np.less_equal(np.abs(d, out=d), epsilon_m, out=regular[a : a + BLOCK])
         reg = np.zeros(n + 1, dtype=bool)  # reg[i]: the step i − 1 → i is regular (False at both ends)
         reg[1:n] = regular
         turn, kappa, heading = np.empty(n), np.empty(n), np.empty(n)
