@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
-from cli.commands import PathCommand
+from cli.commands import PathCommand, small_pages
 from cli.db_impact import _impact_attachment, impact
 from cli.db_inspect import info, show
 from cli.errors import cli_command
@@ -130,6 +130,7 @@ def validate(
 
     Example: trainpos db validate net-2026.11.sqlite --format json
     """
+    small_pages()  # before numpy's import
     from dbtools.validate import validate_path
 
     findings = validate_path(target, locale=csv_locale(delimiter, decimal))

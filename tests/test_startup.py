@@ -228,13 +228,16 @@ def test_validate_command_parses_as_typer_does() -> None:
 
 def test_validate_of_a_db_imports_no_pydantic(sample_db: Path) -> None:
     """``trainpos db validate`` through the real entry point, in a fresh interpreter: the
-    findings printed, pydantic (typer's coercion, 0.1 s of start-up) not imported."""
+    findings printed, pydantic (typer's coercion, 0.1 s of start-up) not imported, and numpy
+    imported with its huge-page advice off (cli.commands.small_pages)."""
     code = (
-        "import json, sys\nfrom cli.main import app\n"
+        "import json, os, sys\nos.environ.pop('NUMPY_MADVISE_HUGEPAGE', None)\nfrom cli.main import app\n"
         "try:\n    app(sys.argv[1:])\nexcept SystemExit as exc:\n    assert exc.code in (0, 1), exc.code\n"
-        "print(json.dumps(sorted({m.split('.')[0] for m in sys.modules})))\n"
+        "from numpy._core.multiarray import _get_madvise_hugepage\n"
+        "print(json.dumps([_get_madvise_hugepage(), sorted({m.split('.')[0] for m in sys.modules})]))\n"
     )
     stdout = fresh_python(code, "db", "validate", str(sample_db), "--format", "json")
     assert '"findings"' in stdout
-    imported = set(json.loads(stdout.strip().splitlines()[-1]))
+    hugepage, imported = json.loads(stdout.strip().splitlines()[-1])
     assert "pandas" in imported and "pydantic" not in imported
+    assert hugepage is False
