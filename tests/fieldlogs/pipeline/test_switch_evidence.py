@@ -8,14 +8,20 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
 
+from dbtools.network import Network
+from dbtools.rules.balise_groups import locate
 from fieldlogs.pipeline.aids.balise_group import BaliseGroupAid, balise_pos, group_table
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.config import BaliseConfig
 from fieldlogs.pipeline.engine import run_aids
-from fieldlogs.pipeline.hypotheses import track_lines
+from fieldlogs.pipeline.estimate import Travel
+from fieldlogs.pipeline.hypotheses import TrackLines, track_lines
 from schemas.enums import EventType
 from tests.fieldlogs.pipeline.network_cases import MARGIN, Start, net, travel
+from tests.fieldlogs.pipeline.test_track_selection_property import DT, Truth, walk
 
 
 def test_balise_pos_on_a_crossover_by_its_track_points_hand_computed() -> None:
@@ -51,3 +57,78 @@ def test_balise_group_on_the_crossover_resolves_the_split() -> None:
     after = p[(p["t"] >= 13.0) & (p["t"] <= 15.0)]
     assert (after["state"] == "determined").all() and (after["track_id"] == "X1").all()
     assert after["pos_m"].iloc[10] == pytest.approx(28.073 + 10.0, abs=0.05)  # 1 s later
+
+
+def _telegrams(network: Network, lines: TrackLines, truth: Truth, t: np.ndarray) -> pd.DataFrame:
+    """A G telegram each time the true position passes a DB balise (placed as the DB's rules and
+    the simulator place it, :func:`dbtools.rules.balise_groups.locate`), in time order."""
+    tid, pos = locate(network)
+    b = network.balises
+    rows = []
+    track = np.array(truth.track, dtype=object)
+    for j in np.flatnonzero(pd.notna(tid) & np.isfinite(pos) & (b["kind"] == "G").to_numpy()):
+        on = track == tid[j]
+        side = truth.pos >= pos[j]
+        hit = np.flatnonzero(on[1:] & on[:-1] & (side[1:] != side[:-1])) + 1
+        rows += [
+            {
+                "t": float(t[i]),
+                "kind": "G",
+                "nid_c": int(b["nid_c"].iloc[j]),
+                "nid_bg": int(b["nid_bg"].iloc[j]),
+                "n_pig": int(b["n_pig"].iloc[j]),
+            }
+            for i in hit
+        ]
+    return pd.DataFrame(sorted(rows, key=lambda r: r["t"]), columns=["t", "kind", "nid_c", "nid_bg", "n_pig"])
+
+
+@settings(max_examples=40, deadline=None)
+@example(name="crossover", start=0, kp=1, speed=10.0, scale=0.01, branch=[1])  # D1 → X1 (group 3) → U2
+@example(name="crossover", start=4, kp=-1, speed=20.0, scale=-0.01, branch=[0, 1])  # U2 → X1 → D1
+@given(
+    name=st.sampled_from(["crossover", "station4"]),
+    start=st.integers(0, 10_000),
+    kp=st.sampled_from([1, -1]),
+    speed=st.floats(3.0, 25.0),
+    scale=st.floats(-0.015, 0.015),
+    branch=st.lists(st.integers(0, 1), min_size=1, max_size=4),
+)
+def test_balise_groups_never_drop_the_true_branch(
+    name: str, start: int, kp: int, speed: float, scale: float, branch: list[int]
+) -> None:
+    # random routes through the crossovers and station tracks (some of them off a line), the
+    # odometry's scale error inside the margin's 2 %: every group read keeps the true track
+    n = net(name)
+    lines = track_lines(n)
+    on_line = [t for t in sorted(lines.lines) if lines[t].line_code and lines[t].metric is not None]
+    tid = on_line[start % len(on_line)]
+    tl = lines[tid]
+    pos0 = 20.0 + (start % 97) / 97.0 * max(tl.length_m - 40.0, 1.0)
+    v = np.full(round(700.0 / speed / DT), speed)
+    truth = walk(n, lines, tid, pos0, kp, v, branch)
+    m = truth.s.size
+    t = np.arange(m) * DT
+    tr = Travel(
+        t,
+        truth.d * (1 + scale),
+        truth.s * (1 + scale),
+        np.abs(v[:m]),
+        np.ones(m, dtype=np.int8),
+        np.ones(m, dtype=bool),
+        np.zeros(m),
+        n,
+    )
+    aid = BaliseGroupAid(group_table(n), lines, BaliseConfig(), _telegrams(n, lines, truth, t))
+    start_fix = Start(tl.line_code, tl.track, float(tl.km_of_pos(pos0)), kp * tl.km_sign)
+    sol = run_aids(tr, [start_fix, TopologyAid(lines, MARGIN), aid], MARGIN)
+    p = sol.positions
+    det = (p["state"] == "determined").to_numpy()
+    claimed = p["track_id"].fillna("").astype(object).to_numpy()
+    assert not (det & (claimed != np.array(truth.track, dtype=object))).any()
+    assert EventType.BALISE_ANOMALY not in {e.type for e in sol.events}  # the true track was never dropped
+    # each read fixes the position on the true track (on a crossover too: placed by its points)
+    reads = np.searchsorted(t, aid.telegrams["t"].to_numpy(dtype=float)) + 1
+    assert det[reads[reads < m]].all()
+    resolved = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
+    assert all(e.detail["track_id"] == truth.track[int(np.searchsorted(t, e.t))] for e in resolved)
