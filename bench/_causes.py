@@ -19,6 +19,19 @@ positions_frame` picks it):
 * ``joint``: one candidate whose interval reaches over a plain joint (no switch);
 * ``other``: what none of these describes (a wrong claim, a determined cycle on a track the
   truth does not know).
+
+A facing switch passage never resolved (:func:`fieldlogs.pipeline.track_truth.switch_resolution`)
+counts as not resolved in the issue's figure whatever the reason; :func:`unresolved` says why,
+apart, where no evidence was physically possible:
+
+* ``run ended within the lead``: the run's remaining true travel after the passage is shorter
+  than the turnout's lead R·α (:func:`fieldlogs.pipeline.aids.track_imu.turnouts`): the branches
+  have not yet parted by their full heading (the lateral separation x²/(2R) at x < R·α is below
+  R·α²/2 — 1.13 m on a 1:12 R 300 m turnout), so neither the IMU nor a GNSS offset can tell them
+  at the test's α;
+* ``balise-only, no group after the switch``: in the balise-only condition (balise groups and
+  pairs the only track evidence) no G telegram was read between the passage and the run's end;
+* ``other``: every other unresolved passage — evidence there was, the engine did not use it.
 """
 
 from __future__ import annotations
@@ -31,6 +44,9 @@ import pandas as pd
 from fieldlogs.pipeline.hypotheses import TrackLines
 from fieldlogs.pipeline.types import Fix
 from schemas.enums import PositionState
+
+#: Why a facing passage stayed unresolved (module docstring), in print order.
+UNRESOLVED = ("run ended within the lead", "balise-only, no group after the switch", "other")
 
 CAUSES = (
     "facing switch, < k fixes",
@@ -102,4 +118,30 @@ def causes(
     for i, j in zip(lost.tolist(), idx.tolist(), strict=True):
         c = _one(str(state[i]), fixes[j] if j >= 0 else None, cand[i], float(t[i]), times, k, lines)
         out[c] = out.get(c, 0.0) + float(ds[i])
+    return out
+
+
+def unresolved(
+    passages: pd.DataFrame,
+    truth: pd.DataFrame,
+    balise: pd.DataFrame | None,
+    balise_only: bool,
+    lead_m: dict[str, float],
+) -> list[tuple[str, float]]:
+    """(reason, remaining true travel [m]) of each passage of ``passages`` (a
+    :func:`~fieldlogs.pipeline.track_truth.switch_resolution` frame) never resolved (module
+    docstring); ``balise`` the run's telegrams, ``lead_m`` each switch's R·α."""
+    t = truth["t"].to_numpy(dtype=float)
+    v = np.abs(truth["speed_mps"].to_numpy(dtype=float))
+    run = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+    g = balise.loc[balise["kind"] == "G", "t"].to_numpy(dtype=float) if balise is not None else np.empty(0)
+    out = []
+    for tp, sw in passages.loc[~passages["resolved"].to_numpy(dtype=bool), ["t", "switch_id"]].itertuples(index=False):
+        left = float(run[-1] - np.interp(tp, t, run))
+        if left < lead_m.get(str(sw), 0.0):
+            out.append((UNRESOLVED[0], left))
+        elif balise_only and not (g >= tp).any():
+            out.append((UNRESOLVED[1], left))
+        else:
+            out.append((UNRESOLVED[2], left))
     return out

@@ -50,13 +50,20 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench._causes import CAUSES, causes
+from bench._causes import CAUSES, UNRESOLVED, causes, unresolved
 from bench._common import over_network_runs, print_rows
 from dbtools.database import read_network
+from fieldlogs.pipeline.aids.track_imu import turnouts
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.run import run_pipeline
-from fieldlogs.pipeline.track_truth import TrackFigures, compare_tracks, track_figures
+from fieldlogs.pipeline.track_truth import (
+    TrackFigures,
+    compare_tracks,
+    facing_passages,
+    switch_resolution,
+    track_figures,
+)
 from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.runs.handle import read_run
 from fieldlogs.runs.write import write_run
@@ -156,6 +163,9 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
         else np.empty(0),
         np.sort(ev.loc[ev["type"] == EventType.SWITCH_SPLIT.value, "t"].to_numpy(dtype=float)),
     )
+    leads = {k: to.lead_m for k, to in turnouts(net.switches).items()}
+    passages = switch_resolution(tc, facing_passages(truth, net))
+    why = unresolved(passages, truth, streams.get("balise"), condition == "balise-only", leads)
     lost = causes(tc, res.positions, res.fixes, times, PipelineConfig().track_select.gps_min_fixes, track_lines(net))
     return {
         "i": i,
@@ -175,6 +185,7 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
         "parallel_by_state": tc[tc["parallel"]].groupby("state")["ds_m"].sum().to_dict(),
         "multipath": bool(sc["network"].get("multipath")),
         "lost": lost,
+        "unresolved": why,
     }
 
 
@@ -231,6 +242,24 @@ def _lost(results: list[dict[str, Any]], condition: str) -> str:
     return ", ".join(f"{k} {100 * by[k] / total:.2f} %" for k in CAUSES if by.get(k)) or "none"
 
 
+def _unresolved(results: list[dict[str, Any]]) -> str:
+    """The facing passages never resolved, by reason (:func:`bench._causes.unresolved`), with
+    their runs, and the share resolved among the passages where evidence was possible."""
+    by: dict[str, list[str]] = {}
+    for r in results:
+        for reason, left in r["unresolved"]:
+            by.setdefault(reason, []).append(f"run {r['i']} {r['condition']} {left:.0f} m")
+    n = sum(r["figures"].passages for r in results)
+    ok = sum(r["figures"].resolved_correct for r in results)
+    undecidable = sum(len(by.get(k, [])) for k in UNRESOLVED[:2])
+    parts = [
+        f"{k} {len(by[k])} ({', '.join(by[k][:4])}{' …' if len(by[k]) > 4 else ''})" for k in UNRESOLVED if k in by
+    ]
+    possible = n - undecidable
+    share = pct(ok / possible if possible else None)
+    return f"{'; '.join(parts) or 'none'}; resolved where evidence was possible: {share} of {possible}"
+
+
 def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     """The accuracy table's rows (label, value with target and verdict)."""
     total = sum((r["figures"] for r in results), TrackFigures())
@@ -281,6 +310,7 @@ def table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
                 f"{c} {pct(by[c]['switches_resolved_correctly'])} of {by[c]['facing_switches']}" for c in CONDITIONS
             ),
         ),
+        ("  unresolved, by reason (counted above as unresolved; remaining run)", _unresolved(results)),
         ("  median distance after the switch, all", f"{s['median_resolution_m'] or float('nan'):.1f} m"),
         (
             "  median distance, D-GPS runs",
@@ -340,6 +370,7 @@ def raw_table(results: list[dict[str, Any]]) -> list[tuple[str, str]]:
             f"{pct(sw)} of {s['facing_switches']} ({s['switches_resolved_wrongly']} wrongly)  (target ≥ 99 %)  "
             f"{verdict((sw or 0.0) >= 0.99 and s['switches_resolved_wrongly'] == 0)}",
         ),
+        ("  unresolved, by reason (counted above as unresolved; remaining run)", _unresolved(results)),
         ("  median distance after the switch, all", f"{s['median_resolution_m'] or float('nan'):.1f} m"),
         (
             "  median by track_gnss (raw-GNSS fits)",

@@ -51,6 +51,7 @@ SMOKE: dict[str, Smoke] = {
             r"wrong-track claims \(determined cycles\)\s+\d",
             r"selectivity D-GPS\s+[\d.]+ %",
             r"not selected, by cause\s+\S",
+            r"unresolved, by reason .*resolved where evidence was possible: \S+( %)? of \d+",
             r"raw GNSS: runs\s+1 ",
             r"median by track_gnss \(raw-GNSS fits\)\s+\S+ m \(n=\d+\)",
         ),

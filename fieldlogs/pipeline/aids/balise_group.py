@@ -13,6 +13,10 @@ on a known track:
   give the direction — the order of N_PIG against the order of their positions on the track —
   and set the initial position (``initial_position``).
 
+A group on a track off a line (a crossover: no line km) is placed by the km of the track's
+own ``track_points``, as the DB's balise rules place it (:func:`balise_pos`): the km interpolated
+between the points' (km, pos) pairs, within 1 m of their km range.
+
 Its uncertainty is the balise aid's: ``balise.fix_uncertainty_m`` + ``balise.latency_budget_s``
 × speed. Groups not in the DB are reported (``balise_anomaly``) and change nothing.
 """
@@ -31,7 +35,7 @@ from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, S
 from fieldlogs.pipeline.aids.balise import telegram_observations
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.config import BaliseConfig
-from fieldlogs.pipeline.hypotheses import TrackLines, after_switch_m
+from fieldlogs.pipeline.hypotheses import TrackLine, TrackLines, after_switch_m
 from fieldlogs.pipeline.types import Event, Fix, Hypothesis
 from schemas.enums import BaliseKind, EventType, FixSource
 
@@ -48,6 +52,20 @@ def group_table(net: Network) -> dict[GroupKey, dict[int, tuple[str, float]]]:
         if pd.notna(c) and pd.notna(g) and pd.notna(p) and pd.notna(tid):
             out.setdefault((int(c), int(g)), {})[int(p)] = (str(tid), float(km))
     return out
+
+
+def balise_pos(tl: TrackLine, km: float) -> float:
+    """pos of a balise at ``km`` on track ``tl``: along its line (:meth:`TrackLine.pos_of_km`);
+    off a line by the track points' km, pos = interp(km; km_j, pos_j) within 1 m of their km range
+    (:func:`dbtools.rules.balise_groups.locate`); NaN where neither places it."""
+    pos = tl.pos_of_km(km)
+    if np.isfinite(pos) or tl.km.size < 2:
+        return pos
+    order = np.argsort(tl.km)
+    k, p = tl.km[order], tl.pos[order]
+    if not (np.all(np.diff(k) > 0) and k[0] - 1.0 <= km <= k[-1] + 1.0):
+        return float("nan")
+    return float(np.interp(km, k, p))
 
 
 @dataclass
@@ -107,7 +125,7 @@ class BaliseGroupAid(StaticAid):
             return Outcome()
         (t0, _k0), (t1, k1) = self.groups[key][last.pig], self.groups[key][pig]
         tl = self.lines[t1]
-        p0, p1 = tl.pos_of_km(self.groups[key][last.pig][1]), tl.pos_of_km(k1)
+        p0, p1 = balise_pos(tl, self.groups[key][last.pig][1]), balise_pos(tl, k1)
         ds = view.s - last.s
         if t0 != t1 or not np.isfinite(p1 - p0) or p1 == p0 or ds == 0:
             return Outcome()
@@ -126,7 +144,7 @@ class BaliseGroupAid(StaticAid):
             why = {"reason": "balise group on none of the candidate tracks", "group": group, "candidates": names}
             return Outcome([Event(view.t, EventType.BALISE_ANOMALY, view.km, detail=why)], forget=True)
         h = on[0]
-        pos = self.lines[tid].pos_of_km(km)
+        pos = balise_pos(self.lines[tid], km)
         if not np.isfinite(pos):
             return Outcome()
         new = self._fix(replace(h, pos_m=pos - h.kp * self.reader_x_m, extra_m=0.0), view)
