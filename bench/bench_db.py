@@ -83,12 +83,27 @@ T = TypeVar("T")
 CELL_M = 15_000.0
 #: Station spacing [m]: ~25 balises per track on a 10 km line.
 STATION_SPACING_M = 1_100.0
+#: Grid points per switch of the German network (DB Netz: about 61,000 km of track, i.e.
+#: 3.05 M points of the 20 m grid, and about 66,000 switches and crossings): a real national
+#: network's density of topology, against which the synthetic one's is printed.
+GERMAN_POINTS_PER_SWITCH = 61_000_000.0 / 20.0 / 66_000.0
+#: The station spacing that gives the synthetic lines about that density (measured: 1,100 m
+#: gives 23 points per switch, twice as dense).
+GERMAN_SPACING_M = 2_400.0
 
 
-def national_network(n_lines: int, length_m: float, seed: int = 2026, *, topology: bool = False) -> Network:
-    """``n_lines`` double-track lines of ``length_m`` each, one per grid cell (zone 9);
-    ``topology``: with a loop pair and a crossover at every station, the main tracks split at
-    their switches (:mod:`fieldlogs.simulate.networks.topology`: ≈ 9 tracks and 6 switches a station)."""
+def national_network(
+    n_lines: int,
+    length_m: float,
+    seed: int = 2026,
+    *,
+    topology: bool = False,
+    station_spacing_m: float = STATION_SPACING_M,
+) -> Network:
+    """``n_lines`` double-track lines of ``length_m`` each, one per grid cell (zone 9), a station
+    every ``station_spacing_m``; ``topology``: with a loop pair and a crossover at every station,
+    the main tracks split at their switches (:mod:`fieldlogs.simulate.networks.topology`: ≈ 9
+    tracks and 6 switches a station)."""
     rng = np.random.default_rng(seed)
     side = math.ceil(math.sqrt(n_lines))
     projector = Projector(9)
@@ -103,8 +118,8 @@ def national_network(n_lines: int, length_m: float, seed: int = 2026, *, topolog
         x0 -= 0.5 * length_m * math.cos(heading) * 0.8
         y0 -= 0.5 * length_m * math.sin(heading) * 0.8
         a = random_alignment(rng, length_m, km0=float(rng.integers(0, 50)) * 1000.0, x0=x0, y0=y0, heading0=heading)
-        n_st = int((length_m - 600.0) // STATION_SPACING_M) + 1
-        stations = [Station(f"{j + 1:02d}", f"S{j + 1}", a.km0 + 300.0 + j * STATION_SPACING_M) for j in range(n_st)]
+        n_st = int((length_m - 600.0) // station_spacing_m) + 1
+        stations = [Station(f"{j + 1:02d}", f"S{j + 1}", a.km0 + 300.0 + j * station_spacing_m) for j in range(n_st)]
         spec = LineSpec(f"{i + 1:04d}", f"Line {i + 1}", a, stations)
         gis.append(gis_grid(spec, projector))
         bal.append(balises(spec))
@@ -470,6 +485,13 @@ def main(argv: list[str] | None = None) -> int:
         help="compare build and validate per grid point: the lines with station layouts (tracks, switches, "
         "connections, balise groups) against the same lines alone",
     )
+    p.add_argument(
+        "--station-spacing-m",
+        type=float,
+        default=STATION_SPACING_M,
+        help=f"with --topology: a station (6 switches) every this many metres along each line (default "
+        f"{STATION_SPACING_M:.0f}; {GERMAN_SPACING_M:.0f} gives the German network's grid points per switch)",
+    )
     args = p.parse_args(argv)
     if args.child:
         what, *paths = args.child
@@ -480,7 +502,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     os.sched_setaffinity(0, sorted(os.sched_getaffinity(0))[: args.cores])
     if args.topology:
-        return compare_topology(args.lines, args.length_m, args.rounds)
+        return compare_topology(args.lines, args.length_m, args.rounds, args.station_spacing_m)
 
     work = args.workdir or Path(tempfile.mkdtemp(prefix="trainpos-bench-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -547,21 +569,28 @@ def _grid_points(src: Path) -> int:
     )
 
 
-def compare_topology(n_lines: int, length_m: float, rounds: int) -> int:
+def compare_topology(n_lines: int, length_m: float, rounds: int, station_spacing_m: float = STATION_SPACING_M) -> int:
     """``db build`` and ``db validate`` CPU per grid point (gis + track_points rows) of the
     network with station layouts against the same lines without them (issue 30: target
     ≤ 1.3×); rounds interleaved (line-only, then with stations), the median and the best
-    of the rounds printed with their ratios."""
+    of the rounds printed with their ratios.
+
+    The network's density is printed as grid points per switch beside a real one's
+    (:data:`GERMAN_POINTS_PER_SWITCH`): the ratio grows with the share of topology per grid
+    point, so a figure is only meaningful with the density it was measured at."""
     work = Path(tempfile.mkdtemp(prefix="trainpos-bench-topo-"))
     try:
         srcs = {}
         for topo in (False, True):
-            net = national_network(n_lines, length_m, topology=topo)
+            net = national_network(n_lines, length_m, topology=topo, station_spacing_m=station_spacing_m)
             srcs[topo] = write_source_set(net, work / f"src-{int(topo)}", force=True)
         counts = {k: (_grid_points(v), len(pd.read_csv(v / "tracks.csv")) if k else 0) for k, v in srcs.items()}
+        n_sw = len(pd.read_csv(srcs[True] / "switches.csv", usecols=[0]))
         print(
             f"line-only: {counts[False][0]:,} grid points; with stations: {counts[True][0]:,} grid points, "
-            f"{counts[True][1]:,} tracks"
+            f"{counts[True][1]:,} tracks, {n_sw:,} switches (a station every {station_spacing_m:.0f} m: "
+            f"{counts[True][0] / max(n_sw, 1):.0f} grid points per switch; the German network "
+            f"≈ {GERMAN_POINTS_PER_SWITCH:.0f})"
         )
         per: dict[tuple[bool, str], list[float]] = {}
         for r in range(rounds + 1):  # round 0 warms the imports and caches up, not counted

@@ -130,6 +130,18 @@ BENCHES = (
         script="bench_db.py",
     ),
     Bench(
+        "db_network_de",
+        "db build / validate per grid point at the German network's density of switches",
+        None,
+        Full(
+            ("--topology", "--lines", "1400", "--station-spacing-m", "2400", "--rounds", "3"),
+            "the national network at a real density: 1400 lines × 10 km, a station every 2.4 km (≈ 47 grid "
+            "points per switch, the German network ≈ 46; ≥ 50,000 tracks), 3 interleaved rounds",
+            "issue 30: ≤ 1.3× the CPU per grid point of the line-only DB (build and validate)",
+        ),
+        script="bench_db.py",
+    ),
+    Bench(
         "review_map",
         "db review network map: page size, build time",
         ("--lines", "10"),

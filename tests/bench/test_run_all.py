@@ -146,7 +146,18 @@ def test_every_full_row_has_a_size_a_target_and_a_unique_name() -> None:
     names = [b.name for b in ra.BENCHES]
     assert len(names) == len(set(names))
     assert all(b.full.size and b.full.target for b in full)
-    issue_rows = {"db", "db_network", "audit", "audit_small", "scaling", "run", "engine", "track_match", "osm"}
+    issue_rows = {
+        "db",
+        "db_network",
+        "db_network_de",
+        "audit",
+        "audit_small",
+        "scaling",
+        "run",
+        "engine",
+        "track_match",
+        "osm",
+    }
     assert issue_rows <= {b.name for b in full}
     scripts = [b.path.name for b in ra.BENCHES if b.quick is not None]
     assert len(scripts) == len(set(scripts)), "two quick rows of one script would replace each other"
