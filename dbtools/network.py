@@ -238,6 +238,21 @@ def joined_text_parts(s: pd.Series) -> Iterator[npt.NDArray[np.uint8]]:
         yield out[:-1] if a + m == n else out
 
 
+def hashed_floats(s: pd.Series) -> npt.NDArray[np.float64]:
+    """A real column's values as the content hash reads them: float64 with one NaN bit pattern
+    for every missing value, and zero without its sign. SQLite stores a REAL without a
+    fractional part as an integer, so ``-0.0`` (a height rounded from −0.004 m, say) reads back
+    from the DB as ``0.0``: the hash made when building must be the one recomputed from the DB."""
+    arr = s.to_numpy(dtype=np.float64, na_value=np.nan)
+    nan = np.isnan(arr)
+    if nan.any():
+        arr = np.where(nan, np.nan, arr)  # one NaN bit pattern
+    neg_zero = np.signbit(arr) & (arr == 0.0)
+    if neg_zero.any():
+        arr = np.where(neg_zero, 0.0, arr)
+    return arr
+
+
 def content_hash(tables: dict[str, pd.DataFrame], *, ordered: bool = False) -> str:
     """SHA-256 over all content tables in canonical form.
 
@@ -267,11 +282,7 @@ def content_hash(tables: dict[str, pd.DataFrame], *, ordered: bool = False) -> s
                 arr = s.astype("Float64").to_numpy(dtype=np.float64, na_value=np.nan)
                 h.update(np.ascontiguousarray(arr).data)  # the array's bytes, not a copy of them
             else:
-                arr = s.to_numpy(dtype=np.float64, na_value=np.nan)
-                nan = np.isnan(arr)
-                if nan.any():
-                    arr = np.where(nan, np.nan, arr)  # one NaN bit pattern
-                h.update(np.ascontiguousarray(arr).data)
+                h.update(np.ascontiguousarray(hashed_floats(s)).data)
     return h.hexdigest()
 
 
