@@ -25,6 +25,12 @@ def load() -> str:
     return f"load {os.getloadavg()[0]:.2f}/{os.cpu_count()} cores"
 
 
+def verdict(target: str, met: bool) -> str:
+    """A benchmark's verdict on a target, in the one form ``bench/run_all.py`` picks out of its
+    output for the full table's *verdict* column: ``(target ≤ 1.3×): met`` or ``… not met``."""
+    return f"(target {target}): {'met' if met else 'not met'}"
+
+
 def best_of(fn: Callable[[], Any], repeat: int = 3) -> tuple[float, float, Any]:
     """(best wall s, CPU s of that run, result) of ``repeat`` calls of ``fn``."""
     best, cpu, out = float("inf"), 0.0, None

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _common import verdict
 
 
 def validate_bound(db: Path) -> None:
@@ -147,11 +148,11 @@ def compare_bounds(src: Path, db: Path, work: Path, rounds: int) -> None:
     print(f"fresh processes, {rounds} interleaved rounds, medians  [load {load0:.2f} → {os.getloadavg()[0]:.2f}]")
     for k in runs:
         print(f"  {k:24s} {med(k, 0):6.2f} s CPU  peak RSS {med(k, 1):5.0f} MB")
+    for what, i in (("CPU", 0), ("peak RSS", 1)):
+        x = ratio("db validate", "validate bound", i)
+        print(f"db validate / bound: {what} {x:.2f}× {verdict('≤ 1.5×', x <= 1.5)}")
+    x = ratio("db build --no-validate", "DuckDB build", 0)
     print(
-        f"db validate / bound: CPU {ratio('db validate', 'validate bound', 0):.2f}× (target ≤ 1.5×), "
-        f"peak RSS {ratio('db validate', 'validate bound', 1):.2f}× (target ≤ 1.5×)"
-    )
-    print(
-        f"db build / DuckDB build: CPU {ratio('db build --no-validate', 'DuckDB build', 0):.2f}× --no-validate, "
-        f"{ratio('db build', 'DuckDB build', 0):.2f}× with the validation rules (target ≤ 1.3×)"
+        f"db build --no-validate / DuckDB build: CPU {x:.2f}× {verdict('≤ 1.3×', x <= 1.3)}; "
+        f"with the validation rules {ratio('db build', 'DuckDB build', 0):.2f}×"
     )

@@ -62,6 +62,7 @@ import pyarrow as pa
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from _common import verdict
 from _db_bounds import compare_bounds, duckdb_build, validate_bound, write_keyed
 
 from dbtools.browse import select_rows
@@ -428,7 +429,8 @@ def compare_checked_builds(src: Path, work: Path, rounds: int) -> None:
         f"db build vs the fastest path with the same checks: db build {best['db build']:.2f} s CPU; "
         + "; ".join(f"{k} {best[k]:.2f} s" for k in alts)
         + f"; ours / fastest ({fastest}) = {best['db build'] / best[fastest]:.2f}× best of {rounds}, "
-        f"median of the rounds' ratios {ratio:.2f}× (target ≤ 1.3×); {same}  [load {os.getloadavg()[0]:.2f}]"
+        f"median of the rounds' ratios {ratio:.2f}× {verdict('≤ 1.3×', ratio <= 1.3)}; {same}  "
+        f"[load {os.getloadavg()[0]:.2f}]"
     )
 
 
@@ -584,8 +586,8 @@ def compare_topology(n_lines: int, length_m: float, rounds: int) -> int:
             a, b = (float(np.median(per[(t, step)])) for t in (False, True))
             a_min, b_min = (min(per[(t, step)]) for t in (False, True))
             print(
-                f"db {step:9}{a:14.2f}{b:16.2f}{b / a:8.2f}×  (target ≤ 1.3×; best {a_min:.2f} / {b_min:.2f} = "
-                f"{b_min / a_min:.2f}×)  [load {os.getloadavg()[0]:.2f}]"
+                f"db {step:9}{a:14.2f}{b:16.2f}{b / a:8.2f}×  {verdict('≤ 1.3×', b / a <= 1.3)}; best "
+                f"{a_min:.2f} / {b_min:.2f} = {b_min / a_min:.2f}×  [load {os.getloadavg()[0]:.2f}]"
             )
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -34,7 +34,7 @@ import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench._common import load
+from bench._common import load, verdict
 
 if TYPE_CHECKING:
     from dbtools.network import Network
@@ -104,9 +104,10 @@ def main() -> int:
                 f"ratio {per['network'][-1] / per['line'][-1]:.2f}×"
             )
         ratios = np.array(per["network"]) / np.array(per["line"])
+        med = float(np.median(ratios))
         print(
-            f"line runs on the network DB / on the line-only DB: median {float(np.median(ratios)):.2f}× "
-            f"(target ≤ 1.3×; rounds {', '.join(f'{x:.2f}' for x in ratios)})  [{load()}]"
+            f"line runs on the network DB / on the line-only DB: median {med:.2f}× {verdict('≤ 1.3×', med <= 1.3)}; "
+            f"rounds {', '.join(f'{x:.2f}' for x in ratios)}  [{load()}]"
         )
         for p in net_runs:
             run = read_run(p)

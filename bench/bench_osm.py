@@ -18,7 +18,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench._common import best_of, load
+from bench._common import best_of, load, verdict
 from dbtools.interchange.osm_import import import_osm
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "osm"
@@ -50,7 +50,7 @@ def run(path: Path, repeat: int) -> dict[str, float]:
     print(f"  osmium read      {rwall:6.2f} s wall {rcpu:6.2f} s CPU")
     print(
         f"  db import (osm)  {wall:6.2f} s wall {cpu:6.2f} s CPU  = {wall / rwall:.1f}× osmium's read"
-        f"  (target ≤ {TARGET_S:g} s: {'met' if wall <= TARGET_S else 'MISSED'})"
+        f"  {verdict(f'≤ {TARGET_S:g} s', wall <= TARGET_S)}"
     )
     print("  rows: " + ", ".join(f"{k} {v}" for k, v in res.rows.items()))
     return {"import_s": wall, "osmium_s": rwall, "ratio": wall / rwall}

@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _common import load, simulated_run
+from _common import load, simulated_run, verdict
 
 
 def best_wall(cmd: list[str], repeat: int) -> tuple[float, float]:
@@ -87,7 +87,8 @@ def main() -> None:
             rt = 3600 * hours
             print(
                 f"trainpos run, {hours:.2f} h {fmt} ({size:.0f} MB): with start-up {wall:.2f} s wall = "
-                f"{rt / wall:,.0f}× real time ({cpu:.2f} s CPU = {rt / cpu:,.0f}×); without: "
+                f"{rt / wall:,.0f}× real time {verdict('≥ 2,000×', rt / wall >= 2000)}; {cpu:.2f} s CPU = "
+                f"{rt / cpu:,.0f}×; without: "
                 f"{_without(wall, start, rt, 'wall')}, {_without(cpu, start_cpu, rt, 'CPU')}; start-up = import "
                 f"cli.main {start:.2f} s wall, {start_cpu:.2f} s CPU  [{load()}]",
                 flush=True,

@@ -37,7 +37,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from _common import load, simulated_run
+from _common import load, simulated_run, verdict
 
 
 def peak_rss_mb() -> float:
@@ -130,10 +130,10 @@ def _windowed_against_whole(run_dir: Path, db: Path, hours: float, rounds: int) 
             f"{b['rss_mb']:.0f} MB  [{load()}]",
             flush=True,
         )
+    med = float(np.median(ratios))
     print(
-        f"{hours:6.2f} h windowed / whole worker CPU: median {float(np.median(ratios)):.2f}× "
-        f"({', '.join(f'{x:.2f}' for x in ratios)}); peak RSS "
-        f"{', '.join(f'{a:.0f}/{b:.0f}' for a, b in peaks)} MB (target CPU ≤ 1.1×)",
+        f"{hours:6.2f} h windowed / whole worker CPU: median {med:.2f}× {verdict('≤ 1.1×', med <= 1.1)}; rounds "
+        f"{', '.join(f'{x:.2f}' for x in ratios)}; peak RSS {', '.join(f'{a:.0f}/{b:.0f}' for a, b in peaks)} MB",
         flush=True,
     )
 
@@ -184,7 +184,10 @@ def main() -> None:
         ref = 1 if len(rows) > 2 else 0
         per_h = cpu[ref] / hours[ref]
         ratios = ", ".join(f"{h:.2f} h {c / (per_h * h):.2f}×" for h, c in zip(hours, cpu, strict=True))
-        print(f"log-log slope of CPU time on run length: {slope:.3f} (wall {slope_w:.3f}); target ≤ 1.05")
+        print(
+            f"log-log slope of CPU time on run length: {slope:.3f} {verdict('≤ 1.05', slope <= 1.05)}; "
+            f"wall {slope_w:.3f}"
+        )
         print(f"CPU against linear extrapolation of the {hours[ref]:.2f} h run: {ratios}")
         wcpu = np.array([r["worker_cpu"] for r in rows])
         slope_worker = float(np.polyfit(np.log(hours), np.log(wcpu), 1)[0])

@@ -33,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np
+from _common import verdict
 from bench_topology import M_LAT, build
 
 from dbtools.gis.track_candidates import find_candidates
@@ -103,6 +104,10 @@ def main() -> None:
     print(f"track match (whole path)  CPU {secs:7.3f} s  {n / secs:12,.0f} fixes/s")
     print(f"nearest-track projection  CPU {near_s:7.3f} s  {n / near_s:12,.0f} fixes/s")
     print(f"ratio track match / nearest-track: {secs / near_s:.2f}×")
+    print(
+        f"track match on {len(net.tracks):,} tracks: {n / secs:,.0f} fixes/s CPU "
+        f"{verdict('≥ 50,000 fixes/s', n / secs >= 50_000)}"
+    )
     print(
         f"path: {r.summary['path_tracks']} tracks in {r.summary['chains']} chain(s); "  # type: ignore[attr-defined]
         f"fixes on the line's track (D/U) or its crossover as laid: {100 * right:.1f} %"

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 
 import typer
 
+from cli.commands import PathCommand, small_pages
 from cli.db_impact import _impact_attachment, impact
 from cli.db_inspect import info, show
 from cli.errors import cli_command
@@ -107,7 +108,7 @@ def build(
         out_c.print(f"validation: {verdict}{hint}")
 
 
-@app.command("validate")
+@app.command("validate", cls=PathCommand)
 @cli_command
 def validate(
     target: Path = typer.Argument(..., help="Onboard DB file (.sqlite) or source set folder."),
@@ -129,6 +130,7 @@ def validate(
 
     Example: trainpos db validate net-2026.11.sqlite --format json
     """
+    small_pages()  # before numpy's import
     from dbtools.validate import validate_path
 
     findings = validate_path(target, locale=csv_locale(delimiter, decimal))

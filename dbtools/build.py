@@ -77,7 +77,7 @@ def build_db(
         raise FindingsError(f"{n} validation error(s) (--strict); nothing was written", validation, path=source_dir)
     created = (now or datetime.now(UTC)).astimezone(UTC)
     version_str = db_version or created.strftime("%Y%m%d.%H%M%S")
-    digest = content_hash(network.tables)
+    digest = content_hash(network.tables, ordered=True)  # read_source_set's frames are canonical
     georef = network_georef(network)
     meta = {
         "db_version": version_str,
@@ -89,5 +89,5 @@ def build_db(
         **network.meta,
         **(georef.to_meta() if georef is not None else {}),
     }
-    write_db(out, network, meta, force=force, inputs=[source_dir])
+    write_db(out, network, meta, force=force, inputs=[source_dir], ordered=True)
     return BuildResult(out, version_str, digest, {k: len(v) for k, v in network.tables.items()}, findings, validation)

@@ -35,9 +35,10 @@ from typing import TYPE_CHECKING
 import pandas as pd
 
 from dbtools.atomic import atomic_file, sweep_stale, temp_sibling
+from dbtools.foreign_keys import check_foreign_keys
 from dbtools.inputs import regular_file
 from dbtools.integrity import check_content_hash
-from dbtools.network import Network, canonical, empty_frame, network_content_hash
+from dbtools.network import Network, canonical, canonical_frame, empty_frame, network_content_hash
 from dbtools.sqlite_columns import insert_tables, read_table_columns
 from dbtools.sqlite_file import SQLITE_BUSY_CODES as SQLITE_BUSY_CODES
 from dbtools.sqlite_file import SQLITE_MAGIC as SQLITE_MAGIC
@@ -106,10 +107,21 @@ def table_rows(table: Table, frame: pd.DataFrame) -> Iterator[tuple[object, ...]
 
 
 def write_db(
-    path: Path, network: Network, meta: dict[str, str], *, force: bool = False, inputs: Iterable[Path | str] = ()
+    path: Path,
+    network: Network,
+    meta: dict[str, str],
+    *,
+    force: bool = False,
+    inputs: Iterable[Path | str] = (),
+    ordered: bool = False,
 ) -> None:
     """Write a complete onboard DB atomically under the output rule of :mod:`dbtools.atomic`
-    (an existing ``path`` only with ``force``; never over a registry or one of ``inputs``)."""
+    (an existing ``path`` only with ``force``; never over a registry or one of ``inputs``).
+    ``ordered``: the network's frames are canonical already (:func:`dbtools.network.canonical_frame`).
+    Nothing is written when a row references a missing row of another table
+    (:func:`dbtools.foreign_keys.check_foreign_keys`: ``sqlite3.IntegrityError``)."""
+    frames = [(t, canonical_frame(t, network.tables.get(t.name, empty_frame(t)), ordered=ordered)) for t in DB_TABLES]
+    check_foreign_keys(frames)
     with atomic_file(Path(path), force=force, inputs=inputs) as tmp:
         tmp.unlink()  # SQLite creates the file itself
         conn = sqlite3.connect(tmp)
@@ -119,13 +131,12 @@ def write_db(
             conn.execute("PRAGMA cache_size=-262144")  # ≤ 256 MB: the GIS key index stays in memory
             conn.execute(f"PRAGMA application_id={APPLICATION_ID}")
             conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
-            conn.execute("PRAGMA foreign_keys=OFF")  # checked after the load, see below
+            conn.execute("PRAGMA foreign_keys=OFF")  # checked on the frames before (check_foreign_keys)
             import sqlite_utils  # writing only: reading a DB does not import it
 
             db = sqlite_utils.Database(conn)
             create_tables(db, ALL_DB_TABLES, indexes=False)
             conn.commit()
-            frames = [(t, canonical(t, network.tables.get(t.name, empty_frame(t)))) for t in DB_TABLES]
             bulk = insert_tables(tmp, frames)  # Arrow batches; False: no driver, rows below
             with conn:
                 for t, frame in frames if not bulk else ():
@@ -136,10 +147,6 @@ def write_db(
                     )
                 conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", sorted(meta.items()))
             _create_indexes(db, ALL_DB_TABLES)
-            # foreign keys are checked once for the whole load (enforcing them row by row
-            # costs a third of the insert time on a national network)
-            if conn.execute("PRAGMA foreign_key_check").fetchone() is not None:
-                raise sqlite3.IntegrityError("FOREIGN KEY constraint failed")
             # no VACUUM: the file was written once, in key order, with no deletions
         finally:
             conn.close()

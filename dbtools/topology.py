@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import sys
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from typing import TYPE_CHECKING
@@ -29,7 +30,8 @@ import pyarrow.compute as pc
 from dbtools.network import Network, canonical, sorted_by
 from dbtools.rules.common import texts
 from schemas.enums import Navigability, TrackEnd, TrackKind
-from schemas.network import NETWORK_TRACKS
+from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES, TRACK_POINTS
+from schemas.tables import BALISES
 
 if TYPE_CHECKING:
     from dbtools.gis.index import GridIndex
@@ -191,8 +193,12 @@ class Topology:
     ``joined`` are dicts keyed by (track_id, end), made on first use; :attr:`graph` holds
     the same navigable adjacency in integer arrays."""
 
-    def __init__(self, tracks: pd.DataFrame, connections: pd.DataFrame) -> None:
-        self.tracks, self.connections = tracks, connections
+    def __init__(
+        self, tracks: pd.DataFrame, connections: pd.DataFrame, codes: Callable[[], TrackCodes] | None = None
+    ) -> None:
+        """``codes``: the network's :func:`track_codes` (of these tracks and connections), for
+        :attr:`graph`; the ids are factorised here without it."""
+        self.tracks, self.connections, self._codes = tracks, connections, codes
 
     @cached_property
     def _cols(self) -> list[npt.NDArray[np.object_]]:
@@ -229,11 +235,16 @@ class Topology:
     def graph(self) -> Graph:
         """The navigable adjacency in codes (:class:`Graph`)."""
         t, c = self.tracks, self.connections
-        ids = pd.concat([t["track_id"], c["track_a"], c["track_b"]], ignore_index=True)
-        codes, uniq = pd.factorize(ids, use_na_sentinel=False)  # a missing id is one more id
+        if self._codes is not None:  # the first three columns the network's codes are made of
+            held = self._codes()
+            ct, ca, cb = (held.of[key] for key in TRACK_ID_COLUMNS[:3])
+            uniq = held.uniques[: 1 + max((int(x.max()) for x in (ct, ca, cb) if len(x)), default=-1)]
+        else:
+            ids = pd.concat([t["track_id"], c["track_a"], c["track_b"]], ignore_index=True)
+            codes, uniq = pd.factorize(ids, use_na_sentinel=False)  # a missing id is one more id
+            n_t, n_c = len(t), len(c)
+            ct, ca, cb = codes[:n_t], codes[n_t : n_t + n_c], codes[n_t + n_c :]
         names = pd.Index(texts(pd.Series(uniq)), dtype="object")
-        n_t, n_c = len(t), len(c)
-        ct, ca, cb = codes[:n_t], codes[n_t : n_t + n_c], codes[n_t + n_c :]
         length = np.zeros(len(names))
         last = len(ct) - 1 - np.unique(ct[::-1], return_index=True)[1]  # the last row of each id
         length[ct[last]] = t["length_m"].to_numpy(dtype=float, na_value=np.nan)[last]
@@ -284,17 +295,72 @@ def first_rows(ids: pd.Series, values: pd.Series) -> npt.NDArray[np.int64]:
     return np.where(at >= 0, pos[np.maximum(at, 0)], -1).astype(np.int64)
 
 
+#: The switch ports, in the order of the port table (:func:`dbtools.rules.topology_tables.port_table`).
+SWITCH_PORT_NAMES = ("a1", "b1", "b2", "a2")
+
+#: Where a track id is named, in the order :func:`track_codes` factorises them (the first
+#: three as :attr:`Topology.graph` does: its codes are theirs). ``all_tracks``: the rows of
+#: :func:`all_tracks`.
+TRACK_ID_COLUMNS = (
+    ("all_tracks", "track_id"),
+    (CONNECTIONS.name, "track_a"),
+    (CONNECTIONS.name, "track_b"),
+    *((SWITCHES.name, f"{p}_track") for p in SWITCH_PORT_NAMES),
+    (TRACK_POINTS.name, "track_id"),
+    (BALISES.name, "track_id"),
+)
+
+
+@dataclass(frozen=True)
+class TrackCodes:
+    """Every track id the network's tables name, factorised once per loaded network (issue
+    30: ≥ 50,000 tracks; each topology and balise rule used to hash the text again): equal
+    ids have equal codes, a missing id is one more code (``pd.factorize(…,
+    use_na_sentinel=False)`` of the columns of :data:`TRACK_ID_COLUMNS` one after the other,
+    codes in order of first appearance). ``of[(table, column)]``: the codes of that column's
+    rows (absent: the table has no such column); ``first``/``last``: per code the first/last
+    row of :func:`all_tracks` holding it (−1: none); ``uniques[code]``: the id."""
+
+    of: dict[tuple[str, str], npt.NDArray[np.int64]]
+    first: npt.NDArray[np.int64]
+    last: npt.NDArray[np.int64]
+    uniques: pd.Index
+
+    def rows(self, table: str, column: str) -> npt.NDArray[np.int64]:
+        """The first row of :func:`all_tracks` holding each row's id (−1: none)."""
+        return np.asarray(self.first[self.of[(table, column)]], dtype=np.int64)
+
+
+def track_codes(net: Network) -> TrackCodes:
+    """The network's :class:`TrackCodes` (built once per loaded network)."""
+
+    def build() -> TrackCodes:
+        tables = {**net.tables, "all_tracks": all_tracks(net)}
+        named = [(key, tables[key[0]][key[1]]) for key in TRACK_ID_COLUMNS if key[1] in tables[key[0]].columns]
+        codes, uniques = pd.factorize(pd.concat([s for _, s in named], ignore_index=True), use_na_sentinel=False)
+        parts = np.split(codes.astype(np.int64), np.cumsum([len(s) for _, s in named])[:-1])
+        of = {key: part for (key, _), part in zip(named, parts, strict=True)}
+        own = of[("all_tracks", "track_id")]
+        first, last = np.full(len(uniques), -1, dtype=np.int64), np.full(len(uniques), -1, dtype=np.int64)
+        seen, at = np.unique(own, return_index=True)  # the first row of each code
+        first[seen] = at
+        seen, at = np.unique(own[::-1], return_index=True)
+        last[seen] = len(own) - 1 - at
+        return TrackCodes(of, first, last, uniques)
+
+    return net.cached(("topology", "track_codes"), build)
+
+
 def connection_rows(net: Network, tracks: pd.DataFrame) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """For every connection: the first row of ``tracks`` holding its ``track_a`` and its
-    ``track_b`` (−1: none) — one hash look-up of both, kept per network when ``tracks`` is
-    :func:`all_tracks` (the topology rules all ask for it)."""
-
-    def build() -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-        c = net.connections
-        both = first_rows(tracks["track_id"], pd.concat([c["track_a"], c["track_b"]], ignore_index=True))
-        return both[: len(c)], both[len(c) :]
-
-    return net.cached(("topology", "connection_rows"), build) if tracks is all_tracks(net) else build()
+    ``track_b`` (−1: none) — from :func:`track_codes` when ``tracks`` is :func:`all_tracks`
+    (the topology rules all ask for it), else one hash look-up of both."""
+    if tracks is all_tracks(net):
+        codes = track_codes(net)
+        return codes.rows(CONNECTIONS.name, "track_a"), codes.rows(CONNECTIONS.name, "track_b")
+    c = net.connections
+    both = first_rows(tracks["track_id"], pd.concat([c["track_a"], c["track_b"]], ignore_index=True))
+    return both[: len(c)], both[len(c) :]
 
 
 def _is(values: pd.Series, *options: str) -> npt.NDArray[np.bool_]:
@@ -305,7 +371,9 @@ def _is(values: pd.Series, *options: str) -> npt.NDArray[np.bool_]:
 def topology(net: Network) -> Topology:
     """The graph of the network's track ends (built once per loaded network, shared by the
     rules and the track matcher; its parts are made on first use)."""
-    return net.cached(("topology", "graph"), lambda: Topology(all_tracks(net), net.connections))
+    return net.cached(
+        ("topology", "graph"), lambda: Topology(all_tracks(net), net.connections, lambda: track_codes(net))
+    )
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ the same values, so ``passes_checks`` is True only when every check would pass.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
@@ -34,21 +35,34 @@ def key_order(frame: pd.DataFrame, keys: tuple[str, ...]) -> tuple[bool, bool]:
         s = frame[k]
         if s.isna().any():
             return False, False
-        if isinstance(s.dtype, pd.StringDtype):
-            arr = pa.array(s.array, from_pandas=True)
-            lt = pc.less(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False)
-            eq = pc.equal(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False)
-        elif pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
-            v = s.to_numpy(dtype=np.float64)
-            lt, eq = v[:-1] < v[1:], v[:-1] == v[1:]
-        else:
+        eq = _pairs_in_order(s, undecided)
+        if eq is None:
             return False, False
-        if (undecided & ~lt & ~eq).any():
-            return False, False  # a pair out of order
         undecided &= eq
         if not undecided.any():
             return True, True
     return True, False
+
+
+def _pairs_in_order(s: pd.Series, undecided: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_] | None:
+    """Whether each value equals the next (length n − 1), or None when an ``undecided`` pair
+    of different values is out of order (or ``s`` is neither text nor a number). Text is
+    compared once for equality and ordered only where the pairs differ (a few per line or
+    track of a GIS frame, not every pair)."""
+    if isinstance(s.dtype, pd.StringDtype):
+        arr = pa.array(s.array, from_pandas=True)
+        eq = np.asarray(pc.equal(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False), dtype=bool)
+        change = np.flatnonzero(undecided & ~eq)
+        if change.size:
+            lt = pc.less(arr.take(pa.array(change)), arr.take(pa.array(change + 1)))
+            if not np.all(lt.to_numpy(zero_copy_only=False)):
+                return None
+        return eq
+    if pd.api.types.is_numeric_dtype(s.dtype) and not pd.api.types.is_bool_dtype(s.dtype):
+        v = s.to_numpy(dtype=np.float64)
+        eq = v[:-1] == v[1:]
+        return None if (undecided & ~eq & ~(v[:-1] < v[1:])).any() else eq
+    return None
 
 
 def _column_passes(c: Column, s: pd.Series) -> bool:

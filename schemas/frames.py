@@ -42,6 +42,8 @@ from schemas.enums import Severity
 from schemas.findings import Finding
 from schemas.frame_screen import passes_checks
 from schemas.model import Column, Table
+from schemas.text_cells import BLANK_WORDS as BLANK_WORDS
+from schemas.text_cells import stripped_text as stripped_text
 from schemas.units import parse_km_array
 
 if TYPE_CHECKING:
@@ -119,17 +121,14 @@ def coerce_frame(
     return Coerced(pd.DataFrame(out, index=raw.index), findings, missing)
 
 
-#: Text cells taken for blank once stripped, in lower case (as :func:`_blank`).
-BLANK_WORDS = ("nan", "na", "null")
-
-
 def _already_typed(table: Table, raw: pd.DataFrame) -> pd.DataFrame | None:
     """The frame :func:`coerce_frame` returns, built without its per-column machinery when
     nothing in ``raw`` can give a finding: every column a declared one, none repeated, every
     required one present, number columns already float64 (as :mod:`dbtools.typed_csv`
     parses them) with no infinity, whole numbers integral and within int64, text columns
     Arrow strings (stripped and blanked by the same Arrow kernels pandas's string methods
-    call in :func:`_blank` and :func:`_coerce_column`), no flag columns. None otherwise:
+    call in :func:`_blank` and :func:`_coerce_column`), flag columns of 0/1 words only
+    (:func:`_flags`). None otherwise:
     the general path names every problem. Same values, dtypes, index and column order
     (hypothesis tests in tests/dbtools/test_typed_csv.py); it costs ≈ 0.1 ms where the
     general path costs ≈ 1 ms a column, which is most of the reading of a small stream."""
@@ -166,9 +165,23 @@ def _typed_column(col: Column, s: pd.Series) -> object | None:
         ints = np.zeros(len(values), dtype=np.int64)
         ints[~nan] = whole
         return pd.arrays.IntegerArray(ints, nan)
-    if col.dtype == "str" and isinstance(s.array, pd.arrays.ArrowStringArray):
-        return pd.arrays.ArrowStringArray(stripped_text(pa_arrow.chunked_array(pa_arrow.array(s.array))))
-    return None
+    if col.dtype not in ("str", "bool") or not isinstance(s.array, pd.arrays.ArrowStringArray):
+        return None
+    text = stripped_text(pa_arrow.chunked_array(pa_arrow.array(s.array)))
+    return pd.arrays.ArrowStringArray(text) if col.dtype == "str" else _flags(text)
+
+
+def _flags(text: pa_arrow.ChunkedArray) -> pd.arrays.BooleanArray | None:
+    """A flag column's stripped text (blanks null) as :func:`_coerce_column` types it — lower
+    case in ``_TRUE`` true, in ``_FALSE`` false, blank missing — or None when a cell is
+    neither (a bad cell: the general path names it)."""
+    lower = pc.utf8_lower(text)
+    true = pc.is_in(lower, value_set=pa_arrow.array(sorted(_TRUE))).to_numpy(zero_copy_only=False)
+    false = pc.is_in(lower, value_set=pa_arrow.array(sorted(_FALSE))).to_numpy(zero_copy_only=False)
+    missing = text.is_null().to_numpy(zero_copy_only=False)
+    if not (true | false | missing).all():
+        return None
+    return pd.arrays.BooleanArray(np.asarray(true, dtype=bool), np.asarray(missing, dtype=bool))
 
 
 def _null_column(col: Column, n: int) -> object:
@@ -178,17 +191,6 @@ def _null_column(col: Column, n: int) -> object:
     if col.dtype == "int":
         return pd.arrays.IntegerArray(np.zeros(n, dtype=np.int64), np.ones(n, dtype=bool))
     return pd.Series([None] * n, dtype=PANDAS_DTYPE[col.dtype]).array
-
-
-def stripped_text(arr: pa_arrow.ChunkedArray) -> pa_arrow.ChunkedArray:
-    """Text cells as :func:`_coerce_column` types them: ``str.strip()`` (Arrow's
-    ``utf8_trim_whitespace``, the kernel pandas's Arrow strings call), null where
-    :func:`_blank` finds a blank (null, empty, or nan/na/null in any letter case once
-    stripped)."""
-    trimmed = pc.utf8_trim_whitespace(arr)
-    words = pa_arrow.array(BLANK_WORDS)
-    blank = pc.fill_null(pc.or_kleene(pc.equal(trimmed, ""), pc.is_in(pc.utf8_lower(trimmed), value_set=words)), True)
-    return pc.if_else(blank, pa_arrow.scalar(None, pa_arrow.string()), trimmed)
 
 
 def _missing_columns(table: Table, raw: pd.DataFrame, extras: list[str], file: str | None) -> list[Finding]:

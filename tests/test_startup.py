@@ -187,3 +187,57 @@ def test_run_command_parses_paths_as_typer_does() -> None:
     with pytest.raises(typer._click.exceptions.MissingParameter) as typers:
         theirs.make_context("run", ["logs/r1", "--out", "o"])
     assert str(mine.value) == str(typers.value)
+
+
+def test_validate_command_parses_as_typer_does() -> None:
+    """``db validate`` is a cli.commands.PathCommand: its Path, str and Enum parameters give
+    the values typer's own (pydantic) coercion gives, of the same types, and a value outside
+    the enumeration the same error (hand-made: click's Choice never lets one through)."""
+    import typer
+    from typer.core import TyperCommand
+
+    import cli.main
+    from cli.commands import _PlainChoice
+    from cli.db import ValidateFmt
+    from cli.db import validate as validate_fn
+
+    ours = typer.main.get_command(cli.main.app).commands["db"].commands["validate"]
+    assert isinstance(ours, cli.main.PathCommand)
+    plain = typer.Typer()
+    plain.command("validate", cls=TyperCommand)(validate_fn)
+    plain.command("other", cls=TyperCommand)(validate_fn)
+    theirs = typer.main.get_command(plain).commands["validate"]
+    for args in (
+        ["net.sqlite"],
+        ["./a b/ü", "--format", "json", "--strict"],
+        ["x.sqlite", "--format", "sarif", "--help-uri-base", "https://x/", "--delimiter", ";", "--decimal", ","],
+        ["-", "--format", "junit"],
+    ):
+        a = ours.make_context("validate", list(args)).params
+        b = theirs.make_context("validate", list(args)).params
+        assert a == b and all(type(a[k]) is type(b[k]) for k in a), (args, a, b)
+        assert isinstance(a["target"], Path) and isinstance(a["fmt"], ValidateFmt)
+    param = next(p for p in ours.params if p.name == "fmt")
+    ctx = ours.make_context("validate", ["x"])
+    with pytest.raises(typer._click.exceptions.BadParameter) as mine:
+        _PlainChoice(param.type_descriptor.parameter_info, ValidateFmt).coerce("xml", param, ctx)
+    with pytest.raises(typer._click.exceptions.BadParameter) as typers:
+        typer._coercion.build_runtime_param(param.type_descriptor).coerce("xml", param, ctx)
+    assert str(mine.value) == str(typers.value) and "is not one of" in str(mine.value)
+
+
+def test_validate_of_a_db_imports_no_pydantic(sample_db: Path) -> None:
+    """``trainpos db validate`` through the real entry point, in a fresh interpreter: the
+    findings printed, pydantic (typer's coercion, 0.1 s of start-up) not imported, and numpy
+    imported with its huge-page advice off (cli.commands.small_pages)."""
+    code = (
+        "import json, os, sys\nos.environ.pop('NUMPY_MADVISE_HUGEPAGE', None)\nfrom cli.main import app\n"
+        "try:\n    app(sys.argv[1:])\nexcept SystemExit as exc:\n    assert exc.code in (0, 1), exc.code\n"
+        "from numpy._core.multiarray import _get_madvise_hugepage\n"
+        "print(json.dumps([_get_madvise_hugepage(), sorted({m.split('.')[0] for m in sys.modules})]))\n"
+    )
+    stdout = fresh_python(code, "db", "validate", str(sample_db), "--format", "json")
+    assert '"findings"' in stdout
+    hugepage, imported = json.loads(stdout.strip().splitlines()[-1])
+    assert "pandas" in imported and "pydantic" not in imported
+    assert hugepage is False

@@ -15,6 +15,8 @@ import pyarrow.compute as pc
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
+#: :func:`text_codes` by runs when a column has at most one run of equal texts per this many rows.
+MIN_RUN = 16
 
 
 def frame_column(frame: pd.DataFrame, name: str, numeric: bool) -> npt.NDArray[Any]:
@@ -36,7 +38,11 @@ def text_codes(frame: pd.DataFrame, name: str) -> tuple[I64, npt.NDArray[np.obje
     if not isinstance(s.dtype, pd.StringDtype):
         codes, uniq = pd.factorize(s, sort=True)
         return np.asarray(codes, dtype=np.int64), np.asarray(uniq, dtype=object)
-    enc = pc.dictionary_encode(pa.array(s.array, from_pandas=True))  # Arrow's hash: 4× pandas' here
+    arr = pa.array(s.array, from_pandas=True)
+    runs = _run_codes(arr)
+    if runs is not None:
+        return runs
+    enc = pc.dictionary_encode(arr)  # Arrow's hash: 4× pandas' here
     if isinstance(enc, pa.ChunkedArray):
         enc = enc.combine_chunks()
     order = pc.array_sort_indices(enc.dictionary).to_numpy()  # code point order, as Python sorts str
@@ -44,6 +50,27 @@ def text_codes(frame: pd.DataFrame, name: str) -> tuple[I64, npt.NDArray[np.obje
     rank[order] = np.arange(order.size)
     index = pc.fill_null(enc.indices, -1).to_numpy(zero_copy_only=False)
     return rank[index], np.asarray(enc.dictionary.take(pa.array(order)).to_pylist(), dtype=object)
+
+
+def _run_codes(arr: Any) -> tuple[I64, npt.NDArray[np.object_]] | None:
+    """:func:`text_codes` of a column without missing values whose rows come in runs of one
+    value (a GIS frame's line and track): consecutive texts compared once, the few run values
+    ranked; None when it has missing values or more than one run per ``MIN_RUN`` rows."""
+    n = len(arr)
+    if n < 2 or arr.null_count:
+        return None
+    new = np.ones(n, dtype=bool)
+    new[1:] = ~np.asarray(pc.equal(arr[:-1], arr[1:]).to_numpy(zero_copy_only=False), dtype=bool)
+    starts = np.flatnonzero(new)
+    if starts.size * MIN_RUN > n:
+        return None
+    values = arr.take(pa.array(starts))
+    uniq = pc.unique(values)
+    order = pc.array_sort_indices(uniq).to_numpy()  # code point order, as Python sorts str
+    sorted_uniq = uniq.take(pa.array(order))
+    run_code = pc.index_in(values, value_set=sorted_uniq).to_numpy(zero_copy_only=False).astype(np.int64)
+    lengths = np.diff(np.append(starts, n))
+    return np.repeat(run_code, lengths), np.asarray(sorted_uniq.to_pylist(), dtype=object)
 
 
 def lex_sorted(a: I64, b: I64, c: F64, block: int) -> bool:

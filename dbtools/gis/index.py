@@ -68,7 +68,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.frame_columns import frame_column, lex_sorted, text_codes
-from dbtools.gis.geometry import GEOD, Projector, geodesic_step, signed_curvature
+from dbtools.gis.geometry import GEOD, Projector, geodesic_step
 from dbtools.gis.georef import AREA_TOLERANCE_M, Georef, derive, georef_of
 from dbtools.network import Network
 from schemas.tables import LAT_RANGE, LON_RANGE
@@ -192,16 +192,42 @@ def exact_steps(lon: F64, lat: F64, steps: I64) -> F64:
     return np.asarray(d, dtype=float)
 
 
-def _blockwise_curvature(x: F64, y: F64) -> F64:
-    """:func:`~dbtools.gis.geometry.signed_curvature` of the whole polyline, computed
-    ``BLOCK`` vertices at a time (each with its two neighbours): the same values with
-    temporaries of a block, not of a million points."""
+def _shape_block(x: F64, y: F64, reg: BoolArray, a: int, b: int, out: tuple[F64, F64, F64]) -> None:
+    """Turn, curvature and heading (module doc, "Shape") of the vertices a:b, written into
+    ``out`` (turn, kappa, heading); ``reg[i]``: the step i − 1 → i is regular. Element by
+    element the same operations for every block, so the values do not depend on the blocks."""
     n = x.size
-    out = np.full(n, np.nan)
-    for a in range(1, n - 1, BLOCK):
-        b = min(a + BLOCK, n - 1)
-        out[a:b] = signed_curvature(x[a - 1 : b + 1], y[a - 1 : b + 1])[1:-1]
-    return out
+    turn, kappa, heading = (o[a:b] for o in out)
+    lo, hi = max(a - 1, 0), min(b + 1, n)  # the points the block's vertices use
+    dx, dy = np.diff(x[lo:hi]), np.diff(y[lo:hi])  # the steps lo … hi − 2
+    seg_h = np.arctan2(dy, dx)
+    back, fwd = reg[a:b], reg[a + 1 : b + 1]
+    not_both = ~(back & fwd)
+    i0, i1 = max(a, 1), min(b, n - 1)  # interior vertices
+    for o in (turn, kappa, heading):
+        o[: i0 - a] = np.nan
+        o[max(i1 - a, i0 - a) :] = np.nan
+    if i1 > i0:
+        s0, s1 = slice(i0 - 1 - lo, i1 - 1 - lo), slice(i0 - lo, i1 - lo)  # the steps before, after
+        inner = turn[i0 - a : i1 - a]  # wrap_angle(seg_h[i] − seg_h[i − 1]) (dbtools.gis.geometry), in place
+        np.subtract(seg_h[s1], seg_h[s0], out=inner)
+        inner += np.pi
+        np.remainder(inner, 2 * np.pi, out=inner)
+        inner -= np.pi
+        # signed_curvature (dbtools.gis.geometry), its sides' lengths shared by the two vertices of a step
+        cx, cy = x[i0 + 1 : i1 + 1] - x[i0 - 1 : i1 - 1], y[i0 + 1 : i1 + 1] - y[i0 - 1 : i1 - 1]
+        length = np.hypot(dx, dy)
+        cross = dx[s0] * dy[s1] - dy[s0] * dx[s1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            kappa[i0 - a : i1 - a] = 2.0 * cross / (length[s0] * length[s1] * np.hypot(cx, cy))
+        np.arctan2(cy, cx, out=heading[i0 - a : i1 - a])  # chord of the neighbours
+    turn[not_both] = np.nan
+    kappa[not_both] = np.nan
+    heading[not_both] = np.nan  # … else the one regular step the vertex has
+    use_fwd = np.flatnonzero(not_both & fwd)
+    use_back = np.flatnonzero(not_both & ~fwd & back)
+    heading[use_fwd] = seg_h[use_fwd + (a - lo)]
+    heading[use_back] = seg_h[use_back + (a - 1 - lo)]
 
 
 class GridIndex:
@@ -458,38 +484,17 @@ class GridIndex:
         return self._shapes[key]
 
     def _shape(self, spacing_m: float, epsilon_m: float) -> GridShape:
-        n, x, y = self.n, self.x, self.y
-        regular = (self.tid[1:] == self.tid[:-1]) & (np.abs(self.dkm - spacing_m) <= epsilon_m)
-        both = np.zeros(n, dtype=bool)
-        both[1:-1] = regular[:-1] & regular[1:]
-        seg_h = np.zeros(0)
-        if n > 1:  # arctan2(Δy, Δx) of each segment, in place
-            seg_h = np.diff(y)
-            np.arctan2(seg_h, np.diff(x), out=seg_h)
-        turn = np.full(n, np.nan)
-        inner = turn[1:-1]  # wrap_angle(seg_h[1:] − seg_h[:-1]) (dbtools.gis.geometry), in place
-        np.subtract(seg_h[1:], seg_h[:-1], out=inner)
-        inner += np.pi
-        np.remainder(inner, 2 * np.pi, out=inner)
-        inner -= np.pi
-        turn[~both] = np.nan
-        kappa = _blockwise_curvature(x, y)
-        kappa[~both] = np.nan
-        # heading at a vertex: chord of its neighbours, else the one regular step it has
-        heading = np.full(n, np.nan)
-        if n > 1:
-            inner = heading[1:-1]
-            np.subtract(y[2:], y[:-2], out=inner)
-            np.arctan2(inner, x[2:] - x[:-2], out=inner)
-            heading[~both] = np.nan
-            fwd = np.zeros(n, dtype=bool)
-            fwd[:-1] = regular
-            back = np.zeros(n, dtype=bool)
-            back[1:] = regular
-            use_fwd = ~both & fwd
-            use_back = ~both & ~fwd & back
-            heading[use_fwd] = seg_h[np.flatnonzero(use_fwd)]
-            heading[use_back] = seg_h[np.flatnonzero(use_back) - 1]
+        n = self.n
+        # dkm is NaN across tracks, so a regular step is within one track
+        regular = np.empty(max(n - 1, 0), dtype=bool)
+        for a in range(0, n - 1, BLOCK):  # |dkm − spacing| ≤ ε, one temporary of a block
+            d = self.dkm[a : a + BLOCK] - spacing_m
+            np.less_equal(np.abs(d, out=d), epsilon_m, out=regular[a : a + BLOCK])
+        reg = np.zeros(n + 1, dtype=bool)  # reg[i]: the step i − 1 → i is regular (False at both ends)
+        reg[1:n] = regular
+        turn, kappa, heading = np.empty(n), np.empty(n), np.empty(n)
+        for a in range(0, n, BLOCK):
+            _shape_block(self.x, self.y, reg, a, min(a + BLOCK, n), (turn, kappa, heading))
         return GridShape(regular, turn, kappa, heading)
 
     def break_steps(self, epsilon_m: float = BREAK_EPSILON_M) -> tuple[BoolArray, I64]:

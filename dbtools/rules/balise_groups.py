@@ -41,7 +41,7 @@ from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, isin, py, texts
 from dbtools.rules.config import ValidationConfig
 from dbtools.rules.route_walk import Walkers, walk
-from dbtools.topology import all_tracks, first_rows, topology
+from dbtools.topology import all_tracks, first_rows, topology, track_codes
 from schemas.enums import BaliseKind, Severity
 from schemas.findings import Finding
 from schemas.tables import BALISE_GROUP_COLUMNS, BALISES
@@ -58,7 +58,7 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     km = column(b, "km_actual_m")
     tid = tid.copy()
     if "track_id" in b.columns:
-        tid[first_rows(tr["track_id"], b["track_id"]) < 0] = None  # unknown: topology.invalid_reference
+        tid[track_codes(net).rows(BALISES.name, "track_id") < 0] = None  # unknown: topology.invalid_reference
     free = np.flatnonzero(pd.isna(tid))
     if free.size:
         along = tr[tr["line_code"].notna() & tr["km_begin_m"].notna() & tr["km_end_m"].notna()]

@@ -42,11 +42,14 @@ the running direction) and −1 on U.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.index import GridIndex
-from dbtools.rules.common import Locator, capped, column, fmt_km, py
+from dbtools.rules.common import Locator, capped, column, fmt_km, group_ids, py
 from dbtools.rules.config import ValidationConfig
 from schemas.enums import S003_KINDS, BaliseKind, Severity, Track
 from schemas.findings import Finding
@@ -54,6 +57,8 @@ from schemas.model import KM_PLAUSIBLE_M
 from schemas.tables import BALISES
 
 T = BALISES.name
+F64 = npt.NDArray[np.float64]
+Obj = npt.NDArray[Any]
 
 
 def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConfig, loc: Locator) -> list[Finding]:
@@ -63,14 +68,16 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
     file = loc.file(T)
     if balises.empty:
         return out
-    out += _key_fields(balises, loc, cap)
-    out += _km_equipment(balises, config, loc)
     bid = column(balises, "balise_id")
     kind = column(balises, "kind")
     line, station, track = column(balises, "line_code"), column(balises, "station_code"), column(balises, "track")
     sig, km = column(balises, "signal_type"), column(balises, "km_actual_m")
     dist = column(balises, "dist_from_initial_m")
-    keyed = pd.notna(line) & pd.notna(station) & pd.notna(track)
+    out += _key_fields(bid, kind, line, station, track, loc, cap)
+    out += _km_equipment(bid, km, column(balises, "km_equipment_m"), config, loc)
+    # pair key of every row → pair id (−1 when a key column is missing)
+    pid = group_ids(balises, ("line_code", "station_code", "track"))
+    keyed = pid >= 0
     sign = np.where(track == Track.UP.value, -1.0, 1.0)
     is_i1, is_i2, is_c = kind == BaliseKind.I1.value, kind == BaliseKind.I2.value, kind == BaliseKind.C.value
 
@@ -80,10 +87,6 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
     def pair_keys(i: int) -> dict[str, object]:
         return {"line_code": py(line[i]), "station_code": py(station[i]), "track": py(track[i])}
 
-    # pair key of every row → pair id (−1 when a key column is missing)
-    key_frame = pd.DataFrame({"l": line, "s": station, "t": track})
-    pid = np.full(len(balises), -1, dtype=np.int64)
-    pid[keyed] = key_frame[keyed].groupby(["l", "s", "t"], sort=False).ngroup().to_numpy()
     n_pairs = int(pid.max()) + 1 if keyed.any() else 0
     n1 = np.bincount(pid[is_i1 & keyed], minlength=n_pairs)
     n2 = np.bincount(pid[is_i2 & keyed], minlength=n_pairs)
@@ -349,15 +352,12 @@ def check_balises(balises: pd.DataFrame, grid: GridIndex, config: ValidationConf
     return out
 
 
-def _key_fields(balises: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
-    """``balise.key_fields`` (module docstring)."""
-    kind, line = column(balises, "kind"), column(balises, "line_code")
-    station, track = column(balises, "station_code"), column(balises, "track")
+def _key_fields(bid: Obj, kind: Obj, line: Obj, station: Obj, track: Obj, loc: Locator, cap: int) -> list[Finding]:
+    """``balise.key_fields`` (module docstring) of the balises' columns (:func:`column`)."""
     s003 = np.isin(kind, [k.value for k in S003_KINDS])
     tracks = [t.value for t in Track]
     bad_track = ~np.isin(np.where(pd.isna(track), "", track).astype(str), tracks)
     missing = pd.isna(line) | pd.isna(station)
-    bid = column(balises, "balise_id")
 
     def finding(i: int) -> Finding:
         if bad_track[i]:
@@ -381,10 +381,8 @@ def _key_fields(balises: pd.DataFrame, loc: Locator, cap: int) -> list[Finding]:
     )
 
 
-def _km_equipment(balises: pd.DataFrame, config: ValidationConfig, loc: Locator) -> list[Finding]:
-    """``balise.km_equipment`` (module docstring)."""
-    actual, equipment = column(balises, "km_actual_m"), column(balises, "km_equipment_m")
-    bid = column(balises, "balise_id")
+def _km_equipment(bid: Obj, actual: F64, equipment: F64, config: ValidationConfig, loc: Locator) -> list[Finding]:
+    """``balise.km_equipment`` (module docstring) of the balises' columns (:func:`column`)."""
     tol = config.km_equipment_tolerance_m
     with np.errstate(invalid="ignore", over="ignore"):
         off = np.abs(equipment - actual)

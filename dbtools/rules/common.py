@@ -61,6 +61,20 @@ def column(frame: pd.DataFrame, name: str) -> npt.NDArray[Any]:
     return s.astype(object).where(s.notna(), None).to_numpy(dtype=object)
 
 
+def group_ids(frame: pd.DataFrame, names: Sequence[str]) -> npt.NDArray[np.int64]:
+    """The group of each row by its values of the columns ``names``, numbered in the order the
+    groups first appear (``groupby(…, sort=False).ngroup()``); −1 where any of them is missing.
+    Grouped on the frame's own typed columns: on their object copies (:func:`column`) pandas
+    would first convert every text back to an Arrow string (4× the time: 52,000 balises 42 ms)."""
+    out = np.full(len(frame), -1, dtype=np.int64)
+    names = list(names)
+    keyed = np.asarray(frame[names].notna().all(axis=1).to_numpy(), dtype=bool)
+    if keyed.any():
+        ids = frame.loc[keyed, names].groupby(names, sort=False, dropna=False).ngroup()
+        out[keyed] = ids.to_numpy(dtype=np.int64)
+    return out
+
+
 def capped(
     rule: str,
     severity: Severity,

@@ -47,7 +47,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from dbtools.gis.index import GridIndex
-from dbtools.rules.common import Locator, capped, column, fmt_km, py
+from dbtools.rules.common import Locator, capped, column, fmt_km, group_ids, py
 from dbtools.rules.config import ValidationConfig
 from schemas.enums import Attribute, Severity, Track
 from schemas.findings import Finding
@@ -135,6 +135,9 @@ class FeatureRows:
     config: ValidationConfig
     loc: Locator
     pos_col: str = "km_m"
+    groups: npt.NDArray[np.int64] | None = None
+    """The feature of each row (:func:`~dbtools.rules.common.group_ids` of the ``where``
+    columns and ``feature_id``; −1 where one is missing); None: found from the arrays."""
 
     @classmethod
     def of(
@@ -149,7 +152,8 @@ class FeatureRows:
         fid, seq, km = column(fp, "feature_id"), column(fp, "seq"), column(fp, pos_col)
         radius, attr = column(fp, "radius_m"), column(fp, "attribute")
         cols = {c: column(fp, c) for c in where}
-        return cls(table, cols, fid, seq, km, radius, attr, config, loc, pos_col)
+        groups = group_ids(fp, (*where, "feature_id"))
+        return cls(table, cols, fid, seq, km, radius, attr, config, loc, pos_col, groups)
 
     @property
     def line(self) -> npt.NDArray[Any]:
@@ -263,12 +267,14 @@ def _outside_gis(r: FeatureRows, grid: GridIndex) -> tuple[list[Finding], npt.ND
 
 def _six_rows(r: FeatureRows) -> tuple[list[Finding], npt.NDArray[np.int64]]:
     """``feature.rows``; the (k, 6) frame rows of the features with seq 1…6."""
-    named = np.all([pd.notna(v) for v in (*r.where.values(), r.fid)], axis=0)
-    keyed = np.flatnonzero(named)
+    groups = r.groups
+    if groups is None:
+        cols = {f"k{j}": v for j, v in enumerate((*r.where.values(), r.fid))}
+        groups = group_ids(pd.DataFrame(cols, dtype=object), list(cols))
+    keyed = np.flatnonzero(groups >= 0)
     if len(keyed) == 0:
         return [], np.zeros((0, 6), dtype=np.int64)
-    cols = {f"k{j}": v[keyed] for j, v in enumerate((*r.where.values(), r.fid))}
-    fgid = pd.DataFrame(cols).groupby(list(cols), sort=False).ngroup().to_numpy()
+    fgid = groups[keyed]
     order = np.lexsort((np.nan_to_num(r.seq[keyed], nan=np.inf), fgid))
     rows, g = keyed[order], fgid[order]
     n_feat = int(g.max()) + 1

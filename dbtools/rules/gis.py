@@ -72,12 +72,7 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
         return loc.at(T, grid.row(i))
 
     # gis.km_grid
-    off = grid.km / sp  # |km − sp·round(km / sp)|, in place (one temporary)
-    np.round(off, out=off)
-    off *= sp
-    np.subtract(grid.km, off, out=off)
-    bad = np.flatnonzero(np.abs(off, out=off) > config.km_epsilon_m)
-    del off
+    bad = _off_grid(grid.km, sp, config.km_epsilon_m)
     out += capped(
         "gis.km_grid",
         Severity.ERROR,
@@ -201,6 +196,20 @@ def check_gis(grid: GridIndex, km_breaks: pd.DataFrame, config: ValidationConfig
 
     out += _track_spacing(grid, shape, config, loc)
     return out
+
+
+def _off_grid(km: F64, spacing: float, epsilon: float) -> I64:
+    """The points whose |km − spacing·round(km / spacing)| > ``epsilon``, ``BLOCK`` points at
+    a time in place (one temporary of a block, not of the whole grid)."""
+    parts = [np.zeros(0, dtype=np.int64)]
+    for a in range(0, km.size, grid_blocks.BLOCK):
+        k = km[a : a + grid_blocks.BLOCK]
+        off = k / spacing
+        np.round(off, out=off)
+        off *= spacing
+        np.subtract(k, off, out=off)
+        parts.append(np.flatnonzero(np.abs(off, out=off) > epsilon) + a)
+    return np.concatenate(parts).astype(np.int64)
 
 
 def _track_spacing(grid: GridIndex, shape: GridShape, config: ValidationConfig, loc: Locator) -> list[Finding]:

@@ -7,7 +7,8 @@ per type); the *routes* of a switch are :data:`schemas.network.SWITCH_ROUTES`. E
 is vectorised over the whole network (no per-track loop): switch ports and connection ends
 are long tables with shared integer codes of switch, track and end
 (:mod:`dbtools.rules.topology_tables`), so joins and duplicate tests run on integers, and
-track ids are looked up by Arrow's hashing of the text as held (issue 30: ≥ 50,000 tracks).
+track ids are looked up by the network's one factorisation of them
+(:func:`dbtools.topology.track_codes`; issue 30: ≥ 50,000 tracks).
 
 * ``topology.invalid_reference`` (error) — a connection, switch port, track_points row or
   balise names a track id that does not exist, or a connection a switch_id that does not.
@@ -74,14 +75,12 @@ from dbtools.rules.topology_tables import (
     incidence_table,
     int_isin,
     is_in,
-    is_in_each,
-    last_length,
+    port_lengths,
     port_rows,
     port_table,
-    port_tracks,
     switch_pairs,
 )
-from dbtools.topology import all_tracks, connection_rows, first_rows, grid_extents
+from dbtools.topology import all_tracks, connection_rows, grid_extents, track_codes
 from schemas.enums import Navigability, Severity
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCH_PORTS, SWITCHES, TRACK_POINTS
@@ -143,7 +142,8 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     ]
     if "track_id" in net.balises.columns:
         refs.append((BALISES.name, net.balises, "track_id", "balise"))
-    known = is_in_each([f[col] for _, f, col, _ in refs], tracks["track_id"])
+    codes = track_codes(net)  # ``tracks`` is all_tracks: an id is known when a row of it holds it
+    known = [codes.rows(table, col) >= 0 for table, _, col, _ in refs]
 
     def ref(k: int) -> None:
         table, frame, col, what = refs[k]
@@ -161,7 +161,8 @@ def _references(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
 
     for k in range(2 + len(ALL_PORTS)):  # connections, then switch ports
         ref(k)
-    bad = np.flatnonzero(~is_in(net.track_points["track_id"], net.tracks["track_id"]))
+    first = codes.rows(TRACK_POINTS.name, "track_id")  # declared: the first rows of all_tracks
+    bad = np.flatnonzero((first < 0) | (first >= len(net.tracks)))
     if bad.size:
         tp_ids = column(net.track_points, "track_id")
         out.add(
@@ -439,7 +440,7 @@ def _overlap(net: Network, ports: pd.DataFrame, tracks: pd.DataFrame, out: _Out)
     tk = per["tk"].to_numpy()
     _, at, back = np.unique(tk, return_index=True, return_inverse=True)  # each track looked up once
     port_of = per.index
-    each = last_length(tracks, port_tracks(net, port_of[at]))  # the text only of the short ones
+    each = port_lengths(net, tracks, port_of[at])  # each track's length by its code
     with np.errstate(invalid="ignore"):
         short = np.flatnonzero(each < lim)
         per = port_rows(net, ports.loc[port_of[each[back.reshape(-1)] < lim]])
@@ -461,13 +462,13 @@ def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     if net.connections.empty:
         return
     tid = texts(tracks["track_id"])[:n_decl]
-    ids, c = tracks["track_id"].iloc[:n_decl], net.connections
+    c = net.connections
     at_end = pd.concat([c["end_a"], c["end_b"]], ignore_index=True)
-    # each connection end's track as its first row in ``ids`` (one hash of the ids): a row of
-    # ``ids`` is in a set of ends' tracks when the first row of its id is among theirs
+    # each connection end's track as its first row of the declared tracks (their codes): a
+    # declared row is in a set of ends' tracks when the first row of its id is among theirs
     end_row = np.concatenate(connection_rows(net, tracks))
-    end_row[end_row >= n_decl] = -1  # a track only implied: not among the declared ``ids``
-    own_row = first_rows(ids, ids)
+    end_row[end_row >= n_decl] = -1  # a track only implied: not among the declared ones
+    own_row = track_codes(net).rows("all_tracks", "track_id")[:n_decl]  # a declared id's first row is declared
 
     def among(ends: npt.NDArray[np.bool_] | None) -> npt.NDArray[np.bool_]:
         hit = np.zeros(n_decl + 1, dtype=bool)

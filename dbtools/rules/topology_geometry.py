@@ -19,8 +19,8 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, py, texts
 from dbtools.rules.config import ValidationConfig
-from dbtools.rules.track_geometry import chord_azimuths, distance_m, end_coordinates, track_geometry
-from dbtools.topology import connection_rows, first_rows
+from dbtools.rules.track_geometry import chord_azimuths, distance_m, end_coordinates, is_begin, track_geometry
+from dbtools.topology import BEGIN, connection_rows, first_rows, track_codes
 from schemas.enums import Severity, TrackKind
 from schemas.findings import Finding
 from schemas.network import CONNECTIONS, NETWORK_TRACKS
@@ -47,15 +47,17 @@ def _gaps(
     if c.empty:
         return []
     ra, rb = connection_rows(net, tracks)
-    ea, eb = column(c, "end_a"), column(c, "end_b")
     ok = (ra >= 0) & (rb >= 0)
     rows = np.flatnonzero(ok)
-    la, lo_a, _ = end_coordinates(geo, ra[ok], ea[ok])
-    lb, lo_b, _ = end_coordinates(geo, rb[ok], eb[ok])
+    la, lo_a, _ = end_coordinates(geo, ra[ok], is_begin(c["end_a"])[ok])
+    lb, lo_b, _ = end_coordinates(geo, rb[ok], is_begin(c["end_b"])[ok])
     gap = distance_m(la, lo_a, lb, lo_b)
     with np.errstate(invalid="ignore"):
         bad = np.flatnonzero(gap > config.connection_gap_m)
-    ta, tb = (column(c, k) if bad.size else np.empty(0, dtype=object) for k in ("track_a", "track_b"))
+    # the text only when there is a finding
+    ta, tb, ea, eb = (
+        column(c, k) if bad.size else np.empty(0, dtype=object) for k in ("track_a", "track_b", "end_a", "end_b")
+    )
     return capped(
         "topology.gap",
         Severity.ERROR,
@@ -141,9 +143,8 @@ def _crossover_ends(net: Network, tracks: pd.DataFrame) -> pd.DataFrame | None:
     looked up by Arrow's hashing of the text as held (:func:`first_rows`)."""
     if net.track_points.empty:
         return None
-    ids = tracks["track_id"]
-    n_t = len(tracks)
-    last = (n_t - 1) - first_rows(ids.iloc[::-1].reset_index(drop=True), ids)  # the last row of each row's id
+    codes = track_codes(net)  # ``tracks`` is all_tracks
+    last = codes.last[codes.of[("all_tracks", "track_id")]]  # the last row of each row's id
     kind = tracks["kind"] == TrackKind.CROSSOVER.value  # False where missing
     is_xo = np.asarray(kind.to_numpy(dtype=bool, na_value=False), dtype=bool)[last]
     if not is_xo.any():
@@ -181,7 +182,7 @@ def _worst_deviation(net: Network, geo: pd.DataFrame, ref: pd.DataFrame) -> pd.D
     angle ``dev`` [deg] between a chord of the crossover and the main track's axis (taken
     modulo 180°), in (track_id, end) order; ends without a chord or an end are left out."""
     ref = ref[ref["end"].notna().to_numpy()]
-    axis = end_coordinates(geo, ref["rows"].to_numpy(), ref["other_end"].to_numpy(dtype=object))[2]
+    axis = end_coordinates(geo, ref["rows"].to_numpy(), ref["other_end"].to_numpy(dtype=object) == BEGIN)[2]
     chords = chord_azimuths(net.track_points, set(ref["track"]))
     cid, az = chords["track_id"].to_numpy(dtype=object), chords["az"].to_numpy(float)
     start = np.flatnonzero(np.r_[True, cid[1:] != cid[:-1]]) if len(cid) else np.zeros(0, dtype=np.int64)

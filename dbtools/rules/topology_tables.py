@@ -17,22 +17,33 @@ import pyarrow.compute as pc
 from dbtools.network import Network
 from dbtools.rules.common import isin as text_isin
 from dbtools.rules.common import texts
-from dbtools.topology import first_rows
+from dbtools.topology import SWITCH_PORT_NAMES, track_codes
 from schemas.network import CONNECTIONS, SWITCH_ROUTES, SWITCHES
 
 I64 = npt.NDArray[np.int64]
-ALL_PORTS = ("a1", "b1", "b2", "a2")
+ALL_PORTS = SWITCH_PORT_NAMES
 
 
-def text_objects(frame: pd.DataFrame, name: str) -> npt.NDArray[np.object_]:
+def text_objects(s: pd.Series) -> npt.NDArray[np.object_]:
     """A text column as objects with NaN for missing, as pandas' ``str`` columns give them."""
-    return np.asarray(frame[name].to_numpy(dtype=object, na_value=np.nan), dtype=object)
+    return np.asarray(s.to_numpy(dtype=object, na_value=np.nan), dtype=object)
 
 
 def held_objects(net: Network, table: str, name: str) -> npt.NDArray[np.object_]:
     """:func:`text_objects` of a column of one of the network's tables, converted once per
     loaded network (the rules pick rows of it)."""
-    return net.cached(("text_objects", table, name), lambda: text_objects(net.tables[table], name))
+    return net.cached(("text_objects", table, name), lambda: text_objects(net.tables[table][name]))
+
+
+def picked_objects(net: Network, table: str, name: str, rows: npt.NDArray[np.int64]) -> npt.NDArray[np.object_]:
+    """:func:`held_objects` at ``rows``: the rows' text only, unless the whole column is already
+    held as objects or most of it is asked for (a rule reports few rows of a national network:
+    no Python string made for the others)."""
+    held = net.peek(("text_objects", table, name))
+    frame = net.tables[table]
+    if held is None and 8 * len(rows) < len(frame):
+        return text_objects(frame[name].iloc[np.asarray(rows, dtype=np.int64)])
+    return held_objects(net, table, name)[rows]
 
 
 def object_frame(columns: dict[str, npt.NDArray[Any]], index: pd.Index | None = None) -> pd.DataFrame:
@@ -56,11 +67,11 @@ def port_rows(net: Network, ports: pd.DataFrame) -> pd.DataFrame:
     for k, p in enumerate(ALL_PORTS):
         at = np.flatnonzero(pk == k)
         if at.size:
-            track[at], end[at] = (held_objects(net, SWITCHES.name, f"{p}_{w}")[srow[at]] for w in ("track", "end"))
+            track[at], end[at] = (picked_objects(net, SWITCHES.name, f"{p}_{w}", srow[at]) for w in ("track", "end"))
     text = object_frame(
         {
-            "switch_id": held_objects(net, SWITCHES.name, "switch_id")[srow],
-            "type": held_objects(net, SWITCHES.name, "type")[srow],
+            "switch_id": picked_objects(net, SWITCHES.name, "switch_id", srow),
+            "type": picked_objects(net, SWITCHES.name, "type", srow),
             "port": np.array(ALL_PORTS, dtype=object)[pk],
             "track": track,
             "end": end,
@@ -68,15 +79,6 @@ def port_rows(net: Network, ports: pd.DataFrame) -> pd.DataFrame:
         ports.index,
     )
     return pd.concat([ports, text], axis=1)
-
-
-def port_tracks(net: Network, rows: npt.ArrayLike) -> pd.Series:
-    """The track of the port table's rows ``rows`` as the switches hold it (Arrow text: no
-    Python string per value), for look-ups by :func:`last_length`."""
-    held = net.cached(
-        ("port_tracks",), lambda: pd.concat([net.switches[f"{p}_track"] for p in ALL_PORTS], ignore_index=True)
-    )
-    return held.iloc[np.asarray(rows, dtype=np.int64)].reset_index(drop=True)
 
 
 def incidence_table(c: pd.DataFrame) -> pd.DataFrame:
@@ -91,7 +93,7 @@ def incidence_rows(net: Network, inc: pd.DataFrame) -> pd.DataFrame:
     track and end, side a/b, switch_id — objects, NaN for missing."""
     crow, b_side = inc["row"].to_numpy(), inc.index.to_numpy() >= len(net.connections)
     side = np.where(b_side, "b", "a").astype(object)
-    ta, ea, tb, eb = (held_objects(net, CONNECTIONS.name, k)[crow] for k in ("track_a", "end_a", "track_b", "end_b"))
+    ta, ea, tb, eb = (picked_objects(net, CONNECTIONS.name, k, crow) for k in ("track_a", "end_a", "track_b", "end_b"))
     text = object_frame(
         {
             "track": np.where(b_side, tb, ta),
@@ -99,7 +101,7 @@ def incidence_rows(net: Network, inc: pd.DataFrame) -> pd.DataFrame:
             "other": np.where(b_side, ta, tb),
             "other_end": np.where(b_side, ea, eb),
             "side": side,
-            "switch_id": held_objects(net, CONNECTIONS.name, "switch_id")[crow],
+            "switch_id": picked_objects(net, CONNECTIONS.name, "switch_id", crow),
         },
         inc.index,
     )
@@ -135,7 +137,12 @@ def add_codes(net: Network, inc: pd.DataFrame, ports: pd.DataFrame) -> None:
     inc["sk"], ports["sk"] = np.concatenate([csk, csk]), np.tile(ssk, len(ALL_PORTS))
     n_code = []
     for what, inc_cols, port_cols in (("track", ("tk", "ok"), "tk"), ("end", ("ek", "oek"), "ek")):
-        ca, cb, *cp = shared_codes(c[f"{what}_a"], c[f"{what}_b"], *(sw[f"{p}_{what}"] for p in ALL_PORTS))
+        if what == "track":  # the network's one factorisation of track ids
+            of = track_codes(net).of
+            ca, cb = of[(CONNECTIONS.name, "track_a")], of[(CONNECTIONS.name, "track_b")]
+            cp = [of[(SWITCHES.name, f"{p}_track")] for p in ALL_PORTS]
+        else:
+            ca, cb, *cp = shared_codes(c[f"{what}_a"], c[f"{what}_b"], *(sw[f"{p}_{what}"] for p in ALL_PORTS))
         inc[inc_cols[0]], inc[inc_cols[1]] = np.concatenate([ca, cb]), np.concatenate([cb, ca])
         ports[port_cols] = np.concatenate(cp)
         n_code.append(1 + max((int(x.max()) for x in (ca, cb, *cp) if len(x)), default=0))
@@ -181,21 +188,6 @@ def is_in(s: pd.Series, known: pd.Series) -> npt.NDArray[np.bool_]:
     return np.asarray(hit.to_numpy(zero_copy_only=False), dtype=bool)
 
 
-def is_in_each(columns: list[pd.Series], known: pd.Series) -> list[npt.NDArray[np.bool_]]:
-    """:func:`is_in` of each column, in one hash look-up when all are held as Arrow text
-    (the set of ``known`` is hashed once, not once a column)."""
-    arrays, k = [arrow_text(s) for s in columns], arrow_text(known)
-    if k is None or any(a is None for a in arrays):
-        return [is_in(s, known) for s in columns]
-    chunks = [ch.cast(pa.large_string()) for a in arrays if a is not None for ch in a.chunks]
-    values = (k.combine_chunks() if isinstance(k, pa.ChunkedArray) else k).cast(pa.large_string())
-    hit = np.asarray(
-        pc.is_in(pa.chunked_array(chunks, pa.large_string()), value_set=values).to_numpy(zero_copy_only=False),
-        dtype=bool,
-    )
-    return np.split(hit, np.cumsum([len(s) for s in columns])[:-1])
-
-
 #: Port → digit of a port pair's code (the pair's smaller and larger port: 4·lo + hi).
 PORT_DIGIT = {p: i for i, p in enumerate(sorted(ALL_PORTS))}
 #: Switch type → codes of its routes, in declared order, with the routes as sorted pairs.
@@ -239,15 +231,12 @@ def switch_pairs(ports: pd.DataFrame, inc: pd.DataFrame) -> pd.DataFrame:
     )
 
 
-def last_length(tracks: pd.DataFrame, ids: npt.NDArray[np.object_] | pd.Series) -> npt.NDArray[np.float64]:
-    """``length_m`` of the given track ids (the last row of an id given twice; NaN: no such
-    track), looked up by Arrow's hashing when the ids are held as Arrow text."""
-    held = tracks["track_id"]
-    n = len(held)
-    if isinstance(ids, pd.Series):
-        named = ids
-    else:
-        named = pd.Series(ids, dtype=held.dtype if isinstance(held.dtype, pd.StringDtype) else object)
-    last = (n - 1) - first_rows(held.iloc[::-1].reset_index(drop=True), named)  # n: none
+def port_lengths(net: Network, tracks: pd.DataFrame, rows: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """``length_m`` of the track at the port table's rows ``rows`` (:func:`port_table`'s order
+    is that of the switches' port columns in :func:`dbtools.topology.track_codes`): the last
+    row of ``tracks`` (:func:`dbtools.topology.all_tracks`) holding its id; NaN: no such track."""
+    codes = track_codes(net)
+    ports = np.concatenate([codes.of[(SWITCHES.name, f"{p}_track")] for p in ALL_PORTS])
+    last = codes.last[ports[np.asarray(rows, dtype=np.int64)]]
     length = np.append(tracks["length_m"].to_numpy(dtype=float, na_value=np.nan), np.nan)
-    return np.asarray(length[last], dtype=float)
+    return np.asarray(length[np.where(last >= 0, last, len(tracks))], dtype=float)

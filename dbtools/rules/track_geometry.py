@@ -39,6 +39,7 @@ from dbtools.gis.index import exact_steps, grid_index, step_bounds
 from dbtools.network import Network, sorted_by
 from dbtools.rules.common import column, texts
 from dbtools.topology import first_rows, grid_extents
+from schemas.enums import TrackEnd
 from schemas.tables import GIS_SPACING_M
 
 F64 = npt.NDArray[np.float64]
@@ -285,14 +286,20 @@ def _from_gis(
     return _Lengths(idx, lon, lat, codes[1:] == codes[:-1], of, steps, *_cached_steps(net, g))
 
 
+def is_begin(ends: pd.Series) -> npt.NDArray[np.bool_]:
+    """Which of the ends (``begin``/``end`` text, as held) are ``begin`` (False where missing):
+    one comparison of the column as held, no Python string per value."""
+    return np.asarray((ends == TrackEnd.BEGIN.value).to_numpy(dtype=bool, na_value=False), dtype=bool)
+
+
 def end_coordinates(
-    geo: pd.DataFrame, rows: npt.NDArray[np.int64], ends: npt.NDArray[np.object_]
+    geo: pd.DataFrame, rows: npt.NDArray[np.int64], at_begin: npt.NDArray[np.bool_]
 ) -> tuple[F64, F64, F64]:
-    """(lat, lon, outward azimuth) of the given track rows at the given ends."""
-    is_begin = ends == "begin"
+    """(lat, lon, outward azimuth) of the given track rows at their begin where ``at_begin``,
+    else at their end."""
     pick = {c: geo[f"{c}_begin"].to_numpy(float)[rows] for c in ("lat", "lon", "az")}
     alt = {c: geo[f"{c}_end"].to_numpy(float)[rows] for c in ("lat", "lon", "az")}
-    return tuple(np.where(is_begin, pick[c], alt[c]) for c in ("lat", "lon", "az"))  # type: ignore[return-value]
+    return tuple(np.where(at_begin, pick[c], alt[c]) for c in ("lat", "lon", "az"))  # type: ignore[return-value]
 
 
 def distance_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:

@@ -55,18 +55,24 @@ SMOKE: dict[str, Smoke] = {
             r"median by track_gnss \(raw-GNSS fits\)\s+\S+ m \(n=\d+\)",
         ),
     ),
-    "bench_audit.py": Smoke("--runs 2 --workers 1 --no-dask", (r"speed-up [\d.]+×",)),
+    "bench_audit.py": Smoke(
+        "--runs 2 --workers 1 --no-dask",
+        (r"speed-up [\d.]+×", r"1 workers / 1 worker, 2 runs: slowest round [\d.]+× \(target ≥ 1×\): (met|not met)"),
+    ),
     "bench_db.py": Smoke(
         "--lines 2 --length-m 2000 --rounds 1 --processes 1",
         (
             r"db build\s+[\d.]+ s wall",
             r"checked fast build: DuckDB not installed|db build vs the fastest path",
-            r"bounds: DuckDB not installed|db validate / bound: CPU [\d.]+× \(target ≤ 1\.5×\), peak RSS",
+            r"bounds: DuckDB not installed|db validate / bound: CPU [\d.]+× \(target ≤ 1\.5×\): (met|not met)",
         ),
     ),
     "bench_engine.py": Smoke(
         "--rounds 1 --runs 1",
-        (r"line runs on the network DB / on the line-only DB: median [\d.]+×", r"sim-net-station\s+[\d.]+ s CPU"),
+        (
+            r"line runs on the network DB / on the line-only DB: median [\d.]+× \(target ≤ 1\.3×\): (met|not met)",
+            r"sim-net-station\s+[\d.]+ s CPU",
+        ),
     ),
     "bench_gis_verify.py": Smoke(
         "--lines 1 --length-km 3 --runs 2 --variants 1 --defects 1 --workers 1 --sizes 2 --seeds 1 "
@@ -85,14 +91,17 @@ SMOKE: dict[str, Smoke] = {
     ),
     "bench_logs.py": Smoke("--hours 0.1 --repeat 1", (r"ours / fastest",)),
     "bench_track_match.py": Smoke(
-        "--lines 2 --per-line 50 --repeat 1", (r"ratio track match / nearest-track: [\d.]+×", r"fixes/s")
+        "--lines 2 --per-line 50 --repeat 1",
+        (r"ratio track match / nearest-track: [\d.]+×", r"fixes/s CPU \(target ≥ 50,000 fixes/s\): (met|not met)"),
     ),
     "bench_matching.py": Smoke(
         "--lines 2 --points 200 --fixes 1000 --loop-fixes 100 --repeat 1",
         (r"ratios: ours / loop = [\d.]+×", r"numpy twin .* fixes/s CPU; frames equal: True"),
     ),
     "bench_odometry.py": Smoke("--hours 0.1 --slips 2 --repeat 1", (r"ratio naive / vectorised \(CPU\): [\d.]+×",)),
-    "bench_osm.py": Smoke("--smoke", (r"osmium read", r"× osmium.s read", r"switches \d+")),
+    "bench_osm.py": Smoke(
+        "--smoke", (r"osmium read", r"× osmium.s read\s+\(target ≤ 10 s\): (met|not met)", r"switches \d+")
+    ),
     "bench_outputs.py": Smoke("--hours 0.1", (r"writing [\d.]+ %",)),
     "bench_pipeline.py": Smoke("--hours 0.1", (r"pipeline: .*× real time",)),
     "bench_possession.py": Smoke("--runs 5", (r"kind\s+sky\s+runs",)),
@@ -101,10 +110,16 @@ SMOKE: dict[str, Smoke] = {
     "bench_review_map.py": Smoke("--lines 2 --length-km 5", (r"drawn vertices \d+", r"map fragment [\d.]+ MB")),
     "bench_run.py": Smoke(
         "--hours 0.05 --repeat 1 --breakdown",
-        (r"trainpos run, .* parquet .*× real time", r"where one csv run's time goes", r"engine \(run_aids\)\s+[\d.]+"),
+        (
+            r"trainpos run, .* parquet .*× real time \(target ≥ 2,000×\): (met|not met)",
+            r"where one csv run's time goes",
+            r"engine \(run_aids\)\s+[\d.]+",
+        ),
         ("stages never called",),
     ),
-    "bench_scaling.py": Smoke("--hours 0.05 0.1", (r"log-log slope of CPU time on run length",)),
+    "bench_scaling.py": Smoke(
+        "--hours 0.05 0.1", (r"log-log slope of CPU time on run length: [\d.]+ \(target ≤ 1\.05\): (met|not met)",)
+    ),
     "bench_simulate.py": Smoke("--km 3 --slice 100 --repeat 1", (r"naive loop .* → ×\d+",)),
     "bench_topology.py": Smoke(
         "--lines 2 --shared-ids", (r"check_topology\s+wall\s+[\d.]+ s", r"check_balise_network\s+wall")

@@ -177,6 +177,43 @@ def test_a_source_file_reads_and_checks_as_text(tmp_path: Path, rows) -> None:  
     assert [repr(f.__dict__) for f in ours.findings] == [repr(f.__dict__) for f in ref.findings]  # NaN-safe
 
 
+FLAG_CELLS = st.sampled_from(
+    ["", "1", "0", "true", "False", " YES", "n ", "y", "T", "f", "NA", "nan", "null", "2", "x", "yes.", "Ｙ", "\tno"]
+)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(FLAG_CELLS, FLAG_CELLS, TEXT_CELLS), min_size=1, max_size=8))
+def test_flag_columns_read_and_check_as_text(tmp_path: Path, rows) -> None:  # type: ignore[no-untyped-def]
+    """The tracks' buffer-stop flags: the typed shortcut (``frames._flags``) gives the text
+    path's frame and findings, and is taken when every flag cell is a 0/1 word or blank."""
+    from schemas import frames
+    from schemas.tables import SOURCE_TABLES
+
+    tracks = SOURCE_TABLES["tracks"]
+    lines = ["track_id,line_code,kind,length_m,name,begin_buffer_stop,end_buffer_stop"]
+    lines += [f"T{i},0001,station,10.5,{csv_cell(text)},{a},{b}" for i, (a, b, text) in enumerate(rows)]
+    path = tmp_path / "tracks.csv"
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    typed = read_csv_typed(tracks, path)
+    ours = frames.read_and_check(tracks, typed if typed is not None else read_raw_table(path), file=str(path))
+    ref = frames.read_and_check(tracks, read_raw_table(path), file=str(path))
+    pd.testing.assert_frame_equal(ours.frame, ref.frame, check_exact=True)
+    assert [repr(f.__dict__) for f in ours.findings] == [repr(f.__dict__) for f in ref.findings]  # NaN-safe
+    words = {"", "1", "0", "true", "false", "yes", "n", "y", "t", "f", "na", "nan", "null", "no"}
+    if typed is not None and all(c.strip().lower() in words for a, b, _ in rows for c in (a, b)):
+        assert frames._already_typed(tracks, typed) is not None
+
+
+def test_flag_columns_by_hand() -> None:
+    from schemas.frames import _flags
+
+    text = pa.chunked_array([pa.array(["1", "no", None, "TRUE", "f"])])
+    flags = _flags(text)
+    assert flags is not None and flags.tolist() == [True, False, pd.NA, True, False]
+    assert _flags(pa.chunked_array([pa.array(["1", "2"])])) is None  # "2" is no flag: the general path names it
+
+
 @pytest.mark.parametrize("name", ["imu", "cab"])
 def test_many_blocks_and_rows_shorter_than_the_first_block_read_as_the_text_path(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, name: str

@@ -3,6 +3,7 @@ so check_frame's findings are pandera's on every frame (hypothesis over damaged 
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -119,3 +120,31 @@ def test_key_order() -> None:
     assert key_order(frame.iloc[::-1], ("a", "b")) == (False, False)
     frame.loc[0, "b"] = np.nan
     assert key_order(frame, ("a", "b")) == (False, False)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    st.lists(
+        st.tuples(st.sampled_from(["", "a", "ab", "b", "é", "😀"]), st.sampled_from(["U", "D"]), st.integers(0, 3)),
+        max_size=30,
+    ),
+    st.booleans(),
+)
+def test_key_order_is_that_of_the_key_tuples(rows: list[tuple[str, str, int]], sort: bool) -> None:
+    """(sorted, unique) of the rows' key tuples as Python orders them (text by code point),
+    for text keys whose order is decided only where two texts differ."""
+    rows = sorted(rows) if sort else rows
+    frame = pd.DataFrame(
+        {
+            "l": pd.array([r[0] for r in rows], dtype="str"),
+            "t": pd.array([r[1] for r in rows], dtype="str"),
+            "k": [float(r[2]) for r in rows],
+        }
+    )
+    in_order = all(a <= b for a, b in itertools.pairwise(rows))
+    unique = all(a < b for a, b in itertools.pairwise(rows))
+    assert key_order(frame, ("l", "t", "k")) == ((True, unique) if in_order else (False, False))
+    pairs = [(r[0], r[1]) for r in rows]
+    in_order = all(a <= b for a, b in itertools.pairwise(pairs))
+    unique = all(a < b for a, b in itertools.pairwise(pairs))
+    assert key_order(frame, ("l", "t")) == ((True, unique) if in_order else (False, False))
