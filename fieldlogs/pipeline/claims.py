@@ -140,6 +140,10 @@ class _Cells:
         return self.track_id, _item(self.track_id, self.pos[j], self.km[j], self.margin[j])
 
 
+#: ``json.dumps(…, separators=(",", ":"))`` made once (dumps builds an encoder per call with these).
+_COMPACT = json.JSONEncoder(separators=(",", ":"))
+
+
 def _json(items: list[tuple[str, dict[str, object]]]) -> str:
     """The ``candidates`` cell of :func:`candidates_text` from its items: one per track (the first)."""
     seen: set[str] = set()
@@ -148,7 +152,7 @@ def _json(items: list[tuple[str, dict[str, object]]]) -> str:
         if tid not in seen:
             seen.add(tid)
             out.append(item)
-    return json.dumps(out, separators=(",", ":"))
+    return _COMPACT.encode(out)
 
 
 def _rs(x: FloatArray) -> list[float | None]:

@@ -23,7 +23,7 @@ from __future__ import annotations
 import heapq
 import itertools
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -33,7 +33,7 @@ from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.positions import positions_frame
-from fieldlogs.pipeline.types import Event, Fix, FloatArray
+from fieldlogs.pipeline.types import Event, Fix, FloatArray, evolved
 
 #: Heap entry: (t, priority, arrival, aid index, observation).
 _Entry = tuple[float, int, int, int, Observation]
@@ -92,6 +92,7 @@ class _Engine:
     def __init__(self, travel: Travel, aids: Sequence[Aid]) -> None:
         self.travel = travel
         self.aids = list(aids)
+        self.priority = [int(aid.priority) for aid in self.aids]
         self.heap: list[_Entry] = []
         self.arrival = itertools.count()
         self.events: list[Event] = []
@@ -103,7 +104,7 @@ class _Engine:
 
     def push(self, k: int, obs: Observation, arrival: int | None = None) -> None:
         n = next(self.arrival) if arrival is None else arrival
-        heapq.heappush(self.heap, (obs.t, int(self.aids[k].priority), n, k, obs))
+        heapq.heappush(self.heap, (obs.t, self.priority[k], n, k, obs))
 
     def km_estimate(self) -> FloatArray:
         if self.fix is None:
@@ -181,7 +182,7 @@ class _Engine:
         # the reference point stays that of the fix that set it when an aid changes the
         # estimate (made uncertain, moved to another track): same allowance reference
         t_ref = new.reference_t
-        new = replace(new, t_ref=t_ref, allowance_ref_m=self.travel.allowance_at(t_ref))
+        new = evolved(new, t_ref=t_ref, allowance_ref_m=self.travel.allowance_at(t_ref))
         if new.source.absolute:
             prev = self.last_abs
             corrections = [e for e in events if e.correction_m is not None]

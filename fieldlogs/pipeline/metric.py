@@ -24,8 +24,18 @@ FloatArray = npt.NDArray[np.float64]
 
 
 def _interp_extrapolated(x: FloatArray | float, xp: FloatArray, fp: FloatArray) -> FloatArray:
-    """np.interp with slope-1 extension beyond both ends."""
+    """np.interp with slope-1 extension beyond both ends (one point: on Python floats, the same
+    IEEE operations; the estimate is read one cycle at a time by the aids)."""
     xa = np.asarray(x, dtype=float)
+    if xa.size == 1:
+        v, lo, hi = xa.item(), float(xp[0]), float(xp[-1])
+        if v > hi:
+            r = float(fp[-1]) + (v - hi)
+        elif v < lo:
+            r = float(fp[0]) + (v - lo)
+        else:
+            r = float(np.interp(v, xp, fp))
+        return np.full(xa.shape, r)
     out = np.interp(xa, xp, fp)
     out = np.where(xa < xp[0], fp[0] + (xa - xp[0]), out)
     return np.asarray(np.where(xa > xp[-1], fp[-1] + (xa - xp[-1]), out), dtype=np.float64)

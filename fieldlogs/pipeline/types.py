@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -279,6 +279,24 @@ class Fix:
         """No position from ``t`` on (off rail)."""
         nan = float("nan")
         return cls(t, s, d, nan, nan, "", "", 1, FixSource.NONE, nan, state=PositionState.UNDETERMINED)
+
+
+_Frozen = TypeVar("_Frozen", Fix, Hypothesis)
+
+
+def evolved(obj: _Frozen, **changes: Any) -> _Frozen:
+    """``dataclasses.replace(obj, **changes)`` of a :class:`Fix` or :class:`Hypothesis` — plain
+    frozen dataclasses (every field an ``__init__`` argument, no ``__post_init__``), so the copy
+    of their fields with ``changes`` is the same object ``replace`` makes, without its per-field
+    work (the engine makes several per D-GPS correction, one every few seconds)."""
+    cls = type(obj)
+    unknown = changes.keys() - cls.__dataclass_fields__.keys()
+    if unknown:
+        raise TypeError(f"{cls.__name__} has no field {', '.join(sorted(unknown))}")
+    new = object.__new__(cls)
+    new.__dict__.update(obj.__dict__)
+    new.__dict__.update(changes)
+    return new
 
 
 def slip_budget_m(duration_s: float, delta_a_mps2: float) -> float:

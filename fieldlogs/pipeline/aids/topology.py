@@ -41,7 +41,7 @@ from fieldlogs.pipeline.hypotheses import (
     triggers,
 )
 from fieldlogs.pipeline.positions import margin_m
-from fieldlogs.pipeline.types import Event, Fix, Hypothesis
+from fieldlogs.pipeline.types import Event, Fix, Hypothesis, evolved
 from schemas.enums import EventType, FixSource, PositionState
 
 _LOCATE, _STEP = "locate", "step"
@@ -60,7 +60,7 @@ def with_hyps(fix: Fix, hyps: list[Hypothesis], t: float, s: float, lines: Track
     line, track, km and k; several the state ambiguous with no line or km."""
     if len(hyps) > 1:
         nan = float("nan")
-        return replace(
+        return evolved(
             fix,
             t_effective=t,
             s_ref=s,
@@ -77,7 +77,7 @@ def with_hyps(fix: Fix, hyps: list[Hypothesis], t: float, s: float, lines: Track
     km = float(tl.km_of_pos(h.pos_m))
     off = fix.km_equipment_m - fix.km_m
     state = PositionState.UNCERTAIN if fix.uncertain_since_d is not None else PositionState.DETERMINED
-    return replace(
+    return evolved(
         fix,
         t_effective=t,
         s_ref=s,

@@ -59,7 +59,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -69,7 +69,7 @@ from fieldlogs.pipeline.aids.track_gps import NetworkFixes
 from fieldlogs.pipeline.config import GpsConfig, MarginConfig, TrackSelectConfig
 from fieldlogs.pipeline.hypotheses import TrackLine
 from fieldlogs.pipeline.positions import margin_m
-from fieldlogs.pipeline.types import Event, FloatArray, Hypothesis
+from fieldlogs.pipeline.types import Event, FloatArray, Hypothesis, evolved
 from schemas.enums import EventType, FixSource, PositionState
 
 #: Search window beyond margin + U either way along the track [m].
@@ -157,11 +157,11 @@ class TrackGpsAlongAid(NetworkFixes):
         if not (self._confirmed(u) if uncertain else m > self.cfg.gps_along_ratio * u):
             return Outcome()
         pos = s_g - h.kp * self.antenna_x_m
-        anchored = replace(fix, d_ref=view.d, t_ref=view.t, uncertainty_m=u, source=FixSource.GPS)
+        anchored = evolved(fix, d_ref=view.d, t_ref=view.t, uncertainty_m=u, source=FixSource.GPS)
         if uncertain:
-            anchored = replace(anchored, state=PositionState.DETERMINED, uncertain_since_d=None)
-        new = replace(
-            with_hyps(anchored, [replace(h, pos_m=pos, extra_m=0.0)], view.t, view.s, self.lines), carried=False
+            anchored = evolved(anchored, state=PositionState.DETERMINED, uncertain_since_d=None)
+        new = evolved(
+            with_hyps(anchored, [evolved(h, pos_m=pos, extra_m=0.0)], view.t, view.s, self.lines), carried=False
         )
         detail: dict[str, object] = {
             "evidence": "gps",
