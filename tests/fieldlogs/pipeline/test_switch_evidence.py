@@ -21,7 +21,7 @@ from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import TrackLines, track_lines
 from schemas.enums import EventType
 from tests.fieldlogs.pipeline.network_cases import MARGIN, Start, net, travel
-from tests.fieldlogs.pipeline.test_track_selection_property import DT, Truth, walk
+from tests.fieldlogs.pipeline.test_track_selection_property import DT, Truth, start_on_line, walk
 
 
 def test_balise_pos_on_a_crossover_by_its_track_points_hand_computed() -> None:
@@ -99,12 +99,8 @@ def test_balise_groups_never_drop_the_true_branch(
 ) -> None:
     # random routes through the crossovers and station tracks (some of them off a line), the
     # odometry's scale error inside the margin's 2 %: every group read keeps the true track
-    n = net(name)
-    lines = track_lines(n)
-    on_line = [t for t in sorted(lines.lines) if lines[t].line_code and lines[t].metric is not None]
-    tid = on_line[start % len(on_line)]
+    n, lines, tid, pos0 = start_on_line(name, start)
     tl = lines[tid]
-    pos0 = 20.0 + (start % 97) / 97.0 * max(tl.length_m - 40.0, 1.0)
     v = np.full(round(700.0 / speed / DT), speed)
     truth = walk(n, lines, tid, pos0, kp, v, branch)
     m = truth.s.size

@@ -37,6 +37,17 @@ class Truth:
     wz: np.ndarray
 
 
+def start_on_line(name: str, start: int) -> tuple[Network, TrackLines, str, float]:
+    """The test network ``name``, its track lines, and a start drawn from ``start``: one of
+    the tracks along a line, at a place ≥ 20 m from both its ends."""
+    n = net(name)
+    lines = track_lines(n)
+    on_line = [t for t in sorted(lines.lines) if lines[t].line_code and lines[t].metric is not None]
+    tid = on_line[start % len(on_line)]
+    pos0 = 20.0 + (start % 97) / 97.0 * max(lines[tid].length_m - 40.0, 1.0)
+    return n, lines, tid, pos0
+
+
 def walk(network: Network, lines: TrackLines, tid: str, pos: float, kp: int, v: np.ndarray, branch: list[int]) -> Truth:
     """The true track and pos per cycle for signed speeds ``v``; at a facing switch the exit
     ``branch[k] % n`` of the k-th one; the train stops at a dead end; yaw rate on turnout leads."""
@@ -114,12 +125,8 @@ def test_no_determined_cycle_on_a_wrong_track(
     seed: int,
     gps: bool,
 ) -> None:
-    n = net(name)
-    lines = track_lines(n)
-    on_line = [t for t in sorted(lines.lines) if lines[t].line_code and lines[t].metric is not None]
-    tid = on_line[start % len(on_line)]
+    n, lines, tid, pos0 = start_on_line(name, start)
     tl = lines[tid]
-    pos0 = 20.0 + (start % 97) / 97.0 * max(tl.length_m - 40.0, 1.0)
     steps = round(600.0 / speed / DT)  # 600 m, then back for reverse_at × that
     v = np.concatenate([np.full(steps, speed), np.full(int(steps * reverse_at), -speed)])
     truth = walk(n, lines, tid, pos0, kp, v, branch)
