@@ -17,7 +17,7 @@ from __future__ import annotations
 import sys
 from collections import defaultdict
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING
 
@@ -325,10 +325,64 @@ class TrackCodes:
     first: npt.NDArray[np.int64]
     last: npt.NDArray[np.int64]
     uniques: pd.Index
+    line_track_frames: Callable[[], dict[str, pd.DataFrame]] = field(repr=False, compare=False)
 
     def rows(self, table: str, column: str) -> npt.NDArray[np.int64]:
         """The first row of :func:`all_tracks` holding each row's id (−1: none)."""
         return np.asarray(self.first[self.of[(table, column)]], dtype=np.int64)
+
+    @cached_property
+    def line_tracks(self) -> LineTrackCodes:
+        """The (line_code, track) pairs of the tables of :data:`LINE_TRACK_TABLES`, coded
+        once (made on first use: the track matcher never asks for them)."""
+        return LineTrackCodes.of_frames(self.line_track_frames())
+
+
+#: Where a (line_code, track) pair is named, in the order :class:`LineTrackCodes` codes them:
+#: the rows of :func:`grid_extents`, of :func:`all_tracks`, the balises.
+LINE_TRACK_TABLES = ("grid_extents", "all_tracks", BALISES.name)
+
+
+@dataclass(frozen=True)
+class LineTrackCodes:
+    """Every (line_code, track) pair of the tables of :data:`LINE_TRACK_TABLES`, coded once
+    per loaded network (issue 30: the grid look-ups of the track geometry, the open-end rule
+    and the balises' placement used to build a ``MultiIndex`` of 83,000 text pairs each):
+    equal pairs have equal codes (in order of first appearance), −1 where the line or the
+    track is missing or the table has no such columns. ``of[table]``: the codes of the
+    table's rows; ``grid[code]``: the row of :func:`grid_extents` holding that pair (−1: the
+    grid has no such line and track)."""
+
+    of: dict[str, npt.NDArray[np.int64]]
+    grid: npt.NDArray[np.int64]
+
+    @staticmethod
+    def of_frames(frames: dict[str, pd.DataFrame]) -> LineTrackCodes:
+        """The codes of the frames (by table name, :data:`LINE_TRACK_TABLES`): each text
+        column factorised once over all the tables, then the pairs of the two codes."""
+        named = {t: f for t, f in frames.items() if "line_code" in f.columns and "track" in f.columns}
+        of = {t: np.full(len(f), -1, dtype=np.int64) for t, f in frames.items()}
+        if not named:
+            return LineTrackCodes(of, np.empty(0, dtype=np.int64))
+        sizes = [len(f) for f in named.values()]
+        line, _ = pd.factorize(pd.concat([f["line_code"] for f in named.values()], ignore_index=True))
+        track, tracks = pd.factorize(pd.concat([f["track"] for f in named.values()], ignore_index=True))
+        pair = line.astype(np.int64) * (len(tracks) + 1) + track
+        ok = (line >= 0) & (track >= 0)
+        codes = np.full(len(pair), -1, dtype=np.int64)
+        codes[ok], uniques = pd.factorize(pair[ok])
+        parts = np.split(codes, np.cumsum(sizes)[:-1])
+        of.update(zip(named, parts, strict=True))
+        grid = np.full(len(uniques), -1, dtype=np.int64)
+        ext = of.get("grid_extents", np.empty(0, dtype=np.int64))
+        at = np.flatnonzero(ext >= 0)[::-1]  # the first row of each pair wins
+        grid[ext[at]] = at
+        return LineTrackCodes(of, grid)
+
+    def grid_rows(self, table: str) -> npt.NDArray[np.int64]:
+        """The row of :func:`grid_extents` of each row's line and track (−1: none)."""
+        codes = self.of[table]
+        return np.where(codes >= 0, self.grid[np.maximum(codes, 0)] if len(self.grid) else -1, -1)
 
 
 def track_codes(net: Network) -> TrackCodes:
@@ -346,7 +400,13 @@ def track_codes(net: Network) -> TrackCodes:
         first[seen] = at
         seen, at = np.unique(own[::-1], return_index=True)
         last[seen] = len(own) - 1 - at
-        return TrackCodes(of, first, last, uniques)
+        return TrackCodes(
+            of,
+            first,
+            last,
+            uniques,
+            lambda: {"grid_extents": grid_extents(net), "all_tracks": tables["all_tracks"], BALISES.name: net.balises},
+        )
 
     return net.cached(("topology", "track_codes"), build)
 
