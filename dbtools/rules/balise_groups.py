@@ -36,6 +36,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, isin, py, texts
@@ -263,10 +265,14 @@ def _places(
             "km": column(b, "km_actual_m")[ok],
         }
     )
-    f = f.sort_values(["nid_c", "nid_bg", "track_id", "pos", "km"], kind="stable")
+    # sorted by nid_c, nid_bg, track id (its text's rank: no object sort), pos, km — stably
+    rank = np.asarray(pc.rank(pa.array(f["track_id"].to_numpy(), type=pa.string()), tiebreaker="dense"), dtype=np.int64)
+    cols = [f[k].to_numpy(dtype=float) for k in ("km", "pos")]
+    order = np.lexsort((*cols, rank, f["nid_bg"].to_numpy(dtype=float), f["nid_c"].to_numpy(dtype=float)))
+    f = f.iloc[order]
     ident = f[["nid_c", "nid_bg"]].to_numpy()
     new_id = np.r_[True, np.any(ident[1:] != ident[:-1], axis=1)] if len(f) else np.zeros(0, dtype=bool)
-    tr = texts(f["track_id"])
+    tr = rank[order]
     where = np.where(np.isfinite(f["pos"].to_numpy()), f["pos"].to_numpy(), f["km"].to_numpy())
     far = np.r_[True, (tr[1:] != tr[:-1]) | (np.abs(np.diff(where)) > config.group_span_m)] if len(f) else new_id
     f["place"] = np.cumsum(new_id | far) - 1

@@ -1,7 +1,8 @@
 """dbtools.topology.TrackCodes.line_tracks: the network's one coding of its (line, track)
 pairs, and what reads it — the grid of each track in the track geometry, the grid extent of
 the open-end rule and the balises' placement by line, track and km — against the look-ups
-by text each made before (issue 30)."""
+by text each made before, and the balises' places ordered by their track id's rank as by its
+text (issue 30)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from dbtools.network import Network, canonical, empty_frame
-from dbtools.rules.balise_groups import _by_km, _by_km_merge, locate
+from dbtools.rules.balise_groups import _by_km, _by_km_merge, _places, locate
+from dbtools.rules.config import ValidationConfig
 from dbtools.rules.track_geometry import track_geometry
 from dbtools.topology import LineTrackCodes, all_tracks, grid_extents, track_codes
 from schemas.tables import BALISES, DB_TABLES
@@ -171,3 +173,52 @@ def test_balises_placed_by_codes_as_by_the_merge(seed: int) -> None:
     known = np.flatnonzero(b["track_id"].notna().to_numpy())
     assert tid[known].tolist() == b["track_id"].iloc[known].tolist()
     assert np.isfinite(pos[free]).sum() == len(placed)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from([1.0, 2.0]),
+            st.sampled_from([5.0, 6.0]),
+            st.one_of(st.none(), st.sampled_from(["T10", "T9", "X", "T1"])),
+            st.one_of(st.just(np.nan), st.sampled_from([0.0, -0.0, 3.0, 90.0])),
+            st.one_of(st.just(np.nan), st.sampled_from([100.0, 103.0, 300.0])),
+        ),
+        max_size=14,
+    )
+)
+def test_places_in_the_order_of_the_text_sort(rows: list[tuple[float, float, str | None, float, float]]) -> None:
+    """The balises of :func:`_places` ordered (by the track id's rank) as the sort of the
+    columns with the ids as text did (stable; NaN km last, a missing id as the empty text)."""
+    n = len(rows)
+    b = pd.DataFrame(
+        {
+            "nid_c": [r[0] for r in rows],
+            "nid_bg": [r[1] for r in rows],
+            "n_pig": 0.0,
+            "n_total": 1.0,
+            "km_actual_m": [r[4] for r in rows],
+        },
+        index=pd.RangeIndex(n),
+    )
+    tid = np.array([r[2] for r in rows], dtype=object)
+    pos = np.array([r[3] for r in rows], dtype=float)
+    got = _places(b, tid, pos, np.ones(n, dtype=bool), ValidationConfig())
+    ref = pd.DataFrame(
+        {
+            "row": np.arange(n),
+            "nid_c": b["nid_c"],
+            "nid_bg": b["nid_bg"],
+            "track_id": pd.Series(tid, dtype=object).fillna(""),
+            "pos": np.nan_to_num(pos, nan=np.inf),
+            "km": b["km_actual_m"],
+        }
+    ).sort_values(["nid_c", "nid_bg", "track_id", "pos", "km"], kind="stable")
+    assert got["row"].tolist() == ref["row"].tolist()
+    far = ref["track_id"].to_numpy(dtype=object)
+    where = np.where(np.isfinite(ref["pos"]), ref["pos"], ref["km"])
+    ident = ref[["nid_c", "nid_bg"]].to_numpy()
+    new = np.r_[True, np.any(ident[1:] != ident[:-1], axis=1)] if n else np.zeros(0, dtype=bool)
+    cut = np.r_[True, (far[1:] != far[:-1]) | (np.abs(np.diff(where)) > ValidationConfig().group_span_m)] if n else new
+    assert got["place"].tolist() == (np.cumsum(new | cut) - 1).tolist()
