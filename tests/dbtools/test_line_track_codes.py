@@ -102,7 +102,8 @@ def line_network(seed: int) -> Network:
                     }
                 )
             )
-    tracks, k = [], 0
+    tracks: list[tuple[str, str | None, str | None, str, float, float, float]] = []
+    k = 0
     for line in ("L1", "L2", "L4"):
         for tr in ("U", "D"):
             cuts = np.sort(rng.uniform(0.0, 2000.0, 3))
