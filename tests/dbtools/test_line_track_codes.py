@@ -146,6 +146,11 @@ def test_geometry_by_codes_is_geometry_by_ids(seed: int) -> None:
     net = line_network(seed)
     assert "start" in grid_extents(net).columns  # the grid as read from a DB: the coded path
     tracks = all_tracks(net)
+    ext = grid_extents(net)
+    grid = pd.MultiIndex.from_arrays([ext["line_code"].astype(object), ext["track"].astype(object)])
+    pairs = pd.MultiIndex.from_arrays([tracks["line_code"].astype(object), tracks["track"].astype(object)])
+    assert tracks["implied"].sum() == 2  # L3's two
+    assert track_codes(net).line_tracks.grid_rows("all_tracks").tolist() == grid.get_indexer(pairs).tolist()
     coded, by_text = track_geometry(net, tracks), track_geometry(net, tracks.copy())
     pd.testing.assert_frame_equal(coded, by_text, check_exact=True)
     on_grid = (tracks["line_code"] != "L4").to_numpy(dtype=bool, na_value=True)  # L4: no grid
@@ -223,3 +228,23 @@ def test_places_in_the_order_of_the_text_sort(rows: list[tuple[float, float, str
     new = np.r_[True, np.any(ident[1:] != ident[:-1], axis=1)] if n else np.zeros(0, dtype=bool)
     cut = np.r_[True, (far[1:] != far[:-1]) | (np.abs(np.diff(where)) > ValidationConfig().group_span_m)] if n else new
     assert got["place"].tolist() == (np.cumsum(new | cut) - 1).tolist()
+
+
+def test_implied_tracks_keep_their_grid_rows() -> None:
+    """Implied tracks are sorted by id ("A1:D" < "A:D": ':' sorts after '1') but the grid by
+    line and track: each implied row's code is still that of its own grid; a line whose
+    track is declared implies nothing."""
+    gis = pd.DataFrame(
+        [(line, tr, 20.0 * i, 35.0, 139.0 + i * 1e-4) for line in ("A", "A1", "B") for tr in "DU" for i in range(3)],
+        columns=["line_code", "track", "km_m", "lat", "lon"],
+    )
+    decl = pd.DataFrame(
+        [("T", "B", "D", "main", 0.0, 40.0, 40.0)],
+        columns=["track_id", "line_code", "track", "kind", "km_begin_m", "km_end_m", "length_m"],
+    )
+    frames = {"gis": gis, "tracks": decl}
+    net = Network({x.name: canonical(x, frames[x.name]) if x.name in frames else empty_frame(x) for x in DB_TABLES})
+    tracks = all_tracks(net)
+    assert tracks["track_id"].tolist() == ["T", "A1:D", "A1:U", "A:D", "A:U", "B:U"]
+    # grid rows: A/D 0, A/U 1, A1/D 2, A1/U 3, B/D 4, B/U 5
+    assert track_codes(net).line_tracks.grid_rows("all_tracks").tolist() == [4, 2, 3, 0, 1, 5]
