@@ -17,7 +17,7 @@ from __future__ import annotations
 import sys
 from collections import defaultdict
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from typing import TYPE_CHECKING
 
@@ -27,7 +27,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from dbtools.network import Network, canonical, sorted_by
+from dbtools.network import Network, canonical_with_index, sorted_by
 from dbtools.rules.common import texts
 from schemas.enums import Navigability, TrackEnd, TrackKind
 from schemas.network import CONNECTIONS, NETWORK_TRACKS, SWITCHES, TRACK_POINTS
@@ -126,34 +126,59 @@ def _grid_extents(gis: pd.DataFrame, grid: GridIndex | None = None) -> pd.DataFr
 
 def all_tracks(net: Network) -> pd.DataFrame:
     """Declared tracks and implied line tracks, in the columns of ``tracks`` plus ``implied``."""
+    return _all_tracks(net)[0]
 
-    def build() -> pd.DataFrame:
+
+def _all_tracks(net: Network) -> tuple[pd.DataFrame, npt.NDArray[np.int64]]:
+    """:func:`all_tracks` and the row of :func:`grid_extents` behind each implied track
+    (built once per loaded network)."""
+
+    def build() -> tuple[pd.DataFrame, npt.NDArray[np.int64]]:
         declared = net.tracks
         ext = grid_extents(net)
-        covered = set(zip(declared["line_code"].astype(object), declared["track"].astype(object), strict=True))
-        keep = [(lc, tr) not in covered for lc, tr in zip(ext["line_code"], ext["track"], strict=True)]
-        ext = ext[np.asarray(keep, dtype=bool)] if len(ext) else ext
+        kept = np.flatnonzero(_implied(net)) if len(ext) else np.arange(len(ext))
+        ext = ext.iloc[kept]
         implied = pd.DataFrame(
             {
                 "track_id": [
                     implied_track_id(str(a), str(b)) for a, b in zip(ext["line_code"], ext["track"], strict=True)
                 ],
-                "line_code": ext["line_code"].astype(object),
-                "track": ext["track"].astype(object),
+                "line_code": ext["line_code"].to_numpy(dtype=object),
+                "track": ext["track"].to_numpy(dtype=object),
                 "kind": TrackKind.MAIN.value,
-                "km_begin_m": ext["km_lo"].astype(float),
-                "km_end_m": ext["km_hi"].astype(float),
-                "length_m": (ext["km_hi"] - ext["km_lo"]).astype(float),
+                "km_begin_m": ext["km_lo"].to_numpy(dtype=float),
+                "km_end_m": ext["km_hi"].to_numpy(dtype=float),
+                "length_m": (ext["km_hi"] - ext["km_lo"]).to_numpy(dtype=float),
                 "name": None,
-            }
+            },
+            index=pd.Index(kept),
         )
-        out = pd.concat(
-            [declared.assign(implied=False), canonical(NETWORK_TRACKS, implied).assign(implied=True)],
-            ignore_index=True,
-        )
-        return out.reset_index(drop=True)
+        implied, rows = canonical_with_index(NETWORK_TRACKS, implied)  # sorted by id: each one's grid row
+        out = pd.concat([declared.assign(implied=False), implied.assign(implied=True)], ignore_index=True)
+        return out.reset_index(drop=True), np.asarray(rows, dtype=np.int64)
 
     return net.cached(("topology", "all_tracks"), build)
+
+
+def _line_track_codes(net: Network) -> LineTrackCodes:
+    """The (line, track) pairs of the grid, the declared tracks and the balises coded once
+    (:class:`LineTrackCodes`; built once per loaded network)."""
+    return net.cached(
+        ("topology", "line_track_codes"),
+        lambda: LineTrackCodes.of_frames(
+            {"grid_extents": grid_extents(net), NETWORK_TRACKS.name: net.tracks, BALISES.name: net.balises}
+        ),
+    )
+
+
+def _implied(net: Network) -> npt.NDArray[np.bool_]:
+    """Which rows of :func:`grid_extents` no declared track's line and track covers."""
+    codes = _line_track_codes(net)
+    covered = np.zeros(len(codes.grid) + 1, dtype=bool)  # the last slot: −1, a missing part
+    covered[codes.of[NETWORK_TRACKS.name]] = True
+    covered[-1] = False
+    ext = codes.of["grid_extents"]
+    return np.asarray(~covered[ext] | (ext < 0), dtype=bool)
 
 
 @dataclass(frozen=True)
@@ -325,10 +350,72 @@ class TrackCodes:
     first: npt.NDArray[np.int64]
     last: npt.NDArray[np.int64]
     uniques: pd.Index
+    line_track_codes: Callable[[], LineTrackCodes] = field(repr=False, compare=False)
 
     def rows(self, table: str, column: str) -> npt.NDArray[np.int64]:
         """The first row of :func:`all_tracks` holding each row's id (−1: none)."""
         return np.asarray(self.first[self.of[(table, column)]], dtype=np.int64)
+
+    @cached_property
+    def line_tracks(self) -> LineTrackCodes:
+        """The (line_code, track) pairs of the tables of :data:`LINE_TRACK_TABLES` (made on
+        first use: the track matcher never asks for them)."""
+        return self.line_track_codes()
+
+
+#: Where a (line_code, track) pair is named, in the order :class:`LineTrackCodes` codes them:
+#: the rows of :func:`grid_extents`, the declared tracks, the balises (and so every row of
+#: :func:`all_tracks`: the declared tracks', then the implied ones' grid rows').
+LINE_TRACK_TABLES = ("grid_extents", NETWORK_TRACKS.name, BALISES.name)
+
+
+@dataclass(frozen=True)
+class LineTrackCodes:
+    """Every (line_code, track) pair of the tables of :data:`LINE_TRACK_TABLES`, coded once
+    per loaded network (issue 30: the grid look-ups of the track geometry, the open-end rule
+    and the balises' placement used to build a ``MultiIndex`` of 83,000 text pairs each):
+    equal pairs have equal codes (in order of first appearance), −1 where the line or the
+    track is missing or the table has no such columns. ``of[table]``: the codes of the
+    table's rows; ``grid[code]``: the row of :func:`grid_extents` holding that pair (−1: the
+    grid has no such line and track)."""
+
+    of: dict[str, npt.NDArray[np.int64]]
+    grid: npt.NDArray[np.int64]
+
+    @staticmethod
+    def of_frames(frames: dict[str, pd.DataFrame]) -> LineTrackCodes:
+        """The codes of the frames (by table name, :data:`LINE_TRACK_TABLES`): each text
+        column factorised once over all the tables, then the pairs of the two codes."""
+        named = {t: f for t, f in frames.items() if "line_code" in f.columns and "track" in f.columns}
+        of = {t: np.full(len(f), -1, dtype=np.int64) for t, f in frames.items()}
+        if not named:
+            return LineTrackCodes(of, np.empty(0, dtype=np.int64))
+        sizes = [len(f) for f in named.values()]
+        line, _ = pd.factorize(pd.concat([f["line_code"] for f in named.values()], ignore_index=True))
+        track, tracks = pd.factorize(pd.concat([f["track"] for f in named.values()], ignore_index=True))
+        pair = line.astype(np.int64) * (len(tracks) + 1) + track
+        ok = (line >= 0) & (track >= 0)
+        codes = np.full(len(pair), -1, dtype=np.int64)
+        codes[ok], uniques = pd.factorize(pair[ok])
+        parts = np.split(codes, np.cumsum(sizes)[:-1])
+        of.update(zip(named, parts, strict=True))
+        grid = np.full(len(uniques), -1, dtype=np.int64)
+        ext = of.get("grid_extents", np.empty(0, dtype=np.int64))
+        at = np.flatnonzero(ext >= 0)[::-1]  # the first row of each pair wins
+        grid[ext[at]] = at
+        return LineTrackCodes(of, grid)
+
+    def with_all_tracks(self, implied: npt.NDArray[np.int64]) -> LineTrackCodes:
+        """These codes (of the grid's rows, the declared tracks' and the balises') with those
+        of :func:`all_tracks`: the declared tracks', then those of its implied tracks' grid
+        rows ``implied``."""
+        rows = np.concatenate([self.of[NETWORK_TRACKS.name], self.of["grid_extents"][implied]])
+        return LineTrackCodes({**self.of, "all_tracks": rows}, self.grid)
+
+    def grid_rows(self, table: str) -> npt.NDArray[np.int64]:
+        """The row of :func:`grid_extents` of each row's line and track (−1: none)."""
+        codes = self.of[table]
+        return np.where(codes >= 0, self.grid[np.maximum(codes, 0)] if len(self.grid) else -1, -1)
 
 
 def track_codes(net: Network) -> TrackCodes:
@@ -346,7 +433,13 @@ def track_codes(net: Network) -> TrackCodes:
         first[seen] = at
         seen, at = np.unique(own[::-1], return_index=True)
         last[seen] = len(own) - 1 - at
-        return TrackCodes(of, first, last, uniques)
+        return TrackCodes(
+            of,
+            first,
+            last,
+            uniques,
+            lambda: _line_track_codes(net).with_all_tracks(_all_tracks(net)[1]),
+        )
 
     return net.cached(("topology", "track_codes"), build)
 

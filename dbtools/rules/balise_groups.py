@@ -36,6 +36,8 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from dbtools.network import Network
 from dbtools.rules.common import Locator, capped, column, isin, py, texts
@@ -52,24 +54,25 @@ F64 = npt.NDArray[np.float64]
 
 def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     """Track id and distance from the track's begin of every balise (None/NaN: not placed)."""
-    b, tr = net.balises, all_tracks(net)
+    b, tr, codes = net.balises, all_tracks(net), track_codes(net)
     n = len(b)
     tid = column(b, "track_id") if "track_id" in b.columns else np.full(n, None, dtype=object)
     km = column(b, "km_actual_m")
     tid = tid.copy()
+    at = np.full(n, -1, dtype=np.int64)  # the first row of ``tr`` holding each balise's track id
     if "track_id" in b.columns:
-        tid[track_codes(net).rows(BALISES.name, "track_id") < 0] = None  # unknown: topology.invalid_reference
+        at = codes.rows(BALISES.name, "track_id")
+        tid[at < 0] = None  # unknown: topology.invalid_reference
     free = np.flatnonzero(pd.isna(tid))
     if free.size:
-        along = tr[tr["line_code"].notna() & tr["km_begin_m"].notna() & tr["km_end_m"].notna()]
-        line, track = column(b, "line_code")[free], column(b, "track")[free]
-        hit = _by_km(along, line, track, km[free])
-        if hit is None:
-            hit = _by_km_merge(along, line, track, km[free])
-        tid[free] = np.where(pd.notna(hit), hit, tid[free])
+        _along_km(net, tr, free, km[free], tid, at)
+    redo = np.flatnonzero(at < 0)  # placed by the merge, or not placed: looked up as before
+    if redo.size:
+        held = tr["track_id"].dtype
+        at[redo] = first_rows(
+            tr["track_id"], pd.Series(tid[redo], dtype=held if isinstance(held, pd.StringDtype) else object)
+        )
     pos = np.full(n, np.nan)
-    held = tr["track_id"].dtype
-    at = first_rows(tr["track_id"], pd.Series(tid, dtype=held if isinstance(held, pd.StringDtype) else object))
     has = np.flatnonzero(at >= 0)
     k0, k1 = (tr[k].to_numpy(dtype=float, na_value=np.nan)[at[has]] for k in ("km_begin_m", "km_end_m"))
     lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
@@ -77,6 +80,33 @@ def locate(net: Network) -> tuple[npt.NDArray[np.object_], F64]:
     pos[has[inside]] = np.abs(km[has[inside]] - k0[inside])
     _from_points(net, tid, km, pos)
     return tid, pos
+
+
+def _along_km(
+    net: Network,
+    tr: pd.DataFrame,
+    free: npt.NDArray[np.intp],
+    km: F64,
+    tid: npt.NDArray[np.object_],
+    at: npt.NDArray[np.int64],
+) -> None:
+    """Place the balises ``free`` (no known track id; ``km`` theirs) on the tracks of ``tr``
+    (:func:`all_tracks`) along their line and track whose km range holds their km: their
+    ``tid`` and, by the sorted search, ``at`` (the first row of ``tr`` with that id)."""
+    b, codes = net.balises, track_codes(net)
+    rows = np.flatnonzero((tr["line_code"].notna() & tr["km_begin_m"].notna() & tr["km_end_m"].notna()).to_numpy())
+    along = tr.iloc[rows]
+    pairs = codes.line_tracks
+    best = _by_km(along, pairs.of["all_tracks"][rows], pairs.of[BALISES.name][free], km)
+    if best is None:
+        hit = _by_km_merge(along, column(b, "line_code")[free], column(b, "track")[free], km)
+        tid[free] = np.where(pd.notna(hit), hit, tid[free])
+        return
+    ids = texts(along["track_id"])
+    found = np.flatnonzero(best < len(along))
+    found = found[pd.notna(ids[best[found]])]
+    tid[free[found]] = ids[best[found]]
+    at[free[found]] = codes.first[codes.of[("all_tracks", "track_id")][rows[best[found]]]]
 
 
 def _by_km_merge(
@@ -99,21 +129,20 @@ def _by_km_merge(
 
 
 def _by_km(
-    along: pd.DataFrame, line: npt.NDArray[np.object_], track: npt.NDArray[np.object_], km: F64
-) -> npt.NDArray[np.object_] | None:
+    along: pd.DataFrame, cg: npt.NDArray[np.int64], qg: npt.NDArray[np.int64], km: F64
+) -> npt.NDArray[np.int64] | None:
     """:func:`_by_km_merge` by a sorted search, for the usual case: no key missing, finite km
     ranges of at least 1 mm that do not overlap within a line and track (touching ends may
-    both hold a km: the first in ``along`` is taken). None when that does not hold."""
-    cl, ct = column(along, "line_code"), column(along, "track")
-    if len(along) == 0 or pd.isna(cl).any() or pd.isna(ct).any() or pd.isna(line).any() or pd.isna(track).any():
+    both hold a km: the first in ``along`` is taken). ``cg``/``qg``: the line/track codes of
+    ``along``'s rows and of the queries (:attr:`dbtools.topology.TrackCodes.line_tracks`, −1:
+    missing). The position in ``along`` of each query's track (``len(along)``: none); None
+    when that does not hold."""
+    if len(along) == 0 or (cg < 0).any() or (qg < 0).any():
         return None
     k0, k1 = column(along, "km_begin_m"), column(along, "km_end_m")
     lo, hi = np.minimum(k0, k1), np.maximum(k0, k1)
     if not (np.isfinite(lo).all() and np.isfinite(hi).all() and np.all(hi - lo >= 1e-3)):
         return None
-    keys = pd.MultiIndex.from_arrays([cl, ct])
-    uniq = keys.unique()
-    cg, qg = uniq.get_indexer(keys), uniq.get_indexer(pd.MultiIndex.from_arrays([line, track]))
     order = np.lexsort((lo, cg))
     cg, lo, hi = cg[order], lo[order], hi[order]
     same = cg[1:] == cg[:-1]
@@ -125,10 +154,9 @@ def _by_km(
     best = np.full(len(km), len(along))  # position in ``along`` of the first track holding km
     for d in (-2, -1, 0, 1):
         j = np.clip(at + d, 0, len(lo) - 1)
-        holds = (qg >= 0) & (cg[j] == qg) & (km >= lo[j] - 1e-6) & (km <= hi[j] + 1e-6)
+        holds = (cg[j] == qg) & (km >= lo[j] - 1e-6) & (km <= hi[j] + 1e-6)
         best = np.where(holds, np.minimum(best, order[j]), best)
-    ids = np.concatenate([texts(along["track_id"]), np.array([None], dtype=object)])
-    return np.asarray(ids[best], dtype=object)
+    return np.asarray(best, dtype=np.int64)
 
 
 def _from_points(net: Network, tid: npt.NDArray[np.object_], km: F64, pos: F64) -> None:
@@ -237,10 +265,14 @@ def _places(
             "km": column(b, "km_actual_m")[ok],
         }
     )
-    f = f.sort_values(["nid_c", "nid_bg", "track_id", "pos", "km"], kind="stable")
+    # sorted by nid_c, nid_bg, track id (its text's rank: no object sort), pos, km — stably
+    rank = np.asarray(pc.rank(pa.array(f["track_id"].to_numpy(), type=pa.string()), tiebreaker="dense"), dtype=np.int64)
+    cols = [f[k].to_numpy(dtype=float) for k in ("km", "pos")]
+    order = np.lexsort((*cols, rank, f["nid_bg"].to_numpy(dtype=float), f["nid_c"].to_numpy(dtype=float)))
+    f = f.iloc[order]
     ident = f[["nid_c", "nid_bg"]].to_numpy()
     new_id = np.r_[True, np.any(ident[1:] != ident[:-1], axis=1)] if len(f) else np.zeros(0, dtype=bool)
-    tr = texts(f["track_id"])
+    tr = rank[order]
     where = np.where(np.isfinite(f["pos"].to_numpy()), f["pos"].to_numpy(), f["km"].to_numpy())
     far = np.r_[True, (tr[1:] != tr[:-1]) | (np.abs(np.diff(where)) > config.group_span_m)] if len(f) else new_id
     f["place"] = np.cumsum(new_id | far) - 1

@@ -488,7 +488,7 @@ def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
         ),
     )
     decl = tracks.iloc[:n_decl]
-    lo, hi = _grid_extent(net, column(decl, "line_code"), column(decl, "track"))
+    lo, hi = _grid_extent(net, n_decl)
     opened = {}
     for e in ("begin", "end"):
         k = column(decl, f"km_{e}_m")
@@ -517,15 +517,13 @@ def _ends(net: Network, tracks: pd.DataFrame, out: _Out) -> None:
     )
 
 
-def _grid_extent(
-    net: Network, line: npt.NDArray[np.object_], track: npt.NDArray[np.object_]
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Lowest and highest km of the grid of each (line, track) given (NaN: no grid)."""
+def _grid_extent(net: Network, n: int) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Lowest and highest km of the grid of the line and track of each of the first ``n``
+    rows of :func:`all_tracks` (NaN: no grid), by the network's shared line/track codes."""
     g = grid_extents(net)
-    if g.empty or not len(line):
-        return np.full(len(line), np.nan), np.full(len(line), np.nan)
-    keys = pd.MultiIndex.from_arrays([texts(g["line_code"]), texts(g["track"])])
-    at = keys.get_indexer(pd.MultiIndex.from_arrays([line, track]))
+    if g.empty or not n:
+        return np.full(n, np.nan), np.full(n, np.nan)
+    at = track_codes(net).line_tracks.grid_rows("all_tracks")[:n]
     lo, hi = g["km_lo"].to_numpy(float), g["km_hi"].to_numpy(float)
     return np.where(at >= 0, lo[at], np.nan), np.where(at >= 0, hi[at], np.nan)
 

@@ -38,8 +38,9 @@ from dbtools.gis.geometry import GEOD
 from dbtools.gis.index import exact_steps, grid_index, step_bounds
 from dbtools.network import Network, sorted_by
 from dbtools.rules.common import column, texts
-from dbtools.topology import first_rows, grid_extents
+from dbtools.topology import all_tracks, first_rows, grid_extents, track_codes
 from schemas.enums import TrackEnd
+from schemas.network import TRACK_POINTS
 from schemas.tables import GIS_SPACING_M
 
 F64 = npt.NDArray[np.float64]
@@ -117,9 +118,7 @@ def track_geometry(
     n = len(tracks)
     out = {k: _nan(n) for k in ("lat_begin", "lon_begin", "az_begin", "lat_end", "lon_end", "az_end")}
     want_az = np.ones(n, dtype=bool) if azimuths is None else np.asarray(azimuths, dtype=bool)
-    tid = texts(tracks["track_id"])
-    own, own_len = _from_track_points(net.track_points)
-    at = own.index.get_indexer(pd.Index(tid)) if len(own) else np.full(n, -1)
+    own, own_len, at = _own_points(net, tracks)
     has_points = at >= 0
     parts = []
     if has_points.any():
@@ -180,14 +179,38 @@ class _OwnLengths:
         return _Lengths(rows, self.lon, self.lat, self.same, of, steps)
 
 
-def _from_track_points(tp: pd.DataFrame) -> tuple[pd.DataFrame, _OwnLengths | None]:
+def _own_points(net: Network, tracks: pd.DataFrame) -> tuple[pd.DataFrame, _OwnLengths | None, npt.NDArray[np.int64]]:
+    """:func:`_from_track_points` of the network's track_points and the group of each row of
+    ``tracks`` in it (−1: none). For :func:`dbtools.topology.all_tracks` and track_points as
+    read from a DB (sorted by track and pos) the points are grouped by the network's track
+    codes (:func:`dbtools.topology.track_codes`: no text hashed again); else by their ids."""
+    tp, n = net.track_points, len(tracks)
+    if not tp.empty and tracks is all_tracks(net) and sorted_by(tp, ("track_id", "pos_m")):
+        codes = track_codes(net)
+        own, own_len = _from_track_points(tp, codes.of[(TRACK_POINTS.name, "track_id")])
+        group = np.full(len(codes.uniques), -1, dtype=np.int64)
+        group[own.index.to_numpy()] = np.arange(len(own))
+        return own, own_len, group[codes.of[("all_tracks", "track_id")]]
+    own, own_len = _from_track_points(tp)
+    at = own.index.get_indexer(pd.Index(texts(tracks["track_id"]))) if len(own) else np.full(n, -1)
+    return own, own_len, np.asarray(at, dtype=np.int64)
+
+
+def _from_track_points(
+    tp: pd.DataFrame, codes: npt.NDArray[np.int64] | None = None
+) -> tuple[pd.DataFrame, _OwnLengths | None]:
     """End points of every track in track_points, and their polyline lengths and outward end
-    azimuths (:meth:`_OwnLengths.azimuths`: the first and last chord's ``Geod.inv`` only)."""
+    azimuths (:meth:`_OwnLengths.azimuths`: the first and last chord's ``Geod.inv`` only).
+    Indexed by the track id, or by the code of ``codes`` (one per row of ``tp``, equal for
+    equal ids; ``tp`` then sorted by track and pos)."""
     if tp.empty:
         return pd.DataFrame(), None
-    if not sorted_by(tp, ("track_id", "pos_m")):
-        tp = tp.sort_values(["track_id", "pos_m"], kind="stable")
-    ids, _ = pd.factorize(tp["track_id"], use_na_sentinel=False)  # equal ids, equal codes
+    if codes is not None:
+        ids = codes
+    else:
+        if not sorted_by(tp, ("track_id", "pos_m")):
+            tp = tp.sort_values(["track_id", "pos_m"], kind="stable")
+        ids, _ = pd.factorize(tp["track_id"], use_na_sentinel=False)  # equal ids, equal codes
     lat, lon = tp["lat"].to_numpy(float), tp["lon"].to_numpy(float)
     first = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     last = np.r_[first[1:] - 1, len(ids) - 1]
@@ -198,7 +221,7 @@ def _from_track_points(tp: pd.DataFrame) -> tuple[pd.DataFrame, _OwnLengths | No
             "lat_end": lat[last],
             "lon_end": lon[last],
         },
-        index=pd.Index(texts(tp["track_id"].iloc[first]), dtype=object),
+        index=pd.Index(texts(tp["track_id"].iloc[first]), dtype=object) if codes is None else pd.Index(ids[first]),
     )
     return ends, _OwnLengths(lon, lat, ids, first)
 
@@ -226,10 +249,11 @@ def _from_gis(
     if gis.empty or not todo.any():
         return None
     ext = grid_extents(net)
+    uniq: pd.MultiIndex | None
     if "start" in ext.columns:  # sorted by line, track and km, as read from a DB: the grid's runs, no group-by
         g = gis
         codes: npt.NDArray[np.int64] = np.repeat(np.arange(len(ext)), np.diff(np.r_[ext["start"].to_numpy(), len(g)]))
-        uniq = pd.MultiIndex.from_arrays([texts(ext["line_code"]), texts(ext["track"])])
+        uniq = None  # the rows of ``ext``: the network's line/track codes (all_tracks) or a MultiIndex
         lo, hi = ext["km_lo"].to_numpy(float), ext["km_hi"].to_numpy(float)
     else:
         g = gis.sort_values(["line_code", "track", "km_m"])
@@ -244,12 +268,10 @@ def _from_gis(
     base = float(np.nanmin(km))
     key = codes * span + (km - base)
 
-    t = tracks[todo]
     idx = np.flatnonzero(todo)
-    q = pd.MultiIndex.from_arrays([texts(t["line_code"]), texts(t["track"])])
-    gid = uniq.get_indexer(q)
-    k0 = t["km_begin_m"].to_numpy(dtype=float, na_value=np.nan)
-    k1 = t["km_end_m"].to_numpy(dtype=float, na_value=np.nan)
+    gid = _grid_rows(net, tracks, idx, uniq if uniq is not None else ext)
+    k0 = tracks["km_begin_m"].to_numpy(dtype=float, na_value=np.nan)[idx]
+    k1 = tracks["km_end_m"].to_numpy(dtype=float, na_value=np.nan)[idx]
     ok = (gid >= 0) & np.isfinite(k0) & np.isfinite(k1)
     idx, gid, k0, k1 = idx[ok], gid[ok], k0[ok], k1[ok]
     if idx.size == 0:
@@ -284,6 +306,20 @@ def _from_gis(
         return np.isin(codes[:-1], gid[which])  # the whole grid of each track's line and track
 
     return _Lengths(idx, lon, lat, codes[1:] == codes[:-1], of, steps, *_cached_steps(net, g))
+
+
+def _grid_rows(
+    net: Network, tracks: pd.DataFrame, idx: npt.NDArray[np.intp], grids: pd.MultiIndex | pd.DataFrame
+) -> npt.NDArray[np.int64]:
+    """The grid (row of ``grids``: its (line_code, track) pairs) of the tracks ``idx`` (−1:
+    none): for :func:`dbtools.topology.all_tracks` and the rows of :func:`grid_extents`, the
+    network's shared codes (:attr:`dbtools.topology.TrackCodes.line_tracks`), else a look-up."""
+    if isinstance(grids, pd.DataFrame):
+        if tracks is all_tracks(net) and grids is grid_extents(net):
+            return track_codes(net).line_tracks.grid_rows("all_tracks")[idx]
+        grids = pd.MultiIndex.from_arrays([texts(grids["line_code"]), texts(grids["track"])])
+    t = tracks.iloc[idx]
+    return np.asarray(grids.get_indexer(pd.MultiIndex.from_arrays([texts(t["line_code"]), texts(t["track"])])))
 
 
 def is_begin(ends: pd.Series) -> npt.NDArray[np.bool_]:
