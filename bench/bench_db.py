@@ -299,8 +299,8 @@ def checked_fast_build(src: Path, out: Path, reader: str = "arrow") -> str:
     from dbtools.rules.common import Locator
     from dbtools.tabular import sha256_file
     from dbtools.typed_csv import BLANK_CELLS
-    from schemas.frames import stripped_text
     from schemas.tables import DB_TABLES, SOURCE_TABLES
+    from schemas.text_cells import stripped_text
 
     stages = _Stages()
     sql_type = {"str": "VARCHAR", "float": "DOUBLE", "int": "DOUBLE", "bool": "VARCHAR"}

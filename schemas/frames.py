@@ -43,7 +43,7 @@ from schemas.findings import Finding
 from schemas.frame_screen import passes_checks
 from schemas.model import Column, Table
 from schemas.text_cells import BLANK_WORDS as BLANK_WORDS
-from schemas.text_cells import stripped_text as stripped_text
+from schemas.text_cells import stripped_text
 from schemas.units import parse_km_array
 
 if TYPE_CHECKING:
