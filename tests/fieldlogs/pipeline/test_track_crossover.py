@@ -5,13 +5,17 @@ through its crossovers: never a wrong track."""
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_crossover import (
@@ -25,6 +29,12 @@ from fieldlogs.pipeline.aids.track_imu import heading_llr, kept
 from fieldlogs.pipeline.engine import Solution, run_aids
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import track_lines
+from fieldlogs.pipeline.run import run_pipeline
+from fieldlogs.pipeline.track_truth import compare_tracks
+from fieldlogs.runs.handle import read_run
+from fieldlogs.runs.write import write_run
+from fieldlogs.simulate.scenario import scenario_from_dict
+from fieldlogs.simulate.simulator import simulate_run
 from schemas.enums import EventType
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
 
@@ -203,3 +213,46 @@ def test_never_a_wrong_track(
     t_past = float(tr.t[min(int(np.searchsorted(tr.d * scale, d_toe + 1.0)), tr.n - 1)])
     late = p[(p["state"] == "determined") & (p["t"] >= t_past)]
     assert set(late["track_id"]) <= truth
+
+
+# -- the network sample's X2 (1:10, R 220.5 m, 60.153 m), simulated and replayed --------------
+def _x2_run(network: Network, tracks: list[str], root: Path) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """IMU-only (no GPS) at 60 km/h from U2 over W7 (facing, left to X2), seed 1: events,
+    positions and the truth comparison of the replay with the default settings."""
+    sc = {
+        "name": "x2",
+        "seed": 1,
+        "run": {"run_id": "X2"},
+        "running": {"line_speed_kmh": 60.0},
+        "network": {"tracks": tracks, "points": [["0420-U2", 300.0], [tracks[-1], 600.0]]},
+        "sensors": {"gps": False},
+    }
+    streams, meta = simulate_run(network, scenario_from_dict(sc, source="test"))
+    res = run_pipeline(read_run(write_run(root / "run", meta, streams)), network)
+    return res.events, res.positions, compare_tracks(res.positions, streams["truth"], network)
+
+
+@pytest.fixture(scope="module")
+def sample_net(sample_network_db: Path) -> Network:
+    return read_network(sample_network_db)
+
+
+def test_x2_of_the_network_sample_resolved_by_its_signature(sample_net: Network, tmp_path: Path) -> None:
+    # the margin at W7 (≈ 12 m) is beyond what the turnout test allows on a 60 m crossover
+    # (m + m_end ≤ 16 m): before this test the candidates U5 and D5 stayed ambiguous until the
+    # balise group past W9 (40 m beyond the next facing switch)
+    events, _, tc = _x2_run(sample_net, ["0420-U2", "0420-U3", "0420-U4", "0420-X2", "0420-D5", "0420-D6"], tmp_path)
+    res = [json.loads(d) for d in events.loc[events["type"] == EventType.TRACK_RESOLVED.value, "detail"]]
+    first = res[0]
+    assert first["evidence"] == "imu_crossover" and first["switch_id"] == "W7"
+    assert first["track_id"] == "0420-D5" and first["candidates"] == ["0420-U5", "0420-D5"]
+    assert first["displacement_m"] == pytest.approx(4.0, abs=3 * first["sigma_m"])  # U and D 4.0 m apart
+    assert not tc["wrong"].any()
+
+
+def test_x2_through_route_never_claims_d(sample_net: Network, tmp_path: Path) -> None:
+    events, positions, tc = _x2_run(sample_net, ["0420-U2", "0420-U3", "0420-U4", "0420-U5"], tmp_path)
+    res = [json.loads(d) for d in events.loc[events["type"] == EventType.TRACK_RESOLVED.value, "detail"]]
+    assert res and all(r["track_id"] == "0420-U5" for r in res)  # the turnout test decides first here
+    assert not tc["wrong"].any()
+    assert "0420-D5" not in set(positions.loc[positions["state"] == "determined", "track_id"])
