@@ -52,7 +52,7 @@ def test_displacement_of_a_crossover_ride_hand_computed() -> None:
     # 10 m/s, 0.1 s cycles: 20 cycles at ω = 0.05 rad/s (R = 200 m, α = 0.1 rad over 20 m),
     # 20 m straight, 20 cycles back: y = 2R(1 − cos α) + 20·sin α = 1.99833 + 1.99667 = 3.99500
     wz = np.concatenate([_ride(20, 20, 0.05), [0.0]])
-    t = np.arange(wz.size) * DT
+    t = np.arange(wz.size, dtype=np.float64) * DT
     d = t * 10.0
     assert lateral_displacement(t, d, wz) == pytest.approx(400.0 * (1 - math.cos(0.1)) + 20.0 * math.sin(0.1), abs=1e-4)
     assert lateral_displacement(t, d, np.zeros(wz.size)) == 0.0  # the through route: none
@@ -67,7 +67,7 @@ def test_displacement_of_a_crossover_ride_hand_computed() -> None:
 def test_sigma_hand_computed() -> None:
     # 10 s at 10 m/s (N = 100 cycles): K = v·T²/2 = 500 m·s, b_g·K = 0.43633 m; white noise
     # q²·v²·Δt³·Σₖ (N − k − ½)² = q²·v²·Δt³·(N³/3 − N/12) = 4.0615e-3 m²; σ_geo² = 0.09 m²
-    t = np.arange(101) * DT
+    t = np.arange(101, dtype=np.float64) * DT
     d = t * 10.0
     var = (B * 500.0) ** 2 + Q * Q * 100.0 * 1e-3 * (100**3 / 3 - 100 / 12) + 0.3**2
     assert displacement_sigma(t, d, CFG) == pytest.approx(math.sqrt(var), rel=1e-9)
@@ -117,7 +117,7 @@ def _wz(tr: Travel, d_toe: float, sign: float, scale: float = 1.0) -> np.ndarray
 
 def _run(n: Network, tr: Travel, start: Start, wz: np.ndarray) -> Solution:
     aid = TrackCrossoverAid(wz, crossovers(n.switches, n.tracks), track_lines(n), CFG, MARGIN)
-    return run_aids(tr, [start, TopologyAid(track_lines(n), MARGIN), aid], MARGIN)  # type: ignore[list-item]
+    return run_aids(tr, [start, TopologyAid(track_lines(n), MARGIN), aid], MARGIN)
 
 
 def _resolved(sol: Solution) -> list[dict[str, object]]:
