@@ -55,7 +55,7 @@ log-likelihood ratio LLR_ab = (D_b − D_a)/(2σ²), D_j = min over μ ∈ S_j o
 dropped when LLR_ab ≥ A + ln(1 + w·√(2/π)/σ) (A = ln((1 − β)/α), Wald's threshold; w the
 widest span: :func:`fieldlogs.pipeline.aids.track_imu.look_threshold` with one look): the true
 track is dropped with probability at most α/(1 − β) per crossover. At 10 m/s over a 1:10
-crossover 4 m apart with m = 10 m the window is ≈ 90 m long, σ ≈ 0.5 m, and the LLR ≈ 30.
+crossover 4 m apart with m = 10 m the window is ≈ 80 m long (8 s), σ ≈ 0.41 m, and the LLR ≈ 47.
 """
 
 from __future__ import annotations
