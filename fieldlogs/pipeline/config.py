@@ -294,7 +294,7 @@ CYCLE_S: dict[str, Any] = {
 class TrackSelectConfig:
     """Which track after a facing switch: the evidence tests of the network aids
     (:mod:`fieldlogs.pipeline.aids.track_gps`, :mod:`fieldlogs.pipeline.aids.track_imu`,
-    :mod:`fieldlogs.pipeline.aids.track_features`), and the
+    :mod:`fieldlogs.pipeline.aids.track_crossover`, :mod:`fieldlogs.pipeline.aids.track_features`), and the
     D-GPS corrections along a determined track (:mod:`fieldlogs.pipeline.aids.track_gps_along`).
 
     A candidate is dropped when another one's log-likelihood ratio against it reaches
@@ -308,6 +308,12 @@ class TrackSelectConfig:
     gyro_noise_dps_rthz: float = setting(0.02, "yaw-rate white noise density", "deg/s/√Hz", ge=0)
     heading_geometry_deg: float = setting(
         0.5, "1σ of a turnout's heading change from laying tolerances and car-body motion", "deg", gt=0
+    )
+    crossover_geometry_m: float = setting(
+        0.3,
+        "1σ of a crossover's lateral displacement from the tracks' spacing, car-body motion and the odometry's scale",
+        "m",
+        gt=0,
     )
     imu_max_margin_m: float = setting(
         30.0, "no IMU test when the margin at the switch exceeds this (the window would hold other curves)", "m", gt=0

@@ -177,6 +177,15 @@ def equirect(origin: tuple[float, float], lat: FloatArray, lon: FloatArray) -> t
     return (np.asarray(lon) - lon0) * k * math.cos(math.radians(lat0)), (np.asarray(lat) - lat0) * k
 
 
+def to_plane(origin: tuple[float, float], tl: TrackLine, xy: FloatArray) -> FloatArray:
+    """(n, 2) points of ``tl``'s own plane in the equirectangular plane centred at ``origin``."""
+    k = math.pi / 180.0 * _R_EARTH
+    lat0, lon0 = tl.origin
+    lat = xy[:, 1] / k + lat0
+    lon = xy[:, 0] / (k * math.cos(math.radians(lat0))) + lon0
+    return np.column_stack(equirect(origin, lat, lon))
+
+
 def _extrap(x: FloatArray, xp: FloatArray, fp: FloatArray) -> FloatArray:
     """Linear interpolation, extended beyond both ends with the end segments' slopes."""
     out = np.interp(x, xp, fp)
@@ -407,11 +416,7 @@ class Segments:
 
     def to_plane(self, tl: TrackLine, xy: FloatArray) -> FloatArray:
         """(n, 2) points of ``tl``'s own plane in this one."""
-        k = math.pi / 180.0 * _R_EARTH
-        lat0, lon0 = tl.origin
-        lat = xy[:, 1] / k + lat0
-        lon = xy[:, 0] / (k * math.cos(math.radians(lat0))) + lon0
-        return np.column_stack(equirect(self.origin, lat, lon))
+        return to_plane(self.origin, tl, xy)
 
     def nearest(self, x: float, y: float, radius_m: float) -> list[tuple[int, float, float, float, float]]:
         """Per track whose centreline passes within ``radius_m`` of (x, y) in this plane:

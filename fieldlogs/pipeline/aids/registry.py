@@ -23,6 +23,7 @@ from fieldlogs.pipeline.aids.rail import RailAid
 from fieldlogs.pipeline.aids.rollback import RollbackAid
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_balise import TrackBaliseAid
+from fieldlogs.pipeline.aids.track_crossover import TrackCrossoverAid, crossovers
 from fieldlogs.pipeline.aids.track_features import TrackFeatureAid, TrackFeatureFixAid, track_feature_tables
 from fieldlogs.pipeline.aids.track_gnss import TrackGnssAid
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes, TrackGpsAid
@@ -118,6 +119,15 @@ def _track_imu(ctx: RunContext) -> Aid | None:
     return TrackImuAid(wz, sw, track_lines(ctx.network), ctx.cfg.track_select, ctx.cfg.margin)
 
 
+def _track_crossover(ctx: RunContext) -> Aid | None:
+    wz = ctx.cycles.imu.get("wz") if ctx.cycles.has_imu else None
+    if wz is None or not _has_topology(ctx):
+        return None
+    net = ctx.network
+    cx = net.cached("crossovers", lambda: crossovers(net.switches, net.tracks))
+    return TrackCrossoverAid(wz, cx, track_lines(net), ctx.cfg.track_select, ctx.cfg.margin) if cx else None
+
+
 def _track_features(ctx: RunContext) -> Aid | None:
     wz = ctx.cycles.imu.get("wz") if ctx.cycles.has_imu else None
     if wz is None or not _has_topology(ctx) or not ctx.cfg.track_select.feature_headings:
@@ -208,6 +218,7 @@ POSITION_AIDS: tuple[Callable[[RunContext], Aid | None], ...] = (
     _balise_group,
     _track_balise,
     _track_imu,
+    _track_crossover,
     _track_features,
     _track_feature_fix,
     _track_gps,

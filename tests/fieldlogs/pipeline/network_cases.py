@@ -30,7 +30,7 @@ def net(name: str) -> Network:
 def travel(network: Network, v: np.ndarray, cab: int = 1) -> Travel:
     """Travel at speeds ``v`` (signed: + toward the F end) on a 0.1 s grid, cab ``cab``."""
     n = v.size
-    t = np.arange(n) * 0.1
+    t = np.arange(n, dtype=np.float64) * 0.1
     ds = np.concatenate([[0.0], np.cumsum(v[:-1] * 0.1)])
     d = np.concatenate([[0.0], np.cumsum(np.abs(v[:-1]) * 0.1)])
     return Travel(
