@@ -119,6 +119,9 @@ class Episode:
     """δ: 1 s mean inertial − pulse speed at re-adhesion (NaN when not re-adhered) [m/s]."""
     speed_update_m: float
     """Distance change by the re-adhesion speed update (0 when not applied) [m]."""
+    start_trusted: bool = True
+    """The start point adhered (:func:`start_trusted`); when not, the episode failed safe at
+    i0 (always true with a ground speed, which carries the correction by its own measurement)."""
     redetect_t: tuple[float, ...] = ()
     """Detections inside the episode's room that re-opened it or fell in its fail-safe [s]."""
     echo_t: tuple[float, ...] = ()
@@ -178,7 +181,7 @@ def _step(
         i0, ok = start_point(s, d, det, back, floor)
         extend = 0.0 if g is None else cfg.ground_max_correction_s - cfg.max_correction_s + cfg.failsafe_watch_s
         ep = _correct(s, d, cfg, g, integrate(s, d, cfg, i0, extend), det, ok, det, crit)
-        return (*found, ep), ep.i_end + 1
+        return (*found, ep), max(ep.i_end, det) + 1  # a fail-safe at its start ends before det
     t_det = float(s.t[det])
     if prev.readhered and _agrees(prev, det):
         # the filters' echo of the slip's end: the speeds still agree
@@ -224,13 +227,26 @@ def _correct(
     v1 = ma(np.concatenate([lead, ig.v_in[:m]]), s.filters.P)[lead.size :]
     with np.errstate(invalid="ignore"):
         agree = np.abs(v1 - s.vp1[sl]) <= readhesion_tolerance(cfg) + cfg.beta_mps2 * tt
-    end = _end(s, cfg, ig, agree, after)
+    # a start point that did not adhere gives v0 and θ0 of slipping pulses, which eq. 13's
+    # budget does not bound: the correction cannot be trusted and fails safe at its start
+    trusted = start_trusted(d, ig, start_found)
+    end = _end(s, cfg, ig, agree, after) if trusted else (i0, False, True)
     ie, readhered, failsafe = end
     m_end = ie - i0 + 1
     end_err = float(v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan")
     v_in, update_m = _speed_update(s, cfg, i0, ie, ig.v_in[:m_end], end_err if readhered else float("nan"))
     w = watch_failsafe(s, cfg, ig, ie) if failsafe and cfg.failsafe_watch_s > 0 else None
-    return _episode(s, d, ig, det, criterion, start_found, end, w, agree, v_in, end_err, update_m)
+    ep = _episode(s, d, ig, det, criterion, start_found, end, w, agree, v_in, end_err, update_m)
+    return ep if trusted else replace(ep, start_trusted=False)
+
+
+def start_trusted(d: Detections, ig: Integration, start_found: bool) -> bool:
+    """The correction's start point i0 adhered: |θ̄| within arcsin(Ta/G) (``clipped``: more is
+    no gradient but the pulses slipping), and i0 found by the start-point search or, the
+    look-back point used instead, flagged by neither eq. 1 nor the residual."""
+    if ig.start.clipped:
+        return False
+    return start_found or not (bool(d.ta_mask[ig.i0]) or bool(d.residual_mask[ig.i0]))
 
 
 def _episode(
