@@ -98,7 +98,7 @@ def assemble(
         else:
             grow = g.grow[1:]
         allowance[g.s + 1 : g.e + 1] += np.minimum(grow, g.budget)
-    for w in watches:
+    for w in [*watches, *(r for ep in episodes for r in ep.rewatches)]:
         if w is not None and w.grow.size:
             allowance[w.cycles] += w.grow
             allowance[w.cycles[-1] + 1 :] += w.grow[-1]

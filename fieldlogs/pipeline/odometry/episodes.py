@@ -119,6 +119,9 @@ class Episode:
     """δ: 1 s mean inertial − pulse speed at re-adhesion (NaN when not re-adhered) [m/s]."""
     speed_update_m: float
     """Distance change by the re-adhesion speed update (0 when not applied) [m]."""
+    rewatches: tuple[Watch, ...] = ()
+    """Watches of the detections after a fail-safe that no correction could follow, each on an
+    integration from the detection's own look-back point (:func:`_rewatched`)."""
     start_trusted: bool = True
     """The start point adhered (:func:`start_trusted`); when not, the episode failed safe at
     i0 (always true with a ground speed, which carries the correction by its own measurement)."""
@@ -188,10 +191,37 @@ def _step(
         return (*found[:-1], replace(prev, echo_t=(*prev.echo_t, t_det))), det + 1
     redetect = (*prev.redetect_t, t_det)
     if prev.failsafe:
-        return (*found[:-1], replace(prev, redetect_t=redetect)), det + 1
+        return (*found[:-1], _rewatched(s, d, cfg, g, replace(prev, redetect_t=redetect), det, kind)), det + 1
     # premature re-adhesion: re-open the correction from its own start point
     again = _correct(s, d, cfg, g, prev.integration, prev.i_detect, prev.start_found, det, prev.criterion)
     return (*found[:-1], replace(again, redetect_t=redetect)), again.i_end + 1
+
+
+def _rewatched(
+    s: AlignedStreams,
+    d: Detections,
+    cfg: OdometryConfig,
+    g: GroundSpeed | None,
+    ep: Episode,
+    det: int,
+    kind: DetectionCriterion,
+) -> Episode:
+    """``ep`` (a fail-safe) with a watch of its own for the detection at ``det`` that no
+    correction can follow (module docstring, "Re-opening and echoes"), unless ``ep``'s watch
+    re-adhered after ``det`` (that watch then saw the disturbance out) or runs on a ground
+    speed."""
+    if g is not None or cfg.failsafe_watch_s <= 0:
+        return ep
+    own = watch_failsafe(s, cfg, ep.integration, ep.i_end)
+    if own is not None and own.readhered and det <= own.end:
+        return ep
+    _, back = lookback_point(s, d, cfg, det, kind)
+    i0 = max(back, ep.i_end, s.warm)
+    ig = integrate(s, d, cfg, i0)
+    if not start_trusted(d, ig, False):  # inside the disturbance: an earlier watch covers it
+        return ep
+    w = watch_failsafe(s, cfg, ig, i0)
+    return ep if w is None else replace(ep, rewatches=(*ep.rewatches, w))
 
 
 def _agrees(ep: Episode, det: int) -> bool:
