@@ -142,7 +142,7 @@ class SlipEpisode:
     start_trusted: bool = field(default=True, kw_only=True)
     """The start point adhered (found, and |θ̄| within arcsin(Ta/G)); when not, v0 and θ0 come
     from slipping pulses, beyond eq. 13's budget: the episode fails safe at its start."""
-    redetect_t: tuple[float, ...] = field(default=(), kw_only=True)
+    after_failsafe_t: tuple[float, ...] = field(default=(), kw_only=True)
     """A fail-safe episode's detections after its fail-safe that no correction could follow
     (inside its watch, or before a new start point had room) [s]: each makes the position
     uncertain again (``FailsafeAid``)."""
@@ -170,6 +170,8 @@ class SlipEpisode:
             "v0_mps": self.v0_mps,
             "speed_source": self.speed_source,
             "speed_update_m": self.speed_update_m,
+            "start_trusted": self.start_trusted,
+            "after_failsafe_t": list(self.after_failsafe_t),
         }
         if self.watch is not None:
             out.update(

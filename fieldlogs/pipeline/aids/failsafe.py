@@ -9,7 +9,7 @@ Two more moments at which the correction cannot be trusted, so the position turn
 * a correction whose start point did not adhere (``SlipEpisode.start_trusted`` false: none
   found, or |θ̄| beyond arcsin(Ta/G)) fails safe at its start: its v0 and θ0 come from slipping
   pulses, an error eq. 13's budget ½·Δa·T² does not bound;
-* a detection after a fail-safe that no correction could follow (``SlipEpisode.redetect_t``:
+* a detection after a fail-safe that no correction could follow (``SlipEpisode.after_failsafe_t``:
   inside the fail-safe watch, or before a new start point had room) — a new disturbance, or
   the old one going on, after an absolute fix may have made the position determined again:
   uncertain again at the detection (no event where it is uncertain already or there is none).
@@ -35,7 +35,7 @@ class FailsafeAid(StaticAid):
 
     def observations(self) -> Iterator[Observation]:
         moments = [(ep.t_end, ep, False) for ep in self.episodes if ep.failsafe]
-        moments += [(t, ep, True) for ep in self.episodes if ep.failsafe for t in ep.redetect_t]
+        moments += [(t, ep, True) for ep in self.episodes if ep.failsafe for t in ep.after_failsafe_t]
         for t, ep, again in sorted(moments, key=lambda m: m[0]):
             yield Observation(t, (ep, again))
 

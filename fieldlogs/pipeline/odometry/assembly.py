@@ -171,7 +171,7 @@ def _public(s: AlignedStreams, ep: Episode, g: _Segment, w: Watch | None) -> Sli
         speed_update_m=ep.speed_update_m if g.source == "inertial" else 0.0,  # radar: the update is not used
         watch=watch,
         start_trusted=ep.start_trusted,
-        redetect_t=tuple(x for x in ep.redetect_t if ep.failsafe and x > t[ep.i_end]),
+        after_failsafe_t=tuple(x for x in ep.redetect_t if ep.failsafe and x > t[ep.i_end]),
     )
 
 

@@ -30,12 +30,30 @@ Re-opening and echoes
       slip's end — ignored (``echo_t``);
     * after a re-adhesion otherwise: proof that the re-adhesion was premature — the
       previous correction is re-opened and continues from its own start point;
-    * after a fail-safe: still the same disturbance — ignored, the distance stays on the
-      pulses (the position is uncertain anyway) (``redetect_t``).
+    * after a fail-safe: no correction — the distance stays on the pulses (``redetect_t``).
+      The position is made uncertain again there (``SlipEpisode.after_failsafe_t``,
+      :mod:`fieldlogs.pipeline.aids.failsafe`): a balise group may have made it determined
+      while the wheel slid on. Unless the fail-safe's own watch re-adhered after it, the
+      detection gets a watch of its own (``rewatches``, allowance only), on an integration
+      from its look-back point when that point adhered: the fail-safe's watch compares with
+      an inertial speed integrated from a start 10–30 s back, which has drifted from any
+      speed by then, and ends at its time limit with the wheel perhaps sliding on (network
+      sample, route seed 2: a slide from 50.3 s, detected at 51.5 s inside the watch that
+      ended at 51.8 s, 15 m under-counted; bench/NOTES.md, "Slip margin").
     A residual onset whose reference u(k − H) lies within the previous episode (or its
     fail-safe watch) is ignored: the residual then compares with slipping pulses. A
     correction lasts ≈ look-back 1–2 s + slip + 1.2 s, so slips longer than ≈ 7.5 s end as
     fail-safe.
+
+Untrusted start (departure from S000, which corrects from the look-back point whatever it
+holds)
+    A start point that did not adhere — |θ̄| beyond arcsin(Ta/G) (``StartAttitude.clipped``),
+    or none found and the look-back point flagged by eq. 1 or the residual — gives v0 and θ0
+    of slipping pulses, an error ½·Δa·T² does not bound (route seed 2: a slide detected at
+    its end lobe, v0 10.2 m/s against 15.4 true, θ̄ clipped at 35 ‰, 63 m taken off 136 m of
+    travel against a 22.8 m budget, 29 cycles claimed on the wrong track). Such a correction
+    fails safe at its start i0: no corrected cycle, the distance on the pulses, its watch
+    from i0 (:func:`start_trusted`).
 
 Re-adhesion speed update (``readhesion_speed_update``)
     Not in the papers. Once re-adhered the wheel measures the ground speed again, so the
