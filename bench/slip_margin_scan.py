@@ -120,7 +120,7 @@ def rows(label: str, results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     """The printed figures of one family."""
     wrong = [r for r in results if r["wrong"]]
     over = [r for r in results if r["over"]]
-    found = sorted({r["name"] for r in wrong + over})
+    found = sorted({r["name"] for r in wrong + over + [r for r in results if r["over_claimed"]]})
     eps = sum(r["episodes"] for r in results)
     return [
         (f"{label}: runs", str(len(results))),

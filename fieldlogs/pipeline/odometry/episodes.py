@@ -35,7 +35,9 @@ Re-opening and echoes
       :mod:`fieldlogs.pipeline.aids.failsafe`): a balise group may have made it determined
       while the wheel slid on. Unless the fail-safe's own watch re-adhered after it, the
       detection gets a watch of its own (``rewatches``, allowance only), on an integration
-      from its look-back point when that point adhered: the fail-safe's watch compares with
+      from its look-back point when that point adhered, the speeds' agreement counted only
+      after the detection (before it they agree: the point precedes the onset; route seed
+      107 left 15 cycles beyond their margin otherwise): the fail-safe's watch compares with
       an inertial speed integrated from a start 10–30 s back, which has drifted from any
       speed by then, and ends at its time limit with the wheel perhaps sliding on (network
       sample, route seed 2: a slide from 50.3 s, detected at 51.5 s inside the watch that
@@ -104,7 +106,13 @@ from fieldlogs.pipeline.odometry.integration import Integration, integrate
 from fieldlogs.pipeline.odometry.signals import BoolArray, held, ma, readonly
 from fieldlogs.pipeline.odometry.start_point import lookback_point, start_point
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
-from fieldlogs.pipeline.odometry.watch import Watch, hold_cycles, readhesion_tolerance, watch_failsafe, watch_fused
+from fieldlogs.pipeline.odometry.watch import (
+    Watch,
+    hold_cycles,
+    readhesion_tolerance,
+    watch_failsafe,
+    watch_fused,
+)
 from fieldlogs.pipeline.types import DetectionCriterion, FloatArray, SlipKind, slip_budget_m
 
 
@@ -238,7 +246,7 @@ def _rewatched(
     ig = integrate(s, d, cfg, i0)
     if not start_trusted(d, ig, False):  # inside the disturbance: an earlier watch covers it
         return ep
-    w = watch_failsafe(s, cfg, ig, i0)
+    w = watch_failsafe(s, cfg, ig, i0, after=det)
     return ep if w is None else replace(ep, rewatches=(*ep.rewatches, w))
 
 
