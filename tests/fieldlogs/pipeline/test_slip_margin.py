@@ -6,6 +6,7 @@ fail-safe; bench/NOTES.md, "Slip margin").
   its end lobe, with its start point inside the slide — |θ̄| beyond arcsin(Ta/G). That
   correction fails safe at its start: the distance stays on the pulses, no eq. 13 budget.
 * :class:`FailsafeAid`: its moments (fail-safes and the detections after them) and reasons.
+* Wheel scale: divided out only on a fit with ≥ 2 residual degrees of freedom.
 * Regression, seeded simulator: the network sample, route 0420-U2 → U3 → U4 → X2 → D5 → D6 at
   60 km/h, IMU-only, seed 2. A balise group made the position determined during the slide
   that began inside a fail-safe watch; the slide's end-lobe correction, started on sliding
@@ -26,11 +27,13 @@ from dbtools.database import read_network
 from fieldlogs.pipeline.aid import EngineView
 from fieldlogs.pipeline.aids.failsafe import FailsafeAid
 from fieldlogs.pipeline.config import OdometryConfig
+from fieldlogs.pipeline.consistency import BaliseEvidence
 from fieldlogs.pipeline.odometry.correct import correct_odometry
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.track_truth import compare_tracks
 from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.pipeline.types import Fix, SlipEpisode
+from fieldlogs.pipeline.wheelscale import MIN_RESCALE_DOF, residual_dof
 from fieldlogs.runs.handle import read_run
 from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
@@ -146,3 +149,38 @@ def test_seed_2_slide_after_a_failsafe_claims_no_wrong_track(sample_network_db: 
     # the slide's own watch (from 49.4 s, before its onset) grows the margin until the
     # candidates span U3's end: no claim until the next balise group
     assert (state.loc[51.5:74.0] != PositionState.DETERMINED.value).all()
+
+
+@pytest.mark.parametrize(
+    "seed",
+    [
+        # a slide inside a fail-safe watch left uncorrected; two balise intervals (slip budgets 56
+        # and 102 m) fitted the wheel −4.98 ± 1.13 % on one residual: divided out, 153 determined
+        # cycles beyond their margin on adf26d4
+        26,
+        # the watch of the slide detected after the fail-safe agreed at once (from before the
+        # onset): 15 uncertain/ambiguous cycles beyond their margin before the watch waited
+        107,
+    ],
+)
+def test_route_seeds_hold_their_margin(sample_network_db: Path, tmp_path: Path, seed: int) -> None:
+    net = read_network(sample_network_db)
+    sc = load_script("slip_margin_scan").route_scenario(seed)
+    streams, meta = simulate_run(net, scenario_from_dict(sc, source="test"))
+    res = run_pipeline(read_run(write_run(tmp_path / "run", meta, streams)), net)
+    cmp = compare_with_truth(res.positions, streams["truth"])
+    assert cmp["claimed"].sum() > 500
+    assert cmp["within_margin"].all()  # every claimed cycle, uncertain and ambiguous ones included
+    scale = res.events[res.events["type"] == EventType.WHEEL_SCALE.value]["detail"]
+    assert not scale.str.contains("pulse distance divided").any()  # the fit widens the margin instead
+    assert scale.str.contains("margin's distance share widened").all()
+
+
+def test_a_scale_is_divided_out_only_with_two_residual_degrees_of_freedom() -> None:
+    def fit(n: int, lag_sigma_s: float) -> BaliseEvidence:
+        return BaliseEvidence(-0.05, 0.01, 0.0, lag_sigma_s, n, 0.05)
+
+    assert residual_dof(fit(2, float("inf"))) == 1  # the scale alone on two intervals
+    assert residual_dof(fit(3, float("inf"))) == 2
+    assert residual_dof(fit(4, 0.2)) == 2  # scale and lag on four
+    assert MIN_RESCALE_DOF == 2
