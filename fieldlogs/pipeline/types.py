@@ -139,6 +139,13 @@ class SlipEpisode:
     switched off, no re-adhesion, or the radar's speed used) [m]."""
     watch: FailsafeWatch | None = field(default=None, kw_only=True)
     """The fail-safe watch (fail-safe episodes, when enabled)."""
+    start_trusted: bool = field(default=True, kw_only=True)
+    """The start point adhered (found, and |θ̄| within arcsin(Ta/G)); when not, v0 and θ0 come
+    from slipping pulses, beyond eq. 13's budget: the episode fails safe at its start."""
+    after_failsafe_t: tuple[float, ...] = field(default=(), kw_only=True)
+    """A fail-safe episode's detections after its fail-safe that no correction could follow
+    (inside its watch, or before a new start point had room) [s]: each makes the position
+    uncertain again (``FailsafeAid``)."""
 
     @property
     def duration_s(self) -> float:
@@ -163,6 +170,8 @@ class SlipEpisode:
             "v0_mps": self.v0_mps,
             "speed_source": self.speed_source,
             "speed_update_m": self.speed_update_m,
+            "start_trusted": self.start_trusted,
+            "after_failsafe_t": list(self.after_failsafe_t),
         }
         if self.watch is not None:
             out.update(

@@ -137,6 +137,10 @@ SMOKE: dict[str, Smoke] = {
         (r"phase\s+wall s\s+CPU s", r"engine \(run_aids\)\s+[\d.]+", r"total \(from the script first line\)"),
         ("stages never called",),
     ),
+    "slip_margin_scan.py": Smoke(
+        "--route-seeds 1 --draw-seeds 31 --runs 1 --workers 1",
+        (r"route 0420-U2…D6, IMU-only: runs\s+1", r"wrong-track claims\s+\d+ runs, \d+ cycles"),
+    ),
     "slip_study.py": Smoke("--runs 1 --workers 1 --show none", (r"detected \d+/\d+",)),
     "stage_memory.py": Smoke("{run} {db}", (r"correct_odometry\s+RSS",)),
     "wheel_gnss_errors.py": Smoke("{run} --db {db} --workers 1", (r"run\s+z\s+err%",)),

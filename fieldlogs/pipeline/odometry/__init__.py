@@ -63,6 +63,10 @@ bench/NOTES.md, "Odometry")
       difference.
     * The fail-safe watch keeps the margin growing while the wheel may still be slipping
       after a fail-safe.
+    * A correction whose start point did not adhere (θ̄ clipped, or no start point found and
+      the look-back point flagged) fails safe at its start; a detection after a fail-safe
+      that no correction can follow gets a watch of its own and makes the position
+      uncertain again (:mod:`.episodes`, :mod:`fieldlogs.pipeline.aids.failsafe`).
     * θ0 uses a least-squares A_p0 over the filter window (pulse quantisation), residual
       detections have their own look-back point and the lobe rule.
     * With a ground speed (the radar [S004]; S000 has none): a third detection criterion,

@@ -98,7 +98,7 @@ def assemble(
         else:
             grow = g.grow[1:]
         allowance[g.s + 1 : g.e + 1] += np.minimum(grow, g.budget)
-    for w in watches:
+    for w in [*watches, *(r for ep in episodes for r in ep.rewatches)]:
         if w is not None and w.grow.size:
             allowance[w.cycles] += w.grow
             allowance[w.cycles[-1] + 1 :] += w.grow[-1]
@@ -170,6 +170,8 @@ def _public(s: AlignedStreams, ep: Episode, g: _Segment, w: Watch | None) -> Sli
         speed_source=g.source,
         speed_update_m=ep.speed_update_m if g.source == "inertial" else 0.0,  # radar: the update is not used
         watch=watch,
+        start_trusted=ep.start_trusted,
+        after_failsafe_t=tuple(x for x in ep.redetect_t if ep.failsafe and x > t[ep.i_end]),
     )
 
 

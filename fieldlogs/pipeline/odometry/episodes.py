@@ -30,12 +30,32 @@ Re-opening and echoes
       slip's end — ignored (``echo_t``);
     * after a re-adhesion otherwise: proof that the re-adhesion was premature — the
       previous correction is re-opened and continues from its own start point;
-    * after a fail-safe: still the same disturbance — ignored, the distance stays on the
-      pulses (the position is uncertain anyway) (``redetect_t``).
+    * after a fail-safe: no correction — the distance stays on the pulses (``redetect_t``).
+      The position is made uncertain again there (``SlipEpisode.after_failsafe_t``,
+      :mod:`fieldlogs.pipeline.aids.failsafe`): a balise group may have made it determined
+      while the wheel slid on. Unless the fail-safe's own watch re-adhered after it, the
+      detection gets a watch of its own (``rewatches``, allowance only), on an integration
+      from its look-back point when that point adhered, the speeds' agreement counted only
+      after the detection (before it they agree: the point precedes the onset; route seed
+      107 left 15 cycles beyond their margin otherwise): the fail-safe's watch compares with
+      an inertial speed integrated from a start 10–30 s back, which has drifted from any
+      speed by then, and ends at its time limit with the wheel perhaps sliding on (network
+      sample, route seed 2: a slide from 50.3 s, detected at 51.5 s inside the watch that
+      ended at 51.8 s, 15 m under-counted; bench/NOTES.md, "Slip margin").
     A residual onset whose reference u(k − H) lies within the previous episode (or its
     fail-safe watch) is ignored: the residual then compares with slipping pulses. A
     correction lasts ≈ look-back 1–2 s + slip + 1.2 s, so slips longer than ≈ 7.5 s end as
     fail-safe.
+
+Untrusted start (departure from S000, which corrects from the look-back point whatever it
+holds)
+    A start point that did not adhere — |θ̄| beyond arcsin(Ta/G) (``StartAttitude.clipped``),
+    or none found and the look-back point flagged by eq. 1 or the residual — gives v0 and θ0
+    of slipping pulses, an error ½·Δa·T² does not bound (route seed 2: a slide detected at
+    its end lobe, v0 10.2 m/s against 15.4 true, θ̄ clipped at 35 ‰, 63 m taken off 136 m of
+    travel against a 22.8 m budget, 29 cycles claimed on the wrong track). Such a correction
+    fails safe at its start i0: no corrected cycle, the distance on the pulses, its watch
+    from i0 (:func:`start_trusted`).
 
 Re-adhesion speed update (``readhesion_speed_update``)
     Not in the papers. Once re-adhered the wheel measures the ground speed again, so the
@@ -86,7 +106,13 @@ from fieldlogs.pipeline.odometry.integration import Integration, integrate
 from fieldlogs.pipeline.odometry.signals import BoolArray, held, ma, readonly
 from fieldlogs.pipeline.odometry.start_point import lookback_point, start_point
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
-from fieldlogs.pipeline.odometry.watch import Watch, hold_cycles, readhesion_tolerance, watch_failsafe, watch_fused
+from fieldlogs.pipeline.odometry.watch import (
+    Watch,
+    hold_cycles,
+    readhesion_tolerance,
+    watch_failsafe,
+    watch_fused,
+)
 from fieldlogs.pipeline.types import DetectionCriterion, FloatArray, SlipKind, slip_budget_m
 
 
@@ -119,6 +145,12 @@ class Episode:
     """δ: 1 s mean inertial − pulse speed at re-adhesion (NaN when not re-adhered) [m/s]."""
     speed_update_m: float
     """Distance change by the re-adhesion speed update (0 when not applied) [m]."""
+    rewatches: tuple[Watch, ...] = ()
+    """Watches of the detections after a fail-safe that no correction could follow, each on an
+    integration from the detection's own look-back point (:func:`_rewatched`)."""
+    start_trusted: bool = True
+    """The start point adhered (:func:`start_trusted`); when not, the episode failed safe at
+    i0 (always true with a ground speed, which carries the correction by its own measurement)."""
     redetect_t: tuple[float, ...] = ()
     """Detections inside the episode's room that re-opened it or fell in its fail-safe [s]."""
     echo_t: tuple[float, ...] = ()
@@ -178,17 +210,44 @@ def _step(
         i0, ok = start_point(s, d, det, back, floor)
         extend = 0.0 if g is None else cfg.ground_max_correction_s - cfg.max_correction_s + cfg.failsafe_watch_s
         ep = _correct(s, d, cfg, g, integrate(s, d, cfg, i0, extend), det, ok, det, crit)
-        return (*found, ep), ep.i_end + 1
+        return (*found, ep), max(ep.i_end, det) + 1  # a fail-safe at its start ends before det
     t_det = float(s.t[det])
     if prev.readhered and _agrees(prev, det):
         # the filters' echo of the slip's end: the speeds still agree
         return (*found[:-1], replace(prev, echo_t=(*prev.echo_t, t_det))), det + 1
     redetect = (*prev.redetect_t, t_det)
     if prev.failsafe:
-        return (*found[:-1], replace(prev, redetect_t=redetect)), det + 1
+        return (*found[:-1], _rewatched(s, d, cfg, g, replace(prev, redetect_t=redetect), det, kind)), det + 1
     # premature re-adhesion: re-open the correction from its own start point
     again = _correct(s, d, cfg, g, prev.integration, prev.i_detect, prev.start_found, det, prev.criterion)
     return (*found[:-1], replace(again, redetect_t=redetect)), again.i_end + 1
+
+
+def _rewatched(
+    s: AlignedStreams,
+    d: Detections,
+    cfg: OdometryConfig,
+    g: GroundSpeed | None,
+    ep: Episode,
+    det: int,
+    kind: DetectionCriterion,
+) -> Episode:
+    """``ep`` (a fail-safe) with a watch of its own for the detection at ``det`` that no
+    correction can follow (module docstring, "Re-opening and echoes"), unless ``ep``'s watch
+    re-adhered after ``det`` (that watch then saw the disturbance out) or runs on a ground
+    speed."""
+    if g is not None or cfg.failsafe_watch_s <= 0:
+        return ep
+    own = watch_failsafe(s, cfg, ep.integration, ep.i_end)
+    if own is not None and own.readhered and det <= own.end:
+        return ep
+    _, back = lookback_point(s, d, cfg, det, kind)
+    i0 = max(back, ep.i_end, s.warm)
+    ig = integrate(s, d, cfg, i0)
+    if not start_trusted(d, ig, False):  # inside the disturbance: an earlier watch covers it
+        return ep
+    w = watch_failsafe(s, cfg, ig, i0, after=det)
+    return ep if w is None else replace(ep, rewatches=(*ep.rewatches, w))
 
 
 def _agrees(ep: Episode, det: int) -> bool:
@@ -224,13 +283,26 @@ def _correct(
     v1 = ma(np.concatenate([lead, ig.v_in[:m]]), s.filters.P)[lead.size :]
     with np.errstate(invalid="ignore"):
         agree = np.abs(v1 - s.vp1[sl]) <= readhesion_tolerance(cfg) + cfg.beta_mps2 * tt
-    end = _end(s, cfg, ig, agree, after)
+    # a start point that did not adhere gives v0 and θ0 of slipping pulses, which eq. 13's
+    # budget does not bound: the correction cannot be trusted and fails safe at its start
+    trusted = start_trusted(d, ig, start_found)
+    end = _end(s, cfg, ig, agree, after) if trusted else (i0, False, True)
     ie, readhered, failsafe = end
     m_end = ie - i0 + 1
     end_err = float(v1[m_end - 1] - s.vp1[ie]) if readhered else float("nan")
     v_in, update_m = _speed_update(s, cfg, i0, ie, ig.v_in[:m_end], end_err if readhered else float("nan"))
     w = watch_failsafe(s, cfg, ig, ie) if failsafe and cfg.failsafe_watch_s > 0 else None
-    return _episode(s, d, ig, det, criterion, start_found, end, w, agree, v_in, end_err, update_m)
+    ep = _episode(s, d, ig, det, criterion, start_found, end, w, agree, v_in, end_err, update_m)
+    return ep if trusted else replace(ep, start_trusted=False)
+
+
+def start_trusted(d: Detections, ig: Integration, start_found: bool) -> bool:
+    """The correction's start point i0 adhered: |θ̄| within arcsin(Ta/G) (``clipped``: more is
+    no gradient but the pulses slipping), and i0 found by the start-point search or, the
+    look-back point used instead, flagged by neither eq. 1 nor the residual."""
+    if ig.start.clipped:
+        return False
+    return start_found or not (bool(d.ta_mask[ig.i0]) or bool(d.residual_mask[ig.i0]))
 
 
 def _episode(

@@ -55,9 +55,12 @@ def hold_cycles(cfg: OdometryConfig, cyc: float) -> int:
     return max(round(cfg.readhesion_hold_s / cyc), 1)
 
 
-def watch_failsafe(s: AlignedStreams, cfg: OdometryConfig, ig: Integration, ie: int) -> Watch | None:
+def watch_failsafe(
+    s: AlignedStreams, cfg: OdometryConfig, ig: Integration, ie: int, after: int | None = None
+) -> Watch | None:
     """Watch of the correction ``ig`` that failed safe at aligned cycle ``ie``: from ie on,
-    compare the 1 s mean inertial speed of its integration with the 1 s mean pulse speed.
+    compare the 1 s mean inertial speed of its integration with the 1 s mean pulse speed
+    (agreement counted only after aligned cycle ``after``, when given: a detection's).
     None when the watch has no room (data end)."""
     t, p, i0 = s.t, s.filters.P, ig.i0
     lead = s.vp[max(i0 - p + 1, 0) : i0]
@@ -69,7 +72,7 @@ def watch_failsafe(s: AlignedStreams, cfg: OdometryConfig, ig: Integration, ie: 
     tt = t[k] - t[i0]
     own = cfg.delta_a_mps2 * tt
     tol = readhesion_tolerance(cfg) + cfg.beta_mps2 * tt
-    return _watch(s, cfg, ie, out, np.abs(v1 - s.vp1[k]), tol, own, "inertial")
+    return _watch(s, cfg, ie, out, np.abs(v1 - s.vp1[k]), tol, own, "inertial", 0 if after is None else after - ie)
 
 
 def watch_fused(s: AlignedStreams, cfg: OdometryConfig, f: Fusion, ie: int) -> Watch | None:
@@ -99,12 +102,14 @@ def _watch(
     tol: FloatArray,
     own: FloatArray,
     source: SpeedSource,
+    quiet: int = 0,
 ) -> Watch:
     """The watch from aligned cycle ``ie`` (output cycles ``out``): it ends where |Δv| ≤ tol
-    held ``readhesion_hold_s``; the allowance grows by (|Δv| + own)·dt until then."""
+    held ``readhesion_hold_s`` (not on its first ``quiet`` + 1 cycles); the allowance grows by
+    (|Δv| + own)·dt until then."""
     with np.errstate(invalid="ignore"):
         ok = held(dv <= tol, hold_cycles(cfg, s.cyc))
-    ok[0] = False
+    ok[: max(quiet, 0) + 1] = False
     hit = np.flatnonzero(ok)
     j = int(hit[0]) if hit.size else dv.size - 1
     grow = np.cumsum((dv + own)[1 : j + 1] * s.dt[out[1 : j + 1]])
