@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING
 import pandas as pd
 
 from dbtools.atomic import atomic_file, sweep_stale, temp_sibling
-from dbtools.foreign_keys import check_foreign_keys
+from dbtools.foreign_keys import check_foreign_keys, foreign_keys_hold
 from dbtools.inputs import regular_file
 from dbtools.integrity import check_content_hash
 from dbtools.network import Network, canonical, canonical_frame, empty_frame, network_content_hash
@@ -306,7 +306,9 @@ def _storage_class_error(conn: sqlite3.Connection, t: Table, path: Path, present
 
 
 def integrity_findings(path: Path, network: Network | None = None) -> list[Finding]:
-    """SQLite-level checks: integrity_check, foreign_key_check, and the meta content hash."""
+    """SQLite-level checks: integrity_check, foreign_key_check, and the meta content hash.
+    ``network``: the file's tables as read; with it, ``foreign_key_check`` runs only when the
+    frames cannot prove that it finds nothing (:func:`dbtools.foreign_keys.foreign_keys_hold`)."""
     findings: list[Finding] = []
     with connect_ro(path) as conn:
         rows = [r[0] for r in conn.execute("PRAGMA integrity_check").fetchall()]
@@ -315,7 +317,12 @@ def integrity_findings(path: Path, network: Network | None = None) -> list[Findi
                 findings.append(
                     Finding("db.integrity", Severity.ERROR, "sqlite", f"integrity_check: {msg}", value=msg, limit="ok")
                 )
-        for table, rowid, parent, _fk in conn.execute("PRAGMA foreign_key_check").fetchall()[:1000]:
+        fk_rows = (
+            []  # the frames read prove the pragma would list nothing (dbtools.foreign_keys)
+            if network is not None and rows == ["ok"] and foreign_keys_hold(conn, network.tables, DB_TABLES)
+            else conn.execute("PRAGMA foreign_key_check").fetchall()[:1000]
+        )
+        for table, rowid, parent, _fk in fk_rows:
             findings.append(
                 Finding(
                     "db.foreign_key",

@@ -70,6 +70,10 @@ class Table:
     unique: tuple[tuple[str, ...], ...] = ()
     foreign_keys: tuple[ForeignKey, ...] = ()
     indexes: tuple[tuple[str, ...], ...] = ()
+    """Secondary indexes of the SQLite table (onboard DBs: built after the bulk load). Each costs
+    every ``db build`` its creation and every ``db validate`` a look-up per row
+    (``integrity_check``): declare one only for a query that needs it (the onboard readers
+    read whole tables; ``db show --where`` works without one, by a scan)."""
     required: bool = True
     """For sources and log streams: must the file exist?"""
     rate_hz: float | None = None

@@ -110,7 +110,7 @@ NETWORK_TRACKS = Table(
     ),
     primary_key=("track_id",),
     foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
-    indexes=(("line_code", "track"),),
+    # no secondary index: every reader reads the whole table (Table.indexes)
     required=False,
 )
 
@@ -139,7 +139,7 @@ CONNECTIONS = Table(
         ForeignKey(("track_a",), "tracks", ("track_id",)),
         ForeignKey(("track_b",), "tracks", ("track_id",)),
     ),
-    indexes=(("track_b", "end_b"),),
+    # no secondary index on (track_b, end_b): every reader reads the whole table (Table.indexes)
     required=False,
 )
 

@@ -12,14 +12,23 @@ compared with α as the ratio measured/α.
 from __future__ import annotations
 
 from functools import partial
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 
-from dbtools.network import Network
+from dbtools.network import Network, sorted_by
 from dbtools.rules.common import Locator, capped, column, py, texts
 from dbtools.rules.config import ValidationConfig
-from dbtools.rules.track_geometry import chord_azimuths, distance_m, end_coordinates, is_begin, track_geometry
+from dbtools.rules.track_geometry import (
+    chord_azimuths,
+    coded_chord_azimuths,
+    distance_m,
+    end_coordinates,
+    is_begin,
+    track_geometry,
+)
 from dbtools.topology import BEGIN, connection_rows, first_rows, track_codes
 from schemas.enums import Severity, TrackKind
 from schemas.findings import Finding
@@ -169,6 +178,7 @@ def _crossover_ends(net: Network, tracks: pd.DataFrame) -> pd.DataFrame | None:
                     "switch_id": texts(c["switch_id"].iloc[hit]),
                     "rows": f_o[hit],
                     "n": number[hit],
+                    "code": codes.of[(CONNECTIONS.name, f"track_{a}")][hit],
                 }
             )
         )
@@ -183,11 +193,18 @@ def _worst_deviation(net: Network, geo: pd.DataFrame, ref: pd.DataFrame) -> pd.D
     modulo 180°), in (track_id, end) order; ends without a chord or an end are left out."""
     ref = ref[ref["end"].notna().to_numpy()]
     axis = end_coordinates(geo, ref["rows"].to_numpy(), ref["other_end"].to_numpy(dtype=object) == BEGIN)[2]
-    chords = chord_azimuths(net.track_points, set(ref["track"]))
-    cid, az = chords["track_id"].to_numpy(dtype=object), chords["az"].to_numpy(float)
+    tp = net.track_points
+    cid: npt.NDArray[Any]
+    if sorted_by(tp, ("track_id", "pos_m")):  # as read from a DB: the chords by track code, no text
+        track = ref["code"].to_numpy(dtype=np.int64)
+        cid, az = coded_chord_azimuths(net, track)
+    else:
+        track = ref["track"].to_numpy(dtype=object)
+        chords = chord_azimuths(tp, set(ref["track"]))
+        cid, az = chords["track_id"].to_numpy(dtype=object), chords["az"].to_numpy(float)
     start = np.flatnonzero(np.r_[True, cid[1:] != cid[:-1]]) if len(cid) else np.zeros(0, dtype=np.int64)
-    run = pd.Index(cid[start], dtype=object)  # chord_azimuths gives each track's chords as one run
-    at = run.get_indexer(pd.Index(ref["track"].to_numpy(dtype=object), dtype=object))
+    run = pd.Index(cid[start])  # each track's chords come as one run
+    at = run.get_indexer(pd.Index(track))
     has = np.flatnonzero(at >= 0)
     s0, cnt = start[at[has]], np.diff(np.r_[start, len(cid)])[at[has]]
     each = np.repeat(np.arange(has.size), cnt)

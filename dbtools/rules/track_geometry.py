@@ -352,6 +352,23 @@ def distance_m(lat0: F64, lon0: F64, lat1: F64, lon1: F64) -> F64:
     return out
 
 
+def coded_chord_azimuths(net: Network, tracks: npt.NDArray[np.int64]) -> tuple[npt.NDArray[np.int64], F64]:
+    """:func:`chord_azimuths` of the network's track_points as read from a DB (sorted by track
+    and pos) for the tracks of the track codes ``tracks`` (:func:`dbtools.topology.track_codes`:
+    equal ids, equal codes), by those codes: (the track code of each chord, its azimuth)."""
+    codes = track_codes(net)
+    own = codes.of[(TRACK_POINTS.name, "track_id")]
+    wanted = np.zeros(len(codes.uniques), dtype=bool)
+    wanted[tracks] = True
+    sel = np.flatnonzero(wanted[own])
+    ids = own[sel]
+    tp = net.track_points
+    lat, lon = tp["lat"].to_numpy(float)[sel], tp["lon"].to_numpy(float)[sel]
+    az, _ = _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])
+    same = ids[1:] == ids[:-1]
+    return ids[1:][same], az[same]
+
+
 def chord_azimuths(tp: pd.DataFrame, track_ids: set[str]) -> pd.DataFrame:
     """Azimuth [deg] of every chord between consecutive track_points of the given tracks:
     columns ``track_id``, ``az``."""
