@@ -182,10 +182,13 @@ class _Engine:
             if self.version != before:
                 self.ask_next(view, range(len(self.aids)))
                 return None
-        if obs.version is None:
-            return None
         # its estimate-dependent moment was taken, nothing changed: the next one
-        nxt = aid.next_observation(view)
+        return None if obs.version is None else self._next(k, view)
+
+    def _next(self, k: int, view: _View) -> _Entry | None:
+        """Aid ``k``'s next dynamic moment: returned when it comes before the heap's first entry
+        that is not idle (those before it taken), pushed otherwise (:meth:`step`)."""
+        nxt = self.aids[k].next_observation(view)
         if nxt is None:
             return None
         entry = (nxt.t, self.priority[k], next(self.arrival), k, Observation(nxt.t, nxt.payload, self.version))
