@@ -26,6 +26,10 @@ engine then takes that moment from the heap without hearing it (nothing would ch
 aid's next dynamic moment is heard at once when it comes before the heap's first entry that is
 not idle (the *horizon*, :mod:`fieldlogs.pipeline.engine`).
 
+An aid whose dynamic moments are many and mostly silent may set ``lane = True``: the engine then
+hears them from a short list beside the heap while they come first, with one view moved from
+moment to moment — such an aid must keep no view past the call it was given in.
+
 Every estimate carries its uncertainty (``Fix.uncertainty_m``) from which the engine's
 margin grows with travel; the engine, not the aid, turns a correction amount
 (``Event.correction_m``) into its position-correction % [S003 §5.2], because only it knows

@@ -22,12 +22,21 @@ hearings in the same order as pushing every moment and popping the least. A stat
 an aid that says it is *idle* for it (:class:`~fieldlogs.pipeline.aid.IdleAid`: hearing it now
 would change nothing) is taken from the heap unheard, so it does not stop the horizon either.
 
+**Lane.** Aids heard at many moments that say nothing at most of them (the D-GPS aids at every
+trusted fix, both at the same times and priority, one after the other) declare ``lane``: once
+one of their dynamic moments is taken, the engine keeps their next moments in a short sorted
+list beside the heap and hears them from there, one view moved from moment to moment, while they
+come first; an entry of theirs already in the heap joins the list when it comes first, idle and
+stale ones are taken. At the first other entry, or the first moment that says something, the
+list goes back to the heap with its arrivals: the order is that of the one heap throughout.
+
 Per-cycle positions and margins are then evaluated vectorised from the recorded fixes
 (:mod:`fieldlogs.pipeline.positions`).
 """
 
 from __future__ import annotations
 
+import bisect
 import heapq
 import itertools
 from collections.abc import Iterable, Sequence
@@ -102,6 +111,7 @@ class _Engine:
         self.aids = list(aids)
         self.priority = [int(aid.priority) for aid in self.aids]
         self.idle = [aid.idle if isinstance(aid, IdleAid) else None for aid in self.aids]
+        self.lane = [bool(getattr(aid, "lane", False)) for aid in self.aids]
         self.heap: list[_Entry] = []
         self.arrival = itertools.count()
         self.events: list[Event] = []
@@ -146,7 +156,10 @@ class _Engine:
                 t, _prio, n, k, obs = entry
                 if t > end:
                     return
-                entry = self.step(t, k, obs, n)
+                if self.lane[k] and obs.version == self.version and not isinstance(obs.payload, Resume):
+                    entry = self._lane(entry, end)
+                else:
+                    entry = self.step(t, k, obs, n)
 
     def step(self, t: float, k: int, obs: Observation, arrival: int | None = None) -> _Entry | None:
         """Hear aid ``k`` at ``t`` (unless its observation is stale or it needs the track and
@@ -173,7 +186,10 @@ class _Engine:
         if aid.needs_track and not self.travel.on_track[i]:
             return None  # the vehicle is not on the track: no position, nothing to aid
         view = _View(self, t, i, d, s)
-        out = aid.observe(obs, view)
+        return self._heard(k, obs, view, aid.observe(obs, view))
+
+    def _heard(self, k: int, obs: Observation, view: _View, out: Outcome) -> _Entry | None:
+        """Apply what aid ``k`` said at ``obs`` and ask for what follows (:meth:`step`)."""
         if out.events or out.estimate is not None or out.forget or out.follow_up:
             before = self.version
             for follow in out.follow_up:
@@ -184,6 +200,52 @@ class _Engine:
                 return None
         # its estimate-dependent moment was taken, nothing changed: the next one
         return None if obs.version is None else self._next(k, view)
+
+    def _lane(self, first: _Entry, end: float) -> _Entry | None:
+        """Hear the dynamic moments of lane aids (``lane``, :mod:`fieldlogs.pipeline.aid`) from
+        ``first`` on, in (time, priority, arrival) order, while they come before every other
+        entry of the heap (module docstring, *lane*): their next moments are kept in a short
+        sorted list instead of the heap, those already in the heap join it when they come first,
+        idle and stale entries before them are taken, one view is moved from moment to moment.
+        Left at the first other entry (the list goes back to the heap) or at the first moment
+        that says something (heard as :meth:`step` would, a view of its own for what follows)."""
+        heap, lane, version = self.heap, [first], self.version
+        travel, on_track = self.travel, self.travel.on_track
+        view = _View(self, first[0], 0, 0.0, 0.0)
+        while lane:
+            while heap and heap[0] < lane[0]:
+                top = heap[0]
+                obs0 = top[4]
+                if obs0.version is None and not self._idle(top[3], obs0):
+                    return self._leave(lane)  # another aid's moment comes first
+                if obs0.version == version and (not self.lane[top[3]] or isinstance(obs0.payload, Resume)):
+                    return self._leave(lane)
+                heapq.heappop(heap)
+                if obs0.version == version:
+                    bisect.insort(lane, top)  # a lane aid's moment: joins the list
+            t, prio, _n, k, obs = entry = lane.pop(0)
+            if t > end:
+                lane.append(entry)
+                return self._leave(lane)  # the loop ends at it
+            i, d, s = travel.at(t)
+            aid = self.aids[k]
+            if aid.needs_track and not on_track[i]:
+                continue  # not heard, no next moment (as in :meth:`step`)
+            view.t, view.i, view.d, view.s = t, i, d, s
+            out = aid.observe(obs, view)
+            if out.events or out.estimate is not None or out.forget or out.follow_up:
+                self._leave(lane)
+                return self._heard(k, obs, _View(self, t, i, d, s), out)
+            nxt = aid.next_observation(view)
+            if nxt is not None:
+                bisect.insort(lane, (nxt.t, prio, next(self.arrival), k, Observation(nxt.t, nxt.payload, version)))
+        return None
+
+    def _leave(self, lane: list[_Entry]) -> _Entry | None:
+        """The lane's moments back to the heap, with their arrivals (nothing to hear at once)."""
+        for entry in lane:
+            heapq.heappush(self.heap, entry)
+        return None
 
     def _next(self, k: int, view: _View) -> _Entry | None:
         """Aid ``k``'s next dynamic moment: returned when it comes before the heap's first entry

@@ -186,6 +186,8 @@ class TrackGpsAid(NetworkFixes):
     name: str = "track_gps"
     priority: Priority = Priority.TRACK
     needs_track: bool = True
+    lane = True
+    """Heard in the engine's lane (:mod:`fieldlogs.pipeline.aid`): it keeps no view past a call."""
     key: tuple[int, ...] = ()
     """Lineage ids of the candidates the evidence is held for."""
     times: list[float] = field(default_factory=list)

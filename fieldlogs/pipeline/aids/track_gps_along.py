@@ -90,6 +90,8 @@ class TrackGpsAlongAid(NetworkFixes):
     name: str = "track_gps_along"
     priority: Priority = Priority.TRACK
     needs_track: bool = True
+    lane = True
+    """Heard in the engine's lane (:mod:`fieldlogs.pipeline.aid`): it keeps no view past a call."""
     anchor: tuple[float, float] = (math.nan, math.nan)
     """(t_effective, s_ref) of the estimate the confirmation below was gathered under."""
     seen: list[tuple[float, float]] = field(default_factory=list)

@@ -1,13 +1,15 @@
-"""The engine's horizon (issue 31: the engine's cost, results unchanged): an aid's next dynamic
-moment heard at once when it comes before the heap's first entry that is not idle, and idle
-static moments (:class:`~fieldlogs.pipeline.aid.IdleAid`) taken unheard — the same hearings,
-events, fixes and positions as an engine that pushes every moment and pops the least.
+"""The engine's horizon and lane (issue 31: the engine's cost, results unchanged): an aid's next
+dynamic moment heard at once when it comes before the heap's first entry that is not idle, idle
+static moments (:class:`~fieldlogs.pipeline.aid.IdleAid`) taken unheard, lane aids' moments heard
+from a list beside the heap — the same hearings, events, fixes and positions as an engine that
+pushes every moment and pops the least.
 
-The reference (:class:`OneByOne`) is the engine with the horizon switched off: every next moment
-pushed, every static moment heard. The aids mimic the D-GPS ones: two dynamic aids heard at the
-same fix times and priority (the first never acting, the second acting at some of them), an
-initial-position aid with static moments at those times (idle with an estimate and no chain),
-and estimate changes by other aids at, before and after those times — ties of (time, priority)
+The reference (:class:`OneByOne`) is the engine with all three switched off. The aids mimic the
+D-GPS ones: two lane aids heard at the same fix times and priority (the first never acting, the
+second also at times of its own, as the along aid on the usable fixes, and acting at some), an
+initial-position aid with static moments at those times (idle with an estimate and no chain), a
+dynamic aid outside the lane at some of those times and priority (as a GNSS epoch aid), and
+estimate changes by other aids at, before and after those times — ties of (time, priority)
 included."""
 
 from __future__ import annotations
@@ -74,6 +76,7 @@ class Stream(StaticAid):
     name: str = "stream"
     acts: frozenset[float] = frozenset()
     kind: int = 0
+    lane: bool = True
     priority: Priority = Priority.TRACK
     heard: int = 0
 
@@ -132,11 +135,13 @@ class Initial(StaticAid):
 
 
 class OneByOne(_Engine):
-    """The engine without the horizon: every next moment pushed, every static moment heard."""
+    """The engine without the horizon and the lane: every next moment pushed, every static moment
+    heard, every moment taken from the heap."""
 
     def __init__(self, tr: Travel, aids: list[Aid]) -> None:
         super().__init__(tr, aids)
         self.idle = [None] * len(self.aids)
+        self.lane = [False] * len(self.aids)
 
     def _next(self, k: int, view: _View) -> _Entry | None:
         nxt = self.aids[k].next_observation(view)  # pushed, whatever comes first
@@ -170,7 +175,7 @@ def aids_of(
     aids.append(Stream(tuple(sorted({*times, *extra})), log, "a", frozenset(acts), kind))
     aids.append(Initial(times, log))
     # a dynamic aid after them at the same priority and times, as a GNSS epoch aid would be
-    aids.append(Stream(tuple(t for t in times if int(t * 2) % 3 == 0), log, "n", frozenset(acts[:1]), 1))
+    aids.append(Stream(tuple(t for t in times if int(t * 2) % 3 == 0), log, "n", frozenset(acts[:1]), 1, False))
     return aids
 
 
