@@ -68,8 +68,9 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from statistics import NormalDist
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -79,6 +80,9 @@ from fieldlogs.pipeline.config import GpsConfig, TrackSelectConfig
 from fieldlogs.pipeline.hypotheses import TrackLine, TrackLines, after_switch_m
 from fieldlogs.pipeline.types import Fix, FloatArray, Hypothesis
 from schemas.enums import PositionState
+
+if TYPE_CHECKING:
+    from fieldlogs.pipeline.estimate import Travel
 
 #: Travel between two fixes used as evidence [m] (module docstring).
 MIN_SPACING_M = 1.0
@@ -204,6 +208,9 @@ class TrackGpsAid(NetworkFixes):
     """(t, offsets) of the last fix seen, for the jump test."""
     jump_t: float = float("-inf")
     """Time of the last jump seen."""
+    key_fix: Fix | None = field(default=None, init=False, repr=False)
+    fix_key: tuple[int, ...] = field(default=(), init=False, repr=False)
+    """The estimate :meth:`_key_of` last saw and its candidates' lineage ids."""
 
     def observations(self) -> list[Observation]:
         return []
@@ -230,7 +237,7 @@ class TrackGpsAid(NetworkFixes):
             self._keep([])  # no evidence across a jump
         elif single and (fix.state != PositionState.DETERMINED or self._gap(view.t)):
             self._keep([])  # the track before a split: determined, fixes in a row
-        key = tuple(h.hid for h in fix.hyps)
+        key = self._key_of(fix)
         if key != self.key:
             self._begin(fix, view)  # a new candidate set: its evidence from the fixes before it
             self.key = key
@@ -241,6 +248,12 @@ class TrackGpsAid(NetworkFixes):
         if single or self.jump_t >= self.set_t - self.gps.jump_hold_s:
             return Outcome()  # a jump in or just before this evidence: no GPS decision on it (docstring)
         return self._test(fix, view)
+
+    def _key_of(self, fix: Fix) -> tuple[int, ...]:
+        """The candidates' lineage ids (made once per estimate: it is asked at every fix)."""
+        if self.key_fix is not fix:
+            self.key_fix, self.fix_key = fix, tuple(h.hid for h in fix.hyps)
+        return self.fix_key
 
     def _test(self, fix: Fix, view: EngineView) -> Outcome:
         """The sequential test on the evidence (module docstring)."""
@@ -312,12 +325,16 @@ class TrackGpsAid(NetworkFixes):
         out: list[tuple[float, list[float]]] = []
         j = int(np.searchsorted(self.t, view.t, side="left")) - 1
         t_next, d_next = view.t, view.d
+        lo = j + 1
+        sd: tuple[list[float], list[float]] = ([], [])
         while j >= 0 and len(out) < MAX_PREFIX:
             tj = float(self.t[j])
             if t_next - tj > self.gps.max_gap_s:
                 break
-            s_j = float(np.interp(tj, view.travel.t, view.travel.s))
-            d_j = float(np.interp(tj, view.travel.t, view.travel.d))
+            if j < lo:  # the travel at the next fixes back, vectorised (np.interp is elementwise)
+                lo = max(j - 2 * MAX_PREFIX, 0)
+                sd = self._travel_at(view.travel, lo, j + 1)
+            s_j, d_j = sd[0][j - lo], sd[1][j - lo]
             if not all(self._inside(h, fix, s_j) for h in fix.hyps):
                 break
             if d_next - d_j >= MIN_SPACING_M:
@@ -326,14 +343,20 @@ class TrackGpsAid(NetworkFixes):
             t_next, j = tj, j - 1
         out.reverse()
         for k in range(len(out) - 1, 0, -1):
-            if np.all(np.abs(np.subtract(out[k][1], out[k - 1][1])) > self._limit()):
+            if np.all(np.abs(np.subtract(out[k][1], out[k - 1][1])) > self.jump_limit):
                 self.jump_t = max(self.jump_t, out[k][0])
                 return out[k:]
         return out
 
-    def _limit(self) -> float:
+    @cached_property
+    def jump_limit(self) -> float:
         """The jump test's limit on a fix-to-fix change of an offset: ``gps_jump_sigma``·σ_w·√2."""
         return self.cfg.gps_jump_sigma * max(self.gps.noise_white_m, 1e-3) * math.sqrt(2.0)
+
+    def _travel_at(self, travel: Travel, j0: int, j1: int) -> tuple[list[float], list[float]]:
+        """S and d interpolated at fixes ``j0 ≤ j < j1``."""
+        tj = self.t[j0:j1]
+        return np.interp(tj, travel.t, travel.s).tolist(), np.interp(tj, travel.t, travel.d).tolist()
 
     def _inside(self, h: Hypothesis, fix: Fix, s: float) -> bool:
         pos = h.pos_m + h.kp * (s - fix.s_ref) + h.kp * self.antenna_x_m
@@ -347,9 +370,11 @@ class TrackGpsAid(NetworkFixes):
         if prev is None or t - prev[0] > self.gps.max_gap_s:
             return False
         before = prev[1] * len(off) if len(prev[1]) == 1 else prev[1]
-        if len(before) != len(off):
+        if len(before) != len(off):  # (a single offset against a single one: compared as it is)
             return False
-        limit = self._limit()
+        limit = self.jump_limit
+        if len(off) == 1:
+            return abs(off[0] - before[0]) > limit
         return all(abs(a - b) > limit for a, b in zip(off, before, strict=True))
 
     def _offsets(self, fix: Fix, s: float, j: int) -> list[float]:
