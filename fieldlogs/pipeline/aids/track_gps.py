@@ -70,7 +70,7 @@ import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from statistics import NormalDist
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -100,6 +100,43 @@ def offset(tl: TrackLine, pos: float, px: float, py: float) -> float:
         return float("nan")
     x, y, ux, uy = tl.point(pos)
     return float(-(px - x) * uy + (py - y) * ux)
+
+
+class Moment(Protocol):
+    """What the evidence reads of a moment: its time, unsigned travel and the run's travel."""
+
+    @property
+    def t(self) -> float: ...
+    @property
+    def d(self) -> float: ...
+    @property
+    def travel(self) -> Travel: ...
+
+
+class At(NamedTuple):
+    """A :class:`Moment` remembered (:meth:`TrackGpsAid.flush`)."""
+
+    t: float
+    d: float
+    travel: Travel
+
+
+def offsets_at(tl: TrackLine, pos: FloatArray, px: list[float], py: list[float]) -> list[float]:
+    """:func:`offset` of each point (px_k, py_k) at each ``pos``_k at once: the same IEEE
+    operations elementwise as :meth:`TrackLine.point` (``max``/``min`` as ``where`` of the same
+    comparisons, ``bisect_right`` as ``searchsorted(side="right")``, the segment's length by
+    ``math.hypot``), so the same numbers as one at a time."""
+    cp, xy = np.asarray(tl.cpos, dtype=float), np.asarray(tl.xy, dtype=float)
+    p = np.where(cp[0] > pos, cp[0], pos)
+    p = np.where(cp[-1] < p, cp[-1], p)
+    j = np.clip(np.searchsorted(cp, p, side="right") - 1, 0, cp.size - 2)
+    diff = cp[j + 1] - cp[j]
+    u = (p - cp[j]) / np.where(1e-9 > diff, 1e-9, diff)
+    x0, y0, dx, dy = xy[j, 0], xy[j, 1], xy[j + 1, 0] - xy[j, 0], xy[j + 1, 1] - xy[j, 1]
+    norm = np.asarray([max(math.hypot(a, b), 1e-9) for a, b in zip(dx.tolist(), dy.tolist(), strict=True)])
+    x, y, ux, uy = x0 + u * dx, y0 + u * dy, dx / norm, dy / norm
+    out: list[float] = (-(np.asarray(px) - x) * uy + (np.asarray(py) - y) * ux).tolist()
+    return out
 
 
 def quad(r: FloatArray, sigma_w: float, sigma_b: float, t: FloatArray | None = None, tau_s: float = math.inf) -> float:
@@ -172,13 +209,18 @@ class NetworkFixes:
             self.t_list.extend(self.t.tolist())
         return self.t_list
 
-    def plane_of(self, tl: TrackLine, j: int) -> tuple[float, float]:
-        """Fix ``j`` in ``tl``'s local plane [m] (:meth:`TrackLine.plane`, elementwise: the same
+    def plane(self, tl: TrackLine) -> tuple[list[float], list[float]]:
+        """The fixes in ``tl``'s local plane [m] (:meth:`TrackLine.plane`, elementwise: the same
         numbers as one fix at a time)."""
         xy = self.planes.get(tl.origin)
         if xy is None:
             x, y = tl.plane(self.lat, self.lon)
             xy = self.planes[tl.origin] = (x.tolist(), y.tolist())
+        return xy
+
+    def plane_of(self, tl: TrackLine, j: int) -> tuple[float, float]:
+        """Fix ``j`` in ``tl``'s local plane [m] (:meth:`plane`)."""
+        xy = self.plane(tl)
         return xy[0][j], xy[1][j]
 
 
@@ -208,6 +250,11 @@ class TrackGpsAid(NetworkFixes):
     """(t, offsets) of the last fix seen, for the jump test."""
     jump_t: float = float("-inf")
     """Time of the last jump seen."""
+    pending: list[tuple[float, float, float, int, Fix]] = field(default_factory=list, init=False, repr=False)
+    """(t, d, S, fix index, estimate) of the fixes heard on a single candidate, not yet in the
+    evidence (:meth:`flush`)."""
+    travel: Travel | None = field(default=None, init=False, repr=False)
+    """The run's travel (:meth:`flush` works the pending fixes in with it)."""
     key_fix: Fix | None = field(default=None, init=False, repr=False)
     fix_key: tuple[int, ...] = field(default=(), init=False, repr=False)
     """The estimate :meth:`_key_of` last saw and its candidates' lineage ids."""
@@ -225,29 +272,67 @@ class TrackGpsAid(NetworkFixes):
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate
+        if fix is not None and len(fix.hyps) == 1:
+            # one candidate: nothing to decide, its evidence only kept for the next split — worked
+            # in when next needed, a stretch of fixes at once (:meth:`flush`)
+            self.travel = view.travel
+            self.pending.append((view.t, view.d, view.s, obs.payload, fix))
+            return Outcome()
+        self.flush()
         if fix is None or not fix.hyps:
             self.prev, self.key = None, ()
             self._keep([])
             return Outcome()
-        j: int = obs.payload
-        off = self._offsets(fix, view.s, j)
+        off = self._offsets(fix, view.s, obs.payload)
+        return self._test(fix, view) if self._hear(fix, view, off) else Outcome()
+
+    def _hear(self, fix: Fix, at: Moment, off: list[float]) -> bool:
+        """Work the fix at ``at`` (its candidates' offsets ``off``) into the evidence; whether the
+        test may run on it (module docstring)."""
         single = len(fix.hyps) < 2
-        if self._jumped(view.t, off):
-            self.jump_t = view.t
+        if self._jumped(at.t, off):
+            self.jump_t = at.t
             self._keep([])  # no evidence across a jump
-        elif single and (fix.state != PositionState.DETERMINED or self._gap(view.t)):
+        elif single and (fix.state != PositionState.DETERMINED or self._gap(at.t)):
             self._keep([])  # the track before a split: determined, fixes in a row
         key = self._key_of(fix)
         if key != self.key:
-            self._begin(fix, view)  # a new candidate set: its evidence from the fixes before it
+            self._begin(fix, at)  # a new candidate set: its evidence from the fixes before it
             self.key = key
-        if view.d - self.last_d < MIN_SPACING_M:
-            return Outcome()  # standing: no independent evidence
-        self.last_d = view.d
-        self._append(view.t, dict(zip(key, off, strict=True)))
-        if single or self.jump_t >= self.set_t - self.gps.jump_hold_s:
-            return Outcome()  # a jump in or just before this evidence: no GPS decision on it (docstring)
-        return self._test(fix, view)
+        if at.d - self.last_d < MIN_SPACING_M:
+            return False  # standing: no independent evidence
+        self.last_d = at.d
+        self._append(at.t, dict(zip(key, off, strict=True)))
+        # a jump in or just before this evidence: no GPS decision on it (docstring)
+        return not (single or self.jump_t >= self.set_t - self.gps.jump_hold_s)
+
+    def flush(self) -> None:
+        """Work the fixes heard on a single candidate since the last call into the evidence, in
+        their order, as if each had been when heard (:meth:`_hear`; a single candidate never
+        decides anything): their offsets computed at once (:func:`offsets_at`)."""
+        pend, self.pending = self.pending, []
+        if not pend or self.travel is None:
+            return
+        travel = self.travel
+        pos = [
+            h.pos_m + h.kp * (s - fix.s_ref) + h.kp * self.antenna_x_m for _t, _d, s, _j, fix in pend for h in fix.hyps
+        ]
+        off = [0.0] * len(pend)
+        by_track: dict[str, list[int]] = {}
+        for k, row in enumerate(pend):
+            by_track.setdefault(row[4].hyps[0].track_id, []).append(k)
+        for track_id, ks in by_track.items():
+            tl = self.lines[track_id]
+            if tl.xy.shape[0] >= 2:
+                xs, ys = self.plane(tl)
+                js = [pend[k][3] for k in ks]
+                o = offsets_at(tl, np.asarray([pos[k] for k in ks]), [xs[j] for j in js], [ys[j] for j in js])
+            else:
+                o = [math.nan] * len(ks)
+            for k, v in zip(ks, o, strict=True):
+                off[k] = pend[k][4].hyps[0].kp * v  # + left of body-forward
+        for (t, d, _s, _j, fix), v in zip(pend, off, strict=True):
+            self._hear(fix, At(t, d, travel), [v])
 
     def _key_of(self, fix: Fix) -> tuple[int, ...]:
         """The candidates' lineage ids (made once per estimate: it is asked at every fix)."""
@@ -296,7 +381,7 @@ class TrackGpsAid(NetworkFixes):
         for h, o in offsets.items():
             self.cols.setdefault(h, []).append(o)
 
-    def _begin(self, fix: Fix, view: EngineView) -> None:
+    def _begin(self, fix: Fix, view: Moment) -> None:
         """The evidence of a new candidate set (module docstring, *evidence before the set*): each
         candidate's lineage's offsets — its own, or its parent's before a split (the candidate of
         the last set on the track it came from) — when every candidate has one; otherwise the fixes
@@ -317,7 +402,7 @@ class TrackGpsAid(NetworkFixes):
             self.last_d = float(np.interp(back[-1][0], view.travel.t, view.travel.d)) if back else float("-inf")
         self.tracks = {h.hid: h.track_id for h in fix.hyps}
 
-    def _backfill(self, fix: Fix, view: EngineView) -> list[tuple[float, list[float]]]:
+    def _backfill(self, fix: Fix, view: Moment) -> list[tuple[float, list[float]]]:
         """Trusted fixes before ``view.t`` (newest first until one lies more than
         ``gps.max_gap_s`` from the next, a candidate's dead-reckoned antenna leaves its own track,
         or ``MAX_PREFIX`` are taken; at least ``MIN_SPACING_M`` of travel apart), each with its
