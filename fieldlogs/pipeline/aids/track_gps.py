@@ -91,6 +91,9 @@ MIN_SPACING_M = 1.0
 MAX_PREFIX = 30
 #: Longest evidence: beyond it, only its last ``MAX_PREFIX`` fixes are kept (module docstring).
 MAX_ROWS = 200
+#: Fixes heard on a single candidate held before they are worked into the evidence at once
+#: (:meth:`TrackGpsAid.flush`; any number gives the same evidence).
+MAX_PENDING = 4096
 
 
 def offset(tl: TrackLine, pos: float, px: float, py: float) -> float:
@@ -277,6 +280,8 @@ class TrackGpsAid(NetworkFixes):
             # in when next needed, a stretch of fixes at once (:meth:`flush`)
             self.travel = view.travel
             self.pending.append((view.t, view.d, view.s, obs.payload, fix))
+            if len(self.pending) >= MAX_PENDING:
+                self.flush()  # the same evidence whenever it is worked in: bounded memory on a long run
             return Outcome()
         self.flush()
         if fix is None or not fix.hyps:

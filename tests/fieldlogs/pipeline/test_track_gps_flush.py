@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome
+from fieldlogs.pipeline.aids import track_gps
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.aids.track_gps import TrackGpsAid, offset, offsets_at
 from fieldlogs.pipeline.aids.track_gps_initial import TrackGpsInitialAid
@@ -96,3 +97,25 @@ def test_flushed_evidence_is_the_one_worked_in_fix_by_fix(
         results.append((repr(sol.fixes), repr(sol.events), state(aid)))
     assert results[0] == results[1]
     assert pending[0] >= 10 and pending[1] == 0  # the stretch on D1 was gathered at once
+
+
+def test_worked_in_by_chunks_on_a_long_stretch() -> None:
+    # at most MAX_PENDING fixes wait (memory on a long run): chunks of 3 give the same evidence
+    n = net("crossover")
+    lines = track_lines(n)
+    per_s = [6.0] * 8 + [4.0, 0.0, 0.0, 8.0] * 5
+    pos = np.concatenate([[50.0], 50.0 + np.cumsum(per_s)])
+    t, lat, lon = _fixes_on("crossover", "D1", [(float(k), float(pos[k]), 0.1 * (k % 3)) for k in range(28)])
+    saved = track_gps.MAX_PENDING
+    results = []
+    try:
+        for cls, most in ((TrackGpsAid, 3), (Eager, saved)):
+            track_gps.MAX_PENDING = most
+            aid = cls(t, lat, lon, lines, CFG, GPS)
+            aids = [TopologyAid(lines, MARGIN), TrackGpsInitialAid(t, lat, lon, lines, CFG, GPS), aid]
+            sol = run_aids(travel(n, np.repeat(per_s, 10)), aids, MARGIN)  # type: ignore[arg-type]
+            assert len(aid.pending) < 3
+            results.append((repr(sol.fixes), repr(sol.events), state(aid)))
+    finally:
+        track_gps.MAX_PENDING = saved
+    assert results[0] == results[1]
