@@ -38,6 +38,8 @@ fixes before a candidate set began count as well, each on the track the candidat
   initial position's steady chain is evidence at once, not five fixes later.
 
 Evidence longer than ``MAX_ROWS`` fixes keeps its last ``MAX_PREFIX`` (a new test, as a restart).
+On one candidate nothing is decided: its fixes are worked into the evidence when it is next
+needed, a stretch at once (:meth:`TrackGpsAid.flush`) — the same evidence as fix by fix.
 
 **Multipath steps.** The model holds a bias that changes slowly; a multipath step
 toward the neighbouring track (a station roof, the simulator's ``network.multipath``: 2–4 m,
