@@ -60,6 +60,7 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -90,6 +91,8 @@ class TrackGpsAlongAid(NetworkFixes):
     name: str = "track_gps_along"
     priority: Priority = Priority.TRACK
     needs_track: bool = True
+    lane = True
+    """Heard in the engine's lane (:mod:`fieldlogs.pipeline.aid`): it keeps no view past a call."""
     anchor: tuple[float, float] = (math.nan, math.nan)
     """(t_effective, s_ref) of the estimate the confirmation below was gathered under."""
     seen: list[tuple[float, float]] = field(default_factory=list)
@@ -107,6 +110,11 @@ class TrackGpsAlongAid(NetworkFixes):
     """The usable fixes in each track's local plane, made on first use."""
     usable_t: list[float] = field(default_factory=list, repr=False)
     """Their times as a list (:meth:`NetworkFixes.fix_times`)."""
+
+    @cached_property
+    def along_u(self) -> float:
+        """:func:`along_uncertainty` of the aid's settings."""
+        return along_uncertainty(self.cfg, self.gps)
 
     def observations(self) -> list[Observation]:
         return []
@@ -143,7 +151,7 @@ class TrackGpsAlongAid(NetworkFixes):
             self.anchor, self.seen = (fix.t_effective, fix.s_ref), []  # a new estimate: confirmation restarts
         h = fix.hyps[0]
         tl = self.lines[h.track_id]
-        u = along_uncertainty(self.cfg, self.gps)
+        u = self.along_u
         m = float(margin_m(fix, view.d, view.travel.allowance_at(view.t), self.margin)) + h.extra_m
         s_dr = h.pos_m + h.kp * (view.s - fix.s_ref) + h.kp * self.antenna_x_m
         x, y = self._plane(tl, *obs.payload)
