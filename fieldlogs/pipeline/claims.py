@@ -116,28 +116,32 @@ def claims(ents: list[Entry]) -> Claims:
         same &= ~e.mask | agree
     text: list[str | None] = [None] * n
     idx = np.flatnonzero(ambiguous)
-    cells = [_Cells.of(e, idx) for e in ents] if idx.size else []
+    cells = [(e.track_id, e.mask[idx].tolist(), _items(e, idx)) for e in ents] if idx.size else []
     for j, i in enumerate(idx.tolist()):
-        text[i] = _json([c.item(j) for c in cells if c.mask[j]])
+        seen: set[str] = set()
+        out = []
+        for tid, mask, items in cells:
+            if mask[j] and tid not in seen:  # one per track (the first)
+                seen.add(tid)
+                out.append(items[j])
+        text[i] = "[" + ",".join(out) + "]"
     return Claims(ambiguous, same, text)
 
 
-@dataclass
-class _Cells:
-    """An entry's ``candidates`` items on the ambiguous cycles, made at once (:func:`claims`)."""
+def _items(e: Entry, idx: npt.NDArray[np.int64]) -> list[str]:
+    """The entry's ``candidates`` item on cycles ``idx`` as JSON text, made at once: what the
+    compact encoder writes of :func:`_item` (a JSON float is ``repr`` of the float; null for
+    a value that is not finite), without a dict and an encoder pass per cycle."""
+    head = '{"track_id":' + _COMPACT.encode(e.track_id) + ',"pos_m":'
+    return [
+        f'{head}{p},"km_m":{k},"margin_m":{m}}}'
+        for p, k, m in zip(_texts(e.pos[idx]), _texts(e.km[idx]), _texts(e.margin[idx]), strict=True)
+    ]
 
-    track_id: str
-    mask: list[bool]
-    pos: list[float | None]
-    km: list[float | None]
-    margin: list[float | None]
 
-    @classmethod
-    def of(cls, e: Entry, idx: npt.NDArray[np.int64]) -> _Cells:
-        return cls(e.track_id, e.mask[idx].tolist(), _rs(e.pos[idx]), _rs(e.km[idx]), _rs(e.margin[idx]))
-
-    def item(self, j: int) -> tuple[str, dict[str, object]]:
-        return self.track_id, _item(self.track_id, self.pos[j], self.km[j], self.margin[j])
+def _texts(x: FloatArray) -> list[str]:
+    """:func:`_r` of every element as JSON text."""
+    return [repr(round(v, 3)) if math.isfinite(v) else "null" for v in x.tolist()]
 
 
 #: ``json.dumps(…, separators=(",", ":"))`` made once (dumps builds an encoder per call with these).
@@ -153,11 +157,6 @@ def _json(items: list[tuple[str, dict[str, object]]]) -> str:
             seen.add(tid)
             out.append(item)
     return _COMPACT.encode(out)
-
-
-def _rs(x: FloatArray) -> list[float | None]:
-    """:func:`_r` of every element."""
-    return [round(v, 3) if math.isfinite(v) else None for v in x.tolist()]
 
 
 def candidates_text(ents: list[Entry], i: int) -> str:
