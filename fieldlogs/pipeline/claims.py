@@ -116,15 +116,18 @@ def claims(ents: list[Entry]) -> Claims:
         same &= ~e.mask | agree
     text: list[str | None] = [None] * n
     idx = np.flatnonzero(ambiguous)
-    cells = [(e.track_id, e.mask[idx].tolist(), _items(e, idx)) for e in ents] if idx.size else []
+    listed = np.zeros((len(ents), idx.size), dtype=bool)  # per ambiguous cycle: one per track (the first)
+    seen: dict[str, BoolArray] = {}
+    for k, e in enumerate(ents):
+        before = seen.setdefault(e.track_id, np.zeros(idx.size, dtype=bool))
+        listed[k] = e.mask[idx] & ~before
+        before |= listed[k]
+    cols = [
+        dict(zip(np.flatnonzero(listed[k]).tolist(), _items(e, idx[listed[k]]), strict=True))
+        for k, e in enumerate(ents)
+    ]
     for j, i in enumerate(idx.tolist()):
-        seen: set[str] = set()
-        out = []
-        for tid, mask, items in cells:
-            if mask[j] and tid not in seen:  # one per track (the first)
-                seen.add(tid)
-                out.append(items[j])
-        text[i] = "[" + ",".join(out) + "]"
+        text[i] = "[" + ",".join(c[j] for c in cols if j in c) + "]"
     return Claims(ambiguous, same, text)
 
 
