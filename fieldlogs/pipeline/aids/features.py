@@ -169,6 +169,7 @@ class FeatureUnit:
         self._cab = np.where(cab < 0, -1, 1)
         self._segment = np.concatenate([[0], np.cumsum(self._cab[1:] != self._cab[:-1])]) if n else np.zeros(0, int)
         self._changes = np.flatnonzero(self._cab[1:] != self._cab[:-1]) + 1
+        self._change_list: list[int] = self._changes.tolist()
         self._allow = np.asarray(o.allowance, dtype=float)
         self.available = bool(n and c.has_imu and np.isfinite(self.kappa).any())
         self.tables, self.skipped = load_tables(self.network.feature_points)
@@ -222,8 +223,9 @@ class FeatureUnit:
         tab = (fix.line_code, fix.track)
         if not self.available or tab not in self.tables or not 0 <= after_i < n:
             return after_i
-        nxt = self._changes[self._changes > after_i]
-        s1 = int(nxt[0]) if nxt.size else n
+        changes = self._change_list
+        j = bisect.bisect_right(changes, after_i)
+        s1 = changes[j] if j < len(changes) else n
         sdir = int(fix.k * self._cab[after_i])
         u0 = sdir * float(km_between(after_i, after_i + 1)[0])
         if not math.isfinite(u0):
@@ -238,7 +240,7 @@ class FeatureUnit:
         reach = (exits[j] + cfg.search_margin_m - u0) / slope - 1.0
         if not reach > 0.0:
             return after_i
-        return min(int(np.searchsorted(self._d, d0 + reach, side="left")), s1)
+        return min(int(self._d.searchsorted(d0 + reach, side="left")), s1)
 
     def evaluation_scan(
         self,
