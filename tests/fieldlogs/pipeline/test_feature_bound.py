@@ -18,21 +18,14 @@ from hypothesis import strategies as st
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
 from fieldlogs.pipeline.aids.features import FeatureUnit
-from fieldlogs.pipeline.config import FeatureConfig, PipelineConfig
+from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.estimate import km_along, signed_travel
 from fieldlogs.pipeline.metric import IDENTITY, TrackMetric
 from fieldlogs.pipeline.types import Fix, FloatArray, Odometry
-from fieldlogs.simulate.networks.alignment import Alignment, Curve
-from fieldlogs.simulate.networks.synthetic import LineSpec, Station, build_network
+from fieldlogs.simulate.networks.synthetic import build_network
 from schemas.enums import FixSource
-
-LINE = "0900"
-KM0 = 10_000.0
-CURVES = [Curve(1000.0, 60.0, 150.0, 400.0, True), Curve(1800.0, 60.0, 200.0, 800.0, False)]
-SPEC = LineSpec(LINE, "Feature bound line", Alignment(3000.0, CURVES, km0=KM0), [Station("01", "A", KM0 + 600.0)])
-CFG = FeatureConfig()
-DT = 0.1
+from tests.fieldlogs.pipeline.test_features import CFG, DT, KM0, LINE, SPEC, between  # the two-curve line
 
 
 @pytest.fixture(scope="module")
@@ -51,10 +44,6 @@ def run_of(v: FloatArray, cab: FloatArray, seed: int = 0) -> tuple[Cycles, Odome
     cyc = Cycles(t, d.copy(), d.copy(), v.copy(), imu, cab.astype(np.int8), np.ones(n, dtype=np.int8), True, True)
     allowance = np.cumsum(np.where(np.arange(n) % 97 == 0, 0.7, 0.0))  # a slip budget growing now and then
     return cyc, Odometry(d, v.copy(), np.zeros(n, dtype=bool), allowance)
-
-
-def between(km: FloatArray):  # type: ignore[no-untyped-def]
-    return lambda i0, i1: km[max(i0, 0) : max(i1, 0)]
 
 
 def test_bound_of_a_constant_run_is_the_exit_check_end_plus_margin_less_a_metre(net: Network) -> None:
