@@ -143,8 +143,20 @@ def _items(e: Entry, idx: npt.NDArray[np.int64]) -> list[str]:
 
 
 def _texts(x: FloatArray) -> list[str]:
-    """:func:`_r` of every element as JSON text."""
-    return [repr(round(v, 3)) if math.isfinite(v) else "null" for v in x.tolist()]
+    """:func:`_r` of every element as JSON text (:func:`_text`)."""
+    return [_text(v) for v in x.tolist()]
+
+
+def _text(v: float) -> str:
+    """``repr(round(v, 3))`` (the JSON text of :func:`_r`; null when not finite), for |v| < 10¹²
+    as ``f"{v:.3f}"`` without its trailing zeros (one left after the point): both are the
+    correctly rounded 3-decimal value of v (CPython's ``round`` and ``f`` formatting are the same
+    dtoa), and a decimal of ≤ 15 significant digits is the shortest text of its float, which
+    ``repr`` writes in fixed notation from 10⁻⁴ to 10¹⁶ — the same text, in half the time."""
+    if -1e12 < v < 1e12:
+        t = f"{v:.3f}".rstrip("0")
+        return t + "0" if t[-1] == "." else t
+    return repr(round(v, 3)) if math.isfinite(v) else "null"
 
 
 #: ``json.dumps(…, separators=(",", ":"))`` made once (dumps builds an encoder per call with these).

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import fieldlogs.pipeline.positions as positions_mod
 from dbtools.network import Network
-from fieldlogs.pipeline.claims import Entry, candidates_text, claims
+from fieldlogs.pipeline.claims import Entry, _text, candidates_text, claims
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import track_lines
@@ -134,3 +134,20 @@ def test_candidates_cells_equal_the_encoder_cycle_by_cycle(spec: list[tuple[str,
     for i in range(4):
         want = candidates_text([e for e in ents if e.mask[i]], i) if cl.ambiguous[i] else None
         assert cl.text[i] == want
+
+
+@settings(max_examples=2000, deadline=None)
+@given(
+    st.one_of(
+        st.floats(),
+        st.floats(-1e12, 1e12),
+        st.integers(-(10**15), 10**15).map(lambda k: k / 1000.0),  # on the mm grid
+        st.integers(-(10**6), 10**6).map(lambda k: k / 2048.0),  # exact binary ties at the 4th decimal
+    )
+)
+def test_cell_number_text_is_repr_of_the_rounded_float(v: float) -> None:
+    """The fast text of a number (``f"{v:.3f}"`` stripped) is ``repr(round(v, 3))`` — the JSON
+    encoder's — on every float: huge, tiny, ties, −0, ±∞ and NaN (null)."""
+    want = repr(round(v, 3)) if math.isfinite(v) else "null"
+    assert _text(v) == want
+    assert _text(-0.0004) == "-0.0" and _text(12.0) == "12.0" and _text(2.0625) == "2.062"
