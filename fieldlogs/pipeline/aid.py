@@ -72,7 +72,7 @@ class Priority(IntEnum):
     """Feature points, evaluated on the estimate the earlier aids left."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Observation:
     """A moment at which an aid has something to say."""
 
@@ -81,6 +81,12 @@ class Observation:
     """Whatever the aid needs back in :meth:`Aid.observe` (a telegram, a decision, …)."""
     version: int | None = None
     """Estimate version it was scheduled under (dynamic observations); None: always valid."""
+
+    def __init__(self, t: float, payload: Any = None, version: int | None = None) -> None:
+        # the frozen dataclass's own __init__ sets each field through object.__setattr__: twice
+        # the time of writing the instance dict, and the engine makes two per GPS fix heard
+        d = self.__dict__
+        d["t"], d["payload"], d["version"] = t, payload, version
 
 
 _T = TypeVar("_T")

@@ -44,10 +44,16 @@ def margin_m(fix: Fix, d: FloatArray | float, allowance: FloatArray | float, cfg
     """The margin of the module docstring for ``fix`` at travel ``d`` and slip budget ``allowance``
     (one travel as floats: the same operations on floats, as the aids ask at every observation)."""
     if isinstance(d, float) and isinstance(allowance, float):
-        return float(_grown(fix, d, max(allowance - fix.allowance_ref_m, 0.0), cfg))
+        return margin_at(fix, d, allowance, cfg)
     d_a = np.asarray(d, dtype=float)
     slip = np.maximum(np.asarray(allowance, dtype=float) - fix.allowance_ref_m, 0.0)
     return np.asarray(_grown(fix, d_a, slip, cfg), dtype=float)
+
+
+def margin_at(fix: Fix, d: float, allowance: float, cfg: MarginConfig) -> float:
+    """:func:`margin_m` of one travel ``d`` and slip budget ``allowance`` as floats (what the
+    aids ask at every observation)."""
+    return float(_grown(fix, d, max(allowance - fix.allowance_ref_m, 0.0), cfg))
 
 
 def margins(
