@@ -1,12 +1,13 @@
 """The per-fix shortcuts of the D-GPS along aid and the engine (branch engine-final): each gives
 what the plain computation gives, bit for bit — the along aid's candidate, track and fix plane
 looked up once per estimate (``TrackGpsAlongAid._basis``), the margin of one travel as floats
-(:func:`fieldlogs.pipeline.positions.margin_at`) and :class:`~fieldlogs.pipeline.aid.Observation`'s
-own ``__init__``."""
+(:func:`fieldlogs.pipeline.positions.margin_at`), :meth:`TrackLine.project`'s loop without its
+tuples and :class:`~fieldlogs.pipeline.aid.Observation`'s own ``__init__``."""
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -27,6 +28,7 @@ from fieldlogs.pipeline.types import Fix, Hypothesis
 from schemas.enums import FixSource
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
 from tests.fieldlogs.pipeline.test_track_gps_along import GPS, _fixes, _Uncertain
+from tests.fieldlogs.pipeline.test_track_line_scalar import line, project_np, same
 
 #: A margin growing 10 % of the travel: past 1.5·U again 18 m after each correction, every 6 s at
 #: 3 m/s — many estimates within A1 (400 m from km 100).
@@ -135,3 +137,23 @@ def test_observation_init_is_the_dataclass_init(t: float, payload: object, versi
     assert obs != Observation(t, payload, None if version is not None else 1)
     with pytest.raises(dataclasses.FrozenInstanceError):
         obs.t = 1.0  # type: ignore[misc]
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.tuples(st.floats(-50.0, 50.0), st.floats(-50.0, 50.0)), min_size=2, max_size=8),
+    st.sampled_from([math.nan, math.inf, -math.inf, 3.0]),
+    st.sampled_from([math.nan, math.inf, -math.inf, -2.0]),
+    st.floats(-20.0, 120.0),
+    st.floats(0.0, 80.0),
+)
+def test_project_of_a_point_not_finite_is_the_array_formula(
+    pts: list[tuple[float, float]], x: float, y: float, near: float, window: float
+) -> None:
+    # :meth:`TrackLine.project` with its clip inlined: a NaN foot stays NaN (and is the nearest, as
+    # ``np.argmin`` takes it), an infinite point gives what the array formula gives
+    xy = np.array(pts, dtype=float)
+    steps = np.hypot(*np.diff(xy, axis=0).T)
+    tl = line(xy, np.concatenate([[0.0], np.cumsum(steps)]))
+    with np.errstate(invalid="ignore", over="ignore"):
+        assert same(tl.project(x, y, near, window), project_np(tl, x, y, near, window))
