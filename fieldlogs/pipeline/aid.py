@@ -21,6 +21,15 @@ visits those moments in time order and knows no sensor: it asks each aid
   new estimate (an absolute fix, the same fix made *uncertain* or moved to another track) or
   the instruction to forget the position (off rail), and follow-up observations.
 
+An aid whose static moment can be a no-op (:class:`IdleAid`) says so through ``idle``: the
+engine then takes that moment from the heap without hearing it (nothing would change), and an
+aid's next dynamic moment is heard at once when it comes before the heap's first entry that is
+not idle (the *horizon*, :mod:`fieldlogs.pipeline.engine`).
+
+An aid whose dynamic moments are many and mostly silent may set ``lane = True``: the engine then
+hears them from a short list beside the heap while they come first, with one view moved from
+moment to moment — such an aid must keep no view past the call it was given in.
+
 Every estimate carries its uncertainty (``Fix.uncertainty_m``) from which the engine's
 margin grows with travel; the engine, not the aid, turns a correction amount
 (``Event.correction_m``) into its position-correction % [S003 §5.2], because only it knows
@@ -63,7 +72,7 @@ class Priority(IntEnum):
     """Feature points, evaluated on the estimate the earlier aids left."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Observation:
     """A moment at which an aid has something to say."""
 
@@ -72,6 +81,12 @@ class Observation:
     """Whatever the aid needs back in :meth:`Aid.observe` (a telegram, a decision, …)."""
     version: int | None = None
     """Estimate version it was scheduled under (dynamic observations); None: always valid."""
+
+    def __init__(self, t: float, payload: Any = None, version: int | None = None) -> None:
+        # the frozen dataclass's own __init__ sets each field through object.__setattr__: twice
+        # the time of writing the instance dict, and the engine makes two per GPS fix heard
+        d = self.__dict__
+        d["t"], d["payload"], d["version"] = t, payload, version
 
 
 _T = TypeVar("_T")
@@ -192,6 +207,16 @@ class Aid(Protocol):
     def next_observation(self, view: EngineView) -> Observation | None: ...
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome: ...
+
+
+@runtime_checkable
+class IdleAid(Protocol):
+    """An aid that can tell, before hearing a static observation, that hearing it would change
+    nothing: no events, no estimate, no follow-up, and its own state unchanged."""
+
+    def idle(self, obs: Observation, estimate: Fix | None) -> bool:
+        """Whether hearing ``obs`` now, with ``estimate`` in force, would be a no-op."""
+        ...
 
 
 class StaticAid:

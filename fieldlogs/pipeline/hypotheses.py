@@ -140,18 +140,20 @@ class TrackLine:
         if hi - lo < 2:
             return math.nan, math.nan
         abs_, l2s = self._segments
-        best = (math.inf, -1, 0.0, 0.0, 0.0)
-        for j in range(lo, hi - 1):
-            (ax, ay), (dx, dy) = xy[j], abs_[j]
-            u = _clip01(((x - ax) * dx + (y - ay) * dy) / l2s[j])
-            fx, fy = ax + u * dx, ay + u * dy
-            d2 = (x - fx) * (x - fx) + (y - fy) * (y - fy)
+        best_d2, j, u = math.inf, -1, 0.0
+        for k in range(lo, hi - 1):
+            (ax, ay), (dx, dy) = xy[k], abs_[k]
+            v = ((x - ax) * dx + (y - ay) * dy) / l2s[k]
+            v = v if v != v else (1.0 if v > 1.0 else (v if v > 0.0 else 0.0))  # np.clip(v, 0, 1), NaN kept
+            ex, ey = x - (ax + v * dx), y - (ay + v * dy)
+            d2 = ex * ex + ey * ey
             if d2 != d2:  # NaN
-                best = (d2, j, u, fx, fy)
+                j, u = k, v
                 break
-            if d2 < best[0] or best[1] < 0:
-                best = (d2, j, u, fx, fy)
-        _, j, u, fx, fy = best
+            if d2 < best_d2 or j < 0:
+                best_d2, j, u = d2, k, v
+        (ax, ay), (dx, dy) = xy[j], abs_[j]
+        fx, fy = ax + u * dx, ay + u * dy  # the nearest foot again: the same operations
         pos = cp[j] + u * (cp[j + 1] - cp[j])
         norm = max(math.sqrt(l2s[j]), 1e-9)
         off = (-(x - fx) * abs_[j][1] + (y - fy) * abs_[j][0]) / norm
@@ -160,13 +162,6 @@ class TrackLine:
     def plane(self, lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:
         """lat/lon [deg] in this track's local plane [m]."""
         return equirect(self.origin, lat, lon)
-
-
-def _clip01(v: float) -> float:
-    """``np.clip(v, 0.0, 1.0)`` of one float (NaN stays NaN)."""
-    if v != v:
-        return v
-    return 1.0 if v > 1.0 else (v if v > 0.0 else 0.0)
 
 
 def equirect(origin: tuple[float, float], lat: FloatArray, lon: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -12,7 +12,7 @@ error; with the gradient, the curves' arc over their chords and the rail height:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -47,6 +47,18 @@ class TrackMetric:
 
     km: FloatArray
     c: FloatArray
+    max_slope: float = field(init=False, repr=False, compare=False)
+    """The largest |Δkm / Δc| of :meth:`km_of_c` (at least 1, the slope beyond the ends; ∞ where two
+    grid points share a c): a Lipschitz constant of the dead-reckoned km in the travel,
+    |km(S₁) − km(S₀)| ≤ max_slope·|S₁ − S₀|, which the feature aid's scheduling bounds its
+    next evaluation with (:meth:`~fieldlogs.pipeline.aids.features.FeatureUnit.evaluation_not_before`)."""
+
+    def __post_init__(self) -> None:
+        dk, dc = np.abs(np.diff(self.km)), np.diff(self.c)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slopes = np.where(dc > 0, dk / np.where(dc > 0, dc, 1.0), np.where(dk > 0, np.inf, 0.0))
+        top = float(slopes.max(initial=1.0))
+        object.__setattr__(self, "max_slope", float("inf") if top != top else max(1.0, top))  # NaN: no bound
 
     def c_of_km(self, km: FloatArray | float) -> FloatArray:
         return _interp_extrapolated(km, self.km, self.c)

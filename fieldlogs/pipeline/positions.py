@@ -30,7 +30,7 @@ from fieldlogs.pipeline.claims import claims, entries, max_margin
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.geometry import VehicleGeometry
-from fieldlogs.pipeline.hypotheses import track_lines
+from fieldlogs.pipeline.hypotheses import TrackLine, track_lines
 from fieldlogs.pipeline.metric import IDENTITY
 from fieldlogs.pipeline.types import Fix, FloatArray
 from schemas.enums import FixSource, PositionState
@@ -44,10 +44,34 @@ def margin_m(fix: Fix, d: FloatArray | float, allowance: FloatArray | float, cfg
     """The margin of the module docstring for ``fix`` at travel ``d`` and slip budget ``allowance``
     (one travel as floats: the same operations on floats, as the aids ask at every observation)."""
     if isinstance(d, float) and isinstance(allowance, float):
-        return float(_grown(fix, d, max(allowance - fix.allowance_ref_m, 0.0), cfg))
+        return margin_at(fix, d, allowance, cfg)
     d_a = np.asarray(d, dtype=float)
     slip = np.maximum(np.asarray(allowance, dtype=float) - fix.allowance_ref_m, 0.0)
     return np.asarray(_grown(fix, d_a, slip, cfg), dtype=float)
+
+
+def margin_at(fix: Fix, d: float, allowance: float, cfg: MarginConfig) -> float:
+    """:func:`margin_m` of one travel ``d`` and slip budget ``allowance`` as floats (what the
+    aids ask at every observation)."""
+    return float(_grown(fix, d, max(allowance - fix.allowance_ref_m, 0.0), cfg))
+
+
+def margins(
+    fixes: list[Fix], sizes: npt.NDArray[np.int64], d: FloatArray, allowance: FloatArray, cfg: MarginConfig
+) -> FloatArray:
+    """:func:`margin_m` of many fixes at once: ``d`` and ``allowance`` hold ``sizes[j]`` cycles of
+    fix j after those of fix j − 1; the same elementwise operations with each fix's numbers
+    repeated over its cycles (the growth while uncertain only on the cycles of fixes that are)."""
+
+    def rep(values: list[float]) -> FloatArray:
+        return np.repeat(np.array(values, dtype=float), sizes)
+
+    m = rep([f.uncertainty_m for f in fixes]) + cfg.distance_pct / 100.0 * np.abs(d - rep([f.d_ref for f in fixes]))
+    m = m + np.maximum(allowance - rep([f.allowance_ref_m for f in fixes]), 0.0)
+    since = rep([np.nan if f.uncertain_since_d is None else f.uncertain_since_d for f in fixes])
+    u = ~np.isnan(since)
+    m[u] = m[u] + cfg.uncertain_growth_pct / 100.0 * np.abs(d[u] - since[u])
+    return m
 
 
 def _grown(fix: Fix, d: Any, slip: Any, cfg: MarginConfig) -> Any:
@@ -90,10 +114,16 @@ def positions_frame(
         j = idx[cyc]
         order = np.argsort(j, kind="stable")  # cycles grouped by fix in force, ascending
         groups, first = np.unique(j[order], return_index=True)
+        single: list[tuple[Fix, npt.NDArray[np.int64]]] = []  # one candidate each: at once
         for jj, sel in zip(groups.tolist(), np.split(cyc[order], first[1:]), strict=True):
             f = fixes[jj]  # the fix in force on cycles ``sel``: dead reckoning and margin
-            if f.state != PositionState.UNDETERMINED:
+            if f.state == PositionState.UNDETERMINED:
+                continue
+            if len(f.hyps) == 1:
+                single.append((f, sel))
+            else:
                 cols.fill(travel, f, sel, cfg)
+        cols.fill_single(travel, single, cfg)
     head, tail = geometry.ends(cols.km, cols.k_sign, np.asarray(travel.cab, dtype=float))
     return pd.DataFrame(
         {
@@ -148,6 +178,63 @@ class _Columns:
         self.state[sel] = state
         self.source[sel] = self.sources.setdefault(str(f.source), len(self.sources))
 
+    def fill_single(self, travel: Travel, items: list[tuple[Fix, npt.NDArray[np.int64]]], cfg: MarginConfig) -> None:
+        """:meth:`fill` of many fixes with one candidate each, at once: the same elementwise
+        operations on the fixes' cycles laid end to end, each fix's numbers repeated over its
+        own (the margin of :func:`margin_m`, pos = pos_h + kp·(S − s_ref), km per track). A fix
+        whose interval reaches over an end of its track on some cycle has neighbours there
+        (:func:`~fieldlogs.pipeline.claims.entries`): :meth:`fill` on its own."""
+        if not items:
+            return
+        if travel.network is None:
+            raise ValueError("a fix with network candidates needs the travel's network")
+        lines = track_lines(travel.network)
+        fs = [f for f, _ in items]
+        hs = [f.hyps[0] for f in fs]
+        tls = [lines[h.track_id] for h in hs]
+        sizes = np.array([sel.size for _, sel in items])
+        sel = np.concatenate([sel for _, sel in items])
+
+        def rep(values: list[float]) -> FloatArray:
+            return np.repeat(np.array(values, dtype=float), sizes)
+
+        m = margins(fs, sizes, travel.d[sel], travel.allowance[sel], cfg)
+        pos = rep([h.pos_m for h in hs]) + rep([h.kp for h in hs]) * (travel.s[sel] - rep([f.s_ref for f in fs]))
+        mh = m + rep([h.extra_m for h in hs])
+        over = (pos - mh < 0) | (pos + mh > rep([tl.length_m for tl in tls]))
+        alone = ~np.logical_or.reduceat(over, np.cumsum(sizes) - sizes)
+        for (f, own), ok in zip(items, alone.tolist(), strict=True):
+            if not ok:
+                self.fill(travel, f, own, cfg)
+        keep = np.repeat(alone, sizes)
+        which = np.repeat(np.arange(len(fs)), sizes)[keep]  # each cycle's fix
+        sel, pos, mh = sel[keep], pos[keep], mh[keep]
+        km = np.full(sel.size, np.nan)
+        first: dict[str, int] = {}
+        on_track = np.array([first.setdefault(h.track_id, j) for j, h in enumerate(hs)])[which]
+        for j in np.unique(on_track).tolist():  # km per track, over all its fixes' cycles
+            on = on_track == j
+            km[on] = tls[j].km_of_pos(pos[on])
+        eq = km + np.array([_eq_offset(f) for f in fs])[which]
+        k_sign = np.array([h.kp * tl.km_sign for h, tl in zip(hs, tls, strict=True)], dtype=float)[which]
+        self._claim(sel, km, eq, pos, mh, k_sign)
+        self._texts(sel, which, fs, tls)
+
+    def _texts(
+        self, sel: npt.NDArray[np.int64], which: npt.NDArray[np.int64], fs: list[Fix], tls: list[TrackLine]
+    ) -> None:
+        """State, source, line, track and track id of single-candidate fixes ``fs`` on cycles
+        ``sel`` (``which``: each cycle's fix)."""
+        code = np.array([self.code(str(f.state)) for f in fs], dtype=np.uint8)
+        src = np.array([self.sources.setdefault(str(f.source), len(self.sources)) for f in fs], dtype=np.uint8)
+        cell = np.empty((len(fs), 3), dtype=object)
+        cell[:] = [
+            (tl.line_code or None, tl.track or None, self.interned(f.hyps[0].track_id))
+            for f, tl in zip(fs, tls, strict=True)
+        ]
+        self.line[sel], self.track[sel], self.track_id[sel] = cell[which, 0], cell[which, 1], cell[which, 2]
+        self.state[sel], self.source[sel] = code[which], src[which]
+
     def code(self, state: str) -> int:
         return self.states.setdefault(state, len(self.states))
 
@@ -184,7 +271,13 @@ class _Columns:
             self.km[lost], self.km_eq[lost], self.k_sign[lost] = np.nan, np.nan, np.nan
 
     def _claim(
-        self, sel: npt.NDArray[np.int64], km: FloatArray, km_eq: FloatArray, pos: FloatArray, margin: FloatArray, k: int
+        self,
+        sel: npt.NDArray[np.int64],
+        km: FloatArray,
+        km_eq: FloatArray,
+        pos: FloatArray,
+        margin: FloatArray,
+        k: int | FloatArray,
     ) -> None:
         self.km[sel], self.km_eq[sel], self.pos[sel], self.margin[sel], self.k_sign[sel] = km, km_eq, pos, margin, k
 

@@ -3,14 +3,17 @@ of the estimate (:meth:`~fieldlogs.pipeline.aids.features.FeatureUnit.evaluation
 evaluated once the estimate has passed it; an accepted one is an absolute fix at its exit
 crossing [S000 §3.2, §4.3.2]. The scan for it is resumed as the engine comes
 (:class:`~fieldlogs.pipeline.aid.Resume`): a GPS correction along the track every few seconds
-changes the estimate long before the next curve, and the scan then ends unread."""
+changes the estimate long before the next curve, and the scan then ends unread; it starts only at
+a lower bound on the evaluation's time read from the estimate and the travel alone
+(:meth:`~fieldlogs.pipeline.aids.features.FeatureUnit.evaluation_not_before`), so most
+estimates are replaced before anything is read."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, Scan, StaticAid, scanned
+from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, Resume, Scan, StaticAid, scanned
 from fieldlogs.pipeline.aids.feature_table import Candidate
 from fieldlogs.pipeline.aids.features import FeatureUnit, KmBetween
 from fieldlogs.pipeline.types import Event, Fix
@@ -38,10 +41,24 @@ class FeatureAid(StaticAid):
         fix = view.estimate
         if fix is None or fix.state != PositionState.DETERMINED:
             return None
-        return scanned(self._scan(fix, view.i, view.km_between))
+        scan = self._scan(fix, view.i, view.km_between)
+        if not fix.line_code:  # only the line tables' features wait (see ``_scan``)
+            return scanned(scan)
+        slope = view.travel.metric(fix).max_slope * abs(fix.k)
+        i_lb = self.unit.evaluation_not_before(fix, view.i, view.km_between, slope)
+        if i_lb >= view.travel.n:
+            return None  # the scan finds none
+        if i_lb > view.i:
+            return Observation(float(view.travel.t[i_lb]), Resume(scan))  # not read before then
+        return scanned(scan)
 
     def _scan(self, fix: Fix, after_i: int, km_between: KmBetween) -> Scan:
-        """:meth:`FeatureUnit.evaluation_scan` in time: read as the engine reaches it."""
+        """:meth:`FeatureUnit.evaluation_scan` in time: read as the engine reaches it, from
+        :meth:`FeatureUnit.evaluation_not_before` on (:meth:`next_observation`) — the same answer
+        as read at once: the probe is dropped with the estimate, and under the same estimate the
+        scan reads nothing else that changes but the unit's evaluated features, which only this
+        aid's own evaluation (its one pending moment) adds to for a line table (the track aids'
+        tables have no line code)."""
         t = self.unit.cycles.t
         scan = self.unit.evaluation_scan(fix, after_i, km_between, chunk=PROBE_CHUNK)
         while True:

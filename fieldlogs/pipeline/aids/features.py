@@ -90,7 +90,9 @@ in the same direction without a cab reversal in between).
 
 from __future__ import annotations
 
+import bisect
 import itertools
+import math
 from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from typing import Any
@@ -167,9 +169,15 @@ class FeatureUnit:
         self._cab = np.where(cab < 0, -1, 1)
         self._segment = np.concatenate([[0], np.cumsum(self._cab[1:] != self._cab[:-1])]) if n else np.zeros(0, int)
         self._changes = np.flatnonzero(self._cab[1:] != self._cab[:-1]) + 1
+        self._change_list: list[int] = self._changes.tolist()
         self._allow = np.asarray(o.allowance, dtype=float)
         self.available = bool(n and c.has_imu and np.isfinite(self.kappa).any())
         self.tables, self.skipped = load_tables(self.network.feature_points)
+        self._exits = {  # u of row 6 per table and direction, ascending (evaluation_not_before)
+            (key, sdir): sorted(tab.travel_rows(sdir)[0][:, 5].tolist())
+            for key, tab in self.tables.items()
+            for sdir in (-1, 1)
+        }
         self._done: dict[tuple[str, str, str, int], int] = {}
 
     @property
@@ -198,6 +206,41 @@ class FeatureUnit:
         own table with a candidate's pos as ``km_between`` and its kp runs the same scan
         along a network track (:mod:`fieldlogs.pipeline.aids.track_features`)."""
         return drained(self.evaluation_scan(fix, after_i, km_between, table, k))
+
+    def evaluation_not_before(self, fix: Fix, after_i: int, km_between: KmBetween, slope: float) -> int:
+        """A cycle :meth:`next_evaluation` of the fix's own line/track is not before (its run
+        length n: it finds none), read from one estimate and the travel only. ``slope`` bounds the
+        estimate's km per metre of travel (|Δkm| ≤ slope·|ΔS|; the fix's metric,
+        :attr:`~fieldlogs.pipeline.metric.TrackMetric.max_slope`).
+
+        A feature is evaluated where u − u₆ ≥ w ≥ ``search_margin_m`` (u = σ·km, the scan's
+        condition), and only one not passed by the margin w₀ at ``after_i`` is looked for:
+        u₆ > u₀ − w₀. Each metre of travel moves u by at most ``slope``, and S by at most the
+        unsigned travel d, so no cycle of the first cab segment with
+        d < d₀ + (min u₆ + search_margin_m − u₀)/slope − 1 m evaluates one (the metre covers
+        rounding); a later segment's cycles are after its start."""
+        n = self._d.size
+        tab = (fix.line_code, fix.track)
+        if not self.available or tab not in self.tables or not 0 <= after_i < n:
+            return after_i
+        changes = self._change_list
+        j = bisect.bisect_right(changes, after_i)
+        s1 = changes[j] if j < len(changes) else n
+        sdir = int(fix.k * self._cab[after_i])
+        u0 = sdir * float(km_between(after_i, after_i + 1)[0])
+        if not math.isfinite(u0):
+            return after_i
+        d0, cfg = float(self._d[after_i]), self.cfg
+        grown = fix.uncertainty_m + cfg.search_growth_pct / 100.0 * abs(d0 - fix.d_ref)
+        w0 = max(grown + max(float(self._allow[after_i]) - fix.allowance_ref_m, 0.0), cfg.search_margin_m)
+        exits = self._exits[(tab, sdir)]
+        j = bisect.bisect_right(exits, u0 - w0 - 1.0)
+        if j == len(exits):
+            return s1
+        reach = (exits[j] + cfg.search_margin_m - u0) / slope - 1.0
+        if not reach > 0.0:
+            return after_i
+        return min(int(self._d.searchsorted(d0 + reach, side="left")), s1)
 
     def evaluation_scan(
         self,

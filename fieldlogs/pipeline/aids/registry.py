@@ -36,7 +36,7 @@ from fieldlogs.pipeline.geometry import VehicleGeometry
 from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.imugap import ImuGap, ImuGapAid
 from fieldlogs.pipeline.rollback import Rollback
-from fieldlogs.pipeline.types import GpsAnalysis, Odometry
+from fieldlogs.pipeline.types import FloatArray, GpsAnalysis, Odometry
 from schemas.enums import BaliseKind
 from schemas.radar import RadarParams
 
@@ -91,8 +91,8 @@ def _network_telegrams(ctx: RunContext, kind: BaliseKind) -> pd.DataFrame | None
     tel = ctx.streams.get("balise")
     if tel is None or not _has_topology(ctx):
         return None
-    rows = tel[tel["kind"] == kind.value]
-    return rows if len(rows) else None
+    mine = (tel["kind"] == kind.value).to_numpy(dtype=bool, na_value=False)
+    return tel[mine] if mine.any() else None  # the mask first: most runs have none of the kind
 
 
 def _balise_group(ctx: RunContext) -> Aid | None:
@@ -151,11 +151,17 @@ def _network_fixes(ctx: RunContext) -> NetworkFixes | None:
     g = ctx.gps
     if g is None or g.fixes is None or not len(g.fixes) or not _has_topology(ctx):
         return None
-    f = g.fixes[g.fixes["trusted"].to_numpy(dtype=bool)]
-    if not len(f):
+    t, lat, lon = _fix_columns(g.fixes, "trusted")
+    if not t.size:
         return None
-    t, lat, lon = (f[c].to_numpy(dtype=float) for c in ("t", "lat", "lon"))
     return NetworkFixes(t, lat, lon, track_lines(ctx.network), ctx.cfg.track_select, ctx.cfg.gps)
+
+
+def _fix_columns(fixes: pd.DataFrame, flag: str) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """t, lat and lon of the GPS fixes whose ``flag`` column is set (each column masked: no frame copy)."""
+    mask = fixes[flag].to_numpy(dtype=bool)
+    t, lat, lon = (fixes[c].to_numpy(dtype=float)[mask] for c in ("t", "lat", "lon"))
+    return t, lat, lon
 
 
 def _track_gps(ctx: RunContext) -> Aid | None:
@@ -167,8 +173,7 @@ def _track_gps_along(ctx: RunContext) -> Aid | None:
     f = _network_fixes(ctx)
     if f is None or ctx.gps is None:
         return None
-    u = ctx.gps.fixes[ctx.gps.fixes["usable"].to_numpy(dtype=bool)]
-    usable = (u["t"].to_numpy(dtype=float), u["lat"].to_numpy(dtype=float), u["lon"].to_numpy(dtype=float))
+    usable = _fix_columns(ctx.gps.fixes, "usable")
     x_a = ctx.geometry.gps_antenna_x_m
     return TrackGpsAlongAid(**vars(f), margin=ctx.cfg.margin, antenna_x_m=x_a, usable=usable)
 

@@ -22,13 +22,15 @@ line-only run is untouched.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, Scan, scanned
+from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, Resume, Scan, scanned
 from fieldlogs.pipeline.config import MarginConfig
+from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import (
     Segments,
     TrackLines,
@@ -150,14 +152,41 @@ class TopologyAid:
         if not placed(fix, self.lines):
             return Observation(view.t, _LOCATE)
         self._remember(fix, view.d)
-        return scanned(self._next_rule(fix, view))
-
-    def _next_rule(self, fix: Fix, view: EngineView) -> Scan:
-        """The first cycle after ``view``'s where a candidate's interval reaches a rule of
-        :func:`~fieldlogs.pipeline.hypotheses.triggers`, read in chunks of doubling length as
-        the engine reaches them (:class:`~fieldlogs.pipeline.aid.Resume`)."""
         tr = view.travel
         i0 = view.i + 1 if tr.t[view.i] <= view.t else view.i
+        i_lb = self.not_before(fix, i0, tr)
+        if i_lb >= tr.n:
+            return None  # the scan finds none
+        scan = self._next_rule(fix, i0, tr)
+        if i_lb > i0:
+            return Observation(float(tr.t[i_lb]), Resume(scan))  # not read before then
+        return scanned(scan)
+
+    def not_before(self, fix: Fix, i0: int, tr: Travel) -> int:
+        """A cycle the first rule from cycle ``i0`` on (:meth:`_next_rule`) is not before (the
+        run's length: none). Every rule of :func:`~fieldlogs.pipeline.hypotheses.triggers`
+        needs a candidate's point beyond an end of its track (past a joint, or past a buffer
+        stop by its margin + extra, both ≥ 0); a point moves by |ΔS| ≤ Δd, so none applies on
+        cycles with d < d(i0) + (the least distance of a point from its track's ends) − 1 m (the
+        metre covers rounding). Read from the candidates and the travel only: the scan, whose
+        answer depends on nothing else that changes under the same estimate, waits until then."""
+        if i0 >= tr.n or fix.uncertainty_m < 0.0:
+            return i0
+        s0 = float(tr.s[i0])
+        room = math.inf
+        for h in fix.hyps:
+            if h.extra_m < 0.0:
+                return i0
+            p = h.pos_m + h.kp * (s0 - fix.s_ref)
+            room = min(room, p, self.lines[h.track_id].length_m - p)
+        if not room > 1.0:  # NaN too
+            return i0
+        return int(np.searchsorted(tr.d, float(tr.d[i0]) + (room - 1.0), side="left"))
+
+    def _next_rule(self, fix: Fix, i0: int, tr: Travel) -> Scan:
+        """The first cycle from ``i0`` on where a candidate's interval reaches a rule of
+        :func:`~fieldlogs.pipeline.hypotheses.triggers`, read in chunks of doubling length as
+        the engine reaches them (:class:`~fieldlogs.pipeline.aid.Resume`)."""
         chunk, first = _CHUNK, i0
         while i0 < tr.n:
             if i0 > first:

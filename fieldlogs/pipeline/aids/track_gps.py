@@ -38,6 +38,8 @@ fixes before a candidate set began count as well, each on the track the candidat
   initial position's steady chain is evidence at once, not five fixes later.
 
 Evidence longer than ``MAX_ROWS`` fixes keeps its last ``MAX_PREFIX`` (a new test, as a restart).
+On one candidate nothing is decided: its fixes are worked into the evidence when it is next
+needed, a stretch at once (:meth:`TrackGpsAid.flush`) — the same evidence as fix by fix.
 
 **Multipath steps.** The model holds a bias that changes slowly; a multipath step
 toward the neighbouring track (a station roof, the simulator's ``network.multipath``: 2–4 m,
@@ -68,8 +70,9 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from statistics import NormalDist
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -80,6 +83,9 @@ from fieldlogs.pipeline.hypotheses import TrackLine, TrackLines, after_switch_m
 from fieldlogs.pipeline.types import Fix, FloatArray, Hypothesis
 from schemas.enums import PositionState
 
+if TYPE_CHECKING:
+    from fieldlogs.pipeline.estimate import Travel
+
 #: Travel between two fixes used as evidence [m] (module docstring).
 MIN_SPACING_M = 1.0
 #: Fixes kept as the start of a new candidate set's evidence: on the determined track before a
@@ -87,6 +93,9 @@ MIN_SPACING_M = 1.0
 MAX_PREFIX = 30
 #: Longest evidence: beyond it, only its last ``MAX_PREFIX`` fixes are kept (module docstring).
 MAX_ROWS = 200
+#: Fixes heard on a single candidate held before they are worked into the evidence at once
+#: (:meth:`TrackGpsAid.flush`; any number gives the same evidence).
+MAX_PENDING = 4096
 
 
 def offset(tl: TrackLine, pos: float, px: float, py: float) -> float:
@@ -96,6 +105,43 @@ def offset(tl: TrackLine, pos: float, px: float, py: float) -> float:
         return float("nan")
     x, y, ux, uy = tl.point(pos)
     return float(-(px - x) * uy + (py - y) * ux)
+
+
+class Moment(Protocol):
+    """What the evidence reads of a moment: its time, unsigned travel and the run's travel."""
+
+    @property
+    def t(self) -> float: ...
+    @property
+    def d(self) -> float: ...
+    @property
+    def travel(self) -> Travel: ...
+
+
+class At(NamedTuple):
+    """A :class:`Moment` remembered (:meth:`TrackGpsAid.flush`)."""
+
+    t: float
+    d: float
+    travel: Travel
+
+
+def offsets_at(tl: TrackLine, pos: FloatArray, px: list[float], py: list[float]) -> list[float]:
+    """:func:`offset` of each point (px_k, py_k) at each ``pos``_k at once: the same IEEE
+    operations elementwise as :meth:`TrackLine.point` (``max``/``min`` as ``where`` of the same
+    comparisons, ``bisect_right`` as ``searchsorted(side="right")``, the segment's length by
+    ``math.hypot``), so the same numbers as one at a time."""
+    cp, xy = np.asarray(tl.cpos, dtype=float), np.asarray(tl.xy, dtype=float)
+    p = np.where(cp[0] > pos, cp[0], pos)
+    p = np.where(cp[-1] < p, cp[-1], p)
+    j = np.clip(np.searchsorted(cp, p, side="right") - 1, 0, cp.size - 2)
+    diff = cp[j + 1] - cp[j]
+    u = (p - cp[j]) / np.where(1e-9 > diff, 1e-9, diff)
+    x0, y0, dx, dy = xy[j, 0], xy[j, 1], xy[j + 1, 0] - xy[j, 0], xy[j + 1, 1] - xy[j, 1]
+    norm = np.asarray([max(math.hypot(a, b), 1e-9) for a, b in zip(dx.tolist(), dy.tolist(), strict=True)])
+    x, y, ux, uy = x0 + u * dx, y0 + u * dy, dx / norm, dy / norm
+    out: list[float] = (-(np.asarray(px) - x) * uy + (np.asarray(py) - y) * ux).tolist()
+    return out
 
 
 def quad(r: FloatArray, sigma_w: float, sigma_b: float, t: FloatArray | None = None, tau_s: float = math.inf) -> float:
@@ -168,13 +214,18 @@ class NetworkFixes:
             self.t_list.extend(self.t.tolist())
         return self.t_list
 
-    def plane_of(self, tl: TrackLine, j: int) -> tuple[float, float]:
-        """Fix ``j`` in ``tl``'s local plane [m] (:meth:`TrackLine.plane`, elementwise: the same
+    def plane(self, tl: TrackLine) -> tuple[list[float], list[float]]:
+        """The fixes in ``tl``'s local plane [m] (:meth:`TrackLine.plane`, elementwise: the same
         numbers as one fix at a time)."""
         xy = self.planes.get(tl.origin)
         if xy is None:
             x, y = tl.plane(self.lat, self.lon)
             xy = self.planes[tl.origin] = (x.tolist(), y.tolist())
+        return xy
+
+    def plane_of(self, tl: TrackLine, j: int) -> tuple[float, float]:
+        """Fix ``j`` in ``tl``'s local plane [m] (:meth:`plane`)."""
+        xy = self.plane(tl)
         return xy[0][j], xy[1][j]
 
 
@@ -186,6 +237,8 @@ class TrackGpsAid(NetworkFixes):
     name: str = "track_gps"
     priority: Priority = Priority.TRACK
     needs_track: bool = True
+    lane = True
+    """Heard in the engine's lane (:mod:`fieldlogs.pipeline.aid`): it keeps no view past a call."""
     key: tuple[int, ...] = ()
     """Lineage ids of the candidates the evidence is held for."""
     times: list[float] = field(default_factory=list)
@@ -202,6 +255,14 @@ class TrackGpsAid(NetworkFixes):
     """(t, offsets) of the last fix seen, for the jump test."""
     jump_t: float = float("-inf")
     """Time of the last jump seen."""
+    pending: list[tuple[float, float, float, int, Fix]] = field(default_factory=list, init=False, repr=False)
+    """(t, d, S, fix index, estimate) of the fixes heard on a single candidate, not yet in the
+    evidence (:meth:`flush`)."""
+    travel: Travel | None = field(default=None, init=False, repr=False)
+    """The run's travel (:meth:`flush` works the pending fixes in with it)."""
+    key_fix: Fix | None = field(default=None, init=False, repr=False)
+    fix_key: tuple[int, ...] = field(default=(), init=False, repr=False)
+    """The estimate :meth:`_key_of` last saw and its candidates' lineage ids."""
 
     def observations(self) -> list[Observation]:
         return []
@@ -216,29 +277,75 @@ class TrackGpsAid(NetworkFixes):
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate
+        if fix is not None and len(fix.hyps) == 1:
+            # one candidate: nothing to decide, its evidence only kept for the next split — worked
+            # in when next needed, a stretch of fixes at once (:meth:`flush`)
+            self.travel = view.travel
+            self.pending.append((view.t, view.d, view.s, obs.payload, fix))
+            if len(self.pending) >= MAX_PENDING:
+                self.flush()  # the same evidence whenever it is worked in: bounded memory on a long run
+            return Outcome()
+        self.flush()
         if fix is None or not fix.hyps:
             self.prev, self.key = None, ()
             self._keep([])
             return Outcome()
-        j: int = obs.payload
-        off = self._offsets(fix, view.s, j)
+        off = self._offsets(fix, view.s, obs.payload)
+        return self._test(fix, view) if self._hear(fix, view, off) else Outcome()
+
+    def _hear(self, fix: Fix, at: Moment, off: list[float]) -> bool:
+        """Work the fix at ``at`` (its candidates' offsets ``off``) into the evidence; whether the
+        test may run on it (module docstring)."""
         single = len(fix.hyps) < 2
-        if self._jumped(view.t, off):
-            self.jump_t = view.t
+        if self._jumped(at.t, off):
+            self.jump_t = at.t
             self._keep([])  # no evidence across a jump
-        elif single and (fix.state != PositionState.DETERMINED or self._gap(view.t)):
+        elif single and (fix.state != PositionState.DETERMINED or self._gap(at.t)):
             self._keep([])  # the track before a split: determined, fixes in a row
-        key = tuple(h.hid for h in fix.hyps)
+        key = self._key_of(fix)
         if key != self.key:
-            self._begin(fix, view)  # a new candidate set: its evidence from the fixes before it
+            self._begin(fix, at)  # a new candidate set: its evidence from the fixes before it
             self.key = key
-        if view.d - self.last_d < MIN_SPACING_M:
-            return Outcome()  # standing: no independent evidence
-        self.last_d = view.d
-        self._append(view.t, dict(zip(key, off, strict=True)))
-        if single or self.jump_t >= self.set_t - self.gps.jump_hold_s:
-            return Outcome()  # a jump in or just before this evidence: no GPS decision on it (docstring)
-        return self._test(fix, view)
+        if at.d - self.last_d < MIN_SPACING_M:
+            return False  # standing: no independent evidence
+        self.last_d = at.d
+        self._append(at.t, dict(zip(key, off, strict=True)))
+        # a jump in or just before this evidence: no GPS decision on it (docstring)
+        return not (single or self.jump_t >= self.set_t - self.gps.jump_hold_s)
+
+    def flush(self) -> None:
+        """Work the fixes heard on a single candidate since the last call into the evidence, in
+        their order, as if each had been when heard (:meth:`_hear`; a single candidate never
+        decides anything): their offsets computed at once (:func:`offsets_at`)."""
+        pend, self.pending = self.pending, []
+        if not pend or self.travel is None:
+            return
+        travel = self.travel
+        pos = [
+            h.pos_m + h.kp * (s - fix.s_ref) + h.kp * self.antenna_x_m for _t, _d, s, _j, fix in pend for h in fix.hyps
+        ]
+        off = [0.0] * len(pend)
+        by_track: dict[str, list[int]] = {}
+        for k, row in enumerate(pend):
+            by_track.setdefault(row[4].hyps[0].track_id, []).append(k)
+        for track_id, ks in by_track.items():
+            tl = self.lines[track_id]
+            if tl.xy.shape[0] >= 2:
+                xs, ys = self.plane(tl)
+                js = [pend[k][3] for k in ks]
+                o = offsets_at(tl, np.asarray([pos[k] for k in ks]), [xs[j] for j in js], [ys[j] for j in js])
+            else:
+                o = [math.nan] * len(ks)
+            for k, v in zip(ks, o, strict=True):
+                off[k] = pend[k][4].hyps[0].kp * v  # + left of body-forward
+        for (t, d, _s, _j, fix), v in zip(pend, off, strict=True):
+            self._hear(fix, At(t, d, travel), [v])
+
+    def _key_of(self, fix: Fix) -> tuple[int, ...]:
+        """The candidates' lineage ids (made once per estimate: it is asked at every fix)."""
+        if self.key_fix is not fix:
+            self.key_fix, self.fix_key = fix, tuple(h.hid for h in fix.hyps)
+        return self.fix_key
 
     def _test(self, fix: Fix, view: EngineView) -> Outcome:
         """The sequential test on the evidence (module docstring)."""
@@ -281,7 +388,7 @@ class TrackGpsAid(NetworkFixes):
         for h, o in offsets.items():
             self.cols.setdefault(h, []).append(o)
 
-    def _begin(self, fix: Fix, view: EngineView) -> None:
+    def _begin(self, fix: Fix, view: Moment) -> None:
         """The evidence of a new candidate set (module docstring, *evidence before the set*): each
         candidate's lineage's offsets — its own, or its parent's before a split (the candidate of
         the last set on the track it came from) — when every candidate has one; otherwise the fixes
@@ -302,7 +409,7 @@ class TrackGpsAid(NetworkFixes):
             self.last_d = float(np.interp(back[-1][0], view.travel.t, view.travel.d)) if back else float("-inf")
         self.tracks = {h.hid: h.track_id for h in fix.hyps}
 
-    def _backfill(self, fix: Fix, view: EngineView) -> list[tuple[float, list[float]]]:
+    def _backfill(self, fix: Fix, view: Moment) -> list[tuple[float, list[float]]]:
         """Trusted fixes before ``view.t`` (newest first until one lies more than
         ``gps.max_gap_s`` from the next, a candidate's dead-reckoned antenna leaves its own track,
         or ``MAX_PREFIX`` are taken; at least ``MIN_SPACING_M`` of travel apart), each with its
@@ -310,12 +417,16 @@ class TrackGpsAid(NetworkFixes):
         out: list[tuple[float, list[float]]] = []
         j = int(np.searchsorted(self.t, view.t, side="left")) - 1
         t_next, d_next = view.t, view.d
+        lo = j + 1
+        sd: tuple[list[float], list[float]] = ([], [])
         while j >= 0 and len(out) < MAX_PREFIX:
             tj = float(self.t[j])
             if t_next - tj > self.gps.max_gap_s:
                 break
-            s_j = float(np.interp(tj, view.travel.t, view.travel.s))
-            d_j = float(np.interp(tj, view.travel.t, view.travel.d))
+            if j < lo:  # the travel at the next fixes back, vectorised (np.interp is elementwise)
+                lo = max(j - 2 * MAX_PREFIX, 0)
+                sd = self._travel_at(view.travel, lo, j + 1)
+            s_j, d_j = sd[0][j - lo], sd[1][j - lo]
             if not all(self._inside(h, fix, s_j) for h in fix.hyps):
                 break
             if d_next - d_j >= MIN_SPACING_M:
@@ -324,14 +435,20 @@ class TrackGpsAid(NetworkFixes):
             t_next, j = tj, j - 1
         out.reverse()
         for k in range(len(out) - 1, 0, -1):
-            if np.all(np.abs(np.subtract(out[k][1], out[k - 1][1])) > self._limit()):
+            if np.all(np.abs(np.subtract(out[k][1], out[k - 1][1])) > self.jump_limit):
                 self.jump_t = max(self.jump_t, out[k][0])
                 return out[k:]
         return out
 
-    def _limit(self) -> float:
+    @cached_property
+    def jump_limit(self) -> float:
         """The jump test's limit on a fix-to-fix change of an offset: ``gps_jump_sigma``·σ_w·√2."""
         return self.cfg.gps_jump_sigma * max(self.gps.noise_white_m, 1e-3) * math.sqrt(2.0)
+
+    def _travel_at(self, travel: Travel, j0: int, j1: int) -> tuple[list[float], list[float]]:
+        """S and d interpolated at fixes ``j0 ≤ j < j1``."""
+        tj = self.t[j0:j1]
+        return np.interp(tj, travel.t, travel.s).tolist(), np.interp(tj, travel.t, travel.d).tolist()
 
     def _inside(self, h: Hypothesis, fix: Fix, s: float) -> bool:
         pos = h.pos_m + h.kp * (s - fix.s_ref) + h.kp * self.antenna_x_m
@@ -345,9 +462,11 @@ class TrackGpsAid(NetworkFixes):
         if prev is None or t - prev[0] > self.gps.max_gap_s:
             return False
         before = prev[1] * len(off) if len(prev[1]) == 1 else prev[1]
-        if len(before) != len(off):
+        if len(before) != len(off):  # (a single offset against a single one: compared as it is)
             return False
-        limit = self._limit()
+        limit = self.jump_limit
+        if len(off) == 1:
+            return abs(off[0] - before[0]) > limit
         return all(abs(a - b) > limit for a, b in zip(off, before, strict=True))
 
     def _offsets(self, fix: Fix, s: float, j: int) -> list[float]:

@@ -60,6 +60,7 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -68,12 +69,15 @@ from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.aids.track_gps import NetworkFixes
 from fieldlogs.pipeline.config import GpsConfig, MarginConfig, TrackSelectConfig
 from fieldlogs.pipeline.hypotheses import TrackLine
-from fieldlogs.pipeline.positions import margin_m
-from fieldlogs.pipeline.types import Event, FloatArray, Hypothesis, evolved
+from fieldlogs.pipeline.positions import margin_at
+from fieldlogs.pipeline.types import Event, Fix, FloatArray, Hypothesis, evolved
 from schemas.enums import EventType, FixSource, PositionState
 
 #: Search window beyond margin + U either way along the track [m].
 _WINDOW_M = 20.0
+
+#: The states the aid acts on (module docstring).
+_ACTING = (PositionState.DETERMINED, PositionState.UNCERTAIN)
 
 
 def along_uncertainty(cfg: TrackSelectConfig, gps: GpsConfig) -> float:
@@ -90,6 +94,8 @@ class TrackGpsAlongAid(NetworkFixes):
     name: str = "track_gps_along"
     priority: Priority = Priority.TRACK
     needs_track: bool = True
+    lane = True
+    """Heard in the engine's lane (:mod:`fieldlogs.pipeline.aid`): it keeps no view past a call."""
     anchor: tuple[float, float] = (math.nan, math.nan)
     """(t_effective, s_ref) of the estimate the confirmation below was gathered under."""
     seen: list[tuple[float, float]] = field(default_factory=list)
@@ -107,6 +113,13 @@ class TrackGpsAlongAid(NetworkFixes):
     """The usable fixes in each track's local plane, made on first use."""
     usable_t: list[float] = field(default_factory=list, repr=False)
     """Their times as a list (:meth:`NetworkFixes.fix_times`)."""
+    basis: tuple[Fix, bool, Hypothesis, TrackLine, list[float], list[float]] | None = field(default=None, repr=False)
+    """(estimate, usable, :meth:`_basis` of them) of the last fix heard."""
+
+    @cached_property
+    def along_u(self) -> float:
+        """:func:`along_uncertainty` of the aid's settings."""
+        return along_uncertainty(self.cfg, self.gps)
 
     def observations(self) -> list[Observation]:
         return []
@@ -125,29 +138,38 @@ class TrackGpsAlongAid(NetworkFixes):
         j = bisect.bisect_right(t, view.t)
         return Observation(t[j], (j, usable)) if j < len(t) else None
 
-    def _plane(self, tl: TrackLine, j: int, usable: bool) -> tuple[float, float]:
-        """Trusted (or usable) fix ``j`` in ``tl``'s local plane, each track's computed once."""
+    def _plane(self, tl: TrackLine, usable: bool) -> tuple[list[float], list[float]]:
+        """The trusted (or usable) fixes in ``tl``'s local plane, each track's computed once."""
         if self.usable is None or not usable:
-            return self.plane_of(tl, j)
+            return self.plane(tl)
         xy = self.usable_planes.get(tl.origin)
         if xy is None:
             x, y = tl.plane(self.usable[1], self.usable[2])
             xy = self.usable_planes[tl.origin] = (x.tolist(), y.tolist())
-        return xy[0][j], xy[1][j]
+        return xy
+
+    def _basis(self, fix: Fix, usable: bool) -> tuple[Hypothesis, TrackLine, list[float], list[float]]:
+        """The estimate's one candidate, its track and the fixes in the track's plane
+        (:meth:`_plane`): looked up once per estimate, not at each of its fixes (``usable``
+        follows from the estimate's state, :meth:`next_observation`)."""
+        if self.basis is None or self.basis[0] is not fix:
+            h = fix.hyps[0]
+            tl = self.lines[h.track_id]
+            self.basis = (fix, usable, h, tl, *self._plane(tl, usable))
+        return self.basis[2:]
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate
-        if fix is None or len(fix.hyps) != 1 or fix.state not in (PositionState.DETERMINED, PositionState.UNCERTAIN):
+        if fix is None or len(fix.hyps) != 1 or fix.state not in _ACTING:
             return Outcome()
         if (fix.t_effective, fix.s_ref) != self.anchor:
             self.anchor, self.seen = (fix.t_effective, fix.s_ref), []  # a new estimate: confirmation restarts
-        h = fix.hyps[0]
-        tl = self.lines[h.track_id]
-        u = along_uncertainty(self.cfg, self.gps)
-        m = float(margin_m(fix, view.d, view.travel.allowance_at(view.t), self.margin)) + h.extra_m
+        h, tl, xs, ys = self._basis(fix, obs.payload[1])
+        u = self.along_u
+        m = margin_at(fix, view.d, view.travel.allowance_at(view.t), self.margin) + h.extra_m
         s_dr = h.pos_m + h.kp * (view.s - fix.s_ref) + h.kp * self.antenna_x_m
-        x, y = self._plane(tl, *obs.payload)
-        s_g, off = tl.project(x, y, s_dr, m + u + _WINDOW_M)
+        j = obs.payload[0]
+        s_g, off = tl.project(xs[j], ys[j], s_dr, m + u + _WINDOW_M)
         if not self._steady(view, h, s_g, off, s_dr, u, tl.length_m):
             return Outcome()
         uncertain = fix.state == PositionState.UNCERTAIN

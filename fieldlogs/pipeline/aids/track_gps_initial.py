@@ -70,6 +70,10 @@ class TrackGpsInitialAid(NetworkFixes):
     def next_observation(self, view: EngineView) -> Observation | None:
         return None
 
+    def idle(self, obs: Observation, estimate: Fix | None) -> bool:
+        """With an estimate in force and no chain, a moment only drops the chain it has not got."""
+        return estimate is not None and self.chain is None
+
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         if view.estimate is not None:
             self.chain = None

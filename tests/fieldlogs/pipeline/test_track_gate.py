@@ -177,4 +177,5 @@ def test_gps_fixes_while_standing_are_one_piece_of_evidence() -> None:
     aid = TrackGpsAid(t, lat, lon, track_lines(n), CFG, GpsConfig())
     aids = [Start("9003", "D", 250.0, 1), TopologyAid(track_lines(n), MARGIN), aid]
     run_aids(tr, aids, MARGIN)  # type: ignore[arg-type]
+    aid.flush()  # the fixes on the single candidate worked into the evidence
     assert len(aid.times) == 2
