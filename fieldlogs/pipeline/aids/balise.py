@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import pandas as pd
+from pandas.core.dtypes.cast import maybe_box_native  # type: ignore[attr-defined]  # to_dict's own boxing
 
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
@@ -260,10 +261,27 @@ def telegram_observations(
     """One observation per telegram row ``keep`` accepts (NaN cells as None), at its t."""
     if tel is None:
         return
-    rows: list[dict[str, Any]] = tel.astype(object).where(tel.notna(), None).to_dict("records")  # type: ignore[assignment]
-    for row in rows:
+    for row in telegram_rows(tel):
         if keep(row):
             yield Observation(float(row["t"]), row)
+
+
+def telegram_rows(tel: pd.DataFrame) -> list[dict[str, Any]]:
+    """The rows of ``tel`` as dicts, NaN/NA cells as None, every cell a native Python value:
+    ``tel.astype(object).where(tel.notna(), None).to_dict("records")``, made column by column —
+    each column's ``to_numpy(dtype=object)`` (the values ``astype(object)`` gives), None where
+    ``isna``, every other cell boxed by pandas' own ``maybe_box_native`` as ``to_dict`` boxes
+    object columns — at a tenth of the cost on a few rows of extension dtypes (a network run's
+    I2 telegrams: ≈ 2.5 ms a call by ``astype``/``where``)."""
+    if not tel.columns.is_unique or tel.shape[1] == 0:
+        return tel.astype(object).where(tel.notna(), None).to_dict("records")  # type: ignore[return-value]
+    names = tel.columns.tolist()
+    missing = tel.isna().to_numpy().tolist()
+    cols = [col.to_numpy(dtype=object).tolist() for _name, col in tel.items()]
+    return [
+        {k: None if m else maybe_box_native(v) for k, v, m in zip(names, vals, miss, strict=True)}
+        for vals, miss in zip(zip(*cols, strict=True), missing, strict=True)
+    ]
 
 
 def _s(v: Any) -> str | None:
