@@ -25,13 +25,17 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import pandas as pd
-from pandas.core.dtypes.cast import maybe_box_native  # type: ignore[attr-defined]  # to_dict's own boxing
 
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
 from fieldlogs.pipeline.config import BaliseConfig
 from fieldlogs.pipeline.types import Event, Fix
 from schemas.enums import BaliseKind, EventType, FixSource, direction_sign
+
+try:  # to_dict's own boxing of a cell (pandas internals: if a pandas release moves it, the slow path below)
+    from pandas.core.dtypes.cast import maybe_box_native  # type: ignore[attr-defined]
+except ImportError:  # pragma: no cover - depends on the installed pandas
+    maybe_box_native = None
 
 PairKey = tuple[str, str, str]
 
@@ -273,7 +277,7 @@ def telegram_rows(tel: pd.DataFrame) -> list[dict[str, Any]]:
     ``isna``, every other cell boxed by pandas' own ``maybe_box_native`` as ``to_dict`` boxes
     object columns — at a tenth of the cost on a few rows of extension dtypes (a network run's
     I2 telegrams: ≈ 2.5 ms a call by ``astype``/``where``)."""
-    if not tel.columns.is_unique or tel.shape[1] == 0:
+    if maybe_box_native is None or not tel.columns.is_unique or tel.shape[1] == 0:
         return tel.astype(object).where(tel.notna(), None).to_dict("records")  # type: ignore[return-value]
     names = tel.columns.tolist()
     missing = tel.isna().to_numpy().tolist()

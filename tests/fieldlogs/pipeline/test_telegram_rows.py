@@ -50,6 +50,17 @@ def test_hand_made_telegrams() -> None:
     assert [o.t for o in telegram_observations(tel, lambda r: r["t"] is not None)] == [126.638, 279.596]
 
 
+def test_without_pandas_boxing_the_slow_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    # a pandas release without ``maybe_box_native`` where it is imported from: the old expression
+    import fieldlogs.pipeline.aids.balise as balise
+
+    tel = pd.DataFrame({"t": [1.5, np.nan], "nid_c": pd.array([None, 7], dtype="Int64")})
+    monkeypatch.setattr(balise, "maybe_box_native", None)
+    rows = telegram_rows(tel)
+    assert rows == [{"t": 1.5, "nid_c": None}, {"t": None, "nid_c": 7}]
+    assert same(rows, reference(tel))
+
+
 def test_empty_and_odd_frames() -> None:
     empty = pd.DataFrame({"t": pd.Series([], dtype=float), "kind": pd.array([], dtype="string")})
     assert telegram_rows(empty) == [] == reference(empty)
