@@ -11,6 +11,7 @@ compared with α as the ratio measured/α.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 from typing import Any
 
@@ -162,29 +163,37 @@ def _crossover_ends(net: Network, tracks: pd.DataFrame) -> pd.DataFrame | None:
     # each connection's switch number: that of the last switch row of its switch_id (NaN: none)
     last_sw = (len(sw) - 1) - first_rows(sw["switch_id"].iloc[::-1].reset_index(drop=True), c["switch_id"])
     number = np.append(sw["switch_number"].to_numpy(dtype=float, na_value=np.nan), np.nan)[last_sw]
-    sides = []
     rows_of = dict(zip("ab", connection_rows(net, tracks), strict=True))
-    for a, b in (("a", "b"), ("b", "a")):  # the incidence table's order: every end a, then every end b
+    sides = []  # the incidence table's order: every end a, then every end b
+    for a, b in (("a", "b"), ("b", "a")):
         f_t, f_o = rows_of[a], rows_of[b]
         xo_t = (f_t >= 0) & is_xo[np.maximum(f_t, 0)]
         main_o = (f_o >= 0) & ~is_xo[np.maximum(f_o, 0)]
         hit = np.flatnonzero(xo_t & main_o & c["switch_id"].notna().to_numpy())
-        sides.append(
-            pd.DataFrame(
-                {
-                    "track": texts(c[f"track_{a}"].iloc[hit]),
-                    "end": texts(c[f"end_{a}"].iloc[hit]),
-                    "other_end": texts(c[f"end_{b}"].iloc[hit]),
-                    "switch_id": texts(c["switch_id"].iloc[hit]),
-                    "rows": f_o[hit],
-                    "n": number[hit],
-                    "code": codes.of[(CONNECTIONS.name, f"track_{a}")][hit],
-                }
-            )
-        )
-    ref = pd.concat(sides, ignore_index=True)
-    ref = ref[np.isfinite(ref["n"].to_numpy(float))].drop_duplicates(["track", "end"])
-    return None if ref.empty else ref.reset_index(drop=True)
+        sides.append((a, b, hit[np.isfinite(number[hit])]))
+    # the first row of each (track, end): tracks by code (equal ids, equal codes), ends as held
+    code = np.concatenate([codes.of[(CONNECTIONS.name, f"track_{a}")][hit] for a, _, hit in sides])
+    end = pd.concat([c[f"end_{a}"].iloc[hit] for a, _, hit in sides], ignore_index=True)
+    first = ~pd.DataFrame({"code": code, "end": end}).duplicated().to_numpy()
+    if not first.any():
+        return None
+    kept = [(a, b, hit[part]) for (a, b, hit), part in zip(sides, np.split(first, [sides[0][2].size]), strict=True)]
+
+    def held(column_of: Callable[[str, str], str]) -> npt.NDArray[Any]:
+        """The text (as :func:`texts`) of a column of the kept ends, side a then side b."""
+        return np.concatenate([texts(c[column_of(a, b)].iloc[hit]) for a, b, hit in kept])
+
+    return pd.DataFrame(
+        {
+            "track": held(lambda a, _: f"track_{a}"),
+            "end": held(lambda a, _: f"end_{a}"),
+            "other_end": held(lambda _, b: f"end_{b}"),
+            "switch_id": held(lambda *_: "switch_id"),
+            "rows": np.concatenate([rows_of[b][hit] for _, b, hit in kept]),
+            "n": np.concatenate([number[hit] for _, _, hit in kept]),
+            "code": code[first],
+        }
+    )
 
 
 def _worst_deviation(net: Network, geo: pd.DataFrame, ref: pd.DataFrame) -> pd.DataFrame:

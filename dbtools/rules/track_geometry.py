@@ -281,13 +281,13 @@ def _from_gis(
         g_ = gid if some is None else gid[some]
         return np.asarray(g_ * span + (np.clip(k, lo[g_], hi[g_]) - base), dtype=float)
 
-    def at(k: F64, some: npt.NDArray[np.intp] | None = None) -> tuple[F64, F64]:
-        """Lat and lon at km ``k`` of the tracks ``gid`` (``gid[some]`` when given)."""
+    def at(k: F64, some: npt.NDArray[np.intp]) -> tuple[F64, F64]:
+        """Lat and lon at km ``k`` of the tracks ``gid[some]``."""
         kk = key_at(k, some)
         return np.interp(kk, key, lat), np.interp(kk, key, lon)
 
-    la0, lo0 = at(k0)
-    la1, lo1 = at(k1)
+    at0, at1 = Interpolation(key_at(k0), key), Interpolation(key_at(k1), key)  # each end's bracket searched once
+    la0, lo0, la1, lo1 = at0(lat), at0(lon), at1(lat), at1(lon)
     for name, v in (("lat_begin", la0), ("lon_begin", lo0), ("lat_end", la1), ("lon_end", lo1)):
         out[name][idx] = v
     az = np.flatnonzero(want_az[idx])
@@ -296,16 +296,58 @@ def _from_gis(
     li1, loi1 = at(k1[az] - inward, az)
     out["az_begin"][idx[az]] = _inv(li0, loi0, la0[az], lo0[az])[0]
     out["az_end"][idx[az]] = _inv(li1, loi1, la1[az], lo1[az])[0]
-    kk0, kk1 = key_at(k0), key_at(k1)
 
     def of(d: F64) -> F64:
-        cum = np.r_[0.0, np.cumsum(d)]
-        return np.abs(np.interp(kk1, key, cum) - np.interp(kk0, key, cum))
+        cum = np.concatenate([[0.0], np.cumsum(d)])
+        return np.abs(at1(cum) - at0(cum))
 
     def steps(which: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
         return np.isin(codes[:-1], gid[which])  # the whole grid of each track's line and track
 
     return _Lengths(idx, lon, lat, codes[1:] == codes[:-1], of, steps, *_cached_steps(net, g))
+
+
+class Interpolation:
+    """``np.interp(x, xp, fp)`` for many ``fp`` over the same ``x`` and ``xp`` (``xp``
+    increasing): the bracket xp[j] ≤ x < xp[j+1] of each x is searched once, and each call
+    does numpy's own arithmetic — slope (fp[j+1] − fp[j]) / (xp[j+1] − xp[j]), value
+    slope·(x − xp[j]) + fp[j] (from the right end of the bracket when that is NaN); fp[j] where
+    x = xp[j]; fp[0] left of xp, fp[−1] from xp[−1] on; NaN where x is NaN — so every value is
+    ``np.interp``'s to the bit. An ``xp`` of fewer than two points, or holding NaN or not
+    increasing: ``np.interp`` itself."""
+
+    def __init__(self, x: F64, xp: F64) -> None:
+        self.x, self.xp = x, xp
+        self.plain = len(xp) < 2 or not bool(np.all(xp[1:] >= xp[:-1]))  # False as well where xp holds NaN
+        if self.plain:
+            return
+        n = len(xp)
+        j = np.searchsorted(xp, x, side="right") - 1
+        self.j = np.clip(j, 0, n - 2)
+        self.lower = xp[self.j]
+        self.upper = xp[self.j + 1]
+        self.first = np.flatnonzero(j < 0)
+        self.last = np.flatnonzero(j >= n - 1)
+        self.hit = np.flatnonzero((j >= 0) & (j < n - 1) & (self.lower == x))
+        self.nan = np.flatnonzero(np.isnan(x))
+
+    def __call__(self, fp: F64) -> F64:
+        if self.plain:
+            return np.asarray(np.interp(self.x, self.xp, fp), dtype=float)
+        y0, y1 = fp[self.j], fp[self.j + 1]
+        with np.errstate(all="ignore"):  # as np.interp: inf and NaN pass through, no warning
+            slope = (y1 - y0) / (self.upper - self.lower)
+            r = slope * (self.x - self.lower) + y0
+            again = np.flatnonzero(np.isnan(r))
+            if again.size:
+                r[again] = slope[again] * (self.x[again] - self.upper[again]) + y1[again]
+                still = again[np.isnan(r[again]) & (y0[again] == y1[again])]
+                r[still] = y0[still]
+        r[self.hit] = y0[self.hit]
+        r[self.last] = fp[-1]
+        r[self.first] = fp[0]
+        r[self.nan] = self.x[self.nan]
+        return np.asarray(r, dtype=float)
 
 
 def _grid_rows(
