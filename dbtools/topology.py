@@ -178,7 +178,7 @@ def _implied(net: Network) -> npt.NDArray[np.bool_]:
     covered[codes.of[NETWORK_TRACKS.name]] = True
     covered[-1] = False
     ext = codes.of["grid_extents"]
-    return np.asarray(~covered[ext] | (ext < 0), dtype=bool)
+    return np.asarray(~covered[ext], dtype=bool)  # −1 reads the last slot: not covered
 
 
 @dataclass(frozen=True)

@@ -134,10 +134,10 @@ class FeatureRows:
     attr: npt.NDArray[Any]
     config: ValidationConfig
     loc: Locator
-    pos_col: str = "km_m"
-    groups: npt.NDArray[np.int64] | None = None
+    groups: npt.NDArray[np.int64]
     """The feature of each row (:func:`~dbtools.rules.common.group_ids` of the ``where``
-    columns and ``feature_id``; −1 where one is missing); None: found from the arrays."""
+    columns and ``feature_id``; −1 where one is missing)."""
+    pos_col: str = "km_m"
 
     @classmethod
     def of(
@@ -153,7 +153,7 @@ class FeatureRows:
         radius, attr = column(fp, "radius_m"), column(fp, "attribute")
         cols = {c: column(fp, c) for c in where}
         groups = group_ids(fp, (*where, "feature_id"))
-        return cls(table, cols, fid, seq, km, radius, attr, config, loc, pos_col, groups)
+        return cls(table, cols, fid, seq, km, radius, attr, config, loc, groups, pos_col)
 
     @property
     def line(self) -> npt.NDArray[Any]:
@@ -268,9 +268,6 @@ def _outside_gis(r: FeatureRows, grid: GridIndex) -> tuple[list[Finding], npt.ND
 def _six_rows(r: FeatureRows) -> tuple[list[Finding], npt.NDArray[np.int64]]:
     """``feature.rows``; the (k, 6) frame rows of the features with seq 1…6."""
     groups = r.groups
-    if groups is None:
-        cols = {f"k{j}": v for j, v in enumerate((*r.where.values(), r.fid))}
-        groups = group_ids(pd.DataFrame(cols, dtype=object), list(cols))
     keyed = np.flatnonzero(groups >= 0)
     if len(keyed) == 0:
         return [], np.zeros((0, 6), dtype=np.int64)

@@ -29,6 +29,7 @@ grid into the next.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -405,10 +406,7 @@ def coded_chord_azimuths(net: Network, tracks: npt.NDArray[np.int64]) -> tuple[n
     sel = np.flatnonzero(wanted[own])
     ids = own[sel]
     tp = net.track_points
-    lat, lon = tp["lat"].to_numpy(float)[sel], tp["lon"].to_numpy(float)[sel]
-    az, _ = _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])
-    same = ids[1:] == ids[:-1]
-    return ids[1:][same], az[same]
+    return _chords(ids, tp["lat"].to_numpy(float)[sel], tp["lon"].to_numpy(float)[sel])
 
 
 def chord_azimuths(tp: pd.DataFrame, track_ids: set[str]) -> pd.DataFrame:
@@ -419,8 +417,13 @@ def chord_azimuths(tp: pd.DataFrame, track_ids: set[str]) -> pd.DataFrame:
     sel = tp[first_rows(wanted, held) >= 0]  # as Arrow text when tp holds it: Arrow's hash look-up
     if not sorted_by(sel, ("track_id", "pos_m")):
         sel = sel.sort_values(["track_id", "pos_m"], kind="stable")
-    ids = texts(sel["track_id"])
-    lat, lon = sel["lat"].to_numpy(float), sel["lon"].to_numpy(float)
+    cid, az = _chords(texts(sel["track_id"]), sel["lat"].to_numpy(float), sel["lon"].to_numpy(float))
+    return pd.DataFrame({"track_id": cid, "az": az})
+
+
+def _chords(ids: npt.NDArray[Any], lat: F64, lon: F64) -> tuple[npt.NDArray[Any], F64]:
+    """(the track of each chord, its azimuth [deg]) between consecutive points of one track:
+    ``ids`` the points' tracks, in track and pos order."""
     az, _ = _inv(lat[:-1], lon[:-1], lat[1:], lon[1:])
     same = ids[1:] == ids[:-1] if len(ids) else np.zeros(0, dtype=bool)
-    return pd.DataFrame({"track_id": ids[1:][same] if len(ids) else ids, "az": az[same]})
+    return (ids[1:][same] if len(ids) else ids), az[same]
