@@ -137,6 +137,11 @@ class Outcome:
     follow_up: Sequence[Observation] = ()
     """Further static observations of this aid (e.g. a decision to re-take once moving)."""
 
+    @property
+    def silent(self) -> bool:
+        """Nothing said: no events, no estimate, no forgetting, no follow-up."""
+        return not (self.events or self.estimate is not None or self.forget or self.follow_up)
+
 
 class EngineView(Protocol):
     """What an aid sees of the engine at an observation (read-only)."""

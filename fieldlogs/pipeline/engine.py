@@ -190,7 +190,7 @@ class _Engine:
 
     def _heard(self, k: int, obs: Observation, view: _View, out: Outcome) -> _Entry | None:
         """Apply what aid ``k`` said at ``obs`` and ask for what follows (:meth:`step`)."""
-        if out.events or out.estimate is not None or out.forget or out.follow_up:
+        if not out.silent:
             before = self.version
             for follow in out.follow_up:
                 self.push(k, follow)
@@ -233,7 +233,7 @@ class _Engine:
                 continue  # not heard, no next moment (as in :meth:`step`)
             view.t, view.i, view.d, view.s = t, i, d, s
             out = aid.observe(obs, view)
-            if out.events or out.estimate is not None or out.forget or out.follow_up:
+            if not out.silent:
                 self._leave(lane)
                 return self._heard(k, obs, _View(self, t, i, d, s), out)
             nxt = aid.next_observation(view)

@@ -173,11 +173,8 @@ class FeatureUnit:
         self._allow = np.asarray(o.allowance, dtype=float)
         self.available = bool(n and c.has_imu and np.isfinite(self.kappa).any())
         self.tables, self.skipped = load_tables(self.network.feature_points)
-        self._exits = {  # u of row 6 per table and direction, ascending (evaluation_not_before)
-            (key, sdir): sorted(tab.travel_rows(sdir)[0][:, 5].tolist())
-            for key, tab in self.tables.items()
-            for sdir in (-1, 1)
-        }
+        self._exits: dict[tuple[tuple[str, str], int], list[float]] = {}
+        """u of row 6 per table and direction, ascending (:meth:`evaluation_not_before`, on first use)."""
         self._done: dict[tuple[str, str, str, int], int] = {}
 
     @property
@@ -233,7 +230,9 @@ class FeatureUnit:
         d0, cfg = float(self._d[after_i]), self.cfg
         grown = fix.uncertainty_m + cfg.search_growth_pct / 100.0 * abs(d0 - fix.d_ref)
         w0 = max(grown + max(float(self._allow[after_i]) - fix.allowance_ref_m, 0.0), cfg.search_margin_m)
-        exits = self._exits[(tab, sdir)]
+        exits = self._exits.get((tab, sdir))
+        if exits is None:
+            exits = self._exits[(tab, sdir)] = sorted(self.tables[tab].travel_rows(sdir)[0][:, 5].tolist())
         j = bisect.bisect_right(exits, u0 - w0 - 1.0)
         if j == len(exits):
             return s1

@@ -113,8 +113,8 @@ class TrackGpsAlongAid(NetworkFixes):
     """The usable fixes in each track's local plane, made on first use."""
     usable_t: list[float] = field(default_factory=list, repr=False)
     """Their times as a list (:meth:`NetworkFixes.fix_times`)."""
-    basis: tuple[Fix, bool, Hypothesis, TrackLine, list[float], list[float]] | None = field(default=None, repr=False)
-    """(estimate, usable, :meth:`_basis` of them) of the last fix heard."""
+    basis: tuple[Fix, Hypothesis, TrackLine, list[float], list[float]] | None = field(default=None, repr=False)
+    """(estimate, :meth:`_basis` of it) of the last fix heard."""
 
     @cached_property
     def along_u(self) -> float:
@@ -155,8 +155,8 @@ class TrackGpsAlongAid(NetworkFixes):
         if self.basis is None or self.basis[0] is not fix:
             h = fix.hyps[0]
             tl = self.lines[h.track_id]
-            self.basis = (fix, usable, h, tl, *self._plane(tl, usable))
-        return self.basis[2:]
+            self.basis = (fix, h, tl, *self._plane(tl, usable))
+        return self.basis[1:]
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         fix = view.estimate
