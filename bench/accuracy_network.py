@@ -62,7 +62,6 @@ from fieldlogs.pipeline.track_truth import (
     compare_tracks,
     facing_passages,
     switch_resolution,
-    track_figures,
 )
 from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.runs.handle import read_run
@@ -136,7 +135,9 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
     res = run_pipeline(read_run(folder), net, PipelineConfig.from_dict(cfg))
     elapsed = time.perf_counter() - t0
     truth = streams["truth"]
-    figs = track_figures(res.positions, truth, net)  # the same comparison as ``tc`` below
+    tc = compare_tracks(res.positions, truth, net)
+    passages = switch_resolution(tc, facing_passages(truth, net))
+    figs = TrackFigures.of(tc, passages)  # :func:`track_figures`, its comparison kept for the rest
     cmp = compare_with_truth(res.positions, truth)
     det = res.positions["state"].to_numpy(dtype=object) == PositionState.DETERMINED.value
     claimed = cmp["claimed"].to_numpy(dtype=bool)
@@ -151,7 +152,6 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
         t_split = float(r["t"])
         kmh = 3.6 * float(np.interp(t_split, tt, v))
         resolved.append((str(d.get("evidence")), float(d["after_switch_m"]), kmh))
-    tc = compare_tracks(res.positions, truth, net)
     wrong = tc.loc[tc["wrong"], "t"].to_numpy(dtype=float)
     gps = streams.get("gps")
     fix1 = float((gps["fix"] == 1).mean()) if gps is not None and len(gps) else 0.0
@@ -164,7 +164,6 @@ def one(args: tuple[Any, ...]) -> dict[str, Any]:
         np.sort(ev.loc[ev["type"] == EventType.SWITCH_SPLIT.value, "t"].to_numpy(dtype=float)),
     )
     leads = {k: to.lead_m for k, to in turnouts(net.switches).items()}
-    passages = switch_resolution(tc, facing_passages(truth, net))
     why = unresolved(passages, truth, streams.get("balise"), condition == "balise-only", leads)
     lost = causes(tc, res.positions, res.fixes, times, PipelineConfig().track_select.gps_min_fixes, track_lines(net))
     return {

@@ -16,8 +16,8 @@ Printed per family: runs, runs with a wrong-track claim and the claimed cycles o
 track (:func:`~fieldlogs.pipeline.track_truth.compare_tracks`), runs with determined cycles whose
 |km error| exceeds the margin and those cycles
 (:func:`~fieldlogs.pipeline.truth.compare_with_truth`), the slip/slide episodes and those
-whose start point was not adhering (none found, or |θ̄| beyond arcsin(Ta/G)), and the runs
-with a finding.
+whose start point was not adhering (``SlipEpisode.start_trusted`` false: |θ̄| beyond
+arcsin(Ta/G), or none found and the look-back point itself flagged), and the runs with a finding.
 """
 
 from __future__ import annotations
@@ -73,15 +73,13 @@ def judge(i: int, db: str, tmp: str, sc: dict[str, Any], cfg: dict[str, Any]) ->
     det = res.positions["state"].to_numpy(dtype=object) == PositionState.DETERMINED.value
     outside = ~cmp["within_margin"].to_numpy(dtype=bool)
     eps = res.odometry.episodes
-    diag = res.odometry.diagnostics
-    clipped = [e.theta_clipped for e in diag.episodes] if diag is not None else [False] * len(eps)
     return {
         "name": sc["name"],
         "wrong": int(tc["wrong"].sum()),
         "over": int((det & outside).sum()),
         "over_claimed": int(outside.sum()),
         "episodes": len(eps),
-        "untrusted": sum(1 for e, c in zip(eps, clipped, strict=True) if c or not e.start_found),
+        "untrusted": sum(1 for e in eps if not e.start_trusted),
     }
 
 
