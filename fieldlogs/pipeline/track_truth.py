@@ -148,8 +148,12 @@ def compare_tracks(positions: pd.DataFrame, truth: pd.DataFrame, network: Networ
     )
 
 
-def facing_passages(truth: pd.DataFrame, network: Network) -> pd.DataFrame:
-    """Facing switch passages of the true route: t, switch, from and to track."""
+def switch_passages(truth: pd.DataFrame, network: Network) -> pd.DataFrame:
+    """Switch passages of the true route: t, switch, from and to track, and whether facing.
+
+    A change of the true track from A to B is a passage of a switch when A's end left there has
+    more than one navigable exit (*facing*: the train was taken to one of them) or its one exit
+    passes a switch (*trailing*: from a branch onto the toe); a change at a plain joint is none."""
     tracks = _text(truth, "track_id")
     pos = truth["pos_m"].to_numpy(dtype=float, na_value=np.nan)
     t = truth["t"].to_numpy(dtype=float)
@@ -161,11 +165,40 @@ def facing_passages(truth: pd.DataFrame, network: Network) -> pd.DataFrame:
         # the end left: the nearer one to the last true position on A
         end = END if np.isfinite(length) and abs(length - pos[i - 1]) < abs(pos[i - 1]) else BEGIN
         exits = topo.exits.get((a, end), [])
-        if len(exits) < 2:
-            continue
         switch = next((e.switch_id for e in exits if e.track_id == b), None)
-        rows.append({"t": float(t[i]), "switch_id": switch, "from_track": a, "to_track": b})
-    return pd.DataFrame(rows, columns=["t", "switch_id", "from_track", "to_track"])
+        if len(exits) < 2 and switch is None:
+            continue
+        rows.append({"t": float(t[i]), "switch_id": switch, "from_track": a, "to_track": b, "facing": len(exits) >= 2})
+    return pd.DataFrame(rows, columns=["t", "switch_id", "from_track", "to_track", "facing"]).astype({"facing": bool})
+
+
+def facing_passages(truth: pd.DataFrame, network: Network) -> pd.DataFrame:
+    """Facing switch passages of the true route: t, switch, from and to track
+    (:func:`switch_passages` that split the route)."""
+    p = switch_passages(truth, network)
+    return p.loc[p["facing"], ["t", "switch_id", "from_track", "to_track"]].reset_index(drop=True)
+
+
+def selectivity_cap(parallel_m: float, passages: int, margin_m: float) -> float:
+    """The highest parallel-track selectivity a run of ``parallel_m`` metres of parallel track
+    with ``passages`` switch passages on it can reach when every position's along-track margin
+    is at least ``margin_m`` at the switches: 1 − 2·n·m / D.
+
+    A claim is determined only when its whole interval [p̂ − m, p̂ + m] lies on one track
+    (:mod:`fieldlogs.pipeline.claims`), so it is ambiguous while p̂ is within m of the joint; with
+    an error e = p̂ − p that changes little over the passage (the D-GPS bias decorrelates over
+    minutes), that is 2m of true travel per passage — parallel track, since right at a switch the
+    other branch lies beside the true one — however fast the branch taken is known. The cap
+    counts nothing else (run start, resolving a facing switch, fail-safe spells)."""
+    if parallel_m <= 0.0:
+        return float("nan")
+    return max(1.0 - 2.0 * passages * margin_m / parallel_m, 0.0)
+
+
+def margin_allowed(target: float, parallel_m: float, passages: int) -> float:
+    """The largest margin at every switch passage that leaves a selectivity of ``target``
+    reachable (the inverse of :func:`selectivity_cap`): (1 − target)·D / (2n) [m]."""
+    return float("inf") if passages == 0 else (1.0 - target) * parallel_m / (2.0 * passages)
 
 
 def _length(network: Network, track_id: str) -> float:

@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from dbtools.network import Network
 from dbtools.sources import read_source_set
@@ -15,7 +17,10 @@ from fieldlogs.pipeline.track_truth import (
     TrackFigures,
     compare_tracks,
     facing_passages,
+    margin_allowed,
     parallel_mask,
+    selectivity_cap,
+    switch_passages,
     switch_resolution,
     track_figures,
 )
@@ -102,6 +107,54 @@ def test_facing_passages_are_the_splitting_switches(crossover: Network) -> None:
     assert list(p["to_track"]) == ["X1", "U3"]
     # rows every 10 m at 1 s: D1 (300 m) 30 rows, X1 (60.17 m) 7 rows, U2 (240 m) 24 rows
     assert list(p["t"]) == [30.0, 30.0 + 7 + 24]
+
+
+def test_switch_passages_facing_and_trailing(crossover: Network) -> None:
+    p = switch_passages(_crossover_truth(crossover), crossover)
+    # D1 → X1 at W1 (facing), X1 → U2 at W2 (from the crossover's branch onto U2's toe side:
+    # trailing), U2 → U3 at W3 (facing, through)
+    assert list(p["switch_id"]) == ["W1", "W2", "W3"]
+    assert list(p["facing"]) == [True, False, True]
+    assert list(p["t"]) == [30.0, 37.0, 61.0]
+
+
+def test_a_plain_joint_is_no_switch_passage(junction: Network) -> None:
+    # the junction's A1 → A2 as a plain joint: one connection, no switch, no branch B1
+    tables = {k: v.copy() for k, v in junction.tables.items()}
+    c = tables["connections"]
+    joint = c[(c["track_a"] == "A1") & (c["track_b"] == "A2")].copy()
+    joint["switch_id"] = pd.NA
+    tables["connections"] = joint.reset_index(drop=True)
+    tables["switches"] = tables["switches"].iloc[:0]
+    net = Network(tables, origin="test")
+    length = {r.track_id: r.length_m for r in all_tracks(net).itertuples()}
+    rows = [("A1", p) for p in np.arange(0.0, length["A1"], 10.0)] + [("A2", p) for p in (0.0, 10.0)]
+    truth = pd.DataFrame(
+        {"t": np.arange(len(rows), dtype=float), "track_id": [r[0] for r in rows], "pos_m": [r[1] for r in rows]}
+    )
+    assert switch_passages(truth, net).empty
+    assert switch_passages(truth, junction)["facing"].tolist() == [True]
+
+
+def test_selectivity_cap_by_hand() -> None:
+    # 1 km of parallel track, 2 passages, margin 2.5 m: 2 × 2 × 2.5 = 10 m ambiguous → 99 %
+    assert selectivity_cap(1000.0, 2, 2.5) == pytest.approx(0.99)
+    assert margin_allowed(0.995, 1000.0, 2) == pytest.approx(1.25)
+    # the network bench's D-GPS runs: 160 passages on 74.36 km; D-GPS's 99.9 % error 3.29 × 0.75 m
+    assert selectivity_cap(74_360.0, 160, 3.2905 * 0.75) == pytest.approx(0.98938, abs=1e-5)
+    assert selectivity_cap(100.0, 10, 10.0) == 0.0
+    assert margin_allowed(0.995, 1000.0, 0) == float("inf")
+
+
+@given(
+    st.floats(100.0, 1e6),
+    st.integers(1, 1000),
+    st.floats(0.9, 0.9999),
+)
+def test_the_allowed_margin_reaches_the_target_exactly(parallel_m: float, n: int, target: float) -> None:
+    m = margin_allowed(target, parallel_m, n)
+    assert selectivity_cap(parallel_m, n, m) == pytest.approx(target, rel=1e-12)
+    assert selectivity_cap(parallel_m, n, 1.01 * m) < target
 
 
 def test_resolution_distance_and_wrong_claims(crossover: Network) -> None:
