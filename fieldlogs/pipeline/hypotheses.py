@@ -87,8 +87,14 @@ class TrackLine:
             return np.asarray(self.dirn * (np.asarray(self.metric.c_of_km(k), dtype=float) - self.c_begin), dtype=float)
         if not self.line_code or self.pos.size < 2:
             return np.full(k.shape, np.nan)
+        km, pos = self.by_km
+        return _extrap(k, km, pos)
+
+    @cached_property
+    def by_km(self) -> tuple[FloatArray, FloatArray]:
+        """``km`` and ``pos`` of the track points in the order of ascending km (``np.argsort``)."""
         order = np.argsort(self.km)
-        return _extrap(k, self.km[order], self.pos[order])
+        return self.km[order], self.pos[order]
 
     @property
     def km_sign(self) -> int:

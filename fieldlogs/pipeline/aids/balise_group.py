@@ -61,8 +61,7 @@ def balise_pos(tl: TrackLine, km: float) -> float:
     pos = tl.pos_of_km(km)
     if np.isfinite(pos) or tl.km.size < 2:
         return pos
-    order = np.argsort(tl.km)
-    k, p = tl.km[order], tl.pos[order]
+    k, p = tl.by_km
     if not (np.all(np.diff(k) > 0) and k[0] - 1.0 <= km <= k[-1] + 1.0):
         return float("nan")
     return float(np.interp(km, k, p))
