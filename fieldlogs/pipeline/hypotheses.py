@@ -41,7 +41,7 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.topology import BEGIN, END, Exit, Topology, all_tracks, centreline, topology
 from fieldlogs.pipeline.metric import IDENTITY, TrackMetric, track_metric
-from fieldlogs.pipeline.types import FloatArray, Hypothesis
+from fieldlogs.pipeline.types import Fix, FloatArray, Hypothesis
 
 #: Earth radius of the local plane of a track's centreline (equirectangular) [m].
 _R_EARTH = 6_371_000.0
@@ -357,6 +357,19 @@ def triggers(h: Hypothesis, pos: FloatArray, m: FloatArray, lines: TrackLines) -
         out = pos - tl.length_m if end == END else -pos
         hit |= out > (0.0 if lines.topo.exits.get((h.track_id, end)) else m + h.extra_m)
     return hit
+
+
+def one_split(fix: Fix | None) -> tuple[str, float] | None:
+    """(``switch_id``, ``split_d``) of the one split all of ``fix``'s candidates (two or more)
+    came out of; None when there are fewer candidates, or they came out of several splits or
+    of none."""
+    if fix is None or len(fix.hyps) < 2:
+        return None
+    keys = {(h.switch_id, h.split_d) for h in fix.hyps}
+    if len(keys) != 1:
+        return None
+    sid, split_d = next(iter(keys))
+    return None if sid is None or split_d is None else (sid, split_d)
 
 
 def after_switch_m(hyps: Iterable[Hypothesis], d: float) -> float | None:
