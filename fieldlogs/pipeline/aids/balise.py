@@ -20,7 +20,7 @@ base of the C balises); it speaks at every telegram.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,6 +38,8 @@ except ImportError:  # pragma: no cover - depends on the installed pandas
     maybe_box_native = None
 
 PairKey = tuple[str, str, str]
+Telegram = dict[str, Any]
+"""One telegram row (:func:`telegram_rows`)."""
 
 
 @dataclass
@@ -77,7 +79,8 @@ class BaliseAid(StaticAid):
 
     db: BaliseDb
     cfg: BaliseConfig
-    telegrams: pd.DataFrame | None = field(default=None, repr=False)
+    telegrams: Sequence[Telegram] = field(default=(), repr=False)
+    """The run's telegrams of every kind (:func:`telegram_rows`): the aid hears all but ``G``."""
     reader_x_m: float = 0.0
     """The balise reader's position forward of the vehicle's reference point [m]."""
     pending: _Pending | None = None
@@ -259,13 +262,9 @@ class BaliseAid(StaticAid):
         ], fix
 
 
-def telegram_observations(
-    tel: pd.DataFrame | None, keep: Callable[[dict[str, Any]], bool] = lambda row: True
-) -> Iterator[Observation]:
-    """One observation per telegram row ``keep`` accepts (NaN cells as None), at its t."""
-    if tel is None:
-        return
-    for row in telegram_rows(tel):
+def telegram_observations(rows: Sequence[Telegram], keep: Callable[[Telegram], bool]) -> Iterator[Observation]:
+    """One observation per telegram row ``keep`` accepts, at its t."""
+    for row in rows:
         if keep(row):
             yield Observation(float(row["t"]), row)
 

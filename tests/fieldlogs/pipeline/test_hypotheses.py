@@ -114,7 +114,7 @@ def _g(t: float, group: int, pig: int) -> dict[str, object]:
 
 
 def _group_aid(n: Network, rows: list[dict[str, object]]) -> BaliseGroupAid:
-    return BaliseGroupAid(group_table(n), track_lines(n), BaliseConfig(), pd.DataFrame(rows))
+    return BaliseGroupAid(group_table(n), track_lines(n), BaliseConfig(), rows)
 
 
 def test_balise_group_beyond_the_switch_is_decisive() -> None:

@@ -47,7 +47,7 @@ def test_hand_made_telegrams() -> None:
     ]
     assert type(rows[1]["nid_c"]) is int and type(rows[0]["t"]) is float
     assert same(rows, reference(tel))
-    assert [o.t for o in telegram_observations(tel, lambda r: r["t"] is not None)] == [126.638, 279.596]
+    assert [o.t for o in telegram_observations(rows, lambda r: r["t"] is not None)] == [126.638, 279.596]
 
 
 def test_without_pandas_boxing_the_slow_path(monkeypatch: pytest.MonkeyPatch) -> None:
