@@ -28,7 +28,8 @@ the caller runs the pragma, whose rows (ids, order) are the findings.
 from __future__ import annotations
 
 import sqlite3
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from functools import cache, partial
 
 import pandas as pd
 import pyarrow as pa
@@ -48,10 +49,20 @@ def _text(s: pd.Series) -> pa.Array:
 def dangling(child: pd.Series, parent: pd.Series) -> int:
     """The position of the first value of ``child`` that is neither missing nor a value of
     ``parent`` (-1 when every value is one or the other)."""
+    return _dangling(child, lambda: _keys(parent))
+
+
+def _keys(parent: pd.Series) -> pa.Array:
+    """The parent key column's values without its nulls (the value set of :func:`dangling`)."""
+    return _text(parent).drop_null()
+
+
+def _dangling(child: pd.Series, keys: Callable[[], pa.Array]) -> int:
+    """:func:`dangling` against the parent key values ``keys()`` (asked only when a child value is not null)."""
     values = _text(child)
     if values.null_count == len(values):
         return -1
-    found = pc.is_in(values, value_set=_text(parent).drop_null())
+    found = pc.is_in(values, value_set=keys())
     missing = pc.and_(pc.invert(found), pc.is_valid(values))
     return int(pc.index(missing, True).as_py())
 
@@ -94,30 +105,53 @@ def foreign_keys_hold(conn: sqlite3.Connection, frames: Mapping[str, pd.DataFram
       finds such a row whatever the parent index's collation, as equal bytes compare equal
       under BINARY, NOCASE and RTRIM alike.
 
+    Each parent key column is checked and read once, however many foreign keys point at it.
     False on any doubt or failure (the caller then runs the pragma)."""
     by_name = {t.name: t for t in tables}
     try:
         conn.execute("EXPLAIN PRAGMA foreign_key_check").fetchall()
         names = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-        for name in names:
-            rows = conn.execute('SELECT "from", "table", "to", seq FROM pragma_foreign_key_list(?)', (name,)).fetchall()
-            table = by_name.get(name)
-            declared = (
-                {(fk.columns[0], fk.other_table, fk.other_columns[0]) for fk in table.foreign_keys} if table else set()
-            )
-            if any(r[3] != 0 for r in rows) or len(rows) != len(declared) or {r[:3] for r in rows} != declared:
-                return False
-        for name in sorted(names & by_name.keys()):
-            for fk in by_name[name].foreign_keys:
-                parent, column, key = fk.other_table, fk.columns[0], fk.other_columns[0]
-                if parent not in names or parent not in frames or name not in frames:
-                    return False
-                if not (_text_column(conn, name, column) and _text_column(conn, parent, key)):
-                    return False
-                if dangling(frames[name][column], frames[parent][key]) >= 0:
-                    return False
+        return _declared_only(conn, names, by_name) and _relations_hold(conn, frames, names, by_name)
     except sqlite3.Error:
         return False
+
+
+def _declared_only(conn: sqlite3.Connection, names: set[str], by_name: Mapping[str, Table]) -> bool:
+    """Every table ``names`` of the file has exactly the declared single-column foreign keys."""
+    for name in names:
+        rows = conn.execute('SELECT "from", "table", "to", seq FROM pragma_foreign_key_list(?)', (name,)).fetchall()
+        table = by_name.get(name)
+        declared = (
+            {(fk.columns[0], fk.other_table, fk.other_columns[0]) for fk in table.foreign_keys} if table else set()
+        )
+        if any(r[3] != 0 for r in rows) or len(rows) != len(declared) or {r[:3] for r in rows} != declared:
+            return False
+    return True
+
+
+def _relations_hold(
+    conn: sqlite3.Connection, frames: Mapping[str, pd.DataFrame], names: set[str], by_name: Mapping[str, Table]
+) -> bool:
+    """Every declared foreign key of the file's tables has TEXT columns without a blob and no
+    dangling child value; a column asked of the file, a parent key set made, once."""
+
+    @cache
+    def text_column(table: str, column: str) -> bool:
+        return _text_column(conn, table, column)
+
+    @cache
+    def keys(parent: str, key: str) -> pa.Array:
+        return _keys(frames[parent][key])
+
+    for name in sorted(names & by_name.keys()):
+        for fk in by_name[name].foreign_keys:
+            parent, column, key = fk.other_table, fk.columns[0], fk.other_columns[0]
+            if parent not in names or parent not in frames or name not in frames:
+                return False
+            if not (text_column(name, column) and text_column(parent, key)):
+                return False
+            if _dangling(frames[name][column], partial(keys, parent, key)) >= 0:
+                return False
     return True
 
 

@@ -16,7 +16,9 @@ entry 0 and dir +1 when it is joined at its begin, its length and −1 at its en
 otherwise: so a joint or a switch within the margin never gives a claim the margin does not
 hold. An ambiguous cycle keeps line, track and km when all its candidates share line and
 track and agree on km within 0.5 m (a joint inside one line track), else leaves them empty;
-its ``candidates`` cell lists every candidate (:func:`candidates_text`).
+its ``candidates`` cell lists every candidate: a JSON list of objects ``track_id``, ``pos_m``,
+``km_m`` (null off a line) and ``margin_m``, rounded to mm, one per track (the first entry of
+each track present on the cycle) (:func:`claims`).
 """
 
 from __future__ import annotations
@@ -133,8 +135,9 @@ def claims(ents: list[Entry]) -> Claims:
 
 def _items(e: Entry, idx: npt.NDArray[np.int64]) -> list[str]:
     """The entry's ``candidates`` item on cycles ``idx`` as JSON text, made at once: what the
-    compact encoder writes of :func:`_item` (a JSON float is ``repr`` of the float; null for
-    a value that is not finite), without a dict and an encoder pass per cycle."""
+    compact JSON encoder writes of the object {``track_id``, ``pos_m``, ``km_m``, ``margin_m``}
+    of the values rounded to mm (a JSON float is ``repr`` of the float; null for a value that
+    is not finite), without a dict and an encoder pass per cycle."""
     head = '{"track_id":' + _COMPACT.encode(e.track_id) + ',"pos_m":'
     return [
         f'{head}{p},"km_m":{k},"margin_m":{m}}}'
@@ -143,12 +146,12 @@ def _items(e: Entry, idx: npt.NDArray[np.int64]) -> list[str]:
 
 
 def _texts(x: FloatArray) -> list[str]:
-    """:func:`_r` of every element as JSON text (:func:`_text`)."""
+    """Every element rounded to mm as JSON text (:func:`_text`)."""
     return [_text(v) for v in x.tolist()]
 
 
 def _text(v: float) -> str:
-    """``repr(round(v, 3))`` (the JSON text of :func:`_r`; null when not finite), for |v| < 10¹²
+    """``repr(round(v, 3))`` (the JSON text of v rounded to mm; null when not finite), for |v| < 10¹²
     as ``f"{v:.3f}"`` without its trailing zeros (one left after the point): both are the
     correctly rounded 3-decimal value of v (CPython's ``round`` and ``f`` formatting are the same
     dtoa), and a decimal of ≤ 15 significant digits is the shortest text of its float, which
@@ -163,32 +166,7 @@ def _text(v: float) -> str:
 _COMPACT = json.JSONEncoder(separators=(",", ":"))
 
 
-def _json(items: list[tuple[str, dict[str, object]]]) -> str:
-    """The ``candidates`` cell of :func:`candidates_text` from its items: one per track (the first)."""
-    seen: set[str] = set()
-    out = []
-    for tid, item in items:
-        if tid not in seen:
-            seen.add(tid)
-            out.append(item)
-    return _COMPACT.encode(out)
-
-
-def candidates_text(ents: list[Entry], i: int) -> str:
-    """The ``candidates`` cell of cycle ``i``: a JSON list of objects ``track_id``, ``pos_m``,
-    ``km_m`` (null off a line) and ``margin_m``, rounded to mm; one per track (the first)."""
-    return _json([(e.track_id, _item(e.track_id, _r(e.pos[i]), _r(e.km[i]), _r(e.margin[i]))) for e in ents])
-
-
-def _item(track_id: str, pos: float | None, km: float | None, margin: float | None) -> dict[str, object]:
-    return {"track_id": track_id, "pos_m": pos, "km_m": km, "margin_m": margin}
-
-
 def max_margin(ents: list[Entry]) -> FloatArray:
     """Per cycle, the largest margin among the present entries."""
     stack = np.vstack([np.where(e.mask, e.margin, -np.inf) for e in ents])
     return np.asarray(stack.max(axis=0), dtype=float)
-
-
-def _r(x: float) -> float | None:
-    return round(float(x), 3) if np.isfinite(x) else None

@@ -125,6 +125,13 @@ class BaliseEvidence:
     rms_m: float
     lag_slip_s: float = 0.0
     """B_L: the part of L̂ the intervals' slip budgets can make, Σ_j |∂L̂/∂a_j|·ΔA_j [s]."""
+    params: int = 2
+    """p: the parameters fitted, 2 (e and L), or 1 for the scale alone (L = 0, σ_L infinite)."""
+
+    @property
+    def residual_dof(self) -> int:
+        """n − p: the fit's residual degrees of freedom."""
+        return self.n - self.params
 
     @property
     def lag_doubt_s(self) -> float:
@@ -176,7 +183,7 @@ def fit_evidence(intervals: list[Interval]) -> BaliseEvidence | None:
         res = y - e * d
         s2 = float(res @ res) / (len(y) - 1) if len(y) > 1 else float("inf")
         rms = float(np.sqrt(np.mean(res**2)))
-        return BaliseEvidence(e, float(np.sqrt(s2 / float(d @ d))), 0.0, float("inf"), len(y), rms)
+        return BaliseEvidence(e, float(np.sqrt(s2 / float(d @ d))), 0.0, float("inf"), len(y), rms, params=1)
     beta = np.linalg.solve(xtx, x.T @ y)
     gain = np.linalg.solve(xtx, x.T) * w  # ∂β/∂a_j: the weighted least squares is linear in a
     res = y - x @ beta

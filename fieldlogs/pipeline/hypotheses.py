@@ -41,7 +41,7 @@ import pandas as pd
 from dbtools.network import Network
 from dbtools.topology import BEGIN, END, Exit, Topology, all_tracks, centreline, topology
 from fieldlogs.pipeline.metric import IDENTITY, TrackMetric, track_metric
-from fieldlogs.pipeline.types import FloatArray, Hypothesis
+from fieldlogs.pipeline.types import Fix, FloatArray, Hypothesis
 
 #: Earth radius of the local plane of a track's centreline (equirectangular) [m].
 _R_EARTH = 6_371_000.0
@@ -87,8 +87,14 @@ class TrackLine:
             return np.asarray(self.dirn * (np.asarray(self.metric.c_of_km(k), dtype=float) - self.c_begin), dtype=float)
         if not self.line_code or self.pos.size < 2:
             return np.full(k.shape, np.nan)
+        km, pos = self.by_km
+        return _extrap(k, km, pos)
+
+    @cached_property
+    def by_km(self) -> tuple[FloatArray, FloatArray]:
+        """``km`` and ``pos`` of the track points in the order of ascending km (``np.argsort``)."""
         order = np.argsort(self.km)
-        return _extrap(k, self.km[order], self.pos[order])
+        return self.km[order], self.pos[order]
 
     @property
     def km_sign(self) -> int:
@@ -111,6 +117,21 @@ class TrackLine:
         u = (p - cp[j]) / seg
         dx, dy = x1 - x0, y1 - y0
         norm = max(math.hypot(dx, dy), 1e-9)
+        return x0 + u * dx, y0 + u * dy, dx / norm, dy / norm
+
+    def points(self, pos: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """:meth:`point` at each of the ``pos`` at once: the same IEEE operations elementwise
+        (``max``/``min`` as ``where`` of the same comparisons, ``bisect_right`` as
+        ``searchsorted(side="right")``, the segment's length by ``math.hypot``), so the same
+        numbers as one at a time."""
+        cp, xy = np.asarray(self.cpos, dtype=float), np.asarray(self.xy, dtype=float)
+        p = np.where(cp[0] > pos, cp[0], pos)
+        p = np.where(cp[-1] < p, cp[-1], p)
+        j = np.clip(np.searchsorted(cp, p, side="right") - 1, 0, cp.size - 2)
+        diff = cp[j + 1] - cp[j]
+        u = (p - cp[j]) / np.where(1e-9 > diff, 1e-9, diff)
+        x0, y0, dx, dy = xy[j, 0], xy[j, 1], xy[j + 1, 0] - xy[j, 0], xy[j + 1, 1] - xy[j, 1]
+        norm = np.asarray([max(math.hypot(a, b), 1e-9) for a, b in zip(dx.tolist(), dy.tolist(), strict=True)])
         return x0 + u * dx, y0 + u * dy, dx / norm, dy / norm
 
     @cached_property
@@ -351,6 +372,19 @@ def triggers(h: Hypothesis, pos: FloatArray, m: FloatArray, lines: TrackLines) -
         out = pos - tl.length_m if end == END else -pos
         hit |= out > (0.0 if lines.topo.exits.get((h.track_id, end)) else m + h.extra_m)
     return hit
+
+
+def one_split(fix: Fix | None) -> tuple[str, float] | None:
+    """(``switch_id``, ``split_d``) of the one split all of ``fix``'s candidates (two or more)
+    came out of; None when there are fewer candidates, or they came out of several splits or
+    of none."""
+    if fix is None or len(fix.hyps) < 2:
+        return None
+    keys = {(h.switch_id, h.split_d) for h in fix.hyps}
+    if len(keys) != 1:
+        return None
+    sid, split_d = next(iter(keys))
+    return None if sid is None or split_d is None else (sid, split_d)
 
 
 def after_switch_m(hyps: Iterable[Hypothesis], d: float) -> float | None:

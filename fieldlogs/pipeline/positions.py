@@ -101,7 +101,8 @@ def positions_frame(
     the vehicle's head and tail km (:mod:`fieldlogs.pipeline.geometry`; NaN without its
     extent). A fix with network candidates (:mod:`fieldlogs.pipeline.hypotheses`) is dead-reckoned
     per candidate along its track: one gives track, pos and km; several give state
-    ``ambiguous``, no track or km, and the ``candidates`` column (:func:`candidates_text`)."""
+    ``ambiguous``, no track or km, and the ``candidates`` column
+    (:func:`~fieldlogs.pipeline.claims.claims`)."""
     geometry = geometry or VehicleGeometry()
     t = travel.t
     n = t.size

@@ -27,13 +27,12 @@ mistyped diameter or teeth count is for run.json, not for this correction); afte
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import replace
 
 from fieldlogs.pipeline.aids.registry import RunContext
 from fieldlogs.pipeline.config import PipelineConfig
-from fieldlogs.pipeline.consistency import BaliseEvidence, balise_evidence, checked_solution
+from fieldlogs.pipeline.consistency import balise_evidence, checked_solution
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.engine import Solution
 from fieldlogs.pipeline.estimate import Travel
@@ -48,11 +47,6 @@ SIGNIFICANCE = 3.0
 MIN_RESCALE_DOF = 2
 #: Largest scale divided out: |s − 1| (a 25 % error is a wrong run.json, not a turned wheel).
 MAX_SCALE = 0.25
-
-
-def residual_dof(ev: BaliseEvidence) -> int:
-    """n − p of the fit: p = 1 for the scale alone (no lag fitted: σ_L infinite), else 2."""
-    return ev.n - (1 if math.isinf(ev.lag_sigma_s) else 2)
 
 
 def scaled_cycles(cycles: Cycles, scale: float) -> Cycles:
@@ -72,7 +66,7 @@ def wheel_corrected(
     fits: list[float] = []
     for _ in range(WHEEL_PASSES if cfg.margin.wheel_rescale else 0):
         ev = balise_evidence(sol.fixes, travel)
-        if ev is None or 100.0 * abs(ev.scale) <= cfg.margin.scale_check_pct or residual_dof(ev) < MIN_RESCALE_DOF:
+        if ev is None or 100.0 * abs(ev.scale) <= cfg.margin.scale_check_pct or ev.residual_dof < MIN_RESCALE_DOF:
             break
         if not abs(ev.scale) >= SIGNIFICANCE * ev.scale_sigma or abs(scale * (1.0 + ev.scale) - 1.0) > MAX_SCALE:
             break

@@ -12,11 +12,14 @@ import sqlite3
 from collections.abc import Iterator
 from pathlib import Path
 
+import pandas as pd
+import pyarrow as pa
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import dbtools.database as database
+import dbtools.foreign_keys as foreign_keys
 from dbtools.build import build_db
 from dbtools.database import integrity_findings, read_network
 from dbtools.foreign_keys import foreign_keys_hold
@@ -108,6 +111,30 @@ def test_edited_db_same_findings_as_the_pragma(built: Path, tmp_path: Path, read
     assert not holds(db) or by_pragma == []  # never True where the pragma lists a row
     if name.startswith("a blob") or name in ("a reference to no track", "a track deleted", "many"):
         assert by_pragma and not holds(db)  # the damage is seen, by the pragma
+
+
+def test_each_column_checked_and_each_parent_read_once(built: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A parent key many foreign keys point at (lines.line_code, tracks.track_id) is asked of
+    the file and made a key set once, whatever the number of its children."""
+    asked: list[tuple[str, str]] = []
+    made: list[int] = []
+    text_column, keys = foreign_keys._text_column, foreign_keys._keys
+
+    def counted_text_column(conn: sqlite3.Connection, table: str, column: str) -> bool:
+        asked.append((table, column))
+        return text_column(conn, table, column)
+
+    def counted_keys(parent: pd.Series) -> pa.Array:
+        made.append(id(parent))
+        return keys(parent)
+
+    monkeypatch.setattr(foreign_keys, "_text_column", counted_text_column)
+    monkeypatch.setattr(foreign_keys, "_keys", counted_keys)
+    assert holds(built)
+    parents = [(p, k) for _, _, p, k in LINKS]
+    assert max(parents.count(pk) for pk in set(parents)) > 1  # the case this is about
+    assert sorted(asked) == sorted(set(asked)) == sorted({(c, col) for c, col, _, _ in LINKS} | set(parents))
+    assert 0 < len(made) <= len(set(parents))
 
 
 def test_a_changed_foreign_key_is_not_taken_on_trust(built: Path, tmp_path: Path) -> None:

@@ -23,7 +23,7 @@ Its uncertainty is the balise aid's: ``balise.fix_uncertainty_m`` + ``balise.lat
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -32,7 +32,7 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
-from fieldlogs.pipeline.aids.balise import telegram_observations
+from fieldlogs.pipeline.aids.balise import Telegram, telegram_observations
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.config import BaliseConfig
 from fieldlogs.pipeline.hypotheses import TrackLine, TrackLines, after_switch_m
@@ -61,8 +61,7 @@ def balise_pos(tl: TrackLine, km: float) -> float:
     pos = tl.pos_of_km(km)
     if np.isfinite(pos) or tl.km.size < 2:
         return pos
-    order = np.argsort(tl.km)
-    k, p = tl.km[order], tl.pos[order]
+    k, p = tl.by_km
     if not (np.all(np.diff(k) > 0) and k[0] - 1.0 <= km <= k[-1] + 1.0):
         return float("nan")
     return float(np.interp(km, k, p))
@@ -83,14 +82,15 @@ class BaliseGroupAid(StaticAid):
     groups: dict[GroupKey, dict[int, tuple[str, float]]]
     lines: TrackLines
     cfg: BaliseConfig
-    telegrams: pd.DataFrame = field(repr=False)
+    telegrams: Sequence[Telegram] = field(repr=False)
+    """The run's telegrams of every kind (:func:`~fieldlogs.pipeline.aids.balise.telegram_rows`): the aid hears G."""
     reader_x_m: float = 0.0
     last: _Read | None = None
     name = "balise_group"
     priority = Priority.TELEGRAM
 
     def observations(self) -> Iterator[Observation]:
-        return telegram_observations(self.telegrams)
+        return telegram_observations(self.telegrams, lambda row: row["kind"] == BaliseKind.G)
 
     def observe(self, obs: Observation, view: EngineView) -> Outcome:
         tel: dict[str, Any] = obs.payload

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import Aid, SpeedAid
-from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
+from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb, Telegram, telegram_rows
 from fieldlogs.pipeline.aids.balise_group import BaliseGroupAid, group_table
 from fieldlogs.pipeline.aids.failsafe import FailsafeAid
 from fieldlogs.pipeline.aids.feature_aid import FeatureAid
@@ -58,6 +59,13 @@ class RunContext:
     rollbacks: tuple[Rollback, ...] = ()
     """Starts the IMU saw rolling back against the cab (:mod:`fieldlogs.pipeline.rollback`)."""
 
+    @cached_property
+    def telegrams(self) -> list[Telegram]:
+        """The run's balise telegrams as rows (:func:`~fieldlogs.pipeline.aids.balise.telegram_rows`),
+        made once for every balise aid, each of which hears its own kinds."""
+        tel = self.streams.get("balise")
+        return [] if tel is None else telegram_rows(tel)
+
 
 def _rail(ctx: RunContext) -> Aid | None:
     return RailAid(ctx.cycles.t, ctx.cycles.pto)
@@ -86,29 +94,29 @@ def _topology(ctx: RunContext) -> Aid | None:
     return TopologyAid(track_lines(ctx.network), ctx.cfg.margin)
 
 
-def _network_telegrams(ctx: RunContext, kind: BaliseKind) -> pd.DataFrame | None:
-    """The run's balise telegrams of ``kind`` on a network DB (None: none, or no topology)."""
-    tel = ctx.streams.get("balise")
-    if tel is None or not _has_topology(ctx):
+def _network_telegrams(ctx: RunContext, kind: BaliseKind) -> list[Telegram] | None:
+    """The run's balise telegrams on a network DB when one is of ``kind`` (None: none of
+    ``kind``, or no topology): an aid for ``kind`` only where it has something to hear."""
+    if ctx.streams.get("balise") is None or not _has_topology(ctx):
         return None
-    mine = (tel["kind"] == kind.value).to_numpy(dtype=bool, na_value=False)
-    return tel[mine] if mine.any() else None  # the mask first: most runs have none of the kind
+    rows = ctx.telegrams
+    return rows if any(row["kind"] == kind for row in rows) else None
 
 
 def _balise_group(ctx: RunContext) -> Aid | None:
-    g = _network_telegrams(ctx, BaliseKind.G)
-    if g is None:
+    tel = _network_telegrams(ctx, BaliseKind.G)
+    if tel is None:
         return None
     groups = ctx.network.cached("balise_groups", lambda: group_table(ctx.network))
-    return BaliseGroupAid(groups, track_lines(ctx.network), ctx.cfg.balise, g, ctx.geometry.reader_x_m)
+    return BaliseGroupAid(groups, track_lines(ctx.network), ctx.cfg.balise, tel, ctx.geometry.reader_x_m)
 
 
 def _track_balise(ctx: RunContext) -> Aid | None:
-    i2 = _network_telegrams(ctx, BaliseKind.I2)
-    if i2 is None:
+    tel = _network_telegrams(ctx, BaliseKind.I2)
+    if tel is None:
         return None
     db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
-    return TrackBaliseAid(db, track_lines(ctx.network), ctx.cfg.balise, ctx.cfg.margin, i2, ctx.geometry.reader_x_m)
+    return TrackBaliseAid(db, track_lines(ctx.network), ctx.cfg.balise, ctx.cfg.margin, tel, ctx.geometry.reader_x_m)
 
 
 def _track_imu(ctx: RunContext) -> Aid | None:
@@ -192,7 +200,7 @@ def _track_gnss(ctx: RunContext) -> Aid | None:
 
 def _balise(ctx: RunContext) -> Aid | None:
     db = ctx.network.cached("balise_db", lambda: BaliseDb.from_network(ctx.network))
-    return BaliseAid(db, ctx.cfg.balise, ctx.streams.get("balise"), ctx.geometry.reader_x_m)
+    return BaliseAid(db, ctx.cfg.balise, ctx.telegrams, ctx.geometry.reader_x_m)
 
 
 def _gps(ctx: RunContext) -> Aid | None:

@@ -22,14 +22,12 @@ of it).
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import pandas as pd
-
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority, StaticAid
-from fieldlogs.pipeline.aids.balise import BaliseDb, telegram_observations
+from fieldlogs.pipeline.aids.balise import BaliseDb, Telegram, telegram_observations
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.config import BaliseConfig, MarginConfig
 from fieldlogs.pipeline.hypotheses import TrackLines, after_switch_m
@@ -46,7 +44,8 @@ class TrackBaliseAid(StaticAid):
     lines: TrackLines
     cfg: BaliseConfig
     margin: MarginConfig
-    telegrams: pd.DataFrame = field(repr=False)
+    telegrams: Sequence[Telegram] = field(repr=False)
+    """The run's telegrams of every kind (:func:`~fieldlogs.pipeline.aids.balise.telegram_rows`): the aid hears I2."""
     reader_x_m: float = 0.0
     name = "track_balise"
     priority = Priority.TELEGRAM

@@ -72,7 +72,7 @@ from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.track_imu import heading_llr, kept, look_threshold, resolve
 from fieldlogs.pipeline.config import MarginConfig, TrackSelectConfig
 from fieldlogs.pipeline.estimate import Travel
-from fieldlogs.pipeline.hypotheses import TrackLines, rebased, to_plane
+from fieldlogs.pipeline.hypotheses import TrackLines, one_split, rebased, to_plane
 from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.types import Fix, FloatArray, Hypothesis
 from schemas.enums import TrackKind
@@ -180,15 +180,8 @@ class TrackCrossoverAid:
 
     def _split(self, fix: Fix | None) -> tuple[str, float] | None:
         """The one split all of ``fix``'s candidates came out of, at a switch with a crossover branch."""
-        if fix is None or len(fix.hyps) < 2:
-            return None
-        keys = {(h.switch_id, h.split_d) for h in fix.hyps}
-        if len(keys) != 1:
-            return None
-        sid, split_d = next(iter(keys))
-        if sid is None or split_d is None or sid not in self.switches or (sid, split_d) in self.done:
-            return None
-        return sid, split_d
+        key = one_split(fix)
+        return None if key is None or key[0] not in self.switches or key in self.done else key
 
     def _exit(self, key: tuple[str, float], fix: Fix, view: EngineView) -> float | None:
         """d at the crossover's far end, from its candidate while on the crossover (kept)."""
@@ -228,7 +221,7 @@ class TrackCrossoverAid:
         fix = view.estimate
         key: tuple[str, float] = obs.payload
         self.done.add(key)
-        if fix is None or len(fix.hyps) < 2 or {(h.switch_id, h.split_d) for h in fix.hyps} != {key}:
+        if fix is None or one_split(fix) != key:
             return Outcome()
         tr = view.travel
         sid, split_d = key

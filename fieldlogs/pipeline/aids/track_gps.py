@@ -127,19 +127,10 @@ class At(NamedTuple):
 
 
 def offsets_at(tl: TrackLine, pos: FloatArray, px: list[float], py: list[float]) -> list[float]:
-    """:func:`offset` of each point (px_k, py_k) at each ``pos``_k at once: the same IEEE
-    operations elementwise as :meth:`TrackLine.point` (``max``/``min`` as ``where`` of the same
-    comparisons, ``bisect_right`` as ``searchsorted(side="right")``, the segment's length by
-    ``math.hypot``), so the same numbers as one at a time."""
-    cp, xy = np.asarray(tl.cpos, dtype=float), np.asarray(tl.xy, dtype=float)
-    p = np.where(cp[0] > pos, cp[0], pos)
-    p = np.where(cp[-1] < p, cp[-1], p)
-    j = np.clip(np.searchsorted(cp, p, side="right") - 1, 0, cp.size - 2)
-    diff = cp[j + 1] - cp[j]
-    u = (p - cp[j]) / np.where(1e-9 > diff, 1e-9, diff)
-    x0, y0, dx, dy = xy[j, 0], xy[j, 1], xy[j + 1, 0] - xy[j, 0], xy[j + 1, 1] - xy[j, 1]
-    norm = np.asarray([max(math.hypot(a, b), 1e-9) for a, b in zip(dx.tolist(), dy.tolist(), strict=True)])
-    x, y, ux, uy = x0 + u * dx, y0 + u * dy, dx / norm, dy / norm
+    """:func:`offset` of each point (px_k, py_k) at each ``pos``_k at once, on the centreline
+    points of :meth:`TrackLine.points` (the same numbers as :meth:`TrackLine.point` one at a
+    time) by the same operations as :func:`offset`."""
+    x, y, ux, uy = tl.points(pos)
     out: list[float] = (-(np.asarray(px) - x) * uy + (np.asarray(py) - y) * ux).tolist()
     return out
 

@@ -51,7 +51,7 @@ import pandas as pd
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.config import MarginConfig, TrackSelectConfig
-from fieldlogs.pipeline.hypotheses import TrackLines, rebased
+from fieldlogs.pipeline.hypotheses import TrackLines, one_split, rebased
 from fieldlogs.pipeline.positions import margin_m
 from fieldlogs.pipeline.types import Event, Fix, FloatArray, Hypothesis
 from schemas.enums import EventType, Side
@@ -122,13 +122,10 @@ class TrackImuAid:
         return []
 
     def _split(self, fix: Fix) -> tuple[str, float, Turnout] | None:
-        sw = {h.switch_id for h in fix.hyps}
-        d0 = {h.split_d for h in fix.hyps}
-        if len(fix.hyps) < 2 or len(sw) != 1 or len(d0) != 1:
+        key = one_split(fix)
+        if key is None or key[0] not in self.switches or key in self.done:
             return None
-        sid, split_d = next(iter(sw)), next(iter(d0))
-        if sid is None or split_d is None or sid not in self.switches or (sid, split_d) in self.done:
-            return None
+        sid, split_d = key
         to = self.switches[sid]
         if any(h.track_id not in to.heading for h in fix.hyps):
             return None
@@ -166,7 +163,7 @@ class TrackImuAid:
         self.look[(sid, split_d)] = self.look.get((sid, split_d), 1) + 1
         if final:
             self.done.add((sid, split_d))
-        if fix is None or len(fix.hyps) < 2 or {(h.switch_id, h.split_d) for h in fix.hyps} != {(sid, split_d)}:
+        if fix is None or one_split(fix) != (sid, split_d):
             return Outcome()
         tr, to = view.travel, self.switches[sid]
         sel = (tr.d >= split_d - m) & (tr.d <= split_d + x) & (tr.t <= view.t)

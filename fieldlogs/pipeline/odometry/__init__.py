@@ -14,7 +14,9 @@ is a function of the previous stages' frozen results and the config:
    (:mod:`.start_point`), attitude at i0 and integration (:mod:`.integration`), with a
    ground speed the fused speed and its budget (:mod:`.fusion`), re-adhesion, speed
    update, re-opening and echoes.
-4. :func:`~.episodes.watch_failsafes` → :class:`~.watch.Watch` per fail-safe episode.
+4. :func:`~.watch.watch_failsafe` (with a ground speed :func:`~.watch.watch_fused`) →
+   :class:`~.watch.Watch` of each fail-safe episode, made as stage 3 ends it
+   (``Episode.watch``).
 5. :func:`~.assembly.assemble` → :class:`Odometry` (d, v, slipping, allowance, the public
    :class:`SlipEpisode` list, and ``diagnostics`` — the internals, for tests and bench).
 6. With a ground speed: :func:`~.ground_products.ground_products`: the speed at low speed

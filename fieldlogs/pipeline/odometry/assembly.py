@@ -73,7 +73,6 @@ def assemble(
     d: Detections,
     cfg: OdometryConfig,
     episodes: Sequence[Episode],
-    watches: Sequence[Watch | None],
 ) -> Odometry:
     """Stage 5: distance, speed, slipping flags and allowance with the episodes applied;
     the public episodes and the diagnostics."""
@@ -98,6 +97,7 @@ def assemble(
         else:
             grow = g.grow[1:]
         allowance[g.s + 1 : g.e + 1] += np.minimum(grow, g.budget)
+    watches = [ep.watch for ep in episodes]
     for w in [*watches, *(r for ep in episodes for r in ep.rewatches)]:
         if w is not None and w.grow.size:
             allowance[w.cycles] += w.grow

@@ -9,7 +9,7 @@ from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.cycles import Cycles
 from fieldlogs.pipeline.odometry.assembly import assemble
 from fieldlogs.pipeline.odometry.detection import detect
-from fieldlogs.pipeline.odometry.episodes import find_episodes, watch_failsafes
+from fieldlogs.pipeline.odometry.episodes import find_episodes
 from fieldlogs.pipeline.odometry.ground import align_ground, metres_per_pulse
 from fieldlogs.pipeline.odometry.ground_products import ground_products
 from fieldlogs.pipeline.odometry.streams import align_streams
@@ -36,8 +36,7 @@ def correct_odometry(cycles: Cycles, cfg: OdometryConfig, ground: SpeedOnCycles 
         g = align_ground(streams, ground, metres_per_pulse(pulses, np.asarray(cycles.d_pulse, dtype=float)))
     detections = detect(streams, cfg, g)
     episodes = find_episodes(streams, detections, cfg, g)
-    watches = watch_failsafes(streams, cfg, episodes)
-    odo = assemble(streams, detections, cfg, episodes, watches)
+    odo = assemble(streams, detections, cfg, episodes)
     if g is None:
         return odo
     return ground_products(streams, g, cfg, odo, [ep.i_settled - streams.delay for ep in episodes])

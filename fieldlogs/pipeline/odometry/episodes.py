@@ -93,7 +93,6 @@ With a ground speed (the radar [S004], stage 1b)
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -145,6 +144,9 @@ class Episode:
     """δ: 1 s mean inertial − pulse speed at re-adhesion (NaN when not re-adhered) [m/s]."""
     speed_update_m: float
     """Distance change by the re-adhesion speed update (0 when not applied) [m]."""
+    watch: Watch | None
+    """A fail-safe's watch (:mod:`.watch`), from ie: on the integration, with a ground speed on
+    the filtered speed (None for the other episodes, and for all when ``failsafe_watch_s`` is 0)."""
     rewatches: tuple[Watch, ...] = ()
     """Watches of the detections after a fail-safe that no correction could follow, each on an
     integration from the detection's own look-back point (:func:`_rewatched`)."""
@@ -238,7 +240,7 @@ def _rewatched(
     speed."""
     if g is not None or cfg.failsafe_watch_s <= 0:
         return ep
-    own = watch_failsafe(s, cfg, ep.integration, ep.i_end)
+    own = ep.watch
     if own is not None and own.readhered and det <= own.end:
         return ep
     _, back = lookback_point(s, d, cfg, det, kind)
@@ -342,6 +344,7 @@ def _episode(
         theta_end=float(ig.theta[m_end - 1]),
         end_speed_error=end_err,
         speed_update_m=update_m,
+        watch=watch,
         fusion=fusion,
         budget=None if budget is None else readonly(budget[:m_end]),
         ground_share=0.0 if fusion is None else ground_share(fusion, m_end),
@@ -433,18 +436,3 @@ def _end_ground(
     if lim is not None:
         return i0 + lim, False, True
     return s.n - 1, False, False
-
-
-def watch_failsafes(s: AlignedStreams, cfg: OdometryConfig, episodes: Sequence[Episode]) -> tuple[Watch | None, ...]:
-    """Stage 4: the watch of every fail-safe episode (None for the others, and for all
-    when ``failsafe_watch_s`` is 0); a correction fused with a ground speed is watched on
-    its filtered speed."""
-    if cfg.failsafe_watch_s <= 0:
-        return tuple(None for _ in episodes)
-    return tuple(_watch_of(s, cfg, ep) if ep.failsafe else None for ep in episodes)
-
-
-def _watch_of(s: AlignedStreams, cfg: OdometryConfig, ep: Episode) -> Watch | None:
-    if ep.fusion is not None:
-        return watch_fused(s, cfg, ep.fusion, ep.i_end)
-    return watch_failsafe(s, cfg, ep.integration, ep.i_end)

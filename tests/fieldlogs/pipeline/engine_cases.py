@@ -6,7 +6,7 @@ import pandas as pd
 
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import Aid
-from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
+from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb, telegram_rows
 from fieldlogs.pipeline.aids.failsafe import FailsafeAid
 from fieldlogs.pipeline.aids.feature_aid import FeatureAid
 from fieldlogs.pipeline.aids.features import FeatureUnit
@@ -31,7 +31,8 @@ def solve(
     network: Network | None = None,
 ) -> Solution:
     """Rail, fail-safe and balise aids, plus GPS and feature points when given."""
-    aids: list[Aid] = [RailAid(c.t, c.pto), FailsafeAid(odo.episodes), BaliseAid(balise_db, cfg.balise, telegrams)]
+    rows = [] if telegrams is None else telegram_rows(telegrams)
+    aids: list[Aid] = [RailAid(c.t, c.pto), FailsafeAid(odo.episodes), BaliseAid(balise_db, cfg.balise, rows)]
     if gps is not None:
         aids.append(GpsAid(gps, cfg.gps))
     if features is not None:

@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 
 from dbtools.gis.geometry import Projector
-from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb
+from fieldlogs.pipeline.aids.balise import BaliseAid, BaliseDb, telegram_rows
 from fieldlogs.pipeline.aids.gps import GpsAid
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.engine import run_aids
@@ -29,7 +29,7 @@ def net():  # type: ignore[no-untyped-def]
 
 def _run(net, cab_sign: int, reader_x: float, geometry: VehicleGeometry | None = None):  # type: ignore[no-untyped-def]
     c, odo = cycles_const(10.0, 40.0, cab=np.full(401, cab_sign, dtype=np.int8))
-    aid = BaliseAid(BaliseDb.from_network(net), CFG.balise, tel(PAIR), reader_x_m=reader_x)
+    aid = BaliseAid(BaliseDb.from_network(net), CFG.balise, telegram_rows(tel(PAIR)), reader_x_m=reader_x)
     return run_aids(Travel.of(c, odo), [aid], CFG.margin, geometry)
 
 

@@ -23,8 +23,9 @@ from fieldlogs.pipeline.aids.track_imu import TrackImuAid, heading_llr, kept, tu
 from fieldlogs.pipeline.config import BaliseConfig, GpsConfig
 from fieldlogs.pipeline.engine import Solution, run_aids
 from fieldlogs.pipeline.estimate import Travel
-from fieldlogs.pipeline.hypotheses import track_lines
-from schemas.enums import EventType
+from fieldlogs.pipeline.hypotheses import one_split, track_lines
+from fieldlogs.pipeline.types import Fix, Hypothesis
+from schemas.enums import EventType, FixSource
 from tests.fieldlogs.pipeline.network_cases import CFG, MARGIN, Start, net, travel
 
 
@@ -113,7 +114,7 @@ def _g(t: float, group: int, pig: int) -> dict[str, object]:
 
 
 def _group_aid(n: Network, rows: list[dict[str, object]]) -> BaliseGroupAid:
-    return BaliseGroupAid(group_table(n), track_lines(n), BaliseConfig(), pd.DataFrame(rows))
+    return BaliseGroupAid(group_table(n), track_lines(n), BaliseConfig(), rows)
 
 
 def test_balise_group_beyond_the_switch_is_decisive() -> None:
@@ -295,3 +296,17 @@ def test_gnss_fit_on_the_wrong_branch_leaves_large_residuals(bad: float, resolve
         assert res[0].detail["track_id"] == "A2"
     else:
         assert not res and (sol.positions[sol.positions["t"] > 11.0]["state"] == "ambiguous").all()
+
+
+def test_one_split_of_the_candidates() -> None:
+    def fix(*hyps: Hypothesis) -> Fix:
+        return Fix(0.0, 0.0, 0.0, math.nan, math.nan, "", "", 1, FixSource.BALISE, 1.0, hyps=hyps)
+
+    a = Hypothesis("A", 5.0, 1, switch_id="W1", split_d=120.0)
+    b = Hypothesis("B", 5.0, 1, switch_id="W1", split_d=120.0)
+    assert one_split(fix(a, b)) == ("W1", 120.0)
+    assert one_split(None) is None and one_split(fix(a)) is None  # fewer than two candidates
+    assert one_split(fix(a, Hypothesis("B", 5.0, 1, switch_id="W1", split_d=80.0))) is None  # two splits of W1
+    assert one_split(fix(a, Hypothesis("B", 5.0, 1, switch_id="W2", split_d=120.0))) is None  # two switches
+    assert one_split(fix(Hypothesis("A", 5.0, 1), Hypothesis("B", 7.0, 1))) is None  # out of no split
+    assert one_split(fix(a, Hypothesis("B", 5.0, 1, switch_id="W1"))) is None  # a split without its travel

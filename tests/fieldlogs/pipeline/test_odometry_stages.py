@@ -30,7 +30,7 @@ from fieldlogs.pipeline.odometry.assembly import assemble
 from fieldlogs.pipeline.odometry.correct import correct_odometry
 from fieldlogs.pipeline.odometry.detection import detect
 from fieldlogs.pipeline.odometry.diagnostics import EpisodeDiagnostics, OdometryDiagnostics
-from fieldlogs.pipeline.odometry.episodes import find_episodes, watch_failsafes
+from fieldlogs.pipeline.odometry.episodes import find_episodes
 from fieldlogs.pipeline.odometry.ground import align_ground, metres_per_pulse
 from fieldlogs.pipeline.odometry.ground_products import ground_products
 from fieldlogs.pipeline.odometry.streams import align_streams
@@ -108,8 +108,8 @@ def run_stages(cycles: Cycles, cfg: OdometryConfig, radar: SpeedOnCycles | None)
     g = None if radar is None else align_ground(s, radar, metres_per_pulse(cycles.pulses, cycles.d_pulse))
     d = detect(s, cfg, g)
     eps = find_episodes(s, d, cfg, g)
-    watches = watch_failsafes(s, cfg, eps)
-    odo = assemble(s, d, cfg, eps, watches)
+    watches = tuple(ep.watch for ep in eps)
+    odo = assemble(s, d, cfg, eps)
     if g is not None:
         odo = ground_products(s, g, cfg, odo, [ep.i_settled - s.delay for ep in eps])
     return s, g, d, eps, watches, odo
@@ -165,7 +165,7 @@ def test_stages_are_pure(data: st.DataObject) -> None:
     assert_same(run_stages(sc.cycles, cfg, radar), first)
     eps_again = find_episodes(s, d, cfg, g)
     assert_same(eps_again, eps)
-    again = assemble(s, d, cfg, eps_again, watch_failsafes(s, cfg, eps_again))
+    again = assemble(s, d, cfg, eps_again)
     if g is not None:
         again = ground_products(s, g, cfg, again, [ep.i_settled - s.delay for ep in eps_again])
     assert_same(again, odo)

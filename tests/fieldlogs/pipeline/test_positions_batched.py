@@ -14,13 +14,14 @@ from hypothesis import strategies as st
 
 import fieldlogs.pipeline.positions as positions_mod
 from dbtools.network import Network
-from fieldlogs.pipeline.claims import Entry, _text, candidates_text, claims
+from fieldlogs.pipeline.claims import Entry, _text, claims
 from fieldlogs.pipeline.config import MarginConfig
 from fieldlogs.pipeline.estimate import Travel
 from fieldlogs.pipeline.hypotheses import track_lines
 from fieldlogs.pipeline.positions import margins, positions_frame
 from fieldlogs.pipeline.types import Fix, Hypothesis
 from schemas.enums import FixSource, PositionState
+from tests.fieldlogs.pipeline.claims_reference import candidates_text
 
 CFG = MarginConfig()
 

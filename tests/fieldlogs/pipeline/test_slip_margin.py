@@ -16,6 +16,7 @@ fail-safe; bench/NOTES.md, "Slip margin").
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -27,13 +28,13 @@ from dbtools.database import read_network
 from fieldlogs.pipeline.aid import EngineView
 from fieldlogs.pipeline.aids.failsafe import FailsafeAid
 from fieldlogs.pipeline.config import OdometryConfig
-from fieldlogs.pipeline.consistency import BaliseEvidence
+from fieldlogs.pipeline.consistency import BaliseEvidence, Interval, fit_evidence
 from fieldlogs.pipeline.odometry.correct import correct_odometry
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.track_truth import compare_tracks
 from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.pipeline.types import Fix, SlipEpisode
-from fieldlogs.pipeline.wheelscale import MIN_RESCALE_DOF, residual_dof
+from fieldlogs.pipeline.wheelscale import MIN_RESCALE_DOF
 from fieldlogs.runs.handle import read_run
 from fieldlogs.runs.write import write_run
 from fieldlogs.simulate.scenario import scenario_from_dict
@@ -177,10 +178,25 @@ def test_route_seeds_hold_their_margin(sample_network_db: Path, tmp_path: Path, 
 
 
 def test_a_scale_is_divided_out_only_with_two_residual_degrees_of_freedom() -> None:
-    def fit(n: int, lag_sigma_s: float) -> BaliseEvidence:
-        return BaliseEvidence(-0.05, 0.01, 0.0, lag_sigma_s, n, 0.05)
+    def fit(n: int, params: int) -> BaliseEvidence:
+        return BaliseEvidence(-0.05, 0.01, 0.0, float("inf") if params == 1 else 0.2, n, 0.05, params=params)
 
-    assert residual_dof(fit(2, float("inf"))) == 1  # the scale alone on two intervals
-    assert residual_dof(fit(3, float("inf"))) == 2
-    assert residual_dof(fit(4, 0.2)) == 2  # scale and lag on four
+    assert fit(2, 1).residual_dof == 1  # the scale alone on two intervals
+    assert fit(3, 1).residual_dof == 2
+    assert fit(4, 2).residual_dof == 2  # scale and lag on four
     assert MIN_RESCALE_DOF == 2
+
+
+def test_the_fit_carries_its_parameter_count() -> None:
+    def iv(dist_m: float, dv_mps: float, along_m: float) -> Interval:
+        return Interval(0.0, 1.0, dist_m, along_m, dv_mps)
+
+    # no speed change between the balises: the scale alone, 1 parameter (σ_L infinite)
+    alone = fit_evidence([iv(d, 0.0, -0.01 * d) for d in (1000.0, 2000.0, 1500.0, 500.0)])
+    assert alone is not None and alone.params == 1 and math.isinf(alone.lag_sigma_s)
+    assert alone.residual_dof == 3 and alone.scale == pytest.approx(-0.01)
+    # speed changes: scale and lag, 2 parameters (a = −0.01·D + 0.5·Δv)
+    rows = [(1000.0, 2.0), (2000.0, -3.0), (1500.0, 1.0), (500.0, 4.0)]
+    both = fit_evidence([iv(d, dv, -0.01 * d + 0.5 * dv) for d, dv in rows])
+    assert both is not None and both.params == 2 and math.isfinite(both.lag_sigma_s)
+    assert both.residual_dof == 2 and both.scale == pytest.approx(-0.01) and both.lag_s == pytest.approx(0.5)

@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 
 from dbtools.network import Network
 from dbtools.rules.balise_groups import locate
+from fieldlogs.pipeline.aids.balise import telegram_rows
 from fieldlogs.pipeline.aids.balise_group import BaliseGroupAid, balise_pos, group_table
 from fieldlogs.pipeline.aids.topology import TopologyAid
 from fieldlogs.pipeline.config import BaliseConfig
@@ -45,7 +46,7 @@ def test_balise_group_on_the_crossover_resolves_the_split() -> None:
     # the balise, and from then on the position is determined on X1 and dead-reckoned along it
     n = net("crossover")
     rows = [{"t": 13.0, "kind": "G", "nid_c": 230, "nid_bg": 3, "n_pig": 0}]
-    aid = BaliseGroupAid(group_table(n), track_lines(n), BaliseConfig(), pd.DataFrame(rows))
+    aid = BaliseGroupAid(group_table(n), track_lines(n), BaliseConfig(), rows)
     sol = run_aids(
         travel(n, np.full(160, 10.0)), [Start("9003", "D", 200.0, 1), TopologyAid(track_lines(n), MARGIN), aid], MARGIN
     )
@@ -115,7 +116,7 @@ def test_balise_groups_never_drop_the_true_branch(
         np.zeros(m),
         n,
     )
-    aid = BaliseGroupAid(group_table(n), lines, BaliseConfig(), _telegrams(n, lines, truth, t))
+    aid = BaliseGroupAid(group_table(n), lines, BaliseConfig(), telegram_rows(_telegrams(n, lines, truth, t)))
     start_fix = Start(tl.line_code, tl.track, float(tl.km_of_pos(pos0)), kp * tl.km_sign)
     sol = run_aids(tr, [start_fix, TopologyAid(lines, MARGIN), aid], MARGIN)
     p = sol.positions
@@ -124,7 +125,7 @@ def test_balise_groups_never_drop_the_true_branch(
     assert not (det & (claimed != np.array(truth.track, dtype=object))).any()
     assert EventType.BALISE_ANOMALY not in {e.type for e in sol.events}  # the true track was never dropped
     # each read fixes the position on the true track (on a crossover too: placed by its points)
-    reads = np.searchsorted(t, aid.telegrams["t"].to_numpy(dtype=float)) + 1
+    reads = np.searchsorted(t, [float(row["t"]) for row in aid.telegrams]) + 1
     assert det[reads[reads < m]].all()
     resolved = [e for e in sol.events if e.type == EventType.TRACK_RESOLVED]
     assert all(e.detail["track_id"] == truth.track[int(np.searchsorted(t, e.t))] for e in resolved)

@@ -6,6 +6,7 @@ telegram stream's dtypes and the others a frame may hold."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -14,7 +15,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fieldlogs.pipeline.aids.balise import telegram_observations, telegram_rows
+from dbtools.database import read_network
+from fieldlogs.pipeline.aids.balise import BaliseAid, telegram_observations, telegram_rows
+from fieldlogs.pipeline.aids.balise_group import BaliseGroupAid
+from fieldlogs.pipeline.aids.registry import position_aids
+from fieldlogs.pipeline.aids.track_balise import TrackBaliseAid
+from fieldlogs.pipeline.config import PipelineConfig
+from fieldlogs.pipeline.run import prepare_run
+from fieldlogs.runs.handle import read_run
+from tests.fieldlogs.pipeline.conftest import SAMPLE_LOGS
 
 
 def reference(tel: pd.DataFrame) -> list[dict[str, Any]]:
@@ -47,7 +56,7 @@ def test_hand_made_telegrams() -> None:
     ]
     assert type(rows[1]["nid_c"]) is int and type(rows[0]["t"]) is float
     assert same(rows, reference(tel))
-    assert [o.t for o in telegram_observations(tel, lambda r: r["t"] is not None)] == [126.638, 279.596]
+    assert [o.t for o in telegram_observations(rows, lambda r: r["t"] is not None)] == [126.638, 279.596]
 
 
 def test_without_pandas_boxing_the_slow_path(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -117,3 +126,27 @@ def test_rows_equal_to_dict_records(case: tuple[list[str], list[list[int]], list
         }
     )
     assert same(telegram_rows(tel), reference(tel))
+
+
+def test_a_run_converts_its_telegrams_once_for_every_balise_aid(sample_network_db: Path) -> None:
+    """On a network run with I1/I2/C and G telegrams the three balise aids share the run's one
+    conversion (:attr:`RunContext.telegrams`), each hearing its own kinds, in the stream's order."""
+    run = read_run(SAMPLE_LOGS / "sim-net-crossover")
+    ctx, _ = prepare_run(run, read_network(sample_network_db), PipelineConfig())
+    tel = ctx.streams["balise"]
+    assert tel is not None and {"I2", "G"} <= set(tel["kind"].dropna())
+    aids = {a.name: a for a in position_aids(ctx)}
+    line, group, track = aids["balise"], aids["balise_group"], aids["track_balise"]
+    assert isinstance(line, BaliseAid) and isinstance(group, BaliseGroupAid) and isinstance(track, TrackBaliseAid)
+    assert line.telegrams is group.telegrams is track.telegrams is ctx.telegrams
+    assert same(ctx.telegrams, reference(tel))
+    kinds = tel["kind"].tolist()
+    kinds_heard: list[tuple[BaliseAid | BaliseGroupAid | TrackBaliseAid, set[str]]] = [
+        (line, {"I1", "I2", "C"}),
+        (group, {"G"}),
+        (track, {"I2"}),
+    ]
+    assert set(kinds) <= {"I1", "I2", "C", "G"}
+    for aid, hears in kinds_heard:
+        heard = [o.payload for o in aid.observations()]
+        assert heard == [row for row, k in zip(ctx.telegrams, kinds, strict=True) if k in hears]

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from fieldlogs.pipeline.aid import Observation, Outcome, Priority, StaticAid
-from fieldlogs.pipeline.aids.balise import BaliseDb
+from fieldlogs.pipeline.aids.balise import BaliseDb, telegram_rows
 from fieldlogs.pipeline.aids.topology import TopologyAid, with_hyps
 from fieldlogs.pipeline.aids.track_balise import TrackBaliseAid
 from fieldlogs.pipeline.config import BaliseConfig
@@ -55,7 +55,7 @@ def _run(t_read: float, track: str = "U") -> Solution:
     n = net("crossover")
     lines = track_lines(n)
     tel = pd.DataFrame({"t": [t_read], "kind": ["I2"], "station_code": ["01"], "track": [track]})
-    aid = TrackBaliseAid(DB, lines, BaliseConfig(), MARGIN, tel)
+    aid = TrackBaliseAid(DB, lines, BaliseConfig(), MARGIN, telegram_rows(tel))
     aids = [_Ambiguous(), TopologyAid(lines, MARGIN), aid]
     return run_aids(travel(n, np.full(120, 10.0)), aids, MARGIN)  # type: ignore[list-item]
 

@@ -1,6 +1,7 @@
 """The GPS offsets test's evidence on a single candidate gathered a stretch of fixes at once
 (:meth:`~fieldlogs.pipeline.aids.track_gps.TrackGpsAid.flush`; issue 31: the engine's cost,
-results unchanged): the offsets computed at once are the ones computed fix by fix, bit for bit,
+results unchanged): the centreline points (:meth:`~fieldlogs.pipeline.hypotheses.TrackLine.points`)
+and offsets computed at once are the ones computed fix by fix, bit for bit,
 and the evidence, jump test state and decisions are those of an aid that works every fix in
 when it is heard."""
 
@@ -34,13 +35,15 @@ LINES = track_lines(net("crossover"))
         st.tuples(st.floats(-60.0, 1200.0), st.floats(-30.0, 30.0), st.floats(-30.0, 30.0)), min_size=1, max_size=40
     ),
 )
-def test_offsets_at_once_are_the_ones_one_at_a_time(track_id: str, rows: list[tuple[float, float, float]]) -> None:
+def test_points_and_offsets_at_once_as_one_at_a_time(track_id: str, rows: list[tuple[float, float, float]]) -> None:
     tl = LINES[track_id]
     cp = [float(c) for c in tl.cpos]
     # positions on the knots, just beside them and beyond both ends, as well as anywhere
     pos = [p if k % 3 else cp[int(abs(p)) % len(cp)] for k, (p, _, _) in enumerate(rows)]
     x0, y0, _ux, _uy = tl.point(0.0)
     px, py = [x0 + dx for _, dx, _ in rows], [y0 + dy for _, _, dy in rows]
+    points = [c.tolist() for c in tl.points(np.asarray(pos))]
+    assert list(zip(*points, strict=True)) == [tl.point(p) for p in pos]  # bit for bit
     got = offsets_at(tl, np.asarray(pos), px, py)
     want = [offset(tl, p, x, y) for p, x, y in zip(pos, px, py, strict=True)]
     assert got == want  # bit for bit

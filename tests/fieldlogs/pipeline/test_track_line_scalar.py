@@ -2,7 +2,7 @@
 (issue 31: the engine's cost, results unchanged): :meth:`TrackLine.point` and
 :meth:`TrackLine.project` against the array formulas they replaced, and the ``candidates``
 cells :func:`~fieldlogs.pipeline.claims.claims` makes at once against
-:func:`~fieldlogs.pipeline.claims.candidates_text` cycle by cycle."""
+the reference text (:mod:`tests.fieldlogs.pipeline.claims_reference`) cycle by cycle."""
 
 from __future__ import annotations
 
@@ -12,9 +12,10 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fieldlogs.pipeline.claims import Entry, candidates_text, claims
+from fieldlogs.pipeline.claims import Entry, claims
 from fieldlogs.pipeline.hypotheses import TrackLine
 from fieldlogs.pipeline.types import FloatArray
+from tests.fieldlogs.pipeline.claims_reference import candidates_text
 
 
 def line(xy: FloatArray, cpos: FloatArray) -> TrackLine:
