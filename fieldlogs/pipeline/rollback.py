@@ -77,29 +77,67 @@ class Rollback:
     """ρ·c of the start (≈ −1)."""
 
 
+@dataclass(frozen=True)
+class _Trace:
+    """The per-cycle arrays every start is judged on, computed once per run: judging a start
+    reads only a few seconds around it, so the detection costs O(cycles + starts) and not
+    O(cycles · starts) (a 24 h run has thousands of starts)."""
+
+    v: npt.NDArray[np.float64]
+    """Pulse speed, NaN as 0 [m/s]."""
+    d: npt.NDArray[np.float64]
+    """Pulse distance [m]."""
+    dt: npt.NDArray[np.float64]
+    """Cycle length [s]."""
+    ax: npt.NDArray[np.float64]
+    cab: npt.NDArray[np.int8]
+    t: npt.NDArray[np.float64]
+    step: float
+    """The run's median cycle length [s] (not below 1 ms)."""
+    last_moving: npt.NDArray[np.int64]
+    """Index of the last cycle with v > 0 at or before each cycle, −1 before the first."""
+
+    @classmethod
+    def of(cls, cycles: Cycles) -> _Trace:
+        v = np.nan_to_num(cycles.v_pulse, nan=0.0)
+        dt = cycles.dt
+        idx = np.where(v > 0, np.arange(v.size), -1)
+        last = np.maximum.accumulate(idx) if idx.size else idx
+        step = max(float(np.median(dt)), 1e-3)
+        return cls(v, cycles.d_pulse, dt, cycles.imu["ax"], cycles.cab, cycles.t, step, last)
+
+    def cycles_of(self, seconds: float) -> int:
+        """``seconds`` in whole cycles of the median length."""
+        return round(seconds / self.step)
+
+
 def _starts(v: npt.NDArray[np.float64], rest: int) -> list[tuple[int, int]]:
-    """(first moving cycle, end of its stretch) of every start after ≥ ``rest`` cycles at rest."""
+    """(first moving cycle, end of its stretch) of every start after ≥ ``rest`` cycles at rest;
+    the stretch ends at the next standstill of ≥ ``rest`` cycles (or the run's end).
+
+    With s(j) true where cycles j … j + rest − 1 are all at rest (a prefix sum of the cycles at
+    rest), a start is a first moving cycle i₀ ≥ rest with s(i₀ − rest), and its end the first j
+    ≥ i₀ with s(j), found by a binary search in the sorted j with s(j)."""
     moving = v > 0
     n = v.size
-    out: list[tuple[int, int]] = []
+    if n <= rest:
+        return []
+    at_rest = np.concatenate(([0], np.cumsum(~moving)))
+    still = at_rest[rest:] - at_rest[: n - rest + 1] == rest  # s(j), j = 0 … n − rest
     edges = np.flatnonzero(np.diff(moving.astype(np.int8)) == 1) + 1
-    for i0 in edges.tolist():
-        if i0 < rest or moving[i0 - rest : i0].any():
-            continue
-        # the stretch ends at the next standstill of ≥ rest cycles (or the run's end)
-        still = np.convolve(~moving[i0:], np.ones(rest, dtype=int), "valid") == rest
-        end = i0 + int(np.argmax(still)) if still.any() else n
-        out.append((i0, end))
-    return out
+    edges = edges[edges >= rest]
+    starts = edges[still[edges - rest]]
+    still_at = np.flatnonzero(still)
+    nxt = np.searchsorted(still_at, starts)
+    ends = np.where(nxt < still_at.size, still_at[np.minimum(nxt, still_at.size - 1)], n)
+    return list(zip(starts.tolist(), ends.tolist(), strict=True))
 
 
-def _judge(cycles: Cycles, i0: int, end: int) -> Rollback | None:
+def _judge(tr: _Trace, i0: int, end: int) -> Rollback | None:
     """The start at cycle ``i0`` (stretch up to ``end``): a rollback or None."""
-    ax = cycles.imu["ax"]
-    v, d, dt = np.nan_to_num(cycles.v_pulse, nan=0.0), cycles.d_pulse, cycles.dt
+    ax, v, d, dt = tr.ax, tr.v, tr.d, tr.dt
     k0 = max(i0 - LEAD_CYCLES, 0)
-    before = np.flatnonzero(v[:i0] > 0)
-    r0 = max(k0 - round(REST_S / max(float(np.median(dt)), 1e-3)), int(before[-1]) + 1 if before.size else 0)
+    r0 = max(k0 - tr.cycles_of(REST_S), int(tr.last_moving[i0 - 1]) + 1)
     a0 = ax[r0:k0]
     if a0.size == 0 or not np.isfinite(a0).all():
         return None
@@ -110,19 +148,19 @@ def _judge(cycles: Cycles, i0: int, end: int) -> Rollback | None:
     if stop <= i0 or not np.isfinite(seg).all() or d[stop - 1] - base < MIN_DISTANCE_M:
         return None
     v_i = np.cumsum((seg - float(a0.mean())) * dt[k0:stop])
-    at_rest_after = stop == end < cycles.n  # the whole stretch is slow and ends at rest: v = 0 there
+    at_rest_after = stop == end < tr.t.size  # the whole stretch is slow and ends at rest: v = 0 there
     if at_rest_after:  # zero-velocity update: the integral's drift is a ramp ending at v_i(end)
         v_i = v_i - v_i[-1] * np.arange(1, v_i.size + 1) / v_i.size
     v_i = v_i[i0 - k0 :]
     vp = v[i0:stop]
-    judged = slice(None) if at_rest_after else slice(0, max(round(JUDGE_S / max(float(np.median(dt)), 1e-3)), 1))
-    c = float(cycles.cab[i0])
+    judged = slice(None) if at_rest_after else slice(0, max(tr.cycles_of(JUDGE_S), 1))
+    c = float(tr.cab[i0])
     ratio = float(np.sum(v_i[judged] * vp[judged]) / max(float(np.sum(vp[judged] ** 2)), 1e-12)) * c
     if ratio > -AGAINST_RATIO:
         return None
     turned = np.flatnonzero(v_i * c >= 0)
     last = stop - 1 if at_rest_after or not turned.size else max(i0 + int(turned[0]) - 1, i0)
-    return Rollback(i0, last, float(cycles.t[i0]), float(cycles.t[last]), float(d[last] - base), ratio)
+    return Rollback(i0, last, float(tr.t[i0]), float(tr.t[last]), float(d[last] - base), ratio)
 
 
 def detect_rollbacks(cycles: Cycles) -> list[Rollback]:
@@ -130,9 +168,8 @@ def detect_rollbacks(cycles: Cycles) -> list[Rollback]:
     tacho gives the sense itself, or without tacho or IMU."""
     if cycles.rotation is not None or not (cycles.has_tacho and cycles.has_imu) or cycles.n < 2:
         return []
-    rest = max(round(STANDSTILL_S / max(float(np.median(cycles.dt)), 1e-3)), 1)
-    v = np.nan_to_num(cycles.v_pulse, nan=0.0)
-    found = (_judge(cycles, i0, end) for i0, end in _starts(v, rest))
+    tr = _Trace.of(cycles)
+    found = (_judge(tr, i0, end) for i0, end in _starts(tr.v, max(tr.cycles_of(STANDSTILL_S), 1)))
     return [r for r in found if r is not None]
 
 

@@ -16,12 +16,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from dbtools.database import read_network
 from dbtools.network import Network
 from fieldlogs.pipeline import run as run_module
 from fieldlogs.pipeline.cycles import IMU_COLUMNS, Cycles, tacho_motion
-from fieldlogs.pipeline.rollback import detect_rollbacks, inferred_rotation
+from fieldlogs.pipeline.rollback import _starts, detect_rollbacks, inferred_rotation
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.truth import compare_with_truth
 from fieldlogs.runs.handle import read_run
@@ -80,6 +82,48 @@ def test_ordinary_starts_are_not_rollbacks() -> None:
     assert detect_rollbacks(_cycles(slow_creep)) == []
     # a two-phase tacho gives the sense itself: nothing to infer
     assert detect_rollbacks(_cycles(ROLL, rotation=np.zeros(210, np.int8))) == []
+
+
+def _starts_by_definition(v: np.ndarray, rest: int) -> list[tuple[int, int]]:
+    """The starts as the module docstring defines them, cycle by cycle: a first moving cycle i₀
+    after ≥ ``rest`` cycles at rest, its stretch ending at the first j ≥ i₀ that begins ``rest``
+    cycles at rest (the run's end without one)."""
+    moving = v > 0
+    n = v.size
+    out = []
+    for i0 in range(rest, n):
+        if moving[i0] and not moving[i0 - 1] and not moving[i0 - rest : i0].any():
+            ends = [j for j in range(i0, n - rest + 1) if not moving[j : j + rest].any()]
+            out.append((i0, ends[0] if ends else n))
+    return out
+
+
+def test_starts_hand_computed() -> None:
+    v = np.array([0, 0, 1, 1, 0, 0, 0, 1, 0, 0, 1], float)
+    # rest 2: after cycles 0-1, 5-6 and 8-9 at rest; stretches end where 2 cycles at rest begin
+    assert _starts(v, 2) == [(2, 4), (7, 8), (10, 11)]
+    # rest 3: cycle 2 has only 2 cycles at rest before it, cycle 10 only 2 (8-9); 7 runs to the end
+    assert _starts(v, 3) == [(7, 11)]
+    assert _starts(np.array([0.0, 1.0]), 2) == []  # shorter than a standstill plus a cycle
+
+
+@given(st.lists(st.sampled_from([0.0, 0.0, 0.5]), max_size=60), st.integers(1, 5))
+def test_starts_as_defined(v: list[float], rest: int) -> None:
+    speed = np.array(v, dtype=float)
+    assert _starts(speed, rest) == _starts_by_definition(speed, rest)
+
+
+def test_every_start_of_a_long_run_is_judged_alike() -> None:
+    """Judging a start reads only the cycles around it: the same rollback repeated after a
+    stop (braking 10 s at −0.5 m/s² from 5 m/s) is found at each repetition with the same
+    figures."""
+    block = [*ROLL, (10.0, -0.5)]
+    cycles_per_block = round(sum(d for d, _ in block) / DT)
+    found = detect_rollbacks(_cycles(block * 4))
+    assert [r.first for r in found] == [50 + k * cycles_per_block for k in range(4)]
+    assert [r.last - r.first for r in found] == [78] * 4
+    assert [r.distance_m for r in found] == pytest.approx([1.6] * 4, abs=0.02)
+    assert [r.ratio for r in found] == pytest.approx([-1.0] * 4, abs=0.05)
 
 
 # -- seeded simulated runs ------------------------------------------------------------------
