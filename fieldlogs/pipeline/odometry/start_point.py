@@ -37,8 +37,10 @@ Lobe rule for eq. 1 (the kind only)
     its onset inside a fail-safe watch, detected at its end lobe at 54.9 s and reported as a
     slip; bench/NOTES.md, "Slide label"). Such an onset is an end lobe when the latest cycle
     eq. 1 flagged within H + M before it had the opposite sign and the detected lobe's peak
-    over the next filter length is at most LOBE_RATIO times that lobe's: the kind is then
-    reversed (:func:`ta_end_lobe`). Its look-back stays the SPEC's: a start point inside the
+    over the next filter length is at most LOBE_RATIO times that lobe's — unless that lobe
+    itself follows one of the detected lobe's sign within H + M: it is then the end lobe of
+    an earlier disturbance (the filters' echo of a corrected slide's end, route seed 67), and
+    the detection a new onset. The kind is then reversed (:func:`ta_end_lobe`). Its look-back stays the SPEC's: a start point inside the
     disturbance fails safe (:func:`fieldlogs.pipeline.odometry.episodes.start_trusted`).
 """
 
@@ -124,13 +126,23 @@ def lobe(
 def ta_end_lobe(diff: FloatArray, ta_mask: BoolArray, det: int, horizon: int, m: int) -> bool:
     """The eq. 1 onset at ``det`` is the end lobe of a disturbance (module docstring, "Lobe
     rule for eq. 1"): the latest cycle ``ta_mask`` flags within the horizon + filter length
-    ``m`` before it has the opposite sign of ``diff`` (K·a_x − K·A_p), and the detected lobe
-    is like that one (:func:`_like_its_onset`). Its kind is then the opposite of its sign."""
-    lo = max(det - horizon - m, 0)
-    flagged = np.flatnonzero(ta_mask[lo:det])
-    if flagged.size == 0 or np.sign(diff[lo + int(flagged[-1])]) != -np.sign(diff[det]):
+    ``m`` before it has the opposite sign of ``diff`` (K·a_x − K·A_p); that lobe — the
+    flagged cycles since the last one of the detected sign — follows none of the detected
+    sign within the same span, and the detected lobe is like it (:func:`_like_its_onset`).
+    Its kind is then the opposite of its sign. A lobe is told by the sign, not by
+    consecutive cycles: ``ta_mask`` may drop a cycle inside one (route seed 67)."""
+    span, sgn = horizon + m, np.sign(diff[det])
+    lo = max(det - span, 0)
+    flagged = lo + np.flatnonzero(ta_mask[lo:det])
+    if flagged.size == 0 or np.sign(diff[flagged[-1]]) != -sgn:
         return False  # nothing before it, or a lobe of its own sign: an onset
-    return _like_its_onset(diff, det, lo + _last_run(flagged), m)
+    own = flagged[np.sign(diff[flagged]) == sgn]
+    opp = flagged[flagged > own[-1]] if own.size else flagged
+    lo = max(int(opp[0]) - span, 0)
+    before = lo + np.flatnonzero(ta_mask[lo : opp[0]])
+    if (np.sign(diff[before]) == sgn).any():
+        return False  # that lobe is itself the end of an earlier disturbance (route seed 67)
+    return _like_its_onset(diff, det, opp, m)
 
 
 def _last_run(idx: IntArray) -> IntArray:

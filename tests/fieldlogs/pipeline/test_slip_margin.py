@@ -115,6 +115,13 @@ def test_eq1_end_lobe_takes_the_kind_of_the_lobe_before_it() -> None:
     diff[62] = 0.0
     assert not ta_end_lobe(diff, np.abs(diff) > 0.34, 141, 40, 39)  # ends at 61: outside
     assert not ta_end_lobe(-diff, np.abs(diff) > 0.34, 141, 40, 39)
+    # the opposite lobe (100 … 120) itself follows a lobe of the detected sign (60 … 70, within
+    # 79 cycles before cycle 100): it ended an earlier disturbance, the detection is an onset
+    diff = np.zeros(300)
+    diff[60:71], diff[100:121], diff[141:181] = -1.5, 1.5, -1.5
+    assert not ta_end_lobe(diff, np.abs(diff) > 0.34, 141, 40, 39)
+    diff[60:71] = 1.5  # of the opposite lobe's sign: no matter
+    assert ta_end_lobe(diff, np.abs(diff) > 0.34, 141, 40, 39)
 
 
 @dataclass
