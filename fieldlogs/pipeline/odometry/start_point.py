@@ -35,13 +35,14 @@ Lobe rule for eq. 1 (the kind only)
     onset lobe opened no episode (it fell in the previous one's room or fail-safe watch) the
     end lobe is the first detection (network sample, route seed 2: a slide over 50.3–54.6 s,
     its onset inside a fail-safe watch, detected at its end lobe at 54.9 s and reported as a
-    slip; bench/NOTES.md, "Slide label"). Such an onset is an end lobe when the latest cycle
-    eq. 1 flagged within H + M before it had the opposite sign and the detected lobe's peak
-    over the next filter length is at most LOBE_RATIO times that lobe's — unless that lobe
-    itself follows one of the detected lobe's sign within H + M: it is then the end lobe of
-    an earlier disturbance (the filters' echo of a corrected slide's end, route seed 67), and
-    the detection a new onset. The kind is then reversed (:func:`ta_end_lobe`). Its look-back stays the SPEC's: a start point inside the
-    disturbance fails safe (:func:`fieldlogs.pipeline.odometry.episodes.start_trusted`).
+    slip; bench/NOTES.md, "Slide label"). Such an onset is an end lobe, its kind reversed
+    (:func:`ta_end_lobe`), when the latest cycle eq. 1 flagged within H + M before it had the
+    opposite sign, that lobe follows none of the detected sign within H + M (else it is the
+    end lobe of an earlier disturbance — the filters' echo of a corrected slide's end, route
+    seed 67 — and the detection a new onset), and the detected lobe's peak over the next
+    filter length is at most LOBE_RATIO times that lobe's. Its look-back stays the SPEC's: a
+    start point inside the disturbance fails safe
+    (:func:`fieldlogs.pipeline.odometry.episodes.start_trusted`).
 """
 
 from __future__ import annotations
