@@ -20,7 +20,8 @@ whose start point was not adhering (``SlipEpisode.start_trusted`` false: |θ̄| 
 arcsin(Ta/G), or none found and the look-back point itself flagged), their kinds (slip, slide)
 and those labelled opposite to the simulated episodes they overlap (``t_start`` ≤ t1 + 3 s,
 ``t_end`` ≥ t0 − 1 s, as ``bench/accuracy.py`` matches them; an episode overlapping injected
-ones of both kinds is not counted), and the runs with a finding.
+ones of both kinds is not counted), the determined cycles, the allowance the fail-safe watches
+added (``FailsafeWatch.allowance_m``), and the runs with a finding.
 """
 
 from __future__ import annotations
@@ -85,6 +86,8 @@ def judge(i: int, db: str, tmp: str, sc: dict[str, Any], cfg: dict[str, Any]) ->
         "episodes": len(eps),
         "untrusted": sum(1 for e in eps if not e.start_trusted),
         "slides": sum(1 for e in eps if e.kind == "slide"),
+        "determined": int(det.sum()),
+        "watch_m": sum(e.watch.allowance_m for e in eps if e.watch is not None),
         "mislabelled": sum(1 for e in eps if _mislabelled(e, injected)),
     }
 
@@ -147,6 +150,10 @@ def rows(label: str, results: list[dict[str, Any]]) -> list[tuple[str, str]]:
             "  kinds",
             f"{eps - slides} slip, {slides} slide; {sum(r['mislabelled'] for r in results)} labelled opposite to "
             "the simulated episode",
+        ),
+        (
+            "  determined cycles; fail-safe watches' allowance",
+            f"{sum(r['determined'] for r in results)}; {sum(r['watch_m'] for r in results):.0f} m",
         ),
         ("  runs with a finding", ", ".join(found[:12]) + (" …" if len(found) > 12 else "") if found else "none"),
     ]
