@@ -109,8 +109,9 @@ def test_a_slip_going_on_at_constant_speed_keeps_the_watch_growing() -> None:
     ahead: agreeing accelerations are no sign of adhesion (bench/NOTES.md, "Slide label": a
     watch ended on them after a filter length stopped at 19.7 s with 76 m of error at 35 s
     against 67 m of allowance). Only the speeds' agreement ends the watch: it runs its 20 s."""
-    accel = lambda t: np.where(t < 20.0, 0.5, 0.0)  # noqa: E731
-    sc = scenario(70.0, accel, 3.0, slip=slip_pulse(5.0, 50.0, 0.3, edge=0.5), ax_noise_kmh_s=0.1)
+    sc = scenario(
+        70.0, lambda t: np.where(t < 20.0, 0.5, 0.0), 3.0, slip=slip_pulse(5.0, 50.0, 0.3, edge=0.5), ax_noise_kmh_s=0.1
+    )
     odo = correct_odometry(sc.cycles, CFG)
     slip = odo.episodes[0]
     assert slip.kind == "slip" and slip.failsafe and slip.t_end == pytest.approx(14.9)
