@@ -17,7 +17,11 @@ track (:func:`~fieldlogs.pipeline.track_truth.compare_tracks`), runs with determ
 |km error| exceeds the margin and those cycles
 (:func:`~fieldlogs.pipeline.truth.compare_with_truth`), the slip/slide episodes and those
 whose start point was not adhering (``SlipEpisode.start_trusted`` false: |θ̄| beyond
-arcsin(Ta/G), or none found and the look-back point itself flagged), and the runs with a finding.
+arcsin(Ta/G), or none found and the look-back point itself flagged), their kinds (slip, slide)
+and those labelled opposite to the simulated episodes they overlap (``t_start`` ≤ t1 + 3 s,
+``t_end`` ≥ t0 − 1 s, as ``bench/accuracy.py`` matches them; an episode overlapping injected
+ones of both kinds is not counted), the determined cycles, the allowance the fail-safe watches
+added (``FailsafeWatch.allowance_m``), and the runs with a finding.
 """
 
 from __future__ import annotations
@@ -73,6 +77,7 @@ def judge(i: int, db: str, tmp: str, sc: dict[str, Any], cfg: dict[str, Any]) ->
     det = res.positions["state"].to_numpy(dtype=object) == PositionState.DETERMINED.value
     outside = ~cmp["within_margin"].to_numpy(dtype=bool)
     eps = res.odometry.episodes
+    injected = meta.extra["sim_truth"]["slip_episodes"]
     return {
         "name": sc["name"],
         "wrong": int(tc["wrong"].sum()),
@@ -80,7 +85,17 @@ def judge(i: int, db: str, tmp: str, sc: dict[str, Any], cfg: dict[str, Any]) ->
         "over_claimed": int(outside.sum()),
         "episodes": len(eps),
         "untrusted": sum(1 for e in eps if not e.start_trusted),
+        "slides": sum(1 for e in eps if e.kind == "slide"),
+        "determined": int(det.sum()),
+        "watch_m": sum(e.watch.allowance_m for e in eps if e.watch is not None),
+        "mislabelled": sum(1 for e in eps if _mislabelled(e, injected)),
     }
+
+
+def _mislabelled(ep: Any, injected: list[dict[str, Any]]) -> bool:
+    """``ep`` overlaps simulated episodes (module docstring), all of the other kind."""
+    kinds = {e["kind"] for e in injected if ep.t_end >= e["t0"] - 1.0 and ep.t_start <= e["t1"] + 3.0}
+    return len(kinds) == 1 and ep.kind not in kinds
 
 
 def route_job(args: tuple[Any, ...]) -> dict[str, Any]:
@@ -120,6 +135,7 @@ def rows(label: str, results: list[dict[str, Any]]) -> list[tuple[str, str]]:
     over = [r for r in results if r["over"]]
     found = sorted({r["name"] for r in wrong + over + [r for r in results if r["over_claimed"]]})
     eps = sum(r["episodes"] for r in results)
+    slides = sum(r["slides"] for r in results)
     return [
         (f"{label}: runs", str(len(results))),
         ("  wrong-track claims", f"{len(wrong)} runs, {sum(r['wrong'] for r in results)} cycles"),
@@ -130,6 +146,15 @@ def rows(label: str, results: list[dict[str, Any]]) -> list[tuple[str, str]]:
             f"{sum(r['over_claimed'] for r in results)} cycles (uncertain included; ambiguous by its km)",
         ),
         ("  slip/slide episodes", f"{eps}, {sum(r['untrusted'] for r in results)} from a start that was not adhering"),
+        (
+            "  kinds",
+            f"{eps - slides} slip, {slides} slide; {sum(r['mislabelled'] for r in results)} labelled opposite to "
+            "the simulated episode",
+        ),
+        (
+            "  determined cycles; fail-safe watches' allowance",
+            f"{sum(r['determined'] for r in results)}; {sum(r['watch_m'] for r in results):.0f} m",
+        ),
         ("  runs with a finding", ", ".join(found[:12]) + (" …" if len(found) > 12 else "") if found else "none"),
     ]
 

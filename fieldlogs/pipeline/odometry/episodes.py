@@ -103,7 +103,7 @@ from fieldlogs.pipeline.odometry.fusion import Fusion, agreement, budget_path, f
 from fieldlogs.pipeline.odometry.ground import GroundSpeed
 from fieldlogs.pipeline.odometry.integration import Integration, integrate
 from fieldlogs.pipeline.odometry.signals import BoolArray, held, ma, readonly
-from fieldlogs.pipeline.odometry.start_point import lookback_point, start_point
+from fieldlogs.pipeline.odometry.start_point import lookback_point, start_point, ta_end_lobe
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
 from fieldlogs.pipeline.odometry.watch import (
     Watch,
@@ -328,7 +328,7 @@ def _episode(
     ie, readhered, failsafe = end
     m_end = ie - ig.i0 + 1
     return Episode(
-        kind="slip" if (_sense(s, d, det, criterion) < 0) != (criterion == "residual-end") else "slide",
+        kind=_disturbance(s, d, det, criterion),
         criterion=criterion,
         i_detect=det,
         i_start=ig.i0,
@@ -378,6 +378,16 @@ def _speed_update(
     ramp = end_err * (s.t[i0 : ie + 1] - s.t[i0]) / duration
     update_m = -float(np.dot(ramp[1:], s.dt[i0 + 1 : ie + 1]))
     return np.maximum(v_in - ramp, 0.0), update_m
+
+
+def _disturbance(s: AlignedStreams, d: Detections, det: int, criterion: DetectionCriterion) -> SlipKind:
+    """The kind of the disturbance detected at ``det``: by the sign of its signal there
+    (:func:`_sense`), reversed at an end lobe — the residual's (criterion "residual-end") or
+    eq. 1's (:func:`~.start_point.ta_end_lobe`)."""
+    end = criterion == "residual-end" or (
+        criterion == "ta" and ta_end_lobe(s.diff, d.ta_mask, det, d.horizon, s.filters.M)
+    )
+    return "slip" if (_sense(s, d, det, criterion) < 0) != end else "slide"
 
 
 def _sense(s: AlignedStreams, d: Detections, det: int, criterion: DetectionCriterion) -> float:

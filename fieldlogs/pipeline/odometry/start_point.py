@@ -27,6 +27,22 @@ Lobe rule (``criterion`` "residual-end")
     before (beyond half the threshold) and the kind is reversed — unless the detected lobe
     is more than LOBE_RATIO times the opposite one (one slip's lobes carry the same speed
     change; a far larger end lobe is a new, deep disturbance).
+
+Lobe rule for eq. 1 (the kind only)
+    Eq. 1 sees a disturbance as two lobes too: the wheel leaving the train's speed, then
+    coming back to it, each of the sign of its acceleration against the body's — a slide's
+    end lobe (the wheel re-accelerating to the train's speed) has a slip's sign. When the
+    onset lobe opened no episode (it fell in the previous one's room or fail-safe watch) the
+    end lobe is the first detection (network sample, route seed 2: a slide over 50.3–54.6 s,
+    its onset inside a fail-safe watch, detected at its end lobe at 54.9 s and reported as a
+    slip; bench/NOTES.md, "Slide label"). Such an onset is an end lobe, its kind reversed
+    (:func:`ta_end_lobe`), when the latest cycle eq. 1 flagged within H + M before it had the
+    opposite sign, that lobe follows none of the detected sign within H + M (else it is the
+    end lobe of an earlier disturbance — the filters' echo of a corrected slide's end, route
+    seed 67 — and the detection a new onset), and the detected lobe's peak over the next
+    filter length is at most LOBE_RATIO times that lobe's. Its look-back stays the SPEC's: a
+    start point inside the disturbance fails safe
+    (:func:`fieldlogs.pipeline.odometry.episodes.start_trusted`).
 """
 
 from __future__ import annotations
@@ -37,6 +53,7 @@ import numpy as np
 
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.odometry.detection import Detections
+from fieldlogs.pipeline.odometry.signals import BoolArray, IntArray
 from fieldlogs.pipeline.odometry.streams import AlignedStreams
 from fieldlogs.pipeline.types import DetectionCriterion, FloatArray
 from schemas.units import kmh_s_to_mps2
@@ -98,21 +115,52 @@ def lobe(
         opp = np.flatnonzero(np.sign(res[det]) * res[lo:det] < -0.5 * thr)
     if opp.size == 0:
         return "residual", det
-    back = opp[::-1]
-    brk = np.flatnonzero(np.diff(back) != -1)
-    lobe_ = back[: brk[0] + 1] if brk.size else back  # the latest opposite lobe, backwards
-    first = int(lobe_[-1])
+    lobe_ = lo + _last_run(opp)
+    first = int(lobe_[0])
     with np.errstate(invalid="ignore"):  # a lobe rises from the noise band, a drift does not
-        rose = bool((np.abs(res[lo : lo + first]) <= QUIET_SHARE * thr).any())
-    # one slip's lobes carry the same speed change: an end lobe far larger than the
-    # opposite lobe is a new, deep disturbance (bench/NOTES.md, "Odometry")
-    sgn = np.sign(res[det])
-    with np.errstate(invalid="ignore"):
-        peak_opp = float(np.nanmax(-sgn * res[lo + lobe_]))
-        peak_end = float(np.nanmax(sgn * res[det : det + m]))
-    if peak_end > LOBE_RATIO * peak_opp:
+        rose = bool((np.abs(res[lo:first]) <= QUIET_SHARE * thr).any())
+    if not _like_its_onset(res, det, lobe_, m):
         return "residual", det
-    return ("residual-end", lo + first) if rose else ("residual", det)
+    return ("residual-end", first) if rose else ("residual", det)
+
+
+def ta_end_lobe(diff: FloatArray, ta_mask: BoolArray, det: int, horizon: int, m: int) -> bool:
+    """The eq. 1 onset at ``det`` is the end lobe of a disturbance (module docstring, "Lobe
+    rule for eq. 1"): the latest cycle ``ta_mask`` flags within the horizon + filter length
+    ``m`` before it has the opposite sign of ``diff`` (K·a_x − K·A_p); that lobe — the
+    flagged cycles since the last one of the detected sign — follows none of the detected
+    sign within the same span, and the detected lobe is like it (:func:`_like_its_onset`).
+    Its kind is then the opposite of its sign. A lobe is told by the sign, not by
+    consecutive cycles: ``ta_mask`` may drop a cycle inside one (route seed 67)."""
+    span, sgn = horizon + m, np.sign(diff[det])
+    lo = max(det - span, 0)
+    flagged = lo + np.flatnonzero(ta_mask[lo:det])
+    if flagged.size == 0 or np.sign(diff[flagged[-1]]) != -sgn:
+        return False  # nothing before it, or a lobe of its own sign: an onset
+    own = flagged[np.sign(diff[flagged]) == sgn]
+    opp = flagged[flagged > own[-1]] if own.size else flagged
+    lo = max(int(opp[0]) - span, 0)
+    before = lo + np.flatnonzero(ta_mask[lo : opp[0]])
+    if (np.sign(diff[before]) == sgn).any():
+        return False  # that lobe is itself the end of an earlier disturbance (route seed 67)
+    return _like_its_onset(diff, det, opp, m)
+
+
+def _last_run(idx: IntArray) -> IntArray:
+    """The last run of consecutive values of the increasing ``idx``."""
+    brk = np.flatnonzero(np.diff(idx) != 1)
+    return idx[int(brk[-1]) + 1 :] if brk.size else idx
+
+
+def _like_its_onset(sig: FloatArray, det: int, lobe_: IntArray, m: int) -> bool:
+    """The lobe detected at ``det`` peaks over the next filter length ``m`` at most LOBE_RATIO
+    times the opposite lobe on the cycles ``lobe_``: one disturbance's lobes carry the same
+    speed change, a far larger end lobe is a new, deep disturbance (bench/NOTES.md, "Odometry")."""
+    sgn = np.sign(sig[det])
+    with np.errstate(invalid="ignore"):
+        peak_opp = float(np.nanmax(-sgn * sig[lobe_]))
+        peak_end = float(np.nanmax(sgn * sig[det : det + m]))
+    return peak_end <= LOBE_RATIO * peak_opp
 
 
 def quiet_before(res: FloatArray, ref: int, back: int, thr: float, cyc: float) -> int:

@@ -101,3 +101,24 @@ def test_end_lobe_like_its_onset_lobe_is_a_short_slips_end() -> None:
 def test_end_lobe_far_larger_than_the_opposite_lobe_is_a_new_disturbance() -> None:
     assert lobes(0.7 * LOBE_RATIO * 1.01) == "residual"
     assert lobes(20.0) == "residual"
+
+
+def test_a_slip_going_on_at_constant_speed_keeps_the_watch_growing() -> None:
+    """From 3 m/s: +0.5 m/s² up to 20 s, then 13 m/s steady; the wheel +30 % over 5–55 s. From
+    20 s the wheel's and the body's accelerations agree (both 0) while the pulses run 3.9 m/s
+    ahead: agreeing accelerations are no sign of adhesion (bench/NOTES.md, "Slide label": a
+    watch ended on them after a filter length stopped at 19.7 s with 76 m of error at 35 s
+    against 67 m of allowance). Only the speeds' agreement ends the watch: it runs its 20 s."""
+    sc = scenario(
+        70.0, lambda t: np.where(t < 20.0, 0.5, 0.0), 3.0, slip=slip_pulse(5.0, 50.0, 0.3, edge=0.5), ax_noise_kmh_s=0.1
+    )
+    odo = correct_odometry(sc.cycles, CFG)
+    slip = odo.episodes[0]
+    assert slip.kind == "slip" and slip.failsafe and slip.t_end == pytest.approx(14.9)
+    assert slip.watch is not None and not slip.watch.readhered
+    assert slip.watch.end_t == pytest.approx(slip.t_end + CFG.failsafe_watch_s)
+    t = sc.cycles.t
+    on = (t >= slip.t_start) & (t <= 55.0)
+    err = (odo.d - sc.s_true)[on] - (odo.d - sc.s_true)[np.flatnonzero(on)[0]]
+    assert err.max() > 150.0  # the pulses' 30 % over 40 s after the fail-safe
+    assert (np.abs(err) <= odo.allowance[on] + 0.03).all()  # + one 3 cm pulse

@@ -30,6 +30,7 @@ from fieldlogs.pipeline.aids.failsafe import FailsafeAid
 from fieldlogs.pipeline.config import OdometryConfig
 from fieldlogs.pipeline.consistency import BaliseEvidence, Interval, fit_evidence
 from fieldlogs.pipeline.odometry.correct import correct_odometry
+from fieldlogs.pipeline.odometry.start_point import ta_end_lobe
 from fieldlogs.pipeline.run import run_pipeline
 from fieldlogs.pipeline.track_truth import compare_tracks
 from fieldlogs.pipeline.truth import compare_with_truth
@@ -71,6 +72,10 @@ def test_a_correction_from_a_sliding_start_point_fails_safe_at_its_start() -> No
     assert slide.t_detect == pytest.approx(28.3) and 22.0 < slide.t_start < 28.0
     assert odo.diagnostics.episodes[1].theta_clipped
     assert not slide.start_trusted and slide.failsafe
+    # its end lobe (the wheel re-accelerating, K·a_x − K·A_p < 0, a slip's sign) follows the
+    # slide's onset lobe (> 0, flagged until 27.x s): the kind is the onset's (eq. 1's lobe rule)
+    assert odo.diagnostics.episodes[1].diff_at_detect_kmh_s < 0
+    assert (slip.kind, slide.kind) == ("slip", "slide")
     # a fail-safe at its start: no corrected cycle, no eq. 13 budget, the distance on the pulses
     assert slide.t_end == slide.t_start and slide.i_end == slide.i_start
     assert slide.max_error_m == 0.0 and slide.d_corrected_m == slide.d_pulse_m == 0.0
@@ -81,6 +86,43 @@ def test_a_correction_from_a_sliding_start_point_fails_safe_at_its_start() -> No
     # the watch from the start grows the allowance by |inertial − pulse speed| + Δa·t
     assert slide.watch is not None and slide.watch.allowance_m > 0.0
     assert slide.after_failsafe_t == ()  # its own detection is not one after its fail-safe
+
+
+def eq1_lobes(end_peak: float, *, opp_last: int = 139, between: bool = False) -> bool:
+    """``ta_end_lobe`` on hand-built K·a_x − K·A_p (0.1 s cycles, Ta 0.34 m/s², H 40 and M 39
+    cycles: the window reaches 79 cycles back): +1.5 m/s² on cycles 100 … ``opp_last``, the
+    detected lobe −``end_peak`` on 141 … 180 (its onset, cycle 141); ``between``: a lobe of
+    −0.5 on 128 … 130 (the detected lobe's sign) after the opposite one."""
+    diff = np.zeros(300)
+    diff[100 : opp_last + 1] = 1.5
+    diff[141:181] = -end_peak
+    if between:
+        diff[128:131] = -0.5
+    return ta_end_lobe(diff, np.abs(diff) > 0.34, 141, 40, 39)
+
+
+def test_eq1_end_lobe_takes_the_kind_of_the_lobe_before_it() -> None:
+    assert eq1_lobes(1.5)  # a slide's onset, then its end: the kind is reversed
+    assert eq1_lobes(4.0 * 1.5)  # LOBE_RATIO × the opposite peak still one disturbance's end
+    assert not eq1_lobes(6.01)  # a far deeper lobe is a new disturbance: its own sign
+    assert eq1_lobes(1.5, opp_last=120)
+    assert not eq1_lobes(1.5, opp_last=120, between=True)  # the latest flagged lobe has its sign: an onset
+    # the window: cycles 141 − 79 = 62 … 140
+    assert eq1_lobes(1.5, opp_last=100)
+    diff = np.zeros(300)
+    diff[50:63] = 1.5
+    diff[141:181] = -1.5
+    assert ta_end_lobe(diff, np.abs(diff) > 0.34, 141, 40, 39)  # its last cycle 62 inside
+    diff[62] = 0.0
+    assert not ta_end_lobe(diff, np.abs(diff) > 0.34, 141, 40, 39)  # ends at 61: outside
+    assert not ta_end_lobe(-diff, np.abs(diff) > 0.34, 141, 40, 39)
+    # the opposite lobe (100 … 120) itself follows a lobe of the detected sign (60 … 70, within
+    # 79 cycles before cycle 100): it ended an earlier disturbance, the detection is an onset
+    diff = np.zeros(300)
+    diff[60:71], diff[100:121], diff[141:181] = -1.5, 1.5, -1.5
+    assert not ta_end_lobe(diff, np.abs(diff) > 0.34, 141, 40, 39)
+    diff[60:71] = 1.5  # of the opposite lobe's sign: no matter
+    assert ta_end_lobe(diff, np.abs(diff) > 0.34, 141, 40, 39)
 
 
 @dataclass
@@ -137,6 +179,11 @@ def test_seed_2_slide_after_a_failsafe_claims_no_wrong_track(sample_network_db: 
     det = res.positions["state"].to_numpy(dtype=object) == PositionState.DETERMINED.value
     assert compare_with_truth(res.positions, truth)["within_margin"].to_numpy(dtype=bool)[det].all()
     # the correction that removed 63 m: from a sliding start point, now a fail-safe at its start
+    # the episodes' kinds are the simulated ones' (slip 21.9–32.9 s, slide 50.3–54.6, slide
+    # 102.8–107.3): the slide found at its end lobe (54.9 s) was a slip on fa5c627
+    sim = meta.extra["sim_truth"]["slip_episodes"]
+    assert [e["kind"] for e in sim] == ["slip", "slide", "slip", "slide"]
+    assert [(e.kind, e.t_detect) for e in res.odometry.episodes] == [("slip", 23.9), ("slide", 54.9), ("slide", 103.7)]
     bad = [e for e in res.odometry.episodes if not e.start_trusted]
     assert [(e.t_start, e.t_end, e.t_detect) for e in bad] == [(52.5, 52.5, 54.9)]
     ev = res.events[res.events["type"] == EventType.FAILSAFE.value]
@@ -144,6 +191,10 @@ def test_seed_2_slide_after_a_failsafe_claims_no_wrong_track(sample_network_db: 
     # the slide's onset at 51.5 s, inside the first slip's watch, after the balise group at 51.2 s
     assert at[51.5] == "slip/slide detected again after a fail-safe, with no room for a correction"
     assert at[52.5] == "slip/slide correction from a start point that was not adhering"
+    kinds = dict(zip(ev["t"].round(3), ev["detail"].str.extract(r'"kind": "([^"]+)"')[0], strict=True))
+    assert kinds[52.5] == "slide"
+    slips = res.events[res.events["type"].isin([EventType.SLIP.value, EventType.SLIDE.value])]
+    assert slips["type"].tolist() == ["slip", "slide", "slide"]
     state = res.positions.set_index(res.positions["t"].round(3))["state"]
     assert state[51.4] == PositionState.DETERMINED.value
     assert state[51.5] == PositionState.UNCERTAIN.value
