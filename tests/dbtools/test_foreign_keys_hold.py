@@ -26,7 +26,6 @@ from schemas.tables import DB_TABLES
 from tests.dbtools.test_topology_golden import synthetic
 
 
-
 def nth(table: str, condition: str) -> str:
     """An SQL condition selecting the rows of ``table`` whose number ``n`` (1-based, in primary-key
     order: a rowid table's rowid as built) satisfies ``condition``; a ``WITHOUT ROWID`` table's

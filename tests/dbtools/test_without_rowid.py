@@ -1,0 +1,121 @@
+"""The network tables of an onboard DB are SQLite ``WITHOUT ROWID`` tables
+(``schemas.model.Table.without_rowid``): their rows are stored once, in the primary key's
+b-tree. A finding on such a row names its key (a rowid table's still its rowid), and a DB built
+before (every table with a rowid) reads, hashes and validates as it did."""
+
+from __future__ import annotations
+
+import shutil
+import sqlite3
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from dbtools.build import build_db
+from dbtools.database import read_network
+from dbtools.network import network_content_hash
+from dbtools.validate import validate_path
+from schemas.errors import InputError
+from schemas.tables import DB_TABLES
+
+NETWORK = Path(__file__).resolve().parents[1] / "data" / "networks" / "crossover"
+WITHOUT_ROWID = {"tracks", "connections", "switches", "track_points"}
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    db = tmp_path_factory.mktemp("wr") / "net.sqlite"
+    build_db(NETWORK, db, db_version="t")
+    return db
+
+
+def copy_of(built: Path, folder: Path, *sqls: str) -> Path:
+    db = folder / "edited.sqlite"
+    shutil.copy(built, db)
+    with sqlite3.connect(db) as conn:
+        for sql in sqls:
+            conn.execute(sql)
+    conn.close()
+    return db
+
+
+def with_rowids(built: Path, folder: Path) -> Path:
+    """The DB as built before: the same tables, each with a rowid (rows inserted in key order)."""
+    db = folder / "rowid.sqlite"
+    shutil.copy(built, db)
+    with sqlite3.connect(db) as conn:
+        conn.execute("PRAGMA foreign_keys = OFF")
+        conn.execute("PRAGMA legacy_alter_table = ON")  # the references keep naming the new tables
+        for name in sorted(WITHOUT_ROWID):
+            sql = conn.execute("SELECT sql FROM sqlite_master WHERE name = ?", (name,)).fetchone()[0]
+            conn.execute(f"ALTER TABLE {name} RENAME TO old_{name}")
+            conn.execute(sql.replace(" WITHOUT ROWID", ""))
+            conn.execute(f"INSERT INTO {name} SELECT * FROM old_{name}")  # a scan: key order
+            conn.execute(f"DROP TABLE old_{name}")
+    conn.execute("VACUUM")
+    conn.close()
+    return db
+
+
+def test_network_tables_are_stored_without_rowid(built: Path) -> None:
+    with sqlite3.connect(built) as conn:
+        wr = dict(conn.execute("SELECT name, wr FROM pragma_table_list WHERE schema = 'main'").fetchall())
+        indexes = {r[0] for r in conn.execute("SELECT tbl_name FROM sqlite_master WHERE type = 'index'")}
+    conn.close()
+    assert {t.name for t in DB_TABLES if t.without_rowid} == WITHOUT_ROWID
+    assert {name for name, flag in wr.items() if flag} == WITHOUT_ROWID
+    assert not indexes & WITHOUT_ROWID  # no second b-tree of the key
+
+
+def test_foreign_key_findings_name_the_key(built: Path, tmp_path: Path) -> None:
+    """Track X1 deleted: the four connections at its ends and its 20 m points dangle; one
+    connection renamed at both ends dangles twice (two findings, one key)."""
+    db = copy_of(
+        built,
+        tmp_path,
+        "DELETE FROM tracks WHERE track_id = 'X1'",
+        "UPDATE connections SET track_a = 'Q', track_b = 'Q' WHERE track_a = 'U2' AND track_b = 'U3'",
+    )
+    fk = [f for f in validate_path(db) if f.rule == "db.foreign_key"]
+    assert {f.value for f in fk} == {"tracks"}
+    conn_keys = [tuple(f.keys.values()) for f in fk if f.table == "connections"]
+    assert conn_keys == [
+        ("D1", "end", "X1", "begin"),
+        ("Q", "end", "Q", "begin"),
+        ("Q", "end", "Q", "begin"),
+        ("U2", "begin", "X1", "end"),
+        ("X1", "begin", "D2", "begin"),
+        ("X1", "end", "U1", "end"),
+    ]
+    first = next(f for f in fk if f.table == "connections")
+    assert list(first.keys) == ["track_a", "end_a", "track_b", "end_b"]
+    assert first.message == (
+        "row (track_a='D1', end_a='end', track_b='X1', end_b='begin') references a missing row of 'tracks'"
+    )
+    points = pd.read_csv(NETWORK / "track_points.csv")
+    x1 = sorted(float(p) for p in points.loc[points["track_id"] == "X1", "pos_m"])
+    assert [f.keys for f in fk if f.table == "track_points"] == [{"track_id": "X1", "pos_m": p} for p in x1]
+    assert len(fk) == 6 + len(x1)
+
+
+def test_a_value_of_another_storage_class_names_the_key(built: Path, tmp_path: Path) -> None:
+    db = copy_of(built, tmp_path, "UPDATE tracks SET length_m = 'long' WHERE track_id = 'D2'")
+    with pytest.raises(InputError, match=r"table 'tracks' row \(track_id='D2'\): text 'long' where a REAL"):
+        read_network(db, verify=False)
+
+
+def test_a_db_with_rowids_reads_and_validates_the_same(built: Path, tmp_path: Path) -> None:
+    old = with_rowids(built, tmp_path)
+    with sqlite3.connect(old) as conn:
+        assert not any(r[0] for r in conn.execute("SELECT wr FROM pragma_table_list WHERE schema = 'main'"))
+    conn.close()
+    new_net, old_net = read_network(built), read_network(old)  # the stored hash verified
+    for t in DB_TABLES:
+        pd.testing.assert_frame_equal(old_net.tables[t.name], new_net.tables[t.name], check_exact=True)
+    assert network_content_hash(old_net) == network_content_hash(new_net)
+    assert [f.to_dict() for f in validate_path(old)] == [f.to_dict() for f in validate_path(built)]
+    edited = copy_of(old, tmp_path, "DELETE FROM tracks WHERE track_id = 'X1'")
+    fk = [f for f in validate_path(edited) if f.rule == "db.foreign_key" and f.table == "connections"]
+    assert [f.keys for f in fk] == [{"rowid": 2}, {"rowid": 7}, {"rowid": 11}, {"rowid": 12}]  # key order
+    assert fk[0].message == "row 2 references a missing row of 'tracks'"
