@@ -142,7 +142,7 @@ def fk_violations(conn: sqlite3.Connection) -> list[tuple[str, dict[str, object]
     rows = conn.execute("PRAGMA foreign_key_check").fetchall()[:MAX_FK_ROWS]
     keyed: dict[str, list[dict[str, object]] | None] = {}
     out: list[tuple[str, dict[str, object], str]] = []
-    for i, (table, rowid, parent, fkid) in enumerate(rows):
+    for table, rowid, parent, _fkid in rows:
         if rowid is not None:
             out.append((table, {"rowid": rowid}, parent))
             continue
@@ -168,7 +168,8 @@ def _keyed(conn: sqlite3.Connection, table: str, listed: list[tuple[int, str]]) 
     if key == ("rowid",) or not key or any(r[4] != 0 or r[3] is None for r in fks):
         return None
     fails = [
-        f"(t.{quoted(c)} IS NOT NULL AND NOT EXISTS (SELECT 1 FROM {quoted(p)} AS p WHERE p.{quoted(k)} = t.{quoted(c)}))"
+        f"(t.{quoted(c)} IS NOT NULL AND "
+        f"NOT EXISTS (SELECT 1 FROM {quoted(p)} AS p WHERE p.{quoted(k)} = t.{quoted(c)}))"
         for _, p, c, k, _ in fks
     ]
     cols = ", ".join(f"t.{quoted(c)}" for c in key)
