@@ -13,7 +13,8 @@ Findings of :func:`check_db` (``db validate`` of a DB file):
 * ``db.integrity`` (error) — SQLite's ``integrity_check`` reports damage (a file cut short,
   bytes overwritten). Fix: take the DB again from the release registry or rebuild it with
   ``db build``; never edit a DB file by hand.
-* ``db.foreign_key`` (error) — a row references a missing row of its parent table. Fix:
+* ``db.foreign_key`` (error) — a row references a missing row of its parent table (the row
+  named by its rowid, in a ``WITHOUT ROWID`` table by its primary key). Fix:
   rebuild the DB from its source set (``db build``); a DB edited by hand is not a release.
 * ``db.meta`` (error) — the ``meta`` table lacks a required key (``content_hash``,
   ``db_version`` …). Fix: rebuild the DB with ``db build``, which writes every key.

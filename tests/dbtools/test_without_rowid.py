@@ -7,10 +7,13 @@ from __future__ import annotations
 
 import shutil
 import sqlite3
+from collections import Counter
 from pathlib import Path
 
 import pandas as pd
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from dbtools.build import build_db
 from dbtools.database import read_network
@@ -18,6 +21,7 @@ from dbtools.network import network_content_hash
 from dbtools.validate import validate_path
 from schemas.errors import InputError
 from schemas.tables import DB_TABLES
+from tests.dbtools.test_foreign_keys_hold import LINKS, nth
 
 NETWORK = Path(__file__).resolve().parents[1] / "data" / "networks" / "crossover"
 WITHOUT_ROWID = {"tracks", "connections", "switches", "track_points"}
@@ -119,3 +123,59 @@ def test_a_db_with_rowids_reads_and_validates_the_same(built: Path, tmp_path: Pa
     fk = [f for f in validate_path(edited) if f.rule == "db.foreign_key" and f.table == "connections"]
     assert [f.keys for f in fk] == [{"rowid": 2}, {"rowid": 7}, {"rowid": 11}, {"rowid": 12}]  # key order
     assert fk[0].message == "row 2 references a missing row of 'tracks'"
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    st.lists(
+        st.tuples(
+            st.sampled_from([link for link in LINKS if link[0] in WITHOUT_ROWID or link[2] == "tracks"]),
+            st.integers(1, 40),
+            st.sampled_from(["nope", "space", "blob", "delete parent"]),
+        ),
+        min_size=1,
+        max_size=4,
+    )
+)
+def test_each_keyed_finding_is_a_dangling_row(
+    built: Path, tmp_path: Path, edits: list[tuple[tuple[str, str, str, str], int, str]]
+) -> None:
+    """Random broken references: each ``db.foreign_key`` finding on a ``WITHOUT ROWID`` table
+    names by its key a row that exists and holds a value its parent lacks, and each table has as
+    many findings as ``PRAGMA foreign_key_check`` lists rows."""
+    sqls = []
+    for (child, column, parent, _key), n, how in edits:
+        if how == "delete parent":
+            sqls.append(f"DELETE FROM {parent} WHERE {nth(parent, f'n = {n}')}")
+        else:
+            value = {"nope": "'nope'", "space": f"{column} || ' '", "blob": f"CAST({column} AS BLOB)"}[how]
+            sqls.append(f"UPDATE {child} SET {column} = {value} WHERE {nth(child, f'n = {n}')}")
+    try:
+        db = copy_of(built, tmp_path, *sqls)
+    except sqlite3.IntegrityError:  # a key made twice: no such file
+        return
+    fk = [f for f in validate_path(db) if f.rule == "db.foreign_key"]
+    with sqlite3.connect(db) as conn:
+        listed = Counter(r[0] for r in conn.execute("PRAGMA foreign_key_check"))
+        assert Counter(f.table for f in fk) == listed
+        for f in fk:
+            if f.table not in WITHOUT_ROWID:
+                assert list(f.keys) == ["rowid"]
+                continue
+            declared = next(t for t in DB_TABLES if t.name == f.table)
+            assert list(f.keys) == list(declared.primary_key)
+            where = " AND ".join(f"{k} = ?" for k in f.keys)
+            row = conn.execute(f"SELECT * FROM {f.table} WHERE {where}", tuple(f.keys.values())).fetchone()
+            assert row is not None
+            values = dict(zip(declared.column_names, row, strict=True))
+            dangles = [
+                fk_.other_table
+                for fk_ in declared.foreign_keys
+                if values[fk_.columns[0]] is not None
+                and conn.execute(
+                    f"SELECT 1 FROM {fk_.other_table} WHERE {fk_.other_columns[0]} = ?", (values[fk_.columns[0]],)
+                ).fetchone()
+                is None
+            ]
+            assert f.value in dangles
+    conn.close()
