@@ -21,7 +21,7 @@ from dbtools.network import network_content_hash
 from dbtools.validate import validate_path
 from schemas.errors import InputError
 from schemas.tables import DB_TABLES
-from tests.dbtools.test_foreign_keys_hold import LINKS, nth
+from tests.dbtools.test_foreign_keys_hold import LINKS, edited, nth
 
 NETWORK = Path(__file__).resolve().parents[1] / "data" / "networks" / "crossover"
 WITHOUT_ROWID = {"tracks", "connections", "switches", "track_points"}
@@ -31,16 +31,6 @@ WITHOUT_ROWID = {"tracks", "connections", "switches", "track_points"}
 def built(tmp_path_factory: pytest.TempPathFactory) -> Path:
     db = tmp_path_factory.mktemp("wr") / "net.sqlite"
     build_db(NETWORK, db, db_version="t")
-    return db
-
-
-def copy_of(built: Path, folder: Path, *sqls: str) -> Path:
-    db = folder / "edited.sqlite"
-    shutil.copy(built, db)
-    with sqlite3.connect(db) as conn:
-        for sql in sqls:
-            conn.execute(sql)
-    conn.close()
     return db
 
 
@@ -75,11 +65,13 @@ def test_network_tables_are_stored_without_rowid(built: Path) -> None:
 def test_foreign_key_findings_name_the_key(built: Path, tmp_path: Path) -> None:
     """Track X1 deleted: the four connections at its ends and its 20 m points dangle; one
     connection renamed at both ends dangles twice (two findings, one key)."""
-    db = copy_of(
+    db = edited(
         built,
         tmp_path,
-        "DELETE FROM tracks WHERE track_id = 'X1'",
-        "UPDATE connections SET track_a = 'Q', track_b = 'Q' WHERE track_a = 'U2' AND track_b = 'U3'",
+        [
+            "DELETE FROM tracks WHERE track_id = 'X1'",
+            "UPDATE connections SET track_a = 'Q', track_b = 'Q' WHERE track_a = 'U2' AND track_b = 'U3'",
+        ],
     )
     fk = [f for f in validate_path(db) if f.rule == "db.foreign_key"]
     assert {f.value for f in fk} == {"tracks"}
@@ -104,7 +96,7 @@ def test_foreign_key_findings_name_the_key(built: Path, tmp_path: Path) -> None:
 
 
 def test_a_value_of_another_storage_class_names_the_key(built: Path, tmp_path: Path) -> None:
-    db = copy_of(built, tmp_path, "UPDATE tracks SET length_m = 'long' WHERE track_id = 'D2'")
+    db = edited(built, tmp_path, ["UPDATE tracks SET length_m = 'long' WHERE track_id = 'D2'"])
     with pytest.raises(InputError, match=r"table 'tracks' row \(track_id='D2'\): text 'long' where a REAL"):
         read_network(db, verify=False)
 
@@ -119,8 +111,8 @@ def test_a_db_with_rowids_reads_and_validates_the_same(built: Path, tmp_path: Pa
         pd.testing.assert_frame_equal(old_net.tables[t.name], new_net.tables[t.name], check_exact=True)
     assert network_content_hash(old_net) == network_content_hash(new_net)
     assert [f.to_dict() for f in validate_path(old)] == [f.to_dict() for f in validate_path(built)]
-    edited = copy_of(old, tmp_path, "DELETE FROM tracks WHERE track_id = 'X1'")
-    fk = [f for f in validate_path(edited) if f.rule == "db.foreign_key" and f.table == "connections"]
+    damaged = edited(old, tmp_path, ["DELETE FROM tracks WHERE track_id = 'X1'"])
+    fk = [f for f in validate_path(damaged) if f.rule == "db.foreign_key" and f.table == "connections"]
     assert [f.keys for f in fk] == [{"rowid": 2}, {"rowid": 7}, {"rowid": 11}, {"rowid": 12}]  # key order
     assert fk[0].message == "row 2 references a missing row of 'tracks'"
 
@@ -151,7 +143,7 @@ def test_each_keyed_finding_is_a_dangling_row(
             value = {"nope": "'nope'", "space": f"{column} || ' '", "blob": f"CAST({column} AS BLOB)"}[how]
             sqls.append(f"UPDATE {child} SET {column} = {value} WHERE {nth(child, f'n = {n}')}")
     try:
-        db = copy_of(built, tmp_path, *sqls)
+        db = edited(built, tmp_path, sqls)
     except sqlite3.IntegrityError:  # a key made twice: no such file
         return
     fk = [f for f in validate_path(db) if f.rule == "db.foreign_key"]
