@@ -9,6 +9,7 @@ import shutil
 import sqlite3
 from collections import Counter
 from pathlib import Path
+from typing import cast
 
 import pandas as pd
 import pytest
@@ -18,6 +19,7 @@ from hypothesis import strategies as st
 from dbtools.build import build_db
 from dbtools.database import read_network
 from dbtools.network import network_content_hash
+from dbtools.sqlite_file import row_key
 from dbtools.validate import validate_path
 from schemas.errors import InputError
 from schemas.tables import DB_TABLES
@@ -171,3 +173,29 @@ def test_each_keyed_finding_is_a_dangling_row(
             ]
             assert f.value in dangles
     conn.close()
+
+
+class _OldSqlite:
+    """A connection as an SQLite older than 3.37 answers it: no ``pragma_table_list``."""
+
+    def __init__(self, conn: sqlite3.Connection) -> None:
+        self.conn = conn
+
+    def execute(self, sql: str, params: tuple[object, ...] = ()) -> sqlite3.Cursor:
+        if "pragma_table_list" in sql:
+            raise sqlite3.OperationalError("no such table: pragma_table_list")
+        return self.conn.execute(sql, params)
+
+
+def test_row_key_without_pragma_table_list(built: Path, tmp_path: Path) -> None:
+    old = with_rowids(built, tmp_path)
+    for db, connections_key in ((built, ("track_a", "end_a", "track_b", "end_b")), (old, ("rowid",))):
+        with sqlite3.connect(db) as conn:
+            for wrapped in (conn, _OldSqlite(conn)):
+                keys = {
+                    name: row_key(cast(sqlite3.Connection, wrapped), name) for name in ("gis", "connections", "tracks")
+                }
+                assert keys["gis"] == ("rowid",)
+                assert keys["connections"] == connections_key
+                assert keys["tracks"] == (("track_id",) if db == built else ("rowid",))
+        conn.close()
