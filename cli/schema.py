@@ -38,7 +38,8 @@ def schema_markdown(t: Table) -> str:
             f"{'yes' if c.nullable else 'no'} | {allowed} |"
         )
     if t.primary_key:
-        lines += ["", f"Key: ({', '.join(t.primary_key)})"]
+        stored = "; an SQLite `WITHOUT ROWID` table: a finding names a row by this key" if t.without_rowid else ""
+        lines += ["", f"Key: ({', '.join(t.primary_key)}){stored}"]
     return "\n".join(lines)
 
 

@@ -13,7 +13,8 @@ Findings of :func:`check_db` (``db validate`` of a DB file):
 * ``db.integrity`` (error) — SQLite's ``integrity_check`` reports damage (a file cut short,
   bytes overwritten). Fix: take the DB again from the release registry or rebuild it with
   ``db build``; never edit a DB file by hand.
-* ``db.foreign_key`` (error) — a row references a missing row of its parent table. Fix:
+* ``db.foreign_key`` (error) — a row references a missing row of its parent table (the row
+  named by its rowid, in a ``WITHOUT ROWID`` table by its primary key). Fix:
   rebuild the DB from its source set (``db build``); a DB edited by hand is not a release.
 * ``db.meta`` (error) — the ``meta`` table lacks a required key (``content_hash``,
   ``db_version`` …). Fix: rebuild the DB with ``db build``, which writes every key.
@@ -35,7 +36,7 @@ from typing import TYPE_CHECKING
 import pandas as pd
 
 from dbtools.atomic import atomic_file, sweep_stale, temp_sibling
-from dbtools.foreign_keys import check_foreign_keys, foreign_keys_hold
+from dbtools.foreign_keys import check_foreign_keys, fk_violations, foreign_keys_hold
 from dbtools.inputs import regular_file
 from dbtools.integrity import check_content_hash
 from dbtools.network import Network, canonical, canonical_frame, empty_frame, network_content_hash
@@ -43,7 +44,7 @@ from dbtools.sqlite_columns import insert_tables, read_table_columns
 from dbtools.sqlite_file import SQLITE_BUSY_CODES as SQLITE_BUSY_CODES
 from dbtools.sqlite_file import SQLITE_MAGIC as SQLITE_MAGIC
 from dbtools.sqlite_file import check_sqlite_file as check_sqlite_file
-from dbtools.sqlite_file import connect_ro, ro_uri
+from dbtools.sqlite_file import connect_ro, quoted, ro_uri, row_key
 from dbtools.sqlite_file import sqlite_input_error as sqlite_input_error
 from schemas.enums import Severity
 from schemas.errors import InputError
@@ -76,13 +77,15 @@ def create_tables(
         pk: str | list[str] | None = None
         if t.primary_key:
             pk = list(t.primary_key) if len(t.primary_key) > 1 else t.primary_key[0]
-        db[t.name].create(  # type: ignore[union-attr]
+        sql = db.create_table_sql(
+            t.name,
             {c.name: _PY_TYPES[c.dtype] for c in t.columns},
             pk=pk,
             not_null={c.name for c in t.columns if not c.nullable},
             foreign_keys=[(fk.columns[0], fk.other_table, fk.other_columns[0]) for fk in t.foreign_keys],
             if_not_exists=if_not_exists,
         )
+        db.execute(f"{sql.rstrip().rstrip(';')} WITHOUT ROWID" if t.without_rowid else sql)
     if indexes:
         _create_indexes(db, tables, if_not_exists=if_not_exists)
 
@@ -289,15 +292,17 @@ def _storage_class_error(conn: sqlite3.Connection, t: Table, path: Path, present
         if allowed is None or c.name not in present:
             continue
         marks = ",".join("?" * len(allowed))
+        key = row_key(conn, t.name)
         hit = conn.execute(
-            f"SELECT rowid, typeof([{c.name}]), quote([{c.name}]) FROM [{t.name}] "
+            f"SELECT {','.join(quoted(k) for k in key)}, typeof([{c.name}]), quote([{c.name}]) FROM [{t.name}] "
             f"WHERE typeof([{c.name}]) NOT IN ({marks}) LIMIT 1",
             allowed,
         ).fetchone()
         if hit is not None:
-            rowid, kind, value = hit
+            *row, kind, value = hit
             return InputError(
-                f"table '{t.name}' row {rowid}: {kind} {str(value)[:60]} where a {c.sql_type} ({c.dtype}) is "
+                f"table '{t.name}' row {_row_text(dict(zip(key, row, strict=True)))}: {kind} {str(value)[:60]} "
+                f"where a {c.sql_type} ({c.dtype}) is "
                 "declared; the DB was not written by trainpos or was edited: rebuild it from its sources",
                 path=path,
                 column=c.name,
@@ -320,16 +325,16 @@ def integrity_findings(path: Path, network: Network | None = None) -> list[Findi
         fk_rows = (
             []  # the frames read prove the pragma would list nothing (dbtools.foreign_keys)
             if network is not None and rows == ["ok"] and foreign_keys_hold(conn, network.tables, DB_TABLES)
-            else conn.execute("PRAGMA foreign_key_check").fetchall()[:1000]
+            else fk_violations(conn)
         )
-        for table, rowid, parent, _fk in fk_rows:
+        for table, keys, parent in fk_rows:
             findings.append(
                 Finding(
                     "db.foreign_key",
                     Severity.ERROR,
                     table,
-                    f"row {rowid} references a missing row of '{parent}'",
-                    keys={"rowid": rowid},
+                    f"row {_row_text(keys)} references a missing row of '{parent}'",
+                    keys=keys,
                     value=parent,
                 )
             )
@@ -356,6 +361,13 @@ def integrity_findings(path: Path, network: Network | None = None) -> list[Findi
         if key not in net.meta:
             findings.append(Finding("db.meta", Severity.ERROR, "meta", f"meta has no '{key}'", keys={"key": key}))
     return findings
+
+
+def _row_text(keys: dict[str, object]) -> str:
+    """A row in a message: its rowid (``3``), or its primary key (``(track_id='T1', pos_m=20.0)``)."""
+    if list(keys) == ["rowid"]:
+        return str(keys["rowid"])
+    return "(" + ", ".join(f"{k}={v!r}" for k, v in keys.items()) + ")"
 
 
 # --------------------------------------------------------------------------- release registry

@@ -35,7 +35,11 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from dbtools.sqlite_file import quoted, row_key
 from schemas.model import Table
+
+#: Rows of ``PRAGMA foreign_key_check`` reported (the rest are not named).
+MAX_FK_ROWS = 1000
 
 
 def _text(s: pd.Series) -> pa.Array:
@@ -160,9 +164,58 @@ def _text_column(conn: sqlite3.Connection, table: str, column: str) -> bool:
     declared = conn.execute("SELECT type FROM pragma_table_info(?) WHERE name = ?", (table, column)).fetchone()
     if declared is None or str(declared[0]).upper() != "TEXT":
         return False
-    q = f"SELECT 1 FROM {_quoted(table)} WHERE {_quoted(column)} >= X'' LIMIT 1"
+    q = f"SELECT 1 FROM {quoted(table)} WHERE {quoted(column)} >= X'' LIMIT 1"
     return conn.execute(q).fetchone() is None
 
 
-def _quoted(name: str) -> str:
-    return '"' + name.replace('"', '""') + '"'
+def fk_violations(conn: sqlite3.Connection) -> list[tuple[str, dict[str, object], str]]:
+    """The first ``MAX_FK_ROWS`` rows of ``PRAGMA foreign_key_check``, each as (child table,
+    the keys naming the row, parent table). A rowid table's row is named by its rowid, as the
+    pragma gives it; a ``WITHOUT ROWID`` table's (the pragma's rowid is NULL) by its primary
+    key (:func:`_keyed`)."""
+    rows = conn.execute("PRAGMA foreign_key_check").fetchall()[:MAX_FK_ROWS]
+    keyed: dict[str, list[dict[str, object]] | None] = {}
+    out: list[tuple[str, dict[str, object], str]] = []
+    for table, rowid, parent, _fkid in rows:
+        if rowid is not None:
+            out.append((table, {"rowid": rowid}, parent))
+            continue
+        if table not in keyed:
+            keyed[table] = _keyed(conn, table, [(r[3], r[2]) for r in rows if r[0] == table and r[1] is None])
+        names = keyed[table]
+        out.append((table, names.pop(0) if names else {"rowid": None}, parent))
+    return out
+
+
+def _keyed(conn: sqlite3.Connection, table: str, listed: list[tuple[int, str]]) -> list[dict[str, object]] | None:
+    """The primary keys of the rows of the ``WITHOUT ROWID`` ``table`` behind the pragma's rows
+    ``listed`` ((foreign key id, parent) each, in the pragma's order), or None when they cannot
+    be told apart. The pragma scans the table in its b-tree's order — the primary key's — and
+    for each row lists every failing foreign key in id order; the same scan here (``ORDER BY``
+    the key) tests each single-column key as the pragma does: a non-null value with no equal
+    parent key (every declared key is TEXT against TEXT: no affinity conversion, BINARY
+    equality). The pairs found must be the pragma's, id and parent, one for one (any other
+    foreign key — several columns, an implicit parent key — gives None: the rows are then
+    named by no key, as before)."""
+    key = row_key(conn, table)
+    fks = conn.execute('SELECT id, "table", "from", "to", seq FROM pragma_foreign_key_list(?)', (table,)).fetchall()
+    if key == ("rowid",) or not key or any(r[4] != 0 or r[3] is None for r in fks):
+        return None
+    fails = [
+        f"(t.{quoted(c)} IS NOT NULL AND "
+        f"NOT EXISTS (SELECT 1 FROM {quoted(p)} AS p WHERE p.{quoted(k)} = t.{quoted(c)}))"
+        for _, p, c, k, _ in fks
+    ]
+    cols = ", ".join(f"t.{quoted(c)}" for c in key)
+    sql = (
+        f"SELECT {cols}, {', '.join(fails)} FROM {quoted(table)} AS t WHERE {' OR '.join(fails)} "
+        f"ORDER BY {cols} LIMIT {len(listed)}"
+    )
+    pairs: list[tuple[int, str]] = []
+    names: list[dict[str, object]] = []
+    for row in conn.execute(sql):
+        for (fkid, parent, *_), failed in zip(fks, row[len(key) :], strict=True):
+            if failed:
+                pairs.append((fkid, parent))
+                names.append(dict(zip(key, row[: len(key)], strict=True)))
+    return names[: len(listed)] if pairs[: len(listed)] == listed else None

@@ -5,6 +5,7 @@ start fast): the header check and the read-only connection every DB read goes th
 from __future__ import annotations
 
 import contextlib
+import re
 import sqlite3
 from collections.abc import Iterator
 from pathlib import Path
@@ -73,3 +74,27 @@ def connect_ro(path: Path) -> Iterator[sqlite3.Connection]:
         raise sqlite_input_error(exc, path, "database is corrupt or unreadable") from exc
     finally:
         conn.close()
+
+
+def row_key(conn: sqlite3.Connection, table: str) -> tuple[str, ...]:
+    """The columns that name a row of ``table`` in findings: ``("rowid",)`` for a rowid table,
+    the primary key's columns (in key order) for a ``WITHOUT ROWID`` table, which has no rowid
+    (:attr:`schemas.model.Table.without_rowid`; a DB built before they were used has none).
+    Told by ``pragma_table_list``'s ``wr`` flag; an SQLite older than 3.37 has no such pragma,
+    and the table's ``CREATE`` statement then says it (it ends with the clause)."""
+    try:
+        wr = conn.execute("SELECT wr FROM pragma_table_list WHERE schema = 'main' AND name = ?", (table,)).fetchone()
+    except sqlite3.OperationalError:  # no pragma_table_list
+        sql = conn.execute("SELECT sql FROM sqlite_master WHERE type = 'table' AND name = ?", (table,)).fetchone()
+        wr = (
+            sql is not None and re.search(r"\)[^)]*\bWITHOUT\s+ROWID\b[^)]*$", str(sql[0]), re.IGNORECASE) is not None,
+        )
+    if wr is None or not wr[0]:
+        return ("rowid",)
+    pk = conn.execute("SELECT name FROM pragma_table_info(?) WHERE pk > 0 ORDER BY pk", (table,)).fetchall()
+    return tuple(str(r[0]) for r in pk)
+
+
+def quoted(name: str) -> str:
+    """An SQL identifier quoted."""
+    return '"' + name.replace('"', '""') + '"'

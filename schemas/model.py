@@ -74,6 +74,13 @@ class Table:
     every ``db build`` its creation and every ``db validate`` a look-up per row
     (``integrity_check``): declare one only for a query that needs it (the onboard readers
     read whole tables; ``db show --where`` works without one, by a scan)."""
+    without_rowid: bool = False
+    """Onboard DBs: an SQLite ``WITHOUT ROWID`` table, its rows stored once, in the b-tree of
+    the primary key (a rowid table holds them in a rowid b-tree plus the key's index: every row
+    twice, which ``db validate``'s ``integrity_check`` reads and cross-checks). For tables read
+    whole, in key order, and looked up by nothing but their key. Their rows have no rowid:
+    findings name the key (:func:`dbtools.foreign_keys.fk_finding_keys`). A DB built before
+    (rowid tables) reads, hashes and validates the same."""
     required: bool = True
     """For sources and log streams: must the file exist?"""
     rate_hz: float | None = None

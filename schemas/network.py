@@ -109,6 +109,7 @@ NETWORK_TRACKS = Table(
         ),
     ),
     primary_key=("track_id",),
+    without_rowid=True,
     foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
     # no secondary index: every reader reads the whole table (Table.indexes)
     required=False,
@@ -135,6 +136,7 @@ CONNECTIONS = Table(
         Column("switch_id", "str", "The switch this connection passes, if any", required=False, nullable=True),
     ),
     primary_key=("track_a", "end_a", "track_b", "end_b"),
+    without_rowid=True,
     foreign_keys=(
         ForeignKey(("track_a",), "tracks", ("track_id",)),
         ForeignKey(("track_b",), "tracks", ("track_id",)),
@@ -217,6 +219,7 @@ SWITCHES = Table(
         Column("name", "str", "Name or local number", required=False, nullable=True),
     ),
     primary_key=("switch_id",),
+    without_rowid=True,
     foreign_keys=(ForeignKey(("line_code",), "lines", ("line_code",)),),
     required=False,
 )
@@ -254,6 +257,7 @@ TRACK_POINTS = Table(
         ),
     ),
     primary_key=("track_id", "pos_m"),
+    without_rowid=True,
     foreign_keys=(ForeignKey(("track_id",), "tracks", ("track_id",)),),
     required=False,
 )

@@ -28,18 +28,33 @@ from dbtools.sqlite_file import connect_ro
 from schemas.tables import DB_TABLES
 from tests.dbtools.test_topology_golden import synthetic
 
+
+def nth(table: str, condition: str) -> str:
+    """An SQL condition selecting the rows of ``table`` whose number ``n`` (1-based, in primary-key
+    order: a rowid table's rowid as built) satisfies ``condition``; a ``WITHOUT ROWID`` table's
+    rows have no rowid to select them by."""
+    declared = next(t for t in DB_TABLES if t.name == table)
+    if not declared.without_rowid:
+        return f"rowid IN (SELECT n FROM (SELECT rowid AS n FROM {table}) WHERE {condition})"
+    key = ", ".join(declared.primary_key)
+    numbered = f"SELECT {key}, row_number() OVER (ORDER BY {key}) AS n FROM {table}"
+    return f"({key}) IN (SELECT {key} FROM ({numbered}) WHERE {condition})"
+
+
 #: (child table, column) of every foreign key of a network DB, and its parent (table, key).
 LINKS = [(t.name, fk.columns[0], fk.other_table, fk.other_columns[0]) for t in DB_TABLES for fk in t.foreign_keys]
 
 EDITS = {
-    "a reference to no track": ["UPDATE connections SET track_b = 'NOPE' WHERE rowid IN (2, 5)"],
-    "a track deleted": ["DELETE FROM tracks WHERE rowid = 3"],
+    "a reference to no track": [f"UPDATE connections SET track_b = 'NOPE' WHERE {nth('connections', 'n IN (2, 5)')}"],
+    "a track deleted": [f"DELETE FROM tracks WHERE {nth('tracks', 'n = 3')}"],
     "a line deleted": ["DELETE FROM lines WHERE rowid = 1"],
-    "track points renamed": ["UPDATE track_points SET track_id = track_id || 'x' WHERE rowid % 7 = 0"],
+    "track points renamed": [
+        f"UPDATE track_points SET track_id = track_id || 'x' WHERE {nth('track_points', 'n % 7 = 0')}"
+    ],
     "a blob equal to its line's text": ["UPDATE gis SET line_code = CAST(line_code AS BLOB) WHERE rowid = 4"],
-    "a blob track id": ["UPDATE connections SET track_a = CAST(track_a AS BLOB) WHERE rowid = 1"],
+    "a blob track id": [f"UPDATE connections SET track_a = CAST(track_a AS BLOB) WHERE {nth('connections', 'n = 1')}"],
     "a blob parent key": ["UPDATE lines SET line_code = CAST(line_code AS BLOB) WHERE rowid = 2"],
-    "a NULL reference": ["UPDATE switches SET line_code = NULL WHERE rowid = 1"],
+    "a NULL reference": [f"UPDATE switches SET line_code = NULL WHERE {nth('switches', 'n = 1')}"],
     "a key with a trailing space": ["UPDATE balises SET line_code = line_code || ' ' WHERE rowid < 4"],
     "many": ["UPDATE gis SET line_code = 'ZZ' || rowid WHERE rowid % 2 = 0"],
     "a foreign key removed": [
@@ -169,9 +184,9 @@ def test_random_edits_same_findings_as_the_pragma(
             "upper": f"upper({column})",
         }.get(how)
         if value is None:
-            sqls.append(f"DELETE FROM {parent} WHERE rowid = {rowid}")
+            sqls.append(f"DELETE FROM {parent} WHERE {nth(parent, f'n = {rowid}')}")
         else:
-            sqls.append(f"UPDATE {child} SET {column} = {value} WHERE rowid = {rowid}")
+            sqls.append(f"UPDATE {child} SET {column} = {value} WHERE {nth(child, f'n = {rowid}')}")
     try:
         db = edited(built, tmp_path, sqls)
     except sqlite3.IntegrityError:  # a NOT NULL column set to NULL, a key made twice: no such file

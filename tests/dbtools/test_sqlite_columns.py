@@ -94,7 +94,8 @@ def stored_rows(db: Path) -> dict[str, list[tuple[object, ...]]]:
     with sqlite3.connect(db) as conn:
         return {
             t.name: conn.execute(
-                f"SELECT {','.join(f'{c}, typeof({c})' for c in t.column_names)} FROM [{t.name}] ORDER BY rowid"
+                f"SELECT {','.join(f'{c}, typeof({c})' for c in t.column_names)} FROM [{t.name}] "
+                f"ORDER BY {','.join(t.primary_key) if t.without_rowid else 'rowid'}"  # a WITHOUT ROWID table has none
             ).fetchall()
             for t in DB_TABLES
         }
@@ -125,8 +126,9 @@ def test_whole_numbers_and_flags_with_missing_values_are_the_sqlite3_frames(tmp_
     build_db(Path(__file__).resolve().parents[1] / "data" / "networks" / "station4", db, db_version="t1")
     with sqlite3.connect(db) as conn:
         conn.execute("UPDATE balises SET nid_c = NULL, n_pig = NULL WHERE rowid = 1")
-        conn.execute("UPDATE tracks SET begin_buffer_stop = 1, end_buffer_stop = NULL WHERE rowid = 1")
-        conn.execute("UPDATE tracks SET begin_buffer_stop = 0, end_buffer_stop = 1 WHERE rowid = 2")
+        first, second = (r[0] for r in conn.execute("SELECT track_id FROM tracks ORDER BY track_id LIMIT 2"))
+        conn.execute("UPDATE tracks SET begin_buffer_stop = 1, end_buffer_stop = NULL WHERE track_id = ?", (first,))
+        conn.execute("UPDATE tracks SET begin_buffer_stop = 0, end_buffer_stop = 1 WHERE track_id = ?", (second,))
     fast = read_table_columns(db, DB_TABLES, min_bytes=0)
     ref = sqlite3_frames(db)
     assert {"balises", "tracks"} <= set(fast)
