@@ -109,8 +109,6 @@ class StreamCursor:
         except (pa.ArrowException, OSError):
             self.reset()
             return None
-        finally:
-            pa.default_memory_pool().release_unused()
         frame = typed_frame(self.table, fast, n_rows)
         return frame, unknown_columns(self.table, self.pf.schema_arrow, str(self.path))
 
@@ -128,8 +126,8 @@ class StreamCursor:
         assert self.pf is not None
         old = self.buf.get(name)
         chunks = list(old.chunks) if old is not None else []
-        for g in groups:
-            chunks.extend(self.pf.read_row_group(g, columns=[name]).column(0).chunks)
+        if groups:  # one call: the groups decoded into one array, not one per group to be joined
+            chunks.extend(self.pf.read_row_groups(groups, columns=[name]).column(0).chunks)
         self.buf[name] = pa.chunked_array(chunks, type=self.pf.schema_arrow.field(name).type)
 
     def _rows(self, t0: float, t1: float) -> Selection:
