@@ -109,6 +109,8 @@ class StreamCursor:
         except (pa.ArrowException, OSError):
             self.reset()
             return None
+        finally:
+            pa.default_memory_pool().release_unused()
         frame = typed_frame(self.table, fast, n_rows)
         return frame, unknown_columns(self.table, self.pf.schema_arrow, str(self.path))
 
