@@ -128,8 +128,8 @@ class StreamCursor:
         assert self.pf is not None
         old = self.buf.get(name)
         chunks = list(old.chunks) if old is not None else []
-        if groups:  # one call: the groups decoded into one array, not one per group to be joined
-            chunks.extend(self.pf.read_row_groups(groups, columns=[name]).column(0).chunks)
+        for g in groups:
+            chunks.extend(self.pf.read_row_group(g, columns=[name]).column(0).chunks)
         self.buf[name] = pa.chunked_array(chunks, type=self.pf.schema_arrow.field(name).type)
 
     def _rows(self, t0: float, t1: float) -> Selection:

@@ -177,13 +177,13 @@ def test_a_cursor_decodes_each_row_group_once(tmp_path: Path, monkeypatch: pytes
     t = np.arange(1000, dtype=float) / 10.0
     frame = pd.DataFrame({"t": t, "x": t * 2.0, "n": pd.array(np.arange(1000), dtype="Int64"), "s": ["a"] * 1000})
     reads: list[int] = []
-    original = pq.ParquetFile.read_row_groups
+    original = pq.ParquetFile.read_row_group
 
-    def counted(self: pq.ParquetFile, groups: list[int], *args: object, **kwargs: object) -> pa.Table:
-        reads.extend(groups)
-        return original(self, groups, *args, **kwargs)
+    def counted(self: pq.ParquetFile, i: int, *args: object, **kwargs: object) -> pa.Table:
+        reads.append(i)
+        return original(self, i, *args, **kwargs)  # type: ignore[arg-type]
 
-    monkeypatch.setattr(pq.ParquetFile, "read_row_groups", counted)
+    monkeypatch.setattr(pq.ParquetFile, "read_row_group", counted)
     starts = [0.0, 40.0, 80.0]  # 40 s windows reading 5 s before and 3 s after: groups of 10 s
     for group, decoded in ((100, [g for g in range(10) for _ in range(4)]), (1000, [0] * 4 * len(starts))):
         path = tmp_path / f"small-{group}.parquet"
