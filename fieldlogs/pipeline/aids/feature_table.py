@@ -15,7 +15,7 @@ place of km and the normal direction begin → end (pos increasing): :func:`load
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
@@ -23,6 +23,9 @@ import pandas as pd
 
 from fieldlogs.pipeline.types import FloatArray
 from schemas.enums import Attribute, Track, direction_sign
+
+if TYPE_CHECKING:
+    from dbtools.network import Network
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,3 +132,11 @@ def load_tables(
         ids = head.loc[good[sel], "feature_id"].to_numpy(dtype=object)
         tables[(line, track)] = FeatureTable(line, track, ids, km[sel], r3[sel], left[sel], 1 if by_track else 0)
     return tables, skipped
+
+
+def line_feature_tables(network: Network) -> tuple[dict[tuple[str, str], FeatureTable], list[dict[str, Any]]]:
+    """:func:`load_tables` of the network's line-form feature points, built once per loaded
+    network (:meth:`Network.cached`) and shared — by every run replayed with it, and by every
+    window of a long run (:mod:`fieldlogs.pipeline.windows`), which rebuilt them each time.
+    A function of the DB alone; its tables and list are read, never modified."""
+    return network.cached(("features", "line_tables"), lambda: load_tables(network.feature_points))

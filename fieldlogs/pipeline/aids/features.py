@@ -103,7 +103,7 @@ import numpy.typing as npt
 from dbtools.masks import sign_runs
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import drained
-from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, load_tables
+from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, line_feature_tables
 from fieldlogs.pipeline.config import FeatureConfig
 from fieldlogs.pipeline.cycles import Cycles, moving_average, standstill_mean
 from fieldlogs.pipeline.types import FeatureOutcome, Fix, FloatArray, Odometry
@@ -172,7 +172,7 @@ class FeatureUnit:
         self._change_list: list[int] = self._changes.tolist()
         self._allow = np.asarray(o.allowance, dtype=float)
         self.available = bool(n and c.has_imu and np.isfinite(self.kappa).any())
-        self.tables, self.skipped = load_tables(self.network.feature_points)
+        self.tables, self.skipped = line_feature_tables(self.network)
         self._exits: dict[tuple[tuple[str, str], int], list[float]] = {}
         """u of row 6 per table and direction, ascending (:meth:`evaluation_not_before`, on first use)."""
         self._done: dict[tuple[str, str, str, int], int] = {}

@@ -65,7 +65,7 @@ import numpy.typing as npt
 from dbtools.gis.geometry import arc_turn
 from dbtools.network import Network
 from fieldlogs.pipeline.aid import EngineView, Observation, Outcome, Priority
-from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, load_tables
+from fieldlogs.pipeline.aids.feature_table import Candidate, FeatureTable, line_feature_tables, load_tables
 from fieldlogs.pipeline.aids.features import FeatureUnit, KmBetween
 from fieldlogs.pipeline.aids.topology import with_hyps
 from fieldlogs.pipeline.aids.track_imu import kept, resolve
@@ -130,7 +130,7 @@ def track_feature_tables(net: Network, lines: TrackLines) -> TrackFeatureTables:
                 by_id[tid] = tab
             else:
                 skipped += [{"track_id": tid, "feature_id": f, "reason": "unknown track"} for f in tab.feature_id]
-        line_tabs, _ = load_tables(net.feature_points)
+        line_tabs, _ = line_feature_tables(net)
         mapped: dict[str, FeatureTable] = {}
         for key, tab in line_tabs.items():
             for tl in lines.by_line.get(key, []):

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 from dbtools.gis.geometry import Projector
 from dbtools.network import Network
+from fieldlogs.pipeline.aids.feature_table import load_tables
 from fieldlogs.pipeline.aids.features import FeatureUnit
 from fieldlogs.pipeline.config import PipelineConfig
 from fieldlogs.pipeline.cycles import Cycles
@@ -180,3 +181,25 @@ def test_engine_answers_identical_with_and_without_the_wait(sample_network_db, m
     assert waited.events.equals(at_once.events)
     assert repr(waited.fixes) == repr(at_once.fixes)  # NaN km of ambiguous fixes: compared as text
     assert (waited.events["type"] == "feature_correction").any()
+
+
+def test_feature_tables_built_once_per_network(net: Network) -> None:
+    """The line feature tables are a function of the DB: every unit on one network (a long run's
+    windows, an audit's runs) shares one build, equal to load_tables'; another network (its rows
+    changed) gets its own."""
+    v, cab = np.full(50, 10.0), np.ones(50)
+    a = FeatureUnit(*run_of(v, cab), net, CFG)
+    b = FeatureUnit(*run_of(v, cab, seed=1), net, CFG)
+    assert a.tables is b.tables and a.skipped is b.skipped
+    fresh, skipped = load_tables(net.feature_points)
+    assert sorted(fresh) == sorted(a.tables) == [(LINE, "D"), (LINE, "U")]
+    for key, tab in fresh.items():
+        np.testing.assert_array_equal(tab.km, a.tables[key].km)
+        assert list(tab.feature_id) == list(a.tables[key].feature_id)
+    assert skipped == a.skipped
+    fp = net.feature_points.copy()
+    first = (fp["feature_id"] == fp["feature_id"].iloc[0]) & (fp["track"] == fp["track"].iloc[0])
+    fp.loc[first, "radius_m"] = 0.0  # that feature's row 3 no longer a curve
+    other = FeatureUnit(*run_of(v, cab), Network({**net.tables, "feature_points": fp}, origin="test"), CFG)
+    assert other.tables is not a.tables
+    assert [s["reason"] for s in other.skipped] == [*(s["reason"] for s in a.skipped), "row 3 radius is not > 0"]
