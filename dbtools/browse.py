@@ -21,7 +21,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from dbtools.sqlite_file import connect_ro
+from dbtools.sqlite_file import connect_ro, quoted
 from schemas.errors import InputError, UsageError
 from schemas.tables import ALL_DB_TABLES
 
@@ -31,11 +31,6 @@ ALLOWED_ACTIONS = frozenset({sqlite3.SQLITE_SELECT, sqlite3.SQLITE_READ, sqlite3
 REFUSED_FUNCTIONS = frozenset({"load_extension"})
 
 Value = int | float | str | None
-
-
-def quoted(name: str) -> str:
-    """``name`` as an SQL identifier, whatever characters it holds."""
-    return '"' + name.replace('"', '""') + '"'
 
 
 def user_tables(conn: sqlite3.Connection) -> list[str]:

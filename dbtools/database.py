@@ -287,12 +287,13 @@ def _storage_class_error(conn: sqlite3.Connection, t: Table, path: Path, present
     """InputError naming table, column, row and value of the first cell whose storage class
     the declared type does not take (text or a blob in a REAL column, 2.5 in an INTEGER
     one); None when every cell fits."""
+    key: tuple[str, ...] | None = None  # the columns naming a row (asked of the file once, when needed)
     for c in t.columns:
         allowed = STORAGE_CLASSES.get(c.dtype)
         if allowed is None or c.name not in present:
             continue
         marks = ",".join("?" * len(allowed))
-        key = row_key(conn, t.name)
+        key = row_key(conn, t.name) if key is None else key
         hit = conn.execute(
             f"SELECT {','.join(quoted(k) for k in key)}, typeof([{c.name}]), quote([{c.name}]) FROM [{t.name}] "
             f"WHERE typeof([{c.name}]) NOT IN ({marks}) LIMIT 1",

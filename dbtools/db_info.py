@@ -17,9 +17,9 @@ import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from dbtools.browse import quoted, table_counts
+from dbtools.browse import table_counts
 from dbtools.integrity import mismatch_text
-from dbtools.sqlite_file import connect_ro
+from dbtools.sqlite_file import connect_ro, quoted
 from schemas.errors import InputError
 from schemas.tables import GEOREF_META_KEYS, META, READABLE_SCHEMA_VERSIONS, SOURCE_HASH_PREFIX
 

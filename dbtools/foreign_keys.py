@@ -61,6 +61,18 @@ def _keys(parent: pd.Series) -> pa.Array:
     return _text(parent).drop_null()
 
 
+def parent_keys(frames: Mapping[str, pd.DataFrame]) -> Callable[[str, str], pa.Array]:
+    """``keys(table, column)``: :func:`_keys` of ``frames[table][column]``, made once however
+    many foreign keys point at it (a table absent from ``frames`` has no rows)."""
+
+    @cache
+    def keys(table: str, column: str) -> pa.Array:
+        f = frames.get(table)
+        return _keys(f[column] if f is not None else pd.Series([], dtype="string"))
+
+    return keys
+
+
 def _dangling(child: pd.Series, keys: Callable[[], pa.Array]) -> int:
     """:func:`dangling` against the parent key values ``keys()`` (asked only when a child value is not null)."""
     values = _text(child)
@@ -75,15 +87,13 @@ def check_foreign_keys(frames: Sequence[tuple[Table, pd.DataFrame]]) -> None:
     """Raise ``sqlite3.IntegrityError`` (what a failed ``PRAGMA foreign_key_check`` raised,
     naming the table, column, row and value) when a row of one of the frames references a
     key absent from its parent table's frame. A parent absent from ``frames`` has no rows."""
-    by_name = {t.name: f for t, f in frames}
+    keys = parent_keys({t.name: f for t, f in frames})
     for table, frame in frames:
         for fk in table.foreign_keys:
             if len(fk.columns) != 1:
                 raise NotImplementedError(f"{table.name}: a foreign key of {len(fk.columns)} columns")
             column, parent_column = fk.columns[0], fk.other_columns[0]
-            parent = by_name.get(fk.other_table)
-            keys = parent[parent_column] if parent is not None else pd.Series([], dtype="string")
-            i = dangling(frame[column], keys)
+            i = _dangling(frame[column], partial(keys, fk.other_table, parent_column))
             if i >= 0:
                 raise sqlite3.IntegrityError(
                     f"FOREIGN KEY constraint failed: {table.name} row {i + 1}: {column} "
@@ -143,10 +153,7 @@ def _relations_hold(
     def text_column(table: str, column: str) -> bool:
         return _text_column(conn, table, column)
 
-    @cache
-    def keys(parent: str, key: str) -> pa.Array:
-        return _keys(frames[parent][key])
-
+    keys = parent_keys(frames)
     for name in sorted(names & by_name.keys()):
         for fk in by_name[name].foreign_keys:
             parent, column, key = fk.other_table, fk.columns[0], fk.other_columns[0]

@@ -79,7 +79,7 @@ class Table:
     the primary key (a rowid table holds them in a rowid b-tree plus the key's index: every row
     twice, which ``db validate``'s ``integrity_check`` reads and cross-checks). For tables read
     whole, in key order, and looked up by nothing but their key. Their rows have no rowid:
-    findings name the key (:func:`dbtools.foreign_keys.fk_finding_keys`). A DB built before
+    findings name the key (:func:`dbtools.foreign_keys.fk_violations`). A DB built before
     (rowid tables) reads, hashes and validates the same."""
     required: bool = True
     """For sources and log streams: must the file exist?"""

@@ -175,8 +175,12 @@ def switch_passages(truth: pd.DataFrame, network: Network) -> pd.DataFrame:
 def facing_passages(truth: pd.DataFrame, network: Network) -> pd.DataFrame:
     """Facing switch passages of the true route: t, switch, from and to track
     (:func:`switch_passages` that split the route)."""
-    p = switch_passages(truth, network)
-    return p.loc[p["facing"], ["t", "switch_id", "from_track", "to_track"]].reset_index(drop=True)
+    return facing_only(switch_passages(truth, network))
+
+
+def facing_only(passages: pd.DataFrame) -> pd.DataFrame:
+    """The facing ones of :func:`switch_passages`, as :func:`facing_passages` gives them."""
+    return passages.loc[passages["facing"], ["t", "switch_id", "from_track", "to_track"]].reset_index(drop=True)
 
 
 def selectivity_cap(parallel_m: float, passages: int, margin_m: float) -> float:

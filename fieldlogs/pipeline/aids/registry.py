@@ -97,7 +97,7 @@ def _topology(ctx: RunContext) -> Aid | None:
 def _network_telegrams(ctx: RunContext, kind: BaliseKind) -> list[Telegram] | None:
     """The run's balise telegrams on a network DB when one is of ``kind`` (None: none of
     ``kind``, or no topology): an aid for ``kind`` only where it has something to hear."""
-    if ctx.streams.get("balise") is None or not _has_topology(ctx):
+    if not _has_topology(ctx):
         return None
     rows = ctx.telegrams
     return rows if any(row["kind"] == kind for row in rows) else None
