@@ -50,12 +50,6 @@ def _text(s: pd.Series) -> pa.Array:
     return arr.cast(pa.large_string())
 
 
-def dangling(child: pd.Series, parent: pd.Series) -> int:
-    """The position of the first value of ``child`` that is neither missing nor a value of
-    ``parent`` (-1 when every value is one or the other)."""
-    return _dangling(child, lambda: _keys(parent))
-
-
 def _keys(parent: pd.Series) -> pa.Array:
     """The parent key column's values without its nulls (the value set of :func:`dangling`)."""
     return _text(parent).drop_null()
@@ -73,8 +67,10 @@ def parent_keys(frames: Mapping[str, pd.DataFrame]) -> Callable[[str, str], pa.A
     return keys
 
 
-def _dangling(child: pd.Series, keys: Callable[[], pa.Array]) -> int:
-    """:func:`dangling` against the parent key values ``keys()`` (asked only when a child value is not null)."""
+def dangling(child: pd.Series, keys: Callable[[], pa.Array]) -> int:
+    """The position of the first value of ``child`` that is neither missing nor one of the parent
+    key values ``keys()`` (-1 when every value is one or the other); ``keys`` is asked only when
+    some child value is not null (:func:`parent_keys` makes each set once)."""
     values = _text(child)
     if values.null_count == len(values):
         return -1
@@ -93,7 +89,7 @@ def check_foreign_keys(frames: Sequence[tuple[Table, pd.DataFrame]]) -> None:
             if len(fk.columns) != 1:
                 raise NotImplementedError(f"{table.name}: a foreign key of {len(fk.columns)} columns")
             column, parent_column = fk.columns[0], fk.other_columns[0]
-            i = _dangling(frame[column], partial(keys, fk.other_table, parent_column))
+            i = dangling(frame[column], partial(keys, fk.other_table, parent_column))
             if i >= 0:
                 raise sqlite3.IntegrityError(
                     f"FOREIGN KEY constraint failed: {table.name} row {i + 1}: {column} "
@@ -161,7 +157,7 @@ def _relations_hold(
                 return False
             if not (text_column(name, column) and text_column(parent, key)):
                 return False
-            if _dangling(frames[name][column], partial(keys, parent, key)) >= 0:
+            if dangling(frames[name][column], partial(keys, parent, key)) >= 0:
                 return False
     return True
 

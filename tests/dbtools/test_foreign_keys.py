@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dbtools.foreign_keys import check_foreign_keys, dangling
+from dbtools.foreign_keys import check_foreign_keys, dangling, parent_keys
 from dbtools.network import canonical, empty_frame
 from schemas.tables import SOURCE_TABLES
 
@@ -72,12 +72,18 @@ def test_the_frames_fail_when_sqlite_finds_a_row(lines, track_lines, points) -> 
         check_foreign_keys(tables)
 
 
+def _first_dangling(child: pd.Series, parent: pd.Series) -> int:
+    """:func:`dangling` of ``child`` against the key column ``parent`` (via :func:`parent_keys`)."""
+    keys = parent_keys({"p": pd.DataFrame({"k": parent})})
+    return dangling(child, lambda: keys("p", "k"))
+
+
 def test_by_hand() -> None:
     parent = pd.Series(["A", "B"], dtype="string")
-    assert dangling(pd.Series(["A", None, "B", "A"], dtype="string"), parent) == -1  # a null references nothing
-    assert dangling(pd.Series(["A", "b", "C"], dtype="string"), parent) == 1  # case counts
-    assert dangling(pd.Series([None, None], dtype="string"), pd.Series([], dtype="string")) == -1
-    assert dangling(pd.Series(["A"], dtype="string"), pd.Series([], dtype="string")) == 0
+    assert _first_dangling(pd.Series(["A", None, "B", "A"], dtype="string"), parent) == -1  # a null references nothing
+    assert _first_dangling(pd.Series(["A", "b", "C"], dtype="string"), parent) == 1  # case counts
+    assert _first_dangling(pd.Series([None, None], dtype="string"), pd.Series([], dtype="string")) == -1
+    assert _first_dangling(pd.Series(["A"], dtype="string"), pd.Series([], dtype="string")) == 0
     tables = frames(["0001"], [("T0", "0001"), ("T1", "0002")], [])
     with pytest.raises(sqlite3.IntegrityError, match="tracks row 2: line_code '0002' is not a line_code of lines"):
         check_foreign_keys(tables)
